@@ -1,0 +1,2 @@
+//! Fit benchmark (filled in with the fitter).
+fn main() {}

@@ -1,0 +1,7 @@
+//! surfscan-sim: speaks the serial protocols of the Mitutoyo SJ-210 family and of GRBL and
+//! Zaber y stages over pseudo-terminals it creates, replaying recorded profiles, so the real
+//! `surfscan` binary can be tested end to end without hardware.
+//!
+//! It parses commands with its own small parsers and computes instrument results with its own
+//! simple code: it shares no protocol or metrology code with `surfscan`, so a bug cannot hide
+//! by being the same on both ends.

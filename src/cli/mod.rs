@@ -1,0 +1,79 @@
+//! The command line: one subcommand per file, each with its own arguments and `run`.
+//!
+//! Exit codes follow sysexits(3) so scripts and systemd can tell causes apart: 0 success,
+//! 1 the job failed, 2 usage, 69 device unavailable, 74 I/O error, 78 bad configuration.
+//!
+//! Layer 5 (composition): may depend on everything.
+
+use clap::{Parser, Subcommand};
+use std::fmt;
+
+pub mod fit;
+
+/// surfscan: unattended surface-roughness scanning with an SJ-210 and a y stage.
+#[derive(Debug, Parser)]
+#[command(name = "surfscan", version, about)]
+pub struct Cli {
+    /// More detailed logging (same as RUST_LOG=debug).
+    #[arg(short, long, global = true)]
+    pub verbose: bool,
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Fit a NURBS surface to a grid of heights and write it as IGES.
+    Fit(fit::Args),
+}
+
+/// Process exit status (sysexits).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Exit {
+    /// 0: success.
+    Ok = 0,
+    /// 1: the job ran and failed.
+    Failed = 1,
+    /// 2: usage error.
+    Usage = 2,
+    /// 69: a device is unavailable.
+    Unavailable = 69,
+    /// 74: input/output error (files, disk).
+    Io = 74,
+    /// 78: configuration error.
+    Config = 78,
+}
+
+/// A command's failure: the exit status and a message that names the cause and the fix.
+#[derive(Debug)]
+pub struct CliError {
+    /// Exit status.
+    pub exit: Exit,
+    /// Message for the operator.
+    pub message: String,
+}
+
+impl CliError {
+    /// Builds an error with an exit status.
+    pub fn new(exit: Exit, message: impl Into<String>) -> CliError {
+        CliError {
+            exit,
+            message: message.into(),
+        }
+    }
+}
+
+impl fmt::Display for CliError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+/// Runs the parsed command.
+pub fn run(cli: Cli) -> Result<(), CliError> {
+    match cli.command {
+        Command::Fit(args) => fit::run(args),
+    }
+}

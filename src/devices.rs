@@ -1,0 +1,181 @@
+//! The contracts between the scan runner and the device drivers.
+//!
+//! The scan layer sees the profiler as an [`Instrument`] and the y axis as a [`YAxis`]
+//! (the motion policy over a stage driver). Drivers classify their errors with
+//! [`DeviceFault::class`] so the runner decides uniformly: suspend and reconnect when a
+//! device is absent, abandon and re-trace the line on a transient fault, re-home when the
+//! stage position is lost, fail the scan on a fatal fault.
+//!
+//! Layer 0 (vocabulary): depends on [`crate::profile`] and [`crate::units`]; no I/O.
+
+use crate::profile::{Conditions, InstrumentResult, Profile};
+use crate::units::Nm;
+use serde::{Deserialize, Serialize};
+
+/// How the scan layer must react to a device error.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FaultClass {
+    /// The device is gone (unplugged, EOF/EIO) or cannot be opened: suspend the scan,
+    /// reconnect with backoff, re-verify identity, then re-trace the current line.
+    Absent,
+    /// The conversation failed or the device refused for now (timeout, garbled reply,
+    /// busy NG code, missed target): abandon the current line and re-trace it, within the
+    /// attempt bound.
+    Transient,
+    /// The stage position can no longer be trusted (reset, alarm, not referenced): re-home
+    /// before the next move.
+    PositionLost,
+    /// A condition the operator must fix (battery abnormal, profile read-out unsupported,
+    /// conditions changed, soft limit): the scan fails with this reason.
+    Fatal,
+}
+
+/// Implemented by every driver error so the runner can react without knowing the driver.
+pub trait DeviceFault: std::error::Error + Send + Sync + 'static {
+    /// How the scan should react.
+    fn class(&self) -> FaultClass;
+    /// The instrument's NG code, when the device answered with one.
+    fn ng_code(&self) -> Option<u16> {
+        None
+    }
+}
+
+/// Battery state (`RDSTU01`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Battery {
+    /// More than 60 % (`000`).
+    Good,
+    /// Below 60 % (`001`): warn.
+    Low,
+    /// Abnormal: temperature, voltage or no battery (`002`): refuse to scan.
+    Abnormal,
+    /// Charging (`003`).
+    Charging,
+    /// Any other code.
+    Unknown(u16),
+}
+
+/// Who the instrument is (`RDSJ 00`, `RDSJ 01`, the configured model).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct InstrumentIdentity {
+    /// Configured model id ("sj210", "sj220", "sj310", "sj410").
+    pub model: String,
+    /// Firmware version string as reported.
+    pub firmware: String,
+    /// Drive unit type as reported (standard, transverse, retractable).
+    pub drive_unit: String,
+}
+
+/// Whether profile read-out works on this firmware, and why not when it does not.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", tag = "status")]
+pub enum ProfileReadout {
+    /// The safe probe (total-count request) was answered.
+    Supported {
+        /// Points the instrument holds now (0 before any trace).
+        points_now: u32,
+    },
+    /// The firmware refused it: the NG code and the operator's options.
+    Unsupported {
+        /// NG code received, if any.
+        ng_code: Option<u16>,
+        /// What the operator can do.
+        advice: String,
+    },
+}
+
+/// What the capability probe found at connect.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ProbeReport {
+    /// Identity.
+    pub identity: InstrumentIdentity,
+    /// Battery state.
+    pub battery: Battery,
+    /// Measurement conditions (`RDCON`).
+    pub conditions: Conditions,
+    /// Number of customised result parameters (`RDPAR`).
+    pub parameter_count: u32,
+    /// Profile read-out capability.
+    pub profile_readout: ProfileReadout,
+    /// Things an operator should know (battery low, pitch assumptions…).
+    pub warnings: Vec<String>,
+}
+
+/// One completed trace: the profile and the instrument's own results.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TracedLine {
+    /// The profile with pitch, kind and conditions attached.
+    pub profile: Profile,
+    /// Every result parameter the instrument reported (`RDRES02`).
+    pub results: Vec<InstrumentResult>,
+    /// Where the x pitch came from ("config", "lambda-s 2.5 um", …).
+    pub pitch_source: String,
+    /// Warnings raised while tracing (length mismatch, retried reads…).
+    pub warnings: Vec<String>,
+}
+
+/// The profiler as the scan runner uses it. One command is in flight at a time; control
+/// commands are never retried by the implementation.
+#[allow(async_fn_in_trait)]
+pub trait Instrument {
+    /// The driver's error type.
+    type Error: DeviceFault;
+    /// Capability probe: identity, battery, conditions, parameter count, auto-sleep off,
+    /// profile read-out capability.
+    async fn probe(&mut self) -> Result<ProbeReport, Self::Error>;
+    /// Makes sure the instrument reads idle (`000`), sending the return command on `005`.
+    /// The stage never moves unless this succeeded.
+    async fn ensure_idle(&mut self) -> Result<(), Self::Error>;
+    /// Traces one line and reads results and profile back.
+    async fn trace(&mut self) -> Result<TracedLine, Self::Error>;
+    /// Best-effort abort of a running measurement (only after reading "measuring").
+    async fn abort(&mut self) -> Result<(), Self::Error>;
+}
+
+/// What the y axis reported when it was connected and verified.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StageReport {
+    /// Controller identity (`$I`, Zaber device id…).
+    pub identity: String,
+    /// Whether the controller's position can be trusted (homed and not reset since).
+    pub position_trusted: bool,
+    /// Position read back now.
+    pub position: Nm,
+}
+
+/// A completed, verified move.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Arrival {
+    /// The absolute target.
+    pub target: Nm,
+    /// Position read back after settling.
+    pub readback: Nm,
+    /// Moves issued to get within the deadband (1 when the first landed).
+    pub attempts: u32,
+}
+
+/// The y axis as the scan runner uses it: the motion policy (absolute targets, host-side
+/// soft limits, unidirectional backlash approach, settle, read back, deadband, bounded
+/// retries) over a GRBL or Zaber driver.
+#[allow(async_fn_in_trait)]
+pub trait YAxis {
+    /// The driver's error type.
+    type Error: DeviceFault;
+    /// Checks a plan's targets before anything moves: soft limits and whether each target
+    /// is exactly representable in device units. Returns warnings to record with the scan
+    /// (inexact steps allowed by configuration); errors when the plan must be refused.
+    fn check_targets(&self, targets: &[Nm]) -> Result<Vec<String>, Self::Error>;
+    /// Opens the conversation, identifies the controller and reads its state.
+    async fn connect(&mut self) -> Result<StageReport, Self::Error>;
+    /// Whether the position is trusted (false after a reset, alarm or `WR`/`WH`).
+    fn position_trusted(&self) -> bool;
+    /// Homes the axis (the position is trusted afterwards).
+    async fn home(&mut self) -> Result<(), Self::Error>;
+    /// Moves to an absolute target, approaching from below (backlash taken out when the
+    /// previous motion was a reverse move or is unknown), settles and verifies.
+    async fn move_to(&mut self, target: Nm) -> Result<Arrival, Self::Error>;
+    /// Stops any motion (best effort).
+    async fn stop(&mut self) -> Result<(), Self::Error>;
+}

@@ -1,0 +1,38 @@
+//! surfscan: unattended surface-roughness scanning with a Mitutoyo SJ-210 profiler and a
+//! motorised y stage, incremental NURBS surface fitting, IGES output and characterisation.
+//!
+//! # Layout
+//!
+//! Layers, each usable without the ones above it (dependencies only point down):
+//!
+//! 0. Vocabulary, no I/O: [`units`] (mm, µm, integer nm), [`profile`] (a traced line with its
+//!    metadata), [`nurbs`] (the surface as a value), [`devices`] (the contracts between the
+//!    scan runner and the drivers).
+//! 1. Pure logic: [`fit`] (the paper's interpolation, incremental), [`iges`] (IGES 5.3
+//!    writer/reader), [`metrology`] (ISO roughness, bearing area curves, areal parameters),
+//!    the codecs inside [`sj210`] and [`stage`].
+//! 2. I/O adapters: [`transport`] (the only code that opens a serial port), the clients in
+//!    [`sj210`] and [`stage`], generic over `AsyncRead + AsyncWrite`.
+//! 3. The session: [`scan`] (plan, durable storage and journal, resume, runner).
+//! 4. Process edges: [`control`] (Unix-socket control), [`telemetry`] (logging).
+//! 5. Composition: [`cli`] (one file per subcommand) and `main.rs`.
+//!
+//! The simulator (`simulator/`, crate `surfscan-sim`) speaks the instrument's and the
+//! stages' serial protocols with its own parsers, never this crate's codecs.
+
+#![warn(missing_docs)]
+
+pub mod cli;
+pub mod control;
+pub mod devices;
+pub mod fit;
+pub mod iges;
+pub mod metrology;
+pub mod nurbs;
+pub mod profile;
+pub mod scan;
+pub mod sj210;
+pub mod stage;
+pub mod telemetry;
+pub mod transport;
+pub mod units;

@@ -1,0 +1,27 @@
+//! The `surfscan` binary: parse arguments, start logging, run the command, map the result to
+//! a sysexits code. The work lives in the library (`surfscan::cli`).
+
+use clap::Parser;
+use surfscan::cli::{self, Cli};
+
+fn main() {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            let _ = e.print();
+            std::process::exit(if e.use_stderr() {
+                cli::Exit::Usage as i32
+            } else {
+                0
+            });
+        }
+    };
+    surfscan::telemetry::init(cli.verbose);
+    match cli::run(cli) {
+        Ok(()) => {}
+        Err(e) => {
+            eprintln!("surfscan: {e}");
+            std::process::exit(e.exit as i32);
+        }
+    }
+}

@@ -1,0 +1,117 @@
+//! One traced line: heights along x with the metadata that makes it traceable.
+//!
+//! A [`Profile`] is what the instrument driver produces, what the scan stores per line,
+//! what the fitter consumes and what the metrology characterises. Heights are µm exactly as
+//! received; x is implied by the pitch (x_i = i × pitch_x_mm, first point at x = 0).
+//!
+//! Layer 0 (vocabulary): depends only on [`crate::units`]; no I/O.
+
+use serde::{Deserialize, Serialize};
+
+/// The kind of profile the instrument exported (ISO 4287 / JIS naming on the SJ series).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum ProfileKind {
+    /// Primary profile (only λs applied): needs the λc filter before R parameters.
+    #[default]
+    P,
+    /// Roughness profile (already λc-filtered).
+    R,
+    /// Waviness profile.
+    W,
+    /// DIN 4776 / motif or other profile types reported by the instrument.
+    Other,
+}
+
+/// The profile filter the instrument applied or was set to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum FilterKind {
+    /// ISO 16610-21 Gaussian.
+    #[default]
+    Gaussian,
+    /// 2RC (2CR75) analogue filter.
+    TwoRc,
+    /// Phase-corrected 2RC (PC75).
+    Pc75,
+    /// No filter.
+    None,
+}
+
+/// Measurement and evaluation conditions of a trace, as read from the instrument (`RDCON`)
+/// or given in a data file. Every field is optional: unknown is stated, never guessed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct Conditions {
+    /// Standard the instrument evaluates to, e.g. "ISO1997", "JIS2001".
+    pub standard: Option<String>,
+    /// Profile kind the parameters are computed on.
+    pub profile_kind: Option<ProfileKind>,
+    /// Filter type.
+    pub filter: Option<FilterKind>,
+    /// Cut-off λc in mm (0.08 / 0.25 / 0.8 / 2.5 / 8).
+    pub lambda_c_mm: Option<f64>,
+    /// Short-wave cut-off λs in µm (2.5 / 8 / 25), `None` when absent or unknown.
+    pub lambda_s_um: Option<f64>,
+    /// Number of sampling lengths N.
+    pub sampling_lengths: Option<u32>,
+    /// Evaluation length in mm (N × λc, or the arbitrary length).
+    pub evaluation_length_mm: Option<f64>,
+    /// Traverse speed in mm/s, when known.
+    pub speed_mm_s: Option<f64>,
+    /// The raw condition record as received, for the record.
+    pub raw: Option<String>,
+}
+
+/// One result parameter as the instrument computed it (`RDRES02`: name, value, unit).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InstrumentResult {
+    /// Parameter name as displayed, e.g. "Ra".
+    pub name: String,
+    /// Value, `None` when the instrument reported an error for it.
+    pub value: Option<f64>,
+    /// Unit as received, e.g. "um" or "µm".
+    pub unit: String,
+}
+
+/// A traced line of heights at a constant x pitch.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Profile {
+    /// Distance between consecutive points along x, in mm.
+    pub pitch_x_mm: f64,
+    /// Heights in µm, exactly as received, first point at x = 0.
+    pub heights_um: Vec<f64>,
+    /// Profile kind (P, R, …).
+    pub kind: ProfileKind,
+    /// Conditions of the trace when known.
+    pub conditions: Conditions,
+}
+
+impl Profile {
+    /// A profile without metadata (primary profile, unknown conditions).
+    pub fn new(pitch_x_mm: f64, heights_um: Vec<f64>) -> Profile {
+        Profile {
+            pitch_x_mm,
+            heights_um,
+            kind: ProfileKind::P,
+            conditions: Conditions::default(),
+        }
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.heights_um.len()
+    }
+
+    /// True when the profile holds no point.
+    pub fn is_empty(&self) -> bool {
+        self.heights_um.is_empty()
+    }
+
+    /// x of point `i` in mm.
+    pub fn x_mm(&self, i: usize) -> f64 {
+        i as f64 * self.pitch_x_mm
+    }
+
+    /// Length covered by the points, (n − 1) × pitch, in mm.
+    pub fn length_mm(&self) -> f64 {
+        self.heights_um.len().saturating_sub(1) as f64 * self.pitch_x_mm
+    }
+}
