@@ -5,3 +5,16 @@
 //! It parses commands with its own small parsers and computes instrument results with its own
 //! simple code: it shares no protocol or metrology code with `surfscan`, so a bug cannot hide
 //! by being the same on both ends.
+//!
+//! Layout:
+//! * [`command`]: frame splitter and command parser (pure);
+//! * [`roughness`]: the simplified Ra/Rq/Rz (pure);
+//! * [`data`]: served profiles (three CSV formats) and line selection by stage y;
+//! * [`instrument`]: the SJ-210/SJ-410 state machine, time as an input (sans-IO);
+#![warn(missing_docs)]
+
+pub mod command;
+pub mod data;
+pub mod instrument;
+pub mod pty;
+pub mod roughness;

@@ -1,0 +1,209 @@
+//! Pseudo-terminals owned by the simulator: create one, put it in raw mode, link its slave path
+//! at a stable name (e.g. `/tmp/sj210`), serve the master side asynchronously with tokio, and
+//! "unplug" it (close the master, remove the link).
+//!
+//! Depends on `nix`/`libc` for the pty calls and on tokio's `AsyncFd`; nothing else in the crate.
+//!
+//! **Keeping the slave open.** When no process holds the slave side open, reading the master
+//! returns `EIO` on Linux. The simulator therefore keeps its own slave descriptor open for the
+//! whole life of a [`Pty`]: the instrument stays "present" between client connections (as a real
+//! USB-serial device node does), and a client that closes and reopens the link finds the same
+//! device. Bytes written while no client is connected stay in the pty buffer, just like bytes a
+//! real instrument sends into an unconnected cable are lost or stale; clients drain on connect.
+
+use std::io;
+use std::os::fd::{AsFd, AsRawFd, OwnedFd};
+use std::path::{Path, PathBuf};
+use std::pin::Pin;
+use std::task::{ready, Context, Poll};
+
+use nix::fcntl::{fcntl, FcntlArg, OFlag};
+use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
+use tokio::io::unix::AsyncFd;
+use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
+
+/// Errors while creating or linking a pseudo-terminal.
+#[derive(Debug, thiserror::Error)]
+pub enum PtyError {
+    /// `openpty` or a termios call failed.
+    #[error("cannot create a pseudo-terminal ({step}): {source}; check /dev/ptmx is available")]
+    Create {
+        /// Which call failed.
+        step: &'static str,
+        /// The OS error.
+        source: nix::Error,
+    },
+    /// The link path exists and is not a symlink, so the simulator refuses to replace it.
+    #[error("link path {path} exists and is not a symbolic link; choose another --*-link path or remove it")]
+    LinkOccupied {
+        /// The requested link path.
+        path: PathBuf,
+    },
+    /// Creating or removing the symlink failed.
+    #[error("cannot link {target} at {path}: {source}")]
+    Link {
+        /// The requested link path.
+        path: PathBuf,
+        /// The slave device path.
+        target: PathBuf,
+        /// The OS error.
+        source: io::Error,
+    },
+    /// Registering the master with the tokio reactor failed (no runtime, or epoll error).
+    #[error("cannot register the pty master with tokio: {0}")]
+    Register(io::Error),
+}
+
+/// A pseudo-terminal whose slave is linked at a chosen path. Dropping it unplugs the device:
+/// the master and the simulator's slave descriptor close and the link is removed.
+#[derive(Debug)]
+pub struct Pty {
+    master: AsyncFd<OwnedFd>,
+    // Held open on purpose; see the module documentation.
+    _slave: OwnedFd,
+    slave_path: PathBuf,
+    link: PathBuf,
+}
+
+impl Pty {
+    /// Creates a raw-mode pseudo-terminal and links its slave at `link`, replacing a stale
+    /// symlink there. Must be called inside a tokio runtime.
+    pub fn create(link: &Path) -> Result<Self, PtyError> {
+        let pair = nix::pty::openpty(None, None).map_err(|source| PtyError::Create {
+            step: "openpty",
+            source,
+        })?;
+        let mut termios = tcgetattr(pair.slave.as_fd()).map_err(|source| PtyError::Create {
+            step: "tcgetattr",
+            source,
+        })?;
+        // Raw: no echo, no CR/LF translation, byte-at-a-time reads.
+        cfmakeraw(&mut termios);
+        tcsetattr(pair.slave.as_fd(), SetArg::TCSANOW, &termios).map_err(|source| {
+            PtyError::Create {
+                step: "tcsetattr",
+                source,
+            }
+        })?;
+        let flags = fcntl(pair.master.as_raw_fd(), FcntlArg::F_GETFL).map_err(|source| {
+            PtyError::Create {
+                step: "fcntl(F_GETFL)",
+                source,
+            }
+        })?;
+        let flags = OFlag::from_bits_truncate(flags) | OFlag::O_NONBLOCK;
+        fcntl(pair.master.as_raw_fd(), FcntlArg::F_SETFL(flags)).map_err(|source| {
+            PtyError::Create {
+                step: "fcntl(F_SETFL)",
+                source,
+            }
+        })?;
+        let slave_path =
+            nix::unistd::ttyname(pair.slave.as_fd()).map_err(|source| PtyError::Create {
+                step: "ttyname",
+                source,
+            })?;
+        link_at(link, &slave_path)?;
+        let master = AsyncFd::new(pair.master).map_err(PtyError::Register)?;
+        Ok(Self {
+            master,
+            _slave: pair.slave,
+            slave_path,
+            link: link.to_path_buf(),
+        })
+    }
+
+    /// The `/dev/pts/N` path of the slave side.
+    pub fn slave_path(&self) -> &Path {
+        &self.slave_path
+    }
+
+    /// The link path clients open.
+    pub fn link(&self) -> &Path {
+        &self.link
+    }
+}
+
+impl Drop for Pty {
+    fn drop(&mut self) {
+        // Only remove the link if it still points at our slave (a newer pty may own it).
+        if std::fs::read_link(&self.link).ok().as_deref() == Some(self.slave_path.as_path()) {
+            let _ = std::fs::remove_file(&self.link);
+        }
+    }
+}
+
+fn link_at(link: &Path, target: &Path) -> Result<(), PtyError> {
+    match std::fs::symlink_metadata(link) {
+        Ok(meta) if meta.file_type().is_symlink() => {
+            std::fs::remove_file(link).map_err(|source| PtyError::Link {
+                path: link.to_path_buf(),
+                target: target.to_path_buf(),
+                source,
+            })?;
+        }
+        Ok(_) => {
+            return Err(PtyError::LinkOccupied {
+                path: link.to_path_buf(),
+            })
+        }
+        Err(_) => {}
+    }
+    std::os::unix::fs::symlink(target, link).map_err(|source| PtyError::Link {
+        path: link.to_path_buf(),
+        target: target.to_path_buf(),
+        source,
+    })
+}
+
+/// Converts a nix error into an `io::Error` (the slave stays open, so `EIO` is a real error).
+fn io_err(e: nix::Error) -> io::Error {
+    io::Error::from_raw_os_error(e as i32)
+}
+
+impl AsyncRead for Pty {
+    fn poll_read(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        loop {
+            let mut guard = ready!(self.master.poll_read_ready(cx))?;
+            let unfilled = buf.initialize_unfilled();
+            match guard.try_io(|fd| {
+                nix::unistd::read(fd.get_ref().as_raw_fd(), unfilled).map_err(io_err)
+            }) {
+                Ok(Ok(n)) => {
+                    buf.advance(n);
+                    return Poll::Ready(Ok(()));
+                }
+                Ok(Err(e)) => return Poll::Ready(Err(e)),
+                Err(_would_block) => continue,
+            }
+        }
+    }
+}
+
+impl AsyncWrite for Pty {
+    fn poll_write(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<io::Result<usize>> {
+        loop {
+            let mut guard = ready!(self.master.poll_write_ready(cx))?;
+            match guard.try_io(|fd| nix::unistd::write(fd.get_ref(), buf).map_err(io_err)) {
+                Ok(result) => return Poll::Ready(result),
+                Err(_would_block) => continue,
+            }
+        }
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, _cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Poll::Ready(Ok(()))
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, _cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Poll::Ready(Ok(()))
+    }
+}

@@ -1,0 +1,91 @@
+//! The simulator's own, deliberately simple roughness calculation for `RDRES` answers.
+//!
+//! Simplified on purpose (it is not ISO 4287 nor the daemon's metrology): the mean line is the
+//! arithmetic mean of the whole profile as served (no filtering, no form removal); Ra and Rq are
+//! taken about that line over the whole profile; Rz is the mean, over N equal sampling lengths,
+//! of (highest − lowest) point. Per-sampling-length values (`bb` = 1..N) use the same mean line.
+//! Pure; depends on nothing.
+
+/// The customised parameters reported, in `RDRES aa` order (1-based): name and unit.
+pub const PARAMETERS: [(&str, &str); 3] = [("Ra", "um"), ("Rq", "um"), ("Rz", "um")];
+
+/// Ra, Rq, Rz for the whole profile and per sampling length.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Roughness {
+    /// `[Ra, Rq, Rz]` over the evaluation length.
+    pub total: [f64; 3],
+    /// `[Ra, Rq, Rz]` per sampling length.
+    pub per_segment: Vec<[f64; 3]>,
+}
+
+fn stats(z: &[f64], mean: f64) -> [f64; 3] {
+    if z.is_empty() {
+        return [0.0; 3];
+    }
+    let n = z.len() as f64;
+    let ra = z.iter().map(|v| (v - mean).abs()).sum::<f64>() / n;
+    let rq = (z.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+    let hi = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let lo = z.iter().copied().fold(f64::INFINITY, f64::min);
+    [ra, rq, hi - lo]
+}
+
+impl Roughness {
+    /// Computes the parameters of `z_um` with `segments` (≥ 1) sampling lengths.
+    pub fn compute(z_um: &[f64], segments: usize) -> Self {
+        let segments = segments.max(1);
+        let mean = if z_um.is_empty() {
+            0.0
+        } else {
+            z_um.iter().sum::<f64>() / z_um.len() as f64
+        };
+        let n = z_um.len();
+        let per_segment: Vec<[f64; 3]> = (0..segments)
+            .map(|k| {
+                let a = k * n / segments;
+                let b = (k + 1) * n / segments;
+                stats(z_um.get(a..b).unwrap_or(&[]), mean)
+            })
+            .collect();
+        let mut total = stats(z_um, mean);
+        total[2] = per_segment.iter().map(|s| s[2]).sum::<f64>() / segments as f64;
+        Self { total, per_segment }
+    }
+
+    /// Value of parameter `param` (0-based) for `index` 0 (whole) or 1..=N (sampling length).
+    pub fn value(&self, param: usize, index: usize) -> Option<f64> {
+        if index == 0 {
+            self.total.get(param).copied()
+        } else {
+            self.per_segment.get(index - 1)?.get(param).copied()
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn square_wave_closed_forms() {
+        // ±a square wave: Ra = Rq = a; Rz = 2a per segment.
+        let z: Vec<f64> = (0..100).map(|i| if i % 2 == 0 { 1.5 } else { -1.5 }).collect();
+        let r = Roughness::compute(&z, 5);
+        assert!((r.total[0] - 1.5).abs() < 1e-12);
+        assert!((r.total[1] - 1.5).abs() < 1e-12);
+        assert!((r.total[2] - 3.0).abs() < 1e-12);
+        assert_eq!(r.per_segment.len(), 5);
+        assert_eq!(r.value(2, 5), Some(3.0));
+        assert_eq!(r.value(2, 6), None);
+    }
+
+    #[test]
+    fn rz_averages_segment_peak_to_valley_and_offset_is_ignored() {
+        // Segment 1: 10 + {0,2} (pv 2); segment 2: 10 + {0,6} (pv 6) → Rz 4; mean 12,
+        // deviations -2,0,-2,4 → Ra = 2, Rq = sqrt(6).
+        let r = Roughness::compute(&[10.0, 12.0, 10.0, 16.0], 2);
+        assert!((r.total[2] - 4.0).abs() < 1e-12);
+        assert!((r.total[0] - 2.0).abs() < 1e-12);
+        assert!((r.total[1] - 6f64.sqrt()).abs() < 1e-12);
+    }
+}
