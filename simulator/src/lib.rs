@@ -11,6 +11,10 @@
 //! * [`roughness`]: the simplified Ra/Rq/Rz (pure);
 //! * [`data`]: served profiles (three CSV formats) and line selection by stage y;
 //! * [`instrument`]: the SJ-210/SJ-410 state machine, time as an input (sans-IO);
+//! * [`replay`]: transcript format v1 and replay of recorded exchanges;
+//! * [`fault`]: fault-injection specs;
+//! * [`pty`]: the pseudo-terminals the simulator owns;
+//! * [`server`]: the serve loop (pacing, faults, unplug/replug) and the [`Simulator`] builder.
 #![warn(missing_docs)]
 
 pub mod command;
@@ -18,3 +22,11 @@ pub mod data;
 pub mod instrument;
 pub mod pty;
 pub mod roughness;
+pub mod fault;
+pub mod replay;
+pub mod server;
+
+pub use data::{ProfileSet, YPosition};
+pub use fault::{Fault, FaultKind, FaultSpec};
+pub use instrument::{Battery, InstrumentConfig, Model};
+pub use server::{ReadyInfo, SimEvent, SimHandle, Simulator};

@@ -104,7 +104,10 @@ impl Pty {
                 source,
             })?;
         link_at(link, &slave_path)?;
-        let master = AsyncFd::new(pair.master).map_err(PtyError::Register)?;
+        // SAFETY: `OwnedFd` owns a valid descriptor that stays open until the `AsyncFd` (and with
+        // it the registration) is dropped; nothing else closes or replaces it.
+        let master = unsafe { AsyncFd::register(pair.master) }
+            .map_err(|e| PtyError::Register(e.into()))?;
         Ok(Self {
             master,
             _slave: pair.slave,

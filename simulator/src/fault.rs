@@ -1,0 +1,207 @@
+//! Fault injection: which frames get a faulty reply, parsed from `--fault SPEC` strings.
+//!
+//! Pure; depends on nothing else in the crate. Spec grammar: `KIND[:ARG]@COMMAND[#N][xK]` —
+//! the fault hits the N-th (1-based, default 1) and the following K−1 (default K = 1) frames
+//! that start with `COMMAND`. Kinds:
+//! * `ng:CODE` — answer `NGCODE` instead of the command (e.g. `ng:011@RDRES#1x3`,
+//!   `ng:007@CTSTA#2`); the instrument does not see the command;
+//! * `drop` — the instrument handles the command but the reply is lost;
+//! * `truncate` — only the first half of the reply, no CR;
+//! * `garbage` — non-ASCII bytes written before the reply;
+//! * `split` — the reply is written in two writes with a short pause between;
+//! * `silence:MS` — the reply comes after MS milliseconds of silence;
+//! * `unplug:MS` — the reply is sent, then the device vanishes (pty closed, link removed) and
+//!   comes back after MS milliseconds as a freshly powered-up instrument (e.g.
+//!   `unplug:2000@CTSTA#2`: vanishes mid-trace 2).
+//!
+//! Battery states are instrument settings, also given as faults: `battery:low`,
+//! `battery:abnormal`.
+
+use std::time::Duration;
+
+/// What happens to the reply of a matching frame.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum FaultKind {
+    /// Reply `NGcode` instead.
+    Ng(u16),
+    /// No reply.
+    Drop,
+    /// First half of the reply only.
+    Truncate,
+    /// Garbage bytes before the reply.
+    Garbage,
+    /// Reply in two writes.
+    Split,
+    /// Delay before the reply.
+    Silence(Duration),
+    /// Reply, then unplug for the given time.
+    Unplug(Duration),
+}
+
+/// One fault rule.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Fault {
+    /// What to do.
+    pub kind: FaultKind,
+    /// Frames starting with this text are counted.
+    pub command: String,
+    /// First matching occurrence hit, 1-based.
+    pub first: u32,
+    /// Number of consecutive occurrences hit.
+    pub count: u32,
+}
+
+/// A parsed `--fault` argument: a wire fault or a battery state.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum FaultSpec {
+    /// A rule applied to replies.
+    Wire(Fault),
+    /// `battery:low`.
+    BatteryLow,
+    /// `battery:abnormal`.
+    BatteryAbnormal,
+}
+
+/// A fault spec that could not be parsed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("bad fault spec {spec:?}: {why}; expected KIND[:ARG]@COMMAND[#N][xK] (kinds ng:CODE, drop, truncate, garbage, split, silence:MS, unplug:MS) or battery:low|abnormal")]
+pub struct FaultSpecError {
+    /// The spec as given.
+    pub spec: String,
+    /// What is wrong.
+    pub why: String,
+}
+
+impl std::str::FromStr for FaultSpec {
+    type Err = FaultSpecError;
+
+    fn from_str(spec: &str) -> Result<Self, Self::Err> {
+        let err = |why: &str| FaultSpecError {
+            spec: spec.to_string(),
+            why: why.to_string(),
+        };
+        match spec {
+            "battery:low" => return Ok(FaultSpec::BatteryLow),
+            "battery:abnormal" => return Ok(FaultSpec::BatteryAbnormal),
+            _ => {}
+        }
+        let (kind, target) = spec.split_once('@').ok_or_else(|| err("missing '@COMMAND'"))?;
+        let (name, arg) = match kind.split_once(':') {
+            Some((n, a)) => (n, Some(a)),
+            None => (kind, None),
+        };
+        let millis = |a: Option<&str>| -> Result<Duration, FaultSpecError> {
+            a.and_then(|a| a.parse::<u64>().ok())
+                .map(Duration::from_millis)
+                .ok_or_else(|| err("this kind needs a duration in milliseconds, e.g. silence:2000"))
+        };
+        let kind = match name {
+            "ng" => {
+                let code = arg
+                    .filter(|a| a.len() == 3)
+                    .and_then(|a| a.parse::<u16>().ok())
+                    .ok_or_else(|| err("ng needs a 3-digit code, e.g. ng:011"))?;
+                FaultKind::Ng(code)
+            }
+            "drop" => FaultKind::Drop,
+            "truncate" => FaultKind::Truncate,
+            "garbage" => FaultKind::Garbage,
+            "split" => FaultKind::Split,
+            "silence" => FaultKind::Silence(millis(arg)?),
+            "unplug" => FaultKind::Unplug(millis(arg)?),
+            _ => return Err(err("unknown kind")),
+        };
+        let (rest, count) = match target.rsplit_once('x') {
+            Some((r, k)) if !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()) => {
+                (r, k.parse::<u32>().map_err(|_| err("bad count after 'x'"))?)
+            }
+            _ => (target, 1),
+        };
+        let (command, first) = match rest.rsplit_once('#') {
+            Some((c, n)) => (c, n.parse::<u32>().map_err(|_| err("bad occurrence after '#'"))?),
+            None => (rest, 1),
+        };
+        if command.is_empty() || first == 0 || count == 0 {
+            return Err(err("command must be non-empty, occurrence and count at least 1"));
+        }
+        Ok(FaultSpec::Wire(Fault {
+            kind,
+            command: command.to_string(),
+            first,
+            count,
+        }))
+    }
+}
+
+/// The rules of one run with their occurrence counters.
+#[derive(Debug, Clone, Default)]
+pub struct FaultPlan {
+    rules: Vec<(Fault, u32)>,
+}
+
+impl FaultPlan {
+    /// A plan from rules.
+    pub fn new(rules: Vec<Fault>) -> Self {
+        Self {
+            rules: rules.into_iter().map(|f| (f, 0)).collect(),
+        }
+    }
+
+    /// Counts `frame` against every rule and returns the first fault that hits it.
+    pub fn check(&mut self, frame: &str) -> Option<FaultKind> {
+        let mut hit = None;
+        for (rule, seen) in &mut self.rules {
+            if frame.starts_with(rule.command.as_str()) {
+                *seen += 1;
+                let last = rule.first.saturating_add(rule.count);
+                if hit.is_none() && *seen >= rule.first && *seen < last {
+                    hit = Some(rule.kind.clone());
+                }
+            }
+        }
+        hit
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn wire(s: &str) -> Fault {
+        match s.parse::<FaultSpec>() {
+            Ok(FaultSpec::Wire(f)) => f,
+            other => panic!("{s}: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn parses_specs() {
+        let f = wire("ng:011@RDRES#2x3");
+        assert_eq!(
+            (f.kind, f.command.as_str(), f.first, f.count),
+            (FaultKind::Ng(11), "RDRES", 2, 3)
+        );
+        assert_eq!(wire("drop@RDSJ 01").command, "RDSJ 01");
+        assert_eq!(
+            wire("unplug:1500@CTSTA#2").kind,
+            FaultKind::Unplug(Duration::from_millis(1500))
+        );
+        assert_eq!("battery:low".parse(), Ok(FaultSpec::BatteryLow));
+        assert!("ng:11@RDRES".parse::<FaultSpec>().is_err());
+        assert!("silence@RDRES".parse::<FaultSpec>().is_err());
+        assert!("boom@RDRES".parse::<FaultSpec>().is_err());
+        assert!("drop".parse::<FaultSpec>().is_err());
+        assert!("drop@RDRES#0".parse::<FaultSpec>().is_err());
+    }
+
+    #[test]
+    fn plan_hits_the_chosen_occurrences_only() {
+        let mut p = FaultPlan::new(vec![wire("ng:033@RDRES#2x2"), wire("drop@RDSTU00")]);
+        assert_eq!(p.check("RDRES02,01,00"), None);
+        assert_eq!(p.check("RDSTU00"), Some(FaultKind::Drop));
+        assert_eq!(p.check("RDRES02,02,00"), Some(FaultKind::Ng(33)));
+        assert_eq!(p.check("RDSTU00"), None);
+        assert_eq!(p.check("RDRES02,03,00"), Some(FaultKind::Ng(33)));
+        assert_eq!(p.check("RDRES02,01,00"), None);
+    }
+}

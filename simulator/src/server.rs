@@ -1,0 +1,461 @@
+//! The running simulator: serves a responder (emulated instrument or transcript replay) over
+//! any byte stream, applies pacing and faults, and owns the instrument's pty life cycle
+//! (ready → unplug → replug) behind the [`Simulator`] builder.
+//!
+//! Depends on every other module of the crate and on tokio. Time comes from
+//! `tokio::time::Instant`, so tests can run it under paused time.
+//!
+//! Stage emulators plug in through [`Simulator::stage`]: the simulator creates the stage's pty,
+//! links it, announces it on the ready line, and hands the pty and the shared [`YPosition`] to
+//! the given serve function; the instrument then serves the line at that y.
+
+use std::future::Future;
+use std::io;
+use std::path::{Path, PathBuf};
+use std::pin::Pin;
+use std::time::Duration;
+
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+use tokio::sync::{mpsc, watch};
+use tokio::time::Instant;
+
+use crate::command::{Frame, FrameSplitter};
+use crate::data::{DataError, ProfileSet, YPosition};
+use crate::fault::{Fault, FaultKind, FaultPlan};
+use crate::instrument::{Instrument, InstrumentConfig};
+use crate::pty::{Pty, PtyError};
+use crate::replay::{Replay, Transcript};
+
+/// Bytes written before a reply by the `garbage` fault.
+pub const GARBAGE: &[u8] = b"\xfe\x00\x7f#";
+/// Pause between the two writes of a `split` reply.
+pub const SPLIT_PAUSE: Duration = Duration::from_millis(20);
+
+/// Answers frames.
+#[derive(Debug)]
+pub enum Responder {
+    /// The emulated instrument.
+    Emulate(Box<Instrument>),
+    /// A recorded transcript.
+    Replay(Box<Replay>),
+}
+
+impl Responder {
+    /// The reply bytes for one frame at `now`, `None` for no reply.
+    pub fn respond(&mut self, frame: &[u8], now: Duration) -> Option<Vec<u8>> {
+        match self {
+            Responder::Emulate(i) => Some(i.respond(frame, now)),
+            Responder::Replay(r) => r.respond(frame, now),
+        }
+    }
+
+    fn power_cycle(&mut self) {
+        if let Responder::Emulate(i) = self {
+            i.power_cycle();
+        }
+    }
+}
+
+/// Serial pacing: each reply is delayed by its transfer time at `baud` (10 bits per byte),
+/// multiplied by `time_scale`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pacing {
+    /// Baud rate.
+    pub baud: u32,
+    /// Multiplies the transfer time (0 = no pacing).
+    pub time_scale: f64,
+}
+
+impl Pacing {
+    fn delay(&self, bytes: usize) -> Duration {
+        if self.baud == 0 || self.time_scale <= 0.0 {
+            return Duration::ZERO;
+        }
+        Duration::try_from_secs_f64(bytes as f64 * 10.0 / f64::from(self.baud) * self.time_scale)
+            .unwrap_or(Duration::ZERO)
+    }
+}
+
+/// Why [`serve_connection`] returned.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Outcome {
+    /// The stream ended.
+    Closed,
+    /// An `unplug` fault fired: the device must vanish for this long.
+    Unplug(Duration),
+    /// Shutdown was requested.
+    Shutdown,
+}
+
+/// Serves `responder` over `io` until the stream ends, an unplug fault fires or `shutdown`
+/// becomes true. `epoch` is time zero of the responder's timeline.
+pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
+    io: &mut T,
+    responder: &mut Responder,
+    faults: &mut FaultPlan,
+    pacing: Pacing,
+    epoch: Instant,
+    shutdown: &mut watch::Receiver<bool>,
+) -> io::Result<Outcome> {
+    let mut splitter = FrameSplitter::new();
+    let mut buf = [0u8; 512];
+    loop {
+        if *shutdown.borrow() {
+            return Ok(Outcome::Shutdown);
+        }
+        let n = tokio::select! {
+            r = io.read(&mut buf) => r?,
+            _ = shutdown.changed() => return Ok(Outcome::Shutdown),
+        };
+        if n == 0 {
+            return Ok(Outcome::Closed);
+        }
+        for frame in splitter.push(buf.get(..n).unwrap_or(&[])) {
+            let line = match frame {
+                Frame::Line(l) => l,
+                Frame::Overflow => {
+                    io.write_all(b"NG013\r").await?;
+                    continue;
+                }
+            };
+            let text: String = line.iter().map(|&b| b as char).collect();
+            let fault = faults.check(&text);
+            let now = Instant::now().saturating_duration_since(epoch);
+            let reply = match &fault {
+                Some(FaultKind::Ng(code)) => Some(format!("NG{code:03}\r").into_bytes()),
+                _ => responder.respond(&line, now),
+            };
+            let Some(reply) = reply else { continue };
+            tokio::time::sleep(pacing.delay(reply.len())).await;
+            match fault {
+                Some(FaultKind::Drop) => {}
+                Some(FaultKind::Truncate) => {
+                    io.write_all(reply.get(..reply.len() / 2).unwrap_or(&[])).await?;
+                }
+                Some(FaultKind::Garbage) => {
+                    let mut bytes = GARBAGE.to_vec();
+                    bytes.extend_from_slice(&reply);
+                    io.write_all(&bytes).await?;
+                }
+                Some(FaultKind::Split) => {
+                    let (a, b) = reply.split_at(reply.len() / 2);
+                    io.write_all(a).await?;
+                    io.flush().await?;
+                    tokio::time::sleep(SPLIT_PAUSE).await;
+                    io.write_all(b).await?;
+                }
+                Some(FaultKind::Silence(d)) => {
+                    tokio::time::sleep(d).await;
+                    io.write_all(&reply).await?;
+                }
+                Some(FaultKind::Unplug(d)) => {
+                    io.write_all(&reply).await?;
+                    io.flush().await?;
+                    return Ok(Outcome::Unplug(d));
+                }
+                Some(FaultKind::Ng(_)) | None => io.write_all(&reply).await?,
+            }
+            io.flush().await?;
+        }
+    }
+}
+
+/// Events the running simulator reports (the binary prints each as one JSON line).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SimEvent {
+    /// The links can be opened.
+    Ready(ReadyInfo),
+    /// The instrument vanished (link removed).
+    Unplugged {
+        /// The instrument link.
+        instrument: PathBuf,
+    },
+    /// The instrument is back (new pty at the same link).
+    Replugged {
+        /// The instrument link.
+        instrument: PathBuf,
+    },
+    /// The serve loop stopped on an I/O error.
+    Failed {
+        /// The error text.
+        error: String,
+    },
+}
+
+/// What the ready line announces.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ReadyInfo {
+    /// Instrument link path.
+    pub instrument: PathBuf,
+    /// Stage link path, when a stage is attached.
+    pub stage: Option<PathBuf>,
+    /// `sj210` or `sj410`, or `replay`.
+    pub model: String,
+    /// Whether `RDEVA` works.
+    pub profile_readout: bool,
+}
+
+impl SimEvent {
+    /// The event as one JSON line (no newline).
+    pub fn to_json(&self) -> String {
+        let path = |p: &Path| serde_json::Value::String(p.display().to_string());
+        let v = match self {
+            SimEvent::Ready(r) => serde_json::json!({
+                "event": "ready",
+                "instrument": path(&r.instrument),
+                "stage": r.stage.as_deref().map(path),
+                "model": r.model,
+                "profile_readout": r.profile_readout,
+            }),
+            SimEvent::Unplugged { instrument } => {
+                serde_json::json!({"event": "unplugged", "instrument": path(instrument)})
+            }
+            SimEvent::Replugged { instrument } => {
+                serde_json::json!({"event": "replugged", "instrument": path(instrument)})
+            }
+            SimEvent::Failed { error } => serde_json::json!({"event": "failed", "error": error}),
+        };
+        v.to_string()
+    }
+}
+
+/// Errors starting the simulator.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// A pty could not be created or linked.
+    #[error(transparent)]
+    Pty(#[from] PtyError),
+    /// Profile data could not be loaded.
+    #[error(transparent)]
+    Data(#[from] DataError),
+}
+
+/// A stage emulator's serve function: gets the stage pty and the shared y position.
+pub type StageServe =
+    Box<dyn FnOnce(Pty, YPosition) -> Pin<Box<dyn Future<Output = io::Result<()>> + Send>> + Send>;
+
+enum Source {
+    Emulate(InstrumentConfig, Option<ProfileSet>),
+    Replay(Transcript, f64),
+}
+
+/// Builder for a running simulator.
+pub struct Simulator {
+    instrument_link: PathBuf,
+    source: Source,
+    faults: Vec<Fault>,
+    baud: u32,
+    y: YPosition,
+    stage: Option<(PathBuf, StageServe)>,
+}
+
+impl std::fmt::Debug for Simulator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Simulator")
+            .field("instrument_link", &self.instrument_link)
+            .field("faults", &self.faults)
+            .field("baud", &self.baud)
+            .field("stage", &self.stage.as_ref().map(|s| &s.0))
+            .finish_non_exhaustive()
+    }
+}
+
+impl Simulator {
+    /// A simulator linking the instrument at `instrument_link`, emulating a default SJ-210 that
+    /// serves the bundled data, at 38400 baud.
+    pub fn new(instrument_link: impl Into<PathBuf>) -> Self {
+        Self {
+            instrument_link: instrument_link.into(),
+            source: Source::Emulate(InstrumentConfig::default(), None),
+            faults: Vec::new(),
+            baud: 38400,
+            y: YPosition::new(),
+            stage: None,
+        }
+    }
+
+    /// Emulates an instrument with this configuration (keeps the profiles already set).
+    pub fn instrument(mut self, cfg: InstrumentConfig) -> Self {
+        let profiles = match self.source {
+            Source::Emulate(_, p) => p,
+            Source::Replay(..) => None,
+        };
+        self.source = Source::Emulate(cfg, profiles);
+        self
+    }
+
+    /// Serves these profiles (default: the bundled 31 Mitutoyo R windows).
+    pub fn profiles(mut self, set: ProfileSet) -> Self {
+        let cfg = match self.source {
+            Source::Emulate(c, _) => c,
+            Source::Replay(..) => InstrumentConfig::default(),
+        };
+        self.source = Source::Emulate(cfg, Some(set));
+        self
+    }
+
+    /// Replays a transcript instead of emulating; `time_scale` scales recorded delays.
+    pub fn replay(mut self, t: Transcript, time_scale: f64) -> Self {
+        self.source = Source::Replay(t, time_scale);
+        self
+    }
+
+    /// Adds a wire fault.
+    pub fn fault(mut self, f: Fault) -> Self {
+        self.faults.push(f);
+        self
+    }
+
+    /// Baud rate for pacing (pacing uses the instrument's time scale).
+    pub fn baud(mut self, baud: u32) -> Self {
+        self.baud = baud;
+        self
+    }
+
+    /// The shared stage y position the instrument reads when a stage is attached.
+    pub fn y_position(&self) -> YPosition {
+        self.y.clone()
+    }
+
+    /// Attaches a stage emulator: its pty is linked at `link` and `serve` runs on it.
+    pub fn stage(mut self, link: impl Into<PathBuf>, serve: StageServe) -> Self {
+        self.stage = Some((link.into(), serve));
+        self
+    }
+
+    /// Creates the ptys and starts serving. When this returns, the links can be opened and the
+    /// first event on the handle is [`SimEvent::Ready`].
+    pub fn start(self) -> Result<SimHandle, SimError> {
+        let stage_attached = self.stage.is_some();
+        let y = stage_attached.then(|| self.y.clone());
+        let (mut responder, model, readout, time_scale) = match self.source {
+            Source::Emulate(cfg, profiles) => {
+                let profiles = match profiles {
+                    Some(p) => p,
+                    None => ProfileSet::bundled()?,
+                };
+                let model = match cfg.model {
+                    crate::instrument::Model::Sj210 => "sj210",
+                    crate::instrument::Model::Sj410 => "sj410",
+                };
+                let (readout, scale) = (cfg.profile_readout, cfg.time_scale);
+                let inst = Instrument::new(cfg, profiles, y);
+                (Responder::Emulate(Box::new(inst)), model, readout, scale)
+            }
+            Source::Replay(t, scale) => (
+                Responder::Replay(Box::new(Replay::new(&t, scale))),
+                "replay",
+                true,
+                scale,
+            ),
+        };
+        let pty = Pty::create(&self.instrument_link)?;
+        let mut stage_link = None;
+        if let Some((link, serve)) = self.stage {
+            let stage_pty = Pty::create(&link)?;
+            stage_link = Some(link);
+            let y = self.y.clone();
+            tokio::spawn(async move {
+                if let Err(e) = serve(stage_pty, y).await {
+                    tracing::warn!("stage emulator stopped: {e}");
+                }
+            });
+        }
+        let (events_tx, events) = mpsc::unbounded_channel();
+        let (shutdown_tx, mut shutdown) = watch::channel(false);
+        let ready = ReadyInfo {
+            instrument: self.instrument_link.clone(),
+            stage: stage_link,
+            model: model.to_string(),
+            profile_readout: readout,
+        };
+        let _ = events_tx.send(SimEvent::Ready(ready.clone()));
+        let mut faults = FaultPlan::new(self.faults);
+        let pacing = Pacing {
+            baud: self.baud,
+            time_scale,
+        };
+        let link = self.instrument_link;
+        let task = tokio::spawn(async move {
+            let epoch = Instant::now();
+            let mut pty = pty;
+            loop {
+                let outcome = serve_connection(
+                    &mut pty,
+                    &mut responder,
+                    &mut faults,
+                    pacing,
+                    epoch,
+                    &mut shutdown,
+                )
+                .await;
+                match outcome {
+                    Ok(Outcome::Unplug(d)) => {
+                        drop(pty);
+                        responder.power_cycle();
+                        let _ = events_tx.send(SimEvent::Unplugged {
+                            instrument: link.clone(),
+                        });
+                        tokio::select! {
+                            _ = tokio::time::sleep(d) => {}
+                            _ = shutdown.changed() => return,
+                        }
+                        pty = match Pty::create(&link) {
+                            Ok(p) => p,
+                            Err(e) => {
+                                let _ = events_tx.send(SimEvent::Failed {
+                                    error: e.to_string(),
+                                });
+                                return;
+                            }
+                        };
+                        let _ = events_tx.send(SimEvent::Replugged {
+                            instrument: link.clone(),
+                        });
+                    }
+                    Ok(Outcome::Closed) | Ok(Outcome::Shutdown) => return,
+                    Err(e) => {
+                        let _ = events_tx.send(SimEvent::Failed {
+                            error: e.to_string(),
+                        });
+                        return;
+                    }
+                }
+            }
+        });
+        Ok(SimHandle {
+            ready,
+            events,
+            shutdown: shutdown_tx,
+            task,
+        })
+    }
+}
+
+/// A running simulator. Dropping it does not stop it; call [`SimHandle::shutdown`].
+#[derive(Debug)]
+pub struct SimHandle {
+    ready: ReadyInfo,
+    /// Events in order; the first is [`SimEvent::Ready`].
+    pub events: mpsc::UnboundedReceiver<SimEvent>,
+    shutdown: watch::Sender<bool>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl SimHandle {
+    /// The paths announced on the ready line.
+    pub fn ready(&self) -> &ReadyInfo {
+        &self.ready
+    }
+
+    /// Waits for the next event (`None` once the simulator has stopped).
+    pub async fn next_event(&mut self) -> Option<SimEvent> {
+        self.events.recv().await
+    }
+
+    /// Stops serving, closes the ptys and removes the links.
+    pub async fn shutdown(self) {
+        let _ = self.shutdown.send(true);
+        let _ = self.task.await;
+    }
+}
