@@ -1,6 +1,147 @@
-//! The `surfscan-sim` binary: a thin command line over the `surfscan_sim` library.
+//! The `surfscan-sim` binary: a thin command line over the `surfscan_sim` library. Prints one
+//! JSON line per simulator event (the first is `{"event":"ready",...}` once the links can be
+//! opened) and runs until SIGTERM, SIGINT or stdin closing.
 
-fn main() {
-    eprintln!("surfscan-sim: no device selected");
-    std::process::exit(2);
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, ValueEnum};
+use surfscan_sim::replay::Transcript;
+use surfscan_sim::{Battery, FaultSpec, InstrumentConfig, Model, ProfileSet, Simulator};
+use tokio::io::AsyncReadExt;
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum ModelArg {
+    Sj210,
+    Sj410,
+}
+
+/// Simulated Mitutoyo SJ-210 / SJ-410 over a pseudo-terminal.
+#[derive(Debug, Parser)]
+#[command(name = "surfscan-sim", version)]
+struct Args {
+    /// Path at which to link the instrument's pty (e.g. /tmp/sj210).
+    #[arg(long)]
+    instrument_link: PathBuf,
+    /// Emulated model.
+    #[arg(long, value_enum, default_value = "sj210")]
+    model: ModelArg,
+    /// Answer RDEVA with NG030, as the SJ-210 manual documents.
+    #[arg(long)]
+    no_profile_readout: bool,
+    /// Profiles to serve: `x_mm,z_um` CSV, `profile,y_mm,x_mm,z_um` CSV, or a header-less grid
+    /// CSV (needs --pitch-x-mm). Default: the bundled 31 windows of a Mitutoyo R profile.
+    #[arg(long)]
+    profiles: Option<PathBuf>,
+    /// x pitch of a grid CSV, mm.
+    #[arg(long)]
+    pitch_x_mm: Option<f64>,
+    /// Multiplies trace, return and transfer times (1 = real time, 0 = instantaneous).
+    #[arg(long, default_value_t = 1.0)]
+    time_scale: f64,
+    /// Baud rate used for pacing replies.
+    #[arg(long, default_value_t = 38400)]
+    baud: u32,
+    /// Decimals of heights in RDEVA replies.
+    #[arg(long, default_value_t = 3)]
+    decimals: u8,
+    /// Stop at the end of travel (status 005) instead of returning.
+    #[arg(long)]
+    no_auto_return: bool,
+    /// Fault to inject, KIND[:ARG]@COMMAND[#N][xK] or battery:low|abnormal (repeatable).
+    #[arg(long = "fault")]
+    faults: Vec<FaultSpec>,
+    /// Replay this recorded transcript (v1) instead of emulating.
+    #[arg(long)]
+    transcript: Option<PathBuf>,
+}
+
+fn build(args: Args) -> Result<Simulator, String> {
+    if !(args.time_scale >= 0.0 && args.time_scale.is_finite()) {
+        return Err(format!(
+            "--time-scale {} must be a finite number ≥ 0",
+            args.time_scale
+        ));
+    }
+    if args.decimals > 6 {
+        return Err(format!("--decimals {} must be 0–6", args.decimals));
+    }
+    let mut cfg = InstrumentConfig {
+        model: match args.model {
+            ModelArg::Sj210 => Model::Sj210,
+            ModelArg::Sj410 => Model::Sj410,
+        },
+        profile_readout: !args.no_profile_readout,
+        decimals: args.decimals,
+        auto_return: !args.no_auto_return,
+        time_scale: args.time_scale,
+        ..InstrumentConfig::default()
+    };
+    let mut sim = Simulator::new(&args.instrument_link).baud(args.baud);
+    for f in args.faults {
+        match f {
+            FaultSpec::Wire(w) => sim = sim.fault(w),
+            FaultSpec::BatteryLow => cfg.battery = Battery::Low,
+            FaultSpec::BatteryAbnormal => cfg.battery = Battery::Abnormal,
+        }
+    }
+    sim = sim.instrument(cfg);
+    if let Some(p) = &args.profiles {
+        let set = ProfileSet::load(p, args.pitch_x_mm).map_err(|e| e.to_string())?;
+        sim = sim.profiles(set);
+    }
+    if let Some(t) = &args.transcript {
+        let text = std::fs::read_to_string(t)
+            .map_err(|e| format!("cannot read transcript {}: {e}", t.display()))?;
+        let transcript =
+            Transcript::parse(&text).map_err(|e| format!("transcript {}: {e}", t.display()))?;
+        sim = sim.replay(transcript, args.time_scale);
+    }
+    Ok(sim)
+}
+
+#[tokio::main]
+async fn main() -> ExitCode {
+    let args = Args::parse();
+    let sim = match build(args) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("surfscan-sim: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let mut handle = match sim.start() {
+        Ok(h) => h,
+        Err(e) => {
+            eprintln!("surfscan-sim: {e}");
+            return ExitCode::from(1);
+        }
+    };
+    let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+    {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("surfscan-sim: cannot install SIGTERM handler: {e}");
+            return ExitCode::from(1);
+        }
+    };
+    let stdin_closed = async {
+        let mut stdin = tokio::io::stdin();
+        let mut buf = [0u8; 64];
+        while matches!(stdin.read(&mut buf).await, Ok(n) if n > 0) {}
+    };
+    tokio::pin!(stdin_closed);
+    loop {
+        tokio::select! {
+            ev = handle.next_event() => match ev {
+                Some(ev) => println!("{}", ev.to_json()),
+                None => break,
+            },
+            _ = term.recv() => break,
+            _ = tokio::signal::ctrl_c() => break,
+            _ = &mut stdin_closed => break,
+        }
+    }
+    handle.shutdown().await;
+    ExitCode::SUCCESS
 }
