@@ -60,7 +60,7 @@ pub enum PtyError {
 pub struct Pty {
     master: AsyncFd<OwnedFd>,
     // Held open on purpose; see the module documentation.
-    _slave: OwnedFd,
+    slave: OwnedFd,
     slave_path: PathBuf,
     link: PathBuf,
 }
@@ -110,7 +110,7 @@ impl Pty {
             .map_err(|e| PtyError::Register(e.into()))?;
         Ok(Self {
             master,
-            _slave: pair.slave,
+            slave: pair.slave,
             slave_path,
             link: link.to_path_buf(),
         })
@@ -124,6 +124,30 @@ impl Pty {
     /// The link path clients open.
     pub fn link(&self) -> &Path {
         &self.link
+    }
+
+    /// Bytes written by the simulator that the client has not read yet (the slave's input
+    /// queue, `FIONREAD`).
+    pub fn unread_by_client(&self) -> io::Result<usize> {
+        let mut n: libc::c_int = 0;
+        // SAFETY: FIONREAD writes one c_int through the pointer, which is valid for the call;
+        // the descriptor is owned by `self` and open.
+        let rc = unsafe { libc::ioctl(self.slave.as_raw_fd(), libc::FIONREAD, &mut n) };
+        if rc < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        Ok(usize::try_from(n).unwrap_or(0))
+    }
+
+    /// Waits (up to `limit`) until the client has read everything written, so that closing the
+    /// pty does not discard a reply the real device would already have transmitted.
+    pub async fn wait_drained(&self, limit: std::time::Duration) {
+        let deadline = tokio::time::Instant::now() + limit;
+        while matches!(self.unread_by_client(), Ok(n) if n > 0)
+            && tokio::time::Instant::now() < deadline
+        {
+            tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+        }
     }
 }
 

@@ -28,6 +28,9 @@ use crate::replay::{Replay, Transcript};
 
 /// Bytes written before a reply by the `garbage` fault.
 pub const GARBAGE: &[u8] = b"\xfe\x00\x7f#";
+/// How long after its reply an `unplug` fault closes the pty (then waits until the client has
+/// read that reply, at most 1 s more).
+pub const UNPLUG_GRACE: Duration = Duration::from_millis(50);
 /// Pause between the two writes of a `split` reply.
 pub const SPLIT_PAUSE: Duration = Duration::from_millis(20);
 
@@ -391,6 +394,10 @@ impl Simulator {
                 .await;
                 match outcome {
                     Ok(Outcome::Unplug(d)) => {
+                        // Writes to a pty master reach the slave's queue asynchronously, and a
+                        // hang-up flushes that queue: give the reply time to arrive and be read.
+                        tokio::time::sleep(UNPLUG_GRACE).await;
+                        pty.wait_drained(Duration::from_secs(1)).await;
                         drop(pty);
                         responder.power_cycle();
                         let _ = events_tx.send(SimEvent::Unplugged {
