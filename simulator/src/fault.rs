@@ -85,7 +85,9 @@ impl std::str::FromStr for FaultSpec {
             "battery:abnormal" => return Ok(FaultSpec::BatteryAbnormal),
             _ => {}
         }
-        let (kind, target) = spec.split_once('@').ok_or_else(|| err("missing '@COMMAND'"))?;
+        let (kind, target) = spec
+            .split_once('@')
+            .ok_or_else(|| err("missing '@COMMAND'"))?;
         let (name, arg) = match kind.split_once(':') {
             Some((n, a)) => (n, Some(a)),
             None => (kind, None),
@@ -118,11 +120,17 @@ impl std::str::FromStr for FaultSpec {
             _ => (target, 1),
         };
         let (command, first) = match rest.rsplit_once('#') {
-            Some((c, n)) => (c, n.parse::<u32>().map_err(|_| err("bad occurrence after '#'"))?),
+            Some((c, n)) => (
+                c,
+                n.parse::<u32>()
+                    .map_err(|_| err("bad occurrence after '#'"))?,
+            ),
             None => (rest, 1),
         };
         if command.is_empty() || first == 0 || count == 0 {
-            return Err(err("command must be non-empty, occurrence and count at least 1"));
+            return Err(err(
+                "command must be non-empty, occurrence and count at least 1",
+            ));
         }
         Ok(FaultSpec::Wire(Fault {
             kind,

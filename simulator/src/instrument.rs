@@ -263,7 +263,8 @@ impl Instrument {
                     self.finish_trace(line);
                     self.phase = if self.cfg.auto_return {
                         Phase::Returning {
-                            end: end + self.scaled(self.traverse_mm(line), self.cfg.return_speed_mm_s),
+                            end: end
+                                + self.scaled(self.traverse_mm(line), self.cfg.return_speed_mm_s),
                         }
                     } else {
                         Phase::AtEnd
@@ -503,7 +504,10 @@ impl Instrument {
         let Some(&(name, unit)) = PARAMETERS.get(usize::from(param) - 1) else {
             return Reply::Ng(32);
         };
-        let Some(value) = res.roughness.value(usize::from(param) - 1, usize::from(index)) else {
+        let Some(value) = res
+            .roughness
+            .value(usize::from(param) - 1, usize::from(index))
+        else {
             return Reply::Ng(32);
         };
         let width = if self.cfg.model == Model::Sj410 { 8 } else { 7 };
@@ -656,7 +660,10 @@ mod tests {
         let mut i = Instrument::new(cfg, set(), None);
         ask(&mut i, "CTSTA", 0);
         assert_eq!(ask(&mut i, "RDEVA00", 0), "OK00004\r");
-        assert_eq!(ask(&mut i, "RDEVA03", 0), "OK03,    1.000,   -1.000,    3.000\r");
+        assert_eq!(
+            ask(&mut i, "RDEVA03", 0),
+            "OK03,    1.000,   -1.000,    3.000\r"
+        );
         assert_eq!(ask(&mut i, "RDEVA50", 0), "OK01,   -3.000\r");
         assert_eq!(ask(&mut i, "RDEVA50", 0), "OK00,0.0\r");
         // The total request rewinds the cursor.

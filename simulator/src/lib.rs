@@ -19,11 +19,11 @@
 
 pub mod command;
 pub mod data;
+pub mod fault;
 pub mod instrument;
 pub mod pty;
-pub mod roughness;
-pub mod fault;
 pub mod replay;
+pub mod roughness;
 pub mod server;
 
 pub use data::{ProfileSet, YPosition};

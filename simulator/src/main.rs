@@ -117,8 +117,7 @@ async fn main() -> ExitCode {
             return ExitCode::from(1);
         }
     };
-    let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-    {
+    let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
         Ok(s) => s,
         Err(e) => {
             eprintln!("surfscan-sim: cannot install SIGTERM handler: {e}");

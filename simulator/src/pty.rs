@@ -106,8 +106,8 @@ impl Pty {
         link_at(link, &slave_path)?;
         // SAFETY: `OwnedFd` owns a valid descriptor that stays open until the `AsyncFd` (and with
         // it the registration) is dropped; nothing else closes or replaces it.
-        let master = unsafe { AsyncFd::register(pair.master) }
-            .map_err(|e| PtyError::Register(e.into()))?;
+        let master =
+            unsafe { AsyncFd::register(pair.master) }.map_err(|e| PtyError::Register(e.into()))?;
         Ok(Self {
             master,
             slave: pair.slave,
@@ -197,9 +197,9 @@ impl AsyncRead for Pty {
         loop {
             let mut guard = ready!(self.master.poll_read_ready(cx))?;
             let unfilled = buf.initialize_unfilled();
-            match guard.try_io(|fd| {
-                nix::unistd::read(fd.get_ref().as_raw_fd(), unfilled).map_err(io_err)
-            }) {
+            match guard
+                .try_io(|fd| nix::unistd::read(fd.get_ref().as_raw_fd(), unfilled).map_err(io_err))
+            {
                 Ok(Ok(n)) => {
                     buf.advance(n);
                     return Poll::Ready(Ok(()));

@@ -50,7 +50,9 @@ pub struct Transcript {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum ReplayError {
     /// The first line is not `# surfscan transcript v1`.
-    #[error("line 1 is {0:?}, expected \"# surfscan transcript v1\"; is this a surfscan transcript?")]
+    #[error(
+        "line 1 is {0:?}, expected \"# surfscan transcript v1\"; is this a surfscan transcript?"
+    )]
     Magic(String),
     /// A data line is not `<time> <dir> <bytes>`.
     #[error("line {line}: {why}: {text:?}")]
@@ -211,7 +213,11 @@ impl Replay {
             if let Some((i, t0)) = self.trace {
                 let polls = self.polls.get(i).or(self.polls.last())?;
                 let dt = now.saturating_sub(t0).as_secs_f64();
-                let scale = if self.time_scale > 0.0 { self.time_scale } else { 1e-9 };
+                let scale = if self.time_scale > 0.0 {
+                    self.time_scale
+                } else {
+                    1e-9
+                };
                 return polls
                     .iter()
                     .take_while(|(t, _)| t * scale <= dt)
@@ -262,7 +268,10 @@ mod tests {
     #[test]
     fn parses_header_and_entries() {
         let t = Transcript::parse(T).unwrap();
-        assert_eq!(t.header[0], ("instrument".to_string(), "SJ-210".to_string()));
+        assert_eq!(
+            t.header[0],
+            ("instrument".to_string(), "SJ-210".to_string())
+        );
         assert_eq!(t.entries.len(), 15);
         assert_eq!(t.entries[3].bytes, b"OK\r");
         assert!(Transcript::parse("hello\n").is_err());
@@ -285,9 +294,15 @@ mod tests {
         assert_eq!(r.respond(b"RDSTU00", at(14.95)).unwrap(), b"OK002\r");
         assert_eq!(r.respond(b"RDSTU00", at(17.0)).unwrap(), b"OK000\r");
         assert_eq!(r.respond(b"RDRES02,01,00", at(17.1)).unwrap(), b"NG033\r");
-        assert_eq!(r.respond(b"RDRES02,01,00", at(17.2)).unwrap(), b"OKRa      3.123 um\r");
+        assert_eq!(
+            r.respond(b"RDRES02,01,00", at(17.2)).unwrap(),
+            b"OKRa      3.123 um\r"
+        );
         // Used up: the last reply repeats.
-        assert_eq!(r.respond(b"RDRES02,01,00", at(17.3)).unwrap(), b"OKRa      3.123 um\r");
+        assert_eq!(
+            r.respond(b"RDRES02,01,00", at(17.3)).unwrap(),
+            b"OKRa      3.123 um\r"
+        );
         // Recorded without a reply; never recorded at all.
         assert_eq!(r.respond(b"RDPSA", at(18.0)), None);
         assert_eq!(r.respond(b"RDCON", at(18.0)), None);

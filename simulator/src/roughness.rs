@@ -69,7 +69,9 @@ mod tests {
     #[test]
     fn square_wave_closed_forms() {
         // ±a square wave: Ra = Rq = a; Rz = 2a per segment.
-        let z: Vec<f64> = (0..100).map(|i| if i % 2 == 0 { 1.5 } else { -1.5 }).collect();
+        let z: Vec<f64> = (0..100)
+            .map(|i| if i % 2 == 0 { 1.5 } else { -1.5 })
+            .collect();
         let r = Roughness::compute(&z, 5);
         assert!((r.total[0] - 1.5).abs() < 1e-12);
         assert!((r.total[1] - 1.5).abs() < 1e-12);

@@ -133,7 +133,8 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
             match fault {
                 Some(FaultKind::Drop) => {}
                 Some(FaultKind::Truncate) => {
-                    io.write_all(reply.get(..reply.len() / 2).unwrap_or(&[])).await?;
+                    io.write_all(reply.get(..reply.len() / 2).unwrap_or(&[]))
+                        .await?;
                 }
                 Some(FaultKind::Garbage) => {
                     let mut bytes = GARBAGE.to_vec();

@@ -94,7 +94,10 @@ impl Client {
             if done {
                 return seen;
             }
-            assert!(Instant::now() < deadline, "never reached {want:?}: {seen:?}");
+            assert!(
+                Instant::now() < deadline,
+                "never reached {want:?}: {seen:?}"
+            );
             std::thread::sleep(Duration::from_millis(20));
         }
     }
@@ -177,7 +180,12 @@ async fn clean_trace_results_and_readout_match_the_fixture() {
     let ra_sim: f64 = ra_reply[8..15].trim().parse().unwrap();
     assert!((ra_sim - ra).abs() < 0.0006, "Ra {ra_sim} vs {ra}");
     assert!(ra > 2.0, "the demo data must be visibly rough, Ra {ra}");
-    let rq_sim: f64 = c.ask("RDRES00,02,00").trim_start_matches("OK").trim().parse().unwrap();
+    let rq_sim: f64 = c
+        .ask("RDRES00,02,00")
+        .trim_start_matches("OK")
+        .trim()
+        .parse()
+        .unwrap();
     assert!((rq_sim - rq).abs() < 0.0006);
 
     assert_eq!(c.ask("RDEVA00"), "OK01067\r");
@@ -313,7 +321,10 @@ async fn every_wire_fault_is_observable() {
     assert_eq!(c.ask("CTSTA"), "NG007\r");
     assert_eq!(c.ask("RDSTU00"), "OK000\r");
     c.send("RDSTU00");
-    assert!(c.drain(Duration::from_millis(300)).is_empty(), "dropped reply");
+    assert!(
+        c.drain(Duration::from_millis(300)).is_empty(),
+        "dropped reply"
+    );
     assert_eq!(c.ask("RDSTU00"), "OK000\r");
     c.send("RDCON");
     // Full reply would be "OK3130001.6012\r" (15 bytes): the first 7 only, no CR.
@@ -324,7 +335,10 @@ async fn every_wire_fault_is_observable() {
     assert_eq!(&g[GARBAGE.len()..], b"OK03\r");
     c.send("RDSJ 00");
     let first = c.read_some(T).unwrap();
-    assert_eq!(first, b"OK0", "first write of a split reply is half of OK000\\r");
+    assert_eq!(
+        first, b"OK0",
+        "first write of a split reply is half of OK000\\r"
+    );
     assert_eq!(c.line(), "00\r");
     c.send("RDPSA");
     assert!(c.read_some(Duration::from_millis(300)).unwrap().is_empty());
@@ -368,7 +382,12 @@ async fn stage_position_selects_the_served_line() {
     assert_eq!(h.ready().stage.as_deref(), Some(stage_link.as_path()));
     assert!(stage_link.exists());
     let mut c = Client::open(&link(&dir));
-    for (y_nm, line) in [(1_060_000, 3), (1_060_000, 3), (1_000_000, 0), (1_099_000, 0)] {
+    for (y_nm, line) in [
+        (1_060_000, 3),
+        (1_060_000, 3),
+        (1_000_000, 0),
+        (1_099_000, 0),
+    ] {
         y.set_nm(y_nm);
         assert_eq!(c.ask("CTSTA"), "OK\r");
         assert_eq!(c.ask("RDEVA00"), "OK00003\r");
@@ -398,7 +417,10 @@ async fn replays_a_recorded_transcript_over_the_pty() {
     let seen = c.poll_until("OK000\r");
     assert_eq!(seen, vec!["OK001\r", "OK000\r"]);
     c.send("RDRES02,01,00");
-    assert_eq!(c.drain(Duration::from_millis(300)), b"OKRa     \xb50.5 um\r");
+    assert_eq!(
+        c.drain(Duration::from_millis(300)),
+        b"OKRa     \xb50.5 um\r"
+    );
     h.shutdown().await;
 }
 
@@ -407,7 +429,12 @@ fn binary_prints_ready_line_and_exits_when_stdin_closes() {
     let dir = tempfile::tempdir().unwrap();
     let l = link(&dir);
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan-sim"))
-        .args(["--instrument-link", l.to_str().unwrap(), "--time-scale", "0"])
+        .args([
+            "--instrument-link",
+            l.to_str().unwrap(),
+            "--time-scale",
+            "0",
+        ])
         .args(["--fault", "battery:abnormal", "--model", "sj410"])
         .stdin(std::process::Stdio::piped())
         .stdout(std::process::Stdio::piped())
@@ -431,7 +458,10 @@ fn binary_prints_ready_line_and_exits_when_stdin_closes() {
             assert!(status.success());
             break;
         }
-        assert!(Instant::now() < deadline, "simulator did not exit on stdin EOF");
+        assert!(
+            Instant::now() < deadline,
+            "simulator did not exit on stdin EOF"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     assert!(!l.exists(), "exit removes the link");
