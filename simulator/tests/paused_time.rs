@@ -1,0 +1,76 @@
+//! The serve loop under tokio's paused clock: the status timeline and serial pacing follow
+//! simulated time exactly, over an in-memory duplex stream instead of a pty.
+
+use std::time::Duration;
+
+use surfscan_sim::data::ServedProfile;
+use surfscan_sim::fault::FaultPlan;
+use surfscan_sim::instrument::Instrument;
+use surfscan_sim::server::{serve_connection, Outcome, Pacing, Responder};
+use surfscan_sim::{InstrumentConfig, ProfileSet};
+use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
+use tokio::time::Instant;
+
+async fn ask(host: &mut DuplexStream, cmd: &str) -> (String, Duration) {
+    let t0 = Instant::now();
+    host.write_all(format!("{cmd}\r").as_bytes()).await.unwrap();
+    let mut out = Vec::new();
+    let mut b = [0u8; 1];
+    while !out.ends_with(b"\r") {
+        host.read_exact(&mut b).await.unwrap();
+        out.push(b[0]);
+    }
+    (String::from_utf8(out).unwrap(), t0.elapsed())
+}
+
+#[tokio::test(start_paused = true)]
+async fn timeline_and_pacing_follow_the_clock() {
+    // One 2000-point profile at 1 µm pitch: 2 mm + λc 2.5 mm = 4.5 mm traverse:
+    // 9 s measuring at 0.5 mm/s, 4.5 s returning at 1 mm/s.
+    let set = ProfileSet::new(vec![ServedProfile {
+        y_mm: 0.0,
+        pitch_x_mm: 0.001,
+        z_um: (0..2000)
+            .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 })
+            .collect(),
+    }])
+    .unwrap();
+    let inst = Instrument::new(InstrumentConfig::default(), set, None);
+    let (mut host, mut dev) = tokio::io::duplex(4096);
+    let (_stop_tx, mut stop) = tokio::sync::watch::channel(false);
+    let epoch = Instant::now();
+    let server = tokio::spawn(async move {
+        let mut r = Responder::Emulate(Box::new(inst));
+        let mut faults = FaultPlan::default();
+        let pacing = Pacing {
+            baud: 9600,
+            time_scale: 1.0,
+        };
+        serve_connection(&mut dev, &mut r, &mut faults, pacing, epoch, &mut stop).await
+    });
+
+    // "OK000\r" is 6 bytes = 60 bits at 9600 baud = 6.25 ms (tokio timers round up to 1 ms).
+    let (reply, took) = ask(&mut host, "RDSTU00").await;
+    assert_eq!(reply, "OK000\r");
+    assert!(
+        took >= Duration::from_micros(6250) && took <= Duration::from_millis(7),
+        "{took:?}"
+    );
+    let (reply, _) = ask(&mut host, "CTSTA").await;
+    assert_eq!(reply, "OK\r");
+    let started = Instant::now();
+    tokio::time::sleep_until(started + Duration::from_millis(8900)).await;
+    assert_eq!(ask(&mut host, "RDSTU00").await.0, "OK001\r");
+    tokio::time::sleep_until(started + Duration::from_millis(9100)).await;
+    assert_eq!(ask(&mut host, "RDSTU00").await.0, "OK002\r");
+    tokio::time::sleep_until(started + Duration::from_millis(13600)).await;
+    assert_eq!(ask(&mut host, "RDSTU00").await.0, "OK000\r");
+    // Square wave ±1: Ra = Rq = 1, Rz = 2.
+    assert_eq!(
+        ask(&mut host, "RDRES02,03,00").await.0,
+        "OKRz      2.000 um\r"
+    );
+
+    drop(host);
+    assert_eq!(server.await.unwrap().unwrap(), Outcome::Closed);
+}
