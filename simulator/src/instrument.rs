@@ -263,8 +263,9 @@ impl Instrument {
                     self.finish_trace(line);
                     self.phase = if self.cfg.auto_return {
                         Phase::Returning {
-                            end: end
-                                + self.scaled(self.traverse_mm(line), self.cfg.return_speed_mm_s),
+                            end: end.saturating_add(
+                                self.scaled(self.traverse_mm(line), self.cfg.return_speed_mm_s),
+                            ),
                         }
                     } else {
                         Phase::AtEnd
@@ -353,7 +354,7 @@ impl Instrument {
             Command::Retract => match self.phase {
                 Phase::Idle | Phase::AtEnd => {
                     self.phase = Phase::Retracting {
-                        end: now + secs(self.cfg.time_scale),
+                        end: now.saturating_add(secs(self.cfg.time_scale)),
                     };
                     Reply::Ok(String::new())
                 }
@@ -365,7 +366,7 @@ impl Instrument {
                 Phase::AtEnd | Phase::Retracted => {
                     let mm = self.last_line.map_or(0.0, |l| self.traverse_mm(l));
                     self.phase = Phase::Returning {
-                        end: now + self.scaled(mm, self.cfg.return_speed_mm_s),
+                        end: now.saturating_add(self.scaled(mm, self.cfg.return_speed_mm_s)),
                     };
                     Reply::Ok(String::new())
                 }
@@ -406,7 +407,9 @@ impl Instrument {
                 self.traces += 1;
                 self.last_line = Some(line);
                 self.results = None;
-                let end = now + self.scaled(self.traverse_mm(line), self.cfg.measure_speed_mm_s);
+                let end = now.saturating_add(
+                    self.scaled(self.traverse_mm(line), self.cfg.measure_speed_mm_s),
+                );
                 self.phase = Phase::Measuring {
                     start: now,
                     end,
@@ -435,7 +438,7 @@ impl Instrument {
             let mm = self.traverse_mm(line) * frac;
             self.results = None;
             self.phase = Phase::Returning {
-                end: now + self.scaled(mm, self.cfg.return_speed_mm_s),
+                end: now.saturating_add(self.scaled(mm, self.cfg.return_speed_mm_s)),
             };
         }
     }
@@ -501,13 +504,13 @@ impl Instrument {
         let Some(res) = &self.results else {
             return Reply::Ng(101);
         };
-        let Some(&(name, unit)) = PARAMETERS.get(usize::from(param) - 1) else {
+        let Some(p) = usize::from(param).checked_sub(1) else {
             return Reply::Ng(32);
         };
-        let Some(value) = res
-            .roughness
-            .value(usize::from(param) - 1, usize::from(index))
-        else {
+        let Some(&(name, unit)) = PARAMETERS.get(p) else {
+            return Reply::Ng(32);
+        };
+        let Some(value) = res.roughness.value(p, usize::from(index)) else {
             return Reply::Ng(32);
         };
         let width = if self.cfg.model == Model::Sj410 { 8 } else { 7 };
@@ -719,6 +722,36 @@ mod tests {
         assert_eq!(ask(&mut i, "RDSTU00", 1), "OK003\r");
         assert_eq!(ask(&mut i, "RDSTU00", 1000), "OK004\r");
         assert_eq!(ask(&mut i, "CTSTA", 1000), "NG018\r");
+    }
+
+    #[test]
+    fn extreme_time_scale_and_direct_commands_do_not_panic() {
+        let cfg = InstrumentConfig {
+            time_scale: f64::INFINITY,
+            ..InstrumentConfig::default()
+        };
+        let mut i = Instrument::new(cfg, set(), None);
+        assert_eq!(ask(&mut i, "CTSTA", 0), "OK\r");
+        assert_eq!(ask(&mut i, "RDSTU00", u64::MAX / 2), "OK001\r");
+        let mut j = Instrument::new(
+            InstrumentConfig {
+                time_scale: 0.0,
+                ..InstrumentConfig::default()
+            },
+            set(),
+            None,
+        );
+        j.handle(Command::Start, s(0));
+        let r = j.handle(
+            Command::Result {
+                ab: None,
+                mode: 2,
+                param: 0,
+                index: 0,
+            },
+            s(0),
+        );
+        assert_eq!(r, Reply::Ng(32));
     }
 
     #[test]
