@@ -45,6 +45,12 @@ struct Args {
     /// Decimals of heights in RDEVA replies.
     #[arg(long, default_value_t = 3)]
     decimals: u8,
+    /// Measuring speed, mm/s (the trace time is traverse length / speed × time scale).
+    #[arg(long, default_value_t = 0.5)]
+    speed_mm_s: f64,
+    /// Number of sampling lengths reported by RDCON and used for Rz (0 = arbitrary length).
+    #[arg(long, default_value_t = 0)]
+    sampling_lengths: u8,
     /// Stop at the end of travel (status 005) instead of returning.
     #[arg(long)]
     no_auto_return: bool,
@@ -66,6 +72,19 @@ fn build(args: Args) -> Result<Simulator, String> {
     if args.decimals > 6 {
         return Err(format!("--decimals {} must be 0–6", args.decimals));
     }
+    if !(args.speed_mm_s > 0.0 && args.speed_mm_s.is_finite()) {
+        return Err(format!(
+            "--speed-mm-s {} must be a positive number",
+            args.speed_mm_s
+        ));
+    }
+    if args.sampling_lengths > 20 {
+        return Err(format!(
+            "--sampling-lengths {} must be 0–20",
+            args.sampling_lengths
+        ));
+    }
+    let defaults = InstrumentConfig::default();
     let mut cfg = InstrumentConfig {
         model: match args.model {
             ModelArg::Sj210 => Model::Sj210,
@@ -75,7 +94,12 @@ fn build(args: Args) -> Result<Simulator, String> {
         decimals: args.decimals,
         auto_return: !args.no_auto_return,
         time_scale: args.time_scale,
-        ..InstrumentConfig::default()
+        measure_speed_mm_s: args.speed_mm_s,
+        conditions: surfscan_sim::instrument::Conditions {
+            sampling_lengths: args.sampling_lengths,
+            ..defaults.conditions.clone()
+        },
+        ..defaults
     };
     let mut sim = Simulator::new(&args.instrument_link).baud(args.baud);
     for f in args.faults {

@@ -328,7 +328,8 @@ impl Simulator {
     }
 
     /// Creates the ptys and starts serving. When this returns, the links can be opened and the
-    /// first event on the handle is [`SimEvent::Ready`].
+    /// first event on the handle is [`SimEvent::Ready`]. Must be called within a tokio runtime
+    /// (the ptys register with its reactor and the serve loop is spawned on it).
     pub fn start(self) -> Result<SimHandle, SimError> {
         let stage_attached = self.stage.is_some();
         let y = stage_attached.then(|| self.y.clone());
@@ -462,8 +463,16 @@ impl SimHandle {
     }
 
     /// Stops serving, closes the ptys and removes the links.
-    pub async fn shutdown(self) {
+    pub async fn shutdown(mut self) {
         let _ = self.shutdown.send(true);
-        let _ = self.task.await;
+        // A reply blocked on a full pty buffer (no client reading) cannot see the signal:
+        // give the loop a moment, then abort it; dropping the pty removes the link either way.
+        if tokio::time::timeout(Duration::from_secs(1), &mut self.task)
+            .await
+            .is_err()
+        {
+            self.task.abort();
+            let _ = (&mut self.task).await;
+        }
     }
 }

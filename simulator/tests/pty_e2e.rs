@@ -466,3 +466,28 @@ fn binary_prints_ready_line_and_exits_when_stdin_closes() {
     }
     assert!(!l.exists(), "exit removes the link");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn shutdown_completes_while_a_reply_is_blocked_on_an_unread_pty() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = InstrumentConfig {
+        time_scale: 0.0,
+        ..InstrumentConfig::default()
+    };
+    let h = start(Simulator::new(link(&dir)).instrument(cfg)).await;
+    let mut c = Client::open(&link(&dir));
+    assert_eq!(c.ask("CTSTA"), "OK\r");
+    assert_eq!(c.ask("RDEVA00"), "OK01067\r");
+    // 8 read-outs of 22 blocks of ~500 bytes (~88 kB), never read: far more than the pty
+    // buffers hold, so the simulator's write blocks.
+    for _ in 0..8 {
+        c.send("RDEVA00");
+        for _ in 0..22 {
+            c.send("RDEVA50");
+        }
+    }
+    tokio::time::timeout(T, h.shutdown())
+        .await
+        .expect("shutdown must not hang on a blocked write");
+    assert!(!link(&dir).exists());
+}
