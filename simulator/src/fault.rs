@@ -1,8 +1,9 @@
 //! Fault injection: which frames get a faulty reply, parsed from `--fault SPEC` strings.
 //!
-//! Pure; depends on nothing else in the crate. Spec grammar: `KIND[:ARG]@COMMAND[#N][xK]` —
+//! Pure; depends on nothing else in the crate. Spec grammar: `KIND[:ARG]@COMMAND[%T][#N][xK]` —
 //! the fault hits the N-th (1-based, default 1) and the following K−1 (default K = 1) frames
-//! that start with `COMMAND`. Kinds:
+//! that start with `COMMAND`; with `%T`, only frames sent during trace T count (trace T begins
+//! with the T-th `CTSTA` frame and lasts until the next one). Kinds:
 //! * `ng:CODE` — answer `NGCODE` instead of the command (e.g. `ng:011@RDRES#1x3`,
 //!   `ng:007@CTSTA#2`); the instrument does not see the command;
 //! * `drop` — the instrument handles the command but the reply is lost;
@@ -10,6 +11,7 @@
 //! * `garbage` — non-ASCII bytes written before the reply;
 //! * `split` — the reply is written in two writes with a short pause between;
 //! * `silence:MS` — the reply comes after MS milliseconds of silence;
+//! * `lf` — an extra LF after the reply's CR;
 //! * `unplug:MS` — the reply is sent, then the device vanishes (pty closed, link removed) and
 //!   comes back after MS milliseconds as a freshly powered-up instrument (e.g.
 //!   `unplug:2000@CTSTA#2`: vanishes mid-trace 2).
@@ -34,6 +36,8 @@ pub enum FaultKind {
     Split,
     /// Delay before the reply.
     Silence(Duration),
+    /// An extra `\n` after the reply.
+    ExtraLf,
     /// Reply, then unplug for the given time.
     Unplug(Duration),
 }
@@ -49,6 +53,8 @@ pub struct Fault {
     pub first: u32,
     /// Number of consecutive occurrences hit.
     pub count: u32,
+    /// Only frames during this trace (1-based) count.
+    pub trace: Option<u32>,
 }
 
 /// A parsed `--fault` argument: a wire fault or a battery state.
@@ -64,7 +70,7 @@ pub enum FaultSpec {
 
 /// A fault spec that could not be parsed.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("bad fault spec {spec:?}: {why}; expected KIND[:ARG]@COMMAND[#N][xK] (kinds ng:CODE, drop, truncate, garbage, split, silence:MS, unplug:MS) or battery:low|abnormal")]
+#[error("bad fault spec {spec:?}: {why}; expected KIND[:ARG]@COMMAND[%TRACE][#N][xK] (kinds ng:CODE, drop, truncate, garbage, split, lf, silence:MS, unplug:MS) or battery:low|abnormal")]
 pub struct FaultSpecError {
     /// The spec as given.
     pub spec: String,
@@ -110,6 +116,7 @@ impl std::str::FromStr for FaultSpec {
             "garbage" => FaultKind::Garbage,
             "split" => FaultKind::Split,
             "silence" => FaultKind::Silence(millis(arg)?),
+            "lf" => FaultKind::ExtraLf,
             "unplug" => FaultKind::Unplug(millis(arg)?),
             _ => return Err(err("unknown kind")),
         };
@@ -119,7 +126,7 @@ impl std::str::FromStr for FaultSpec {
             }
             _ => (target, 1),
         };
-        let (command, first) = match rest.rsplit_once('#') {
+        let (rest, first) = match rest.rsplit_once('#') {
             Some((c, n)) => (
                 c,
                 n.parse::<u32>()
@@ -127,9 +134,19 @@ impl std::str::FromStr for FaultSpec {
             ),
             None => (rest, 1),
         };
-        if command.is_empty() || first == 0 || count == 0 {
+        let (command, trace) = match rest.rsplit_once('%') {
+            Some((c, t)) => (
+                c,
+                Some(
+                    t.parse::<u32>()
+                        .map_err(|_| err("bad trace number after '%'"))?,
+                ),
+            ),
+            None => (rest, None),
+        };
+        if command.is_empty() || first == 0 || count == 0 || trace == Some(0) {
             return Err(err(
-                "command must be non-empty, occurrence and count at least 1",
+                "command must be non-empty; trace, occurrence and count at least 1",
             ));
         }
         Ok(FaultSpec::Wire(Fault {
@@ -137,6 +154,7 @@ impl std::str::FromStr for FaultSpec {
             command: command.to_string(),
             first,
             count,
+            trace,
         }))
     }
 }
@@ -145,6 +163,7 @@ impl std::str::FromStr for FaultSpec {
 #[derive(Debug, Clone, Default)]
 pub struct FaultPlan {
     rules: Vec<(Fault, u32)>,
+    traces: u32,
 }
 
 impl FaultPlan {
@@ -152,14 +171,19 @@ impl FaultPlan {
     pub fn new(rules: Vec<Fault>) -> Self {
         Self {
             rules: rules.into_iter().map(|f| (f, 0)).collect(),
+            traces: 0,
         }
     }
 
     /// Counts `frame` against every rule and returns the first fault that hits it.
     pub fn check(&mut self, frame: &str) -> Option<FaultKind> {
+        if frame.starts_with("CTSTA") {
+            self.traces = self.traces.saturating_add(1);
+        }
         let mut hit = None;
         for (rule, seen) in &mut self.rules {
-            if frame.starts_with(rule.command.as_str()) {
+            let in_trace = rule.trace.is_none_or(|t| t == self.traces);
+            if in_trace && frame.starts_with(rule.command.as_str()) {
                 *seen += 1;
                 let last = rule.first.saturating_add(rule.count);
                 if hit.is_none() && *seen >= rule.first && *seen < last {
@@ -200,6 +224,27 @@ mod tests {
         assert!("boom@RDRES".parse::<FaultSpec>().is_err());
         assert!("drop".parse::<FaultSpec>().is_err());
         assert!("drop@RDRES#0".parse::<FaultSpec>().is_err());
+    }
+
+    #[test]
+    fn trace_filter_counts_only_within_that_trace() {
+        let f = wire("ng:101@RDRES%2#2x2");
+        assert_eq!((f.trace, f.first, f.count), (Some(2), 2, 2));
+        assert!("drop@RDRES%0".parse::<FaultSpec>().is_err());
+        let mut p = FaultPlan::new(vec![f, wire("lf@RDSTU00%1")]);
+        assert_eq!(p.check("RDRES02,01,00"), None);
+        assert_eq!(p.check("CTSTA"), None);
+        assert_eq!(p.check("RDSTU00"), Some(FaultKind::ExtraLf));
+        assert_eq!(p.check("RDRES02,01,00"), None);
+        assert_eq!(p.check("RDRES02,02,00"), None);
+        assert_eq!(p.check("CTSTA"), None);
+        assert_eq!(p.check("RDSTU00"), None);
+        assert_eq!(p.check("RDRES02,01,00"), None);
+        assert_eq!(p.check("RDRES02,02,00"), Some(FaultKind::Ng(101)));
+        assert_eq!(p.check("RDRES02,03,00"), Some(FaultKind::Ng(101)));
+        assert_eq!(p.check("RDRES02,01,00"), None);
+        assert_eq!(p.check("CTSTA"), None);
+        assert_eq!(p.check("RDRES02,02,00"), None);
     }
 
     #[test]

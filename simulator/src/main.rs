@@ -54,7 +54,7 @@ struct Args {
     /// Stop at the end of travel (status 005) instead of returning.
     #[arg(long)]
     no_auto_return: bool,
-    /// Fault to inject, KIND[:ARG]@COMMAND[#N][xK] or battery:low|abnormal (repeatable).
+    /// Fault to inject, KIND[:ARG]@COMMAND[%TRACE][#N][xK] or battery:low|abnormal (repeatable).
     #[arg(long = "fault")]
     faults: Vec<FaultSpec>,
     /// Replay this recorded transcript (v1) instead of emulating.

@@ -148,6 +148,11 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
                     tokio::time::sleep(SPLIT_PAUSE).await;
                     io.write_all(b).await?;
                 }
+                Some(FaultKind::ExtraLf) => {
+                    let mut bytes = reply.clone();
+                    bytes.push(b'\n');
+                    io.write_all(&bytes).await?;
+                }
                 Some(FaultKind::Silence(d)) => {
                     tokio::time::sleep(d).await;
                     io.write_all(&reply).await?;

@@ -311,7 +311,8 @@ async fn every_wire_fault_is_observable() {
         .fault(wire("truncate@RDCON"))
         .fault(wire("garbage@RDPAR"))
         .fault(wire("split@RDSJ 00"))
-        .fault(wire("silence:600@RDPSA"));
+        .fault(wire("silence:600@RDPSA"))
+        .fault(wire("lf@RDSTU01"));
     let h = start(sim).await;
     let mut c = Client::open(&link(&dir));
     assert_eq!(c.ask("RDSJ 01"), "NG011\r");
@@ -343,7 +344,8 @@ async fn every_wire_fault_is_observable() {
     c.send("RDPSA");
     assert!(c.read_some(Duration::from_millis(300)).unwrap().is_empty());
     assert_eq!(c.line(), "OK0.000\r");
-    assert_eq!(c.ask("RDSTU01"), "OK001\r");
+    c.send("RDSTU01");
+    assert_eq!(c.drain(Duration::from_millis(300)), b"OK001\r\n");
     h.shutdown().await;
 }
 
