@@ -234,3 +234,44 @@ impl AsyncWrite for Pty {
         Poll::Ready(Ok(()))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+    #[tokio::test]
+    async fn replaces_a_stale_link_refuses_a_file_and_survives_client_reconnects() {
+        let dir = tempfile::tempdir().unwrap();
+        let link = dir.path().join("dev");
+        std::os::unix::fs::symlink("/nonexistent/stale", &link).unwrap();
+        let mut pty = Pty::create(&link).unwrap();
+        assert_eq!(std::fs::read_link(&link).unwrap(), pty.slave_path());
+
+        // A client connects, writes, goes away; the next one still finds the device.
+        for round in 0..2u8 {
+            let mut client = std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(&link)
+                .unwrap();
+            std::io::Write::write_all(&mut client, &[b'a' + round]).unwrap();
+            let mut b = [0u8; 1];
+            pty.read_exact(&mut b).await.unwrap();
+            assert_eq!(b[0], b'a' + round);
+            pty.write_all(b"z").await.unwrap();
+            let mut r = [0u8; 1];
+            std::io::Read::read_exact(&mut client, &mut r).unwrap();
+            assert_eq!(&r, b"z");
+        }
+
+        let file = dir.path().join("plain");
+        std::fs::write(&file, b"x").unwrap();
+        assert!(matches!(
+            Pty::create(&file),
+            Err(PtyError::LinkOccupied { .. })
+        ));
+        drop(pty);
+        assert!(std::fs::symlink_metadata(&link).is_err(), "drop unplugs");
+    }
+}
