@@ -30,3 +30,6 @@ pub use data::{ProfileSet, YPosition};
 pub use fault::{Fault, FaultKind, FaultSpec};
 pub use instrument::{Battery, InstrumentConfig, Model};
 pub use server::{ReadyInfo, SimEvent, SimHandle, Simulator};
+
+pub mod grbl;
+pub mod zaber;

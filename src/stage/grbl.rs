@@ -444,6 +444,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
                     })
                 }
                 Some(GrblMessage::Banner(_)) => self.expect_banner = false,
+                Some(GrblMessage::Alarm(3)) => self.trusted = false,
                 Some(_) => {}
             }
         }
