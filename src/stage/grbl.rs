@@ -235,6 +235,8 @@ pub struct GrblStage<T> {
     trusted: bool,
     expect_banner: bool,
     needs_reset: bool,
+    /// A reply may still be in flight from an interrupted exchange: drain before talking.
+    dirty: bool,
     warnings: Vec<String>,
 }
 
@@ -250,6 +252,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
             trusted: false,
             expect_banner: false,
             needs_reset: false,
+            dirty: false,
             warnings: Vec::new(),
         }
     }
@@ -346,8 +349,43 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
         Ok(m)
     }
 
+    /// Discards whatever is still arriving from an interrupted exchange (until the link
+    /// has been quiet for a tenth of the reply timeout), noting resets and lost positions.
+    async fn drain(&mut self) -> Result<(), StageError> {
+        let quiet = self.cfg.reply_timeout / 10;
+        while let Some(m) = self.next_raw(quiet).await? {
+            match m {
+                GrblMessage::Banner(_) if !self.expect_banner => self.trusted = false,
+                GrblMessage::Banner(_) => self.expect_banner = false,
+                GrblMessage::Alarm(1 | 3) => {
+                    self.trusted = false;
+                    self.needs_reset = true;
+                }
+                GrblMessage::Alarm(_) => self.needs_reset = true,
+                other => tracing::debug!(?other, "discarded stale GRBL message"),
+            }
+        }
+        self.dirty = false;
+        Ok(())
+    }
+
     /// Sends one line and waits for its `ok`/`error`, collecting the lines before it.
     async fn command(
+        &mut self,
+        line: &str,
+        timeout: Duration,
+    ) -> Result<Vec<GrblMessage>, StageError> {
+        if self.dirty {
+            self.drain().await?;
+        }
+        let r = self.command_inner(line, timeout).await;
+        if r.is_err() {
+            self.dirty = true;
+        }
+        r
+    }
+
+    async fn command_inner(
         &mut self,
         line: &str,
         timeout: Duration,
@@ -382,6 +420,17 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
     }
 
     async fn query_status(&mut self) -> Result<StatusReport, StageError> {
+        if self.dirty {
+            self.drain().await?;
+        }
+        let r = self.query_status_inner().await;
+        if r.is_err() {
+            self.dirty = true;
+        }
+        r
+    }
+
+    async fn query_status_inner(&mut self) -> Result<StatusReport, StageError> {
         self.write(&[RT_STATUS]).await?;
         loop {
             match self.next(self.cfg.reply_timeout).await? {
@@ -449,6 +498,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
             }
         }
         self.needs_reset = false;
+        self.dirty = false;
         Ok(())
     }
 }

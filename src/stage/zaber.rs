@@ -224,6 +224,8 @@ pub struct ZaberStage<T> {
     cfg: ZaberConfig,
     framer: LineFramer,
     pending: std::collections::VecDeque<String>,
+    /// A reply may still be in flight from an interrupted exchange: drain before talking.
+    dirty: bool,
 }
 
 impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
@@ -234,6 +236,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
             cfg,
             framer: LineFramer::new(512),
             pending: Default::default(),
+            dirty: false,
         }
     }
 
@@ -274,6 +277,33 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
     /// Sends a command to this axis and returns its reply (RJ → error). Info and alert lines
     /// and replies from other devices are skipped.
     async fn command(&mut self, command: &str) -> Result<Reply, StageError> {
+        if self.dirty {
+            // Discard late replies until the link is quiet for a tenth of the reply timeout.
+            self.pending.clear();
+            loop {
+                let quiet = tokio::time::Instant::now() + self.cfg.reply_timeout / 10;
+                match self.next_line(quiet).await {
+                    Ok(l) => tracing::debug!(line = %l, "discarded stale Zaber line"),
+                    Err(StageError::Timeout { .. }) => break,
+                    Err(e) => return Err(e),
+                }
+            }
+            self.dirty = false;
+        }
+        let r = self.command_inner(command).await;
+        // A rejection consumed its reply; any other failure may leave one in flight.
+        if r.is_err()
+            && !matches!(
+                r,
+                Err(StageError::Rejected { .. } | StageError::ControllerLimit { .. })
+            )
+        {
+            self.dirty = true;
+        }
+        r
+    }
+
+    async fn command_inner(&mut self, command: &str) -> Result<Reply, StageError> {
         let line = encode_command(self.cfg.device, self.cfg.axis, None, command, false);
         let w = async {
             self.io.write_all(line.as_bytes()).await?;

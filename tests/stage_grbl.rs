@@ -1,0 +1,271 @@
+//! End to end over an in-memory duplex link: the GRBL driver and the motion policy against
+//! the simulated GRBL controller (own parser, backlash dead band, fault injection).
+
+use std::sync::Arc;
+use std::time::Duration;
+use surfscan::devices::{DeviceFault, FaultClass, YAxis};
+use surfscan::stage::grbl::GrblStage;
+use surfscan::stage::{MotionPolicy, ScanDirection, StageError, StageSettings};
+use surfscan::units::Nm;
+use surfscan_sim::grbl::{serve, GrblSimConfig, StageFault, StageShared};
+use tokio::io::DuplexStream;
+
+const SETTINGS: &str = r#"
+port = "/dev/null"
+protocol = "grbl"
+steps-per-mm = 400
+soft-limit-min-mm = -100
+soft-limit-max-mm = 0
+backlash-mm = 0.05
+settle-ms = 50
+deadband-um = 1
+max-move-attempts = 3
+feed-mm-min = 60
+poll-interval-ms = 200
+"#;
+
+/// 0.05 mm backlash at 400 steps/mm.
+const BACKLASH_NM: i64 = 50_000;
+
+type Axis = MotionPolicy<GrblStage<DuplexStream>>;
+
+fn start(sim: GrblSimConfig) -> (Axis, Arc<StageShared>) {
+    let settings: StageSettings = toml::from_str(SETTINGS).unwrap();
+    let (host, dev) = tokio::io::duplex(4096);
+    let shared = StageShared::new();
+    tokio::spawn(serve(dev, sim, shared.clone()));
+    let mut g = settings.grbl_config().unwrap();
+    g.open_grace = Duration::from_millis(300);
+    let axis = MotionPolicy::new(GrblStage::new(host, g), settings.policy_config().unwrap());
+    (axis, shared)
+}
+
+fn sim_cfg() -> GrblSimConfig {
+    GrblSimConfig {
+        steps_per_mm: 400.0,
+        max_travel_mm: 100.0,
+        backlash_mm: 0.05,
+        start_steps: -4000,
+        homed_at_start: false,
+        ..Default::default()
+    }
+}
+
+async fn homed() -> (Axis, Arc<StageShared>) {
+    let (mut a, s) = start(sim_cfg());
+    a.connect().await.unwrap();
+    a.home().await.unwrap();
+    (a, s)
+}
+
+#[tokio::test(start_paused = true)]
+async fn homing_makes_the_position_trusted() {
+    let (mut a, shared) = start(sim_cfg());
+    let r = a.connect().await.unwrap();
+    assert!(r.identity.contains("VER:1.1h"), "{}", r.identity);
+    assert!(!r.position_trusted, "powered up in Alarm: not referenced");
+    assert_eq!(r.position, Nm(-10_000_000));
+    let e = a.move_to(Nm(-5_000_000)).await.unwrap_err();
+    assert_eq!(e.class(), FaultClass::PositionLost);
+    a.home().await.unwrap();
+    assert!(a.position_trusted());
+    // Homing ends with a move down from the pull-off: the carriage lags by the backlash.
+    assert_eq!(shared.true_position_nm(), BACKLASH_NM);
+}
+
+#[tokio::test(start_paused = true)]
+async fn thirty_one_steps_land_exactly_with_backlash_taken_out() {
+    let (mut a, shared) = homed().await;
+    let y_start = Nm(-20_000_000);
+    let step = Nm(10_000);
+    let targets: Vec<Nm> = (0..31).map(|k| Nm(y_start.0 + k * step.0)).collect();
+    assert!(a.check_targets(&targets).unwrap().is_empty());
+    for (k, &t) in targets.iter().enumerate() {
+        let arr = a.move_to(t).await.unwrap();
+        assert_eq!(arr.readback, t, "line {k}");
+        assert_eq!(arr.attempts, 1, "line {k}");
+        // 0.01 mm = 4 steps at 400 steps/mm: the target is exactly -8000 + 4k steps.
+        assert_eq!(a.to_units(t).0, -8000 + 4 * k as i64);
+        assert_eq!(shared.true_position_nm(), t.0, "carriage at line {k}");
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn backlash_is_taken_out_only_when_direction_reverses() {
+    let (mut a, shared) = homed().await;
+    for k in 0..5 {
+        a.move_to(Nm(-1_000_000 + k * 10_000)).await.unwrap();
+        assert_eq!(shared.true_position_nm(), -1_000_000 + k * 10_000);
+    }
+    // Resume at an earlier line: a reverse move. Without the approach from below the
+    // carriage would sit BACKLASH_NM above the target.
+    a.move_to(Nm(-990_000)).await.unwrap();
+    assert_eq!(shared.true_position_nm(), -990_000);
+    // A reverse move made behind the policy's back (e.g. a jog) is visible only through the
+    // readback; the policy sees a reverse target and re-approaches.
+    a.move_to(Nm(-2_000_000)).await.unwrap();
+    assert_eq!(shared.true_position_nm(), -2_000_000);
+}
+
+#[tokio::test(start_paused = true)]
+async fn negative_step_scan_approaches_from_above_consistently() {
+    let (mut a, shared) = homed().await;
+    a.set_scan_direction(ScanDirection::Negative);
+    for k in 0..6 {
+        let t = -1_000_000 - k * 10_000;
+        let arr = a.move_to(Nm(t)).await.unwrap();
+        assert_eq!(arr.readback, Nm(t));
+        // Approached from above: the carriage trails the motor by the full backlash, the
+        // same on every line.
+        assert_eq!(shared.true_position_nm(), t + BACKLASH_NM);
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn soft_limit_violation_sends_nothing() {
+    let (mut a, shared) = homed().await;
+    let before = shared.bytes_received();
+    let e = a.move_to(Nm(10_000)).await.unwrap_err();
+    assert!(
+        matches!(
+            e,
+            StageError::SoftLimit {
+                target: Nm(10_000),
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::Fatal);
+    let e = a.check_targets(&[Nm(-100_000_001)]).unwrap_err();
+    assert!(matches!(e, StageError::SoftLimit { .. }));
+    tokio::task::yield_now().await;
+    assert_eq!(shared.bytes_received(), before);
+}
+
+#[tokio::test(start_paused = true)]
+async fn reset_banner_mid_session_is_position_lost_until_rehomed() {
+    let (mut a, shared) = homed().await;
+    a.move_to(Nm(-1_000_000)).await.unwrap();
+    shared.inject(StageFault::ResetBanner);
+    let e = a.move_to(Nm(-990_000)).await.unwrap_err();
+    assert_eq!(e.class(), FaultClass::PositionLost, "{e}");
+    assert!(!a.position_trusted());
+    let e = a.move_to(Nm(-990_000)).await.unwrap_err();
+    assert!(matches!(e, StageError::PositionLost { .. }));
+    a.home().await.unwrap();
+    a.move_to(Nm(-990_000)).await.unwrap();
+    assert_eq!(shared.true_position_nm(), -990_000);
+}
+
+#[tokio::test(start_paused = true)]
+async fn alarm2_needs_reset_and_our_own_reset_banner_is_not_position_lost() {
+    let (mut a, shared) = homed().await;
+    a.move_to(Nm(-1_000_000)).await.unwrap();
+    shared.inject(StageFault::Alarm2);
+    let e = a.move_to(Nm(-990_000)).await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::Fault { reason, class: FaultClass::Fatal } if reason.contains("ALARM:2")),
+        "{e}"
+    );
+    assert!(a.position_trusted(), "ALARM:2 keeps the position");
+    // Recovery: soft reset (its banner is expected) then $H.
+    a.home().await.unwrap();
+    assert!(a.position_trusted());
+    a.move_to(Nm(-990_000)).await.unwrap();
+    assert_eq!(shared.true_position_nm(), -990_000);
+}
+
+#[tokio::test(start_paused = true)]
+async fn error15_is_a_controller_limit() {
+    let (mut a, shared) = homed().await;
+    shared.inject(StageFault::Error15);
+    let e = a.move_to(Nm(-1_000_000)).await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::ControllerLimit { reason, .. } if reason.contains("error:15")),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::Fatal);
+}
+
+#[tokio::test(start_paused = true)]
+async fn silence_times_out_and_vanishing_is_absent() {
+    let (mut a, shared) = homed().await;
+    shared.inject(StageFault::Silence);
+    let e = a.move_to(Nm(-1_000_000)).await.unwrap_err();
+    assert!(matches!(e, StageError::Timeout { .. }), "{e}");
+    assert_eq!(e.class(), FaultClass::Transient);
+
+    let (mut a, shared) = homed().await;
+    shared.inject(StageFault::Vanish);
+    let e = a.move_to(Nm(-1_000_000)).await.unwrap_err();
+    assert!(matches!(e, StageError::Vanished { .. }), "{e}");
+    assert_eq!(e.class(), FaultClass::Absent);
+}
+
+#[tokio::test(start_paused = true)]
+async fn reset_at_open_is_detected_and_reported() {
+    let (mut a, _shared) = start(GrblSimConfig {
+        banner_at_open: true,
+        homed_at_start: true,
+        ..sim_cfg()
+    });
+    let r = a.connect().await.unwrap();
+    assert!(
+        !r.position_trusted,
+        "an Arduino reset at open loses the position"
+    );
+
+    let (mut a, _shared) = start(GrblSimConfig {
+        homed_at_start: true,
+        ..sim_cfg()
+    });
+    let r = a.connect().await.unwrap();
+    assert!(
+        r.position_trusted,
+        "no banner, Idle: the controller kept its reference"
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn simulator_locks_gcode_out_during_a_jog() {
+    use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
+    let (host, dev) = tokio::io::duplex(4096);
+    let shared = StageShared::new();
+    tokio::spawn(serve(
+        dev,
+        GrblSimConfig {
+            homed_at_start: true,
+            start_steps: -4000,
+            ..sim_cfg()
+        },
+        shared,
+    ));
+    let (r, mut w) = tokio::io::split(host);
+    let mut lines = BufReader::new(r).lines();
+    // 1 mm at 60 mm/min: a one-second jog.
+    w.write_all(b"$J=G53 G90 Y-9 F60\n").await.unwrap();
+    assert_eq!(lines.next_line().await.unwrap().unwrap(), "ok");
+    w.write_all(b"G4 P0.01\n").await.unwrap();
+    assert_eq!(lines.next_line().await.unwrap().unwrap(), "error:9");
+    w.write_all(b"?").await.unwrap();
+    assert!(lines
+        .next_line()
+        .await
+        .unwrap()
+        .unwrap()
+        .starts_with("<Jog|MPos:0.000,-10.000"));
+    tokio::time::sleep(Duration::from_millis(1001)).await;
+    w.write_all(b"?").await.unwrap();
+    assert!(lines
+        .next_line()
+        .await
+        .unwrap()
+        .unwrap()
+        .starts_with("<Idle|MPos:0.000,-9.000"));
+    w.write_all(b"G4 P0.01\n").await.unwrap();
+    assert_eq!(lines.next_line().await.unwrap().unwrap(), "ok");
+    // Past travel: refused, no alarm.
+    w.write_all(b"$J=G53 G90 Y1 F60\n").await.unwrap();
+    assert_eq!(lines.next_line().await.unwrap().unwrap(), "error:15");
+}
