@@ -1,0 +1,141 @@
+//! End to end over an in-memory duplex link: the Zaber driver and the motion policy against
+//! the simulated Zaber device (own parser, backlash dead band, fault injection).
+
+use std::sync::Arc;
+use surfscan::devices::{DeviceFault, FaultClass, YAxis};
+use surfscan::stage::zaber::ZaberStage;
+use surfscan::stage::{MotionPolicy, StageError, StageSettings};
+use surfscan::units::Nm;
+use surfscan_sim::grbl::{StageFault, StageShared};
+use surfscan_sim::zaber::{serve, ZaberSimConfig};
+use tokio::io::DuplexStream;
+
+const SETTINGS: &str = r#"
+port = "/dev/null"
+protocol = "zaber"
+nm-per-microstep = 125
+device = 1
+axis = 1
+soft-limit-min-mm = 0
+soft-limit-max-mm = 100
+backlash-mm = 0.05
+settle-ms = 50
+deadband-um = 0.5
+poll-interval-ms = 100
+"#;
+
+type Axis = MotionPolicy<ZaberStage<DuplexStream>>;
+
+fn start() -> (Axis, Arc<StageShared>) {
+    let settings: StageSettings = toml::from_str(SETTINGS).unwrap();
+    let (host, dev) = tokio::io::duplex(4096);
+    let shared = StageShared::new();
+    let sim = ZaberSimConfig {
+        nm_per_microstep: 125.0,
+        limit_max: 800_000,
+        backlash: 400, // 0.05 mm
+        start: 123_456,
+        homed_at_start: false,
+        ..Default::default()
+    };
+    tokio::spawn(serve(dev, sim, shared.clone()));
+    let axis = MotionPolicy::new(
+        ZaberStage::new(host, settings.zaber_config()),
+        settings.policy_config().unwrap(),
+    );
+    (axis, shared)
+}
+
+async fn homed() -> (Axis, Arc<StageShared>) {
+    let (mut a, s) = start();
+    a.connect().await.unwrap();
+    a.home().await.unwrap();
+    (a, s)
+}
+
+#[tokio::test(start_paused = true)]
+async fn not_referenced_until_homed() {
+    let (mut a, shared) = start();
+    let r = a.connect().await.unwrap();
+    assert!(r.identity.contains("50081"), "{}", r.identity);
+    assert!(!r.position_trusted, "WR at power-up");
+    assert_eq!(r.position, Nm(123_456 * 125));
+    assert!(matches!(
+        a.move_to(Nm(10_000_000)).await,
+        Err(StageError::PositionLost { .. })
+    ));
+    a.home().await.unwrap();
+    assert!(a.position_trusted());
+    assert_eq!(shared.true_position_nm(), 0);
+}
+
+#[tokio::test(start_paused = true)]
+async fn thirty_one_steps_land_exactly_with_backlash_taken_out() {
+    let (mut a, shared) = homed().await;
+    // Start high, then scan: the first move is a reverse move from wherever we are.
+    a.move_to(Nm(50_000_000)).await.unwrap();
+    let targets: Vec<Nm> = (0..31).map(|k| Nm(10_000_000 + k * 10_000)).collect();
+    assert!(a.check_targets(&targets).unwrap().is_empty());
+    for (k, &t) in targets.iter().enumerate() {
+        let arr = a.move_to(t).await.unwrap();
+        // 0.01 mm = 80 microsteps of 125 nm.
+        assert_eq!(a.to_units(t).0, 80_000 + 80 * k as i64);
+        assert_eq!(arr.readback, t, "line {k}");
+        assert_eq!(shared.true_position_nm(), t.0, "carriage at line {k}");
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn faults_map_to_named_errors() {
+    let (mut a, shared) = homed().await;
+    a.move_to(Nm(10_000_000)).await.unwrap();
+
+    shared.inject(StageFault::Reject);
+    let e = a.move_to(Nm(10_010_000)).await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::Rejected { reason, .. } if reason.contains("AGAIN")),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::Transient);
+    a.move_to(Nm(10_010_000)).await.unwrap();
+    assert_eq!(shared.true_position_nm(), 10_010_000);
+
+    shared.inject(StageFault::Stall);
+    let e = a.move_to(Nm(20_000_000)).await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::Fault { reason, .. } if reason.starts_with("FS")),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::PositionLost);
+    assert!(!a.position_trusted());
+    a.home().await.unwrap();
+    a.move_to(Nm(20_000_000)).await.unwrap();
+    assert_eq!(shared.true_position_nm(), 20_000_000);
+
+    shared.inject(StageFault::PositionLostWr);
+    let e = a.move_to(Nm(20_010_000)).await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::PositionLost { reason } if reason.starts_with("WR")),
+        "{e}"
+    );
+    assert!(!a.position_trusted());
+}
+
+#[tokio::test(start_paused = true)]
+async fn soft_limit_violation_sends_nothing_and_silence_and_vanishing_are_named() {
+    let (mut a, shared) = homed().await;
+    let before = shared.bytes_received();
+    let e = a.move_to(Nm(100_000_001)).await.unwrap_err();
+    assert!(matches!(e, StageError::SoftLimit { .. }), "{e}");
+    tokio::task::yield_now().await;
+    assert_eq!(shared.bytes_received(), before);
+
+    shared.inject(StageFault::Silence);
+    let e = a.move_to(Nm(1_000_000)).await.unwrap_err();
+    assert!(matches!(e, StageError::Timeout { .. }), "{e}");
+
+    let (mut a, shared) = homed().await;
+    shared.inject(StageFault::Vanish);
+    let e = a.move_to(Nm(1_000_000)).await.unwrap_err();
+    assert_eq!(e.class(), FaultClass::Absent, "{e}");
+}
