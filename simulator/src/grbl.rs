@@ -241,7 +241,6 @@ impl Machine {
 
     fn jog(&mut self, words: &str) -> String {
         let mut absolute = false;
-        let mut machine = false;
         let mut y: Option<f64> = None;
         let mut f: Option<f64> = None;
         let b = words.as_bytes();
@@ -264,10 +263,14 @@ impl Machine {
                 None => return "error:2\r\n".into(),
             };
             match (c, v) {
-                (b'G', v) if v == 90.0 => absolute = true,
-                (b'G', v) if v == 91.0 => absolute = false,
-                (b'G', v) if v == 53.0 => machine = true,
-                (b'G', v) if v == 21.0 => {}
+                // G53 (machine coordinates) and G21 (mm) are accepted; no work offsets are
+                // emulated, so machine and work coordinates coincide.
+                (b'G', v) if v.fract() == 0.0 => match v as i64 {
+                    90 => absolute = true,
+                    91 => absolute = false,
+                    53 | 21 => {}
+                    _ => return "error:16\r\n".into(),
+                },
                 (b'Y', v) => y = Some(v),
                 (b'X', _) | (b'Z', _) => {}
                 (b'F', v) => f = Some(v),
@@ -275,7 +278,6 @@ impl Machine {
             }
             i = j;
         }
-        let _ = machine; // No work offsets are emulated: G53 and work coordinates coincide.
         let (Some(yv), Some(feed)) = (y, f) else {
             return if f.is_none() {
                 "error:22\r\n"

@@ -446,7 +446,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
         }
     }
 
-    fn to_status(&mut self, r: &StatusReport) -> Result<StageStatus, StageError> {
+    fn status_from(&mut self, r: &StatusReport) -> Result<StageStatus, StageError> {
         if let Some(w) = r.wco_mm {
             self.wco_mm = w;
         }
@@ -536,7 +536,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
         }
         let r = self.query_status().await?;
         self.trusted = !reset_at_open && r.state != GrblState::Alarm;
-        let mut st = self.to_status(&r)?;
+        let mut st = self.status_from(&r)?;
         if reset_at_open {
             st.warnings.push(
                 "controller reset when the port was opened (Arduino DTR auto-reset): position lost, homing required".into(),
@@ -547,7 +547,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
 
     async fn status(&mut self) -> Result<StageStatus, StageError> {
         let r = self.query_status().await?;
-        self.to_status(&r)
+        self.status_from(&r)
     }
 
     async fn home(&mut self, timeout: Duration) -> Result<StageStatus, StageError> {
@@ -577,7 +577,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
         let deadline = tokio::time::Instant::now() + timeout;
         loop {
             let r = self.query_status().await?;
-            let st = self.to_status(&r)?;
+            let st = self.status_from(&r)?;
             match st.motion {
                 Motion::Idle => return Ok(st),
                 Motion::Alarm => {
