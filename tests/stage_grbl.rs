@@ -269,3 +269,60 @@ async fn simulator_locks_gcode_out_during_a_jog() {
     w.write_all(b"$J=G53 G90 Y1 F60\n").await.unwrap();
     assert_eq!(lines.next_line().await.unwrap().unwrap(), "error:15");
 }
+
+#[tokio::test(start_paused = true)]
+async fn hard_limit_alarm_mid_session_is_position_lost_and_wpos_reports_use_wco() {
+    use surfscan::stage::Stage;
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let settings: StageSettings = toml::from_str(SETTINGS).unwrap();
+    let (host, mut dev) = tokio::io::duplex(4096);
+    let mut g = GrblStage::new(host, settings.grbl_config().unwrap());
+    let script = tokio::spawn(async move {
+        let mut b = [0u8; 1];
+        // First `?`: a WPos report with its offset (MPos y = 2.5 + (−5) = −2.5 mm).
+        dev.read_exact(&mut b).await.unwrap();
+        assert_eq!(b[0], b'?');
+        dev.write_all(b"<Idle|WPos:0.000,2.500,0.000|FS:0,0|WCO:0.000,-5.000,0.000>\r\n")
+            .await
+            .unwrap();
+        // Second `?`: a WPos report without WCO reuses the last offset (−1.25 mm).
+        dev.read_exact(&mut b).await.unwrap();
+        dev.write_all(b"<Idle|WPos:0.000,3.750,0.000|FS:0,0>\r\n")
+            .await
+            .unwrap();
+        // Third `?`: a hard-limit alarm arrives first.
+        dev.read_exact(&mut b).await.unwrap();
+        dev.write_all(b"ALARM:1\r\n[MSG:Reset to continue]\r\n")
+            .await
+            .unwrap();
+        dev
+    });
+    assert_eq!(g.status().await.unwrap().position_units, -1000); // −2.5 mm × 400
+    assert_eq!(g.status().await.unwrap().position_units, -500); // −1.25 mm × 400
+    let e = g.status().await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::PositionLost { reason } if reason.contains("ALARM:1")),
+        "{e}"
+    );
+    script.await.unwrap();
+}
+
+#[test]
+fn connect_to_a_missing_port_is_absent() {
+    let mut s: StageSettings = toml::from_str(SETTINGS).unwrap();
+    s.port = "/dev/surfscan-no-such-port".into();
+    let e = match surfscan::stage::connect(&s) {
+        Err(e) => e,
+        Ok(_) => panic!("opened a port that does not exist"),
+    };
+    assert_eq!(e.class(), FaultClass::Absent, "{e}");
+    s.poll_interval_ms = 100;
+    let e = match surfscan::stage::connect(&s) {
+        Err(e) => e,
+        Ok(_) => panic!("accepted a 10 Hz GRBL poll"),
+    };
+    assert!(
+        matches!(e, StageError::Config(ref m) if m.contains("5 Hz")),
+        "{e}"
+    );
+}
