@@ -265,6 +265,17 @@ async fn simulator_locks_gcode_out_during_a_jog() {
         .starts_with("<Idle|MPos:0.000,-9.000"));
     w.write_all(b"G4 P0.01\n").await.unwrap();
     assert_eq!(lines.next_line().await.unwrap().unwrap(), "ok");
+    // Jog cancel (0x85) stops a running jog where it is.
+    w.write_all(b"$J=G53 G90 Y-8 F60\n").await.unwrap();
+    assert_eq!(lines.next_line().await.unwrap().unwrap(), "ok");
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    w.write_all(&[0x85, b'?']).await.unwrap();
+    assert!(lines
+        .next_line()
+        .await
+        .unwrap()
+        .unwrap()
+        .starts_with("<Idle|MPos:0.000,-8.500"));
     // Past travel: refused, no alarm.
     w.write_all(b"$J=G53 G90 Y1 F60\n").await.unwrap();
     assert_eq!(lines.next_line().await.unwrap().unwrap(), "error:15");

@@ -169,6 +169,18 @@ mod tests {
     }
 
     #[tokio::test]
+    async fn home_on_start_homes_an_unreferenced_stage_in_connect() {
+        let mut c = cfg(ScanDirection::Positive);
+        c.home_on_start = true;
+        let mut s = SimStage::new(777, 0);
+        s.referenced = false;
+        let mut p = MotionPolicy::new(s, c);
+        let r = p.connect().await.unwrap();
+        assert!(r.position_trusted);
+        assert_eq!(r.position, Nm(0));
+    }
+
+    #[tokio::test]
     async fn negative_scan_direction_approaches_from_above() {
         let mut p = policy(ScanDirection::Negative, -4000).await;
         p.move_to(Nm(-10_000_000)).await.unwrap(); // -4000 units
