@@ -186,6 +186,7 @@ async fn error15_is_a_controller_limit() {
         "{e}"
     );
     assert_eq!(e.class(), FaultClass::Fatal);
+    assert_eq!(e.ng_code(), Some(15));
 }
 
 #[tokio::test(start_paused = true)]

@@ -406,12 +406,14 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
                     return Err(StageError::ControllerLimit {
                         command: line.to_string(),
                         reason: format!("error:15 {}", error_text(15)),
+                        code: Some(15),
                     })
                 }
                 Some(GrblMessage::Error(n)) => {
                     return Err(StageError::Rejected {
                         command: line.to_string(),
                         reason: format!("error:{n} {}", error_text(n)),
+                        code: Some(n),
                     })
                 }
                 Some(m) => seen.push(m),

@@ -80,6 +80,8 @@ pub enum StageError {
         command: String,
         /// The controller's reason (error code, RJ reason).
         reason: String,
+        /// The controller's numeric error code (GRBL `error:N`), when it gave one.
+        code: Option<u16>,
     },
     /// The controller refused a move beyond its own travel limits.
     #[error("stage controller refused {command:?} as beyond its travel ({reason}); check soft-limit-min-mm/max-mm against the controller's travel settings")]
@@ -88,6 +90,8 @@ pub enum StageError {
         command: String,
         /// The controller's reason.
         reason: String,
+        /// The controller's numeric error code (GRBL `error:N`), when it gave one.
+        code: Option<u16>,
     },
     /// A target outside the configured soft limits; nothing was sent.
     #[error("target {target} is outside the stage soft limits [{min}, {max}]; nothing was sent. Change y-start/step/lines or the limits")]
@@ -156,6 +160,13 @@ impl DeviceFault for StageError {
             | StageError::Config(_) => FaultClass::Fatal,
             StageError::PositionLost { .. } => FaultClass::PositionLost,
             StageError::Fault { class, .. } => *class,
+        }
+    }
+
+    fn ng_code(&self) -> Option<u16> {
+        match self {
+            StageError::Rejected { code, .. } | StageError::ControllerLimit { code, .. } => *code,
+            _ => None,
         }
     }
 }

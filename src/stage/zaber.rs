@@ -326,11 +326,13 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
                             StageError::ControllerLimit {
                                 command: command.to_string(),
                                 reason,
+                                code: None,
                             }
                         } else {
                             StageError::Rejected {
                                 command: command.to_string(),
                                 reason,
+                                code: None,
                             }
                         });
                     }
