@@ -338,3 +338,27 @@ fn connect_to_a_missing_port_is_absent() {
         "{e}"
     );
 }
+
+#[tokio::test(start_paused = true)]
+async fn garbage_and_over_long_lines_are_skipped_by_the_driver() {
+    use surfscan::stage::Stage;
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let settings: StageSettings = toml::from_str(SETTINGS).unwrap();
+    let (host, mut dev) = tokio::io::duplex(4096);
+    let mut g = GrblStage::new(host, settings.grbl_config().unwrap());
+    let script = tokio::spawn(async move {
+        let mut b = [0u8; 1];
+        dev.read_exact(&mut b).await.unwrap();
+        let mut junk = vec![0xffu8, 0x00, 0xfe, b'\r', b'\n'];
+        junk.extend(std::iter::repeat_n(b'x', 600));
+        junk.extend_from_slice(b"\r\n<Idle|MPos:0.000,-1.000,0.000>\r\n");
+        // Delivered in two pieces, splitting the status report.
+        let (a, rest) = junk.split_at(junk.len() - 10);
+        dev.write_all(a).await.unwrap();
+        tokio::task::yield_now().await;
+        dev.write_all(rest).await.unwrap();
+        dev
+    });
+    assert_eq!(g.status().await.unwrap().position_units, -400);
+    script.await.unwrap();
+}
