@@ -300,7 +300,9 @@ impl<S: Stage> YAxis for MotionPolicy<S> {
             self.position_units = Some(st.position_units);
             let rb = self.to_nm(st.position_units);
             readback = Some(rb);
-            if (rb.0 - target.0).abs() <= self.cfg.deadband.0 {
+            // Compare with the target as the device can represent it: an inexact target
+            // (allowed and recorded by `check_targets`) must not count as a miss.
+            if (rb.0 - self.to_nm(tu).0).abs() <= self.cfg.deadband.0 {
                 return Ok(Arrival {
                     target,
                     readback: rb,

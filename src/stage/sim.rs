@@ -284,6 +284,15 @@ mod tests {
         c.allow_inexact_step = true;
         let p = MotionPolicy::new(SimStage::new(0, 0), c);
         assert_eq!(p.check_targets(&targets).unwrap().len(), 1);
+        // Allowed: moving to 0.01 mm lands on 3 steps (2.5 rounded half away from zero) =
+        // 12 000 nm, and that is an arrival, not a miss.
+        let mut c = cfg(ScanDirection::Positive);
+        c.nm_per_unit = 4000.0;
+        c.allow_inexact_step = true;
+        let mut p = MotionPolicy::new(SimStage::new(0, 0), c);
+        p.connect().await.unwrap();
+        let a = p.move_to(Nm(10_000)).await.unwrap();
+        assert_eq!((a.readback, a.attempts), (Nm(12_000), 1));
         // 400 steps/mm: exact, no warning.
         let p = MotionPolicy::new(SimStage::new(0, 0), cfg(ScanDirection::Positive));
         assert!(p.check_targets(&targets).unwrap().is_empty());
