@@ -139,3 +139,18 @@ async fn soft_limit_violation_sends_nothing_and_silence_and_vanishing_are_named(
     let e = a.move_to(Nm(1_000_000)).await.unwrap_err();
     assert_eq!(e.class(), FaultClass::Absent, "{e}");
 }
+
+#[tokio::test(start_paused = true)]
+async fn stop_halts_a_move_and_clears_its_own_interruption_flag() {
+    use surfscan::stage::Stage;
+    let (mut a, shared) = homed().await;
+    let s = a.stage_mut();
+    // 800 000 microsteps at 100 000 per second: an eight-second move.
+    s.begin_move_abs(800_000).await.unwrap();
+    tokio::time::sleep(std::time::Duration::from_secs(2)).await;
+    s.stop().await.unwrap();
+    let st = s.status().await.unwrap();
+    assert_eq!(st.position_units, 200_000);
+    assert!(st.warnings.is_empty(), "{:?}", st.warnings);
+    assert_eq!(shared.true_position_nm(), 200_000 * 125);
+}

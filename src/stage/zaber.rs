@@ -442,7 +442,10 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for ZaberStage<T> {
     }
 
     async fn stop(&mut self) -> Result<(), StageError> {
-        self.command("stop").await.map(|_| ())
+        self.command("stop").await?;
+        // Our own stop raises NI (movement interrupted); clear it so it is not read later
+        // as a fault.
+        self.command("warnings clear").await.map(|_| ())
     }
 }
 
