@@ -231,6 +231,8 @@ impl StageSettings {
             axis: self.axis,
             poll_interval: Duration::from_millis(self.poll_interval_ms),
             reply_timeout: Duration::from_secs(2),
+            message_ids: false,
+            checksums: false,
         }
     }
 }

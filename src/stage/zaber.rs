@@ -216,6 +216,11 @@ pub struct ZaberConfig {
     pub poll_interval: Duration,
     /// Timeout for one reply.
     pub reply_timeout: Duration,
+    /// Send a message id (00–99) with every command and accept only the reply carrying it,
+    /// so a late reply to an earlier command can never be taken for the current one.
+    pub message_ids: bool,
+    /// Append a `:CC` checksum to every command.
+    pub checksums: bool,
 }
 
 /// The Zaber driver.
@@ -226,6 +231,7 @@ pub struct ZaberStage<T> {
     pending: std::collections::VecDeque<String>,
     /// A reply may still be in flight from an interrupted exchange: drain before talking.
     dirty: bool,
+    next_id: u8,
 }
 
 impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
@@ -237,6 +243,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
             framer: LineFramer::new(512),
             pending: Default::default(),
             dirty: false,
+            next_id: 0,
         }
     }
 
@@ -304,7 +311,18 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
     }
 
     async fn command_inner(&mut self, command: &str) -> Result<Reply, StageError> {
-        let line = encode_command(self.cfg.device, self.cfg.axis, None, command, false);
+        let id = self.cfg.message_ids.then(|| {
+            let id = self.next_id;
+            self.next_id = (self.next_id + 1) % 100;
+            id
+        });
+        let line = encode_command(
+            self.cfg.device,
+            self.cfg.axis,
+            id,
+            command,
+            self.cfg.checksums,
+        );
         let w = async {
             self.io.write_all(line.as_bytes()).await?;
             self.io.flush().await
@@ -318,7 +336,9 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
             let l = self.next_line(deadline).await?;
             match parse_line(&l) {
                 Ok(ZaberMessage::Reply(r))
-                    if r.device == self.cfg.device && r.axis == self.cfg.axis =>
+                    if r.device == self.cfg.device
+                        && r.axis == self.cfg.axis
+                        && (id.is_none() || r.id == id) =>
                 {
                     if !r.accepted {
                         let reason = format!("RJ {}", r.data);
