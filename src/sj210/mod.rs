@@ -3,5 +3,7 @@
 //! Layers 1–2: the codec and tables are pure; the client is generic over `AsyncRead + AsyncWrite`.
 //!
 //! - [`codec`]: CR-terminated lines in and out, `OK`/`NG`/malformed classification.
+//! - [`models`]: per-model command strings and code tables, config overrides, `RDCON` parsing.
 
 pub mod codec;
+pub mod models;
