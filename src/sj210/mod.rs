@@ -4,6 +4,8 @@
 //!
 //! - [`codec`]: CR-terminated lines in and out, `OK`/`NG`/malformed classification.
 //! - [`models`]: per-model command strings and code tables, config overrides, `RDCON` parsing.
+//! - [`settings`]: the `[instrument]` config section.
 
 pub mod codec;
 pub mod models;
+pub mod settings;
