@@ -213,6 +213,23 @@ pub fn classify(line: &[u8]) -> Reply {
     Reply::Malformed(Bytes::copy_from_slice(line))
 }
 
+/// Escapes bytes for logs and transcripts: printable ASCII except `\\` as is, `\\\\` for a
+/// backslash, `\\r` `\\n` `\\t`, everything else `\\xHH`.
+pub fn escape_bytes(bytes: &[u8]) -> String {
+    let mut out = String::with_capacity(bytes.len());
+    for &b in bytes {
+        match b {
+            b'\\' => out.push_str("\\\\"),
+            b'\r' => out.push_str("\\r"),
+            b'\n' => out.push_str("\\n"),
+            b'\t' => out.push_str("\\t"),
+            0x20..=0x7E => out.push(char::from(b)),
+            _ => out.push_str(&format!("\\x{b:02X}")),
+        }
+    }
+    out
+}
+
 /// Tokio codec for the SJ-210 link: decodes [`Reply`] lines, encodes `&str` commands.
 #[derive(Debug, Clone)]
 pub struct Sj210Codec {
@@ -311,6 +328,12 @@ mod tests {
             out.push(r);
         }
         out
+    }
+
+    #[test]
+    fn escapes_like_the_transcript_format() {
+        assert_eq!(escape_bytes(b"OK000\r"), "OK000\\r");
+        assert_eq!(escape_bytes(b"a\\b\n\t\xb5 "), "a\\\\b\\n\\t\\xB5 ");
     }
 
     #[test]

@@ -4,8 +4,12 @@
 //!
 //! - [`codec`]: CR-terminated lines in and out, `OK`/`NG`/malformed classification.
 //! - [`models`]: per-model command strings and code tables, config overrides, `RDCON` parsing.
+//! - [`error`]: the two-layer error (conversation failed / instrument said NG) and trace failures.
+//! - [`client`]: the client over any byte stream, probe and trace; implements `Instrument`.
 //! - [`settings`]: the `[instrument]` config section.
 
+pub mod client;
 pub mod codec;
+pub mod error;
 pub mod models;
 pub mod settings;
