@@ -6,10 +6,12 @@
 //! - [`models`]: per-model command strings and code tables, config overrides, `RDCON` parsing.
 //! - [`error`]: the two-layer error (conversation failed / instrument said NG) and trace failures.
 //! - [`client`]: the client over any byte stream, probe and trace; implements `Instrument`.
+//! - [`recorder`]: tees a conversation into a replayable transcript (format v1).
 //! - [`settings`]: the `[instrument]` config section.
 
 pub mod client;
 pub mod codec;
 pub mod error;
 pub mod models;
+pub mod recorder;
 pub mod settings;
