@@ -71,6 +71,8 @@ pub fn run(args: Args) -> Result<(), CliError> {
         .enable_all()
         .build()
         .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
+    // The serial stream registers with the reactor, so it is opened inside the runtime.
+    let _guard = rt.enter();
     let port = crate::transport::open(&settings.serial())
         .map_err(|e| CliError::new(Exit::Unavailable, e.to_string()))?;
     let log: SharedTranscript = Arc::new(Mutex::new(Transcript::new()));
