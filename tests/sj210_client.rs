@@ -202,7 +202,9 @@ fn trace_script() -> Vec<Step> {
 
 #[tokio::test(start_paused = true)]
 async fn clean_trace_reads_results_and_profile_in_blocks() {
-    let mut script = trace_script();
+    // Conditions read at probe time differ from those at the trace: warned and recorded.
+    let mut script: Vec<Step> = vec![("RDCON0", Some(b"OK0302232050.500220.0030.019\r"))];
+    script.extend(trace_script());
     script.push(("RDEVA000", Some(b"OK00120\r")));
     script.push(("RDEVA050", Some(block(0, 50))));
     script.push(("RDEVA050", Some(block(50, 50))));
@@ -210,7 +212,19 @@ async fn clean_trace_reads_results_and_profile_in_blocks() {
     let n = script.len();
     let (io, h) = device(script);
     let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj410), opts());
+    c.conditions().await.unwrap();
     let line = Instrument::trace(&mut c).await.unwrap();
+    assert!(
+        line.warnings
+            .iter()
+            .any(|w| w.contains("conditions changed")),
+        "{:?}",
+        line.warnings
+    );
+    assert_eq!(
+        line.profile.conditions.raw.as_deref(),
+        Some("0332132050.500220.0030.019")
+    );
     let expect = heights();
     assert_eq!(line.profile.heights_um.len(), 120);
     for (a, b) in line.profile.heights_um.iter().zip(&expect) {

@@ -602,13 +602,22 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         if self.battery == Some(Battery::Abnormal) {
             return Err(Sj210Error::BatteryAbnormal);
         }
-        let conditions = match self.conditions.clone() {
-            Some(c) => c,
-            None => self.conditions().await?,
-        };
+        // Read the conditions for every line: they are recorded with its profile, and an
+        // operator may have changed them on the instrument since the probe.
+        let before = self.conditions.clone();
+        let conditions = self.conditions().await?;
+        let mut warnings = Vec::new();
+        if let Some(b) = before.filter(|b| b.raw != conditions.raw) {
+            let w = format!(
+                "measurement conditions changed on the instrument: {:?} -> {:?}",
+                b.raw.unwrap_or_default(),
+                conditions.raw.clone().unwrap_or_default()
+            );
+            tracing::warn!("{w}");
+            warnings.push(w);
+        }
         let (pitch_um, pitch_source) = self.pitch_um(&conditions)?;
         self.run_trace().await?;
-        let mut warnings = Vec::new();
         let results = self.read_results(&mut warnings).await?;
         let heights_um = self.read_profile(&mut warnings).await?;
         if let Some(l) = conditions.evaluation_length_mm {

@@ -213,3 +213,54 @@ impl DeviceFault for Sj210Error {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ng(code: u16) -> Sj210Error {
+        Sj210Error::Device {
+            command: "RDSTU00".into(),
+            code: NgCode::from_code(code),
+            byte_pos: None,
+            meaning: "",
+        }
+    }
+
+    #[test]
+    fn classification_follows_what_the_runner_must_do() {
+        assert_eq!(ng(11).class(), FaultClass::Transient);
+        assert_eq!(ng(33).class(), FaultClass::Transient);
+        assert_eq!(ng(30).class(), FaultClass::Fatal);
+        assert_eq!(ng(22).class(), FaultClass::Fatal);
+        assert_eq!(ng(30).ng_code(), Some(30));
+        let vanished = Sj210Error::Link {
+            command: "RDSTU00".into(),
+            source: LinkError::Vanished {
+                detail: "EIO".into(),
+            },
+        };
+        assert_eq!(vanished.class(), FaultClass::Absent);
+        let wrapped = Sj210Error::ProfileReadoutFailed {
+            first: "x".into(),
+            second: Box::new(ng(11)),
+        };
+        assert_eq!(wrapped.class(), FaultClass::Transient);
+        assert_eq!(wrapped.ng_code(), Some(11));
+        assert_eq!(Sj210Error::BatteryAbnormal.class(), FaultClass::Fatal);
+    }
+
+    #[test]
+    fn messages_name_the_command_and_the_code() {
+        let e = Sj210Error::Device {
+            command: "RDEVA00".into(),
+            code: NgCode::InvalidFormat,
+            byte_pos: Some(5),
+            meaning: "invalid command format",
+        };
+        let m = e.to_string();
+        assert!(m.contains("\"RDEVA00\""), "{m}");
+        assert!(m.contains("NG031"), "{m}");
+        assert!(m.contains("data byte 5"), "{m}");
+    }
+}
