@@ -485,3 +485,66 @@ async fn parameter_calculation_error_is_recorded_without_value() {
     assert!(w[0].contains("NG110"));
     finish(c, h, n).await;
 }
+
+#[tokio::test(start_paused = true)]
+async fn trace_that_never_ends_hits_the_deadline() {
+    let mut o = opts();
+    o.trace_deadline = Some(Duration::from_millis(1000));
+    // Polls at 250, 500, 750, 1000 ms all read "measuring"; the deadline is then reached.
+    let script: Vec<Step> = vec![
+        ("RDCON", Some(b"OK3120504.0012\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("CTSTA", Some(b"OK\r")),
+        ("RDSTU00", Some(b"OK001\r")),
+        ("RDSTU00", Some(b"OK001\r")),
+        ("RDSTU00", Some(b"OK001\r")),
+        ("RDSTU00", Some(b"OK001\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), o);
+    let e = c.trace_line().await.unwrap_err();
+    assert!(
+        matches!(
+            e,
+            Sj210Error::TraceDeadline {
+                waited_ms: 1000,
+                last_status: 1
+            }
+        ),
+        "{e:?}"
+    );
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn start_with_non_empty_payload_is_a_protocol_error() {
+    let script: Vec<Step> = vec![
+        ("RDCON", Some(b"OK3120504.0012\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("CTSTA", Some(b"OK001\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.trace_line().await.unwrap_err();
+    assert!(
+        matches!(&e, Sj210Error::UnexpectedReply { command, payload, .. } if command == "CTSTA" && payload == "001"),
+        "{e:?}"
+    );
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn trace_refuses_to_start_unless_idle() {
+    let script: Vec<Step> = vec![
+        ("RDCON", Some(b"OK3120504.0012\r")),
+        ("RDSTU00", Some(b"OK005\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.trace_line().await.unwrap_err();
+    assert!(matches!(e, Sj210Error::NotIdle { status: 5, .. }), "{e:?}");
+    finish(c, h, n).await;
+}

@@ -119,10 +119,14 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
     /// After a timeout or malformed reply: drain what is still arriving, forget partial
     /// lines, and read the status once so the next command starts on a clean link.
     async fn recover(&mut self) {
+        // Drain until the line is quiet for an inter-byte interval, but never longer than a
+        // first-byte timeout in total: a device that streams garbage must not hang us.
         let mut chunk = [0u8; 512];
-        while let Ok(Ok(n)) = timeout(self.opts.inter_byte, self.io.read(&mut chunk)).await {
-            if n == 0 {
-                break;
+        let drain_end = Instant::now() + self.opts.first_byte;
+        while Instant::now() < drain_end {
+            match timeout(self.opts.inter_byte, self.io.read(&mut chunk)).await {
+                Ok(Ok(n)) if n > 0 => continue,
+                _ => break,
             }
         }
         self.buf.clear();
