@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 use std::fmt;
 
 pub mod fit;
+pub mod probe;
 
 /// surfscan: unattended surface-roughness scanning with an SJ-210 and a y stage.
 #[derive(Debug, Parser)]
@@ -27,6 +28,8 @@ pub struct Cli {
 pub enum Command {
     /// Fit a NURBS surface to a grid of heights and write it as IGES.
     Fit(fit::Args),
+    /// Read-only first-hour checklist on the instrument (moves the stylus only with --trace).
+    Probe(probe::Args),
 }
 
 /// Process exit status (sysexits).
@@ -75,5 +78,6 @@ impl fmt::Display for CliError {
 pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::Fit(args) => fit::run(args),
+        Command::Probe(args) => probe::run(args),
     }
 }

@@ -1,0 +1,550 @@
+//! Scripted conversations against the SJ-210 client, in-process over `tokio::io::duplex`.
+//! A fake device asserts every command byte-for-byte and answers from the script; the
+//! script must be consumed exactly, so an extra (e.g. retried) command fails the test.
+//! Time is paused, so timeouts elapse instantly and deterministically.
+
+use std::time::Duration;
+use surfscan::devices::{Battery, DeviceFault, FaultClass, Instrument, ProfileReadout};
+use surfscan::sj210::client::Sj210Client;
+use surfscan::sj210::codec::NgCode;
+use surfscan::sj210::error::{LinkError, Sj210Error};
+use surfscan::sj210::models::{CommandOverrides, ModelId, ModelTable};
+use surfscan::sj210::settings::ClientOptions;
+use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
+use tokio::task::JoinHandle;
+
+/// One step: the exact command expected (without CR) and the raw reply (None = silence;
+/// `Some(b"")` is not used). A reply `DROP` closes the link.
+type Step = (&'static str, Option<&'static [u8]>);
+const DROP: &[u8] = b"<drop>";
+
+fn device(script: Vec<Step>) -> (DuplexStream, JoinHandle<Result<usize, String>>) {
+    let (host, mut dev) = tokio::io::duplex(4096);
+    let h = tokio::spawn(async move {
+        for (i, (expect, reply)) in script.iter().enumerate() {
+            let mut line = Vec::new();
+            loop {
+                let mut b = [0u8; 1];
+                match dev.read(&mut b).await {
+                    Ok(0) | Err(_) => {
+                        return Err(format!("link closed at step {i}, expected {expect:?}"))
+                    }
+                    Ok(_) if b[0] == b'\r' => break,
+                    Ok(_) => line.push(b[0]),
+                }
+            }
+            let got = String::from_utf8_lossy(&line).to_string();
+            if got != *expect {
+                return Err(format!("step {i}: expected {expect:?}, got {got:?}"));
+            }
+            match reply {
+                Some(r) if *r == DROP => return Ok(i + 1),
+                Some(r) => dev.write_all(r).await.map_err(|e| e.to_string())?,
+                None => {}
+            }
+        }
+        // Anything sent after the script is a test failure.
+        let mut b = [0u8; 64];
+        match dev.read(&mut b).await {
+            Ok(0) | Err(_) => Ok(script.len()),
+            Ok(n) => Err(format!(
+                "unexpected extra command {:?}",
+                String::from_utf8_lossy(&b[..n])
+            )),
+        }
+    });
+    (host, h)
+}
+
+fn opts() -> ClientOptions {
+    ClientOptions {
+        first_byte: Duration::from_millis(2000),
+        inter_byte: Duration::from_millis(200),
+        poll_interval: Duration::from_millis(250),
+        start_deadline: Duration::from_millis(1000),
+        read_retry_budget: Duration::from_millis(1000),
+        trace_deadline: Some(Duration::from_secs(60)),
+        pitch_x_um: None,
+        max_line: 4096,
+    }
+}
+
+async fn finish<S>(client: Sj210Client<S>, h: JoinHandle<Result<usize, String>>, steps: usize)
+where
+    S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin,
+{
+    drop(client.into_inner());
+    let consumed = h.await.unwrap().unwrap();
+    assert_eq!(consumed, steps, "script not consumed exactly");
+}
+
+const PROBE_HEAD: [Step; 5] = [
+    ("RDSJ 01", Some(b"OKV1.00\r")),
+    ("RDSJ 00", Some(b"OK000\r")),
+    ("RDSTU01", Some(b"OK001\r")),
+    ("RDCON", Some(b"OK3120504.0012\r")),
+    ("RDPAR", Some(b"OK03\r")),
+];
+
+#[tokio::test(start_paused = true)]
+async fn probe_sj210_as_documented_reports_no_readout_and_low_battery() {
+    let mut script = PROBE_HEAD.to_vec();
+    script.push(("CTOFF01", Some(b"OK\r")));
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let r = c.probe_report().await.unwrap();
+    assert_eq!(r.identity.firmware, "V1.00");
+    assert_eq!(r.identity.drive_unit, "000 standard");
+    assert_eq!(r.battery, Battery::Low);
+    assert_eq!(r.parameter_count, 3);
+    assert_eq!(r.conditions.lambda_c_mm, Some(0.8));
+    assert!(r.warnings.iter().any(|w| w.contains("battery below 60")));
+    // λs 2.5 µm derived from λc 0.8 mm gives the assumed 0.5 µm pitch.
+    assert!(r
+        .warnings
+        .iter()
+        .any(|w| w.contains("x pitch 0.5 um assumed")));
+    match &r.profile_readout {
+        ProfileReadout::Unsupported { ng_code, advice } => {
+            assert_eq!(*ng_code, None);
+            assert!(advice.contains("SJ-410 manual documents RDEVA"));
+            assert!(advice.contains("[instrument.commands]"));
+        }
+        other => panic!("expected unsupported, got {other:?}"),
+    }
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn probe_with_override_names_the_ng_code_and_instrument_probe_refuses() {
+    let mut script = PROBE_HEAD.to_vec();
+    script[2] = ("RDSTU01", Some(b"OK000\r"));
+    script.push(("CTOFF01", Some(b"OK\r")));
+    script.push(("RDEVA00", Some(b"NG030\r")));
+    let n = script.len();
+    let (io, h) = device(script);
+    let o = CommandOverrides {
+        profile_total: Some("RDEVA00".into()),
+        profile_block: Some("RDEVA{n}".into()),
+        ..Default::default()
+    };
+    let table = ModelTable::with_overrides(ModelId::Sj210, &o).unwrap();
+    let mut c = Sj210Client::new(io, table, opts());
+    let e = Instrument::probe(&mut c).await.unwrap_err();
+    match &e {
+        Sj210Error::ProfileUnsupported { ng_code, advice } => {
+            assert_eq!(*ng_code, Some(30));
+            assert!(advice.contains("NG030"), "{advice}");
+            assert!(advice.contains("\"RDEVA00\""), "{advice}");
+        }
+        other => panic!("expected ProfileUnsupported, got {other:?}"),
+    }
+    assert_eq!(e.class(), FaultClass::Fatal);
+    assert_eq!(e.ng_code(), Some(30));
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn battery_abnormal_is_fatal_at_probe() {
+    let script: Vec<Step> = vec![
+        ("RDSJ 01", Some(b"OKV1.00\r")),
+        ("RDSJ 00", Some(b"OK000\r")),
+        ("RDSTU01", Some(b"OK002\r")),
+        ("RDCON0", Some(b"OK0302232050.500220.0030.019\r")),
+        ("RDPAR0", Some(b"OK01\r")),
+        ("CTOFF01", Some(b"OK\r")),
+        ("RDEVA000", Some(b"OK00000\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj410), opts());
+    let e = Instrument::probe(&mut c).await.unwrap_err();
+    assert!(matches!(e, Sj210Error::BatteryAbnormal));
+    assert_eq!(e.class(), FaultClass::Fatal);
+    // The client remembers it and refuses to trace without sending anything.
+    assert!(matches!(
+        c.trace_line().await,
+        Err(Sj210Error::BatteryAbnormal)
+    ));
+    finish(c, h, n).await;
+}
+
+/// 120 heights: i × 0.01 − 0.5 µm, formatted as the blocks will carry them.
+fn heights() -> Vec<f64> {
+    (0..120).map(|i| f64::from(i) * 0.01 - 0.5).collect()
+}
+
+fn block(from: usize, n: usize) -> &'static [u8] {
+    let mut s = format!("OK{n:02}");
+    for v in &heights()[from..from + n] {
+        s.push_str(&format!(",{v:.3}"));
+    }
+    s.push('\r');
+    Box::leak(s.into_bytes().into_boxed_slice())
+}
+
+fn trace_script() -> Vec<Step> {
+    vec![
+        ("RDCON0", Some(b"OK0332132050.500220.0030.019\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("CTSTA", Some(b"OK\r")),
+        ("RDSTU00", Some(b"OK001\r")),
+        ("RDSTU00", Some(b"OK001\r")),
+        ("RDSTU00", Some(b"OK002\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("RDPAR0", Some(b"OK02\r")),
+        ("RDRES002,01,00", Some(b"NG101\r")),
+        ("RDRES002,01,00", Some(b"OKRa      1.2345 um\r")),
+        ("RDRES002,02,00", Some(b"OKRz     10.0000 \xb5m\r")),
+    ]
+}
+
+#[tokio::test(start_paused = true)]
+async fn clean_trace_reads_results_and_profile_in_blocks() {
+    // Conditions read at probe time differ from those at the trace: warned and recorded.
+    let mut script: Vec<Step> = vec![("RDCON0", Some(b"OK0302232050.500220.0030.019\r"))];
+    script.extend(trace_script());
+    script.push(("RDEVA000", Some(b"OK00120\r")));
+    script.push(("RDEVA050", Some(block(0, 50))));
+    script.push(("RDEVA050", Some(block(50, 50))));
+    script.push(("RDEVA020", Some(block(100, 20))));
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj410), opts());
+    c.conditions().await.unwrap();
+    let line = Instrument::trace(&mut c).await.unwrap();
+    assert!(
+        line.warnings
+            .iter()
+            .any(|w| w.contains("conditions changed")),
+        "{:?}",
+        line.warnings
+    );
+    assert_eq!(
+        line.profile.conditions.raw.as_deref(),
+        Some("0332132050.500220.0030.019")
+    );
+    let expect = heights();
+    assert_eq!(line.profile.heights_um.len(), 120);
+    for (a, b) in line.profile.heights_um.iter().zip(&expect) {
+        assert!((a - b).abs() < 5e-4, "{a} vs {b}");
+    }
+    // SJ-410 conditions: profile digit 3 = R-Motif → Other; λs digit 1 = 8 µm → 1 µm pitch.
+    assert_eq!(line.profile.kind, surfscan::profile::ProfileKind::Other);
+    assert!((line.profile.pitch_x_mm - 0.001).abs() < 1e-12);
+    assert_eq!(line.pitch_source, "lambda-s 8 um");
+    assert_eq!(line.results.len(), 2);
+    assert_eq!(line.results[0].value, Some(1.2345));
+    assert_eq!(line.results[1].unit, "\u{b5}m");
+    // 120 × 1 µm = 0.12 mm against 5 × 2.5 mm = 12.5 mm: more than 1 % off.
+    assert!(
+        line.warnings.iter().any(|w| w.contains("12.5000 mm")),
+        "{:?}",
+        line.warnings
+    );
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn profile_readout_restarts_once_after_a_malformed_block() {
+    let mut script = trace_script();
+    script.push(("RDEVA000", Some(b"OK00060\r")));
+    script.push(("RDEVA050", Some(b"\xff\xfe garbage\r")));
+    // Recovery: drain, one status read.
+    script.push(("RDSTU00", Some(b"OK000\r")));
+    script.push(("RDEVA000", Some(b"OK00060\r")));
+    script.push(("RDEVA050", Some(block(0, 50))));
+    script.push(("RDEVA010", Some(block(50, 10))));
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj410), opts());
+    let line = c.trace_line().await.unwrap();
+    assert_eq!(line.profile.heights_um.len(), 60);
+    assert!(line.warnings.iter().any(|w| w.contains("restarted")));
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn profile_readout_failing_twice_means_retrace_and_no_block_is_retried() {
+    let mut script = trace_script();
+    script.push(("RDEVA000", Some(b"OK00060\r")));
+    script.push(("RDEVA050", Some(b"NG011\r")));
+    script.push(("RDEVA000", Some(b"OK00060\r")));
+    script.push(("RDEVA050", Some(block(0, 50))));
+    script.push(("RDEVA010", Some(b"OK0.0\r")));
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj410), opts());
+    let e = c.trace_line().await.unwrap_err();
+    match &e {
+        Sj210Error::ProfileReadoutFailed { first, second } => {
+            assert!(first.contains("NG011"), "{first}");
+            assert!(matches!(
+                **second,
+                Sj210Error::ProfileCountMismatch {
+                    announced: 60,
+                    received: 50
+                }
+            ));
+        }
+        other => panic!("expected ProfileReadoutFailed, got {other:?}"),
+    }
+    assert_eq!(e.class(), FaultClass::Transient);
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn start_refused_busy_is_not_retried() {
+    let script: Vec<Step> = vec![
+        ("RDCON", Some(b"OK3120504.0012\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("CTSTA", Some(b"NG011\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.trace_line().await.unwrap_err();
+    assert_eq!(e.code(), Some(NgCode::Busy));
+    assert!(e.to_string().contains("\"CTSTA\""));
+    assert_eq!(e.class(), FaultClass::Transient);
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn never_reaching_measuring_is_stylus_not_on_workpiece() {
+    // Start deadline 1000 ms, polls every 250 ms: idle at 250, 500, 750, 1000 → error.
+    let script: Vec<Step> = vec![
+        ("RDCON", Some(b"OK3120504.0012\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("CTSTA", Some(b"OK\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.trace_line().await.unwrap_err();
+    assert!(
+        matches!(e, Sj210Error::StylusNotOnWorkpiece { last_status: 0, waited_ms } if waited_ms >= 1000),
+        "{e:?}"
+    );
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn over_range_reads_the_detector_position() {
+    let script: Vec<Step> = vec![
+        ("RDCON", Some(b"OK3120504.0012\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("CTSTA", Some(b"OK\r")),
+        ("RDSTU00", Some(b"OK001\r")),
+        ("RDSTU00", Some(b"NG007\r")),
+        ("RDPSA", Some(b"OK-201.5\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.trace_line().await.unwrap_err();
+    assert!(
+        matches!(&e, Sj210Error::OverRange { position: Some(p) } if p == "-201.5"),
+        "{e:?}"
+    );
+    assert_eq!(e.ng_code(), Some(7));
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn retract_state_during_trace_is_named() {
+    let script: Vec<Step> = vec![
+        ("RDCON", Some(b"OK3120504.0012\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("CTSTA", Some(b"OK\r")),
+        ("RDSTU00", Some(b"OK001\r")),
+        ("RDSTU00", Some(b"OK004\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.trace_line().await.unwrap_err();
+    assert!(matches!(e, Sj210Error::Retracted { status: 4 }), "{e:?}");
+    assert_eq!(e.class(), FaultClass::Fatal);
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn first_byte_timeout_recovers_with_a_status_read() {
+    let script: Vec<Step> = vec![("RDSJ 01", None), ("RDSTU00", Some(b"OK000\r"))];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.probe_report().await.unwrap_err();
+    match &e {
+        Sj210Error::Link {
+            command,
+            source: LinkError::FirstByteTimeout { waited_ms: 2000 },
+        } => assert_eq!(command, "RDSJ 01"),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(e.class(), FaultClass::Transient);
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn stalled_reply_is_an_inter_byte_timeout_with_the_partial_bytes() {
+    let script: Vec<Step> = vec![("RDSTU00", Some(b"OK0")), ("RDSTU00", Some(b"OK000\r"))];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.status().await.unwrap_err();
+    assert!(
+        matches!(&e, Sj210Error::Link { source: LinkError::InterByteTimeout { partial, waited_ms: 200 }, .. } if partial == "OK0"),
+        "{e:?}"
+    );
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn vanished_device_is_absent() {
+    let script: Vec<Step> = vec![("RDSTU00", Some(DROP))];
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.status().await.unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            Sj210Error::Link {
+                source: LinkError::Vanished { .. },
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+    assert_eq!(e.class(), FaultClass::Absent);
+    assert_eq!(h.await.unwrap().unwrap(), 1);
+}
+
+#[tokio::test(start_paused = true)]
+async fn read_retry_is_bounded_by_the_budget() {
+    // Budget 1000 ms, interval 250 ms: attempts at 0, 250, 500, 750, 1000 ms, then give up.
+    let script: Vec<Step> = vec![("RDPAR", Some(b"NG033\r")); 5];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.parameter_count().await.unwrap_err();
+    assert_eq!(e.code(), Some(NgCode::Processing));
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn abort_is_sent_only_while_measuring() {
+    let script: Vec<Step> = vec![
+        ("RDSTU00", Some(b"OK002\r")),
+        ("RDSTU00", Some(b"OK001\r")),
+        ("CTSTA", Some(b"OK\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    Instrument::abort(&mut c).await.unwrap();
+    Instrument::abort(&mut c).await.unwrap();
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn ensure_idle_returns_the_detector_from_005() {
+    let script: Vec<Step> = vec![
+        ("RDSTU00", Some(b"OK005\r")),
+        ("CTRTN", Some(b"OK\r")),
+        ("RDSTU00", Some(b"OK002\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    Instrument::ensure_idle(&mut c).await.unwrap();
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn parameter_calculation_error_is_recorded_without_value() {
+    let script: Vec<Step> = vec![
+        ("RDPAR", Some(b"OK02\r")),
+        ("RDRES02,01,00", Some(b"OKRa     0.123  um\r")),
+        ("RDRES02,02,00", Some(b"NG110\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let mut w = Vec::new();
+    let r = c.read_results(&mut w).await.unwrap();
+    assert_eq!(r[0].value, Some(0.123));
+    assert_eq!(r[1].value, None);
+    assert!(w[0].contains("NG110"));
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn trace_that_never_ends_hits_the_deadline() {
+    let mut o = opts();
+    o.trace_deadline = Some(Duration::from_millis(1000));
+    // Polls at 250, 500, 750, 1000 ms all read "measuring"; the deadline is then reached.
+    let script: Vec<Step> = vec![
+        ("RDCON", Some(b"OK3120504.0012\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("CTSTA", Some(b"OK\r")),
+        ("RDSTU00", Some(b"OK001\r")),
+        ("RDSTU00", Some(b"OK001\r")),
+        ("RDSTU00", Some(b"OK001\r")),
+        ("RDSTU00", Some(b"OK001\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), o);
+    let e = c.trace_line().await.unwrap_err();
+    assert!(
+        matches!(
+            e,
+            Sj210Error::TraceDeadline {
+                waited_ms: 1000,
+                last_status: 1
+            }
+        ),
+        "{e:?}"
+    );
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn start_with_non_empty_payload_is_a_protocol_error() {
+    let script: Vec<Step> = vec![
+        ("RDCON", Some(b"OK3120504.0012\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("CTSTA", Some(b"OK001\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.trace_line().await.unwrap_err();
+    assert!(
+        matches!(&e, Sj210Error::UnexpectedReply { command, payload, .. } if command == "CTSTA" && payload == "001"),
+        "{e:?}"
+    );
+    finish(c, h, n).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn trace_refuses_to_start_unless_idle() {
+    let script: Vec<Step> = vec![
+        ("RDCON", Some(b"OK3120504.0012\r")),
+        ("RDSTU00", Some(b"OK005\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.trace_line().await.unwrap_err();
+    assert!(matches!(e, Sj210Error::NotIdle { status: 5, .. }), "{e:?}");
+    finish(c, h, n).await;
+}
