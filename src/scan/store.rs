@@ -602,7 +602,13 @@ pub fn free_bytes(dir: &Path) -> Result<u64, StoreError> {
         path: dir.to_path_buf(),
         source: io::Error::from(e),
     })?;
-    Ok(u64::from(st.blocks_available()).saturating_mul(u64::from(st.fragment_size())))
+    // The libc types are u64 on 64-bit Linux but narrower elsewhere: keep the widening.
+    #[allow(clippy::useless_conversion)]
+    let (blocks, size) = (
+        u64::from(st.blocks_available()),
+        u64::from(st.fragment_size()),
+    );
+    Ok(blocks.saturating_mul(size))
 }
 
 /// Refuses (with [`StoreError::DiskTooSmall`]) when `available_bytes` cannot hold
