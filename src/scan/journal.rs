@@ -257,6 +257,8 @@ pub struct Journal {
     path: PathBuf,
     file: fs::File,
     faults: Arc<dyn StorageFaults>,
+    /// Length of the well-formed journal: a failed append is rolled back to it.
+    len: u64,
 }
 
 impl std::fmt::Debug for Journal {
@@ -282,8 +284,19 @@ impl Journal {
                 path: path.clone(),
                 source,
             })?;
-        let _ = fs::File::open(scan_dir).and_then(|d| d.sync_all());
-        let mut j = Journal { path, file, faults };
+        fs::File::open(scan_dir)
+            .and_then(|d| d.sync_all())
+            .map_err(|source| JournalError::Io {
+                op: "fsync directory",
+                path: scan_dir.to_path_buf(),
+                source,
+            })?;
+        let mut j = Journal {
+            path,
+            file,
+            faults,
+            len: 0,
+        };
         j.append(&Record::Start(Box::new(start)))?;
         Ok(j)
     }
@@ -313,6 +326,7 @@ impl Journal {
                 path: path.to_path_buf(),
                 file,
                 faults,
+                len: rec.valid_len,
             },
             rec,
         ))
@@ -323,7 +337,9 @@ impl Journal {
         &self.path
     }
 
-    /// Appends one record (one `write` of the line with its newline) and fsyncs.
+    /// Appends one record (one `write` of the line with its newline) and fsyncs. When the
+    /// write fails part-way (e.g. the disk filled up), the file is cut back to its previous
+    /// length (best effort) so a later append cannot leave a damaged record in the middle.
     pub fn append(&mut self, record: &Record) -> Result<(), JournalError> {
         let mut line = serde_json::to_vec(record).map_err(|source| JournalError::Serialise {
             path: self.path.clone(),
@@ -337,8 +353,13 @@ impl Journal {
         self.faults
             .before_write(WriteStep::Journal, &self.path)
             .map_err(io("append"))?;
-        self.file.write_all(&line).map_err(io("append"))?;
-        self.file.sync_data().map_err(io("fsync"))
+        if let Err(e) = self.file.write_all(&line) {
+            let _ = self.file.set_len(self.len);
+            return Err(io("append")(e));
+        }
+        self.file.sync_data().map_err(io("fsync"))?;
+        self.len += line.len() as u64;
+        Ok(())
     }
 }
 
