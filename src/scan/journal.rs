@@ -439,7 +439,8 @@ impl ResumeState {
 }
 
 /// Scan directories under `output_dir` whose journal has no stop record, sorted by name
-/// (oldest id first). Directories without a journal are ignored; a damaged journal is an error.
+/// (oldest id first). Directories without a journal, or whose journal holds not even a
+/// complete start record, are ignored; a damaged journal is an error.
 pub fn find_unfinished(output_dir: &Path) -> Result<Vec<PathBuf>, JournalError> {
     let io = |source| JournalError::Io {
         op: "list",
@@ -459,6 +460,11 @@ pub fn find_unfinished(output_dir: &Path) -> Result<Vec<PathBuf>, JournalError> 
             continue;
         }
         let rec = read_journal(&jpath)?;
+        if rec.records.is_empty() {
+            // Crashed while writing the start record: no line can have been committed
+            // (lines follow the start record), so there is nothing to resume.
+            continue;
+        }
         let state = ResumeState::from_records(&jpath, &rec.records)?;
         if !state.is_stopped() {
             out.push(dir);
@@ -466,4 +472,43 @@ pub fn find_unfinished(output_dir: &Path) -> Result<Vec<PathBuf>, JournalError> 
     }
     out.sort();
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_and_unterminated_journals() {
+        let p = Path::new("j");
+        let r = parse_journal(p, b"").unwrap();
+        assert_eq!((r.records.len(), r.valid_len, r.torn_bytes), (0, 0, 0));
+        let r = parse_journal(p, b"{\"class\":\"st").unwrap();
+        assert_eq!((r.records.len(), r.valid_len, r.torn_bytes), (0, 0, 12));
+        let e = ResumeState::from_records(p, &r.records).unwrap_err();
+        assert!(matches!(e, JournalError::NoStart { ref found, .. } if found == "nothing"));
+    }
+
+    #[test]
+    fn a_complete_record_without_its_newline_counts_as_torn() {
+        let rec =
+            br#"{"class":"stop","status":"success","reason":"done","time":"2026-01-01T00:00:00Z"}"#;
+        let r = parse_journal(Path::new("j"), rec).unwrap();
+        assert!(r.records.is_empty());
+        assert_eq!(r.torn_bytes, rec.len() as u64);
+        let mut with_nl = rec.to_vec();
+        with_nl.push(b'\n');
+        let r = parse_journal(Path::new("j"), &with_nl).unwrap();
+        assert_eq!(r.records.len(), 1);
+        assert!(matches!(&r.records[0], Record::Stop(s) if s.status == StopStatus::Success));
+    }
+
+    #[test]
+    fn find_unfinished_skips_a_journal_torn_inside_its_start_record() {
+        let tmp = tempfile::tempdir().unwrap();
+        let d = tmp.path().join("20260101T000000Z-x");
+        fs::create_dir(&d).unwrap();
+        fs::write(d.join(JOURNAL_FILE), b"{\"class\":\"start\",\"sc").unwrap();
+        assert!(find_unfinished(tmp.path()).unwrap().is_empty());
+    }
 }
