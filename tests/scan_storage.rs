@@ -127,7 +127,9 @@ fn lines_round_trip_with_their_y_and_heights_bit_identical() {
         let (m, p) = line(k);
         store.commit_line(&mut journal, &m, &p).unwrap();
     }
-    let all = store.load_all().unwrap();
+    let loaded = store.load_all().unwrap();
+    assert!(loaded.incomplete.is_empty());
+    let all = loaded.lines;
     assert_eq!(all.len(), 3);
     for (k, l) in all.iter().enumerate() {
         let (m, p) = line(k as u32);
@@ -209,6 +211,28 @@ fn journal_write_failure_leaves_the_line_file_but_resume_retraces_it_exactly_onc
 }
 
 #[test]
+fn a_crash_between_the_two_line_files_leaves_an_incomplete_line_that_is_skipped_and_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Line 1's journal append fails; then its JSON is removed, as if the process had been
+    // killed between the rename of the CSV and that of the JSON.
+    let hook = FailNth::new(WriteStep::Journal, 2, libc::EIO);
+    let (store, mut journal, _) = new_scan(tmp.path(), 3, hook);
+    let (m0, p0) = line(0);
+    store.commit_line(&mut journal, &m0, &p0).unwrap();
+    let (m1, p1) = line(1);
+    assert!(store.commit_line(&mut journal, &m1, &p1).is_err());
+    std::fs::remove_file(store.lines_dir().join("0001.json")).unwrap();
+    let loaded = store.load_all().unwrap();
+    assert_eq!(loaded.lines.len(), 1);
+    assert_eq!(loaded.lines[0].profile, p0);
+    assert_eq!(loaded.incomplete, vec![1]);
+    let err = store.load_line(1).unwrap_err();
+    assert!(matches!(err, StoreError::MissingCompanion { .. }), "{err}");
+    drop(journal);
+    assert_eq!(state_of(&store).first_missing(3), Some(1));
+}
+
+#[test]
 fn disk_full_during_a_line_fails_cleanly_with_earlier_lines_intact() {
     for step in [WriteStep::LineCsv, WriteStep::LineJson] {
         let tmp = tempfile::tempdir().unwrap();
@@ -247,6 +271,11 @@ fn disk_full_during_a_line_fails_cleanly_with_earlier_lines_intact() {
             assert_eq!(l.profile, line(k as u32).1);
         }
         assert!(!store.lines_dir().join("0002.json").exists());
+        assert!(
+            !store.lines_dir().join("0002.csv").exists(),
+            "{step:?}: never half-kept"
+        );
+        assert!(store.load_all().unwrap().incomplete.is_empty());
         // a failed scan is not offered for resume
         assert!(find_unfinished(tmp.path()).unwrap().is_empty());
     }

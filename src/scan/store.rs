@@ -226,6 +226,15 @@ impl StoredLine {
     }
 }
 
+/// The lines of a scan directory as found by [`ScanStore::load_all`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadedLines {
+    /// Complete lines, in index order.
+    pub lines: Vec<StoredLine>,
+    /// Indices with only one of their two files (not loaded).
+    pub incomplete: Vec<u32>,
+}
+
 /// Renders the heights file: header `x_mm,z_um`, one row per point, both numbers in Rust's
 /// shortest round-trip decimal form, so reading back yields bit-identical values.
 pub fn render_csv(profile: &Profile) -> String {
@@ -389,7 +398,8 @@ impl ScanStore {
     }
 
     /// Writes a line's two files durably (heights first, metadata second); returns the
-    /// SHA-256 of the heights file, hex.
+    /// SHA-256 of the heights file, hex. When the metadata cannot be written the heights
+    /// file is removed again (best effort), so a failed line leaves nothing behind.
     pub fn write_line(&self, meta: &LineMeta, profile: &Profile) -> Result<String, StoreError> {
         let dir = self.lines_dir();
         let csv = render_csv(profile);
@@ -414,13 +424,18 @@ impl ScanStore {
             WriteStep::LineCsv,
             &*self.faults,
         )?;
-        write_durably(
+        if let Err(e) = write_durably(
             &dir,
             &meta_name(meta.index),
             &json,
             WriteStep::LineJson,
             &*self.faults,
-        )?;
+        ) {
+            // Never half-keep a line: without its metadata the heights file goes too.
+            let _ = fs::remove_file(dir.join(csv_name(meta.index)));
+            let _ = sync_dir(&dir);
+            return Err(e);
+        }
         Ok(hex_sha256(csv.as_bytes()))
     }
 
@@ -509,11 +524,13 @@ impl ScanStore {
         Ok(StoredLine { meta, profile })
     }
 
-    /// Indices of all line files present in `lines/` (either file of a line counts; temp
-    /// files are ignored), ascending.
-    pub fn stored_indices(&self) -> Result<BTreeSet<u32>, StoreError> {
+    /// Indices of the lines in `lines/`, split into complete ones (both files present) and
+    /// incomplete ones (only one of the two: a crash between the two renames). Temporary
+    /// files are ignored.
+    pub fn stored_indices(&self) -> Result<(BTreeSet<u32>, BTreeSet<u32>), StoreError> {
         let dir = self.lines_dir();
-        let mut out = BTreeSet::new();
+        let mut csv = BTreeSet::new();
+        let mut json = BTreeSet::new();
         for entry in fs::read_dir(&dir).map_err(io_err("list", &dir))? {
             let entry = entry.map_err(io_err("list", &dir))?;
             let name = entry.file_name();
@@ -521,24 +538,34 @@ impl ScanStore {
             let Some((stem, ext)) = name.rsplit_once('.') else {
                 continue;
             };
-            if (ext == "csv" || ext == "json") && !stem.is_empty() {
-                if let Ok(i) = stem.parse::<u32>() {
-                    if stem.bytes().all(|b| b.is_ascii_digit()) {
-                        out.insert(i);
-                    }
-                }
+            if stem.is_empty() || !stem.bytes().all(|b| b.is_ascii_digit()) {
+                continue;
             }
+            let Ok(i) = stem.parse::<u32>() else { continue };
+            match ext {
+                "csv" => csv.insert(i),
+                "json" => json.insert(i),
+                _ => false,
+            };
         }
-        Ok(out)
+        let complete = csv.intersection(&json).copied().collect();
+        let incomplete = csv.symmetric_difference(&json).copied().collect();
+        Ok((complete, incomplete))
     }
 
-    /// Loads every line stored in the directory, in index order (for `fit`/`analyze` of a
-    /// partial, aborted or failed scan: the lines it has).
-    pub fn load_all(&self) -> Result<Vec<StoredLine>, StoreError> {
-        self.stored_indices()?
+    /// Loads every complete line stored in the directory, in index order (for `fit` and
+    /// `analyze` of a partial, aborted or failed scan: the lines it has), and names the
+    /// incomplete ones. A complete but malformed line is an error.
+    pub fn load_all(&self) -> Result<LoadedLines, StoreError> {
+        let (complete, incomplete) = self.stored_indices()?;
+        let lines = complete
             .into_iter()
             .map(|i| self.load_line(i))
-            .collect()
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(LoadedLines {
+            lines,
+            incomplete: incomplete.into_iter().collect(),
+        })
     }
 
     /// Loads the lines the journal records as completed, checking each heights file against
