@@ -710,6 +710,21 @@ mod tests {
     }
 
     #[test]
+    fn csv_budget_bounds_worst_case_rows() {
+        // Pitches and heights that are not exact binary fractions print with 17 significant
+        // digits; the per-point budget must still hold.
+        let n = 20_000;
+        let heights: Vec<f64> = (0..n).map(|i| -(i as f64) / 3.0e4 - 1.0e-7).collect();
+        let p = Profile::new(0.0001, heights);
+        let csv = render_csv(&p);
+        assert!(
+            csv.len() as u64 <= CSV_BYTES_PER_POINT * n as u64,
+            "{} bytes for {n} points",
+            csv.len()
+        );
+    }
+
+    #[test]
     fn disk_estimate_and_check() {
         // 31 lines × 8000 points: 248000 × 173 B + 31 × 8 KiB + 4 MiB.
         let e = estimate_scan_bytes(31, 8000);
