@@ -1,0 +1,685 @@
+//! Durable scan storage: durability order, journal recovery, resume state, disk-full
+//! handling, the metrics file format and the systemd unit's required directives.
+
+use std::io;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+
+use chrono::{TimeZone, Utc};
+use surfscan::profile::{Conditions, InstrumentResult, Profile, ProfileKind};
+use surfscan::scan::journal::{
+    find_unfinished, parse_journal, InterruptionRecord, Journal, JournalError, Record, ResumeState,
+    StartRecord, StopRecord, StopStatus,
+};
+use surfscan::scan::metrics::{write_metrics, ScanMetrics};
+use surfscan::scan::store::{
+    LineMeta, NoFaults, ScanId, ScanStore, StorageFaults, StoreError, WriteStep,
+};
+use surfscan::units::Nm;
+
+/// Fails the `nth` (0-based) write of `step` with `errno`, once; records every write asked.
+struct FailNth {
+    step: WriteStep,
+    nth: usize,
+    errno: i32,
+    seen: AtomicUsize,
+    log: Mutex<Vec<(WriteStep, String)>>,
+}
+
+impl FailNth {
+    fn new(step: WriteStep, nth: usize, errno: i32) -> Arc<FailNth> {
+        Arc::new(FailNth {
+            step,
+            nth,
+            errno,
+            seen: AtomicUsize::new(0),
+            log: Mutex::new(Vec::new()),
+        })
+    }
+}
+
+impl StorageFaults for FailNth {
+    fn before_write(&self, step: WriteStep, path: &Path) -> io::Result<()> {
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        self.log.lock().unwrap().push((step, name));
+        if step == self.step && self.seen.fetch_add(1, Ordering::SeqCst) == self.nth {
+            return Err(io::Error::from_raw_os_error(self.errno));
+        }
+        Ok(())
+    }
+}
+
+fn start_record(id: &ScanId, lines: u32) -> StartRecord {
+    StartRecord {
+        scan_id: id.0.clone(),
+        time: Utc.with_ymd_and_hms(2026, 1, 2, 3, 4, 5).unwrap(),
+        plan: serde_json::json!({"lines": lines, "y_start_nm": 0, "y_step_nm": 10000}),
+        config: serde_json::json!({"scan": {"lines": lines}}),
+        config_hash: "ab".repeat(32),
+        specimen: "block-7".into(),
+        operator: "kim".into(),
+        notes: "night run".into(),
+        software_version: "0.1.0".into(),
+        instrument_model: "SJ-210".into(),
+        firmware: "2.00".into(),
+        drive_unit: "standard".into(),
+        conditions: Conditions::default(),
+    }
+}
+
+/// Line `k`: 5 points with heights that need full round-trip precision.
+fn line(k: u32) -> (LineMeta, Profile) {
+    let heights: Vec<f64> = (0..5)
+        .map(|i| f64::from(k) * 0.1 + f64::from(i) / 3.0 - 0.7)
+        .collect();
+    let mut p = Profile::new(0.0005, heights);
+    p.kind = ProfileKind::R;
+    let t = Utc.with_ymd_and_hms(2026, 1, 2, 3, 10, k).unwrap();
+    let meta = LineMeta {
+        index: k,
+        y_target_nm: Nm(i64::from(k) * 10_000),
+        y_readback_nm: Some(Nm(i64::from(k) * 10_000 + 3)),
+        pitch_x_mm: 0.0005,
+        points: 5,
+        kind: ProfileKind::R,
+        conditions: Conditions::default(),
+        results: vec![InstrumentResult {
+            name: "Ra".into(),
+            value: Some(0.123),
+            unit: "um".into(),
+        }],
+        started_at: t,
+        finished_at: t,
+        attempt: 1,
+    };
+    (meta, p)
+}
+
+fn new_scan(
+    out: &Path,
+    lines: u32,
+    faults: Arc<dyn StorageFaults>,
+) -> (ScanStore, Journal, ScanId) {
+    let id = ScanId::new(
+        Utc.with_ymd_and_hms(2026, 1, 2, 3, 4, 5).unwrap(),
+        "Block 7",
+    );
+    let store = ScanStore::create(out, &id, faults.clone()).unwrap();
+    let journal = Journal::create(store.root(), start_record(&id, lines), faults).unwrap();
+    (store, journal, id)
+}
+
+fn state_of(store: &ScanStore) -> ResumeState {
+    let (_, rec) = Journal::open(&store.journal_path(), Arc::new(NoFaults)).unwrap();
+    ResumeState::from_records(&store.journal_path(), &rec.records).unwrap()
+}
+
+#[test]
+fn lines_round_trip_with_their_y_and_heights_bit_identical() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (store, mut journal, id) = new_scan(tmp.path(), 3, Arc::new(NoFaults));
+    assert_eq!(id.0, "20260102T030405Z-block-7");
+    for k in 0..3 {
+        let (m, p) = line(k);
+        store.commit_line(&mut journal, &m, &p).unwrap();
+    }
+    let loaded = store.load_all().unwrap();
+    assert!(loaded.incomplete.is_empty());
+    let all = loaded.lines;
+    assert_eq!(all.len(), 3);
+    for (k, l) in all.iter().enumerate() {
+        let (m, p) = line(k as u32);
+        assert_eq!(l.meta, m);
+        assert_eq!(l.profile, p, "heights must be bit-identical");
+        assert_eq!(l.y_mm(), k as f64 * 0.01);
+    }
+    let st = state_of(&store);
+    assert_eq!(st.first_missing(3), None);
+    assert_eq!(store.load_committed(&st.lines).unwrap().len(), 3);
+    // no temporary files are left behind
+    let names: Vec<String> = std::fs::read_dir(store.lines_dir())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.iter().all(|n| !n.ends_with(".tmp")), "{names:?}");
+    assert_eq!(names.len(), 6);
+}
+
+#[test]
+fn durability_order_is_csv_then_json_then_journal() {
+    let tmp = tempfile::tempdir().unwrap();
+    let hook = FailNth::new(WriteStep::Metrics, usize::MAX, 0);
+    let (store, mut journal, _) = new_scan(tmp.path(), 2, hook.clone());
+    hook.log.lock().unwrap().clear();
+    let (m, p) = line(0);
+    store.commit_line(&mut journal, &m, &p).unwrap();
+    let log = hook.log.lock().unwrap().clone();
+    assert_eq!(
+        log,
+        vec![
+            (WriteStep::LineCsv, "0000.csv".to_string()),
+            (WriteStep::LineJson, "0000.json".to_string()),
+            (WriteStep::Journal, "journal.jsonl".to_string()),
+        ]
+    );
+}
+
+#[test]
+fn journal_write_failure_leaves_the_line_file_but_resume_retraces_it_exactly_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    // journal write #0 is the start record; #1 line 0; #2 line 1 fails.
+    let hook = FailNth::new(WriteStep::Journal, 2, libc::EIO);
+    let (store, mut journal, _) = new_scan(tmp.path(), 3, hook);
+    let (m0, p0) = line(0);
+    store.commit_line(&mut journal, &m0, &p0).unwrap();
+    let (m1, p1) = line(1);
+    let err = store.commit_line(&mut journal, &m1, &p1).unwrap_err();
+    assert!(
+        matches!(err, StoreError::Journal(JournalError::Io { .. })),
+        "{err}"
+    );
+    drop(journal);
+
+    // The line file was renamed into place before the journal append was attempted.
+    assert!(store.lines_dir().join("0001.csv").is_file());
+    assert!(store.lines_dir().join("0001.json").is_file());
+    let st = state_of(&store);
+    assert_eq!(st.completed().into_iter().collect::<Vec<_>>(), vec![0]);
+    assert_eq!(st.first_missing(3), Some(1));
+
+    // Resume: re-trace line 1 (attempt 2), then line 2.
+    let (mut journal, rec) = Journal::open(&store.journal_path(), Arc::new(NoFaults)).unwrap();
+    assert_eq!(rec.torn_bytes, 0);
+    let (mut m1b, mut p1b) = line(1);
+    m1b.attempt = 2;
+    p1b.heights_um[0] = 42.0;
+    store.commit_line(&mut journal, &m1b, &p1b).unwrap();
+    let (m2, p2) = line(2);
+    store.commit_line(&mut journal, &m2, &p2).unwrap();
+
+    let st = state_of(&store);
+    assert!(st.duplicates.is_empty());
+    let idx: Vec<u32> = st.lines.iter().map(|l| l.index).collect();
+    assert_eq!(idx, vec![0, 1, 2], "every line exactly once");
+    let lines = store.load_committed(&st.lines).unwrap();
+    assert_eq!(lines[1].meta.attempt, 2);
+    assert_eq!(lines[1].profile.heights_um[0], 42.0);
+}
+
+#[test]
+fn a_crash_between_the_two_line_files_leaves_an_incomplete_line_that_is_skipped_and_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Line 1's journal append fails; then its JSON is removed, as if the process had been
+    // killed between the rename of the CSV and that of the JSON.
+    let hook = FailNth::new(WriteStep::Journal, 2, libc::EIO);
+    let (store, mut journal, _) = new_scan(tmp.path(), 3, hook);
+    let (m0, p0) = line(0);
+    store.commit_line(&mut journal, &m0, &p0).unwrap();
+    let (m1, p1) = line(1);
+    assert!(store.commit_line(&mut journal, &m1, &p1).is_err());
+    std::fs::remove_file(store.lines_dir().join("0001.json")).unwrap();
+    let loaded = store.load_all().unwrap();
+    assert_eq!(loaded.lines.len(), 1);
+    assert_eq!(loaded.lines[0].profile, p0);
+    assert_eq!(loaded.incomplete, vec![1]);
+    let err = store.load_line(1).unwrap_err();
+    assert!(matches!(err, StoreError::MissingCompanion { .. }), "{err}");
+    drop(journal);
+    assert_eq!(state_of(&store).first_missing(3), Some(1));
+}
+
+#[test]
+fn disk_full_during_a_line_fails_cleanly_with_earlier_lines_intact() {
+    for step in [WriteStep::LineCsv, WriteStep::LineJson] {
+        let tmp = tempfile::tempdir().unwrap();
+        // The third write of this step (line 2) fails with ENOSPC.
+        let hook = FailNth::new(step, 2, libc::ENOSPC);
+        let (store, mut journal, _) = new_scan(tmp.path(), 4, hook);
+        for k in 0..2 {
+            let (m, p) = line(k);
+            store.commit_line(&mut journal, &m, &p).unwrap();
+        }
+        let (m2, p2) = line(2);
+        let err = store.commit_line(&mut journal, &m2, &p2).unwrap_err();
+        assert!(err.is_disk_full(), "{step:?}: {err}");
+        assert!(err.to_string().contains("0002"), "names the file: {err}");
+        // The scan records its failure and stops.
+        journal
+            .append(&Record::Stop(StopRecord {
+                status: StopStatus::Fail,
+                reason: format!("disk full: {err}"),
+                time: Utc::now(),
+            }))
+            .unwrap();
+        drop(journal);
+
+        let leftovers: Vec<String> = std::fs::read_dir(store.lines_dir())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".tmp"))
+            .collect();
+        assert!(leftovers.is_empty(), "{leftovers:?}");
+        let st = state_of(&store);
+        assert_eq!(st.lines.len(), 2);
+        assert_eq!(st.stop.as_ref().map(|s| s.status), Some(StopStatus::Fail));
+        let kept = store.load_committed(&st.lines).unwrap();
+        for (k, l) in kept.iter().enumerate() {
+            assert_eq!(l.profile, line(k as u32).1);
+        }
+        assert!(!store.lines_dir().join("0002.json").exists());
+        assert!(
+            !store.lines_dir().join("0002.csv").exists(),
+            "{step:?}: never half-kept"
+        );
+        assert!(store.load_all().unwrap().incomplete.is_empty());
+        // a failed scan is not offered for resume
+        assert!(find_unfinished(tmp.path()).unwrap().is_empty());
+    }
+}
+
+fn journal_bytes_with_records(dir: &Path) -> (Vec<u8>, usize) {
+    let id = ScanId("s".into());
+    let mut j = Journal::create(dir, start_record(&id, 3), Arc::new(NoFaults)).unwrap();
+    for k in 0..2u32 {
+        let (m, _) = line(k);
+        j.append(&Record::Line(surfscan::scan::journal::LineRecord {
+            index: k,
+            y_target_nm: m.y_target_nm,
+            y_readback_nm: m.y_readback_nm,
+            attempt: 1,
+            points: 5,
+            csv_sha256: "00".repeat(32),
+            time: m.finished_at,
+        }))
+        .unwrap();
+    }
+    let before_last = std::fs::read(dir.join("journal.jsonl")).unwrap().len();
+    j.append(&Record::Interruption(InterruptionRecord {
+        reason: "instrument unplugged".into(),
+        device: Some("instrument".into()),
+        line: Some(2),
+        time: Utc.with_ymd_and_hms(2026, 1, 2, 4, 0, 0).unwrap(),
+    }))
+    .unwrap();
+    (
+        std::fs::read(dir.join("journal.jsonl")).unwrap(),
+        before_last,
+    )
+}
+
+#[test]
+fn journal_truncated_at_every_offset_of_its_last_record_recovers_the_previous_records() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (full, before_last) = journal_bytes_with_records(tmp.path());
+    let full_rec = parse_journal(Path::new("j"), &full).unwrap();
+    assert_eq!(full_rec.records.len(), 4);
+    assert_eq!(full_rec.torn_bytes, 0);
+    let previous = &full_rec.records[..3];
+    for cut in before_last..full.len() {
+        let path = tmp.path().join(format!("j{cut}.jsonl"));
+        std::fs::write(&path, &full[..cut]).unwrap();
+        let (mut j, rec) = Journal::open(&path, Arc::new(NoFaults)).unwrap();
+        assert_eq!(rec.records, previous, "cut at {cut}");
+        assert_eq!(rec.torn_bytes, (cut - before_last) as u64, "cut at {cut}");
+        assert_eq!(
+            std::fs::metadata(&path).unwrap().len(),
+            before_last as u64,
+            "torn tail truncated on disk (cut at {cut})"
+        );
+        // Appending after recovery yields a well-formed journal.
+        j.append(&full_rec.records[3]).unwrap();
+        drop(j);
+        assert_eq!(std::fs::read(&path).unwrap(), full, "cut at {cut}");
+    }
+}
+
+#[test]
+fn garbage_after_the_last_record_is_dropped_but_damage_in_the_middle_is_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (full, before_last) = journal_bytes_with_records(tmp.path());
+    // Zero-filled block after a power loss: invalid last line, terminated.
+    let mut zeros = full.clone();
+    zeros.extend_from_slice(&[0u8; 37]);
+    zeros.push(b'\n');
+    let rec = parse_journal(Path::new("j"), &zeros).unwrap();
+    assert_eq!(rec.records.len(), 4);
+    assert_eq!(rec.torn_bytes, 38);
+
+    // Corrupt the second record (a line record) in the middle.
+    let mut bad = full.clone();
+    let second_line_start = full.iter().position(|&b| b == b'\n').unwrap() + 1;
+    bad[second_line_start + 2] = b'#';
+    let err = parse_journal(Path::new("journal.jsonl"), &bad).unwrap_err();
+    match &err {
+        JournalError::BadRecord {
+            line, offset, path, ..
+        } => {
+            assert_eq!(*line, 2);
+            assert_eq!(*offset, second_line_start as u64);
+            assert_eq!(path, Path::new("journal.jsonl"));
+        }
+        other => panic!("expected BadRecord, got {other}"),
+    }
+    assert!(err.to_string().contains("line 2"));
+    let _ = before_last;
+}
+
+#[test]
+fn duplicate_line_records_keep_the_first_and_are_reported() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (store, mut journal, _) = new_scan(tmp.path(), 3, Arc::new(NoFaults));
+    let (m0, p0) = line(0);
+    store.commit_line(&mut journal, &m0, &p0).unwrap();
+    let (m1, p1) = line(1);
+    store.commit_line(&mut journal, &m1, &p1).unwrap();
+    let first_l1 = state_of(&store).lines[1].clone();
+    let (mut m1b, p1b) = line(1);
+    m1b.attempt = 3;
+    store.commit_line(&mut journal, &m1b, &p1b).unwrap();
+    let st = state_of(&store);
+    assert_eq!(st.duplicates, vec![1]);
+    assert_eq!(st.lines.len(), 2);
+    assert_eq!(st.lines[1], first_l1);
+    assert_eq!(st.lines[1].attempt, 1);
+    assert_eq!(st.first_missing(3), Some(2));
+}
+
+#[test]
+fn resume_state_and_unfinished_scan_discovery() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path();
+    // finished scan
+    let id_a = ScanId("20260101T000000Z-a".into());
+    let a = ScanStore::create(out, &id_a, Arc::new(NoFaults)).unwrap();
+    let mut ja = Journal::create(a.root(), start_record(&id_a, 1), Arc::new(NoFaults)).unwrap();
+    ja.append(&Record::Stop(StopRecord {
+        status: StopStatus::Success,
+        reason: "complete".into(),
+        time: Utc::now(),
+    }))
+    .unwrap();
+    // unfinished scan with line 0 and 2 done (line 1 missing), an interruption
+    let id_b = ScanId("20260102T000000Z-b".into());
+    let b = ScanStore::create(out, &id_b, Arc::new(NoFaults)).unwrap();
+    let mut jb = Journal::create(b.root(), start_record(&id_b, 4), Arc::new(NoFaults)).unwrap();
+    for k in [0, 2] {
+        let (m, p) = line(k);
+        b.commit_line(&mut jb, &m, &p).unwrap();
+    }
+    jb.append(&Record::Interruption(InterruptionRecord {
+        reason: "SIGTERM".into(),
+        device: None,
+        line: Some(3),
+        time: Utc::now(),
+    }))
+    .unwrap();
+    // a directory without a journal is ignored
+    std::fs::create_dir(out.join("not-a-scan")).unwrap();
+
+    assert_eq!(find_unfinished(out).unwrap(), vec![b.root().to_path_buf()]);
+    let st = state_of(&b);
+    assert!(!st.is_stopped());
+    assert_eq!(st.first_missing(4), Some(1));
+    assert_eq!(st.interruptions.len(), 1);
+    assert_eq!(st.start.plan["lines"], 4);
+    assert_eq!(st.start.specimen, "block-7");
+    assert!(find_unfinished(&out.join("absent")).unwrap().is_empty());
+
+    // A journal without a start record is a named error.
+    let p = out.join("x.jsonl");
+    std::fs::write(&p, b"{\"class\":\"stop\",\"status\":\"abort\",\"reason\":\"r\",\"time\":\"2026-01-01T00:00:00Z\"}\n").unwrap();
+    let rec = parse_journal(&p, &std::fs::read(&p).unwrap()).unwrap();
+    let err = ResumeState::from_records(&p, &rec.records).unwrap_err();
+    assert!(
+        matches!(err, JournalError::NoStart { ref found, .. } if found == "stop"),
+        "{err}"
+    );
+}
+
+#[test]
+fn malformed_line_files_are_named_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (store, mut journal, _) = new_scan(tmp.path(), 3, Arc::new(NoFaults));
+    let (m, p) = line(0);
+    store.commit_line(&mut journal, &m, &p).unwrap();
+    let csv = store.lines_dir().join("0000.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    std::fs::write(&csv, text.replacen("0.0005,", "0.0005;", 1)).unwrap();
+    let err = store.load_line(0).unwrap_err();
+    assert!(matches!(err, StoreError::CsvRow { line: 3, .. }), "{err}");
+    assert!(err.to_string().contains("0000.csv"));
+
+    // heights file changed after commit: checksum mismatch
+    std::fs::write(&csv, {
+        let changed = text.replace("x_mm,z_um\n0,-0.7\n", "x_mm,z_um\n0,-0.75\n");
+        assert_ne!(changed, text);
+        changed
+    })
+    .unwrap();
+    let st = state_of(&store);
+    let err = store.load_committed(&st.lines).unwrap_err();
+    assert!(err.to_string().contains("SHA-256"), "{err}");
+
+    // metadata without heights
+    std::fs::remove_file(&csv).unwrap();
+    let err = store.load_line(0).unwrap_err();
+    assert!(matches!(err, StoreError::MissingCompanion { .. }), "{err}");
+
+    // bad metadata JSON
+    let (m1, p1) = line(1);
+    store.commit_line(&mut journal, &m1, &p1).unwrap();
+    std::fs::write(store.lines_dir().join("0001.json"), "{\"index\": 1").unwrap();
+    let err = store.load_line(1).unwrap_err();
+    assert!(matches!(err, StoreError::MetaJson { .. }), "{err}");
+}
+
+#[test]
+fn preflight_refuses_a_scan_larger_than_the_free_space() {
+    let tmp = tempfile::tempdir().unwrap();
+    let free = surfscan::scan::store::free_bytes(tmp.path()).unwrap();
+    assert!(free > 0);
+    assert!(surfscan::scan::store::preflight_disk(tmp.path(), 31, 1000).is_ok());
+    // More points than could fit even at one byte each.
+    let err = surfscan::scan::store::preflight_disk(tmp.path(), u32::MAX, u64::MAX).unwrap_err();
+    assert!(matches!(err, StoreError::DiskTooSmall { .. }), "{err}");
+}
+
+#[test]
+fn metrics_file_is_prometheus_exposition_text() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut m = ScanMetrics {
+        scan_id: "20260102T030405Z-block-7".into(),
+        lines_done: 12,
+        lines_total: 31,
+        last_line_seconds: Some(41.5),
+        line_seconds_sum: 498.0,
+        line_seconds_count: 12,
+        retries: 2,
+        suspensions: 1,
+        last_line_unix_seconds: Some(1767323405.0),
+        fit_residual_um: Some(0.0125),
+        ..Default::default()
+    };
+    m.reconnects.insert("instrument".into(), 3);
+    m.reconnects.insert("stage".into(), 0);
+    let path = tmp.path().join("surfscan.prom");
+    write_metrics(&path, &m, &NoFaults).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    let l = "scan=\"20260102T030405Z-block-7\"";
+    for expected in [
+        "# TYPE surfscan_lines_done gauge".to_string(),
+        format!("surfscan_lines_done{{{l}}} 12"),
+        format!("surfscan_lines_total{{{l}}} 31"),
+        format!("surfscan_last_line_duration_seconds{{{l}}} 41.5"),
+        "# TYPE surfscan_line_duration_seconds summary".to_string(),
+        format!("surfscan_line_duration_seconds_sum{{{l}}} 498"),
+        format!("surfscan_line_duration_seconds_count{{{l}}} 12"),
+        "# TYPE surfscan_line_retries_total counter".to_string(),
+        format!("surfscan_line_retries_total{{{l}}} 2"),
+        format!("surfscan_reconnects_total{{{l},device=\"instrument\"}} 3"),
+        format!("surfscan_reconnects_total{{{l},device=\"stage\"}} 0"),
+        format!("surfscan_suspensions_total{{{l}}} 1"),
+        format!("surfscan_last_line_timestamp_seconds{{{l}}} 1767323405"),
+        format!("surfscan_fit_residual_micrometres{{{l}}} 0.0125"),
+    ] {
+        assert!(
+            text.lines().any(|x| x == expected),
+            "missing {expected:?} in\n{text}"
+        );
+    }
+    // Exposition grammar, checked line by line: comments are HELP/TYPE with a valid type,
+    // every sample is `name{labels} value` with a metric name, a TYPE declared before it
+    // (summary samples use _sum/_count), and a parseable value.
+    let mut declared: Vec<String> = Vec::new();
+    assert!(text.ends_with('\n'));
+    for line in text.lines() {
+        if let Some(rest) = line.strip_prefix("# ") {
+            let mut parts = rest.splitn(3, ' ');
+            let kw = parts.next().unwrap();
+            let name = parts.next().unwrap();
+            let tail = parts.next().unwrap();
+            assert!(kw == "HELP" || kw == "TYPE", "{line}");
+            if kw == "TYPE" {
+                assert!(["gauge", "counter", "summary"].contains(&tail), "{line}");
+                declared.push(name.to_string());
+            }
+            continue;
+        }
+        let (name, rest) = line.split_once('{').expect(line);
+        assert!(
+            name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+                && !name.starts_with(|c: char| c.is_ascii_digit()),
+            "{line}"
+        );
+        let base = name
+            .strip_suffix("_sum")
+            .or_else(|| name.strip_suffix("_count"))
+            .filter(|b| declared.iter().any(|d| d == b))
+            .unwrap_or(name);
+        assert!(declared.iter().any(|d| d == base), "undeclared {line}");
+        let (labels, value) = rest.rsplit_once("} ").expect(line);
+        for pair in labels.split(',') {
+            let (k, v) = pair.split_once('=').expect(line);
+            assert!(
+                k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_'),
+                "{line}"
+            );
+            assert!(v.starts_with('"') && v.ends_with('"'), "{line}");
+        }
+        assert!(value.parse::<f64>().is_ok(), "{line}");
+    }
+    // No temporary file is left, and a failing write leaves the previous file in place.
+    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 1);
+    m.lines_done = 13;
+    let hook = FailNth::new(WriteStep::Metrics, 0, libc::ENOSPC);
+    assert!(write_metrics(&path, &m, &*hook).unwrap_err().is_disk_full());
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), text);
+}
+
+// ---- systemd unit -------------------------------------------------------------------
+
+/// `(key, value)` of every directive in `[Service]`.
+fn service_directives(unit: &str) -> Vec<(String, String)> {
+    let mut section = String::new();
+    let mut out = Vec::new();
+    for raw in unit.lines() {
+        let line = raw.trim();
+        if line.is_empty() || line.starts_with('#') || line.starts_with(';') {
+            continue;
+        }
+        if line.starts_with('[') {
+            section = line.to_string();
+            continue;
+        }
+        if section == "[Service]" {
+            let (k, v) = line.split_once('=').expect(line);
+            out.push((k.trim().to_string(), v.trim().to_string()));
+        }
+    }
+    out
+}
+
+fn seconds(v: &str) -> u64 {
+    if let Some(m) = v.strip_suffix("min") {
+        m.parse::<u64>().unwrap() * 60
+    } else {
+        v.trim_end_matches('s').parse().unwrap()
+    }
+}
+
+#[test]
+fn service_unit_has_the_required_directives() {
+    let unit = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("systemd/surfscan.service"),
+    )
+    .unwrap();
+    let d = service_directives(&unit);
+    let get = |k: &str| -> Vec<&str> {
+        d.iter()
+            .filter(|(kk, _)| kk == k)
+            .map(|(_, v)| v.as_str())
+            .collect()
+    };
+    assert_eq!(get("Type"), ["notify"]);
+    assert_eq!(
+        get("ExecStart"),
+        ["/usr/bin/surfscan daemon --config /etc/surfscan/surfscan.toml"]
+    );
+    assert!(seconds(get("WatchdogSec")[0]) > 0);
+    assert!(
+        get("PrivateDevices").is_empty(),
+        "PrivateDevices hides the serial ports"
+    );
+    assert!(get("DynamicUser").is_empty());
+    assert_eq!(get("DevicePolicy"), ["closed"]);
+    let allow = get("DeviceAllow");
+    assert!(
+        allow.contains(&"char-ttyUSB rw") && allow.contains(&"char-ttyACM rw"),
+        "{allow:?}"
+    );
+    assert_eq!(get("SupplementaryGroups"), ["dialout"]);
+    assert_eq!(get("User"), ["surfscan"]);
+    assert_eq!(get("Group"), ["surfscan"]);
+    assert_eq!(get("StateDirectory"), ["surfscan"]);
+    assert_eq!(get("RuntimeDirectory"), ["surfscan"]);
+    assert_eq!(get("ProtectSystem"), ["strict"]);
+    assert_eq!(get("ProtectHome"), ["yes"]);
+    assert_eq!(get("NoNewPrivileges"), ["yes"]);
+    assert_eq!(get("RestrictAddressFamilies"), ["AF_UNIX"]);
+    assert_eq!(get("Restart"), ["on-failure"]);
+    assert!(seconds(get("TimeoutStopSec")[0]) >= 120);
+
+    let sysusers = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("systemd/surfscan.sysusers"),
+    )
+    .unwrap();
+    assert!(sysusers.lines().any(|l| l.starts_with("g surfscan ")));
+    assert!(sysusers.lines().any(|l| l.starts_with("u surfscan ")));
+    let rules = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("systemd/99-surfscan.rules"),
+    )
+    .unwrap();
+    let rules: Vec<&str> = rules
+        .lines()
+        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
+        .collect();
+    assert_eq!(rules.len(), 2);
+    for (rule, link) in rules
+        .iter()
+        .zip(["SYMLINK+=\"sj210\"", "SYMLINK+=\"ystage\""])
+    {
+        for needed in [
+            link,
+            "GROUP=\"dialout\"",
+            "ENV{ID_MM_DEVICE_IGNORE}=\"1\"",
+            "TAG+=\"systemd\"",
+            "ATTRS{serial}==",
+        ] {
+            assert!(rule.contains(needed), "{needed} missing in {rule}");
+        }
+    }
+}
