@@ -35,7 +35,8 @@ pub struct Split {
 /// The sampled, truncated (±`cutoff_mm`) and unnormalised Gaussian weights w_k for offsets
 /// k = 0, 1, …, half (the kernel is symmetric).
 fn weights(cutoff_mm: f64, pitch_mm: f64) -> Vec<f64> {
-    let half = (cutoff_mm / pitch_mm).floor() as usize;
+    // The small epsilon keeps e.g. 0.8 / 0.0005 at 1600 despite rounding of the quotient.
+    let half = (cutoff_mm / pitch_mm + 1e-9).floor() as usize;
     let scale = ALPHA * cutoff_mm;
     (0..=half)
         .map(|k| {
