@@ -38,6 +38,93 @@ pub fn material_ratio_pct(heights: &[f64], level: f64) -> f64 {
     inside / (heights.len() - 1) as f64 * 100.0
 }
 
+/// Material ratio in % of a piecewise-linear curve through points (`xs[i]`, `zs[i]`) with
+/// increasing x (any spacing) at `level`: the x-length at or above `level` over the x range.
+/// Returns 0 when fewer than two points or a zero x range are given.
+pub fn material_ratio_xz_pct(xs: &[f64], zs: &[f64], level: f64) -> f64 {
+    let mut inside = 0.0;
+    let mut total = 0.0;
+    for (xw, zw) in xs.windows(2).zip(zs.windows(2)) {
+        let (x0, x1, a, b) = match (xw, zw) {
+            ([x0, x1], [a, b]) => (*x0, *x1, *a, *b),
+            _ => continue,
+        };
+        let dx = x1 - x0;
+        total += dx;
+        let (hi, lo) = if a >= b { (a, b) } else { (b, a) };
+        if lo >= level {
+            inside += dx;
+        } else if hi > level {
+            inside += dx * (hi - level) / (hi - lo);
+        }
+    }
+    if total > 0.0 {
+        inside / total * 100.0
+    } else {
+        0.0
+    }
+}
+
+/// The bearing area curve of a curve sampled at increasing, not necessarily uniform x (mm):
+/// the mean line is the x-weighted (trapezoidal) mean, levels are equal steps over the range.
+pub fn bearing_curve_xz(
+    xs: &[f64],
+    zs: &[f64],
+    levels: usize,
+) -> Result<BearingCurve, MetrologyError> {
+    check_finite(zs)?;
+    check_finite(xs)?;
+    if xs.len() != zs.len() || xs.len() < 2 {
+        return Err(MetrologyError::BadParameter {
+            what: "points",
+            value: xs.len().min(zs.len()) as f64,
+            hint: "give at least 2 (x, z) points, as many x as z",
+        });
+    }
+    if let Some(i) = xs.windows(2).position(|w| matches!(w, [a, b] if b <= a)) {
+        return Err(MetrologyError::BadParameter {
+            what: "x (mm) not increasing at index",
+            value: (i + 1) as f64,
+            hint: "sample the curve at strictly increasing x",
+        });
+    }
+    if levels < 2 {
+        return Err(MetrologyError::BadParameter {
+            what: "levels",
+            value: levels as f64,
+            hint: "give at least 2 height levels (the paper uses 101)",
+        });
+    }
+    let (mut area, mut total) = (0.0, 0.0);
+    for (xw, zw) in xs.windows(2).zip(zs.windows(2)) {
+        if let ([x0, x1], [a, b]) = (xw, zw) {
+            area += 0.5 * (a + b) * (x1 - x0);
+            total += x1 - x0;
+        }
+    }
+    let mean = area / total;
+    let z: Vec<f64> = zs.iter().map(|h| h - mean).collect();
+    let top = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let bottom = z.iter().copied().fold(f64::INFINITY, f64::min);
+    let points = (0..levels)
+        .map(|k| {
+            let h = top - (top - bottom) * k as f64 / (levels - 1) as f64;
+            let mr = if k == 0 {
+                0.0
+            } else if k == levels - 1 {
+                100.0
+            } else {
+                material_ratio_xz_pct(xs, &z, h)
+            };
+            [h, mr]
+        })
+        .collect();
+    Ok(BearingCurve {
+        mean_line_um: mean,
+        points,
+    })
+}
+
 /// One bearing area curve: levels from the highest to the lowest point, with their ratios.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct BearingCurve {

@@ -1,15 +1,18 @@
 //! Surface characterisation: ISO 4287 / 21920 roughness per traced line, the ISO 13565-2 Rk
-//! family and the bearing area curve of a (model) curve as the paper's Appendix A computes it.
+//! family and the bearing area curves of sampled curves and of the fitted NURBS model as the
+//! paper's Appendix A computes them.
 //!
 //! Every number is computed the way the SJ series computes it (filter mean line as reference,
 //! per-sampling-length averaging, 7-point slope, minimum-gradient 40 % secant) and carries a
 //! [`Recipe`](params::Recipe) naming the filter, λc, λs, N, the standard and a definition id per
 //! parameter, so it can be compared honestly with other software.
 //!
-//! Layer 1 (pure logic): numbers in, values out; depends only on [`crate::profile`]. No I/O.
+//! Layer 1 (pure logic): numbers in, values out; depends only on [`crate::profile`] and
+//! [`crate::nurbs`]. No I/O.
 
 pub mod bearing;
 pub mod filter;
+pub mod model;
 pub mod params;
 
 use thiserror::Error;
