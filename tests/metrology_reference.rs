@@ -15,11 +15,15 @@
 //! * Gaussian filter ends: scipy pads (reflect), we use the moment criterion; the filtered
 //!   profiles are compared in the interior, one λc away from either end, with the same kernel
 //!   (σ = λc·sqrt(ln2/2)/π, truncated at ±λc).
+//! * Areal (sur-2, 31 profiles): both remove the least-squares plane and use the same Sdq
+//!   (forward differences) and Sdr (two triangulations averaged) discretisations; compared
+//!   to 1e-6 relative.
 //! * No filter on the Mitutoyo export: it already is an R profile (λc 2.5 mm, N = 4).
 
 use serde_json::Value;
 use std::path::PathBuf;
 use std::process::Command;
+use surfscan::metrology::areal::{areal_params, Grid};
 use surfscan::metrology::filter::split;
 use surfscan::metrology::params::{analyze_line, Options};
 
@@ -187,4 +191,38 @@ fn real_profiles_agree_with_surfalize_and_scipy_where_conventions_agree() {
         close(max, num(g, "max"), 1e-6, &format!("{name} max"));
         close(min, num(g, "min"), 1e-6, &format!("{name} min"));
     }
+}
+
+#[test]
+fn areal_parameters_of_the_31_profile_grid_agree_with_surfalize() {
+    let reference = reference();
+    let a = &reference["areal_sur2"];
+    let path = data_dir().join("sur-2.31profiles.y_mm_x_mm_z_um.csv");
+    let text = std::fs::read_to_string(&path)
+        .unwrap_or_else(|e| panic!("{}: {e}; set SURFSCAN_REAL_DATA", path.display()));
+    let z: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| l.split(',').nth(3).unwrap().trim().parse::<f64>().unwrap())
+        .collect();
+    let (rows, cols) = (num(a, "rows") as usize, num(a, "cols") as usize);
+    assert_eq!(rows * cols, z.len());
+    let grid = Grid {
+        heights_um: &z,
+        rows,
+        cols,
+        pitch_x_mm: num(a, "pitch_x_mm"),
+        pitch_y_mm: num(a, "pitch_y_mm"),
+    };
+    let p = areal_params(&grid).unwrap();
+    close(p.sa_um, num(a, "Sa"), 1e-6, "Sa");
+    close(p.sq_um, num(a, "Sq"), 1e-6, "Sq");
+    close(p.sp_um, num(a, "Sp"), 1e-6, "Sp");
+    close(p.sv_um, num(a, "Sv"), 1e-6, "Sv");
+    close(p.sz_um, num(a, "Sz"), 1e-6, "Sz");
+    close(p.ssk, num(a, "Ssk"), 1e-6, "Ssk");
+    close(p.sku, num(a, "Sku"), 1e-6, "Sku");
+    close(p.sdq, num(a, "Sdq"), 1e-6, "Sdq");
+    close(p.sdr_pct, num(a, "Sdr"), 1e-6, "Sdr");
 }

@@ -1,6 +1,6 @@
 //! Surface characterisation: ISO 4287 / 21920 roughness per traced line, the ISO 13565-2 Rk
 //! family and the bearing area curves of sampled curves and of the fitted NURBS model as the
-//! paper's Appendix A computes them.
+//! paper's Appendix A computes them, and ISO 25178 areal parameters of a levelled height grid.
 //!
 //! Every number is computed the way the SJ series computes it (filter mean line as reference,
 //! per-sampling-length averaging, 7-point slope, minimum-gradient 40 % secant) and carries a
@@ -10,6 +10,7 @@
 //! Layer 1 (pure logic): numbers in, values out; depends only on [`crate::profile`] and
 //! [`crate::nurbs`]. No I/O.
 
+pub mod areal;
 pub mod bearing;
 pub mod filter;
 pub mod model;
