@@ -8,6 +8,7 @@
 use clap::{Parser, Subcommand};
 use std::fmt;
 
+pub mod analyze;
 pub mod fit;
 
 /// surfscan: unattended surface-roughness scanning with an SJ-210 and a y stage.
@@ -27,6 +28,8 @@ pub struct Cli {
 pub enum Command {
     /// Fit a NURBS surface to a grid of heights and write it as IGES.
     Fit(fit::Args),
+    /// Characterise a profile or grid CSV: ISO roughness per line, areal parameters, bearing area curves.
+    Analyze(analyze::Args),
 }
 
 /// Process exit status (sysexits).
@@ -75,5 +78,6 @@ impl fmt::Display for CliError {
 pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::Fit(args) => fit::run(args),
+        Command::Analyze(args) => analyze::run(args),
     }
 }

@@ -1,0 +1,306 @@
+//! `surfscan analyze`: surface characterisation of a profile CSV (header `x_mm,z_um`) or of a
+//! grid CSV of heights in µm (rows = traced lines along y, columns = points along x, as
+//! `surfscan fit` reads; pitches required). Writes `report.json` and `summary.csv` into the
+//! output directory.
+//!
+//! Layer 5 (composition): reads files, calls [`crate::metrology`] and [`crate::fit`].
+
+use super::{CliError, Exit};
+use crate::fit::{fit_grid, FitOptions};
+use crate::metrology::areal::{areal_params, smr_curve, Grid};
+use crate::metrology::model::{model_bearing_curves, ModelBacOptions};
+use crate::metrology::params::{analyze_line, Options, Recipe, RoughnessParams};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `surfscan analyze`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Profile CSV (`x_mm,z_um` header) or grid CSV of heights in µm.
+    pub input: PathBuf,
+    /// Cut-off λc in mm (also the sampling length).
+    #[arg(long, default_value_t = 0.8)]
+    pub lc: f64,
+    /// The input already is an R profile: no λc filter.
+    #[arg(long)]
+    pub no_filter: bool,
+    /// Grid pitch along x (between columns), mm.
+    #[arg(long)]
+    pub pitch_x: Option<f64>,
+    /// Grid pitch along y (between rows), mm.
+    #[arg(long)]
+    pub pitch_y: Option<f64>,
+    /// Profile curves extracted from the model for the bearing area curves.
+    #[arg(long, default_value_t = 31)]
+    pub curves: usize,
+    /// Equal height levels per bearing area curve.
+    #[arg(long, default_value_t = 101)]
+    pub levels: usize,
+    /// Output directory for report.json and summary.csv.
+    #[arg(long, default_value = ".")]
+    pub out: PathBuf,
+}
+
+/// One line's entry in the report.
+#[derive(Debug, Serialize)]
+struct LineReport {
+    index: usize,
+    y_mm: f64,
+    #[serde(flatten)]
+    params: RoughnessParams,
+}
+
+/// Areal results with their curve.
+#[derive(Debug, Serialize)]
+struct SurfaceReport {
+    #[serde(flatten)]
+    params: crate::metrology::areal::ArealParams,
+    /// Pooled Smr(c): `[height_um, material_ratio_pct]`.
+    bac: Vec<[f64; 2]>,
+}
+
+#[derive(Debug, Serialize)]
+struct Report {
+    software: String,
+    input: String,
+    kind: &'static str,
+    recipe: Recipe,
+    lines: Vec<LineReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    surface_grid: Option<SurfaceReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    bac_curves: Option<Vec<crate::metrology::model::ModelCurveBac>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    bac_curves_recipe: Option<String>,
+}
+
+fn failed(msg: impl Into<String>) -> CliError {
+    CliError::new(Exit::Failed, msg)
+}
+
+fn parse_numbers(line: &str) -> Option<Vec<f64>> {
+    line.split(',')
+        .map(|f| f.trim().parse::<f64>().ok())
+        .collect::<Option<Vec<f64>>>()
+}
+
+/// Reads a profile CSV: returns pitch (mm) and heights (µm). x must be uniformly spaced.
+fn read_profile(path: &Path, text: &str) -> Result<(f64, Vec<f64>), CliError> {
+    let mut x = Vec::new();
+    let mut z = Vec::new();
+    for (n, line) in text.lines().enumerate().skip(1) {
+        if line.trim().is_empty() {
+            continue;
+        }
+        match parse_numbers(line).as_deref() {
+            Some([xv, zv, ..]) => {
+                x.push(*xv);
+                z.push(*zv);
+            }
+            _ => {
+                return Err(failed(format!(
+                    "{}: line {} is not two numbers x_mm,z_um: {line:?}",
+                    path.display(),
+                    n + 1
+                )))
+            }
+        }
+    }
+    let (first, last) = match (x.first(), x.last()) {
+        (Some(f), Some(l)) if x.len() >= 2 => (*f, *l),
+        _ => return Err(failed(format!("{}: fewer than 2 points", path.display()))),
+    };
+    let pitch = (last - first) / (x.len() - 1) as f64;
+    if let Some(i) = x
+        .windows(2)
+        .position(|w| matches!(w, [a, b] if ((b - a) - pitch).abs() > 0.01 * pitch.abs()))
+    {
+        return Err(failed(format!(
+            "{}: x is not uniformly spaced at row {} (pitch {pitch} mm); resample the profile first",
+            path.display(),
+            i + 2
+        )));
+    }
+    Ok((pitch, z))
+}
+
+/// Reads a grid CSV: rows of equal length (a non-numeric first line is taken as a header).
+fn read_grid(path: &Path, text: &str) -> Result<(Vec<f64>, usize, usize), CliError> {
+    let mut z = Vec::new();
+    let mut cols = 0;
+    let mut rows = 0;
+    for (n, line) in text.lines().enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let Some(values) = parse_numbers(line) else {
+            if n == 0 {
+                continue;
+            }
+            return Err(failed(format!(
+                "{}: line {} holds a value that is not a number",
+                path.display(),
+                n + 1
+            )));
+        };
+        if rows == 0 {
+            cols = values.len();
+        } else if values.len() != cols {
+            return Err(failed(format!(
+                "{}: line {} has {} values, the first row had {cols}; all rows must be equally long",
+                path.display(),
+                n + 1,
+                values.len()
+            )));
+        }
+        z.extend(values);
+        rows += 1;
+    }
+    Ok((z, rows, cols))
+}
+
+/// Runs `surfscan analyze`.
+pub fn run(args: Args) -> Result<(), CliError> {
+    let text = std::fs::read_to_string(&args.input).map_err(|e| {
+        CliError::new(
+            Exit::Io,
+            format!("cannot read {}: {e}", args.input.display()),
+        )
+    })?;
+    let options = Options {
+        lambda_c_mm: args.lc,
+        apply_lambda_c: !args.no_filter,
+        lambda_s_um: None,
+        sampling_lengths: None,
+    };
+    let is_profile = text
+        .lines()
+        .next()
+        .is_some_and(|h| h.trim_start().starts_with("x_mm"));
+    let report = if is_profile {
+        let (pitch, z) = read_profile(&args.input, &text)?;
+        let a = analyze_line(&z, pitch, &options)
+            .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
+        Report {
+            software: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
+            input: args.input.display().to_string(),
+            kind: "profile",
+            recipe: a.recipe,
+            lines: vec![LineReport {
+                index: 0,
+                y_mm: 0.0,
+                params: a.params,
+            }],
+            surface_grid: None,
+            bac_curves: None,
+            bac_curves_recipe: None,
+        }
+    } else {
+        let (Some(px), Some(py)) = (args.pitch_x, args.pitch_y) else {
+            return Err(CliError::new(
+                Exit::Usage,
+                "a grid CSV needs --pitch-x MM and --pitch-y MM (a profile CSV starts with the header x_mm,z_um)",
+            ));
+        };
+        let (z, rows, cols) = read_grid(&args.input, &text)?;
+        let mut lines = Vec::with_capacity(rows);
+        let mut recipe = None;
+        for (index, row) in z.chunks_exact(cols.max(1)).enumerate() {
+            let a = analyze_line(row, px, &options)
+                .map_err(|e| failed(format!("{} line {index}: {e}", args.input.display())))?;
+            recipe.get_or_insert(a.recipe);
+            lines.push(LineReport {
+                index,
+                y_mm: index as f64 * py,
+                params: a.params,
+            });
+        }
+        let recipe = recipe.ok_or_else(|| failed(format!("{}: no lines", args.input.display())))?;
+        let grid = Grid {
+            heights_um: &z,
+            rows,
+            cols,
+            pitch_x_mm: px,
+            pitch_y_mm: py,
+        };
+        let err =
+            |e: crate::metrology::MetrologyError| failed(format!("{}: {e}", args.input.display()));
+        let surface_grid = SurfaceReport {
+            params: areal_params(&grid).map_err(err)?,
+            bac: smr_curve(&grid, args.levels).map_err(err)?,
+        };
+        let y: Vec<f64> = (0..rows).map(|j| j as f64 * py).collect();
+        let fit = fit_grid(px, &y, &z, cols, FitOptions::default()).map_err(|e| {
+            failed(format!(
+                "{}: the NURBS fit failed: {e}",
+                args.input.display()
+            ))
+        })?;
+        let bac_options = ModelBacOptions {
+            curves: args.curves,
+            levels: args.levels,
+            samples_per_curve: None,
+        };
+        let curves = model_bearing_curves(&fit.surface, &bac_options).map_err(err)?;
+        Report {
+            software: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
+            input: args.input.display().to_string(),
+            kind: "grid",
+            recipe,
+            lines,
+            surface_grid: Some(surface_grid),
+            bac_curves: Some(curves),
+            bac_curves_recipe: Some(format!(
+                "paper Appendix A: {} iso-curves along x of the degree 5/5 interpolating surface at equally spaced v, each sampled at 8 points per control point along u, referenced to its x-weighted mean line, {} equal levels, crossings linear along x",
+                args.curves, args.levels
+            )),
+        }
+    };
+    write_outputs(&args.out, &report)
+}
+
+fn fmt_opt(v: Option<f64>) -> String {
+    v.map(|v| format!("{v}")).unwrap_or_default()
+}
+
+fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
+    let io = |p: &Path, e: std::io::Error| {
+        CliError::new(Exit::Io, format!("cannot write {}: {e}", p.display()))
+    };
+    std::fs::create_dir_all(out).map_err(|e| io(out, e))?;
+    let json = serde_json::to_string_pretty(report)
+        .map_err(|e| failed(format!("cannot encode the report: {e}")))?;
+    let path = out.join("report.json");
+    std::fs::write(&path, json).map_err(|e| io(&path, e))?;
+    let mut csv = String::from(
+        "index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um,Rp_um,Rv_um,Rt_um,Rz1max_um,Rsk,Rku,Rdq,RSm_um,Rk_um,Rpk_um,Rvk_um,Mr1_pct,Mr2_pct\n",
+    );
+    for l in &report.lines {
+        let p = &l.params;
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            l.index,
+            l.y_mm,
+            p.ra_um,
+            p.rq_um,
+            p.rz_um,
+            fmt_opt(p.rzjis_um),
+            p.rp_um,
+            p.rv_um,
+            p.rt_um,
+            p.rz1max_um,
+            p.rsk,
+            p.rku,
+            p.rdq,
+            fmt_opt(p.rsm_um),
+            p.rk_um,
+            p.rpk_um,
+            p.rvk_um,
+            p.mr1_pct,
+            p.mr2_pct
+        ));
+    }
+    let path = out.join("summary.csv");
+    std::fs::write(&path, csv).map_err(|e| io(&path, e))?;
+    Ok(())
+}
