@@ -95,6 +95,13 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
     // Levelled grid: the plane takes the samples' mean A/cols; Sz = 2A.
     let sz = report["surface_grid"]["Sz_um"].as_f64().unwrap();
     assert!((sz - 2.0 * amp).abs() < 1e-9, "Sz {sz}");
+    // The model sampled at half the pitch: the cosine's extremes are data points.
+    let model_sz = report["surface"]["Sz_um"].as_f64().unwrap();
+    assert!(
+        (model_sz - 2.0 * amp).abs() < 0.01 * amp,
+        "model Sz {model_sz}"
+    );
+    assert_eq!(report["surface"]["bac"].as_array().unwrap().len(), 101);
     let bac = report["surface_grid"]["bac"].as_array().unwrap();
     assert_eq!(bac.len(), 101);
     let curves = report["bac_curves"].as_array().unwrap();

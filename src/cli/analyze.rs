@@ -8,7 +8,7 @@
 use super::{CliError, Exit};
 use crate::fit::{fit_grid, FitOptions};
 use crate::metrology::areal::{areal_params, smr_curve, Grid};
-use crate::metrology::model::{model_bearing_curves, ModelBacOptions};
+use crate::metrology::model::{model_bearing_curves, sample_model_grid, ModelBacOptions};
 use crate::metrology::params::{analyze_line, Options, Recipe, RoughnessParams};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -66,6 +66,10 @@ struct Report {
     kind: &'static str,
     recipe: Recipe,
     lines: Vec<LineReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    surface: Option<SurfaceReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    surface_recipe: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     surface_grid: Option<SurfaceReport>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -191,6 +195,8 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 y_mm: 0.0,
                 params: a.params,
             }],
+            surface: None,
+            surface_recipe: None,
             surface_grid: None,
             bac_curves: None,
             bac_curves_recipe: None,
@@ -242,12 +248,31 @@ pub fn run(args: Args) -> Result<(), CliError> {
             samples_per_curve: None,
         };
         let curves = model_bearing_curves(&fit.surface, &bac_options).map_err(err)?;
+        let model_cols = 2 * cols - 1;
+        let model_z = sample_model_grid(&fit.surface, &fit.params_v, 0.0, px / 2.0, model_cols)
+            .map_err(err)?;
+        let model_grid = Grid {
+            heights_um: &model_z,
+            rows,
+            cols: model_cols,
+            pitch_x_mm: px / 2.0,
+            pitch_y_mm: py,
+        };
+        let surface = SurfaceReport {
+            params: areal_params(&model_grid).map_err(err)?,
+            bac: smr_curve(&model_grid, args.levels).map_err(err)?,
+        };
         Report {
             software: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
             input: args.input.display().to_string(),
             kind: "grid",
             recipe,
             lines,
+            surface: Some(surface),
+            surface_recipe: Some(format!(
+                "the degree 5/5 interpolating NURBS surface sampled on the data lines (their v) at half the x pitch ({} points per line, x(u) inverted by bisection), then levelled and evaluated as surface_grid",
+                model_cols
+            )),
             surface_grid: Some(surface_grid),
             bac_curves: Some(curves),
             bac_curves_recipe: Some(format!(

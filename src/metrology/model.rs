@@ -96,3 +96,48 @@ pub fn model_bearing_curves(
     }
     Ok(out)
 }
+
+/// Samples the model on a regular grid: one row per v in `vs` (e.g. the data lines'
+/// parameters, where the model's y equals the line's y), `cols` points at x = `x0_mm` +
+/// k·`pitch_x_mm` found by inverting x(u) along each iso-curve (bisection; x must increase with
+/// u). Heights in µm, row-major.
+pub fn sample_model_grid(
+    surface: &NurbsSurface,
+    vs: &[f64],
+    x0_mm: f64,
+    pitch_x_mm: f64,
+    cols: usize,
+) -> Result<Vec<f64>, MetrologyError> {
+    super::check_pitch(pitch_x_mm)?;
+    let bad = |what: &'static str, value: f64| MetrologyError::BadParameter {
+        what,
+        value,
+        hint: "the model's x must increase along u and cover the requested x range",
+    };
+    let mut out = Vec::with_capacity(vs.len() * cols);
+    for &v in vs {
+        let iso = surface.iso_curve_u(v);
+        let at = |u: f64| {
+            iso.evaluate(u)
+                .ok_or(bad("iso-curve poles", iso.poles.len() as f64))
+        };
+        let (lo_x, hi_x) = (at(0.0)?[0], at(1.0)?[0]);
+        for k in 0..cols {
+            let x = x0_mm + k as f64 * pitch_x_mm;
+            if x < lo_x - 1e-9 * pitch_x_mm.max(1.0) || x > hi_x + 1e-9 * hi_x.abs().max(1.0) {
+                return Err(bad("x (mm) outside the model", x));
+            }
+            let (mut a, mut b) = (0.0f64, 1.0f64);
+            for _ in 0..50 {
+                let m = 0.5 * (a + b);
+                if at(m)?[0] < x {
+                    a = m;
+                } else {
+                    b = m;
+                }
+            }
+            out.push(at(0.5 * (a + b))?[2] * 1000.0);
+        }
+    }
+    Ok(out)
+}
