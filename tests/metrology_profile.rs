@@ -358,3 +358,33 @@ fn material_ratio_interpolates_crossings() {
     // 0,2,0: at level 1 half of each segment.
     assert!((material_ratio_pct(&[0.0, 2.0, 0.0], 1.0) - 50.0).abs() < 1e-12);
 }
+
+#[test]
+fn instrument_results_are_paired_with_ours_in_our_units() {
+    use surfscan::metrology::instrument::compare;
+    use surfscan::profile::InstrumentResult;
+    let z = sine(8000, 0.0005, 0.1, 1.0);
+    let p = analyze_line(&z, 0.0005, &no_filter(0.8)).unwrap().params;
+    let r = |name: &str, value: Option<f64>, unit: &str| InstrumentResult {
+        name: name.to_string(),
+        value,
+        unit: unit.to_string(),
+    };
+    let c = compare(
+        &p,
+        &[
+            r("Ra", Some(0.6), "µm"),
+            r("RSm", Some(0.1), "mm"),
+            r("Rz", None, "um"),
+            r("Pc", Some(12.0), "/cm"),
+        ],
+    );
+    assert_eq!(c.len(), 4);
+    assert!((c[0].difference.unwrap() - (p.ra_um - 0.6)).abs() < 1e-12);
+    // 0.1 mm = 100 µm; our RSm is the wavelength, 100 µm.
+    assert!((c[1].instrument.unwrap() - 100.0).abs() < 1e-12);
+    assert!(c[1].difference.unwrap().abs() < 1e-6);
+    assert_eq!(c[2].instrument, None);
+    assert_eq!(c[2].difference, None);
+    assert_eq!(c[3].ours, None);
+}

@@ -13,6 +13,7 @@
 pub mod areal;
 pub mod bearing;
 pub mod filter;
+pub mod instrument;
 pub mod model;
 pub mod params;
 
