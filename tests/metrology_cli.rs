@@ -61,8 +61,8 @@ fn analyze_profile_csv_writes_report_and_summary() {
 #[test]
 fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
     let dir = tempfile::tempdir().unwrap();
-    // 9 lines of z = A·cos(2πx/λ), 4 whole periods of 100 points plus the closing point.
-    let (rows, cols, amp) = (9usize, 401usize, 0.5);
+    // 13 lines of z = A·cos(2πx/λ), 4 whole periods of 100 points plus the closing point.
+    let (rows, cols, amp) = (13usize, 401usize, 0.5);
     let mut csv = String::new();
     for _ in 0..rows {
         let row: Vec<String> = (0..cols)
@@ -91,7 +91,7 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["lines"].as_array().unwrap().len(), rows);
-    assert!((report["lines"][8]["y_mm"].as_f64().unwrap() - 0.08).abs() < 1e-12);
+    assert!((report["lines"][12]["y_mm"].as_f64().unwrap() - 0.12).abs() < 1e-12);
     // Levelled grid: the plane takes the samples' mean A/cols; Sz = 2A.
     let sz = report["surface_grid"]["Sz_um"].as_f64().unwrap();
     assert!((sz - 2.0 * amp).abs() < 1e-9, "Sz {sz}");
@@ -102,6 +102,11 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
         "model Sz {model_sz}"
     );
     assert_eq!(report["surface"]["bac"].as_array().unwrap().len(), 101);
+    let mvm = &report["model_vs_measured"];
+    assert_eq!(mvm["points_left_out"].as_array().unwrap().len(), rows);
+    assert_eq!(mvm["lines_left_out"].as_array().unwrap().len(), 6); // rows 1, 3, …, 11
+                                                                    // Lines are identical, so leaving one out changes nothing: the model predicts it.
+    assert!(mvm["lines_left_out"][0]["max_abs_um"].as_f64().unwrap() < 1e-6);
     let bac = report["surface_grid"]["bac"].as_array().unwrap();
     assert_eq!(bac.len(), 101);
     let curves = report["bac_curves"].as_array().unwrap();

@@ -120,3 +120,42 @@ fn model_sampled_on_the_real_31_line_grid_reproduces_data_and_keeps_sa_sq() {
         raw.sq_um
     );
 }
+
+#[test]
+fn holdout_predicts_a_smooth_surface_and_misses_a_held_out_spike() {
+    use surfscan::metrology::holdout::holdout;
+    // z = A·cos(2πx/λx)·cos(2πy/λy), 40 points per λx and 16 lines per λy: a degree 5 model of
+    // the kept half predicts the held-out half to a small fraction of A.
+    let (rows, cols, px, py, amp) = (21usize, 161usize, 0.001, 0.01, 1.0);
+    let mut z: Vec<f64> = (0..rows * cols)
+        .map(|k| {
+            let (r, c) = (k / cols, k % cols);
+            amp * (2.0 * PI * c as f64 / 40.0).cos() * (2.0 * PI * r as f64 / 16.0).cos()
+        })
+        .collect();
+    let h = holdout(&z, rows, cols, px, py, FitOptions::default()).unwrap();
+    assert_eq!(h.points_left_out.len(), rows);
+    assert!(h.points_left_out.iter().all(|l| l.points == 80));
+    // Odd rows between the first and last kept (even) rows: 1, 3, …, 19.
+    assert_eq!(h.lines_left_out.len(), 10);
+    assert_eq!(h.lines_left_out[0].index, 1);
+    for l in h.points_left_out.iter().chain(&h.lines_left_out) {
+        assert!(
+            l.max_abs_um < 0.02 * amp,
+            "line {}: {}",
+            l.index,
+            l.max_abs_um
+        );
+        assert!(l.rms_um <= l.max_abs_um);
+    }
+    // A spike at a held-out point (line 3, column 81) is invisible to the refit: the difference
+    // there is about the spike's height, and only line 3 sees it.
+    z[3 * cols + 81] += 5.0;
+    let h = holdout(&z, rows, cols, px, py, FitOptions::default()).unwrap();
+    assert!(
+        (h.points_left_out[3].max_abs_um - 5.0).abs() < 0.1,
+        "{}",
+        h.points_left_out[3].max_abs_um
+    );
+    assert!(h.points_left_out[4].max_abs_um < 0.02 * amp);
+}

@@ -8,6 +8,7 @@
 use super::{CliError, Exit};
 use crate::fit::{fit_grid, FitOptions};
 use crate::metrology::areal::{areal_params, smr_curve, Grid};
+use crate::metrology::holdout::{holdout, Holdout};
 use crate::metrology::model::{model_bearing_curves, sample_model_grid, ModelBacOptions};
 use crate::metrology::params::{analyze_line, Options, Recipe, RoughnessParams};
 use serde::Serialize;
@@ -76,6 +77,11 @@ struct Report {
     bac_curves: Option<Vec<crate::metrology::model::ModelCurveBac>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     bac_curves_recipe: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    model_vs_measured: Option<Holdout>,
+    /// Why the hold-out comparison could not be made (e.g. too few lines to refit half).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    model_vs_measured_error: Option<String>,
 }
 
 fn failed(msg: impl Into<String>) -> CliError {
@@ -200,6 +206,8 @@ pub fn run(args: Args) -> Result<(), CliError> {
             surface_grid: None,
             bac_curves: None,
             bac_curves_recipe: None,
+            model_vs_measured: None,
+            model_vs_measured_error: None,
         }
     } else {
         let (Some(px), Some(py)) = (args.pitch_x, args.pitch_y) else {
@@ -258,6 +266,12 @@ pub fn run(args: Args) -> Result<(), CliError> {
             pitch_x_mm: px / 2.0,
             pitch_y_mm: py,
         };
+        // A grid too small to refit half of it still gets everything else.
+        let (model_vs_measured, model_vs_measured_error) =
+            match holdout(&z, rows, cols, px, py, FitOptions::default()) {
+                Ok(h) => (Some(h), None),
+                Err(e) => (None, Some(e.to_string())),
+            };
         let surface = SurfaceReport {
             params: areal_params(&model_grid).map_err(err)?,
             bac: smr_curve(&model_grid, args.levels).map_err(err)?,
@@ -275,6 +289,8 @@ pub fn run(args: Args) -> Result<(), CliError> {
             )),
             surface_grid: Some(surface_grid),
             bac_curves: Some(curves),
+            model_vs_measured,
+            model_vs_measured_error,
             bac_curves_recipe: Some(format!(
                 "paper Appendix A: {} iso-curves along x of the degree 5/5 interpolating surface at equally spaced v, each sampled at 8 points per control point along u, referenced to its x-weighted mean line, {} equal levels, crossings linear along x",
                 args.curves, args.levels

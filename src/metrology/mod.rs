@@ -8,11 +8,12 @@
 //! parameter, so it can be compared honestly with other software.
 //!
 //! Layer 1 (pure logic): numbers in, values out; depends only on [`crate::profile`] and
-//! [`crate::nurbs`]. No I/O.
+//! [`crate::nurbs`], and [`crate::fit`] for the hold-out refits. No I/O.
 
 pub mod areal;
 pub mod bearing;
 pub mod filter;
+pub mod holdout;
 pub mod instrument;
 pub mod model;
 pub mod params;
@@ -86,6 +87,9 @@ pub enum MetrologyError {
         /// Columns.
         cols: usize,
     },
+    /// The NURBS fit of a hold-out grid failed.
+    #[error("the NURBS fit for the hold-out comparison failed: {0}")]
+    Fit(#[from] crate::fit::FitError),
     /// A bearing-area parameter is out of range.
     #[error("{what} = {value} is out of range; {hint}")]
     BadParameter {
