@@ -72,7 +72,7 @@ pub fn holdout(
     let sub: Vec<f64> = (0..rows)
         .flat_map(|r| row(r).iter().step_by(2).copied().collect::<Vec<f64>>())
         .collect();
-    let fit = fit_grid(2.0 * pitch_x_mm, &y, &sub, kept_cols, options.clone())?;
+    let fit = fit_grid(2.0 * pitch_x_mm, &y, &sub, kept_cols, options)?;
     let held = (cols.saturating_sub(1)) / 2;
     let model = sample_model_grid(
         &fit.surface,
