@@ -124,6 +124,19 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
             .count(),
         rows + 1
     );
+    // Plots as PNG (signature) and SVG (one polyline per model curve plus the pooled curve).
+    for name in ["bac.png", "heightmap.png"] {
+        let bytes = std::fs::read(out.join(name)).unwrap();
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{name}");
+    }
+    let svg = std::fs::read_to_string(out.join("bac.svg")).unwrap();
+    assert!(svg.starts_with("<svg"));
+    assert!(
+        svg.matches("<polyline").count() >= 5 + 1,
+        "curves missing from bac.svg"
+    );
+    let map = std::fs::read_to_string(out.join("heightmap.svg")).unwrap();
+    assert!(map.matches("<rect").count() >= rows * cols);
 }
 
 #[test]

@@ -11,6 +11,7 @@ use crate::metrology::areal::{areal_params, smr_curve, Grid};
 use crate::metrology::holdout::{holdout, Holdout};
 use crate::metrology::model::{model_bearing_curves, sample_model_grid, ModelBacOptions};
 use crate::metrology::params::{analyze_line, Options, Recipe, RoughnessParams};
+use crate::metrology::plots::{plot_bearing_curves, plot_height_map};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -187,6 +188,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         .lines()
         .next()
         .is_some_and(|h| h.trim_start().starts_with("x_mm"));
+    let mut grid_for_plots = None;
     let report = if is_profile {
         let (pitch, z) = read_profile(&args.input, &text)?;
         let a = analyze_line(&z, pitch, &options)
@@ -276,7 +278,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             params: areal_params(&model_grid).map_err(err)?,
             bac: smr_curve(&model_grid, args.levels).map_err(err)?,
         };
-        Report {
+        let report = Report {
             software: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
             input: args.input.display().to_string(),
             kind: "grid",
@@ -295,9 +297,21 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 "paper Appendix A: {} iso-curves along x of the degree 5/5 interpolating surface at equally spaced v, each sampled at 8 points per control point along u, referenced to its x-weighted mean line, {} equal levels, crossings linear along x",
                 args.curves, args.levels
             )),
-        }
+        };
+        grid_for_plots = Some((z, rows, cols));
+        report
     };
-    write_outputs(&args.out, &report)
+    write_outputs(&args.out, &report)?;
+    if let (Some(curves), Some(surface), Some((z, rows, cols))) =
+        (&report.bac_curves, &report.surface, grid_for_plots)
+    {
+        let err = |e: crate::metrology::MetrologyError| CliError::new(Exit::Io, e.to_string());
+        let title = format!("Bearing area curves: {} model curves, pooled", curves.len());
+        plot_bearing_curves(&args.out, curves, &surface.bac, &title).map_err(err)?;
+        let (px, py) = (args.pitch_x.unwrap_or(1.0), args.pitch_y.unwrap_or(1.0));
+        plot_height_map(&args.out, &z, rows, cols, px, py, "Measured heights").map_err(err)?;
+    }
+    Ok(())
 }
 
 fn fmt_opt(v: Option<f64>) -> String {

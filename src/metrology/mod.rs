@@ -7,7 +7,8 @@
 //! [`Recipe`](params::Recipe) naming the filter, λc, λs, N, the standard and a definition id per
 //! parameter, so it can be compared honestly with other software.
 //!
-//! Layer 1 (pure logic): numbers in, values out; depends only on [`crate::profile`] and
+//! Layer 1 (pure logic): numbers in, values out, except [`plots`], which writes PNG/SVG files into
+//! a directory the caller gives; depends only on [`crate::profile`] and
 //! [`crate::nurbs`], and [`crate::fit`] for the hold-out refits. No I/O.
 
 pub mod areal;
@@ -17,6 +18,7 @@ pub mod holdout;
 pub mod instrument;
 pub mod model;
 pub mod params;
+pub mod plots;
 
 use thiserror::Error;
 
@@ -90,6 +92,16 @@ pub enum MetrologyError {
     /// The NURBS fit of a hold-out grid failed.
     #[error("the NURBS fit for the hold-out comparison failed: {0}")]
     Fit(#[from] crate::fit::FitError),
+    /// A plot could not be drawn or written.
+    #[error(
+        "cannot write the plot {path}: {message}; check the directory and the installed fonts"
+    )]
+    Plot {
+        /// The file.
+        path: String,
+        /// What plotters reported.
+        message: String,
+    },
     /// A bearing-area parameter is out of range.
     #[error("{what} = {value} is out of range; {hint}")]
     BadParameter {
