@@ -132,7 +132,7 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
     let svg = std::fs::read_to_string(out.join("bac.svg")).unwrap();
     assert!(svg.starts_with("<svg"));
     assert!(
-        svg.matches("<polyline").count() >= 5 + 1,
+        svg.matches("<polyline").count() > 5,
         "curves missing from bac.svg"
     );
     let map = std::fs::read_to_string(out.join("heightmap.svg")).unwrap();
