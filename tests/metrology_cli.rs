@@ -129,6 +129,24 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
         let bytes = std::fs::read(out.join(name)).unwrap();
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{name}");
     }
+    let measured =
+        surfscan::metrology::x3p::read_x3p(&std::fs::read(out.join("measured.x3p")).unwrap())
+            .unwrap();
+    assert_eq!((measured.rows, measured.cols), (rows, cols));
+    let model =
+        surfscan::metrology::x3p::read_x3p(&std::fs::read(out.join("model.x3p")).unwrap()).unwrap();
+    assert_eq!((model.rows, model.cols), (rows, 2 * cols - 1));
+    assert!((model.pitch_x_mm - 0.0005).abs() < 1e-12);
+    // The model passes through the data: every 2nd model column is a measured point.
+    for (k, m) in model
+        .heights_um
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| (k % (2 * cols - 1)) % 2 == 0)
+    {
+        let (r, c) = (k / (2 * cols - 1), (k % (2 * cols - 1)) / 2);
+        assert!((m - measured.heights_um[r * cols + c]).abs() < 1e-6);
+    }
     let svg = std::fs::read_to_string(out.join("bac.svg")).unwrap();
     assert!(svg.starts_with("<svg"));
     assert!(

@@ -1,7 +1,8 @@
 //! `surfscan analyze`: surface characterisation of a profile CSV (header `x_mm,z_um`) or of a
 //! grid CSV of heights in µm (rows = traced lines along y, columns = points along x, as
 //! `surfscan fit` reads; pitches required). Writes `report.json` and `summary.csv` into the
-//! output directory.
+//! output directory, and for a grid also `measured.x3p`, `model.x3p` (ISO 25178-72), `bac.png|svg`
+//! and `heightmap.png|svg`.
 //!
 //! Layer 5 (composition): reads files, calls [`crate::metrology`] and [`crate::fit`].
 
@@ -12,6 +13,7 @@ use crate::metrology::holdout::{holdout, Holdout};
 use crate::metrology::model::{model_bearing_curves, sample_model_grid, ModelBacOptions};
 use crate::metrology::params::{analyze_line, Options, Recipe, RoughnessParams};
 use crate::metrology::plots::{plot_bearing_curves, plot_height_map};
+use crate::metrology::x3p::{to_x3p, X3pMeta};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -298,6 +300,42 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 args.curves, args.levels
             )),
         };
+        let meta = |what: &str| X3pMeta {
+            date: chrono::Utc::now().to_rfc3339(),
+            version: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
+            comment: format!("{what} of {}", args.input.display()),
+            ..X3pMeta::default()
+        };
+        let x3p = [
+            (
+                "measured.x3p",
+                to_x3p(&z, rows, cols, px, py, &meta("measured grid")).map_err(err)?,
+            ),
+            (
+                "model.x3p",
+                to_x3p(
+                    &model_z,
+                    rows,
+                    model_cols,
+                    px / 2.0,
+                    py,
+                    &meta("NURBS model sampled at half the x pitch on the data lines"),
+                )
+                .map_err(err)?,
+            ),
+        ];
+        std::fs::create_dir_all(&args.out).map_err(|e| {
+            CliError::new(
+                Exit::Io,
+                format!("cannot create {}: {e}", args.out.display()),
+            )
+        })?;
+        for (name, bytes) in x3p {
+            let path = args.out.join(name);
+            std::fs::write(&path, bytes).map_err(|e| {
+                CliError::new(Exit::Io, format!("cannot write {}: {e}", path.display()))
+            })?;
+        }
         grid_for_plots = Some((z, rows, cols));
         report
     };

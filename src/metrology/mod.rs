@@ -19,6 +19,7 @@ pub mod instrument;
 pub mod model;
 pub mod params;
 pub mod plots;
+pub mod x3p;
 
 use thiserror::Error;
 
