@@ -125,7 +125,7 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
         rows + 1
     );
     // Plots as PNG (signature) and SVG (one polyline per model curve plus the pooled curve).
-    for name in ["bac.png", "heightmap.png"] {
+    for name in ["bac.png", "heightmap.png", "overlay.png"] {
         let bytes = std::fs::read(out.join(name)).unwrap();
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{name}");
     }
@@ -152,6 +152,11 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
     assert!(
         svg.matches("<polyline").count() > 5,
         "curves missing from bac.svg"
+    );
+    let overlay = std::fs::read_to_string(out.join("overlay.svg")).unwrap();
+    assert!(
+        overlay.matches("<circle").count() >= cols,
+        "measured points missing"
     );
     let map = std::fs::read_to_string(out.join("heightmap.svg")).unwrap();
     assert!(map.matches("<rect").count() >= rows * cols);

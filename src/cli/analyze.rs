@@ -2,7 +2,7 @@
 //! grid CSV of heights in µm (rows = traced lines along y, columns = points along x, as
 //! `surfscan fit` reads; pitches required). Writes `report.json` and `summary.csv` into the
 //! output directory, and for a grid also `measured.x3p`, `model.x3p` (ISO 25178-72), `bac.png|svg`
-//! and `heightmap.png|svg`.
+//! `heightmap.png|svg` and `overlay.png|svg` (measured vs model of one line).
 //!
 //! Layer 5 (composition): reads files, calls [`crate::metrology`] and [`crate::fit`].
 
@@ -12,7 +12,7 @@ use crate::metrology::areal::{areal_params, smr_curve, Grid};
 use crate::metrology::holdout::{holdout, Holdout};
 use crate::metrology::model::{model_bearing_curves, sample_model_grid, ModelBacOptions};
 use crate::metrology::params::{analyze_line, Options, Recipe, RoughnessParams};
-use crate::metrology::plots::{plot_bearing_curves, plot_height_map};
+use crate::metrology::plots::{plot_bearing_curves, plot_height_map, plot_profile_overlay};
 use crate::metrology::x3p::{to_x3p, X3pMeta};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -40,6 +40,9 @@ pub struct Args {
     /// Equal height levels per bearing area curve.
     #[arg(long, default_value_t = 101)]
     pub levels: usize,
+    /// Line (0-based) drawn in the measured-vs-model overlay; default the middle line.
+    #[arg(long)]
+    pub overlay_line: Option<usize>,
     /// Output directory for report.json and summary.csv.
     #[arg(long, default_value = ".")]
     pub out: PathBuf,
@@ -336,11 +339,11 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 CliError::new(Exit::Io, format!("cannot write {}: {e}", path.display()))
             })?;
         }
-        grid_for_plots = Some((z, rows, cols));
+        grid_for_plots = Some((z, rows, cols, model_z));
         report
     };
     write_outputs(&args.out, &report)?;
-    if let (Some(curves), Some(surface), Some((z, rows, cols))) =
+    if let (Some(curves), Some(surface), Some((z, rows, cols, model_z))) =
         (&report.bac_curves, &report.surface, grid_for_plots)
     {
         let err = |e: crate::metrology::MetrologyError| CliError::new(Exit::Io, e.to_string());
@@ -348,6 +351,30 @@ pub fn run(args: Args) -> Result<(), CliError> {
         plot_bearing_curves(&args.out, curves, &surface.bac, &title).map_err(err)?;
         let (px, py) = (args.pitch_x.unwrap_or(1.0), args.pitch_y.unwrap_or(1.0));
         plot_height_map(&args.out, &z, rows, cols, px, py, "Measured heights").map_err(err)?;
+        let line = args
+            .overlay_line
+            .unwrap_or(rows / 2)
+            .min(rows.saturating_sub(1));
+        let mc = 2 * cols - 1;
+        let measured: Vec<(f64, f64)> = z
+            .get(line * cols..(line + 1) * cols)
+            .unwrap_or(&[])
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i as f64 * px, *v))
+            .collect();
+        let model: Vec<(f64, f64)> = model_z
+            .get(line * mc..(line + 1) * mc)
+            .unwrap_or(&[])
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i as f64 * px / 2.0, *v))
+            .collect();
+        let title = format!(
+            "Line {line} (y = {:.4} mm): measured and model",
+            line as f64 * py
+        );
+        plot_profile_overlay(&args.out, &measured, &model, &title).map_err(err)?;
     }
     Ok(())
 }

@@ -192,3 +192,87 @@ pub fn plot_height_map(
     }
     Ok([png, svg])
 }
+
+fn draw_overlay<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    measured: &[(f64, f64)],
+    model: &[(f64, f64)],
+    title: &str,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let pts = measured.iter().chain(model.iter());
+    let (x0, x1, z0, z1) = pts.fold(
+        (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ),
+        |(a, b, c, d), p| (a.min(p.0), b.max(p.0), c.min(p.1), d.max(p.1)),
+    );
+    let (x0, x1) = if x1 > x0 { (x0, x1) } else { (0.0, 1.0) };
+    let (z0, z1) = if z1 > z0 {
+        (z0, z1)
+    } else {
+        (z0 - 1.0, z0 + 1.0)
+    };
+    let pad = 0.05 * (z1 - z0);
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 22))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(x0..x1, (z0 - pad)..(z1 + pad))
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .x_desc("x (mm)")
+        .y_desc("height (µm)")
+        .draw()
+        .map_err(|e| e.to_string())?;
+    chart
+        .draw_series(LineSeries::new(model.iter().copied(), RED.stroke_width(1)))
+        .map_err(|e| e.to_string())?
+        .label("NURBS model")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+    chart
+        .draw_series(
+            measured
+                .iter()
+                .map(|&(x, z)| Circle::new((x, z), 2, BLUE.filled())),
+        )
+        .map_err(|e| e.to_string())?
+        .label("measured")
+        .legend(|(x, y)| Circle::new((x + 10, y), 3, BLUE.filled()));
+    chart
+        .configure_series_labels()
+        .border_style(BLACK)
+        .background_style(WHITE)
+        .draw()
+        .map_err(|e| e.to_string())?;
+    root.present().map_err(|e| e.to_string())
+}
+
+/// Writes `overlay.png` and `overlay.svg` into `dir`: measured points of a line as dots and the
+/// model's curve through them, as `(x_mm, z_um)` pairs.
+pub fn plot_profile_overlay(
+    dir: &Path,
+    measured: &[(f64, f64)],
+    model: &[(f64, f64)],
+    title: &str,
+) -> Result<[PathBuf; 2], MetrologyError> {
+    let png = dir.join("overlay.png");
+    let svg = dir.join("overlay.svg");
+    {
+        let root = BitMapBackend::new(&png, (1000, 500)).into_drawing_area();
+        draw_overlay(&root, measured, model, title).map_err(|e| plot_err(&png, e))?;
+    }
+    {
+        let root = SVGBackend::new(&svg, (1000, 500)).into_drawing_area();
+        draw_overlay(&root, measured, model, title).map_err(|e| plot_err(&svg, e))?;
+    }
+    Ok([png, svg])
+}
