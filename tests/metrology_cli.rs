@@ -48,6 +48,12 @@ fn analyze_profile_csv_writes_report_and_summary() {
     assert!((line["RzJIS_um"].as_f64().unwrap() - 2.0).abs() < 1e-9);
     assert!((line["RSm_um"].as_f64().unwrap() - 100.0).abs() < 1e-4);
     assert_eq!(report["recipe"]["sampling_lengths"], 5);
+    // Rmr at half of Rt below the top of a sine is at its mean line: 50 % of the length.
+    let rmr = line["Rmr_table"].as_array().unwrap();
+    assert_eq!(rmr.len(), 11);
+    assert!((rmr[5][0].as_f64().unwrap() - 1.0).abs() < 1e-9);
+    assert!((rmr[5][1].as_f64().unwrap() - 50.0).abs() < 0.01);
+    assert_eq!(rmr[10][1].as_f64().unwrap(), 100.0);
     assert!(report["recipe"]["definitions"]["Rz"]
         .as_str()
         .unwrap()

@@ -55,6 +55,18 @@ struct LineReport {
     y_mm: f64,
     #[serde(flatten)]
     params: RoughnessParams,
+    /// Rmr(c) at depths c = 0, 10, …, 100 % of Rt below the highest peak: `[c_um, Rmr_pct]`.
+    #[serde(rename = "Rmr_table")]
+    rmr_table: Vec<[f64; 2]>,
+}
+
+fn rmr_table(a: &crate::metrology::params::LineAnalysis) -> Vec<[f64; 2]> {
+    (0..=10)
+        .map(|k| {
+            let c = a.params.rt_um * k as f64 / 10.0;
+            [c, a.rmr_pct(c)]
+        })
+        .collect()
 }
 
 /// Areal results with their curve.
@@ -198,6 +210,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         let (pitch, z) = read_profile(&args.input, &text)?;
         let a = analyze_line(&z, pitch, &options)
             .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
+        let rmr = rmr_table(&a);
         Report {
             software: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
             input: args.input.display().to_string(),
@@ -206,6 +219,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             lines: vec![LineReport {
                 index: 0,
                 y_mm: 0.0,
+                rmr_table: rmr,
                 params: a.params,
             }],
             surface: None,
@@ -229,10 +243,12 @@ pub fn run(args: Args) -> Result<(), CliError> {
         for (index, row) in z.chunks_exact(cols.max(1)).enumerate() {
             let a = analyze_line(row, px, &options)
                 .map_err(|e| failed(format!("{} line {index}: {e}", args.input.display())))?;
+            let rmr = rmr_table(&a);
             recipe.get_or_insert(a.recipe);
             lines.push(LineReport {
                 index,
                 y_mm: index as f64 * py,
+                rmr_table: rmr,
                 params: a.params,
             });
         }
