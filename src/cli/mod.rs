@@ -8,6 +8,7 @@
 use clap::{Parser, Subcommand};
 use std::fmt;
 
+pub mod analyze;
 pub mod fit;
 pub mod probe;
 
@@ -30,6 +31,8 @@ pub enum Command {
     Fit(fit::Args),
     /// Read-only first-hour checklist on the instrument (moves the stylus only with --trace).
     Probe(probe::Args),
+    /// Characterise a profile or grid CSV: ISO roughness per line, areal parameters, bearing area curves.
+    Analyze(analyze::Args),
 }
 
 /// Process exit status (sysexits).
@@ -79,5 +82,6 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::Fit(args) => fit::run(args),
         Command::Probe(args) => probe::run(args),
+        Command::Analyze(args) => analyze::run(args),
     }
 }

@@ -1,3 +1,654 @@
 //! The paper's incremental NURBS surface interpolation (section 2): chord-length parameters averaged over rows and columns, averaged knots, banded collocation solves.
 //!
 //! Layer 1 (pure logic): depends on [`crate::nurbs`], [`crate::units`], [`crate::profile`]; no I/O, no tokio.
+//!
+//! The algorithm is P&T A9.3/A9.4 exactly as `geomdl.fitting.interpolate_surface` does it.
+//! Data point Q(k, l) = (k·pitch, y_l, z_kl / 1000) in mm, k = column (u, x), l = row (v, y);
+//! every distance, including the chord lengths that define the parameters, is in mm.
+//!
+//! * Parameters along u: per row, cumulative 3-D chord lengths normalised to [0, 1], averaged
+//!   over rows; along v likewise per column, averaged over columns.
+//! * Knots by averaging (P&T eq. 9.8), clamped.
+//! * The collocation matrix of each direction is the same for every line (the parameters are
+//!   averaged), so it is factored once (banded LU without pivoting; totally positive) and
+//!   applied to every row (u), then to every column (v, streaming over whole rows).
+//! * z goes through both solves. x depends only on u and y only on v, and B-splines sum to
+//!   one, so the x poles are the 1-D solve of the x values along u (the same for every row)
+//!   and the y poles the 1-D solve of the y values along v. This equals the two-direction
+//!   solve up to rounding.
+//!
+//! [`IncrementalFitter::push_line`] does each line's share on arrival (validation, row
+//! parameters, running sums, column chord accumulation); [`IncrementalFitter::finish`] only
+//! what needs all lines. [`fit_grid`] goes through the same path, so an incremental fit is
+//! bit-identical to a batch fit of the same data.
+
+mod banded;
+
+pub use banded::{BandLu, ZeroPivot};
+
+use crate::nurbs::{NurbsSurface, SurfaceError};
+use crate::profile::Profile;
+use std::time::Instant;
+use thiserror::Error;
+
+/// Degrees of the fitted surface.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FitOptions {
+    /// Degree along u (x, columns). The paper uses 5.
+    pub degree_u: usize,
+    /// Degree along v (y, rows). The paper uses 5.
+    pub degree_v: usize,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            degree_u: 5,
+            degree_v: 5,
+        }
+    }
+}
+
+/// Why a grid cannot be interpolated. Every variant carries the offending numbers.
+#[derive(Debug, Error, PartialEq)]
+pub enum FitError {
+    /// A degree is zero.
+    #[error(
+        "degrees must be at least 1 (got u={degree_u}, v={degree_v}); use 5/5 as in the paper"
+    )]
+    InvalidDegree {
+        /// Degree along u.
+        degree_u: usize,
+        /// Degree along v.
+        degree_v: usize,
+    },
+    /// A line has a different number of points than the first line.
+    #[error("line {line} has {got} points but the first line had {expected}; all lines must have the same length")]
+    RowLength {
+        /// Line index (0-based).
+        line: usize,
+        /// Points in this line.
+        got: usize,
+        /// Points in the first line.
+        expected: usize,
+    },
+    /// A height is NaN or infinite.
+    #[error(
+        "line {line}, point {index}: height {value} µm is not finite; re-measure or drop the line"
+    )]
+    NonFinite {
+        /// Line index.
+        line: usize,
+        /// Point index within the line.
+        index: usize,
+        /// The value.
+        value: f64,
+    },
+    /// A line's y position is NaN or infinite.
+    #[error("line {line}: y = {y_mm} mm is not finite")]
+    NonFiniteY {
+        /// Line index.
+        line: usize,
+        /// The value.
+        y_mm: f64,
+    },
+    /// The lines' y positions are not strictly monotone (repeated or reversed).
+    #[error("line {line}: y = {y_mm} mm does not continue the strictly monotone order after {previous_y_mm} mm")]
+    LineOrder {
+        /// Line index.
+        line: usize,
+        /// Its y.
+        y_mm: f64,
+        /// y of the previous line.
+        previous_y_mm: f64,
+    },
+    /// The x pitch is not a positive finite number.
+    #[error("line {line}: x pitch {pitch_x_mm} mm must be positive and finite")]
+    BadPitch {
+        /// Line index.
+        line: usize,
+        /// The pitch.
+        pitch_x_mm: f64,
+    },
+    /// The x pitch differs from the first line's.
+    #[error("line {line}: x pitch {got} mm differs from the first line's {expected} mm; all lines must share one pitch")]
+    PitchMismatch {
+        /// Line index.
+        line: usize,
+        /// Its pitch.
+        got: f64,
+        /// The first line's pitch.
+        expected: f64,
+    },
+    /// Fewer lines than degree_v + 1.
+    #[error("{got} lines is fewer than degree_v + 1 = {need}; trace more lines or lower degree_v")]
+    TooFewRows {
+        /// Lines so far.
+        got: usize,
+        /// Lines needed.
+        need: usize,
+    },
+    /// Fewer points per line than degree_u + 1.
+    #[error("{got} points per line is fewer than degree_u + 1 = {need}; lower degree_u or measure longer lines")]
+    TooFewColumns {
+        /// Points per line.
+        got: usize,
+        /// Points needed.
+        need: usize,
+    },
+    /// Two consecutive points coincide (zero chord), so chord-length parameters are undefined.
+    #[error("{direction} direction, line {line}, point {index}: zero chord length to the previous point ({previous:?} → {point:?} mm); remove duplicate points")]
+    CoincidentPoints {
+        /// "u" (along a line) or "v" (across lines, within a column).
+        direction: &'static str,
+        /// Line index (row).
+        line: usize,
+        /// Point index (column).
+        index: usize,
+        /// The previous point (x, y, z) in mm.
+        previous: [f64; 3],
+        /// The point (x, y, z) in mm.
+        point: [f64; 3],
+    },
+    /// A chord length overflowed (heights or positions far too large).
+    #[error("{direction} direction, line {line}, point {index}: chord length {chord} mm is not finite; check units of the heights (µm) and positions (mm)")]
+    ChordOverflow {
+        /// "u" or "v".
+        direction: &'static str,
+        /// Line index.
+        line: usize,
+        /// Point index.
+        index: usize,
+        /// The chord.
+        chord: f64,
+    },
+    /// `fit_grid` was given a height array that is not rows × cols.
+    #[error("grid has {len} heights, expected {rows} rows × {cols} columns")]
+    GridShape {
+        /// Heights given.
+        len: usize,
+        /// Rows (y values given).
+        rows: usize,
+        /// Columns given.
+        cols: usize,
+    },
+    /// A zero or non-finite pivot in the collocation factorisation.
+    #[error("{direction} collocation matrix has pivot {pivot} at row {index}; the parameters are degenerate")]
+    SingularCollocation {
+        /// "u" or "v".
+        direction: &'static str,
+        /// Row.
+        index: usize,
+        /// Pivot value.
+        pivot: f64,
+    },
+    /// The assembled surface failed its invariants.
+    #[error("fitted surface is invalid: {0}")]
+    Surface(#[from] SurfaceError),
+}
+
+/// Seconds spent per stage of a fit.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FitTimings {
+    /// Chord lengths and parameters (summed over `push_line` calls plus the final averaging).
+    pub params_s: f64,
+    /// Knot vectors, collocation matrices and their factorisations.
+    pub knots_factor_s: f64,
+    /// Solves along u (one per row).
+    pub solve_u_s: f64,
+    /// Solves along v (all columns at once) and assembly of the control net.
+    pub solve_v_s: f64,
+}
+
+impl FitTimings {
+    /// Sum of all stages.
+    pub fn total_s(&self) -> f64 {
+        self.params_s + self.knots_factor_s + self.solve_u_s + self.solve_v_s
+    }
+}
+
+/// A fitted surface with its data parameters.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitResult {
+    /// The interpolating surface (mm).
+    pub surface: NurbsSurface,
+    /// Averaged parameters ū_k of the columns.
+    pub params_u: Vec<f64>,
+    /// Averaged parameters v̄_l of the rows.
+    pub params_v: Vec<f64>,
+    /// Time per stage.
+    pub timings: FitTimings,
+}
+
+/// Accumulates traced lines and fits the paper's surface through them.
+#[derive(Debug, Clone)]
+pub struct IncrementalFitter {
+    options: FitOptions,
+    cols: usize,
+    pitch_x_mm: f64,
+    y_mm: Vec<f64>,
+    /// Heights in mm, row-major.
+    z_mm: Vec<f64>,
+    /// Σ over rows of each row's normalised cumulative chord, per column.
+    sum_u: Vec<f64>,
+    /// Cumulative chord along v per column, row-major (row 0 is zeros).
+    cum_v: Vec<f64>,
+    /// Scratch for one row's parameters.
+    scratch: Vec<f64>,
+    params_s: f64,
+}
+
+fn secs(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64()
+}
+
+impl IncrementalFitter {
+    /// A fitter with no lines.
+    pub fn new(options: FitOptions) -> Self {
+        IncrementalFitter {
+            options,
+            cols: 0,
+            pitch_x_mm: 0.0,
+            y_mm: Vec::new(),
+            z_mm: Vec::new(),
+            sum_u: Vec::new(),
+            cum_v: Vec::new(),
+            scratch: Vec::new(),
+            params_s: 0.0,
+        }
+    }
+
+    /// Adds a traced line at `y_mm` (see [`IncrementalFitter::push_row`]).
+    pub fn push_line(&mut self, y_mm: f64, profile: &Profile) -> Result<(), FitError> {
+        self.push_row(y_mm, profile.pitch_x_mm, &profile.heights_um)
+    }
+
+    /// Adds a line of heights (µm) at `y_mm` with x pitch `pitch_x_mm`: validates it, computes
+    /// its chord-length parameters and adds them to the running sums, accumulates the chords
+    /// to the previous line per column, and stores z in mm. On error nothing is changed.
+    pub fn push_row(
+        &mut self,
+        y_mm: f64,
+        pitch_x_mm: f64,
+        heights_um: &[f64],
+    ) -> Result<(), FitError> {
+        let start = Instant::now();
+        let line = self.y_mm.len();
+        let FitOptions { degree_u, degree_v } = self.options;
+        if degree_u == 0 || degree_v == 0 {
+            return Err(FitError::InvalidDegree { degree_u, degree_v });
+        }
+        if !(pitch_x_mm.is_finite() && pitch_x_mm > 0.0) {
+            return Err(FitError::BadPitch { line, pitch_x_mm });
+        }
+        if !y_mm.is_finite() {
+            return Err(FitError::NonFiniteY { line, y_mm });
+        }
+        let n = heights_um.len();
+        if line == 0 {
+            if n < degree_u + 1 {
+                return Err(FitError::TooFewColumns {
+                    got: n,
+                    need: degree_u + 1,
+                });
+            }
+        } else {
+            if n != self.cols {
+                return Err(FitError::RowLength {
+                    line,
+                    got: n,
+                    expected: self.cols,
+                });
+            }
+            if (pitch_x_mm - self.pitch_x_mm).abs() > 1e-9 * self.pitch_x_mm {
+                return Err(FitError::PitchMismatch {
+                    line,
+                    got: pitch_x_mm,
+                    expected: self.pitch_x_mm,
+                });
+            }
+            let prev = self.y_mm[line - 1];
+            let increasing = if line >= 2 {
+                self.y_mm[1] > self.y_mm[0]
+            } else {
+                y_mm > prev
+            };
+            if y_mm == prev || (y_mm > prev) != increasing {
+                return Err(FitError::LineOrder {
+                    line,
+                    y_mm,
+                    previous_y_mm: prev,
+                });
+            }
+        }
+        if let Some(index) = heights_um.iter().position(|h| !h.is_finite()) {
+            return Err(FitError::NonFinite {
+                line,
+                index,
+                value: heights_um[index],
+            });
+        }
+
+        // Row chords along u (3-D, mm) into the scratch buffer as cumulative sums.
+        let pitch = if line == 0 {
+            pitch_x_mm
+        } else {
+            self.pitch_x_mm
+        };
+        let p2 = pitch * pitch;
+        self.scratch.clear();
+        self.scratch.reserve(n);
+        self.scratch.push(0.0);
+        let mut acc = 0.0;
+        let mut prev_z = heights_um[0] / 1000.0;
+        for (k, &h) in heights_um.iter().enumerate().skip(1) {
+            let z = h / 1000.0;
+            let dz = z - prev_z;
+            let d = (p2 + dz * dz).sqrt();
+            if d == 0.0 || !d.is_finite() {
+                return Err(self.chord_error(
+                    "u",
+                    line,
+                    k,
+                    d,
+                    [(k - 1) as f64 * pitch, y_mm, prev_z],
+                    [k as f64 * pitch, y_mm, z],
+                ));
+            }
+            acc += d;
+            self.scratch.push(acc);
+            prev_z = z;
+        }
+        if !acc.is_finite() {
+            return Err(FitError::ChordOverflow {
+                direction: "u",
+                line,
+                index: n - 1,
+                chord: acc,
+            });
+        }
+
+        // Column chords along v to the previous line.
+        let new_cum: Option<Vec<f64>> = if line == 0 {
+            None
+        } else {
+            let dy = y_mm - self.y_mm[line - 1];
+            let dy2 = dy * dy;
+            let prev_row = &self.z_mm[(line - 1) * n..line * n];
+            let prev_cum = &self.cum_v[(line - 1) * n..line * n];
+            let mut row = Vec::with_capacity(n);
+            for (k, ((&h, &pz), &pc)) in heights_um.iter().zip(prev_row).zip(prev_cum).enumerate() {
+                let dz = h / 1000.0 - pz;
+                let d = (dy2 + dz * dz).sqrt();
+                let c = pc + d;
+                if d == 0.0 || !c.is_finite() {
+                    let x = k as f64 * pitch;
+                    return Err(self.chord_error(
+                        "v",
+                        line,
+                        k,
+                        d,
+                        [x, self.y_mm[line - 1], pz],
+                        [x, y_mm, h / 1000.0],
+                    ));
+                }
+                row.push(c);
+            }
+            Some(row)
+        };
+
+        // Commit: nothing below can fail.
+        if line == 0 {
+            self.cols = n;
+            self.pitch_x_mm = pitch_x_mm;
+            self.sum_u = vec![0.0; n];
+            self.cum_v.resize(n, 0.0);
+        } else if let Some(row) = new_cum {
+            self.cum_v.extend_from_slice(&row);
+        }
+        let total = acc;
+        for (s, &c) in self.sum_u.iter_mut().zip(&self.scratch) {
+            *s += c / total;
+        }
+        self.z_mm.extend(heights_um.iter().map(|h| h / 1000.0));
+        self.y_mm.push(y_mm);
+        self.params_s += secs(start);
+        Ok(())
+    }
+
+    fn chord_error(
+        &self,
+        direction: &'static str,
+        line: usize,
+        index: usize,
+        chord: f64,
+        previous: [f64; 3],
+        point: [f64; 3],
+    ) -> FitError {
+        if chord == 0.0 {
+            FitError::CoincidentPoints {
+                direction,
+                line,
+                index,
+                previous,
+                point,
+            }
+        } else {
+            FitError::ChordOverflow {
+                direction,
+                line,
+                index,
+                chord,
+            }
+        }
+    }
+
+    /// Number of lines pushed so far.
+    pub fn lines(&self) -> usize {
+        self.y_mm.len()
+    }
+
+    /// Points per line (0 before the first line).
+    pub fn columns(&self) -> usize {
+        self.cols
+    }
+
+    /// The surface through the lines so far (needs at least `degree_v + 1` lines), for a live
+    /// preview. The fitter is unchanged and the result equals what [`IncrementalFitter::finish`]
+    /// would give now.
+    pub fn provisional(&self) -> Result<FitResult, FitError> {
+        self.check_ready()?;
+        self.solve(self.z_mm.clone())
+    }
+
+    /// The surface through all lines.
+    pub fn finish(mut self) -> Result<FitResult, FitError> {
+        self.check_ready()?;
+        let z = std::mem::take(&mut self.z_mm);
+        self.solve(z)
+    }
+
+    fn check_ready(&self) -> Result<(), FitError> {
+        let FitOptions { degree_u, degree_v } = self.options;
+        if degree_u == 0 || degree_v == 0 {
+            return Err(FitError::InvalidDegree { degree_u, degree_v });
+        }
+        let rows = self.lines();
+        if rows < degree_v + 1 {
+            return Err(FitError::TooFewRows {
+                got: rows,
+                need: degree_v + 1,
+            });
+        }
+        Ok(())
+    }
+
+    /// Averages, knots, factorisations and solves; `z` is the row-major height grid in mm and
+    /// becomes the z coordinates of the poles.
+    fn solve(&self, mut z: Vec<f64>) -> Result<FitResult, FitError> {
+        let FitOptions {
+            degree_u: p,
+            degree_v: q,
+        } = self.options;
+        let (rows, cols) = (self.lines(), self.cols);
+        let mut timings = FitTimings {
+            params_s: self.params_s,
+            ..FitTimings::default()
+        };
+
+        let t = Instant::now();
+        let params_u = average_params_u(&self.sum_u, rows);
+        let params_v = average_params_v(&self.cum_v, rows, cols);
+        timings.params_s += secs(t);
+
+        let t = Instant::now();
+        let knots_u = averaged_knots(&params_u, p);
+        let knots_v = averaged_knots(&params_v, q);
+        let lu_u = BandLu::collocation(p, &knots_u, &params_u).map_err(|e| {
+            FitError::SingularCollocation {
+                direction: "u",
+                index: e.index,
+                pivot: e.pivot,
+            }
+        })?;
+        let lu_v = BandLu::collocation(q, &knots_v, &params_v).map_err(|e| {
+            FitError::SingularCollocation {
+                direction: "v",
+                index: e.index,
+                pivot: e.pivot,
+            }
+        })?;
+        timings.knots_factor_s = secs(t);
+
+        let t = Instant::now();
+        for row in z.chunks_exact_mut(cols) {
+            lu_u.solve_in_place(row);
+        }
+        let mut px: Vec<f64> = (0..cols).map(|k| k as f64 * self.pitch_x_mm).collect();
+        lu_u.solve_in_place(&mut px);
+        timings.solve_u_s = secs(t);
+
+        let t = Instant::now();
+        lu_v.solve_rows_in_place(&mut z, cols);
+        let mut py = self.y_mm.clone();
+        lu_v.solve_in_place(&mut py);
+        let mut poles = Vec::with_capacity(rows * cols);
+        for (zrow, &y) in z.chunks_exact(cols).zip(&py) {
+            poles.extend(zrow.iter().zip(&px).map(|(&zz, &x)| [x, y, zz]));
+        }
+        drop(z);
+        let surface = NurbsSurface::try_new(p, q, knots_u, knots_v, cols, rows, poles)?;
+        timings.solve_v_s = secs(t);
+
+        Ok(FitResult {
+            surface,
+            params_u,
+            params_v,
+            timings,
+        })
+    }
+}
+
+/// ū_k: mean over rows of the normalised cumulative chords; exactly 0 and 1 at the ends.
+fn average_params_u(sum_u: &[f64], rows: usize) -> Vec<f64> {
+    let r = rows as f64;
+    let mut out: Vec<f64> = sum_u.iter().map(|s| s / r).collect();
+    if let Some(f) = out.first_mut() {
+        *f = 0.0;
+    }
+    if let Some(l) = out.last_mut() {
+        *l = 1.0;
+    }
+    out
+}
+
+/// v̄_l: mean over columns of each column's cumulative chord normalised by its total.
+fn average_params_v(cum_v: &[f64], rows: usize, cols: usize) -> Vec<f64> {
+    let totals = &cum_v[(rows - 1) * cols..rows * cols];
+    let c = cols as f64;
+    let mut out: Vec<f64> = cum_v
+        .chunks_exact(cols)
+        .map(|row| row.iter().zip(totals).map(|(a, t)| a / t).sum::<f64>() / c)
+        .collect();
+    if let Some(f) = out.first_mut() {
+        *f = 0.0;
+    }
+    if let Some(l) = out.last_mut() {
+        *l = 1.0;
+    }
+    out
+}
+
+/// Clamped knot vector by averaging (P&T eq. 9.8): `degree + 1` zeros,
+/// `u_{j+p} = (1/p) Σ_{i=j}^{j+p−1} ū_i` for j = 1..n−p, `degree + 1` ones.
+pub fn averaged_knots(params: &[f64], degree: usize) -> Vec<f64> {
+    let count = params.len();
+    let mut knots = Vec::with_capacity(count + degree + 1);
+    knots.extend(std::iter::repeat_n(0.0, degree + 1));
+    let inv = 1.0 / degree as f64;
+    for j in 1..count.saturating_sub(degree) {
+        knots.push(inv * params[j..j + degree].iter().sum::<f64>());
+    }
+    knots.extend(std::iter::repeat_n(1.0, degree + 1));
+    knots
+}
+
+/// Fits a whole grid at once: rows are lines at `y_mm`, `heights_um` is row-major
+/// `y_mm.len() × cols` in µm. Goes through [`IncrementalFitter`], so the result is
+/// bit-identical to pushing the rows one by one.
+pub fn fit_grid(
+    pitch_x_mm: f64,
+    y_mm: &[f64],
+    heights_um: &[f64],
+    cols: usize,
+    options: FitOptions,
+) -> Result<FitResult, FitError> {
+    let rows = y_mm.len();
+    if cols == 0 || heights_um.len() != rows * cols {
+        return Err(FitError::GridShape {
+            len: heights_um.len(),
+            rows,
+            cols,
+        });
+    }
+    let mut fitter = IncrementalFitter::new(options);
+    for (row, &y) in heights_um.chunks_exact(cols).zip(y_mm) {
+        fitter.push_row(y, pitch_x_mm, row)?;
+    }
+    fitter.finish()
+}
+
+/// Largest distance |S(ū_k, v̄_l) − Q(k, l)| in mm over all data points of the grid the result
+/// was fitted to. Returns infinity when the grid's shape does not match the result.
+pub fn max_residual_mm(
+    result: &FitResult,
+    pitch_x_mm: f64,
+    y_mm: &[f64],
+    heights_um: &[f64],
+    cols: usize,
+) -> f64 {
+    let rows = y_mm.len();
+    if cols != result.params_u.len()
+        || rows != result.params_v.len()
+        || heights_um.len() != rows * cols
+    {
+        return f64::INFINITY;
+    }
+    let mut worst = 0.0f64;
+    for ((row, &y), &v) in heights_um
+        .chunks_exact(cols)
+        .zip(y_mm)
+        .zip(&result.params_v)
+    {
+        let pts = result.surface.evaluate_grid(&result.params_u, &[v]);
+        for (k, (p, &h)) in pts.iter().zip(row).enumerate() {
+            let q = [k as f64 * pitch_x_mm, y, h / 1000.0];
+            let d = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
+            worst = worst.max(d);
+        }
+    }
+    worst
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,3 +1,136 @@
-//! Surface characterisation: ISO 4287/21920 roughness per line, ISO 13565-2 Rk family, bearing area curves from the NURBS model, areal parameters, plots, X3P.
+//! Surface characterisation: ISO 4287 / 21920 roughness per traced line, the ISO 13565-2 Rk
+//! family and the bearing area curves of sampled curves and of the fitted NURBS model as the
+//! paper's Appendix A computes them, and ISO 25178 areal parameters of a levelled height grid.
 //!
-//! Layer 1 (pure logic) except the writers of plots and X3P, which take a directory from the caller.
+//! Every number is computed the way the SJ series computes it (filter mean line as reference,
+//! per-sampling-length averaging, 7-point slope, minimum-gradient 40 % secant) and carries a
+//! [`Recipe`](params::Recipe) naming the filter, λc, λs, N, the standard and a definition id per
+//! parameter, so it can be compared honestly with other software.
+//!
+//! Layer 1 (pure logic): numbers in, values out, except [`plots`], which writes PNG/SVG files into
+//! a directory the caller gives; depends only on [`crate::profile`] and
+//! [`crate::nurbs`], and [`crate::fit`] for the hold-out refits. No I/O.
+
+pub mod areal;
+pub mod bearing;
+pub mod filter;
+pub mod holdout;
+pub mod instrument;
+pub mod model;
+pub mod params;
+pub mod plots;
+pub mod x3p;
+
+use thiserror::Error;
+
+/// Why a profile or grid cannot be characterised.
+#[derive(Debug, Error, PartialEq)]
+pub enum MetrologyError {
+    /// The lateral pitch is zero, negative or not finite.
+    #[error(
+        "pitch {pitch_mm} mm is not a positive finite number; give the sampling interval in mm"
+    )]
+    BadPitch {
+        /// The offending pitch in mm.
+        pitch_mm: f64,
+    },
+    /// A cut-off wavelength is zero, negative or not finite.
+    #[error("cut-off {cutoff_mm} mm is not a positive finite number; use e.g. 0.08, 0.25, 0.8, 2.5 or 8 mm")]
+    BadCutoff {
+        /// The offending cut-off in mm.
+        cutoff_mm: f64,
+    },
+    /// A height is NaN or infinite.
+    #[error(
+        "height at index {index} is {value} (not finite); remove invalid points before analysis"
+    )]
+    NonFiniteHeight {
+        /// Index of the point.
+        index: usize,
+        /// Its value.
+        value: f64,
+    },
+    /// The profile is shorter than one sampling length, or too short for the 7-point slope.
+    #[error("profile of {points} points ({length_mm} mm) is shorter than one sampling length of {sampling_length_mm} mm or than {min_points} points; trace a longer profile or choose a shorter λc")]
+    TooShort {
+        /// Points in the profile.
+        points: usize,
+        /// Its length in mm.
+        length_mm: f64,
+        /// The sampling length asked for, in mm.
+        sampling_length_mm: f64,
+        /// Minimum points per sampling length.
+        min_points: usize,
+    },
+    /// The requested number of sampling lengths is zero.
+    #[error("number of sampling lengths must be at least 1 (got {got})")]
+    ZeroSections {
+        /// The number given.
+        got: u32,
+    },
+    /// The grid dimensions do not match the number of heights.
+    #[error("grid of {rows} rows × {cols} columns needs {expected} heights, got {got}")]
+    GridSize {
+        /// Rows (lines along y).
+        rows: usize,
+        /// Columns (points along x).
+        cols: usize,
+        /// rows × cols.
+        expected: usize,
+        /// Heights given.
+        got: usize,
+    },
+    /// A grid needs at least 2 × 2 points for slopes and levelling.
+    #[error(
+        "grid of {rows} × {cols} is too small; at least 2 × 2 points (3 × 3 for slopes) are needed"
+    )]
+    GridTooSmall {
+        /// Rows.
+        rows: usize,
+        /// Columns.
+        cols: usize,
+    },
+    /// The NURBS fit of a hold-out grid failed.
+    #[error("the NURBS fit for the hold-out comparison failed: {0}")]
+    Fit(#[from] crate::fit::FitError),
+    /// A plot could not be drawn or written.
+    #[error(
+        "cannot write the plot {path}: {message}; check the directory and the installed fonts"
+    )]
+    Plot {
+        /// The file.
+        path: String,
+        /// What plotters reported.
+        message: String,
+    },
+    /// A bearing-area parameter is out of range.
+    #[error("{what} = {value} is out of range; {hint}")]
+    BadParameter {
+        /// Parameter name.
+        what: &'static str,
+        /// Its value.
+        value: f64,
+        /// What is accepted.
+        hint: &'static str,
+    },
+}
+
+/// Checks that every height is finite.
+pub(crate) fn check_finite(heights: &[f64]) -> Result<(), MetrologyError> {
+    match heights.iter().position(|z| !z.is_finite()) {
+        Some(index) => Err(MetrologyError::NonFiniteHeight {
+            index,
+            value: heights.get(index).copied().unwrap_or(f64::NAN),
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Checks a lateral pitch in mm.
+pub(crate) fn check_pitch(pitch_mm: f64) -> Result<(), MetrologyError> {
+    if pitch_mm.is_finite() && pitch_mm > 0.0 {
+        Ok(())
+    } else {
+        Err(MetrologyError::BadPitch { pitch_mm })
+    }
+}

@@ -10,6 +10,9 @@
 //!
 //! Layer 0 (vocabulary): depends on nothing else in the crate; no I/O.
 
+mod eval;
+pub use eval::{basis_funs, find_span, BSplineCurve};
+
 use thiserror::Error;
 
 /// Why a set of degrees, knots and poles is not a valid B-spline surface.

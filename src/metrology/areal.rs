@@ -1,0 +1,233 @@
+//! ISO 25178-2 areal height parameters of a regular height grid after least-squares plane
+//! levelling, and the pooled areal material ratio curve Smr(c).
+//!
+//! Grids are row-major: `rows` traced lines along y, `cols` points along x. Discretisations
+//! (ISO 25178-2:2021 Annex D): Sdq from the forward differences, each direction averaged over its
+//! own differences; Sdr from the developed area with every cell split into two triangles along
+//! each diagonal and the two triangulations averaged (D.3), over the projected area of the
+//! (cols − 1)·(rows − 1) cells. Smr(c) pools the lines: at each level the cross-line lengths of
+//! all lines (crossings interpolated linearly along x) over their total length.
+//!
+//! Depends on [`super::bearing`] and [`super::MetrologyError`].
+
+use super::bearing::material_ratio_pct;
+use super::{check_finite, check_pitch, MetrologyError};
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// The areal parameters of a levelled grid (heights in µm, slopes dimensionless).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ArealParams {
+    /// Arithmetic mean height.
+    #[serde(rename = "Sa_um")]
+    pub sa_um: f64,
+    /// Root mean square height.
+    #[serde(rename = "Sq_um")]
+    pub sq_um: f64,
+    /// Maximum peak height.
+    #[serde(rename = "Sp_um")]
+    pub sp_um: f64,
+    /// Maximum pit depth.
+    #[serde(rename = "Sv_um")]
+    pub sv_um: f64,
+    /// Maximum height Sp + Sv.
+    #[serde(rename = "Sz_um")]
+    pub sz_um: f64,
+    /// Skewness.
+    #[serde(rename = "Ssk")]
+    pub ssk: f64,
+    /// Kurtosis (3 for a Gaussian).
+    #[serde(rename = "Sku")]
+    pub sku: f64,
+    /// Root mean square gradient.
+    #[serde(rename = "Sdq")]
+    pub sdq: f64,
+    /// Developed interfacial area ratio in %.
+    #[serde(rename = "Sdr_pct")]
+    pub sdr_pct: f64,
+    /// The levelling plane z = a + b·x + c·y removed (a µm, b and c µm/mm, x and y in mm from
+    /// the first point).
+    pub plane_um: [f64; 3],
+    /// Definition id per parameter.
+    pub definitions: BTreeMap<String, String>,
+}
+
+/// A row-major height grid with its pitches.
+#[derive(Debug, Clone, Copy)]
+pub struct Grid<'a> {
+    /// Heights in µm, `rows × cols`, row-major.
+    pub heights_um: &'a [f64],
+    /// Lines along y.
+    pub rows: usize,
+    /// Points along x.
+    pub cols: usize,
+    /// Pitch along x in mm.
+    pub pitch_x_mm: f64,
+    /// Pitch along y in mm.
+    pub pitch_y_mm: f64,
+}
+
+impl Grid<'_> {
+    fn check(&self) -> Result<(), MetrologyError> {
+        check_pitch(self.pitch_x_mm)?;
+        check_pitch(self.pitch_y_mm)?;
+        if self.rows.checked_mul(self.cols) != Some(self.heights_um.len()) {
+            return Err(MetrologyError::GridSize {
+                rows: self.rows,
+                cols: self.cols,
+                expected: self.rows.saturating_mul(self.cols),
+                got: self.heights_um.len(),
+            });
+        }
+        if self.rows < 2 || self.cols < 2 {
+            return Err(MetrologyError::GridTooSmall {
+                rows: self.rows,
+                cols: self.cols,
+            });
+        }
+        check_finite(self.heights_um)
+    }
+}
+
+/// Removes the least-squares plane z = a + b·x + c·y; returns the residual heights and (a, b, c).
+pub fn level_plane(grid: &Grid<'_>) -> Result<(Vec<f64>, [f64; 3]), MetrologyError> {
+    grid.check()?;
+    // Centred coordinates make the normal equations diagonal on a full regular grid.
+    let xc = (grid.cols - 1) as f64 * 0.5;
+    let yc = (grid.rows - 1) as f64 * 0.5;
+    let (mut sz, mut sxz, mut syz, mut sxx, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (k, z) in grid.heights_um.iter().enumerate() {
+        let x = (k % grid.cols) as f64 - xc;
+        let y = (k / grid.cols) as f64 - yc;
+        sz += z;
+        sxz += x * z;
+        syz += y * z;
+        sxx += x * x;
+        syy += y * y;
+    }
+    let n = grid.heights_um.len() as f64;
+    let (a, b, c) = (sz / n, sxz / sxx, syz / syy);
+    let levelled = grid
+        .heights_um
+        .iter()
+        .enumerate()
+        .map(|(k, z)| {
+            let x = (k % grid.cols) as f64 - xc;
+            let y = (k / grid.cols) as f64 - yc;
+            z - (a + b * x + c * y)
+        })
+        .collect();
+    // In mm from the first point: z = a' + b'·x_mm + c'·y_mm.
+    let b_mm = b / grid.pitch_x_mm;
+    let c_mm = c / grid.pitch_y_mm;
+    Ok((levelled, [a - b * xc - c * yc, b_mm, c_mm]))
+}
+
+/// The definition ids of the areal parameters.
+pub fn definitions() -> BTreeMap<String, String> {
+    [
+        ("levelling", "least-squares plane z = a + b x + c y removed first"),
+        ("Sa", "ISO25178-2/Sa mean |z| over the grid"),
+        ("Sq", "ISO25178-2/Sq rms z over the grid"),
+        ("Sp", "ISO25178-2/Sp max z"),
+        ("Sv", "ISO25178-2/Sv |min z|"),
+        ("Sz", "ISO25178-2/Sz Sp + Sv (maximum height, not S10z)"),
+        ("Ssk", "ISO25178-2/Ssk mean z^3 / Sq^3"),
+        ("Sku", "ISO25178-2/Sku mean z^4 / Sq^4"),
+        ("Sdq", "ISO25178-2:2021 D/Sdq sqrt(mean (dz/dx)^2 + mean (dz/dy)^2), forward differences"),
+        ("Sdr", "ISO25178-2:2021 D.3/Sdr two-diagonal triangulation averaged, over (cols-1)(rows-1) cells"),
+        ("Smr(c)", "ISO25178-2/Smr(c) pooled lines, linear crossings along x, levels equal over the range"),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v.to_string()))
+    .collect()
+}
+
+/// Sa … Sdr of a grid after plane levelling.
+pub fn areal_params(grid: &Grid<'_>) -> Result<ArealParams, MetrologyError> {
+    let (z, plane) = level_plane(grid)?;
+    let n = z.len() as f64;
+    let sa = z.iter().map(|v| v.abs()).sum::<f64>() / n;
+    let m2 = z.iter().map(|v| v * v).sum::<f64>() / n;
+    let m3 = z.iter().map(|v| v * v * v).sum::<f64>() / n;
+    let m4 = z.iter().map(|v| v * v * v * v).sum::<f64>() / n;
+    let sq = m2.sqrt();
+    let sp = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let sv = -z.iter().copied().fold(f64::INFINITY, f64::min);
+    let (rows, cols) = (grid.rows, grid.cols);
+    let dx = grid.pitch_x_mm * 1000.0;
+    let dy = grid.pitch_y_mm * 1000.0;
+    let at = |r: usize, c: usize| z.get(r * cols + c).copied().unwrap_or(0.0);
+    let (mut gx, mut gy) = (0.0, 0.0);
+    for r in 0..rows {
+        for c in 0..cols {
+            if c + 1 < cols {
+                gx += ((at(r, c + 1) - at(r, c)) / dx).powi(2);
+            }
+            if r + 1 < rows {
+                gy += ((at(r + 1, c) - at(r, c)) / dy).powi(2);
+            }
+        }
+    }
+    let sdq = (gx / (rows * (cols - 1)) as f64 + gy / ((rows - 1) * cols) as f64).sqrt();
+    let mut area = 0.0;
+    let zz = (dx * dy).powi(2);
+    for r in 0..rows - 1 {
+        for c in 0..cols - 1 {
+            let xb = (dy * (at(r, c + 1) - at(r, c))).powi(2);
+            let xt = (dy * (at(r + 1, c + 1) - at(r + 1, c))).powi(2);
+            let yl = (dx * (at(r + 1, c) - at(r, c))).powi(2);
+            let yr = (dx * (at(r + 1, c + 1) - at(r, c + 1))).powi(2);
+            area += 0.25
+                * ((xb + yl + zz).sqrt()
+                    + (xb + yr + zz).sqrt()
+                    + (xt + yr + zz).sqrt()
+                    + (xt + yl + zz).sqrt());
+        }
+    }
+    let projected = (cols - 1) as f64 * dx * (rows - 1) as f64 * dy;
+    Ok(ArealParams {
+        sa_um: sa,
+        sq_um: sq,
+        sp_um: sp,
+        sv_um: sv,
+        sz_um: sp + sv,
+        ssk: if sq > 0.0 { m3 / sq.powi(3) } else { 0.0 },
+        sku: if sq > 0.0 { m4 / (m2 * m2) } else { 0.0 },
+        sdq,
+        sdr_pct: (area / projected - 1.0) * 100.0,
+        plane_um: plane,
+        definitions: definitions(),
+    })
+}
+
+/// The pooled areal material ratio curve Smr(c) of the levelled grid: `levels` equal steps from
+/// the highest to the lowest point, as `[height_um, material_ratio_pct]` pairs.
+pub fn smr_curve(grid: &Grid<'_>, levels: usize) -> Result<Vec<[f64; 2]>, MetrologyError> {
+    let (z, _) = level_plane(grid)?;
+    if levels < 2 {
+        return Err(MetrologyError::BadParameter {
+            what: "levels",
+            value: levels as f64,
+            hint: "give at least 2 height levels (the paper uses 101)",
+        });
+    }
+    let top = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let bottom = z.iter().copied().fold(f64::INFINITY, f64::min);
+    Ok((0..levels)
+        .map(|k| {
+            let h = top - (top - bottom) * k as f64 / (levels - 1) as f64;
+            let mr = if k == 0 {
+                0.0
+            } else if k == levels - 1 {
+                100.0
+            } else {
+                z.chunks_exact(grid.cols)
+                    .map(|row| material_ratio_pct(row, h))
+                    .sum::<f64>()
+                    / grid.rows as f64
+            };
+            [h, mr]
+        })
+        .collect())
+}

@@ -1,0 +1,143 @@
+//! The bearing area curves of the fitted NURBS surface, as the paper's Appendix A: profile
+//! curves are extracted from the model (iso-curves along x at equally spaced v, 31 by default),
+//! each is sampled densely along its parameter (not only at the data points), referenced to its
+//! mean line and cut at equal height levels (101 by default); MAR(h) = ΣL_i / L0 × 100 % from the
+//! x-lengths of the cross lines, crossings interpolated linearly between the dense samples.
+//!
+//! Depends on [`crate::nurbs`] (evaluation) and [`super::bearing`].
+
+use super::bearing::{bearing_curve_xz, BearingCurve};
+use super::MetrologyError;
+use crate::nurbs::NurbsSurface;
+use serde::Serialize;
+
+/// Options for the model's bearing area curves, with the paper's defaults.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelBacOptions {
+    /// Number of iso-curves along x, at equally spaced v from 0 to 1 (paper: 31).
+    pub curves: usize,
+    /// Equal height levels per curve (paper: 101).
+    pub levels: usize,
+    /// Samples per curve, equally spaced in u; `None` = 8 per control point along u.
+    pub samples_per_curve: Option<usize>,
+}
+
+impl Default for ModelBacOptions {
+    fn default() -> ModelBacOptions {
+        ModelBacOptions {
+            curves: 31,
+            levels: 101,
+            samples_per_curve: None,
+        }
+    }
+}
+
+/// The bearing area curve of one model profile curve.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ModelCurveBac {
+    /// Surface parameter v of the iso-curve.
+    pub v: f64,
+    /// y of the curve in mm (at its first sample).
+    pub y_mm: f64,
+    /// Samples the curve was evaluated at.
+    pub samples: usize,
+    /// Its bearing area curve (heights in µm relative to its mean line).
+    pub curve: BearingCurve,
+}
+
+/// The bearing area curves of `options.curves` iso-curves of `surface` (coordinates in mm;
+/// heights are reported in µm).
+pub fn model_bearing_curves(
+    surface: &NurbsSurface,
+    options: &ModelBacOptions,
+) -> Result<Vec<ModelCurveBac>, MetrologyError> {
+    if options.curves == 0 {
+        return Err(MetrologyError::BadParameter {
+            what: "curves",
+            value: 0.0,
+            hint: "extract at least 1 profile curve from the model (the paper uses 31)",
+        });
+    }
+    let samples = options
+        .samples_per_curve
+        .unwrap_or(8 * surface.count_u())
+        .max(2);
+    let mut out = Vec::with_capacity(options.curves);
+    for j in 0..options.curves {
+        let v = if options.curves == 1 {
+            0.5
+        } else {
+            j as f64 / (options.curves - 1) as f64
+        };
+        let iso = surface.iso_curve_u(v);
+        let mut xs = Vec::with_capacity(samples);
+        let mut zs = Vec::with_capacity(samples);
+        let mut y_mm = f64::NAN;
+        for k in 0..samples {
+            let u = k as f64 / (samples - 1) as f64;
+            let p = iso.evaluate(u).ok_or(MetrologyError::BadParameter {
+                what: "iso-curve poles",
+                value: iso.poles.len() as f64,
+                hint: "the surface's knot vector does not match its poles; refit it",
+            })?;
+            if k == 0 {
+                y_mm = p[1];
+            }
+            xs.push(p[0]);
+            zs.push(p[2] * 1000.0);
+        }
+        let curve = bearing_curve_xz(&xs, &zs, options.levels)?;
+        out.push(ModelCurveBac {
+            v,
+            y_mm,
+            samples,
+            curve,
+        });
+    }
+    Ok(out)
+}
+
+/// Samples the model on a regular grid: one row per v in `vs` (e.g. the data lines'
+/// parameters, where the model's y equals the line's y), `cols` points at x = `x0_mm` +
+/// k·`pitch_x_mm` found by inverting x(u) along each iso-curve (bisection; x must increase with
+/// u). Heights in µm, row-major.
+pub fn sample_model_grid(
+    surface: &NurbsSurface,
+    vs: &[f64],
+    x0_mm: f64,
+    pitch_x_mm: f64,
+    cols: usize,
+) -> Result<Vec<f64>, MetrologyError> {
+    super::check_pitch(pitch_x_mm)?;
+    let bad = |what: &'static str, value: f64| MetrologyError::BadParameter {
+        what,
+        value,
+        hint: "the model's x must increase along u and cover the requested x range",
+    };
+    let mut out = Vec::with_capacity(vs.len() * cols);
+    for &v in vs {
+        let iso = surface.iso_curve_u(v);
+        let at = |u: f64| {
+            iso.evaluate(u)
+                .ok_or(bad("iso-curve poles", iso.poles.len() as f64))
+        };
+        let (lo_x, hi_x) = (at(0.0)?[0], at(1.0)?[0]);
+        for k in 0..cols {
+            let x = x0_mm + k as f64 * pitch_x_mm;
+            if x < lo_x - 1e-9 * pitch_x_mm.max(1.0) || x > hi_x + 1e-9 * hi_x.abs().max(1.0) {
+                return Err(bad("x (mm) outside the model", x));
+            }
+            let (mut a, mut b) = (0.0f64, 1.0f64);
+            for _ in 0..50 {
+                let m = 0.5 * (a + b);
+                if at(m)?[0] < x {
+                    a = m;
+                } else {
+                    b = m;
+                }
+            }
+            out.push(at(0.5 * (a + b))?[2] * 1000.0);
+        }
+    }
+    Ok(out)
+}

@@ -1,0 +1,648 @@
+//! ISO 4287:1997 profile parameters and the ISO 13565-2 Rk family of one traced line, computed
+//! as the SJ series computes them, each with its [`Recipe`].
+//!
+//! Conventions (see the recipe's definition ids):
+//! * heights are referenced to the λc filter mean line (no extra mean removal); with no filter
+//!   the exported R profile is taken as it is;
+//! * N = L/λc (L = points × pitch), rounded to the nearest whole number when within 1 % of it,
+//!   else truncated and the central N·lr evaluated; each sampling length holds an equal share
+//!   ⌊n/N⌋ of the points (a remainder of fewer than N points at the end is not evaluated);
+//! * Ra, Rq, Rp, Rv, Rz, Rsk, Rku, RΔq, RSm and RzJIS per sampling length, then averaged;
+//!   Rt, Rz1max and the Rk family over the evaluation length;
+//! * RΔq from the ISO 4287 7-point derivative, computed over the evaluation length and pooled
+//!   per sampling length (points within 3 of either end have no slope);
+//! * the Rk family from the material ratio curve Rmc(mr) (linear quantiles of the ordinates),
+//!   the equivalent straight line being the 40 % secant of least gradient (the first if tied,
+//!   mr searched in 0.1 % steps), A1/A2 in µm·%, Rpk = 2·A1/Mr1, Rvk = 2·A2/(100 − Mr2).
+//!
+//! Depends on [`super::filter`], [`super::bearing`] and [`crate::profile`].
+
+use super::bearing::material_ratio_pct;
+use super::filter::{self, END_TREATMENT};
+use super::{check_finite, check_pitch, MetrologyError};
+use crate::profile::{FilterKind, Profile, ProfileKind};
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// How a line is evaluated. Defaults: λc = 0.8 mm with the Gaussian filter, no λs, N from the
+/// length.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Options {
+    /// Cut-off λc in mm; also the sampling length lr.
+    pub lambda_c_mm: f64,
+    /// Apply the λc Gaussian filter (false for profiles that already are R profiles).
+    pub apply_lambda_c: bool,
+    /// Short-wave cut-off λs in µm, applied first when given.
+    pub lambda_s_um: Option<f64>,
+    /// Number of sampling lengths; `None` derives it from the length (see module docs).
+    pub sampling_lengths: Option<u32>,
+}
+
+impl Default for Options {
+    fn default() -> Options {
+        Options {
+            lambda_c_mm: 0.8,
+            apply_lambda_c: true,
+            lambda_s_um: None,
+            sampling_lengths: None,
+        }
+    }
+}
+
+impl Options {
+    /// Options from a profile's recorded conditions: its λc, N and λs where known, and no λc
+    /// filter when the profile is already an R profile or the filter is recorded as none.
+    pub fn from_profile(profile: &Profile) -> Options {
+        let c = &profile.conditions;
+        let kind = c.profile_kind.unwrap_or(profile.kind);
+        Options {
+            lambda_c_mm: c.lambda_c_mm.unwrap_or(0.8),
+            apply_lambda_c: kind != ProfileKind::R && c.filter != Some(FilterKind::None),
+            // An exported R profile has had λs applied by the instrument already.
+            lambda_s_um: if kind == ProfileKind::R {
+                None
+            } else {
+                c.lambda_s_um
+            },
+            sampling_lengths: c.sampling_lengths,
+        }
+    }
+}
+
+/// How a set of numbers was obtained: enough to reproduce them in other software.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Recipe {
+    /// Standards followed.
+    pub standard: String,
+    /// Profile filter, e.g. "ISO 16610-21 Gaussian" or "none (input is an R profile)".
+    pub filter: String,
+    /// End-effect treatment of the filter, or "none".
+    pub end_treatment: String,
+    /// Cut-off λc in mm (sampling length).
+    pub lambda_c_mm: f64,
+    /// Short-wave cut-off λs in µm when applied by this software.
+    pub lambda_s_um: Option<f64>,
+    /// Number of sampling lengths N.
+    pub sampling_lengths: u32,
+    /// How N was chosen.
+    pub sampling_lengths_rule: String,
+    /// Points per sampling length.
+    pub points_per_section: usize,
+    /// Points of the input left out of the evaluation (remainder or truncation).
+    pub points_not_evaluated: usize,
+    /// Pitch in mm.
+    pub pitch_mm: f64,
+    /// Reference line for heights.
+    pub mean_line: String,
+    /// Definition id per parameter name.
+    pub definitions: BTreeMap<String, String>,
+}
+
+/// The parameters of one line; field names in JSON follow the report's naming (`Ra_um`, …).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RoughnessParams {
+    /// Arithmetic mean deviation, lr-mean.
+    #[serde(rename = "Ra_um")]
+    pub ra_um: f64,
+    /// Root mean square deviation, lr-mean.
+    #[serde(rename = "Rq_um")]
+    pub rq_um: f64,
+    /// Maximum peak height, lr-mean.
+    #[serde(rename = "Rp_um")]
+    pub rp_um: f64,
+    /// Maximum valley depth, lr-mean.
+    #[serde(rename = "Rv_um")]
+    pub rv_um: f64,
+    /// Maximum height Rp + Rv per sampling length, lr-mean (ISO 4287:1997).
+    #[serde(rename = "Rz_um")]
+    pub rz_um: f64,
+    /// Total height over the evaluation length.
+    #[serde(rename = "Rt_um")]
+    pub rt_um: f64,
+    /// Largest single-section Rz.
+    #[serde(rename = "Rz1max_um")]
+    pub rz1max_um: f64,
+    /// JIS ten-point height, lr-mean; `None` when a section has fewer than 5 peaks or valleys.
+    #[serde(rename = "RzJIS_um")]
+    pub rzjis_um: Option<f64>,
+    /// Skewness, lr-mean.
+    #[serde(rename = "Rsk")]
+    pub rsk: f64,
+    /// Kurtosis (3 for a Gaussian), lr-mean.
+    #[serde(rename = "Rku")]
+    pub rku: f64,
+    /// Root mean square slope (7-point), lr-mean, dimensionless.
+    #[serde(rename = "Rdq")]
+    pub rdq: f64,
+    /// Mean width of profile elements, lr-mean; `None` when no section holds two elements.
+    #[serde(rename = "RSm_um")]
+    pub rsm_um: Option<f64>,
+    /// Core roughness depth.
+    #[serde(rename = "Rk_um")]
+    pub rk_um: f64,
+    /// Reduced peak height.
+    #[serde(rename = "Rpk_um")]
+    pub rpk_um: f64,
+    /// Reduced valley depth.
+    #[serde(rename = "Rvk_um")]
+    pub rvk_um: f64,
+    /// Material ratio at the upper core limit.
+    #[serde(rename = "Mr1_pct")]
+    pub mr1_pct: f64,
+    /// Material ratio at the lower core limit.
+    #[serde(rename = "Mr2_pct")]
+    pub mr2_pct: f64,
+    /// Peak area above the core, µm·%.
+    #[serde(rename = "A1_um_pct")]
+    pub a1_um_pct: f64,
+    /// Valley area below the core, µm·%.
+    #[serde(rename = "A2_um_pct")]
+    pub a2_um_pct: f64,
+}
+
+/// A characterised line: its parameters, its recipe and the evaluated R profile.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LineAnalysis {
+    /// The parameters.
+    pub params: RoughnessParams,
+    /// How they were computed.
+    pub recipe: Recipe,
+    /// The evaluated roughness ordinates (evaluation length only) in µm.
+    pub roughness_um: Vec<f64>,
+}
+
+impl LineAnalysis {
+    /// Rmr(c): material ratio in % at `depth_um` below the highest peak of the evaluation length,
+    /// from the lengths of the cross line on the piecewise-linear profile.
+    pub fn rmr_pct(&self, depth_um: f64) -> f64 {
+        let top = self
+            .roughness_um
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max);
+        material_ratio_pct(&self.roughness_um, top - depth_um)
+    }
+}
+
+/// The definition ids written into every recipe.
+pub fn definitions() -> BTreeMap<String, String> {
+    [
+        ("Ra", "ISO4287:1997/Ra mean|Z| per lr, lr-mean, filter mean line"),
+        ("Rq", "ISO4287:1997/Rq rms Z per lr, lr-mean, filter mean line"),
+        ("Rp", "ISO4287:1997/Rp max Z per lr, lr-mean"),
+        ("Rv", "ISO4287:1997/Rv |min Z| per lr, lr-mean"),
+        ("Rz", "ISO4287:1997/Rz max height Rp+Rv per lr, lr-mean (RzDIN)"),
+        ("Rt", "ISO4287:1997/Rt max-min over ln"),
+        ("Rz1max", "ISO4287:1997/Rz1max largest per-lr Rz"),
+        ("RzJIS", "JIS-B0601:2001/RzJIS ten-point: 5 highest peaks + 5 deepest valleys (extremes between mean-line crossings) per lr, lr-mean"),
+        ("Rsk", "ISO4287:1997/Rsk mean Z^3/Rq^3 per lr (no mean removal), lr-mean"),
+        ("Rku", "ISO4287:1997/Rku mean Z^4/Rq^4 per lr (3 for Gaussian), lr-mean"),
+        ("Rdq", "ISO4287:1997/Rdq rms 7-point slope per lr, lr-mean"),
+        ("RSm", "ISO4287:1997/RSm elements between upward mean-line crossings; peak >= 10% Rz, valley <= -10% Rz of the lr; elements < 1% lr merged; lr-mean"),
+        ("Rmr(c)", "ISO4287:1997/Rmr(c) bearing length at depth c below the highest peak over ln, linear crossings"),
+        ("Rk", "ISO13565-2/Rk min-gradient 40% secant on linear-quantile Rmc(mr) over ln, 0.1% search step"),
+        ("Rpk", "ISO13565-2/Rpk = 2*A1/Mr1"),
+        ("Rvk", "ISO13565-2/Rvk = 2*A2/(100-Mr2)"),
+        ("Mr1", "ISO13565-2/Mr1 = Rmr at the upper core level C"),
+        ("Mr2", "ISO13565-2/Mr2 = Rmr at the lower core level D"),
+        ("A1", "ISO13565-2/A1 area above C for mr in [0, Mr1], um*%"),
+        ("A2", "ISO13565-2/A2 area below D for mr in [Mr2, 100], um*%"),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v.to_string()))
+    .collect()
+}
+
+/// Minimum points per sampling length (the 7-point slope and meaningful moments need some).
+const MIN_POINTS_PER_SECTION: usize = 8;
+
+/// Characterises one line of heights (µm) sampled at `pitch_mm`.
+pub fn analyze_line(
+    heights_um: &[f64],
+    pitch_mm: f64,
+    options: &Options,
+) -> Result<LineAnalysis, MetrologyError> {
+    check_pitch(pitch_mm)?;
+    check_finite(heights_um)?;
+    let lc = options.lambda_c_mm;
+    if !(lc.is_finite() && lc > 0.0) {
+        return Err(MetrologyError::BadCutoff { cutoff_mm: lc });
+    }
+    let n_all = heights_um.len();
+    let too_short = MetrologyError::TooShort {
+        points: n_all,
+        length_mm: n_all as f64 * pitch_mm,
+        sampling_length_mm: lc,
+        min_points: MIN_POINTS_PER_SECTION,
+    };
+
+    // λs then λc.
+    let primary = match options.lambda_s_um {
+        Some(ls) => filter::gaussian_mean_line(heights_um, pitch_mm, ls / 1000.0)?,
+        None => heights_um.to_vec(),
+    };
+    let r_all = if options.apply_lambda_c {
+        filter::split(&primary, pitch_mm, lc)?.roughness_um
+    } else {
+        primary
+    };
+
+    // Sampling lengths.
+    let length_mm = n_all as f64 * pitch_mm;
+    let ratio = length_mm / lc;
+    let (n_sec, rule, start, per) = match options.sampling_lengths {
+        Some(0) => return Err(MetrologyError::ZeroSections { got: 0 }),
+        Some(k) => {
+            let k = k as usize;
+            (k, format!("given N = {k}, ⌊n/N⌋ points each"), 0, n_all / k)
+        }
+        None => {
+            let nearest = ratio.round();
+            if nearest >= 1.0 && (ratio - nearest).abs() <= 0.01 * nearest {
+                let k = nearest as usize;
+                (
+                    k,
+                    format!("L/λc = {ratio:.4} within 1 % of {k}, ⌊n/N⌋ points each"),
+                    0,
+                    n_all / k,
+                )
+            } else {
+                let k = ratio.floor() as usize;
+                if k == 0 {
+                    return Err(too_short);
+                }
+                let per = (lc / pitch_mm).round() as usize;
+                let used = (k * per).min(n_all);
+                (
+                    k,
+                    format!("L/λc = {ratio:.4} truncated to {k}, central N·lr evaluated"),
+                    (n_all - used) / 2,
+                    per,
+                )
+            }
+        }
+    };
+    if per < MIN_POINTS_PER_SECTION {
+        return Err(too_short);
+    }
+    let used = n_sec * per;
+    let r: Vec<f64> = r_all.get(start..start + used).ok_or(too_short)?.to_vec();
+
+    // 7-point slope over the evaluation length.
+    let slopes: Vec<Option<f64>> = (0..used)
+        .map(|i| {
+            if i < 3 || i + 3 >= used {
+                return None;
+            }
+            let z = |k: usize| r.get(k).copied().unwrap_or(0.0);
+            Some(
+                (z(i + 3) - 9.0 * z(i + 2) + 45.0 * z(i + 1) - 45.0 * z(i - 1) + 9.0 * z(i - 2)
+                    - z(i - 3))
+                    / (60.0 * pitch_mm * 1000.0),
+            )
+        })
+        .collect();
+
+    let mut acc = Acc::default();
+    let lr_um = per as f64 * pitch_mm * 1000.0;
+    for s in 0..n_sec {
+        let sec = r.get(s * per..(s + 1) * per).unwrap_or(&[]);
+        let sl = slopes.get(s * per..(s + 1) * per).unwrap_or(&[]);
+        acc.add_section(sec, sl, pitch_mm * 1000.0, lr_um);
+    }
+    let k = n_sec as f64;
+    let max = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let min = r.iter().copied().fold(f64::INFINITY, f64::min);
+    let rk = rk_family(&r)?;
+
+    let params = RoughnessParams {
+        ra_um: acc.ra / k,
+        rq_um: acc.rq / k,
+        rp_um: acc.rp / k,
+        rv_um: acc.rv / k,
+        rz_um: acc.rz / k,
+        rt_um: max - min,
+        rz1max_um: acc.rz1max,
+        rzjis_um: acc.rzjis.map(|v| v / k),
+        rsk: acc.rsk / k,
+        rku: acc.rku / k,
+        rdq: acc.rdq / k,
+        rsm_um: if acc.rsm_n > 0 {
+            Some(acc.rsm / acc.rsm_n as f64)
+        } else {
+            None
+        },
+        rk_um: rk.rk_um,
+        rpk_um: rk.rpk_um,
+        rvk_um: rk.rvk_um,
+        mr1_pct: rk.mr1_pct,
+        mr2_pct: rk.mr2_pct,
+        a1_um_pct: rk.a1_um_pct,
+        a2_um_pct: rk.a2_um_pct,
+    };
+    let recipe = Recipe {
+        standard: "ISO 4287:1997 (as the SJ series, standard ISO1997), ISO 13565-2, ISO 16610-21"
+            .to_string(),
+        filter: if options.apply_lambda_c {
+            "ISO 16610-21 Gaussian, kernel truncated at ±λc".to_string()
+        } else {
+            "none (input is an R profile)".to_string()
+        },
+        end_treatment: if options.apply_lambda_c {
+            END_TREATMENT.to_string()
+        } else {
+            "none".to_string()
+        },
+        lambda_c_mm: lc,
+        lambda_s_um: options.lambda_s_um,
+        sampling_lengths: n_sec as u32,
+        sampling_lengths_rule: rule,
+        points_per_section: per,
+        points_not_evaluated: n_all - used,
+        pitch_mm,
+        mean_line: if options.apply_lambda_c {
+            "λc Gaussian filter mean line".to_string()
+        } else {
+            "zero line of the R profile as given".to_string()
+        },
+        definitions: definitions(),
+    };
+    Ok(LineAnalysis {
+        params,
+        recipe,
+        roughness_um: r,
+    })
+}
+
+/// Characterises a [`Profile`] with options from its conditions ([`Options::from_profile`]).
+pub fn analyze_profile(profile: &Profile) -> Result<LineAnalysis, MetrologyError> {
+    analyze_line(
+        &profile.heights_um,
+        profile.pitch_x_mm,
+        &Options::from_profile(profile),
+    )
+}
+
+/// Sums of per-section values.
+#[derive(Default)]
+struct Acc {
+    ra: f64,
+    rq: f64,
+    rp: f64,
+    rv: f64,
+    rz: f64,
+    rz1max: f64,
+    rzjis: Option<f64>,
+    rzjis_missing: bool,
+    rsk: f64,
+    rku: f64,
+    rdq: f64,
+    rsm: f64,
+    rsm_n: usize,
+}
+
+impl Acc {
+    fn add_section(&mut self, z: &[f64], slopes: &[Option<f64>], pitch_um: f64, lr_um: f64) {
+        let n = z.len().max(1) as f64;
+        let ra = z.iter().map(|v| v.abs()).sum::<f64>() / n;
+        let m2 = z.iter().map(|v| v * v).sum::<f64>() / n;
+        let m3 = z.iter().map(|v| v * v * v).sum::<f64>() / n;
+        let m4 = z.iter().map(|v| v * v * v * v).sum::<f64>() / n;
+        let rq = m2.sqrt();
+        let rp = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let rv = -z.iter().copied().fold(f64::INFINITY, f64::min);
+        self.ra += ra;
+        self.rq += rq;
+        self.rp += rp;
+        self.rv += rv;
+        self.rz += rp + rv;
+        self.rz1max = self.rz1max.max(rp + rv);
+        if rq > 0.0 {
+            self.rsk += m3 / rq.powi(3);
+            self.rku += m4 / (m2 * m2);
+        }
+        let sl: Vec<f64> = slopes.iter().flatten().copied().collect();
+        if !sl.is_empty() {
+            self.rdq += (sl.iter().map(|s| s * s).sum::<f64>() / sl.len() as f64).sqrt();
+        }
+        match ten_point(z) {
+            Some(v) if !self.rzjis_missing => self.rzjis = Some(self.rzjis.unwrap_or(0.0) + v),
+            _ => {
+                self.rzjis_missing = true;
+                self.rzjis = None;
+            }
+        }
+        if let Some(w) = mean_element_width_um(z, pitch_um, 0.1 * (rp + rv), 0.01 * lr_um) {
+            self.rsm += w;
+            self.rsm_n += 1;
+        }
+    }
+}
+
+/// Ten-point height of a section: peaks are the maxima of the portions above the mean line,
+/// valleys the minima of the portions below; mean of the 5 highest plus mean of the 5 deepest.
+fn ten_point(z: &[f64]) -> Option<f64> {
+    let mut peaks = Vec::new();
+    let mut valleys = Vec::new();
+    let mut cur: Option<(bool, f64)> = None;
+    for &v in z {
+        if v == 0.0 {
+            continue;
+        }
+        let above = v > 0.0;
+        cur = match cur {
+            Some((a, ext)) if a == above => Some((a, if above { ext.max(v) } else { ext.min(v) })),
+            Some((a, ext)) => {
+                if a {
+                    peaks.push(ext);
+                } else {
+                    valleys.push(ext);
+                }
+                Some((above, v))
+            }
+            None => Some((above, v)),
+        };
+    }
+    // The portions cut by the section ends are incomplete and do not count.
+    if peaks.len() + valleys.len() > 0 {
+        // the first portion was pushed when the second began: drop it as incomplete.
+        let first_above = z.iter().find(|v| **v != 0.0).map(|v| *v > 0.0);
+        match first_above {
+            Some(true) if !peaks.is_empty() => {
+                peaks.remove(0);
+            }
+            Some(false) if !valleys.is_empty() => {
+                valleys.remove(0);
+            }
+            _ => {}
+        }
+    }
+    if peaks.len() < 5 || valleys.len() < 5 {
+        return None;
+    }
+    peaks.sort_by(|a, b| b.total_cmp(a));
+    valleys.sort_by(|a, b| a.total_cmp(b));
+    let p: f64 = peaks.iter().take(5).sum::<f64>() / 5.0;
+    let v: f64 = valleys.iter().take(5).sum::<f64>() / 5.0;
+    Some(p - v)
+}
+
+/// Mean width of profile elements in a section: boundaries at the upward mean-line crossings
+/// (linearly interpolated) that precede a peak reaching `+h` after a valley reaching `−h`;
+/// elements narrower than `min_width_um` are merged into the following one.
+fn mean_element_width_um(z: &[f64], pitch_um: f64, h: f64, min_width_um: f64) -> Option<f64> {
+    let mut bounds: Vec<f64> = Vec::new();
+    let mut last_up: Option<f64> = None;
+    let mut seen_valley = false;
+    for i in 1..z.len() {
+        let (a, b) = match (z.get(i - 1), z.get(i)) {
+            (Some(a), Some(b)) => (*a, *b),
+            _ => continue,
+        };
+        if a <= 0.0 && b > 0.0 {
+            let t = a / (a - b);
+            last_up = Some((i as f64 - 1.0 + t) * pitch_um);
+        }
+        if b <= -h {
+            seen_valley = true;
+        }
+        if b >= h && seen_valley {
+            if let Some(x) = last_up {
+                // An element narrower than the width discrimination merges with its neighbour.
+                if bounds.last().is_none_or(|&l| x - l >= min_width_um) {
+                    bounds.push(x);
+                }
+            }
+            seen_valley = false;
+        }
+    }
+    if bounds.len() < 2 {
+        return None;
+    }
+    let first = bounds.first()?;
+    let last = bounds.last()?;
+    Some((last - first) / (bounds.len() - 1) as f64)
+}
+
+/// The Rk family of a set of ordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RkFamily {
+    /// Core depth C − D.
+    pub rk_um: f64,
+    /// Reduced peak height.
+    pub rpk_um: f64,
+    /// Reduced valley depth.
+    pub rvk_um: f64,
+    /// Material ratio at C.
+    pub mr1_pct: f64,
+    /// Material ratio at D.
+    pub mr2_pct: f64,
+    /// Area above C, µm·%.
+    pub a1_um_pct: f64,
+    /// Area below D, µm·%.
+    pub a2_um_pct: f64,
+}
+
+/// Rmc(mr): height at material ratio `mr_pct` by linear quantiles of `sorted_desc`.
+fn rmc(sorted_desc: &[f64], mr_pct: f64) -> f64 {
+    let n = sorted_desc.len();
+    let p = (mr_pct / 100.0).clamp(0.0, 1.0) * (n.saturating_sub(1)) as f64;
+    let i = p.floor() as usize;
+    let t = p - i as f64;
+    let a = sorted_desc.get(i).copied().unwrap_or(0.0);
+    let b = sorted_desc.get(i + 1).copied().unwrap_or(a);
+    a + t * (b - a)
+}
+
+/// Material ratio (%) at level `c` on the quantile curve: the inverse of [`rmc`].
+fn mr_at(sorted_desc: &[f64], c: f64) -> f64 {
+    let n = sorted_desc.len();
+    if n < 2 {
+        return 0.0;
+    }
+    let first = sorted_desc.first().copied().unwrap_or(0.0);
+    let last = sorted_desc.last().copied().unwrap_or(0.0);
+    if c >= first {
+        return 0.0;
+    }
+    if c <= last {
+        return 100.0;
+    }
+    // First index with value < c (values are non-increasing).
+    let k = sorted_desc.partition_point(|v| *v >= c);
+    let k = k.max(1);
+    let hi = sorted_desc.get(k - 1).copied().unwrap_or(first);
+    let lo = sorted_desc.get(k).copied().unwrap_or(last);
+    let t = if hi > lo { (hi - c) / (hi - lo) } else { 0.0 };
+    ((k - 1) as f64 + t) / (n - 1) as f64 * 100.0
+}
+
+/// The ISO 13565-2 Rk family from ordinates (µm): minimum-gradient 40 % secant on the
+/// linear-quantile material ratio curve, searched in 0.1 % steps.
+pub fn rk_family(z: &[f64]) -> Result<RkFamily, MetrologyError> {
+    check_finite(z)?;
+    if z.len() < 2 {
+        return Err(MetrologyError::TooShort {
+            points: z.len(),
+            length_mm: 0.0,
+            sampling_length_mm: 0.0,
+            min_points: 2,
+        });
+    }
+    let mut s = z.to_vec();
+    s.sort_by(|a, b| b.total_cmp(a));
+    const STEPS: usize = 1000; // 0.1 % grid
+    let h: Vec<f64> = (0..=STEPS)
+        .map(|k| rmc(&s, k as f64 * 100.0 / STEPS as f64))
+        .collect();
+    let win = STEPS * 40 / 100;
+    let mut best: Option<(f64, usize)> = None;
+    for a in 0..=(STEPS - win) {
+        let drop = h.get(a).copied().unwrap_or(0.0) - h.get(a + win).copied().unwrap_or(0.0);
+        // Strictly smaller beyond rounding: the first secant wins a tie.
+        let better = match best {
+            None => true,
+            Some((b, _)) => drop < b - 1e-12 * b.abs(),
+        };
+        if better {
+            best = Some((drop, a));
+        }
+    }
+    let best = best.unwrap_or((0.0, 0));
+    let a_pct = best.1 as f64 * 100.0 / STEPS as f64;
+    let slope = -best.0 / 40.0; // µm per %
+    let h_a = h.get(best.1).copied().unwrap_or(0.0);
+    let c = h_a - slope * a_pct;
+    let d = h_a + slope * (100.0 - a_pct);
+    let mr1 = mr_at(&s, c);
+    let mr2 = mr_at(&s, d);
+    // Areas by trapezoids on a fine grid of the quantile curve.
+    let area = |from: f64, to: f64, f: &dyn Fn(f64) -> f64| -> f64 {
+        if to <= from {
+            return 0.0;
+        }
+        let m = 2000usize;
+        let dx = (to - from) / m as f64;
+        (0..m)
+            .map(|k| {
+                let x0 = from + k as f64 * dx;
+                0.5 * (f(x0) + f(x0 + dx)) * dx
+            })
+            .sum()
+    };
+    let a1 = area(0.0, mr1, &|mr| (rmc(&s, mr) - c).max(0.0));
+    let a2 = area(mr2, 100.0, &|mr| (d - rmc(&s, mr)).max(0.0));
+    Ok(RkFamily {
+        rk_um: c - d,
+        rpk_um: if mr1 > 0.0 { 2.0 * a1 / mr1 } else { 0.0 },
+        rvk_um: if mr2 < 100.0 {
+            2.0 * a2 / (100.0 - mr2)
+        } else {
+            0.0
+        },
+        mr1_pct: mr1,
+        mr2_pct: mr2,
+        a1_um_pct: a1,
+        a2_um_pct: a2,
+    })
+}

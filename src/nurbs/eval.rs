@@ -1,0 +1,278 @@
+//! Evaluation of B-spline curves and of [`NurbsSurface`]: knot span search (P&T A2.1), the
+//! non-vanishing basis functions (A2.2), surface points (A3.5), iso-parametric curves and a
+//! fast path for a whole grid of parameters.
+//!
+//! Layer 0 (vocabulary): depends only on the surface type in [`crate::nurbs`]; no I/O.
+//! Parameters outside the knot range are clamped to it, so evaluation never panics.
+
+use super::NurbsSurface;
+
+/// Largest supported degree for the stack buffers used while evaluating.
+const MAX_STACK_DEGREE: usize = 15;
+
+/// Index of the knot span containing `t` (P&T A2.1) for a clamped knot vector with `count`
+/// poles and degree `degree`: the `s` with `knots[s] <= t < knots[s+1]`, `degree <= s < count`.
+/// `t` is clamped into `[knots[degree], knots[count]]`; the last span is used at the right end.
+pub fn find_span(degree: usize, knots: &[f64], count: usize, t: f64) -> usize {
+    let lo_t = knots[degree];
+    let hi_t = knots[count];
+    if t.is_nan() || t <= lo_t {
+        // First non-empty span starting at the domain start.
+        let mut s = degree;
+        while s + 1 < count && knots[s + 1] <= lo_t {
+            s += 1;
+        }
+        return s;
+    }
+    if t >= hi_t {
+        let mut s = count - 1;
+        while s > degree && knots[s] >= hi_t {
+            s -= 1;
+        }
+        return s;
+    }
+    let (mut low, mut high) = (degree, count);
+    let mut mid = (low + high) / 2;
+    while t < knots[mid] || t >= knots[mid + 1] {
+        if t < knots[mid] {
+            high = mid;
+        } else {
+            low = mid;
+        }
+        mid = (low + high) / 2;
+    }
+    mid
+}
+
+/// The `degree + 1` non-vanishing basis functions `N_{span-degree..=span, degree}(t)` (P&T A2.2),
+/// written into `out[..=degree]`. `out`, `left` and `right` must hold at least `degree + 1` values.
+pub fn basis_funs(
+    span: usize,
+    t: f64,
+    degree: usize,
+    knots: &[f64],
+    out: &mut [f64],
+    left: &mut [f64],
+    right: &mut [f64],
+) {
+    out[0] = 1.0;
+    for j in 1..=degree {
+        left[j] = t - knots[span + 1 - j];
+        right[j] = knots[span + j] - t;
+        let mut saved = 0.0;
+        for r in 0..j {
+            let temp = out[r] / (right[r + 1] + left[j - r]);
+            out[r] = saved + right[r + 1] * temp;
+            saved = left[j - r] * temp;
+        }
+        out[j] = saved;
+    }
+}
+
+/// Basis functions into a freshly allocated vector (for degrees above the stack limit).
+fn basis_vec(span: usize, t: f64, degree: usize, knots: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; degree + 1];
+    let mut left = vec![0.0; degree + 1];
+    let mut right = vec![0.0; degree + 1];
+    basis_funs(span, t, degree, knots, &mut out, &mut left, &mut right);
+    out
+}
+
+/// Span and basis values at `t`, clamped into the domain.
+fn span_basis(degree: usize, knots: &[f64], count: usize, t: f64) -> (usize, Vec<f64>) {
+    let lo = knots[degree];
+    let hi = knots[count];
+    let t = if t.is_nan() { lo } else { t.clamp(lo, hi) };
+    let span = find_span(degree, knots, count, t);
+    if degree <= MAX_STACK_DEGREE {
+        let mut out = [0.0; MAX_STACK_DEGREE + 1];
+        let mut left = [0.0; MAX_STACK_DEGREE + 1];
+        let mut right = [0.0; MAX_STACK_DEGREE + 1];
+        basis_funs(span, t, degree, knots, &mut out, &mut left, &mut right);
+        (span, out[..=degree].to_vec())
+    } else {
+        (span, basis_vec(span, t, degree, knots))
+    }
+}
+
+/// A non-rational B-spline curve in millimetres (an iso-parametric curve of a surface, or a
+/// fitted profile).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BSplineCurve {
+    /// Degree.
+    pub degree: usize,
+    /// Clamped knot vector, `poles.len() + degree + 1` values.
+    pub knots: Vec<f64>,
+    /// Control points.
+    pub poles: Vec<[f64; 3]>,
+}
+
+impl BSplineCurve {
+    /// Point at parameter `t` (clamped into the knot range). A curve whose knot vector does
+    /// not match its poles (`knots.len() != poles.len() + degree + 1`) or that has fewer than
+    /// `degree + 1` poles evaluates to `None`.
+    pub fn evaluate(&self, t: f64) -> Option<[f64; 3]> {
+        let n = self.poles.len();
+        if n < self.degree + 1 || self.knots.len() != n + self.degree + 1 {
+            return None;
+        }
+        let (span, basis) = span_basis(self.degree, &self.knots, n, t);
+        let mut p = [0.0; 3];
+        for (r, b) in basis.iter().enumerate() {
+            let q = self.poles[span - self.degree + r];
+            p[0] += b * q[0];
+            p[1] += b * q[1];
+            p[2] += b * q[2];
+        }
+        Some(p)
+    }
+}
+
+impl NurbsSurface {
+    /// Surface point S(u, v) in mm (P&T A3.5; unit weights). Parameters are clamped to [0, 1]
+    /// (the knot range).
+    pub fn evaluate(&self, u: f64, v: f64) -> [f64; 3] {
+        let (su, bu) = span_basis(self.degree_u, &self.knots_u, self.count_u, u);
+        let (sv, bv) = span_basis(self.degree_v, &self.knots_v, self.count_v, v);
+        let mut p = [0.0; 3];
+        for (l, nv) in bv.iter().enumerate() {
+            let row = (sv - self.degree_v + l) * self.count_u + su - self.degree_u;
+            let mut t = [0.0; 3];
+            for (k, nu) in bu.iter().enumerate() {
+                let q = self.poles[row + k];
+                t[0] += nu * q[0];
+                t[1] += nu * q[1];
+                t[2] += nu * q[2];
+            }
+            p[0] += nv * t[0];
+            p[1] += nv * t[1];
+            p[2] += nv * t[2];
+        }
+        p
+    }
+
+    /// The iso-parametric curve at fixed `v`, running along u (x).
+    pub fn iso_curve_u(&self, v: f64) -> BSplineCurve {
+        let (sv, bv) = span_basis(self.degree_v, &self.knots_v, self.count_v, v);
+        let mut poles = vec![[0.0; 3]; self.count_u];
+        for (l, nv) in bv.iter().enumerate() {
+            let row = (sv - self.degree_v + l) * self.count_u;
+            for (out, q) in poles.iter_mut().zip(&self.poles[row..row + self.count_u]) {
+                out[0] += nv * q[0];
+                out[1] += nv * q[1];
+                out[2] += nv * q[2];
+            }
+        }
+        BSplineCurve {
+            degree: self.degree_u,
+            knots: self.knots_u.clone(),
+            poles,
+        }
+    }
+
+    /// The iso-parametric curve at fixed `u`, running along v (y).
+    pub fn iso_curve_v(&self, u: f64) -> BSplineCurve {
+        let (su, bu) = span_basis(self.degree_u, &self.knots_u, self.count_u, u);
+        let poles = (0..self.count_v)
+            .map(|j| {
+                let base = j * self.count_u + su - self.degree_u;
+                let mut p = [0.0; 3];
+                for (k, nu) in bu.iter().enumerate() {
+                    let q = self.poles[base + k];
+                    p[0] += nu * q[0];
+                    p[1] += nu * q[1];
+                    p[2] += nu * q[2];
+                }
+                p
+            })
+            .collect();
+        BSplineCurve {
+            degree: self.degree_v,
+            knots: self.knots_v.clone(),
+            poles,
+        }
+    }
+
+    /// Points S(us[a], vs[b]) for the whole grid, v-outer / u-inner (`b * us.len() + a`).
+    /// Basis functions are computed once per parameter and each v reduces the net to an
+    /// iso-curve first, so a point costs about `degree_u + 1` multiply-adds per coordinate.
+    pub fn evaluate_grid(&self, us: &[f64], vs: &[f64]) -> Vec<[f64; 3]> {
+        let ubasis: Vec<(usize, Vec<f64>)> = us
+            .iter()
+            .map(|&u| span_basis(self.degree_u, &self.knots_u, self.count_u, u))
+            .collect();
+        let mut out = Vec::with_capacity(us.len() * vs.len());
+        for &v in vs {
+            let curve = self.iso_curve_u(v);
+            for (su, bu) in &ubasis {
+                let base = su - self.degree_u;
+                let mut p = [0.0; 3];
+                for (k, nu) in bu.iter().enumerate() {
+                    let q = curve.poles[base + k];
+                    p[0] += nu * q[0];
+                    p[1] += nu * q[1];
+                    p[2] += nu * q[2];
+                }
+                out.push(p);
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn basis_is_partition_of_unity_and_matches_hand_values() {
+        // Quadratic, knots 0 0 0 1 2 3 4 4 5 5 5 (P&T ex. 2.3): at u = 5/2,
+        // N_{2,2} = 1/8, N_{3,2} = 6/8, N_{4,2} = 1/8.
+        let knots = [0.0, 0.0, 0.0, 1.0, 2.0, 3.0, 4.0, 4.0, 5.0, 5.0, 5.0];
+        let span = find_span(2, &knots, 8, 2.5);
+        assert_eq!(span, 4);
+        let (mut n, mut l, mut r) = ([0.0; 3], [0.0; 3], [0.0; 3]);
+        basis_funs(span, 2.5, 2, &knots, &mut n, &mut l, &mut r);
+        assert!((n[0] - 0.125).abs() < 1e-15);
+        assert!((n[1] - 0.75).abs() < 1e-15);
+        assert!((n[2] - 0.125).abs() < 1e-15);
+        // Right end uses the last non-empty span.
+        assert_eq!(find_span(2, &knots, 8, 5.0), 7);
+        assert_eq!(find_span(2, &knots, 8, 9.0), 7);
+        assert_eq!(find_span(2, &knots, 8, -1.0), 2);
+    }
+
+    #[test]
+    fn bilinear_patch_evaluates_to_closed_form() {
+        let s = NurbsSurface::try_new(
+            1,
+            1,
+            vec![0.0, 0.0, 1.0, 1.0],
+            vec![0.0, 0.0, 1.0, 1.0],
+            2,
+            2,
+            vec![
+                [0.0, 0.0, 0.0],
+                [2.0, 0.0, 1.0],
+                [0.0, 3.0, 2.0],
+                [2.0, 3.0, 5.0],
+            ],
+        )
+        .unwrap();
+        let (u, v) = (0.3, 0.6);
+        let z =
+            (1.0 - u) * (1.0 - v) * 0.0 + u * (1.0 - v) * 1.0 + (1.0 - u) * v * 2.0 + u * v * 5.0;
+        let p = s.evaluate(u, v);
+        assert!((p[0] - 2.0 * u).abs() < 1e-15);
+        assert!((p[1] - 3.0 * v).abs() < 1e-15);
+        assert!((p[2] - z).abs() < 1e-15);
+        let cu = s.iso_curve_u(v).evaluate(u).unwrap();
+        let cv = s.iso_curve_v(u).evaluate(v).unwrap();
+        let g = s.evaluate_grid(&[u], &[v]);
+        for q in [cu, cv, g[0]] {
+            for c in 0..3 {
+                assert!((q[c] - p[c]).abs() < 1e-15);
+            }
+        }
+    }
+}

@@ -1,0 +1,182 @@
+//! `surfscan analyze` end to end on synthetic inputs with known answers.
+
+use serde_json::Value;
+use std::f64::consts::PI;
+use std::process::Command;
+
+fn surfscan() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_surfscan"))
+}
+
+#[test]
+fn analyze_profile_csv_writes_report_and_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    // A = 1 µm, λ = 0.1 mm, 200 points per period, 4 mm: N = 5 at λc 0.8, whole periods.
+    let mut csv = String::from("x_mm,z_um\n");
+    for i in 0..8000 {
+        let x = i as f64 * 0.0005;
+        csv.push_str(&format!(
+            "{x:.7},{:.12}\n",
+            (2.0 * PI * i as f64 / 200.0).sin()
+        ));
+    }
+    let input = dir.path().join("line.csv");
+    std::fs::write(&input, csv).unwrap();
+    let out = dir.path().join("out");
+    let status = surfscan()
+        .args([
+            "analyze",
+            input.to_str().unwrap(),
+            "--no-filter",
+            "--lc",
+            "0.8",
+            "--out",
+        ])
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let line = &report["lines"][0];
+    assert_eq!(line["index"], 0);
+    // Ra = (2/M)·cot(π/M) for M = 200 samples per period (→ 2A/π); Rq = A/√2; Rz = 2A.
+    let ra = 2.0 / 200.0 / (PI / 200.0).tan();
+    assert!((line["Ra_um"].as_f64().unwrap() - ra).abs() < 1e-9);
+    assert!((line["Rq_um"].as_f64().unwrap() - 0.5f64.sqrt()).abs() < 1e-9);
+    assert!((line["Rz_um"].as_f64().unwrap() - 2.0).abs() < 1e-9);
+    assert!((line["RzJIS_um"].as_f64().unwrap() - 2.0).abs() < 1e-9);
+    assert!((line["RSm_um"].as_f64().unwrap() - 100.0).abs() < 1e-4);
+    assert_eq!(report["recipe"]["sampling_lengths"], 5);
+    // Rmr at half of Rt below the top of a sine is at its mean line: 50 % of the length.
+    let rmr = line["Rmr_table"].as_array().unwrap();
+    assert_eq!(rmr.len(), 11);
+    assert!((rmr[5][0].as_f64().unwrap() - 1.0).abs() < 1e-9);
+    assert!((rmr[5][1].as_f64().unwrap() - 50.0).abs() < 0.01);
+    assert_eq!(rmr[10][1].as_f64().unwrap(), 100.0);
+    assert!(report["recipe"]["definitions"]["Rz"]
+        .as_str()
+        .unwrap()
+        .contains("ISO4287:1997"));
+    let summary = std::fs::read_to_string(out.join("summary.csv")).unwrap();
+    let rows: Vec<&str> = summary.lines().collect();
+    assert_eq!(rows.len(), 2);
+    assert!(rows[0].starts_with("index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um"));
+}
+
+#[test]
+fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
+    let dir = tempfile::tempdir().unwrap();
+    // 13 lines of z = A·cos(2πx/λ), 4 whole periods of 100 points plus the closing point.
+    let (rows, cols, amp) = (13usize, 401usize, 0.5);
+    let mut csv = String::new();
+    for _ in 0..rows {
+        let row: Vec<String> = (0..cols)
+            .map(|c| format!("{:.12}", amp * (2.0 * PI * c as f64 / 100.0).cos()))
+            .collect();
+        csv.push_str(&row.join(","));
+        csv.push('\n');
+    }
+    let input = dir.path().join("grid.csv");
+    std::fs::write(&input, csv).unwrap();
+    let out = dir.path().join("out");
+    let status = surfscan()
+        .args([
+            "analyze",
+            input.to_str().unwrap(),
+            "--lc",
+            "0.25",
+            "--pitch-x",
+            "0.001",
+        ])
+        .args(["--pitch-y", "0.01", "--curves", "5", "--out"])
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["lines"].as_array().unwrap().len(), rows);
+    assert!((report["lines"][12]["y_mm"].as_f64().unwrap() - 0.12).abs() < 1e-12);
+    // Levelled grid: the plane takes the samples' mean A/cols; Sz = 2A.
+    let sz = report["surface_grid"]["Sz_um"].as_f64().unwrap();
+    assert!((sz - 2.0 * amp).abs() < 1e-9, "Sz {sz}");
+    // The model sampled at half the pitch: the cosine's extremes are data points.
+    let model_sz = report["surface"]["Sz_um"].as_f64().unwrap();
+    assert!(
+        (model_sz - 2.0 * amp).abs() < 0.01 * amp,
+        "model Sz {model_sz}"
+    );
+    assert_eq!(report["surface"]["bac"].as_array().unwrap().len(), 101);
+    let mvm = &report["model_vs_measured"];
+    assert_eq!(mvm["points_left_out"].as_array().unwrap().len(), rows);
+    assert_eq!(mvm["lines_left_out"].as_array().unwrap().len(), 6); // rows 1, 3, …, 11
+                                                                    // Lines are identical, so leaving one out changes nothing: the model predicts it.
+    assert!(mvm["lines_left_out"][0]["max_abs_um"].as_f64().unwrap() < 1e-6);
+    let bac = report["surface_grid"]["bac"].as_array().unwrap();
+    assert_eq!(bac.len(), 101);
+    let curves = report["bac_curves"].as_array().unwrap();
+    assert_eq!(curves.len(), 5);
+    // Model curve BAC at its mean line: half the length is above (arccos(0)/π = 50 %).
+    let pts = curves[2]["curve"]["points"].as_array().unwrap();
+    assert_eq!(pts.len(), 101);
+    let mid = &pts[50];
+    assert!(mid[0].as_f64().unwrap().abs() < 0.01 * amp);
+    assert!((mid[1].as_f64().unwrap() - 50.0).abs() < 1.0, "{mid}");
+    assert_eq!(
+        std::fs::read_to_string(out.join("summary.csv"))
+            .unwrap()
+            .lines()
+            .count(),
+        rows + 1
+    );
+    // Plots as PNG (signature) and SVG (one polyline per model curve plus the pooled curve).
+    for name in ["bac.png", "heightmap.png", "overlay.png"] {
+        let bytes = std::fs::read(out.join(name)).unwrap();
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{name}");
+    }
+    let measured =
+        surfscan::metrology::x3p::read_x3p(&std::fs::read(out.join("measured.x3p")).unwrap())
+            .unwrap();
+    assert_eq!((measured.rows, measured.cols), (rows, cols));
+    let model =
+        surfscan::metrology::x3p::read_x3p(&std::fs::read(out.join("model.x3p")).unwrap()).unwrap();
+    assert_eq!((model.rows, model.cols), (rows, 2 * cols - 1));
+    assert!((model.pitch_x_mm - 0.0005).abs() < 1e-12);
+    // The model passes through the data: every 2nd model column is a measured point.
+    for (k, m) in model
+        .heights_um
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| (k % (2 * cols - 1)) % 2 == 0)
+    {
+        let (r, c) = (k / (2 * cols - 1), (k % (2 * cols - 1)) / 2);
+        assert!((m - measured.heights_um[r * cols + c]).abs() < 1e-6);
+    }
+    let svg = std::fs::read_to_string(out.join("bac.svg")).unwrap();
+    assert!(svg.starts_with("<svg"));
+    assert!(
+        svg.matches("<polyline").count() > 5,
+        "curves missing from bac.svg"
+    );
+    let overlay = std::fs::read_to_string(out.join("overlay.svg")).unwrap();
+    assert!(
+        overlay.matches("<circle").count() >= cols,
+        "measured points missing"
+    );
+    let map = std::fs::read_to_string(out.join("heightmap.svg")).unwrap();
+    assert!(map.matches("<rect").count() >= rows * cols);
+}
+
+#[test]
+fn analyze_grid_without_pitches_is_a_usage_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("grid.csv");
+    std::fs::write(&input, "1,2,3\n4,5,6\n").unwrap();
+    let out = surfscan()
+        .args(["analyze", input.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--pitch-x"));
+}

@@ -1,0 +1,390 @@
+//! Analytic checks of the Gaussian filter, the ISO 4287 parameters, the Rk family and the bearing
+//! area curve. Expected values are closed forms derived in the comments, never the code's output.
+
+// Index loops mirror the formulas (several arrays at the same index).
+#![allow(clippy::needless_range_loop)]
+
+use std::f64::consts::PI;
+use surfscan::metrology::bearing::{
+    bearing_curve, bearing_curve_of, material_ratio_pct, pooled_bearing_curve,
+};
+use surfscan::metrology::filter::{gaussian_mean_line, mean_line_transmission, split};
+use surfscan::metrology::params::{analyze_line, rk_family, Options};
+use surfscan::metrology::MetrologyError;
+
+fn sine(n: usize, pitch_mm: f64, wavelength_mm: f64, amp: f64) -> Vec<f64> {
+    (0..n)
+        .map(|i| amp * (2.0 * PI * i as f64 * pitch_mm / wavelength_mm).sin())
+        .collect()
+}
+
+/// Amplitude of the interior part (one λc away from each end) by projection on sin/cos.
+fn amplitude(z: &[f64], pitch_mm: f64, wavelength_mm: f64, skip: usize, periods_pts: usize) -> f64 {
+    let (mut s, mut c) = (0.0, 0.0);
+    for i in skip..skip + periods_pts {
+        let ph = 2.0 * PI * i as f64 * pitch_mm / wavelength_mm;
+        s += z[i] * ph.sin();
+        c += z[i] * ph.cos();
+    }
+    2.0 * (s * s + c * c).sqrt() / periods_pts as f64
+}
+
+#[test]
+fn gaussian_filter_transmits_half_at_cutoff_for_every_standard_cutoff() {
+    for lc in [0.08, 0.25, 0.8, 2.5] {
+        let pitch = lc / 400.0;
+        let z = sine(4000, pitch, lc, 1.0);
+        let w = gaussian_mean_line(&z, pitch, lc).unwrap();
+        // Interior: skip λc at the start, average over 5 whole periods.
+        let a = amplitude(&w, pitch, lc, 400, 2000);
+        assert!((a - 0.5).abs() < 0.001, "λc {lc}: transmission {a}");
+    }
+}
+
+#[test]
+fn gaussian_filter_follows_exp_minus_pi_alpha_ratio_squared() {
+    let lc: f64 = 0.8;
+    let pitch: f64 = 0.0005;
+    for ratio in [0.3f64, 0.5, 0.7, 1.0, 1.5, 2.0, 4.0] {
+        let lambda = ratio * lc;
+        let n_per = (lambda / pitch).round() as usize;
+        let z = sine(1600 + 12 * n_per + 1600, pitch, lambda, 1.0);
+        let w = gaussian_mean_line(&z, pitch, lc).unwrap();
+        let a = amplitude(&w, pitch, lambda, 1600, 10 * n_per);
+        // H_W(λ) = exp(−π (α λc / λ)²), α² = ln2/π  ⇒  H_W = 2^(−(λc/λ)²).
+        let expected = 2f64.powf(-(1.0 / ratio).powi(2));
+        assert!(
+            (a - expected).abs() < 0.002,
+            "λ/λc {ratio}: {a} vs {expected}"
+        );
+        assert!((mean_line_transmission(lc, lambda) - expected).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn roughness_plus_waviness_is_primary() {
+    let p: Vec<f64> = (0..3000)
+        .map(|i| {
+            let x = i as f64 * 0.001;
+            0.3 * x * x + (x * 37.0).sin() + 0.2 * (x * 411.0).cos()
+        })
+        .collect();
+    let s = split(&p, 0.001, 0.8).unwrap();
+    for i in 0..p.len() {
+        assert!((s.roughness_um[i] + s.mean_line_um[i] - p[i]).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn end_treatment_keeps_a_tilted_line_as_its_own_mean_line() {
+    // First-order moment criterion: a straight line is reproduced exactly, ends included.
+    // A plain renormalised kernel would bend towards the interior by ~0.2·λc·slope at the ends.
+    let p: Vec<f64> = (0..2000).map(|i| 3.0 + 0.01 * i as f64).collect();
+    let w = gaussian_mean_line(&p, 0.001, 0.8).unwrap();
+    for i in 0..p.len() {
+        assert!(
+            (w[i] - p[i]).abs() < 1e-9,
+            "point {i}: {} vs {}",
+            w[i],
+            p[i]
+        );
+    }
+}
+
+fn no_filter(lc: f64) -> Options {
+    Options {
+        lambda_c_mm: lc,
+        apply_lambda_c: false,
+        lambda_s_um: None,
+        sampling_lengths: None,
+    }
+}
+
+#[test]
+fn sine_parameters_match_closed_forms() {
+    // A = 1 µm, λ = 0.1 mm, pitch 0.5 µm, L = 4 mm ⇒ N = 5 sections of 8 whole periods.
+    let (amp, lambda, pitch) = (1.0, 0.1, 0.0005);
+    let z = sine(8000, pitch, lambda, amp);
+    let a = analyze_line(&z, pitch, &no_filter(0.8)).unwrap();
+    let p = &a.params;
+    assert_eq!(a.recipe.sampling_lengths, 5);
+    assert_eq!(a.recipe.points_per_section, 1600);
+    // M = 200 samples per period, starting at phase 0: mean |sin| = (2/M)·cot(π/M) (→ 2A/π).
+    let ra = amp * 2.0 / 200.0 / (PI / 200.0).tan();
+    assert!((ra - 2.0 * amp / PI).abs() < 1e-4);
+    assert!((p.ra_um - ra).abs() < 1e-9, "Ra {} vs {ra}", p.ra_um);
+    assert!((p.rq_um - amp / 2f64.sqrt()).abs() < 1e-9, "Rq {}", p.rq_um);
+    assert!(p.rsk.abs() < 1e-9, "Rsk {}", p.rsk);
+    assert!((p.rku - 1.5).abs() < 1e-9, "Rku {}", p.rku);
+    assert!((p.rp_um - amp).abs() < 1e-9 && (p.rv_um - amp).abs() < 1e-9);
+    assert!((p.rz_um - 2.0 * amp).abs() < 1e-9);
+    assert!((p.rt_um - 2.0 * amp).abs() < 1e-9);
+    assert!((p.rz1max_um - 2.0 * amp).abs() < 1e-9);
+    assert!((p.rzjis_um.unwrap() - 2.0 * amp).abs() < 1e-9);
+    assert!(
+        (p.rsm_um.unwrap() - lambda * 1000.0).abs() < 1e-6,
+        "RSm {:?}",
+        p.rsm_um
+    );
+    // Slope A·(2π/λ)·cos ⇒ rms = A·2π/(λ·√2), λ in µm.
+    let k = 2.0 * PI / (lambda * 1000.0);
+    let rdq = amp * k / 2f64.sqrt();
+    assert!((p.rdq - rdq).abs() < 5e-4 * rdq, "Rdq {} vs {rdq}", p.rdq);
+    // Exactly: the analytic slope A·k·cos at the points that have a 7-point slope (not the
+    // first 3 and last 3 of the evaluation length), rms per section, averaged.
+    let mut sum = 0.0;
+    for s in 0..5 {
+        let idx: Vec<usize> = (s * 1600..(s + 1) * 1600)
+            .filter(|i| (3..7997).contains(i))
+            .collect();
+        let ms = idx
+            .iter()
+            .map(|&i| (amp * k * (k * i as f64 * pitch * 1000.0).cos()).powi(2))
+            .sum::<f64>()
+            / idx.len() as f64;
+        sum += ms.sqrt();
+    }
+    assert!(
+        (p.rdq - sum / 5.0).abs() < 1e-9,
+        "Rdq {} vs {}",
+        p.rdq,
+        sum / 5.0
+    );
+    // Rmc(mr) = A·cos(π·mr/100) is flattest at its ends: the 40 % secants from 0 % and from
+    // 60 % tie with the least drop A·(1 − cos 0.4π); the first one wins. Extended to 100 %:
+    // C = A, D = A − 2.5·A·(1 − cos 0.4π), Rk = C − D; Mr1 = 0; Mr2 = arccos(D/A)/π·100;
+    // A2 = ∫[Mr2,100] (D − A cos(πm/100)) dm = D·(100 − Mr2) + (100A/π)·sin(π·Mr2/100).
+    let rk = 2.5 * amp * (1.0 - (0.4 * PI).cos());
+    let d = amp - rk;
+    let mr2 = (d / amp).acos() / PI * 100.0;
+    let a2 = d * (100.0 - mr2) + 100.0 * amp / PI * (PI * mr2 / 100.0).sin();
+    assert!((p.rk_um - rk).abs() < 1e-3, "Rk {} vs {rk}", p.rk_um);
+    assert_eq!(p.mr1_pct, 0.0);
+    assert_eq!(p.rpk_um, 0.0);
+    // 200 samples per period hit each height twice: mr is resolved to about 1 %.
+    assert!((p.mr2_pct - mr2).abs() < 0.6, "Mr2 {} vs {mr2}", p.mr2_pct);
+    // Densely: ordinates A·cos(π(k + ½)/n) are the sine's heights at uniform phase.
+    let n = 200_000;
+    let dense: Vec<f64> = (0..n)
+        .map(|k| amp * (PI * (k as f64 + 0.5) / n as f64).cos())
+        .collect();
+    let f = rk_family(&dense).unwrap();
+    assert!((f.rk_um - rk).abs() < 1e-4, "Rk {} vs {rk}", f.rk_um);
+    assert!((f.mr2_pct - mr2).abs() < 0.01, "Mr2 {} vs {mr2}", f.mr2_pct);
+    assert!(
+        (f.a2_um_pct - a2).abs() < 1e-3 * a2,
+        "A2 {} vs {a2}",
+        f.a2_um_pct
+    );
+    assert!((f.rvk_um - 2.0 * a2 / (100.0 - mr2)).abs() < 1e-3 * f.rvk_um);
+    assert_eq!(f.mr1_pct, 0.0);
+    // Rmr at depth A below the top (the mean line) is 50 %.
+    // (4000 of the 7999 segments lie at or above the mean line.)
+    assert!(
+        (a.rmr_pct(amp) - 4000.0 / 7999.0 * 100.0).abs() < 1e-9,
+        "{}",
+        a.rmr_pct(amp)
+    );
+}
+
+#[test]
+fn triangle_wave_parameters_match_closed_forms() {
+    // Heights uniform in [−A, A]: Ra = A/2, Rq = A/√3, Rku = 9/5, |slope| = 4A/λ.
+    let (amp, lambda, pitch) = (2.0, 0.2, 0.0005);
+    let per = (lambda / pitch) as usize; // 400 points per period
+    let z: Vec<f64> = (0..8000)
+        .map(|i| {
+            let t = (i % per) as f64 / per as f64; // phase in [0, 1)
+            let u = (t + 0.25).fract();
+            amp * (if u < 0.5 {
+                4.0 * u - 1.0
+            } else {
+                3.0 - 4.0 * u
+            })
+        })
+        .collect();
+    let p = analyze_line(&z, pitch, &no_filter(0.8)).unwrap().params;
+    assert!((p.ra_um - amp / 2.0).abs() < 1e-4, "Ra {}", p.ra_um);
+    assert!((p.rq_um - amp / 3f64.sqrt()).abs() < 1e-4, "Rq {}", p.rq_um);
+    assert!((p.rku - 1.8).abs() < 1e-3, "Rku {}", p.rku);
+    assert!(p.rsk.abs() < 1e-6);
+    let slope = 4.0 * amp / (lambda * 1000.0);
+    assert!(
+        (p.rdq - slope).abs() < 0.03 * slope,
+        "Rdq {} vs {slope}",
+        p.rdq
+    );
+    // Uniform heights: Rmc is a straight line, every secant ties, Rk = full range.
+    assert!((p.rk_um - 2.0 * amp).abs() < 1e-3, "Rk {}", p.rk_um);
+    assert!((p.rsm_um.unwrap() - lambda * 1000.0).abs() < 1e-6);
+}
+
+#[test]
+fn rz_is_per_section_mean_and_rz1max_the_largest() {
+    // Two sections of 10 points; section 0 spans +3/−1, section 1 spans +1/−1.
+    let mut z = vec![0.0; 20];
+    z[2] = 3.0;
+    z[5] = -1.0;
+    z[12] = 1.0;
+    z[15] = -1.0;
+    let o = Options {
+        sampling_lengths: Some(2),
+        ..no_filter(0.01)
+    };
+    let p = analyze_line(&z, 0.001, &o).unwrap().params;
+    assert!((p.rz_um - 3.0).abs() < 1e-12); // ((3+1) + (1+1)) / 2
+    assert!((p.rz1max_um - 4.0).abs() < 1e-12);
+    assert!((p.rt_um - 4.0).abs() < 1e-12);
+    assert!((p.rp_um - 2.0).abs() < 1e-12); // (3 + 1) / 2
+    assert!((p.rv_um - 1.0).abs() < 1e-12);
+    // Ra per section: 4/10 and 2/10, mean 0.3.
+    assert!((p.ra_um - 0.3).abs() < 1e-12);
+}
+
+#[test]
+fn sampling_lengths_round_within_one_percent_and_truncate_otherwise() {
+    // The Mitutoyo export: 6664 × 1.5 µm = 9.996 mm, λc 2.5 ⇒ 3.9984 ⇒ N = 4, 1666 points each.
+    let z = sine(6664, 0.0015, 0.1, 1.0);
+    let a = analyze_line(&z, 0.0015, &no_filter(2.5)).unwrap();
+    assert_eq!(a.recipe.sampling_lengths, 4);
+    assert_eq!(a.recipe.points_per_section, 1666);
+    assert_eq!(a.recipe.points_not_evaluated, 0);
+    // 4.5 mm at λc 0.8: 5.625 is not within 1 % ⇒ N = 5 of 1600 points, 1000 points left out.
+    let z = sine(9000, 0.0005, 0.1, 1.0);
+    let a = analyze_line(&z, 0.0005, &no_filter(0.8)).unwrap();
+    assert_eq!(a.recipe.sampling_lengths, 5);
+    assert_eq!(a.recipe.points_per_section, 1600);
+    assert_eq!(a.recipe.points_not_evaluated, 1000);
+}
+
+#[test]
+fn gaussian_heights_give_rk_2_622_rq() {
+    // Rmc of N(0, σ²) between 30 % and 70 % drops 2·Φ⁻¹(0.7)·σ = 1.04880σ; /0.4 ⇒ 2.6220σ.
+    let mut state: u64 = 0x2545_f491_4f6c_dd1d;
+    let mut uni = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    };
+    let z: Vec<f64> = (0..200_000)
+        .map(|_| (-2.0 * uni().ln()).sqrt() * (2.0 * PI * uni()).cos())
+        .collect();
+    let rk = rk_family(&z).unwrap();
+    assert!((rk.rk_um - 2.622).abs() < 0.03, "Rk {}", rk.rk_um);
+    assert!(rk.mr1_pct > 3.0 && rk.mr1_pct < 15.0, "Mr1 {}", rk.mr1_pct);
+    assert!(rk.mr2_pct > 85.0 && rk.mr2_pct < 97.0, "Mr2 {}", rk.mr2_pct);
+    // Rpk is the triangle height: A1 = Rpk·Mr1/2.
+    assert!((rk.a1_um_pct - rk.rpk_um * rk.mr1_pct / 2.0).abs() < 1e-9);
+}
+
+#[test]
+fn filtered_sine_far_below_cutoff_keeps_its_parameters() {
+    // λ = λc/8: H_R = 1 − 2^(−64) ≈ 1, so Ra ≈ 2A/π even with the filter and its ends.
+    // In the interior (≥ λc from the ends, full kernel) R equals P to the kernel's tail weight.
+    let z = sine(8000, 0.0005, 0.1, 1.0);
+    let s = split(&z, 0.0005, 0.8).unwrap();
+    for i in 1600..6400 {
+        assert!((s.roughness_um[i] - z[i]).abs() < 1e-6, "point {i}");
+    }
+    // Within λc of the ends the one-sided local-line kernel leaks about 1 % of the sine into
+    // the mean line; those zones are 40 % of this profile, so Ra stays within 0.5 %.
+    let p = analyze_line(&z, 0.0005, &Options::default())
+        .unwrap()
+        .params;
+    assert!(
+        (p.ra_um - 2.0 / PI).abs() < 0.005 * 2.0 / PI,
+        "Ra {}",
+        p.ra_um
+    );
+    assert!((p.rq_um - 1.0 / 2f64.sqrt()).abs() < 0.005 / 2f64.sqrt());
+}
+
+#[test]
+fn bad_input_gets_named_errors() {
+    let mut z = sine(2000, 0.001, 0.1, 1.0);
+    z[17] = f64::NAN;
+    assert!(matches!(
+        analyze_line(&z, 0.001, &Options::default()),
+        Err(MetrologyError::NonFiniteHeight { index: 17, .. })
+    ));
+    let z = sine(2000, 0.001, 0.1, 1.0);
+    assert_eq!(
+        analyze_line(&z, 0.0, &Options::default()),
+        Err(MetrologyError::BadPitch { pitch_mm: 0.0 })
+    );
+    assert!(matches!(
+        analyze_line(&z[..500], 0.001, &Options::default()),
+        Err(MetrologyError::TooShort { points: 500, .. })
+    ));
+    let o = Options {
+        lambda_c_mm: -1.0,
+        ..Options::default()
+    };
+    assert!(matches!(
+        analyze_line(&z, 0.001, &o),
+        Err(MetrologyError::BadCutoff { .. })
+    ));
+}
+
+#[test]
+fn bearing_curve_of_a_sine_is_arccos() {
+    // z = A sin θ over whole periods: z ≥ h for θ ∈ [asin(h/A), π − asin(h/A)], a fraction
+    // (π − 2 asin(h/A)) / 2π = arccos(h/A)/π of the length.
+    let amp = 1.5;
+    let curve = |x: f64| 4.0 + amp * (2.0 * PI * x / 0.25).sin(); // offset removed by mean line
+    let b = bearing_curve_of(curve, 0.0, 1.0, 40_001, 101).unwrap();
+    assert_eq!(b.points.len(), 101);
+    assert!((b.mean_line_um - 4.0).abs() < 1e-9);
+    for [h, mr] in &b.points {
+        let expected = (h / amp).clamp(-1.0, 1.0).acos() / PI * 100.0;
+        assert!((mr - expected).abs() < 0.05, "h {h}: {mr} vs {expected}");
+    }
+    assert!((b.points[0][0] - amp).abs() < 1e-6);
+    assert!((b.points[100][0] + amp).abs() < 1e-6);
+    // Pooling two copies of the same curve gives the same curve.
+    let z: Vec<f64> = (0..4001).map(|i| curve(i as f64 / 4000.0)).collect();
+    let single = bearing_curve(&z, 101).unwrap();
+    let pooled = pooled_bearing_curve(&[z.clone(), z], 101).unwrap();
+    for (a, b) in single.points.iter().zip(&pooled.points) {
+        assert!((a[0] - b[0]).abs() < 1e-12 && (a[1] - b[1]).abs() < 1e-9);
+    }
+}
+
+#[test]
+fn material_ratio_interpolates_crossings() {
+    // One segment from 0 to 1: at level 0.25 three quarters of it is above.
+    assert!((material_ratio_pct(&[0.0, 1.0], 0.25) - 75.0).abs() < 1e-12);
+    // 0,2,0: at level 1 half of each segment.
+    assert!((material_ratio_pct(&[0.0, 2.0, 0.0], 1.0) - 50.0).abs() < 1e-12);
+}
+
+#[test]
+fn instrument_results_are_paired_with_ours_in_our_units() {
+    use surfscan::metrology::instrument::compare;
+    use surfscan::profile::InstrumentResult;
+    let z = sine(8000, 0.0005, 0.1, 1.0);
+    let p = analyze_line(&z, 0.0005, &no_filter(0.8)).unwrap().params;
+    let r = |name: &str, value: Option<f64>, unit: &str| InstrumentResult {
+        name: name.to_string(),
+        value,
+        unit: unit.to_string(),
+    };
+    let c = compare(
+        &p,
+        &[
+            r("Ra", Some(0.6), "µm"),
+            r("RSm", Some(0.1), "mm"),
+            r("Rz", None, "um"),
+            r("Pc", Some(12.0), "/cm"),
+        ],
+    );
+    assert_eq!(c.len(), 4);
+    assert!((c[0].difference.unwrap() - (p.ra_um - 0.6)).abs() < 1e-12);
+    // 0.1 mm = 100 µm; our RSm is the wavelength, 100 µm.
+    assert!((c[1].instrument.unwrap() - 100.0).abs() < 1e-12);
+    assert!(c[1].difference.unwrap().abs() < 1e-6);
+    assert_eq!(c[2].instrument, None);
+    assert_eq!(c[2].difference, None);
+    assert_eq!(c[3].ours, None);
+}
