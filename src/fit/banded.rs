@@ -253,7 +253,8 @@ impl BandLu {
 mod tests {
     use super::*;
 
-    /// Dense reference: Gaussian elimination with partial pivoting.
+    /// Dense reference: Gaussian elimination with partial pivoting (textbook index form).
+    #[allow(clippy::needless_range_loop)]
     fn dense_solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
         let n = b.len();
         for k in 0..n {
