@@ -357,14 +357,16 @@ impl IncrementalFitter {
         let p2 = pitch * pitch;
         self.scratch.clear();
         self.scratch.resize(n, 0.0);
-        for (d, w) in self.scratch[1..].iter_mut().zip(zrow.windows(2)) {
-            let dz = w[1] - w[0];
+        for ((d, &z1), &z0) in self.scratch[1..].iter_mut().zip(&zrow[1..]).zip(zrow) {
+            let dz = z1 - z0;
             *d = (p2 + dz * dz).sqrt();
         }
-        if let Some(k) = self.scratch[1..]
-            .iter()
-            .position(|&d| d == 0.0 || !d.is_finite())
-        {
+        // Branch-free scan first (vectorises); locate the culprit only on failure.
+        if any_bad_chord(&self.scratch[1..]) {
+            let k = self.scratch[1..]
+                .iter()
+                .position(|&d| d == 0.0 || !d.is_finite())
+                .unwrap_or(0);
             let k = k + 1;
             let (d, pz, z) = (self.scratch[k], zrow[k - 1], zrow[k]);
             return Err(Self::chord_error(
@@ -402,7 +404,12 @@ impl IncrementalFitter {
                 let dz = z - pz;
                 (dy2 + dz * dz).sqrt()
             }));
-            if let Some(k) = self.vrow.iter().position(|&d| d == 0.0 || !d.is_finite()) {
+            if any_bad_chord(&self.vrow) {
+                let k = self
+                    .vrow
+                    .iter()
+                    .position(|&d| d == 0.0 || !d.is_finite())
+                    .unwrap_or(0);
                 let x = k as f64 * pitch;
                 return Err(Self::chord_error(
                     "v",
@@ -416,7 +423,10 @@ impl IncrementalFitter {
             for (c, &pc) in self.vrow.iter_mut().zip(prev_cum) {
                 *c += pc;
             }
-            if let Some(k) = self.vrow.iter().position(|c| !c.is_finite()) {
+            if let Some(k) = any_bad_chord(&self.vrow)
+                .then(|| self.vrow.iter().position(|c| !c.is_finite()))
+                .flatten()
+            {
                 return Err(FitError::ChordOverflow {
                     direction: "v",
                     line,
@@ -582,6 +592,13 @@ impl IncrementalFitter {
     }
 }
 
+/// True when some chord is zero or not finite; a branch-free scan so it vectorises.
+fn any_bad_chord(chords: &[f64]) -> bool {
+    chords
+        .iter()
+        .fold(false, |bad, &d| bad | (d == 0.0) | !d.is_finite())
+}
+
 /// ū_k: mean over rows of the normalised cumulative chords; exactly 0 and 1 at the ends.
 fn average_params_u(sum_u: &[f64], rows: usize) -> Vec<f64> {
     let r = rows as f64;
@@ -601,7 +618,7 @@ fn average_params_v(cum_v: &[f64], rows: usize, cols: usize) -> Vec<f64> {
     let c = cols as f64;
     let mut out: Vec<f64> = cum_v
         .chunks_exact(cols)
-        .map(|row| row.iter().zip(totals).map(|(a, t)| a / t).sum::<f64>() / c)
+        .map(|row| sum_ratios(row, totals) / c)
         .collect();
     if let Some(f) = out.first_mut() {
         *f = 0.0;
@@ -610,6 +627,20 @@ fn average_params_v(cum_v: &[f64], rows: usize, cols: usize) -> Vec<f64> {
         *l = 1.0;
     }
     out
+}
+
+/// Σ a_k / t_k with four partial sums (a fixed order, so results are reproducible).
+fn sum_ratios(a: &[f64], t: &[f64]) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let (a4, t4) = (a.chunks_exact(4), t.chunks_exact(4));
+    let (ar, tr) = (a4.remainder(), t4.remainder());
+    for (x, y) in a4.zip(t4) {
+        for l in 0..4 {
+            acc[l] += x[l] / y[l];
+        }
+    }
+    let tail: f64 = ar.iter().zip(tr).map(|(x, y)| x / y).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// Clamped knot vector by averaging (P&T eq. 9.8): `degree + 1` zeros,
