@@ -1,7 +1,7 @@
 //! Independent CAD check: a fit of a real 12×40 window of the bundled sur-2 grid is written as
 //! IGES (once whole, once forced into patches) and read back by OpenCascade through
 //! `tests/python/check_iges_occt.py`, which must find one B-spline face per patch with the
-//! right degrees and pole counts that passes through the measured points within 1e-10 mm.
+//! right degrees, pole counts and bit-identical knots, that passes through the measured points within 1e-10 mm.
 //! Fails (does not skip) when python3 or OCP is missing.
 use std::process::Command;
 use surfscan::fit::{fit_grid, FitOptions};
@@ -72,6 +72,7 @@ fn check(split: bool, expect_patches_at_least: usize) {
         expect_patches.push(serde_json::json!({
             "degree_u": 5, "degree_v": 5,
             "poles_u": p.count_u(), "poles_v": p.count_v(),
+            "knots_u": p.knots_u(), "knots_v": p.knots_v(),
             "points": points,
         }));
     }

@@ -253,3 +253,40 @@ fn refuses_a_limit_that_cannot_be_met() {
     );
     assert!(matches!(r, Err(IgesError::EntityTooLarge { .. })), "{r:?}");
 }
+
+#[test]
+fn reader_rejects_garbage_and_absurd_sizes_without_panicking() {
+    assert!(read_iges(b"").is_err());
+    assert!(read_iges(b"hello\n").is_err());
+    let mut out = Vec::new();
+    write_iges(&mut out, &[surface(9, 6)], &opts()).unwrap();
+    let text = String::from_utf8(out).unwrap();
+    let p1 = text.lines().find(|l| l.ends_with("P      1")).unwrap();
+    // K1 = u64::MAX: the size arithmetic must not overflow. Cut back to 64 data columns.
+    let huge = p1.replacen("128,8,5,", "128,18446744073709551615,5,", 1);
+    let fixed = format!("{}{}", &huge[..64], &p1[64..]);
+    let bad = text.replace(p1, &fixed);
+    assert!(matches!(
+        read_iges(bad.as_bytes()),
+        Err(IgesError::Parameter { .. })
+    ));
+}
+
+#[test]
+fn large_nets_formatted_in_parallel_chunks_round_trip_bit_identical() {
+    // 300 × 250 = 75 000 poles: above the parallel-formatting threshold.
+    let s = surface(300, 250);
+    let mut out = Vec::new();
+    let stats = write_iges(&mut out, std::slice::from_ref(&s), &opts()).unwrap();
+    assert_eq!(stats.patches, 1);
+    let r = &read_iges(&out).unwrap().surfaces[0];
+    let pb = |s: &NurbsSurface| {
+        s.poles()
+            .iter()
+            .flatten()
+            .map(|x| x.to_bits())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(pb(r), pb(&s));
+    assert_eq!(r.knots_v(), s.knots_v());
+}

@@ -9,7 +9,7 @@
 use super::{CliError, Exit};
 use crate::atomic::write_atomically;
 use crate::fit::{max_residual_mm, FitOptions, IncrementalFitter};
-use crate::iges::{write_iges, IgesOptions};
+use crate::iges::{write_iges, IgesError, IgesOptions};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -195,7 +195,18 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let stats = write_atomically(&args.output, |w| {
         write_iges(w, std::slice::from_ref(&fit.surface), &opts).map_err(std::io::Error::other)
     })
-    .map_err(|e| io_err("cannot write IGES", &args.output, e))?;
+    .map_err(|e| {
+        // A surface the format cannot hold is a data problem, not an I/O failure.
+        let format_problem = e
+            .get_ref()
+            .and_then(|inner| inner.downcast_ref::<IgesError>())
+            .is_some_and(|ie| !matches!(ie, IgesError::Io(_)));
+        let mut err = io_err("cannot write IGES", &args.output, e);
+        if format_problem {
+            err.exit = Exit::Failed;
+        }
+        err
+    })?;
     let write_s = t_write.elapsed().as_secs_f64();
 
     let s = &fit.surface;

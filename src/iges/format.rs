@@ -14,6 +14,35 @@ pub fn push_real(out: &mut Vec<u8>, value: f64) -> bool {
     }
     let mut buf = zmij::Buffer::new();
     let text = buf.format_finite(value).as_bytes();
+    // Fast paths for the plain decimals the formatter gives for everyday magnitudes.
+    let (sign, body) = match text.split_first() {
+        Some((b'-', rest)) => (&b"-"[..], rest),
+        _ => (&b""[..], text),
+    };
+    if body.contains(&b'.')
+        && body.last().is_some_and(|&c| c != b'0' && c != b'.')
+        && body.iter().all(|&c| c != b'e' && c != b'E')
+    {
+        if !body.starts_with(b"0.0") {
+            // `12.5`, `0.53`: already valid and shorter than any exponent form.
+            out.extend_from_slice(text);
+            return true;
+        }
+        // `0.000123`: z zeros after the point, then the significant digits.
+        let z = body[2..].iter().take_while(|&&c| c == b'0').count();
+        let sig = &body[2 + z..];
+        if z <= 2 {
+            out.extend_from_slice(text);
+        } else {
+            out.extend_from_slice(sign);
+            out.push(sig[0]);
+            out.push(b'.');
+            out.extend_from_slice(&sig[1..]);
+            out.extend_from_slice(b"E-");
+            push_uint(out, z as u64 + 1);
+        }
+        return true;
+    }
     // Decompose whatever shape the shortest-digits formatter produced into sign, significant
     // digits and a decimal exponent, so the IGES form does not depend on its style.
     let (negative, body) = match text.split_first() {
@@ -144,10 +173,27 @@ pub fn push_int(out: &mut Vec<u8>, v: i64) {
 /// Appends `v` right-justified in a field of `width` columns (wider numbers take more room;
 /// callers keep values within their fields).
 pub fn push_right(out: &mut Vec<u8>, v: i64, width: usize) {
-    let mut tmp = Vec::with_capacity(20);
-    push_int(&mut tmp, v);
-    out.extend(std::iter::repeat_n(b' ', width.saturating_sub(tmp.len())));
-    out.extend_from_slice(&tmp);
+    let mut tmp = [0u8; 20];
+    let mut i = tmp.len();
+    let mut m = v.unsigned_abs();
+    loop {
+        i -= 1;
+        tmp[i] = b'0' + (m % 10) as u8;
+        m /= 10;
+        if m == 0 {
+            break;
+        }
+    }
+    if v < 0 {
+        i -= 1;
+        tmp[i] = b'-';
+    }
+    let digits = &tmp[i..];
+    out.extend(std::iter::repeat_n(
+        b' ',
+        width.saturating_sub(digits.len()),
+    ));
+    out.extend_from_slice(digits);
 }
 
 /// `text` reduced to printable ASCII (others become `?`), as IGES strings require.
@@ -171,64 +217,98 @@ pub fn hollerith(text: &str) -> String {
 #[derive(Debug)]
 pub struct FieldPacker {
     width: usize,
-    /// Completed records, each exactly `width` bytes (space padded).
-    pub data: Vec<u8>,
-    line: Vec<u8>,
+    /// Records written so far; the last one may still be filling (from `line_start`).
+    data: Vec<u8>,
+    line_start: usize,
 }
 
 impl FieldPacker {
     /// A packer for records of `width` data columns (64 in P, 72 in G).
     pub fn new(width: usize) -> FieldPacker {
+        FieldPacker::with_capacity(width, 0)
+    }
+
+    /// Like [`FieldPacker::new`], reserving `bytes` for the records.
+    pub fn with_capacity(width: usize, bytes: usize) -> FieldPacker {
         FieldPacker {
             width,
-            data: Vec::new(),
-            line: Vec::with_capacity(width),
+            data: Vec::with_capacity(bytes),
+            line_start: 0,
         }
     }
 
     /// Adds `token` followed by `delimiter`; starts a new record first if they do not fit.
     pub fn push(&mut self, token: &[u8], delimiter: u8) {
         let need = token.len() + 1;
-        if self.line.len() + need > self.width {
+        let used = self.data.len() - self.line_start;
+        if used + need > self.width {
             if need <= self.width {
-                self.flush_line();
+                self.pad_line();
             } else {
                 // Only Hollerith strings can be this long: fill records with it.
                 let mut rest = token;
                 loop {
-                    let room = self.width - self.line.len();
+                    let room = self.width - (self.data.len() - self.line_start);
                     if rest.len() < room {
                         break;
                     }
-                    self.line.extend_from_slice(&rest[..room]);
+                    self.data.extend_from_slice(&rest[..room]);
                     rest = &rest[room..];
-                    self.flush_line();
+                    self.line_start = self.data.len();
                 }
-                self.line.extend_from_slice(rest);
-                self.line.push(delimiter);
+                self.data.extend_from_slice(rest);
+                self.data.push(delimiter);
                 return;
             }
         }
-        self.line.extend_from_slice(token);
-        self.line.push(delimiter);
+        self.data.extend_from_slice(token);
+        self.data.push(delimiter);
     }
 
-    fn flush_line(&mut self) {
-        self.data.extend_from_slice(&self.line);
-        self.data
-            .extend(std::iter::repeat_n(b' ', self.width - self.line.len()));
-        self.line.clear();
+    /// Adds a real (see [`push_real`]) followed by `delimiter`, formatting it in place.
+    /// Returns `false` (adding nothing) for NaN or infinity.
+    pub fn push_real(&mut self, value: f64, delimiter: u8) -> bool {
+        let before = self.data.len();
+        if !push_real(&mut self.data, value) {
+            return false;
+        }
+        self.data.push(delimiter);
+        if self.data.len() - self.line_start > self.width {
+            let mut tmp = [0u8; 64];
+            let len = self.data.len() - before;
+            tmp[..len].copy_from_slice(&self.data[before..]);
+            self.data.truncate(before);
+            self.pad_line();
+            self.data.extend_from_slice(&tmp[..len]);
+        }
+        true
+    }
+
+    /// Ends the record being filled and appends whole records packed elsewhere (`records`
+    /// must be a multiple of the width, as [`FieldPacker::finish`] returns).
+    pub fn append_records(&mut self, records: &[u8]) {
+        if self.data.len() > self.line_start {
+            self.pad_line();
+        }
+        self.data.extend_from_slice(records);
+        self.line_start = self.data.len();
+    }
+
+    fn pad_line(&mut self) {
+        let end = self.line_start + self.width;
+        self.data.resize(end, b' ');
+        self.line_start = end;
     }
 
     /// Number of complete records so far plus the one being filled.
     pub fn records(&self) -> usize {
-        self.data.len() / self.width + usize::from(!self.line.is_empty())
+        self.line_start / self.width + usize::from(self.data.len() > self.line_start)
     }
 
     /// Finishes the last record and returns all records (`records() * width` bytes).
     pub fn finish(mut self) -> Vec<u8> {
-        if !self.line.is_empty() {
-            self.flush_line();
+        if self.data.len() > self.line_start {
+            self.pad_line();
         }
         self.data
     }
@@ -257,6 +337,10 @@ mod tests {
         assert_eq!(real(1e20), "1.E20");
         assert_eq!(real(100.0), "100.");
         assert_eq!(real(123456.0), "123456.");
+        assert_eq!(real(0.00085), "8.5E-4");
+        assert_eq!(real(-0.00085), "-8.5E-4");
+        assert_eq!(real(0.0085), "0.0085");
+        assert_eq!(real(0.00123456789), "0.00123456789");
     }
 
     #[test]
@@ -312,6 +396,12 @@ mod tests {
             p.push(t.as_bytes(), b',');
         }
         assert_eq!(p.finish(), b"1234,5678,9,        ".to_vec());
+        let mut p = FieldPacker::new(10);
+        assert!(p.push_real(0.125, b','));
+        assert!(p.push_real(0.375, b','));
+        assert!(p.push_real(2.5, b';'));
+        assert!(!p.push_real(f64::NAN, b';'));
+        assert_eq!(p.finish(), b"0.125,    0.375,2.5;".to_vec());
         let mut p = FieldPacker::new(8);
         p.push(b"12HABCDEFGHIJKL", b';');
         assert_eq!(p.finish(), b"12HABCDEFGHIJKL;".to_vec());

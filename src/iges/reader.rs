@@ -293,9 +293,22 @@ fn surface_128(params: &[String], de: usize) -> Result<NurbsSurface, IgesError> 
     let k2 = parse_int(&params[2], de, "K2")?;
     let m1 = parse_int(&params[3], de, "M1")?;
     let m2 = parse_int(&params[4], de, "M2")?;
-    let (nu, nv) = (k1 + 1, k2 + 1);
-    let (a, b, c) = (k1 + m1 + 2, k2 + m2 + 2, nu * nv);
-    let expected = 10 + a + b + 4 * c + 4;
+    let sizes = (|| {
+        let (nu, nv) = (k1.checked_add(1)?, k2.checked_add(1)?);
+        let a = k1.checked_add(m1)?.checked_add(2)?;
+        let b = k2.checked_add(m2)?.checked_add(2)?;
+        let c = nu.checked_mul(nv)?;
+        let expected = a
+            .checked_add(b)?
+            .checked_add(c.checked_mul(4)?)?
+            .checked_add(14)?;
+        Some((nu, nv, a, b, c, expected))
+    })();
+    let Some((nu, nv, a, b, c, expected)) = sizes else {
+        return Err(perr(format!(
+            "K1={k1}, K2={k2}, M1={m1}, M2={m2} are too large"
+        )));
+    };
     if params.len() != expected {
         return Err(perr(format!(
             "{} parameters, entity 128 with K1={k1}, K2={k2}, M1={m1}, M2={m2} needs {expected}",

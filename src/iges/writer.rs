@@ -65,14 +65,20 @@ pub struct IgesStats {
     pub bytes: u64,
 }
 
+/// Nets with at least this many poles are formatted in parallel chunks.
+const PARALLEL_POLES: usize = 65_536;
+/// Number of chunks a large net is formatted in (fixed, so output is reproducible).
+const POLE_CHUNKS: usize = 4;
+
 /// Minimum user-intended resolution written in G19, mm (well below height resolution).
 pub const MIN_RESOLUTION_MM: f64 = 1e-7;
 
 /// Formats the parameter data (columns 1–64 of each P line) of one entity 128.
 fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<Vec<u8>, IgesError> {
-    let mut p = FieldPacker::new(64);
-    let mut tok = Vec::with_capacity(32);
     let (nu, nv) = (s.count_u(), s.count_v());
+    // About 3 × 20 + 3 bytes per pole; a guess that avoids most reallocation.
+    let mut p = FieldPacker::with_capacity(64, nu * nv * 72 + 4096);
+    let mut tok = Vec::with_capacity(32);
     let closed_u = (0..nv).all(|j| s.pole(0, j) == s.pole(nu - 1, j));
     let closed_v = (0..nu).all(|i| s.pole(i, 0) == s.pole(i, nv - 1));
     let head: [u64; 10] = [
@@ -92,18 +98,17 @@ fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<Vec<u8>, IgesErro
         push_uint(&mut tok, h);
         p.push(&tok, b',');
     }
-    let mut real = |p: &mut FieldPacker, v: f64, what: &'static str, index: usize, delim: u8| {
-        tok.clear();
-        if !push_real(&mut tok, v) {
-            return Err(IgesError::NonFinite {
+    let real = |p: &mut FieldPacker, v: f64, what: &'static str, index: usize, delim: u8| {
+        if p.push_real(v, delim) {
+            Ok(())
+        } else {
+            Err(IgesError::NonFinite {
                 patch,
                 what,
                 index,
                 value: v,
-            });
+            })
         }
-        p.push(&tok, delim);
-        Ok(())
     };
     for (i, &k) in s.knots_u().iter().enumerate() {
         real(&mut p, k, "u knot", i, b',')?;
@@ -114,10 +119,48 @@ fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<Vec<u8>, IgesErro
     for _ in 0..nu * nv {
         p.push(b"1.", b',');
     }
-    for (i, pole) in s.poles().iter().enumerate() {
-        for &c in pole {
-            real(&mut p, c, "pole coordinate", i, b',')?;
+    // Poles are most of the text: large nets are formatted in a fixed number of chunks on
+    // scoped threads, each chunk starting a fresh record (a record may end early after any
+    // delimiter), so the output does not depend on how many cores run it.
+    let poles = s.poles();
+    let chunk = if poles.len() >= PARALLEL_POLES {
+        poles.len().div_ceil(POLE_CHUNKS)
+    } else {
+        poles.len().max(1)
+    };
+    let format_chunk = |first: usize, part: &[[f64; 3]]| -> Result<Vec<u8>, IgesError> {
+        let mut q = FieldPacker::with_capacity(64, part.len() * 72 + 64);
+        for (k, pole) in part.iter().enumerate() {
+            for &c in pole {
+                real(&mut q, c, "pole coordinate", first + k, b',')?;
+            }
         }
+        Ok(q.finish())
+    };
+    let parts: Vec<Result<Vec<u8>, IgesError>> = if poles.len() >= PARALLEL_POLES {
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = poles
+                .chunks(chunk)
+                .enumerate()
+                .map(|(n, part)| {
+                    let f = &format_chunk;
+                    scope.spawn(move || f(n * chunk, part))
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join().unwrap_or_else(|_| {
+                        Err(IgesError::Io(io::Error::other("formatting thread failed")))
+                    })
+                })
+                .collect()
+        })
+    } else {
+        vec![format_chunk(0, poles)]
+    };
+    for part in parts {
+        p.append_records(&part?);
     }
     let (ku, kv) = (s.knots_u(), s.knots_v());
     let dom = [ku[s.degree_u()], ku[nu], kv[s.degree_v()], kv[nv]];
@@ -243,7 +286,7 @@ pub fn write_iges<W: Write>(
         .fold(0.0f64, |m, c| m.max(c.abs()));
 
     let mut counter = CountingWriter { inner: w, bytes: 0 };
-    let mut buf = Vec::with_capacity(1 << 16);
+    let mut buf = Vec::with_capacity((1 << 21) + 128);
 
     // Start section.
     let start = wrap72(&opts.start_lines);
@@ -335,7 +378,7 @@ pub fn write_iges<W: Write>(
             push_right(&mut buf, seq as i64, 7);
             buf.push(b'\n');
             seq += 1;
-            if buf.len() >= 1 << 16 {
+            if buf.len() >= 1 << 21 {
                 counter.write_all(&buf)?;
                 buf.clear();
             }

@@ -4,6 +4,7 @@
 Usage: check_iges_occt.py FILE.igs EXPECT.json
 
 EXPECT.json: {"faces": N, "patches": [{"degree_u", "degree_v", "poles_u", "poles_v",
+"knots_u", "knots_v" (optional, full clamped vectors, compared exactly),
 "points": [[u, v, x, y, z], ...]}, ...], "tolerance_mm": 1e-10}
 
 Reads the file with IGESControl_Reader, transfers all roots, requires exactly N faces, each a
@@ -60,6 +61,13 @@ def main():
         if got != exp_t:
             print(f"FAIL: face {k}: degrees/poles {got}, expected {exp_t}")
             return 1
+        for name, seq_fn in (("knots_u", bs.UKnotSequence), ("knots_v", bs.VKnotSequence)):
+            if name in want:
+                arr = seq_fn()
+                got_k = [arr.Value(i) for i in range(arr.Lower(), arr.Upper() + 1)]
+                if got_k != want[name]:
+                    print(f"FAIL: face {k}: {name} {got_k} differ from the written {want[name]}")
+                    return 1
         for u, v, x, y, z in want["points"]:
             p = bs.Value(u, v)
             d = max(abs(p.X() - x), abs(p.Y() - y), abs(p.Z() - z))
