@@ -54,8 +54,9 @@ fn de_boor(degree: usize, knots: &[f64], ctrl: &[[f64; 3]], t: f64) -> [f64; 3] 
         for j in (r..=degree).rev() {
             let i = j + k - degree;
             let a = (t - knots[i]) / (knots[i + degree + 1 - r] - knots[i]);
-            for c in 0..3 {
-                d[j][c] = (1.0 - a) * d[j - 1][c] + a * d[j][c];
+            let prev = d[j - 1];
+            for (c, pc) in d[j].iter_mut().zip(prev) {
+                *c = (1.0 - a) * pc + a * *c;
             }
         }
     }
