@@ -1,2 +1,137 @@
-//! Fit benchmark (filled in with the fitter).
-fn main() {}
+//! Fit benchmark: throughput of the paper's surface interpolation on synthetic roughness-like
+//! grids, the time `finish()` takes after the last line of a 31-line scan, and peak memory.
+//!
+//! `cargo bench --bench fit [-- CASE...]` with CASE among `31x2000`, `31x8000`, `1000x10000`,
+//! `finish` (default: all). Figures are medians of several runs on one core.
+
+use std::time::Instant;
+use surfscan::fit::{fit_grid, FitOptions, FitResult, IncrementalFitter};
+
+const RUNS: usize = 5;
+const PITCH_X_MM: f64 = 0.0005;
+const PITCH_Y_MM: f64 = 0.01;
+
+/// Roughness-like heights in µm, row-major: two waves plus uniform noise from an LCG.
+fn synthetic_grid(rows: usize, cols: usize) -> Vec<f64> {
+    let mut s: u64 = 0x9E37_79B9_7F4A_7C15;
+    let mut out = Vec::with_capacity(rows * cols);
+    for l in 0..rows {
+        for k in 0..cols {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let noise = ((s >> 11) as f64 / (1u64 << 53) as f64) - 0.5;
+            out.push(
+                1.2 * (k as f64 * 0.0123 + l as f64 * 0.3).sin()
+                    + 0.3 * (k as f64 * 0.21).cos()
+                    + 0.6 * noise,
+            );
+        }
+    }
+    out
+}
+
+fn y_positions(rows: usize) -> Vec<f64> {
+    (0..rows).map(|l| l as f64 * PITCH_Y_MM).collect()
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Peak resident set size of this process in MB (VmHWM), if readable.
+fn peak_rss_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
+
+/// The fit alone: one `fit_grid` call, timed from the caller's side.
+fn fit_once(y: &[f64], h: &[f64], cols: usize) -> (FitResult, f64) {
+    let t = Instant::now();
+    let r = fit_grid(PITCH_X_MM, y, h, cols, FitOptions::default()).expect("fit");
+    (r, t.elapsed().as_secs_f64())
+}
+
+/// Consumer of a fitted surface after the fit (output stages are timed here, separately).
+fn after_fit(_result: &FitResult) {}
+
+fn bench_grid(rows: usize, cols: usize) {
+    let h = synthetic_grid(rows, cols);
+    let y = y_positions(rows);
+    let points = (rows * cols) as f64;
+    let (mut wall, mut params, mut factor, mut su, mut sv) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..RUNS {
+        let (r, w) = fit_once(&y, &h, cols);
+        wall.push(w);
+        params.push(r.timings.params_s);
+        factor.push(r.timings.knots_factor_s);
+        su.push(r.timings.solve_u_s);
+        sv.push(r.timings.solve_v_s);
+        after_fit(&r);
+    }
+    let w = median(wall);
+    println!(
+        "{rows}x{cols}: fit {:.4} s wall (median of {RUNS}), {:.1} M points/s | params {:.4} s, knots+factor {:.5} s, solve_u {:.4} s, solve_v+assemble {:.4} s",
+        w,
+        points / w / 1e6,
+        median(params),
+        median(factor),
+        median(su),
+        median(sv)
+    );
+}
+
+fn bench_finish() {
+    let (rows, cols) = (31, 8000);
+    let h = synthetic_grid(rows, cols);
+    let y = y_positions(rows);
+    let mut fitter = IncrementalFitter::new(FitOptions::default());
+    for (row, &yy) in h.chunks_exact(cols).zip(&y).take(rows - 1) {
+        fitter.push_row(yy, PITCH_X_MM, row).expect("push");
+    }
+    let last = &h[(rows - 1) * cols..];
+    let (mut push, mut finish) = (Vec::new(), Vec::new());
+    for _ in 0..RUNS {
+        let mut f = fitter.clone();
+        let t = Instant::now();
+        f.push_row(y[rows - 1], PITCH_X_MM, last).expect("push");
+        push.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let r = f.finish().expect("finish");
+        finish.push(t.elapsed().as_secs_f64());
+        after_fit(&r);
+    }
+    println!(
+        "31x8000 incremental: push_line(31st) {:.2} ms, finish() {:.2} ms (medians of {RUNS})",
+        median(push) * 1e3,
+        median(finish) * 1e3
+    );
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with('-'))
+        .collect();
+    let want = |name: &str| args.is_empty() || args.iter().any(|a| a == name);
+    if want("31x2000") {
+        bench_grid(31, 2000);
+    }
+    if want("31x8000") {
+        bench_grid(31, 8000);
+    }
+    if want("finish") {
+        bench_finish();
+    }
+    if want("1000x10000") {
+        bench_grid(1000, 10000);
+        match peak_rss_mb() {
+            Some(mb) => println!("peak RSS after 1000x10000: {mb:.0} MB (VmHWM)"),
+            None => println!("peak RSS: /proc/self/status not readable"),
+        }
+    }
+}

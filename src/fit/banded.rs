@@ -134,9 +134,81 @@ impl BandLu {
         }
     }
 
+    /// Solves A x = b in place for four interleaved right-hand sides (lane l of every entry
+    /// belongs to system l). Each lane sees exactly the operations of
+    /// [`BandLu::solve_in_place`], so results are bit-identical to it.
+    fn solve_lanes(&self, b: &mut [[f64; 4]]) {
+        let (n, lo, up, w) = (self.n, self.lower, self.upper, self.width);
+        let b = &mut b[..n];
+        for i in 1..n {
+            let j0 = i.saturating_sub(lo);
+            let row = &self.band[i * w + j0 + lo - i..i * w + lo];
+            let mut s = b[i];
+            for (a, x) in row.iter().zip(&b[j0..i]) {
+                for l in 0..4 {
+                    s[l] -= a * x[l];
+                }
+            }
+            b[i] = s;
+        }
+        for i in (0..n).rev() {
+            let j1 = (i + up).min(n - 1);
+            let row = &self.band[i * w + lo + 1..i * w + lo + 1 + (j1 - i)];
+            let mut s = b[i];
+            for (a, x) in row.iter().zip(&b[i + 1..=j1]) {
+                for l in 0..4 {
+                    s[l] -= a * x[l];
+                }
+            }
+            let rp = self.recip_pivot[i];
+            for v in s.iter_mut() {
+                *v *= rp;
+            }
+            b[i] = s;
+        }
+    }
+
+    /// Solves A x = b for every contiguous row of length n of the row-major block `data`
+    /// (one system per row). Rows are solved four at a time, interleaved, so the four
+    /// substitution chains run in parallel; results equal [`BandLu::solve_in_place`] per row.
+    pub fn solve_each_row(&self, data: &mut [f64]) {
+        let n = self.n;
+        let mut buf = vec![[0.0f64; 4]; n];
+        let mut quads = data.chunks_exact_mut(4 * n);
+        for quad in &mut quads {
+            let (r0, rest) = quad.split_at_mut(n);
+            let (r1, rest) = rest.split_at_mut(n);
+            let (r2, r3) = rest.split_at_mut(n);
+            for (k, b) in buf.iter_mut().enumerate() {
+                *b = [r0[k], r1[k], r2[k], r3[k]];
+            }
+            self.solve_lanes(&mut buf);
+            for (k, b) in buf.iter().enumerate() {
+                r0[k] = b[0];
+                r1[k] = b[1];
+                r2[k] = b[2];
+                r3[k] = b[3];
+            }
+        }
+        for row in quads.into_remainder().chunks_exact_mut(n) {
+            self.solve_in_place(row);
+        }
+    }
+
     /// Solves A X = B in place where B is row-major with n rows of `cols` values: every
     /// column is a right-hand side. Rows are combined whole, so memory is read sequentially.
     pub fn solve_rows_in_place(&self, data: &mut [f64], cols: usize) {
+        self.solve_rows_in_place_then(data, cols, |_, _| {});
+    }
+
+    /// As [`BandLu::solve_rows_in_place`], calling `done(i, row)` as soon as row i of the
+    /// solution is final (rows are finished last to first), while it is still in cache.
+    pub fn solve_rows_in_place_then(
+        &self,
+        data: &mut [f64],
+        cols: usize,
+        mut done: impl FnMut(usize, &[f64]),
+    ) {
         let (n, lo, up) = (self.n, self.lower, self.upper);
         if cols == 0 {
             return;
@@ -172,6 +244,7 @@ impl BandLu {
             for t in target.iter_mut() {
                 *t *= rp;
             }
+            done(i, target);
         }
     }
 }
@@ -180,7 +253,8 @@ impl BandLu {
 mod tests {
     use super::*;
 
-    /// Dense reference: Gaussian elimination with partial pivoting.
+    /// Dense reference: Gaussian elimination with partial pivoting (textbook index form).
+    #[allow(clippy::needless_range_loop)]
     fn dense_solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
         let n = b.len();
         for k in 0..n {
@@ -232,6 +306,16 @@ mod tests {
         lu.solve_in_place(&mut x);
         for (a, e) in x.iter().zip(&expect) {
             assert!((a - e).abs() < 1e-12, "{a} vs {e}");
+        }
+        // Several right-hand sides as rows (four interleaved plus a remainder).
+        let mut rows_block: Vec<f64> = (0..6)
+            .flat_map(|r| rhs.iter().map(move |v| v * (r as f64 - 2.0)))
+            .collect();
+        lu.solve_each_row(&mut rows_block);
+        for (r, row) in rows_block.chunks_exact(n).enumerate() {
+            for (a, e) in row.iter().zip(&expect) {
+                assert!((a - e * (r as f64 - 2.0)).abs() < 1e-12);
+            }
         }
         // Several right-hand sides as columns of a row-major block.
         let cols = 3;

@@ -235,6 +235,10 @@ pub struct IncrementalFitter {
     cum_v: Vec<f64>,
     /// Scratch for one row's parameters.
     scratch: Vec<f64>,
+    /// Scratch for one row's heights in mm.
+    zrow: Vec<f64>,
+    /// Scratch for one row's cumulative column chords.
+    vrow: Vec<f64>,
     params_s: f64,
 }
 
@@ -254,8 +258,18 @@ impl IncrementalFitter {
             sum_u: Vec::new(),
             cum_v: Vec::new(),
             scratch: Vec::new(),
+            zrow: Vec::new(),
+            vrow: Vec::new(),
             params_s: 0.0,
         }
+    }
+
+    /// Reserves room for `lines` more lines of `cols` points (avoids regrowing the stores when
+    /// the scan size is known).
+    pub fn reserve_lines(&mut self, lines: usize, cols: usize) {
+        self.z_mm.reserve(lines.saturating_mul(cols));
+        self.cum_v.reserve(lines.saturating_mul(cols));
+        self.y_mm.reserve(lines);
     }
 
     /// Adds a traced line at `y_mm` (see [`IncrementalFitter::push_row`]).
@@ -329,35 +343,45 @@ impl IncrementalFitter {
             });
         }
 
-        // Row chords along u (3-D, mm) into the scratch buffer as cumulative sums.
+        // Heights in mm, once.
         let pitch = if line == 0 {
             pitch_x_mm
         } else {
             self.pitch_x_mm
         };
+        self.zrow.clear();
+        self.zrow.extend(heights_um.iter().map(|h| h / 1000.0));
+        let zrow = &self.zrow;
+
+        // Row chords along u (3-D, mm), then their cumulative sums.
         let p2 = pitch * pitch;
         self.scratch.clear();
-        self.scratch.reserve(n);
-        self.scratch.push(0.0);
+        self.scratch.resize(n, 0.0);
+        for ((d, &z1), &z0) in self.scratch[1..].iter_mut().zip(&zrow[1..]).zip(zrow) {
+            let dz = z1 - z0;
+            *d = (p2 + dz * dz).sqrt();
+        }
+        // Branch-free scan first (vectorises); locate the culprit only on failure.
+        if any_bad_chord(&self.scratch[1..]) {
+            let k = self.scratch[1..]
+                .iter()
+                .position(|&d| d == 0.0 || !d.is_finite())
+                .unwrap_or(0);
+            let k = k + 1;
+            let (d, pz, z) = (self.scratch[k], zrow[k - 1], zrow[k]);
+            return Err(Self::chord_error(
+                "u",
+                line,
+                k,
+                d,
+                [(k - 1) as f64 * pitch, y_mm, pz],
+                [k as f64 * pitch, y_mm, z],
+            ));
+        }
         let mut acc = 0.0;
-        let mut prev_z = heights_um[0] / 1000.0;
-        for (k, &h) in heights_um.iter().enumerate().skip(1) {
-            let z = h / 1000.0;
-            let dz = z - prev_z;
-            let d = (p2 + dz * dz).sqrt();
-            if d == 0.0 || !d.is_finite() {
-                return Err(self.chord_error(
-                    "u",
-                    line,
-                    k,
-                    d,
-                    [(k - 1) as f64 * pitch, y_mm, prev_z],
-                    [k as f64 * pitch, y_mm, z],
-                ));
-            }
-            acc += d;
-            self.scratch.push(acc);
-            prev_z = z;
+        for d in self.scratch.iter_mut() {
+            acc += *d;
+            *d = acc;
         }
         if !acc.is_finite() {
             return Err(FitError::ChordOverflow {
@@ -368,34 +392,49 @@ impl IncrementalFitter {
             });
         }
 
-        // Column chords along v to the previous line.
-        let new_cum: Option<Vec<f64>> = if line == 0 {
-            None
-        } else {
-            let dy = y_mm - self.y_mm[line - 1];
+        // Column chords along v to the previous line, then the new cumulative row.
+        if line > 0 {
+            let prev_y = self.y_mm[line - 1];
+            let dy = y_mm - prev_y;
             let dy2 = dy * dy;
             let prev_row = &self.z_mm[(line - 1) * n..line * n];
             let prev_cum = &self.cum_v[(line - 1) * n..line * n];
-            let mut row = Vec::with_capacity(n);
-            for (k, ((&h, &pz), &pc)) in heights_um.iter().zip(prev_row).zip(prev_cum).enumerate() {
-                let dz = h / 1000.0 - pz;
-                let d = (dy2 + dz * dz).sqrt();
-                let c = pc + d;
-                if d == 0.0 || !c.is_finite() {
-                    let x = k as f64 * pitch;
-                    return Err(self.chord_error(
-                        "v",
-                        line,
-                        k,
-                        d,
-                        [x, self.y_mm[line - 1], pz],
-                        [x, y_mm, h / 1000.0],
-                    ));
-                }
-                row.push(c);
+            self.vrow.clear();
+            self.vrow.extend(zrow.iter().zip(prev_row).map(|(&z, &pz)| {
+                let dz = z - pz;
+                (dy2 + dz * dz).sqrt()
+            }));
+            if any_bad_chord(&self.vrow) {
+                let k = self
+                    .vrow
+                    .iter()
+                    .position(|&d| d == 0.0 || !d.is_finite())
+                    .unwrap_or(0);
+                let x = k as f64 * pitch;
+                return Err(Self::chord_error(
+                    "v",
+                    line,
+                    k,
+                    self.vrow[k],
+                    [x, prev_y, prev_row[k]],
+                    [x, y_mm, zrow[k]],
+                ));
             }
-            Some(row)
-        };
+            for (c, &pc) in self.vrow.iter_mut().zip(prev_cum) {
+                *c += pc;
+            }
+            if let Some(k) = any_bad_chord(&self.vrow)
+                .then(|| self.vrow.iter().position(|c| !c.is_finite()))
+                .flatten()
+            {
+                return Err(FitError::ChordOverflow {
+                    direction: "v",
+                    line,
+                    index: k,
+                    chord: self.vrow[k],
+                });
+            }
+        }
 
         // Commit: nothing below can fail.
         if line == 0 {
@@ -403,21 +442,20 @@ impl IncrementalFitter {
             self.pitch_x_mm = pitch_x_mm;
             self.sum_u = vec![0.0; n];
             self.cum_v.resize(n, 0.0);
-        } else if let Some(row) = new_cum {
-            self.cum_v.extend_from_slice(&row);
+        } else {
+            self.cum_v.extend_from_slice(&self.vrow);
         }
         let total = acc;
         for (s, &c) in self.sum_u.iter_mut().zip(&self.scratch) {
             *s += c / total;
         }
-        self.z_mm.extend(heights_um.iter().map(|h| h / 1000.0));
+        self.z_mm.extend_from_slice(&self.zrow);
         self.y_mm.push(y_mm);
         self.params_s += secs(start);
         Ok(())
     }
 
     fn chord_error(
-        &self,
         direction: &'static str,
         line: usize,
         index: usize,
@@ -521,21 +559,26 @@ impl IncrementalFitter {
         timings.knots_factor_s = secs(t);
 
         let t = Instant::now();
-        for row in z.chunks_exact_mut(cols) {
-            lu_u.solve_in_place(row);
-        }
+        lu_u.solve_each_row(&mut z);
         let mut px: Vec<f64> = (0..cols).map(|k| k as f64 * self.pitch_x_mm).collect();
         lu_u.solve_in_place(&mut px);
         timings.solve_u_s = secs(t);
 
         let t = Instant::now();
-        lu_v.solve_rows_in_place(&mut z, cols);
         let mut py = self.y_mm.clone();
         lu_v.solve_in_place(&mut py);
-        let mut poles = Vec::with_capacity(rows * cols);
-        for (zrow, &y) in z.chunks_exact(cols).zip(&py) {
-            poles.extend(zrow.iter().zip(&px).map(|(&zz, &x)| [x, y, zz]));
-        }
+        // Rows of the solution are final last to first; each goes straight into the net.
+        let mut poles = vec![[0.0f64; 3]; rows * cols];
+        lu_v.solve_rows_in_place_then(&mut z, cols, |j, zrow| {
+            let y = py[j];
+            for ((out, &zz), &x) in poles[j * cols..(j + 1) * cols]
+                .iter_mut()
+                .zip(zrow)
+                .zip(&px)
+            {
+                *out = [x, y, zz];
+            }
+        });
         drop(z);
         let surface = NurbsSurface::try_new(p, q, knots_u, knots_v, cols, rows, poles)?;
         timings.solve_v_s = secs(t);
@@ -547,6 +590,13 @@ impl IncrementalFitter {
             timings,
         })
     }
+}
+
+/// True when some chord is zero or not finite; a branch-free scan so it vectorises.
+fn any_bad_chord(chords: &[f64]) -> bool {
+    chords
+        .iter()
+        .fold(false, |bad, &d| bad | (d == 0.0) | !d.is_finite())
 }
 
 /// ū_k: mean over rows of the normalised cumulative chords; exactly 0 and 1 at the ends.
@@ -568,7 +618,7 @@ fn average_params_v(cum_v: &[f64], rows: usize, cols: usize) -> Vec<f64> {
     let c = cols as f64;
     let mut out: Vec<f64> = cum_v
         .chunks_exact(cols)
-        .map(|row| row.iter().zip(totals).map(|(a, t)| a / t).sum::<f64>() / c)
+        .map(|row| sum_ratios(row, totals) / c)
         .collect();
     if let Some(f) = out.first_mut() {
         *f = 0.0;
@@ -577,6 +627,20 @@ fn average_params_v(cum_v: &[f64], rows: usize, cols: usize) -> Vec<f64> {
         *l = 1.0;
     }
     out
+}
+
+/// Σ a_k / t_k with four partial sums (a fixed order, so results are reproducible).
+fn sum_ratios(a: &[f64], t: &[f64]) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let (a4, t4) = (a.chunks_exact(4), t.chunks_exact(4));
+    let (ar, tr) = (a4.remainder(), t4.remainder());
+    for (x, y) in a4.zip(t4) {
+        for l in 0..4 {
+            acc[l] += x[l] / y[l];
+        }
+    }
+    let tail: f64 = ar.iter().zip(tr).map(|(x, y)| x / y).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// Clamped knot vector by averaging (P&T eq. 9.8): `degree + 1` zeros,
@@ -612,6 +676,7 @@ pub fn fit_grid(
         });
     }
     let mut fitter = IncrementalFitter::new(options);
+    fitter.reserve_lines(rows, cols);
     for (row, &y) in heights_um.chunks_exact(cols).zip(y_mm) {
         fitter.push_row(y, pitch_x_mm, row)?;
     }
