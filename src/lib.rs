@@ -22,6 +22,7 @@
 
 #![warn(missing_docs)]
 
+pub mod atomic;
 pub mod cli;
 pub mod control;
 pub mod devices;

@@ -1,9 +1,18 @@
 //! `surfscan fit`: CSV grid of heights → NURBS surface → IGES file and fit report.
 //!
+//! Exit status: 0 done; 2 bad pitch or degree arguments; 74 the input cannot be read or an
+//! output cannot be written; 1 the data are malformed (the message names line, column and
+//! content) or cannot be interpolated.
+//!
 //! Layer 5 (composition).
 
 use super::{CliError, Exit};
-use std::path::PathBuf;
+use crate::atomic::write_atomically;
+use crate::fit::{max_residual_mm, FitOptions, IncrementalFitter};
+use crate::iges::{write_iges, IgesError, IgesOptions};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 /// Arguments of `surfscan fit`.
 #[derive(Debug, clap::Args)]
@@ -30,10 +39,253 @@ pub struct Args {
     pub report: Option<PathBuf>,
 }
 
+/// A height grid read from CSV: row-major heights in µm.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grid {
+    /// Number of rows (traced lines).
+    pub rows: usize,
+    /// Number of columns (points per line).
+    pub cols: usize,
+    /// Heights in µm, row-major.
+    pub heights_um: Vec<f64>,
+}
+
+/// Parses the grid CSV: no header, `,` separated, one row per line; blank lines at the end
+/// are ignored. Errors name the 1-based line and column and the offending content.
+pub fn parse_grid(text: &str) -> Result<Grid, String> {
+    let mut heights_um = Vec::new();
+    let mut cols = 0usize;
+    let mut rows = 0usize;
+    let lines: Vec<&str> = text.lines().collect();
+    let last = lines
+        .iter()
+        .rposition(|l| !l.trim().is_empty())
+        .map_or(0, |i| i + 1);
+    for (li, line) in lines[..last].iter().enumerate() {
+        let mut n = 0usize;
+        for (ci, field) in line.split(',').enumerate() {
+            let f = field.trim();
+            let v: f64 = f.parse().map_err(|_| {
+                format!(
+                    "line {}, column {}: {f:?} is not a number (expected heights in µm, ',' separated, no header)",
+                    li + 1,
+                    ci + 1
+                )
+            })?;
+            if !v.is_finite() {
+                return Err(format!(
+                    "line {}, column {}: {f:?} is not a finite height",
+                    li + 1,
+                    ci + 1
+                ));
+            }
+            heights_um.push(v);
+            n += 1;
+        }
+        if rows == 0 {
+            cols = n;
+        } else if n != cols {
+            return Err(format!(
+                "line {}: {n} values, but line 1 has {cols}; every row must have the same number of points",
+                li + 1
+            ));
+        }
+        rows += 1;
+    }
+    if rows == 0 {
+        return Err("the file holds no data rows".into());
+    }
+    Ok(Grid {
+        rows,
+        cols,
+        heights_um,
+    })
+}
+
+fn io_err(what: &str, path: &Path, e: impl std::fmt::Display) -> CliError {
+    CliError::new(Exit::Io, format!("{what} {}: {e}", path.display()))
+}
+
+fn ensure_parent(path: &Path) -> Result<(), CliError> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| io_err("cannot create directory", dir, e))?;
+    }
+    Ok(())
+}
+
 /// Runs `surfscan fit`.
-pub fn run(_args: Args) -> Result<(), CliError> {
-    Err(CliError::new(
-        Exit::Failed,
-        "surfscan fit: the fitter is being wired in",
-    ))
+pub fn run(args: Args) -> Result<(), CliError> {
+    for (name, v) in [("--pitch-x", args.pitch_x), ("--pitch-y", args.pitch_y)] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(CliError::new(
+                Exit::Usage,
+                format!("{name} {v} mm must be a positive number of millimetres"),
+            ));
+        }
+    }
+    if args.degree_u == 0 || args.degree_v == 0 {
+        return Err(CliError::new(
+            Exit::Usage,
+            "--degree-u and --degree-v must be at least 1 (the paper uses 5)",
+        ));
+    }
+    let t_read = Instant::now();
+    let text = std::fs::read_to_string(&args.input)
+        .map_err(|e| io_err("cannot read grid", &args.input, e))?;
+    let grid = parse_grid(&text)
+        .map_err(|m| CliError::new(Exit::Failed, format!("{}: {m}", args.input.display())))?;
+    let read_s = t_read.elapsed().as_secs_f64();
+
+    let options = FitOptions {
+        degree_u: args.degree_u,
+        degree_v: args.degree_v,
+    };
+    let y_mm: Vec<f64> = (0..grid.rows).map(|r| r as f64 * args.pitch_y).collect();
+    let progress = if std::io::stderr().is_terminal() && grid.heights_um.len() >= 1_000_000 {
+        indicatif::ProgressBar::new(grid.rows as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let t_fit = Instant::now();
+    let mut fitter = IncrementalFitter::new(options);
+    for (row, &y) in grid.heights_um.chunks_exact(grid.cols).zip(&y_mm) {
+        fitter
+            .push_row(y, args.pitch_x, row)
+            .map_err(|e| CliError::new(Exit::Failed, format!("{}: {e}", args.input.display())))?;
+        progress.inc(1);
+    }
+    let fit = fitter
+        .finish()
+        .map_err(|e| CliError::new(Exit::Failed, format!("{}: {e}", args.input.display())))?;
+    progress.finish_and_clear();
+    let fit_s = t_fit.elapsed().as_secs_f64();
+    let t_res = Instant::now();
+    let residual_mm = max_residual_mm(&fit, args.pitch_x, &y_mm, &grid.heights_um, grid.cols);
+    let residual_s = t_res.elapsed().as_secs_f64();
+
+    let now = chrono::Utc::now().naive_utc();
+    let file_name = args
+        .output
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let opts = IgesOptions {
+        file_name,
+        start_lines: vec![
+            format!(
+                "Surface fitted by surfscan {} (global B-spline interpolation, p={}, q={}); units mm.",
+                env!("CARGO_PKG_VERSION"),
+                args.degree_u,
+                args.degree_v
+            ),
+            format!(
+                "Input: {} ({} lines x {} points, pitch x {} mm, pitch y {} mm, heights um).",
+                args.input.display(),
+                grid.rows,
+                grid.cols,
+                args.pitch_x,
+                args.pitch_y
+            ),
+        ],
+        timestamp: now,
+        ..IgesOptions::default()
+    };
+    ensure_parent(&args.output)?;
+    let t_write = Instant::now();
+    let stats = write_atomically(&args.output, |w| {
+        write_iges(w, std::slice::from_ref(&fit.surface), &opts).map_err(std::io::Error::other)
+    })
+    .map_err(|e| {
+        // A surface the format cannot hold is a data problem, not an I/O failure.
+        let format_problem = e
+            .get_ref()
+            .and_then(|inner| inner.downcast_ref::<IgesError>())
+            .is_some_and(|ie| !matches!(ie, IgesError::Io(_)));
+        let mut err = io_err("cannot write IGES", &args.output, e);
+        if format_problem {
+            err.exit = Exit::Failed;
+        }
+        err
+    })?;
+    let write_s = t_write.elapsed().as_secs_f64();
+
+    let s = &fit.surface;
+    let report = serde_json::json!({
+        "input": args.input.display().to_string(),
+        "output": args.output.display().to_string(),
+        "grid": { "rows": grid.rows, "cols": grid.cols },
+        "pitch_x_mm": args.pitch_x,
+        "pitch_y_mm": args.pitch_y,
+        "degree_u": s.degree_u(),
+        "degree_v": s.degree_v(),
+        "knots_u_len": s.knots_u().len(),
+        "knots_v_len": s.knots_v().len(),
+        "poles_u": s.count_u(),
+        "poles_v": s.count_v(),
+        "max_residual_mm": residual_mm,
+        "patches": stats.patches,
+        "iges_bytes": stats.bytes,
+        "iges_parameter_lines": stats.parameter_lines,
+        "timings_s": {
+            "read": read_s,
+            "fit_params": fit.timings.params_s,
+            "fit_knots_factor": fit.timings.knots_factor_s,
+            "fit_solve_u": fit.timings.solve_u_s,
+            "fit_solve_v": fit.timings.solve_v_s,
+            "fit_total": fit_s,
+            "residual": residual_s,
+            "write_iges": write_s,
+        },
+    });
+    if let Some(path) = &args.report {
+        ensure_parent(path)?;
+        write_atomically(path, |w| {
+            serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)?;
+            std::io::Write::write_all(w, b"\n")
+        })
+        .map_err(|e| io_err("cannot write report", path, e))?;
+    }
+    println!(
+        "{}: {}x{} grid, {}x{} poles, max residual {:.3e} mm, {} patch(es), {} bytes; fit {:.1} ms, write {:.1} ms",
+        args.output.display(),
+        grid.rows,
+        grid.cols,
+        s.count_u(),
+        s.count_v(),
+        residual_mm,
+        stats.patches,
+        stats.bytes,
+        fit_s * 1e3,
+        write_s * 1e3
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_a_grid_and_ignores_trailing_blank_lines() {
+        let g = parse_grid("1, 2.5,3\n-4,5e-1,6\n\n").unwrap();
+        assert_eq!((g.rows, g.cols), (2, 3));
+        assert_eq!(g.heights_um, vec![1.0, 2.5, 3.0, -4.0, 0.5, 6.0]);
+    }
+
+    #[test]
+    fn names_line_column_and_content_of_bad_values() {
+        let e = parse_grid("1,2,3\n4,x5,6\n").unwrap_err();
+        assert!(
+            e.contains("line 2, column 2") && e.contains("\"x5\""),
+            "{e}"
+        );
+        let e = parse_grid("1,2,3\n4,NaN,6\n").unwrap_err();
+        assert!(e.contains("line 2, column 2"), "{e}");
+        let e = parse_grid("1,2,3\n4,5\n").unwrap_err();
+        assert!(
+            e.contains("line 2: 2 values") && e.contains("line 1 has 3"),
+            "{e}"
+        );
+        assert!(parse_grid("\n\n").is_err());
+    }
 }

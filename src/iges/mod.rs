@@ -1,3 +1,80 @@
-//! IGES 5.3 writer (entity 128, millimetres) and a reader of the entities it writes.
+//! IGES 5.3 writer (entity 128, millimetres) and a strict reader of the files it writes.
 //!
-//! Layer 1 (pure logic): depends on [`crate::nurbs`]; writes to any `io::Write`, never opens files.
+//! * [`format`]: reals (shortest round-trip, `.` and `E`), Hollerith strings, record packing.
+//! * [`writer`]: [`write_iges`] formats surfaces into S/G/D/P/T sections.
+//! * [`split`]: exact patches along v by knot insertion, for surfaces too large for one entity.
+//! * [`reader`]: [`read_iges`] checks the structure and rebuilds the surfaces.
+//!
+//! Layer 1 (pure logic): depends on [`crate::nurbs`]; writes to any `io::Write` and reads
+//! from byte slices, never opens files.
+
+pub mod format;
+pub mod reader;
+pub mod split;
+pub mod writer;
+
+pub use reader::{read_iges, IgesFile};
+pub use split::{split_v, split_v_middle};
+pub use writer::{write_iges, IgesOptions, IgesStats, MAX_SECTION_LINES};
+
+use thiserror::Error;
+
+/// Why a file could not be written or read.
+#[derive(Debug, Error)]
+pub enum IgesError {
+    /// Writing failed.
+    #[error("writing IGES failed: {0}")]
+    Io(#[from] std::io::Error),
+    /// Nothing to write.
+    #[error("no surface to write; pass at least one")]
+    NoSurfaces,
+    /// A value is NaN or infinite (IGES has no syntax for it; readers misbehave silently).
+    #[error("patch {patch}: {what} {index} is {value}, not finite; refusing to write it")]
+    NonFinite {
+        /// Patch index.
+        patch: usize,
+        /// Which kind of value.
+        what: &'static str,
+        /// Its index.
+        index: usize,
+        /// The value.
+        value: f64,
+    },
+    /// A surface without interior v knots needs more P lines than allowed.
+    #[error("a {count_u}×{count_v} surface needs {lines} P lines (limit {max_lines}) and has no interior v knot to split at; raise the limit")]
+    EntityTooLarge {
+        /// Lines needed.
+        lines: usize,
+        /// The limit.
+        max_lines: usize,
+        /// Poles along u.
+        count_u: usize,
+        /// Poles along v.
+        count_v: usize,
+    },
+    /// A section would exceed 9,999,999 lines (the 7-digit sequence field).
+    #[error("section {section} would need {lines} lines, more than the 9999999 IGES allows; write fewer lines per file (split the grid into several files)")]
+    SectionTooLong {
+        /// Section letter.
+        section: char,
+        /// Lines needed.
+        lines: usize,
+    },
+    /// The file's structure is invalid (line length, section letters, sequence numbers,
+    /// terminate counts, directory entries, pointers).
+    #[error("line {line}: {message}")]
+    Structure {
+        /// 1-based line number in the file.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// An entity's parameters are invalid.
+    #[error("entity at DE {de}: {message}")]
+    Parameter {
+        /// DE sequence number of the entity.
+        de: usize,
+        /// What is wrong.
+        message: String,
+    },
+}

@@ -1,0 +1,409 @@
+//! Low-level IGES text: reals in shortest round-trip form with `.` and `E`, Hollerith
+//! strings, right-justified integers, and the packing of free-format parameters into
+//! fixed-width records that break only after a delimiter.
+//!
+//! Layer 1 (pure logic): no dependencies inside the crate; writes into byte buffers.
+
+/// Appends `value` to `out` as an IGES real: the shortest decimal that reads back to the same
+/// f64, always with a `.`, with an upper-case `E` exponent when that is shorter than the plain
+/// form (`1.`, `0.`, `-0.25`, `1.2345E-4`, `1.E-7`). Returns `false` (and appends nothing) for
+/// NaN or infinity.
+pub fn push_real(out: &mut Vec<u8>, value: f64) -> bool {
+    if !value.is_finite() {
+        return false;
+    }
+    let mut buf = zmij::Buffer::new();
+    let text = buf.format_finite(value).as_bytes();
+    // Fast paths for the plain decimals the formatter gives for everyday magnitudes.
+    let (sign, body) = match text.split_first() {
+        Some((b'-', rest)) => (&b"-"[..], rest),
+        _ => (&b""[..], text),
+    };
+    if body.contains(&b'.')
+        && body.last().is_some_and(|&c| c != b'0' && c != b'.')
+        && body.iter().all(|&c| c != b'e' && c != b'E')
+    {
+        if !body.starts_with(b"0.0") {
+            // `12.5`, `0.53`: already valid and shorter than any exponent form.
+            out.extend_from_slice(text);
+            return true;
+        }
+        // `0.000123`: z zeros after the point, then the significant digits.
+        let z = body[2..].iter().take_while(|&&c| c == b'0').count();
+        let sig = &body[2 + z..];
+        if z <= 2 {
+            out.extend_from_slice(text);
+        } else {
+            out.extend_from_slice(sign);
+            out.push(sig[0]);
+            out.push(b'.');
+            out.extend_from_slice(&sig[1..]);
+            out.extend_from_slice(b"E-");
+            push_uint(out, z as u64 + 1);
+        }
+        return true;
+    }
+    // Decompose whatever shape the shortest-digits formatter produced into sign, significant
+    // digits and a decimal exponent, so the IGES form does not depend on its style.
+    let (negative, body) = match text.split_first() {
+        Some((b'-', rest)) => (true, rest),
+        _ => (false, text),
+    };
+    let (mantissa, exp_part) = match body.iter().position(|&c| c == b'e' || c == b'E') {
+        Some(i) => (&body[..i], &body[i + 1..]),
+        None => (body, &b""[..]),
+    };
+    let mut exp10: i32 = 0;
+    if !exp_part.is_empty() {
+        let (sign, digits) = match exp_part.split_first() {
+            Some((b'-', d)) => (-1, d),
+            Some((b'+', d)) => (1, d),
+            _ => (1, exp_part),
+        };
+        let mut e = 0i32;
+        for &d in digits {
+            e = e * 10 + i32::from(d - b'0');
+        }
+        exp10 = sign * e;
+    }
+    let mut digits = [0u8; 40];
+    let mut n = 0usize;
+    let mut point: Option<usize> = None;
+    for &c in mantissa {
+        if c == b'.' {
+            point = Some(n);
+        } else if n < digits.len() {
+            digits[n] = c;
+            n += 1;
+        }
+    }
+    let int_len = point.unwrap_or(n) as i32;
+    // Strip leading zeros (adjusting nothing: they sit before the point or after it as
+    // position shifts) and trailing zeros.
+    let mut start = 0usize;
+    while start < n && digits[start] == b'0' {
+        start += 1;
+    }
+    let mut end = n;
+    while end > start && digits[end - 1] == b'0' {
+        end -= 1;
+    }
+    if negative {
+        out.push(b'-');
+    }
+    if start == end {
+        out.extend_from_slice(b"0.");
+        return true;
+    }
+    let sig = &digits[start..end];
+    // value = 0.d1d2..dk × 10^dec, where dec counts the digit positions before the point.
+    let dec = int_len - start as i32 + exp10;
+    let k = sig.len() as i32;
+    // Plain form length: dec >= k: k + (dec - k) zeros + "."; 0 < dec < k: k + 1;
+    // dec <= 0: "0." + (-dec) zeros + k.
+    let plain_len = if dec >= k {
+        dec + 1
+    } else if dec > 0 {
+        k + 1
+    } else {
+        2 - dec + k
+    };
+    let sci_exp = dec - 1;
+    let exp_len = if sci_exp < 0 { 1 } else { 0 } + decimal_len(sci_exp.unsigned_abs());
+    let sci_len = k + 2 + exp_len as i32;
+    if plain_len <= sci_len {
+        if dec >= k {
+            out.extend_from_slice(sig);
+            out.extend(std::iter::repeat_n(b'0', (dec - k) as usize));
+            out.push(b'.');
+        } else if dec > 0 {
+            out.extend_from_slice(&sig[..dec as usize]);
+            out.push(b'.');
+            out.extend_from_slice(&sig[dec as usize..]);
+        } else {
+            out.extend_from_slice(b"0.");
+            out.extend(std::iter::repeat_n(b'0', (-dec) as usize));
+            out.extend_from_slice(sig);
+        }
+    } else {
+        out.push(sig[0]);
+        out.push(b'.');
+        out.extend_from_slice(&sig[1..]);
+        out.push(b'E');
+        if sci_exp < 0 {
+            out.push(b'-');
+        }
+        push_uint(out, sci_exp.unsigned_abs() as u64);
+    }
+    true
+}
+
+fn decimal_len(mut v: u32) -> u32 {
+    let mut n = 1;
+    while v >= 10 {
+        v /= 10;
+        n += 1;
+    }
+    n
+}
+
+/// Appends an unsigned integer in decimal.
+pub fn push_uint(out: &mut Vec<u8>, mut v: u64) {
+    let mut tmp = [0u8; 20];
+    let mut i = tmp.len();
+    loop {
+        i -= 1;
+        tmp[i] = b'0' + (v % 10) as u8;
+        v /= 10;
+        if v == 0 {
+            break;
+        }
+    }
+    out.extend_from_slice(&tmp[i..]);
+}
+
+/// Appends a signed integer in decimal.
+pub fn push_int(out: &mut Vec<u8>, v: i64) {
+    if v < 0 {
+        out.push(b'-');
+    }
+    push_uint(out, v.unsigned_abs());
+}
+
+/// Appends `v` right-justified in a field of `width` columns (wider numbers take more room;
+/// callers keep values within their fields).
+pub fn push_right(out: &mut Vec<u8>, v: i64, width: usize) {
+    let mut tmp = [0u8; 20];
+    let mut i = tmp.len();
+    let mut m = v.unsigned_abs();
+    loop {
+        i -= 1;
+        tmp[i] = b'0' + (m % 10) as u8;
+        m /= 10;
+        if m == 0 {
+            break;
+        }
+    }
+    if v < 0 {
+        i -= 1;
+        tmp[i] = b'-';
+    }
+    let digits = &tmp[i..];
+    out.extend(std::iter::repeat_n(
+        b' ',
+        width.saturating_sub(digits.len()),
+    ));
+    out.extend_from_slice(digits);
+}
+
+/// `text` reduced to printable ASCII (others become `?`), as IGES strings require.
+pub fn ascii_printable(text: &str) -> String {
+    text.chars()
+        .map(|c| if (' '..='~').contains(&c) { c } else { '?' })
+        .collect()
+}
+
+/// A Hollerith string `nH…` for `text` (made printable ASCII first).
+pub fn hollerith(text: &str) -> String {
+    let t = ascii_printable(text);
+    format!("{}H{}", t.len(), t)
+}
+
+/// Packs free-format tokens into fixed-width data fields, breaking only after a delimiter.
+///
+/// Each token is pushed together with the delimiter that follows it, so a number is never
+/// split from its delimiter nor across records. Hollerith strings longer than a whole field
+/// may continue on the next record (the only split IGES allows).
+#[derive(Debug)]
+pub struct FieldPacker {
+    width: usize,
+    /// Records written so far; the last one may still be filling (from `line_start`).
+    data: Vec<u8>,
+    line_start: usize,
+}
+
+impl FieldPacker {
+    /// A packer for records of `width` data columns (64 in P, 72 in G).
+    pub fn new(width: usize) -> FieldPacker {
+        FieldPacker::with_capacity(width, 0)
+    }
+
+    /// Like [`FieldPacker::new`], reserving `bytes` for the records.
+    pub fn with_capacity(width: usize, bytes: usize) -> FieldPacker {
+        FieldPacker {
+            width,
+            data: Vec::with_capacity(bytes),
+            line_start: 0,
+        }
+    }
+
+    /// Adds `token` followed by `delimiter`; starts a new record first if they do not fit.
+    pub fn push(&mut self, token: &[u8], delimiter: u8) {
+        let need = token.len() + 1;
+        let used = self.data.len() - self.line_start;
+        if used + need > self.width {
+            if need <= self.width {
+                self.pad_line();
+            } else {
+                // Only Hollerith strings can be this long: fill records with it.
+                let mut rest = token;
+                loop {
+                    let room = self.width - (self.data.len() - self.line_start);
+                    if rest.len() < room {
+                        break;
+                    }
+                    self.data.extend_from_slice(&rest[..room]);
+                    rest = &rest[room..];
+                    self.line_start = self.data.len();
+                }
+                self.data.extend_from_slice(rest);
+                self.data.push(delimiter);
+                return;
+            }
+        }
+        self.data.extend_from_slice(token);
+        self.data.push(delimiter);
+    }
+
+    /// Adds a real (see [`push_real`]) followed by `delimiter`, formatting it in place.
+    /// Returns `false` (adding nothing) for NaN or infinity.
+    pub fn push_real(&mut self, value: f64, delimiter: u8) -> bool {
+        let before = self.data.len();
+        if !push_real(&mut self.data, value) {
+            return false;
+        }
+        self.data.push(delimiter);
+        if self.data.len() - self.line_start > self.width {
+            let mut tmp = [0u8; 64];
+            let len = self.data.len() - before;
+            tmp[..len].copy_from_slice(&self.data[before..]);
+            self.data.truncate(before);
+            self.pad_line();
+            self.data.extend_from_slice(&tmp[..len]);
+        }
+        true
+    }
+
+    /// Ends the record being filled and appends whole records packed elsewhere (`records`
+    /// must be a multiple of the width, as [`FieldPacker::finish`] returns).
+    pub fn append_records(&mut self, records: &[u8]) {
+        if self.data.len() > self.line_start {
+            self.pad_line();
+        }
+        self.data.extend_from_slice(records);
+        self.line_start = self.data.len();
+    }
+
+    fn pad_line(&mut self) {
+        let end = self.line_start + self.width;
+        self.data.resize(end, b' ');
+        self.line_start = end;
+    }
+
+    /// Number of complete records so far plus the one being filled.
+    pub fn records(&self) -> usize {
+        self.line_start / self.width + usize::from(self.data.len() > self.line_start)
+    }
+
+    /// Finishes the last record and returns all records (`records() * width` bytes).
+    pub fn finish(mut self) -> Vec<u8> {
+        if self.data.len() > self.line_start {
+            self.pad_line();
+        }
+        self.data
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn real(v: f64) -> String {
+        let mut out = Vec::new();
+        assert!(push_real(&mut out, v));
+        String::from_utf8(out).unwrap()
+    }
+
+    #[test]
+    fn reals_have_point_and_upper_case_exponent() {
+        assert_eq!(real(1.0), "1.");
+        assert_eq!(real(0.0), "0.");
+        assert_eq!(real(-0.0), "-0.");
+        assert_eq!(real(0.25), "0.25");
+        assert_eq!(real(-12.5), "-12.5");
+        assert_eq!(real(1e-7), "1.E-7");
+        assert_eq!(real(1.2345e-4), "1.2345E-4");
+        assert_eq!(real(0.012), "0.012");
+        assert_eq!(real(1e20), "1.E20");
+        assert_eq!(real(100.0), "100.");
+        assert_eq!(real(123456.0), "123456.");
+        assert_eq!(real(0.00085), "8.5E-4");
+        assert_eq!(real(-0.00085), "-8.5E-4");
+        assert_eq!(real(0.0085), "0.0085");
+        assert_eq!(real(0.00123456789), "0.00123456789");
+    }
+
+    #[test]
+    fn reals_refuse_non_finite() {
+        let mut out = Vec::new();
+        assert!(!push_real(&mut out, f64::NAN));
+        assert!(!push_real(&mut out, f64::INFINITY));
+        assert!(out.is_empty());
+    }
+
+    #[test]
+    fn reals_round_trip_bit_exact() {
+        // A deterministic spread of magnitudes and bit patterns (xorshift).
+        let mut s: u64 = 0x9E37_79B9_7F4A_7C15;
+        for _ in 0..20000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let v = f64::from_bits(s);
+            if !v.is_finite() {
+                continue;
+            }
+            let t = real(v);
+            assert!(t.contains('.'), "{t}");
+            assert!(!t.contains('e'), "{t}");
+            let back: f64 = t.parse().unwrap();
+            assert_eq!(back.to_bits(), v.to_bits(), "{v:e} -> {t}");
+        }
+        for v in [
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            f64::MIN,
+            5e-324,
+            0.1,
+            1.0 / 3.0,
+        ] {
+            let back: f64 = real(v).parse().unwrap();
+            assert_eq!(back.to_bits(), v.to_bits());
+        }
+    }
+
+    #[test]
+    fn hollerith_counts_characters() {
+        assert_eq!(hollerith("MM"), "2HMM");
+        assert_eq!(hollerith("a,b;"), "4Ha,b;");
+        assert_eq!(hollerith("µm"), "2H?m");
+    }
+
+    #[test]
+    fn packer_breaks_only_after_delimiters() {
+        let mut p = FieldPacker::new(10);
+        for t in ["1234", "5678", "9"] {
+            p.push(t.as_bytes(), b',');
+        }
+        assert_eq!(p.finish(), b"1234,5678,9,        ".to_vec());
+        let mut p = FieldPacker::new(10);
+        assert!(p.push_real(0.125, b','));
+        assert!(p.push_real(0.375, b','));
+        assert!(p.push_real(2.5, b';'));
+        assert!(!p.push_real(f64::NAN, b';'));
+        assert_eq!(p.finish(), b"0.125,    0.375,2.5;".to_vec());
+        let mut p = FieldPacker::new(8);
+        p.push(b"12HABCDEFGHIJKL", b';');
+        assert_eq!(p.finish(), b"12HABCDEFGHIJKL;".to_vec());
+    }
+}
