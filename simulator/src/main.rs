@@ -3,8 +3,8 @@
 //! opened) and runs until SIGTERM, SIGINT or stdin closing.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::process::ExitCode;
+use std::sync::Arc;
 
 use clap::{Parser, ValueEnum};
 use surfscan_sim::grbl::{GrblSimConfig, StageFaultSpec, StageShared};
