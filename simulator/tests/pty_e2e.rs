@@ -10,9 +10,11 @@ use std::time::{Duration, Instant};
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
 use surfscan_sim::data::{ServedProfile, YPosition};
+use surfscan_sim::grbl::StageShared;
 use surfscan_sim::pty::Pty;
 use surfscan_sim::replay::Transcript;
 use surfscan_sim::server::GARBAGE;
+use surfscan_sim::zaber::ZaberSimConfig;
 use surfscan_sim::{
     Battery, FaultSpec, InstrumentConfig, Model, ProfileSet, SimEvent, SimHandle, Simulator,
 };
@@ -492,4 +494,76 @@ async fn shutdown_completes_while_a_reply_is_blocked_on_an_unread_pty() {
         .await
         .expect("shutdown must not hang on a blocked write");
     assert!(!link(&dir).exists());
+}
+
+/// Reads one Zaber reply (ends with CR LF), or panics after `T`.
+fn zaber_reply(c: &mut Client) -> String {
+    let deadline = Instant::now() + T;
+    let mut out = Vec::new();
+    while !out.ends_with(b"\r\n") {
+        assert!(
+            Instant::now() < deadline,
+            "no CR LF within {T:?}; got {out:?}"
+        );
+        out.extend(c.read_some(Duration::from_millis(100)).unwrap());
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn simulated_zaber_position_selects_the_served_line() {
+    let dir = tempfile::tempdir().unwrap();
+    // Lines at y = 1.00, 1.02, … 1.08 mm; line i has first height i.
+    let set = ProfileSet::new(
+        (0..5)
+            .map(|i| ServedProfile {
+                y_mm: 1.0 + 0.02 * i as f64,
+                pitch_x_mm: 0.001,
+                z_um: vec![i as f64, 0.5, -0.5],
+            })
+            .collect(),
+    )
+    .unwrap();
+    let cfg = InstrumentConfig {
+        time_scale: 0.0,
+        ..InstrumentConfig::default()
+    };
+    let stage_link = dir.path().join("zaber");
+    let shared = StageShared::new();
+    // 125 nm per microstep: 8160 microsteps = 1.02 mm (line 1).
+    let zaber = ZaberSimConfig {
+        nm_per_microstep: 125.0,
+        start: 8160,
+        homed_at_start: true,
+        time_scale: 1000.0,
+        ..ZaberSimConfig::default()
+    };
+    let sim = Simulator::new(link(&dir))
+        .instrument(cfg)
+        .profiles(set)
+        .zaber_stage(&stage_link, zaber, shared.clone());
+    let h = start(sim).await;
+    assert_eq!(h.ready().stage.as_deref(), Some(stage_link.as_path()));
+    assert_eq!(h.ready().instrument.as_deref(), Some(link(&dir).as_path()));
+    let mut inst = Client::open(&link(&dir));
+    let mut stage = Client::open(&stage_link);
+    assert_eq!(inst.ask("CTSTA"), "OK\r");
+    assert_eq!(inst.ask("RDEVA00"), "OK00003\r");
+    assert_eq!(inst.ask("RDEVA01"), format!("OK01,{:>9.3}\r", 1.0));
+    // Move to 1.06 mm = 8480 microsteps (line 3) and wait for IDLE.
+    stage.port.write_all(b"/1 1 move abs 8480\r\n").unwrap();
+    assert!(zaber_reply(&mut stage).starts_with("@01 1 OK"));
+    loop {
+        stage.port.write_all(b"/1 1\r\n").unwrap();
+        if zaber_reply(&mut stage).contains(" IDLE ") {
+            break;
+        }
+    }
+    assert_eq!(shared.true_position_nm(), 1_060_000);
+    inst.poll_until("OK000\r");
+    assert_eq!(inst.ask("CTSTA"), "OK\r");
+    assert_eq!(inst.ask("RDEVA00"), "OK00003\r");
+    assert_eq!(inst.ask("RDEVA01"), format!("OK01,{:>9.3}\r", 3.0));
+    h.shutdown().await;
+    assert!(!stage_link.exists(), "shutdown removes the stage link");
 }
