@@ -545,3 +545,38 @@ pub async fn serve<T: AsyncRead + AsyncWrite + Unpin>(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stage_fault_specs_parse_with_and_without_delay() {
+        let s: StageFaultSpec = "reset-banner@1500".parse().unwrap();
+        assert_eq!(
+            s,
+            StageFaultSpec {
+                fault: StageFault::ResetBanner,
+                after_ms: 1500
+            }
+        );
+        let s: StageFaultSpec = "vanish".parse().unwrap();
+        assert_eq!((s.fault, s.after_ms), (StageFault::Vanish, 0));
+        assert!("stall@soon"
+            .parse::<StageFaultSpec>()
+            .unwrap_err()
+            .contains("soon"));
+        assert!("jam".parse::<StageFaultSpec>().unwrap_err().contains("jam"));
+    }
+
+    #[test]
+    fn linked_y_follows_published_positions() {
+        let shared = StageShared::new();
+        shared.publish_position_nm(-42);
+        let y = YPosition::new();
+        shared.link_y(y.clone());
+        assert_eq!(y.get_nm(), -42);
+        shared.publish_position_nm(1_060_000);
+        assert_eq!(y.get_nm(), 1_060_000);
+    }
+}

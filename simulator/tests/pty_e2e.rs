@@ -496,8 +496,8 @@ async fn shutdown_completes_while_a_reply_is_blocked_on_an_unread_pty() {
     assert!(!link(&dir).exists());
 }
 
-/// Reads one Zaber reply (ends with CR LF), or panics after `T`.
-fn zaber_reply(c: &mut Client) -> String {
+/// Reads one stage reply (GRBL and Zaber end lines with CR LF), or panics after `T`.
+fn reply_crlf(c: &mut Client) -> String {
     let deadline = Instant::now() + T;
     let mut out = Vec::new();
     while !out.ends_with(b"\r\n") {
@@ -552,10 +552,10 @@ async fn simulated_zaber_position_selects_the_served_line() {
     assert_eq!(inst.ask("RDEVA01"), format!("OK01,{:>9.3}\r", 1.0));
     // Move to 1.06 mm = 8480 microsteps (line 3) and wait for IDLE.
     stage.port.write_all(b"/1 1 move abs 8480\r\n").unwrap();
-    assert!(zaber_reply(&mut stage).starts_with("@01 1 OK"));
+    assert!(reply_crlf(&mut stage).starts_with("@01 1 OK"));
     loop {
         stage.port.write_all(b"/1 1\r\n").unwrap();
-        if zaber_reply(&mut stage).contains(" IDLE ") {
+        if reply_crlf(&mut stage).contains(" IDLE ") {
             break;
         }
     }
@@ -566,4 +566,52 @@ async fn simulated_zaber_position_selects_the_served_line() {
     assert_eq!(inst.ask("RDEVA01"), format!("OK01,{:>9.3}\r", 3.0));
     h.shutdown().await;
     assert!(!stage_link.exists(), "shutdown removes the stage link");
+}
+
+#[test]
+fn binary_runs_a_grbl_stage_alone_with_an_injected_fault() {
+    let dir = tempfile::tempdir().unwrap();
+    let l = dir.path().join("grbl");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan-sim"))
+        .args([
+            "--stage-link",
+            l.to_str().unwrap(),
+            "--stage-protocol",
+            "grbl",
+        ])
+        .args(["--time-scale", "0.001", "--stage-fault", "error15"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let mut ready = String::new();
+    out.read_line(&mut ready).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&ready).unwrap();
+    assert_eq!(v["event"], "ready");
+    assert_eq!(v["instrument"], serde_json::Value::Null);
+    assert_eq!(v["stage"], l.to_str().unwrap());
+    let mut c = Client::open(&l);
+    // Powered up in Alarm: unlock, then the first jog meets the injected error:15 and the
+    // second one, identical and within travel, is accepted.
+    c.port.write_all(b"$X\n").unwrap();
+    assert_eq!(reply_crlf(&mut c), "[MSG:Caution: Unlocked]\r\nok\r\n");
+    c.port.write_all(b"$J=G53 G90 Y-1.000 F600\n").unwrap();
+    assert_eq!(reply_crlf(&mut c), "error:15\r\n");
+    c.port.write_all(b"$J=G53 G90 Y-1.000 F600\n").unwrap();
+    assert_eq!(reply_crlf(&mut c), "ok\r\n");
+    drop(child.stdin.take());
+    let deadline = Instant::now() + T;
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            assert!(status.success());
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "simulator did not exit on stdin EOF"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(!l.exists(), "exit removes the stage link");
 }
