@@ -58,7 +58,8 @@ struct Args {
     /// x pitch of a grid CSV, mm.
     #[arg(long)]
     pitch_x_mm: Option<f64>,
-    /// Multiplies trace, return and transfer times (1 = real time, 0 = instantaneous).
+    /// Multiplies trace, return, transfer and stage motion times (1 = real time, 0 =
+    /// instantaneous).
     #[arg(long, default_value_t = 1.0)]
     time_scale: f64,
     /// Baud rate used for pacing replies.
