@@ -8,14 +8,16 @@
 //! an alarm; a backlash dead band between motor and carriage; and injected faults.
 //! The carriage's true position is published in nm through [`StageShared`].
 //!
-//! Depends on tokio only.
+//! Depends on tokio and [`crate::data::YPosition`] (the y the instrument reads).
 
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::time::Instant;
+
+use crate::data::YPosition;
 
 /// A fault to inject into a simulated stage (GRBL or Zaber); applied when the next byte
 /// arrives.
@@ -39,6 +41,61 @@ pub enum StageFault {
     Vanish,
 }
 
+impl std::str::FromStr for StageFault {
+    type Err = String;
+
+    /// Parses `reset-banner`, `alarm2`, `error15`, `reject`, `stall`, `position-lost`,
+    /// `silence`, `vanish`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        Ok(match s {
+            "reset-banner" => StageFault::ResetBanner,
+            "alarm2" => StageFault::Alarm2,
+            "error15" => StageFault::Error15,
+            "reject" => StageFault::Reject,
+            "stall" => StageFault::Stall,
+            "position-lost" => StageFault::PositionLostWr,
+            "silence" => StageFault::Silence,
+            "vanish" => StageFault::Vanish,
+            _ => {
+                return Err(format!(
+                    "unknown stage fault {s:?}; use reset-banner, alarm2, error15, reject, \
+                     stall, position-lost, silence or vanish"
+                ))
+            }
+        })
+    }
+}
+
+/// A stage fault with its injection time: `KIND[@MS]` queues KIND MS milliseconds after the
+/// simulator is ready (default 0); it takes effect when the next bytes from the host arrive.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StageFaultSpec {
+    /// The fault.
+    pub fault: StageFault,
+    /// Delay after ready, ms.
+    pub after_ms: u64,
+}
+
+impl std::str::FromStr for StageFaultSpec {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (kind, after_ms) = match s.split_once('@') {
+            Some((k, ms)) => (
+                k,
+                ms.parse::<u64>().map_err(|_| {
+                    format!("stage fault {s:?}: {ms:?} after '@' must be whole milliseconds")
+                })?,
+            ),
+            None => (s, 0),
+        };
+        Ok(StageFaultSpec {
+            fault: kind.parse()?,
+            after_ms,
+        })
+    }
+}
+
 /// State shared between a simulated stage and its observers.
 #[derive(Debug, Default)]
 pub struct StageShared {
@@ -47,6 +104,8 @@ pub struct StageShared {
     /// Bytes received from the host so far.
     pub bytes_received: AtomicU64,
     faults: Mutex<VecDeque<StageFault>>,
+    /// Mirrors the true position for the simulated instrument's profile selection.
+    y: OnceLock<YPosition>,
 }
 
 impl StageShared {
@@ -59,6 +118,21 @@ impl StageShared {
     pub fn inject(&self, f: StageFault) {
         if let Ok(mut q) = self.faults.lock() {
             q.push_back(f);
+        }
+    }
+
+    /// Mirrors every later true-position update into `y` (the instrument serves the line at
+    /// that y). Only the first call has an effect.
+    pub fn link_y(&self, y: YPosition) {
+        y.set_nm(self.true_position_nm());
+        let _ = self.y.set(y);
+    }
+
+    /// Records the carriage's true position, nm (and mirrors it into the linked y).
+    pub fn publish_position_nm(&self, nm: i64) {
+        self.true_position_nm.store(nm, Ordering::SeqCst);
+        if let Some(y) = self.y.get() {
+            y.set_nm(nm);
         }
     }
 
@@ -162,7 +236,7 @@ impl Machine {
         let phys = c + self.counter_offset;
         self.carriage = self.carriage.clamp(phys, phys + self.backlash);
         let nm = (self.carriage as f64 * self.nm_per_step()).round() as i64;
-        self.shared.true_position_nm.store(nm, Ordering::SeqCst);
+        self.shared.publish_position_nm(nm);
     }
 
     fn update(&mut self) {
@@ -469,5 +543,40 @@ pub async fn serve<T: AsyncRead + AsyncWrite + Unpin>(
         if !m.silent && !out.is_empty() {
             io.write_all(out.as_bytes()).await?;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stage_fault_specs_parse_with_and_without_delay() {
+        let s: StageFaultSpec = "reset-banner@1500".parse().unwrap();
+        assert_eq!(
+            s,
+            StageFaultSpec {
+                fault: StageFault::ResetBanner,
+                after_ms: 1500
+            }
+        );
+        let s: StageFaultSpec = "vanish".parse().unwrap();
+        assert_eq!((s.fault, s.after_ms), (StageFault::Vanish, 0));
+        assert!("stall@soon"
+            .parse::<StageFaultSpec>()
+            .unwrap_err()
+            .contains("soon"));
+        assert!("jam".parse::<StageFaultSpec>().unwrap_err().contains("jam"));
+    }
+
+    #[test]
+    fn linked_y_follows_published_positions() {
+        let shared = StageShared::new();
+        shared.publish_position_nm(-42);
+        let y = YPosition::new();
+        shared.link_y(y.clone());
+        assert_eq!(y.get_nm(), -42);
+        shared.publish_position_nm(1_060_000);
+        assert_eq!(y.get_nm(), 1_060_000);
     }
 }

@@ -15,6 +15,8 @@
 //! * [`fault`]: fault-injection specs;
 //! * [`pty`]: the pseudo-terminals the simulator owns;
 //! * [`server`]: the serve loop (pacing, faults, unplug/replug) and the [`Simulator`] builder.
+//! * [`grbl`], [`zaber`]: the simulated y stages (motion, backlash, stage faults), attached
+//!   with [`Simulator::grbl_stage`] / [`Simulator::zaber_stage`].
 #![warn(missing_docs)]
 
 pub mod command;

@@ -4,11 +4,20 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
 
 use clap::{Parser, ValueEnum};
+use surfscan_sim::grbl::{GrblSimConfig, StageFaultSpec, StageShared};
 use surfscan_sim::replay::Transcript;
+use surfscan_sim::zaber::ZaberSimConfig;
 use surfscan_sim::{Battery, FaultSpec, InstrumentConfig, Model, ProfileSet, Simulator};
 use tokio::io::AsyncReadExt;
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum StageProtocolArg {
+    Grbl,
+    Zaber,
+}
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum ModelArg {
@@ -16,13 +25,26 @@ enum ModelArg {
     Sj410,
 }
 
-/// Simulated Mitutoyo SJ-210 / SJ-410 over a pseudo-terminal.
+/// Simulated Mitutoyo SJ-210 / SJ-410 and GRBL / Zaber y stage over pseudo-terminals.
 #[derive(Debug, Parser)]
 #[command(name = "surfscan-sim", version)]
 struct Args {
     /// Path at which to link the instrument's pty (e.g. /tmp/sj210).
-    #[arg(long)]
-    instrument_link: PathBuf,
+    #[arg(long, required_unless_present = "stage_link")]
+    instrument_link: Option<PathBuf>,
+    /// Path at which to link the simulated stage's pty (e.g. /tmp/ystage).
+    #[arg(long, requires = "stage_protocol")]
+    stage_link: Option<PathBuf>,
+    /// Protocol of the simulated stage.
+    #[arg(long, value_enum, requires = "stage_link")]
+    stage_protocol: Option<StageProtocolArg>,
+    /// Backlash between motor and carriage of the simulated stage, µm.
+    #[arg(long, default_value_t = 0.0)]
+    stage_backlash_um: f64,
+    /// Stage fault, KIND[@MS] queued MS ms after ready (repeatable); KIND is reset-banner,
+    /// alarm2, error15, reject, stall, position-lost, silence or vanish.
+    #[arg(long = "stage-fault")]
+    stage_faults: Vec<StageFaultSpec>,
     /// Emulated model.
     #[arg(long, value_enum, default_value = "sj210")]
     model: ModelArg,
@@ -36,7 +58,8 @@ struct Args {
     /// x pitch of a grid CSV, mm.
     #[arg(long)]
     pitch_x_mm: Option<f64>,
-    /// Multiplies trace, return and transfer times (1 = real time, 0 = instantaneous).
+    /// Multiplies trace, return, transfer and stage motion times (1 = real time, 0 =
+    /// instantaneous).
     #[arg(long, default_value_t = 1.0)]
     time_scale: f64,
     /// Baud rate used for pacing replies.
@@ -62,7 +85,7 @@ struct Args {
     transcript: Option<PathBuf>,
 }
 
-fn build(args: Args) -> Result<Simulator, String> {
+fn build(args: Args, shared: &Arc<StageShared>) -> Result<Simulator, String> {
     if !(args.time_scale >= 0.0 && args.time_scale.is_finite()) {
         return Err(format!(
             "--time-scale {} must be a finite number ≥ 0",
@@ -101,7 +124,45 @@ fn build(args: Args) -> Result<Simulator, String> {
         },
         ..defaults
     };
-    let mut sim = Simulator::new(&args.instrument_link).baud(args.baud);
+    let mut sim = match &args.instrument_link {
+        Some(l) => Simulator::new(l),
+        None => Simulator::without_instrument(),
+    }
+    .baud(args.baud);
+    if !(args.stage_backlash_um >= 0.0 && args.stage_backlash_um.is_finite()) {
+        return Err(format!(
+            "--stage-backlash-um {} must be a finite number ≥ 0",
+            args.stage_backlash_um
+        ));
+    }
+    // The instrument's time scale multiplies durations; the stages' is a speed-up factor.
+    let speed_up = if args.time_scale > 0.0 {
+        1.0 / args.time_scale
+    } else {
+        1e9
+    };
+    if let (Some(link), Some(protocol)) = (&args.stage_link, args.stage_protocol) {
+        match protocol {
+            StageProtocolArg::Grbl => {
+                let cfg = GrblSimConfig {
+                    backlash_mm: args.stage_backlash_um / 1000.0,
+                    time_scale: speed_up,
+                    ..GrblSimConfig::default()
+                };
+                sim = sim.grbl_stage(link, cfg, shared.clone());
+            }
+            StageProtocolArg::Zaber => {
+                let defaults = ZaberSimConfig::default();
+                let cfg = ZaberSimConfig {
+                    backlash: (args.stage_backlash_um * 1000.0 / defaults.nm_per_microstep).round()
+                        as i64,
+                    time_scale: speed_up,
+                    ..defaults
+                };
+                sim = sim.zaber_stage(link, cfg, shared.clone());
+            }
+        }
+    }
     for f in args.faults {
         match f {
             FaultSpec::Wire(w) => sim = sim.fault(w),
@@ -127,7 +188,9 @@ fn build(args: Args) -> Result<Simulator, String> {
 #[tokio::main]
 async fn main() -> ExitCode {
     let args = Args::parse();
-    let sim = match build(args) {
+    let shared = StageShared::new();
+    let stage_faults = args.stage_faults.clone();
+    let sim = match build(args, &shared) {
         Ok(s) => s,
         Err(e) => {
             eprintln!("surfscan-sim: {e}");
@@ -141,6 +204,13 @@ async fn main() -> ExitCode {
             return ExitCode::from(1);
         }
     };
+    for f in stage_faults {
+        let shared = shared.clone();
+        tokio::spawn(async move {
+            tokio::time::sleep(std::time::Duration::from_millis(f.after_ms)).await;
+            shared.inject(f.fault);
+        });
+    }
     let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
         Ok(s) => s,
         Err(e) => {

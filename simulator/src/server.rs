@@ -13,6 +13,7 @@ use std::future::Future;
 use std::io;
 use std::path::{Path, PathBuf};
 use std::pin::Pin;
+use std::sync::Arc;
 use std::time::Duration;
 
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
@@ -22,6 +23,7 @@ use tokio::time::Instant;
 use crate::command::{Frame, FrameSplitter};
 use crate::data::{DataError, ProfileSet, YPosition};
 use crate::fault::{Fault, FaultKind, FaultPlan};
+use crate::grbl::StageShared;
 use crate::instrument::{Instrument, InstrumentConfig};
 use crate::pty::{Pty, PtyError};
 use crate::replay::{Replay, Transcript};
@@ -194,8 +196,8 @@ pub enum SimEvent {
 /// What the ready line announces.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ReadyInfo {
-    /// Instrument link path.
-    pub instrument: PathBuf,
+    /// Instrument link path, when an instrument is emulated.
+    pub instrument: Option<PathBuf>,
     /// Stage link path, when a stage is attached.
     pub stage: Option<PathBuf>,
     /// `sj210` or `sj410`, or `replay`.
@@ -211,7 +213,7 @@ impl SimEvent {
         let v = match self {
             SimEvent::Ready(r) => serde_json::json!({
                 "event": "ready",
-                "instrument": path(&r.instrument),
+                "instrument": r.instrument.as_deref().map(path),
                 "stage": r.stage.as_deref().map(path),
                 "model": r.model,
                 "profile_readout": r.profile_readout,
@@ -250,7 +252,7 @@ enum Source {
 
 /// Builder for a running simulator.
 pub struct Simulator {
-    instrument_link: PathBuf,
+    instrument_link: Option<PathBuf>,
     source: Source,
     faults: Vec<Fault>,
     baud: u32,
@@ -274,13 +276,56 @@ impl Simulator {
     /// serves the bundled data, at 38400 baud.
     pub fn new(instrument_link: impl Into<PathBuf>) -> Self {
         Self {
-            instrument_link: instrument_link.into(),
+            instrument_link: Some(instrument_link.into()),
             source: Source::Emulate(InstrumentConfig::default(), None),
             faults: Vec::new(),
             baud: 38400,
             y: YPosition::new(),
             stage: None,
         }
+    }
+
+    /// A simulator without an instrument: attach a stage with [`Simulator::stage`],
+    /// [`Simulator::grbl_stage`] or [`Simulator::zaber_stage`].
+    pub fn without_instrument() -> Self {
+        Self {
+            instrument_link: None,
+            ..Self::new(PathBuf::new())
+        }
+    }
+
+    /// Attaches the simulated GRBL controller at `link`; its true position drives the
+    /// instrument's profile selection. Faults are injected through `shared`.
+    pub fn grbl_stage(
+        self,
+        link: impl Into<PathBuf>,
+        cfg: crate::grbl::GrblSimConfig,
+        shared: Arc<StageShared>,
+    ) -> Self {
+        self.stage(
+            link,
+            Box::new(move |pty, y| {
+                shared.link_y(y);
+                Box::pin(crate::grbl::serve(pty, cfg, shared))
+            }),
+        )
+    }
+
+    /// Attaches the simulated Zaber device at `link`; its true position drives the
+    /// instrument's profile selection. Faults are injected through `shared`.
+    pub fn zaber_stage(
+        self,
+        link: impl Into<PathBuf>,
+        cfg: crate::zaber::ZaberSimConfig,
+        shared: Arc<StageShared>,
+    ) -> Self {
+        self.stage(
+            link,
+            Box::new(move |pty, y| {
+                shared.link_y(y);
+                Box::pin(crate::zaber::serve(pty, cfg, shared))
+            }),
+        )
     }
 
     /// Emulates an instrument with this configuration (keeps the profiles already set).
@@ -359,17 +404,23 @@ impl Simulator {
                 scale,
             ),
         };
-        let pty = Pty::create(&self.instrument_link)?;
+        let pty = match &self.instrument_link {
+            Some(l) => Some(Pty::create(l)?),
+            None => None,
+        };
         let mut stage_link = None;
+        let mut stage_task = None;
         if let Some((link, serve)) = self.stage {
             let stage_pty = Pty::create(&link)?;
             stage_link = Some(link);
             let y = self.y.clone();
-            tokio::spawn(async move {
+            // The pty (and with it the link) lives as long as the serve function: a
+            // vanishing stage removes its link.
+            stage_task = Some(tokio::spawn(async move {
                 if let Err(e) = serve(stage_pty, y).await {
                     tracing::warn!("stage emulator stopped: {e}");
                 }
-            });
+            }));
         }
         let (events_tx, events) = mpsc::unbounded_channel();
         let (shutdown_tx, mut shutdown) = watch::channel(false);
@@ -385,10 +436,13 @@ impl Simulator {
             baud: self.baud,
             time_scale,
         };
-        let link = self.instrument_link;
         let task = tokio::spawn(async move {
+            let (Some(link), Some(mut pty)) = (self.instrument_link, pty) else {
+                // Stage only: run until shutdown.
+                let _ = shutdown.wait_for(|s| *s).await;
+                return;
+            };
             let epoch = Instant::now();
-            let mut pty = pty;
             loop {
                 let outcome = serve_connection(
                     &mut pty,
@@ -442,6 +496,7 @@ impl Simulator {
             events,
             shutdown: shutdown_tx,
             task,
+            stage_task,
         })
     }
 }
@@ -454,6 +509,7 @@ pub struct SimHandle {
     pub events: mpsc::UnboundedReceiver<SimEvent>,
     shutdown: watch::Sender<bool>,
     task: tokio::task::JoinHandle<()>,
+    stage_task: Option<tokio::task::JoinHandle<()>>,
 }
 
 impl SimHandle {
@@ -478,6 +534,10 @@ impl SimHandle {
         {
             self.task.abort();
             let _ = (&mut self.task).await;
+        }
+        if let Some(t) = self.stage_task.take() {
+            t.abort();
+            let _ = t.await;
         }
     }
 }

@@ -91,7 +91,7 @@ impl Dev {
         let phys = p + self.offset;
         self.carriage = self.carriage.clamp(phys, phys + self.cfg.backlash);
         let nm = (self.carriage as f64 * self.cfg.nm_per_microstep).round() as i64;
-        self.shared.true_position_nm.store(nm, Ordering::SeqCst);
+        self.shared.publish_position_nm(nm);
     }
 
     fn update(&mut self) {

@@ -10,9 +10,11 @@ use std::time::{Duration, Instant};
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
 use surfscan_sim::data::{ServedProfile, YPosition};
+use surfscan_sim::grbl::StageShared;
 use surfscan_sim::pty::Pty;
 use surfscan_sim::replay::Transcript;
 use surfscan_sim::server::GARBAGE;
+use surfscan_sim::zaber::ZaberSimConfig;
 use surfscan_sim::{
     Battery, FaultSpec, InstrumentConfig, Model, ProfileSet, SimEvent, SimHandle, Simulator,
 };
@@ -492,4 +494,124 @@ async fn shutdown_completes_while_a_reply_is_blocked_on_an_unread_pty() {
         .await
         .expect("shutdown must not hang on a blocked write");
     assert!(!link(&dir).exists());
+}
+
+/// Reads one stage reply (GRBL and Zaber end lines with CR LF), or panics after `T`.
+fn reply_crlf(c: &mut Client) -> String {
+    let deadline = Instant::now() + T;
+    let mut out = Vec::new();
+    while !out.ends_with(b"\r\n") {
+        assert!(
+            Instant::now() < deadline,
+            "no CR LF within {T:?}; got {out:?}"
+        );
+        out.extend(c.read_some(Duration::from_millis(100)).unwrap());
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn simulated_zaber_position_selects_the_served_line() {
+    let dir = tempfile::tempdir().unwrap();
+    // Lines at y = 1.00, 1.02, … 1.08 mm; line i has first height i.
+    let set = ProfileSet::new(
+        (0..5)
+            .map(|i| ServedProfile {
+                y_mm: 1.0 + 0.02 * i as f64,
+                pitch_x_mm: 0.001,
+                z_um: vec![i as f64, 0.5, -0.5],
+            })
+            .collect(),
+    )
+    .unwrap();
+    let cfg = InstrumentConfig {
+        time_scale: 0.0,
+        ..InstrumentConfig::default()
+    };
+    let stage_link = dir.path().join("zaber");
+    let shared = StageShared::new();
+    // 125 nm per microstep: 8160 microsteps = 1.02 mm (line 1).
+    let zaber = ZaberSimConfig {
+        nm_per_microstep: 125.0,
+        start: 8160,
+        homed_at_start: true,
+        time_scale: 1000.0,
+        ..ZaberSimConfig::default()
+    };
+    let sim = Simulator::new(link(&dir))
+        .instrument(cfg)
+        .profiles(set)
+        .zaber_stage(&stage_link, zaber, shared.clone());
+    let h = start(sim).await;
+    assert_eq!(h.ready().stage.as_deref(), Some(stage_link.as_path()));
+    assert_eq!(h.ready().instrument.as_deref(), Some(link(&dir).as_path()));
+    let mut inst = Client::open(&link(&dir));
+    let mut stage = Client::open(&stage_link);
+    assert_eq!(inst.ask("CTSTA"), "OK\r");
+    assert_eq!(inst.ask("RDEVA00"), "OK00003\r");
+    assert_eq!(inst.ask("RDEVA01"), format!("OK01,{:>9.3}\r", 1.0));
+    // Move to 1.06 mm = 8480 microsteps (line 3) and wait for IDLE.
+    stage.port.write_all(b"/1 1 move abs 8480\r\n").unwrap();
+    assert!(reply_crlf(&mut stage).starts_with("@01 1 OK"));
+    loop {
+        stage.port.write_all(b"/1 1\r\n").unwrap();
+        if reply_crlf(&mut stage).contains(" IDLE ") {
+            break;
+        }
+    }
+    assert_eq!(shared.true_position_nm(), 1_060_000);
+    inst.poll_until("OK000\r");
+    assert_eq!(inst.ask("CTSTA"), "OK\r");
+    assert_eq!(inst.ask("RDEVA00"), "OK00003\r");
+    assert_eq!(inst.ask("RDEVA01"), format!("OK01,{:>9.3}\r", 3.0));
+    h.shutdown().await;
+    assert!(!stage_link.exists(), "shutdown removes the stage link");
+}
+
+#[test]
+fn binary_runs_a_grbl_stage_alone_with_an_injected_fault() {
+    let dir = tempfile::tempdir().unwrap();
+    let l = dir.path().join("grbl");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan-sim"))
+        .args([
+            "--stage-link",
+            l.to_str().unwrap(),
+            "--stage-protocol",
+            "grbl",
+        ])
+        .args(["--time-scale", "0.001", "--stage-fault", "error15"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let mut ready = String::new();
+    out.read_line(&mut ready).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&ready).unwrap();
+    assert_eq!(v["event"], "ready");
+    assert_eq!(v["instrument"], serde_json::Value::Null);
+    assert_eq!(v["stage"], l.to_str().unwrap());
+    let mut c = Client::open(&l);
+    // Powered up in Alarm: unlock, then the first jog meets the injected error:15 and the
+    // second one, identical and within travel, is accepted.
+    c.port.write_all(b"$X\n").unwrap();
+    assert_eq!(reply_crlf(&mut c), "[MSG:Caution: Unlocked]\r\nok\r\n");
+    c.port.write_all(b"$J=G53 G90 Y-1.000 F600\n").unwrap();
+    assert_eq!(reply_crlf(&mut c), "error:15\r\n");
+    c.port.write_all(b"$J=G53 G90 Y-1.000 F600\n").unwrap();
+    assert_eq!(reply_crlf(&mut c), "ok\r\n");
+    drop(child.stdin.take());
+    let deadline = Instant::now() + T;
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            assert!(status.success());
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "simulator did not exit on stdin EOF"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(!l.exists(), "exit removes the stage link");
 }
