@@ -393,3 +393,112 @@ async fn model_without_profile_readout_fails_at_probe_naming_the_code() {
     assert!(e.to_string().contains("030"), "{e}");
     rig.sim.shutdown().await;
 }
+
+/// Runs `surfscan probe --config CONFIG --record RECORD` (the real binary) and returns its exit
+/// code and standard output.
+async fn run_probe_binary(config: &Path, record: &Path) -> (Option<i32>, String, String) {
+    let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .arg("probe")
+        .arg("--config")
+        .arg(config)
+        .arg("--record")
+        .arg(record)
+        .kill_on_drop(true)
+        .output();
+    let out = tokio::time::timeout(Duration::from_secs(30), child)
+        .await
+        .expect("surfscan probe did not finish within 30 s")
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn probe_config(dir: &Path, name: &str, link: &Path) -> PathBuf {
+    let config = dir.join(name);
+    std::fs::write(
+        &config,
+        format!(
+            "[instrument]\nport = \"{}\"\nbaud = 38400\n[instrument.timeouts]\nfirst-byte-ms = 2000\n[instrument.commands]\nprofile-total = \"RDEVA00\"\nprofile-block = \"RDEVA{{n}}\"\n",
+            link.display()
+        ),
+    )
+    .unwrap();
+    config
+}
+
+/// The commands (host → device lines) of a transcript, in order.
+fn commands_of(t: &surfscan_sim::replay::Transcript) -> Vec<Vec<u8>> {
+    t.entries
+        .iter()
+        .filter(|e| e.dir == surfscan_sim::replay::Dir::ToDevice)
+        .map(|e| e.bytes.clone())
+        .collect()
+}
+
+#[tokio::test]
+async fn probe_binary_summarises_and_its_transcript_replays() {
+    let cfg = InstrumentConfig {
+        firmware: "V2.34".into(),
+        ..fast_config()
+    };
+    let rig = start(cfg, &["battery:low"]).await;
+    let dir = tempfile::tempdir().unwrap();
+    let config = probe_config(dir.path(), "probe.toml", &rig.link);
+    let record = dir.path().join("first.txt");
+    let (code, stdout, stderr) = run_probe_binary(&config, &record).await;
+    assert_eq!(code, Some(0), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert!(stdout.contains("V2.34"), "{stdout}");
+    assert!(stdout.contains("Low"), "{stdout}");
+    assert!(stdout.contains("read-out supported"), "{stdout}");
+    assert!(stdout.contains("parameters 3"), "{stdout}");
+    assert!(stdout.contains("transcript written"), "{stdout}");
+    rig.sim.shutdown().await;
+
+    // The simulator parses the transcript with its own reader.
+    let text = std::fs::read_to_string(&record).unwrap();
+    let first = surfscan_sim::replay::Transcript::parse(&text).unwrap();
+    let sent = commands_of(&first);
+    assert!(sent.iter().any(|c| c.starts_with(b"RDSJ 01")), "{sent:?}");
+    assert!(sent.iter().any(|c| c.starts_with(b"RDEVA00")), "{sent:?}");
+    // Read-only: nothing that moves the stylus.
+    assert!(!sent.iter().any(|c| c.starts_with(b"CTSTA")), "{sent:?}");
+    assert!(!sent.iter().any(|c| c.starts_with(b"CTRTN")), "{sent:?}");
+
+    // Replaying it: the same checklist runs against the recording and sees the same answers.
+    let link = dir.path().join("replayed");
+    let mut sim = Simulator::new(&link)
+        .replay(first.clone(), 0.0)
+        .start()
+        .unwrap();
+    match tokio::time::timeout(EVENT_WAIT, sim.next_event()).await {
+        Ok(Some(SimEvent::Ready(r))) => assert_eq!(r.model, "replay"),
+        other => panic!("expected the ready event, got {other:?}"),
+    }
+    let config = probe_config(dir.path(), "replay.toml", &link);
+    let record2 = dir.path().join("second.txt");
+    let (code, stdout2, stderr2) = run_probe_binary(&config, &record2).await;
+    assert_eq!(code, Some(0), "stdout:\n{stdout2}\nstderr:\n{stderr2}");
+    sim.shutdown().await;
+    let summary = |s: &str| -> Vec<String> {
+        s.lines()
+            .filter(|l| !l.starts_with("link") && !l.starts_with("transcript"))
+            .map(str::to_string)
+            .collect()
+    };
+    assert_eq!(summary(&stdout2), summary(&stdout));
+    let second =
+        surfscan_sim::replay::Transcript::parse(&std::fs::read_to_string(&record2).unwrap())
+            .unwrap();
+    assert_eq!(commands_of(&second), sent);
+    let replies = |t: &surfscan_sim::replay::Transcript| -> Vec<Vec<u8>> {
+        t.entries
+            .iter()
+            .filter(|e| e.dir == surfscan_sim::replay::Dir::ToHost)
+            .map(|e| e.bytes.clone())
+            .collect()
+    };
+    assert_eq!(replies(&second), replies(&first));
+}
