@@ -306,7 +306,7 @@ async fn device_vanishing_mid_trace_is_absent_and_comes_back() {
     let mut rig = start(fast_config(), &["unplug:200@RDSTU00%1#2"]).await;
     let mut c = open(&rig.link);
     c.probe().await.unwrap();
-    let e = c.trace().await.err().expect("the trace must fail");
+    let e = c.trace().await.expect_err("the trace must fail");
     assert!(
         matches!(
             &e,
@@ -361,7 +361,7 @@ async fn battery_low_warns_and_abnormal_refuses() {
 
     let rig = start(fast_config(), &["battery:abnormal"]).await;
     let mut c = open(&rig.link);
-    let e = c.probe().await.err().expect("probe must refuse");
+    let e = c.probe().await.expect_err("probe must refuse");
     assert!(matches!(e, Sj210Error::BatteryAbnormal), "{e}");
     // A trace is refused without moving the stylus.
     assert!(matches!(c.trace().await, Err(Sj210Error::BatteryAbnormal)));
@@ -385,7 +385,7 @@ async fn model_without_profile_readout_fails_at_probe_naming_the_code() {
         }
         other => panic!("expected unsupported, got {other:?}"),
     }
-    let e = c.probe().await.err().expect("probe must refuse");
+    let e = c.probe().await.expect_err("probe must refuse");
     match &e {
         Sj210Error::ProfileUnsupported { ng_code, .. } => assert_eq!(*ng_code, Some(30)),
         other => panic!("expected ProfileUnsupported, got {other}"),
@@ -501,4 +501,51 @@ async fn probe_binary_summarises_and_its_transcript_replays() {
             .collect()
     };
     assert_eq!(replies(&second), replies(&first));
+}
+
+#[tokio::test]
+async fn pitch_from_lambda_s_with_conditions_recorded_and_length_warning() {
+    let mut cfg = fast_config();
+    // λc 2.5 mm × N = 5: evaluation length 12.5 mm.
+    cfg.conditions.sampling_lengths = 5;
+    let rig = start(cfg, &[]).await;
+    let port = transport::open(&SerialSettings {
+        path: rig.link.display().to_string(),
+        baud: 38400,
+        parity: Parity::None,
+        flow_control: FlowControl::None,
+    })
+    .unwrap();
+    let opts = ClientOptions {
+        pitch_x_um: None,
+        ..options()
+    };
+    let mut c = Sj210Client::new(port, readout_table(), opts);
+    c.probe().await.unwrap();
+    let line = c.trace().await.unwrap();
+    // λs 8 µm → 1 µm pitch (the reference's mapping), not the fixture's own 1.5 µm.
+    assert!((line.profile.pitch_x_mm - 0.001).abs() < 1e-12);
+    assert!(
+        line.pitch_source.contains("lambda-s"),
+        "{}",
+        line.pitch_source
+    );
+    let cond = &line.profile.conditions;
+    assert_eq!(cond.lambda_c_mm, Some(2.5));
+    assert_eq!(cond.lambda_s_um, Some(8.0));
+    assert_eq!(cond.evaluation_length_mm, Some(12.5));
+    let n = fixture_line(0).len() as f64;
+    let covered_mm = n * 0.001;
+    let off = ((covered_mm - 12.5) / 12.5).abs() > 0.01;
+    // The bundled windows are short (about 1.6 mm at 1.5 µm), so the warning must fire.
+    assert!(off, "{n} points unexpectedly cover the evaluation length");
+    assert_eq!(
+        line.warnings
+            .iter()
+            .any(|w| w.contains("evaluation length")),
+        off,
+        "{n} points: {:?}",
+        line.warnings
+    );
+    rig.sim.shutdown().await;
 }
