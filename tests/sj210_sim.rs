@@ -23,8 +23,8 @@ const EVENT_WAIT: Duration = Duration::from_secs(10);
 
 fn options() -> ClientOptions {
     ClientOptions {
-        first_byte: Duration::from_millis(400),
-        inter_byte: Duration::from_millis(150),
+        first_byte: Duration::from_millis(800),
+        inter_byte: Duration::from_millis(200),
         poll_interval: Duration::from_millis(10),
         start_deadline: Duration::from_millis(1500),
         read_retry_budget: Duration::from_millis(1000),
@@ -285,13 +285,13 @@ async fn dropped_and_truncated_read_replies_are_named() {
 
 #[tokio::test]
 async fn long_silence_times_out_then_the_link_recovers() {
-    let rig = start(fast_config(), &["silence:700@RDSTU01"]).await;
+    let rig = start(fast_config(), &["silence:1300@RDSTU01"]).await;
     let mut c = open(&rig.link);
     match c.command("RDSTU01", true).await {
         Err(Sj210Error::Link {
             source: LinkError::FirstByteTimeout { waited_ms },
             ..
-        }) => assert_eq!(waited_ms, 400),
+        }) => assert_eq!(waited_ms, 800),
         other => panic!("expected a first-byte timeout, got {other:?}"),
     }
     // The late reply is drained by the recovery, not mistaken for the next answer.
@@ -391,6 +391,18 @@ async fn model_without_profile_readout_fails_at_probe_naming_the_code() {
         other => panic!("expected ProfileUnsupported, got {other}"),
     }
     assert!(e.to_string().contains("030"), "{e}");
+    // The SJ-210 table as documented has no read-out command at all: said so, with the
+    // operator's options, without sending anything that could fail mid-scan.
+    let port = c.into_inner();
+    let mut plain = Sj210Client::new(port, ModelTable::builtin(ModelId::Sj210), options());
+    match plain.probe().await.expect_err("probe must refuse") {
+        Sj210Error::ProfileUnsupported { ng_code, advice } => {
+            assert_eq!(ng_code, None);
+            assert!(advice.contains("SJ-410"), "{advice}");
+            assert!(advice.contains("profile-total"), "{advice}");
+        }
+        other => panic!("expected ProfileUnsupported, got {other}"),
+    }
     rig.sim.shutdown().await;
 }
 
