@@ -561,3 +561,25 @@ async fn pitch_from_lambda_s_with_conditions_recorded_and_length_warning() {
     );
     rig.sim.shutdown().await;
 }
+
+#[tokio::test]
+async fn sj410_table_reads_the_sj410_emulation() {
+    let cfg = InstrumentConfig {
+        model: surfscan_sim::Model::Sj410,
+        ..fast_config()
+    };
+    let rig = start(cfg, &[]).await;
+    let port = transport::open(&SerialSettings {
+        path: rig.link.display().to_string(),
+        baud: 38400,
+        parity: Parity::None,
+        flow_control: FlowControl::None,
+    })
+    .unwrap();
+    let mut c = Sj210Client::new(port, ModelTable::builtin(ModelId::Sj410), options());
+    let report = c.probe().await.unwrap();
+    assert_eq!(report.parameter_count, 3);
+    let line = c.trace().await.unwrap();
+    assert_line(&line, 0);
+    rig.sim.shutdown().await;
+}
