@@ -7,6 +7,9 @@
 //! Expected heights come from the simulator's fixture rounded to the printed decimals; expected
 //! results from a plain re-computation of the simulator's documented definitions (mean line of
 //! the whole served profile, Ra = mean |z − m|, Rq = rms).
+//!
+//! Depends on the public API of `surfscan` (transport, `sj210`, `devices`) and of
+//! `surfscan-sim` (builder, fault specs, bundled profiles, transcript reader), nothing else.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
