@@ -116,11 +116,10 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         }
     }
 
-    /// After a timeout or malformed reply: drain what is still arriving, forget partial
-    /// lines, and read the status once so the next command starts on a clean link.
-    async fn recover(&mut self) {
-        // Drain until the line is quiet for an inter-byte interval, but never longer than a
-        // first-byte timeout in total: a device that streams garbage must not hang us.
+    /// Reads and discards input until the line is quiet for an inter-byte interval, but never
+    /// longer than a first-byte timeout in total (a device that streams garbage must not hang
+    /// us); forgets partial lines.
+    async fn drain(&mut self) {
         let mut chunk = [0u8; 512];
         let drain_end = Instant::now() + self.opts.first_byte;
         while Instant::now() < drain_end {
@@ -131,9 +130,21 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         }
         self.buf.clear();
         self.codec.reset();
+    }
+
+    /// After a timeout or malformed reply: drain what is still arriving, forget partial
+    /// lines, and read the status once so the next command starts on a clean link.
+    async fn recover(&mut self) {
+        self.drain().await;
         let status = self.table.commands.status.plain();
         match self.transact(&status).await {
-            Ok(r) => tracing::info!(reply = ?r, "status after recovery"),
+            Ok(r) => {
+                tracing::info!(reply = ?r, "status after recovery");
+                // A reply later than the drain window answers the status request instead,
+                // and the real status reply follows it: swallow that one too, or every later
+                // answer would be shifted by one.
+                self.drain().await;
+            }
             Err(e) => {
                 tracing::warn!("status re-read after recovery failed: {e}");
                 self.buf.clear();
@@ -322,6 +333,12 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
                     expected: "a point count",
                 }),
             },
+            // The command is recognised, there is just no trace in memory yet (a fresh
+            // instrument): the read-out works, with nothing to read now.
+            Err(Sj210Error::Device {
+                code: NgCode::NoResults,
+                ..
+            }) => Ok(ProfileReadout::Supported { points_now: 0 }),
             Err(Sj210Error::Device { code, .. }) if code.is_unsupported() => {
                 Ok(ProfileReadout::Unsupported {
                     ng_code: Some(code.code()),

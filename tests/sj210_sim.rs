@@ -1,0 +1,588 @@
+//! End to end: the SJ-210 client, over the real serial transport, against `surfscan-sim`
+//! running in-process on a pseudo-terminal. Each test starts its own simulator, waits for its
+//! ready event (never a fixed sleep), and checks one path of the driver: a clean trace with
+//! profile read-out, each injected fault with its named error or recovery, a model without
+//! profile read-out, and the `surfscan probe` binary with its replayable transcript.
+//!
+//! Expected heights come from the simulator's fixture rounded to the printed decimals; expected
+//! results from a plain re-computation of the simulator's documented definitions (mean line of
+//! the whole served profile, Ra = mean |z − m|, Rq = rms).
+//!
+//! Depends on the public API of `surfscan` (transport, `sj210`, `devices`) and of
+//! `surfscan-sim` (builder, fault specs, bundled profiles, transcript reader), nothing else.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+use surfscan::devices::{Battery, DeviceFault, FaultClass, Instrument, ProfileReadout};
+use surfscan::sj210::client::Sj210Client;
+use surfscan::sj210::error::{LinkError, Sj210Error};
+use surfscan::sj210::models::{CommandOverrides, ModelId, ModelTable};
+use surfscan::sj210::settings::ClientOptions;
+use surfscan::transport::{self, FlowControl, Parity, SerialSettings};
+use surfscan_sim::{FaultSpec, InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
+use tokio_serial::SerialStream;
+
+const EVENT_WAIT: Duration = Duration::from_secs(10);
+
+fn options() -> ClientOptions {
+    ClientOptions {
+        first_byte: Duration::from_millis(800),
+        inter_byte: Duration::from_millis(200),
+        poll_interval: Duration::from_millis(10),
+        start_deadline: Duration::from_millis(1500),
+        read_retry_budget: Duration::from_millis(1000),
+        trace_deadline: Some(Duration::from_secs(10)),
+        // The x pitch is not on the wire: the config gives the fixture's.
+        pitch_x_um: Some(fixture_pitch_um()),
+        ..ClientOptions::default()
+    }
+}
+
+fn fixture_pitch_um() -> f64 {
+    ProfileSet::bundled().unwrap().profiles()[0].pitch_x_mm * 1000.0
+}
+
+fn fast_config() -> InstrumentConfig {
+    InstrumentConfig {
+        time_scale: 0.02,
+        ..InstrumentConfig::default()
+    }
+}
+
+struct Rig {
+    _dir: tempfile::TempDir,
+    link: PathBuf,
+    sim: SimHandle,
+}
+
+/// Starts a simulator with `cfg` and the given fault specs, and waits for its ready event.
+async fn start(mut cfg: InstrumentConfig, faults: &[&str]) -> Rig {
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("sj210");
+    let mut wire = Vec::new();
+    for f in faults {
+        match f.parse::<FaultSpec>().unwrap() {
+            FaultSpec::Wire(w) => wire.push(w),
+            FaultSpec::BatteryLow => cfg.battery = surfscan_sim::Battery::Low,
+            FaultSpec::BatteryAbnormal => cfg.battery = surfscan_sim::Battery::Abnormal,
+        }
+    }
+    let mut b = Simulator::new(&link).instrument(cfg);
+    for w in wire {
+        b = b.fault(w);
+    }
+    let mut sim = b.start().unwrap();
+    match tokio::time::timeout(EVENT_WAIT, sim.next_event()).await {
+        Ok(Some(SimEvent::Ready(r))) => assert_eq!(r.instrument, link),
+        other => panic!("expected the ready event, got {other:?}"),
+    }
+    Rig {
+        _dir: dir,
+        link,
+        sim,
+    }
+}
+
+fn open(link: &Path) -> Sj210Client<SerialStream> {
+    let port = transport::open(&SerialSettings {
+        path: link.display().to_string(),
+        baud: 38400,
+        parity: Parity::None,
+        flow_control: FlowControl::None,
+    })
+    .unwrap();
+    Sj210Client::new(port, readout_table(), options())
+}
+
+/// The SJ-210 table with the profile read-out commands the reference suggests trying
+/// (`RDEVA00` total, `RDEVAnn` blocks), set as a config override would set them.
+fn readout_table() -> ModelTable {
+    let o = CommandOverrides {
+        profile_total: Some("RDEVA00".into()),
+        profile_block: Some("RDEVA{n}".into()),
+        ..CommandOverrides::default()
+    };
+    ModelTable::with_overrides(ModelId::Sj210, &o).unwrap()
+}
+
+/// The first bundled profile (what the first trace without a stage serves), rounded to the
+/// 3 printed decimals.
+fn fixture_line(index: usize) -> Vec<f64> {
+    let set = ProfileSet::bundled().unwrap();
+    set.profiles()[index]
+        .z_um
+        .iter()
+        .map(|z| (z * 1000.0).round() / 1000.0)
+        .collect()
+}
+
+fn ra_rq(z: &[f64]) -> (f64, f64) {
+    let n = z.len() as f64;
+    let m = z.iter().sum::<f64>() / n;
+    let ra = z.iter().map(|v| (v - m).abs()).sum::<f64>() / n;
+    let rq = (z.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / n).sqrt();
+    (ra, rq)
+}
+
+fn result(line: &surfscan::devices::TracedLine, name: &str) -> f64 {
+    line.results
+        .iter()
+        .find(|r| r.name == name)
+        .and_then(|r| r.value)
+        .unwrap_or_else(|| panic!("no {name} in {:?}", line.results))
+}
+
+/// Checks a traced line is the `index`-th fixture line with matching results.
+fn assert_line(line: &surfscan::devices::TracedLine, index: usize) {
+    let expected = fixture_line(index);
+    assert_eq!(line.profile.heights_um.len(), expected.len());
+    for (i, (got, want)) in line.profile.heights_um.iter().zip(&expected).enumerate() {
+        assert!((got - want).abs() < 5e-7, "point {i}: {got} vs {want}");
+    }
+    let set = ProfileSet::bundled().unwrap();
+    let served = &set.profiles()[index];
+    assert!(
+        (line.profile.pitch_x_mm - served.pitch_x_mm).abs() < 1e-9,
+        "pitch {} mm, fixture {} mm",
+        line.profile.pitch_x_mm,
+        served.pitch_x_mm
+    );
+    assert_eq!(line.pitch_source, "config");
+    let (ra, rq) = ra_rq(&served.z_um);
+    // Results are printed with a few decimals in 7 characters: compare to 0.5 % or 2 nm.
+    let close = |a: f64, b: f64| (a - b).abs() <= (0.005 * b.abs()).max(0.002);
+    assert!(
+        close(result(line, "Ra"), ra),
+        "Ra {} vs {ra}",
+        result(line, "Ra")
+    );
+    assert!(
+        close(result(line, "Rq"), rq),
+        "Rq {} vs {rq}",
+        result(line, "Rq")
+    );
+}
+
+#[tokio::test]
+async fn clean_trace_reads_the_fixture_profile_and_results() {
+    let rig = start(fast_config(), &[]).await;
+    let mut c = open(&rig.link);
+    let report = c.probe().await.unwrap();
+    assert_eq!(report.battery, Battery::Good);
+    assert_eq!(report.identity.firmware, "V1.00");
+    assert!(matches!(
+        report.profile_readout,
+        ProfileReadout::Supported { .. }
+    ));
+    assert_eq!(report.parameter_count, 3);
+    let line = c.trace().await.unwrap();
+    assert_line(&line, 0);
+    let line2 = c.trace().await.unwrap();
+    assert_line(&line2, 1);
+    rig.sim.shutdown().await;
+}
+
+/// Probe, then one trace that must succeed despite `faults` and serve fixture line 0.
+async fn trace_recovers(faults: &[&str]) -> surfscan::devices::TracedLine {
+    let rig = start(fast_config(), faults).await;
+    let mut c = open(&rig.link);
+    c.probe().await.unwrap();
+    let line = c
+        .trace()
+        .await
+        .unwrap_or_else(|e| panic!("{faults:?}: {e}"));
+    assert_line(&line, 0);
+    rig.sim.shutdown().await;
+    line
+}
+
+/// Probe, then one trace that must fail; returns the error.
+async fn trace_fails(faults: &[&str]) -> Sj210Error {
+    let rig = start(fast_config(), faults).await;
+    let mut c = open(&rig.link);
+    c.probe().await.unwrap();
+    let e = match c.trace().await {
+        Ok(_) => panic!("{faults:?}: the trace succeeded"),
+        Err(e) => e,
+    };
+    rig.sim.shutdown().await;
+    e
+}
+
+#[tokio::test]
+async fn busy_and_not_ready_codes_on_reads_are_retried() {
+    trace_recovers(&["ng:011@RDRES#1x2"]).await;
+    trace_recovers(&["ng:033@RDPAR#1x1"]).await;
+    trace_recovers(&["ng:101@RDRES#2x2"]).await;
+}
+
+#[tokio::test]
+async fn busy_on_start_is_not_retried() {
+    let e = trace_fails(&["ng:011@CTSTA"]).await;
+    assert_eq!(e.code().map(|c| c.code()), Some(11), "{e}");
+}
+
+#[tokio::test]
+async fn over_range_is_named_with_the_detector_position() {
+    let e = trace_fails(&["ng:007@CTSTA"]).await;
+    match e {
+        Sj210Error::OverRange { position } => assert!(position.is_some()),
+        other => panic!("expected OverRange, got {other}"),
+    }
+    let e = trace_fails(&["ng:007@RDSTU00%1#2"]).await;
+    assert!(matches!(e, Sj210Error::OverRange { .. }), "{e}");
+}
+
+#[tokio::test]
+async fn profile_block_error_restarts_the_read_out_once() {
+    // NG020 on the first block: the read-out restarts from the total and succeeds.
+    let line = trace_recovers(&["ng:020@RDEVA%1#2"]).await;
+    assert!(
+        line.warnings.iter().any(|w| w.contains("restarted")),
+        "{:?}",
+        line.warnings
+    );
+    // Errors on both attempts: the line must be re-traced, with the NG code named.
+    let e = trace_fails(&["ng:020@RDEVA%1#2", "ng:020@RDEVA%1#4"]).await;
+    assert!(matches!(e, Sj210Error::ProfileReadoutFailed { .. }), "{e}");
+    assert_eq!(e.code().map(|c| c.code()), Some(20));
+}
+
+#[tokio::test]
+async fn dropped_truncated_garbage_and_split_replies() {
+    // A dropped or truncated status poll during the trace: recovery, polling goes on.
+    trace_recovers(&["drop@RDSTU00%1#2"]).await;
+    trace_recovers(&["truncate@RDSTU00%1#2"]).await;
+    // A reply split across reads is reassembled; a stray LF is tolerated.
+    trace_recovers(&["split@RDEVA%1#2x3", "split@RDRES", "lf@RDRES#2"]).await;
+    // Garbage before a block reply: malformed, the read-out restarts once and succeeds.
+    let line = trace_recovers(&["garbage@RDEVA%1#3"]).await;
+    assert!(line.warnings.iter().any(|w| w.contains("restarted")));
+    // A dropped block reply: first-byte timeout, restart, success.
+    trace_recovers(&["drop@RDEVA%1#2"]).await;
+}
+
+#[tokio::test]
+async fn dropped_and_truncated_read_replies_are_named() {
+    let rig = start(fast_config(), &["drop@RDSJ 01", "truncate@RDCON"]).await;
+    let mut c = open(&rig.link);
+    match c.command("RDSJ 01", true).await {
+        Err(Sj210Error::Link {
+            source: LinkError::FirstByteTimeout { .. },
+            ..
+        }) => {}
+        other => panic!("expected a first-byte timeout, got {other:?}"),
+    }
+    match c.command("RDCON", true).await {
+        Err(Sj210Error::Link {
+            source: LinkError::InterByteTimeout { partial, .. },
+            ..
+        }) => assert!(partial.starts_with("OK"), "{partial}"),
+        other => panic!("expected an inter-byte timeout, got {other:?}"),
+    }
+    // After recovery the link is clean: the next reads answer normally.
+    assert_eq!(c.command("RDSJ 01", true).await.unwrap(), "V1.00");
+    assert_eq!(c.status().await.unwrap(), 0);
+    rig.sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn long_silence_times_out_then_the_link_recovers() {
+    let rig = start(fast_config(), &["silence:1300@RDSTU01"]).await;
+    let mut c = open(&rig.link);
+    match c.command("RDSTU01", true).await {
+        Err(Sj210Error::Link {
+            source: LinkError::FirstByteTimeout { waited_ms },
+            ..
+        }) => assert_eq!(waited_ms, 800),
+        other => panic!("expected a first-byte timeout, got {other:?}"),
+    }
+    // The late reply is drained by the recovery, not mistaken for the next answer.
+    assert_eq!(c.command("RDSJ 01", true).await.unwrap(), "V1.00");
+    let line = c.trace().await.unwrap();
+    assert_line(&line, 0);
+    rig.sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn device_vanishing_mid_trace_is_absent_and_comes_back() {
+    let mut rig = start(fast_config(), &["unplug:200@RDSTU00%1#2"]).await;
+    let mut c = open(&rig.link);
+    c.probe().await.unwrap();
+    let e = c.trace().await.expect_err("the trace must fail");
+    assert!(
+        matches!(
+            &e,
+            Sj210Error::Link {
+                source: LinkError::Vanished { .. },
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::Absent);
+    drop(c);
+    let mut seen = Vec::new();
+    loop {
+        match tokio::time::timeout(EVENT_WAIT, rig.sim.next_event()).await {
+            Ok(Some(SimEvent::Replugged { instrument })) => {
+                assert_eq!(instrument, rig.link);
+                break;
+            }
+            Ok(Some(ev)) => seen.push(ev),
+            other => panic!("no replug event (saw {seen:?}): {other:?}"),
+        }
+    }
+    assert!(
+        seen.iter().any(|e| matches!(e, SimEvent::Unplugged { .. })),
+        "{seen:?}"
+    );
+    // A fresh instrument on a new pty at the same link: probe and trace work again.
+    let mut c = open(&rig.link);
+    c.probe().await.unwrap();
+    let line = c.trace().await.unwrap();
+    assert!(!line.profile.heights_um.is_empty());
+    rig.sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn battery_low_warns_and_abnormal_refuses() {
+    let rig = start(fast_config(), &["battery:low"]).await;
+    let mut c = open(&rig.link);
+    let report = c.probe().await.unwrap();
+    assert_eq!(report.battery, Battery::Low);
+    assert!(
+        report
+            .warnings
+            .iter()
+            .any(|w| w.to_lowercase().contains("battery")),
+        "{:?}",
+        report.warnings
+    );
+    assert_line(&c.trace().await.unwrap(), 0);
+    rig.sim.shutdown().await;
+
+    let rig = start(fast_config(), &["battery:abnormal"]).await;
+    let mut c = open(&rig.link);
+    let e = c.probe().await.expect_err("probe must refuse");
+    assert!(matches!(e, Sj210Error::BatteryAbnormal), "{e}");
+    // A trace is refused without moving the stylus.
+    assert!(matches!(c.trace().await, Err(Sj210Error::BatteryAbnormal)));
+    assert_eq!(c.status().await.unwrap(), 0);
+    rig.sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn model_without_profile_readout_fails_at_probe_naming_the_code() {
+    let cfg = InstrumentConfig {
+        profile_readout: false,
+        ..fast_config()
+    };
+    let rig = start(cfg, &[]).await;
+    let mut c = open(&rig.link);
+    let report = c.probe_report().await.unwrap();
+    match &report.profile_readout {
+        ProfileReadout::Unsupported { ng_code, advice } => {
+            assert_eq!(*ng_code, Some(30));
+            assert!(!advice.is_empty());
+        }
+        other => panic!("expected unsupported, got {other:?}"),
+    }
+    let e = c.probe().await.expect_err("probe must refuse");
+    match &e {
+        Sj210Error::ProfileUnsupported { ng_code, .. } => assert_eq!(*ng_code, Some(30)),
+        other => panic!("expected ProfileUnsupported, got {other}"),
+    }
+    assert!(e.to_string().contains("030"), "{e}");
+    // The SJ-210 table as documented has no read-out command at all: said so, with the
+    // operator's options, without sending anything that could fail mid-scan.
+    let port = c.into_inner();
+    let mut plain = Sj210Client::new(port, ModelTable::builtin(ModelId::Sj210), options());
+    match plain.probe().await.expect_err("probe must refuse") {
+        Sj210Error::ProfileUnsupported { ng_code, advice } => {
+            assert_eq!(ng_code, None);
+            assert!(advice.contains("SJ-410"), "{advice}");
+            assert!(advice.contains("profile-total"), "{advice}");
+        }
+        other => panic!("expected ProfileUnsupported, got {other}"),
+    }
+    rig.sim.shutdown().await;
+}
+
+/// Runs `surfscan probe --config CONFIG --record RECORD` (the real binary) and returns its exit
+/// code and standard output.
+async fn run_probe_binary(config: &Path, record: &Path) -> (Option<i32>, String, String) {
+    let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .arg("probe")
+        .arg("--config")
+        .arg(config)
+        .arg("--record")
+        .arg(record)
+        .kill_on_drop(true)
+        .output();
+    let out = tokio::time::timeout(Duration::from_secs(30), child)
+        .await
+        .expect("surfscan probe did not finish within 30 s")
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn probe_config(dir: &Path, name: &str, link: &Path) -> PathBuf {
+    let config = dir.join(name);
+    std::fs::write(
+        &config,
+        format!(
+            "[instrument]\nport = \"{}\"\nbaud = 38400\n[instrument.timeouts]\nfirst-byte-ms = 2000\n[instrument.commands]\nprofile-total = \"RDEVA00\"\nprofile-block = \"RDEVA{{n}}\"\n",
+            link.display()
+        ),
+    )
+    .unwrap();
+    config
+}
+
+/// The commands (host → device lines) of a transcript, in order.
+fn commands_of(t: &surfscan_sim::replay::Transcript) -> Vec<Vec<u8>> {
+    t.entries
+        .iter()
+        .filter(|e| e.dir == surfscan_sim::replay::Dir::ToDevice)
+        .map(|e| e.bytes.clone())
+        .collect()
+}
+
+#[tokio::test]
+async fn probe_binary_summarises_and_its_transcript_replays() {
+    let cfg = InstrumentConfig {
+        firmware: "V2.34".into(),
+        ..fast_config()
+    };
+    let rig = start(cfg, &["battery:low"]).await;
+    let dir = tempfile::tempdir().unwrap();
+    let config = probe_config(dir.path(), "probe.toml", &rig.link);
+    let record = dir.path().join("first.txt");
+    let (code, stdout, stderr) = run_probe_binary(&config, &record).await;
+    assert_eq!(code, Some(0), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert!(stdout.contains("V2.34"), "{stdout}");
+    assert!(stdout.contains("Low"), "{stdout}");
+    assert!(stdout.contains("read-out supported"), "{stdout}");
+    assert!(stdout.contains("parameters 3"), "{stdout}");
+    assert!(stdout.contains("transcript written"), "{stdout}");
+    rig.sim.shutdown().await;
+
+    // The simulator parses the transcript with its own reader.
+    let text = std::fs::read_to_string(&record).unwrap();
+    let first = surfscan_sim::replay::Transcript::parse(&text).unwrap();
+    let sent = commands_of(&first);
+    assert!(sent.iter().any(|c| c.starts_with(b"RDSJ 01")), "{sent:?}");
+    assert!(sent.iter().any(|c| c.starts_with(b"RDEVA00")), "{sent:?}");
+    // Read-only: nothing that moves the stylus.
+    assert!(!sent.iter().any(|c| c.starts_with(b"CTSTA")), "{sent:?}");
+    assert!(!sent.iter().any(|c| c.starts_with(b"CTRTN")), "{sent:?}");
+
+    // Replaying it: the same checklist runs against the recording and sees the same answers.
+    let link = dir.path().join("replayed");
+    let mut sim = Simulator::new(&link)
+        .replay(first.clone(), 0.0)
+        .start()
+        .unwrap();
+    match tokio::time::timeout(EVENT_WAIT, sim.next_event()).await {
+        Ok(Some(SimEvent::Ready(r))) => assert_eq!(r.model, "replay"),
+        other => panic!("expected the ready event, got {other:?}"),
+    }
+    let config = probe_config(dir.path(), "replay.toml", &link);
+    let record2 = dir.path().join("second.txt");
+    let (code, stdout2, stderr2) = run_probe_binary(&config, &record2).await;
+    assert_eq!(code, Some(0), "stdout:\n{stdout2}\nstderr:\n{stderr2}");
+    sim.shutdown().await;
+    let summary = |s: &str| -> Vec<String> {
+        s.lines()
+            .filter(|l| !l.starts_with("link") && !l.starts_with("transcript"))
+            .map(str::to_string)
+            .collect()
+    };
+    assert_eq!(summary(&stdout2), summary(&stdout));
+    let second =
+        surfscan_sim::replay::Transcript::parse(&std::fs::read_to_string(&record2).unwrap())
+            .unwrap();
+    assert_eq!(commands_of(&second), sent);
+    let replies = |t: &surfscan_sim::replay::Transcript| -> Vec<Vec<u8>> {
+        t.entries
+            .iter()
+            .filter(|e| e.dir == surfscan_sim::replay::Dir::ToHost)
+            .map(|e| e.bytes.clone())
+            .collect()
+    };
+    assert_eq!(replies(&second), replies(&first));
+}
+
+#[tokio::test]
+async fn pitch_from_lambda_s_with_conditions_recorded_and_length_warning() {
+    let mut cfg = fast_config();
+    // λc 2.5 mm × N = 5: evaluation length 12.5 mm.
+    cfg.conditions.sampling_lengths = 5;
+    let rig = start(cfg, &[]).await;
+    let port = transport::open(&SerialSettings {
+        path: rig.link.display().to_string(),
+        baud: 38400,
+        parity: Parity::None,
+        flow_control: FlowControl::None,
+    })
+    .unwrap();
+    let opts = ClientOptions {
+        pitch_x_um: None,
+        ..options()
+    };
+    let mut c = Sj210Client::new(port, readout_table(), opts);
+    c.probe().await.unwrap();
+    let line = c.trace().await.unwrap();
+    // λs 8 µm → 1 µm pitch (the reference's mapping), not the fixture's own 1.5 µm.
+    assert!((line.profile.pitch_x_mm - 0.001).abs() < 1e-12);
+    assert!(
+        line.pitch_source.contains("lambda-s"),
+        "{}",
+        line.pitch_source
+    );
+    let cond = &line.profile.conditions;
+    assert_eq!(cond.lambda_c_mm, Some(2.5));
+    assert_eq!(cond.lambda_s_um, Some(8.0));
+    assert_eq!(cond.evaluation_length_mm, Some(12.5));
+    let n = fixture_line(0).len() as f64;
+    let covered_mm = n * 0.001;
+    let off = ((covered_mm - 12.5) / 12.5).abs() > 0.01;
+    // The bundled windows are short (about 1.6 mm at 1.5 µm), so the warning must fire.
+    assert!(off, "{n} points unexpectedly cover the evaluation length");
+    assert_eq!(
+        line.warnings
+            .iter()
+            .any(|w| w.contains("evaluation length")),
+        off,
+        "{n} points: {:?}",
+        line.warnings
+    );
+    rig.sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn sj410_table_reads_the_sj410_emulation() {
+    let cfg = InstrumentConfig {
+        model: surfscan_sim::Model::Sj410,
+        ..fast_config()
+    };
+    let rig = start(cfg, &[]).await;
+    let port = transport::open(&SerialSettings {
+        path: rig.link.display().to_string(),
+        baud: 38400,
+        parity: Parity::None,
+        flow_control: FlowControl::None,
+    })
+    .unwrap();
+    let mut c = Sj210Client::new(port, ModelTable::builtin(ModelId::Sj410), options());
+    let report = c.probe().await.unwrap();
+    assert_eq!(report.parameter_count, 3);
+    let line = c.trace().await.unwrap();
+    assert_line(&line, 0);
+    rig.sim.shutdown().await;
+}
