@@ -205,3 +205,158 @@ async fn zaber_unplugged_is_absent() {
     assert!(!dir.path().join("zaber").exists());
     h.shutdown().await;
 }
+
+#[tokio::test]
+async fn grbl_alarm2_is_fatal_and_recovered_by_reset_and_home() {
+    let (_dir, h, mut a, shared) = grbl().await;
+    a.home().await.unwrap();
+    a.move_to(Nm(-1_000_000)).await.unwrap();
+    shared.inject(StageFault::Alarm2);
+    let e = a.move_to(Nm(-990_000)).await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::Fault { reason, class: FaultClass::Fatal } if reason.contains("ALARM:2")),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::Fatal);
+    assert!(a.position_trusted(), "ALARM:2 keeps the position");
+    // Recovery: soft reset (its banner is expected, not a lost position) then $H.
+    a.home().await.unwrap();
+    assert!(a.position_trusted());
+    let t = Nm(-990_000);
+    assert_eq!(a.move_to(t).await.unwrap().readback, t);
+    assert_eq!(shared.true_position_nm(), t.0);
+    h.shutdown().await;
+}
+
+#[tokio::test]
+async fn grbl_error15_is_a_controller_limit() {
+    let (_dir, h, mut a, shared) = grbl().await;
+    a.home().await.unwrap();
+    shared.inject(StageFault::Error15);
+    let e = a.move_to(Nm(-1_000_000)).await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::ControllerLimit { reason, .. } if reason.contains("error:15")),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::Fatal);
+    assert_eq!(e.ng_code(), Some(15));
+    h.shutdown().await;
+}
+
+#[tokio::test]
+async fn grbl_silence_is_a_transient_timeout() {
+    let (_dir, h, mut a, shared) = grbl().await;
+    a.home().await.unwrap();
+    shared.inject(StageFault::Silence);
+    let e = a.move_to(Nm(-1_000_000)).await.unwrap_err();
+    assert!(matches!(e, StageError::Timeout { .. }), "{e}");
+    assert_eq!(e.class(), FaultClass::Transient);
+    h.shutdown().await;
+}
+
+#[tokio::test]
+async fn grbl_unplugged_is_absent() {
+    let (dir, h, mut a, shared) = grbl().await;
+    a.home().await.unwrap();
+    a.move_to(Nm(-1_000_000)).await.unwrap();
+    shared.inject(StageFault::Vanish);
+    let e = a.move_to(Nm(-990_000)).await.unwrap_err();
+    assert!(matches!(e, StageError::Vanished { .. }), "{e}");
+    assert_eq!(e.class(), FaultClass::Absent, "{e}");
+    assert!(!dir.path().join("grbl").exists());
+    h.shutdown().await;
+}
+
+/// Up, up, down, up from `base_nm` by 0.01 mm steps. Scanning upwards, every target is
+/// approached from below: a move that continues upwards is one move; the first move after
+/// homing and a reversal are two (down past the target by the backlash, then up onto it).
+/// The simulated carriage lags the motor by the backlash after any downward move, so it lands
+/// exactly on the target only if the last move onto it was upwards.
+async fn backlash_only_on_reversal(a: &mut AnyYAxis, shared: &StageShared, base_nm: i64) {
+    a.home().await.unwrap();
+    let steps: [(i64, u64); 5] = [(0, 2), (1, 1), (2, 1), (1, 2), (2, 1)];
+    for (i, (k, moves)) in steps.into_iter().enumerate() {
+        let t = target(base_nm, k);
+        let before = shared.moves_started();
+        let arr = a.move_to(t).await.unwrap();
+        assert_eq!(arr.readback, t, "step {i}");
+        assert_eq!(shared.true_position_nm(), t.0, "carriage at step {i}");
+        assert_eq!(shared.moves_started() - before, moves, "moves for step {i}");
+    }
+}
+
+#[tokio::test]
+async fn grbl_backlash_is_taken_out_only_when_direction_reverses() {
+    let (_dir, h, mut a, shared) = grbl().await;
+    backlash_only_on_reversal(&mut a, &shared, -20_000_000).await;
+    h.shutdown().await;
+}
+
+#[tokio::test]
+async fn zaber_backlash_is_taken_out_only_when_direction_reverses() {
+    let (_dir, h, mut a, shared) = zaber().await;
+    backlash_only_on_reversal(&mut a, &shared, 10_000_000).await;
+    h.shutdown().await;
+}
+
+#[tokio::test]
+async fn zaber_reject_is_transient_and_the_retry_lands() {
+    let (_dir, h, mut a, shared) = zaber().await;
+    a.home().await.unwrap();
+    a.move_to(Nm(10_000_000)).await.unwrap();
+    shared.inject(StageFault::Reject);
+    let e = a.move_to(Nm(10_010_000)).await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::Rejected { reason, .. } if reason.contains("AGAIN")),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::Transient);
+    assert!(a.position_trusted(), "a rejected command moves nothing");
+    let t = Nm(10_010_000);
+    assert_eq!(a.move_to(t).await.unwrap().readback, t);
+    assert_eq!(shared.true_position_nm(), t.0);
+    h.shutdown().await;
+}
+
+#[tokio::test]
+async fn zaber_stall_is_position_lost_until_rehomed() {
+    let (_dir, h, mut a, shared) = zaber().await;
+    a.home().await.unwrap();
+    a.move_to(Nm(10_000_000)).await.unwrap();
+    shared.inject(StageFault::Stall);
+    let e = a.move_to(Nm(20_000_000)).await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::Fault { reason, .. } if reason.starts_with("FS")),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::PositionLost);
+    assert!(!a.position_trusted());
+    let e = a.move_to(Nm(20_000_000)).await.unwrap_err();
+    assert!(matches!(e, StageError::PositionLost { .. }), "{e}");
+    a.home().await.unwrap();
+    let t = Nm(20_000_000);
+    assert_eq!(a.move_to(t).await.unwrap().readback, t);
+    assert_eq!(shared.true_position_nm(), t.0);
+    h.shutdown().await;
+}
+
+#[tokio::test]
+async fn zaber_wr_flag_is_position_lost_until_rehomed() {
+    let (_dir, h, mut a, shared) = zaber().await;
+    a.home().await.unwrap();
+    a.move_to(Nm(20_000_000)).await.unwrap();
+    shared.inject(StageFault::PositionLostWr);
+    let e = a.move_to(Nm(20_010_000)).await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::PositionLost { reason } if reason.starts_with("WR")),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::PositionLost);
+    assert!(!a.position_trusted());
+    a.home().await.unwrap();
+    assert!(a.position_trusted());
+    let t = Nm(20_010_000);
+    assert_eq!(a.move_to(t).await.unwrap().readback, t);
+    assert_eq!(shared.true_position_nm(), t.0);
+    h.shutdown().await;
+}

@@ -103,6 +103,9 @@ pub struct StageShared {
     pub true_position_nm: AtomicI64,
     /// Bytes received from the host so far.
     pub bytes_received: AtomicU64,
+    /// Moves accepted and started so far (GRBL jogs, Zaber `move abs`/`move rel`; homing
+    /// cycles are not counted).
+    pub moves_started: AtomicU64,
     faults: Mutex<VecDeque<StageFault>>,
     /// Mirrors the true position for the simulated instrument's profile selection.
     y: OnceLock<YPosition>,
@@ -149,6 +152,16 @@ impl StageShared {
     /// Bytes received so far.
     pub fn bytes_received(&self) -> u64 {
         self.bytes_received.load(Ordering::SeqCst)
+    }
+
+    /// Records that a move was accepted and started.
+    pub fn note_move_started(&self) {
+        self.moves_started.fetch_add(1, Ordering::SeqCst);
+    }
+
+    /// Moves accepted and started so far (homing cycles are not counted).
+    pub fn moves_started(&self) -> u64 {
+        self.moves_started.load(Ordering::SeqCst)
     }
 }
 
@@ -387,6 +400,7 @@ impl Machine {
             dur: Duration::from_secs_f64(secs),
         });
         self.state = State::Jog;
+        self.shared.note_move_started();
         "ok\r\n".into()
     }
 

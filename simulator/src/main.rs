@@ -205,6 +205,12 @@ async fn main() -> ExitCode {
         }
     };
     for f in stage_faults {
+        // Queued at once, not through a zero-length timer: a timer tick can come after the
+        // host's first commands.
+        if f.after_ms == 0 {
+            shared.inject(f.fault);
+            continue;
+        }
         let shared = shared.clone();
         tokio::spawn(async move {
             tokio::time::sleep(std::time::Duration::from_millis(f.after_ms)).await;

@@ -124,6 +124,7 @@ impl Dev {
             start: Instant::now(),
             dur: Duration::from_secs_f64(secs),
         });
+        self.shared.note_move_started();
     }
 
     fn flag(&self) -> &'static str {
