@@ -233,12 +233,8 @@ pub struct IncrementalFitter {
     sum_u: Vec<f64>,
     /// Cumulative chord along v per column, row-major (row 0 is zeros).
     cum_v: Vec<f64>,
-    /// Scratch for one row's parameters.
+    /// Scratch for one row's chords, then its cumulative chords.
     scratch: Vec<f64>,
-    /// Scratch for one row's heights in mm.
-    zrow: Vec<f64>,
-    /// Scratch for one row's cumulative column chords.
-    vrow: Vec<f64>,
     params_s: f64,
 }
 
@@ -258,8 +254,6 @@ impl IncrementalFitter {
             sum_u: Vec::new(),
             cum_v: Vec::new(),
             scratch: Vec::new(),
-            zrow: Vec::new(),
-            vrow: Vec::new(),
             params_s: 0.0,
         }
     }
@@ -335,105 +329,74 @@ impl IncrementalFitter {
                 });
             }
         }
-        if let Some(index) = heights_um.iter().position(|h| !h.is_finite()) {
-            return Err(FitError::NonFinite {
-                line,
-                index,
-                value: heights_um[index],
-            });
-        }
-
-        // Heights in mm, once.
+        // The row is written straight into the stores (heights in mm, cumulative column
+        // chords) and the stores are truncated back if a check fails, so on error nothing is
+        // changed and on success no copy is needed. Each pass below is branch-free so it
+        // vectorises; the checks only accumulate flags, and the culprit is located afterwards
+        // in the order: non-finite height, u chord, u total, v chord, v cumulative chord.
         let pitch = if line == 0 {
             pitch_x_mm
         } else {
             self.pitch_x_mm
         };
-        self.zrow.clear();
-        self.zrow.extend(heights_um.iter().map(|h| h / 1000.0));
-        let zrow = &self.zrow;
+        let base = line * n;
+        debug_assert_eq!(self.z_mm.len(), base);
 
-        // Row chords along u (3-D, mm), then their cumulative sums.
-        let p2 = pitch * pitch;
-        self.scratch.clear();
-        self.scratch.resize(n, 0.0);
-        for ((d, &z1), &z0) in self.scratch[1..].iter_mut().zip(&zrow[1..]).zip(zrow) {
-            let dz = z1 - z0;
-            *d = (p2 + dz * dz).sqrt();
-        }
-        // Branch-free scan first (vectorises); locate the culprit only on failure.
-        if any_bad_chord(&self.scratch[1..]) {
-            let k = self.scratch[1..]
-                .iter()
-                .position(|&d| d == 0.0 || !d.is_finite())
-                .unwrap_or(0);
-            let k = k + 1;
-            let (d, pz, z) = (self.scratch[k], zrow[k - 1], zrow[k]);
-            return Err(Self::chord_error(
-                "u",
+        // Heights in mm, once (the division, not a multiplication by 1e-3, fixes the bits).
+        let mut non_finite = false;
+        self.z_mm.extend(heights_um.iter().map(|&h| {
+            non_finite |= !h.is_finite();
+            h / 1000.0
+        }));
+        if non_finite {
+            self.z_mm.truncate(base);
+            let index = heights_um.iter().position(|h| !h.is_finite()).unwrap_or(0);
+            return Err(FitError::NonFinite {
                 line,
-                k,
-                d,
-                [(k - 1) as f64 * pitch, y_mm, pz],
-                [k as f64 * pitch, y_mm, z],
-            ));
-        }
-        let mut acc = 0.0;
-        for d in self.scratch.iter_mut() {
-            acc += *d;
-            *d = acc;
-        }
-        if !acc.is_finite() {
-            return Err(FitError::ChordOverflow {
-                direction: "u",
-                line,
-                index: n - 1,
-                chord: acc,
+                index,
+                value: heights_um.get(index).copied().unwrap_or(f64::NAN),
             });
         }
 
-        // Column chords along v to the previous line, then the new cumulative row.
-        if line > 0 {
-            let prev_y = self.y_mm[line - 1];
-            let dy = y_mm - prev_y;
-            let dy2 = dy * dy;
-            let prev_row = &self.z_mm[(line - 1) * n..line * n];
-            let prev_cum = &self.cum_v[(line - 1) * n..line * n];
-            self.vrow.clear();
-            self.vrow.extend(zrow.iter().zip(prev_row).map(|(&z, &pz)| {
-                let dz = z - pz;
-                (dy2 + dz * dz).sqrt()
-            }));
-            if any_bad_chord(&self.vrow) {
-                let k = self
-                    .vrow
-                    .iter()
-                    .position(|&d| d == 0.0 || !d.is_finite())
-                    .unwrap_or(0);
-                let x = k as f64 * pitch;
-                return Err(Self::chord_error(
-                    "v",
-                    line,
-                    k,
-                    self.vrow[k],
-                    [x, prev_y, prev_row[k]],
-                    [x, y_mm, zrow[k]],
-                ));
+        // One pass over the row: the chord along u to the left neighbour (3-D, mm) and, from
+        // the second line on, the chord along v to the previous line in the same column added
+        // to that column's cumulative chord. Per value the operations are the same as
+        // computing the two chord rows separately, so the bits are too.
+        let p2 = pitch * pitch;
+        self.scratch.clear();
+        self.scratch.resize(n, 0.0);
+        let (bad_u, bad_v, bad_cum, dy2) = {
+            let (stored, zrow) = self.z_mm.split_at(base);
+            let mut bad_u = false;
+            for ((d, &z1), &z0) in self.scratch[1..].iter_mut().zip(&zrow[1..]).zip(zrow) {
+                let dz = z1 - z0;
+                *d = (p2 + dz * dz).sqrt();
+                bad_u |= (*d == 0.0) | !d.is_finite();
             }
-            for (c, &pc) in self.vrow.iter_mut().zip(prev_cum) {
-                *c += pc;
+            if line == 0 {
+                self.cum_v.resize(n, 0.0);
+                (bad_u, false, false, 0.0)
+            } else {
+                let dy = y_mm - self.y_mm[line - 1];
+                let dy2 = dy * dy;
+                let prev_row = &stored[base - n..];
+                let (bad_v, bad_cum) = extend_column_chords(&mut self.cum_v, zrow, prev_row, dy2);
+                (bad_u, bad_v, bad_cum, dy2)
             }
-            if let Some(k) = any_bad_chord(&self.vrow)
-                .then(|| self.vrow.iter().position(|c| !c.is_finite()))
-                .flatten()
-            {
-                return Err(FitError::ChordOverflow {
-                    direction: "v",
-                    line,
-                    index: k,
-                    chord: self.vrow[k],
-                });
+        };
+        let mut acc = 0.0;
+        if !bad_u {
+            // Cumulative u chords: a serial sum, in index order.
+            for d in self.scratch.iter_mut() {
+                acc += *d;
+                *d = acc;
             }
+        }
+        if bad_u || !acc.is_finite() || bad_v || bad_cum {
+            let err = self.row_error(line, y_mm, pitch, dy2, bad_u, acc, bad_v);
+            self.z_mm.truncate(base);
+            self.cum_v.truncate(base);
+            return Err(err);
         }
 
         // Commit: nothing below can fail.
@@ -441,18 +404,89 @@ impl IncrementalFitter {
             self.cols = n;
             self.pitch_x_mm = pitch_x_mm;
             self.sum_u = vec![0.0; n];
-            self.cum_v.resize(n, 0.0);
-        } else {
-            self.cum_v.extend_from_slice(&self.vrow);
         }
         let total = acc;
         for (s, &c) in self.sum_u.iter_mut().zip(&self.scratch) {
             *s += c / total;
         }
-        self.z_mm.extend_from_slice(&self.zrow);
         self.y_mm.push(y_mm);
         self.params_s += secs(start);
         Ok(())
+    }
+
+    /// The error for a row whose checks failed in [`IncrementalFitter::push_row`], with the
+    /// row still in the stores (`z_mm` and `cum_v` hold it as their last `n` values) and the
+    /// u chords in `scratch` (cumulated only when they were all valid). Reports the first
+    /// failure in the order: u chord, u total, v chord, v cumulative chord.
+    #[allow(clippy::too_many_arguments)]
+    #[cold]
+    fn row_error(
+        &self,
+        line: usize,
+        y_mm: f64,
+        pitch: f64,
+        dy2: f64,
+        bad_u: bool,
+        acc: f64,
+        bad_v: bool,
+    ) -> FitError {
+        let n = self.scratch.len();
+        let base = line * n;
+        let zrow = &self.z_mm[base..base + n];
+        if bad_u {
+            let k = self.scratch[1..]
+                .iter()
+                .position(|&d| d == 0.0 || !d.is_finite())
+                .unwrap_or(0)
+                + 1;
+            return Self::chord_error(
+                "u",
+                line,
+                k,
+                self.scratch[k],
+                [(k - 1) as f64 * pitch, y_mm, zrow[k - 1]],
+                [k as f64 * pitch, y_mm, zrow[k]],
+            );
+        }
+        if !acc.is_finite() {
+            return FitError::ChordOverflow {
+                direction: "u",
+                line,
+                index: n - 1,
+                chord: acc,
+            };
+        }
+        let prev_y = self.y_mm[line - 1];
+        let prev_row = &self.z_mm[base - n..base];
+        if bad_v {
+            let chord = |k: usize| {
+                let dz = zrow[k] - prev_row[k];
+                (dy2 + dz * dz).sqrt()
+            };
+            let k = (0..n)
+                .position(|k| {
+                    let d = chord(k);
+                    d == 0.0 || !d.is_finite()
+                })
+                .unwrap_or(0);
+            let x = k as f64 * pitch;
+            return Self::chord_error(
+                "v",
+                line,
+                k,
+                chord(k),
+                [x, prev_y, prev_row[k]],
+                [x, y_mm, zrow[k]],
+            );
+        }
+        let cum = &self.cum_v[base..base + n];
+        let k = cum.iter().position(|c| !c.is_finite()).unwrap_or(0);
+        FitError::ChordOverflow {
+            direction: "v",
+            line,
+            index: k,
+            chord: cum[k],
+        }
     }
 
     fn chord_error(
@@ -592,11 +626,30 @@ impl IncrementalFitter {
     }
 }
 
-/// True when some chord is zero or not finite; a branch-free scan so it vectorises.
-fn any_bad_chord(chords: &[f64]) -> bool {
-    chords
-        .iter()
-        .fold(false, |bad, &d| bad | (d == 0.0) | !d.is_finite())
+/// Appends one row of cumulative column chords to `cum_v` (whose last `zrow.len()` values are
+/// the previous line's): chord (√(dy² + Δz²), mm) to the previous line's height plus the
+/// previous cumulative value. Returns (some chord is zero or not finite, some cumulative value
+/// is not finite); branch-free so it vectorises.
+fn extend_column_chords(
+    cum_v: &mut Vec<f64>,
+    zrow: &[f64],
+    prev_row: &[f64],
+    dy2: f64,
+) -> (bool, bool) {
+    let n = zrow.len();
+    let base = cum_v.len();
+    cum_v.resize(base + n, 0.0);
+    let (before, row) = cum_v.split_at_mut(base);
+    let prev_cum = &before[base - n..];
+    let (mut bad_v, mut bad_cum) = (false, false);
+    for (((c, &pc), &z), &pz) in row.iter_mut().zip(prev_cum).zip(zrow).zip(prev_row) {
+        let dz = z - pz;
+        let d = (dy2 + dz * dz).sqrt();
+        bad_v |= (d == 0.0) | !d.is_finite();
+        *c = d + pc;
+        bad_cum |= !c.is_finite();
+    }
+    (bad_v, bad_cum)
 }
 
 /// ū_k: mean over rows of the normalised cumulative chords; exactly 0 and 1 at the ends.
