@@ -23,7 +23,11 @@ fn large_surface() -> NurbsSurface {
     let mut poles = Vec::with_capacity(nu * nv);
     for j in 0..nv {
         for i in 0..nu {
-            let (x, y) = (i as f64 * 0.0005, j as f64 * 0.01);
+            // Poles of a real fit carry 17 significant digits; so do these.
+            let (x, y) = (
+                i as f64 * 0.000_500_000_000_3,
+                j as f64 * 0.010_000_000_000_7,
+            );
             let z = 1e-3 * (0.8 * (x * 157.0).sin() + 0.3 * (x * 911.0 + y * 40.0).cos());
             poles.push([x, y, z]);
         }
