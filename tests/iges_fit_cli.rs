@@ -108,3 +108,127 @@ fn missing_input_exits_74_and_bad_pitch_exits_2() {
         .unwrap();
     assert_eq!(st.status.code(), Some(2));
 }
+
+#[test]
+fn a_surface_too_large_for_one_file_is_written_as_named_parts_with_a_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("plane.csv");
+    std::fs::write(&input, plane_grid(80, 10, 0.01, 0.02)).unwrap();
+    let run = |out: &std::path::Path, report: &std::path::Path, caps: &[String]| {
+        let st = surfscan()
+            .arg("fit")
+            .arg(&input)
+            .arg("-o")
+            .arg(out)
+            .args(["--pitch-x", "0.01", "--pitch-y", "0.02", "--report"])
+            .arg(report)
+            .args(caps)
+            .output()
+            .unwrap();
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+        let rep: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(report).unwrap()).unwrap();
+        (String::from_utf8_lossy(&st.stdout).into_owned(), rep)
+    };
+    // Whole surface in one entity, then split into entities of at most a sixth of it.
+    let one = dir.path().join("one.igs");
+    let (_, rep) = run(&one, &dir.path().join("one.json"), &[]);
+    let whole = rep["iges_parameter_lines"].as_u64().unwrap() as usize;
+    let entity_cap = (whole / 6).to_string();
+    let split = dir.path().join("split.igs");
+    let (_, rep) = run(
+        &split,
+        &dir.path().join("split.json"),
+        &["--max-iges-lines-per-entity".into(), entity_cap.clone()],
+    );
+    assert_eq!(rep["iges_files"].as_array().unwrap().len(), 1);
+    let patches = surfscan::iges::read_iges(&std::fs::read(&split).unwrap())
+        .unwrap()
+        .surfaces;
+    let sizes: Vec<usize> = patches
+        .iter()
+        .map(|p| {
+            surfscan::iges::write_iges(
+                Vec::new(),
+                std::slice::from_ref(p),
+                &surfscan::iges::IgesOptions::default(),
+            )
+            .unwrap()
+            .parameter_lines
+        })
+        .collect();
+    let (total, largest) = (sizes.iter().sum::<usize>(), *sizes.iter().max().unwrap());
+    // total/3 + largest < total/2 lines per file: greedy grouping needs exactly 3 files.
+    assert!(largest < total / 6, "{sizes:?}");
+    let file_cap = (total / 3 + largest).to_string();
+
+    let out = dir.path().join("parts/plane.igs");
+    let report = dir.path().join("parts.json");
+    let (stdout, rep) = run(
+        &out,
+        &report,
+        &[
+            "--max-iges-lines-per-entity".into(),
+            entity_cap,
+            "--max-iges-lines-per-file".into(),
+            file_cap,
+        ],
+    );
+    assert!(!out.exists(), "the single-file name must not be written");
+    assert!(stdout.contains("wrote 3 files"), "{stdout}");
+    assert!(stdout.contains("plane.part1-of-3.igs"), "{stdout}");
+    let files = rep["iges_files"].as_array().unwrap();
+    assert_eq!(files.len(), 3);
+    let mut all = Vec::new();
+    let mut bytes = 0;
+    for (k, f) in files.iter().enumerate() {
+        let path = dir
+            .path()
+            .join(format!("parts/plane.part{}-of-3.igs", k + 1));
+        assert_eq!(f["path"], path.display().to_string());
+        let data = std::fs::read(&path).unwrap();
+        assert_eq!(f["bytes"], data.len() as u64);
+        bytes += data.len() as u64;
+        let file = surfscan::iges::read_iges(&data).unwrap();
+        assert_eq!(f["patches"], file.surfaces.len());
+        let start = file.start_lines.join(" ");
+        let (v0, v1) = (
+            f["v_range"][0].as_f64().unwrap(),
+            f["v_range"][1].as_f64().unwrap(),
+        );
+        assert!(
+            start.contains(&format!("part {} of 3, v range [{v0}, {v1}]", k + 1)),
+            "{start}"
+        );
+        assert_eq!(file.surfaces[0].knots_v()[0], v0);
+        assert_eq!(*file.surfaces.last().unwrap().knots_v().last().unwrap(), v1);
+        all.extend(file.surfaces);
+    }
+    assert_eq!(rep["iges_bytes"], bytes);
+    assert_eq!(rep["patches"], all.len());
+    // Parts tile v in order from 0 to 1, and every patch lies on the fitted plane.
+    assert_eq!(all[0].knots_v()[0], 0.0);
+    assert_eq!(*all.last().unwrap().knots_v().last().unwrap(), 1.0);
+    for w in all.windows(2) {
+        assert_eq!(w[0].knots_v().last(), w[1].knots_v().first());
+    }
+    for p in &all {
+        let (v0, v1) = (p.knots_v()[0], *p.knots_v().last().unwrap());
+        for a in 0..=6 {
+            for b in 0..=6 {
+                let q = p.evaluate(a as f64 / 6.0, v0 + (v1 - v0) * b as f64 / 6.0);
+                assert!((q[2] - (0.5 * q[0] + 0.25 * q[1])).abs() < 1e-12, "{q:?}");
+            }
+        }
+    }
+    // The top corner is the last data point (y = 79 · 0.02 mm).
+    let c = all.last().unwrap().evaluate(1.0, 1.0);
+    assert!(
+        (c[0] - 0.09).abs() < 1e-12 && (c[1] - 1.58).abs() < 1e-12,
+        "{c:?}"
+    );
+}

@@ -1,6 +1,6 @@
 //! IGES writer/reader: byte layout rules, bit-exact round trip, refusal of bad values, and
 //! exact patch splitting (checked against an independent de Boor evaluation).
-use surfscan::iges::{read_iges, split_v, write_iges, IgesError, IgesOptions};
+use surfscan::iges::{plan_files, read_iges, split_v, write_iges, IgesError, IgesOptions};
 use surfscan::nurbs::NurbsSurface;
 
 fn opts() -> IgesOptions {
@@ -290,4 +290,135 @@ fn large_nets_formatted_in_parallel_chunks_round_trip_bit_identical() {
     };
     assert_eq!(pb(r), pb(&s));
     assert_eq!(r.knots_v(), s.knots_v());
+}
+
+/// A fitted 60×25 grid (degree 5×5) of a wavy height field.
+fn fitted_surface() -> NurbsSurface {
+    use surfscan::fit::{FitOptions, IncrementalFitter};
+    let mut f = IncrementalFitter::new(FitOptions {
+        degree_u: 5,
+        degree_v: 5,
+    });
+    for r in 0..60 {
+        let row: Vec<f64> = (0..25)
+            .map(|c| 0.8 * ((c as f64) * 0.37 + (r as f64) * 0.21).sin() + 0.01 * (r * c) as f64)
+            .collect();
+        f.push_row(r as f64 * 0.05, 0.02, &row).unwrap();
+    }
+    f.finish().unwrap().surface
+}
+
+/// P lines `write_iges` reports for `patches` written as one file with no caps.
+fn p_lines(patches: &[NurbsSurface]) -> usize {
+    write_iges(Vec::new(), patches, &opts())
+        .unwrap()
+        .parameter_lines
+}
+
+#[test]
+fn plan_files_groups_exact_patches_into_capped_files_that_read_back() {
+    let s = fitted_surface();
+    let whole = p_lines(std::slice::from_ref(&s));
+    // Entities of at most a sixth of the surface: one file holds them all without a file cap.
+    let entity_cap = whole / 6;
+    let one = plan_files(
+        &s,
+        &IgesOptions {
+            max_parameter_lines_per_entity: entity_cap,
+            ..opts()
+        },
+    )
+    .unwrap();
+    assert_eq!(one.len(), 1);
+    let sizes: Vec<usize> = one[0]
+        .iter()
+        .map(|p| p_lines(std::slice::from_ref(p)))
+        .collect();
+    let (total, largest) = (sizes.iter().sum::<usize>(), *sizes.iter().max().unwrap());
+    // A file cap of total/3 + largest patch: greedy filling leaves each closed file with more
+    // than total/3 lines, so at most 3 files; and since it is below total/2 (the largest
+    // patch is under total/6), two files cannot hold everything: exactly 3.
+    assert!(largest < total / 6, "{sizes:?}");
+    let file_cap = total / 3 + largest;
+    let o = IgesOptions {
+        max_parameter_lines_per_entity: entity_cap,
+        max_parameter_lines_per_file: file_cap,
+        ..opts()
+    };
+    let groups = plan_files(&s, &o).unwrap();
+    assert_eq!(
+        groups.len(),
+        3,
+        "{:?}",
+        groups.iter().map(|g| g.len()).collect::<Vec<_>>()
+    );
+    // Writing the whole surface in one file under the same caps is refused with a named error.
+    let r = write_iges(Vec::new(), std::slice::from_ref(&s), &o);
+    assert!(
+        matches!(r, Err(IgesError::SectionTooLong { section: 'P', max_lines, .. }) if max_lines == file_cap),
+        "{r:?}"
+    );
+    let mut read_back: Vec<Vec<NurbsSurface>> = Vec::new();
+    for (k, g) in groups.iter().enumerate() {
+        // Each entity and each file stays within its cap; greedy grouping leaves no room for
+        // the next file's first patch.
+        for p in g {
+            assert!(p_lines(std::slice::from_ref(p)) <= entity_cap);
+        }
+        let lines = p_lines(g);
+        assert!(lines <= file_cap, "file {k}: {lines} > {file_cap}");
+        if let Some(next) = groups.get(k + 1) {
+            assert!(lines + p_lines(&next[..1]) > file_cap);
+        }
+        let mut out = Vec::new();
+        let st = write_iges(&mut out, g, &o).unwrap();
+        assert_eq!(st.parameter_lines, lines);
+        assert_eq!(st.patches, g.len());
+        let file = read_iges(&out).unwrap();
+        assert_eq!(file.surfaces.len(), g.len());
+        for (a, b) in file.surfaces.iter().zip(g) {
+            assert_eq!(a, b, "file {k} does not read back bit-identical");
+        }
+        read_back.push(file.surfaces);
+    }
+    let all: Vec<&NurbsSurface> = read_back.iter().flatten().collect();
+    let nu = s.count_u();
+    // v ranges tile the domain; adjacent patches (also across files) share the boundary row.
+    let (q, nv) = (s.degree_v(), s.count_v());
+    assert_eq!(all[0].knots_v()[0], s.knots_v()[q]);
+    assert_eq!(
+        *all.last().unwrap().knots_v().last().unwrap(),
+        s.knots_v()[nv]
+    );
+    for w in all.windows(2) {
+        assert_eq!(w[0].knots_v().last(), w[1].knots_v().first());
+        let top = &w[0].poles()[(w[0].count_v() - 1) * nu..];
+        let bottom = &w[1].poles()[..nu];
+        assert_eq!(top, bottom);
+    }
+    // Each patch evaluates like the original over its v range, by the crate's evaluator and
+    // by the independent de Boor evaluation.
+    let (u0, u1) = (s.knots_u()[s.degree_u()], s.knots_u()[nu]);
+    for p in &all {
+        let (v0, v1) = (p.knots_v()[0], *p.knots_v().last().unwrap());
+        for a in 0..=12 {
+            for b in 0..=12 {
+                let u = u0 + (u1 - u0) * a as f64 / 12.0;
+                let v = v0 + (v1 - v0) * b as f64 / 12.0;
+                let (e, g, d) = (s.evaluate(u, v), p.evaluate(u, v), eval(p, u, v));
+                for c in 0..3 {
+                    assert!((e[c] - g[c]).abs() <= 1e-12, "{u} {v}: {e:?} vs {g:?}");
+                    assert!((e[c] - d[c]).abs() <= 1e-12, "{u} {v}: {e:?} vs {d:?}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn plan_files_keeps_a_surface_that_fits_in_one_file_whole() {
+    let s = surface(30, 40);
+    let groups = plan_files(&s, &opts()).unwrap();
+    assert_eq!(groups.len(), 1);
+    assert_eq!(groups[0], vec![s]);
 }

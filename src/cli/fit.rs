@@ -4,12 +4,18 @@
 //! output cannot be written; 1 the data are malformed (the message names line, column and
 //! content) or cannot be interpolated.
 //!
+//! A surface whose IGES text does not fit one file (the P section is capped at 9,999,999
+//! lines) is written as several complete IGES files of whole exact patches: `OUT.igs` is then
+//! not written; part i of n goes to `OUT.part<i>-of-<n>.igs` (see [`part_path`]), its Start
+//! section names the part and its v range, and the report lists every file.
+//!
 //! Layer 5 (composition).
 
 use super::{CliError, Exit};
 use crate::atomic::write_atomically;
 use crate::fit::{max_residual_mm, FitOptions, IncrementalFitter};
-use crate::iges::{write_iges, IgesError, IgesOptions};
+use crate::iges::{plan_files, write_iges, IgesError, IgesOptions, MAX_SECTION_LINES};
+use crate::nurbs::NurbsSurface;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -37,6 +43,56 @@ pub struct Args {
     /// Write a JSON fit report here.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Largest number of IGES Parameter Data lines per file (at most 9999999); a larger
+    /// surface is written as several files `OUT.part<i>-of-<n>.igs`.
+    #[arg(long, default_value_t = MAX_SECTION_LINES)]
+    pub max_iges_lines_per_file: usize,
+    /// Largest number of IGES Parameter Data lines per entity 128; a larger surface is split
+    /// along v into exact patches.
+    #[arg(long, default_value_t = MAX_SECTION_LINES)]
+    pub max_iges_lines_per_entity: usize,
+}
+
+/// Where part `index` (1-based) of `count` goes when the surface needs several files:
+/// `dir/name.igs` → `dir/name.part2-of-3.igs` (an output without extension gets
+/// `.part2-of-3`).
+pub fn part_path(output: &Path, index: usize, count: usize) -> PathBuf {
+    let stem = output
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let name = match output.extension() {
+        Some(ext) => format!("{stem}.part{index}-of-{count}.{}", ext.to_string_lossy()),
+        None => format!("{stem}.part{index}-of-{count}"),
+    };
+    output.with_file_name(name)
+}
+
+/// The v parameter range covered by a group of consecutive patches.
+fn v_range(patches: &[NurbsSurface]) -> [f64; 2] {
+    let lo = patches
+        .first()
+        .and_then(|s| s.knots_v().get(s.degree_v()).copied())
+        .unwrap_or(f64::NAN);
+    let hi = patches
+        .last()
+        .and_then(|s| s.knots_v().get(s.count_v()).copied())
+        .unwrap_or(f64::NAN);
+    [lo, hi]
+}
+
+/// Maps a failed atomic IGES write to the CLI error: a surface the format cannot hold is a
+/// data problem (exit 1), anything else an I/O failure.
+fn iges_write_error(path: &Path, e: std::io::Error) -> CliError {
+    let format_problem = e
+        .get_ref()
+        .and_then(|inner| inner.downcast_ref::<IgesError>())
+        .is_some_and(|ie| !matches!(ie, IgesError::Io(_)));
+    let mut err = io_err("cannot write IGES", path, e);
+    if format_problem {
+        err.exit = Exit::Failed;
+    }
+    err
 }
 
 /// A height grid read from CSV: row-major heights in µm.
@@ -190,23 +246,60 @@ pub fn run(args: Args) -> Result<(), CliError> {
         timestamp: now,
         ..IgesOptions::default()
     };
+    let opts = IgesOptions {
+        max_parameter_lines_per_file: args.max_iges_lines_per_file,
+        max_parameter_lines_per_entity: args.max_iges_lines_per_entity,
+        ..opts
+    };
     ensure_parent(&args.output)?;
     let t_write = Instant::now();
-    let stats = write_atomically(&args.output, |w| {
-        write_iges(w, std::slice::from_ref(&fit.surface), &opts).map_err(std::io::Error::other)
-    })
-    .map_err(|e| {
-        // A surface the format cannot hold is a data problem, not an I/O failure.
-        let format_problem = e
-            .get_ref()
-            .and_then(|inner| inner.downcast_ref::<IgesError>())
-            .is_some_and(|ie| !matches!(ie, IgesError::Io(_)));
-        let mut err = io_err("cannot write IGES", &args.output, e);
-        if format_problem {
-            err.exit = Exit::Failed;
-        }
-        err
+    let groups = plan_files(&fit.surface, &opts).map_err(|e| {
+        CliError::new(
+            Exit::Failed,
+            format!("cannot write IGES {}: {e}", args.output.display()),
+        )
     })?;
+    let n_files = groups.len();
+    let mut files = Vec::with_capacity(n_files);
+    let mut stats = crate::iges::IgesStats::default();
+    for (k, group) in groups.iter().enumerate() {
+        let range = v_range(group);
+        let path = if n_files == 1 {
+            args.output.clone()
+        } else {
+            part_path(&args.output, k + 1, n_files)
+        };
+        let mut part_opts = opts.clone();
+        if n_files > 1 {
+            part_opts.file_name = path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            part_opts.start_lines.push(format!(
+                "part {} of {}, v range [{}, {}]; {} exact patch(es); adjacent parts share their boundary pole row, the union of all parts is the surface.",
+                k + 1,
+                n_files,
+                range[0],
+                range[1],
+                group.len()
+            ));
+        }
+        let st = write_atomically(&path, |w| {
+            write_iges(w, group, &part_opts).map_err(std::io::Error::other)
+        })
+        .map_err(|e| iges_write_error(&path, e))?;
+        stats.patches += st.patches;
+        stats.bytes += st.bytes;
+        stats.parameter_lines += st.parameter_lines;
+        files.push(serde_json::json!({
+            "path": path.display().to_string(),
+            "part": k + 1,
+            "v_range": range,
+            "patches": st.patches,
+            "bytes": st.bytes,
+            "parameter_lines": st.parameter_lines,
+        }));
+    }
     let write_s = t_write.elapsed().as_secs_f64();
 
     let s = &fit.surface;
@@ -226,6 +319,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         "patches": stats.patches,
         "iges_bytes": stats.bytes,
         "iges_parameter_lines": stats.parameter_lines,
+        "iges_files": files,
         "timings_s": {
             "read": read_s,
             "fit_params": fit.timings.params_s,
@@ -245,9 +339,20 @@ pub fn run(args: Args) -> Result<(), CliError> {
         })
         .map_err(|e| io_err("cannot write report", path, e))?;
     }
+    let written = if n_files == 1 {
+        args.output.display().to_string()
+    } else {
+        format!(
+            "{} too large for one IGES file; wrote {} files {} .. {}",
+            args.output.display(),
+            n_files,
+            part_path(&args.output, 1, n_files).display(),
+            part_path(&args.output, n_files, n_files).display()
+        )
+    };
     println!(
         "{}: {}x{} grid, {}x{} poles, max residual {:.3e} mm, {} patch(es), {} bytes; fit {:.1} ms, write {:.1} ms",
-        args.output.display(),
+        written,
         grid.rows,
         grid.cols,
         s.count_u(),
@@ -264,6 +369,22 @@ pub fn run(args: Args) -> Result<(), CliError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn part_names_keep_directory_and_extension() {
+        assert_eq!(
+            part_path(Path::new("/data/run 7/sur-2.igs"), 2, 3),
+            PathBuf::from("/data/run 7/sur-2.part2-of-3.igs")
+        );
+        assert_eq!(
+            part_path(Path::new("out/a.b.IGES"), 10, 12),
+            PathBuf::from("out/a.b.part10-of-12.IGES")
+        );
+        assert_eq!(
+            part_path(Path::new("surface"), 1, 2),
+            PathBuf::from("surface.part1-of-2")
+        );
+    }
 
     #[test]
     fn parses_a_grid_and_ignores_trailing_blank_lines() {

@@ -1,7 +1,8 @@
 //! IGES 5.3 writer (entity 128, millimetres) and a strict reader of the files it writes.
 //!
 //! * [`format`]: reals (shortest round-trip, `.` and `E`), Hollerith strings, record packing.
-//! * [`writer`]: [`write_iges`] formats surfaces into S/G/D/P/T sections.
+//! * [`writer`]: [`write_iges`] formats surfaces into S/G/D/P/T sections; [`plan_files`]
+//!   groups the exact patches of a surface too large for one file into several files.
 //! * [`split`]: exact patches along v by knot insertion, for surfaces too large for one entity.
 //! * [`reader`]: [`read_iges`] checks the structure and rebuilds the surfaces.
 //!
@@ -15,7 +16,7 @@ pub mod writer;
 
 pub use reader::{read_iges, IgesFile};
 pub use split::{split_v, split_v_middle};
-pub use writer::{write_iges, IgesOptions, IgesStats, MAX_SECTION_LINES};
+pub use writer::{plan_files, write_iges, IgesOptions, IgesStats, MAX_SECTION_LINES};
 
 use thiserror::Error;
 
@@ -52,13 +53,16 @@ pub enum IgesError {
         /// Poles along v.
         count_v: usize,
     },
-    /// A section would exceed 9,999,999 lines (the 7-digit sequence field).
-    #[error("section {section} would need {lines} lines, more than the 9999999 IGES allows; write fewer lines per file (split the grid into several files)")]
+    /// A section would exceed the per-file limit (at most 9,999,999 lines, the 7-digit
+    /// sequence field).
+    #[error("section {section} would need {lines} lines, more than the {max_lines} allowed per file; group the patches into several files with plan_files")]
     SectionTooLong {
         /// Section letter.
         section: char,
         /// Lines needed.
         lines: usize,
+        /// The per-file limit.
+        max_lines: usize,
     },
     /// The file's structure is invalid (line length, section letters, sequence numbers,
     /// terminate counts, directory entries, pointers).

@@ -32,6 +32,10 @@ pub struct IgesOptions {
     /// Largest number of Parameter Data lines one entity may take; larger surfaces are split
     /// along v into exact patches. Default [`MAX_SECTION_LINES`].
     pub max_parameter_lines_per_entity: usize,
+    /// Largest number of Parameter Data lines one file may take (the P section's 7-digit
+    /// sequence field caps it at [`MAX_SECTION_LINES`]); [`plan_files`] groups patches into
+    /// as many files as needed. Default [`MAX_SECTION_LINES`].
+    pub max_parameter_lines_per_file: usize,
 }
 
 impl Default for IgesOptions {
@@ -44,6 +48,7 @@ impl Default for IgesOptions {
             timestamp: chrono::NaiveDateTime::default(),
             start_lines: Vec::new(),
             max_parameter_lines_per_entity: MAX_SECTION_LINES,
+            max_parameter_lines_per_file: MAX_SECTION_LINES,
         }
     }
 }
@@ -204,6 +209,69 @@ fn format_patches(
     }
 }
 
+/// Splits `surface` along v until each patch needs at most `max_lines` P lines; appends
+/// (patch, its P line count) in v order. Formats each candidate once to count its lines.
+fn split_to_fit(
+    surface: NurbsSurface,
+    max_lines: usize,
+    out: &mut Vec<(NurbsSurface, usize)>,
+) -> Result<(), IgesError> {
+    let lines = entity_128_params(&surface, out.len())?.len() / 64;
+    if lines <= max_lines {
+        out.push((surface, lines));
+        return Ok(());
+    }
+    match split_v_middle(&surface) {
+        Some((lower, upper)) => {
+            drop(surface);
+            split_to_fit(lower, max_lines, out)?;
+            split_to_fit(upper, max_lines, out)
+        }
+        None => Err(IgesError::EntityTooLarge {
+            lines,
+            max_lines,
+            count_u: surface.count_u(),
+            count_v: surface.count_v(),
+        }),
+    }
+}
+
+/// Plans how `surface` is written: splits it along v into exact patches (adjacent patches
+/// share their boundary pole row, so their union is exactly the surface), each needing at
+/// most `opts.max_parameter_lines_per_entity` and `opts.max_parameter_lines_per_file` P lines,
+/// then groups consecutive patches into files whose P sections stay within
+/// `opts.max_parameter_lines_per_file` (never more than [`MAX_SECTION_LINES`]). Returns one
+/// group per file, in v order; pass each group to [`write_iges`]. One group means one file.
+pub fn plan_files(
+    surface: &NurbsSurface,
+    opts: &IgesOptions,
+) -> Result<Vec<Vec<NurbsSurface>>, IgesError> {
+    let file_cap = opts
+        .max_parameter_lines_per_file
+        .clamp(1, MAX_SECTION_LINES);
+    let entity_cap = opts.max_parameter_lines_per_entity.clamp(1, file_cap);
+    let mut patches = Vec::new();
+    split_to_fit(surface.clone(), entity_cap, &mut patches)?;
+    let mut files: Vec<Vec<NurbsSurface>> = Vec::new();
+    let mut current: Vec<NurbsSurface> = Vec::new();
+    let mut current_lines = 0usize;
+    for (patch, lines) in patches {
+        // Two DE lines per entity; the DE section shares the same 7-digit cap.
+        let fits =
+            current_lines + lines <= file_cap && 2 * (current.len() + 1) <= MAX_SECTION_LINES;
+        if !current.is_empty() && !fits {
+            files.push(std::mem::take(&mut current));
+            current_lines = 0;
+        }
+        current_lines += lines;
+        current.push(patch);
+    }
+    if !current.is_empty() {
+        files.push(current);
+    }
+    Ok(files)
+}
+
 /// Wraps free text to 72 columns at spaces (hard-splitting longer words).
 fn wrap72(lines: &[String]) -> Vec<String> {
     let mut out = Vec::new();
@@ -264,6 +332,9 @@ pub fn write_iges<W: Write>(
     if surfaces.is_empty() {
         return Err(IgesError::NoSurfaces);
     }
+    let file_cap = opts
+        .max_parameter_lines_per_file
+        .clamp(1, MAX_SECTION_LINES);
     let max_lines = opts
         .max_parameter_lines_per_entity
         .clamp(1, MAX_SECTION_LINES);
@@ -273,10 +344,18 @@ pub fn write_iges<W: Write>(
     }
     let p_lines: usize = patches.iter().map(|d| d.len() / 64).sum();
     let d_lines = 2 * patches.len();
-    if p_lines > MAX_SECTION_LINES || d_lines > MAX_SECTION_LINES {
+    if p_lines > file_cap {
         return Err(IgesError::SectionTooLong {
             section: 'P',
             lines: p_lines,
+            max_lines: file_cap,
+        });
+    }
+    if d_lines > MAX_SECTION_LINES {
+        return Err(IgesError::SectionTooLong {
+            section: 'D',
+            lines: d_lines,
+            max_lines: MAX_SECTION_LINES,
         });
     }
     let max_coord = surfaces
