@@ -61,7 +61,7 @@ fn model_sampled_on_the_real_31_line_grid_reproduces_data_and_keeps_sa_sq() {
     use surfscan::metrology::model::sample_model_grid;
     let dir = match std::env::var_os("SURFSCAN_REAL_DATA") {
         Some(d) => std::path::PathBuf::from(d),
-        None => std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/real"),
+        None => std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real"),
     };
     let path = dir.join("sur-2.31profiles.y_mm_x_mm_z_um.csv");
     let text = std::fs::read_to_string(&path)

@@ -1,4 +1,4 @@
-//! The real profiles in `shared/data/real/` checked against an independent implementation:
+//! The real profiles in `tests/data/real/` checked against an independent implementation:
 //! surfalize 0.19.2 and scipy, run by `tests/python/metrology_surfalize.py`. The test fails (it
 //! does not skip) when Python or those packages are missing:
 //! `pip install -r tests/python/requirements.txt`.
@@ -30,7 +30,7 @@ use surfscan::metrology::params::{analyze_line, Options};
 fn data_dir() -> PathBuf {
     match std::env::var_os("SURFSCAN_REAL_DATA") {
         Some(d) => PathBuf::from(d),
-        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/real"),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real"),
     }
 }
 
