@@ -103,7 +103,20 @@ pub fn bearing_curve_xz(
         }
     }
     let mean = area / total;
-    let z: Vec<f64> = zs.iter().map(|h| h - mean).collect();
+    Ok(curve_about_mean(zs, mean, levels, |z, h| {
+        material_ratio_xz_pct(xs, z, h)
+    }))
+}
+
+/// Heights referenced to `mean`, `levels` equal levels from the highest point (0 %) to the
+/// lowest (100 %), the ratio at each interior level from `ratio(referenced heights, level)`.
+fn curve_about_mean(
+    heights: &[f64],
+    mean: f64,
+    levels: usize,
+    ratio: impl Fn(&[f64], f64) -> f64,
+) -> BearingCurve {
+    let z: Vec<f64> = heights.iter().map(|h| h - mean).collect();
     let top = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let bottom = z.iter().copied().fold(f64::INFINITY, f64::min);
     let points = (0..levels)
@@ -114,15 +127,15 @@ pub fn bearing_curve_xz(
             } else if k == levels - 1 {
                 100.0
             } else {
-                material_ratio_xz_pct(xs, &z, h)
+                ratio(&z, h)
             };
             [h, mr]
         })
         .collect();
-    Ok(BearingCurve {
+    BearingCurve {
         mean_line_um: mean,
         points,
-    })
+    }
 }
 
 /// One bearing area curve: levels from the highest to the lowest point, with their ratios.
@@ -159,26 +172,7 @@ pub fn bearing_curve(heights: &[f64], levels: usize) -> Result<BearingCurve, Met
     let first = heights.first().copied().unwrap_or(0.0);
     let last = heights.last().copied().unwrap_or(0.0);
     let mean = (heights.iter().sum::<f64>() - 0.5 * (first + last)) / (n - 1) as f64;
-    let z: Vec<f64> = heights.iter().map(|h| h - mean).collect();
-    let top = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let bottom = z.iter().copied().fold(f64::INFINITY, f64::min);
-    let points = (0..levels)
-        .map(|k| {
-            let h = top - (top - bottom) * k as f64 / (levels - 1) as f64;
-            let mr = if k == 0 {
-                0.0
-            } else if k == levels - 1 {
-                100.0
-            } else {
-                material_ratio_pct(&z, h)
-            };
-            [h, mr]
-        })
-        .collect();
-    Ok(BearingCurve {
-        mean_line_um: mean,
-        points,
-    })
+    Ok(curve_about_mean(heights, mean, levels, material_ratio_pct))
 }
 
 /// The bearing area curve of a curve given as a function of x (mm, heights in µm), sampled at
