@@ -14,7 +14,8 @@
 //! 2. I/O adapters: [`transport`] (the only code that opens a serial port), the clients in
 //!    [`sj210`] and [`stage`], generic over `AsyncRead + AsyncWrite`.
 //! 3. The session: [`scan`] (plan, durable storage and journal, resume, runner).
-//! 4. Process edges: [`telemetry`] (logging), [`atomic`] (durable file replacement).
+//! 4. Process edges: [`telemetry`] (logging), [`atomic`] (durable file replacement),
+//!    [`control`] (the operator's control socket).
 //! 5. Composition: [`cli`] (one file per subcommand) and `main.rs`.
 //!
 //! The simulator (`simulator/`, crate `surfscan-sim`) speaks the instrument's and the
@@ -24,6 +25,7 @@
 
 pub mod atomic;
 pub mod cli;
+pub mod control;
 pub mod devices;
 pub mod fit;
 pub mod iges;
