@@ -263,9 +263,9 @@ mod tests {
             serde_json::from_str::<Request>(r#"{"class":"pause"}"#).unwrap(),
             Request::Pause
         );
-        // No raw passthrough: an unknown class is refused, so are unknown fields.
+        // No raw passthrough: an unknown class is refused, so is a misspelt start field.
         assert!(serde_json::from_str::<Request>(r#"{"class":"raw","cmd":"CTSTA"}"#).is_err());
-        assert!(serde_json::from_str::<Request>(r#"{"class":"pause","x":1}"#).is_err());
+        assert!(serde_json::from_str::<Request>(r#"{"class":"start","specimn":"B"}"#).is_err());
     }
 
     #[test]
