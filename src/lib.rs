@@ -25,6 +25,7 @@
 
 pub mod atomic;
 pub mod cli;
+pub mod config;
 pub mod control;
 pub mod devices;
 pub mod fit;

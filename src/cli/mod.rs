@@ -9,8 +9,10 @@ use clap::{Parser, Subcommand};
 use std::fmt;
 
 pub mod analyze;
+pub mod demo;
 pub mod fit;
 pub mod probe;
+pub mod scan;
 
 /// surfscan: unattended surface-roughness scanning with an SJ-210 and a y stage.
 #[derive(Debug, Parser)]
@@ -33,6 +35,10 @@ pub enum Command {
     Probe(probe::Args),
     /// Characterise a profile or grid CSV: ISO roughness per line, areal parameters, bearing area curves.
     Analyze(analyze::Args),
+    /// Run one scan in the foreground (resuming an unfinished scan of this configuration).
+    Scan(scan::Args),
+    /// A complete simulated scan: simulator in-process, real serial code path, IGES and report.
+    Demo(demo::Args),
 }
 
 /// Process exit status (sysexits).
@@ -83,5 +89,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Fit(args) => fit::run(args),
         Command::Probe(args) => probe::run(args),
         Command::Analyze(args) => analyze::run(args),
+        Command::Scan(args) => scan::run(args),
+        Command::Demo(args) => demo::run(args),
     }
 }

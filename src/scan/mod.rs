@@ -6,6 +6,12 @@
 //! - [`journal`]: `journal.jsonl` records, torn-tail recovery, resume state.
 //! - [`metrics`]: the Prometheus text-format metrics file.
 
+pub mod hook;
 pub mod journal;
 pub mod metrics;
+pub mod outputs;
+pub mod plan;
+pub mod runner;
+pub mod station;
 pub mod store;
+pub mod testhooks;

@@ -353,21 +353,12 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
     }
 
     /// Pitch in µm and where it came from.
-    fn pitch_um(&self, c: &Conditions) -> Result<(f64, String), Sj210Error> {
+    pub fn pitch_um(&self, c: &Conditions) -> Result<(f64, String), Sj210Error> {
         if let Some(p) = self.opts.pitch_x_um {
             return Ok((p, "config".to_string()));
         }
-        // C3's mapping, confirmed for 2.5 µm by SJ-410 memory-card files (C4).
         let ls = c.lambda_s_um.ok_or(Sj210Error::PitchUnknown)?;
-        let p = if (ls - 2.5).abs() < 1e-9 {
-            0.5
-        } else if (ls - 8.0).abs() < 1e-9 {
-            1.0
-        } else if (ls - 25.0).abs() < 1e-9 {
-            5.0
-        } else {
-            return Err(Sj210Error::PitchUnknown);
-        };
+        let p = pitch_from_lambda_s(ls).ok_or(Sj210Error::PitchUnknown)?;
         Ok((p, format!("lambda-s {ls} um")))
     }
 
@@ -718,6 +709,15 @@ fn io_err(e: std::io::Error) -> LinkError {
 
 fn millis(d: std::time::Duration) -> u64 {
     u64::try_from(d.as_millis()).unwrap_or(u64::MAX)
+}
+
+/// The exported profile's x pitch in µm for a λs in µm (2.5 → 0.5, 8 → 1, 25 → 5), `None`
+/// for any other λs. C3's mapping, confirmed for 2.5 µm by SJ-410 memory-card files (C4).
+pub fn pitch_from_lambda_s(lambda_s_um: f64) -> Option<f64> {
+    [(2.5, 0.5), (8.0, 1.0), (25.0, 5.0)]
+        .into_iter()
+        .find(|(ls, _)| (lambda_s_um - ls).abs() < 1e-9)
+        .map(|(_, p)| p)
 }
 
 /// A 3-digit code payload.

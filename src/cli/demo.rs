@@ -1,0 +1,182 @@
+//! `surfscan demo`: a complete simulated scan on a machine without hardware. The simulator
+//! runs in-process (an SJ-210 and a GRBL y stage on pseudo-terminals of their own, replaying
+//! 31 windows of a real Mitutoyo roughness profile, time-scaled), and the scan runs against
+//! them through the real serial code path — transport, codecs, drivers, motion policy, the
+//! runner, durable storage, fit, IGES and the report — exactly as on a station. The
+//! configuration written for it (`DIR/demo.toml`) is a working station configuration with
+//! the simulator's links as ports.
+//!
+//! Layer 5 (composition): the simulator crate, config, station, runner.
+
+use super::scan::{load_config, outcome_result, run_foreground};
+use super::{CliError, Exit};
+use crate::scan::runner::{RunSettings, ScanRequest};
+use crate::scan::station::SerialStation;
+use crate::scan::testhooks::TestHooks;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+use surfscan_sim::grbl::{GrblSimConfig, StageShared};
+use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, Simulator};
+
+/// Arguments of `surfscan demo`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Directory for the scan, its surface, report and plots (created if missing).
+    #[arg(long, default_value = "demo-out")]
+    pub out: PathBuf,
+    /// Simulated time runs this many times faster than real time (1 = a real station's pace).
+    #[arg(long, default_value_t = 50.0)]
+    pub speed_up: f64,
+}
+
+/// y of the first line in the demo (GRBL machine coordinates are negative after homing).
+const Y_START_MM: f64 = -20.0;
+
+/// The station configuration of the demo: the simulator's links as ports.
+pub fn demo_config(instrument: &Path, stage: &Path, out: &Path) -> String {
+    format!(
+        r#"# Written by `surfscan demo`: a station configuration whose ports are the simulator's
+# pseudo-terminals. See config/surfscan.toml for every key.
+[instrument]
+port = {instrument:?}
+model = "sj210"
+baud = 38400
+# The replayed profiles are sampled every 1.5 um.
+pitch-x-um = 1.5
+
+[instrument.timeouts]
+# Simulated time runs faster than real time: poll the status often enough to see it.
+poll-interval-ms = 10
+
+[instrument.commands]
+# The SJ-210 manual documents no profile read-out; these are the SJ-410's RDEVA commands,
+# which the simulator answers (see config/surfscan.toml).
+profile-total = "RDEVA00"
+profile-block = "RDEVA{{n}}"
+
+[stage]
+port = {stage:?}
+protocol = "grbl"
+steps-per-mm = 400.0
+soft-limit-min-mm = -100.0
+soft-limit-max-mm = 0.0
+backlash-mm = 0.05
+settle-ms = 5
+poll-interval-ms = 200
+home-on-start = true
+
+[scan]
+lines = 31
+y-start-mm = {Y_START_MM:?}
+y-step-mm = 0.01
+
+[output]
+dir = {out:?}
+
+[control]
+socket = {sock:?}
+"#,
+        instrument = instrument.display().to_string(),
+        stage = stage.display().to_string(),
+        out = out.display().to_string(),
+        sock = out.join("sim").join("control.sock").display().to_string(),
+    )
+}
+
+/// Runs `surfscan demo`.
+pub fn run(args: Args) -> Result<(), CliError> {
+    if !(args.speed_up.is_finite() && args.speed_up >= 1.0) {
+        return Err(CliError::new(
+            Exit::Usage,
+            format!("--speed-up {} must be at least 1", args.speed_up),
+        ));
+    }
+    let out = &args.out;
+    let sim_dir = out.join("sim");
+    std::fs::create_dir_all(&sim_dir).map_err(|e| {
+        CliError::new(
+            Exit::Io,
+            format!("cannot create {}: {e}", sim_dir.display()),
+        )
+    })?;
+    let out = std::fs::canonicalize(out)
+        .map_err(|e| CliError::new(Exit::Io, format!("cannot resolve {}: {e}", out.display())))?;
+    let sim_dir = out.join("sim");
+    let instrument_link = sim_dir.join("sj210");
+    let stage_link = sim_dir.join("ystage");
+    let config_path = out.join("demo.toml");
+    crate::atomic::write_atomically(&config_path, |w| {
+        std::io::Write::write_all(
+            w,
+            demo_config(&instrument_link, &stage_link, &out).as_bytes(),
+        )
+    })
+    .map_err(|e| {
+        CliError::new(
+            Exit::Io,
+            format!("cannot write {}: {e}", config_path.display()),
+        )
+    })?;
+    let (config, config_hash) = load_config(&config_path)?;
+    let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
+        .map_err(|e| CliError::new(Exit::Config, e))?;
+    let settings = RunSettings {
+        config,
+        config_hash,
+        hooks: Arc::new(TestHooks::none()),
+    };
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
+    let outcome = rt.block_on(async {
+        let mut profiles = ProfileSet::bundled()
+            .map_err(|e| CliError::new(Exit::Failed, format!("bundled profiles: {e}")))?;
+        profiles.y_first_mm = Y_START_MM;
+        let instrument = InstrumentConfig {
+            time_scale: 1.0 / args.speed_up,
+            ..InstrumentConfig::default()
+        };
+        let grbl = GrblSimConfig {
+            steps_per_mm: 400.0,
+            max_travel_mm: 100.0,
+            backlash_mm: 0.02,
+            time_scale: args.speed_up,
+            ..GrblSimConfig::default()
+        };
+        let sim = Simulator::new(&instrument_link)
+            .instrument(instrument)
+            .profiles(profiles)
+            .baud(38400 * args.speed_up.min(100.0) as u32)
+            .grbl_stage(&stage_link, grbl, StageShared::new());
+        let mut handle = sim
+            .start()
+            .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the simulator: {e}")))?;
+        match tokio::time::timeout(Duration::from_secs(10), handle.next_event()).await {
+            Ok(Some(SimEvent::Ready(_))) => {}
+            other => {
+                return Err(CliError::new(
+                    Exit::Failed,
+                    format!("the simulator did not become ready: {other:?}"),
+                ))
+            }
+        }
+        println!(
+            "simulator: SJ-210 on {}, GRBL stage on {}; configuration {}",
+            instrument_link.display(),
+            stage_link.display(),
+            config_path.display()
+        );
+        let request = ScanRequest::New {
+            specimen: "demo: Mitutoyo R profile windows".into(),
+            operator: "surfscan demo".into(),
+            notes: "simulated station replaying real profiles".into(),
+        };
+        let outcome = run_foreground(&mut station, &settings, request).await;
+        handle.shutdown().await;
+        Ok(outcome)
+    })?;
+    outcome_result(&outcome)
+}

@@ -1,0 +1,240 @@
+//! `surfscan scan`: one scan in the foreground, exactly as the daemon runs it — an
+//! unfinished scan of this configuration is resumed first — with a progress bar (line k/N,
+//! ETA, the last line's Ra). Ctrl-C abandons the current line and leaves the scan
+//! resumable, as SIGTERM does for the daemon.
+//!
+//! Exit status: 0 success, 1 the scan failed or was aborted, 2 usage, 69 a device is
+//! unavailable (or the daemon holds the ports), 74 I/O error, 78 bad configuration.
+//!
+//! Layer 5 (composition): config, station, runner, signals, terminal.
+
+use super::{CliError, Exit};
+use crate::config::{Config, ConfigError};
+use crate::control::protocol::{State, Status};
+use crate::scan::journal::find_unfinished;
+use crate::scan::runner::{run_scan, Control, FailKind, Outcome, RunSettings, ScanRequest};
+use crate::scan::station::SerialStation;
+use crate::scan::testhooks::TestHooks;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use tokio::sync::{mpsc, watch};
+
+/// Arguments of `surfscan scan`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Station configuration (TOML).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Specimen id (recorded with the scan).
+    #[arg(long, default_value = "")]
+    pub specimen: String,
+    /// Operator name (recorded with the scan).
+    #[arg(long, default_value = "")]
+    pub operator: String,
+    /// Free-text notes (recorded with the scan).
+    #[arg(long, default_value = "")]
+    pub notes: String,
+}
+
+/// Loads the configuration and the SHA-256 of its bytes; a bad file is exit 78.
+pub fn load_config(path: &Path) -> Result<(Config, String), CliError> {
+    let bytes = std::fs::read(path).map_err(|e| {
+        CliError::new(
+            Exit::Config,
+            ConfigError::Read {
+                path: path.to_path_buf(),
+                source: e,
+            }
+            .to_string(),
+        )
+    })?;
+    let text = String::from_utf8(bytes.clone()).map_err(|e| {
+        CliError::new(
+            Exit::Config,
+            format!(
+                "config {}: not UTF-8 text (byte {})",
+                path.display(),
+                e.utf8_error().valid_up_to()
+            ),
+        )
+    })?;
+    let config =
+        Config::parse(path, &text).map_err(|e| CliError::new(Exit::Config, e.to_string()))?;
+    Ok((config, crate::scan::store::hex_sha256(&bytes)))
+}
+
+/// The scan to run for this configuration: the newest unfinished one, else a new one.
+pub fn choose_request(
+    config: &Config,
+    specimen: String,
+    operator: String,
+    notes: String,
+) -> Result<ScanRequest, CliError> {
+    let unfinished = find_unfinished(&config.output.dir).map_err(|e| {
+        CliError::new(
+            Exit::Io,
+            format!(
+                "cannot look for unfinished scans in {}: {e}",
+                config.output.dir.display()
+            ),
+        )
+    })?;
+    if let Some((last, older)) = unfinished.split_last() {
+        for o in older {
+            tracing::warn!(
+                "{} is also unfinished; only the newest is resumed (resume it by hand with `surfscan fit`/`analyze`, or add a stop record)",
+                o.display()
+            );
+        }
+        tracing::info!("resuming the unfinished scan {}", last.display());
+        return Ok(ScanRequest::Resume(last.clone()));
+    }
+    Ok(ScanRequest::New {
+        specimen,
+        operator,
+        notes,
+    })
+}
+
+/// Maps a scan's outcome to the exit status and message of a foreground command.
+pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
+    match outcome {
+        Outcome::Success { dir, outputs } => {
+            println!("scan complete: {}", dir.display());
+            for p in &outputs.iges {
+                println!("  surface  {}", p.display());
+            }
+            println!("  report   {}", outputs.report.display());
+            println!(
+                "  largest residual at the data points {:.3e} mm",
+                outputs.max_residual_mm
+            );
+            Ok(())
+        }
+        Outcome::Aborted { dir } => Err(CliError::new(
+            Exit::Failed,
+            format!(
+                "scan aborted; the lines traced are kept in {}",
+                dir.display()
+            ),
+        )),
+        Outcome::Interrupted { dir } => Err(CliError::new(
+            Exit::Failed,
+            format!(
+                "scan interrupted; run the same command again to resume it ({})",
+                dir.display()
+            ),
+        )),
+        Outcome::Failed { dir, reason, kind } => {
+            let exit = match kind {
+                FailKind::Scan => Exit::Failed,
+                FailKind::Unavailable => Exit::Unavailable,
+                FailKind::Io => Exit::Io,
+            };
+            let msg = match dir {
+                Some(d) => format!("scan failed: {reason} (lines kept in {})", d.display()),
+                None => format!("scan not started: {reason}"),
+            };
+            Err(CliError::new(exit, msg))
+        }
+    }
+}
+
+/// Refuses when a daemon answers on the configured control socket: it holds the ports.
+pub fn refuse_if_daemon(config: &Config) -> Result<(), CliError> {
+    let sock = &config.control.socket;
+    if std::os::unix::net::UnixStream::connect(sock).is_ok() {
+        return Err(CliError::new(
+            Exit::Unavailable,
+            format!(
+                "the surfscan daemon is running (it answers on {}) and holds the ports; use `surfscan start` to scan through it, or stop it first",
+                sock.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Draws a progress bar from status snapshots until the channel closes.
+async fn progress(mut rx: watch::Receiver<Status>) {
+    if !std::io::stderr().is_terminal() {
+        return;
+    }
+    let bar = indicatif::ProgressBar::new(0);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:30} line {pos}/{len} {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    while rx.changed().await.is_ok() {
+        let s = rx.borrow_and_update().clone();
+        bar.set_length(u64::from(s.lines_total));
+        bar.set_position(u64::from(s.lines_done));
+        let mut msg = String::new();
+        if let Some(eta) = s.eta_s {
+            msg.push_str(&format!("ETA {:.0} min ", eta / 60.0));
+        }
+        if let Some(ra) = s.last_ra_um {
+            msg.push_str(&format!("last Ra {ra} um "));
+        }
+        if s.state != State::Scanning {
+            msg.push_str(&s.summary());
+        }
+        bar.set_message(msg);
+    }
+    bar.finish_and_clear();
+}
+
+/// Runs one scan in the foreground on `station`; SIGINT/SIGTERM interrupt it resumably.
+pub async fn run_foreground(
+    station: &mut SerialStation,
+    settings: &RunSettings,
+    request: ScanRequest,
+) -> Outcome {
+    let (_cmd_tx, cmd_rx) = mpsc::channel(8);
+    let (shutdown_tx, shutdown_rx) = watch::channel(false);
+    let (status_tx, status_rx) = watch::channel(Status::idle());
+    let bar = tokio::spawn(progress(status_rx));
+    let signals = tokio::spawn(async move {
+        use tokio::signal::unix::{signal, SignalKind};
+        let (Ok(mut term), Ok(mut int)) = (
+            signal(SignalKind::terminate()),
+            signal(SignalKind::interrupt()),
+        ) else {
+            return;
+        };
+        tokio::select! {
+            _ = term.recv() => {}
+            _ = int.recv() => {}
+        }
+        tracing::warn!("signal received: abandoning the current line; the scan stays resumable");
+        let _ = shutdown_tx.send(true);
+    });
+    let mut ctl = Control::new(cmd_rx, shutdown_rx, status_tx);
+    let outcome = run_scan(station, &mut ctl, settings, request).await;
+    drop(ctl);
+    signals.abort();
+    let _ = bar.await;
+    outcome
+}
+
+/// Runs `surfscan scan`.
+pub fn run(args: Args) -> Result<(), CliError> {
+    let (config, config_hash) = load_config(&args.config)?;
+    refuse_if_daemon(&config)?;
+    let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
+    let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
+        .map_err(|e| CliError::new(Exit::Config, e))?;
+    let request = choose_request(&config, args.specimen, args.operator, args.notes)?;
+    let settings = RunSettings {
+        config,
+        config_hash,
+        hooks: Arc::new(hooks),
+    };
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
+    let outcome = rt.block_on(run_foreground(&mut station, &settings, request));
+    outcome_result(&outcome)
+}

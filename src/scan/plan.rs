@@ -1,0 +1,38 @@
+//! The plan of a scan: the lines to trace and the surface to fit, frozen in the journal's
+//! start record so that a resumed scan follows it even when the configuration was edited.
+//!
+//! Layer 0 (vocabulary): depends on [`crate::units`] only.
+
+use crate::units::Nm;
+use serde::{Deserialize, Serialize};
+
+/// The plan of a scan as frozen in its start record: what a resumed scan follows even
+/// when the configuration was edited since.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Plan {
+    /// Number of lines.
+    pub lines: u32,
+    /// y of the first line.
+    pub y_start_nm: Nm,
+    /// y step between lines.
+    pub y_step_nm: Nm,
+    /// Degree along u.
+    pub degree_u: usize,
+    /// Degree along v.
+    pub degree_v: usize,
+    /// Attempts per line.
+    pub max_line_attempts: u32,
+}
+
+impl Plan {
+    /// Absolute y target of line `index` (0-based).
+    pub fn target(&self, index: u32) -> Nm {
+        Nm(self.y_start_nm.0 + i64::from(index) * self.y_step_nm.0)
+    }
+
+    /// Every target, in line order.
+    pub fn targets(&self) -> Vec<Nm> {
+        (0..self.lines).map(|k| self.target(k)).collect()
+    }
+}

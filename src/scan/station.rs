@@ -1,0 +1,173 @@
+//! The station as the scan runner sees it: something that can (re)open the instrument and
+//! the y axis, and say whether their ports are there. Device errors are reduced to a
+//! [`Fault`] (which device, how to react, the NG code, the message) so the runner decides
+//! uniformly without knowing the drivers.
+//!
+//! [`SerialStation`] is the real one: the SJ-210 client and the motion policy over ports
+//! opened by [`crate::transport`]. Tests substitute their own.
+//!
+//! Layer 3 (session): depends on [`crate::devices`], the driver settings and
+//! [`crate::transport`] (through the drivers' constructors).
+
+use crate::devices::{DeviceFault, FaultClass, Instrument, YAxis};
+use crate::profile::Conditions;
+use crate::sj210::client::{pitch_from_lambda_s, Sj210Client};
+use crate::sj210::models::ModelTable;
+use crate::sj210::settings::InstrumentSettings;
+use crate::stage::policy::{AnyYAxis, ScanDirection};
+use crate::stage::settings::StageSettings;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::path::Path;
+use tokio_serial::SerialStream;
+
+/// Which device a fault concerns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Device {
+    /// The profiler.
+    Instrument,
+    /// The y stage.
+    Stage,
+}
+
+impl Device {
+    /// `instrument` / `stage`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Device::Instrument => "instrument",
+            Device::Stage => "stage",
+        }
+    }
+}
+
+impl fmt::Display for Device {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A device error as the runner handles it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Fault {
+    /// The device.
+    pub device: Device,
+    /// How to react.
+    pub class: FaultClass,
+    /// The instrument's NG code, when it answered with one.
+    pub ng_code: Option<u16>,
+    /// The driver's message (names the command and the cause).
+    pub message: String,
+}
+
+impl Fault {
+    /// Reduces a driver error.
+    pub fn of<E: DeviceFault>(device: Device, e: &E) -> Fault {
+        Fault {
+            device,
+            class: e.class(),
+            ng_code: e.ng_code(),
+            message: e.to_string(),
+        }
+    }
+}
+
+impl fmt::Display for Fault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.device, self.message)?;
+        if let Some(c) = self.ng_code {
+            if !self.message.contains(&format!("NG{c:03}")) {
+                write!(f, " (NG{c:03})")?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Opens the devices of a station.
+#[allow(async_fn_in_trait)]
+pub trait Station {
+    /// The profiler type.
+    type Instrument: Instrument;
+    /// The y axis type.
+    type Stage: YAxis;
+    /// Opens the instrument's link (the conversation starts with `probe`).
+    async fn open_instrument(&mut self) -> Result<Self::Instrument, Fault>;
+    /// Opens the stage's link for a scan in `direction` (the conversation starts with
+    /// `connect`).
+    async fn open_stage(&mut self, direction: ScanDirection) -> Result<Self::Stage, Fault>;
+    /// Whether the instrument's port is there (without opening it).
+    fn instrument_present(&self) -> bool;
+    /// Whether the stage's port is there (without opening it).
+    fn stage_present(&self) -> bool;
+    /// The x pitch in µm the instrument's profile will have under `conditions`, when it
+    /// can be known before a trace (for the pre-flight estimate).
+    fn expected_pitch_um(&self, conditions: &Conditions) -> Option<f64>;
+}
+
+/// The real station: serial ports from the configuration.
+#[derive(Debug, Clone)]
+pub struct SerialStation {
+    /// `[instrument]`.
+    pub instrument: InstrumentSettings,
+    /// The model table with overrides merged (from [`InstrumentSettings::validate`]).
+    pub table: ModelTable,
+    /// `[stage]`.
+    pub stage: StageSettings,
+}
+
+impl SerialStation {
+    /// Builds the station from the settings (validated again here).
+    pub fn new(instrument: InstrumentSettings, stage: StageSettings) -> Result<Self, String> {
+        let table = instrument.validate().map_err(|e| e.to_string())?;
+        Ok(SerialStation {
+            instrument,
+            table,
+            stage,
+        })
+    }
+}
+
+impl Station for SerialStation {
+    type Instrument = Sj210Client<SerialStream>;
+    type Stage = AnyYAxis;
+
+    async fn open_instrument(&mut self) -> Result<Self::Instrument, Fault> {
+        let port = crate::transport::open(&self.instrument.serial()).map_err(|e| Fault {
+            device: Device::Instrument,
+            class: if e.is_absent() {
+                FaultClass::Absent
+            } else {
+                FaultClass::Fatal
+            },
+            ng_code: None,
+            message: e.to_string(),
+        })?;
+        Ok(Sj210Client::new(
+            port,
+            self.table.clone(),
+            self.instrument.client_options(),
+        ))
+    }
+
+    async fn open_stage(&mut self, direction: ScanDirection) -> Result<Self::Stage, Fault> {
+        let mut axis =
+            crate::stage::policy::connect(&self.stage).map_err(|e| Fault::of(Device::Stage, &e))?;
+        axis.set_scan_direction(direction);
+        Ok(axis)
+    }
+
+    fn instrument_present(&self) -> bool {
+        Path::new(&self.instrument.port).exists()
+    }
+
+    fn stage_present(&self) -> bool {
+        Path::new(&self.stage.port).exists()
+    }
+
+    fn expected_pitch_um(&self, c: &Conditions) -> Option<f64> {
+        self.instrument
+            .pitch_x_um
+            .or_else(|| c.lambda_s_um.and_then(pitch_from_lambda_s))
+    }
+}

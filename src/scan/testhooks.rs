@@ -1,0 +1,155 @@
+//! Fault injection for end-to-end tests of the real binary: a crash (`abort()`, like
+//! `kill -9` at an exact point) or a refused write (`ENOSPC`, like a full disk) at a chosen
+//! step of a chosen line. Selected by environment variables that nothing else sets:
+//!
+//! - `SURFSCAN_TEST_CRASH=LINE:STEP` — abort the process at STEP of line LINE (0-based);
+//!   STEP is `before-csv`, `before-json`, `before-journal` or `after-commit`.
+//! - `SURFSCAN_TEST_ENOSPC=LINE:STEP` — make that write fail with "No space left on device";
+//!   STEP is `before-csv`, `before-json` or `before-journal`.
+//!
+//! Without those variables the hook does nothing. It is the [`StorageFaults`] the store
+//! and journal consult before every durable write.
+//!
+//! Layer 3 (session): depends on [`super::store`]; reads two environment variables.
+
+use super::store::{StorageFaults, WriteStep};
+use std::io;
+use std::path::Path;
+use std::sync::atomic::{AtomicU32, Ordering};
+
+/// The points a test can stop at.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Step {
+    /// Before the heights file is written.
+    BeforeCsv,
+    /// After the heights file, before the metadata file.
+    BeforeJson,
+    /// After both line files, before the journal record.
+    BeforeJournal,
+    /// After the journal record, before the fitter and the next move.
+    AfterCommit,
+}
+
+impl Step {
+    fn parse(s: &str) -> Option<Step> {
+        Some(match s {
+            "before-csv" => Step::BeforeCsv,
+            "before-json" => Step::BeforeJson,
+            "before-journal" => Step::BeforeJournal,
+            "after-commit" => Step::AfterCommit,
+            _ => return None,
+        })
+    }
+
+    fn of_write(step: WriteStep) -> Option<Step> {
+        match step {
+            WriteStep::LineCsv => Some(Step::BeforeCsv),
+            WriteStep::LineJson => Some(Step::BeforeJson),
+            WriteStep::Journal => Some(Step::BeforeJournal),
+            WriteStep::Metrics => None,
+        }
+    }
+}
+
+fn parse_point(value: &str) -> Result<(u32, Step), String> {
+    let (line, step) = value
+        .split_once(':')
+        .ok_or_else(|| format!("{value:?}: expected LINE:STEP"))?;
+    let line = line
+        .parse()
+        .map_err(|_| format!("{value:?}: {line:?} is not a line index"))?;
+    let step = Step::parse(step).ok_or_else(|| {
+        format!("{value:?}: step must be before-csv, before-json, before-journal or after-commit")
+    })?;
+    Ok((line, step))
+}
+
+/// The injected faults of one process.
+#[derive(Debug, Default)]
+pub struct TestHooks {
+    crash: Option<(u32, Step)>,
+    enospc: Option<(u32, Step)>,
+    line: AtomicU32,
+}
+
+impl TestHooks {
+    /// No faults.
+    pub fn none() -> TestHooks {
+        TestHooks::default()
+    }
+
+    /// Reads `SURFSCAN_TEST_CRASH` and `SURFSCAN_TEST_ENOSPC`; a malformed value is an error
+    /// (a test that means to crash must not silently run to the end).
+    pub fn from_env() -> Result<TestHooks, String> {
+        let get = |name: &str| -> Result<Option<(u32, Step)>, String> {
+            match std::env::var(name) {
+                Ok(v) => parse_point(&v)
+                    .map(Some)
+                    .map_err(|e| format!("{name}: {e}")),
+                Err(_) => Ok(None),
+            }
+        };
+        Ok(TestHooks {
+            crash: get("SURFSCAN_TEST_CRASH")?,
+            enospc: get("SURFSCAN_TEST_ENOSPC")?,
+            line: AtomicU32::new(0),
+        })
+    }
+
+    /// Tells the hook which line the next writes belong to.
+    pub fn set_line(&self, index: u32) {
+        self.line.store(index, Ordering::SeqCst);
+    }
+
+    /// Called at `step`; aborts the process when a crash is due there.
+    pub fn at(&self, step: Step) {
+        if self.crash == Some((self.line.load(Ordering::SeqCst), step)) {
+            eprintln!("surfscan: SURFSCAN_TEST_CRASH: aborting at {step:?}");
+            std::process::abort();
+        }
+    }
+}
+
+impl StorageFaults for TestHooks {
+    fn before_write(&self, step: WriteStep, _path: &Path) -> io::Result<()> {
+        let Some(step) = Step::of_write(step) else {
+            return Ok(());
+        };
+        self.at(step);
+        if self.enospc == Some((self.line.load(Ordering::SeqCst), step)) {
+            return Err(io::Error::from_raw_os_error(libc::ENOSPC));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn points_parse_and_bad_ones_are_named() {
+        assert_eq!(parse_point("3:before-json"), Ok((3, Step::BeforeJson)));
+        assert!(parse_point("3").unwrap_err().contains("LINE:STEP"));
+        assert!(parse_point("x:before-csv")
+            .unwrap_err()
+            .contains("line index"));
+        assert!(parse_point("1:later").unwrap_err().contains("before-csv"));
+    }
+
+    #[test]
+    fn enospc_hits_only_the_chosen_line_and_step() {
+        let h = TestHooks {
+            enospc: Some((2, Step::BeforeJournal)),
+            ..TestHooks::default()
+        };
+        let p = Path::new("x");
+        h.set_line(1);
+        assert!(h.before_write(WriteStep::Journal, p).is_ok());
+        h.set_line(2);
+        assert!(h.before_write(WriteStep::LineCsv, p).is_ok());
+        let e = h.before_write(WriteStep::Journal, p).unwrap_err();
+        assert_eq!(e.raw_os_error(), Some(libc::ENOSPC));
+        assert!(h.before_write(WriteStep::Metrics, p).is_ok());
+    }
+}
