@@ -1,0 +1,236 @@
+//! `surfscan daemon`: the station service (systemd `Type=notify`).
+//!
+//! Start-up: logging is already on; the configuration is loaded (exit 78 on a bad file),
+//! the control socket bound, then `READY=1` — devices may appear later and are reported in
+//! `STATUS=`. An unfinished scan in `output.dir` is resumed at once; otherwise the daemon
+//! waits for `surfscan start`, and never starts a scan by itself. Every status change is
+//! sent as `STATUS=`; `WATCHDOG=1` comes from the scan loop itself (and the idle loop).
+//! SIGTERM/SIGINT: `STOPPING=1`, the current line is abandoned cleanly and an interruption
+//! (not a stop) is recorded, so the scan resumes at the next start. The notification hook
+//! runs when a scan completes, fails, is aborted or suspends.
+//!
+//! Layer 5 (composition): config, control server, runner, service notifications, hook.
+
+use super::scan::{choose_request, load_config};
+use super::{CliError, Exit};
+use crate::control::protocol::{
+    ControlChannels, DeviceState, OperatorCommand, OperatorRequest, State, Status,
+};
+use crate::control::server;
+use crate::scan::hook::{Hook, HookEvent, HookStatus};
+use crate::scan::runner::{run_scan, Control, Outcome, RunSettings, ScanRequest};
+use crate::scan::station::{SerialStation, Station};
+use crate::scan::testhooks::TestHooks;
+use crate::service::Notifier;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::{mpsc, watch};
+
+/// Arguments of `surfscan daemon`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Station configuration (TOML).
+    #[arg(long, default_value = "/etc/surfscan/surfscan.toml")]
+    pub config: PathBuf,
+}
+
+/// How often device presence is refreshed while idle.
+const IDLE_TICK: Duration = Duration::from_secs(2);
+
+/// Runs `surfscan daemon`.
+pub fn run(args: Args) -> Result<(), CliError> {
+    let (config, config_hash) = load_config(&args.config)?;
+    let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
+    let station = SerialStation::new(config.instrument.clone(), config.stage.clone())
+        .map_err(|e| CliError::new(Exit::Config, e))?;
+    let settings = RunSettings {
+        config,
+        config_hash,
+        hooks: Arc::new(hooks),
+    };
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
+    rt.block_on(daemon(settings, station))
+}
+
+fn hook_status(s: &str) -> Option<HookStatus> {
+    Some(match s {
+        "success" => HookStatus::Success,
+        "fail" => HookStatus::Fail,
+        "abort" => HookStatus::Abort,
+        "suspended" => HookStatus::Suspended,
+        _ => return None,
+    })
+}
+
+fn presence(present: bool) -> DeviceState {
+    if present {
+        DeviceState::Present
+    } else {
+        DeviceState::Absent
+    }
+}
+
+async fn daemon(settings: RunSettings, mut station: SerialStation) -> Result<(), CliError> {
+    let config = &settings.config;
+    let notifier = Arc::new(Notifier::from_env());
+    let srv = server::bind(&config.control.socket)
+        .await
+        .map_err(|e| CliError::new(Exit::Unavailable, e.to_string()))?;
+    let (status_tx, status_rx) = watch::channel(Status::idle());
+    let (cmd_tx, cmd_rx) = mpsc::channel::<OperatorRequest>(16);
+    let (shutdown_tx, shutdown_rx) = watch::channel(false);
+
+    let mut srv_shutdown = shutdown_rx.clone();
+    let server_task = tokio::spawn(srv.serve(
+        ControlChannels {
+            status: status_rx.clone(),
+            commands: cmd_tx,
+        },
+        async move {
+            let _ = srv_shutdown.wait_for(|v| *v).await;
+        },
+    ));
+    tracing::info!(
+        "surfscan daemon {} ready: control socket {}, scans in {}",
+        env!("CARGO_PKG_VERSION"),
+        config.control.socket.display(),
+        config.output.dir.display()
+    );
+    notifier.ready();
+
+    // STATUS= on every change.
+    let n = notifier.clone();
+    let mut rx = status_rx.clone();
+    tokio::spawn(async move {
+        let mut last = String::new();
+        loop {
+            let text = rx.borrow_and_update().summary();
+            if text != last {
+                n.status(&text);
+                last = text;
+            }
+            if rx.changed().await.is_err() {
+                break;
+            }
+        }
+    });
+
+    // SIGTERM / SIGINT.
+    let n = notifier.clone();
+    tokio::spawn(async move {
+        use tokio::signal::unix::{signal, SignalKind};
+        let (Ok(mut term), Ok(mut int)) = (
+            signal(SignalKind::terminate()),
+            signal(SignalKind::interrupt()),
+        ) else {
+            tracing::error!("cannot install signal handlers");
+            return;
+        };
+        tokio::select! {
+            _ = term.recv() => tracing::info!("SIGTERM: stopping"),
+            _ = int.recv() => tracing::info!("SIGINT: stopping"),
+        }
+        n.stopping();
+        let _ = shutdown_tx.send(true);
+    });
+
+    // Notification hook.
+    let (ev_tx, mut ev_rx) = mpsc::unbounded_channel();
+    let hook = config.notify.as_ref().and_then(Hook::new);
+    tokio::spawn(async move {
+        while let Some(ev) = ev_rx.recv().await {
+            let ev: crate::scan::runner::ScanEvent = ev;
+            if let (Some(h), Some(status)) = (&hook, hook_status(ev.status)) {
+                h.fire(HookEvent {
+                    scan_id: ev.scan_id,
+                    status,
+                    reason: ev.reason,
+                    scan_dir: ev.dir,
+                });
+            }
+        }
+    });
+
+    let mut ctl = Control::new(cmd_rx, shutdown_rx.clone(), status_tx);
+    if let Some(period) = notifier.watchdog_interval() {
+        let n = notifier.clone();
+        ctl.watchdog = Some((period, Arc::new(move || n.watchdog())));
+    }
+    ctl.events = Some(ev_tx);
+
+    // Resume an unfinished scan at start-up.
+    let mut stop = false;
+    match choose_request(config, String::new(), String::new(), String::new()) {
+        Ok(req @ ScanRequest::Resume(_)) => {
+            let outcome = run_scan(&mut station, &mut ctl, &settings, req).await;
+            stop = matches!(outcome, Outcome::Interrupted { .. });
+        }
+        Ok(_) => {}
+        Err(e) => tracing::error!("{e}"),
+    }
+
+    let mut tick = tokio::time::interval(
+        notifier
+            .watchdog_interval()
+            .map_or(IDLE_TICK, |w| w.min(IDLE_TICK)),
+    );
+    let mut shutdown = shutdown_rx.clone();
+    while !stop && !*shutdown.borrow() {
+        tokio::select! {
+            Ok(()) = shutdown.changed() => {}
+            req = ctl.commands.recv() => {
+                let Some(req) = req else { break };
+                match req.command {
+                    OperatorCommand::Start { specimen, operator, notes } => {
+                        let busy = ctl.status.borrow().state != State::Idle;
+                        if busy {
+                            let _ = req.reply.send(Err("a scan is already running".into()));
+                            continue;
+                        }
+                        let _ = req.reply.send(Ok(format!(
+                            "starting a scan of {} lines; follow it with `surfscan status --watch`",
+                            config.scan.lines
+                        )));
+                        let request = match choose_request(config, specimen.clone(), operator.clone(), notes.clone()) {
+                            Ok(r) => r,
+                            Err(e) => {
+                                tracing::error!("{e}");
+                                ScanRequest::New { specimen, operator, notes }
+                            }
+                        };
+                        let outcome = run_scan(&mut station, &mut ctl, &settings, request).await;
+                        stop = matches!(outcome, Outcome::Interrupted { .. });
+                    }
+                    OperatorCommand::Pause | OperatorCommand::Resume | OperatorCommand::Abort => {
+                        let _ = req.reply.send(Err(
+                            "no scan is running; `surfscan start` starts one".into(),
+                        ));
+                    }
+                }
+            }
+            _ = tick.tick() => {
+                notifier.watchdog();
+                let (i, s) = (presence(station.instrument_present()), presence(station.stage_present()));
+                ctl.status.send_if_modified(|st| {
+                    let changed = st.instrument != i || st.stage != s;
+                    st.instrument = i;
+                    st.stage = s;
+                    changed
+                });
+            }
+        }
+    }
+    notifier.stopping();
+    // The server stops on the shutdown signal; on a closed command channel tell it too.
+    drop(ctl);
+    if *shutdown_rx.borrow() {
+        let _ = tokio::time::timeout(Duration::from_secs(5), server_task).await;
+    }
+    tracing::info!("surfscan daemon stopped");
+    Ok(())
+}
