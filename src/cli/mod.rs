@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 use std::fmt;
 
 pub mod analyze;
+pub mod control;
 pub mod fit;
 pub mod probe;
 
@@ -33,6 +34,16 @@ pub enum Command {
     Probe(probe::Args),
     /// Characterise a profile or grid CSV: ISO roughness per line, areal parameters, bearing area curves.
     Analyze(analyze::Args),
+    /// Show the daemon's status (with --watch: on every change).
+    Status(control::StatusArgs),
+    /// Pause the running scan after the current line is on disk.
+    Pause(control::CommandArgs),
+    /// Resume a paused scan.
+    Resume(control::CommandArgs),
+    /// Abort the running scan (recorded as abort).
+    Abort(control::CommandArgs),
+    /// Start a scan of the configured plan.
+    Start(control::StartArgs),
 }
 
 /// Process exit status (sysexits).
@@ -83,5 +94,10 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Fit(args) => fit::run(args),
         Command::Probe(args) => probe::run(args),
         Command::Analyze(args) => analyze::run(args),
+        Command::Status(args) => control::run_status(args),
+        Command::Pause(args) => control::run_command(control::Verb::Pause, args),
+        Command::Resume(args) => control::run_command(control::Verb::Resume, args),
+        Command::Abort(args) => control::run_command(control::Verb::Abort, args),
+        Command::Start(args) => control::run_start(args),
     }
 }

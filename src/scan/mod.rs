@@ -6,6 +6,7 @@
 //! - [`journal`]: `journal.jsonl` records, torn-tail recovery, resume state.
 //! - [`metrics`]: the Prometheus text-format metrics file.
 
+pub mod hook;
 pub mod journal;
 pub mod metrics;
 pub mod store;
