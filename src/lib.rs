@@ -34,6 +34,7 @@ pub mod metrology;
 pub mod nurbs;
 pub mod profile;
 pub mod scan;
+pub mod service;
 pub mod sj210;
 pub mod stage;
 pub mod telemetry;

@@ -9,6 +9,8 @@ use clap::{Parser, Subcommand};
 use std::fmt;
 
 pub mod analyze;
+pub mod control;
+pub mod daemon;
 pub mod demo;
 pub mod fit;
 pub mod probe;
@@ -37,8 +39,20 @@ pub enum Command {
     Analyze(analyze::Args),
     /// Run one scan in the foreground (resuming an unfinished scan of this configuration).
     Scan(scan::Args),
+    /// The station service (systemd Type=notify): resumes unfinished scans, takes commands on the control socket.
+    Daemon(daemon::Args),
     /// A complete simulated scan: simulator in-process, real serial code path, IGES and report.
     Demo(demo::Args),
+    /// Show the daemon's status (with --watch: on every change).
+    Status(control::StatusArgs),
+    /// Pause the running scan after the current line is on disk.
+    Pause(control::CommandArgs),
+    /// Resume a paused scan.
+    Resume(control::CommandArgs),
+    /// Abort the running scan (recorded as abort).
+    Abort(control::CommandArgs),
+    /// Start a scan of the configured plan.
+    Start(control::StartArgs),
 }
 
 /// Process exit status (sysexits).
@@ -90,6 +104,12 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Probe(args) => probe::run(args),
         Command::Analyze(args) => analyze::run(args),
         Command::Scan(args) => scan::run(args),
+        Command::Daemon(args) => daemon::run(args),
         Command::Demo(args) => demo::run(args),
+        Command::Status(args) => control::run_status(args),
+        Command::Pause(args) => control::run_command(control::Verb::Pause, args),
+        Command::Resume(args) => control::run_command(control::Verb::Resume, args),
+        Command::Abort(args) => control::run_command(control::Verb::Abort, args),
+        Command::Start(args) => control::run_start(args),
     }
 }

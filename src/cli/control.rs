@@ -1,0 +1,431 @@
+//! `surfscan status|pause|resume|abort|start`: the operator's commands to a running daemon
+//! over its control socket, with output for people (or the raw JSON messages with `--json`).
+//!
+//! Exit codes: 0 done, 1 the daemon refused (its message is printed), 69 the daemon is not
+//! reachable or speaks another protocol version, 74 the conversation broke off, 78 the
+//! `--config` file is unreadable or its `[control] socket` is not a string.
+//!
+//! Layer 5 (composition): depends on [`crate::control`].
+
+use super::{CliError, Exit};
+use crate::control::client::{ClientError, ControlClient, Received};
+use crate::control::protocol::{DeviceState, Message, Request, State, Status};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Where the daemon listens unless told otherwise (under the unit's `RuntimeDirectory`).
+pub const DEFAULT_SOCKET: &str = "/run/surfscan/control.sock";
+
+/// Which daemon to talk to.
+#[derive(Debug, Clone, clap::Args)]
+pub struct Target {
+    /// Control socket of the daemon [default: the config's `[control] socket`, else
+    /// /run/surfscan/control.sock]. Wins over --config.
+    #[arg(long, value_name = "PATH")]
+    pub socket: Option<PathBuf>,
+    /// Config file; only its `[control]` table's `socket` key is read.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Print the daemon's replies as the raw JSON lines it sent, one per line.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `surfscan status`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct StatusArgs {
+    /// The daemon.
+    #[command(flatten)]
+    pub target: Target,
+    /// Keep printing the status on every change until interrupted.
+    #[arg(long)]
+    pub watch: bool,
+}
+
+/// Arguments of `surfscan pause|resume|abort`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct CommandArgs {
+    /// The daemon.
+    #[command(flatten)]
+    pub target: Target,
+}
+
+/// Arguments of `surfscan start`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct StartArgs {
+    /// The daemon.
+    #[command(flatten)]
+    pub target: Target,
+    /// Specimen id, recorded with the scan.
+    #[arg(long, value_name = "ID", default_value = "")]
+    pub specimen: String,
+    /// Operator name, recorded with the scan [default: $USER].
+    #[arg(long, value_name = "NAME")]
+    pub operator: Option<String>,
+    /// Free-text notes, recorded with the scan.
+    #[arg(long, value_name = "TEXT", default_value = "")]
+    pub notes: String,
+}
+
+/// Which operator command to send.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verb {
+    /// `pause`.
+    Pause,
+    /// `resume`.
+    Resume,
+    /// `abort`.
+    Abort,
+}
+
+/// The socket to use: `--socket`, else the config's `[control] socket`, else the default.
+pub fn socket_path(target: &Target) -> Result<PathBuf, CliError> {
+    if let Some(s) = &target.socket {
+        return Ok(s.clone());
+    }
+    match &target.config {
+        Some(config) => Ok(config_socket(config)?.unwrap_or_else(|| PathBuf::from(DEFAULT_SOCKET))),
+        None => Ok(PathBuf::from(DEFAULT_SOCKET)),
+    }
+}
+
+/// Reads only `[control] socket` from a TOML config, ignoring every other table.
+pub fn config_socket(path: &Path) -> Result<Option<PathBuf>, CliError> {
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        CliError::new(
+            Exit::Config,
+            format!("cannot read config {}: {e}", path.display()),
+        )
+    })?;
+    let mut doc: toml::Table = toml::from_str(&text).map_err(|e| {
+        CliError::new(
+            Exit::Config,
+            format!("config {} is not valid TOML: {e}", path.display()),
+        )
+    })?;
+    let Some(control) = doc.remove("control") else {
+        return Ok(None);
+    };
+    let toml::Value::Table(control) = control else {
+        return Err(CliError::new(
+            Exit::Config,
+            format!(
+                "`control` in {} must be a table ([control])",
+                path.display()
+            ),
+        ));
+    };
+    match control.get("socket") {
+        None => Ok(None),
+        Some(toml::Value::String(s)) if !s.is_empty() => Ok(Some(PathBuf::from(s))),
+        Some(other) => Err(CliError::new(
+            Exit::Config,
+            format!(
+                "[control] socket in {} must be a non-empty path string, found {other}",
+                path.display()
+            ),
+        )),
+    }
+}
+
+/// Runs `surfscan status`.
+pub fn run_status(args: StatusArgs) -> Result<(), CliError> {
+    let path = socket_path(&args.target)?;
+    let json = args.target.json;
+    block_on(async move {
+        let mut client = ControlClient::connect(&path).await.map_err(client_error)?;
+        let request = if args.watch {
+            Request::Watch
+        } else {
+            Request::Status
+        };
+        let first = client.request(&request).await.map_err(client_error)?;
+        print_reply(&first, json, false)?;
+        if !args.watch {
+            return Ok(());
+        }
+        loop {
+            match client.next().await.map_err(client_error)? {
+                Some(m) => print_reply(&m, json, true)?,
+                None => {
+                    return Err(CliError::new(
+                        Exit::Io,
+                        format!(
+                            "the daemon at {} closed the connection (stopped or restarted?); systemctl status surfscan",
+                            path.display()
+                        ),
+                    ))
+                }
+            }
+        }
+    })
+}
+
+/// Runs `surfscan pause|resume|abort`.
+pub fn run_command(verb: Verb, args: CommandArgs) -> Result<(), CliError> {
+    let request = match verb {
+        Verb::Pause => Request::Pause,
+        Verb::Resume => Request::Resume,
+        Verb::Abort => Request::Abort,
+    };
+    send_command(&args.target, request)
+}
+
+/// Runs `surfscan start`.
+pub fn run_start(args: StartArgs) -> Result<(), CliError> {
+    let operator = args
+        .operator
+        .or_else(|| std::env::var("USER").ok())
+        .unwrap_or_default();
+    let request = Request::Start {
+        specimen: args.specimen,
+        operator,
+        notes: args.notes,
+    };
+    send_command(&args.target, request)
+}
+
+fn send_command(target: &Target, request: Request) -> Result<(), CliError> {
+    let path = socket_path(target)?;
+    let json = target.json;
+    block_on(async move {
+        let mut client = ControlClient::connect(&path).await.map_err(client_error)?;
+        let reply = client.request(&request).await.map_err(client_error)?;
+        print_reply(&reply, json, false)
+    })
+}
+
+fn block_on<F: std::future::Future<Output = Result<(), CliError>>>(f: F) -> Result<(), CliError> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?
+        .block_on(f)
+}
+
+fn client_error(e: ClientError) -> CliError {
+    let exit = match &e {
+        ClientError::Unreachable { .. } | ClientError::Incompatible { .. } => Exit::Unavailable,
+        ClientError::Io { .. } => Exit::Io,
+    };
+    CliError::new(exit, e.to_string())
+}
+
+/// Prints one reply; an `Error` from the daemon becomes exit status 1.
+fn print_reply(m: &Received, json: bool, compact: bool) -> Result<(), CliError> {
+    if json {
+        println!("{}", m.raw);
+    }
+    match &m.message {
+        Message::Error { message } => Err(CliError::new(
+            Exit::Failed,
+            format!("the daemon refused: {message}"),
+        )),
+        _ if json => Ok(()),
+        Message::Status(s) if compact => {
+            println!(
+                "{} {}",
+                chrono::Local::now().format("%H:%M:%S"),
+                render_status_line(s)
+            );
+            Ok(())
+        }
+        Message::Status(s) => {
+            print!("{}", render_status(s));
+            Ok(())
+        }
+        Message::Ack { command, detail } => {
+            println!("{command}: {detail}");
+            Ok(())
+        }
+        Message::Hello { .. } => Err(CliError::new(
+            Exit::Io,
+            format!("the daemon sent a second greeting: {}", m.raw),
+        )),
+    }
+}
+
+fn kebab<T: serde::Serialize>(v: T) -> String {
+    serde_json::to_value(v)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_owned))
+        .unwrap_or_default()
+}
+
+fn devices(s: &Status) -> String {
+    let name = |d: DeviceState| kebab(d);
+    format!("instrument {}, stage {}", name(s.instrument), name(s.stage))
+}
+
+/// A duration for people: `45 s`, `12 min 30 s`, `2 h 05 min`.
+pub fn format_eta(seconds: f64) -> Option<String> {
+    if !seconds.is_finite() || seconds < 0.0 {
+        return None;
+    }
+    let s = seconds.round() as u64;
+    Some(if s < 60 {
+        format!("{s} s")
+    } else if s < 3600 {
+        format!("{} min {:02} s", s / 60, s % 60)
+    } else {
+        format!("{} h {:02} min", s / 3600, (s % 3600) / 60)
+    })
+}
+
+/// The status as a block of labelled lines for people.
+pub fn render_status(s: &Status) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "{}", s.summary());
+    let _ = writeln!(out, "  state      {}", kebab(s.state));
+    if let Some(id) = &s.scan_id {
+        match &s.scan_dir {
+            Some(dir) => {
+                let _ = writeln!(out, "  scan       {id} in {dir}");
+            }
+            None => {
+                let _ = writeln!(out, "  scan       {id}");
+            }
+        }
+    }
+    if s.lines_total > 0 || s.scan_id.is_some() {
+        let _ = write!(out, "  lines      {}/{} done", s.lines_done, s.lines_total);
+        match s.current_line {
+            Some(k) if s.state != State::Idle => {
+                let _ = writeln!(out, ", on line {k}");
+            }
+            _ => out.push('\n'),
+        }
+    }
+    if let Some(y) = s.y_mm {
+        let _ = writeln!(out, "  y          {y:.3} mm");
+    }
+    if let Some(ra) = s.last_ra_um {
+        let _ = writeln!(out, "  last Ra    {ra:.3} µm");
+    }
+    if let Some(eta) = s.eta_s.and_then(format_eta) {
+        let _ = writeln!(out, "  ETA        {eta}");
+    }
+    let _ = writeln!(out, "  devices    {}", devices(s));
+    if let Some(r) = &s.reason {
+        let _ = writeln!(out, "  reason     {r}");
+    }
+    if let Some(l) = &s.last_stop {
+        let _ = writeln!(
+            out,
+            "  last stop  {}: {} ({}) in {}",
+            l.scan_id, l.status, l.reason, l.dir
+        );
+    }
+    out
+}
+
+/// The status on one line, for `--watch`.
+pub fn render_status_line(s: &Status) -> String {
+    let mut out = s.summary();
+    if let Some(ra) = s.last_ra_um {
+        let _ = write!(out, "; last Ra {ra:.3} µm");
+    }
+    if let Some(eta) = s.eta_s.and_then(format_eta) {
+        let _ = write!(out, "; ETA {eta}");
+    }
+    let _ = write!(out, "; {}", devices(s));
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::protocol::LastStop;
+
+    fn scanning() -> Status {
+        let mut s = Status::idle();
+        s.state = State::Scanning;
+        s.scan_id = Some("G-0142".into());
+        s.scan_dir = Some("/var/lib/surfscan/scans/G-0142".into());
+        s.lines_done = 11;
+        s.lines_total = 31;
+        s.current_line = Some(12);
+        s.y_mm = Some(0.11);
+        s.last_ra_um = Some(0.4521);
+        s.eta_s = Some(750.0);
+        s.instrument = DeviceState::Connected;
+        s.stage = DeviceState::Reconnecting;
+        s
+    }
+
+    #[test]
+    fn status_block_shows_what_an_operator_asks_for() {
+        let text = render_status(&scanning());
+        let expected = "scan G-0142: line 12/31, y=0.110 mm\n  state      scanning\n  scan       G-0142 in /var/lib/surfscan/scans/G-0142\n  lines      11/31 done, on line 12\n  y          0.110 mm\n  last Ra    0.452 µm\n  ETA        12 min 30 s\n  devices    instrument connected, stage reconnecting\n";
+        assert_eq!(text, expected);
+    }
+
+    #[test]
+    fn idle_block_shows_the_last_stop_and_no_scan_fields() {
+        let mut s = Status::idle();
+        s.last_stop = Some(LastStop {
+            scan_id: "G-0141".into(),
+            status: "fail".into(),
+            reason: "stage following error".into(),
+            dir: "/d/G-0141".into(),
+        });
+        s.reason = Some("stage following error".into());
+        let text = render_status(&s);
+        assert!(!text.contains("lines"), "{text}");
+        assert!(!text.contains("ETA"), "{text}");
+        assert!(
+            text.contains("  devices    instrument absent, stage absent\n"),
+            "{text}"
+        );
+        assert!(
+            text.contains("  last stop  G-0141: fail (stage following error) in /d/G-0141\n"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn eta_is_rounded_into_units() {
+        assert_eq!(format_eta(44.6).as_deref(), Some("45 s"));
+        assert_eq!(format_eta(60.0).as_deref(), Some("1 min 00 s"));
+        assert_eq!(format_eta(7530.0).as_deref(), Some("2 h 05 min"));
+        assert_eq!(format_eta(-1.0), None);
+        assert_eq!(format_eta(f64::NAN), None);
+    }
+
+    #[test]
+    fn watch_line_is_one_line() {
+        let line = render_status_line(&scanning());
+        assert_eq!(
+            line,
+            "scan G-0142: line 12/31, y=0.110 mm; last Ra 0.452 µm; ETA 12 min 30 s; instrument connected, stage reconnecting"
+        );
+    }
+
+    #[test]
+    fn socket_comes_from_flag_then_config_then_default() {
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = dir.path().join("s.toml");
+        std::fs::write(
+            &cfg,
+            "[instrument]\nport = 3\n[control]\nsocket = \"/tmp/x.sock\"\nother = 1\n",
+        )
+        .unwrap();
+        let mut t = Target {
+            socket: None,
+            config: Some(cfg.clone()),
+            json: false,
+        };
+        assert_eq!(socket_path(&t).unwrap(), PathBuf::from("/tmp/x.sock"));
+        t.socket = Some("/tmp/flag.sock".into());
+        assert_eq!(socket_path(&t).unwrap(), PathBuf::from("/tmp/flag.sock"));
+        std::fs::write(&cfg, "[instrument]\nport = \"/dev/sj210\"\n").unwrap();
+        t.socket = None;
+        assert_eq!(socket_path(&t).unwrap(), PathBuf::from(DEFAULT_SOCKET));
+        std::fs::write(&cfg, "[control]\nsocket = 5\n").unwrap();
+        let e = socket_path(&t).unwrap_err();
+        assert_eq!(e.exit, Exit::Config);
+        assert!(e.message.contains("[control] socket"), "{}", e.message);
+        t.config = Some(dir.path().join("missing.toml"));
+        assert_eq!(socket_path(&t).unwrap_err().exit, Exit::Config);
+    }
+}

@@ -1,0 +1,681 @@
+//! The control-socket server: binds the Unix socket (refusing to steal a live daemon's,
+//! replacing a stale one), greets every connection, answers `status`, streams `watch`, and
+//! forwards operator commands to the scan runner with a bounded wait for its answer.
+//!
+//! Every write to a client is bounded in time: a client that does not read (a stuck `watch`
+//! terminal, a suspended pipe) is disconnected instead of having messages queued for it, so
+//! no client can make the daemon's memory grow or delay the others. Status is read from a
+//! `watch` channel, which keeps only the latest snapshot, so a watcher that falls behind
+//! skips intermediate snapshots rather than accumulating them.
+//!
+//! Layer 4 (process edge): depends on [`super::protocol`], tokio and tokio-util's codec.
+
+use super::protocol::{
+    ControlChannels, Message, OperatorCommand, OperatorRequest, Request, Status, PROTOCOL_VERSION,
+};
+use bytes::{Buf, BytesMut};
+use futures::StreamExt;
+use std::future::Future;
+use std::io;
+use std::os::unix::fs::{FileTypeExt, MetadataExt, PermissionsExt};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::io::AsyncWriteExt;
+use tokio::net::unix::OwnedWriteHalf;
+use tokio::net::{UnixListener, UnixStream};
+use tokio::sync::{oneshot, watch, Semaphore};
+use tokio::task::JoinSet;
+use tokio_util::codec::{Decoder, FramedRead};
+
+/// Mode of the control socket: the daemon's user and group (operators join the group).
+pub const SOCKET_MODE: u32 = 0o660;
+
+/// Limits of the server; [`ServerOptions::default`] documents the values the daemon uses.
+#[derive(Debug, Clone)]
+pub struct ServerOptions {
+    /// Longest request line accepted, bytes (default 64 KiB). Longer lines are discarded up to
+    /// their newline and answered with an error; the connection stays usable.
+    pub max_line_bytes: usize,
+    /// How long one write to a client may take before that client is disconnected
+    /// (default 2 s).
+    pub write_timeout: Duration,
+    /// How long to wait for the runner to answer a forwarded command (default 10 s).
+    pub reply_timeout: Duration,
+    /// Connections served at once (default 32); further ones get an error and are closed.
+    pub max_connections: usize,
+}
+
+impl Default for ServerOptions {
+    fn default() -> ServerOptions {
+        ServerOptions {
+            max_line_bytes: 64 * 1024,
+            write_timeout: Duration::from_secs(2),
+            reply_timeout: Duration::from_secs(10),
+            max_connections: 32,
+        }
+    }
+}
+
+/// Why the control socket could not be set up. Each message names the path and what to do.
+#[derive(Debug, thiserror::Error)]
+pub enum ControlError {
+    /// The socket's directory is missing and could not be created.
+    #[error("cannot create the control socket's directory {dir}: {source}; create it (the unit's RuntimeDirectory=surfscan does) or set [control] socket to a writable place")]
+    CreateDir {
+        /// The directory.
+        dir: PathBuf,
+        /// The cause.
+        source: io::Error,
+    },
+    /// Something that is not a socket sits at the socket path.
+    #[error(
+        "{path} exists and is not a socket; remove it or set [control] socket to another path"
+    )]
+    NotASocket {
+        /// The path.
+        path: PathBuf,
+    },
+    /// Another process answers on the socket.
+    #[error("another surfscan daemon is running: {path} answers connections; stop it (systemctl stop surfscan) or set [control] socket to another path")]
+    AlreadyRunning {
+        /// The path.
+        path: PathBuf,
+    },
+    /// The existing socket could not be checked for a live daemon.
+    #[error("cannot tell whether a daemon is listening on {path}: {source}; check its owner and permissions, stop any daemon using it, then remove it")]
+    Probe {
+        /// The path.
+        path: PathBuf,
+        /// The cause.
+        source: io::Error,
+    },
+    /// A stale socket file could not be removed.
+    #[error("cannot remove the stale control socket {path}: {source}; remove it by hand")]
+    RemoveStale {
+        /// The path.
+        path: PathBuf,
+        /// The cause.
+        source: io::Error,
+    },
+    /// Binding failed.
+    #[error("cannot bind the control socket {path}: {source}; check that its directory is writable by the daemon's user or set [control] socket to another path")]
+    Bind {
+        /// The path.
+        path: PathBuf,
+        /// The cause.
+        source: io::Error,
+    },
+    /// The socket's mode could not be set.
+    #[error("cannot set mode 0660 on the control socket {path}: {source}")]
+    Permissions {
+        /// The path.
+        path: PathBuf,
+        /// The cause.
+        source: io::Error,
+    },
+}
+
+/// A bound control socket, ready to [`serve`](ControlServer::serve).
+#[derive(Debug)]
+pub struct ControlServer {
+    listener: UnixListener,
+    path: PathBuf,
+    /// Inode of the socket file this server created, so shutdown removes only its own file.
+    inode: Option<(u64, u64)>,
+    options: ServerOptions,
+}
+
+/// Binds the control socket at `path` with [`ServerOptions::default`].
+pub async fn bind(path: &Path) -> Result<ControlServer, ControlError> {
+    bind_with_options(path, ServerOptions::default()).await
+}
+
+/// Binds the control socket at `path`: creates the parent directory if missing, refuses if
+/// a live daemon answers on an existing socket, removes a stale one, binds and sets mode
+/// [`SOCKET_MODE`].
+pub async fn bind_with_options(
+    path: &Path,
+    options: ServerOptions,
+) -> Result<ControlServer, ControlError> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        if !dir.exists() {
+            std::fs::create_dir_all(dir).map_err(|source| ControlError::CreateDir {
+                dir: dir.to_owned(),
+                source,
+            })?;
+        }
+    }
+    match std::fs::symlink_metadata(path) {
+        Ok(meta) if !meta.file_type().is_socket() => {
+            return Err(ControlError::NotASocket {
+                path: path.to_owned(),
+            })
+        }
+        Ok(_) => clear_stale(path).await?,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => {}
+        Err(source) => {
+            return Err(ControlError::Probe {
+                path: path.to_owned(),
+                source,
+            })
+        }
+    }
+    let listener = UnixListener::bind(path).map_err(|source| {
+        if source.kind() == io::ErrorKind::AddrInUse {
+            ControlError::AlreadyRunning {
+                path: path.to_owned(),
+            }
+        } else {
+            ControlError::Bind {
+                path: path.to_owned(),
+                source,
+            }
+        }
+    })?;
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(SOCKET_MODE)).map_err(
+        |source| ControlError::Permissions {
+            path: path.to_owned(),
+            source,
+        },
+    )?;
+    let inode = std::fs::symlink_metadata(path)
+        .ok()
+        .map(|m| (m.dev(), m.ino()));
+    tracing::info!(socket = %path.display(), "control socket bound");
+    Ok(ControlServer {
+        listener,
+        path: path.to_owned(),
+        inode,
+        options,
+    })
+}
+
+/// An existing socket file: refuse if something answers, remove it if nothing does.
+async fn clear_stale(path: &Path) -> Result<(), ControlError> {
+    let probe = tokio::time::timeout(Duration::from_secs(2), UnixStream::connect(path)).await;
+    match probe {
+        Ok(Ok(_live)) => Err(ControlError::AlreadyRunning {
+            path: path.to_owned(),
+        }),
+        Ok(Err(e)) if e.kind() == io::ErrorKind::ConnectionRefused => {
+            tracing::info!(socket = %path.display(), "removing stale control socket (nothing answers)");
+            match std::fs::remove_file(path) {
+                Ok(()) => Ok(()),
+                Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(()),
+                Err(source) => Err(ControlError::RemoveStale {
+                    path: path.to_owned(),
+                    source,
+                }),
+            }
+        }
+        Ok(Err(e)) if e.kind() == io::ErrorKind::NotFound => Ok(()),
+        Ok(Err(source)) => Err(ControlError::Probe {
+            path: path.to_owned(),
+            source,
+        }),
+        Err(_elapsed) => Err(ControlError::Probe {
+            path: path.to_owned(),
+            source: io::Error::new(
+                io::ErrorKind::TimedOut,
+                "a process accepts connections but did not complete one within 2 s",
+            ),
+        }),
+    }
+}
+
+impl ControlServer {
+    /// Where the socket is.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Accepts connections until `shutdown` completes, then closes every connection and
+    /// removes the socket file (if it is still the one this server created).
+    pub async fn serve(self, channels: ControlChannels, shutdown: impl Future<Output = ()>) {
+        let ControlServer {
+            listener,
+            path,
+            inode,
+            options,
+        } = self;
+        let options = Arc::new(options);
+        let slots = Arc::new(Semaphore::new(options.max_connections));
+        let mut connections = JoinSet::new();
+        tokio::pin!(shutdown);
+        loop {
+            tokio::select! {
+                () = &mut shutdown => break,
+                Some(_) = connections.join_next(), if !connections.is_empty() => {}
+                accepted = listener.accept() => match accepted {
+                    Ok((stream, _)) => {
+                        let permit = Arc::clone(&slots).try_acquire_owned().ok();
+                        let channels = channels.clone();
+                        let options = Arc::clone(&options);
+                        connections.spawn(async move {
+                            match permit {
+                                Some(_permit) => serve_connection(stream, channels, &options).await,
+                                None => refuse_busy(stream, &options).await,
+                            }
+                        });
+                    }
+                    Err(e) => {
+                        // EMFILE and the like: back off instead of spinning.
+                        tracing::warn!(error = %e, "control socket: accept failed");
+                        tokio::time::sleep(Duration::from_millis(100)).await;
+                    }
+                },
+            }
+        }
+        connections.shutdown().await;
+        drop(listener);
+        let ours = std::fs::symlink_metadata(&path)
+            .ok()
+            .map(|m| (m.dev(), m.ino()));
+        if ours.is_some() && ours == inode {
+            if let Err(e) = std::fs::remove_file(&path) {
+                tracing::warn!(socket = %path.display(), error = %e, "cannot remove the control socket");
+            }
+        }
+        tracing::info!(socket = %path.display(), "control socket closed");
+    }
+}
+
+/// A client beyond `max_connections`: one error, then close.
+async fn refuse_busy(stream: UnixStream, options: &ServerOptions) {
+    let (_, mut writer) = stream.into_split();
+    let msg = Message::Error {
+        message: format!(
+            "the daemon already serves {} control connections; close some (stray `surfscan status --watch`?) and retry",
+            options.max_connections
+        ),
+    };
+    let _ = send(&mut writer, &msg, options.write_timeout).await;
+}
+
+/// Why a connection ended early.
+#[derive(Debug)]
+enum Closed {
+    /// A write did not complete within the bound.
+    Slow,
+    /// The client went away or the socket failed.
+    Io(io::Error),
+}
+
+async fn serve_connection(
+    stream: UnixStream,
+    mut channels: ControlChannels,
+    options: &ServerOptions,
+) {
+    let (reader, mut writer) = stream.into_split();
+    let mut lines = FramedRead::new(reader, RequestCodec::new(options.max_line_bytes));
+    let hello = Message::Hello {
+        protocol: PROTOCOL_VERSION,
+        software: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
+        pid: std::process::id(),
+    };
+    let mut watching = false;
+    let result: Result<(), Closed> = async {
+        send(&mut writer, &hello, options.write_timeout).await?;
+        loop {
+            tokio::select! {
+                frame = lines.next() => match frame {
+                    None => return Ok(()),
+                    Some(Err(e)) => return Err(Closed::Io(e)),
+                    Some(Ok(frame)) => {
+                        let replies = answer(frame, &mut channels, &mut watching, options).await;
+                        for m in &replies {
+                            send(&mut writer, m, options.write_timeout).await?;
+                        }
+                    }
+                },
+                changed = channels.status.changed(), if watching => {
+                    let msg = match changed {
+                        Ok(()) => snapshot(&mut channels.status, true),
+                        Err(_) => {
+                            watching = false;
+                            Message::Error { message: "the scan runner stopped publishing status (the daemon is shutting down); reconnect when it is back".into() }
+                        }
+                    };
+                    send(&mut writer, &msg, options.write_timeout).await?;
+                }
+            }
+        }
+    }
+    .await;
+    match result {
+        Ok(()) => tracing::debug!("control client disconnected"),
+        Err(Closed::Slow) => tracing::warn!(
+            timeout_ms = options.write_timeout.as_millis() as u64,
+            watching,
+            "control client dropped: it did not read its messages in time"
+        ),
+        Err(Closed::Io(e)) => tracing::debug!(error = %e, "control connection ended"),
+    }
+}
+
+/// The replies to one request line.
+async fn answer(
+    frame: Frame,
+    channels: &mut ControlChannels,
+    watching: &mut bool,
+    options: &ServerOptions,
+) -> Vec<Message> {
+    let line = match frame {
+        Frame::Line(line) => line,
+        Frame::TooLong => {
+            return vec![Message::Error {
+                message: format!(
+                "request line longer than {} bytes was discarded; send one JSON object per line",
+                options.max_line_bytes
+            ),
+            }]
+        }
+        Frame::NotUtf8 => {
+            return vec![Message::Error {
+                message: "request line is not UTF-8 text; send one JSON object per line".into(),
+            }]
+        }
+    };
+    let request: Request = match serde_json::from_str(&line) {
+        Ok(r) => r,
+        Err(e) => return vec![malformed(&line, &e)],
+    };
+    let command = match request {
+        Request::Status => return vec![snapshot(&mut channels.status, false)],
+        Request::Watch => {
+            *watching = true;
+            return vec![snapshot(&mut channels.status, true)];
+        }
+        Request::Pause => OperatorCommand::Pause,
+        Request::Resume => OperatorCommand::Resume,
+        Request::Abort => OperatorCommand::Abort,
+        Request::Start {
+            specimen,
+            operator,
+            notes,
+        } => OperatorCommand::Start {
+            specimen,
+            operator,
+            notes,
+        },
+    };
+    vec![forward(command, channels, options.reply_timeout).await]
+}
+
+/// The error for a line that is not a valid request, naming what was wrong.
+fn malformed(line: &str, e: &serde_json::Error) -> Message {
+    const CLASSES: &str = "status, watch, pause, resume, abort, start";
+    let class = serde_json::from_str::<serde_json::Value>(line)
+        .ok()
+        .and_then(|v| v.get("class").and_then(|c| c.as_str()).map(str::to_owned));
+    let message = match (e.classify(), class) {
+        (serde_json::error::Category::Data, Some(class))
+            if !CLASSES.split(", ").any(|c| c == class) =>
+        {
+            format!("unknown request class {class:?}; the daemon accepts {CLASSES}")
+        }
+        (serde_json::error::Category::Data, _) => {
+            format!("invalid request: {e}; requests are JSON objects with a class ({CLASSES})")
+        }
+        _ => format!("request is not valid JSON: {e}; send one JSON object per line"),
+    };
+    Message::Error { message }
+}
+
+fn snapshot(status: &mut watch::Receiver<Status>, mark_seen: bool) -> Message {
+    let s = if mark_seen {
+        status.borrow_and_update().clone()
+    } else {
+        status.borrow().clone()
+    };
+    Message::Status(Box::new(s))
+}
+
+/// Sends a command to the runner and turns its answer into `Ack` or `Error`.
+async fn forward(
+    command: OperatorCommand,
+    channels: &ControlChannels,
+    reply_timeout: Duration,
+) -> Message {
+    let name = match &command {
+        OperatorCommand::Pause => "pause",
+        OperatorCommand::Resume => "resume",
+        OperatorCommand::Abort => "abort",
+        OperatorCommand::Start { .. } => "start",
+    };
+    let gone = || {
+        Message::Error {
+        message: format!(
+            "the scan runner is not running, so {name} cannot be carried out; see `journalctl -u surfscan` and restart the daemon"
+        ),
+    }
+    };
+    let (reply, answer) = oneshot::channel();
+    let exchange = async {
+        channels
+            .commands
+            .send(OperatorRequest { command, reply })
+            .await
+            .map_err(|_| ())?;
+        answer.await.map_err(|_| ())
+    };
+    match tokio::time::timeout(reply_timeout, exchange).await {
+        Ok(Ok(Ok(detail))) => Message::Ack {
+            command: name.to_owned(),
+            detail,
+        },
+        Ok(Ok(Err(message))) => Message::Error { message },
+        Ok(Err(())) => gone(),
+        Err(_elapsed) => Message::Error {
+            message: format!(
+                "the scan runner did not answer {name} within {} s; it may be busy with a device, try again or see `journalctl -u surfscan`",
+                reply_timeout.as_secs_f64()
+            ),
+        },
+    }
+}
+
+/// Writes one message as a JSON line, giving up after `timeout`.
+async fn send(writer: &mut OwnedWriteHalf, msg: &Message, timeout: Duration) -> Result<(), Closed> {
+    let mut line = serde_json::to_vec(msg).map_err(|e| Closed::Io(io::Error::other(e)))?;
+    line.push(b'\n');
+    match tokio::time::timeout(timeout, writer.write_all(&line)).await {
+        Ok(Ok(())) => Ok(()),
+        Ok(Err(e)) => Err(Closed::Io(e)),
+        Err(_elapsed) => Err(Closed::Slow),
+    }
+}
+
+/// One request line as the codec delivers it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Frame {
+    /// A line without its terminator (`\n` or `\r\n`); blank lines are skipped.
+    Line(String),
+    /// A line longer than the limit; it has been discarded up to its newline.
+    TooLong,
+    /// A line that is not UTF-8.
+    NotUtf8,
+}
+
+/// Splits the request stream into lines of bounded length. Unlike tokio-util's
+/// `LinesCodec`, an oversized or non-UTF-8 line is an item, not a stream error, so the
+/// connection carries on with the next line.
+#[derive(Debug)]
+pub struct RequestCodec {
+    max_line_bytes: usize,
+    /// Inside an oversized line: drop bytes up to the next newline.
+    discarding: bool,
+    /// Bytes already searched for a newline.
+    searched: usize,
+}
+
+impl RequestCodec {
+    /// A codec accepting lines up to `max_line_bytes` (terminator excluded).
+    pub fn new(max_line_bytes: usize) -> RequestCodec {
+        RequestCodec {
+            max_line_bytes,
+            discarding: false,
+            searched: 0,
+        }
+    }
+
+    fn frame(&self, raw: &[u8]) -> Option<Frame> {
+        let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
+        if raw.len() > self.max_line_bytes {
+            return Some(Frame::TooLong);
+        }
+        match std::str::from_utf8(raw) {
+            Ok(s) if s.trim().is_empty() => None,
+            Ok(s) => Some(Frame::Line(s.to_owned())),
+            Err(_) => Some(Frame::NotUtf8),
+        }
+    }
+}
+
+impl Decoder for RequestCodec {
+    type Item = Frame;
+    type Error = io::Error;
+
+    fn decode(&mut self, buf: &mut BytesMut) -> Result<Option<Frame>, io::Error> {
+        loop {
+            let newline = buf[self.searched..]
+                .iter()
+                .position(|&b| b == b'\n')
+                .map(|i| self.searched + i);
+            match newline {
+                Some(end) => {
+                    self.searched = 0;
+                    if self.discarding {
+                        self.discarding = false;
+                        buf.advance(end + 1);
+                        continue;
+                    }
+                    let line = buf.split_to(end + 1);
+                    match self.frame(&line[..end]) {
+                        Some(frame) => return Ok(Some(frame)),
+                        None => continue,
+                    }
+                }
+                None if self.discarding => {
+                    buf.clear();
+                    self.searched = 0;
+                    return Ok(None);
+                }
+                // +1 leaves room for a `\r` before the newline.
+                None if buf.len() > self.max_line_bytes + 1 => {
+                    buf.clear();
+                    self.searched = 0;
+                    self.discarding = true;
+                    return Ok(Some(Frame::TooLong));
+                }
+                None => {
+                    self.searched = buf.len();
+                    return Ok(None);
+                }
+            }
+        }
+    }
+
+    fn decode_eof(&mut self, buf: &mut BytesMut) -> Result<Option<Frame>, io::Error> {
+        if let Some(frame) = self.decode(buf)? {
+            return Ok(Some(frame));
+        }
+        self.searched = 0;
+        if self.discarding || buf.is_empty() {
+            self.discarding = false;
+            buf.clear();
+            return Ok(None);
+        }
+        // A last request without its newline.
+        let rest = buf.split_to(buf.len());
+        Ok(self.frame(&rest))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn decode_all(codec: &mut RequestCodec, chunks: &[&[u8]]) -> Vec<Frame> {
+        let mut buf = BytesMut::new();
+        let mut out = Vec::new();
+        for c in chunks {
+            buf.extend_from_slice(c);
+            while let Some(f) = codec.decode(&mut buf).unwrap() {
+                out.push(f);
+            }
+        }
+        while let Some(f) = codec.decode_eof(&mut buf).unwrap() {
+            out.push(f);
+        }
+        out
+    }
+
+    #[test]
+    fn lines_split_across_reads_and_crlf_and_blank_lines() {
+        let mut c = RequestCodec::new(64);
+        let frames = decode_all(
+            &mut c,
+            &[
+                b"{\"class\":",
+                b"\"status\"}\r\n\n  \r\n{\"class\":\"pause\"}\n{\"cl",
+            ],
+        );
+        assert_eq!(
+            frames,
+            vec![
+                Frame::Line(r#"{"class":"status"}"#.into()),
+                Frame::Line(r#"{"class":"pause"}"#.into()),
+                Frame::Line(r#"{"cl"#.into()),
+            ]
+        );
+    }
+
+    #[test]
+    fn oversized_line_is_reported_once_and_the_next_line_survives() {
+        let mut c = RequestCodec::new(8);
+        let long = [b'x'; 20];
+        let frames = decode_all(&mut c, &[&long, &long, b"tail\nok\n"]);
+        assert_eq!(frames, vec![Frame::TooLong, Frame::Line("ok".into())]);
+        // Oversized but complete within one read.
+        let mut c = RequestCodec::new(8);
+        let frames = decode_all(&mut c, &[b"0123456789\nfine\n"]);
+        assert_eq!(frames, vec![Frame::TooLong, Frame::Line("fine".into())]);
+        // Exactly at the limit, with CRLF.
+        let mut c = RequestCodec::new(8);
+        let frames = decode_all(&mut c, &[b"01234567", b"\r\n"]);
+        assert_eq!(frames, vec![Frame::Line("01234567".into())]);
+    }
+
+    #[test]
+    fn garbage_bytes_are_an_item_not_an_error() {
+        let mut c = RequestCodec::new(64);
+        let frames = decode_all(&mut c, &[b"\xff\xfe\n{}\n"]);
+        assert_eq!(frames, vec![Frame::NotUtf8, Frame::Line("{}".into())]);
+    }
+
+    #[test]
+    fn malformed_requests_are_named() {
+        let bad_json = serde_json::from_str::<Request>("{nope").unwrap_err();
+        let Message::Error { message } = malformed("{nope", &bad_json) else {
+            panic!("not an error")
+        };
+        assert!(message.contains("not valid JSON"), "{message}");
+        let line = r#"{"class":"raw","cmd":"CTSTA"}"#;
+        let e = serde_json::from_str::<Request>(line).unwrap_err();
+        let Message::Error { message } = malformed(line, &e) else {
+            panic!("not an error")
+        };
+        assert!(
+            message.contains("unknown request class \"raw\""),
+            "{message}"
+        );
+        let line = r#"{"class":"start","specimn":"B"}"#;
+        let e = serde_json::from_str::<Request>(line).unwrap_err();
+        let Message::Error { message } = malformed(line, &e) else {
+            panic!("not an error")
+        };
+        assert!(message.contains("specimn"), "{message}");
+    }
+}

@@ -1,0 +1,440 @@
+//! The control-socket server over a real Unix socket, against a fake scan runner that answers
+//! commands and publishes status the way the real runner does.
+
+use serde_json::{json, Value};
+use std::os::unix::fs::PermissionsExt;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use surfscan::control::protocol::{
+    ControlChannels, DeviceState, OperatorCommand, OperatorRequest, State, Status, PROTOCOL_VERSION,
+};
+use surfscan::control::server::{self, ControlError, ServerOptions};
+use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader, Lines};
+use tokio::net::unix::{OwnedReadHalf, OwnedWriteHalf};
+use tokio::net::UnixStream;
+use tokio::sync::{mpsc, oneshot, watch};
+
+/// The fake runner's published state and the commands it has seen.
+struct Runner {
+    status: watch::Sender<Status>,
+    seen: Arc<Mutex<Vec<OperatorCommand>>>,
+}
+
+fn scanning() -> Status {
+    let mut s = Status::idle();
+    s.state = State::Scanning;
+    s.scan_id = Some("G-0142".into());
+    s.scan_dir = Some("/var/lib/surfscan/scans/G-0142".into());
+    s.lines_done = 11;
+    s.lines_total = 31;
+    s.current_line = Some(12);
+    s.y_mm = Some(0.11);
+    s.last_ra_um = Some(0.452);
+    s.eta_s = Some(750.0);
+    s.instrument = DeviceState::Connected;
+    s.stage = DeviceState::Connected;
+    s
+}
+
+/// A runner that pauses only a scanning scan, resumes only a paused one, and accepts
+/// abort and start.
+fn fake_runner(initial: Status) -> (ControlChannels, Runner) {
+    let (status_tx, status_rx) = watch::channel(initial);
+    let (cmd_tx, mut cmd_rx) = mpsc::channel::<OperatorRequest>(4);
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let publisher = status_tx.clone();
+    let log = Arc::clone(&seen);
+    tokio::spawn(async move {
+        while let Some(req) = cmd_rx.recv().await {
+            log.lock().unwrap().push(req.command.clone());
+            let state = publisher.borrow().state;
+            let answer = match (&req.command, state) {
+                (OperatorCommand::Pause, State::Scanning) => {
+                    publisher.send_modify(|s| s.state = State::Pausing);
+                    Ok("pausing after line 12 is on disk".to_owned())
+                }
+                (OperatorCommand::Pause, _) => Err("no scan is scanning; nothing to pause".into()),
+                (OperatorCommand::Resume, State::Paused) => Ok("resuming".into()),
+                (OperatorCommand::Resume, _) => {
+                    Err("the scan is not paused; resume releases an operator pause".into())
+                }
+                (OperatorCommand::Abort, _) => Ok("aborting".into()),
+                (OperatorCommand::Start { specimen, .. }, _) => {
+                    Ok(format!("starting a scan of {specimen}"))
+                }
+            };
+            let _ = req.reply.send(answer);
+        }
+    });
+    (
+        ControlChannels {
+            status: status_rx,
+            commands: cmd_tx,
+        },
+        Runner {
+            status: status_tx,
+            seen,
+        },
+    )
+}
+
+/// A served socket in a fresh directory; dropping the sender shuts the server down.
+struct Served {
+    _dir: tempfile::TempDir,
+    path: PathBuf,
+    stop: Option<oneshot::Sender<()>>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl Served {
+    async fn shutdown(mut self) {
+        let _ = self.stop.take().unwrap().send(());
+        tokio::time::timeout(Duration::from_secs(5), &mut self.task)
+            .await
+            .expect("serve returns after shutdown")
+            .unwrap();
+    }
+}
+
+async fn serve(channels: ControlChannels, options: ServerOptions) -> Served {
+    let dir = tempfile::tempdir().unwrap();
+    // A parent that does not exist yet: bind creates it.
+    let path = dir.path().join("run").join("control.sock");
+    let server = server::bind_with_options(&path, options).await.unwrap();
+    let (stop, stopped) = oneshot::channel::<()>();
+    let task = tokio::spawn(server.serve(channels, async {
+        let _ = stopped.await;
+    }));
+    Served {
+        _dir: dir,
+        path,
+        stop: Some(stop),
+        task,
+    }
+}
+
+struct Conn {
+    lines: Lines<BufReader<OwnedReadHalf>>,
+    writer: OwnedWriteHalf,
+}
+
+impl Conn {
+    async fn open(path: &Path) -> Conn {
+        let (r, w) = UnixStream::connect(path).await.unwrap().into_split();
+        Conn {
+            lines: BufReader::new(r).lines(),
+            writer: w,
+        }
+    }
+
+    async fn recv(&mut self) -> Value {
+        let line = tokio::time::timeout(Duration::from_secs(5), self.lines.next_line())
+            .await
+            .expect("a message within 5 s")
+            .unwrap()
+            .expect("connection still open");
+        serde_json::from_str(&line).unwrap()
+    }
+
+    async fn send_raw(&mut self, bytes: &[u8]) {
+        self.writer.write_all(bytes).await.unwrap();
+    }
+
+    async fn ask(&mut self, request: Value) -> Value {
+        let mut line = serde_json::to_vec(&request).unwrap();
+        line.push(b'\n');
+        self.send_raw(&line).await;
+        self.recv().await
+    }
+
+    /// Opens a connection and consumes the greeting.
+    async fn greeted(path: &Path) -> Conn {
+        let mut c = Conn::open(path).await;
+        assert_eq!(c.recv().await["class"], "hello");
+        c
+    }
+}
+
+fn status_of(m: &Value) -> Status {
+    assert_eq!(m["class"], "status", "{m}");
+    let mut v = m.clone();
+    v.as_object_mut().unwrap().remove("class");
+    serde_json::from_value(v).unwrap()
+}
+
+#[tokio::test]
+async fn greeting_comes_first_with_the_protocol_version() {
+    let (channels, _runner) = fake_runner(Status::idle());
+    let served = serve(channels, ServerOptions::default()).await;
+    let mut c = Conn::open(&served.path).await;
+    // Nothing sent yet: the greeting arrives unprompted.
+    let hello = c.recv().await;
+    assert_eq!(hello["class"], "hello");
+    assert_eq!(hello["protocol"], json!(1));
+    assert_eq!(PROTOCOL_VERSION, 1);
+    assert_eq!(hello["pid"], json!(std::process::id()));
+    assert_eq!(
+        hello["software"],
+        json!(format!("surfscan {}", env!("CARGO_PKG_VERSION")))
+    );
+    served.shutdown().await;
+}
+
+#[tokio::test]
+async fn status_returns_the_runners_snapshot() {
+    let (channels, runner) = fake_runner(Status::idle());
+    let served = serve(channels, ServerOptions::default()).await;
+    let mut c = Conn::greeted(&served.path).await;
+    assert_eq!(
+        status_of(&c.ask(json!({"class":"status"})).await),
+        Status::idle()
+    );
+    runner.status.send_replace(scanning());
+    let m = c.ask(json!({"class":"status"})).await;
+    assert_eq!(m["state"], "scanning");
+    assert_eq!(status_of(&m), scanning());
+    served.shutdown().await;
+}
+
+#[tokio::test]
+async fn pause_is_forwarded_and_acked_and_a_refusal_comes_back_as_error() {
+    let (channels, runner) = fake_runner(scanning());
+    let served = serve(channels, ServerOptions::default()).await;
+    let mut c = Conn::greeted(&served.path).await;
+    let ack = c.ask(json!({"class":"pause"})).await;
+    assert_eq!(
+        ack,
+        json!({"class":"ack","command":"pause","detail":"pausing after line 12 is on disk"})
+    );
+    assert_eq!(runner.status.borrow().state, State::Pausing);
+    // The runner refuses a resume of a scan that is not paused.
+    let refused = c.ask(json!({"class":"resume"})).await;
+    assert_eq!(
+        refused,
+        json!({"class":"error","message":"the scan is not paused; resume releases an operator pause"})
+    );
+    let started = c
+        .ask(json!({"class":"start","specimen":"B12","operator":"ana","notes":"lapped"}))
+        .await;
+    assert_eq!(started["class"], "ack");
+    assert_eq!(started["command"], "start");
+    assert_eq!(started["detail"], "starting a scan of B12");
+    assert_eq!(
+        *runner.seen.lock().unwrap(),
+        vec![
+            OperatorCommand::Pause,
+            OperatorCommand::Resume,
+            OperatorCommand::Start {
+                specimen: "B12".into(),
+                operator: "ana".into(),
+                notes: "lapped".into()
+            }
+        ]
+    );
+    served.shutdown().await;
+}
+
+#[tokio::test]
+async fn malformed_and_unknown_requests_get_errors_and_the_connection_still_answers() {
+    let (channels, runner) = fake_runner(scanning());
+    let served = serve(channels, ServerOptions::default()).await;
+    let mut c = Conn::greeted(&served.path).await;
+
+    c.send_raw(b"{\"class\": \"status\"\n").await;
+    let e = c.recv().await;
+    assert_eq!(e["class"], "error");
+    assert!(
+        e["message"].as_str().unwrap().contains("not valid JSON"),
+        "{e}"
+    );
+
+    let e = c.ask(json!({"class":"raw","cmd":"CTSTA"})).await;
+    assert_eq!(e["class"], "error");
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("unknown request class \"raw\""),
+        "{e}"
+    );
+
+    let e = c.ask(json!({"class":"start","specimn":"B"})).await;
+    assert_eq!(e["class"], "error");
+    assert!(e["message"].as_str().unwrap().contains("specimn"), "{e}");
+
+    // Longer than the 64 KiB bound: refused, and the rest of the stream is still read.
+    let mut long = vec![b'x'; 70 * 1024];
+    long.push(b'\n');
+    c.send_raw(&long).await;
+    let e = c.recv().await;
+    assert_eq!(e["class"], "error");
+    assert!(e["message"].as_str().unwrap().contains("65536"), "{e}");
+
+    c.send_raw(b"\xff\xfe\n").await;
+    assert_eq!(c.recv().await["class"], "error");
+
+    // Still usable, and nothing malformed reached the runner.
+    assert_eq!(
+        status_of(&c.ask(json!({"class":"status"})).await),
+        scanning()
+    );
+    assert!(runner.seen.lock().unwrap().is_empty());
+    served.shutdown().await;
+}
+
+#[tokio::test]
+async fn watch_sends_the_current_snapshot_then_every_change() {
+    let (channels, runner) = fake_runner(Status::idle());
+    let served = serve(channels, ServerOptions::default()).await;
+    let mut c = Conn::greeted(&served.path).await;
+    assert_eq!(
+        status_of(&c.ask(json!({"class":"watch"})).await),
+        Status::idle()
+    );
+    for k in 1..=3u32 {
+        runner.status.send_modify(|s| s.lines_done = k);
+        assert_eq!(status_of(&c.recv().await).lines_done, k);
+    }
+    // A watcher can still ask questions.
+    let e = c.ask(json!({"class":"pause"})).await;
+    assert_eq!(e["class"], "error");
+    served.shutdown().await;
+}
+
+#[tokio::test]
+async fn socket_mode_is_0660_and_its_directory_is_created() {
+    let (channels, _runner) = fake_runner(Status::idle());
+    let served = serve(channels, ServerOptions::default()).await;
+    let mode = std::fs::metadata(&served.path)
+        .unwrap()
+        .permissions()
+        .mode();
+    assert_eq!(mode & 0o777, 0o660, "mode {:o}", mode & 0o777);
+    served.shutdown().await;
+}
+
+#[tokio::test]
+async fn a_stale_socket_is_replaced_and_a_live_one_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("control.sock");
+    // A crashed daemon leaves its socket file behind: nothing listens on it.
+    drop(std::os::unix::net::UnixListener::bind(&path).unwrap());
+    assert!(path.exists());
+    let (channels, _runner) = fake_runner(Status::idle());
+    let first = server::bind(&path).await.expect("stale socket replaced");
+    let (stop, stopped) = oneshot::channel::<()>();
+    let task = tokio::spawn(first.serve(channels, async {
+        let _ = stopped.await;
+    }));
+    // The replacement really serves.
+    Conn::greeted(&path).await;
+
+    let err = server::bind(&path).await.unwrap_err();
+    assert!(
+        matches!(err, ControlError::AlreadyRunning { .. }),
+        "{err:?}"
+    );
+    let msg = err.to_string();
+    assert!(msg.contains("another surfscan daemon is running"), "{msg}");
+    assert!(msg.contains(&path.display().to_string()), "{msg}");
+    // The refused attempt left the live socket alone.
+    Conn::greeted(&path).await;
+    let _ = stop.send(());
+    task.await.unwrap();
+}
+
+#[tokio::test]
+async fn a_file_that_is_not_a_socket_is_left_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("control.sock");
+    std::fs::write(&path, "keep me").unwrap();
+    let err = server::bind(&path).await.unwrap_err();
+    assert!(matches!(err, ControlError::NotASocket { .. }), "{err:?}");
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), "keep me");
+}
+
+#[tokio::test]
+async fn shutdown_closes_connections_and_removes_the_socket_file() {
+    let (channels, _runner) = fake_runner(Status::idle());
+    let served = serve(channels, ServerOptions::default()).await;
+    let path = served.path.clone();
+    let mut c = Conn::greeted(&path).await;
+    assert_eq!(c.ask(json!({"class":"watch"})).await["class"], "status");
+    served.shutdown().await;
+    assert!(!path.exists(), "socket file left behind");
+    let eof = tokio::time::timeout(Duration::from_secs(5), c.lines.next_line())
+        .await
+        .expect("connection closed promptly")
+        .unwrap();
+    assert_eq!(eof, None);
+}
+
+#[tokio::test]
+async fn a_runner_that_is_gone_or_silent_gives_an_error_not_a_hang() {
+    // Gone: the command receiver has been dropped.
+    let (status_tx, status_rx) = watch::channel(Status::idle());
+    let (cmd_tx, cmd_rx) = mpsc::channel::<OperatorRequest>(1);
+    drop(cmd_rx);
+    let served = serve(
+        ControlChannels {
+            status: status_rx,
+            commands: cmd_tx,
+        },
+        ServerOptions::default(),
+    )
+    .await;
+    let mut c = Conn::greeted(&served.path).await;
+    let e = c.ask(json!({"class":"abort"})).await;
+    assert_eq!(e["class"], "error");
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("scan runner is not running"),
+        "{e}"
+    );
+    served.shutdown().await;
+    drop(status_tx);
+
+    // Silent: it takes the command and never answers.
+    let (_status_tx, status_rx) = watch::channel(Status::idle());
+    let (cmd_tx, mut cmd_rx) = mpsc::channel::<OperatorRequest>(1);
+    let held = tokio::spawn(async move {
+        let mut kept = Vec::new();
+        while let Some(r) = cmd_rx.recv().await {
+            kept.push(r);
+        }
+        kept.len()
+    });
+    let options = ServerOptions {
+        reply_timeout: Duration::from_millis(300),
+        ..ServerOptions::default()
+    };
+    let served = serve(
+        ControlChannels {
+            status: status_rx,
+            commands: cmd_tx,
+        },
+        options,
+    )
+    .await;
+    let mut c = Conn::greeted(&served.path).await;
+    let t0 = std::time::Instant::now();
+    let e = c.ask(json!({"class":"pause"})).await;
+    assert_eq!(e["class"], "error");
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("did not answer pause"),
+        "{e}"
+    );
+    assert!(
+        t0.elapsed() >= Duration::from_millis(250),
+        "{:?}",
+        t0.elapsed()
+    );
+    served.shutdown().await;
+    assert_eq!(held.await.unwrap(), 1);
+}
