@@ -460,4 +460,28 @@ dir = "/var/lib/surfscan/scans"
         let e = parse("[scan]\nlines = 3").unwrap_err().to_string();
         assert!(e.contains("missing field"), "{e}");
     }
+
+    #[test]
+    fn the_shipped_station_config_is_valid_and_complete() {
+        let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/config/surfscan.toml"));
+        let c = Config::load(path).unwrap();
+        assert_eq!(c.scan.lines, 31);
+        assert_eq!(c.plan().unwrap().y_step_nm, Nm(10_000));
+        // Every documented key is present (commented-out optional ones included), so the
+        // file stays the reference: compare against the keys the schema serialises.
+        let text = std::fs::read_to_string(path).unwrap();
+        let v = serde_json::to_value(&c).unwrap();
+        for (table, keys) in v.as_object().unwrap() {
+            let Some(keys) = keys.as_object() else { continue };
+            for key in keys.keys() {
+                if key == "commands" || key == "timeouts" {
+                    continue;
+                }
+                assert!(
+                    text.contains(&format!("{key} =")) || text.contains(&format!("# {key} =")),
+                    "[{table}] {key} is not documented in config/surfscan.toml"
+                );
+            }
+        }
+    }
 }
