@@ -363,12 +363,14 @@ async fn answer(
 ) -> Vec<Message> {
     let line = match frame {
         Frame::Line(line) => line,
-        Frame::TooLong => return vec![Message::Error {
-            message: format!(
+        Frame::TooLong => {
+            return vec![Message::Error {
+                message: format!(
                 "request line longer than {} bytes was discarded; send one JSON object per line",
                 options.max_line_bytes
             ),
-        }],
+            }]
+        }
         Frame::NotUtf8 => {
             return vec![Message::Error {
                 message: "request line is not UTF-8 text; send one JSON object per line".into(),
