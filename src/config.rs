@@ -472,7 +472,9 @@ dir = "/var/lib/surfscan/scans"
         let text = std::fs::read_to_string(path).unwrap();
         let v = serde_json::to_value(&c).unwrap();
         for (table, keys) in v.as_object().unwrap() {
-            let Some(keys) = keys.as_object() else { continue };
+            let Some(keys) = keys.as_object() else {
+                continue;
+            };
             for key in keys.keys() {
                 if key == "commands" || key == "timeouts" {
                     continue;

@@ -438,3 +438,42 @@ async fn a_runner_that_is_gone_or_silent_gives_an_error_not_a_hang() {
     served.shutdown().await;
     assert_eq!(held.await.unwrap(), 1);
 }
+
+#[tokio::test]
+async fn connections_beyond_the_limit_are_told_so_and_closed() {
+    let (channels, _runner) = fake_runner(Status::idle());
+    let options = ServerOptions {
+        max_connections: 1,
+        ..ServerOptions::default()
+    };
+    let served = serve(channels, options).await;
+    let mut first = Conn::greeted(&served.path).await;
+    let mut second = Conn::open(&served.path).await;
+    let e = second.recv().await;
+    assert_eq!(e["class"], "error");
+    assert!(
+        e["message"].as_str().unwrap().contains("already serves 1"),
+        "{e}"
+    );
+    let eof = tokio::time::timeout(Duration::from_secs(5), second.lines.next_line())
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(eof, None);
+    // The first is unaffected, and its slot is free again once it leaves.
+    assert_eq!(
+        first.ask(json!({"class":"status"})).await["class"],
+        "status"
+    );
+    drop(first);
+    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    loop {
+        let mut c = Conn::open(&served.path).await;
+        if c.recv().await["class"] == "hello" {
+            break;
+        }
+        assert!(std::time::Instant::now() < deadline, "slot never freed");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    served.shutdown().await;
+}

@@ -21,6 +21,10 @@ pub const MAX_MESSAGE_BYTES: u64 = 1024 * 1024;
 /// How long the daemon has to greet a new connection.
 pub const GREETING_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// How long to wait for the answer to a request. The daemon bounds its own wait for the
+/// scan runner (10 s), so this only fires when the daemon itself is stuck.
+pub const REPLY_TIMEOUT: Duration = Duration::from_secs(30);
+
 /// Why a conversation with the daemon failed.
 #[derive(Debug, thiserror::Error)]
 pub enum ClientError {
@@ -143,9 +147,14 @@ impl ControlClient {
     /// Sends `request` and returns the first message in reply.
     pub async fn request(&mut self, request: &Request) -> Result<Received, ClientError> {
         self.send(request).await?;
-        match self.next().await? {
-            Some(m) => Ok(m),
-            None => Err(self.io("the daemon closed the connection without answering")),
+        match tokio::time::timeout(REPLY_TIMEOUT, self.next()).await {
+            Ok(Ok(Some(m))) => Ok(m),
+            Ok(Ok(None)) => Err(self.io("the daemon closed the connection without answering")),
+            Ok(Err(e)) => Err(e),
+            Err(_) => Err(self.io(format!(
+                "no answer within {} s; see `journalctl -u surfscan`",
+                REPLY_TIMEOUT.as_secs()
+            ))),
         }
     }
 

@@ -323,10 +323,8 @@ async fn serve_connection(
                     None => return Ok(()),
                     Some(Err(e)) => return Err(Closed::Io(e)),
                     Some(Ok(frame)) => {
-                        let replies = answer(frame, &mut channels, &mut watching, options).await;
-                        for m in &replies {
-                            send(&mut writer, m, options.write_timeout).await?;
-                        }
+                        let reply = answer(frame, &mut channels, &mut watching, options).await;
+                        send(&mut writer, &reply, options.write_timeout).await?;
                     }
                 },
                 changed = channels.status.changed(), if watching => {
@@ -354,38 +352,38 @@ async fn serve_connection(
     }
 }
 
-/// The replies to one request line.
+/// The reply to one request line.
 async fn answer(
     frame: Frame,
     channels: &mut ControlChannels,
     watching: &mut bool,
     options: &ServerOptions,
-) -> Vec<Message> {
+) -> Message {
     let line = match frame {
         Frame::Line(line) => line,
         Frame::TooLong => {
-            return vec![Message::Error {
+            let limit = options.max_line_bytes;
+            return Message::Error {
                 message: format!(
-                "request line longer than {} bytes was discarded; send one JSON object per line",
-                options.max_line_bytes
-            ),
-            }]
+                    "request line longer than {limit} bytes was discarded; send one JSON object per line"
+                ),
+            };
         }
         Frame::NotUtf8 => {
-            return vec![Message::Error {
+            return Message::Error {
                 message: "request line is not UTF-8 text; send one JSON object per line".into(),
-            }]
+            }
         }
     };
     let request: Request = match serde_json::from_str(&line) {
         Ok(r) => r,
-        Err(e) => return vec![malformed(&line, &e)],
+        Err(e) => return malformed(&line, &e),
     };
     let command = match request {
-        Request::Status => return vec![snapshot(&mut channels.status, false)],
+        Request::Status => return snapshot(&mut channels.status, false),
         Request::Watch => {
             *watching = true;
-            return vec![snapshot(&mut channels.status, true)];
+            return snapshot(&mut channels.status, true);
         }
         Request::Pause => OperatorCommand::Pause,
         Request::Resume => OperatorCommand::Resume,
@@ -400,7 +398,7 @@ async fn answer(
             notes,
         },
     };
-    vec![forward(command, channels, options.reply_timeout).await]
+    forward(command, channels, options.reply_timeout).await
 }
 
 /// The error for a line that is not a valid request, naming what was wrong.

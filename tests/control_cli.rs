@@ -1,0 +1,316 @@
+//! The `surfscan status|pause|resume|abort|start` binary against a real control socket served
+//! in this process, and against sockets where no daemon (or a wrong one) answers.
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use surfscan::control::protocol::{
+    ControlChannels, DeviceState, OperatorCommand, OperatorRequest, State, Status,
+};
+use surfscan::control::server::{self, ServerOptions};
+use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
+use tokio::sync::{mpsc, oneshot, watch};
+
+fn scanning() -> Status {
+    let mut s = Status::idle();
+    s.state = State::Scanning;
+    s.scan_id = Some("G-0142".into());
+    s.scan_dir = Some("/var/lib/surfscan/scans/G-0142".into());
+    s.lines_done = 11;
+    s.lines_total = 31;
+    s.current_line = Some(12);
+    s.y_mm = Some(0.11);
+    s.last_ra_um = Some(0.452);
+    s.eta_s = Some(750.0);
+    s.instrument = DeviceState::Connected;
+    s.stage = DeviceState::Present;
+    s
+}
+
+struct Daemon {
+    _dir: tempfile::TempDir,
+    path: PathBuf,
+    status: watch::Sender<Status>,
+    seen: Arc<Mutex<Vec<OperatorCommand>>>,
+    stop: Option<oneshot::Sender<()>>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl Daemon {
+    /// A served socket with a runner that acks pause and start and refuses resume.
+    async fn start() -> Daemon {
+        let (status_tx, status_rx) = watch::channel(scanning());
+        let (cmd_tx, mut cmd_rx) = mpsc::channel::<OperatorRequest>(4);
+        let seen = Arc::new(Mutex::new(Vec::new()));
+        let log = Arc::clone(&seen);
+        tokio::spawn(async move {
+            while let Some(req) = cmd_rx.recv().await {
+                log.lock().unwrap().push(req.command.clone());
+                let answer = match req.command {
+                    OperatorCommand::Pause => Ok("pausing after line 12 is on disk".to_owned()),
+                    OperatorCommand::Resume => Err("the scan is not paused".to_owned()),
+                    OperatorCommand::Abort => Ok("aborting".to_owned()),
+                    OperatorCommand::Start { specimen, .. } => Ok(format!("starting {specimen}")),
+                };
+                let _ = req.reply.send(answer);
+            }
+        });
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("control.sock");
+        let server = server::bind_with_options(&path, ServerOptions::default())
+            .await
+            .unwrap();
+        let (stop, stopped) = oneshot::channel::<()>();
+        let task = tokio::spawn(server.serve(
+            ControlChannels {
+                status: status_rx,
+                commands: cmd_tx,
+            },
+            async {
+                let _ = stopped.await;
+            },
+        ));
+        Daemon {
+            _dir: dir,
+            path,
+            status: status_tx,
+            seen,
+            stop: Some(stop),
+            task,
+        }
+    }
+
+    async fn shutdown(mut self) {
+        let _ = self.stop.take().unwrap().send(());
+        (&mut self.task).await.unwrap();
+    }
+}
+
+fn surfscan() -> tokio::process::Command {
+    let mut c = tokio::process::Command::new(env!("CARGO_BIN_EXE_surfscan"));
+    c.env_remove("RUST_LOG").kill_on_drop(true);
+    c
+}
+
+async fn run(args: &[&str], socket: &Path) -> Output {
+    let out = surfscan().args(args).arg("--socket").arg(socket).output();
+    tokio::time::timeout(Duration::from_secs(30), out)
+        .await
+        .expect("the command finishes")
+        .unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[tokio::test]
+async fn status_prints_the_summary_and_the_fields_people_want() {
+    let d = Daemon::start().await;
+    let out = run(&["status"], &d.path).await;
+    let stdout = text(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{stdout}{}", text(&out.stderr));
+    for want in [
+        "scan G-0142: line 12/31, y=0.110 mm\n",
+        "lines      11/31 done, on line 12\n",
+        "y          0.110 mm\n",
+        "last Ra    0.452 µm\n",
+        "ETA        12 min 30 s\n",
+        "devices    instrument connected, stage present\n",
+    ] {
+        assert!(stdout.contains(want), "missing {want:?} in:\n{stdout}");
+    }
+    d.shutdown().await;
+}
+
+#[tokio::test]
+async fn status_json_prints_the_raw_status_message() {
+    let d = Daemon::start().await;
+    let out = run(&["status", "--json"], &d.path).await;
+    assert_eq!(out.status.code(), Some(0));
+    let stdout = text(&out.stdout);
+    assert_eq!(stdout.lines().count(), 1, "{stdout}");
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    assert_eq!(v["class"], "status");
+    assert_eq!(v["state"], "scanning");
+    assert_eq!(v["lines_done"], 11);
+    assert_eq!(v["stage"], "present");
+    d.shutdown().await;
+}
+
+#[tokio::test]
+async fn commands_are_acked_or_refused_with_the_daemons_message() {
+    let d = Daemon::start().await;
+    let out = run(&["pause"], &d.path).await;
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert_eq!(
+        text(&out.stdout),
+        "pause: pausing after line 12 is on disk\n"
+    );
+
+    let out = run(&["resume"], &d.path).await;
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = text(&out.stderr);
+    assert!(stderr.contains("the scan is not paused"), "{stderr}");
+
+    let out = run(
+        &[
+            "start",
+            "--specimen",
+            "B12",
+            "--operator",
+            "ana",
+            "--notes",
+            "lapped steel",
+        ],
+        &d.path,
+    )
+    .await;
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert_eq!(text(&out.stdout), "start: starting B12\n");
+    assert_eq!(
+        *d.seen.lock().unwrap(),
+        vec![
+            OperatorCommand::Pause,
+            OperatorCommand::Resume,
+            OperatorCommand::Start {
+                specimen: "B12".into(),
+                operator: "ana".into(),
+                notes: "lapped steel".into()
+            }
+        ]
+    );
+    d.shutdown().await;
+}
+
+#[tokio::test]
+async fn config_names_the_socket_through_its_control_table() {
+    let d = Daemon::start().await;
+    let cfg = d.path.with_file_name("surfscan.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[instrument]\nport = \"/dev/sj210\"\n\n[control]\nsocket = {:?}\n",
+            d.path.display().to_string()
+        ),
+    )
+    .unwrap();
+    let out = surfscan()
+        .arg("abort")
+        .arg("--config")
+        .arg(&cfg)
+        .output()
+        .await
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert_eq!(text(&out.stdout), "abort: aborting\n");
+    d.shutdown().await;
+}
+
+#[tokio::test]
+async fn nothing_listening_is_exit_69_with_a_hint() {
+    let dir = tempfile::tempdir().unwrap();
+    // No file at all.
+    let missing = dir.path().join("missing.sock");
+    let out = run(&["status"], &missing).await;
+    assert_eq!(out.status.code(), Some(69));
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("is the daemon running? systemctl status surfscan"),
+        "{stderr}"
+    );
+    assert!(stderr.contains(&missing.display().to_string()), "{stderr}");
+    // A stale socket file: connection refused.
+    let stale = dir.path().join("stale.sock");
+    drop(std::os::unix::net::UnixListener::bind(&stale).unwrap());
+    let out = run(&["pause"], &stale).await;
+    assert_eq!(out.status.code(), Some(69), "{}", text(&out.stderr));
+}
+
+/// A listener that greets with `greeting` (if any) and then closes each connection.
+async fn fake_daemon(path: &Path, greeting: Option<&'static str>) -> tokio::task::JoinHandle<()> {
+    let listener = tokio::net::UnixListener::bind(path).unwrap();
+    tokio::spawn(async move {
+        while let Ok((mut s, _)) = listener.accept().await {
+            if let Some(g) = greeting {
+                let _ = s.write_all(g.as_bytes()).await;
+            }
+            let _ = s.shutdown().await;
+        }
+    })
+}
+
+#[tokio::test]
+async fn an_incompatible_greeting_is_refused_clearly() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("future.sock");
+    let task = fake_daemon(
+        &path,
+        Some("{\"class\":\"hello\",\"protocol\":99,\"software\":\"surfscan 9.0.0\",\"pid\":1}\n"),
+    )
+    .await;
+    let out = run(&["status"], &path).await;
+    assert_eq!(out.status.code(), Some(69));
+    let stderr = text(&out.stderr);
+    assert!(stderr.contains("protocol 99"), "{stderr}");
+    assert!(stderr.contains("surfscan 9.0.0"), "{stderr}");
+    task.abort();
+}
+
+#[tokio::test]
+async fn a_conversation_cut_short_is_exit_74() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cut.sock");
+    // Greets, then hangs up before answering.
+    let task = fake_daemon(
+        &path,
+        Some("{\"class\":\"hello\",\"protocol\":1,\"software\":\"surfscan 0.1.0\",\"pid\":1}\n"),
+    )
+    .await;
+    let out = run(&["status"], &path).await;
+    assert_eq!(out.status.code(), Some(74), "{}", text(&out.stderr));
+    // Depending on timing the hang-up shows as end of stream or as a broken pipe on sending.
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("control conversation with")
+            && stderr.contains(&path.display().to_string()),
+        "{stderr}"
+    );
+    task.abort();
+}
+
+#[tokio::test]
+async fn watch_prints_every_change_until_the_daemon_goes_away() {
+    let d = Daemon::start().await;
+    let mut child = surfscan()
+        .args(["status", "--watch", "--json", "--socket"])
+        .arg(&d.path)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let mut next = async || -> serde_json::Value {
+        let l = tokio::time::timeout(Duration::from_secs(10), lines.next_line())
+            .await
+            .expect("a line within 10 s")
+            .unwrap()
+            .expect("still running");
+        serde_json::from_str(&l).unwrap()
+    };
+    assert_eq!(next().await["lines_done"], 11);
+    d.status.send_modify(|s| {
+        s.lines_done = 12;
+        s.current_line = Some(13);
+    });
+    let v = next().await;
+    assert_eq!(v["lines_done"], 12);
+    assert_eq!(v["current_line"], 13);
+    d.shutdown().await;
+    let status = tokio::time::timeout(Duration::from_secs(10), child.wait())
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(status.code(), Some(74));
+}

@@ -1,0 +1,340 @@
+//! End to end: the real `surfscan daemon` binary against the simulator (SJ-210 + GRBL stage,
+//! started in-process on pseudo-terminals), driven through its control socket and watched
+//! through a `NOTIFY_SOCKET` datagram socket bound by the test, as systemd would.
+//!
+//! Depends on the `surfscan` binary, the `surfscan_sim` library and the control client.
+
+use std::os::unix::net::UnixDatagram;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+use surfscan::control::client::ControlClient;
+use surfscan::control::protocol::{Message, Request, State, Status};
+use surfscan::scan::journal::{read_journal, Record, StopStatus};
+use surfscan_sim::grbl::{GrblSimConfig, StageShared};
+use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
+
+const SPEED_UP: f64 = 50.0;
+const LINES: u32 = 8;
+const DEADLINE: Duration = Duration::from_secs(90);
+
+struct Rig {
+    dir: tempfile::TempDir,
+    sim: SimHandle,
+    config: PathBuf,
+    socket: PathBuf,
+    notify: UnixDatagram,
+}
+
+impl Rig {
+    fn out(&self) -> PathBuf {
+        self.dir.path().join("scans")
+    }
+}
+
+async fn rig() -> Rig {
+    let dir = tempfile::tempdir().unwrap();
+    let inst = dir.path().join("sj210");
+    let stage = dir.path().join("ystage");
+    let mut profiles = ProfileSet::bundled().unwrap();
+    profiles.y_first_mm = -20.0;
+    let sim = Simulator::new(&inst)
+        .instrument(InstrumentConfig {
+            time_scale: 1.0 / SPEED_UP,
+            ..InstrumentConfig::default()
+        })
+        .profiles(profiles)
+        .baud(1_000_000)
+        .grbl_stage(
+            &stage,
+            GrblSimConfig {
+                steps_per_mm: 400.0,
+                max_travel_mm: 100.0,
+                time_scale: SPEED_UP * 10.0,
+                ..GrblSimConfig::default()
+            },
+            StageShared::new(),
+        );
+    let mut sim = sim.start().unwrap();
+    match tokio::time::timeout(Duration::from_secs(10), sim.next_event()).await {
+        Ok(Some(SimEvent::Ready(_))) => {}
+        other => panic!("simulator not ready: {other:?}"),
+    }
+    let socket = dir.path().join("run").join("control.sock");
+    let text = surfscan::cli::demo::demo_config(&inst, &stage, &dir.path().join("scans"))
+        .replace(
+            "lines = 31",
+            &format!("lines = {LINES}\n[fit]\ndegree-v = 3"),
+        )
+        .replace(
+            &format!(
+                "{:?}",
+                dir.path()
+                    .join("scans/sim/control.sock")
+                    .display()
+                    .to_string()
+            ),
+            &format!("{:?}", socket.display().to_string()),
+        );
+    let config = dir.path().join("station.toml");
+    std::fs::write(&config, text).unwrap();
+    let notify = UnixDatagram::bind(dir.path().join("notify.sock")).unwrap();
+    notify
+        .set_read_timeout(Some(Duration::from_millis(200)))
+        .unwrap();
+    Rig {
+        dir,
+        sim,
+        config,
+        socket,
+        notify,
+    }
+}
+
+fn spawn_daemon(r: &Rig) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(["daemon", "--config"])
+        .arg(&r.config)
+        .env("NOTIFY_SOCKET", r.dir.path().join("notify.sock"))
+        .env_remove("WATCHDOG_USEC")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+/// Reads notify datagrams until one satisfies `want`; returns all seen.
+fn notify_until(r: &Rig, want: impl Fn(&str) -> bool) -> Vec<String> {
+    let mut seen = Vec::new();
+    let start = Instant::now();
+    let mut buf = [0u8; 4096];
+    while start.elapsed() < DEADLINE {
+        if let Ok(n) = r.notify.recv(&mut buf) {
+            let m = String::from_utf8_lossy(&buf[..n]).into_owned();
+            let done = want(&m);
+            seen.push(m);
+            if done {
+                return seen;
+            }
+        }
+    }
+    panic!("notify message not seen; got {seen:?}");
+}
+
+async fn client(r: &Rig) -> ControlClient {
+    ControlClient::connect(&r.socket).await.unwrap()
+}
+
+async fn status(r: &Rig) -> Status {
+    match client(r)
+        .await
+        .request(&Request::Status)
+        .await
+        .unwrap()
+        .message
+    {
+        Message::Status(s) => *s,
+        other => panic!("expected status, got {other:?}"),
+    }
+}
+
+async fn wait_status(r: &Rig, what: &str, f: impl Fn(&Status) -> bool) -> Status {
+    let start = Instant::now();
+    loop {
+        let s = status(r).await;
+        if f(&s) {
+            return s;
+        }
+        assert!(start.elapsed() < DEADLINE, "{what}: last status {s:?}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+fn scan_dir(r: &Rig) -> PathBuf {
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(r.out())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.join("journal.jsonl").exists())
+        .collect();
+    dirs.sort();
+    assert_eq!(dirs.len(), 1, "{dirs:?}");
+    dirs.pop().unwrap()
+}
+
+fn records(dir: &Path) -> Vec<Record> {
+    read_journal(&dir.join("journal.jsonl")).unwrap().records
+}
+
+fn line_indices(recs: &[Record]) -> Vec<u32> {
+    recs.iter()
+        .filter_map(|r| match r {
+            Record::Line(l) => Some(l.index),
+            _ => None,
+        })
+        .collect()
+}
+
+fn wait_exit(child: &mut Child) -> std::process::ExitStatus {
+    let start = Instant::now();
+    loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            return s;
+        }
+        assert!(start.elapsed() < DEADLINE, "daemon did not exit");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn sigterm(child: &Child) {
+    let pid = nix::unistd::Pid::from_raw(child.id() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket() {
+    let r = rig().await;
+    let mut d = spawn_daemon(&r);
+    let seen = notify_until(&r, |m| m.contains("READY=1"));
+    assert!(
+        r.socket.exists(),
+        "READY=1 before the control socket was bound: {seen:?}"
+    );
+    // Idle: the greeting comes first, then status; no scan starts by itself.
+    let mut c = client(&r).await;
+    assert!(matches!(
+        c.hello().message,
+        Message::Hello { protocol: 1, .. }
+    ));
+    let s = status(&r).await;
+    assert_eq!(s.state, State::Idle);
+    assert!(!r.out().exists() || std::fs::read_dir(r.out()).unwrap().next().is_none());
+
+    let ack = c
+        .request(&Request::Start {
+            specimen: "B-12".into(),
+            operator: "ana".into(),
+            notes: "socket test".into(),
+        })
+        .await
+        .unwrap();
+    assert!(matches!(ack.message, Message::Ack { .. }), "{ack:?}");
+    wait_status(&r, "scanning", |s| s.state == State::Scanning).await;
+    // Deferred pause: takes effect once a line is on disk, never mid-line.
+    let ack = client(&r).await.request(&Request::Pause).await.unwrap();
+    assert!(matches!(ack.message, Message::Ack { .. }), "{ack:?}");
+    let paused = wait_status(&r, "paused", |s| s.state == State::Paused).await;
+    let dir = scan_dir(&r);
+    let done = line_indices(&records(&dir));
+    assert_eq!(done.len() as u32, paused.lines_done);
+    assert!(paused.lines_done >= 1 && paused.lines_done < LINES);
+    // While paused nothing is traced.
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert_eq!(line_indices(&records(&dir)), done);
+    let seen = notify_until(&r, |m| m.contains("STATUS=") && m.contains("paused"));
+    assert!(seen.iter().any(|m| m.contains("STATUS=")), "{seen:?}");
+
+    let ack = client(&r).await.request(&Request::Resume).await.unwrap();
+    assert!(matches!(ack.message, Message::Ack { .. }), "{ack:?}");
+    wait_status(&r, "progress after resume", |s| {
+        s.lines_done > paused.lines_done
+    })
+    .await;
+    let ack = client(&r).await.request(&Request::Abort).await.unwrap();
+    assert!(matches!(ack.message, Message::Ack { .. }), "{ack:?}");
+    let s = wait_status(&r, "idle after abort", |s| s.state == State::Idle).await;
+    assert_eq!(s.last_stop.as_ref().unwrap().status, "abort");
+    let recs = records(&dir);
+    match recs.last().unwrap() {
+        Record::Stop(s) => assert_eq!(s.status, StopStatus::Abort),
+        other => panic!("last record {other:?}"),
+    }
+    assert!(recs.iter().any(
+        |r| matches!(r, Record::Interruption(i) if i.reason.contains("paused by the operator"))
+    ));
+    let idx = line_indices(&recs);
+    let mut sorted = idx.clone();
+    sorted.dedup();
+    assert_eq!(idx, sorted, "each line exactly once, in order");
+    // Pausing with no scan running is refused with a reason.
+    let e = client(&r).await.request(&Request::Pause).await.unwrap();
+    assert!(
+        matches!(&e.message, Message::Error { message } if message.contains("no scan")),
+        "{e:?}"
+    );
+
+    sigterm(&d);
+    notify_until(&r, |m| m.contains("STOPPING=1"));
+    assert!(wait_exit(&mut d).success());
+    assert!(!r.socket.exists(), "socket removed at shutdown");
+    r.sim.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_mid_scan_records_an_interruption_and_the_restart_resumes_by_itself() {
+    let r = rig().await;
+    let mut d = spawn_daemon(&r);
+    notify_until(&r, |m| m.contains("READY=1"));
+    client(&r)
+        .await
+        .request(&Request::Start {
+            specimen: "resume".into(),
+            operator: String::new(),
+            notes: String::new(),
+        })
+        .await
+        .unwrap();
+    wait_status(&r, "two lines", |s| s.lines_done >= 2).await;
+    sigterm(&d);
+    notify_until(&r, |m| m.contains("STOPPING=1"));
+    assert!(wait_exit(&mut d).success());
+    let dir = scan_dir(&r);
+    let recs = records(&dir);
+    assert!(
+        !recs.iter().any(|r| matches!(r, Record::Stop(_))),
+        "SIGTERM must not end the scan"
+    );
+    assert!(
+        matches!(recs.last().unwrap(), Record::Interruption(i) if i.reason.contains("shutdown"))
+    );
+    let before = line_indices(&recs).len() as u32;
+    assert!(before < LINES, "the scan was still running");
+
+    // The restart resumes without a start command and completes.
+    let mut d = spawn_daemon(&r);
+    let s = wait_status(&r, "complete after restart", |s| {
+        s.last_stop.as_ref().is_some_and(|l| l.status == "success")
+    })
+    .await;
+    assert_eq!(s.state, State::Idle);
+    let recs = records(&dir);
+    assert_eq!(line_indices(&recs), (0..LINES).collect::<Vec<_>>());
+    assert!(recs.iter().any(
+        |r| matches!(r, Record::Interruption(i) if i.reason.contains("resumed after a restart"))
+    ));
+    assert!(dir.join("surface.igs").exists() && dir.join("report.json").exists());
+    sigterm(&d);
+    assert!(wait_exit(&mut d).success());
+    r.sim.shutdown().await;
+}
+
+#[test]
+fn a_bad_config_exits_78_naming_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("bad.toml");
+    let text = surfscan::cli::demo::demo_config(
+        Path::new("/dev/null"),
+        Path::new("/dev/null"),
+        dir.path(),
+    )
+    .replace("y-step-mm = 0.01", "y-step-mm = 0.01\ny-stepp-mm = 1");
+    std::fs::write(&p, text).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(["daemon", "--config"])
+        .arg(&p)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(78));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("y-stepp-mm"), "{err}");
+}
