@@ -540,6 +540,14 @@ fn a_malformed_line_file_is_a_clear_error_naming_the_file() {
         assert!(!stderr.contains("panicked"), "{cmd}: {stderr}");
     }
     std::fs::write(&csv, text).unwrap();
+    // A directory that is not a scan is named as such.
+    let out = surfscan()
+        .args(["analyze", tmp.path().to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("not a scan directory"), "{stderr}");
     let meta = scan.join("lines/0005.json");
     std::fs::write(&meta, "{ \"index\": 5, ").unwrap();
     let out = surfscan()

@@ -273,6 +273,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         index: (0..rows as u32).collect(),
         y_readback_mm: vec![None; rows],
         instrument: None,
+        standard: vec![None; rows],
     };
     let ctx = ReportContext {
         input: args.input.display().to_string(),

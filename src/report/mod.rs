@@ -24,7 +24,7 @@ use crate::atomic::write_atomically;
 use crate::fit::{fit_grid, FitError, FitOptions};
 use crate::metrology::areal::{self, areal_params, smr_curve, ArealParams, Grid};
 use crate::metrology::holdout::{holdout, Holdout};
-use crate::metrology::instrument::{compare, Comparison};
+use crate::metrology::instrument::{compare_under, Comparison};
 use crate::metrology::model::ModelCurveBac;
 use crate::metrology::model::{model_bearing_curves, sample_model_grid, ModelBacOptions};
 use crate::metrology::params::{analyze_line, LineAnalysis, Options, Recipe, RoughnessParams};
@@ -308,6 +308,9 @@ pub struct LineGrid {
     pub y_readback_mm: Vec<Option<f64>>,
     /// The instrument's results per row (`None`: not a scan, no comparison).
     pub instrument: Option<Vec<Vec<InstrumentResult>>>,
+    /// The standard the instrument evaluated each row to (its recorded conditions), which
+    /// decides what its `Rz` means.
+    pub standard: Vec<Option<String>>,
 }
 
 /// Everything besides the grid that goes into a report.
@@ -598,10 +601,13 @@ pub fn characterise_grid(
             y_readback_mm: grid.y_readback_mm.get(row).copied().flatten(),
             params: a.params.clone(),
             rmr_table: rmr_table(a),
-            instrument: grid
-                .instrument
-                .as_ref()
-                .map(|all| compare(&a.params, all.get(row).map_or(&[][..], |v| &v[..]))),
+            instrument: grid.instrument.as_ref().map(|all| {
+                compare_under(
+                    &a.params,
+                    all.get(row).map_or(&[][..], |v| &v[..]),
+                    grid.standard.get(row).and_then(|s| s.as_deref()),
+                )
+            }),
         })
         .collect();
     timings.lines = t.elapsed().as_secs_f64();
@@ -878,6 +884,12 @@ fn model_error(e: &FitError) -> String {
 /// Every line must have the same number of points and the same x pitch (they are one grid);
 /// a line that differs is named.
 pub fn load_scan_grid(dir: &Path) -> Result<(LineGrid, Vec<StoredLine>, Vec<u32>), ReportError> {
+    if !dir.join("lines").is_dir() {
+        return Err(ReportError::Lines {
+            path: dir.to_path_buf(),
+            reason: "is not a scan directory: it has no lines/ folder (a scan holds lines/NNNN.csv + NNNN.json and journal.jsonl)".to_string(),
+        });
+    }
     let store = ScanStore::open(dir, Arc::new(NoFaults))?;
     let loaded = store.load_all()?;
     let Some(first) = loaded.lines.first() else {
@@ -928,6 +940,11 @@ pub fn load_scan_grid(dir: &Path) -> Result<(LineGrid, Vec<StoredLine>, Vec<u32>
                 .map(|l| l.meta.results.clone())
                 .collect(),
         ),
+        standard: loaded
+            .lines
+            .iter()
+            .map(|l| l.meta.conditions.standard.clone())
+            .collect(),
     };
     Ok((grid, loaded.lines, loaded.incomplete))
 }
