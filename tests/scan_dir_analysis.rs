@@ -458,6 +458,11 @@ fn partial_scan_is_analysed_with_the_lines_it_has_and_names_the_incomplete_one()
         .collect();
     // Every 2nd of the 12 lines used is refitted from the others: positions 1, 3, 5, 7, 9.
     assert_eq!(held, vec![1, 3, 6, 8, 10]);
+    // Each line carries its own share: line 6 was left out whole, line 5 was not.
+    let line6 = &r["lines"][5]["model_vs_measured"];
+    assert_eq!(line6["line_left_out"]["index"], 6);
+    assert_eq!(line6["points_left_out"]["index"], 6);
+    assert!(r["lines"][4]["model_vs_measured"]["line_left_out"].is_null());
     assert!(std::fs::metadata(tmp.path().join("out/model.x3p")).is_ok());
     // Nothing was written into the scan directory when --out points elsewhere.
     assert!(!scan.join("report.json").exists());

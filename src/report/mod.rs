@@ -8,10 +8,10 @@
 //! the instrument's own results beside ours with `ours − instrument`), `surface` (areal
 //! parameters of the NURBS model, `bac` pooled `[height_um, material_ratio_pct]`, `bac_curves`
 //! the paper's per-curve tables), `surface_grid` (the same on the measured grid),
-//! `model_vs_measured` (hold-out refits, per line), `recipe` (filter, λc and why, a definition id
-//! per parameter), and for scans `traceability` (from the journal's start record) and `scan`
-//! (stop record, `complete`/`partial`, lines used and incomplete), `fit` (what the caller passed,
-//! verbatim) and `warnings`.
+//! `model_vs_measured` (hold-out refits; each line also carries its own share), `recipe`
+//! (filter, λc and why, a definition id per parameter), and for scans `traceability` (from the
+//! journal's start record) and `scan` (stop record, `complete`/`partial`, lines used and
+//! incomplete), `fit` (what the caller passed, verbatim), `warnings` and `timings_s`.
 //!
 //! A partial, aborted or failed scan is characterised with the complete lines it has; lines
 //! with only one of their two files are named in a warning. A complete but malformed line file
@@ -23,7 +23,7 @@
 use crate::atomic::write_atomically;
 use crate::fit::{fit_grid, FitError, FitOptions};
 use crate::metrology::areal::{self, areal_params, smr_curve, ArealParams, Grid};
-use crate::metrology::holdout::{holdout, Holdout};
+use crate::metrology::holdout::{holdout, Holdout, HoldoutLine};
 use crate::metrology::instrument::{compare_under, Comparison};
 use crate::metrology::model::ModelCurveBac;
 use crate::metrology::model::{model_bearing_curves, sample_model_grid, ModelBacOptions};
@@ -233,6 +233,17 @@ struct LineReport {
     /// The instrument's results beside ours (scans only).
     #[serde(skip_serializing_if = "Option::is_none")]
     instrument: Option<Vec<Comparison>>,
+    /// This line's share of the hold-out comparison (when it could be made).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    model_vs_measured: Option<LineHoldout>,
+}
+
+/// The hold-out differences of one line: at its own left-out points, and (every 2nd line)
+/// for the whole line left out.
+#[derive(Debug, Clone, Serialize)]
+struct LineHoldout {
+    points_left_out: Option<HoldoutLine>,
+    line_left_out: Option<HoldoutLine>,
 }
 
 /// Areal results with their curves.
@@ -592,7 +603,7 @@ pub fn characterise_grid(
                 incomplete: Vec::new(),
             })?;
     recipe.definitions.extend(areal::definitions());
-    let lines: Vec<LineReport> = analyses
+    let mut lines: Vec<LineReport> = analyses
         .iter()
         .enumerate()
         .map(|(row, a)| LineReport {
@@ -608,6 +619,7 @@ pub fn characterise_grid(
                     grid.standard.get(row).and_then(|s| s.as_deref()),
                 )
             }),
+            model_vs_measured: None,
         })
         .collect();
     timings.lines = t.elapsed().as_secs_f64();
@@ -731,6 +743,16 @@ pub fn characterise_grid(
         }
         Err(e) => (None, Some(e.to_string())),
     };
+    if let Some(h) = &model_vs_measured {
+        let find =
+            |v: &[HoldoutLine], index: u32| v.iter().find(|l| l.index == index as usize).cloned();
+        for line in &mut lines {
+            line.model_vs_measured = Some(LineHoldout {
+                points_left_out: find(&h.points_left_out, line.index),
+                line_left_out: find(&h.lines_left_out, line.index),
+            });
+        }
+    }
     timings.holdout = t.elapsed().as_secs_f64();
 
     // Files.
