@@ -196,6 +196,12 @@ fn print_outputs(o: &ScanOutputs) {
 /// Runs `surfscan analyze`.
 pub fn run(args: Args) -> Result<(), CliError> {
     if args.input.is_dir() {
+        if args.pitch_x.is_some() || args.pitch_y.is_some() {
+            return Err(CliError::new(
+                Exit::Usage,
+                "--pitch-x/--pitch-y are for a grid CSV; a scan directory's pitch and y come from its line metadata",
+            ));
+        }
         let options = ScanAnalysisOptions {
             curves: args.curves,
             levels: args.levels,

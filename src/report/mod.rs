@@ -1111,3 +1111,82 @@ pub fn characterise_scan(
     outputs.elapsed_s += load_s;
     Ok(outputs)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::profile::Profile;
+    use crate::scan::store::LineMeta;
+    use crate::units::Nm;
+
+    fn line(kind: ProfileKind, lambda_c_mm: Option<f64>, filter: Option<FilterKind>) -> StoredLine {
+        let conditions = Conditions {
+            lambda_c_mm,
+            filter,
+            ..Conditions::default()
+        };
+        let t = chrono::Utc::now();
+        StoredLine {
+            meta: LineMeta {
+                index: 0,
+                y_target_nm: Nm(0),
+                y_readback_nm: None,
+                pitch_x_mm: 0.001,
+                points: 3,
+                kind,
+                conditions: conditions.clone(),
+                results: Vec::new(),
+                started_at: t,
+                finished_at: t,
+                attempt: 1,
+            },
+            profile: Profile {
+                pitch_x_mm: 0.001,
+                heights_um: vec![0.0; 3],
+                kind,
+                conditions,
+            },
+        }
+    }
+
+    #[test]
+    fn the_recorded_kind_and_filter_decide_and_the_options_override() {
+        let defaults = ScanAnalysisOptions::default();
+        let (o, src, why) = scan_line_options(&line(ProfileKind::P, Some(2.5), None), &defaults);
+        assert!(o.apply_lambda_c && o.lambda_c_mm == 2.5, "{o:?}");
+        assert!(
+            src.contains("recorded") && why.contains("applied"),
+            "{src} / {why}"
+        );
+
+        let (o, _, why) = scan_line_options(&line(ProfileKind::R, Some(0.8), None), &defaults);
+        assert!(!o.apply_lambda_c && why.contains("R profile"), "{why}");
+
+        let (o, _, why) = scan_line_options(
+            &line(ProfileKind::P, None, Some(FilterKind::None)),
+            &defaults,
+        );
+        assert!(!o.apply_lambda_c && why.contains("none"), "{why}");
+
+        let (o, src, _) = scan_line_options(&line(ProfileKind::P, None, None), &defaults);
+        assert!(o.lambda_c_mm == 0.8 && src.contains("default"), "{src}");
+
+        let forced = ScanAnalysisOptions {
+            lambda_c_mm: Some(0.25),
+            no_filter: true,
+            ..ScanAnalysisOptions::default()
+        };
+        let (o, src, why) = scan_line_options(&line(ProfileKind::P, Some(0.8), None), &forced);
+        assert!(!o.apply_lambda_c && o.lambda_c_mm == 0.25, "{o:?}");
+        assert!(src.contains("overriding the recorded 0.8"), "{src}");
+        assert!(why.contains("--no-filter"), "{why}");
+    }
+
+    #[test]
+    fn mean_pitch_flags_uneven_lines() {
+        assert_eq!(mean_pitch_y(&[0.0, 0.01, 0.02]), (0.01, true));
+        let (p, even) = mean_pitch_y(&[0.0, 0.01, 0.03]);
+        assert!((p - 0.015).abs() < 1e-15 && !even);
+        assert_eq!(mean_pitch_y(&[0.5]), (1.0, true));
+    }
+}
