@@ -15,7 +15,8 @@
 //!    [`sj210`] and [`stage`], generic over `AsyncRead + AsyncWrite`.
 //! 3. The session: [`scan`] (plan, durable storage and journal, resume, runner).
 //! 4. Process edges: [`telemetry`] (logging), [`atomic`] (durable file replacement),
-//!    [`control`] (the operator's control socket).
+//!    [`control`] (the operator's control socket), [`report`] (characterisation of a scan
+//!    directory or grid into report.json, summary.csv, plots and X3P).
 //! 5. Composition: [`cli`] (one file per subcommand) and `main.rs`.
 //!
 //! The simulator (`simulator/`, crate `surfscan-sim`) speaks the instrument's and the
@@ -33,6 +34,7 @@ pub mod iges;
 pub mod metrology;
 pub mod nurbs;
 pub mod profile;
+pub mod report;
 pub mod scan;
 pub mod service;
 pub mod sj210;

@@ -115,7 +115,7 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
     assert!(mvm["lines_left_out"][0]["max_abs_um"].as_f64().unwrap() < 1e-6);
     let bac = report["surface_grid"]["bac"].as_array().unwrap();
     assert_eq!(bac.len(), 101);
-    let curves = report["bac_curves"].as_array().unwrap();
+    let curves = report["surface"]["bac_curves"].as_array().unwrap();
     assert_eq!(curves.len(), 5);
     // Model curve BAC at its mean line: half the length is above (arccos(0)/π = 50 %).
     let pts = curves[2]["curve"]["points"].as_array().unwrap();

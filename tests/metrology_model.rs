@@ -133,7 +133,8 @@ fn holdout_predicts_a_smooth_surface_and_misses_a_held_out_spike() {
             amp * (2.0 * PI * c as f64 / 40.0).cos() * (2.0 * PI * r as f64 / 16.0).cos()
         })
         .collect();
-    let h = holdout(&z, rows, cols, px, py, FitOptions::default()).unwrap();
+    let y: Vec<f64> = (0..rows).map(|r| r as f64 * py).collect();
+    let h = holdout(&z, cols, px, &y, FitOptions::default()).unwrap();
     assert_eq!(h.points_left_out.len(), rows);
     assert!(h.points_left_out.iter().all(|l| l.points == 80));
     // Odd rows between the first and last kept (even) rows: 1, 3, …, 19.
@@ -151,7 +152,7 @@ fn holdout_predicts_a_smooth_surface_and_misses_a_held_out_spike() {
     // A spike at a held-out point (line 3, column 81) is invisible to the refit: the difference
     // there is about the spike's height, and only line 3 sees it.
     z[3 * cols + 81] += 5.0;
-    let h = holdout(&z, rows, cols, px, py, FitOptions::default()).unwrap();
+    let h = holdout(&z, cols, px, &y, FitOptions::default()).unwrap();
     assert!(
         (h.points_left_out[3].max_abs_um - 5.0).abs() < 0.1,
         "{}",

@@ -42,6 +42,9 @@ fn x3p_round_trips_and_surfalize_reads_it() {
     let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, &meta).unwrap();
     let back = read_x3p(&bytes).unwrap();
     assert_eq!((back.rows, back.cols), (rows, cols));
+    // Record2 comes back unescaped; empty fields were written as "not available".
+    assert_eq!(back.meta.comment, "measured grid <test> & more");
+    assert_eq!(back.meta.creator, "");
     assert!((back.pitch_x_mm - 0.0015).abs() < 1e-15);
     assert!((back.pitch_y_mm - 0.01).abs() < 1e-15);
     for (a, b) in back.heights_um.iter().zip(&z) {

@@ -1,31 +1,34 @@
-//! `surfscan analyze`: surface characterisation of a profile CSV (header `x_mm,z_um`) or of a
-//! grid CSV of heights in µm (rows = traced lines along y, columns = points along x, as
-//! `surfscan fit` reads; pitches required). Writes `report.json` and `summary.csv` into the
-//! output directory, and for a grid also `measured.x3p`, `model.x3p` (ISO 25178-72), `bac.png|svg`
-//! `heightmap.png|svg` and `overlay.png|svg` (measured vs model of one line).
+//! `surfscan analyze`: surface characterisation of a scan directory (as the scan daemon writes
+//! it), of a profile CSV (header `x_mm,z_um`) or of a grid CSV of heights in µm (rows = traced
+//! lines along y, columns = points along x, as `surfscan fit` reads; pitches required).
+//! A scan directory and a grid go through [`crate::report`] (the daemon's entry point
+//! [`crate::report::characterise_scan`] for scans): `report.json`, `summary.csv`,
+//! `measured.x3p`, `model.x3p` (ISO 25178-72), `bac.png|svg`, `heightmap.png|svg` and
+//! `overlay.png|svg` (measured vs model of one line). A profile gets `report.json` and
+//! `summary.csv`.
 //!
-//! Layer 5 (composition): reads files, calls [`crate::metrology`] and [`crate::fit`].
+//! Layer 5 (composition): reads files, calls [`crate::report`] and [`crate::metrology`].
 
 use super::{CliError, Exit};
-use crate::fit::{fit_grid, FitOptions};
-use crate::metrology::areal::{areal_params, smr_curve, Grid};
-use crate::metrology::holdout::{holdout, Holdout};
-use crate::metrology::model::{model_bearing_curves, sample_model_grid, ModelBacOptions};
 use crate::metrology::params::{analyze_line, Options, Recipe, RoughnessParams};
-use crate::metrology::plots::{plot_bearing_curves, plot_height_map, plot_profile_overlay};
-use crate::metrology::x3p::{to_x3p, X3pMeta};
+use crate::report::{
+    characterise_grid, characterise_scan, LineGrid, ReportContext, ReportError,
+    ScanAnalysisOptions, ScanOutputs,
+};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `surfscan analyze`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Profile CSV (`x_mm,z_um` header) or grid CSV of heights in µm.
+    /// Scan directory, profile CSV (`x_mm,z_um` header) or grid CSV of heights in µm.
     pub input: PathBuf,
-    /// Cut-off λc in mm (also the sampling length).
-    #[arg(long, default_value_t = 0.8)]
-    pub lc: f64,
-    /// The input already is an R profile: no λc filter.
+    /// Cut-off λc in mm (also the sampling length). Default: for a scan the λc the instrument
+    /// recorded (else 0.8 mm), for a CSV 0.8 mm.
+    #[arg(long)]
+    pub lc: Option<f64>,
+    /// No λc filter (the input already is an R profile). Default: for a scan, filter unless
+    /// the instrument exported an R profile; for a CSV, filter.
     #[arg(long)]
     pub no_filter: bool,
     /// Grid pitch along x (between columns), mm.
@@ -40,13 +43,17 @@ pub struct Args {
     /// Equal height levels per bearing area curve.
     #[arg(long, default_value_t = 101)]
     pub levels: usize,
-    /// Line (0-based) drawn in the measured-vs-model overlay; default the middle line.
+    /// Line drawn in the measured-vs-model overlay (a scan's line index, a grid's 0-based
+    /// row); default the middle line.
     #[arg(long)]
-    pub overlay_line: Option<usize>,
-    /// Output directory for report.json and summary.csv.
-    #[arg(long, default_value = ".")]
-    pub out: PathBuf,
+    pub overlay_line: Option<u32>,
+    /// Output directory. Default: the scan directory for a scan, `.` for a CSV.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
 }
+
+/// Default λc in mm for CSV input.
+const DEFAULT_LC_MM: f64 = 0.8;
 
 /// One line's entry in the report.
 #[derive(Debug, Serialize)]
@@ -69,15 +76,6 @@ fn rmr_table(a: &crate::metrology::params::LineAnalysis) -> Vec<[f64; 2]> {
         .collect()
 }
 
-/// Areal results with their curve.
-#[derive(Debug, Serialize)]
-struct SurfaceReport {
-    #[serde(flatten)]
-    params: crate::metrology::areal::ArealParams,
-    /// Pooled Smr(c): `[height_um, material_ratio_pct]`.
-    bac: Vec<[f64; 2]>,
-}
-
 #[derive(Debug, Serialize)]
 struct Report {
     software: String,
@@ -85,21 +83,6 @@ struct Report {
     kind: &'static str,
     recipe: Recipe,
     lines: Vec<LineReport>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    surface: Option<SurfaceReport>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    surface_recipe: Option<String>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    surface_grid: Option<SurfaceReport>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    bac_curves: Option<Vec<crate::metrology::model::ModelCurveBac>>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    bac_curves_recipe: Option<String>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    model_vs_measured: Option<Holdout>,
-    /// Why the hold-out comparison could not be made (e.g. too few lines to refit half).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    model_vs_measured_error: Option<String>,
 }
 
 fn failed(msg: impl Into<String>) -> CliError {
@@ -187,31 +170,84 @@ fn read_grid(path: &Path, text: &str) -> Result<(Vec<f64>, usize, usize), CliErr
     Ok((z, rows, cols))
 }
 
+fn report_error(e: ReportError) -> CliError {
+    let exit = match e {
+        ReportError::Io { .. } => Exit::Io,
+        ReportError::Store(ref s) if matches!(s, crate::scan::store::StoreError::Io { .. }) => {
+            Exit::Io
+        }
+        _ => Exit::Failed,
+    };
+    CliError::new(exit, e.to_string())
+}
+
+fn print_outputs(o: &ScanOutputs) {
+    for w in &o.warnings {
+        eprintln!("surfscan: warning: {w}");
+    }
+    println!(
+        "{}: {} lines characterised in {:.2} s",
+        o.report_json.display(),
+        o.lines_used.len(),
+        o.elapsed_s
+    );
+}
+
 /// Runs `surfscan analyze`.
 pub fn run(args: Args) -> Result<(), CliError> {
+    if args.input.is_dir() {
+        if args.pitch_x.is_some() || args.pitch_y.is_some() {
+            return Err(CliError::new(
+                Exit::Usage,
+                "--pitch-x/--pitch-y are for a grid CSV; a scan directory's pitch and y come from its line metadata",
+            ));
+        }
+        let options = ScanAnalysisOptions {
+            curves: args.curves,
+            levels: args.levels,
+            lambda_c_mm: args.lc,
+            no_filter: args.no_filter,
+            overlay_line: args.overlay_line,
+            fit: None,
+            out_dir: args.out.clone(),
+        };
+        let outputs = characterise_scan(&args.input, &options).map_err(report_error)?;
+        print_outputs(&outputs);
+        return Ok(());
+    }
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from("."));
     let text = std::fs::read_to_string(&args.input).map_err(|e| {
         CliError::new(
             Exit::Io,
             format!("cannot read {}: {e}", args.input.display()),
         )
     })?;
+    let lc = args.lc.unwrap_or(DEFAULT_LC_MM);
     let options = Options {
-        lambda_c_mm: args.lc,
+        lambda_c_mm: lc,
         apply_lambda_c: !args.no_filter,
         lambda_s_um: None,
         sampling_lengths: None,
+    };
+    let lambda_c_source = match args.lc {
+        Some(v) => format!("given ({v} mm)"),
+        None => format!("default {DEFAULT_LC_MM} mm (set --lc to choose)"),
+    };
+    let filter_reason = if args.no_filter {
+        "no λc filter: asked for (--no-filter)".to_string()
+    } else {
+        "λc filter applied: a CSV is taken as a primary profile unless --no-filter".to_string()
     };
     let is_profile = text
         .lines()
         .next()
         .is_some_and(|h| h.trim_start().starts_with("x_mm"));
-    let mut grid_for_plots = None;
-    let report = if is_profile {
+    if is_profile {
         let (pitch, z) = read_profile(&args.input, &text)?;
         let a = analyze_line(&z, pitch, &options)
             .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
         let rmr = rmr_table(&a);
-        Report {
+        let report = Report {
             software: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
             input: args.input.display().to_string(),
             kind: "profile",
@@ -222,176 +258,47 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 rmr_table: rmr,
                 params: a.params,
             }],
-            surface: None,
-            surface_recipe: None,
-            surface_grid: None,
-            bac_curves: None,
-            bac_curves_recipe: None,
-            model_vs_measured: None,
-            model_vs_measured_error: None,
-        }
-    } else {
-        let (Some(px), Some(py)) = (args.pitch_x, args.pitch_y) else {
-            return Err(CliError::new(
-                Exit::Usage,
-                "a grid CSV needs --pitch-x MM and --pitch-y MM (a profile CSV starts with the header x_mm,z_um)",
-            ));
         };
-        let (z, rows, cols) = read_grid(&args.input, &text)?;
-        let mut lines = Vec::with_capacity(rows);
-        let mut recipe = None;
-        for (index, row) in z.chunks_exact(cols.max(1)).enumerate() {
-            let a = analyze_line(row, px, &options)
-                .map_err(|e| failed(format!("{} line {index}: {e}", args.input.display())))?;
-            let rmr = rmr_table(&a);
-            recipe.get_or_insert(a.recipe);
-            lines.push(LineReport {
-                index,
-                y_mm: index as f64 * py,
-                rmr_table: rmr,
-                params: a.params,
-            });
-        }
-        let recipe = recipe.ok_or_else(|| failed(format!("{}: no lines", args.input.display())))?;
-        let grid = Grid {
-            heights_um: &z,
-            rows,
-            cols,
-            pitch_x_mm: px,
-            pitch_y_mm: py,
-        };
-        let err =
-            |e: crate::metrology::MetrologyError| failed(format!("{}: {e}", args.input.display()));
-        let surface_grid = SurfaceReport {
-            params: areal_params(&grid).map_err(err)?,
-            bac: smr_curve(&grid, args.levels).map_err(err)?,
-        };
-        let y: Vec<f64> = (0..rows).map(|j| j as f64 * py).collect();
-        let fit = fit_grid(px, &y, &z, cols, FitOptions::default()).map_err(|e| {
-            failed(format!(
-                "{}: the NURBS fit failed: {e}",
-                args.input.display()
-            ))
-        })?;
-        let bac_options = ModelBacOptions {
+        return write_outputs(&out, &report);
+    }
+    let (Some(px), Some(py)) = (args.pitch_x, args.pitch_y) else {
+        return Err(CliError::new(
+            Exit::Usage,
+            "a grid CSV needs --pitch-x MM and --pitch-y MM (a profile CSV starts with the header x_mm,z_um; a scan is a directory)",
+        ));
+    };
+    let (z, rows, cols) = read_grid(&args.input, &text)?;
+    if rows == 0 {
+        return Err(failed(format!("{}: no lines", args.input.display())));
+    }
+    let grid = LineGrid {
+        heights_um: z,
+        cols,
+        pitch_x_mm: px,
+        y_mm: (0..rows).map(|j| j as f64 * py).collect(),
+        index: (0..rows as u32).collect(),
+        y_readback_mm: vec![None; rows],
+        instrument: None,
+        standard: vec![None; rows],
+    };
+    let ctx = ReportContext {
+        input: args.input.display().to_string(),
+        kind: "grid",
+        line_options: options,
+        lambda_c_source,
+        filter_reason,
+        traceability: None,
+        scan: None,
+        options: ScanAnalysisOptions {
             curves: args.curves,
             levels: args.levels,
-            samples_per_curve: None,
-        };
-        let curves = model_bearing_curves(&fit.surface, &bac_options).map_err(err)?;
-        let model_cols = 2 * cols - 1;
-        let model_z = sample_model_grid(&fit.surface, &fit.params_v, 0.0, px / 2.0, model_cols)
-            .map_err(err)?;
-        let model_grid = Grid {
-            heights_um: &model_z,
-            rows,
-            cols: model_cols,
-            pitch_x_mm: px / 2.0,
-            pitch_y_mm: py,
-        };
-        // A grid too small to refit half of it still gets everything else.
-        let (model_vs_measured, model_vs_measured_error) =
-            match holdout(&z, rows, cols, px, py, FitOptions::default()) {
-                Ok(h) => (Some(h), None),
-                Err(e) => (None, Some(e.to_string())),
-            };
-        let surface = SurfaceReport {
-            params: areal_params(&model_grid).map_err(err)?,
-            bac: smr_curve(&model_grid, args.levels).map_err(err)?,
-        };
-        let report = Report {
-            software: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
-            input: args.input.display().to_string(),
-            kind: "grid",
-            recipe,
-            lines,
-            surface: Some(surface),
-            surface_recipe: Some(format!(
-                "the degree 5/5 interpolating NURBS surface sampled on the data lines (their v) at half the x pitch ({} points per line, x(u) inverted by bisection), then levelled and evaluated as surface_grid",
-                model_cols
-            )),
-            surface_grid: Some(surface_grid),
-            bac_curves: Some(curves),
-            model_vs_measured,
-            model_vs_measured_error,
-            bac_curves_recipe: Some(format!(
-                "paper Appendix A: {} iso-curves along x of the degree 5/5 interpolating surface at equally spaced v, each sampled at 8 points per control point along u, referenced to its x-weighted mean line, {} equal levels, crossings linear along x",
-                args.curves, args.levels
-            )),
-        };
-        let meta = |what: &str| X3pMeta {
-            date: chrono::Utc::now().to_rfc3339(),
-            version: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
-            comment: format!("{what} of {}", args.input.display()),
-            ..X3pMeta::default()
-        };
-        let x3p = [
-            (
-                "measured.x3p",
-                to_x3p(&z, rows, cols, px, py, &meta("measured grid")).map_err(err)?,
-            ),
-            (
-                "model.x3p",
-                to_x3p(
-                    &model_z,
-                    rows,
-                    model_cols,
-                    px / 2.0,
-                    py,
-                    &meta("NURBS model sampled at half the x pitch on the data lines"),
-                )
-                .map_err(err)?,
-            ),
-        ];
-        std::fs::create_dir_all(&args.out).map_err(|e| {
-            CliError::new(
-                Exit::Io,
-                format!("cannot create {}: {e}", args.out.display()),
-            )
-        })?;
-        for (name, bytes) in x3p {
-            let path = args.out.join(name);
-            std::fs::write(&path, bytes).map_err(|e| {
-                CliError::new(Exit::Io, format!("cannot write {}: {e}", path.display()))
-            })?;
-        }
-        grid_for_plots = Some((z, rows, cols, model_z));
-        report
+            overlay_line: args.overlay_line,
+            ..ScanAnalysisOptions::default()
+        },
+        warnings: Vec::new(),
     };
-    write_outputs(&args.out, &report)?;
-    if let (Some(curves), Some(surface), Some((z, rows, cols, model_z))) =
-        (&report.bac_curves, &report.surface, grid_for_plots)
-    {
-        let err = |e: crate::metrology::MetrologyError| CliError::new(Exit::Io, e.to_string());
-        let title = format!("Bearing area curves: {} model curves, pooled", curves.len());
-        plot_bearing_curves(&args.out, curves, &surface.bac, &title).map_err(err)?;
-        let (px, py) = (args.pitch_x.unwrap_or(1.0), args.pitch_y.unwrap_or(1.0));
-        plot_height_map(&args.out, &z, rows, cols, px, py, "Measured heights").map_err(err)?;
-        let line = args
-            .overlay_line
-            .unwrap_or(rows / 2)
-            .min(rows.saturating_sub(1));
-        let mc = 2 * cols - 1;
-        let measured: Vec<(f64, f64)> = z
-            .get(line * cols..(line + 1) * cols)
-            .unwrap_or(&[])
-            .iter()
-            .enumerate()
-            .map(|(i, v)| (i as f64 * px, *v))
-            .collect();
-        let model: Vec<(f64, f64)> = model_z
-            .get(line * mc..(line + 1) * mc)
-            .unwrap_or(&[])
-            .iter()
-            .enumerate()
-            .map(|(i, v)| (i as f64 * px / 2.0, *v))
-            .collect();
-        let title = format!(
-            "Line {line} (y = {:.4} mm): measured and model",
-            line as f64 * py
-        );
-        plot_profile_overlay(&args.out, &measured, &model, &title).map_err(err)?;
-    }
+    let outputs = characterise_grid(&grid, ctx, &out).map_err(report_error)?;
+    print_outputs(&outputs);
     Ok(())
 }
 
@@ -407,14 +314,15 @@ fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
     let json = serde_json::to_string_pretty(report)
         .map_err(|e| failed(format!("cannot encode the report: {e}")))?;
     let path = out.join("report.json");
-    std::fs::write(&path, json).map_err(|e| io(&path, e))?;
+    crate::atomic::write_atomically(&path, |w| std::io::Write::write_all(w, json.as_bytes()))
+        .map_err(|e| io(&path, e))?;
     let mut csv = String::from(
-        "index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um,Rp_um,Rv_um,Rt_um,Rz1max_um,Rsk,Rku,Rdq,RSm_um,Rk_um,Rpk_um,Rvk_um,Mr1_pct,Mr2_pct\n",
+        "index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um,Rp_um,Rv_um,Rt_um,Rz1max_um,Rsk,Rku,Rdq,RSm_um,Rk_um,Rpk_um,Rvk_um,Mr1_pct,Mr2_pct,A1,A2\n",
     );
     for l in &report.lines {
         let p = &l.params;
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             l.index,
             l.y_mm,
             p.ra_um,
@@ -433,10 +341,13 @@ fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
             p.rpk_um,
             p.rvk_um,
             p.mr1_pct,
-            p.mr2_pct
+            p.mr2_pct,
+            p.a1_um_pct,
+            p.a2_um_pct
         ));
     }
     let path = out.join("summary.csv");
-    std::fs::write(&path, csv).map_err(|e| io(&path, e))?;
+    crate::atomic::write_atomically(&path, |w| std::io::Write::write_all(w, csv.as_bytes()))
+        .map_err(|e| io(&path, e))?;
     Ok(())
 }

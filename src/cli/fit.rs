@@ -1,4 +1,11 @@
-//! `surfscan fit`: CSV grid of heights → NURBS surface → IGES file and fit report.
+//! `surfscan fit`: CSV grid of heights, or a scan directory, → NURBS surface → IGES file and
+//! fit report.
+//!
+//! A scan directory (`lines/NNNN.csv` + `NNNN.json`, as the scan daemon writes it) is fitted
+//! from its complete lines in index order: y of each line is its target `y_target_nm`, the x
+//! pitch is the one stored with the lines, the default output is `SCAN_DIR/surface.igs`.
+//! Lines with only one of their two files are left out and named in a warning. A grid CSV
+//! needs `--pitch-x`, `--pitch-y` and `-o`.
 //!
 //! Exit status: 0 done; 2 bad pitch or degree arguments; 74 the input cannot be read or an
 //! output cannot be written; 1 the data are malformed (the message names line, column and
@@ -23,17 +30,18 @@ use std::time::Instant;
 /// Arguments of `surfscan fit`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Grid CSV of heights in µm (rows = traced lines along y, columns = points along x).
+    /// Scan directory, or grid CSV of heights in µm (rows = traced lines along y, columns =
+    /// points along x).
     pub input: PathBuf,
-    /// Output IGES file.
+    /// Output IGES file (required for a grid CSV; default `SCAN_DIR/surface.igs`).
     #[arg(short, long)]
-    pub output: PathBuf,
-    /// Pitch along x (between columns), mm.
+    pub output: Option<PathBuf>,
+    /// Pitch along x (between columns), mm (grid CSV only; a scan stores its own).
     #[arg(long)]
-    pub pitch_x: f64,
-    /// Pitch along y (between rows), mm.
+    pub pitch_x: Option<f64>,
+    /// Pitch along y (between rows), mm (grid CSV only; a scan's lines are at their stored y).
     #[arg(long)]
-    pub pitch_y: f64,
+    pub pitch_y: Option<f64>,
     /// Degree along u (x).
     #[arg(long, default_value_t = 5)]
     pub degree_u: usize,
@@ -169,9 +177,74 @@ fn ensure_parent(path: &Path) -> Result<(), CliError> {
     Ok(())
 }
 
-/// Runs `surfscan fit`.
-pub fn run(args: Args) -> Result<(), CliError> {
-    for (name, v) in [("--pitch-x", args.pitch_x), ("--pitch-y", args.pitch_y)] {
+/// The lines to fit, however they were read.
+struct Input {
+    grid: Grid,
+    pitch_x_mm: f64,
+    /// `Some` for a grid CSV (equally spaced rows).
+    pitch_y_mm: Option<f64>,
+    y_mm: Vec<f64>,
+    /// Line indices (a scan's `NNNN`; rows for a CSV).
+    index: Vec<u32>,
+    output: PathBuf,
+    kind: &'static str,
+}
+
+fn read_scan(args: &Args) -> Result<Input, CliError> {
+    for (name, given) in [
+        ("--pitch-x", args.pitch_x.is_some()),
+        ("--pitch-y", args.pitch_y.is_some()),
+    ] {
+        if given {
+            return Err(CliError::new(
+                Exit::Usage,
+                format!(
+                    "{name} is for a grid CSV; a scan directory's pitch and y come from its line metadata"
+                ),
+            ));
+        }
+    }
+    let (lines, _, incomplete) = crate::report::load_scan_grid(&args.input).map_err(|e| {
+        let exit = match &e {
+            crate::report::ReportError::Store(crate::scan::store::StoreError::Io { .. }) => {
+                Exit::Io
+            }
+            _ => Exit::Failed,
+        };
+        CliError::new(exit, e.to_string())
+    })?;
+    if !incomplete.is_empty() {
+        eprintln!(
+            "surfscan: warning: lines {incomplete:?} have only one of their two files in {} and were left out",
+            args.input.join("lines").display()
+        );
+    }
+    Ok(Input {
+        grid: Grid {
+            rows: lines.y_mm.len(),
+            cols: lines.cols,
+            heights_um: lines.heights_um,
+        },
+        pitch_x_mm: lines.pitch_x_mm,
+        pitch_y_mm: None,
+        y_mm: lines.y_mm,
+        index: lines.index,
+        output: args
+            .output
+            .clone()
+            .unwrap_or_else(|| args.input.join("surface.igs")),
+        kind: "scan",
+    })
+}
+
+fn read_csv(args: &Args) -> Result<Input, CliError> {
+    let (Some(pitch_x), Some(pitch_y)) = (args.pitch_x, args.pitch_y) else {
+        return Err(CliError::new(
+            Exit::Usage,
+            "a grid CSV needs --pitch-x MM and --pitch-y MM (a scan directory stores its own)",
+        ));
+    };
+    for (name, v) in [("--pitch-x", pitch_x), ("--pitch-y", pitch_y)] {
         if !(v.is_finite() && v > 0.0) {
             return Err(CliError::new(
                 Exit::Usage,
@@ -179,6 +252,30 @@ pub fn run(args: Args) -> Result<(), CliError> {
             ));
         }
     }
+    let Some(output) = args.output.clone() else {
+        return Err(CliError::new(
+            Exit::Usage,
+            "a grid CSV needs -o OUT.igs (only a scan directory has a default output)",
+        ));
+    };
+    let text = std::fs::read_to_string(&args.input)
+        .map_err(|e| io_err("cannot read grid", &args.input, e))?;
+    let grid = parse_grid(&text)
+        .map_err(|m| CliError::new(Exit::Failed, format!("{}: {m}", args.input.display())))?;
+    let rows = grid.rows;
+    Ok(Input {
+        grid,
+        pitch_x_mm: pitch_x,
+        pitch_y_mm: Some(pitch_y),
+        y_mm: (0..rows).map(|r| r as f64 * pitch_y).collect(),
+        index: (0..rows as u32).collect(),
+        output,
+        kind: "grid",
+    })
+}
+
+/// Runs `surfscan fit`.
+pub fn run(args: Args) -> Result<(), CliError> {
     if args.degree_u == 0 || args.degree_v == 0 {
         return Err(CliError::new(
             Exit::Usage,
@@ -186,17 +283,26 @@ pub fn run(args: Args) -> Result<(), CliError> {
         ));
     }
     let t_read = Instant::now();
-    let text = std::fs::read_to_string(&args.input)
-        .map_err(|e| io_err("cannot read grid", &args.input, e))?;
-    let grid = parse_grid(&text)
-        .map_err(|m| CliError::new(Exit::Failed, format!("{}: {m}", args.input.display())))?;
+    let input = if args.input.is_dir() {
+        read_scan(&args)?
+    } else {
+        read_csv(&args)?
+    };
     let read_s = t_read.elapsed().as_secs_f64();
+    let Input {
+        grid,
+        pitch_x_mm,
+        pitch_y_mm,
+        y_mm,
+        index,
+        output,
+        kind,
+    } = input;
 
     let options = FitOptions {
         degree_u: args.degree_u,
         degree_v: args.degree_v,
     };
-    let y_mm: Vec<f64> = (0..grid.rows).map(|r| r as f64 * args.pitch_y).collect();
     let progress = if std::io::stderr().is_terminal() && grid.heights_um.len() >= 1_000_000 {
         indicatif::ProgressBar::new(grid.rows as u64)
     } else {
@@ -206,7 +312,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let mut fitter = IncrementalFitter::new(options);
     for (row, &y) in grid.heights_um.chunks_exact(grid.cols).zip(&y_mm) {
         fitter
-            .push_row(y, args.pitch_x, row)
+            .push_row(y, pitch_x_mm, row)
             .map_err(|e| CliError::new(Exit::Failed, format!("{}: {e}", args.input.display())))?;
         progress.inc(1);
     }
@@ -216,12 +322,11 @@ pub fn run(args: Args) -> Result<(), CliError> {
     progress.finish_and_clear();
     let fit_s = t_fit.elapsed().as_secs_f64();
     let t_res = Instant::now();
-    let residual_mm = max_residual_mm(&fit, args.pitch_x, &y_mm, &grid.heights_um, grid.cols);
+    let residual_mm = max_residual_mm(&fit, pitch_x_mm, &y_mm, &grid.heights_um, grid.cols);
     let residual_s = t_res.elapsed().as_secs_f64();
 
     let now = chrono::Utc::now().naive_utc();
-    let file_name = args
-        .output
+    let file_name = output
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
@@ -234,14 +339,25 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 args.degree_u,
                 args.degree_v
             ),
-            format!(
-                "Input: {} ({} lines x {} points, pitch x {} mm, pitch y {} mm, heights um).",
-                args.input.display(),
-                grid.rows,
-                grid.cols,
-                args.pitch_x,
-                args.pitch_y
-            ),
+            match pitch_y_mm {
+                Some(py) => format!(
+                    "Input: {} ({} lines x {} points, pitch x {} mm, pitch y {} mm, heights um).",
+                    args.input.display(),
+                    grid.rows,
+                    grid.cols,
+                    pitch_x_mm,
+                    py
+                ),
+                None => format!(
+                    "Input: scan {} ({} lines x {} points, pitch x {} mm, y {} .. {} mm, heights um).",
+                    args.input.display(),
+                    grid.rows,
+                    grid.cols,
+                    pitch_x_mm,
+                    y_mm.first().copied().unwrap_or(f64::NAN),
+                    y_mm.last().copied().unwrap_or(f64::NAN)
+                ),
+            },
         ],
         timestamp: now,
         ..IgesOptions::default()
@@ -251,12 +367,12 @@ pub fn run(args: Args) -> Result<(), CliError> {
         max_parameter_lines_per_entity: args.max_iges_lines_per_entity,
         ..opts
     };
-    ensure_parent(&args.output)?;
+    ensure_parent(&output)?;
     let t_write = Instant::now();
     let groups = plan_files(&fit.surface, &opts).map_err(|e| {
         CliError::new(
             Exit::Failed,
-            format!("cannot write IGES {}: {e}", args.output.display()),
+            format!("cannot write IGES {}: {e}", output.display()),
         )
     })?;
     let n_files = groups.len();
@@ -265,9 +381,9 @@ pub fn run(args: Args) -> Result<(), CliError> {
     for (k, group) in groups.iter().enumerate() {
         let range = v_range(group);
         let path = if n_files == 1 {
-            args.output.clone()
+            output.clone()
         } else {
-            part_path(&args.output, k + 1, n_files)
+            part_path(&output, k + 1, n_files)
         };
         let mut part_opts = opts.clone();
         if n_files > 1 {
@@ -305,10 +421,13 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let s = &fit.surface;
     let report = serde_json::json!({
         "input": args.input.display().to_string(),
-        "output": args.output.display().to_string(),
+        "input_kind": kind,
+        "output": output.display().to_string(),
         "grid": { "rows": grid.rows, "cols": grid.cols },
-        "pitch_x_mm": args.pitch_x,
-        "pitch_y_mm": args.pitch_y,
+        "pitch_x_mm": pitch_x_mm,
+        "pitch_y_mm": pitch_y_mm,
+        "y_mm": y_mm,
+        "lines": index,
         "degree_u": s.degree_u(),
         "degree_v": s.degree_v(),
         "knots_u_len": s.knots_u().len(),
@@ -340,14 +459,14 @@ pub fn run(args: Args) -> Result<(), CliError> {
         .map_err(|e| io_err("cannot write report", path, e))?;
     }
     let written = if n_files == 1 {
-        args.output.display().to_string()
+        output.display().to_string()
     } else {
         format!(
             "{} too large for one IGES file; wrote {} files {} .. {}",
-            args.output.display(),
+            output.display(),
             n_files,
-            part_path(&args.output, 1, n_files).display(),
-            part_path(&args.output, n_files, n_files).display()
+            part_path(&output, 1, n_files).display(),
+            part_path(&output, n_files, n_files).display()
         )
     };
     println!(

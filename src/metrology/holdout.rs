@@ -45,17 +45,24 @@ fn stats(index: usize, y_mm: f64, model: &[f64], measured: &[f64]) -> HoldoutLin
     }
 }
 
-/// Runs both hold-out refits on a row-major grid (heights µm, `rows` lines at y = j·pitch_y).
+/// Runs both hold-out refits on a row-major grid (heights µm, one row per line at `y_mm[j]`,
+/// increasing; the lines need not be equally spaced, e.g. a scan with a line missing).
 pub fn holdout(
     heights_um: &[f64],
-    rows: usize,
     cols: usize,
     pitch_x_mm: f64,
-    pitch_y_mm: f64,
+    y_mm: &[f64],
     options: FitOptions,
 ) -> Result<Holdout, MetrologyError> {
     super::check_pitch(pitch_x_mm)?;
-    super::check_pitch(pitch_y_mm)?;
+    let rows = y_mm.len();
+    if let Some(w) = y_mm.windows(2).find(|w| !matches!(w, [a, b] if b > a)) {
+        return Err(MetrologyError::BadParameter {
+            what: "y (mm) of a line",
+            value: w.get(1).copied().unwrap_or(f64::NAN),
+            hint: "line y values must be finite and strictly increasing",
+        });
+    }
     if rows.checked_mul(cols) != Some(heights_um.len()) {
         return Err(MetrologyError::GridSize {
             rows,
@@ -65,14 +72,14 @@ pub fn holdout(
         });
     }
     let row = |r: usize| heights_um.get(r * cols..(r + 1) * cols).unwrap_or(&[]);
-    let y: Vec<f64> = (0..rows).map(|j| j as f64 * pitch_y_mm).collect();
+    let y = y_mm;
 
     // Every 2nd point of each line out: fit the even columns at twice the pitch.
     let kept_cols = cols.div_ceil(2);
     let sub: Vec<f64> = (0..rows)
         .flat_map(|r| row(r).iter().step_by(2).copied().collect::<Vec<f64>>())
         .collect();
-    let fit = fit_grid(2.0 * pitch_x_mm, &y, &sub, kept_cols, options)?;
+    let fit = fit_grid(2.0 * pitch_x_mm, y, &sub, kept_cols, options)?;
     let held = (cols.saturating_sub(1)) / 2;
     let model = sample_model_grid(
         &fit.surface,
@@ -98,12 +105,15 @@ pub fn holdout(
     // Every 2nd line out: fit the even rows, evaluate at the odd rows' y.
     let kept_rows: Vec<usize> = (0..rows).step_by(2).collect();
     let sub: Vec<f64> = kept_rows.iter().flat_map(|&r| row(r).to_vec()).collect();
-    let ky: Vec<f64> = kept_rows.iter().map(|&r| r as f64 * pitch_y_mm).collect();
+    let ky: Vec<f64> = kept_rows
+        .iter()
+        .map(|&r| y.get(r).copied().unwrap_or(f64::NAN))
+        .collect();
     let fit = fit_grid(pitch_x_mm, &ky, &sub, cols, options)?;
     let last_kept = kept_rows.last().copied().unwrap_or(0);
     let mut lines_left_out = Vec::new();
     for r in (1..last_kept).step_by(2) {
-        let target = r as f64 * pitch_y_mm;
+        let target = y.get(r).copied().unwrap_or(f64::NAN);
         // y depends on v only (every line has constant y), so bisect y(0, v).
         let (mut a, mut b) = (0.0f64, 1.0f64);
         for _ in 0..50 {

@@ -99,8 +99,11 @@ pub fn model_bearing_curves(
 
 /// Samples the model on a regular grid: one row per v in `vs` (e.g. the data lines'
 /// parameters, where the model's y equals the line's y), `cols` points at x = `x0_mm` +
-/// k·`pitch_x_mm` found by inverting x(u) along each iso-curve (bisection; x must increase with
-/// u). Heights in µm, row-major.
+/// k·`pitch_x_mm` found by inverting x(u) along each iso-curve (x must increase with u).
+/// The inversion is the Illinois variant of false position, bracketed from the previous
+/// point's u (the targets increase), stopped at |x(u) − x| ≤ 1e-13 mm or a bracket of 1e-15 in
+/// u; a few evaluations per point instead of the 50 of plain bisection. Heights in µm,
+/// row-major.
 pub fn sample_model_grid(
     surface: &NurbsSurface,
     vs: &[f64],
@@ -114,7 +117,7 @@ pub fn sample_model_grid(
         value,
         hint: "the model's x must increase along u and cover the requested x range",
     };
-    let mut out = Vec::with_capacity(vs.len() * cols);
+    let mut out = Vec::with_capacity(vs.len().saturating_mul(cols));
     for &v in vs {
         let iso = surface.iso_curve_u(v);
         let at = |u: f64| {
@@ -122,22 +125,64 @@ pub fn sample_model_grid(
                 .ok_or(bad("iso-curve poles", iso.poles.len() as f64))
         };
         let (lo_x, hi_x) = (at(0.0)?[0], at(1.0)?[0]);
+        let mut u_from = 0.0f64;
         for k in 0..cols {
             let x = x0_mm + k as f64 * pitch_x_mm;
             if x < lo_x - 1e-9 * pitch_x_mm.max(1.0) || x > hi_x + 1e-9 * hi_x.abs().max(1.0) {
                 return Err(bad("x (mm) outside the model", x));
             }
-            let (mut a, mut b) = (0.0f64, 1.0f64);
-            for _ in 0..50 {
-                let m = 0.5 * (a + b);
-                if at(m)?[0] < x {
-                    a = m;
-                } else {
-                    b = m;
-                }
-            }
-            out.push(at(0.5 * (a + b))?[2] * 1000.0);
+            let u = invert_x(&at, x, u_from, hi_x)?;
+            u_from = u;
+            out.push(at(u)?[2] * 1000.0);
         }
     }
     Ok(out)
+}
+
+/// The u in [`u_from`, 1] where the iso-curve's x equals `x_mm` (Illinois false position).
+fn invert_x<F>(at: &F, x_mm: f64, u_from: f64, x_at_1: f64) -> Result<f64, MetrologyError>
+where
+    F: Fn(f64) -> Result<[f64; 3], MetrologyError>,
+{
+    const X_TOL_MM: f64 = 1e-13;
+    let (mut a, mut b) = (u_from, 1.0f64);
+    let mut fa = at(a)?[0] - x_mm;
+    let mut fb = x_at_1 - x_mm;
+    if fa >= -X_TOL_MM {
+        return Ok(a);
+    }
+    if fb <= X_TOL_MM {
+        return Ok(b);
+    }
+    // 0: no side repeated yet; 1: a kept last time; 2: b kept last time.
+    let mut side = 0u8;
+    for _ in 0..200 {
+        let c = if fb != fa {
+            (a * fb - b * fa) / (fb - fa)
+        } else {
+            0.5 * (a + b)
+        };
+        // Keep c strictly inside the bracket (rounding can put it on an end).
+        let c = if c > a && c < b { c } else { 0.5 * (a + b) };
+        let fc = at(c)?[0] - x_mm;
+        if fc.abs() <= X_TOL_MM || b - a <= 1e-15 {
+            return Ok(c);
+        }
+        if fc < 0.0 {
+            a = c;
+            fa = fc;
+            if side == 1 {
+                fb *= 0.5;
+            }
+            side = 1;
+        } else {
+            b = c;
+            fb = fc;
+            if side == 2 {
+                fa *= 0.5;
+            }
+            side = 2;
+        }
+    }
+    Ok(0.5 * (a + b))
 }

@@ -152,11 +152,11 @@ pub struct RoughnessParams {
     /// Material ratio at the lower core limit.
     #[serde(rename = "Mr2_pct")]
     pub mr2_pct: f64,
-    /// Peak area above the core, µm·%.
-    #[serde(rename = "A1_um_pct")]
+    /// Peak area above the core, µm·% (report key `A1`, unit in the recipe's definition).
+    #[serde(rename = "A1")]
     pub a1_um_pct: f64,
-    /// Valley area below the core, µm·%.
-    #[serde(rename = "A2_um_pct")]
+    /// Valley area below the core, µm·% (report key `A2`, unit in the recipe's definition).
+    #[serde(rename = "A2")]
     pub a2_um_pct: f64,
 }
 

@@ -2,8 +2,9 @@
 //! curves in one graph (like the paper's Figure 8) and a height map of a grid.
 //!
 //! The only file-writing part of the metrology: the caller gives the directory. Depends on
-//! [`super::model`] (the curves) and [`super::MetrologyError`].
+//! [`super::model`] (the curves), [`super::areal::Grid`] and [`super::MetrologyError`].
 
+use super::areal::Grid;
 use super::model::ModelCurveBac;
 use super::MetrologyError;
 use plotters::coord::Shift;
@@ -17,16 +18,46 @@ fn plot_err(path: &Path, e: impl std::fmt::Display) -> MetrologyError {
     }
 }
 
+/// Fills the area white and, for a non-empty caption, writes it as one small line at the
+/// bottom (traceability: specimen, instrument, conditions, software); returns the area above.
+fn with_caption<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    caption: &str,
+) -> Result<DrawingArea<DB, Shift>, String>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    if caption.trim().is_empty() {
+        return Ok(root.clone());
+    }
+    let (_, h) = root.dim_in_pixel();
+    let (upper, lower) = root.split_vertically(h.saturating_sub(CAPTION_PX));
+    let style = TextStyle::from(("sans-serif", 13).into_font()).color(&BLACK);
+    lower
+        .draw_text(caption, &style, (10, 5))
+        .map_err(|e| e.to_string())?;
+    Ok(upper)
+}
+
+/// Height of the caption line in pixels.
+const CAPTION_PX: u32 = 24;
+
+/// Largest number of columns drawn in a height map; wider grids are averaged over bins of
+/// equal width first (stated in the map's title), which keeps a 31 × 8000 scan's SVG small.
+pub const MAX_MAP_COLUMNS: usize = 800;
+
 fn draw_bac<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     curves: &[ModelCurveBac],
     pooled: &[[f64; 2]],
     title: &str,
+    caption: &str,
 ) -> Result<(), String>
 where
     DB::ErrorType: 'static,
 {
-    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let root = &with_caption(root, caption)?;
     let all = curves
         .iter()
         .flat_map(|c| c.curve.points.iter())
@@ -83,39 +114,40 @@ where
 }
 
 /// Writes `bac.png` and `bac.svg` into `dir`: every curve's MAR(h) thin and coloured, the pooled
-/// curve thick and black. Returns the two paths.
+/// curve thick and black; `caption` (may be empty) is written as a line below the graph.
+/// Returns the two paths.
 pub fn plot_bearing_curves(
     dir: &Path,
     curves: &[ModelCurveBac],
     pooled: &[[f64; 2]],
     title: &str,
+    caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
     let png = dir.join("bac.png");
     let svg = dir.join("bac.svg");
     {
         let root = BitMapBackend::new(&png, (900, 600)).into_drawing_area();
-        draw_bac(&root, curves, pooled, title).map_err(|e| plot_err(&png, e))?;
+        draw_bac(&root, curves, pooled, title, caption).map_err(|e| plot_err(&png, e))?;
     }
     {
         let root = SVGBackend::new(&svg, (900, 600)).into_drawing_area();
-        draw_bac(&root, curves, pooled, title).map_err(|e| plot_err(&svg, e))?;
+        draw_bac(&root, curves, pooled, title, caption).map_err(|e| plot_err(&svg, e))?;
     }
     Ok([png, svg])
 }
 
 fn draw_map<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
-    z: &[f64],
-    rows: usize,
-    cols: usize,
-    pitch_x_mm: f64,
-    pitch_y_mm: f64,
+    grid: &Grid<'_>,
     title: &str,
+    caption: &str,
 ) -> Result<(), String>
 where
     DB::ErrorType: 'static,
 {
-    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let (z, rows, cols) = (grid.heights_um, grid.rows, grid.cols);
+    let (pitch_x_mm, pitch_y_mm) = (grid.pitch_x_mm, grid.pitch_y_mm);
+    let root = &with_caption(root, caption)?;
     let (lo, hi) = z
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
@@ -158,16 +190,17 @@ where
     root.present().map_err(|e| e.to_string())
 }
 
-/// Writes `heightmap.png` and `heightmap.svg` into `dir` for a row-major grid (heights µm).
+/// Writes `heightmap.png` and `heightmap.svg` into `dir` for a row-major grid (heights µm);
+/// more than [`MAX_MAP_COLUMNS`] columns are averaged over bins first. `caption` (may be
+/// empty) is written as a line below the map.
 pub fn plot_height_map(
     dir: &Path,
-    heights_um: &[f64],
-    rows: usize,
-    cols: usize,
-    pitch_x_mm: f64,
-    pitch_y_mm: f64,
+    grid: &Grid<'_>,
     title: &str,
+    caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
+    let (heights_um, rows, cols) = (grid.heights_um, grid.rows, grid.cols);
+    let (pitch_x_mm, pitch_y_mm) = (grid.pitch_x_mm, grid.pitch_y_mm);
     if rows.checked_mul(cols) != Some(heights_um.len()) || rows == 0 || cols == 0 {
         return Err(MetrologyError::GridSize {
             rows,
@@ -178,17 +211,48 @@ pub fn plot_height_map(
     }
     super::check_pitch(pitch_x_mm)?;
     super::check_pitch(pitch_y_mm)?;
+    let (binned, cols, pitch_x_mm, title) = if cols > MAX_MAP_COLUMNS {
+        let bin = cols.div_ceil(MAX_MAP_COLUMNS);
+        let out_cols = cols / bin;
+        let z: Vec<f64> = (0..rows * out_cols)
+            .map(|k| {
+                let (r, c) = (k / out_cols, k % out_cols);
+                let start = r * cols + c * bin;
+                let part = heights_um.get(start..start + bin).unwrap_or(&[]);
+                part.iter().sum::<f64>() / part.len().max(1) as f64
+            })
+            .collect();
+        (
+            std::borrow::Cow::Owned(z),
+            out_cols,
+            pitch_x_mm * bin as f64,
+            format!("{title}, means of {bin} points along x"),
+        )
+    } else {
+        (
+            std::borrow::Cow::Borrowed(heights_um),
+            cols,
+            pitch_x_mm,
+            title.to_string(),
+        )
+    };
+    let shown = Grid {
+        heights_um: &binned,
+        rows,
+        cols,
+        pitch_x_mm,
+        pitch_y_mm,
+    };
+    let title = title.as_str();
     let png = dir.join("heightmap.png");
     let svg = dir.join("heightmap.svg");
     {
         let root = BitMapBackend::new(&png, (1000, 500)).into_drawing_area();
-        draw_map(&root, heights_um, rows, cols, pitch_x_mm, pitch_y_mm, title)
-            .map_err(|e| plot_err(&png, e))?;
+        draw_map(&root, &shown, title, caption).map_err(|e| plot_err(&png, e))?;
     }
     {
         let root = SVGBackend::new(&svg, (1000, 500)).into_drawing_area();
-        draw_map(&root, heights_um, rows, cols, pitch_x_mm, pitch_y_mm, title)
-            .map_err(|e| plot_err(&svg, e))?;
+        draw_map(&root, &shown, title, caption).map_err(|e| plot_err(&svg, e))?;
     }
     Ok([png, svg])
 }
@@ -198,11 +262,12 @@ fn draw_overlay<DB: DrawingBackend>(
     measured: &[(f64, f64)],
     model: &[(f64, f64)],
     title: &str,
+    caption: &str,
 ) -> Result<(), String>
 where
     DB::ErrorType: 'static,
 {
-    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let root = &with_caption(root, caption)?;
     let pts = measured.iter().chain(model.iter());
     let (x0, x1, z0, z1) = pts.fold(
         (
@@ -257,22 +322,24 @@ where
 }
 
 /// Writes `overlay.png` and `overlay.svg` into `dir`: measured points of a line as dots and the
-/// model's curve through them, as `(x_mm, z_um)` pairs.
+/// model's curve through them, as `(x_mm, z_um)` pairs; `caption` (may be empty) is written as
+/// a line below the graph.
 pub fn plot_profile_overlay(
     dir: &Path,
     measured: &[(f64, f64)],
     model: &[(f64, f64)],
     title: &str,
+    caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
     let png = dir.join("overlay.png");
     let svg = dir.join("overlay.svg");
     {
         let root = BitMapBackend::new(&png, (1000, 500)).into_drawing_area();
-        draw_overlay(&root, measured, model, title).map_err(|e| plot_err(&png, e))?;
+        draw_overlay(&root, measured, model, title, caption).map_err(|e| plot_err(&png, e))?;
     }
     {
         let root = SVGBackend::new(&svg, (1000, 500)).into_drawing_area();
-        draw_overlay(&root, measured, model, title).map_err(|e| plot_err(&svg, e))?;
+        draw_overlay(&root, measured, model, title, caption).map_err(|e| plot_err(&svg, e))?;
     }
     Ok([png, svg])
 }

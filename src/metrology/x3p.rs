@@ -108,6 +108,19 @@ fn xml_escape(s: &str) -> String {
         .replace('>', "&gt;")
 }
 
+fn xml_unescape(s: &str) -> String {
+    s.replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&amp;", "&")
+}
+
+fn from_na(s: Option<&str>) -> String {
+    match s {
+        Some("not available") | None => String::new(),
+        Some(v) => xml_unescape(v),
+    }
+}
+
 fn or_na(s: &str) -> String {
     if s.trim().is_empty() {
         "not available".to_string()
@@ -241,6 +254,8 @@ pub struct X3pGrid {
     pub pitch_x_mm: f64,
     /// y pitch, mm.
     pub pitch_y_mm: f64,
+    /// Record2 as written ("not available" read back as an empty field).
+    pub meta: X3pMeta,
 }
 
 fn bad(what: &'static str) -> MetrologyError {
@@ -325,5 +340,14 @@ pub fn read_x3p(zip: &[u8]) -> Result<X3pGrid, MetrologyError> {
         cols,
         pitch_x_mm: num("CX", "Increment")? * 1e3,
         pitch_y_mm: num("CY", "Increment")? * 1e3,
+        meta: X3pMeta {
+            date: from_na(tag(&xml, "Record2", "Date")),
+            creator: from_na(tag(&xml, "Record2", "Creator")),
+            manufacturer: from_na(tag(&xml, "Instrument", "Manufacturer")),
+            model: from_na(tag(&xml, "Instrument", "Model")),
+            serial: from_na(tag(&xml, "Instrument", "Serial")),
+            version: from_na(tag(&xml, "Instrument", "Version")),
+            comment: from_na(tag(&xml, "Record2", "Comment")),
+        },
     })
 }

@@ -1,0 +1,700 @@
+//! Scan directories characterised and fitted end to end: a directory is built exactly as the
+//! scan daemon builds it (`ScanStore::create`, `Journal::create`, `ScanStore::commit_line`)
+//! from the real `sur-2` profiles, with instrument results deliberately offset from values
+//! computed here, then `surfscan analyze SCAN_DIR`, `surfscan fit SCAN_DIR` and
+//! `report::characterise_scan` are checked against what was put in.
+
+use chrono::{TimeZone, Utc};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::Arc;
+use surfscan::metrology::params::{analyze_line, Options};
+use surfscan::profile::{Conditions, FilterKind, InstrumentResult, Profile, ProfileKind};
+use surfscan::scan::journal::{Journal, Record, StartRecord, StopRecord, StopStatus};
+use surfscan::scan::store::{LineMeta, NoFaults, ScanId, ScanStore};
+use surfscan::units::Nm;
+
+fn surfscan() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_surfscan"))
+}
+
+/// x pitch and y step of the bundled `sur-2` grid (tests/data/README.md).
+const PITCH_X_MM: f64 = 0.003484;
+const STEP_Y_NM: i64 = 10_452;
+
+/// Offsets put into the instrument's results: ours − instrument must come out as these.
+const RA_OFFSET_UM: f64 = 0.05;
+const RZ_OFFSET_UM: f64 = -0.1;
+
+const SPECIMEN: &str = "SUR-2 brass <B&S> #7";
+const OPERATOR: &str = "J. Tester";
+const NOTES: &str = "after lapping; x along the grinding marks";
+const MODEL: &str = "SJ-210";
+const FIRMWARE: &str = "1.234";
+const DRIVE: &str = "standard drive unit 178-230";
+const CONFIG_HASH: &str = "9f2c0000000000000000000000000000000000000000000000000000000000aa";
+const SOFTWARE: &str = "0.9.1-test";
+
+fn sur2_rows() -> Vec<Vec<f64>> {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/sur-2.grid.csv");
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| l.split(',').map(|v| v.trim().parse().unwrap()).collect())
+        .collect()
+}
+
+fn conditions(kind: ProfileKind) -> Conditions {
+    Conditions {
+        standard: Some("ISO1997".into()),
+        profile_kind: Some(kind),
+        filter: Some(FilterKind::Gaussian),
+        lambda_c_mm: Some(0.8),
+        lambda_s_um: None,
+        sampling_lengths: None,
+        evaluation_length_mm: None,
+        speed_mm_s: Some(0.5),
+        raw: None,
+    }
+}
+
+/// How this test expects a P line under [`conditions`] to be evaluated.
+fn expected_options() -> Options {
+    Options {
+        lambda_c_mm: 0.8,
+        apply_lambda_c: true,
+        lambda_s_um: None,
+        sampling_lengths: None,
+    }
+}
+
+/// Builds a scan of the given `sur-2` rows as the daemon does and returns its directory.
+/// Every line's instrument results are Ra = ours − RA_OFFSET_UM (µm) and Rz = ours −
+/// RZ_OFFSET_UM given in nm, plus a parameter we do not compute.
+fn build_scan(
+    parent: &Path,
+    rows: &[usize],
+    kind: ProfileKind,
+    stop: Option<StopStatus>,
+) -> PathBuf {
+    let data = sur2_rows();
+    let start = Utc.with_ymd_and_hms(2026, 11, 30, 9, 15, 0).unwrap();
+    let id = ScanId::new(start, SPECIMEN);
+    let faults = Arc::new(NoFaults);
+    let store = ScanStore::create(parent, &id, faults.clone()).unwrap();
+    let mut journal = Journal::create(
+        store.root(),
+        StartRecord {
+            scan_id: id.0.clone(),
+            time: start,
+            plan: json!({ "lines": rows.len(), "y_step_nm": STEP_Y_NM }),
+            config: json!({ "output": { "dir": parent.display().to_string() } }),
+            config_hash: CONFIG_HASH.into(),
+            specimen: SPECIMEN.into(),
+            operator: OPERATOR.into(),
+            notes: NOTES.into(),
+            software_version: SOFTWARE.into(),
+            instrument_model: MODEL.into(),
+            firmware: FIRMWARE.into(),
+            drive_unit: DRIVE.into(),
+            conditions: conditions(kind),
+        },
+        faults,
+    )
+    .unwrap();
+    for &r in rows {
+        let z = data[r].clone();
+        let ours = analyze_line(&z, PITCH_X_MM, &expected_options())
+            .unwrap()
+            .params;
+        let profile = Profile {
+            pitch_x_mm: PITCH_X_MM,
+            heights_um: z,
+            kind,
+            conditions: conditions(kind),
+        };
+        let meta = LineMeta {
+            index: r as u32,
+            y_target_nm: Nm(r as i64 * STEP_Y_NM),
+            y_readback_nm: Some(Nm(r as i64 * STEP_Y_NM + 3)),
+            pitch_x_mm: PITCH_X_MM,
+            points: profile.heights_um.len(),
+            kind,
+            conditions: conditions(kind),
+            results: vec![
+                InstrumentResult {
+                    name: "Ra".into(),
+                    value: Some(ours.ra_um - RA_OFFSET_UM),
+                    unit: "µm".into(),
+                },
+                InstrumentResult {
+                    name: "Rz".into(),
+                    value: Some((ours.rz_um - RZ_OFFSET_UM) * 1000.0),
+                    unit: "nm".into(),
+                },
+                InstrumentResult {
+                    name: "Rmr0".into(),
+                    value: Some(42.0),
+                    unit: "%".into(),
+                },
+            ],
+            started_at: start,
+            finished_at: start,
+            attempt: 1,
+        };
+        store.commit_line(&mut journal, &meta, &profile).unwrap();
+    }
+    if let Some(status) = stop {
+        journal
+            .append(&Record::Stop(StopRecord {
+                status,
+                reason: "test".into(),
+                time: start,
+            }))
+            .unwrap();
+    }
+    store.root().to_path_buf()
+}
+
+fn run_ok(args: &[&str]) -> std::process::Output {
+    let out = surfscan().args(args).output().unwrap();
+    assert!(
+        out.status.success(),
+        "surfscan {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn report(dir: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn analyze_scan_dir_writes_every_file_with_traceability_and_instrument_differences() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rows: Vec<usize> = (0..31).collect();
+    let scan = build_scan(tmp.path(), &rows, ProfileKind::P, Some(StopStatus::Success));
+    run_ok(&["analyze", scan.to_str().unwrap()]);
+
+    for name in [
+        "report.json",
+        "summary.csv",
+        "bac.png",
+        "bac.svg",
+        "heightmap.png",
+        "heightmap.svg",
+        "overlay.png",
+        "overlay.svg",
+        "measured.x3p",
+        "model.x3p",
+    ] {
+        let meta = std::fs::metadata(scan.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(meta.len() > 0, "{name} is empty");
+    }
+    let r = report(&scan);
+    assert_eq!(r["kind"], "scan");
+
+    // Traceability equals what the start record holds.
+    let t = &r["traceability"];
+    assert_eq!(t["specimen"], SPECIMEN);
+    assert_eq!(t["operator"], OPERATOR);
+    assert_eq!(t["notes"], NOTES);
+    assert_eq!(t["software_version"], SOFTWARE);
+    assert_eq!(t["config_hash"], CONFIG_HASH);
+    assert_eq!(t["instrument_model"], MODEL);
+    assert_eq!(t["firmware"], FIRMWARE);
+    assert_eq!(t["drive_unit"], DRIVE);
+    assert_eq!(t["scan_id"], scan.file_name().unwrap().to_str().unwrap());
+    assert_eq!(t["conditions"]["lambda_c_mm"], 0.8);
+    assert_eq!(t["conditions"]["standard"], "ISO1997");
+    assert_eq!(r["scan"]["status"], "complete");
+    assert_eq!(r["scan"]["stop"]["status"], "success");
+    assert_eq!(r["scan"]["lines_used"].as_array().unwrap().len(), 31);
+
+    // Lines: keys, values against an independent call, y from the metadata, and the
+    // instrument's results beside ours with the known differences.
+    let data = sur2_rows();
+    let lines = r["lines"].as_array().unwrap();
+    assert_eq!(lines.len(), 31);
+    for key in [
+        "index",
+        "y_mm",
+        "Ra_um",
+        "Rq_um",
+        "Rz_um",
+        "RzJIS_um",
+        "Rp_um",
+        "Rv_um",
+        "Rt_um",
+        "Rz1max_um",
+        "Rsk",
+        "Rku",
+        "RSm_um",
+        "Rdq",
+        "Rk_um",
+        "Rpk_um",
+        "Rvk_um",
+        "Mr1_pct",
+        "Mr2_pct",
+        "A1",
+        "A2",
+        "Rmr_table",
+        "instrument",
+    ] {
+        assert!(lines[7].get(key).is_some(), "line key {key} missing");
+    }
+    for (k, line) in lines.iter().enumerate() {
+        assert_eq!(line["index"], k);
+        let y = line["y_mm"].as_f64().unwrap();
+        assert!(
+            (y - k as f64 * STEP_Y_NM as f64 * 1e-6).abs() < 1e-15,
+            "{y}"
+        );
+        let ours = analyze_line(&data[k], PITCH_X_MM, &expected_options())
+            .unwrap()
+            .params;
+        assert!((line["Ra_um"].as_f64().unwrap() - ours.ra_um).abs() < 1e-12);
+        assert!((line["A1"].as_f64().unwrap() - ours.a1_um_pct).abs() < 1e-12);
+        let inst = line["instrument"].as_array().unwrap();
+        let by = |n: &str| inst.iter().find(|c| c["name"] == n).unwrap().clone();
+        let ra = by("Ra");
+        assert!(
+            (ra["difference"].as_f64().unwrap() - RA_OFFSET_UM).abs() < 1e-12,
+            "{ra}"
+        );
+        assert!((ra["ours"].as_f64().unwrap() - ours.ra_um).abs() < 1e-12);
+        assert_eq!(ra["unit"], "um");
+        let rz = by("Rz");
+        assert!(
+            (rz["difference"].as_f64().unwrap() - RZ_OFFSET_UM).abs() < 1e-9,
+            "{rz}"
+        );
+        assert!((rz["instrument"].as_f64().unwrap() - (ours.rz_um - RZ_OFFSET_UM)).abs() < 1e-9);
+        let rmr0 = by("Rmr0");
+        assert!(rmr0["ours"].is_null() && rmr0["difference"].is_null());
+    }
+
+    // Surface sections and the recipe.
+    for key in [
+        "Sa_um", "Sq_um", "Sz_um", "Ssk", "Sku", "Sdq", "Sdr_pct", "bac",
+    ] {
+        assert!(r["surface"].get(key).is_some(), "surface.{key}");
+        assert!(r["surface_grid"].get(key).is_some(), "surface_grid.{key}");
+    }
+    assert_eq!(r["surface"]["bac"].as_array().unwrap().len(), 101);
+    assert_eq!(r["surface"]["bac_curves"].as_array().unwrap().len(), 31);
+    assert_eq!(
+        r["model_vs_measured"]["points_left_out"]
+            .as_array()
+            .unwrap()
+            .len(),
+        31
+    );
+    let defs = &r["recipe"]["definitions"];
+    for p in ["Ra", "Rz", "RzJIS", "Rk", "A1", "A2", "Sa", "Sq", "Sdr"] {
+        assert!(
+            defs[p].as_str().is_some_and(|d| !d.is_empty()),
+            "definition of {p}"
+        );
+    }
+    assert_eq!(r["recipe"]["lambda_c_mm"], 0.8);
+    assert!(r["recipe"]["lambda_c_source"]
+        .as_str()
+        .unwrap()
+        .contains("recorded"));
+    assert!(r["recipe"]["filter_reason"]
+        .as_str()
+        .unwrap()
+        .contains("filter applied"));
+
+    // summary.csv: header plus one row per line, with the instrument's Ra.
+    let csv = std::fs::read_to_string(scan.join("summary.csv")).unwrap();
+    let mut csv_lines = csv.lines();
+    let header: Vec<&str> = csv_lines.next().unwrap().split(',').collect();
+    let col = |n: &str| header.iter().position(|h| *h == n).unwrap();
+    let rows_csv: Vec<Vec<&str>> = csv_lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows_csv.len(), 31);
+    let ours5 = analyze_line(&data[5], PITCH_X_MM, &expected_options())
+        .unwrap()
+        .params;
+    let inst_ra: f64 = rows_csv[5][col("instrument_Ra_um")].parse().unwrap();
+    assert!((inst_ra - (ours5.ra_um - RA_OFFSET_UM)).abs() < 1e-12);
+    let inst_rz: f64 = rows_csv[5][col("instrument_Rz_um")].parse().unwrap();
+    assert!((inst_rz - (ours5.rz_um - RZ_OFFSET_UM)).abs() < 1e-9);
+
+    // Plots carry the traceability caption.
+    for name in ["bac.svg", "heightmap.svg", "overlay.svg"] {
+        let svg = std::fs::read_to_string(scan.join(name)).unwrap();
+        assert!(svg.contains("SUR-2 brass"), "{name} lacks the specimen");
+        assert!(
+            svg.contains(FIRMWARE) && svg.contains(SOFTWARE),
+            "{name} lacks instrument/software"
+        );
+        assert!(svg.contains("λc 0.8 mm"), "{name} lacks the conditions");
+    }
+}
+
+#[test]
+fn x3p_of_a_scan_carries_the_traceability_and_surfalize_reads_it() {
+    use surfscan::metrology::x3p::read_x3p;
+    let tmp = tempfile::tempdir().unwrap();
+    let rows: Vec<usize> = (0..8).collect();
+    let scan = build_scan(tmp.path(), &rows, ProfileKind::R, Some(StopStatus::Success));
+    run_ok(&["analyze", scan.to_str().unwrap()]);
+    let data = sur2_rows();
+    for name in ["measured.x3p", "model.x3p"] {
+        let back = read_x3p(&std::fs::read(scan.join(name)).unwrap()).unwrap();
+        assert_eq!(back.meta.creator, OPERATOR, "{name}");
+        assert_eq!(back.meta.model, MODEL);
+        assert_eq!(back.meta.manufacturer, "Mitutoyo");
+        assert_eq!(back.meta.version, FIRMWARE);
+        assert_eq!(back.meta.date, "2026-11-30T09:15:00+00:00");
+        for part in [
+            SPECIMEN,
+            NOTES,
+            DRIVE,
+            SOFTWARE,
+            CONFIG_HASH,
+            "\"lambda_c_mm\":0.8",
+        ] {
+            assert!(
+                back.meta.comment.contains(part),
+                "{name}: {part} not in {:?}",
+                back.meta.comment
+            );
+        }
+        assert_eq!(back.rows, 8);
+        assert!((back.pitch_y_mm - STEP_Y_NM as f64 * 1e-6).abs() < 1e-12);
+    }
+    let measured = read_x3p(&std::fs::read(scan.join("measured.x3p")).unwrap()).unwrap();
+    assert_eq!(measured.cols, data[0].len());
+    assert!((measured.heights_um[3 * measured.cols + 10] - data[3][10]).abs() < 1e-9);
+
+    let script =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/python/metrology_x3p_read.py");
+    let out = Command::new("python3")
+        .arg(&script)
+        .arg(scan.join("measured.x3p"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "surfalize could not read the scan's X3P:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["rows"], 8);
+    assert_eq!(v["cols"], data[0].len());
+    assert!((v["heights_um"][10].as_f64().unwrap() - data[0][10]).abs() < 1e-9);
+
+    // An R profile from the instrument is not filtered again, and the recipe says why.
+    let r = report(&scan);
+    assert!(
+        r["recipe"]["filter_reason"]
+            .as_str()
+            .unwrap()
+            .contains("R profile"),
+        "{}",
+        r["recipe"]
+    );
+    let unfiltered = Options {
+        apply_lambda_c: false,
+        ..expected_options()
+    };
+    let ours = analyze_line(&data[2], PITCH_X_MM, &unfiltered)
+        .unwrap()
+        .params;
+    assert!((r["lines"][2]["Ra_um"].as_f64().unwrap() - ours.ra_um).abs() < 1e-12);
+}
+
+#[test]
+fn partial_scan_is_analysed_with_the_lines_it_has_and_names_the_incomplete_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rows: Vec<usize> = (0..13).collect();
+    let scan = build_scan(tmp.path(), &rows, ProfileKind::P, Some(StopStatus::Abort));
+    // Line 4 lost its metadata (a crash between the two renames).
+    std::fs::remove_file(scan.join("lines/0004.json")).unwrap();
+    let out = run_ok(&[
+        "analyze",
+        scan.to_str().unwrap(),
+        "--out",
+        tmp.path().join("out").to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("warning") && stderr.contains("[4]"),
+        "{stderr}"
+    );
+    let r = report(&tmp.path().join("out"));
+    let used: Vec<u64> = r["lines"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["index"].as_u64().unwrap())
+        .collect();
+    assert_eq!(used, vec![0, 1, 2, 3, 5, 6, 7, 8, 9, 10, 11, 12]);
+    assert_eq!(r["scan"]["status"], "partial");
+    assert_eq!(r["scan"]["stop"]["status"], "abort");
+    assert_eq!(r["scan"]["lines_incomplete"], json!([4]));
+    assert_eq!(r["scan"]["lines_in_journal"].as_array().unwrap().len(), 13);
+    assert!(r["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|w| w.as_str().unwrap().contains("[4]")));
+    // Line 5 keeps its own y although line 4 is missing.
+    assert!(
+        (r["lines"][4]["y_mm"].as_f64().unwrap() - 5.0 * STEP_Y_NM as f64 * 1e-6).abs() < 1e-15
+    );
+    // The hold-out refit still runs on the uneven lines and reports them by their index.
+    let held: Vec<u64> = r["model_vs_measured"]["lines_left_out"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["index"].as_u64().unwrap())
+        .collect();
+    // Every 2nd of the 12 lines used is refitted from the others: positions 1, 3, 5, 7, 9.
+    assert_eq!(held, vec![1, 3, 6, 8, 10]);
+    // Each line carries its own share: line 6 was left out whole, line 5 was not.
+    let line6 = &r["lines"][5]["model_vs_measured"];
+    assert_eq!(line6["line_left_out"]["index"], 6);
+    assert_eq!(line6["points_left_out"]["index"], 6);
+    assert!(r["lines"][4]["model_vs_measured"]["line_left_out"].is_null());
+    assert!(std::fs::metadata(tmp.path().join("out/model.x3p")).is_ok());
+    // Nothing was written into the scan directory when --out points elsewhere.
+    assert!(!scan.join("report.json").exists());
+}
+
+#[test]
+fn fit_scan_dir_writes_an_iges_through_the_stored_points() {
+    use surfscan::fit::{fit_grid, FitOptions};
+    use surfscan::iges::reader::read_iges;
+    let tmp = tempfile::tempdir().unwrap();
+    // Lines 0..=7 with line 3 never traced: y is uneven and must come from the metadata.
+    let rows = [0usize, 1, 2, 4, 5, 6, 7];
+    let scan = build_scan(tmp.path(), &rows, ProfileKind::P, None);
+    let report_path = tmp.path().join("fit.json");
+    run_ok(&[
+        "fit",
+        scan.to_str().unwrap(),
+        "--report",
+        report_path.to_str().unwrap(),
+    ]);
+    let iges = read_iges(&std::fs::read(scan.join("surface.igs")).unwrap()).unwrap();
+    assert_eq!(iges.surfaces.len(), 1);
+    let s = &iges.surfaces[0];
+    let data = sur2_rows();
+    let cols = data[0].len();
+    assert_eq!((s.count_u(), s.count_v()), (cols, rows.len()));
+    let y: Vec<f64> = rows
+        .iter()
+        .map(|&r| r as f64 * STEP_Y_NM as f64 * 1e-6)
+        .collect();
+    let z: Vec<f64> = rows.iter().flat_map(|&r| data[r].clone()).collect();
+    // The interpolation parameters of these points (the fitter's own, independent of the CLI
+    // and the IGES round trip): the read-back surface must pass through every stored point.
+    let params = fit_grid(PITCH_X_MM, &y, &z, cols, FitOptions::default()).unwrap();
+    let mut worst = 0.0f64;
+    for (l, &v) in params.params_v.iter().enumerate() {
+        for (k, &u) in params.params_u.iter().enumerate() {
+            let p = s.evaluate(u, v);
+            let q = [k as f64 * PITCH_X_MM, y[l], z[l * cols + k] / 1000.0];
+            for d in 0..3 {
+                worst = worst.max((p[d] - q[d]).abs());
+            }
+        }
+    }
+    assert!(
+        worst <= 1e-10,
+        "surface misses a stored point by {worst} mm"
+    );
+    let rep: Value = serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
+    assert_eq!(rep["input_kind"], "scan");
+    assert_eq!(rep["lines"], json!([0, 1, 2, 4, 5, 6, 7]));
+    assert_eq!(rep["pitch_x_mm"], PITCH_X_MM);
+    // Pitches belong to grid CSVs only.
+    let out = surfscan()
+        .args(["fit", scan.to_str().unwrap(), "--pitch-x", "0.001"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn a_malformed_line_file_is_a_clear_error_naming_the_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rows: Vec<usize> = (0..7).collect();
+    let scan = build_scan(tmp.path(), &rows, ProfileKind::P, Some(StopStatus::Fail));
+    let csv = scan.join("lines/0002.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    std::fs::write(&csv, text.replacen("\n0.003484,", "\n0.003484,12..5x", 1)).unwrap();
+    for cmd in ["analyze", "fit"] {
+        let out = surfscan()
+            .args([cmd, scan.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{cmd}: {stderr}");
+        assert!(
+            stderr.contains("0002.csv") && stderr.contains("line 3"),
+            "{cmd}: {stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{cmd}: {stderr}");
+    }
+    std::fs::write(&csv, text).unwrap();
+    // A directory that is not a scan is named as such.
+    let out = surfscan()
+        .args(["analyze", tmp.path().to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("not a scan directory"), "{stderr}");
+    let meta = scan.join("lines/0005.json");
+    std::fs::write(&meta, "{ \"index\": 5, ").unwrap();
+    let out = surfscan()
+        .args(["analyze", scan.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("0005.json"), "{stderr}");
+}
+
+#[test]
+fn characterise_scan_writes_the_callers_fit_section_verbatim_and_returns_the_paths() {
+    use surfscan::report::{characterise_scan, ScanAnalysisOptions};
+    let tmp = tempfile::tempdir().unwrap();
+    let rows: Vec<usize> = (0..7).collect();
+    let scan = build_scan(tmp.path(), &rows, ProfileKind::P, Some(StopStatus::Success));
+    let fit = json!({ "max_residual_mm": 3.5e-13, "poles": [563, 7], "iges": "surface.igs" });
+    let options = ScanAnalysisOptions {
+        fit: Some(fit.clone()),
+        curves: 5,
+        levels: 21,
+        lambda_c_mm: Some(0.25),
+        overlay_line: Some(6),
+        ..ScanAnalysisOptions::default()
+    };
+    let out = characterise_scan(&scan, &options).unwrap();
+    assert_eq!(out.report_json, scan.join("report.json"));
+    assert_eq!(out.lines_used, (0..7).collect::<Vec<u32>>());
+    assert!(out.incomplete_lines.is_empty());
+    assert_eq!(out.plots.len(), 6);
+    for p in out.plots.iter().chain([&out.summary_csv]) {
+        assert!(p.starts_with(&scan) && p.exists(), "{}", p.display());
+    }
+    assert!(out.model_x3p.as_ref().is_some_and(|p| p.exists()));
+    let r = report(&scan);
+    assert_eq!(r["fit"], fit);
+    assert_eq!(r["surface"]["bac_curves"].as_array().unwrap().len(), 5);
+    assert_eq!(r["surface"]["bac"].as_array().unwrap().len(), 21);
+    // The override wins over the recorded 0.8 mm, and the recipe says so.
+    assert_eq!(r["recipe"]["lambda_c_mm"], 0.25);
+    assert!(r["recipe"]["lambda_c_source"]
+        .as_str()
+        .unwrap()
+        .contains("overriding"));
+    let data = sur2_rows();
+    let ours = analyze_line(
+        &data[3],
+        PITCH_X_MM,
+        &Options {
+            lambda_c_mm: 0.25,
+            ..expected_options()
+        },
+    )
+    .unwrap()
+    .params;
+    assert!((r["lines"][3]["Rq_um"].as_f64().unwrap() - ours.rq_um).abs() < 1e-12);
+    let overlay = std::fs::read_to_string(scan.join("overlay.svg")).unwrap();
+    assert!(overlay.contains("Line 6 "), "overlay does not draw line 6");
+}
+
+/// A daemon-sized scan: 31 lines × 8000 points at 0.5 µm of a synthetic rough profile.
+fn timing_scan(parent: &Path, kind: ProfileKind) -> PathBuf {
+    let start = Utc.with_ymd_and_hms(2026, 11, 30, 9, 15, 0).unwrap();
+    let id = ScanId::new(start, &format!("timing {kind:?}"));
+    let faults = Arc::new(NoFaults);
+    let store = ScanStore::create(parent, &id, faults.clone()).unwrap();
+    let mut journal = Journal::create(
+        store.root(),
+        StartRecord {
+            scan_id: id.0.clone(),
+            time: start,
+            plan: json!({ "lines": 31 }),
+            config: json!({}),
+            config_hash: CONFIG_HASH.into(),
+            specimen: "timing".into(),
+            operator: OPERATOR.into(),
+            notes: String::new(),
+            software_version: SOFTWARE.into(),
+            instrument_model: MODEL.into(),
+            firmware: FIRMWARE.into(),
+            drive_unit: DRIVE.into(),
+            conditions: conditions(kind),
+        },
+        faults,
+    )
+    .unwrap();
+    let (cols, px) = (8000usize, 0.0005);
+    for r in 0..31u32 {
+        let z: Vec<f64> = (0..cols)
+            .map(|i| {
+                let x = i as f64 * px;
+                let y = r as f64 * 0.01;
+                let noise = ((i * 7919 + r as usize * 104_729) % 1000) as f64 / 1000.0;
+                0.5 * (x * 97.0 + y * 13.0).sin()
+                    + 0.2 * (x * 611.0 - y * 29.0).cos()
+                    + 0.05 * noise
+            })
+            .collect();
+        let profile = Profile {
+            pitch_x_mm: px,
+            heights_um: z,
+            kind,
+            conditions: conditions(kind),
+        };
+        let meta = LineMeta {
+            index: r,
+            y_target_nm: Nm(r as i64 * 10_000),
+            y_readback_nm: None,
+            pitch_x_mm: px,
+            points: cols,
+            kind,
+            conditions: conditions(kind),
+            results: vec![],
+            started_at: start,
+            finished_at: start,
+            attempt: 1,
+        };
+        store.commit_line(&mut journal, &meta, &profile).unwrap();
+    }
+    store.root().to_path_buf()
+}
+
+/// Timing of `characterise_scan` on daemon-sized scans, R profile (no filter) and P profile
+/// (λc 0.8 mm Gaussian filter per line). Run with
+/// `cargo test --release --test scan_dir_analysis -- --ignored --nocapture`.
+#[test]
+#[ignore = "timing run; use --release"]
+fn timing_31_by_8000_scan() {
+    use surfscan::report::{characterise_scan, ScanAnalysisOptions};
+    let tmp = tempfile::tempdir().unwrap();
+    for kind in [ProfileKind::R, ProfileKind::P] {
+        let scan = timing_scan(tmp.path(), kind);
+        let t = std::time::Instant::now();
+        let out = characterise_scan(&scan, &ScanAnalysisOptions::default()).unwrap();
+        let wall = t.elapsed().as_secs_f64();
+        let r = report(&scan);
+        println!(
+            "31 x 8000 scan, {kind:?} profile: characterise_scan {wall:.2} s wall; stages {}",
+            r["timings_s"]
+        );
+        assert_eq!(out.lines_used.len(), 31);
+        assert!(wall < 30.0, "{wall} s");
+    }
+}
