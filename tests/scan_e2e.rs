@@ -93,7 +93,10 @@ async fn a_complete_scan_stores_the_served_lines_and_a_surface_through_them() {
             }
         }
     }
-    assert!(worst <= 1e-10, "surface misses a stored point by {worst} mm");
+    assert!(
+        worst <= 1e-10,
+        "surface misses a stored point by {worst} mm"
+    );
 
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap();
@@ -133,7 +136,11 @@ fn assert_crash_left(dir: &std::path::Path, k: usize, step: &str) {
         "after-commit" => (true, true, k + 1),
         other => panic!("{other}"),
     };
-    assert_eq!((csv, json), (want_csv, want_json), "{step}: files of line {k}");
+    assert_eq!(
+        (csv, json),
+        (want_csv, want_json),
+        "{step}: files of line {k}"
+    );
     assert_eq!(
         indices,
         (0..want_records as u32).collect::<Vec<_>>(),
@@ -152,7 +159,13 @@ async fn a_crash_at_every_durability_step_resumes_to_the_same_surface() {
         rig.shutdown().await;
         r
     };
-    let runs = ["before-csv", "before-json", "before-journal", "after-commit"].map(|step| {
+    let runs = [
+        "before-csv",
+        "before-json",
+        "before-journal",
+        "after-commit",
+    ]
+    .map(|step| {
         let reference = reference.clone();
         async move {
             let rig = Rig::start(RigOptions::default()).await;
@@ -168,7 +181,11 @@ async fn a_crash_at_every_durability_step_resumes_to_the_same_surface() {
             assert_crash_left(&dir, K, step);
             let o = run_scan(&cfg, &[]).await;
             assert!(o.status.success(), "{step}: rerun {}", describe(&o));
-            assert_eq!(scan_dir(&rig.out_dir("out")), dir, "{step}: same scan resumed");
+            assert_eq!(
+                scan_dir(&rig.out_dir("out")),
+                dir,
+                "{step}: same scan resumed"
+            );
             assert_lines_exactly(&dir, rig.options.lines);
             assert_journal_complete(&dir, rig.options.lines);
             assert_eq!(
@@ -223,7 +240,11 @@ async fn a_journal_torn_anywhere_in_its_last_record_resumes_cleanly() {
             (0..kept as u32).collect::<Vec<_>>(),
             "cut at byte {cut}"
         );
-        let torn = if cut == bytes.len() { 0 } else { cut - last_start };
+        let torn = if cut == bytes.len() {
+            0
+        } else {
+            cut - last_start
+        };
         assert_eq!(rec.torn_bytes as usize, torn, "cut at byte {cut}");
         assert_eq!(
             std::fs::metadata(&jpath).unwrap().len() as usize,
@@ -271,4 +292,240 @@ fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
             std::fs::copy(e.path(), dest).unwrap();
         }
     }
+}
+
+/// The stop record of a journal, if any.
+fn stop_record(records: &[Record]) -> Option<surfscan::scan::journal::StopRecord> {
+    records.iter().find_map(|r| match r {
+        Record::Stop(s) => Some(s.clone()),
+        _ => None,
+    })
+}
+
+/// A bad configuration is refused with exit 78 and a message naming the key, before any
+/// scan directory exists.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_bad_configuration_exits_78_naming_the_key() {
+    let rig = Rig::start(RigOptions::default()).await;
+    let good = std::fs::read_to_string(rig.config("out")).unwrap();
+    let cases = [
+        (
+            "unknown key",
+            good.replace("[scan]\n", "[scan]\nline-count = 8\n"),
+            "line-count",
+        ),
+        (
+            "too few lines for degree-v 3",
+            good.replace("lines = 8", "lines = 3"),
+            "scan.lines",
+        ),
+        (
+            "inexact step",
+            good.replace("y-step-mm = 0.01", "y-step-mm = 0.0100004"),
+            "scan.y-step-mm",
+        ),
+    ];
+    for (what, text, key) in cases {
+        assert_ne!(text, good, "{what}: the edit applies");
+        let path = rig.tmp.path().join("bad.toml");
+        std::fs::write(&path, text).unwrap();
+        let o = run_scan(&path, &[]).await;
+        assert_eq!(o.status.code(), Some(78), "{what}: {}", describe(&o));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(key), "{what}: message names {key}: {err}");
+        assert!(!rig.out_dir("out").exists(), "{what}: nothing was started");
+    }
+    rig.shutdown().await;
+}
+
+/// A full disk while line 3 is written: exit 74, stop record `fail` saying disk full, the
+/// lines before intact and loadable, line 3 absent.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_disk_during_a_line_fails_the_scan_without_half_a_line() {
+    const K: usize = 3;
+    let runs = ["before-csv", "before-json", "before-journal"].map(|step| async move {
+        let rig = Rig::start(RigOptions::default()).await;
+        let point = format!("{K}:{step}");
+        let o = run_scan(&rig.config("out"), &[("SURFSCAN_TEST_ENOSPC", &point)]).await;
+        assert_eq!(o.status.code(), Some(74), "{step}: {}", describe(&o));
+        let dir = scan_dir(&rig.out_dir("out"));
+        let (records, state) = journal(&dir);
+        let stop = stop_record(&records).unwrap_or_else(|| panic!("{step}: no stop record"));
+        assert_eq!(stop.status, StopStatus::Fail, "{step}");
+        assert!(stop.reason.contains("disk full"), "{step}: {}", stop.reason);
+        assert_eq!(
+            line_record_indices(&records),
+            (0..K as u32).collect::<Vec<_>>(),
+            "{step}"
+        );
+        // Lines before K are exactly the served ones; line K left no file at all.
+        assert_lines_exactly(&dir, K);
+        let store = ScanStore::open(&dir, std::sync::Arc::new(NoFaults)).unwrap();
+        assert_eq!(store.load_committed(&state.lines).unwrap().len(), K);
+        assert_eq!(store.load_all().unwrap().lines.len(), K, "{step}");
+        rig.shutdown().await;
+    });
+    futures::future::join_all(runs).await;
+}
+
+/// SIGTERM mid-scan: non-zero exit without a stop record but with an interruption; the rerun
+/// completes with every line once and the uninterrupted run's surface.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_mid_scan_leaves_it_resumable() {
+    let rig = Rig::start(RigOptions::default()).await;
+    let n = rig.options.lines;
+    let reference = reference_surface(&rig, "reference").await;
+    let cfg = rig.config("out");
+    let child = scan_command(&cfg, &[]).spawn().unwrap();
+    let out = rig.out_dir("out");
+    wait_until(Duration::from_secs(60), "three committed lines", || {
+        committed_lines(&out) >= 3
+    })
+    .await;
+    let pid = nix::unistd::Pid::from_raw(child.id().unwrap() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).unwrap();
+    let o = tokio::time::timeout(Duration::from_secs(60), child.wait_with_output())
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", describe(&o));
+    let dir = scan_dir(&out);
+    let (records, state) = journal(&dir);
+    assert!(
+        stop_record(&records).is_none(),
+        "no stop record: {records:?}"
+    );
+    let done = state.lines.len();
+    assert!((3..n).contains(&done), "{done} lines before the signal");
+    assert!(
+        interruptions(&records)
+            .iter()
+            .any(|r| r.contains("shutdown")),
+        "{:?}",
+        interruptions(&records)
+    );
+    let o = run_scan(&cfg, &[]).await;
+    assert!(o.status.success(), "{}", describe(&o));
+    assert_lines_exactly(&dir, n);
+    assert_journal_complete(&dir, n);
+    assert_eq!(surface_bits(&dir.join("surface.igs")), reference);
+    rig.shutdown().await;
+}
+
+/// An NG code on every attempt of line 2 fails the scan naming the code; on fewer attempts
+/// than the bound the line is traced again and its attempt number is recorded.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ng_codes_on_a_trace_are_retried_within_the_attempt_bound() {
+    let exhausted = async {
+        let rig = Rig::start(RigOptions {
+            faults: vec!["ng:011@CTSTA#3x3".into()],
+            ..RigOptions::default()
+        })
+        .await;
+        let o = run_scan(&rig.config("out"), &[]).await;
+        assert_eq!(o.status.code(), Some(1), "{}", describe(&o));
+        let dir = scan_dir(&rig.out_dir("out"));
+        let (records, _) = journal(&dir);
+        let stop = stop_record(&records).expect("stop record");
+        assert_eq!(stop.status, StopStatus::Fail);
+        assert!(
+            stop.reason.contains("NG011") && stop.reason.contains("line 3"),
+            "{}",
+            stop.reason
+        );
+        assert_eq!(line_record_indices(&records), vec![0, 1]);
+        assert_lines_exactly(&dir, 2);
+        rig.shutdown().await;
+    };
+    let recovered = async {
+        let rig = Rig::start(RigOptions {
+            faults: vec!["ng:011@CTSTA#3x2".into()],
+            ..RigOptions::default()
+        })
+        .await;
+        let n = rig.options.lines;
+        let o = run_scan(&rig.config("out"), &[]).await;
+        assert!(o.status.success(), "{}", describe(&o));
+        let dir = scan_dir(&rig.out_dir("out"));
+        assert_lines_exactly(&dir, n);
+        let records = assert_journal_complete(&dir, n);
+        let attempts: Vec<u32> = records
+            .iter()
+            .filter_map(|r| match r {
+                Record::Line(l) => Some(l.attempt),
+                _ => None,
+            })
+            .collect();
+        let mut want = vec![1; n];
+        want[2] = 3;
+        assert_eq!(attempts, want);
+        let meta: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join("lines").join("0002.json")).unwrap())
+                .unwrap();
+        assert_eq!(meta["attempt"], 3);
+        let abandoned = interruptions(&records)
+            .into_iter()
+            .filter(|r| r.contains("line 3 attempt") && r.contains("NG011"))
+            .count();
+        assert_eq!(abandoned, 2);
+        rig.shutdown().await;
+    };
+    futures::join!(exhausted, recovered);
+}
+
+/// The instrument unplugged mid-trace and back: the scan suspends, records it, and
+/// completes without duplicating the line.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_instrument_unplugged_mid_trace_suspends_and_the_scan_completes() {
+    let rig = Rig::start(RigOptions {
+        faults: vec!["unplug:300@CTSTA#3".into()],
+        ..RigOptions::default()
+    })
+    .await;
+    let n = rig.options.lines;
+    let o = run_scan(&rig.config("out"), &[]).await;
+    assert!(o.status.success(), "{}", describe(&o));
+    let dir = scan_dir(&rig.out_dir("out"));
+    assert_lines_exactly(&dir, n);
+    let records = assert_journal_complete(&dir, n);
+    let notes = interruptions(&records);
+    let pos = |pat: &str| notes.iter().position(|r| r.contains(pat));
+    let gone = pos("instrument unavailable").or(pos("line 3 abandoned"));
+    let back = pos("instrument back");
+    assert!(
+        matches!((gone, back), (Some(g), Some(b)) if g < b),
+        "suspend then back: {notes:?}"
+    );
+    rig.shutdown().await;
+}
+
+/// The stage controller resets (banner, position lost) mid-scan: the runner re-homes and
+/// completes; the served heights prove the carriage was truly at every target.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stage_reset_mid_scan_rehomes_and_completes() {
+    let rig = Rig::start(RigOptions::default()).await;
+    let n = rig.options.lines;
+    let cfg = rig.config("out");
+    let child = scan_command(&cfg, &[]).spawn().unwrap();
+    let out = rig.out_dir("out");
+    wait_until(Duration::from_secs(60), "three committed lines", || {
+        committed_lines(&out) >= 3
+    })
+    .await;
+    rig.stage.inject(StageFault::ResetBanner);
+    let o = tokio::time::timeout(Duration::from_secs(120), child.wait_with_output())
+        .await
+        .unwrap()
+        .unwrap();
+    assert!(o.status.success(), "{}", describe(&o));
+    let dir = scan_dir(&out);
+    assert_lines_exactly(&dir, n);
+    let records = assert_journal_complete(&dir, n);
+    let notes = interruptions(&records);
+    assert!(
+        notes.iter().any(|r| r.contains("re-homing")),
+        "a re-homing is recorded: {notes:?}"
+    );
+    assert_eq!(rig.stage.true_position_nm(), target_nm(n - 1));
+    rig.shutdown().await;
 }

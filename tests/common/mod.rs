@@ -39,7 +39,9 @@ pub fn height_nm(k: usize, i: usize) -> i64 {
 
 /// The heights of line `k` as the instrument prints them (3 decimals), µm.
 pub fn served_heights_um(k: usize) -> Vec<f64> {
-    (0..POINTS).map(|i| height_nm(k, i) as f64 / 1000.0).collect()
+    (0..POINTS)
+        .map(|i| height_nm(k, i) as f64 / 1000.0)
+        .collect()
 }
 
 /// The profile set served for `lines` lines.
@@ -234,6 +236,21 @@ pub fn scan_command(config: &Path, env: &[(&str, &str)]) -> tokio::process::Comm
     for (k, v) in env {
         c.env(k, v);
     }
+    // The simulator's pty descriptors are not close-on-exec: a child holding a copy of the
+    // instrument's master would keep an "unplugged" device alive. Mark every inherited
+    // descriptor above stderr close-on-exec (fcntl is async-signal-safe).
+    // SAFETY: the closure only calls fcntl on descriptor numbers, allowed between fork and exec.
+    unsafe {
+        c.pre_exec(|| {
+            for fd in 3..4096 {
+                let flags = libc::fcntl(fd, libc::F_GETFD);
+                if flags >= 0 {
+                    libc::fcntl(fd, libc::F_SETFD, flags | libc::FD_CLOEXEC);
+                }
+            }
+            Ok(())
+        });
+    }
     c
 }
 
@@ -263,7 +280,11 @@ pub fn scan_dir(out: &Path) -> PathBuf {
         .map(|e| e.expect("entry").path())
         .filter(|p| p.is_dir())
         .collect();
-    assert_eq!(dirs.len(), 1, "exactly one scan directory in {out:?}: {dirs:?}");
+    assert_eq!(
+        dirs.len(),
+        1,
+        "exactly one scan directory in {out:?}: {dirs:?}"
+    );
     dirs.into_iter().next().unwrap_or_default()
 }
 
@@ -271,7 +292,10 @@ pub fn scan_dir(out: &Path) -> PathBuf {
 pub fn journal(dir: &Path) -> (Vec<Record>, ResumeState) {
     let path = dir.join("journal.jsonl");
     let rec = read_journal(&path).expect("journal readable");
-    assert_eq!(rec.torn_bytes, 0, "journal of a finished run has no torn tail");
+    assert_eq!(
+        rec.torn_bytes, 0,
+        "journal of a finished run has no torn tail"
+    );
     let state = ResumeState::from_records(&path, &rec.records).expect("resume state");
     (rec.records, state)
 }
