@@ -1107,10 +1107,8 @@ async fn one_line<S: Station>(
                 );
                 return Ok(());
             }
-            Err(LineError::Interrupt(i)) => {
-                cleanup(ctl, devices).await;
-                return Err(End::from(i));
-            }
+            // `finish` makes the best-effort abort and stop, once, for every interrupt.
+            Err(LineError::Interrupt(i)) => return Err(End::from(i)),
             Err(LineError::Storage(e)) => return Err(storage_fail(&e)),
             Err(LineError::Refused(reason)) => {
                 return Err(fail(format!("line {}: {reason}", k + 1)))
