@@ -207,12 +207,16 @@ async fn a_journal_torn_anywhere_in_its_last_record_resumes_cleanly() {
     const K: usize = 3;
     let rig = Rig::start(RigOptions::default()).await;
     let n = rig.options.lines;
-    let reference = reference_surface(&rig, "reference").await;
-    let o = run_scan(
-        &rig.config("partial"),
-        &[("SURFSCAN_TEST_CRASH", &format!("{K}:after-commit"))],
-    )
-    .await;
+    let reference = async {
+        let rig = Rig::start(RigOptions::default()).await;
+        let r = reference_surface(&rig, "reference").await;
+        rig.shutdown().await;
+        r
+    };
+    let (partial_cfg, point) = (rig.config("partial"), format!("{K}:after-commit"));
+    let env = [("SURFSCAN_TEST_CRASH", point.as_str())];
+    let crashed = run_scan(&partial_cfg, &env);
+    let (reference, o) = futures::join!(reference, crashed);
     assert!(o.status.code().is_none(), "{}", describe(&o));
     let partial = scan_dir(&rig.out_dir("partial"));
     let bytes = std::fs::read(partial.join("journal.jsonl")).unwrap();
@@ -259,25 +263,27 @@ async fn a_journal_torn_anywhere_in_its_last_record_resumes_cleanly() {
     // Representative cuts through the binary: inside the class tag, mid-record, and the
     // complete record without its newline.
     let len = bytes.len();
-    for (i, cut) in [last_start + 3, (last_start + len) / 2, len - 1]
-        .into_iter()
-        .enumerate()
-    {
-        let out = format!("cut{i}");
-        let target = rig.out_dir(&out).join(partial.file_name().unwrap());
-        copy_dir(&partial, &target);
-        std::fs::write(target.join("journal.jsonl"), &bytes[..cut]).unwrap();
-        let o = run_scan(&rig.config(&out), &[]).await;
-        assert!(o.status.success(), "cut at {cut}: {}", describe(&o));
-        assert_eq!(scan_dir(&rig.out_dir(&out)), target);
-        assert_lines_exactly(&target, n);
-        assert_journal_complete(&target, n);
-        assert_eq!(
-            surface_bits(&target.join("surface.igs")),
-            reference,
-            "cut at {cut}"
-        );
-    }
+    let runs = [last_start + 3, (last_start + len) / 2, len - 1].map(|cut| {
+        let (partial, bytes, reference) = (&partial, &bytes, &reference);
+        async move {
+            let rig = Rig::start(RigOptions::default()).await;
+            let target = rig.out_dir("out").join(partial.file_name().unwrap());
+            copy_dir(partial, &target);
+            std::fs::write(target.join("journal.jsonl"), &bytes[..cut]).unwrap();
+            let o = run_scan(&rig.config("out"), &[]).await;
+            assert!(o.status.success(), "cut at {cut}: {}", describe(&o));
+            assert_eq!(scan_dir(&rig.out_dir("out")), target);
+            assert_lines_exactly(&target, n);
+            assert_journal_complete(&target, n);
+            assert_eq!(
+                &surface_bits(&target.join("surface.igs")),
+                reference,
+                "cut at {cut}"
+            );
+            rig.shutdown().await;
+        }
+    });
+    futures::future::join_all(runs).await;
     rig.shutdown().await;
 }
 
@@ -374,7 +380,12 @@ async fn a_full_disk_during_a_line_fails_the_scan_without_half_a_line() {
 async fn sigterm_mid_scan_leaves_it_resumable() {
     let rig = Rig::start(RigOptions::default()).await;
     let n = rig.options.lines;
-    let reference = reference_surface(&rig, "reference").await;
+    let reference = tokio::spawn(async {
+        let rig = Rig::start(RigOptions::default()).await;
+        let r = reference_surface(&rig, "reference").await;
+        rig.shutdown().await;
+        r
+    });
     let cfg = rig.config("out");
     let child = scan_command(&cfg, &[]).spawn().unwrap();
     let out = rig.out_dir("out");
@@ -408,6 +419,7 @@ async fn sigterm_mid_scan_leaves_it_resumable() {
     assert!(o.status.success(), "{}", describe(&o));
     assert_lines_exactly(&dir, n);
     assert_journal_complete(&dir, n);
+    let reference = reference.await.expect("reference run");
     assert_eq!(surface_bits(&dir.join("surface.igs")), reference);
     rig.shutdown().await;
 }
@@ -490,11 +502,14 @@ async fn an_instrument_unplugged_mid_trace_suspends_and_the_scan_completes() {
     let records = assert_journal_complete(&dir, n);
     let notes = interruptions(&records);
     let pos = |pat: &str| notes.iter().position(|r| r.contains(pat));
-    let gone = pos("instrument unavailable").or(pos("line 3 abandoned"));
-    let back = pos("instrument back");
+    let (abandoned, gone, back) = (
+        pos("line 3 abandoned: instrument"),
+        pos("instrument unavailable"),
+        pos("instrument back"),
+    );
     assert!(
-        matches!((gone, back), (Some(g), Some(b)) if g < b),
-        "suspend then back: {notes:?}"
+        matches!((abandoned, gone, back), (Some(a), Some(g), Some(b)) if a < g && g < b),
+        "line 3 abandoned, suspended, then back: {notes:?}"
     );
     rig.shutdown().await;
 }

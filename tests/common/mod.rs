@@ -25,8 +25,12 @@ pub const Y_STEP_MM: f64 = 0.01;
 pub const POINTS: usize = 160;
 /// x pitch of the served profiles, mm.
 pub const PITCH_X_MM: f64 = 0.0015;
-/// Simulated time runs this many times faster than real time.
-pub const SPEED_UP: f64 = 1000.0;
+/// The instrument's simulated time runs this many times faster than real time. A trace then
+/// reads "measuring" or "returning" for about 80 ms, long enough for the client's status
+/// polls to see it on a loaded machine (at 1000 it is 8 ms and polls can miss it).
+pub const SPEED_UP: f64 = 100.0;
+/// The stage's simulated motion runs this many times faster than real time.
+pub const STAGE_SPEED_UP: f64 = 1000.0;
 
 /// Height of point `i` of line `k` in integer nanometres: a smooth form plus a
 /// line-dependent ripple, different for every line so a trace at the wrong y is caught.
@@ -114,7 +118,7 @@ impl Rig {
             steps_per_mm: 400.0,
             max_travel_mm: 100.0,
             backlash_mm: 0.02,
-            time_scale: SPEED_UP,
+            time_scale: STAGE_SPEED_UP,
             ..GrblSimConfig::default()
         };
         let mut sim = Simulator::new(&instrument_link)
@@ -232,6 +236,8 @@ pub fn scan_command(config: &Path, env: &[(&str, &str)]) -> tokio::process::Comm
         .env_remove("SURFSCAN_TEST_ENOSPC")
         .env("RUST_LOG", "info")
         .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
         .kill_on_drop(true);
     for (k, v) in env {
         c.env(k, v);
