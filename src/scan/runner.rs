@@ -32,7 +32,9 @@ use super::metrics::{write_metrics, ScanMetrics};
 use super::outputs::{write_outputs, Outputs};
 use super::plan::Plan;
 use super::station::{Device, Fault, Station};
-use super::store::{preflight_disk, LineMeta, ScanId, ScanStore, StoreError};
+use super::store::{
+    csv_name, meta_name, preflight_disk, sync_dir, LineMeta, ScanId, ScanStore, StoreError,
+};
 use super::testhooks::{Step, TestHooks};
 use crate::config::Config;
 use crate::control::protocol::{
@@ -1105,10 +1107,8 @@ async fn one_line<S: Station>(
                 );
                 return Ok(());
             }
-            Err(LineError::Interrupt(i)) => {
-                cleanup(ctl, devices).await;
-                return Err(End::from(i));
-            }
+            // `finish` makes the best-effort abort and stop, once, for every interrupt.
+            Err(LineError::Interrupt(i)) => return Err(End::from(i)),
             Err(LineError::Storage(e)) => return Err(storage_fail(&e)),
             Err(LineError::Refused(reason)) => {
                 return Err(fail(format!("line {}: {reason}", k + 1)))
@@ -1261,11 +1261,41 @@ async fn try_line<S: Station>(
 fn scan_commit(scan: &mut Scan, meta: &LineMeta, profile: &Profile) -> Result<(), LineError> {
     // The hook learns the line before any of its writes.
     scan.hooks.set_line(meta.index);
-    scan.store
-        .commit_line(&mut scan.journal, meta, profile)
-        .map_err(LineError::Storage)?;
+    if let Err(e) = scan.store.commit_line(&mut scan.journal, meta, profile) {
+        discard_uncommitted(scan, meta.index);
+        return Err(LineError::Storage(e));
+    }
     scan.hooks.at(Step::AfterCommit);
     Ok(())
+}
+
+/// After a failed commit: when the journal holds no record of line `index` (its append
+/// failed or never happened), the line's files are removed so that nothing reading the
+/// directory (`fit`, `analyze`) takes a line the scan never committed. A record that did
+/// reach the journal (e.g. only its fsync failed) keeps the files it vouches for.
+fn discard_uncommitted(scan: &Scan, index: u32) {
+    let recorded = super::journal::read_journal(scan.journal.path()).is_ok_and(|r| {
+        r.records
+            .iter()
+            .any(|rec| matches!(rec, Record::Line(l) if l.index == index))
+    });
+    if recorded {
+        return;
+    }
+    let dir = scan.store.lines_dir();
+    for name in [csv_name(index), meta_name(index)] {
+        match std::fs::remove_file(dir.join(&name)) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => tracing::warn!(
+                scan_id = %scan.id,
+                "cannot remove {} of the uncommitted line {}: {e}",
+                name,
+                index + 1
+            ),
+        }
+    }
+    let _ = sync_dir(&dir);
 }
 
 /// A traced line must fit the scan: finite heights, the scan's point count and pitch,

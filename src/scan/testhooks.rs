@@ -5,7 +5,8 @@
 //! - `SURFSCAN_TEST_CRASH=LINE:STEP` — abort the process at STEP of line LINE (0-based);
 //!   STEP is `before-csv`, `before-json`, `before-journal` or `after-commit`.
 //! - `SURFSCAN_TEST_ENOSPC=LINE:STEP` — make that write fail with "No space left on device";
-//!   STEP is `before-csv`, `before-json` or `before-journal`.
+//!   STEP is `before-csv`, `before-json` or `before-journal`. Only that one write fails: the
+//!   records that follow it (the stop record saying why) are written.
 //!
 //! Without those variables the hook does nothing. It is the [`StorageFaults`] the store
 //! and journal consult before every durable write.
@@ -15,7 +16,7 @@
 use super::store::{StorageFaults, WriteStep};
 use std::io;
 use std::path::Path;
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 /// The points a test can stop at.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -69,6 +70,7 @@ fn parse_point(value: &str) -> Result<(u32, Step), String> {
 pub struct TestHooks {
     crash: Option<(u32, Step)>,
     enospc: Option<(u32, Step)>,
+    enospc_done: AtomicBool,
     line: AtomicU32,
 }
 
@@ -92,6 +94,7 @@ impl TestHooks {
         Ok(TestHooks {
             crash: get("SURFSCAN_TEST_CRASH")?,
             enospc: get("SURFSCAN_TEST_ENOSPC")?,
+            enospc_done: AtomicBool::new(false),
             line: AtomicU32::new(0),
         })
     }
@@ -116,7 +119,9 @@ impl StorageFaults for TestHooks {
             return Ok(());
         };
         self.at(step);
-        if self.enospc == Some((self.line.load(Ordering::SeqCst), step)) {
+        if self.enospc == Some((self.line.load(Ordering::SeqCst), step))
+            && !self.enospc_done.swap(true, Ordering::SeqCst)
+        {
             return Err(io::Error::from_raw_os_error(libc::ENOSPC));
         }
         Ok(())
@@ -151,5 +156,7 @@ mod tests {
         let e = h.before_write(WriteStep::Journal, p).unwrap_err();
         assert_eq!(e.raw_os_error(), Some(libc::ENOSPC));
         assert!(h.before_write(WriteStep::Metrics, p).is_ok());
+        // The stop record that follows (same line, same step) is written.
+        assert!(h.before_write(WriteStep::Journal, p).is_ok());
     }
 }

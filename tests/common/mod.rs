@@ -1,0 +1,445 @@
+//! Shared rig of the end-to-end scan tests: an in-process simulator (SJ-210 and a GRBL y
+//! stage on pseudo-terminals) serving a small profile set the test owns, a station
+//! configuration pointing at it, and helpers to run the real `surfscan scan` binary and read
+//! back what it left on disk (journal, line files, surface).
+//!
+//! The profile heights are integers of nanometres, so the instrument's three printed
+//! decimals carry them exactly and a stored height must equal the served one bit for bit.
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use surfscan::scan::journal::{read_journal, Record, ResumeState};
+use surfscan_sim::data::ServedProfile;
+use surfscan_sim::grbl::{GrblSimConfig, StageShared};
+use surfscan_sim::{FaultSpec, InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
+
+/// y of line 0 (GRBL machine coordinates are negative after homing), mm.
+pub const Y_START_MM: f64 = -20.0;
+/// y step of the plan and of the served lines, mm.
+pub const Y_STEP_MM: f64 = 0.01;
+/// Points per served profile.
+pub const POINTS: usize = 160;
+/// x pitch of the served profiles, mm.
+pub const PITCH_X_MM: f64 = 0.0015;
+/// The instrument's simulated time runs this many times faster than real time. A trace then
+/// reads "measuring" or "returning" for about 80 ms, long enough for the client's status
+/// polls to see it on a loaded machine (at 1000 it is 8 ms and polls can miss it).
+pub const SPEED_UP: f64 = 100.0;
+/// The stage's simulated motion runs this many times faster than real time.
+pub const STAGE_SPEED_UP: f64 = 1000.0;
+
+/// Height of point `i` of line `k` in integer nanometres: a smooth form plus a
+/// line-dependent ripple, different for every line so a trace at the wrong y is caught.
+pub fn height_nm(k: usize, i: usize) -> i64 {
+    let x = i as f64 * PITCH_X_MM;
+    let form = 1500.0 * (x * 40.0).sin() + 400.0 * ((k as f64) * 0.7 + x * 90.0).cos();
+    let ripple = ((k * 7919 + i * 104_729) % 601) as f64 - 300.0;
+    (form + ripple + 37.0 * k as f64).round() as i64
+}
+
+/// The heights of line `k` as the instrument prints them (3 decimals), µm.
+pub fn served_heights_um(k: usize) -> Vec<f64> {
+    (0..POINTS)
+        .map(|i| height_nm(k, i) as f64 / 1000.0)
+        .collect()
+}
+
+/// The profile set served for `lines` lines.
+pub fn profile_set(lines: usize) -> ProfileSet {
+    let profiles = (0..lines)
+        .map(|k| ServedProfile {
+            y_mm: Y_START_MM + k as f64 * Y_STEP_MM,
+            pitch_x_mm: PITCH_X_MM,
+            z_um: served_heights_um(k),
+        })
+        .collect();
+    let mut set = ProfileSet::new(profiles).expect("profile set");
+    // The grid is the plan's exactly (the mean spacing of the y values may be off by an ulp).
+    set.y_first_mm = Y_START_MM;
+    set.y_step_mm = Y_STEP_MM;
+    set
+}
+
+/// Target y of line `k` in integer nm, as the plan computes it.
+pub fn target_nm(k: usize) -> i64 {
+    -20_000_000 + 10_000 * k as i64
+}
+
+/// What the rig is built with.
+#[derive(Debug, Clone)]
+pub struct RigOptions {
+    /// Lines of the scan (and of the served set).
+    pub lines: usize,
+    /// Wire faults (`--fault` specs) of the instrument.
+    pub faults: Vec<String>,
+    /// `max-line-attempts`.
+    pub max_line_attempts: u32,
+    /// Extra TOML appended to `[scan]`.
+    pub extra_scan: String,
+}
+
+impl Default for RigOptions {
+    fn default() -> Self {
+        RigOptions {
+            lines: 8,
+            faults: Vec::new(),
+            max_line_attempts: 3,
+            extra_scan: String::new(),
+        }
+    }
+}
+
+/// A running simulator with its configuration.
+pub struct Rig {
+    pub tmp: tempfile::TempDir,
+    pub sim: Option<SimHandle>,
+    pub stage: Arc<StageShared>,
+    pub options: RigOptions,
+    pub instrument_link: PathBuf,
+    pub stage_link: PathBuf,
+}
+
+impl Rig {
+    /// Starts the simulator and waits for its ready event.
+    pub async fn start(options: RigOptions) -> Rig {
+        let tmp = tempfile::tempdir().expect("temp dir");
+        let instrument_link = tmp.path().join("sj210");
+        let stage_link = tmp.path().join("ystage");
+        let stage = StageShared::new();
+        let instrument = InstrumentConfig {
+            time_scale: 1.0 / SPEED_UP,
+            ..InstrumentConfig::default()
+        };
+        let grbl = GrblSimConfig {
+            steps_per_mm: 400.0,
+            max_travel_mm: 100.0,
+            backlash_mm: 0.02,
+            time_scale: STAGE_SPEED_UP,
+            ..GrblSimConfig::default()
+        };
+        let mut sim = Simulator::new(&instrument_link)
+            .instrument(instrument)
+            .profiles(profile_set(options.lines))
+            .baud(38400 * 100)
+            .grbl_stage(&stage_link, grbl, stage.clone());
+        for spec in &options.faults {
+            match spec.parse::<FaultSpec>() {
+                Ok(FaultSpec::Wire(f)) => sim = sim.fault(f),
+                other => panic!("fault spec {spec}: {other:?}"),
+            }
+        }
+        let mut handle = sim.start().expect("simulator starts");
+        match tokio::time::timeout(Duration::from_secs(10), handle.next_event()).await {
+            Ok(Some(SimEvent::Ready(_))) => {}
+            other => panic!("simulator not ready: {other:?}"),
+        }
+        Rig {
+            tmp,
+            sim: Some(handle),
+            stage,
+            options,
+            instrument_link,
+            stage_link,
+        }
+    }
+
+    /// Writes a configuration whose output directory is `out` (relative to the rig's temp
+    /// dir); returns its path.
+    pub fn config(&self, out: &str) -> PathBuf {
+        self.config_with(out, "")
+    }
+
+    /// As [`Rig::config`], with `extra` TOML lines appended to the `[scan]` table.
+    pub fn config_with(&self, out: &str, extra: &str) -> PathBuf {
+        let dir = self.tmp.path().join(out);
+        let text = format!(
+            r#"[instrument]
+port = {instrument:?}
+model = "sj210"
+baud = 38400
+pitch-x-um = 1.5
+
+[instrument.timeouts]
+poll-interval-ms = 5
+
+[instrument.commands]
+profile-total = "RDEVA00"
+profile-block = "RDEVA{{n}}"
+
+[stage]
+port = {stage:?}
+protocol = "grbl"
+steps-per-mm = 400.0
+soft-limit-min-mm = -100.0
+soft-limit-max-mm = 0.0
+backlash-mm = 0.05
+settle-ms = 2
+poll-interval-ms = 200
+home-on-start = true
+
+[scan]
+lines = {lines}
+y-start-mm = {Y_START_MM:?}
+y-step-mm = {Y_STEP_MM:?}
+max-line-attempts = {attempts}
+reconnect-initial-ms = 50
+reconnect-max-ms = 400
+{extra_scan}{extra}
+
+[fit]
+degree-v = 3
+
+[output]
+dir = {dir:?}
+
+[control]
+socket = {sock:?}
+"#,
+            instrument = self.instrument_link.display().to_string(),
+            stage = self.stage_link.display().to_string(),
+            lines = self.options.lines,
+            attempts = self.options.max_line_attempts,
+            extra_scan = self.options.extra_scan,
+            dir = dir.display().to_string(),
+            sock = self.tmp.path().join("control.sock").display().to_string(),
+        );
+        let path = self.tmp.path().join(format!("{out}.toml"));
+        std::fs::write(&path, text).expect("write config");
+        path
+    }
+
+    /// The output directory of configuration `out`.
+    pub fn out_dir(&self, out: &str) -> PathBuf {
+        self.tmp.path().join(out)
+    }
+
+    /// Stops the simulator.
+    pub async fn shutdown(mut self) {
+        if let Some(h) = self.sim.take() {
+            h.shutdown().await;
+        }
+    }
+}
+
+/// `surfscan scan --config CONFIG` with the traceability arguments and `env`.
+pub fn scan_command(config: &Path, env: &[(&str, &str)]) -> tokio::process::Command {
+    let mut c = tokio::process::Command::new(env!("CARGO_BIN_EXE_surfscan"));
+    c.arg("scan")
+        .arg("--config")
+        .arg(config)
+        .args(["--specimen", "coupon A-17", "--operator", "R. Tester"])
+        .env_remove("SURFSCAN_TEST_CRASH")
+        .env_remove("SURFSCAN_TEST_ENOSPC")
+        .env("RUST_LOG", "info")
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .kill_on_drop(true);
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    // The simulator's pty descriptors are not close-on-exec: a child holding a copy of the
+    // instrument's master would keep an "unplugged" device alive. Mark every inherited
+    // descriptor above stderr close-on-exec (fcntl is async-signal-safe).
+    // SAFETY: the closure only calls fcntl on descriptor numbers, allowed between fork and exec.
+    unsafe {
+        c.pre_exec(|| {
+            for fd in 3..4096 {
+                let flags = libc::fcntl(fd, libc::F_GETFD);
+                if flags >= 0 {
+                    libc::fcntl(fd, libc::F_SETFD, flags | libc::FD_CLOEXEC);
+                }
+            }
+            Ok(())
+        });
+    }
+    c
+}
+
+/// Runs the scan to its end (at most two minutes).
+pub async fn run_scan(config: &Path, env: &[(&str, &str)]) -> Output {
+    let child = scan_command(config, env).output();
+    tokio::time::timeout(Duration::from_secs(120), child)
+        .await
+        .expect("surfscan scan finished within 120 s")
+        .expect("surfscan scan ran")
+}
+
+/// Exit code and captured output, for assertion messages.
+pub fn describe(o: &Output) -> String {
+    format!(
+        "status {:?}\n--- stdout\n{}\n--- stderr\n{}",
+        o.status,
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// The one scan directory under `out`.
+pub fn scan_dir(out: &Path) -> PathBuf {
+    let dirs: Vec<PathBuf> = std::fs::read_dir(out)
+        .expect("output dir")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.is_dir())
+        .collect();
+    assert_eq!(
+        dirs.len(),
+        1,
+        "exactly one scan directory in {out:?}: {dirs:?}"
+    );
+    dirs.into_iter().next().unwrap_or_default()
+}
+
+/// The journal's records and the resume state derived from them.
+pub fn journal(dir: &Path) -> (Vec<Record>, ResumeState) {
+    let path = dir.join("journal.jsonl");
+    let rec = read_journal(&path).expect("journal readable");
+    assert_eq!(
+        rec.torn_bytes, 0,
+        "journal of a finished run has no torn tail"
+    );
+    let state = ResumeState::from_records(&path, &rec.records).expect("resume state");
+    (rec.records, state)
+}
+
+/// Line indices of the journal's line records, in order, duplicates included.
+pub fn line_record_indices(records: &[Record]) -> Vec<u32> {
+    records
+        .iter()
+        .filter_map(|r| match r {
+            Record::Line(l) => Some(l.index),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Reasons of the interruption records.
+pub fn interruptions(records: &[Record]) -> Vec<String> {
+    records
+        .iter()
+        .filter_map(|r| match r {
+            Record::Interruption(i) => Some(i.reason.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Checks that `lines/` holds exactly lines `0..n` (each a csv and a json, nothing else),
+/// each with the header `x_mm,z_um`, the pitch, and the heights the simulator served.
+pub fn assert_lines_exactly(dir: &Path, n: usize) {
+    let lines_dir = dir.join("lines");
+    let mut names: Vec<String> = std::fs::read_dir(&lines_dir)
+        .expect("lines dir")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    let expect: Vec<String> = (0..n)
+        .flat_map(|k| [format!("{k:04}.csv"), format!("{k:04}.json")])
+        .collect();
+    assert_eq!(names, expect, "files in {lines_dir:?}");
+    for k in 0..n {
+        let text = std::fs::read_to_string(lines_dir.join(format!("{k:04}.csv"))).expect("csv");
+        let mut rows = text.lines();
+        assert_eq!(rows.next(), Some("x_mm,z_um"), "header of line {k}");
+        let want = served_heights_um(k);
+        let mut got = Vec::new();
+        for (i, row) in rows.enumerate() {
+            let (x, z) = row.split_once(',').expect("two columns");
+            let x: f64 = x.parse().expect("x number");
+            assert!(
+                (x - i as f64 * PITCH_X_MM).abs() < 1e-12,
+                "line {k} point {i}: x {x}"
+            );
+            got.push(z.parse::<f64>().expect("z number"));
+        }
+        assert_eq!(got.len(), POINTS, "points of line {k}");
+        for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert_eq!(
+                g.to_bits(),
+                w.to_bits(),
+                "line {k} point {i}: stored {g} µm, served {w} µm"
+            );
+        }
+        let meta: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(lines_dir.join(format!("{k:04}.json"))).expect("json"),
+        )
+        .expect("json parses");
+        assert_eq!(meta["index"], k as u64);
+        assert_eq!(meta["points"], POINTS as u64);
+        assert_eq!(meta["y_target_nm"], target_nm(k));
+        assert_eq!(
+            meta["y_readback_nm"],
+            target_nm(k),
+            "line {k}: stage read back at the target"
+        );
+    }
+}
+
+/// Checks the journal of a successful scan: start first, one line record per index in
+/// order, the stop record `success` last.
+pub fn assert_journal_complete(dir: &Path, n: usize) -> Vec<Record> {
+    let (records, state) = journal(dir);
+    assert!(matches!(records.first(), Some(Record::Start(_))));
+    assert_eq!(
+        line_record_indices(&records),
+        (0..n as u32).collect::<Vec<_>>(),
+        "one line record per index"
+    );
+    assert!(state.duplicates.is_empty());
+    match records.last() {
+        Some(Record::Stop(s)) => assert_eq!(
+            s.status,
+            surfscan::scan::journal::StopStatus::Success,
+            "{s:?}"
+        ),
+        other => panic!("last record is not a stop record: {other:?}"),
+    }
+    let stops = records
+        .iter()
+        .filter(|r| matches!(r, Record::Stop(_)))
+        .count();
+    assert_eq!(stops, 1, "one stop record");
+    records
+}
+
+/// Knots and poles of every surface in an IGES file, as f64 bit patterns.
+pub fn surface_bits(path: &Path) -> Vec<Vec<u64>> {
+    let file = surfscan::iges::read_iges(&std::fs::read(path).expect("iges")).expect("iges reads");
+    file.surfaces
+        .iter()
+        .map(|s| {
+            let mut bits: Vec<u64> = vec![s.degree_u() as u64, s.degree_v() as u64];
+            bits.extend(s.knots_u().iter().map(|v| v.to_bits()));
+            bits.extend(s.knots_v().iter().map(|v| v.to_bits()));
+            bits.extend(s.poles().iter().flat_map(|p| p.iter().map(|v| v.to_bits())));
+            bits
+        })
+        .collect()
+}
+
+/// Polls `cond` every 10 ms until it holds or `limit` passes.
+pub async fn wait_until(limit: Duration, what: &str, mut cond: impl FnMut() -> bool) {
+    let deadline = Instant::now() + limit;
+    while !cond() {
+        assert!(Instant::now() < deadline, "timed out waiting for {what}");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+}
+
+/// Number of line records in the journal of the one scan under `out` (0 while none).
+pub fn committed_lines(out: &Path) -> usize {
+    let Ok(entries) = std::fs::read_dir(out) else {
+        return 0;
+    };
+    for e in entries.flatten() {
+        let j = e.path().join("journal.jsonl");
+        if let Ok(rec) = read_journal(&j) {
+            return line_record_indices(&rec.records).len();
+        }
+    }
+    0
+}

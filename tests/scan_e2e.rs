@@ -1,0 +1,546 @@
+//! End-to-end scans: the real `surfscan scan` binary as a child process against the
+//! simulator started in this process (SJ-210 and GRBL stage on pseudo-terminals), through
+//! crashes at every durability step, a torn journal, an unplugged instrument, a reset stage,
+//! a full disk, SIGTERM, NG codes and bad configurations. The simulator's profile set is the
+//! independent reference for every stored height.
+
+mod common;
+
+use common::*;
+use std::time::Duration;
+use surfscan::scan::journal::{Journal, Record, ResumeState, StopStatus};
+use surfscan::scan::store::{NoFaults, ScanStore};
+use surfscan_sim::grbl::StageFault;
+
+/// The paper's parameters, computed here from the stored points independently of the
+/// fitter: chord-length parameters of every row (resp. column), averaged.
+fn chord_params(points: &[Vec<[f64; 3]>]) -> (Vec<f64>, Vec<f64>) {
+    let rows = points.len();
+    let cols = points[0].len();
+    let dist = |a: [f64; 3], b: [f64; 3]| {
+        ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+    };
+    let chord = |seq: Vec<[f64; 3]>| -> Vec<f64> {
+        let mut acc = vec![0.0];
+        for w in seq.windows(2) {
+            let last = *acc.last().unwrap_or(&0.0);
+            acc.push(last + dist(w[0], w[1]));
+        }
+        let total = *acc.last().unwrap_or(&1.0);
+        acc.iter().map(|a| a / total).collect()
+    };
+    let mut u = vec![0.0; cols];
+    for row in points {
+        for (k, p) in chord(row.clone()).into_iter().enumerate() {
+            u[k] += p / rows as f64;
+        }
+    }
+    let mut v = vec![0.0; rows];
+    for c in 0..cols {
+        let col: Vec<[f64; 3]> = points.iter().map(|r| r[c]).collect();
+        for (l, p) in chord(col).into_iter().enumerate() {
+            v[l] += p / cols as f64;
+        }
+    }
+    (u, v)
+}
+
+/// A complete scan: lines, journal, surface and report.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_complete_scan_stores_the_served_lines_and_a_surface_through_them() {
+    let rig = Rig::start(RigOptions::default()).await;
+    let n = rig.options.lines;
+    let cfg = rig.config("out");
+    let o = run_scan(&cfg, &[]).await;
+    assert!(o.status.success(), "{}", describe(&o));
+    let dir = scan_dir(&rig.out_dir("out"));
+    assert_lines_exactly(&dir, n);
+    let records = assert_journal_complete(&dir, n);
+    match records.first() {
+        Some(Record::Start(s)) => {
+            assert_eq!(s.specimen, "coupon A-17");
+            assert_eq!(s.operator, "R. Tester");
+        }
+        other => panic!("{other:?}"),
+    }
+    // The carriage ends truly at the last target (backlash included).
+    assert_eq!(rig.stage.true_position_nm(), target_nm(n - 1));
+
+    // The surface: degrees and pole counts of the grid, through every stored point.
+    let iges = dir.join("surface.igs");
+    let file = surfscan::iges::reader::read_iges(&std::fs::read(&iges).unwrap()).unwrap();
+    assert_eq!(file.surfaces.len(), 1);
+    let s = &file.surfaces[0];
+    assert_eq!((s.degree_u(), s.degree_v()), (5, 3));
+    assert_eq!((s.count_u(), s.count_v()), (POINTS, n));
+    let points: Vec<Vec<[f64; 3]>> = (0..n)
+        .map(|k| {
+            let y = target_nm(k) as f64 / 1e6;
+            served_heights_um(k)
+                .iter()
+                .enumerate()
+                .map(|(i, z)| [i as f64 * PITCH_X_MM, y, z / 1000.0])
+                .collect()
+        })
+        .collect();
+    let (u, v) = chord_params(&points);
+    let mut worst = 0.0f64;
+    for (l, row) in points.iter().enumerate() {
+        for (k, p) in row.iter().enumerate() {
+            let e = s.evaluate(u[k], v[l]);
+            for d in 0..3 {
+                worst = worst.max((e[d] - p[d]).abs());
+            }
+        }
+    }
+    assert!(
+        worst <= 1e-10,
+        "surface misses a stored point by {worst} mm"
+    );
+
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["traceability"]["specimen"], "coupon A-17");
+    assert_eq!(report["traceability"]["operator"], "R. Tester");
+    assert_eq!(report["traceability"]["instrument_model"], "sj210");
+    assert_eq!(report["fit"]["poles_u"], POINTS as u64);
+    assert_eq!(report["fit"]["poles_v"], n as u64);
+    assert_eq!(report["lines"].as_array().map(Vec::len), Some(n));
+    rig.shutdown().await;
+}
+
+/// Runs an uninterrupted scan on `rig` into `out` and returns its surface's bits.
+async fn reference_surface(rig: &Rig, out: &str) -> Vec<Vec<u64>> {
+    let o = run_scan(&rig.config(out), &[]).await;
+    assert!(o.status.success(), "{}", describe(&o));
+    let dir = scan_dir(&rig.out_dir(out));
+    assert_journal_complete(&dir, rig.options.lines);
+    surface_bits(&dir.join("surface.igs"))
+}
+
+/// What a crash at `step` of line `k` must leave behind, before the rerun.
+fn assert_crash_left(dir: &std::path::Path, k: usize, step: &str) {
+    let lines = dir.join("lines");
+    let csv = lines.join(format!("{k:04}.csv")).exists();
+    let json = lines.join(format!("{k:04}.json")).exists();
+    let rec = surfscan::scan::journal::read_journal(&dir.join("journal.jsonl")).unwrap();
+    let indices = line_record_indices(&rec.records);
+    assert!(
+        !rec.records.iter().any(|r| matches!(r, Record::Stop(_))),
+        "{step}: no stop record after a crash"
+    );
+    let (want_csv, want_json, want_records) = match step {
+        "before-csv" => (false, false, k),
+        "before-json" => (true, false, k),
+        "before-journal" => (true, true, k),
+        "after-commit" => (true, true, k + 1),
+        other => panic!("{other}"),
+    };
+    assert_eq!(
+        (csv, json),
+        (want_csv, want_json),
+        "{step}: files of line {k}"
+    );
+    assert_eq!(
+        indices,
+        (0..want_records as u32).collect::<Vec<_>>(),
+        "{step}: line records"
+    );
+}
+
+/// `kill -9` at each durability step of line 3, then a rerun: every line exactly once and
+/// the surface bit-identical to an uninterrupted run's.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_crash_at_every_durability_step_resumes_to_the_same_surface() {
+    const K: usize = 3;
+    let reference = {
+        let rig = Rig::start(RigOptions::default()).await;
+        let r = reference_surface(&rig, "reference").await;
+        rig.shutdown().await;
+        r
+    };
+    let runs = [
+        "before-csv",
+        "before-json",
+        "before-journal",
+        "after-commit",
+    ]
+    .map(|step| {
+        let reference = reference.clone();
+        async move {
+            let rig = Rig::start(RigOptions::default()).await;
+            let cfg = rig.config("out");
+            let point = format!("{K}:{step}");
+            let o = run_scan(&cfg, &[("SURFSCAN_TEST_CRASH", &point)]).await;
+            assert!(
+                !o.status.success() && o.status.code().is_none(),
+                "{step}: the process must abort: {}",
+                describe(&o)
+            );
+            let dir = scan_dir(&rig.out_dir("out"));
+            assert_crash_left(&dir, K, step);
+            let o = run_scan(&cfg, &[]).await;
+            assert!(o.status.success(), "{step}: rerun {}", describe(&o));
+            assert_eq!(
+                scan_dir(&rig.out_dir("out")),
+                dir,
+                "{step}: same scan resumed"
+            );
+            assert_lines_exactly(&dir, rig.options.lines);
+            assert_journal_complete(&dir, rig.options.lines);
+            assert_eq!(
+                surface_bits(&dir.join("surface.igs")),
+                reference,
+                "{step}: surface differs from the uninterrupted run's"
+            );
+            rig.shutdown().await;
+        }
+    });
+    futures::future::join_all(runs).await;
+}
+
+/// A journal cut at every byte offset of its last record: recovery keeps exactly the
+/// complete records (checked in-process for every offset), and the binary resumes a few
+/// representative cuts to the uninterrupted run's surface.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_journal_torn_anywhere_in_its_last_record_resumes_cleanly() {
+    const K: usize = 3;
+    let rig = Rig::start(RigOptions::default()).await;
+    let n = rig.options.lines;
+    let reference = async {
+        let rig = Rig::start(RigOptions::default()).await;
+        let r = reference_surface(&rig, "reference").await;
+        rig.shutdown().await;
+        r
+    };
+    let (partial_cfg, point) = (rig.config("partial"), format!("{K}:after-commit"));
+    let env = [("SURFSCAN_TEST_CRASH", point.as_str())];
+    let crashed = run_scan(&partial_cfg, &env);
+    let (reference, o) = futures::join!(reference, crashed);
+    assert!(o.status.code().is_none(), "{}", describe(&o));
+    let partial = scan_dir(&rig.out_dir("partial"));
+    let bytes = std::fs::read(partial.join("journal.jsonl")).unwrap();
+    assert_eq!(bytes.last(), Some(&b'\n'));
+    let last_start = bytes[..bytes.len() - 1]
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .map_or(0, |p| p + 1);
+    let last: Record = serde_json::from_slice(&bytes[last_start..]).unwrap();
+    assert!(
+        matches!(&last, Record::Line(l) if l.index == K as u32),
+        "last record is line {K}'s: {last:?}"
+    );
+
+    // Every cut, in-process.
+    let scratch = tempfile::tempdir().unwrap();
+    let jpath = scratch.path().join("journal.jsonl");
+    for cut in last_start..=bytes.len() {
+        std::fs::write(&jpath, &bytes[..cut]).unwrap();
+        let (_journal, rec) = Journal::open(&jpath, std::sync::Arc::new(NoFaults)).unwrap();
+        let state = ResumeState::from_records(&jpath, &rec.records).unwrap();
+        let kept = if cut == bytes.len() { K + 1 } else { K };
+        assert_eq!(
+            state.completed().into_iter().collect::<Vec<_>>(),
+            (0..kept as u32).collect::<Vec<_>>(),
+            "cut at byte {cut}"
+        );
+        let torn = if cut == bytes.len() {
+            0
+        } else {
+            cut - last_start
+        };
+        assert_eq!(rec.torn_bytes as usize, torn, "cut at byte {cut}");
+        assert_eq!(
+            std::fs::metadata(&jpath).unwrap().len() as usize,
+            if cut == bytes.len() { cut } else { last_start },
+            "cut at byte {cut}: the torn tail is truncated on disk"
+        );
+        // The lines the journal keeps load and match their recorded hashes.
+        let store = ScanStore::open(&partial, std::sync::Arc::new(NoFaults)).unwrap();
+        assert_eq!(store.load_committed(&state.lines).unwrap().len(), kept);
+    }
+
+    // Representative cuts through the binary: inside the class tag, mid-record, and the
+    // complete record without its newline.
+    let len = bytes.len();
+    let runs = [last_start + 3, (last_start + len) / 2, len - 1].map(|cut| {
+        let (partial, bytes, reference) = (&partial, &bytes, &reference);
+        async move {
+            let rig = Rig::start(RigOptions::default()).await;
+            let target = rig.out_dir("out").join(partial.file_name().unwrap());
+            copy_dir(partial, &target);
+            std::fs::write(target.join("journal.jsonl"), &bytes[..cut]).unwrap();
+            let o = run_scan(&rig.config("out"), &[]).await;
+            assert!(o.status.success(), "cut at {cut}: {}", describe(&o));
+            assert_eq!(scan_dir(&rig.out_dir("out")), target);
+            assert_lines_exactly(&target, n);
+            assert_journal_complete(&target, n);
+            assert_eq!(
+                &surface_bits(&target.join("surface.igs")),
+                reference,
+                "cut at {cut}"
+            );
+            rig.shutdown().await;
+        }
+    });
+    futures::future::join_all(runs).await;
+    rig.shutdown().await;
+}
+
+fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let dest = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &dest);
+        } else {
+            std::fs::copy(e.path(), dest).unwrap();
+        }
+    }
+}
+
+/// The stop record of a journal, if any.
+fn stop_record(records: &[Record]) -> Option<surfscan::scan::journal::StopRecord> {
+    records.iter().find_map(|r| match r {
+        Record::Stop(s) => Some(s.clone()),
+        _ => None,
+    })
+}
+
+/// A bad configuration is refused with exit 78 and a message naming the key, before any
+/// scan directory exists.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_bad_configuration_exits_78_naming_the_key() {
+    let rig = Rig::start(RigOptions::default()).await;
+    let good = std::fs::read_to_string(rig.config("out")).unwrap();
+    let cases = [
+        (
+            "unknown key",
+            good.replace("[scan]\n", "[scan]\nline-count = 8\n"),
+            "line-count",
+        ),
+        (
+            "too few lines for degree-v 3",
+            good.replace("lines = 8", "lines = 3"),
+            "scan.lines",
+        ),
+        (
+            "inexact step",
+            good.replace("y-step-mm = 0.01", "y-step-mm = 0.0100004"),
+            "scan.y-step-mm",
+        ),
+    ];
+    for (what, text, key) in cases {
+        assert_ne!(text, good, "{what}: the edit applies");
+        let path = rig.tmp.path().join("bad.toml");
+        std::fs::write(&path, text).unwrap();
+        let o = run_scan(&path, &[]).await;
+        assert_eq!(o.status.code(), Some(78), "{what}: {}", describe(&o));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(key), "{what}: message names {key}: {err}");
+        assert!(!rig.out_dir("out").exists(), "{what}: nothing was started");
+    }
+    rig.shutdown().await;
+}
+
+/// A full disk while line 3 is written: exit 74, stop record `fail` saying disk full, the
+/// lines before intact and loadable, line 3 absent.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_disk_during_a_line_fails_the_scan_without_half_a_line() {
+    const K: usize = 3;
+    let runs = ["before-csv", "before-json", "before-journal"].map(|step| async move {
+        let rig = Rig::start(RigOptions::default()).await;
+        let point = format!("{K}:{step}");
+        let o = run_scan(&rig.config("out"), &[("SURFSCAN_TEST_ENOSPC", &point)]).await;
+        assert_eq!(o.status.code(), Some(74), "{step}: {}", describe(&o));
+        let dir = scan_dir(&rig.out_dir("out"));
+        let (records, state) = journal(&dir);
+        let stop = stop_record(&records).unwrap_or_else(|| panic!("{step}: no stop record"));
+        assert_eq!(stop.status, StopStatus::Fail, "{step}");
+        assert!(stop.reason.contains("disk full"), "{step}: {}", stop.reason);
+        assert_eq!(
+            line_record_indices(&records),
+            (0..K as u32).collect::<Vec<_>>(),
+            "{step}"
+        );
+        // Lines before K are exactly the served ones; line K left no file at all.
+        assert_lines_exactly(&dir, K);
+        let store = ScanStore::open(&dir, std::sync::Arc::new(NoFaults)).unwrap();
+        assert_eq!(store.load_committed(&state.lines).unwrap().len(), K);
+        assert_eq!(store.load_all().unwrap().lines.len(), K, "{step}");
+        rig.shutdown().await;
+    });
+    futures::future::join_all(runs).await;
+}
+
+/// SIGTERM mid-scan: non-zero exit without a stop record but with an interruption; the rerun
+/// completes with every line once and the uninterrupted run's surface.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_mid_scan_leaves_it_resumable() {
+    let rig = Rig::start(RigOptions::default()).await;
+    let n = rig.options.lines;
+    let reference = tokio::spawn(async {
+        let rig = Rig::start(RigOptions::default()).await;
+        let r = reference_surface(&rig, "reference").await;
+        rig.shutdown().await;
+        r
+    });
+    let cfg = rig.config("out");
+    let child = scan_command(&cfg, &[]).spawn().unwrap();
+    let out = rig.out_dir("out");
+    wait_until(Duration::from_secs(60), "three committed lines", || {
+        committed_lines(&out) >= 3
+    })
+    .await;
+    let pid = nix::unistd::Pid::from_raw(child.id().unwrap() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).unwrap();
+    let o = tokio::time::timeout(Duration::from_secs(60), child.wait_with_output())
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", describe(&o));
+    let dir = scan_dir(&out);
+    let (records, state) = journal(&dir);
+    assert!(
+        stop_record(&records).is_none(),
+        "no stop record: {records:?}"
+    );
+    let done = state.lines.len();
+    assert!((3..n).contains(&done), "{done} lines before the signal");
+    assert!(
+        interruptions(&records)
+            .iter()
+            .any(|r| r.contains("shutdown")),
+        "{:?}",
+        interruptions(&records)
+    );
+    let o = run_scan(&cfg, &[]).await;
+    assert!(o.status.success(), "{}", describe(&o));
+    assert_lines_exactly(&dir, n);
+    assert_journal_complete(&dir, n);
+    let reference = reference.await.expect("reference run");
+    assert_eq!(surface_bits(&dir.join("surface.igs")), reference);
+    rig.shutdown().await;
+}
+
+/// An NG code on every attempt of line 2 fails the scan naming the code; on fewer attempts
+/// than the bound the line is traced again and its attempt number is recorded.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ng_codes_on_a_trace_are_retried_within_the_attempt_bound() {
+    let exhausted = async {
+        let rig = Rig::start(RigOptions {
+            faults: vec!["ng:011@CTSTA#3x3".into()],
+            ..RigOptions::default()
+        })
+        .await;
+        let o = run_scan(&rig.config("out"), &[]).await;
+        assert_eq!(o.status.code(), Some(1), "{}", describe(&o));
+        let dir = scan_dir(&rig.out_dir("out"));
+        let (records, _) = journal(&dir);
+        let stop = stop_record(&records).expect("stop record");
+        assert_eq!(stop.status, StopStatus::Fail);
+        assert!(
+            stop.reason.contains("NG011") && stop.reason.contains("line 3"),
+            "{}",
+            stop.reason
+        );
+        assert_eq!(line_record_indices(&records), vec![0, 1]);
+        assert_lines_exactly(&dir, 2);
+        rig.shutdown().await;
+    };
+    let recovered = async {
+        let rig = Rig::start(RigOptions {
+            faults: vec!["ng:011@CTSTA#3x2".into()],
+            ..RigOptions::default()
+        })
+        .await;
+        let n = rig.options.lines;
+        let o = run_scan(&rig.config("out"), &[]).await;
+        assert!(o.status.success(), "{}", describe(&o));
+        let dir = scan_dir(&rig.out_dir("out"));
+        assert_lines_exactly(&dir, n);
+        let records = assert_journal_complete(&dir, n);
+        let attempts: Vec<u32> = records
+            .iter()
+            .filter_map(|r| match r {
+                Record::Line(l) => Some(l.attempt),
+                _ => None,
+            })
+            .collect();
+        let mut want = vec![1; n];
+        want[2] = 3;
+        assert_eq!(attempts, want);
+        let meta: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join("lines").join("0002.json")).unwrap())
+                .unwrap();
+        assert_eq!(meta["attempt"], 3);
+        let abandoned = interruptions(&records)
+            .into_iter()
+            .filter(|r| r.contains("line 3 attempt") && r.contains("NG011"))
+            .count();
+        assert_eq!(abandoned, 2);
+        rig.shutdown().await;
+    };
+    futures::join!(exhausted, recovered);
+}
+
+/// The instrument unplugged mid-trace and back: the scan suspends, records it, and
+/// completes without duplicating the line.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_instrument_unplugged_mid_trace_suspends_and_the_scan_completes() {
+    let rig = Rig::start(RigOptions {
+        faults: vec!["unplug:300@CTSTA#3".into()],
+        ..RigOptions::default()
+    })
+    .await;
+    let n = rig.options.lines;
+    let o = run_scan(&rig.config("out"), &[]).await;
+    assert!(o.status.success(), "{}", describe(&o));
+    let dir = scan_dir(&rig.out_dir("out"));
+    assert_lines_exactly(&dir, n);
+    let records = assert_journal_complete(&dir, n);
+    let notes = interruptions(&records);
+    let pos = |pat: &str| notes.iter().position(|r| r.contains(pat));
+    let (abandoned, gone, back) = (
+        pos("line 3 abandoned: instrument"),
+        pos("instrument unavailable"),
+        pos("instrument back"),
+    );
+    assert!(
+        matches!((abandoned, gone, back), (Some(a), Some(g), Some(b)) if a < g && g < b),
+        "line 3 abandoned, suspended, then back: {notes:?}"
+    );
+    rig.shutdown().await;
+}
+
+/// The stage controller resets (banner, position lost) mid-scan: the runner re-homes and
+/// completes; the served heights prove the carriage was truly at every target.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stage_reset_mid_scan_rehomes_and_completes() {
+    let rig = Rig::start(RigOptions::default()).await;
+    let n = rig.options.lines;
+    let cfg = rig.config("out");
+    let child = scan_command(&cfg, &[]).spawn().unwrap();
+    let out = rig.out_dir("out");
+    wait_until(Duration::from_secs(60), "three committed lines", || {
+        committed_lines(&out) >= 3
+    })
+    .await;
+    rig.stage.inject(StageFault::ResetBanner);
+    let o = tokio::time::timeout(Duration::from_secs(120), child.wait_with_output())
+        .await
+        .unwrap()
+        .unwrap();
+    assert!(o.status.success(), "{}", describe(&o));
+    let dir = scan_dir(&out);
+    assert_lines_exactly(&dir, n);
+    let records = assert_journal_complete(&dir, n);
+    let notes = interruptions(&records);
+    assert!(
+        notes.iter().any(|r| r.contains("re-homing")),
+        "a re-homing is recorded: {notes:?}"
+    );
+    assert_eq!(rig.stage.true_position_nm(), target_nm(n - 1));
+    rig.shutdown().await;
+}

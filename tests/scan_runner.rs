@@ -1,0 +1,621 @@
+//! The scan runner in-process against a scripted station (fake instrument and y axis, no
+//! serial ports) under paused tokio time: operator pause/resume/abort through the command
+//! channel, the attempt bound, the rule that the stage moves only after the instrument read
+//! idle, and the reconnection backoff after a device vanished.
+
+use std::collections::VecDeque;
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use surfscan::config::Config;
+use surfscan::control::protocol::{OperatorCommand, OperatorRequest, State, Status};
+use surfscan::devices::{
+    Arrival, Battery, DeviceFault, FaultClass, Instrument, InstrumentIdentity, ProbeReport,
+    ProfileReadout, StageReport, TracedLine, YAxis,
+};
+use surfscan::profile::{Conditions, Profile, ProfileKind};
+use surfscan::scan::journal::{read_journal, Record, StopStatus};
+use surfscan::scan::runner::{run_scan, Control, Outcome, RunSettings, ScanRequest};
+use surfscan::scan::station::{Device, Fault, Station};
+use surfscan::scan::testhooks::TestHooks;
+use surfscan::stage::policy::ScanDirection;
+use surfscan::units::Nm;
+use tokio::sync::{mpsc, oneshot, watch};
+use tokio::time::Instant;
+
+const LINES: u32 = 5;
+const POINTS: usize = 24;
+
+#[derive(Debug, thiserror::Error)]
+#[error("scripted {class:?} fault")]
+struct FakeError {
+    class: FaultClass,
+}
+
+impl DeviceFault for FakeError {
+    fn class(&self) -> FaultClass {
+        self.class
+    }
+}
+
+/// What the devices did, in order.
+#[derive(Debug, Clone, PartialEq)]
+enum Event {
+    OpenInstrument(Instant, bool),
+    EnsureIdle(bool),
+    Move(Nm),
+    TraceStart,
+    TraceEnd(bool),
+    Home,
+    Abort,
+    Stop,
+}
+
+/// The script and the log shared by the fake devices and the test.
+#[derive(Default)]
+struct World {
+    log: Vec<Event>,
+    /// Outcome of successive traces: `None` succeeds, `Some(class)` fails.
+    traces: VecDeque<Option<FaultClass>>,
+    /// Outcome of successive `ensure_idle` calls (missing = success).
+    idle: VecDeque<Option<FaultClass>>,
+    /// `open_instrument` calls that fail as absent before one succeeds, after the first.
+    absent_opens: u32,
+    opens: u32,
+    /// y of the carriage, nm.
+    y: Option<Nm>,
+    /// Told when a trace starts, with the carriage's y.
+    trace_started: Option<mpsc::UnboundedSender<Nm>>,
+}
+
+type Shared = Arc<Mutex<World>>;
+
+fn with<T>(w: &Shared, f: impl FnOnce(&mut World) -> T) -> T {
+    f(&mut w.lock().expect("world lock"))
+}
+
+fn conditions() -> Conditions {
+    Conditions {
+        standard: Some("ISO1997".into()),
+        lambda_c_mm: Some(0.8),
+        evaluation_length_mm: Some(0.023),
+        ..Conditions::default()
+    }
+}
+
+struct FakeInstrument(Shared);
+struct FakeStage(Shared);
+struct FakeStation(Shared);
+
+impl Instrument for FakeInstrument {
+    type Error = FakeError;
+
+    async fn probe(&mut self) -> Result<ProbeReport, FakeError> {
+        Ok(ProbeReport {
+            identity: InstrumentIdentity {
+                model: "sj210".into(),
+                firmware: "V1.00".into(),
+                drive_unit: "standard".into(),
+            },
+            battery: Battery::Good,
+            conditions: conditions(),
+            parameter_count: 3,
+            profile_readout: ProfileReadout::Supported { points_now: 0 },
+            warnings: Vec::new(),
+        })
+    }
+
+    async fn ensure_idle(&mut self) -> Result<(), FakeError> {
+        let r = with(&self.0, |w| w.idle.pop_front().flatten());
+        with(&self.0, |w| w.log.push(Event::EnsureIdle(r.is_none())));
+        match r {
+            None => Ok(()),
+            Some(class) => Err(FakeError { class }),
+        }
+    }
+
+    async fn trace(&mut self) -> Result<TracedLine, FakeError> {
+        let (y, tx) = with(&self.0, |w| {
+            w.log.push(Event::TraceStart);
+            (w.y.unwrap_or(Nm(0)), w.trace_started.clone())
+        });
+        if let Some(tx) = tx {
+            let _ = tx.send(y);
+        }
+        tokio::time::sleep(Duration::from_secs(10)).await;
+        let r = with(&self.0, |w| w.traces.pop_front().flatten());
+        with(&self.0, |w| w.log.push(Event::TraceEnd(r.is_none())));
+        if let Some(class) = r {
+            return Err(FakeError { class });
+        }
+        let k = y.0 as f64 / 10_000.0;
+        Ok(TracedLine {
+            profile: Profile {
+                pitch_x_mm: 0.001,
+                heights_um: (0..POINTS)
+                    .map(|i| ((i as f64) * 0.7 + k).sin() * 2.0)
+                    .collect(),
+                kind: ProfileKind::R,
+                conditions: conditions(),
+            },
+            results: Vec::new(),
+            pitch_source: "config".into(),
+            warnings: Vec::new(),
+        })
+    }
+
+    async fn abort(&mut self) -> Result<(), FakeError> {
+        with(&self.0, |w| w.log.push(Event::Abort));
+        Ok(())
+    }
+}
+
+impl YAxis for FakeStage {
+    type Error = FakeError;
+
+    fn check_targets(&self, _targets: &[Nm]) -> Result<Vec<String>, FakeError> {
+        Ok(Vec::new())
+    }
+
+    async fn connect(&mut self) -> Result<StageReport, FakeError> {
+        Ok(StageReport {
+            identity: "fake stage".into(),
+            position_trusted: true,
+            position: Nm(0),
+        })
+    }
+
+    fn position_trusted(&self) -> bool {
+        true
+    }
+
+    async fn home(&mut self) -> Result<(), FakeError> {
+        with(&self.0, |w| w.log.push(Event::Home));
+        Ok(())
+    }
+
+    async fn move_to(&mut self, target: Nm) -> Result<Arrival, FakeError> {
+        with(&self.0, |w| {
+            w.log.push(Event::Move(target));
+            w.y = Some(target);
+        });
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        Ok(Arrival {
+            target,
+            readback: target,
+            attempts: 1,
+        })
+    }
+
+    async fn stop(&mut self) -> Result<(), FakeError> {
+        with(&self.0, |w| w.log.push(Event::Stop));
+        Ok(())
+    }
+}
+
+impl Station for FakeStation {
+    type Instrument = FakeInstrument;
+    type Stage = FakeStage;
+
+    async fn open_instrument(&mut self) -> Result<FakeInstrument, Fault> {
+        let absent = with(&self.0, |w| {
+            w.opens += 1;
+            let absent = w.opens > 1 && w.absent_opens > 0;
+            if absent {
+                w.absent_opens -= 1;
+            }
+            w.log.push(Event::OpenInstrument(Instant::now(), !absent));
+            absent
+        });
+        if absent {
+            return Err(Fault {
+                device: Device::Instrument,
+                class: FaultClass::Absent,
+                ng_code: None,
+                message: "no such port".into(),
+            });
+        }
+        Ok(FakeInstrument(self.0.clone()))
+    }
+
+    async fn open_stage(&mut self, _direction: ScanDirection) -> Result<FakeStage, Fault> {
+        Ok(FakeStage(self.0.clone()))
+    }
+
+    fn instrument_present(&self) -> bool {
+        true
+    }
+
+    fn stage_present(&self) -> bool {
+        true
+    }
+
+    fn expected_pitch_um(&self, _conditions: &Conditions) -> Option<f64> {
+        Some(1.0)
+    }
+}
+
+fn settings(out: &Path) -> RunSettings {
+    let text = format!(
+        r#"[instrument]
+port = "/nonexistent/sj210"
+[stage]
+port = "/nonexistent/ystage"
+protocol = "grbl"
+steps-per-mm = 400.0
+soft-limit-min-mm = -100.0
+soft-limit-max-mm = 0.0
+[scan]
+lines = {LINES}
+y-start-mm = -20.0
+y-step-mm = 0.01
+max-line-attempts = 3
+reconnect-initial-ms = 1000
+reconnect-max-ms = 4000
+[fit]
+degree-u = 3
+degree-v = 3
+[output]
+dir = {out:?}
+"#,
+        out = out.display().to_string()
+    );
+    RunSettings {
+        config: Config::parse(Path::new("runner-test.toml"), &text).expect("config"),
+        config_hash: "0".repeat(64),
+        hooks: Arc::new(TestHooks::none()),
+    }
+}
+
+fn target(k: u32) -> Nm {
+    Nm(-20_000_000 + 10_000 * i64::from(k))
+}
+
+struct Harness {
+    world: Shared,
+    tmp: tempfile::TempDir,
+    commands: mpsc::Sender<OperatorRequest>,
+    status: watch::Receiver<Status>,
+    ctl: Control,
+    started: mpsc::UnboundedReceiver<Nm>,
+    _shutdown: watch::Sender<bool>,
+}
+
+fn harness() -> Harness {
+    let (cmd_tx, cmd_rx) = mpsc::channel(8);
+    let (shutdown_tx, shutdown_rx) = watch::channel(false);
+    let (status_tx, status_rx) = watch::channel(Status::idle());
+    let (started_tx, started) = mpsc::unbounded_channel();
+    let world = Arc::new(Mutex::new(World {
+        trace_started: Some(started_tx),
+        ..World::default()
+    }));
+    Harness {
+        world,
+        tmp: tempfile::tempdir().expect("tmp"),
+        commands: cmd_tx,
+        status: status_rx,
+        ctl: Control::new(cmd_rx, shutdown_rx, status_tx),
+        started,
+        _shutdown: shutdown_tx,
+    }
+}
+
+fn new_scan() -> ScanRequest {
+    ScanRequest::New {
+        specimen: "fake".into(),
+        operator: "test".into(),
+        notes: String::new(),
+    }
+}
+
+async fn request(tx: &mpsc::Sender<OperatorRequest>, command: OperatorCommand) -> String {
+    let (reply, rx) = oneshot::channel();
+    tx.send(OperatorRequest { command, reply })
+        .await
+        .expect("runner listens");
+    rx.await.expect("runner answers").expect("command accepted")
+}
+
+fn records(dir: &Path) -> Vec<Record> {
+    read_journal(&dir.join("journal.jsonl"))
+        .expect("journal")
+        .records
+}
+
+fn line_indices(records: &[Record]) -> Vec<u32> {
+    records
+        .iter()
+        .filter_map(|r| match r {
+            Record::Line(l) => Some(l.index),
+            _ => None,
+        })
+        .collect()
+}
+
+fn stop_status(records: &[Record]) -> Option<StopStatus> {
+    records.iter().find_map(|r| match r {
+        Record::Stop(s) => Some(s.status),
+        _ => None,
+    })
+}
+
+fn scan_dir_of(outcome: &Outcome) -> std::path::PathBuf {
+    match outcome {
+        Outcome::Success { dir, .. } | Outcome::Aborted { dir } | Outcome::Interrupted { dir } => {
+            dir.clone()
+        }
+        Outcome::Failed { dir, .. } => dir.clone().expect("scan dir"),
+    }
+}
+
+/// Every move is preceded, since the previous move, by an `ensure_idle` that succeeded, and
+/// no trace runs between that check and the move.
+fn assert_moves_follow_idle(log: &[Event]) {
+    let mut idle_ok = false;
+    for (i, e) in log.iter().enumerate() {
+        match e {
+            Event::EnsureIdle(ok) => idle_ok = *ok,
+            Event::TraceStart | Event::TraceEnd(_) | Event::OpenInstrument(..) => idle_ok = false,
+            Event::Move(t) => {
+                assert!(
+                    idle_ok,
+                    "move to {t:?} (event {i}) without a successful ensure_idle: {log:?}"
+                );
+                idle_ok = false;
+            }
+            _ => {}
+        }
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn pause_waits_for_the_line_on_disk_and_resume_continues() {
+    let mut h = harness();
+    let settings = settings(h.tmp.path());
+    let mut station = FakeStation(h.world.clone());
+    let world = h.world.clone();
+    let commands = h.commands.clone();
+    let mut status = h.status.clone();
+    let driver = async {
+        // Line 0 traces, then line 1: pause while line 1 is being traced.
+        assert_eq!(h.started.recv().await, Some(target(0)));
+        assert_eq!(h.started.recv().await, Some(target(1)));
+        let reply = request(&commands, OperatorCommand::Pause).await;
+        assert!(
+            reply.contains("once the current line is on disk"),
+            "{reply}"
+        );
+        assert_eq!(status.borrow().state, State::Pausing);
+        status
+            .wait_for(|s| s.state == State::Paused)
+            .await
+            .expect("paused");
+        let dir = std::path::PathBuf::from(status.borrow().scan_dir.clone().expect("dir"));
+        // Paused only once line 1 is on disk; nothing moved towards line 2.
+        assert_eq!(line_indices(&records(&dir)), vec![0, 1]);
+        assert!(dir.join("lines/0001.csv").exists());
+        tokio::time::sleep(Duration::from_secs(600)).await;
+        let moves: Vec<Event> = with(&world, |w| w.log.clone())
+            .into_iter()
+            .filter(|e| matches!(e, Event::Move(_)))
+            .collect();
+        assert_eq!(moves, vec![Event::Move(target(0)), Event::Move(target(1))]);
+        let reply = request(&commands, OperatorCommand::Resume).await;
+        assert!(reply.contains("resumes"), "{reply}");
+    };
+    let (outcome, ()) = tokio::join!(
+        run_scan(&mut station, &mut h.ctl, &settings, new_scan()),
+        driver
+    );
+    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    let recs = records(&scan_dir_of(&outcome));
+    assert_eq!(line_indices(&recs), (0..LINES).collect::<Vec<_>>());
+    assert_eq!(stop_status(&recs), Some(StopStatus::Success));
+    let notes: Vec<String> = recs
+        .iter()
+        .filter_map(|r| match r {
+            Record::Interruption(i) => Some(i.reason.clone()),
+            _ => None,
+        })
+        .collect();
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.contains("paused by the operator after line 2")),
+        "{notes:?}"
+    );
+    assert!(
+        notes.iter().any(|n| n.contains("resumed by the operator")),
+        "{notes:?}"
+    );
+    assert_moves_follow_idle(&with(&h.world, |w| w.log.clone()));
+}
+
+#[tokio::test(start_paused = true)]
+async fn abort_mid_trace_stops_the_devices_and_records_abort() {
+    let mut h = harness();
+    let settings = settings(h.tmp.path());
+    let mut station = FakeStation(h.world.clone());
+    let commands = h.commands.clone();
+    let driver = async {
+        for k in 0..3 {
+            assert_eq!(h.started.recv().await, Some(target(k)));
+        }
+        let reply = request(&commands, OperatorCommand::Abort).await;
+        assert!(reply.contains("aborting"), "{reply}");
+    };
+    let (outcome, ()) = tokio::join!(
+        run_scan(&mut station, &mut h.ctl, &settings, new_scan()),
+        driver
+    );
+    assert!(matches!(outcome, Outcome::Aborted { .. }), "{outcome:?}");
+    let dir = scan_dir_of(&outcome);
+    let recs = records(&dir);
+    assert_eq!(line_indices(&recs), vec![0, 1]);
+    assert_eq!(stop_status(&recs), Some(StopStatus::Abort));
+    assert!(
+        !dir.join("lines/0002.csv").exists(),
+        "the aborted line is not kept"
+    );
+    let log = with(&h.world, |w| w.log.clone());
+    // The trace of line 2 was cancelled (never ended), then abort and stop were sent.
+    let tail: Vec<&Event> = log.iter().rev().take(3).collect();
+    assert_eq!(
+        tail,
+        vec![&Event::Stop, &Event::Abort, &Event::TraceStart],
+        "{log:?}"
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn transient_faults_are_retried_up_to_the_attempt_bound() {
+    // Line 1 fails twice, then succeeds on its third (last allowed) attempt.
+    let mut h = harness();
+    with(&h.world, |w| {
+        w.traces = [
+            None,
+            Some(FaultClass::Transient),
+            Some(FaultClass::Transient),
+        ]
+        .into();
+    });
+    let settings = settings(h.tmp.path());
+    let mut station = FakeStation(h.world.clone());
+    let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
+    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    let recs = records(&scan_dir_of(&outcome));
+    let attempts: Vec<u32> = recs
+        .iter()
+        .filter_map(|r| match r {
+            Record::Line(l) => Some(l.attempt),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(attempts, vec![1, 3, 1, 1, 1]);
+
+    // Three failures of line 1 exhaust the bound: the scan fails, no fourth trace.
+    let mut h = harness();
+    with(&h.world, |w| {
+        w.traces = [
+            None,
+            Some(FaultClass::Transient),
+            Some(FaultClass::Transient),
+            Some(FaultClass::Transient),
+        ]
+        .into();
+    });
+    let settings = settings_for(&h);
+    let mut station = FakeStation(h.world.clone());
+    let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
+    match &outcome {
+        Outcome::Failed { reason, .. } => {
+            assert!(reason.contains("line 2: 3 attempt(s) failed"), "{reason}")
+        }
+        other => panic!("{other:?}"),
+    }
+    let traces = with(&h.world, |w| {
+        w.log.iter().filter(|e| **e == Event::TraceStart).count()
+    });
+    assert_eq!(traces, 4, "one trace of line 0, three of line 1");
+    let recs = records(&scan_dir_of(&outcome));
+    assert_eq!(line_indices(&recs), vec![0]);
+    assert_eq!(stop_status(&recs), Some(StopStatus::Fail));
+}
+
+fn settings_for(h: &Harness) -> RunSettings {
+    settings(h.tmp.path())
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_stage_moves_only_after_the_instrument_read_idle() {
+    let mut h = harness();
+    with(&h.world, |w| {
+        // Line 0 fine; line 1's first idle check fails (busy), its retry passes.
+        w.idle = [None, Some(FaultClass::Transient), None].into();
+    });
+    let settings = settings(h.tmp.path());
+    let mut station = FakeStation(h.world.clone());
+    let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
+    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    let log = with(&h.world, |w| w.log.clone());
+    assert_moves_follow_idle(&log);
+    let moves = log.iter().filter(|e| matches!(e, Event::Move(_))).count();
+    assert_eq!(
+        moves, LINES as usize,
+        "one move per line, none after the failed check"
+    );
+    // The failed check is directly followed by another check, not by a move.
+    let failed = log
+        .iter()
+        .position(|e| *e == Event::EnsureIdle(false))
+        .expect("the scripted failure happened");
+    assert_eq!(
+        log.get(failed + 1),
+        Some(&Event::EnsureIdle(true)),
+        "{log:?}"
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_vanished_instrument_is_reopened_with_exponential_backoff() {
+    let mut h = harness();
+    with(&h.world, |w| {
+        // Line 1's trace finds the instrument gone; four reopen attempts fail.
+        w.traces = [None, Some(FaultClass::Absent)].into();
+        w.absent_opens = 4;
+    });
+    let settings = settings(h.tmp.path());
+    let mut station = FakeStation(h.world.clone());
+    let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
+    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    let opens: Vec<(Instant, bool)> = with(&h.world, |w| {
+        w.log
+            .iter()
+            .filter_map(|e| match e {
+                Event::OpenInstrument(t, ok) => Some((*t, *ok)),
+                _ => None,
+            })
+            .collect()
+    });
+    // The first open at start, then the reconnection: immediately, then after 1, 2, 4, 4 s.
+    assert_eq!(
+        opens.iter().map(|o| o.1).collect::<Vec<_>>(),
+        vec![true, false, false, false, false, true]
+    );
+    let gaps_ms: Vec<u128> = opens
+        .windows(2)
+        .skip(1)
+        .map(|w| w[1].0.duration_since(w[0].0).as_millis())
+        .collect();
+    assert_eq!(gaps_ms, vec![1000, 2000, 4000, 4000]);
+    let recs = records(&scan_dir_of(&outcome));
+    assert_eq!(line_indices(&recs), (0..LINES).collect::<Vec<_>>());
+    let attempts: Vec<u32> = recs
+        .iter()
+        .filter_map(|r| match r {
+            Record::Line(l) => Some(l.attempt),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        attempts,
+        vec![1; LINES as usize],
+        "a suspension uses up no attempt"
+    );
+    let notes: Vec<String> = recs
+        .iter()
+        .filter_map(|r| match r {
+            Record::Interruption(i) => Some(i.reason.clone()),
+            _ => None,
+        })
+        .collect();
+    let gone = notes
+        .iter()
+        .position(|n| n.contains("instrument unavailable"));
+    let back = notes.iter().position(|n| n.contains("instrument back"));
+    assert!(
+        matches!((gone, back), (Some(g), Some(b)) if g < b),
+        "{notes:?}"
+    );
+}
