@@ -62,10 +62,7 @@ async fn rig() -> Rig {
     }
     let socket = dir.path().join("run").join("control.sock");
     let text = surfscan::cli::demo::demo_config(&inst, &stage, &dir.path().join("scans"))
-        .replace(
-            "lines = 31",
-            &format!("lines = {LINES}\n[fit]\ndegree-v = 3"),
-        )
+        .replace("lines = 31", &format!("lines = {LINES}"))
         .replace(
             &format!(
                 "{:?}",
@@ -76,6 +73,7 @@ async fn rig() -> Rig {
             ),
             &format!("{:?}", socket.display().to_string()),
         );
+    let text = format!("{text}\n[fit]\ndegree-v = 3\n");
     let config = dir.path().join("station.toml");
     std::fs::write(&config, text).unwrap();
     let notify = UnixDatagram::bind(dir.path().join("notify.sock")).unwrap();
@@ -91,25 +89,58 @@ async fn rig() -> Rig {
     }
 }
 
-fn spawn_daemon(r: &Rig) -> Child {
-    Command::new(env!("CARGO_BIN_EXE_surfscan"))
-        .args(["daemon", "--config"])
-        .arg(&r.config)
-        .env("NOTIFY_SOCKET", r.dir.path().join("notify.sock"))
-        .env_remove("WATCHDOG_USEC")
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap()
+/// The daemon process; killed if the test fails before it exits, so no daemon outlives it.
+struct Daemon(Child);
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        if let Ok(None) = self.0.try_wait() {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
 }
 
-/// Reads notify datagrams until one satisfies `want`; returns all seen.
-fn notify_until(r: &Rig, want: impl Fn(&str) -> bool) -> Vec<String> {
+impl std::ops::Deref for Daemon {
+    type Target = Child;
+    fn deref(&self) -> &Child {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Daemon {
+    fn deref_mut(&mut self) -> &mut Child {
+        &mut self.0
+    }
+}
+
+fn spawn_daemon(r: &Rig) -> Daemon {
+    Daemon(
+        Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(["daemon", "--config"])
+            .arg(&r.config)
+            .env("NOTIFY_SOCKET", r.dir.path().join("notify.sock"))
+            .env_remove("WATCHDOG_USEC")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    )
+}
+
+/// Reads notify datagrams until one satisfies `want`; returns all seen. Fails at once when
+/// the daemon has exited.
+fn notify_until(r: &Rig, d: &mut Child, want: impl Fn(&str) -> bool) -> Vec<String> {
     let mut seen = Vec::new();
     let start = Instant::now();
     let mut buf = [0u8; 4096];
     while start.elapsed() < DEADLINE {
+        if let Some(status) = d.try_wait().unwrap() {
+            if !seen.iter().any(|m: &String| want(m)) {
+                panic!("the daemon exited ({status}) before the notification; got {seen:?}");
+            }
+        }
         if let Ok(n) = r.notify.recv(&mut buf) {
             let m = String::from_utf8_lossy(&buf[..n]).into_owned();
             let done = want(&m);
@@ -195,7 +226,7 @@ fn sigterm(child: &Child) {
 async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket() {
     let r = rig().await;
     let mut d = spawn_daemon(&r);
-    let seen = notify_until(&r, |m| m.contains("READY=1"));
+    let seen = notify_until(&r, &mut d, |m| m.contains("READY=1"));
     assert!(
         r.socket.exists(),
         "READY=1 before the control socket was bound: {seen:?}"
@@ -231,7 +262,9 @@ async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket()
     // While paused nothing is traced.
     tokio::time::sleep(Duration::from_millis(500)).await;
     assert_eq!(line_indices(&records(&dir)), done);
-    let seen = notify_until(&r, |m| m.contains("STATUS=") && m.contains("paused"));
+    let seen = notify_until(&r, &mut d, |m| {
+        m.contains("STATUS=") && m.contains("paused")
+    });
     assert!(seen.iter().any(|m| m.contains("STATUS=")), "{seen:?}");
 
     let ack = client(&r).await.request(&Request::Resume).await.unwrap();
@@ -264,7 +297,7 @@ async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket()
     );
 
     sigterm(&d);
-    notify_until(&r, |m| m.contains("STOPPING=1"));
+    notify_until(&r, &mut d, |m| m.contains("STOPPING=1"));
     assert!(wait_exit(&mut d).success());
     assert!(!r.socket.exists(), "socket removed at shutdown");
     r.sim.shutdown().await;
@@ -274,7 +307,7 @@ async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket()
 async fn sigterm_mid_scan_records_an_interruption_and_the_restart_resumes_by_itself() {
     let r = rig().await;
     let mut d = spawn_daemon(&r);
-    notify_until(&r, |m| m.contains("READY=1"));
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
     client(&r)
         .await
         .request(&Request::Start {
@@ -286,7 +319,7 @@ async fn sigterm_mid_scan_records_an_interruption_and_the_restart_resumes_by_its
         .unwrap();
     wait_status(&r, "two lines", |s| s.lines_done >= 2).await;
     sigterm(&d);
-    notify_until(&r, |m| m.contains("STOPPING=1"));
+    notify_until(&r, &mut d, |m| m.contains("STOPPING=1"));
     assert!(wait_exit(&mut d).success());
     let dir = scan_dir(&r);
     let recs = records(&dir);
@@ -302,6 +335,7 @@ async fn sigterm_mid_scan_records_an_interruption_and_the_restart_resumes_by_its
 
     // The restart resumes without a start command and completes.
     let mut d = spawn_daemon(&r);
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
     let s = wait_status(&r, "complete after restart", |s| {
         s.last_stop.as_ref().is_some_and(|l| l.status == "success")
     })

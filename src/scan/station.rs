@@ -143,6 +143,11 @@ impl Station for SerialStation {
             ng_code: None,
             message: e.to_string(),
         })?;
+        // Replies to commands of an earlier process (killed mid-conversation) may still sit
+        // in the input buffer; they must not be taken as answers to this one's.
+        if let Err(e) = tokio_serial::SerialPort::clear(&port, tokio_serial::ClearBuffer::Input) {
+            tracing::debug!("cannot clear the instrument's input buffer: {e}");
+        }
         Ok(Sj210Client::new(
             port,
             self.table.clone(),

@@ -41,6 +41,10 @@ pub struct Sj210Client<S> {
     opts: ClientOptions,
     battery: Option<Battery>,
     conditions: Option<Conditions>,
+    /// A command was sent and its reply not yet consumed: set while a transaction runs, so a
+    /// transaction cancelled mid-flight (operator abort, shutdown) leaves it set and the next
+    /// one drains the late reply first instead of taking it as its own answer.
+    in_flight: bool,
 }
 
 impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
@@ -54,6 +58,7 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             opts,
             battery: None,
             conditions: None,
+            in_flight: false,
         }
     }
 
@@ -70,13 +75,25 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
     /// Sends one command and reads one reply, without recovery or retry.
     async fn transact(&mut self, command: &str) -> Result<Reply, LinkError> {
         let bytes = encode_command(command)?;
+        if self.in_flight {
+            tracing::info!("the previous command was cancelled before its reply; draining the link before {command:?}");
+            self.drain().await;
+        }
         if !self.buf.is_empty() {
             tracing::warn!(stale = %escape_bytes(&self.buf), "discarding unsolicited bytes before {command:?}");
             self.buf.clear();
             self.codec.reset();
         }
         tracing::debug!(tx = %escape_bytes(&bytes));
-        self.io.write_all(&bytes).await.map_err(io_err)?;
+        self.in_flight = true;
+        let reply = self.exchange(&bytes).await;
+        self.in_flight = false;
+        reply
+    }
+
+    /// Writes one encoded command and reads its reply line.
+    async fn exchange(&mut self, bytes: &[u8]) -> Result<Reply, LinkError> {
+        self.io.write_all(bytes).await.map_err(io_err)?;
         self.io.flush().await.map_err(io_err)?;
         let mut got_any = false;
         loop {
