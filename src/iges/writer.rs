@@ -446,17 +446,21 @@ pub fn write_iges<W: Write>(
     buf.clear();
 
     // Parameter data: columns 65–72 hold the DE back-pointer.
-    let mut seq = 1usize;
+    // Each line is assembled in a fixed 81-byte template; the sequence number is counted up
+    // in its decimal digits (p_lines fits in the 7-digit field, checked above).
+    let mut line = [b' '; 81];
+    line[72] = b'P';
+    line[80] = b'\n';
+    let mut seq = SequenceField::new();
     for (k, data) in patches.iter().enumerate() {
         let mut back = Vec::with_capacity(8);
         push_right(&mut back, (2 * k + 1) as i64, 8);
+        line[64..72].copy_from_slice(&back);
         for chunk in data.chunks_exact(64) {
-            buf.extend_from_slice(chunk);
-            buf.extend_from_slice(&back);
-            buf.push(b'P');
-            push_right(&mut buf, seq as i64, 7);
-            buf.push(b'\n');
-            seq += 1;
+            line[..64].copy_from_slice(chunk);
+            seq.increment();
+            line[73..80].copy_from_slice(&seq.digits);
+            buf.extend_from_slice(&line);
             if buf.len() >= 1 << 21 {
                 counter.write_all(&buf)?;
                 buf.clear();
@@ -488,6 +492,35 @@ pub fn write_iges<W: Write>(
     })
 }
 
+/// A 7-column right-justified sequence number kept as text and counted up in place.
+struct SequenceField {
+    digits: [u8; 7],
+}
+
+impl SequenceField {
+    /// The field before the first line (blank; the first increment makes it 1).
+    fn new() -> SequenceField {
+        SequenceField { digits: [b' '; 7] }
+    }
+
+    /// Adds one (the caller keeps the count within seven digits).
+    fn increment(&mut self) {
+        for d in self.digits.iter_mut().rev() {
+            match *d {
+                b'9' => *d = b'0',
+                b' ' => {
+                    *d = b'1';
+                    return;
+                }
+                _ => {
+                    *d += 1;
+                    return;
+                }
+            }
+        }
+    }
+}
+
 struct CountingWriter<W> {
     inner: W,
     bytes: u64,
@@ -501,5 +534,24 @@ impl<W: Write> Write for CountingWriter<W> {
     }
     fn flush(&mut self) -> io::Result<()> {
         self.inner.flush()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sequence_field_counts_like_right_justified_decimal() {
+        let mut seq = SequenceField::new();
+        let mut expected = Vec::with_capacity(7);
+        for n in 1..=1_000_123i64 {
+            seq.increment();
+            if n <= 1200 || (999_990..=1_000_010).contains(&n) || n % 9973 == 0 {
+                expected.clear();
+                push_right(&mut expected, n, 7);
+                assert_eq!(&seq.digits[..], &expected[..], "{n}");
+            }
+        }
     }
 }
