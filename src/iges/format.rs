@@ -23,6 +23,28 @@ pub fn push_real(out: &mut Vec<u8>, value: f64) -> bool {
         extend_short(out, text);
         return true;
     }
+    // Second fast path, the magnitude of most fitted heights in mm: for 1e-5 <= |v| < 1e-3
+    // the formatter writes `0.000ddd` or `0.0000ddd`, and the exponent form `d.ddE-4` is
+    // always shorter.
+    if (1e-5..1e-3).contains(&magnitude) {
+        let negative = usize::from(value.is_sign_negative());
+        let body = &text[negative..];
+        let zeros = body[2..].iter().take_while(|&&c| c == b'0').count();
+        let sig = &body[2 + zeros..];
+        let mut tmp = [0u8; 64];
+        tmp[0] = b'-';
+        let mut len = negative;
+        tmp[len] = sig[0];
+        tmp[len + 1] = b'.';
+        len += 2;
+        copy_short(&mut tmp[len..len + 32], &sig[1..]);
+        len += sig.len() - 1;
+        tmp[len] = b'E';
+        tmp[len + 1] = b'-';
+        tmp[len + 2] = b'0' + (zeros + 1) as u8;
+        extend_short(out, &tmp[..len + 3]);
+        return true;
+    }
     reformat(out, text);
     true
 }
@@ -165,7 +187,14 @@ fn extend_short(out: &mut Vec<u8>, bytes: &[u8]) {
     }
     let base = out.len();
     out.extend_from_slice(&[0u8; 32]);
-    let dst = &mut out[base..base + 32];
+    copy_short(&mut out[base..base + 32], bytes);
+    out.truncate(base + n);
+}
+
+/// Copies `src` (at most 32 bytes) to the start of the 32-byte `dst` with fixed-size copies.
+#[inline]
+fn copy_short(dst: &mut [u8], src: &[u8]) {
+    let (dst, bytes, n) = (&mut dst[..32], src, src.len());
     // Two overlapping copies of a power-of-two size cover every length in its range.
     if n >= 16 {
         dst[..16].copy_from_slice(&bytes[..16]);
@@ -181,7 +210,6 @@ fn extend_short(out: &mut Vec<u8>, bytes: &[u8]) {
             *d = b;
         }
     }
-    out.truncate(base + n);
 }
 
 fn decimal_len(mut v: u32) -> u32 {
@@ -307,7 +335,7 @@ impl FieldPacker {
                 return;
             }
         }
-        self.data.extend_from_slice(token);
+        extend_short(&mut self.data, token);
         self.data.push(delimiter);
     }
 
@@ -458,7 +486,7 @@ mod tests {
         // Every magnitude the poles of a fit take and the edges of the fast path: 1e-3 and
         // 1e15 and their neighbours, integers (`100.`, `1.E3`), 17-digit values.
         let mut values = vec![1e-3, 1e15, 1000.0, 100.0, 1e14, 123456789012345.0, 0.0];
-        for v in [1e-3f64, 1e15, 1e-2] {
+        for v in [1e-3f64, 1e15, 1e-2, 1e-4, 1e-5] {
             values.push(f64::from_bits(v.to_bits() - 1));
             values.push(f64::from_bits(v.to_bits() + 1));
         }

@@ -78,11 +78,30 @@ const POLE_CHUNKS: usize = 4;
 /// Minimum user-intended resolution written in G19, mm (well below height resolution).
 pub const MIN_RESOLUTION_MM: f64 = 1e-7;
 
+/// The parameter data (columns 1–64 of each P line) of one entity, as consecutive segments
+/// of whole 64-column records (kept apart rather than copied into one buffer).
+struct ParamText {
+    segments: Vec<Vec<u8>>,
+}
+
+impl ParamText {
+    /// Number of P lines.
+    fn lines(&self) -> usize {
+        self.segments.iter().map(|s| s.len() / 64).sum()
+    }
+
+    /// The 64-column records in order.
+    fn records(&self) -> impl Iterator<Item = &[u8]> {
+        self.segments.iter().flat_map(|s| s.chunks_exact(64))
+    }
+}
+
 /// Formats the parameter data (columns 1–64 of each P line) of one entity 128.
-fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<Vec<u8>, IgesError> {
+fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<ParamText, IgesError> {
     let (nu, nv) = (s.count_u(), s.count_v());
-    // About 3 × 20 + 3 bytes per pole; a guess that avoids most reallocation.
-    let mut p = FieldPacker::with_capacity(64, nu * nv * 72 + 4096);
+    // Header, knots and weights: 3 bytes per weight and up to 25 per knot.
+    let knots = s.knots_u().len() + s.knots_v().len();
+    let mut p = FieldPacker::with_capacity(64, nu * nv * 3 + knots * 25 + 4096);
     let mut tok = Vec::with_capacity(32);
     let closed_u = (0..nv).all(|j| s.pole(0, j) == s.pole(nu - 1, j));
     let closed_v = (0..nu).all(|i| s.pole(i, 0) == s.pole(i, nv - 1));
@@ -164,21 +183,27 @@ fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<Vec<u8>, IgesErro
     } else {
         vec![format_chunk(0, poles)]
     };
+    // Each pole chunk starts a fresh record and so does the parameter range after them, as
+    // if all were appended to one packer.
+    let mut segments = Vec::with_capacity(parts.len() + 2);
+    segments.push(p.finish());
     for part in parts {
-        p.append_records(&part?);
+        segments.push(part?);
     }
+    let mut tail = FieldPacker::new(64);
     let (ku, kv) = (s.knots_u(), s.knots_v());
     let dom = [ku[s.degree_u()], ku[nu], kv[s.degree_v()], kv[nv]];
     for (i, &d) in dom.iter().enumerate() {
         real(
-            &mut p,
+            &mut tail,
             d,
             "parameter range",
             i,
             if i == 3 { b';' } else { b',' },
         )?;
     }
-    Ok(p.finish())
+    segments.push(tail.finish());
+    Ok(ParamText { segments })
 }
 
 /// Formats `surface`, splitting it along v into exact patches until each fits in
@@ -186,10 +211,10 @@ fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<Vec<u8>, IgesErro
 fn format_patches(
     surface: &NurbsSurface,
     max_lines: usize,
-    out: &mut Vec<Vec<u8>>,
+    out: &mut Vec<ParamText>,
 ) -> Result<(), IgesError> {
     let data = entity_128_params(surface, out.len())?;
-    let lines = data.len() / 64;
+    let lines = data.lines();
     if lines <= max_lines {
         out.push(data);
         return Ok(());
@@ -216,7 +241,7 @@ fn split_to_fit(
     max_lines: usize,
     out: &mut Vec<(NurbsSurface, usize)>,
 ) -> Result<(), IgesError> {
-    let lines = entity_128_params(&surface, out.len())?.len() / 64;
+    let lines = entity_128_params(&surface, out.len())?.lines();
     if lines <= max_lines {
         out.push((surface, lines));
         return Ok(());
@@ -338,11 +363,11 @@ pub fn write_iges<W: Write>(
     let max_lines = opts
         .max_parameter_lines_per_entity
         .clamp(1, MAX_SECTION_LINES);
-    let mut patches: Vec<Vec<u8>> = Vec::new();
+    let mut patches: Vec<ParamText> = Vec::new();
     for s in surfaces {
         format_patches(s, max_lines, &mut patches)?;
     }
-    let p_lines: usize = patches.iter().map(|d| d.len() / 64).sum();
+    let p_lines: usize = patches.iter().map(ParamText::lines).sum();
     let d_lines = 2 * patches.len();
     if p_lines > file_cap {
         return Err(IgesError::SectionTooLong {
@@ -426,7 +451,7 @@ pub fn write_iges<W: Write>(
     let mut pd_pointer = 1usize;
     let mut field = Vec::with_capacity(80);
     for (k, data) in patches.iter().enumerate() {
-        let n = data.len() / 64;
+        let n = data.lines();
         field.clear();
         for v in [128, pd_pointer as i64, 0, 0, 0, 0, 0, 0] {
             push_right(&mut field, v, 8);
@@ -456,7 +481,7 @@ pub fn write_iges<W: Write>(
         let mut back = Vec::with_capacity(8);
         push_right(&mut back, (2 * k + 1) as i64, 8);
         line[64..72].copy_from_slice(&back);
-        for chunk in data.chunks_exact(64) {
+        for chunk in data.records() {
             line[..64].copy_from_slice(chunk);
             seq.increment();
             line[73..80].copy_from_slice(&seq.digits);
