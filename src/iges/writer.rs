@@ -261,6 +261,30 @@ fn split_to_fit(
     }
 }
 
+/// Longest real token with its delimiter: sign, 17 digits, point, `E-308`, delimiter.
+const MAX_REAL_TOKEN: usize = 25;
+
+/// An upper bound on the P lines [`entity_128_params`] takes for `s`, from token counts
+/// alone. Every token (with its delimiter) is at most [`MAX_REAL_TOKEN`] bytes, so each
+/// 64-column record of a segment but the last holds at least two; the weights (`1.,`)
+/// hold 21 a record; each segment may end with one partial record.
+fn p_lines_bound(s: &NurbsSurface) -> usize {
+    let poles = s.count_u().saturating_mul(s.count_v());
+    let per_record = 64 / MAX_REAL_TOKEN;
+    let head_tokens = 10 + s.knots_u().len() + s.knots_v().len();
+    let chunks = if poles >= PARALLEL_POLES {
+        POLE_CHUNKS
+    } else {
+        1
+    };
+    head_tokens.div_ceil(per_record)
+        + poles.div_ceil(64 / 3)
+        + 1
+        + poles.saturating_mul(3).div_ceil(per_record)
+        + chunks
+        + 1
+}
+
 /// Plans how `surface` is written: splits it along v into exact patches (adjacent patches
 /// share their boundary pole row, so their union is exactly the surface), each needing at
 /// most `opts.max_parameter_lines_per_entity` and `opts.max_parameter_lines_per_file` P lines,
@@ -275,6 +299,12 @@ pub fn plan_files(
         .max_parameter_lines_per_file
         .clamp(1, MAX_SECTION_LINES);
     let entity_cap = opts.max_parameter_lines_per_entity.clamp(1, file_cap);
+    // Usually the whole surface fits one entity in one file by a wide margin; a bound on its
+    // P lines shows that without formatting it (write_iges formats it once, later). The
+    // result is the one the exact count below would give.
+    if p_lines_bound(surface) <= entity_cap {
+        return Ok(vec![vec![surface.clone()]]);
+    }
     let mut patches = Vec::new();
     split_to_fit(surface.clone(), entity_cap, &mut patches)?;
     let mut files: Vec<Vec<NurbsSurface>> = Vec::new();
@@ -565,6 +595,70 @@ impl<W: Write> Write for CountingWriter<W> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A degree-3 surface whose every real takes the longest form (`-d.dddddddddddddddE-3dd`).
+    fn longest_tokens(nu: usize, nv: usize) -> NurbsSurface {
+        let d = 3;
+        let knots = |n: usize| {
+            let mut k = vec![0.0; d + 1];
+            k.extend((1..n - d).map(|j| j as f64 / (n - d) as f64 * 0.999_999_999_999_999_9));
+            k.extend(vec![1.0; d + 1]);
+            k
+        };
+        let v = -1.234_567_890_123_456_7e-300;
+        NurbsSurface::try_new(d, d, knots(nu), knots(nv), nu, nv, vec![[v; 3]; nu * nv]).unwrap()
+    }
+
+    #[test]
+    fn p_line_bound_is_never_below_the_real_count() {
+        let mut real = Vec::new();
+        assert!(crate::iges::format::push_real(
+            &mut real,
+            -1.234_567_890_123_456_7e-300
+        ));
+        assert_eq!(
+            real.len() + 1,
+            MAX_REAL_TOKEN,
+            "{}",
+            String::from_utf8_lossy(&real)
+        );
+        // Small nets (one pole chunk) and one past the parallel threshold (four chunks).
+        for (nu, nv) in [(4, 4), (37, 5), (PARALLEL_POLES / 8 + 1, 8)] {
+            let s = longest_tokens(nu, nv);
+            let lines = entity_128_params(&s, 0).unwrap().lines();
+            let bound = p_lines_bound(&s);
+            assert!(bound >= lines, "{nu}x{nv}: bound {bound} < {lines} lines");
+            // Tight enough to be useful: within 1.6x for these worst-case tokens.
+            assert!(
+                bound * 10 <= lines * 16,
+                "{nu}x{nv}: bound {bound} vs {lines}"
+            );
+        }
+    }
+
+    #[test]
+    fn plan_without_formatting_equals_the_exact_plan() {
+        let s = longest_tokens(40, 6);
+        let lines = entity_128_params(&s, 0).unwrap().lines();
+        let bound = p_lines_bound(&s);
+        // At the bound the shortcut answers; exactly at the real count the formatting path
+        // answers; both give the surface unsplit. One line less splits it.
+        for cap in [bound, lines] {
+            let opts = IgesOptions {
+                max_parameter_lines_per_entity: cap,
+                ..IgesOptions::default()
+            };
+            let plan = plan_files(&s, &opts).unwrap();
+            assert_eq!(plan.len(), 1);
+            assert_eq!(plan[0], vec![s.clone()]);
+        }
+        let opts = IgesOptions {
+            max_parameter_lines_per_entity: lines - 1,
+            ..IgesOptions::default()
+        };
+        let plan = plan_files(&s, &opts).unwrap();
+        assert!(plan.iter().map(Vec::len).sum::<usize>() >= 2);
+    }
 
     #[test]
     fn sequence_field_counts_like_right_justified_decimal() {
