@@ -176,7 +176,7 @@ impl BandLu {
 
     /// Solves A x = b for every contiguous row of length n of the row-major block `data`
     /// (one system per row). The factor is the same for every row, so rows are solved
-    /// [`LANES`] at a time, interleaved: the substitution chains of a block run side by side
+    /// eight at a time, interleaved: the substitution chains of a block run side by side
     /// in vector registers (a short last block is padded with zero systems). Results equal
     /// [`BandLu::solve_in_place`] per row, bit for bit.
     pub fn solve_each_row(&self, data: &mut [f64]) {
