@@ -14,7 +14,7 @@ use crate::nurbs::{basis_funs, find_span};
 const LANES: usize = 8;
 
 /// A square banded matrix with `lower` sub- and `upper` super-diagonals, row-major band storage:
-/// entry (i, j) lives at `i * width + (j + lower - i)`. After [`BandLu::factor`] it holds the unit
+/// entry (i, j) lives at `i * width + (j + lower - i)`. After factoring it holds the unit
 /// lower factor L below the diagonal and U on and above it.
 #[derive(Debug, Clone)]
 pub struct BandLu {
