@@ -5,8 +5,8 @@
 //! Layer 1 (pure logic): depends on `libc` only (one advisory `madvise` on Linux; elsewhere a
 //! no-op). The hint never changes the contents of memory, only how it is mapped.
 
-/// Buffers smaller than this are left alone (a huge page is 2 MiB).
-const MIN_ADVISED_BYTES: usize = 8 << 20;
+/// Buffers smaller than one huge page (2 MiB) are left alone.
+const MIN_ADVISED_BYTES: usize = 2 << 20;
 
 /// Asks the kernel to map the whole capacity of `v` with transparent huge pages. Call it
 /// right after allocating or growing `v`, before the memory is written, so the first touch
