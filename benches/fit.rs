@@ -2,12 +2,16 @@
 //! grids, the time `finish()` takes after the last line of a 31-line scan, and peak memory.
 //!
 //! `cargo bench --bench fit [-- CASE...]` with CASE among `31x2000`, `31x8000`, `1000x10000`,
-//! `finish` (default: all). Figures are medians of several runs on one core.
+//! `finish` (default: all). Figures are medians of several runs (21 for the small grids, 5 for
+//! the large one); the fit is single-threaded, so they are one core's figures.
 
 use std::time::Instant;
 use surfscan::fit::{fit_grid, FitOptions, FitResult, IncrementalFitter};
 
+/// Runs per large case (a 10⁷-point fit takes a quarter of a second).
 const RUNS: usize = 5;
+/// Runs per small case: enough that the median is stable on a machine shared with builds.
+const SMALL_RUNS: usize = 21;
 const PITCH_X_MM: f64 = 0.0005;
 const PITCH_Y_MM: f64 = 0.01;
 
@@ -35,6 +39,21 @@ fn y_positions(rows: usize) -> Vec<f64> {
     (0..rows).map(|l| l as f64 * PITCH_Y_MM).collect()
 }
 
+/// CPU time of this process so far, s (all threads; with one thread, one core's work). It
+/// leaves out time spent waiting for the CPU, so it stays meaningful on a loaded machine.
+fn cpu_s() -> f64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
+    if rc != 0 {
+        return f64::NAN;
+    }
+    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -48,24 +67,51 @@ fn peak_rss_mb() -> Option<f64> {
     Some(kb / 1024.0)
 }
 
-/// The fit alone: one `fit_grid` call, timed from the caller's side.
-fn fit_once(y: &[f64], h: &[f64], cols: usize) -> (FitResult, f64) {
-    let t = Instant::now();
+/// The fit alone: one `fit_grid` call, timed from the caller's side (wall s, CPU s).
+fn fit_once(y: &[f64], h: &[f64], cols: usize) -> (FitResult, f64, f64) {
+    let (t, c) = (Instant::now(), cpu_s());
     let r = fit_grid(PITCH_X_MM, y, h, cols, FitOptions::default()).expect("fit");
-    (r, t.elapsed().as_secs_f64())
+    (r, t.elapsed().as_secs_f64(), cpu_s() - c)
 }
 
 /// Consumer of a fitted surface after the fit (output stages are timed here, separately).
 fn after_fit(_result: &FitResult) {}
 
+/// FNV-1a (one 64-bit word per step) over the bits of the knots and poles: equal digests mean bit-identical surfaces,
+/// so a change that should only make the fit faster can be checked against the old build.
+fn digest(r: &FitResult) -> u64 {
+    let s = &r.surface;
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let values = s
+        .knots_u()
+        .iter()
+        .chain(s.knots_v())
+        .chain(s.poles().iter().flatten());
+    for v in values {
+        h = (h ^ v.to_bits()).wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
 fn bench_grid(rows: usize, cols: usize) {
+    let runs = if rows * cols >= 1_000_000 {
+        RUNS
+    } else {
+        SMALL_RUNS
+    };
     let h = synthetic_grid(rows, cols);
     let y = y_positions(rows);
     let points = (rows * cols) as f64;
     let (mut wall, mut params, mut factor, mut su, mut sv) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for _ in 0..RUNS {
-        let (r, w) = fit_once(&y, &h, cols);
+    let mut sum = 0;
+    let mut cpu = Vec::new();
+    for _ in 0..runs {
+        let (r, w, c) = fit_once(&y, &h, cols);
+        cpu.push(c);
+        if sum == 0 {
+            sum = digest(&r);
+        }
         wall.push(w);
         params.push(r.timings.params_s);
         factor.push(r.timings.knots_factor_s);
@@ -75,9 +121,11 @@ fn bench_grid(rows: usize, cols: usize) {
     }
     let w = median(wall);
     println!(
-        "{rows}x{cols}: fit {:.4} s wall (median of {RUNS}), {:.1} M points/s | params {:.4} s, knots+factor {:.5} s, solve_u {:.4} s, solve_v+assemble {:.4} s",
+        "{rows}x{cols}: fit {:.4} s wall (median of {runs}), {:.1} M points/s, CPU {:.4} s ({:.1} M points/s) | params {:.4} s, knots+factor {:.5} s, solve_u {:.4} s, solve_v+assemble {:.4} s | digest {sum:016x}",
         w,
         points / w / 1e6,
+        median(cpu.clone()),
+        points / median(cpu) / 1e6,
         median(params),
         median(factor),
         median(su),
@@ -94,21 +142,23 @@ fn bench_finish() {
         fitter.push_row(yy, PITCH_X_MM, row).expect("push");
     }
     let last = &h[(rows - 1) * cols..];
-    let (mut push, mut finish) = (Vec::new(), Vec::new());
-    for _ in 0..RUNS {
+    let (mut push, mut finish, mut finish_cpu) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..SMALL_RUNS {
         let mut f = fitter.clone();
         let t = Instant::now();
         f.push_row(y[rows - 1], PITCH_X_MM, last).expect("push");
         push.push(t.elapsed().as_secs_f64());
-        let t = Instant::now();
+        let (t, c) = (Instant::now(), cpu_s());
         let r = f.finish().expect("finish");
         finish.push(t.elapsed().as_secs_f64());
+        finish_cpu.push(cpu_s() - c);
         after_fit(&r);
     }
     println!(
-        "31x8000 incremental: push_line(31st) {:.2} ms, finish() {:.2} ms (medians of {RUNS})",
+        "31x8000 incremental: push_line(31st) {:.2} ms, finish() {:.2} ms, CPU {:.2} ms (medians of {SMALL_RUNS})",
         median(push) * 1e3,
-        median(finish) * 1e3
+        median(finish) * 1e3,
+        median(finish_cpu) * 1e3
     );
 }
 

@@ -4,12 +4,17 @@
 //! pivoting is stable and keeps the band: the factors are stored in the matrix's own band.
 //! One factorisation serves every right-hand side of a direction.
 //!
-//! Layer 1 (pure logic): depends on [`crate::nurbs`] (basis functions) only.
+//! Layer 1 (pure logic): depends on [`crate::nurbs`] (basis functions) and the fit's SIMD
+//! dispatch only.
 
+use super::simd;
 use crate::nurbs::{basis_funs, find_span};
 
+/// Right-hand sides solved side by side by [`BandLu::solve_each_row`].
+const LANES: usize = 8;
+
 /// A square banded matrix with `lower` sub- and `upper` super-diagonals, row-major band storage:
-/// entry (i, j) lives at `i * width + (j + lower - i)`. After [`BandLu::factor`] it holds the unit
+/// entry (i, j) lives at `i * width + (j + lower - i)`. After factoring it holds the unit
 /// lower factor L below the diagonal and U on and above it.
 #[derive(Debug, Clone)]
 pub struct BandLu {
@@ -134,10 +139,11 @@ impl BandLu {
         }
     }
 
-    /// Solves A x = b in place for four interleaved right-hand sides (lane l of every entry
-    /// belongs to system l). Each lane sees exactly the operations of
-    /// [`BandLu::solve_in_place`], so results are bit-identical to it.
-    fn solve_lanes(&self, b: &mut [[f64; 4]]) {
+    /// Solves A x = b in place for [`LANES`] interleaved right-hand sides (lane l of every
+    /// entry belongs to system l). Each lane sees exactly the operations of
+    /// [`BandLu::solve_in_place`], in the same order, so results are bit-identical to it.
+    #[inline(always)]
+    fn solve_lanes(&self, b: &mut [[f64; LANES]]) {
         let (n, lo, up, w) = (self.n, self.lower, self.upper, self.width);
         let b = &mut b[..n];
         for i in 1..n {
@@ -145,7 +151,7 @@ impl BandLu {
             let row = &self.band[i * w + j0 + lo - i..i * w + lo];
             let mut s = b[i];
             for (a, x) in row.iter().zip(&b[j0..i]) {
-                for l in 0..4 {
+                for l in 0..LANES {
                     s[l] -= a * x[l];
                 }
             }
@@ -156,7 +162,7 @@ impl BandLu {
             let row = &self.band[i * w + lo + 1..i * w + lo + 1 + (j1 - i)];
             let mut s = b[i];
             for (a, x) in row.iter().zip(&b[i + 1..=j1]) {
-                for l in 0..4 {
+                for l in 0..LANES {
                     s[l] -= a * x[l];
                 }
             }
@@ -169,30 +175,37 @@ impl BandLu {
     }
 
     /// Solves A x = b for every contiguous row of length n of the row-major block `data`
-    /// (one system per row). Rows are solved four at a time, interleaved, so the four
-    /// substitution chains run in parallel; results equal [`BandLu::solve_in_place`] per row.
+    /// (one system per row). The factor is the same for every row, so rows are solved
+    /// eight at a time, interleaved: the substitution chains of a block run side by side
+    /// in vector registers (a short last block is padded with zero systems). Results equal
+    /// [`BandLu::solve_in_place`] per row, bit for bit.
     pub fn solve_each_row(&self, data: &mut [f64]) {
         let n = self.n;
-        let mut buf = vec![[0.0f64; 4]; n];
-        let mut quads = data.chunks_exact_mut(4 * n);
-        for quad in &mut quads {
-            let (r0, rest) = quad.split_at_mut(n);
-            let (r1, rest) = rest.split_at_mut(n);
-            let (r2, r3) = rest.split_at_mut(n);
-            for (k, b) in buf.iter_mut().enumerate() {
-                *b = [r0[k], r1[k], r2[k], r3[k]];
-            }
-            self.solve_lanes(&mut buf);
-            for (k, b) in buf.iter().enumerate() {
-                r0[k] = b[0];
-                r1[k] = b[1];
-                r2[k] = b[2];
-                r3[k] = b[3];
-            }
+        if n == 0 {
+            return;
         }
-        for row in quads.into_remainder().chunks_exact_mut(n) {
-            self.solve_in_place(row);
-        }
+        let whole = data.len() / n * n;
+        let data = &mut data[..whole];
+        simd::wide(|| {
+            let mut buf = vec![[0.0f64; LANES]; n];
+            for block in data.chunks_mut(LANES * n) {
+                let used = block.len() / n;
+                if used < LANES {
+                    buf.fill([0.0; LANES]);
+                }
+                for (l, row) in block.chunks_exact(n).enumerate() {
+                    for (b, &v) in buf.iter_mut().zip(row) {
+                        b[l] = v;
+                    }
+                }
+                self.solve_lanes(&mut buf);
+                for (l, row) in block.chunks_exact_mut(n).enumerate() {
+                    for (v, b) in row.iter_mut().zip(&buf) {
+                        *v = b[l];
+                    }
+                }
+            }
+        });
     }
 
     /// Solves A X = B in place where B is row-major with n rows of `cols` values: every
@@ -214,38 +227,64 @@ impl BandLu {
             return;
         }
         let data = &mut data[..n * cols];
-        for i in 1..n {
-            let (before, rest) = data.split_at_mut(i * cols);
-            let target = &mut rest[..cols];
-            for j in i.saturating_sub(lo)..i {
-                let a = self.at(i, j);
-                if a != 0.0 {
-                    let src = &before[j * cols..(j + 1) * cols];
-                    for (t, s) in target.iter_mut().zip(src) {
-                        *t -= a * s;
+        simd::wide(|| {
+            let mut terms: Vec<(f64, usize)> = Vec::with_capacity(lo.max(up));
+            for i in 1..n {
+                let (before, rest) = data.split_at_mut(i * cols);
+                terms.clear();
+                for j in i.saturating_sub(lo)..i {
+                    let a = self.at(i, j);
+                    if a != 0.0 {
+                        terms.push((a, j * cols));
                     }
                 }
+                subtract_rows(&mut rest[..cols], before, &terms, None);
             }
-        }
-        for i in (0..n).rev() {
-            let (head, after) = data.split_at_mut((i + 1) * cols);
-            let target = &mut head[i * cols..];
-            let j1 = (i + up).min(n - 1);
-            for j in i + 1..=j1 {
-                let a = self.at(i, j);
-                if a != 0.0 {
-                    let src = &after[(j - i - 1) * cols..(j - i) * cols];
-                    for (t, s) in target.iter_mut().zip(src) {
-                        *t -= a * s;
+            for i in (0..n).rev() {
+                let (head, after) = data.split_at_mut((i + 1) * cols);
+                let target = &mut head[i * cols..];
+                let j1 = (i + up).min(n - 1);
+                terms.clear();
+                for j in i + 1..=j1 {
+                    let a = self.at(i, j);
+                    if a != 0.0 {
+                        terms.push((a, (j - i - 1) * cols));
                     }
                 }
+                subtract_rows(target, after, &terms, Some(self.recip_pivot[i]));
+                done(i, target);
             }
-            let rp = self.recip_pivot[i];
-            for t in target.iter_mut() {
-                *t *= rp;
+        });
+    }
+}
+
+/// Columns per block of [`subtract_rows`]: the target block stays in L1 while every source
+/// row is subtracted from it.
+const ROW_BLOCK: usize = 512;
+
+/// `target[c] = ((target[c] − a₀·s₀[c]) − a₁·s₁[c] − …) · scale` for every column c, where
+/// term (a, offset) names the source row `rows[offset..offset + target.len()]`; the
+/// terms subtracted one at a time in the order given and `scale` applied last, exactly as
+/// subtracting whole rows one after another would (so the bits are the same); blocked so
+/// the target is read and written once per block instead of once per term.
+#[inline(always)]
+fn subtract_rows(target: &mut [f64], rows: &[f64], terms: &[(f64, usize)], scale: Option<f64>) {
+    let cols = target.len();
+    let mut start = 0;
+    while start < cols {
+        let end = (start + ROW_BLOCK).min(cols);
+        let t = &mut target[start..end];
+        for &(a, offset) in terms {
+            for (x, &s) in t.iter_mut().zip(&rows[offset + start..offset + end]) {
+                *x -= a * s;
             }
-            done(i, target);
         }
+        if let Some(rp) = scale {
+            for x in t.iter_mut() {
+                *x *= rp;
+            }
+        }
+        start = end;
     }
 }
 
@@ -277,6 +316,81 @@ mod tests {
             x[i] = (b[i] - s) / a[i][i];
         }
         x
+    }
+
+    /// A degree-5 collocation factor on `n` uneven parameters (averaged knots).
+    fn quintic(n: usize) -> BandLu {
+        let p = 5;
+        let mut params: Vec<f64> = (0..n)
+            .map(|k| k as f64 + 0.4 * ((k * 37 % 11) as f64 / 11.0))
+            .collect();
+        let last = params[n - 1];
+        for t in params.iter_mut() {
+            *t /= last;
+        }
+        params[0] = 0.0;
+        let mut knots = vec![0.0; p + 1];
+        for j in 1..n - p {
+            knots.push(params[j..j + p].iter().sum::<f64>() / p as f64);
+        }
+        knots.extend(std::iter::repeat_n(1.0, p + 1));
+        BandLu::collocation(p, &knots, &params).unwrap()
+    }
+
+    fn rhs(rows: usize, n: usize) -> Vec<f64> {
+        (0..rows * n)
+            .map(|k| ((k * 7919 % 1013) as f64 - 506.0) * 1.37e-4)
+            .collect()
+    }
+
+    #[test]
+    fn interleaved_row_solves_are_bit_identical_to_single_solves() {
+        let n = 57;
+        let lu = quintic(n);
+        // Full blocks, a padded short block, and fewer rows than one block.
+        for rows in [1, 3, LANES - 1, LANES, LANES + 1, 3 * LANES + 7] {
+            let mut block = rhs(rows, n);
+            let mut single = block.clone();
+            lu.solve_each_row(&mut block);
+            for row in single.chunks_exact_mut(n) {
+                lu.solve_in_place(row);
+            }
+            let same = block
+                .iter()
+                .zip(&single)
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+            assert!(
+                same,
+                "{rows} rows: interleaved solve differs from single solves"
+            );
+        }
+    }
+
+    #[test]
+    fn column_solves_are_bit_identical_to_single_solves() {
+        let n = 40;
+        let lu = quintic(n);
+        // More columns than one block of subtract_rows, and a ragged last block.
+        let cols = ROW_BLOCK + 77;
+        let data = rhs(n, cols);
+        let mut block = data.clone();
+        let mut order = Vec::new();
+        lu.solve_rows_in_place_then(&mut block, cols, |i, row| {
+            assert_eq!(row.len(), cols);
+            order.push(i);
+        });
+        assert_eq!(order, (0..n).rev().collect::<Vec<_>>());
+        for c in [0, 1, ROW_BLOCK - 1, ROW_BLOCK, cols - 1] {
+            let mut col: Vec<f64> = (0..n).map(|i| data[i * cols + c]).collect();
+            lu.solve_in_place(&mut col);
+            for (i, v) in col.iter().enumerate() {
+                assert_eq!(
+                    v.to_bits(),
+                    block[i * cols + c].to_bits(),
+                    "column {c}, row {i}"
+                );
+            }
+        }
     }
 
     #[test]

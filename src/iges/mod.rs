@@ -1,6 +1,6 @@
 //! IGES 5.3 writer (entity 128, millimetres) and a strict reader of the files it writes.
 //!
-//! * [`format`]: reals (shortest round-trip, `.` and `E`), Hollerith strings, record packing.
+//! * [`format`](mod@format): reals (shortest round-trip, `.` and `E`), Hollerith strings, record packing.
 //! * [`writer`]: [`write_iges`] formats surfaces into S/G/D/P/T sections; [`plan_files`]
 //!   groups the exact patches of a surface too large for one file into several files.
 //! * [`split`]: exact patches along v by knot insertion, for surfaces too large for one entity.

@@ -78,11 +78,30 @@ const POLE_CHUNKS: usize = 4;
 /// Minimum user-intended resolution written in G19, mm (well below height resolution).
 pub const MIN_RESOLUTION_MM: f64 = 1e-7;
 
+/// The parameter data (columns 1–64 of each P line) of one entity, as consecutive segments
+/// of whole 64-column records (kept apart rather than copied into one buffer).
+struct ParamText {
+    segments: Vec<Vec<u8>>,
+}
+
+impl ParamText {
+    /// Number of P lines.
+    fn lines(&self) -> usize {
+        self.segments.iter().map(|s| s.len() / 64).sum()
+    }
+
+    /// The 64-column records in order.
+    fn records(&self) -> impl Iterator<Item = &[u8]> {
+        self.segments.iter().flat_map(|s| s.chunks_exact(64))
+    }
+}
+
 /// Formats the parameter data (columns 1–64 of each P line) of one entity 128.
-fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<Vec<u8>, IgesError> {
+fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<ParamText, IgesError> {
     let (nu, nv) = (s.count_u(), s.count_v());
-    // About 3 × 20 + 3 bytes per pole; a guess that avoids most reallocation.
-    let mut p = FieldPacker::with_capacity(64, nu * nv * 72 + 4096);
+    // Header, knots and weights: 3 bytes per weight and up to 25 per knot.
+    let knots = s.knots_u().len() + s.knots_v().len();
+    let mut p = FieldPacker::with_capacity(64, nu * nv * 3 + knots * 25 + 4096);
     let mut tok = Vec::with_capacity(32);
     let closed_u = (0..nv).all(|j| s.pole(0, j) == s.pole(nu - 1, j));
     let closed_v = (0..nu).all(|i| s.pole(i, 0) == s.pole(i, nv - 1));
@@ -164,21 +183,27 @@ fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<Vec<u8>, IgesErro
     } else {
         vec![format_chunk(0, poles)]
     };
+    // Each pole chunk starts a fresh record and so does the parameter range after them, as
+    // if all were appended to one packer.
+    let mut segments = Vec::with_capacity(parts.len() + 2);
+    segments.push(p.finish());
     for part in parts {
-        p.append_records(&part?);
+        segments.push(part?);
     }
+    let mut tail = FieldPacker::new(64);
     let (ku, kv) = (s.knots_u(), s.knots_v());
     let dom = [ku[s.degree_u()], ku[nu], kv[s.degree_v()], kv[nv]];
     for (i, &d) in dom.iter().enumerate() {
         real(
-            &mut p,
+            &mut tail,
             d,
             "parameter range",
             i,
             if i == 3 { b';' } else { b',' },
         )?;
     }
-    Ok(p.finish())
+    segments.push(tail.finish());
+    Ok(ParamText { segments })
 }
 
 /// Formats `surface`, splitting it along v into exact patches until each fits in
@@ -186,10 +211,10 @@ fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<Vec<u8>, IgesErro
 fn format_patches(
     surface: &NurbsSurface,
     max_lines: usize,
-    out: &mut Vec<Vec<u8>>,
+    out: &mut Vec<ParamText>,
 ) -> Result<(), IgesError> {
     let data = entity_128_params(surface, out.len())?;
-    let lines = data.len() / 64;
+    let lines = data.lines();
     if lines <= max_lines {
         out.push(data);
         return Ok(());
@@ -216,7 +241,7 @@ fn split_to_fit(
     max_lines: usize,
     out: &mut Vec<(NurbsSurface, usize)>,
 ) -> Result<(), IgesError> {
-    let lines = entity_128_params(&surface, out.len())?.len() / 64;
+    let lines = entity_128_params(&surface, out.len())?.lines();
     if lines <= max_lines {
         out.push((surface, lines));
         return Ok(());
@@ -236,6 +261,30 @@ fn split_to_fit(
     }
 }
 
+/// Longest real token with its delimiter: sign, 17 digits, point, `E-308`, delimiter.
+const MAX_REAL_TOKEN: usize = 25;
+
+/// An upper bound on the P lines [`entity_128_params`] takes for `s`, from token counts
+/// alone. Every token (with its delimiter) is at most [`MAX_REAL_TOKEN`] bytes, so each
+/// 64-column record of a segment but the last holds at least two; the weights (`1.,`)
+/// hold 21 a record; each segment may end with one partial record.
+fn p_lines_bound(s: &NurbsSurface) -> usize {
+    let poles = s.count_u().saturating_mul(s.count_v());
+    let per_record = 64 / MAX_REAL_TOKEN;
+    let head_tokens = 10 + s.knots_u().len() + s.knots_v().len();
+    let chunks = if poles >= PARALLEL_POLES {
+        POLE_CHUNKS
+    } else {
+        1
+    };
+    head_tokens.div_ceil(per_record)
+        + poles.div_ceil(64 / 3)
+        + 1
+        + poles.saturating_mul(3).div_ceil(per_record)
+        + chunks
+        + 1
+}
+
 /// Plans how `surface` is written: splits it along v into exact patches (adjacent patches
 /// share their boundary pole row, so their union is exactly the surface), each needing at
 /// most `opts.max_parameter_lines_per_entity` and `opts.max_parameter_lines_per_file` P lines,
@@ -250,6 +299,12 @@ pub fn plan_files(
         .max_parameter_lines_per_file
         .clamp(1, MAX_SECTION_LINES);
     let entity_cap = opts.max_parameter_lines_per_entity.clamp(1, file_cap);
+    // Usually the whole surface fits one entity in one file by a wide margin; a bound on its
+    // P lines shows that without formatting it (write_iges formats it once, later). The
+    // result is the one the exact count below would give.
+    if p_lines_bound(surface) <= entity_cap {
+        return Ok(vec![vec![surface.clone()]]);
+    }
     let mut patches = Vec::new();
     split_to_fit(surface.clone(), entity_cap, &mut patches)?;
     let mut files: Vec<Vec<NurbsSurface>> = Vec::new();
@@ -338,11 +393,11 @@ pub fn write_iges<W: Write>(
     let max_lines = opts
         .max_parameter_lines_per_entity
         .clamp(1, MAX_SECTION_LINES);
-    let mut patches: Vec<Vec<u8>> = Vec::new();
+    let mut patches: Vec<ParamText> = Vec::new();
     for s in surfaces {
         format_patches(s, max_lines, &mut patches)?;
     }
-    let p_lines: usize = patches.iter().map(|d| d.len() / 64).sum();
+    let p_lines: usize = patches.iter().map(ParamText::lines).sum();
     let d_lines = 2 * patches.len();
     if p_lines > file_cap {
         return Err(IgesError::SectionTooLong {
@@ -426,7 +481,7 @@ pub fn write_iges<W: Write>(
     let mut pd_pointer = 1usize;
     let mut field = Vec::with_capacity(80);
     for (k, data) in patches.iter().enumerate() {
-        let n = data.len() / 64;
+        let n = data.lines();
         field.clear();
         for v in [128, pd_pointer as i64, 0, 0, 0, 0, 0, 0] {
             push_right(&mut field, v, 8);
@@ -446,17 +501,21 @@ pub fn write_iges<W: Write>(
     buf.clear();
 
     // Parameter data: columns 65–72 hold the DE back-pointer.
-    let mut seq = 1usize;
+    // Each line is assembled in a fixed 81-byte template; the sequence number is counted up
+    // in its decimal digits (p_lines fits in the 7-digit field, checked above).
+    let mut line = [b' '; 81];
+    line[72] = b'P';
+    line[80] = b'\n';
+    let mut seq = SequenceField::new();
     for (k, data) in patches.iter().enumerate() {
         let mut back = Vec::with_capacity(8);
         push_right(&mut back, (2 * k + 1) as i64, 8);
-        for chunk in data.chunks_exact(64) {
-            buf.extend_from_slice(chunk);
-            buf.extend_from_slice(&back);
-            buf.push(b'P');
-            push_right(&mut buf, seq as i64, 7);
-            buf.push(b'\n');
-            seq += 1;
+        line[64..72].copy_from_slice(&back);
+        for chunk in data.records() {
+            line[..64].copy_from_slice(chunk);
+            seq.increment();
+            line[73..80].copy_from_slice(&seq.digits);
+            buf.extend_from_slice(&line);
             if buf.len() >= 1 << 21 {
                 counter.write_all(&buf)?;
                 buf.clear();
@@ -488,6 +547,35 @@ pub fn write_iges<W: Write>(
     })
 }
 
+/// A 7-column right-justified sequence number kept as text and counted up in place.
+struct SequenceField {
+    digits: [u8; 7],
+}
+
+impl SequenceField {
+    /// The field before the first line (blank; the first increment makes it 1).
+    fn new() -> SequenceField {
+        SequenceField { digits: [b' '; 7] }
+    }
+
+    /// Adds one (the caller keeps the count within seven digits).
+    fn increment(&mut self) {
+        for d in self.digits.iter_mut().rev() {
+            match *d {
+                b'9' => *d = b'0',
+                b' ' => {
+                    *d = b'1';
+                    return;
+                }
+                _ => {
+                    *d += 1;
+                    return;
+                }
+            }
+        }
+    }
+}
+
 struct CountingWriter<W> {
     inner: W,
     bytes: u64,
@@ -501,5 +589,88 @@ impl<W: Write> Write for CountingWriter<W> {
     }
     fn flush(&mut self) -> io::Result<()> {
         self.inner.flush()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A degree-3 surface whose every real takes the longest form (`-d.dddddddddddddddE-3dd`).
+    fn longest_tokens(nu: usize, nv: usize) -> NurbsSurface {
+        let d = 3;
+        let knots = |n: usize| {
+            let mut k = vec![0.0; d + 1];
+            k.extend((1..n - d).map(|j| j as f64 / (n - d) as f64 * 0.999_999_999_999_999_9));
+            k.extend(vec![1.0; d + 1]);
+            k
+        };
+        let v = -1.234_567_890_123_456_7e-300;
+        NurbsSurface::try_new(d, d, knots(nu), knots(nv), nu, nv, vec![[v; 3]; nu * nv]).unwrap()
+    }
+
+    #[test]
+    fn p_line_bound_is_never_below_the_real_count() {
+        let mut real = Vec::new();
+        assert!(crate::iges::format::push_real(
+            &mut real,
+            -1.234_567_890_123_456_7e-300
+        ));
+        assert_eq!(
+            real.len() + 1,
+            MAX_REAL_TOKEN,
+            "{}",
+            String::from_utf8_lossy(&real)
+        );
+        // Small nets (one pole chunk) and one past the parallel threshold (four chunks).
+        for (nu, nv) in [(4, 4), (37, 5), (PARALLEL_POLES / 8 + 1, 8)] {
+            let s = longest_tokens(nu, nv);
+            let lines = entity_128_params(&s, 0).unwrap().lines();
+            let bound = p_lines_bound(&s);
+            assert!(bound >= lines, "{nu}x{nv}: bound {bound} < {lines} lines");
+            // Tight enough to be useful: within 1.6x for these worst-case tokens.
+            assert!(
+                bound * 10 <= lines * 16,
+                "{nu}x{nv}: bound {bound} vs {lines}"
+            );
+        }
+    }
+
+    #[test]
+    fn plan_without_formatting_equals_the_exact_plan() {
+        let s = longest_tokens(40, 6);
+        let lines = entity_128_params(&s, 0).unwrap().lines();
+        let bound = p_lines_bound(&s);
+        // At the bound the shortcut answers; exactly at the real count the formatting path
+        // answers; both give the surface unsplit. One line less splits it.
+        for cap in [bound, lines] {
+            let opts = IgesOptions {
+                max_parameter_lines_per_entity: cap,
+                ..IgesOptions::default()
+            };
+            let plan = plan_files(&s, &opts).unwrap();
+            assert_eq!(plan.len(), 1);
+            assert_eq!(plan[0], vec![s.clone()]);
+        }
+        let opts = IgesOptions {
+            max_parameter_lines_per_entity: lines - 1,
+            ..IgesOptions::default()
+        };
+        let plan = plan_files(&s, &opts).unwrap();
+        assert!(plan.iter().map(Vec::len).sum::<usize>() >= 2);
+    }
+
+    #[test]
+    fn sequence_field_counts_like_right_justified_decimal() {
+        let mut seq = SequenceField::new();
+        let mut expected = Vec::with_capacity(7);
+        for n in 1..=1_000_123i64 {
+            seq.increment();
+            if n <= 1200 || (999_990..=1_000_010).contains(&n) || n % 9973 == 0 {
+                expected.clear();
+                push_right(&mut expected, n, 7);
+                assert_eq!(&seq.digits[..], &expected[..], "{n}");
+            }
+        }
     }
 }

@@ -193,7 +193,7 @@ impl NurbsSurface {
         }
     }
 
-    /// Points S(us[a], vs[b]) for the whole grid, v-outer / u-inner (`b * us.len() + a`).
+    /// Points `S(us[a], vs[b])` for the whole grid, v-outer / u-inner (`b * us.len() + a`).
     /// Basis functions are computed once per parameter and each v reduces the net to an
     /// iso-curve first, so a point costs about `degree_u + 1` multiply-adds per coordinate.
     pub fn evaluate_grid(&self, us: &[f64], vs: &[f64]) -> Vec<[f64; 3]> {
