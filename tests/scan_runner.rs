@@ -264,6 +264,7 @@ dir = {out:?}
         config: Config::parse(Path::new("runner-test.toml"), &text).expect("config"),
         config_hash: "0".repeat(64),
         hooks: Arc::new(TestHooks::none()),
+        characterise: None,
     }
 }
 

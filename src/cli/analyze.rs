@@ -210,6 +210,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             overlay_line: args.overlay_line,
             fit: None,
             out_dir: args.out.clone(),
+            completing: false,
         };
         let outputs = characterise_scan(&args.input, &options).map_err(report_error)?;
         print_outputs(&outputs);

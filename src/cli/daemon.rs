@@ -44,11 +44,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
     let station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
-    let settings = RunSettings {
-        config,
-        config_hash,
-        hooks: Arc::new(hooks),
-    };
+    let settings = super::scan::run_settings(config, config_hash, hooks);
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()

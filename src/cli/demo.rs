@@ -10,11 +10,10 @@
 
 use super::scan::{load_config, outcome_result, run_foreground};
 use super::{CliError, Exit};
-use crate::scan::runner::{RunSettings, ScanRequest};
+use crate::scan::runner::ScanRequest;
 use crate::scan::station::SerialStation;
 use crate::scan::testhooks::TestHooks;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::time::Duration;
 use surfscan_sim::grbl::{GrblSimConfig, StageShared};
 use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, Simulator};
@@ -121,11 +120,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let (config, config_hash) = load_config(&config_path)?;
     let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
-    let settings = RunSettings {
-        config,
-        config_hash,
-        hooks: Arc::new(TestHooks::none()),
-    };
+    let settings = super::scan::run_settings(config, config_hash, TestHooks::none());
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()

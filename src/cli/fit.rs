@@ -21,8 +21,8 @@
 use super::{CliError, Exit};
 use crate::atomic::write_atomically;
 use crate::fit::{max_residual_mm, FitOptions, IncrementalFitter};
-use crate::iges::{plan_files, write_iges, IgesError, IgesOptions, MAX_SECTION_LINES};
-use crate::nurbs::NurbsSurface;
+use crate::iges::{IgesOptions, MAX_SECTION_LINES};
+use crate::scan::outputs::{write_surface_files, SurfaceWriteError};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -61,46 +61,14 @@ pub struct Args {
     pub max_iges_lines_per_entity: usize,
 }
 
-/// Where part `index` (1-based) of `count` goes when the surface needs several files:
-/// `dir/name.igs` → `dir/name.part2-of-3.igs` (an output without extension gets
-/// `.part2-of-3`).
-pub fn part_path(output: &Path, index: usize, count: usize) -> PathBuf {
-    let stem = output
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let name = match output.extension() {
-        Some(ext) => format!("{stem}.part{index}-of-{count}.{}", ext.to_string_lossy()),
-        None => format!("{stem}.part{index}-of-{count}"),
+pub use crate::scan::outputs::part_path;
+
+fn iges_write_error(e: SurfaceWriteError) -> CliError {
+    let exit = match e {
+        SurfaceWriteError::Format { .. } => Exit::Failed,
+        SurfaceWriteError::Io { .. } => Exit::Io,
     };
-    output.with_file_name(name)
-}
-
-/// The v parameter range covered by a group of consecutive patches.
-fn v_range(patches: &[NurbsSurface]) -> [f64; 2] {
-    let lo = patches
-        .first()
-        .and_then(|s| s.knots_v().get(s.degree_v()).copied())
-        .unwrap_or(f64::NAN);
-    let hi = patches
-        .last()
-        .and_then(|s| s.knots_v().get(s.count_v()).copied())
-        .unwrap_or(f64::NAN);
-    [lo, hi]
-}
-
-/// Maps a failed atomic IGES write to the CLI error: a surface the format cannot hold is a
-/// data problem (exit 1), anything else an I/O failure.
-fn iges_write_error(path: &Path, e: std::io::Error) -> CliError {
-    let format_problem = e
-        .get_ref()
-        .and_then(|inner| inner.downcast_ref::<IgesError>())
-        .is_some_and(|ie| !matches!(ie, IgesError::Io(_)));
-    let mut err = io_err("cannot write IGES", path, e);
-    if format_problem {
-        err.exit = Exit::Failed;
-    }
-    err
+    CliError::new(exit, e.to_string())
 }
 
 /// A height grid read from CSV: row-major heights in µm.
@@ -369,53 +337,27 @@ pub fn run(args: Args) -> Result<(), CliError> {
     };
     ensure_parent(&output)?;
     let t_write = Instant::now();
-    let groups = plan_files(&fit.surface, &opts).map_err(|e| {
-        CliError::new(
-            Exit::Failed,
-            format!("cannot write IGES {}: {e}", output.display()),
-        )
-    })?;
-    let n_files = groups.len();
-    let mut files = Vec::with_capacity(n_files);
+    let written = write_surface_files(&output, &fit.surface, &opts).map_err(iges_write_error)?;
+    let n_files = written.len();
     let mut stats = crate::iges::IgesStats::default();
-    for (k, group) in groups.iter().enumerate() {
-        let range = v_range(group);
-        let path = if n_files == 1 {
-            output.clone()
-        } else {
-            part_path(&output, k + 1, n_files)
-        };
-        let mut part_opts = opts.clone();
-        if n_files > 1 {
-            part_opts.file_name = path
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            part_opts.start_lines.push(format!(
-                "part {} of {}, v range [{}, {}]; {} exact patch(es); adjacent parts share their boundary pole row, the union of all parts is the surface.",
-                k + 1,
-                n_files,
-                range[0],
-                range[1],
-                group.len()
-            ));
-        }
-        let st = write_atomically(&path, |w| {
-            write_iges(w, group, &part_opts).map_err(std::io::Error::other)
-        })
-        .map_err(|e| iges_write_error(&path, e))?;
-        stats.patches += st.patches;
-        stats.bytes += st.bytes;
-        stats.parameter_lines += st.parameter_lines;
-        files.push(serde_json::json!({
-            "path": path.display().to_string(),
-            "part": k + 1,
-            "v_range": range,
-            "patches": st.patches,
-            "bytes": st.bytes,
-            "parameter_lines": st.parameter_lines,
-        }));
+    for w in &written {
+        stats.patches += w.patches;
+        stats.bytes += w.bytes;
+        stats.parameter_lines += w.parameter_lines;
     }
+    let files: Vec<serde_json::Value> = written
+        .iter()
+        .map(|w| {
+            serde_json::json!({
+                "path": w.path.display().to_string(),
+                "part": w.part,
+                "v_range": w.v_range,
+                "patches": w.patches,
+                "bytes": w.bytes,
+                "parameter_lines": w.parameter_lines,
+            })
+        })
+        .collect();
     let write_s = t_write.elapsed().as_secs_f64();
 
     let s = &fit.surface;

@@ -11,7 +11,9 @@
 use super::{CliError, Exit};
 use crate::config::{Config, ConfigError};
 use crate::control::protocol::{State, Status};
+use crate::report::{characterise_scan, ScanAnalysisOptions};
 use crate::scan::journal::find_unfinished;
+use crate::scan::outputs::Characterise;
 use crate::scan::runner::{run_scan, Control, FailKind, Outcome, RunSettings, ScanRequest};
 use crate::scan::station::SerialStation;
 use crate::scan::testhooks::TestHooks;
@@ -64,6 +66,38 @@ pub fn load_config(path: &Path) -> Result<(Config, String), CliError> {
     Ok((config, crate::scan::store::hex_sha256(&bytes)))
 }
 
+/// The runner's settings for a station: the configuration, its hash, the test hooks, and
+/// the characterisation of `[analysis]` run when a scan completes.
+pub fn run_settings(config: Config, config_hash: String, hooks: TestHooks) -> RunSettings {
+    let a = config.analysis.clone();
+    let characterise: Characterise = Arc::new(move |dir: &Path, fit: serde_json::Value| {
+        let options = ScanAnalysisOptions {
+            curves: a.curves,
+            levels: a.levels,
+            lambda_c_mm: a.lambda_c_mm,
+            no_filter: a.no_filter,
+            fit: Some(fit),
+            completing: true,
+            ..ScanAnalysisOptions::default()
+        };
+        let out = characterise_scan(dir, &options).map_err(|e| e.to_string())?;
+        for w in &out.warnings {
+            tracing::warn!("characterisation: {w}");
+        }
+        let mut files = vec![out.summary_csv];
+        files.extend(out.plots);
+        files.extend(out.measured_x3p);
+        files.extend(out.model_x3p);
+        Ok(files)
+    });
+    RunSettings {
+        config,
+        config_hash,
+        hooks: Arc::new(hooks),
+        characterise: Some(characterise),
+    }
+}
+
 /// The scan to run for this configuration: the newest unfinished one, else a new one.
 pub fn choose_request(
     config: &Config,
@@ -106,6 +140,12 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
                 println!("  surface  {}", p.display());
             }
             println!("  report   {}", outputs.report.display());
+            for p in &outputs.files {
+                println!("  file     {}", p.display());
+            }
+            if let Some(e) = &outputs.characterisation_error {
+                println!("  characterisation failed: {e}; the report holds the fit and the instrument's results");
+            }
             println!(
                 "  largest residual at the data points {:.3e} mm",
                 outputs.max_residual_mm
@@ -226,11 +266,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
     let request = choose_request(&config, args.specimen, args.operator, args.notes)?;
-    let settings = RunSettings {
-        config,
-        config_hash,
-        hooks: Arc::new(hooks),
-    };
+    let settings = run_settings(config, config_hash, hooks);
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()

@@ -64,7 +64,9 @@ impl Options {
             } else {
                 c.lambda_s_um
             },
-            sampling_lengths: c.sampling_lengths,
+            // The SJ series reports N = 0 for an arbitrary evaluation length: its
+            // parameters are then taken over the whole length as one section.
+            sampling_lengths: c.sampling_lengths.map(|n| n.max(1)),
         }
     }
 }

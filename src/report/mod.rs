@@ -62,6 +62,10 @@ pub struct ScanAnalysisOptions {
     pub fit: Option<serde_json::Value>,
     /// Where the files go (default `None`: the scan directory itself).
     pub out_dir: Option<PathBuf>,
+    /// The scan is being completed by the runner (every planned line on disk; its success
+    /// stop record follows this report), so no stop record yet does not make it partial
+    /// (default `false`).
+    pub completing: bool,
 }
 
 impl Default for ScanAnalysisOptions {
@@ -74,6 +78,7 @@ impl Default for ScanAnalysisOptions {
             overlay_line: None,
             fit: None,
             out_dir: None,
+            completing: false,
         }
     }
 }
@@ -1066,7 +1071,11 @@ pub fn characterise_scan(
             .plan
             .get("lines")
             .and_then(serde_json::Value::as_u64);
-        let complete = matches!(&s.stop, Some(st) if st.status == StopStatus::Success)
+        let stopped_ok = match &s.stop {
+            Some(st) => st.status == StopStatus::Success,
+            None => options.completing,
+        };
+        let complete = stopped_ok
             && incomplete.is_empty()
             && lines_planned.is_none_or(|n| n == lines_used.len() as u64);
         ScanStatus {

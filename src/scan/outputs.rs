@@ -11,11 +11,11 @@ use super::journal::StartRecord;
 use super::plan::Plan;
 use super::store::{ScanStore, StoredLine};
 use crate::atomic::write_atomically;
-use crate::config::Config;
 use crate::fit::{max_residual_mm, FitResult, IncrementalFitter};
-use crate::iges::{plan_files, write_iges, IgesOptions};
+use crate::iges::{plan_files, write_iges, IgesError, IgesOptions};
 use crate::nurbs::NurbsSurface;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// The files a completed scan wrote.
@@ -25,9 +25,21 @@ pub struct Outputs {
     pub iges: Vec<PathBuf>,
     /// `report.json`.
     pub report: PathBuf,
+    /// Other files of the characterisation (summary, plots, X3P).
+    pub files: Vec<PathBuf>,
+    /// Why the characterisation could not be made, when it could not (the report then
+    /// holds the fit and the instrument's own results only).
+    pub characterisation_error: Option<String>,
     /// Largest distance between the surface and a measured point, mm.
     pub max_residual_mm: f64,
 }
+
+/// The characterisation of a finished scan directory, supplied by the composition layer
+/// (the CLI passes `crate::report::characterise_scan`): it is given the scan directory and
+/// the fit section for `report.json`, writes the report and its files, and returns the
+/// paths of the files other than `report.json`.
+pub type Characterise =
+    Arc<dyn Fn(&Path, serde_json::Value) -> Result<Vec<PathBuf>, String> + Send + Sync>;
 
 /// Where part `index` (1-based) of `count` goes when the surface needs several files:
 /// `dir/name.igs` → `dir/name.part2-of-3.igs` (an output without extension gets
@@ -74,6 +86,46 @@ pub struct WrittenIges {
     pub parameter_lines: usize,
 }
 
+/// Why the IGES files could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum SurfaceWriteError {
+    /// The surface cannot be represented in the format (a data problem).
+    #[error("cannot write IGES {path}: {message}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What the writer refused.
+        message: String,
+    },
+    /// The file system refused (full disk, permissions).
+    #[error("cannot write IGES {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+fn write_error(path: &Path, e: std::io::Error) -> SurfaceWriteError {
+    let format = e
+        .get_ref()
+        .and_then(|inner| inner.downcast_ref::<IgesError>())
+        .filter(|ie| !matches!(ie, IgesError::Io(_)))
+        .map(|ie| ie.to_string());
+    match format {
+        Some(message) => SurfaceWriteError::Format {
+            path: path.to_path_buf(),
+            message,
+        },
+        None => SurfaceWriteError::Io {
+            path: path.to_path_buf(),
+            source: e,
+        },
+    }
+}
+
 /// Writes `surface` as IGES at `output`, or as several complete files
 /// `output.part<i>-of-<n>.igs` when one P section cannot hold it; each file atomically.
 /// Errors carry the path and say whether the format or the disk refused.
@@ -81,9 +133,11 @@ pub fn write_surface_files(
     output: &Path,
     surface: &NurbsSurface,
     opts: &IgesOptions,
-) -> Result<Vec<WrittenIges>, String> {
-    let groups = plan_files(surface, opts)
-        .map_err(|e| format!("cannot write IGES {}: {e}", output.display()))?;
+) -> Result<Vec<WrittenIges>, SurfaceWriteError> {
+    let groups = plan_files(surface, opts).map_err(|e| SurfaceWriteError::Format {
+        path: output.to_path_buf(),
+        message: e.to_string(),
+    })?;
     let n_files = groups.len();
     let mut files = Vec::with_capacity(n_files);
     for (k, group) in groups.iter().enumerate() {
@@ -111,7 +165,7 @@ pub fn write_surface_files(
         let st = write_atomically(&path, |w| {
             write_iges(w, group, &part_opts).map_err(std::io::Error::other)
         })
-        .map_err(|e| format!("cannot write IGES {}: {e}", path.display()))?;
+        .map_err(|e| write_error(&path, e))?;
         files.push(WrittenIges {
             path,
             part: k + 1,
@@ -175,15 +229,16 @@ pub fn traceability_json(start: &StartRecord) -> serde_json::Value {
     })
 }
 
-/// Fits the lines, writes the IGES and `report.json` into the scan directory.
+/// Fits the lines, writes the IGES, then the characterisation (or, without one or when it
+/// fails, a `report.json` with the fit and the instrument's own results) into the scan
+/// directory.
 pub fn write_outputs(
     store: &ScanStore,
     start: &StartRecord,
     plan: &Plan,
     fitter: IncrementalFitter,
-    config: &Config,
+    characterise: Option<&Characterise>,
 ) -> Result<Outputs, String> {
-    let _ = config;
     let t_fit = Instant::now();
     let fit = fitter.finish().map_err(|e| format!("fit: {e}"))?;
     let finish_s = t_fit.elapsed().as_secs_f64();
@@ -197,8 +252,9 @@ pub fn write_outputs(
         ..IgesOptions::default()
     };
     let t_write = Instant::now();
-    let files = write_surface_files(&iges_path, &fit.surface, &opts)?;
+    let files = write_surface_files(&iges_path, &fit.surface, &opts).map_err(|e| e.to_string())?;
     let write_s = t_write.elapsed().as_secs_f64();
+    let iges_files: Vec<PathBuf> = files.iter().map(|f| f.path.clone()).collect();
     let s = &fit.surface;
     let fit_json = serde_json::json!({
         "grid": { "rows": lines.len(), "cols": lines.first().map_or(0, |l| l.profile.len()) },
@@ -220,6 +276,24 @@ pub fn write_outputs(
         },
     });
     let report_path = store.root().join("report.json");
+    let mut characterisation_error = None;
+    if let Some(ch) = characterise {
+        match ch(store.root(), fit_json.clone()) {
+            Ok(files) => {
+                return Ok(Outputs {
+                    iges: iges_files,
+                    report: report_path,
+                    files,
+                    characterisation_error: None,
+                    max_residual_mm: residual,
+                })
+            }
+            Err(e) => {
+                tracing::error!("characterisation of {} failed: {e}", store.root().display());
+                characterisation_error = Some(e);
+            }
+        }
+    }
     let line_json: Vec<serde_json::Value> = lines
         .iter()
         .map(|l| {
@@ -238,6 +312,7 @@ pub fn write_outputs(
         "traceability": traceability_json(start),
         "fit": fit_json,
         "lines": line_json,
+        "characterisation_error": characterisation_error,
     });
     write_atomically(&report_path, |w| {
         serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)?;
@@ -245,8 +320,10 @@ pub fn write_outputs(
     })
     .map_err(|e| format!("cannot write {}: {e}", report_path.display()))?;
     Ok(Outputs {
-        iges: files.into_iter().map(|f| f.path).collect(),
+        iges: iges_files,
         report: report_path,
+        files: Vec::new(),
+        characterisation_error,
         max_residual_mm: residual,
     })
 }

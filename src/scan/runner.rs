@@ -29,7 +29,7 @@ use super::journal::{
     StopStatus,
 };
 use super::metrics::{write_metrics, ScanMetrics};
-use super::outputs::{write_outputs, Outputs};
+use super::outputs::{write_outputs, Characterise, Outputs};
 use super::plan::Plan;
 use super::station::{Device, Fault, Station};
 use super::store::{
@@ -308,7 +308,7 @@ impl Control {
 }
 
 /// What the runner needs besides devices and control.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct RunSettings {
     /// The configuration as loaded.
     pub config: Config,
@@ -316,6 +316,20 @@ pub struct RunSettings {
     pub config_hash: String,
     /// Fault injection (tests only; none in production).
     pub hooks: Arc<TestHooks>,
+    /// The characterisation run when a scan completes (none: the report holds the fit and
+    /// the instrument's own results only).
+    pub characterise: Option<Characterise>,
+}
+
+impl std::fmt::Debug for RunSettings {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RunSettings")
+            .field("config", &self.config)
+            .field("config_hash", &self.config_hash)
+            .field("hooks", &self.hooks)
+            .field("characterise", &self.characterise.is_some())
+            .finish()
+    }
 }
 
 /// Why a line attempt ended without a committed line.
@@ -1360,7 +1374,7 @@ async fn finish<S: Station>(
                 &scan.start,
                 &scan.plan,
                 fitter,
-                &settings.config,
+                settings.characterise.as_ref(),
             ) {
                 Ok(outputs) => {
                     scan.metrics.fit_residual_um = Some(outputs.max_residual_mm * 1000.0);
