@@ -13,9 +13,11 @@
 //!    the codecs inside [`sj210`] and [`stage`].
 //! 2. I/O adapters: [`transport`] (the only code that opens a serial port), the clients in
 //!    [`sj210`] and [`stage`], generic over `AsyncRead + AsyncWrite`.
-//! 3. The session: [`scan`] (plan, durable storage and journal, resume, runner).
-//! 4. Process edges: [`telemetry`] (logging), [`atomic`] (durable file replacement),
-//!    [`control`] (the operator's control socket), [`report`] (characterisation of a scan
+//! 3. The session: [`scan`] (plan, station, durable storage and journal, resume, the runner,
+//!    the outputs of a completed scan).
+//! 4. Process edges: [`config`] (the station's TOML, validated), [`telemetry`] (logging),
+//!    [`atomic`] (durable file replacement), [`control`] (the operator's control socket),
+//!    [`service`] (systemd notifications), [`report`] (characterisation of a scan
 //!    directory or grid into report.json, summary.csv, plots and X3P).
 //! 5. Composition: [`cli`] (one file per subcommand) and `main.rs`.
 //!

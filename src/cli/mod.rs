@@ -31,11 +31,11 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Fit a NURBS surface to a grid of heights and write it as IGES.
+    /// Fit a NURBS surface to a grid CSV or a scan directory and write it as IGES.
     Fit(fit::Args),
     /// Read-only first-hour checklist on the instrument (moves the stylus only with --trace).
     Probe(probe::Args),
-    /// Characterise a profile or grid CSV: ISO roughness per line, areal parameters, bearing area curves.
+    /// Characterise a profile CSV, grid CSV or scan directory: ISO roughness per line, areal parameters, bearing area curves, plots, X3P.
     Analyze(analyze::Args),
     /// Run one scan in the foreground (resuming an unfinished scan of this configuration).
     Scan(scan::Args),
