@@ -237,6 +237,11 @@ impl Config {
         self.stage
             .policy_config()
             .map_err(|e| Config::invalid(path, "stage", e.to_string()))?;
+        if self.stage.protocol == crate::stage::settings::StageProtocol::Grbl {
+            self.stage
+                .grbl_config()
+                .map_err(|e| Config::invalid(path, "stage", e.to_string()))?;
+        }
         let f = &self.fit;
         if f.degree_u == 0 || f.degree_v == 0 {
             return Err(Config::invalid(
@@ -457,6 +462,13 @@ dir = "/var/lib/surfscan/scans"
             .unwrap_err()
             .to_string();
         assert!(e.contains("line 31") && e.contains("soft limits"), "{e}");
+        let e = parse(&MINIMAL.replace("steps-per-mm", "poll-interval-ms = 50\nsteps-per-mm"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("stage") && e.contains("poll-interval-ms = 50"),
+            "{e}"
+        );
         let e = parse("[scan]\nlines = 3").unwrap_err().to_string();
         assert!(e.contains("missing field"), "{e}");
     }

@@ -73,7 +73,12 @@ async fn rig() -> Rig {
             ),
             &format!("{:?}", socket.display().to_string()),
         );
-    let text = format!("{text}\n[fit]\ndegree-v = 3\n");
+    let hook_log = dir.path().join("hook.log");
+    let text = format!(
+        "{text}\n[fit]\ndegree-v = 3\n[metrics]\nfile = {:?}\n[notify]\ncommand = [\"/bin/sh\", \"-c\", \"env | grep ^SURFSCAN_ | sort >> {}\"]\n",
+        dir.path().join("surfscan.prom").display().to_string(),
+        hook_log.display()
+    );
     let config = dir.path().join("station.toml");
     std::fs::write(&config, text).unwrap();
     let notify = UnixDatagram::bind(dir.path().join("notify.sock")).unwrap();
@@ -347,6 +352,30 @@ async fn sigterm_mid_scan_records_an_interruption_and_the_restart_resumes_by_its
         |r| matches!(r, Record::Interruption(i) if i.reason.contains("resumed after a restart"))
     ));
     assert!(dir.join("surface.igs").exists() && dir.join("report.json").exists());
+    // The notification hook ran for the completion with the scan's id, status and directory.
+    let id = dir.file_name().unwrap().to_string_lossy().into_owned();
+    let start = Instant::now();
+    let hook = loop {
+        let text = std::fs::read_to_string(r.dir.path().join("hook.log")).unwrap_or_default();
+        if text.contains("SURFSCAN_STATUS=success") || start.elapsed() > DEADLINE {
+            break text;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    };
+    assert!(hook.contains("SURFSCAN_STATUS=success"), "{hook}");
+    assert!(hook.contains(&format!("SURFSCAN_SCAN_ID={id}")), "{hook}");
+    assert!(
+        hook.contains(&format!("SURFSCAN_SCAN_DIR={}", dir.display())),
+        "{hook}"
+    );
+    // The metrics file counts every line of the plan as done.
+    let prom = std::fs::read_to_string(r.dir.path().join("surfscan.prom")).unwrap();
+    let done = prom
+        .lines()
+        .find(|l| l.starts_with("surfscan_lines_done"))
+        .and_then(|l| l.rsplit(' ').next())
+        .and_then(|v| v.parse::<f64>().ok());
+    assert_eq!(done, Some(f64::from(LINES)), "{prom}");
     sigterm(&d);
     assert!(wait_exit(&mut d).success());
     r.sim.shutdown().await;

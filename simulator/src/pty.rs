@@ -85,6 +85,16 @@ impl Pty {
                 source,
             }
         })?;
+        // Close-on-exec on both ends: a process the simulator's host spawns (the daemon under
+        // test) must not inherit them, or an "unplugged" device would stay open in it.
+        for fd in [pair.master.as_raw_fd(), pair.slave.as_raw_fd()] {
+            fcntl(fd, FcntlArg::F_SETFD(nix::fcntl::FdFlag::FD_CLOEXEC)).map_err(|source| {
+                PtyError::Create {
+                    step: "fcntl(F_SETFD)",
+                    source,
+                }
+            })?;
+        }
         let flags = fcntl(pair.master.as_raw_fd(), FcntlArg::F_GETFL).map_err(|source| {
             PtyError::Create {
                 step: "fcntl(F_GETFL)",

@@ -310,11 +310,16 @@ pub fn render_status(s: &Status) -> String {
         let _ = writeln!(out, "  reason     {r}");
     }
     if let Some(l) = &s.last_stop {
-        let _ = writeln!(
-            out,
-            "  last stop  {}: {} ({}) in {}",
-            l.scan_id, l.status, l.reason, l.dir
-        );
+        let _ = if l.scan_id.is_empty() {
+            // The scan never started (a device missing at start): no id, no directory.
+            writeln!(out, "  last start {}: {}", l.status, l.reason)
+        } else {
+            writeln!(
+                out,
+                "  last stop  {}: {} ({}) in {}",
+                l.scan_id, l.status, l.reason, l.dir
+            )
+        };
     }
     out
 }

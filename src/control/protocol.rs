@@ -179,6 +179,9 @@ impl Status {
             .unwrap_or_default();
         match (&self.scan_id, self.state) {
             (None, State::Idle) => match &self.last_stop {
+                Some(s) if s.scan_id.is_empty() => {
+                    format!("idle; last start: {} ({})", s.status, s.reason)
+                }
                 Some(s) => format!("idle; last scan {}: {} ({})", s.scan_id, s.status, s.reason),
                 None => "idle".to_owned(),
             },

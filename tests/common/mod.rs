@@ -242,21 +242,6 @@ pub fn scan_command(config: &Path, env: &[(&str, &str)]) -> tokio::process::Comm
     for (k, v) in env {
         c.env(k, v);
     }
-    // The simulator's pty descriptors are not close-on-exec: a child holding a copy of the
-    // instrument's master would keep an "unplugged" device alive. Mark every inherited
-    // descriptor above stderr close-on-exec (fcntl is async-signal-safe).
-    // SAFETY: the closure only calls fcntl on descriptor numbers, allowed between fork and exec.
-    unsafe {
-        c.pre_exec(|| {
-            for fd in 3..4096 {
-                let flags = libc::fcntl(fd, libc::F_GETFD);
-                if flags >= 0 {
-                    libc::fcntl(fd, libc::F_SETFD, flags | libc::FD_CLOEXEC);
-                }
-            }
-            Ok(())
-        });
-    }
     c
 }
 

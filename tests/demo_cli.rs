@@ -1,0 +1,104 @@
+//! The README's main job, `surfscan demo`, run as the binary: a complete simulated 31-line
+//! scan must leave the IGES, the report with the characterisation, the plots and X3P in the
+//! output directory, all consistent with the stored lines.
+//!
+//! Depends on the `surfscan` binary and the library's readers (IGES, X3P, scan store).
+
+use std::path::PathBuf;
+use std::process::Command;
+use std::sync::Arc;
+use surfscan::iges::reader::read_iges;
+use surfscan::metrology::x3p::read_x3p;
+use surfscan::scan::store::{NoFaults, ScanStore};
+
+#[test]
+fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
+    let out = tempfile::tempdir().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(["demo", "--speed-up", "50", "--out"])
+        .arg(out.path())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "demo failed: {stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let dirs: Vec<PathBuf> = std::fs::read_dir(out.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.join("journal.jsonl").exists())
+        .collect();
+    assert_eq!(dirs.len(), 1, "{dirs:?}");
+    let dir = &dirs[0];
+    assert!(
+        stdout.contains(&dir.join("surface.igs").display().to_string()),
+        "{stdout}"
+    );
+
+    let store = ScanStore::open(dir, Arc::new(NoFaults)).unwrap();
+    let lines = store.load_all().unwrap();
+    assert_eq!(lines.lines.len(), 31);
+    assert!(lines.incomplete.is_empty());
+    let cols = lines.lines[0].profile.len();
+
+    // The IGES surface has one pole per data point (interpolation), degrees 5 x 5.
+    let iges = read_iges(&std::fs::read(dir.join("surface.igs")).unwrap()).unwrap();
+    let s = &iges.surfaces[0];
+    assert_eq!((s.degree_u(), s.degree_v()), (5, 5));
+    assert_eq!((s.count_u(), s.count_v()), (cols, 31));
+
+    // The report: one entry per line with the ISO parameters and the instrument's own values
+    // beside ours; the pooled bearing area curve runs from 0 % to 100 %.
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap();
+    let rl = report["lines"].as_array().unwrap();
+    assert_eq!(rl.len(), 31);
+    for l in rl {
+        let ra = l["Ra_um"].as_f64().unwrap();
+        let rq = l["Rq_um"].as_f64().unwrap();
+        assert!(ra > 0.0 && rq >= ra, "Rq ≥ Ra for any profile: {l}");
+        let inst = l["instrument"].as_array().unwrap();
+        let ra_inst = inst.iter().find(|c| c["name"] == "Ra").unwrap();
+        let diff = ra_inst["difference"].as_f64().unwrap();
+        let expect = ra - ra_inst["instrument"].as_f64().unwrap();
+        assert!((diff - expect).abs() < 1e-12, "{ra_inst}");
+    }
+    let bac = report["surface"]["bac"].as_array().unwrap();
+    let first = bac.first().unwrap()[1].as_f64().unwrap();
+    let last = bac.last().unwrap()[1].as_f64().unwrap();
+    assert!(
+        first.abs() < 1e-9 && (last - 100.0).abs() < 1e-9,
+        "{first} {last}"
+    );
+    assert_eq!(report["scan"]["status"], "complete");
+    assert_eq!(report["traceability"]["instrument_model"], "sj210");
+    assert!(report["fit"]["max_residual_mm"].as_f64().unwrap() <= 1e-10);
+
+    // Spreadsheet summary: a header and one row per line.
+    let summary = std::fs::read_to_string(dir.join("summary.csv")).unwrap();
+    assert_eq!(summary.lines().count(), 32);
+    for plot in ["bac", "heightmap", "overlay"] {
+        for ext in ["png", "svg"] {
+            let p = dir.join(format!("{plot}.{ext}"));
+            assert!(
+                std::fs::metadata(&p).unwrap().len() > 1000,
+                "{}",
+                p.display()
+            );
+        }
+    }
+    // The measured X3P holds exactly the stored heights.
+    let x = read_x3p(&std::fs::read(dir.join("measured.x3p")).unwrap()).unwrap();
+    assert_eq!((x.rows, x.cols), (31, cols));
+    for (r, l) in lines.lines.iter().enumerate() {
+        for (c, z) in l.profile.heights_um.iter().enumerate() {
+            let got = x.heights_um[r * cols + c];
+            assert!(
+                (got - z).abs() <= 1e-9 * z.abs().max(1.0),
+                "({r},{c}) {got} vs {z}"
+            );
+        }
+    }
+}
