@@ -548,3 +548,46 @@ async fn trace_refuses_to_start_unless_idle() {
     assert!(matches!(e, Sj210Error::NotIdle { status: 5, .. }), "{e:?}");
     finish(c, h, n).await;
 }
+
+/// A command whose future is dropped before its reply arrives (an operator abort or a
+/// shutdown cancels it) must not leave that reply to be taken as the next command's answer.
+#[tokio::test(start_paused = true)]
+async fn a_reply_to_a_cancelled_command_is_not_taken_as_the_next_answer() {
+    let (io, mut dev) = tokio::io::duplex(4096);
+    let device = tokio::spawn(async move {
+        let mut seen = Vec::new();
+        let mut line = Vec::new();
+        let mut b = [0u8; 1];
+        while let Ok(1) = dev.read(&mut b).await {
+            if b[0] != b'\r' {
+                line.push(b[0]);
+                continue;
+            }
+            let cmd = String::from_utf8_lossy(&line).to_string();
+            line.clear();
+            match cmd.as_str() {
+                // Slow: the host gives up waiting before this arrives.
+                "RDSTU00" => {
+                    tokio::time::sleep(Duration::from_millis(500)).await;
+                    dev.write_all(b"OK001\r").await.unwrap();
+                }
+                "RDSJ 01" => dev.write_all(b"OKV1.00\r").await.unwrap(),
+                other => panic!("unexpected command {other:?}"),
+            }
+            seen.push(cmd);
+        }
+        seen
+    });
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let cancelled = tokio::time::timeout(Duration::from_millis(100), c.status()).await;
+    assert!(
+        cancelled.is_err(),
+        "the status read should still be waiting"
+    );
+    // Let the late reply arrive on the link before the next command is sent.
+    tokio::time::sleep(Duration::from_millis(600)).await;
+    let firmware = c.command("RDSJ 01", true).await.unwrap();
+    assert_eq!(firmware, "V1.00");
+    drop(c);
+    assert_eq!(device.await.unwrap(), ["RDSTU00", "RDSJ 01"]);
+}
