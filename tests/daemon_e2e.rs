@@ -294,6 +294,18 @@ async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket()
     let mut sorted = idx.clone();
     sorted.dedup();
     assert_eq!(idx, sorted, "each line exactly once, in order");
+    // A foreground scan of the same station is refused while the daemon holds the ports.
+    let fg = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(["scan", "--config"])
+        .arg(&r.config)
+        .output()
+        .unwrap();
+    assert_eq!(fg.status.code(), Some(69));
+    let err = String::from_utf8_lossy(&fg.stderr);
+    assert!(
+        err.contains("daemon is running") && err.contains("surfscan start"),
+        "{err}"
+    );
     // Pausing with no scan running is refused with a reason.
     let e = client(&r).await.request(&Request::Pause).await.unwrap();
     assert!(
