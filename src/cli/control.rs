@@ -91,18 +91,7 @@ pub fn socket_path(target: &Target) -> Result<PathBuf, CliError> {
 
 /// Reads only `[control] socket` from a TOML config, ignoring every other table.
 pub fn config_socket(path: &Path) -> Result<Option<PathBuf>, CliError> {
-    let text = std::fs::read_to_string(path).map_err(|e| {
-        CliError::new(
-            Exit::Config,
-            format!("cannot read config {}: {e}", path.display()),
-        )
-    })?;
-    let mut doc: toml::Table = toml::from_str(&text).map_err(|e| {
-        CliError::new(
-            Exit::Config,
-            format!("config {} is not valid TOML: {e}", path.display()),
-        )
-    })?;
+    let mut doc = super::read_toml_table(path)?;
     let Some(control) = doc.remove("control") else {
         return Ok(None);
     };

@@ -432,22 +432,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn part_names_keep_directory_and_extension() {
-        assert_eq!(
-            part_path(Path::new("/data/run 7/sur-2.igs"), 2, 3),
-            PathBuf::from("/data/run 7/sur-2.part2-of-3.igs")
-        );
-        assert_eq!(
-            part_path(Path::new("out/a.b.IGES"), 10, 12),
-            PathBuf::from("out/a.b.part10-of-12.IGES")
-        );
-        assert_eq!(
-            part_path(Path::new("surface"), 1, 2),
-            PathBuf::from("surface.part1-of-2")
-        );
-    }
-
-    #[test]
     fn parses_a_grid_and_ignores_trailing_blank_lines() {
         let g = parse_grid("1, 2.5,3\n-4,5e-1,6\n\n").unwrap();
         assert_eq!((g.rows, g.cols), (2, 3));

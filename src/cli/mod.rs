@@ -97,6 +97,23 @@ impl fmt::Display for CliError {
     }
 }
 
+/// Reads a TOML file as a plain table, for commands that take one table of a station
+/// configuration and ignore the rest; unreadable or invalid files are exit 78.
+pub fn read_toml_table(path: &std::path::Path) -> Result<toml::Table, CliError> {
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        CliError::new(
+            Exit::Config,
+            format!("cannot read config {}: {e}", path.display()),
+        )
+    })?;
+    toml::from_str(&text).map_err(|e| {
+        CliError::new(
+            Exit::Config,
+            format!("config {} is not valid TOML: {e}", path.display()),
+        )
+    })
+}
+
 /// Runs the parsed command.
 pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {

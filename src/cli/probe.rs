@@ -32,18 +32,7 @@ pub struct Args {
 
 /// Reads the `[instrument]` table of a TOML config, ignoring every other table.
 pub fn load_instrument_settings(path: &Path) -> Result<InstrumentSettings, CliError> {
-    let text = std::fs::read_to_string(path).map_err(|e| {
-        CliError::new(
-            Exit::Config,
-            format!("cannot read config {}: {e}", path.display()),
-        )
-    })?;
-    let mut doc: toml::Table = toml::from_str(&text).map_err(|e| {
-        CliError::new(
-            Exit::Config,
-            format!("config {} is not valid TOML: {e}", path.display()),
-        )
-    })?;
+    let mut doc = super::read_toml_table(path)?;
     let section = doc.remove("instrument").ok_or_else(|| {
         CliError::new(
             Exit::Config,

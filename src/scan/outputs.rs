@@ -352,6 +352,10 @@ mod tests {
             PathBuf::from("/data/run 7/sur-2.part2-of-3.igs")
         );
         assert_eq!(
+            part_path(Path::new("out/a.b.IGES"), 10, 12),
+            PathBuf::from("out/a.b.part10-of-12.IGES")
+        );
+        assert_eq!(
             part_path(Path::new("surface"), 1, 2),
             PathBuf::from("surface.part1-of-2")
         );
