@@ -17,8 +17,8 @@ use crate::control::protocol::{
     ControlChannels, DeviceState, OperatorCommand, OperatorRequest, State, Status,
 };
 use crate::control::server;
-use crate::scan::hook::{Hook, HookEvent, HookStatus};
-use crate::scan::runner::{run_scan, Control, Outcome, RunSettings, ScanRequest};
+use crate::scan::hook::{Hook, HookEvent};
+use crate::scan::runner::{run_scan, Control, Outcome, RunSettings, ScanEvent, ScanRequest};
 use crate::scan::station::{SerialStation, Station};
 use crate::scan::testhooks::TestHooks;
 use crate::service::Notifier;
@@ -51,16 +51,6 @@ pub fn run(args: Args) -> Result<(), CliError> {
         .build()
         .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
     rt.block_on(daemon(settings, station))
-}
-
-fn hook_status(s: &str) -> Option<HookStatus> {
-    Some(match s {
-        "success" => HookStatus::Success,
-        "fail" => HookStatus::Fail,
-        "abort" => HookStatus::Abort,
-        "suspended" => HookStatus::Suspended,
-        _ => return None,
-    })
 }
 
 fn presence(present: bool) -> DeviceState {
@@ -136,15 +126,14 @@ async fn daemon(settings: RunSettings, mut station: SerialStation) -> Result<(),
     });
 
     // Notification hook.
-    let (ev_tx, mut ev_rx) = mpsc::unbounded_channel();
+    let (ev_tx, mut ev_rx) = mpsc::unbounded_channel::<ScanEvent>();
     let hook = config.notify.as_ref().and_then(Hook::new);
     tokio::spawn(async move {
         while let Some(ev) = ev_rx.recv().await {
-            let ev: crate::scan::runner::ScanEvent = ev;
-            if let (Some(h), Some(status)) = (&hook, hook_status(ev.status)) {
+            if let Some(h) = &hook {
                 h.fire(HookEvent {
                     scan_id: ev.scan_id,
-                    status,
+                    status: ev.status,
                     reason: ev.reason,
                     scan_dir: ev.dir,
                 });

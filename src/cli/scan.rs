@@ -51,7 +51,8 @@ pub fn load_config(path: &Path) -> Result<(Config, String), CliError> {
             .to_string(),
         )
     })?;
-    let text = String::from_utf8(bytes.clone()).map_err(|e| {
+    let hash = crate::scan::store::hex_sha256(&bytes);
+    let text = String::from_utf8(bytes).map_err(|e| {
         CliError::new(
             Exit::Config,
             format!(
@@ -63,7 +64,7 @@ pub fn load_config(path: &Path) -> Result<(Config, String), CliError> {
     })?;
     let config =
         Config::parse(path, &text).map_err(|e| CliError::new(Exit::Config, e.to_string()))?;
-    Ok((config, crate::scan::store::hex_sha256(&bytes)))
+    Ok((config, hash))
 }
 
 /// The runner's settings for a station: the configuration, its hash, the test hooks, and

@@ -24,6 +24,7 @@
 //! [`super::journal`] (disk), [`crate::fit`], [`super::outputs`], [`crate::control::protocol`]
 //! (status and command types) and [`crate::config`] (the settings it runs under).
 
+use super::hook::HookStatus;
 use super::journal::{
     InterruptionRecord, Journal, JournalError, Record, ResumeState, StartRecord, StopRecord,
     StopStatus,
@@ -119,8 +120,8 @@ pub struct ScanEvent {
     pub scan_id: String,
     /// Scan directory.
     pub dir: PathBuf,
-    /// `success`, `fail`, `abort` or `suspended`.
-    pub status: &'static str,
+    /// What happened.
+    pub status: HookStatus,
     /// Why, for people.
     pub reason: String,
 }
@@ -175,7 +176,7 @@ impl Control {
         self.status.send_modify(f);
     }
 
-    fn event(&self, scan_id: &str, dir: &Path, status: &'static str, reason: &str) {
+    fn event(&self, scan_id: &str, dir: &Path, status: HookStatus, reason: &str) {
         if let Some(tx) = &self.events {
             let _ = tx.send(ScanEvent {
                 scan_id: scan_id.to_owned(),
@@ -188,6 +189,15 @@ impl Control {
 
     fn shutting_down(&self) -> bool {
         *self.shutdown.borrow()
+    }
+
+    /// The watchdog ticker (hourly, i.e. idle, without a watchdog).
+    fn watchdog_tick(&self) -> tokio::time::Interval {
+        let period = self
+            .watchdog
+            .as_ref()
+            .map_or(Duration::from_secs(3600), |w| w.0);
+        tokio::time::interval(period)
     }
 
     fn pet(&self) {
@@ -248,11 +258,7 @@ impl Control {
         if self.shutting_down() {
             return Err(Interrupt::Shutdown);
         }
-        let period = self
-            .watchdog
-            .as_ref()
-            .map_or(Duration::from_secs(3600), |w| w.0);
-        let mut tick = tokio::time::interval(period);
+        let mut tick = self.watchdog_tick();
         loop {
             tokio::select! {
                 out = &mut fut => return Ok(out),
@@ -273,11 +279,7 @@ impl Control {
 
     /// Waits while paused; returns on resume, or the interrupt.
     async fn paused(&mut self) -> Result<(), Interrupt> {
-        let period = self
-            .watchdog
-            .as_ref()
-            .map_or(Duration::from_secs(3600), |w| w.0);
-        let mut tick = tokio::time::interval(period);
+        let mut tick = self.watchdog_tick();
         loop {
             if self.shutting_down() {
                 return Err(Interrupt::Shutdown);
@@ -386,23 +388,8 @@ fn storage_fail(e: &StoreError) -> End {
     }
 }
 
-fn journal_fail(e: &JournalError) -> End {
-    storage_fail(&StoreError::Journal(clone_journal_error(e)))
-}
-
-fn clone_journal_error(e: &JournalError) -> JournalError {
-    match e {
-        JournalError::Io { op, path, source } => JournalError::Io {
-            op,
-            path: path.clone(),
-            source: std::io::Error::new(source.kind(), source.to_string()),
-        },
-        other => JournalError::Io {
-            op: "journal",
-            path: PathBuf::new(),
-            source: std::io::Error::other(other.to_string()),
-        },
-    }
+fn journal_fail(e: JournalError) -> End {
+    storage_fail(&StoreError::Journal(e))
 }
 
 /// The open devices of a running scan.
@@ -466,40 +453,38 @@ impl Scan {
 /// Compares the conditions a line was traced under with the scan's; the first difference,
 /// named, when they differ.
 pub fn conditions_difference(scan: &Conditions, line: &Conditions) -> Option<String> {
-    fn opt<T: std::fmt::Debug>(v: &Option<T>) -> String {
-        v.as_ref()
-            .map_or("unknown".to_owned(), |x| format!("{x:?}"))
+    fn differs<T: PartialEq + std::fmt::Debug>(
+        name: &str,
+        at_start: &Option<T>,
+        now: &Option<T>,
+    ) -> Option<String> {
+        let show = |v: &Option<T>| {
+            v.as_ref()
+                .map_or("unknown".to_owned(), |x| format!("{x:?}"))
+        };
+        (at_start != now).then(|| {
+            format!(
+                "{name} was {} at the start of the scan, now {}",
+                show(at_start),
+                show(now)
+            )
+        })
     }
-    let checks: [(&str, String, String); 8] = [
-        ("standard", opt(&scan.standard), opt(&line.standard)),
-        ("profile", opt(&scan.profile_kind), opt(&line.profile_kind)),
-        ("filter", opt(&scan.filter), opt(&line.filter)),
-        (
-            "lambda-c mm",
-            opt(&scan.lambda_c_mm),
-            opt(&line.lambda_c_mm),
-        ),
-        (
-            "lambda-s um",
-            opt(&scan.lambda_s_um),
-            opt(&line.lambda_s_um),
-        ),
-        (
-            "sampling lengths",
-            opt(&scan.sampling_lengths),
-            opt(&line.sampling_lengths),
-        ),
-        (
-            "evaluation length mm",
-            opt(&scan.evaluation_length_mm),
-            opt(&line.evaluation_length_mm),
-        ),
-        ("speed mm/s", opt(&scan.speed_mm_s), opt(&line.speed_mm_s)),
-    ];
-    checks
-        .into_iter()
-        .find(|(_, a, b)| a != b)
-        .map(|(name, a, b)| format!("{name} was {a} at the start of the scan, now {b}"))
+    let (a, b) = (scan, line);
+    differs("standard", &a.standard, &b.standard)
+        .or_else(|| differs("profile", &a.profile_kind, &b.profile_kind))
+        .or_else(|| differs("filter", &a.filter, &b.filter))
+        .or_else(|| differs("lambda-c mm", &a.lambda_c_mm, &b.lambda_c_mm))
+        .or_else(|| differs("lambda-s um", &a.lambda_s_um, &b.lambda_s_um))
+        .or_else(|| differs("sampling lengths", &a.sampling_lengths, &b.sampling_lengths))
+        .or_else(|| {
+            differs(
+                "evaluation length mm",
+                &a.evaluation_length_mm,
+                &b.evaluation_length_mm,
+            )
+        })
+        .or_else(|| differs("speed mm/s", &a.speed_mm_s, &b.speed_mm_s))
 }
 
 /// A rough duration of one line: traverse at the measuring speed, return at twice that,
@@ -569,7 +554,7 @@ pub async fn run_scan<S: Station>(
         }
     };
     let end = scan_lines(station, ctl, &mut scan, &mut devices).await;
-    finish(station, ctl, settings, scan, devices, end).await
+    finish(ctl, settings, scan, devices, end).await
 }
 
 fn publish_end(ctl: &Control, id: Option<&str>, dir: Option<&Path>, status: &str, reason: &str) {
@@ -718,7 +703,7 @@ async fn begin<S: Station>(
                 conditions: report.conditions.clone(),
             };
             let journal = Journal::create(&dir, start.clone(), faults)
-                .map_err(|e| (journal_fail(&e), Some(dir.clone())))?;
+                .map_err(|e| (journal_fail(e), Some(dir.clone())))?;
             tracing::info!(scan_id = %id, "scan started in {}", dir.display());
             devices.need_home = config.stage.home_on_start || !stage_report.position_trusted;
             devices.stage_identity = Some(stage_report.identity.clone());
@@ -950,7 +935,7 @@ async fn reconnect<S: Station>(
                     let reason = format!("{device} unavailable ({f}); reconnecting");
                     scan.interruption(&reason, Some(device), line);
                     scan.metrics.suspensions += 1;
-                    ctl.event(&scan.id, &scan.dir, "suspended", &reason);
+                    ctl.event(&scan.id, &scan.dir, HookStatus::Suspended, &reason);
                     ctl.publish(|s| {
                         s.state = State::Suspended;
                         s.reason = Some(reason.clone());
@@ -1190,8 +1175,7 @@ fn retry_or_fail(
 }
 
 /// Best-effort abort of a running measurement and stop of the stage, bounded in time.
-async fn cleanup<S: Station>(ctl: &Control, devices: &mut Devices<S>) {
-    let _ = ctl;
+async fn cleanup<S: Station>(devices: &mut Devices<S>) {
     if let Some(i) = devices.instrument.as_mut() {
         match tokio::time::timeout(CLEANUP_TIMEOUT, i.abort()).await {
             Ok(Ok(())) => {}
@@ -1350,7 +1334,6 @@ fn check_line(scan: &Scan, t: &TracedLine) -> Result<(), LineError> {
 /// Closes the scan: outputs and stop record on success, stop record on abort or failure,
 /// an interruption record on shutdown.
 async fn finish<S: Station>(
-    _station: &mut S,
     ctl: &mut Control,
     settings: &RunSettings,
     mut scan: Scan,
@@ -1398,7 +1381,7 @@ async fn finish<S: Station>(
                         };
                     }
                     tracing::info!(scan_id = %id, "scan complete: {reason}");
-                    ctl.event(&id, &dir, "success", &reason);
+                    ctl.event(&id, &dir, HookStatus::Success, &reason);
                     publish_end(ctl, Some(&id), Some(&dir), "success", &reason);
                     Outcome::Success { dir, outputs }
                 }
@@ -1413,18 +1396,18 @@ async fn finish<S: Station>(
             }
         }
         Some(End::Abort) => {
-            cleanup(ctl, &mut devices).await;
+            cleanup(&mut devices).await;
             let reason = "aborted by the operator".to_owned();
             if let Err(e) = scan.stop(StopStatus::Abort, &reason) {
                 tracing::error!(scan_id = %id, "cannot write the stop record: {e}");
             }
             tracing::warn!(scan_id = %id, "scan aborted; {} lines kept", scan.fitter.lines());
-            ctl.event(&id, &dir, "abort", &reason);
+            ctl.event(&id, &dir, HookStatus::Abort, &reason);
             publish_end(ctl, Some(&id), Some(&dir), "abort", &reason);
             Outcome::Aborted { dir }
         }
         Some(End::Shutdown) => {
-            cleanup(ctl, &mut devices).await;
+            cleanup(&mut devices).await;
             let line = scan.fitter.lines() as u32;
             scan.interruption(
                 "shutdown (SIGTERM/SIGINT): current line abandoned; the scan resumes at the next start",
@@ -1443,7 +1426,7 @@ fn close_failed(ctl: &Control, scan: &mut Scan, reason: &str, kind: FailKind) ->
     if let Err(e) = scan.stop(StopStatus::Fail, reason) {
         tracing::error!(scan_id = %scan.id, "cannot write the stop record: {e}");
     }
-    ctl.event(&scan.id, &scan.dir, "fail", reason);
+    ctl.event(&scan.id, &scan.dir, HookStatus::Fail, reason);
     publish_end(ctl, Some(&scan.id), Some(&scan.dir), "fail", reason);
     Outcome::Failed {
         dir: Some(scan.dir.clone()),
