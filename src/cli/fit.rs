@@ -361,7 +361,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let write_s = t_write.elapsed().as_secs_f64();
 
     let s = &fit.surface;
-    let report = serde_json::json!({
+    let mut report = serde_json::json!({
         "input": args.input.display().to_string(),
         "input_kind": kind,
         "output": output.display().to_string(),
@@ -370,12 +370,6 @@ pub fn run(args: Args) -> Result<(), CliError> {
         "pitch_y_mm": pitch_y_mm,
         "y_mm": y_mm,
         "lines": index,
-        "degree_u": s.degree_u(),
-        "degree_v": s.degree_v(),
-        "knots_u_len": s.knots_u().len(),
-        "knots_v_len": s.knots_v().len(),
-        "poles_u": s.count_u(),
-        "poles_v": s.count_v(),
         "max_residual_mm": residual_mm,
         "patches": stats.patches,
         "iges_bytes": stats.bytes,
@@ -392,6 +386,9 @@ pub fn run(args: Args) -> Result<(), CliError> {
             "write_iges": write_s,
         },
     });
+    if let Some(o) = report.as_object_mut() {
+        o.extend(crate::scan::outputs::surface_fields(s));
+    }
     if let Some(path) = &args.report {
         ensure_parent(path)?;
         write_atomically(path, |w| {

@@ -178,6 +178,18 @@ pub fn write_surface_files(
     Ok(files)
 }
 
+/// The degrees, knot-vector lengths and pole counts of a surface, for fit reports.
+pub fn surface_fields(s: &NurbsSurface) -> serde_json::Map<String, serde_json::Value> {
+    let mut m = serde_json::Map::new();
+    m.insert("degree_u".into(), s.degree_u().into());
+    m.insert("degree_v".into(), s.degree_v().into());
+    m.insert("knots_u_len".into(), s.knots_u().len().into());
+    m.insert("knots_v_len".into(), s.knots_v().len().into());
+    m.insert("poles_u".into(), s.count_u().into());
+    m.insert("poles_v".into(), s.count_v().into());
+    m
+}
+
 /// The Start-section lines that make an IGES file of a scan traceable.
 pub fn traceability_lines(start: &StartRecord, plan: &Plan) -> Vec<String> {
     let c = &start.conditions;
@@ -255,15 +267,8 @@ pub fn write_outputs(
     let files = write_surface_files(&iges_path, &fit.surface, &opts).map_err(|e| e.to_string())?;
     let write_s = t_write.elapsed().as_secs_f64();
     let iges_files: Vec<PathBuf> = files.iter().map(|f| f.path.clone()).collect();
-    let s = &fit.surface;
-    let fit_json = serde_json::json!({
+    let mut fit_json = serde_json::json!({
         "grid": { "rows": lines.len(), "cols": lines.first().map_or(0, |l| l.profile.len()) },
-        "degree_u": s.degree_u(),
-        "degree_v": s.degree_v(),
-        "knots_u_len": s.knots_u().len(),
-        "knots_v_len": s.knots_v().len(),
-        "poles_u": s.count_u(),
-        "poles_v": s.count_v(),
         "max_residual_mm": residual,
         "iges_files": files,
         "timings_s": {
@@ -275,6 +280,9 @@ pub fn write_outputs(
             "write_iges": write_s,
         },
     });
+    if let Some(o) = fit_json.as_object_mut() {
+        o.extend(surface_fields(&fit.surface));
+    }
     let report_path = store.root().join("report.json");
     let mut characterisation_error = None;
     if let Some(ch) = characterise {

@@ -588,6 +588,11 @@ fn downgrade(d: DeviceState) -> DeviceState {
 
 type BeginError = (End, Option<PathBuf>);
 
+/// An interrupt before the scan directory exists.
+fn interrupted(i: Interrupt) -> BeginError {
+    (End::from(i), None)
+}
+
 /// Opens and verifies the devices, creates or reopens the scan directory, rebuilds the
 /// fitter on resume.
 async fn begin<S: Station>(
@@ -624,12 +629,12 @@ async fn begin<S: Station>(
             let mut instrument = ctl
                 .guarded(station.open_instrument())
                 .await
-                .map_err(|i| (End::from(i), None))?
+                .map_err(interrupted)?
                 .map_err(unavailable)?;
             let report = ctl
                 .guarded(instrument.probe())
                 .await
-                .map_err(|i| (End::from(i), None))?
+                .map_err(interrupted)?
                 .map_err(|e| unavailable(Fault::of(Device::Instrument, &e)))?;
             for w in &report.warnings {
                 tracing::warn!("instrument: {w}");
@@ -638,12 +643,12 @@ async fn begin<S: Station>(
             let mut stage = ctl
                 .guarded(station.open_stage(direction))
                 .await
-                .map_err(|i| (End::from(i), None))?
+                .map_err(interrupted)?
                 .map_err(unavailable)?;
             let stage_report = ctl
                 .guarded(stage.connect())
                 .await
-                .map_err(|i| (End::from(i), None))?
+                .map_err(interrupted)?
                 .map_err(|e| unavailable(Fault::of(Device::Stage, &e)))?;
             ctl.publish(|s| s.stage = DeviceState::Connected);
             let warnings = stage
