@@ -1,8 +1,7 @@
 //! X3P writer: digests against their published vectors, a round trip through our reader, and
 //! the file read by an independent reader (surfalize; the test fails when it is missing:
-//! `pip install -r tests/python/requirements.txt`).
+//! `bash .ci/run` (tests/python/requirements.txt in .venv/)).
 
-use std::process::Command;
 use surfscan::metrology::x3p::{crc32, md5, read_x3p, to_x3p, X3pMeta};
 
 fn hex(b: &[u8]) -> String {
@@ -61,14 +60,14 @@ fn x3p_round_trips_and_surfalize_reads_it() {
     std::fs::write(&path, &bytes).unwrap();
     let script = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/python/metrology_x3p_read.py");
-    let out = Command::new("python3")
+    let out = crate::common::python()
         .arg(&script)
         .arg(&path)
         .output()
         .unwrap();
     assert!(
         out.status.success(),
-        "surfalize could not read the X3P (pip install -r tests/python/requirements.txt):\n{}",
+        "surfalize could not read the X3P (run `bash .ci/run`, which installs tests/python/requirements.txt into .venv/):\n{}",
         String::from_utf8_lossy(&out.stderr)
     );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();

@@ -428,3 +428,21 @@ pub fn committed_lines(out: &Path) -> usize {
     }
     0
 }
+
+/// The Python interpreter of the independent reference checks: `$SURFSCAN_PYTHON` when set,
+/// else the virtual environment `.ci/run` creates in the checkout (`.venv/`). A missing
+/// interpreter fails the calling test with what to do; the checks are never skipped.
+pub fn python() -> std::process::Command {
+    let python = match std::env::var_os("SURFSCAN_PYTHON") {
+        Some(p) => PathBuf::from(p),
+        None => Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python3"),
+    };
+    assert!(
+        python.exists(),
+        "no Python for the reference checks at {}: run `bash .ci/run` once (it creates .venv/ \
+         from tests/python/requirements.txt), or set SURFSCAN_PYTHON to an interpreter that has \
+         those packages",
+        python.display()
+    );
+    std::process::Command::new(python)
+}

@@ -1,7 +1,7 @@
 //! The real profiles in `tests/data/real/` checked against an independent implementation:
 //! surfalize 0.19.2 and scipy, run by `tests/python/metrology_surfalize.py`. The test fails (it
 //! does not skip) when Python or those packages are missing:
-//! `pip install -r tests/python/requirements.txt`.
+//! `bash .ci/run` (tests/python/requirements.txt in .venv/).
 //!
 //! Known convention differences, and how each is handled here:
 //! * surfalize subtracts the profile mean and evaluates Ra/Rq/Rsk/Rku over the whole length; the
@@ -22,7 +22,6 @@
 
 use serde_json::Value;
 use std::path::PathBuf;
-use std::process::Command;
 use surfscan::metrology::areal::{areal_params, Grid};
 use surfscan::metrology::filter::split;
 use surfscan::metrology::params::{analyze_line, Options};
@@ -51,14 +50,14 @@ fn load(name: &str) -> (Vec<f64>, Vec<f64>) {
 fn reference() -> Value {
     let script =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/python/metrology_surfalize.py");
-    let out = Command::new("python3")
+    let out = crate::common::python()
         .arg(&script)
         .arg(data_dir())
         .output()
         .expect("python3 must be installed to run the independent reference");
     assert!(
         out.status.success(),
-        "reference script failed (pip install -r tests/python/requirements.txt):\n{}",
+        "reference script failed (run `bash .ci/run`, which installs tests/python/requirements.txt into .venv/):\n{}",
         String::from_utf8_lossy(&out.stderr)
     );
     serde_json::from_slice(&out.stdout).expect("reference script prints JSON")

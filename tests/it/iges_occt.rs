@@ -3,7 +3,6 @@
 //! `tests/python/check_iges_occt.py`, which must find one B-spline face per patch with the
 //! right degrees, pole counts and bit-identical knots, that passes through the measured points within 1e-10 mm.
 //! Fails (does not skip) when python3 or OCP is missing.
-use std::process::Command;
 use surfscan::fit::{fit_grid, FitOptions};
 use surfscan::iges::{write_iges, IgesOptions};
 
@@ -88,7 +87,7 @@ fn check(split: bool, expect_patches_at_least: usize) {
         env!("CARGO_MANIFEST_DIR"),
         "/tests/python/check_iges_occt.py"
     );
-    let out = Command::new("python3")
+    let out = crate::common::python()
         .arg(script)
         .arg(&igs)
         .arg(&json)

@@ -4,9 +4,7 @@
 //! a full disk, SIGTERM, NG codes and bad configurations. The simulator's profile set is the
 //! independent reference for every stored height.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use std::time::Duration;
 use surfscan::scan::journal::{Journal, Record, ResumeState, StopStatus};
 use surfscan::scan::store::{NoFaults, ScanStore};

@@ -13,6 +13,7 @@ fn recv(sock: &UnixDatagram) -> String {
 
 #[test]
 fn notifications_reach_the_socket_named_by_the_environment() {
+    let _env = crate::process_state();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("notify");
     let sock = UnixDatagram::bind(&path).unwrap();

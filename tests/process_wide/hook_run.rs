@@ -29,8 +29,12 @@ fn hook(command: Vec<String>, timeout_s: u64) -> Hook {
     Hook::new(&settings).expect("a command is configured")
 }
 
+// The guard is held across awaits on purpose: it keeps the process-wide environment change
+// away from the other tests of this binary, and nothing inside this test contends for it.
+#[allow(clippy::await_holding_lock)]
 #[tokio::test]
 async fn the_hook_sees_the_four_variables() {
+    let _env = crate::process_state();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("env.txt");
     let s = script(

@@ -375,7 +375,7 @@ fn x3p_of_a_scan_carries_the_traceability_and_surfalize_reads_it() {
 
     let script =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/python/metrology_x3p_read.py");
-    let out = Command::new("python3")
+    let out = crate::common::python()
         .arg(&script)
         .arg(scan.join("measured.x3p"))
         .output()

@@ -3,7 +3,6 @@
 //! `tests/python/fit_geomdl.py`. Fails (never skips) when python3 or geomdl is missing.
 
 use std::io::Write;
-use std::process::Command;
 use surfscan::fit::{fit_grid, FitOptions};
 
 /// Deterministic rough heights (µm).
@@ -49,7 +48,7 @@ fn check(rows: usize, cols: usize, pitch_x_mm: f64, y_mm: &[f64], p: usize, q: u
     drop(f);
 
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/fit_geomdl.py");
-    let out = Command::new("python3")
+    let out = crate::common::python()
         .arg(script)
         .arg(&csv)
         .arg(format!("{pitch_x_mm:e}"))
@@ -57,11 +56,11 @@ fn check(rows: usize, cols: usize, pitch_x_mm: f64, y_mm: &[f64], p: usize, q: u
         .arg(q.to_string())
         .output()
         .unwrap_or_else(|e| {
-            panic!("cannot run python3 ({e}); install Python 3 and then `pip install geomdl`")
+            panic!("cannot run python3 ({e}); run `bash .ci/run` to create .venv/")
         });
     assert!(
         out.status.success(),
-        "fit_geomdl.py failed ({}); if geomdl is missing: `pip install geomdl`\n{}",
+        "fit_geomdl.py failed ({}); if geomdl is missing, run `bash .ci/run` to create .venv/\n{}",
         out.status,
         String::from_utf8_lossy(&out.stderr)
     );

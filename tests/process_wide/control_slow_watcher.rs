@@ -28,8 +28,12 @@ fn peer_closed(sock: &std::os::unix::net::UnixStream) -> bool {
         .is_some_and(|r| r.contains(PollFlags::POLLHUP))
 }
 
+// The guard is held across awaits on purpose: no other test of this binary may allocate while
+// this one measures resident memory, and nothing inside this test contends for it.
+#[allow(clippy::await_holding_lock)]
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_watcher_that_never_reads_is_dropped_and_another_keeps_receiving() {
+    let _memory = crate::process_state();
     // Each snapshot carries 32 KiB of reason text, so a server that queued every change for
     // the stuck watcher would hold 5000 × 32 KiB ≈ 160 MiB.
     const CHANGES: u32 = 5000;

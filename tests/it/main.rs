@@ -1,0 +1,30 @@
+//! The integration tests, one binary with a module per area (codecs and clients against
+//! byte streams and pseudo-terminals, the real `surfscan` binary against the simulator, the
+//! independent Python reference checks). Tests that change process-wide state (environment
+//! variables, resident memory) live in `tests/process_wide/` instead.
+
+mod common;
+mod control_cli;
+mod control_server;
+mod daemon_e2e;
+mod demo_cli;
+mod fit_geomdl;
+mod iges_fit_cli;
+mod iges_occt;
+mod iges_roundtrip;
+mod metrology_areal;
+mod metrology_cli;
+mod metrology_model;
+mod metrology_profile;
+mod metrology_reference;
+mod metrology_x3p;
+mod scan_dir_analysis;
+mod scan_e2e;
+mod scan_runner;
+mod scan_storage;
+mod sj210_client;
+mod sj210_probe_cli;
+mod sj210_sim;
+mod stage_grbl;
+mod stage_pty;
+mod stage_zaber;
