@@ -18,6 +18,7 @@ mod metrology_model;
 mod metrology_profile;
 mod metrology_reference;
 mod metrology_x3p;
+mod model_honesty;
 mod scan_dir_analysis;
 mod scan_e2e;
 mod scan_runner;
