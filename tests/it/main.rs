@@ -15,6 +15,7 @@ mod iges_roundtrip;
 mod metrology_areal;
 mod metrology_cli;
 mod metrology_model;
+mod metrology_plots;
 mod metrology_profile;
 mod metrology_reference;
 mod metrology_x3p;
