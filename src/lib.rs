@@ -6,8 +6,9 @@
 //! Layers, each usable without the ones above it (dependencies only point down):
 //!
 //! 0. Vocabulary, no I/O: [`units`] (mm, µm, integer nm), [`numfmt`] (numbers written for
-//!    people), [`profile`] (a traced line with its metadata), [`nurbs`] (the surface as a
-//!    value), [`devices`] (the contracts between the scan runner and the drivers).
+//!    people), [`build_info`] (version and commit), [`profile`] (a traced line with its
+//!    metadata), [`nurbs`] (the surface as a value), [`devices`] (the contracts between the
+//!    scan runner and the drivers).
 //! 1. Pure logic: [`fit`] (the paper's interpolation, incremental), [`iges`] (IGES 5.3
 //!    writer/reader), [`metrology`] (ISO roughness, bearing area curves, areal parameters),
 //!    the codecs inside [`sj210`] and [`stage`].
@@ -27,6 +28,7 @@
 #![warn(missing_docs)]
 
 pub mod atomic;
+pub mod build_info;
 pub mod cli;
 pub mod config;
 pub mod control;
