@@ -4,6 +4,7 @@
 //! variables, resident memory) live in `tests/process_wide/` instead.
 
 mod common;
+mod config_ranges;
 mod control_cli;
 mod control_server;
 mod daemon_e2e;
