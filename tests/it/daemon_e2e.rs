@@ -142,10 +142,19 @@ fn notify_until(r: &Rig, d: &mut Child, want: impl Fn(&str) -> bool) -> Vec<Stri
     let start = Instant::now();
     let mut buf = [0u8; 4096];
     while start.elapsed() < DEADLINE {
-        if let Some(status) = d.try_wait().unwrap() {
-            if !seen.iter().any(|m: &String| want(m)) {
-                panic!("the daemon exited ({status}) before the notification; got {seen:?}");
+        let exited = d.try_wait().unwrap();
+        if let Some(status) = exited {
+            // Datagrams it sent before exiting may still wait in the socket: read them all
+            // before concluding that the notification never came.
+            r.notify.set_nonblocking(true).unwrap();
+            while let Ok(n) = r.notify.recv(&mut buf) {
+                seen.push(String::from_utf8_lossy(&buf[..n]).into_owned());
             }
+            r.notify.set_nonblocking(false).unwrap();
+            if seen.iter().any(|m: &String| want(m)) {
+                return seen;
+            }
+            panic!("the daemon exited ({status}) before the notification; got {seen:?}");
         }
         if let Ok(n) = r.notify.recv(&mut buf) {
             let m = String::from_utf8_lossy(&buf[..n]).into_owned();
