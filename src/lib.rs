@@ -34,6 +34,7 @@ pub mod config;
 pub mod control;
 pub mod devices;
 pub mod fit;
+pub mod hook;
 pub mod iges;
 pub mod metrology;
 pub mod numfmt;

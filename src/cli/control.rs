@@ -19,7 +19,8 @@
 
 use super::{CliError, Exit};
 use crate::control::client::{ClientError, ControlClient, Received};
-use crate::control::protocol::{DeviceState, Message, Request, State, Status};
+use crate::control::protocol::{Message, Request};
+use crate::scan::status::{DeviceState, State, Status};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -393,7 +394,7 @@ pub fn render_status_line(s: &Status) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::protocol::LastStop;
+    use crate::scan::status::{Ending, LastStop};
 
     fn scanning() -> Status {
         let mut s = Status::idle();
@@ -423,7 +424,7 @@ mod tests {
         let mut s = Status::idle();
         s.last_stop = Some(LastStop {
             scan_id: "G-0141".into(),
-            status: "fail".into(),
+            status: Ending::Fail,
             reason: "stage following error".into(),
             dir: "/d/G-0141".into(),
         });

@@ -6,20 +6,24 @@
 //! Exit status: 0 success, 1 the scan failed or was aborted, 2 usage, 69 a device is
 //! unavailable (or the daemon holds the ports), 74 I/O error, 78 bad configuration.
 //!
-//! Layer 5 (composition): config, station, runner, signals, terminal.
+//! Layer 5 (composition): config, station, runner, signals, terminal; turns the configuration
+//! into the runner's typed settings.
 
 use super::{CliError, Exit};
 use crate::config::{Config, ConfigError};
-use crate::control::protocol::{State, Status};
 use crate::report::{characterise_scan, ScanAnalysisOptions};
 use crate::scan::journal::find_unfinished;
 use crate::scan::outputs::Characterise;
-use crate::scan::runner::{run_scan, Control, FailKind, Outcome, RunSettings, ScanRequest};
+use crate::scan::plan::Plan;
+use crate::scan::runner::{run_scan, Control, FailKind, Outcome, ScanRequest};
+use crate::scan::settings::{Backoff, RunSettings};
 use crate::scan::station::SerialStation;
+use crate::scan::status::{State, Status};
 use crate::scan::testhooks::TestHooks;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 
 /// Arguments of `surfscan scan`.
@@ -67,9 +71,28 @@ pub fn load_config(path: &Path) -> Result<(Config, String), CliError> {
     Ok((config, hash))
 }
 
-/// The runner's settings for a station: the configuration, its hash, the test hooks, and
-/// the characterisation of `[analysis]` run when a scan completes.
-pub fn run_settings(config: Config, config_hash: String, hooks: TestHooks) -> RunSettings {
+/// The plan of a new scan of this configuration.
+pub fn plan_of(config: &Config) -> Result<Plan, ConfigError> {
+    let (y_start_nm, y_step_nm) = config.y_grid_nm()?;
+    Ok(Plan {
+        lines: config.scan.lines,
+        y_start_nm,
+        y_step_nm,
+        degree_u: config.fit.degree_u,
+        degree_v: config.fit.degree_v,
+        max_line_attempts: config.scan.max_line_attempts,
+    })
+}
+
+/// The runner's settings for a station: the plan and session settings of the configuration,
+/// a frozen copy of it and its hash, the test hooks, and the characterisation of `[analysis]`
+/// run when a scan completes. A configuration whose plan cannot be made is exit 78.
+pub fn run_settings(
+    config: &Config,
+    config_hash: String,
+    hooks: TestHooks,
+) -> Result<RunSettings, CliError> {
+    let plan = plan_of(config).map_err(|e| CliError::new(Exit::Config, e.to_string()))?;
     let a = config.analysis.clone();
     let characterise: Characterise = Arc::new(move |dir: &Path, fit: serde_json::Value| {
         let options = ScanAnalysisOptions {
@@ -91,12 +114,21 @@ pub fn run_settings(config: Config, config_hash: String, hooks: TestHooks) -> Ru
         files.extend(out.model_x3p);
         Ok(files)
     });
-    RunSettings {
-        config,
+    Ok(RunSettings {
+        plan,
+        output_dir: config.output.dir.clone(),
+        home_on_start: config.stage.home_on_start,
+        instrument_baud: config.instrument.baud,
+        backoff: Backoff {
+            initial: Duration::from_millis(config.scan.reconnect_initial_ms),
+            max: Duration::from_millis(config.scan.reconnect_max_ms),
+        },
+        metrics_file: config.metrics.file.clone(),
+        config: serde_json::to_value(config).unwrap_or_default(),
         config_hash,
         hooks: Arc::new(hooks),
         characterise: Some(characterise),
-    }
+    })
 }
 
 /// The scan to run for this configuration: the newest unfinished one, else a new one.
@@ -305,7 +337,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
     let request = choose_request(&config, args.specimen, args.operator, args.notes)?;
-    let settings = run_settings(config, config_hash, hooks);
+    let settings = run_settings(&config, config_hash, hooks)?;
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()

@@ -2,7 +2,7 @@
 //! configurations.
 //!
 //! Pure: depends on [`crate::transport`] (link settings types), [`crate::units`], and the
-//! stage's own config types.
+//! configuration types of the policy and the drivers (which import nothing from here).
 
 use super::grbl::GrblConfig;
 use super::policy::{PolicyConfig, ScanDirection};
@@ -205,6 +205,16 @@ impl StageSettings {
             allow_inexact_step: self.allow_inexact_step,
             direction: ScanDirection::Positive,
         })
+    }
+
+    /// Checks every setting the policy and the selected driver use, before a port is
+    /// opened.
+    pub fn validate(&self) -> Result<(), StageError> {
+        self.policy_config()?;
+        match self.protocol {
+            StageProtocol::Grbl => self.grbl_config().map(|_| ()),
+            StageProtocol::Zaber => Ok(()),
+        }
     }
 
     /// The GRBL driver's configuration.

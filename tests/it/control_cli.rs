@@ -5,10 +5,10 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use surfscan::control::protocol::{
-    ControlChannels, DeviceState, OperatorCommand, OperatorRequest, State, Status,
-};
+use surfscan::control::protocol::ControlChannels;
 use surfscan::control::server::{self, ServerOptions};
+use surfscan::scan::command::{OperatorCommand, OperatorRequest};
+use surfscan::scan::status::{DeviceState, State, Status};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::sync::{mpsc, oneshot, watch};
 

@@ -5,6 +5,7 @@
 
 mod cli_conventions;
 mod common;
+mod config_ranges;
 mod control_cli;
 mod control_server;
 mod daemon_e2e;

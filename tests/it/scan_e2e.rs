@@ -6,8 +6,9 @@
 
 use crate::common::*;
 use std::time::Duration;
+use surfscan::scan::faults::NoFaults;
 use surfscan::scan::journal::{Journal, Record, ResumeState, StopStatus};
-use surfscan::scan::store::{NoFaults, ScanStore};
+use surfscan::scan::store::ScanStore;
 use surfscan_sim::grbl::StageFault;
 
 /// The paper's parameters, computed here from the stored points independently of the

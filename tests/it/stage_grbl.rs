@@ -323,13 +323,13 @@ async fn hard_limit_alarm_mid_session_is_position_lost_and_wpos_reports_use_wco(
 fn connect_to_a_missing_port_is_absent() {
     let mut s: StageSettings = toml::from_str(SETTINGS).unwrap();
     s.port = "/dev/surfscan-no-such-port".into();
-    let e = match surfscan::stage::connect(&s) {
+    let e = match surfscan::scan::station::open_stage(&s) {
         Err(e) => e,
         Ok(_) => panic!("opened a port that does not exist"),
     };
     assert_eq!(e.class(), FaultClass::Absent, "{e}");
     s.poll_interval_ms = 100;
-    let e = match surfscan::stage::connect(&s) {
+    let e = match surfscan::scan::station::open_stage(&s) {
         Err(e) => e,
         Ok(_) => panic!("accepted a 10 Hz GRBL poll"),
     };
