@@ -3,12 +3,15 @@
 //! opens a port. Unknown keys are refused everywhere (`deny_unknown_fields`); a bad file
 //! maps to exit status 78 (`EX_CONFIG`) with a message naming the file, the key and the fix.
 //!
+//! The tables no lower module owns (`[scan]`, `[fit]`, `[output]`, …) are defined here; the
+//! composition layer turns them into the typed settings of the modules that use them (the
+//! scan runner never sees this file's types).
+//!
 //! Layer 4 (process edge): depends on the settings types of [`crate::sj210`],
-//! [`crate::stage`] and [`crate::scan::hook`], on [`crate::scan::plan`] and [`crate::units`], and
-//! reads one file.
+//! [`crate::stage`] and [`crate::hook`], on [`crate::units`], and reads one file; nothing
+//! from the scan session.
 
-use crate::scan::hook::HookSettings;
-use crate::scan::plan::Plan;
+use crate::hook::HookSettings;
 use crate::sj210::settings::InstrumentSettings;
 use crate::stage::settings::StageSettings;
 use crate::units::Nm;
@@ -432,24 +435,14 @@ impl Config {
         Ok(())
     }
 
-    /// The plan this configuration describes.
-    pub fn plan(&self) -> Result<Plan, ConfigError> {
-        self.plan_checked(Path::new("(config)"))
+    /// y of the first line and the step between lines in whole nanometres (the grid of the
+    /// scan's plan), checked.
+    pub fn y_grid_nm(&self) -> Result<(Nm, Nm), ConfigError> {
+        self.y_grid_checked(Path::new("(config)"))
     }
 
-    fn plan_checked(&self, path: &Path) -> Result<Plan, ConfigError> {
+    fn y_grid_checked(&self, path: &Path) -> Result<(Nm, Nm), ConfigError> {
         let s = &self.scan;
-        let min_lines = self.fit.degree_v + 1;
-        if (s.lines as usize) < min_lines {
-            return Err(Config::invalid(
-                path,
-                "scan.lines",
-                format!(
-                    "{} lines cannot carry a surface of degree-v {}: at least {min_lines} are needed",
-                    s.lines, self.fit.degree_v
-                ),
-            ));
-        }
         let y_start_nm = Nm::try_from_mm(s.y_start_mm).ok_or_else(|| {
             Config::invalid(
                 path,
@@ -477,6 +470,25 @@ impl Config {
                 "must not be 0 (the paper steps 0.01 mm)".into(),
             ));
         }
+        Ok((y_start_nm, y_step_nm))
+    }
+
+    /// The plan's rules: enough lines for the degree, whole-nanometre y, every line inside
+    /// the stage's soft limits, at least one attempt per line.
+    fn plan_checked(&self, path: &Path) -> Result<(), ConfigError> {
+        let s = &self.scan;
+        let min_lines = self.fit.degree_v + 1;
+        if (s.lines as usize) < min_lines {
+            return Err(Config::invalid(
+                path,
+                "scan.lines",
+                format!(
+                    "{} lines cannot carry a surface of degree-v {}: at least {min_lines} are needed",
+                    s.lines, self.fit.degree_v
+                ),
+            ));
+        }
+        let (y_start_nm, y_step_nm) = self.y_grid_checked(path)?;
         if s.max_line_attempts == 0 {
             return Err(Config::invalid(
                 path,
@@ -484,17 +496,9 @@ impl Config {
                 "must be at least 1".into(),
             ));
         }
-        let plan = Plan {
-            lines: s.lines,
-            y_start_nm,
-            y_step_nm,
-            degree_u: self.fit.degree_u,
-            degree_v: self.fit.degree_v,
-            max_line_attempts: s.max_line_attempts,
-        };
         let (lo, hi) = (self.stage.soft_limit_min_mm, self.stage.soft_limit_max_mm);
         for k in [0, s.lines - 1] {
-            let y = plan.target(k).to_mm();
+            let y = Nm(y_start_nm.0 + i64::from(k) * y_step_nm.0).to_mm();
             if y < lo || y > hi {
                 return Err(Config::invalid(
                     path,
@@ -506,7 +510,7 @@ impl Config {
                 ));
             }
         }
-        Ok(plan)
+        Ok(())
     }
 }
 
@@ -683,11 +687,10 @@ dir = "/var/lib/surfscan/scans"
             c.control.socket,
             PathBuf::from("/run/surfscan/control.sock")
         );
-        let plan = c.plan().unwrap();
-        assert_eq!(plan.target(0), Nm(1_000_000));
+        let (start, step) = c.y_grid_nm().unwrap();
+        assert_eq!(start, Nm(1_000_000));
         // 0.01 mm steps are exact integers: line 30 at 1.3 mm, no accumulated rounding.
-        assert_eq!(plan.target(30), Nm(1_300_000));
-        assert_eq!(plan.targets().len(), 31);
+        assert_eq!(Nm(start.0 + 30 * step.0), Nm(1_300_000));
     }
 
     #[test]
@@ -960,7 +963,7 @@ dir = "/var/lib/surfscan/scans"
         let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/config/surfscan.toml"));
         let c = Config::load(path).unwrap();
         assert_eq!(c.scan.lines, 31);
-        assert_eq!(c.plan().unwrap().y_step_nm, Nm(10_000));
+        assert_eq!(c.y_grid_nm().unwrap().1, Nm(10_000));
         // Every documented key is present (commented-out optional ones included), so the
         // file stays the reference: compare against the keys the schema serialises.
         let text = std::fs::read_to_string(path).unwrap();
