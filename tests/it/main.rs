@@ -29,6 +29,7 @@ mod scan_storage;
 mod sj210_client;
 mod sj210_probe_cli;
 mod sj210_sim;
+mod sj_parameters;
 mod stage_grbl;
 mod stage_pty;
 mod stage_zaber;
