@@ -11,8 +11,9 @@
 
 use crate::devices::{DeviceFault, FaultClass, Instrument, YAxis};
 use crate::profile::Conditions;
-use crate::sj210::client::{pitch_from_lambda_s, Sj210Client};
+use crate::sj210::client::Sj210Client;
 use crate::sj210::models::ModelTable;
+use crate::sj210::sampling::pitch_from_lambda_s;
 use crate::sj210::settings::InstrumentSettings;
 use crate::stage::{AnyYAxis, ScanDirection, StageError, StageSettings};
 use serde::{Deserialize, Serialize};
