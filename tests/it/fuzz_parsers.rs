@@ -355,9 +355,11 @@ const SJ210_REPLIES: &[&[u8]] = &[
 #[test]
 fn sj210_codec_and_reply_parsers() {
     use bytes::BytesMut;
-    use surfscan::sj210::client::{parse_block, parse_result};
     use surfscan::sj210::codec::{classify, encode_command, Reply, Sj210Codec};
     use surfscan::sj210::models::{ModelId, ModelTable};
+    use surfscan::sj210::replies::{
+        battery_from_code, leading_number, parse_block, parse_code, parse_param_count, parse_result,
+    };
     use tokio_util::codec::Decoder;
 
     let seeds: Vec<Vec<u8>> = SJ210_REPLIES.iter().map(|s| s.to_vec()).collect();
@@ -402,6 +404,9 @@ fn sj210_codec_and_reply_parsers() {
             };
             let _ = parse_block(&payload);
             let _ = parse_result("RDRES02", &payload, width);
+            let _ = parse_code(&payload).map(battery_from_code);
+            let _ = leading_number(&payload);
+            let _ = parse_param_count(&payload);
             for t in &tables {
                 let _ = t.parse_conditions(&payload);
             }
