@@ -326,7 +326,10 @@ fn config_loader() {
         // What start-up does with a file: parse, validate, then derive every driver's
         // settings and the plan from it.
         if let Ok(c) = surfscan::config::Config::parse(Path::new("fuzz.toml"), &text(&b)) {
-            let _ = c.plan();
+            let _ = surfscan::cli::scan::plan_of(&c);
+            let _ = c.y_grid_nm();
+            let _ = c.fit.v_method_for(c.scan.lines as usize);
+            let _ = c.analysis.spike_options();
             let _ = c.stage.policy_config();
             let _ = c.stage.nm_per_unit();
             let _ = c.instrument.client_options();
@@ -505,7 +508,7 @@ fn grid_and_profile_csv() {
         let t = text(&b);
         let pitch_mm = [0.0015, 0.0, -1.0, f64::NAN][pitch as usize];
         let _ = surfscan::cli::fit::parse_grid(&t);
-        let _ = surfscan::scan::store::parse_csv(Path::new("fuzz.csv"), &t, pitch_mm);
+        let _ = surfscan::scan::line_csv::parse_csv(Path::new("fuzz.csv"), &t, pitch_mm);
         // The simulator's own reader of the traces it serves.
         let _ = surfscan_sim::ProfileSet::parse(&t, Some(pitch_mm));
         let _ = surfscan_sim::ProfileSet::parse(&t, None);
