@@ -31,4 +31,5 @@ mod sj210_probe_cli;
 mod sj210_sim;
 mod stage_grbl;
 mod stage_pty;
+mod stage_scan;
 mod stage_zaber;
