@@ -28,6 +28,7 @@ mod scan_runner;
 mod scan_storage;
 mod sj210_client;
 mod sj210_probe_cli;
+mod sj210_readout_probe;
 mod sj210_sim;
 mod stage_grbl;
 mod stage_pty;
