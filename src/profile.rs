@@ -67,7 +67,7 @@ pub struct Conditions {
 ///
 /// JSON field names (in a line's `NNNN.json`, under `results`): `name`, `value`, `unit`,
 /// `printed`, `ng_code`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct InstrumentResult {
     /// Parameter name as the instrument printed it, trimmed: "Ra", "Rz1max", "Rmr". A
     /// parameter the instrument could not calculate (an NG code, see `ng_code`) is named by
