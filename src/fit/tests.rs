@@ -2,6 +2,7 @@
 //! and error reporting.
 
 use super::*;
+use crate::profile::Profile;
 
 /// Deterministic roughness-like heights (µm): a few waves plus LCG noise.
 fn rough_grid(rows: usize, cols: usize, seed: u64) -> Vec<f64> {
