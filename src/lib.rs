@@ -7,7 +7,7 @@
 //!
 //! 0. Vocabulary, no I/O: [`units`] (mm, µm, integer nm), [`profile`] (a traced line with its
 //!    metadata), [`nurbs`] (the surface as a value), [`devices`] (the contracts between the
-//!    scan runner and the drivers).
+//!    scan runner and the drivers), [`numbers`] (decimal numbers in CSV text, read fast).
 //! 1. Pure logic: [`fit`] (the paper's interpolation, incremental), [`iges`] (IGES 5.3
 //!    writer/reader), [`metrology`] (ISO roughness, bearing area curves, areal parameters),
 //!    the codecs inside [`sj210`] and [`stage`].
@@ -34,6 +34,7 @@ pub mod devices;
 pub mod fit;
 pub mod iges;
 pub mod metrology;
+pub mod numbers;
 pub mod nurbs;
 pub mod profile;
 pub mod report;
