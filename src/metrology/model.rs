@@ -114,28 +114,52 @@ pub fn sample_model_grid(
     cols: usize,
 ) -> Result<Vec<f64>, MetrologyError> {
     super::check_pitch(pitch_x_mm)?;
+    if x_depends_on_u_only(surface) {
+        sample_shared_u(surface, vs, x0_mm, pitch_x_mm, cols)
+    } else {
+        sample_per_line(surface, vs, x0_mm, pitch_x_mm, cols)
+    }
+}
+
+/// [`sample_model_grid`] for a net whose x depends on u alone: one inversion, one basis.
+fn sample_shared_u(
+    surface: &NurbsSurface,
+    vs: &[f64],
+    x0_mm: f64,
+    pitch_x_mm: f64,
+    cols: usize,
+) -> Result<Vec<f64>, MetrologyError> {
     let mut out = Vec::with_capacity(vs.len().saturating_mul(cols));
     let mut poles = Vec::new();
-    if x_depends_on_u_only(surface) {
-        // Every iso-curve along u has the same x(u) (the net's x is constant down each column,
-        // as in every fit), so x(u) is inverted once and the basis at the found u serves every
-        // line.
-        let x_curve = BSplineCurve {
-            degree: surface.degree_u(),
-            knots: surface.knots_u().to_vec(),
-            poles: (0..surface.count_u())
-                .map(|i| [surface.pole(i, 0)[0], 0.0, 0.0])
-                .collect(),
-        };
-        let x_at = |u: f64| x_curve.evaluate(u).map_or(f64::NAN, |p| p[0]);
-        let us = invert_row(&x_at, x0_mm, pitch_x_mm, cols)?;
-        let basis = UBasis::new(surface, &us);
-        for &v in vs {
-            surface.iso_poles_u_padded(v, &mut poles);
-            basis.for_each_point(&poles, |_, p| out.push(p[2] * 1000.0));
-        }
-        return Ok(out);
+    // Every iso-curve along u has the same x(u) (the net's x is constant down each column,
+    // as in every fit), so x(u) is inverted once and the basis at the found u serves every
+    // line.
+    let x_curve = BSplineCurve {
+        degree: surface.degree_u(),
+        knots: surface.knots_u().to_vec(),
+        poles: (0..surface.count_u())
+            .map(|i| [surface.pole(i, 0)[0], 0.0, 0.0])
+            .collect(),
+    };
+    let x_at = |u: f64| x_curve.evaluate(u).map_or(f64::NAN, |p| p[0]);
+    let us = invert_row(&x_at, x0_mm, pitch_x_mm, cols)?;
+    let basis = UBasis::new(surface, &us);
+    for &v in vs {
+        surface.iso_poles_u_padded(v, &mut poles);
+        basis.for_each_point(&poles, |_, p| out.push(p[2] * 1000.0));
     }
+    Ok(out)
+}
+
+/// [`sample_model_grid`] for any net: x(u) inverted along each line's own iso-curve.
+fn sample_per_line(
+    surface: &NurbsSurface,
+    vs: &[f64],
+    x0_mm: f64,
+    pitch_x_mm: f64,
+    cols: usize,
+) -> Result<Vec<f64>, MetrologyError> {
+    let mut out = Vec::with_capacity(vs.len().saturating_mul(cols));
     for &v in vs {
         let iso = surface.iso_curve_u(v);
         let at = |u: f64| iso.evaluate(u).map_or(f64::NAN, |p| p[0]);
@@ -229,4 +253,45 @@ fn invert_x<F: Fn(f64) -> f64>(at: &F, x_mm: f64, u_from: f64, x_at_1: f64) -> f
         }
     }
     0.5 * (a + b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::{fit_grid, FitOptions};
+
+    #[test]
+    fn one_inversion_for_all_lines_equals_one_per_line() {
+        // A fitted net (x constant down each column) sampled both ways, at half the pitch as
+        // the report does and at an offset, unrelated pitch.
+        let (rows, cols, px) = (9, 400, 0.0005);
+        let mut s: u64 = 0x9E37_79B9_7F4A_7C15;
+        let h: Vec<f64> = (0..rows * cols)
+            .map(|k| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let noise = (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+                (k % cols) as f64 * 0.002 + (k as f64 * 0.05).sin() + 0.4 * noise
+            })
+            .collect();
+        let y: Vec<f64> = (0..rows).map(|l| l as f64 * 0.01).collect();
+        let fit = fit_grid(px, &y, &h, cols, FitOptions::default()).unwrap();
+        assert!(x_depends_on_u_only(&fit.surface));
+        for (x0, pitch, n) in [(0.0, px / 2.0, 2 * cols - 1), (0.00013, 0.00071, 250)] {
+            let shared = sample_shared_u(&fit.surface, &fit.params_v, x0, pitch, n).unwrap();
+            let per_line = sample_per_line(&fit.surface, &fit.params_v, x0, pitch, n).unwrap();
+            let scale = per_line.iter().map(|z| z.abs()).fold(0.0, f64::max);
+            for (k, (a, b)) in shared.iter().zip(&per_line).enumerate() {
+                assert!(
+                    (a - b).abs() <= 1e-12 * scale,
+                    "point {k}: shared {a} vs per line {b}"
+                );
+            }
+            assert_eq!(
+                sample_model_grid(&fit.surface, &fit.params_v, x0, pitch, n).unwrap(),
+                shared
+            );
+        }
+    }
 }
