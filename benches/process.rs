@@ -373,8 +373,8 @@ fn process_cpu_s() -> f64 {
 
 /// The daemon's characterisation of a completed scan directory, in-process, for an R profile
 /// (no λc filter) and a P profile (λc 0.8 mm per line).
-fn bench_scan(dir: &Path, cols: usize, runs: usize) {
-    for kind in [ProfileKind::R, ProfileKind::P] {
+fn bench_scan(dir: &Path, cols: usize, runs: usize, kinds: &[ProfileKind]) {
+    for &kind in kinds {
         let scan = write_scan(dir, kind, cols);
         let (mut wall, mut cpu) = (Vec::new(), Vec::new());
         let mut stages = serde_json::Value::Null;
@@ -416,8 +416,9 @@ fn main() {
     if !full {
         bench_fit(dir, 7, 60, 1, false);
         bench_large(dir, 9, 70, 1, false);
-        bench_analyze(dir, 7, 4000, 1, false);
-        bench_scan(dir, 400, 1);
+        // At least one λc (0.8 mm = 1600 points) per line.
+        bench_analyze(dir, 7, 1800, 1, false);
+        bench_scan(dir, 1800, 1, &[ProfileKind::P]);
         return;
     }
     if want("fit") {
@@ -430,6 +431,6 @@ fn main() {
         bench_analyze(dir, 31, 8000, 7, count_instructions);
     }
     if want("scan") {
-        bench_scan(dir, 8000, 5);
+        bench_scan(dir, 8000, 5, &[ProfileKind::R, ProfileKind::P]);
     }
 }
