@@ -28,8 +28,11 @@ use std::sync::Arc;
 use std::time::Instant;
 use surfscan::profile::{Conditions, FilterKind, Profile, ProfileKind};
 use surfscan::report::{characterise_scan, ScanAnalysisOptions};
+use surfscan::scan::faults::NoFaults;
 use surfscan::scan::journal::{Journal, StartRecord};
-use surfscan::scan::store::{LineMeta, NoFaults, ScanId, ScanStore};
+use surfscan::scan::line::LineMeta;
+use surfscan::scan::scan_id::ScanId;
+use surfscan::scan::store::ScanStore;
 use surfscan::units::Nm;
 
 const PITCH_X_MM: f64 = 0.0005;

@@ -3,12 +3,15 @@
 //! opens a port. Unknown keys are refused everywhere (`deny_unknown_fields`); a bad file
 //! maps to exit status 78 (`EX_CONFIG`) with a message naming the file, the key and the fix.
 //!
+//! The tables no lower module owns (`[scan]`, `[fit]`, `[output]`, …) are defined here; the
+//! composition layer turns them into the typed settings of the modules that use them (the
+//! scan runner never sees this file's types).
+//!
 //! Layer 4 (process edge): depends on the settings types of [`crate::sj210`],
-//! [`crate::stage`] and [`crate::scan::hook`], on [`crate::scan::plan`] and [`crate::units`], and
-//! reads one file.
+//! [`crate::stage`] and [`crate::hook`], on [`crate::units`], and reads one file; nothing
+//! from the scan session.
 
-use crate::scan::hook::HookSettings;
-use crate::scan::plan::Plan;
+use crate::hook::HookSettings;
 use crate::sj210::settings::InstrumentSettings;
 use crate::stage::settings::StageSettings;
 use crate::units::Nm;
@@ -65,6 +68,15 @@ fn d_curves() -> usize {
 fn d_levels() -> usize {
     101
 }
+fn d_spike_sigma() -> f64 {
+    crate::metrology::outliers::SpikeOptions::default().threshold_sigma
+}
+fn d_spike_points() -> usize {
+    crate::metrology::outliers::SpikeOptions::default().max_points
+}
+fn d_holdout_threshold() -> f64 {
+    crate::metrology::holdout::SUPPORTED_BELOW_SQ
+}
 
 /// `[scan]`: the grid of traced lines.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -87,7 +99,7 @@ pub struct ScanSettings {
     pub reconnect_max_ms: u64,
 }
 
-/// `[fit]`: the interpolating surface.
+/// `[fit]`: the surface.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub struct FitSettings {
@@ -97,6 +109,16 @@ pub struct FitSettings {
     /// Degree along y / v (default 5).
     #[serde(default = "d_degree")]
     pub degree_v: usize,
+    /// How the surface is made across the lines (default `interpolate`, the paper).
+    #[serde(default)]
+    pub v_method: VMethodSetting,
+    /// Poles along v for `v-method = "least-squares"` (default: a quarter of the lines, at least
+    /// degree-v + 1); refused with `interpolate`.
+    #[serde(default)]
+    pub v_control_rows: Option<usize>,
+    /// What the fit does with the spikes `[analysis]` finds (default `keep`).
+    #[serde(default)]
+    pub outliers: FitOutliers,
 }
 
 impl Default for FitSettings {
@@ -104,8 +126,61 @@ impl Default for FitSettings {
         FitSettings {
             degree_u: 5,
             degree_v: 5,
+            v_method: VMethodSetting::default(),
+            v_control_rows: None,
+            outliers: FitOutliers::default(),
         }
     }
+}
+
+impl FitSettings {
+    /// The method across the lines for a scan of `lines` lines.
+    pub fn v_method_for(&self, lines: usize) -> crate::fit::VMethod {
+        match self.v_method {
+            VMethodSetting::Interpolate => crate::fit::VMethod::Interpolate,
+            VMethodSetting::LeastSquares => crate::fit::VMethod::LeastSquares {
+                control_rows: self.v_control_rows.unwrap_or_else(|| {
+                    crate::fit::approx_v::default_control_rows(lines, self.degree_v)
+                }),
+            },
+        }
+    }
+}
+
+/// `[fit] v-method`: the paper's interpolation through every line, or a least-squares
+/// approximation across the lines (see [`crate::fit::approx_v`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum VMethodSetting {
+    /// The paper (bit-identical to the plain fit).
+    #[default]
+    Interpolate,
+    /// Least squares across the lines with `v-control-rows` poles.
+    LeastSquares,
+}
+
+/// `[fit] outliers`: whether the fit sees the spikes as measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum FitOutliers {
+    /// Fit the data as measured (the paper).
+    #[default]
+    Keep,
+    /// Replace each spike by the straight line between its neighbours before fitting; the
+    /// IGES Start section and the report say so and list the spikes.
+    Replace,
+}
+
+/// `[analysis] outliers`: what characterisation does with the spikes it finds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum OutlierPolicy {
+    /// Name them in the warnings and the report; the data stay as measured.
+    #[default]
+    Flag,
+    /// Also leave them out of the per-line parameters and the measured grid's areal
+    /// parameters (bridged by the straight line between their neighbours).
+    Exclude,
 }
 
 /// `[output]`: storage.
@@ -147,6 +222,20 @@ pub struct AnalysisSettings {
     /// Treat profiles as R profiles (no λc filter), whatever the instrument says.
     #[serde(default)]
     pub no_filter: bool,
+    /// Spikes: `flag` (default; named, data unchanged) or `exclude` from characterisation.
+    #[serde(default)]
+    pub outliers: OutlierPolicy,
+    /// A spike deviates from its line's median roughness by more than this many robust σ
+    /// (1.4826 · MAD; default 10).
+    #[serde(default = "d_spike_sigma")]
+    pub spike_threshold_sigma: f64,
+    /// The longest run of points that counts as a spike (default 5).
+    #[serde(default = "d_spike_points")]
+    pub spike_max_points: usize,
+    /// The model between lines is supported when the hold-out rms is at most this × Sq
+    /// (default 0.5).
+    #[serde(default = "d_holdout_threshold")]
+    pub holdout_threshold: f64,
 }
 
 impl Default for AnalysisSettings {
@@ -156,6 +245,20 @@ impl Default for AnalysisSettings {
             levels: d_levels(),
             lambda_c_mm: None,
             no_filter: false,
+            outliers: OutlierPolicy::default(),
+            spike_threshold_sigma: d_spike_sigma(),
+            spike_max_points: d_spike_points(),
+            holdout_threshold: d_holdout_threshold(),
+        }
+    }
+}
+
+impl AnalysisSettings {
+    /// The spike rule of these settings.
+    pub fn spike_options(&self) -> crate::metrology::outliers::SpikeOptions {
+        crate::metrology::outliers::SpikeOptions {
+            threshold_sigma: self.spike_threshold_sigma,
+            max_points: self.spike_max_points,
         }
     }
 }
@@ -229,8 +332,35 @@ impl Config {
         }
     }
 
-    /// Checks what can be checked without devices.
+    /// Checks every numeric key against its range in [`NUMERIC_KEYS`]; the first value out
+    /// of range is the error, naming the key, the value and the range.
+    pub fn check_ranges(&self, path: &Path) -> Result<(), ConfigError> {
+        for k in NUMERIC_KEYS {
+            if let Some(v) = (k.value)(self) {
+                if !k.contains(v) {
+                    return Err(Config::invalid(
+                        path,
+                        k.key,
+                        format!(
+                            "{v}{} is outside its valid range {} to {}{}; {}",
+                            k.unit_suffix(),
+                            k.min,
+                            k.max,
+                            k.unit_suffix(),
+                            k.hint
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks what can be checked without devices: first every numeric key against its
+    /// range (so nothing below computes with an absurd value), then the relations between
+    /// keys and what the owning modules require.
     pub fn validate(&self, path: &Path) -> Result<(), ConfigError> {
+        self.check_ranges(path)?;
         self.instrument
             .validate()
             .map_err(|e| Config::invalid(path, "instrument", e.to_string()))?;
@@ -242,25 +372,14 @@ impl Config {
                 .grbl_config()
                 .map_err(|e| Config::invalid(path, "stage", e.to_string()))?;
         }
-        let f = &self.fit;
-        if f.degree_u == 0 || f.degree_v == 0 {
-            return Err(Config::invalid(
-                path,
-                "fit",
-                format!(
-                    "degree-u = {} and degree-v = {} must both be at least 1 (the paper uses 5)",
-                    f.degree_u, f.degree_v
-                ),
-            ));
-        }
         self.plan_checked(path)?;
         let s = &self.scan;
-        if s.reconnect_initial_ms == 0 || s.reconnect_max_ms < s.reconnect_initial_ms {
+        if s.reconnect_max_ms < s.reconnect_initial_ms {
             return Err(Config::invalid(
                 path,
                 "scan.reconnect-initial-ms",
                 format!(
-                    "reconnect-initial-ms = {} must be > 0 and at most reconnect-max-ms = {}",
+                    "reconnect-initial-ms = {} must be at most reconnect-max-ms = {}",
                     s.reconnect_initial_ms, s.reconnect_max_ms
                 ),
             ));
@@ -279,25 +398,30 @@ impl Config {
                 "must name a socket path, e.g. \"/run/surfscan/control.sock\"".into(),
             ));
         }
-        let a = &self.analysis;
-        if a.curves == 0 || a.levels < 2 {
-            return Err(Config::invalid(
-                path,
-                "analysis",
-                format!(
-                    "curves = {} must be ≥ 1 and levels = {} ≥ 2",
-                    a.curves, a.levels
-                ),
-            ));
-        }
-        if let Some(lc) = a.lambda_c_mm {
-            if !(lc.is_finite() && lc > 0.0) {
+        // Ranges are in NUMERIC_KEYS; what remains is the relation between keys.
+        let f = &self.fit;
+        match (f.v_method, f.v_control_rows) {
+            (VMethodSetting::Interpolate, Some(n)) => {
                 return Err(Config::invalid(
                     path,
-                    "analysis.lambda-c-mm",
-                    format!("{lc} must be a positive length in mm (0.08, 0.25, 0.8, 2.5 or 8)"),
-                ));
+                    "fit.v-control-rows",
+                    format!("{n} control rows apply to v-method = \"least-squares\" only; the paper's interpolation has one pole row per line (remove the key or set the method)"),
+                ))
             }
+            (VMethodSetting::LeastSquares, Some(n))
+                if n < f.degree_v + 1 || n > self.scan.lines as usize =>
+            {
+                return Err(Config::invalid(
+                    path,
+                    "fit.v-control-rows",
+                    format!(
+                        "{n} must lie between degree-v + 1 = {} and the {} lines of [scan]",
+                        f.degree_v + 1,
+                        self.scan.lines
+                    ),
+                ))
+            }
+            _ => {}
         }
         if let Some(n) = &self.notify {
             if n.command.is_empty() {
@@ -311,24 +435,14 @@ impl Config {
         Ok(())
     }
 
-    /// The plan this configuration describes.
-    pub fn plan(&self) -> Result<Plan, ConfigError> {
-        self.plan_checked(Path::new("(config)"))
+    /// y of the first line and the step between lines in whole nanometres (the grid of the
+    /// scan's plan), checked.
+    pub fn y_grid_nm(&self) -> Result<(Nm, Nm), ConfigError> {
+        self.y_grid_checked(Path::new("(config)"))
     }
 
-    fn plan_checked(&self, path: &Path) -> Result<Plan, ConfigError> {
+    fn y_grid_checked(&self, path: &Path) -> Result<(Nm, Nm), ConfigError> {
         let s = &self.scan;
-        let min_lines = self.fit.degree_v + 1;
-        if (s.lines as usize) < min_lines {
-            return Err(Config::invalid(
-                path,
-                "scan.lines",
-                format!(
-                    "{} lines cannot carry a surface of degree-v {}: at least {min_lines} are needed",
-                    s.lines, self.fit.degree_v
-                ),
-            ));
-        }
         let y_start_nm = Nm::try_from_mm(s.y_start_mm).ok_or_else(|| {
             Config::invalid(
                 path,
@@ -356,6 +470,25 @@ impl Config {
                 "must not be 0 (the paper steps 0.01 mm)".into(),
             ));
         }
+        Ok((y_start_nm, y_step_nm))
+    }
+
+    /// The plan's rules: enough lines for the degree, whole-nanometre y, every line inside
+    /// the stage's soft limits, at least one attempt per line.
+    fn plan_checked(&self, path: &Path) -> Result<(), ConfigError> {
+        let s = &self.scan;
+        let min_lines = self.fit.degree_v + 1;
+        if (s.lines as usize) < min_lines {
+            return Err(Config::invalid(
+                path,
+                "scan.lines",
+                format!(
+                    "{} lines cannot carry a surface of degree-v {}: at least {min_lines} are needed",
+                    s.lines, self.fit.degree_v
+                ),
+            ));
+        }
+        let (y_start_nm, y_step_nm) = self.y_grid_checked(path)?;
         if s.max_line_attempts == 0 {
             return Err(Config::invalid(
                 path,
@@ -363,17 +496,9 @@ impl Config {
                 "must be at least 1".into(),
             ));
         }
-        let plan = Plan {
-            lines: s.lines,
-            y_start_nm,
-            y_step_nm,
-            degree_u: self.fit.degree_u,
-            degree_v: self.fit.degree_v,
-            max_line_attempts: s.max_line_attempts,
-        };
         let (lo, hi) = (self.stage.soft_limit_min_mm, self.stage.soft_limit_max_mm);
         for k in [0, s.lines - 1] {
-            let y = plan.target(k).to_mm();
+            let y = Nm(y_start_nm.0 + i64::from(k) * y_step_nm.0).to_mm();
             if y < lo || y > hi {
                 return Err(Config::invalid(
                     path,
@@ -385,9 +510,148 @@ impl Config {
                 ));
             }
         }
-        Ok(plan)
+        Ok(())
     }
 }
+
+/// A numeric configuration value as written: integers stay integers in messages.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Num {
+    /// An integer key's value.
+    Int(i128),
+    /// A real key's value.
+    Real(f64),
+}
+
+impl Num {
+    fn as_f64(self) -> f64 {
+        match self {
+            Num::Int(v) => v as f64,
+            Num::Real(v) => v,
+        }
+    }
+}
+
+impl std::fmt::Display for Num {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Num::Int(v) => write!(f, "{v}"),
+            // Debug keeps 1e-30 and 1e300 short instead of writing out every digit.
+            Num::Real(v) => write!(f, "{v:?}"),
+        }
+    }
+}
+
+/// One numeric key of the file and its valid range (inclusive), checked by
+/// [`Config::check_ranges`] before any other validation computes with the value.
+#[derive(Debug, Clone, Copy)]
+pub struct NumericKey {
+    /// The key as written, with its tables: `stage.feed-mm-min`.
+    pub key: &'static str,
+    /// Smallest valid value.
+    pub min: Num,
+    /// Largest valid value.
+    pub max: Num,
+    /// Unit for messages (`ms`, `mm/min`; empty for counts).
+    pub unit: &'static str,
+    /// What the key is for and what to do, for the message.
+    pub hint: &'static str,
+    /// The value in a parsed configuration; `None` when an optional key is absent.
+    pub value: fn(&Config) -> Option<Num>,
+}
+
+impl NumericKey {
+    /// Whether `v` lies within the range (NaN never does).
+    pub fn contains(&self, v: Num) -> bool {
+        match (v, self.min, self.max) {
+            (Num::Int(v), Num::Int(lo), Num::Int(hi)) => lo <= v && v <= hi,
+            _ => {
+                let v = v.as_f64();
+                v >= self.min.as_f64() && v <= self.max.as_f64()
+            }
+        }
+    }
+
+    fn unit_suffix(&self) -> String {
+        if self.unit.is_empty() {
+            String::new()
+        } else {
+            format!(" {}", self.unit)
+        }
+    }
+}
+
+macro_rules! int_key {
+    ($key:literal, $min:expr, $max:expr, $unit:literal, $hint:literal, |$c:ident| $get:expr) => {
+        NumericKey {
+            key: $key,
+            min: Num::Int($min),
+            max: Num::Int($max),
+            unit: $unit,
+            hint: $hint,
+            value: |$c: &Config| $get.map(|v| Num::Int(v as i128)),
+        }
+    };
+}
+
+macro_rules! real_key {
+    ($key:literal, $min:expr, $max:expr, $unit:literal, $hint:literal, |$c:ident| $get:expr) => {
+        NumericKey {
+            key: $key,
+            min: Num::Real($min),
+            max: Num::Real($max),
+            unit: $unit,
+            hint: $hint,
+            value: |$c: &Config| $get.map(Num::Real),
+        }
+    };
+}
+
+/// Every numeric key of the file with its valid range. The bounds are wide enough for any
+/// station we know of and narrow enough that the arithmetic on them (durations, nanometre
+/// targets, degrees + 1) cannot overflow; relations between keys (lines ≥ degree-v + 1,
+/// soft-limit-min < soft-limit-max, the model's baud rates) are checked afterwards.
+#[rustfmt::skip]
+pub const NUMERIC_KEYS: &[NumericKey] = &[
+    int_key!("instrument.baud", 300, 115_200, "baud", "set the rate the instrument is set to (9600, 19200, 38400)", |c| Some(c.instrument.baud)),
+    real_key!("instrument.pitch-x-um", 0.001, 1000.0, "µm", "the SJ-210 exports 0.5 to 1.5 µm; remove the key to derive it from λs", |c| c.instrument.pitch_x_um),
+    int_key!("instrument.timeouts.first-byte-ms", 1, 600_000, "ms", "the default is 2000", |c| Some(c.instrument.timeouts.first_byte_ms)),
+    int_key!("instrument.timeouts.inter-byte-ms", 1, 60_000, "ms", "the default is 200", |c| Some(c.instrument.timeouts.inter_byte_ms)),
+    int_key!("instrument.timeouts.poll-interval-ms", 1, 60_000, "ms", "the default is 250", |c| Some(c.instrument.timeouts.poll_interval_ms)),
+    int_key!("instrument.timeouts.start-deadline-ms", 1, 600_000, "ms", "the default is 5000", |c| Some(c.instrument.timeouts.start_deadline_ms)),
+    int_key!("instrument.timeouts.read-retry-budget-ms", 0, 3_600_000, "ms", "the default is 10000; 0 retries nothing", |c| Some(c.instrument.timeouts.read_retry_budget_ms)),
+    int_key!("instrument.timeouts.trace-deadline-ms", 1, 3_600_000, "ms", "remove the key to derive it from the measuring conditions", |c| c.instrument.timeouts.trace_deadline_ms),
+    int_key!("stage.baud", 300, 4_000_000, "baud", "GRBL and Zaber use 115200", |c| Some(c.stage.baud)),
+    real_key!("stage.steps-per-mm", 0.001, 10_000_000.0, "steps/mm", "set the controller's $101", |c| c.stage.steps_per_mm),
+    real_key!("stage.mm-per-microstep", 1e-9, 1.0, "mm", "take it from the stage's datasheet", |c| c.stage.mm_per_microstep),
+    real_key!("stage.nm-per-microstep", 0.001, 1_000_000.0, "nm", "take it from the stage's datasheet", |c| c.stage.nm_per_microstep),
+    int_key!("stage.device", 1, 99, "", "Zaber device addresses are 1 to 99 (0 would address every device)", |c| Some(c.stage.device)),
+    int_key!("stage.axis", 1, 9, "", "Zaber axes are numbered from 1 (0 would address the whole device)", |c| Some(c.stage.axis)),
+    real_key!("stage.soft-limit-min-mm", -10_000.0, 10_000.0, "mm", "set the stage's lowest allowed target in machine coordinates", |c| Some(c.stage.soft_limit_min_mm)),
+    real_key!("stage.soft-limit-max-mm", -10_000.0, 10_000.0, "mm", "set the stage's highest allowed target in machine coordinates", |c| Some(c.stage.soft_limit_max_mm)),
+    real_key!("stage.backlash-mm", 0.0, 10.0, "mm", "0 disables the backlash take-out", |c| Some(c.stage.backlash_mm)),
+    int_key!("stage.settle-ms", 0, 60_000, "ms", "the default is 200", |c| Some(c.stage.settle_ms)),
+    real_key!("stage.deadband-um", 0.0, 1000.0, "µm", "the default is 1", |c| Some(c.stage.deadband_um)),
+    int_key!("stage.max-move-attempts", 1, 100, "", "the default is 3", |c| Some(c.stage.max_move_attempts)),
+    real_key!("stage.feed-mm-min", 0.1, 100_000.0, "mm/min", "the default is 60", |c| Some(c.stage.feed_mm_min)),
+    int_key!("stage.poll-interval-ms", 1, 60_000, "ms", "the default is 250 (GRBL needs at least 200)", |c| Some(c.stage.poll_interval_ms)),
+    int_key!("scan.lines", 1, 100_000, "", "the paper traces 31 lines", |c| Some(c.scan.lines)),
+    real_key!("scan.y-start-mm", -10_000.0, 10_000.0, "mm", "set the first line's y in machine coordinates", |c| Some(c.scan.y_start_mm)),
+    real_key!("scan.y-step-mm", -100.0, 100.0, "mm", "the paper steps 0.01 mm", |c| Some(c.scan.y_step_mm)),
+    int_key!("scan.max-line-attempts", 1, 100, "", "the default is 3", |c| Some(c.scan.max_line_attempts)),
+    int_key!("scan.reconnect-initial-ms", 1, 600_000, "ms", "the default is 1000", |c| Some(c.scan.reconnect_initial_ms)),
+    int_key!("scan.reconnect-max-ms", 1, 3_600_000, "ms", "the default is 30000", |c| Some(c.scan.reconnect_max_ms)),
+    int_key!("fit.degree-u", 1, 15, "", "the paper uses 5", |c| Some(c.fit.degree_u)),
+    int_key!("fit.degree-v", 1, 15, "", "the paper uses 5", |c| Some(c.fit.degree_v)),
+    int_key!("analysis.curves", 1, 10_000, "", "the default is 31", |c| Some(c.analysis.curves)),
+    int_key!("analysis.levels", 2, 100_000, "", "the default is 101", |c| Some(c.analysis.levels)),
+    real_key!("analysis.lambda-c-mm", 0.001, 100.0, "mm", "the ISO cut-offs are 0.08, 0.25, 0.8, 2.5 and 8 mm", |c| c.analysis.lambda_c_mm),
+    real_key!("analysis.spike-threshold-sigma", 1.0, 1000.0, "", "robust standard deviations; the default is 10", |c| Some(c.analysis.spike_threshold_sigma)),
+    int_key!("analysis.spike-max-points", 1, 10_000, "", "the longest run of points that is a spike; the default is 5", |c| Some(c.analysis.spike_max_points)),
+    real_key!("analysis.holdout-threshold", 0.001, 100.0, "", "a multiple of Sq; the default is 0.5", |c| Some(c.analysis.holdout_threshold)),
+    int_key!("fit.v-control-rows", 2, 100_000, "", "pole rows across the lines, at most the number of lines; remove the key for a quarter of the lines", |c| c.fit.v_control_rows),
+    int_key!("notify.timeout-s", 1, 86_400, "s", "the default is 30", |c| c.notify.as_ref().map(|n| n.timeout_s)),
+];
 
 #[cfg(test)]
 mod tests {
@@ -423,11 +687,10 @@ dir = "/var/lib/surfscan/scans"
             c.control.socket,
             PathBuf::from("/run/surfscan/control.sock")
         );
-        let plan = c.plan().unwrap();
-        assert_eq!(plan.target(0), Nm(1_000_000));
+        let (start, step) = c.y_grid_nm().unwrap();
+        assert_eq!(start, Nm(1_000_000));
         // 0.01 mm steps are exact integers: line 30 at 1.3 mm, no accumulated rounding.
-        assert_eq!(plan.target(30), Nm(1_300_000));
-        assert_eq!(plan.targets().len(), 31);
+        assert_eq!(Nm(start.0 + 30 * step.0), Nm(1_300_000));
     }
 
     #[test]
@@ -473,12 +736,234 @@ dir = "/var/lib/surfscan/scans"
         assert!(e.contains("missing field"), "{e}");
     }
 
+    /// The shipped configuration with every commented-out `key = value` line and table
+    /// header switched on: a file that sets every key the schema has (not a valid station:
+    /// both Zaber scales are set, for one).
+    fn every_key_text() -> String {
+        let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/config/surfscan.toml"));
+        let text = std::fs::read_to_string(path).unwrap();
+        let mut out = String::new();
+        for line in text.lines() {
+            let body = line.strip_prefix("# ").unwrap_or("");
+            let is_table = body.starts_with('[') && body.trim_end().ends_with(']');
+            let is_key = body.split_once(" = ").is_some_and(|(k, _)| {
+                !k.is_empty() && k.chars().all(|c| c.is_ascii_lowercase() || c == '-')
+            });
+            out.push_str(if is_table || is_key { body } else { line });
+            out.push('\n');
+        }
+        out
+    }
+
+    fn numeric_leaves(prefix: &str, v: &serde_json::Value, out: &mut Vec<String>) {
+        match v {
+            serde_json::Value::Object(m) => {
+                for (k, v) in m {
+                    let key = if prefix.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{prefix}.{k}")
+                    };
+                    numeric_leaves(&key, v, out);
+                }
+            }
+            serde_json::Value::Number(_) => out.push(prefix.to_owned()),
+            _ => {}
+        }
+    }
+
+    fn set_key(table: &mut toml::Table, dotted: &str, value: toml::Value) {
+        let mut parts: Vec<&str> = dotted.split('.').collect();
+        let last = parts.pop().unwrap();
+        let mut t = table;
+        for p in parts {
+            t = t
+                .entry(p)
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+                .as_table_mut()
+                .unwrap();
+        }
+        t.insert(last.to_owned(), value);
+    }
+
+    fn toml_value(n: Num) -> toml::Value {
+        match n {
+            Num::Int(v) => toml::Value::Integer(i64::try_from(v).unwrap()),
+            Num::Real(v) => toml::Value::Float(v),
+        }
+    }
+
+    #[test]
+    fn every_numeric_key_of_the_schema_has_a_range() {
+        let c: Config = toml::from_str(&every_key_text()).unwrap();
+        let mut leaves = Vec::new();
+        numeric_leaves("", &serde_json::to_value(&c).unwrap(), &mut leaves);
+        leaves.sort();
+        let mut table: Vec<String> = NUMERIC_KEYS.iter().map(|k| k.key.to_owned()).collect();
+        table.sort();
+        assert_eq!(
+            leaves, table,
+            "every numeric key needs an entry in NUMERIC_KEYS (and config/surfscan.toml)"
+        );
+        for k in NUMERIC_KEYS {
+            assert!((k.value)(&c).is_some(), "{} not read from the file", k.key);
+        }
+    }
+
+    #[test]
+    fn each_numeric_key_is_accepted_at_its_bounds_and_refused_beyond() {
+        let base: toml::Table = toml::from_str(&every_key_text()).unwrap();
+        let base_config: Config = toml::from_str(&every_key_text()).unwrap();
+        base_config.check_ranges(Path::new("t.toml")).unwrap();
+        let name = |key: &str| key.rsplit('.').next().unwrap().to_owned();
+        for k in NUMERIC_KEYS {
+            for bound in [k.min, k.max] {
+                let mut t = base.clone();
+                set_key(&mut t, k.key, toml_value(bound));
+                let c: Config = toml::from_str(&toml::to_string(&t).unwrap()).unwrap();
+                assert_eq!((k.value)(&c), Some(bound), "{}", k.key);
+                if let Err(e) = c.check_ranges(Path::new("t.toml")) {
+                    panic!("{} = {bound} is its own bound but refused: {e}", k.key);
+                }
+            }
+            let beyond: Vec<toml::Value> = match (k.min, k.max) {
+                (Num::Int(lo), Num::Int(hi)) => {
+                    [lo - 1, hi + 1, -1, i64::MAX.into(), i64::MIN.into()]
+                        .into_iter()
+                        .filter(|v| !(lo..=hi).contains(v))
+                        .map(|v| toml::Value::Integer(v as i64))
+                        .collect()
+                }
+                (Num::Real(lo), Num::Real(hi)) => [
+                    lo - (lo.abs() * 1e-3).max(1e-12),
+                    hi + (hi.abs() * 1e-3).max(1e-12),
+                    f64::NAN,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    1e300,
+                    -1e300,
+                ]
+                .into_iter()
+                .map(toml::Value::Float)
+                .collect(),
+                _ => panic!("{}: bounds of mixed kinds", k.key),
+            };
+            for v in beyond {
+                let mut t = base.clone();
+                set_key(&mut t, k.key, v.clone());
+                let text = toml::to_string(&t).unwrap();
+                match Config::parse(Path::new("t.toml"), &text) {
+                    Ok(_) => panic!("{} = {v} accepted", k.key),
+                    // Out of range for the key's type: refused by the parser, which quotes
+                    // the key's line.
+                    Err(ConfigError::Parse { message, .. }) => {
+                        assert!(message.contains(&name(k.key)), "{} = {v}: {message}", k.key)
+                    }
+                    Err(ConfigError::Invalid { key, message, .. }) => {
+                        assert_eq!(key, k.key, "{} = {v}: {message}", k.key);
+                        assert!(message.contains("valid range"), "{message}");
+                    }
+                    Err(e) => panic!("{} = {v}: {e}", k.key),
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn feed_mm_min_1e_minus_30_is_refused_naming_the_key() {
+        // Used to overflow the move-timeout Duration inside validation (a panic, exit 134).
+        let text = MINIMAL.replace("steps-per-mm", "feed-mm-min = 1e-30\nsteps-per-mm");
+        let e = parse(&text).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                ConfigError::Invalid {
+                    key: "stage.feed-mm-min",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        let e = e.to_string();
+        assert!(
+            e.contains("1e-30 mm/min") && e.contains("0.1 to 100000.0 mm/min"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn huge_degree_is_refused_before_degree_plus_one_is_computed() {
+        let text = format!("{MINIMAL}\n[fit]\ndegree-v = {}\n", i64::MAX);
+        let e = parse(&text).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                ConfigError::Invalid {
+                    key: "fit.degree-v",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn model_and_outlier_keys_parse_and_are_checked() {
+        let c = parse(MINIMAL).unwrap();
+        assert_eq!(c.fit.v_method_for(31), crate::fit::VMethod::Interpolate);
+        assert_eq!(c.analysis.outliers, OutlierPolicy::Flag);
+        assert_eq!(c.fit.outliers, FitOutliers::Keep);
+        assert_eq!(c.analysis.spike_options(), Default::default());
+        let text = format!(
+            "{MINIMAL}[fit]\nv-method = \"least-squares\"\noutliers = \"replace\"\n[analysis]\noutliers = \"exclude\"\nspike-threshold-sigma = 8.0\n"
+        );
+        let c = parse(&text).unwrap();
+        assert_eq!(
+            c.fit.v_method_for(31),
+            crate::fit::VMethod::LeastSquares { control_rows: 8 }
+        );
+        assert_eq!(c.fit.outliers, FitOutliers::Replace);
+        assert_eq!(c.analysis.outliers, OutlierPolicy::Exclude);
+        assert_eq!(c.analysis.spike_options().threshold_sigma, 8.0);
+        let rows = text.replace("outliers = \"replace\"", "v-control-rows = 12");
+        assert_eq!(
+            parse(&rows).unwrap().fit.v_method_for(31),
+            crate::fit::VMethod::LeastSquares { control_rows: 12 }
+        );
+        for (bad, key) in [
+            (text.replace("least-squares", "spline"), "unknown variant"),
+            (
+                rows.replace("v-control-rows = 12", "v-control-rows = 40"),
+                "fit.v-control-rows",
+            ),
+            (
+                rows.replace("v-control-rows = 12", "v-control-rows = 5"),
+                "fit.v-control-rows",
+            ),
+            (
+                format!("{MINIMAL}[fit]\nv-control-rows = 8\n"),
+                "least-squares\" only",
+            ),
+            (
+                text.replace("= 8.0", "= 0.0"),
+                "analysis.spike-threshold-sigma",
+            ),
+            (
+                format!("{MINIMAL}[analysis]\nholdout-threshold = -1.0\n"),
+                "analysis.holdout-threshold",
+            ),
+        ] {
+            let e = parse(&bad).unwrap_err().to_string();
+            assert!(e.contains(key), "{e}");
+        }
+    }
+
     #[test]
     fn the_shipped_station_config_is_valid_and_complete() {
         let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/config/surfscan.toml"));
         let c = Config::load(path).unwrap();
         assert_eq!(c.scan.lines, 31);
-        assert_eq!(c.plan().unwrap().y_step_nm, Nm(10_000));
+        assert_eq!(c.y_grid_nm().unwrap().1, Nm(10_000));
         // Every documented key is present (commented-out optional ones included), so the
         // file stays the reference: compare against the keys the schema serialises.
         let text = std::fs::read_to_string(path).unwrap();

@@ -167,12 +167,13 @@ async fn clean_trace_results_and_readout_match_the_fixture() {
     let seen = c.poll_until("OK000\r");
     assert_eq!(seen, vec!["OK001\r", "OK002\r", "OK000\r"]);
 
-    // Independent Ra/Rq of profile 0 rounded to 3 decimals, about its mean.
+    // Independent Ra/Rq of profile 0 rounded to 3 decimals. It is an R profile, served as
+    // the instrument exports it: relative to the instrument's mean line, i.e. about zero.
     let z: Vec<f64> = fixture()[0]
         .iter()
         .map(|v| (v * 1000.0).round() / 1000.0)
         .collect();
-    let mean = z.iter().sum::<f64>() / z.len() as f64;
+    let mean = 0.0;
     let ra = z.iter().map(|v| (v - mean).abs()).sum::<f64>() / z.len() as f64;
     let rq = (z.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / z.len() as f64).sqrt();
     let ra_reply = c.ask("RDRES02,01,00");
@@ -469,6 +470,43 @@ fn binary_prints_ready_line_and_exits_when_stdin_closes() {
         std::thread::sleep(Duration::from_millis(20));
     }
     assert!(!l.exists(), "exit removes the link");
+}
+
+#[test]
+fn binary_with_stdin_from_dev_null_keeps_running_until_sigterm() {
+    let dir = tempfile::tempdir().unwrap();
+    let l = link(&dir);
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan-sim"))
+        .args([
+            "--instrument-link",
+            l.to_str().unwrap(),
+            "--time-scale",
+            "0",
+        ])
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let mut ready = String::new();
+    out.read_line(&mut ready).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&ready).unwrap();
+    assert_eq!(v["event"], "ready");
+    // Still serving well after the ready line: /dev/null's end of file is no stop signal.
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "quit with stdin at /dev/null"
+    );
+    let mut c = Client::open(&l);
+    assert!(c.ask("RDSTU01").starts_with("OK"));
+    let pid = nix::unistd::Pid::from_raw(child.id() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).unwrap();
+    let output = child.wait_with_output().unwrap();
+    assert!(output.status.success());
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert!(err.contains("stopping (SIGTERM)"), "{err}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -177,7 +177,9 @@ fn read_grid(path: &Path, text: &str) -> Result<(Vec<f64>, usize, usize), CliErr
 fn report_error(e: ReportError) -> CliError {
     let exit = match e {
         ReportError::Io { .. } => Exit::Io,
-        ReportError::Store(ref s) if matches!(s, crate::scan::store::StoreError::Io { .. }) => {
+        ReportError::Store(ref s)
+            if matches!(s, crate::scan::store_error::StoreError::Io { .. }) =>
+        {
             Exit::Io
         }
         _ => Exit::Failed,

@@ -13,13 +13,16 @@
 
 use super::scan::{choose_request, load_config};
 use super::{CliError, Exit};
-use crate::control::protocol::{
-    ControlChannels, DeviceState, OperatorCommand, OperatorRequest, State, Status,
-};
+use crate::config::Config;
+use crate::control::protocol::ControlChannels;
 use crate::control::server;
-use crate::scan::hook::{Hook, HookEvent};
-use crate::scan::runner::{run_scan, Control, Outcome, RunSettings, ScanEvent, ScanRequest};
+use crate::hook::Hook;
+use crate::scan::command::{OperatorCommand, OperatorRequest};
+use crate::scan::event::ScanEvent;
+use crate::scan::runner::{run_scan, Control, Outcome, ScanRequest};
+use crate::scan::settings::RunSettings;
 use crate::scan::station::{SerialStation, Station};
+use crate::scan::status::{DeviceState, State, Status};
 use crate::scan::testhooks::TestHooks;
 use crate::service::Notifier;
 use std::path::PathBuf;
@@ -31,7 +34,7 @@ use tokio::sync::{mpsc, watch};
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Station configuration (TOML).
-    #[arg(long, default_value = "/etc/surfscan/surfscan.toml")]
+    #[arg(long, default_value = super::DEFAULT_CONFIG)]
     pub config: PathBuf,
 }
 
@@ -44,13 +47,13 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
     let station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
-    let settings = super::scan::run_settings(config, config_hash, hooks);
+    let settings = super::scan::run_settings(&config, config_hash, hooks)?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
         .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
-    rt.block_on(daemon(settings, station))
+    rt.block_on(daemon(&config, settings, station))
 }
 
 fn presence(present: bool) -> DeviceState {
@@ -61,8 +64,11 @@ fn presence(present: bool) -> DeviceState {
     }
 }
 
-async fn daemon(settings: RunSettings, mut station: SerialStation) -> Result<(), CliError> {
-    let config = &settings.config;
+async fn daemon(
+    config: &Config,
+    settings: RunSettings,
+    mut station: SerialStation,
+) -> Result<(), CliError> {
     let notifier = Arc::new(Notifier::from_env());
     let srv = server::bind(&config.control.socket)
         .await
@@ -131,12 +137,7 @@ async fn daemon(settings: RunSettings, mut station: SerialStation) -> Result<(),
     tokio::spawn(async move {
         while let Some(ev) = ev_rx.recv().await {
             if let Some(h) = &hook {
-                h.fire(HookEvent {
-                    scan_id: ev.scan_id,
-                    status: ev.status,
-                    reason: ev.reason,
-                    scan_dir: ev.dir,
-                });
+                h.fire(ev);
             }
         }
     });
@@ -174,7 +175,13 @@ async fn daemon(settings: RunSettings, mut station: SerialStation) -> Result<(),
                     OperatorCommand::Start { specimen, operator, notes } => {
                         let busy = ctl.status.borrow().state != State::Idle;
                         if busy {
-                            let _ = req.reply.send(Err("a scan is already running".into()));
+                            let running = match ctl.status.borrow().scan_id.clone() {
+                                Some(id) => format!("scan {id} is running"),
+                                None => "a scan is being started (no id yet)".to_owned(),
+                            };
+                            let _ = req.reply.send(Err(format!(
+                                "{running}; abort it first or wait until it ends"
+                            )));
                             continue;
                         }
                         let _ = req.reply.send(Ok(format!(

@@ -120,7 +120,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let (config, config_hash) = load_config(&config_path)?;
     let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
-    let settings = super::scan::run_settings(config, config_hash, TestHooks::none());
+    let settings = super::scan::run_settings(&config, config_hash, TestHooks::none())?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()

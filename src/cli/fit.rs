@@ -185,9 +185,9 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
     }
     let (lines, _, incomplete) = crate::report::load_scan_grid(&args.input).map_err(|e| {
         let exit = match &e {
-            crate::report::ReportError::Store(crate::scan::store::StoreError::Io { .. }) => {
-                Exit::Io
-            }
+            crate::report::ReportError::Store(crate::scan::store_error::StoreError::Io {
+                ..
+            }) => Exit::Io,
             _ => Exit::Failed,
         };
         CliError::new(exit, e.to_string())

@@ -1,14 +1,14 @@
 //! The operator's control channel: a Unix socket speaking JSON lines.
 //!
-//! - [`protocol`]: the wire messages (every message has a `class`), the status snapshot the
-//!   scan runner publishes, and the in-process contract between the socket server and the
-//!   runner (a command channel with replies, a watch channel of status).
+//! - [`protocol`]: the wire messages (every message has a `class`) and the server's side of the
+//!   in-process contract with the runner (a command channel with replies, a watch channel of
+//!   the status snapshots the runner publishes, [`crate::scan::status`]).
 //! - [`server`]: binds the socket (refusing a live daemon's, replacing a stale one) and serves
 //!   greetings, status, watch streams and forwarded commands with bounded writes and waits.
 //! - [`client`]: the command line's side: greeting check, requests, raw lines for `--json`.
 //!
-//! Layer 4 (process edge): depends on tokio channels and serde; the runner depends on
-//! [`protocol`], never the other way round.
+//! Layer 4 (process edge): depends on tokio, serde and the scan's status and command types; the
+//! scan never depends on this module.
 
 pub mod client;
 pub mod protocol;

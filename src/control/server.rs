@@ -8,11 +8,12 @@
 //! `watch` channel, which keeps only the latest snapshot, so a watcher that falls behind
 //! skips intermediate snapshots rather than accumulating them.
 //!
-//! Layer 4 (process edge): depends on [`super::protocol`], tokio and tokio-util's codec.
+//! Layer 4 (process edge): depends on [`super::protocol`], the scan's status and command types,
+//! tokio and tokio-util's codec.
 
-use super::protocol::{
-    ControlChannels, Message, OperatorCommand, OperatorRequest, Request, Status, PROTOCOL_VERSION,
-};
+use super::protocol::{ControlChannels, Message, Request, PROTOCOL_VERSION};
+use crate::scan::command::{OperatorCommand, OperatorRequest};
+use crate::scan::status::Status;
 use bytes::{Buf, BytesMut};
 use futures::StreamExt;
 use std::future::Future;

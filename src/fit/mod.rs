@@ -33,6 +33,7 @@
 //! ([`BandLu`]), `residual` ([`max_residual_mm`]), `simd` and `memory` (speed without
 //! changing a bit).
 
+pub mod approx_v;
 mod banded;
 mod error;
 mod incremental;
@@ -44,6 +45,7 @@ mod result;
 mod simd;
 mod solve;
 
+pub use approx_v::{fit_grid_with, MethodError, VMethod};
 pub use banded::{BandLu, ZeroPivot};
 pub use error::FitError;
 pub use incremental::IncrementalFitter;

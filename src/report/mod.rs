@@ -32,8 +32,11 @@ use crate::metrology::plots::{plot_bearing_curves, plot_height_map, plot_profile
 use crate::metrology::x3p::{to_x3p, X3pMeta};
 use crate::metrology::MetrologyError;
 use crate::profile::{Conditions, FilterKind, InstrumentResult, ProfileKind};
+use crate::scan::faults::NoFaults;
 use crate::scan::journal::{read_journal, ResumeState, StartRecord, StopRecord, StopStatus};
-use crate::scan::store::{csv_name, NoFaults, ScanStore, StoreError, StoredLine};
+use crate::scan::line::StoredLine;
+use crate::scan::store::{csv_name, ScanStore};
+use crate::scan::store_error::StoreError;
 use serde::Serialize;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -1125,7 +1128,7 @@ pub fn characterise_scan(
 mod tests {
     use super::*;
     use crate::profile::Profile;
-    use crate::scan::store::LineMeta;
+    use crate::scan::line::LineMeta;
     use crate::units::Nm;
 
     fn line(kind: ProfileKind, lambda_c_mm: Option<f64>, filter: Option<FilterKind>) -> StoredLine {

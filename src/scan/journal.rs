@@ -6,8 +6,8 @@
 //! invalid last line) is truncated and reported; an invalid record before the end is a named
 //! error. [`ResumeState`] derives what a restarted scan needs.
 //!
-//! Layer 3 (session): depends on [`crate::profile`], [`crate::units`] and the write hook of
-//! [`super::store`]; file I/O only.
+//! Layer 3 (session): depends on [`crate::profile`], [`crate::units`] and the storage fault
+//! hook ([`super::faults`]); file I/O only.
 
 use std::collections::BTreeSet;
 use std::fs::{self, OpenOptions};
@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 use crate::profile::Conditions;
 use crate::units::Nm;
 
-use super::store::{open_append, StorageFaults, WriteStep};
+use super::faults::{StorageFaults, WriteStep};
 
 /// The journal's file name inside a scan directory.
 pub const JOURNAL_FILE: &str = "journal.jsonl";
@@ -320,7 +320,10 @@ impl Journal {
             f.set_len(rec.valid_len).map_err(io("truncate"))?;
             f.sync_all().map_err(io("fsync"))?;
         }
-        let file = open_append(path).map_err(io("open"))?;
+        let file = OpenOptions::new()
+            .append(true)
+            .open(path)
+            .map_err(io("open"))?;
         Ok((
             Journal {
                 path: path.to_path_buf(),

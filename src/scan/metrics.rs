@@ -4,13 +4,15 @@
 //! [`ScanMetrics::render`] is a pure formatter; [`write_metrics`] writes it with temp file,
 //! fsync and rename so the collector never reads a half-written file.
 //!
-//! Layer 3 (session): depends on [`super::store`] for the durable write.
+//! Layer 3 (session): depends on [`super::faults`] for the durable write and
+//! [`super::store_error`].
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use super::store::{write_durably, StorageFaults, StoreError, WriteStep};
+use super::faults::{write_file_durably, StorageFaults, WriteStep};
+use super::store_error::{io_err, StoreError};
 
 /// The numbers a station is monitored by.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -163,25 +165,14 @@ pub fn write_metrics(
     path: &Path,
     metrics: &ScanMetrics,
     faults: &dyn StorageFaults,
-) -> Result<PathBuf, StoreError> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let name =
-        path.file_name()
-            .and_then(|n| n.to_str())
-            .ok_or_else(|| StoreError::Inconsistent {
-                path: path.to_path_buf(),
-                reason: "the metrics path must end in a UTF-8 file name".into(),
-            })?;
-    write_durably(
-        dir,
-        name,
+) -> Result<(), StoreError> {
+    write_file_durably(
+        path,
         metrics.render().as_bytes(),
         WriteStep::Metrics,
         faults,
     )
+    .map_err(io_err("write", path))
 }
 
 #[cfg(test)]

@@ -1,25 +1,41 @@
-//! The scan: plan, durable line storage and journal, resume, and the runner that drives instrument, stage and fitter.
+//! The scan: plan, durable line storage and journal, resume, and the runner that drives
+//! instrument, stage and fitter.
 //!
-//! Layer 3: depends on the device contracts ([`crate::devices`]), the fitter, the IGES writer,
-//! the status types of [`crate::control::protocol`] and the settings of [`crate::config`].
+//! Layer 3 (session): depends on the device contracts ([`crate::devices`]) and drivers, the
+//! fitter, the IGES writer and [`crate::atomic`]; never on the configuration file or the
+//! control socket (the composition layer hands the runner typed [`settings`], and the socket
+//! serves the runner's [`status`] and forwards [`command`]s).
 //!
 //! - [`plan`]: the lines to trace and the surface to fit, frozen in the journal.
+//! - [`settings`]: what the runner is told by the composition layer.
+//! - [`status`], [`command`], [`event`]: the snapshots the runner publishes, the operator
+//!   commands it takes, the events it reports (for the notification hook).
 //! - [`station`]: opening the instrument and the stage; device errors reduced to a `Fault`.
 //! - [`runner`]: one scan, new or resumed, to its end: per-line durability, faults by class,
 //!   suspension and reconnection, pause/abort, shutdown.
-//! - [`store`]: the scan directory, durable line files, reading lines back, pre-flight disk check.
+//! - [`store`]: the scan directory; [`line`] and [`line_csv`]: a stored line's metadata and
+//!   heights file; [`scan_id`]: the scan's name; [`store_error`]: what can go wrong there;
+//!   [`disk`]: the pre-flight disk check; [`faults`]: the storage fault hook.
 //! - [`journal`]: `journal.jsonl` records, torn-tail recovery, resume state.
 //! - [`outputs`]: IGES and report of a completed scan.
 //! - [`metrics`]: the Prometheus text-format metrics file.
-//! - [`hook`]: the notification command run when a scan completes, fails or suspends.
 //! - [`testhooks`]: crash and full-disk injection for end-to-end tests.
 
-pub mod hook;
+pub mod command;
+pub mod disk;
+pub mod event;
+pub mod faults;
 pub mod journal;
+pub mod line;
+pub mod line_csv;
 pub mod metrics;
 pub mod outputs;
 pub mod plan;
 pub mod runner;
+pub mod scan_id;
+pub mod settings;
 pub mod station;
+pub mod status;
 pub mod store;
+pub mod store_error;
 pub mod testhooks;

@@ -8,8 +8,9 @@
 //! [`super::store`] and [`super::journal`] (to read the lines and the start record).
 
 use super::journal::StartRecord;
+use super::line::StoredLine;
 use super::plan::Plan;
-use super::store::{ScanStore, StoredLine};
+use super::store::ScanStore;
 use crate::atomic::write_atomically;
 use crate::fit::{max_residual_mm, FitResult, IncrementalFitter};
 use crate::iges::{plan_parts, write_iges_seekable, IgesError, IgesOptions};

@@ -21,26 +21,28 @@
 //! and records an interruption, not a stop, so the scan resumes at the next start.
 //!
 //! Layer 3 (session): depends on [`super::station`] (devices), [`super::store`] and
-//! [`super::journal`] (disk), [`crate::fit`], [`super::outputs`], [`crate::control::protocol`]
-//! (status and command types) and [`crate::config`] (the settings it runs under).
+//! [`super::journal`] (disk), [`crate::fit`], [`super::outputs`], and the session's own
+//! status, command and settings types.
 
-use super::hook::HookStatus;
+use super::command::{OperatorCommand, OperatorRequest};
+use super::disk::preflight_disk;
+use super::event::{ScanEvent, ScanEventKind};
+use super::faults::StorageFaults;
 use super::journal::{
     InterruptionRecord, Journal, JournalError, Record, ResumeState, StartRecord, StopRecord,
     StopStatus,
 };
+use super::line::LineMeta;
 use super::metrics::{write_metrics, ScanMetrics};
-use super::outputs::{write_outputs, Characterise, Outputs};
+use super::outputs::{write_outputs, Outputs};
 use super::plan::Plan;
+use super::scan_id::ScanId;
+use super::settings::{Backoff, RunSettings};
 use super::station::{Device, Fault, Station};
-use super::store::{
-    csv_name, meta_name, preflight_disk, sync_dir, LineMeta, ScanId, ScanStore, StoreError,
-};
+use super::status::{DeviceState, Ending, LastStop, State, Status};
+use super::store::{csv_name, meta_name, sync_dir, ScanStore};
+use super::store_error::StoreError;
 use super::testhooks::{Step, TestHooks};
-use crate::config::Config;
-use crate::control::protocol::{
-    DeviceState, LastStop, OperatorCommand, OperatorRequest, State, Status,
-};
 use crate::devices::{FaultClass, Instrument, InstrumentIdentity, TracedLine, YAxis};
 use crate::fit::{FitOptions, IncrementalFitter};
 use crate::profile::{Conditions, Profile};
@@ -113,19 +115,6 @@ pub enum Outcome {
     },
 }
 
-/// A scan event for the notification hook.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ScanEvent {
-    /// Scan id.
-    pub scan_id: String,
-    /// Scan directory.
-    pub dir: PathBuf,
-    /// What happened.
-    pub status: HookStatus,
-    /// Why, for people.
-    pub reason: String,
-}
-
 /// The runner's connection to the outside: commands in, status out, watchdog, shutdown.
 pub struct Control {
     /// Operator commands (from the control socket; a closed channel means none).
@@ -176,12 +165,12 @@ impl Control {
         self.status.send_modify(f);
     }
 
-    fn event(&self, scan_id: &str, dir: &Path, status: HookStatus, reason: &str) {
+    fn event(&self, scan_id: &str, dir: &Path, kind: ScanEventKind, reason: &str) {
         if let Some(tx) = &self.events {
             let _ = tx.send(ScanEvent {
                 scan_id: scan_id.to_owned(),
                 dir: dir.to_path_buf(),
-                status,
+                kind,
                 reason: reason.to_owned(),
             });
         }
@@ -208,9 +197,13 @@ impl Control {
 
     /// Answers a command that arrived while a scan runs; `Some` when it interrupts.
     fn on_command(&mut self, req: OperatorRequest, paused: bool) -> Option<Interrupt> {
-        let scan = self.status.borrow().scan_id.clone().unwrap_or_default();
+        // Before its start record exists a new scan has no id yet: say so, never "scan  …".
+        let scan = match self.status.borrow().scan_id.clone() {
+            Some(id) => format!("scan {id}"),
+            None => "the scan being started (no id yet)".to_owned(),
+        };
         let (reply, interrupt) = match req.command {
-            OperatorCommand::Pause if paused => (Ok("already paused".to_owned()), None),
+            OperatorCommand::Pause if paused => (Ok(format!("{scan} is already paused")), None),
             OperatorCommand::Pause => {
                 self.pause_requested = true;
                 self.publish(|s| {
@@ -219,13 +212,11 @@ impl Control {
                     }
                 });
                 (
-                    Ok(format!(
-                        "scan {scan} pauses once the current line is on disk"
-                    )),
+                    Ok(format!("{scan} pauses once the current line is on disk")),
                     None,
                 )
             }
-            OperatorCommand::Resume if paused => (Ok(format!("scan {scan} resumes")), None),
+            OperatorCommand::Resume if paused => (Ok(format!("{scan} resumes")), None),
             OperatorCommand::Resume if self.pause_requested => {
                 self.pause_requested = false;
                 self.publish(|s| {
@@ -235,14 +226,18 @@ impl Control {
                 });
                 (Ok("pause request withdrawn".to_owned()), None)
             }
-            OperatorCommand::Resume => (Err(format!("scan {scan} is not paused")), None),
+            // Resume is idempotent like pause: the scan is in the state asked for.
+            OperatorCommand::Resume => (
+                Ok(format!("{scan} is not paused; it goes on scanning")),
+                None,
+            ),
             OperatorCommand::Abort => (
-                Ok(format!("aborting scan {scan}; lines on disk are kept")),
+                Ok(format!("aborting {scan}; lines on disk are kept")),
                 Some(Interrupt::Abort),
             ),
             OperatorCommand::Start { .. } => (
                 Err(format!(
-                    "scan {scan} is running; abort it first or wait until it ends"
+                    "{scan} is running; abort it first or wait until it ends"
                 )),
                 None,
             ),
@@ -306,31 +301,6 @@ impl Control {
                 _ = tick.tick() => self.pet(),
             }
         }
-    }
-}
-
-/// What the runner needs besides devices and control.
-#[derive(Clone)]
-pub struct RunSettings {
-    /// The configuration as loaded.
-    pub config: Config,
-    /// SHA-256 of the configuration file, hex.
-    pub config_hash: String,
-    /// Fault injection (tests only; none in production).
-    pub hooks: Arc<TestHooks>,
-    /// The characterisation run when a scan completes (none: the report holds the fit and
-    /// the instrument's own results only).
-    pub characterise: Option<Characterise>,
-}
-
-impl std::fmt::Debug for RunSettings {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("RunSettings")
-            .field("config", &self.config)
-            .field("config_hash", &self.config_hash)
-            .field("hooks", &self.hooks)
-            .field("characterise", &self.characterise.is_some())
-            .finish()
     }
 }
 
@@ -414,8 +384,8 @@ struct Scan {
     line_durations: Vec<f64>,
     hooks: Arc<TestHooks>,
     metrics_path: Option<PathBuf>,
-    /// Reconnection backoff: first wait, longest wait.
-    backoff: (Duration, Duration),
+    /// Reconnection backoff.
+    backoff: Backoff,
 }
 
 impl Scan {
@@ -521,7 +491,7 @@ pub async fn run_scan<S: Station>(
         Ok(v) => v,
         Err((End::Fail { reason, kind }, dir)) => {
             tracing::error!("scan cannot start: {reason}");
-            publish_end(ctl, None, dir.as_deref(), "fail", &reason);
+            publish_end(ctl, None, dir.as_deref(), Ending::Fail, &reason);
             return Outcome::Failed { dir, reason, kind };
         }
         Err((End::Abort, dir)) => {
@@ -529,7 +499,7 @@ pub async fn run_scan<S: Station>(
                 ctl,
                 None,
                 dir.as_deref(),
-                "abort",
+                Ending::Abort,
                 "aborted before the first line",
             );
             return match dir {
@@ -542,7 +512,7 @@ pub async fn run_scan<S: Station>(
             };
         }
         Err((End::Shutdown, dir)) => {
-            publish_end(ctl, None, dir.as_deref(), "interrupted", "shutdown");
+            publish_end(ctl, None, dir.as_deref(), Ending::Interrupted, "shutdown");
             return match dir {
                 Some(dir) => Outcome::Interrupted { dir },
                 None => Outcome::Failed {
@@ -557,7 +527,7 @@ pub async fn run_scan<S: Station>(
     finish(ctl, settings, scan, devices, end).await
 }
 
-fn publish_end(ctl: &Control, id: Option<&str>, dir: Option<&Path>, status: &str, reason: &str) {
+fn publish_end(ctl: &Control, id: Option<&str>, dir: Option<&Path>, status: Ending, reason: &str) {
     ctl.publish(|s| {
         let scan_id = id
             .map(str::to_owned)
@@ -566,7 +536,7 @@ fn publish_end(ctl: &Control, id: Option<&str>, dir: Option<&Path>, status: &str
         *s = Status {
             last_stop: Some(LastStop {
                 scan_id,
-                status: status.to_owned(),
+                status,
                 reason: reason.to_owned(),
                 dir: dir.map(|d| d.display().to_string()).unwrap_or_default(),
             }),
@@ -602,14 +572,13 @@ async fn begin<S: Station>(
     request: ScanRequest,
     devices: &mut Devices<S>,
 ) -> Result<Scan, BeginError> {
-    let config = &settings.config;
     match request {
         ScanRequest::New {
             specimen,
             operator,
             notes,
         } => {
-            let plan = config.plan().map_err(|e| (fail(e.to_string()), None))?;
+            let plan = settings.plan;
             let direction = ScanDirection::of_step(plan.y_step_nm);
             // Devices first: a scan directory is created only for a scan that can start.
             let unavailable = |f: Fault| {
@@ -664,21 +633,23 @@ async fn begin<S: Station>(
                 // Unknown: assume the SJ-210's longest profile (16 mm at 0.5 µm).
                 _ => 32_001,
             };
-            std::fs::create_dir_all(&config.output.dir).map_err(|e| {
+            let output_dir = &settings.output_dir;
+            std::fs::create_dir_all(output_dir).map_err(|e| {
                 (
                     End::Fail {
                         reason: format!(
                             "cannot create output directory {}: {e}",
-                            config.output.dir.display()
+                            output_dir.display()
                         ),
                         kind: FailKind::Io,
                     },
                     None,
                 )
             })?;
-            let needed = preflight_disk(&config.output.dir, plan.lines, points)
+            let needed = preflight_disk(output_dir, plan.lines, points)
                 .map_err(|e| (storage_fail(&e), None))?;
-            let line_s = estimate_line_seconds(&report.conditions, points, config.instrument.baud);
+            let line_s =
+                estimate_line_seconds(&report.conditions, points, settings.instrument_baud);
             tracing::info!(
                 "pre-flight: {} lines of about {points} points, about {:.0} s per line ({:.1} h), about {:.1} MB on disk",
                 plan.lines,
@@ -687,16 +658,16 @@ async fn begin<S: Station>(
                 needed as f64 / 1e6
             );
             let now = Utc::now();
-            let id = unique_id(&config.output.dir, now, &specimen);
-            let faults: Arc<dyn super::store::StorageFaults> = settings.hooks.clone();
-            let store = ScanStore::create(&config.output.dir, &id, faults.clone())
+            let id = unique_id(output_dir, now, &specimen);
+            let faults: Arc<dyn StorageFaults> = settings.hooks.clone();
+            let store = ScanStore::create(output_dir, &id, faults.clone())
                 .map_err(|e| (storage_fail(&e), None))?;
             let dir = store.root().to_path_buf();
             let start = StartRecord {
                 scan_id: id.0.clone(),
                 time: now,
                 plan: serde_json::to_value(plan).unwrap_or_default(),
-                config: serde_json::to_value(config).unwrap_or_default(),
+                config: settings.config.clone(),
                 config_hash: settings.config_hash.clone(),
                 specimen,
                 operator,
@@ -710,7 +681,7 @@ async fn begin<S: Station>(
             let journal = Journal::create(&dir, start.clone(), faults)
                 .map_err(|e| (journal_fail(e), Some(dir.clone())))?;
             tracing::info!(scan_id = %id, "scan started in {}", dir.display());
-            devices.need_home = config.stage.home_on_start || !stage_report.position_trusted;
+            devices.need_home = settings.home_on_start || !stage_report.position_trusted;
             devices.stage_identity = Some(stage_report.identity.clone());
             devices.instrument = Some(instrument);
             devices.stage = Some(stage);
@@ -723,7 +694,7 @@ async fn begin<S: Station>(
         }
         ScanRequest::Resume(dir) => {
             let some_dir = Some(dir.clone());
-            let faults: Arc<dyn super::store::StorageFaults> = settings.hooks.clone();
+            let faults: Arc<dyn StorageFaults> = settings.hooks.clone();
             let store =
                 ScanStore::open(&dir, faults.clone()).map_err(|e| (storage_fail(&e), None))?;
             let (journal, recovery) = Journal::open(&store.journal_path(), faults)
@@ -846,11 +817,8 @@ fn new_scan(
         pitch_x_mm: None,
         line_durations: Vec::new(),
         hooks: settings.hooks.clone(),
-        metrics_path: settings.config.metrics.file.clone(),
-        backoff: (
-            Duration::from_millis(settings.config.scan.reconnect_initial_ms),
-            Duration::from_millis(settings.config.scan.reconnect_max_ms),
-        ),
+        metrics_path: settings.metrics_file.clone(),
+        backoff: settings.backoff,
     }
 }
 
@@ -940,7 +908,7 @@ async fn reconnect<S: Station>(
                     let reason = format!("{device} unavailable ({f}); reconnecting");
                     scan.interruption(&reason, Some(device), line);
                     scan.metrics.suspensions += 1;
-                    ctl.event(&scan.id, &scan.dir, HookStatus::Suspended, &reason);
+                    ctl.event(&scan.id, &scan.dir, ScanEventKind::Suspended, &reason);
                     ctl.publish(|s| {
                         s.state = State::Suspended;
                         s.reason = Some(reason.clone());
@@ -954,18 +922,10 @@ async fn reconnect<S: Station>(
                     tracing::info!(scan_id = %scan.id, "still waiting for the {device}: {f}");
                 }
                 last = f.message.clone();
-                backoff = next_backoff(backoff, scan.backoff);
+                backoff = scan.backoff.next(backoff);
             }
             Err(f) => return Err(fail(f.to_string())),
         }
-    }
-}
-
-fn next_backoff(current: Duration, (initial, max): (Duration, Duration)) -> Duration {
-    if current.is_zero() {
-        initial
-    } else {
-        (current * 2).min(max)
     }
 }
 
@@ -1378,7 +1338,7 @@ async fn finish<S: Station>(
                     );
                     if let Err(e) = scan.stop(StopStatus::Success, &reason) {
                         let reason = format!("cannot write the stop record: {e}");
-                        publish_end(ctl, Some(&id), Some(&dir), "fail", &reason);
+                        publish_end(ctl, Some(&id), Some(&dir), Ending::Fail, &reason);
                         return Outcome::Failed {
                             dir: Some(dir),
                             reason,
@@ -1386,8 +1346,8 @@ async fn finish<S: Station>(
                         };
                     }
                     tracing::info!(scan_id = %id, "scan complete: {reason}");
-                    ctl.event(&id, &dir, HookStatus::Success, &reason);
-                    publish_end(ctl, Some(&id), Some(&dir), "success", &reason);
+                    ctl.event(&id, &dir, ScanEventKind::Success, &reason);
+                    publish_end(ctl, Some(&id), Some(&dir), Ending::Success, &reason);
                     Outcome::Success { dir, outputs }
                 }
                 Err(e) => {
@@ -1407,8 +1367,8 @@ async fn finish<S: Station>(
                 tracing::error!(scan_id = %id, "cannot write the stop record: {e}");
             }
             tracing::warn!(scan_id = %id, "scan aborted; {} lines kept", scan.fitter.lines());
-            ctl.event(&id, &dir, HookStatus::Abort, &reason);
-            publish_end(ctl, Some(&id), Some(&dir), "abort", &reason);
+            ctl.event(&id, &dir, ScanEventKind::Abort, &reason);
+            publish_end(ctl, Some(&id), Some(&dir), Ending::Abort, &reason);
             Outcome::Aborted { dir }
         }
         Some(End::Shutdown) => {
@@ -1431,8 +1391,8 @@ fn close_failed(ctl: &Control, scan: &mut Scan, reason: &str, kind: FailKind) ->
     if let Err(e) = scan.stop(StopStatus::Fail, reason) {
         tracing::error!(scan_id = %scan.id, "cannot write the stop record: {e}");
     }
-    ctl.event(&scan.id, &scan.dir, HookStatus::Fail, reason);
-    publish_end(ctl, Some(&scan.id), Some(&scan.dir), "fail", reason);
+    ctl.event(&scan.id, &scan.dir, ScanEventKind::Fail, reason);
+    publish_end(ctl, Some(&scan.id), Some(&scan.dir), Ending::Fail, reason);
     Outcome::Failed {
         dir: Some(scan.dir.clone()),
         reason: reason.to_owned(),

@@ -11,11 +11,11 @@
 
 use crate::devices::{DeviceFault, FaultClass, Instrument, YAxis};
 use crate::profile::Conditions;
-use crate::sj210::client::{pitch_from_lambda_s, Sj210Client};
+use crate::sj210::client::Sj210Client;
 use crate::sj210::models::ModelTable;
+use crate::sj210::sampling::pitch_from_lambda_s;
 use crate::sj210::settings::InstrumentSettings;
-use crate::stage::policy::{AnyYAxis, ScanDirection};
-use crate::stage::settings::StageSettings;
+use crate::stage::{AnyYAxis, ScanDirection, StageError, StageSettings};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::Path;
@@ -130,7 +130,7 @@ impl SerialStation {
 
 impl Station for SerialStation {
     type Instrument = Sj210Client<SerialStream>;
-    type Stage = AnyYAxis;
+    type Stage = AnyYAxis<SerialStream>;
 
     async fn open_instrument(&mut self) -> Result<Self::Instrument, Fault> {
         let port = crate::transport::open(&self.instrument.serial()).map_err(|e| Fault {
@@ -156,8 +156,7 @@ impl Station for SerialStation {
     }
 
     async fn open_stage(&mut self, direction: ScanDirection) -> Result<Self::Stage, Fault> {
-        let mut axis =
-            crate::stage::policy::connect(&self.stage).map_err(|e| Fault::of(Device::Stage, &e))?;
+        let mut axis = open_stage(&self.stage).map_err(|e| Fault::of(Device::Stage, &e))?;
         axis.set_scan_direction(direction);
         Ok(axis)
     }
@@ -175,4 +174,13 @@ impl Station for SerialStation {
             .pitch_x_um
             .or_else(|| c.lambda_s_um.and_then(pitch_from_lambda_s))
     }
+}
+
+/// Validates the `[stage]` settings, then opens the port (via [`crate::transport::open`]) and
+/// builds the selected driver and the motion policy over it; the axis still needs
+/// [`YAxis::connect`].
+pub fn open_stage(settings: &StageSettings) -> Result<AnyYAxis<SerialStream>, StageError> {
+    settings.validate()?;
+    let io = crate::transport::open(&settings.serial())?;
+    AnyYAxis::new(settings, io)
 }

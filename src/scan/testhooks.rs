@@ -11,9 +11,9 @@
 //! Without those variables the hook does nothing. It is the [`StorageFaults`] the store
 //! and journal consult before every durable write.
 //!
-//! Layer 3 (session): depends on [`super::store`]; reads two environment variables.
+//! Layer 3 (session): depends on [`super::faults`]; reads two environment variables.
 
-use super::store::{StorageFaults, WriteStep};
+use super::faults::{StorageFaults, WriteStep};
 use std::io;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};

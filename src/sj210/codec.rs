@@ -3,10 +3,10 @@
 //!
 //! Pure (layer 1): bytes in, values out; the `tokio_util` codec traits only wrap the pure
 //! functions so a `Framed` stream or the client's own read loop can use them. Depends on
-//! nothing in the crate.
+//! [`super::ng`] (the NG code a reply carries) only.
 
+pub use super::ng::NgCode;
 use bytes::{Buf, BufMut, Bytes, BytesMut};
-use std::fmt;
 use thiserror::Error;
 use tokio_util::codec::{Decoder, Encoder};
 
@@ -16,101 +16,6 @@ pub const CR: u8 = b'\r';
 pub const LF: u8 = b'\n';
 /// Default maximum reply length. An `RDEVA` block of 50 values is about 500 bytes.
 pub const DEFAULT_MAX_LINE: usize = 4096;
-
-/// An NG code from the instrument. Known codes are named (the SJ-220 device table as carried
-/// by the public program C2, `sj220_exceptions.py`; 020 from the SJ-410 program C3).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum NgCode {
-    /// 007: detector over-range.
-    OverRange,
-    /// 011: command sent while busy.
-    Busy,
-    /// 012: control timeout.
-    ControlTimeout,
-    /// 013: communication buffer overflow.
-    BufferOverflow,
-    /// 018: invalid measurement start position.
-    InvalidStartPosition,
-    /// 019: invalid setting value.
-    InvalidSetting,
-    /// 020: stylus at the end of travel (SJ-410, seen in C3).
-    EndOfTravel,
-    /// 022: detector disconnected.
-    DetectorDisconnected,
-    /// 030: illegal command (not supported by this firmware).
-    IllegalCommand,
-    /// 031: invalid command format.
-    InvalidFormat,
-    /// 032: invalid command value.
-    InvalidValue,
-    /// 033: command still being processed.
-    Processing,
-    /// 101: no calculation results (yet).
-    NoResults,
-    /// Any other code.
-    Other(u16),
-}
-
-impl NgCode {
-    /// The code from its number.
-    pub fn from_code(code: u16) -> NgCode {
-        match code {
-            7 => NgCode::OverRange,
-            11 => NgCode::Busy,
-            12 => NgCode::ControlTimeout,
-            13 => NgCode::BufferOverflow,
-            18 => NgCode::InvalidStartPosition,
-            19 => NgCode::InvalidSetting,
-            20 => NgCode::EndOfTravel,
-            22 => NgCode::DetectorDisconnected,
-            30 => NgCode::IllegalCommand,
-            31 => NgCode::InvalidFormat,
-            32 => NgCode::InvalidValue,
-            33 => NgCode::Processing,
-            101 => NgCode::NoResults,
-            other => NgCode::Other(other),
-        }
-    }
-
-    /// The number as the instrument sent it.
-    pub fn code(self) -> u16 {
-        match self {
-            NgCode::OverRange => 7,
-            NgCode::Busy => 11,
-            NgCode::ControlTimeout => 12,
-            NgCode::BufferOverflow => 13,
-            NgCode::InvalidStartPosition => 18,
-            NgCode::InvalidSetting => 19,
-            NgCode::EndOfTravel => 20,
-            NgCode::DetectorDisconnected => 22,
-            NgCode::IllegalCommand => 30,
-            NgCode::InvalidFormat => 31,
-            NgCode::InvalidValue => 32,
-            NgCode::Processing => 33,
-            NgCode::NoResults => 101,
-            NgCode::Other(c) => c,
-        }
-    }
-
-    /// True for codes that mean "not now" on a read: busy, still processing, no results yet.
-    pub fn is_retryable_read(self) -> bool {
-        matches!(self, NgCode::Busy | NgCode::Processing | NgCode::NoResults)
-    }
-
-    /// True for codes that mean "this firmware does not understand the command".
-    pub fn is_unsupported(self) -> bool {
-        matches!(
-            self,
-            NgCode::IllegalCommand | NgCode::InvalidFormat | NgCode::InvalidValue
-        )
-    }
-}
-
-impl fmt::Display for NgCode {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "NG{:03}", self.code())
-    }
-}
 
 /// One reply line, classified.
 #[derive(Debug, Clone, PartialEq, Eq)]

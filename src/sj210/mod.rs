@@ -1,17 +1,32 @@
-//! The Mitutoyo SJ-210 family driver: codec, model tables, client, capability probe, recorder.
+//! The Mitutoyo SJ-210 family driver.
 //!
-//! Layers 1–2: the codec and tables are pure; the client is generic over `AsyncRead + AsyncWrite`.
-//!
+//! Pure (layer 1), bytes and strings in, values out:
 //! - [`codec`]: CR-terminated lines in and out, `OK`/`NG`/malformed classification.
-//! - [`models`]: per-model command strings and code tables, config overrides, `RDCON` parsing.
-//! - [`error`]: the two-layer error (conversation failed / instrument said NG) and trace failures.
-//! - [`client`]: the client over any byte stream, probe and trace; implements `Instrument`.
+//! - [`ng`]: the NG code table (one for every model) and [`ng::NgCode`].
+//! - [`replies`]: what an `OK` payload means (codes, counts, results, profile blocks).
+//! - [`sampling`]: the x pitch of the exported profile and the point count a trace must have.
+//! - [`sanity`]: checks of a read-out (repeated blocks, the instrument's Ra against ours).
+//! - [`readout_probe`]: judging the candidate read-out forms and what to configure.
+//! - [`models`]: per-model command strings and code tables, config overrides, `RDCON`.
+//! - [`sources`]: the documents the tables cite.
+//! - [`error`]: the two-layer error (conversation failed / instrument said NG) and trace
+//!   failures.
+//!
+//! I/O adapters (layer 2), generic over `AsyncRead + AsyncWrite`:
+//! - [`client`]: the client, probe and trace; implements `Instrument`.
 //! - [`recorder`]: tees a conversation into a replayable transcript (format v1).
-//! - [`settings`]: the `[instrument]` config section.
+//!
+//! Settings (layer 4): [`settings`], the `[instrument]` config section.
 
 pub mod client;
 pub mod codec;
 pub mod error;
 pub mod models;
+pub mod ng;
+pub mod readout_probe;
 pub mod recorder;
+pub mod replies;
+pub mod sampling;
+pub mod sanity;
 pub mod settings;
+pub mod sources;

@@ -3,17 +3,13 @@
 //! back, deadband, bounded retries, "missed target", position-lost handling. Implements
 //! [`crate::devices::YAxis`].
 //!
-//! Depends on [`super::Stage`], [`crate::devices`], [`crate::units`]; [`connect`] also on
-//! [`crate::transport`].
+//! Layer 2: generic over any [`super::Stage`]; depends on [`crate::devices`] and
+//! [`crate::units`]. It knows no protocol, no settings file and no port.
 
-use super::grbl::GrblStage;
-use super::settings::{StageProtocol, StageSettings};
-use super::zaber::ZaberStage;
 use super::{Stage, StageError};
 use crate::devices::{Arrival, DeviceFault, FaultClass, StageReport, YAxis};
 use crate::units::Nm;
 use std::time::Duration;
-use tokio_serial::SerialStream;
 
 /// The direction the scan moves in; backlash is taken out by approaching from the
 /// opposite side.
@@ -44,7 +40,7 @@ impl ScanDirection {
     }
 }
 
-/// The policy's parameters (built from [`StageSettings::policy_config`]).
+/// The policy's parameters (built from [`super::StageSettings::policy_config`]).
 #[derive(Debug, Clone)]
 pub struct PolicyConfig {
     /// One device unit in nm.
@@ -65,8 +61,6 @@ pub struct PolicyConfig {
     pub move_timeout: Duration,
     /// Bound on homing.
     pub home_timeout: Duration,
-    /// Home in `connect`.
-    pub home_on_start: bool,
     /// Accept inexact targets with a warning.
     pub allow_inexact_step: bool,
     /// Scan direction.
@@ -228,9 +222,9 @@ impl<S: Stage> YAxis for MotionPolicy<S> {
         self.trusted = st.position_trusted;
         self.position_units = Some(st.position_units);
         self.last_dir = None;
-        if self.cfg.home_on_start {
-            self.home().await?;
-        }
+        // Connecting never homes: whoever drives the scan decides when (once at start with
+        // home-on-start, or because the position is not trusted), so a cycle is never run
+        // twice in a row.
         Ok(StageReport {
             identity,
             position_trusted: self.trusted,
@@ -323,81 +317,4 @@ impl<S: Stage> YAxis for MotionPolicy<S> {
         self.last_dir = None;
         self.stage.stop().await
     }
-}
-
-/// A policy over whichever driver the settings select, on a real serial port.
-pub enum AnyYAxis {
-    /// GRBL / grblHAL.
-    Grbl(MotionPolicy<GrblStage<SerialStream>>),
-    /// Zaber ASCII.
-    Zaber(MotionPolicy<ZaberStage<SerialStream>>),
-}
-
-impl AnyYAxis {
-    /// Sets the scan direction (from the sign of the plan's step).
-    pub fn set_scan_direction(&mut self, d: ScanDirection) {
-        match self {
-            AnyYAxis::Grbl(p) => p.set_scan_direction(d),
-            AnyYAxis::Zaber(p) => p.set_scan_direction(d),
-        }
-    }
-}
-
-impl YAxis for AnyYAxis {
-    type Error = StageError;
-
-    fn check_targets(&self, targets: &[Nm]) -> Result<Vec<String>, StageError> {
-        match self {
-            AnyYAxis::Grbl(p) => p.check_targets(targets),
-            AnyYAxis::Zaber(p) => p.check_targets(targets),
-        }
-    }
-    async fn connect(&mut self) -> Result<StageReport, StageError> {
-        match self {
-            AnyYAxis::Grbl(p) => p.connect().await,
-            AnyYAxis::Zaber(p) => p.connect().await,
-        }
-    }
-    fn position_trusted(&self) -> bool {
-        match self {
-            AnyYAxis::Grbl(p) => p.position_trusted(),
-            AnyYAxis::Zaber(p) => p.position_trusted(),
-        }
-    }
-    async fn home(&mut self) -> Result<(), StageError> {
-        match self {
-            AnyYAxis::Grbl(p) => p.home().await,
-            AnyYAxis::Zaber(p) => p.home().await,
-        }
-    }
-    async fn move_to(&mut self, target: Nm) -> Result<Arrival, StageError> {
-        match self {
-            AnyYAxis::Grbl(p) => p.move_to(target).await,
-            AnyYAxis::Zaber(p) => p.move_to(target).await,
-        }
-    }
-    async fn stop(&mut self) -> Result<(), StageError> {
-        match self {
-            AnyYAxis::Grbl(p) => p.stop().await,
-            AnyYAxis::Zaber(p) => p.stop().await,
-        }
-    }
-}
-
-/// Validates the settings and opens the port (via [`crate::transport::open`]); the
-/// returned axis still needs [`YAxis::connect`].
-pub fn connect(settings: &StageSettings) -> Result<AnyYAxis, StageError> {
-    let cfg = settings.policy_config()?;
-    Ok(match settings.protocol {
-        StageProtocol::Grbl => {
-            let g = settings.grbl_config()?;
-            let io = crate::transport::open(&settings.serial())?;
-            AnyYAxis::Grbl(MotionPolicy::new(GrblStage::new(io, g), cfg))
-        }
-        StageProtocol::Zaber => {
-            let z = settings.zaber_config();
-            let io = crate::transport::open(&settings.serial())?;
-            AnyYAxis::Zaber(MotionPolicy::new(ZaberStage::new(io, z), cfg))
-        }
-    })
 }

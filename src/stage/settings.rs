@@ -2,7 +2,7 @@
 //! configurations.
 //!
 //! Pure: depends on [`crate::transport`] (link settings types), [`crate::units`], and the
-//! stage's own config types.
+//! configuration types of the policy and the drivers (which import nothing from here).
 
 use super::grbl::GrblConfig;
 use super::policy::{PolicyConfig, ScanDirection};
@@ -201,10 +201,19 @@ impl StageSettings {
             max_attempts: self.max_move_attempts,
             move_timeout,
             home_timeout: move_timeout + Duration::from_secs(60),
-            home_on_start: self.home_on_start,
             allow_inexact_step: self.allow_inexact_step,
             direction: ScanDirection::Positive,
         })
+    }
+
+    /// Checks every setting the policy and the selected driver use, before a port is
+    /// opened.
+    pub fn validate(&self) -> Result<(), StageError> {
+        self.policy_config()?;
+        match self.protocol {
+            StageProtocol::Grbl => self.grbl_config().map(|_| ()),
+            StageProtocol::Zaber => Ok(()),
+        }
     }
 
     /// The GRBL driver's configuration.

@@ -6,10 +6,10 @@ use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use surfscan::control::protocol::{
-    ControlChannels, DeviceState, OperatorCommand, OperatorRequest, State, Status, PROTOCOL_VERSION,
-};
+use surfscan::control::protocol::{ControlChannels, PROTOCOL_VERSION};
 use surfscan::control::server::{self, ControlError, ServerOptions};
+use surfscan::scan::command::{OperatorCommand, OperatorRequest};
+use surfscan::scan::status::{DeviceState, State, Status};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader, Lines};
 use tokio::net::unix::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::net::UnixStream;

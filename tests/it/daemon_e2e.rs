@@ -9,8 +9,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 use surfscan::control::client::ControlClient;
-use surfscan::control::protocol::{Message, Request, State, Status};
+use surfscan::control::protocol::{Message, Request};
 use surfscan::scan::journal::{read_journal, Record, StopStatus};
+use surfscan::scan::status::{Ending, State, Status};
 use surfscan_sim::grbl::{GrblSimConfig, StageShared};
 use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
 
@@ -141,10 +142,19 @@ fn notify_until(r: &Rig, d: &mut Child, want: impl Fn(&str) -> bool) -> Vec<Stri
     let start = Instant::now();
     let mut buf = [0u8; 4096];
     while start.elapsed() < DEADLINE {
-        if let Some(status) = d.try_wait().unwrap() {
-            if !seen.iter().any(|m: &String| want(m)) {
-                panic!("the daemon exited ({status}) before the notification; got {seen:?}");
+        let exited = d.try_wait().unwrap();
+        if let Some(status) = exited {
+            // Datagrams it sent before exiting may still wait in the socket: read them all
+            // before concluding that the notification never came.
+            r.notify.set_nonblocking(true).unwrap();
+            while let Ok(n) = r.notify.recv(&mut buf) {
+                seen.push(String::from_utf8_lossy(&buf[..n]).into_owned());
             }
+            r.notify.set_nonblocking(false).unwrap();
+            if seen.iter().any(|m: &String| want(m)) {
+                return seen;
+            }
+            panic!("the daemon exited ({status}) before the notification; got {seen:?}");
         }
         if let Ok(n) = r.notify.recv(&mut buf) {
             let m = String::from_utf8_lossy(&buf[..n]).into_owned();
@@ -281,7 +291,7 @@ async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket()
     let ack = client(&r).await.request(&Request::Abort).await.unwrap();
     assert!(matches!(ack.message, Message::Ack { .. }), "{ack:?}");
     let s = wait_status(&r, "idle after abort", |s| s.state == State::Idle).await;
-    assert_eq!(s.last_stop.as_ref().unwrap().status, "abort");
+    assert_eq!(s.last_stop.as_ref().unwrap().status, Ending::Abort);
     let recs = records(&dir);
     match recs.last().unwrap() {
         Record::Stop(s) => assert_eq!(s.status, StopStatus::Abort),
@@ -354,7 +364,9 @@ async fn sigterm_mid_scan_records_an_interruption_and_the_restart_resumes_by_its
     let mut d = spawn_daemon(&r);
     notify_until(&r, &mut d, |m| m.contains("READY=1"));
     let s = wait_status(&r, "complete after restart", |s| {
-        s.last_stop.as_ref().is_some_and(|l| l.status == "success")
+        s.last_stop
+            .as_ref()
+            .is_some_and(|l| l.status == Ending::Success)
     })
     .await;
     assert_eq!(s.state, State::Idle);

@@ -3,7 +3,9 @@
 //! independent Python reference checks). Tests that change process-wide state (environment
 //! variables, resident memory) live in `tests/process_wide/` instead.
 
+mod cli_conventions;
 mod common;
+mod config_ranges;
 mod control_cli;
 mod control_server;
 mod daemon_e2e;
@@ -16,16 +18,20 @@ mod iges_roundtrip;
 mod metrology_areal;
 mod metrology_cli;
 mod metrology_model;
+mod metrology_plots;
 mod metrology_profile;
 mod metrology_reference;
 mod metrology_x3p;
+mod model_honesty;
 mod scan_dir_analysis;
 mod scan_e2e;
 mod scan_runner;
 mod scan_storage;
 mod sj210_client;
 mod sj210_probe_cli;
+mod sj210_readout_probe;
 mod sj210_sim;
 mod stage_grbl;
 mod stage_pty;
+mod stage_scan;
 mod stage_zaber;

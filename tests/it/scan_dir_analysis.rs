@@ -11,8 +11,11 @@ use std::process::Command;
 use std::sync::Arc;
 use surfscan::metrology::params::{analyze_line, Options};
 use surfscan::profile::{Conditions, FilterKind, InstrumentResult, Profile, ProfileKind};
+use surfscan::scan::faults::NoFaults;
 use surfscan::scan::journal::{Journal, Record, StartRecord, StopRecord, StopStatus};
-use surfscan::scan::store::{LineMeta, NoFaults, ScanId, ScanStore};
+use surfscan::scan::line::LineMeta;
+use surfscan::scan::scan_id::ScanId;
+use surfscan::scan::store::ScanStore;
 use surfscan::units::Nm;
 
 fn surfscan() -> Command {

@@ -8,15 +8,17 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use surfscan::config::Config;
-use surfscan::control::protocol::{OperatorCommand, OperatorRequest, State, Status};
 use surfscan::devices::{
     Arrival, Battery, DeviceFault, FaultClass, Instrument, InstrumentIdentity, ProbeReport,
     ProfileReadout, StageReport, TracedLine, YAxis,
 };
 use surfscan::profile::{Conditions, Profile, ProfileKind};
+use surfscan::scan::command::{OperatorCommand, OperatorRequest};
 use surfscan::scan::journal::{read_journal, Record, StopStatus};
-use surfscan::scan::runner::{run_scan, Control, Outcome, RunSettings, ScanRequest};
+use surfscan::scan::runner::{run_scan, Control, Outcome, ScanRequest};
+use surfscan::scan::settings::RunSettings;
 use surfscan::scan::station::{Device, Fault, Station};
+use surfscan::scan::status::{State, Status};
 use surfscan::scan::testhooks::TestHooks;
 use surfscan::stage::policy::ScanDirection;
 use surfscan::units::Nm;
@@ -260,11 +262,11 @@ dir = {out:?}
 "#,
         out = out.display().to_string()
     );
+    let config = Config::parse(Path::new("runner-test.toml"), &text).expect("config");
     RunSettings {
-        config: Config::parse(Path::new("runner-test.toml"), &text).expect("config"),
-        config_hash: "0".repeat(64),
-        hooks: Arc::new(TestHooks::none()),
         characterise: None,
+        ..surfscan::cli::scan::run_settings(&config, "0".repeat(64), TestHooks::none())
+            .expect("settings")
     }
 }
 
@@ -402,8 +404,22 @@ async fn pause_waits_for_the_line_on_disk_and_resume_continues() {
             .filter(|e| matches!(e, Event::Move(_)))
             .collect();
         assert_eq!(moves, vec![Event::Move(target(0)), Event::Move(target(1))]);
+        // Repeated commands are answered alike (exit 0 at the command line): the scan is
+        // in the state asked for, and the reply names it by its id.
+        let id = status.borrow().scan_id.clone().expect("id");
+        let reply = request(&commands, OperatorCommand::Pause).await;
+        assert_eq!(reply, format!("scan {id} is already paused"));
         let reply = request(&commands, OperatorCommand::Resume).await;
         assert!(reply.contains("resumes"), "{reply}");
+        status
+            .wait_for(|s| s.state == State::Scanning)
+            .await
+            .expect("scanning again");
+        let reply = request(&commands, OperatorCommand::Resume).await;
+        assert_eq!(
+            reply,
+            format!("scan {id} is not paused; it goes on scanning")
+        );
     };
     let (outcome, ()) = tokio::join!(
         run_scan(&mut station, &mut h.ctl, &settings, new_scan()),

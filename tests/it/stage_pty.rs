@@ -1,17 +1,19 @@
-//! End to end over real pseudo-terminals: `surfscan::stage::connect` opens the simulated GRBL
-//! and Zaber stages (started in-process through the `surfscan_sim` library) with the real
-//! transport code, and the motion policy drives them; the simulator's true carriage position
-//! is the independent check.
+//! End to end over real pseudo-terminals: `surfscan::scan::station::open_stage` opens the
+//! simulated GRBL and Zaber stages (started in-process through the `surfscan_sim` library)
+//! with the real transport code, and the motion policy drives them; the simulator's true
+//! carriage position is the independent check.
 
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 use surfscan::devices::{DeviceFault, FaultClass, YAxis};
-use surfscan::stage::{connect, AnyYAxis, StageError, StageSettings};
+use surfscan::scan::station::open_stage;
+use surfscan::stage::{AnyYAxis, StageError, StageSettings};
 use surfscan::units::Nm;
 use surfscan_sim::grbl::{GrblSimConfig, StageFault, StageShared};
 use surfscan_sim::zaber::ZaberSimConfig;
 use surfscan_sim::{SimEvent, SimHandle, Simulator};
+use tokio_serial::SerialStream;
 
 /// Simulated motion runs this many times faster than real time.
 const SPEED_UP: f64 = 1000.0;
@@ -49,7 +51,12 @@ feed-mm-min = 60
 poll-interval-ms = 200
 "#;
 
-async fn grbl() -> (tempfile::TempDir, SimHandle, AnyYAxis, Arc<StageShared>) {
+async fn grbl() -> (
+    tempfile::TempDir,
+    SimHandle,
+    AnyYAxis<SerialStream>,
+    Arc<StageShared>,
+) {
     let dir = tempfile::tempdir().unwrap();
     let link = dir.path().join("grbl");
     let shared = StageShared::new();
@@ -58,18 +65,19 @@ async fn grbl() -> (tempfile::TempDir, SimHandle, AnyYAxis, Arc<StageShared>) {
         max_travel_mm: 100.0,
         backlash_mm: 0.05,
         time_scale: SPEED_UP,
-        start_steps: -4000,
+        start_mm: -10.0,
         homed_at_start: false,
         ..Default::default()
     };
     let sim = Simulator::without_instrument().grbl_stage(&link, cfg, shared.clone());
     let h = ready(sim, &link).await;
-    let mut axis = connect(&settings(GRBL, &link)).expect("opens the pty");
+    let mut axis = open_stage(&settings(GRBL, &link)).expect("opens the pty");
     let r = axis.connect().await.unwrap();
     assert!(r.identity.contains("VER:1.1h"), "{}", r.identity);
     assert!(!r.position_trusted, "powered up in Alarm");
-    // -4000 steps at 2500 nm/step.
-    assert_eq!(r.position, Nm(-10_000_000));
+    // Just powered up 10 mm below the switch: the counter reads 0 where the stage stands.
+    assert_eq!(r.position, Nm(0));
+    assert_eq!(shared.true_position_nm(), -10_000_000);
     (dir, h, axis, shared)
 }
 
@@ -156,7 +164,12 @@ deadband-um = 0.5
 poll-interval-ms = 20
 "#;
 
-async fn zaber() -> (tempfile::TempDir, SimHandle, AnyYAxis, Arc<StageShared>) {
+async fn zaber() -> (
+    tempfile::TempDir,
+    SimHandle,
+    AnyYAxis<SerialStream>,
+    Arc<StageShared>,
+) {
     let dir = tempfile::tempdir().unwrap();
     let link = dir.path().join("zaber");
     let shared = StageShared::new();
@@ -171,7 +184,7 @@ async fn zaber() -> (tempfile::TempDir, SimHandle, AnyYAxis, Arc<StageShared>) {
     };
     let sim = Simulator::without_instrument().zaber_stage(&link, cfg, shared.clone());
     let h = ready(sim, &link).await;
-    let mut axis = connect(&settings(ZABER, &link)).expect("opens the pty");
+    let mut axis = open_stage(&settings(ZABER, &link)).expect("opens the pty");
     let r = axis.connect().await.unwrap();
     assert!(r.identity.contains("50081"), "{}", r.identity);
     assert!(!r.position_trusted, "WR at power-up");
@@ -272,7 +285,11 @@ async fn grbl_unplugged_is_absent() {
 /// homing and a reversal are two (down past the target by the backlash, then up onto it).
 /// The simulated carriage lags the motor by the backlash after any downward move, so it lands
 /// exactly on the target only if the last move onto it was upwards.
-async fn backlash_only_on_reversal(a: &mut AnyYAxis, shared: &StageShared, base_nm: i64) {
+async fn backlash_only_on_reversal(
+    a: &mut AnyYAxis<SerialStream>,
+    shared: &StageShared,
+    base_nm: i64,
+) {
     a.home().await.unwrap();
     let steps: [(i64, u64); 5] = [(0, 2), (1, 1), (2, 1), (1, 2), (2, 1)];
     for (i, (k, moves)) in steps.into_iter().enumerate() {

@@ -157,7 +157,7 @@ async fn stop_halts_a_move_and_clears_its_own_interruption_flag() {
 
 #[tokio::test(start_paused = true)]
 async fn message_ids_and_checksums_work_end_to_end_and_skip_stale_replies() {
-    use surfscan::stage::zaber::encode_command;
+    use surfscan::stage::zaber::codec::encode_command;
     use tokio::io::AsyncWriteExt;
     let settings: StageSettings = toml::from_str(SETTINGS).unwrap();
     let (host, dev) = tokio::io::duplex(4096);

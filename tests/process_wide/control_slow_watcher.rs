@@ -4,8 +4,10 @@
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use std::os::fd::AsFd;
 use std::time::{Duration, Instant};
-use surfscan::control::protocol::{ControlChannels, OperatorRequest, State, Status};
+use surfscan::control::protocol::ControlChannels;
 use surfscan::control::server::{self, ServerOptions};
+use surfscan::scan::command::OperatorRequest;
+use surfscan::scan::status::{State, Status};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::sync::{mpsc, oneshot, watch};
 

@@ -4,14 +4,15 @@
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use surfscan::scan::hook::{Hook, HookEvent, HookOutcome, HookSettings, HookStatus};
+use surfscan::hook::{Hook, HookOutcome, HookSettings};
+use surfscan::scan::event::{ScanEvent, ScanEventKind as HookStatus};
 
-fn event(status: HookStatus) -> HookEvent {
-    HookEvent {
+fn event(kind: HookStatus) -> ScanEvent {
+    ScanEvent {
         scan_id: "G-0142".into(),
-        status,
+        kind,
         reason: "stage following error on line 12".into(),
-        scan_dir: PathBuf::from("/var/lib/surfscan/scans/G-0142"),
+        dir: PathBuf::from("/var/lib/surfscan/scans/G-0142"),
     }
 }
 

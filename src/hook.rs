@@ -11,12 +11,11 @@
 //! `SURFSCAN_REASON` and `SURFSCAN_SCAN_DIR`; systemd's notification variables are removed
 //! so the hook cannot speak to the service manager on the daemon's behalf.
 //!
-//! Layer 3 (the session): depends on tokio's process support, nix for the process group and
-//! serde for [`HookSettings`].
+//! Layer 4 (process edge): depends on the scan's events ([`crate::scan::event`]), tokio's
+//! process support, nix for the process group and serde for [`HookSettings`].
 
+use crate::scan::event::ScanEvent;
 use serde::{Deserialize, Serialize};
-use std::fmt;
-use std::path::PathBuf;
 use std::process::{ExitStatus, Stdio};
 use std::time::Duration;
 
@@ -70,50 +69,6 @@ impl HookSettings {
     }
 }
 
-/// How a scan ended or why it stopped, as `SURFSCAN_STATUS` names it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum HookStatus {
-    /// All lines done and the surface written.
-    Success,
-    /// The scan failed.
-    Fail,
-    /// The operator aborted it.
-    Abort,
-    /// A device fault suspended it; it resumes by itself.
-    Suspended,
-}
-
-impl HookStatus {
-    /// The word in `SURFSCAN_STATUS`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            HookStatus::Success => "success",
-            HookStatus::Fail => "fail",
-            HookStatus::Abort => "abort",
-            HookStatus::Suspended => "suspended",
-        }
-    }
-}
-
-impl fmt::Display for HookStatus {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-/// What the hook is told.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct HookEvent {
-    /// `SURFSCAN_SCAN_ID`.
-    pub scan_id: String,
-    /// `SURFSCAN_STATUS`.
-    pub status: HookStatus,
-    /// `SURFSCAN_REASON` (may be empty).
-    pub reason: String,
-    /// `SURFSCAN_SCAN_DIR`.
-    pub scan_dir: PathBuf,
-}
-
 /// How one hook run ended.
 #[derive(Debug)]
 pub enum HookOutcome {
@@ -151,17 +106,17 @@ impl Hook {
 
     /// Starts the hook in its own task and returns at once; the outcome is logged, and the
     /// handle may be awaited or dropped. Must be called inside a tokio runtime.
-    pub fn fire(&self, event: HookEvent) -> tokio::task::JoinHandle<HookOutcome> {
+    pub fn fire(&self, event: ScanEvent) -> tokio::task::JoinHandle<HookOutcome> {
         let hook = self.clone();
         tokio::spawn(async move { hook.run(&event).await })
     }
 
     /// Runs the hook to completion or timeout and logs anything but success.
-    pub async fn run(&self, event: &HookEvent) -> HookOutcome {
+    pub async fn run(&self, event: &ScanEvent) -> HookOutcome {
         let outcome = self.run_quietly(event).await;
         let command = self.command.join(" ");
         let scan = event.scan_id.as_str();
-        let status = event.status.as_str();
+        let status = event.kind.as_str();
         match &outcome {
             HookOutcome::Succeeded => {
                 tracing::info!(command, scan, status, "notification hook done")
@@ -191,13 +146,13 @@ impl Hook {
         outcome
     }
 
-    async fn run_quietly(&self, event: &HookEvent) -> HookOutcome {
+    async fn run_quietly(&self, event: &ScanEvent) -> HookOutcome {
         let mut cmd = tokio::process::Command::new(&self.command[0]);
         cmd.args(&self.command[1..])
             .env("SURFSCAN_SCAN_ID", &event.scan_id)
-            .env("SURFSCAN_STATUS", event.status.as_str())
+            .env("SURFSCAN_STATUS", event.kind.as_str())
             .env("SURFSCAN_REASON", &event.reason)
-            .env("SURFSCAN_SCAN_DIR", &event.scan_dir)
+            .env("SURFSCAN_SCAN_DIR", &event.dir)
             .env_remove("NOTIFY_SOCKET")
             .env_remove("WATCHDOG_USEC")
             .env_remove("WATCHDOG_PID")

@@ -1,6 +1,6 @@
 //! Splits a byte stream into text lines (CR, LF or CRLF terminated) with a length bound.
 //!
-//! Pure: no I/O. Used by the GRBL and Zaber drivers.
+//! Pure: no I/O, depends on nothing in the crate. [`super::link::LineLink`] feeds it.
 
 use thiserror::Error;
 

@@ -1,0 +1,86 @@
+//! The disk pre-flight: how many bytes a planned scan writes, and whether the output
+//! directory's file system can hold them before the first line is traced.
+//!
+//! Layer 3 (session): depends on [`super::store_error`] and `statvfs`.
+
+use std::io;
+use std::path::Path;
+
+use super::store_error::StoreError;
+
+/// Bytes budgeted per stored point in the heights CSV (`x_mm,z_um` shortest round-trip:
+/// up to ~22 + ~22 characters, comma, newline).
+pub const CSV_BYTES_PER_POINT: u64 = 48;
+/// Bytes budgeted per point in the IGES surface (three coordinates of a pole plus a weight
+/// at up to ~24 characters each, in 64-column parameter lines with 16-column tails).
+pub const IGES_BYTES_PER_POINT: u64 = 125;
+/// Bytes budgeted per line for its metadata JSON and journal record.
+pub const META_BYTES_PER_LINE: u64 = 8 * 1024;
+/// Fixed allowance for the start record, report, plots and metrics.
+pub const FIXED_BYTES: u64 = 4 * 1024 * 1024;
+
+/// Estimated bytes a scan of `lines` lines of `points_per_line` points writes.
+pub fn estimate_scan_bytes(lines: u32, points_per_line: u64) -> u64 {
+    let points = points_per_line.saturating_mul(u64::from(lines));
+    points
+        .saturating_mul(CSV_BYTES_PER_POINT + IGES_BYTES_PER_POINT)
+        .saturating_add(u64::from(lines).saturating_mul(META_BYTES_PER_LINE))
+        .saturating_add(FIXED_BYTES)
+}
+
+/// Bytes available to an unprivileged writer on the file system holding `dir`.
+pub fn free_bytes(dir: &Path) -> Result<u64, StoreError> {
+    let st = nix::sys::statvfs::statvfs(dir).map_err(|e| StoreError::Io {
+        op: "statvfs",
+        path: dir.to_path_buf(),
+        source: io::Error::from(e),
+    })?;
+    // The libc types are u64 on 64-bit Linux but narrower elsewhere: keep the widening.
+    #[allow(clippy::useless_conversion)]
+    let (blocks, size) = (
+        u64::from(st.blocks_available()),
+        u64::from(st.fragment_size()),
+    );
+    Ok(blocks.saturating_mul(size))
+}
+
+/// Refuses (with [`StoreError::DiskTooSmall`]) when `available_bytes` cannot hold
+/// `needed_bytes`; pure so that it can be tested without filling a disk.
+pub fn check_space(path: &Path, needed_bytes: u64, available_bytes: u64) -> Result<(), StoreError> {
+    if needed_bytes > available_bytes {
+        return Err(StoreError::DiskTooSmall {
+            path: path.to_path_buf(),
+            needed_bytes,
+            available_bytes,
+        });
+    }
+    Ok(())
+}
+
+/// Pre-flight: estimates the scan's disk use and checks the free space of `output_dir`.
+/// Returns the estimate on success.
+pub fn preflight_disk(
+    output_dir: &Path,
+    lines: u32,
+    points_per_line: u64,
+) -> Result<u64, StoreError> {
+    let needed = estimate_scan_bytes(lines, points_per_line);
+    check_space(output_dir, needed, free_bytes(output_dir)?)?;
+    Ok(needed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn disk_estimate_and_check() {
+        // 31 lines × 8000 points: 248000 × 173 B + 31 × 8 KiB + 4 MiB.
+        let e = estimate_scan_bytes(31, 8000);
+        assert_eq!(e, 248_000 * 173 + 31 * 8192 + 4 * 1024 * 1024);
+        assert!(check_space(Path::new("/x"), e, e).is_ok());
+        let err = check_space(Path::new("/x"), e, e - 1).unwrap_err();
+        assert!(err.is_disk_full());
+        assert!(err.to_string().contains(&e.to_string()));
+    }
+}

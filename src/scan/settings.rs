@@ -1,0 +1,98 @@
+//! What the scan runner is told by the composition layer: the plan of a new scan and the
+//! station's settings that concern the session, already validated and typed. The runner never
+//! sees the configuration file; the frozen copy of it in the start record is opaque
+//! traceability.
+//!
+//! Layer 3 (session): depends on [`super::plan`], [`super::outputs`] and [`super::testhooks`].
+
+use super::outputs::Characterise;
+use super::plan::Plan;
+use super::testhooks::TestHooks;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Exponential backoff between reconnection tries: the first wait, doubling up to `max`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Backoff {
+    /// First wait.
+    pub initial: Duration,
+    /// Longest wait.
+    pub max: Duration,
+}
+
+impl Backoff {
+    /// The wait after `current` (zero before the first wait): `initial`, then doubling, at
+    /// most `max`.
+    pub fn next(&self, current: Duration) -> Duration {
+        if current.is_zero() {
+            self.initial
+        } else {
+            (current * 2).min(self.max)
+        }
+    }
+}
+
+/// What the runner needs besides devices and control.
+#[derive(Clone)]
+pub struct RunSettings {
+    /// The plan of a new scan (a resumed scan follows the plan frozen in its journal).
+    pub plan: Plan,
+    /// Directory holding one sub-directory per scan (created if missing).
+    pub output_dir: PathBuf,
+    /// Home the stage before the first line of a new scan even when its position is trusted.
+    pub home_on_start: bool,
+    /// Baud rate of the instrument's link, for the pre-flight estimate of a line's duration.
+    pub instrument_baud: u32,
+    /// Reconnection backoff of a vanished device.
+    pub backoff: Backoff,
+    /// The Prometheus textfile written after every line, if any.
+    pub metrics_file: Option<PathBuf>,
+    /// The configuration as loaded, frozen into the start record for traceability (opaque
+    /// to the session: it follows `plan`, never this copy).
+    pub config: serde_json::Value,
+    /// SHA-256 of the configuration file, hex.
+    pub config_hash: String,
+    /// Fault injection (tests only; none in production).
+    pub hooks: Arc<TestHooks>,
+    /// The characterisation run when a scan completes (none: the report holds the fit and
+    /// the instrument's own results only).
+    pub characterise: Option<Characterise>,
+}
+
+impl std::fmt::Debug for RunSettings {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RunSettings")
+            .field("plan", &self.plan)
+            .field("output_dir", &self.output_dir)
+            .field("home_on_start", &self.home_on_start)
+            .field("instrument_baud", &self.instrument_baud)
+            .field("backoff", &self.backoff)
+            .field("metrics_file", &self.metrics_file)
+            .field("config_hash", &self.config_hash)
+            .field("hooks", &self.hooks)
+            .field("characterise", &self.characterise.is_some())
+            .finish_non_exhaustive()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn backoff_doubles_up_to_its_limit() {
+        let b = Backoff {
+            initial: Duration::from_secs(1),
+            max: Duration::from_secs(4),
+        };
+        let mut d = Duration::ZERO;
+        let waits: Vec<u64> = (0..5)
+            .map(|_| {
+                d = b.next(d);
+                d.as_secs()
+            })
+            .collect();
+        assert_eq!(waits, vec![1, 2, 4, 4, 4]);
+    }
+}

@@ -1,0 +1,108 @@
+//! Errors of a scan directory and its line files, shared by the store, the line file format
+//! and the disk pre-flight.
+//!
+//! Layer 3 (session): depends on [`super::journal`] (whose errors it can carry) and std.
+
+use std::io;
+use std::path::{Path, PathBuf};
+
+use super::journal::JournalError;
+
+/// Errors of the scan directory and its line files.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    /// A file system operation failed.
+    #[error("{op} {path}: {source} (check the output directory's permissions and free space)")]
+    Io {
+        /// What was being done ("create", "write", "rename", …).
+        op: &'static str,
+        /// The path concerned.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: io::Error,
+    },
+    /// The heights file does not start with the `x_mm,z_um` header.
+    #[error("{path}: line 1 is {found:?}, expected the header \"x_mm,z_um\"")]
+    CsvHeader {
+        /// The file.
+        path: PathBuf,
+        /// The first line as found.
+        found: String,
+    },
+    /// A data row of a heights file is malformed.
+    #[error("{path}: line {line}: {content:?}: {reason}")]
+    CsvRow {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number in the file.
+        line: usize,
+        /// The row as found.
+        content: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A metadata file is not valid line metadata.
+    #[error("{path}: not valid line metadata: {source}")]
+    MetaJson {
+        /// The file.
+        path: PathBuf,
+        /// The parser's error (with its line and column).
+        #[source]
+        source: serde_json::Error,
+    },
+    /// One of the two files of a line is missing.
+    #[error("{path}: its companion {missing} is missing; the line is incomplete (re-trace it or remove the file)")]
+    MissingCompanion {
+        /// The file that exists.
+        path: PathBuf,
+        /// The file that should exist next to it.
+        missing: PathBuf,
+    },
+    /// The metadata disagrees with the file name or with the heights file.
+    #[error("{path}: {reason}")]
+    Inconsistent {
+        /// The file.
+        path: PathBuf,
+        /// What disagrees, with both values.
+        reason: String,
+    },
+    /// A journal operation failed.
+    #[error(transparent)]
+    Journal(#[from] JournalError),
+    /// The file system cannot hold the planned scan.
+    #[error("{path}: the scan needs about {needed_bytes} bytes but only {available_bytes} are free; free space or choose another output.dir")]
+    DiskTooSmall {
+        /// The output directory checked.
+        path: PathBuf,
+        /// Estimated bytes the scan will write.
+        needed_bytes: u64,
+        /// Bytes available to an unprivileged writer.
+        available_bytes: u64,
+    },
+}
+
+impl StoreError {
+    /// True when the underlying cause is a full disk or exhausted quota.
+    pub fn is_disk_full(&self) -> bool {
+        let code = match self {
+            StoreError::Io { source, .. } => source.raw_os_error(),
+            StoreError::Journal(JournalError::Io { source, .. }) => source.raw_os_error(),
+            StoreError::DiskTooSmall { .. } => return true,
+            _ => None,
+        };
+        matches!(code, Some(libc::ENOSPC) | Some(libc::EDQUOT))
+    }
+}
+
+/// Maps an I/O error of `op` on `path` to [`StoreError::Io`].
+pub(crate) fn io_err<'a>(
+    op: &'static str,
+    path: &'a Path,
+) -> impl FnOnce(io::Error) -> StoreError + 'a {
+    move |source| StoreError::Io {
+        op,
+        path: path.to_path_buf(),
+        source,
+    }
+}

@@ -1,0 +1,160 @@
+//! The conversation with the instrument: one command in flight, first-byte and inter-byte
+//! timeouts, recovery after a garbled or late reply (drain, re-read status), and bounded
+//! retries of idempotent reads on "not now" codes. Never retries a `CT` command.
+//!
+//! Layer 2: part of [`super::Sj210Client`]; depends on [`crate::sj210::codec`] and
+//! [`crate::sj210::error`].
+
+use super::{io_err, millis, Sj210Client};
+use crate::sj210::codec::{encode_command, escape_bytes, Reply};
+use crate::sj210::error::{LinkError, Sj210Error};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+use tokio::time::{sleep, timeout, Instant};
+use tokio_util::codec::Decoder;
+
+impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
+    /// Sends one command and reads one reply, without recovery or retry.
+    async fn transact(&mut self, command: &str) -> Result<Reply, LinkError> {
+        let bytes = encode_command(command)?;
+        if self.in_flight {
+            tracing::info!("the previous command was cancelled before its reply; draining the link before {command:?}");
+            self.drain().await;
+        }
+        if !self.buf.is_empty() {
+            tracing::warn!(stale = %escape_bytes(&self.buf), "discarding unsolicited bytes before {command:?}");
+            self.buf.clear();
+            self.codec.reset();
+        }
+        tracing::debug!(tx = %escape_bytes(&bytes));
+        self.in_flight = true;
+        let reply = self.exchange(&bytes).await;
+        self.in_flight = false;
+        reply
+    }
+
+    /// Writes one encoded command and reads its reply line.
+    async fn exchange(&mut self, bytes: &[u8]) -> Result<Reply, LinkError> {
+        self.io.write_all(bytes).await.map_err(io_err)?;
+        self.io.flush().await.map_err(io_err)?;
+        let mut got_any = false;
+        loop {
+            if let Some(reply) = self.codec.decode(&mut self.buf).map_err(io_err)? {
+                tracing::debug!(rx = ?reply);
+                return Ok(reply);
+            }
+            let wait = if got_any {
+                self.opts.inter_byte
+            } else {
+                self.opts.first_byte
+            };
+            let mut chunk = [0u8; 512];
+            match timeout(wait, self.io.read(&mut chunk)).await {
+                Err(_) if got_any => {
+                    return Err(LinkError::InterByteTimeout {
+                        partial: escape_bytes(&self.buf),
+                        waited_ms: millis(wait),
+                    })
+                }
+                Err(_) => {
+                    return Err(LinkError::FirstByteTimeout {
+                        waited_ms: millis(wait),
+                    })
+                }
+                Ok(Ok(0)) => {
+                    return Err(LinkError::Vanished {
+                        detail: "end of file on the port".into(),
+                    })
+                }
+                Ok(Ok(n)) => {
+                    got_any = true;
+                    self.buf.extend_from_slice(chunk.get(..n).unwrap_or(&[]));
+                }
+                Ok(Err(e)) => return Err(io_err(e)),
+            }
+        }
+    }
+
+    /// Reads and discards input until the line is quiet for an inter-byte interval, but never
+    /// longer than a first-byte timeout in total (a device that streams garbage must not hang
+    /// us); forgets partial lines.
+    async fn drain(&mut self) {
+        let mut chunk = [0u8; 512];
+        let drain_end = Instant::now() + self.opts.first_byte;
+        while Instant::now() < drain_end {
+            match timeout(self.opts.inter_byte, self.io.read(&mut chunk)).await {
+                Ok(Ok(n)) if n > 0 => continue,
+                _ => break,
+            }
+        }
+        self.buf.clear();
+        self.codec.reset();
+    }
+
+    /// After a timeout or malformed reply: drain what is still arriving, forget partial
+    /// lines, and read the status once so the next command starts on a clean link.
+    async fn recover(&mut self) {
+        self.drain().await;
+        let status = self.table.commands.status.plain();
+        match self.transact(&status).await {
+            Ok(r) => {
+                tracing::info!(reply = ?r, "status after recovery");
+                // A reply later than the drain window answers the status request instead,
+                // and the real status reply follows it: swallow that one too, or every later
+                // answer would be shifted by one.
+                self.drain().await;
+            }
+            Err(e) => {
+                tracing::warn!("status re-read after recovery failed: {e}");
+                self.buf.clear();
+                self.codec.reset();
+            }
+        }
+    }
+
+    /// One command, its `OK` payload, or a named error. `RD` commands are retried on
+    /// NG011/NG033/NG101 within the retry budget when `retry` is true; `CT` commands never.
+    pub async fn command(&mut self, command: &str, retry: bool) -> Result<String, Sj210Error> {
+        let retry = retry && command.starts_with("RD");
+        let started = Instant::now();
+        loop {
+            match self.transact(command).await {
+                Ok(Reply::Ok(payload)) => return Ok(payload),
+                Ok(Reply::Ng { code, byte_pos }) => {
+                    if retry
+                        && code.is_retryable_read()
+                        && started.elapsed() + self.opts.poll_interval
+                            <= self.opts.read_retry_budget
+                    {
+                        tracing::debug!("{command:?} answered {code}, retrying");
+                        sleep(self.opts.poll_interval).await;
+                        continue;
+                    }
+                    return Err(Sj210Error::Device {
+                        command: command.to_string(),
+                        code,
+                        byte_pos,
+                        meaning: code.meaning(),
+                    });
+                }
+                Ok(Reply::Malformed(raw)) => {
+                    self.recover().await;
+                    return Err(Sj210Error::Link {
+                        command: command.to_string(),
+                        source: LinkError::Malformed {
+                            raw: escape_bytes(&raw),
+                        },
+                    });
+                }
+                Err(source) => {
+                    if !matches!(source, LinkError::Vanished { .. } | LinkError::Encode(_)) {
+                        self.recover().await;
+                    }
+                    return Err(Sj210Error::Link {
+                        command: command.to_string(),
+                        source,
+                    });
+                }
+            }
+        }
+    }
+}

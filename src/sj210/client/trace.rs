@@ -1,0 +1,161 @@
+//! One trace's motion: waiting for idle (returning the detector from `005`), starting the
+//! measurement, polling the status until it is back, the deadline from the conditions,
+//! over-range with the detector position, and the best-effort abort.
+//!
+//! Layer 2: part of [`super::Sj210Client`]. Time comes from `tokio::time`.
+
+use super::{millis, status, Sj210Client};
+use crate::sj210::codec::NgCode;
+use crate::sj210::error::{LinkError, Sj210Error};
+use tokio::io::{AsyncRead, AsyncWrite};
+use tokio::time::{sleep, Instant};
+
+impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
+    /// Status must be idle; on `005` the detector is returned first, on `002` the return
+    /// is awaited.
+    pub async fn wait_idle(&mut self) -> Result<(), Sj210Error> {
+        let deadline = Instant::now() + self.trace_deadline();
+        let mut returned = false;
+        loop {
+            let s = self.status().await?;
+            match s {
+                status::IDLE => return Ok(()),
+                status::INTERMEDIATE if !returned => {
+                    let c = self.table.commands.return_to_start.plain();
+                    self.command(&c, false).await?;
+                    returned = true;
+                }
+                status::RETURNING | status::INTERMEDIATE => {}
+                status::RETRACTING | status::RETRACTED => {
+                    return Err(Sj210Error::Retracted { status: s })
+                }
+                other => {
+                    return Err(Sj210Error::NotIdle {
+                        status: other,
+                        meaning: self.table.status_meaning(other),
+                    })
+                }
+            }
+            if Instant::now() >= deadline {
+                return Err(Sj210Error::NotIdle {
+                    status: s,
+                    meaning: self.table.status_meaning(s),
+                });
+            }
+            sleep(self.opts.poll_interval).await;
+        }
+    }
+
+    fn trace_deadline(&self) -> std::time::Duration {
+        if let Some(d) = self.opts.trace_deadline {
+            return d;
+        }
+        let c = self.conditions.clone().unwrap_or_default();
+        // Traverse = evaluation length + pre/post travel (≈ λc); the SJ-210 drive range
+        // (17.5 mm) when unknown. Speed 0.5 mm/s measuring, 1 mm/s returning unless known.
+        let lc = c.lambda_c_mm.unwrap_or(2.5);
+        let traverse = c.evaluation_length_mm.map(|l| l + lc).unwrap_or(17.5);
+        let speed = c.speed_mm_s.filter(|s| *s > 0.0).unwrap_or(0.5);
+        let secs = (traverse / speed + traverse / 1.0 + 10.0) * 2.0;
+        std::time::Duration::from_secs_f64(secs.clamp(1.0, 3600.0))
+    }
+
+    /// Over-range: read the detector position for the log, then the named error.
+    async fn over_range(&mut self) -> Sj210Error {
+        let c = self.table.commands.position.plain();
+        let position = match self.command(&c, false).await {
+            Ok(p) => Some(p.trim().to_string()),
+            Err(e) => {
+                tracing::warn!("detector position after over-range unreadable: {e}");
+                None
+            }
+        };
+        tracing::error!(position = ?position, "detector over-range");
+        Sj210Error::OverRange { position }
+    }
+
+    /// Starts a trace and polls the status until the instrument is back (idle or `005`).
+    pub async fn run_trace(&mut self) -> Result<(), Sj210Error> {
+        let s = self.status().await?;
+        if s != status::IDLE {
+            return Err(Sj210Error::NotIdle {
+                status: s,
+                meaning: self.table.status_meaning(s),
+            });
+        }
+        let start = self.table.commands.start.plain();
+        match self.command(&start, false).await {
+            Ok(p) if p.is_empty() => {}
+            Ok(payload) => {
+                return Err(Sj210Error::UnexpectedReply {
+                    command: start,
+                    payload,
+                    expected: "an empty OK",
+                })
+            }
+            Err(e) if e.code() == Some(NgCode::OverRange) => return Err(self.over_range().await),
+            Err(e) => return Err(e),
+        }
+        let started = Instant::now();
+        let deadline = self.trace_deadline();
+        let mut active = false;
+        let mut link_failures = 0u32;
+        loop {
+            sleep(self.opts.poll_interval).await;
+            let s = match self.status().await {
+                Ok(s) => {
+                    link_failures = 0;
+                    s
+                }
+                Err(e) if e.code() == Some(NgCode::OverRange) => {
+                    return Err(self.over_range().await)
+                }
+                Err(Sj210Error::Link { source, command })
+                    if !matches!(source, LinkError::Vanished { .. }) && link_failures < 2 =>
+                {
+                    tracing::warn!("{command:?} failed during the trace: {source}; polling on");
+                    link_failures += 1;
+                    continue;
+                }
+                Err(e) => return Err(e),
+            };
+            match s {
+                status::MEASURING | status::RETURNING => active = true,
+                status::IDLE | status::INTERMEDIATE if active => return Ok(()),
+                status::IDLE | status::INTERMEDIATE => {
+                    if started.elapsed() >= self.opts.start_deadline {
+                        return Err(Sj210Error::StylusNotOnWorkpiece {
+                            waited_ms: millis(started.elapsed()),
+                            last_status: s,
+                        });
+                    }
+                }
+                status::RETRACTING | status::RETRACTED => {
+                    return Err(Sj210Error::Retracted { status: s })
+                }
+                other => {
+                    return Err(Sj210Error::UnexpectedReply {
+                        command: self.table.commands.status.plain(),
+                        payload: format!("{other:03}"),
+                        expected: "a status 000-005",
+                    })
+                }
+            }
+            if started.elapsed() >= deadline {
+                return Err(Sj210Error::TraceDeadline {
+                    waited_ms: millis(deadline),
+                    last_status: s,
+                });
+            }
+        }
+    }
+
+    /// Best-effort abort: sends the abort command only after reading "measuring".
+    pub async fn abort_measurement(&mut self) -> Result<(), Sj210Error> {
+        if self.status().await? == status::MEASURING {
+            let c = self.table.commands.abort.plain();
+            self.command(&c, false).await?;
+        }
+        Ok(())
+    }
+}
