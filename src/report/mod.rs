@@ -823,7 +823,7 @@ pub fn characterise_grid(
             grid.y_mm.get(overlay_row).copied().unwrap_or(f64::NAN)
         );
         plots.extend(
-            plot_profile_overlay(out, &measured_pts, &model_pts, &title, &caption)
+            plot_profile_overlay(out, &measured_pts, &model_pts, &[], &title, &caption)
                 .map_err(plot_err)?,
         );
     }
