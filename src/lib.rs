@@ -5,7 +5,8 @@
 //!
 //! Layers, each usable without the ones above it (dependencies only point down):
 //!
-//! 0. Vocabulary, no I/O: [`units`] (mm, µm, integer nm), [`profile`] (a traced line with its
+//! 0. Vocabulary, no I/O: [`units`] (mm, µm, integer nm), [`numfmt`] (numbers written for
+//!    people), [`build_info`] (version and commit), [`profile`] (a traced line with its
 //!    metadata), [`nurbs`] (the surface as a value), [`devices`] (the contracts between the
 //!    scan runner and the drivers).
 //! 1. Pure logic: [`fit`] (the paper's interpolation, incremental), [`iges`] (IGES 5.3
@@ -29,6 +30,7 @@
 #![warn(missing_docs)]
 
 pub mod atomic;
+pub mod build_info;
 pub mod cli;
 pub mod config;
 pub mod control;
@@ -37,6 +39,7 @@ pub mod fit;
 pub mod hook;
 pub mod iges;
 pub mod metrology;
+pub mod numfmt;
 pub mod nurbs;
 pub mod profile;
 pub mod report;

@@ -86,6 +86,14 @@ pub enum TransportError {
         /// What was observed.
         detail: String,
     },
+    /// The path names a regular file, a directory or another node that is not a terminal.
+    #[error("{path} is {what}, not a serial device: set the port to the device node, e.g. /dev/ttyUSB0 or a /dev/serial/by-id/… link")]
+    NotADevice {
+        /// Path tried.
+        path: String,
+        /// What it is instead ("a regular file", "a directory", …).
+        what: &'static str,
+    },
     /// Any other error opening the port.
     #[error("cannot open serial device {path}: {source}")]
     Open {
@@ -124,6 +132,10 @@ fn classify_open_error(path: &str, e: tokio_serial::Error) -> TransportError {
         io::ErrorKind::NotFound => TransportError::NotFound { path, source },
         io::ErrorKind::PermissionDenied => TransportError::PermissionDenied { path, source },
         _ if source.raw_os_error() == Some(libc::EBUSY) => TransportError::Busy { path, source },
+        _ if source.raw_os_error() == Some(libc::ENOTTY) => TransportError::NotADevice {
+            path,
+            what: "not a terminal",
+        },
         _ if source.raw_os_error() == Some(libc::ENXIO)
             || source.raw_os_error() == Some(libc::ENODEV) =>
         {
@@ -133,15 +145,45 @@ fn classify_open_error(path: &str, e: tokio_serial::Error) -> TransportError {
     }
 }
 
+/// Checks that `path` names a device node that could be a serial port (a character device,
+/// following symlinks): absent is [`TransportError::NotFound`], a regular file, directory,
+/// FIFO or socket is [`TransportError::NotADevice`].
+pub fn check_device_node(path: &str) -> Result<(), TransportError> {
+    use std::os::unix::fs::FileTypeExt;
+    let meta = std::fs::metadata(path).map_err(|source| match source.kind() {
+        io::ErrorKind::PermissionDenied => TransportError::PermissionDenied {
+            path: path.to_string(),
+            source,
+        },
+        _ => TransportError::NotFound {
+            path: path.to_string(),
+            source: io::Error::new(io::ErrorKind::NotFound, "no such device node"),
+        },
+    })?;
+    let t = meta.file_type();
+    let what = if t.is_char_device() {
+        return Ok(());
+    } else if t.is_file() {
+        "a regular file"
+    } else if t.is_dir() {
+        "a directory"
+    } else if t.is_fifo() {
+        "a FIFO"
+    } else if t.is_socket() {
+        "a socket"
+    } else {
+        "a block device"
+    };
+    Err(TransportError::NotADevice {
+        path: path.to_string(),
+        what,
+    })
+}
+
 /// Opens the port 8 data bits, 1 stop bit, with the given baud, parity and flow control,
 /// exclusively (TIOCEXCL), so a second process cannot interleave bytes.
 pub fn open(settings: &SerialSettings) -> Result<SerialStream, TransportError> {
-    if !std::path::Path::new(&settings.path).exists() {
-        return Err(TransportError::NotFound {
-            path: settings.path.clone(),
-            source: io::Error::new(io::ErrorKind::NotFound, "no such device node"),
-        });
-    }
+    check_device_node(&settings.path)?;
     let parity = match settings.parity {
         Parity::None => tokio_serial::Parity::None,
         Parity::Even => tokio_serial::Parity::Even,
@@ -163,4 +205,47 @@ pub fn open(settings: &SerialSettings) -> Result<SerialStream, TransportError> {
         .set_exclusive(true)
         .map_err(|e| classify_open_error(&settings.path, e))?;
     Ok(stream)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_regular_file_or_directory_is_named_as_such_not_as_not_a_typewriter() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("port.txt");
+        std::fs::write(&file, b"x").unwrap();
+        let file = file.to_str().unwrap();
+        let e = check_device_node(file).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                TransportError::NotADevice {
+                    what: "a regular file",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(
+            e.to_string()
+                .contains("is a regular file, not a serial device"),
+            "{e}"
+        );
+        let e = check_device_node(dir.path().to_str().unwrap()).unwrap_err();
+        assert!(e.to_string().contains("is a directory"), "{e}");
+        let e = check_device_node("/nonexistent/ttyUSB9").unwrap_err();
+        assert!(e.is_absent(), "{e}");
+        // A character device passes (whether it is a serial port the open finds out).
+        check_device_node("/dev/null").unwrap();
+        let e = open(&SerialSettings {
+            path: file.to_string(),
+            baud: 9600,
+            parity: Parity::None,
+            flow_control: FlowControl::None,
+        })
+        .unwrap_err();
+        assert!(matches!(e, TransportError::NotADevice { .. }), "{e}");
+    }
 }

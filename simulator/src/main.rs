@@ -1,6 +1,9 @@
 //! The `surfscan-sim` binary: a thin command line over the `surfscan_sim` library. Prints one
 //! JSON line per simulator event (the first is `{"event":"ready",...}` once the links can be
-//! opened) and runs until SIGTERM, SIGINT or stdin closing.
+//! opened) and runs until SIGTERM, SIGINT or, when its standard input is a pipe or a
+//! terminal, that input closing (so a test harness stops it by closing the pipe). Standard
+//! input that can never deliver a byte (`/dev/null`, a file, as under systemd or `nohup`)
+//! is not watched. The reason it stops is printed on standard error.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -224,23 +227,42 @@ async fn main() -> ExitCode {
             return ExitCode::from(1);
         }
     };
-    let stdin_closed = async {
+    let watch_stdin = stdin_can_close();
+    let stdin_closed = async move {
+        if !watch_stdin {
+            return std::future::pending::<()>().await;
+        }
         let mut stdin = tokio::io::stdin();
         let mut buf = [0u8; 64];
         while matches!(stdin.read(&mut buf).await, Ok(n) if n > 0) {}
     };
     tokio::pin!(stdin_closed);
-    loop {
+    let why = loop {
         tokio::select! {
             ev = handle.next_event() => match ev {
                 Some(ev) => println!("{}", ev.to_json()),
-                None => break,
+                None => break "the simulator ended",
             },
-            _ = term.recv() => break,
-            _ = tokio::signal::ctrl_c() => break,
-            _ = &mut stdin_closed => break,
+            _ = term.recv() => break "SIGTERM",
+            _ = tokio::signal::ctrl_c() => break "SIGINT",
+            _ = &mut stdin_closed => break "standard input closed",
         }
-    }
+    };
+    eprintln!("surfscan-sim: stopping ({why})");
     handle.shutdown().await;
     ExitCode::SUCCESS
+}
+
+/// Whether standard input is something that can close while we run: a pipe, a socket or a
+/// terminal. `/dev/null` and regular files are at their end from the start, so watching
+/// them would stop the simulator at once.
+fn stdin_can_close() -> bool {
+    use std::io::IsTerminal;
+    use std::os::unix::fs::FileTypeExt;
+    if std::io::stdin().is_terminal() {
+        return true;
+    }
+    std::fs::metadata("/proc/self/fd/0")
+        .map(|m| m.file_type().is_fifo() || m.file_type().is_socket())
+        .unwrap_or(false)
 }

@@ -471,6 +471,43 @@ fn binary_prints_ready_line_and_exits_when_stdin_closes() {
     assert!(!l.exists(), "exit removes the link");
 }
 
+#[test]
+fn binary_with_stdin_from_dev_null_keeps_running_until_sigterm() {
+    let dir = tempfile::tempdir().unwrap();
+    let l = link(&dir);
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan-sim"))
+        .args([
+            "--instrument-link",
+            l.to_str().unwrap(),
+            "--time-scale",
+            "0",
+        ])
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let mut ready = String::new();
+    out.read_line(&mut ready).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&ready).unwrap();
+    assert_eq!(v["event"], "ready");
+    // Still serving well after the ready line: /dev/null's end of file is no stop signal.
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "quit with stdin at /dev/null"
+    );
+    let mut c = Client::open(&l);
+    assert!(c.ask("RDSTU01").starts_with("OK"));
+    let pid = nix::unistd::Pid::from_raw(child.id() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).unwrap();
+    let output = child.wait_with_output().unwrap();
+    assert!(output.status.success());
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert!(err.contains("stopping (SIGTERM)"), "{err}");
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn shutdown_completes_while_a_reply_is_blocked_on_an_unread_pty() {
     let dir = tempfile::tempdir().unwrap();

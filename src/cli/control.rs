@@ -5,6 +5,16 @@
 //! reachable or speaks another protocol version, 74 the conversation broke off, 78 the
 //! `--config` file is unreadable or its `[control] socket` is not a string.
 //!
+//! `pause` and `resume` are idempotent: both exit 0 when the scan ends up in the state asked
+//! for, including when it already was (`already paused`, `not paused; it goes on scanning`),
+//! and 1 when there is no scan to pause or resume. `start` while a scan runs exits 1 with the
+//! running scan's id. `status --watch` outlives the daemon: when the connection closes it
+//! says so on standard error and reconnects (every 0.5 s at first, then every 5 s) until
+//! the daemon is back or it is interrupted.
+//!
+//! Without `--socket` and `--config`, the `[control] socket` of `/etc/surfscan/surfscan.toml`
+//! is used when that file exists and can be read, else `/run/surfscan/control.sock`.
+//!
 //! Layer 5 (composition): depends on [`crate::control`].
 
 use super::{CliError, Exit};
@@ -13,6 +23,7 @@ use crate::control::protocol::{Message, Request};
 use crate::scan::status::{DeviceState, State, Status};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 /// Where the daemon listens unless told otherwise (under the unit's `RuntimeDirectory`).
 pub const DEFAULT_SOCKET: &str = "/run/surfscan/control.sock";
@@ -24,7 +35,8 @@ pub struct Target {
     /// /run/surfscan/control.sock]. Wins over --config.
     #[arg(long, value_name = "PATH")]
     pub socket: Option<PathBuf>,
-    /// Config file; only its `[control]` table's `socket` key is read.
+    /// Config file; only its `[control]` table's `socket` key is read [default:
+    /// /etc/surfscan/surfscan.toml when it exists].
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
     /// Print the daemon's replies as the raw JSON lines it sent, one per line.
@@ -79,15 +91,35 @@ pub enum Verb {
     Abort,
 }
 
-/// The socket to use: `--socket`, else the config's `[control] socket`, else the default.
+/// The socket to use: `--socket`, else the `[control] socket` of `--config`, else that of
+/// the default configuration, else the default socket.
 pub fn socket_path(target: &Target) -> Result<PathBuf, CliError> {
+    socket_path_with_default(target, Path::new(super::DEFAULT_CONFIG))
+}
+
+/// [`socket_path`] with `default_config` standing for `/etc/surfscan/surfscan.toml`: an
+/// absent default is skipped silently, an unreadable or invalid one with a warning (an
+/// operator may not be allowed to read the station's file, and the default socket is then
+/// the best guess).
+pub fn socket_path_with_default(
+    target: &Target,
+    default_config: &Path,
+) -> Result<PathBuf, CliError> {
     if let Some(s) = &target.socket {
         return Ok(s.clone());
     }
-    match &target.config {
-        Some(config) => Ok(config_socket(config)?.unwrap_or_else(|| PathBuf::from(DEFAULT_SOCKET))),
-        None => Ok(PathBuf::from(DEFAULT_SOCKET)),
-    }
+    let from_config = match &target.config {
+        Some(config) => config_socket(config)?,
+        None if default_config.exists() => match config_socket(default_config) {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("surfscan: warning: {e}; trying {DEFAULT_SOCKET}");
+                None
+            }
+        },
+        None => None,
+    };
+    Ok(from_config.unwrap_or_else(|| PathBuf::from(DEFAULT_SOCKET)))
 }
 
 /// Reads only `[control] socket` from a TOML config, ignoring every other table.
@@ -118,37 +150,69 @@ pub fn config_socket(path: &Path) -> Result<Option<PathBuf>, CliError> {
     }
 }
 
+/// First and longest wait between reconnection attempts of `status --watch`.
+pub const WATCH_RECONNECT: (Duration, Duration) =
+    (Duration::from_millis(500), Duration::from_secs(5));
+
 /// Runs `surfscan status`.
 pub fn run_status(args: StatusArgs) -> Result<(), CliError> {
     let path = socket_path(&args.target)?;
     let json = args.target.json;
     block_on(async move {
         let mut client = ControlClient::connect(&path).await.map_err(client_error)?;
-        let request = if args.watch {
-            Request::Watch
-        } else {
-            Request::Status
-        };
-        let first = client.request(&request).await.map_err(client_error)?;
-        print_reply(&first, json, false)?;
         if !args.watch {
-            return Ok(());
+            let first = client
+                .request(&Request::Status)
+                .await
+                .map_err(client_error)?;
+            return print_reply(&first, json, false);
         }
+        let first = client
+            .request(&Request::Watch)
+            .await
+            .map_err(client_error)?;
+        print_reply(&first, json, false)?;
         loop {
-            match client.next().await.map_err(client_error)? {
-                Some(m) => print_reply(&m, json, true)?,
-                None => {
-                    return Err(CliError::new(
-                        Exit::Io,
-                        format!(
-                            "the daemon at {} closed the connection (stopped or restarted?); systemctl status surfscan",
-                            path.display()
-                        ),
-                    ))
+            let why = match client.next().await {
+                Ok(Some(m)) => {
+                    print_reply(&m, json, true)?;
+                    continue;
                 }
-            }
+                Ok(None) => "closed the connection".to_string(),
+                Err(e) => e.to_string(),
+            };
+            eprintln!(
+                "surfscan: the daemon at {} {why} (stopped or restarted?); reconnecting",
+                path.display()
+            );
+            client = reconnect_watch(&path, json).await?;
         }
     })
+}
+
+/// Connects again until the daemon answers, then asks to watch and prints the first status
+/// (with a note that the connection is back); a daemon of another protocol version is an
+/// error, as at the first connection.
+async fn reconnect_watch(path: &Path, json: bool) -> Result<ControlClient, CliError> {
+    let (mut wait, max) = WATCH_RECONNECT;
+    loop {
+        tokio::time::sleep(wait).await;
+        wait = (wait * 2).min(max);
+        let mut client = match ControlClient::connect(path).await {
+            Ok(c) => c,
+            Err(e @ ClientError::Incompatible { .. }) => return Err(client_error(e)),
+            Err(_) => continue,
+        };
+        match client.request(&Request::Watch).await {
+            Ok(first) => {
+                eprintln!("surfscan: reconnected to the daemon at {}", path.display());
+                print_reply(&first, json, true)?;
+                return Ok(client);
+            }
+            Err(e @ ClientError::Incompatible { .. }) => return Err(client_error(e)),
+            Err(_) => continue,
+        }
+    }
 }
 
 /// Runs `surfscan pause|resume|abort`.
@@ -422,5 +486,32 @@ mod tests {
         assert!(e.message.contains("[control] socket"), "{}", e.message);
         t.config = Some(dir.path().join("missing.toml"));
         assert_eq!(socket_path(&t).unwrap_err().exit, Exit::Config);
+    }
+
+    #[test]
+    fn the_default_config_names_the_socket_when_it_exists() {
+        let dir = tempfile::tempdir().unwrap();
+        let default = dir.path().join("surfscan.toml");
+        let t = Target {
+            socket: None,
+            config: None,
+            json: false,
+        };
+        // Absent: the default socket.
+        assert_eq!(
+            socket_path_with_default(&t, &default).unwrap(),
+            PathBuf::from(DEFAULT_SOCKET)
+        );
+        std::fs::write(&default, "[control]\nsocket = \"/tmp/station.sock\"\n").unwrap();
+        assert_eq!(
+            socket_path_with_default(&t, &default).unwrap(),
+            PathBuf::from("/tmp/station.sock")
+        );
+        // Broken: a warning and the default socket, not a failure of `status`.
+        std::fs::write(&default, "[control\n").unwrap();
+        assert_eq!(
+            socket_path_with_default(&t, &default).unwrap(),
+            PathBuf::from(DEFAULT_SOCKET)
+        );
     }
 }

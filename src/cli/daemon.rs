@@ -34,7 +34,7 @@ use tokio::sync::{mpsc, watch};
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Station configuration (TOML).
-    #[arg(long, default_value = "/etc/surfscan/surfscan.toml")]
+    #[arg(long, default_value = super::DEFAULT_CONFIG)]
     pub config: PathBuf,
 }
 
@@ -175,7 +175,13 @@ async fn daemon(
                     OperatorCommand::Start { specimen, operator, notes } => {
                         let busy = ctl.status.borrow().state != State::Idle;
                         if busy {
-                            let _ = req.reply.send(Err("a scan is already running".into()));
+                            let running = match ctl.status.borrow().scan_id.clone() {
+                                Some(id) => format!("scan {id} is running"),
+                                None => "a scan is being started (no id yet)".to_owned(),
+                            };
+                            let _ = req.reply.send(Err(format!(
+                                "{running}; abort it first or wait until it ends"
+                            )));
                             continue;
                         }
                         let _ = req.reply.send(Ok(format!(

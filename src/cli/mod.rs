@@ -9,16 +9,21 @@ use clap::{Parser, Subcommand};
 use std::fmt;
 
 pub mod analyze;
+pub mod check_config;
 pub mod control;
 pub mod daemon;
 pub mod demo;
+pub mod docs;
 pub mod fit;
 pub mod probe;
 pub mod scan;
 
+/// The station configuration read when `--config` is not given.
+pub const DEFAULT_CONFIG: &str = "/etc/surfscan/surfscan.toml";
+
 /// surfscan: unattended surface-roughness scanning with an SJ-210 and a y stage.
 #[derive(Debug, Parser)]
-#[command(name = "surfscan", version, about)]
+#[command(name = "surfscan", version = crate::build_info::LONG_VERSION, about)]
 pub struct Cli {
     /// More detailed logging (same as RUST_LOG=debug).
     #[arg(short, long, global = true)]
@@ -53,6 +58,12 @@ pub enum Command {
     Abort(control::CommandArgs),
     /// Start a scan of the configured plan.
     Start(control::StartArgs),
+    /// Check a station configuration without opening any device (exit 78 when invalid).
+    CheckConfig(check_config::Args),
+    /// Print the shell completion script for bash, zsh, fish, elvish or powershell.
+    Completions(docs::CompletionsArgs),
+    /// Write the man pages (surfscan.1 and one per subcommand) into a directory.
+    Manpages(docs::ManpagesArgs),
 }
 
 /// Process exit status (sysexits).
@@ -128,5 +139,8 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Resume(args) => control::run_command(control::Verb::Resume, args),
         Command::Abort(args) => control::run_command(control::Verb::Abort, args),
         Command::Start(args) => control::run_start(args),
+        Command::CheckConfig(args) => check_config::run(args),
+        Command::Completions(args) => docs::run_completions(args),
+        Command::Manpages(args) => docs::run_manpages(args),
     }
 }

@@ -29,7 +29,7 @@ use tokio::sync::{mpsc, watch};
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Station configuration (TOML).
-    #[arg(long)]
+    #[arg(long, default_value = super::DEFAULT_CONFIG)]
     pub config: PathBuf,
     /// Specimen id (recorded with the scan).
     #[arg(long, default_value = "")]
@@ -217,33 +217,71 @@ pub fn refuse_if_daemon(config: &Config) -> Result<(), CliError> {
     Ok(())
 }
 
-/// Draws a progress bar from status snapshots until the channel closes.
+/// What the progress bar says after its bar: lines done, the ETA only while scanning (a
+/// paused or suspended scan has none), the last line's Ra, and the state when it is not
+/// scanning.
+pub fn progress_message(s: &Status) -> String {
+    let mut parts = Vec::new();
+    if s.state == State::Scanning {
+        if let Some(eta) = s.eta_s.and_then(super::control::format_eta) {
+            parts.push(format!("ETA {eta}"));
+        }
+    }
+    if let Some(ra) = s.last_ra_um {
+        parts.push(format!(
+            "last Ra {} µm",
+            crate::numfmt::fmt(ra, crate::numfmt::Quantity::HeightUm)
+        ));
+    }
+    if s.state != State::Scanning {
+        parts.push(s.summary());
+    }
+    parts.join("; ")
+}
+
+/// Lines done and planned for the bar, `None` while the plan's line count is unknown (before
+/// the scan starts) or after it ended (the idle status carries no count): the bar then keeps
+/// what it showed.
+pub fn bar_position(s: &Status) -> Option<(u64, u64)> {
+    (s.lines_total > 0).then(|| {
+        (
+            u64::from(s.lines_done.min(s.lines_total)),
+            u64::from(s.lines_total),
+        )
+    })
+}
+
+/// Draws a progress bar from status snapshots until the channel closes. The bar appears
+/// once the plan's line count is known (never a full bar of `0/0`), keeps its length when
+/// the scan ends (no `7/0`), and log lines are printed above it (see
+/// [`crate::telemetry::set_progress_bar`]).
 async fn progress(mut rx: watch::Receiver<Status>) {
     if !std::io::stderr().is_terminal() {
         return;
     }
-    let bar = indicatif::ProgressBar::new(0);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{bar:30} line {pos}/{len} {msg}")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
+    let mut bar: Option<indicatif::ProgressBar> = None;
     while rx.changed().await.is_ok() {
         let s = rx.borrow_and_update().clone();
-        bar.set_length(u64::from(s.lines_total));
-        bar.set_position(u64::from(s.lines_done));
-        let mut msg = String::new();
-        if let Some(eta) = s.eta_s {
-            msg.push_str(&format!("ETA {:.0} min ", eta / 60.0));
-        }
-        if let Some(ra) = s.last_ra_um {
-            msg.push_str(&format!("last Ra {ra} um "));
-        }
-        if s.state != State::Scanning {
-            msg.push_str(&s.summary());
-        }
-        bar.set_message(msg);
+        let Some((pos, len)) = bar_position(&s) else {
+            continue;
+        };
+        let b = bar.get_or_insert_with(|| {
+            let b = indicatif::ProgressBar::new(u64::from(s.lines_total));
+            b.set_style(
+                indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} lines done  {msg}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            crate::telemetry::set_progress_bar(Some(b.clone()));
+            b
+        });
+        b.set_length(len);
+        b.set_position(pos);
+        b.set_message(progress_message(&s));
     }
-    bar.finish_and_clear();
+    crate::telemetry::set_progress_bar(None);
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
 }
 
 /// Runs one scan in the foreground on `station`; SIGINT/SIGTERM interrupt it resumably.
@@ -294,4 +332,50 @@ pub fn run(args: Args) -> Result<(), CliError> {
         .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
     let outcome = rt.block_on(run_foreground(&mut station, &settings, request));
     outcome_result(&outcome)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scanning() -> Status {
+        let mut s = Status::idle();
+        s.state = State::Scanning;
+        s.scan_id = Some("S1".into());
+        s.lines_done = 7;
+        s.lines_total = 31;
+        s.current_line = Some(8);
+        s.eta_s = Some(750.0);
+        s.last_ra_um = Some(0.452_149_8);
+        s
+    }
+
+    #[test]
+    fn the_bar_waits_for_the_plan_and_keeps_its_length_at_the_end() {
+        assert_eq!(bar_position(&Status::idle()), None);
+        assert_eq!(bar_position(&scanning()), Some((7, 31)));
+        // The idle status published when the scan ends: no `7/0`.
+        let mut end = Status::idle();
+        end.lines_done = 7;
+        assert_eq!(bar_position(&end), None);
+    }
+
+    #[test]
+    fn the_message_has_a_readable_eta_only_while_scanning() {
+        assert_eq!(
+            progress_message(&scanning()),
+            "ETA 12 min 30 s; last Ra 0.4521 µm"
+        );
+        let mut s = scanning();
+        s.eta_s = Some(20.0);
+        assert!(
+            progress_message(&s).starts_with("ETA 20 s;"),
+            "{}",
+            progress_message(&s)
+        );
+        s.state = State::Paused;
+        let m = progress_message(&s);
+        assert!(!m.contains("ETA"), "{m}");
+        assert!(m.contains("paused"), "{m}");
+    }
 }

@@ -543,6 +543,12 @@ pub struct RkFamily {
     pub a1_um_pct: f64,
     /// Area below D, µm·%.
     pub a2_um_pct: f64,
+    /// Upper core level C (the equivalent straight line at mr = 0 %), µm.
+    pub upper_level_um: f64,
+    /// Lower core level D (the equivalent straight line at mr = 100 %), µm.
+    pub lower_level_um: f64,
+    /// Where the 40 % secant of least gradient starts, % (it ends 40 % later).
+    pub secant_start_pct: f64,
 }
 
 /// Rmc(mr): height at material ratio `mr_pct` by linear quantiles of `sorted_desc`.
@@ -646,5 +652,25 @@ pub fn rk_family(z: &[f64]) -> Result<RkFamily, MetrologyError> {
         mr2_pct: mr2,
         a1_um_pct: a1,
         a2_um_pct: a2,
+        upper_level_um: c,
+        lower_level_um: d,
+        secant_start_pct: a_pct,
     })
+}
+
+/// The material ratio curve Rmc(mr) that [`rk_family`] works on, as `points` pairs
+/// `[mr_pct, height_um]` at equal steps of mr from 0 to 100 % (linear quantiles of the
+/// ordinates, the highest at 0 %); empty for fewer than 2 ordinates or points.
+pub fn material_ratio_curve(z: &[f64], points: usize) -> Vec<[f64; 2]> {
+    if z.len() < 2 || points < 2 {
+        return Vec::new();
+    }
+    let mut s = z.to_vec();
+    s.sort_by(|a, b| b.total_cmp(a));
+    (0..points)
+        .map(|k| {
+            let mr = 100.0 * k as f64 / (points - 1) as f64;
+            [mr, rmc(&s, mr)]
+        })
+        .collect()
 }

@@ -1,15 +1,49 @@
-//! Plots a person would rather look at than read, as PNG and SVG (plotters): all bearing area
-//! curves in one graph (like the paper's Figure 8) and a height map of a grid.
+//! Plots a metrologist would put in a report, as PNG and SVG (plotters): the material ratio
+//! curves of the model's profile curves with the pooled areal Smr(c) (like the paper's
+//! Figure 8), a height map of a grid, a measured-vs-model profile, and the ISO 13565-2 Rk
+//! construction of one line.
+//!
+//! Conventions every plot keeps:
+//! * the text is drawn with DejaVu Sans, bundled into the binary (`assets/fonts/`, licence
+//!   beside it), so every glyph (µ, λ, ·) renders the same on any machine; the SVG files name
+//!   the generic `sans-serif` family and are laid out with the bundled font's metrics;
+//! * colours are the perceptual, colour-blind safe viridis map, and every colour has a key (a
+//!   labelled colour bar or a legend entry);
+//! * a map is drawn to true scale, or the exaggeration of its shorter axis is stated on it;
+//! * ISO vocabulary: Rmr(c) for a profile's material ratio, Smr(c) for the areal one;
+//! * the title and the traceability footer wrap rather than run off the edge.
 //!
 //! The only file-writing part of the metrology: the caller gives the directory. Depends on
-//! [`super::model`] (the curves), [`super::areal::Grid`] and [`super::MetrologyError`].
+//! [`super::model`] (the curves), [`super::areal::Grid`], [`super::params::RkFamily`],
+//! [`crate::numfmt`] and [`super::MetrologyError`].
 
 use super::areal::Grid;
 use super::model::ModelCurveBac;
+use super::params::RkFamily;
 use super::MetrologyError;
+use crate::numfmt::{fmt, Quantity};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
+
+/// DejaVu Sans 2.37, unmodified (Bitstream Vera licence, `assets/fonts/LICENSE-DejaVu.txt`).
+const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+
+/// The family the bundled font is registered under: the generic name, so the SVG files ask
+/// their viewer for a sans-serif face rather than one it may not have.
+const FAMILY: &str = "sans-serif";
+
+/// Registers the bundled font with plotters, once per process.
+fn ensure_font() -> Result<(), String> {
+    static REGISTERED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let ok = *REGISTERED
+        .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
+    if ok {
+        Ok(())
+    } else {
+        Err("the bundled font cannot be read (assets/fonts/DejaVuSans.ttf is damaged)".into())
+    }
+}
 
 fn plot_err(path: &Path, e: impl std::fmt::Display) -> MetrologyError {
     MetrologyError::Plot {
@@ -18,34 +52,243 @@ fn plot_err(path: &Path, e: impl std::fmt::Display) -> MetrologyError {
     }
 }
 
-/// Fills the area white and, for a non-empty caption, writes it as one small line at the
-/// bottom (traceability: specimen, instrument, conditions, software); returns the area above.
-fn with_caption<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    caption: &str,
-) -> Result<DrawingArea<DB, Shift>, String>
+fn font(size: u32) -> TextStyle<'static> {
+    TextStyle::from((FAMILY, size).into_font()).color(&BLACK)
+}
+
+/// An axis tick label: up to 4 significant digits without trailing zeros (a tick's zeros
+/// carry no precision), float noise around zero written as 0.
+fn tick(v: f64) -> String {
+    if v.abs() < 1e-12 {
+        return "0".to_string();
+    }
+    let s = crate::numfmt::sig(v, 4);
+    if s.contains('e') || !s.contains('.') {
+        return s;
+    }
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// Dark blue of the measured data and curves (Okabe–Ito "blue").
+const DATA: RGBColor = RGBColor(0, 114, 178);
+/// Vermillion of the model and of constructions (Okabe–Ito).
+const MODEL: RGBColor = RGBColor(213, 94, 0);
+/// Bluish green (Okabe–Ito) for the second construction element.
+const SECOND: RGBColor = RGBColor(0, 158, 115);
+
+/// The viridis colour at `t` in [0, 1] (clamped; NaN is the low end).
+pub fn viridis(t: f64) -> RGBColor {
+    let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
+    ViridisRGB.get_color(t as f32)
+}
+
+/// Width of `text` in `style`, px (from the bundled font's metrics).
+fn text_width(text: &str, style: &TextStyle<'_>) -> u32 {
+    style.font.box_size(text).map(|(w, _)| w).unwrap_or(0)
+}
+
+/// Greedy word wrap of `text` into lines no wider than `width` px in `style`; a word wider
+/// than the line goes on a line of its own.
+fn wrap(text: &str, style: &TextStyle<'_>, width: u32) -> Vec<String> {
+    let mut lines: Vec<String> = Vec::new();
+    let mut cur = String::new();
+    for word in text.split_whitespace() {
+        let candidate = if cur.is_empty() {
+            word.to_string()
+        } else {
+            format!("{cur} {word}")
+        };
+        // A separator (`·`) ends the line it follows rather than starting the next.
+        let separator = word.chars().all(|c| !c.is_alphanumeric());
+        if cur.is_empty() || separator || text_width(&candidate, style) <= width {
+            cur = candidate;
+        } else {
+            lines.push(std::mem::replace(&mut cur, word.to_string()));
+        }
+    }
+    if !cur.is_empty() {
+        lines.push(cur);
+    }
+    lines
+}
+
+/// Title size, subtitle size, footer size and the line spacing factor.
+const TITLE_PX: u32 = 20;
+const SUBTITLE_PX: u32 = 14;
+const FOOTER_PX: u32 = 12;
+const SIDE_PAD: u32 = 12;
+
+/// Lines of the title band and of the footer, wrapped to the figure's width.
+struct Frame {
+    title: Vec<String>,
+    subtitle: Vec<String>,
+    footer: Vec<String>,
+}
+
+impl Frame {
+    /// The frame of a figure `figure_w` px wide.
+    fn new(figure_w: u32, title: &str, subtitle: &str, footer: &str) -> Frame {
+        let width = figure_w.saturating_sub(2 * SIDE_PAD);
+        Frame {
+            title: wrap(title, &font(TITLE_PX), width),
+            subtitle: wrap(subtitle, &font(SUBTITLE_PX), width),
+            footer: wrap(footer, &font(FOOTER_PX), width),
+        }
+    }
+
+    fn top_px(&self) -> u32 {
+        8 + self.title.len() as u32 * (TITLE_PX + 6)
+            + self.subtitle.len() as u32 * (SUBTITLE_PX + 5)
+    }
+
+    fn bottom_px(&self) -> u32 {
+        if self.footer.is_empty() {
+            4
+        } else {
+            8 + self.footer.len() as u32 * (FOOTER_PX + 5)
+        }
+    }
+
+    /// Fills the area white, draws the title band and the footer, returns the body between.
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+    ) -> Result<DrawingArea<DB, Shift>, String>
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let mut y = 8i32;
+        for l in &self.title {
+            root.draw_text(l, &font(TITLE_PX), (SIDE_PAD as i32, y))
+                .map_err(|e| e.to_string())?;
+            y += (TITLE_PX + 6) as i32;
+        }
+        for l in &self.subtitle {
+            root.draw_text(
+                l,
+                &font(SUBTITLE_PX).color(&RGBColor(60, 60, 60)),
+                (SIDE_PAD as i32, y),
+            )
+            .map_err(|e| e.to_string())?;
+            y += (SUBTITLE_PX + 5) as i32;
+        }
+        let (_, h) = root.dim_in_pixel();
+        let mut y = h.saturating_sub(self.bottom_px()) as i32 + 6;
+        for l in &self.footer {
+            root.draw_text(
+                l,
+                &font(FOOTER_PX).color(&RGBColor(60, 60, 60)),
+                (SIDE_PAD as i32, y),
+            )
+            .map_err(|e| e.to_string())?;
+            y += (FOOTER_PX + 5) as i32;
+        }
+        let body_h = h
+            .saturating_sub(self.top_px())
+            .saturating_sub(self.bottom_px());
+        let (_, rest) = root.split_vertically(self.top_px());
+        let (body, _) = rest.split_vertically(body_h);
+        Ok(body)
+    }
+}
+
+/// A vertical colour bar for values `lo..hi` with its label, filling `area`; `margin_top`
+/// and `plot_h` align the bar with the plotting area beside it.
+fn draw_colour_bar<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    lo: f64,
+    hi: f64,
+    label: &str,
+    margin_top: u32,
+    plot_h: u32,
+) -> Result<(), String>
 where
     DB::ErrorType: 'static,
 {
-    root.fill(&WHITE).map_err(|e| e.to_string())?;
-    if caption.trim().is_empty() {
-        return Ok(root.clone());
-    }
-    let (_, h) = root.dim_in_pixel();
-    let (upper, lower) = root.split_vertically(h.saturating_sub(CAPTION_PX));
-    let style = TextStyle::from(("sans-serif", 13).into_font()).color(&BLACK);
-    lower
-        .draw_text(caption, &style, (10, 5))
+    let (w, _) = area.dim_in_pixel();
+    let (_, below) = area.split_vertically(margin_top);
+    let (bar_area, _) = below.split_vertically(plot_h);
+    let (hi, lo_) = if hi > lo { (hi, lo) } else { (lo + 1.0, lo) };
+    let mut bar = ChartBuilder::on(&bar_area)
+        .margin_left(24)
+        .margin_right(w.saturating_sub(24 + 22 + 90))
+        .right_y_label_area_size(90)
+        .build_cartesian_2d(0f64..1f64, lo_..hi)
         .map_err(|e| e.to_string())?;
-    Ok(upper)
+    bar.configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_labels(6)
+        .y_label_style(font(12))
+        .y_label_formatter(&|v| tick(*v))
+        .y_desc(label)
+        .axis_desc_style(font(13))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    let steps = 128;
+    bar.draw_series((0..steps).map(|k| {
+        let a = lo_ + (hi - lo_) * k as f64 / steps as f64;
+        let b = lo_ + (hi - lo_) * (k + 1) as f64 / steps as f64;
+        Rectangle::new(
+            [(0.0, a), (1.0, b)],
+            viridis((k as f64 + 0.5) / steps as f64).filled(),
+        )
+    }))
+    .map_err(|e| e.to_string())?;
+    bar.draw_series(std::iter::once(Rectangle::new(
+        [(0.0, lo_), (1.0, hi)],
+        BLACK.stroke_width(1),
+    )))
+    .map_err(|e| e.to_string())?;
+    Ok(())
 }
 
-/// Height of the caption line in pixels.
-const CAPTION_PX: u32 = 24;
+/// Writes `STEM.png` and `STEM.svg` into `DIR`, running the drawing expression once with
+/// `root` a bitmap area and once with `root` an SVG area (the drawing code is generic over
+/// the backend; a closure cannot be). Returns the two paths from the enclosing function.
+macro_rules! png_and_svg {
+    ($dir:expr, $stem:expr, $size:expr, |$root:ident| $draw:expr) => {{
+        let png = $dir.join(format!("{}.png", $stem));
+        let svg = $dir.join(format!("{}.svg", $stem));
+        ensure_font().map_err(|e| plot_err(&png, e))?;
+        {
+            let $root = BitMapBackend::new(&png, $size).into_drawing_area();
+            let drawn: Result<(), String> = $draw;
+            drawn.map_err(|e| plot_err(&png, e))?;
+            $root.present().map_err(|e| plot_err(&png, e))?;
+        }
+        {
+            let $root = SVGBackend::new(&svg, $size).into_drawing_area();
+            let drawn: Result<(), String> = $draw;
+            drawn.map_err(|e| plot_err(&svg, e))?;
+            $root.present().map_err(|e| plot_err(&svg, e))?;
+        }
+        Ok([png, svg])
+    }};
+}
 
-/// Largest number of columns drawn in a height map; wider grids are averaged over bins of
-/// equal width first (stated in the map's title), which keeps a 31 × 8000 scan's SVG small.
-pub const MAX_MAP_COLUMNS: usize = 800;
+/// The range of `values` padded by 5 % (a unit range around a constant, `fallback` when
+/// there is none).
+fn padded_range(values: impl Iterator<Item = f64>, fallback: (f64, f64)) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    if !(lo.is_finite() && hi.is_finite()) {
+        return fallback;
+    }
+    if hi > lo {
+        let pad = 0.05 * (hi - lo);
+        (lo - pad, hi + pad)
+    } else {
+        (lo - 1.0, hi + 1.0)
+    }
+}
+
+/// Figure size of the bearing area curve plot.
+const BAC_SIZE: (u32, u32) = (1000, 640);
 
 fn draw_bac<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
@@ -57,42 +300,65 @@ fn draw_bac<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let root = &with_caption(root, caption)?;
+    let subtitle = if curves.is_empty() {
+        "Areal material ratio Smr(c) of the measured grid (ISO 25178-2); heights c from the mean plane".to_string()
+    } else {
+        format!(
+            "Thin: Rmr(c) of each of the {} profile curves of the model, coloured by the curve's y (bar); thick black: areal Smr(c) pooled over the surface (ISO 25178-2)",
+            curves.len()
+        )
+    };
+    let frame = Frame::new(root.dim_in_pixel().0, title, &subtitle, caption);
+    let body = frame.draw(root)?;
+    let (bw, _) = body.dim_in_pixel();
+    let bar_w = if curves.is_empty() { 0 } else { MAP_BAR_W };
+    let (plot_area, bar_area) = body.split_horizontally(bw.saturating_sub(bar_w));
     let all = curves
         .iter()
         .flat_map(|c| c.curve.points.iter())
-        .chain(pooled.iter());
-    let (lo, hi) = all.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-        (lo.min(p[0]), hi.max(p[0]))
-    });
-    let (lo, hi) = if lo.is_finite() && hi > lo {
-        (lo, hi)
-    } else {
-        (-1.0, 1.0)
-    };
-    let pad = 0.05 * (hi - lo);
-    let mut chart = ChartBuilder::on(root)
-        .caption(title, ("sans-serif", 22))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0f64..100f64, (lo - pad)..(hi + pad))
+        .chain(pooled.iter())
+        .map(|p| p[0]);
+    let (lo, hi) = padded_range(all, (-1.0, 1.0));
+    let (margin, x_area) = (12u32, 50u32);
+    let mut chart = ChartBuilder::on(&plot_area)
+        .margin(margin)
+        .x_label_area_size(x_area)
+        .y_label_area_size(80)
+        .build_cartesian_2d(0f64..100f64, lo..hi)
         .map_err(|e| e.to_string())?;
     chart
         .configure_mesh()
-        .x_desc("material area ratio MAR (%)")
-        .y_desc("height from mean line (µm)")
+        .x_desc("material ratio (%)")
+        .x_label_formatter(&|v| tick(*v))
+        .y_desc("height c from the mean line (µm)")
+        .label_style(font(13))
+        .axis_desc_style(font(14))
+        .y_label_formatter(&|v| tick(*v))
+        .light_line_style(RGBColor(235, 235, 235))
         .draw()
         .map_err(|e| e.to_string())?;
-    let n = curves.len().max(1);
+    let (y_lo, y_hi) = curves
+        .iter()
+        .map(|c| c.y_mm)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| {
+            (a.min(y), b.max(y))
+        });
+    let y_span = if y_hi > y_lo { y_hi - y_lo } else { 1.0 };
     for (k, c) in curves.iter().enumerate() {
-        let colour = HSLColor(0.66 * k as f64 / n as f64, 0.7, 0.45);
-        chart
+        let colour = viridis((c.y_mm - y_lo) / y_span);
+        let series = chart
             .draw_series(LineSeries::new(
                 c.curve.points.iter().map(|p| (p[1], p[0])),
                 colour.stroke_width(1),
             ))
             .map_err(|e| e.to_string())?;
+        if k == 0 {
+            series
+                .label("Rmr(c) of one model profile curve (colour: its y)")
+                .legend(|(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 24, y)], viridis(0.5).stroke_width(2))
+                });
+        }
     }
     if !pooled.is_empty() {
         chart
@@ -101,21 +367,36 @@ where
                 BLACK.stroke_width(3),
             ))
             .map_err(|e| e.to_string())?
-            .label("pooled")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(3)));
+            .label(if curves.is_empty() {
+                "Smr(c), measured grid"
+            } else {
+                "Smr(c), pooled over the model surface"
+            })
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], BLACK.stroke_width(3)));
+    }
+    if !curves.is_empty() || !pooled.is_empty() {
         chart
             .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font(font(13))
             .border_style(BLACK)
-            .background_style(WHITE)
+            .background_style(WHITE.mix(0.9))
             .draw()
             .map_err(|e| e.to_string())?;
     }
-    root.present().map_err(|e| e.to_string())
+    if !curves.is_empty() {
+        let plot_h = plot_area
+            .dim_in_pixel()
+            .1
+            .saturating_sub(2 * margin + x_area);
+        draw_colour_bar(&bar_area, y_lo, y_hi, "curve y (mm)", margin, plot_h)?;
+    }
+    Ok(())
 }
 
-/// Writes `bac.png` and `bac.svg` into `dir`: every curve's MAR(h) thin and coloured, the pooled
-/// curve thick and black; `caption` (may be empty) is written as a line below the graph.
-/// Returns the two paths.
+/// Writes `bac.png` and `bac.svg` into `dir`: every model curve's Rmr(c) thin and coloured
+/// by its y (with a colour bar), the pooled areal Smr(c) thick and black; `caption` (may be
+/// empty) is the traceability footer. Returns the two paths.
 pub fn plot_bearing_curves(
     dir: &Path,
     curves: &[ModelCurveBac],
@@ -123,76 +404,177 @@ pub fn plot_bearing_curves(
     title: &str,
     caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
-    let png = dir.join("bac.png");
-    let svg = dir.join("bac.svg");
-    {
-        let root = BitMapBackend::new(&png, (900, 600)).into_drawing_area();
-        draw_bac(&root, curves, pooled, title, caption).map_err(|e| plot_err(&png, e))?;
+    png_and_svg!(dir, "bac", BAC_SIZE, |root| draw_bac(
+        &root, curves, pooled, title, caption
+    ))
+}
+
+/// Largest number of columns drawn in a height map; wider grids are averaged over bins of
+/// equal width first (stated in the map's title), which keeps a 31 × 8000 scan's SVG small.
+pub const MAX_MAP_COLUMNS: usize = 800;
+
+/// Exaggerations offered for the shorter axis of a map that would be too thin at true scale.
+const EXAGGERATIONS: [f64; 12] = [
+    1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0, 5000.0,
+];
+
+/// How a map of `w_mm` × `h_mm` is drawn: plotting-area pixels and the exaggeration of y
+/// (`> 1`: y is stretched) or of x (`< 1`: x is stretched by the reciprocal).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapScale {
+    /// Width of the plotting area, px.
+    pub plot_w: u32,
+    /// Height of the plotting area, px.
+    pub plot_h: u32,
+    /// Pixels per mm along y over pixels per mm along x (1 = true scale).
+    pub y_over_x: f64,
+}
+
+/// The plotting-area size and exaggeration for a map of `w_mm` × `h_mm`: true scale when the
+/// shorter side gets at least `min_px` within `max_w` × `max_h`, else the smallest
+/// exaggeration of [`EXAGGERATIONS`] that gives it `min_px`.
+pub fn map_scale(w_mm: f64, h_mm: f64, max_w: u32, max_h: u32, min_px: u32) -> MapScale {
+    let ratio = h_mm / w_mm;
+    let pick = |true_px: f64| {
+        EXAGGERATIONS
+            .iter()
+            .copied()
+            .find(|f| true_px * f >= min_px as f64)
+            .unwrap_or(EXAGGERATIONS[EXAGGERATIONS.len() - 1])
+    };
+    if ratio <= max_h as f64 / max_w as f64 {
+        let f = pick(max_w as f64 * ratio);
+        let plot_h = (max_w as f64 * ratio * f).round().clamp(1.0, max_h as f64) as u32;
+        MapScale {
+            plot_w: max_w,
+            plot_h,
+            y_over_x: f,
+        }
+    } else {
+        let f = pick(max_h as f64 / ratio);
+        let plot_w = (max_h as f64 / ratio * f).round().clamp(1.0, max_w as f64) as u32;
+        MapScale {
+            plot_w,
+            plot_h: max_h,
+            y_over_x: 1.0 / f,
+        }
     }
-    {
-        let root = SVGBackend::new(&svg, (900, 600)).into_drawing_area();
-        draw_bac(&root, curves, pooled, title, caption).map_err(|e| plot_err(&svg, e))?;
+}
+
+/// Margins and label areas of the map (px).
+const MAP_MARGIN: u32 = 14;
+const MAP_X_AREA: u32 = 50;
+const MAP_Y_AREA: u32 = 70;
+const MAP_BAR_W: u32 = 150;
+const MAP_WIDTH: u32 = 1000;
+
+fn map_note(scale: &MapScale) -> String {
+    if scale.y_over_x == 1.0 {
+        "true scale: x and y drawn 1:1".to_string()
+    } else if scale.y_over_x > 1.0 {
+        format!(
+            "not to scale: y stretched ×{} against x",
+            fmt(scale.y_over_x, Quantity::Ratio).trim_end_matches(".00")
+        )
+    } else {
+        format!(
+            "not to scale: x stretched ×{} against y",
+            fmt(1.0 / scale.y_over_x, Quantity::Ratio).trim_end_matches(".00")
+        )
     }
-    Ok([png, svg])
+}
+
+/// The subtitle of a map: size, points, height range and scale.
+fn map_subtitle(grid: &Grid<'_>, scale: &MapScale) -> String {
+    let (lo, hi) = height_range(grid.heights_um);
+    format!(
+        "{} × {} mm, {} lines × {} points; heights {} … {} µm; {}",
+        fmt(grid.cols as f64 * grid.pitch_x_mm, Quantity::LengthMm),
+        fmt(grid.rows as f64 * grid.pitch_y_mm, Quantity::LengthMm),
+        grid.rows,
+        grid.cols,
+        fmt(lo, Quantity::HeightUm),
+        fmt(hi, Quantity::HeightUm),
+        map_note(scale)
+    )
+}
+
+fn height_range(z: &[f64]) -> (f64, f64) {
+    z.iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(*v), hi.max(*v))
+        })
 }
 
 fn draw_map<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     grid: &Grid<'_>,
-    title: &str,
-    caption: &str,
+    scale: &MapScale,
+    frame: &Frame,
 ) -> Result<(), String>
 where
     DB::ErrorType: 'static,
 {
-    let (z, rows, cols) = (grid.heights_um, grid.rows, grid.cols);
-    let (pitch_x_mm, pitch_y_mm) = (grid.pitch_x_mm, grid.pitch_y_mm);
-    let root = &with_caption(root, caption)?;
-    let (lo, hi) = z
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-            (lo.min(*v), hi.max(*v))
-        });
+    let (z, cols) = (grid.heights_um, grid.cols);
+    let (px, py) = (grid.pitch_x_mm, grid.pitch_y_mm);
+    let (lo, hi) = height_range(z);
     let span = if hi > lo { hi - lo } else { 1.0 };
-    let w = cols as f64 * pitch_x_mm;
-    let h = rows as f64 * pitch_y_mm;
-    let mut chart = ChartBuilder::on(root)
-        .caption(
-            format!("{title} (height {lo:.3} … {hi:.3} µm, blue → red)"),
-            ("sans-serif", 20),
-        )
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0f64..w, 0f64..h)
+    let w = cols as f64 * px;
+    let h = grid.rows as f64 * py;
+    let body = frame.draw(root)?;
+    let chart_w = scale.plot_w + MAP_Y_AREA + 2 * MAP_MARGIN;
+    let (chart_area, rest) = body.split_horizontally(chart_w);
+    let (chart_area, _) = chart_area.split_vertically(scale.plot_h + 2 * MAP_MARGIN + MAP_X_AREA);
+    let (bar_area, _) = rest.split_horizontally(MAP_BAR_W);
+    // Axis ranges chosen so that one pixel is the same length along x and y (times the
+    // stated exaggeration), whatever the rounding of the pixel counts.
+    let mm_per_px_x = w / scale.plot_w as f64;
+    let y_top = scale.plot_h as f64 * mm_per_px_x / scale.y_over_x;
+    let mut chart = ChartBuilder::on(&chart_area)
+        .margin(MAP_MARGIN)
+        .x_label_area_size(MAP_X_AREA)
+        .y_label_area_size(MAP_Y_AREA)
+        .build_cartesian_2d(0f64..w, 0f64..y_top.max(h))
         .map_err(|e| e.to_string())?;
     chart
         .configure_mesh()
         .disable_mesh()
         .x_desc("x (mm)")
         .y_desc("y (mm)")
+        .label_style(font(13))
+        .axis_desc_style(font(14))
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .x_labels(8)
+        .y_labels(4)
         .draw()
         .map_err(|e| e.to_string())?;
     chart
         .draw_series(z.iter().enumerate().map(|(k, v)| {
             let (r, c) = ((k / cols) as f64, (k % cols) as f64);
-            let t = (v - lo) / span;
-            let colour = HSLColor(0.66 * (1.0 - t), 0.85, 0.5);
             Rectangle::new(
-                [
-                    (c * pitch_x_mm, r * pitch_y_mm),
-                    ((c + 1.0) * pitch_x_mm, (r + 1.0) * pitch_y_mm),
-                ],
-                colour.filled(),
+                [(c * px, r * py), ((c + 1.0) * px, (r + 1.0) * py)],
+                viridis((v - lo) / span).filled(),
             )
         }))
         .map_err(|e| e.to_string())?;
-    root.present().map_err(|e| e.to_string())
+    draw_colour_bar(
+        &bar_area,
+        lo,
+        hi,
+        "height (µm)",
+        MAP_MARGIN,
+        scale.plot_h.max(MAP_MIN_BAR_H),
+    )
 }
 
-/// Writes `heightmap.png` and `heightmap.svg` into `dir` for a row-major grid (heights µm);
-/// more than [`MAX_MAP_COLUMNS`] columns are averaged over bins first. `caption` (may be
-/// empty) is written as a line below the map.
+/// The colour bar is at least this tall even beside a thin map, px.
+const MAP_MIN_BAR_H: u32 = 160;
+
+/// Writes `heightmap.png` and `heightmap.svg` into `dir` for a row-major grid (heights µm)
+/// in viridis with a colour bar, to true scale or with the exaggeration stated; more than
+/// [`MAX_MAP_COLUMNS`] columns are averaged over bins first. `caption` (may be empty) is the
+/// traceability footer.
 pub fn plot_height_map(
     dir: &Path,
     grid: &Grid<'_>,
@@ -226,7 +608,7 @@ pub fn plot_height_map(
             std::borrow::Cow::Owned(z),
             out_cols,
             pitch_x_mm * bin as f64,
-            format!("{title}, means of {bin} points along x"),
+            format!("{title} (means of {bin} points along x)"),
         )
     } else {
         (
@@ -243,19 +625,46 @@ pub fn plot_height_map(
         pitch_x_mm,
         pitch_y_mm,
     };
-    let title = title.as_str();
-    let png = dir.join("heightmap.png");
-    let svg = dir.join("heightmap.svg");
-    {
-        let root = BitMapBackend::new(&png, (1000, 500)).into_drawing_area();
-        draw_map(&root, &shown, title, caption).map_err(|e| plot_err(&png, e))?;
-    }
-    {
-        let root = SVGBackend::new(&svg, (1000, 500)).into_drawing_area();
-        draw_map(&root, &shown, title, caption).map_err(|e| plot_err(&svg, e))?;
-    }
-    Ok([png, svg])
+    let max_w = MAP_WIDTH - MAP_BAR_W - MAP_Y_AREA - 2 * MAP_MARGIN;
+    let scale = map_scale(
+        cols as f64 * pitch_x_mm,
+        rows as f64 * pitch_y_mm,
+        max_w,
+        520,
+        160,
+    );
+    let frame = Frame::new(MAP_WIDTH, &title, &map_subtitle(&shown, &scale), caption);
+    let height = frame.top_px()
+        + frame.bottom_px()
+        + scale.plot_h.max(MAP_MIN_BAR_H)
+        + 2 * MAP_MARGIN
+        + MAP_X_AREA;
+    png_and_svg!(dir, "heightmap", (MAP_WIDTH, height), |root| draw_map(
+        &root, &shown, &scale, &frame
+    ))
 }
+
+/// Pixels per µm of height over pixels per µm of length in a profile plot of `x_span_mm`
+/// across `plot_w` px and `z_span_um` across `plot_h` px.
+fn vertical_exaggeration(x_span_mm: f64, z_span_um: f64, plot_w: u32, plot_h: u32) -> f64 {
+    let per_um_x = plot_w as f64 / (x_span_mm * 1000.0);
+    let per_um_z = plot_h as f64 / z_span_um;
+    per_um_z / per_um_x
+}
+
+fn exaggeration_note(e: f64) -> String {
+    if (e - 1.0).abs() < 0.005 {
+        "heights and lengths at the same scale".to_string()
+    } else {
+        format!(
+            "heights exaggerated ×{} against lengths (µm vs mm axes)",
+            crate::numfmt::sig(e, 2)
+        )
+    }
+}
+
+/// Figure size of a profile plot.
+const PROFILE_SIZE: (u32, u32) = (1000, 520);
 
 fn draw_overlay<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
@@ -267,63 +676,82 @@ fn draw_overlay<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let root = &with_caption(root, caption)?;
-    let pts = measured.iter().chain(model.iter());
-    let (x0, x1, z0, z1) = pts.fold(
-        (
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-        ),
-        |(a, b, c, d), p| (a.min(p.0), b.max(p.0), c.min(p.1), d.max(p.1)),
-    );
+    // The x range is not padded: a profile starts and ends at its data.
+    let (x0, x1) = measured
+        .iter()
+        .chain(model)
+        .map(|p| p.0)
+        .filter(|x| x.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+            (a.min(x), b.max(x))
+        });
     let (x0, x1) = if x1 > x0 { (x0, x1) } else { (0.0, 1.0) };
-    let (z0, z1) = if z1 > z0 {
-        (z0, z1)
-    } else {
-        (z0 - 1.0, z0 + 1.0)
+    let (z0, z1) = padded_range(measured.iter().chain(model).map(|p| p.1), (-1.0, 1.0));
+    let probe_frame = |subtitle: &str| Frame::new(root.dim_in_pixel().0, title, subtitle, caption);
+    let (margin, x_area, y_area) = (12u32, 50u32, 80u32);
+    let plot_size = |frame: &Frame| {
+        let (w, h) = root.dim_in_pixel();
+        (
+            w.saturating_sub(2 * margin + y_area),
+            h.saturating_sub(frame.top_px() + frame.bottom_px() + 2 * margin + x_area),
+        )
     };
-    let pad = 0.05 * (z1 - z0);
-    let mut chart = ChartBuilder::on(root)
-        .caption(title, ("sans-serif", 22))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(x0..x1, (z0 - pad)..(z1 + pad))
+    let first = probe_frame("measured points and the model's curve");
+    let (pw, ph) = plot_size(&first);
+    let e = vertical_exaggeration(x1 - x0, z1 - z0, pw, ph);
+    let frame = probe_frame(&format!(
+        "Dots: the measured heights; line: the NURBS model evaluated between them; {}",
+        exaggeration_note(e)
+    ));
+    let body = frame.draw(root)?;
+    let mut chart = ChartBuilder::on(&body)
+        .margin(margin)
+        .x_label_area_size(x_area)
+        .y_label_area_size(y_area)
+        .build_cartesian_2d(x0..x1, z0..z1)
         .map_err(|e| e.to_string())?;
     chart
         .configure_mesh()
         .x_desc("x (mm)")
         .y_desc("height (µm)")
+        .label_style(font(13))
+        .axis_desc_style(font(14))
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .light_line_style(RGBColor(235, 235, 235))
         .draw()
         .map_err(|e| e.to_string())?;
     chart
-        .draw_series(LineSeries::new(model.iter().copied(), RED.stroke_width(1)))
+        .draw_series(LineSeries::new(
+            model.iter().copied(),
+            MODEL.stroke_width(1),
+        ))
         .map_err(|e| e.to_string())?
         .label("NURBS model")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], MODEL.stroke_width(2)));
     chart
         .draw_series(
             measured
                 .iter()
-                .map(|&(x, z)| Circle::new((x, z), 2, BLUE.filled())),
+                .map(|&(x, z)| Circle::new((x, z), 2, DATA.filled())),
         )
         .map_err(|e| e.to_string())?
         .label("measured")
-        .legend(|(x, y)| Circle::new((x + 10, y), 3, BLUE.filled()));
+        .legend(|(x, y)| Circle::new((x + 12, y), 3, DATA.filled()));
     chart
         .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font(font(13))
         .border_style(BLACK)
-        .background_style(WHITE)
+        .background_style(WHITE.mix(0.9))
         .draw()
         .map_err(|e| e.to_string())?;
-    root.present().map_err(|e| e.to_string())
+    Ok(())
 }
 
-/// Writes `overlay.png` and `overlay.svg` into `dir`: measured points of a line as dots and the
-/// model's curve through them, as `(x_mm, z_um)` pairs; `caption` (may be empty) is written as
-/// a line below the graph.
+/// Writes `overlay.png` and `overlay.svg` into `dir`: measured points of a line as dots and
+/// the model's curve through them, as `(x_mm, z_um)` pairs, the height exaggeration stated;
+/// `caption` (may be empty) is the traceability footer.
 pub fn plot_profile_overlay(
     dir: &Path,
     measured: &[(f64, f64)],
@@ -331,15 +759,288 @@ pub fn plot_profile_overlay(
     title: &str,
     caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
-    let png = dir.join("overlay.png");
-    let svg = dir.join("overlay.svg");
-    {
-        let root = BitMapBackend::new(&png, (1000, 500)).into_drawing_area();
-        draw_overlay(&root, measured, model, title, caption).map_err(|e| plot_err(&png, e))?;
+    png_and_svg!(dir, "overlay", PROFILE_SIZE, |root| draw_overlay(
+        &root, measured, model, title, caption
+    ))
+}
+
+/// Figure size of the Rk construction.
+const RK_SIZE: (u32, u32) = (1000, 560);
+/// Width of the Rk plot's side panel holding the values.
+const RK_PANEL_W: u32 = 220;
+
+fn draw_rk<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    curve: &[[f64; 2]],
+    rk: &RkFamily,
+    title: &str,
+    caption: &str,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let (c, d) = (rk.upper_level_um, rk.lower_level_um);
+    let frame = Frame::new(
+        root.dim_in_pixel().0,
+        title,
+        "ISO 13565-2: the equivalent straight line is the 40 % secant of least gradient of the material ratio curve, extended to 0 % (level C) and 100 % (level D); the triangles have the areas A1 above C and A2 below D",
+        caption,
+    );
+    let body = frame.draw(root)?;
+    let (bw, _) = body.dim_in_pixel();
+    let (plot_area, panel) = body.split_horizontally(bw.saturating_sub(RK_PANEL_W));
+    let heights = curve
+        .iter()
+        .map(|p| p[1])
+        .chain([c + rk.rpk_um, d - rk.rvk_um, c, d]);
+    let (lo, hi) = padded_range(heights, (-1.0, 1.0));
+    let mut chart = ChartBuilder::on(&plot_area)
+        .margin(12)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d(0f64..100f64, lo..hi)
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .x_desc("material ratio Rmr (%)")
+        .x_label_formatter(&|v| tick(*v))
+        .y_desc("height c (µm)")
+        .label_style(font(13))
+        .axis_desc_style(font(14))
+        .y_label_formatter(&|v| tick(*v))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    // Rpk and Rvk triangles (areas equal to A1 and A2).
+    chart
+        .draw_series(std::iter::once(Polygon::new(
+            vec![(0.0, c), (0.0, c + rk.rpk_um), (rk.mr1_pct, c)],
+            MODEL.mix(0.25).filled(),
+        )))
+        .map_err(err)?
+        .label("Rpk triangle (area A1)")
+        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 24, y + 5)], MODEL.mix(0.25).filled()));
+    chart
+        .draw_series(std::iter::once(Polygon::new(
+            vec![(rk.mr2_pct, d), (100.0, d), (100.0, d - rk.rvk_um)],
+            SECOND.mix(0.25).filled(),
+        )))
+        .map_err(err)?
+        .label("Rvk triangle (area A2)")
+        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 24, y + 5)], SECOND.mix(0.25).filled()));
+    // Levels C and D, and Mr1, Mr2.
+    let grey = RGBColor(110, 110, 110);
+    for level in [c, d] {
+        chart
+            .draw_series(DashedLineSeries::new(
+                [(0.0, level), (100.0, level)],
+                6,
+                4,
+                grey.stroke_width(1),
+            ))
+            .map_err(err)?;
     }
-    {
-        let root = SVGBackend::new(&svg, (1000, 500)).into_drawing_area();
-        draw_overlay(&root, measured, model, title, caption).map_err(|e| plot_err(&svg, e))?;
+    for (mr, level) in [(rk.mr1_pct, c), (rk.mr2_pct, d)] {
+        chart
+            .draw_series(DashedLineSeries::new(
+                [(mr, lo), (mr, level)],
+                6,
+                4,
+                grey.stroke_width(1),
+            ))
+            .map_err(err)?;
     }
-    Ok([png, svg])
+    // The material ratio curve.
+    chart
+        .draw_series(LineSeries::new(
+            curve.iter().map(|p| (p[0], p[1])),
+            DATA.stroke_width(2),
+        ))
+        .map_err(err)?
+        .label("material ratio curve of the line")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], DATA.stroke_width(2)));
+    // The equivalent straight line, with the 40 % secant it is the extension of.
+    chart
+        .draw_series(LineSeries::new(
+            [(0.0, c), (100.0, d)],
+            MODEL.stroke_width(1),
+        ))
+        .map_err(err)?
+        .label("equivalent straight line")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], MODEL.stroke_width(1)));
+    let s = rk.secant_start_pct;
+    let at = |mr: f64| c + (d - c) * mr / 100.0;
+    chart
+        .draw_series(LineSeries::new(
+            [(s, at(s)), (s + 40.0, at(s + 40.0))],
+            MODEL.stroke_width(4),
+        ))
+        .map_err(err)?
+        .label("40 % secant of least gradient")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], MODEL.stroke_width(4)));
+    let tag = font(13).color(&grey);
+    for (text, x, y) in [
+        ("C", 50.0, c),
+        ("D", 50.0, d),
+        ("Mr1", rk.mr1_pct, lo),
+        ("Mr2", rk.mr2_pct, lo),
+    ] {
+        let (px, py) = chart.backend_coord(&(x, y));
+        let (dx, dy) = if text.starts_with("Mr") {
+            (3, -18)
+        } else {
+            (0, -17)
+        };
+        root.draw_text(text, &tag, (px + dx, py + dy))
+            .map_err(err)?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font(font(13))
+        .border_style(BLACK)
+        .background_style(WHITE.mix(0.9))
+        .draw()
+        .map_err(err)?;
+    // The values, in the side panel.
+    let rows = [
+        ("Rk", fmt(rk.rk_um, Quantity::HeightUm), "µm"),
+        ("Rpk", fmt(rk.rpk_um, Quantity::HeightUm), "µm"),
+        ("Rvk", fmt(rk.rvk_um, Quantity::HeightUm), "µm"),
+        ("Mr1", fmt(rk.mr1_pct, Quantity::Percent), "%"),
+        ("Mr2", fmt(rk.mr2_pct, Quantity::Percent), "%"),
+        ("A1", fmt(rk.a1_um_pct, Quantity::Area), "µm·%"),
+        ("A2", fmt(rk.a2_um_pct, Quantity::Area), "µm·%"),
+        ("C", fmt(c, Quantity::HeightUm), "µm"),
+        ("D", fmt(d, Quantity::HeightUm), "µm"),
+    ];
+    let mut y = 24;
+    panel
+        .draw_text("ISO 13565-2", &font(15), (10, y))
+        .map_err(err)?;
+    y += 28;
+    for (name, value, unit) in rows {
+        panel.draw_text(name, &font(14), (10, y)).map_err(err)?;
+        let value_style = font(14);
+        let (vw, _) = panel
+            .estimate_text_size(&value, &value_style)
+            .map_err(err)?;
+        panel
+            .draw_text(&value, &value_style, (140 - vw as i32, y))
+            .map_err(err)?;
+        panel.draw_text(unit, &font(14), (148, y)).map_err(err)?;
+        y += 22;
+    }
+    Ok(())
+}
+
+/// Writes `STEM.png` and `STEM.svg` into `dir`: the ISO 13565-2 construction of one line —
+/// its material ratio curve (`[mr_pct, height_um]` pairs, e.g. from
+/// [`super::params::material_ratio_curve`]), the equivalent straight line and its 40 %
+/// secant, the levels C and D, Mr1 and Mr2, and the Rpk/Rvk triangles — with the values in a
+/// side panel. `caption` (may be empty) is the traceability footer.
+pub fn plot_rk_construction(
+    dir: &Path,
+    stem: &str,
+    curve: &[[f64; 2]],
+    rk: &RkFamily,
+    title: &str,
+    caption: &str,
+) -> Result<[PathBuf; 2], MetrologyError> {
+    png_and_svg!(dir, stem, RK_SIZE, |root| draw_rk(
+        &root, curve, rk, title, caption
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_thin_map_states_its_exaggeration_and_a_square_one_is_true_scale() {
+        // The demo's 1.6 × 0.3 mm grid in a 776 px wide area: 145 px at true scale.
+        let s = map_scale(1.6, 0.3, 776, 520, 160);
+        assert_eq!(s.y_over_x, 2.0);
+        assert_eq!(s.plot_w, 776);
+        assert_eq!(s.plot_h, 291);
+        assert!(map_note(&s).contains("y stretched ×2"), "{}", map_note(&s));
+        let s = map_scale(1.0, 0.5, 776, 520, 160);
+        assert_eq!((s.y_over_x, s.plot_h), (1.0, 388));
+        assert_eq!(map_note(&s), "true scale: x and y drawn 1:1");
+        // A tall grid: the x axis gets the exaggeration.
+        let s = map_scale(0.01, 2.0, 776, 520, 160);
+        assert_eq!(s.plot_h, 520);
+        assert!(s.y_over_x < 1.0 && s.plot_w >= 160, "{s:?}");
+        assert!(map_note(&s).contains("x stretched"), "{}", map_note(&s));
+    }
+
+    #[test]
+    fn profile_exaggeration_is_pixels_per_micrometre_compared() {
+        // 1 mm across 1000 px and 1 µm across 1 px: the same pixels per µm.
+        assert!((vertical_exaggeration(1.0, 1.0, 1000, 1) - 1.0).abs() < 1e-12);
+        // 1.6 mm across 800 px, 4 µm across 400 px: 100 px/µm against 0.5 px/µm.
+        assert!((vertical_exaggeration(1.6, 4.0, 800, 400) - 200.0).abs() < 1e-9);
+    }
+
+    /// Renders `text` in the bundled font into a small RGB buffer.
+    fn render(text: &str) -> Vec<u8> {
+        ensure_font().unwrap();
+        let mut buf = vec![255u8; 80 * 40 * 3];
+        {
+            let root = BitMapBackend::with_buffer(&mut buf, (80, 40)).into_drawing_area();
+            root.draw_text(text, &font(24), (5, 5)).unwrap();
+            root.present().unwrap();
+        }
+        buf
+    }
+
+    #[test]
+    fn the_bundled_font_draws_micro_and_lambda_not_a_missing_glyph_box() {
+        let blank = vec![255u8; 80 * 40 * 3];
+        // U+E000 is a private-use code point the font has no glyph for.
+        let missing = render("\u{e000}");
+        for text in ["µ", "λ", "·", "Å"] {
+            let drawn = render(text);
+            assert_ne!(drawn, blank, "{text} drew nothing");
+            assert_ne!(drawn, missing, "{text} drew the missing-glyph box");
+        }
+        assert_ne!(render("µ"), render("λ"));
+    }
+
+    #[test]
+    fn long_text_wraps_within_the_width() {
+        ensure_font().unwrap();
+        let style = font(FOOTER_PX);
+        let text = "specimen A-17 · SJ-210 fw 2.00 (standard drive unit) · ISO1997 Gauss λc 0.8 mm λs 2.5 µm · scan 20250101T000000Z · surfscan 0.1.0 · and some more words to force a wrap";
+        let lines = wrap(text, &style, 400);
+        assert!(lines.len() >= 3, "{lines:?}");
+        for l in &lines {
+            assert!(text_width(l, &style) <= 400, "{l:?} is wider than 400 px");
+        }
+        assert_eq!(
+            lines.join(" "),
+            text.split_whitespace().collect::<Vec<_>>().join(" ")
+        );
+    }
+
+    #[test]
+    fn ticks_drop_insignificant_zeros_and_float_noise() {
+        assert_eq!(tick(0.30000000000000004), "0.3");
+        assert_eq!(tick(-1.3877787807814457e-17), "0");
+        assert_eq!(tick(100.0), "100");
+        assert_eq!(tick(-2.5), "-2.5");
+        assert_eq!(tick(1.0e7), "1.000e7");
+    }
+
+    #[test]
+    fn viridis_runs_from_dark_violet_to_yellow() {
+        assert_eq!(viridis(0.0), RGBColor(68, 1, 84));
+        assert_eq!(viridis(1.0), RGBColor(254, 232, 37));
+        assert_eq!(viridis(f64::NAN), viridis(0.0));
+        assert_eq!(viridis(7.0), viridis(1.0));
+        // Perceptual order: lightness (the green channel here) rises throughout.
+        let g: Vec<u8> = (0..=10).map(|k| viridis(k as f64 / 10.0).1).collect();
+        assert!(g.windows(2).all(|w| w[0] < w[1]), "{g:?}");
+    }
 }

@@ -197,9 +197,13 @@ impl Control {
 
     /// Answers a command that arrived while a scan runs; `Some` when it interrupts.
     fn on_command(&mut self, req: OperatorRequest, paused: bool) -> Option<Interrupt> {
-        let scan = self.status.borrow().scan_id.clone().unwrap_or_default();
+        // Before its start record exists a new scan has no id yet: say so, never "scan  …".
+        let scan = match self.status.borrow().scan_id.clone() {
+            Some(id) => format!("scan {id}"),
+            None => "the scan being started (no id yet)".to_owned(),
+        };
         let (reply, interrupt) = match req.command {
-            OperatorCommand::Pause if paused => (Ok("already paused".to_owned()), None),
+            OperatorCommand::Pause if paused => (Ok(format!("{scan} is already paused")), None),
             OperatorCommand::Pause => {
                 self.pause_requested = true;
                 self.publish(|s| {
@@ -208,13 +212,11 @@ impl Control {
                     }
                 });
                 (
-                    Ok(format!(
-                        "scan {scan} pauses once the current line is on disk"
-                    )),
+                    Ok(format!("{scan} pauses once the current line is on disk")),
                     None,
                 )
             }
-            OperatorCommand::Resume if paused => (Ok(format!("scan {scan} resumes")), None),
+            OperatorCommand::Resume if paused => (Ok(format!("{scan} resumes")), None),
             OperatorCommand::Resume if self.pause_requested => {
                 self.pause_requested = false;
                 self.publish(|s| {
@@ -224,14 +226,18 @@ impl Control {
                 });
                 (Ok("pause request withdrawn".to_owned()), None)
             }
-            OperatorCommand::Resume => (Err(format!("scan {scan} is not paused")), None),
+            // Resume is idempotent like pause: the scan is in the state asked for.
+            OperatorCommand::Resume => (
+                Ok(format!("{scan} is not paused; it goes on scanning")),
+                None,
+            ),
             OperatorCommand::Abort => (
-                Ok(format!("aborting scan {scan}; lines on disk are kept")),
+                Ok(format!("aborting {scan}; lines on disk are kept")),
                 Some(Interrupt::Abort),
             ),
             OperatorCommand::Start { .. } => (
                 Err(format!(
-                    "scan {scan} is running; abort it first or wait until it ends"
+                    "{scan} is running; abort it first or wait until it ends"
                 )),
                 None,
             ),

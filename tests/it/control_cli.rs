@@ -31,7 +31,7 @@ fn scanning() -> Status {
 struct Daemon {
     _dir: tempfile::TempDir,
     path: PathBuf,
-    status: watch::Sender<Status>,
+    _status: watch::Sender<Status>,
     seen: Arc<Mutex<Vec<OperatorCommand>>>,
     stop: Option<oneshot::Sender<()>>,
     task: tokio::task::JoinHandle<()>,
@@ -74,7 +74,7 @@ impl Daemon {
         Daemon {
             _dir: dir,
             path,
-            status: status_tx,
+            _status: status_tx,
             seen,
             stop: Some(stop),
             task,
@@ -280,37 +280,88 @@ async fn a_conversation_cut_short_is_exit_74() {
     task.abort();
 }
 
+/// A served socket at `path` answering with `status`; stopping it ends the server.
+async fn serve_at(
+    path: &Path,
+    status: Status,
+) -> (
+    watch::Sender<Status>,
+    oneshot::Sender<()>,
+    tokio::task::JoinHandle<()>,
+) {
+    let (status_tx, status_rx) = watch::channel(status);
+    let (cmd_tx, _cmd_rx) = mpsc::channel::<OperatorRequest>(4);
+    let server = server::bind_with_options(path, ServerOptions::default())
+        .await
+        .unwrap();
+    let (stop, stopped) = oneshot::channel::<()>();
+    let task = tokio::spawn(server.serve(
+        ControlChannels {
+            status: status_rx,
+            commands: cmd_tx,
+        },
+        async {
+            let _ = stopped.await;
+        },
+    ));
+    (status_tx, stop, task)
+}
+
 #[tokio::test]
-async fn watch_prints_every_change_until_the_daemon_goes_away() {
-    let d = Daemon::start().await;
+async fn watch_prints_every_change_and_reconnects_when_the_daemon_restarts() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("control.sock");
+    let (status, stop, task) = serve_at(&path, scanning()).await;
     let mut child = surfscan()
         .args(["status", "--watch", "--json", "--socket"])
-        .arg(&d.path)
+        .arg(&path)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
     let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let mut errs = BufReader::new(child.stderr.take().unwrap()).lines();
     let mut next = async || -> serde_json::Value {
-        let l = tokio::time::timeout(Duration::from_secs(10), lines.next_line())
+        let l = tokio::time::timeout(Duration::from_secs(20), lines.next_line())
             .await
-            .expect("a line within 10 s")
+            .expect("a line within 20 s")
             .unwrap()
             .expect("still running");
         serde_json::from_str(&l).unwrap()
     };
     assert_eq!(next().await["lines_done"], 11);
-    d.status.send_modify(|s| {
+    status.send_modify(|s| {
         s.lines_done = 12;
         s.current_line = Some(13);
     });
     let v = next().await;
     assert_eq!(v["lines_done"], 12);
     assert_eq!(v["current_line"], 13);
-    d.shutdown().await;
-    let status = tokio::time::timeout(Duration::from_secs(10), child.wait())
+
+    // The daemon stops (its socket file goes with it) and comes back on the same path.
+    let _ = stop.send(());
+    task.await.unwrap();
+    let note = tokio::time::timeout(Duration::from_secs(10), errs.next_line())
         .await
+        .expect("a note within 10 s")
         .unwrap()
-        .unwrap();
-    assert_eq!(status.code(), Some(74));
+        .expect("stderr open");
+    assert!(note.contains("reconnecting"), "{note}");
+    let _ = std::fs::remove_file(&path);
+    let mut back = scanning();
+    back.lines_done = 20;
+    let (_status, stop, task) = serve_at(&path, back).await;
+    let v = next().await;
+    assert_eq!(v["lines_done"], 20, "{v}");
+    let note = tokio::time::timeout(Duration::from_secs(10), errs.next_line())
+        .await
+        .expect("a note within 10 s")
+        .unwrap()
+        .expect("stderr open");
+    assert!(note.contains("reconnected"), "{note}");
+    // Still watching: no exit of its own.
+    assert!(child.try_wait().unwrap().is_none());
+    child.kill().await.unwrap();
+    let _ = stop.send(());
+    task.await.unwrap();
 }

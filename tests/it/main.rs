@@ -3,6 +3,7 @@
 //! independent Python reference checks). Tests that change process-wide state (environment
 //! variables, resident memory) live in `tests/process_wide/` instead.
 
+mod cli_conventions;
 mod common;
 mod config_ranges;
 mod control_cli;
@@ -16,9 +17,11 @@ mod iges_roundtrip;
 mod metrology_areal;
 mod metrology_cli;
 mod metrology_model;
+mod metrology_plots;
 mod metrology_profile;
 mod metrology_reference;
 mod metrology_x3p;
+mod model_honesty;
 mod scan_dir_analysis;
 mod scan_e2e;
 mod scan_runner;

@@ -52,6 +52,13 @@ async fn a_complete_scan_stores_the_served_lines_and_a_surface_through_them() {
     let cfg = rig.config("out");
     let o = run_scan(&cfg, &[]).await;
     assert!(o.status.success(), "{}", describe(&o));
+    // The log went to a pipe, not a terminal: plain text, no colour escapes.
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("scan started in"), "{log}");
+    assert!(
+        !log.contains('\x1b'),
+        "ANSI escapes in a log written to a pipe: {log:?}"
+    );
     let dir = scan_dir(&rig.out_dir("out"));
     assert_lines_exactly(&dir, n);
     let records = assert_journal_complete(&dir, n);

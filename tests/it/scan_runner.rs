@@ -404,8 +404,22 @@ async fn pause_waits_for_the_line_on_disk_and_resume_continues() {
             .filter(|e| matches!(e, Event::Move(_)))
             .collect();
         assert_eq!(moves, vec![Event::Move(target(0)), Event::Move(target(1))]);
+        // Repeated commands are answered alike (exit 0 at the command line): the scan is
+        // in the state asked for, and the reply names it by its id.
+        let id = status.borrow().scan_id.clone().expect("id");
+        let reply = request(&commands, OperatorCommand::Pause).await;
+        assert_eq!(reply, format!("scan {id} is already paused"));
         let reply = request(&commands, OperatorCommand::Resume).await;
         assert!(reply.contains("resumes"), "{reply}");
+        status
+            .wait_for(|s| s.state == State::Scanning)
+            .await
+            .expect("scanning again");
+        let reply = request(&commands, OperatorCommand::Resume).await;
+        assert_eq!(
+            reply,
+            format!("scan {id} is not paused; it goes on scanning")
+        );
     };
     let (outcome, ()) = tokio::join!(
         run_scan(&mut station, &mut h.ctl, &settings, new_scan()),

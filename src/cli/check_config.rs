@@ -1,0 +1,105 @@
+//! `surfscan check-config [FILE]`: validates a station configuration exactly as the daemon
+//! and `scan` load it (every table, every key, the plan), without opening any device, and
+//! prints what it would do. Device paths that are absent or are not device nodes are noted
+//! (a device may be plugged in later); a port that is a regular file, a directory or another
+//! node that can never be a serial port makes the file invalid.
+//!
+//! Exit status: 0 valid (notes are printed on standard error), 78 invalid or unreadable,
+//! with the message naming the file, the key and the fix.
+//!
+//! Layer 5 (composition): depends on [`crate::config`] and [`crate::transport`].
+
+use super::scan::load_config;
+use super::{CliError, Exit, DEFAULT_CONFIG};
+use crate::config::Config;
+use crate::numfmt::{fmt, Quantity};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+/// Arguments of `surfscan check-config`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Station configuration (TOML).
+    #[arg(default_value = DEFAULT_CONFIG)]
+    pub config: PathBuf,
+}
+
+/// The name a setting has in the file (its serde name), e.g. `sj210`, `grbl`.
+fn name<T: serde::Serialize + std::fmt::Debug>(v: &T) -> String {
+    serde_json::to_value(v)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_owned))
+        .unwrap_or_else(|| format!("{v:?}"))
+}
+
+/// What the configuration asks for, for people.
+pub fn summary(config: &Config) -> String {
+    let mut out = String::new();
+    let i = &config.instrument;
+    let _ = writeln!(
+        out,
+        "  instrument  {} on {} at {} baud",
+        name(&i.model),
+        i.port,
+        i.baud
+    );
+    let s = &config.stage;
+    let _ = writeln!(
+        out,
+        "  stage       {} on {} at {} baud",
+        name(&s.protocol),
+        s.port,
+        s.baud
+    );
+    let sc = &config.scan;
+    let _ = writeln!(
+        out,
+        "  scan        {} lines from y = {} mm in steps of {} mm",
+        sc.lines,
+        fmt(sc.y_start_mm, Quantity::PositionMm),
+        fmt(sc.y_step_mm, Quantity::PositionMm)
+    );
+    let _ = writeln!(out, "  output      {}", config.output.dir.display());
+    let _ = writeln!(out, "  control     {}", config.control.socket.display());
+    out
+}
+
+/// The device paths checked: notes for absent devices, or the first port that can never be
+/// a serial device as an error.
+pub fn check_ports(config: &Config) -> Result<Vec<String>, String> {
+    let mut notes = Vec::new();
+    for (what, port) in [
+        ("instrument", &config.instrument.port),
+        ("stage", &config.stage.port),
+    ] {
+        match crate::transport::check_device_node(port) {
+            Ok(()) => {}
+            Err(e) if e.is_absent() => notes.push(format!(
+                "[{what}] port {port} is not present now (plug the device in, or correct the path)"
+            )),
+            Err(e) => return Err(format!("[{what}] port: {e}")),
+        }
+    }
+    Ok(notes)
+}
+
+/// Runs `surfscan check-config`.
+pub fn run(args: Args) -> Result<(), CliError> {
+    let (config, hash) = load_config(&args.config)?;
+    let notes = check_ports(&config).map_err(|e| {
+        CliError::new(
+            Exit::Config,
+            format!("config {}: {e}", args.config.display()),
+        )
+    })?;
+    println!(
+        "{}: valid (sha256 {})",
+        args.config.display(),
+        hash.get(..12).unwrap_or(&hash)
+    );
+    print!("{}", summary(&config));
+    for note in notes {
+        eprintln!("surfscan: note: {note}");
+    }
+    Ok(())
+}

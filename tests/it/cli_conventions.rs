@@ -1,0 +1,189 @@
+//! What a daemon's users expect of its command line: `--version` naming the commit, man
+//! pages and shell completions generated from the same definition as the parser, and
+//! `check-config`.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn surfscan(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(args)
+        .env_remove("RUST_LOG")
+        .output()
+        .unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn version_names_the_commit_it_was_built_from() {
+    let out = surfscan(&["--version"]);
+    assert_eq!(out.status.code(), Some(0));
+    let v = text(&out.stdout);
+    let expected_commit = Command::new("git")
+        .args(["rev-parse", "--short=12", "HEAD"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| text(&o.stdout).trim().to_string())
+        .filter(|c| !c.is_empty());
+    let commit = match (std::env::var("SURFSCAN_COMMIT"), expected_commit) {
+        (Ok(c), _) if !c.is_empty() => c,
+        (_, Some(c)) => c,
+        _ => "unknown".to_string(),
+    };
+    assert_eq!(
+        v,
+        format!("surfscan {} (commit {commit})\n", env!("CARGO_PKG_VERSION"))
+    );
+}
+
+#[test]
+fn completions_know_every_subcommand_and_option() {
+    for shell in ["bash", "zsh", "fish"] {
+        let out = surfscan(&["completions", shell]);
+        assert_eq!(out.status.code(), Some(0), "{shell}: {}", text(&out.stderr));
+        let script = text(&out.stdout);
+        // fish names long options without their dashes (`-l speed-up`).
+        for word in ["check-config", "analyze", "speed-up", "watch", "manpages"] {
+            assert!(script.contains(word), "{shell} completion lacks {word}");
+        }
+    }
+    let out = surfscan(&["completions", "tcsh"]);
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "an unknown shell is a usage error"
+    );
+}
+
+#[test]
+fn man_pages_cover_the_command_and_every_subcommand() {
+    let dir = tempfile::tempdir().unwrap();
+    let man = dir.path().join("man1");
+    let out = surfscan(&["manpages", man.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    // roff escapes a hyphen as `\-`; read the pages as a person would see them.
+    let read = |p: &Path| {
+        std::fs::read_to_string(p)
+            .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+            .replace("\\-", "-")
+    };
+    let main = read(&man.join("surfscan.1"));
+    assert!(main.contains(".TH surfscan 1"), "title header: {main}");
+    assert!(
+        main.contains(env!("CARGO_PKG_VERSION")),
+        "version in the page"
+    );
+    for sub in [
+        "scan",
+        "daemon",
+        "demo",
+        "fit",
+        "analyze",
+        "status",
+        "pause",
+        "resume",
+        "abort",
+        "start",
+        "probe",
+        "check-config",
+        "completions",
+        "manpages",
+    ] {
+        let text = read(&man.join(format!("surfscan-{sub}.1")));
+        assert!(
+            text.contains(&format!(".TH surfscan-{sub} 1")),
+            "{sub}: {text}"
+        );
+        assert!(main.contains(sub), "surfscan.1 does not list {sub}");
+    }
+    let scan = read(&man.join("surfscan-scan.1"));
+    assert!(
+        scan.contains("/etc/surfscan/surfscan.toml"),
+        "default config"
+    );
+    assert!(
+        scan.contains("verbose"),
+        "the global option is on the subcommand's page"
+    );
+}
+
+fn demo_config(dir: &Path, instrument: &Path, stage: &Path) -> std::path::PathBuf {
+    let p = dir.join("station.toml");
+    std::fs::write(
+        &p,
+        surfscan::cli::demo::demo_config(instrument, stage, &dir.join("out")),
+    )
+    .unwrap();
+    p
+}
+
+#[test]
+fn check_config_validates_without_opening_devices() {
+    let dir = tempfile::tempdir().unwrap();
+    // Character devices as ports: valid, and the summary says what would be done.
+    let cfg = demo_config(dir.path(), Path::new("/dev/null"), Path::new("/dev/zero"));
+    let out = surfscan(&["check-config", cfg.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains(": valid (sha256 "), "{stdout}");
+    assert!(
+        stdout.contains("instrument  sj210 on /dev/null at 38400 baud"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("stage       grbl on /dev/zero"), "{stdout}");
+    assert!(
+        stdout.contains("scan        31 lines from y = -20.0000 mm in steps of 0.0100 mm"),
+        "{stdout}"
+    );
+
+    // An absent device is a note, not a failure: it may be plugged in later.
+    let absent = dir.path().join("ttyUSB7");
+    let cfg = demo_config(dir.path(), &absent, Path::new("/dev/null"));
+    let out = surfscan(&["check-config", cfg.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("is not present now"),
+        "{}",
+        text(&out.stderr)
+    );
+
+    // A regular file can never be a serial port: exit 78 naming the cause.
+    let file = dir.path().join("port.txt");
+    std::fs::write(&file, "not a device").unwrap();
+    let cfg = demo_config(dir.path(), &file, Path::new("/dev/null"));
+    let out = surfscan(&["check-config", cfg.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(78));
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("is a regular file, not a serial device"),
+        "{err}"
+    );
+    assert!(!err.contains("Not a typewriter"), "{err}");
+
+    // A misspelt key: exit 78 naming it.
+    let text_ok = std::fs::read_to_string(&cfg).unwrap();
+    std::fs::write(&cfg, text_ok.replace("y-step-mm", "y-stepp-mm")).unwrap();
+    let out = surfscan(&["check-config", cfg.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(78));
+    assert!(
+        text(&out.stderr).contains("y-stepp-mm"),
+        "{}",
+        text(&out.stderr)
+    );
+
+    // The default path, absent here: exit 78 naming it.
+    if !Path::new("/etc/surfscan/surfscan.toml").exists() {
+        let out = surfscan(&["check-config"]);
+        assert_eq!(out.status.code(), Some(78));
+        assert!(
+            text(&out.stderr).contains("/etc/surfscan/surfscan.toml"),
+            "{}",
+            text(&out.stderr)
+        );
+    }
+}

@@ -1,0 +1,215 @@
+//! The plots as a metrology engineer reads them: every plot as PNG and SVG, ISO words
+//! (Rmr(c), Smr(c)), a key for every colour, the scale stated, the Rk construction drawn from
+//! the numbers the metrology computed, and nothing drawn off the edge of the figure.
+//!
+//! `SURFSCAN_PLOT_DIR=DIR` keeps the figures in DIR to look at them.
+
+use surfscan::fit::{fit_grid, FitOptions};
+use surfscan::metrology::areal::{smr_curve, Grid};
+use surfscan::metrology::model::{model_bearing_curves, ModelBacOptions};
+use surfscan::metrology::params::{analyze_line, material_ratio_curve, rk_family, Options};
+use surfscan::metrology::plots::{
+    plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction,
+};
+
+/// A rough, plateau-honed looking profile: sines plus a deterministic noise, with deep
+/// valleys every so often (so the Rk construction has both triangles).
+fn profile(row: usize, cols: usize) -> Vec<f64> {
+    let mut s = 0x2545_f491_4f6c_dd1du64 ^ (row as u64).wrapping_mul(0x9e37_79b9);
+    (0..cols)
+        .map(|i| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let noise = (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            let x = i as f64 * 0.0015;
+            let valley = if (i / 37) % 9 == 0 { -2.0 } else { 0.0 };
+            0.8 * (x * 40.0 + row as f64 * 0.3).sin() + 0.3 * (x * 170.0).cos() + noise + valley
+        })
+        .collect()
+}
+
+struct Out {
+    dir: std::path::PathBuf,
+    _tmp: Option<tempfile::TempDir>,
+}
+
+fn out_dir() -> Out {
+    match std::env::var_os("SURFSCAN_PLOT_DIR") {
+        Some(d) => {
+            let dir = std::path::PathBuf::from(d);
+            std::fs::create_dir_all(&dir).unwrap();
+            Out { dir, _tmp: None }
+        }
+        None => {
+            let t = tempfile::tempdir().unwrap();
+            Out {
+                dir: t.path().to_path_buf(),
+                _tmp: Some(t),
+            }
+        }
+    }
+}
+
+const ROWS: usize = 31;
+const COLS: usize = 1067; // 1.6 mm at 1.5 µm
+const PX: f64 = 0.0015;
+const PY: f64 = 0.01;
+
+fn grid() -> Vec<f64> {
+    (0..ROWS).flat_map(|r| profile(r, COLS)).collect()
+}
+
+const LONG_CAPTION: &str = "specimen demo: Mitutoyo R profile windows · SJ-210 fw 1.00 (standard drive unit) · ISO1997 Gauss λc 0.8 mm λs 2.5 µm · scan 20250101T000000Z-abcdef · surfscan 0.1.0 (0123456789ab) · operator a person with a rather long name · notes: more text than fits on one line of the figure";
+
+/// Decodes a PNG and checks that nothing is drawn in the outer 4 px of the right edge and
+/// of the bottom (text that ran off the figure would touch them) while the footer holds text.
+fn assert_nothing_at_the_edge(png: &std::path::Path) {
+    let img = image::open(png).unwrap().to_rgb8();
+    let (w, h) = img.dimensions();
+    let ink = |x: u32, y: u32| {
+        let p = img.get_pixel(x, y);
+        p.0.iter().any(|&c| c < 200)
+    };
+    for y in 0..h {
+        for x in w - 4..w {
+            assert!(
+                !ink(x, y),
+                "{}: ink at the right edge ({x}, {y})",
+                png.display()
+            );
+        }
+    }
+    for y in h - 3..h {
+        for x in 0..w {
+            assert!(
+                !ink(x, y),
+                "{}: ink at the bottom edge ({x}, {y})",
+                png.display()
+            );
+        }
+    }
+    let footer_ink = (h - 40..h).any(|y| (0..w).any(|x| ink(x, y)));
+    assert!(footer_ink, "{}: no footer text", png.display());
+}
+
+#[test]
+fn every_plot_is_png_and_svg_in_iso_words_with_a_key_for_every_colour() {
+    let out = out_dir();
+    let z = grid();
+    let y: Vec<f64> = (0..ROWS).map(|r| r as f64 * PY).collect();
+    let fit = fit_grid(PX, &y, &z, COLS, FitOptions::default()).unwrap();
+    let curves = model_bearing_curves(&fit.surface, &ModelBacOptions::default()).unwrap();
+    let g = Grid {
+        heights_um: &z,
+        rows: ROWS,
+        cols: COLS,
+        pitch_x_mm: PX,
+        pitch_y_mm: PY,
+    };
+    let pooled = smr_curve(&g, 101).unwrap();
+
+    let [png, svg] = plot_bearing_curves(
+        &out.dir,
+        &curves,
+        &pooled,
+        "Material ratio curves",
+        LONG_CAPTION,
+    )
+    .unwrap();
+    assert_eq!(&std::fs::read(&png).unwrap()[..8], b"\x89PNG\r\n\x1a\n");
+    assert_nothing_at_the_edge(&png);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    for word in ["Rmr(c)", "Smr(c)", "curve y (mm)", "material ratio (%)"] {
+        assert!(text.contains(word), "bac.svg lacks {word:?}");
+    }
+    assert!(!text.contains("MAR"), "bac.svg uses the non-ISO word MAR");
+    assert!(text.contains(r#"font-family="sans-serif""#));
+    // One polyline per model curve plus the pooled one (the legend samples are paths too).
+    assert!(text.matches("<polyline").count() > curves.len());
+
+    let [png, svg] = plot_height_map(&out.dir, &g, "Measured heights", LONG_CAPTION).unwrap();
+    assert_nothing_at_the_edge(&png);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    // 1.6 × 0.31 mm: too thin at true scale, so the stretch is stated; the colour bar is
+    // labelled.
+    assert!(
+        text.contains("y stretched ×2 against x"),
+        "{}",
+        svg.display()
+    );
+    assert!(text.contains("height (µm)"));
+
+    let measured: Vec<(f64, f64)> = z[..COLS]
+        .iter()
+        .enumerate()
+        .map(|(i, v)| (i as f64 * PX, *v))
+        .collect();
+    let [png, svg] =
+        plot_profile_overlay(&out.dir, &measured, &measured, "Line 1", LONG_CAPTION).unwrap();
+    assert_nothing_at_the_edge(&png);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.contains("heights exaggerated ×"), "{}", svg.display());
+    assert!(text.contains("NURBS model") && text.contains("measured"));
+
+    let a = analyze_line(&z[..COLS], PX, &Options::default()).unwrap();
+    let rk = rk_family(&a.roughness_um).unwrap();
+    let curve = material_ratio_curve(&a.roughness_um, 1001);
+    let [png, svg] = plot_rk_construction(
+        &out.dir,
+        "rk-0000",
+        &curve,
+        &rk,
+        "Line 1 (y = 0.0000 mm): ISO 13565-2 Rk construction",
+        LONG_CAPTION,
+    )
+    .unwrap();
+    assert!(png.ends_with("rk-0000.png"));
+    assert_nothing_at_the_edge(&png);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    for word in [
+        "equivalent straight line",
+        "40 % secant of least gradient",
+        "Rpk triangle (area A1)",
+        "Rvk triangle (area A2)",
+        "Mr1",
+        "Mr2",
+    ] {
+        assert!(text.contains(word), "rk svg lacks {word:?}");
+    }
+    // The values in the panel are the metrology's, written with 4 significant digits.
+    let rk_text = surfscan::numfmt::fmt(rk.rk_um, surfscan::numfmt::Quantity::HeightUm);
+    assert!(
+        text.contains(&format!("\n{rk_text}\n")),
+        "Rk {rk_text} missing"
+    );
+}
+
+#[test]
+fn rk_construction_is_consistent_with_the_parameters() {
+    // The levels the plot draws are the ones Rk, Mr1 and Mr2 come from: C − D = Rk, and the
+    // curve crosses C at Mr1 and D at Mr2.
+    let z = profile(3, COLS);
+    let a = analyze_line(&z, PX, &Options::default()).unwrap();
+    let rk = rk_family(&a.roughness_um).unwrap();
+    assert!((rk.upper_level_um - rk.lower_level_um - rk.rk_um).abs() < 1e-12);
+    assert!((rk.rk_um - a.params.rk_um).abs() < 1e-12);
+    let curve = material_ratio_curve(&a.roughness_um, 100_001);
+    let height_at = |mr: f64| {
+        let k = (mr / 100.0 * 100_000.0).round() as usize;
+        curve[k][1]
+    };
+    assert!((height_at(rk.mr1_pct) - rk.upper_level_um).abs() < 1e-2 * rk.rk_um);
+    assert!((height_at(rk.mr2_pct) - rk.lower_level_um).abs() < 1e-2 * rk.rk_um);
+    // The secant lies on the equivalent line, 40 % long, inside 0 … 100 %.
+    assert!(rk.secant_start_pct >= 0.0 && rk.secant_start_pct <= 60.0);
+    let line = |mr: f64| rk.upper_level_um + (rk.lower_level_um - rk.upper_level_um) * mr / 100.0;
+    let s = rk.secant_start_pct;
+    assert!((height_at(s) - line(s)).abs() < 1e-2 * rk.rk_um);
+    assert!((height_at(s + 40.0) - line(s + 40.0)).abs() < 1e-2 * rk.rk_um);
+    // The curve runs from the highest to the lowest ordinate.
+    let max = a.roughness_um.iter().copied().fold(f64::MIN, f64::max);
+    let min = a.roughness_um.iter().copied().fold(f64::MAX, f64::min);
+    assert_eq!(curve[0], [0.0, max]);
+    assert_eq!(curve[100_000], [100.0, min]);
+}
