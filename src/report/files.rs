@@ -205,7 +205,7 @@ fn write_plots(
             source: e,
         };
         plots.extend(
-            plot_profile_overlay(out, &measured_pts, &model_pts, &title, &caption)
+            plot_profile_overlay(out, &measured_pts, &model_pts, &[], &title, &caption)
                 .map_err(plot_err)?,
         );
     }
