@@ -527,6 +527,87 @@ fn fit_scan_dir_writes_an_iges_through_the_stored_points() {
 }
 
 #[test]
+fn fit_scan_dir_checks_the_journal_and_keeps_a_completed_surface() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rows: Vec<usize> = (0..7).collect();
+    let scan = build_scan(tmp.path(), &rows, ProfileKind::P, Some(StopStatus::Success));
+    let scan_s = scan.to_str().unwrap();
+    run_ok(&["fit", scan_s]);
+    let surface = scan.join("surface.igs");
+    let first = std::fs::read(&surface).unwrap();
+
+    // A second fit does not replace the completed scan's surface unless asked.
+    let out = surfscan().args(["fit", scan_s]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("the surface the completed scan wrote"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("--force") && stderr.contains("-o"),
+        "{stderr}"
+    );
+    let other = tmp.path().join("refit.igs");
+    run_ok(&["fit", scan_s, "-o", other.to_str().unwrap()]);
+    assert!(other.exists());
+    run_ok(&["fit", scan_s, "--force"]);
+
+    // A line never committed to the journal (files on disk, no record) is left out.
+    let lines = scan.join("lines");
+    std::fs::copy(lines.join("0006.csv"), lines.join("0020.csv")).unwrap();
+    let mut meta: Value =
+        serde_json::from_str(&std::fs::read_to_string(lines.join("0006.json")).unwrap()).unwrap();
+    meta["index"] = json!(20);
+    meta["y_target_nm"] = json!(20 * STEP_Y_NM);
+    std::fs::write(lines.join("0020.json"), meta.to_string()).unwrap();
+    let report_path = tmp.path().join("fit.json");
+    let out = surfscan()
+        .args(["fit", scan_s, "--force", "--report"])
+        .arg(&report_path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains("lines 21 (0020.csv) are on disk but the journal never committed them"),
+        "{stderr}"
+    );
+    let rep: Value = serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
+    assert_eq!(rep["lines"], json!([0, 1, 2, 3, 4, 5, 6]));
+    assert_eq!(
+        std::fs::read(&surface).unwrap(),
+        first,
+        "the same lines, the same surface"
+    );
+
+    // A height edited after the line was traced is refused, naming the file and the line.
+    let csv = lines.join("0002.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    // One more digit on the first height: still a valid file, a different number.
+    let mut rows_text: Vec<String> = text.lines().map(str::to_owned).collect();
+    rows_text[1].push('7');
+    let edited = rows_text.join("\n") + "\n";
+    assert_ne!(edited, text);
+    std::fs::write(&csv, edited).unwrap();
+    let out = surfscan()
+        .args(["fit", scan_s, "--force"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("0002.csv") && stderr.contains("line 3 was changed"),
+        "{stderr}"
+    );
+    assert_eq!(
+        std::fs::read(&surface).unwrap(),
+        first,
+        "nothing was written"
+    );
+}
+
+#[test]
 fn a_malformed_line_file_is_a_clear_error_naming_the_file() {
     let tmp = tempfile::tempdir().unwrap();
     let rows: Vec<usize> = (0..7).collect();
