@@ -482,7 +482,13 @@ fn x3p_meta(ctx: &ReportContext, what: &str) -> X3pMeta {
                 date: t.started_at.clone(),
                 creator: t.operator.clone(),
                 // The scan daemon drives the Mitutoyo SJ series; any other model is not named.
-                manufacturer: if t.instrument_model.trim_start().starts_with("SJ-") {
+                // (recorded as e.g. "sj210" from the config or "SJ-210" from the instrument).
+                manufacturer: if t
+                    .instrument_model
+                    .trim_start()
+                    .to_ascii_lowercase()
+                    .starts_with("sj")
+                {
                     "Mitutoyo".to_string()
                 } else {
                     String::new()
@@ -502,6 +508,7 @@ fn x3p_meta(ctx: &ReportContext, what: &str) -> X3pMeta {
                     t.config_hash,
                     software()
                 ),
+                ..X3pMeta::default()
             }
         }
         None => X3pMeta {
