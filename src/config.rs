@@ -68,6 +68,15 @@ fn d_curves() -> usize {
 fn d_levels() -> usize {
     101
 }
+fn d_spike_sigma() -> f64 {
+    crate::metrology::outliers::SpikeOptions::default().threshold_sigma
+}
+fn d_spike_points() -> usize {
+    crate::metrology::outliers::SpikeOptions::default().max_points
+}
+fn d_holdout_threshold() -> f64 {
+    crate::metrology::holdout::SUPPORTED_BELOW_SQ
+}
 
 /// `[scan]`: the grid of traced lines.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -90,7 +99,7 @@ pub struct ScanSettings {
     pub reconnect_max_ms: u64,
 }
 
-/// `[fit]`: the interpolating surface.
+/// `[fit]`: the surface.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub struct FitSettings {
@@ -100,6 +109,16 @@ pub struct FitSettings {
     /// Degree along y / v (default 5).
     #[serde(default = "d_degree")]
     pub degree_v: usize,
+    /// How the surface is made across the lines (default `interpolate`, the paper).
+    #[serde(default)]
+    pub v_method: VMethodSetting,
+    /// Poles along v for `v-method = "least-squares"` (default: a quarter of the lines, at least
+    /// degree-v + 1); refused with `interpolate`.
+    #[serde(default)]
+    pub v_control_rows: Option<usize>,
+    /// What the fit does with the spikes `[analysis]` finds (default `keep`).
+    #[serde(default)]
+    pub outliers: FitOutliers,
 }
 
 impl Default for FitSettings {
@@ -107,8 +126,61 @@ impl Default for FitSettings {
         FitSettings {
             degree_u: 5,
             degree_v: 5,
+            v_method: VMethodSetting::default(),
+            v_control_rows: None,
+            outliers: FitOutliers::default(),
         }
     }
+}
+
+impl FitSettings {
+    /// The method across the lines for a scan of `lines` lines.
+    pub fn v_method_for(&self, lines: usize) -> crate::fit::VMethod {
+        match self.v_method {
+            VMethodSetting::Interpolate => crate::fit::VMethod::Interpolate,
+            VMethodSetting::LeastSquares => crate::fit::VMethod::LeastSquares {
+                control_rows: self.v_control_rows.unwrap_or_else(|| {
+                    crate::fit::approx_v::default_control_rows(lines, self.degree_v)
+                }),
+            },
+        }
+    }
+}
+
+/// `[fit] v-method`: the paper's interpolation through every line, or a least-squares
+/// approximation across the lines (see [`crate::fit::approx_v`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum VMethodSetting {
+    /// The paper (bit-identical to the plain fit).
+    #[default]
+    Interpolate,
+    /// Least squares across the lines with `v-control-rows` poles.
+    LeastSquares,
+}
+
+/// `[fit] outliers`: whether the fit sees the spikes as measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum FitOutliers {
+    /// Fit the data as measured (the paper).
+    #[default]
+    Keep,
+    /// Replace each spike by the straight line between its neighbours before fitting; the
+    /// IGES Start section and the report say so and list the spikes.
+    Replace,
+}
+
+/// `[analysis] outliers`: what characterisation does with the spikes it finds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum OutlierPolicy {
+    /// Name them in the warnings and the report; the data stay as measured.
+    #[default]
+    Flag,
+    /// Also leave them out of the per-line parameters and the measured grid's areal
+    /// parameters (bridged by the straight line between their neighbours).
+    Exclude,
 }
 
 /// `[output]`: storage.
@@ -150,6 +222,20 @@ pub struct AnalysisSettings {
     /// Treat profiles as R profiles (no λc filter), whatever the instrument says.
     #[serde(default)]
     pub no_filter: bool,
+    /// Spikes: `flag` (default; named, data unchanged) or `exclude` from characterisation.
+    #[serde(default)]
+    pub outliers: OutlierPolicy,
+    /// A spike deviates from its line's median roughness by more than this many robust σ
+    /// (1.4826 · MAD; default 10).
+    #[serde(default = "d_spike_sigma")]
+    pub spike_threshold_sigma: f64,
+    /// The longest run of points that counts as a spike (default 5).
+    #[serde(default = "d_spike_points")]
+    pub spike_max_points: usize,
+    /// The model between lines is supported when the hold-out rms is at most this × Sq
+    /// (default 0.5).
+    #[serde(default = "d_holdout_threshold")]
+    pub holdout_threshold: f64,
 }
 
 impl Default for AnalysisSettings {
@@ -159,6 +245,20 @@ impl Default for AnalysisSettings {
             levels: d_levels(),
             lambda_c_mm: None,
             no_filter: false,
+            outliers: OutlierPolicy::default(),
+            spike_threshold_sigma: d_spike_sigma(),
+            spike_max_points: d_spike_points(),
+            holdout_threshold: d_holdout_threshold(),
+        }
+    }
+}
+
+impl AnalysisSettings {
+    /// The spike rule of these settings.
+    pub fn spike_options(&self) -> crate::metrology::outliers::SpikeOptions {
+        crate::metrology::outliers::SpikeOptions {
+            threshold_sigma: self.spike_threshold_sigma,
+            max_points: self.spike_max_points,
         }
     }
 }
@@ -297,6 +397,31 @@ impl Config {
                 "control.socket",
                 "must name a socket path, e.g. \"/run/surfscan/control.sock\"".into(),
             ));
+        }
+        // Ranges are in NUMERIC_KEYS; what remains is the relation between keys.
+        let f = &self.fit;
+        match (f.v_method, f.v_control_rows) {
+            (VMethodSetting::Interpolate, Some(n)) => {
+                return Err(Config::invalid(
+                    path,
+                    "fit.v-control-rows",
+                    format!("{n} control rows apply to v-method = \"least-squares\" only; the paper's interpolation has one pole row per line (remove the key or set the method)"),
+                ))
+            }
+            (VMethodSetting::LeastSquares, Some(n))
+                if n < f.degree_v + 1 || n > self.scan.lines as usize =>
+            {
+                return Err(Config::invalid(
+                    path,
+                    "fit.v-control-rows",
+                    format!(
+                        "{n} must lie between degree-v + 1 = {} and the {} lines of [scan]",
+                        f.degree_v + 1,
+                        self.scan.lines
+                    ),
+                ))
+            }
+            _ => {}
         }
         if let Some(n) = &self.notify {
             if n.command.is_empty() {
@@ -521,6 +646,10 @@ pub const NUMERIC_KEYS: &[NumericKey] = &[
     int_key!("analysis.curves", 1, 10_000, "", "the default is 31", |c| Some(c.analysis.curves)),
     int_key!("analysis.levels", 2, 100_000, "", "the default is 101", |c| Some(c.analysis.levels)),
     real_key!("analysis.lambda-c-mm", 0.001, 100.0, "mm", "the ISO cut-offs are 0.08, 0.25, 0.8, 2.5 and 8 mm", |c| c.analysis.lambda_c_mm),
+    real_key!("analysis.spike-threshold-sigma", 1.0, 1000.0, "", "robust standard deviations; the default is 10", |c| Some(c.analysis.spike_threshold_sigma)),
+    int_key!("analysis.spike-max-points", 1, 10_000, "", "the longest run of points that is a spike; the default is 5", |c| Some(c.analysis.spike_max_points)),
+    real_key!("analysis.holdout-threshold", 0.001, 100.0, "", "a multiple of Sq; the default is 0.5", |c| Some(c.analysis.holdout_threshold)),
+    int_key!("fit.v-control-rows", 2, 100_000, "", "pole rows across the lines, at most the number of lines; remove the key for a quarter of the lines", |c| c.fit.v_control_rows),
     int_key!("notify.timeout-s", 1, 86_400, "s", "the default is 30", |c| c.notify.as_ref().map(|n| n.timeout_s)),
 ];
 
@@ -776,6 +905,57 @@ dir = "/var/lib/surfscan/scans"
             ),
             "{e}"
         );
+    }
+
+    #[test]
+    fn model_and_outlier_keys_parse_and_are_checked() {
+        let c = parse(MINIMAL).unwrap();
+        assert_eq!(c.fit.v_method_for(31), crate::fit::VMethod::Interpolate);
+        assert_eq!(c.analysis.outliers, OutlierPolicy::Flag);
+        assert_eq!(c.fit.outliers, FitOutliers::Keep);
+        assert_eq!(c.analysis.spike_options(), Default::default());
+        let text = format!(
+            "{MINIMAL}[fit]\nv-method = \"least-squares\"\noutliers = \"replace\"\n[analysis]\noutliers = \"exclude\"\nspike-threshold-sigma = 8.0\n"
+        );
+        let c = parse(&text).unwrap();
+        assert_eq!(
+            c.fit.v_method_for(31),
+            crate::fit::VMethod::LeastSquares { control_rows: 8 }
+        );
+        assert_eq!(c.fit.outliers, FitOutliers::Replace);
+        assert_eq!(c.analysis.outliers, OutlierPolicy::Exclude);
+        assert_eq!(c.analysis.spike_options().threshold_sigma, 8.0);
+        let rows = text.replace("outliers = \"replace\"", "v-control-rows = 12");
+        assert_eq!(
+            parse(&rows).unwrap().fit.v_method_for(31),
+            crate::fit::VMethod::LeastSquares { control_rows: 12 }
+        );
+        for (bad, key) in [
+            (text.replace("least-squares", "spline"), "unknown variant"),
+            (
+                rows.replace("v-control-rows = 12", "v-control-rows = 40"),
+                "fit.v-control-rows",
+            ),
+            (
+                rows.replace("v-control-rows = 12", "v-control-rows = 5"),
+                "fit.v-control-rows",
+            ),
+            (
+                format!("{MINIMAL}[fit]\nv-control-rows = 8\n"),
+                "least-squares\" only",
+            ),
+            (
+                text.replace("= 8.0", "= 0.0"),
+                "analysis.spike-threshold-sigma",
+            ),
+            (
+                format!("{MINIMAL}[analysis]\nholdout-threshold = -1.0\n"),
+                "analysis.holdout-threshold",
+            ),
+        ] {
+            let e = parse(&bad).unwrap_err().to_string();
+            assert!(e.contains(key), "{e}");
+        }
     }
 
     #[test]

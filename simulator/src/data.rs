@@ -19,6 +19,10 @@ use std::sync::Arc;
 pub const BUNDLED_31_WINDOWS: &str =
     include_str!("../data/mitutoyo_R.31windows.profile_y_mm_x_mm_z_um.csv");
 
+/// The whole bundled Mitutoyo R profile (see `data/README.md`): 6664 points at 1.5 µm, as the
+/// instrument exported it under λc 2.5 mm, N 4, λs 8 µm.
+pub const BUNDLED_MITUTOYO_R: &str = include_str!("../data/mitutoyo_surftest_R.x_mm_z_um.csv");
+
 /// Errors while loading profile data; each names the line and what to fix.
 #[derive(Debug, thiserror::Error)]
 pub enum DataError {
@@ -290,6 +294,12 @@ impl ProfileSet {
         Self::parse(BUNDLED_31_WINDOWS, None)
     }
 
+    /// The whole bundled Mitutoyo R profile, one line of 6664 points at 1.5 µm: what a trace
+    /// under λc 2.5 mm, N 4 (λs 8 µm) delivers.
+    pub fn bundled_mitutoyo_r() -> Result<Self, DataError> {
+        Self::parse(BUNDLED_MITUTOYO_R, None)
+    }
+
     /// The profiles.
     pub fn profiles(&self) -> &[ServedProfile] {
         &self.profiles
@@ -363,6 +373,16 @@ mod tests {
             ProfileSet::parse("profile,y_mm,x_mm,z_um\n1,0,0,1\n", None),
             Err(DataError::Order { line: 2, .. })
         ));
+    }
+
+    #[test]
+    fn bundled_mitutoyo_r_is_one_line_of_6664_points_at_1_5_um() {
+        let s = ProfileSet::bundled_mitutoyo_r().unwrap();
+        assert_eq!(s.profiles().len(), 1);
+        let p = &s.profiles()[0];
+        // 4 sampling lengths of floor(2.5 mm / 1.5 µm) = 1666 points.
+        assert_eq!(p.z_um.len(), 4 * 1666);
+        assert!((p.pitch_x_mm - 0.0015).abs() < 1e-12);
     }
 
     #[test]

@@ -1,23 +1,57 @@
-//! A simulated GRBL 1.1 controller driving one Y axis, written from the GRBL documentation
-//! (interface.md, commands.md, jogging.md) with its own parser.
+//! A simulated GRBL 1.1h controller driving one Y axis, written from GRBL's documentation and
+//! firmware behaviour with its own parser.
 //!
-//! Emulates: line commands answered `ok`/`error:N`; real-time bytes `?` `!` `~` 0x18 0x85;
-//! status reports `<State|MPos:…|FS:…>`; `$I`, `$H`, `$X`; `$J=` jogs (absolute `G90`,
-//! relative `G91`, machine `G53`) moving at the feed rate × a time-scale factor; soft limits
-//! (jog past travel → `error:15`); every G-code line refused with `error:9` during a jog or
-//! an alarm; a backlash dead band between motor and carriage; and injected faults.
-//! The carriage's true position is published in nm through [`StageShared`].
+//! What it does as the firmware does:
+//! * Lines are cleaned as GRBL cleans them (spaces and control bytes dropped, `(…)` and `;`
+//!   comments removed, letters upper-cased, 80-byte line buffer → `error:11`) and answered
+//!   `ok`/`error:N`; real-time bytes (`?` `!` `~` 0x18 0x85, any other byte ≥ 0x80 swallowed)
+//!   act at once, even while a line is being executed.
+//! * A settings store (`$$` prints bare `$N=value` lines; `$N=value` writes, with GRBL's
+//!   checks: `$20=1` without homing → `error:10`, `$22=0` also clears `$20`). A first boot with
+//!   blank settings prints `error:7` and the default settings before the banner and runs on
+//!   GRBL's generic defaults (250 steps/mm, homing off) whatever the mechanics are.
+//! * Status reports `<State|MPos:…|FS:rate,0|Pn:Y|WCO:…|Ov:100,100,100>`: `MPos` or `WPos`
+//!   by `$10`, `Bf:` with `$10` bit 1, `WCO:` every 10th report at rest (30th when busy) and
+//!   `Ov:` on the report after it, then every 10th (20th), `Pn:Y` while the home switch is
+//!   pressed, `FS:` the real, ramping speed (planner trapezoid at `$121`, feed capped at `$111`).
+//! * `$J=` jogs (`G53`, `G90`/`G91`, `G20`/`G21`; feed required) queue in the planner; with
+//!   soft limits a target outside [−`$131`, 0] is `error:15`; `$J=` outside Idle/Jog is
+//!   `error:8`; other G-code during a jog or an alarm is `error:9`; `G4 P…` dwells.
+//! * Jog cancel (0x85, or a feed hold `!` during a jog) decelerates at `$121` and reports `Jog`
+//!   until at rest, then `Idle`.
+//! * `$H` (`error:5` with homing disabled) runs GRBL's cycle: seek the switch at `$25` (up to
+//!   1.5 × `$131`), pull off `$27`, locate at `$24`, pull off again, a `$26` debounce after each;
+//!   machine space is then [−`$131`, 0] with the axis at MPos −`$27`. `?` is not answered
+//!   during the cycle; one request is answered with `<Home|…>` just before the `ok`. Switch not
+//!   found → `ALARM:9`, switch still pressed after the pull-off → `ALARM:8`, a reset during
+//!   the cycle → `ALARM:6`.
+//! * Soft reset (0x18): during motion `ALARM:3`, GRBL's 500 ms alarm pause, the banner and
+//!   `[MSG:'$H'|'$X' to unlock]`; the position counter keeps where the stepper stopped. A
+//!   power cycle (fault `reset-banner`) is what zeroes it; with homing enabled the board then
+//!   powers up in Alarm.
+//! * With hard limits (`$21=1`) a jog that runs onto the switch stops there: `ALARM:1`,
+//!   `[MSG:Reset to continue]`, nothing but a soft reset is heard.
 //!
-//! Depends on tokio and [`crate::data::YPosition`] (the y the instrument reads).
+//! The mechanics: the home switch sits at the top of travel (GRBL's default homing direction)
+//! at physical 0, the carriage trails the motor by a backlash dead band on reversal, and the
+//! motor moves the configured steps per mm whatever `$101` says. The carriage's true position is
+//! published in nm through [`StageShared`]. Not emulated: G-code motion (`G0`/`G1`; answered
+//! `error:20`), check mode, sleep, `$RST`, safety door, spindle and coolant, X and Z.
+//!
+//! Depends on tokio, [`crate::motion`] and [`crate::data::YPosition`] (the y the instrument
+//! reads).
 
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
-use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::time::Instant;
 
 use crate::data::YPosition;
+use machine::Machine;
+
+mod machine;
+mod settings;
 
 /// A fault to inject into a simulated stage (GRBL or Zaber); applied when the next byte
 /// arrives.
@@ -165,289 +199,81 @@ impl StageShared {
     }
 }
 
-/// Configuration of the simulated GRBL controller.
+/// Configuration of the simulated GRBL controller: the mechanics and the settings the board
+/// was programmed with.
 #[derive(Debug, Clone)]
 pub struct GrblSimConfig {
-    /// Steps per mm (`$101`).
+    /// Steps per mm of the mechanics, and the board's `$101` (unless `blank_settings`).
     pub steps_per_mm: f64,
-    /// Travel (`$131`): machine coordinates span [−travel, 0] after homing.
+    /// `$111`: maximum rate, mm/min (jog feeds are capped to it).
+    pub max_rate_mm_min: f64,
+    /// `$121`: acceleration, mm/s².
+    pub acceleration_mm_s2: f64,
+    /// `$131`: maximum travel, mm; machine space is [−travel, 0] after homing.
     pub max_travel_mm: f64,
+    /// `$22`: homing cycle enabled (the board then powers up in Alarm).
+    pub homing_enabled: bool,
+    /// `$20`: soft limits (needs homing).
+    pub soft_limits: bool,
+    /// `$21`: hard limits (the home switch doubles as the limit switch).
+    pub hard_limits: bool,
+    /// `$24`: homing locate feed, mm/min.
+    pub homing_feed_mm_min: f64,
+    /// `$25`: homing seek rate, mm/min.
+    pub homing_seek_mm_min: f64,
+    /// `$26`: homing switch debounce, ms.
+    pub homing_debounce_ms: u32,
+    /// `$27`: homing pull-off, mm.
+    pub homing_pulloff_mm: f64,
+    /// `$10`: status report mask (bit 0 MPos instead of WPos, bit 1 buffer state).
+    pub status_report_mask: u8,
+    /// The G54 work offset of Y, mm (what `WCO:` reports; `WPos = MPos − WCO`).
+    pub work_offset_y_mm: f64,
     /// Backlash between motor and carriage, mm.
     pub backlash_mm: f64,
-    /// Speed-up of simulated time (1 = real speed).
+    /// Speed-up of simulated time (1 = real speed): motion, dwells, debounce, alarm pauses.
     pub time_scale: f64,
-    /// Homing seek rate, mm/min.
-    pub homing_rate_mm_min: f64,
-    /// Print the banner when the link opens (Arduino DTR reset).
+    /// Print the boot messages when the link opens (Arduino DTR reset).
     pub banner_at_open: bool,
-    /// Machine position counter at start (steps); with `homed_at_start` false the board
-    /// starts in Alarm.
-    pub start_steps: i64,
-    /// Whether the board starts homed (Idle) or in Alarm (`$22=1` power-up).
+    /// Where the motor stands at start, mm from the home switch (machine coordinates once
+    /// homed; negative is below the switch).
+    pub start_mm: f64,
+    /// The board was homed before the link opened and has not been reset since (Idle, the
+    /// counter in machine coordinates); otherwise it has just powered up (counter 0, Alarm
+    /// when homing is enabled).
     pub homed_at_start: bool,
+    /// First boot with blank EEPROM: `error:7`, the settings and then the banner (with
+    /// `banner_at_open`), and GRBL's generic defaults in force.
+    pub blank_settings: bool,
+    /// The `$I` build-info string (settable with `$I=`).
+    pub build_info: String,
 }
 
 impl Default for GrblSimConfig {
+    /// A lab y stage: 400 steps/mm, 500 mm/min, 10 mm/s², 200 mm travel, home switch with
+    /// homing and soft limits enabled, just powered up 50 mm below the switch.
     fn default() -> Self {
         GrblSimConfig {
             steps_per_mm: 400.0,
+            max_rate_mm_min: 500.0,
+            acceleration_mm_s2: 10.0,
             max_travel_mm: 200.0,
+            homing_enabled: true,
+            soft_limits: true,
+            hard_limits: false,
+            homing_feed_mm_min: 25.0,
+            homing_seek_mm_min: 500.0,
+            homing_debounce_ms: 250,
+            homing_pulloff_mm: 1.0,
+            status_report_mask: 1,
+            work_offset_y_mm: 0.0,
             backlash_mm: 0.0,
             time_scale: 1.0,
-            homing_rate_mm_min: 500.0,
             banner_at_open: false,
-            start_steps: 0,
+            start_mm: -50.0,
             homed_at_start: false,
-        }
-    }
-}
-
-const BANNER: &str = "\r\nGrbl 1.1h ['$' for help]\r\n";
-
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum State {
-    Idle,
-    Jog,
-    Hold,
-    Alarm,
-    /// ALARM:2 critical: only a soft reset is heard.
-    Locked,
-}
-
-struct Jog {
-    from: i64,
-    to: i64,
-    start: Instant,
-    dur: Duration,
-}
-
-struct Machine {
-    cfg: GrblSimConfig,
-    shared: Arc<StageShared>,
-    state: State,
-    /// Position counter (what MPos reports), steps.
-    counter: i64,
-    /// Physical motor position minus counter (changes when a reset zeroes the counter).
-    counter_offset: i64,
-    /// Carriage position, steps, in the physical frame.
-    carriage: i64,
-    backlash: i64,
-    jog: Option<Jog>,
-    feed: f64,
-    silent: bool,
-    alarm2_next: bool,
-    error15_next: bool,
-}
-
-impl Machine {
-    fn nm_per_step(&self) -> f64 {
-        1e6 / self.cfg.steps_per_mm
-    }
-
-    fn set_counter(&mut self, c: i64) {
-        self.counter = c;
-        let phys = c + self.counter_offset;
-        self.carriage = self.carriage.clamp(phys, phys + self.backlash);
-        let nm = (self.carriage as f64 * self.nm_per_step()).round() as i64;
-        self.shared.publish_position_nm(nm);
-    }
-
-    fn update(&mut self) {
-        let now = Instant::now();
-        if let Some(j) = &self.jog {
-            let (from, to, start, dur) = (j.from, j.to, j.start, j.dur);
-            let el = now.saturating_duration_since(start);
-            if el >= dur {
-                self.jog = None;
-                self.set_counter(to);
-                if self.state == State::Jog {
-                    self.state = State::Idle;
-                }
-            } else if self.state == State::Jog {
-                let f = el.as_secs_f64() / dur.as_secs_f64().max(1e-9);
-                self.set_counter(from + ((to - from) as f64 * f).round() as i64);
-            }
-        }
-    }
-
-    fn status(&mut self) -> String {
-        self.update();
-        let st = match self.state {
-            State::Idle => "Idle",
-            State::Jog => "Jog",
-            State::Hold => "Hold:0",
-            State::Alarm | State::Locked => "Alarm",
-        };
-        let y = self.counter as f64 / self.cfg.steps_per_mm;
-        format!(
-            "<{st}|MPos:0.000,{y:.3},0.000|FS:{:.0},0>\r\n",
-            if self.state == State::Jog {
-                self.feed
-            } else {
-                0.0
-            }
-        )
-    }
-
-    fn reset(&mut self) -> String {
-        self.update();
-        // A reset while moving loses steps: ALARM:3 before the banner.
-        let prefix = if self.state == State::Jog {
-            "ALARM:3\r\n"
-        } else {
-            ""
-        };
-        self.jog = None;
-        self.state = State::Alarm;
-        format!("{prefix}{BANNER}[MSG:'$H'|'$X' to unlock]\r\n")
-    }
-
-    /// Power-on style reset: the counter restarts at 0 while the motor stays put.
-    fn lose_position(&mut self) -> String {
-        self.update();
-        self.jog = None;
-        self.counter_offset += self.counter;
-        self.counter = 0;
-        self.state = State::Alarm;
-        format!("{BANNER}[MSG:'$H'|'$X' to unlock]\r\n")
-    }
-
-    async fn home(&mut self) -> String {
-        // Seek the switch at the top of travel, pull off, set machine zero there.
-        let phys = self.counter + self.counter_offset;
-        let dist_mm = (phys.unsigned_abs() as f64) / self.cfg.steps_per_mm;
-        let secs = dist_mm / self.cfg.homing_rate_mm_min * 60.0 / self.cfg.time_scale;
-        tokio::time::sleep(Duration::from_secs_f64(secs.max(0.0))).await;
-        self.counter_offset = 0;
-        let pull_off = (self.cfg.steps_per_mm).round() as i64;
-        self.set_counter(pull_off);
-        self.set_counter(0);
-        self.state = State::Idle;
-        "ok\r\n".into()
-    }
-
-    fn jog(&mut self, words: &str) -> String {
-        let mut absolute = false;
-        let mut y: Option<f64> = None;
-        let mut f: Option<f64> = None;
-        let b = words.as_bytes();
-        let mut i = 0;
-        while i < b.len() {
-            let c = b.get(i).copied().unwrap_or(b' ').to_ascii_uppercase();
-            if c == b' ' {
-                i += 1;
-                continue;
-            }
-            let mut j = i + 1;
-            while j < b.len()
-                && b.get(j)
-                    .is_some_and(|d| d.is_ascii_digit() || *d == b'.' || *d == b'-' || *d == b'+')
-            {
-                j += 1;
-            }
-            let v: f64 = match words.get(i + 1..j).and_then(|s| s.parse().ok()) {
-                Some(v) => v,
-                None => return "error:2\r\n".into(),
-            };
-            match (c, v) {
-                // G53 (machine coordinates) and G21 (mm) are accepted; no work offsets are
-                // emulated, so machine and work coordinates coincide.
-                (b'G', v) if v.fract() == 0.0 => match v as i64 {
-                    90 => absolute = true,
-                    91 => absolute = false,
-                    53 | 21 => {}
-                    _ => return "error:16\r\n".into(),
-                },
-                (b'Y', v) => y = Some(v),
-                (b'X', _) | (b'Z', _) => {}
-                (b'F', v) => f = Some(v),
-                _ => return "error:16\r\n".into(),
-            }
-            i = j;
-        }
-        let (Some(yv), Some(feed)) = (y, f) else {
-            return if f.is_none() {
-                "error:22\r\n"
-            } else {
-                "error:16\r\n"
-            }
-            .into();
-        };
-        if feed <= 0.0 {
-            return "error:16\r\n".into();
-        }
-        self.update();
-        let cur_mm = self.counter as f64 / self.cfg.steps_per_mm;
-        let target_mm = if absolute { yv } else { cur_mm + yv };
-        if self.error15_next || target_mm > 0.0 || target_mm < -self.cfg.max_travel_mm {
-            self.error15_next = false;
-            return "error:15\r\n".into();
-        }
-        if self.alarm2_next {
-            self.alarm2_next = false;
-            self.jog = None;
-            self.state = State::Locked;
-            return "ALARM:2\r\n[MSG:Reset to continue]\r\n".into();
-        }
-        let to = (target_mm * self.cfg.steps_per_mm).round() as i64;
-        let dist_mm = ((to - self.counter) as f64).abs() / self.cfg.steps_per_mm;
-        let secs = dist_mm / feed * 60.0 / self.cfg.time_scale;
-        self.feed = feed;
-        self.jog = Some(Jog {
-            from: self.counter,
-            to,
-            start: Instant::now(),
-            dur: Duration::from_secs_f64(secs),
-        });
-        self.state = State::Jog;
-        self.shared.note_move_started();
-        "ok\r\n".into()
-    }
-
-    async fn line(&mut self, line: &str) -> String {
-        self.update();
-        let l = line.trim();
-        if l.is_empty() {
-            return "ok\r\n".into();
-        }
-        match self.state {
-            State::Locked => return String::new(),
-            State::Alarm => {
-                return match l {
-                    "$X" => {
-                        self.state = State::Idle;
-                        "[MSG:Caution: Unlocked]\r\nok\r\n".into()
-                    }
-                    "$H" => self.home().await,
-                    "$I" => "[VER:1.1h.20190825:]\r\n[OPT:V,15,128]\r\nok\r\n".into(),
-                    _ if l.starts_with("$J=") => "error:8\r\n".into(),
-                    _ if l.starts_with('$') => "ok\r\n".into(),
-                    _ => "error:9\r\n".into(),
-                };
-            }
-            _ => {}
-        }
-        if let Some(words) = l.strip_prefix("$J=") {
-            if !matches!(self.state, State::Idle | State::Jog) {
-                return "error:8\r\n".into();
-            }
-            return self.jog(words);
-        }
-        match l {
-            "$I" => "[VER:1.1h.20190825:]\r\n[OPT:V,15,128]\r\nok\r\n".into(),
-            "$H" if self.state == State::Idle => self.home().await,
-            "$X" => "ok\r\n".into(),
-            _ if l.starts_with('$') => {
-                if self.state == State::Idle {
-                    "ok\r\n".into()
-                } else {
-                    "error:8\r\n".into()
-                }
-            }
-            // G-code: locked out during a jog (G4 included); only G4 is emulated at rest.
-            _ if self.state == State::Jog || self.state == State::Hold => "error:9\r\n".into(),
-            _ if l.starts_with("G4") => "ok\r\n".into(),
-            _ => "error:20\r\n".into(),
+            blank_settings: false,
+            build_info: String::new(),
         }
     }
 }
@@ -458,48 +284,38 @@ pub async fn serve<T: AsyncRead + AsyncWrite + Unpin>(
     config: GrblSimConfig,
     shared: Arc<StageShared>,
 ) -> std::io::Result<()> {
-    let backlash = (config.backlash_mm * config.steps_per_mm).round() as i64;
-    let mut m = Machine {
-        state: if config.homed_at_start {
-            State::Idle
-        } else {
-            State::Alarm
-        },
-        counter: config.start_steps,
-        counter_offset: 0,
-        carriage: config.start_steps,
-        backlash,
-        jog: None,
-        feed: 0.0,
-        silent: false,
-        alarm2_next: false,
-        error15_next: false,
-        shared,
-        cfg: config,
-    };
-    m.set_counter(m.counter);
-    if m.cfg.banner_at_open {
-        let mut s = BANNER.to_string();
-        if m.state == State::Alarm {
-            s.push_str("[MSG:'$H'|'$X' to unlock]\r\n");
-        }
-        io.write_all(s.as_bytes()).await?;
-    }
-    let mut line = Vec::new();
-    let mut overflow = false;
+    let mut m = Machine::new(config, shared);
     let mut buf = [0u8; 256];
     loop {
-        let n = io.read(&mut buf).await?;
+        let now = m.clock.sim(Instant::now());
+        m.advance(now);
+        m.run_lines(now);
+        let out = m.take_output(now);
+        if !m.silent && !out.is_empty() {
+            io.write_all(out.as_bytes()).await?;
+            io.flush().await?;
+        }
+        let deadline = m.next_deadline();
+        let n = tokio::select! {
+            r = io.read(&mut buf) => r?,
+            _ = async {
+                match deadline {
+                    Some(d) => tokio::time::sleep_until(d).await,
+                    None => std::future::pending().await,
+                }
+            } => continue,
+        };
         if n == 0 {
             return Ok(());
         }
         m.shared
             .bytes_received
             .fetch_add(n as u64, Ordering::SeqCst);
-        let mut out = String::new();
+        let now = m.clock.sim(Instant::now());
+        m.advance(now);
         while let Some(f) = m.shared.take_fault() {
             match f {
-                StageFault::ResetBanner => out.push_str(&m.lose_position()),
+                StageFault::ResetBanner => m.power_cycle(now),
                 StageFault::Alarm2 => m.alarm2_next = true,
                 StageFault::Error15 => m.error15_next = true,
                 StageFault::Silence => m.silent = true,
@@ -507,56 +323,7 @@ pub async fn serve<T: AsyncRead + AsyncWrite + Unpin>(
                 StageFault::Reject | StageFault::Stall | StageFault::PositionLostWr => {}
             }
         }
-        for &b in buf.get(..n).unwrap_or(&[]) {
-            match b {
-                b'?' => {
-                    if m.state != State::Locked {
-                        out.push_str(&m.status());
-                    }
-                }
-                b'!' => {
-                    m.update();
-                    if m.state == State::Jog {
-                        // A jog in hold is cancelled on resume; model it as stopping here.
-                        m.jog = None;
-                        m.state = State::Hold;
-                    }
-                }
-                b'~' => {
-                    if m.state == State::Hold {
-                        m.state = State::Idle;
-                    }
-                }
-                0x18 => {
-                    line.clear();
-                    out.push_str(&m.reset());
-                }
-                0x85 => {
-                    m.update();
-                    if m.state == State::Jog {
-                        m.jog = None;
-                        m.state = State::Idle;
-                    }
-                }
-                b'\n' | b'\r' if overflow => {
-                    overflow = false;
-                    line.clear();
-                    out.push_str("error:11\r\n");
-                }
-                b'\n' | b'\r' => {
-                    if !line.is_empty() {
-                        let l = String::from_utf8_lossy(&line).into_owned();
-                        line.clear();
-                        out.push_str(&m.line(&l).await);
-                    }
-                }
-                _ if line.len() < 80 => line.push(b),
-                _ => overflow = true,
-            }
-        }
-        if !m.silent && !out.is_empty() {
-            io.write_all(out.as_bytes()).await?;
-        }
+        m.receive(buf.get(..n).unwrap_or(&[]), now);
     }
 }
 

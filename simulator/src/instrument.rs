@@ -95,6 +95,29 @@ impl Conditions {
     }
 }
 
+/// How `RDRES` prints a value inside its field.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ResultLayout {
+    /// As Mitutoyo's own PC export shows the instrument's results: a sign position, then the
+    /// number left-justified in the rest of the field (`" 3.308 "`, `" -0.144"`).
+    #[default]
+    Export,
+    /// Right-justified, as the SJ-210 manual's example prints it (`"  3.123"`).
+    Manual,
+}
+
+/// Which `RDEVA` forms the emulated firmware answers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ReadoutForm {
+    /// The model's own form: no selector byte on the SJ-210 (`RDEVAnn`), an A/B selector on
+    /// the SJ-410 (`RDEVA0nn`, `RDEVA1nn`).
+    #[default]
+    Model,
+    /// Only `RDEVA` with exactly this selector (`None` = `RDEVAnn`, `Some(1)` = `RDEVA1nn`);
+    /// every other `RDEVA` form is a known command with a wrong data form (`NG031`).
+    Only(Option<u8>),
+}
+
 /// Configuration of the emulated instrument. Defaults: SJ-210 with profile read-out, 3 height
 /// decimals, auto-return on, battery good, 0.5 mm/s measuring, 1 mm/s return, real time.
 #[derive(Debug, Clone, PartialEq)]
@@ -103,6 +126,10 @@ pub struct InstrumentConfig {
     pub model: Model,
     /// Whether `RDEVA` works (otherwise `NG030`, as the SJ-210 manual documents).
     pub profile_readout: bool,
+    /// Which `RDEVA` forms are answered when it works.
+    pub readout_form: ReadoutForm,
+    /// How `RDRES` values are justified.
+    pub result_layout: ResultLayout,
     /// Decimals of heights in `RDEVA` replies (3 = 1 nm).
     pub decimals: u8,
     /// Auto-return after a trace (`000`), or stop at the end of travel (`005`).
@@ -126,6 +153,8 @@ impl Default for InstrumentConfig {
         Self {
             model: Model::Sj210,
             profile_readout: true,
+            readout_form: ReadoutForm::Model,
+            result_layout: ResultLayout::Export,
             decimals: 3,
             auto_return: true,
             battery: Battery::Good,
@@ -285,7 +314,10 @@ impl Instrument {
         };
         let heights_um: Vec<f64> = p.z_um.iter().map(|&z| round_to(z, decimals)).collect();
         let segments = usize::from(self.cfg.conditions.sampling_lengths).max(1);
-        let roughness = Roughness::compute(&heights_um, segments);
+        // An R profile is served as the instrument exports it, already relative to its mean
+        // line; other kinds are taken about their arithmetic mean.
+        let about_zero = self.cfg.conditions.profile == 1;
+        let roughness = Roughness::compute(&heights_um, segments, about_zero);
         self.results = Some(Results {
             heights_um,
             roughness,
@@ -514,7 +546,11 @@ impl Instrument {
             return Reply::Ng(32);
         };
         let width = if self.cfg.model == Model::Sj410 { 8 } else { 7 };
-        let Some(v) = fit_width(value, width) else {
+        let field = match self.cfg.result_layout {
+            ResultLayout::Export => export_field(value, width),
+            ResultLayout::Manual => fit_width(value, width),
+        };
+        let Some(v) = field else {
             return Reply::Ng(102);
         };
         match mode {
@@ -528,7 +564,11 @@ impl Instrument {
         if !self.cfg.profile_readout {
             return Reply::Ng(30);
         }
-        if !self.selector_ok(ab) {
+        let form_ok = match self.cfg.readout_form {
+            ReadoutForm::Model => self.selector_ok(ab),
+            ReadoutForm::Only(sel) => ab == sel,
+        };
+        if !form_ok {
             return Reply::Ng(31);
         }
         if self.busy() {
@@ -562,6 +602,17 @@ impl Instrument {
             }
         }
     }
+}
+
+/// Formats `value` as Mitutoyo's export shows it: one sign position, then the number with as
+/// many of 3 decimals as fit, left-justified in the remaining `width − 1` characters.
+fn export_field(value: f64, width: usize) -> Option<String> {
+    let inner = width.checked_sub(1)?;
+    (0..=3usize)
+        .rev()
+        .map(|d| format!("{value:.d$}"))
+        .find(|s| s.len() <= inner)
+        .map(|s| format!(" {s:<inner$}"))
 }
 
 /// Formats `value` right-justified in `width` characters with as many of 3 decimals as fit.
@@ -604,8 +655,13 @@ mod tests {
 
     #[test]
     fn timeline_measure_return_idle() {
-        // 4.5 mm at 0.5 mm/s = 9 s measuring; at 1 mm/s = 4.5 s returning.
-        let mut i = Instrument::new(InstrumentConfig::default(), set(), None);
+        // 4.5 mm at 0.5 mm/s = 9 s measuring; at 1 mm/s = 4.5 s returning. Results in the
+        // manual's right-justified layout.
+        let cfg = InstrumentConfig {
+            result_layout: ResultLayout::Manual,
+            ..InstrumentConfig::default()
+        };
+        let mut i = Instrument::new(cfg, set(), None);
         assert_eq!(ask(&mut i, "RDSTU00", 0), "OK000\r");
         assert_eq!(ask(&mut i, "RDRES02,01,00", 0), "NG101\r");
         assert_eq!(ask(&mut i, "CTSTA", 1000), "OK\r");
@@ -685,6 +741,7 @@ mod tests {
         let cfg = InstrumentConfig {
             model: Model::Sj410,
             time_scale: 0.0,
+            result_layout: ResultLayout::Manual,
             ..InstrumentConfig::default()
         };
         let mut i = Instrument::new(cfg, set(), None);
@@ -752,6 +809,43 @@ mod tests {
             s(0),
         );
         assert_eq!(r, Reply::Ng(32));
+    }
+
+    #[test]
+    fn results_in_the_export_layout_and_an_r_profile_about_its_mean_line() {
+        let cfg = InstrumentConfig {
+            time_scale: 0.0,
+            ..InstrumentConfig::default()
+        };
+        let mut i = Instrument::new(cfg, set(), None);
+        ask(&mut i, "CTSTA", 0);
+        ask(&mut i, "CTSTA", 0);
+        ask(&mut i, "CTSTA", 0);
+        // Third trace serves profile 0 again ([1, -1, 3, -3]): Ra 2, Rq sqrt(5), Rz 6.
+        assert_eq!(ask(&mut i, "RDRES02,01,00", 0), "OKRa     2.000  um\r");
+        assert_eq!(ask(&mut i, "RDRES00,03,00", 0), "OK 6.000 \r");
+        // Profile 1 ([0.123, 0, 0, 0], an R profile): Ra about zero, not about its mean.
+        ask(&mut i, "CTSTA", 0);
+        assert_eq!(ask(&mut i, "RDRES02,01,00", 0), "OKRa     0.031  um\r");
+        assert_eq!(export_field(-0.144, 7).as_deref(), Some(" -0.144"));
+        assert_eq!(export_field(3.308, 7).as_deref(), Some(" 3.308 "));
+        assert_eq!(export_field(123.456, 7).as_deref(), Some(" 123.46"));
+        assert_eq!(export_field(-1234567.0, 7), None);
+    }
+
+    #[test]
+    fn readout_answers_only_the_configured_form() {
+        let cfg = InstrumentConfig {
+            time_scale: 0.0,
+            readout_form: ReadoutForm::Only(Some(1)),
+            ..InstrumentConfig::default()
+        };
+        let mut i = Instrument::new(cfg, set(), None);
+        ask(&mut i, "CTSTA", 0);
+        assert_eq!(ask(&mut i, "RDEVA00", 0), "NG031\r");
+        assert_eq!(ask(&mut i, "RDEVA000", 0), "NG031\r");
+        assert_eq!(ask(&mut i, "RDEVA100", 0), "OK00004\r");
+        assert_eq!(ask(&mut i, "RDEVA102", 0), "OK02,    1.000,   -1.000\r");
     }
 
     #[test]

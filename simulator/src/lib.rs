@@ -16,13 +16,15 @@
 //! * [`pty`]: the pseudo-terminals the simulator owns;
 //! * [`server`]: the serve loop (pacing, faults, unplug/replug) and the [`Simulator`] builder.
 //! * [`grbl`], [`zaber`]: the simulated y stages (motion, backlash, stage faults), attached
-//!   with [`Simulator::grbl_stage`] / [`Simulator::zaber_stage`].
+//!   with [`Simulator::grbl_stage`] / [`Simulator::zaber_stage`]; [`motion`]: their
+//!   trapezoidal motion profiles (pure).
 #![warn(missing_docs)]
 
 pub mod command;
 pub mod data;
 pub mod fault;
 pub mod instrument;
+pub mod motion;
 pub mod pty;
 pub mod replay;
 pub mod roughness;

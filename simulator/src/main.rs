@@ -11,6 +11,7 @@ use std::sync::Arc;
 
 use clap::{Parser, ValueEnum};
 use surfscan_sim::grbl::{GrblSimConfig, StageFaultSpec, StageShared};
+use surfscan_sim::instrument::{ReadoutForm, ResultLayout};
 use surfscan_sim::replay::Transcript;
 use surfscan_sim::zaber::ZaberSimConfig;
 use surfscan_sim::{Battery, FaultSpec, InstrumentConfig, Model, ProfileSet, Simulator};
@@ -20,6 +21,21 @@ use tokio::io::AsyncReadExt;
 enum StageProtocolArg {
     Grbl,
     Zaber,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum LayoutArg {
+    Export,
+    Manual,
+}
+
+fn parse_readout_form(s: &str) -> Result<ReadoutForm, String> {
+    match s {
+        "RDEVA" => Ok(ReadoutForm::Only(None)),
+        "RDEVA0" => Ok(ReadoutForm::Only(Some(0))),
+        "RDEVA1" => Ok(ReadoutForm::Only(Some(1))),
+        _ => Err(format!("{s:?} is not RDEVA, RDEVA0 or RDEVA1")),
+    }
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -54,6 +70,19 @@ struct Args {
     /// Answer RDEVA with NG030, as the SJ-210 manual documents.
     #[arg(long)]
     no_profile_readout: bool,
+    /// Answer only this RDEVA form and NG031 to the others: `RDEVA` (no selector byte),
+    /// `RDEVA0` or `RDEVA1`. Default: the model's own form.
+    #[arg(long, value_parser = parse_readout_form)]
+    readout_form: Option<ReadoutForm>,
+    /// How RDRES prints values: `export` (a sign position, the number left-justified, as
+    /// Mitutoyo's PC export shows them) or `manual` (right-justified, the manual's example).
+    #[arg(long, value_enum, default_value = "export")]
+    result_layout: LayoutArg,
+    /// Serve the whole bundled Mitutoyo R profile (6664 points at 1.5 µm) on every trace,
+    /// under the conditions it was recorded with (λc 2.5 mm, N 4); overrides
+    /// --sampling-lengths and --profiles.
+    #[arg(long)]
+    mitutoyo_r: bool,
     /// Profiles to serve: `x_mm,z_um` CSV, `profile,y_mm,x_mm,z_um` CSV, or a header-less grid
     /// CSV (needs --pitch-x-mm). Default: the bundled 31 windows of a Mitutoyo R profile.
     #[arg(long)]
@@ -117,12 +146,21 @@ fn build(args: Args, shared: &Arc<StageShared>) -> Result<Simulator, String> {
             ModelArg::Sj410 => Model::Sj410,
         },
         profile_readout: !args.no_profile_readout,
+        readout_form: args.readout_form.unwrap_or_default(),
+        result_layout: match args.result_layout {
+            LayoutArg::Export => ResultLayout::Export,
+            LayoutArg::Manual => ResultLayout::Manual,
+        },
         decimals: args.decimals,
         auto_return: !args.no_auto_return,
         time_scale: args.time_scale,
         measure_speed_mm_s: args.speed_mm_s,
         conditions: surfscan_sim::instrument::Conditions {
-            sampling_lengths: args.sampling_lengths,
+            sampling_lengths: if args.mitutoyo_r {
+                4
+            } else {
+                args.sampling_lengths
+            },
             ..defaults.conditions.clone()
         },
         ..defaults
@@ -174,7 +212,9 @@ fn build(args: Args, shared: &Arc<StageShared>) -> Result<Simulator, String> {
         }
     }
     sim = sim.instrument(cfg);
-    if let Some(p) = &args.profiles {
+    if args.mitutoyo_r {
+        sim = sim.profiles(ProfileSet::bundled_mitutoyo_r().map_err(|e| e.to_string())?);
+    } else if let Some(p) = &args.profiles {
         let set = ProfileSet::load(p, args.pitch_x_mm).map_err(|e| e.to_string())?;
         sim = sim.profiles(set);
     }

@@ -1,9 +1,11 @@
 //! The simulator's own, deliberately simple roughness calculation for `RDRES` answers.
 //!
-//! Simplified on purpose (it is not ISO 4287 nor the daemon's metrology): the mean line is the
-//! arithmetic mean of the whole profile as served (no filtering, no form removal); Ra and Rq are
-//! taken about that line over the whole profile; Rz is the mean, over N equal sampling lengths,
-//! of (highest − lowest) point. Per-sampling-length values (`bb` = 1..N) use the same mean line.
+//! Simplified on purpose (it is not ISO 4287 nor the daemon's metrology): no filtering, no form
+//! removal; the mean line is zero for an R profile (served as the instrument exports it,
+//! already relative to its filter mean line) and otherwise the arithmetic mean of the whole
+//! profile as served; Ra and Rq are taken about that line over the whole profile; Rz is the
+//! mean, over N equal sampling lengths, of (highest − lowest) point. Per-sampling-length values
+//! (`bb` = 1..N) use the same mean line.
 //! Pure; depends on nothing.
 
 /// The customised parameters reported, in `RDRES aa` order (1-based): name and unit.
@@ -31,10 +33,11 @@ fn stats(z: &[f64], mean: f64) -> [f64; 3] {
 }
 
 impl Roughness {
-    /// Computes the parameters of `z_um` with `segments` (≥ 1) sampling lengths.
-    pub fn compute(z_um: &[f64], segments: usize) -> Self {
+    /// Computes the parameters of `z_um` with `segments` (≥ 1) sampling lengths, about a
+    /// mean line at zero (`about_zero`, an R profile) or at the profile's arithmetic mean.
+    pub fn compute(z_um: &[f64], segments: usize, about_zero: bool) -> Self {
         let segments = segments.max(1);
-        let mean = if z_um.is_empty() {
+        let mean = if z_um.is_empty() || about_zero {
             0.0
         } else {
             z_um.iter().sum::<f64>() / z_um.len() as f64
@@ -72,7 +75,8 @@ mod tests {
         let z: Vec<f64> = (0..100)
             .map(|i| if i % 2 == 0 { 1.5 } else { -1.5 })
             .collect();
-        let r = Roughness::compute(&z, 5);
+        let r = Roughness::compute(&z, 5, false);
+        assert_eq!(Roughness::compute(&z, 5, true), r);
         assert!((r.total[0] - 1.5).abs() < 1e-12);
         assert!((r.total[1] - 1.5).abs() < 1e-12);
         assert!((r.total[2] - 3.0).abs() < 1e-12);
@@ -85,9 +89,13 @@ mod tests {
     fn rz_averages_segment_peak_to_valley_and_offset_is_ignored() {
         // Segment 1: 10 + {0,2} (pv 2); segment 2: 10 + {0,6} (pv 6) → Rz 4; mean 12,
         // deviations -2,0,-2,4 → Ra = 2, Rq = sqrt(6).
-        let r = Roughness::compute(&[10.0, 12.0, 10.0, 16.0], 2);
+        let r = Roughness::compute(&[10.0, 12.0, 10.0, 16.0], 2, false);
         assert!((r.total[2] - 4.0).abs() < 1e-12);
         assert!((r.total[0] - 2.0).abs() < 1e-12);
         assert!((r.total[1] - 6f64.sqrt()).abs() < 1e-12);
+        // About a zero mean line (an R profile) the offset counts: Ra = 12, Rz unchanged.
+        let r = Roughness::compute(&[10.0, 12.0, 10.0, 16.0], 2, true);
+        assert!((r.total[0] - 12.0).abs() < 1e-12);
+        assert!((r.total[2] - 4.0).abs() < 1e-12);
     }
 }

@@ -35,7 +35,12 @@ async fn timeline_and_pacing_follow_the_clock() {
             .collect(),
     }])
     .unwrap();
-    let inst = Instrument::new(InstrumentConfig::default(), set, None);
+    // Results in the manual's right-justified layout.
+    let cfg = InstrumentConfig {
+        result_layout: surfscan_sim::instrument::ResultLayout::Manual,
+        ..InstrumentConfig::default()
+    };
+    let inst = Instrument::new(cfg, set, None);
     let (mut host, mut dev) = tokio::io::duplex(4096);
     let (_stop_tx, mut stop) = tokio::sync::watch::channel(false);
     let epoch = Instant::now();

@@ -2,12 +2,19 @@
 //! link check, conditions, parameters, profile capability, battery — printed as a summary
 //! and optionally recorded as a replayable transcript. The stylus only moves with `--trace`.
 //!
+//! `--readout` then looks for the profile read-out command on the trace the instrument holds
+//! (candidate forms, verdicts, a ready-to-paste `[instrument.commands]` snippet, and what
+//! remains when every form is refused); `--passthrough PC_PORT` instead relays a session
+//! between Mitutoyo's PC software on a second serial port and the instrument, recording
+//! every exchange.
+//!
 //! Layer 5 (composition): depends on [`crate::sj210`] and [`crate::transport`].
 
 use super::{CliError, Exit};
 use crate::devices::{DeviceFault, FaultClass, ProbeReport, ProfileReadout};
 use crate::sj210::client::Sj210Client;
 use crate::sj210::error::Sj210Error;
+use crate::sj210::readout_probe::{Conclusion, ReadoutForm, ReadoutProbe};
 use crate::sj210::recorder::{Recorder, SharedTranscript, Transcript, TranscriptHeader};
 use crate::sj210::settings::InstrumentSettings;
 use std::path::{Path, PathBuf};
@@ -28,6 +35,27 @@ pub struct Args {
     /// Free text for the transcript's `notes` header.
     #[arg(long, default_value = "")]
     pub notes: String,
+    /// Look for the profile read-out command on the trace the instrument holds (status 000
+    /// or 005 after a finished trace; with --trace, after that one): tries RDEVA00, RDEVA000,
+    /// RDEVA100 and every --form, and prints the verdicts and the config snippet. Read-only.
+    #[arg(long)]
+    pub readout: bool,
+    /// Another read-out form for --readout, tried after the candidates: TOTAL ending in 00
+    /// (the block command is TOTAL with {n} for the 00), or TOTAL=BLOCK (repeatable).
+    #[arg(long = "form", requires = "readout", value_parser = parse_form)]
+    pub forms: Vec<ReadoutForm>,
+    /// Relay between Mitutoyo's PC software on this serial port and the instrument, recording
+    /// every exchange into --record (which it needs); ends on Ctrl-C, SIGTERM, --for-s, or
+    /// when either side goes away. Nothing else is sent.
+    #[arg(long, value_name = "PC_PORT", requires = "record", conflicts_with_all = ["trace", "readout"])]
+    pub passthrough: Option<PathBuf>,
+    /// End the pass-through after this many seconds.
+    #[arg(long, requires = "passthrough")]
+    pub for_s: Option<f64>,
+}
+
+fn parse_form(s: &str) -> Result<ReadoutForm, String> {
+    ReadoutForm::parse(s)
 }
 
 /// Reads the `[instrument]` table of a TOML config, ignoring every other table.
@@ -67,9 +95,41 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let log: SharedTranscript = Arc::new(Mutex::new(Transcript::new()));
     let date = chrono::Utc::now().to_rfc3339();
     let io = Recorder::new(port, Arc::clone(&log));
+    if let Some(pc_port) = &args.passthrough {
+        let outcome = rt.block_on(passthrough(io, &settings, pc_port, args.for_s));
+        let header = TranscriptHeader {
+            instrument: format!(
+                "pass-through: instrument {} at {} baud, PC software on {}",
+                settings.port,
+                settings.baud,
+                pc_port.display()
+            ),
+            model: settings.model.to_string(),
+            firmware: None,
+            date,
+            notes: args.notes.clone(),
+        };
+        write_transcript(args.record.as_deref(), &log, &header)?;
+        return outcome;
+    }
     let mut client = Sj210Client::new(io, table, settings.client_options());
     let outcome = rt.block_on(checklist(&mut client, &settings, args.trace));
-    if let Some(path) = &args.record {
+    let mut readout = None;
+    let outcome = match outcome {
+        Ok(report) if args.readout => {
+            let forms = ReadoutForm::candidates(&args.forms);
+            match rt.block_on(client.probe_readout_forms(&forms)) {
+                Ok(p) => {
+                    print_readout(&p);
+                    readout = Some(p);
+                    Ok(report)
+                }
+                Err(e) => Err(e),
+            }
+        }
+        other => other,
+    };
+    if args.record.is_some() {
         let firmware = outcome.as_ref().ok().map(|r| r.identity.firmware.clone());
         let header = TranscriptHeader {
             instrument: format!("{} at {} baud", settings.port, settings.baud),
@@ -78,25 +138,129 @@ pub fn run(args: Args) -> Result<(), CliError> {
             date,
             notes: args.notes.clone(),
         };
-        let text = match log.lock() {
-            Ok(g) => g.render(&header),
-            Err(p) => p.into_inner().render(&header),
-        };
-        std::fs::write(path, text).map_err(|e| {
-            CliError::new(
-                Exit::Io,
-                format!("cannot write transcript {}: {e}", path.display()),
-            )
-        })?;
-        println!("transcript written to {}", path.display());
+        write_transcript(args.record.as_deref(), &log, &header)?;
     }
-    outcome.map(|_| ()).map_err(|e| {
+    outcome.map_err(|e| {
         let exit = match e.class() {
             FaultClass::Absent => Exit::Unavailable,
             _ => Exit::Failed,
         };
         CliError::new(exit, format!("probe failed: {e}"))
+    })?;
+    match readout.map(|p| p.conclusion()) {
+        None | Some(Conclusion::Works(_)) | Some(Conclusion::WorksWithDoubts(..)) => Ok(()),
+        Some(_) => Err(CliError::new(
+            Exit::Failed,
+            "probe: no profile read-out form works on this instrument (see the verdicts above)",
+        )),
+    }
+}
+
+/// Writes the transcript to `path` when one was asked for.
+fn write_transcript(
+    path: Option<&Path>,
+    log: &SharedTranscript,
+    header: &TranscriptHeader,
+) -> Result<(), CliError> {
+    let Some(path) = path else { return Ok(()) };
+    let text = match log.lock() {
+        Ok(g) => g.render(header),
+        Err(p) => p.into_inner().render(header),
+    };
+    std::fs::write(path, text).map_err(|e| {
+        CliError::new(
+            Exit::Io,
+            format!("cannot write transcript {}: {e}", path.display()),
+        )
+    })?;
+    println!("transcript written to {}", path.display());
+    Ok(())
+}
+
+/// Relays bytes between the PC software's port and the instrument (through the recorder,
+/// so every exchange lands in the transcript) until a signal, the time limit, or either side
+/// going away.
+async fn passthrough<S>(
+    mut instrument: S,
+    settings: &InstrumentSettings,
+    pc_port: &Path,
+    for_s: Option<f64>,
+) -> Result<(), CliError>
+where
+    S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin,
+{
+    let limit = match for_s {
+        Some(s) if s.is_finite() && s > 0.0 => Some(std::time::Duration::from_secs_f64(s)),
+        Some(s) => {
+            return Err(CliError::new(
+                Exit::Usage,
+                format!("--for-s {s} must be a positive number of seconds"),
+            ))
+        }
+        None => None,
+    };
+    let mut pc = crate::transport::open(&crate::transport::SerialSettings {
+        path: pc_port.display().to_string(),
+        ..settings.serial()
     })
+    .map_err(|e| CliError::new(Exit::Unavailable, format!("PC side: {e}")))?;
+    println!(
+        "passthrough relaying {} (PC software) <-> {} (instrument) at {} baud; pull a profile in the PC software, then stop with Ctrl-C",
+        pc_port.display(),
+        settings.port,
+        settings.baud
+    );
+    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+        .map_err(|e| CliError::new(Exit::Failed, format!("cannot watch SIGTERM: {e}")))?;
+    let until = async {
+        match limit {
+            Some(d) => tokio::time::sleep(d).await,
+            None => std::future::pending().await,
+        }
+    };
+    let (mut pc_rx, mut pc_tx) = tokio::io::split(&mut pc);
+    let (mut inst_rx, mut inst_tx) = tokio::io::split(&mut instrument);
+    // Whichever direction ends first (a side closed or failed) ends the relay.
+    tokio::select! {
+        r = tokio::io::copy(&mut pc_rx, &mut inst_tx) => match r {
+            Ok(n) => println!("passthrough the PC side closed after {n} bytes to the instrument"),
+            Err(e) => println!("passthrough the PC side ended: {e}"),
+        },
+        r = tokio::io::copy(&mut inst_rx, &mut pc_tx) => match r {
+            Ok(n) => println!("passthrough the instrument side closed after {n} bytes to the PC"),
+            Err(e) => println!("passthrough the instrument side ended: {e}"),
+        },
+        _ = tokio::signal::ctrl_c() => println!("passthrough stopped (interrupt)"),
+        _ = term.recv() => println!("passthrough stopped (SIGTERM)"),
+        _ = until => println!("passthrough stopped after --for-s"),
+    }
+    Ok(())
+}
+
+fn print_readout(p: &ReadoutProbe) {
+    match &p.pitch {
+        Some((pitch, source)) => println!("readout   x pitch {pitch} um ({source})"),
+        None => println!("readout   x pitch unknown: no count or Ra check (set pitch-x-um)"),
+    }
+    for r in &p.results {
+        println!("readout   {}: {}", r.form, r.verdict.describe());
+    }
+    match p.conclusion() {
+        Conclusion::Works(f) => println!("verdict   {} reads the profile", f.total),
+        Conclusion::WorksWithDoubts(f, _) => {
+            println!("verdict   {} reads the profile, with doubts", f.total)
+        }
+        Conclusion::NeedsTrace => println!("verdict   no profile held"),
+        Conclusion::NotSupported => println!("verdict   no read-out command (NG030 on every form)"),
+        Conclusion::NoFormFound => println!("verdict   no form read the profile"),
+    }
+    if let Some(s) = p.snippet() {
+        println!("snippet   paste into the station config:");
+        print!("{s}");
+    }
+    if let Some(g) = p.guidance() {
+        println!("next      {g}");
+    }
 }
 
 async fn checklist<S>(

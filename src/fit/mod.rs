@@ -27,10 +27,12 @@
 //! rows interleaved, and the large stores and the pole net are advised for huge pages
 //! (`memory`) so their first touch does not cost a page fault per 4 KiB.
 
+pub mod approx_v;
 mod banded;
 mod memory;
 mod simd;
 
+pub use approx_v::{fit_grid_with, MethodError, VMethod};
 pub use banded::{BandLu, ZeroPivot};
 
 use memory::{advise_huge_pages, zeroed_huge};

@@ -11,12 +11,15 @@
 //! a directory the caller gives; depends only on [`crate::profile`] and
 //! [`crate::nurbs`], and [`crate::fit`] for the hold-out refits. No I/O.
 
+pub mod anisotropy;
 pub mod areal;
 pub mod bearing;
 pub mod filter;
+pub mod folds;
 pub mod holdout;
 pub mod instrument;
 pub mod model;
+pub mod outliers;
 pub mod params;
 pub mod plots;
 pub mod x3p;
@@ -93,6 +96,9 @@ pub enum MetrologyError {
     /// The NURBS fit of a hold-out grid failed.
     #[error("the NURBS fit for the hold-out comparison failed: {0}")]
     Fit(#[from] crate::fit::FitError),
+    /// The surface fit with a method across the lines (e.g. least squares) failed.
+    #[error("the surface fit for the hold-out comparison failed: {0}")]
+    FitMethod(#[from] crate::fit::MethodError),
     /// A plot could not be drawn or written.
     #[error(
         "cannot write the plot {path}: {message}; check the directory's permissions and free space"

@@ -2,10 +2,12 @@
 //! the instrument answered with an NG code ([`Sj210Error::Device`]); plus the named failures
 //! of a trace. Each carries the command that failed and says what to do.
 //!
-//! Layer 1: depends on [`super::codec`], [`super::models`] and [`crate::devices`].
+//! Layer 1: depends on [`super::codec`], [`super::models`], [`super::sampling`] and
+//! [`crate::devices`].
 
 use super::codec::{EncodeError, NgCode};
 use super::models::ModelError;
+use super::sampling::PointCountMismatch;
 use crate::devices::{DeviceFault, FaultClass};
 use thiserror::Error;
 
@@ -152,6 +154,14 @@ pub enum Sj210Error {
         /// Failure of the restart.
         second: Box<Sj210Error>,
     },
+    /// The profile's point count is not the one its conditions and pitch give.
+    #[error("{mismatch} ({}; pitch from {pitch_source}): the x pitch or the conditions do not describe this profile, so the line was not kept. Set [instrument] pitch-x-um to the instrument's pitch; if this firmware's export is known to differ from N x floor(lambda-c / pitch), set [instrument] check-point-count = false", mismatch.expected)]
+    PointCount {
+        /// Expected and received counts with the rule's numbers.
+        mismatch: PointCountMismatch,
+        /// Where the pitch came from ("config", "lambda-s 8 um").
+        pitch_source: String,
+    },
     /// No pitch configured and no λs known.
     #[error("the x pitch is unknown: the conditions give no λs; set [instrument] pitch-x-um")]
     PitchUnknown,
@@ -201,6 +211,7 @@ impl DeviceFault for Sj210Error {
             | Sj210Error::BatteryAbnormal
             | Sj210Error::ProfileUnsupported { .. }
             | Sj210Error::PitchUnknown
+            | Sj210Error::PointCount { .. }
             | Sj210Error::Conditions(_) => FaultClass::Fatal,
         }
     }

@@ -4,7 +4,9 @@
 //! - [`codec`]: CR-terminated lines in and out, `OK`/`NG`/malformed classification.
 //! - [`ng`]: the NG code table (one for every model) and [`ng::NgCode`].
 //! - [`replies`]: what an `OK` payload means (codes, counts, results, profile blocks).
-//! - [`sampling`]: the x pitch of the exported profile.
+//! - [`sampling`]: the x pitch of the exported profile and the point count a trace must have.
+//! - [`sanity`]: checks of a read-out (repeated blocks, the instrument's Ra against ours).
+//! - [`readout_probe`]: judging the candidate read-out forms and what to configure.
 //! - [`models`]: per-model command strings and code tables, config overrides, `RDCON`.
 //! - [`sources`]: the documents the tables cite.
 //! - [`error`]: the two-layer error (conversation failed / instrument said NG) and trace
@@ -21,8 +23,10 @@ pub mod codec;
 pub mod error;
 pub mod models;
 pub mod ng;
+pub mod readout_probe;
 pub mod recorder;
 pub mod replies;
 pub mod sampling;
+pub mod sanity;
 pub mod settings;
 pub mod sources;

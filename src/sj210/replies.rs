@@ -29,7 +29,13 @@ pub fn leading_number(payload: &str) -> Option<u32> {
     digits.parse().ok()
 }
 
-/// One `RDRES…02` payload: name (6), value (width), unit (3, right-justified).
+/// One `RDRES…02` payload: parameter name (6 characters), then the value, then the unit
+/// (3 characters, right-justified), read by trimming whatever the justification: the SJ-210
+/// manual shows the value right-justified (`"Ra      3.123 um"`), Mitutoyo's PC export has
+/// a sign position and the number left-justified in the field (`" 3.308 "`, `" -0.144"`).
+/// The value and the unit are the last two words; `width` (the model's value field, 7 on
+/// the SJ-210, 8 on the SJ-410) only splits a value glued to its unit. A value that is not a
+/// number (`Err110`) is `None`. The unit is kept as received (`um` in ASCII, or latin-1 `µm`).
 pub fn parse_result(
     command: &str,
     payload: &str,
@@ -42,17 +48,48 @@ pub fn parse_result(
         expected: "name (6) + value + unit (3)",
     };
     let name: String = chars.get(..6).ok_or_else(bad)?.iter().collect();
-    let value: String = chars.get(6..6 + width).ok_or_else(bad)?.iter().collect();
-    let unit: String = chars.get(6 + width..).unwrap_or(&[]).iter().collect();
     let name = name.trim().to_string();
-    if name.is_empty() {
+    let rest: String = chars.get(6..).unwrap_or(&[]).iter().collect();
+    let (value, unit) = split_value_unit(&rest, width);
+    if name.is_empty() || value.is_empty() {
         return Err(bad());
     }
     Ok(InstrumentResult {
         name,
-        value: value.trim().parse::<f64>().ok().filter(|v| v.is_finite()),
-        unit: unit.trim().to_string(),
+        value: number(&value),
+        unit,
     })
+}
+
+/// A number with any spaces inside removed (a sign position may be separated from the
+/// digits); `None` when it is not a finite number.
+fn number(text: &str) -> Option<f64> {
+    let t: String = text.chars().filter(|c| !c.is_whitespace()).collect();
+    t.parse::<f64>().ok().filter(|v| v.is_finite())
+}
+
+/// Splits the text after the name into value and unit, both trimmed.
+fn split_value_unit(rest: &str, width: usize) -> (String, String) {
+    let t = rest.trim();
+    if let Some((v, u)) = t.rsplit_once(char::is_whitespace) {
+        // A last word that is itself a number belongs to the value (no unit given).
+        if number(u).is_none() {
+            return (v.trim().to_string(), u.to_string());
+        }
+        return (t.to_string(), String::new());
+    }
+    if number(t).is_none() {
+        // One word: a value glued to its unit at the model's field width.
+        let chars: Vec<char> = rest.chars().collect();
+        if let (Some(v), Some(u)) = (chars.get(..width), chars.get(width..)) {
+            let v: String = v.iter().collect();
+            let u: String = u.iter().collect();
+            if number(&v).is_some() {
+                return (v.trim().to_string(), u.trim().to_string());
+            }
+        }
+    }
+    (t.to_string(), String::new())
 }
 
 /// One profile block: a value count, then that many heights in µm. Values may be
@@ -162,6 +199,34 @@ mod tests {
         let r = parse_result("RDRES02,02,00", "Rc    Err110 um", 7).unwrap();
         assert_eq!(r.value, None);
         assert!(parse_result("RDRES02,02,00", "Ra   1", 7).is_err());
+    }
+
+    #[test]
+    fn result_fields_right_and_left_justified_read_the_same() {
+        // The manual's layout: value right-justified in 7, unit right-justified in 3.
+        let right = parse_result("RDRES02,01,00", "Ra      3.308 um", 7).unwrap();
+        // Mitutoyo's export layout: a sign position, the number left-justified.
+        let left = parse_result("RDRES02,01,00", "Ra     3.308  um", 7).unwrap();
+        assert_eq!(right, left);
+        assert_eq!(
+            (left.name.as_str(), left.value, left.unit.as_str()),
+            ("Ra", Some(3.308), "um")
+        );
+        let neg = parse_result("RDRES02,04,00", "Rsk    -0.144   ", 7).unwrap();
+        assert_eq!(
+            (neg.name.as_str(), neg.value, neg.unit.as_str()),
+            ("Rsk", Some(-0.144), "")
+        );
+        let neg_right = parse_result("RDRES02,04,00", "Rsk     -0.144   ", 7).unwrap();
+        assert_eq!(neg_right, neg);
+        // A sign position separated from the digits, and trailing blanks trimmed away.
+        let spaced = parse_result("RDRES02,04,00", "Rsk   - 0.144", 7).unwrap();
+        assert_eq!(spaced.value, Some(-0.144));
+        // Percentages and a value glued to its unit at the field width.
+        let mr = parse_result("RDRES02,05,00", "Rmr    45.20  %", 7).unwrap();
+        assert_eq!((mr.value, mr.unit.as_str()), (Some(45.2), "%"));
+        let glued = parse_result("RDRES02,01,00", "Ra      3.308um", 7).unwrap();
+        assert_eq!((glued.value, glued.unit.as_str()), (Some(3.308), "um"));
     }
 
     #[test]

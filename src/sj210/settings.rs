@@ -28,9 +28,14 @@ pub struct InstrumentSettings {
     /// Flow control: `none` (default) or `rts-cts`.
     #[serde(default)]
     pub flow_control: FlowControl,
-    /// x pitch of the exported profile in µm; when absent it is derived from λs.
+    /// x pitch of the exported profile in µm; when absent it is derived from λs
+    /// (2.5 → 0.5, 8 → 1.5, 25 → 5 µm, ISO 3274).
     #[serde(default)]
     pub pitch_x_um: Option<f64>,
+    /// Refuse a profile whose point count is not N × ⌊λc / pitch⌋ (default true). Set false
+    /// only for a firmware whose export is known to follow another rule.
+    #[serde(default = "default_true")]
+    pub check_point_count: bool,
     /// Timeouts and pacing.
     #[serde(default)]
     pub timeouts: TimeoutSettings,
@@ -41,6 +46,10 @@ pub struct InstrumentSettings {
 
 fn default_baud() -> u32 {
     9600
+}
+
+fn default_true() -> bool {
+    true
 }
 
 /// `[instrument.timeouts]`, all in milliseconds.
@@ -91,6 +100,8 @@ pub struct ClientOptions {
     pub trace_deadline: Option<Duration>,
     /// Configured x pitch in µm.
     pub pitch_x_um: Option<f64>,
+    /// Refuse a profile whose point count is not the one its conditions give.
+    pub check_point_count: bool,
     /// Longest accepted reply line in bytes.
     pub max_line: usize,
 }
@@ -112,6 +123,7 @@ impl ClientOptions {
             read_retry_budget: Duration::from_millis(t.read_retry_budget_ms),
             trace_deadline: t.trace_deadline_ms.map(Duration::from_millis),
             pitch_x_um,
+            check_point_count: true,
             max_line: super::codec::DEFAULT_MAX_LINE,
         }
     }
@@ -186,7 +198,10 @@ impl InstrumentSettings {
 
     /// The client options.
     pub fn client_options(&self) -> ClientOptions {
-        ClientOptions::from_timeouts(&self.timeouts, self.pitch_x_um)
+        ClientOptions {
+            check_point_count: self.check_point_count,
+            ..ClientOptions::from_timeouts(&self.timeouts, self.pitch_x_um)
+        }
     }
 }
 

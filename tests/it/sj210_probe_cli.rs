@@ -76,6 +76,10 @@ fn probe_is_read_only_and_records_every_frame() {
         record: Some(record.clone()),
         trace: false,
         notes: "pty test".into(),
+        readout: false,
+        forms: Vec::new(),
+        passthrough: None,
+        for_s: None,
     })
     .unwrap();
     let seen = rx.recv_timeout(Duration::from_secs(20)).unwrap().unwrap();

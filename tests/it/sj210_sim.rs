@@ -5,8 +5,8 @@
 //! profile read-out, and the `surfscan probe` binary with its replayable transcript.
 //!
 //! Expected heights come from the simulator's fixture rounded to the printed decimals; expected
-//! results from a plain re-computation of the simulator's documented definitions (mean line of
-//! the whole served profile, Ra = mean |z − m|, Rq = rms).
+//! results from a plain re-computation of the simulator's documented definitions (the served
+//! R profile about a zero mean line, as the instrument exports it: Ra = mean |z|, Rq = rms).
 //!
 //! Depends on the public API of `surfscan` (transport, `sj210`, `devices`) and of
 //! `surfscan-sim` (builder, fault specs, bundled profiles, transcript reader), nothing else.
@@ -118,9 +118,8 @@ fn fixture_line(index: usize) -> Vec<f64> {
 
 fn ra_rq(z: &[f64]) -> (f64, f64) {
     let n = z.len() as f64;
-    let m = z.iter().sum::<f64>() / n;
-    let ra = z.iter().map(|v| (v - m).abs()).sum::<f64>() / n;
-    let rq = (z.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / n).sqrt();
+    let ra = z.iter().map(|v| v.abs()).sum::<f64>() / n;
+    let rq = (z.iter().map(|v| v * v).sum::<f64>() / n).sqrt();
     (ra, rq)
 }
 
@@ -518,28 +517,63 @@ async fn probe_binary_summarises_and_its_transcript_replays() {
     assert_eq!(replies(&second), replies(&first));
 }
 
-#[tokio::test]
-async fn pitch_from_lambda_s_with_conditions_recorded_and_length_warning() {
-    let mut cfg = fast_config();
-    // λc 2.5 mm × N = 5: evaluation length 12.5 mm.
-    cfg.conditions.sampling_lengths = 5;
-    let rig = start(cfg, &[]).await;
+fn open_with(link: &Path, opts: ClientOptions) -> Sj210Client<SerialStream> {
     let port = transport::open(&SerialSettings {
-        path: rig.link.display().to_string(),
+        path: link.display().to_string(),
         baud: 38400,
         parity: Parity::None,
         flow_control: FlowControl::None,
     })
     .unwrap();
+    Sj210Client::new(port, readout_table(), opts)
+}
+
+#[tokio::test]
+async fn a_point_count_that_does_not_fit_the_conditions_is_named_and_fatal() {
+    let mut cfg = fast_config();
+    // λc 2.5 mm × N = 5 at λs 8 µm: 5 × floor(2.5 mm / 1.5 µm) = 8330 points expected, but
+    // the bundled windows have 1067.
+    cfg.conditions.sampling_lengths = 5;
+    let rig = start(cfg, &[]).await;
     let opts = ClientOptions {
         pitch_x_um: None,
         ..options()
     };
-    let mut c = Sj210Client::new(port, readout_table(), opts);
+    let mut c = open_with(&rig.link, opts.clone());
+    c.probe().await.unwrap();
+    let e = c
+        .trace()
+        .await
+        .expect_err("the count does not fit N 5 x 1666");
+    match &e {
+        Sj210Error::PointCount {
+            mismatch,
+            pitch_source,
+        } => {
+            assert_eq!(mismatch.received, fixture_line(0).len());
+            assert_eq!(mismatch.expected.points, 8330);
+            assert_eq!(mismatch.expected.per_sampling_length, 1666);
+            assert!(pitch_source.contains("lambda-s"), "{pitch_source}");
+        }
+        other => panic!("expected PointCount, got {other}"),
+    }
+    assert_eq!(e.class(), FaultClass::Fatal);
+    let m = e.to_string();
+    assert!(m.contains("8330") && m.contains("pitch-x-um"), "{m}");
+    drop(c);
+
+    // With the check switched off the line is kept: pitch from λs 8 µm is 1.5 µm (ISO 3274),
+    // and the length warning says the points do not cover N × λc.
+    let mut c = open_with(
+        &rig.link,
+        ClientOptions {
+            check_point_count: false,
+            ..opts
+        },
+    );
     c.probe().await.unwrap();
     let line = c.trace().await.unwrap();
-    // λs 8 µm → 1 µm pitch (the reference's mapping), not the fixture's own 1.5 µm.
-    assert!((line.profile.pitch_x_mm - 0.001).abs() < 1e-12);
+    assert!((line.profile.pitch_x_mm - 0.0015).abs() < 1e-12);
     assert!(
         line.pitch_source.contains("lambda-s"),
         "{}",
@@ -549,20 +583,66 @@ async fn pitch_from_lambda_s_with_conditions_recorded_and_length_warning() {
     assert_eq!(cond.lambda_c_mm, Some(2.5));
     assert_eq!(cond.lambda_s_um, Some(8.0));
     assert_eq!(cond.evaluation_length_mm, Some(12.5));
-    let n = fixture_line(0).len() as f64;
-    let covered_mm = n * 0.001;
-    let off = ((covered_mm - 12.5) / 12.5).abs() > 0.01;
-    // The bundled windows are short (about 1.6 mm at 1.5 µm), so the warning must fire.
-    assert!(off, "{n} points unexpectedly cover the evaluation length");
-    assert_eq!(
+    assert!(
         line.warnings
             .iter()
             .any(|w| w.contains("evaluation length")),
-        off,
-        "{n} points: {:?}",
+        "{:?}",
         line.warnings
     );
     rig.sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn the_mitutoyo_r_profile_under_its_conditions_is_6664_points_at_1_5_um() {
+    // The simulator serves the whole bundled export under the conditions it was recorded
+    // with: λc 2.5 mm, N 4 (λs 8 µm on the SJ-210). No pitch is configured: the rule gives it.
+    let mut cfg = fast_config();
+    cfg.conditions.sampling_lengths = 4;
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("sj210");
+    let set = ProfileSet::bundled_mitutoyo_r().unwrap();
+    let served: Vec<f64> = set.profiles()[0]
+        .z_um
+        .iter()
+        .map(|z| (z * 1000.0).round() / 1000.0)
+        .collect();
+    let mut sim = Simulator::new(&link)
+        .instrument(cfg)
+        .profiles(set)
+        .start()
+        .unwrap();
+    assert!(matches!(
+        tokio::time::timeout(EVENT_WAIT, sim.next_event()).await,
+        Ok(Some(SimEvent::Ready(_)))
+    ));
+    let mut c = open_with(
+        &link,
+        ClientOptions {
+            pitch_x_um: None,
+            ..options()
+        },
+    );
+    c.probe().await.unwrap();
+    let line = c.trace().await.unwrap();
+    assert_eq!(line.profile.heights_um.len(), 6664);
+    assert_eq!(line.profile.heights_um, served);
+    assert!((line.profile.pitch_x_mm - 0.0015).abs() < 1e-12);
+    assert_eq!(line.profile.conditions.sampling_lengths, Some(4));
+    assert!(line.warnings.is_empty(), "{:?}", line.warnings);
+    // The simulator prints its results in the export's layout; the value is read by trimming.
+    let (ra, _) = ra_rq(&served);
+    assert!(
+        (result(&line, "Ra") - ra).abs() <= 0.0005 + 1e-9,
+        "Ra {}",
+        result(&line, "Ra")
+    );
+    assert!(
+        line.results.iter().all(|r| r.unit == "um"),
+        "{:?}",
+        line.results
+    );
+    sim.shutdown().await;
 }
 
 #[tokio::test]

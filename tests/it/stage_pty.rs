@@ -65,7 +65,7 @@ async fn grbl() -> (
         max_travel_mm: 100.0,
         backlash_mm: 0.05,
         time_scale: SPEED_UP,
-        start_steps: -4000,
+        start_mm: -10.0,
         homed_at_start: false,
         ..Default::default()
     };
@@ -75,8 +75,9 @@ async fn grbl() -> (
     let r = axis.connect().await.unwrap();
     assert!(r.identity.contains("VER:1.1h"), "{}", r.identity);
     assert!(!r.position_trusted, "powered up in Alarm");
-    // -4000 steps at 2500 nm/step.
-    assert_eq!(r.position, Nm(-10_000_000));
+    // Just powered up 10 mm below the switch: the counter reads 0 where the stage stands.
+    assert_eq!(r.position, Nm(0));
+    assert_eq!(shared.true_position_nm(), -10_000_000);
     (dir, h, axis, shared)
 }
 

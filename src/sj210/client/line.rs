@@ -1,6 +1,7 @@
 //! One complete line: conditions (and whether they changed), the pitch, the trace, the
-//! results and the profile, checked against the evaluation length, as a
-//! [`crate::devices::TracedLine`].
+//! results and the profile, its point count checked against the conditions
+//! ([`crate::sj210::sampling::check_point_count`]) and its length against the evaluation
+//! length, as a [`crate::devices::TracedLine`].
 //!
 //! Layer 2: part of [`super::Sj210Client`].
 
@@ -8,6 +9,7 @@ use super::Sj210Client;
 use crate::devices::{Battery, TracedLine};
 use crate::profile::Profile;
 use crate::sj210::error::Sj210Error;
+use crate::sj210::sampling::check_point_count;
 use tokio::io::{AsyncRead, AsyncWrite};
 
 impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
@@ -33,7 +35,15 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         let (pitch_um, pitch_source) = self.pitch_um(&conditions)?;
         self.run_trace().await?;
         let results = self.read_results(&mut warnings).await?;
-        let heights_um = self.read_profile(&mut warnings).await?;
+        let heights_um = self.read_profile(&mut warnings).await?.heights_um;
+        if self.opts.check_point_count {
+            check_point_count(&conditions, pitch_um, heights_um.len()).map_err(|mismatch| {
+                Sj210Error::PointCount {
+                    mismatch,
+                    pitch_source: pitch_source.clone(),
+                }
+            })?;
+        }
         if let Some(l) = conditions.evaluation_length_mm {
             let covered = heights_um.len() as f64 * pitch_um / 1000.0;
             if l > 0.0 && ((covered - l) / l).abs() > 0.01 {

@@ -6,7 +6,8 @@
 //! - `probe.rs`: the capability probe;
 //! - `trace.rs`: waiting for idle, one trace, abort;
 //! - `readout.rs`: the profile read-out;
-//! - `line.rs`: one complete line (trace, results, profile).
+//! - `line.rs`: one complete line (trace, results, profile);
+//! - `forms.rs`: the read-out probe that finds the read-out command.
 //!
 //! Reply payloads are read by the pure parsers in [`super::replies`], beside the codec.
 //!
@@ -15,6 +16,7 @@
 //! and the settings of [`super`], and on the vocabulary in [`crate::devices`] /
 //! [`crate::profile`]. Time comes from `tokio::time`, so tests can pause it.
 
+mod forms;
 mod line;
 mod link;
 mod probe;

@@ -1,0 +1,471 @@
+//! Is the fitted surface still a height map, and does it stay within what was measured?
+//!
+//! An interpolant can fold: when one line holds a spike, the chord-length parameters give the
+//! spike a large share of u, the degree-5 solve swings, and x runs backwards along the
+//! iso-curves (the surface then has several heights over one x, which no CAD or FE height
+//! model expects). Between uncorrelated lines it can also overshoot far beyond the measured
+//! heights. The checks, all on the surface as fitted:
+//!
+//! * **control net**: x must increase from pole to pole along u in every pole row, and y
+//!   along v in every pole column (a fold of the net is where a fold of the surface comes from);
+//! * **iso-curves along u** at every data line's v and at `between` equally spaced v inside
+//!   each interval between lines, each sampled at `samples_per_pole` points per pole along u:
+//!   x must increase; a backward run is reported with its x range and how far x runs back;
+//! * **iso-curves along v** at `count_u` equally spaced u, sampled likewise along v: y must
+//!   increase;
+//! * **height range**: the highest and lowest point of the iso-curve samples against the
+//!   measured heights' range; the overshoot (how far the model goes beyond the measured range,
+//!   above plus below) is reported in µm and in % of the measured range, and named as a
+//!   warning beyond [`OVERSHOOT_WARN_PCT`].
+//!
+//! Depends on [`crate::nurbs`] only.
+
+use crate::nurbs::{BSplineCurve, NurbsSurface};
+use serde::Serialize;
+
+/// An overshoot beyond this share of the measured height range is named as a warning (%).
+pub const OVERSHOOT_WARN_PCT: f64 = 10.0;
+
+/// How densely the surface is sampled. [`Default`]: 8 samples per pole, 3 iso-curves between
+/// consecutive lines.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FoldOptions {
+    /// Samples per pole along an iso-curve.
+    pub samples_per_pole: usize,
+    /// Iso-curves along u inside each interval between data lines.
+    pub between: usize,
+}
+
+impl Default for FoldOptions {
+    fn default() -> FoldOptions {
+        FoldOptions {
+            samples_per_pole: 8,
+            between: 3,
+        }
+    }
+}
+
+/// Where the control net runs backwards in one direction.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct NetFold {
+    /// "u" (x along pole rows) or "v" (y along pole columns).
+    pub direction: &'static str,
+    /// Pole rows (u) or columns (v) with at least one backward step.
+    pub affected: usize,
+    /// Pole rows (u) or columns (v) checked.
+    pub checked: usize,
+    /// The first backward step: row (u) or column (v) index.
+    pub at_line: usize,
+    /// The first backward step: pole index i → i + 1 along the direction.
+    pub at_pole: usize,
+    /// The coordinate (x for u, y for v) at pole i and i + 1, mm.
+    pub from_mm: f64,
+    /// See `from_mm`.
+    pub to_mm: f64,
+    /// Largest backward step over the whole net, mm.
+    pub worst_back_mm: f64,
+}
+
+/// Where sampled iso-curves run backwards in one direction.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct IsoFold {
+    /// "u" (x along iso-curves of constant v) or "v" (y along iso-curves of constant u).
+    pub direction: &'static str,
+    /// Iso-curves with a backward run.
+    pub affected: usize,
+    /// Iso-curves checked.
+    pub checked: usize,
+    /// The fixed parameter of the worst curve (v for u-curves, u for v-curves).
+    pub at_parameter: f64,
+    /// The other coordinate of the worst curve at its start, mm (y for u-curves, x for
+    /// v-curves).
+    pub at_mm: f64,
+    /// The coordinate range over which the worst curve runs back, mm (lower, upper).
+    pub range_mm: [f64; 2],
+    /// How far it runs back, mm.
+    pub back_mm: f64,
+}
+
+/// The model's sampled height range against the measured one.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct HeightRange {
+    /// Lowest sampled model height, µm.
+    pub model_min_um: f64,
+    /// Highest sampled model height, µm.
+    pub model_max_um: f64,
+    /// (x, y) in mm of the lowest sample.
+    pub model_min_at_mm: [f64; 2],
+    /// (x, y) in mm of the highest sample.
+    pub model_max_at_mm: [f64; 2],
+    /// Lowest measured height, µm.
+    pub measured_min_um: f64,
+    /// Highest measured height, µm.
+    pub measured_max_um: f64,
+    /// How far the model goes beyond the measured range (above plus below), µm.
+    pub overshoot_um: f64,
+    /// The same in % of the measured range.
+    pub overshoot_pct: f64,
+    /// Points sampled.
+    pub samples: usize,
+}
+
+/// Every check of the module.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ModelChecks {
+    /// Backward steps of the control net, per direction (absent: none).
+    pub net: Vec<NetFold>,
+    /// Backward runs of the sampled iso-curves, per direction (absent: none).
+    pub iso_curves: Vec<IsoFold>,
+    /// The height range.
+    pub height_range: HeightRange,
+    /// How the surface was sampled.
+    pub recipe: String,
+}
+
+impl ModelChecks {
+    /// True when a sampled iso-curve runs backwards (the surface is not a height map).
+    pub fn folds(&self) -> bool {
+        !self.iso_curves.is_empty()
+    }
+
+    /// One warning per finding: folds of the surface and of its net, and an overshoot beyond
+    /// [`OVERSHOOT_WARN_PCT`].
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        for f in &self.iso_curves {
+            let (c, other) = if f.direction == "u" {
+                ("x", "y")
+            } else {
+                ("y", "x")
+            };
+            w.push(format!(
+                "model fold: {c} runs backwards along {} by up to {:.3} µm ({c} {:.4} … {:.4} mm) on {} of {} iso-curves (worst at {} = {:.4} mm); the surface is not a height map there",
+                f.direction,
+                f.back_mm * 1000.0,
+                f.range_mm[0],
+                f.range_mm[1],
+                f.affected,
+                f.checked,
+                other,
+                f.at_mm
+            ));
+        }
+        for f in &self.net {
+            let (c, what) = if f.direction == "u" {
+                ("x", "pole rows")
+            } else {
+                ("y", "pole columns")
+            };
+            w.push(format!(
+                "control net fold: {c} decreases from pole {} to {} ({:.4} → {:.4} mm) in {} of {} {what} (largest step back {:.3} µm)",
+                f.at_pole,
+                f.at_pole + 1,
+                f.from_mm,
+                f.to_mm,
+                f.affected,
+                f.checked,
+                f.worst_back_mm * 1000.0
+            ));
+        }
+        let h = &self.height_range;
+        if h.overshoot_pct > OVERSHOOT_WARN_PCT {
+            w.push(format!(
+                "model overshoot: sampled densely, the model spans {:.2} … {:.2} µm where the measured heights span {:.2} … {:.2} µm ({:.0} % beyond the measured range; highest at x = {:.4}, y = {:.4} mm, lowest at x = {:.4}, y = {:.4} mm)",
+                h.model_min_um,
+                h.model_max_um,
+                h.measured_min_um,
+                h.measured_max_um,
+                h.overshoot_pct,
+                h.model_max_at_mm[0],
+                h.model_max_at_mm[1],
+                h.model_min_at_mm[0],
+                h.model_min_at_mm[1]
+            ));
+        }
+        w
+    }
+}
+
+/// Samples of a curve at `n` equally spaced parameters in [0, 1].
+fn samples(curve: &BSplineCurve, n: usize) -> Vec<[f64; 3]> {
+    (0..n)
+        .filter_map(|k| curve.evaluate(k as f64 / (n - 1) as f64))
+        .collect()
+}
+
+/// The worst backward run of an iso-curve so far: (fixed parameter, the other coordinate at
+/// its start in mm, (lower, upper, back) in mm).
+type Worst = (f64, f64, (f64, f64, f64));
+
+/// The worst backward run of coordinate `c` along `pts`: (lower, upper, back) in mm.
+fn backward_run(pts: &[[f64; 3]], c: usize) -> Option<(f64, f64, f64)> {
+    let mut worst: Option<(f64, f64, f64)> = None;
+    let mut k = 1;
+    while k < pts.len() {
+        if pts[k][c] > pts[k - 1][c] {
+            k += 1;
+            continue;
+        }
+        let top = pts[k - 1][c];
+        let mut bottom = pts[k][c];
+        while k + 1 < pts.len() && pts[k + 1][c] <= pts[k][c] {
+            k += 1;
+            bottom = pts[k][c];
+        }
+        let back = top - bottom;
+        if worst.is_none_or(|w| back > w.2) {
+            worst = Some((bottom, top, back));
+        }
+        k += 1;
+    }
+    worst
+}
+
+/// Checks the control net, the sampled iso-curves and the height range of `surface` fitted to
+/// data lines at parameters `line_vs` (increasing), against the measured `heights_um`.
+pub fn check_model(
+    surface: &NurbsSurface,
+    line_vs: &[f64],
+    heights_um: &[f64],
+    options: &FoldOptions,
+) -> ModelChecks {
+    let (nu, nv) = (surface.count_u(), surface.count_v());
+    let per = options.samples_per_pole.max(1);
+
+    // Control net.
+    let mut net = Vec::new();
+    for (direction, lines, along) in [("u", nv, nu), ("v", nu, nv)] {
+        let (mut affected, mut first, mut worst) = (0usize, None, 0.0f64);
+        for line in 0..lines {
+            let mut hit = false;
+            for i in 0..along.saturating_sub(1) {
+                let (a, b) = if direction == "u" {
+                    (surface.pole(i, line)[0], surface.pole(i + 1, line)[0])
+                } else {
+                    (surface.pole(line, i)[1], surface.pole(line, i + 1)[1])
+                };
+                if b <= a {
+                    hit = true;
+                    worst = worst.max(a - b);
+                    if first.is_none() {
+                        first = Some((line, i, a, b));
+                    }
+                }
+            }
+            affected += usize::from(hit);
+        }
+        if let Some((at_line, at_pole, from_mm, to_mm)) = first {
+            net.push(NetFold {
+                direction,
+                affected,
+                checked: lines,
+                at_line,
+                at_pole,
+                from_mm,
+                to_mm,
+                worst_back_mm: worst,
+            });
+        }
+    }
+
+    // Iso-curves along u at and between the lines; they also give the height range.
+    let mut vs: Vec<f64> = Vec::new();
+    for (k, &v) in line_vs.iter().enumerate() {
+        vs.push(v);
+        if let Some(&next) = line_vs.get(k + 1) {
+            for b in 1..=options.between {
+                vs.push(v + (next - v) * b as f64 / (options.between + 1) as f64);
+            }
+        }
+    }
+    if vs.is_empty() {
+        vs = vec![0.0, 1.0];
+    }
+    let n_u = (per * nu).max(2);
+    let us: Vec<f64> = (0..n_u).map(|k| k as f64 / (n_u - 1) as f64).collect();
+    let mut range = (f64::INFINITY, [0.0; 2], f64::NEG_INFINITY, [0.0; 2]);
+    let mut iso = Vec::new();
+    let mut fold_u: (usize, Option<Worst>) = (0, None);
+    // A few iso-curves at a time: the u basis is computed once per chunk, memory stays small.
+    for chunk in vs.chunks(16) {
+        let grid = surface.evaluate_grid(&us, chunk);
+        for (&v, pts) in chunk.iter().zip(grid.chunks_exact(n_u)) {
+            for p in pts {
+                let z = p[2] * 1000.0;
+                if z < range.0 {
+                    range.0 = z;
+                    range.1 = [p[0], p[1]];
+                }
+                if z > range.2 {
+                    range.2 = z;
+                    range.3 = [p[0], p[1]];
+                }
+            }
+            if let Some(run) = backward_run(pts, 0) {
+                fold_u.0 += 1;
+                if fold_u.1.is_none_or(|(_, _, w)| run.2 > w.2) {
+                    fold_u.1 = Some((v, pts.first().map_or(f64::NAN, |p| p[1]), run));
+                }
+            }
+        }
+    }
+    if let Some((v, y, (lo, hi, back))) = fold_u.1 {
+        iso.push(IsoFold {
+            direction: "u",
+            affected: fold_u.0,
+            checked: vs.len(),
+            at_parameter: v,
+            at_mm: y,
+            range_mm: [lo, hi],
+            back_mm: back,
+        });
+    }
+    let n_v = (per * nv).max(2);
+    let mut fold_v: (usize, Option<Worst>) = (0, None);
+    let curves_v = nu.max(2);
+    for k in 0..curves_v {
+        let u = k as f64 / (curves_v - 1) as f64;
+        let pts = samples(&surface.iso_curve_v(u), n_v);
+        if let Some(run) = backward_run(&pts, 1) {
+            fold_v.0 += 1;
+            if fold_v.1.is_none_or(|(_, _, w)| run.2 > w.2) {
+                fold_v.1 = Some((u, pts.first().map_or(f64::NAN, |p| p[0]), run));
+            }
+        }
+    }
+    if let Some((u, x, (lo, hi, back))) = fold_v.1 {
+        iso.push(IsoFold {
+            direction: "v",
+            affected: fold_v.0,
+            checked: curves_v,
+            at_parameter: u,
+            at_mm: x,
+            range_mm: [lo, hi],
+            back_mm: back,
+        });
+    }
+
+    let mmin = heights_um.iter().copied().fold(f64::INFINITY, f64::min);
+    let mmax = heights_um.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let overshoot = (range.2 - mmax).max(0.0) + (mmin - range.0).max(0.0);
+    let span = mmax - mmin;
+    ModelChecks {
+        net,
+        iso_curves: iso,
+        height_range: HeightRange {
+            model_min_um: range.0,
+            model_max_um: range.2,
+            model_min_at_mm: range.1,
+            model_max_at_mm: range.3,
+            measured_min_um: mmin,
+            measured_max_um: mmax,
+            overshoot_um: overshoot,
+            overshoot_pct: if span > 0.0 {
+                overshoot / span * 100.0
+            } else {
+                0.0
+            },
+            samples: vs.len() * n_u,
+        },
+        recipe: format!(
+            "control net: x strictly increasing along u in every pole row, y along v in every pole column; iso-curves along u at the {} data lines and {} equally spaced v between consecutive lines, iso-curves along v at {} equally spaced u, each sampled at {} points per pole; height range over the u iso-curve samples; overshoot beyond {} % of the measured range is a warning",
+            line_vs.len(),
+            options.between,
+            curves_v,
+            per,
+            OVERSHOOT_WARN_PCT
+        ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::{fit_grid, FitOptions};
+
+    #[test]
+    fn a_smooth_surface_neither_folds_nor_overshoots() {
+        let (rows, cols) = (8, 60);
+        let y: Vec<f64> = (0..rows).map(|r| r as f64 * 0.01).collect();
+        let z: Vec<f64> = (0..rows * cols)
+            .map(|k| 2.0 * ((k % cols) as f64 * 0.05).sin() + ((k / cols) as f64 * 0.3).cos())
+            .collect();
+        let fit = fit_grid(0.002, &y, &z, cols, FitOptions::default()).unwrap();
+        let c = check_model(&fit.surface, &fit.params_v, &z, &FoldOptions::default());
+        assert!(c.net.is_empty() && !c.folds(), "{c:?}");
+        assert!(c.height_range.overshoot_pct < 2.0, "{:?}", c.height_range);
+        assert!(c.warnings().is_empty(), "{:?}", c.warnings());
+    }
+
+    #[test]
+    fn a_net_that_runs_back_is_named_with_its_place() {
+        // A bilinear patch stretched so x goes 0 → 2 → 1 → 3 along u: the net and the
+        // surface fold between the second and third pole.
+        let mut poles = Vec::new();
+        for y in [0.0, 1.0] {
+            for x in [0.0, 2.0, 1.0, 3.0] {
+                poles.push([x, y, 0.001 * x]);
+            }
+        }
+        let s = NurbsSurface::try_new(
+            1,
+            1,
+            vec![0.0, 0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0, 1.0],
+            vec![0.0, 0.0, 1.0, 1.0],
+            4,
+            2,
+            poles,
+        )
+        .unwrap();
+        // 4 samples per pole put samples on the knots 1/3 and 2/3 (16 samples, 15 steps).
+        let options = FoldOptions {
+            samples_per_pole: 4,
+            between: 3,
+        };
+        let c = check_model(&s, &[0.0, 1.0], &[0.0, 3.0], &options);
+        let n = &c.net[0];
+        assert_eq!((n.direction, n.affected, n.at_pole), ("u", 2, 1));
+        assert_eq!((n.from_mm, n.to_mm), (2.0, 1.0));
+        let f = &c.iso_curves[0];
+        assert_eq!((f.direction, f.affected, f.checked), ("u", 5, 5));
+        assert!(
+            (f.back_mm - 1.0).abs() < 1e-12 && f.range_mm == [1.0, 2.0],
+            "{f:?}"
+        );
+        let w = c.warnings().join("\n");
+        assert!(
+            w.contains("model fold: x runs backwards") && w.contains("x 1.0000 … 2.0000 mm"),
+            "{w}"
+        );
+        assert!(w.contains("control net fold"), "{w}");
+    }
+
+    #[test]
+    fn overshoot_is_measured_against_the_data_range() {
+        // Lines alternating ±1 µm: the interpolant between them swings beyond ±1.
+        let (rows, cols) = (12, 30);
+        let y: Vec<f64> = (0..rows).map(|r| r as f64 * 0.01).collect();
+        let z: Vec<f64> = (0..rows * cols)
+            .map(|k| if (k / cols) % 3 == 0 { 1.0 } else { -1.0 } * (1.0 + 0.1 * (k % cols) as f64 / cols as f64))
+            .collect();
+        let fit = fit_grid(0.002, &y, &z, cols, FitOptions::default()).unwrap();
+        let c = check_model(&fit.surface, &fit.params_v, &z, &FoldOptions::default());
+        let h = &c.height_range;
+        assert!(h.measured_max_um <= 1.1 && h.measured_min_um >= -1.1);
+        assert!(
+            h.model_max_um > h.measured_max_um && h.overshoot_pct > OVERSHOOT_WARN_PCT,
+            "{h:?}"
+        );
+        assert!(
+            (h.overshoot_um
+                - ((h.model_max_um - h.measured_max_um).max(0.0)
+                    + (h.measured_min_um - h.model_min_um).max(0.0)))
+            .abs()
+                < 1e-12
+        );
+        assert!(c
+            .warnings()
+            .iter()
+            .any(|w| w.starts_with("model overshoot")));
+    }
+}

@@ -1,0 +1,175 @@
+//! Sanity checks of a profile read-out against itself and against the instrument's own
+//! results: a block received twice in a row (the instrument's read-out cursor went back), and
+//! the instrument's Ra against Ra computed here from the same heights.
+//!
+//! # The Ra rule
+//!
+//! Ours is the project's metrology ([`crate::metrology::params::analyze_profile`]: ISO 4287
+//! Ra per sampling length, lr-mean, with the line's recorded conditions). It must agree with
+//! the instrument's `Ra` to within
+//!
+//! - **2 % of the instrument's Ra + 0.005 µm for an R profile**: the instrument exported the
+//!   heights it evaluated, relative to its own mean line, so the only differences are the
+//!   printed resolution of the heights and of Ra (0.001 µm each) and where the sampling
+//!   lengths split. Mitutoyo's own export agrees to the last printed digit (Ra 3.308 µm both);
+//! - **10 % + 0.005 µm for a P profile**: we apply the ISO 16610-21 Gaussian λc filter
+//!   ourselves, and the instrument filtered its primary profile with pre- and post-travel we
+//!   never receive, so the ends of the mean line differ.
+//!
+//! Other profile kinds (W, motif, DF) are not compared, nor is a line without an instrument
+//! `Ra` in µm or too short for our evaluation. A larger disagreement means the heights are not
+//! the ones the instrument evaluated (another trace's, a shifted or repeated block, wrong
+//! units).
+//!
+//! # Repeated blocks
+//!
+//! Two consecutive blocks with the same values, in the same order, are one block received
+//! twice. A block whose values are all equal (a flat or clipped stretch) can legitimately
+//! repeat and is not counted.
+//!
+//! Pure (layer 1): depends on [`crate::metrology`] and [`crate::profile`].
+
+use crate::metrology::params::analyze_profile;
+use crate::profile::{InstrumentResult, Profile, ProfileKind};
+use serde::{Deserialize, Serialize};
+
+/// Relative part of the Ra tolerance for an R profile.
+pub const RA_REL_TOL_R: f64 = 0.02;
+/// Relative part of the Ra tolerance for a P profile.
+pub const RA_REL_TOL_P: f64 = 0.10;
+/// Absolute part of the Ra tolerance, µm.
+pub const RA_ABS_TOL_UM: f64 = 0.005;
+
+/// The instrument's Ra against ours from the same heights.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RaCheck {
+    /// The instrument's Ra, µm.
+    pub instrument_um: f64,
+    /// Ours from the read-out heights, µm.
+    pub ours_um: f64,
+    /// The allowed difference, µm (see the module docs).
+    pub tolerance_um: f64,
+}
+
+impl RaCheck {
+    /// |ours − instrument| ≤ tolerance.
+    pub fn agrees(&self) -> bool {
+        (self.ours_um - self.instrument_um).abs() <= self.tolerance_um
+    }
+}
+
+/// The instrument's `Ra` in µm among its results, when it reported one with a value.
+pub fn instrument_ra_um(results: &[InstrumentResult]) -> Option<f64> {
+    let r = results
+        .iter()
+        .find(|r| r.name.trim().eq_ignore_ascii_case("ra"))?;
+    let v = r.value?;
+    match r.unit.trim() {
+        "um" | "µm" | "μm" | "" => Some(v),
+        "nm" => Some(v / 1000.0),
+        "mm" => Some(v * 1000.0),
+        _ => None,
+    }
+}
+
+/// Compares the instrument's Ra with ours from `profile`; `None` when it cannot be compared
+/// (no instrument Ra, a profile kind other than R or P, or too short to evaluate).
+pub fn check_ra(profile: &Profile, results: &[InstrumentResult]) -> Option<RaCheck> {
+    let instrument_um = instrument_ra_um(results)?;
+    let kind = profile.conditions.profile_kind.unwrap_or(profile.kind);
+    let rel = match kind {
+        ProfileKind::R => RA_REL_TOL_R,
+        ProfileKind::P => RA_REL_TOL_P,
+        ProfileKind::W | ProfileKind::Other => return None,
+    };
+    let ours_um = analyze_profile(profile).ok()?.params.ra_um;
+    Some(RaCheck {
+        instrument_um,
+        ours_um,
+        tolerance_um: rel * instrument_um.abs() + RA_ABS_TOL_UM,
+    })
+}
+
+/// A block of the read-out that repeated the block before it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RepeatedBlock {
+    /// 1-based number of the block request that answered the previous block again.
+    pub block: u32,
+    /// 0-based index of its first height in the read-out.
+    pub first_point: u32,
+    /// Number of values in it.
+    pub values: u32,
+}
+
+/// True when `block` is `previous` received again: same length (at least 2 values), same
+/// values in the same order, and not all equal.
+pub fn is_repeated_block(previous: &[f64], block: &[f64]) -> bool {
+    block.len() >= 2 && previous == block && block.iter().any(|v| v != &block[0])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::profile::Conditions;
+
+    fn r(name: &str, v: Option<f64>, unit: &str) -> InstrumentResult {
+        InstrumentResult {
+            name: name.into(),
+            value: v,
+            unit: unit.into(),
+        }
+    }
+
+    fn r_profile(z: Vec<f64>) -> Profile {
+        Profile {
+            pitch_x_mm: 0.0015,
+            heights_um: z,
+            kind: ProfileKind::R,
+            conditions: Conditions {
+                profile_kind: Some(ProfileKind::R),
+                lambda_c_mm: Some(0.08),
+                sampling_lengths: Some(1),
+                ..Conditions::default()
+            },
+        }
+    }
+
+    #[test]
+    fn instrument_ra_by_name_and_unit() {
+        let res = [r("Rq", Some(2.0), "um"), r(" RA ", Some(1.5), "\u{b5}m")];
+        assert_eq!(instrument_ra_um(&res), Some(1.5));
+        assert_eq!(instrument_ra_um(&[r("Ra", Some(1500.0), "nm")]), Some(1.5));
+        assert_eq!(instrument_ra_um(&[r("Ra", None, "um")]), None);
+        assert_eq!(instrument_ra_um(&[r("Ra", Some(1.0), "in")]), None);
+    }
+
+    #[test]
+    fn ra_of_a_square_wave_agrees_and_a_wrong_one_does_not() {
+        // ±2 µm square wave, about zero: Ra = 2 µm exactly.
+        let z: Vec<f64> = (0..60)
+            .map(|i| if i % 2 == 0 { 2.0 } else { -2.0 })
+            .collect();
+        let p = r_profile(z);
+        let ok = check_ra(&p, &[r("Ra", Some(2.0), "um")]).unwrap();
+        assert!((ok.ours_um - 2.0).abs() < 1e-12);
+        assert!((ok.tolerance_um - (0.04 + 0.005)).abs() < 1e-12);
+        assert!(ok.agrees());
+        // 2.04 is inside 2 % + 5 nm of 2.0; 2.06 is not.
+        assert!(check_ra(&p, &[r("Ra", Some(2.04), "um")]).unwrap().agrees());
+        assert!(!check_ra(&p, &[r("Ra", Some(2.1), "um")]).unwrap().agrees());
+        let mut w = p.clone();
+        w.conditions.profile_kind = Some(ProfileKind::W);
+        assert_eq!(check_ra(&w, &[r("Ra", Some(2.0), "um")]), None);
+        assert_eq!(check_ra(&p, &[]), None);
+    }
+
+    #[test]
+    fn repeated_blocks_but_not_flat_ones() {
+        assert!(is_repeated_block(&[1.0, 2.0, 3.0], &[1.0, 2.0, 3.0]));
+        assert!(!is_repeated_block(&[1.0, 2.0, 3.0], &[1.0, 2.0, 3.5]));
+        assert!(!is_repeated_block(&[1.0, 2.0], &[1.0, 2.0, 3.0]));
+        assert!(!is_repeated_block(&[0.0, 0.0, 0.0], &[0.0, 0.0, 0.0]));
+        assert!(!is_repeated_block(&[4.0], &[4.0]));
+        assert!(!is_repeated_block(&[], &[]));
+    }
+}

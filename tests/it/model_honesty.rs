@@ -1,0 +1,232 @@
+//! How far the model can be trusted: spikes named, folds and overshoot found, the between-line
+//! hold-out verdict on a surface the lines do resolve (a smooth sine) and on one they do not
+//! (uncorrelated lines), the least-squares alternative across lines, and the default fit kept
+//! bit for bit the paper's.
+
+use surfscan::config::FitSettings;
+use surfscan::fit::{fit_grid, fit_grid_with, FitOptions, VMethod};
+use surfscan::metrology::areal::{areal_params, Grid};
+use surfscan::metrology::folds::{check_model, FoldOptions};
+use surfscan::metrology::holdout::{between_lines, SUPPORTED_BELOW_SQ};
+use surfscan::metrology::outliers::{find_spikes, spike_roughness, SpikeOptions};
+
+const ROWS: usize = 31;
+const COLS: usize = 400;
+const PX: f64 = 0.0015;
+const PY: f64 = 0.01;
+
+/// A small deterministic generator (splitmix64) for reproducible random grids.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Approximately Gaussian (sum of 4 uniforms), unit variance.
+    fn gauss(&mut self) -> f64 {
+        ((0..4).map(|_| self.next()).sum::<f64>() - 2.0) * 3.0f64.sqrt()
+    }
+}
+
+fn y_mm(rows: usize) -> Vec<f64> {
+    (0..rows).map(|r| r as f64 * PY).collect()
+}
+
+/// Smooth along x and y: the lines, 10 µm apart, sample a 0.25 mm wavelength in y densely.
+fn sine_grid() -> Vec<f64> {
+    (0..ROWS * COLS)
+        .map(|k| {
+            let (x, y) = ((k % COLS) as f64 * PX, (k / COLS) as f64 * PY);
+            3.0 * (x / 0.08 * std::f64::consts::TAU).sin()
+                * (y / 0.25 * std::f64::consts::TAU).cos()
+        })
+        .collect()
+}
+
+/// Each line a rough profile of its own (smooth along x, correlation length a few µm),
+/// independent of its neighbours.
+fn uncorrelated_grid(seed: u64) -> Vec<f64> {
+    let mut rng = Rng(seed);
+    let mut z = Vec::with_capacity(ROWS * COLS);
+    for _ in 0..ROWS {
+        let noise: Vec<f64> = (0..COLS + 8).map(|_| rng.gauss()).collect();
+        // A 9-point moving average: correlated along the line, not across.
+        z.extend((0..COLS).map(|i| noise[i..i + 9].iter().sum::<f64>() / 3.0));
+    }
+    z
+}
+
+fn sq(z: &[f64], rows: usize, cols: usize) -> f64 {
+    areal_params(&Grid {
+        heights_um: z,
+        rows,
+        cols,
+        pitch_x_mm: PX,
+        pitch_y_mm: PY,
+    })
+    .unwrap()
+    .sq_um
+}
+
+fn verdict(z: &[f64], method: VMethod) -> surfscan::metrology::holdout::BetweenLines {
+    between_lines(
+        z,
+        COLS,
+        PX,
+        &y_mm(ROWS),
+        FitOptions::default(),
+        method,
+        2,
+        sq(z, ROWS, COLS),
+        SUPPORTED_BELOW_SQ,
+    )
+    .unwrap()
+}
+
+#[test]
+fn a_smooth_sine_grid_is_supported_between_lines() {
+    let z = sine_grid();
+    for method in [
+        VMethod::Interpolate,
+        VMethod::LeastSquares { control_rows: 12 },
+    ] {
+        let b = verdict(&z, method);
+        assert!(b.supported, "{}", b.verdict);
+        // The sine between lines is predicted to a small fraction of its height.
+        assert!(b.rms_over_sq < 0.05, "{}", b.verdict);
+        assert_eq!(b.lines.len(), 15);
+        assert!(
+            b.short()
+                .starts_with("the model between lines is supported by the data (hold-out rms"),
+            "{}",
+            b.short()
+        );
+    }
+    let fit = fit_grid(PX, &y_mm(ROWS), &z, COLS, FitOptions::default()).unwrap();
+    let c = check_model(&fit.surface, &fit.params_v, &z, &FoldOptions::default());
+    assert!(c.warnings().is_empty(), "{:?}", c.warnings());
+}
+
+#[test]
+fn uncorrelated_lines_are_not_supported_and_the_interpolant_overshoots() {
+    let z = uncorrelated_grid(7);
+    let b = verdict(&z, VMethod::Interpolate);
+    assert!(!b.supported, "{}", b.verdict);
+    // Worse than a flat plane (which would score about 1): the interpolant swings.
+    assert!(b.rms_over_sq > 1.0, "{}", b.verdict);
+    assert!(
+        b.short()
+            .contains("not supported by the data (hold-out rms"),
+        "{}",
+        b.short()
+    );
+    // The least-squares surface across lines is still not supported, but closer to a plane.
+    let ls = verdict(&z, VMethod::LeastSquares { control_rows: 8 });
+    assert!(
+        !ls.supported && ls.rms_um < b.rms_um,
+        "{} / {}",
+        ls.verdict,
+        b.verdict
+    );
+    let fit = fit_grid(PX, &y_mm(ROWS), &z, COLS, FitOptions::default()).unwrap();
+    let c = check_model(&fit.surface, &fit.params_v, &z, &FoldOptions::default());
+    assert!(c.height_range.overshoot_pct > 10.0, "{:?}", c.height_range);
+    assert!(
+        c.warnings()
+            .iter()
+            .any(|w| w.starts_with("model overshoot")),
+        "{:?}",
+        c.warnings()
+    );
+}
+
+#[test]
+fn a_100_um_spike_is_named_and_the_default_surface_folds_with_a_named_warning() {
+    let mut z = uncorrelated_grid(11);
+    let (line, at) = (12usize, 233usize);
+    z[line * COLS + at] += 100.0;
+    let mut found = Vec::new();
+    for r in 0..ROWS {
+        let row = &z[r * COLS..(r + 1) * COLS];
+        let rough = spike_roughness(row, PX, None).unwrap();
+        let s = find_spikes(&rough, row, PX, &SpikeOptions::default()).unwrap();
+        found.extend(s.spikes.into_iter().map(|sp| (r, sp)));
+    }
+    assert_eq!(found.len(), 1, "{found:?}");
+    let (r, sp) = &found[0];
+    assert_eq!((*r, sp.peak), (line, at));
+    assert!((sp.x_mm - at as f64 * PX).abs() < 1e-12);
+    assert_eq!(sp.height_um, z[line * COLS + at]);
+
+    let fit = fit_grid(PX, &y_mm(ROWS), &z, COLS, FitOptions::default()).unwrap();
+    let c = check_model(&fit.surface, &fit.params_v, &z, &FoldOptions::default());
+    let w = c.warnings();
+    // The spike takes a large share of u: the default surface folds, and says where.
+    assert!(c.folds(), "{c:?}");
+    let fold = w
+        .iter()
+        .find(|w| w.starts_with("model fold"))
+        .expect("fold warning");
+    let x = at as f64 * PX;
+    let f = &c.iso_curves[0];
+    assert!(
+        f.range_mm[0] <= x + PX && f.range_mm[1] >= x - PX,
+        "fold at {:?}, spike at x = {x}",
+        f.range_mm
+    );
+    assert!(fold.contains("x runs backwards along u"), "{fold}");
+    assert!(w.iter().any(|w| w.starts_with("control net fold")), "{w:?}");
+}
+
+#[test]
+fn the_default_fit_is_the_papers_bit_for_bit() {
+    // Property: for random grids (sizes, heights, spikes, unequal line spacing), the fit the
+    // default [fit] settings choose is bit-identical to the paper's interpolation.
+    let settings = FitSettings::default();
+    let mut rng = Rng(2024);
+    for case in 0..24 {
+        let rows = 6 + (rng.next() * 20.0) as usize;
+        let cols = 6 + (rng.next() * 200.0) as usize;
+        let px = 0.0005 + rng.next() * 0.002;
+        let mut y = 0.0;
+        let ys: Vec<f64> = (0..rows)
+            .map(|_| {
+                y += 0.005 + rng.next() * 0.01;
+                y
+            })
+            .collect();
+        let scale = 0.01 + rng.next() * 20.0;
+        let mut z: Vec<f64> = (0..rows * cols).map(|_| rng.gauss() * scale).collect();
+        if case % 3 == 0 {
+            let k = (rng.next() * (rows * cols) as f64) as usize;
+            z[k] += 100.0;
+        }
+        let method = settings.v_method_for(rows);
+        assert_eq!(method, VMethod::Interpolate);
+        let options = FitOptions {
+            degree_u: settings.degree_u,
+            degree_v: settings.degree_v,
+        };
+        let paper = fit_grid(px, &ys, &z, cols, FitOptions::default()).unwrap();
+        let ours = fit_grid_with(px, &ys, &z, cols, options, method).unwrap();
+        let bits = |s: &surfscan::nurbs::NurbsSurface| -> Vec<u64> {
+            s.knots_u()
+                .iter()
+                .chain(s.knots_v())
+                .copied()
+                .chain(s.poles().iter().flatten().copied())
+                .map(f64::to_bits)
+                .collect()
+        };
+        assert_eq!(
+            bits(&paper.surface),
+            bits(&ours.surface),
+            "case {case}: {rows}x{cols}"
+        );
+        assert_eq!(paper.params_u, ours.params_u);
+        assert_eq!(paper.params_v, ours.params_v);
+    }
+}
