@@ -475,6 +475,17 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let input = if args.input.is_dir() {
         read_scan(&args)?
     } else {
+        // Arguments first (a bad value is a usage error whatever the file), then the file
+        // itself, then what a grid CSV needs: a missing file is never reported as a
+        // missing pitch.
+        for (name, v) in [("--pitch-x", args.pitch_x), ("--pitch-y", args.pitch_y)] {
+            if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
+                return Err(CliError::new(
+                    Exit::Usage,
+                    format!("{name} {v} mm must be a positive number of millimetres"),
+                ));
+            }
+        }
         check_input_file(&args.input)?;
         read_csv(&args)?
     };
