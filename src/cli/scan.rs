@@ -179,9 +179,20 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
             if let Some(e) = &outputs.characterisation_error {
                 println!("  characterisation failed: {e}; the report holds the fit and the instrument's results");
             }
+            match std::fs::read(&outputs.report)
+                .ok()
+                .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+            {
+                Some(report) => {
+                    for (k, v) in result_summary(&report) {
+                        println!("  {k:<8} {v}");
+                    }
+                }
+                None => println!("  (the report cannot be read back for a summary)"),
+            }
             println!(
-                "  largest residual at the data points {:.3e} mm",
-                outputs.max_residual_mm
+                "  fit      passes through every measured point (largest residual {} mm)",
+                crate::numfmt::sig(outputs.max_residual_mm, 2)
             );
             Ok(())
         }
@@ -211,6 +222,76 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
             };
             Err(CliError::new(exit, msg))
         }
+    }
+}
+
+/// The result of a characterised scan in a few lines, from its `report.json`: lines
+/// characterised (of those planned), the range and spread of Ra, Sa of the model and of the
+/// measured grid, and the model's verdict where the report carries one.
+pub fn result_summary(report: &serde_json::Value) -> Vec<(&'static str, String)> {
+    use crate::numfmt::{fmt, Quantity::HeightUm};
+    let mut out = Vec::new();
+    let ra: Vec<f64> = report["lines"]
+        .as_array()
+        .map(|l| l.iter().filter_map(|l| l["Ra_um"].as_f64()).collect())
+        .unwrap_or_default();
+    let planned = report["scan"]["lines_planned"]
+        .as_u64()
+        .map(|n| format!(" of {n} planned"))
+        .unwrap_or_default();
+    out.push(("lines", format!("{}{planned} characterised", ra.len())));
+    if !ra.is_empty() {
+        let n = ra.len() as f64;
+        let (lo, hi) = ra
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(*v), b.max(*v))
+            });
+        let mean = ra.iter().sum::<f64>() / n;
+        let sd = if ra.len() > 1 {
+            (ra.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (n - 1.0)).sqrt()
+        } else {
+            0.0
+        };
+        out.push((
+            "Ra",
+            format!(
+                "{} … {} µm (mean {} µm, s.d. {} µm)",
+                fmt(lo, HeightUm),
+                fmt(hi, HeightUm),
+                fmt(mean, HeightUm),
+                fmt(sd, HeightUm)
+            ),
+        ));
+    }
+    let sa = [("model", "surface"), ("measured grid", "surface_grid")]
+        .iter()
+        .filter_map(|(name, key)| {
+            report[*key]["Sa_um"]
+                .as_f64()
+                .map(|v| format!("{} µm ({name})", fmt(v, HeightUm)))
+        })
+        .collect::<Vec<_>>();
+    if !sa.is_empty() {
+        out.push(("Sa", sa.join(", ")));
+    }
+    if let Some(v) = find_verdict(&report["model_vs_measured"]) {
+        out.push(("model", v));
+    }
+    out
+}
+
+/// The first non-empty `verdict` string anywhere below `v`.
+fn find_verdict(v: &serde_json::Value) -> Option<String> {
+    match v {
+        serde_json::Value::Object(m) => m
+            .get("verdict")
+            .and_then(|s| s.as_str())
+            .filter(|s| !s.is_empty())
+            .map(str::to_owned)
+            .or_else(|| m.values().find_map(find_verdict)),
+        serde_json::Value::Array(a) => a.iter().find_map(find_verdict),
+        _ => None,
     }
 }
 
@@ -360,6 +441,36 @@ mod tests {
         s.eta_s = Some(750.0);
         s.last_ra_um = Some(0.452_149_8);
         s
+    }
+
+    #[test]
+    fn the_result_summary_gives_lines_ra_sa_and_the_verdict() {
+        let report = serde_json::json!({
+            "lines": [{"Ra_um": 0.41234}, {"Ra_um": 0.5}, {"Ra_um": 0.45}],
+            "scan": {"lines_planned": 31},
+            "surface": {"Sa_um": 0.4444444},
+            "surface_grid": {"Sa_um": 0.43},
+            "model_vs_measured": {"between_lines": {"verdict": "supported by the data"}},
+        });
+        let s = result_summary(&report);
+        assert_eq!(s[0], ("lines", "3 of 31 planned characterised".to_string()));
+        assert_eq!(
+            s[1],
+            (
+                "Ra",
+                "0.4123 … 0.5000 µm (mean 0.4541 µm, s.d. 0.04397 µm)".to_string()
+            )
+        );
+        assert_eq!(
+            s[2],
+            (
+                "Sa",
+                "0.4444 µm (model), 0.4300 µm (measured grid)".to_string()
+            )
+        );
+        assert_eq!(s[3], ("model", "supported by the data".to_string()));
+        // Nothing characterised: only the count.
+        assert_eq!(result_summary(&serde_json::json!({})).len(), 1);
     }
 
     #[test]

@@ -37,6 +37,19 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
         stdout.contains(&dir.join("surface.igs").display().to_string()),
         "{stdout}"
     );
+    // The end of the scan says what came out, not only the residual at the data points.
+    assert!(
+        stdout.contains("  lines    31 of 31 planned characterised\n"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("  Ra       ") && stdout.contains(" µm (mean "),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("  Sa       ") && stdout.contains("(model)"),
+        "{stdout}"
+    );
 
     let store = ScanStore::open(dir, Arc::new(NoFaults)).unwrap();
     let lines = store.load_all().unwrap();
