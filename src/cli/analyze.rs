@@ -265,7 +265,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
         let rmr = rmr_table(&a);
         let report = Report {
-            software: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
+            software: crate::build_info::software(),
             input: args.input.display().to_string(),
             kind: "profile",
             recipe: a.recipe,
@@ -457,10 +457,6 @@ fn run_x3p(args: &Args, bytes: &[u8], out: &Path) -> Result<(), CliError> {
     Ok(())
 }
 
-fn fmt_opt(v: Option<f64>) -> String {
-    v.map(|v| format!("{v}")).unwrap_or_default()
-}
-
 fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
     let io = |p: &Path, e: std::io::Error| {
         CliError::new(Exit::Io, format!("cannot write {}: {e}", p.display()))
@@ -471,35 +467,39 @@ fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
     let path = out.join("report.json");
     crate::atomic::write_atomically(&path, |w| std::io::Write::write_all(w, json.as_bytes()))
         .map_err(|e| io(&path, e))?;
+    // As a scan's summary.csv: 1-based line, values with the digits of their quantity.
+    use crate::numfmt::{fmt as f, fmt_opt as fo, Quantity::*};
     let mut csv = String::from(
-        "index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um,Rp_um,Rv_um,Rt_um,Rz1max_um,Rsk,Rku,Rdq,RSm_um,Rk_um,Rpk_um,Rvk_um,Mr1_pct,Mr2_pct,A1,A2\n",
+        "line,index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um,Rp_um,Rv_um,Rt_um,Rz1max_um,Rsk,Rku,Rdq,RSm_um,Rk_um,Rpk_um,Rvk_um,Mr1_pct,Mr2_pct,A1_um_pct,A2_um_pct\n",
     );
     for l in &report.lines {
         let p = &l.params;
-        csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
-            l.index,
-            l.y_mm,
-            p.ra_um,
-            p.rq_um,
-            p.rz_um,
-            fmt_opt(p.rzjis_um),
-            p.rp_um,
-            p.rv_um,
-            p.rt_um,
-            p.rz1max_um,
-            p.rsk,
-            p.rku,
-            p.rdq,
-            fmt_opt(p.rsm_um),
-            p.rk_um,
-            p.rpk_um,
-            p.rvk_um,
-            p.mr1_pct,
-            p.mr2_pct,
-            p.a1_um_pct,
-            p.a2_um_pct
-        ));
+        let row = [
+            (l.index + 1).to_string(),
+            format!("{:04}", l.index),
+            f(l.y_mm, PositionMm),
+            f(p.ra_um, HeightUm),
+            f(p.rq_um, HeightUm),
+            f(p.rz_um, HeightUm),
+            fo(p.rzjis_um, HeightUm),
+            f(p.rp_um, HeightUm),
+            f(p.rv_um, HeightUm),
+            f(p.rt_um, HeightUm),
+            f(p.rz1max_um, HeightUm),
+            f(p.rsk, Ratio),
+            f(p.rku, Ratio),
+            f(p.rdq, Ratio),
+            fo(p.rsm_um, HeightUm),
+            f(p.rk_um, HeightUm),
+            f(p.rpk_um, HeightUm),
+            f(p.rvk_um, HeightUm),
+            f(p.mr1_pct, Percent),
+            f(p.mr2_pct, Percent),
+            f(p.a1_um_pct, Area),
+            f(p.a2_um_pct, Area),
+        ];
+        csv.push_str(&row.join(","));
+        csv.push('\n');
     }
     let path = out.join("summary.csv");
     crate::atomic::write_atomically(&path, |w| std::io::Write::write_all(w, csv.as_bytes()))

@@ -108,7 +108,7 @@ pub fn run_settings(
         for w in &out.warnings {
             tracing::warn!("characterisation: {w}");
         }
-        let mut files = vec![out.summary_csv];
+        let mut files = vec![out.report_html, out.summary_csv];
         files.extend(out.plots);
         files.extend(out.measured_x3p);
         files.extend(out.model_x3p);
@@ -173,8 +173,20 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
                 println!("  surface  {}", p.display());
             }
             println!("  report   {}", outputs.report.display());
-            for p in &outputs.files {
+            // The report for people first; the per-line Rk plots as one entry.
+            let (rk, files): (Vec<&PathBuf>, Vec<&PathBuf>) = outputs
+                .files
+                .iter()
+                .partition(|p| p.parent().and_then(|d| d.file_name()) == Some("rk".as_ref()));
+            for p in files {
                 println!("  file     {}", p.display());
+            }
+            if let Some(dir) = rk.first().and_then(|p| p.parent()) {
+                println!(
+                    "  file     {}/ ({} Rk construction plots, one PNG and SVG per line)",
+                    dir.display(),
+                    rk.len()
+                );
             }
             if let Some(e) = &outputs.characterisation_error {
                 println!("  characterisation failed: {e}; the report holds the fit and the instrument's results");
@@ -225,74 +237,10 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
     }
 }
 
-/// The result of a characterised scan in a few lines, from its `report.json`: lines
-/// characterised (of those planned), the range and spread of Ra, Sa of the model and of the
-/// measured grid, and the model's verdict where the report carries one.
+/// The result of a characterised scan in a few lines, from its `report.json` (see
+/// [`crate::report::html::result_summary`]).
 pub fn result_summary(report: &serde_json::Value) -> Vec<(&'static str, String)> {
-    use crate::numfmt::{fmt, Quantity::HeightUm};
-    let mut out = Vec::new();
-    let ra: Vec<f64> = report["lines"]
-        .as_array()
-        .map(|l| l.iter().filter_map(|l| l["Ra_um"].as_f64()).collect())
-        .unwrap_or_default();
-    let planned = report["scan"]["lines_planned"]
-        .as_u64()
-        .map(|n| format!(" of {n} planned"))
-        .unwrap_or_default();
-    out.push(("lines", format!("{}{planned} characterised", ra.len())));
-    if !ra.is_empty() {
-        let n = ra.len() as f64;
-        let (lo, hi) = ra
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                (a.min(*v), b.max(*v))
-            });
-        let mean = ra.iter().sum::<f64>() / n;
-        let sd = if ra.len() > 1 {
-            (ra.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (n - 1.0)).sqrt()
-        } else {
-            0.0
-        };
-        out.push((
-            "Ra",
-            format!(
-                "{} … {} µm (mean {} µm, s.d. {} µm)",
-                fmt(lo, HeightUm),
-                fmt(hi, HeightUm),
-                fmt(mean, HeightUm),
-                fmt(sd, HeightUm)
-            ),
-        ));
-    }
-    let sa = [("model", "surface"), ("measured grid", "surface_grid")]
-        .iter()
-        .filter_map(|(name, key)| {
-            report[*key]["Sa_um"]
-                .as_f64()
-                .map(|v| format!("{} µm ({name})", fmt(v, HeightUm)))
-        })
-        .collect::<Vec<_>>();
-    if !sa.is_empty() {
-        out.push(("Sa", sa.join(", ")));
-    }
-    if let Some(v) = find_verdict(&report["model_vs_measured"]) {
-        out.push(("model", v));
-    }
-    out
-}
-
-/// The first non-empty `verdict` string anywhere below `v`.
-fn find_verdict(v: &serde_json::Value) -> Option<String> {
-    match v {
-        serde_json::Value::Object(m) => m
-            .get("verdict")
-            .and_then(|s| s.as_str())
-            .filter(|s| !s.is_empty())
-            .map(str::to_owned)
-            .or_else(|| m.values().find_map(find_verdict)),
-        serde_json::Value::Array(a) => a.iter().find_map(find_verdict),
-        _ => None,
-    }
+    crate::report::html::result_summary(report)
 }
 
 /// Refuses when a daemon answers on the configured control socket: it holds the ports.
