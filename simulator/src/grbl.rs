@@ -140,6 +140,8 @@ pub struct StageShared {
     /// Moves accepted and started so far (GRBL jogs, Zaber `move abs`/`move rel`; homing
     /// cycles are not counted).
     pub moves_started: AtomicU64,
+    /// Homing cycles started so far (GRBL `$H`, Zaber `home`).
+    pub homing_cycles: AtomicU64,
     faults: Mutex<VecDeque<StageFault>>,
     /// Mirrors the true position for the simulated instrument's profile selection.
     y: OnceLock<YPosition>,
@@ -191,6 +193,16 @@ impl StageShared {
     /// Records that a move was accepted and started.
     pub fn note_move_started(&self) {
         self.moves_started.fetch_add(1, Ordering::SeqCst);
+    }
+
+    /// Records that a homing cycle started.
+    pub fn note_homing_started(&self) {
+        self.homing_cycles.fetch_add(1, Ordering::SeqCst);
+    }
+
+    /// Homing cycles started so far.
+    pub fn homing_cycles(&self) -> u64 {
+        self.homing_cycles.load(Ordering::SeqCst)
     }
 
     /// Moves accepted and started so far (homing cycles are not counted).

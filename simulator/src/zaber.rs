@@ -158,6 +158,7 @@ impl Dev {
                 (true, f)
             }
             ["home"] if axis <= 1 => {
+                self.shared.note_homing_started();
                 self.stalled = false;
                 self.interrupted = false;
                 // Retract to the home sensor, back off, reset the position.

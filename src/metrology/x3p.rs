@@ -337,11 +337,13 @@ fn entries(zip: &[u8]) -> Result<Vec<Entry>, MetrologyError> {
         ));
     }
     // The end-of-central-directory record: the last "PK\x05\x06" (a comment may follow it).
-    let eocd = (0..zip.len().saturating_sub(21))
+    let Some(eocd) = (0..zip.len().saturating_sub(21))
         .rev()
         .take(65_557)
         .find(|&i| u32_at(zip, i) == Some(0x0605_4b50))
-        .ok_or_else(|| bad("the zip archive has no central directory (truncated file?)"))?;
+    else {
+        return local_entries(zip);
+    };
     let count = u16_at(zip, eocd + 10).ok_or_else(|| bad("zip directory"))?;
     let mut p = u32_at(zip, eocd + 16).ok_or_else(|| bad("zip directory"))? as usize;
     let mut out = Vec::with_capacity(count);
@@ -374,27 +376,81 @@ fn entries(zip: &[u8]) -> Result<Vec<Entry>, MetrologyError> {
                 "{name}: the archive ends inside it (truncated file?)"
             ))
         })?;
-        let data = match method {
-            0 => raw.to_vec(),
-            8 => miniz_oxide::inflate::decompress_to_vec_with_limit(
-                raw,
-                usize_.clamp(1, MAX_ENTRY_BYTES),
-            )
-            .map_err(|e| bad(format!("{name}: cannot inflate ({e:?})")))?,
-            m => {
-                return Err(bad(format!(
-                    "{name}: zip compression method {m} (only stored and deflate are read)"
-                )))
-            }
-        };
-        if data.len() != usize_ || crc32(&data) != crc {
-            return Err(bad(format!(
-                "{name}: CRC-32 or size does not match (damaged file)"
-            )));
-        }
+        let data = inflate(&name, method, raw, usize_, crc)?;
         out.push(Entry { name, data });
     }
     Ok(out)
+}
+
+/// The entries of an archive without a central directory (cut short, or written by a
+/// streaming tool), from its local headers in order; an entry whose sizes are deferred to a
+/// data descriptor cannot be found this way.
+fn local_entries(zip: &[u8]) -> Result<Vec<Entry>, MetrologyError> {
+    let mut out = Vec::new();
+    let mut p = 0usize;
+    while u32_at(zip, p) == Some(0x0403_4b50) {
+        let field = |off: usize| u16_at(zip, p + off).ok_or_else(|| bad("zip header"));
+        let (flags, method) = (field(6)?, field(8)?);
+        let crc = u32_at(zip, p + 14).ok_or_else(|| bad("zip header"))?;
+        let csize = u32_at(zip, p + 18).ok_or_else(|| bad("zip header"))? as usize;
+        let usize_ = u32_at(zip, p + 22).ok_or_else(|| bad("zip header"))? as usize;
+        let (name_len, extra_len) = (field(26)?, field(28)?);
+        let name = zip
+            .get(p + 30..p + 30 + name_len)
+            .ok_or_else(|| bad("zip entry name"))?;
+        let name = String::from_utf8_lossy(name).into_owned();
+        if flags & 0x08 != 0 {
+            return Err(bad(format!(
+                "{name}: its sizes follow its data and the archive has no central directory (truncated file?)"
+            )));
+        }
+        let start = p + 30 + name_len + extra_len;
+        let raw = zip.get(start..start + csize).ok_or_else(|| {
+            bad(format!(
+                "{name}: the archive ends inside it (truncated file?)"
+            ))
+        })?;
+        out.push(Entry {
+            data: inflate(&name, method, raw, usize_, crc)?,
+            name,
+        });
+        p = start + csize;
+    }
+    if out.is_empty() {
+        return Err(bad(
+            "the zip archive has no readable entry (truncated file?)",
+        ));
+    }
+    Ok(out)
+}
+
+/// The bytes of an entry stored (method 0) or deflated (8), checked against its size and
+/// CRC-32.
+fn inflate(
+    name: &str,
+    method: usize,
+    raw: &[u8],
+    size: usize,
+    crc: u32,
+) -> Result<Vec<u8>, MetrologyError> {
+    let data = match method {
+        0 => raw.to_vec(),
+        8 => {
+            miniz_oxide::inflate::decompress_to_vec_with_limit(raw, size.clamp(1, MAX_ENTRY_BYTES))
+                .map_err(|e| bad(format!("{name}: cannot inflate ({e:?})")))?
+        }
+        m => {
+            return Err(bad(format!(
+                "{name}: zip compression method {m} (only stored and deflate are read)"
+            )))
+        }
+    };
+    if data.len() != size || crc32(&data) != crc {
+        return Err(bad(format!(
+            "{name}: CRC-32 or size does not match (damaged file)"
+        )));
+    }
+    Ok(data)
 }
 
 /// The first descendant of `node` whose local name (without namespace) is `name`.
@@ -474,13 +530,12 @@ pub fn read_x3p(zip: &[u8]) -> Result<X3pGrid, MetrologyError> {
     let z_type = text_at(cz, &["DataType"]).unwrap_or("D").to_string();
     let z_inc = number(cz, &["Increment"])?.unwrap_or(1.0);
     let z_off = number(cz, &["Offset"])?.unwrap_or(0.0);
+    // xsd:unsignedInt in ISO 5436-2; a size read as a real (1e300) would overflow rows × cols.
     let size = |n: &str| -> Result<usize, MetrologyError> {
-        let v = number(r3, &["MatrixDimension", n])?
+        let t = text_at(r3, &["MatrixDimension", n])
             .ok_or_else(|| bad(format!("Record3/MatrixDimension has no {n}")))?;
-        if v < 0.0 || v.fract() != 0.0 {
-            return Err(bad(format!("MatrixDimension/{n} is {v}")));
-        }
-        Ok(v as usize)
+        t.parse::<usize>()
+            .map_err(|_| bad(format!("MatrixDimension/{n} is {t:?}, not a whole number")))
     };
     let (cols, rows) = (size("SizeX")?, size("SizeY")?);
     if size("SizeZ")? != 1 {
@@ -490,7 +545,8 @@ pub fn read_x3p(zip: &[u8]) -> Result<X3pGrid, MetrologyError> {
         .checked_mul(cols)
         .filter(|&n| n > 0)
         .ok_or_else(|| bad(format!("grid of {rows} × {cols} points")))?;
-    let mut raw: Vec<f64> = Vec::with_capacity(n);
+    // Nothing is allocated from the sizes main.xml claims before the data confirm them.
+    let mut raw: Vec<f64> = Vec::new();
     let mut valid: Option<Vec<bool>> = None;
     if let Some(link) = child(r3, "DataLink") {
         let name = text_at(link, &["PointDataLink"])
@@ -509,11 +565,11 @@ pub fn read_x3p(zip: &[u8]) -> Result<X3pGrid, MetrologyError> {
             "D" => 8,
             t => return Err(bad(format!("CZ DataType {t:?} (expected I, L, F or D)"))),
         };
-        if data.len() != n * width {
+        if n.checked_mul(width) != Some(data.len()) {
             return Err(bad(format!(
                 "{name} holds {} bytes, but {rows} × {cols} points of type {z_type} need {}",
                 data.len(),
-                n * width
+                n.saturating_mul(width)
             )));
         }
         raw.extend(data.chunks_exact(width).map(|b| match b {

@@ -883,7 +883,7 @@ pub fn characterise_grid(
             )
         );
         plots.extend(
-            plot_profile_overlay(out, &measured_pts, &model_pts, &title, &caption)
+            plot_profile_overlay(out, &measured_pts, &model_pts, &[], &title, &caption)
                 .map_err(plot_err)?,
         );
     }

@@ -61,8 +61,6 @@ pub struct PolicyConfig {
     pub move_timeout: Duration,
     /// Bound on homing.
     pub home_timeout: Duration,
-    /// Home in `connect`.
-    pub home_on_start: bool,
     /// Accept inexact targets with a warning.
     pub allow_inexact_step: bool,
     /// Scan direction.
@@ -224,9 +222,9 @@ impl<S: Stage> YAxis for MotionPolicy<S> {
         self.trusted = st.position_trusted;
         self.position_units = Some(st.position_units);
         self.last_dir = None;
-        if self.cfg.home_on_start {
-            self.home().await?;
-        }
+        // Connecting never homes: whoever drives the scan decides when (once at start with
+        // home-on-start, or because the position is not trusted), so a cycle is never run
+        // twice in a row.
         Ok(StageReport {
             identity,
             position_trusted: self.trusted,

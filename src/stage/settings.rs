@@ -201,7 +201,6 @@ impl StageSettings {
             max_attempts: self.max_move_attempts,
             move_timeout,
             home_timeout: move_timeout + Duration::from_secs(60),
-            home_on_start: self.home_on_start,
             allow_inexact_step: self.allow_inexact_step,
             direction: ScanDirection::Positive,
         })

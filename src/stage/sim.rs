@@ -33,6 +33,8 @@ pub struct SimStage {
     pub referenced: bool,
     /// Every `begin_move_abs` target, in order.
     pub moves: Vec<i64>,
+    /// Homing cycles run.
+    pub homes: u32,
     /// Faults applied to the next moves, in order.
     pub faults: VecDeque<SimFault>,
     pending: Option<SimFault>,
@@ -75,6 +77,7 @@ impl Stage for SimStage {
     }
 
     async fn home(&mut self, _timeout: Duration) -> Result<StageStatus, StageError> {
+        self.homes += 1;
         self.set_motor(-1000);
         self.set_motor(0);
         self.referenced = true;
@@ -135,7 +138,6 @@ mod tests {
             max_attempts: 3,
             move_timeout: Duration::from_secs(1),
             home_timeout: Duration::from_secs(1),
-            home_on_start: false,
             allow_inexact_step: false,
             direction: dir,
         }
@@ -169,15 +171,22 @@ mod tests {
     }
 
     #[tokio::test]
-    async fn home_on_start_homes_an_unreferenced_stage_in_connect() {
-        let mut c = cfg(ScanDirection::Positive);
-        c.home_on_start = true;
+    async fn connect_reports_an_unreferenced_stage_without_homing_it() {
         let mut s = SimStage::new(777, 0);
         s.referenced = false;
-        let mut p = MotionPolicy::new(s, c);
+        let mut p = MotionPolicy::new(s, cfg(ScanDirection::Positive));
         let r = p.connect().await.unwrap();
-        assert!(r.position_trusted);
-        assert_eq!(r.position, Nm(0));
+        assert!(!r.position_trusted);
+        assert_eq!(r.position, Nm(777 * 2500));
+        assert_eq!(p.stage().homes, 0, "connecting must not home");
+        assert!(matches!(
+            p.move_to(Nm(0)).await,
+            Err(StageError::PositionLost { .. })
+        ));
+        p.home().await.unwrap();
+        assert_eq!(p.stage().homes, 1);
+        assert!(p.position_trusted());
+        assert_eq!(p.stage().motor_units, 0);
     }
 
     #[tokio::test]

@@ -456,6 +456,7 @@ impl Machine {
     // --- homing -------------------------------------------------------------------------
 
     fn begin_homing(&mut self, t: f64) {
+        self.shared.note_homing_started();
         self.state = State::Home;
         self.homing = Some(Homing {
             phase: HomePhase::Seek,
