@@ -368,6 +368,27 @@ impl FieldPacker {
         self.line_start = self.data.len();
     }
 
+    /// Bytes held: the complete records not yet drained and the one being filled.
+    pub fn bytes(&self) -> usize {
+        self.data.len()
+    }
+
+    /// Pads the record being filled to the full width, so that what follows starts a new one.
+    pub fn pad_last(&mut self) {
+        if self.data.len() > self.line_start {
+            self.pad_line();
+        }
+    }
+
+    /// Hands the complete records (a multiple of the width) to `f` and keeps only the record
+    /// being filled, so a long entity can be written as it is packed.
+    pub fn drain_records<R>(&mut self, f: impl FnOnce(&[u8]) -> R) -> R {
+        let r = f(&self.data[..self.line_start]);
+        self.data.drain(..self.line_start);
+        self.line_start = 0;
+        r
+    }
+
     fn pad_line(&mut self) {
         let end = self.line_start + self.width;
         self.data.resize(end, b' ');

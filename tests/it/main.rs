@@ -11,6 +11,7 @@ mod control_server;
 mod daemon_e2e;
 mod demo_cli;
 mod fit_geomdl;
+mod fit_scipy;
 mod fuzz_parsers;
 mod iges_fit_cli;
 mod iges_occt;

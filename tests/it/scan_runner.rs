@@ -314,9 +314,13 @@ fn new_scan() -> ScanRequest {
 
 async fn request(tx: &mpsc::Sender<OperatorRequest>, command: OperatorCommand) -> String {
     let (reply, rx) = oneshot::channel();
-    tx.send(OperatorRequest { command, reply })
-        .await
-        .expect("runner listens");
+    tx.send(OperatorRequest {
+        command,
+        peer: surfscan::scan::command::Peer::this_process(),
+        reply,
+    })
+    .await
+    .expect("runner listens");
     rx.await.expect("runner answers").expect("command accepted")
 }
 
