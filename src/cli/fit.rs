@@ -123,7 +123,10 @@ pub struct Grid {
 /// Parses the grid CSV: no header, `,` separated, one row per line; blank lines at the end
 /// are ignored. Errors name the 1-based line and column and the offending content.
 pub fn parse_grid(text: &str) -> Result<Grid, String> {
-    let mut heights_um = Vec::new();
+    // Room for every field at once (one per ',' plus one per line), so a large grid is not
+    // copied while it grows.
+    let fields = text.bytes().filter(|&b| b == b',' || b == b'\n').count() + 1;
+    let mut heights_um = Vec::with_capacity(fields);
     let mut cols = 0usize;
     let mut rows = 0usize;
     let lines: Vec<&str> = text.lines().collect();

@@ -4,7 +4,8 @@
 //! resumable, as SIGTERM does for the daemon.
 //!
 //! Exit status: 0 success, 1 the scan failed or was aborted, 2 usage, 69 a device is
-//! unavailable (or the daemon holds the ports), 74 I/O error, 78 bad configuration.
+//! unavailable (or another `scan` or the daemon holds the station: its pid and scan are
+//! named), 74 I/O error, 78 bad configuration.
 //!
 //! Layer 5 (composition): config, station, runner, signals, terminal; turns the configuration
 //! into the runner's typed settings.
@@ -20,6 +21,7 @@ use crate::scan::settings::{Backoff, RunSettings};
 use crate::scan::station::SerialStation;
 use crate::scan::status::{State, Status};
 use crate::scan::testhooks::TestHooks;
+use crate::station_lock::{self, LockError, StationLock};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -331,9 +333,55 @@ pub async fn run_foreground(
     settings: &RunSettings,
     request: ScanRequest,
 ) -> Outcome {
+    run_foreground_locked(station, settings, request, None).await
+}
+
+/// Takes the station's lock for the life of the process (exit 69 when another process holds
+/// the output directory or a device, naming it), then sweeps the leftovers of interrupted
+/// writes from the output directory.
+pub fn lock_station(config: &Config, command: &str) -> Result<Arc<StationLock>, CliError> {
+    let devices = [
+        Path::new(&config.instrument.port),
+        Path::new(&config.stage.port),
+    ];
+    let lock = StationLock::acquire(
+        command,
+        &config.output.dir,
+        &devices,
+        Path::new(station_lock::DEVICE_LOCK_DIR),
+    )
+    .map_err(|e| match e {
+        LockError::Held { .. } => CliError::new(Exit::Unavailable, e.to_string()),
+        LockError::Io { .. } => CliError::new(Exit::Io, e.to_string()),
+    })?;
+    lock.sweep_leftovers();
+    Ok(Arc::new(lock))
+}
+
+/// Keeps the scan id in the station's lock up to date from the status, until it closes.
+pub async fn record_scan_in_lock(lock: Arc<StationLock>, mut status: watch::Receiver<Status>) {
+    loop {
+        let id = status.borrow_and_update().scan_id.clone();
+        lock.set_scan(id.as_deref());
+        if status.changed().await.is_err() {
+            break;
+        }
+    }
+}
+
+/// [`run_foreground`], recording the scan in the station's `lock` when given.
+pub async fn run_foreground_locked(
+    station: &mut SerialStation,
+    settings: &RunSettings,
+    request: ScanRequest,
+    lock: Option<Arc<StationLock>>,
+) -> Outcome {
     let (_cmd_tx, cmd_rx) = mpsc::channel(8);
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let (status_tx, status_rx) = watch::channel(Status::idle());
+    if let Some(lock) = lock {
+        tokio::spawn(record_scan_in_lock(lock, status_rx.clone()));
+    }
     let bar = tokio::spawn(progress(status_rx));
     let signals = tokio::spawn(async move {
         use tokio::signal::unix::{signal, SignalKind};
@@ -361,6 +409,7 @@ pub async fn run_foreground(
 /// Runs `surfscan scan`.
 pub fn run(args: Args) -> Result<(), CliError> {
     let (config, config_hash) = load_config(&args.config)?;
+    let lock = lock_station(&config, "scan")?;
     refuse_if_daemon(&config)?;
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
     let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
@@ -371,7 +420,12 @@ pub fn run(args: Args) -> Result<(), CliError> {
         .enable_all()
         .build()
         .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
-    let outcome = rt.block_on(run_foreground(&mut station, &settings, request));
+    let outcome = rt.block_on(run_foreground_locked(
+        &mut station,
+        &settings,
+        request,
+        Some(lock),
+    ));
     outcome_result(&outcome)
 }
 

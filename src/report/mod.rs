@@ -1279,6 +1279,7 @@ mod tests {
                 kind,
                 conditions: conditions.clone(),
                 results: Vec::new(),
+                readout_warnings: Vec::new(),
                 started_at: t,
                 finished_at: t,
                 attempt: 1,
