@@ -356,6 +356,7 @@ fn write_scan(parent: &Path, kind: ProfileKind, cols: usize) -> PathBuf {
             kind,
             conditions: conditions.clone(),
             results: vec![],
+            readout_warnings: Vec::new(),
             started_at: start,
             finished_at: start,
             attempt: 1,

@@ -337,14 +337,18 @@ impl IncrementalFitter {
         let mut z = Vec::with_capacity(self.z_mm.len());
         advise_huge_pages(&z);
         z.extend_from_slice(&self.z_mm);
-        self.solve(z)
+        let params = self.averaged_params();
+        self.solve(z, params)
     }
 
     /// The surface through all lines.
     pub fn finish(mut self) -> Result<FitResult, FitError> {
         self.check_ready()?;
         let z = std::mem::take(&mut self.z_mm);
-        self.solve(z)
+        let params = self.averaged_params();
+        // The column chords are only needed for v̄: freed before the net is allocated.
+        self.cum_v = Vec::new();
+        self.solve(z, params)
     }
 
     fn check_ready(&self) -> Result<(), FitError> {

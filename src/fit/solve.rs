@@ -14,21 +14,32 @@ use std::time::Instant;
 impl IncrementalFitter {
     /// Averages, knots, factorisations and solves; `z` is the row-major height grid in mm and
     /// becomes the z coordinates of the poles.
-    pub(super) fn solve(&self, mut z: Vec<f64>) -> Result<FitResult, FitError> {
+    /// The averaged parameters ū and v̄ from the running sums, and the seconds it took.
+    pub(super) fn averaged_params(&self) -> (Vec<f64>, Vec<f64>, f64) {
+        let (rows, cols) = (self.lines(), self.cols);
+        let t = Instant::now();
+        let params_u = average_params_u(&self.sum_u, rows);
+        let params_v = simd::wide(|| average_params_v(&self.cum_v, rows, cols));
+        (params_u, params_v, secs(t))
+    }
+
+    /// Knots, factorisations and solves from the averaged parameters (see
+    /// [`IncrementalFitter::averaged_params`], which needs the column chords; the solve does
+    /// not, so [`IncrementalFitter::finish`] frees them first).
+    pub(super) fn solve(
+        &self,
+        mut z: Vec<f64>,
+        (params_u, params_v, params_s): (Vec<f64>, Vec<f64>, f64),
+    ) -> Result<FitResult, FitError> {
         let FitOptions {
             degree_u: p,
             degree_v: q,
         } = self.options;
         let (rows, cols) = (self.lines(), self.cols);
         let mut timings = FitTimings {
-            params_s: self.params_s,
+            params_s: self.params_s + params_s,
             ..FitTimings::default()
         };
-
-        let t = Instant::now();
-        let params_u = average_params_u(&self.sum_u, rows);
-        let params_v = simd::wide(|| average_params_v(&self.cum_v, rows, cols));
-        timings.params_s += secs(t);
 
         let t = Instant::now();
         let knots_u = averaged_knots(&params_u, p);

@@ -260,12 +260,7 @@ fn stream_entity_128(
     for (n, part) in poles.chunks(chunk).enumerate() {
         let mut q = FieldPacker::with_capacity(64, BLOCK_BYTES + 4096);
         for_each_piece_in_order(part, n * chunk, patch, workers, &mut |t: &Tokens| {
-            let mut at = 0usize;
-            for &len in &t.lens {
-                let end = at + usize::from(len);
-                q.push(&t.text[at..end], b',');
-                at = end;
-            }
+            q.push_tokens(&t.text, &t.lens, b',');
             if q.bytes() >= BLOCK_BYTES {
                 hand_on(&mut q, false)?;
             }

@@ -143,6 +143,7 @@ impl Instrument for FakeInstrument {
             results: Vec::new(),
             pitch_source: "config".into(),
             warnings: Vec::new(),
+            readout_warnings: Vec::new(),
         })
     }
 
