@@ -110,7 +110,7 @@ pub fn run_settings(
         for w in &out.warnings {
             tracing::warn!("characterisation: {w}");
         }
-        let mut files = vec![out.summary_csv];
+        let mut files = vec![out.report_html, out.summary_csv];
         files.extend(out.plots);
         files.extend(out.measured_x3p);
         files.extend(out.model_x3p);
@@ -175,15 +175,38 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
                 println!("  surface  {}", p.display());
             }
             println!("  report   {}", outputs.report.display());
-            for p in &outputs.files {
+            // The report for people first; the per-line Rk plots as one entry.
+            let (rk, files): (Vec<&PathBuf>, Vec<&PathBuf>) = outputs
+                .files
+                .iter()
+                .partition(|p| p.parent().and_then(|d| d.file_name()) == Some("rk".as_ref()));
+            for p in files {
                 println!("  file     {}", p.display());
+            }
+            if let Some(dir) = rk.first().and_then(|p| p.parent()) {
+                println!(
+                    "  file     {}/ ({} Rk construction plots, one PNG and SVG per line)",
+                    dir.display(),
+                    rk.len()
+                );
             }
             if let Some(e) = &outputs.characterisation_error {
                 println!("  characterisation failed: {e}; the report holds the fit and the instrument's results");
             }
+            match std::fs::read(&outputs.report)
+                .ok()
+                .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+            {
+                Some(report) => {
+                    for (k, v) in result_summary(&report) {
+                        println!("  {k:<8} {v}");
+                    }
+                }
+                None => println!("  (the report cannot be read back for a summary)"),
+            }
             println!(
-                "  largest residual at the data points {:.3e} mm",
-                outputs.max_residual_mm
+                "  fit      passes through every measured point (largest residual {} mm)",
+                crate::numfmt::sig(outputs.max_residual_mm, 2)
             );
             Ok(())
         }
@@ -214,6 +237,12 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
             Err(CliError::new(exit, msg))
         }
     }
+}
+
+/// The result of a characterised scan in a few lines, from its `report.json` (see
+/// [`crate::report::html::result_summary`]).
+pub fn result_summary(report: &serde_json::Value) -> Vec<(&'static str, String)> {
+    crate::report::html::result_summary(report)
 }
 
 /// Refuses when a daemon answers on the configured control socket: it holds the ports.
@@ -414,6 +443,36 @@ mod tests {
         s.eta_s = Some(750.0);
         s.last_ra_um = Some(0.452_149_8);
         s
+    }
+
+    #[test]
+    fn the_result_summary_gives_lines_ra_sa_and_the_verdict() {
+        let report = serde_json::json!({
+            "lines": [{"Ra_um": 0.41234}, {"Ra_um": 0.5}, {"Ra_um": 0.45}],
+            "scan": {"lines_planned": 31},
+            "surface": {"Sa_um": 0.4444444},
+            "surface_grid": {"Sa_um": 0.43},
+            "model_vs_measured": {"between_lines": {"verdict": "supported by the data"}},
+        });
+        let s = result_summary(&report);
+        assert_eq!(s[0], ("lines", "3 of 31 planned characterised".to_string()));
+        assert_eq!(
+            s[1],
+            (
+                "Ra",
+                "0.4123 … 0.5000 µm (mean 0.4541 µm, s.d. 0.04397 µm)".to_string()
+            )
+        );
+        assert_eq!(
+            s[2],
+            (
+                "Sa",
+                "0.4444 µm (model), 0.4300 µm (measured grid)".to_string()
+            )
+        );
+        assert_eq!(s[3], ("model", "supported by the data".to_string()));
+        // Nothing characterised: only the count.
+        assert_eq!(result_summary(&serde_json::json!({})).len(), 1);
     }
 
     #[test]
