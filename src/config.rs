@@ -198,11 +198,19 @@ pub struct ControlSettings {
     /// Unix socket path (default `/run/surfscan/control.sock`).
     #[serde(default = "d_socket")]
     pub socket: PathBuf,
+    /// Groups (names or numeric ids) whose members may start, pause, resume and abort;
+    /// status and watch stay open to everyone who can open the socket. Default: anyone who
+    /// can open the socket may command.
+    #[serde(default)]
+    pub allowed_groups: Option<Vec<String>>,
 }
 
 impl Default for ControlSettings {
     fn default() -> Self {
-        ControlSettings { socket: d_socket() }
+        ControlSettings {
+            socket: d_socket(),
+            allowed_groups: None,
+        }
     }
 }
 
@@ -422,6 +430,15 @@ impl Config {
                 ))
             }
             _ => {}
+        }
+        if let Some(groups) = &self.control.allowed_groups {
+            if groups.is_empty() || groups.iter().any(|g| g.trim().is_empty()) {
+                return Err(Config::invalid(
+                    path,
+                    "control.allowed-groups",
+                    format!("{groups:?} must name at least one group, none of them empty, e.g. [\"surfscan-operators\"]; remove the key to let everyone who can open the socket command"),
+                ));
+            }
         }
         if let Some(n) = &self.notify {
             if n.command.is_empty() {

@@ -8,7 +8,7 @@
 //! 0. Vocabulary, no I/O: [`units`] (mm, µm, integer nm), [`numfmt`] (numbers written for
 //!    people), [`build_info`] (version and commit), [`profile`] (a traced line with its
 //!    metadata), [`nurbs`] (the surface as a value), [`devices`] (the contracts between the
-//!    scan runner and the drivers).
+//!    scan runner and the drivers), [`numbers`] (decimal numbers in CSV text, read fast).
 //! 1. Pure logic: [`fit`] (the paper's interpolation, incremental), [`iges`] (IGES 5.3
 //!    writer/reader), [`metrology`] (ISO roughness, bearing area curves, areal parameters),
 //!    the codecs inside [`sj210`] and [`stage`].
@@ -37,6 +37,7 @@ pub mod fit;
 pub mod hook;
 pub mod iges;
 pub mod metrology;
+pub mod numbers;
 pub mod numfmt;
 pub mod nurbs;
 pub mod profile;

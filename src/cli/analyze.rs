@@ -90,6 +90,10 @@ fn failed(msg: impl Into<String>) -> CliError {
 }
 
 fn parse_numbers(line: &str) -> Option<Vec<f64>> {
+    let mut fast = Vec::new();
+    if crate::numbers::parse_csv_line(line.as_bytes(), &mut fast).is_some() {
+        return Some(fast);
+    }
     line.split(',')
         .map(|f| f.trim().parse::<f64>().ok())
         .collect::<Option<Vec<f64>>>()

@@ -44,6 +44,19 @@ const IDLE_TICK: Duration = Duration::from_secs(2);
 /// Runs `surfscan daemon`.
 pub fn run(args: Args) -> Result<(), CliError> {
     let (config, config_hash) = load_config(&args.config)?;
+    let control = server::ServerOptions {
+        allowed_groups: match &config.control.allowed_groups {
+            Some(names) => Some(server::resolve_groups(names).map_err(|e| {
+                let path = args.config.display();
+                CliError::new(
+                    Exit::Config,
+                    format!("config {path}: control.allowed-groups: {e}"),
+                )
+            })?),
+            None => None,
+        },
+        ..server::ServerOptions::default()
+    };
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
     let station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
@@ -53,7 +66,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         .enable_all()
         .build()
         .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
-    rt.block_on(daemon(&config, settings, station))
+    rt.block_on(daemon(&config, settings, station, control))
 }
 
 fn presence(present: bool) -> DeviceState {
@@ -68,9 +81,10 @@ async fn daemon(
     config: &Config,
     settings: RunSettings,
     mut station: SerialStation,
+    control: server::ServerOptions,
 ) -> Result<(), CliError> {
     let notifier = Arc::new(Notifier::from_env());
-    let srv = server::bind(&config.control.socket)
+    let srv = server::bind_with_options(&config.control.socket, control)
         .await
         .map_err(|e| CliError::new(Exit::Unavailable, e.to_string()))?;
     let (status_tx, status_rx) = watch::channel(Status::idle());

@@ -85,7 +85,10 @@ pub struct Grid {
 /// Parses the grid CSV: no header, `,` separated, one row per line; blank lines at the end
 /// are ignored. Errors name the 1-based line and column and the offending content.
 pub fn parse_grid(text: &str) -> Result<Grid, String> {
-    let mut heights_um = Vec::new();
+    // Room for every field at once (one per ',' plus one per line), so a large grid is not
+    // copied while it grows.
+    let fields = text.bytes().filter(|&b| b == b',' || b == b'\n').count() + 1;
+    let mut heights_um = Vec::with_capacity(fields);
     let mut cols = 0usize;
     let mut rows = 0usize;
     let lines: Vec<&str> = text.lines().collect();
@@ -94,26 +97,12 @@ pub fn parse_grid(text: &str) -> Result<Grid, String> {
         .rposition(|l| !l.trim().is_empty())
         .map_or(0, |i| i + 1);
     for (li, line) in lines[..last].iter().enumerate() {
-        let mut n = 0usize;
-        for (ci, field) in line.split(',').enumerate() {
-            let f = field.trim();
-            let v: f64 = f.parse().map_err(|_| {
-                format!(
-                    "line {}, column {}: {f:?} is not a number (expected heights in µm, ',' separated, no header)",
-                    li + 1,
-                    ci + 1
-                )
-            })?;
-            if !v.is_finite() {
-                return Err(format!(
-                    "line {}, column {}: {f:?} is not a finite height",
-                    li + 1,
-                    ci + 1
-                ));
-            }
-            heights_um.push(v);
-            n += 1;
-        }
+        // Plain lines of finite numbers take one pass; anything else is read (and its error
+        // worded) field by field below.
+        let n = match crate::numbers::parse_csv_line(line.as_bytes(), &mut heights_um) {
+            Some(n) => n,
+            None => parse_grid_line(li, line, &mut heights_um)?,
+        };
         if rows == 0 {
             cols = n;
         } else if n != cols {
@@ -132,6 +121,31 @@ pub fn parse_grid(text: &str) -> Result<Grid, String> {
         cols,
         heights_um,
     })
+}
+
+/// One grid line field by field with `str::parse`; errors name the 1-based line and column.
+fn parse_grid_line(li: usize, line: &str, heights_um: &mut Vec<f64>) -> Result<usize, String> {
+    let mut n = 0usize;
+    for (ci, field) in line.split(',').enumerate() {
+        let f = field.trim();
+        let v: f64 = f.parse().map_err(|_| {
+            format!(
+                "line {}, column {}: {f:?} is not a number (expected heights in µm, ',' separated, no header)",
+                li + 1,
+                ci + 1
+            )
+        })?;
+        if !v.is_finite() {
+            return Err(format!(
+                "line {}, column {}: {f:?} is not a finite height",
+                li + 1,
+                ci + 1
+            ));
+        }
+        heights_um.push(v);
+        n += 1;
+    }
+    Ok(n)
 }
 
 fn io_err(what: &str, path: &Path, e: impl std::fmt::Display) -> CliError {

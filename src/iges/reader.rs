@@ -47,7 +47,8 @@ fn fields(text: &[u8]) -> Result<Vec<String>, String> {
                 .and_then(|s| s.parse().ok())
                 .ok_or("bad Hollerith count")?;
             let start = digits_end + 1;
-            let end = start + n;
+            // A count near usize::MAX must not wrap around past the end.
+            let end = start.saturating_add(n);
             if end > text.len() {
                 return Err(format!(
                     "Hollerith string of {n} characters runs past the end"

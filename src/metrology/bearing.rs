@@ -38,6 +38,36 @@ pub fn material_ratio_pct(heights: &[f64], level: f64) -> f64 {
     inside / (heights.len() - 1) as f64 * 100.0
 }
 
+/// C(mr): the level at which the material ratio of the piecewise-linear curve through
+/// `heights` (uniform spacing) is `mr_pct`, the inverse of [`material_ratio_pct`] (which falls
+/// continuously from 100 % at the lowest point to 0 % at the highest). C(0) is the highest
+/// point, C(100) the lowest; in between, bisection to 1e-12 of the height range. Where the
+/// curve is flat (a level holding a whole segment) the highest such level is returned.
+pub fn level_at_material_ratio(heights: &[f64], mr_pct: f64) -> f64 {
+    let top = heights.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let bottom = heights.iter().copied().fold(f64::INFINITY, f64::min);
+    if !(top.is_finite() && bottom.is_finite()) || mr_pct <= 0.0 {
+        return top;
+    }
+    if mr_pct >= 100.0 {
+        return bottom;
+    }
+    // material_ratio_pct(level) is non-increasing in level: find its crossing of mr_pct.
+    let (mut lo, mut hi) = (bottom, top);
+    while hi - lo > 1e-12 * (top - bottom).max(f64::MIN_POSITIVE) {
+        let mid = 0.5 * (lo + hi);
+        if material_ratio_pct(heights, mid) >= mr_pct {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        if mid == lo && mid == hi {
+            break;
+        }
+    }
+    lo
+}
+
 /// Material ratio in % of a piecewise-linear curve through points (`xs[i]`, `zs[i]`) with
 /// increasing x (any spacing) at `level`: the x-length at or above `level` over the x range.
 /// Returns 0 when fewer than two points or a zero x range are given.
@@ -257,4 +287,25 @@ pub fn pooled_bearing_curve(
         mean_line_um: 0.0,
         points,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_level_at_a_material_ratio_inverts_the_ratio() {
+        // A ramp from 0 to 1: the ratio at level h is (1 − h) · 100 %, so C(mr) = 1 − mr/100.
+        let ramp: Vec<f64> = (0..=100).map(|i| i as f64 / 100.0).collect();
+        for mr in [0.0, 2.5, 10.0, 25.0, 50.0, 99.0, 100.0] {
+            let c = level_at_material_ratio(&ramp, mr);
+            assert!((c - (1.0 - mr / 100.0)).abs() < 1e-10, "mr {mr}: {c}");
+        }
+        // A flat top holding 20 % of the length: every level up to it has at least 20 %.
+        let mut plateau = vec![1.0; 21];
+        plateau.extend((0..80).map(|i| 1.0 - (i + 1) as f64 / 80.0));
+        let c = level_at_material_ratio(&plateau, 10.0);
+        assert!((c - 1.0).abs() < 1e-10, "{c}");
+        assert!((material_ratio_pct(&plateau, c) - 20.0).abs() < 1e-9);
+    }
 }

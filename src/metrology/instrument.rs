@@ -1,11 +1,32 @@
 //! Our parameters side by side with the values the instrument reported (`RDRES`), with the
-//! difference, so a user can see at a glance where the two agree.
+//! difference and whether it lies within a documented tolerance, so a user can see at a glance
+//! where the two agree.
+//!
+//! **Tolerances** ([`tolerance_for`]): |ours − instrument| ≤ max(rel · |instrument|, abs).
+//! They allow for what legitimately separates our number from the instrument's on the same
+//! trace: the printed resolution of its result (3 decimals), and, for a primary profile we
+//! filter ourselves, the λc filter near the ends (the instrument filters its whole traverse,
+//! run-up and run-out included; the exported evaluation length lacks them, so our mean line
+//! differs within λc/2 of each end). On the instrument's own R profile our heights, Rp/Rv/Rz/
+//! Rt and lr-averaged moments reproduce its values (see the metrology reference notes), so a
+//! value outside its tolerance points at a wrong condition, a read-out error or a different
+//! definition, not at rounding.
+//!
+//! | parameters | rel | abs |
+//! |---|---|---|
+//! | Ra Rq Rp Rv Rz Rt Rz1max RzJIS | 2 % | 0.002 µm |
+//! | Rsk Rku | 5 % | 0.02 |
+//! | RΔq | 3 % | 0.002 |
+//! | RSm Rc RPc (element rules: hysteresis and end elements differ between implementations) | 5 % | 0.5 µm, 0.005 µm, 1 /cm |
+//! | Rk Rpk Rvk Rδc (the instrument's material ratio curve is binned at 1 % of Rt) | 5 % | 0.005 µm |
+//! | Mr1 Mr2 Rmr Rmr(c) | — | 1 percentage point |
 //!
 //! Depends on [`super::params`] and [`crate::profile`].
 
 use super::params::RoughnessParams;
 use crate::profile::InstrumentResult;
 use serde::Serialize;
+use std::collections::HashMap;
 
 /// One parameter as the instrument and as we computed it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -20,53 +41,117 @@ pub struct Comparison {
     /// ours − instrument, when both exist.
     pub difference: Option<f64>,
     /// Our parameter it was compared with (`RzJIS` for the instrument's `Rz` under JIS1982 /
-    /// JIS1994, where Rz is the ten-point height), `None` for names we do not compute.
-    pub compared_with: Option<&'static str>,
-    /// Unit of `instrument`, `ours` and `difference` ("um", "%", "" for ratios).
+    /// JIS1994, where Rz is the ten-point height; `Rmr(c)@10%Rt` for the first `Rmr(c)`),
+    /// `None` for names we do not compute.
+    pub compared_with: Option<String>,
+    /// Unit of `instrument`, `ours` and `difference` ("um", "%", "/cm", "" for ratios).
     pub unit: &'static str,
+    /// The largest |difference| still in agreement ([`tolerance_for`]), when both exist.
+    pub tolerance: Option<f64>,
+    /// |difference| ≤ tolerance, when both exist.
+    pub within_tolerance: Option<bool>,
 }
 
-/// Our value for an instrument parameter name, with its unit; `None` for names we do not map.
-/// (value, unit, our parameter name).
-type Ours = (Option<f64>, &'static str, &'static str);
+/// A tolerance: |ours − instrument| ≤ max(rel · |instrument|, abs).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Tolerance {
+    /// Relative part (0.02 = 2 %).
+    pub rel: f64,
+    /// Absolute floor, in the parameter's unit.
+    pub abs: f64,
+}
 
-fn ours_for(name: &str, p: &RoughnessParams, jis_ten_point_rz: bool) -> Option<Ours> {
-    let key: String = name
-        .chars()
+impl Tolerance {
+    /// The allowed |difference| at the instrument's value `instrument`.
+    pub fn allowed(&self, instrument: f64) -> f64 {
+        (self.rel * instrument.abs()).max(self.abs)
+    }
+}
+
+fn key(name: &str) -> String {
+    name.chars()
         .filter(|c| !c.is_whitespace())
         .collect::<String>()
-        .to_ascii_lowercase();
-    Some(match key.as_str() {
-        "ra" => (Some(p.ra_um), "um", "Ra"),
-        "rq" => (Some(p.rq_um), "um", "Rq"),
-        "rz" if jis_ten_point_rz => (p.rzjis_um, "um", "RzJIS"),
-        "rz" => (Some(p.rz_um), "um", "Rz"),
-        "rp" => (Some(p.rp_um), "um", "Rp"),
-        "rv" => (Some(p.rv_um), "um", "Rv"),
-        "rt" => (Some(p.rt_um), "um", "Rt"),
-        "rz1max" => (Some(p.rz1max_um), "um", "Rz1max"),
-        "rzjis" => (p.rzjis_um, "um", "RzJIS"),
-        "rsk" => (Some(p.rsk), "", "Rsk"),
-        "rku" => (Some(p.rku), "", "Rku"),
-        "rdq" | "rδq" | "rΔq" | "rdeltaq" => (Some(p.rdq), "", "Rdq"),
-        "rsm" => (p.rsm_um, "um", "RSm"),
-        "rk" => (Some(p.rk_um), "um", "Rk"),
-        "rpk" => (Some(p.rpk_um), "um", "Rpk"),
-        "rvk" => (Some(p.rvk_um), "um", "Rvk"),
-        "mr1" => (Some(p.mr1_pct), "%", "Mr1"),
-        "mr2" => (Some(p.mr2_pct), "%", "Mr2"),
-        _ => return None,
-    })
+        .to_lowercase()
+}
+
+/// The tolerance of the module docs for our parameter `name` (as in `compared_with`, e.g.
+/// "Ra", "Rmr(c)@10%Rt"); `None` for names without one.
+pub fn tolerance_for(name: &str) -> Option<Tolerance> {
+    let k = key(name);
+    let base = k.split('@').next().unwrap_or("");
+    let t = |rel, abs| Some(Tolerance { rel, abs });
+    match base {
+        "ra" | "rq" | "rp" | "rv" | "rz" | "rt" | "rz1max" | "rzjis" => t(0.02, 0.002),
+        "rsk" | "rku" => t(0.05, 0.02),
+        "rdq" => t(0.03, 0.002),
+        "rsm" => t(0.05, 0.5),
+        "rc" => t(0.05, 0.005),
+        "rpc" => t(0.05, 1.0),
+        "rk" | "rpk" | "rvk" | "rdc" => t(0.05, 0.005),
+        "mr1" | "mr2" | "rmr" | "rmr(c)" => t(0.0, 1.0),
+        _ => None,
+    }
+}
+
+/// Our value for an instrument parameter name, with its unit: (value, unit, our name).
+/// `occurrence` counts earlier results of the same name (the instrument reports `Rmr(c)` once
+/// per level, in the order of its settings). `None` for names we do not map.
+type Ours = (Option<f64>, &'static str, String);
+
+fn ours_for(
+    name: &str,
+    p: &RoughnessParams,
+    jis_ten_point_rz: bool,
+    occurrence: usize,
+) -> Option<Ours> {
+    let k = key(name);
+    let named = |v: Option<f64>, unit: &'static str, n: &str| Some((v, unit, n.to_string()));
+    match k.as_str() {
+        "ra" => named(Some(p.ra_um), "um", "Ra"),
+        "rq" => named(Some(p.rq_um), "um", "Rq"),
+        "rz" if jis_ten_point_rz => named(p.rzjis_um, "um", "RzJIS"),
+        "rz" => named(Some(p.rz_um), "um", "Rz"),
+        "rp" => named(Some(p.rp_um), "um", "Rp"),
+        "rv" => named(Some(p.rv_um), "um", "Rv"),
+        "rt" => named(Some(p.rt_um), "um", "Rt"),
+        "rz1max" => named(Some(p.rz1max_um), "um", "Rz1max"),
+        "rzjis" => named(p.rzjis_um, "um", "RzJIS"),
+        "rsk" => named(Some(p.rsk), "", "Rsk"),
+        "rku" => named(Some(p.rku), "", "Rku"),
+        "rdq" | "rδq" | "rΔq" | "rdeltaq" => named(Some(p.rdq), "", "Rdq"),
+        "rsm" => named(p.rsm_um, "um", "RSm"),
+        "rc" => named(p.rc_um, "um", "Rc"),
+        "rpc" | "pc" => named(p.rpc_per_cm, "/cm", "RPc"),
+        "rk" => named(Some(p.rk_um), "um", "Rk"),
+        "rpk" => named(Some(p.rpk_um), "um", "Rpk"),
+        "rvk" => named(Some(p.rvk_um), "um", "Rvk"),
+        "mr1" => named(Some(p.mr1_pct), "%", "Mr1"),
+        "mr2" => named(Some(p.mr2_pct), "%", "Mr2"),
+        "rmr" => named(Some(p.rmr_pct), "%", "Rmr"),
+        "rdc" | "rδc" | "rΔc" | "rdeltac" => named(Some(p.rdc_um), "um", "Rdc"),
+        "rmr(c)" | "mr(c)" | "mr[c]" => {
+            let level = p.rmr_c.get(occurrence)?;
+            Some((
+                Some(level.value_pct),
+                "%",
+                format!("Rmr(c)@{}%Rt", level.depth_pct_rt),
+            ))
+        }
+        _ => None,
+    }
 }
 
 /// Factor from the instrument's unit to ours, `None` when not understood.
 fn factor(unit_in: &str, ours: &str) -> Option<f64> {
-    let u = unit_in.trim().to_ascii_lowercase();
+    let u = unit_in.trim().to_lowercase();
     match (ours, u.as_str()) {
         ("um", "um" | "µm" | "μm" | "micron") => Some(1.0),
         ("um", "mm") => Some(1000.0),
         ("um", "nm") => Some(0.001),
         ("%", "%" | "") => Some(1.0),
+        ("/cm", "/cm" | "1/cm" | "cm-1") => Some(1.0),
+        ("/cm", "/mm" | "1/mm") => Some(10.0),
         ("", "" | "-") => Some(1.0),
         _ => None,
     }
@@ -95,28 +180,43 @@ pub fn compare_under(
             .to_ascii_uppercase();
         s == "JIS1982" || s == "JIS1994" || s == "JIS82" || s == "JIS94"
     });
+    let mut seen: HashMap<String, usize> = HashMap::new();
     instrument
         .iter()
-        .map(|r| match ours_for(&r.name, params, jis) {
-            Some((ours, unit, ours_name)) => {
-                let inst = r.value.zip(factor(&r.unit, unit)).map(|(v, f)| v * f);
-                Comparison {
-                    name: r.name.clone(),
-                    instrument: inst,
-                    ours,
-                    difference: ours.zip(inst).map(|(o, i)| o - i),
-                    unit,
-                    compared_with: Some(ours_name),
+        .map(|r| {
+            let count = seen.entry(key(&r.name)).or_insert(0);
+            let occurrence = *count;
+            *count += 1;
+            match ours_for(&r.name, params, jis, occurrence) {
+                Some((ours, unit, ours_name)) => {
+                    let inst = r.value.zip(factor(&r.unit, unit)).map(|(v, f)| v * f);
+                    let difference = ours.zip(inst).map(|(o, i)| o - i);
+                    let tolerance = tolerance_for(&ours_name)
+                        .zip(inst)
+                        .filter(|_| difference.is_some())
+                        .map(|(t, i)| t.allowed(i));
+                    Comparison {
+                        name: r.name.clone(),
+                        instrument: inst,
+                        ours,
+                        difference,
+                        unit,
+                        within_tolerance: difference.zip(tolerance).map(|(d, t)| d.abs() <= t),
+                        tolerance,
+                        compared_with: Some(ours_name),
+                    }
                 }
+                None => Comparison {
+                    name: r.name.clone(),
+                    instrument: r.value,
+                    ours: None,
+                    difference: None,
+                    unit: "",
+                    compared_with: None,
+                    tolerance: None,
+                    within_tolerance: None,
+                },
             }
-            None => Comparison {
-                name: r.name.clone(),
-                instrument: r.value,
-                ours: None,
-                difference: None,
-                unit: "",
-                compared_with: None,
-            },
         })
         .collect()
 }

@@ -13,11 +13,22 @@
 //!   per sampling length (points within 3 of either end have no slope);
 //! * the Rk family from the material ratio curve Rmc(mr) (linear quantiles of the ordinates),
 //!   the equivalent straight line being the 40 % secant of least gradient (the first if tied,
-//!   mr searched in 0.1 % steps), A1/A2 in µm·%, Rpk = 2·A1/Mr1, Rvk = 2·A2/(100 − Mr2).
+//!   mr searched in 0.1 % steps), A1/A2 in µm·%, Rpk = 2·A1/Mr1, Rvk = 2·A2/(100 − Mr2);
+//! * profile elements (RSm, Rc, RPc) as the SJ series discriminates them: an element is a peak
+//!   and the valley after it, bounded by upward mean-line crossings; its peak must reach
+//!   +10 % of the section's Rz and its valley −10 % (the instrument's "Zp/Zv: 10 %"), and an
+//!   element narrower than 1 % of the sampling length is merged into the next; RSm and Rc
+//!   (mean Zt = Zp + Zv) per sampling length, then averaged; RPc = 1 cm / RSm, in 1/cm (the
+//!   SJ manuals: "Pc = unit length / Sm", not ASME's count of ±c crossings);
+//! * the material ratio parameters the SJ series reports, over the evaluation length on the
+//!   piecewise-linear profile ([`MaterialLevels`], the levels the SJ-410's own result files
+//!   show): Rmr(c) with the "peak reference" (depth below the highest peak in % of Rt),
+//!   Rδc = C(Rmr1) − C(Rmr2) and the relative material ratio Rmr at Rδc below C(Rmr0),
+//!   C(mr) being the level at which the material ratio is mr.
 //!
 //! Depends on [`super::filter`], [`super::bearing`] and [`crate::profile`].
 
-use super::bearing::material_ratio_pct;
+use super::bearing::{level_at_material_ratio, material_ratio_pct};
 use super::filter::{self, END_TREATMENT};
 use super::{check_finite, check_pitch, MetrologyError};
 use crate::profile::{FilterKind, Profile, ProfileKind};
@@ -139,6 +150,21 @@ pub struct RoughnessParams {
     /// Mean width of profile elements, lr-mean; `None` when no section holds two elements.
     #[serde(rename = "RSm_um")]
     pub rsm_um: Option<f64>,
+    /// Mean height Zt = Zp + Zv of the same profile elements, lr-mean; `None` as RSm.
+    #[serde(rename = "Rc_um")]
+    pub rc_um: Option<f64>,
+    /// Peak count per centimetre, 10 mm / RSm; `None` as RSm.
+    #[serde(rename = "RPc_per_cm")]
+    pub rpc_per_cm: Option<f64>,
+    /// Rmr(c) at the peak-reference depths of [`MaterialLevels::rmr_c_depths_pct_rt`].
+    #[serde(rename = "Rmr(c)")]
+    pub rmr_c: Vec<RmrC>,
+    /// Rδc = C(Rmr1) − C(Rmr2) at [`MaterialLevels::rdc_pct`], µm.
+    #[serde(rename = "Rdc_um")]
+    pub rdc_um: f64,
+    /// Relative material ratio at [`MaterialLevels::rmr_delta_um`] below C(Rmr0), %.
+    #[serde(rename = "Rmr_pct")]
+    pub rmr_pct: f64,
     /// Core roughness depth.
     #[serde(rename = "Rk_um")]
     pub rk_um: f64,
@@ -160,6 +186,44 @@ pub struct RoughnessParams {
     /// Valley area below the core, µm·% (report key `A2`, unit in the recipe's definition).
     #[serde(rename = "A2")]
     pub a2_um_pct: f64,
+}
+
+/// One Rmr(c) value with its level.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RmrC {
+    /// Depth below the highest peak in % of Rt (the SJ series' "P:10 %").
+    pub depth_pct_rt: f64,
+    /// The same depth in µm.
+    pub depth_um: f64,
+    /// The material ratio there, %.
+    pub value_pct: f64,
+}
+
+/// The levels of the material ratio parameters. [`Default`] is the set an SJ-410 reports in its
+/// own result files (`Rmr(c)` "P:10,0%" and "P:15,0%", `Rdc` "10,0%:25,0%", `Rmr`
+/// "0,0%:0,10um", public SJ-410 memory-card files, firmware V.1.014); the SJ-210's defaults are
+/// not documented in what we found and are taken to be the same.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MaterialLevels {
+    /// Rmr(c) depths below the highest peak, % of Rt.
+    pub rmr_c_depths_pct_rt: Vec<f64>,
+    /// Rδc between these two material ratios (Rmr1, Rmr2), %.
+    pub rdc_pct: [f64; 2],
+    /// Rmr's reference material ratio Rmr0, %.
+    pub rmr_reference_pct: f64,
+    /// Rmr's depth below C(Rmr0), µm.
+    pub rmr_delta_um: f64,
+}
+
+impl Default for MaterialLevels {
+    fn default() -> MaterialLevels {
+        MaterialLevels {
+            rmr_c_depths_pct_rt: vec![10.0, 15.0],
+            rdc_pct: [10.0, 25.0],
+            rmr_reference_pct: 0.0,
+            rmr_delta_um: 0.1,
+        }
+    }
 }
 
 /// A characterised line: its parameters, its recipe and the evaluated R profile.
@@ -201,6 +265,11 @@ pub fn definitions() -> BTreeMap<String, String> {
         ("Rku", "ISO4287:1997/Rku mean Z^4/Rq^4 per lr (3 for Gaussian), lr-mean"),
         ("Rdq", "ISO4287:1997/Rdq rms 7-point slope per lr, lr-mean"),
         ("RSm", "ISO4287:1997/RSm elements between upward mean-line crossings; peak >= 10% Rz, valley <= -10% Rz of the lr; elements < 1% lr merged; lr-mean"),
+        ("Rc", "ISO4287:1997/Rc mean Zt = Zp + Zv of the RSm elements (SJ series Zp/Zv: 10% of Rz, 1% lr), lr-mean"),
+        ("RPc", "SJ series Pc/RPc = 1 cm / RSm, per cm (not the ASME count of +-c crossings)"),
+        ("Rmr(c)_SJ", "SJ series mr[c] peak reference: Rmr at a depth below the highest peak of ln given in % of Rt, linear crossings"),
+        ("Rdc", "ISO4287:1997/Rdc = C(Rmr1) - C(Rmr2) on the piecewise-linear material ratio curve over ln; SJ series levels 10% and 25%"),
+        ("Rmr", "ISO4287:1997/Rmr relative material ratio at C(Rmr0) - Rdc; SJ series Rmr0 = 0% (the highest peak), Rdc = 0.10 um"),
         ("Rmr(c)", "ISO4287:1997/Rmr(c) bearing length at depth c below the highest peak over ln, linear crossings"),
         ("Rk", "ISO13565-2/Rk min-gradient 40% secant on linear-quantile Rmc(mr) over ln, 0.1% search step"),
         ("Rpk", "ISO13565-2/Rpk = 2*A1/Mr1"),
@@ -316,6 +385,26 @@ pub fn analyze_line(
     let max = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let min = r.iter().copied().fold(f64::INFINITY, f64::min);
     let rk = rk_family(&r)?;
+    let levels = MaterialLevels::default();
+    let rt = max - min;
+    let rmr_c = levels
+        .rmr_c_depths_pct_rt
+        .iter()
+        .map(|&d| {
+            let depth_um = rt * d / 100.0;
+            RmrC {
+                depth_pct_rt: d,
+                depth_um,
+                value_pct: material_ratio_pct(&r, max - depth_um),
+            }
+        })
+        .collect();
+    let rdc_um = level_at_material_ratio(&r, levels.rdc_pct[0])
+        - level_at_material_ratio(&r, levels.rdc_pct[1]);
+    let rmr_pct = material_ratio_pct(
+        &r,
+        level_at_material_ratio(&r, levels.rmr_reference_pct) - levels.rmr_delta_um,
+    );
 
     let params = RoughnessParams {
         ra_um: acc.ra / k,
@@ -329,11 +418,15 @@ pub fn analyze_line(
         rsk: acc.rsk / k,
         rku: acc.rku / k,
         rdq: acc.rdq / k,
-        rsm_um: if acc.rsm_n > 0 {
-            Some(acc.rsm / acc.rsm_n as f64)
-        } else {
-            None
-        },
+        rsm_um: (acc.rsm_n > 0).then(|| acc.rsm / acc.rsm_n as f64),
+        rc_um: (acc.rsm_n > 0).then(|| acc.rc / acc.rsm_n as f64),
+        rpc_per_cm: (acc.rsm_n > 0)
+            .then(|| acc.rsm / acc.rsm_n as f64)
+            .filter(|w| *w > 0.0)
+            .map(|w| 10_000.0 / w),
+        rmr_c,
+        rdc_um,
+        rmr_pct,
         rk_um: rk.rk_um,
         rpk_um: rk.rpk_um,
         rvk_um: rk.rvk_um,
@@ -400,6 +493,7 @@ struct Acc {
     rku: f64,
     rdq: f64,
     rsm: f64,
+    rc: f64,
     rsm_n: usize,
 }
 
@@ -434,8 +528,11 @@ impl Acc {
                 self.rzjis = None;
             }
         }
-        if let Some(w) = mean_element_width_um(z, pitch_um, 0.1 * (rp + rv), 0.01 * lr_um) {
-            self.rsm += w;
+        let elements = profile_elements(z, pitch_um, 0.1 * (rp + rv), 0.01 * lr_um);
+        if !elements.is_empty() {
+            let n = elements.len() as f64;
+            self.rsm += elements.iter().map(|e| e.width_um).sum::<f64>() / n;
+            self.rc += elements.iter().map(|e| e.zp + e.zv).sum::<f64>() / n;
             self.rsm_n += 1;
         }
     }
@@ -489,10 +586,22 @@ fn ten_point(z: &[f64]) -> Option<f64> {
     Some(p - v)
 }
 
-/// Mean width of profile elements in a section: boundaries at the upward mean-line crossings
-/// (linearly interpolated) that precede a peak reaching `+h` after a valley reaching `−h`;
-/// elements narrower than `min_width_um` are merged into the following one.
-fn mean_element_width_um(z: &[f64], pitch_um: f64, h: f64, min_width_um: f64) -> Option<f64> {
+/// A profile element of a section: a peak and the valley after it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Element {
+    /// Width Xs, µm.
+    width_um: f64,
+    /// Highest point above the mean line, µm.
+    zp: f64,
+    /// Depth of the lowest point below the mean line, µm.
+    zv: f64,
+}
+
+/// The profile elements of a section: boundaries at the upward mean-line crossings (linearly
+/// interpolated) that precede a peak reaching `+h` after a valley reaching `−h`; an element
+/// narrower than `min_width_um` is merged into the following one (its boundary is dropped).
+/// Zp and Zv are the extremes of the ordinates between consecutive boundaries.
+fn profile_elements(z: &[f64], pitch_um: f64, h: f64, min_width_um: f64) -> Vec<Element> {
     let mut bounds: Vec<f64> = Vec::new();
     let mut last_up: Option<f64> = None;
     let mut seen_valley = false;
@@ -518,12 +627,23 @@ fn mean_element_width_um(z: &[f64], pitch_um: f64, h: f64, min_width_um: f64) ->
             seen_valley = false;
         }
     }
-    if bounds.len() < 2 {
-        return None;
-    }
-    let first = bounds.first()?;
-    let last = bounds.last()?;
-    Some((last - first) / (bounds.len() - 1) as f64)
+    bounds
+        .windows(2)
+        .filter_map(|w| {
+            let (a, b) = (*w.first()?, *w.get(1)?);
+            // Ordinates strictly inside the element (a crossing lies between two points).
+            let first = (a / pitch_um).ceil() as usize;
+            let last = ((b / pitch_um).floor() as usize).min(z.len().saturating_sub(1));
+            let inside = z.get(first..=last)?;
+            let zp = inside.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let zv = -inside.iter().copied().fold(f64::INFINITY, f64::min);
+            Some(Element {
+                width_um: b - a,
+                zp,
+                zv,
+            })
+        })
+        .collect()
 }
 
 /// The Rk family of a set of ordinates.

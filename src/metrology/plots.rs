@@ -670,6 +670,7 @@ fn draw_overlay<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     measured: &[(f64, f64)],
     model: &[(f64, f64)],
+    residual: &[(f64, f64)],
     title: &str,
     caption: &str,
 ) -> Result<(), String>
@@ -680,6 +681,7 @@ where
     let (x0, x1) = measured
         .iter()
         .chain(model)
+        .chain(residual)
         .map(|p| p.0)
         .filter(|x| x.is_finite())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
@@ -689,22 +691,39 @@ where
     let (z0, z1) = padded_range(measured.iter().chain(model).map(|p| p.1), (-1.0, 1.0));
     let probe_frame = |subtitle: &str| Frame::new(root.dim_in_pixel().0, title, subtitle, caption);
     let (margin, x_area, y_area) = (12u32, 50u32, 80u32);
+    // With a residual panel the profile takes the upper 70 % of the body.
+    let share = |h: u32| if residual.is_empty() { h } else { h * 7 / 10 };
     let plot_size = |frame: &Frame| {
         let (w, h) = root.dim_in_pixel();
+        let body = h.saturating_sub(frame.top_px() + frame.bottom_px());
         (
             w.saturating_sub(2 * margin + y_area),
-            h.saturating_sub(frame.top_px() + frame.bottom_px() + 2 * margin + x_area),
+            share(body).saturating_sub(2 * margin + x_area),
         )
     };
     let first = probe_frame("measured points and the model's curve");
     let (pw, ph) = plot_size(&first);
     let e = vertical_exaggeration(x1 - x0, z1 - z0, pw, ph);
-    let frame = probe_frame(&format!(
-        "Dots: the measured heights; line: the NURBS model evaluated between them; {}",
-        exaggeration_note(e)
-    ));
+    let frame = probe_frame(&if residual.is_empty() {
+        format!(
+            "Dots: the measured heights; line: the NURBS model evaluated between them; {}",
+            exaggeration_note(e)
+        )
+    } else {
+        format!(
+            "Dots: the measured heights; line: the NURBS model at this line; lower panel: model − measured at the measured x; {}",
+            exaggeration_note(e)
+        )
+    });
     let body = frame.draw(root)?;
-    let mut chart = ChartBuilder::on(&body)
+    let (upper, lower) = if residual.is_empty() {
+        (body, None)
+    } else {
+        let (_, h) = body.dim_in_pixel();
+        let (u, l) = body.split_vertically(share(h));
+        (u, Some(l))
+    };
+    let mut chart = ChartBuilder::on(&upper)
         .margin(margin)
         .x_label_area_size(x_area)
         .y_label_area_size(y_area)
@@ -746,21 +765,61 @@ where
         .background_style(WHITE.mix(0.9))
         .draw()
         .map_err(|e| e.to_string())?;
+    if let Some(lower) = lower {
+        // Symmetric about zero, so the sign of a miss reads at a glance.
+        let r = residual
+            .iter()
+            .map(|p| p.1.abs())
+            .filter(|v| v.is_finite())
+            .fold(0.0f64, f64::max);
+        let r = if r > 0.0 { 1.05 * r } else { 1.0 };
+        let mut res = ChartBuilder::on(&lower)
+            .margin(margin)
+            .x_label_area_size(x_area)
+            .y_label_area_size(y_area)
+            .build_cartesian_2d(x0..x1, -r..r)
+            .map_err(|e| e.to_string())?;
+        res.configure_mesh()
+            .x_desc("x (mm)")
+            .y_desc("model − measured (µm)")
+            .label_style(font(13))
+            .axis_desc_style(font(14))
+            .x_label_formatter(&|v| tick(*v))
+            .y_label_formatter(&|v| tick(*v))
+            .y_labels(5)
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        res.draw_series(LineSeries::new(
+            [(x0, 0.0), (x1, 0.0)],
+            BLACK.stroke_width(1),
+        ))
+        .map_err(|e| e.to_string())?;
+        res.draw_series(LineSeries::new(
+            residual.iter().copied(),
+            MODEL.stroke_width(1),
+        ))
+        .map_err(|e| e.to_string())?;
+    }
     Ok(())
 }
 
-/// Writes `overlay.png` and `overlay.svg` into `dir`: measured points of a line as dots and
-/// the model's curve through them, as `(x_mm, z_um)` pairs, the height exaggeration stated;
-/// `caption` (may be empty) is the traceability footer.
+/// Writes `overlay.png` and `overlay.svg` into `dir`, the paper's Figure 2 made honest:
+/// a line's measured heights as dots and the model's curve at that line, as `(x_mm, z_um)`
+/// pairs, the height exaggeration stated; when `residual` (`(x_mm, model − measured µm)`) is
+/// not empty, a panel below shows it. The caller says in `title` what the model is (the
+/// report draws the surface refitted without this line, so the curve is a prediction, not an
+/// interpolation through the dots). `caption` (may be empty) is the traceability footer.
 pub fn plot_profile_overlay(
     dir: &Path,
     measured: &[(f64, f64)],
     model: &[(f64, f64)],
+    residual: &[(f64, f64)],
     title: &str,
     caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
     png_and_svg!(dir, "overlay", PROFILE_SIZE, |root| draw_overlay(
-        &root, measured, model, title, caption
+        &root, measured, model, residual, title, caption
     ))
 }
 

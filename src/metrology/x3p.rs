@@ -320,17 +320,23 @@ pub fn read_x3p(zip: &[u8]) -> Result<X3pGrid, MetrologyError> {
             .and_then(|v| v.parse::<f64>().ok())
             .ok_or(bad("numeric field missing"))
     };
-    let cols = num("MatrixDimension", "SizeX")? as usize;
-    let rows = num("MatrixDimension", "SizeY")? as usize;
+    // xsd:unsignedInt in ISO 5436-2; a size read as a real (1e300) would overflow rows × cols.
+    let size = |name: &str| -> Result<usize, MetrologyError> {
+        tag(&xml, "MatrixDimension", name)
+            .and_then(|v| v.parse::<usize>().ok())
+            .ok_or(bad("matrix size missing or not a whole number"))
+    };
+    let cols = size("SizeX")?;
+    let rows = size("SizeY")?;
     let heights_um: Vec<f64> = data
         .chunks_exact(8)
         .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) * 1e6)
         .collect();
-    if heights_um.len() != rows * cols {
+    if rows.checked_mul(cols) != Some(heights_um.len()) {
         return Err(MetrologyError::GridSize {
             rows,
             cols,
-            expected: rows * cols,
+            expected: rows.saturating_mul(cols),
             got: heights_um.len(),
         });
     }

@@ -823,7 +823,7 @@ pub fn characterise_grid(
             grid.y_mm.get(overlay_row).copied().unwrap_or(f64::NAN)
         );
         plots.extend(
-            plot_profile_overlay(out, &measured_pts, &model_pts, &title, &caption)
+            plot_profile_overlay(out, &measured_pts, &model_pts, &[], &title, &caption)
                 .map_err(plot_err)?,
         );
     }
@@ -1148,6 +1148,7 @@ mod tests {
                 kind,
                 conditions: conditions.clone(),
                 results: Vec::new(),
+                readout_warnings: Vec::new(),
                 started_at: t,
                 finished_at: t,
                 attempt: 1,

@@ -13,7 +13,7 @@ use super::plan::Plan;
 use super::store::ScanStore;
 use crate::atomic::write_atomically;
 use crate::fit::{max_residual_mm, FitResult, IncrementalFitter};
-use crate::iges::{plan_files, write_iges, IgesError, IgesOptions};
+use crate::iges::{plan_parts, write_iges_seekable, IgesError, IgesOptions};
 use crate::nurbs::NurbsSurface;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -135,7 +135,7 @@ pub fn write_surface_files(
     surface: &NurbsSurface,
     opts: &IgesOptions,
 ) -> Result<Vec<WrittenIges>, SurfaceWriteError> {
-    let groups = plan_files(surface, opts).map_err(|e| SurfaceWriteError::Format {
+    let groups = plan_parts(surface, opts).map_err(|e| SurfaceWriteError::Format {
         path: output.to_path_buf(),
         message: e.to_string(),
     })?;
@@ -164,7 +164,7 @@ pub fn write_surface_files(
             ));
         }
         let st = write_atomically(&path, |w| {
-            write_iges(w, group, &part_opts).map_err(std::io::Error::other)
+            write_iges_seekable(w, group, &part_opts).map_err(std::io::Error::other)
         })
         .map_err(|e| write_error(&path, e))?;
         files.push(WrittenIges {

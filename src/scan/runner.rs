@@ -1195,6 +1195,9 @@ async fn try_line<S: Station>(
     for w in &traced.warnings {
         tracing::warn!(scan_id = %scan.id, line = k + 1, "{w}");
     }
+    for w in &traced.readout_warnings {
+        tracing::warn!(scan_id = %scan.id, line = k + 1, "kept with a read-out warning: {w}");
+    }
     let profile = &traced.profile;
     let meta = LineMeta {
         index: k,
@@ -1205,6 +1208,7 @@ async fn try_line<S: Station>(
         kind: profile.kind,
         conditions: profile.conditions.clone(),
         results: traced.results.clone(),
+        readout_warnings: traced.readout_warnings.clone(),
         started_at,
         finished_at,
         attempt,

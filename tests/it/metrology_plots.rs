@@ -146,11 +146,27 @@ fn every_plot_is_png_and_svg_in_iso_words_with_a_key_for_every_colour() {
         .map(|(i, v)| (i as f64 * PX, *v))
         .collect();
     let [png, svg] =
-        plot_profile_overlay(&out.dir, &measured, &measured, "Line 1", LONG_CAPTION).unwrap();
+        plot_profile_overlay(&out.dir, &measured, &measured, &[], "Line 1", LONG_CAPTION).unwrap();
     assert_nothing_at_the_edge(&png);
     let text = std::fs::read_to_string(&svg).unwrap();
     assert!(text.contains("heights exaggerated ×"), "{}", svg.display());
     assert!(text.contains("NURBS model") && text.contains("measured"));
+    assert!(!text.contains("model − measured"));
+    // With a residual: its panel, labelled, below the profile.
+    let residual: Vec<(f64, f64)> = measured.iter().map(|&(x, z)| (x, 0.1 * z)).collect();
+    let [png, svg] = plot_profile_overlay(
+        &out.dir,
+        &measured,
+        &measured,
+        &residual,
+        "Line 1 left out",
+        LONG_CAPTION,
+    )
+    .unwrap();
+    assert_nothing_at_the_edge(&png);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.contains("model − measured (µm)"), "{}", svg.display());
+    assert!(text.contains("lower panel: model − measured"));
 
     let a = analyze_line(&z[..COLS], PX, &Options::default()).unwrap();
     let rk = rk_family(&a.roughness_um).unwrap();

@@ -369,6 +369,8 @@ fn instrument_results_are_paired_with_ours_in_our_units() {
         name: name.to_string(),
         value,
         unit: unit.to_string(),
+        printed: None,
+        ng_code: None,
     };
     let c = compare(
         &p,
@@ -376,7 +378,7 @@ fn instrument_results_are_paired_with_ours_in_our_units() {
             r("Ra", Some(0.6), "µm"),
             r("RSm", Some(0.1), "mm"),
             r("Rz", None, "um"),
-            r("Pc", Some(12.0), "/cm"),
+            r("Ppi", Some(12.0), "/in"),
         ],
     );
     assert_eq!(c.len(), 4);
@@ -388,16 +390,16 @@ fn instrument_results_are_paired_with_ours_in_our_units() {
     assert_eq!(c[2].difference, None);
     assert_eq!(c[3].ours, None);
     assert_eq!(c[3].compared_with, None);
-    assert_eq!(c[2].compared_with, Some("Rz"));
+    assert_eq!(c[2].compared_with.as_deref(), Some("Rz"));
 
     // Under JIS1994 the instrument's Rz is the ten-point height: compared with our RzJIS.
     use surfscan::metrology::instrument::compare_under;
     let rz = [r("Rz", Some(1.0), "um")];
     let iso = compare_under(&p, &rz, Some("ISO1997"));
-    assert_eq!(iso[0].compared_with, Some("Rz"));
+    assert_eq!(iso[0].compared_with.as_deref(), Some("Rz"));
     assert!((iso[0].difference.unwrap() - (p.rz_um - 1.0)).abs() < 1e-12);
     let jis = compare_under(&p, &rz, Some("JIS1994"));
-    assert_eq!(jis[0].compared_with, Some("RzJIS"));
+    assert_eq!(jis[0].compared_with.as_deref(), Some("RzJIS"));
     let rzjis = p.rzjis_um.unwrap();
     assert!((jis[0].difference.unwrap() - (rzjis - 1.0)).abs() < 1e-12);
 }

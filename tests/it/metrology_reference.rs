@@ -137,6 +137,28 @@ fn real_profiles_agree_with_surfalize_and_scipy_where_conventions_agree() {
         1e-9,
         "Rku (ln, mean removed)",
     );
+    // The material ratio parameters at the SJ series' levels. surfalize's curve is the point
+    // quantiles, ours the piecewise-linear bearing length; on 6664 points they differ by
+    // about one point's share: 1/6663 = 0.015 % in mr, and for a level that times the local
+    // slope (about 0.12 µm per % between 10 and 25 %), for each of Rdc's two levels.
+    close(
+        p.rdc_um,
+        num(m, "Rdc_10_25_quantiles"),
+        4e-3,
+        "Rdc(10 %, 25 %)",
+    );
+    for (c, key) in p
+        .rmr_c
+        .iter()
+        .zip(["Rmr_c_peak_10pct_quantiles", "Rmr_c_peak_15pct_quantiles"])
+    {
+        assert!(
+            (c.value_pct - num(m, key)).abs() < 0.015,
+            "{key}: ours {} vs reference {}",
+            c.value_pct,
+            num(m, key)
+        );
+    }
 
     // Other conventions: printed side by side, only a sanity band asserted.
     println!(

@@ -6,6 +6,8 @@ missing, so the calling test fails instead of skipping.
 
 What is computed (the conventions are surfalize's own, stated beside each value):
 * mitutoyo: the Mitutoyo SurfTest R profile as exported (no filter).
+  - Rdc(10 %, 25 %) and Rmr(c) at 10 % and 15 % of Rt below the highest point: surfalize's
+    material ratio curve is the point quantiles, ours the piecewise-linear bearing length.
   - Rp/Rv/Rz with n_sections=4 and Rt: surfalize takes the ordinates as given for these.
   - Ra/Rq/Rsk/Rku: surfalize subtracts the profile mean and evaluates over the whole length.
   - Rk/Rpk/Rvk/Mr1/Mr2: surfalize least-squares fits the 40 % window (our secant differs).
@@ -57,7 +59,17 @@ def main():
         "Rvk_least_squares": float(p.Rvk()),
         "Mr1_least_squares": float(p.Rmr1()),
         "Mr2_least_squares": float(p.Rmr2()),
+        # The material ratio curve as point quantiles (np.quantile), ours is the
+        # piecewise-linear bearing length: they differ by about one point's share.
+        "Rdc_10_25_quantiles": float(p.Rdc(10.0, 25.0)),
     }
+    # Rmr(c) with the SJ series' peak reference: depth below the highest point in % of Rt.
+    # surfalize's material ratio curve is built from the heights as given (no mean removal).
+    rt = float(z.max() - z.min())
+    for depth in (10.0, 15.0):
+        out["mitutoyo"][f"Rmr_c_peak_{depth:g}pct_quantiles"] = float(
+            p.Rmr(float(z.max()) - rt * depth / 100.0)
+        )
 
     for name, lc in (("hfm-1", 0.8), ("dektak-1", 0.25)):
         x, z = load(root / f"{name}.x_mm_z_um.csv")
