@@ -19,7 +19,8 @@
 //! 4. Process edges: [`config`] (the station's TOML, validated), [`telemetry`] (logging),
 //!    [`atomic`] (durable file replacement), [`control`] (the operator's control socket),
 //!    [`service`] (systemd notifications), [`report`] (characterisation of a scan
-//!    directory or grid into report.json, summary.csv, plots and X3P).
+//!    directory or grid into report.json, summary.csv, plots and X3P), [`station_lock`]
+//!    (one process per station).
 //! 5. Composition: [`cli`] (one file per subcommand) and `main.rs`.
 //!
 //! The simulator (`simulator/`, crate `surfscan-sim`) speaks the instrument's and the
@@ -46,6 +47,7 @@ pub mod scan;
 pub mod service;
 pub mod sj210;
 pub mod stage;
+pub mod station_lock;
 pub mod telemetry;
 pub mod transport;
 pub mod units;

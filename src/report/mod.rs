@@ -1,7 +1,10 @@
 //! Characterisation reports: a scan directory (what the scan daemon calls when a scan ends, and
 //! what `surfscan analyze SCAN_DIR` runs) or a height grid is characterised line by line and as
 //! a surface, and the results are written next to the data: `report.json` (atomically),
-//! `summary.csv`, `bac|heightmap|overlay.png|svg`, `measured.x3p` and `model.x3p`.
+//! `report.html` (the report for people, plots embedded: [`html`]), `summary.csv` (values
+//! with the significant digits of their quantity, lines 1-based),
+//! `bac|heightmap|overlay.png|svg`, `rk/NNNN.png|svg` (the ISO 13565-2 construction of each
+//! line), `measured.x3p` and `model.x3p`.
 //!
 //! `report.json` holds `lines` (one per traced line: `index`, `y_mm`, the ISO 4287 / ISO 13565-2
 //! parameters under the names of [`RoughnessParams`], `Rmr_table`, and for scans `instrument`:
@@ -20,6 +23,8 @@
 //! Layer 4 (reporting at the process edge): depends on [`crate::scan`] (reading the scan
 //! directory), [`crate::metrology`], [`crate::fit`] and [`crate::atomic`].
 
+pub mod html;
+
 use crate::atomic::write_atomically;
 use crate::fit::{fit_grid, FitError, FitOptions};
 use crate::metrology::areal::{self, areal_params, smr_curve, ArealParams, Grid};
@@ -27,10 +32,15 @@ use crate::metrology::holdout::{holdout, Holdout, HoldoutLine};
 use crate::metrology::instrument::{compare_under, Comparison};
 use crate::metrology::model::ModelCurveBac;
 use crate::metrology::model::{model_bearing_curves, sample_model_grid, ModelBacOptions};
-use crate::metrology::params::{analyze_line, LineAnalysis, Options, Recipe, RoughnessParams};
-use crate::metrology::plots::{plot_bearing_curves, plot_height_map, plot_profile_overlay};
+use crate::metrology::params::{
+    analyze_line, material_ratio_curve, rk_family, LineAnalysis, Options, Recipe, RoughnessParams,
+};
+use crate::metrology::plots::{
+    plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction,
+};
 use crate::metrology::x3p::{to_x3p, X3pMeta};
 use crate::metrology::MetrologyError;
+use crate::numfmt::{fmt as nfmt, fmt_opt as nfmt_opt, line_number, Quantity};
 use crate::profile::{Conditions, FilterKind, InstrumentResult, ProfileKind};
 use crate::scan::faults::NoFaults;
 use crate::scan::journal::{read_journal, ResumeState, StartRecord, StopRecord, StopStatus};
@@ -93,6 +103,8 @@ pub struct ScanOutputs {
     pub report_json: PathBuf,
     /// `summary.csv`.
     pub summary_csv: PathBuf,
+    /// `report.html`, the report for people (plots embedded).
+    pub report_html: PathBuf,
     /// The PNG and SVG plots written.
     pub plots: Vec<PathBuf>,
     /// `measured.x3p`, when the grid could be written (every height finite).
@@ -177,6 +189,15 @@ pub struct Traceability {
     pub firmware: String,
     /// Drive unit.
     pub drive_unit: String,
+    /// The instrument's maker (the SJ series is Mitutoyo's), empty when not known.
+    pub manufacturer: String,
+    /// The instrument's serial number: the SJ series reports none over its link, so this is
+    /// `[traceability] serial-number` of the configuration the scan ran with.
+    pub instrument_serial: Option<String>,
+    /// Stylus tip radius, µm (`[traceability] stylus-tip-radius-um`).
+    pub stylus_tip_radius_um: Option<f64>,
+    /// The instrument's last calibration, ISO 8601 date (`[traceability] calibration-date`).
+    pub calibration_date: Option<String>,
     /// Measurement conditions read at start.
     pub conditions: Conditions,
 }
@@ -194,8 +215,31 @@ impl From<&StartRecord> for Traceability {
             instrument_model: s.instrument_model.clone(),
             firmware: s.firmware.clone(),
             drive_unit: s.drive_unit.clone(),
+            manufacturer: manufacturer_of(&s.instrument_model).to_string(),
+            instrument_serial: traceability_key(s, "serial-number")
+                .and_then(|v| v.as_str().map(str::to_owned)),
+            stylus_tip_radius_um: traceability_key(s, "stylus-tip-radius-um")
+                .and_then(serde_json::Value::as_f64),
+            calibration_date: traceability_key(s, "calibration-date")
+                .and_then(|v| v.as_str().map(str::to_owned)),
             conditions: s.conditions.clone(),
         }
+    }
+}
+
+/// A key of the `[traceability]` table of the configuration a scan recorded at its start.
+fn traceability_key<'a>(s: &'a StartRecord, key: &str) -> Option<&'a serde_json::Value> {
+    s.config.get("traceability")?.get(key)
+}
+
+/// The maker of an instrument model: the scan daemon drives the Mitutoyo SJ series
+/// (recorded as e.g. "sj210" from the config or "SJ-210" from the instrument); any other
+/// model is not named.
+pub fn manufacturer_of(model: &str) -> &'static str {
+    if model.trim_start().to_ascii_lowercase().starts_with("sj") {
+        "Mitutoyo"
+    } else {
+        ""
     }
 }
 
@@ -361,7 +405,7 @@ fn metrology(what: impl Into<String>) -> impl FnOnce(MetrologyError) -> ReportEr
 }
 
 fn software() -> String {
-    format!("surfscan {}", env!("CARGO_PKG_VERSION"))
+    crate::build_info::software()
 }
 
 fn rmr_table(a: &LineAnalysis) -> Vec<[f64; 2]> {
@@ -415,7 +459,10 @@ fn analyse_lines(
         .enumerate()
         .map(|(row, r)| {
             let index = grid.index.get(row).copied().unwrap_or(row as u32);
-            r.map_err(metrology(format!("{label} line {index}")))
+            r.map_err(metrology(format!(
+                "{label} line {} ({index:04})",
+                line_number(index)
+            )))
         })
         .collect()
 }
@@ -451,16 +498,20 @@ fn caption(ctx: &ReportContext) -> String {
             if let Some(l) = c.lambda_s_um {
                 cond.push(format!("λs {l} µm"));
             }
-            if let Some(n) = c.sampling_lengths {
-                cond.push(format!("N {n}"));
+            match c.sampling_lengths {
+                // The SJ series' N = 0: an arbitrary evaluation length, one section.
+                Some(0) => cond.push("arbitrary evaluation length".to_string()),
+                Some(n) => cond.push(format!("N = {n}")),
+                None => {}
             }
             let cond = if cond.is_empty() {
                 "conditions not recorded".to_string()
             } else {
                 cond.join(" ")
             };
+            // The recorded software version already names the program ("surfscan 0.1.0").
             format!(
-                "specimen {} · {} fw {} ({}) · {} · scan {} · surfscan {}",
+                "specimen {} · {} fw {} ({}) · {} · scan {} · {}",
                 t.specimen,
                 t.instrument_model,
                 t.firmware,
@@ -480,15 +531,19 @@ fn x3p_meta(ctx: &ReportContext, what: &str) -> X3pMeta {
             let conditions = serde_json::to_string(&t.conditions).unwrap_or_default();
             X3pMeta {
                 date: t.started_at.clone(),
-                creator: t.operator.clone(),
-                // The scan daemon drives the Mitutoyo SJ series; any other model is not named.
-                manufacturer: if t.instrument_model.trim_start().starts_with("SJ-") {
-                    "Mitutoyo".to_string()
-                } else {
-                    String::new()
+                calibration_date: t.calibration_date.clone().unwrap_or_default(),
+                probe: match t.stylus_tip_radius_um {
+                    Some(r) => format!(
+                        "{} stylus, tip radius {} µm",
+                        t.instrument_model,
+                        crate::numfmt::sig(r, 3)
+                    ),
+                    None => String::new(),
                 },
+                creator: t.operator.clone(),
+                manufacturer: t.manufacturer.clone(),
                 model: t.instrument_model.clone(),
-                serial: String::new(),
+                serial: t.instrument_serial.clone().unwrap_or_default(),
                 version: t.firmware.clone(),
                 comment: format!(
                     "{what}; specimen {}; scan {}; operator {}; notes: {}; drive unit {}; conditions {}; scanned by surfscan {}, config sha256 {}; written by {}",
@@ -520,10 +575,6 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
     })
 }
 
-fn fmt_opt(v: Option<f64>) -> String {
-    v.map(|v| format!("{v}")).unwrap_or_default()
-}
-
 /// The instrument's value of `name` in our unit, from a line's comparisons.
 fn instrument_value(line: &LineReport, name: &str) -> Option<f64> {
     line.instrument
@@ -533,37 +584,42 @@ fn instrument_value(line: &LineReport, name: &str) -> Option<f64> {
         .and_then(|c| c.instrument)
 }
 
+/// `summary.csv` for people and spreadsheets: one row per line, `line` 1-based and `index`
+/// the NNNN of its files, every value with the significant digits of its quantity
+/// ([`crate::numfmt`]; `report.json` keeps full precision).
 fn summary_csv(lines: &[LineReport]) -> String {
+    use Quantity::{Area, HeightUm as H, Percent, PositionMm, Ratio};
     let mut csv = String::from(
-        "index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um,Rp_um,Rv_um,Rt_um,Rz1max_um,Rsk,Rku,Rdq,RSm_um,Rk_um,Rpk_um,Rvk_um,Mr1_pct,Mr2_pct,A1,A2,instrument_Ra_um,instrument_Rq_um,instrument_Rz_um\n",
+        "line,index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um,Rp_um,Rv_um,Rt_um,Rz1max_um,Rsk,Rku,Rdq,RSm_um,Rk_um,Rpk_um,Rvk_um,Mr1_pct,Mr2_pct,A1_um_pct,A2_um_pct,instrument_Ra_um,instrument_Rq_um,instrument_Rz_um\n",
     );
     for l in lines {
         let p = &l.params;
         let row: Vec<String> = vec![
-            l.index.to_string(),
-            l.y_mm.to_string(),
-            p.ra_um.to_string(),
-            p.rq_um.to_string(),
-            p.rz_um.to_string(),
-            fmt_opt(p.rzjis_um),
-            p.rp_um.to_string(),
-            p.rv_um.to_string(),
-            p.rt_um.to_string(),
-            p.rz1max_um.to_string(),
-            p.rsk.to_string(),
-            p.rku.to_string(),
-            p.rdq.to_string(),
-            fmt_opt(p.rsm_um),
-            p.rk_um.to_string(),
-            p.rpk_um.to_string(),
-            p.rvk_um.to_string(),
-            p.mr1_pct.to_string(),
-            p.mr2_pct.to_string(),
-            p.a1_um_pct.to_string(),
-            p.a2_um_pct.to_string(),
-            fmt_opt(instrument_value(l, "Ra")),
-            fmt_opt(instrument_value(l, "Rq")),
-            fmt_opt(instrument_value(l, "Rz")),
+            line_number(l.index).to_string(),
+            format!("{:04}", l.index),
+            nfmt(l.y_mm, PositionMm),
+            nfmt(p.ra_um, H),
+            nfmt(p.rq_um, H),
+            nfmt(p.rz_um, H),
+            nfmt_opt(p.rzjis_um, H),
+            nfmt(p.rp_um, H),
+            nfmt(p.rv_um, H),
+            nfmt(p.rt_um, H),
+            nfmt(p.rz1max_um, H),
+            nfmt(p.rsk, Ratio),
+            nfmt(p.rku, Ratio),
+            nfmt(p.rdq, Ratio),
+            nfmt_opt(p.rsm_um, H),
+            nfmt(p.rk_um, H),
+            nfmt(p.rpk_um, H),
+            nfmt(p.rvk_um, H),
+            nfmt(p.mr1_pct, Percent),
+            nfmt(p.mr2_pct, Percent),
+            nfmt(p.a1_um_pct, Area),
+            nfmt(p.a2_um_pct, Area),
+            nfmt_opt(instrument_value(l, "Ra"), H),
+            nfmt_opt(instrument_value(l, "Rq"), H),
+            nfmt_opt(instrument_value(l, "Rz"), H),
         ];
         csv.push_str(&row.join(","));
         csv.push('\n');
@@ -817,15 +873,48 @@ pub fn characterise_grid(
             .enumerate()
             .map(|(i, v)| (i as f64 * px / 2.0, *v))
             .collect();
+        let index = grid.index.get(overlay_row).copied().unwrap_or(0);
         let title = format!(
-            "Line {} (y = {:.4} mm): measured and model",
-            grid.index.get(overlay_row).copied().unwrap_or(0),
-            grid.y_mm.get(overlay_row).copied().unwrap_or(f64::NAN)
+            "Line {} ({index:04}, y = {} mm): measured and model",
+            line_number(index),
+            nfmt(
+                grid.y_mm.get(overlay_row).copied().unwrap_or(f64::NAN),
+                Quantity::PositionMm
+            )
         );
         plots.extend(
             plot_profile_overlay(out, &measured_pts, &model_pts, &[], &title, &caption)
                 .map_err(plot_err)?,
         );
+    }
+    // The ISO 13565-2 construction of every line, from the ordinates its Rk family came from.
+    let rk_dir = out.join("rk");
+    std::fs::create_dir_all(&rk_dir).map_err(|source| ReportError::Io {
+        path: rk_dir.clone(),
+        source,
+    })?;
+    let mut rk_plots = Vec::new();
+    for (row, a) in analyses.iter().enumerate() {
+        let index = grid.index.get(row).copied().unwrap_or(row as u32);
+        let rk = rk_family(&a.roughness_um).map_err(plot_err)?;
+        let title = format!(
+            "Line {} ({index:04}, y = {} mm): ISO 13565-2 Rk construction",
+            line_number(index),
+            nfmt(
+                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
+                Quantity::PositionMm
+            )
+        );
+        let files = plot_rk_construction(
+            &rk_dir,
+            &format!("{index:04}"),
+            &material_ratio_curve(&a.roughness_um, 1001),
+            &rk,
+            &title,
+            &caption,
+        )
+        .map_err(plot_err)?;
+        rk_plots.push((title, files));
     }
     let measured_x3p = out.join("measured.x3p");
     let bytes = to_x3p(
@@ -889,8 +978,50 @@ pub fn characterise_grid(
     let mut json = serde_json::to_vec_pretty(&report)?;
     json.push(b'\n');
     write_file(&report_json, &json)?;
+
+    // The report for people, with the plots embedded and the scan's journal.
+    let journal = (ctx.kind == "scan")
+        .then(|| {
+            let path = Path::new(&ctx.input).join(crate::scan::journal::JOURNAL_FILE);
+            read_journal(&path)
+                .and_then(|r| ResumeState::from_records(&path, &r.records))
+                .ok()
+        })
+        .flatten();
+    let pair = |stem: &str| {
+        (
+            out.join(format!("{stem}.png")),
+            out.join(format!("{stem}.svg")),
+        )
+    };
+    let mut figures = Vec::new();
+    for (stem, title) in [
+        ("heightmap", "Measured heights"),
+        ("bac", "Material ratio curves"),
+        ("overlay", "One line: measured and model"),
+    ] {
+        let (png, svg) = pair(stem);
+        figures.extend(html::Figure::from_files(title, &png, &svg, false));
+    }
+    for (title, [png, svg]) in &rk_plots {
+        figures.extend(html::Figure::from_files(title.clone(), png, svg, true));
+    }
+    let value = serde_json::to_value(&report)?;
+    let report_html = out.join("report.html");
+    write_file(
+        &report_html,
+        html::render(
+            &value,
+            journal.as_ref(),
+            &figures,
+            ctx.options.completing.then(chrono::Utc::now),
+        )
+        .as_bytes(),
+    )?;
+    plots.extend(rk_plots.into_iter().flat_map(|(_, files)| files));
     Ok(ScanOutputs {
         report_json,
+        report_html,
         summary_csv: summary,
         plots,
         measured_x3p: Some(measured_x3p),

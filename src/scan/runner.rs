@@ -672,7 +672,7 @@ async fn begin<S: Station>(
                 specimen,
                 operator,
                 notes,
-                software_version: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
+                software_version: crate::build_info::software(),
                 instrument_model: report.identity.model.clone(),
                 firmware: report.identity.firmware.clone(),
                 drive_unit: report.identity.drive_unit.clone(),
