@@ -24,8 +24,8 @@
 
 use std::path::Path;
 use std::process::Command;
-use surfscan::cli::demo::demo_config;
 use std::time::Duration;
+use surfscan::cli::demo::demo_config;
 use surfscan::devices::YAxis;
 use surfscan::scan::journal::{read_journal, Record};
 use surfscan::scan::station::open_stage;
@@ -228,7 +228,9 @@ async fn run(a: Args) {
     });
     let stage_cfg = stage_cfg.expect("a start record");
     let settle_ms = stage_cfg["settle-ms"].as_f64().expect("settle-ms recorded");
-    let feed = stage_cfg["feed-mm-min"].as_f64().expect("feed-mm-min recorded");
+    let feed = stage_cfg["feed-mm-min"]
+        .as_f64()
+        .expect("feed-mm-min recorded");
     assert_eq!(feed, FEED_MM_MIN, "the move time below assumes this feed");
     let times: Vec<(u32, f64)> = rec
         .records
