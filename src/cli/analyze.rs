@@ -10,12 +10,18 @@
 //! holding invalid (not measured) points is left out with a warning rather than filled in,
 //! and a one-line X3P profile is characterised as a profile.
 //!
+//! The model is fitted once at `--degree-u/--degree-v` (default: a scan's frozen plan, else
+//! the paper's 5/5); the report's model sections describe that surface and the hold-out
+//! refits use the same degrees, so a scan directory gives the report its scan wrote.
+//!
 //! Layer 5 (composition): reads files, calls [`crate::report`] and [`crate::metrology`].
 
 use super::{CliError, Exit};
+use crate::fit::FitOptions;
 use crate::metrology::params::{analyze_line, Options, Recipe, RoughnessParams};
+use crate::report::scan_dir::fit_for_report;
 use crate::report::{
-    characterise_grid, characterise_scan, LineGrid, ReportContext, ReportError,
+    characterise, characterise_scan, LineGrid, Model, ReportContext, ReportError,
     ScanAnalysisOptions, ScanOutputs,
 };
 use serde::Serialize;
@@ -54,6 +60,12 @@ pub struct Args {
     /// Output directory. Default: the scan directory for a scan, `.` for a CSV.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Degree of the model along u (x). Default: a scan's frozen plan, else 5 (the paper).
+    #[arg(long)]
+    pub degree_u: Option<usize>,
+    /// Degree of the model along v (y). Default: a scan's frozen plan, else 5 (the paper).
+    #[arg(long)]
+    pub degree_v: Option<usize>,
 }
 
 /// Default λc in mm for CSV input.
@@ -205,6 +217,12 @@ fn print_outputs(o: &ScanOutputs) {
 
 /// Runs `surfscan analyze`.
 pub fn run(args: Args) -> Result<(), CliError> {
+    if args.degree_u == Some(0) || args.degree_v == Some(0) {
+        return Err(CliError::new(
+            Exit::Usage,
+            "--degree-u and --degree-v must be at least 1 (the paper uses 5)",
+        ));
+    }
     if args.input.is_dir() {
         if args.pitch_x.is_some() || args.pitch_y.is_some() {
             return Err(CliError::new(
@@ -218,9 +236,9 @@ pub fn run(args: Args) -> Result<(), CliError> {
             lambda_c_mm: args.lc,
             no_filter: args.no_filter,
             overlay_line: args.overlay_line,
-            fit: None,
+            degree_u: args.degree_u,
+            degree_v: args.degree_v,
             out_dir: args.out.clone(),
-            completing: false,
         };
         let outputs = characterise_scan(&args.input, &options).map_err(report_error)?;
         print_outputs(&outputs);
@@ -310,6 +328,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         filter_reason,
         traceability: None,
         scan: None,
+        fit: None,
         options: ScanAnalysisOptions {
             curves: args.curves,
             levels: args.levels,
@@ -317,8 +336,9 @@ pub fn run(args: Args) -> Result<(), CliError> {
             ..ScanAnalysisOptions::default()
         },
         warnings: Vec::new(),
+        finished_at: None,
     };
-    let outputs = characterise_grid(&grid, ctx, &out).map_err(report_error)?;
+    let outputs = fit_and_characterise(&grid, ctx, &args, &out)?;
     print_outputs(&outputs);
     Ok(())
 }
@@ -448,6 +468,7 @@ fn run_x3p(args: &Args, bytes: &[u8], out: &Path) -> Result<(), CliError> {
         filter_reason,
         traceability: None,
         scan: None,
+        fit: None,
         options: ScanAnalysisOptions {
             curves: args.curves,
             levels: args.levels,
@@ -455,10 +476,35 @@ fn run_x3p(args: &Args, bytes: &[u8], out: &Path) -> Result<(), CliError> {
             ..ScanAnalysisOptions::default()
         },
         warnings,
+        finished_at: None,
     };
-    let outputs = characterise_grid(&grid, ctx, out).map_err(report_error)?;
+    let outputs = fit_and_characterise(&grid, ctx, args, out)?;
     print_outputs(&outputs);
     Ok(())
+}
+
+/// Fits `grid` once at `--degree-u/--degree-v` (default 5/5) and characterises it with that
+/// surface (the model sections and the hold-out refits use the same degrees).
+fn fit_and_characterise(
+    grid: &LineGrid,
+    mut ctx: ReportContext,
+    args: &Args,
+    out: &Path,
+) -> Result<ScanOutputs, CliError> {
+    let paper = FitOptions::default();
+    let degrees = FitOptions {
+        degree_u: args.degree_u.unwrap_or(paper.degree_u),
+        degree_v: args.degree_v.unwrap_or(paper.degree_v),
+    };
+    let (fit, summary, fit_s) = fit_for_report(grid, degrees);
+    ctx.fit = summary;
+    let model = Model {
+        degrees,
+        fit: fit.as_ref(),
+    };
+    let mut outputs = characterise(grid, model, ctx, out).map_err(report_error)?;
+    outputs.elapsed_s += fit_s;
+    Ok(outputs)
 }
 
 fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {

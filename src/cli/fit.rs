@@ -21,13 +21,17 @@
 //! not written; part i of n goes to `OUT.part<i>-of-<n>.igs` (see [`part_path`]), its Start
 //! section names the part and its v range, and the report lists every file.
 //!
+//! The degrees are `--degree-u/--degree-v`, by default those of a scan's frozen plan (its
+//! journal's start record), else the paper's 5/5.
+//!
 //! Layer 5 (composition).
 
 use super::{CliError, Exit};
 use crate::atomic::write_atomically;
 use crate::fit::{max_residual_mm, FitOptions, IncrementalFitter};
 use crate::iges::{IgesOptions, MAX_SECTION_LINES};
-use crate::scan::outputs::{write_surface_files, SurfaceWriteError};
+use crate::scan::outputs::SurfaceShape;
+use crate::scan::surface_files::{write_surface_files, SurfaceWriteError};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -47,12 +51,12 @@ pub struct Args {
     /// Pitch along y (between rows), mm (grid CSV only; a scan's lines are at their stored y).
     #[arg(long)]
     pub pitch_y: Option<f64>,
-    /// Degree along u (x).
-    #[arg(long, default_value_t = 5)]
-    pub degree_u: usize,
-    /// Degree along v (y).
-    #[arg(long, default_value_t = 5)]
-    pub degree_v: usize,
+    /// Degree along u (x). Default: a scan's frozen plan, else 5 (the paper).
+    #[arg(long)]
+    pub degree_u: Option<usize>,
+    /// Degree along v (y). Default: a scan's frozen plan, else 5 (the paper).
+    #[arg(long)]
+    pub degree_v: Option<usize>,
     /// Write a JSON fit report here.
     #[arg(long)]
     pub report: Option<PathBuf>,
@@ -99,7 +103,7 @@ pub fn sniff_input(path: &Path, head: &[u8]) -> InputKind {
     InputKind::GridCsv
 }
 
-pub use crate::scan::outputs::part_path;
+pub use crate::scan::surface_files::part_path;
 
 fn iges_write_error(e: SurfaceWriteError) -> CliError {
     let exit = match e {
@@ -208,6 +212,8 @@ struct Input {
     index: Vec<u32>,
     output: PathBuf,
     kind: &'static str,
+    /// The degrees to fit with.
+    degrees: FitOptions,
 }
 
 fn read_scan(args: &Args) -> Result<Input, CliError> {
@@ -289,6 +295,14 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             .clone()
             .unwrap_or_else(|| args.input.join("surface.igs")),
         kind: "scan",
+        degrees: crate::report::scan_dir::scan_degrees(
+            args.degree_u,
+            args.degree_v,
+            crate::report::scan_dir::read_scan_journal(&args.input)
+                .ok()
+                .as_ref()
+                .map(|s| &s.start),
+        ),
     })
 }
 
@@ -439,6 +453,7 @@ fn read_csv(args: &Args) -> Result<Input, CliError> {
         index: (0..rows as u32).collect(),
         output,
         kind: "grid",
+        degrees: crate::report::scan_dir::scan_degrees(args.degree_u, args.degree_v, None),
     })
 }
 
@@ -479,7 +494,7 @@ fn check_input_file(path: &Path) -> Result<(), CliError> {
 
 /// Runs `surfscan fit`.
 pub fn run(args: Args) -> Result<(), CliError> {
-    if args.degree_u == 0 || args.degree_v == 0 {
+    if args.degree_u == Some(0) || args.degree_v == Some(0) {
         return Err(CliError::new(
             Exit::Usage,
             "--degree-u and --degree-v must be at least 1 (the paper uses 5)",
@@ -512,12 +527,9 @@ pub fn run(args: Args) -> Result<(), CliError> {
         index,
         output,
         kind,
+        degrees: options,
     } = input;
 
-    let options = FitOptions {
-        degree_u: args.degree_u,
-        degree_v: args.degree_v,
-    };
     let progress = if std::io::stderr().is_terminal() && grid.heights_um.len() >= 1_000_000 {
         indicatif::ProgressBar::new(grid.rows as u64)
     } else {
@@ -551,8 +563,8 @@ pub fn run(args: Args) -> Result<(), CliError> {
             format!(
                 "Surface fitted by surfscan {} (global B-spline interpolation, p={}, q={}); units mm.",
                 env!("CARGO_PKG_VERSION"),
-                args.degree_u,
-                args.degree_v
+                options.degree_u,
+                options.degree_v
             ),
             match pitch_y_mm {
                 Some(py) => format!(
@@ -633,8 +645,11 @@ pub fn run(args: Args) -> Result<(), CliError> {
             "write_iges": write_s,
         },
     });
-    if let Some(o) = report.as_object_mut() {
-        o.extend(crate::scan::outputs::surface_fields(s));
+    if let (Some(o), Ok(serde_json::Value::Object(shape))) = (
+        report.as_object_mut(),
+        serde_json::to_value(SurfaceShape::of(s)),
+    ) {
+        o.extend(shape);
     }
     if let Some(path) = &args.report {
         ensure_parent(path)?;

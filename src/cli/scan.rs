@@ -12,9 +12,8 @@
 
 use super::{CliError, Exit};
 use crate::config::{Config, ConfigError};
-use crate::report::{characterise_scan, ScanAnalysisOptions};
+use crate::report::{ScanAnalysisOptions, ScanCharacteriser};
 use crate::scan::journal::find_unfinished;
-use crate::scan::outputs::Characterise;
 use crate::scan::plan::Plan;
 use crate::scan::runner::{run_scan, Control, FailKind, Outcome, ScanRequest};
 use crate::scan::settings::{Backoff, RunSettings};
@@ -95,27 +94,16 @@ pub fn run_settings(
     hooks: TestHooks,
 ) -> Result<RunSettings, CliError> {
     let plan = plan_of(config).map_err(|e| CliError::new(Exit::Config, e.to_string()))?;
-    let a = config.analysis.clone();
-    let characterise: Characterise = Arc::new(move |dir: &Path, fit: serde_json::Value| {
-        let options = ScanAnalysisOptions {
+    let a = &config.analysis;
+    let characterise = ScanCharacteriser {
+        options: ScanAnalysisOptions {
             curves: a.curves,
             levels: a.levels,
             lambda_c_mm: a.lambda_c_mm,
             no_filter: a.no_filter,
-            fit: Some(fit),
-            completing: true,
             ..ScanAnalysisOptions::default()
-        };
-        let out = characterise_scan(dir, &options).map_err(|e| e.to_string())?;
-        for w in &out.warnings {
-            tracing::warn!("characterisation: {w}");
-        }
-        let mut files = vec![out.report_html, out.summary_csv];
-        files.extend(out.plots);
-        files.extend(out.measured_x3p);
-        files.extend(out.model_x3p);
-        Ok(files)
-    });
+        },
+    };
     Ok(RunSettings {
         plan,
         output_dir: config.output.dir.clone(),
@@ -129,7 +117,7 @@ pub fn run_settings(
         config: serde_json::to_value(config).unwrap_or_default(),
         config_hash,
         hooks: Arc::new(hooks),
-        characterise: Some(characterise),
+        characterise: Some(Arc::new(characterise)),
     })
 }
 

@@ -14,6 +14,7 @@ use surfscan::profile::{Conditions, FilterKind, InstrumentResult, Profile, Profi
 use surfscan::scan::faults::NoFaults;
 use surfscan::scan::journal::{Journal, Record, StartRecord, StopRecord, StopStatus};
 use surfscan::scan::line::LineMeta;
+use surfscan::scan::plan::Plan;
 use surfscan::scan::scan_id::ScanId;
 use surfscan::scan::store::ScanStore;
 use surfscan::units::Nm;
@@ -74,6 +75,18 @@ fn expected_options() -> Options {
     }
 }
 
+/// The frozen plan of a scan of `lines` lines at the paper's degrees.
+fn plan(lines: u32) -> Plan {
+    Plan {
+        lines,
+        y_start_nm: Nm(0),
+        y_step_nm: Nm(STEP_Y_NM),
+        degree_u: 5,
+        degree_v: 5,
+        max_line_attempts: 3,
+    }
+}
+
 /// Builds a scan of the given `sur-2` rows as the daemon does and returns its directory.
 /// Every line's instrument results are Ra = ours − RA_OFFSET_UM (µm) and Rz = ours −
 /// RZ_OFFSET_UM given in nm, plus a parameter we do not compute.
@@ -93,7 +106,7 @@ fn build_scan(
         StartRecord {
             scan_id: id.0.clone(),
             time: start,
-            plan: json!({ "lines": rows.len(), "y_step_nm": STEP_Y_NM }),
+            plan: plan(rows.len() as u32),
             config: json!({
                 "output": { "dir": parent.display().to_string() },
                 "traceability": {
@@ -689,18 +702,18 @@ fn a_malformed_line_file_is_a_clear_error_naming_the_file() {
 }
 
 #[test]
-fn characterise_scan_writes_the_callers_fit_section_verbatim_and_returns_the_paths() {
+fn characterise_scan_reports_the_fit_it_describes_and_returns_the_paths() {
     use surfscan::report::{characterise_scan, ScanAnalysisOptions};
     let tmp = tempfile::tempdir().unwrap();
     let rows: Vec<usize> = (0..7).collect();
     let scan = build_scan(tmp.path(), &rows, ProfileKind::P, Some(StopStatus::Success));
-    let fit = json!({ "max_residual_mm": 3.5e-13, "poles": [563, 7], "iges": "surface.igs" });
+    // v asked for, u from the frozen plan (5).
     let options = ScanAnalysisOptions {
-        fit: Some(fit.clone()),
         curves: 5,
         levels: 21,
         lambda_c_mm: Some(0.25),
         overlay_line: Some(6),
+        degree_v: Some(3),
         ..ScanAnalysisOptions::default()
     };
     let out = characterise_scan(&scan, &options).unwrap();
@@ -715,7 +728,20 @@ fn characterise_scan_writes_the_callers_fit_section_verbatim_and_returns_the_pat
     }
     assert!(out.model_x3p.as_ref().is_some_and(|p| p.exists()));
     let r = report(&scan);
-    assert_eq!(r["fit"], fit);
+    // The fit section describes the surface of the model sections: the 7 lines.
+    assert_eq!(
+        (r["fit"]["degree_u"].as_u64(), r["fit"]["degree_v"].as_u64()),
+        (Some(5), Some(3))
+    );
+    assert_eq!(r["fit"]["poles_v"], 7);
+    assert_eq!(r["fit"]["grid"]["rows"], 7);
+    assert!(r["fit"]["max_residual_mm"].as_f64().unwrap() < 1e-9);
+    assert!(
+        r["fit"]["iges_files"].as_array().unwrap().is_empty(),
+        "analyze writes no IGES"
+    );
+    let recipe = r["surface"]["recipe"].as_str().unwrap();
+    assert!(recipe.contains("degree 5/3"), "{recipe}");
     assert_eq!(r["surface"]["bac_curves"].as_array().unwrap().len(), 5);
     assert_eq!(r["surface"]["bac"].as_array().unwrap().len(), 21);
     // The override wins over the recorded 0.8 mm, and the recipe says so.
