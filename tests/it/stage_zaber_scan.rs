@@ -78,19 +78,7 @@ impl ZaberRig {
     /// A station configuration for this rig; `stage_extra` is appended to `[stage]`.
     fn config(&self, out: &str, nm_per_microstep: f64, stage_extra: &str) -> PathBuf {
         let text = format!(
-            r#"[instrument]
-port = {instrument:?}
-model = "sj210"
-baud = 38400
-pitch-x-um = 1.5
-
-[instrument.timeouts]
-poll-interval-ms = 5
-
-[instrument.commands]
-profile-total = "RDEVA00"
-profile-block = "RDEVA{{n}}"
-
+            r#"{instrument}
 [stage]
 port = {stage:?}
 protocol = "zaber"
@@ -121,7 +109,7 @@ dir = {dir:?}
 [control]
 socket = {sock:?}
 "#,
-            instrument = self.instrument_link.display().to_string(),
+            instrument = instrument_section(&self.instrument_link),
             stage = self.stage_link.display().to_string(),
             dir = self.out(out).display().to_string(),
             sock = self.tmp.path().join("control.sock").display().to_string(),
@@ -191,56 +179,43 @@ async fn a_scan_starts_on_an_axis_powered_up_without_a_reference() {
     rig.shutdown().await;
 }
 
-/// Waits until `n` lines are committed, then injects `fault` into the axis.
-async fn inject_after_lines(rig: &ZaberRig, n: usize, fault: StageFault) {
+/// Runs a scan, injects `fault` into the axis once three lines are committed, and checks
+/// that the scan re-homed (the journal naming `flag`) and still landed every line at its y.
+async fn scan_through(fault: StageFault, flag: &str) {
+    let rig = ZaberRig::start(powered_up(125.0)).await;
+    let cfg = rig.config("out", 125.0, "");
+    let scan = tokio::spawn(async move { run_scan(&cfg, &[]).await });
     let out = rig.out("out");
-    wait_until(Duration::from_secs(60), "lines committed", || {
-        committed_lines(&out) >= n
+    wait_until(Duration::from_secs(60), "three lines committed", || {
+        committed_lines(&out) >= 3
     })
     .await;
     rig.stage.inject(fault);
+    let o = scan.await.expect("scan task");
+    assert!(o.status.success(), "{}", describe(&o));
+    assert_eq!(rig.stage.homing_cycles(), 2, "{}", describe(&o));
+    let records = assert_scan_lands_every_line(&scan_dir(&out), 0);
+    let why = interruptions(&records);
+    assert!(
+        why.iter()
+            .any(|r| r.contains(flag) && r.contains("re-homing")),
+        "{why:?}"
+    );
+    rig.shutdown().await;
 }
 
 /// A power cycle in the middle of the scan: the axis reads 0 where it stands with `WR`. The
 /// scan must notice before it traces at a wrong y, re-home and go on where it was.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_power_cycle_mid_scan_rehomes_and_every_line_lands_at_its_y() {
-    let rig = ZaberRig::start(powered_up(125.0)).await;
-    let cfg = rig.config("out", 125.0, "");
-    let scan = tokio::spawn(async move { run_scan(&cfg, &[]).await });
-    inject_after_lines(&rig, 3, StageFault::PositionLostWr).await;
-    let o = scan.await.expect("scan task");
-    assert!(o.status.success(), "{}", describe(&o));
-    assert_eq!(rig.stage.homing_cycles(), 2, "{}", describe(&o));
-    let records = assert_scan_lands_every_line(&scan_dir(&rig.out("out")), 0);
-    let why = interruptions(&records);
-    assert!(
-        why.iter()
-            .any(|r| r.contains("WR") && r.contains("re-homing")),
-        "{why:?}"
-    );
-    rig.shutdown().await;
+    scan_through(StageFault::PositionLostWr, "WR").await;
 }
 
 /// A stall during a move: the carriage stops half way (`FS`). The line is re-traced after a
 /// home, never traced where the carriage happened to stop.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_stall_mid_scan_rehomes_and_every_line_lands_at_its_y() {
-    let rig = ZaberRig::start(powered_up(125.0)).await;
-    let cfg = rig.config("out", 125.0, "");
-    let scan = tokio::spawn(async move { run_scan(&cfg, &[]).await });
-    inject_after_lines(&rig, 3, StageFault::Stall).await;
-    let o = scan.await.expect("scan task");
-    assert!(o.status.success(), "{}", describe(&o));
-    assert_eq!(rig.stage.homing_cycles(), 2, "{}", describe(&o));
-    let records = assert_scan_lands_every_line(&scan_dir(&rig.out("out")), 0);
-    let why = interruptions(&records);
-    assert!(
-        why.iter()
-            .any(|r| r.contains("FS") && r.contains("re-homing")),
-        "{why:?}"
-    );
-    rig.shutdown().await;
+    scan_through(StageFault::Stall, "FS").await;
 }
 
 /// 0.047625 µm microsteps (a fine lead-screw axis): 0.01 mm is 209.97 microsteps. Without
