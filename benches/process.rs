@@ -308,7 +308,14 @@ fn write_scan(parent: &Path, kind: ProfileKind, cols: usize) -> PathBuf {
         StartRecord {
             scan_id: id.0.clone(),
             time: start,
-            plan: serde_json::json!({ "lines": 31 }),
+            plan: surfscan::scan::plan::Plan {
+                lines: 31,
+                y_start_nm: Nm(0),
+                y_step_nm: Nm(10_000),
+                degree_u: 5,
+                degree_v: 5,
+                max_line_attempts: 3,
+            },
             config: serde_json::json!({}),
             config_hash: "0".repeat(64),
             specimen: "timing".into(),

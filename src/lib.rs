@@ -18,8 +18,11 @@
 //!    the outputs of a completed scan).
 //! 4. Process edges: [`config`] (the station's TOML, validated), [`telemetry`] (logging),
 //!    [`atomic`] (durable file replacement), [`control`] (the operator's control socket),
-//!    [`service`] (systemd notifications), [`report`] (characterisation of a scan
-//!    directory or grid into report.json, summary.csv, plots and X3P).
+//!    [`service`] (systemd notifications), [`hook`] (the notification command),
+//!    [`report`] (characterisation of a completed scan, a scan directory or a grid into
+//!    report.json, report.html, summary.csv, plots and X3P, section by section; the runner
+//!    reaches it through the scan's `Characterise` contract, supplied by the composition),
+//!    [`station_lock`] (one process per station).
 //! 5. Composition: [`cli`] (one file per subcommand) and `main.rs`.
 //!
 //! The simulator (`simulator/`, crate `surfscan-sim`) speaks the instrument's and the
@@ -46,6 +49,7 @@ pub mod scan;
 pub mod service;
 pub mod sj210;
 pub mod stage;
+pub mod station_lock;
 pub mod telemetry;
 pub mod transport;
 pub mod units;

@@ -4,17 +4,25 @@
 //! A scan directory (`lines/NNNN.csv` + `NNNN.json`, as the scan daemon writes it) is fitted
 //! from its complete lines in index order: y of each line is its target `y_target_nm`, the x
 //! pitch is the one stored with the lines, the default output is `SCAN_DIR/surface.igs`.
-//! Lines with only one of their two files are left out and named in a warning. A grid CSV
-//! needs `--pitch-x`, `--pitch-y` and `-o`.
+//! Lines with only one of their two files are left out and named in a warning. Each line's
+//! heights file is checked against the SHA-256 its journal record holds: a file changed after
+//! it was traced is refused (naming it), a line the journal never committed is left out with a
+//! warning. An existing `SCAN_DIR/surface.igs` (a completed scan's surface) is not replaced
+//! unless `--force` is given or `-o` names the output. A grid CSV needs `--pitch-x`,
+//! `--pitch-y` and `-o`; an IGES file or another non-grid input is named as such.
 //!
-//! Exit status: 0 done; 2 bad pitch or degree arguments; 74 the input cannot be read or an
-//! output cannot be written; 1 the data are malformed (the message names line, column and
-//! content) or cannot be interpolated.
+//! Exit status: 0 done; 2 bad pitch or degree arguments, an input of the wrong kind, or an
+//! existing surface not to be replaced; 74 the input cannot be read or an output cannot be
+//! written; 1 the data are malformed (the message names line, column and content), a line
+//! file does not match its journal record, or the data cannot be interpolated.
 //!
 //! A surface whose IGES text does not fit one file (the P section is capped at 9,999,999
 //! lines) is written as several complete IGES files of whole exact patches: `OUT.igs` is then
 //! not written; part i of n goes to `OUT.part<i>-of-<n>.igs` (see [`part_path`]), its Start
 //! section names the part and its v range, and the report lists every file.
+//!
+//! The degrees are `--degree-u/--degree-v`, by default those of a scan's frozen plan (its
+//! journal's start record), else the paper's 5/5.
 //!
 //! Layer 5 (composition).
 
@@ -22,7 +30,8 @@ use super::{CliError, Exit};
 use crate::atomic::write_atomically;
 use crate::fit::{max_residual_mm, FitOptions, IncrementalFitter};
 use crate::iges::{IgesOptions, MAX_SECTION_LINES};
-use crate::scan::outputs::{write_surface_files, SurfaceWriteError};
+use crate::scan::outputs::SurfaceShape;
+use crate::scan::surface_files::{write_surface_files, SurfaceWriteError};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -42,12 +51,12 @@ pub struct Args {
     /// Pitch along y (between rows), mm (grid CSV only; a scan's lines are at their stored y).
     #[arg(long)]
     pub pitch_y: Option<f64>,
-    /// Degree along u (x).
-    #[arg(long, default_value_t = 5)]
-    pub degree_u: usize,
-    /// Degree along v (y).
-    #[arg(long, default_value_t = 5)]
-    pub degree_v: usize,
+    /// Degree along u (x). Default: a scan's frozen plan, else 5 (the paper).
+    #[arg(long)]
+    pub degree_u: Option<usize>,
+    /// Degree along v (y). Default: a scan's frozen plan, else 5 (the paper).
+    #[arg(long)]
+    pub degree_v: Option<usize>,
     /// Write a JSON fit report here.
     #[arg(long)]
     pub report: Option<PathBuf>,
@@ -59,9 +68,42 @@ pub struct Args {
     /// along v into exact patches.
     #[arg(long, default_value_t = MAX_SECTION_LINES)]
     pub max_iges_lines_per_entity: usize,
+    /// Replace an existing SCAN_DIR/surface.igs (by default it is kept: it is the surface the
+    /// scan wrote when it completed).
+    #[arg(long)]
+    pub force: bool,
 }
 
-pub use crate::scan::outputs::part_path;
+/// What a file given to `fit` is, from its name and first bytes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InputKind {
+    /// Text that may be a grid CSV.
+    GridCsv,
+    /// An IGES file (`.igs`/`.iges`, or 80-column lines with `S` in column 73).
+    Iges,
+    /// A zip archive or an `.x3p` file.
+    X3p,
+}
+
+/// Classifies a file from its name and its first bytes (at least the first line).
+pub fn sniff_input(path: &Path, head: &[u8]) -> InputKind {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if ext == "x3p" || head.starts_with(b"PK\x03\x04") {
+        return InputKind::X3p;
+    }
+    let first = head.split(|b| *b == b'\n').next().unwrap_or(&[]);
+    let first = first.strip_suffix(b"\r").unwrap_or(first);
+    let iges_line = first.len() == 80 && first.get(72) == Some(&b'S');
+    if ext == "igs" || ext == "iges" || iges_line {
+        return InputKind::Iges;
+    }
+    InputKind::GridCsv
+}
+
+pub use crate::scan::surface_files::part_path;
 
 fn iges_write_error(e: SurfaceWriteError) -> CliError {
     let exit = match e {
@@ -170,6 +212,8 @@ struct Input {
     index: Vec<u32>,
     output: PathBuf,
     kind: &'static str,
+    /// The degrees to fit with.
+    degrees: FitOptions,
 }
 
 fn read_scan(args: &Args) -> Result<Input, CliError> {
@@ -186,7 +230,7 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             ));
         }
     }
-    let (lines, _, incomplete) = crate::report::load_scan_grid(&args.input).map_err(|e| {
+    let (mut lines, _, incomplete) = crate::report::load_scan_grid(&args.input).map_err(|e| {
         let exit = match &e {
             crate::report::ReportError::Store(crate::scan::store_error::StoreError::Io {
                 ..
@@ -197,9 +241,44 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
     })?;
     if !incomplete.is_empty() {
         eprintln!(
-            "surfscan: warning: lines {incomplete:?} have only one of their two files in {} and were left out",
+            "surfscan: warning: lines {} have only one of their two files in {} and were left out",
+            line_list(&incomplete),
             args.input.join("lines").display()
         );
+    }
+    let check = check_against_journal(&args.input, &lines.index)?;
+    if !check.uncommitted.is_empty() {
+        eprintln!(
+            "surfscan: warning: lines {} are on disk but the journal never committed them (the scan stopped before their record); they were left out",
+            line_list(&check.uncommitted)
+        );
+        keep_rows(&mut lines, |i| !check.uncommitted.contains(&i));
+        if lines.index.is_empty() {
+            return Err(CliError::new(
+                Exit::Failed,
+                format!(
+                    "{}: no line the journal committed; nothing to fit",
+                    args.input.display()
+                ),
+            ));
+        }
+    }
+    let default_output = args.input.join("surface.igs");
+    if args.output.is_none() && !args.force {
+        if let Some(existing) = existing_surface(&default_output) {
+            return Err(CliError::new(
+                Exit::Usage,
+                format!(
+                    "{} exists ({}); it is kept: pass --force to replace it, or -o OTHER.igs to write the new fit elsewhere",
+                    existing.display(),
+                    if check.completed {
+                        "the surface the completed scan wrote"
+                    } else {
+                        "an earlier fit of this scan"
+                    }
+                ),
+            ));
+        }
     }
     Ok(Input {
         grid: Grid {
@@ -216,6 +295,127 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             .clone()
             .unwrap_or_else(|| args.input.join("surface.igs")),
         kind: "scan",
+        degrees: crate::report::scan_dir::scan_degrees(
+            args.degree_u,
+            args.degree_v,
+            crate::report::scan_dir::read_scan_journal(&args.input)
+                .ok()
+                .as_ref()
+                .map(|s| &s.start),
+        ),
+    })
+}
+
+/// Line indices as a person reads them: 1-based, with the file names they are stored in.
+fn line_list(indices: &[u32]) -> String {
+    indices
+        .iter()
+        .map(|&i| {
+            format!(
+                "{} ({})",
+                crate::numfmt::line_number(i),
+                crate::scan::store::csv_name(i)
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Keeps the rows of `lines` whose index passes `keep`.
+fn keep_rows(lines: &mut crate::report::LineGrid, keep: impl Fn(u32) -> bool) {
+    let cols = lines.cols;
+    let rows: Vec<usize> = (0..lines.index.len())
+        .filter(|&r| keep(lines.index[r]))
+        .collect();
+    let pick = |v: &Vec<f64>| rows.iter().map(|&r| v[r]).collect::<Vec<f64>>();
+    lines.heights_um = rows
+        .iter()
+        .flat_map(|&r| lines.heights_um[r * cols..(r + 1) * cols].to_vec())
+        .collect();
+    lines.y_mm = pick(&lines.y_mm);
+    lines.index = rows.iter().map(|&r| lines.index[r]).collect();
+    lines.y_readback_mm = rows.iter().map(|&r| lines.y_readback_mm[r]).collect();
+    lines.standard = rows.iter().map(|&r| lines.standard[r].clone()).collect();
+    if let Some(inst) = &lines.instrument {
+        lines.instrument = Some(rows.iter().map(|&r| inst[r].clone()).collect());
+    }
+}
+
+/// The existing surface at `output` (or the first part of a split one), if any.
+fn existing_surface(output: &Path) -> Option<PathBuf> {
+    if output.exists() {
+        return Some(output.to_path_buf());
+    }
+    let stem = output.file_stem()?.to_string_lossy().into_owned();
+    let dir = output.parent()?;
+    std::fs::read_dir(dir)
+        .ok()?
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| {
+            p.file_name()
+                .map(|n| {
+                    n.to_string_lossy()
+                        .starts_with(&format!("{stem}.part1-of-"))
+                })
+                .unwrap_or(false)
+        })
+}
+
+/// What the journal says about the lines to fit.
+struct JournalCheck {
+    /// Lines on disk without a journal record (never committed).
+    uncommitted: Vec<u32>,
+    /// The scan stopped with success.
+    completed: bool,
+}
+
+/// Checks every line file against the SHA-256 of its journal record. A scan without a
+/// readable journal is fitted as it is, with a warning; a file that differs from its record
+/// is an error naming it.
+fn check_against_journal(dir: &Path, index: &[u32]) -> Result<JournalCheck, CliError> {
+    use crate::scan::journal::{read_journal, ResumeState, StopStatus, JOURNAL_FILE};
+    let path = dir.join(JOURNAL_FILE);
+    let state = match read_journal(&path).and_then(|r| ResumeState::from_records(&path, &r.records))
+    {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!(
+                "surfscan: warning: the line files cannot be checked against the journal ({e}); they are fitted as they are"
+            );
+            return Ok(JournalCheck {
+                uncommitted: Vec::new(),
+                completed: false,
+            });
+        }
+    };
+    let mut uncommitted = Vec::new();
+    for &i in index {
+        let Some(record) = state.lines.iter().find(|l| l.index == i) else {
+            uncommitted.push(i);
+            continue;
+        };
+        let file = dir.join("lines").join(crate::scan::store::csv_name(i));
+        let bytes = std::fs::read(&file).map_err(|e| io_err("cannot read", &file, e))?;
+        let sha = crate::scan::store::hex_sha256(&bytes);
+        if sha != record.csv_sha256 {
+            return Err(CliError::new(
+                Exit::Failed,
+                format!(
+                    "{}: line {} was changed after it was traced: its SHA-256 {sha} differs from the journal's {}; restore the file (the journal holds no copy), or fit the edited heights as a grid CSV",
+                    file.display(),
+                    crate::numfmt::line_number(i),
+                    record.csv_sha256
+                ),
+            ));
+        }
+    }
+    Ok(JournalCheck {
+        uncommitted,
+        completed: state
+            .stop
+            .as_ref()
+            .is_some_and(|s| s.status == StopStatus::Success),
     })
 }
 
@@ -253,12 +453,48 @@ fn read_csv(args: &Args) -> Result<Input, CliError> {
         index: (0..rows as u32).collect(),
         output,
         kind: "grid",
+        degrees: crate::report::scan_dir::scan_degrees(args.degree_u, args.degree_v, None),
     })
+}
+
+/// Refuses a file that is absent, or that is not a grid CSV, naming what it is.
+fn check_input_file(path: &Path) -> Result<(), CliError> {
+    use std::io::Read;
+    let mut head = vec![0u8; 256];
+    let n = std::fs::File::open(path)
+        .and_then(|mut f| f.read(&mut head))
+        .map_err(|e| {
+            CliError::new(
+                Exit::Io,
+                format!(
+                    "cannot read {}: {e}; fit reads a grid CSV of heights in µm or a scan directory",
+                    path.display()
+                ),
+            )
+        })?;
+    head.truncate(n);
+    match sniff_input(path, &head) {
+        InputKind::GridCsv => Ok(()),
+        InputKind::Iges => Err(CliError::new(
+            Exit::Usage,
+            format!(
+                "{} is an IGES file (a fitted surface), not heights to fit; fit reads a grid CSV of heights in µm or a scan directory",
+                path.display()
+            ),
+        )),
+        InputKind::X3p => Err(CliError::new(
+            Exit::Usage,
+            format!(
+                "{} is an X3P archive; fit reads a grid CSV of heights in µm or a scan directory (`surfscan analyze` reads X3P)",
+                path.display()
+            ),
+        )),
+    }
 }
 
 /// Runs `surfscan fit`.
 pub fn run(args: Args) -> Result<(), CliError> {
-    if args.degree_u == 0 || args.degree_v == 0 {
+    if args.degree_u == Some(0) || args.degree_v == Some(0) {
         return Err(CliError::new(
             Exit::Usage,
             "--degree-u and --degree-v must be at least 1 (the paper uses 5)",
@@ -268,6 +504,18 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let input = if args.input.is_dir() {
         read_scan(&args)?
     } else {
+        // Arguments first (a bad value is a usage error whatever the file), then the file
+        // itself, then what a grid CSV needs: a missing file is never reported as a
+        // missing pitch.
+        for (name, v) in [("--pitch-x", args.pitch_x), ("--pitch-y", args.pitch_y)] {
+            if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
+                return Err(CliError::new(
+                    Exit::Usage,
+                    format!("{name} {v} mm must be a positive number of millimetres"),
+                ));
+            }
+        }
+        check_input_file(&args.input)?;
         read_csv(&args)?
     };
     let read_s = t_read.elapsed().as_secs_f64();
@@ -279,12 +527,9 @@ pub fn run(args: Args) -> Result<(), CliError> {
         index,
         output,
         kind,
+        degrees: options,
     } = input;
 
-    let options = FitOptions {
-        degree_u: args.degree_u,
-        degree_v: args.degree_v,
-    };
     let progress = if std::io::stderr().is_terminal() && grid.heights_um.len() >= 1_000_000 {
         indicatif::ProgressBar::new(grid.rows as u64)
     } else {
@@ -318,8 +563,8 @@ pub fn run(args: Args) -> Result<(), CliError> {
             format!(
                 "Surface fitted by surfscan {} (global B-spline interpolation, p={}, q={}); units mm.",
                 env!("CARGO_PKG_VERSION"),
-                args.degree_u,
-                args.degree_v
+                options.degree_u,
+                options.degree_v
             ),
             match pitch_y_mm {
                 Some(py) => format!(
@@ -400,8 +645,11 @@ pub fn run(args: Args) -> Result<(), CliError> {
             "write_iges": write_s,
         },
     });
-    if let Some(o) = report.as_object_mut() {
-        o.extend(crate::scan::outputs::surface_fields(s));
+    if let (Some(o), Ok(serde_json::Value::Object(shape))) = (
+        report.as_object_mut(),
+        serde_json::to_value(SurfaceShape::of(s)),
+    ) {
+        o.extend(shape);
     }
     if let Some(path) = &args.report {
         ensure_parent(path)?;

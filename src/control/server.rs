@@ -498,23 +498,27 @@ fn peer_info(stream: &UnixStream) -> Option<PeerInfo> {
 }
 
 /// `SO_PEERGROUPS` (Linux 4.13): the supplementary groups of the peer's credentials at
-/// connect time. The constant is the asm-generic value, which libc does not export; other
-/// architectures fall back to the primary group alone.
-#[cfg(all(
+/// connect time. The number is the asm-generic one, which libc does not export; the
+/// architectures with their own socket numbering (mips, sparc) and other systems fall back to
+/// the primary group alone.
+const SO_PEERGROUPS: Option<libc::c_int> = if cfg!(all(
     target_os = "linux",
-    any(
-        target_arch = "x86_64",
-        target_arch = "x86",
-        target_arch = "aarch64",
-        target_arch = "arm",
-        target_arch = "riscv64",
-        target_arch = "loongarch64",
-        target_arch = "powerpc64",
-        target_arch = "s390x"
-    )
-))]
+    not(any(
+        target_arch = "mips",
+        target_arch = "mips64",
+        target_arch = "sparc",
+        target_arch = "sparc64"
+    ))
+)) {
+    Some(59)
+} else {
+    None
+};
+
 fn peer_groups(fd: std::os::unix::io::RawFd) -> io::Result<Vec<u32>> {
-    const SO_PEERGROUPS: libc::c_int = 59;
+    let Some(option) = SO_PEERGROUPS else {
+        return Err(io::Error::from(io::ErrorKind::Unsupported));
+    };
     let gid_size = std::mem::size_of::<libc::gid_t>();
     let mut capacity = 64usize;
     loop {
@@ -526,7 +530,7 @@ fn peer_groups(fd: std::os::unix::io::RawFd) -> io::Result<Vec<u32>> {
             libc::getsockopt(
                 fd,
                 libc::SOL_SOCKET,
-                SO_PEERGROUPS,
+                option,
                 buf.as_mut_ptr().cast(),
                 &mut len,
             )
@@ -543,23 +547,6 @@ fn peer_groups(fd: std::os::unix::io::RawFd) -> io::Result<Vec<u32>> {
         }
         return Err(e);
     }
-}
-
-#[cfg(not(all(
-    target_os = "linux",
-    any(
-        target_arch = "x86_64",
-        target_arch = "x86",
-        target_arch = "aarch64",
-        target_arch = "arm",
-        target_arch = "riscv64",
-        target_arch = "loongarch64",
-        target_arch = "powerpc64",
-        target_arch = "s390x"
-    )
-)))]
-fn peer_groups(_fd: std::os::unix::io::RawFd) -> io::Result<Vec<u32>> {
-    Err(io::Error::from(io::ErrorKind::Unsupported))
 }
 
 /// Whether the peer may command under `allowed`: one of its groups is listed. Without its

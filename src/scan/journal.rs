@@ -6,8 +6,8 @@
 //! invalid last line) is truncated and reported; an invalid record before the end is a named
 //! error. [`ResumeState`] derives what a restarted scan needs.
 //!
-//! Layer 3 (session): depends on [`crate::profile`], [`crate::units`] and the storage fault
-//! hook ([`super::faults`]); file I/O only.
+//! Layer 3 (session): depends on [`crate::profile`], [`crate::units`], the plan and the storage
+//! fault hook ([`super::faults`]); file I/O only.
 
 use std::collections::BTreeSet;
 use std::fs::{self, OpenOptions};
@@ -22,6 +22,7 @@ use crate::profile::Conditions;
 use crate::units::Nm;
 
 use super::faults::{StorageFaults, WriteStep};
+use super::plan::Plan;
 
 /// The journal's file name inside a scan directory.
 pub const JOURNAL_FILE: &str = "journal.jsonl";
@@ -89,8 +90,9 @@ pub struct StartRecord {
     /// Start time.
     pub time: DateTime<Utc>,
     /// The plan frozen at start (it wins over a config edited since).
-    pub plan: serde_json::Value,
-    /// The whole configuration as loaded.
+    pub plan: Plan,
+    /// The whole configuration as loaded, for traceability: its types belong to the process
+    /// edge above the session, which never reads this copy back.
     pub config: serde_json::Value,
     /// SHA-256 of the configuration file, hex.
     pub config_hash: String,
@@ -154,6 +156,17 @@ pub enum StopStatus {
     Abort,
     /// Ended by an unrecoverable fault.
     Fail,
+}
+
+impl StopStatus {
+    /// `success`, `abort` or `fail`, as the journal spells it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            StopStatus::Success => "success",
+            StopStatus::Abort => "abort",
+            StopStatus::Fail => "fail",
+        }
+    }
 }
 
 /// The final record of a scan.

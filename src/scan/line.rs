@@ -57,7 +57,7 @@ impl StoredLine {
     }
 }
 
-/// The lines of a scan directory as found by [`ScanStore::load_all`].
+/// The lines of a scan directory as found by [`ScanStore::load_all`](super::store::ScanStore::load_all).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LoadedLines {
     /// Complete lines, in index order.

@@ -13,11 +13,12 @@
 //! - [`station`]: opening the instrument and the stage; device errors reduced to a `Fault`.
 //! - [`runner`]: one scan, new or resumed, to its end: per-line durability, faults by class,
 //!   suspension and reconnection, pause/abort, shutdown.
-//! - [`store`]: the scan directory; [`line`] and [`line_csv`]: a stored line's metadata and
+//! - [`store`]: the scan directory; [`line`](mod@line) and [`line_csv`]: a stored line's metadata and
 //!   heights file; [`scan_id`]: the scan's name; [`store_error`]: what can go wrong there;
 //!   [`disk`]: the pre-flight disk check; [`faults`]: the storage fault hook.
 //! - [`journal`]: `journal.jsonl` records, torn-tail recovery, resume state.
-//! - [`outputs`]: IGES and report of a completed scan.
+//! - [`outputs`]: what a completed scan writes from memory (IGES via [`surface_files`], with
+//!   [`traceability`]; the report through the [`outputs::Characterise`] contract).
 //! - [`metrics`]: the Prometheus text-format metrics file.
 //! - [`testhooks`]: crash and full-disk injection for end-to-end tests.
 
@@ -38,4 +39,6 @@ pub mod station;
 pub mod status;
 pub mod store;
 pub mod store_error;
+pub mod surface_files;
 pub mod testhooks;
+pub mod traceability;

@@ -1,23 +1,162 @@
-//! What a completed scan leaves besides its lines: the fitted surface as IGES
-//! (`surface.igs`, or `surface.part<i>-of-<n>.igs` when one file cannot hold it) with the
-//! scan's traceability in its Start section, and `report.json` with the fit statistics,
-//! the instrument's own results per line and the traceability of the scan. Every file is
-//! replaced atomically (temporary name, fsync, rename).
+//! What a completed scan leaves besides its lines, in one pass from memory: the fitter's
+//! surface is written as IGES ([`super::surface_files`]) with the scan's traceability in its
+//! Start section, and the characterisation ([`Characterise`], supplied by the composition
+//! layer) is given the lines the runner holds and that same surface. No line file is read
+//! back and nothing is refitted here. Without a characterisation, or when it fails,
+//! `report.json` holds the fit summary and the instrument's own results per line.
 //!
-//! Layer 3 (session): depends on [`crate::fit`], [`crate::iges`], [`crate::atomic`],
-//! [`super::store`] and [`super::journal`] (to read the lines and the start record).
+//! Layer 3 (session): depends on [`crate::fit`], [`super::surface_files`],
+//! [`super::traceability`], [`super::line`] and [`crate::atomic`].
 
 use super::journal::StartRecord;
 use super::line::StoredLine;
 use super::plan::Plan;
-use super::store::ScanStore;
+use super::surface_files::{write_surface_files, SurfaceWriteError, WrittenIges};
+use super::traceability::{traceability_json, traceability_lines};
 use crate::atomic::write_atomically;
-use crate::fit::{max_residual_mm, FitResult, IncrementalFitter};
-use crate::iges::{plan_parts, write_iges_seekable, IgesError, IgesOptions};
+use crate::fit::{max_residual_mm, FitError, FitOptions, FitResult, IncrementalFitter};
+use crate::iges::IgesOptions;
 use crate::nurbs::NurbsSurface;
+use serde::Serialize;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::time::Instant;
+
+/// The degrees, knot-vector lengths and pole counts of a surface, for fit reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct SurfaceShape {
+    /// Degree along u (x).
+    pub degree_u: usize,
+    /// Degree along v (y).
+    pub degree_v: usize,
+    /// Length of the u knot vector.
+    pub knots_u_len: usize,
+    /// Length of the v knot vector.
+    pub knots_v_len: usize,
+    /// Poles along u.
+    pub poles_u: usize,
+    /// Poles along v.
+    pub poles_v: usize,
+}
+
+impl SurfaceShape {
+    /// The shape of `s`.
+    pub fn of(s: &NurbsSurface) -> SurfaceShape {
+        SurfaceShape {
+            degree_u: s.degree_u(),
+            degree_v: s.degree_v(),
+            knots_u_len: s.knots_u().len(),
+            knots_v_len: s.knots_v().len(),
+            poles_u: s.count_u(),
+            poles_v: s.count_v(),
+        }
+    }
+}
+
+/// Lines and points per line of a fitted grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct GridShape {
+    /// Lines.
+    pub rows: usize,
+    /// Points per line.
+    pub cols: usize,
+}
+
+/// Seconds per stage of a fit and of writing it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FitTimes {
+    /// Chord lengths and parameters.
+    pub fit_params: f64,
+    /// Knot vectors and factorisations.
+    pub fit_knots_factor: f64,
+    /// Solves along u.
+    pub fit_solve_u: f64,
+    /// Solves along v.
+    pub fit_solve_v: f64,
+    /// The whole final fit (the incremental part ran while the lines arrived).
+    pub finish: f64,
+    /// Writing the IGES file(s), when they were written.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub write_iges: Option<f64>,
+}
+
+/// The fit a scan's outputs describe: the `fit` section of `report.json`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FitSummary {
+    /// The grid fitted.
+    pub grid: GridShape,
+    /// Largest distance between the surface and a measured point, mm.
+    pub max_residual_mm: f64,
+    /// The IGES files written (none when only characterised).
+    pub iges_files: Vec<WrittenIges>,
+    /// Seconds per stage.
+    pub timings_s: FitTimes,
+    /// Degrees, knots and poles.
+    #[serde(flatten)]
+    pub shape: SurfaceShape,
+}
+
+impl FitSummary {
+    /// The summary of `fit` through a `rows × cols` grid.
+    pub fn new(
+        fit: &FitResult,
+        grid: GridShape,
+        max_residual_mm: f64,
+        finish_s: f64,
+        iges_files: Vec<WrittenIges>,
+        write_iges_s: Option<f64>,
+    ) -> FitSummary {
+        FitSummary {
+            grid,
+            max_residual_mm,
+            iges_files,
+            timings_s: FitTimes {
+                fit_params: fit.timings.params_s,
+                fit_knots_factor: fit.timings.knots_factor_s,
+                fit_solve_u: fit.timings.solve_u_s,
+                fit_solve_v: fit.timings.solve_v_s,
+                finish: finish_s,
+                write_iges: write_iges_s,
+            },
+            shape: SurfaceShape::of(&fit.surface),
+        }
+    }
+}
+
+/// A completed scan as the characterisation receives it.
+#[derive(Debug, Clone, Copy)]
+pub struct CompletedScan<'a> {
+    /// The scan directory (where the files go).
+    pub dir: &'a Path,
+    /// Its start record.
+    pub start: &'a StartRecord,
+    /// Its lines, in index order, exactly as committed.
+    pub lines: &'a [StoredLine],
+    /// The surface written to `surface.igs`, with its data parameters.
+    pub fit: &'a FitResult,
+    /// The degrees of that surface (the plan's), which the hold-out refits use too.
+    pub degrees: FitOptions,
+    /// The fit summary for the report.
+    pub summary: &'a FitSummary,
+}
+
+/// What a characterisation wrote besides `report.json`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Characterised {
+    /// The other files (summary, plots, X3P).
+    pub files: Vec<PathBuf>,
+    /// What was left out or approximated, for the operator.
+    pub warnings: Vec<String>,
+}
+
+/// The characterisation of a completed scan, supplied by the composition layer: it writes
+/// `report.json` and its files into the scan directory.
+pub trait Characterise: Send + Sync {
+    /// Characterises `scan`.
+    fn characterise(
+        &self,
+        scan: &CompletedScan<'_>,
+    ) -> Result<Characterised, Box<dyn std::error::Error + Send + Sync>>;
+}
 
 /// The files a completed scan wrote.
 #[derive(Debug, Clone, PartialEq)]
@@ -35,72 +174,18 @@ pub struct Outputs {
     pub max_residual_mm: f64,
 }
 
-/// The characterisation of a finished scan directory, supplied by the composition layer
-/// (the CLI passes `crate::report::characterise_scan`): it is given the scan directory and
-/// the fit section for `report.json`, writes the report and its files, and returns the
-/// paths of the files other than `report.json`.
-pub type Characterise =
-    Arc<dyn Fn(&Path, serde_json::Value) -> Result<Vec<PathBuf>, String> + Send + Sync>;
-
-/// Where part `index` (1-based) of `count` goes when the surface needs several files:
-/// `dir/name.igs` → `dir/name.part2-of-3.igs` (an output without extension gets
-/// `.part2-of-3`).
-pub fn part_path(output: &Path, index: usize, count: usize) -> PathBuf {
-    let stem = output
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let name = match output.extension() {
-        Some(ext) => format!("{stem}.part{index}-of-{count}.{}", ext.to_string_lossy()),
-        None => format!("{stem}.part{index}-of-{count}"),
-    };
-    output.with_file_name(name)
-}
-
-/// The v parameter range covered by a group of consecutive patches.
-fn v_range(patches: &[NurbsSurface]) -> [f64; 2] {
-    let lo = patches
-        .first()
-        .and_then(|s| s.knots_v().get(s.degree_v()).copied())
-        .unwrap_or(f64::NAN);
-    let hi = patches
-        .last()
-        .and_then(|s| s.knots_v().get(s.count_v()).copied())
-        .unwrap_or(f64::NAN);
-    [lo, hi]
-}
-
-/// One IGES file written by [`write_surface_files`].
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct WrittenIges {
-    /// Path.
-    pub path: PathBuf,
-    /// 1-based part number.
-    pub part: usize,
-    /// v parameter range of the part.
-    pub v_range: [f64; 2],
-    /// Entities 128 in it.
-    pub patches: usize,
-    /// Bytes.
-    pub bytes: u64,
-    /// Parameter Data lines.
-    pub parameter_lines: usize,
-}
-
-/// Why the IGES files could not be written.
+/// Why the outputs of a completed scan could not be written.
 #[derive(Debug, thiserror::Error)]
-pub enum SurfaceWriteError {
-    /// The surface cannot be represented in the format (a data problem).
-    #[error("cannot write IGES {path}: {message}")]
-    Format {
-        /// The file.
-        path: PathBuf,
-        /// What the writer refused.
-        message: String,
-    },
-    /// The file system refused (full disk, permissions).
-    #[error("cannot write IGES {path}: {source}")]
-    Io {
+pub enum OutputsError {
+    /// The lines cannot be interpolated.
+    #[error("fit: {0}")]
+    Fit(#[from] FitError),
+    /// The IGES file(s) cannot be written.
+    #[error(transparent)]
+    Iges(#[from] SurfaceWriteError),
+    /// `report.json` cannot be written.
+    #[error("cannot write {path}: {source}")]
+    Report {
         /// The file.
         path: PathBuf,
         /// The operating system's error.
@@ -109,197 +194,99 @@ pub enum SurfaceWriteError {
     },
 }
 
-fn write_error(path: &Path, e: std::io::Error) -> SurfaceWriteError {
-    let format = e
-        .get_ref()
-        .and_then(|inner| inner.downcast_ref::<IgesError>())
-        .filter(|ie| !matches!(ie, IgesError::Io(_)))
-        .map(|ie| ie.to_string());
-    match format {
-        Some(message) => SurfaceWriteError::Format {
-            path: path.to_path_buf(),
-            message,
-        },
-        None => SurfaceWriteError::Io {
-            path: path.to_path_buf(),
-            source: e,
-        },
+impl OutputsError {
+    /// True when the disk refused (full, read-only), not the data.
+    pub fn is_io(&self) -> bool {
+        matches!(
+            self,
+            OutputsError::Report { .. } | OutputsError::Iges(SurfaceWriteError::Io { .. })
+        )
     }
 }
 
-/// Writes `surface` as IGES at `output`, or as several complete files
-/// `output.part<i>-of-<n>.igs` when one P section cannot hold it; each file atomically.
-/// Errors carry the path and say whether the format or the disk refused.
-pub fn write_surface_files(
-    output: &Path,
-    surface: &NurbsSurface,
-    opts: &IgesOptions,
-) -> Result<Vec<WrittenIges>, SurfaceWriteError> {
-    let groups = plan_parts(surface, opts).map_err(|e| SurfaceWriteError::Format {
-        path: output.to_path_buf(),
-        message: e.to_string(),
-    })?;
-    let n_files = groups.len();
-    let mut files = Vec::with_capacity(n_files);
-    for (k, group) in groups.iter().enumerate() {
-        let range = v_range(group);
-        let path = if n_files == 1 {
-            output.to_path_buf()
-        } else {
-            part_path(output, k + 1, n_files)
-        };
-        let mut part_opts = opts.clone();
-        part_opts.file_name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        if n_files > 1 {
-            part_opts.start_lines.push(format!(
-                "part {} of {}, v range [{}, {}]; {} exact patch(es); adjacent parts share their boundary pole row, the union of all parts is the surface.",
-                k + 1,
-                n_files,
-                range[0],
-                range[1],
-                group.len()
-            ));
-        }
-        let st = write_atomically(&path, |w| {
-            write_iges_seekable(w, group, &part_opts).map_err(std::io::Error::other)
-        })
-        .map_err(|e| write_error(&path, e))?;
-        files.push(WrittenIges {
-            path,
-            part: k + 1,
-            v_range: range,
-            patches: st.patches,
-            bytes: st.bytes,
-            parameter_lines: st.parameter_lines,
-        });
+/// The heights of `lines` as one row-major grid (µm) and their y (mm).
+fn grid_of(lines: &[StoredLine]) -> (Vec<f64>, Vec<f64>, usize) {
+    let cols = lines.first().map_or(0, |l| l.profile.len());
+    let mut z = Vec::with_capacity(lines.len() * cols);
+    for l in lines {
+        z.extend_from_slice(&l.profile.heights_um);
     }
-    Ok(files)
+    (z, lines.iter().map(StoredLine::y_mm).collect(), cols)
 }
 
-/// The degrees, knot-vector lengths and pole counts of a surface, for fit reports.
-pub fn surface_fields(s: &NurbsSurface) -> serde_json::Map<String, serde_json::Value> {
-    let mut m = serde_json::Map::new();
-    m.insert("degree_u".into(), s.degree_u().into());
-    m.insert("degree_v".into(), s.degree_v().into());
-    m.insert("knots_u_len".into(), s.knots_u().len().into());
-    m.insert("knots_v_len".into(), s.knots_v().len().into());
-    m.insert("poles_u".into(), s.count_u().into());
-    m.insert("poles_v".into(), s.count_v().into());
-    m
-}
-
-/// The Start-section lines that make an IGES file of a scan traceable.
-pub fn traceability_lines(start: &StartRecord, plan: &Plan) -> Vec<String> {
-    let c = &start.conditions;
-    vec![
-        format!(
-            "Surface fitted by {} (global B-spline interpolation, p={}, q={}); units mm.",
-            start.software_version, plan.degree_u, plan.degree_v
-        ),
-        format!(
-            "Scan {}: specimen {:?}, operator {:?}, notes {:?}.",
-            start.scan_id, start.specimen, start.operator, start.notes
-        ),
-        format!(
-            "Instrument Mitutoyo {} firmware {:?}, drive unit {:?}; conditions: standard {}, profile {}, lambda-c {} mm, lambda-s {} um, evaluation length {} mm.",
-            start.instrument_model,
-            start.firmware,
-            start.drive_unit,
-            c.standard.as_deref().unwrap_or("unknown"),
-            c.profile_kind.map_or("unknown".to_owned(), |k| format!("{k:?}")),
-            c.lambda_c_mm.map_or("unknown".to_owned(), |v| v.to_string()),
-            c.lambda_s_um.map_or("unknown".to_owned(), |v| v.to_string()),
-            c.evaluation_length_mm.map_or("unknown".to_owned(), |v| v.to_string()),
-        ),
-        format!(
-            "Grid: {} lines from y = {} mm by {} mm; config sha256 {}; started {}.",
-            plan.lines,
-            plan.y_start_nm.to_mm(),
-            plan.y_step_nm.to_mm(),
-            start.config_hash,
-            start.time.to_rfc3339()
-        ),
-    ]
-}
-
-/// The traceability block of `report.json`.
-pub fn traceability_json(start: &StartRecord) -> serde_json::Value {
-    serde_json::json!({
-        "scan_id": start.scan_id,
-        "specimen": start.specimen,
-        "operator": start.operator,
-        "notes": start.notes,
-        "software_version": start.software_version,
-        "config_hash": start.config_hash,
-        "instrument_model": start.instrument_model,
-        "firmware": start.firmware,
-        "drive_unit": start.drive_unit,
-        "conditions": start.conditions,
-        "started": start.time,
-    })
-}
-
-/// Fits the lines, writes the IGES, then the characterisation (or, without one or when it
+/// Finishes the fit, writes the IGES, then the characterisation (or, without one or when it
 /// fails, a `report.json` with the fit and the instrument's own results) into the scan
-/// directory.
+/// directory `dir`. `lines` are the scan's lines as committed, the ones `fitter` holds.
 pub fn write_outputs(
-    store: &ScanStore,
+    dir: &Path,
     start: &StartRecord,
     plan: &Plan,
     fitter: IncrementalFitter,
-    characterise: Option<&Characterise>,
-) -> Result<Outputs, String> {
+    lines: &[StoredLine],
+    characterise: Option<&dyn Characterise>,
+) -> Result<Outputs, OutputsError> {
     let t_fit = Instant::now();
-    let fit = fitter.finish().map_err(|e| format!("fit: {e}"))?;
+    let fit = fitter.finish()?;
     let finish_s = t_fit.elapsed().as_secs_f64();
-    let loaded = store.load_all().map_err(|e| e.to_string())?;
-    let lines = loaded.lines;
-    let residual = residual_of(&fit, &lines);
-    let iges_path = store.root().join("surface.igs");
+    let (z, y, cols) = grid_of(lines);
+    let pitch_x_mm = lines.first().map_or(f64::NAN, |l| l.profile.pitch_x_mm);
+    let residual = if lines.is_empty() {
+        f64::NAN
+    } else {
+        max_residual_mm(&fit, pitch_x_mm, &y, &z, cols)
+    };
+    drop(z);
+    let iges_path = dir.join("surface.igs");
     let opts = IgesOptions {
         start_lines: traceability_lines(start, plan),
         timestamp: chrono::Utc::now().naive_utc(),
         ..IgesOptions::default()
     };
     let t_write = Instant::now();
-    let files = write_surface_files(&iges_path, &fit.surface, &opts).map_err(|e| e.to_string())?;
+    let files = write_surface_files(&iges_path, &fit.surface, &opts)?;
     let write_s = t_write.elapsed().as_secs_f64();
     let iges_files: Vec<PathBuf> = files.iter().map(|f| f.path.clone()).collect();
-    let mut fit_json = serde_json::json!({
-        "grid": { "rows": lines.len(), "cols": lines.first().map_or(0, |l| l.profile.len()) },
-        "max_residual_mm": residual,
-        "iges_files": files,
-        "timings_s": {
-            "fit_params": fit.timings.params_s,
-            "fit_knots_factor": fit.timings.knots_factor_s,
-            "fit_solve_u": fit.timings.solve_u_s,
-            "fit_solve_v": fit.timings.solve_v_s,
-            "finish": finish_s,
-            "write_iges": write_s,
+    let summary = FitSummary::new(
+        &fit,
+        GridShape {
+            rows: lines.len(),
+            cols,
         },
-    });
-    if let Some(o) = fit_json.as_object_mut() {
-        o.extend(surface_fields(&fit.surface));
-    }
-    let report_path = store.root().join("report.json");
+        residual,
+        finish_s,
+        files,
+        Some(write_s),
+    );
+    let report_path = dir.join("report.json");
     let mut characterisation_error = None;
     if let Some(ch) = characterise {
-        match ch(store.root(), fit_json.clone()) {
-            Ok(files) => {
+        let scan = CompletedScan {
+            dir,
+            start,
+            lines,
+            fit: &fit,
+            degrees: FitOptions {
+                degree_u: plan.degree_u,
+                degree_v: plan.degree_v,
+            },
+            summary: &summary,
+        };
+        match ch.characterise(&scan) {
+            Ok(done) => {
+                for w in &done.warnings {
+                    tracing::warn!("characterisation: {w}");
+                }
                 return Ok(Outputs {
                     iges: iges_files,
                     report: report_path,
-                    files,
+                    files: done.files,
                     characterisation_error: None,
                     max_residual_mm: residual,
-                })
+                });
             }
             Err(e) => {
-                tracing::error!("characterisation of {} failed: {e}", store.root().display());
-                characterisation_error = Some(e);
+                tracing::error!("characterisation of {} failed: {e}", dir.display());
+                characterisation_error = Some(e.to_string());
             }
         }
     }
@@ -319,7 +306,7 @@ pub fn write_outputs(
     let report = serde_json::json!({
         "software": start.software_version,
         "traceability": traceability_json(start),
-        "fit": fit_json,
+        "fit": summary,
         "lines": line_json,
         "characterisation_error": characterisation_error,
     });
@@ -327,7 +314,10 @@ pub fn write_outputs(
         serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)?;
         std::io::Write::write_all(w, b"\n")
     })
-    .map_err(|e| format!("cannot write {}: {e}", report_path.display()))?;
+    .map_err(|source| OutputsError::Report {
+        path: report_path.clone(),
+        source,
+    })?;
     Ok(Outputs {
         iges: iges_files,
         report: report_path,
@@ -335,38 +325,4 @@ pub fn write_outputs(
         characterisation_error,
         max_residual_mm: residual,
     })
-}
-
-fn residual_of(fit: &FitResult, lines: &[StoredLine]) -> f64 {
-    let Some(first) = lines.first() else {
-        return f64::NAN;
-    };
-    let cols = first.profile.len();
-    let y: Vec<f64> = lines.iter().map(StoredLine::y_mm).collect();
-    let mut z = Vec::with_capacity(lines.len() * cols);
-    for l in lines {
-        z.extend_from_slice(&l.profile.heights_um);
-    }
-    max_residual_mm(fit, first.profile.pitch_x_mm, &y, &z, cols)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn part_names_keep_directory_and_extension() {
-        assert_eq!(
-            part_path(Path::new("/data/run 7/sur-2.igs"), 2, 3),
-            PathBuf::from("/data/run 7/sur-2.part2-of-3.igs")
-        );
-        assert_eq!(
-            part_path(Path::new("out/a.b.IGES"), 10, 12),
-            PathBuf::from("out/a.b.part10-of-12.IGES")
-        );
-        assert_eq!(
-            part_path(Path::new("surface"), 1, 2),
-            PathBuf::from("surface.part1-of-2")
-        );
-    }
 }

@@ -32,7 +32,7 @@ use super::journal::{
     InterruptionRecord, Journal, JournalError, Record, ResumeState, StartRecord, StopRecord,
     StopStatus,
 };
-use super::line::LineMeta;
+use super::line::{LineMeta, StoredLine};
 use super::metrics::{write_metrics, ScanMetrics};
 use super::outputs::{write_outputs, Outputs};
 use super::plan::Plan;
@@ -379,6 +379,8 @@ struct Scan {
     plan: Plan,
     start: StartRecord,
     fitter: IncrementalFitter,
+    /// The committed lines, in index order, as the fitter holds them.
+    lines: Vec<StoredLine>,
     pitch_x_mm: Option<f64>,
     metrics: ScanMetrics,
     line_durations: Vec<f64>,
@@ -666,13 +668,13 @@ async fn begin<S: Station>(
             let start = StartRecord {
                 scan_id: id.0.clone(),
                 time: now,
-                plan: serde_json::to_value(plan).unwrap_or_default(),
+                plan,
                 config: settings.config.clone(),
                 config_hash: settings.config_hash.clone(),
                 specimen,
                 operator,
                 notes,
-                software_version: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
+                software_version: crate::build_info::software(),
                 instrument_model: report.identity.model.clone(),
                 firmware: report.identity.firmware.clone(),
                 drive_unit: report.identity.drive_unit.clone(),
@@ -701,15 +703,7 @@ async fn begin<S: Station>(
                 .map_err(|e| (fail(e.to_string()), None))?;
             let state = ResumeState::from_records(journal.path(), &recovery.records)
                 .map_err(|e| (fail(e.to_string()), None))?;
-            let plan: Plan = serde_json::from_value(state.start.plan.clone()).map_err(|e| {
-                (
-                    fail(format!(
-                        "{}: the start record's plan is unreadable ({e}); the scan cannot be resumed",
-                        journal.path().display()
-                    )),
-                    None,
-                )
-            })?;
+            let plan = state.start.plan;
             if state.start.config_hash != settings.config_hash {
                 tracing::warn!(
                     "the configuration changed since scan {} started; the plan frozen in its journal is followed",
@@ -751,6 +745,7 @@ async fn begin<S: Station>(
                     String::new()
                 }
             );
+            scan.lines = lines;
             tracing::info!(scan_id = %scan.id, "{note}");
             scan.interruption(&note, None, None);
             publish_progress(ctl, &scan, None);
@@ -814,6 +809,7 @@ fn new_scan(
         plan,
         start,
         fitter,
+        lines: Vec::new(),
         pitch_x_mm: None,
         line_durations: Vec::new(),
         hooks: settings.hooks.clone(),
@@ -1218,11 +1214,16 @@ async fn try_line<S: Station>(
         .push_line(target.to_mm(), profile)
         .map_err(|e| LineError::Refused(format!("the fitter refused the stored line: {e}")))?;
     scan.pitch_x_mm.get_or_insert(profile.pitch_x_mm);
-    Ok(traced
+    let ra = traced
         .results
         .iter()
         .find(|r| r.name.trim().eq_ignore_ascii_case("ra"))
-        .and_then(|r| r.value))
+        .and_then(|r| r.value);
+    scan.lines.push(StoredLine {
+        meta,
+        profile: traced.profile,
+    });
+    Ok(ra)
 }
 
 fn scan_commit(scan: &mut Scan, meta: &LineMeta, profile: &Profile) -> Result<(), LineError> {
@@ -1322,11 +1323,12 @@ async fn finish<S: Station>(
                 IncrementalFitter::new(FitOptions::default()),
             );
             match write_outputs(
-                &scan.store,
+                &scan.dir,
                 &scan.start,
                 &scan.plan,
                 fitter,
-                settings.characterise.as_ref(),
+                &scan.lines,
+                settings.characterise.as_deref(),
             ) {
                 Ok(outputs) => {
                     scan.metrics.fit_residual_um = Some(outputs.max_residual_mm * 1000.0);

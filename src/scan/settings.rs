@@ -57,7 +57,7 @@ pub struct RunSettings {
     pub hooks: Arc<TestHooks>,
     /// The characterisation run when a scan completes (none: the report holds the fit and
     /// the instrument's own results only).
-    pub characterise: Option<Characterise>,
+    pub characterise: Option<Arc<dyn Characterise>>,
 }
 
 impl std::fmt::Debug for RunSettings {

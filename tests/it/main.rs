@@ -37,3 +37,4 @@ mod stage_grbl;
 mod stage_pty;
 mod stage_scan;
 mod stage_zaber;
+mod station_lock;

@@ -115,6 +115,142 @@ async fn a_complete_scan_stores_the_served_lines_and_a_surface_through_them() {
     rig.shutdown().await;
 }
 
+/// Every number in a JSON value, in document order.
+fn numbers(v: &serde_json::Value) -> Vec<f64> {
+    match v {
+        serde_json::Value::Number(n) => vec![n.as_f64().unwrap_or(f64::NAN)],
+        serde_json::Value::Array(a) => a.iter().flat_map(numbers).collect(),
+        serde_json::Value::Object(o) => o.values().flat_map(numbers).collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// The x (resp. y) of the interpolating surface depends on u (resp. v) only, because every
+/// line shares the x positions and every point of a line its y: the u where x = `x_mm` and
+/// the v where y = `y_mm`, by bisection (both increase along their parameter).
+fn parameter_where(s: &surfscan::nurbs::NurbsSurface, axis: usize, target: f64) -> f64 {
+    let at = |t: f64| {
+        if axis == 0 {
+            s.evaluate(t, 0.5)[0]
+        } else {
+            s.evaluate(0.5, t)[1]
+        }
+    };
+    let (mut a, mut b) = (0.0f64, 1.0f64);
+    for _ in 0..200 {
+        let m = 0.5 * (a + b);
+        if at(m) < target {
+            a = m;
+        } else {
+            b = m;
+        }
+    }
+    0.5 * (a + b)
+}
+
+/// Regression: the report refitted the lines at 5/5 whatever `[fit]` said, so with other
+/// degrees its model sections and `model.x3p` described another surface than `surface.igs`.
+/// At 3/3 the report, the X3P of the model and the IGES must describe one surface, and
+/// `surfscan analyze` of the directory must give the runner's report.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_scan_at_degree_3_reports_and_samples_the_surface_it_wrote() {
+    let rig = Rig::start(RigOptions {
+        degrees: (3, 3),
+        ..RigOptions::default()
+    })
+    .await;
+    let n = rig.options.lines;
+    let o = run_scan(&rig.config("out"), &[]).await;
+    assert!(o.status.success(), "{}", describe(&o));
+    let dir = scan_dir(&rig.out_dir("out"));
+
+    let file = surfscan::iges::reader::read_iges(&std::fs::read(dir.join("surface.igs")).unwrap())
+        .unwrap();
+    assert_eq!(file.surfaces.len(), 1);
+    let s = &file.surfaces[0];
+    assert_eq!((s.degree_u(), s.degree_v()), (3, 3));
+
+    // model.x3p: the IGES surface at x = i * pitch/2 on every data line, evaluated here.
+    let x3p =
+        surfscan::metrology::x3p::read_x3p(&std::fs::read(dir.join("model.x3p")).unwrap()).unwrap();
+    assert_eq!((x3p.rows, x3p.cols), (n, 2 * POINTS - 1));
+    let mut worst = 0.0f64;
+    for l in 0..n {
+        let v = parameter_where(s, 1, target_nm(l) as f64 / 1e6);
+        for i in 0..x3p.cols {
+            let u = parameter_where(s, 0, i as f64 * PITCH_X_MM / 2.0);
+            let z_um = s.evaluate(u, v)[2] * 1000.0;
+            worst = worst.max((x3p.heights_um[l * x3p.cols + i] - z_um).abs());
+        }
+    }
+    assert!(worst < 1e-6, "model.x3p is {worst} µm off the IGES surface");
+
+    // The model sections: the surface's degrees, and the paper's bearing curves of the
+    // IGES surface itself.
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["fit"]["degree_u"], 3);
+    assert_eq!(report["fit"]["degree_v"], 3);
+    let recipe = report["surface"]["recipe"].as_str().unwrap_or_default();
+    assert!(recipe.contains("degree 3/3"), "{recipe}");
+    let curves = surfscan::metrology::model::model_bearing_curves(
+        s,
+        &surfscan::metrology::model::ModelBacOptions::default(),
+    )
+    .unwrap();
+    // The IGES text carries the poles to the last digit of their decimal form; the curves
+    // of the surface read back agree with the report's to far below a nanometre.
+    let (ours, theirs) = (
+        numbers(&report["surface"]["bac_curves"]),
+        numbers(&serde_json::to_value(&curves).unwrap()),
+    );
+    assert_eq!(ours.len(), theirs.len());
+    let worst = ours
+        .iter()
+        .zip(&theirs)
+        .fold(0.0f64, |w, (a, b)| w.max((a - b).abs()));
+    assert!(
+        worst < 1e-9,
+        "the report's bearing curves are {worst} off those of surface.igs"
+    );
+
+    // `surfscan analyze` of the directory (degrees from the frozen plan) gives the same report
+    // and the same X3P files as the runner wrote from memory.
+    let again = rig.tmp.path().join("again");
+    let a = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .arg("analyze")
+        .arg(&dir)
+        .arg("--out")
+        .arg(&again)
+        .output()
+        .unwrap();
+    assert!(a.status.success(), "{}", describe(&a));
+    let second: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(again.join("report.json")).unwrap()).unwrap();
+    for key in [
+        "recipe",
+        "lines",
+        "surface",
+        "surface_grid",
+        "model_vs_measured",
+        "traceability",
+        "warnings",
+    ] {
+        assert_eq!(report[key], second[key], "report.json: {key} differs");
+    }
+    assert_eq!(
+        report["fit"]["max_residual_mm"],
+        second["fit"]["max_residual_mm"]
+    );
+    for f in ["model.x3p", "measured.x3p", "summary.csv"] {
+        assert!(
+            std::fs::read(dir.join(f)).unwrap() == std::fs::read(again.join(f)).unwrap(),
+            "{f} differs"
+        );
+    }
+    rig.shutdown().await;
+}
+
 /// Runs an uninterrupted scan on `rig` into `out` and returns its surface's bits.
 async fn reference_surface(rig: &Rig, out: &str) -> Vec<Vec<u64>> {
     let o = run_scan(&rig.config(out), &[]).await;

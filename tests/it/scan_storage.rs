@@ -59,7 +59,14 @@ fn start_record(id: &ScanId, lines: u32) -> StartRecord {
     StartRecord {
         scan_id: id.0.clone(),
         time: Utc.with_ymd_and_hms(2026, 1, 2, 3, 4, 5).unwrap(),
-        plan: serde_json::json!({"lines": lines, "y_start_nm": 0, "y_step_nm": 10000}),
+        plan: surfscan::scan::plan::Plan {
+            lines,
+            y_start_nm: Nm(0),
+            y_step_nm: Nm(10_000),
+            degree_u: 5,
+            degree_v: 5,
+            max_line_attempts: 3,
+        },
         config: serde_json::json!({"scan": {"lines": lines}}),
         config_hash: "ab".repeat(32),
         specimen: "block-7".into(),
@@ -430,7 +437,7 @@ fn resume_state_and_unfinished_scan_discovery() {
     assert!(!st.is_stopped());
     assert_eq!(st.first_missing(4), Some(1));
     assert_eq!(st.interruptions.len(), 1);
-    assert_eq!(st.start.plan["lines"], 4);
+    assert_eq!(st.start.plan.lines, 4);
     assert_eq!(st.start.specimen, "block-7");
     assert!(find_unfinished(&out.join("absent")).unwrap().is_empty());
 

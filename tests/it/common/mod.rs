@@ -8,6 +8,8 @@
 
 #![allow(dead_code)]
 
+pub mod chromium;
+
 use std::path::{Path, PathBuf};
 use std::process::Output;
 use std::sync::Arc;
@@ -80,6 +82,8 @@ pub struct RigOptions {
     pub max_line_attempts: u32,
     /// Extra TOML appended to `[scan]`.
     pub extra_scan: String,
+    /// `[fit]` degree-u and degree-v.
+    pub degrees: (usize, usize),
 }
 
 impl Default for RigOptions {
@@ -89,6 +93,7 @@ impl Default for RigOptions {
             faults: Vec::new(),
             max_line_attempts: 3,
             extra_scan: String::new(),
+            degrees: (5, 3),
         }
     }
 }
@@ -191,7 +196,8 @@ reconnect-max-ms = 400
 {extra_scan}{extra}
 
 [fit]
-degree-v = 3
+degree-u = {degree_u}
+degree-v = {degree_v}
 
 [output]
 dir = {dir:?}
@@ -204,6 +210,8 @@ socket = {sock:?}
             lines = self.options.lines,
             attempts = self.options.max_line_attempts,
             extra_scan = self.options.extra_scan,
+            degree_u = self.options.degrees.0,
+            degree_v = self.options.degrees.1,
             dir = dir.display().to_string(),
             sock = self.tmp.path().join("control.sock").display().to_string(),
         );

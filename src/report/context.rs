@@ -1,0 +1,86 @@
+//! What the characterisation is given besides the grid: how to evaluate the lines, the
+//! model to describe, and what is known about the scan.
+//!
+//! Layer 4 (reporting): depends on [`crate::fit`] and [`crate::metrology::params`].
+
+use super::document::{ScanStatus, Traceability};
+use crate::fit::{FitError, FitOptions, FitResult};
+use crate::metrology::params::Options;
+use crate::scan::outputs::FitSummary;
+use std::path::PathBuf;
+
+/// How a scan or grid is characterised. [`Default`]: 31 model curves, 101 levels, λc and
+/// filter from the recorded conditions, the middle line in the overlay, the degrees of the
+/// scan's frozen plan (5/5 without one), output into the scan directory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScanAnalysisOptions {
+    /// Profile curves extracted from the model for the bearing area curves (paper: 31).
+    pub curves: usize,
+    /// Equal height levels per bearing area curve (paper: 101).
+    pub levels: usize,
+    /// λc in mm overriding the instrument's recorded cut-off (default `None`: the recorded
+    /// λc, or 0.8 mm when none is recorded). It is also the sampling length.
+    pub lambda_c_mm: Option<f64>,
+    /// Never apply the λc filter (default `false`: filter primary profiles, not R profiles).
+    pub no_filter: bool,
+    /// Line index drawn in the measured-vs-model overlay (default `None`: the middle line used).
+    pub overlay_line: Option<u32>,
+    /// Degree of the model along u (default `None`: the scan's frozen plan, else 5).
+    pub degree_u: Option<usize>,
+    /// Degree of the model along v (default `None`: the scan's frozen plan, else 5).
+    pub degree_v: Option<usize>,
+    /// Where the files go (default `None`: the scan directory itself).
+    pub out_dir: Option<PathBuf>,
+}
+
+impl Default for ScanAnalysisOptions {
+    fn default() -> ScanAnalysisOptions {
+        ScanAnalysisOptions {
+            curves: 31,
+            levels: 101,
+            lambda_c_mm: None,
+            no_filter: false,
+            overlay_line: None,
+            degree_u: None,
+            degree_v: None,
+            out_dir: None,
+        }
+    }
+}
+
+/// The surface the model sections describe: the fit (or why there is none) and its degrees,
+/// which the hold-out refits use too.
+#[derive(Debug, Clone, Copy)]
+pub struct Model<'a> {
+    /// Degrees of the surface.
+    pub degrees: FitOptions,
+    /// The fitted surface with its data parameters, or why the grid could not be fitted.
+    pub fit: Result<&'a FitResult, &'a FitError>,
+}
+
+/// Everything besides the grid and the model that goes into a report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReportContext {
+    /// The input as named in the report (a file or a scan directory).
+    pub input: String,
+    /// `"grid"` or `"scan"`.
+    pub kind: &'static str,
+    /// How every line is evaluated.
+    pub line_options: Options,
+    /// Where λc came from, for the recipe.
+    pub lambda_c_source: String,
+    /// Why the λc filter was or was not applied, for the recipe.
+    pub filter_reason: String,
+    /// Traceability (scans).
+    pub traceability: Option<Traceability>,
+    /// Scan status (scans).
+    pub scan: Option<ScanStatus>,
+    /// Summary of the fit the model sections describe.
+    pub fit: Option<FitSummary>,
+    /// Model curves, levels and the overlay line.
+    pub options: ScanAnalysisOptions,
+    /// Warnings gathered so far (e.g. while reading the lines).
+    pub warnings: Vec<String>,
+    /// When the scan finished, when the runner is completing it (the report says so).
+    pub finished_at: Option<chrono::DateTime<chrono::Utc>>,
+}

@@ -1,0 +1,251 @@
+//! The report as data: what `report.json` holds, as typed values a renderer (JSON today)
+//! reads. Every section of the characterisation fills its own part.
+//!
+//! Layer 4 (reporting): depends on the metrology result types, the scan's journal records
+//! ([`crate::scan::journal`]) and the fit summary of [`crate::scan::outputs`].
+
+use crate::metrology::areal::ArealParams;
+use crate::metrology::holdout::{Holdout, HoldoutLine};
+use crate::metrology::instrument::Comparison;
+use crate::metrology::model::ModelCurveBac;
+use crate::metrology::params::{Recipe, RoughnessParams};
+use crate::profile::Conditions;
+use crate::scan::journal::{StartRecord, StopRecord};
+use crate::scan::outputs::FitSummary;
+use serde::Serialize;
+
+/// `report.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    /// `surfscan <version>` that wrote the report.
+    pub software: String,
+    /// The input as named (a file or a scan directory).
+    pub input: String,
+    /// `grid` or `scan`.
+    pub kind: &'static str,
+    /// How the lines were evaluated.
+    pub recipe: ReportRecipe,
+    /// Per-line ISO parameters.
+    pub lines: Vec<LineReport>,
+    /// Areal parameters and bearing curves of the NURBS model.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub surface: Option<SurfaceReport>,
+    /// Why `surface` is missing.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub surface_error: Option<String>,
+    /// Areal parameters of the measured grid as traced.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub surface_grid: Option<SurfaceReport>,
+    /// Why `surface_grid` is missing.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub surface_grid_error: Option<String>,
+    /// The hold-out refits (model against points it was not fitted to).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub model_vs_measured: Option<Holdout>,
+    /// Why the hold-out comparison could not be made (e.g. too few lines to refit half).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub model_vs_measured_error: Option<String>,
+    /// Traceability of a scan, from its journal's start record.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub traceability: Option<Traceability>,
+    /// How far a scan got.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scan: Option<ScanStatus>,
+    /// The fit the model sections describe (degrees, knots, poles, residual; the IGES files
+    /// when the scan wrote them).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit: Option<FitSummary>,
+    /// Everything that was left out or approximated, for the operator.
+    pub warnings: Vec<String>,
+    /// Seconds per section.
+    pub timings_s: Timings,
+}
+
+/// The recipe of the report: the lines' recipe, where λc came from and why the filter was or
+/// was not applied; `definitions` holds the profile and the areal definition ids.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReportRecipe {
+    /// The lines' recipe.
+    #[serde(flatten)]
+    pub lines: Recipe,
+    /// Where λc came from.
+    pub lambda_c_source: String,
+    /// Why the λc filter was or was not applied.
+    pub filter_reason: String,
+}
+
+/// One line's entry in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct LineReport {
+    /// Line index (a scan's `NNNN`, a grid's row).
+    pub index: u32,
+    /// y of the line, mm.
+    pub y_mm: f64,
+    /// y read back from the stage, mm, when known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub y_readback_mm: Option<f64>,
+    /// The ISO parameters.
+    #[serde(flatten)]
+    pub params: RoughnessParams,
+    /// Rmr(c) at depths c = 0, 10, …, 100 % of Rt below the highest peak: `[c_um, Rmr_pct]`.
+    #[serde(rename = "Rmr_table")]
+    pub rmr_table: Vec<[f64; 2]>,
+    /// The instrument's results beside ours (scans only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub instrument: Option<Vec<Comparison>>,
+    /// This line's share of the hold-out comparison (when it could be made).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub model_vs_measured: Option<LineHoldout>,
+}
+
+/// The hold-out differences of one line: at its own left-out points, and (every 2nd line)
+/// for the whole line left out.
+#[derive(Debug, Clone, Serialize)]
+pub struct LineHoldout {
+    /// At the line's left-out points.
+    pub points_left_out: Option<HoldoutLine>,
+    /// With the whole line left out.
+    pub line_left_out: Option<HoldoutLine>,
+}
+
+/// Areal results with their curves.
+#[derive(Debug, Clone, Serialize)]
+pub struct SurfaceReport {
+    /// The areal parameters.
+    #[serde(flatten)]
+    pub params: ArealParams,
+    /// Pooled Smr(c): `[height_um, material_ratio_pct]`.
+    pub bac: Vec<[f64; 2]>,
+    /// How the grid was obtained.
+    pub recipe: String,
+    /// The paper's per-curve bearing area curves (model only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bac_curves: Option<Vec<ModelCurveBac>>,
+    /// How the per-curve tables were made.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bac_curves_recipe: Option<String>,
+}
+
+/// Seconds spent per section.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Timings {
+    /// Per-line ISO parameters.
+    pub lines: f64,
+    /// Areal parameters of the measured grid.
+    pub surface_grid: f64,
+    /// The fit (0 when the caller supplied the surface).
+    pub fit: f64,
+    /// The model sections.
+    pub model: f64,
+    /// The hold-out refits.
+    pub holdout: f64,
+    /// Writing the files.
+    pub write: f64,
+    /// Everything.
+    pub total: f64,
+}
+
+/// Traceability of a scan, from its journal's start record.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Traceability {
+    /// Scan id.
+    pub scan_id: String,
+    /// When the scan started (ISO 8601).
+    pub started_at: String,
+    /// Specimen id.
+    pub specimen: String,
+    /// Operator.
+    pub operator: String,
+    /// Free-text notes.
+    pub notes: String,
+    /// surfscan version that ran the scan.
+    pub software_version: String,
+    /// SHA-256 of the configuration file.
+    pub config_hash: String,
+    /// Instrument model as identified.
+    pub instrument_model: String,
+    /// Instrument firmware.
+    pub firmware: String,
+    /// Drive unit.
+    pub drive_unit: String,
+    /// The instrument's maker (the SJ series is Mitutoyo's), empty when not known.
+    pub manufacturer: String,
+    /// The instrument's serial number: the SJ series reports none over its link, so this is
+    /// `[traceability] serial-number` of the configuration the scan ran with.
+    pub instrument_serial: Option<String>,
+    /// Stylus tip radius, µm (`[traceability] stylus-tip-radius-um`).
+    pub stylus_tip_radius_um: Option<f64>,
+    /// The instrument's last calibration, ISO 8601 date (`[traceability] calibration-date`).
+    pub calibration_date: Option<String>,
+    /// Measurement conditions read at start.
+    pub conditions: Conditions,
+}
+
+impl From<&StartRecord> for Traceability {
+    fn from(s: &StartRecord) -> Traceability {
+        Traceability {
+            scan_id: s.scan_id.clone(),
+            started_at: s.time.to_rfc3339(),
+            specimen: s.specimen.clone(),
+            operator: s.operator.clone(),
+            notes: s.notes.clone(),
+            software_version: s.software_version.clone(),
+            config_hash: s.config_hash.clone(),
+            instrument_model: s.instrument_model.clone(),
+            firmware: s.firmware.clone(),
+            drive_unit: s.drive_unit.clone(),
+            manufacturer: manufacturer_of(&s.instrument_model).to_string(),
+            instrument_serial: traceability_key(s, "serial-number")
+                .and_then(|v| v.as_str().map(str::to_owned)),
+            stylus_tip_radius_um: traceability_key(s, "stylus-tip-radius-um")
+                .and_then(serde_json::Value::as_f64),
+            calibration_date: traceability_key(s, "calibration-date")
+                .and_then(|v| v.as_str().map(str::to_owned)),
+            conditions: s.conditions.clone(),
+        }
+    }
+}
+
+/// A key of the `[traceability]` table of the configuration a scan recorded at its start.
+fn traceability_key<'a>(s: &'a StartRecord, key: &str) -> Option<&'a serde_json::Value> {
+    s.config.get("traceability")?.get(key)
+}
+
+/// The maker of an instrument model: the scan daemon drives the Mitutoyo SJ series
+/// (recorded as e.g. "sj210" from the config or "SJ-210" from the instrument); any other
+/// model is not named.
+pub fn manufacturer_of(model: &str) -> &'static str {
+    if model.trim_start().to_ascii_lowercase().starts_with("sj") {
+        "Mitutoyo"
+    } else {
+        ""
+    }
+}
+
+/// Whether a scan's characterisation covers its whole plan.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Completeness {
+    /// Stopped with success (or being completed), no line missing or incomplete.
+    Complete,
+    /// Anything else: the lines it has.
+    Partial,
+}
+
+/// How far the scan got.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ScanStatus {
+    /// Complete or partial.
+    pub status: Completeness,
+    /// The journal's stop record, `None` while the scan has none (running, being completed,
+    /// or crashed).
+    pub stop: Option<StopRecord>,
+    /// Lines the frozen plan asks for.
+    pub lines_planned: u32,
+    /// Lines characterised.
+    pub lines_used: Vec<u32>,
+    /// Lines with only one of their two files (left out).
+    pub lines_incomplete: Vec<u32>,
+    /// Lines the journal records as completed.
+    pub lines_in_journal: Vec<u32>,
+}

@@ -1,0 +1,381 @@
+//! Section: the files of a characterisation — plots (bearing curves, height map, measured vs
+//! model of one line, the Rk construction of each line), `measured.x3p`, `model.x3p`,
+//! `summary.csv`, `report.json` and `report.html`, each replaced atomically.
+//!
+//! Layer 4 (reporting): depends on [`crate::metrology::plots`], [`crate::metrology::x3p`]
+//! and [`crate::atomic`].
+
+use super::context::ReportContext;
+use super::document::Report;
+use super::error::{metrology, ReportError};
+use super::grid::LineGrid;
+use super::html;
+use super::model::SampledModel;
+use super::summary::summary_csv;
+use crate::atomic::write_atomically;
+use crate::metrology::areal::Grid;
+use crate::metrology::model::ModelCurveBac;
+use crate::metrology::params::{material_ratio_curve, rk_family, LineAnalysis};
+use crate::metrology::plots::{
+    plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction,
+};
+use crate::metrology::x3p::{to_x3p, X3pMeta};
+use crate::metrology::MetrologyError;
+use crate::numfmt::{fmt as nfmt, line_number, Quantity};
+use crate::scan::journal::{read_journal, ResumeState};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// The files written.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Files {
+    /// `report.json`.
+    pub report_json: PathBuf,
+    /// `report.html`, the report for people (plots embedded).
+    pub report_html: PathBuf,
+    /// `summary.csv`.
+    pub summary_csv: PathBuf,
+    /// The PNG and SVG plots (the Rk constructions are in `rk_plots`).
+    pub plots: Vec<PathBuf>,
+    /// The Rk construction of each line: its title and its PNG and SVG.
+    pub rk_plots: Vec<(String, [PathBuf; 2])>,
+    /// `measured.x3p`.
+    pub measured_x3p: PathBuf,
+    /// `model.x3p`, when the model could be sampled.
+    pub model_x3p: Option<PathBuf>,
+}
+
+pub(crate) fn software() -> String {
+    crate::build_info::software()
+}
+
+fn caption(ctx: &ReportContext) -> String {
+    match &ctx.traceability {
+        Some(t) => {
+            let c = &t.conditions;
+            let mut cond = Vec::new();
+            if let Some(s) = &c.standard {
+                cond.push(s.clone());
+            }
+            if let Some(f) = c.filter {
+                cond.push(format!("{f:?}"));
+            }
+            if let Some(l) = c.lambda_c_mm {
+                cond.push(format!("λc {l} mm"));
+            }
+            if let Some(l) = c.lambda_s_um {
+                cond.push(format!("λs {l} µm"));
+            }
+            match c.sampling_lengths {
+                // The SJ series' N = 0: an arbitrary evaluation length, one section.
+                Some(0) => cond.push("arbitrary evaluation length".to_string()),
+                Some(n) => cond.push(format!("N = {n}")),
+                None => {}
+            }
+            let cond = if cond.is_empty() {
+                "conditions not recorded".to_string()
+            } else {
+                cond.join(" ")
+            };
+            // The recorded software version already names the program ("surfscan 0.1.0").
+            format!(
+                "specimen {} · {} fw {} ({}) · {} · scan {} · {}",
+                t.specimen,
+                t.instrument_model,
+                t.firmware,
+                t.drive_unit,
+                cond,
+                t.scan_id,
+                t.software_version
+            )
+        }
+        None => format!("{} · {}", ctx.input, software()),
+    }
+}
+
+fn x3p_meta(ctx: &ReportContext, what: &str) -> X3pMeta {
+    match &ctx.traceability {
+        Some(t) => {
+            let conditions = serde_json::to_string(&t.conditions).unwrap_or_default();
+            X3pMeta {
+                date: t.started_at.clone(),
+                calibration_date: t.calibration_date.clone().unwrap_or_default(),
+                probe: match t.stylus_tip_radius_um {
+                    Some(r) => format!(
+                        "{} stylus, tip radius {} µm",
+                        t.instrument_model,
+                        crate::numfmt::sig(r, 3)
+                    ),
+                    None => String::new(),
+                },
+                creator: t.operator.clone(),
+                manufacturer: t.manufacturer.clone(),
+                model: t.instrument_model.clone(),
+                serial: t.instrument_serial.clone().unwrap_or_default(),
+                version: t.firmware.clone(),
+                comment: format!(
+                    "{what}; specimen {}; scan {}; operator {}; notes: {}; drive unit {}; conditions {}; scanned by surfscan {}, config sha256 {}; written by {}",
+                    t.specimen,
+                    t.scan_id,
+                    t.operator,
+                    t.notes,
+                    t.drive_unit,
+                    conditions,
+                    t.software_version,
+                    t.config_hash,
+                    software()
+                ),
+            }
+        }
+        None => X3pMeta {
+            date: chrono::Utc::now().to_rfc3339(),
+            version: software(),
+            comment: format!("{what} of {}", ctx.input),
+            ..X3pMeta::default()
+        },
+    }
+}
+
+fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
+    write_atomically(path, |w| w.write_all(bytes)).map_err(|source| ReportError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// The overlay's row: the requested line when it is among the rows (else a warning and the
+/// middle row).
+fn overlay_row(grid: &LineGrid, ctx: &mut ReportContext) -> usize {
+    let rows = grid.rows();
+    match ctx.options.overlay_line {
+        Some(i) => match grid.index.iter().position(|&k| k == i) {
+            Some(r) => r,
+            None => {
+                ctx.warnings.push(format!(
+                    "overlay line {i} is not among the lines used ({:?}); the middle line is drawn",
+                    grid.index
+                ));
+                rows / 2
+            }
+        },
+        None => rows / 2,
+    }
+}
+
+/// The plots: bearing curves (the model's when there are any, else the measured grid's
+/// pooled curve), the measured height map and, with a model, the overlay of one line.
+fn write_plots(
+    out: &Path,
+    grid: &LineGrid,
+    measured: &Grid<'_>,
+    sampled: Option<&SampledModel>,
+    report: &Report,
+    ctx: &mut ReportContext,
+) -> Result<Vec<PathBuf>, ReportError> {
+    let caption = caption(ctx);
+    let mut plots = Vec::new();
+    let plot_err = |e: MetrologyError| ReportError::Metrology {
+        what: format!("{}: plots", ctx.input),
+        source: e,
+    };
+    let (bac_curves, pooled): (&[ModelCurveBac], &[[f64; 2]]) =
+        match (&report.surface, &report.surface_grid) {
+            (Some(s), _) => (s.bac_curves.as_deref().unwrap_or(&[]), &s.bac),
+            (None, Some(g)) => (&[], &g.bac),
+            (None, None) => (&[], &[]),
+        };
+    let bac_title = if bac_curves.is_empty() {
+        "Bearing area curve of the measured grid, pooled".to_string()
+    } else {
+        format!(
+            "Bearing area curves: {} model curves, pooled",
+            bac_curves.len()
+        )
+    };
+    plots.extend(
+        plot_bearing_curves(out, bac_curves, pooled, &bac_title, &caption).map_err(plot_err)?,
+    );
+    plots.extend(plot_height_map(out, measured, "Measured heights", &caption).map_err(plot_err)?);
+    if let Some(model) = sampled {
+        let row = overlay_row(grid, ctx);
+        let px = grid.pitch_x_mm;
+        let measured_pts: Vec<(f64, f64)> = grid
+            .row(row)
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i as f64 * px, *v))
+            .collect();
+        let model_pts: Vec<(f64, f64)> = model
+            .heights_um
+            .get(row * model.cols..(row + 1) * model.cols)
+            .unwrap_or(&[])
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i as f64 * model.pitch_x_mm, *v))
+            .collect();
+        let index = grid.index.get(row).copied().unwrap_or(0);
+        let title = format!(
+            "Line {} ({index:04}, y = {} mm): measured and model",
+            line_number(index),
+            nfmt(
+                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
+                Quantity::PositionMm
+            )
+        );
+        let plot_err = |e: MetrologyError| ReportError::Metrology {
+            what: format!("{}: plots", ctx.input),
+            source: e,
+        };
+        plots.extend(
+            plot_profile_overlay(out, &measured_pts, &model_pts, &[], &title, &caption)
+                .map_err(plot_err)?,
+        );
+    }
+    Ok(plots)
+}
+
+/// The ISO 13565-2 construction of every line, from the ordinates its Rk family came from:
+/// `rk/NNNN.png|svg`, with each figure's title.
+fn write_rk_plots(
+    out: &Path,
+    grid: &LineGrid,
+    analyses: &[LineAnalysis],
+    ctx: &ReportContext,
+) -> Result<Vec<(String, [PathBuf; 2])>, ReportError> {
+    let caption = caption(ctx);
+    let plot_err = |e: MetrologyError| ReportError::Metrology {
+        what: format!("{}: plots", ctx.input),
+        source: e,
+    };
+    let rk_dir = out.join("rk");
+    std::fs::create_dir_all(&rk_dir).map_err(|source| ReportError::Io {
+        path: rk_dir.clone(),
+        source,
+    })?;
+    let mut rk_plots = Vec::new();
+    for (row, a) in analyses.iter().enumerate() {
+        let index = grid.index_of(row);
+        let rk = rk_family(&a.roughness_um).map_err(plot_err)?;
+        let title = format!(
+            "Line {} ({index:04}, y = {} mm): ISO 13565-2 Rk construction",
+            line_number(index),
+            nfmt(
+                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
+                Quantity::PositionMm
+            )
+        );
+        let files = plot_rk_construction(
+            &rk_dir,
+            &format!("{index:04}"),
+            &material_ratio_curve(&a.roughness_um, 1001),
+            &rk,
+            &title,
+            &caption,
+        )
+        .map_err(plot_err)?;
+        rk_plots.push((title, files));
+    }
+    Ok(rk_plots)
+}
+
+/// Writes the plots and X3P files (which may add warnings to `ctx`), then `summary.csv`;
+/// `report.json` and `report.html` are written last by [`write_report`], once the warnings
+/// are final.
+pub fn write_data_files(
+    out: &Path,
+    grid: &LineGrid,
+    analyses: &[LineAnalysis],
+    measured: &Grid<'_>,
+    sampled: Option<&SampledModel>,
+    report: &Report,
+    ctx: &mut ReportContext,
+) -> Result<Files, ReportError> {
+    let plots = write_plots(out, grid, measured, sampled, report, ctx)?;
+    let rk_plots = write_rk_plots(out, grid, analyses, ctx)?;
+    let measured_x3p = out.join("measured.x3p");
+    let bytes = to_x3p(
+        &grid.heights_um,
+        measured.rows,
+        measured.cols,
+        measured.pitch_x_mm,
+        measured.pitch_y_mm,
+        &x3p_meta(ctx, "measured heights as traced"),
+    )
+    .map_err(metrology(format!("{}: measured.x3p", ctx.input)))?;
+    write_file(&measured_x3p, &bytes)?;
+    let model_x3p = match sampled {
+        Some(model) => {
+            let path = out.join("model.x3p");
+            let bytes = to_x3p(
+                &model.heights_um,
+                measured.rows,
+                model.cols,
+                model.pitch_x_mm,
+                measured.pitch_y_mm,
+                &x3p_meta(
+                    ctx,
+                    "NURBS model sampled at half the x pitch on the data lines",
+                ),
+            )
+            .map_err(metrology(format!("{}: model.x3p", ctx.input)))?;
+            write_file(&path, &bytes)?;
+            Some(path)
+        }
+        None => None,
+    };
+    let summary = out.join("summary.csv");
+    write_file(&summary, summary_csv(&report.lines).as_bytes())?;
+    Ok(Files {
+        report_json: out.join("report.json"),
+        report_html: out.join("report.html"),
+        summary_csv: summary,
+        plots,
+        rk_plots,
+        measured_x3p,
+        model_x3p,
+    })
+}
+
+/// Writes `report.json`, then `report.html`, the report for people, with the plots embedded
+/// and what the scan's journal recorded.
+pub fn write_report(
+    out: &Path,
+    files: &Files,
+    report: &Report,
+    ctx: &ReportContext,
+) -> Result<(), ReportError> {
+    let mut json = serde_json::to_vec_pretty(report)?;
+    json.push(b'\n');
+    write_file(&files.report_json, &json)?;
+    let journal = (ctx.kind == "scan")
+        .then(|| {
+            let path = Path::new(&ctx.input).join(crate::scan::journal::JOURNAL_FILE);
+            read_journal(&path)
+                .and_then(|r| ResumeState::from_records(&path, &r.records))
+                .ok()
+        })
+        .flatten();
+    let pair = |stem: &str| {
+        (
+            out.join(format!("{stem}.png")),
+            out.join(format!("{stem}.svg")),
+        )
+    };
+    let mut figures = Vec::new();
+    for (stem, title) in [
+        ("heightmap", "Measured heights"),
+        ("bac", "Material ratio curves"),
+        ("overlay", "One line: measured and model"),
+    ] {
+        let (png, svg) = pair(stem);
+        figures.extend(html::Figure::from_files(title, &png, &svg, false));
+    }
+    for (title, [png, svg]) in &files.rk_plots {
+        figures.extend(html::Figure::from_files(title.clone(), png, svg, true));
+    }
+    let value = serde_json::to_value(report)?;
+    write_file(
+        &files.report_html,
+        html::render(&value, journal.as_ref(), &figures, ctx.finished_at).as_bytes(),
+    )
+}

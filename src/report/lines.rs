@@ -1,0 +1,129 @@
+//! Section: the ISO 4287 / ISO 13565-2 parameters of every line as the instrument computes
+//! them, the Rmr table, and the instrument's own results beside ours. Needs no model.
+//!
+//! Layer 4 (reporting): depends on [`crate::metrology::params`] and
+//! [`crate::metrology::instrument`].
+
+use super::context::ReportContext;
+use super::document::{LineReport, ReportRecipe};
+use super::error::{metrology, ReportError};
+use super::grid::LineGrid;
+use crate::metrology::areal;
+use crate::metrology::instrument::compare_under;
+use crate::metrology::params::{analyze_line, LineAnalysis, Options};
+use crate::metrology::MetrologyError;
+use crate::numfmt::line_number;
+use std::path::PathBuf;
+
+/// What the section produces.
+#[derive(Debug, Clone)]
+pub struct LinesSection {
+    /// The recipe of every line (and the areal definitions).
+    pub recipe: ReportRecipe,
+    /// One entry per row of the grid.
+    pub lines: Vec<LineReport>,
+    /// Each row's analysis (its roughness profile draws the Rk construction).
+    pub analyses: Vec<LineAnalysis>,
+}
+
+/// Rmr(c) at depths c = 0, 10, …, 100 % of Rt below the highest peak: `[c_um, Rmr_pct]`.
+pub fn rmr_table(a: &LineAnalysis) -> Vec<[f64; 2]> {
+    (0..=10)
+        .map(|k| {
+            let c = a.params.rt_um * k as f64 / 10.0;
+            [c, a.rmr_pct(c)]
+        })
+        .collect()
+}
+
+/// Characterises every line, in parallel over the available cores (lines are independent).
+fn analyse_lines(
+    grid: &LineGrid,
+    options: &Options,
+    label: &str,
+) -> Result<Vec<LineAnalysis>, ReportError> {
+    let rows: Vec<&[f64]> = grid.heights_um.chunks(grid.cols.max(1)).collect();
+    let workers = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+        .clamp(1, rows.len().max(1));
+    let chunk = rows.len().div_ceil(workers).max(1);
+    let results: Vec<Vec<Result<LineAnalysis, MetrologyError>>> = std::thread::scope(|s| {
+        let handles: Vec<_> = rows
+            .chunks(chunk)
+            .map(|part| {
+                s.spawn(move || {
+                    part.iter()
+                        .map(|z| analyze_line(z, grid.pitch_x_mm, options))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join().unwrap_or_else(|_| {
+                    vec![Err(MetrologyError::BadParameter {
+                        what: "line analysis thread",
+                        value: f64::NAN,
+                        hint: "a line analysis thread panicked; report this with the input",
+                    })]
+                })
+            })
+            .collect()
+    });
+    results
+        .into_iter()
+        .flatten()
+        .enumerate()
+        .map(|(row, r)| {
+            let index = grid.index_of(row);
+            r.map_err(metrology(format!(
+                "{label} line {} ({index:04})",
+                line_number(index)
+            )))
+        })
+        .collect()
+}
+
+/// Runs the section.
+pub fn characterise(grid: &LineGrid, ctx: &ReportContext) -> Result<LinesSection, ReportError> {
+    let analyses = analyse_lines(grid, &ctx.line_options, &ctx.input)?;
+    let mut recipe =
+        analyses
+            .first()
+            .map(|a| a.recipe.clone())
+            .ok_or_else(|| ReportError::NoLines {
+                dir: PathBuf::from(&ctx.input),
+                incomplete: Vec::new(),
+            })?;
+    recipe.definitions.extend(areal::definitions());
+    let lines = analyses
+        .iter()
+        .enumerate()
+        .map(|(row, a)| LineReport {
+            index: grid.index_of(row),
+            y_mm: grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
+            y_readback_mm: grid.y_readback_mm.get(row).copied().flatten(),
+            params: a.params.clone(),
+            rmr_table: rmr_table(a),
+            instrument: grid.instrument.as_ref().map(|all| {
+                compare_under(
+                    &a.params,
+                    all.get(row).map_or(&[][..], |v| &v[..]),
+                    grid.standard.get(row).and_then(|s| s.as_deref()),
+                )
+            }),
+            model_vs_measured: None,
+        })
+        .collect();
+    Ok(LinesSection {
+        recipe: ReportRecipe {
+            lines: recipe,
+            lambda_c_source: ctx.lambda_c_source.clone(),
+            filter_reason: ctx.filter_reason.clone(),
+        },
+        lines,
+        analyses,
+    })
+}

@@ -1,0 +1,441 @@
+//! A scan's characterisation: the lines of a completed scan handed over by the runner (in
+//! memory, with the surface it fitted), or the lines of a scan directory read back
+//! (`surfscan analyze SCAN_DIR`, which fits them with the same degrees). Both go through
+//! [`characterise_scan_lines`], so the same lines give the same report.
+//!
+//! A partial, aborted or failed scan is characterised with the complete lines it has; lines
+//! with only one of their two files are named in a warning. A complete but malformed line
+//! file is an error naming the file.
+//!
+//! Layer 4 (reporting): depends on [`crate::scan`] (its journal, store and line types, and
+//! the [`Characterise`] contract the runner calls), [`crate::fit`] and the sections.
+
+use super::context::{Model, ReportContext, ScanAnalysisOptions};
+use super::document::{Completeness, ScanStatus, Traceability};
+use super::error::ReportError;
+use super::grid::LineGrid;
+use super::{characterise, ScanOutputs};
+use crate::fit::{fit_grid, max_residual_mm, FitOptions, FitResult};
+use crate::metrology::params::Options;
+use crate::profile::{FilterKind, ProfileKind};
+use crate::scan::faults::NoFaults;
+use crate::scan::journal::{
+    read_journal, ResumeState, StartRecord, StopRecord, StopStatus, JOURNAL_FILE,
+};
+use crate::scan::line::StoredLine;
+use crate::scan::outputs::{Characterise, Characterised, CompletedScan, FitSummary, GridShape};
+use crate::scan::store::ScanStore;
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// The complete lines of a scan directory, in index order, and the incomplete ones.
+pub fn load_scan_lines(dir: &Path) -> Result<(Vec<StoredLine>, Vec<u32>), ReportError> {
+    if !dir.join("lines").is_dir() {
+        return Err(ReportError::Lines {
+            path: dir.to_path_buf(),
+            reason: "is not a scan directory: it has no lines/ folder (a scan holds lines/NNNN.csv + NNNN.json and journal.jsonl)".to_string(),
+        });
+    }
+    let store = ScanStore::open(dir, Arc::new(NoFaults))?;
+    let loaded = store.load_all()?;
+    if loaded.lines.is_empty() {
+        return Err(ReportError::NoLines {
+            dir: dir.to_path_buf(),
+            incomplete: loaded.incomplete,
+        });
+    }
+    Ok((loaded.lines, loaded.incomplete))
+}
+
+/// The complete lines of a scan directory as one grid, with the lines themselves and the
+/// incomplete ones named. Every line must have the same number of points and the same x
+/// pitch (they are one grid); a line that differs is named.
+pub fn load_scan_grid(dir: &Path) -> Result<(LineGrid, Vec<StoredLine>, Vec<u32>), ReportError> {
+    let (lines, incomplete) = load_scan_lines(dir)?;
+    let grid = LineGrid::of_scan(&lines, &dir.join("lines"))?;
+    Ok((grid, lines, incomplete))
+}
+
+/// The journal of a scan directory, when it can be read.
+pub fn read_scan_journal(dir: &Path) -> Result<ResumeState, crate::scan::journal::JournalError> {
+    let path = dir.join(JOURNAL_FILE);
+    read_journal(&path).and_then(|rec| ResumeState::from_records(&path, &rec.records))
+}
+
+/// The degrees to fit a scan with: each as asked for, else the scan's frozen plan (from
+/// its start record), else the paper's 5.
+pub fn scan_degrees(
+    degree_u: Option<usize>,
+    degree_v: Option<usize>,
+    start: Option<&StartRecord>,
+) -> FitOptions {
+    let paper = FitOptions::default();
+    FitOptions {
+        degree_u: degree_u
+            .or(start.map(|s| s.plan.degree_u))
+            .unwrap_or(paper.degree_u),
+        degree_v: degree_v
+            .or(start.map(|s| s.plan.degree_v))
+            .unwrap_or(paper.degree_v),
+    }
+}
+
+/// How the lines of a scan are evaluated: λc from the override, else the recorded
+/// conditions, else 0.8 mm; the λc filter unless `no_filter`, the profile is an R profile
+/// (already λc-filtered by the instrument) or the recorded filter is none. Returns the
+/// options and, for the recipe, where λc came from and why the filter was or was not applied.
+pub fn scan_line_options(
+    line: &StoredLine,
+    options: &ScanAnalysisOptions,
+) -> (Options, String, String) {
+    let mut o = Options::from_profile(&line.profile);
+    let recorded = line.profile.conditions.lambda_c_mm;
+    let lambda_c_source = match (options.lambda_c_mm, recorded) {
+        (Some(lc), Some(r)) => {
+            o.lambda_c_mm = lc;
+            format!("given ({lc} mm, overriding the recorded {r} mm)")
+        }
+        (Some(lc), None) => {
+            o.lambda_c_mm = lc;
+            format!("given ({lc} mm; the instrument recorded none)")
+        }
+        (None, Some(r)) => format!("the instrument's recorded conditions ({r} mm)"),
+        (None, None) => format!(
+            "default {} mm (the instrument recorded no λc; set --lc to choose)",
+            o.lambda_c_mm
+        ),
+    };
+    let kind = line.meta.kind;
+    let (apply, filter_reason) = if options.no_filter {
+        (false, "no λc filter: asked for (--no-filter)".to_string())
+    } else if kind == ProfileKind::R {
+        (
+            false,
+            "no λc filter: the instrument exported an R profile, already λc-filtered".to_string(),
+        )
+    } else if line.profile.conditions.filter == Some(FilterKind::None) {
+        (
+            false,
+            "no λc filter: the instrument's conditions record the filter as none".to_string(),
+        )
+    } else {
+        (
+            true,
+            format!("λc filter applied: the stored profile is of kind {kind:?}, not an R profile"),
+        )
+    };
+    o.apply_lambda_c = apply;
+    (o, lambda_c_source, filter_reason)
+}
+
+/// What is known about the scan whose lines are characterised.
+#[derive(Debug, Clone, Copy)]
+pub struct ScanFacts<'a> {
+    /// The start record (traceability, the frozen plan).
+    pub start: &'a StartRecord,
+    /// The stop record, if the scan has one.
+    pub stop: Option<&'a StopRecord>,
+    /// Line indices the journal records as completed.
+    pub journal_lines: &'a [u32],
+    /// The runner is completing the scan (every planned line on disk; its success stop
+    /// record follows this report), so no stop record yet does not make it partial.
+    pub completing: bool,
+}
+
+/// Characterises a scan's lines with `model` (the surface fitted through them) and writes the
+/// files into `out`: the work behind both the runner's end of scan and
+/// [`characterise_scan`].
+#[allow(clippy::too_many_arguments)]
+pub fn characterise_scan_lines(
+    dir: &Path,
+    lines: &[StoredLine],
+    incomplete: &[u32],
+    facts: Option<ScanFacts<'_>>,
+    model: Model<'_>,
+    fit: Option<FitSummary>,
+    options: &ScanAnalysisOptions,
+    mut warnings: Vec<String>,
+) -> Result<ScanOutputs, ReportError> {
+    let grid = LineGrid::of_scan(lines, &dir.join("lines"))?;
+    if !incomplete.is_empty() {
+        warnings.push(format!(
+            "lines {incomplete:?} have only one of their two files in {} and were left out",
+            dir.join("lines").display()
+        ));
+    }
+    let first = lines.first().ok_or_else(|| ReportError::NoLines {
+        dir: dir.to_path_buf(),
+        incomplete: incomplete.to_vec(),
+    })?;
+    let (line_options, lambda_c_source, filter_reason) = scan_line_options(first, options);
+    if let Some(l) = lines
+        .iter()
+        .find(|l| l.meta.conditions != first.meta.conditions || l.meta.kind != first.meta.kind)
+    {
+        warnings.push(format!(
+            "line {} was traced under other conditions than line {}; every line is evaluated as line {} ({})",
+            l.meta.index, first.meta.index, first.meta.index, filter_reason
+        ));
+    }
+    let lines_used: Vec<u32> = grid.index.clone();
+    let scan = facts.map(|f| {
+        let lines_planned = f.start.plan.lines;
+        let stopped_ok = match f.stop {
+            Some(st) => st.status == StopStatus::Success,
+            None => f.completing,
+        };
+        let complete =
+            stopped_ok && incomplete.is_empty() && lines_planned as usize == lines_used.len();
+        ScanStatus {
+            status: if complete {
+                Completeness::Complete
+            } else {
+                Completeness::Partial
+            },
+            stop: f.stop.cloned(),
+            lines_planned,
+            lines_used: lines_used.clone(),
+            lines_incomplete: incomplete.to_vec(),
+            lines_in_journal: f.journal_lines.to_vec(),
+        }
+    });
+    if let Some(s) = &scan {
+        if s.status == Completeness::Partial {
+            warnings.push(format!(
+                "partial scan ({}): characterised with the {} lines it has",
+                match &s.stop {
+                    Some(st) => format!("stopped: {}, {}", st.status.as_str(), st.reason),
+                    None => "no stop record".to_string(),
+                },
+                lines_used.len()
+            ));
+        }
+    }
+    let ctx = ReportContext {
+        input: dir.display().to_string(),
+        kind: "scan",
+        line_options,
+        lambda_c_source,
+        filter_reason,
+        traceability: facts.map(|f| Traceability::from(f.start)),
+        scan,
+        fit,
+        options: options.clone(),
+        warnings,
+        finished_at: facts.filter(|f| f.completing).map(|_| chrono::Utc::now()),
+    };
+    let out = options.out_dir.clone().unwrap_or_else(|| dir.to_path_buf());
+    let mut outputs = characterise(&grid, model, ctx, &out)?;
+    outputs.incomplete_lines = incomplete.to_vec();
+    Ok(outputs)
+}
+
+/// Fits `grid` with `degrees` and summarises the fit (no IGES written).
+pub fn fit_for_report(
+    grid: &LineGrid,
+    degrees: FitOptions,
+) -> (
+    Result<FitResult, crate::fit::FitError>,
+    Option<FitSummary>,
+    f64,
+) {
+    let t = Instant::now();
+    let fit = fit_grid(
+        grid.pitch_x_mm,
+        &grid.y_mm,
+        &grid.heights_um,
+        grid.cols,
+        degrees,
+    );
+    let fit_s = t.elapsed().as_secs_f64();
+    let summary = fit.as_ref().ok().map(|f| {
+        let residual = max_residual_mm(f, grid.pitch_x_mm, &grid.y_mm, &grid.heights_um, grid.cols);
+        FitSummary::new(
+            f,
+            GridShape {
+                rows: grid.rows(),
+                cols: grid.cols,
+            },
+            residual,
+            fit_s,
+            Vec::new(),
+            None,
+        )
+    });
+    (fit, summary, fit_s)
+}
+
+/// Characterises the scan in `dir` (a partial, aborted or failed one with the complete lines
+/// it has): fits its lines with the degrees of `options` (default: the scan's frozen plan,
+/// else 5/5) and writes `report.json`, `summary.csv`, the plots, `measured.x3p` and
+/// `model.x3p` into the scan directory (or `options.out_dir`). Returns the paths and the
+/// warnings.
+pub fn characterise_scan(
+    dir: &Path,
+    options: &ScanAnalysisOptions,
+) -> Result<ScanOutputs, ReportError> {
+    let t = Instant::now();
+    let (lines, incomplete) = load_scan_lines(dir)?;
+    let mut warnings = Vec::new();
+    let state = match read_scan_journal(dir) {
+        Ok(s) => Some(s),
+        Err(e) => {
+            warnings.push(format!("no traceability: the journal cannot be used ({e})"));
+            None
+        }
+    };
+    let degrees = scan_degrees(
+        options.degree_u,
+        options.degree_v,
+        state.as_ref().map(|s| &s.start),
+    );
+    let grid = LineGrid::of_scan(&lines, &dir.join("lines"))?;
+    let (fit, summary, fit_s) = fit_for_report(&grid, degrees);
+    drop(grid);
+    let journal_lines: Vec<u32> = state
+        .as_ref()
+        .map(|s| s.lines.iter().map(|l| l.index).collect())
+        .unwrap_or_default();
+    let facts = state.as_ref().map(|s| ScanFacts {
+        start: &s.start,
+        stop: s.stop.as_ref(),
+        journal_lines: &journal_lines,
+        completing: false,
+    });
+    let model = Model {
+        degrees,
+        fit: fit.as_ref(),
+    };
+    let load_s = t.elapsed().as_secs_f64() - fit_s;
+    let mut outputs = characterise_scan_lines(
+        dir,
+        &lines,
+        &incomplete,
+        facts,
+        model,
+        summary,
+        options,
+        warnings,
+    )?;
+    outputs.report.timings_s.fit = fit_s;
+    outputs.elapsed_s += load_s + fit_s;
+    Ok(outputs)
+}
+
+/// The characterisation the runner calls when a scan completes: the scan's lines as it holds
+/// them, the surface it fitted and wrote as IGES, and `[analysis]`'s options.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScanCharacteriser {
+    /// Curves, levels, λc and filter (the degrees are the scan's own surface's).
+    pub options: ScanAnalysisOptions,
+}
+
+impl Characterise for ScanCharacteriser {
+    fn characterise(
+        &self,
+        scan: &CompletedScan<'_>,
+    ) -> Result<Characterised, Box<dyn std::error::Error + Send + Sync>> {
+        let journal_lines: Vec<u32> = scan.lines.iter().map(|l| l.meta.index).collect();
+        let facts = ScanFacts {
+            start: scan.start,
+            stop: None,
+            journal_lines: &journal_lines,
+            completing: true,
+        };
+        let model = Model {
+            degrees: scan.degrees,
+            fit: Ok(scan.fit),
+        };
+        let out = characterise_scan_lines(
+            scan.dir,
+            scan.lines,
+            &[],
+            Some(facts),
+            model,
+            Some(scan.summary.clone()),
+            &self.options,
+            Vec::new(),
+        )?;
+        let mut files = vec![out.report_html, out.summary_csv];
+        files.extend(out.plots);
+        files.extend(out.measured_x3p);
+        files.extend(out.model_x3p);
+        Ok(Characterised {
+            files,
+            warnings: out.warnings,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::profile::{Conditions, Profile};
+    use crate::scan::line::LineMeta;
+    use crate::units::Nm;
+
+    fn line(kind: ProfileKind, lambda_c_mm: Option<f64>, filter: Option<FilterKind>) -> StoredLine {
+        let conditions = Conditions {
+            lambda_c_mm,
+            filter,
+            ..Conditions::default()
+        };
+        let t = chrono::Utc::now();
+        StoredLine {
+            meta: LineMeta {
+                index: 0,
+                y_target_nm: Nm(0),
+                y_readback_nm: None,
+                pitch_x_mm: 0.001,
+                points: 3,
+                kind,
+                conditions: conditions.clone(),
+                results: Vec::new(),
+                readout_warnings: Vec::new(),
+                started_at: t,
+                finished_at: t,
+                attempt: 1,
+            },
+            profile: Profile {
+                pitch_x_mm: 0.001,
+                heights_um: vec![0.0; 3],
+                kind,
+                conditions,
+            },
+        }
+    }
+
+    #[test]
+    fn the_recorded_kind_and_filter_decide_and_the_options_override() {
+        let defaults = ScanAnalysisOptions::default();
+        let (o, src, why) = scan_line_options(&line(ProfileKind::P, Some(2.5), None), &defaults);
+        assert!(o.apply_lambda_c && o.lambda_c_mm == 2.5, "{o:?}");
+        assert!(
+            src.contains("recorded") && why.contains("applied"),
+            "{src} / {why}"
+        );
+
+        let (o, _, why) = scan_line_options(&line(ProfileKind::R, Some(0.8), None), &defaults);
+        assert!(!o.apply_lambda_c && why.contains("R profile"), "{why}");
+
+        let (o, _, why) = scan_line_options(
+            &line(ProfileKind::P, None, Some(FilterKind::None)),
+            &defaults,
+        );
+        assert!(!o.apply_lambda_c && why.contains("none"), "{why}");
+
+        let (o, src, _) = scan_line_options(&line(ProfileKind::P, None, None), &defaults);
+        assert!(o.lambda_c_mm == 0.8 && src.contains("default"), "{src}");
+
+        let forced = ScanAnalysisOptions {
+            lambda_c_mm: Some(0.25),
+            no_filter: true,
+            ..ScanAnalysisOptions::default()
+        };
+        let (o, src, why) = scan_line_options(&line(ProfileKind::P, Some(0.8), None), &forced);
+        assert!(!o.apply_lambda_c && o.lambda_c_mm == 0.25, "{o:?}");
+        assert!(src.contains("overriding the recorded 0.8"), "{src}");
+        assert!(why.contains("--no-filter"), "{why}");
+    }
+}
