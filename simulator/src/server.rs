@@ -80,8 +80,11 @@ impl Responder {
     }
 }
 
-/// Serial pacing: each reply is delayed by its transfer time at `baud` (10 bits per byte),
-/// multiplied by `time_scale`.
+/// Serial pacing: each reply is delayed by the transfer time at `baud` (10 bits per byte) of
+/// the command that asked for it (with its terminator) and of the reply itself, multiplied by
+/// `time_scale`. A pseudo-terminal delivers the command at once, so the command's own time on
+/// a real wire is spent here; the exchange then ends when its last reply byte would have
+/// arrived.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pacing {
     /// Baud rate.
@@ -153,7 +156,7 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
                 _ => responder.respond(&line, now),
             };
             let Some(reply) = reply else { continue };
-            tokio::time::sleep(pacing.delay(reply.len())).await;
+            tokio::time::sleep(pacing.delay(line.len() + 1 + reply.len())).await;
             match fault {
                 Some(FaultKind::Drop) => {}
                 Some(FaultKind::Truncate) => {
@@ -280,6 +283,7 @@ pub struct Simulator {
     source: Source,
     faults: Vec<Fault>,
     baud: u32,
+    pacing_scale: Option<f64>,
     y: YPosition,
     stage: Option<(PathBuf, StageServe)>,
 }
@@ -304,6 +308,7 @@ impl Simulator {
             source: Source::Emulate(InstrumentConfig::default(), None),
             faults: Vec::new(),
             baud: 38400,
+            pacing_scale: None,
             y: YPosition::new(),
             stage: None,
         }
@@ -390,6 +395,13 @@ impl Simulator {
         self
     }
 
+    /// Paces the link with its own time scale instead of the instrument's (1 = the wire's real
+    /// speed): e.g. an instantaneous trace whose read-out still takes real time.
+    pub fn pacing_time_scale(mut self, time_scale: f64) -> Self {
+        self.pacing_scale = Some(time_scale);
+        self
+    }
+
     /// The shared stage y position the instrument reads when a stage is attached.
     pub fn y_position(&self) -> YPosition {
         self.y.clone()
@@ -458,7 +470,7 @@ impl Simulator {
         let mut faults = FaultPlan::new(self.faults);
         let pacing = Pacing {
             baud: self.baud,
-            time_scale,
+            time_scale: self.pacing_scale.unwrap_or(time_scale),
         };
         let task = tokio::spawn(async move {
             let (Some(link), Some(mut pty)) = (self.instrument_link, pty) else {
