@@ -29,18 +29,18 @@
 
 pub mod channels;
 pub mod command;
-mod device_ops;
+pub mod device_ops;
 pub mod disk;
-mod disk_ops;
+pub mod disk_ops;
 pub mod event;
 pub mod faults;
 pub mod journal;
-mod ledger;
+pub mod ledger;
 pub mod line;
 pub mod line_csv;
 pub mod machine;
 pub mod metrics;
-mod opening;
+pub mod opening;
 pub mod outcome;
 pub mod outputs;
 pub mod plan;
