@@ -121,7 +121,8 @@ pub fn run_settings(
     })
 }
 
-/// The scan to run for this configuration: the newest unfinished one, else a new one.
+/// The scan to run for this configuration: the unfinished one started last (by its
+/// journal), else a new one. A scan whose journal is damaged is skipped with a warning.
 pub fn choose_request(
     config: &Config,
     specimen: String,

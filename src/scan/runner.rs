@@ -667,6 +667,7 @@ async fn begin<S: Station>(
             let dir = store.root().to_path_buf();
             let start = StartRecord {
                 scan_id: id.0.clone(),
+                sequence: 0,
                 time: now,
                 plan,
                 config: settings.config.clone(),
