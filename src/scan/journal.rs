@@ -14,8 +14,8 @@
 //! [`ResumeState`] derives what a restarted scan needs; [`survey`] finds the scan to resume
 //! from the journals themselves and names the damaged ones, which are skipped.
 //!
-//! Layer 3 (session): depends on [`crate::profile`], [`crate::units`], the plan and the storage
-//! fault hook ([`super::faults`]); file I/O only.
+//! Layer 3 (session): depends on [`crate::profile`], [`crate::units`], the plan, the operator's
+//! [`Peer`] and the storage fault hook ([`super::faults`]); file I/O only.
 
 use std::collections::BTreeSet;
 use std::fs::{self, OpenOptions};
@@ -29,6 +29,7 @@ use serde::{Deserialize, Serialize};
 use crate::profile::Conditions;
 use crate::units::Nm;
 
+use super::command::Peer;
 use super::faults::{StorageFaults, WriteStep};
 use super::plan::Plan;
 
@@ -125,6 +126,9 @@ pub struct StartRecord {
     pub drive_unit: String,
     /// Measurement conditions read at start.
     pub conditions: Conditions,
+    /// Who started the scan (the control socket's peer, or this process).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peer: Option<Peer>,
 }
 
 /// A completed, durably stored line.
@@ -157,6 +161,9 @@ pub struct InterruptionRecord {
     pub line: Option<u32>,
     /// When.
     pub time: DateTime<Utc>,
+    /// Who asked, for an operator's command (pause, resume, abort, continue, start over).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peer: Option<Peer>,
 }
 
 /// A committed line whose heights file no longer matches the SHA-256 of its line record:
@@ -212,6 +219,19 @@ pub struct StopRecord {
     pub time: DateTime<Utc>,
 }
 
+/// The operator continued a failed scan after clearing the cause: the stop record before
+/// it no longer ends the scan.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ContinueRecord {
+    /// The failure the scan is continued after.
+    pub after: String,
+    /// Who asked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peer: Option<Peer>,
+    /// When.
+    pub time: DateTime<Utc>,
+}
+
 /// One journal record.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "class", rename_all = "lowercase")]
@@ -226,6 +246,8 @@ pub enum Record {
     Quarantine(QuarantineRecord),
     /// The stop record.
     Stop(StopRecord),
+    /// A failed scan continued (`--resume`).
+    Continue(ContinueRecord),
 }
 
 impl Record {
@@ -236,6 +258,7 @@ impl Record {
             Record::Interruption(_) => "interruption",
             Record::Quarantine(_) => "quarantine",
             Record::Stop(_) => "stop",
+            Record::Continue(_) => "continue",
         }
     }
 }
@@ -551,6 +574,7 @@ impl ResumeState {
                     state.quarantined.push(q.clone());
                 }
                 Record::Stop(s) => state.stop = Some(s.clone()),
+                Record::Continue(_) => state.stop = None,
             }
         }
         Ok(state)
