@@ -144,7 +144,7 @@ pub fn choose_request(
     if let Some((last, older)) = unfinished.split_last() {
         for o in older {
             tracing::warn!(
-                "{} is also unfinished; only the newest is resumed (resume it by hand with `surfscan fit`/`analyze`, or add a stop record)",
+                "{} is also unfinished; only the one started last is resumed (resume it by hand with `surfscan fit`/`analyze`, or add a stop record)",
                 o.display()
             );
         }

@@ -1,9 +1,15 @@
-//! The fault policy end to end, the real `surfscan scan` against the simulator: damage on
-//! disk is repaired or stepped around, never obeyed — a damaged record in another scan's
-//! journal is named and that scan skipped while a new one runs to completion.
+//! The fault policy end to end, the real `surfscan scan` against the simulator: faults that
+//! clear by themselves suspend the scan, which then completes with every line once and on
+//! target — the instrument busy, bytes without line ends and a flood of stray replies for
+//! seconds (the simulator's time-window faults; the night's 15 s, 60 s and 30 s scaled down,
+//! still longer than a few quick attempts take), a file system that really fills up — and
+//! damage on disk is repaired or stepped around, never obeyed: a changed committed line is
+//! quarantined and traced again, a damaged record in another scan's journal is named and that
+//! scan skipped while a new one runs to completion.
 
 use crate::common::*;
 use std::path::PathBuf;
+use std::time::{Duration, Instant};
 
 /// The scan directories under `out`, sorted by name.
 fn scan_dirs(out: &std::path::Path) -> Vec<PathBuf> {
@@ -119,5 +125,185 @@ async fn a_flipped_digit_in_a_committed_line_is_quarantined_and_the_line_traced_
     );
     assert!(matches!(records.last(), Some(Record::Stop(s)) if s.status == StopStatus::Success));
     assert_eq!(surface_bits(&dir.join("surface.igs")), reference);
+    rig.shutdown().await;
+}
+
+/// Runs an 8-line scan with `fault` (a window opening at the third trace) and a 60 s budget;
+/// checks it completed with every line once and on target; returns the interruption notes
+/// and how long the scan took.
+async fn scan_through(fault: &str) -> (Vec<String>, Duration) {
+    let rig = Rig::start(RigOptions {
+        faults: vec![fault.to_owned()],
+        extra_scan: "transient-budget-s = 60\n".into(),
+        ..RigOptions::default()
+    })
+    .await;
+    let n = rig.options.lines;
+    let t0 = Instant::now();
+    let o = run_scan(&rig.config("out"), &[]).await;
+    let took = t0.elapsed();
+    assert!(o.status.success(), "{fault}: {}", describe(&o));
+    let dir = scan_dir(&rig.out_dir("out"));
+    assert_lines_exactly(&dir, n);
+    let records = assert_journal_complete(&dir, n);
+    rig.shutdown().await;
+    (interruptions(&records), took)
+}
+
+/// The notes say the scan was suspended on line 3 and went on once line 3 was on disk.
+fn assert_suspended_on_line_3(fault: &str, notes: &[String]) {
+    assert!(
+        notes
+            .iter()
+            .any(|r| r.starts_with("suspended: instrument busy since")),
+        "{fault}: {notes:?}"
+    );
+    assert!(
+        notes
+            .iter()
+            .any(|r| r.starts_with("line 3 on disk after") && r.ends_with("scan continues")),
+        "{fault}: {notes:?}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_instrument_busy_for_a_window_suspends_the_scan_which_then_completes() {
+    let fault = "busy:4000@CTSTA#3";
+    let (notes, took) = scan_through(fault).await;
+    assert_suspended_on_line_3(fault, &notes);
+    assert!(
+        notes.iter().any(|r| r.contains("NG011")),
+        "the busy answer is named: {notes:?}"
+    );
+    assert!(took >= Duration::from_secs(4), "{took:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bytes_without_line_ends_for_a_window_suspend_the_scan_which_then_completes() {
+    let fault = "noeol:4000@CTSTA#3";
+    let (notes, took) = scan_through(fault).await;
+    assert_suspended_on_line_3(fault, &notes);
+    assert!(took >= Duration::from_secs(4), "{took:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_flood_of_stray_replies_for_a_window_suspends_the_scan_which_then_completes() {
+    let fault = "flood:4000@CTSTA#3";
+    let (notes, took) = scan_through(fault).await;
+    assert_suspended_on_line_3(fault, &notes);
+    assert!(took >= Duration::from_secs(4), "{took:?}");
+}
+
+/// A file system mounted for one test and unmounted when the test ends (also on failure).
+struct Mount(PathBuf);
+
+impl Mount {
+    /// A tmpfs of `bytes` at `dir` (created). The tests run as root, as `.ci/run` does.
+    fn tmpfs(dir: &std::path::Path, bytes: u64) -> Mount {
+        std::fs::create_dir_all(dir).unwrap();
+        let o = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={bytes}")])
+            .arg("tmpfs")
+            .arg(dir)
+            .output()
+            .expect("run mount");
+        assert!(
+            o.status.success(),
+            "this test mounts a small tmpfs to fill it for real and needs root (as .ci/run runs): {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        Mount(dir.to_path_buf())
+    }
+}
+
+impl Drop for Mount {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount")
+            .arg("-l")
+            .arg(&self.0)
+            .status();
+    }
+}
+
+/// Writes zeros into `path` until the file system refuses (ENOSPC); returns the bytes written.
+fn fill(path: &std::path::Path) -> u64 {
+    use std::io::Write;
+    let mut f = std::fs::File::create(path).unwrap();
+    let chunk = vec![0u8; 64 * 1024];
+    let mut n = 0u64;
+    loop {
+        match f.write(&chunk) {
+            Ok(0) => break,
+            Ok(k) => n += k as u64,
+            Err(e) if e.raw_os_error() == Some(libc::ENOSPC) => break,
+            Err(e) => panic!("filling {}: {e}", path.display()),
+        }
+    }
+    let _ = f.sync_all();
+    n
+}
+
+/// The output directory's file system really fills up mid-scan (a small tmpfs and a ballast
+/// file): the scan suspends instead of failing, and when the ballast is removed it goes on by
+/// itself and completes with every line once and on target.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_really_full_disk_suspends_the_scan_which_goes_on_when_space_is_freed() {
+    const N: usize = 8;
+    let rig = Rig::start(RigOptions {
+        lines: N,
+        ..RigOptions::default()
+    })
+    .await;
+    let out = rig.out_dir("out");
+    // Room for the pre-flight estimate of 8 short lines (about 4.3 MB), not much more.
+    let mount = Mount::tmpfs(&out, 6 << 20);
+    let metrics = rig.tmp.path().join("surfscan.prom");
+    let config = rig.config_with(
+        "out",
+        &format!("\n[metrics]\nfile = {:?}\n", metrics.display().to_string()),
+    );
+    let mut scan = scan_command(&config, &[]).spawn().expect("scan starts");
+    wait_until(Duration::from_secs(60), "two lines on disk", || {
+        committed_lines(&out) >= 2
+    })
+    .await;
+    let ballast = out.join("ballast");
+    assert!(fill(&ballast) > 0);
+    wait_until(Duration::from_secs(60), "the scan suspended", || {
+        std::fs::read_to_string(&metrics).is_ok_and(|m| {
+            m.lines()
+                .any(|l| l.starts_with("surfscan_suspensions_total{") && !l.ends_with(" 0"))
+        })
+    })
+    .await;
+    let held = committed_lines(&out);
+    assert!(held < N, "suspended before the end");
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert_eq!(
+        committed_lines(&out),
+        held,
+        "nothing is committed while the disk is full"
+    );
+    assert!(
+        scan.try_wait().unwrap().is_none(),
+        "the scan waits for space instead of ending"
+    );
+    std::fs::remove_file(&ballast).unwrap();
+    let o = tokio::time::timeout(Duration::from_secs(120), scan.wait_with_output())
+        .await
+        .expect("the scan ends")
+        .unwrap();
+    assert!(o.status.success(), "{}", describe(&o));
+    let dir = scan_dir(&out);
+    assert_lines_exactly(&dir, N);
+    let records = assert_journal_complete(&dir, N);
+    assert!(
+        interruptions(&records)
+            .iter()
+            .any(|r| r.starts_with("space is back")),
+        "{:?}",
+        interruptions(&records)
+    );
+    drop(mount);
     rig.shutdown().await;
 }
