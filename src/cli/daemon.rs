@@ -19,7 +19,7 @@ use crate::control::protocol::ControlChannels;
 use crate::control::server;
 use crate::hook::Hook;
 use crate::scan::channels::Control;
-use crate::scan::command::{OperatorCommand, OperatorRequest};
+use crate::scan::command::{OperatorCommand, OperatorRequest, Peer, StartMode};
 use crate::scan::event::ScanEvent;
 use crate::scan::outcome::{Outcome, ScanRequest};
 use crate::scan::runner::run_scan;
@@ -177,8 +177,16 @@ async fn daemon(
 
     // Resume an unfinished scan at start-up.
     let mut stop = false;
-    match choose_request(config, String::new(), String::new(), String::new()) {
-        Ok(req @ ScanRequest::Resume(_)) => {
+    match choose_request(
+        config,
+        String::new(),
+        String::new(),
+        String::new(),
+        StartMode::Auto,
+        Peer::this_process(),
+    ) {
+        Ok(ScanRequest::Resume { dir, .. }) => {
+            let req = ScanRequest::Resume { dir, peer: None };
             let outcome = run_scan(&mut station, &mut ctl, &settings, req).await;
             stop = matches!(outcome, Outcome::Interrupted { .. });
             note_damaged_journals(config, &ctl.status);
@@ -199,7 +207,7 @@ async fn daemon(
             req = ctl.commands.recv() => {
                 let Some(req) = req else { break };
                 match req.command {
-                    OperatorCommand::Start { specimen, operator, notes } => {
+                    OperatorCommand::Start { specimen, operator, notes, mode } => {
                         let busy = ctl.status.borrow().state != State::Idle;
                         if busy {
                             let running = match ctl.status.borrow().scan_id.clone() {
@@ -211,20 +219,22 @@ async fn daemon(
                             )));
                             continue;
                         }
-                        let _ = req.reply.send(Ok(format!(
-                            "starting a scan of {} lines; follow it with `surfscan status --watch`",
-                            config.scan.lines
-                        )));
-                        let mut request = match choose_request(config, specimen.clone(), operator.clone(), notes.clone()) {
+                        let request = match choose_request(config, specimen, operator, notes, mode, req.peer) {
                             Ok(r) => r,
                             Err(e) => {
                                 tracing::error!("{e}");
-                                ScanRequest::New { specimen, operator, notes, peer: None }
+                                let _ = req.reply.send(Err(e.to_string()));
+                                continue;
                             }
                         };
-                        if let ScanRequest::New { peer, .. } = &mut request {
-                            *peer = Some(req.peer);
-                        }
+                        let what = match &request {
+                            ScanRequest::New { .. } => format!("starting a scan of {} lines", config.scan.lines),
+                            ScanRequest::Resume { dir, .. } => format!("resuming the unfinished scan {}", dir.display()),
+                            ScanRequest::Continue { dir, .. } => format!("continuing the failed scan {}", dir.display()),
+                        };
+                        let _ = req.reply.send(Ok(format!(
+                            "{what}; follow it with `surfscan status --watch`"
+                        )));
                         let outcome = run_scan(&mut station, &mut ctl, &settings, request).await;
                         stop = matches!(outcome, Outcome::Interrupted { .. });
                         note_damaged_journals(config, &ctl.status);

@@ -193,17 +193,20 @@ pub enum StopStatus {
     Success,
     /// Aborted by the operator.
     Abort,
-    /// Ended by an unrecoverable fault.
+    /// Ended by a fault the operator must clear (`--resume` continues it).
     Fail,
+    /// Left unfinished and given up for a new scan (`--new`).
+    Abandoned,
 }
 
 impl StopStatus {
-    /// `success`, `abort` or `fail`, as the journal spells it.
+    /// `success`, `abort`, `fail` or `abandoned`, as the journal spells it.
     pub fn as_str(self) -> &'static str {
         match self {
             StopStatus::Success => "success",
             StopStatus::Abort => "abort",
             StopStatus::Fail => "fail",
+            StopStatus::Abandoned => "abandoned",
         }
     }
 }

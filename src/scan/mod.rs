@@ -13,7 +13,8 @@
 //! - [`station`]: opening the instrument and the stage; device errors reduced to a `Fault`.
 //! - [`machine`]: the sans-IO session core: events (with the time) in, actions out; the
 //!   fault policy (classes, transient budget, suspension, disk full, pause/abort, shutdown).
-//! - [`runner`]: performs the machine's actions on devices, disk and channels;
+//! - [`runner`]: performs the machine's actions on devices ([`device_ops`]), disk
+//!   ([`disk_ops`]) and channels;
 //!   [`channels`]: its connection to the outside; [`outcome`]: what it is asked and how a
 //!   scan ended; [`opening`]: creating or reopening a scan directory; [`ledger`]: the
 //!   running scan's journal, lines and fitter.
@@ -28,7 +29,9 @@
 
 pub mod channels;
 pub mod command;
+mod device_ops;
 pub mod disk;
+mod disk_ops;
 pub mod event;
 pub mod faults;
 pub mod journal;

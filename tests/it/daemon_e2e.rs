@@ -10,6 +10,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 use surfscan::control::client::ControlClient;
 use surfscan::control::protocol::{Message, Request};
+use surfscan::scan::command::StartMode;
 use surfscan::scan::journal::{read_journal, Record, StopStatus};
 use surfscan::scan::status::{Ending, State, Status};
 use surfscan_sim::grbl::{GrblSimConfig, StageShared};
@@ -267,6 +268,7 @@ async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket()
             specimen: "B-12".into(),
             operator: "ana".into(),
             notes: "socket test".into(),
+            mode: StartMode::Auto,
         })
         .await
         .unwrap();
@@ -347,6 +349,7 @@ async fn sigterm_mid_scan_records_an_interruption_and_the_restart_resumes_by_its
             specimen: "resume".into(),
             operator: String::new(),
             notes: String::new(),
+            mode: StartMode::Auto,
         })
         .await
         .unwrap();
@@ -462,6 +465,7 @@ async fn a_damaged_journal_is_named_in_the_status_and_does_not_hold_up_the_daemo
             specimen: "after-damage".into(),
             operator: "ana".into(),
             notes: String::new(),
+            mode: StartMode::Auto,
         })
         .await
         .unwrap();

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::devices::FaultClass;
+use crate::scan::command::StartMode;
 
 const LINES: u32 = 3;
 
@@ -924,6 +925,7 @@ fn commands_answer_while_running_and_start_is_refused() {
             specimen: String::new(),
             operator: String::new(),
             notes: String::new(),
+            mode: StartMode::Auto,
         },
         peer: peer(),
     });
