@@ -218,10 +218,11 @@ pub fn choose_request(
 }
 
 /// The failed scan (stop record `fail`) under `output_dir` that started last, by its start
-/// record's time; scans whose journal cannot be read are skipped with a warning.
+/// record's sequence number (then its time); scans whose journal cannot be read are skipped
+/// with a warning.
 fn newest_failed(output_dir: &Path) -> Option<PathBuf> {
     let entries = std::fs::read_dir(output_dir).ok()?;
-    let mut best: Option<(chrono::DateTime<chrono::Utc>, PathBuf)> = None;
+    let mut best: Option<((u64, chrono::DateTime<chrono::Utc>), PathBuf)> = None;
     for dir in entries.filter_map(|e| e.ok().map(|e| e.path())) {
         let path = dir.join(JOURNAL_FILE);
         if !path.is_file() {
@@ -238,8 +239,10 @@ fn newest_failed(output_dir: &Path) -> Option<PathBuf> {
         if state.stop.as_ref().map(|s| s.status) != Some(StopStatus::Fail) {
             continue;
         }
-        if best.as_ref().is_none_or(|(t, _)| state.start.time > *t) {
-            best = Some((state.start.time, dir));
+        // Started last by the sequence number no clock reorders, then (older journals) time.
+        let key = (state.start.sequence, state.start.time);
+        if best.as_ref().is_none_or(|(k, _)| key > *k) {
+            best = Some((key, dir));
         }
     }
     best.map(|(_, d)| d)
