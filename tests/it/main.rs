@@ -38,4 +38,5 @@ mod stage_grbl;
 mod stage_pty;
 mod stage_scan;
 mod stage_zaber;
+mod stage_zaber_scan;
 mod station_lock;
