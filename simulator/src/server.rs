@@ -80,8 +80,11 @@ impl Responder {
     }
 }
 
-/// Serial pacing: each reply is delayed by its transfer time at `baud` (10 bits per byte),
-/// multiplied by `time_scale`.
+/// Serial pacing: each reply is delayed by the transfer time at `baud` (10 bits per byte) of
+/// the command that asked for it (with its terminator) and of the reply itself, multiplied by
+/// `time_scale`. A pseudo-terminal delivers the command at once, so the command's own time on
+/// a real wire is spent here; the exchange then ends when its last reply byte would have
+/// arrived.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pacing {
     /// Baud rate.
@@ -181,7 +184,7 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
             if verdict.strip_line_end {
                 reply.retain(|&b| b != b'\r' && b != b'\n');
             }
-            tokio::time::sleep(pacing.delay(reply.len())).await;
+            tokio::time::sleep(pacing.delay(line.len() + 1 + reply.len())).await;
             match fault {
                 Some(FaultKind::Drop) => {}
                 Some(FaultKind::Truncate) => {
@@ -312,6 +315,7 @@ pub struct Simulator {
     source: Source,
     faults: Vec<Fault>,
     baud: u32,
+    pacing_scale: Option<f64>,
     y: YPosition,
     stage: Option<(PathBuf, StageServe)>,
 }
@@ -336,6 +340,7 @@ impl Simulator {
             source: Source::Emulate(InstrumentConfig::default(), None),
             faults: Vec::new(),
             baud: 38400,
+            pacing_scale: None,
             y: YPosition::new(),
             stage: None,
         }
@@ -422,6 +427,13 @@ impl Simulator {
         self
     }
 
+    /// Paces the link with its own time scale instead of the instrument's (1 = the wire's real
+    /// speed): e.g. an instantaneous trace whose read-out still takes real time.
+    pub fn pacing_time_scale(mut self, time_scale: f64) -> Self {
+        self.pacing_scale = Some(time_scale);
+        self
+    }
+
     /// The shared stage y position the instrument reads when a stage is attached.
     pub fn y_position(&self) -> YPosition {
         self.y.clone()
@@ -490,7 +502,7 @@ impl Simulator {
         let mut faults = FaultPlan::new(self.faults);
         let pacing = Pacing {
             baud: self.baud,
-            time_scale,
+            time_scale: self.pacing_scale.unwrap_or(time_scale),
         };
         let task = tokio::spawn(async move {
             let (Some(link), Some(mut pty)) = (self.instrument_link, pty) else {

@@ -255,3 +255,24 @@ impl Books<'_> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scan::outputs::OutputsError;
+    use crate::scan::surface_files::SurfaceWriteError;
+
+    #[test]
+    fn a_full_disk_is_found_through_the_outputs_error_chain() {
+        let full = OutputsError::Iges(SurfaceWriteError::Io {
+            path: "surface.igs".into(),
+            source: std::io::Error::from_raw_os_error(libc::ENOSPC),
+        });
+        assert!(is_disk_full_text(&full));
+        let denied = OutputsError::Report {
+            path: "report.json".into(),
+            source: std::io::Error::from_raw_os_error(libc::EACCES),
+        };
+        assert!(!is_disk_full_text(&denied));
+    }
+}

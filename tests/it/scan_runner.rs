@@ -766,3 +766,42 @@ async fn starting_over_records_the_unfinished_scan_as_abandoned() {
         .expect("scan list")
         .is_empty());
 }
+
+/// A scan whose lines are all committed but whose surface was never written (killed after
+/// the last commit) writes its outputs on resume without opening either device.
+#[tokio::test(start_paused = true)]
+async fn a_scan_with_every_line_committed_writes_its_outputs_without_devices() {
+    let mut h = harness();
+    let settings = settings_for(&h);
+    let mut station = FakeStation(h.world.clone());
+    let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
+    let dir = scan_dir_of(&outcome);
+    // As if killed after the last commit: no stop record, no outputs.
+    let journal = dir.join("journal.jsonl");
+    let text = std::fs::read_to_string(&journal).expect("journal");
+    let kept: Vec<&str> = text
+        .lines()
+        .filter(|l| !l.contains(r#""class":"stop""#))
+        .collect();
+    assert_eq!(
+        kept.len() + 1,
+        text.lines().count(),
+        "one stop record dropped"
+    );
+    std::fs::write(&journal, kept.join("\n") + "\n").expect("journal");
+    std::fs::remove_file(dir.join("surface.igs")).expect("surface");
+    with(&h.world, |w| w.log.clear());
+    let request = ScanRequest::Resume {
+        dir: dir.clone(),
+        peer: None,
+    };
+    let outcome = run_scan(&mut station, &mut h.ctl, &settings, request).await;
+    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    assert!(dir.join("surface.igs").exists());
+    assert_eq!(
+        with(&h.world, |w| w.log.clone()),
+        Vec::<Event>::new(),
+        "no device was opened, moved or traced"
+    );
+    assert_eq!(line_indices(&records(&dir)), (0..LINES).collect::<Vec<_>>());
+}
