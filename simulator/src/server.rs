@@ -22,7 +22,7 @@ use tokio::time::Instant;
 
 use crate::command::{Frame, FrameSplitter};
 use crate::data::{DataError, ProfileSet, YPosition};
-use crate::fault::{Fault, FaultKind, FaultPlan};
+use crate::fault::{Fault, FaultKind, FaultPlan, CHATTER_PERIOD};
 use crate::grbl::StageShared;
 use crate::instrument::{Instrument, InstrumentConfig};
 use crate::pty::{Pty, PtyError};
@@ -126,13 +126,37 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
 ) -> io::Result<Outcome> {
     let mut splitter = FrameSplitter::new();
     let mut buf = [0u8; 512];
+    let clock = || Instant::now().saturating_duration_since(epoch);
+    // While a `noeol` or `flood` window is open, unsolicited bytes flow between replies on a
+    // steady cadence that frames arriving in between do not reset.
+    let mut next_chatter: Option<Instant> = None;
     loop {
         if *shutdown.borrow() {
             return Ok(Outcome::Shutdown);
         }
+        next_chatter = match (faults.chattering(clock()), next_chatter) {
+            (false, _) => None,
+            (true, Some(t)) => Some(t),
+            (true, None) => Some(Instant::now() + CHATTER_PERIOD),
+        };
+        let tick = async {
+            match next_chatter {
+                Some(t) => tokio::time::sleep_until(t).await,
+                None => std::future::pending::<()>().await,
+            }
+        };
         let n = tokio::select! {
             r = io.read(&mut buf) => r?,
             _ = shutdown.changed() => return Ok(Outcome::Shutdown),
+            () = tick => {
+                next_chatter = next_chatter.map(|t| t + CHATTER_PERIOD);
+                let bytes = faults.chatter(clock());
+                if !bytes.is_empty() {
+                    io.write_all(&bytes).await?;
+                    io.flush().await?;
+                }
+                continue;
+            }
         };
         if n == 0 {
             return Ok(Outcome::Closed);
@@ -146,8 +170,9 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
                 }
             };
             let text: String = line.iter().map(|&b| b as char).collect();
-            let fault = faults.check(&text);
-            let now = Instant::now().saturating_duration_since(epoch);
+            let now = clock();
+            let verdict = faults.check_at(&text, now);
+            let fault = verdict.kind;
             let reply = match &fault {
                 Some(FaultKind::Ng(code)) => Some(format!("NG{code:03}\r").into_bytes()),
                 Some(k @ (FaultKind::RepeatBlock | FaultKind::Skew(_))) => {
@@ -155,7 +180,10 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
                 }
                 _ => responder.respond(&line, now),
             };
-            let Some(reply) = reply else { continue };
+            let Some(mut reply) = reply else { continue };
+            if verdict.strip_line_end {
+                reply.retain(|&b| b != b'\r' && b != b'\n');
+            }
             tokio::time::sleep(pacing.delay(line.len() + 1 + reply.len())).await;
             match fault {
                 Some(FaultKind::Drop) => {}
@@ -189,9 +217,13 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
                     io.flush().await?;
                     return Ok(Outcome::Unplug(d));
                 }
-                Some(FaultKind::Ng(_) | FaultKind::RepeatBlock | FaultKind::Skew(_)) | None => {
-                    io.write_all(&reply).await?
-                }
+                Some(
+                    FaultKind::Ng(_)
+                    | FaultKind::RepeatBlock
+                    | FaultKind::Skew(_)
+                    | FaultKind::Window(..),
+                )
+                | None => io.write_all(&reply).await?,
             }
             io.flush().await?;
         }

@@ -383,6 +383,9 @@ pub fn render_status(s: &Status) -> String {
             )
         };
     }
+    for d in &s.damaged_journals {
+        let _ = writeln!(out, "  warning    {d}");
+    }
     out
 }
 

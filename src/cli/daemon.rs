@@ -93,7 +93,11 @@ async fn daemon(
     let srv = server::bind_with_options(&config.control.socket, control)
         .await
         .map_err(|e| CliError::new(Exit::Unavailable, e.to_string()))?;
-    let (status_tx, status_rx) = watch::channel(Status::idle());
+    // The scans skipped for a damaged journal are in the status from the first request on.
+    let (status_tx, status_rx) = watch::channel(Status {
+        damaged_journals: damaged_journal_warnings(config),
+        ..Status::idle()
+    });
     let (cmd_tx, cmd_rx) = mpsc::channel::<OperatorRequest>(16);
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
 
@@ -185,6 +189,7 @@ async fn daemon(
             let req = ScanRequest::Resume { dir, peer: None };
             let outcome = run_scan(&mut station, &mut ctl, &settings, req).await;
             stop = matches!(outcome, Outcome::Interrupted { .. });
+            note_damaged_journals(config, &ctl.status);
         }
         Ok(_) => {}
         Err(e) => tracing::error!("{e}"),
@@ -232,6 +237,7 @@ async fn daemon(
                         )));
                         let outcome = run_scan(&mut station, &mut ctl, &settings, request).await;
                         stop = matches!(outcome, Outcome::Interrupted { .. });
+                        note_damaged_journals(config, &ctl.status);
                     }
                     OperatorCommand::Pause | OperatorCommand::Resume | OperatorCommand::Abort => {
                         let _ = req.reply.send(Err(
@@ -260,4 +266,26 @@ async fn daemon(
     }
     tracing::info!("surfscan daemon stopped");
     Ok(())
+}
+
+/// Shows in the status the scans skipped because their journal is damaged (the snapshot a
+/// scan's end publishes starts afresh, so this is noted again after each scan).
+fn note_damaged_journals(config: &Config, status: &watch::Sender<Status>) {
+    let warnings = damaged_journal_warnings(config);
+    status.send_if_modified(|s| {
+        let changed = s.damaged_journals != warnings;
+        s.damaged_journals = warnings;
+        changed
+    });
+}
+
+/// One warning per scan of the output directory whose journal is damaged (also logged).
+fn damaged_journal_warnings(config: &Config) -> Vec<String> {
+    let warnings = crate::scan::journal::survey(&config.output.dir)
+        .map(|s| s.warnings())
+        .unwrap_or_default();
+    for w in &warnings {
+        tracing::warn!("{w}");
+    }
+    warnings
 }

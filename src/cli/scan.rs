@@ -145,10 +145,11 @@ pub fn run_settings(
     })
 }
 
-/// The scan to run for this configuration, as `mode` asks: the newest unfinished one (no
-/// stop record), else a new one; with [`StartMode::Resume`] a failed one is continued too
-/// (refused when there is none); with [`StartMode::New`] unfinished scans are recorded as
-/// abandoned and a new one starts. `peer` is who asked, for the journal.
+/// The scan to run for this configuration, as `mode` asks: the unfinished one (no stop
+/// record) started last, by its journal, else a new one; with [`StartMode::Resume`] a failed
+/// one is continued too (refused when there is none); with [`StartMode::New`] unfinished scans
+/// are recorded as abandoned and a new one starts. A scan whose journal is damaged is skipped
+/// with a warning. `peer` is who asked, for the journal.
 pub fn choose_request(
     config: &Config,
     specimen: String,
@@ -179,7 +180,7 @@ pub fn choose_request(
     if let Some((last, older)) = unfinished.split_last() {
         for o in older {
             tracing::warn!(
-                "{} is also unfinished; only the newest is resumed (resume it by hand with `surfscan fit`/`analyze`, or add a stop record)",
+                "{} is also unfinished; only the one started last is resumed (resume it by hand with `surfscan fit`/`analyze`, or add a stop record)",
                 o.display()
             );
         }
@@ -217,10 +218,11 @@ pub fn choose_request(
 }
 
 /// The failed scan (stop record `fail`) under `output_dir` that started last, by its start
-/// record's time; scans whose journal cannot be read are skipped with a warning.
+/// record's sequence number (then its time); scans whose journal cannot be read are skipped
+/// with a warning.
 fn newest_failed(output_dir: &Path) -> Option<PathBuf> {
     let entries = std::fs::read_dir(output_dir).ok()?;
-    let mut best: Option<(chrono::DateTime<chrono::Utc>, PathBuf)> = None;
+    let mut best: Option<((u64, chrono::DateTime<chrono::Utc>), PathBuf)> = None;
     for dir in entries.filter_map(|e| e.ok().map(|e| e.path())) {
         let path = dir.join(JOURNAL_FILE);
         if !path.is_file() {
@@ -237,8 +239,10 @@ fn newest_failed(output_dir: &Path) -> Option<PathBuf> {
         if state.stop.as_ref().map(|s| s.status) != Some(StopStatus::Fail) {
             continue;
         }
-        if best.as_ref().is_none_or(|(t, _)| state.start.time > *t) {
-            best = Some((state.start.time, dir));
+        // Started last by the sequence number no clock reorders, then (older journals) time.
+        let key = (state.start.sequence, state.start.time);
+        if best.as_ref().is_none_or(|(k, _)| key > *k) {
+            best = Some((key, dir));
         }
     }
     best.map(|(_, d)| d)
