@@ -75,6 +75,9 @@ fn d_backoff_initial() -> u64 {
 fn d_backoff_max() -> u64 {
     30_000
 }
+fn d_transient_budget() -> u64 {
+    600
+}
 fn d_degree() -> usize {
     5
 }
@@ -107,9 +110,15 @@ pub struct ScanSettings {
     pub y_start_mm: f64,
     /// y distance between lines, mm (the paper: 0.01); a whole number of nanometres, ≠ 0.
     pub y_step_mm: f64,
-    /// Attempts per line before the scan fails with the last fault (default 3).
+    /// Times a line may be abandoned because the stage lost its position (re-homed each
+    /// time) before the scan fails with the last fault (default 3).
     #[serde(default = "d_attempts")]
     pub max_line_attempts: u32,
+    /// How long transient faults (NG codes, timeouts, garbage, busy) are retried with
+    /// backoff, from the first one since the last committed line, before the scan fails
+    /// naming the last fault, s (default 600).
+    #[serde(default = "d_transient_budget")]
+    pub transient_budget_s: u64,
     /// First wait before reconnecting a vanished device, ms (default 1000); doubles per try.
     #[serde(default = "d_backoff_initial")]
     pub reconnect_initial_ms: u64,
@@ -363,21 +372,8 @@ impl Config {
     /// of range is the error, naming the key, the value and the range.
     pub fn check_ranges(&self, path: &Path) -> Result<(), ConfigError> {
         for k in NUMERIC_KEYS {
-            if let Some(v) = (k.value)(self) {
-                if !k.contains(v) {
-                    return Err(Config::invalid(
-                        path,
-                        k.key,
-                        format!(
-                            "{v}{} is outside its valid range {} to {}{}; {}",
-                            k.unit_suffix(),
-                            k.min,
-                            k.max,
-                            k.unit_suffix(),
-                            k.hint
-                        ),
-                    ));
-                }
+            if let Some(v) = k.value(self) {
+                k.check(path, v)?;
             }
         }
         Ok(())
@@ -601,11 +597,47 @@ pub struct NumericKey {
     pub unit: &'static str,
     /// What the key is for and what to do, for the message.
     pub hint: &'static str,
-    /// The value in a parsed configuration; `None` when an optional key is absent.
-    pub value: fn(&Config) -> Option<Num>,
+    /// Where the value is read from.
+    pub get: Getter,
+}
+
+/// Where a [`NumericKey`]'s value is read from.
+#[derive(Debug, Clone, Copy)]
+pub enum Getter {
+    /// From the whole file; `None` when an optional key is absent.
+    Config(fn(&Config) -> Option<Num>),
+    /// From the `[instrument]` table, which `surfscan probe` also reads on its own.
+    Instrument(fn(&InstrumentSettings) -> Option<Num>),
 }
 
 impl NumericKey {
+    /// The value in a parsed configuration; `None` when an optional key is absent.
+    pub fn value(&self, c: &Config) -> Option<Num> {
+        match self.get {
+            Getter::Config(f) => f(c),
+            Getter::Instrument(f) => f(&c.instrument),
+        }
+    }
+
+    /// `Ok` when `v` is in range, else the error naming the key, the value and the range.
+    fn check(&self, path: &Path, v: Num) -> Result<(), ConfigError> {
+        if self.contains(v) {
+            return Ok(());
+        }
+        Err(Config::invalid(
+            path,
+            self.key,
+            format!(
+                "{v}{} is outside its valid range {} to {}{}; {}",
+                self.unit_suffix(),
+                self.min,
+                self.max,
+                self.unit_suffix(),
+                self.hint
+            ),
+        ))
+    }
+
     /// Whether `v` lies within the range (NaN never does).
     pub fn contains(&self, v: Num) -> bool {
         match (v, self.min, self.max) {
@@ -627,6 +659,16 @@ impl NumericKey {
 }
 
 macro_rules! int_key {
+    (instrument $key:literal, $min:expr, $max:expr, $unit:literal, $hint:literal, |$c:ident| $get:expr) => {
+        NumericKey {
+            key: $key,
+            min: Num::Int($min),
+            max: Num::Int($max),
+            unit: $unit,
+            hint: $hint,
+            get: Getter::Instrument(|$c: &InstrumentSettings| $get.map(|v| Num::Int(v as i128))),
+        }
+    };
     ($key:literal, $min:expr, $max:expr, $unit:literal, $hint:literal, |$c:ident| $get:expr) => {
         NumericKey {
             key: $key,
@@ -634,12 +676,22 @@ macro_rules! int_key {
             max: Num::Int($max),
             unit: $unit,
             hint: $hint,
-            value: |$c: &Config| $get.map(|v| Num::Int(v as i128)),
+            get: Getter::Config(|$c: &Config| $get.map(|v| Num::Int(v as i128))),
         }
     };
 }
 
 macro_rules! real_key {
+    (instrument $key:literal, $min:expr, $max:expr, $unit:literal, $hint:literal, |$c:ident| $get:expr) => {
+        NumericKey {
+            key: $key,
+            min: Num::Real($min),
+            max: Num::Real($max),
+            unit: $unit,
+            hint: $hint,
+            get: Getter::Instrument(|$c: &InstrumentSettings| $get.map(Num::Real)),
+        }
+    };
     ($key:literal, $min:expr, $max:expr, $unit:literal, $hint:literal, |$c:ident| $get:expr) => {
         NumericKey {
             key: $key,
@@ -647,9 +699,25 @@ macro_rules! real_key {
             max: Num::Real($max),
             unit: $unit,
             hint: $hint,
-            value: |$c: &Config| $get.map(Num::Real),
+            get: Getter::Config(|$c: &Config| $get.map(Num::Real)),
         }
     };
+}
+
+/// Checks the numeric keys of an `[instrument]` table read on its own (as `surfscan probe`
+/// reads it) against the same ranges as in a whole file.
+pub fn check_instrument_ranges(
+    path: &Path,
+    instrument: &InstrumentSettings,
+) -> Result<(), ConfigError> {
+    for k in NUMERIC_KEYS {
+        if let Getter::Instrument(f) = k.get {
+            if let Some(v) = f(instrument) {
+                k.check(path, v)?;
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Every numeric key of the file with its valid range. The bounds are wide enough for any
@@ -658,14 +726,14 @@ macro_rules! real_key {
 /// soft-limit-min < soft-limit-max, the model's baud rates) are checked afterwards.
 #[rustfmt::skip]
 pub const NUMERIC_KEYS: &[NumericKey] = &[
-    int_key!("instrument.baud", 300, 115_200, "baud", "set the rate the instrument is set to (9600, 19200, 38400)", |c| Some(c.instrument.baud)),
-    real_key!("instrument.pitch-x-um", 0.001, 1000.0, "µm", "the SJ-210 exports 0.5 to 1.5 µm; remove the key to derive it from λs", |c| c.instrument.pitch_x_um),
-    int_key!("instrument.timeouts.first-byte-ms", 1, 600_000, "ms", "the default is 2000", |c| Some(c.instrument.timeouts.first_byte_ms)),
-    int_key!("instrument.timeouts.inter-byte-ms", 1, 60_000, "ms", "the default is 200", |c| Some(c.instrument.timeouts.inter_byte_ms)),
-    int_key!("instrument.timeouts.poll-interval-ms", 1, 60_000, "ms", "the default is 250", |c| Some(c.instrument.timeouts.poll_interval_ms)),
-    int_key!("instrument.timeouts.start-deadline-ms", 1, 600_000, "ms", "the default is 5000", |c| Some(c.instrument.timeouts.start_deadline_ms)),
-    int_key!("instrument.timeouts.read-retry-budget-ms", 0, 3_600_000, "ms", "the default is 10000; 0 retries nothing", |c| Some(c.instrument.timeouts.read_retry_budget_ms)),
-    int_key!("instrument.timeouts.trace-deadline-ms", 1, 3_600_000, "ms", "remove the key to derive it from the measuring conditions", |c| c.instrument.timeouts.trace_deadline_ms),
+    int_key!(instrument "instrument.baud", 300, 115_200, "baud", "set the rate the instrument is set to (9600, 19200, 38400)", |c| Some(c.baud)),
+    real_key!(instrument "instrument.pitch-x-um", 0.001, 1000.0, "µm", "the SJ-210 exports 0.5 to 1.5 µm; remove the key to derive it from λs", |c| c.pitch_x_um),
+    int_key!(instrument "instrument.timeouts.first-byte-ms", 1, 600_000, "ms", "the default is 2000", |c| Some(c.timeouts.first_byte_ms)),
+    int_key!(instrument "instrument.timeouts.inter-byte-ms", 1, 60_000, "ms", "the default is 200", |c| Some(c.timeouts.inter_byte_ms)),
+    int_key!(instrument "instrument.timeouts.poll-interval-ms", 1, 60_000, "ms", "the default is 250", |c| Some(c.timeouts.poll_interval_ms)),
+    int_key!(instrument "instrument.timeouts.start-deadline-ms", 1, 600_000, "ms", "the default is 5000", |c| Some(c.timeouts.start_deadline_ms)),
+    int_key!(instrument "instrument.timeouts.read-retry-budget-ms", 0, 3_600_000, "ms", "the default is 10000; 0 retries nothing", |c| Some(c.timeouts.read_retry_budget_ms)),
+    int_key!(instrument "instrument.timeouts.trace-deadline-ms", 1, 3_600_000, "ms", "remove the key to derive it from the measuring conditions", |c| c.timeouts.trace_deadline_ms),
     int_key!("stage.baud", 300, 4_000_000, "baud", "GRBL and Zaber use 115200", |c| Some(c.stage.baud)),
     real_key!("stage.steps-per-mm", 0.001, 10_000_000.0, "steps/mm", "set the controller's $101", |c| c.stage.steps_per_mm),
     real_key!("stage.mm-per-microstep", 1e-9, 1.0, "mm", "take it from the stage's datasheet", |c| c.stage.mm_per_microstep),
@@ -684,6 +752,7 @@ pub const NUMERIC_KEYS: &[NumericKey] = &[
     real_key!("scan.y-start-mm", -10_000.0, 10_000.0, "mm", "set the first line's y in machine coordinates", |c| Some(c.scan.y_start_mm)),
     real_key!("scan.y-step-mm", -100.0, 100.0, "mm", "the paper steps 0.01 mm", |c| Some(c.scan.y_step_mm)),
     int_key!("scan.max-line-attempts", 1, 100, "", "the default is 3", |c| Some(c.scan.max_line_attempts)),
+    int_key!("scan.transient-budget-s", 1, 604_800, "s", "the default is 600 (ten minutes)", |c| Some(c.scan.transient_budget_s)),
     int_key!("scan.reconnect-initial-ms", 1, 600_000, "ms", "the default is 1000", |c| Some(c.scan.reconnect_initial_ms)),
     int_key!("scan.reconnect-max-ms", 1, 3_600_000, "ms", "the default is 30000", |c| Some(c.scan.reconnect_max_ms)),
     int_key!("fit.degree-u", 1, 15, "", "the paper uses 5", |c| Some(c.fit.degree_u)),
@@ -882,7 +951,7 @@ dir = "/var/lib/surfscan/scans"
             "every numeric key needs an entry in NUMERIC_KEYS (and config/surfscan.toml)"
         );
         for k in NUMERIC_KEYS {
-            assert!((k.value)(&c).is_some(), "{} not read from the file", k.key);
+            assert!(k.value(&c).is_some(), "{} not read from the file", k.key);
         }
     }
 
@@ -897,7 +966,7 @@ dir = "/var/lib/surfscan/scans"
                 let mut t = base.clone();
                 set_key(&mut t, k.key, toml_value(bound));
                 let c: Config = toml::from_str(&toml::to_string(&t).unwrap()).unwrap();
-                assert_eq!((k.value)(&c), Some(bound), "{}", k.key);
+                assert_eq!(k.value(&c), Some(bound), "{}", k.key);
                 if let Err(e) = c.check_ranges(Path::new("t.toml")) {
                     panic!("{} = {bound} is its own bound but refused: {e}", k.key);
                 }

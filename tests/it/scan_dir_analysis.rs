@@ -105,6 +105,7 @@ fn build_scan(
         store.root(),
         StartRecord {
             scan_id: id.0.clone(),
+            sequence: 1,
             time: start,
             plan: plan(rows.len() as u32),
             config: json!({
@@ -124,6 +125,7 @@ fn build_scan(
             firmware: FIRMWARE.into(),
             drive_unit: DRIVE.into(),
             conditions: conditions(kind),
+            peer: None,
         },
         faults,
     )
@@ -798,6 +800,7 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
                 device: device.map(str::to_owned),
                 line,
                 time: t,
+                peer: None,
             }))
             .unwrap();
     }

@@ -62,6 +62,12 @@ pub struct Sj210Client<S> {
     /// transaction cancelled mid-flight (operator abort, shutdown) leaves it set and the next
     /// one drains the late reply first instead of taking it as its own answer.
     in_flight: bool,
+    /// Traces whose start command the instrument accepted.
+    traces_started: u64,
+    /// Command mnemonics (`RDCON`, `RDSTU`, …) the instrument has answered `OK` on this
+    /// link: a "command not understood" answer to one of them is a stray or late reply, not
+    /// a model table that is wrong for the firmware.
+    answered: std::collections::BTreeSet<String>,
 }
 
 impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
@@ -76,6 +82,8 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             battery: None,
             conditions: None,
             in_flight: false,
+            traces_started: 0,
+            answered: std::collections::BTreeSet::new(),
         }
     }
 
@@ -117,6 +125,10 @@ impl<S: AsyncRead + AsyncWrite + Unpin> crate::devices::Instrument for Sj210Clie
 
     async fn abort(&mut self) -> Result<(), Sj210Error> {
         self.abort_measurement().await
+    }
+
+    fn traces_started(&self) -> Option<u64> {
+        Some(self.traces_started)
     }
 }
 
