@@ -6,7 +6,8 @@
 //! configuration written for it (`DIR/demo.toml`) is a working station configuration with
 //! the simulator's links as ports.
 //!
-//! Layer 5 (composition): the simulator crate, config, station, runner.
+//! Layer 5 (composition): the simulator crate, config, station, runner. Built with the
+//! default `sim` feature; a station build (`--no-default-features`) leaves it out.
 
 use super::scan::{load_config, outcome_result, run_foreground};
 use super::{CliError, Exit};

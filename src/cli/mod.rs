@@ -12,6 +12,7 @@ pub mod analyze;
 pub mod check_config;
 pub mod control;
 pub mod daemon;
+#[cfg(feature = "sim")]
 pub mod demo;
 pub mod docs;
 pub mod fit;
@@ -47,6 +48,7 @@ pub enum Command {
     /// The station service (systemd Type=notify): resumes unfinished scans, takes commands on the control socket.
     Daemon(daemon::Args),
     /// A complete simulated scan: simulator in-process, real serial code path, IGES and report.
+    #[cfg(feature = "sim")]
     Demo(demo::Args),
     /// Show the daemon's status (with --watch: on every change).
     Status(control::StatusArgs),
@@ -133,6 +135,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Analyze(args) => analyze::run(args),
         Command::Scan(args) => scan::run(args),
         Command::Daemon(args) => daemon::run(args),
+        #[cfg(feature = "sim")]
         Command::Demo(args) => demo::run(args),
         Command::Status(args) => control::run_status(args),
         Command::Pause(args) => control::run_command(control::Verb::Pause, args),
