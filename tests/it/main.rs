@@ -10,6 +10,7 @@ mod control_cli;
 mod control_server;
 mod daemon_e2e;
 mod demo_cli;
+mod fault_policy;
 mod fit_geomdl;
 mod fit_scipy;
 mod fuzz_parsers;
