@@ -1,8 +1,12 @@
 //! Why a grid cannot be interpolated: every variant names the line, point or direction and
-//! carries the offending numbers.
+//! carries the offending numbers. Messages count lines from 1 with the 0-based file index
+//! beside it (`line 5 (0004)`), and write positions and pitches with the digits a person
+//! reads ([`crate::numfmt`]); the variants keep the full values.
 //!
-//! Layer 1 (pure logic): depends on [`crate::nurbs`] (the surface's own invariants).
+//! Layer 1 (pure logic): depends on [`crate::nurbs`] (the surface's own invariants) and
+//! [`crate::numfmt`].
 
+use crate::numfmt::{fmt, Quantity};
 use crate::nurbs::SurfaceError;
 use thiserror::Error;
 
@@ -20,7 +24,7 @@ pub enum FitError {
         degree_v: usize,
     },
     /// A line has a different number of points than the first line.
-    #[error("line {line} has {got} points but the first line had {expected}; all lines must have the same length")]
+    #[error("line {} ({:04}) has {got} points but the first line had {expected}; all lines must have the same length", .line + 1, .line)]
     RowLength {
         /// Line index (0-based).
         line: usize,
@@ -31,7 +35,7 @@ pub enum FitError {
     },
     /// A height is NaN or infinite.
     #[error(
-        "line {line}, point {index}: height {value} µm is not finite; re-measure or drop the line"
+        "line {} ({:04}), point {index}: height {value} µm is not finite; re-measure or drop the line", .line + 1, .line
     )]
     NonFinite {
         /// Line index.
@@ -42,7 +46,7 @@ pub enum FitError {
         value: f64,
     },
     /// A line's y position is NaN or infinite.
-    #[error("line {line}: y = {y_mm} mm is not finite")]
+    #[error("line {} ({:04}): y = {y_mm} mm is not finite", .line + 1, .line)]
     NonFiniteY {
         /// Line index.
         line: usize,
@@ -50,7 +54,7 @@ pub enum FitError {
         y_mm: f64,
     },
     /// The lines' y positions are not strictly monotone (repeated or reversed).
-    #[error("line {line}: y = {y_mm} mm does not continue the strictly monotone order after {previous_y_mm} mm")]
+    #[error("line {} ({:04}): y = {} mm does not continue the strictly monotone order after {} mm", .line + 1, .line, pos(*.y_mm), pos(*.previous_y_mm))]
     LineOrder {
         /// Line index.
         line: usize,
@@ -60,7 +64,7 @@ pub enum FitError {
         previous_y_mm: f64,
     },
     /// The x pitch is not a positive finite number.
-    #[error("line {line}: x pitch {pitch_x_mm} mm must be positive and finite")]
+    #[error("line {} ({:04}): x pitch {} mm must be positive and finite", .line + 1, .line, len(*.pitch_x_mm))]
     BadPitch {
         /// Line index.
         line: usize,
@@ -68,7 +72,7 @@ pub enum FitError {
         pitch_x_mm: f64,
     },
     /// The x pitch differs from the first line's.
-    #[error("line {line}: x pitch {got} mm differs from the first line's {expected} mm; all lines must share one pitch")]
+    #[error("line {} ({:04}): x pitch {} mm differs from the first line's {} mm; all lines must share one pitch", .line + 1, .line, len(*.got), len(*.expected))]
     PitchMismatch {
         /// Line index.
         line: usize,
@@ -94,7 +98,7 @@ pub enum FitError {
         need: usize,
     },
     /// Two consecutive points coincide (zero chord), so chord-length parameters are undefined.
-    #[error("{direction} direction, line {line}, point {index}: zero chord length to the previous point ({previous:?} → {point:?} mm); remove duplicate points")]
+    #[error("{direction} direction, line {} ({:04}), point {index}: zero chord length to the previous point ({previous:?} → {point:?} mm); remove duplicate points", .line + 1, .line)]
     CoincidentPoints {
         /// "u" (along a line) or "v" (across lines, within a column).
         direction: &'static str,
@@ -108,7 +112,7 @@ pub enum FitError {
         point: [f64; 3],
     },
     /// A chord length overflowed (heights or positions far too large).
-    #[error("{direction} direction, line {line}, point {index}: chord length {chord} mm is not finite; check units of the heights (µm) and positions (mm)")]
+    #[error("{direction} direction, line {} ({:04}), point {index}: chord length {chord} mm is not finite; check units of the heights (µm) and positions (mm)", .line + 1, .line)]
     ChordOverflow {
         /// "u" or "v".
         direction: &'static str,
@@ -142,4 +146,14 @@ pub enum FitError {
     /// The assembled surface failed its invariants.
     #[error("fitted surface is invalid: {0}")]
     Surface(#[from] SurfaceError),
+}
+
+/// A lateral position for a message.
+fn pos(v: f64) -> String {
+    fmt(v, Quantity::PositionMm)
+}
+
+/// A pitch or length for a message.
+fn len(v: f64) -> String {
+    fmt(v, Quantity::LengthMm)
 }

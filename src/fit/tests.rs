@@ -222,7 +222,7 @@ fn errors_name_the_offending_numbers() {
     );
     assert_eq!(
         f.push_row(f64::NAN, 0.001, &row).unwrap_err().to_string(),
-        "line 0: y = NaN mm is not finite"
+        "line 1 (0000): y = NaN mm is not finite"
     );
     let mut bad = row.clone();
     bad[3] = f64::INFINITY;
