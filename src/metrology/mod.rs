@@ -11,6 +11,7 @@
 //! a directory the caller gives; depends only on [`crate::profile`] and
 //! [`crate::nurbs`], and [`crate::fit`] for the hold-out refits. No I/O.
 
+pub mod alternatives;
 pub mod anisotropy;
 pub mod areal;
 pub mod bearing;
