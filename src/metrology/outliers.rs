@@ -35,7 +35,7 @@ pub const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 const MEAN_ABS_TO_SIGMA: f64 = 1.253_314_137_315_500_3;
 
 /// How spikes are found. [`Default`]: k = 10 robust σ, at most 5 consecutive points.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct SpikeOptions {
     /// k: a point deviating from the median of the roughness profile by more than k robust σ
     /// (1.4826 · MAD) is a candidate.
@@ -76,7 +76,7 @@ impl SpikeOptions {
     /// The rule in words, for recipes.
     pub fn describe(&self) -> String {
         format!(
-            "isolated spike: a run of at most {} consecutive points whose roughness ordinate deviates from the line's median by more than {} x 1.4826 x MAD (MAD of the line's roughness profile: the λc Gaussian roughness of a primary profile, else the heights minus their least-squares line)",
+            "isolated spike: a run of at most {} consecutive points whose roughness ordinate deviates from the line's median by more than {} x 1.4826 x MAD (MAD of the line's roughness profile: the lambda-c Gaussian roughness of a primary profile, else the heights minus their least-squares line)",
             self.max_points, self.threshold_sigma
         )
     }
