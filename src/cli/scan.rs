@@ -3,8 +3,14 @@
 //! ETA, the last line's Ra). Ctrl-C abandons the current line and leaves the scan
 //! resumable, as SIGTERM does for the daemon.
 //!
-//! Exit status: 0 success, 1 the scan failed or was aborted, 2 usage, 69 a device is
-//! unavailable (or the daemon holds the ports), 74 I/O error, 78 bad configuration.
+//! Exit status: 0 success, 1 the scan failed or was aborted, 2 usage, 3 the scan completed
+//! but its characterisation is partial (every line, the IGES and every output that could be
+//! made are written; report.json names the sections that could not be made and why), 69 a
+//! device is unavailable (or the daemon holds the ports), 74 I/O error, 78 bad configuration.
+//!
+//! The end-of-scan summary prints the verdict on the model between lines (the hold-out of
+//! [`crate::metrology::holdout`]), not the residual at the data points, which an interpolant
+//! makes zero by construction.
 //!
 //! Layer 5 (composition): config, station, runner, signals, terminal; turns the configuration
 //! into the runner's typed settings.
@@ -80,6 +86,9 @@ pub fn plan_of(config: &Config) -> Result<Plan, ConfigError> {
         degree_u: config.fit.degree_u,
         degree_v: config.fit.degree_v,
         max_line_attempts: config.scan.max_line_attempts,
+        v_method: config.fit.v_method_for(config.scan.lines as usize),
+        replace_spikes: (config.fit.outliers == crate::config::FitOutliers::Replace)
+            .then(|| config.analysis.spike_options()),
     })
 }
 
@@ -99,6 +108,9 @@ pub fn run_settings(
             levels: a.levels,
             lambda_c_mm: a.lambda_c_mm,
             no_filter: a.no_filter,
+            spikes: a.spike_options(),
+            exclude_spikes: a.outliers == crate::config::OutlierPolicy::Exclude,
+            holdout_threshold: a.holdout_threshold,
             ..ScanAnalysisOptions::default()
         },
     };
@@ -167,11 +179,18 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
             if let Some(e) = &outputs.characterisation_error {
                 println!("  characterisation failed: {e}; the report holds the fit and the instrument's results");
             }
-            println!(
-                "  largest residual at the data points {:.3e} mm",
-                outputs.max_residual_mm
-            );
-            Ok(())
+            println!("  {}", outputs.verdict);
+            if outputs.characterisation_complete {
+                Ok(())
+            } else {
+                Err(CliError::new(
+                    Exit::Partial,
+                    format!(
+                        "scan complete, but its characterisation is partial (report.json's characterisation and warnings say which sections could not be made and why): {}",
+                        outputs.report.display()
+                    ),
+                ))
+            }
         }
         Outcome::Aborted { dir } => Err(CliError::new(
             Exit::Failed,

@@ -4,10 +4,14 @@
 //! Layer 4 (reporting): depends on the metrology result types, the scan's journal records
 //! ([`crate::scan::journal`]) and the fit summary of [`crate::scan::outputs`].
 
+use crate::fit::VMethod;
+use crate::metrology::anisotropy::Anisotropy;
 use crate::metrology::areal::ArealParams;
-use crate::metrology::holdout::{Holdout, HoldoutLine};
+use crate::metrology::folds::ModelChecks;
+use crate::metrology::holdout::{BetweenLines, Holdout, HoldoutLine};
 use crate::metrology::instrument::Comparison;
 use crate::metrology::model::ModelCurveBac;
+use crate::metrology::outliers::LineSpike;
 use crate::metrology::params::{Recipe, RoughnessParams};
 use crate::profile::Conditions;
 use crate::scan::journal::{StartRecord, StopRecord};
@@ -45,6 +49,25 @@ pub struct Report {
     /// Why the hold-out comparison could not be made (e.g. too few lines to refit half).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub model_vs_measured_error: Option<String>,
+    /// How far the surface between lines can be trusted: every 2nd line left out, refitted,
+    /// judged against Sq.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub between_lines: Option<BetweenLines>,
+    /// Why `between_lines` is missing.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub between_lines_error: Option<String>,
+    /// The surface the model sections describe: method, recipe, spikes replaced.
+    pub model: ModelReport,
+    /// Folds of the control net and the surface, and its height range against the data's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub model_checks: Option<ModelChecks>,
+    /// The spikes found in the lines and what was done with them.
+    pub outliers: OutliersReport,
+    /// The grid's anisotropy and what it does to Sdq and Sdr.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub anisotropy: Option<Anisotropy>,
+    /// Whether every section could be made.
+    pub characterisation: Characterisation,
     /// Traceability of a scan, from its journal's start record.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub traceability: Option<Traceability>,
@@ -59,6 +82,63 @@ pub struct Report {
     pub warnings: Vec<String>,
     /// Seconds per section.
     pub timings_s: Timings,
+}
+
+/// The surface the model sections describe.
+#[derive(Debug, Clone, Serialize)]
+pub struct ModelReport {
+    /// The method across the lines (with its control rows when least squares).
+    pub v_method: VMethod,
+    /// The recipe in one sentence.
+    pub description: String,
+    /// Degrees.
+    pub degree_u: usize,
+    /// Degrees.
+    pub degree_v: usize,
+    /// The spikes replaced before fitting (only when asked for).
+    pub spikes_replaced: Vec<LineSpike>,
+}
+
+/// The spikes of the lines.
+#[derive(Debug, Clone, Serialize)]
+pub struct OutliersReport {
+    /// The rule.
+    pub rule: String,
+    /// `flag` (data as measured) or `exclude` (bridged in the per-line and measured-grid
+    /// parameters).
+    pub policy: &'static str,
+    /// Every spike: line, points, x, measured height, deviation.
+    pub spikes: Vec<LineSpike>,
+    /// Lines the rule could not judge, with the reason.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub lines_not_judged: Vec<LineNotJudged>,
+}
+
+/// A line the spike rule could not judge.
+#[derive(Debug, Clone, Serialize)]
+pub struct LineNotJudged {
+    /// Line index.
+    pub line: u32,
+    /// Why.
+    pub reason: String,
+}
+
+/// Whether the characterisation is complete, and which sections failed and why.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Characterisation {
+    /// Every section was made.
+    pub complete: bool,
+    /// The sections that failed, each with its reason (each also in `warnings`).
+    pub failed_sections: Vec<FailedSection>,
+}
+
+/// A section that could not be made.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FailedSection {
+    /// Its key in the report (e.g. `surface`, `between_lines`).
+    pub section: String,
+    /// Why.
+    pub reason: String,
 }
 
 /// The recipe of the report: the lines' recipe, where λc came from and why the filter was or

@@ -9,7 +9,7 @@ use super::document::{LineReport, ReportRecipe};
 use super::error::{metrology, ReportError};
 use super::grid::LineGrid;
 use crate::metrology::areal;
-use crate::metrology::instrument::compare_under;
+use crate::metrology::instrument::compare_profile;
 use crate::metrology::params::{analyze_line, LineAnalysis, Options};
 use crate::metrology::MetrologyError;
 use std::path::PathBuf;
@@ -99,10 +99,11 @@ pub fn characterise(grid: &LineGrid, ctx: &ReportContext) -> Result<LinesSection
             params: a.params.clone(),
             rmr_table: rmr_table(a),
             instrument: grid.instrument.as_ref().map(|all| {
-                compare_under(
+                compare_profile(
                     &a.params,
                     all.get(row).map_or(&[][..], |v| &v[..]),
                     grid.standard.get(row).and_then(|s| s.as_deref()),
+                    ctx.line_options.apply_lambda_c,
                 )
             }),
             model_vs_measured: None,

@@ -15,8 +15,9 @@ use super::document::{Completeness, ScanStatus, Traceability};
 use super::error::ReportError;
 use super::grid::LineGrid;
 use super::{characterise, ScanOutputs};
-use crate::fit::{fit_grid, max_residual_mm, FitOptions, FitResult};
+use crate::fit::{max_residual_mm, FitOptions, MethodError};
 use crate::metrology::params::Options;
+use crate::metrology::surface_model::{fit_model, FittedModel, ModelRecipe};
 use crate::profile::{FilterKind, ProfileKind};
 use crate::scan::faults::NoFaults;
 use crate::scan::journal::{
@@ -78,6 +79,38 @@ pub fn scan_degrees(
         degree_v: degree_v
             .or(start.map(|s| s.plan.degree_v))
             .unwrap_or(paper.degree_v),
+    }
+}
+
+/// How to fit a scan's `lines`: degrees by [`scan_degrees`], the method across the lines and
+/// the spike replacement as `options` ask, else as the scan's frozen plan says, else the
+/// paper (interpolation, data as measured). Replaced spikes are found with `options.spikes`
+/// (the plan's own rule when the plan asks for the replacement and `options` do not say).
+pub fn scan_recipe(
+    options: &ScanAnalysisOptions,
+    start: Option<&StartRecord>,
+    lines: &[StoredLine],
+) -> ModelRecipe {
+    let degrees = scan_degrees(options.degree_u, options.degree_v, start);
+    let plan = start.map(|s| s.plan);
+    let method = options
+        .v_method
+        .or(plan.map(|p| p.v_method))
+        .unwrap_or_default();
+    let replace_spikes = match options.replace_spikes {
+        Some(true) => Some(options.spikes),
+        Some(false) => None,
+        None => plan.and_then(|p| p.replace_spikes),
+    };
+    let lambda_c_mm = lines.first().and_then(|l| {
+        let (o, _, _) = scan_line_options(l, options);
+        o.apply_lambda_c.then_some(o.lambda_c_mm)
+    });
+    ModelRecipe {
+        degrees,
+        method,
+        replace_spikes,
+        lambda_c_mm,
     }
 }
 
@@ -230,25 +263,23 @@ pub fn characterise_scan_lines(
     Ok(outputs)
 }
 
-/// Fits `grid` with `degrees` and summarises the fit (no IGES written).
+/// Fits `grid` as `recipe` says and summarises the fit (no IGES written).
 pub fn fit_for_report(
     grid: &LineGrid,
-    degrees: FitOptions,
-) -> (
-    Result<FitResult, crate::fit::FitError>,
-    Option<FitSummary>,
-    f64,
-) {
+    recipe: &ModelRecipe,
+) -> (Result<FittedModel, MethodError>, Option<FitSummary>, f64) {
     let t = Instant::now();
-    let fit = fit_grid(
-        grid.pitch_x_mm,
-        &grid.y_mm,
+    let fit = fit_model(
         &grid.heights_um,
         grid.cols,
-        degrees,
+        &grid.index,
+        grid.pitch_x_mm,
+        &grid.y_mm,
+        recipe,
     );
     let fit_s = t.elapsed().as_secs_f64();
-    let summary = fit.as_ref().ok().map(|f| {
+    let summary = fit.as_ref().ok().map(|m| {
+        let f = &m.fit;
         let residual = max_residual_mm(f, grid.pitch_x_mm, &grid.y_mm, &grid.heights_um, grid.cols);
         FitSummary::new(
             f,
@@ -284,13 +315,9 @@ pub fn characterise_scan(
             None
         }
     };
-    let degrees = scan_degrees(
-        options.degree_u,
-        options.degree_v,
-        state.as_ref().map(|s| &s.start),
-    );
+    let recipe = scan_recipe(options, state.as_ref().map(|s| &s.start), &lines);
     let grid = LineGrid::of_scan(&lines, &dir.join("lines"))?;
-    let (fit, summary, fit_s) = fit_for_report(&grid, degrees);
+    let (fitted, summary, fit_s) = fit_for_report(&grid, &recipe);
     drop(grid);
     let journal_lines: Vec<u32> = state
         .as_ref()
@@ -303,8 +330,9 @@ pub fn characterise_scan(
         completing: false,
     });
     let model = Model {
-        degrees,
-        fit: fit.as_ref(),
+        recipe,
+        fit: fitted.as_ref().map(|m| &m.fit),
+        replaced: fitted.as_ref().map_or(&[][..], |m| &m.replaced[..]),
     };
     let load_s = t.elapsed().as_secs_f64() - fit_s;
     let mut outputs = characterise_scan_lines(
@@ -343,8 +371,9 @@ impl Characterise for ScanCharacteriser {
             completing: true,
         };
         let model = Model {
-            degrees: scan.degrees,
+            recipe: scan.recipe,
             fit: Ok(scan.fit),
+            replaced: scan.replaced,
         };
         let out = characterise_scan_lines(
             scan.dir,
@@ -356,6 +385,8 @@ impl Characterise for ScanCharacteriser {
             &self.options,
             Vec::new(),
         )?;
+        let complete = out.complete();
+        let verdict = out.verdict_line();
         let mut files = vec![out.summary_csv];
         files.extend(out.plots);
         files.extend(out.measured_x3p);
@@ -363,6 +394,8 @@ impl Characterise for ScanCharacteriser {
         Ok(Characterised {
             files,
             warnings: out.warnings,
+            complete,
+            verdict,
         })
     }
 }
