@@ -2,11 +2,12 @@
 //! grids, the time `finish()` takes after the last line of a 31-line scan, and peak memory.
 //!
 //! `cargo bench --bench fit [-- CASE...]` with CASE among `31x2000`, `31x8000`, `1000x10000`,
-//! `finish` (default: all). Figures are medians of several runs (21 for the small grids, 5 for
+//! `finish`, `residual` (the residual check and the CSV
+//! parse of a 31×8000 grid) (default: all). Figures are medians of several runs (21 for the small grids, 5 for
 //! the large one); the fit is single-threaded, so they are one core's figures.
 
 use std::time::Instant;
-use surfscan::fit::{fit_grid, FitOptions, FitResult, IncrementalFitter};
+use surfscan::fit::{fit_grid, max_residual_mm, FitOptions, FitResult, IncrementalFitter};
 
 /// Runs per large case (a 10⁷-point fit takes a quarter of a second).
 const RUNS: usize = 5;
@@ -133,6 +134,51 @@ fn bench_grid(rows: usize, cols: usize) {
     );
 }
 
+/// The residual check of a 31×8000 fit (distance of every data point to the surface), and
+/// reading the same grid from CSV text with four-decimal heights.
+fn bench_residual_and_csv(rows: usize, cols: usize, runs: usize) {
+    let h = synthetic_grid(rows, cols);
+    let y = y_positions(rows);
+    let (r, _, _) = fit_once(&y, &h, cols);
+    let (mut wall, mut cpu) = (Vec::new(), Vec::new());
+    let mut worst = 0.0;
+    for _ in 0..runs {
+        let (t, c) = (Instant::now(), cpu_s());
+        worst = max_residual_mm(&r, PITCH_X_MM, &y, &h, cols);
+        wall.push(t.elapsed().as_secs_f64());
+        cpu.push(cpu_s() - c);
+    }
+    println!(
+        "{rows}x{cols} residual check: {:.2} ms wall, {:.2} ms CPU (median of {runs}; target <= 2 ms), max residual {worst:.3e} mm",
+        median(wall) * 1e3,
+        median(cpu) * 1e3
+    );
+    let mut text = String::with_capacity(rows * cols * 8);
+    for row in h.chunks_exact(cols) {
+        for (k, v) in row.iter().enumerate() {
+            use std::fmt::Write;
+            let sep = if k + 1 == cols { '\n' } else { ',' };
+            let _ = write!(text, "{v:.4}{sep}");
+        }
+    }
+    let (mut wall, mut cpu) = (Vec::new(), Vec::new());
+    for _ in 0..runs {
+        let (t, c) = (Instant::now(), cpu_s());
+        let g = surfscan::cli::fit::parse_grid(&text).expect("parse");
+        wall.push(t.elapsed().as_secs_f64());
+        cpu.push(cpu_s() - c);
+        assert_eq!(g.heights_um.len(), rows * cols);
+    }
+    let n = (rows * cols) as f64;
+    println!(
+        "{rows}x{cols} grid CSV parse ({:.1} MB): {:.2} ms wall, {:.2} ms CPU, {:.1} ns per number (median of {runs})",
+        text.len() as f64 / 1e6,
+        median(wall.clone()) * 1e3,
+        median(cpu) * 1e3,
+        median(wall) / n * 1e9
+    );
+}
+
 fn bench_finish() {
     let (rows, cols) = (31, 8000);
     let h = synthetic_grid(rows, cols);
@@ -168,6 +214,7 @@ fn main() {
     // the benchmark runs on the small grid.
     if !std::env::args().any(|a| a == "--bench") {
         bench_grid(31, 2000);
+        bench_residual_and_csv(7, 300, 1);
         return;
     }
     let args: Vec<String> = std::env::args()
@@ -180,6 +227,9 @@ fn main() {
     }
     if want("31x8000") {
         bench_grid(31, 8000);
+    }
+    if want("residual") {
+        bench_residual_and_csv(31, 8000, SMALL_RUNS);
     }
     if want("finish") {
         bench_finish();

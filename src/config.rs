@@ -45,6 +45,25 @@ pub struct Config {
     /// `[metrics]`: Prometheus textfile.
     #[serde(default)]
     pub metrics: MetricsSettings,
+    /// `[traceability]`: what the reports and X3P files say about the instrument beyond what
+    /// it reports itself.
+    #[serde(default)]
+    pub traceability: TraceabilitySettings,
+}
+
+/// `[traceability]`: facts about the instrument that it does not report over its link, for
+/// the reports and X3P files. Every key is optional; a missing one is reported as not
+/// recorded. The whole configuration is recorded in each scan's journal, so a scan keeps
+/// the values it was made with.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub struct TraceabilitySettings {
+    /// The instrument's serial number, when the instrument does not report one.
+    pub serial_number: Option<String>,
+    /// Radius of the stylus tip, µm (the SJ-210's standard styli: 2 or 5 µm).
+    pub stylus_tip_radius_um: Option<f64>,
+    /// Date of the instrument's last calibration, ISO 8601 (`YYYY-MM-DD`).
+    pub calibration_date: Option<String>,
 }
 
 fn d_attempts() -> u32 {
@@ -198,11 +217,19 @@ pub struct ControlSettings {
     /// Unix socket path (default `/run/surfscan/control.sock`).
     #[serde(default = "d_socket")]
     pub socket: PathBuf,
+    /// Groups (names or numeric ids) whose members may start, pause, resume and abort;
+    /// status and watch stay open to everyone who can open the socket. Default: anyone who
+    /// can open the socket may command.
+    #[serde(default)]
+    pub allowed_groups: Option<Vec<String>>,
 }
 
 impl Default for ControlSettings {
     fn default() -> Self {
-        ControlSettings { socket: d_socket() }
+        ControlSettings {
+            socket: d_socket(),
+            allowed_groups: None,
+        }
     }
 }
 
@@ -422,6 +449,24 @@ impl Config {
                 ))
             }
             _ => {}
+        }
+        if let Some(d) = &self.traceability.calibration_date {
+            if chrono::NaiveDate::parse_from_str(d, "%Y-%m-%d").is_err() {
+                return Err(Config::invalid(
+                    path,
+                    "traceability.calibration-date",
+                    format!("{d:?} must be a date as YYYY-MM-DD, e.g. \"2026-03-14\""),
+                ));
+            }
+        }
+        if let Some(groups) = &self.control.allowed_groups {
+            if groups.is_empty() || groups.iter().any(|g| g.trim().is_empty()) {
+                return Err(Config::invalid(
+                    path,
+                    "control.allowed-groups",
+                    format!("{groups:?} must name at least one group, none of them empty, e.g. [\"surfscan-operators\"]; remove the key to let everyone who can open the socket command"),
+                ));
+            }
         }
         if let Some(n) = &self.notify {
             if n.command.is_empty() {
@@ -651,6 +696,7 @@ pub const NUMERIC_KEYS: &[NumericKey] = &[
     real_key!("analysis.holdout-threshold", 0.001, 100.0, "", "a multiple of Sq; the default is 0.5", |c| Some(c.analysis.holdout_threshold)),
     int_key!("fit.v-control-rows", 2, 100_000, "", "pole rows across the lines, at most the number of lines; remove the key for a quarter of the lines", |c| c.fit.v_control_rows),
     int_key!("notify.timeout-s", 1, 86_400, "s", "the default is 30", |c| c.notify.as_ref().map(|n| n.timeout_s)),
+    real_key!("traceability.stylus-tip-radius-um", 0.01, 100.0, "µm", "the SJ-210's standard styli have 2 or 5 µm", |c| c.traceability.stylus_tip_radius_um),
 ];
 
 #[cfg(test)]
@@ -691,6 +737,36 @@ dir = "/var/lib/surfscan/scans"
         assert_eq!(start, Nm(1_000_000));
         // 0.01 mm steps are exact integers: line 30 at 1.3 mm, no accumulated rounding.
         assert_eq!(Nm(start.0 + 30 * step.0), Nm(1_300_000));
+    }
+
+    #[test]
+    fn traceability_keys_are_optional_and_checked() {
+        assert_eq!(
+            parse(MINIMAL).unwrap().traceability,
+            TraceabilitySettings::default()
+        );
+        let with = format!(
+            "{MINIMAL}[traceability]\nserial-number = \"SN-7\"\nstylus-tip-radius-um = 2.0\ncalibration-date = \"2026-03-14\"\n"
+        );
+        let t = parse(&with).unwrap().traceability;
+        assert_eq!(t.serial_number.as_deref(), Some("SN-7"));
+        assert_eq!(t.stylus_tip_radius_um, Some(2.0));
+        assert_eq!(t.calibration_date.as_deref(), Some("2026-03-14"));
+        let e = parse(&with.replace("2026-03-14", "14.03.2026"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("traceability.calibration-date") && e.contains("YYYY-MM-DD"),
+            "{e}"
+        );
+        let e = parse(&with.replace("= 2.0", "= -2.0"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("traceability.stylus-tip-radius-um"), "{e}");
+        let e = parse(&with.replace("serial-number", "serial"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("serial"), "{e}");
     }
 
     #[test]

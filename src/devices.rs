@@ -108,12 +108,77 @@ pub struct ProbeReport {
 pub struct TracedLine {
     /// The profile with pitch, kind and conditions attached.
     pub profile: Profile,
-    /// Every result parameter the instrument reported (`RDRES02`).
+    /// Every result parameter the instrument reported (`RDPAR`, then one `RDRES…02` each),
+    /// in its order; see [`InstrumentResult`] for the fields.
     pub results: Vec<InstrumentResult>,
     /// Where the x pitch came from ("config", "lambda-s 2.5 um", …).
     pub pitch_source: String,
-    /// Warnings raised while tracing (length mismatch, retried reads…).
+    /// Warnings raised while tracing (length mismatch, retried reads…), for the log.
     pub warnings: Vec<String>,
+    /// Doubts about the read-out that one re-read of the profile did not clear; the line is
+    /// kept with them, and they belong in its stored metadata and in the report.
+    pub readout_warnings: Vec<ReadoutWarning>,
+}
+
+/// A block of the profile read-out that repeated the block before it (the instrument's
+/// read-out cursor went back).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RepeatedBlock {
+    /// 1-based number of the block request that answered the previous block again.
+    pub block: u32,
+    /// 0-based index of its first height in the read-out.
+    pub first_point: u32,
+    /// Number of values in it.
+    pub values: u32,
+}
+
+/// A named doubt about a line's profile read-out, kept with the line after one re-read of
+/// the profile did not clear it. JSON: `{"kind": "repeated-block", "blocks": [...]}` or
+/// `{"kind": "ra-disagrees", "instrument_um": …, "ours_um": …, "tolerance_um": …}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum ReadoutWarning {
+    /// Blocks received twice in a row: the heights after them may be shifted by a block.
+    RepeatedBlock {
+        /// The repeated blocks of the kept read-out.
+        blocks: Vec<RepeatedBlock>,
+    },
+    /// The instrument's Ra and the Ra computed from the read-out heights differ by more
+    /// than the tolerance (the rule is in `crate::sj210::sanity`).
+    RaDisagrees {
+        /// The instrument's Ra, µm.
+        instrument_um: f64,
+        /// Ra from the read-out heights, µm.
+        ours_um: f64,
+        /// The allowed difference, µm.
+        tolerance_um: f64,
+    },
+}
+
+impl std::fmt::Display for ReadoutWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ReadoutWarning::RepeatedBlock { blocks } => {
+                let list: Vec<String> = blocks
+                    .iter()
+                    .map(|b| format!("{} (from point {})", b.block, b.first_point))
+                    .collect();
+                write!(
+                    f,
+                    "repeated read-out block(s) {}: the instrument's read-out cursor went back, later heights may be shifted",
+                    list.join(", ")
+                )
+            }
+            ReadoutWarning::RaDisagrees {
+                instrument_um,
+                ours_um,
+                tolerance_um,
+            } => write!(
+                f,
+                "the instrument's Ra {instrument_um} um and Ra {ours_um:.4} um from the read-out heights differ by more than {tolerance_um:.4} um"
+            ),
+        }
+    }
 }
 
 /// The profiler as the scan runner uses it. One command is in flight at a time; control

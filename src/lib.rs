@@ -8,7 +8,7 @@
 //! 0. Vocabulary, no I/O: [`units`] (mm, µm, integer nm), [`numfmt`] (numbers written for
 //!    people), [`build_info`] (version and commit), [`profile`] (a traced line with its
 //!    metadata), [`nurbs`] (the surface as a value), [`devices`] (the contracts between the
-//!    scan runner and the drivers).
+//!    scan runner and the drivers), [`numbers`] (decimal numbers in CSV text, read fast).
 //! 1. Pure logic: [`fit`] (the paper's interpolation, incremental), [`iges`] (IGES 5.3
 //!    writer/reader), [`metrology`] (ISO roughness, bearing area curves, areal parameters),
 //!    the codecs inside [`sj210`] and [`stage`].
@@ -20,8 +20,9 @@
 //!    [`atomic`] (durable file replacement), [`control`] (the operator's control socket),
 //!    [`service`] (systemd notifications), [`hook`] (the notification command),
 //!    [`report`] (characterisation of a completed scan, a scan directory or a grid into
-//!    report.json, summary.csv, plots and X3P, section by section; the runner reaches it
-//!    through the scan's `Characterise` contract, supplied by the composition).
+//!    report.json, report.html, summary.csv, plots and X3P, section by section; the runner
+//!    reaches it through the scan's `Characterise` contract, supplied by the composition),
+//!    [`station_lock`] (one process per station).
 //! 5. Composition: [`cli`] (one file per subcommand) and `main.rs`.
 //!
 //! The simulator (`simulator/`, crate `surfscan-sim`) speaks the instrument's and the
@@ -39,6 +40,7 @@ pub mod fit;
 pub mod hook;
 pub mod iges;
 pub mod metrology;
+pub mod numbers;
 pub mod numfmt;
 pub mod nurbs;
 pub mod profile;
@@ -47,6 +49,7 @@ pub mod scan;
 pub mod service;
 pub mod sj210;
 pub mod stage;
+pub mod station_lock;
 pub mod telemetry;
 pub mod transport;
 pub mod units;

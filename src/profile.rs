@@ -60,15 +60,34 @@ pub struct Conditions {
     pub raw: Option<String>,
 }
 
-/// One result parameter as the instrument computed it (`RDRES02`: name, value, unit).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// One result parameter as the instrument computed and printed it (`RDRES…02`: name, value,
+/// unit). A traced line carries one per parameter the instrument reports — `RDPAR` says how
+/// many are customised, each is read with one `RDRES` — in the instrument's order, whatever
+/// the parameter (Ra, Rq, Rz, Rp, Rv, Rt, Rsk, Rku, Rz1max, RSm, Rc, RPc, Rδc, Rmr, …).
+///
+/// JSON field names (in a line's `NNNN.json`, under `results`): `name`, `value`, `unit`,
+/// `printed`, `ng_code`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct InstrumentResult {
-    /// Parameter name as displayed, e.g. "Ra".
+    /// Parameter name as the instrument printed it, trimmed: "Ra", "Rz1max", "Rmr". A
+    /// parameter the instrument could not calculate (an NG code, see `ng_code`) is named by
+    /// its number, "#05".
     pub name: String,
-    /// Value, `None` when the instrument reported an error for it.
+    /// The printed value as a number, in `unit`; `None` when it printed no number (`Err110`)
+    /// or answered an NG code.
     pub value: Option<f64>,
-    /// Unit as received, e.g. "um" or "µm".
+    /// Unit as printed, trimmed: "um" (ASCII, as the SJ series sends it), "µm", "%", or ""
+    /// for ratios (Rsk, Rku).
     pub unit: String,
+    /// The value field exactly as printed, trimmed ("3.308", "-0.144", "Err110"): its
+    /// decimals are the instrument's printed resolution. `None` when the parameter answered
+    /// an NG code, or for results not read from an instrument.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub printed: Option<String>,
+    /// The NG code the instrument answered for this parameter instead of a value (a
+    /// calculation error, 102–199: too few peaks, no profile element, …).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ng_code: Option<u16>,
 }
 
 /// A traced line of heights at a constant x pitch.

@@ -14,7 +14,11 @@
 //! * `lf` — an extra LF after the reply's CR;
 //! * `unplug:MS` — the reply is sent, then the device vanishes (pty closed, link removed) and
 //!   comes back after MS milliseconds as a freshly powered-up instrument (e.g.
-//!   `unplug:2000@CTSTA#2`: vanishes mid-trace 2).
+//!   `unplug:2000@CTSTA#2`: vanishes mid-trace 2);
+//! * `repeat` — an `RDEVA` block request is answered with the previous block again (the
+//!   read-out cursor went back one block), e.g. `repeat@RDEVA50#3`;
+//! * `skew:PCT` — an `RDRES` answer's value is off by PCT percent (signed), so the
+//!   instrument's result disagrees with its own heights, e.g. `skew:20@RDRES02,01`.
 //!
 //! Battery states are instrument settings, also given as faults: `battery:low`,
 //! `battery:abnormal`.
@@ -40,6 +44,10 @@ pub enum FaultKind {
     ExtraLf,
     /// Reply, then unplug for the given time.
     Unplug(Duration),
+    /// An `RDEVA` block answered with the previous block again.
+    RepeatBlock,
+    /// An `RDRES` value off by this many percent.
+    Skew(i32),
 }
 
 /// One fault rule.
@@ -70,7 +78,7 @@ pub enum FaultSpec {
 
 /// A fault spec that could not be parsed.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("bad fault spec {spec:?}: {why}; expected KIND[:ARG]@COMMAND[%TRACE][#N][xK] (kinds ng:CODE, drop, truncate, garbage, split, lf, silence:MS, unplug:MS) or battery:low|abnormal")]
+#[error("bad fault spec {spec:?}: {why}; expected KIND[:ARG]@COMMAND[%TRACE][#N][xK] (kinds ng:CODE, drop, truncate, garbage, split, lf, silence:MS, unplug:MS, repeat, skew:PCT) or battery:low|abnormal")]
 pub struct FaultSpecError {
     /// The spec as given.
     pub spec: String,
@@ -118,6 +126,12 @@ impl std::str::FromStr for FaultSpec {
             "silence" => FaultKind::Silence(millis(arg)?),
             "lf" => FaultKind::ExtraLf,
             "unplug" => FaultKind::Unplug(millis(arg)?),
+            "repeat" => FaultKind::RepeatBlock,
+            "skew" => FaultKind::Skew(
+                arg.and_then(|a| a.parse::<i32>().ok())
+                    .filter(|p| (-99..=1000).contains(p))
+                    .ok_or_else(|| err("skew needs a percentage from -99 to 1000, e.g. skew:20"))?,
+            ),
             _ => return Err(err("unknown kind")),
         };
         let (rest, count) = match target.rsplit_once('x') {
@@ -224,6 +238,10 @@ mod tests {
         assert!("boom@RDRES".parse::<FaultSpec>().is_err());
         assert!("drop".parse::<FaultSpec>().is_err());
         assert!("drop@RDRES#0".parse::<FaultSpec>().is_err());
+        assert_eq!(wire("repeat@RDEVA50#3").kind, FaultKind::RepeatBlock);
+        assert_eq!(wire("skew:-30@RDRES02,01").kind, FaultKind::Skew(-30));
+        assert!("skew@RDRES".parse::<FaultSpec>().is_err());
+        assert!("skew:-100@RDRES".parse::<FaultSpec>().is_err());
     }
 
     #[test]

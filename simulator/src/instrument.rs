@@ -209,6 +209,8 @@ struct Results {
     heights_um: Vec<f64>,
     roughness: Roughness,
     cursor: usize,
+    /// Values served by the last block request (for a `repeat` fault).
+    last_block: usize,
 }
 
 /// The emulated instrument.
@@ -221,6 +223,8 @@ pub struct Instrument {
     traces: u64,
     results: Option<Results>,
     last_line: Option<usize>,
+    /// Percent by which the result being answered is off (a `skew` fault), 0 normally.
+    skew_pct: i32,
 }
 
 fn secs(s: f64) -> Duration {
@@ -243,7 +247,25 @@ impl Instrument {
             traces: 0,
             results: None,
             last_line: None,
+            skew_pct: 0,
         }
+    }
+
+    /// Answers a frame as if the read-out cursor had gone back by the last block first: an
+    /// `RDEVA` block request then gets the previous block again.
+    pub fn respond_repeating_block(&mut self, frame: &[u8], now: Duration) -> Vec<u8> {
+        if let Some(r) = self.results.as_mut() {
+            r.cursor = r.cursor.saturating_sub(r.last_block);
+        }
+        self.respond(frame, now)
+    }
+
+    /// Answers a frame with any result value off by `pct` percent.
+    pub fn respond_skewed(&mut self, frame: &[u8], now: Duration, pct: i32) -> Vec<u8> {
+        self.skew_pct = pct;
+        let reply = self.respond(frame, now);
+        self.skew_pct = 0;
+        reply
     }
 
     /// The configuration.
@@ -322,6 +344,7 @@ impl Instrument {
             heights_um,
             roughness,
             cursor: 0,
+            last_block: 0,
         });
     }
 
@@ -545,6 +568,7 @@ impl Instrument {
         let Some(value) = res.roughness.value(p, usize::from(index)) else {
             return Reply::Ng(32);
         };
+        let value = value * (1.0 + f64::from(self.skew_pct) / 100.0);
         let width = if self.cfg.model == Model::Sj410 { 8 } else { 7 };
         let field = match self.cfg.result_layout {
             ResultLayout::Export => export_field(value, width),
@@ -587,6 +611,7 @@ impl Instrument {
                 let start = res.cursor.min(res.heights_um.len());
                 let end = (start + usize::from(n)).min(res.heights_um.len());
                 res.cursor = end;
+                res.last_block = end - start;
                 let Some(block) = res.heights_um.get(start..end) else {
                     return Reply::Ok("00,0.0".to_string());
                 };
@@ -678,8 +703,11 @@ mod tests {
         assert_eq!(ask(&mut i, "RDRES02,02,00", 14500), "OKRq      2.236 um\r");
         assert_eq!(ask(&mut i, "RDRES00,03,00", 14500), "OK  6.000\r");
         assert_eq!(ask(&mut i, "RDRES01,03,00", 14500), "OK3\r");
-        assert_eq!(ask(&mut i, "RDRES02,04,00", 14500), "NG032\r");
-        assert_eq!(ask(&mut i, "RDPAR", 14500), "OK03\r");
+        // Rp 3, Rsk 0 (unitless), beyond the 9 customised parameters NG032.
+        assert_eq!(ask(&mut i, "RDRES02,04,00", 14500), "OKRp      3.000 um\r");
+        assert_eq!(ask(&mut i, "RDRES02,07,00", 14500), "OKRsk     0.000   \r");
+        assert_eq!(ask(&mut i, "RDRES02,10,00", 14500), "NG032\r");
+        assert_eq!(ask(&mut i, "RDPAR", 14500), "OK09\r");
     }
 
     #[test]
@@ -846,6 +874,25 @@ mod tests {
         assert_eq!(ask(&mut i, "RDEVA000", 0), "NG031\r");
         assert_eq!(ask(&mut i, "RDEVA100", 0), "OK00004\r");
         assert_eq!(ask(&mut i, "RDEVA102", 0), "OK02,    1.000,   -1.000\r");
+    }
+
+    #[test]
+    fn repeated_block_and_skewed_result_faults() {
+        let cfg = InstrumentConfig {
+            time_scale: 0.0,
+            ..InstrumentConfig::default()
+        };
+        let mut i = Instrument::new(cfg, set(), None);
+        ask(&mut i, "CTSTA", 0);
+        assert_eq!(ask(&mut i, "RDEVA00", 0), "OK00004\r");
+        assert_eq!(ask(&mut i, "RDEVA02", 0), "OK02,    1.000,   -1.000\r");
+        let again = String::from_utf8(i.respond_repeating_block(b"RDEVA02", s(0))).unwrap();
+        assert_eq!(again, "OK02,    1.000,   -1.000\r");
+        assert_eq!(ask(&mut i, "RDEVA02", 0), "OK02,    3.000,   -3.000\r");
+        // Ra 2.000 off by +20 %; the next answer is right again.
+        let skewed = String::from_utf8(i.respond_skewed(b"RDRES02,01,00", s(0), 20)).unwrap();
+        assert_eq!(skewed, "OKRa     2.400  um\r");
+        assert_eq!(ask(&mut i, "RDRES02,01,00", 0), "OKRa     2.000  um\r");
     }
 
     #[test]

@@ -54,6 +54,25 @@ impl Responder {
         }
     }
 
+    /// The reply with a semantic fault applied by the emulated instrument (a repeated read-out
+    /// block, a skewed result); a replayed transcript answers as recorded.
+    fn respond_faulted(
+        &mut self,
+        frame: &[u8],
+        now: Duration,
+        kind: &FaultKind,
+    ) -> Option<Vec<u8>> {
+        match (self, kind) {
+            (Responder::Emulate(i), FaultKind::RepeatBlock) => {
+                Some(i.respond_repeating_block(frame, now))
+            }
+            (Responder::Emulate(i), FaultKind::Skew(pct)) => {
+                Some(i.respond_skewed(frame, now, *pct))
+            }
+            (r, _) => r.respond(frame, now),
+        }
+    }
+
     fn power_cycle(&mut self) {
         if let Responder::Emulate(i) = self {
             i.power_cycle();
@@ -128,6 +147,9 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
             let now = Instant::now().saturating_duration_since(epoch);
             let reply = match &fault {
                 Some(FaultKind::Ng(code)) => Some(format!("NG{code:03}\r").into_bytes()),
+                Some(k @ (FaultKind::RepeatBlock | FaultKind::Skew(_))) => {
+                    responder.respond_faulted(&line, now, k)
+                }
                 _ => responder.respond(&line, now),
             };
             let Some(reply) = reply else { continue };
@@ -164,7 +186,9 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
                     io.flush().await?;
                     return Ok(Outcome::Unplug(d));
                 }
-                Some(FaultKind::Ng(_)) | None => io.write_all(&reply).await?,
+                Some(FaultKind::Ng(_) | FaultKind::RepeatBlock | FaultKind::Skew(_)) | None => {
+                    io.write_all(&reply).await?
+                }
             }
             io.flush().await?;
         }

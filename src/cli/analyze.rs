@@ -5,7 +5,10 @@
 //! [`crate::report::characterise_scan`] for scans): `report.json`, `summary.csv`,
 //! `measured.x3p`, `model.x3p` (ISO 25178-72), `bac.png|svg`, `heightmap.png|svg` and
 //! `overlay.png|svg` (measured vs model of one line). A profile gets `report.json` and
-//! `summary.csv`.
+//! `summary.csv`. An X3P file (ISO 25178-72, as Gwyddion, MountainsMap and surfalize write
+//! it) is read as a grid with its own pitches (rows along y are the traced lines); a line
+//! holding invalid (not measured) points is left out with a warning rather than filled in,
+//! and a one-line X3P profile is characterised as a profile.
 //!
 //! The model is fitted once at `--degree-u/--degree-v` and `--v-method` (default: a scan's
 //! frozen plan, else the paper's 5/5 interpolation); the report's model sections describe
@@ -35,7 +38,8 @@ use std::path::{Path, PathBuf};
 /// Arguments of `surfscan analyze`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Scan directory, profile CSV (`x_mm,z_um` header) or grid CSV of heights in µm.
+    /// Scan directory, X3P file, profile CSV (`x_mm,z_um` header) or grid CSV of heights in
+    /// µm.
     pub input: PathBuf,
     /// Cut-off λc in mm (also the sampling length). Default: for a scan the λc the instrument
     /// recorded (else 0.8 mm), for a CSV 0.8 mm.
@@ -129,6 +133,10 @@ fn failed(msg: impl Into<String>) -> CliError {
 }
 
 fn parse_numbers(line: &str) -> Option<Vec<f64>> {
+    let mut fast = Vec::new();
+    if crate::numbers::parse_csv_line(line.as_bytes(), &mut fast).is_some() {
+        return Some(fast);
+    }
     line.split(',')
         .map(|f| f.trim().parse::<f64>().ok())
         .collect::<Option<Vec<f64>>>()
@@ -297,11 +305,21 @@ pub fn run(args: Args) -> Result<(), CliError> {
         return finish(&outputs);
     }
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from("."));
-    let text = std::fs::read_to_string(&args.input).map_err(|e| {
+    let bytes = std::fs::read(&args.input).map_err(|e| {
         CliError::new(
             Exit::Io,
             format!("cannot read {}: {e}", args.input.display()),
         )
+    })?;
+    if super::fit::sniff_input(&args.input, &bytes) == super::fit::InputKind::X3p {
+        return run_x3p(&args, &bytes, &out);
+    }
+    let text = String::from_utf8(bytes).map_err(|e| {
+        failed(format!(
+            "{}: not text (byte {} is not UTF-8); analyze reads a scan directory, an X3P file or a CSV",
+            args.input.display(),
+            e.utf8_error().valid_up_to()
+        ))
     })?;
     let lc = args.lc.unwrap_or(DEFAULT_LC_MM);
     let options = Options {
@@ -329,7 +347,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
         let rmr = rmr_table(&a);
         let report = Report {
-            software: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
+            software: crate::build_info::software(),
             input: args.input.display().to_string(),
             kind: "profile",
             recipe: a.recipe,
@@ -362,22 +380,6 @@ pub fn run(args: Args) -> Result<(), CliError> {
         instrument: None,
         standard: vec![None; rows],
     };
-    let analysis = ScanAnalysisOptions {
-        curves: args.curves,
-        levels: args.levels,
-        overlay_line: args.overlay_line,
-        degree_u: args.degree_u,
-        degree_v: args.degree_v,
-        spikes: args.model.spikes()?,
-        exclude_spikes: args.outliers == OutliersArg::Exclude,
-        holdout_threshold: holdout_threshold(args.holdout_threshold)?,
-        v_method: args.model.v_method(rows, args.degree_v.unwrap_or(5))?,
-        replace_spikes: args.model.replace(),
-        ..ScanAnalysisOptions::default()
-    };
-    let mut recipe = crate::report::scan_dir::scan_recipe(&analysis, None, &[]);
-    recipe.lambda_c_mm = options.apply_lambda_c.then_some(options.lambda_c_mm);
-    let (fitted, summary, fit_s) = fit_for_report(&grid, &recipe);
     let ctx = ReportContext {
         input: args.input.display().to_string(),
         kind: "grid",
@@ -386,17 +388,12 @@ pub fn run(args: Args) -> Result<(), CliError> {
         filter_reason,
         traceability: None,
         scan: None,
-        fit: summary,
-        options: analysis,
+        fit: None,
+        options: ScanAnalysisOptions::default(),
         warnings: Vec::new(),
+        finished_at: None,
     };
-    let model = Model {
-        recipe,
-        fit: fitted.as_ref().map(|m| &m.fit),
-        replaced: fitted.as_ref().map_or(&[][..], |m| &m.replaced[..]),
-    };
-    let mut outputs = characterise(&grid, model, ctx, &out).map_err(report_error)?;
-    outputs.elapsed_s += fit_s;
+    let outputs = fit_and_characterise(&grid, ctx, &args, &out)?;
     finish(&outputs)
 }
 
@@ -411,8 +408,180 @@ fn holdout_threshold(v: f64) -> Result<f64, CliError> {
     }
 }
 
-fn fmt_opt(v: Option<f64>) -> String {
-    v.map(|v| format!("{v}")).unwrap_or_default()
+/// `analyze FILE.x3p`: the grid read with its pitches; lines with invalid points left out.
+fn run_x3p(args: &Args, bytes: &[u8], out: &Path) -> Result<(), CliError> {
+    if args.pitch_x.is_some() || args.pitch_y.is_some() {
+        return Err(CliError::new(
+            Exit::Usage,
+            "--pitch-x/--pitch-y are for a grid CSV; an X3P file stores its own pitches",
+        ));
+    }
+    let x = crate::metrology::x3p::read_x3p(bytes)
+        .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
+    let lc = args.lc.unwrap_or(DEFAULT_LC_MM);
+    let options = Options {
+        lambda_c_mm: lc,
+        apply_lambda_c: !args.no_filter,
+        lambda_s_um: None,
+        sampling_lengths: None,
+    };
+    let m = &x.meta;
+    let source = [
+        m.manufacturer.as_str(),
+        m.model.as_str(),
+        if m.serial.is_empty() { "" } else { "serial" },
+        m.serial.as_str(),
+    ]
+    .iter()
+    .filter(|s| !s.is_empty())
+    .copied()
+    .collect::<Vec<_>>()
+    .join(" ");
+    let input = format!(
+        "{} (X3P {} of {} × {} points{}{})",
+        args.input.display(),
+        x.feature_type,
+        x.rows,
+        x.cols,
+        if source.is_empty() {
+            String::new()
+        } else {
+            format!(", {source}")
+        },
+        if m.date.is_empty() {
+            String::new()
+        } else {
+            format!(", measured {}", m.date)
+        }
+    );
+    let mut warnings = Vec::new();
+    let complete: Vec<usize> = (0..x.rows)
+        .filter(|&r| {
+            x.heights_um[r * x.cols..(r + 1) * x.cols]
+                .iter()
+                .all(|v| v.is_finite())
+        })
+        .collect();
+    if complete.len() < x.rows {
+        let left: Vec<String> = (0..x.rows)
+            .filter(|r| !complete.contains(r))
+            .map(|r| (r + 1).to_string())
+            .collect();
+        warnings.push(format!(
+            "{} of {} points are marked invalid (not measured); lines {} hold them and were left out (nothing is filled in)",
+            x.invalid_points,
+            x.rows * x.cols,
+            left.join(", ")
+        ));
+    }
+    if complete.is_empty() {
+        return Err(failed(format!(
+            "{}: every line holds invalid (not measured) points ({} of {}); fill or crop them in the software that wrote the file, then analyse again",
+            args.input.display(),
+            x.invalid_points,
+            x.rows * x.cols
+        )));
+    }
+    let lambda_c_source = match args.lc {
+        Some(v) => format!("given ({v} mm)"),
+        None => format!("default {DEFAULT_LC_MM} mm (set --lc to choose)"),
+    };
+    let filter_reason = if args.no_filter {
+        "no λc filter: asked for (--no-filter)".to_string()
+    } else {
+        "λc filter applied: an X3P file is taken as a primary surface unless --no-filter"
+            .to_string()
+    };
+    if x.rows == 1 {
+        let z = &x.heights_um;
+        let a = analyze_line(z, x.pitch_x_mm, &options)
+            .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
+        let report = Report {
+            software: crate::build_info::software(),
+            input,
+            kind: "profile",
+            recipe: a.recipe.clone(),
+            lines: vec![LineReport {
+                index: 0,
+                y_mm: 0.0,
+                rmr_table: rmr_table(&a),
+                params: a.params,
+            }],
+        };
+        return write_outputs(out, &report);
+    }
+    let heights_um: Vec<f64> = complete
+        .iter()
+        .flat_map(|&r| x.heights_um[r * x.cols..(r + 1) * x.cols].iter().copied())
+        .collect();
+    let n = complete.len();
+    let grid = LineGrid {
+        heights_um,
+        cols: x.cols,
+        pitch_x_mm: x.pitch_x_mm,
+        y_mm: complete.iter().map(|&r| r as f64 * x.pitch_y_mm).collect(),
+        index: complete.iter().map(|&r| r as u32).collect(),
+        y_readback_mm: vec![None; n],
+        instrument: None,
+        standard: vec![None; n],
+    };
+    let ctx = ReportContext {
+        input,
+        kind: "x3p",
+        line_options: options,
+        lambda_c_source,
+        filter_reason,
+        traceability: None,
+        scan: None,
+        fit: None,
+        options: ScanAnalysisOptions::default(),
+        warnings,
+        finished_at: None,
+    };
+    let outputs = fit_and_characterise(&grid, ctx, args, out)?;
+    finish(&outputs)
+}
+
+/// Fits `grid` once the way the arguments ask (`--degree-u/--degree-v`, default the paper's
+/// 5/5; `--v-method`; spikes replaced only with `--replace-spikes`) and characterises it with
+/// that surface (the model sections and the hold-out refits are made the same way).
+fn fit_and_characterise(
+    grid: &LineGrid,
+    mut ctx: ReportContext,
+    args: &Args,
+    out: &Path,
+) -> Result<ScanOutputs, CliError> {
+    let analysis = ScanAnalysisOptions {
+        curves: args.curves,
+        levels: args.levels,
+        overlay_line: args.overlay_line,
+        degree_u: args.degree_u,
+        degree_v: args.degree_v,
+        spikes: args.model.spikes()?,
+        exclude_spikes: args.outliers == OutliersArg::Exclude,
+        holdout_threshold: holdout_threshold(args.holdout_threshold)?,
+        v_method: args
+            .model
+            .v_method(grid.rows(), args.degree_v.unwrap_or(5))?,
+        replace_spikes: args.model.replace(),
+        ..ScanAnalysisOptions::default()
+    };
+    let mut recipe = crate::report::scan_dir::scan_recipe(&analysis, None, &[]);
+    recipe.lambda_c_mm = ctx
+        .line_options
+        .apply_lambda_c
+        .then_some(ctx.line_options.lambda_c_mm);
+    let (fitted, summary, fit_s) = fit_for_report(grid, &recipe);
+    ctx.fit = summary;
+    ctx.options = analysis;
+    let model = Model {
+        recipe,
+        fit: fitted.as_ref().map(|m| &m.fit),
+        replaced: fitted.as_ref().map_or(&[][..], |m| &m.replaced[..]),
+    };
+    let mut outputs = characterise(grid, model, ctx, out).map_err(report_error)?;
+    outputs.elapsed_s += fit_s;
+    Ok(outputs)
 }
 
 fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
@@ -425,35 +594,39 @@ fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
     let path = out.join("report.json");
     crate::atomic::write_atomically(&path, |w| std::io::Write::write_all(w, json.as_bytes()))
         .map_err(|e| io(&path, e))?;
+    // As a scan's summary.csv: 1-based line, values with the digits of their quantity.
+    use crate::numfmt::{fmt as f, fmt_opt as fo, Quantity::*};
     let mut csv = String::from(
-        "index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um,Rp_um,Rv_um,Rt_um,Rz1max_um,Rsk,Rku,Rdq,RSm_um,Rk_um,Rpk_um,Rvk_um,Mr1_pct,Mr2_pct,A1,A2\n",
+        "line,index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um,Rp_um,Rv_um,Rt_um,Rz1max_um,Rsk,Rku,Rdq,RSm_um,Rk_um,Rpk_um,Rvk_um,Mr1_pct,Mr2_pct,A1_um_pct,A2_um_pct\n",
     );
     for l in &report.lines {
         let p = &l.params;
-        csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
-            l.index,
-            l.y_mm,
-            p.ra_um,
-            p.rq_um,
-            p.rz_um,
-            fmt_opt(p.rzjis_um),
-            p.rp_um,
-            p.rv_um,
-            p.rt_um,
-            p.rz1max_um,
-            p.rsk,
-            p.rku,
-            p.rdq,
-            fmt_opt(p.rsm_um),
-            p.rk_um,
-            p.rpk_um,
-            p.rvk_um,
-            p.mr1_pct,
-            p.mr2_pct,
-            p.a1_um_pct,
-            p.a2_um_pct
-        ));
+        let row = [
+            (l.index + 1).to_string(),
+            format!("{:04}", l.index),
+            f(l.y_mm, PositionMm),
+            f(p.ra_um, HeightUm),
+            f(p.rq_um, HeightUm),
+            f(p.rz_um, HeightUm),
+            fo(p.rzjis_um, HeightUm),
+            f(p.rp_um, HeightUm),
+            f(p.rv_um, HeightUm),
+            f(p.rt_um, HeightUm),
+            f(p.rz1max_um, HeightUm),
+            f(p.rsk, Ratio),
+            f(p.rku, Ratio),
+            f(p.rdq, Ratio),
+            fo(p.rsm_um, HeightUm),
+            f(p.rk_um, HeightUm),
+            f(p.rpk_um, HeightUm),
+            f(p.rvk_um, HeightUm),
+            f(p.mr1_pct, Percent),
+            f(p.mr2_pct, Percent),
+            f(p.a1_um_pct, Area),
+            f(p.a2_um_pct, Area),
+        ];
+        csv.push_str(&row.join(","));
+        csv.push('\n');
     }
     let path = out.join("summary.csv");
     crate::atomic::write_atomically(&path, |w| std::io::Write::write_all(w, csv.as_bytes()))

@@ -1,7 +1,8 @@
 //! `surfscan daemon`: the station service (systemd `Type=notify`).
 //!
 //! Start-up: logging is already on; the configuration is loaded (exit 78 on a bad file),
-//! the control socket bound, then `READY=1` — devices may appear later and are reported in
+//! the station locked (exit 69 naming the process that holds it) and leftovers of
+//! interrupted writes swept, the control socket bound, then `READY=1` — devices may appear later and are reported in
 //! `STATUS=`. An unfinished scan in `output.dir` is resumed at once; otherwise the daemon
 //! waits for `surfscan start`, and never starts a scan by itself. Every status change is
 //! sent as `STATUS=`; `WATCHDOG=1` comes from the scan loop itself (and the idle loop).
@@ -25,6 +26,7 @@ use crate::scan::station::{SerialStation, Station};
 use crate::scan::status::{DeviceState, State, Status};
 use crate::scan::testhooks::TestHooks;
 use crate::service::Notifier;
+use crate::station_lock::StationLock;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
@@ -44,6 +46,20 @@ const IDLE_TICK: Duration = Duration::from_secs(2);
 /// Runs `surfscan daemon`.
 pub fn run(args: Args) -> Result<(), CliError> {
     let (config, config_hash) = load_config(&args.config)?;
+    let control = server::ServerOptions {
+        allowed_groups: match &config.control.allowed_groups {
+            Some(names) => Some(server::resolve_groups(names).map_err(|e| {
+                let path = args.config.display();
+                CliError::new(
+                    Exit::Config,
+                    format!("config {path}: control.allowed-groups: {e}"),
+                )
+            })?),
+            None => None,
+        },
+        ..server::ServerOptions::default()
+    };
+    let lock = super::scan::lock_station(&config, "daemon")?;
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
     let station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
@@ -53,7 +69,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         .enable_all()
         .build()
         .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
-    rt.block_on(daemon(&config, settings, station))
+    rt.block_on(daemon(&config, settings, station, control, lock))
 }
 
 fn presence(present: bool) -> DeviceState {
@@ -68,9 +84,11 @@ async fn daemon(
     config: &Config,
     settings: RunSettings,
     mut station: SerialStation,
+    control: server::ServerOptions,
+    lock: Arc<StationLock>,
 ) -> Result<(), CliError> {
     let notifier = Arc::new(Notifier::from_env());
-    let srv = server::bind(&config.control.socket)
+    let srv = server::bind_with_options(&config.control.socket, control)
         .await
         .map_err(|e| CliError::new(Exit::Unavailable, e.to_string()))?;
     let (status_tx, status_rx) = watch::channel(Status::idle());
@@ -94,6 +112,8 @@ async fn daemon(
         config.output.dir.display()
     );
     notifier.ready();
+
+    tokio::spawn(super::scan::record_scan_in_lock(lock, status_rx.clone()));
 
     // STATUS= on every change.
     let n = notifier.clone();

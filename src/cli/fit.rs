@@ -4,12 +4,17 @@
 //! A scan directory (`lines/NNNN.csv` + `NNNN.json`, as the scan daemon writes it) is fitted
 //! from its complete lines in index order: y of each line is its target `y_target_nm`, the x
 //! pitch is the one stored with the lines, the default output is `SCAN_DIR/surface.igs`.
-//! Lines with only one of their two files are left out and named in a warning. A grid CSV
-//! needs `--pitch-x`, `--pitch-y` and `-o`.
+//! Lines with only one of their two files are left out and named in a warning. Each line's
+//! heights file is checked against the SHA-256 its journal record holds: a file changed after
+//! it was traced is refused (naming it), a line the journal never committed is left out with a
+//! warning. An existing `SCAN_DIR/surface.igs` (a completed scan's surface) is not replaced
+//! unless `--force` is given or `-o` names the output. A grid CSV needs `--pitch-x`,
+//! `--pitch-y` and `-o`; an IGES file or another non-grid input is named as such.
 //!
-//! Exit status: 0 done; 2 bad pitch or degree arguments; 74 the input cannot be read or an
-//! output cannot be written; 1 the data are malformed (the message names line, column and
-//! content) or cannot be interpolated.
+//! Exit status: 0 done; 2 bad pitch or degree arguments, an input of the wrong kind, or an
+//! existing surface not to be replaced; 74 the input cannot be read or an output cannot be
+//! written; 1 the data are malformed (the message names line, column and content), a line
+//! file does not match its journal record, or the data cannot be interpolated.
 //!
 //! A surface whose IGES text does not fit one file (the P section is capped at 9,999,999
 //! lines) is written as several complete IGES files of whole exact patches: `OUT.igs` is then
@@ -88,6 +93,39 @@ pub struct Args {
     /// The surface and the spike rule.
     #[command(flatten)]
     pub model: ModelArgs,
+    /// Replace an existing SCAN_DIR/surface.igs (by default it is kept: it is the surface the
+    /// scan wrote when it completed).
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// What a file given to `fit` is, from its name and first bytes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InputKind {
+    /// Text that may be a grid CSV.
+    GridCsv,
+    /// An IGES file (`.igs`/`.iges`, or 80-column lines with `S` in column 73).
+    Iges,
+    /// A zip archive or an `.x3p` file.
+    X3p,
+}
+
+/// Classifies a file from its name and its first bytes (at least the first line).
+pub fn sniff_input(path: &Path, head: &[u8]) -> InputKind {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if ext == "x3p" || head.starts_with(b"PK\x03\x04") {
+        return InputKind::X3p;
+    }
+    let first = head.split(|b| *b == b'\n').next().unwrap_or(&[]);
+    let first = first.strip_suffix(b"\r").unwrap_or(first);
+    let iges_line = first.len() == 80 && first.get(72) == Some(&b'S');
+    if ext == "igs" || ext == "iges" || iges_line {
+        return InputKind::Iges;
+    }
+    InputKind::GridCsv
 }
 
 pub use crate::scan::surface_files::part_path;
@@ -114,7 +152,10 @@ pub struct Grid {
 /// Parses the grid CSV: no header, `,` separated, one row per line; blank lines at the end
 /// are ignored. Errors name the 1-based line and column and the offending content.
 pub fn parse_grid(text: &str) -> Result<Grid, String> {
-    let mut heights_um = Vec::new();
+    // Room for every field at once (one per ',' plus one per line), so a large grid is not
+    // copied while it grows.
+    let fields = text.bytes().filter(|&b| b == b',' || b == b'\n').count() + 1;
+    let mut heights_um = Vec::with_capacity(fields);
     let mut cols = 0usize;
     let mut rows = 0usize;
     let lines: Vec<&str> = text.lines().collect();
@@ -123,26 +164,12 @@ pub fn parse_grid(text: &str) -> Result<Grid, String> {
         .rposition(|l| !l.trim().is_empty())
         .map_or(0, |i| i + 1);
     for (li, line) in lines[..last].iter().enumerate() {
-        let mut n = 0usize;
-        for (ci, field) in line.split(',').enumerate() {
-            let f = field.trim();
-            let v: f64 = f.parse().map_err(|_| {
-                format!(
-                    "line {}, column {}: {f:?} is not a number (expected heights in µm, ',' separated, no header)",
-                    li + 1,
-                    ci + 1
-                )
-            })?;
-            if !v.is_finite() {
-                return Err(format!(
-                    "line {}, column {}: {f:?} is not a finite height",
-                    li + 1,
-                    ci + 1
-                ));
-            }
-            heights_um.push(v);
-            n += 1;
-        }
+        // Plain lines of finite numbers take one pass; anything else is read (and its error
+        // worded) field by field below.
+        let n = match crate::numbers::parse_csv_line(line.as_bytes(), &mut heights_um) {
+            Some(n) => n,
+            None => parse_grid_line(li, line, &mut heights_um)?,
+        };
         if rows == 0 {
             cols = n;
         } else if n != cols {
@@ -161,6 +188,31 @@ pub fn parse_grid(text: &str) -> Result<Grid, String> {
         cols,
         heights_um,
     })
+}
+
+/// One grid line field by field with `str::parse`; errors name the 1-based line and column.
+fn parse_grid_line(li: usize, line: &str, heights_um: &mut Vec<f64>) -> Result<usize, String> {
+    let mut n = 0usize;
+    for (ci, field) in line.split(',').enumerate() {
+        let f = field.trim();
+        let v: f64 = f.parse().map_err(|_| {
+            format!(
+                "line {}, column {}: {f:?} is not a number (expected heights in µm, ',' separated, no header)",
+                li + 1,
+                ci + 1
+            )
+        })?;
+        if !v.is_finite() {
+            return Err(format!(
+                "line {}, column {}: {f:?} is not a finite height",
+                li + 1,
+                ci + 1
+            ));
+        }
+        heights_um.push(v);
+        n += 1;
+    }
+    Ok(n)
 }
 
 fn io_err(what: &str, path: &Path, e: impl std::fmt::Display) -> CliError {
@@ -207,20 +259,56 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             ));
         }
     }
-    let (lines, stored, incomplete) = crate::report::load_scan_grid(&args.input).map_err(|e| {
-        let exit = match &e {
-            crate::report::ReportError::Store(crate::scan::store_error::StoreError::Io {
-                ..
-            }) => Exit::Io,
-            _ => Exit::Failed,
-        };
-        CliError::new(exit, e.to_string())
-    })?;
+    let (mut lines, stored, incomplete) =
+        crate::report::load_scan_grid(&args.input).map_err(|e| {
+            let exit = match &e {
+                crate::report::ReportError::Store(crate::scan::store_error::StoreError::Io {
+                    ..
+                }) => Exit::Io,
+                _ => Exit::Failed,
+            };
+            CliError::new(exit, e.to_string())
+        })?;
     if !incomplete.is_empty() {
         eprintln!(
-            "surfscan: warning: lines {incomplete:?} have only one of their two files in {} and were left out",
+            "surfscan: warning: lines {} have only one of their two files in {} and were left out",
+            line_list(&incomplete),
             args.input.join("lines").display()
         );
+    }
+    let check = check_against_journal(&args.input, &lines.index)?;
+    if !check.uncommitted.is_empty() {
+        eprintln!(
+            "surfscan: warning: lines {} are on disk but the journal never committed them (the scan stopped before their record); they were left out",
+            line_list(&check.uncommitted)
+        );
+        keep_rows(&mut lines, |i| !check.uncommitted.contains(&i));
+        if lines.index.is_empty() {
+            return Err(CliError::new(
+                Exit::Failed,
+                format!(
+                    "{}: no line the journal committed; nothing to fit",
+                    args.input.display()
+                ),
+            ));
+        }
+    }
+    let default_output = args.input.join("surface.igs");
+    if args.output.is_none() && !args.force {
+        if let Some(existing) = existing_surface(&default_output) {
+            return Err(CliError::new(
+                Exit::Usage,
+                format!(
+                    "{} exists ({}); it is kept: pass --force to replace it, or -o OTHER.igs to write the new fit elsewhere",
+                    existing.display(),
+                    if check.completed {
+                        "the surface the completed scan wrote"
+                    } else {
+                        "an earlier fit of this scan"
+                    }
+                ),
+            ));
+        }
     }
     let journal = crate::report::scan_dir::read_scan_journal(&args.input).ok();
     let start = journal.as_ref().map(|s| &s.start);
@@ -245,6 +333,119 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             let o = crate::metrology::params::Options::from_profile(&l.profile);
             o.apply_lambda_c.then_some(o.lambda_c_mm)
         }),
+    })
+}
+
+/// Line indices as a person reads them: 1-based, with the file names they are stored in.
+fn line_list(indices: &[u32]) -> String {
+    indices
+        .iter()
+        .map(|&i| {
+            format!(
+                "{} ({})",
+                crate::numfmt::line_number(i),
+                crate::scan::store::csv_name(i)
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Keeps the rows of `lines` whose index passes `keep`.
+fn keep_rows(lines: &mut crate::report::LineGrid, keep: impl Fn(u32) -> bool) {
+    let cols = lines.cols;
+    let rows: Vec<usize> = (0..lines.index.len())
+        .filter(|&r| keep(lines.index[r]))
+        .collect();
+    let pick = |v: &Vec<f64>| rows.iter().map(|&r| v[r]).collect::<Vec<f64>>();
+    lines.heights_um = rows
+        .iter()
+        .flat_map(|&r| lines.heights_um[r * cols..(r + 1) * cols].to_vec())
+        .collect();
+    lines.y_mm = pick(&lines.y_mm);
+    lines.index = rows.iter().map(|&r| lines.index[r]).collect();
+    lines.y_readback_mm = rows.iter().map(|&r| lines.y_readback_mm[r]).collect();
+    lines.standard = rows.iter().map(|&r| lines.standard[r].clone()).collect();
+    if let Some(inst) = &lines.instrument {
+        lines.instrument = Some(rows.iter().map(|&r| inst[r].clone()).collect());
+    }
+}
+
+/// The existing surface at `output` (or the first part of a split one), if any.
+fn existing_surface(output: &Path) -> Option<PathBuf> {
+    if output.exists() {
+        return Some(output.to_path_buf());
+    }
+    let stem = output.file_stem()?.to_string_lossy().into_owned();
+    let dir = output.parent()?;
+    std::fs::read_dir(dir)
+        .ok()?
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| {
+            p.file_name()
+                .map(|n| {
+                    n.to_string_lossy()
+                        .starts_with(&format!("{stem}.part1-of-"))
+                })
+                .unwrap_or(false)
+        })
+}
+
+/// What the journal says about the lines to fit.
+struct JournalCheck {
+    /// Lines on disk without a journal record (never committed).
+    uncommitted: Vec<u32>,
+    /// The scan stopped with success.
+    completed: bool,
+}
+
+/// Checks every line file against the SHA-256 of its journal record. A scan without a
+/// readable journal is fitted as it is, with a warning; a file that differs from its record
+/// is an error naming it.
+fn check_against_journal(dir: &Path, index: &[u32]) -> Result<JournalCheck, CliError> {
+    use crate::scan::journal::{read_journal, ResumeState, StopStatus, JOURNAL_FILE};
+    let path = dir.join(JOURNAL_FILE);
+    let state = match read_journal(&path).and_then(|r| ResumeState::from_records(&path, &r.records))
+    {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!(
+                "surfscan: warning: the line files cannot be checked against the journal ({e}); they are fitted as they are"
+            );
+            return Ok(JournalCheck {
+                uncommitted: Vec::new(),
+                completed: false,
+            });
+        }
+    };
+    let mut uncommitted = Vec::new();
+    for &i in index {
+        let Some(record) = state.lines.iter().find(|l| l.index == i) else {
+            uncommitted.push(i);
+            continue;
+        };
+        let file = dir.join("lines").join(crate::scan::store::csv_name(i));
+        let bytes = std::fs::read(&file).map_err(|e| io_err("cannot read", &file, e))?;
+        let sha = crate::scan::store::hex_sha256(&bytes);
+        if sha != record.csv_sha256 {
+            return Err(CliError::new(
+                Exit::Failed,
+                format!(
+                    "{}: line {} was changed after it was traced: its SHA-256 {sha} differs from the journal's {}; restore the file (the journal holds no copy), or fit the edited heights as a grid CSV",
+                    file.display(),
+                    crate::numfmt::line_number(i),
+                    record.csv_sha256
+                ),
+            ));
+        }
+    }
+    Ok(JournalCheck {
+        uncommitted,
+        completed: state
+            .stop
+            .as_ref()
+            .is_some_and(|s| s.status == StopStatus::Success),
     })
 }
 
@@ -288,6 +489,41 @@ fn read_csv(args: &Args) -> Result<Input, CliError> {
     })
 }
 
+/// Refuses a file that is absent, or that is not a grid CSV, naming what it is.
+fn check_input_file(path: &Path) -> Result<(), CliError> {
+    use std::io::Read;
+    let mut head = vec![0u8; 256];
+    let n = std::fs::File::open(path)
+        .and_then(|mut f| f.read(&mut head))
+        .map_err(|e| {
+            CliError::new(
+                Exit::Io,
+                format!(
+                    "cannot read {}: {e}; fit reads a grid CSV of heights in µm or a scan directory",
+                    path.display()
+                ),
+            )
+        })?;
+    head.truncate(n);
+    match sniff_input(path, &head) {
+        InputKind::GridCsv => Ok(()),
+        InputKind::Iges => Err(CliError::new(
+            Exit::Usage,
+            format!(
+                "{} is an IGES file (a fitted surface), not heights to fit; fit reads a grid CSV of heights in µm or a scan directory",
+                path.display()
+            ),
+        )),
+        InputKind::X3p => Err(CliError::new(
+            Exit::Usage,
+            format!(
+                "{} is an X3P archive; fit reads a grid CSV of heights in µm or a scan directory (`surfscan analyze` reads X3P)",
+                path.display()
+            ),
+        )),
+    }
+}
+
 /// Runs `surfscan fit`.
 pub fn run(args: Args) -> Result<(), CliError> {
     if args.degree_u == Some(0) || args.degree_v == Some(0) {
@@ -300,6 +536,18 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let input = if args.input.is_dir() {
         read_scan(&args)?
     } else {
+        // Arguments first (a bad value is a usage error whatever the file), then the file
+        // itself, then what a grid CSV needs: a missing file is never reported as a
+        // missing pitch.
+        for (name, v) in [("--pitch-x", args.pitch_x), ("--pitch-y", args.pitch_y)] {
+            if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
+                return Err(CliError::new(
+                    Exit::Usage,
+                    format!("{name} {v} mm must be a positive number of millimetres"),
+                ));
+            }
+        }
+        check_input_file(&args.input)?;
         read_csv(&args)?
     };
     let read_s = t_read.elapsed().as_secs_f64();

@@ -6,11 +6,12 @@
 //! Exit status: 0 success, 1 the scan failed or was aborted, 2 usage, 3 the scan completed
 //! but its characterisation is partial (every line, the IGES and every output that could be
 //! made are written; report.json names the sections that could not be made and why), 69 a
-//! device is unavailable (or the daemon holds the ports), 74 I/O error, 78 bad configuration.
+//! device is unavailable (or another `scan` or the daemon holds the station: its pid and scan
+//! are named), 74 I/O error, 78 bad configuration.
 //!
-//! The end-of-scan summary prints the verdict on the model between lines (the hold-out of
-//! [`crate::metrology::holdout`]), not the residual at the data points, which an interpolant
-//! makes zero by construction.
+//! The end-of-scan summary prints the result (lines, Ra, Sa) and the verdict on the model
+//! between lines (the hold-out of [`crate::metrology::holdout`]), not the residual at the data
+//! points, which an interpolant makes zero by construction.
 //!
 //! Layer 5 (composition): config, station, runner, signals, terminal; turns the configuration
 //! into the runner's typed settings.
@@ -25,6 +26,7 @@ use crate::scan::settings::{Backoff, RunSettings};
 use crate::scan::station::SerialStation;
 use crate::scan::status::{State, Status};
 use crate::scan::testhooks::TestHooks;
+use crate::station_lock::{self, LockError, StationLock};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -173,13 +175,43 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
                 println!("  surface  {}", p.display());
             }
             println!("  report   {}", outputs.report.display());
-            for p in &outputs.files {
+            // The report for people first; the per-line Rk plots as one entry.
+            let (rk, files): (Vec<&PathBuf>, Vec<&PathBuf>) = outputs
+                .files
+                .iter()
+                .partition(|p| p.parent().and_then(|d| d.file_name()) == Some("rk".as_ref()));
+            for p in files {
                 println!("  file     {}", p.display());
+            }
+            if let Some(dir) = rk.first().and_then(|p| p.parent()) {
+                println!(
+                    "  file     {}/ ({} Rk construction plots, one PNG and SVG per line)",
+                    dir.display(),
+                    rk.len()
+                );
             }
             if let Some(e) = &outputs.characterisation_error {
                 println!("  characterisation failed: {e}; the report holds the fit and the instrument's results");
             }
-            println!("  {}", outputs.verdict);
+            let report = std::fs::read(&outputs.report)
+                .ok()
+                .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok());
+            match &report {
+                Some(report) => {
+                    for (k, v) in result_summary(report) {
+                        println!("  {k:<8} {v}");
+                    }
+                }
+                None => println!("  (the report cannot be read back for a summary)"),
+            }
+            // Without a verdict in the report, say why there is none.
+            if report
+                .as_ref()
+                .and_then(crate::report::html::verdict)
+                .is_none()
+            {
+                println!("  model    {}", outputs.verdict);
+            }
             if outputs.characterisation_complete {
                 Ok(())
             } else {
@@ -219,6 +251,12 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
             Err(CliError::new(exit, msg))
         }
     }
+}
+
+/// The result of a characterised scan in a few lines, from its `report.json` (see
+/// [`crate::report::html::result_summary`]).
+pub fn result_summary(report: &serde_json::Value) -> Vec<(&'static str, String)> {
+    crate::report::html::result_summary(report)
 }
 
 /// Refuses when a daemon answers on the configured control socket: it holds the ports.
@@ -309,9 +347,55 @@ pub async fn run_foreground(
     settings: &RunSettings,
     request: ScanRequest,
 ) -> Outcome {
+    run_foreground_locked(station, settings, request, None).await
+}
+
+/// Takes the station's lock for the life of the process (exit 69 when another process holds
+/// the output directory or a device, naming it), then sweeps the leftovers of interrupted
+/// writes from the output directory.
+pub fn lock_station(config: &Config, command: &str) -> Result<Arc<StationLock>, CliError> {
+    let devices = [
+        Path::new(&config.instrument.port),
+        Path::new(&config.stage.port),
+    ];
+    let lock = StationLock::acquire(
+        command,
+        &config.output.dir,
+        &devices,
+        Path::new(station_lock::DEVICE_LOCK_DIR),
+    )
+    .map_err(|e| match e {
+        LockError::Held { .. } => CliError::new(Exit::Unavailable, e.to_string()),
+        LockError::Io { .. } => CliError::new(Exit::Io, e.to_string()),
+    })?;
+    lock.sweep_leftovers();
+    Ok(Arc::new(lock))
+}
+
+/// Keeps the scan id in the station's lock up to date from the status, until it closes.
+pub async fn record_scan_in_lock(lock: Arc<StationLock>, mut status: watch::Receiver<Status>) {
+    loop {
+        let id = status.borrow_and_update().scan_id.clone();
+        lock.set_scan(id.as_deref());
+        if status.changed().await.is_err() {
+            break;
+        }
+    }
+}
+
+/// [`run_foreground`], recording the scan in the station's `lock` when given.
+pub async fn run_foreground_locked(
+    station: &mut SerialStation,
+    settings: &RunSettings,
+    request: ScanRequest,
+    lock: Option<Arc<StationLock>>,
+) -> Outcome {
     let (_cmd_tx, cmd_rx) = mpsc::channel(8);
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let (status_tx, status_rx) = watch::channel(Status::idle());
+    if let Some(lock) = lock {
+        tokio::spawn(record_scan_in_lock(lock, status_rx.clone()));
+    }
     let bar = tokio::spawn(progress(status_rx));
     let signals = tokio::spawn(async move {
         use tokio::signal::unix::{signal, SignalKind};
@@ -339,6 +423,7 @@ pub async fn run_foreground(
 /// Runs `surfscan scan`.
 pub fn run(args: Args) -> Result<(), CliError> {
     let (config, config_hash) = load_config(&args.config)?;
+    let lock = lock_station(&config, "scan")?;
     refuse_if_daemon(&config)?;
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
     let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
@@ -349,7 +434,12 @@ pub fn run(args: Args) -> Result<(), CliError> {
         .enable_all()
         .build()
         .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
-    let outcome = rt.block_on(run_foreground(&mut station, &settings, request));
+    let outcome = rt.block_on(run_foreground_locked(
+        &mut station,
+        &settings,
+        request,
+        Some(lock),
+    ));
     outcome_result(&outcome)
 }
 
@@ -367,6 +457,42 @@ mod tests {
         s.eta_s = Some(750.0);
         s.last_ra_um = Some(0.452_149_8);
         s
+    }
+
+    #[test]
+    fn the_result_summary_gives_lines_ra_sa_and_the_verdict() {
+        let report = serde_json::json!({
+            "lines": [{"Ra_um": 0.41234}, {"Ra_um": 0.5}, {"Ra_um": 0.45}],
+            "scan": {"lines_planned": 31},
+            "surface": {"Sa_um": 0.4444444},
+            "surface_grid": {"Sa_um": 0.43},
+            "between_lines": {"summary": "the model between lines is supported by the data"},
+        });
+        let s = result_summary(&report);
+        assert_eq!(s[0], ("lines", "3 of 31 planned characterised".to_string()));
+        assert_eq!(
+            s[1],
+            (
+                "Ra",
+                "0.4123 … 0.5000 µm (mean 0.4541 µm, s.d. 0.04397 µm)".to_string()
+            )
+        );
+        assert_eq!(
+            s[2],
+            (
+                "Sa",
+                "0.4444 µm (model), 0.4300 µm (measured grid)".to_string()
+            )
+        );
+        assert_eq!(
+            s[3],
+            (
+                "model",
+                "the model between lines is supported by the data".to_string()
+            )
+        );
+        // Nothing characterised: only the count.
+        assert_eq!(result_summary(&serde_json::json!({})).len(), 1);
     }
 
     #[test]

@@ -8,25 +8,40 @@
 //! `watch` channel, which keeps only the latest snapshot, so a watcher that falls behind
 //! skips intermediate snapshots rather than accumulating them.
 //!
+//! The operator always gets through: a client that sends no complete request within
+//! [`ServerOptions::request_timeout`] of connecting (or of its last answer) is dropped, and a
+//! watcher is exempt only while it watches; watchers may hold all but
+//! [`ServerOptions::reserved_for_requests`] of the slots; and when every slot is taken, the
+//! connection that has waited longest without sending a request makes room for the new one.
+//! Requests are checked strictly (an unknown field is refused, not ignored), each command
+//! carries the sender's credentials from the kernel ([`Peer`]) to the runner, and
+//! [`ServerOptions::allowed_groups`] narrows who may command; status and watch stay open to
+//! everyone who can open the socket.
+//!
 //! Layer 4 (process edge): depends on [`super::protocol`], the scan's status and command types,
-//! tokio and tokio-util's codec.
+//! tokio and tokio-util's codec, nix for group names, and libc for the peer's groups
+//! (`SO_PEERGROUPS`, which no crate wraps).
 
 use super::protocol::{ControlChannels, Message, Request, PROTOCOL_VERSION};
-use crate::scan::command::{OperatorCommand, OperatorRequest};
+use crate::scan::command::{OperatorCommand, OperatorRequest, Peer};
 use crate::scan::status::Status;
 use bytes::{Buf, BytesMut};
 use futures::StreamExt;
+use serde::Deserialize;
+use std::collections::HashMap;
 use std::future::Future;
 use std::io;
 use std::os::unix::fs::{FileTypeExt, MetadataExt, PermissionsExt};
+use std::os::unix::io::AsRawFd;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::io::AsyncWriteExt;
 use tokio::net::unix::OwnedWriteHalf;
 use tokio::net::{UnixListener, UnixStream};
-use tokio::sync::{oneshot, watch, Semaphore};
+use tokio::sync::{oneshot, watch, Notify};
 use tokio::task::JoinSet;
+use tokio::time::Instant;
 use tokio_util::codec::{Decoder, FramedRead};
 
 /// Mode of the control socket: the daemon's user and group (operators join the group).
@@ -43,8 +58,21 @@ pub struct ServerOptions {
     pub write_timeout: Duration,
     /// How long to wait for the runner to answer a forwarded command (default 10 s).
     pub reply_timeout: Duration,
-    /// Connections served at once (default 32); further ones get an error and are closed.
+    /// Connections served at once (default 32). When all are taken, the one that has waited
+    /// longest without sending a request is dropped for the newcomer; when none is waiting
+    /// (all watch or have a request in progress), the newcomer gets an error and is closed.
     pub max_connections: usize,
+    /// How long a client may take to send a complete request line after the greeting or
+    /// after its last answer (default 5 s) before it is told so and dropped. A client
+    /// dripping bytes without a newline is dropped just the same; watchers are exempt.
+    pub request_timeout: Duration,
+    /// Slots of `max_connections` that watchers may not take (default 4), so status and
+    /// commands get through however many watchers there are.
+    pub reserved_for_requests: usize,
+    /// Group ids whose members may command (start, pause, resume, abort): the peer's primary
+    /// or supplementary groups as the kernel reports them for the connection. `None`
+    /// (default): everyone who can open the socket.
+    pub allowed_groups: Option<Vec<u32>>,
 }
 
 impl Default for ServerOptions {
@@ -54,6 +82,9 @@ impl Default for ServerOptions {
             write_timeout: Duration::from_secs(2),
             reply_timeout: Duration::from_secs(10),
             max_connections: 32,
+            request_timeout: Duration::from_secs(5),
+            reserved_for_requests: 4,
+            allowed_groups: None,
         }
     }
 }
@@ -192,6 +223,26 @@ pub async fn bind_with_options(
     })
 }
 
+/// The group ids of `[control] allowed-groups`: each entry is a group name, or a numeric id
+/// taken as it is. An unknown name is an error naming it.
+pub fn resolve_groups(names: &[String]) -> Result<Vec<u32>, String> {
+    names
+        .iter()
+        .map(|name| {
+            if let Ok(gid) = name.trim().parse::<u32>() {
+                return Ok(gid);
+            }
+            match nix::unistd::Group::from_name(name.trim()) {
+                Ok(Some(g)) => Ok(g.gid.as_raw()),
+                Ok(None) => Err(format!(
+                    "no group named {name:?} on this system; create it (groupadd) or correct the name"
+                )),
+                Err(e) => Err(format!("cannot look up group {name:?}: {e}")),
+            }
+        })
+        .collect()
+}
+
 /// An existing socket file: refuse if something answers, remove it if nothing does.
 async fn clear_stale(path: &Path) -> Result<(), ControlError> {
     let probe = tokio::time::timeout(Duration::from_secs(2), UnixStream::connect(path)).await;
@@ -240,8 +291,8 @@ impl ControlServer {
             inode,
             options,
         } = self;
+        let slots = Arc::new(Slots::new(&options));
         let options = Arc::new(options);
-        let slots = Arc::new(Semaphore::new(options.max_connections));
         let mut connections = JoinSet::new();
         tokio::pin!(shutdown);
         loop {
@@ -250,12 +301,12 @@ impl ControlServer {
                 Some(_) = connections.join_next(), if !connections.is_empty() => {}
                 accepted = listener.accept() => match accepted {
                     Ok((stream, _)) => {
-                        let permit = Arc::clone(&slots).try_acquire_owned().ok();
+                        let slot = Slots::admit(&slots);
                         let channels = channels.clone();
                         let options = Arc::clone(&options);
                         connections.spawn(async move {
-                            match permit {
-                                Some(_permit) => serve_connection(stream, channels, &options).await,
+                            match slot {
+                                Some(slot) => serve_connection(stream, slot, channels, &options).await,
                                 None => refuse_busy(stream, &options).await,
                             }
                         });
@@ -282,12 +333,127 @@ impl ControlServer {
     }
 }
 
+/// The connection slots: who holds one, who is waiting for a request (and since when), who
+/// watches. The lock is held only for table updates, never across an await.
+struct Slots {
+    max: usize,
+    max_watchers: usize,
+    table: Mutex<SlotTable>,
+}
+
+#[derive(Default)]
+struct SlotTable {
+    next_id: u64,
+    held: HashMap<u64, SlotState>,
+}
+
+struct SlotState {
+    /// Waiting for a request since then; `None` while a request is handled.
+    waiting_since: Option<Instant>,
+    watching: bool,
+    /// Told when the slot is taken from this connection for a newcomer.
+    evict: Arc<Notify>,
+}
+
+/// A connection's slot, given back when it is dropped.
+struct Slot {
+    id: u64,
+    slots: Arc<Slots>,
+    evict: Arc<Notify>,
+}
+
+impl Slots {
+    fn new(options: &ServerOptions) -> Slots {
+        Slots {
+            max: options.max_connections,
+            max_watchers: options
+                .max_connections
+                .saturating_sub(options.reserved_for_requests),
+            table: Mutex::new(SlotTable::default()),
+        }
+    }
+
+    fn table(&self) -> std::sync::MutexGuard<'_, SlotTable> {
+        // The table stays consistent even if a holder panicked: every update is one insert
+        // or remove or field store.
+        self.table.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// A slot for a new connection: a free one, else the one of the connection that has
+    /// waited longest for a request (that connection is told to go), else none.
+    fn admit(slots: &Arc<Slots>) -> Option<Slot> {
+        let mut t = slots.table();
+        if t.held.len() >= slots.max {
+            let victim = t
+                .held
+                .iter()
+                .filter(|(_, s)| !s.watching)
+                .filter_map(|(id, s)| s.waiting_since.map(|since| (since, *id)))
+                .min()
+                .map(|(_, id)| id)?;
+            if let Some(v) = t.held.remove(&victim) {
+                v.evict.notify_one();
+            }
+        }
+        let id = t.next_id;
+        t.next_id += 1;
+        let evict = Arc::new(Notify::new());
+        t.held.insert(
+            id,
+            SlotState {
+                waiting_since: None,
+                watching: false,
+                evict: Arc::clone(&evict),
+            },
+        );
+        Some(Slot {
+            id,
+            slots: Arc::clone(slots),
+            evict,
+        })
+    }
+}
+
+impl Slot {
+    /// Marks the connection as waiting for a request (it may be evicted) or not.
+    fn waiting(&self, waiting: bool) {
+        if let Some(s) = self.slots.table().held.get_mut(&self.id) {
+            s.waiting_since = waiting.then(Instant::now);
+        }
+    }
+
+    /// Makes the connection a watcher if the watchers' share of the slots allows it.
+    fn start_watching(&self) -> bool {
+        let mut t = self.slots.table();
+        let watchers = t.held.values().filter(|s| s.watching).count();
+        match t.held.get_mut(&self.id) {
+            Some(s) if s.watching => true,
+            Some(s) if watchers < self.slots.max_watchers => {
+                s.watching = true;
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Completes when the slot has been given to a newcomer.
+    async fn evicted(&self) {
+        self.evict.notified().await;
+    }
+}
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        self.slots.table().held.remove(&self.id);
+    }
+}
+
 /// A client beyond `max_connections`: one error, then close.
 async fn refuse_busy(stream: UnixStream, options: &ServerOptions) {
     let (_, mut writer) = stream.into_split();
     let msg = Message::Error {
         message: format!(
-            "the daemon already serves {} control connections; close some (stray `surfscan status --watch`?) and retry",
+            "the daemon already serves {} control connections, all watching or with a request in progress; close some (stray `surfscan status --watch`?) and retry",
             options.max_connections
         ),
     };
@@ -299,15 +465,107 @@ async fn refuse_busy(stream: UnixStream, options: &ServerOptions) {
 enum Closed {
     /// A write did not complete within the bound.
     Slow,
+    /// No complete request within the bound.
+    Idle,
+    /// Its slot was given to a newcomer while it sent nothing.
+    Evicted,
     /// The client went away or the socket failed.
     Io(io::Error),
 }
 
+/// The peer's identity as the kernel recorded it when it connected.
+#[derive(Debug, Clone)]
+struct PeerInfo {
+    peer: Peer,
+    /// Primary and supplementary groups; `None` when they cannot be read.
+    groups: Option<Vec<u32>>,
+}
+
+fn peer_info(stream: &UnixStream) -> Option<PeerInfo> {
+    let cred = stream.peer_cred().ok()?;
+    let peer = Peer {
+        uid: cred.uid(),
+        gid: cred.gid(),
+        pid: cred.pid().and_then(|p| u32::try_from(p).ok()),
+    };
+    let groups = peer_groups(stream.as_raw_fd()).ok().map(|mut g| {
+        g.push(peer.gid);
+        g.sort_unstable();
+        g.dedup();
+        g
+    });
+    Some(PeerInfo { peer, groups })
+}
+
+/// `SO_PEERGROUPS` (Linux 4.13): the supplementary groups of the peer's credentials at
+/// connect time. The number is the asm-generic one, which libc does not export; the
+/// architectures with their own socket numbering (mips, sparc) and other systems fall back to
+/// the primary group alone.
+const SO_PEERGROUPS: Option<libc::c_int> = if cfg!(all(
+    target_os = "linux",
+    not(any(
+        target_arch = "mips",
+        target_arch = "mips64",
+        target_arch = "sparc",
+        target_arch = "sparc64"
+    ))
+)) {
+    Some(59)
+} else {
+    None
+};
+
+fn peer_groups(fd: std::os::unix::io::RawFd) -> io::Result<Vec<u32>> {
+    let Some(option) = SO_PEERGROUPS else {
+        return Err(io::Error::from(io::ErrorKind::Unsupported));
+    };
+    let gid_size = std::mem::size_of::<libc::gid_t>();
+    let mut capacity = 64usize;
+    loop {
+        let mut buf: Vec<libc::gid_t> = vec![0; capacity];
+        let mut len = (capacity * gid_size) as libc::socklen_t;
+        // SAFETY: `buf` holds `len` bytes; the kernel writes at most `len` bytes into it and
+        // stores the length it needs (or wrote) in `len`.
+        let r = unsafe {
+            libc::getsockopt(
+                fd,
+                libc::SOL_SOCKET,
+                option,
+                buf.as_mut_ptr().cast(),
+                &mut len,
+            )
+        };
+        let needed = len as usize / gid_size;
+        if r == 0 {
+            buf.truncate(needed);
+            return Ok(buf);
+        }
+        let e = io::Error::last_os_error();
+        if e.raw_os_error() == Some(libc::ERANGE) && needed > capacity {
+            capacity = needed;
+            continue;
+        }
+        return Err(e);
+    }
+}
+
+/// Whether the peer may command under `allowed`: one of its groups is listed. Without its
+/// supplementary groups only the primary group counts.
+fn may_command(info: Option<&PeerInfo>, allowed: &[u32]) -> bool {
+    let Some(info) = info else { return false };
+    match &info.groups {
+        Some(groups) => groups.iter().any(|g| allowed.contains(g)),
+        None => allowed.contains(&info.peer.gid),
+    }
+}
+
 async fn serve_connection(
     stream: UnixStream,
+    slot: Slot,
     mut channels: ControlChannels,
     options: &ServerOptions,
 ) {
+    let peer = peer_info(&stream);
     let (reader, mut writer) = stream.into_split();
     let mut lines = FramedRead::new(reader, RequestCodec::new(options.max_line_bytes));
     let hello = Message::Hello {
@@ -318,14 +576,22 @@ async fn serve_connection(
     let mut watching = false;
     let result: Result<(), Closed> = async {
         send(&mut writer, &hello, options.write_timeout).await?;
+        let mut deadline = Instant::now() + options.request_timeout;
+        slot.waiting(true);
         loop {
             tokio::select! {
+                () = slot.evicted(), if !watching => return Err(Closed::Evicted),
+                () = tokio::time::sleep_until(deadline), if !watching => return Err(Closed::Idle),
                 frame = lines.next() => match frame {
                     None => return Ok(()),
                     Some(Err(e)) => return Err(Closed::Io(e)),
                     Some(Ok(frame)) => {
-                        let reply = answer(frame, &mut channels, &mut watching, options).await;
+                        slot.waiting(false);
+                        let ctx = Context { slot: &slot, peer: peer.as_ref(), options };
+                        let reply = answer(frame, &mut channels, &mut watching, &ctx).await;
                         send(&mut writer, &reply, options.write_timeout).await?;
+                        deadline = Instant::now() + options.request_timeout;
+                        slot.waiting(!watching);
                     }
                 },
                 changed = channels.status.changed(), if watching => {
@@ -342,6 +608,7 @@ async fn serve_connection(
         }
     }
     .await;
+    let farewell = |message: String| Message::Error { message };
     match result {
         Ok(()) => tracing::debug!("control client disconnected"),
         Err(Closed::Slow) => tracing::warn!(
@@ -349,8 +616,34 @@ async fn serve_connection(
             watching,
             "control client dropped: it did not read its messages in time"
         ),
+        Err(Closed::Idle) => {
+            tracing::info!(
+                timeout_ms = options.request_timeout.as_millis() as u64,
+                "control client dropped: no complete request in time"
+            );
+            let msg = farewell(format!(
+                "no complete request within {} s; the connection is closed (send one JSON object per line, ending in a newline)",
+                options.request_timeout.as_secs_f64()
+            ));
+            let _ = send(&mut writer, &msg, options.write_timeout).await;
+        }
+        Err(Closed::Evicted) => {
+            tracing::info!("control client dropped: its slot went to a new connection");
+            let msg = farewell(format!(
+                "all {} control connections were taken and this one had sent no request, so it was closed to let another client in; send the request right after connecting",
+                options.max_connections
+            ));
+            let _ = send(&mut writer, &msg, options.write_timeout).await;
+        }
         Err(Closed::Io(e)) => tracing::debug!(error = %e, "control connection ended"),
     }
+}
+
+/// What [`answer`] needs to know about the connection.
+struct Context<'a> {
+    slot: &'a Slot,
+    peer: Option<&'a PeerInfo>,
+    options: &'a ServerOptions,
 }
 
 /// The reply to one request line.
@@ -358,8 +651,9 @@ async fn answer(
     frame: Frame,
     channels: &mut ControlChannels,
     watching: &mut bool,
-    options: &ServerOptions,
+    ctx: &Context<'_>,
 ) -> Message {
+    let options = ctx.options;
     let line = match frame {
         Frame::Line(line) => line,
         Frame::TooLong => {
@@ -376,13 +670,21 @@ async fn answer(
             }
         }
     };
-    let request: Request = match serde_json::from_str(&line) {
+    let request = match parse_request(&line) {
         Ok(r) => r,
-        Err(e) => return malformed(&line, &e),
+        Err(message) => return message,
     };
     let command = match request {
         Request::Status => return snapshot(&mut channels.status, false),
         Request::Watch => {
+            if !ctx.slot.start_watching() {
+                return Message::Error {
+                    message: format!(
+                        "{} clients already watch, the most this daemon allows (the other slots are kept for requests); close a stray `surfscan status --watch` and retry",
+                        options.max_connections.saturating_sub(options.reserved_for_requests)
+                    ),
+                };
+            }
             *watching = true;
             return snapshot(&mut channels.status, true);
         }
@@ -399,7 +701,61 @@ async fn answer(
             notes,
         },
     };
-    forward(command, channels, options.reply_timeout).await
+    let name = command_name(&command);
+    let Some(info) = ctx.peer else {
+        return Message::Error {
+            message: format!("{name} refused: the kernel did not say who sent it (SO_PEERCRED failed), so it cannot be recorded"),
+        };
+    };
+    if let Some(allowed) = &options.allowed_groups {
+        if !may_command(Some(info), allowed) {
+            tracing::warn!(uid = info.peer.uid, pid = ?info.peer.pid, command = name, "control command refused: not in [control] allowed-groups");
+            let groups = match &info.groups {
+                Some(g) => format!("groups {g:?}"),
+                None => format!("primary group {}", info.peer.gid),
+            };
+            return Message::Error {
+                message: format!(
+                    "{name} refused: uid {} ({groups}) is in none of the groups [control] allowed-groups names (gids {allowed:?}); status and watch stay open, ask the station's administrator to add you to one of them",
+                    info.peer.uid
+                ),
+            };
+        }
+    }
+    forward(command, info.peer, channels, options.reply_timeout).await
+}
+
+/// Parses one request line strictly: besides what serde refuses (an unknown class, a
+/// misspelt `start` field), a field the request's class does not have is refused too, e.g.
+/// `{"class":"pause","force":true}` (serde's `deny_unknown_fields` does not reach the
+/// field-less classes of an internally tagged enum). The known fields are those the request
+/// has when serialised, so a field added to a request is known without a second list.
+pub fn parse_request(line: &str) -> Result<Request, Message> {
+    let value: serde_json::Value = serde_json::from_str(line).map_err(|e| malformed(line, &e))?;
+    let request = Request::deserialize(&value).map_err(|e| malformed(line, &e))?;
+    let known = serde_json::to_value(&request).unwrap_or_default();
+    if let (Some(given), Some(known)) = (value.as_object(), known.as_object()) {
+        if let Some(unknown) = given.keys().find(|k| !known.contains_key(*k)) {
+            let class = known.get("class").and_then(|c| c.as_str()).unwrap_or("?");
+            let mut fields: Vec<&str> = known
+                .keys()
+                .map(String::as_str)
+                .filter(|k| *k != "class")
+                .collect();
+            fields.sort_unstable();
+            let takes = if fields.is_empty() {
+                "takes no fields besides class".to_owned()
+            } else {
+                format!("takes {}", fields.join(", "))
+            };
+            return Err(Message::Error {
+                message: format!(
+                    "unknown field {unknown:?} in a {class} request; {class} {takes}, and nothing is carried out"
+                ),
+            });
+        }
+    }
+    Ok(request)
 }
 
 /// The error for a line that is not a valid request, naming what was wrong.
@@ -431,18 +787,23 @@ fn snapshot(status: &mut watch::Receiver<Status>, mark_seen: bool) -> Message {
     Message::Status(Box::new(s))
 }
 
-/// Sends a command to the runner and turns its answer into `Ack` or `Error`.
-async fn forward(
-    command: OperatorCommand,
-    channels: &ControlChannels,
-    reply_timeout: Duration,
-) -> Message {
-    let name = match &command {
+fn command_name(command: &OperatorCommand) -> &'static str {
+    match command {
         OperatorCommand::Pause => "pause",
         OperatorCommand::Resume => "resume",
         OperatorCommand::Abort => "abort",
         OperatorCommand::Start { .. } => "start",
-    };
+    }
+}
+
+/// Sends a command to the runner and turns its answer into `Ack` or `Error`.
+async fn forward(
+    command: OperatorCommand,
+    peer: Peer,
+    channels: &ControlChannels,
+    reply_timeout: Duration,
+) -> Message {
+    let name = command_name(&command);
     let gone = || {
         Message::Error {
         message: format!(
@@ -454,7 +815,11 @@ async fn forward(
     let exchange = async {
         channels
             .commands
-            .send(OperatorRequest { command, reply })
+            .send(OperatorRequest {
+                command,
+                peer,
+                reply,
+            })
             .await
             .map_err(|_| ())?;
         answer.await.map_err(|_| ())
@@ -652,6 +1017,52 @@ mod tests {
         let mut c = RequestCodec::new(64);
         let frames = decode_all(&mut c, &[b"\xff\xfe\n{}\n"]);
         assert_eq!(frames, vec![Frame::NotUtf8, Frame::Line("{}".into())]);
+    }
+
+    #[test]
+    fn an_unknown_field_is_refused_on_every_class() {
+        for (line, field) in [
+            (r#"{"class":"pause","force":true}"#, "force"),
+            (r#"{"class":"status","verbose":1}"#, "verbose"),
+            (r#"{"class":"watch","every":1}"#, "every"),
+            (r#"{"class":"resume","all":1}"#, "all"),
+            (r#"{"class":"abort","now":1}"#, "now"),
+            (r#"{"class":"start","specimen":"B","force":1}"#, "force"),
+        ] {
+            let Err(Message::Error { message }) = parse_request(line) else {
+                panic!("{line} accepted")
+            };
+            assert!(
+                message.contains("unknown field") && message.contains(field),
+                "{message}"
+            );
+        }
+        let Err(Message::Error { message }) = parse_request(r#"{"class":"pause","force":true}"#)
+        else {
+            panic!()
+        };
+        assert!(
+            message.contains("\"force\"") && message.contains("takes no fields"),
+            "{message}"
+        );
+        assert_eq!(
+            parse_request(r#"{"class":"pause"}"#).unwrap(),
+            Request::Pause
+        );
+        assert!(matches!(
+            parse_request(r#"{"class":"start","notes":"n"}"#).unwrap(),
+            Request::Start { notes, .. } if notes == "n"
+        ));
+    }
+
+    #[test]
+    fn groups_are_resolved_by_name_or_number() {
+        assert_eq!(
+            resolve_groups(&["root".into(), "4242".into()]).unwrap(),
+            vec![0, 4242]
+        );
+        let e = resolve_groups(&["no-such-group-here".into()]).unwrap_err();
+        assert!(e.contains("no group named \"no-such-group-here\""), "{e}");
     }
 
     #[test]

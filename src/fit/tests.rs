@@ -2,6 +2,7 @@
 //! and error reporting.
 
 use super::*;
+use crate::profile::Profile;
 
 /// Deterministic roughness-like heights (µm): a few waves plus LCG noise.
 fn rough_grid(rows: usize, cols: usize, seed: u64) -> Vec<f64> {
@@ -323,5 +324,63 @@ fn errors_name_the_offending_numbers() {
             rows: 2,
             cols: 3
         })
+    );
+}
+
+/// The residual check as it was first written: each row's iso-curve evaluated at every ū_k
+/// through the public curve evaluation (basis recomputed per point). The fast check must give
+/// the same number to the bit, since it only reuses the basis instead of recomputing it.
+fn residual_by_curve_evaluation(r: &FitResult, pitch: f64, y: &[f64], h: &[f64]) -> f64 {
+    let cols = r.params_u.len();
+    let mut worst = 0.0f64;
+    for ((row, &yy), &v) in h.chunks_exact(cols).zip(y).zip(&r.params_v) {
+        let curve = r.surface.iso_curve_u(v);
+        for (k, (&u, &z)) in r.params_u.iter().zip(row).enumerate() {
+            let p = curve.evaluate(u).unwrap();
+            let q = [k as f64 * pitch, yy, z / 1000.0];
+            let d = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
+            worst = worst.max(d);
+        }
+    }
+    worst
+}
+
+#[test]
+fn residual_reusing_the_basis_equals_per_point_evaluation_to_the_bit() {
+    for (rows, cols, p, q) in [(31, 700, 5, 5), (9, 40, 3, 2), (6, 6, 5, 5)] {
+        let h = rough_grid(rows, cols, (rows * cols) as u64);
+        let y = ys(rows, 0.01);
+        let r = fit_grid(
+            0.0005,
+            &y,
+            &h,
+            cols,
+            FitOptions {
+                degree_u: p,
+                degree_v: q,
+            },
+        )
+        .unwrap();
+        let fast = max_residual_mm(&r, 0.0005, &y, &h, cols);
+        let slow = residual_by_curve_evaluation(&r, 0.0005, &y, &h);
+        assert_eq!(
+            fast.to_bits(),
+            slow.to_bits(),
+            "{rows}x{cols}: {fast:e} vs {slow:e}"
+        );
+        assert!(fast > 0.0 && fast < 1e-12, "{fast:e}");
+        // The grid evaluation shares the code path; it must agree with the curves too.
+        let g = r.surface.evaluate_grid(&r.params_u, &r.params_v[1..2]);
+        let c = r.surface.iso_curve_u(r.params_v[1]);
+        for (pt, &u) in g.iter().zip(&r.params_u) {
+            assert_eq!(*pt, c.evaluate(u).unwrap());
+        }
+    }
+    // A grid that does not match the result is refused, not misread.
+    let h = rough_grid(7, 20, 1);
+    let r = fit_grid(0.0005, &ys(7, 0.01), &h, 20, FitOptions::default()).unwrap();
+    assert_eq!(
+        max_residual_mm(&r, 0.0005, &ys(7, 0.01), &h[..139], 20),
+        f64::INFINITY
     );
 }

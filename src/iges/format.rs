@@ -191,6 +191,41 @@ fn extend_short(out: &mut Vec<u8>, bytes: &[u8]) {
     out.truncate(base + n);
 }
 
+/// Appends `bytes` (at most 32) and then `last`, with one capacity check and fixed-size copies
+/// (two overlapping copies of a power-of-two size cover every length in its range): the
+/// packing of tokens into records, the formatter's innermost loop, is written by hand here
+/// because `extend_from_slice` of a short slice costs a `memcpy` call and a second check.
+#[inline]
+fn push_short_then(out: &mut Vec<u8>, bytes: &[u8], last: u8) {
+    let n = bytes.len();
+    assert!(n <= 32);
+    out.reserve(33);
+    let len = out.len();
+    let src = bytes.as_ptr();
+    // SAFETY: `reserve(33)` guarantees 33 writable bytes from `len`; every copy below writes
+    // within [len, len + n] (n <= 32) and reads within `bytes` (each overlapping pair covers
+    // [0, n) with both copies inside it); `set_len` then covers exactly the bytes written.
+    unsafe {
+        let dst = out.as_mut_ptr().add(len);
+        if n >= 16 {
+            std::ptr::copy_nonoverlapping(src, dst, 16);
+            std::ptr::copy_nonoverlapping(src.add(n - 16), dst.add(n - 16), 16);
+        } else if n >= 8 {
+            std::ptr::copy_nonoverlapping(src, dst, 8);
+            std::ptr::copy_nonoverlapping(src.add(n - 8), dst.add(n - 8), 8);
+        } else if n >= 4 {
+            std::ptr::copy_nonoverlapping(src, dst, 4);
+            std::ptr::copy_nonoverlapping(src.add(n - 4), dst.add(n - 4), 4);
+        } else {
+            for i in 0..n {
+                *dst.add(i) = *src.add(i);
+            }
+        }
+        *dst.add(n) = last;
+        out.set_len(len + n + 1);
+    }
+}
+
 /// Copies `src` (at most 32 bytes) to the start of the 32-byte `dst` with fixed-size copies.
 #[inline]
 fn copy_short(dst: &mut [u8], src: &[u8]) {
@@ -339,6 +374,26 @@ impl FieldPacker {
         self.data.push(delimiter);
     }
 
+    /// Adds pre-formatted tokens (`lens[i]` bytes each, concatenated in `text`), each followed
+    /// by `delimiter`: exactly what one [`FieldPacker::push`] per token gives, in one loop
+    /// that checks capacity once per token.
+    pub fn push_tokens(&mut self, text: &[u8], lens: &[u8], delimiter: u8) {
+        let mut at = 0usize;
+        for &len in lens {
+            let n = usize::from(len);
+            let token = &text[at..at + n];
+            at += n;
+            if n + 1 > self.width {
+                self.push(token, delimiter);
+                continue;
+            }
+            if self.data.len() - self.line_start + n + 1 > self.width {
+                self.pad_line();
+            }
+            push_short_then(&mut self.data, token, delimiter);
+        }
+    }
+
     /// Adds a real (see [`push_real`]) followed by `delimiter`, formatting it in place.
     /// Returns `false` (adding nothing) for NaN or infinity.
     pub fn push_real(&mut self, value: f64, delimiter: u8) -> bool {
@@ -366,6 +421,27 @@ impl FieldPacker {
         }
         self.data.extend_from_slice(records);
         self.line_start = self.data.len();
+    }
+
+    /// Bytes held: the complete records not yet drained and the one being filled.
+    pub fn bytes(&self) -> usize {
+        self.data.len()
+    }
+
+    /// Pads the record being filled to the full width, so that what follows starts a new one.
+    pub fn pad_last(&mut self) {
+        if self.data.len() > self.line_start {
+            self.pad_line();
+        }
+    }
+
+    /// Hands the complete records (a multiple of the width) to `f` and keeps only the record
+    /// being filled, so a long entity can be written as it is packed.
+    pub fn drain_records<R>(&mut self, f: impl FnOnce(&[u8]) -> R) -> R {
+        let r = f(&self.data[..self.line_start]);
+        self.data.drain(..self.line_start);
+        self.line_start = 0;
+        r
     }
 
     fn pad_line(&mut self) {

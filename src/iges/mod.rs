@@ -1,8 +1,9 @@
 //! IGES 5.3 writer (entity 128, millimetres) and a strict reader of the files it writes.
 //!
 //! * [`format`](mod@format): reals (shortest round-trip, `.` and `E`), Hollerith strings, record packing.
-//! * [`writer`]: [`write_iges`] formats surfaces into S/G/D/P/T sections; [`plan_files`]
-//!   groups the exact patches of a surface too large for one file into several files.
+//! * [`writer`]: [`write_iges_seekable`] (a file) and [`write_iges`] (any writer) stream
+//!   surfaces into S/G/D/P/T sections; [`plan_parts`] groups the exact patches of a surface too
+//!   large for one file into several files, planned from token counts.
 //! * [`split`]: exact patches along v by knot insertion, for surfaces too large for one entity.
 //! * [`reader`]: [`read_iges`] checks the structure and rebuilds the surfaces.
 //!
@@ -11,12 +12,17 @@
 
 pub mod format;
 pub mod reader;
+#[cfg(test)]
+mod reference;
 pub mod split;
 pub mod writer;
 
 pub use reader::{read_iges, IgesFile};
 pub use split::{split_v, split_v_middle};
-pub use writer::{plan_files, write_iges, IgesOptions, IgesStats, MAX_SECTION_LINES};
+pub use writer::{
+    parameter_lines_bound, plan_files, plan_parts, write_iges, write_iges_seekable, IgesOptions,
+    IgesStats, MAX_SECTION_LINES,
+};
 
 use thiserror::Error;
 

@@ -3,12 +3,23 @@
 //!
 //! Layer 1 (pure logic): depends on [`crate::nurbs`] and the formatting in [`super::format`];
 //! a formatter over any `io::Write` (the caller picks and syncs the file).
+//!
+//! The Parameter Data is streamed: each entity's records are formatted in pieces (the reals
+//! on worker threads, packed into records in order on the calling thread) and written as they
+//! come, so a file of any size needs a few MB of buffers. The Directory Entry section, which
+//! precedes the data but holds each entity's line count, is written with zero counts first and
+//! rewritten in place at the end (its lines have a fixed width); [`write_iges_seekable`] does
+//! this on a seekable writer such as a file, [`write_iges`] on any writer through a buffer.
+//! Parts and patches are planned from token counts (an upper bound on the lines of each
+//! entity), never by formatting the surface first.
 
 use super::format::{ascii_printable, hollerith, push_real, push_right, push_uint, FieldPacker};
 use super::split::split_v_middle;
 use super::IgesError;
 use crate::nurbs::NurbsSurface;
+use std::borrow::Cow;
 use std::io::{self, Write};
+use std::io::{Seek, SeekFrom};
 
 /// Largest sequence number a section may reach (7-digit field).
 pub const MAX_SECTION_LINES: usize = 9_999_999;
@@ -70,38 +81,131 @@ pub struct IgesStats {
     pub bytes: u64,
 }
 
-/// Nets with at least this many poles are formatted in parallel chunks.
+/// Nets with at least this many poles are formatted as [`POLE_CHUNKS`] chunks, each starting
+/// a fresh record (a fixed layout, so the bytes do not depend on how many cores run it).
 const PARALLEL_POLES: usize = 65_536;
-/// Number of chunks a large net is formatted in (fixed, so output is reproducible).
+/// Number of chunks a large net is formatted in.
 const POLE_CHUNKS: usize = 4;
+/// Poles whose reals a worker formats at a time.
+const PIECE_POLES: usize = 4096;
+/// Records are handed on (and P lines written) in blocks of about this many bytes.
+const BLOCK_BYTES: usize = 1 << 20;
 
 /// Minimum user-intended resolution written in G19, mm (well below height resolution).
 pub const MIN_RESOLUTION_MM: f64 = 1e-7;
 
-/// The parameter data (columns 1–64 of each P line) of one entity, as consecutive segments
-/// of whole 64-column records (kept apart rather than copied into one buffer).
-struct ParamText {
-    segments: Vec<Vec<u8>>,
+/// The IGES texts of a piece of poles' coordinates, concatenated, with each one's length.
+#[derive(Default)]
+struct Tokens {
+    text: Vec<u8>,
+    lens: Vec<u8>,
 }
 
-impl ParamText {
-    /// Number of P lines.
-    fn lines(&self) -> usize {
-        self.segments.iter().map(|s| s.len() / 64).sum()
+/// Formats every coordinate of `poles` (the first being pole `first` of its patch) into
+/// `tokens`; a non-finite coordinate is returned as (pole index, value).
+fn format_pole_tokens(
+    poles: &[[f64; 3]],
+    first: usize,
+    tokens: &mut Tokens,
+) -> Result<(), (usize, f64)> {
+    tokens.text.clear();
+    tokens.lens.clear();
+    for (k, pole) in poles.iter().enumerate() {
+        for &c in pole {
+            let before = tokens.text.len();
+            if !push_real(&mut tokens.text, c) {
+                return Err((first + k, c));
+            }
+            tokens.lens.push((tokens.text.len() - before) as u8);
+        }
     }
-
-    /// The 64-column records in order.
-    fn records(&self) -> impl Iterator<Item = &[u8]> {
-        self.segments.iter().flat_map(|s| s.chunks_exact(64))
-    }
+    Ok(())
 }
 
-/// Formats the parameter data (columns 1–64 of each P line) of one entity 128.
-fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<ParamText, IgesError> {
+/// Threads that format reals while the calling thread packs and writes.
+fn worker_count() -> usize {
+    std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+        .clamp(1, 4)
+}
+
+/// Formats the coordinates of `poles` piece by piece on `workers` threads (worker w takes
+/// pieces w, w + workers, …, at most two ahead) and hands each piece's tokens to `consume` in
+/// pole order. `first` is the index of `poles[0]` in its patch (for errors).
+fn for_each_piece_in_order(
+    poles: &[[f64; 3]],
+    first: usize,
+    patch: usize,
+    workers: usize,
+    consume: &mut dyn FnMut(&Tokens) -> Result<(), IgesError>,
+) -> Result<(), IgesError> {
+    let non_finite = |(index, value): (usize, f64)| IgesError::NonFinite {
+        patch,
+        what: "pole coordinate",
+        index,
+        value,
+    };
+    let pieces: Vec<&[[f64; 3]]> = poles.chunks(PIECE_POLES).collect();
+    if workers <= 1 || pieces.len() <= 1 {
+        let mut tokens = Tokens::default();
+        for (i, piece) in pieces.iter().enumerate() {
+            format_pole_tokens(piece, first + i * PIECE_POLES, &mut tokens).map_err(non_finite)?;
+            consume(&tokens)?;
+        }
+        return Ok(());
+    }
+    std::thread::scope(|scope| {
+        let mut receivers = Vec::with_capacity(workers);
+        for w in 0..workers {
+            let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Tokens, (usize, f64)>>(2);
+            receivers.push(rx);
+            let pieces = &pieces;
+            scope.spawn(move || {
+                for i in (w..pieces.len()).step_by(workers) {
+                    let mut tokens = Tokens::default();
+                    let r = format_pole_tokens(pieces[i], first + i * PIECE_POLES, &mut tokens)
+                        .map(|()| tokens);
+                    let failed = r.is_err();
+                    // A closed channel means the consumer stopped (an error): stop too.
+                    if tx.send(r).is_err() || failed {
+                        return;
+                    }
+                }
+            });
+        }
+        for i in 0..pieces.len() {
+            let piece = receivers[i % workers].recv().map_err(|_| {
+                IgesError::Io(io::Error::other("a formatting thread stopped early"))
+            })?;
+            consume(&piece.map_err(non_finite)?)?;
+        }
+        Ok(())
+    })
+}
+
+/// Streams the parameter data (columns 1–64 of each P line) of one entity 128 to `emit` in
+/// blocks of whole 64-column records, and returns the number of records. The layout: header,
+/// knots and weights from one record on; the poles in one chunk, or [`POLE_CHUNKS`] chunks
+/// for large nets, each starting a fresh record; the parameter range on a fresh record.
+fn stream_entity_128(
+    s: &NurbsSurface,
+    patch: usize,
+    workers: usize,
+    emit: &mut dyn FnMut(&[u8]) -> Result<(), IgesError>,
+) -> Result<usize, IgesError> {
     let (nu, nv) = (s.count_u(), s.count_v());
-    // Header, knots and weights: 3 bytes per weight and up to 25 per knot.
-    let knots = s.knots_u().len() + s.knots_v().len();
-    let mut p = FieldPacker::with_capacity(64, nu * nv * 3 + knots * 25 + 4096);
+    let mut records = 0usize;
+    let mut hand_on = |p: &mut FieldPacker, all: bool| -> Result<(), IgesError> {
+        if all {
+            p.pad_last();
+        }
+        p.drain_records(|block| {
+            records += block.len() / 64;
+            emit(block)
+        })
+    };
+    let mut p = FieldPacker::with_capacity(64, BLOCK_BYTES + 128);
     let mut tok = Vec::with_capacity(32);
     let closed_u = (0..nv).all(|j| s.pole(0, j) == s.pole(nu - 1, j));
     let closed_v = (0..nu).all(|i| s.pole(i, 0) == s.pole(i, nv - 1));
@@ -140,55 +244,29 @@ fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<ParamText, IgesEr
     for (i, &k) in s.knots_v().iter().enumerate() {
         real(&mut p, k, "v knot", i, b',')?;
     }
-    for _ in 0..nu * nv {
+    for n in 0..nu * nv {
         p.push(b"1.", b',');
+        if n % 65_536 == 0 && p.bytes() >= BLOCK_BYTES {
+            hand_on(&mut p, false)?;
+        }
     }
-    // Poles are most of the text: large nets are formatted in a fixed number of chunks on
-    // scoped threads, each chunk starting a fresh record (a record may end early after any
-    // delimiter), so the output does not depend on how many cores run it.
+    hand_on(&mut p, true)?;
     let poles = s.poles();
     let chunk = if poles.len() >= PARALLEL_POLES {
         poles.len().div_ceil(POLE_CHUNKS)
     } else {
         poles.len().max(1)
     };
-    let format_chunk = |first: usize, part: &[[f64; 3]]| -> Result<Vec<u8>, IgesError> {
-        let mut q = FieldPacker::with_capacity(64, part.len() * 72 + 64);
-        for (k, pole) in part.iter().enumerate() {
-            for &c in pole {
-                real(&mut q, c, "pole coordinate", first + k, b',')?;
+    for (n, part) in poles.chunks(chunk).enumerate() {
+        let mut q = FieldPacker::with_capacity(64, BLOCK_BYTES + 4096);
+        for_each_piece_in_order(part, n * chunk, patch, workers, &mut |t: &Tokens| {
+            q.push_tokens(&t.text, &t.lens, b',');
+            if q.bytes() >= BLOCK_BYTES {
+                hand_on(&mut q, false)?;
             }
-        }
-        Ok(q.finish())
-    };
-    let parts: Vec<Result<Vec<u8>, IgesError>> = if poles.len() >= PARALLEL_POLES {
-        std::thread::scope(|scope| {
-            let handles: Vec<_> = poles
-                .chunks(chunk)
-                .enumerate()
-                .map(|(n, part)| {
-                    let f = &format_chunk;
-                    scope.spawn(move || f(n * chunk, part))
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| {
-                    h.join().unwrap_or_else(|_| {
-                        Err(IgesError::Io(io::Error::other("formatting thread failed")))
-                    })
-                })
-                .collect()
-        })
-    } else {
-        vec![format_chunk(0, poles)]
-    };
-    // Each pole chunk starts a fresh record and so does the parameter range after them, as
-    // if all were appended to one packer.
-    let mut segments = Vec::with_capacity(parts.len() + 2);
-    segments.push(p.finish());
-    for part in parts {
-        segments.push(part?);
+            Ok(())
+        })?;
+        hand_on(&mut q, true)?;
     }
     let mut tail = FieldPacker::new(64);
     let (ku, kv) = (s.knots_u(), s.knots_v());
@@ -202,46 +280,19 @@ fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<ParamText, IgesEr
             if i == 3 { b';' } else { b',' },
         )?;
     }
-    segments.push(tail.finish());
-    Ok(ParamText { segments })
+    hand_on(&mut tail, true)?;
+    Ok(records)
 }
 
-/// Formats `surface`, splitting it along v into exact patches until each fits in
-/// `max_lines` P lines. Appends (surface P data) per patch.
-fn format_patches(
-    surface: &NurbsSurface,
+/// Splits `surface` along v until each patch's P lines are bounded by `max_lines` (from
+/// token counts, [`parameter_lines_bound`]); appends (patch, its bound) in v order. A surface
+/// that fits is borrowed, not copied.
+fn split_to_fit<'a>(
+    surface: Cow<'a, NurbsSurface>,
     max_lines: usize,
-    out: &mut Vec<ParamText>,
+    out: &mut Vec<(Cow<'a, NurbsSurface>, usize)>,
 ) -> Result<(), IgesError> {
-    let data = entity_128_params(surface, out.len())?;
-    let lines = data.lines();
-    if lines <= max_lines {
-        out.push(data);
-        return Ok(());
-    }
-    drop(data);
-    match split_v_middle(surface) {
-        Some((lower, upper)) => {
-            format_patches(&lower, max_lines, out)?;
-            format_patches(&upper, max_lines, out)
-        }
-        None => Err(IgesError::EntityTooLarge {
-            lines,
-            max_lines,
-            count_u: surface.count_u(),
-            count_v: surface.count_v(),
-        }),
-    }
-}
-
-/// Splits `surface` along v until each patch needs at most `max_lines` P lines; appends
-/// (patch, its P line count) in v order. Formats each candidate once to count its lines.
-fn split_to_fit(
-    surface: NurbsSurface,
-    max_lines: usize,
-    out: &mut Vec<(NurbsSurface, usize)>,
-) -> Result<(), IgesError> {
-    let lines = entity_128_params(&surface, out.len())?.lines();
+    let lines = parameter_lines_bound(&surface);
     if lines <= max_lines {
         out.push((surface, lines));
         return Ok(());
@@ -249,8 +300,8 @@ fn split_to_fit(
     match split_v_middle(&surface) {
         Some((lower, upper)) => {
             drop(surface);
-            split_to_fit(lower, max_lines, out)?;
-            split_to_fit(upper, max_lines, out)
+            split_to_fit(Cow::Owned(lower), max_lines, out)?;
+            split_to_fit(Cow::Owned(upper), max_lines, out)
         }
         None => Err(IgesError::EntityTooLarge {
             lines,
@@ -264,11 +315,12 @@ fn split_to_fit(
 /// Longest real token with its delimiter: sign, 17 digits, point, `E-308`, delimiter.
 const MAX_REAL_TOKEN: usize = 25;
 
-/// An upper bound on the P lines [`entity_128_params`] takes for `s`, from token counts
-/// alone. Every token (with its delimiter) is at most [`MAX_REAL_TOKEN`] bytes, so each
-/// 64-column record of a segment but the last holds at least two; the weights (`1.,`)
-/// hold 21 a record; each segment may end with one partial record.
-fn p_lines_bound(s: &NurbsSurface) -> usize {
+/// An upper bound on the P lines one entity 128 of `s` takes, from token counts alone (no
+/// formatting). Every token (with its delimiter) is at most 25 bytes, so each 64-column record
+/// of a segment but the last holds at least two; the weights (`1.,`) hold 21 a record; each
+/// segment may end with one partial record. Exceeds the real count by at most about 60 %
+/// (worst-case 17-digit tokens; about 25 % for a fit's poles).
+pub fn parameter_lines_bound(s: &NurbsSurface) -> usize {
     let poles = s.count_u().saturating_mul(s.count_v());
     let per_record = 64 / MAX_REAL_TOKEN;
     let head_tokens = 10 + s.knots_u().len() + s.knots_v().len();
@@ -286,28 +338,26 @@ fn p_lines_bound(s: &NurbsSurface) -> usize {
 }
 
 /// Plans how `surface` is written: splits it along v into exact patches (adjacent patches
-/// share their boundary pole row, so their union is exactly the surface), each needing at
-/// most `opts.max_parameter_lines_per_entity` and `opts.max_parameter_lines_per_file` P lines,
-/// then groups consecutive patches into files whose P sections stay within
-/// `opts.max_parameter_lines_per_file` (never more than [`MAX_SECTION_LINES`]). Returns one
-/// group per file, in v order; pass each group to [`write_iges`]. One group means one file.
-pub fn plan_files(
-    surface: &NurbsSurface,
+/// share their boundary pole row, so their union is exactly the surface) whose P lines are
+/// bounded ([`parameter_lines_bound`]) by `opts.max_parameter_lines_per_entity` and
+/// `opts.max_parameter_lines_per_file`, then groups consecutive patches greedily into files
+/// whose bounds add up to at most `opts.max_parameter_lines_per_file` (never more than
+/// [`MAX_SECTION_LINES`]). Returns one group per file, in v order; a surface that fits one
+/// file is borrowed whole. Nothing is formatted: the bound is computed from token counts.
+pub fn plan_parts<'a>(
+    surface: &'a NurbsSurface,
     opts: &IgesOptions,
-) -> Result<Vec<Vec<NurbsSurface>>, IgesError> {
+) -> Result<Vec<Cow<'a, [NurbsSurface]>>, IgesError> {
     let file_cap = opts
         .max_parameter_lines_per_file
         .clamp(1, MAX_SECTION_LINES);
     let entity_cap = opts.max_parameter_lines_per_entity.clamp(1, file_cap);
-    // Usually the whole surface fits one entity in one file by a wide margin; a bound on its
-    // P lines shows that without formatting it (write_iges formats it once, later). The
-    // result is the one the exact count below would give.
-    if p_lines_bound(surface) <= entity_cap {
-        return Ok(vec![vec![surface.clone()]]);
+    if parameter_lines_bound(surface) <= entity_cap {
+        return Ok(vec![Cow::Borrowed(std::slice::from_ref(surface))]);
     }
     let mut patches = Vec::new();
-    split_to_fit(surface.clone(), entity_cap, &mut patches)?;
-    let mut files: Vec<Vec<NurbsSurface>> = Vec::new();
+    split_to_fit(Cow::Borrowed(surface), entity_cap, &mut patches)?;
+    let mut files: Vec<Cow<'a, [NurbsSurface]>> = Vec::new();
     let mut current: Vec<NurbsSurface> = Vec::new();
     let mut current_lines = 0usize;
     for (patch, lines) in patches {
@@ -315,16 +365,27 @@ pub fn plan_files(
         let fits =
             current_lines + lines <= file_cap && 2 * (current.len() + 1) <= MAX_SECTION_LINES;
         if !current.is_empty() && !fits {
-            files.push(std::mem::take(&mut current));
+            files.push(Cow::Owned(std::mem::take(&mut current)));
             current_lines = 0;
         }
         current_lines += lines;
-        current.push(patch);
+        current.push(patch.into_owned());
     }
     if !current.is_empty() {
-        files.push(current);
+        files.push(Cow::Owned(current));
     }
     Ok(files)
+}
+
+/// [`plan_parts`] with every group owned.
+pub fn plan_files(
+    surface: &NurbsSurface,
+    opts: &IgesOptions,
+) -> Result<Vec<Vec<NurbsSurface>>, IgesError> {
+    Ok(plan_parts(surface, opts)?
+        .into_iter()
+        .map(Cow::into_owned)
+        .collect())
 }
 
 /// Wraps free text to 72 columns at spaces (hard-splitting longer words).
@@ -377,55 +438,22 @@ fn date_stamp(t: &chrono::NaiveDateTime) -> String {
     hollerith(&t.format("%Y%m%d.%H%M%S").to_string())
 }
 
-/// Writes `surfaces` as an IGES 5.3 file: one independent entity 128 per surface (or per
-/// patch when a surface needs more than `opts.max_parameter_lines_per_entity` P lines).
-pub fn write_iges<W: Write>(
-    w: W,
+/// The Start and Global sections as records; returns their line counts.
+fn start_and_global(
+    out: &mut Vec<u8>,
     surfaces: &[NurbsSurface],
     opts: &IgesOptions,
-) -> Result<IgesStats, IgesError> {
-    if surfaces.is_empty() {
-        return Err(IgesError::NoSurfaces);
-    }
-    let file_cap = opts
-        .max_parameter_lines_per_file
-        .clamp(1, MAX_SECTION_LINES);
-    let max_lines = opts
-        .max_parameter_lines_per_entity
-        .clamp(1, MAX_SECTION_LINES);
-    let mut patches: Vec<ParamText> = Vec::new();
-    for s in surfaces {
-        format_patches(s, max_lines, &mut patches)?;
-    }
-    let p_lines: usize = patches.iter().map(ParamText::lines).sum();
-    let d_lines = 2 * patches.len();
-    if p_lines > file_cap {
-        return Err(IgesError::SectionTooLong {
-            section: 'P',
-            lines: p_lines,
-            max_lines: file_cap,
-        });
-    }
-    if d_lines > MAX_SECTION_LINES {
-        return Err(IgesError::SectionTooLong {
-            section: 'D',
-            lines: d_lines,
-            max_lines: MAX_SECTION_LINES,
-        });
-    }
+) -> (usize, usize) {
     let max_coord = surfaces
         .iter()
         .flat_map(|s| s.poles().iter())
         .flat_map(|p| p.iter())
         .fold(0.0f64, |m, c| m.max(c.abs()));
-
-    let mut counter = CountingWriter { inner: w, bytes: 0 };
-    let mut buf = Vec::with_capacity((1 << 21) + 128);
-
+    let buf = out;
     // Start section.
     let start = wrap72(&opts.start_lines);
     for (i, line) in start.iter().enumerate() {
-        record(&mut buf, line.as_bytes(), b'S', i + 1);
+        record(buf, line.as_bytes(), b'S', i + 1);
     }
 
     // Global section: 26 parameters.
@@ -474,77 +502,187 @@ pub fn write_iges<W: Write>(
     let g_data = g.finish();
     let g_lines = g_data.len() / 72;
     for (i, chunk) in g_data.chunks_exact(72).enumerate() {
-        record(&mut buf, chunk, b'G', i + 1);
+        record(buf, chunk, b'G', i + 1);
     }
 
-    // Directory entries.
+    (start.len(), g_lines)
+}
+
+/// The Directory Entry lines of entities 128 with the given P line counts.
+fn directory(out: &mut Vec<u8>, counts: &[usize]) {
     let mut pd_pointer = 1usize;
     let mut field = Vec::with_capacity(80);
-    for (k, data) in patches.iter().enumerate() {
-        let n = data.lines();
+    for (k, &n) in counts.iter().enumerate() {
         field.clear();
         for v in [128, pd_pointer as i64, 0, 0, 0, 0, 0, 0] {
             push_right(&mut field, v, 8);
         }
         field.extend_from_slice(b"00000000");
-        record(&mut buf, &field, b'D', 2 * k + 1);
+        record(out, &field, b'D', 2 * k + 1);
         field.clear();
         for v in [128, 0, 0, n as i64, 0] {
             push_right(&mut field, v, 8);
         }
         field.extend_from_slice(b"                   PATCH");
         push_right(&mut field, (k + 1) as i64, 8);
-        record(&mut buf, &field, b'D', 2 * k + 2);
+        record(out, &field, b'D', 2 * k + 2);
         pd_pointer += n;
     }
-    counter.write_all(&buf)?;
-    buf.clear();
+}
 
-    // Parameter data: columns 65–72 hold the DE back-pointer.
-    // Each line is assembled in a fixed 81-byte template; the sequence number is counted up
-    // in its decimal digits (p_lines fits in the 7-digit field, checked above).
-    let mut line = [b' '; 81];
-    line[72] = b'P';
-    line[80] = b'\n';
-    let mut seq = SequenceField::new();
-    for (k, data) in patches.iter().enumerate() {
-        let mut back = Vec::with_capacity(8);
-        push_right(&mut back, (2 * k + 1) as i64, 8);
-        line[64..72].copy_from_slice(&back);
-        for chunk in data.records() {
-            line[..64].copy_from_slice(chunk);
-            seq.increment();
-            line[73..80].copy_from_slice(&seq.digits);
-            buf.extend_from_slice(&line);
-            if buf.len() >= 1 << 21 {
-                counter.write_all(&buf)?;
-                buf.clear();
-            }
-        }
-    }
-
-    // Terminate.
+/// The Terminate line.
+fn terminate(out: &mut Vec<u8>, counts: [usize; 4]) {
     let mut t = Vec::with_capacity(72);
-    for (letter, count) in [
-        (b'S', start.len()),
-        (b'G', g_lines),
-        (b'D', d_lines),
-        (b'P', p_lines),
-    ] {
+    for (letter, count) in [b'S', b'G', b'D', b'P'].into_iter().zip(counts) {
         t.push(letter);
         push_right(&mut t, count as i64, 7);
     }
-    record(&mut buf, &t, b'T', 1);
-    counter.write_all(&buf)?;
-    counter.flush()?;
+    record(out, &t, b'T', 1);
+}
+
+/// Turns 64-column parameter records into P lines: each is assembled in a fixed 81-byte
+/// template (columns 65–72 the DE back-pointer) with the sequence number counted up in place.
+struct ParameterLines {
+    line: [u8; 81],
+    seq: SequenceField,
+    count: usize,
+}
+
+impl ParameterLines {
+    fn new() -> ParameterLines {
+        let mut line = [b' '; 81];
+        line[72] = b'P';
+        line[80] = b'\n';
+        ParameterLines {
+            line,
+            seq: SequenceField::new(),
+            count: 0,
+        }
+    }
+
+    /// Sets the DE back-pointer of the lines that follow.
+    fn entity(&mut self, de: usize) {
+        let mut back = Vec::with_capacity(8);
+        push_right(&mut back, de as i64, 8);
+        self.line[64..72].copy_from_slice(&back);
+    }
+
+    /// Appends the P lines of `records` (whole 64-column records) to `out`. Past the 7-digit
+    /// field the sequence number wraps; the writer refuses such a file before it is used.
+    fn push(&mut self, records: &[u8], out: &mut Vec<u8>) {
+        for chunk in records.chunks_exact(64) {
+            self.line[..64].copy_from_slice(chunk);
+            self.seq.increment();
+            self.line[73..80].copy_from_slice(&self.seq.digits);
+            out.extend_from_slice(&self.line);
+        }
+        self.count += records.len() / 64;
+    }
+}
+
+/// Splits each surface into the patches one file holds (bounded by
+/// `opts.max_parameter_lines_per_entity`), borrowing those that fit.
+fn file_patches<'a>(
+    surfaces: &'a [NurbsSurface],
+    opts: &IgesOptions,
+) -> Result<Vec<Cow<'a, NurbsSurface>>, IgesError> {
+    if surfaces.is_empty() {
+        return Err(IgesError::NoSurfaces);
+    }
+    let max_lines = opts
+        .max_parameter_lines_per_entity
+        .clamp(1, MAX_SECTION_LINES);
+    let mut patches = Vec::new();
+    for s in surfaces {
+        split_to_fit(Cow::Borrowed(s), max_lines, &mut patches)?;
+    }
+    let d_lines = 2 * patches.len();
+    if d_lines > MAX_SECTION_LINES {
+        return Err(IgesError::SectionTooLong {
+            section: 'D',
+            lines: d_lines,
+            max_lines: MAX_SECTION_LINES,
+        });
+    }
+    Ok(patches.into_iter().map(|(p, _)| p).collect())
+}
+
+/// Writes `surfaces` as an IGES 5.3 file into a seekable writer (a file), streaming the
+/// Parameter Data as it is formatted: one independent entity 128 per surface, or per exact
+/// patch when a surface's P lines may exceed `opts.max_parameter_lines_per_entity`. The
+/// Directory Entry section is rewritten in place once the line counts are known; the writer is
+/// left at the end of the file. A P section longer than `opts.max_parameter_lines_per_file` is
+/// an error after the fact (the caller discards what was written, as it would after a full
+/// disk).
+pub fn write_iges_seekable<W: Write + Seek>(
+    mut w: W,
+    surfaces: &[NurbsSurface],
+    opts: &IgesOptions,
+) -> Result<IgesStats, IgesError> {
+    let patches = file_patches(surfaces, opts)?;
+    let file_cap = opts
+        .max_parameter_lines_per_file
+        .clamp(1, MAX_SECTION_LINES);
+    let origin = w.stream_position()?;
+    let mut buf = Vec::with_capacity(2 * BLOCK_BYTES + 4096);
+    let (s_lines, g_lines) = start_and_global(&mut buf, surfaces, opts);
+    let d_offset = buf.len() as u64;
+    let d_lines = 2 * patches.len();
+    directory(&mut buf, &vec![0; patches.len()]);
+    let workers = worker_count();
+    let mut lines = ParameterLines::new();
+    let mut counts = Vec::with_capacity(patches.len());
+    for (k, patch) in patches.iter().enumerate() {
+        lines.entity(2 * k + 1);
+        let n = stream_entity_128(patch, k, workers, &mut |records| {
+            lines.push(records, &mut buf);
+            if buf.len() >= BLOCK_BYTES {
+                w.write_all(&buf)?;
+                buf.clear();
+            }
+            Ok(())
+        })?;
+        counts.push(n);
+    }
+    let p_lines = lines.count;
+    if p_lines > file_cap {
+        return Err(IgesError::SectionTooLong {
+            section: 'P',
+            lines: p_lines,
+            max_lines: file_cap,
+        });
+    }
+    terminate(&mut buf, [s_lines, g_lines, d_lines, p_lines]);
+    w.write_all(&buf)?;
+    buf.clear();
+    directory(&mut buf, &counts);
+    w.seek(SeekFrom::Start(origin + d_offset))?;
+    w.write_all(&buf)?;
+    w.seek(SeekFrom::End(0))?;
+    w.flush()?;
     Ok(IgesStats {
         patches: patches.len(),
-        start_lines: start.len(),
+        start_lines: s_lines,
         global_lines: g_lines,
         directory_lines: d_lines,
         parameter_lines: p_lines,
-        bytes: counter.bytes,
+        bytes: 81 * (s_lines + g_lines + d_lines + p_lines + 1) as u64,
     })
+}
+
+/// Writes `surfaces` as an IGES 5.3 file into any writer (see [`write_iges_seekable`], which
+/// a file should use: this one assembles the whole file in memory first, and writes nothing
+/// when it fails).
+pub fn write_iges<W: Write>(
+    mut w: W,
+    surfaces: &[NurbsSurface],
+    opts: &IgesOptions,
+) -> Result<IgesStats, IgesError> {
+    let mut file = io::Cursor::new(Vec::new());
+    let stats = write_iges_seekable(&mut file, surfaces, opts)?;
+    w.write_all(file.get_ref())?;
+    w.flush()?;
+    Ok(stats)
 }
 
 /// A 7-column right-justified sequence number kept as text and counted up in place.
@@ -576,25 +714,10 @@ impl SequenceField {
     }
 }
 
-struct CountingWriter<W> {
-    inner: W,
-    bytes: u64,
-}
-
-impl<W: Write> Write for CountingWriter<W> {
-    fn write(&mut self, b: &[u8]) -> io::Result<usize> {
-        let n = self.inner.write(b)?;
-        self.bytes += n as u64;
-        Ok(n)
-    }
-    fn flush(&mut self) -> io::Result<()> {
-        self.inner.flush()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::iges::reference::{entity_128_params, ParamText};
 
     /// A degree-3 surface whose every real takes the longest form (`-d.dddddddddddddddE-3dd`).
     fn longest_tokens(nu: usize, nv: usize) -> NurbsSurface {
@@ -607,6 +730,122 @@ mod tests {
         };
         let v = -1.234_567_890_123_456_7e-300;
         NurbsSurface::try_new(d, d, knots(nu), knots(nv), nu, nv, vec![[v; 3]; nu * nv]).unwrap()
+    }
+
+    /// A degree-5 surface with a fit's kind of reals (17 digits, µm heights in mm, zeros).
+    fn fit_like(nu: usize, nv: usize) -> NurbsSurface {
+        let d = 5;
+        let knots = |n: usize| {
+            let mut k = vec![0.0; d + 1];
+            k.extend((1..n - d).map(|j| j as f64 / (n - d) as f64));
+            k.extend(vec![1.0; d + 1]);
+            k
+        };
+        let mut poles = Vec::with_capacity(nu * nv);
+        for j in 0..nv {
+            for i in 0..nu {
+                let (x, y) = (
+                    i as f64 * 0.000_500_000_000_3,
+                    j as f64 * 0.010_000_000_000_7,
+                );
+                let z = 1e-3 * (0.8 * (x * 157.0).sin() + 0.3 * (x * 911.0 + y * 40.0).cos());
+                poles.push([x, y, z]);
+            }
+        }
+        NurbsSurface::try_new(d, d, knots(nu), knots(nv), nu, nv, poles).unwrap()
+    }
+
+    /// The file as the writer made it before it streamed: every entity formatted into memory
+    /// first ([`entity_128_params`], kept verbatim), then framed.
+    fn reference_file(patches: &[NurbsSurface], opts: &IgesOptions) -> Vec<u8> {
+        let texts: Vec<ParamText> = patches
+            .iter()
+            .enumerate()
+            .map(|(k, p)| entity_128_params(p, k).unwrap())
+            .collect();
+        let counts: Vec<usize> = texts.iter().map(ParamText::lines).collect();
+        let mut out = Vec::new();
+        let (s, g) = start_and_global(&mut out, patches, opts);
+        directory(&mut out, &counts);
+        let mut lines = ParameterLines::new();
+        for (k, t) in texts.iter().enumerate() {
+            lines.entity(2 * k + 1);
+            for r in t.records() {
+                lines.push(r, &mut out);
+            }
+        }
+        terminate(&mut out, [s, g, 2 * patches.len(), lines.count]);
+        out
+    }
+
+    #[test]
+    fn streamed_files_equal_the_formatted_in_memory_ones_byte_for_byte() {
+        let opts = IgesOptions {
+            start_lines: vec!["reference".into()],
+            ..IgesOptions::default()
+        };
+        // One small entity, one above the chunking threshold (four pole chunks, several
+        // pieces per worker), several patches in one file, worst-case tokens.
+        let big = fit_like(PARALLEL_POLES / 16 + 7, 17);
+        let cases: Vec<Vec<NurbsSurface>> = vec![
+            vec![fit_like(40, 7)],
+            vec![big.clone()],
+            vec![fit_like(30, 9), fit_like(12, 6), longest_tokens(9, 5)],
+            vec![longest_tokens(PARALLEL_POLES / 8 + 1, 8)],
+        ];
+        for patches in &cases {
+            let want = reference_file(patches, &opts);
+            let mut got = Vec::new();
+            let stats = write_iges(&mut got, patches, &opts).unwrap();
+            assert!(
+                got == want,
+                "{} patches: streamed file differs",
+                patches.len()
+            );
+            assert_eq!(stats.bytes, want.len() as u64);
+            // One formatting thread or several: the same bytes.
+            let mut single = io::Cursor::new(Vec::new());
+            let mut records = Vec::new();
+            for (k, p) in patches.iter().enumerate() {
+                let n = stream_entity_128(p, k, 1, &mut |r| {
+                    records.extend_from_slice(r);
+                    Ok(())
+                })
+                .unwrap();
+                assert_eq!(n, entity_128_params(p, k).unwrap().lines());
+            }
+            let expected: Vec<u8> = patches
+                .iter()
+                .enumerate()
+                .flat_map(|(k, p)| {
+                    entity_128_params(p, k)
+                        .unwrap()
+                        .records()
+                        .flatten()
+                        .copied()
+                        .collect::<Vec<u8>>()
+                })
+                .collect();
+            assert!(records == expected);
+            write_iges_seekable(&mut single, patches, &opts).unwrap();
+            assert!(single.into_inner() == want);
+        }
+    }
+
+    #[test]
+    fn a_non_finite_coordinate_is_named_by_its_pole() {
+        // A surface refuses non-finite poles (try_new), so this guards the formatter alone:
+        // the pole's index within its patch and the value come back.
+        let mut poles = vec![[0.25, 1.0, -3e-4]; 10];
+        poles[7][1] = f64::INFINITY;
+        let mut t = Tokens::default();
+        assert_eq!(
+            format_pole_tokens(&poles[2..], 100, &mut t),
+            Err((105, f64::INFINITY))
+        );
+        assert_eq!(format_pole_tokens(&poles[..7], 0, &mut t), Ok(()));
+        assert_eq!(t.lens.len(), 21);
+        assert_eq!(&t.text[..t.lens[0] as usize], b"0.25");
     }
 
     #[test]
@@ -622,11 +861,11 @@ mod tests {
             "{}",
             String::from_utf8_lossy(&real)
         );
-        // Small nets (one pole chunk) and one past the parallel threshold (four chunks).
+        // Small nets (one pole chunk) and one past the chunking threshold (four chunks).
         for (nu, nv) in [(4, 4), (37, 5), (PARALLEL_POLES / 8 + 1, 8)] {
             let s = longest_tokens(nu, nv);
             let lines = entity_128_params(&s, 0).unwrap().lines();
-            let bound = p_lines_bound(&s);
+            let bound = parameter_lines_bound(&s);
             assert!(bound >= lines, "{nu}x{nv}: bound {bound} < {lines} lines");
             // Tight enough to be useful: within 1.6x for these worst-case tokens.
             assert!(
@@ -637,27 +876,23 @@ mod tests {
     }
 
     #[test]
-    fn plan_without_formatting_equals_the_exact_plan() {
-        let s = longest_tokens(40, 6);
-        let lines = entity_128_params(&s, 0).unwrap().lines();
-        let bound = p_lines_bound(&s);
-        // At the bound the shortcut answers; exactly at the real count the formatting path
-        // answers; both give the surface unsplit. One line less splits it.
-        for cap in [bound, lines] {
-            let opts = IgesOptions {
-                max_parameter_lines_per_entity: cap,
-                ..IgesOptions::default()
-            };
-            let plan = plan_files(&s, &opts).unwrap();
-            assert_eq!(plan.len(), 1);
-            assert_eq!(plan[0], vec![s.clone()]);
-        }
-        let opts = IgesOptions {
-            max_parameter_lines_per_entity: lines - 1,
+    fn plans_come_from_the_bound_and_every_part_fits() {
+        let s = longest_tokens(40, 16);
+        let bound = parameter_lines_bound(&s);
+        let opts = |cap: usize| IgesOptions {
+            max_parameter_lines_per_entity: cap,
             ..IgesOptions::default()
         };
-        let plan = plan_files(&s, &opts).unwrap();
-        assert!(plan.iter().map(Vec::len).sum::<usize>() >= 2);
+        // At the bound the surface stays whole (and borrowed); below it, it is split, and
+        // each patch's real line count is within the cap.
+        let plan = plan_parts(&s, &opts(bound)).unwrap();
+        assert!(matches!(&plan[..], [Cow::Borrowed(g)] if g.len() == 1 && g[0] == s));
+        let plan = plan_files(&s, &opts(bound - 1)).unwrap();
+        let patches: Vec<&NurbsSurface> = plan.iter().flatten().collect();
+        assert!(patches.len() >= 2);
+        for p in patches {
+            assert!(entity_128_params(p, 0).unwrap().lines() < bound);
+        }
     }
 
     #[test]

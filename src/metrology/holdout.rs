@@ -16,11 +16,13 @@
 //! spikes are reported beside the verdict (and bridged first when characterisation excludes
 //! them).
 //!
-//! Depends on [`crate::fit`] (refits), [`super::model`] (sampling) and [`crate::nurbs`].
+//! Depends on [`crate::fit`] (refits), [`super::model`] (sampling), [`crate::nurbs`] and
+//! [`crate::numfmt`] (the figures in the verdict's words).
 
 use super::model::sample_model_grid;
 use super::MetrologyError;
 use crate::fit::{fit_grid_with, FitOptions, VMethod};
+use crate::numfmt::{fmt, sig, Quantity};
 use serde::Serialize;
 
 /// The largest hold-out rms, in units of Sq, for which the model between lines is supported.
@@ -343,6 +345,8 @@ pub struct BetweenLines {
     pub threshold: f64,
     /// rms / Sq ≤ threshold.
     pub supported: bool,
+    /// The short verdict ([`BetweenLines::short`]), for summaries.
+    pub summary: String,
     /// The verdict in one sentence.
     pub verdict: String,
     /// The model's heights at the held-out lines (per held-out line, at the data x), µm; not
@@ -355,14 +359,14 @@ impl BetweenLines {
     /// The short verdict: "supported / not supported by the data (hold-out rms X µm = Y × Sq)".
     pub fn short(&self) -> String {
         format!(
-            "the model between lines is {} by the data (hold-out rms {:.3} µm = {:.2} × Sq)",
+            "the model between lines is {} by the data (hold-out rms {} µm = {} × Sq)",
             if self.supported {
                 "supported"
             } else {
                 "not supported"
             },
-            self.rms_um,
-            self.rms_over_sq
+            fmt(self.rms_um, Quantity::HeightUm),
+            sig(self.rms_over_sq, 2)
         )
     }
 }
@@ -437,19 +441,21 @@ pub fn between_lines(
         rms_over_sq: ratio,
         threshold,
         supported,
+        summary: String::new(),
         verdict: String::new(),
         model_um,
         lines,
     };
+    out.summary = out.short();
     out.verdict = format!(
-        "{}: every {} line left out ({} lines) and the rest refitted ({}), the refit misses them by {:.3} µm rms and {:.3} µm at worst, against Sq {:.3} µm; supported means rms ≤ {} × Sq",
-        out.short(),
+        "{}: every {} line left out ({} lines) and the rest refitted ({}), the refit misses them by {} µm rms and {} µm at worst, against Sq {} µm; supported means rms ≤ {} × Sq",
+        out.summary,
         ordinal(every),
         out.lines.len(),
         method.name(),
-        rms,
-        max_abs,
-        sq_um,
+        fmt(rms, Quantity::HeightUm),
+        fmt(max_abs, Quantity::HeightUm),
+        fmt(sq_um, Quantity::HeightUm),
         threshold
     );
     Ok(out)
@@ -521,7 +527,7 @@ mod tests {
         assert!(!b.supported);
         assert!(
             b.short()
-                .contains("not supported by the data (hold-out rms 2.000 µm = 2.00 × Sq)"),
+                .contains("not supported by the data (hold-out rms 2.000 µm = 2.0 × Sq)"),
             "{}",
             b.short()
         );

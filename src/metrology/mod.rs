@@ -103,13 +103,19 @@ pub enum MetrologyError {
     FitMethod(#[from] crate::fit::MethodError),
     /// A plot could not be drawn or written.
     #[error(
-        "cannot write the plot {path}: {message}; check the directory and the installed fonts"
+        "cannot write the plot {path}: {message}; check the directory's permissions and free space"
     )]
     Plot {
         /// The file.
         path: String,
         /// What plotters reported.
         message: String,
+    },
+    /// An X3P file cannot be read.
+    #[error("not a readable X3P file: {reason}")]
+    X3p {
+        /// What is wrong, with the value found.
+        reason: String,
     },
     /// A bearing-area parameter is out of range.
     #[error("{what} = {value} is out of range; {hint}")]

@@ -8,7 +8,7 @@
 
 use super::bearing::{bearing_curve_xz, BearingCurve};
 use super::MetrologyError;
-use crate::nurbs::NurbsSurface;
+use crate::nurbs::{BSplineCurve, NurbsSurface, UBasis};
 use serde::Serialize;
 
 /// Options for the model's bearing area curves, with the paper's defaults.
@@ -62,6 +62,12 @@ pub fn model_bearing_curves(
         .samples_per_curve
         .unwrap_or(8 * surface.count_u())
         .max(2);
+    // Every curve is sampled at the same u, so the basis along u is computed once.
+    let us: Vec<f64> = (0..samples)
+        .map(|k| k as f64 / (samples - 1) as f64)
+        .collect();
+    let basis = UBasis::new(surface, &us);
+    let mut poles = Vec::new();
     let mut out = Vec::with_capacity(options.curves);
     for j in 0..options.curves {
         let v = if options.curves == 1 {
@@ -69,23 +75,17 @@ pub fn model_bearing_curves(
         } else {
             j as f64 / (options.curves - 1) as f64
         };
-        let iso = surface.iso_curve_u(v);
+        surface.iso_poles_u_padded(v, &mut poles);
         let mut xs = Vec::with_capacity(samples);
         let mut zs = Vec::with_capacity(samples);
         let mut y_mm = f64::NAN;
-        for k in 0..samples {
-            let u = k as f64 / (samples - 1) as f64;
-            let p = iso.evaluate(u).ok_or(MetrologyError::BadParameter {
-                what: "iso-curve poles",
-                value: iso.poles.len() as f64,
-                hint: "the surface's knot vector does not match its poles; refit it",
-            })?;
+        basis.for_each_point(&poles, |k, p| {
             if k == 0 {
                 y_mm = p[1];
             }
             xs.push(p[0]);
             zs.push(p[2] * 1000.0);
-        }
+        });
         let curve = bearing_curve_xz(&xs, &zs, options.levels)?;
         out.push(ModelCurveBac {
             v,
@@ -102,8 +102,10 @@ pub fn model_bearing_curves(
 /// k·`pitch_x_mm` found by inverting x(u) along each iso-curve (x must increase with u).
 /// The inversion is the Illinois variant of false position, bracketed from the previous
 /// point's u (the targets increase), stopped at |x(u) − x| ≤ 1e-13 mm or a bracket of 1e-15 in
-/// u; a few evaluations per point instead of the 50 of plain bisection. Heights in µm,
-/// row-major.
+/// u; a few evaluations per point instead of the 50 of plain bisection. When the net's x is
+/// constant down each column (every fit's is: x depends on u alone), x(u) is the same on every
+/// iso-curve up to rounding, so it is inverted once on the net's own x and the basis at the
+/// found u serves every line. Heights in µm, row-major.
 pub fn sample_model_grid(
     surface: &NurbsSurface,
     vs: &[f64],
@@ -112,47 +114,113 @@ pub fn sample_model_grid(
     cols: usize,
 ) -> Result<Vec<f64>, MetrologyError> {
     super::check_pitch(pitch_x_mm)?;
-    let bad = |what: &'static str, value: f64| MetrologyError::BadParameter {
-        what,
-        value,
-        hint: "the model's x must increase along u and cover the requested x range",
+    if x_depends_on_u_only(surface) {
+        sample_shared_u(surface, vs, x0_mm, pitch_x_mm, cols)
+    } else {
+        sample_per_line(surface, vs, x0_mm, pitch_x_mm, cols)
+    }
+}
+
+/// [`sample_model_grid`] for a net whose x depends on u alone: one inversion, one basis.
+fn sample_shared_u(
+    surface: &NurbsSurface,
+    vs: &[f64],
+    x0_mm: f64,
+    pitch_x_mm: f64,
+    cols: usize,
+) -> Result<Vec<f64>, MetrologyError> {
+    let mut out = Vec::with_capacity(vs.len().saturating_mul(cols));
+    let mut poles = Vec::new();
+    // Every iso-curve along u has the same x(u) (the net's x is constant down each column,
+    // as in every fit), so x(u) is inverted once and the basis at the found u serves every
+    // line.
+    let x_curve = BSplineCurve {
+        degree: surface.degree_u(),
+        knots: surface.knots_u().to_vec(),
+        poles: (0..surface.count_u())
+            .map(|i| [surface.pole(i, 0)[0], 0.0, 0.0])
+            .collect(),
     };
+    let x_at = |u: f64| x_curve.evaluate(u).map_or(f64::NAN, |p| p[0]);
+    let us = invert_row(&x_at, x0_mm, pitch_x_mm, cols)?;
+    let basis = UBasis::new(surface, &us);
+    for &v in vs {
+        surface.iso_poles_u_padded(v, &mut poles);
+        basis.for_each_point(&poles, |_, p| out.push(p[2] * 1000.0));
+    }
+    Ok(out)
+}
+
+/// [`sample_model_grid`] for any net: x(u) inverted along each line's own iso-curve.
+fn sample_per_line(
+    surface: &NurbsSurface,
+    vs: &[f64],
+    x0_mm: f64,
+    pitch_x_mm: f64,
+    cols: usize,
+) -> Result<Vec<f64>, MetrologyError> {
     let mut out = Vec::with_capacity(vs.len().saturating_mul(cols));
     for &v in vs {
         let iso = surface.iso_curve_u(v);
-        let at = |u: f64| {
-            iso.evaluate(u)
-                .ok_or(bad("iso-curve poles", iso.poles.len() as f64))
-        };
-        let (lo_x, hi_x) = (at(0.0)?[0], at(1.0)?[0]);
-        let mut u_from = 0.0f64;
-        for k in 0..cols {
-            let x = x0_mm + k as f64 * pitch_x_mm;
-            if x < lo_x - 1e-9 * pitch_x_mm.max(1.0) || x > hi_x + 1e-9 * hi_x.abs().max(1.0) {
-                return Err(bad("x (mm) outside the model", x));
-            }
-            let u = invert_x(&at, x, u_from, hi_x)?;
-            u_from = u;
-            out.push(at(u)?[2] * 1000.0);
+        let at = |u: f64| iso.evaluate(u).map_or(f64::NAN, |p| p[0]);
+        let us = invert_row(&at, x0_mm, pitch_x_mm, cols)?;
+        for u in us {
+            out.push(iso.evaluate(u).map_or(f64::NAN, |p| p[2]) * 1000.0);
         }
     }
     Ok(out)
 }
 
-/// The u in [`u_from`, 1] where the iso-curve's x equals `x_mm` (Illinois false position).
-fn invert_x<F>(at: &F, x_mm: f64, u_from: f64, x_at_1: f64) -> Result<f64, MetrologyError>
-where
-    F: Fn(f64) -> Result<[f64; 3], MetrologyError>,
-{
+/// Whether every pole's x equals the x of the pole below it in the first row, so that x on the
+/// surface depends on u alone.
+fn x_depends_on_u_only(surface: &NurbsSurface) -> bool {
+    let nu = surface.count_u();
+    let poles = surface.poles();
+    let first = &poles[..nu];
+    poles
+        .chunks_exact(nu)
+        .all(|row| row.iter().zip(first).all(|(p, q)| p[0] == q[0]))
+}
+
+/// The u of each target x = `x0_mm` + k·`pitch_x_mm`, k < `cols`, along a curve whose x is
+/// `x_at(u)` (increasing), each bracketed from the previous one's u.
+fn invert_row<F: Fn(f64) -> f64>(
+    x_at: &F,
+    x0_mm: f64,
+    pitch_x_mm: f64,
+    cols: usize,
+) -> Result<Vec<f64>, MetrologyError> {
+    let bad = |what: &'static str, value: f64| MetrologyError::BadParameter {
+        what,
+        value,
+        hint: "the model's x must increase along u and cover the requested x range",
+    };
+    let (lo_x, hi_x) = (x_at(0.0), x_at(1.0));
+    let mut us = Vec::with_capacity(cols);
+    let mut u_from = 0.0f64;
+    for k in 0..cols {
+        let x = x0_mm + k as f64 * pitch_x_mm;
+        if x < lo_x - 1e-9 * pitch_x_mm.max(1.0) || x > hi_x + 1e-9 * hi_x.abs().max(1.0) {
+            return Err(bad("x (mm) outside the model", x));
+        }
+        let u = invert_x(x_at, x, u_from, hi_x);
+        u_from = u;
+        us.push(u);
+    }
+    Ok(us)
+}
+
+/// The u in [`u_from`, 1] where the curve's x equals `x_mm` (Illinois false position).
+fn invert_x<F: Fn(f64) -> f64>(at: &F, x_mm: f64, u_from: f64, x_at_1: f64) -> f64 {
     const X_TOL_MM: f64 = 1e-13;
     let (mut a, mut b) = (u_from, 1.0f64);
-    let mut fa = at(a)?[0] - x_mm;
+    let mut fa = at(a) - x_mm;
     let mut fb = x_at_1 - x_mm;
     if fa >= -X_TOL_MM {
-        return Ok(a);
+        return a;
     }
     if fb <= X_TOL_MM {
-        return Ok(b);
+        return b;
     }
     // 0: no side repeated yet; 1: a kept last time; 2: b kept last time.
     let mut side = 0u8;
@@ -164,9 +232,9 @@ where
         };
         // Keep c strictly inside the bracket (rounding can put it on an end).
         let c = if c > a && c < b { c } else { 0.5 * (a + b) };
-        let fc = at(c)?[0] - x_mm;
+        let fc = at(c) - x_mm;
         if fc.abs() <= X_TOL_MM || b - a <= 1e-15 {
-            return Ok(c);
+            return c;
         }
         if fc < 0.0 {
             a = c;
@@ -184,5 +252,46 @@ where
             side = 2;
         }
     }
-    Ok(0.5 * (a + b))
+    0.5 * (a + b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::{fit_grid, FitOptions};
+
+    #[test]
+    fn one_inversion_for_all_lines_equals_one_per_line() {
+        // A fitted net (x constant down each column) sampled both ways, at half the pitch as
+        // the report does and at an offset, unrelated pitch.
+        let (rows, cols, px) = (9, 400, 0.0005);
+        let mut s: u64 = 0x9E37_79B9_7F4A_7C15;
+        let h: Vec<f64> = (0..rows * cols)
+            .map(|k| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let noise = (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+                (k % cols) as f64 * 0.002 + (k as f64 * 0.05).sin() + 0.4 * noise
+            })
+            .collect();
+        let y: Vec<f64> = (0..rows).map(|l| l as f64 * 0.01).collect();
+        let fit = fit_grid(px, &y, &h, cols, FitOptions::default()).unwrap();
+        assert!(x_depends_on_u_only(&fit.surface));
+        for (x0, pitch, n) in [(0.0, px / 2.0, 2 * cols - 1), (0.00013, 0.00071, 250)] {
+            let shared = sample_shared_u(&fit.surface, &fit.params_v, x0, pitch, n).unwrap();
+            let per_line = sample_per_line(&fit.surface, &fit.params_v, x0, pitch, n).unwrap();
+            let scale = per_line.iter().map(|z| z.abs()).fold(0.0, f64::max);
+            for (k, (a, b)) in shared.iter().zip(&per_line).enumerate() {
+                assert!(
+                    (a - b).abs() <= 1e-12 * scale,
+                    "point {k}: shared {a} vs per line {b}"
+                );
+            }
+            assert_eq!(
+                sample_model_grid(&fit.surface, &fit.params_v, x0, pitch, n).unwrap(),
+                shared
+            );
+        }
+    }
 }

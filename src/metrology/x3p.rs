@@ -1,11 +1,18 @@
-//! X3P (ISO 25178-72, the openGPS ISO 5436-2 XML format that Gwyddion and MountainsMap read) of a
-//! regular height grid: a zip archive (stored, uncompressed) holding `main.xml`,
-//! `bindata/data.bin` (little-endian f64 heights in metres, x fastest) and `md5checksum.hex`.
-//! The MD5 and CRC-32 the format needs are implemented here (small, tested against the RFC
-//! vectors) so no archive or digest dependency is needed. A reader for the files this writer
-//! produces is included for round trips.
+//! X3P (ISO 25178-72, the openGPS ISO 5436-2 XML format that Gwyddion and MountainsMap read
+//! and write) of a regular height grid.
 //!
-//! Depends on [`super::MetrologyError`] only; returns bytes, the caller writes the file.
+//! The writer produces a zip archive (stored, uncompressed) holding `main.xml`,
+//! `bindata/data.bin` (little-endian f64 heights in metres, x fastest) and `md5checksum.hex`;
+//! the MD5 and CRC-32 it needs are implemented here (small, tested against the RFC vectors).
+//!
+//! The reader takes X3P files of other software too: stored or deflated zip entries (found
+//! through the central directory, so data descriptors do not matter), surfaces (`SUR`) and
+//! profiles (`PRF`) on incremental x/y axes, heights as int16/int32/float32/float64 (`I`, `L`,
+//! `F`, `D`) in `bindata/*.bin` or as text in a `DataList`, scaled by the z axis's increment and
+//! offset, invalid points from `ValidPointsLink` or non-finite values (returned as NaN), and
+//! both MD5 sums checked when present. Deflate is miniz_oxide's, XML roxmltree's.
+//!
+//! Depends on [`super::MetrologyError`] only; takes and returns bytes, the caller does the I/O.
 
 use super::{check_finite, check_pitch, MetrologyError};
 
@@ -14,6 +21,12 @@ use super::{check_finite, check_pitch, MetrologyError};
 pub struct X3pMeta {
     /// ISO 8601 date-time of the measurement.
     pub date: String,
+    /// The instrument's calibration date (ISO 8601 date or date-time). The format requires a
+    /// value: an empty one is written as [`UNKNOWN_CALIBRATION_DATE`] and the comment says
+    /// that it was not recorded.
+    pub calibration_date: String,
+    /// The probing system's identification (stylus, tip radius); empty: the model.
+    pub probe: String,
     /// Operator or creator.
     pub creator: String,
     /// Instrument manufacturer.
@@ -108,16 +121,11 @@ fn xml_escape(s: &str) -> String {
         .replace('>', "&gt;")
 }
 
-fn xml_unescape(s: &str) -> String {
-    s.replace("&lt;", "<")
-        .replace("&gt;", ">")
-        .replace("&amp;", "&")
-}
-
+/// A Record2 field as read (the XML parser has unescaped it), "not available" as empty.
 fn from_na(s: Option<&str>) -> String {
     match s {
         Some("not available") | None => String::new(),
-        Some(v) => xml_unescape(v),
+        Some(v) => v.to_string(),
     }
 }
 
@@ -181,6 +189,20 @@ fn zip_stored(entries: &[(&str, &[u8])]) -> Vec<u8> {
     out
 }
 
+/// What an unknown calibration date is written as: the format requires an xsd:dateTime, and
+/// the epoch cannot be mistaken for a real calibration.
+pub const UNKNOWN_CALIBRATION_DATE: &str = "1970-01-01T00:00:00Z";
+
+/// An ISO 8601 date (`2025-03-14`) as the xsd:dateTime the format wants; a date-time as it is.
+fn as_datetime(d: &str) -> String {
+    let d = d.trim();
+    if d.len() == 10 && d.as_bytes().get(4) == Some(&b'-') && d.as_bytes().get(7) == Some(&b'-') {
+        format!("{d}T00:00:00")
+    } else {
+        d.to_string()
+    }
+}
+
 /// The X3P archive of a row-major grid (heights µm, `rows` lines along y, `cols` points along x).
 pub fn to_x3p(
     heights_um: &[f64],
@@ -214,7 +236,7 @@ pub fn to_x3p(
 <CY><AxisType>I</AxisType><DataType>D</DataType><Increment>{iy:e}</Increment><Offset>0</Offset></CY>
 <CZ><AxisType>A</AxisType><DataType>D</DataType><Increment>1</Increment><Offset>0</Offset></CZ>
 </Axes></Record1>
-<Record2><Date>{date}</Date><Creator>{creator}</Creator><Instrument><Manufacturer>{man}</Manufacturer><Model>{model}</Model><Serial>{serial}</Serial><Version>{version}</Version></Instrument><CalibrationDate>{date}</CalibrationDate><ProbingSystem><Type>Contacting</Type><Identification>{model}</Identification></ProbingSystem><Comment>{comment}</Comment></Record2>
+<Record2><Date>{date}</Date><Creator>{creator}</Creator><Instrument><Manufacturer>{man}</Manufacturer><Model>{model}</Model><Serial>{serial}</Serial><Version>{version}</Version></Instrument><CalibrationDate>{calibration}</CalibrationDate><ProbingSystem><Type>Contacting</Type><Identification>{probe}</Identification></ProbingSystem><Comment>{comment}</Comment></Record2>
 <Record3><MatrixDimension><SizeX>{cols}</SizeX><SizeY>{rows}</SizeY><SizeZ>1</SizeZ></MatrixDimension><DataLink><PointDataLink>bindata/data.bin</PointDataLink><MD5ChecksumPointData>{data_md5}</MD5ChecksumPointData></DataLink></Record3>
 <Record4><ChecksumFile>md5checksum.hex</ChecksumFile></Record4>
 </p:ISO5436_2>
@@ -231,7 +253,26 @@ pub fn to_x3p(
         model = or_na(&meta.model),
         serial = or_na(&meta.serial),
         version = or_na(&meta.version),
-        comment = or_na(&meta.comment),
+        calibration = if meta.calibration_date.trim().is_empty() {
+            UNKNOWN_CALIBRATION_DATE.to_string()
+        } else {
+            xml_escape(&as_datetime(&meta.calibration_date))
+        },
+        probe = if meta.probe.trim().is_empty() {
+            or_na(&meta.model)
+        } else {
+            xml_escape(&meta.probe)
+        },
+        comment = {
+            let mut c = meta.comment.clone();
+            if meta.calibration_date.trim().is_empty() {
+                if !c.is_empty() {
+                    c.push_str("; ");
+                }
+                c.push_str("calibration date not recorded (CalibrationDate is a placeholder)");
+            }
+            or_na(&c)
+        },
     );
     let checksum = format!("{} *main.xml\n", hex(&md5(xml.as_bytes())));
     Ok(zip_stored(&[
@@ -241,119 +282,381 @@ pub fn to_x3p(
     ]))
 }
 
-/// A grid read back from an X3P written by [`to_x3p`].
+/// A grid read from an X3P file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct X3pGrid {
-    /// Heights in µm, row-major.
+    /// Heights in µm, row-major (x fastest); invalid points are NaN.
     pub heights_um: Vec<f64>,
-    /// Rows (SizeY).
+    /// Rows (SizeY): lines along y.
     pub rows: usize,
-    /// Columns (SizeX).
+    /// Columns (SizeX): points along x.
     pub cols: usize,
     /// x pitch, mm.
     pub pitch_x_mm: f64,
-    /// y pitch, mm.
+    /// y pitch, mm (1 for a profile without a y axis).
     pub pitch_y_mm: f64,
+    /// `SUR` (a surface) or `PRF` (a profile).
+    pub feature_type: String,
+    /// Points the file marks invalid (not measured), NaN in `heights_um`.
+    pub invalid_points: usize,
     /// Record2 as written ("not available" read back as an empty field).
     pub meta: X3pMeta,
 }
 
-fn bad(what: &'static str) -> MetrologyError {
-    MetrologyError::BadParameter {
-        what,
-        value: 0.0,
-        hint: "not an X3P archive of stored entries as this software writes",
+/// Why an X3P file cannot be read: what is wrong, with the value found.
+fn bad(what: impl Into<String>) -> MetrologyError {
+    MetrologyError::X3p {
+        reason: what.into(),
     }
 }
 
-fn entries(zip: &[u8]) -> Result<Vec<(String, &[u8])>, MetrologyError> {
-    let mut out = Vec::new();
-    let mut p = 0usize;
-    let u16_at = |i: usize| {
-        zip.get(i..i + 2)
-            .map(|b| u16::from_le_bytes([b[0], b[1]]) as usize)
+/// One zip entry: its name and its (decompressed) bytes.
+struct Entry {
+    name: String,
+    data: Vec<u8>,
+}
+
+fn u16_at(b: &[u8], i: usize) -> Option<usize> {
+    b.get(i..i + 2)
+        .map(|v| u16::from_le_bytes([v[0], v[1]]) as usize)
+}
+
+fn u32_at(b: &[u8], i: usize) -> Option<u32> {
+    b.get(i..i + 4)
+        .map(|v| u32::from_le_bytes([v[0], v[1], v[2], v[3]]))
+}
+
+/// Largest entry the reader inflates (a 31 × 100 000 f64 grid is 25 MB).
+const MAX_ENTRY_BYTES: usize = 1 << 30;
+
+/// The entries of a zip archive, from its central directory.
+fn entries(zip: &[u8]) -> Result<Vec<Entry>, MetrologyError> {
+    if !zip.starts_with(b"PK") {
+        return Err(bad(
+            "not a zip archive (an X3P file is a zip of main.xml and the data)",
+        ));
+    }
+    // The end-of-central-directory record: the last "PK\x05\x06" (a comment may follow it).
+    let Some(eocd) = (0..zip.len().saturating_sub(21))
+        .rev()
+        .take(65_557)
+        .find(|&i| u32_at(zip, i) == Some(0x0605_4b50))
+    else {
+        return local_entries(zip);
     };
-    let u32_at = |i: usize| {
-        zip.get(i..i + 4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    };
-    while u32_at(p) == Some(0x0403_4b50) {
-        if u16_at(p + 8) != Some(0) {
-            return Err(bad("compressed zip entry"));
+    let count = u16_at(zip, eocd + 10).ok_or_else(|| bad("zip directory"))?;
+    let mut p = u32_at(zip, eocd + 16).ok_or_else(|| bad("zip directory"))? as usize;
+    let mut out = Vec::with_capacity(count);
+    for _ in 0..count {
+        if u32_at(zip, p) != Some(0x0201_4b50) {
+            return Err(bad(format!(
+                "zip central directory entry at byte {p} is damaged"
+            )));
         }
-        let size = u32_at(p + 18).ok_or(bad("zip header"))? as usize;
-        let name_len = u16_at(p + 26).ok_or(bad("zip header"))?;
-        let extra = u16_at(p + 28).ok_or(bad("zip header"))?;
-        let name = zip.get(p + 30..p + 30 + name_len).ok_or(bad("zip name"))?;
-        let start = p + 30 + name_len + extra;
-        let data = zip.get(start..start + size).ok_or(bad("zip data"))?;
-        out.push((String::from_utf8_lossy(name).into_owned(), data));
-        p = start + size;
+        let field = |off: usize| u16_at(zip, p + off).ok_or_else(|| bad("zip directory"));
+        let method = field(10)?;
+        let crc = u32_at(zip, p + 16).ok_or_else(|| bad("zip directory"))?;
+        let csize = u32_at(zip, p + 20).ok_or_else(|| bad("zip directory"))? as usize;
+        let usize_ = u32_at(zip, p + 24).ok_or_else(|| bad("zip directory"))? as usize;
+        let (name_len, extra_len, comment_len) = (field(28)?, field(30)?, field(32)?);
+        let local = u32_at(zip, p + 42).ok_or_else(|| bad("zip directory"))? as usize;
+        let name = zip
+            .get(p + 46..p + 46 + name_len)
+            .ok_or_else(|| bad("zip entry name"))?;
+        let name = String::from_utf8_lossy(name).into_owned();
+        p += 46 + name_len + extra_len + comment_len;
+        if u32_at(zip, local) != Some(0x0403_4b50) {
+            return Err(bad(format!("{name}: its zip header is damaged")));
+        }
+        let l_name = u16_at(zip, local + 26).ok_or_else(|| bad("zip header"))?;
+        let l_extra = u16_at(zip, local + 28).ok_or_else(|| bad("zip header"))?;
+        let start = local + 30 + l_name + l_extra;
+        let raw = zip.get(start..start + csize).ok_or_else(|| {
+            bad(format!(
+                "{name}: the archive ends inside it (truncated file?)"
+            ))
+        })?;
+        let data = inflate(&name, method, raw, usize_, crc)?;
+        out.push(Entry { name, data });
     }
     Ok(out)
 }
 
-fn tag<'a>(xml: &'a str, outer: &str, name: &str) -> Option<&'a str> {
-    let o = xml.find(&format!("<{outer}>"))?;
-    let rest = xml.get(o..)?;
-    let s = rest.find(&format!("<{name}>"))? + name.len() + 2;
-    let e = rest.get(s..)?.find(&format!("</{name}>"))? + s;
-    rest.get(s..e).map(str::trim)
+/// The entries of an archive without a central directory (cut short, or written by a
+/// streaming tool), from its local headers in order; an entry whose sizes are deferred to a
+/// data descriptor cannot be found this way.
+fn local_entries(zip: &[u8]) -> Result<Vec<Entry>, MetrologyError> {
+    let mut out = Vec::new();
+    let mut p = 0usize;
+    while u32_at(zip, p) == Some(0x0403_4b50) {
+        let field = |off: usize| u16_at(zip, p + off).ok_or_else(|| bad("zip header"));
+        let (flags, method) = (field(6)?, field(8)?);
+        let crc = u32_at(zip, p + 14).ok_or_else(|| bad("zip header"))?;
+        let csize = u32_at(zip, p + 18).ok_or_else(|| bad("zip header"))? as usize;
+        let usize_ = u32_at(zip, p + 22).ok_or_else(|| bad("zip header"))? as usize;
+        let (name_len, extra_len) = (field(26)?, field(28)?);
+        let name = zip
+            .get(p + 30..p + 30 + name_len)
+            .ok_or_else(|| bad("zip entry name"))?;
+        let name = String::from_utf8_lossy(name).into_owned();
+        if flags & 0x08 != 0 {
+            return Err(bad(format!(
+                "{name}: its sizes follow its data and the archive has no central directory (truncated file?)"
+            )));
+        }
+        let start = p + 30 + name_len + extra_len;
+        let raw = zip.get(start..start + csize).ok_or_else(|| {
+            bad(format!(
+                "{name}: the archive ends inside it (truncated file?)"
+            ))
+        })?;
+        out.push(Entry {
+            data: inflate(&name, method, raw, usize_, crc)?,
+            name,
+        });
+        p = start + csize;
+    }
+    if out.is_empty() {
+        return Err(bad(
+            "the zip archive has no readable entry (truncated file?)",
+        ));
+    }
+    Ok(out)
 }
 
-/// Reads back an archive written by [`to_x3p`], checking both MD5 sums.
+/// The bytes of an entry stored (method 0) or deflated (8), checked against its size and
+/// CRC-32.
+fn inflate(
+    name: &str,
+    method: usize,
+    raw: &[u8],
+    size: usize,
+    crc: u32,
+) -> Result<Vec<u8>, MetrologyError> {
+    let data = match method {
+        0 => raw.to_vec(),
+        8 => {
+            miniz_oxide::inflate::decompress_to_vec_with_limit(raw, size.clamp(1, MAX_ENTRY_BYTES))
+                .map_err(|e| bad(format!("{name}: cannot inflate ({e:?})")))?
+        }
+        m => {
+            return Err(bad(format!(
+                "{name}: zip compression method {m} (only stored and deflate are read)"
+            )))
+        }
+    };
+    if data.len() != size || crc32(&data) != crc {
+        return Err(bad(format!(
+            "{name}: CRC-32 or size does not match (damaged file)"
+        )));
+    }
+    Ok(data)
+}
+
+/// The first descendant of `node` whose local name (without namespace) is `name`.
+fn child<'a, 'i>(node: roxmltree::Node<'a, 'i>, name: &str) -> Option<roxmltree::Node<'a, 'i>> {
+    node.children()
+        .find(|n| n.is_element() && n.tag_name().name() == name)
+}
+
+/// The trimmed text of the element at `path` (local names) below `node`.
+fn text_at<'a>(node: roxmltree::Node<'a, '_>, path: &[&str]) -> Option<&'a str> {
+    let mut n = node;
+    for p in path {
+        n = child(n, p)?;
+    }
+    n.text().map(str::trim)
+}
+
+fn number(node: roxmltree::Node<'_, '_>, path: &[&str]) -> Result<Option<f64>, MetrologyError> {
+    match text_at(node, path) {
+        None | Some("") => Ok(None),
+        Some(t) => t.parse::<f64>().map(Some).map_err(|_| {
+            bad(format!(
+                "main.xml: {} is {t:?}, not a number",
+                path.join("/")
+            ))
+        }),
+    }
+}
+
+/// Reads an X3P archive (ours or another program's, see the module docs), checking its
+/// checksums.
 pub fn read_x3p(zip: &[u8]) -> Result<X3pGrid, MetrologyError> {
     let entries = entries(zip)?;
-    let get = |n: &str| entries.iter().find(|(k, _)| k == n).map(|(_, d)| *d);
-    let xml_bytes = get("main.xml").ok_or(bad("main.xml missing"))?;
-    let data = get("bindata/data.bin").ok_or(bad("bindata/data.bin missing"))?;
-    let sums = get("md5checksum.hex").ok_or(bad("md5checksum.hex missing"))?;
-    if !String::from_utf8_lossy(sums).starts_with(&hex(&md5(xml_bytes))) {
-        return Err(bad("main.xml MD5 mismatch"));
-    }
-    let xml = String::from_utf8_lossy(xml_bytes);
-    if tag(&xml, "DataLink", "MD5ChecksumPointData") != Some(hex(&md5(data)).as_str()) {
-        return Err(bad("data.bin MD5 mismatch"));
-    }
-    let num = |outer: &str, name: &str| -> Result<f64, MetrologyError> {
-        tag(&xml, outer, name)
-            .and_then(|v| v.parse::<f64>().ok())
-            .ok_or(bad("numeric field missing"))
+    let get = |n: &str| {
+        let n = n.trim().trim_start_matches("./");
+        entries.iter().find(|e| e.name == n).map(|e| &e.data[..])
     };
+    let xml_bytes = get("main.xml").ok_or_else(|| bad("the archive holds no main.xml"))?;
+    if let Some(sums) = get("md5checksum.hex") {
+        let want = String::from_utf8_lossy(sums);
+        let want = want.split_whitespace().next().unwrap_or("");
+        if !want.eq_ignore_ascii_case(&hex(&md5(xml_bytes))) {
+            return Err(bad(
+                "main.xml does not match its MD5 in md5checksum.hex (damaged file)",
+            ));
+        }
+    }
+    let xml =
+        std::str::from_utf8(xml_bytes).map_err(|e| bad(format!("main.xml is not UTF-8 ({e})")))?;
+    let doc = roxmltree::Document::parse(xml).map_err(|e| bad(format!("main.xml: {e}")))?;
+    let root = doc.root_element();
+    let r1 = child(root, "Record1").ok_or_else(|| bad("main.xml has no Record1"))?;
+    let r3 = child(root, "Record3").ok_or_else(|| bad("main.xml has no Record3"))?;
+    let feature = text_at(r1, &["FeatureType"]).unwrap_or("").to_string();
+    if feature != "SUR" && feature != "PRF" {
+        return Err(bad(format!(
+            "FeatureType {feature:?}: only surfaces (SUR) and profiles (PRF) are read, not point clouds"
+        )));
+    }
+    let axes = child(r1, "Axes").ok_or_else(|| bad("main.xml has no Record1/Axes"))?;
+    for a in ["CX", "CY"] {
+        if let Some(t) = child(axes, a).and_then(|n| text_at(n, &["AxisType"])) {
+            if t != "I" {
+                return Err(bad(format!(
+                    "axis {a} is of type {t:?}: only incremental (I) x and y axes form a grid"
+                )));
+            }
+        }
+    }
+    let cx = child(axes, "CX").ok_or_else(|| bad("main.xml has no CX axis"))?;
+    let pitch_x_m = number(cx, &["Increment"])?.ok_or_else(|| bad("CX has no Increment"))?;
+    let pitch_y_m = match child(axes, "CY") {
+        Some(cy) => number(cy, &["Increment"])?,
+        None => None,
+    };
+    let cz = child(axes, "CZ").ok_or_else(|| bad("main.xml has no CZ axis"))?;
+    let z_type = text_at(cz, &["DataType"]).unwrap_or("D").to_string();
+    let z_inc = number(cz, &["Increment"])?.unwrap_or(1.0);
+    let z_off = number(cz, &["Offset"])?.unwrap_or(0.0);
     // xsd:unsignedInt in ISO 5436-2; a size read as a real (1e300) would overflow rows × cols.
-    let size = |name: &str| -> Result<usize, MetrologyError> {
-        tag(&xml, "MatrixDimension", name)
-            .and_then(|v| v.parse::<usize>().ok())
-            .ok_or(bad("matrix size missing or not a whole number"))
+    let size = |n: &str| -> Result<usize, MetrologyError> {
+        let t = text_at(r3, &["MatrixDimension", n])
+            .ok_or_else(|| bad(format!("Record3/MatrixDimension has no {n}")))?;
+        t.parse::<usize>()
+            .map_err(|_| bad(format!("MatrixDimension/{n} is {t:?}, not a whole number")))
     };
-    let cols = size("SizeX")?;
-    let rows = size("SizeY")?;
-    let heights_um: Vec<f64> = data
-        .chunks_exact(8)
-        .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) * 1e6)
-        .collect();
-    if rows.checked_mul(cols) != Some(heights_um.len()) {
-        return Err(MetrologyError::GridSize {
-            rows,
-            cols,
-            expected: rows.saturating_mul(cols),
-            got: heights_um.len(),
-        });
+    let (cols, rows) = (size("SizeX")?, size("SizeY")?);
+    if size("SizeZ")? != 1 {
+        return Err(bad("several layers (SizeZ > 1) are not read"));
     }
+    let n = rows
+        .checked_mul(cols)
+        .filter(|&n| n > 0)
+        .ok_or_else(|| bad(format!("grid of {rows} × {cols} points")))?;
+    // Nothing is allocated from the sizes main.xml claims before the data confirm them.
+    let mut raw: Vec<f64> = Vec::new();
+    let mut valid: Option<Vec<bool>> = None;
+    if let Some(link) = child(r3, "DataLink") {
+        let name = text_at(link, &["PointDataLink"])
+            .ok_or_else(|| bad("DataLink has no PointDataLink"))?;
+        let data = get(name).ok_or_else(|| bad(format!("the archive holds no {name}")))?;
+        if let Some(want) = text_at(link, &["MD5ChecksumPointData"]) {
+            if !want.eq_ignore_ascii_case(&hex(&md5(data))) {
+                return Err(bad(format!(
+                    "{name} does not match its MD5 in main.xml (damaged file)"
+                )));
+            }
+        }
+        let width = match z_type.as_str() {
+            "I" => 2,
+            "L" | "F" => 4,
+            "D" => 8,
+            t => return Err(bad(format!("CZ DataType {t:?} (expected I, L, F or D)"))),
+        };
+        if n.checked_mul(width) != Some(data.len()) {
+            return Err(bad(format!(
+                "{name} holds {} bytes, but {rows} × {cols} points of type {z_type} need {}",
+                data.len(),
+                n.saturating_mul(width)
+            )));
+        }
+        raw.extend(data.chunks_exact(width).map(|b| match b {
+            [a, b] => f64::from(i16::from_le_bytes([*a, *b])),
+            [a, b, c, d] if z_type == "L" => f64::from(i32::from_le_bytes([*a, *b, *c, *d])),
+            [a, b, c, d] => f64::from(f32::from_le_bytes([*a, *b, *c, *d])),
+            [a, b, c, d, e, f, g, h] => f64::from_le_bytes([*a, *b, *c, *d, *e, *f, *g, *h]),
+            _ => f64::NAN,
+        }));
+        if let Some(vname) = text_at(link, &["ValidPointsLink"]) {
+            let bits = get(vname).ok_or_else(|| bad(format!("the archive holds no {vname}")))?;
+            if bits.len() * 8 < n {
+                return Err(bad(format!(
+                    "{vname} has {} bits for {n} points",
+                    bits.len() * 8
+                )));
+            }
+            // One bit per point, least significant bit first; a set bit is a valid point.
+            valid = Some((0..n).map(|k| bits[k / 8] >> (k % 8) & 1 == 1).collect());
+        }
+    } else if let Some(list) = child(r3, "DataList") {
+        for d in list.children().filter(|c| c.is_element()) {
+            let t = d.text().map(str::trim).unwrap_or("");
+            raw.push(if t.is_empty() {
+                f64::NAN
+            } else {
+                t.parse()
+                    .map_err(|_| bad(format!("DataList Datum {:?} is not a number", t)))?
+            });
+        }
+        if raw.len() != n {
+            return Err(bad(format!(
+                "DataList holds {} values for {rows} × {cols} points",
+                raw.len()
+            )));
+        }
+    } else {
+        return Err(bad("Record3 has neither a DataLink nor a DataList"));
+    }
+    let mut invalid_points = 0;
+    let heights_um: Vec<f64> = raw
+        .iter()
+        .enumerate()
+        .map(|(k, v)| {
+            let ok = valid.as_ref().is_none_or(|m| m[k]);
+            let z = (v * z_inc + z_off) * 1e6;
+            if ok && z.is_finite() {
+                z
+            } else {
+                invalid_points += 1;
+                f64::NAN
+            }
+        })
+        .collect();
+    let pitch_x_mm = pitch_x_m * 1e3;
+    let pitch_y_mm = match pitch_y_m {
+        Some(p) => p * 1e3,
+        None if rows == 1 => 1.0,
+        None => return Err(bad("CY has no Increment")),
+    };
+    check_pitch(pitch_x_mm)?;
+    check_pitch(pitch_y_mm)?;
+    let meta = match child(root, "Record2") {
+        Some(r2) => {
+            let f = |path: &[&str]| from_na(text_at(r2, path));
+            X3pMeta {
+                date: f(&["Date"]),
+                calibration_date: f(&["CalibrationDate"]),
+                probe: f(&["ProbingSystem", "Identification"]),
+                creator: f(&["Creator"]),
+                manufacturer: f(&["Instrument", "Manufacturer"]),
+                model: f(&["Instrument", "Model"]),
+                serial: f(&["Instrument", "Serial"]),
+                version: f(&["Instrument", "Version"]),
+                comment: f(&["Comment"]),
+            }
+        }
+        None => X3pMeta::default(),
+    };
     Ok(X3pGrid {
         heights_um,
         rows,
         cols,
-        pitch_x_mm: num("CX", "Increment")? * 1e3,
-        pitch_y_mm: num("CY", "Increment")? * 1e3,
-        meta: X3pMeta {
-            date: from_na(tag(&xml, "Record2", "Date")),
-            creator: from_na(tag(&xml, "Record2", "Creator")),
-            manufacturer: from_na(tag(&xml, "Instrument", "Manufacturer")),
-            model: from_na(tag(&xml, "Instrument", "Model")),
-            serial: from_na(tag(&xml, "Instrument", "Serial")),
-            version: from_na(tag(&xml, "Instrument", "Version")),
-            comment: from_na(tag(&xml, "Record2", "Comment")),
-        },
+        pitch_x_mm,
+        pitch_y_mm,
+        feature_type: feature,
+        invalid_points,
+        meta,
     })
 }

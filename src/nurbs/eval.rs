@@ -95,6 +95,86 @@ fn span_basis(degree: usize, knots: &[f64], count: usize, t: f64) -> (usize, Vec
     }
 }
 
+/// Span and basis values at `t` (clamped into the domain), the values written into
+/// `out[..=degree]` without allocating (for degrees up to the stack limit). The same
+/// arithmetic as [`span_basis`].
+fn span_basis_into(degree: usize, knots: &[f64], count: usize, t: f64, out: &mut [f64]) -> usize {
+    let lo = knots[degree];
+    let hi = knots[count];
+    let t = if t.is_nan() { lo } else { t.clamp(lo, hi) };
+    let span = find_span(degree, knots, count, t);
+    if degree <= MAX_STACK_DEGREE {
+        let mut left = [0.0; MAX_STACK_DEGREE + 1];
+        let mut right = [0.0; MAX_STACK_DEGREE + 1];
+        basis_funs(span, t, degree, knots, out, &mut left, &mut right);
+    } else {
+        out[..=degree].copy_from_slice(&basis_vec(span, t, degree, knots));
+    }
+    span
+}
+
+/// The non-vanishing basis functions along u of a surface at a list of parameters, computed
+/// once and applied to any number of iso-curves (every row of a grid shares its u values).
+#[derive(Debug, Clone)]
+pub struct UBasis {
+    degree: usize,
+    /// Index of the first pole each parameter's basis applies to (span − degree).
+    first: Vec<usize>,
+    /// `degree + 1` values per parameter.
+    values: Vec<f64>,
+}
+
+impl UBasis {
+    /// The basis along u of `surface` at each of `us` (clamped into the domain).
+    pub fn new(surface: &NurbsSurface, us: &[f64]) -> UBasis {
+        let d = surface.degree_u;
+        let mut first = Vec::with_capacity(us.len());
+        let mut values = vec![0.0; us.len() * (d + 1)];
+        for (&u, out) in us.iter().zip(values.chunks_exact_mut(d + 1)) {
+            let span = span_basis_into(d, &surface.knots_u, surface.count_u, u, out);
+            first.push(span - d);
+        }
+        UBasis {
+            degree: d,
+            first,
+            values,
+        }
+    }
+
+    /// Number of parameters.
+    pub fn len(&self) -> usize {
+        self.first.len()
+    }
+
+    /// Whether there are no parameters.
+    pub fn is_empty(&self) -> bool {
+        self.first.is_empty()
+    }
+
+    /// Calls `f(k, point)` for each parameter k with the point of the curve whose poles are
+    /// `curve` (as [`NurbsSurface::iso_poles_u_padded`] makes them; lane 3 is zero), in the
+    /// arithmetic of [`BSplineCurve::evaluate`]: Σ basis·pole from zero, in pole order.
+    #[inline(always)]
+    pub fn for_each_point(&self, curve: &[[f64; 4]], mut f: impl FnMut(usize, [f64; 4])) {
+        let n = self.degree + 1;
+        for (k, (&base, b)) in self
+            .first
+            .iter()
+            .zip(self.values.chunks_exact(n))
+            .enumerate()
+        {
+            let poles = &curve[base..base + n];
+            let mut p = [0.0f64; 4];
+            for (q, &nu) in poles.iter().zip(b) {
+                for c in 0..4 {
+                    p[c] += nu * q[c];
+                }
+            }
+            f(k, p);
+        }
+    }
+}
+
 /// A non-rational B-spline curve in millimetres (an iso-parametric curve of a surface, or a
 /// fitted profile).
 #[derive(Debug, Clone, PartialEq)]
@@ -116,7 +196,16 @@ impl BSplineCurve {
         if n < self.degree + 1 || self.knots.len() != n + self.degree + 1 {
             return None;
         }
-        let (span, basis) = span_basis(self.degree, &self.knots, n, t);
+        let mut stack = [0.0; MAX_STACK_DEGREE + 1];
+        let heap;
+        let (span, basis): (usize, &[f64]) = if self.degree <= MAX_STACK_DEGREE {
+            let span = span_basis_into(self.degree, &self.knots, n, t, &mut stack);
+            (span, &stack[..=self.degree])
+        } else {
+            let (span, b) = span_basis(self.degree, &self.knots, n, t);
+            heap = b;
+            (span, &heap)
+        };
         let mut p = [0.0; 3];
         for (r, b) in basis.iter().enumerate() {
             let q = self.poles[span - self.degree + r];
@@ -170,6 +259,37 @@ impl NurbsSurface {
         }
     }
 
+    /// The poles of the iso-parametric curve at fixed `v` (as [`NurbsSurface::iso_curve_u`]
+    /// computes them, to the bit) into `out`, each padded to four lanes with a zero so that a
+    /// point's three coordinates are one vector.
+    pub fn iso_poles_u_padded(&self, v: f64, out: &mut Vec<[f64; 4]>) {
+        let mut bv = [0.0; MAX_STACK_DEGREE + 1];
+        let sv = if self.degree_v <= MAX_STACK_DEGREE {
+            span_basis_into(self.degree_v, &self.knots_v, self.count_v, v, &mut bv)
+        } else {
+            let (sv, b) = span_basis(self.degree_v, &self.knots_v, self.count_v, v);
+            out.clear();
+            out.resize(self.count_u, [0.0; 4]);
+            self.accumulate_rows(sv, &b, out);
+            return;
+        };
+        out.clear();
+        out.resize(self.count_u, [0.0; 4]);
+        self.accumulate_rows(sv, &bv[..=self.degree_v], out);
+    }
+
+    /// Adds Σ_l bv[l] · (pole row sv − degree_v + l) into `out`, row by row.
+    fn accumulate_rows(&self, sv: usize, bv: &[f64], out: &mut [[f64; 4]]) {
+        for (l, nv) in bv.iter().enumerate() {
+            let row = (sv - self.degree_v + l) * self.count_u;
+            for (o, q) in out.iter_mut().zip(&self.poles[row..row + self.count_u]) {
+                o[0] += nv * q[0];
+                o[1] += nv * q[1];
+                o[2] += nv * q[2];
+            }
+        }
+    }
+
     /// The iso-parametric curve at fixed `u`, running along v (y).
     pub fn iso_curve_v(&self, u: f64) -> BSplineCurve {
         let (su, bu) = span_basis(self.degree_u, &self.knots_u, self.count_u, u);
@@ -197,24 +317,12 @@ impl NurbsSurface {
     /// Basis functions are computed once per parameter and each v reduces the net to an
     /// iso-curve first, so a point costs about `degree_u + 1` multiply-adds per coordinate.
     pub fn evaluate_grid(&self, us: &[f64], vs: &[f64]) -> Vec<[f64; 3]> {
-        let ubasis: Vec<(usize, Vec<f64>)> = us
-            .iter()
-            .map(|&u| span_basis(self.degree_u, &self.knots_u, self.count_u, u))
-            .collect();
+        let basis = UBasis::new(self, us);
         let mut out = Vec::with_capacity(us.len() * vs.len());
+        let mut curve = Vec::new();
         for &v in vs {
-            let curve = self.iso_curve_u(v);
-            for (su, bu) in &ubasis {
-                let base = su - self.degree_u;
-                let mut p = [0.0; 3];
-                for (k, nu) in bu.iter().enumerate() {
-                    let q = curve.poles[base + k];
-                    p[0] += nu * q[0];
-                    p[1] += nu * q[1];
-                    p[2] += nu * q[2];
-                }
-                out.push(p);
-            }
+            self.iso_poles_u_padded(v, &mut curve);
+            basis.for_each_point(&curve, |_, p| out.push([p[0], p[1], p[2]]));
         }
         out
     }

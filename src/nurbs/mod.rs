@@ -11,7 +11,7 @@
 //! Layer 0 (vocabulary): depends on nothing else in the crate; no I/O.
 
 mod eval;
-pub use eval::{basis_funs, find_span, BSplineCurve};
+pub use eval::{basis_funs, find_span, BSplineCurve, UBasis};
 
 use thiserror::Error;
 

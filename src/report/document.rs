@@ -248,6 +248,15 @@ pub struct Traceability {
     pub firmware: String,
     /// Drive unit.
     pub drive_unit: String,
+    /// The instrument's maker (the SJ series is Mitutoyo's), empty when not known.
+    pub manufacturer: String,
+    /// The instrument's serial number: the SJ series reports none over its link, so this is
+    /// `[traceability] serial-number` of the configuration the scan ran with.
+    pub instrument_serial: Option<String>,
+    /// Stylus tip radius, µm (`[traceability] stylus-tip-radius-um`).
+    pub stylus_tip_radius_um: Option<f64>,
+    /// The instrument's last calibration, ISO 8601 date (`[traceability] calibration-date`).
+    pub calibration_date: Option<String>,
     /// Measurement conditions read at start.
     pub conditions: Conditions,
 }
@@ -265,8 +274,31 @@ impl From<&StartRecord> for Traceability {
             instrument_model: s.instrument_model.clone(),
             firmware: s.firmware.clone(),
             drive_unit: s.drive_unit.clone(),
+            manufacturer: manufacturer_of(&s.instrument_model).to_string(),
+            instrument_serial: traceability_key(s, "serial-number")
+                .and_then(|v| v.as_str().map(str::to_owned)),
+            stylus_tip_radius_um: traceability_key(s, "stylus-tip-radius-um")
+                .and_then(serde_json::Value::as_f64),
+            calibration_date: traceability_key(s, "calibration-date")
+                .and_then(|v| v.as_str().map(str::to_owned)),
             conditions: s.conditions.clone(),
         }
+    }
+}
+
+/// A key of the `[traceability]` table of the configuration a scan recorded at its start.
+fn traceability_key<'a>(s: &'a StartRecord, key: &str) -> Option<&'a serde_json::Value> {
+    s.config.get("traceability")?.get(key)
+}
+
+/// The maker of an instrument model: the scan daemon drives the Mitutoyo SJ series
+/// (recorded as e.g. "sj210" from the config or "SJ-210" from the instrument); any other
+/// model is not named.
+pub fn manufacturer_of(model: &str) -> &'static str {
+    if model.trim_start().to_ascii_lowercase().starts_with("sj") {
+        "Mitutoyo"
+    } else {
+        ""
     }
 }
 

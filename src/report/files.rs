@@ -1,6 +1,6 @@
 //! Section: the files of a characterisation — plots (bearing curves, height map, measured vs
-//! model of one line), `measured.x3p`, `model.x3p`, `summary.csv` and `report.json`, each
-//! replaced atomically.
+//! model of one line, the Rk construction of each line), `measured.x3p`, `model.x3p`,
+//! `summary.csv`, `report.json` and `report.html`, each replaced atomically.
 //!
 //! Layer 4 (reporting): depends on [`crate::metrology::plots`], [`crate::metrology::x3p`]
 //! and [`crate::atomic`].
@@ -9,14 +9,20 @@ use super::context::ReportContext;
 use super::document::Report;
 use super::error::{metrology, ReportError};
 use super::grid::LineGrid;
+use super::html;
 use super::model::SampledModel;
 use super::summary::summary_csv;
 use crate::atomic::write_atomically;
 use crate::metrology::areal::Grid;
 use crate::metrology::model::ModelCurveBac;
-use crate::metrology::plots::{plot_bearing_curves, plot_height_map, plot_profile_overlay};
+use crate::metrology::params::{material_ratio_curve, rk_family, LineAnalysis};
+use crate::metrology::plots::{
+    plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction,
+};
 use crate::metrology::x3p::{to_x3p, X3pMeta};
 use crate::metrology::MetrologyError;
+use crate::numfmt::{fmt as nfmt, line_label, line_number, Quantity};
+use crate::scan::journal::{read_journal, ResumeState};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -25,10 +31,14 @@ use std::path::{Path, PathBuf};
 pub struct Files {
     /// `report.json`.
     pub report_json: PathBuf,
+    /// `report.html`, the report for people (plots embedded).
+    pub report_html: PathBuf,
     /// `summary.csv`.
     pub summary_csv: PathBuf,
-    /// The PNG and SVG plots.
+    /// The PNG and SVG plots (the Rk constructions are in `rk_plots`).
     pub plots: Vec<PathBuf>,
+    /// The Rk construction of each line: its title and its PNG and SVG.
+    pub rk_plots: Vec<(String, [PathBuf; 2])>,
     /// `measured.x3p`.
     pub measured_x3p: PathBuf,
     /// `model.x3p`, when the model could be sampled.
@@ -36,7 +46,7 @@ pub struct Files {
 }
 
 pub(crate) fn software() -> String {
-    format!("surfscan {}", env!("CARGO_PKG_VERSION"))
+    crate::build_info::software()
 }
 
 fn caption(ctx: &ReportContext) -> String {
@@ -56,16 +66,20 @@ fn caption(ctx: &ReportContext) -> String {
             if let Some(l) = c.lambda_s_um {
                 cond.push(format!("λs {l} µm"));
             }
-            if let Some(n) = c.sampling_lengths {
-                cond.push(format!("N {n}"));
+            match c.sampling_lengths {
+                // The SJ series' N = 0: an arbitrary evaluation length, one section.
+                Some(0) => cond.push("arbitrary evaluation length".to_string()),
+                Some(n) => cond.push(format!("N = {n}")),
+                None => {}
             }
             let cond = if cond.is_empty() {
                 "conditions not recorded".to_string()
             } else {
                 cond.join(" ")
             };
+            // The recorded software version already names the program ("surfscan 0.1.0").
             format!(
-                "specimen {} · {} fw {} ({}) · {} · scan {} · surfscan {}",
+                "specimen {} · {} fw {} ({}) · {} · scan {} · {}",
                 t.specimen,
                 t.instrument_model,
                 t.firmware,
@@ -85,15 +99,19 @@ fn x3p_meta(ctx: &ReportContext, what: &str) -> X3pMeta {
             let conditions = serde_json::to_string(&t.conditions).unwrap_or_default();
             X3pMeta {
                 date: t.started_at.clone(),
-                creator: t.operator.clone(),
-                // The scan daemon drives the Mitutoyo SJ series; any other model is not named.
-                manufacturer: if t.instrument_model.trim_start().starts_with("SJ-") {
-                    "Mitutoyo".to_string()
-                } else {
-                    String::new()
+                calibration_date: t.calibration_date.clone().unwrap_or_default(),
+                probe: match t.stylus_tip_radius_um {
+                    Some(r) => format!(
+                        "{} stylus, tip radius {} µm",
+                        t.instrument_model,
+                        crate::numfmt::sig(r, 3)
+                    ),
+                    None => String::new(),
                 },
+                creator: t.operator.clone(),
+                manufacturer: t.manufacturer.clone(),
                 model: t.instrument_model.clone(),
-                serial: String::new(),
+                serial: t.instrument_serial.clone().unwrap_or_default(),
                 version: t.firmware.clone(),
                 comment: format!(
                     "{what}; specimen {}; scan {}; operator {}; notes: {}; drive unit {}; conditions {}; scanned by surfscan {}, config sha256 {}; written by {}",
@@ -191,8 +209,8 @@ pub fn held_out_overlay(
                 .min_by_key(|(_, l)| l.index.abs_diff(wanted))?;
             ctx.warnings.push(format!(
                 "the overlay shows line {} (left out of the hold-out refit) instead of line {}: {e}",
-                grid.index_of(line.index),
-                grid.index_of(wanted)
+                line_label(grid.index_of(line.index)),
+                line_label(grid.index_of(wanted))
             ));
             (line.index, line.rms_um, b.model_um.get(k)?.clone())
         }
@@ -217,10 +235,14 @@ pub fn held_out_overlay(
             .map(|(i, (m, z))| (i as f64 * px, m - z))
             .collect(),
         title: format!(
-            "Line {} (y = {:.4} mm) left out: its measured heights and the model refitted without it (rms {:.3} µm)",
+            "Line {} ({:04}, y = {} mm) left out: its measured heights and the model refitted without it (rms {} µm)",
+            line_number(grid.index_of(row)),
             grid.index_of(row),
-            grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
-            rms
+            nfmt(
+                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
+                Quantity::PositionMm
+            ),
+            nfmt(rms, Quantity::HeightUm)
         ),
     })
 }
@@ -284,10 +306,14 @@ fn write_plots(
             .enumerate()
             .map(|(i, v)| (i as f64 * model.pitch_x_mm, *v))
             .collect();
+        let index = grid.index.get(row).copied().unwrap_or(0);
         let title = format!(
-            "Line {} (y = {:.4} mm): measured and model (fitted through these points; no line could be held out)",
-            grid.index.get(row).copied().unwrap_or(0),
-            grid.y_mm.get(row).copied().unwrap_or(f64::NAN)
+            "Line {} ({index:04}, y = {} mm): measured and model (fitted through these points; no line could be held out)",
+            line_number(index),
+            nfmt(
+                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
+                Quantity::PositionMm
+            )
         );
         let plot_err = |e: MetrologyError| ReportError::Metrology {
             what: format!("{}: plots", ctx.input),
@@ -301,11 +327,58 @@ fn write_plots(
     Ok(plots)
 }
 
+/// The ISO 13565-2 construction of every line, from the ordinates its Rk family came from:
+/// `rk/NNNN.png|svg`, with each figure's title.
+fn write_rk_plots(
+    out: &Path,
+    grid: &LineGrid,
+    analyses: &[LineAnalysis],
+    ctx: &ReportContext,
+) -> Result<Vec<(String, [PathBuf; 2])>, ReportError> {
+    let caption = caption(ctx);
+    let plot_err = |e: MetrologyError| ReportError::Metrology {
+        what: format!("{}: plots", ctx.input),
+        source: e,
+    };
+    let rk_dir = out.join("rk");
+    std::fs::create_dir_all(&rk_dir).map_err(|source| ReportError::Io {
+        path: rk_dir.clone(),
+        source,
+    })?;
+    let mut rk_plots = Vec::new();
+    for (row, a) in analyses.iter().enumerate() {
+        let index = grid.index_of(row);
+        let rk = rk_family(&a.roughness_um).map_err(plot_err)?;
+        let title = format!(
+            "Line {} ({index:04}, y = {} mm): ISO 13565-2 Rk construction",
+            line_number(index),
+            nfmt(
+                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
+                Quantity::PositionMm
+            )
+        );
+        let files = plot_rk_construction(
+            &rk_dir,
+            &format!("{index:04}"),
+            &material_ratio_curve(&a.roughness_um, 1001),
+            &rk,
+            &title,
+            &caption,
+        )
+        .map_err(plot_err)?;
+        rk_plots.push((title, files));
+    }
+    Ok(rk_plots)
+}
+
 /// Writes the plots and X3P files (which may add warnings to `ctx`), then `summary.csv`;
-/// `report.json` is written last by [`write_report`], once the warnings are final.
+/// `report.json` and `report.html` are written last by [`write_report`], once the warnings
+/// are final.
+#[allow(clippy::too_many_arguments)]
 pub fn write_data_files(
     out: &Path,
     grid: &LineGrid,
+    analyses: &[LineAnalysis],
     measured: &Grid<'_>,
     sampled: Option<&SampledModel>,
     overlay: Option<&Overlay>,
@@ -313,6 +386,7 @@ pub fn write_data_files(
     ctx: &mut ReportContext,
 ) -> Result<Files, ReportError> {
     let plots = write_plots(out, grid, measured, sampled, overlay, report, ctx)?;
+    let rk_plots = write_rk_plots(out, grid, analyses, ctx)?;
     let measured_x3p = out.join("measured.x3p");
     let bytes = to_x3p(
         &grid.heights_um,
@@ -348,16 +422,55 @@ pub fn write_data_files(
     write_file(&summary, summary_csv(&report.lines).as_bytes())?;
     Ok(Files {
         report_json: out.join("report.json"),
+        report_html: out.join("report.html"),
         summary_csv: summary,
         plots,
+        rk_plots,
         measured_x3p,
         model_x3p,
     })
 }
 
-/// Writes `report.json`.
-pub fn write_report(path: &Path, report: &Report) -> Result<(), ReportError> {
+/// Writes `report.json`, then `report.html`, the report for people, with the plots embedded
+/// and what the scan's journal recorded.
+pub fn write_report(
+    out: &Path,
+    files: &Files,
+    report: &Report,
+    ctx: &ReportContext,
+) -> Result<(), ReportError> {
     let mut json = serde_json::to_vec_pretty(report)?;
     json.push(b'\n');
-    write_file(path, &json)
+    write_file(&files.report_json, &json)?;
+    let journal = (ctx.kind == "scan")
+        .then(|| {
+            let path = Path::new(&ctx.input).join(crate::scan::journal::JOURNAL_FILE);
+            read_journal(&path)
+                .and_then(|r| ResumeState::from_records(&path, &r.records))
+                .ok()
+        })
+        .flatten();
+    let pair = |stem: &str| {
+        (
+            out.join(format!("{stem}.png")),
+            out.join(format!("{stem}.svg")),
+        )
+    };
+    let mut figures = Vec::new();
+    for (stem, title) in [
+        ("heightmap", "Measured heights"),
+        ("bac", "Material ratio curves"),
+        ("overlay", "One line: measured and model"),
+    ] {
+        let (png, svg) = pair(stem);
+        figures.extend(html::Figure::from_files(title, &png, &svg, false));
+    }
+    for (title, [png, svg]) in &files.rk_plots {
+        figures.extend(html::Figure::from_files(title.clone(), png, svg, true));
+    }
+    let value = serde_json::to_value(report)?;
+    write_file(
+        &files.report_html,
+        html::render(&value, journal.as_ref(), &figures, ctx.finished_at).as_bytes(),
+    )
 }

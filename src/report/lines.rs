@@ -12,6 +12,7 @@ use crate::metrology::areal;
 use crate::metrology::instrument::compare_profile;
 use crate::metrology::params::{analyze_line, LineAnalysis, Options};
 use crate::metrology::MetrologyError;
+use crate::numfmt::line_number;
 use std::path::PathBuf;
 
 /// What the section produces.
@@ -21,6 +22,8 @@ pub struct LinesSection {
     pub recipe: ReportRecipe,
     /// One entry per row of the grid.
     pub lines: Vec<LineReport>,
+    /// Each row's analysis (its roughness profile draws the Rk construction).
+    pub analyses: Vec<LineAnalysis>,
 }
 
 /// Rmr(c) at depths c = 0, 10, …, 100 % of Rt below the highest peak: `[c_um, Rmr_pct]`.
@@ -73,7 +76,13 @@ fn analyse_lines(
         .into_iter()
         .flatten()
         .enumerate()
-        .map(|(row, r)| r.map_err(metrology(format!("{label} line {}", grid.index_of(row)))))
+        .map(|(row, r)| {
+            let index = grid.index_of(row);
+            r.map_err(metrology(format!(
+                "{label} line {} ({index:04})",
+                line_number(index)
+            )))
+        })
         .collect()
 }
 
@@ -116,5 +125,6 @@ pub fn characterise(grid: &LineGrid, ctx: &ReportContext) -> Result<LinesSection
             filter_reason: ctx.filter_reason.clone(),
         },
         lines,
+        analyses,
     })
 }

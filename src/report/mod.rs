@@ -17,7 +17,8 @@
 //!   bearing tables `bac_curves`;
 //! - [`holdout`]: `model_vs_measured`, refits at the same degrees with points or lines left
 //!   out (each line also carries its own share) — the only fits the report makes;
-//! - [`files`]: the plots, the X3P files, `summary.csv` and `report.json`.
+//! - [`files`]: the plots, the X3P files, `summary.csv`, `report.json` and `report.html` (the
+//!   report for people, plots embedded: [`html`]).
 //!
 //! `report.json` also holds `recipe` (filter, λc and why, a definition id per parameter),
 //! for scans `traceability` (from the journal's start record) and `scan` (stop record,
@@ -36,6 +37,7 @@ pub mod error;
 pub mod files;
 pub mod grid;
 pub mod holdout;
+pub mod html;
 pub mod lines;
 pub mod model;
 pub mod outliers;
@@ -43,7 +45,7 @@ pub mod scan_dir;
 pub mod summary;
 
 pub use context::{Model, ReportContext, ScanAnalysisOptions};
-pub use document::{Report, ScanStatus, Traceability};
+pub use document::{manufacturer_of, Report, ScanStatus, Traceability};
 pub use error::ReportError;
 pub use grid::LineGrid;
 pub use scan_dir::{characterise_scan, load_scan_grid, scan_line_options, ScanCharacteriser};
@@ -62,6 +64,8 @@ pub struct ScanOutputs {
     pub report: Report,
     /// `report.json`.
     pub report_json: PathBuf,
+    /// `report.html`, the report for people (plots embedded).
+    pub report_html: PathBuf,
     /// `summary.csv`.
     pub summary_csv: PathBuf,
     /// The PNG and SVG plots written.
@@ -130,6 +134,7 @@ pub fn characterise(
     let lines::LinesSection {
         recipe,
         lines: mut line_reports,
+        analyses,
     } = lines::characterise(cgrid, &ctx)?;
     timings.lines = t.elapsed().as_secs_f64();
 
@@ -276,6 +281,7 @@ pub fn characterise(
     let written = files::write_data_files(
         out,
         grid,
+        &analyses,
         &measured,
         model_section.sampled.as_ref(),
         overlay.as_ref(),
@@ -286,11 +292,14 @@ pub fn characterise(
     timings.total = t_all.elapsed().as_secs_f64();
     report.warnings = ctx.warnings.clone();
     report.timings_s = timings;
-    files::write_report(&written.report_json, &report)?;
+    files::write_report(out, &written, &report, &ctx)?;
+    let mut plots = written.plots;
+    plots.extend(written.rk_plots.into_iter().flat_map(|(_, files)| files));
     Ok(ScanOutputs {
         report_json: written.report_json,
+        report_html: written.report_html,
         summary_csv: written.summary_csv,
-        plots: written.plots,
+        plots,
         measured_x3p: Some(written.measured_x3p),
         model_x3p: written.model_x3p,
         lines_used: grid.index.clone(),

@@ -256,6 +256,7 @@ pub fn characterise_scan_lines(
         fit,
         options: options.clone(),
         warnings,
+        finished_at: facts.filter(|f| f.completing).map(|_| chrono::Utc::now()),
     };
     let out = options.out_dir.clone().unwrap_or_else(|| dir.to_path_buf());
     let mut outputs = characterise(&grid, model, ctx, &out)?;
@@ -387,7 +388,7 @@ impl Characterise for ScanCharacteriser {
         )?;
         let complete = out.complete();
         let verdict = out.verdict_line();
-        let mut files = vec![out.summary_csv];
+        let mut files = vec![out.report_html, out.summary_csv];
         files.extend(out.plots);
         files.extend(out.measured_x3p);
         files.extend(out.model_x3p);
@@ -424,6 +425,7 @@ mod tests {
                 kind,
                 conditions: conditions.clone(),
                 results: Vec::new(),
+                readout_warnings: Vec::new(),
                 started_at: t,
                 finished_at: t,
                 attempt: 1,

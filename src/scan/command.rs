@@ -1,7 +1,8 @@
 //! Operator commands as the scan runner receives them: the control socket (or any other
 //! front end) forwards each with a channel for the runner's answer.
 //!
-//! Layer 3 (session): depends on tokio's oneshot channel only.
+//! Layer 3 (session): depends on tokio's oneshot channel, serde, and nix for this process's
+//! credentials.
 
 use tokio::sync::oneshot;
 
@@ -25,12 +26,38 @@ pub enum OperatorCommand {
     },
 }
 
+/// Who sent a command: the peer's credentials as the kernel gave them when it connected
+/// to the control socket (`SO_PEERCRED`), for the journal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Peer {
+    /// User id.
+    pub uid: u32,
+    /// Primary group id.
+    pub gid: u32,
+    /// Process id; `None` when the kernel could not name it (a peer in another PID
+    /// namespace).
+    pub pid: Option<u32>,
+}
+
+impl Peer {
+    /// This process, for commands that do not come over the socket.
+    pub fn this_process() -> Peer {
+        Peer {
+            uid: nix::unistd::geteuid().as_raw(),
+            gid: nix::unistd::getegid().as_raw(),
+            pid: Some(std::process::id()),
+        }
+    }
+}
+
 /// A forwarded command with the channel for the runner's answer: `Ok(detail)` when it was
 /// accepted (the control socket sends an `ack`), `Err(message)` when refused.
 #[derive(Debug)]
 pub struct OperatorRequest {
     /// The command.
     pub command: OperatorCommand,
+    /// Who sent it.
+    pub peer: Peer,
     /// Where the runner answers.
     pub reply: oneshot::Sender<Result<String, String>>,
 }

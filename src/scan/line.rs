@@ -1,10 +1,12 @@
 //! A stored line: its metadata (`NNNN.json`) and its profile (`NNNN.csv`).
 //!
-//! Layer 3 (session): depends on [`crate::profile`] and [`crate::units`]; no I/O.
+//! Layer 3 (session): depends on [`crate::profile`], [`crate::devices`] (the read-out
+//! warnings) and [`crate::units`]; no I/O.
 
 use chrono::{DateTime, Utc};
 use serde::{Deserialize, Serialize};
 
+use crate::devices::ReadoutWarning;
 use crate::profile::{Conditions, InstrumentResult, Profile, ProfileKind};
 use crate::units::Nm;
 
@@ -28,6 +30,9 @@ pub struct LineMeta {
     pub conditions: Conditions,
     /// The instrument's own results for this trace.
     pub results: Vec<InstrumentResult>,
+    /// Doubts about the profile read-out that a re-read did not clear.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub readout_warnings: Vec<ReadoutWarning>,
     /// When the trace was started.
     pub started_at: DateTime<Utc>,
     /// When the profile had been read out.

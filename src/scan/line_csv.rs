@@ -44,13 +44,9 @@ pub fn parse_csv(path: &Path, text: &str, pitch_x_mm: f64) -> Result<Vec<f64>, S
         let Some((x, z)) = r.split_once(',') else {
             return Err(row_err("expected two comma-separated numbers".into()));
         };
-        let x: f64 = x
-            .trim()
-            .parse()
+        let x: f64 = crate::numbers::parse_f64(x.trim())
             .map_err(|e| row_err(format!("x_mm is not a number: {e}")))?;
-        let z: f64 = z
-            .trim()
-            .parse()
+        let z: f64 = crate::numbers::parse_f64(z.trim())
             .map_err(|e| row_err(format!("z_um is not a number: {e}")))?;
         if !z.is_finite() || !x.is_finite() {
             return Err(row_err("values must be finite".into()));

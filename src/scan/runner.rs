@@ -674,7 +674,7 @@ async fn begin<S: Station>(
                 specimen,
                 operator,
                 notes,
-                software_version: format!("surfscan {}", env!("CARGO_PKG_VERSION")),
+                software_version: crate::build_info::software(),
                 instrument_model: report.identity.model.clone(),
                 firmware: report.identity.firmware.clone(),
                 drive_unit: report.identity.drive_unit.clone(),
@@ -1191,6 +1191,9 @@ async fn try_line<S: Station>(
     for w in &traced.warnings {
         tracing::warn!(scan_id = %scan.id, line = k + 1, "{w}");
     }
+    for w in &traced.readout_warnings {
+        tracing::warn!(scan_id = %scan.id, line = k + 1, "kept with a read-out warning: {w}");
+    }
     let profile = &traced.profile;
     let meta = LineMeta {
         index: k,
@@ -1201,6 +1204,7 @@ async fn try_line<S: Station>(
         kind: profile.kind,
         conditions: profile.conditions.clone(),
         results: traced.results.clone(),
+        readout_warnings: traced.readout_warnings.clone(),
         started_at,
         finished_at,
         attempt,

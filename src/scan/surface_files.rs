@@ -5,7 +5,7 @@
 //! Layer 3 (session): depends on [`crate::iges`], [`crate::nurbs`] and [`crate::atomic`].
 
 use crate::atomic::write_atomically;
-use crate::iges::{plan_files, write_iges, IgesError, IgesOptions};
+use crate::iges::{plan_parts, write_iges_seekable, IgesError, IgesOptions};
 use crate::nurbs::NurbsSurface;
 use std::path::{Path, PathBuf};
 
@@ -102,7 +102,7 @@ pub fn write_surface_files(
     surface: &NurbsSurface,
     opts: &IgesOptions,
 ) -> Result<Vec<WrittenIges>, SurfaceWriteError> {
-    let groups = plan_files(surface, opts).map_err(|e| SurfaceWriteError::Format {
+    let groups = plan_parts(surface, opts).map_err(|e| SurfaceWriteError::Format {
         path: output.to_path_buf(),
         message: e.to_string(),
     })?;
@@ -131,7 +131,7 @@ pub fn write_surface_files(
             ));
         }
         let st = write_atomically(&path, |w| {
-            write_iges(w, group, &part_opts).map_err(std::io::Error::other)
+            write_iges_seekable(w, group, &part_opts).map_err(std::io::Error::other)
         })
         .map_err(|e| write_error(&path, e))?;
         files.push(WrittenIges {

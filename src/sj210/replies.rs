@@ -58,6 +58,8 @@ pub fn parse_result(
         name,
         value: number(&value),
         unit,
+        printed: Some(value),
+        ng_code: None,
     })
 }
 
@@ -198,6 +200,7 @@ mod tests {
         );
         let r = parse_result("RDRES02,02,00", "Rc    Err110 um", 7).unwrap();
         assert_eq!(r.value, None);
+        assert_eq!(r.printed.as_deref(), Some("Err110"));
         assert!(parse_result("RDRES02,02,00", "Ra   1", 7).is_err());
     }
 
@@ -212,6 +215,7 @@ mod tests {
             (left.name.as_str(), left.value, left.unit.as_str()),
             ("Ra", Some(3.308), "um")
         );
+        assert_eq!(left.printed.as_deref(), Some("3.308"));
         let neg = parse_result("RDRES02,04,00", "Rsk    -0.144   ", 7).unwrap();
         assert_eq!(
             (neg.name.as_str(), neg.value, neg.unit.as_str()),

@@ -27,8 +27,10 @@
 //! twice. A block whose values are all equal (a flat or clipped stretch) can legitimately
 //! repeat and is not counted.
 //!
-//! Pure (layer 1): depends on [`crate::metrology`] and [`crate::profile`].
+//! Pure (layer 1): depends on [`crate::metrology`], [`crate::profile`] and [`crate::devices`]
+//! (the warning types a line carries).
 
+pub use crate::devices::RepeatedBlock;
 use crate::metrology::params::analyze_profile;
 use crate::profile::{InstrumentResult, Profile, ProfileKind};
 use serde::{Deserialize, Serialize};
@@ -90,17 +92,6 @@ pub fn check_ra(profile: &Profile, results: &[InstrumentResult]) -> Option<RaChe
     })
 }
 
-/// A block of the read-out that repeated the block before it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct RepeatedBlock {
-    /// 1-based number of the block request that answered the previous block again.
-    pub block: u32,
-    /// 0-based index of its first height in the read-out.
-    pub first_point: u32,
-    /// Number of values in it.
-    pub values: u32,
-}
-
 /// True when `block` is `previous` received again: same length (at least 2 values), same
 /// values in the same order, and not all equal.
 pub fn is_repeated_block(previous: &[f64], block: &[f64]) -> bool {
@@ -117,6 +108,8 @@ mod tests {
             name: name.into(),
             value: v,
             unit: unit.into(),
+            printed: v.map(|v| v.to_string()),
+            ng_code: None,
         }
     }
 

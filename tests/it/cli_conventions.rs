@@ -187,3 +187,47 @@ fn check_config_validates_without_opening_devices() {
         );
     }
 }
+
+#[test]
+fn fit_names_the_real_cause_for_a_missing_or_wrong_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("missing.csv");
+    let out = surfscan(&["fit", missing.to_str().unwrap(), "-o", "x.igs"]);
+    assert_eq!(out.status.code(), Some(74));
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("missing.csv") && err.contains("No such file"),
+        "{err}"
+    );
+    assert!(!err.contains("--pitch-x"), "{err}");
+
+    // An IGES file (here one fit wrote) is named as such, with or without its extension.
+    let grid = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sur-2.grid.csv");
+    let iges = dir.path().join("s.igs");
+    let out = surfscan(&[
+        "fit",
+        grid.to_str().unwrap(),
+        "-o",
+        iges.to_str().unwrap(),
+        "--pitch-x",
+        "0.003484",
+        "--pitch-y",
+        "0.010452",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let renamed = dir.path().join("surface.dat");
+    std::fs::copy(&iges, &renamed).unwrap();
+    for input in [&iges, &renamed] {
+        let out = surfscan(&[
+            "fit",
+            input.to_str().unwrap(),
+            "--pitch-x",
+            "1",
+            "--pitch-y",
+            "1",
+        ]);
+        assert_eq!(out.status.code(), Some(2));
+        let err = text(&out.stderr);
+        assert!(err.contains("is an IGES file"), "{err}");
+    }
+}

@@ -55,3 +55,25 @@ fn feed_mm_min_1e_minus_30_exits_78_naming_the_key() {
         );
     }
 }
+
+#[test]
+fn an_unknown_allowed_group_exits_78_naming_the_key() {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = config(tmp.path(), "");
+    let text =
+        std::fs::read_to_string(&path).unwrap() + "allowed-groups = [\"no-such-group-here\"]\n";
+    std::fs::write(&path, text).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(["daemon", "--config"])
+        .arg(&path)
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(78), "{stderr}");
+    assert!(
+        stderr.contains("control.allowed-groups") && stderr.contains("no-such-group-here"),
+        "{stderr}"
+    );
+    assert!(!tmp.path().join("control.sock").exists());
+}

@@ -8,17 +8,18 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use surfscan::control::protocol::{ControlChannels, PROTOCOL_VERSION};
 use surfscan::control::server::{self, ControlError, ServerOptions};
-use surfscan::scan::command::{OperatorCommand, OperatorRequest};
+use surfscan::scan::command::{OperatorCommand, OperatorRequest, Peer};
 use surfscan::scan::status::{DeviceState, State, Status};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader, Lines};
 use tokio::net::unix::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::net::UnixStream;
 use tokio::sync::{mpsc, oneshot, watch};
 
-/// The fake runner's published state and the commands it has seen.
+/// The fake runner's published state, the commands it has seen and who sent them.
 struct Runner {
     status: watch::Sender<Status>,
     seen: Arc<Mutex<Vec<OperatorCommand>>>,
+    peers: Arc<Mutex<Vec<Peer>>>,
 }
 
 fn scanning() -> Status {
@@ -43,11 +44,14 @@ fn fake_runner(initial: Status) -> (ControlChannels, Runner) {
     let (status_tx, status_rx) = watch::channel(initial);
     let (cmd_tx, mut cmd_rx) = mpsc::channel::<OperatorRequest>(4);
     let seen = Arc::new(Mutex::new(Vec::new()));
+    let peers = Arc::new(Mutex::new(Vec::new()));
+    let peer_log = Arc::clone(&peers);
     let publisher = status_tx.clone();
     let log = Arc::clone(&seen);
     tokio::spawn(async move {
         while let Some(req) = cmd_rx.recv().await {
             log.lock().unwrap().push(req.command.clone());
+            peer_log.lock().unwrap().push(req.peer);
             let state = publisher.borrow().state;
             let answer = match (&req.command, state) {
                 (OperatorCommand::Pause, State::Scanning) => {
@@ -75,6 +79,7 @@ fn fake_runner(initial: Status) -> (ControlChannels, Runner) {
         Runner {
             status: status_tx,
             seen,
+            peers,
         },
     )
 }
@@ -442,12 +447,16 @@ async fn a_runner_that_is_gone_or_silent_gives_an_error_not_a_hang() {
 #[tokio::test]
 async fn connections_beyond_the_limit_are_told_so_and_closed() {
     let (channels, _runner) = fake_runner(Status::idle());
+    // One slot, which a watcher may take: then nobody waits for a request whose slot could
+    // be given to the newcomer.
     let options = ServerOptions {
         max_connections: 1,
+        reserved_for_requests: 0,
         ..ServerOptions::default()
     };
     let served = serve(channels, options).await;
     let mut first = Conn::greeted(&served.path).await;
+    assert_eq!(first.ask(json!({"class":"watch"})).await["class"], "status");
     let mut second = Conn::open(&served.path).await;
     let e = second.recv().await;
     assert_eq!(e["class"], "error");
@@ -475,5 +484,351 @@ async fn connections_beyond_the_limit_are_told_so_and_closed() {
         assert!(std::time::Instant::now() < deadline, "slot never freed");
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
+    served.shutdown().await;
+}
+
+#[tokio::test]
+async fn an_unknown_field_is_refused_naming_it_and_nothing_is_carried_out() {
+    let (channels, runner) = fake_runner(scanning());
+    let served = serve(channels, ServerOptions::default()).await;
+    let mut c = Conn::greeted(&served.path).await;
+    for (request, field) in [
+        (json!({"class":"pause","force":true}), "force"),
+        (json!({"class":"abort","now":1}), "now"),
+        (json!({"class":"resume","all":true}), "all"),
+        (json!({"class":"status","verbose":true}), "verbose"),
+        (json!({"class":"watch","every":5}), "every"),
+        (
+            json!({"class":"start","specimen":"B","force":true}),
+            "force",
+        ),
+    ] {
+        let e = c.ask(request.clone()).await;
+        assert_eq!(e["class"], "error", "{request}: {e}");
+        let message = e["message"].as_str().unwrap();
+        assert!(
+            message.contains("unknown field") && message.contains(field),
+            "{request}: {message}"
+        );
+    }
+    assert!(runner.seen.lock().unwrap().is_empty());
+    // The same connection still carries out a well-formed request.
+    assert_eq!(c.ask(json!({"class":"pause"})).await["class"], "ack");
+    assert_eq!(*runner.seen.lock().unwrap(), vec![OperatorCommand::Pause]);
+    served.shutdown().await;
+}
+
+#[tokio::test]
+async fn each_command_carries_the_senders_uid_and_pid_to_the_runner() {
+    let (channels, runner) = fake_runner(scanning());
+    let served = serve(channels, ServerOptions::default()).await;
+    let mut c = Conn::greeted(&served.path).await;
+    assert_eq!(c.ask(json!({"class":"pause"})).await["class"], "ack");
+    assert_eq!(c.ask(json!({"class":"abort"})).await["class"], "ack");
+    let me = Peer {
+        uid: nix::unistd::geteuid().as_raw(),
+        gid: nix::unistd::getegid().as_raw(),
+        pid: Some(std::process::id()),
+    };
+    assert_eq!(*runner.peers.lock().unwrap(), vec![me, me]);
+    served.shutdown().await;
+}
+
+#[tokio::test]
+async fn a_client_without_a_complete_request_in_time_is_dropped_but_a_watcher_is_not() {
+    let (channels, runner) = fake_runner(scanning());
+    let options = ServerOptions {
+        request_timeout: Duration::from_millis(400),
+        ..ServerOptions::default()
+    };
+    let served = serve(channels, options).await;
+
+    // Silent after the greeting.
+    let mut idle = Conn::greeted(&served.path).await;
+    let t0 = std::time::Instant::now();
+    let e = idle.recv().await;
+    assert_eq!(e["class"], "error", "{e}");
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("no complete request within 0.4 s"),
+        "{e}"
+    );
+    assert!(
+        t0.elapsed() >= Duration::from_millis(350),
+        "{:?}",
+        t0.elapsed()
+    );
+    assert_eq!(idle.lines.next_line().await.unwrap(), None);
+
+    // Dripping bytes without ever ending the line does not keep it alive.
+    let mut drip = Conn::greeted(&served.path).await;
+    let mut writer = drip.writer;
+    let dripper = tokio::spawn(async move {
+        for b in b"{\"class\":\"status\"".iter().cycle() {
+            if writer.write_all(&[*b]).await.is_err() {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    });
+    let e = tokio::time::timeout(Duration::from_secs(5), drip.lines.next_line())
+        .await
+        .unwrap()
+        .unwrap()
+        .unwrap();
+    assert!(e.contains("no complete request"), "{e}");
+    assert_eq!(drip.lines.next_line().await.unwrap(), None);
+    dripper.abort();
+
+    // Each answer starts the period again: two requests 300 ms apart outlive one period.
+    let mut steady = Conn::greeted(&served.path).await;
+    for _ in 0..3 {
+        tokio::time::sleep(Duration::from_millis(250)).await;
+        assert_eq!(
+            steady.ask(json!({"class":"status"})).await["class"],
+            "status"
+        );
+    }
+
+    // A watcher sends nothing after `watch` and still gets every change.
+    let mut watcher = Conn::greeted(&served.path).await;
+    assert_eq!(
+        watcher.ask(json!({"class":"watch"})).await["class"],
+        "status"
+    );
+    tokio::time::sleep(Duration::from_millis(1000)).await;
+    runner.status.send_modify(|s| s.lines_done = 12);
+    let s = watcher.recv().await;
+    assert_eq!(status_of(&s).lines_done, 12);
+    served.shutdown().await;
+}
+
+/// `n` connections that have been greeted and then send nothing.
+async fn idle_clients(path: &Path, n: usize) -> Vec<Conn> {
+    let mut out = Vec::new();
+    for _ in 0..n {
+        out.push(Conn::greeted(path).await);
+    }
+    out
+}
+
+#[tokio::test]
+async fn thirty_two_idle_or_slow_drip_clients_do_not_lock_out_status_and_pause() {
+    let (channels, runner) = fake_runner(scanning());
+    // A request period far longer than the test: the operator gets through because the
+    // connection that waited longest without a request makes room, not because the squatters
+    // time out.
+    let options = ServerOptions {
+        request_timeout: Duration::from_secs(600),
+        ..ServerOptions::default()
+    };
+    assert_eq!(options.max_connections, 32);
+    let served = serve(channels, options).await;
+
+    let mut idle = idle_clients(&served.path, 32).await;
+    let mut op = Conn::greeted(&served.path).await;
+    assert_eq!(op.ask(json!({"class":"status"})).await["class"], "status");
+    let mut op2 = Conn::greeted(&served.path).await;
+    assert_eq!(op2.ask(json!({"class":"pause"})).await["class"], "ack");
+    // The two that waited longest were told why they were closed; the rest are untouched.
+    for c in &mut idle[..2] {
+        let e = c.recv().await;
+        assert!(
+            e["message"]
+                .as_str()
+                .unwrap()
+                .contains("closed to let another client in"),
+            "{e}"
+        );
+        assert_eq!(c.lines.next_line().await.unwrap(), None);
+    }
+    drop((idle, op, op2));
+
+    // 32 clients sending one byte at a time and never a newline.
+    runner.status.send_replace(scanning());
+    let mut drips = Vec::new();
+    for _ in 0..32 {
+        let Conn { lines, mut writer } = Conn::greeted(&served.path).await;
+        drips.push(tokio::spawn(async move {
+            let _lines = lines;
+            while writer.write_all(b" ").await.is_ok() {
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+        }));
+    }
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let mut op = Conn::greeted(&served.path).await;
+    assert_eq!(
+        status_of(&op.ask(json!({"class":"status"})).await).state,
+        State::Scanning
+    );
+    assert_eq!(op.ask(json!({"class":"pause"})).await["class"], "ack");
+    assert_eq!(
+        *runner.seen.lock().unwrap(),
+        vec![OperatorCommand::Pause, OperatorCommand::Pause]
+    );
+    for d in drips {
+        d.abort();
+    }
+    served.shutdown().await;
+}
+
+#[tokio::test]
+async fn watchers_cannot_take_the_slots_kept_for_requests() {
+    let (channels, runner) = fake_runner(scanning());
+    let options = ServerOptions {
+        max_connections: 6,
+        reserved_for_requests: 2,
+        request_timeout: Duration::from_secs(600),
+        ..ServerOptions::default()
+    };
+    let served = serve(channels, options).await;
+    let mut watchers = idle_clients(&served.path, 4).await;
+    for w in &mut watchers {
+        assert_eq!(w.ask(json!({"class":"watch"})).await["class"], "status");
+    }
+    // A fifth watcher is refused (and stays connected as an ordinary client).
+    let mut fifth = Conn::greeted(&served.path).await;
+    let e = fifth.ask(json!({"class":"watch"})).await;
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("4 clients already watch"),
+        "{e}"
+    );
+    assert_eq!(
+        fifth.ask(json!({"class":"status"})).await["class"],
+        "status"
+    );
+    // Every slot taken (4 watchers, 2 idle): a request still gets in, and the watchers keep
+    // their streams.
+    let _idle = idle_clients(&served.path, 1).await;
+    let mut op = Conn::greeted(&served.path).await;
+    assert_eq!(op.ask(json!({"class":"pause"})).await["class"], "ack");
+    runner.status.send_modify(|s| s.lines_done = 20);
+    for w in &mut watchers {
+        // The pause's own change may come first.
+        while status_of(&w.recv().await).lines_done != 20 {}
+    }
+    served.shutdown().await;
+}
+
+/// The process's groups (effective and supplementary) and a gid outside them.
+fn my_groups_and_another() -> (Vec<u32>, u32) {
+    let mut mine: Vec<u32> = nix::unistd::getgroups()
+        .unwrap()
+        .into_iter()
+        .map(|g| g.as_raw())
+        .collect();
+    mine.push(nix::unistd::getegid().as_raw());
+    let other = (40_000..).find(|g| !mine.contains(g)).unwrap();
+    (mine, other)
+}
+
+#[tokio::test]
+async fn allowed_groups_narrow_who_may_command_and_leave_status_open() {
+    let (mine, other) = my_groups_and_another();
+    let (channels, runner) = fake_runner(scanning());
+    let options = ServerOptions {
+        allowed_groups: Some(vec![other]),
+        ..ServerOptions::default()
+    };
+    let served = serve(channels, options).await;
+    let mut c = Conn::greeted(&served.path).await;
+    for class in ["pause", "resume", "abort", "start"] {
+        let e = c.ask(json!({"class": class})).await;
+        assert_eq!(e["class"], "error", "{class}: {e}");
+        let message = e["message"].as_str().unwrap();
+        assert!(
+            message.contains(&format!("{class} refused"))
+                && message.contains("allowed-groups")
+                && message.contains(&format!("uid {}", nix::unistd::geteuid())),
+            "{message}"
+        );
+    }
+    assert!(runner.seen.lock().unwrap().is_empty());
+    assert_eq!(c.ask(json!({"class":"status"})).await["class"], "status");
+    assert_eq!(c.ask(json!({"class":"watch"})).await["class"], "status");
+    served.shutdown().await;
+
+    // A group the process is in: commands pass.
+    let (channels, runner) = fake_runner(scanning());
+    let options = ServerOptions {
+        allowed_groups: Some(vec![other, mine[0]]),
+        ..ServerOptions::default()
+    };
+    let served = serve(channels, options).await;
+    let mut c = Conn::greeted(&served.path).await;
+    assert_eq!(c.ask(json!({"class":"pause"})).await["class"], "ack");
+    assert_eq!(*runner.seen.lock().unwrap(), vec![OperatorCommand::Pause]);
+    served.shutdown().await;
+}
+
+/// `surfscan <verb> --socket PATH` run with the primary group `gid` and only `groups` as its
+/// supplementary groups (root may set both; the test suite runs as root, as CI does).
+fn client_with_groups(verb: &str, socket: &Path, gid: u32, groups: &[u32]) -> std::process::Output {
+    use std::os::unix::process::CommandExt;
+    assert!(
+        nix::unistd::geteuid().is_root(),
+        "giving a client other groups needs root; run the suite as root (CI does)"
+    );
+    let groups: Vec<libc::gid_t> = groups.to_vec();
+    let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan"));
+    c.args([verb, "--socket"]).arg(socket);
+    // SAFETY: between fork and exec the closure only makes two system calls on data
+    // prepared before the fork; it allocates nothing.
+    unsafe {
+        c.pre_exec(move || {
+            if libc::setgroups(groups.len(), groups.as_ptr()) != 0 || libc::setgid(gid) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    c.output().unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_supplementary_group_of_the_peer_counts_for_allowed_groups() {
+    let (_, other) = my_groups_and_another();
+    let (operators, primary) = (other, other + 1);
+    let (channels, runner) = fake_runner(scanning());
+    let options = ServerOptions {
+        allowed_groups: Some(vec![operators]),
+        ..ServerOptions::default()
+    };
+    let served = serve(channels, options).await;
+    let path = served.path.clone();
+    // Only in the operators' group through a supplementary group: allowed.
+    let ok = tokio::task::spawn_blocking(move || {
+        client_with_groups("pause", &path, primary, &[operators])
+    })
+    .await
+    .unwrap();
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let peers = runner.peers.lock().unwrap().clone();
+    assert_eq!(peers.len(), 1);
+    assert_eq!((peers[0].uid, peers[0].gid), (0, primary));
+    // Without it: refused, naming the groups it has.
+    let path = served.path.clone();
+    let refused = tokio::task::spawn_blocking(move || {
+        client_with_groups("pause", &path, primary, &[primary + 1])
+    })
+    .await
+    .unwrap();
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("allowed-groups") && stderr.contains(&format!("{}", primary + 1)),
+        "{stderr}"
+    );
+    assert_eq!(runner.seen.lock().unwrap().len(), 1);
     served.shutdown().await;
 }

@@ -254,7 +254,13 @@ async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket()
     ));
     let s = status(&r).await;
     assert_eq!(s.state, State::Idle);
-    assert!(!r.out().exists() || std::fs::read_dir(r.out()).unwrap().next().is_none());
+    // No scan directory: only the station's lock file (the daemon holds the station).
+    assert!(
+        !r.out().exists()
+            || std::fs::read_dir(r.out())
+                .unwrap()
+                .all(|e| !e.unwrap().path().is_dir())
+    );
 
     let ack = c
         .request(&Request::Start {
@@ -313,7 +319,7 @@ async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket()
     assert_eq!(fg.status.code(), Some(69));
     let err = String::from_utf8_lossy(&fg.stderr);
     assert!(
-        err.contains("daemon is running") && err.contains("surfscan start"),
+        err.contains("in use by surfscan daemon, pid") && err.contains("surfscan start"),
         "{err}"
     );
     // Pausing with no scan running is refused with a reason.

@@ -37,6 +37,19 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
         stdout.contains(&dir.join("surface.igs").display().to_string()),
         "{stdout}"
     );
+    // The end of the scan says what came out, not only the residual at the data points.
+    assert!(
+        stdout.contains("  lines    31 of 31 planned characterised\n"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("  Ra       ") && stdout.contains(" µm (mean "),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("  Sa       ") && stdout.contains("(model)"),
+        "{stdout}"
+    );
 
     let store = ScanStore::open(dir, Arc::new(NoFaults)).unwrap();
     let lines = store.load_all().unwrap();
@@ -90,6 +103,21 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
             );
         }
     }
+    // The footer names the software once and the demo's arbitrary evaluation length in
+    // words (the instrument's N = 0), and every line has its Rk construction.
+    let footer = std::fs::read_to_string(dir.join("bac.svg")).unwrap();
+    assert!(
+        !footer.contains("surfscan surfscan"),
+        "doubled name in the footer"
+    );
+    assert!(footer.contains("arbitrary evaluation length"));
+    assert!(!footer.contains(" N 0"));
+    for k in 0..31 {
+        assert!(dir.join(format!("rk/{k:04}.png")).exists(), "rk/{k:04}.png");
+    }
+    assert!(std::fs::read_to_string(dir.join("report.html"))
+        .unwrap()
+        .contains("31 of 31 planned characterised"));
     // The measured X3P holds exactly the stored heights.
     let x = read_x3p(&std::fs::read(dir.join("measured.x3p")).unwrap()).unwrap();
     assert_eq!((x.rows, x.cols), (31, cols));

@@ -134,10 +134,15 @@ fn a_surface_too_large_for_one_file_is_written_as_named_parts_with_a_report() {
             serde_json::from_slice(&std::fs::read(report).unwrap()).unwrap();
         (String::from_utf8_lossy(&st.stdout).into_owned(), rep)
     };
-    // Whole surface in one entity, then split into entities of at most a sixth of it.
+    // Whole surface in one entity, then split into entities of at most a sixth of it (parts
+    // and patches are planned from the bound on their P lines, from token counts).
     let one = dir.path().join("one.igs");
-    let (_, rep) = run(&one, &dir.path().join("one.json"), &[]);
-    let whole = rep["iges_parameter_lines"].as_u64().unwrap() as usize;
+    let _ = run(&one, &dir.path().join("one.json"), &[]);
+    let whole_surface = surfscan::iges::read_iges(&std::fs::read(&one).unwrap())
+        .unwrap()
+        .surfaces
+        .remove(0);
+    let whole = surfscan::iges::parameter_lines_bound(&whole_surface);
     let entity_cap = (whole / 6).to_string();
     let split = dir.path().join("split.igs");
     let (_, rep) = run(
@@ -151,15 +156,7 @@ fn a_surface_too_large_for_one_file_is_written_as_named_parts_with_a_report() {
         .surfaces;
     let sizes: Vec<usize> = patches
         .iter()
-        .map(|p| {
-            surfscan::iges::write_iges(
-                Vec::new(),
-                std::slice::from_ref(p),
-                &surfscan::iges::IgesOptions::default(),
-            )
-            .unwrap()
-            .parameter_lines
-        })
+        .map(surfscan::iges::parameter_lines_bound)
         .collect();
     let (total, largest) = (sizes.iter().sum::<usize>(), *sizes.iter().max().unwrap());
     // total/3 + largest < total/2 lines per file: greedy grouping needs exactly 3 files.

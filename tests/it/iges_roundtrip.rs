@@ -1,6 +1,8 @@
 //! IGES writer/reader: byte layout rules, bit-exact round trip, refusal of bad values, and
 //! exact patch splitting (checked against an independent de Boor evaluation).
-use surfscan::iges::{plan_files, read_iges, split_v, write_iges, IgesError, IgesOptions};
+use surfscan::iges::{
+    parameter_lines_bound, plan_files, read_iges, split_v, write_iges, IgesError, IgesOptions,
+};
 use surfscan::nurbs::NurbsSurface;
 
 fn opts() -> IgesOptions {
@@ -315,10 +317,15 @@ fn p_lines(patches: &[NurbsSurface]) -> usize {
         .parameter_lines
 }
 
+/// The bound on P lines the planner works from (token counts, no formatting).
+fn bound(patches: &[NurbsSurface]) -> usize {
+    patches.iter().map(parameter_lines_bound).sum()
+}
+
 #[test]
 fn plan_files_groups_exact_patches_into_capped_files_that_read_back() {
     let s = fitted_surface();
-    let whole = p_lines(std::slice::from_ref(&s));
+    let whole = bound(std::slice::from_ref(&s));
     // Entities of at most a sixth of the surface: one file holds them all without a file cap.
     let entity_cap = whole / 6;
     let one = plan_files(
@@ -332,7 +339,7 @@ fn plan_files_groups_exact_patches_into_capped_files_that_read_back() {
     assert_eq!(one.len(), 1);
     let sizes: Vec<usize> = one[0]
         .iter()
-        .map(|p| p_lines(std::slice::from_ref(p)))
+        .map(|p| bound(std::slice::from_ref(p)))
         .collect();
     let (total, largest) = (sizes.iter().sum::<usize>(), *sizes.iter().max().unwrap());
     // A file cap of total/3 + largest patch: greedy filling leaves each closed file with more
@@ -366,9 +373,12 @@ fn plan_files_groups_exact_patches_into_capped_files_that_read_back() {
             assert!(p_lines(std::slice::from_ref(p)) <= entity_cap);
         }
         let lines = p_lines(g);
-        assert!(lines <= file_cap, "file {k}: {lines} > {file_cap}");
+        assert!(
+            lines <= bound(g) && bound(g) <= file_cap,
+            "file {k}: {lines} > {file_cap}"
+        );
         if let Some(next) = groups.get(k + 1) {
-            assert!(lines + p_lines(&next[..1]) > file_cap);
+            assert!(bound(g) + bound(&next[..1]) > file_cap);
         }
         let mut out = Vec::new();
         let st = write_iges(&mut out, g, &o).unwrap();

@@ -61,7 +61,8 @@ fn analyze_profile_csv_writes_report_and_summary() {
     let summary = std::fs::read_to_string(out.join("summary.csv")).unwrap();
     let rows: Vec<&str> = summary.lines().collect();
     assert_eq!(rows.len(), 2);
-    assert!(rows[0].starts_with("index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um"));
+    assert!(rows[0].starts_with("line,index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um"));
+    assert!(rows[1].starts_with("1,0000,0.0000,"), "{}", rows[1]);
 }
 
 #[test]

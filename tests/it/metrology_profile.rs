@@ -369,6 +369,8 @@ fn instrument_results_are_paired_with_ours_in_our_units() {
         name: name.to_string(),
         value,
         unit: unit.to_string(),
+        printed: None,
+        ng_code: None,
     };
     let c = compare(
         &p,

@@ -41,8 +41,15 @@ fn x3p_round_trips_and_surfalize_reads_it() {
     let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, &meta).unwrap();
     let back = read_x3p(&bytes).unwrap();
     assert_eq!((back.rows, back.cols), (rows, cols));
-    // Record2 comes back unescaped; empty fields were written as "not available".
-    assert_eq!(back.meta.comment, "measured grid <test> & more");
+    // Record2 comes back unescaped; empty fields were written as "not available"; the
+    // missing calibration date is said in the comment.
+    assert!(
+        back.meta
+            .comment
+            .starts_with("measured grid <test> & more; calibration date not recorded"),
+        "{}",
+        back.meta.comment
+    );
     assert_eq!(back.meta.creator, "");
     assert!((back.pitch_x_mm - 0.0015).abs() < 1e-15);
     assert!((back.pitch_y_mm - 0.01).abs() < 1e-15);
@@ -84,4 +91,217 @@ fn x3p_round_trips_and_surfalize_reads_it() {
     for (a, b) in h.iter().zip(&z) {
         assert!((a - b).abs() < 1e-9, "{a} vs {b}");
     }
+}
+
+#[test]
+fn x3p_files_of_other_software_are_read() {
+    // Written by surfalize and by a script that follows ISO 25178-72 with Python's zipfile
+    // (deflated entries, int16 with z scaling, a validity mask, a DataList profile); the
+    // script reports what it put in.
+    let dir = tempfile::tempdir().unwrap();
+    let script =
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/python/x3p_write.py");
+    let out = crate::common::python()
+        .arg(&script)
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "x3p_write.py failed (run `bash .ci/run`, which installs tests/python/requirements.txt into .venv/):\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let files: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let files = files.as_object().unwrap();
+    assert_eq!(files.len(), 4);
+    for (name, want) in files {
+        let bytes = std::fs::read(dir.path().join(name)).unwrap();
+        let got = read_x3p(&bytes).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(got.rows as u64, want["rows"].as_u64().unwrap(), "{name}");
+        assert_eq!(got.cols as u64, want["cols"].as_u64().unwrap(), "{name}");
+        let rel = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
+        assert!(
+            rel(got.pitch_x_mm, want["pitch_x_mm"].as_f64().unwrap()),
+            "{name}"
+        );
+        assert!(
+            rel(got.pitch_y_mm, want["pitch_y_mm"].as_f64().unwrap()),
+            "{name}"
+        );
+        let heights = want["heights_um"].as_array().unwrap();
+        assert_eq!(got.heights_um.len(), heights.len(), "{name}");
+        let mut invalid = 0;
+        for (k, (g, w)) in got.heights_um.iter().zip(heights).enumerate() {
+            match w.as_f64() {
+                None => {
+                    invalid += 1;
+                    assert!(g.is_nan(), "{name} point {k}: {g}, expected invalid");
+                }
+                Some(w) => assert!(
+                    (g - w).abs() <= 1e-9 * w.abs().max(1.0),
+                    "{name} point {k}: {g} vs {w}"
+                ),
+            }
+        }
+        assert_eq!(got.invalid_points, invalid, "{name}");
+    }
+    let int16 = read_x3p(&std::fs::read(dir.path().join("int16-valid.x3p")).unwrap()).unwrap();
+    assert_eq!(int16.invalid_points, 1);
+    assert_eq!(int16.meta.creator, "A. Person & Co");
+    assert_eq!(int16.meta.manufacturer, "Example Optics");
+    assert_eq!(int16.meta.serial, "SN 42");
+    assert_eq!(int16.meta.calibration_date, "2024-01-31T00:00:00");
+    assert_eq!(int16.meta.probe, "50x objective");
+    let profile =
+        read_x3p(&std::fs::read(dir.path().join("profile-datalist.x3p")).unwrap()).unwrap();
+    assert_eq!(profile.feature_type, "PRF");
+}
+
+#[test]
+fn damaged_or_unsupported_x3p_files_are_named_clearly() {
+    let (z, rows, cols) = grid();
+    let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, &X3pMeta::default()).unwrap();
+    let e = read_x3p(&bytes[..bytes.len() / 2]).unwrap_err().to_string();
+    assert!(e.contains("not a readable X3P file"), "{e}");
+    let e = read_x3p(b"x_mm,z_um\n0,1\n").unwrap_err().to_string();
+    assert!(e.contains("not a zip archive"), "{e}");
+}
+
+#[test]
+fn calibration_date_and_manufacturer_are_what_the_caller_gives() {
+    let (z, rows, cols) = grid();
+    let meta = X3pMeta {
+        date: "2026-11-30T09:15:00+00:00".into(),
+        calibration_date: "2026-03-14".into(),
+        manufacturer: "Mitutoyo".into(),
+        model: "SJ-210".into(),
+        serial: "123456".into(),
+        probe: "SJ-210 stylus, tip radius 2 µm".into(),
+        ..X3pMeta::default()
+    };
+    let back = read_x3p(&to_x3p(&z, rows, cols, 0.0015, 0.01, &meta).unwrap()).unwrap();
+    // The calibration date, not the scan's start; a plain date becomes an xsd:dateTime.
+    assert_eq!(back.meta.calibration_date, "2026-03-14T00:00:00");
+    assert_eq!(back.meta.date, "2026-11-30T09:15:00+00:00");
+    assert_eq!(back.meta.manufacturer, "Mitutoyo");
+    assert_eq!(back.meta.serial, "123456");
+    assert_eq!(back.meta.probe, "SJ-210 stylus, tip radius 2 µm");
+    // Unknown: the epoch placeholder, and the comment says so.
+    let back =
+        read_x3p(&to_x3p(&z, rows, cols, 0.0015, 0.01, &X3pMeta::default()).unwrap()).unwrap();
+    assert_eq!(back.meta.calibration_date, "1970-01-01T00:00:00Z");
+    assert!(
+        back.meta.comment.contains("calibration date not recorded"),
+        "{}",
+        back.meta.comment
+    );
+}
+
+#[test]
+fn analyze_reads_an_x3p_as_the_same_grid_as_its_csv() {
+    // The bundled sur-2 grid as CSV and as X3P: the lines analyze reports from the X3P are
+    // the CSV's, with the same numbers.
+    let csv =
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/sur-2.grid.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| l.split(',').map(|v| v.trim().parse().unwrap()).collect())
+        .collect();
+    let cols = rows[0].len();
+    let z: Vec<f64> = rows.iter().flatten().copied().collect();
+    let dir = tempfile::tempdir().unwrap();
+    let x3p = dir.path().join("sur-2.x3p");
+    std::fs::write(
+        &x3p,
+        to_x3p(
+            &z,
+            rows.len(),
+            cols,
+            0.003484,
+            0.010452,
+            &X3pMeta::default(),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    let run = |input: &std::path::Path, out: &str, extra: &[&str]| {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .arg("analyze")
+            .arg(input)
+            .args(["--out", dir.path().join(out).to_str().unwrap()])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(dir.path().join(out).join("report.json")).unwrap(),
+        )
+        .unwrap();
+        (r, String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let (from_csv, _) = run(
+        &csv,
+        "csv",
+        &["--pitch-x", "0.003484", "--pitch-y", "0.010452"],
+    );
+    let (from_x3p, _) = run(&x3p, "x3p", &[]);
+    assert_eq!(from_x3p["kind"], "x3p");
+    assert_eq!(from_x3p["lines"].as_array().unwrap().len(), rows.len());
+    for (a, b) in from_csv["lines"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(from_x3p["lines"].as_array().unwrap())
+    {
+        // Heights go through metres in the file: equal to rounding.
+        let (ra, rb) = (a["Ra_um"].as_f64().unwrap(), b["Ra_um"].as_f64().unwrap());
+        assert!((ra - rb).abs() <= 1e-12 * ra, "{ra} vs {rb}");
+    }
+    assert!(std::fs::metadata(dir.path().join("x3p/heightmap.png")).is_ok());
+}
+
+#[test]
+fn analyze_leaves_out_lines_with_invalid_points_of_a_foreign_x3p() {
+    let dir = tempfile::tempdir().unwrap();
+    let script =
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/python/x3p_write.py");
+    let out = crate::common::python()
+        .arg(&script)
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // 5 lines × 200 points at 2 µm, NaN on lines 2 and 5: three lines characterised.
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .arg("analyze")
+        .arg(dir.path().join("surfalize-f-nan.x3p"))
+        .args([
+            "--lc",
+            "0.08",
+            "--out",
+            dir.path().join("r").to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("lines 2, 5 hold them and were left out"),
+        "{stderr}"
+    );
+    let r: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("r/report.json")).unwrap()).unwrap();
+    let idx: Vec<u64> = r["lines"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["index"].as_u64().unwrap())
+        .collect();
+    assert_eq!(idx, vec![0, 2, 3]);
 }

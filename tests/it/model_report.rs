@@ -202,7 +202,10 @@ fn analyze_says_a_sine_grid_is_supported_and_uncorrelated_lines_are_not() {
         assert!(stdout.contains(word), "{name}: {stdout}");
         // The figure printed is the report's.
         let ratio = b["rms_over_sq"].as_f64().unwrap();
-        assert!(stdout.contains(&format!("= {ratio:.2} × Sq)")), "{stdout}");
+        assert!(
+            stdout.contains(&format!("= {} × Sq)", surfscan::numfmt::sig(ratio, 2))),
+            "{stdout}"
+        );
         assert!(r["characterisation"]["complete"].as_bool().unwrap());
         // The anisotropy caveats are stated either way.
         let a = &r["anisotropy"];

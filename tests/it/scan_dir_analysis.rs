@@ -39,6 +39,7 @@ const FIRMWARE: &str = "1.234";
 const DRIVE: &str = "standard drive unit 178-230";
 const CONFIG_HASH: &str = "9f2c0000000000000000000000000000000000000000000000000000000000aa";
 const SOFTWARE: &str = "0.9.1-test";
+const SERIAL: &str = "SJ210-00417";
 
 fn sur2_rows() -> Vec<Vec<f64>> {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/sur-2.grid.csv");
@@ -108,7 +109,14 @@ fn build_scan(
             scan_id: id.0.clone(),
             time: start,
             plan: plan(rows.len() as u32),
-            config: json!({ "output": { "dir": parent.display().to_string() } }),
+            config: json!({
+                "output": { "dir": parent.display().to_string() },
+                "traceability": {
+                    "serial-number": SERIAL,
+                    "stylus-tip-radius-um": 2.0,
+                    "calibration-date": "2026-03-14",
+                },
+            }),
             config_hash: CONFIG_HASH.into(),
             specimen: SPECIMEN.into(),
             operator: OPERATOR.into(),
@@ -146,18 +154,25 @@ fn build_scan(
                     name: "Ra".into(),
                     value: Some(ours.ra_um - RA_OFFSET_UM),
                     unit: "µm".into(),
+                    printed: None,
+                    ng_code: None,
                 },
                 InstrumentResult {
                     name: "Rz".into(),
                     value: Some((ours.rz_um - RZ_OFFSET_UM) * 1000.0),
                     unit: "nm".into(),
+                    printed: None,
+                    ng_code: None,
                 },
                 InstrumentResult {
                     name: "Rmr0".into(),
                     value: Some(42.0),
                     unit: "%".into(),
+                    printed: None,
+                    ng_code: None,
                 },
             ],
+            readout_warnings: Vec::new(),
             started_at: start,
             finished_at: start,
             attempt: 1,
@@ -225,6 +240,10 @@ fn analyze_scan_dir_writes_every_file_with_traceability_and_instrument_differenc
     assert_eq!(t["instrument_model"], MODEL);
     assert_eq!(t["firmware"], FIRMWARE);
     assert_eq!(t["drive_unit"], DRIVE);
+    assert_eq!(t["manufacturer"], "Mitutoyo");
+    assert_eq!(t["instrument_serial"], SERIAL);
+    assert_eq!(t["stylus_tip_radius_um"], 2.0);
+    assert_eq!(t["calibration_date"], "2026-03-14");
     assert_eq!(t["scan_id"], scan.file_name().unwrap().to_str().unwrap());
     assert_eq!(t["conditions"]["lambda_c_mm"], 0.8);
     assert_eq!(t["conditions"]["standard"], "ISO1997");
@@ -338,10 +357,22 @@ fn analyze_scan_dir_writes_every_file_with_traceability_and_instrument_differenc
     let ours5 = analyze_line(&data[5], PITCH_X_MM, &expected_options())
         .unwrap()
         .params;
-    let inst_ra: f64 = rows_csv[5][col("instrument_Ra_um")].parse().unwrap();
-    assert!((inst_ra - (ours5.ra_um - RA_OFFSET_UM)).abs() < 1e-12);
-    let inst_rz: f64 = rows_csv[5][col("instrument_Rz_um")].parse().unwrap();
-    assert!((inst_rz - (ours5.rz_um - RZ_OFFSET_UM)).abs() < 1e-9);
+    // Written with the 4 significant digits of a height, line numbers 1-based beside the
+    // files' index.
+    use surfscan::numfmt::{fmt, Quantity::HeightUm};
+    assert_eq!(
+        rows_csv[5][col("instrument_Ra_um")],
+        fmt(ours5.ra_um - RA_OFFSET_UM, HeightUm)
+    );
+    assert_eq!(
+        rows_csv[5][col("instrument_Rz_um")],
+        fmt(ours5.rz_um - RZ_OFFSET_UM, HeightUm)
+    );
+    assert_eq!(rows_csv[5][col("Ra_um")], fmt(ours5.ra_um, HeightUm));
+    assert_eq!(
+        (rows_csv[5][col("line")], rows_csv[5][col("index")]),
+        ("6", "0005")
+    );
 
     // Plots carry the traceability caption.
     for name in ["bac.svg", "heightmap.svg", "overlay.svg"] {
@@ -370,6 +401,14 @@ fn x3p_of_a_scan_carries_the_traceability_and_surfalize_reads_it() {
         assert_eq!(back.meta.manufacturer, "Mitutoyo");
         assert_eq!(back.meta.version, FIRMWARE);
         assert_eq!(back.meta.date, "2026-11-30T09:15:00+00:00");
+        // The instrument's calibration, not the scan's start; serial and stylus from the
+        // configuration the scan recorded.
+        assert_eq!(back.meta.calibration_date, "2026-03-14T00:00:00", "{name}");
+        assert_eq!(back.meta.serial, SERIAL, "{name}");
+        assert_eq!(
+            back.meta.probe, "SJ-210 stylus, tip radius 2.00 µm",
+            "{name}"
+        );
         for part in [
             SPECIMEN,
             NOTES,
@@ -542,6 +581,88 @@ fn fit_scan_dir_writes_an_iges_through_the_stored_points() {
 }
 
 #[test]
+fn fit_scan_dir_checks_the_journal_and_keeps_a_completed_surface() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rows: Vec<usize> = (0..7).collect();
+    let scan = build_scan(tmp.path(), &rows, ProfileKind::P, Some(StopStatus::Success));
+    let scan_s = scan.to_str().unwrap();
+    run_ok(&["fit", scan_s]);
+    let surface = scan.join("surface.igs");
+    // The surface itself: the Parameter Data section (the Global section holds the time).
+    let poles = |p: &Path| -> Vec<String> {
+        std::fs::read_to_string(p)
+            .unwrap()
+            .lines()
+            .filter(|l| l.as_bytes().get(72) == Some(&b'P'))
+            .map(str::to_owned)
+            .collect()
+    };
+    let first = poles(&surface);
+
+    // A second fit does not replace the completed scan's surface unless asked.
+    let out = surfscan().args(["fit", scan_s]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("the surface the completed scan wrote"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("--force") && stderr.contains("-o"),
+        "{stderr}"
+    );
+    let other = tmp.path().join("refit.igs");
+    run_ok(&["fit", scan_s, "-o", other.to_str().unwrap()]);
+    assert!(other.exists());
+    run_ok(&["fit", scan_s, "--force"]);
+
+    // A line never committed to the journal (files on disk, no record) is left out.
+    let lines = scan.join("lines");
+    std::fs::copy(lines.join("0006.csv"), lines.join("0020.csv")).unwrap();
+    let mut meta: Value =
+        serde_json::from_str(&std::fs::read_to_string(lines.join("0006.json")).unwrap()).unwrap();
+    meta["index"] = json!(20);
+    meta["y_target_nm"] = json!(20 * STEP_Y_NM);
+    std::fs::write(lines.join("0020.json"), meta.to_string()).unwrap();
+    let report_path = tmp.path().join("fit.json");
+    let out = surfscan()
+        .args(["fit", scan_s, "--force", "--report"])
+        .arg(&report_path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains("lines 21 (0020.csv) are on disk but the journal never committed them"),
+        "{stderr}"
+    );
+    let rep: Value = serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
+    assert_eq!(rep["lines"], json!([0, 1, 2, 3, 4, 5, 6]));
+    assert_eq!(poles(&surface), first, "the same lines, the same surface");
+
+    // A height edited after the line was traced is refused, naming the file and the line.
+    let csv = lines.join("0002.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    // One more digit on the first height: still a valid file, a different number.
+    let mut rows_text: Vec<String> = text.lines().map(str::to_owned).collect();
+    rows_text[1].push('7');
+    let edited = rows_text.join("\n") + "\n";
+    assert_ne!(edited, text);
+    std::fs::write(&csv, edited).unwrap();
+    let out = surfscan()
+        .args(["fit", scan_s, "--force"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("0002.csv") && stderr.contains("line 3 was changed"),
+        "{stderr}"
+    );
+    assert_eq!(poles(&surface), first, "nothing was written");
+}
+
+#[test]
 fn a_malformed_line_file_is_a_clear_error_naming_the_file() {
     let tmp = tempfile::tempdir().unwrap();
     let rows: Vec<usize> = (0..7).collect();
@@ -601,7 +722,9 @@ fn characterise_scan_reports_the_fit_it_describes_and_returns_the_paths() {
     assert_eq!(out.report_json, scan.join("report.json"));
     assert_eq!(out.lines_used, (0..7).collect::<Vec<u32>>());
     assert!(out.incomplete_lines.is_empty());
-    assert_eq!(out.plots.len(), 6);
+    // Bearing curves, height map, overlay, and the Rk construction of each of the 7 lines.
+    assert_eq!(out.plots.len(), 6 + 2 * 7);
+    assert!(out.report_html.exists());
     for p in out.plots.iter().chain([&out.summary_csv]) {
         assert!(p.starts_with(&scan) && p.exists(), "{}", p.display());
     }
@@ -643,93 +766,115 @@ fn characterise_scan_reports_the_fit_it_describes_and_returns_the_paths() {
     assert!((r["lines"][3]["Rq_um"].as_f64().unwrap() - ours.rq_um).abs() < 1e-12);
     // The overlay draws the requested line left out of a refit, against its measured heights.
     let overlay = std::fs::read_to_string(scan.join("overlay.svg")).unwrap();
+    // Index 5 is the 6th line: people count from 1, the file index is beside it.
     assert!(
-        overlay.contains("Line 5 ") && overlay.contains("left out"),
-        "overlay does not draw line 5 left out"
+        overlay.contains("Line 6 (0005, ") && overlay.contains("left out"),
+        "overlay does not draw index 5 left out"
     );
 }
 
-/// A daemon-sized scan: 31 lines × 8000 points at 0.5 µm of a synthetic rough profile.
-fn timing_scan(parent: &Path, kind: ProfileKind) -> PathBuf {
-    let start = Utc.with_ymd_and_hms(2026, 11, 30, 9, 15, 0).unwrap();
-    let id = ScanId::new(start, &format!("timing {kind:?}"));
-    let faults = Arc::new(NoFaults);
-    let store = ScanStore::create(parent, &id, faults.clone()).unwrap();
-    let mut journal = Journal::create(
-        store.root(),
-        StartRecord {
-            scan_id: id.0.clone(),
-            time: start,
-            plan: plan(31),
-            config: json!({}),
-            config_hash: CONFIG_HASH.into(),
-            specimen: "timing".into(),
-            operator: OPERATOR.into(),
-            notes: String::new(),
-            software_version: SOFTWARE.into(),
-            instrument_model: MODEL.into(),
-            firmware: FIRMWARE.into(),
-            drive_unit: DRIVE.into(),
-            conditions: conditions(kind),
-        },
-        faults,
-    )
-    .unwrap();
-    let (cols, px) = (8000usize, 0.0005);
-    for r in 0..31u32 {
-        let z: Vec<f64> = (0..cols)
-            .map(|i| {
-                let x = i as f64 * px;
-                let y = r as f64 * 0.01;
-                let noise = ((i * 7919 + r as usize * 104_729) % 1000) as f64 / 1000.0;
-                0.5 * (x * 97.0 + y * 13.0).sin()
-                    + 0.2 * (x * 611.0 - y * 29.0).cos()
-                    + 0.05 * noise
-            })
-            .collect();
-        let profile = Profile {
-            pitch_x_mm: px,
-            heights_um: z,
-            kind,
-            conditions: conditions(kind),
-        };
-        let meta = LineMeta {
-            index: r,
-            y_target_nm: Nm(r as i64 * 10_000),
-            y_readback_nm: None,
-            pitch_x_mm: px,
-            points: cols,
-            kind,
-            conditions: conditions(kind),
-            results: vec![],
-            started_at: start,
-            finished_at: start,
-            attempt: 1,
-        };
-        store.commit_line(&mut journal, &meta, &profile).unwrap();
+/// The check a test page runs once loaded: every image decoded, the rows of every table with
+/// an id, and every error or console message, written into the DOM for `--dump-dom`.
+const CHECK_HEAD: &str = "<script>window.__e=[];addEventListener('error',function(e){__e.push(String(e.message||(e.target&&e.target.tagName)||'error'))},true);['error','warn','log'].forEach(function(k){var o=console[k];console[k]=function(){__e.push(k+': '+[].join.call(arguments,' '));o.apply(console,arguments)}});</script>";
+const CHECK_BODY: &str = "<script>addEventListener('load',function(){var t={};[].forEach.call(document.querySelectorAll('table[id]'),function(x){t[x.id]=x.rows.length});var r={errors:__e,images:[].map.call(document.images,function(i){return i.complete&&i.naturalWidth>0}),tables:t};var p=document.createElement('pre');p.id='surfscan-check';p.textContent=JSON.stringify(r);document.body.appendChild(p)});</script>";
+
+#[test]
+fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
+    use surfscan::scan::journal::InterruptionRecord;
+    let tmp = tempfile::tempdir().unwrap();
+    let rows: Vec<usize> = (0..8).collect();
+    let scan = build_scan(tmp.path(), &rows, ProfileKind::P, None);
+    // What happened during the scan, as the runner records it.
+    let (mut journal, _) = Journal::open(&scan.join("journal.jsonl"), Arc::new(NoFaults)).unwrap();
+    let t = Utc.with_ymd_and_hms(2026, 11, 30, 9, 45, 0).unwrap();
+    for (reason, device, line) in [
+        ("instrument unplugged <USB>", Some("instrument"), Some(3)),
+        (
+            "resumed after a restart with 4 of 8 lines on disk",
+            None,
+            None,
+        ),
+    ] {
+        journal
+            .append(&Record::Interruption(InterruptionRecord {
+                reason: reason.into(),
+                device: device.map(str::to_owned),
+                line,
+                time: t,
+            }))
+            .unwrap();
     }
-    store.root().to_path_buf()
+    journal
+        .append(&Record::Stop(StopRecord {
+            status: StopStatus::Success,
+            reason: "all lines traced".into(),
+            time: Utc.with_ymd_and_hms(2026, 11, 30, 10, 17, 30).unwrap(),
+        }))
+        .unwrap();
+    drop(journal);
+    run_ok(&["analyze", scan.to_str().unwrap()]);
+    let page = scan.join("report.html");
+    let html = std::fs::read_to_string(&page).unwrap();
+    // Warnings first, numbers for people, the journal's events and the traceability.
+    let at = |s: &str| {
+        html.find(s)
+            .unwrap_or_else(|| panic!("report.html lacks {s:?}"))
+    };
+    assert!(at("id=\"warnings\"") < at("id=\"result\""));
+    assert!(at("id=\"result\"") < at("id=\"lines\""));
+    assert!(html.contains("instrument unplugged &lt;USB&gt;"));
+    assert!(
+        html.contains("<td>4 <span class=\"muted\">(0003)</span></td>"),
+        "line 4 of the event"
+    );
+    assert!(html.contains("SUR-2 brass &lt;B&amp;S&gt; #7"));
+    assert!(
+        html.contains("<td class=\"t\">1 h 02 min</td>"),
+        "duration from the journal"
+    );
+    assert!(!html.contains("<script"), "the report runs no script");
+
+    // As a browser shows it: the page as written logs nothing.
+    let plain = surfscan_check_render(&page);
+    assert!(plain.console.is_empty(), "console: {:?}", plain.console);
+    assert!(plain.dom.contains("id=\"t-lines\""));
+
+    // With the checker added (and the report's policy relaxed for that one inline script):
+    // every image decodes and every table has its rows.
+    let checked = tmp.path().join("checked.html");
+    let with_check = html
+        .replace(
+            "default-src 'none';",
+            "default-src 'none'; script-src 'unsafe-inline';",
+        )
+        .replacen("<head>", &format!("<head>{CHECK_HEAD}"), 1)
+        .replacen("</body>", &format!("{CHECK_BODY}</body>"), 1);
+    std::fs::write(&checked, with_check).unwrap();
+    let r = surfscan_check_render(&checked);
+    let tag = "<pre id=\"surfscan-check\">";
+    let start = r.dom.find(tag).expect("the check ran") + tag.len();
+    let end = start + r.dom[start..].find("</pre>").unwrap();
+    let check: Value = serde_json::from_str(&r.dom[start..end].replace("&quot;", "\"")).unwrap();
+    assert_eq!(check["errors"], json!([]), "{check}");
+    let images = check["images"].as_array().unwrap();
+    // Height map, bearing curves, overlay and one Rk construction per line.
+    assert_eq!(images.len(), 3 + rows.len(), "{check}");
+    assert!(
+        images.iter().all(|i| i == true),
+        "an image did not decode: {check}"
+    );
+    let tables = &check["tables"];
+    assert_eq!(
+        tables["t-lines"],
+        json!(1 + rows.len() + 2),
+        "header, lines, mean, s.d."
+    );
+    assert_eq!(tables["t-events"], json!(3), "header and two events");
+    assert!(tables["t-traceability"].as_u64().unwrap() >= 10);
+    assert!(tables["t-instrument"].as_u64().unwrap() > rows.len() as u64);
+    assert!(tables["t-areal"].as_u64().unwrap() >= 10);
 }
 
-/// Timing of `characterise_scan` on daemon-sized scans, R profile (no filter) and P profile
-/// (λc 0.8 mm Gaussian filter per line). Run with
-/// `cargo test --release --test scan_dir_analysis -- --ignored --nocapture`.
-#[test]
-#[ignore = "timing run; use --release"]
-fn timing_31_by_8000_scan() {
-    use surfscan::report::{characterise_scan, ScanAnalysisOptions};
-    let tmp = tempfile::tempdir().unwrap();
-    for kind in [ProfileKind::R, ProfileKind::P] {
-        let scan = timing_scan(tmp.path(), kind);
-        let t = std::time::Instant::now();
-        let out = characterise_scan(&scan, &ScanAnalysisOptions::default()).unwrap();
-        let wall = t.elapsed().as_secs_f64();
-        let r = report(&scan);
-        println!(
-            "31 x 8000 scan, {kind:?} profile: characterise_scan {wall:.2} s wall; stages {}",
-            r["timings_s"]
-        );
-        assert_eq!(out.lines_used.len(), 31);
-        assert!(wall < 30.0, "{wall} s");
-    }
+fn surfscan_check_render(page: &Path) -> crate::common::chromium::Rendered {
+    crate::common::chromium::render(page)
 }

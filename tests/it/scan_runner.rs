@@ -143,6 +143,7 @@ impl Instrument for FakeInstrument {
             results: Vec::new(),
             pitch_source: "config".into(),
             warnings: Vec::new(),
+            readout_warnings: Vec::new(),
         })
     }
 
@@ -314,9 +315,13 @@ fn new_scan() -> ScanRequest {
 
 async fn request(tx: &mpsc::Sender<OperatorRequest>, command: OperatorCommand) -> String {
     let (reply, rx) = oneshot::channel();
-    tx.send(OperatorRequest { command, reply })
-        .await
-        .expect("runner listens");
+    tx.send(OperatorRequest {
+        command,
+        peer: surfscan::scan::command::Peer::this_process(),
+        reply,
+    })
+    .await
+    .expect("runner listens");
     rx.await.expect("runner answers").expect("command accepted")
 }
 

@@ -13,7 +13,9 @@
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
-use surfscan::devices::{Battery, DeviceFault, FaultClass, Instrument, ProfileReadout};
+use surfscan::devices::{
+    Battery, DeviceFault, FaultClass, Instrument, ProfileReadout, ReadoutWarning, RepeatedBlock,
+};
 use surfscan::sj210::client::Sj210Client;
 use surfscan::sj210::error::{LinkError, Sj210Error};
 use surfscan::sj210::models::{CommandOverrides, ModelId, ModelTable};
@@ -173,7 +175,7 @@ async fn clean_trace_reads_the_fixture_profile_and_results() {
         report.profile_readout,
         ProfileReadout::Supported { .. }
     ));
-    assert_eq!(report.parameter_count, 3);
+    assert_eq!(report.parameter_count, 9);
     let line = c.trace().await.unwrap();
     assert_line(&line, 0);
     let line2 = c.trace().await.unwrap();
@@ -467,7 +469,7 @@ async fn probe_binary_summarises_and_its_transcript_replays() {
     assert!(stdout.contains("V2.34"), "{stdout}");
     assert!(stdout.contains("Low"), "{stdout}");
     assert!(stdout.contains("read-out supported"), "{stdout}");
-    assert!(stdout.contains("parameters 3"), "{stdout}");
+    assert!(stdout.contains("parameters 9"), "{stdout}");
     assert!(stdout.contains("transcript written"), "{stdout}");
     rig.sim.shutdown().await;
 
@@ -637,8 +639,14 @@ async fn the_mitutoyo_r_profile_under_its_conditions_is_6664_points_at_1_5_um() 
         "Ra {}",
         result(&line, "Ra")
     );
+    // Heights in ASCII "um"; the ratios Rsk and Rku without a unit.
     assert!(
-        line.results.iter().all(|r| r.unit == "um"),
+        line.results.iter().all(|r| r.unit
+            == if r.name.starts_with("Rsk") || r.name.starts_with("Rku") {
+                ""
+            } else {
+                "um"
+            }),
         "{:?}",
         line.results
     );
@@ -661,8 +669,182 @@ async fn sj410_table_reads_the_sj410_emulation() {
     .unwrap();
     let mut c = Sj210Client::new(port, ModelTable::builtin(ModelId::Sj410), options());
     let report = c.probe().await.unwrap();
-    assert_eq!(report.parameter_count, 3);
+    assert_eq!(report.parameter_count, 9);
     let line = c.trace().await.unwrap();
     assert_line(&line, 0);
     rig.sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn every_parameter_the_instrument_reports_is_in_the_line_as_printed() {
+    let rig = start(fast_config(), &[]).await;
+    let mut c = open(&rig.link);
+    c.probe().await.unwrap();
+    let line = c.trace().await.unwrap();
+    // RDPAR says 9; one RDRES each, in the instrument's order, names and units as printed.
+    let names: Vec<(&str, &str)> = line
+        .results
+        .iter()
+        .map(|r| (r.name.as_str(), r.unit.as_str()))
+        .collect();
+    assert_eq!(names, surfscan_sim::roughness::PARAMETERS.to_vec());
+    for r in &line.results {
+        let printed = r.printed.as_deref().expect("printed text kept");
+        // The value is the printed number; the printed text keeps its decimals.
+        assert_eq!(printed.parse::<f64>().ok(), r.value, "{r:?}");
+        assert!(printed.len() <= 6, "{r:?}");
+        assert_eq!(r.ng_code, None);
+    }
+    // Independent checks of the simulator's definitions on the served heights (about zero).
+    let z = fixture_line(0);
+    let hi = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let lo = z.iter().copied().fold(f64::INFINITY, f64::min);
+    let close = |a: f64, b: f64| (a - b).abs() <= (0.005 * b.abs()).max(0.002);
+    assert!(
+        close(result(&line, "Rt"), hi - lo),
+        "Rt {}",
+        result(&line, "Rt")
+    );
+    assert!(close(result(&line, "Rp"), hi), "Rp {}", result(&line, "Rp"));
+    assert!(
+        close(result(&line, "Rv"), -lo),
+        "Rv {}",
+        result(&line, "Rv")
+    );
+    assert!(
+        line.readout_warnings.is_empty(),
+        "{:?}",
+        line.readout_warnings
+    );
+    rig.sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn a_repeated_block_is_read_again_and_a_clean_second_read_kept() {
+    // The 3rd block request of the first read-out answers the 2nd block again.
+    let line = trace_recovers(&["repeat@RDEVA50#3"]).await;
+    assert!(
+        line.readout_warnings.is_empty(),
+        "{:?}",
+        line.readout_warnings
+    );
+    assert!(
+        line.warnings.iter().any(|w| w.contains("read out again")
+            && w.contains("repeated read-out block(s) 3 (from point 100)")),
+        "{:?}",
+        line.warnings
+    );
+    assert!(
+        line.warnings
+            .iter()
+            .any(|w| w.contains("second read-out was clean")),
+        "{:?}",
+        line.warnings
+    );
+}
+
+#[tokio::test]
+async fn a_block_repeated_in_both_reads_is_kept_with_a_named_warning() {
+    // 1067 points: 21 requests of 50 and one of 17 per read-out. The first read-out's 3rd and
+    // the second read-out's 4th RDEVA50 (the 25th overall) repeat the block before them.
+    let rig = start(fast_config(), &["repeat@RDEVA50#3", "repeat@RDEVA50#25"]).await;
+    let mut c = open(&rig.link);
+    c.probe().await.unwrap();
+    let line = c.trace().await.unwrap();
+    assert_eq!(
+        line.readout_warnings,
+        vec![ReadoutWarning::RepeatedBlock {
+            blocks: vec![RepeatedBlock {
+                block: 4,
+                first_point: 150,
+                values: 50
+            }]
+        }]
+    );
+    // The kept read-out is the second: points 150–199 repeat 100–149, later ones are shifted.
+    let served = fixture_line(0);
+    let h = &line.profile.heights_um;
+    assert_eq!(h.len(), served.len());
+    assert_eq!(h[..150], served[..150]);
+    assert_eq!(h[150..200], served[100..150]);
+    assert_eq!(h[200..], served[150..served.len() - 50]);
+    rig.sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn an_instrument_ra_that_disagrees_with_its_heights_is_kept_with_a_named_warning() {
+    // The instrument's Ra answer is 20 % high; the heights are right.
+    let rig = start(fast_config(), &["skew:20@RDRES02,01"]).await;
+    let mut c = open(&rig.link);
+    c.probe().await.unwrap();
+    let line = c.trace().await.unwrap();
+    let (ra, _) = ra_rq(&fixture_line(0));
+    match line.readout_warnings.as_slice() {
+        [ReadoutWarning::RaDisagrees {
+            instrument_um,
+            ours_um,
+            tolerance_um,
+        }] => {
+            assert!(
+                (instrument_um - 1.2 * ra).abs() < 0.002,
+                "{instrument_um} vs {ra}"
+            );
+            assert!((ours_um - ra).abs() < 1e-9, "{ours_um} vs {ra}");
+            // 2 % of the instrument's Ra + 0.005 µm for an R profile.
+            assert!((tolerance_um - (0.02 * instrument_um + 0.005)).abs() < 1e-12);
+        }
+        other => panic!("expected one Ra warning, got {other:?}"),
+    }
+    // The profile was read a second time before the line was kept, and it is the served one.
+    assert!(
+        line.warnings.iter().any(|w| w.contains("read out again")),
+        "{:?}",
+        line.warnings
+    );
+    assert_eq!(line.profile.heights_um, fixture_line(0));
+    rig.sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn a_read_out_warning_is_stored_with_the_line_it_belongs_to() {
+    use crate::common::{run_scan, scan_dir, Rig, RigOptions};
+    // Only the first line's instrument Ra is off; every line is kept, the first with the
+    // named warning in its metadata file.
+    let rig = Rig::start(RigOptions {
+        lines: 4,
+        faults: vec!["skew:25@RDRES02,01%1".into()],
+        ..RigOptions::default()
+    })
+    .await;
+    let o = run_scan(&rig.config("out"), &[]).await;
+    assert!(o.status.success(), "{}", crate::common::describe(&o));
+    let dir = scan_dir(&rig.out_dir("out"));
+    let meta = |k: u32| -> serde_json::Value {
+        let text = std::fs::read_to_string(dir.join(format!("lines/{k:04}.json"))).unwrap();
+        serde_json::from_str(&text).unwrap()
+    };
+    let first = meta(0);
+    let w = &first["readout_warnings"];
+    assert_eq!(w.as_array().map(Vec::len), Some(1), "{first}");
+    assert_eq!(w[0]["kind"], "ra-disagrees", "{first}");
+    let (inst, ours) = (
+        w[0]["instrument_um"].as_f64().unwrap(),
+        w[0]["ours_um"].as_f64().unwrap(),
+    );
+    assert!((inst / ours - 1.25).abs() < 0.01, "{inst} vs {ours}");
+    // The instrument's results are stored as printed, every one of them.
+    assert_eq!(
+        first["results"].as_array().map(Vec::len),
+        Some(9),
+        "{first}"
+    );
+    assert!(first["results"][0]["printed"].is_string(), "{first}");
+    for k in 1..3 {
+        assert!(
+            meta(k).get("readout_warnings").is_none(),
+            "line {k}: {}",
+            meta(k)
+        );
+    }
+    rig.shutdown().await;
 }

@@ -149,6 +149,7 @@ fn the_instruments_values_are_compared_within_a_documented_tolerance() {
         name: name.to_string(),
         value: Some(value),
         unit: unit.to_string(),
+        ..InstrumentResult::default()
     };
     let c = compare(
         &p,

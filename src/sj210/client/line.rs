@@ -1,15 +1,19 @@
 //! One complete line: conditions (and whether they changed), the pitch, the trace, the
 //! results and the profile, its point count checked against the conditions
 //! ([`crate::sj210::sampling::check_point_count`]) and its length against the evaluation
-//! length, as a [`crate::devices::TracedLine`].
+//! length, and its read-out checked for sanity ([`crate::sj210::sanity`]: a repeated block,
+//! the instrument's Ra against ours). A read-out in doubt is read again once; a doubt the
+//! re-read does not clear stays with the line as a [`ReadoutWarning`].
 //!
 //! Layer 2: part of [`super::Sj210Client`].
 
+use super::readout::ReadoutPass;
 use super::Sj210Client;
-use crate::devices::{Battery, TracedLine};
-use crate::profile::Profile;
+use crate::devices::{Battery, ReadoutWarning, TracedLine};
+use crate::profile::{Conditions, InstrumentResult, Profile};
 use crate::sj210::error::Sj210Error;
 use crate::sj210::sampling::check_point_count;
+use crate::sj210::sanity::check_ra;
 use tokio::io::{AsyncRead, AsyncWrite};
 
 impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
@@ -35,15 +39,39 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         let (pitch_um, pitch_source) = self.pitch_um(&conditions)?;
         self.run_trace().await?;
         let results = self.read_results(&mut warnings).await?;
-        let heights_um = self.read_profile(&mut warnings).await?.heights_um;
-        if self.opts.check_point_count {
-            check_point_count(&conditions, pitch_um, heights_um.len()).map_err(|mismatch| {
-                Sj210Error::PointCount {
-                    mismatch,
-                    pitch_source: pitch_source.clone(),
+        let check = LineCheck {
+            conditions: &conditions,
+            pitch_um,
+            pitch_source: &pitch_source,
+            check_count: self.opts.check_point_count,
+            results: &results,
+        };
+        let mut pass = self.read_profile(&mut warnings).await?;
+        let mut doubts = check.doubts(&pass)?;
+        if !doubts.is_empty() {
+            let list: Vec<String> = doubts.iter().map(ToString::to_string).collect();
+            tracing::warn!(
+                "profile read-out in doubt ({}); reading it again",
+                list.join("; ")
+            );
+            warnings.push(format!("profile read out again after: {}", list.join("; ")));
+            match self.read_profile_once().await {
+                Ok(again) => {
+                    doubts = check.doubts(&again)?;
+                    pass = again;
+                    if doubts.is_empty() {
+                        warnings.push("the second read-out was clean and is kept".into());
+                    }
                 }
-            })?;
+                Err(e) => {
+                    tracing::warn!("the second read-out failed ({e}); keeping the first");
+                    warnings.push(format!(
+                        "the second read-out failed ({e}); the first is kept"
+                    ));
+                }
+            }
         }
+        let heights_um = pass.heights_um;
         if let Some(l) = conditions.evaluation_length_mm {
             let covered = heights_um.len() as f64 * pitch_um / 1000.0;
             if l > 0.0 && ((covered - l) / l).abs() > 0.01 {
@@ -54,6 +82,9 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
                 tracing::warn!("{w}");
                 warnings.push(w);
             }
+        }
+        for d in &doubts {
+            tracing::warn!("line kept with a read-out warning: {d}");
         }
         let kind = conditions.profile_kind.unwrap_or_default();
         Ok(TracedLine {
@@ -66,6 +97,51 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             results,
             pitch_source,
             warnings,
+            readout_warnings: doubts,
         })
+    }
+}
+
+/// What a read-out pass is checked against.
+struct LineCheck<'a> {
+    conditions: &'a Conditions,
+    pitch_um: f64,
+    pitch_source: &'a str,
+    check_count: bool,
+    results: &'a [InstrumentResult],
+}
+
+impl LineCheck<'_> {
+    /// A wrong point count is an error (the pitch or the conditions are not this profile's);
+    /// a repeated block and an Ra disagreement are doubts.
+    fn doubts(&self, pass: &ReadoutPass) -> Result<Vec<ReadoutWarning>, Sj210Error> {
+        if self.check_count {
+            check_point_count(self.conditions, self.pitch_um, pass.heights_um.len()).map_err(
+                |mismatch| Sj210Error::PointCount {
+                    mismatch,
+                    pitch_source: self.pitch_source.to_string(),
+                },
+            )?;
+        }
+        let mut out = Vec::new();
+        if !pass.repeated_blocks.is_empty() {
+            out.push(ReadoutWarning::RepeatedBlock {
+                blocks: pass.repeated_blocks.clone(),
+            });
+        }
+        let profile = Profile {
+            pitch_x_mm: self.pitch_um / 1000.0,
+            heights_um: pass.heights_um.clone(),
+            kind: self.conditions.profile_kind.unwrap_or_default(),
+            conditions: self.conditions.clone(),
+        };
+        if let Some(ra) = check_ra(&profile, self.results).filter(|r| !r.agrees()) {
+            out.push(ReadoutWarning::RaDisagrees {
+                instrument_um: ra.instrument_um,
+                ours_um: ra.ours_um,
+                tolerance_um: ra.tolerance_um,
+            });
+        }
+        Ok(out)
     }
 }

@@ -24,6 +24,8 @@ mod readout;
 mod reads;
 mod trace;
 
+pub use readout::ReadoutPass;
+
 use super::codec::Sj210Codec;
 use super::error::{LinkError, Sj210Error};
 use super::models::ModelTable;

@@ -60,7 +60,10 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         })
     }
 
-    /// Reads every result parameter (`RDPAR`, then the result command for 01..=n).
+    /// Reads every result parameter the instrument reports: `RDPAR` (how many are
+    /// customised), then the result command for 01..=n, each as printed
+    /// ([`crate::sj210::replies::parse_result`]). A parameter answering a calculation error
+    /// (NG102–199) is kept by its number with the code and no value, and warned about.
     pub async fn read_results(
         &mut self,
         warnings: &mut Vec<String>,
@@ -81,6 +84,8 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
                         name: format!("#{aa:02}"),
                         value: None,
                         unit: String::new(),
+                        printed: None,
+                        ng_code: Some(code.code()),
                     });
                 }
                 Err(e) => return Err(e),

@@ -8,6 +8,8 @@
 
 #![allow(dead_code)]
 
+pub mod chromium;
+
 use std::path::{Path, PathBuf};
 use std::process::Output;
 use std::sync::Arc;

@@ -1,0 +1,449 @@
+//! Whole-process benchmark: the real `surfscan` binary on grid CSVs, timed from outside as an
+//! operator would see it, beside the paper-exact banded scipy reference measured in the same
+//! run (`tests/python/fit_scipy_banded.py`, the fit alone, CSV reading and imports excluded).
+//!
+//! `cargo bench --bench process [-- CASE...] [--instructions]` with CASE among
+//! * `fit` — `surfscan fit` 31×8000, CSV in → IGES fsynced; 15 runs alternating with the
+//!   reference. Target: the reference's fit time ÷ ours ≥ 1.3.
+//! * `large` — `surfscan fit` 1000×10000 (several IGES files); 3 runs. Targets: ≤ 2.5 s and
+//!   peak RSS ≤ 3 × the grid's f64 bytes (80 MB).
+//! * `analyze` — `surfscan analyze` of the 31×8000 grid CSV (λc 0.8 mm filter, model, hold-out,
+//!   plots, X3P); 7 runs. Target ≤ 0.3 s.
+//! * `scan` — `characterise_scan` (the daemon's characterisation) of 31×8000 scan directories
+//!   with an R profile (no filter) and a P profile (λc filter), in-process; 5 runs each.
+//!
+//! Default: all four. Figures are medians; CPU time (user + system, all threads, of the child
+//! from `wait4`) is printed beside wall time because the machine is shared: a run that waited
+//! for a core shows it in wall time only. `--instructions` also runs each binary case once
+//! under `valgrind --tool=callgrind` and prints the instruction count, the figure least moved
+//! by other load (valgrind serialises threads and is slow: about a minute for `fit`).
+//!
+//! Without `--bench` (as under `cargo test --all-targets`) every case runs once on a small
+//! grid, so the benchmark itself is checked.
+
+use chrono::{TimeZone, Utc};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::Arc;
+use std::time::Instant;
+use surfscan::profile::{Conditions, FilterKind, Profile, ProfileKind};
+use surfscan::report::{characterise_scan, ScanAnalysisOptions};
+use surfscan::scan::faults::NoFaults;
+use surfscan::scan::journal::{Journal, StartRecord};
+use surfscan::scan::line::LineMeta;
+use surfscan::scan::scan_id::ScanId;
+use surfscan::scan::store::ScanStore;
+use surfscan::units::Nm;
+
+const PITCH_X_MM: f64 = 0.0005;
+const PITCH_Y_MM: f64 = 0.01;
+
+/// The python interpreter with numpy and scipy: `SURFSCAN_PYTHON`, else the project's `.venv`.
+fn python() -> PathBuf {
+    match std::env::var_os("SURFSCAN_PYTHON") {
+        Some(p) => PathBuf::from(p),
+        None => Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python3"),
+    }
+}
+
+/// Roughness-like heights in µm with four decimals, as a profiler exports them: two waves plus
+/// uniform noise from an LCG. Row-major CSV, no header.
+fn write_grid_csv(path: &Path, rows: usize, cols: usize) {
+    use std::io::Write;
+    let mut s: u64 = 0x9E37_79B9_7F4A_7C15;
+    let mut out = std::io::BufWriter::new(std::fs::File::create(path).expect("create grid csv"));
+    for l in 0..rows {
+        for k in 0..cols {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let noise = ((s >> 11) as f64 / (1u64 << 53) as f64) - 0.5;
+            let h = 1.2 * (k as f64 * 0.0123 + l as f64 * 0.3).sin()
+                + 0.3 * (k as f64 * 0.21).cos()
+                + 0.6 * noise;
+            let sep = if k + 1 == cols { "\n" } else { "," };
+            write!(out, "{h:.4}{sep}").expect("write grid csv");
+        }
+    }
+    out.flush().expect("flush grid csv");
+}
+
+/// One finished child: wall time, CPU time (user + system) and peak resident set.
+struct Run {
+    wall_s: f64,
+    cpu_s: f64,
+    max_rss_mb: f64,
+    stdout: String,
+}
+
+/// Runs `cmd` to completion and reads its resource use with `wait4`; panics with its error
+/// output when it fails.
+// The child is reaped by `wait4` (which std's `Child` cannot do while returning the rusage).
+#[allow(clippy::zombie_processes)]
+fn run(cmd: &mut Command) -> Run {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (out_path, err_path) = (dir.path().join("out"), dir.path().join("err"));
+    let t = Instant::now();
+    let child = cmd
+        .stdin(Stdio::null())
+        .stdout(std::fs::File::create(&out_path).expect("stdout file"))
+        .stderr(std::fs::File::create(&err_path).expect("stderr file"))
+        .spawn()
+        .unwrap_or_else(|e| panic!("cannot start {cmd:?}: {e}"));
+    let mut status = 0;
+    // SAFETY: an all-zero rusage is a valid value of the plain C struct.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: the pid is our own unwaited child; status and usage are valid and writable.
+    let rc = unsafe { libc::wait4(child.id() as libc::pid_t, &mut status, 0, &mut usage) };
+    let wall_s = t.elapsed().as_secs_f64();
+    assert_eq!(rc, child.id() as libc::pid_t, "wait4 failed");
+    let stdout = std::fs::read_to_string(&out_path).unwrap_or_default();
+    if !(libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0) {
+        panic!(
+            "{cmd:?} failed (status {status}):\n{}\n{stdout}",
+            std::fs::read_to_string(&err_path).unwrap_or_default()
+        );
+    }
+    let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    Run {
+        wall_s,
+        cpu_s: tv(usage.ru_utime) + tv(usage.ru_stime),
+        max_rss_mb: usage.ru_maxrss as f64 / 1024.0,
+        stdout,
+    }
+}
+
+/// Instructions the command executes, counted by callgrind (`None` without valgrind).
+fn instructions(cmd: &Command) -> Option<u64> {
+    let dir = tempfile::tempdir().ok()?;
+    let out = Command::new("valgrind")
+        .arg("--tool=callgrind")
+        .arg(format!(
+            "--callgrind-out-file={}",
+            dir.path().join("cg.out").display()
+        ))
+        .arg(cmd.get_program())
+        .args(cmd.get_args())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .output()
+        .ok()?;
+    let text = String::from_utf8_lossy(&out.stderr);
+    let line = text.lines().find(|l| l.contains("Collected :"))?;
+    line.rsplit(':').next()?.trim().parse().ok()
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn surfscan() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_surfscan"))
+}
+
+fn fit_command(csv: &Path, out: &Path) -> Command {
+    let mut c = surfscan();
+    c.arg("fit")
+        .arg(csv)
+        .arg("--pitch-x")
+        .arg(PITCH_X_MM.to_string())
+        .arg("--pitch-y")
+        .arg(PITCH_Y_MM.to_string())
+        .arg("-o")
+        .arg(out);
+    c
+}
+
+fn reference_command(csv: &Path) -> Command {
+    let script = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/python/fit_scipy_banded.py"
+    );
+    let mut c = Command::new(python());
+    c.arg(script)
+        .arg(csv)
+        .arg(PITCH_X_MM.to_string())
+        .arg(PITCH_Y_MM.to_string())
+        .args(["5", "5"]);
+    c
+}
+
+/// The reference's own figures for its fit: (wall s, CPU s).
+fn reference_fit(csv: &Path) -> (f64, f64) {
+    let r = run(&mut reference_command(csv));
+    let v: serde_json::Value = serde_json::from_str(&r.stdout)
+        .unwrap_or_else(|e| panic!("reference printed no JSON ({e}): {}", r.stdout));
+    (
+        v["fit_s"].as_f64().expect("fit_s"),
+        v["fit_cpu_s"].as_f64().expect("fit_cpu_s"),
+    )
+}
+
+fn print_instructions(name: &str, cmd: &Command, wanted: bool) {
+    if !wanted {
+        return;
+    }
+    match instructions(cmd) {
+        Some(n) => println!("  {name}: {:.1} M instructions (callgrind)", n as f64 / 1e6),
+        None => println!("  {name}: instruction count unavailable (valgrind missing?)"),
+    }
+}
+
+fn bench_fit(dir: &Path, rows: usize, cols: usize, runs: usize, count_instructions: bool) {
+    let csv = dir.join(format!("grid{rows}x{cols}.csv"));
+    write_grid_csv(&csv, rows, cols);
+    let out = dir.join(format!("fit{rows}x{cols}.igs"));
+    let (mut wall, mut cpu, mut ref_wall, mut ref_cpu) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..runs {
+        let r = run(&mut fit_command(&csv, &out));
+        wall.push(r.wall_s);
+        cpu.push(r.cpu_s);
+        let (w, c) = reference_fit(&csv);
+        ref_wall.push(w);
+        ref_cpu.push(c);
+    }
+    let (w, c, rw, rc) = (median(wall), median(cpu), median(ref_wall), median(ref_cpu));
+    println!(
+        "fit {rows}x{cols} whole process, CSV in -> IGES fsynced (medians of {runs}): {:.1} ms wall, {:.1} ms CPU | scipy reference fit alone {:.1} ms wall, {:.1} ms CPU | reference/ours {:.2}x wall, {:.2}x CPU (target >= 1.3x)",
+        w * 1e3,
+        c * 1e3,
+        rw * 1e3,
+        rc * 1e3,
+        rw / w,
+        rc / c
+    );
+    print_instructions("surfscan fit", &fit_command(&csv, &out), count_instructions);
+}
+
+fn bench_large(dir: &Path, rows: usize, cols: usize, runs: usize, count_instructions: bool) {
+    let csv = dir.join(format!("grid{rows}x{cols}.csv"));
+    write_grid_csv(&csv, rows, cols);
+    let out = dir.join(format!("large{rows}x{cols}.igs"));
+    let grid_mb = (rows * cols * 8) as f64 / (1024.0 * 1024.0);
+    let (mut wall, mut cpu, mut rss) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..runs {
+        let r = run(&mut fit_command(&csv, &out));
+        wall.push(r.wall_s);
+        cpu.push(r.cpu_s);
+        rss.push(r.max_rss_mb);
+        for e in std::fs::read_dir(dir).expect("read bench dir").flatten() {
+            if e.file_name().to_string_lossy().starts_with("large") {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+    }
+    let rss = median(rss);
+    println!(
+        "fit {rows}x{cols} whole process (medians of {runs}): {:.2} s wall (target <= 2.5 s), {:.2} s CPU, peak RSS {rss:.0} MiB = {:.2}x the grid's {grid_mb:.0} MiB of f64 (target <= 3x)",
+        median(wall),
+        median(cpu),
+        rss / grid_mb
+    );
+    print_instructions(
+        "surfscan fit (large)",
+        &fit_command(&csv, &out),
+        count_instructions,
+    );
+}
+
+fn bench_analyze(dir: &Path, rows: usize, cols: usize, runs: usize, count_instructions: bool) {
+    let csv = dir.join(format!("grid{rows}x{cols}.csv"));
+    if !csv.exists() {
+        write_grid_csv(&csv, rows, cols);
+    }
+    let out = dir.join(format!("analyze{rows}x{cols}"));
+    let command = || {
+        let mut c = surfscan();
+        c.arg("analyze")
+            .arg(&csv)
+            .arg("--pitch-x")
+            .arg(PITCH_X_MM.to_string())
+            .arg("--pitch-y")
+            .arg(PITCH_Y_MM.to_string())
+            .arg("--out")
+            .arg(&out);
+        c
+    };
+    let (mut wall, mut cpu) = (Vec::new(), Vec::new());
+    for _ in 0..runs {
+        let r = run(&mut command());
+        wall.push(r.wall_s);
+        cpu.push(r.cpu_s);
+    }
+    let report: serde_json::Value = std::fs::read_to_string(out.join("report.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or_default();
+    println!(
+        "analyze {rows}x{cols} whole process (medians of {runs}): {:.3} s wall (target <= 0.3 s), {:.3} s CPU; stages of the last run {}",
+        median(wall),
+        median(cpu),
+        report["timings_s"]
+    );
+    print_instructions("surfscan analyze", &command(), count_instructions);
+}
+
+/// A daemon-sized scan directory, 31 lines × `cols` points at 0.5 µm of a synthetic rough
+/// profile, committed line by line through the scan store and journal as the runner does.
+fn write_scan(parent: &Path, kind: ProfileKind, cols: usize) -> PathBuf {
+    let start = Utc.with_ymd_and_hms(2026, 11, 30, 9, 15, 0).unwrap();
+    let id = ScanId::new(start, &format!("timing {kind:?}"));
+    let faults = Arc::new(NoFaults);
+    let store = ScanStore::create(parent, &id, faults.clone()).expect("scan store");
+    let conditions = Conditions {
+        standard: Some("ISO1997".into()),
+        profile_kind: Some(kind),
+        filter: Some(FilterKind::Gaussian),
+        lambda_c_mm: Some(0.8),
+        lambda_s_um: None,
+        sampling_lengths: None,
+        evaluation_length_mm: None,
+        speed_mm_s: Some(0.5),
+        raw: None,
+    };
+    let mut journal = Journal::create(
+        store.root(),
+        StartRecord {
+            scan_id: id.0.clone(),
+            time: start,
+            plan: surfscan::scan::plan::Plan {
+                lines: 31,
+                y_start_nm: Nm(0),
+                y_step_nm: Nm(10_000),
+                degree_u: 5,
+                degree_v: 5,
+                max_line_attempts: 3,
+                v_method: Default::default(),
+                replace_spikes: None,
+            },
+            config: serde_json::json!({}),
+            config_hash: "0".repeat(64),
+            specimen: "timing".into(),
+            operator: "bench".into(),
+            notes: String::new(),
+            software_version: "bench".into(),
+            instrument_model: "SJ-210".into(),
+            firmware: "1.0".into(),
+            drive_unit: "standard".into(),
+            conditions: conditions.clone(),
+        },
+        faults,
+    )
+    .expect("journal");
+    for r in 0..31u32 {
+        let z: Vec<f64> = (0..cols)
+            .map(|i| {
+                let x = i as f64 * PITCH_X_MM;
+                let y = r as f64 * PITCH_Y_MM;
+                let noise = ((i * 7919 + r as usize * 104_729) % 1000) as f64 / 1000.0;
+                0.5 * (x * 97.0 + y * 13.0).sin()
+                    + 0.2 * (x * 611.0 - y * 29.0).cos()
+                    + 0.05 * noise
+            })
+            .collect();
+        let profile = Profile {
+            pitch_x_mm: PITCH_X_MM,
+            heights_um: z,
+            kind,
+            conditions: conditions.clone(),
+        };
+        let meta = LineMeta {
+            index: r,
+            y_target_nm: Nm(r as i64 * 10_000),
+            y_readback_nm: None,
+            pitch_x_mm: PITCH_X_MM,
+            points: cols,
+            kind,
+            conditions: conditions.clone(),
+            results: vec![],
+            readout_warnings: Vec::new(),
+            started_at: start,
+            finished_at: start,
+            attempt: 1,
+        };
+        store
+            .commit_line(&mut journal, &meta, &profile)
+            .expect("commit line");
+    }
+    store.root().to_path_buf()
+}
+
+/// CPU time of this process so far (all threads), s.
+fn process_cpu_s() -> f64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
+    if rc != 0 {
+        return f64::NAN;
+    }
+    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
+}
+
+/// The daemon's characterisation of a completed scan directory, in-process, for an R profile
+/// (no λc filter) and a P profile (λc 0.8 mm per line).
+fn bench_scan(dir: &Path, cols: usize, runs: usize, kinds: &[ProfileKind]) {
+    for &kind in kinds {
+        let scan = write_scan(dir, kind, cols);
+        let (mut wall, mut cpu) = (Vec::new(), Vec::new());
+        let mut stages = serde_json::Value::Null;
+        for _ in 0..runs {
+            let (t, c) = (Instant::now(), process_cpu_s());
+            let out = characterise_scan(&scan, &ScanAnalysisOptions::default())
+                .expect("characterise scan");
+            wall.push(t.elapsed().as_secs_f64());
+            cpu.push(process_cpu_s() - c);
+            assert_eq!(out.lines_used.len(), 31);
+            let report: serde_json::Value = std::fs::read_to_string(&out.report_json)
+                .ok()
+                .and_then(|t| serde_json::from_str(&t).ok())
+                .unwrap_or_default();
+            stages = report["timings_s"].clone();
+        }
+        println!(
+            "characterise_scan 31x{cols}, {kind:?} profile (medians of {runs}): {:.3} s wall, {:.3} s CPU; stages of the last run {stages}",
+            median(wall),
+            median(cpu)
+        );
+    }
+}
+
+fn main() {
+    let full = std::env::args().any(|a| a == "--bench");
+    let count_instructions = std::env::args().any(|a| a == "--instructions");
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with('-'))
+        .collect();
+    let want = |name: &str| args.is_empty() || args.iter().any(|a| a == name);
+    // Next to the build, on the disk the outputs would go to (not a RAM-backed /tmp), so the
+    // fsync costs what it costs an operator.
+    let base = Path::new(env!("CARGO_TARGET_TMPDIR"));
+    std::fs::create_dir_all(base).expect("bench dir");
+    let dir = tempfile::tempdir_in(base).expect("bench dir");
+    let dir = dir.path();
+    if !full {
+        bench_fit(dir, 7, 60, 1, false);
+        bench_large(dir, 9, 70, 1, false);
+        // At least one λc (0.8 mm = 1600 points) per line.
+        bench_analyze(dir, 7, 1800, 1, false);
+        bench_scan(dir, 1800, 1, &[ProfileKind::P]);
+        return;
+    }
+    if want("fit") {
+        bench_fit(dir, 31, 8000, 15, count_instructions);
+    }
+    if want("large") {
+        bench_large(dir, 1000, 10_000, 3, count_instructions);
+    }
+    if want("analyze") {
+        bench_analyze(dir, 31, 8000, 7, count_instructions);
+    }
+    if want("scan") {
+        bench_scan(dir, 8000, 5, &[ProfileKind::R, ProfileKind::P]);
+    }
+}

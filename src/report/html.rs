@@ -1,0 +1,833 @@
+//! `report.html`: the report a person opens. One self-contained file (styles inline, the
+//! plots embedded as data URIs, no script, nothing fetched; a Content-Security-Policy says
+//! so to the browser), rendered from the report as `report.json` holds it and, for a scan,
+//! the journal's record of what happened during it.
+//!
+//! Order, most urgent first: warnings; the result in brief; traceability; what happened
+//! during the scan (interruptions, re-traces, resumes, the stop); the plots; the areal
+//! parameters of the model and of the measured grid; the per-line ISO parameters; the
+//! instrument's own results beside ours with a tolerance flag; the model checked against
+//! data it was not fitted to; the recipe every number was computed with. Numbers carry the
+//! significant digits of their quantity ([`crate::numfmt`]); line numbers are 1-based with
+//! the index of the files they are stored in; `report.json` keeps full precision.
+//!
+//! The renderer reads the serialized report (its field names are the report's documented
+//! contract), so every field any section adds is there to show without a second data model.
+//!
+//! Layer 4 (reporting): depends on the scan's journal records ([`crate::scan::journal`]) and
+//! [`crate::numfmt`]; returns text, the caller writes it.
+
+use crate::numfmt::{fmt, line_number, sig, Quantity};
+use crate::scan::journal::ResumeState;
+use base64::Engine as _;
+use serde_json::Value;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// One plot to embed: a title, and the PNG or SVG bytes with their media type.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Figure {
+    /// Caption shown above the image (and its alt text).
+    pub title: String,
+    /// `image/png` or `image/svg+xml`.
+    pub media_type: &'static str,
+    /// The file's bytes.
+    pub bytes: Vec<u8>,
+    /// Shown collapsed (the per-line figures) rather than open.
+    pub collapsed: bool,
+}
+
+impl Figure {
+    /// The smaller of a plot's PNG and SVG files (text-heavy plots are smaller as SVG, maps
+    /// as PNG), read from disk; `None` when neither can be read.
+    pub fn from_files(
+        title: impl Into<String>,
+        png: &Path,
+        svg: &Path,
+        collapsed: bool,
+    ) -> Option<Figure> {
+        let (media_type, bytes) = match (std::fs::read(png).ok(), std::fs::read(svg).ok()) {
+            (Some(p), Some(s)) if s.len() < p.len() => ("image/svg+xml", s),
+            (Some(p), _) => ("image/png", p),
+            (None, Some(s)) => ("image/svg+xml", s),
+            (None, None) => return None,
+        };
+        Some(Figure {
+            title: title.into(),
+            media_type,
+            bytes,
+            collapsed,
+        })
+    }
+}
+
+/// Text escaped for HTML element content and attribute values.
+pub fn esc(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+const STYLE: &str = "
+body{font-family:'DejaVu Sans',Verdana,sans-serif;margin:2em auto;max-width:1150px;padding:0 1em;color:#222;line-height:1.4}
+h1{font-size:1.6em;margin-bottom:.2em}h2{font-size:1.25em;margin-top:1.8em;border-bottom:1px solid #ccc}
+table{border-collapse:collapse;margin:.6em 0;font-size:.9em}
+th,td{border:1px solid #ccc;padding:.2em .5em;text-align:right;vertical-align:top}
+th{background:#f2f2f2}td.t,th.t{text-align:left}
+.warn{background:#fff4e5;border-left:4px solid #d55e00;padding:.5em 1em}
+.ok{background:#eef7f1;border-left:4px solid #009e73;padding:.5em 1em}
+.flag{color:#b00;font-weight:bold}.muted{color:#666}
+figure{margin:1em 0}figcaption{font-weight:bold;margin-bottom:.3em}
+img{max-width:100%;height:auto;border:1px solid #ddd}
+.scroll{overflow-x:auto}summary{cursor:pointer;margin:.3em 0}
+";
+
+/// The tolerance of the instrument-vs-ours flag for a unit: 2 % of the instrument's value,
+/// at least 0.005 µm, 1 % point or 0.05 (dimensionless) — about what the instrument's
+/// display resolution and the filter's end treatment account for.
+pub fn tolerance(instrument: f64, unit: &str) -> f64 {
+    let floor = match unit {
+        "um" | "µm" => 0.005,
+        "%" => 1.0,
+        _ => 0.05,
+    };
+    (0.02 * instrument.abs()).max(floor)
+}
+
+fn quantity(unit: &str) -> Quantity {
+    match unit {
+        "um" | "µm" => Quantity::HeightUm,
+        "%" => Quantity::Percent,
+        _ => Quantity::Ratio,
+    }
+}
+
+fn unit_label(unit: &str) -> &str {
+    match unit {
+        "um" => "µm",
+        u => u,
+    }
+}
+
+/// Mean and sample standard deviation (NaN for no values).
+pub fn mean_sd(v: &[f64]) -> (f64, f64) {
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let sd = if v.len() > 1 {
+        (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0)).sqrt()
+    } else {
+        0.0
+    };
+    (m, sd)
+}
+
+/// A line as a person names it: `3` and the index of its files, `0002`.
+fn line_label(index: u64) -> String {
+    let number = u32::try_from(index).map_or(index + 1, line_number);
+    format!("{number} <span class=\"muted\">({index:04})</span>")
+}
+
+/// A duration for people: `45 s`, `12 min 30 s`, `2 h 05 min`.
+fn duration(seconds: i64) -> String {
+    let s = seconds.max(0);
+    if s < 60 {
+        format!("{s} s")
+    } else if s < 3600 {
+        format!("{} min {:02} s", s / 60, s % 60)
+    } else {
+        format!("{} h {:02} min", s / 3600, (s % 3600) / 60)
+    }
+}
+
+fn text(v: &Value) -> String {
+    match v {
+        Value::String(s) => s.clone(),
+        Value::Null => String::new(),
+        v => v.to_string(),
+    }
+}
+
+fn num(v: &Value, q: Quantity) -> String {
+    v.as_f64().map(|x| fmt(x, q)).unwrap_or_default()
+}
+
+fn kv(h: &mut String, key: &str, value_html: &str) {
+    let _ = writeln!(
+        h,
+        "<tr><th class=\"t\">{}</th><td class=\"t\">{value_html}</td></tr>",
+        esc(key)
+    );
+}
+
+fn row(h: &mut String, cells: &[(&str, String)]) {
+    h.push_str("<tr>");
+    for (class, c) in cells {
+        if class.is_empty() {
+            let _ = write!(h, "<td>{c}</td>");
+        } else {
+            let _ = write!(h, "<td class=\"{class}\">{c}</td>");
+        }
+    }
+    h.push_str("</tr>\n");
+}
+
+/// Per-line columns: report key, heading, quantity.
+const LINE_COLUMNS: &[(&str, &str, Quantity)] = &[
+    ("Ra_um", "Ra µm", Quantity::HeightUm),
+    ("Rq_um", "Rq µm", Quantity::HeightUm),
+    ("Rz_um", "Rz µm", Quantity::HeightUm),
+    ("Rp_um", "Rp µm", Quantity::HeightUm),
+    ("Rv_um", "Rv µm", Quantity::HeightUm),
+    ("Rt_um", "Rt µm", Quantity::HeightUm),
+    ("Rz1max_um", "Rz1max µm", Quantity::HeightUm),
+    ("RzJIS_um", "RzJIS µm", Quantity::HeightUm),
+    ("Rsk", "Rsk", Quantity::Ratio),
+    ("Rku", "Rku", Quantity::Ratio),
+    ("Rdq", "RΔq", Quantity::Ratio),
+    ("RSm_um", "RSm µm", Quantity::HeightUm),
+    ("Rk_um", "Rk µm", Quantity::HeightUm),
+    ("Rpk_um", "Rpk µm", Quantity::HeightUm),
+    ("Rvk_um", "Rvk µm", Quantity::HeightUm),
+    ("Mr1_pct", "Mr1 %", Quantity::Percent),
+    ("Mr2_pct", "Mr2 %", Quantity::Percent),
+];
+
+/// Areal rows: report key, heading, quantity.
+const AREAL_ROWS: &[(&str, &str, Quantity)] = &[
+    ("Sa_um", "Sa µm", Quantity::HeightUm),
+    ("Sq_um", "Sq µm", Quantity::HeightUm),
+    ("Sp_um", "Sp µm", Quantity::HeightUm),
+    ("Sv_um", "Sv µm", Quantity::HeightUm),
+    ("Sz_um", "Sz µm", Quantity::HeightUm),
+    ("Ssk", "Ssk", Quantity::Ratio),
+    ("Sku", "Sku", Quantity::Ratio),
+    ("Sdq", "Sdq", Quantity::Ratio),
+    ("Sdr_pct", "Sdr %", Quantity::Percent),
+];
+
+/// The model's verdict (whether the data support the surface between the lines) in short,
+/// where the report carries one.
+pub fn verdict(report: &Value) -> Option<String> {
+    report["between_lines"]["summary"]
+        .as_str()
+        .filter(|s| !s.is_empty())
+        .map(str::to_owned)
+}
+
+/// The result in a few `(what, value)` pairs: lines characterised (of those planned), the
+/// Ra range with mean and s.d., Sa of the model and of the measured grid, the verdict.
+pub fn result_summary(report: &Value) -> Vec<(&'static str, String)> {
+    let mut out = Vec::new();
+    let ra: Vec<f64> = report["lines"]
+        .as_array()
+        .map(|l| l.iter().filter_map(|l| l["Ra_um"].as_f64()).collect())
+        .unwrap_or_default();
+    let planned = report["scan"]["lines_planned"]
+        .as_u64()
+        .map(|n| format!(" of {n} planned"))
+        .unwrap_or_default();
+    out.push(("lines", format!("{}{planned} characterised", ra.len())));
+    if !ra.is_empty() {
+        let (lo, hi) = ra
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(*v), b.max(*v))
+            });
+        let (m, sd) = mean_sd(&ra);
+        let h = Quantity::HeightUm;
+        out.push((
+            "Ra",
+            format!(
+                "{} … {} µm (mean {} µm, s.d. {} µm)",
+                fmt(lo, h),
+                fmt(hi, h),
+                fmt(m, h),
+                fmt(sd, h)
+            ),
+        ));
+    }
+    let sa: Vec<String> = [("model", "surface"), ("measured grid", "surface_grid")]
+        .iter()
+        .filter_map(|(name, key)| {
+            report[*key]["Sa_um"]
+                .as_f64()
+                .map(|v| format!("{} µm ({name})", fmt(v, Quantity::HeightUm)))
+        })
+        .collect();
+    if !sa.is_empty() {
+        out.push(("Sa", sa.join(", ")));
+    }
+    if let Some(v) = verdict(report) {
+        out.push(("model", v));
+    }
+    out
+}
+
+/// Renders the report. `report` is the report as serialized into `report.json`; `journal`
+/// the scan's journal when it could be read; `figures` are embedded in order; `completed`
+/// the time a scan being completed ends (its stop record is written after the report).
+pub fn render(
+    report: &Value,
+    journal: Option<&ResumeState>,
+    figures: &[Figure],
+    completed: Option<chrono::DateTime<chrono::Utc>>,
+) -> String {
+    let mut h = String::with_capacity(
+        64 * 1024 + figures.iter().map(|f| f.bytes.len() * 4 / 3).sum::<usize>(),
+    );
+    let t = &report["traceability"];
+    let title = match (t["specimen"].as_str(), t["scan_id"].as_str()) {
+        (Some(s), Some(id)) if !s.is_empty() => format!("{s} — scan {id}"),
+        (_, Some(id)) => format!("scan {id}"),
+        _ => text(&report["input"]),
+    };
+    let _ = write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; img-src data:; style-src 'unsafe-inline'\">\n<title>Surface report: {t}</title>\n<style>{STYLE}</style>\n</head>\n<body>\n<h1>Surface report: {t}</h1>\n",
+        t = esc(&title)
+    );
+    let status = match report["scan"]["status"].as_str() {
+        Some(s) => format!("{s} scan"),
+        None => text(&report["kind"]),
+    };
+    let _ = writeln!(
+        h,
+        "<p class=\"muted\">{} · {} · written by {}</p>",
+        esc(&text(&report["input"])),
+        esc(&status),
+        esc(&text(&report["software"]))
+    );
+    warnings(&mut h, report);
+    h.push_str("<h2 id=\"result\">Result</h2>\n<table id=\"t-result\">\n");
+    for (k, v) in result_summary(report) {
+        kv(&mut h, k, &esc(&v));
+    }
+    h.push_str("</table>\n");
+    traceability(&mut h, report, journal, completed);
+    if let Some(j) = journal {
+        events(&mut h, j);
+    }
+    plots(&mut h, figures);
+    areal(&mut h, report);
+    lines(&mut h, report);
+    instrument(&mut h, report);
+    holdout(&mut h, report);
+    recipe(&mut h, report);
+    h.push_str("</body>\n</html>\n");
+    h
+}
+
+fn warnings(h: &mut String, report: &Value) {
+    h.push_str("<h2 id=\"warnings\">Warnings</h2>\n");
+    let mut all: Vec<String> = report["warnings"]
+        .as_array()
+        .map(|w| w.iter().map(text).collect())
+        .unwrap_or_default();
+    for (what, key) in [
+        ("model surface", "surface_error"),
+        ("measured grid", "surface_grid_error"),
+        ("model against measured", "model_vs_measured_error"),
+    ] {
+        if let Some(e) = report[key].as_str() {
+            if !all.iter().any(|w| w.contains(e)) {
+                all.push(format!("no {what} results: {e}"));
+            }
+        }
+    }
+    if all.is_empty() {
+        h.push_str("<p class=\"ok\" id=\"no-warnings\">None.</p>\n");
+    } else {
+        h.push_str("<div class=\"warn\"><ul id=\"warning-list\">\n");
+        for w in &all {
+            let _ = writeln!(h, "<li>{}</li>", esc(w));
+        }
+        h.push_str("</ul></div>\n");
+    }
+}
+
+fn traceability(
+    h: &mut String,
+    report: &Value,
+    journal: Option<&ResumeState>,
+    completed: Option<chrono::DateTime<chrono::Utc>>,
+) {
+    let t = &report["traceability"];
+    if t.is_null() {
+        return;
+    }
+    h.push_str("<h2 id=\"traceability\">Traceability</h2>\n<table id=\"t-traceability\">\n");
+    for (k, key) in [
+        ("scan", "scan_id"),
+        ("specimen", "specimen"),
+        ("operator", "operator"),
+        ("notes", "notes"),
+        ("started", "started_at"),
+    ] {
+        kv(h, k, &esc(&text(&t[key])));
+    }
+    let stop_time = journal
+        .and_then(|j| j.stop.as_ref().map(|s| s.time))
+        .or_else(|| {
+            report["scan"]["stop"]["time"]
+                .as_str()
+                .and_then(|s| chrono::DateTime::parse_from_rfc3339(s).ok())
+                .map(|d| d.with_timezone(&chrono::Utc))
+        })
+        .or(completed);
+    match stop_time {
+        Some(stop) => {
+            kv(h, "finished", &esc(&stop.to_rfc3339()));
+            if let Some(start) = t["started_at"]
+                .as_str()
+                .and_then(|s| chrono::DateTime::parse_from_rfc3339(s).ok())
+            {
+                let d = (stop - start.with_timezone(&chrono::Utc)).num_seconds();
+                kv(h, "duration", &esc(&duration(d)));
+            }
+        }
+        None => kv(
+            h,
+            "finished",
+            "<span class=\"muted\">no stop record (being completed, still running, or stopped without one)</span>",
+        ),
+    }
+    let na = "<span class=\"muted\">not recorded</span>";
+    let or_na = |v: &Value| {
+        let s = text(v);
+        if s.is_empty() {
+            na.to_string()
+        } else {
+            esc(&s)
+        }
+    };
+    kv(h, "instrument", &or_na(&t["instrument_model"]));
+    kv(h, "manufacturer", &or_na(&t["manufacturer"]));
+    kv(h, "serial number", &or_na(&t["instrument_serial"]));
+    kv(h, "firmware", &or_na(&t["firmware"]));
+    kv(h, "drive unit", &or_na(&t["drive_unit"]));
+    kv(
+        h,
+        "stylus tip radius",
+        &t["stylus_tip_radius_um"]
+            .as_f64()
+            .map(|r| format!("{} µm", sig(r, 3)))
+            .unwrap_or_else(|| na.to_string()),
+    );
+    kv(h, "calibration date", &or_na(&t["calibration_date"]));
+    let c = &t["conditions"];
+    let mut cond = Vec::new();
+    if let Some(s) = c["standard"].as_str() {
+        cond.push(format!("standard {s}"));
+    }
+    if let Some(f) = c["filter"].as_str() {
+        cond.push(format!("filter {f}"));
+    }
+    if let Some(l) = c["lambda_c_mm"].as_f64() {
+        cond.push(format!("λc {} mm", sig(l, 3)));
+    }
+    if let Some(l) = c["lambda_s_um"].as_f64() {
+        cond.push(format!("λs {} µm", sig(l, 3)));
+    }
+    match c["sampling_lengths"].as_u64() {
+        Some(0) => cond.push("arbitrary evaluation length".into()),
+        Some(n) => cond.push(format!("N = {n}")),
+        None => {}
+    }
+    kv(
+        h,
+        "conditions",
+        &if cond.is_empty() {
+            na.to_string()
+        } else {
+            esc(&cond.join(", "))
+        },
+    );
+    kv(h, "scanned by", &or_na(&t["software_version"]));
+    kv(
+        h,
+        "configuration",
+        &format!("sha256 <code>{}</code>", esc(&text(&t["config_hash"]))),
+    );
+    h.push_str("</table>\n");
+}
+
+fn events(h: &mut String, j: &ResumeState) {
+    h.push_str("<h2 id=\"events\">During the scan</h2>\n");
+    let retraced: Vec<_> = j.lines.iter().filter(|l| l.attempt > 1).collect();
+    if j.interruptions.is_empty() && retraced.is_empty() {
+        h.push_str(
+            "<p class=\"ok\" id=\"no-events\">No interruption, re-trace or resume: every line was traced on its first attempt.</p>\n",
+        );
+    } else {
+        h.push_str("<table id=\"t-events\">\n<tr><th class=\"t\">time (UTC)</th><th>line</th><th class=\"t\">device</th><th class=\"t\">what</th></tr>\n");
+        let mut rows: Vec<(chrono::DateTime<chrono::Utc>, String, String, String)> = j
+            .interruptions
+            .iter()
+            .map(|i| {
+                (
+                    i.time,
+                    i.line.map(|l| line_label(u64::from(l))).unwrap_or_default(),
+                    esc(i.device.as_deref().unwrap_or("")),
+                    esc(&i.reason),
+                )
+            })
+            .collect();
+        rows.extend(retraced.iter().map(|l| {
+            (
+                l.time,
+                line_label(u64::from(l.index)),
+                String::new(),
+                format!("traced on attempt {} (re-traced)", l.attempt),
+            )
+        }));
+        rows.sort_by_key(|r| r.0);
+        for (time, line, dev, what) in rows {
+            row(
+                h,
+                &[
+                    ("t", esc(&time.format("%Y-%m-%d %H:%M:%S").to_string())),
+                    ("", line),
+                    ("t", dev),
+                    ("t", what),
+                ],
+            );
+        }
+        h.push_str("</table>\n");
+    }
+    if !j.duplicates.is_empty() {
+        let _ = writeln!(
+            h,
+            "<p>Lines recorded more than once (the first record is used): {}.</p>",
+            j.duplicates
+                .iter()
+                .map(|&i| line_label(u64::from(i)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    if let Some(stop) = &j.stop {
+        let _ = writeln!(
+            h,
+            "<p>Stopped {}: {} ({}).</p>",
+            esc(&stop.time.to_rfc3339()),
+            esc(&format!("{:?}", stop.status).to_lowercase()),
+            esc(&stop.reason)
+        );
+    }
+}
+
+fn plots(h: &mut String, figures: &[Figure]) {
+    if figures.is_empty() {
+        return;
+    }
+    h.push_str("<h2 id=\"plots\">Plots</h2>\n");
+    let engine = base64::engine::general_purpose::STANDARD;
+    for f in figures {
+        let img = format!(
+            "<img alt=\"{}\" src=\"data:{};base64,{}\">",
+            esc(&f.title),
+            f.media_type,
+            engine.encode(&f.bytes)
+        );
+        if f.collapsed {
+            let _ = writeln!(
+                h,
+                "<details><summary>{}</summary><figure>{img}</figure></details>",
+                esc(&f.title)
+            );
+        } else {
+            let _ = writeln!(
+                h,
+                "<figure><figcaption>{}</figcaption>{img}</figure>",
+                esc(&f.title)
+            );
+        }
+    }
+}
+
+fn areal(h: &mut String, report: &Value) {
+    let cols: Vec<(&str, &Value)> = [
+        ("model surface", &report["surface"]),
+        ("measured grid", &report["surface_grid"]),
+    ]
+    .into_iter()
+    .filter(|(_, v)| v.is_object())
+    .collect();
+    if cols.is_empty() {
+        return;
+    }
+    h.push_str("<h2 id=\"areal\">Areal parameters (ISO 25178-2)</h2>\n<table id=\"t-areal\">\n<tr><th class=\"t\">parameter</th>");
+    for (n, _) in &cols {
+        let _ = write!(h, "<th>{n}</th>");
+    }
+    h.push_str("</tr>\n");
+    for (key, head, q) in AREAL_ROWS {
+        let mut cells = vec![("t", esc(head))];
+        for (_, s) in &cols {
+            cells.push(("", num(&s[*key], *q)));
+        }
+        row(h, &cells);
+    }
+    h.push_str("</table>\n<ul>\n");
+    for (n, s) in &cols {
+        let _ = writeln!(h, "<li><b>{n}</b>: {}</li>", esc(&text(&s["recipe"])));
+        if let Some(r) = s["bac_curves_recipe"].as_str() {
+            let _ = writeln!(h, "<li><b>{n}, bearing curves</b>: {}</li>", esc(r));
+        }
+    }
+    h.push_str("</ul>\n");
+}
+
+fn lines(h: &mut String, report: &Value) {
+    let Some(lines) = report["lines"].as_array() else {
+        return;
+    };
+    h.push_str("<h2 id=\"lines\">Per line (ISO 4287, ISO 13565-2)</h2>\n<div class=\"scroll\"><table id=\"t-lines\">\n<tr><th>line</th><th>y mm</th>");
+    for (_, head, _) in LINE_COLUMNS {
+        let _ = write!(h, "<th>{}</th>", esc(head));
+    }
+    h.push_str("</tr>\n");
+    for l in lines {
+        let mut cells = vec![
+            ("", line_label(l["index"].as_u64().unwrap_or(0))),
+            ("", num(&l["y_mm"], Quantity::PositionMm)),
+        ];
+        for (key, _, q) in LINE_COLUMNS {
+            cells.push(("", num(&l[*key], *q)));
+        }
+        row(h, &cells);
+    }
+    for (name, mean) in [("mean", true), ("s.d.", false)] {
+        let mut cells = vec![("t", format!("<b>{name}</b>")), ("", String::new())];
+        for (key, _, q) in LINE_COLUMNS {
+            let v: Vec<f64> = lines.iter().filter_map(|l| l[*key].as_f64()).collect();
+            let (m, sd) = mean_sd(&v);
+            cells.push((
+                "",
+                if v.is_empty() {
+                    String::new()
+                } else {
+                    fmt(if mean { m } else { sd }, *q)
+                },
+            ));
+        }
+        row(h, &cells);
+    }
+    h.push_str("</table></div>\n");
+}
+
+fn instrument(h: &mut String, report: &Value) {
+    let Some(lines) = report["lines"].as_array() else {
+        return;
+    };
+    if !lines
+        .iter()
+        .any(|l| l["instrument"].as_array().is_some_and(|c| !c.is_empty()))
+    {
+        return;
+    }
+    h.push_str("<h2 id=\"instrument\">The instrument's results beside ours</h2>\n<p>Flagged when |ours − instrument| exceeds 2 % of the instrument's value, or 0.005 µm, 1 % point or 0.05 for dimensionless parameters, whichever is larger.</p>\n<div class=\"scroll\"><table id=\"t-instrument\">\n<tr><th>line</th><th class=\"t\">parameter</th><th>instrument</th><th>ours</th><th>ours − instrument</th><th>tolerance</th><th class=\"t\">within</th></tr>\n");
+    let mut flagged = 0;
+    for l in lines {
+        for c in l["instrument"].as_array().into_iter().flatten() {
+            let unit = c["unit"].as_str().unwrap_or("");
+            let q = quantity(unit);
+            let u = unit_label(unit);
+            let (inst, ours, diff) = (
+                c["instrument"].as_f64(),
+                c["ours"].as_f64(),
+                c["difference"].as_f64(),
+            );
+            let tol = inst.map(|i| tolerance(i, unit));
+            let within = match (diff, tol) {
+                (Some(d), Some(t)) if d.abs() <= t => "yes".to_string(),
+                (Some(_), Some(_)) => {
+                    flagged += 1;
+                    "<span class=\"flag\">NO</span>".to_string()
+                }
+                _ => "<span class=\"muted\">not compared</span>".to_string(),
+            };
+            let name = text(&c["name"]).trim().to_string();
+            let name = match c["compared_with"].as_str() {
+                Some(w) if !w.eq_ignore_ascii_case(&name) => format!("{name} (ours: {w})"),
+                _ => name,
+            };
+            let with_unit = |v: Option<f64>, q: Quantity| {
+                v.map(|v| format!("{} {u}", fmt(v, q))).unwrap_or_default()
+            };
+            row(
+                h,
+                &[
+                    ("", line_label(l["index"].as_u64().unwrap_or(0))),
+                    ("t", esc(&name)),
+                    ("", with_unit(inst, q)),
+                    ("", with_unit(ours, q)),
+                    ("", with_unit(diff, Quantity::Difference)),
+                    ("", with_unit(tol, Quantity::Difference)),
+                    ("t", within),
+                ],
+            );
+        }
+    }
+    h.push_str("</table></div>\n");
+    let _ = writeln!(
+        h,
+        "<p id=\"instrument-flagged\">{flagged} comparison(s) outside the tolerance.</p>"
+    );
+}
+
+fn holdout(h: &mut String, report: &Value) {
+    let m = &report["model_vs_measured"];
+    if !m.is_object() {
+        return;
+    }
+    h.push_str("<h2 id=\"model\">The model against data it was not fitted to</h2>\n");
+    if let Some(v) = verdict(report) {
+        let _ = writeln!(h, "<p><b>{}</b></p>", esc(&v));
+    }
+    h.push_str("<table id=\"t-model\">\n<tr><th class=\"t\">left out and predicted</th><th>lines</th><th>largest |model − measured| µm</th><th>largest rms µm</th></tr>\n");
+    for (what, key) in [
+        ("every 2nd point of each line", "points_left_out"),
+        ("every 2nd line", "lines_left_out"),
+    ] {
+        let v = m[key].as_array().cloned().unwrap_or_default();
+        let max = |k: &str| {
+            v.iter()
+                .filter_map(|l| l[k].as_f64())
+                .fold(f64::NAN, f64::max)
+        };
+        row(
+            h,
+            &[
+                ("t", esc(what)),
+                ("", v.len().to_string()),
+                ("", fmt(max("max_abs_um"), Quantity::HeightUm)),
+                ("", fmt(max("rms_um"), Quantity::HeightUm)),
+            ],
+        );
+    }
+    h.push_str("</table>\n");
+}
+
+fn recipe(h: &mut String, report: &Value) {
+    let r = &report["recipe"];
+    h.push_str("<h2 id=\"recipe\">Recipe</h2>\n<table id=\"t-recipe\">\n");
+    kv(h, "standard", &esc(&text(&r["standard"])));
+    kv(h, "filter", &esc(&text(&r["filter"])));
+    kv(h, "why", &esc(&text(&r["filter_reason"])));
+    kv(h, "end treatment", &esc(&text(&r["end_treatment"])));
+    kv(
+        h,
+        "λc (sampling length)",
+        &format!(
+            "{} mm — {}",
+            r["lambda_c_mm"]
+                .as_f64()
+                .map(|v| sig(v, 3))
+                .unwrap_or_default(),
+            esc(&text(&r["lambda_c_source"]))
+        ),
+    );
+    kv(
+        h,
+        "λs",
+        &r["lambda_s_um"]
+            .as_f64()
+            .map(|v| format!("{} µm", sig(v, 3)))
+            .unwrap_or_else(|| "not applied by this software".into()),
+    );
+    kv(
+        h,
+        "sampling lengths N",
+        &format!(
+            "{} — {}",
+            text(&r["sampling_lengths"]),
+            esc(&text(&r["sampling_lengths_rule"]))
+        ),
+    );
+    kv(
+        h,
+        "points per sampling length",
+        &text(&r["points_per_section"]),
+    );
+    kv(h, "points not evaluated", &text(&r["points_not_evaluated"]));
+    kv(
+        h,
+        "pitch",
+        &format!("{} mm", num(&r["pitch_mm"], Quantity::LengthMm)),
+    );
+    kv(h, "mean line", &esc(&text(&r["mean_line"])));
+    h.push_str("</table>\n");
+    if let Some(defs) = r["definitions"].as_object() {
+        h.push_str("<details><summary>Definition of every parameter</summary><table id=\"t-definitions\">\n");
+        for (k, v) in defs {
+            kv(h, k, &esc(&text(v)));
+        }
+        h.push_str("</table></details>\n");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn text_is_escaped() {
+        assert_eq!(
+            esc("<B&S> \"x\" 'y'"),
+            "&lt;B&amp;S&gt; &quot;x&quot; &#39;y&#39;"
+        );
+    }
+
+    #[test]
+    fn the_tolerance_has_a_floor_per_unit() {
+        assert_eq!(tolerance(10.0, "um"), 0.2);
+        assert_eq!(tolerance(0.1, "um"), 0.005);
+        assert_eq!(tolerance(50.0, "%"), 1.0);
+        assert_eq!(tolerance(0.2, ""), 0.05);
+    }
+
+    #[test]
+    fn a_report_renders_with_warnings_first_and_numbers_for_people() {
+        let report = serde_json::json!({
+            "software": "surfscan 0.1.0 (commit abc)",
+            "input": "/scans/x",
+            "kind": "scan",
+            "warnings": ["line 4 <left out>"],
+            "lines": [
+                {"index": 0, "y_mm": 0.0, "Ra_um": 0.0045000000000000005,
+                 "instrument": [{"name": "Ra", "instrument": 0.5, "ours": 0.6, "difference": 0.1, "compared_with": "Ra", "unit": "um"}]},
+                {"index": 1, "y_mm": 0.01, "Ra_um": 0.5}
+            ],
+            "model_vs_measured": {"points_left_out": [], "lines_left_out": []},
+            "between_lines": {"summary": "the model between lines is not supported by the data"},
+            "recipe": {"lambda_c_mm": 0.8}
+        });
+        let h = render(&report, None, &[], None);
+        let warn = h.find("id=\"warnings\"").unwrap();
+        assert!(warn < h.find("id=\"result\"").unwrap());
+        assert!(warn < h.find("id=\"lines\"").unwrap());
+        assert!(h.contains("line 4 &lt;left out&gt;"));
+        assert!(h.contains("<td>0.004500</td>"), "4 significant digits");
+        assert!(!h.contains("0.0045000000000000005"));
+        // 1-based line numbers with the file index beside them.
+        assert!(h.contains("<td>1 <span class=\"muted\">(0000)</span></td>"));
+        // 0.1 µm off on 0.5 µm: outside 2 % / 0.005 µm.
+        assert!(h.contains("<span class=\"flag\">NO</span>"));
+        assert!(h.contains("1 comparison(s) outside the tolerance"));
+        assert!(h.contains("not supported by the data"));
+        assert!(!h.contains("<script"), "no script in the report");
+    }
+}
