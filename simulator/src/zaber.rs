@@ -3,16 +3,23 @@
 //!
 //! Emulates: `/dev axis [id] command[:CC]` (message ids echoed, checksums verified), replies
 //! `@dd a [id] OK|RJ BUSY|IDLE flag data`; `move abs`, `move rel`, `home`, `stop`, `get pos`,
-//! `get deviceid`, `warnings clear`, the empty poll; motion at a configured speed × a
-//! time-scale factor; travel limits (`RJ … BADDATA`); `WR` until homed; a backlash dead band;
-//! injected faults (`RJ`, stall `FS`, position lost `WR`, silence, vanishing).
+//! `get deviceid`, `warnings clear`, the empty poll; trapezoidal motion at a configured speed
+//! and acceleration × a time-scale factor; travel limits (`RJ … BADDATA`); a backlash dead
+//! band; injected faults (`RJ`, stall `FS`, power cycle, silence, vanishing).
 //!
-//! Depends on tokio and [`crate::grbl::StageShared`] (the shared handle and fault list).
+//! Reference as a real axis has it: powered up (or power-cycled) it reads position 0 where
+//! it stands and carries `WR` on every reply, status polls included, until a `home` has
+//! completed: the home retracts to the home sensor at physical 0, comes back onto it from
+//! below (taking out the backlash) and only then sets the reference and clears `WR`. A stall
+//! stops the carriage where it happens (`IDLE FS` from then on; `BUSY --` before it).
+//!
+//! Depends on tokio, [`crate::motion`] and [`crate::grbl::StageShared`] (the shared handle and
+//! fault list).
 
 use crate::grbl::{StageFault, StageShared};
+use crate::motion::Profile;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
-use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::time::Instant;
 
@@ -29,13 +36,16 @@ pub struct ZaberSimConfig {
     pub limit_max: i64,
     /// Speed, microsteps per second.
     pub speed_per_s: f64,
+    /// Acceleration, microsteps per second².
+    pub accel_per_s2: f64,
     /// Speed-up of simulated time.
     pub time_scale: f64,
     /// Backlash, microsteps.
     pub backlash: i64,
-    /// Start position, microsteps.
+    /// Where the axis stands at start, microsteps from the home sensor.
     pub start: i64,
-    /// Whether the device starts referenced (otherwise `WR` until homed).
+    /// The axis was homed before the link opened (position = `start`, no `WR`); otherwise it
+    /// has just powered up: position 0 where it stands, `WR` until homed.
     pub homed_at_start: bool,
 }
 
@@ -47,6 +57,7 @@ impl Default for ZaberSimConfig {
             nm_per_microstep: 125.0,
             limit_max: 800_000,
             speed_per_s: 100_000.0,
+            accel_per_s2: 1_000_000.0,
             time_scale: 1.0,
             backlash: 0,
             start: 0,
@@ -55,21 +66,56 @@ impl Default for ZaberSimConfig {
     }
 }
 
-struct Move {
+/// What a motion is for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Purpose {
+    Move,
+    /// First leg of a home: retract past the sensor.
+    HomeRetract,
+    /// Second leg: onto the sensor from below; the reference is set when it ends.
+    HomeApproach,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Motion {
+    /// Simulated start time, s.
+    start: f64,
+    /// Physical position at the start, microsteps.
     from: i64,
-    to: i64,
-    start: Instant,
-    dur: Duration,
+    sign: i64,
+    prof: Profile,
+    /// A stall stops the motion after this distance (microsteps along the profile).
+    stall_at: Option<f64>,
+    purpose: Purpose,
+}
+
+impl Motion {
+    fn end_dist(&self) -> f64 {
+        self.stall_at
+            .map_or(self.prof.distance(), |s| s.min(self.prof.distance()))
+    }
+
+    fn end(&self) -> f64 {
+        self.start + self.prof.time_at(self.end_dist())
+    }
+
+    fn phys_at(&self, t: f64) -> i64 {
+        let d = self.prof.position(t - self.start).min(self.end_dist());
+        self.from + self.sign * d.round() as i64
+    }
 }
 
 struct Dev {
     cfg: ZaberSimConfig,
     shared: Arc<StageShared>,
-    pos: i64,
-    /// Physical motor minus reported position (changes when the reference is lost).
+    t0: Instant,
+    scale: f64,
+    /// Physical motor position, microsteps (0 = the home sensor).
+    phys: i64,
+    /// Physical minus reported position (changes when the reference is lost or set).
     offset: i64,
     carriage: i64,
-    mv: Option<Move>,
+    mv: Option<Motion>,
     referenced: bool,
     stalled: bool,
     interrupted: bool,
@@ -86,44 +132,77 @@ fn lrc(body: &str) -> u8 {
 }
 
 impl Dev {
-    fn set_pos(&mut self, p: i64) {
-        self.pos = p;
-        let phys = p + self.offset;
-        self.carriage = self.carriage.clamp(phys, phys + self.cfg.backlash);
+    fn now(&self) -> f64 {
+        Instant::now()
+            .saturating_duration_since(self.t0)
+            .as_secs_f64()
+            * self.scale
+    }
+
+    fn pos(&self) -> i64 {
+        self.phys - self.offset
+    }
+
+    fn set_phys(&mut self, p: i64) {
+        self.phys = p;
+        self.carriage = self.carriage.clamp(p, p + self.cfg.backlash);
         let nm = (self.carriage as f64 * self.cfg.nm_per_microstep).round() as i64;
         self.shared.publish_position_nm(nm);
     }
 
+    /// Advances the motion to now: ends, stalls and the legs of a home.
     fn update(&mut self) {
-        if let Some(m) = &self.mv {
-            let (from, to, start, dur) = (m.from, m.to, m.start, m.dur);
-            let el = Instant::now().saturating_duration_since(start);
-            if el >= dur {
-                self.mv = None;
-                self.set_pos(to);
-            } else {
-                let f = el.as_secs_f64() / dur.as_secs_f64().max(1e-9);
-                self.set_pos(from + ((to - from) as f64 * f).round() as i64);
+        let now = self.now();
+        while let Some(m) = self.mv {
+            let end = m.end();
+            if end > now {
+                self.set_phys(m.phys_at(now));
+                return;
+            }
+            self.set_phys(m.phys_at(end));
+            self.mv = None;
+            if m.stall_at.is_some_and(|s| s < m.prof.distance()) {
+                self.stalled = true;
+                return;
+            }
+            match m.purpose {
+                Purpose::Move => {}
+                Purpose::HomeRetract => self.start_motion(end, 0, Purpose::HomeApproach),
+                Purpose::HomeApproach => {
+                    // At the sensor: this is position 0 from now on.
+                    self.offset = self.phys;
+                    self.referenced = true;
+                }
             }
         }
     }
 
-    fn start_move(&mut self, to: i64) {
-        let to = if self.stall_next {
-            self.stall_next = false;
-            self.stalled = true;
-            self.pos + (to - self.pos) / 2
+    fn start_motion(&mut self, t: f64, to_phys: i64, purpose: Purpose) {
+        let d = to_phys - self.phys;
+        let prof = Profile::new(
+            d.unsigned_abs() as f64,
+            0.0,
+            self.cfg.speed_per_s,
+            self.cfg.accel_per_s2,
+        );
+        let stall_at = if purpose == Purpose::Move && std::mem::take(&mut self.stall_next) {
+            Some((prof.distance() / 2.0).floor())
         } else {
-            to
+            None
         };
-        let secs =
-            (to - self.pos).unsigned_abs() as f64 / self.cfg.speed_per_s / self.cfg.time_scale;
-        self.mv = Some(Move {
-            from: self.pos,
-            to,
-            start: Instant::now(),
-            dur: Duration::from_secs_f64(secs),
+        self.mv = Some(Motion {
+            start: t,
+            from: self.phys,
+            sign: d.signum(),
+            prof,
+            stall_at,
+            purpose,
         });
+    }
+
+    fn start_move(&mut self, to: i64) {
+        let now = self.now();
+        self.start_motion(now, to + self.offset, Purpose::Move);
         self.shared.note_move_started();
     }
 
@@ -139,7 +218,17 @@ impl Dev {
         }
     }
 
-    /// Handles one command; returns (accepted, data) or `None` for no reply.
+    /// A power cycle: motion stops, the position reads 0 where the axis stands, `WR`.
+    fn power_cycle(&mut self) {
+        self.update();
+        self.mv = None;
+        self.offset = self.phys;
+        self.referenced = false;
+        self.stalled = false;
+        self.interrupted = false;
+    }
+
+    /// Handles one command; returns (accepted, data).
     fn command(&mut self, axis: u8, words: &[&str]) -> (bool, String) {
         self.update();
         if self.reject_next {
@@ -150,7 +239,7 @@ impl Dev {
         match words {
             [] => (true, "0".into()),
             ["get", "deviceid"] => (true, self.cfg.device_id.to_string()),
-            ["get", "pos"] if axis <= 1 => (true, self.pos.to_string()),
+            ["get", "pos"] if axis <= 1 => (true, self.pos().to_string()),
             ["warnings", "clear"] => {
                 let f = self.flag().to_string();
                 self.stalled = false;
@@ -161,18 +250,11 @@ impl Dev {
                 self.shared.note_homing_started();
                 self.stalled = false;
                 self.interrupted = false;
-                // Retract to the home sensor, back off, reset the position.
-                self.offset = 0;
-                self.set_pos(self.pos.max(0) + self.cfg.backlash + 10);
-                self.set_pos(-(self.cfg.backlash + 10));
-                self.referenced = true;
-                let secs = 0.5 / self.cfg.time_scale;
-                self.mv = Some(Move {
-                    from: -(self.cfg.backlash + 10),
-                    to: 0,
-                    start: Instant::now(),
-                    dur: Duration::from_secs_f64(secs),
-                });
+                self.referenced = false;
+                // Retract past the sensor (by the backlash and a margin), then back onto it.
+                let now = self.now();
+                let past = -(self.cfg.backlash + 10);
+                self.start_motion(now, past.min(self.phys), Purpose::HomeRetract);
                 (true, "0".into())
             }
             ["stop"] if axis <= 1 => {
@@ -191,8 +273,8 @@ impl Dev {
                 _ => (false, "BADDATA".into()),
             },
             ["move", "rel", _] if axis <= 1 => match num(2) {
-                Some(d) if (0..=self.cfg.limit_max).contains(&(self.pos + d)) => {
-                    self.start_move(self.pos + d);
+                Some(d) if (0..=self.cfg.limit_max).contains(&(self.pos() + d)) => {
+                    self.start_move(self.pos() + d);
                     (true, "0".into())
                 }
                 _ => (false, "BADDATA".into()),
@@ -254,9 +336,20 @@ pub async fn serve<T: AsyncRead + AsyncWrite + Unpin>(
     config: ZaberSimConfig,
     shared: Arc<StageShared>,
 ) -> std::io::Result<()> {
+    let scale = if config.time_scale.is_finite() && config.time_scale > 0.0 {
+        config.time_scale
+    } else {
+        1.0
+    };
     let mut d = Dev {
-        pos: config.start,
-        offset: 0,
+        t0: Instant::now(),
+        scale,
+        phys: config.start,
+        offset: if config.homed_at_start {
+            0
+        } else {
+            config.start
+        },
         carriage: config.start,
         mv: None,
         referenced: config.homed_at_start,
@@ -267,7 +360,7 @@ pub async fn serve<T: AsyncRead + AsyncWrite + Unpin>(
         shared,
         cfg: config,
     };
-    d.set_pos(d.pos);
+    d.set_phys(d.phys);
     let mut silent = false;
     let mut line = Vec::new();
     let mut buf = [0u8; 256];
@@ -283,13 +376,7 @@ pub async fn serve<T: AsyncRead + AsyncWrite + Unpin>(
             match f {
                 StageFault::Reject => d.reject_next = true,
                 StageFault::Stall => d.stall_next = true,
-                StageFault::PositionLostWr => {
-                    d.update();
-                    d.mv = None;
-                    d.offset += d.pos;
-                    d.pos = 0;
-                    d.referenced = false;
-                }
+                StageFault::PositionLostWr => d.power_cycle(),
                 StageFault::Silence => silent = true,
                 StageFault::Vanish => return Ok(()),
                 StageFault::ResetBanner | StageFault::Alarm2 | StageFault::Error15 => {}

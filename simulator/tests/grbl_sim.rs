@@ -2,59 +2,18 @@
 //! tokio's paused clock. Expected timings are worked out from the settings (trapezoids at
 //! `$121`), not read off the simulator.
 
-use std::sync::Arc;
+mod stage_host;
+
+use stage_host::Host;
 use std::time::Duration;
-use surfscan_sim::grbl::{serve, GrblSimConfig, StageFault, StageShared};
-use tokio::io::WriteHalf;
-use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader, DuplexStream, Lines, ReadHalf};
+use surfscan_sim::grbl::{serve, GrblSimConfig, StageFault};
 use tokio::time::Instant;
 
-struct Host {
-    lines: Lines<BufReader<ReadHalf<DuplexStream>>>,
-    w: WriteHalf<DuplexStream>,
-    shared: Arc<StageShared>,
+fn start(cfg: GrblSimConfig) -> Host {
+    Host::start(|dev, shared| serve(dev, cfg, shared))
 }
 
 impl Host {
-    fn start(cfg: GrblSimConfig) -> Host {
-        let (host, dev) = tokio::io::duplex(1 << 16);
-        let shared = StageShared::new();
-        tokio::spawn(serve(dev, cfg, shared.clone()));
-        let (r, w) = tokio::io::split(host);
-        Host {
-            lines: BufReader::new(r).lines(),
-            w,
-            shared,
-        }
-    }
-
-    async fn send(&mut self, b: &[u8]) {
-        self.w.write_all(b).await.unwrap();
-    }
-
-    /// The next non-empty line, within `secs` of simulated time.
-    async fn line_within(&mut self, secs: f64) -> Option<String> {
-        let deadline = Instant::now() + Duration::from_secs_f64(secs);
-        loop {
-            match tokio::time::timeout_at(deadline, self.lines.next_line()).await {
-                Err(_) => return None,
-                Ok(l) => {
-                    let l = l.unwrap().expect("stream open");
-                    let l = l.trim_end_matches('\r').to_string();
-                    if !l.is_empty() {
-                        return Some(l);
-                    }
-                }
-            }
-        }
-    }
-
-    async fn line(&mut self) -> String {
-        self.line_within(60.0)
-            .await
-            .expect("a line within a minute")
-    }
-
     async fn ask(&mut self, cmd: &str) -> String {
         self.send(format!("{cmd}\n").as_bytes()).await;
         self.line().await
@@ -114,7 +73,7 @@ async fn sleep(secs: f64) {
 
 #[tokio::test(start_paused = true)]
 async fn powers_up_in_alarm_at_zero_with_wco_and_ov_on_their_own_cadence() {
-    let mut h = Host::start(GrblSimConfig::default());
+    let mut h = start(GrblSimConfig::default());
     // Just powered up 50 mm below the switch: the counter reads 0 where the stage stands.
     let r1 = h.status().await;
     assert_eq!(
@@ -146,7 +105,7 @@ async fn powers_up_in_alarm_at_zero_with_wco_and_ov_on_their_own_cadence() {
 
 #[tokio::test(start_paused = true)]
 async fn homing_seeks_pulls_off_locates_and_ends_at_minus_pulloff() {
-    let mut h = Host::start(GrblSimConfig {
+    let mut h = start(GrblSimConfig {
         backlash_mm: 0.05,
         ..GrblSimConfig::default()
     });
@@ -185,7 +144,7 @@ async fn homing_seeks_pulls_off_locates_and_ends_at_minus_pulloff() {
 #[tokio::test(start_paused = true)]
 async fn homing_without_a_switch_in_reach_is_alarm_9_then_a_reset() {
     // 200 mm travel, searched over 1.5 × 200 = 300 mm; the switch is 400 mm away.
-    let mut h = Host::start(GrblSimConfig {
+    let mut h = start(GrblSimConfig {
         start_mm: -400.0,
         ..GrblSimConfig::default()
     });
@@ -199,7 +158,7 @@ async fn homing_without_a_switch_in_reach_is_alarm_9_then_a_reset() {
 
 #[tokio::test(start_paused = true)]
 async fn homing_disabled_is_error_5_and_the_board_powers_up_idle() {
-    let mut h = Host::start(GrblSimConfig {
+    let mut h = start(GrblSimConfig {
         homing_enabled: false,
         soft_limits: false,
         ..GrblSimConfig::default()
@@ -214,7 +173,7 @@ async fn homing_disabled_is_error_5_and_the_board_powers_up_idle() {
 
 #[tokio::test(start_paused = true)]
 async fn feed_ramps_at_the_axis_acceleration_and_is_capped_at_max_rate() {
-    let mut h = Host::start(homed());
+    let mut h = start(homed());
     assert_eq!(h.ask("$J=G53 G90 Y-21 F6000").await, "ok");
     let t0 = Instant::now();
     sleep(0.1).await;
@@ -240,7 +199,7 @@ async fn feed_ramps_at_the_axis_acceleration_and_is_capped_at_max_rate() {
 
 #[tokio::test(start_paused = true)]
 async fn jog_cancel_decelerates_at_the_axis_acceleration() {
-    let mut h = Host::start(homed());
+    let mut h = start(homed());
     assert_eq!(h.ask("$J=G53 G90 Y-100 F500").await, "ok");
     sleep(2.0).await;
     let before = h.status().await;
@@ -270,7 +229,7 @@ async fn jog_cancel_decelerates_at_the_axis_acceleration() {
 
 #[tokio::test(start_paused = true)]
 async fn soft_reset_during_a_jog_is_alarm_3_and_keeps_the_counter() {
-    let mut h = Host::start(homed());
+    let mut h = start(homed());
     assert_eq!(h.ask("$J=G53 G90 Y-50 F500").await, "ok");
     sleep(2.0).await;
     h.send(&[0x18]).await;
@@ -293,7 +252,7 @@ async fn soft_reset_during_a_jog_is_alarm_3_and_keeps_the_counter() {
 
 #[tokio::test(start_paused = true)]
 async fn power_cycle_zeroes_the_counter_where_the_stage_stands() {
-    let mut h = Host::start(homed());
+    let mut h = start(homed());
     assert_eq!(h.ask("$J=G53 G90 Y-20 F500").await, "ok");
     sleep(5.0).await;
     assert_eq!(mpos_y(&h.status().await), -20.0);
@@ -313,7 +272,7 @@ async fn power_cycle_zeroes_the_counter_where_the_stage_stands() {
 
 #[tokio::test(start_paused = true)]
 async fn first_boot_with_blank_settings_prints_error_7_and_the_defaults_before_the_banner() {
-    let mut h = Host::start(GrblSimConfig {
+    let mut h = start(GrblSimConfig {
         blank_settings: true,
         banner_at_open: true,
         ..GrblSimConfig::default()
@@ -343,7 +302,7 @@ async fn first_boot_with_blank_settings_prints_error_7_and_the_defaults_before_t
 
 #[tokio::test(start_paused = true)]
 async fn settings_are_listed_and_written_with_grbls_checks() {
-    let mut h = Host::start(homed());
+    let mut h = start(homed());
     let listed = h.lines_until_ok("$$").await;
     for want in [
         "$10=1",
@@ -369,7 +328,7 @@ async fn settings_are_listed_and_written_with_grbls_checks() {
 
 #[tokio::test(start_paused = true)]
 async fn switch_shows_as_pn_y_and_a_hard_limit_locks_until_reset() {
-    let mut h = Host::start(GrblSimConfig {
+    let mut h = start(GrblSimConfig {
         soft_limits: false,
         hard_limits: true,
         ..homed()
@@ -394,7 +353,7 @@ async fn switch_shows_as_pn_y_and_a_hard_limit_locks_until_reset() {
 
 #[tokio::test(start_paused = true)]
 async fn lines_are_cleaned_as_grbl_does_and_gcode_is_locked_out_during_a_jog() {
-    let mut h = Host::start(homed());
+    let mut h = start(homed());
     assert_eq!(h.ask("$j = g53 g90 y-2 (one mm) f60 ; down").await, "ok");
     assert_eq!(h.ask("G4 P0.01").await, "error:9");
     assert_eq!(h.ask("$I").await, "error:8");
@@ -413,7 +372,7 @@ async fn lines_are_cleaned_as_grbl_does_and_gcode_is_locked_out_during_a_jog() {
 
 #[tokio::test(start_paused = true)]
 async fn wpos_reports_subtract_the_work_offset() {
-    let mut h = Host::start(GrblSimConfig {
+    let mut h = start(GrblSimConfig {
         status_report_mask: 0,
         work_offset_y_mm: -5.0,
         ..homed()

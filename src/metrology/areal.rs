@@ -10,7 +10,7 @@
 //!
 //! Depends on [`super::bearing`] and [`super::MetrologyError`].
 
-use super::bearing::material_ratio_pct;
+use super::bearing::{equal_levels, material_ratios_pct};
 use super::{check_finite, check_pitch, MetrologyError};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -214,20 +214,75 @@ pub fn smr_curve(grid: &Grid<'_>, levels: usize) -> Result<Vec<[f64; 2]>, Metrol
     }
     let top = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let bottom = z.iter().copied().fold(f64::INFINITY, f64::min);
-    Ok((0..levels)
-        .map(|k| {
-            let h = top - (top - bottom) * k as f64 / (levels - 1) as f64;
+    let hs = equal_levels(top, bottom, levels);
+    let interior = &hs[1..levels - 1];
+    let rows: Vec<Vec<f64>> = z
+        .chunks_exact(grid.cols)
+        .map(|row| material_ratios_pct(row, interior))
+        .collect();
+    Ok(hs
+        .iter()
+        .enumerate()
+        .map(|(k, &h)| {
             let mr = if k == 0 {
                 0.0
             } else if k == levels - 1 {
                 100.0
             } else {
-                z.chunks_exact(grid.cols)
-                    .map(|row| material_ratio_pct(row, h))
-                    .sum::<f64>()
-                    / grid.rows as f64
+                rows.iter().map(|r| r[k - 1]).sum::<f64>() / grid.rows as f64
             };
             [h, mr]
         })
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::metrology::bearing::material_ratio_pct;
+
+    #[test]
+    fn smr_curve_equals_the_per_level_pooled_ratio() {
+        // A rough tilted grid, and one of quantised heights whose levels fall on samples.
+        let (rows, cols) = (7, 900);
+        let mut seed = 0x2545_F491_4F6C_DD1Du64;
+        let mut noise = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let rough: Vec<f64> = (0..rows * cols)
+            .map(|k| 0.001 * k as f64 + ((k % cols) as f64 * 0.02).sin() + noise())
+            .collect();
+        let steps: Vec<f64> = (0..rows * cols).map(|_| (noise() * 6.0).floor()).collect();
+        for heights in [rough, steps] {
+            let grid = Grid {
+                heights_um: &heights,
+                rows,
+                cols,
+                pitch_x_mm: 0.0005,
+                pitch_y_mm: 0.01,
+            };
+            let curve = smr_curve(&grid, 101).unwrap();
+            let (z, _) = level_plane(&grid).unwrap();
+            for (k, p) in curve.iter().enumerate() {
+                let slow = match k {
+                    0 => 0.0,
+                    100 => 100.0,
+                    _ => {
+                        z.chunks_exact(cols)
+                            .map(|row| material_ratio_pct(row, p[0]))
+                            .sum::<f64>()
+                            / rows as f64
+                    }
+                };
+                assert!(
+                    (p[1] - slow).abs() <= 1e-12 * slow.abs(),
+                    "level {k}: {} vs {slow} per level",
+                    p[1]
+                );
+            }
+        }
+    }
 }

@@ -133,31 +133,34 @@ pub fn bearing_curve_xz(
         }
     }
     let mean = area / total;
-    Ok(curve_about_mean(zs, mean, levels, |z, h| {
-        material_ratio_xz_pct(xs, z, h)
+    Ok(curve_about_mean(zs, mean, levels, |z, hs| {
+        material_ratios_xz_pct(xs, z, hs)
     }))
 }
 
 /// Heights referenced to `mean`, `levels` equal levels from the highest point (0 %) to the
-/// lowest (100 %), the ratio at each interior level from `ratio(referenced heights, level)`.
+/// lowest (100 %), the ratios at the interior levels from `ratios(referenced heights, levels)`.
 fn curve_about_mean(
     heights: &[f64],
     mean: f64,
     levels: usize,
-    ratio: impl Fn(&[f64], f64) -> f64,
+    ratios: impl Fn(&[f64], &[f64]) -> Vec<f64>,
 ) -> BearingCurve {
     let z: Vec<f64> = heights.iter().map(|h| h - mean).collect();
     let top = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let bottom = z.iter().copied().fold(f64::INFINITY, f64::min);
-    let points = (0..levels)
-        .map(|k| {
-            let h = top - (top - bottom) * k as f64 / (levels - 1) as f64;
+    let hs = equal_levels(top, bottom, levels);
+    let interior = ratios(&z, &hs[1..levels - 1]);
+    let points = hs
+        .iter()
+        .enumerate()
+        .map(|(k, &h)| {
             let mr = if k == 0 {
                 0.0
             } else if k == levels - 1 {
                 100.0
             } else {
-                ratio(&z, h)
+                interior[k - 1]
             };
             [h, mr]
         })
@@ -166,6 +169,114 @@ fn curve_about_mean(
         mean_line_um: mean,
         points,
     }
+}
+
+/// `levels` (at least 2) equal steps from `top` down to `bottom`, level k at
+/// `top − (top − bottom)·k/(levels − 1)`: non-increasing in k, as the rounding of each step
+/// is monotone.
+pub(crate) fn equal_levels(top: f64, bottom: f64, levels: usize) -> Vec<f64> {
+    (0..levels)
+        .map(|k| top - (top - bottom) * k as f64 / (levels - 1) as f64)
+        .collect()
+}
+
+/// [`material_ratio_pct`] at each of `levels`. The same terms per segment, each computed as
+/// there to the bit, but added up per level in another order, so the ratios agree to rounding
+/// (about 1e-15 relative). For non-increasing levels (as a bearing curve's are) each segment
+/// touches only the levels it crosses: O(n log L + crossings) instead of O(n·L); other level
+/// lists take the per-level way.
+pub fn material_ratios_pct(heights: &[f64], levels: &[f64]) -> Vec<f64> {
+    if heights.len() < 2 || !is_non_increasing(levels) || !all_finite(heights) {
+        return levels
+            .iter()
+            .map(|&h| material_ratio_pct(heights, h))
+            .collect();
+    }
+    let segments = (heights.len() - 1) as f64;
+    inside_lengths(heights, |_| 1.0, levels)
+        .into_iter()
+        .map(|inside| inside / segments * 100.0)
+        .collect()
+}
+
+/// [`material_ratio_xz_pct`] at each of `levels`, as [`material_ratios_pct`] is to
+/// [`material_ratio_pct`]: the same terms, summed per level in another order.
+pub fn material_ratios_xz_pct(xs: &[f64], zs: &[f64], levels: &[f64]) -> Vec<f64> {
+    if xs.len() != zs.len()
+        || xs.len() < 2
+        || !is_non_increasing(levels)
+        || !all_finite(xs)
+        || !all_finite(zs)
+    {
+        return levels
+            .iter()
+            .map(|&h| material_ratio_xz_pct(xs, zs, h))
+            .collect();
+    }
+    // The total in the order the per-level function sums it, so the divisor is the same bits.
+    let total: f64 = xs.windows(2).fold(0.0, |t, w| t + (w[1] - w[0]));
+    let inside = inside_lengths(zs, |i| xs[i + 1] - xs[i], levels);
+    inside
+        .into_iter()
+        .map(|inside| {
+            if total > 0.0 {
+                inside / total * 100.0
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+fn all_finite(v: &[f64]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+fn is_non_increasing(levels: &[f64]) -> bool {
+    levels.windows(2).all(|w| w[1] <= w[0])
+}
+
+/// For each of `levels` (non-increasing, finite), the summed length inside the material of
+/// the piecewise-linear curve through `zs`, segment i weighing `weight(i)`: the whole weight
+/// where the segment's lower end is at or above the level, `weight·(hi − level)/(hi − lo)`
+/// where the level cuts it, nothing where it lies below. Each segment's whole weight is added
+/// once, at the first level it is entirely above, and carried down by a running sum; only the
+/// levels strictly inside its height range get a fraction.
+#[inline(always)]
+fn inside_lengths(zs: &[f64], weight: impl Fn(usize) -> f64, levels: &[f64]) -> Vec<f64> {
+    let l = levels.len();
+    // first_at_or_below(z): the first level index k with levels[k] <= z; first_below(z): the
+    // first with levels[k] < z.
+    let first_at_or_below = |z: f64| levels.partition_point(|&h| h > z);
+    let first_below = |z: f64| levels.partition_point(|&h| h >= z);
+    let mut whole = vec![0.0f64; l + 1];
+    let mut cut = vec![0.0f64; l];
+    let Some(&z0) = zs.first() else {
+        return cut;
+    };
+    let mut prev = (z0, first_at_or_below(z0), first_below(z0));
+    for (i, &z) in zs.iter().enumerate().skip(1) {
+        let next = (z, first_at_or_below(z), first_below(z));
+        let ((lo, lo_at, _), (hi, _, hi_below)) = if prev.0 >= next.0 {
+            (next, prev)
+        } else {
+            (prev, next)
+        };
+        let w = weight(i - 1);
+        // Levels k >= lo_at are at or below lo: the whole segment is inside.
+        whole[lo_at] += w;
+        // Levels hi_below <= k < lo_at lie strictly between lo and hi.
+        for k in hi_below..lo_at {
+            cut[k] += w * (hi - levels[k]) / (hi - lo);
+        }
+        prev = next;
+    }
+    let mut running = 0.0;
+    for (c, &w) in cut.iter_mut().zip(&whole) {
+        running += w;
+        *c += running;
+    }
+    cut
 }
 
 /// One bearing area curve: levels from the highest to the lowest point, with their ratios.
@@ -202,7 +313,7 @@ pub fn bearing_curve(heights: &[f64], levels: usize) -> Result<BearingCurve, Met
     let first = heights.first().copied().unwrap_or(0.0);
     let last = heights.last().copied().unwrap_or(0.0);
     let mean = (heights.iter().sum::<f64>() - 0.5 * (first + last)) / (n - 1) as f64;
-    Ok(curve_about_mean(heights, mean, levels, material_ratio_pct))
+    Ok(curve_about_mean(heights, mean, levels, material_ratios_pct))
 }
 
 /// The bearing area curve of a curve given as a function of x (mm, heights in µm), sampled at
@@ -271,13 +382,19 @@ pub fn pooled_bearing_curve(
         .fold(f64::INFINITY, f64::min);
     let weights: Vec<f64> = centred.iter().map(|c| (c.len() - 1) as f64).collect();
     let total: f64 = weights.iter().sum();
-    let points = (0..levels)
-        .map(|k| {
-            let h = top - (top - bottom) * k as f64 / (levels - 1) as f64;
-            let mr = centred
+    let hs = equal_levels(top, bottom, levels);
+    let ratios: Vec<Vec<f64>> = centred
+        .iter()
+        .map(|c| material_ratios_pct(c, &hs))
+        .collect();
+    let points = hs
+        .iter()
+        .enumerate()
+        .map(|(k, &h)| {
+            let mr = ratios
                 .iter()
                 .zip(&weights)
-                .map(|(c, w)| material_ratio_pct(c, h) * w)
+                .map(|(r, w)| r[k] * w)
                 .sum::<f64>()
                 / total;
             [h, mr]
@@ -292,6 +409,161 @@ pub fn pooled_bearing_curve(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Uniform in [0, 1) from an LCG (deterministic).
+    fn lcg(seed: &mut u64) -> f64 {
+        *seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn assert_close(fast: &[f64], slow: &[f64], what: &str) {
+        assert_eq!(fast.len(), slow.len(), "{what}");
+        for (k, (a, b)) in fast.iter().zip(slow).enumerate() {
+            assert!(
+                (a - b).abs() <= 1e-12 * a.abs().max(b.abs()),
+                "{what}, level {k}: {a} vs {b} per level"
+            );
+        }
+    }
+
+    /// Curves that stress the level bookkeeping: rough noise, a dense smooth wave on uneven x,
+    /// quantised heights whose levels fall exactly on samples, plateaus and flat segments,
+    /// a constant curve.
+    fn test_curves() -> Vec<(Vec<f64>, Vec<f64>)> {
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        let mut out = Vec::new();
+        let n = 3000;
+        let rough: Vec<f64> = (0..n)
+            .map(|i| (i as f64 * 0.013).sin() + 0.8 * lcg(&mut seed))
+            .collect();
+        let mut x = 0.0;
+        let uneven: Vec<f64> = (0..n)
+            .map(|_| {
+                x += 0.0002 + 0.0003 * lcg(&mut seed);
+                x
+            })
+            .collect();
+        let smooth: Vec<f64> = uneven.iter().map(|x| (x * 40.0).sin() * 1.7).collect();
+        let steps: Vec<f64> = (0..n)
+            .map(|_| (lcg(&mut seed) * 10.0).floor() - 5.0)
+            .collect();
+        let mut plateau = vec![2.0; 50];
+        plateau.extend((0..200).map(|i| (i as f64 * 0.1).cos()));
+        plateau.extend(vec![-1.0; 80]);
+        let uniform = |m: usize| (0..m).map(|i| i as f64 * 0.0005).collect::<Vec<f64>>();
+        out.push((uniform(n), rough));
+        out.push((uneven, smooth));
+        out.push((uniform(n), steps));
+        out.push((uniform(plateau.len()), plateau));
+        out.push((uniform(40), vec![0.25; 40]));
+        out
+    }
+
+    #[test]
+    fn ratios_at_many_levels_equal_the_ratio_at_each_level() {
+        for (xs, zs) in test_curves() {
+            let top = zs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let bottom = zs.iter().copied().fold(f64::INFINITY, f64::min);
+            // The bearing curve's levels (on the quantised curve 101 levels over a range of 9
+            // fall on every sample height), levels outside the range, and repeated levels.
+            let mut cases = vec![
+                equal_levels(top, bottom, 101),
+                equal_levels(top, bottom, 10),
+            ];
+            cases.push(vec![
+                top + 1.0,
+                top,
+                0.5 * (top + bottom),
+                bottom,
+                bottom - 1.0,
+            ]);
+            cases.push(vec![0.0, 0.0, 0.0, -0.5, -0.5]);
+            for levels in &cases {
+                let slow: Vec<f64> = levels.iter().map(|&h| material_ratio_pct(&zs, h)).collect();
+                assert_close(&material_ratios_pct(&zs, levels), &slow, "uniform");
+                let slow: Vec<f64> = levels
+                    .iter()
+                    .map(|&h| material_ratio_xz_pct(&xs, &zs, h))
+                    .collect();
+                assert_close(&material_ratios_xz_pct(&xs, &zs, levels), &slow, "x, z");
+            }
+            // Levels in no order take the per-level way: the same bits.
+            let shuffled = [
+                bottom,
+                top,
+                0.3 * top + 0.7 * bottom,
+                0.9 * top + 0.1 * bottom,
+            ];
+            let slow: Vec<f64> = shuffled
+                .iter()
+                .map(|&h| material_ratio_pct(&zs, h))
+                .collect();
+            assert_eq!(material_ratios_pct(&zs, &shuffled), slow);
+        }
+    }
+
+    #[test]
+    fn bearing_curves_equal_the_per_level_computation() {
+        for (xs, zs) in test_curves() {
+            for (curve, per_level) in [
+                (
+                    bearing_curve_xz(&xs, &zs, 101).unwrap(),
+                    Box::new(|z: &[f64], h: f64| material_ratio_xz_pct(&xs, z, h))
+                        as Box<dyn Fn(&[f64], f64) -> f64>,
+                ),
+                (
+                    bearing_curve(&zs, 101).unwrap(),
+                    Box::new(|z: &[f64], h: f64| material_ratio_pct(z, h)),
+                ),
+            ] {
+                // As the curve was computed before: heights about the mean, equal levels,
+                // each level's ratio on its own.
+                let z: Vec<f64> = zs.iter().map(|h| h - curve.mean_line_um).collect();
+                let top = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                let bottom = z.iter().copied().fold(f64::INFINITY, f64::min);
+                let (heights, ratios): (Vec<f64>, Vec<f64>) =
+                    curve.points.iter().map(|p| (p[0], p[1])).unzip();
+                let slow: Vec<f64> = (0..101)
+                    .map(|k| {
+                        let h = top - (top - bottom) * k as f64 / 100.0;
+                        assert_eq!(heights[k].to_bits(), h.to_bits(), "level {k}");
+                        match k {
+                            0 => 0.0,
+                            100 => 100.0,
+                            _ => per_level(&z, h),
+                        }
+                    })
+                    .collect();
+                assert_close(&ratios, &slow, "bearing curve");
+            }
+            // Pooled over three curves: each level's weighted ratios as before.
+            let curves = vec![zs.clone(), zs.iter().map(|z| 0.5 * z + 0.1).collect(), zs];
+            let pooled = pooled_bearing_curve(&curves, 51).unwrap();
+            let centred: Vec<Vec<f64>> = curves
+                .iter()
+                .map(|c| {
+                    let m = bearing_curve(c, 2).unwrap().mean_line_um;
+                    c.iter().map(|h| h - m).collect()
+                })
+                .collect();
+            let total: f64 = centred.iter().map(|c| (c.len() - 1) as f64).sum();
+            let slow: Vec<f64> = pooled
+                .points
+                .iter()
+                .map(|p| {
+                    centred
+                        .iter()
+                        .map(|c| material_ratio_pct(c, p[0]) * (c.len() - 1) as f64)
+                        .sum::<f64>()
+                        / total
+                })
+                .collect();
+            let fast: Vec<f64> = pooled.points.iter().map(|p| p[1]).collect();
+            assert_close(&fast, &slow, "pooled");
+        }
+    }
 
     #[test]
     fn the_level_at_a_material_ratio_inverts_the_ratio() {

@@ -68,6 +68,22 @@ pub enum StageError {
         /// Upper limit.
         max: Nm,
     },
+    /// A target outside the travel the controller itself enforces (GRBL soft limits): it
+    /// would be refused in the middle of the scan, so the plan is refused before anything
+    /// moves.
+    #[error("target {target} is outside the travel the stage controller enforces [{min}, {max}]; nothing was sent. Change y-start/step/lines, or the controller's travel (GRBL: $131 with soft limits $20=1 give machine space [-$131, 0])")]
+    OutsideControllerTravel {
+        /// The refused position.
+        target: Nm,
+        /// Lower end of the controller's travel.
+        min: Nm,
+        /// Upper end of the controller's travel.
+        max: Nm,
+    },
+    /// The controller is set up differently from what the driver is configured for (steps
+    /// per mm, report units, homing disabled…).
+    #[error("stage controller settings do not fit: {0}")]
+    ControllerSetup(String),
     /// A step that the device cannot represent exactly.
     #[error("target {target} is {units:.4} device units; rounding moves it by {error_nm:.1} nm. Choose a step that is a whole number of device units, or set stage.allow-inexact-step = true")]
     InexactTarget {
@@ -122,6 +138,8 @@ impl DeviceFault for StageError {
             StageError::ControllerLimit { .. }
             | StageError::SoftLimit { .. }
             | StageError::InexactTarget { .. }
+            | StageError::OutsideControllerTravel { .. }
+            | StageError::ControllerSetup(_)
             | StageError::Config(_) => FaultClass::Fatal,
             StageError::PositionLost { .. } => FaultClass::PositionLost,
             StageError::Fault { class, .. } => *class,

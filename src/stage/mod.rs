@@ -6,6 +6,7 @@
 //! - [`grbl`], [`zaber`]: one directory per controller, its codec (`codec.rs`, pure) beside
 //!   its driver (`mod.rs`, generic over `AsyncRead + AsyncWrite + Unpin`).
 //! - [`policy`]: absolute targets, soft limits, backlash, settle, deadband, retries.
+//! - [`ramp`]: how long a move takes (trapezoid), to poll again when it should be over.
 //! - [`any`]: the policy over whichever driver the settings select, on a stream the caller
 //!   opened (composition opens ports; nothing here does).
 //! - [`settings`]: the `[stage]` section, validated into driver and policy configurations.
@@ -21,6 +22,7 @@ pub mod framer;
 pub mod grbl;
 pub mod link;
 pub mod policy;
+pub mod ramp;
 pub mod settings;
 pub mod sim;
 pub mod zaber;
@@ -53,12 +55,25 @@ pub struct StageStatus {
     pub warnings: Vec<String>,
 }
 
+/// What a controller says about itself when it is connected.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Identity {
+    /// Model, firmware and build information, for the scan's record.
+    pub text: String,
+    /// The travel the controller itself enforces, device units (GRBL soft limits): a target
+    /// outside it would be refused in the middle of a scan.
+    pub travel_units: Option<(i64, i64)>,
+    /// Facts the operator should know (a feed above the controller's maximum…).
+    pub warnings: Vec<String>,
+}
+
 /// The device layer of a y stage: protocol facts only. Backlash, retries, settle time and
 /// soft limits live in [`policy::MotionPolicy`].
 #[allow(async_fn_in_trait)]
 pub trait Stage {
-    /// Identifies the controller and reads its state; reports a reset seen at open.
-    async fn identify(&mut self) -> Result<(String, StageStatus), StageError>;
+    /// Identifies the controller, checks its settings against the driver's and reads its
+    /// state; reports a reset seen at open.
+    async fn identify(&mut self) -> Result<(Identity, StageStatus), StageError>;
     /// Reads the current status.
     async fn status(&mut self) -> Result<StageStatus, StageError>;
     /// Homes the axis and waits until it is done.

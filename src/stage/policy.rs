@@ -79,6 +79,8 @@ pub struct MotionPolicy<S> {
     last_dir: Option<i64>,
     /// Last position read back, device units.
     position_units: Option<i64>,
+    /// The travel the controller enforces itself, when it said (from `connect`).
+    controller_travel: Option<(Nm, Nm)>,
 }
 
 impl<S: Stage> MotionPolicy<S> {
@@ -90,6 +92,7 @@ impl<S: Stage> MotionPolicy<S> {
             trusted: false,
             last_dir: None,
             position_units: None,
+            controller_travel: None,
         }
     }
 
@@ -132,6 +135,15 @@ impl<S: Stage> MotionPolicy<S> {
                     min: self.cfg.min,
                     max: self.cfg.max,
                 });
+            }
+            if let Some((min, max)) = self.controller_travel {
+                if p < min || p > max {
+                    return Err(StageError::OutsideControllerTravel {
+                        target: p,
+                        min,
+                        max,
+                    });
+                }
             }
         }
         Ok(())
@@ -216,8 +228,20 @@ impl<S: Stage> YAxis for MotionPolicy<S> {
 
     async fn connect(&mut self) -> Result<StageReport, StageError> {
         let (identity, st) = self.stage.identify().await?;
-        for w in &st.warnings {
+        for w in identity.warnings.iter().chain(&st.warnings) {
             tracing::warn!(warning = %w, "stage at connect");
+        }
+        self.controller_travel = identity
+            .travel_units
+            .map(|(lo, hi)| (self.to_nm(lo), self.to_nm(hi)));
+        if let Some((min, max)) = self.controller_travel {
+            if self.cfg.min < min || self.cfg.max > max {
+                tracing::warn!(
+                    "stage soft limits [{}, {}] reach beyond the controller's own travel [{min}, {max}]; targets outside it are refused",
+                    self.cfg.min,
+                    self.cfg.max
+                );
+            }
         }
         self.trusted = st.position_trusted;
         self.position_units = Some(st.position_units);
@@ -226,7 +250,7 @@ impl<S: Stage> YAxis for MotionPolicy<S> {
         // home-on-start, or because the position is not trusted), so a cycle is never run
         // twice in a row.
         Ok(StageReport {
-            identity,
+            identity: identity.text,
             position_trusted: self.trusted,
             position: self.to_nm(self.position_units.unwrap_or(st.position_units)),
         })

@@ -3,7 +3,7 @@
 //!
 //! Depends only on the [`Stage`] trait; no I/O.
 
-use super::{Motion, Stage, StageError, StageStatus};
+use super::{Identity, Motion, Stage, StageError, StageStatus};
 use crate::devices::FaultClass;
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -68,8 +68,12 @@ impl SimStage {
 }
 
 impl Stage for SimStage {
-    async fn identify(&mut self) -> Result<(String, StageStatus), StageError> {
-        Ok(("sim stage".into(), self.st()))
+    async fn identify(&mut self) -> Result<(Identity, StageStatus), StageError> {
+        let id = Identity {
+            text: "sim stage".into(),
+            ..Identity::default()
+        };
+        Ok((id, self.st()))
     }
 
     async fn status(&mut self) -> Result<StageStatus, StageError> {

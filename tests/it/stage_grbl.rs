@@ -30,7 +30,11 @@ const BACKLASH_NM: i64 = 50_000;
 type Axis = MotionPolicy<GrblStage<DuplexStream>>;
 
 fn start(sim: GrblSimConfig) -> (Axis, Arc<StageShared>) {
-    let settings: StageSettings = toml::from_str(SETTINGS).unwrap();
+    start_with(SETTINGS, sim)
+}
+
+fn start_with(settings: &str, sim: GrblSimConfig) -> (Axis, Arc<StageShared>) {
+    let settings: StageSettings = toml::from_str(settings).unwrap();
     let (host, dev) = tokio::io::duplex(4096);
     let shared = StageShared::new();
     tokio::spawn(serve(dev, sim, shared.clone()));
@@ -310,4 +314,104 @@ async fn garbage_and_over_long_lines_are_skipped_by_the_driver() {
     });
     assert_eq!(g.status().await.unwrap().position_units, -400);
     script.await.unwrap();
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_board_with_blank_settings_is_refused_by_its_steps_per_mm() {
+    // First boot with a blank EEPROM: error:7, GRBL's defaults ($101=250) and the banner.
+    let (mut a, _shared) = start(GrblSimConfig {
+        blank_settings: true,
+        banner_at_open: true,
+        ..sim_cfg()
+    });
+    let e = a.connect().await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::ControllerSetup(m) if m.contains("$101 is 250") && m.contains("400")),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::Fatal);
+}
+
+#[tokio::test(start_paused = true)]
+async fn homing_on_a_board_without_homing_is_a_named_error_not_a_retry() {
+    let (mut a, shared) = start(GrblSimConfig {
+        homing_enabled: false,
+        soft_limits: false,
+        ..sim_cfg()
+    });
+    // Powered up Idle (no homing lock), but the position is still not referenced.
+    let r = a.connect().await.unwrap();
+    assert_eq!(r.position, Nm(0));
+    let e = a.home().await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::ControllerSetup(m) if m.contains("$22=0")),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::Fatal);
+    assert_eq!(shared.homing_cycles(), 0);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_plan_beyond_the_boards_own_travel_is_refused_before_anything_moves() {
+    // Host limits reach to −150 mm; the board enforces [−$131, 0] = [−100, 0].
+    let wide = SETTINGS.replace("soft-limit-min-mm = -100", "soft-limit-min-mm = -150");
+    let (mut a, shared) = start_with(&wide, sim_cfg());
+    a.connect().await.unwrap();
+    a.home().await.unwrap();
+    let before = shared.bytes_received();
+    let plan: Vec<Nm> = (0..31).map(|k| Nm(-120_000_000 + k * 10_000)).collect();
+    let e = a.check_targets(&plan).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            StageError::OutsideControllerTravel {
+                min: Nm(-100_000_000),
+                max: Nm(0),
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::Fatal);
+    tokio::task::yield_now().await;
+    assert_eq!(shared.bytes_received(), before);
+    // Inside it, the plan is fine.
+    let plan: Vec<Nm> = (0..31).map(|k| Nm(-99_000_000 + k * 10_000)).collect();
+    assert!(a.check_targets(&plan).unwrap().is_empty());
+}
+
+#[tokio::test(start_paused = true)]
+async fn work_coordinate_reports_are_turned_into_machine_positions() {
+    // $10=0: WPos in the reports, WCO only on every tenth; G54 Y offset −5 mm.
+    let (mut a, shared) = start(GrblSimConfig {
+        status_report_mask: 0,
+        work_offset_y_mm: -5.0,
+        ..sim_cfg()
+    });
+    a.connect().await.unwrap();
+    a.home().await.unwrap();
+    for k in 0..12 {
+        // Twelve lines: more reports than one WCO refresh period.
+        let t = Nm(-20_000_000 + k * 10_000);
+        assert_eq!(a.move_to(t).await.unwrap().readback, t, "line {k}");
+        assert_eq!(shared.true_position_nm(), t.0, "carriage at line {k}");
+    }
+}
+
+/// The jog's end is polled when the planner says it is over, not a poll interval later.
+#[tokio::test(start_paused = true)]
+async fn a_scan_step_is_polled_when_its_trapezoid_ends() {
+    let (mut a, _shared) = homed().await;
+    a.move_to(Nm(-20_000_000)).await.unwrap();
+    let t0 = tokio::time::Instant::now();
+    a.move_to(Nm(-19_990_000)).await.unwrap();
+    let took = t0.elapsed().as_secs_f64();
+    // 0.01 mm at 60 mm/min and 10 mm/s² ($121): a triangle of 2·sqrt(0.01/10) = 63.2 ms,
+    // then 50 ms settle. Polling every 200 ms would make it 250 ms.
+    let device = 0.063_246 + 0.050;
+    assert!(took >= device, "{took}");
+    assert!(
+        took < device + 0.010,
+        "{took} s for {device} s of device time"
+    );
 }

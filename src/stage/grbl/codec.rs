@@ -49,6 +49,10 @@ pub struct StatusReport {
     pub wpos_mm: Option<[f64; 3]>,
     /// Work coordinate offset, if reported.
     pub wco_mm: Option<[f64; 3]>,
+    /// The real speed now, mm/min (`FS:` or `F:`), if reported.
+    pub feed_mm_min: Option<f64>,
+    /// Input pins that are active (`Pn:`: `X`/`Y`/`Z` limits, `P` probe, `D` door…).
+    pub pins: Option<String>,
 }
 
 /// One line from the controller.
@@ -72,7 +76,9 @@ pub enum GrblMessage {
     Feedback(String),
     /// The start-up banner (`Grbl 1.1h ['$' for help]`, `GrblHAL 1.1f ['$' or '$HELP' for help]`).
     Banner(String),
-    /// `>…:ok` start-up block echo or a settings line (`$100=250.000`).
+    /// A setting as `$$` lists it: `$101=400.000`.
+    Setting(u16, f64),
+    /// `>…:ok` start-up block echo or another `$` line (`$N0=…`).
     Other(String),
 }
 
@@ -131,6 +137,8 @@ pub fn parse_line(line: &str) -> Option<GrblMessage> {
             mpos_mm: None,
             wpos_mm: None,
             wco_mm: None,
+            feed_mm_min: None,
+            pins: None,
         };
         for f in fields {
             if let Some(v) = f.strip_prefix("MPos:") {
@@ -139,6 +147,12 @@ pub fn parse_line(line: &str) -> Option<GrblMessage> {
                 rep.wpos_mm = Some(parse_axes(v)?);
             } else if let Some(v) = f.strip_prefix("WCO:") {
                 rep.wco_mm = Some(parse_axes(v)?);
+            } else if let Some(v) = f.strip_prefix("FS:").or_else(|| f.strip_prefix("F:")) {
+                // `FS:rate,spindle` (variable-spindle builds) or `F:rate`.
+                let rate: f64 = v.split(',').next()?.trim().parse().ok()?;
+                rep.feed_mm_min = rate.is_finite().then_some(rate.max(0.0));
+            } else if let Some(v) = f.strip_prefix("Pn:") {
+                rep.pins = Some(v.to_string());
             }
         }
         if rep.mpos_mm.is_none() && rep.wpos_mm.is_none() {
@@ -161,10 +175,24 @@ pub fn parse_line(line: &str) -> Option<GrblMessage> {
     if (lower.starts_with("grbl ") || lower.starts_with("grblhal ")) && line.contains("for help") {
         return Some(GrblMessage::Banner(line.to_string()));
     }
+    if let Some((n, v)) = parse_setting(line) {
+        return Some(GrblMessage::Setting(n, v));
+    }
     if line.starts_with('>') || line.starts_with('$') {
         return Some(GrblMessage::Other(line.to_string()));
     }
     None
+}
+
+/// `$N=value` with a numeric setting number (not a `$N0=` startup line).
+fn parse_setting(line: &str) -> Option<(u16, f64)> {
+    let (n, v) = line.strip_prefix('$')?.split_once('=')?;
+    if n.is_empty() || !n.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    let n: u16 = n.parse().ok()?;
+    let v: f64 = v.trim().parse().ok()?;
+    v.is_finite().then_some((n, v))
 }
 
 /// Encodes a jog to an absolute machine Y coordinate.
@@ -178,10 +206,15 @@ pub fn error_text(code: u16) -> &'static str {
         1 => "expected command letter",
         2 => "bad number format",
         3 => "invalid '$' statement",
+        5 => "homing cycle not enabled in settings ($22)",
+        7 => "settings unreadable (EEPROM); restored to defaults",
         8 => "command requires Idle",
         9 => "G-code locked out during alarm or jog",
         15 => "jog target exceeds machine travel",
+        10 => "soft limits need homing enabled",
+        11 => "line longer than the controller's line buffer",
         16 => "invalid jog command",
+        22 => "feed rate undefined",
         20..=38 => "G-code parser error",
         _ => "see the GRBL error code table",
     }
@@ -217,12 +250,37 @@ mod tests {
                 mpos_mm: None,
                 wpos_mm: Some([1.0, 2.5, 0.0]),
                 wco_mm: Some([0.0, -5.0, 0.0]),
+                feed_mm_min: Some(0.0),
+                pins: None,
             }))
         );
         let m = parse_line("<Jog|MPos:0.000,-12.345,0.000|Bf:15,128|FS:60,0>");
         assert!(
-            matches!(m, Some(GrblMessage::Status(StatusReport { state: GrblState::Jog, mpos_mm: Some(p), .. })) if p[1] == -12.345)
+            matches!(m, Some(GrblMessage::Status(StatusReport { state: GrblState::Jog, mpos_mm: Some(p), feed_mm_min: Some(f), .. })) if p[1] == -12.345 && f == 60.0)
         );
+    }
+
+    #[test]
+    fn firmware_fields_pins_overrides_and_the_no_spindle_feed() {
+        // As GRBL 1.1h sends them: Pn while a switch is pressed, Ov on its own cadence, and
+        // `F:` instead of `FS:` on builds without a variable spindle.
+        let m = parse_line("<Alarm|MPos:0.000,0.000,0.000|F:0|Pn:Y|Ov:100,100,100>");
+        let Some(GrblMessage::Status(r)) = m else {
+            panic!("{m:?}")
+        };
+        assert_eq!(r.state, GrblState::Alarm);
+        assert_eq!(r.pins.as_deref(), Some("Y"));
+        assert_eq!(r.feed_mm_min, Some(0.0));
+        assert_eq!(r.mpos_mm, Some([0.0, 0.0, 0.0]));
+        // grblHAL with a fourth axis.
+        let m = parse_line("<Idle|MPos:1.000,-2.000,3.000,4.000|FS:0,0>");
+        assert!(matches!(
+            m,
+            Some(GrblMessage::Status(StatusReport {
+                mpos_mm: Some([1.0, -2.0, 3.0]),
+                ..
+            }))
+        ));
     }
 
     #[test]
@@ -250,6 +308,16 @@ mod tests {
             parse_line("GrblHAL 1.1f ['$' or '$HELP' for help]"),
             Some(GrblMessage::Banner(_))
         ));
+        assert_eq!(
+            parse_line("$101=400.000"),
+            Some(GrblMessage::Setting(101, 400.0))
+        );
+        assert_eq!(parse_line("$22=1"), Some(GrblMessage::Setting(22, 1.0)));
+        assert_eq!(parse_line("$N0="), Some(GrblMessage::Other("$N0=".into())));
+        assert_eq!(
+            parse_line("$101=x"),
+            Some(GrblMessage::Other("$101=x".into()))
+        );
     }
 
     #[test]

@@ -1,23 +1,38 @@
 //! GRBL 1.1 / grblHAL: a [`Stage`] driver generic over `AsyncRead + AsyncWrite + Unpin`,
-//! over the pure line codec in [`codec`].
+//! over the pure line codec in [`codec`] and the settings check in [`controller`].
+//!
+//! At connect the driver reads `$I` and `$$`: the board's steps per mm must be the
+//! configured ones, reports must be in mm, and the board's own travel (soft limits,
+//! [−`$131`, 0]) goes to the policy so a plan that would hit it is refused up front. `$H` on a
+//! board without homing is a named error; after `$H` the axis stands at MPos −`$27`.
 //!
 //! Moves are jogs to absolute machine coordinates (`$J=G53 G90 Y… F…`); completion is seen
 //! by polling `?` until `Idle` (G-code, even `G4`, is refused with `error:9` during a jog).
+//! The first poll comes when the planner's trapezoid (feed capped at `$111`, ramps at `$121`)
+//! says the jog is over, and each later one when the rest should be done, from the reported
+//! position and real speed (`FS:`), never more than the poll interval apart.
 //! A banner or `ALARM:1`/`ALARM:3` not caused by our own reset means the position is lost.
+//! Reports in work coordinates (`$10=0`) are turned into machine coordinates with the `WCO:`
+//! GRBL sends every few reports; the driver waits for one at connect.
 //!
-//! Layer 2: depends on [`codec`], [`super::link`] and the stage vocabulary in [`super`].
+//! Layer 2: depends on [`codec`], [`controller`], [`super::link`], [`super::ramp`] and the
+//! stage vocabulary in [`super`].
 
 pub mod codec;
+pub mod controller;
 
 use super::link::LineLink;
-use super::{Motion, Stage, StageError, StageStatus};
+use super::ramp::move_time;
+use super::{Identity, Motion, Stage, StageError, StageStatus};
 use crate::devices::FaultClass;
 use codec::{
     alarm_text, encode_jog_y, error_text, parse_line, GrblMessage, GrblState, StatusReport,
     RT_JOG_CANCEL, RT_SOFT_RESET, RT_STATUS,
 };
+use controller::ControllerSettings;
 use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncWrite};
+use tokio::time::Instant;
 
 /// Settings of the GRBL driver.
 #[derive(Debug, Clone)]
@@ -26,7 +41,7 @@ pub struct GrblConfig {
     pub steps_per_mm: f64,
     /// Jog feed rate, mm/min.
     pub feed_mm_min: f64,
-    /// Status poll interval (GRBL asks for ≤ 5 Hz).
+    /// Longest wait between two status polls while a jog runs (GRBL asks for ≤ 5 Hz).
     pub poll_interval: Duration,
     /// Timeout for one line's `ok`/`error` or a status report.
     pub reply_timeout: Duration,
@@ -34,17 +49,38 @@ pub struct GrblConfig {
     pub open_grace: Duration,
 }
 
+/// How late after the planned end of a jog the status is polled: the USB round trip and the
+/// stepper's last segment.
+const POLL_MARGIN: Duration = Duration::from_millis(5);
+/// The shortest wait between two polls of a jog that is still running.
+const MIN_POLL_GAP: Duration = Duration::from_millis(20);
+/// GRBL sends `WCO:` at least every 30th report (every 10th at rest).
+const REPORTS_PER_WCO: usize = 31;
+
+/// A jog sent and not yet seen to end.
+#[derive(Debug, Clone, Copy)]
+struct Jog {
+    target_units: i64,
+    from_units: Option<i64>,
+    sent: Instant,
+}
+
 /// The GRBL driver.
 pub struct GrblStage<T> {
     link: LineLink<T>,
     cfg: GrblConfig,
-    wco_mm: [f64; 3],
+    wco_mm: Option<[f64; 3]>,
     trusted: bool,
     expect_banner: bool,
     needs_reset: bool,
     /// A reply may still be in flight from an interrupted exchange: drain before talking.
     dirty: bool,
     warnings: Vec<String>,
+    /// What `$$` said at connect.
+    board: ControllerSettings,
+    /// The position of the last status report, steps.
+    last_units: Option<i64>,
+    jog: Option<Jog>,
 }
 
 impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
@@ -53,12 +89,15 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
         GrblStage {
             link: LineLink::new(io, 256, "GRBL"),
             cfg,
-            wco_mm: [0.0; 3],
+            wco_mm: None,
             trusted: false,
             expect_banner: false,
             needs_reset: false,
             dirty: false,
             warnings: Vec::new(),
+            board: ControllerSettings::default(),
+            last_units: None,
+            jog: None,
         }
     }
 
@@ -67,13 +106,32 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
         (mm * self.cfg.steps_per_mm).round() as i64
     }
 
+    /// The feed the board really jogs at, mm/min (capped at `$111`).
+    fn effective_feed_mm_min(&self) -> f64 {
+        match self.board.max_rate_mm_min() {
+            Some(max) => self.cfg.feed_mm_min.min(max),
+            None => self.cfg.feed_mm_min,
+        }
+    }
+
+    /// How long the rest of a jog takes: `distance_units` to go at `speed_mm_min` now.
+    fn remaining_time(&self, distance_units: i64, speed_mm_min: f64) -> Duration {
+        let mm = distance_units.unsigned_abs() as f64 / self.cfg.steps_per_mm;
+        move_time(
+            mm,
+            speed_mm_min / 60.0,
+            self.effective_feed_mm_min() / 60.0,
+            self.board.acceleration_mm_s2(),
+        )
+    }
+
     async fn write(&mut self, bytes: &[u8]) -> Result<(), StageError> {
         self.link.write(bytes).await
     }
 
     /// Next message, handling push messages that change trust. `Ok(None)` on timeout.
     async fn next_raw(&mut self, timeout: Duration) -> Result<Option<GrblMessage>, StageError> {
-        let deadline = tokio::time::Instant::now() + timeout;
+        let deadline = Instant::now() + timeout;
         while let Some(line) = self.link.next_line(deadline).await? {
             match parse_line(&line) {
                 Some(m) => return Ok(Some(m)),
@@ -226,12 +284,20 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
 
     fn status_from(&mut self, r: &StatusReport) -> Result<StageStatus, StageError> {
         if let Some(w) = r.wco_mm {
-            self.wco_mm = w;
+            self.wco_mm = Some(w);
         }
-        let y_mm = match (r.mpos_mm, r.wpos_mm) {
-            (Some(m), _) => m[1],
-            (None, Some(w)) => w[1] + self.wco_mm[1],
-            (None, None) => {
+        let y_mm = match (r.mpos_mm, r.wpos_mm, self.wco_mm) {
+            (Some(m), _, _) => m[1],
+            (None, Some(w), Some(wco)) => w[1] + wco[1],
+            (None, Some(_), None) => {
+                return Err(StageError::Protocol {
+                    line: format!("{r:?}"),
+                    why: "a work-coordinate report (WPos) before any WCO: the machine position \
+                          is unknown; set $10=1 on the controller for machine positions"
+                        .into(),
+                })
+            }
+            (None, None, _) => {
                 return Err(StageError::Protocol {
                     line: format!("{r:?}"),
                     why: "status report without a position".into(),
@@ -246,11 +312,17 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
             GrblState::Home => Motion::Homing,
             GrblState::Alarm => Motion::Alarm,
         };
+        let mut warnings = std::mem::take(&mut self.warnings);
+        if r.pins.as_deref().is_some_and(|p| p.contains('Y')) {
+            warnings.push("the Y limit/home switch is pressed (Pn:Y)".into());
+        }
+        let units = self.mm_to_units(y_mm);
+        self.last_units = Some(units);
         Ok(StageStatus {
             motion,
             position_trusted: self.trusted,
-            position_units: self.mm_to_units(y_mm),
-            warnings: std::mem::take(&mut self.warnings),
+            position_units: units,
+            warnings,
         })
     }
 
@@ -259,14 +331,16 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
         self.expect_banner = true;
         self.link.clear();
         self.write(&[RT_SOFT_RESET]).await?;
-        let deadline = tokio::time::Instant::now() + self.cfg.reply_timeout;
+        // A reset in motion prints ALARM:3 and pauses half a second before the banner.
+        let timeout = self.cfg.reply_timeout + Duration::from_millis(500);
+        let deadline = Instant::now() + timeout;
         while self.expect_banner {
-            let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+            let left = deadline.saturating_duration_since(Instant::now());
             match self.next_raw(left).await? {
                 None => {
                     return Err(StageError::Timeout {
                         waiting_for: "the banner after a soft reset".into(),
-                        timeout_ms: self.cfg.reply_timeout.as_millis() as u64,
+                        timeout_ms: timeout.as_millis() as u64,
                     })
                 }
                 Some(GrblMessage::Banner(_)) => self.expect_banner = false,
@@ -276,23 +350,48 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
         }
         self.needs_reset = false;
         self.dirty = false;
+        self.jog = None;
         Ok(())
+    }
+
+    /// Reads `$$` and checks it against the configuration.
+    async fn read_settings(&mut self) -> Result<Vec<String>, StageError> {
+        let lines = self.command("$$", self.cfg.reply_timeout).await?;
+        self.board = ControllerSettings::from_pairs(lines.into_iter().filter_map(|m| match m {
+            GrblMessage::Setting(n, v) => Some((n, v)),
+            _ => None,
+        }));
+        self.board
+            .check(self.cfg.steps_per_mm, self.cfg.feed_mm_min)
+    }
+
+    /// The homing cycle is off on the board: `$H` cannot give a reference.
+    fn homing_disabled() -> StageError {
+        StageError::ControllerSetup(
+            "the controller's homing cycle is disabled ($22=0), so $H cannot reference the \
+             axis: fit a home switch and set $22=1 (with $20=1 for soft limits); without one \
+             the position after a reset or power cycle cannot be trusted"
+                .into(),
+        )
     }
 }
 
 impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
-    async fn identify(&mut self) -> Result<(String, StageStatus), StageError> {
-        // An Arduino resets when the port opens: its banner arrives within the grace time.
+    async fn identify(&mut self) -> Result<(Identity, StageStatus), StageError> {
+        // An Arduino resets when the port opens: its banner arrives within the grace time
+        // (after `error:7` and the settings when its EEPROM was blank).
         let mut reset_at_open = false;
-        let deadline = tokio::time::Instant::now() + self.cfg.open_grace;
+        let mut eeprom_reset = false;
+        let deadline = Instant::now() + self.cfg.open_grace;
         loop {
-            let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+            let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
                 break;
             }
             match self.next_raw(left).await? {
                 None => break,
                 Some(GrblMessage::Banner(_)) => reset_at_open = true,
+                Some(GrblMessage::Error(7)) => eeprom_reset = true,
                 Some(_) => {}
             }
         }
@@ -311,7 +410,26 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
                 why: "no [VER:…] line before ok; is this a GRBL controller?".into(),
             });
         }
-        let r = self.query_status().await?;
+        let mut warnings = Vec::new();
+        if eeprom_reset {
+            warnings.push(
+                "the controller reported error:7 at start-up: its settings were unreadable and \
+                 were restored to GRBL's defaults"
+                    .into(),
+            );
+        }
+        warnings.extend(self.read_settings().await?);
+        let mut r = self.query_status().await?;
+        // Work-coordinate reports: wait for the WCO GRBL sends every few reports.
+        let mut polls = 1;
+        while r.mpos_mm.is_none() && r.wco_mm.is_none() && self.wco_mm.is_none() {
+            if polls >= REPORTS_PER_WCO {
+                break;
+            }
+            tokio::time::sleep(self.cfg.poll_interval).await;
+            r = self.query_status().await?;
+            polls += 1;
+        }
         self.trusted = !reset_at_open && r.state != GrblState::Alarm;
         let mut st = self.status_from(&r)?;
         if reset_at_open {
@@ -319,7 +437,19 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
                 "controller reset when the port was opened (Arduino DTR auto-reset): position lost, homing required".into(),
             );
         }
-        Ok((ident.join(" "), st))
+        let spm = self.cfg.steps_per_mm;
+        let travel_units = self.board.enforced_travel_mm().map(|(lo, hi)| {
+            (
+                (lo * spm).ceil() as i64, // whole steps inside the travel
+                (hi * spm).floor() as i64,
+            )
+        });
+        let id = Identity {
+            text: ident.join(" "),
+            travel_units,
+            warnings,
+        };
+        Ok((id, st))
     }
 
     async fn status(&mut self) -> Result<StageStatus, StageError> {
@@ -328,11 +458,20 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
     }
 
     async fn home(&mut self, timeout: Duration) -> Result<StageStatus, StageError> {
+        if self.board.homing_enabled() == Some(false) {
+            return Err(Self::homing_disabled());
+        }
         if self.needs_reset {
             self.soft_reset().await?;
         }
-        // `?` is not answered during homing; `$H` answers ok when the cycle is over.
-        self.command("$H", timeout).await?;
+        self.jog = None;
+        // `?` is not answered during homing; `$H` answers ok when the cycle is over (after
+        // an ALARM:8/9 when it failed, which `next` turns into an error first).
+        match self.command("$H", timeout).await {
+            Ok(_) => {}
+            Err(StageError::Rejected { code: Some(5), .. }) => return Err(Self::homing_disabled()),
+            Err(e) => return Err(e),
+        }
         self.trusted = true;
         self.status().await
     }
@@ -346,19 +485,44 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
         }
         let y_mm = target_units as f64 / self.cfg.steps_per_mm;
         let line = encode_jog_y(y_mm, self.cfg.feed_mm_min);
+        let sent = Instant::now();
+        self.jog = None;
         self.command(&line, self.cfg.reply_timeout).await?;
+        self.jog = Some(Jog {
+            target_units,
+            from_units: self.last_units,
+            sent,
+        });
         Ok(())
     }
 
     async fn wait_done(&mut self, timeout: Duration) -> Result<StageStatus, StageError> {
-        let deadline = tokio::time::Instant::now() + timeout;
+        let deadline = Instant::now() + timeout;
+        // First look when the planner's trapezoid says the jog is over.
+        let mut wake = match self.jog {
+            Some(j) => match j.from_units {
+                Some(from) => {
+                    j.sent + self.remaining_time(j.target_units - from, 0.0) + POLL_MARGIN
+                }
+                None => Instant::now(),
+            },
+            None => Instant::now(),
+        };
         loop {
+            let at = wake
+                .min(Instant::now() + self.cfg.poll_interval)
+                .min(deadline);
+            tokio::time::sleep_until(at).await;
             let r = self.query_status().await?;
             let st = self.status_from(&r)?;
             match st.motion {
-                Motion::Idle => return Ok(st),
+                Motion::Idle => {
+                    self.jog = None;
+                    return Ok(st);
+                }
                 Motion::Alarm => {
                     self.needs_reset = true;
+                    self.jog = None;
                     return Err(StageError::Fault {
                         reason: "controller in Alarm state during a move".into(),
                         class: FaultClass::PositionLost,
@@ -366,17 +530,28 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
                 }
                 Motion::Moving | Motion::Homing => {}
             }
-            if tokio::time::Instant::now() >= deadline {
+            if Instant::now() >= deadline {
                 return Err(StageError::Timeout {
                     waiting_for: "the jog to finish (state Idle)".into(),
                     timeout_ms: timeout.as_millis() as u64,
                 });
             }
-            tokio::time::sleep(self.cfg.poll_interval).await;
+            // Still moving: look again when the rest should be done, from where it is and
+            // how fast it goes now.
+            let left = match self.jog {
+                Some(j) => self.remaining_time(
+                    j.target_units - st.position_units,
+                    r.feed_mm_min
+                        .unwrap_or_else(|| self.effective_feed_mm_min()),
+                ),
+                None => self.cfg.poll_interval,
+            };
+            wake = Instant::now() + (left + POLL_MARGIN).max(MIN_POLL_GAP);
         }
     }
 
     async fn stop(&mut self) -> Result<(), StageError> {
+        self.jog = None;
         self.write(&[RT_JOG_CANCEL]).await
     }
 }

@@ -1,14 +1,18 @@
 //! Zaber ASCII: a [`Stage`] driver generic over `AsyncRead + AsyncWrite + Unpin`, over the
 //! pure codec in [`codec`].
 //!
-//! Positions are integer microsteps; completion is seen by polling until `IDLE`.
+//! Positions are integer microsteps; completion is seen by polling until `IDLE`. Every reply
+//! carries the device's worst warning flag and a move fails on a fault flag as soon as one is
+//! seen; a home is the exception: an axis that powered up without a reference carries `WR`
+//! (or `WH`) on every reply until its home has completed, status polls included, so while
+//! homing those two are expected and the flags are judged once the device is idle.
 //!
 //! Layer 2: depends on [`codec`], [`super::link`] and the stage vocabulary in [`super`].
 
 pub mod codec;
 
 use super::link::LineLink;
-use super::{Motion, Stage, StageError, StageStatus};
+use super::{Identity, Motion, Stage, StageError, StageStatus};
 use codec::{encode_command, flag_fault, parse_line, Reply, ZaberMessage, ZaberParseError};
 use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncWrite};
@@ -155,6 +159,13 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
         }
     }
 
+    fn check_flag_while_homing(r: &Reply) -> Result<(), StageError> {
+        match r.flag.as_deref() {
+            Some("WR" | "WH") | None => Ok(()),
+            Some(_) => Self::check_flag(r),
+        }
+    }
+
     async fn get_pos(&mut self) -> Result<(Reply, i64), StageError> {
         let r = self.command("get pos").await?;
         let pos = r
@@ -200,17 +211,18 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
 }
 
 impl<T: AsyncRead + AsyncWrite + Unpin> Stage for ZaberStage<T> {
-    async fn identify(&mut self) -> Result<(String, StageStatus), StageError> {
+    async fn identify(&mut self) -> Result<(Identity, StageStatus), StageError> {
         let axis = self.cfg.axis;
         self.cfg.axis = 0;
         let id = self.command("get deviceid").await;
         self.cfg.axis = axis;
         let id = id?;
         let (r, pos) = self.get_pos().await?;
-        Ok((
-            format!("zaber device {} id {}", self.cfg.device, id.data),
-            Self::status_of(&r, pos),
-        ))
+        let identity = Identity {
+            text: format!("zaber device {} id {}", self.cfg.device, id.data),
+            ..Identity::default()
+        };
+        Ok((identity, Self::status_of(&r, pos)))
     }
 
     async fn status(&mut self) -> Result<StageStatus, StageError> {
@@ -220,9 +232,38 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for ZaberStage<T> {
     }
 
     async fn home(&mut self, timeout: Duration) -> Result<StageStatus, StageError> {
-        // The home reply itself carries WR/WH: that is expected and ignored.
-        self.command("home").await?;
-        self.poll_idle(timeout).await
+        // Until the home has completed the axis has no reference: WR/WH on the home reply and
+        // on every poll while it runs are expected. Any other fault flag ends it at once.
+        let r = self.command("home").await?;
+        Self::check_flag_while_homing(&r)?;
+        let deadline = tokio::time::Instant::now() + timeout;
+        loop {
+            let r = self.command("").await?;
+            Self::check_flag_while_homing(&r)?;
+            if !r.busy {
+                break;
+            }
+            if tokio::time::Instant::now() >= deadline {
+                return Err(StageError::Timeout {
+                    waiting_for: "the home to complete (IDLE)".into(),
+                    timeout_ms: timeout.as_millis() as u64,
+                });
+            }
+            tokio::time::sleep(self.cfg.poll_interval).await;
+        }
+        // Ended: now the flags count, WR/WH included.
+        let (r, pos) = self.get_pos().await?;
+        match r.flag.as_deref() {
+            Some(f @ ("WR" | "WH")) => Err(StageError::PositionLost {
+                reason: format!(
+                    "{f} after the home completed: the device is still not referenced; check                      the home sensor and its cable"
+                ),
+            }),
+            _ => {
+                Self::check_flag(&r)?;
+                Ok(Self::status_of(&r, pos))
+            }
+        }
     }
 
     async fn begin_move_abs(&mut self, target_units: i64) -> Result<(), StageError> {
