@@ -78,9 +78,6 @@ pub struct Args {
     /// and measured-grid parameters, bridged by the straight line between neighbours).
     #[arg(long, value_enum, default_value_t = OutliersArg::Flag)]
     pub outliers: OutliersArg,
-    /// The model between lines is supported when the hold-out rms is at most this × Sq.
-    #[arg(long, default_value_t = crate::metrology::holdout::SUPPORTED_BELOW_SQ)]
-    pub holdout_threshold: f64,
     /// The surface and the spike rule.
     #[command(flatten)]
     pub model: ModelArgs,
@@ -297,7 +294,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             out_dir: args.out.clone(),
             spikes: args.model.spikes()?,
             exclude_spikes: args.outliers == OutliersArg::Exclude,
-            holdout_threshold: holdout_threshold(args.holdout_threshold)?,
+            holdout_threshold: args.model.holdout_threshold()?,
             v_method: args.model.v_method(lines, args.degree_v.unwrap_or(5))?,
             replace_spikes: args.model.replace(),
         };
@@ -391,21 +388,9 @@ pub fn run(args: Args) -> Result<(), CliError> {
         fit: None,
         options: ScanAnalysisOptions::default(),
         warnings: Vec::new(),
-        finished_at: None,
     };
     let outputs = fit_and_characterise(&grid, ctx, &args, &out)?;
     finish(&outputs)
-}
-
-fn holdout_threshold(v: f64) -> Result<f64, CliError> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(CliError::new(
-            Exit::Usage,
-            format!("--holdout-threshold {v} must be a positive multiple of Sq (default 0.5)"),
-        ))
-    }
 }
 
 /// `analyze FILE.x3p`: the grid read with its pitches; lines with invalid points left out.
@@ -536,7 +521,6 @@ fn run_x3p(args: &Args, bytes: &[u8], out: &Path) -> Result<(), CliError> {
         fit: None,
         options: ScanAnalysisOptions::default(),
         warnings,
-        finished_at: None,
     };
     let outputs = fit_and_characterise(&grid, ctx, args, out)?;
     finish(&outputs)
@@ -559,7 +543,7 @@ fn fit_and_characterise(
         degree_v: args.degree_v,
         spikes: args.model.spikes()?,
         exclude_spikes: args.outliers == OutliersArg::Exclude,
-        holdout_threshold: holdout_threshold(args.holdout_threshold)?,
+        holdout_threshold: args.model.holdout_threshold()?,
         v_method: args
             .model
             .v_method(grid.rows(), args.degree_v.unwrap_or(5))?,

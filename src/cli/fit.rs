@@ -45,7 +45,7 @@ use crate::metrology::alternatives::{
     compare as compare_alternatives, table as alternatives_table,
 };
 use crate::metrology::areal::{areal_params, Grid as ArealGrid};
-use crate::metrology::holdout::{between_lines, SUPPORTED_BELOW_SQ};
+use crate::metrology::holdout::{between_lines, holdout_every, ordinal};
 use crate::metrology::outliers::bridged_grid;
 use crate::metrology::surface_model::{fit_model, ModelRecipe};
 use crate::scan::outputs::SurfaceShape;
@@ -615,8 +615,10 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let fit_s = t_fit.elapsed().as_secs_f64();
     for r in &replaced {
         eprintln!(
-            "surfscan: replaced before fitting (asked for): spike in line {} at x = {:.4} mm, height {:.3} µm",
-            r.line, r.spike.x_mm, r.spike.height_um
+            "surfscan: replaced before fitting (asked for): spike in line {} at x = {} mm, height {} µm",
+            crate::numfmt::line_label(r.line),
+            crate::numfmt::fmt(r.spike.x_mm, crate::numfmt::Quantity::PositionMm),
+            crate::numfmt::fmt(r.spike.height_um, crate::numfmt::Quantity::HeightUm)
         );
     }
     let t_res = Instant::now();
@@ -718,7 +720,18 @@ pub fn run(args: Args) -> Result<(), CliError> {
     })
     .map(|a| a.sq_um)
     .map_err(|e| e.to_string());
+    // Every 2nd line left out, or every k-th when too few lines remain for that (as the
+    // report does).
+    let threshold = args.model.holdout_threshold()?;
+    let every = holdout_every(grid.rows, recipe.degrees.degree_v).ok_or_else(|| {
+        format!(
+            "{} lines cannot verify the surface between them: leaving one out leaves at most degree-v + 1 = {} for the refit; trace more lines or lower degree-v",
+            grid.rows,
+            recipe.degrees.degree_v + 1
+        )
+    });
     let verdict = sq.clone().and_then(|sq| {
+        let every = every.clone()?;
         between_lines(
             &fitted_z,
             grid.cols,
@@ -726,22 +739,22 @@ pub fn run(args: Args) -> Result<(), CliError> {
             &y_mm,
             recipe.degrees,
             recipe.method,
-            2,
+            every,
             sq,
-            SUPPORTED_BELOW_SQ,
+            threshold,
         )
         .map_err(|e| e.to_string())
     });
-    let alternatives = match (&sq, args.compare) {
-        (Ok(sq), true) => Some(compare_alternatives(
+    let alternatives = match (&sq, &every, args.compare) {
+        (Ok(sq), Ok(every), true) => Some(compare_alternatives(
             &fitted_z,
             grid.cols,
             pitch_x_mm,
             &y_mm,
             recipe.degrees,
-            2,
+            *every,
             *sq,
-            SUPPORTED_BELOW_SQ,
+            threshold,
         )),
         _ => None,
     };
@@ -835,12 +848,15 @@ pub fn run(args: Args) -> Result<(), CliError> {
     }
     if let Some(alts) = &alternatives {
         println!(
-            "\nhold-out of the alternatives (every 2nd line left out and refitted; supported means rms ≤ {SUPPORTED_BELOW_SQ} × Sq):"
+            "\nhold-out of the alternatives (every {} line left out and refitted; supported means rms ≤ {threshold} × Sq):",
+            ordinal(*every.as_ref().unwrap_or(&2))
         );
         print!("{}", alternatives_table(alts));
     } else if args.compare {
-        if let Err(e) = &sq {
-            println!("no comparison: the grid has no Sq ({e})");
+        match (&sq, &every) {
+            (Err(e), _) => println!("no comparison: the grid has no Sq ({e})"),
+            (_, Err(e)) => println!("no comparison: {e}"),
+            _ => {}
         }
     }
     Ok(())

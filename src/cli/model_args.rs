@@ -1,6 +1,7 @@
 //! The options `surfscan fit` and `surfscan analyze` share for the surface and the spikes:
-//! the method across the lines, spike replacement before fitting (only when asked), and the
-//! spike rule. Each defaults to a scan's frozen plan where it has one, else to the paper.
+//! the method across the lines, spike replacement before fitting (only when asked), the
+//! spike rule and the hold-out threshold of the verdict on the model between lines. Each
+//! defaults to a scan's frozen plan where it has one, else to the paper.
 //!
 //! Layer 5 (composition).
 
@@ -40,6 +41,10 @@ pub struct ModelArgs {
     /// The longest run of points that counts as a spike.
     #[arg(long, default_value_t = SpikeOptions::default().max_points)]
     pub spike_max_points: usize,
+    /// The model between lines is supported by the data when the hold-out rms is at most
+    /// this × Sq.
+    #[arg(long, default_value_t = crate::metrology::holdout::SUPPORTED_BELOW_SQ)]
+    pub holdout_threshold: f64,
 }
 
 impl ModelArgs {
@@ -70,6 +75,22 @@ impl ModelArgs {
                 });
                 Ok(Some(VMethod::LeastSquares { control_rows: rows }))
             }
+        }
+    }
+
+    /// The hold-out threshold (× Sq), checked.
+    pub fn holdout_threshold(&self) -> Result<f64, CliError> {
+        let v = self.holdout_threshold;
+        if v.is_finite() && v > 0.0 {
+            Ok(v)
+        } else {
+            Err(CliError::new(
+                Exit::Usage,
+                format!(
+                    "--holdout-threshold {v} must be a positive multiple of Sq (default {})",
+                    crate::metrology::holdout::SUPPORTED_BELOW_SQ
+                ),
+            ))
         }
     }
 

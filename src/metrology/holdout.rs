@@ -371,7 +371,8 @@ impl BetweenLines {
     }
 }
 
-fn ordinal(k: usize) -> String {
+/// `2nd`, `3rd`, `11th`: how the verdict names every k-th line.
+pub fn ordinal(k: usize) -> String {
     let suffix = match (k % 10, k % 100) {
         (1, 11) | (2, 12) | (3, 13) => "th",
         (1, _) => "st",

@@ -5,10 +5,11 @@
 //! reports, [`ModelRecipe::start_lines`] for the IGES Start section, with every replaced
 //! spike named.
 //!
-//! Depends on [`crate::fit`] and [`super::outliers`].
+//! Depends on [`crate::fit`], [`super::outliers`] and [`crate::numfmt`].
 
 use super::outliers::{bridged_grid, find_grid_spikes, LineSpike, SpikeOptions};
 use crate::fit::{fit_grid_with, FitOptions, FitResult, MethodError, VMethod};
+use crate::numfmt::{fmt, line_number, Quantity};
 
 /// How the surface is made. [`Default`]: the paper (5/5, interpolation, data as measured).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -57,8 +58,13 @@ impl ModelRecipe {
             ));
             for s in replaced.iter().take(20) {
                 lines.push(format!(
-                    "Replaced: line {} points {}..{} (peak x = {} mm, height {} um), bridged by the straight line between its neighbours.",
-                    s.line, s.spike.first, s.spike.last, s.spike.x_mm, s.spike.height_um
+                    "Replaced: line {} (file {:04}) points {}..{} of the line (peak x = {} mm, height {} um), bridged by the straight line between its neighbours.",
+                    line_number(s.line),
+                    s.line,
+                    s.spike.first + 1,
+                    s.spike.last + 1,
+                    fmt(s.spike.x_mm, Quantity::PositionMm),
+                    fmt(s.spike.height_um, Quantity::HeightUm)
                 ));
             }
             if replaced.len() > 20 {
@@ -163,7 +169,8 @@ mod tests {
         let lines = r.start_lines(&m.replaced).join("\n");
         assert!(
             lines.contains("Spikes replaced before fitting")
-                && lines.contains("Replaced: line 3 points 50..50"),
+                // 1-based for people: index 3 is line 4, point 50 the 51st.
+                && lines.contains("Replaced: line 4 (file 0003) points 51..51"),
             "{lines}"
         );
         assert!(r.describe().contains("replaced by the straight line"));

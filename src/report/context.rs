@@ -106,6 +106,4 @@ pub struct ReportContext {
     pub options: ScanAnalysisOptions,
     /// Warnings gathered so far (e.g. while reading the lines).
     pub warnings: Vec<String>,
-    /// When the scan finished, when the runner is completing it (the report says so).
-    pub finished_at: Option<chrono::DateTime<chrono::Utc>>,
 }

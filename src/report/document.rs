@@ -130,6 +130,11 @@ pub struct Characterisation {
     pub complete: bool,
     /// The sections that failed, each with its reason (each also in `warnings`).
     pub failed_sections: Vec<FailedSection>,
+    /// The sections the grid has too few lines for (the fit needs degree-v + 1 lines, a
+    /// hold-out more than that after leaving lines out), each with its reason (also in
+    /// `warnings`). They are not failures: a complete characterisation of so few lines has
+    /// none of them.
+    pub sections_not_possible: Vec<FailedSection>,
 }
 
 /// A section that could not be made.
@@ -232,6 +237,11 @@ pub struct Traceability {
     pub scan_id: String,
     /// When the scan started (ISO 8601).
     pub started_at: String,
+    /// When it finished (ISO 8601): its stop record's time, or the time the runner completed
+    /// it; `None` while it has neither (still running, or stopped without a record).
+    pub finished_at: Option<String>,
+    /// From start to finish, s (`None` without a finish).
+    pub duration_s: Option<f64>,
     /// Specimen id.
     pub specimen: String,
     /// Operator.
@@ -266,6 +276,8 @@ impl From<&StartRecord> for Traceability {
         Traceability {
             scan_id: s.scan_id.clone(),
             started_at: s.time.to_rfc3339(),
+            finished_at: None,
+            duration_s: None,
             specimen: s.specimen.clone(),
             operator: s.operator.clone(),
             notes: s.notes.clone(),
@@ -283,6 +295,18 @@ impl From<&StartRecord> for Traceability {
                 .and_then(|v| v.as_str().map(str::to_owned)),
             conditions: s.conditions.clone(),
         }
+    }
+}
+
+impl Traceability {
+    /// Traceability of a scan started as `start` says and finished at `finished`.
+    pub fn of_scan(start: &StartRecord, finished: Option<chrono::DateTime<chrono::Utc>>) -> Self {
+        let mut t = Traceability::from(start);
+        if let Some(f) = finished {
+            t.finished_at = Some(f.to_rfc3339());
+            t.duration_s = Some((f - start.time).num_milliseconds() as f64 / 1000.0);
+        }
+        t
     }
 }
 

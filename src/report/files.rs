@@ -471,6 +471,6 @@ pub fn write_report(
     let value = serde_json::to_value(report)?;
     write_file(
         &files.report_html,
-        html::render(&value, journal.as_ref(), &figures, ctx.finished_at).as_bytes(),
+        html::render(&value, journal.as_ref(), &figures).as_bytes(),
     )
 }

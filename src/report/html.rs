@@ -276,14 +276,8 @@ pub fn result_summary(report: &Value) -> Vec<(&'static str, String)> {
 }
 
 /// Renders the report. `report` is the report as serialized into `report.json`; `journal`
-/// the scan's journal when it could be read; `figures` are embedded in order; `completed`
-/// the time a scan being completed ends (its stop record is written after the report).
-pub fn render(
-    report: &Value,
-    journal: Option<&ResumeState>,
-    figures: &[Figure],
-    completed: Option<chrono::DateTime<chrono::Utc>>,
-) -> String {
+/// the scan's journal when it could be read; `figures` are embedded in order.
+pub fn render(report: &Value, journal: Option<&ResumeState>, figures: &[Figure]) -> String {
     let mut h = String::with_capacity(
         64 * 1024 + figures.iter().map(|f| f.bytes.len() * 4 / 3).sum::<usize>(),
     );
@@ -315,7 +309,7 @@ pub fn render(
         kv(&mut h, k, &esc(&v));
     }
     h.push_str("</table>\n");
-    traceability(&mut h, report, journal, completed);
+    traceability(&mut h, report);
     if let Some(j) = journal {
         events(&mut h, j);
     }
@@ -357,12 +351,7 @@ fn warnings(h: &mut String, report: &Value) {
     }
 }
 
-fn traceability(
-    h: &mut String,
-    report: &Value,
-    journal: Option<&ResumeState>,
-    completed: Option<chrono::DateTime<chrono::Utc>>,
-) {
+fn traceability(h: &mut String, report: &Value) {
     let t = &report["traceability"];
     if t.is_null() {
         return;
@@ -377,30 +366,17 @@ fn traceability(
     ] {
         kv(h, k, &esc(&text(&t[key])));
     }
-    let stop_time = journal
-        .and_then(|j| j.stop.as_ref().map(|s| s.time))
-        .or_else(|| {
-            report["scan"]["stop"]["time"]
-                .as_str()
-                .and_then(|s| chrono::DateTime::parse_from_rfc3339(s).ok())
-                .map(|d| d.with_timezone(&chrono::Utc))
-        })
-        .or(completed);
-    match stop_time {
+    match t["finished_at"].as_str() {
         Some(stop) => {
-            kv(h, "finished", &esc(&stop.to_rfc3339()));
-            if let Some(start) = t["started_at"]
-                .as_str()
-                .and_then(|s| chrono::DateTime::parse_from_rfc3339(s).ok())
-            {
-                let d = (stop - start.with_timezone(&chrono::Utc)).num_seconds();
-                kv(h, "duration", &esc(&duration(d)));
+            kv(h, "finished", &esc(stop));
+            if let Some(d) = t["duration_s"].as_f64() {
+                kv(h, "duration", &esc(&duration(d.round() as i64)));
             }
         }
         None => kv(
             h,
             "finished",
-            "<span class=\"muted\">no stop record (being completed, still running, or stopped without one)</span>",
+            "<span class=\"muted\">no stop record (still running, or stopped without one)</span>",
         ),
     }
     let na = "<span class=\"muted\">not recorded</span>";
@@ -815,7 +791,7 @@ mod tests {
             "between_lines": {"summary": "the model between lines is not supported by the data"},
             "recipe": {"lambda_c_mm": 0.8}
         });
-        let h = render(&report, None, &[], None);
+        let h = render(&report, None, &[]);
         let warn = h.find("id=\"warnings\"").unwrap();
         assert!(warn < h.find("id=\"result\"").unwrap());
         assert!(warn < h.find("id=\"lines\"").unwrap());

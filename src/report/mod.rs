@@ -92,7 +92,9 @@ pub struct ScanOutputs {
 /// areal parameters, the hold-out refits, the verdict) never removes the per-line
 /// parameters, the measured grid's areal parameters, `measured.x3p` or the plots of the
 /// data; each failure is named in `warnings` and in `characterisation.failed_sections`, and
-/// [`ScanOutputs::complete`] is false.
+/// [`ScanOutputs::complete`] is false. A section the grid has too few lines for (no fit
+/// below degree-v + 1 lines, no hold-out without lines to spare) is named in `warnings` and
+/// `characterisation.sections_not_possible` instead: it is not a failure.
 pub fn characterise(
     grid: &LineGrid,
     model: Model<'_>,
@@ -123,7 +125,12 @@ pub fn characterise(
     // when asked for.
     let t = Instant::now();
     let outliers = outliers::characterise(grid, &ctx);
-    outliers::warn(&outliers, model.replaced, &mut ctx.warnings);
+    outliers::warn(
+        &outliers,
+        model.replaced,
+        grid.pitch_x_mm,
+        &mut ctx.warnings,
+    );
     let bridged = if ctx.options.exclude_spikes && !outliers.spikes.is_empty() {
         Some(outliers::bridged(grid, &outliers.spikes))
     } else {
@@ -141,9 +148,15 @@ pub fn characterise(
     let t = Instant::now();
     let (py, evenly) = grid::mean_pitch_y(&grid.y_mm);
     if !evenly {
+        let y: Vec<String> = grid
+            .y_mm
+            .iter()
+            .map(|y| crate::numfmt::fmt(*y, crate::numfmt::Quantity::PositionMm))
+            .collect();
         ctx.warnings.push(format!(
-            "the lines are not equally spaced in y (y = {:?} mm); the areal parameters, the height map and the X3P files use the mean pitch {py} mm",
-            grid.y_mm
+            "the lines are not equally spaced in y (y = {} mm); the areal parameters, the height map and the X3P files use the mean pitch {} mm",
+            y.join(", "),
+            crate::numfmt::fmt(py, crate::numfmt::Quantity::LengthMm)
         ));
     }
     let measured = areal::measured(grid, py);
@@ -233,6 +246,25 @@ pub fn characterise(
             ctx.warnings.push(b.verdict.clone());
         }
     }
+    // What the line count rules out is not a failure: the fit needs degree-v + 1 lines, the
+    // hold-outs more than that once lines are left out.
+    let q = model.recipe.degrees.degree_v;
+    let fit_possible = rows > q;
+    let holdout_possible =
+        fit_possible && crate::metrology::holdout::holdout_every(rows, q).is_some();
+    let (not_possible, failed_sections): (Vec<FailedSection>, Vec<FailedSection>) = failed_sections
+        .into_iter()
+        .partition(|f| match f.section.split('.').next().unwrap_or_default() {
+            "surface" => !fit_possible,
+            "model_vs_measured" | "between_lines" => !holdout_possible,
+            _ => false,
+        });
+    for f in &not_possible {
+        ctx.warnings.push(format!(
+            "{} not made ({rows} lines are too few): {}",
+            f.section, f.reason
+        ));
+    }
     for f in &failed_sections {
         ctx.warnings
             .push(format!("{} could not be made: {}", f.section, f.reason));
@@ -269,6 +301,7 @@ pub fn characterise(
         characterisation: Characterisation {
             complete: failed_sections.is_empty(),
             failed_sections,
+            sections_not_possible: not_possible,
         },
         traceability: ctx.traceability.clone(),
         scan: ctx.scan.clone(),

@@ -4,12 +4,13 @@
 //! hold-out) use a copy of the grid with each spike bridged by the straight line between its
 //! neighbours, and the files of the data (`measured.x3p`, the height map) stay as traced.
 //!
-//! Layer 4 (reporting): depends on [`crate::metrology::outliers`].
+//! Layer 4 (reporting): depends on [`crate::metrology::outliers`] and [`crate::numfmt`].
 
 use super::context::ReportContext;
 use super::document::{LineNotJudged, OutliersReport};
 use super::grid::LineGrid;
 use crate::metrology::outliers::{bridged_grid, find_grid_spikes, LineSpike};
+use crate::numfmt::{fmt, line_label, sig, Quantity};
 
 /// At most this many spikes are listed one by one in the warnings (all are in the report).
 const LISTED: usize = 20;
@@ -43,19 +44,26 @@ pub fn characterise(grid: &LineGrid, ctx: &ReportContext) -> OutliersReport {
     }
 }
 
-/// The warnings: every spike (the first [`LISTED`], then a count), what was done with them,
-/// and the lines that could not be judged.
-pub fn warn(o: &OutliersReport, replaced: &[LineSpike], warnings: &mut Vec<String>) {
+/// The warnings: every spike (the first [`LISTED`], then a count) with its line (1-based,
+/// the file index beside it), x and height, what was done with them, and the lines that could
+/// not be judged. `pitch_x_mm` places the points of a spike along x.
+pub fn warn(
+    o: &OutliersReport,
+    replaced: &[LineSpike],
+    pitch_x_mm: f64,
+    warnings: &mut Vec<String>,
+) {
+    let px = pitch_x_mm;
     for s in o.spikes.iter().take(LISTED) {
         warnings.push(format!(
-            "spike in line {} at x = {:.4} mm: height {:.3} µm, {:.1} robust σ from the line's median roughness ({} point(s), {}..{}); {}",
-            s.line,
-            s.spike.x_mm,
-            s.spike.height_um,
-            s.spike.deviation_sigma,
+            "spike in line {} at x = {} mm: height {} µm, {} robust σ from the line's median roughness ({} point(s), x = {} … {} mm); {}",
+            line_label(s.line),
+            fmt(s.spike.x_mm, Quantity::PositionMm),
+            fmt(s.spike.height_um, Quantity::HeightUm),
+            sig(s.spike.deviation_sigma, 3),
             s.spike.last - s.spike.first + 1,
-            s.spike.first,
-            s.spike.last,
+            fmt(s.spike.first as f64 * px, Quantity::PositionMm),
+            fmt(s.spike.last as f64 * px, Quantity::PositionMm),
             match o.policy {
                 "exclude" => "left out of the per-line and measured-grid parameters (bridged)",
                 _ => "flagged only, the data stay as measured",
@@ -78,7 +86,8 @@ pub fn warn(o: &OutliersReport, replaced: &[LineSpike], warnings: &mut Vec<Strin
     for l in &o.lines_not_judged {
         warnings.push(format!(
             "line {} could not be checked for spikes: {}",
-            l.line, l.reason
+            line_label(l.line),
+            l.reason
         ));
     }
 }

@@ -18,6 +18,7 @@ use super::{characterise, ScanOutputs};
 use crate::fit::{max_residual_mm, FitOptions, MethodError};
 use crate::metrology::params::Options;
 use crate::metrology::surface_model::{fit_model, FittedModel, ModelRecipe};
+use crate::numfmt::line_label;
 use crate::profile::{FilterKind, ProfileKind};
 use crate::scan::faults::NoFaults;
 use crate::scan::journal::{
@@ -192,8 +193,10 @@ pub fn characterise_scan_lines(
 ) -> Result<ScanOutputs, ReportError> {
     let grid = LineGrid::of_scan(lines, &dir.join("lines"))?;
     if !incomplete.is_empty() {
+        let labels: Vec<String> = incomplete.iter().map(|&i| line_label(i)).collect();
         warnings.push(format!(
-            "lines {incomplete:?} have only one of their two files in {} and were left out",
+            "lines {} have only one of their two files in {} and were left out",
+            labels.join(", "),
             dir.join("lines").display()
         ));
     }
@@ -208,7 +211,10 @@ pub fn characterise_scan_lines(
     {
         warnings.push(format!(
             "line {} was traced under other conditions than line {}; every line is evaluated as line {} ({})",
-            l.meta.index, first.meta.index, first.meta.index, filter_reason
+            line_label(l.meta.index),
+            line_label(first.meta.index),
+            line_label(first.meta.index),
+            filter_reason
         ));
     }
     let lines_used: Vec<u32> = grid.index.clone();
@@ -245,18 +251,23 @@ pub fn characterise_scan_lines(
             ));
         }
     }
+    // A scan finished when its stop record says, or now when the runner is completing it.
+    let finished_at = facts.and_then(|f| {
+        f.stop
+            .map(|s| s.time)
+            .or_else(|| f.completing.then(chrono::Utc::now))
+    });
     let ctx = ReportContext {
         input: dir.display().to_string(),
         kind: "scan",
         line_options,
         lambda_c_source,
         filter_reason,
-        traceability: facts.map(|f| Traceability::from(f.start)),
+        traceability: facts.map(|f| Traceability::of_scan(f.start, finished_at)),
         scan,
         fit,
         options: options.clone(),
         warnings,
-        finished_at: facts.filter(|f| f.completing).map(|_| chrono::Utc::now()),
     };
     let out = options.out_dir.clone().unwrap_or_else(|| dir.to_path_buf());
     let mut outputs = characterise(&grid, model, ctx, &out)?;

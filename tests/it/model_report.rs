@@ -150,7 +150,7 @@ fn a_100_um_spike_keeps_every_lines_parameters_names_the_spike_and_exits_partial
     assert!(
         warnings
             .iter()
-            .any(|w| w.starts_with("spike in line 12 at x = 0.2250 mm")),
+            .any(|w| w.starts_with("spike in line 13 (0012) at x = 0.2250 mm")),
         "{warnings:?}"
     );
     // The data stay as measured (flag only): line 12's Rt includes the spike.
@@ -226,6 +226,53 @@ fn analyze_says_a_sine_grid_is_supported_and_uncorrelated_lines_are_not() {
     }
 }
 
+/// Too few lines for a section is not a failure: 4 lines at degree v 3 fit but leave none to
+/// hold out, 3 lines at the paper's degree 5 cannot be fitted at all. Both say what is missing
+/// and why, and exit 0; the same grid with a fold exits 3 (above).
+#[test]
+fn sections_the_line_count_rules_out_are_named_but_not_a_partial_characterisation() {
+    let dir = tempfile::tempdir().unwrap();
+    let z = sine();
+    for (lines, degree_v, missing) in [
+        (4usize, "3", &["model_vs_measured", "between_lines"][..]),
+        (
+            3,
+            "5",
+            &["surface", "model_vs_measured", "between_lines"][..],
+        ),
+    ] {
+        let grid = dir.path().join(format!("{lines}.csv"));
+        write_grid(&grid, &z[..lines * COLS]);
+        let out = dir.path().join(format!("out{lines}"));
+        let o = analyze(&grid, &out, &["--degree-v", degree_v]);
+        let (stdout, stderr) = text(&o);
+        assert_eq!(o.status.code(), Some(0), "{lines} lines: {stderr}");
+        let r = report(&out);
+        let c = &r["characterisation"];
+        assert_eq!(c["complete"], true, "{c}");
+        assert!(c["failed_sections"].as_array().unwrap().is_empty(), "{c}");
+        let not: Vec<&str> = c["sections_not_possible"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(|f| f["section"].as_str())
+            .collect();
+        assert_eq!(not, missing, "{c}");
+        for m in missing {
+            let said = format!("{m} not made ({lines} lines are too few)");
+            assert!(stderr.contains(&said), "{said}: {stderr}");
+        }
+        assert!(
+            stdout.contains("no verdict on the model between lines"),
+            "{stdout}"
+        );
+        // The lines are characterised whatever the model could do.
+        assert_eq!(r["lines"].as_array().unwrap().len(), lines);
+        assert!(out.join("measured.x3p").exists());
+        assert_eq!(out.join("model.x3p").exists(), lines == 4);
+    }
+}
+
 #[test]
 fn spikes_are_replaced_for_the_fit_only_when_asked_and_then_named() {
     let dir = tempfile::tempdir().unwrap();
@@ -282,7 +329,11 @@ fn spikes_are_replaced_for_the_fit_only_when_asked_and_then_named() {
     let (replaced, report, _) = fit("replaced", &["--replace-spikes"]);
     let start = replaced.start_lines.join(" ");
     assert!(start.contains("Spikes replaced before fitting"), "{start}");
-    assert!(start.contains("line 7"), "{start}");
+    // 1-based, the file index beside it.
+    assert!(
+        start.contains("line 8 (file 0007) points 41..41"),
+        "{start}"
+    );
     let named = report["model"]["spikes_replaced"].as_array().unwrap();
     assert_eq!(named.len(), 1);
     assert_eq!(

@@ -813,6 +813,10 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
         .unwrap();
     drop(journal);
     run_ok(&["analyze", scan.to_str().unwrap()]);
+    // report.json carries the finish and the duration too: 09:15:00 to 10:17:30.
+    let t = &report(&scan)["traceability"];
+    assert_eq!(t["finished_at"], "2026-11-30T10:17:30+00:00");
+    assert_eq!(t["duration_s"].as_f64(), Some(3750.0));
     let page = scan.join("report.html");
     let html = std::fs::read_to_string(&page).unwrap();
     // Warnings first, numbers for people, the journal's events and the traceability.
