@@ -328,6 +328,7 @@ fn write_scan(parent: &Path, kind: ProfileKind, cols: usize) -> PathBuf {
             firmware: "1.0".into(),
             drive_unit: "standard".into(),
             conditions: conditions.clone(),
+            peer: None,
         },
         faults,
     )

@@ -75,6 +75,9 @@ fn d_backoff_initial() -> u64 {
 fn d_backoff_max() -> u64 {
     30_000
 }
+fn d_transient_budget() -> u64 {
+    600
+}
 fn d_degree() -> usize {
     5
 }
@@ -107,9 +110,15 @@ pub struct ScanSettings {
     pub y_start_mm: f64,
     /// y distance between lines, mm (the paper: 0.01); a whole number of nanometres, ≠ 0.
     pub y_step_mm: f64,
-    /// Attempts per line before the scan fails with the last fault (default 3).
+    /// Times a line may be abandoned because the stage lost its position (re-homed each
+    /// time) before the scan fails with the last fault (default 3).
     #[serde(default = "d_attempts")]
     pub max_line_attempts: u32,
+    /// How long transient faults (NG codes, timeouts, garbage, busy) are retried with
+    /// backoff, from the first one since the last committed line, before the scan fails
+    /// naming the last fault, s (default 600).
+    #[serde(default = "d_transient_budget")]
+    pub transient_budget_s: u64,
     /// First wait before reconnecting a vanished device, ms (default 1000); doubles per try.
     #[serde(default = "d_backoff_initial")]
     pub reconnect_initial_ms: u64,
@@ -684,6 +693,7 @@ pub const NUMERIC_KEYS: &[NumericKey] = &[
     real_key!("scan.y-start-mm", -10_000.0, 10_000.0, "mm", "set the first line's y in machine coordinates", |c| Some(c.scan.y_start_mm)),
     real_key!("scan.y-step-mm", -100.0, 100.0, "mm", "the paper steps 0.01 mm", |c| Some(c.scan.y_step_mm)),
     int_key!("scan.max-line-attempts", 1, 100, "", "the default is 3", |c| Some(c.scan.max_line_attempts)),
+    int_key!("scan.transient-budget-s", 1, 604_800, "s", "the default is 600 (ten minutes)", |c| Some(c.scan.transient_budget_s)),
     int_key!("scan.reconnect-initial-ms", 1, 600_000, "ms", "the default is 1000", |c| Some(c.scan.reconnect_initial_ms)),
     int_key!("scan.reconnect-max-ms", 1, 3_600_000, "ms", "the default is 30000", |c| Some(c.scan.reconnect_max_ms)),
     int_key!("fit.degree-u", 1, 15, "", "the paper uses 5", |c| Some(c.fit.degree_u)),

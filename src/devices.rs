@@ -20,11 +20,11 @@ pub enum FaultClass {
     /// reconnect with backoff, re-verify identity, then re-trace the current line.
     Absent,
     /// The conversation failed or the device refused for now (timeout, garbled reply,
-    /// busy NG code, missed target): abandon the current line and re-trace it, within the
-    /// attempt bound.
+    /// busy NG code, missed target): abandon the current line and re-trace it with backoff,
+    /// within the session's transient-fault time budget.
     Transient,
     /// The stage position can no longer be trusted (reset, alarm, not referenced): re-home
-    /// before the next move.
+    /// before the next move (a bounded number of times per line).
     PositionLost,
     /// A condition the operator must fix (battery abnormal, profile read-out unsupported,
     /// conditions changed, soft limit): the scan fails with this reason.
@@ -197,6 +197,11 @@ pub trait Instrument {
     async fn trace(&mut self) -> Result<TracedLine, Self::Error>;
     /// Best-effort abort of a running measurement (only after reading "measuring").
     async fn abort(&mut self) -> Result<(), Self::Error>;
+    /// How many traces the instrument accepted the start command of since it was opened,
+    /// when the driver knows: a trace refused before it began (busy) is no attempt.
+    fn traces_started(&self) -> Option<u64> {
+        None
+    }
 }
 
 /// What the y axis reported when it was connected and verified.

@@ -14,8 +14,9 @@
 //!    the codecs inside [`sj210`] and [`stage`].
 //! 2. I/O adapters: [`transport`] (the only code that opens a serial port), the clients in
 //!    [`sj210`] and [`stage`], generic over `AsyncRead + AsyncWrite`.
-//! 3. The session: [`scan`] (plan, station, durable storage and journal, resume, the runner,
-//!    the outputs of a completed scan).
+//! 3. The session: [`scan`] (plan, station, durable storage and journal, resume, the sans-IO
+//!    session machine and the runner that performs its actions, the outputs of a completed
+//!    scan).
 //! 4. Process edges: [`config`] (the station's TOML, validated), [`telemetry`] (logging),
 //!    [`atomic`] (durable file replacement), [`control`] (the operator's control socket),
 //!    [`service`] (systemd notifications), [`hook`] (the notification command),

@@ -18,9 +18,11 @@ use crate::config::Config;
 use crate::control::protocol::ControlChannels;
 use crate::control::server;
 use crate::hook::Hook;
+use crate::scan::channels::Control;
 use crate::scan::command::{OperatorCommand, OperatorRequest};
 use crate::scan::event::ScanEvent;
-use crate::scan::runner::{run_scan, Control, Outcome, ScanRequest};
+use crate::scan::outcome::{Outcome, ScanRequest};
+use crate::scan::runner::run_scan;
 use crate::scan::settings::RunSettings;
 use crate::scan::station::{SerialStation, Station};
 use crate::scan::status::{DeviceState, State, Status};
@@ -208,13 +210,16 @@ async fn daemon(
                             "starting a scan of {} lines; follow it with `surfscan status --watch`",
                             config.scan.lines
                         )));
-                        let request = match choose_request(config, specimen.clone(), operator.clone(), notes.clone()) {
+                        let mut request = match choose_request(config, specimen.clone(), operator.clone(), notes.clone()) {
                             Ok(r) => r,
                             Err(e) => {
                                 tracing::error!("{e}");
-                                ScanRequest::New { specimen, operator, notes }
+                                ScanRequest::New { specimen, operator, notes, peer: None }
                             }
                         };
+                        if let ScanRequest::New { peer, .. } = &mut request {
+                            *peer = Some(req.peer);
+                        }
                         let outcome = run_scan(&mut station, &mut ctl, &settings, request).await;
                         stop = matches!(outcome, Outcome::Interrupted { .. });
                     }

@@ -10,7 +10,7 @@
 
 use super::scan::{load_config, outcome_result, run_foreground};
 use super::{CliError, Exit};
-use crate::scan::runner::ScanRequest;
+use crate::scan::outcome::ScanRequest;
 use crate::scan::station::SerialStation;
 use crate::scan::testhooks::TestHooks;
 use std::path::{Path, PathBuf};
@@ -168,6 +168,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             specimen: "demo: Mitutoyo R profile windows".into(),
             operator: "surfscan demo".into(),
             notes: "simulated station replaying real profiles".into(),
+            peer: None,
         };
         let outcome = run_foreground(&mut station, &settings, request).await;
         handle.shutdown().await;

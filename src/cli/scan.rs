@@ -19,9 +19,11 @@
 use super::{CliError, Exit};
 use crate::config::{Config, ConfigError};
 use crate::report::{ScanAnalysisOptions, ScanCharacteriser};
+use crate::scan::channels::Control;
 use crate::scan::journal::find_unfinished;
+use crate::scan::outcome::{FailKind, Outcome, ScanRequest};
 use crate::scan::plan::Plan;
-use crate::scan::runner::{run_scan, Control, FailKind, Outcome, ScanRequest};
+use crate::scan::runner::run_scan;
 use crate::scan::settings::{Backoff, RunSettings};
 use crate::scan::station::SerialStation;
 use crate::scan::status::{State, Status};
@@ -125,6 +127,7 @@ pub fn run_settings(
             initial: Duration::from_millis(config.scan.reconnect_initial_ms),
             max: Duration::from_millis(config.scan.reconnect_max_ms),
         },
+        transient_budget: Duration::from_secs(config.scan.transient_budget_s),
         metrics_file: config.metrics.file.clone(),
         config: serde_json::to_value(config).unwrap_or_default(),
         config_hash,
@@ -163,6 +166,7 @@ pub fn choose_request(
         specimen,
         operator,
         notes,
+        peer: None,
     })
 }
 

@@ -28,6 +28,23 @@ pub fn estimate_scan_bytes(lines: u32, points_per_line: u64) -> u64 {
         .saturating_add(FIXED_BYTES)
 }
 
+/// Estimated bytes still to be written by a scan of `lines` lines of which `committed` are
+/// on disk: the remaining lines' files and records, the surface of the whole grid, and the
+/// report.
+pub fn remaining_scan_bytes(lines: u32, committed: u32, points_per_line: u64) -> u64 {
+    let left = u64::from(lines.saturating_sub(committed));
+    points_per_line
+        .saturating_mul(left)
+        .saturating_mul(CSV_BYTES_PER_POINT)
+        .saturating_add(left.saturating_mul(META_BYTES_PER_LINE))
+        .saturating_add(
+            points_per_line
+                .saturating_mul(u64::from(lines))
+                .saturating_mul(IGES_BYTES_PER_POINT),
+        )
+        .saturating_add(FIXED_BYTES)
+}
+
 /// Bytes available to an unprivileged writer on the file system holding `dir`.
 pub fn free_bytes(dir: &Path) -> Result<u64, StoreError> {
     let st = nix::sys::statvfs::statvfs(dir).map_err(|e| StoreError::Io {
@@ -82,5 +99,24 @@ mod tests {
         let err = check_space(Path::new("/x"), e, e - 1).unwrap_err();
         assert!(err.is_disk_full());
         assert!(err.to_string().contains(&e.to_string()));
+    }
+
+    #[test]
+    fn what_remains_is_the_missing_lines_plus_the_whole_surface() {
+        // Nothing committed: the whole scan.
+        assert_eq!(
+            remaining_scan_bytes(31, 0, 8000),
+            estimate_scan_bytes(31, 8000)
+        );
+        // 30 of 31 committed: one line's files, the surface of all 31, the fixed part.
+        assert_eq!(
+            remaining_scan_bytes(31, 30, 8000),
+            8000 * 48 + 8192 + 31 * 8000 * 125 + 4 * 1024 * 1024
+        );
+        // All committed: the surface and report only.
+        assert_eq!(
+            remaining_scan_bytes(31, 31, 8000),
+            31 * 8000 * 125 + 4 * 1024 * 1024
+        );
     }
 }

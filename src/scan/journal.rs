@@ -6,8 +6,8 @@
 //! invalid last line) is truncated and reported; an invalid record before the end is a named
 //! error. [`ResumeState`] derives what a restarted scan needs.
 //!
-//! Layer 3 (session): depends on [`crate::profile`], [`crate::units`], the plan and the storage
-//! fault hook ([`super::faults`]); file I/O only.
+//! Layer 3 (session): depends on [`crate::profile`], [`crate::units`], the plan, the operator's
+//! [`Peer`] and the storage fault hook ([`super::faults`]); file I/O only.
 
 use std::collections::BTreeSet;
 use std::fs::{self, OpenOptions};
@@ -21,6 +21,7 @@ use serde::{Deserialize, Serialize};
 use crate::profile::Conditions;
 use crate::units::Nm;
 
+use super::command::Peer;
 use super::faults::{StorageFaults, WriteStep};
 use super::plan::Plan;
 
@@ -112,6 +113,9 @@ pub struct StartRecord {
     pub drive_unit: String,
     /// Measurement conditions read at start.
     pub conditions: Conditions,
+    /// Who started the scan (the control socket's peer, or this process).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peer: Option<Peer>,
 }
 
 /// A completed, durably stored line.
@@ -144,6 +148,9 @@ pub struct InterruptionRecord {
     pub line: Option<u32>,
     /// When.
     pub time: DateTime<Utc>,
+    /// Who asked, for an operator's command (pause, resume, abort, continue, start over).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peer: Option<Peer>,
 }
 
 /// How a scan ended.
@@ -180,6 +187,19 @@ pub struct StopRecord {
     pub time: DateTime<Utc>,
 }
 
+/// The operator continued a failed scan after clearing the cause: the stop record before
+/// it no longer ends the scan.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ContinueRecord {
+    /// The failure the scan is continued after.
+    pub after: String,
+    /// Who asked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peer: Option<Peer>,
+    /// When.
+    pub time: DateTime<Utc>,
+}
+
 /// One journal record.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "class", rename_all = "lowercase")]
@@ -192,6 +212,8 @@ pub enum Record {
     Interruption(InterruptionRecord),
     /// The stop record.
     Stop(StopRecord),
+    /// A failed scan continued (`--resume`).
+    Continue(ContinueRecord),
 }
 
 impl Record {
@@ -201,6 +223,7 @@ impl Record {
             Record::Line(_) => "line",
             Record::Interruption(_) => "interruption",
             Record::Stop(_) => "stop",
+            Record::Continue(_) => "continue",
         }
     }
 }
@@ -432,6 +455,7 @@ impl ResumeState {
                 }
                 Record::Interruption(x) => state.interruptions.push(x.clone()),
                 Record::Stop(s) => state.stop = Some(s.clone()),
+                Record::Continue(_) => state.stop = None,
             }
         }
         Ok(state)

@@ -11,8 +11,12 @@
 //! - [`status`], [`command`], [`event`]: the snapshots the runner publishes, the operator
 //!   commands it takes, the events it reports (for the notification hook).
 //! - [`station`]: opening the instrument and the stage; device errors reduced to a `Fault`.
-//! - [`runner`]: one scan, new or resumed, to its end: per-line durability, faults by class,
-//!   suspension and reconnection, pause/abort, shutdown.
+//! - [`machine`]: the sans-IO session core: events (with the time) in, actions out; the
+//!   fault policy (classes, transient budget, suspension, disk full, pause/abort, shutdown).
+//! - [`runner`]: performs the machine's actions on devices, disk and channels;
+//!   [`channels`]: its connection to the outside; [`outcome`]: what it is asked and how a
+//!   scan ended; [`opening`]: creating or reopening a scan directory; [`ledger`]: the
+//!   running scan's journal, lines and fitter.
 //! - [`store`]: the scan directory; [`line`](mod@line) and [`line_csv`]: a stored line's metadata and
 //!   heights file; [`scan_id`]: the scan's name; [`store_error`]: what can go wrong there;
 //!   [`disk`]: the pre-flight disk check; [`faults`]: the storage fault hook.
@@ -22,14 +26,19 @@
 //! - [`metrics`]: the Prometheus text-format metrics file.
 //! - [`testhooks`]: crash and full-disk injection for end-to-end tests.
 
+pub mod channels;
 pub mod command;
 pub mod disk;
 pub mod event;
 pub mod faults;
 pub mod journal;
+mod ledger;
 pub mod line;
 pub mod line_csv;
+pub mod machine;
 pub mod metrics;
+mod opening;
+pub mod outcome;
 pub mod outputs;
 pub mod plan;
 pub mod runner;

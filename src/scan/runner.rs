@@ -1,474 +1,543 @@
-//! The scan runner: drives instrument, stage, storage and fitter through one scan, new or
-//! resumed, and survives what a night can throw at it.
+//! The scan runner: performs the session machine's actions ([`super::machine`]) on the
+//! devices, the disk and the channels, and feeds each result back as an event with the time
+//! it happened. Every decision (fault classes, retries, suspension, pause, abort) is the
+//! machine's; the runner only executes, answers commands while a device operation is in
+//! flight, and drops that operation when the machine cancels it.
 //!
-//! Per line k: the instrument must read idle (`000`; `CTRTN` on `005`) — the stage never
-//! moves otherwise — then move to y_k (absolute target, settle, read back), trace, read
-//! results and profile, check the line against the scan (conditions, pitch, point count),
-//! **commit it durably** (line files, then the journal record; [`ScanStore::commit_line`]),
-//! push it into the incremental fitter and publish status. Only then does the next move
-//! happen.
+//! Per line the machine asks, in order: instrument idle, move, trace, commit (line files,
+//! then the journal record; [`ScanStore::commit_line`](super::store::ScanStore::commit_line)),
+//! push into the fitter. Only then does the next move happen.
 //!
-//! Faults are handled by class ([`FaultClass`]): a device that vanished suspends the scan
-//! (interruption recorded, notification hook, reconnect with exponential backoff, identity
-//! re-verified, then the line is traced again — suspension does not use up attempts); a
-//! transient fault abandons the line and re-traces it, at most `max-line-attempts` times;
-//! a lost stage position re-homes first; a fatal fault, a full disk or exhausted attempts
-//! end the scan with `fail` and the specific reason. A line is never half-kept.
-//!
-//! Operator commands arrive on a channel while any device operation is in flight: pause is
-//! deferred until the current line is on disk, abort cancels the operation and makes a
-//! best-effort instrument abort and stage stop. Shutdown (SIGTERM) abandons the current line
-//! and records an interruption, not a stop, so the scan resumes at the next start.
-//!
-//! Layer 3 (session): depends on [`super::station`] (devices), [`super::store`] and
-//! [`super::journal`] (disk), [`crate::fit`], [`super::outputs`], and the session's own
-//! status, command and settings types.
+//! Layer 3 (session): depends on [`super::machine`], [`super::station`] (devices),
+//! [`super::ledger`] and [`super::opening`] (disk), [`super::channels`], and the session's
+//! own settings, status, command and outcome types.
 
-use super::command::{OperatorCommand, OperatorRequest};
-use super::disk::preflight_disk;
-use super::event::{ScanEvent, ScanEventKind};
-use super::faults::StorageFaults;
-use super::journal::{
-    InterruptionRecord, Journal, JournalError, Record, ResumeState, StartRecord, StopRecord,
-    StopStatus,
-};
+use super::channels::Control;
+use super::command::{OperatorRequest, Peer};
+use super::disk::free_bytes;
+use super::journal::StopStatus;
+use super::ledger::Ledger;
 use super::line::{LineMeta, StoredLine};
-use super::metrics::{write_metrics, ScanMetrics};
-use super::outputs::{write_outputs, Outputs};
-use super::plan::Plan;
-use super::scan_id::ScanId;
-use super::settings::{Backoff, RunSettings};
+use super::machine::{
+    ended_status, Action, End, Event, FailKind, Machine, Now, Policy, StorageFailure, TracedSummary,
+};
+use super::opening::{self, expected_points, NewScan};
+use super::outcome::{Outcome, ScanRequest};
+use super::outputs::Outputs;
+use super::settings::RunSettings;
 use super::station::{Device, Fault, Station};
-use super::status::{DeviceState, Ending, LastStop, State, Status};
-use super::store::{csv_name, meta_name, sync_dir, ScanStore};
-use super::store_error::StoreError;
-use super::testhooks::{Step, TestHooks};
-use crate::devices::{FaultClass, Instrument, InstrumentIdentity, TracedLine, YAxis};
-use crate::fit::{FitOptions, IncrementalFitter};
-use crate::profile::{Conditions, Profile};
+use super::status::Ending;
+use crate::devices::{FaultClass, Instrument, InstrumentIdentity, ProbeReport, TracedLine, YAxis};
 use crate::stage::policy::ScanDirection;
+use crate::units::Nm;
 use chrono::{DateTime, Utc};
+use std::collections::VecDeque;
 use std::future::Future;
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::time::{Duration, Instant};
-use tokio::sync::{mpsc, watch};
+use std::path::PathBuf;
+use std::time::Duration;
+
+pub use super::machine::conditions_difference;
+pub use super::opening::estimate_line_seconds;
 
 /// Time allowed for the best-effort abort and stop after an operator abort or shutdown.
 const CLEANUP_TIMEOUT: Duration = Duration::from_secs(10);
 
-/// What to run.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum ScanRequest {
-    /// A new scan of the configured plan.
-    New {
-        /// Specimen id.
-        specimen: String,
-        /// Operator.
-        operator: String,
-        /// Notes.
-        notes: String,
-    },
-    /// Resume the unfinished scan in this directory.
-    Resume(PathBuf),
-}
-
-/// Why a scan could not complete, for exit codes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FailKind {
-    /// The scan ran and failed (device fault, exhausted attempts, changed conditions).
-    Scan,
-    /// A device was not there when a new scan was to start.
-    Unavailable,
-    /// The disk refused (full, read-only, permissions).
-    Io,
-}
-
-/// How a scan ended.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Outcome {
-    /// All lines traced, surface and report written.
-    Success {
-        /// Scan directory.
-        dir: PathBuf,
-        /// Files written at the end.
-        outputs: Outputs,
-    },
-    /// The operator aborted it.
-    Aborted {
-        /// Scan directory.
-        dir: PathBuf,
-    },
-    /// It failed; the reason is in the journal's stop record when `dir` is set.
-    Failed {
-        /// Scan directory, when one was created.
-        dir: Option<PathBuf>,
-        /// Why.
-        reason: String,
-        /// For the exit code.
-        kind: FailKind,
-    },
-    /// Shut down (SIGTERM) mid-scan: no stop record, it resumes at the next start.
-    Interrupted {
-        /// Scan directory.
-        dir: PathBuf,
-    },
-}
-
-/// The runner's connection to the outside: commands in, status out, watchdog, shutdown.
-pub struct Control {
-    /// Operator commands (from the control socket; a closed channel means none).
-    pub commands: mpsc::Receiver<OperatorRequest>,
-    /// Becomes `true` on SIGTERM/SIGINT.
-    pub shutdown: watch::Receiver<bool>,
-    /// Where status snapshots are published.
-    pub status: watch::Sender<Status>,
-    /// Called at `watchdog_interval` from inside the scan loop (systemd `WATCHDOG=1`).
-    pub watchdog: Option<(Duration, Arc<dyn Fn() + Send + Sync>)>,
-    /// Scan events (complete, fail, abort, suspended) for the notification hook.
-    pub events: Option<mpsc::UnboundedSender<ScanEvent>>,
-    pause_requested: bool,
-}
-
-impl std::fmt::Debug for Control {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Control")
-            .field("pause_requested", &self.pause_requested)
-            .finish_non_exhaustive()
+fn now() -> Now {
+    Now {
+        mono: tokio::time::Instant::now().into_std(),
+        wall: Utc::now(),
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Interrupt {
-    Abort,
-    Shutdown,
-}
-
-impl Control {
-    /// A control with the given channels, no watchdog and no event sink.
-    pub fn new(
-        commands: mpsc::Receiver<OperatorRequest>,
-        shutdown: watch::Receiver<bool>,
-        status: watch::Sender<Status>,
-    ) -> Control {
-        Control {
-            commands,
-            shutdown,
-            status,
-            watchdog: None,
-            events: None,
-            pause_requested: false,
-        }
-    }
-
-    fn publish(&self, f: impl FnOnce(&mut Status)) {
-        self.status.send_modify(f);
-    }
-
-    fn event(&self, scan_id: &str, dir: &Path, kind: ScanEventKind, reason: &str) {
-        if let Some(tx) = &self.events {
-            let _ = tx.send(ScanEvent {
-                scan_id: scan_id.to_owned(),
-                dir: dir.to_path_buf(),
-                kind,
-                reason: reason.to_owned(),
-            });
-        }
-    }
-
-    fn shutting_down(&self) -> bool {
-        *self.shutdown.borrow()
-    }
-
-    /// The watchdog ticker (hourly, i.e. idle, without a watchdog).
-    fn watchdog_tick(&self) -> tokio::time::Interval {
-        let period = self
-            .watchdog
-            .as_ref()
-            .map_or(Duration::from_secs(3600), |w| w.0);
-        tokio::time::interval(period)
-    }
-
-    fn pet(&self) {
-        if let Some((_, f)) = &self.watchdog {
-            f();
-        }
-    }
-
-    /// Answers a command that arrived while a scan runs; `Some` when it interrupts.
-    fn on_command(&mut self, req: OperatorRequest, paused: bool) -> Option<Interrupt> {
-        // Before its start record exists a new scan has no id yet: say so, never "scan  …".
-        let scan = match self.status.borrow().scan_id.clone() {
-            Some(id) => format!("scan {id}"),
-            None => "the scan being started (no id yet)".to_owned(),
-        };
-        let (reply, interrupt) = match req.command {
-            OperatorCommand::Pause if paused => (Ok(format!("{scan} is already paused")), None),
-            OperatorCommand::Pause => {
-                self.pause_requested = true;
-                self.publish(|s| {
-                    if s.state == State::Scanning {
-                        s.state = State::Pausing;
-                    }
-                });
-                (
-                    Ok(format!("{scan} pauses once the current line is on disk")),
-                    None,
-                )
-            }
-            OperatorCommand::Resume if paused => (Ok(format!("{scan} resumes")), None),
-            OperatorCommand::Resume if self.pause_requested => {
-                self.pause_requested = false;
-                self.publish(|s| {
-                    if s.state == State::Pausing {
-                        s.state = State::Scanning;
-                    }
-                });
-                (Ok("pause request withdrawn".to_owned()), None)
-            }
-            // Resume is idempotent like pause: the scan is in the state asked for.
-            OperatorCommand::Resume => (
-                Ok(format!("{scan} is not paused; it goes on scanning")),
-                None,
-            ),
-            OperatorCommand::Abort => (
-                Ok(format!("aborting {scan}; lines on disk are kept")),
-                Some(Interrupt::Abort),
-            ),
-            OperatorCommand::Start { .. } => (
-                Err(format!(
-                    "{scan} is running; abort it first or wait until it ends"
-                )),
-                None,
-            ),
-        };
-        let _ = req.reply.send(reply);
-        interrupt
-    }
-
-    /// Awaits `fut` while answering commands, watching for shutdown and feeding the
-    /// watchdog; an abort or a shutdown cancels `fut`.
-    async fn guarded<T>(&mut self, fut: impl Future<Output = T>) -> Result<T, Interrupt> {
-        tokio::pin!(fut);
-        if self.shutting_down() {
-            return Err(Interrupt::Shutdown);
-        }
-        let mut tick = self.watchdog_tick();
-        loop {
-            tokio::select! {
-                out = &mut fut => return Ok(out),
-                Ok(()) = self.shutdown.changed() => {
-                    if self.shutting_down() {
-                        return Err(Interrupt::Shutdown);
-                    }
-                }
-                Some(req) = self.commands.recv() => {
-                    if let Some(i) = self.on_command(req, false) {
-                        return Err(i);
-                    }
-                }
-                _ = tick.tick() => self.pet(),
-            }
-        }
-    }
-
-    /// Waits while paused; returns on resume, or the interrupt.
-    async fn paused(&mut self) -> Result<(), Interrupt> {
-        let mut tick = self.watchdog_tick();
-        loop {
-            if self.shutting_down() {
-                return Err(Interrupt::Shutdown);
-            }
-            tokio::select! {
-                Ok(()) = self.shutdown.changed() => {}
-                req = self.commands.recv() => match req {
-                    Some(req) => {
-                        let resume = req.command == OperatorCommand::Resume;
-                        if let Some(i) = self.on_command(req, true) {
-                            return Err(i);
-                        }
-                        if resume {
-                            self.pause_requested = false;
-                            return Ok(());
-                        }
-                    }
-                    // Nobody can ever resume (no control channel): wait for shutdown only.
-                    None => {
-                        let _ = self.shutdown.wait_for(|v| *v).await;
-                        return Err(Interrupt::Shutdown);
-                    }
-                },
-                _ = tick.tick() => self.pet(),
-            }
-        }
-    }
-}
-
-/// Why a line attempt ended without a committed line.
-#[derive(Debug)]
-enum LineError {
-    Fault(Fault),
-    Interrupt(Interrupt),
-    /// The line is not acceptable for this scan and retrying cannot help.
-    Refused(String),
-    /// The line was not acceptable but a re-trace may give a good one.
-    Retry(String),
-    Storage(StoreError),
-}
-
-impl From<Interrupt> for LineError {
-    fn from(i: Interrupt) -> Self {
-        LineError::Interrupt(i)
-    }
-}
-
-/// The end of a scan as decided inside the loop.
-#[derive(Debug)]
-enum End {
-    Abort,
-    Shutdown,
-    Fail { reason: String, kind: FailKind },
-}
-
-impl From<Interrupt> for End {
-    fn from(i: Interrupt) -> Self {
-        match i {
-            Interrupt::Abort => End::Abort,
-            Interrupt::Shutdown => End::Shutdown,
-        }
-    }
-}
-
-fn fail(reason: impl Into<String>) -> End {
-    End::Fail {
-        reason: reason.into(),
-        kind: FailKind::Scan,
-    }
-}
-
-fn storage_fail(e: &StoreError) -> End {
-    let reason = if e.is_disk_full() {
-        format!("disk full: {e}")
-    } else {
-        format!("storage: {e}")
-    };
-    End::Fail {
-        reason,
-        kind: FailKind::Io,
-    }
-}
-
-fn journal_fail(e: JournalError) -> End {
-    storage_fail(&StoreError::Journal(e))
-}
-
-/// The open devices of a running scan.
-struct Devices<S: Station> {
+/// The devices of a running scan and what they reported.
+struct Hands<'s, S: Station> {
+    station: &'s mut S,
     instrument: Option<S::Instrument>,
     stage: Option<S::Stage>,
-    need_home: bool,
+    direction: ScanDirection,
+    targets: Vec<Nm>,
+    /// The instrument's report at the start of a new scan.
+    probe: Option<ProbeReport>,
+    /// Warnings of the start (instrument and stage), for the journal.
+    warnings: Vec<String>,
+    /// The stage controller the scan started with, when known.
     stage_identity: Option<String>,
+    /// The instrument the scan started with (set once the scan has a start record).
+    identity: Option<InstrumentIdentity>,
+    /// Read back by the last move.
+    readback: Option<Nm>,
 }
 
-/// One running scan's state.
-struct Scan {
-    id: String,
-    dir: PathBuf,
-    store: ScanStore,
-    journal: Journal,
-    plan: Plan,
-    start: StartRecord,
-    fitter: IncrementalFitter,
-    /// The committed lines, in index order, as the fitter holds them.
-    lines: Vec<StoredLine>,
-    pitch_x_mm: Option<f64>,
-    metrics: ScanMetrics,
-    line_durations: Vec<f64>,
-    hooks: Arc<TestHooks>,
-    metrics_path: Option<PathBuf>,
-    /// Reconnection backoff.
-    backoff: Backoff,
+/// A traced line waiting for its commit.
+struct Held {
+    traced: TracedLine,
+    readback: Option<Nm>,
+    started_at: DateTime<Utc>,
+    finished_at: DateTime<Utc>,
 }
 
-impl Scan {
-    fn interruption(&mut self, reason: &str, device: Option<Device>, line: Option<u32>) {
-        tracing::warn!(scan_id = %self.id, line = line.map(|l| l + 1), "interruption: {reason}");
-        let r = Record::Interruption(InterruptionRecord {
-            reason: reason.to_owned(),
-            device: device.map(|d| d.name().to_owned()),
-            line,
-            time: Utc::now(),
-        });
-        if let Err(e) = self.journal.append(&r) {
-            tracing::error!(scan_id = %self.id, "cannot record the interruption in the journal: {e}");
+impl<S: Station> Hands<'_, S> {
+    /// Performs a device effect; its result as the machine's event.
+    async fn perform(&mut self, action: &Action, held: &mut Option<Held>) -> Event {
+        match action {
+            Action::Open(d) => self.open(*d).await,
+            Action::Home => {
+                let Some(stage) = self.stage.as_mut() else {
+                    return not_open(Device::Stage);
+                };
+                tracing::info!("homing the stage");
+                match stage.home().await {
+                    Ok(()) => Event::Homed,
+                    Err(e) => fault(Device::Stage, &e),
+                }
+            }
+            Action::EnsureIdle => {
+                let Some(i) = self.instrument.as_mut() else {
+                    return not_open(Device::Instrument);
+                };
+                match i.ensure_idle().await {
+                    Ok(()) => Event::Idle,
+                    Err(e) => fault(Device::Instrument, &e),
+                }
+            }
+            Action::Move(target) => {
+                let Some(stage) = self.stage.as_mut() else {
+                    return not_open(Device::Stage);
+                };
+                match stage.move_to(*target).await {
+                    Ok(a) => {
+                        self.readback = Some(a.readback);
+                        Event::Arrived
+                    }
+                    Err(e) => fault(Device::Stage, &e),
+                }
+            }
+            Action::Trace => {
+                let Some(i) = self.instrument.as_mut() else {
+                    return not_open(Device::Instrument);
+                };
+                let before = i.traces_started();
+                let started_at = Utc::now();
+                match i.trace().await {
+                    Ok(traced) => {
+                        let p = &traced.profile;
+                        let summary = TracedSummary {
+                            points: p.len(),
+                            pitch_x_mm: p.pitch_x_mm,
+                            first_non_finite: p
+                                .heights_um
+                                .iter()
+                                .position(|z| !z.is_finite())
+                                .map(|k| (k, p.heights_um[k])),
+                            conditions: p.conditions.clone(),
+                            ra_um: traced
+                                .results
+                                .iter()
+                                .find(|r| r.name.trim().eq_ignore_ascii_case("ra"))
+                                .and_then(|r| r.value),
+                        };
+                        *held = Some(Held {
+                            traced,
+                            readback: self.readback,
+                            started_at,
+                            finished_at: Utc::now(),
+                        });
+                        Event::Traced(summary)
+                    }
+                    Err(e) => {
+                        // Unknown to the driver: the trace is taken as started.
+                        let trace_started = match (before, i.traces_started()) {
+                            (Some(b), Some(a)) => a > b,
+                            _ => true,
+                        };
+                        Event::Fault {
+                            fault: Fault::of(Device::Instrument, &e),
+                            trace_started,
+                        }
+                    }
+                }
+            }
+            Action::Cleanup => {
+                self.cleanup().await;
+                Event::CleanedUp
+            }
+            Action::SetTimer(d) => {
+                tokio::time::sleep(*d).await;
+                Event::TimerFired
+            }
+            other => unreachable_effect(other),
         }
     }
 
-    fn stop(&mut self, status: StopStatus, reason: &str) -> Result<(), JournalError> {
-        self.journal.append(&Record::Stop(StopRecord {
-            status,
-            reason: reason.to_owned(),
-            time: Utc::now(),
-        }))
-    }
-
-    fn eta_s(&self) -> Option<f64> {
-        if self.line_durations.is_empty() {
-            return None;
-        }
-        let mean = self.line_durations.iter().sum::<f64>() / self.line_durations.len() as f64;
-        let left = self.plan.lines.saturating_sub(self.fitter.lines() as u32);
-        Some(mean * f64::from(left))
-    }
-}
-
-/// Compares the conditions a line was traced under with the scan's; the first difference,
-/// named, when they differ.
-pub fn conditions_difference(scan: &Conditions, line: &Conditions) -> Option<String> {
-    fn differs<T: PartialEq + std::fmt::Debug>(
-        name: &str,
-        at_start: &Option<T>,
-        now: &Option<T>,
-    ) -> Option<String> {
-        let show = |v: &Option<T>| {
-            v.as_ref()
-                .map_or("unknown".to_owned(), |x| format!("{x:?}"))
+    /// Opens and verifies a device: at the start of a new scan its report is kept; once the
+    /// scan has a start record a different instrument or controller is a fatal fault.
+    async fn open(&mut self, device: Device) -> Event {
+        let fatal = |message: String| Event::Fault {
+            fault: Fault {
+                device,
+                class: FaultClass::Fatal,
+                ng_code: None,
+                message,
+            },
+            trace_started: false,
         };
-        (at_start != now).then(|| {
-            format!(
-                "{name} was {} at the start of the scan, now {}",
-                show(at_start),
-                show(now)
-            )
-        })
+        match device {
+            Device::Instrument => {
+                let mut i = match self.station.open_instrument().await {
+                    Ok(i) => i,
+                    Err(f) => return open_fault(f),
+                };
+                let report = match i.probe().await {
+                    Ok(r) => r,
+                    Err(e) => return fault(Device::Instrument, &e),
+                };
+                if let Some(want) = &self.identity {
+                    let got = &report.identity;
+                    if got.model != want.model
+                        || got.firmware != want.firmware
+                        || got.drive_unit != want.drive_unit
+                    {
+                        return fatal(format!(
+                            "a different instrument answered: model {}, firmware {:?}, drive unit {:?}; the scan started with model {}, firmware {:?}, drive unit {:?}",
+                            got.model, got.firmware, got.drive_unit, want.model, want.firmware, want.drive_unit
+                        ));
+                    }
+                } else {
+                    for w in &report.warnings {
+                        tracing::warn!("instrument: {w}");
+                    }
+                    self.warnings.extend(report.warnings.iter().cloned());
+                    self.probe = Some(report);
+                }
+                self.instrument = Some(i);
+                Event::Opened {
+                    device,
+                    position_trusted: true,
+                }
+            }
+            Device::Stage => {
+                let mut st = match self.station.open_stage(self.direction).await {
+                    Ok(s) => s,
+                    Err(f) => return open_fault(f),
+                };
+                let report = match st.connect().await {
+                    Ok(r) => r,
+                    Err(e) => return fault(Device::Stage, &e),
+                };
+                match &self.stage_identity {
+                    Some(want) if &report.identity != want => {
+                        return fatal(format!(
+                        "a different stage controller answered: {:?}; the scan started with {:?}",
+                        report.identity, want
+                    ))
+                    }
+                    Some(_) => {}
+                    None if self.identity.is_none() => {
+                        // A new scan: its targets are checked before anything moves.
+                        match st.check_targets(&self.targets) {
+                            Ok(w) => {
+                                for w in &w {
+                                    tracing::warn!("stage: {w}");
+                                }
+                                // Stage warnings first, as the journal always listed them.
+                                let mut all = w;
+                                all.append(&mut self.warnings);
+                                self.warnings = all;
+                            }
+                            Err(e) => return fatal(Fault::of(Device::Stage, &e).message),
+                        }
+                        self.stage_identity = Some(report.identity.clone());
+                    }
+                    None => {}
+                }
+                self.stage = Some(st);
+                Event::Opened {
+                    device,
+                    position_trusted: report.position_trusted,
+                }
+            }
+        }
     }
-    let (a, b) = (scan, line);
-    differs("standard", &a.standard, &b.standard)
-        .or_else(|| differs("profile", &a.profile_kind, &b.profile_kind))
-        .or_else(|| differs("filter", &a.filter, &b.filter))
-        .or_else(|| differs("lambda-c mm", &a.lambda_c_mm, &b.lambda_c_mm))
-        .or_else(|| differs("lambda-s um", &a.lambda_s_um, &b.lambda_s_um))
-        .or_else(|| differs("sampling lengths", &a.sampling_lengths, &b.sampling_lengths))
-        .or_else(|| {
-            differs(
-                "evaluation length mm",
-                &a.evaluation_length_mm,
-                &b.evaluation_length_mm,
-            )
-        })
-        .or_else(|| differs("speed mm/s", &a.speed_mm_s, &b.speed_mm_s))
+
+    /// Best-effort abort of a running measurement and stop of the stage, bounded in time.
+    async fn cleanup(&mut self) {
+        if let Some(i) = self.instrument.as_mut() {
+            match tokio::time::timeout(CLEANUP_TIMEOUT, i.abort()).await {
+                Ok(Ok(())) => {}
+                Ok(Err(e)) => tracing::warn!("instrument abort failed: {e}"),
+                Err(_) => tracing::warn!("instrument abort timed out"),
+            }
+        }
+        if let Some(s) = self.stage.as_mut() {
+            match tokio::time::timeout(CLEANUP_TIMEOUT, s.stop()).await {
+                Ok(Ok(())) => {}
+                Ok(Err(e)) => tracing::warn!("stage stop failed: {e}"),
+                Err(_) => tracing::warn!("stage stop timed out"),
+            }
+        }
+    }
 }
 
-/// A rough duration of one line: traverse at the measuring speed, return at twice that,
-/// and the profile read-out at the link's baud rate (about 12 characters per point).
-pub fn estimate_line_seconds(conditions: &Conditions, points: u64, baud: u32) -> f64 {
-    let length_mm = conditions.evaluation_length_mm.unwrap_or(4.0);
-    let speed = conditions.speed_mm_s.filter(|s| *s > 0.0).unwrap_or(0.5);
-    // Pre-travel and post-travel of half a cut-off each side, as the SJ series does.
-    let traverse = length_mm + conditions.lambda_c_mm.unwrap_or(0.8);
-    let trace = traverse / speed * 1.5;
-    let readout = points as f64 * 12.0 * 10.0 / f64::from(baud.max(1));
-    trace + readout
+fn fault<E: crate::devices::DeviceFault>(device: Device, e: &E) -> Event {
+    Event::Fault {
+        fault: Fault::of(device, e),
+        trace_started: false,
+    }
+}
+
+fn open_fault(f: Fault) -> Event {
+    Event::Fault {
+        fault: f,
+        trace_started: false,
+    }
+}
+
+fn not_open(device: Device) -> Event {
+    Event::Fault {
+        fault: Fault {
+            device,
+            class: FaultClass::Absent,
+            ng_code: None,
+            message: "not connected".to_owned(),
+        },
+        trace_started: false,
+    }
+}
+
+fn unreachable_effect(a: &Action) -> Event {
+    // The machine issues only device effects here; anything else is a bug worth a loud
+    // message, not a panic in a night's scan.
+    tracing::error!("internal: {a:?} performed as a device effect");
+    Event::Fault {
+        fault: Fault {
+            device: Device::Instrument,
+            class: FaultClass::Fatal,
+            ng_code: None,
+            message: format!("internal: {a:?} is not a device operation"),
+        },
+        trace_started: false,
+    }
+}
+
+/// The executor's state besides the devices.
+struct Books<'a> {
+    settings: &'a RunSettings,
+    ledger: Option<Ledger>,
+    new_scan: Option<NewScan>,
+    held: Option<Held>,
+    outputs: Option<Outputs>,
+    /// The reply channel of the command being fed.
+    reply: Option<tokio::sync::oneshot::Sender<Result<String, String>>>,
+    end: Option<End>,
+    /// Why the stop record could not be written.
+    stop_error: Option<String>,
+}
+
+impl Books<'_> {
+    /// Performs an immediate action.
+    fn immediate(&mut self, ctl: &Control, a: Action) {
+        match a {
+            Action::Publish(s) => ctl.publish(s),
+            Action::Record(n) => match &mut self.ledger {
+                Some(l) => l.note(&n),
+                None => tracing::warn!("{}", n.reason),
+            },
+            Action::Notify(kind, reason) => {
+                if let Some(l) = &self.ledger {
+                    ctl.event(&l.id, &l.dir, kind, &reason);
+                }
+            }
+            Action::Reply(r) => {
+                if let Some(tx) = self.reply.take() {
+                    let _ = tx.send(r);
+                }
+            }
+            Action::Metrics(m) => {
+                if let Some(l) = &self.ledger {
+                    l.metrics(&m);
+                }
+            }
+            Action::Stop(end) => {
+                self.write_stop(&end);
+                self.end = Some(end);
+            }
+            Action::Close(_) | Action::Cancel => {}
+            other => tracing::error!("internal: {other:?} performed as an immediate action"),
+        }
+    }
+
+    /// Performs a disk effect.
+    fn disk(&mut self, a: &Action, probe: Option<&ProbeReport>, station_points: u64) -> Event {
+        match a {
+            Action::CreateScan => {
+                let (Some(who), Some(report)) = (self.new_scan.take(), probe) else {
+                    return storage_event(
+                        false,
+                        "internal: no probe report for the new scan".into(),
+                    );
+                };
+                match opening::create(self.settings, who, report, station_points) {
+                    Ok(l) => {
+                        let ev = Event::Created {
+                            scan_id: l.id.clone(),
+                            dir: l.dir.display().to_string(),
+                            conditions: l.start.conditions.clone(),
+                            points_per_line: station_points,
+                        };
+                        self.ledger = Some(l);
+                        ev
+                    }
+                    Err(e) => storage_event(e.is_disk_full(), e.to_string()),
+                }
+            }
+            Action::Commit { line, attempt } => {
+                let (Some(l), Some(h)) = (self.ledger.as_mut(), self.held.as_ref()) else {
+                    return storage_event(false, "internal: no line to commit".into());
+                };
+                let p = &h.traced.profile;
+                let meta = LineMeta {
+                    index: *line,
+                    y_target_nm: l.plan.target(*line),
+                    y_readback_nm: h.readback,
+                    pitch_x_mm: p.pitch_x_mm,
+                    points: p.len(),
+                    kind: p.kind,
+                    conditions: p.conditions.clone(),
+                    results: h.traced.results.clone(),
+                    readout_warnings: h.traced.readout_warnings.clone(),
+                    started_at: h.started_at,
+                    finished_at: h.finished_at,
+                    attempt: *attempt,
+                };
+                for w in &h.traced.warnings {
+                    tracing::warn!(scan_id = %l.id, line = line + 1, "{w}");
+                }
+                match l.commit(&meta, p) {
+                    Ok(()) => Event::Committed,
+                    Err(e) => storage_event(e.is_disk_full(), e.to_string()),
+                }
+            }
+            Action::Push { line } => {
+                let (Some(l), Some(h)) = (self.ledger.as_mut(), self.held.take()) else {
+                    return Event::PushRefused("internal: no committed line to push".into());
+                };
+                let meta_line = StoredLine {
+                    meta: LineMeta {
+                        index: *line,
+                        y_target_nm: l.plan.target(*line),
+                        y_readback_nm: h.readback,
+                        pitch_x_mm: h.traced.profile.pitch_x_mm,
+                        points: h.traced.profile.len(),
+                        kind: h.traced.profile.kind,
+                        conditions: h.traced.profile.conditions.clone(),
+                        results: h.traced.results,
+                        readout_warnings: h.traced.readout_warnings,
+                        started_at: h.started_at,
+                        finished_at: h.finished_at,
+                        attempt: 0,
+                    },
+                    profile: h.traced.profile,
+                };
+                let y_mm = meta_line.y_mm();
+                match l.push(meta_line) {
+                    Ok(()) => {
+                        tracing::info!(
+                            scan_id = %l.id,
+                            line = line + 1,
+                            y_mm,
+                            "line {}/{} on disk",
+                            line + 1,
+                            l.plan.lines
+                        );
+                        Event::Pushed
+                    }
+                    Err(e) => Event::PushRefused(e.to_string()),
+                }
+            }
+            Action::WriteOutputs => {
+                let Some(l) = self.ledger.as_mut() else {
+                    return storage_event(false, "internal: no scan to finish".into());
+                };
+                match l.write_outputs(self.settings.characterise.as_deref()) {
+                    Ok(outputs) => {
+                        let summary = format!(
+                            "{} lines; surface {}",
+                            l.plan.lines,
+                            outputs
+                                .iges
+                                .first()
+                                .map(|p| p.display().to_string())
+                                .unwrap_or_default()
+                        );
+                        self.outputs = Some(outputs);
+                        Event::OutputsWritten { summary }
+                    }
+                    Err(e) => {
+                        let full = e.is_io() && is_disk_full_text(&e);
+                        let message = if full {
+                            e.to_string()
+                        } else {
+                            format!(
+                                "all lines are on disk but the outputs could not be written: {e}; run `surfscan fit {}` and `surfscan analyze {}` once the cause is cleared",
+                                l.dir.display(),
+                                l.dir.display()
+                            )
+                        };
+                        storage_event(full, message)
+                    }
+                }
+            }
+            Action::CheckSpace => {
+                let dir = self
+                    .ledger
+                    .as_ref()
+                    .map_or_else(|| self.settings.output_dir.clone(), |l| l.dir.clone());
+                let free_bytes = free_bytes(&dir).unwrap_or_else(|e| {
+                    tracing::warn!("cannot read the free space of {}: {e}", dir.display());
+                    0
+                });
+                Event::SpaceChecked { free_bytes }
+            }
+            other => {
+                tracing::error!("internal: {other:?} performed as a disk effect");
+                storage_event(
+                    false,
+                    format!("internal: {other:?} is not a disk operation"),
+                )
+            }
+        }
+    }
+}
+
+fn storage_event(disk_full: bool, message: String) -> Event {
+    Event::StorageFailed(StorageFailure { disk_full, message })
+}
+
+/// Whether an outputs error is the disk being full (the error chain carries `ENOSPC`).
+fn is_disk_full_text(e: &(dyn std::error::Error + 'static)) -> bool {
+    let mut cur: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    while let Some(err) = cur {
+        if let Some(io) = err.downcast_ref::<std::io::Error>() {
+            if io.raw_os_error() == Some(libc::ENOSPC) || io.raw_os_error() == Some(libc::EDQUOT) {
+                return true;
+            }
+        }
+        cur = err.source();
+    }
+    false
+}
+
+fn is_device_effect(a: &Action) -> bool {
+    matches!(
+        a,
+        Action::Open(_)
+            | Action::Home
+            | Action::EnsureIdle
+            | Action::Move(_)
+            | Action::Trace
+            | Action::Cleanup
+            | Action::SetTimer(_)
+    )
 }
 
 /// Runs one scan to its end.
@@ -478,930 +547,387 @@ pub async fn run_scan<S: Station>(
     settings: &RunSettings,
     request: ScanRequest,
 ) -> Outcome {
-    ctl.pause_requested = false;
-    let mut devices: Devices<S> = Devices {
+    let policy = Policy {
+        backoff: settings.backoff,
+        transient_budget: settings.transient_budget,
+        home_on_start: settings.home_on_start,
+    };
+    let before = ctl.status.borrow().clone();
+    let mut books = Books {
+        settings,
+        ledger: None,
+        new_scan: None,
+        held: None,
+        outputs: None,
+        reply: None,
+        end: None,
+        stop_error: None,
+    };
+    let mut hands = Hands {
+        station,
         instrument: None,
         stage: None,
-        need_home: false,
+        direction: ScanDirection::of_step(settings.plan.y_step_nm),
+        targets: settings.plan.targets(),
+        probe: None,
+        warnings: Vec::new(),
         stage_identity: None,
+        identity: None,
+        readback: None,
     };
-    ctl.publish(|s| {
-        s.state = State::Starting;
-        s.reason = None;
-    });
-    let mut scan = match begin(station, ctl, settings, request, &mut devices).await {
-        Ok(v) => v,
-        Err((End::Fail { reason, kind }, dir)) => {
-            tracing::error!("scan cannot start: {reason}");
-            publish_end(ctl, None, dir.as_deref(), Ending::Fail, &reason);
-            return Outcome::Failed { dir, reason, kind };
-        }
-        Err((End::Abort, dir)) => {
-            publish_end(
-                ctl,
-                None,
-                dir.as_deref(),
-                Ending::Abort,
-                "aborted before the first line",
-            );
-            return match dir {
-                Some(dir) => Outcome::Aborted { dir },
-                None => Outcome::Failed {
-                    dir: None,
-                    reason: "aborted before the scan started".into(),
-                    kind: FailKind::Scan,
-                },
-            };
-        }
-        Err((End::Shutdown, dir)) => {
-            publish_end(ctl, None, dir.as_deref(), Ending::Interrupted, "shutdown");
-            return match dir {
-                Some(dir) => Outcome::Interrupted { dir },
-                None => Outcome::Failed {
-                    dir: None,
-                    reason: "shut down before the scan started".into(),
-                    kind: FailKind::Scan,
-                },
-            };
-        }
-    };
-    let end = scan_lines(station, ctl, &mut scan, &mut devices).await;
-    finish(ctl, settings, scan, devices, end).await
-}
-
-fn publish_end(ctl: &Control, id: Option<&str>, dir: Option<&Path>, status: Ending, reason: &str) {
-    ctl.publish(|s| {
-        let scan_id = id
-            .map(str::to_owned)
-            .or_else(|| s.scan_id.clone())
-            .unwrap_or_default();
-        *s = Status {
-            last_stop: Some(LastStop {
-                scan_id,
-                status,
-                reason: reason.to_owned(),
-                dir: dir.map(|d| d.display().to_string()).unwrap_or_default(),
-            }),
-            instrument: s.instrument,
-            stage: s.stage,
-            ..Status::idle()
-        };
-        s.instrument = downgrade(s.instrument);
-        s.stage = downgrade(s.stage);
-    });
-}
-
-fn downgrade(d: DeviceState) -> DeviceState {
-    match d {
-        DeviceState::Connected | DeviceState::Reconnecting => DeviceState::Present,
-        other => other,
-    }
-}
-
-type BeginError = (End, Option<PathBuf>);
-
-/// An interrupt before the scan directory exists.
-fn interrupted(i: Interrupt) -> BeginError {
-    (End::from(i), None)
-}
-
-/// Opens and verifies the devices, creates or reopens the scan directory, rebuilds the
-/// fitter on resume.
-async fn begin<S: Station>(
-    station: &mut S,
-    ctl: &mut Control,
-    settings: &RunSettings,
-    request: ScanRequest,
-    devices: &mut Devices<S>,
-) -> Result<Scan, BeginError> {
-    match request {
+    let mut machine = match request {
         ScanRequest::New {
             specimen,
             operator,
             notes,
+            peer,
         } => {
-            let plan = settings.plan;
-            let direction = ScanDirection::of_step(plan.y_step_nm);
-            // Devices first: a scan directory is created only for a scan that can start.
-            let unavailable = |f: Fault| {
-                let kind = if f.class == FaultClass::Absent {
-                    FailKind::Unavailable
-                } else {
-                    FailKind::Scan
-                };
-                (
-                    End::Fail {
-                        reason: f.to_string(),
-                        kind,
-                    },
-                    None,
-                )
-            };
-            let mut instrument = ctl
-                .guarded(station.open_instrument())
-                .await
-                .map_err(interrupted)?
-                .map_err(unavailable)?;
-            let report = ctl
-                .guarded(instrument.probe())
-                .await
-                .map_err(interrupted)?
-                .map_err(|e| unavailable(Fault::of(Device::Instrument, &e)))?;
-            for w in &report.warnings {
-                tracing::warn!("instrument: {w}");
-            }
-            ctl.publish(|s| s.instrument = DeviceState::Connected);
-            let mut stage = ctl
-                .guarded(station.open_stage(direction))
-                .await
-                .map_err(interrupted)?
-                .map_err(unavailable)?;
-            let stage_report = ctl
-                .guarded(stage.connect())
-                .await
-                .map_err(interrupted)?
-                .map_err(|e| unavailable(Fault::of(Device::Stage, &e)))?;
-            ctl.publish(|s| s.stage = DeviceState::Connected);
-            let warnings = stage
-                .check_targets(&plan.targets())
-                .map_err(|e| (fail(Fault::of(Device::Stage, &e).to_string()), None))?;
-            for w in &warnings {
-                tracing::warn!("stage: {w}");
-            }
-            // Pre-flight: the disk must hold the whole scan.
-            let pitch_um = station.expected_pitch_um(&report.conditions);
-            let points = match (pitch_um, report.conditions.evaluation_length_mm) {
-                (Some(p), Some(l)) if p > 0.0 => (l * 1000.0 / p).ceil() as u64 + 1,
-                // Unknown: assume the SJ-210's longest profile (16 mm at 0.5 µm).
-                _ => 32_001,
-            };
-            let output_dir = &settings.output_dir;
-            std::fs::create_dir_all(output_dir).map_err(|e| {
-                (
-                    End::Fail {
-                        reason: format!(
-                            "cannot create output directory {}: {e}",
-                            output_dir.display()
-                        ),
-                        kind: FailKind::Io,
-                    },
-                    None,
-                )
-            })?;
-            let needed = preflight_disk(output_dir, plan.lines, points)
-                .map_err(|e| (storage_fail(&e), None))?;
-            let line_s =
-                estimate_line_seconds(&report.conditions, points, settings.instrument_baud);
-            tracing::info!(
-                "pre-flight: {} lines of about {points} points, about {:.0} s per line ({:.1} h), about {:.1} MB on disk",
-                plan.lines,
-                line_s,
-                line_s * f64::from(plan.lines) / 3600.0,
-                needed as f64 / 1e6
-            );
-            let now = Utc::now();
-            let id = unique_id(output_dir, now, &specimen);
-            let faults: Arc<dyn StorageFaults> = settings.hooks.clone();
-            let store = ScanStore::create(output_dir, &id, faults.clone())
-                .map_err(|e| (storage_fail(&e), None))?;
-            let dir = store.root().to_path_buf();
-            let start = StartRecord {
-                scan_id: id.0.clone(),
-                time: now,
-                plan,
-                config: settings.config.clone(),
-                config_hash: settings.config_hash.clone(),
+            books.new_scan = Some(NewScan {
                 specimen,
                 operator,
                 notes,
-                software_version: crate::build_info::software(),
-                instrument_model: report.identity.model.clone(),
-                firmware: report.identity.firmware.clone(),
-                drive_unit: report.identity.drive_unit.clone(),
-                conditions: report.conditions.clone(),
+                peer: peer.or_else(|| Some(Peer::this_process())),
+            });
+            Machine::new_scan(settings.plan, policy, before)
+        }
+        request @ (ScanRequest::Resume(_) | ScanRequest::Continue { .. }) => {
+            let (dir, continued_by) = match request {
+                ScanRequest::Continue { dir, peer } => (dir, Some(peer)),
+                ScanRequest::Resume(dir) => (dir, None),
+                ScanRequest::New { .. } => unreachable!("matched above"),
             };
-            let journal = Journal::create(&dir, start.clone(), faults)
-                .map_err(|e| (journal_fail(e), Some(dir.clone())))?;
-            tracing::info!(scan_id = %id, "scan started in {}", dir.display());
-            devices.need_home = settings.home_on_start || !stage_report.position_trusted;
-            devices.stage_identity = Some(stage_report.identity.clone());
-            devices.instrument = Some(instrument);
-            devices.stage = Some(stage);
-            let mut scan = new_scan(settings, id.0, dir, store, journal, plan, start);
-            for w in warnings.iter().chain(&report.warnings) {
-                scan.interruption(&format!("warning at start: {w}"), None, None);
-            }
-            publish_progress(ctl, &scan, None);
-            Ok(scan)
-        }
-        ScanRequest::Resume(dir) => {
-            let some_dir = Some(dir.clone());
-            let faults: Arc<dyn StorageFaults> = settings.hooks.clone();
-            let store =
-                ScanStore::open(&dir, faults.clone()).map_err(|e| (storage_fail(&e), None))?;
-            let (journal, recovery) = Journal::open(&store.journal_path(), faults)
-                .map_err(|e| (fail(e.to_string()), None))?;
-            let state = ResumeState::from_records(journal.path(), &recovery.records)
-                .map_err(|e| (fail(e.to_string()), None))?;
-            let plan = state.start.plan;
-            if state.start.config_hash != settings.config_hash {
-                tracing::warn!(
-                    "the configuration changed since scan {} started; the plan frozen in its journal is followed",
-                    state.start.scan_id
-                );
-            }
-            let id = state.start.scan_id.clone();
-            let start = state.start.clone();
-            let mut scan = new_scan(settings, id, dir.clone(), store, journal, plan, start);
-            let lines = scan.store.load_committed(&state.lines).map_err(|e| {
-                (
-                    fail(format!("cannot rebuild the fit: {e}")),
-                    some_dir.clone(),
-                )
-            })?;
-            for l in &lines {
-                scan.fitter.push_line(l.y_mm(), &l.profile).map_err(|e| {
-                    (
-                        fail(format!(
-                            "cannot rebuild the fit from line {}: {e}",
-                            l.meta.index + 1
-                        )),
-                        some_dir.clone(),
-                    )
-                })?;
-                scan.pitch_x_mm.get_or_insert(l.profile.pitch_x_mm);
-            }
-            scan.metrics.lines_done = lines.len() as u32;
-            let note = format!(
-                "resumed after a restart with {} of {} lines on disk{}",
-                lines.len(),
-                plan.lines,
-                if recovery.torn_bytes > 0 {
-                    format!(
-                        "; a torn journal tail of {} bytes was truncated",
-                        recovery.torn_bytes
-                    )
-                } else {
-                    String::new()
+            match reopen(settings, &dir, continued_by) {
+                Ok((resumed, l)) => {
+                    hands.attach(&l);
+                    let plan = l.plan;
+                    books.ledger = Some(l);
+                    Machine::resumed(plan, policy, before, resumed)
                 }
-            );
-            scan.lines = lines;
-            tracing::info!(scan_id = %scan.id, "{note}");
-            scan.interruption(&note, None, None);
-            publish_progress(ctl, &scan, None);
-            // Devices: a resumed scan waits for them like a suspended one.
-            if let Err(end) =
-                reconnect(station, ctl, &mut scan, devices, Device::Instrument, None).await
-            {
-                return Err((end, some_dir));
+                Err((reason, kind)) => return refused(ctl, reason, kind),
             }
-            if let Err(end) = reconnect(station, ctl, &mut scan, devices, Device::Stage, None).await
-            {
-                return Err((end, some_dir));
-            }
-            Ok(scan)
         }
-    }
-}
-
-fn scan_identity(s: &StartRecord) -> InstrumentIdentity {
-    InstrumentIdentity {
-        model: s.instrument_model.clone(),
-        firmware: s.firmware.clone(),
-        drive_unit: s.drive_unit.clone(),
-    }
-}
-
-fn unique_id(output_dir: &Path, now: DateTime<Utc>, specimen: &str) -> ScanId {
-    let base = ScanId::new(now, specimen);
-    if !output_dir.join(&base.0).exists() {
-        return base;
-    }
-    (2..)
-        .map(|n| ScanId(format!("{}-{n}", base.0)))
-        .find(|id| !output_dir.join(&id.0).exists())
-        .unwrap_or(base)
-}
-
-fn new_scan(
-    settings: &RunSettings,
-    id: String,
-    dir: PathBuf,
-    store: ScanStore,
-    journal: Journal,
-    plan: Plan,
-    start: StartRecord,
-) -> Scan {
-    let fitter = IncrementalFitter::new(FitOptions {
-        degree_u: plan.degree_u,
-        degree_v: plan.degree_v,
-    });
-    Scan {
-        metrics: ScanMetrics {
-            scan_id: id.clone(),
-            lines_total: plan.lines,
-            ..ScanMetrics::default()
-        },
-        id,
-        dir,
-        store,
-        journal,
-        plan,
-        start,
-        fitter,
-        lines: Vec::new(),
-        pitch_x_mm: None,
-        line_durations: Vec::new(),
-        hooks: settings.hooks.clone(),
-        metrics_path: settings.metrics_file.clone(),
-        backoff: settings.backoff,
-    }
-}
-
-fn publish_progress(ctl: &Control, scan: &Scan, current: Option<u32>) {
-    let done = scan.fitter.lines() as u32;
-    let eta = scan.eta_s();
-    ctl.publish(|s| {
-        s.scan_id = Some(scan.id.clone());
-        s.scan_dir = Some(scan.dir.display().to_string());
-        s.lines_done = done;
-        s.lines_total = scan.plan.lines;
-        s.current_line = current.map(|k| k + 1);
-        s.y_mm = current.map(|k| scan.plan.target(k).to_mm());
-        s.eta_s = eta;
-    });
-}
-
-/// Suspends until `device` is open and verified again (or there already).
-async fn reconnect<S: Station>(
-    station: &mut S,
-    ctl: &mut Control,
-    scan: &mut Scan,
-    devices: &mut Devices<S>,
-    device: Device,
-    line: Option<u32>,
-) -> Result<(), End> {
-    let present = match device {
-        Device::Instrument => devices.instrument.is_some(),
-        Device::Stage => devices.stage.is_some(),
     };
-    if present {
-        return Ok(());
+    drive(&mut machine, &mut hands, &mut books, ctl).await;
+    finish(ctl, &machine, books)
+}
+
+/// Reopens a scan directory for the machine; the refusal (reason and kind) when it cannot
+/// be run.
+fn reopen(
+    settings: &RunSettings,
+    dir: &std::path::Path,
+    continued_by: Option<Option<Peer>>,
+) -> Result<(super::machine::Resumed, Ledger), (String, FailKind)> {
+    let r = opening::reopen(settings, dir, continued_by.is_some())
+        .map_err(|reason| (reason, FailKind::Scan))?;
+    let mut ledger = r.ledger;
+    let peer = continued_by.flatten();
+    let note = match &r.failed {
+        Some(reason) => format!("{}; it had failed: {reason}", r.note),
+        None => r.note.clone(),
+    };
+    if r.failed.is_some() {
+        ledger
+            .reopen_failed(peer)
+            .map_err(|e| (format!("cannot record the continuation: {e}"), FailKind::Io))?;
     }
-    let started = Instant::now();
-    let mut backoff = Duration::ZERO;
-    let mut suspended = false;
-    let mut last = String::new();
+    ledger.note(&super::machine::Note {
+        reason: note,
+        device: None,
+        line: None,
+        peer,
+    });
+    Ok((r.resumed, ledger))
+}
+
+fn refused(ctl: &Control, reason: String, kind: FailKind) -> Outcome {
+    tracing::error!("scan cannot start: {reason}");
+    let s = ended_status(&ctl.status.borrow(), Ending::Fail, &reason);
+    ctl.publish(s);
+    Outcome::Failed {
+        dir: None,
+        reason,
+        kind,
+    }
+}
+
+impl<S: Station> Hands<'_, S> {
+    /// Takes the identities of the scan's start record: reopened devices must match them.
+    fn attach(&mut self, l: &Ledger) {
+        self.identity = Some(InstrumentIdentity {
+            model: l.start.instrument_model.clone(),
+            firmware: l.start.firmware.clone(),
+            drive_unit: l.start.drive_unit.clone(),
+        });
+        self.direction = ScanDirection::of_step(l.plan.y_step_nm);
+        self.targets = l.plan.targets();
+    }
+}
+
+/// The executor loop: actions out of the machine performed, results fed back, commands and
+/// shutdown fed while a device operation is in flight.
+async fn drive<S: Station>(
+    machine: &mut Machine,
+    hands: &mut Hands<'_, S>,
+    books: &mut Books<'_>,
+    ctl: &mut Control,
+) {
+    let mut queue: VecDeque<Action> = machine.start(now()).into();
+    let mut shutdown_fed = false;
     loop {
-        if !backoff.is_zero() {
-            ctl.guarded(tokio::time::sleep(backoff)).await?;
+        let Some(action) = queue.pop_front() else {
+            if machine.ended() {
+                return;
+            }
+            // Nothing in flight (paused): wait for a command or the shutdown.
+            let ev = wait_for_operator(ctl, books, &mut shutdown_fed).await;
+            queue.extend(machine.handle(ev, now()));
+            continue;
+        };
+        if !action.is_effect() {
+            if let Action::Close(d) = action {
+                match d {
+                    Device::Instrument => hands.instrument = None,
+                    Device::Stage => hands.stage = None,
+                }
+            }
+            books.immediate(ctl, action);
+            continue;
         }
-        let attempt = match device {
-            Device::Instrument => open_instrument_verified(station, ctl, scan)
-                .await?
-                .map(|i| {
-                    devices.instrument = Some(i);
-                }),
-            Device::Stage => {
-                let direction = ScanDirection::of_step(scan.plan.y_step_nm);
-                open_stage_verified(station, ctl, devices, direction)
-                    .await?
-                    .map(|(st, trusted)| {
-                        devices.stage = Some(st);
-                        if !trusted {
-                            devices.need_home = true;
-                        }
-                    })
+        if !is_device_effect(&action) {
+            let points = hands.points();
+            let ev = books.disk(&action, hands.probe.as_ref(), points);
+            if matches!(ev, Event::Created { .. }) {
+                if let Some(l) = &books.ledger {
+                    hands.identity = Some(InstrumentIdentity {
+                        model: l.start.instrument_model.clone(),
+                        firmware: l.start.firmware.clone(),
+                        drive_unit: l.start.drive_unit.clone(),
+                    });
+                }
+                if let Some(l) = books.ledger.as_mut() {
+                    for w in std::mem::take(&mut hands.warnings) {
+                        l.note(&super::machine::Note {
+                            reason: format!("warning at start: {w}"),
+                            device: None,
+                            line: None,
+                            peer: None,
+                        });
+                    }
+                }
+            }
+            queue.extend(machine.handle(ev, now()));
+            continue;
+        }
+        if !shutdown_fed && ctl.shutting_down() && action != Action::Cleanup {
+            shutdown_fed = true;
+            queue.clear();
+            queue.extend(machine.handle(Event::Shutdown, now()));
+            continue;
+        }
+        let cleanup = action == Action::Cleanup;
+        let ev = {
+            let mut held = books.held.take();
+            let fut = hands.perform(&action, &mut held);
+            let out = if cleanup {
+                Some(fut.await)
+            } else {
+                guarded(fut, machine, books, ctl, &mut queue, &mut shutdown_fed).await
+            };
+            if held.is_some() {
+                books.held = held;
+            }
+            out
+        };
+        if let Some(ev) = ev {
+            queue.extend(machine.handle(ev, now()));
+        }
+    }
+}
+
+impl<S: Station> Hands<'_, S> {
+    fn points(&self) -> u64 {
+        match &self.probe {
+            Some(r) => {
+                expected_points(self.station.expected_pitch_um(&r.conditions), &r.conditions)
+            }
+            None => opening::LONGEST_PROFILE_POINTS,
+        }
+    }
+}
+
+/// Awaits a device effect while feeding commands and shutdown to the machine; `None` when
+/// the machine cancelled it (the actions that follow the cancel are queued).
+async fn guarded(
+    fut: impl Future<Output = Event>,
+    machine: &mut Machine,
+    books: &mut Books<'_>,
+    ctl: &mut Control,
+    queue: &mut VecDeque<Action>,
+    shutdown_fed: &mut bool,
+) -> Option<Event> {
+    tokio::pin!(fut);
+    let mut tick = ctl.watchdog_tick();
+    loop {
+        let ev = tokio::select! {
+            out = &mut fut => return Some(out),
+            Ok(()) = ctl.shutdown.changed() => {
+                if !ctl.shutting_down() || *shutdown_fed {
+                    continue;
+                }
+                *shutdown_fed = true;
+                Event::Shutdown
+            }
+            Some(req) = ctl.commands.recv() => command_event(books, req),
+            _ = tick.tick() => {
+                ctl.pet();
+                continue;
             }
         };
-        match attempt {
-            Ok(()) => {
-                ctl.publish(|s| match device {
-                    Device::Instrument => s.instrument = DeviceState::Connected,
-                    Device::Stage => s.stage = DeviceState::Connected,
-                });
-                if suspended {
-                    let msg = format!(
-                        "{device} back after {:.0} s; scan continues",
-                        started.elapsed().as_secs_f64()
-                    );
-                    scan.interruption(&msg, Some(device), line);
-                    *scan
-                        .metrics
-                        .reconnects
-                        .entry(device.name().to_owned())
-                        .or_default() += 1;
-                    ctl.publish(|s| {
-                        s.state = State::Scanning;
-                        s.reason = None;
-                    });
-                }
-                return Ok(());
+        let actions = machine.handle(ev, now());
+        let mut it = actions.into_iter();
+        let mut cancelled = false;
+        for a in it.by_ref() {
+            if a == Action::Cancel {
+                cancelled = true;
+                break;
             }
-            Err(f) if matches!(f.class, FaultClass::Absent | FaultClass::Transient) => {
-                if !suspended {
-                    suspended = true;
-                    let reason = format!("{device} unavailable ({f}); reconnecting");
-                    scan.interruption(&reason, Some(device), line);
-                    scan.metrics.suspensions += 1;
-                    ctl.event(&scan.id, &scan.dir, ScanEventKind::Suspended, &reason);
-                    ctl.publish(|s| {
-                        s.state = State::Suspended;
-                        s.reason = Some(reason.clone());
-                        match device {
-                            Device::Instrument => s.instrument = DeviceState::Reconnecting,
-                            Device::Stage => s.stage = DeviceState::Reconnecting,
-                        }
-                    });
-                    write_scan_metrics(scan);
-                } else if f.message != last {
-                    tracing::info!(scan_id = %scan.id, "still waiting for the {device}: {f}");
-                }
-                last = f.message.clone();
-                backoff = scan.backoff.next(backoff);
+            if a.is_effect() {
+                queue.push_back(a);
+                continue;
             }
-            Err(f) => return Err(fail(f.to_string())),
+            books.immediate(ctl, a);
+        }
+        if cancelled {
+            queue.clear();
+            queue.extend(it);
+            return None;
         }
     }
 }
 
-async fn open_instrument_verified<S: Station>(
-    station: &mut S,
+fn command_event(books: &mut Books<'_>, req: OperatorRequest) -> Event {
+    books.reply = Some(req.reply);
+    Event::Command {
+        command: req.command,
+        peer: req.peer,
+    }
+}
+
+/// Waits (nothing in flight) for a command or the shutdown, feeding the watchdog.
+async fn wait_for_operator(
     ctl: &mut Control,
-    scan: &Scan,
-) -> Result<Result<S::Instrument, Fault>, End> {
-    let mut i = match ctl.guarded(station.open_instrument()).await? {
-        Ok(i) => i,
-        Err(f) => return Ok(Err(f)),
-    };
-    let report = match ctl.guarded(i.probe()).await? {
-        Ok(r) => r,
-        Err(e) => return Ok(Err(Fault::of(Device::Instrument, &e))),
-    };
-    let want = scan_identity(&scan.start);
-    if report.identity.model != want.model
-        || report.identity.firmware != want.firmware
-        || report.identity.drive_unit != want.drive_unit
-    {
-        return Err(fail(format!(
-            "a different instrument answered: model {}, firmware {:?}, drive unit {:?}; the scan started with model {}, firmware {:?}, drive unit {:?}",
-            report.identity.model,
-            report.identity.firmware,
-            report.identity.drive_unit,
-            want.model,
-            want.firmware,
-            want.drive_unit
-        )));
-    }
-    Ok(Ok(i))
-}
-
-async fn open_stage_verified<S: Station>(
-    station: &mut S,
-    ctl: &mut Control,
-    devices: &Devices<S>,
-    direction: ScanDirection,
-) -> Result<Result<(S::Stage, bool), Fault>, End> {
-    let mut st = match ctl.guarded(station.open_stage(direction)).await? {
-        Ok(s) => s,
-        Err(f) => return Ok(Err(f)),
-    };
-    let report = match ctl.guarded(st.connect()).await? {
-        Ok(r) => r,
-        Err(e) => return Ok(Err(Fault::of(Device::Stage, &e))),
-    };
-    if let Some(want) = &devices.stage_identity {
-        if &report.identity != want {
-            return Err(fail(format!(
-                "a different stage controller answered: {:?}; the scan started with {:?}",
-                report.identity, want
-            )));
-        }
-    }
-    Ok(Ok((st, report.position_trusted)))
-}
-
-fn write_scan_metrics(scan: &Scan) {
-    if let Some(p) = &scan.metrics_path {
-        if let Err(e) = write_metrics(p, &scan.metrics, &*scan.store.faults()) {
-            tracing::warn!("cannot write metrics {}: {e}", p.display());
-        }
-    }
-}
-
-/// The line loop from the first missing line to the last.
-async fn scan_lines<S: Station>(
-    station: &mut S,
-    ctl: &mut Control,
-    scan: &mut Scan,
-    devices: &mut Devices<S>,
-) -> Option<End> {
-    // Lines are committed in order, so the fitter holds lines 0..n and n is next.
-    let first = scan.fitter.lines() as u32;
-    ctl.publish(|s| s.state = State::Scanning);
-    for k in first..scan.plan.lines {
-        if let Err(end) = one_line(station, ctl, scan, devices, k).await {
-            return Some(end);
-        }
-        if ctl.pause_requested && k + 1 < scan.plan.lines {
-            let reason = format!("paused by the operator after line {}", k + 1);
-            scan.interruption(&reason, None, Some(k));
-            ctl.publish(|s| {
-                s.state = State::Paused;
-                s.reason = Some(reason.clone());
-                s.current_line = None;
-            });
-            if let Err(i) = ctl.paused().await {
-                return Some(End::from(i));
-            }
-            scan.interruption("resumed by the operator", None, Some(k + 1));
-            ctl.publish(|s| {
-                s.state = State::Scanning;
-                s.reason = None;
-            });
-        }
-    }
-    None
-}
-
-/// Traces line `k` until it is committed, within the attempt bound.
-async fn one_line<S: Station>(
-    station: &mut S,
-    ctl: &mut Control,
-    scan: &mut Scan,
-    devices: &mut Devices<S>,
-    k: u32,
-) -> Result<(), End> {
-    let mut attempt = 1u32;
-    let started = Instant::now();
+    books: &mut Books<'_>,
+    shutdown_fed: &mut bool,
+) -> Event {
+    let mut tick = ctl.watchdog_tick();
     loop {
-        reconnect(station, ctl, scan, devices, Device::Instrument, Some(k)).await?;
-        reconnect(station, ctl, scan, devices, Device::Stage, Some(k)).await?;
-        publish_progress(ctl, scan, Some(k));
-        ctl.publish(|s| {
-            if s.state != State::Pausing {
-                s.state = State::Scanning;
-            }
-        });
-        match try_line(ctl, scan, devices, k, attempt).await {
-            Ok(ra) => {
-                let secs = started.elapsed().as_secs_f64();
-                scan.line_durations.push(secs);
-                let m = &mut scan.metrics;
-                m.lines_done = scan.fitter.lines() as u32;
-                m.last_line_seconds = Some(secs);
-                m.line_seconds_sum += secs;
-                m.line_seconds_count += 1;
-                m.last_line_unix_seconds = Some(Utc::now().timestamp_millis() as f64 / 1000.0);
-                write_scan_metrics(scan);
-                publish_progress(ctl, scan, None);
-                ctl.publish(|s| s.last_ra_um = ra);
-                tracing::info!(
-                    scan_id = %scan.id,
-                    line = k + 1,
-                    y_mm = scan.plan.target(k).to_mm(),
-                    "line {}/{} on disk ({secs:.1} s{})",
-                    k + 1,
-                    scan.plan.lines,
-                    ra.map(|r| format!(", Ra {r} um")).unwrap_or_default()
-                );
-                return Ok(());
-            }
-            // `finish` makes the best-effort abort and stop, once, for every interrupt.
-            Err(LineError::Interrupt(i)) => return Err(End::from(i)),
-            Err(LineError::Storage(e)) => return Err(storage_fail(&e)),
-            Err(LineError::Refused(reason)) => {
-                return Err(fail(format!("line {}: {reason}", k + 1)))
-            }
-            Err(LineError::Retry(reason)) => {
-                retry_or_fail(scan, k, &mut attempt, &reason, None)?;
-            }
-            Err(LineError::Fault(f)) => match f.class {
-                FaultClass::Absent => {
-                    match f.device {
-                        Device::Instrument => devices.instrument = None,
-                        Device::Stage => devices.stage = None,
-                    }
-                    scan.interruption(
-                        &format!("line {} abandoned: {f}", k + 1),
-                        Some(f.device),
-                        Some(k),
-                    );
+        if ctl.shutting_down() && !*shutdown_fed {
+            *shutdown_fed = true;
+            return Event::Shutdown;
+        }
+        tokio::select! {
+            Ok(()) = ctl.shutdown.changed() => {}
+            req = ctl.commands.recv() => match req {
+                Some(req) => return command_event(books, req),
+                // Nobody can ever command (no control channel): wait for shutdown only.
+                None => {
+                    let _ = ctl.shutdown.wait_for(|v| *v).await;
                 }
-                FaultClass::Transient => {
-                    retry_or_fail(scan, k, &mut attempt, &f.to_string(), Some(f.device))?;
-                }
-                FaultClass::PositionLost => {
-                    devices.need_home = true;
-                    retry_or_fail(
-                        scan,
-                        k,
-                        &mut attempt,
-                        &format!("{f}; re-homing"),
-                        Some(f.device),
-                    )?;
-                }
-                FaultClass::Fatal => return Err(fail(format!("line {}: {f}", k + 1))),
             },
+            _ = tick.tick() => ctl.pet(),
         }
     }
 }
 
-fn retry_or_fail(
-    scan: &mut Scan,
-    k: u32,
-    attempt: &mut u32,
-    reason: &str,
-    device: Option<Device>,
-) -> Result<(), End> {
-    if *attempt >= scan.plan.max_line_attempts {
-        return Err(fail(format!(
-            "line {}: {} attempt(s) failed; last: {reason}",
-            k + 1,
-            attempt
-        )));
-    }
-    scan.interruption(
-        &format!(
-            "line {} attempt {attempt} of {} abandoned: {reason}; tracing it again",
-            k + 1,
-            scan.plan.max_line_attempts
-        ),
-        device,
-        Some(k),
-    );
-    scan.metrics.retries += 1;
-    *attempt += 1;
-    Ok(())
-}
-
-/// Best-effort abort of a running measurement and stop of the stage, bounded in time.
-async fn cleanup<S: Station>(devices: &mut Devices<S>) {
-    if let Some(i) = devices.instrument.as_mut() {
-        match tokio::time::timeout(CLEANUP_TIMEOUT, i.abort()).await {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => tracing::warn!("instrument abort failed: {e}"),
-            Err(_) => tracing::warn!("instrument abort timed out"),
-        }
-    }
-    if let Some(s) = devices.stage.as_mut() {
-        match tokio::time::timeout(CLEANUP_TIMEOUT, s.stop()).await {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => tracing::warn!("stage stop failed: {e}"),
-            Err(_) => tracing::warn!("stage stop timed out"),
+impl Books<'_> {
+    /// The journal's account of the end, written when the machine stops (before the
+    /// notification hook hears of it): the stop record, or for a shutdown the interruption
+    /// that leaves the scan resumable.
+    fn write_stop(&mut self, end: &End) {
+        let Some(l) = self.ledger.as_mut() else {
+            return;
+        };
+        let written = match end {
+            End::Success { summary } => l.stop(StopStatus::Success, summary),
+            End::Abort { .. } => l.stop(StopStatus::Abort, "aborted by the operator"),
+            End::Fail(r) => {
+                tracing::error!(scan_id = %l.id, "scan failed: {r}");
+                l.stop(StopStatus::Fail, &r.to_string())
+            }
+            // The machine recorded the interruption: no stop record, the scan resumes.
+            End::Shutdown => Ok(()),
+        };
+        if let Err(e) = written {
+            tracing::error!(scan_id = %l.id, "cannot write the stop record: {e}");
+            self.stop_error = Some(e.to_string());
         }
     }
 }
 
-/// One attempt at line `k`; returns the instrument's Ra when it reported one.
-async fn try_line<S: Station>(
-    ctl: &mut Control,
-    scan: &mut Scan,
-    devices: &mut Devices<S>,
-    k: u32,
-    attempt: u32,
-) -> Result<Option<f64>, LineError> {
-    let target = scan.plan.target(k);
-    let (Some(instrument), Some(stage)) = (devices.instrument.as_mut(), devices.stage.as_mut())
-    else {
-        return Err(LineError::Retry("a device is not connected".into()));
+/// Makes the outcome of the ended scan.
+fn finish(ctl: &Control, machine: &Machine, mut books: Books<'_>) -> Outcome {
+    let end = books.end.take().unwrap_or(End::Shutdown);
+    let Some(l) = books.ledger.take() else {
+        // Ended before the scan had a directory.
+        return match end {
+            End::Fail(r) => {
+                let reason = r.to_string();
+                tracing::error!("scan cannot start: {reason}");
+                Outcome::Failed {
+                    dir: None,
+                    kind: r.kind(),
+                    reason,
+                }
+            }
+            End::Abort { .. } => Outcome::Failed {
+                dir: None,
+                reason: "aborted before the scan started".into(),
+                kind: FailKind::Scan,
+            },
+            End::Shutdown => Outcome::Failed {
+                dir: None,
+                reason: "shut down before the scan started".into(),
+                kind: FailKind::Scan,
+            },
+            End::Success { .. } => Outcome::Failed {
+                dir: None,
+                reason: "internal: a scan without a directory cannot succeed".into(),
+                kind: FailKind::Scan,
+            },
+        };
     };
-    if devices.need_home {
-        tracing::info!(scan_id = %scan.id, "homing the stage");
-        ctl.guarded(stage.home())
-            .await?
-            .map_err(|e| LineError::Fault(Fault::of(Device::Stage, &e)))?;
-        devices.need_home = false;
-    }
-    // The stage never moves unless the instrument reads idle.
-    ctl.guarded(instrument.ensure_idle())
-        .await?
-        .map_err(|e| LineError::Fault(Fault::of(Device::Instrument, &e)))?;
-    let arrival = ctl
-        .guarded(stage.move_to(target))
-        .await?
-        .map_err(|e| LineError::Fault(Fault::of(Device::Stage, &e)))?;
-    let started_at = Utc::now();
-    let traced = ctl
-        .guarded(instrument.trace())
-        .await?
-        .map_err(|e| LineError::Fault(Fault::of(Device::Instrument, &e)))?;
-    let finished_at = Utc::now();
-    check_line(scan, &traced)?;
-    for w in &traced.warnings {
-        tracing::warn!(scan_id = %scan.id, line = k + 1, "{w}");
-    }
-    for w in &traced.readout_warnings {
-        tracing::warn!(scan_id = %scan.id, line = k + 1, "kept with a read-out warning: {w}");
-    }
-    let profile = &traced.profile;
-    let meta = LineMeta {
-        index: k,
-        y_target_nm: target,
-        y_readback_nm: Some(arrival.readback),
-        pitch_x_mm: profile.pitch_x_mm,
-        points: profile.len(),
-        kind: profile.kind,
-        conditions: profile.conditions.clone(),
-        results: traced.results.clone(),
-        readout_warnings: traced.readout_warnings.clone(),
-        started_at,
-        finished_at,
-        attempt,
-    };
-    scan_commit(scan, &meta, profile)?;
-    scan.fitter
-        .push_line(target.to_mm(), profile)
-        .map_err(|e| LineError::Refused(format!("the fitter refused the stored line: {e}")))?;
-    scan.pitch_x_mm.get_or_insert(profile.pitch_x_mm);
-    let ra = traced
-        .results
-        .iter()
-        .find(|r| r.name.trim().eq_ignore_ascii_case("ra"))
-        .and_then(|r| r.value);
-    scan.lines.push(StoredLine {
-        meta,
-        profile: traced.profile,
-    });
-    Ok(ra)
-}
-
-fn scan_commit(scan: &mut Scan, meta: &LineMeta, profile: &Profile) -> Result<(), LineError> {
-    // The hook learns the line before any of its writes.
-    scan.hooks.set_line(meta.index);
-    if let Err(e) = scan.store.commit_line(&mut scan.journal, meta, profile) {
-        discard_uncommitted(scan, meta.index);
-        return Err(LineError::Storage(e));
-    }
-    scan.hooks.at(Step::AfterCommit);
-    Ok(())
-}
-
-/// After a failed commit: when the journal holds no record of line `index` (its append
-/// failed or never happened), the line's files are removed so that nothing reading the
-/// directory (`fit`, `analyze`) takes a line the scan never committed. A record that did
-/// reach the journal (e.g. only its fsync failed) keeps the files it vouches for.
-fn discard_uncommitted(scan: &Scan, index: u32) {
-    let recorded = super::journal::read_journal(scan.journal.path()).is_ok_and(|r| {
-        r.records
-            .iter()
-            .any(|rec| matches!(rec, Record::Line(l) if l.index == index))
-    });
-    if recorded {
-        return;
-    }
-    let dir = scan.store.lines_dir();
-    for name in [csv_name(index), meta_name(index)] {
-        match std::fs::remove_file(dir.join(&name)) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => tracing::warn!(
-                scan_id = %scan.id,
-                "cannot remove {} of the uncommitted line {}: {e}",
-                name,
-                index + 1
-            ),
-        }
-    }
-    let _ = sync_dir(&dir);
-}
-
-/// A traced line must fit the scan: finite heights, the scan's point count and pitch,
-/// unchanged conditions.
-fn check_line(scan: &Scan, t: &TracedLine) -> Result<(), LineError> {
-    let p = &t.profile;
-    if let Some(i) = p.heights_um.iter().position(|z| !z.is_finite()) {
-        return Err(LineError::Retry(format!(
-            "point {} of {} is {} (not a finite height)",
-            i + 1,
-            p.len(),
-            p.heights_um[i]
-        )));
-    }
-    let cols = scan.fitter.columns();
-    if cols > 0 && p.len() != cols {
-        return Err(LineError::Retry(format!(
-            "{} points, but the scan's lines have {cols}",
-            p.len()
-        )));
-    }
-    if let Some(px) = scan.pitch_x_mm {
-        if px != p.pitch_x_mm {
-            return Err(LineError::Refused(format!(
-                "x pitch {} mm differs from the scan's {px} mm",
-                p.pitch_x_mm
-            )));
-        }
-    }
-    if let Some(d) = conditions_difference(&scan.start.conditions, &p.conditions) {
-        return Err(LineError::Refused(format!(
-            "measurement conditions changed on the instrument: {d}; restore them and start a new scan (the lines so far are kept)"
-        )));
-    }
-    Ok(())
-}
-
-/// Closes the scan: outputs and stop record on success, stop record on abort or failure,
-/// an interruption record on shutdown.
-async fn finish<S: Station>(
-    ctl: &mut Control,
-    settings: &RunSettings,
-    mut scan: Scan,
-    mut devices: Devices<S>,
-    end: Option<End>,
-) -> Outcome {
-    let dir = scan.dir.clone();
-    let id = scan.id.clone();
+    let dir: PathBuf = l.dir.clone();
     match end {
-        None => {
-            ctl.publish(|s| {
-                s.state = State::Finishing;
-                s.current_line = None;
-            });
-            let fitter = std::mem::replace(
-                &mut scan.fitter,
-                IncrementalFitter::new(FitOptions::default()),
-            );
-            match write_outputs(
-                &scan.dir,
-                &scan.start,
-                &scan.plan,
-                fitter,
-                &scan.lines,
-                settings.characterise.as_deref(),
-            ) {
-                Ok(outputs) => {
-                    scan.metrics.fit_residual_um = Some(outputs.max_residual_mm * 1000.0);
-                    write_scan_metrics(&scan);
-                    let reason = format!(
-                        "{} lines; surface {}",
-                        scan.plan.lines,
-                        outputs
-                            .iges
-                            .first()
-                            .map(|p| p.display().to_string())
-                            .unwrap_or_default()
-                    );
-                    if let Err(e) = scan.stop(StopStatus::Success, &reason) {
-                        let reason = format!("cannot write the stop record: {e}");
-                        publish_end(ctl, Some(&id), Some(&dir), Ending::Fail, &reason);
-                        return Outcome::Failed {
-                            dir: Some(dir),
-                            reason,
-                            kind: FailKind::Io,
-                        };
-                    }
-                    tracing::info!(scan_id = %id, "scan complete: {reason}");
-                    ctl.event(&id, &dir, ScanEventKind::Success, &reason);
-                    publish_end(ctl, Some(&id), Some(&dir), Ending::Success, &reason);
-                    Outcome::Success { dir, outputs }
-                }
-                Err(e) => {
-                    let reason = format!(
-                        "all lines are on disk but the outputs could not be written: {e}; free space and run `surfscan fit {}` and `surfscan analyze {}`",
-                        dir.display(),
-                        dir.display()
-                    );
-                    close_failed(ctl, &mut scan, &reason, FailKind::Io)
-                }
+        End::Success { summary } => {
+            if let Some(e) = books.stop_error.take() {
+                let reason = format!("cannot write the stop record: {e}");
+                ctl.publish(ended_status(machine.status(), Ending::Fail, &reason));
+                return Outcome::Failed {
+                    dir: Some(dir),
+                    reason,
+                    kind: FailKind::Io,
+                };
+            }
+            tracing::info!(scan_id = %l.id, "scan complete: {summary}");
+            match books.outputs.take() {
+                Some(outputs) => Outcome::Success { dir, outputs },
+                None => Outcome::Failed {
+                    dir: Some(dir),
+                    reason: "internal: the outputs were not kept".into(),
+                    kind: FailKind::Io,
+                },
             }
         }
-        Some(End::Abort) => {
-            cleanup(&mut devices).await;
-            let reason = "aborted by the operator".to_owned();
-            if let Err(e) = scan.stop(StopStatus::Abort, &reason) {
-                tracing::error!(scan_id = %id, "cannot write the stop record: {e}");
-            }
-            tracing::warn!(scan_id = %id, "scan aborted; {} lines kept", scan.fitter.lines());
-            ctl.event(&id, &dir, ScanEventKind::Abort, &reason);
-            publish_end(ctl, Some(&id), Some(&dir), Ending::Abort, &reason);
+        End::Abort { .. } => {
+            tracing::warn!(scan_id = %l.id, "scan aborted; {} lines kept", l.lines.len());
             Outcome::Aborted { dir }
         }
-        Some(End::Shutdown) => {
-            cleanup(&mut devices).await;
-            let line = scan.fitter.lines() as u32;
-            scan.interruption(
-                "shutdown (SIGTERM/SIGINT): current line abandoned; the scan resumes at the next start",
-                None,
-                (line < scan.plan.lines).then_some(line),
-            );
-            ctl.publish(|s| s.state = State::Stopping);
-            Outcome::Interrupted { dir }
-        }
-        Some(End::Fail { reason, kind }) => close_failed(ctl, &mut scan, &reason, kind),
-    }
-}
-
-fn close_failed(ctl: &Control, scan: &mut Scan, reason: &str, kind: FailKind) -> Outcome {
-    tracing::error!(scan_id = %scan.id, "scan failed: {reason}");
-    if let Err(e) = scan.stop(StopStatus::Fail, reason) {
-        tracing::error!(scan_id = %scan.id, "cannot write the stop record: {e}");
-    }
-    ctl.event(&scan.id, &scan.dir, ScanEventKind::Fail, reason);
-    publish_end(ctl, Some(&scan.id), Some(&scan.dir), Ending::Fail, reason);
-    Outcome::Failed {
-        dir: Some(scan.dir.clone()),
-        reason: reason.to_owned(),
-        kind,
+        End::Shutdown => Outcome::Interrupted { dir },
+        End::Fail(r) => Outcome::Failed {
+            dir: Some(dir),
+            kind: r.kind(),
+            reason: r.to_string(),
+        },
     }
 }

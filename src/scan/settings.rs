@@ -44,8 +44,11 @@ pub struct RunSettings {
     pub home_on_start: bool,
     /// Baud rate of the instrument's link, for the pre-flight estimate of a line's duration.
     pub instrument_baud: u32,
-    /// Reconnection backoff of a vanished device.
+    /// Backoff of reconnection tries, transient retries and free-space checks.
     pub backoff: Backoff,
+    /// How long transient faults may go on, from the first one since the last committed
+    /// line, before the scan fails (`[scan] transient-budget-s`).
+    pub transient_budget: Duration,
     /// The Prometheus textfile written after every line, if any.
     pub metrics_file: Option<PathBuf>,
     /// The configuration as loaded, frozen into the start record for traceability (opaque
@@ -68,6 +71,7 @@ impl std::fmt::Debug for RunSettings {
             .field("home_on_start", &self.home_on_start)
             .field("instrument_baud", &self.instrument_baud)
             .field("backoff", &self.backoff)
+            .field("transient_budget", &self.transient_budget)
             .field("metrics_file", &self.metrics_file)
             .field("config_hash", &self.config_hash)
             .field("hooks", &self.hooks)

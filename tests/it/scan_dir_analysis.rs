@@ -126,6 +126,7 @@ fn build_scan(
             firmware: FIRMWARE.into(),
             drive_unit: DRIVE.into(),
             conditions: conditions(kind),
+            peer: None,
         },
         faults,
     )
@@ -801,6 +802,7 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
                 device: device.map(str::to_owned),
                 line,
                 time: t,
+                peer: None,
             }))
             .unwrap();
     }

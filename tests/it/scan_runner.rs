@@ -13,9 +13,11 @@ use surfscan::devices::{
     ProfileReadout, StageReport, TracedLine, YAxis,
 };
 use surfscan::profile::{Conditions, Profile, ProfileKind};
+use surfscan::scan::channels::Control;
 use surfscan::scan::command::{OperatorCommand, OperatorRequest};
 use surfscan::scan::journal::{read_journal, Record, StopStatus};
-use surfscan::scan::runner::{run_scan, Control, Outcome, ScanRequest};
+use surfscan::scan::outcome::{Outcome, ScanRequest};
+use surfscan::scan::runner::run_scan;
 use surfscan::scan::settings::RunSettings;
 use surfscan::scan::station::{Device, Fault, Station};
 use surfscan::scan::status::{State, Status};
@@ -310,6 +312,7 @@ fn new_scan() -> ScanRequest {
         specimen: "fake".into(),
         operator: "test".into(),
         notes: String::new(),
+        peer: None,
     }
 }
 
@@ -491,8 +494,8 @@ async fn abort_mid_trace_stops_the_devices_and_records_abort() {
 }
 
 #[tokio::test(start_paused = true)]
-async fn transient_faults_are_retried_up_to_the_attempt_bound() {
-    // Line 1 fails twice, then succeeds on its third (last allowed) attempt.
+async fn transient_faults_are_retried_within_the_time_budget() {
+    // Line 1 fails twice, then succeeds on its third trace.
     let mut h = harness();
     with(&h.world, |w| {
         w.traces = [
@@ -516,30 +519,36 @@ async fn transient_faults_are_retried_up_to_the_attempt_bound() {
         .collect();
     assert_eq!(attempts, vec![1, 3, 1, 1, 1]);
 
-    // Three failures of line 1 exhaust the bound: the scan fails, no fourth trace.
+    // Faults on every trace of line 1 for longer than the budget (30 s): each trace takes
+    // 10 s, the waits are 1, 2 and 4 s, so the faults come 0, 11, 23 and 37 s after the
+    // first; the fourth finds the budget spent and the scan fails naming it, with no
+    // further trace.
     let mut h = harness();
     with(&h.world, |w| {
-        w.traces = [
-            None,
-            Some(FaultClass::Transient),
-            Some(FaultClass::Transient),
-            Some(FaultClass::Transient),
-        ]
-        .into();
+        w.traces = std::iter::once(None)
+            .chain(std::iter::repeat_n(Some(FaultClass::Transient), 100))
+            .collect();
     });
-    let settings = settings_for(&h);
+    let settings = RunSettings {
+        transient_budget: Duration::from_secs(30),
+        ..settings_for(&h)
+    };
     let mut station = FakeStation(h.world.clone());
     let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
     match &outcome {
         Outcome::Failed { reason, .. } => {
-            assert!(reason.contains("line 2: 3 attempt(s) failed"), "{reason}")
+            assert!(
+                reason.contains("line 2: transient faults since")
+                    && reason.contains("outlasted the 30 s budget"),
+                "{reason}"
+            )
         }
         other => panic!("{other:?}"),
     }
     let traces = with(&h.world, |w| {
         w.log.iter().filter(|e| **e == Event::TraceStart).count()
     });
-    assert_eq!(traces, 4, "one trace of line 0, three of line 1");
+    assert_eq!(traces, 5, "one trace of line 0, four of line 1");
     let recs = records(&scan_dir_of(&outcome));
     assert_eq!(line_indices(&recs), vec![0]);
     assert_eq!(stop_status(&recs), Some(StopStatus::Fail));

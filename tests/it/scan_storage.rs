@@ -79,6 +79,7 @@ fn start_record(id: &ScanId, lines: u32) -> StartRecord {
         firmware: "2.00".into(),
         drive_unit: "standard".into(),
         conditions: Conditions::default(),
+        peer: None,
     }
 }
 
@@ -317,6 +318,7 @@ fn journal_bytes_with_records(dir: &Path) -> (Vec<u8>, usize) {
         device: Some("instrument".into()),
         line: Some(2),
         time: Utc.with_ymd_and_hms(2026, 1, 2, 4, 0, 0).unwrap(),
+        peer: None,
     }))
     .unwrap();
     (
@@ -429,6 +431,7 @@ fn resume_state_and_unfinished_scan_discovery() {
         device: None,
         line: Some(3),
         time: Utc::now(),
+        peer: None,
     }))
     .unwrap();
     // a directory without a journal is ignored

@@ -62,6 +62,8 @@ pub struct Sj210Client<S> {
     /// transaction cancelled mid-flight (operator abort, shutdown) leaves it set and the next
     /// one drains the late reply first instead of taking it as its own answer.
     in_flight: bool,
+    /// Traces whose start command the instrument accepted.
+    traces_started: u64,
 }
 
 impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
@@ -76,6 +78,7 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             battery: None,
             conditions: None,
             in_flight: false,
+            traces_started: 0,
         }
     }
 
@@ -117,6 +120,10 @@ impl<S: AsyncRead + AsyncWrite + Unpin> crate::devices::Instrument for Sj210Clie
 
     async fn abort(&mut self) -> Result<(), Sj210Error> {
         self.abort_measurement().await
+    }
+
+    fn traces_started(&self) -> Option<u64> {
+        Some(self.traces_started)
     }
 }
 

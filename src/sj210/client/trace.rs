@@ -96,6 +96,7 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             Err(e) if e.code() == Some(NgCode::OverRange) => return Err(self.over_range().await),
             Err(e) => return Err(e),
         }
+        self.traces_started += 1;
         let started = Instant::now();
         let deadline = self.trace_deadline();
         let mut active = false;

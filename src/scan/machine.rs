@@ -1,0 +1,1516 @@
+//! The scan session as a sans-IO state machine: events in, each with the time it happened;
+//! actions out. It owns the plan, the line being worked on, the attempt counters, the
+//! pause and suspension state, the backoff and the transient-fault budget, the status
+//! snapshot and the metrics; it performs nothing. The runner ([`super::runner`]) performs
+//! each action and feeds its result back as an event.
+//!
+//! The protocol: [`Machine::start`] and every [`Machine::handle`] return a batch of actions.
+//! All but the last are immediate (publish, record, notify, reply, metrics, close, cancel,
+//! stop); the last may be an *effect* ([`Action::is_effect`]) whose result is the next
+//! event. While an effect is in flight the runner feeds operator commands and shutdown; a
+//! batch answering one of them may begin with [`Action::Cancel`] (drop the effect in
+//! flight) followed by a new effect. After [`Action::Stop`] the machine takes no more
+//! events.
+//!
+//! The policy, per line k (the README's fault table):
+//! - the instrument must read idle before the stage moves; then move, trace, check the line
+//!   against the scan, commit it durably, push it into the fitter; only then line k+1;
+//! - **absent** device: close it, record, reopen at once and then with exponential backoff
+//!   while suspended ("instrument unavailable"); it costs no attempt;
+//! - **transient** fault (NG code, timeout, garbage, busy, a line that a re-trace may fix):
+//!   retried with backoff while the time budget lasts, which runs from the first such fault
+//!   and starts again when a line commits; status and journal say "suspended: instrument
+//!   busy since …"; an attempt is counted only when a trace was really started; an exhausted
+//!   budget fails the scan naming the last fault;
+//! - **position lost**: re-home, then re-trace, at most `max-line-attempts` times a line;
+//! - **fatal** fault or a line that cannot belong to the scan: the scan fails, named;
+//! - **disk full** while committing or writing the outputs: suspended ("disk full: the
+//!   remaining lines need about … MB"), free space checked with backoff, then the held line
+//!   is committed (or the outputs written) and the scan goes on by itself;
+//! - a scan whose lines are all committed writes its outputs without opening any device;
+//! - pause is deferred until the current line is on disk; abort and shutdown cancel what is
+//!   in flight, make a best-effort device clean-up, then end (shutdown leaves the scan
+//!   resumable: no stop record).
+//!
+//! Layer 3 (session): depends on the session's own plan, settings (backoff), station
+//! ([`Device`], [`Fault`]), status, command, event and metrics types, [`super::disk`]'s
+//! pure size estimate, and [`crate::devices`]'s fault classes. No tokio, no files, no
+//! clock reads: time is an input.
+
+use super::command::{OperatorCommand, Peer};
+use super::disk::remaining_scan_bytes;
+use super::event::ScanEventKind;
+use super::metrics::ScanMetrics;
+use super::plan::Plan;
+use super::settings::Backoff;
+use super::station::{Device, Fault};
+use super::status::{DeviceState, Ending, LastStop, State, Status};
+use crate::devices::FaultClass;
+use crate::profile::Conditions;
+use crate::units::Nm;
+use chrono::{DateTime, SecondsFormat, Utc};
+use std::fmt;
+use std::time::{Duration, Instant};
+
+/// When an event happened: a monotonic instant (for budgets and durations) and the wall
+/// clock (for what people read).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Now {
+    /// Monotonic time.
+    pub mono: Instant,
+    /// Wall-clock time.
+    pub wall: DateTime<Utc>,
+}
+
+/// The session's fault policy, from the station's settings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Policy {
+    /// Backoff of reconnection tries, transient retries and free-space checks.
+    pub backoff: Backoff,
+    /// How long transient faults may go on (from the first one since the last committed
+    /// line) before the scan fails.
+    pub transient_budget: Duration,
+    /// Home before the first line of a new scan even when the position is trusted.
+    pub home_on_start: bool,
+}
+
+/// What a resumed scan already has on disk.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Resumed {
+    /// Scan id.
+    pub scan_id: String,
+    /// Scan directory, for people.
+    pub dir: String,
+    /// Lines committed (they are lines `0..committed`).
+    pub committed: u32,
+    /// Points per committed line, when a line is committed.
+    pub columns: Option<usize>,
+    /// x pitch of the committed lines, mm.
+    pub pitch_x_mm: Option<f64>,
+    /// Conditions the scan started under.
+    pub conditions: Conditions,
+    /// Estimated points per line, for the disk-space need.
+    pub points_per_line: u64,
+}
+
+/// A traced line as the machine checks it (the heights stay with the runner).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TracedSummary {
+    /// Number of points.
+    pub points: usize,
+    /// x pitch, mm.
+    pub pitch_x_mm: f64,
+    /// The first height that is not a finite number: its 0-based index and value.
+    pub first_non_finite: Option<(usize, f64)>,
+    /// Conditions it was traced under.
+    pub conditions: Conditions,
+    /// The instrument's Ra of the line, µm, when it reported one.
+    pub ra_um: Option<f64>,
+}
+
+/// Why a traced line does not fit the scan.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LineProblem {
+    /// A height is not a finite number (a re-trace may give a good line).
+    NotFinite {
+        /// 0-based index of the point.
+        point: usize,
+        /// Points of the line.
+        points: usize,
+        /// The value.
+        value: f64,
+    },
+    /// Another point count than the scan's lines (a re-trace may give a good line).
+    PointCount {
+        /// Points of this line.
+        points: usize,
+        /// Points of the scan's lines.
+        scan: usize,
+    },
+    /// Another x pitch than the scan's.
+    Pitch {
+        /// This line's pitch, mm.
+        pitch_x_mm: f64,
+        /// The scan's, mm.
+        scan: f64,
+    },
+    /// The measurement conditions changed on the instrument (what changed, named).
+    ConditionsChanged(String),
+}
+
+impl LineProblem {
+    /// True when tracing the line again may give an acceptable one.
+    pub fn retry_may_help(&self) -> bool {
+        matches!(
+            self,
+            LineProblem::NotFinite { .. } | LineProblem::PointCount { .. }
+        )
+    }
+}
+
+impl fmt::Display for LineProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LineProblem::NotFinite {
+                point,
+                points,
+                value,
+            } => write!(
+                f,
+                "point {} of {points} is {value} (not a finite height)",
+                point + 1
+            ),
+            LineProblem::PointCount { points, scan } => {
+                write!(f, "{points} points, but the scan's lines have {scan}")
+            }
+            LineProblem::Pitch { pitch_x_mm, scan } => {
+                write!(f, "x pitch {pitch_x_mm} mm differs from the scan's {scan} mm")
+            }
+            LineProblem::ConditionsChanged(d) => write!(
+                f,
+                "measurement conditions changed on the instrument: {d}; restore them and continue the scan with --resume (the lines so far are kept)"
+            ),
+        }
+    }
+}
+
+/// What a storage failure was.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StorageFailure {
+    /// The file system has no space left (`ENOSPC`, quota): it can clear by itself.
+    pub disk_full: bool,
+    /// The error, naming the file.
+    pub message: String,
+}
+
+/// Why a scan failed: what the operator must clear before continuing it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FailReason {
+    /// A device could not be opened or verified when a new scan was to start.
+    NotStarted(Fault),
+    /// A fault the operator must fix.
+    Fatal {
+        /// The line being worked on (0-based), if any.
+        line: Option<u32>,
+        /// The fault.
+        fault: Fault,
+    },
+    /// Transient faults went on for longer than the budget.
+    BudgetExhausted {
+        /// The line (0-based).
+        line: u32,
+        /// The budget, seconds.
+        budget_s: u64,
+        /// When the first fault of the run happened.
+        since: DateTime<Utc>,
+        /// Traces started for the line in that time.
+        traces: u32,
+        /// The last fault.
+        last: String,
+    },
+    /// The stage lost its position again and again on one line.
+    PositionLostRepeatedly {
+        /// The line (0-based).
+        line: u32,
+        /// How often.
+        times: u32,
+        /// The last fault.
+        last: Fault,
+    },
+    /// The traced line cannot belong to this scan.
+    LineRefused {
+        /// The line (0-based).
+        line: u32,
+        /// Why.
+        problem: LineProblem,
+    },
+    /// The fitter refused a committed line.
+    FitterRefused {
+        /// The line (0-based).
+        line: u32,
+        /// The fitter's message.
+        message: String,
+    },
+    /// The disk refused for a reason that does not clear by itself (permissions,
+    /// read-only file system, damage).
+    Storage(String),
+    /// Every line is on disk but the outputs could not be made (the message says how to
+    /// make them by hand).
+    Outputs(String),
+}
+
+impl FailReason {
+    /// The exit-code class of the failure.
+    pub fn kind(&self) -> FailKind {
+        match self {
+            FailReason::NotStarted(f) if f.class == FaultClass::Absent => FailKind::Unavailable,
+            FailReason::Storage(_) | FailReason::Outputs(_) => FailKind::Io,
+            _ => FailKind::Scan,
+        }
+    }
+}
+
+impl fmt::Display for FailReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FailReason::NotStarted(fault) => write!(f, "{fault}"),
+            FailReason::Fatal {
+                line: Some(k),
+                fault,
+            } => write!(f, "line {}: {fault}", k + 1),
+            FailReason::Fatal { line: None, fault } => write!(f, "{fault}"),
+            FailReason::BudgetExhausted {
+                line,
+                budget_s,
+                since,
+                traces,
+                last,
+            } => write!(
+                f,
+                "line {}: transient faults since {} outlasted the {budget_s} s budget ({traces} trace(s) started); last: {last}",
+                line + 1,
+                since.to_rfc3339_opts(SecondsFormat::Secs, true)
+            ),
+            FailReason::PositionLostRepeatedly { line, times, last } => write!(
+                f,
+                "line {}: the stage lost its position {times} time(s); last: {last}",
+                line + 1
+            ),
+            FailReason::LineRefused { line, problem } => write!(f, "line {}: {problem}", line + 1),
+            FailReason::FitterRefused { line, message } => write!(
+                f,
+                "line {}: the fitter refused the stored line: {message}",
+                line + 1
+            ),
+            FailReason::Storage(m) => write!(f, "storage: {m}"),
+            FailReason::Outputs(m) => f.write_str(m),
+        }
+    }
+}
+
+/// Why a scan could not complete, for exit codes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FailKind {
+    /// The scan ran and failed (device fault, exhausted budget, changed conditions).
+    Scan,
+    /// A device was not there when a new scan was to start.
+    Unavailable,
+    /// The disk refused (read-only, permissions).
+    Io,
+}
+
+/// How the scan ends.
+#[derive(Debug, Clone, PartialEq)]
+pub enum End {
+    /// Every line committed and the outputs written.
+    Success {
+        /// What was written, for the stop record.
+        summary: String,
+    },
+    /// The operator aborted it.
+    Abort {
+        /// Who.
+        peer: Option<Peer>,
+    },
+    /// Shut down (SIGTERM): no stop record, it resumes at the next start.
+    Shutdown,
+    /// It failed.
+    Fail(FailReason),
+}
+
+/// An interruption for the journal: what happened, to which device, on which line, asked
+/// by whom.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Note {
+    /// For people.
+    pub reason: String,
+    /// The device concerned.
+    pub device: Option<Device>,
+    /// The line being worked on (0-based).
+    pub line: Option<u32>,
+    /// The operator's connection, for commands.
+    pub peer: Option<Peer>,
+}
+
+/// An event of the session.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// The device is open and verified; `position_trusted` is the stage's (ignored for the
+    /// instrument).
+    Opened {
+        /// Which.
+        device: Device,
+        /// Whether the stage's position can be trusted.
+        position_trusted: bool,
+    },
+    /// The new scan's directory and start record are on disk.
+    Created {
+        /// Scan id.
+        scan_id: String,
+        /// Scan directory, for people.
+        dir: String,
+        /// Conditions the scan starts under.
+        conditions: Conditions,
+        /// Estimated points per line.
+        points_per_line: u64,
+    },
+    /// The stage is homed.
+    Homed,
+    /// The instrument reads idle.
+    Idle,
+    /// The stage arrived at the line's target.
+    Arrived,
+    /// The line was traced and read out.
+    Traced(TracedSummary),
+    /// The line is durably committed (files and journal record).
+    Committed,
+    /// The fitter took the committed line.
+    Pushed,
+    /// The fitter refused the committed line.
+    PushRefused(String),
+    /// The outputs are written.
+    OutputsWritten {
+        /// What was written, for the stop record.
+        summary: String,
+    },
+    /// A device operation failed; `trace_started` says whether a trace was really started
+    /// (false for faults outside a trace, and for a trace refused before it began).
+    Fault {
+        /// The fault.
+        fault: Fault,
+        /// Whether a trace was started.
+        trace_started: bool,
+    },
+    /// A durable write failed (commit, or the outputs when finishing).
+    StorageFailed(StorageFailure),
+    /// The free space of the output directory, as asked by [`Action::CheckSpace`].
+    SpaceChecked {
+        /// Bytes free (0 when it could not be read).
+        free_bytes: u64,
+    },
+    /// The timer set by [`Action::SetTimer`] fired.
+    TimerFired,
+    /// The best-effort clean-up is done.
+    CleanedUp,
+    /// An operator command (the runner holds its reply channel and sends [`Action::Reply`]).
+    Command {
+        /// The command.
+        command: OperatorCommand,
+        /// Who sent it.
+        peer: Peer,
+    },
+    /// SIGTERM / SIGINT.
+    Shutdown,
+}
+
+/// Something for the runner to do.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Action {
+    /// Open the device and verify it (probe / connect; identity against the scan's once it
+    /// has a start record). Result: [`Event::Opened`] or [`Event::Fault`].
+    Open(Device),
+    /// Drop a device that vanished (immediate).
+    Close(Device),
+    /// Pre-flight disk check, create the scan directory and its start record. Result:
+    /// [`Event::Created`] or [`Event::StorageFailed`].
+    CreateScan,
+    /// Home the stage. Result: [`Event::Homed`] or [`Event::Fault`].
+    Home,
+    /// Make the instrument read idle. Result: [`Event::Idle`] or [`Event::Fault`].
+    EnsureIdle,
+    /// Move to the target. Result: [`Event::Arrived`] or [`Event::Fault`].
+    Move(Nm),
+    /// Trace the line. Result: [`Event::Traced`] or [`Event::Fault`].
+    Trace,
+    /// Commit the traced line (held by the runner) durably as line `line`, produced by trace
+    /// `attempt`. Result: [`Event::Committed`] or [`Event::StorageFailed`].
+    Commit {
+        /// 0-based line index.
+        line: u32,
+        /// 1-based number of the trace that produced it.
+        attempt: u32,
+    },
+    /// Push the committed line into the fitter. Result: [`Event::Pushed`] or
+    /// [`Event::PushRefused`].
+    Push {
+        /// 0-based line index.
+        line: u32,
+    },
+    /// Finish the fit and write IGES, report, X3P, plots. Result:
+    /// [`Event::OutputsWritten`], [`Event::StorageFailed`] (disk full) or
+    /// [`Event::PushRefused`]-free failure as [`Event::StorageFailed`] with `disk_full`
+    /// false.
+    WriteOutputs,
+    /// Read the free space of the output directory. Result: [`Event::SpaceChecked`].
+    CheckSpace,
+    /// Wait. Result: [`Event::TimerFired`].
+    SetTimer(Duration),
+    /// Best-effort instrument abort and stage stop. Result: [`Event::CleanedUp`].
+    Cleanup,
+    /// Drop the effect in flight (immediate; an abort or shutdown arrived).
+    Cancel,
+    /// Publish this status snapshot (immediate).
+    Publish(Status),
+    /// Append an interruption record (immediate).
+    Record(Note),
+    /// Tell the notification hook (immediate).
+    Notify(ScanEventKind, String),
+    /// Answer the command last fed (immediate).
+    Reply(Result<String, String>),
+    /// Write the metrics file (immediate).
+    Metrics(ScanMetrics),
+    /// The scan ends (immediate; the stop record, except after a shutdown).
+    Stop(End),
+}
+
+impl Action {
+    /// True for actions whose result is the next event.
+    pub fn is_effect(&self) -> bool {
+        !matches!(
+            self,
+            Action::Close(_)
+                | Action::Cancel
+                | Action::Publish(_)
+                | Action::Record(_)
+                | Action::Notify(..)
+                | Action::Reply(_)
+                | Action::Metrics(_)
+                | Action::Stop(_)
+        )
+    }
+}
+
+/// The effect in flight, i.e. what the next event answers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Doing {
+    Open(Device),
+    Create,
+    Home,
+    Idle,
+    Move,
+    Trace,
+    Commit,
+    Push,
+    Outputs,
+    CheckSpace,
+    /// A wait; what follows it.
+    Wait(AfterWait),
+    Cleanup,
+    /// Paused by the operator: nothing in flight.
+    Paused,
+    Nothing,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum AfterWait {
+    /// Reopen this device.
+    Open(Device),
+    /// Start the line again.
+    Retry,
+    /// Check the free space.
+    CheckSpace,
+}
+
+/// Why the scan is suspended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum Cause {
+    Absent(Device),
+    Busy(Device),
+    /// Disk full while committing the held line (`outputs` false) or writing the outputs.
+    DiskFull {
+        needed_bytes: u64,
+        outputs: bool,
+    },
+}
+
+#[derive(Debug, Clone)]
+struct Suspension {
+    cause: Cause,
+    since: Now,
+    /// The last wait.
+    wait: Duration,
+}
+
+/// The transient-fault budget of the current line.
+#[derive(Debug, Clone)]
+struct Budget {
+    since: Now,
+    last: String,
+}
+
+/// The session core.
+#[derive(Debug, Clone)]
+pub struct Machine {
+    plan: Plan,
+    policy: Policy,
+    status: Status,
+    metrics: ScanMetrics,
+    /// True once the scan directory and start record exist.
+    created: bool,
+    /// The next line to commit (lines `0..line` are committed).
+    line: u32,
+    doing: Doing,
+    instrument_open: bool,
+    stage_open: bool,
+    need_home: bool,
+    pause_requested: bool,
+    /// Traces started for the current line.
+    traces: u32,
+    /// Re-homes after a lost position on the current line.
+    rehomes: u32,
+    /// When the current line's work began.
+    line_began: Option<Instant>,
+    line_seconds: Vec<f64>,
+    budget: Option<Budget>,
+    /// Backoff of transient retries on the current line.
+    retry_wait: Duration,
+    suspension: Option<Suspension>,
+    /// Points per committed line, and the scan's pitch.
+    columns: Option<usize>,
+    pitch_x_mm: Option<f64>,
+    conditions: Option<Conditions>,
+    points_per_line: u64,
+    /// Ra of the traced line waiting for its commit.
+    held_ra: Option<f64>,
+    ending: Option<End>,
+    ended: bool,
+}
+
+impl Machine {
+    /// A new scan of `plan`; `status` is the snapshot before it (device states and the last
+    /// stop are carried on).
+    pub fn new_scan(plan: Plan, policy: Policy, status: Status) -> Machine {
+        Machine::build(plan, policy, status, None)
+    }
+
+    /// A scan resumed from its directory.
+    pub fn resumed(plan: Plan, policy: Policy, status: Status, r: Resumed) -> Machine {
+        Machine::build(plan, policy, status, Some(r))
+    }
+
+    fn build(plan: Plan, policy: Policy, mut status: Status, r: Option<Resumed>) -> Machine {
+        status.state = State::Starting;
+        status.reason = None;
+        let mut m = Machine {
+            plan,
+            policy,
+            status,
+            metrics: ScanMetrics {
+                lines_total: plan.lines,
+                ..ScanMetrics::default()
+            },
+            created: false,
+            line: 0,
+            doing: Doing::Nothing,
+            instrument_open: false,
+            stage_open: false,
+            need_home: false,
+            pause_requested: false,
+            traces: 0,
+            rehomes: 0,
+            line_began: None,
+            line_seconds: Vec::new(),
+            budget: None,
+            retry_wait: Duration::ZERO,
+            suspension: None,
+            columns: None,
+            pitch_x_mm: None,
+            conditions: None,
+            points_per_line: 0,
+            held_ra: None,
+            ending: None,
+            ended: false,
+        };
+        if let Some(r) = r {
+            m.created = true;
+            m.line = r.committed.min(plan.lines);
+            m.columns = r.columns;
+            m.pitch_x_mm = r.pitch_x_mm;
+            m.conditions = Some(r.conditions);
+            m.points_per_line = r.points_per_line;
+            m.metrics.scan_id = r.scan_id.clone();
+            m.metrics.lines_done = m.line;
+            m.status.scan_id = Some(r.scan_id);
+            m.status.scan_dir = Some(r.dir);
+        }
+        m
+    }
+
+    /// The status snapshot as the machine last published it.
+    pub fn status(&self) -> &Status {
+        &self.status
+    }
+
+    /// The plan.
+    pub fn plan(&self) -> &Plan {
+        &self.plan
+    }
+
+    /// The next line to commit (0-based); equals the plan's line count when all are.
+    pub fn line(&self) -> u32 {
+        self.line
+    }
+
+    /// True once [`Action::Stop`] was returned.
+    pub fn ended(&self) -> bool {
+        self.ended
+    }
+
+    /// The first actions: open the devices of a new scan, or (resumed) go on where the
+    /// scan stands.
+    pub fn start(&mut self, now: Now) -> Vec<Action> {
+        let mut out = Vec::new();
+        if self.created {
+            self.publish_progress(&mut out, None);
+            self.next_step(now, &mut out);
+        } else {
+            self.publish(&mut out);
+            self.effect(&mut out, Doing::Open(Device::Instrument));
+        }
+        out
+    }
+
+    /// One event in; the actions it calls for.
+    pub fn handle(&mut self, event: Event, now: Now) -> Vec<Action> {
+        let mut out = Vec::new();
+        if self.ended {
+            if let Event::Command { command, .. } = event {
+                out.push(Action::Reply(Err(self.refusal(&command))));
+            }
+            return out;
+        }
+        match event {
+            Event::Command { command, peer } => self.command(command, peer, now, &mut out),
+            Event::Shutdown => self.interrupt(End::Shutdown, &mut out),
+            Event::CleanedUp => {
+                if self.doing == Doing::Cleanup {
+                    let end = self.ending.take().unwrap_or(End::Shutdown);
+                    self.stop(end, &mut out);
+                }
+            }
+            _ if self.ending.is_some() => {}
+            ev => self.progress(ev, now, &mut out),
+        }
+        out
+    }
+
+    fn refusal(&self, _command: &OperatorCommand) -> String {
+        "the scan has ended".to_owned()
+    }
+
+    // ---- the line loop -------------------------------------------------------------
+
+    fn progress(&mut self, ev: Event, now: Now, out: &mut Vec<Action>) {
+        match (self.doing, ev) {
+            (
+                Doing::Open(d),
+                Event::Opened {
+                    device,
+                    position_trusted,
+                },
+            ) if d == device => self.opened(device, position_trusted, now, out),
+            (Doing::Open(d), Event::Fault { fault, .. }) => self.open_failed(d, fault, now, out),
+            (
+                Doing::Create,
+                Event::Created {
+                    scan_id,
+                    dir,
+                    conditions,
+                    points_per_line,
+                },
+            ) => {
+                self.created = true;
+                self.metrics.scan_id = scan_id.clone();
+                self.status.scan_id = Some(scan_id);
+                self.status.scan_dir = Some(dir);
+                self.conditions = Some(conditions);
+                self.points_per_line = points_per_line;
+                self.publish_progress(out, None);
+                self.status.state = State::Scanning;
+                self.next_step(now, out);
+            }
+            (Doing::Create, Event::StorageFailed(s)) => {
+                self.fail(FailReason::Storage(s.message), out)
+            }
+            (Doing::Home, Event::Homed) => {
+                self.need_home = false;
+                self.next_step(now, out);
+            }
+            (Doing::Idle, Event::Idle) => {
+                let target = self.plan.target(self.line);
+                self.doing = Doing::Move;
+                out.push(Action::Move(target));
+            }
+            (Doing::Move, Event::Arrived) => self.effect(out, Doing::Trace),
+            (Doing::Trace, Event::Traced(t)) => {
+                self.traces += 1;
+                match self.check(&t) {
+                    None => {
+                        self.held_ra = t.ra_um;
+                        self.columns.get_or_insert(t.points);
+                        self.pitch_x_mm.get_or_insert(t.pitch_x_mm);
+                        self.commit(out);
+                    }
+                    Some(p) if p.retry_may_help() => {
+                        let why = format!("line {}: {p}", self.line + 1);
+                        self.transient(why, Device::Instrument, now, out);
+                    }
+                    Some(problem) => self.fail(
+                        FailReason::LineRefused {
+                            line: self.line,
+                            problem,
+                        },
+                        out,
+                    ),
+                }
+            }
+            (
+                Doing::Home | Doing::Idle | Doing::Move | Doing::Trace,
+                Event::Fault {
+                    fault,
+                    trace_started,
+                },
+            ) => {
+                // A trace cut off by a vanished device is the suspension's, not an attempt.
+                if self.doing == Doing::Trace && trace_started && fault.class != FaultClass::Absent
+                {
+                    self.traces += 1;
+                }
+                self.line_fault(fault, now, out);
+            }
+            (Doing::Commit, Event::Committed) => {
+                self.effect_push(out);
+            }
+            (Doing::Commit, Event::StorageFailed(s)) => self.storage_failed(s, false, now, out),
+            (Doing::Push, Event::Pushed) => self.line_done(now, out),
+            (Doing::Push, Event::PushRefused(message)) => self.fail(
+                FailReason::FitterRefused {
+                    line: self.line,
+                    message,
+                },
+                out,
+            ),
+            (Doing::Outputs, Event::OutputsWritten { summary }) => {
+                self.stop(End::Success { summary }, out)
+            }
+            (Doing::Outputs, Event::StorageFailed(s)) => self.storage_failed(s, true, now, out),
+            (Doing::CheckSpace, Event::SpaceChecked { free_bytes }) => {
+                self.space_checked(free_bytes, now, out)
+            }
+            (Doing::Wait(after), Event::TimerFired) => match after {
+                AfterWait::Open(d) => self.effect(out, Doing::Open(d)),
+                AfterWait::Retry => self.next_step(now, out),
+                AfterWait::CheckSpace => self.effect(out, Doing::CheckSpace),
+            },
+            // An answer to something not asked (a late result after a cancel): ignored.
+            _ => {}
+        }
+    }
+
+    /// Issues the effect `doing` stands for.
+    fn effect(&mut self, out: &mut Vec<Action>, doing: Doing) {
+        self.doing = doing;
+        out.push(match doing {
+            Doing::Open(d) => Action::Open(d),
+            Doing::Create => Action::CreateScan,
+            Doing::Home => Action::Home,
+            Doing::Idle => Action::EnsureIdle,
+            Doing::Move => Action::Move(self.plan.target(self.line)),
+            Doing::Trace => Action::Trace,
+            Doing::Commit => Action::Commit {
+                line: self.line,
+                attempt: self.traces.max(1),
+            },
+            Doing::Push => Action::Push { line: self.line },
+            Doing::Outputs => Action::WriteOutputs,
+            Doing::CheckSpace => Action::CheckSpace,
+            Doing::Cleanup => Action::Cleanup,
+            Doing::Wait(_) | Doing::Paused | Doing::Nothing => return,
+        });
+    }
+
+    fn wait(&mut self, out: &mut Vec<Action>, d: Duration, after: AfterWait) {
+        self.doing = Doing::Wait(after);
+        out.push(Action::SetTimer(d));
+    }
+
+    fn commit(&mut self, out: &mut Vec<Action>) {
+        self.effect(out, Doing::Commit);
+    }
+
+    fn effect_push(&mut self, out: &mut Vec<Action>) {
+        self.effect(out, Doing::Push);
+    }
+
+    /// What the current line needs next: devices, homing, idle, then move and trace; the
+    /// outputs once every line is committed.
+    fn next_step(&mut self, now: Now, out: &mut Vec<Action>) {
+        if self.line >= self.plan.lines {
+            self.status.state = State::Finishing;
+            self.status.current_line = None;
+            self.status.y_mm = None;
+            self.publish(out);
+            self.effect(out, Doing::Outputs);
+            return;
+        }
+        if !self.instrument_open {
+            return self.effect(out, Doing::Open(Device::Instrument));
+        }
+        if !self.stage_open {
+            return self.effect(out, Doing::Open(Device::Stage));
+        }
+        self.line_began.get_or_insert(now.mono);
+        if self.status.state != State::Pausing && self.suspension.is_none() {
+            self.status.state = State::Scanning;
+        }
+        self.publish_progress(out, Some(self.line));
+        if self.need_home {
+            return self.effect(out, Doing::Home);
+        }
+        self.effect(out, Doing::Idle);
+    }
+
+    fn opened(&mut self, device: Device, trusted: bool, now: Now, out: &mut Vec<Action>) {
+        match device {
+            Device::Instrument => {
+                self.instrument_open = true;
+                self.status.instrument = DeviceState::Connected;
+            }
+            Device::Stage => {
+                self.stage_open = true;
+                self.status.stage = DeviceState::Connected;
+                if !trusted || (!self.created && self.policy.home_on_start) {
+                    self.need_home = true;
+                }
+            }
+        }
+        if let Some(s) = &self.suspension {
+            if s.cause == Cause::Absent(device) {
+                let secs = (now.mono - s.since.mono).as_secs_f64();
+                out.push(self.note(
+                    format!("{device} back after {secs:.0} s; scan continues"),
+                    Some(device),
+                ));
+                *self
+                    .metrics
+                    .reconnects
+                    .entry(device.name().to_owned())
+                    .or_default() += 1;
+                self.suspension = None;
+                self.status.state = State::Scanning;
+                self.status.reason = None;
+            }
+        }
+        if !self.created {
+            self.publish(out);
+            match device {
+                Device::Instrument => self.effect(out, Doing::Open(Device::Stage)),
+                Device::Stage => self.effect(out, Doing::Create),
+            }
+            return;
+        }
+        self.next_step(now, out);
+    }
+
+    fn open_failed(&mut self, device: Device, fault: Fault, now: Now, out: &mut Vec<Action>) {
+        if !self.created {
+            return self.fail(FailReason::NotStarted(fault), out);
+        }
+        if !matches!(fault.class, FaultClass::Absent | FaultClass::Transient) {
+            return self.fail(
+                FailReason::Fatal {
+                    line: self.current(),
+                    fault,
+                },
+                out,
+            );
+        }
+        let wait = match &mut self.suspension {
+            Some(s) if s.cause == Cause::Absent(device) => {
+                s.wait = self.policy.backoff.next(s.wait);
+                s.wait
+            }
+            _ => {
+                let reason = format!("{device} unavailable ({fault}); reconnecting");
+                out.push(self.note(reason.clone(), Some(device)));
+                out.push(Action::Notify(ScanEventKind::Suspended, reason.clone()));
+                self.metrics.suspensions += 1;
+                let wait = self.policy.backoff.next(Duration::ZERO);
+                self.suspension = Some(Suspension {
+                    cause: Cause::Absent(device),
+                    since: now,
+                    wait,
+                });
+                self.status.state = State::Suspended;
+                self.status.reason = Some(reason);
+                match device {
+                    Device::Instrument => self.status.instrument = DeviceState::Reconnecting,
+                    Device::Stage => self.status.stage = DeviceState::Reconnecting,
+                }
+                self.publish(out);
+                out.push(Action::Metrics(self.metrics.clone()));
+                wait
+            }
+        };
+        self.wait(out, wait, AfterWait::Open(device));
+    }
+
+    fn line_fault(&mut self, fault: Fault, now: Now, out: &mut Vec<Action>) {
+        let k = self.line;
+        match fault.class {
+            FaultClass::Absent => {
+                out.push(Action::Close(fault.device));
+                match fault.device {
+                    Device::Instrument => self.instrument_open = false,
+                    Device::Stage => self.stage_open = false,
+                }
+                out.push(self.note(
+                    format!("line {} abandoned: {fault}", k + 1),
+                    Some(fault.device),
+                ));
+                self.effect(out, Doing::Open(fault.device));
+            }
+            FaultClass::Transient => {
+                let why = format!("line {}: {fault}", k + 1);
+                self.transient(why, fault.device, now, out);
+            }
+            FaultClass::PositionLost => {
+                self.rehomes += 1;
+                if self.rehomes >= self.plan.max_line_attempts {
+                    return self.fail(
+                        FailReason::PositionLostRepeatedly {
+                            line: k,
+                            times: self.rehomes,
+                            last: fault,
+                        },
+                        out,
+                    );
+                }
+                self.need_home = true;
+                self.metrics.retries += 1;
+                out.push(self.note(
+                    format!(
+                        "line {} abandoned: {fault}; re-homing ({} of {} allowed)",
+                        k + 1,
+                        self.rehomes,
+                        self.plan.max_line_attempts - 1
+                    ),
+                    Some(fault.device),
+                ));
+                self.next_step(now, out);
+            }
+            FaultClass::Fatal => self.fail(
+                FailReason::Fatal {
+                    line: Some(k),
+                    fault,
+                },
+                out,
+            ),
+        }
+    }
+
+    /// A fault that may clear by itself: retried with backoff while the budget lasts.
+    fn transient(&mut self, why: String, device: Device, now: Now, out: &mut Vec<Action>) {
+        let first = self.budget.is_none();
+        let budget = self.budget.get_or_insert(Budget {
+            since: now,
+            last: String::new(),
+        });
+        budget.last = why.clone();
+        let since = budget.since;
+        let spent = now.mono.saturating_duration_since(since.mono);
+        if spent >= self.policy.transient_budget {
+            return self.fail(
+                FailReason::BudgetExhausted {
+                    line: self.line,
+                    budget_s: self.policy.transient_budget.as_secs(),
+                    since: since.wall,
+                    traces: self.traces,
+                    last: why,
+                },
+                out,
+            );
+        }
+        self.retry_wait = self.policy.backoff.next(self.retry_wait);
+        let left = self.policy.transient_budget - spent;
+        let wait = self.retry_wait.min(left);
+        let reason = format!(
+            "{device} busy since {}; retrying the line (budget left {} s); last: {why}",
+            stamp(since.wall),
+            left.as_secs()
+        );
+        out.push(self.note(
+            format!(
+                "suspended: {reason}; trying again in {:.1} s",
+                wait.as_secs_f64()
+            ),
+            Some(device),
+        ));
+        self.metrics.retries += 1;
+        if first {
+            self.metrics.suspensions += 1;
+            out.push(Action::Notify(ScanEventKind::Suspended, reason.clone()));
+        }
+        self.suspension = Some(Suspension {
+            cause: Cause::Busy(device),
+            since,
+            wait,
+        });
+        self.status.state = State::Suspended;
+        self.status.reason = Some(reason);
+        self.publish(out);
+        out.push(Action::Metrics(self.metrics.clone()));
+        self.wait(out, wait, AfterWait::Retry);
+    }
+
+    fn storage_failed(
+        &mut self,
+        s: StorageFailure,
+        outputs: bool,
+        now: Now,
+        out: &mut Vec<Action>,
+    ) {
+        if !s.disk_full {
+            return self.fail(
+                if outputs {
+                    FailReason::Outputs(s.message)
+                } else {
+                    FailReason::Storage(s.message)
+                },
+                out,
+            );
+        }
+        let committed = self.line;
+        let needed_bytes = remaining_scan_bytes(
+            self.plan.lines,
+            committed,
+            self.columns.map_or(self.points_per_line, |c| c as u64),
+        );
+        let what = if outputs {
+            "the surface and report".to_owned()
+        } else {
+            format!("line {}", self.line + 1)
+        };
+        let wait = match &mut self.suspension {
+            Some(sus) if matches!(sus.cause, Cause::DiskFull { .. }) => {
+                sus.wait = self.policy.backoff.next(sus.wait);
+                sus.wait
+            }
+            _ => self.policy.backoff.next(Duration::ZERO),
+        };
+        let reason = format!(
+            "disk full while writing {what} ({}); the remaining lines need about {} MB; waiting for space",
+            s.message,
+            mb(needed_bytes)
+        );
+        out.push(self.note(format!("suspended: {reason}"), None));
+        if !matches!(
+            self.suspension.as_ref().map(|s| &s.cause),
+            Some(Cause::DiskFull { .. })
+        ) {
+            self.metrics.suspensions += 1;
+            out.push(Action::Notify(ScanEventKind::Suspended, reason.clone()));
+            self.suspension = Some(Suspension {
+                cause: Cause::DiskFull {
+                    needed_bytes,
+                    outputs,
+                },
+                since: now,
+                wait,
+            });
+        }
+        self.status.state = State::Suspended;
+        self.status.reason = Some(reason);
+        self.publish(out);
+        out.push(Action::Metrics(self.metrics.clone()));
+        self.wait(out, wait, AfterWait::CheckSpace);
+    }
+
+    fn space_checked(&mut self, free: u64, now: Now, out: &mut Vec<Action>) {
+        let Some(Suspension {
+            cause:
+                Cause::DiskFull {
+                    needed_bytes,
+                    outputs,
+                },
+            since,
+            wait,
+        }) = self.suspension.clone()
+        else {
+            return;
+        };
+        if free < needed_bytes {
+            let next = self.policy.backoff.next(wait);
+            if let Some(s) = &mut self.suspension {
+                s.wait = next;
+            }
+            self.status.reason = Some(format!(
+                "disk full since {}: {} MB free, the remaining lines need about {} MB; free space in the output directory",
+                stamp(since.wall),
+                mb(free),
+                mb(needed_bytes)
+            ));
+            self.publish(out);
+            return self.wait(out, next, AfterWait::CheckSpace);
+        }
+        let secs = (now.mono - since.mono).as_secs_f64();
+        out.push(self.note(
+            format!(
+                "space is back ({} MB free) after {secs:.0} s; scan continues",
+                mb(free)
+            ),
+            None,
+        ));
+        self.suspension = None;
+        self.status.state = State::Scanning;
+        self.status.reason = None;
+        if outputs {
+            self.status.state = State::Finishing;
+            self.publish(out);
+            self.effect(out, Doing::Outputs);
+        } else {
+            self.publish(out);
+            self.commit(out);
+        }
+    }
+
+    fn line_done(&mut self, now: Now, out: &mut Vec<Action>) {
+        let k = self.line;
+        if let Some(s) = self.suspension.take() {
+            let secs = (now.mono - s.since.mono).as_secs_f64();
+            out.push(self.note(
+                format!(
+                    "line {} on disk after {secs:.0} s of faults; scan continues",
+                    k + 1
+                ),
+                None,
+            ));
+            self.status.reason = None;
+        }
+        let secs = self
+            .line_began
+            .take()
+            .map_or(0.0, |t| (now.mono - t).as_secs_f64());
+        self.line_seconds.push(secs);
+        self.line += 1;
+        self.traces = 0;
+        self.rehomes = 0;
+        self.budget = None;
+        self.retry_wait = Duration::ZERO;
+        let m = &mut self.metrics;
+        m.lines_done = self.line;
+        m.last_line_seconds = Some(secs);
+        m.line_seconds_sum += secs;
+        m.line_seconds_count += 1;
+        m.last_line_unix_seconds = Some(now.wall.timestamp_millis() as f64 / 1000.0);
+        out.push(Action::Metrics(self.metrics.clone()));
+        if self.status.state == State::Suspended {
+            self.status.state = State::Scanning;
+        }
+        self.status.last_ra_um = self.held_ra.take().or(self.status.last_ra_um);
+        self.publish_progress(out, None);
+        if self.pause_requested && self.line < self.plan.lines {
+            self.pause_requested = false;
+            let reason = format!("paused by the operator after line {}", k + 1);
+            out.push(Action::Record(Note {
+                reason: reason.clone(),
+                device: None,
+                line: Some(k),
+                peer: None,
+            }));
+            self.status.state = State::Paused;
+            self.status.reason = Some(reason);
+            self.status.current_line = None;
+            self.publish(out);
+            self.doing = Doing::Paused;
+            return;
+        }
+        self.next_step(now, out);
+    }
+
+    /// A traced line must fit the scan: finite heights, the scan's point count and pitch,
+    /// unchanged conditions.
+    fn check(&self, t: &TracedSummary) -> Option<LineProblem> {
+        if let Some((point, value)) = t.first_non_finite {
+            return Some(LineProblem::NotFinite {
+                point,
+                points: t.points,
+                value,
+            });
+        }
+        if let Some(cols) = self.columns {
+            if t.points != cols {
+                return Some(LineProblem::PointCount {
+                    points: t.points,
+                    scan: cols,
+                });
+            }
+        }
+        if let Some(px) = self.pitch_x_mm {
+            if px != t.pitch_x_mm {
+                return Some(LineProblem::Pitch {
+                    pitch_x_mm: t.pitch_x_mm,
+                    scan: px,
+                });
+            }
+        }
+        let scan = self.conditions.as_ref()?;
+        conditions_difference(scan, &t.conditions).map(LineProblem::ConditionsChanged)
+    }
+
+    // ---- operator commands and the end ---------------------------------------------
+
+    fn command(&mut self, command: OperatorCommand, peer: Peer, now: Now, out: &mut Vec<Action>) {
+        let scan = match &self.status.scan_id {
+            Some(id) => format!("scan {id}"),
+            None => "the scan being started (no id yet)".to_owned(),
+        };
+        let paused = self.doing == Doing::Paused;
+        let by = format!(
+            "uid {} gid {} pid {}",
+            peer.uid,
+            peer.gid,
+            peer.pid.map_or("unknown".to_owned(), |p| p.to_string())
+        );
+        let note = |reason: String, line: Option<u32>| {
+            Action::Record(Note {
+                reason,
+                device: None,
+                line,
+                peer: Some(peer),
+            })
+        };
+        if self.ending.is_some() {
+            out.push(Action::Reply(Err(format!("{scan} is ending"))));
+            return;
+        }
+        match command {
+            OperatorCommand::Pause if paused => {
+                out.push(Action::Reply(Ok(format!("{scan} is already paused"))))
+            }
+            OperatorCommand::Pause => {
+                self.pause_requested = true;
+                if self.status.state == State::Scanning {
+                    self.status.state = State::Pausing;
+                }
+                out.push(Action::Reply(Ok(format!(
+                    "{scan} pauses once the current line is on disk"
+                ))));
+                if self.created {
+                    out.push(note(format!("pause requested by {by}"), self.current()));
+                }
+                self.publish(out);
+            }
+            OperatorCommand::Resume if paused => {
+                out.push(Action::Reply(Ok(format!("{scan} resumes"))));
+                out.push(note(
+                    format!("resumed by the operator ({by})"),
+                    Some(self.line),
+                ));
+                self.status.state = State::Scanning;
+                self.status.reason = None;
+                self.next_step(now, out);
+            }
+            OperatorCommand::Resume if self.pause_requested => {
+                self.pause_requested = false;
+                if self.status.state == State::Pausing {
+                    self.status.state = State::Scanning;
+                }
+                out.push(Action::Reply(Ok("pause request withdrawn".to_owned())));
+                if self.created {
+                    out.push(note(
+                        format!("pause request withdrawn by {by}"),
+                        self.current(),
+                    ));
+                }
+                self.publish(out);
+            }
+            OperatorCommand::Resume => out.push(Action::Reply(Ok(format!(
+                "{scan} is not paused; it goes on scanning"
+            )))),
+            OperatorCommand::Abort => {
+                out.push(Action::Reply(Ok(format!(
+                    "aborting {scan}; lines on disk are kept"
+                ))));
+                if self.created {
+                    out.push(note(format!("abort requested by {by}"), self.current()));
+                }
+                self.interrupt(End::Abort { peer: Some(peer) }, out);
+            }
+            OperatorCommand::Start { .. } => out.push(Action::Reply(Err(format!(
+                "{scan} is running; abort it first or wait until it ends"
+            )))),
+        }
+    }
+
+    /// Abort or shutdown: cancel what is in flight, clean up the devices, then stop.
+    fn interrupt(&mut self, end: End, out: &mut Vec<Action>) {
+        if self.ending.is_some() {
+            return;
+        }
+        if self.doing.is_effect() {
+            out.push(Action::Cancel);
+        }
+        if self.instrument_open || self.stage_open {
+            self.ending = Some(end);
+            self.effect(out, Doing::Cleanup);
+        } else {
+            self.stop(end, out);
+        }
+    }
+
+    fn fail(&mut self, reason: FailReason, out: &mut Vec<Action>) {
+        self.stop(End::Fail(reason), out);
+    }
+
+    fn stop(&mut self, end: End, out: &mut Vec<Action>) {
+        self.ended = true;
+        self.doing = Doing::Nothing;
+        let (ending, kind, reason) = match &end {
+            End::Success { summary } => (
+                Ending::Success,
+                Some(ScanEventKind::Success),
+                summary.clone(),
+            ),
+            End::Abort { .. } if self.created => (
+                Ending::Abort,
+                Some(ScanEventKind::Abort),
+                "aborted by the operator".to_owned(),
+            ),
+            End::Abort { .. } => (
+                Ending::Abort,
+                None,
+                "aborted before the first line".to_owned(),
+            ),
+            End::Shutdown => (Ending::Interrupted, None, "shutdown".to_owned()),
+            End::Fail(r) => (
+                Ending::Fail,
+                self.created.then_some(ScanEventKind::Fail),
+                r.to_string(),
+            ),
+        };
+        if matches!(end, End::Shutdown) && self.created {
+            out.push(self.note(
+                "shutdown (SIGTERM/SIGINT): current line abandoned; the scan resumes at the next start"
+                    .to_owned(),
+                None,
+            ));
+        }
+        out.push(Action::Stop(end.clone()));
+        if let Some(kind) = kind {
+            out.push(Action::Notify(kind, reason.clone()));
+        }
+        if matches!(end, End::Shutdown) && self.created {
+            self.status.state = State::Stopping;
+        } else {
+            self.status = ended_status(&self.status, ending, &reason);
+        }
+        self.publish(out);
+    }
+
+    // ---- helpers -----------------------------------------------------------------
+
+    /// The line being worked on, if any.
+    fn current(&self) -> Option<u32> {
+        (self.created && self.line < self.plan.lines).then_some(self.line)
+    }
+
+    fn note(&self, reason: String, device: Option<Device>) -> Action {
+        Action::Record(Note {
+            reason,
+            device,
+            line: self.current(),
+            peer: None,
+        })
+    }
+
+    fn publish(&self, out: &mut Vec<Action>) {
+        out.push(Action::Publish(self.status.clone()));
+    }
+
+    fn publish_progress(&mut self, out: &mut Vec<Action>, current: Option<u32>) {
+        self.status.lines_done = self.line;
+        self.status.lines_total = self.plan.lines;
+        self.status.current_line = current.map(|k| k + 1);
+        self.status.y_mm = current.map(|k| self.plan.target(k).to_mm());
+        self.status.eta_s = (!self.line_seconds.is_empty()).then(|| {
+            let mean = self.line_seconds.iter().sum::<f64>() / self.line_seconds.len() as f64;
+            mean * f64::from(self.plan.lines.saturating_sub(self.line))
+        });
+        self.publish(out);
+    }
+}
+
+impl Doing {
+    fn is_effect(self) -> bool {
+        !matches!(self, Doing::Paused | Doing::Nothing)
+    }
+}
+
+/// The snapshot after a scan (or an attempt to start one) ended: idle, the last stop named,
+/// the devices no longer connected.
+pub fn ended_status(s: &Status, ending: Ending, reason: &str) -> Status {
+    let downgrade = |d: DeviceState| match d {
+        DeviceState::Connected | DeviceState::Reconnecting => DeviceState::Present,
+        other => other,
+    };
+    Status {
+        last_stop: Some(LastStop {
+            scan_id: s.scan_id.clone().unwrap_or_default(),
+            status: ending,
+            reason: reason.to_owned(),
+            dir: s.scan_dir.clone().unwrap_or_default(),
+        }),
+        instrument: downgrade(s.instrument),
+        stage: downgrade(s.stage),
+        ..Status::idle()
+    }
+}
+
+/// Compares the conditions a line was traced under with the scan's; the first difference,
+/// named, when they differ.
+pub fn conditions_difference(scan: &Conditions, line: &Conditions) -> Option<String> {
+    fn differs<T: PartialEq + fmt::Debug>(
+        name: &str,
+        at_start: &Option<T>,
+        now: &Option<T>,
+    ) -> Option<String> {
+        let show = |v: &Option<T>| {
+            v.as_ref()
+                .map_or("unknown".to_owned(), |x| format!("{x:?}"))
+        };
+        (at_start != now).then(|| {
+            format!(
+                "{name} was {} at the start of the scan, now {}",
+                show(at_start),
+                show(now)
+            )
+        })
+    }
+    let (a, b) = (scan, line);
+    differs("standard", &a.standard, &b.standard)
+        .or_else(|| differs("profile", &a.profile_kind, &b.profile_kind))
+        .or_else(|| differs("filter", &a.filter, &b.filter))
+        .or_else(|| differs("lambda-c mm", &a.lambda_c_mm, &b.lambda_c_mm))
+        .or_else(|| differs("lambda-s um", &a.lambda_s_um, &b.lambda_s_um))
+        .or_else(|| differs("sampling lengths", &a.sampling_lengths, &b.sampling_lengths))
+        .or_else(|| {
+            differs(
+                "evaluation length mm",
+                &a.evaluation_length_mm,
+                &b.evaluation_length_mm,
+            )
+        })
+        .or_else(|| differs("speed mm/s", &a.speed_mm_s, &b.speed_mm_s))
+}
+
+fn stamp(t: DateTime<Utc>) -> String {
+    t.to_rfc3339_opts(SecondsFormat::Secs, true)
+}
+
+fn mb(bytes: u64) -> String {
+    format!("{:.1}", bytes as f64 / 1e6)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,944 @@
+//! The session core driven through its promises without a runtime, a disk or a clock: each
+//! test feeds events at chosen times and reads the actions back.
+
+use super::*;
+use crate::devices::FaultClass;
+
+const LINES: u32 = 3;
+
+fn plan() -> Plan {
+    Plan {
+        lines: LINES,
+        y_start_nm: Nm(-20_000_000),
+        y_step_nm: Nm(10_000),
+        degree_u: 3,
+        degree_v: 2,
+        max_line_attempts: 3,
+    }
+}
+
+fn policy() -> Policy {
+    Policy {
+        backoff: Backoff {
+            initial: Duration::from_secs(1),
+            max: Duration::from_secs(8),
+        },
+        transient_budget: Duration::from_secs(60),
+        home_on_start: false,
+    }
+}
+
+fn peer() -> Peer {
+    Peer {
+        uid: 1000,
+        gid: 100,
+        pid: Some(4242),
+    }
+}
+
+fn fault(device: Device, class: FaultClass, message: &str) -> Fault {
+    Fault {
+        device,
+        class,
+        ng_code: None,
+        message: message.to_owned(),
+    }
+}
+
+fn good_line() -> TracedSummary {
+    TracedSummary {
+        points: 100,
+        pitch_x_mm: 0.0005,
+        first_non_finite: None,
+        conditions: Conditions::default(),
+        ra_um: Some(0.2),
+    }
+}
+
+/// A machine and a clock the test moves by hand.
+struct Rig {
+    m: Machine,
+    t0: Instant,
+    wall0: DateTime<Utc>,
+    elapsed: Duration,
+    /// Every action returned so far.
+    log: Vec<Action>,
+}
+
+impl Rig {
+    /// A new scan whose devices opened and whose directory exists: the first line's
+    /// `EnsureIdle` is the last action.
+    fn started() -> Rig {
+        let mut r = Rig::fresh();
+        let a = r.start();
+        assert_eq!(effect(&a), Some(&Action::Open(Device::Instrument)));
+        r.feed(opened(Device::Instrument));
+        let a = r.feed(opened(Device::Stage));
+        assert_eq!(effect(&a), Some(&Action::CreateScan));
+        let a = r.feed(Event::Created {
+            scan_id: "S".into(),
+            dir: "/out/S".into(),
+            conditions: Conditions::default(),
+            points_per_line: 100,
+        });
+        assert_eq!(effect(&a), Some(&Action::EnsureIdle));
+        r
+    }
+
+    fn fresh() -> Rig {
+        Rig::with(Machine::new_scan(plan(), policy(), Status::idle()))
+    }
+
+    fn with(m: Machine) -> Rig {
+        Rig {
+            m,
+            t0: Instant::now(),
+            wall0: DateTime::parse_from_rfc3339("2026-12-02T01:00:00Z")
+                .expect("time")
+                .with_timezone(&Utc),
+            elapsed: Duration::ZERO,
+            log: Vec::new(),
+        }
+    }
+
+    fn now(&self) -> Now {
+        Now {
+            mono: self.t0 + self.elapsed,
+            wall: self.wall0 + chrono::Duration::from_std(self.elapsed).expect("duration"),
+        }
+    }
+
+    fn start(&mut self) -> Vec<Action> {
+        let a = self.m.start(self.now());
+        self.log.extend(a.iter().cloned());
+        a
+    }
+
+    fn feed(&mut self, ev: Event) -> Vec<Action> {
+        let a = self.m.handle(ev, self.now());
+        self.log.extend(a.iter().cloned());
+        a
+    }
+
+    fn wait(&mut self, d: Duration) {
+        self.elapsed += d;
+    }
+
+    /// Drives the current line from `EnsureIdle` to its commit and push.
+    fn line_ok(&mut self) -> Vec<Action> {
+        self.feed(Event::Idle);
+        self.feed(Event::Arrived);
+        let a = self.feed(Event::Traced(good_line()));
+        assert!(matches!(effect(&a), Some(Action::Commit { .. })), "{a:?}");
+        self.feed(Event::Committed);
+        self.feed(Event::Pushed)
+    }
+
+    /// Drives the machine to the trace of the current line (after `EnsureIdle`).
+    fn up_to_trace(&mut self) {
+        self.feed(Event::Idle);
+        let a = self.feed(Event::Arrived);
+        assert_eq!(effect(&a), Some(&Action::Trace));
+    }
+
+    fn records(&self) -> Vec<String> {
+        self.log
+            .iter()
+            .filter_map(|a| match a {
+                Action::Record(n) => Some(n.reason.clone()),
+                _ => None,
+            })
+            .collect()
+    }
+}
+
+fn opened(device: Device) -> Event {
+    Event::Opened {
+        device,
+        position_trusted: true,
+    }
+}
+
+fn fault_event(device: Device, class: FaultClass, message: &str, trace_started: bool) -> Event {
+    Event::Fault {
+        fault: fault(device, class, message),
+        trace_started,
+    }
+}
+
+/// The effect of a batch (its last action, when it is one).
+fn effect(actions: &[Action]) -> Option<&Action> {
+    actions.last().filter(|a| a.is_effect())
+}
+
+fn stop_of(actions: &[Action]) -> Option<&End> {
+    actions.iter().find_map(|a| match a {
+        Action::Stop(e) => Some(e),
+        _ => None,
+    })
+}
+
+fn last_status(actions: &[Action]) -> Option<&Status> {
+    actions.iter().rev().find_map(|a| match a {
+        Action::Publish(s) => Some(s),
+        _ => None,
+    })
+}
+
+/// How the machine reacts to a fault.
+#[derive(Debug, PartialEq)]
+enum Reaction {
+    /// Closes the device and reopens it at once (suspension costs no attempt).
+    Reopen(Device),
+    /// Waits (backoff) and tries the line again; the scan is suspended meanwhile.
+    RetryAfter(Duration),
+    /// Homes the stage before the line is tried again.
+    Rehome,
+    /// The scan fails.
+    Fails,
+}
+
+fn reaction(actions: &[Action]) -> Reaction {
+    if stop_of(actions).is_some() {
+        return Reaction::Fails;
+    }
+    match effect(actions) {
+        Some(Action::Open(d)) => {
+            assert!(actions.contains(&Action::Close(*d)), "{actions:?}");
+            Reaction::Reopen(*d)
+        }
+        Some(Action::SetTimer(d)) => Reaction::RetryAfter(*d),
+        Some(Action::Home) => Reaction::Rehome,
+        other => panic!("unexpected reaction {other:?} in {actions:?}"),
+    }
+}
+
+/// Brings a started scan to one step of its first line.
+type ToStep = fn(&mut Rig);
+
+/// The README's fault table, per fault class and per step of a line: every class in every
+/// state it can arise in.
+#[test]
+fn every_fault_class_in_every_step_of_a_line_gets_its_reaction() {
+    use FaultClass::*;
+    let steps: [(&str, ToStep); 4] = [
+        ("homing", |r| {
+            // A stage that needs homing (its position is not trusted after a reopen).
+            r.feed(fault_event(Device::Stage, Absent, "EOF", false));
+            let a = r.feed(Event::Opened {
+                device: Device::Stage,
+                position_trusted: false,
+            });
+            assert_eq!(effect(&a), Some(&Action::Home));
+        }),
+        ("ensuring idle", |_| {}),
+        ("moving", |r| {
+            let a = r.feed(Event::Idle);
+            assert_eq!(effect(&a), Some(&Action::Move(plan().target(0))));
+        }),
+        ("tracing", |r| r.up_to_trace()),
+    ];
+    let table = [
+        (Absent, Reaction::Reopen(Device::Instrument)),
+        (Transient, Reaction::RetryAfter(Duration::from_secs(1))),
+        (PositionLost, Reaction::Rehome),
+        (Fatal, Reaction::Fails),
+    ];
+    for (step, to_step) in steps {
+        for (class, want) in &table {
+            let mut r = Rig::started();
+            to_step(&mut r);
+            let a = r.feed(fault_event(Device::Instrument, *class, "boom", false));
+            assert_eq!(&reaction(&a), want, "{class:?} while {step}");
+            if *class == Fatal {
+                assert_eq!(
+                    stop_of(&a),
+                    Some(&End::Fail(FailReason::Fatal {
+                        line: Some(0),
+                        fault: fault(Device::Instrument, Fatal, "boom"),
+                    })),
+                    "{step}"
+                );
+            }
+            if *class == Transient {
+                let s = last_status(&a).expect("status");
+                assert_eq!(s.state, State::Suspended, "{step}");
+                assert!(
+                    s.reason
+                        .as_deref()
+                        .unwrap_or_default()
+                        .starts_with("instrument busy since 2026-12-02T01:00:00Z"),
+                    "{step}: {:?}",
+                    s.reason
+                );
+                assert!(
+                    r.records()
+                        .iter()
+                        .any(|n| n.starts_with("suspended: instrument busy since")),
+                    "{step}: {:?}",
+                    r.records()
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_scan_traces_idle_move_trace_commit_push_per_line_then_writes_its_outputs() {
+    let mut r = Rig::started();
+    for k in 0..LINES {
+        let a = r.feed(Event::Idle);
+        assert_eq!(effect(&a), Some(&Action::Move(plan().target(k))));
+        let a = r.feed(Event::Arrived);
+        assert_eq!(effect(&a), Some(&Action::Trace));
+        let a = r.feed(Event::Traced(good_line()));
+        assert_eq!(
+            effect(&a),
+            Some(&Action::Commit {
+                line: k,
+                attempt: 1
+            })
+        );
+        let a = r.feed(Event::Committed);
+        assert_eq!(effect(&a), Some(&Action::Push { line: k }));
+        r.wait(Duration::from_secs(10));
+        let a = r.feed(Event::Pushed);
+        let s = last_status(&a).expect("status");
+        assert_eq!(s.lines_done, k + 1);
+        assert_eq!(s.last_ra_um, Some(0.2));
+        if k + 1 < LINES {
+            assert_eq!(effect(&a), Some(&Action::EnsureIdle));
+        } else {
+            assert_eq!(effect(&a), Some(&Action::WriteOutputs));
+        }
+    }
+    let a = r.feed(Event::OutputsWritten {
+        summary: "3 lines".into(),
+    });
+    assert_eq!(
+        stop_of(&a),
+        Some(&End::Success {
+            summary: "3 lines".into()
+        })
+    );
+    assert!(a.contains(&Action::Notify(ScanEventKind::Success, "3 lines".into())));
+    let s = last_status(&a).expect("status");
+    assert_eq!(s.state, State::Idle);
+    assert_eq!(
+        s.last_stop.as_ref().map(|l| (l.status, l.scan_id.as_str())),
+        Some((Ending::Success, "S"))
+    );
+    assert!(r.m.ended());
+    // No move was ever asked for before its line's idle.
+    let mut idle = false;
+    for a in &r.log {
+        match a {
+            Action::EnsureIdle => idle = true,
+            Action::Move(_) => {
+                assert!(idle, "a move without an idle before it");
+                idle = false;
+            }
+            _ => {}
+        }
+    }
+}
+
+#[test]
+fn transient_faults_are_retried_with_backoff_until_the_budget_is_spent() {
+    let mut r = Rig::started();
+    r.up_to_trace();
+    let mut waits = Vec::new();
+    loop {
+        let a = r.feed(fault_event(
+            Device::Instrument,
+            FaultClass::Transient,
+            "NG011 busy",
+            false,
+        ));
+        if let Some(end) = stop_of(&a) {
+            match end {
+                End::Fail(FailReason::BudgetExhausted {
+                    line,
+                    budget_s,
+                    last,
+                    traces,
+                    ..
+                }) => {
+                    assert_eq!((*line, *budget_s, *traces), (0, 60, 0));
+                    assert_eq!(last, "line 1: instrument: NG011 busy");
+                }
+                other => panic!("{other:?}"),
+            }
+            break;
+        }
+        let Some(Action::SetTimer(d)) = effect(&a) else {
+            panic!("{a:?}")
+        };
+        waits.push(d.as_secs());
+        r.wait(*d);
+        let a = r.feed(Event::TimerFired);
+        assert_eq!(
+            effect(&a),
+            Some(&Action::EnsureIdle),
+            "the line is tried again"
+        );
+        r.up_to_trace();
+    }
+    // 1, 2, 4, 8, 8, … capped at the budget's remainder; 60 s in all.
+    assert_eq!(waits, vec![1, 2, 4, 8, 8, 8, 8, 8, 8, 5]);
+    assert_eq!(waits.iter().sum::<u64>(), 60);
+}
+
+#[test]
+fn the_budget_starts_again_when_a_line_commits() {
+    let mut r = Rig::started();
+    r.up_to_trace();
+    r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Transient,
+        "timeout",
+        true,
+    ));
+    r.wait(Duration::from_secs(50));
+    r.feed(Event::TimerFired);
+    let a = r.line_ok();
+    let s = last_status(&a).expect("status");
+    assert_eq!(
+        s.state,
+        State::Scanning,
+        "back to scanning once the line is on disk"
+    );
+    assert_eq!(s.reason, None);
+    assert!(r
+        .records()
+        .iter()
+        .any(|n| n.starts_with("line 1 on disk after 50 s of faults")));
+    // Line 2: 50 s already went by, yet a fault now opens a fresh 60 s budget.
+    r.up_to_trace();
+    let a = r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Transient,
+        "timeout",
+        true,
+    ));
+    assert_eq!(reaction(&a), Reaction::RetryAfter(Duration::from_secs(1)));
+    r.wait(Duration::from_secs(59));
+    r.feed(Event::TimerFired);
+    r.up_to_trace();
+    let a = r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Transient,
+        "timeout",
+        true,
+    ));
+    assert_eq!(reaction(&a), Reaction::RetryAfter(Duration::from_secs(1)));
+    r.wait(Duration::from_secs(1));
+    r.feed(Event::TimerFired);
+    r.up_to_trace();
+    let a = r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Transient,
+        "timeout",
+        true,
+    ));
+    assert!(matches!(
+        stop_of(&a),
+        Some(End::Fail(FailReason::BudgetExhausted {
+            line: 1,
+            traces: 3,
+            ..
+        }))
+    ));
+}
+
+#[test]
+fn an_attempt_counts_only_when_a_trace_was_really_started() {
+    let mut r = Rig::started();
+    // Refused before it began (busy), then a fault outside the trace: no attempt.
+    r.up_to_trace();
+    r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Transient,
+        "NG011",
+        false,
+    ));
+    r.feed(Event::TimerFired);
+    r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Transient,
+        "not idle",
+        false,
+    ));
+    r.feed(Event::TimerFired);
+    r.up_to_trace();
+    let a = r.feed(Event::Traced(good_line()));
+    assert_eq!(
+        effect(&a),
+        Some(&Action::Commit {
+            line: 0,
+            attempt: 1
+        })
+    );
+    r.feed(Event::Committed);
+    r.feed(Event::Pushed);
+    // A trace that started and broke off counts.
+    r.up_to_trace();
+    r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Transient,
+        "timeout",
+        true,
+    ));
+    r.feed(Event::TimerFired);
+    r.up_to_trace();
+    let a = r.feed(Event::Traced(good_line()));
+    assert_eq!(
+        effect(&a),
+        Some(&Action::Commit {
+            line: 1,
+            attempt: 2
+        })
+    );
+}
+
+#[test]
+fn a_vanished_device_is_reopened_with_backoff_and_costs_no_attempt() {
+    let mut r = Rig::started();
+    r.up_to_trace();
+    let a = r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Absent,
+        "EOF",
+        true,
+    ));
+    assert_eq!(reaction(&a), Reaction::Reopen(Device::Instrument));
+    let mut waits = Vec::new();
+    for _ in 0..4 {
+        let a = r.feed(fault_event(
+            Device::Instrument,
+            FaultClass::Absent,
+            "no such port",
+            false,
+        ));
+        let s = r.m.status();
+        assert_eq!(s.state, State::Suspended);
+        assert_eq!(s.instrument, DeviceState::Reconnecting);
+        let Some(Action::SetTimer(d)) = effect(&a) else {
+            panic!("{a:?}")
+        };
+        waits.push(d.as_secs());
+        r.wait(*d);
+        let a = r.feed(Event::TimerFired);
+        assert_eq!(effect(&a), Some(&Action::Open(Device::Instrument)));
+    }
+    assert_eq!(waits, vec![1, 2, 4, 8]);
+    let a = r.feed(opened(Device::Instrument));
+    assert_eq!(effect(&a), Some(&Action::EnsureIdle));
+    let s = last_status(&a).expect("status");
+    assert_eq!(
+        (s.state, s.instrument),
+        (State::Scanning, DeviceState::Connected)
+    );
+    assert!(r
+        .records()
+        .iter()
+        .any(|n| n == "instrument back after 15 s; scan continues"));
+    // One suspension was announced, not one per try.
+    let notices = r
+        .log
+        .iter()
+        .filter(|a| matches!(a, Action::Notify(ScanEventKind::Suspended, _)))
+        .count();
+    assert_eq!(notices, 1);
+    r.up_to_trace();
+    let a = r.feed(Event::Traced(good_line()));
+    assert_eq!(
+        effect(&a),
+        Some(&Action::Commit {
+            line: 0,
+            attempt: 1
+        }),
+        "a suspension uses up no attempt, not even the trace the unplug cut off"
+    );
+}
+
+#[test]
+fn a_different_instrument_after_a_reconnect_fails_the_scan() {
+    let mut r = Rig::started();
+    r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Absent,
+        "EOF",
+        false,
+    ));
+    let a = r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Fatal,
+        "a different instrument answered",
+        false,
+    ));
+    assert!(matches!(
+        stop_of(&a),
+        Some(End::Fail(FailReason::Fatal { line: Some(0), .. }))
+    ));
+}
+
+#[test]
+fn a_lost_position_rehomes_within_the_attempt_bound() {
+    let mut r = Rig::started();
+    for n in 1..3 {
+        r.feed(Event::Idle);
+        let a = r.feed(fault_event(
+            Device::Stage,
+            FaultClass::PositionLost,
+            "reset",
+            false,
+        ));
+        assert_eq!(reaction(&a), Reaction::Rehome, "loss {n}");
+        let a = r.feed(Event::Homed);
+        assert_eq!(effect(&a), Some(&Action::EnsureIdle));
+    }
+    r.feed(Event::Idle);
+    let a = r.feed(fault_event(
+        Device::Stage,
+        FaultClass::PositionLost,
+        "reset",
+        false,
+    ));
+    assert!(matches!(
+        stop_of(&a),
+        Some(End::Fail(FailReason::PositionLostRepeatedly {
+            line: 0,
+            times: 3,
+            ..
+        }))
+    ));
+}
+
+#[test]
+fn a_line_that_a_retrace_may_fix_is_retried_and_one_that_cannot_belong_fails() {
+    let mut r = Rig::started();
+    r.line_ok();
+    r.up_to_trace();
+    let short = TracedSummary {
+        points: 99,
+        ..good_line()
+    };
+    let a = r.feed(Event::Traced(short));
+    assert_eq!(reaction(&a), Reaction::RetryAfter(Duration::from_secs(1)));
+    r.feed(Event::TimerFired);
+    r.up_to_trace();
+    let other_pitch = TracedSummary {
+        pitch_x_mm: 0.001,
+        ..good_line()
+    };
+    let a = r.feed(Event::Traced(other_pitch));
+    assert_eq!(
+        stop_of(&a),
+        Some(&End::Fail(FailReason::LineRefused {
+            line: 1,
+            problem: LineProblem::Pitch {
+                pitch_x_mm: 0.001,
+                scan: 0.0005
+            }
+        }))
+    );
+}
+
+#[test]
+fn changed_conditions_fail_the_scan_naming_what_changed() {
+    let mut r = Rig::started();
+    r.up_to_trace();
+    let mut t = good_line();
+    t.conditions.speed_mm_s = Some(0.25);
+    let a = r.feed(Event::Traced(t));
+    let Some(End::Fail(reason)) = stop_of(&a) else {
+        panic!("{a:?}")
+    };
+    assert!(
+        reason
+            .to_string()
+            .contains("speed mm/s was unknown at the start of the scan, now 0.25"),
+        "{reason}"
+    );
+}
+
+#[test]
+fn a_full_disk_suspends_checks_space_with_backoff_and_commits_the_held_line() {
+    let mut r = Rig::started();
+    r.line_ok();
+    r.up_to_trace();
+    r.feed(Event::Traced(good_line()));
+    let a = r.feed(Event::StorageFailed(StorageFailure {
+        disk_full: true,
+        message: "write lines/0001.csv: No space left on device".into(),
+    }));
+    assert_eq!(stop_of(&a), None, "a full disk never ends the scan");
+    let s = last_status(&a).expect("status");
+    assert_eq!(s.state, State::Suspended);
+    let need = remaining_scan_bytes(LINES, 1, 100);
+    assert!(
+        s.reason
+            .as_deref()
+            .unwrap_or_default()
+            .contains(&format!("the remaining lines need about {} MB", mb(need))),
+        "{:?}",
+        s.reason
+    );
+    assert_eq!(effect(&a), Some(&Action::SetTimer(Duration::from_secs(1))));
+    let a = r.feed(Event::TimerFired);
+    assert_eq!(effect(&a), Some(&Action::CheckSpace));
+    // Still too little: the next check waits longer.
+    let a = r.feed(Event::SpaceChecked {
+        free_bytes: need - 1,
+    });
+    assert_eq!(effect(&a), Some(&Action::SetTimer(Duration::from_secs(2))));
+    r.feed(Event::TimerFired);
+    let a = r.feed(Event::SpaceChecked { free_bytes: need });
+    assert_eq!(
+        effect(&a),
+        Some(&Action::Commit {
+            line: 1,
+            attempt: 1
+        }),
+        "the traced line is committed, not traced again"
+    );
+    r.feed(Event::Committed);
+    let a = r.feed(Event::Pushed);
+    assert_eq!(effect(&a), Some(&Action::EnsureIdle));
+    assert!(!r.log.iter().any(|a| matches!(a, Action::Stop(_))));
+}
+
+#[test]
+fn a_full_disk_while_writing_the_outputs_waits_and_writes_them_again() {
+    let mut r = Rig::started();
+    for _ in 0..LINES {
+        r.line_ok();
+    }
+    let a = r.feed(Event::StorageFailed(StorageFailure {
+        disk_full: true,
+        message: "surface.igs: No space left on device".into(),
+    }));
+    assert_eq!(stop_of(&a), None);
+    r.feed(Event::TimerFired);
+    let a = r.feed(Event::SpaceChecked {
+        free_bytes: u64::MAX,
+    });
+    assert_eq!(effect(&a), Some(&Action::WriteOutputs));
+}
+
+#[test]
+fn a_storage_failure_that_cannot_clear_fails_as_io() {
+    let mut r = Rig::started();
+    r.up_to_trace();
+    r.feed(Event::Traced(good_line()));
+    let a = r.feed(Event::StorageFailed(StorageFailure {
+        disk_full: false,
+        message: "Read-only file system".into(),
+    }));
+    let Some(End::Fail(reason)) = stop_of(&a) else {
+        panic!("{a:?}")
+    };
+    assert_eq!(reason.kind(), FailKind::Io);
+}
+
+#[test]
+fn a_scan_with_every_line_committed_writes_its_outputs_without_opening_devices() {
+    let m = Machine::resumed(
+        plan(),
+        policy(),
+        Status::idle(),
+        Resumed {
+            scan_id: "S".into(),
+            dir: "/out/S".into(),
+            committed: LINES,
+            columns: Some(100),
+            pitch_x_mm: Some(0.0005),
+            conditions: Conditions::default(),
+            points_per_line: 100,
+        },
+    );
+    let mut r = Rig::with(m);
+    let a = r.start();
+    assert_eq!(effect(&a), Some(&Action::WriteOutputs));
+    assert!(!a.iter().any(|a| matches!(a, Action::Open(_))));
+}
+
+#[test]
+fn a_resumed_scan_reopens_its_devices_and_goes_on_at_its_first_missing_line() {
+    let m = Machine::resumed(
+        plan(),
+        policy(),
+        Status::idle(),
+        Resumed {
+            scan_id: "S".into(),
+            dir: "/out/S".into(),
+            committed: 2,
+            columns: Some(100),
+            pitch_x_mm: Some(0.0005),
+            conditions: Conditions::default(),
+            points_per_line: 100,
+        },
+    );
+    let mut r = Rig::with(m);
+    let a = r.start();
+    assert_eq!(effect(&a), Some(&Action::Open(Device::Instrument)));
+    // Not there yet: a resumed scan waits for it like a suspended one.
+    let a = r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Absent,
+        "no port",
+        false,
+    ));
+    assert_eq!(stop_of(&a), None);
+    r.feed(Event::TimerFired);
+    r.feed(opened(Device::Instrument));
+    let a = r.feed(opened(Device::Stage));
+    assert_eq!(effect(&a), Some(&Action::EnsureIdle));
+    let a = r.feed(Event::Idle);
+    assert_eq!(effect(&a), Some(&Action::Move(plan().target(2))));
+}
+
+#[test]
+fn pause_waits_for_the_line_on_disk_and_resume_goes_on() {
+    let mut r = Rig::started();
+    r.up_to_trace();
+    let a = r.feed(Event::Command {
+        command: OperatorCommand::Pause,
+        peer: peer(),
+    });
+    assert!(!a.contains(&Action::Cancel), "the trace goes on");
+    assert_eq!(
+        a.first(),
+        Some(&Action::Reply(Ok(
+            "scan S pauses once the current line is on disk".into()
+        )))
+    );
+    assert_eq!(last_status(&a).map(|s| s.state), Some(State::Pausing));
+    r.feed(Event::Traced(good_line()));
+    r.feed(Event::Committed);
+    let a = r.feed(Event::Pushed);
+    assert_eq!(effect(&a), None, "paused: nothing in flight");
+    assert_eq!(last_status(&a).map(|s| s.state), Some(State::Paused));
+    let a = r.feed(Event::Command {
+        command: OperatorCommand::Pause,
+        peer: peer(),
+    });
+    assert_eq!(
+        a,
+        vec![Action::Reply(Ok("scan S is already paused".into()))]
+    );
+    let a = r.feed(Event::Command {
+        command: OperatorCommand::Resume,
+        peer: peer(),
+    });
+    assert_eq!(effect(&a), Some(&Action::EnsureIdle));
+    let notes: Vec<&Note> = r
+        .log
+        .iter()
+        .filter_map(|a| match a {
+            Action::Record(n) if n.peer.is_some() => Some(n),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(notes.len(), 2, "pause and resume, each with who asked");
+    assert_eq!(
+        notes[0].reason,
+        "pause requested by uid 1000 gid 100 pid 4242"
+    );
+    assert!(notes[1].reason.starts_with("resumed by the operator"));
+}
+
+#[test]
+fn abort_cancels_the_trace_cleans_up_and_records_abort() {
+    let mut r = Rig::started();
+    r.line_ok();
+    r.up_to_trace();
+    let a = r.feed(Event::Command {
+        command: OperatorCommand::Abort,
+        peer: peer(),
+    });
+    assert!(a.contains(&Action::Cancel));
+    assert_eq!(effect(&a), Some(&Action::Cleanup));
+    // A late answer of the cancelled trace changes nothing.
+    assert!(r.feed(Event::Traced(good_line())).is_empty());
+    let a = r.feed(Event::CleanedUp);
+    assert_eq!(stop_of(&a), Some(&End::Abort { peer: Some(peer()) }));
+    assert_eq!(
+        last_status(&a)
+            .and_then(|s| s.last_stop.as_ref())
+            .map(|l| l.status),
+        Some(Ending::Abort)
+    );
+}
+
+#[test]
+fn shutdown_abandons_the_line_and_leaves_the_scan_resumable() {
+    let mut r = Rig::started();
+    r.line_ok();
+    r.feed(Event::Idle);
+    let a = r.feed(Event::Shutdown);
+    assert!(a.contains(&Action::Cancel));
+    assert_eq!(effect(&a), Some(&Action::Cleanup));
+    let a = r.feed(Event::CleanedUp);
+    assert_eq!(stop_of(&a), Some(&End::Shutdown));
+    assert_eq!(last_status(&a).map(|s| s.state), Some(State::Stopping));
+    let n = a
+        .iter()
+        .find_map(|a| match a {
+            Action::Record(n) => Some(n),
+            _ => None,
+        })
+        .expect("an interruption");
+    assert_eq!(n.line, Some(1));
+    assert!(n.reason.starts_with("shutdown"));
+}
+
+#[test]
+fn a_device_missing_at_the_start_of_a_new_scan_is_unavailable_not_a_suspension() {
+    let mut r = Rig::fresh();
+    r.start();
+    let a = r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Absent,
+        "no such port",
+        false,
+    ));
+    let Some(End::Fail(reason)) = stop_of(&a) else {
+        panic!("{a:?}")
+    };
+    assert_eq!(reason.kind(), FailKind::Unavailable);
+    assert!(
+        !a.iter().any(|a| matches!(a, Action::Notify(..))),
+        "no scan exists to notify about"
+    );
+}
+
+#[test]
+fn commands_answer_while_running_and_start_is_refused() {
+    let mut r = Rig::started();
+    let a = r.feed(Event::Command {
+        command: OperatorCommand::Start {
+            specimen: String::new(),
+            operator: String::new(),
+            notes: String::new(),
+        },
+        peer: peer(),
+    });
+    assert_eq!(
+        a,
+        vec![Action::Reply(Err(
+            "scan S is running; abort it first or wait until it ends".into()
+        ))]
+    );
+    let a = r.feed(Event::Command {
+        command: OperatorCommand::Resume,
+        peer: peer(),
+    });
+    assert_eq!(
+        a,
+        vec![Action::Reply(Ok(
+            "scan S is not paused; it goes on scanning".into()
+        ))]
+    );
+}

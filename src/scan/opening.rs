@@ -1,0 +1,220 @@
+//! Opening a scan's directory: creating a new one (pre-flight disk check, directory, start
+//! record) once its devices answered, or reopening an unfinished or failed one and loading
+//! its committed lines into memory and the fitter.
+//!
+//! Layer 3 (session): depends on [`super::store`], [`super::journal`], [`super::disk`],
+//! [`super::ledger`], the session's settings and [`crate::devices`]' reports.
+
+use super::command::Peer;
+use super::disk::preflight_disk;
+use super::journal::{Journal, ResumeState, StartRecord};
+use super::ledger::Ledger;
+use super::machine::Resumed;
+use super::scan_id::ScanId;
+use super::settings::RunSettings;
+use super::store::ScanStore;
+use super::store_error::StoreError;
+use crate::devices::ProbeReport;
+use crate::profile::Conditions;
+use chrono::{DateTime, Utc};
+use std::path::Path;
+
+/// Points a line is assumed to have when nothing better is known: the SJ-210's longest
+/// profile (16 mm at 0.5 µm).
+pub const LONGEST_PROFILE_POINTS: u64 = 32_001;
+
+/// Who asked for a new scan and what it is of.
+#[derive(Debug, Clone)]
+pub(super) struct NewScan {
+    pub specimen: String,
+    pub operator: String,
+    pub notes: String,
+    pub peer: Option<Peer>,
+}
+
+/// Points per line the instrument will deliver under `conditions` at `pitch_um`.
+pub fn expected_points(pitch_um: Option<f64>, conditions: &Conditions) -> u64 {
+    match (pitch_um, conditions.evaluation_length_mm) {
+        (Some(p), Some(l)) if p > 0.0 => (l * 1000.0 / p).ceil() as u64 + 1,
+        _ => LONGEST_PROFILE_POINTS,
+    }
+}
+
+/// A rough duration of one line: traverse at the measuring speed, return at twice that,
+/// and the profile read-out at the link's baud rate (about 12 characters per point).
+pub fn estimate_line_seconds(conditions: &Conditions, points: u64, baud: u32) -> f64 {
+    let length_mm = conditions.evaluation_length_mm.unwrap_or(4.0);
+    let speed = conditions.speed_mm_s.filter(|s| *s > 0.0).unwrap_or(0.5);
+    // Pre-travel and post-travel of half a cut-off each side, as the SJ series does.
+    let traverse = length_mm + conditions.lambda_c_mm.unwrap_or(0.8);
+    let trace = traverse / speed * 1.5;
+    let readout = points as f64 * 12.0 * 10.0 / f64::from(baud.max(1));
+    trace + readout
+}
+
+/// Creates a new scan once both devices answered: pre-flight (the disk must hold the
+/// whole scan), directory, start record.
+pub(super) fn create(
+    settings: &RunSettings,
+    who: NewScan,
+    report: &ProbeReport,
+    points: u64,
+) -> Result<Ledger, StoreError> {
+    let plan = settings.plan;
+    let output_dir = &settings.output_dir;
+    std::fs::create_dir_all(output_dir).map_err(|e| StoreError::Io {
+        op: "create output directory",
+        path: output_dir.clone(),
+        source: e,
+    })?;
+    let needed = preflight_disk(output_dir, plan.lines, points)?;
+    let line_s = estimate_line_seconds(&report.conditions, points, settings.instrument_baud);
+    tracing::info!(
+        "pre-flight: {} lines of about {points} points, about {:.0} s per line ({:.1} h), about {:.1} MB on disk",
+        plan.lines,
+        line_s,
+        line_s * f64::from(plan.lines) / 3600.0,
+        needed as f64 / 1e6
+    );
+    let now = Utc::now();
+    let id = unique_id(output_dir, now, &who.specimen);
+    let faults = settings.hooks.clone();
+    let store = ScanStore::create(output_dir, &id, faults.clone())?;
+    let start = StartRecord {
+        scan_id: id.0.clone(),
+        time: now,
+        plan,
+        config: settings.config.clone(),
+        config_hash: settings.config_hash.clone(),
+        specimen: who.specimen,
+        operator: who.operator,
+        notes: who.notes,
+        software_version: crate::build_info::software(),
+        instrument_model: report.identity.model.clone(),
+        firmware: report.identity.firmware.clone(),
+        drive_unit: report.identity.drive_unit.clone(),
+        conditions: report.conditions.clone(),
+        peer: who.peer,
+    };
+    let journal =
+        Journal::create(store.root(), start.clone(), faults).map_err(StoreError::Journal)?;
+    tracing::info!(scan_id = %id, "scan started in {}", store.root().display());
+    Ok(Ledger::new(
+        store,
+        journal,
+        start,
+        settings.hooks.clone(),
+        settings.metrics_file.clone(),
+    ))
+}
+
+/// A reopened scan: its ledger with the committed lines loaded and fitted, what the machine
+/// needs to know of it, and the note for the journal.
+pub(super) struct Reopened {
+    pub ledger: Ledger,
+    pub resumed: Resumed,
+    pub note: String,
+    /// The stop record's reason when the scan had failed.
+    pub failed: Option<String>,
+}
+
+/// Reopens the scan in `dir`: journal (a torn tail truncated), committed lines checked
+/// against their hashes, the fitter rebuilt. A scan with a stop record is refused unless
+/// `continue_failed` and it failed.
+pub(super) fn reopen(
+    settings: &RunSettings,
+    dir: &Path,
+    continue_failed: bool,
+) -> Result<Reopened, String> {
+    let faults = settings.hooks.clone();
+    let store = ScanStore::open(dir, faults.clone()).map_err(|e| format!("storage: {e}"))?;
+    let (journal, recovery) =
+        Journal::open(&store.journal_path(), faults).map_err(|e| e.to_string())?;
+    let state =
+        ResumeState::from_records(journal.path(), &recovery.records).map_err(|e| e.to_string())?;
+    let failed = match &state.stop {
+        None => None,
+        Some(s) if continue_failed && s.status == super::journal::StopStatus::Fail => {
+            Some(s.reason.clone())
+        }
+        Some(s) => {
+            return Err(format!(
+                "scan {} has ended ({}: {}); it cannot be continued",
+                state.start.scan_id,
+                s.status.as_str(),
+                s.reason
+            ))
+        }
+    };
+    let plan = state.start.plan;
+    if state.start.config_hash != settings.config_hash {
+        tracing::warn!(
+            "the configuration changed since scan {} started; the plan frozen in its journal is followed",
+            state.start.scan_id
+        );
+    }
+    let mut ledger = Ledger::new(
+        store,
+        journal,
+        state.start.clone(),
+        settings.hooks.clone(),
+        settings.metrics_file.clone(),
+    );
+    let lines = ledger
+        .store
+        .load_committed(&state.lines)
+        .map_err(|e| format!("cannot rebuild the fit: {e}"))?;
+    let columns = lines.first().map(|l| l.profile.len());
+    let pitch_x_mm = lines.first().map(|l| l.profile.pitch_x_mm);
+    let committed = lines.len() as u32;
+    for l in lines {
+        let index = l.meta.index;
+        ledger
+            .push(l)
+            .map_err(|e| format!("cannot rebuild the fit from line {}: {e}", index + 1))?;
+    }
+    let note = format!(
+        "{} with {committed} of {} lines on disk{}",
+        if failed.is_some() {
+            "continued after a failure"
+        } else {
+            "resumed after a restart"
+        },
+        plan.lines,
+        if recovery.torn_bytes > 0 {
+            format!(
+                "; a torn journal tail of {} bytes was truncated",
+                recovery.torn_bytes
+            )
+        } else {
+            String::new()
+        }
+    );
+    tracing::info!(scan_id = %ledger.id, "{note}");
+    let resumed = Resumed {
+        scan_id: ledger.id.clone(),
+        dir: ledger.dir.display().to_string(),
+        committed,
+        columns,
+        pitch_x_mm,
+        conditions: state.start.conditions.clone(),
+        points_per_line: columns.map_or(LONGEST_PROFILE_POINTS, |c| c as u64),
+    };
+    Ok(Reopened {
+        ledger,
+        resumed,
+        note,
+        failed,
+    })
+}
+
+fn unique_id(output_dir: &Path, now: DateTime<Utc>, specimen: &str) -> ScanId {
+    let base = ScanId::new(now, specimen);
+    if !output_dir.join(&base.0).exists() {
+        return base;
+    }
+    (2..)
+        .map(|n| ScanId(format!("{}-{n}", base.0)))
+        .find(|id| !output_dir.join(&id.0).exists())
+        .unwrap_or(base)
+}
