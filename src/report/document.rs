@@ -157,6 +157,14 @@ pub struct ReportRecipe {
     pub lambda_c_source: String,
     /// Why the λc filter was or was not applied.
     pub filter_reason: String,
+    /// The spike rule (its threshold in robust σ and longest run of points).
+    pub spike_rule: String,
+    /// What characterisation does with the spikes: `flag` (named, the data as measured) or
+    /// `exclude` (bridged for the per-line and measured-grid parameters).
+    pub outliers: &'static str,
+    /// The model between lines is supported by the data when the hold-out rms is at most
+    /// this × Sq.
+    pub holdout_threshold_sq: f64,
 }
 
 /// One line's entry in the report.

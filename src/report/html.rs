@@ -666,12 +666,51 @@ fn instrument(h: &mut String, report: &Value) {
 
 fn holdout(h: &mut String, report: &Value) {
     let m = &report["model_vs_measured"];
-    if !m.is_object() {
+    let b = &report["between_lines"];
+    if !m.is_object() && !b.is_object() {
         return;
     }
     h.push_str("<h2 id=\"model\">The model against data it was not fitted to</h2>\n");
-    if let Some(v) = verdict(report) {
-        let _ = writeln!(h, "<p><b>{}</b></p>", esc(&v));
+    if let Some(v) = b["verdict"].as_str() {
+        let _ = writeln!(h, "<p id=\"verdict\"><b>{}</b></p>", esc(v));
+    }
+    let r = &report["model_checks"]["height_range"];
+    if let (Some(lo), Some(hi), Some(mlo), Some(mhi), Some(pct)) = (
+        r["model_min_um"].as_f64(),
+        r["model_max_um"].as_f64(),
+        r["measured_min_um"].as_f64(),
+        r["measured_max_um"].as_f64(),
+        r["overshoot_pct"].as_f64(),
+    ) {
+        let q = Quantity::HeightUm;
+        let _ = writeln!(
+            h,
+            "<p id=\"height-range\">Sampled densely, the model spans {} … {} µm where the measured heights span {} … {} µm ({} % beyond the measured range).</p>",
+            fmt(lo, q),
+            fmt(hi, q),
+            fmt(mlo, q),
+            fmt(mhi, q),
+            fmt(pct, Quantity::Percent)
+        );
+    }
+    let a = &report["anisotropy"];
+    if let (Some(ratio), Some(r), Some(share), Some(dom)) = (
+        a["pitch_ratio_y_over_x"].as_f64(),
+        a["line_correlation_at_pitch_y"].as_f64(),
+        a["sdq_y_share_pct"].as_f64(),
+        a["dominant"].as_str(),
+    ) {
+        let _ = writeln!(
+            h,
+            "<p id=\"anisotropy\">The lines are {} × the x pitch apart; neighbouring lines correlate at r = {}; the slopes along {} dominate Sdq and Sdr ({} % of Sdq² comes from dz/dy, across the lines).</p>",
+            sig(ratio, 3),
+            sig(r, 2),
+            esc(dom),
+            fmt(share, Quantity::Percent)
+        );
+    }
+    if !m.is_object() {
+        return;
     }
     h.push_str("<table id=\"t-model\">\n<tr><th class=\"t\">left out and predicted</th><th>lines</th><th>largest |model − measured| µm</th><th>largest rms µm</th></tr>\n");
     for (what, key) in [
@@ -745,6 +784,30 @@ fn recipe(h: &mut String, report: &Value) {
         &format!("{} mm", num(&r["pitch_mm"], Quantity::LengthMm)),
     );
     kv(h, "mean line", &esc(&text(&r["mean_line"])));
+    kv(h, "surface", &esc(&text(&report["model"]["description"])));
+    kv(
+        h,
+        "spikes",
+        &esc(&format!(
+            "{} — {}",
+            text(&r["spike_rule"]),
+            match r["outliers"].as_str() {
+                Some("exclude") =>
+                    "excluded (bridged) from the per-line and measured-grid parameters",
+                _ => "flagged only, the data as measured",
+            }
+        )),
+    );
+    if let Some(t) = r["holdout_threshold_sq"].as_f64() {
+        kv(
+            h,
+            "model between lines",
+            &esc(&format!(
+                "supported by the data when the hold-out rms is at most {} × Sq",
+                sig(t, 2)
+            )),
+        );
+    }
     h.push_str("</table>\n");
     if let Some(defs) = r["definitions"].as_object() {
         h.push_str("<details><summary>Definition of every parameter</summary><table id=\"t-definitions\">\n");
@@ -788,8 +851,13 @@ mod tests {
                 {"index": 1, "y_mm": 0.01, "Ra_um": 0.5}
             ],
             "model_vs_measured": {"points_left_out": [], "lines_left_out": []},
-            "between_lines": {"summary": "the model between lines is not supported by the data"},
-            "recipe": {"lambda_c_mm": 0.8}
+            "between_lines": {"summary": "the model between lines is not supported by the data",
+                              "verdict": "the model between lines is not supported by the data: every 2nd line left out"},
+            "model_checks": {"height_range": {"model_min_um": -21.4, "model_max_um": 19.0,
+                             "measured_min_um": -13.1, "measured_max_um": 9.1, "overshoot_pct": 82.0}},
+            "model": {"description": "global B-spline interpolation (the paper)"},
+            "recipe": {"lambda_c_mm": 0.8, "spike_rule": "isolated spike: at most 5 points", "outliers": "flag",
+                       "holdout_threshold_sq": 0.5}
         });
         let h = render(&report, None, &[]);
         let warn = h.find("id=\"warnings\"").unwrap();
@@ -804,6 +872,15 @@ mod tests {
         assert!(h.contains("<span class=\"flag\">NO</span>"));
         assert!(h.contains("1 comparison(s) outside the tolerance"));
         assert!(h.contains("not supported by the data"));
+        // The verdict in full, the model's height range against the data's, and the recipe of
+        // the model and of the spikes.
+        assert!(h.contains(
+            "<b>the model between lines is not supported by the data: every 2nd line left out</b>"
+        ));
+        assert!(h.contains("the model spans -21.40 … 19.00 µm where the measured heights span -13.10 … 9.100 µm (82.0 % beyond"));
+        assert!(h.contains("global B-spline interpolation (the paper)"));
+        assert!(h.contains("isolated spike: at most 5 points — flagged only, the data as measured"));
+        assert!(h.contains("at most 0.50 × Sq"));
         assert!(!h.contains("<script"), "no script in the report");
     }
 }

@@ -123,6 +123,13 @@ pub fn characterise(grid: &LineGrid, ctx: &ReportContext) -> Result<LinesSection
             lines: recipe,
             lambda_c_source: ctx.lambda_c_source.clone(),
             filter_reason: ctx.filter_reason.clone(),
+            spike_rule: ctx.options.spikes.describe(),
+            outliers: if ctx.options.exclude_spikes {
+                "exclude"
+            } else {
+                "flag"
+            },
+            holdout_threshold_sq: ctx.options.holdout_threshold,
         },
         lines,
         analyses,

@@ -816,7 +816,15 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
     drop(journal);
     run_ok(&["analyze", scan.to_str().unwrap()]);
     // report.json carries the finish and the duration too: 09:15:00 to 10:17:30.
-    let t = &report(&scan)["traceability"];
+    let r = report(&scan);
+    // The recipe names the spike rule, what was done with the spikes and the verdict's threshold.
+    assert!(r["recipe"]["spike_rule"]
+        .as_str()
+        .unwrap()
+        .contains("10 x 1.4826 x MAD"));
+    assert_eq!(r["recipe"]["outliers"], "flag");
+    assert_eq!(r["recipe"]["holdout_threshold_sq"], 0.5);
+    let t = &r["traceability"];
     assert_eq!(t["finished_at"], "2026-11-30T10:17:30+00:00");
     assert_eq!(t["duration_s"].as_f64(), Some(3750.0));
     let page = scan.join("report.html");
