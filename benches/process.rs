@@ -307,6 +307,7 @@ fn write_scan(parent: &Path, kind: ProfileKind, cols: usize) -> PathBuf {
         store.root(),
         StartRecord {
             scan_id: id.0.clone(),
+            sequence: 1,
             time: start,
             plan: surfscan::scan::plan::Plan {
                 lines: 31,

@@ -7,7 +7,8 @@
 //! worked out here from the simulated devices' parameters, not measured from the software:
 //!
 //! * trace: (profile length + λc) at the measuring speed, then back at the return speed;
-//! * read-out wire time: the `RDEVA` blocks' reply bytes at the instrument's baud rate;
+//! * read-out wire time: the `RDEVA` commands' and replies' bytes at the instrument's baud
+//!   rate (the simulator paces both, as a real wire would);
 //! * move: 0.01 mm on the planner's trapezoid (feed, `$121` acceleration);
 //! * settle: the configured settle time (read back from the journal's start record).
 //!
@@ -72,14 +73,14 @@ fn args() -> Args {
     a
 }
 
-/// Reply bytes of the read-out of `n` points: `RDEVA00` → `OK` + 5 digits + CR, then one
-/// `OKnn` + `,` + 9 characters per value + CR per block of up to 50.
+/// Bytes on the wire for the read-out of `n` points: `RDEVA00` + CR → `OK` + 5 digits + CR,
+/// then per block of up to 50 `RDEVAnn` + CR → `OKnn` + `,` + 9 characters per value + CR.
 fn readout_bytes(n: usize) -> usize {
-    let mut bytes = 8;
+    let mut bytes = 8 + 8;
     let mut left = n;
     while left > 0 {
         let k = left.min(BLOCK);
-        bytes += 4 + 10 * k + 1;
+        bytes += 8 + 4 + 10 * k + 1;
         left -= k;
     }
     bytes

@@ -372,21 +372,8 @@ impl Config {
     /// of range is the error, naming the key, the value and the range.
     pub fn check_ranges(&self, path: &Path) -> Result<(), ConfigError> {
         for k in NUMERIC_KEYS {
-            if let Some(v) = (k.value)(self) {
-                if !k.contains(v) {
-                    return Err(Config::invalid(
-                        path,
-                        k.key,
-                        format!(
-                            "{v}{} is outside its valid range {} to {}{}; {}",
-                            k.unit_suffix(),
-                            k.min,
-                            k.max,
-                            k.unit_suffix(),
-                            k.hint
-                        ),
-                    ));
-                }
+            if let Some(v) = k.value(self) {
+                k.check(path, v)?;
             }
         }
         Ok(())
@@ -610,11 +597,47 @@ pub struct NumericKey {
     pub unit: &'static str,
     /// What the key is for and what to do, for the message.
     pub hint: &'static str,
-    /// The value in a parsed configuration; `None` when an optional key is absent.
-    pub value: fn(&Config) -> Option<Num>,
+    /// Where the value is read from.
+    pub get: Getter,
+}
+
+/// Where a [`NumericKey`]'s value is read from.
+#[derive(Debug, Clone, Copy)]
+pub enum Getter {
+    /// From the whole file; `None` when an optional key is absent.
+    Config(fn(&Config) -> Option<Num>),
+    /// From the `[instrument]` table, which `surfscan probe` also reads on its own.
+    Instrument(fn(&InstrumentSettings) -> Option<Num>),
 }
 
 impl NumericKey {
+    /// The value in a parsed configuration; `None` when an optional key is absent.
+    pub fn value(&self, c: &Config) -> Option<Num> {
+        match self.get {
+            Getter::Config(f) => f(c),
+            Getter::Instrument(f) => f(&c.instrument),
+        }
+    }
+
+    /// `Ok` when `v` is in range, else the error naming the key, the value and the range.
+    fn check(&self, path: &Path, v: Num) -> Result<(), ConfigError> {
+        if self.contains(v) {
+            return Ok(());
+        }
+        Err(Config::invalid(
+            path,
+            self.key,
+            format!(
+                "{v}{} is outside its valid range {} to {}{}; {}",
+                self.unit_suffix(),
+                self.min,
+                self.max,
+                self.unit_suffix(),
+                self.hint
+            ),
+        ))
+    }
+
     /// Whether `v` lies within the range (NaN never does).
     pub fn contains(&self, v: Num) -> bool {
         match (v, self.min, self.max) {
@@ -636,6 +659,16 @@ impl NumericKey {
 }
 
 macro_rules! int_key {
+    (instrument $key:literal, $min:expr, $max:expr, $unit:literal, $hint:literal, |$c:ident| $get:expr) => {
+        NumericKey {
+            key: $key,
+            min: Num::Int($min),
+            max: Num::Int($max),
+            unit: $unit,
+            hint: $hint,
+            get: Getter::Instrument(|$c: &InstrumentSettings| $get.map(|v| Num::Int(v as i128))),
+        }
+    };
     ($key:literal, $min:expr, $max:expr, $unit:literal, $hint:literal, |$c:ident| $get:expr) => {
         NumericKey {
             key: $key,
@@ -643,12 +676,22 @@ macro_rules! int_key {
             max: Num::Int($max),
             unit: $unit,
             hint: $hint,
-            value: |$c: &Config| $get.map(|v| Num::Int(v as i128)),
+            get: Getter::Config(|$c: &Config| $get.map(|v| Num::Int(v as i128))),
         }
     };
 }
 
 macro_rules! real_key {
+    (instrument $key:literal, $min:expr, $max:expr, $unit:literal, $hint:literal, |$c:ident| $get:expr) => {
+        NumericKey {
+            key: $key,
+            min: Num::Real($min),
+            max: Num::Real($max),
+            unit: $unit,
+            hint: $hint,
+            get: Getter::Instrument(|$c: &InstrumentSettings| $get.map(Num::Real)),
+        }
+    };
     ($key:literal, $min:expr, $max:expr, $unit:literal, $hint:literal, |$c:ident| $get:expr) => {
         NumericKey {
             key: $key,
@@ -656,9 +699,25 @@ macro_rules! real_key {
             max: Num::Real($max),
             unit: $unit,
             hint: $hint,
-            value: |$c: &Config| $get.map(Num::Real),
+            get: Getter::Config(|$c: &Config| $get.map(Num::Real)),
         }
     };
+}
+
+/// Checks the numeric keys of an `[instrument]` table read on its own (as `surfscan probe`
+/// reads it) against the same ranges as in a whole file.
+pub fn check_instrument_ranges(
+    path: &Path,
+    instrument: &InstrumentSettings,
+) -> Result<(), ConfigError> {
+    for k in NUMERIC_KEYS {
+        if let Getter::Instrument(f) = k.get {
+            if let Some(v) = f(instrument) {
+                k.check(path, v)?;
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Every numeric key of the file with its valid range. The bounds are wide enough for any
@@ -667,14 +726,14 @@ macro_rules! real_key {
 /// soft-limit-min < soft-limit-max, the model's baud rates) are checked afterwards.
 #[rustfmt::skip]
 pub const NUMERIC_KEYS: &[NumericKey] = &[
-    int_key!("instrument.baud", 300, 115_200, "baud", "set the rate the instrument is set to (9600, 19200, 38400)", |c| Some(c.instrument.baud)),
-    real_key!("instrument.pitch-x-um", 0.001, 1000.0, "µm", "the SJ-210 exports 0.5 to 1.5 µm; remove the key to derive it from λs", |c| c.instrument.pitch_x_um),
-    int_key!("instrument.timeouts.first-byte-ms", 1, 600_000, "ms", "the default is 2000", |c| Some(c.instrument.timeouts.first_byte_ms)),
-    int_key!("instrument.timeouts.inter-byte-ms", 1, 60_000, "ms", "the default is 200", |c| Some(c.instrument.timeouts.inter_byte_ms)),
-    int_key!("instrument.timeouts.poll-interval-ms", 1, 60_000, "ms", "the default is 250", |c| Some(c.instrument.timeouts.poll_interval_ms)),
-    int_key!("instrument.timeouts.start-deadline-ms", 1, 600_000, "ms", "the default is 5000", |c| Some(c.instrument.timeouts.start_deadline_ms)),
-    int_key!("instrument.timeouts.read-retry-budget-ms", 0, 3_600_000, "ms", "the default is 10000; 0 retries nothing", |c| Some(c.instrument.timeouts.read_retry_budget_ms)),
-    int_key!("instrument.timeouts.trace-deadline-ms", 1, 3_600_000, "ms", "remove the key to derive it from the measuring conditions", |c| c.instrument.timeouts.trace_deadline_ms),
+    int_key!(instrument "instrument.baud", 300, 115_200, "baud", "set the rate the instrument is set to (9600, 19200, 38400)", |c| Some(c.baud)),
+    real_key!(instrument "instrument.pitch-x-um", 0.001, 1000.0, "µm", "the SJ-210 exports 0.5 to 1.5 µm; remove the key to derive it from λs", |c| c.pitch_x_um),
+    int_key!(instrument "instrument.timeouts.first-byte-ms", 1, 600_000, "ms", "the default is 2000", |c| Some(c.timeouts.first_byte_ms)),
+    int_key!(instrument "instrument.timeouts.inter-byte-ms", 1, 60_000, "ms", "the default is 200", |c| Some(c.timeouts.inter_byte_ms)),
+    int_key!(instrument "instrument.timeouts.poll-interval-ms", 1, 60_000, "ms", "the default is 250", |c| Some(c.timeouts.poll_interval_ms)),
+    int_key!(instrument "instrument.timeouts.start-deadline-ms", 1, 600_000, "ms", "the default is 5000", |c| Some(c.timeouts.start_deadline_ms)),
+    int_key!(instrument "instrument.timeouts.read-retry-budget-ms", 0, 3_600_000, "ms", "the default is 10000; 0 retries nothing", |c| Some(c.timeouts.read_retry_budget_ms)),
+    int_key!(instrument "instrument.timeouts.trace-deadline-ms", 1, 3_600_000, "ms", "remove the key to derive it from the measuring conditions", |c| c.timeouts.trace_deadline_ms),
     int_key!("stage.baud", 300, 4_000_000, "baud", "GRBL and Zaber use 115200", |c| Some(c.stage.baud)),
     real_key!("stage.steps-per-mm", 0.001, 10_000_000.0, "steps/mm", "set the controller's $101", |c| c.stage.steps_per_mm),
     real_key!("stage.mm-per-microstep", 1e-9, 1.0, "mm", "take it from the stage's datasheet", |c| c.stage.mm_per_microstep),
@@ -892,7 +951,7 @@ dir = "/var/lib/surfscan/scans"
             "every numeric key needs an entry in NUMERIC_KEYS (and config/surfscan.toml)"
         );
         for k in NUMERIC_KEYS {
-            assert!((k.value)(&c).is_some(), "{} not read from the file", k.key);
+            assert!(k.value(&c).is_some(), "{} not read from the file", k.key);
         }
     }
 
@@ -907,7 +966,7 @@ dir = "/var/lib/surfscan/scans"
                 let mut t = base.clone();
                 set_key(&mut t, k.key, toml_value(bound));
                 let c: Config = toml::from_str(&toml::to_string(&t).unwrap()).unwrap();
-                assert_eq!((k.value)(&c), Some(bound), "{}", k.key);
+                assert_eq!(k.value(&c), Some(bound), "{}", k.key);
                 if let Err(e) = c.check_ranges(Path::new("t.toml")) {
                     panic!("{} = {bound} is its own bound but refused: {e}", k.key);
                 }

@@ -20,6 +20,15 @@
 //! * `skew:PCT` — an `RDRES` answer's value is off by PCT percent (signed), so the
 //!   instrument's result disagrees with its own heights, e.g. `skew:20@RDRES02,01`.
 //!
+//! Time windows: the matching frame opens a window of MS milliseconds (of the serve loop's
+//! clock) during which the fault applies to every frame and to the idle line (no `xK`):
+//! * `busy:MS` — every frame is answered `NG011` (busy); the instrument does not see it,
+//!   e.g. `busy:15000@CTSTA#2`;
+//! * `noeol:MS` — replies come without their line end, and between them the line carries
+//!   printable bytes without a line end ([`NOEOL_FILLER`] every [`CHATTER_PERIOD`]);
+//! * `flood:MS` — stray reply lines nobody asked for ([`STRAY_REPLIES`], in turn, one every
+//!   [`CHATTER_PERIOD`]) besides the real replies.
+//!
 //! Battery states are instrument settings, also given as faults: `battery:low`,
 //! `battery:abnormal`.
 
@@ -48,6 +57,36 @@ pub enum FaultKind {
     RepeatBlock,
     /// An `RDRES` value off by this many percent.
     Skew(i32),
+    /// Opens a time window of this length (see [`Window`]).
+    Window(Window, Duration),
+}
+
+/// What a time-window fault does while its window is open.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Window {
+    /// Every frame is answered `NG011`.
+    Busy,
+    /// Replies lose their line end; filler bytes without a line end flow between them.
+    NoLineEnd,
+    /// Stray reply lines flow between the real replies.
+    Flood,
+}
+
+/// How often a `noeol` or `flood` window writes its unsolicited bytes.
+pub const CHATTER_PERIOD: Duration = Duration::from_millis(20);
+/// What a `noeol` window writes every [`CHATTER_PERIOD`]: printable, no CR or LF.
+pub const NOEOL_FILLER: &[u8] = b"0.000,  ";
+/// The stray lines a `flood` window writes, in turn: well-formed replies to no command.
+pub const STRAY_REPLIES: [&[u8]; 3] = [b"OK\r", b"NG030\r", b"NG011\r"];
+
+/// What the serve loop does to one frame.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Verdict {
+    /// The fault hitting this frame, if any ([`FaultKind::Window`] never appears here: an
+    /// open `busy` window shows as `Ng(11)`).
+    pub kind: Option<FaultKind>,
+    /// Whether the reply loses its line end (a `noeol` window is open).
+    pub strip_line_end: bool,
 }
 
 /// One fault rule.
@@ -78,7 +117,7 @@ pub enum FaultSpec {
 
 /// A fault spec that could not be parsed.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("bad fault spec {spec:?}: {why}; expected KIND[:ARG]@COMMAND[%TRACE][#N][xK] (kinds ng:CODE, drop, truncate, garbage, split, lf, silence:MS, unplug:MS, repeat, skew:PCT) or battery:low|abnormal")]
+#[error("bad fault spec {spec:?}: {why}; expected KIND[:ARG]@COMMAND[%TRACE][#N][xK] (kinds ng:CODE, drop, truncate, garbage, split, lf, silence:MS, unplug:MS, repeat, skew:PCT; windows busy:MS, noeol:MS, flood:MS without xK) or battery:low|abnormal")]
 pub struct FaultSpecError {
     /// The spec as given.
     pub spec: String,
@@ -132,6 +171,9 @@ impl std::str::FromStr for FaultSpec {
                     .filter(|p| (-99..=1000).contains(p))
                     .ok_or_else(|| err("skew needs a percentage from -99 to 1000, e.g. skew:20"))?,
             ),
+            "busy" => FaultKind::Window(Window::Busy, millis(arg)?),
+            "noeol" => FaultKind::Window(Window::NoLineEnd, millis(arg)?),
+            "flood" => FaultKind::Window(Window::Flood, millis(arg)?),
             _ => return Err(err("unknown kind")),
         };
         let (rest, count) = match target.rsplit_once('x') {
@@ -163,6 +205,11 @@ impl std::str::FromStr for FaultSpec {
                 "command must be non-empty; trace, occurrence and count at least 1",
             ));
         }
+        if matches!(kind, FaultKind::Window(..)) && count != 1 {
+            return Err(err(
+                "a time window is opened by one frame: no count 'xK' (make the window longer)",
+            ));
+        }
         Ok(FaultSpec::Wire(Fault {
             kind,
             command: command.to_string(),
@@ -173,11 +220,15 @@ impl std::str::FromStr for FaultSpec {
     }
 }
 
-/// The rules of one run with their occurrence counters.
+/// The rules of one run with their occurrence counters and open time windows.
 #[derive(Debug, Clone, Default)]
 pub struct FaultPlan {
     rules: Vec<(Fault, u32)>,
     traces: u32,
+    /// Open windows: what, and until when (on the caller's clock).
+    windows: Vec<(Window, Duration)>,
+    /// Stray lines written so far (selects the next of [`STRAY_REPLIES`]).
+    strays: usize,
 }
 
 impl FaultPlan {
@@ -186,7 +237,59 @@ impl FaultPlan {
         Self {
             rules: rules.into_iter().map(|f| (f, 0)).collect(),
             traces: 0,
+            windows: Vec::new(),
+            strays: 0,
         }
+    }
+
+    /// Counts `frame` (received at `now` on the serve loop's clock) against every rule, opens
+    /// the window of a window fault it hits, and says what happens to it: an open `busy`
+    /// window answers `NG011` before any other fault; otherwise the first rule that hits.
+    pub fn check_at(&mut self, frame: &str, now: Duration) -> Verdict {
+        let hit = self.check(frame);
+        if let Some(FaultKind::Window(w, d)) = hit {
+            self.windows.push((w, now.saturating_add(d)));
+        }
+        let hit = hit.filter(|k| !matches!(k, FaultKind::Window(..)));
+        let kind = if self.window_open(Window::Busy, now) {
+            Some(FaultKind::Ng(11))
+        } else {
+            hit
+        };
+        Verdict {
+            kind,
+            strip_line_end: self.window_open(Window::NoLineEnd, now),
+        }
+    }
+
+    /// Whether a window of this kind is open at `now` (it closes at its end, exclusive).
+    pub fn window_open(&self, w: Window, now: Duration) -> bool {
+        self.windows.iter().any(|&(k, until)| k == w && now < until)
+    }
+
+    /// Whether unsolicited bytes flow at `now` (a `noeol` or `flood` window is open).
+    pub fn chattering(&self, now: Duration) -> bool {
+        self.window_open(Window::NoLineEnd, now) || self.window_open(Window::Flood, now)
+    }
+
+    /// The unsolicited bytes of one [`CHATTER_PERIOD`] at `now`: the next stray line of an
+    /// open `flood` window and the filler of an open `noeol` window (a stray line loses its
+    /// line end too while both are open); empty when neither is open.
+    pub fn chatter(&mut self, now: Duration) -> Vec<u8> {
+        let mut out = Vec::new();
+        if self.window_open(Window::Flood, now) {
+            let stray = STRAY_REPLIES
+                .get(self.strays % STRAY_REPLIES.len())
+                .copied()
+                .unwrap_or_default();
+            self.strays = self.strays.wrapping_add(1);
+            out.extend_from_slice(stray);
+        }
+        if self.window_open(Window::NoLineEnd, now) {
+            out.retain(|&b| b != b'\r' && b != b'\n');
+            out.extend_from_slice(NOEOL_FILLER);
+        }
+        out
     }
 
     /// Counts `frame` against every rule and returns the first fault that hits it.
@@ -263,6 +366,69 @@ mod tests {
         assert_eq!(p.check("RDRES02,01,00"), None);
         assert_eq!(p.check("CTSTA"), None);
         assert_eq!(p.check("RDRES02,02,00"), None);
+    }
+
+    #[test]
+    fn window_specs_parse_and_refuse_a_count() {
+        assert_eq!(
+            wire("busy:15000@CTSTA#2").kind,
+            FaultKind::Window(Window::Busy, Duration::from_secs(15))
+        );
+        assert_eq!(
+            wire("noeol:500@RDEVA%3").kind,
+            FaultKind::Window(Window::NoLineEnd, Duration::from_millis(500))
+        );
+        assert_eq!(
+            wire("flood:30000@RDSTU").kind,
+            FaultKind::Window(Window::Flood, Duration::from_secs(30))
+        );
+        assert!("busy@CTSTA".parse::<FaultSpec>().is_err());
+        assert!("flood:100@CTSTAx2".parse::<FaultSpec>().is_err());
+    }
+
+    #[test]
+    fn a_busy_window_answers_ng011_to_every_frame_until_it_closes() {
+        let ms = Duration::from_millis;
+        let mut p = FaultPlan::new(vec![wire("busy:1000@CTSTA#2"), wire("drop@RDRES#1")]);
+        let v = |k: Option<FaultKind>| Verdict {
+            kind: k,
+            strip_line_end: false,
+        };
+        assert_eq!(p.check_at("CTSTA", ms(0)), v(None));
+        assert_eq!(p.check_at("RDSTU00", ms(100)), v(None));
+        // The second CTSTA opens the window and is itself refused.
+        assert_eq!(p.check_at("CTSTA", ms(200)), v(Some(FaultKind::Ng(11))));
+        assert_eq!(p.check_at("RDSTU00", ms(700)), v(Some(FaultKind::Ng(11))));
+        // Busy wins over another rule hitting the same frame.
+        assert_eq!(
+            p.check_at("RDRES02,01", ms(1199)),
+            v(Some(FaultKind::Ng(11)))
+        );
+        assert!(!p.chattering(ms(500)));
+        // Closed at 200 + 1000 ms.
+        assert_eq!(p.check_at("CTSTA", ms(1200)), v(None));
+        assert!(!p.window_open(Window::Busy, ms(1200)));
+    }
+
+    #[test]
+    fn noeol_and_flood_windows_strip_line_ends_and_chatter() {
+        let ms = Duration::from_millis;
+        let mut p = FaultPlan::new(vec![wire("noeol:100@RDSTU#1"), wire("flood:300@RDRES")]);
+        assert!(p.chatter(ms(0)).is_empty());
+        let v = p.check_at("RDSTU00", ms(10));
+        assert!(v.strip_line_end && v.kind.is_none());
+        assert_eq!(p.chatter(ms(20)), NOEOL_FILLER);
+        assert!(p.check_at("RDRES02,01", ms(50)).strip_line_end);
+        // Both open: the stray line loses its CR, the filler follows.
+        assert_eq!(p.chatter(ms(60)), b"OK0.000,  ".to_vec());
+        // noeol closed at 110: stray lines in turn, with their CR.
+        assert!(!p.check_at("RDSTU00", ms(110)).strip_line_end);
+        assert_eq!(p.chatter(ms(120)), b"NG030\r".to_vec());
+        assert_eq!(p.chatter(ms(140)), b"NG011\r".to_vec());
+        assert_eq!(p.chatter(ms(160)), b"OK\r".to_vec());
+        assert!(p.chattering(ms(349)));
+        assert!(!p.chattering(ms(350)));
+        assert!(p.chatter(ms(350)).is_empty());
     }
 
     #[test]

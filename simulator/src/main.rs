@@ -109,7 +109,8 @@ struct Args {
     /// Stop at the end of travel (status 005) instead of returning.
     #[arg(long)]
     no_auto_return: bool,
-    /// Fault to inject, KIND[:ARG]@COMMAND[%TRACE][#N][xK] or battery:low|abnormal (repeatable).
+    /// Fault to inject, KIND[:ARG]@COMMAND[%TRACE][#N][xK] or battery:low|abnormal (repeatable);
+    /// busy:MS, noeol:MS and flood:MS open a time window at the matching frame.
     #[arg(long = "fault")]
     faults: Vec<FaultSpec>,
     /// Replay this recorded transcript (v1) instead of emulating.

@@ -22,7 +22,7 @@ use tokio::time::Instant;
 
 use crate::command::{Frame, FrameSplitter};
 use crate::data::{DataError, ProfileSet, YPosition};
-use crate::fault::{Fault, FaultKind, FaultPlan};
+use crate::fault::{Fault, FaultKind, FaultPlan, CHATTER_PERIOD};
 use crate::grbl::StageShared;
 use crate::instrument::{Instrument, InstrumentConfig};
 use crate::pty::{Pty, PtyError};
@@ -80,8 +80,11 @@ impl Responder {
     }
 }
 
-/// Serial pacing: each reply is delayed by its transfer time at `baud` (10 bits per byte),
-/// multiplied by `time_scale`.
+/// Serial pacing: each reply is delayed by the transfer time at `baud` (10 bits per byte) of
+/// the command that asked for it (with its terminator) and of the reply itself, multiplied by
+/// `time_scale`. A pseudo-terminal delivers the command at once, so the command's own time on
+/// a real wire is spent here; the exchange then ends when its last reply byte would have
+/// arrived.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pacing {
     /// Baud rate.
@@ -123,13 +126,37 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
 ) -> io::Result<Outcome> {
     let mut splitter = FrameSplitter::new();
     let mut buf = [0u8; 512];
+    let clock = || Instant::now().saturating_duration_since(epoch);
+    // While a `noeol` or `flood` window is open, unsolicited bytes flow between replies on a
+    // steady cadence that frames arriving in between do not reset.
+    let mut next_chatter: Option<Instant> = None;
     loop {
         if *shutdown.borrow() {
             return Ok(Outcome::Shutdown);
         }
+        next_chatter = match (faults.chattering(clock()), next_chatter) {
+            (false, _) => None,
+            (true, Some(t)) => Some(t),
+            (true, None) => Some(Instant::now() + CHATTER_PERIOD),
+        };
+        let tick = async {
+            match next_chatter {
+                Some(t) => tokio::time::sleep_until(t).await,
+                None => std::future::pending::<()>().await,
+            }
+        };
         let n = tokio::select! {
             r = io.read(&mut buf) => r?,
             _ = shutdown.changed() => return Ok(Outcome::Shutdown),
+            () = tick => {
+                next_chatter = next_chatter.map(|t| t + CHATTER_PERIOD);
+                let bytes = faults.chatter(clock());
+                if !bytes.is_empty() {
+                    io.write_all(&bytes).await?;
+                    io.flush().await?;
+                }
+                continue;
+            }
         };
         if n == 0 {
             return Ok(Outcome::Closed);
@@ -143,8 +170,9 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
                 }
             };
             let text: String = line.iter().map(|&b| b as char).collect();
-            let fault = faults.check(&text);
-            let now = Instant::now().saturating_duration_since(epoch);
+            let now = clock();
+            let verdict = faults.check_at(&text, now);
+            let fault = verdict.kind;
             let reply = match &fault {
                 Some(FaultKind::Ng(code)) => Some(format!("NG{code:03}\r").into_bytes()),
                 Some(k @ (FaultKind::RepeatBlock | FaultKind::Skew(_))) => {
@@ -152,8 +180,11 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
                 }
                 _ => responder.respond(&line, now),
             };
-            let Some(reply) = reply else { continue };
-            tokio::time::sleep(pacing.delay(reply.len())).await;
+            let Some(mut reply) = reply else { continue };
+            if verdict.strip_line_end {
+                reply.retain(|&b| b != b'\r' && b != b'\n');
+            }
+            tokio::time::sleep(pacing.delay(line.len() + 1 + reply.len())).await;
             match fault {
                 Some(FaultKind::Drop) => {}
                 Some(FaultKind::Truncate) => {
@@ -186,9 +217,13 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
                     io.flush().await?;
                     return Ok(Outcome::Unplug(d));
                 }
-                Some(FaultKind::Ng(_) | FaultKind::RepeatBlock | FaultKind::Skew(_)) | None => {
-                    io.write_all(&reply).await?
-                }
+                Some(
+                    FaultKind::Ng(_)
+                    | FaultKind::RepeatBlock
+                    | FaultKind::Skew(_)
+                    | FaultKind::Window(..),
+                )
+                | None => io.write_all(&reply).await?,
             }
             io.flush().await?;
         }
@@ -280,6 +315,7 @@ pub struct Simulator {
     source: Source,
     faults: Vec<Fault>,
     baud: u32,
+    pacing_scale: Option<f64>,
     y: YPosition,
     stage: Option<(PathBuf, StageServe)>,
 }
@@ -304,6 +340,7 @@ impl Simulator {
             source: Source::Emulate(InstrumentConfig::default(), None),
             faults: Vec::new(),
             baud: 38400,
+            pacing_scale: None,
             y: YPosition::new(),
             stage: None,
         }
@@ -390,6 +427,13 @@ impl Simulator {
         self
     }
 
+    /// Paces the link with its own time scale instead of the instrument's (1 = the wire's real
+    /// speed): e.g. an instantaneous trace whose read-out still takes real time.
+    pub fn pacing_time_scale(mut self, time_scale: f64) -> Self {
+        self.pacing_scale = Some(time_scale);
+        self
+    }
+
     /// The shared stage y position the instrument reads when a stage is attached.
     pub fn y_position(&self) -> YPosition {
         self.y.clone()
@@ -458,7 +502,7 @@ impl Simulator {
         let mut faults = FaultPlan::new(self.faults);
         let pacing = Pacing {
             baud: self.baud,
-            time_scale,
+            time_scale: self.pacing_scale.unwrap_or(time_scale),
         };
         let task = tokio::spawn(async move {
             let (Some(link), Some(mut pty)) = (self.instrument_link, pty) else {

@@ -3,7 +3,8 @@
 //!
 //! Emulates: `/dev axis [id] command[:CC]` (message ids echoed, checksums verified), replies
 //! `@dd a [id] OK|RJ BUSY|IDLE flag data`; `move abs`, `move rel`, `home`, `stop`, `get pos`,
-//! `get deviceid`, `warnings clear`, the empty poll; trapezoidal motion at a configured speed
+//! `get deviceid`, `get maxspeed`/`accel`/`limit.min`/`limit.max` (in Zaber's data units),
+//! `warnings clear`, the empty poll; trapezoidal motion at a configured speed
 //! and acceleration × a time-scale factor; travel limits (`RJ … BADDATA`); a backlash dead
 //! band; injected faults (`RJ`, stall `FS`, power cycle, silence, vanishing).
 //!
@@ -123,6 +124,10 @@ struct Dev {
     stall_next: bool,
 }
 
+/// Zaber's speed unit: one microstep per second is 1.6384 data units (acceleration: one
+/// microstep per s² is 0.16384).
+const SPEED_DATA_PER_MICROSTEP_S: f64 = 1.6384;
+
 fn lrc(body: &str) -> u8 {
     let mut s: u32 = 0;
     for b in body.bytes() {
@@ -240,6 +245,21 @@ impl Dev {
             [] => (true, "0".into()),
             ["get", "deviceid"] => (true, self.cfg.device_id.to_string()),
             ["get", "pos"] if axis <= 1 => (true, self.pos().to_string()),
+            // Speed and acceleration in Zaber's data units: microsteps/s × 1.6384 and
+            // microsteps/s² × 1.6384 / 10.
+            ["get", "maxspeed"] if axis <= 1 => (
+                true,
+                format!("{:.0}", self.cfg.speed_per_s * SPEED_DATA_PER_MICROSTEP_S),
+            ),
+            ["get", "accel"] if axis <= 1 => (
+                true,
+                format!(
+                    "{:.0}",
+                    self.cfg.accel_per_s2 * SPEED_DATA_PER_MICROSTEP_S / 10.0
+                ),
+            ),
+            ["get", "limit.min"] if axis <= 1 => (true, "0".into()),
+            ["get", "limit.max"] if axis <= 1 => (true, self.cfg.limit_max.to_string()),
             ["warnings", "clear"] => {
                 let f = self.flag().to_string();
                 self.stalled = false;

@@ -54,11 +54,12 @@ async fn timeline_and_pacing_follow_the_clock() {
         serve_connection(&mut dev, &mut r, &mut faults, pacing, epoch, &mut stop).await
     });
 
-    // "OK000\r" is 6 bytes = 60 bits at 9600 baud = 6.25 ms (tokio timers round up to 1 ms).
+    // "RDSTU00\r" and "OK000\r" are 8 + 6 bytes = 140 bits at 9600 baud = 14.583 ms (tokio
+    // timers round up to 1 ms): the command's time on the wire and the reply's.
     let (reply, took) = ask(&mut host, "RDSTU00").await;
     assert_eq!(reply, "OK000\r");
     assert!(
-        took >= Duration::from_micros(6250) && took <= Duration::from_millis(7),
+        took >= Duration::from_micros(14_583) && took <= Duration::from_millis(15),
         "{took:?}"
     );
     let (reply, _) = ask(&mut host, "CTSTA").await;

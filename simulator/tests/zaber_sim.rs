@@ -111,3 +111,19 @@ async fn a_power_cycle_reads_zero_where_the_stage_stands_with_wr() {
     assert_eq!(h.ask("get pos").await, "@01 1 OK IDLE WR 0");
     assert_eq!(h.shared.true_position_nm(), stopped);
 }
+
+/// Speed and acceleration in Zaber's data units (microsteps/s × 1.6384, microsteps/s² ×
+/// 1.6384 / 10) and the travel, as a host reads them to time its polls and check a plan.
+#[tokio::test(start_paused = true)]
+async fn settings_are_reported_in_zabers_data_units() {
+    let mut h = start(ZaberSimConfig {
+        speed_per_s: 50_000.0,
+        accel_per_s2: 400_000.0,
+        limit_max: 305_381,
+        ..powered_up()
+    });
+    assert_eq!(h.ask("get maxspeed").await, "@01 1 OK IDLE WR 81920");
+    assert_eq!(h.ask("get accel").await, "@01 1 OK IDLE WR 65536");
+    assert_eq!(h.ask("get limit.min").await, "@01 1 OK IDLE WR 0");
+    assert_eq!(h.ask("get limit.max").await, "@01 1 OK IDLE WR 305381");
+}

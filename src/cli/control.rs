@@ -78,6 +78,13 @@ pub struct StartArgs {
     /// Free-text notes, recorded with the scan.
     #[arg(long, value_name = "TEXT", default_value = "")]
     pub notes: String,
+    /// Continue the newest unfinished or failed scan at its first missing line (after the
+    /// cause of a failure was cleared).
+    #[arg(long, conflicts_with = "new")]
+    pub resume: bool,
+    /// Start a new scan even when one is unfinished (that one is recorded as abandoned).
+    #[arg(long)]
+    pub new: bool,
 }
 
 /// Which operator command to send.
@@ -235,6 +242,7 @@ pub fn run_start(args: StartArgs) -> Result<(), CliError> {
         specimen: args.specimen,
         operator,
         notes: args.notes,
+        mode: super::scan::start_mode(args.resume, args.new),
     };
     send_command(&args.target, request)
 }
@@ -374,6 +382,9 @@ pub fn render_status(s: &Status) -> String {
                 l.scan_id, l.status, l.reason, l.dir
             )
         };
+    }
+    for d in &s.damaged_journals {
+        let _ = writeln!(out, "  warning    {d}");
     }
     out
 }

@@ -19,7 +19,7 @@ use crate::control::protocol::ControlChannels;
 use crate::control::server;
 use crate::hook::Hook;
 use crate::scan::channels::Control;
-use crate::scan::command::{OperatorCommand, OperatorRequest};
+use crate::scan::command::{OperatorCommand, OperatorRequest, Peer, StartMode};
 use crate::scan::event::ScanEvent;
 use crate::scan::outcome::{Outcome, ScanRequest};
 use crate::scan::runner::run_scan;
@@ -93,7 +93,11 @@ async fn daemon(
     let srv = server::bind_with_options(&config.control.socket, control)
         .await
         .map_err(|e| CliError::new(Exit::Unavailable, e.to_string()))?;
-    let (status_tx, status_rx) = watch::channel(Status::idle());
+    // The scans skipped for a damaged journal are in the status from the first request on.
+    let (status_tx, status_rx) = watch::channel(Status {
+        damaged_journals: damaged_journal_warnings(config),
+        ..Status::idle()
+    });
     let (cmd_tx, cmd_rx) = mpsc::channel::<OperatorRequest>(16);
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
 
@@ -173,10 +177,19 @@ async fn daemon(
 
     // Resume an unfinished scan at start-up.
     let mut stop = false;
-    match choose_request(config, String::new(), String::new(), String::new()) {
-        Ok(req @ ScanRequest::Resume(_)) => {
+    match choose_request(
+        config,
+        String::new(),
+        String::new(),
+        String::new(),
+        StartMode::Auto,
+        Peer::this_process(),
+    ) {
+        Ok(ScanRequest::Resume { dir, .. }) => {
+            let req = ScanRequest::Resume { dir, peer: None };
             let outcome = run_scan(&mut station, &mut ctl, &settings, req).await;
             stop = matches!(outcome, Outcome::Interrupted { .. });
+            note_damaged_journals(config, &ctl.status);
         }
         Ok(_) => {}
         Err(e) => tracing::error!("{e}"),
@@ -194,7 +207,7 @@ async fn daemon(
             req = ctl.commands.recv() => {
                 let Some(req) = req else { break };
                 match req.command {
-                    OperatorCommand::Start { specimen, operator, notes } => {
+                    OperatorCommand::Start { specimen, operator, notes, mode } => {
                         let busy = ctl.status.borrow().state != State::Idle;
                         if busy {
                             let running = match ctl.status.borrow().scan_id.clone() {
@@ -206,22 +219,25 @@ async fn daemon(
                             )));
                             continue;
                         }
-                        let _ = req.reply.send(Ok(format!(
-                            "starting a scan of {} lines; follow it with `surfscan status --watch`",
-                            config.scan.lines
-                        )));
-                        let mut request = match choose_request(config, specimen.clone(), operator.clone(), notes.clone()) {
+                        let request = match choose_request(config, specimen, operator, notes, mode, req.peer) {
                             Ok(r) => r,
                             Err(e) => {
                                 tracing::error!("{e}");
-                                ScanRequest::New { specimen, operator, notes, peer: None }
+                                let _ = req.reply.send(Err(e.to_string()));
+                                continue;
                             }
                         };
-                        if let ScanRequest::New { peer, .. } = &mut request {
-                            *peer = Some(req.peer);
-                        }
+                        let what = match &request {
+                            ScanRequest::New { .. } => format!("starting a scan of {} lines", config.scan.lines),
+                            ScanRequest::Resume { dir, .. } => format!("resuming the unfinished scan {}", dir.display()),
+                            ScanRequest::Continue { dir, .. } => format!("continuing the failed scan {}", dir.display()),
+                        };
+                        let _ = req.reply.send(Ok(format!(
+                            "{what}; follow it with `surfscan status --watch`"
+                        )));
                         let outcome = run_scan(&mut station, &mut ctl, &settings, request).await;
                         stop = matches!(outcome, Outcome::Interrupted { .. });
+                        note_damaged_journals(config, &ctl.status);
                     }
                     OperatorCommand::Pause | OperatorCommand::Resume | OperatorCommand::Abort => {
                         let _ = req.reply.send(Err(
@@ -250,4 +266,26 @@ async fn daemon(
     }
     tracing::info!("surfscan daemon stopped");
     Ok(())
+}
+
+/// Shows in the status the scans skipped because their journal is damaged (the snapshot a
+/// scan's end publishes starts afresh, so this is noted again after each scan).
+fn note_damaged_journals(config: &Config, status: &watch::Sender<Status>) {
+    let warnings = damaged_journal_warnings(config);
+    status.send_if_modified(|s| {
+        let changed = s.damaged_journals != warnings;
+        s.damaged_journals = warnings;
+        changed
+    });
+}
+
+/// One warning per scan of the output directory whose journal is damaged (also logged).
+fn damaged_journal_warnings(config: &Config) -> Vec<String> {
+    let warnings = crate::scan::journal::survey(&config.output.dir)
+        .map(|s| s.warnings())
+        .unwrap_or_default();
+    for w in &warnings {
+        tracing::warn!("{w}");
+    }
+    warnings
 }

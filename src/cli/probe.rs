@@ -49,13 +49,25 @@ pub struct Args {
     /// when either side goes away. Nothing else is sent.
     #[arg(long, value_name = "PC_PORT", requires = "record", conflicts_with_all = ["trace", "readout"])]
     pub passthrough: Option<PathBuf>,
-    /// End the pass-through after this many seconds.
-    #[arg(long, requires = "passthrough")]
+    /// End the pass-through after this many seconds (more than 0, at most a week).
+    #[arg(long, requires = "passthrough", value_parser = parse_for_s)]
     pub for_s: Option<f64>,
 }
 
 fn parse_form(s: &str) -> Result<ReadoutForm, String> {
     ReadoutForm::parse(s)
+}
+
+/// The longest pass-through `--for-s` accepts: a week.
+const MAX_PASSTHROUGH_S: f64 = 7.0 * 86_400.0;
+
+fn parse_for_s(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v > 0.0 && v <= MAX_PASSTHROUGH_S => Ok(v),
+        _ => Err(format!(
+            "{s:?} is not a number of seconds between 0 (exclusive) and {MAX_PASSTHROUGH_S} (a week)"
+        )),
+    }
 }
 
 /// Reads the `[instrument]` table of a TOML config, ignoring every other table.
@@ -70,12 +82,15 @@ pub fn load_instrument_settings(path: &Path) -> Result<InstrumentSettings, CliEr
             ),
         )
     })?;
-    section.try_into().map_err(|e: toml::de::Error| {
+    let settings: InstrumentSettings = section.try_into().map_err(|e: toml::de::Error| {
         CliError::new(
             Exit::Config,
             format!("[instrument] in {}: {e}", path.display()),
         )
-    })
+    })?;
+    crate::config::check_instrument_ranges(path, &settings)
+        .map_err(|e| CliError::new(Exit::Config, e.to_string()))?;
+    Ok(settings)
 }
 
 /// Runs `surfscan probe`.
@@ -189,12 +204,15 @@ async fn passthrough<S>(
 where
     S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin,
 {
-    let limit = match for_s {
-        Some(s) if s.is_finite() && s > 0.0 => Some(std::time::Duration::from_secs_f64(s)),
-        Some(s) => {
+    let limit = match for_s.map(std::time::Duration::try_from_secs_f64) {
+        Some(Ok(d)) if !d.is_zero() && d.as_secs_f64() <= MAX_PASSTHROUGH_S => Some(d),
+        Some(_) => {
             return Err(CliError::new(
                 Exit::Usage,
-                format!("--for-s {s} must be a positive number of seconds"),
+                format!(
+                    "--for-s {} must be a number of seconds between 0 (exclusive) and {MAX_PASSTHROUGH_S} (a week)",
+                    for_s.unwrap_or(f64::NAN)
+                ),
             ))
         }
         None => None,

@@ -20,7 +20,12 @@ use super::{CliError, Exit};
 use crate::config::{Config, ConfigError};
 use crate::report::{ScanAnalysisOptions, ScanCharacteriser};
 use crate::scan::channels::Control;
-use crate::scan::journal::find_unfinished;
+use crate::scan::command::{Peer, StartMode};
+use crate::scan::faults::NoFaults;
+use crate::scan::journal::{
+    find_unfinished, read_journal, Journal, Record, ResumeState, StopRecord, StopStatus,
+    JOURNAL_FILE,
+};
 use crate::scan::outcome::{FailKind, Outcome, ScanRequest};
 use crate::scan::plan::Plan;
 use crate::scan::runner::run_scan;
@@ -50,6 +55,22 @@ pub struct Args {
     /// Free-text notes (recorded with the scan).
     #[arg(long, default_value = "")]
     pub notes: String,
+    /// Continue the newest unfinished or failed scan at its first missing line (after the
+    /// cause of a failure was cleared).
+    #[arg(long, conflicts_with = "new")]
+    pub resume: bool,
+    /// Start a new scan even when one is unfinished (that one is recorded as abandoned).
+    #[arg(long)]
+    pub new: bool,
+}
+
+/// The start mode of `--resume` / `--new` (neither: resume an unfinished scan, else new).
+pub fn start_mode(resume: bool, new: bool) -> StartMode {
+    match (resume, new) {
+        (true, _) => StartMode::Resume,
+        (_, true) => StartMode::New,
+        _ => StartMode::Auto,
+    }
 }
 
 /// Loads the configuration and the SHA-256 of its bytes; a bad file is exit 78.
@@ -136,38 +157,137 @@ pub fn run_settings(
     })
 }
 
-/// The scan to run for this configuration: the newest unfinished one, else a new one.
+/// The scan to run for this configuration, as `mode` asks: the unfinished one (no stop
+/// record) started last, by its journal, else a new one; with [`StartMode::Resume`] a failed
+/// one is continued too (refused when there is none); with [`StartMode::New`] unfinished scans
+/// are recorded as abandoned and a new one starts. A scan whose journal is damaged is skipped
+/// with a warning. `peer` is who asked, for the journal.
 pub fn choose_request(
     config: &Config,
     specimen: String,
     operator: String,
     notes: String,
+    mode: StartMode,
+    peer: Peer,
 ) -> Result<ScanRequest, CliError> {
-    let unfinished = find_unfinished(&config.output.dir).map_err(|e| {
+    let out = &config.output.dir;
+    let unfinished = find_unfinished(out).map_err(|e| {
         CliError::new(
             Exit::Io,
-            format!(
-                "cannot look for unfinished scans in {}: {e}",
-                config.output.dir.display()
-            ),
+            format!("cannot look for unfinished scans in {}: {e}", out.display()),
         )
     })?;
+    let new = ScanRequest::New {
+        specimen,
+        operator,
+        notes,
+        peer: Some(peer),
+    };
+    if mode == StartMode::New {
+        for dir in &unfinished {
+            abandon(dir, peer)?;
+        }
+        return Ok(new);
+    }
     if let Some((last, older)) = unfinished.split_last() {
         for o in older {
             tracing::warn!(
-                "{} is also unfinished; only the newest is resumed (resume it by hand with `surfscan fit`/`analyze`, or add a stop record)",
+                "{} is also unfinished; only the one started last is resumed (resume it by hand with `surfscan fit`/`analyze`, or add a stop record)",
                 o.display()
             );
         }
         tracing::info!("resuming the unfinished scan {}", last.display());
-        return Ok(ScanRequest::Resume(last.clone()));
+        return Ok(ScanRequest::Resume {
+            dir: last.clone(),
+            peer: Some(peer),
+        });
     }
-    Ok(ScanRequest::New {
-        specimen,
-        operator,
-        notes,
-        peer: None,
-    })
+    let failed = newest_failed(out);
+    match (mode, failed) {
+        (StartMode::Resume, Some(dir)) => {
+            tracing::info!("continuing the failed scan {}", dir.display());
+            Ok(ScanRequest::Continue {
+                dir,
+                peer: Some(peer),
+            })
+        }
+        (StartMode::Resume, None) => Err(CliError::new(
+            Exit::Failed,
+            format!(
+                "no unfinished or failed scan in {} to resume; start without --resume for a new one",
+                out.display()
+            ),
+        )),
+        (_, Some(dir)) => {
+            tracing::warn!(
+                "the last scan {} failed; a new scan starts (`--resume` continues the failed one at its first missing line)",
+                dir.display()
+            );
+            Ok(new)
+        }
+        (_, None) => Ok(new),
+    }
+}
+
+/// The failed scan (stop record `fail`) under `output_dir` that started last, by its start
+/// record's sequence number (then its time); scans whose journal cannot be read are skipped
+/// with a warning.
+fn newest_failed(output_dir: &Path) -> Option<PathBuf> {
+    let entries = std::fs::read_dir(output_dir).ok()?;
+    let mut best: Option<((u64, chrono::DateTime<chrono::Utc>), PathBuf)> = None;
+    for dir in entries.filter_map(|e| e.ok().map(|e| e.path())) {
+        let path = dir.join(JOURNAL_FILE);
+        if !path.is_file() {
+            continue;
+        }
+        let state =
+            match read_journal(&path).and_then(|r| ResumeState::from_records(&path, &r.records)) {
+                Ok(s) => s,
+                Err(e) => {
+                    tracing::warn!("skipping {}: {e}", dir.display());
+                    continue;
+                }
+            };
+        if state.stop.as_ref().map(|s| s.status) != Some(StopStatus::Fail) {
+            continue;
+        }
+        // Started last by the sequence number no clock reorders, then (older journals) time.
+        let key = (state.start.sequence, state.start.time);
+        if best.as_ref().is_none_or(|(k, _)| key > *k) {
+            best = Some((key, dir));
+        }
+    }
+    best.map(|(_, d)| d)
+}
+
+/// Records in an unfinished scan's journal that it was abandoned for a new one.
+fn abandon(dir: &Path, peer: Peer) -> Result<(), CliError> {
+    let path = dir.join(JOURNAL_FILE);
+    let io = |e: String| {
+        CliError::new(
+            Exit::Io,
+            format!(
+                "cannot record that the scan in {} is abandoned: {e}",
+                dir.display()
+            ),
+        )
+    };
+    let (mut journal, _) =
+        Journal::open(&path, Arc::new(NoFaults)).map_err(|e| io(e.to_string()))?;
+    let reason = format!(
+        "abandoned: a new scan was started instead (--new, by uid {} pid {})",
+        peer.uid,
+        peer.pid.map_or("unknown".to_owned(), |p| p.to_string())
+    );
+    journal
+        .append(&Record::Stop(StopRecord {
+            status: StopStatus::Abandoned,
+            reason: reason.clone(),
+            time: chrono::Utc::now(),
+        }))
+        .map_err(|e| io(e.to_string()))?;
+    tracing::warn!("{}: {reason}", dir.display());
+    Ok(())
 }
 
 /// Maps a scan's outcome to the exit status and message of a foreground command.
@@ -432,7 +552,14 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
     let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
-    let request = choose_request(&config, args.specimen, args.operator, args.notes)?;
+    let request = choose_request(
+        &config,
+        args.specimen,
+        args.operator,
+        args.notes,
+        start_mode(args.resume, args.new),
+        Peer::this_process(),
+    )?;
     let settings = run_settings(&config, config_hash, hooks)?;
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()

@@ -11,7 +11,7 @@
 //! Layer 4 (process edge): serde types plus tokio channel types; depends on the scan's status
 //! and command types; no I/O.
 
-use crate::scan::command::OperatorRequest;
+use crate::scan::command::{OperatorRequest, StartMode};
 use crate::scan::status::Status;
 use serde::{Deserialize, Serialize};
 use tokio::sync::{mpsc, watch};
@@ -44,6 +44,10 @@ pub enum Request {
         /// Free-text notes.
         #[serde(default)]
         notes: String,
+        /// `auto` (default: resume an unfinished scan, else a new one), `resume` (also
+        /// continue a failed one) or `new` (start over).
+        #[serde(default)]
+        mode: StartMode,
     },
 }
 
@@ -97,7 +101,8 @@ mod tests {
             Request::Start {
                 specimen: "B12".into(),
                 operator: String::new(),
-                notes: String::new()
+                notes: String::new(),
+                mode: StartMode::Auto,
             }
         );
         assert_eq!(

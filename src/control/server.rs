@@ -695,10 +695,12 @@ async fn answer(
             specimen,
             operator,
             notes,
+            mode,
         } => OperatorCommand::Start {
             specimen,
             operator,
             notes,
+            mode,
         },
     };
     let name = command_name(&command);

@@ -18,8 +18,8 @@
 //! |---|---|---|---|
 //! | Ra Rq Rp Rv Rz Rt Rz1max RzJIS | 2 % | 10 % | 0.005 µm |
 //! | Rsk Rku | 5 % | 15 % | 0.02 |
-//! | RΔq | 3 % | 10 % | 0.002 |
-//! | RSm, Rc, RPc (element rules: hysteresis and end elements differ between implementations) | 5 % | 10 % | 0.5 µm, 0.005 µm, 1 /cm |
+//! | RΔq RΔa | 3 % | 10 % | 0.002 |
+//! | RSm Rc RPc Rppi (element rules: hysteresis and end elements differ between implementations) | 5 % | 10 % | 0.5 µm, 0.005 µm, 1 /cm, 2.5 /in |
 //! | Rk Rpk Rvk Rδc (the instrument's material ratio curve is binned at 1 % of Rt) | 5 % | 10 % | 0.005 µm |
 //! | Mr1 Mr2 Rmr Rmr(c) | — | — | 1 (R) or 2 (filtered here) percentage points |
 //!
@@ -46,7 +46,7 @@ pub struct Comparison {
     /// JIS1994, where Rz is the ten-point height; `Rmr(c)@10%Rt` for the first `Rmr(c)`),
     /// `None` for names we do not compute.
     pub compared_with: Option<String>,
-    /// Unit of `instrument`, `ours` and `difference` ("um", "%", "/cm", "" for ratios).
+    /// Unit of `instrument`, `ours` and `difference` ("um", "%", "/cm", "/in", "" for ratios).
     pub unit: &'static str,
     /// The largest |difference| still in agreement ([`tolerance_for`]), when both exist.
     pub tolerance: Option<f64>,
@@ -92,10 +92,11 @@ pub fn tolerance_for(name: &str, filtered_here: bool) -> Option<Tolerance> {
     match base {
         "ra" | "rq" | "rp" | "rv" | "rz" | "rt" | "rz1max" | "rzjis" => t(0.02, 0.10, 0.005),
         "rsk" | "rku" => t(0.05, 0.15, 0.02),
-        "rdq" => t(0.03, 0.10, 0.002),
+        "rdq" | "rda" => t(0.03, 0.10, 0.002),
         "rsm" => t(0.05, 0.10, 0.5),
         "rc" => t(0.05, 0.10, 0.005),
         "rpc" => t(0.05, 0.10, 1.0),
+        "rppi" => t(0.05, 0.10, 2.5),
         "rk" | "rpk" | "rvk" | "rdc" => t(0.05, 0.10, 0.005),
         "mr1" | "mr2" | "rmr" | "rmr(c)" => t(0.0, 0.0, if filtered_here { 2.0 } else { 1.0 }),
         _ => None,
@@ -128,9 +129,11 @@ fn ours_for(
         "rsk" => named(Some(p.rsk), "", "Rsk"),
         "rku" => named(Some(p.rku), "", "Rku"),
         "rdq" | "rδq" | "rΔq" | "rdeltaq" => named(Some(p.rdq), "", "Rdq"),
+        "rda" | "rδa" | "rΔa" | "rdeltaa" | "da" => named(Some(p.rda), "", "Rda"),
         "rsm" => named(p.rsm_um, "um", "RSm"),
         "rc" => named(p.rc_um, "um", "Rc"),
         "rpc" | "pc" => named(p.rpc_per_cm, "/cm", "RPc"),
+        "rppi" | "ppi" => named(p.rppi_per_inch, "/in", "Rppi"),
         "rk" => named(Some(p.rk_um), "um", "Rk"),
         "rpk" => named(Some(p.rpk_um), "um", "Rpk"),
         "rvk" => named(Some(p.rvk_um), "um", "Rvk"),
@@ -160,6 +163,7 @@ fn factor(unit_in: &str, ours: &str) -> Option<f64> {
         ("%", "%" | "") => Some(1.0),
         ("/cm", "/cm" | "1/cm" | "cm-1") => Some(1.0),
         ("/cm", "/mm" | "1/mm") => Some(10.0),
+        ("/in", "/in" | "1/in" | "/inch" | "ppi") => Some(1.0),
         ("", "" | "-") => Some(1.0),
         _ => None,
     }

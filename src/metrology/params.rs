@@ -9,8 +9,9 @@
 //!   ⌊n/N⌋ of the points (a remainder of fewer than N points at the end is not evaluated);
 //! * Ra, Rq, Rp, Rv, Rz, Rsk, Rku, RΔq, RSm and RzJIS per sampling length, then averaged;
 //!   Rt, Rz1max and the Rk family over the evaluation length;
-//! * RΔq from the ISO 4287 7-point derivative, computed over the evaluation length and pooled
-//!   per sampling length (points within 3 of either end have no slope);
+//! * RΔq (and RΔa, the mean |slope| the SJ series also reports) from the ISO 4287 7-point
+//!   derivative, computed over the evaluation length and pooled per sampling length (points
+//!   within 3 of either end have no slope);
 //! * the Rk family from the material ratio curve Rmc(mr) (linear quantiles of the ordinates),
 //!   the equivalent straight line being the 40 % secant of least gradient (the first if tied,
 //!   mr searched in 0.1 % steps), A1/A2 in µm·%, Rpk = 2·A1/Mr1, Rvk = 2·A2/(100 − Mr2);
@@ -19,7 +20,8 @@
 //!   +10 % of the section's Rz and its valley −10 % (the instrument's "Zp/Zv: 10 %"), and an
 //!   element narrower than 1 % of the sampling length is merged into the next; RSm and Rc
 //!   (mean Zt = Zp + Zv) per sampling length, then averaged; RPc = 1 cm / RSm, in 1/cm (the
-//!   SJ manuals: "Pc = unit length / Sm", not ASME's count of ±c crossings);
+//!   SJ manuals: "Pc = unit length / Sm", not ASME's count of ±c crossings), and Rppi the
+//!   same for one inch (the SJ series' Ppi);
 //! * the material ratio parameters the SJ series reports, over the evaluation length on the
 //!   piecewise-linear profile ([`MaterialLevels`], the levels the SJ-410's own result files
 //!   show): Rmr(c) with the "peak reference" (depth below the highest peak in % of Rt),
@@ -147,6 +149,10 @@ pub struct RoughnessParams {
     /// Root mean square slope (7-point), lr-mean, dimensionless.
     #[serde(rename = "Rdq")]
     pub rdq: f64,
+    /// Arithmetic mean slope |dZ/dX| (the same 7-point slope), lr-mean, dimensionless: the
+    /// SJ series' RΔa (Da on the SJ-301).
+    #[serde(rename = "Rda")]
+    pub rda: f64,
     /// Mean width of profile elements, lr-mean; `None` when no section holds two elements.
     #[serde(rename = "RSm_um")]
     pub rsm_um: Option<f64>,
@@ -156,6 +162,10 @@ pub struct RoughnessParams {
     /// Peak count per centimetre, 10 mm / RSm; `None` as RSm.
     #[serde(rename = "RPc_per_cm")]
     pub rpc_per_cm: Option<f64>,
+    /// Peak count per inch, 25.4 mm / RSm (the SJ series' Ppi: Pc for a unit length of one
+    /// inch); `None` as RSm.
+    #[serde(rename = "Rppi_per_inch")]
+    pub rppi_per_inch: Option<f64>,
     /// Rmr(c) at the peak-reference depths of [`MaterialLevels::rmr_c_depths_pct_rt`].
     #[serde(rename = "Rmr(c)")]
     pub rmr_c: Vec<RmrC>,
@@ -264,9 +274,11 @@ pub fn definitions() -> BTreeMap<String, String> {
         ("Rsk", "ISO4287:1997/Rsk mean Z^3/Rq^3 per lr (no mean removal), lr-mean"),
         ("Rku", "ISO4287:1997/Rku mean Z^4/Rq^4 per lr (3 for Gaussian), lr-mean"),
         ("Rdq", "ISO4287:1997/Rdq rms 7-point slope per lr, lr-mean"),
+        ("Rda", "SJ series RΔa (Da): mean |7-point slope| per lr, lr-mean"),
         ("RSm", "ISO4287:1997/RSm elements between upward mean-line crossings; peak >= 10% Rz, valley <= -10% Rz of the lr; elements < 1% lr merged; lr-mean"),
         ("Rc", "ISO4287:1997/Rc mean Zt = Zp + Zv of the RSm elements (SJ series Zp/Zv: 10% of Rz, 1% lr), lr-mean"),
         ("RPc", "SJ series Pc/RPc = 1 cm / RSm, per cm (not the ASME count of +-c crossings)"),
+        ("Rppi", "SJ series Ppi = 1 inch / RSm (Pc for a unit length of 1 inch), per inch"),
         ("Rmr(c)_SJ", "SJ series mr[c] peak reference: Rmr at a depth below the highest peak of ln given in % of Rt, linear crossings"),
         ("Rdc", "ISO4287:1997/Rdc = C(Rmr1) - C(Rmr2) on the piecewise-linear material ratio curve over ln; SJ series levels 10% and 25%"),
         ("Rmr", "ISO4287:1997/Rmr relative material ratio at C(Rmr0) - Rdc; SJ series Rmr0 = 0% (the highest peak), Rdc = 0.10 um"),
@@ -418,12 +430,17 @@ pub fn analyze_line(
         rsk: acc.rsk / k,
         rku: acc.rku / k,
         rdq: acc.rdq / k,
+        rda: acc.rda / k,
         rsm_um: (acc.rsm_n > 0).then(|| acc.rsm / acc.rsm_n as f64),
         rc_um: (acc.rsm_n > 0).then(|| acc.rc / acc.rsm_n as f64),
         rpc_per_cm: (acc.rsm_n > 0)
             .then(|| acc.rsm / acc.rsm_n as f64)
             .filter(|w| *w > 0.0)
             .map(|w| 10_000.0 / w),
+        rppi_per_inch: (acc.rsm_n > 0)
+            .then(|| acc.rsm / acc.rsm_n as f64)
+            .filter(|w| *w > 0.0)
+            .map(|w| 25_400.0 / w),
         rmr_c,
         rdc_um,
         rmr_pct,
@@ -492,6 +509,7 @@ struct Acc {
     rsk: f64,
     rku: f64,
     rdq: f64,
+    rda: f64,
     rsm: f64,
     rc: f64,
     rsm_n: usize,
@@ -520,6 +538,7 @@ impl Acc {
         let sl: Vec<f64> = slopes.iter().flatten().copied().collect();
         if !sl.is_empty() {
             self.rdq += (sl.iter().map(|s| s * s).sum::<f64>() / sl.len() as f64).sqrt();
+            self.rda += sl.iter().map(|s| s.abs()).sum::<f64>() / sl.len() as f64;
         }
         match ten_point(z) {
             Some(v) if !self.rzjis_missing => self.rzjis = Some(self.rzjis.unwrap_or(0.0) + v),

@@ -6,6 +6,20 @@
 
 use tokio::sync::oneshot;
 
+/// Which scan a start runs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StartMode {
+    /// Resume the newest unfinished scan (no stop record), else start a new one.
+    #[default]
+    Auto,
+    /// Resume the newest unfinished scan, else continue the newest failed one at its first
+    /// missing line; refused when there is neither.
+    Resume,
+    /// Start a new scan; unfinished scans are recorded as abandoned.
+    New,
+}
+
 /// A command for the runner.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum OperatorCommand {
@@ -23,6 +37,8 @@ pub enum OperatorCommand {
         operator: String,
         /// Notes.
         notes: String,
+        /// Which scan.
+        mode: StartMode,
     },
 }
 

@@ -1,10 +1,18 @@
 //! The scan journal `journal.jsonl`: one JSON object per line, each tagged by `class`.
 //!
 //! Records: a start record (frozen plan and config, traceability), one record per completed
-//! line keyed by its 0-based index, interruption records and a final stop record. Appends are
-//! fsynced. Opening recovers from a crash: a torn tail (an unterminated last line, or an
-//! invalid last line) is truncated and reported; an invalid record before the end is a named
-//! error. [`ResumeState`] derives what a restarted scan needs.
+//! line keyed by its 0-based index, interruption records, quarantine records (a committed
+//! line whose file was found changed, moved aside to be traced again) and a final stop
+//! record. Appends are fsynced.
+//!
+//! Each record ends with a `"crc"` member: the CRC-32 (IEEE, 8 hex digits) of the record's
+//! JSON object written without that member, so a changed byte anywhere in a record is seen.
+//! Journals written before records carried a CRC are read as they are; once a record has a
+//! CRC, every later one must have one. Opening recovers from a crash: a torn tail (an
+//! unterminated last line, or a last line that is not a valid record or fails its CRC) is
+//! truncated and reported; an invalid record before the end is damage, a named error.
+//! [`ResumeState`] derives what a restarted scan needs; [`survey`] finds the scan to resume
+//! from the journals themselves and names the damaged ones, which are skipped.
 //!
 //! Layer 3 (session): depends on [`crate::profile`], [`crate::units`], the plan, the operator's
 //! [`Peer`] and the storage fault hook ([`super::faults`]); file I/O only.
@@ -88,6 +96,11 @@ pub enum JournalError {
 pub struct StartRecord {
     /// The scan id.
     pub scan_id: String,
+    /// The scan's place among the scans of its output directory, independent of the clock:
+    /// one more than the highest of the journals there when it started ([`next_sequence`]),
+    /// assigned by [`Journal::create`]; 0 in journals of versions before it.
+    #[serde(default)]
+    pub sequence: u64,
     /// Start time.
     pub time: DateTime<Utc>,
     /// The plan frozen at start (it wins over a config edited since).
@@ -153,6 +166,25 @@ pub struct InterruptionRecord {
     pub peer: Option<Peer>,
 }
 
+/// A committed line whose heights file no longer matches the SHA-256 of its line record:
+/// its two files were moved aside (under `quarantine/` in the scan directory) and the line is
+/// traced again. Its line record no longer counts; a later line record of the same index does.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct QuarantineRecord {
+    /// 0-based line index.
+    pub index: u32,
+    /// SHA-256 the line record holds, hex.
+    pub expected_sha256: String,
+    /// SHA-256 of the file as found, hex (empty when it could not be read).
+    pub found_sha256: String,
+    /// Where the heights file was moved, relative to the scan directory.
+    pub moved_to: String,
+    /// What was wrong, for people.
+    pub reason: String,
+    /// When.
+    pub time: DateTime<Utc>,
+}
+
 /// How a scan ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -161,17 +193,20 @@ pub enum StopStatus {
     Success,
     /// Aborted by the operator.
     Abort,
-    /// Ended by an unrecoverable fault.
+    /// Ended by a fault the operator must clear (`--resume` continues it).
     Fail,
+    /// Left unfinished and given up for a new scan (`--new`).
+    Abandoned,
 }
 
 impl StopStatus {
-    /// `success`, `abort` or `fail`, as the journal spells it.
+    /// `success`, `abort`, `fail` or `abandoned`, as the journal spells it.
     pub fn as_str(self) -> &'static str {
         match self {
             StopStatus::Success => "success",
             StopStatus::Abort => "abort",
             StopStatus::Fail => "fail",
+            StopStatus::Abandoned => "abandoned",
         }
     }
 }
@@ -210,6 +245,8 @@ pub enum Record {
     Line(LineRecord),
     /// An interruption.
     Interruption(InterruptionRecord),
+    /// A committed line moved aside to be traced again.
+    Quarantine(QuarantineRecord),
     /// The stop record.
     Stop(StopRecord),
     /// A failed scan continued (`--resume`).
@@ -222,10 +259,71 @@ impl Record {
             Record::Start(_) => "start",
             Record::Line(_) => "line",
             Record::Interruption(_) => "interruption",
+            Record::Quarantine(_) => "quarantine",
             Record::Stop(_) => "stop",
             Record::Continue(_) => "continue",
         }
     }
+}
+
+/// The CRC member every record line ends with: `,"crc":"` + 8 hex digits + `"}`.
+const CRC_KEY: &[u8] = b",\"crc\":\"";
+/// Length of that member with the closing brace.
+const CRC_SUFFIX_LEN: usize = 18;
+
+/// One record as its journal line (without the newline): the record's JSON object with a
+/// last member `"crc"`, the CRC-32 of the object as written without that member.
+pub fn encode_record(record: &Record) -> serde_json::Result<Vec<u8>> {
+    let mut line = serde_json::to_vec(record)?;
+    let crc = crc32fast::hash(&line);
+    // Every record is a JSON object with at least its class: it ends with `}`.
+    line.pop();
+    line.extend_from_slice(format!(",\"crc\":\"{crc:08x}\"}}").as_bytes());
+    Ok(line)
+}
+
+/// Splits a record line into the object without its CRC member and the CRC's hex digits,
+/// or returns the line whole when it has no CRC member (a journal of an older version).
+fn split_crc(line: &[u8]) -> (std::borrow::Cow<'_, [u8]>, Option<&[u8]>) {
+    let n = line.len();
+    let key = n
+        .checked_sub(CRC_SUFFIX_LEN)
+        .and_then(|at| line.get(at..at + CRC_KEY.len()));
+    match (key, line.get(n.saturating_sub(10)..n.saturating_sub(2))) {
+        (Some(k), Some(hex)) if k == CRC_KEY && line.ends_with(b"\"}") => {
+            let mut body = line.get(..n - CRC_SUFFIX_LEN).unwrap_or_default().to_vec();
+            body.push(b'}');
+            (std::borrow::Cow::Owned(body), Some(hex))
+        }
+        _ => (std::borrow::Cow::Borrowed(line), None),
+    }
+}
+
+/// Decodes one record line: the record and whether it carried a CRC, or why it is not a
+/// valid record.
+fn decode_line(line: &[u8]) -> Result<(Record, bool), String> {
+    let (body, hex) = split_crc(line);
+    if let Some(hex) = hex {
+        let recorded = std::str::from_utf8(hex)
+            .ok()
+            .filter(|h| h.bytes().all(|b| b.is_ascii_hexdigit()))
+            .and_then(|h| u32::from_str_radix(h, 16).ok())
+            .ok_or_else(|| {
+                format!(
+                    "its CRC {:?} is not 8 hex digits",
+                    String::from_utf8_lossy(hex)
+                )
+            })?;
+        let actual = crc32fast::hash(&body);
+        if actual != recorded {
+            return Err(format!(
+                "its content has CRC-32 {actual:08x}, the record says {recorded:08x}: a byte of it was changed"
+            ));
+        }
+    }
+    serde_json::from_slice::<Record>(&body)
+        .map(|r| (r, hex.is_some()))
+        .map_err(|e| e.to_string())
 }
 
 /// What reading a journal found.
@@ -239,12 +337,14 @@ pub struct Recovery {
     pub torn_bytes: u64,
 }
 
-/// Parses journal bytes: every newline-terminated line must be a record, except that an
+/// Parses journal bytes: every newline-terminated line must be a record (whose CRC, when it
+/// has one, matches; after a record with a CRC every record must have one), except that an
 /// invalid *last* line and any unterminated tail count as torn.
 pub fn parse_journal(path: &Path, bytes: &[u8]) -> Result<Recovery, JournalError> {
     let mut records = Vec::new();
     let mut pos = 0usize;
     let mut line_no = 0usize;
+    let mut crc_seen = false;
     while pos < bytes.len() {
         let rest = bytes.get(pos..).unwrap_or_default();
         let Some(nl) = rest.iter().position(|&b| b == b'\n') else {
@@ -253,7 +353,15 @@ pub fn parse_journal(path: &Path, bytes: &[u8]) -> Result<Recovery, JournalError
         line_no += 1;
         let line = rest.get(..nl).unwrap_or_default();
         let next = pos + nl + 1;
-        match serde_json::from_slice::<Record>(line) {
+        let decoded = decode_line(line).and_then(|(r, crc)| {
+            if crc_seen && !crc {
+                Err("it has no CRC although the records before it have one".to_owned())
+            } else {
+                crc_seen |= crc;
+                Ok(r)
+            }
+        });
+        match decoded {
             Ok(r) => records.push(r),
             Err(e) => {
                 if next >= bytes.len() {
@@ -265,7 +373,7 @@ pub fn parse_journal(path: &Path, bytes: &[u8]) -> Result<Recovery, JournalError
                     line: line_no,
                     offset: pos as u64,
                     content,
-                    reason: e.to_string(),
+                    reason: e,
                 });
             }
         }
@@ -304,12 +412,16 @@ impl std::fmt::Debug for Journal {
 }
 
 impl Journal {
-    /// Creates the journal of a new scan in `scan_dir` and writes the start record.
+    /// Creates the journal of a new scan in `scan_dir` and writes the start record, numbered
+    /// after the scans beside it in the output directory (its `sequence` is assigned here).
     pub fn create(
         scan_dir: &Path,
-        start: StartRecord,
+        mut start: StartRecord,
         faults: Arc<dyn StorageFaults>,
     ) -> Result<Journal, JournalError> {
+        if let Some(output_dir) = scan_dir.parent() {
+            start.sequence = next_sequence(output_dir);
+        }
         let path = scan_dir.join(JOURNAL_FILE);
         let file = OpenOptions::new()
             .append(true)
@@ -380,7 +492,7 @@ impl Journal {
     /// write fails part-way (e.g. the disk filled up), the file is cut back to its previous
     /// length (best effort) so a later append cannot leave a damaged record in the middle.
     pub fn append(&mut self, record: &Record) -> Result<(), JournalError> {
-        let mut line = serde_json::to_vec(record).map_err(|source| JournalError::Serialise {
+        let mut line = encode_record(record).map_err(|source| JournalError::Serialise {
             path: self.path.clone(),
             source,
         })?;
@@ -413,6 +525,8 @@ pub struct ResumeState {
     pub duplicates: Vec<u32>,
     /// Interruptions recorded so far.
     pub interruptions: Vec<InterruptionRecord>,
+    /// Committed lines moved aside to be traced again, in journal order.
+    pub quarantined: Vec<QuarantineRecord>,
     /// The stop record, if the scan has ended.
     pub stop: Option<StopRecord>,
 }
@@ -436,6 +550,7 @@ impl ResumeState {
             lines: Vec::new(),
             duplicates: Vec::new(),
             interruptions: Vec::new(),
+            quarantined: Vec::new(),
             stop: None,
         };
         for (i, r) in it.enumerate() {
@@ -454,6 +569,13 @@ impl ResumeState {
                     }
                 }
                 Record::Interruption(x) => state.interruptions.push(x.clone()),
+                Record::Quarantine(q) => {
+                    // The line's record no longer counts: the line is traced again.
+                    if seen.remove(&q.index) {
+                        state.lines.retain(|l| l.index != q.index);
+                    }
+                    state.quarantined.push(q.clone());
+                }
                 Record::Stop(s) => state.stop = Some(s.clone()),
                 Record::Continue(_) => state.stop = None,
             }
@@ -478,10 +600,56 @@ impl ResumeState {
     }
 }
 
-/// Scan directories under `output_dir` whose journal has no stop record, sorted by name
-/// (oldest id first). Directories without a journal, or whose journal holds not even a
-/// complete start record, are ignored; a damaged journal is an error.
-pub fn find_unfinished(output_dir: &Path) -> Result<Vec<PathBuf>, JournalError> {
+/// A scan directory whose journal has no stop record.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Unfinished {
+    /// The scan directory.
+    pub dir: PathBuf,
+    /// Its scan id, from the start record.
+    pub scan_id: String,
+    /// Its sequence number, from the start record.
+    pub sequence: u64,
+    /// Its start time, from the start record.
+    pub started: DateTime<Utc>,
+}
+
+/// What the journals under an output directory say.
+#[derive(Debug, Default)]
+pub struct Survey {
+    /// Scans without a stop record, started first first: by the start record's sequence
+    /// number (which no clock can reorder), then its time (journals of older versions have
+    /// sequence 0), then its scan id. The last is the one to resume.
+    pub unfinished: Vec<Unfinished>,
+    /// Journals that cannot be read or hold a damaged record: those scans are skipped.
+    pub damaged: Vec<JournalError>,
+    /// The highest sequence number of the readable journals (0 when there are none).
+    pub max_sequence: u64,
+}
+
+impl Survey {
+    /// The scan to resume: the unfinished one started last.
+    pub fn to_resume(&self) -> Option<&Unfinished> {
+        self.unfinished.last()
+    }
+
+    /// One warning per skipped journal, naming it, the damaged record and what to do.
+    pub fn warnings(&self) -> Vec<String> {
+        self.damaged
+            .iter()
+            .map(|e| {
+                format!("{e}; that scan is skipped (it is not resumed), new scans are not held up")
+            })
+            .collect()
+    }
+}
+
+/// Reads every scan journal under `output_dir` (each directory holding a `journal.jsonl`)
+/// and sorts them into unfinished scans and damaged journals. Which scan is unfinished, and
+/// in which order, comes from the journals' own records, not from directory names (a clock
+/// set backwards names a newer scan earlier; a directory may be renamed). Directories whose
+/// journal holds not even a complete start record are ignored: no line was committed there.
+/// Only an output directory that cannot be listed is an error.
+pub fn survey(output_dir: &Path) -> Result<Survey, JournalError> {
     let io = |source| JournalError::Io {
         op: "list",
         path: output_dir.to_path_buf(),
@@ -489,29 +657,64 @@ pub fn find_unfinished(output_dir: &Path) -> Result<Vec<PathBuf>, JournalError> 
     };
     let entries = match fs::read_dir(output_dir) {
         Ok(e) => e,
-        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Survey::default()),
         Err(e) => return Err(io(e)),
     };
-    let mut out = Vec::new();
+    let mut out = Survey::default();
     for entry in entries {
         let dir = entry.map_err(io)?.path();
         let jpath = dir.join(JOURNAL_FILE);
         if !jpath.is_file() {
             continue;
         }
-        let rec = read_journal(&jpath)?;
-        if rec.records.is_empty() {
-            // Crashed while writing the start record: no line can have been committed
-            // (lines follow the start record), so there is nothing to resume.
-            continue;
-        }
-        let state = ResumeState::from_records(&jpath, &rec.records)?;
-        if !state.is_stopped() {
-            out.push(dir);
+        let state = read_journal(&jpath).and_then(|rec| {
+            if rec.records.is_empty() {
+                // Crashed while writing the start record: no line can have been committed
+                // (lines follow the start record), so there is nothing to resume.
+                return Ok(None);
+            }
+            ResumeState::from_records(&jpath, &rec.records).map(Some)
+        });
+        match state {
+            Ok(Some(st)) => {
+                out.max_sequence = out.max_sequence.max(st.start.sequence);
+                if !st.is_stopped() {
+                    out.unfinished.push(Unfinished {
+                        dir,
+                        scan_id: st.start.scan_id,
+                        sequence: st.start.sequence,
+                        started: st.start.time,
+                    });
+                }
+            }
+            Ok(None) => {}
+            Err(e) => out.damaged.push(e),
         }
     }
-    out.sort();
+    out.unfinished.sort_by(|a, b| {
+        (a.sequence, a.started, &a.scan_id, &a.dir)
+            .cmp(&(b.sequence, b.started, &b.scan_id, &b.dir))
+    });
     Ok(out)
+}
+
+/// The sequence number of a new scan in `output_dir`: one more than the highest of the
+/// journals there (1 for the first; an unlistable directory counts as empty, the scan's own
+/// creation then names the problem).
+pub fn next_sequence(output_dir: &Path) -> u64 {
+    survey(output_dir)
+        .map_or(0, |s| s.max_sequence)
+        .saturating_add(1)
+}
+
+/// Scan directories under `output_dir` whose journal has no stop record, oldest start first
+/// (see [`survey`]); damaged journals are skipped with a warning in the log.
+pub fn find_unfinished(output_dir: &Path) -> Result<Vec<PathBuf>, JournalError> {
+    let s = survey(output_dir)?;
+    for w in s.warnings() {
+        tracing::warn!("{w}");
+    }
+    Ok(s.unfinished.into_iter().map(|u| u.dir).collect())
 }
 
 #[cfg(test)]

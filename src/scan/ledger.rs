@@ -19,6 +19,7 @@ use super::testhooks::{Step, TestHooks};
 use crate::fit::{FitError, FitOptions, IncrementalFitter};
 use crate::profile::Profile;
 use chrono::Utc;
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -35,6 +36,9 @@ pub(super) struct Ledger {
     fitter: Option<IncrementalFitter>,
     /// The committed lines, in index order.
     pub lines: Vec<StoredLine>,
+    /// Committed lines after a gap (a line moved aside at resume): each goes to the fitter
+    /// right after the line before it.
+    pub ahead: BTreeMap<u32, StoredLine>,
     hooks: Arc<TestHooks>,
     metrics_path: Option<PathBuf>,
 }
@@ -56,6 +60,7 @@ impl Ledger {
             plan,
             fitter: Some(fitter_of(&plan)),
             lines: Vec::new(),
+            ahead: BTreeMap::new(),
             start,
             hooks,
             metrics_path,
@@ -150,11 +155,17 @@ impl Ledger {
         let _ = sync_dir(&dir);
     }
 
-    /// Pushes a committed line into the fitter and keeps it.
+    /// Pushes a committed line into the fitter and keeps it, then the lines committed
+    /// ahead of it that follow it without a gap.
     pub fn push(&mut self, line: StoredLine) -> Result<(), FitError> {
-        let fitter = self.fitter.get_or_insert_with(|| fitter_of(&self.plan));
-        fitter.push_line(line.y_mm(), &line.profile)?;
-        self.lines.push(line);
+        let mut next = Some(line);
+        while let Some(line) = next.take() {
+            let fitter = self.fitter.get_or_insert_with(|| fitter_of(&self.plan));
+            fitter.push_line(line.y_mm(), &line.profile)?;
+            let following = line.meta.index.saturating_add(1);
+            self.lines.push(line);
+            next = self.ahead.remove(&following);
+        }
         Ok(())
     }
 

@@ -1,6 +1,7 @@
 //! The heights file of a line, `NNNN.csv`: header `x_mm,z_um`, one row per point, both
 //! numbers in Rust's shortest round-trip decimal form, so reading back yields bit-identical
-//! values.
+//! values. x starts at 0: point *i* is at *i* × pitch (Mitutoyo's own export numbers the same
+//! points from one pitch to *n* pitches; see [`crate::sj210::sampling`]).
 //!
 //! Layer 3 (session): depends on [`crate::profile`] and [`super::store_error`]; no I/O.
 

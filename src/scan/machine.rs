@@ -49,6 +49,7 @@ use crate::devices::FaultClass;
 use crate::profile::Conditions;
 use crate::units::Nm;
 use chrono::{DateTime, SecondsFormat, Utc};
+use std::collections::BTreeSet;
 use std::fmt;
 use std::time::{Duration, Instant};
 
@@ -81,8 +82,12 @@ pub struct Resumed {
     pub scan_id: String,
     /// Scan directory, for people.
     pub dir: String,
-    /// Lines committed (they are lines `0..committed`).
+    /// Lines committed without a gap (they are lines `0..committed`).
     pub committed: u32,
+    /// Lines committed after the first gap (a committed line moved aside at resume, to be
+    /// traced again): the machine skips them; the ledger feeds them to the fitter after the
+    /// line before them.
+    pub ahead: BTreeSet<u32>,
     /// Points per committed line, when a line is committed.
     pub columns: Option<usize>,
     /// x pitch of the committed lines, mm.
@@ -549,6 +554,8 @@ pub struct Machine {
     created: bool,
     /// The next line to commit (lines `0..line` are committed).
     line: u32,
+    /// Lines committed after the next one (resumed after a gap); skipped when reached.
+    ahead: BTreeSet<u32>,
     doing: Doing,
     instrument_open: bool,
     stage_open: bool,
@@ -617,6 +624,7 @@ impl Machine {
             pitch_x_mm: None,
             conditions: None,
             points_per_line: 0,
+            ahead: BTreeSet::new(),
             held_ra: None,
             ending: None,
             ended: false,
@@ -624,12 +632,14 @@ impl Machine {
         if let Some(r) = r {
             m.created = true;
             m.line = r.committed.min(plan.lines);
+            m.ahead = r.ahead;
+            m.skip_ahead();
             m.columns = r.columns;
             m.pitch_x_mm = r.pitch_x_mm;
             m.conditions = Some(r.conditions);
             m.points_per_line = r.points_per_line;
             m.metrics.scan_id = r.scan_id.clone();
-            m.metrics.lines_done = m.line;
+            m.metrics.lines_done = m.done();
             m.status.scan_id = Some(r.scan_id);
             m.status.scan_dir = Some(r.dir);
         }
@@ -1193,12 +1203,14 @@ impl Machine {
             .map_or(0.0, |t| (now.mono - t).as_secs_f64());
         self.line_seconds.push(secs);
         self.line += 1;
+        self.skip_ahead();
         self.traces = 0;
         self.rehomes = 0;
         self.budget = None;
         self.retry_wait = Duration::ZERO;
+        let done = self.done();
         let m = &mut self.metrics;
-        m.lines_done = self.line;
+        m.lines_done = done;
         m.last_line_seconds = Some(secs);
         m.line_seconds_sum += secs;
         m.line_seconds_count += 1;
@@ -1428,14 +1440,26 @@ impl Machine {
         out.push(Action::Publish(self.status.clone()));
     }
 
+    /// Steps the next line past the lines already committed after a gap.
+    fn skip_ahead(&mut self) {
+        while self.ahead.remove(&self.line) {
+            self.line += 1;
+        }
+    }
+
+    /// Lines committed: those before the next line and those committed ahead of it.
+    fn done(&self) -> u32 {
+        self.line.saturating_add(self.ahead.len() as u32)
+    }
+
     fn publish_progress(&mut self, out: &mut Vec<Action>, current: Option<u32>) {
-        self.status.lines_done = self.line;
+        self.status.lines_done = self.done();
         self.status.lines_total = self.plan.lines;
         self.status.current_line = current.map(|k| k + 1);
         self.status.y_mm = current.map(|k| self.plan.target(k).to_mm());
         self.status.eta_s = (!self.line_seconds.is_empty()).then(|| {
             let mean = self.line_seconds.iter().sum::<f64>() / self.line_seconds.len() as f64;
-            mean * f64::from(self.plan.lines.saturating_sub(self.line))
+            mean * f64::from(self.plan.lines.saturating_sub(self.done()))
         });
         self.publish(out);
     }

@@ -13,7 +13,8 @@
 //! - [`station`]: opening the instrument and the stage; device errors reduced to a `Fault`.
 //! - [`machine`]: the sans-IO session core: events (with the time) in, actions out; the
 //!   fault policy (classes, transient budget, suspension, disk full, pause/abort, shutdown).
-//! - [`runner`]: performs the machine's actions on devices, disk and channels;
+//! - [`runner`]: performs the machine's actions on devices ([`device_ops`]), disk
+//!   ([`disk_ops`]) and channels;
 //!   [`channels`]: its connection to the outside; [`outcome`]: what it is asked and how a
 //!   scan ended; [`opening`]: creating or reopening a scan directory; [`ledger`]: the
 //!   running scan's journal, lines and fitter.
@@ -28,16 +29,18 @@
 
 pub mod channels;
 pub mod command;
+pub mod device_ops;
 pub mod disk;
+pub mod disk_ops;
 pub mod event;
 pub mod faults;
 pub mod journal;
-mod ledger;
+pub mod ledger;
 pub mod line;
 pub mod line_csv;
 pub mod machine;
 pub mod metrics;
-mod opening;
+pub mod opening;
 pub mod outcome;
 pub mod outputs;
 pub mod plan;

@@ -7,7 +7,7 @@
 
 use super::command::Peer;
 use super::disk::preflight_disk;
-use super::journal::{Journal, ResumeState, StartRecord};
+use super::journal::{Journal, Record, ResumeState, StartRecord};
 use super::ledger::Ledger;
 use super::machine::Resumed;
 use super::scan_id::ScanId;
@@ -82,6 +82,8 @@ pub(super) fn create(
     let store = ScanStore::create(output_dir, &id, faults.clone())?;
     let start = StartRecord {
         scan_id: id.0.clone(),
+        // Numbered by `Journal::create`.
+        sequence: 0,
         time: now,
         plan,
         config: settings.config.clone(),
@@ -160,27 +162,65 @@ pub(super) fn reopen(
         settings.hooks.clone(),
         settings.metrics_file.clone(),
     );
-    let lines = ledger
+    // A committed line that fails its check is moved aside (both hashes journaled) and
+    // traced again, instead of refusing to resume.
+    let checked = ledger
         .store
-        .load_committed(&state.lines)
+        .load_committed_repairing(&state.lines, Utc::now())
         .map_err(|e| format!("cannot rebuild the fit: {e}"))?;
+    for q in &checked.quarantined {
+        tracing::warn!(scan_id = %ledger.id, line = q.index + 1, "{} (now {})", q.reason, q.moved_to);
+        ledger
+            .journal
+            .append(&Record::Quarantine(q.clone()))
+            .map_err(|e| format!("cannot record the line moved aside: {e}"))?;
+    }
+    let mut lines = checked.lines;
+    lines.sort_by_key(|l| l.meta.index);
     let columns = lines.first().map(|l| l.profile.len());
     let pitch_x_mm = lines.first().map(|l| l.profile.pitch_x_mm);
-    let committed = lines.len() as u32;
+    // The fitter takes lines in order: those after the first gap wait in the ledger.
+    let committed = lines
+        .iter()
+        .zip(0u32..)
+        .take_while(|(l, k)| l.meta.index == *k)
+        .count();
+    ledger.ahead = lines
+        .split_off(committed)
+        .into_iter()
+        .map(|l| (l.meta.index, l))
+        .collect();
+    let ahead = ledger.ahead.keys().copied().collect();
+    let on_disk = committed + ledger.ahead.len();
+    let committed = committed as u32;
     for l in lines {
         let index = l.meta.index;
         ledger
             .push(l)
             .map_err(|e| format!("cannot rebuild the fit from line {}: {e}", index + 1))?;
     }
+    let quarantined: Vec<String> = checked
+        .quarantined
+        .iter()
+        .map(|q| (q.index + 1).to_string())
+        .collect();
     let note = format!(
-        "{} with {committed} of {} lines on disk{}",
+        "{} with {on_disk} of {} lines on disk{}{}",
         if failed.is_some() {
             "continued after a failure"
         } else {
             "resumed after a restart"
         },
         plan.lines,
+        if quarantined.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; line(s) {} failed their check, were moved to {}/ and are traced again",
+                quarantined.join(", "),
+                super::store::QUARANTINE_DIR
+            )
+        },
         if recovery.torn_bytes > 0 {
             format!(
                 "; a torn journal tail of {} bytes was truncated",
@@ -195,6 +235,7 @@ pub(super) fn reopen(
         scan_id: ledger.id.clone(),
         dir: ledger.dir.display().to_string(),
         committed,
+        ahead,
         columns,
         pitch_x_mm,
         conditions: state.start.conditions.clone(),

@@ -25,7 +25,12 @@ pub enum ScanRequest {
         peer: Option<Peer>,
     },
     /// Resume the unfinished scan in this directory.
-    Resume(PathBuf),
+    Resume {
+        /// The scan directory.
+        dir: PathBuf,
+        /// Who asked (none: the daemon resuming at start-up).
+        peer: Option<Peer>,
+    },
     /// Continue a scan that failed, at its first missing line, after the operator cleared
     /// the cause.
     Continue {

@@ -12,7 +12,8 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 
-/// Exponential backoff between reconnection tries: the first wait, doubling up to `max`.
+/// Exponential backoff between reconnection tries, transient retries and free-space checks:
+/// the first wait, doubling up to `max`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Backoff {
     /// First wait.

@@ -115,6 +115,9 @@ pub struct Status {
     pub stage: DeviceState,
     /// How the previous scan ended, if one ended since the daemon started.
     pub last_stop: Option<LastStop>,
+    /// Scans skipped because their journal is damaged, one message each (path, record, why).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub damaged_journals: Vec<String>,
 }
 
 impl Status {
@@ -134,6 +137,7 @@ impl Status {
             instrument: DeviceState::Absent,
             stage: DeviceState::Absent,
             last_stop: None,
+            damaged_journals: Vec::new(),
         }
     }
 

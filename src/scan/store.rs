@@ -17,12 +17,13 @@ use std::io;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use chrono::{DateTime, Utc};
 use sha2::{Digest, Sha256};
 
 use crate::profile::Profile;
 
 use super::faults::{write_file_durably, StorageFaults, WriteStep};
-use super::journal::{Journal, LineRecord, Record, JOURNAL_FILE};
+use super::journal::{Journal, LineRecord, QuarantineRecord, Record, JOURNAL_FILE};
 use super::line::{LineMeta, LoadedLines, StoredLine};
 use super::line_csv::{parse_csv, render_csv};
 use super::scan_id::ScanId;
@@ -291,6 +292,113 @@ impl ScanStore {
             out.push(line);
         }
         Ok(out)
+    }
+}
+
+/// Name of the directory inside a scan directory where damaged committed lines are moved.
+pub const QUARANTINE_DIR: &str = "quarantine";
+
+/// What [`ScanStore::load_committed_repairing`] found: the committed lines that check out,
+/// and the ones moved aside to be traced again (each as the record the journal gets).
+#[derive(Debug)]
+pub struct CommittedLines {
+    /// Lines whose heights file matches its journal record, in record order.
+    pub lines: Vec<StoredLine>,
+    /// Lines moved to `quarantine/`, in record order.
+    pub quarantined: Vec<QuarantineRecord>,
+}
+
+impl ScanStore {
+    /// Like [`ScanStore::load_committed`], but a committed line whose heights file fails its
+    /// SHA-256, is missing, or whose files cannot be read as a line is not obeyed: its files
+    /// are moved (durably) to `quarantine/NNNN.csv` / `.json` (`NNNN-2.csv`, … when that name
+    /// is taken) and it is reported, both hashes with it, so the caller records it in the
+    /// journal and traces the line again. Other I/O errors (a disk that cannot be read) are
+    /// errors: nothing can be decided about the line then.
+    pub fn load_committed_repairing(
+        &self,
+        records: &[LineRecord],
+        now: DateTime<Utc>,
+    ) -> Result<CommittedLines, StoreError> {
+        let mut out = CommittedLines {
+            lines: Vec::with_capacity(records.len()),
+            quarantined: Vec::new(),
+        };
+        for r in records {
+            let csv_path = self.lines_dir().join(csv_name(r.index));
+            let found = match fs::read(&csv_path) {
+                Ok(bytes) => Some(hex_sha256(&bytes)),
+                Err(e) if e.kind() == io::ErrorKind::NotFound => None,
+                Err(e) => return Err(io_err("read", &csv_path)(e)),
+            };
+            let problem = match &found {
+                None => Some("its heights file is missing".to_owned()),
+                Some(sha) if *sha != r.csv_sha256 => Some(format!(
+                    "its heights file has SHA-256 {sha}, the journal's line record {}: the file was changed after the line was committed",
+                    r.csv_sha256
+                )),
+                Some(_) => match self.load_line(r.index) {
+                    Ok(line) => {
+                        out.lines.push(line);
+                        None
+                    }
+                    Err(e)
+                        if matches!(&e, StoreError::Io { source, .. }
+                            if source.kind() != io::ErrorKind::NotFound) =>
+                    {
+                        return Err(e);
+                    }
+                    Err(e) => Some(format!("its files cannot be read as a line: {e}")),
+                },
+            };
+            if let Some(reason) = problem {
+                let moved_to = self.quarantine(r.index)?;
+                out.quarantined.push(QuarantineRecord {
+                    index: r.index,
+                    expected_sha256: r.csv_sha256.clone(),
+                    found_sha256: found.unwrap_or_default(),
+                    moved_to,
+                    reason: format!(
+                        "line {}: {reason}; moved aside, it is traced again",
+                        r.index + 1
+                    ),
+                    time: now,
+                });
+            }
+        }
+        Ok(out)
+    }
+
+    /// Moves line `index`'s files (those present) into `quarantine/` under a name not yet
+    /// taken, fsyncing both directories; returns the heights file's new path relative to the
+    /// scan directory.
+    fn quarantine(&self, index: u32) -> Result<String, StoreError> {
+        let qdir = self.root.join(QUARANTINE_DIR);
+        fs::create_dir_all(&qdir).map_err(io_err("create directory", &qdir))?;
+        let stem = (1u32..)
+            .map(|n| match n {
+                1 => format!("{index:04}"),
+                n => format!("{index:04}-{n}"),
+            })
+            .find(|stem| {
+                !qdir.join(format!("{stem}.csv")).exists()
+                    && !qdir.join(format!("{stem}.json")).exists()
+            })
+            .unwrap_or_else(|| format!("{index:04}"));
+        let lines = self.lines_dir();
+        for (from, ext) in [(csv_name(index), "csv"), (meta_name(index), "json")] {
+            let src = lines.join(from);
+            let dst = qdir.join(format!("{stem}.{ext}"));
+            match fs::rename(&src, &dst) {
+                Ok(()) => {}
+                Err(e) if e.kind() == io::ErrorKind::NotFound => {}
+                Err(e) => return Err(io_err("move aside", &src)(e)),
+            }
+        }
+        sync_dir(&qdir)?;
+        sync_dir(&lines)?;
+        sync_dir(&self.root)?;
+        Ok(format!("{QUARANTINE_DIR}/{stem}.csv"))
     }
 }
 

@@ -60,8 +60,9 @@ pub struct StageStatus {
 pub struct Identity {
     /// Model, firmware and build information, for the scan's record.
     pub text: String,
-    /// The travel the controller itself enforces, device units (GRBL soft limits): a target
-    /// outside it would be refused in the middle of a scan.
+    /// The travel the controller itself enforces, device units (GRBL soft limits, Zaber
+    /// `limit.min`/`limit.max`): a target outside it would be refused in the middle of a
+    /// scan.
     pub travel_units: Option<(i64, i64)>,
     /// Facts the operator should know (a feed above the controller's maximum…).
     pub warnings: Vec<String>,

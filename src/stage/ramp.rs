@@ -6,6 +6,12 @@
 
 use std::time::Duration;
 
+/// How late after the planned end of a move its status is polled: the USB round trip and the
+/// stepper's last segment.
+pub const POLL_MARGIN: Duration = Duration::from_millis(5);
+/// The shortest wait between two polls of a move that is still running.
+pub const MIN_POLL_GAP: Duration = Duration::from_millis(20);
+
 /// Time to cover `distance` (mm, ≥ 0) from speed `v0` (mm/s) to rest, cruising at no more
 /// than `feed` (mm/s), with acceleration `accel` (mm/s²; `None` or not positive: no ramp,
 /// `distance / feed`). Zero for an empty move or a feed that is not positive.

@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use surfscan::control::protocol::ControlChannels;
 use surfscan::control::server::{self, ServerOptions};
-use surfscan::scan::command::{OperatorCommand, OperatorRequest};
+use surfscan::scan::command::{OperatorCommand, OperatorRequest, StartMode};
 use surfscan::scan::status::{DeviceState, State, Status};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::sync::{mpsc, oneshot, watch};
@@ -177,7 +177,8 @@ async fn commands_are_acked_or_refused_with_the_daemons_message() {
             OperatorCommand::Start {
                 specimen: "B12".into(),
                 operator: "ana".into(),
-                notes: "lapped steel".into()
+                notes: "lapped steel".into(),
+                mode: StartMode::Auto,
             }
         ]
     );

@@ -8,7 +8,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use surfscan::control::protocol::{ControlChannels, PROTOCOL_VERSION};
 use surfscan::control::server::{self, ControlError, ServerOptions};
-use surfscan::scan::command::{OperatorCommand, OperatorRequest, Peer};
+use surfscan::scan::command::{OperatorCommand, OperatorRequest, Peer, StartMode};
 use surfscan::scan::status::{DeviceState, State, Status};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader, Lines};
 use tokio::net::unix::{OwnedReadHalf, OwnedWriteHalf};
@@ -233,7 +233,8 @@ async fn pause_is_forwarded_and_acked_and_a_refusal_comes_back_as_error() {
             OperatorCommand::Start {
                 specimen: "B12".into(),
                 operator: "ana".into(),
-                notes: "lapped".into()
+                notes: "lapped".into(),
+                mode: StartMode::Auto,
             }
         ]
     );

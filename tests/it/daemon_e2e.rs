@@ -10,6 +10,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 use surfscan::control::client::ControlClient;
 use surfscan::control::protocol::{Message, Request};
+use surfscan::scan::command::StartMode;
 use surfscan::scan::journal::{read_journal, Record, StopStatus};
 use surfscan::scan::status::{Ending, State, Status};
 use surfscan_sim::grbl::{GrblSimConfig, StageShared};
@@ -267,6 +268,7 @@ async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket()
             specimen: "B-12".into(),
             operator: "ana".into(),
             notes: "socket test".into(),
+            mode: StartMode::Auto,
         })
         .await
         .unwrap();
@@ -347,6 +349,7 @@ async fn sigterm_mid_scan_records_an_interruption_and_the_restart_resumes_by_its
             specimen: "resume".into(),
             operator: String::new(),
             notes: String::new(),
+            mode: StartMode::Auto,
         })
         .await
         .unwrap();
@@ -430,4 +433,44 @@ fn a_bad_config_exits_78_naming_the_key() {
     assert_eq!(out.status.code(), Some(78));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("y-stepp-mm"), "{err}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_damaged_journal_is_named_in_the_status_and_does_not_hold_up_the_daemon() {
+    let r = rig().await;
+    // An old scan whose journal has a record that is not valid before its last one.
+    let old = r.out().join("20250101T000000Z-old");
+    std::fs::create_dir_all(old.join("lines")).unwrap();
+    let journal = old.join("journal.jsonl");
+    std::fs::write(
+        &journal,
+        "{\"class\":\"start\",\"scan_id\":\"x\"}\n{\"class\":\"li#e\"}\n{\"class\":\"stop\"}\n",
+    )
+    .unwrap();
+    let mut d = spawn_daemon(&r);
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    let s = status(&r).await;
+    assert_eq!(s.state, State::Idle);
+    assert_eq!(s.damaged_journals.len(), 1, "{s:?}");
+    assert!(
+        s.damaged_journals[0].contains(&journal.display().to_string())
+            && s.damaged_journals[0].contains("line 1"),
+        "{}",
+        s.damaged_journals[0]
+    );
+    // The daemon still takes a start: the damaged scan holds nothing up.
+    let ack = client(&r)
+        .await
+        .request(&Request::Start {
+            specimen: "after-damage".into(),
+            operator: "ana".into(),
+            notes: String::new(),
+            mode: StartMode::Auto,
+        })
+        .await
+        .unwrap();
+    assert!(matches!(ack.message, Message::Ack { .. }), "{ack:?}");
+    let s = wait_status(&r, "a new scan", |s| s.scan_id.is_some()).await;
+    assert!(!s.scan_id.unwrap().contains("old"));
+    drop(d);
 }

@@ -378,18 +378,23 @@ fn instrument_results_are_paired_with_ours_in_our_units() {
             r("Ra", Some(0.6), "µm"),
             r("RSm", Some(0.1), "mm"),
             r("Rz", None, "um"),
-            r("Ppi", Some(12.0), "/in"),
+            r("HSC", Some(12.0), ""),
+            r("Ppi", Some(250.0), "/in"),
         ],
     );
-    assert_eq!(c.len(), 4);
+    assert_eq!(c.len(), 5);
     assert!((c[0].difference.unwrap() - (p.ra_um - 0.6)).abs() < 1e-12);
     // 0.1 mm = 100 µm; our RSm is the wavelength, 100 µm.
     assert!((c[1].instrument.unwrap() - 100.0).abs() < 1e-12);
     assert!(c[1].difference.unwrap().abs() < 1e-6);
     assert_eq!(c[2].instrument, None);
     assert_eq!(c[2].difference, None);
+    // A parameter we do not compute (the high spot count needs a count level we are not given).
     assert_eq!(c[3].ours, None);
     assert_eq!(c[3].compared_with, None);
+    // Ppi is Pc per inch: 25.4 mm / 0.1 mm = 254 peaks per inch.
+    assert_eq!(c[4].compared_with.as_deref(), Some("Rppi"));
+    assert!((c[4].difference.unwrap() - 4.0).abs() < 1e-4, "{:?}", c[4]);
     assert_eq!(c[2].compared_with.as_deref(), Some("Rz"));
 
     // Under JIS1994 the instrument's Rz is the ten-point height: compared with our RzJIS.

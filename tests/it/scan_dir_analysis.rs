@@ -107,6 +107,7 @@ fn build_scan(
         store.root(),
         StartRecord {
             scan_id: id.0.clone(),
+            sequence: 1,
             time: start,
             plan: plan(rows.len() as u32),
             config: json!({

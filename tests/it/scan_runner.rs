@@ -7,6 +7,7 @@ use std::collections::VecDeque;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
+use surfscan::cli::scan::choose_request;
 use surfscan::config::Config;
 use surfscan::devices::{
     Arrival, Battery, DeviceFault, FaultClass, Instrument, InstrumentIdentity, ProbeReport,
@@ -14,7 +15,7 @@ use surfscan::devices::{
 };
 use surfscan::profile::{Conditions, Profile, ProfileKind};
 use surfscan::scan::channels::Control;
-use surfscan::scan::command::{OperatorCommand, OperatorRequest};
+use surfscan::scan::command::{OperatorCommand, OperatorRequest, Peer, StartMode};
 use surfscan::scan::journal::{read_journal, Record, StopStatus};
 use surfscan::scan::outcome::{Outcome, ScanRequest};
 use surfscan::scan::runner::run_scan;
@@ -241,6 +242,15 @@ impl Station for FakeStation {
 }
 
 fn settings(out: &Path) -> RunSettings {
+    let config = runner_config(out);
+    RunSettings {
+        characterise: None,
+        ..surfscan::cli::scan::run_settings(&config, "0".repeat(64), TestHooks::none())
+            .expect("settings")
+    }
+}
+
+fn runner_config(out: &Path) -> Config {
     let text = format!(
         r#"[instrument]
 port = "/nonexistent/sj210"
@@ -265,12 +275,7 @@ dir = {out:?}
 "#,
         out = out.display().to_string()
     );
-    let config = Config::parse(Path::new("runner-test.toml"), &text).expect("config");
-    RunSettings {
-        characterise: None,
-        ..surfscan::cli::scan::run_settings(&config, "0".repeat(64), TestHooks::none())
-            .expect("settings")
-    }
+    Config::parse(Path::new("runner-test.toml"), &text).expect("config")
 }
 
 fn target(k: u32) -> Nm {
@@ -649,4 +654,154 @@ async fn a_vanished_instrument_is_reopened_with_exponential_backoff() {
         matches!((gone, back), (Some(g), Some(b)) if g < b),
         "{notes:?}"
     );
+}
+
+/// A failed scan is continued at its first missing line once the cause is cleared: the lines
+/// before stay as they were, the journal records the continuation, and it ends in success
+/// with every line once.
+#[tokio::test(start_paused = true)]
+async fn a_failed_scan_continues_at_its_first_missing_line() {
+    let mut h = harness();
+    with(&h.world, |w| {
+        w.traces = [None, None, Some(FaultClass::Fatal)].into();
+    });
+    let settings = settings_for(&h);
+    let mut station = FakeStation(h.world.clone());
+    let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
+    assert!(matches!(outcome, Outcome::Failed { .. }), "{outcome:?}");
+    let dir = scan_dir_of(&outcome);
+    assert_eq!(stop_status(&records(&dir)), Some(StopStatus::Fail));
+    let csv0 = std::fs::read(dir.join("lines/0000.csv")).expect("line 1");
+
+    // Without asking for it, a failed scan is not resumed: a new one would start.
+    let config = runner_config(h.tmp.path());
+    let auto = choose_request(
+        &config,
+        String::new(),
+        String::new(),
+        String::new(),
+        StartMode::Auto,
+        Peer::this_process(),
+    )
+    .expect("request");
+    assert!(matches!(auto, ScanRequest::New { .. }), "{auto:?}");
+    let request = choose_request(
+        &config,
+        String::new(),
+        String::new(),
+        String::new(),
+        StartMode::Resume,
+        Peer::this_process(),
+    )
+    .expect("request");
+    assert_eq!(
+        request,
+        ScanRequest::Continue {
+            dir: dir.clone(),
+            peer: Some(Peer::this_process())
+        }
+    );
+    let traces_before = with(&h.world, |w| {
+        w.log.iter().filter(|e| **e == Event::TraceStart).count()
+    });
+    let outcome = run_scan(&mut station, &mut h.ctl, &settings, request).await;
+    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    let recs = records(&dir);
+    assert_eq!(line_indices(&recs), (0..LINES).collect::<Vec<_>>());
+    assert!(recs
+        .iter()
+        .any(|r| matches!(r, Record::Continue(c) if c.peer.is_some())));
+    assert!(matches!(recs.last(), Some(Record::Stop(s)) if s.status == StopStatus::Success));
+    let traces = with(&h.world, |w| {
+        w.log.iter().filter(|e| **e == Event::TraceStart).count()
+    }) - traces_before;
+    assert_eq!(
+        traces as u32,
+        LINES - 2,
+        "only the missing lines are traced"
+    );
+    assert_eq!(
+        std::fs::read(dir.join("lines/0000.csv")).expect("line 1"),
+        csv0
+    );
+}
+
+/// `--new` over an unfinished scan records it as abandoned, so it is never resumed.
+#[tokio::test(start_paused = true)]
+async fn starting_over_records_the_unfinished_scan_as_abandoned() {
+    let mut h = harness();
+    let settings = settings_for(&h);
+    let mut station = FakeStation(h.world.clone());
+    let (ctl, started, shutdown) = (&mut h.ctl, &mut h.started, &h._shutdown);
+    let outcome = tokio::join!(run_scan(&mut station, ctl, &settings, new_scan()), async {
+        assert_eq!(started.recv().await, Some(target(0)));
+        shutdown.send(true).expect("shutdown");
+    })
+    .0;
+    let dir = scan_dir_of(&outcome);
+    assert!(
+        matches!(outcome, Outcome::Interrupted { .. }),
+        "{outcome:?}"
+    );
+    let config = runner_config(h.tmp.path());
+    let request = choose_request(
+        &config,
+        String::new(),
+        String::new(),
+        String::new(),
+        StartMode::New,
+        Peer::this_process(),
+    )
+    .expect("request");
+    assert!(matches!(request, ScanRequest::New { .. }), "{request:?}");
+    let recs = records(&dir);
+    match recs.last() {
+        Some(Record::Stop(s)) => {
+            assert_eq!(s.status, StopStatus::Abandoned);
+            assert!(s.reason.contains("--new"), "{}", s.reason);
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(surfscan::scan::journal::find_unfinished(&config.output.dir)
+        .expect("scan list")
+        .is_empty());
+}
+
+/// A scan whose lines are all committed but whose surface was never written (killed after
+/// the last commit) writes its outputs on resume without opening either device.
+#[tokio::test(start_paused = true)]
+async fn a_scan_with_every_line_committed_writes_its_outputs_without_devices() {
+    let mut h = harness();
+    let settings = settings_for(&h);
+    let mut station = FakeStation(h.world.clone());
+    let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
+    let dir = scan_dir_of(&outcome);
+    // As if killed after the last commit: no stop record, no outputs.
+    let journal = dir.join("journal.jsonl");
+    let text = std::fs::read_to_string(&journal).expect("journal");
+    let kept: Vec<&str> = text
+        .lines()
+        .filter(|l| !l.contains(r#""class":"stop""#))
+        .collect();
+    assert_eq!(
+        kept.len() + 1,
+        text.lines().count(),
+        "one stop record dropped"
+    );
+    std::fs::write(&journal, kept.join("\n") + "\n").expect("journal");
+    std::fs::remove_file(dir.join("surface.igs")).expect("surface");
+    with(&h.world, |w| w.log.clear());
+    let request = ScanRequest::Resume {
+        dir: dir.clone(),
+        peer: None,
+    };
+    let outcome = run_scan(&mut station, &mut h.ctl, &settings, request).await;
+    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    assert!(dir.join("surface.igs").exists());
+    assert_eq!(
+        with(&h.world, |w| w.log.clone()),
+        Vec::<Event>::new(),
+        "no device was opened, moved or traced"
+    );
+    assert_eq!(line_indices(&records(&dir)), (0..LINES).collect::<Vec<_>>());
 }

@@ -58,6 +58,7 @@ impl StorageFaults for FailNth {
 fn start_record(id: &ScanId, lines: u32) -> StartRecord {
     StartRecord {
         scan_id: id.0.clone(),
+        sequence: 1,
         time: Utc.with_ymd_and_hms(2026, 1, 2, 3, 4, 5).unwrap(),
         plan: surfscan::scan::plan::Plan {
             lines,
@@ -699,4 +700,244 @@ fn service_unit_has_the_required_directives() {
             assert!(rule.contains(needed), "{needed} missing in {rule}");
         }
     }
+}
+
+/// The journal bytes with the CRC member of every record removed, as an older version wrote
+/// them.
+fn without_crcs(bytes: &[u8]) -> Vec<u8> {
+    let text = String::from_utf8(bytes.to_vec()).unwrap();
+    let mut out = String::new();
+    for line in text.split_inclusive('\n') {
+        let at = line.rfind(",\"crc\":\"").expect("every record has a CRC");
+        out.push_str(&line[..at]);
+        out.push_str("}\n");
+    }
+    out.into_bytes()
+}
+
+/// Byte offset of the first digit of `key`'s value in record `n` (0-based) of `bytes`.
+fn digit_of(bytes: &[u8], n: usize, key: &str) -> usize {
+    let start: usize = bytes
+        .split_inclusive(|&b| b == b'\n')
+        .take(n)
+        .map(<[u8]>::len)
+        .sum();
+    let line = std::str::from_utf8(&bytes[start..]).unwrap();
+    let at = line.find(&format!("\"{key}\":")).unwrap() + key.len() + 3;
+    assert!(
+        line.as_bytes()[at].is_ascii_digit(),
+        "{}",
+        &line[at..at + 10]
+    );
+    start + at
+}
+
+fn flip_digit(bytes: &mut [u8], at: usize) {
+    bytes[at] = if bytes[at] == b'9' {
+        b'8'
+    } else {
+        bytes[at] + 1
+    };
+}
+
+#[test]
+fn a_flipped_digit_is_damage_in_the_middle_and_a_torn_tail_at_the_end() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (full, before_last) = journal_bytes_with_records(tmp.path());
+    let intact = parse_journal(Path::new("j"), &full).unwrap().records;
+
+    // The second line record (journal line 3) with its index one digit off is still valid
+    // JSON, so only the CRC can tell: the journal is damaged there.
+    let mut bad = full.clone();
+    let at = digit_of(&full, 2, "index");
+    flip_digit(&mut bad, at);
+    assert!(serde_json::from_slice::<serde_json::Value>(
+        bad.split(|&b| b == b'\n').nth(2).unwrap()
+    )
+    .is_ok());
+    let err = parse_journal(Path::new("journal.jsonl"), &bad).unwrap_err();
+    match &err {
+        JournalError::BadRecord { line, reason, .. } => {
+            assert_eq!(*line, 3);
+            assert!(reason.contains("CRC-32"), "{reason}");
+        }
+        other => panic!("expected BadRecord, got {other}"),
+    }
+
+    // The same flip in the last record: a torn tail, truncated on open.
+    let mut torn = full.clone();
+    let at = digit_of(&full, 3, "line");
+    flip_digit(&mut torn, at);
+    let path = tmp.path().join("torn.jsonl");
+    std::fs::write(&path, &torn).unwrap();
+    let (_, rec) = Journal::open(&path, Arc::new(NoFaults)).unwrap();
+    assert_eq!(rec.records, intact[..3]);
+    assert_eq!(rec.torn_bytes, (full.len() - before_last) as u64);
+    assert_eq!(std::fs::read(&path).unwrap(), full[..before_last]);
+}
+
+#[test]
+fn journals_without_crcs_are_read_and_appended_to_with_crcs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (full, before_last) = journal_bytes_with_records(tmp.path());
+    let intact = parse_journal(Path::new("j"), &full).unwrap().records;
+    let old = without_crcs(&full);
+    assert!(!String::from_utf8_lossy(&old).contains("crc"));
+    let path = tmp.path().join("old.jsonl");
+    std::fs::write(&path, &old).unwrap();
+    let (mut j, rec) = Journal::open(&path, Arc::new(NoFaults)).unwrap();
+    assert_eq!(rec.records, intact);
+    assert_eq!(rec.torn_bytes, 0);
+    // An old journal goes on with records that carry a CRC.
+    j.append(&intact[3]).unwrap();
+    drop(j);
+    let appended = std::fs::read(&path).unwrap();
+    assert_eq!(appended[old.len()..], full[before_last..]);
+    let rec = parse_journal(&path, &appended).unwrap();
+    assert_eq!(rec.records.len(), 5);
+
+    // But once a record has a CRC, one without it (its CRC member mangled into another key)
+    // is damage, not an old record.
+    let mut mangled = full.clone();
+    let second = full.iter().position(|&b| b == b'\n').unwrap() + 1;
+    let crc_at = second
+        + std::str::from_utf8(&full[second..])
+            .unwrap()
+            .find(",\"crc\":")
+            .unwrap();
+    mangled[crc_at + 4] = b'x'; // "crc" -> "cxc"
+    let err = parse_journal(Path::new("j"), &mangled).unwrap_err();
+    assert!(err.to_string().contains("no CRC"), "{err}");
+}
+
+#[test]
+fn the_scan_to_resume_comes_from_the_journals_and_a_damaged_one_is_skipped_and_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path();
+    let scan = |name: &str, stopped: bool| {
+        let id = ScanId(name.into());
+        let s = ScanStore::create(out, &id, Arc::new(NoFaults)).unwrap();
+        let mut j = Journal::create(s.root(), start_record(&id, 3), Arc::new(NoFaults)).unwrap();
+        let (m, p) = line(0);
+        s.commit_line(&mut j, &m, &p).unwrap();
+        if stopped {
+            j.append(&Record::Stop(StopRecord {
+                status: StopStatus::Success,
+                reason: "complete".into(),
+                time: Utc::now(),
+            }))
+            .unwrap();
+        }
+        s
+    };
+    // Started in this order, the clock set back in between: names (and start times, all the
+    // same here) say nothing about which came last.
+    let first = scan("20270101T000000Z-first", false);
+    let finished = scan("20260601T000000Z-finished", true);
+    let last = scan("20250101T000000Z-last", false);
+    let survey = surfscan::scan::journal::survey(out).unwrap();
+    assert!(survey.damaged.is_empty());
+    let order: Vec<&std::path::Path> = survey.unfinished.iter().map(|u| u.dir.as_path()).collect();
+    assert_eq!(order, vec![first.root(), last.root()]);
+    assert_eq!(survey.to_resume().unwrap().dir, last.root());
+    assert_eq!(
+        survey
+            .unfinished
+            .iter()
+            .map(|u| u.sequence)
+            .collect::<Vec<_>>(),
+        vec![1, 3]
+    );
+    assert_eq!(survey.max_sequence, 3);
+    assert_eq!(surfscan::scan::journal::next_sequence(out), 4);
+
+    // A damaged record in the finished scan's journal: that scan is named and skipped, the
+    // others are found as before.
+    let jpath = finished.journal_path();
+    let mut bytes = std::fs::read(&jpath).unwrap();
+    let at = digit_of(&bytes, 1, "index");
+    flip_digit(&mut bytes, at);
+    std::fs::write(&jpath, &bytes).unwrap();
+    let survey = surfscan::scan::journal::survey(out).unwrap();
+    assert_eq!(survey.unfinished.len(), 2);
+    assert_eq!(survey.to_resume().unwrap().dir, last.root());
+    let warnings = survey.warnings();
+    assert_eq!(warnings.len(), 1);
+    assert!(
+        warnings[0].contains(&jpath.display().to_string())
+            && warnings[0].contains("line 2")
+            && warnings[0].contains("skipped"),
+        "{}",
+        warnings[0]
+    );
+    assert_eq!(
+        find_unfinished(out).unwrap(),
+        vec![first.root(), last.root()]
+    );
+}
+
+#[test]
+fn a_committed_line_changed_on_disk_is_moved_aside_with_both_hashes_and_traced_again() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (store, mut journal, _) = new_scan(tmp.path(), 4, Arc::new(NoFaults));
+    for k in 0..4 {
+        let (m, p) = line(k);
+        store.commit_line(&mut journal, &m, &p).unwrap();
+    }
+    let st = state_of(&store);
+    let csv = store.lines_dir().join("0001.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    // One flipped digit in a height.
+    let changed = text.replacen("-0.6", "-0.7", 1);
+    assert_ne!(changed, text);
+    std::fs::write(&csv, &changed).unwrap();
+    // And line 3's heights file gone altogether.
+    std::fs::remove_file(store.lines_dir().join("0003.csv")).unwrap();
+
+    let now = Utc.with_ymd_and_hms(2026, 1, 3, 0, 0, 0).unwrap();
+    let got = store.load_committed_repairing(&st.lines, now).unwrap();
+    let kept: Vec<u32> = got.lines.iter().map(|l| l.meta.index).collect();
+    assert_eq!(kept, vec![0, 2]);
+    assert_eq!(got.quarantined.len(), 2);
+    let q = &got.quarantined[0];
+    assert_eq!(q.index, 1);
+    assert_eq!(q.expected_sha256, st.lines[1].csv_sha256);
+    assert_eq!(
+        q.found_sha256,
+        surfscan::scan::store::hex_sha256(changed.as_bytes())
+    );
+    assert_eq!(q.moved_to, "quarantine/0001.csv");
+    assert_eq!(
+        std::fs::read_to_string(store.root().join(&q.moved_to)).unwrap(),
+        changed
+    );
+    assert!(store.root().join("quarantine/0001.json").exists());
+    assert!(!csv.exists() && !store.lines_dir().join("0001.json").exists());
+    assert_eq!(got.quarantined[1].index, 3);
+    assert_eq!(got.quarantined[1].found_sha256, "");
+
+    // Journaled, the lines no longer count; traced again, the new records do.
+    for q in &got.quarantined {
+        journal.append(&Record::Quarantine(q.clone())).unwrap();
+    }
+    let st = state_of(&store);
+    assert_eq!(st.completed().into_iter().collect::<Vec<_>>(), vec![0, 2]);
+    assert_eq!(st.first_missing(4), Some(1));
+    assert_eq!(st.quarantined.len(), 2);
+    for k in [1, 3] {
+        let (mut m, p) = line(k);
+        m.attempt = 2;
+        store.commit_line(&mut journal, &m, &p).unwrap();
+    }
+    let st = state_of(&store);
+    assert!(st.duplicates.is_empty());
+    assert_eq!(st.first_missing(4), None);
+    let again = store.load_committed_repairing(&st.lines, now).unwrap();
+    assert_eq!(again.lines.len(), 4);
+    assert!(again.quarantined.is_empty());
+
+    // Quarantined a second time, the line gets the next free name.
+    std::fs::write(&csv, &changed).unwrap();
+    let third = store.load_committed_repairing(&st.lines, now).unwrap();
+    assert_eq!(third.quarantined[0].moved_to, "quarantine/0001-2.csv");
 }

@@ -610,3 +610,41 @@ async fn a_reply_to_a_cancelled_command_is_not_taken_as_the_next_answer() {
     drop(c);
     assert_eq!(device.await.unwrap(), ["RDSTU00", "RDSJ 01"]);
 }
+
+/// An answer that would mean "wrong model table" (an unknown conditions layout, NG030) is
+/// fatal only for a command never understood on this link; after the command was answered
+/// well, it is a stray or late reply: a transient fault, after which the link is resynced.
+#[tokio::test(start_paused = true)]
+async fn a_table_error_after_the_command_worked_is_a_stray_reply_not_a_wrong_table() {
+    let script: Vec<Step> = vec![
+        ("RDCON", Some(b"OK3120504.0012\r")),
+        ("RDCON", Some(b"OK000\r")),
+        ("RDCON", Some(b"NG030\r")),
+        ("RDSTU00", Some(b"OK000\r")),
+        ("RDCON", Some(b"OK3120504.0012\r")),
+    ];
+    let n = script.len();
+    let (io, h) = device(script);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    c.conditions().await.unwrap();
+    let e = c.conditions().await.unwrap_err();
+    assert!(matches!(e, Sj210Error::UnexpectedReply { .. }), "{e:?}");
+    assert_eq!(e.class(), FaultClass::Transient);
+    let e = c.conditions().await.unwrap_err();
+    assert!(
+        matches!(e, Sj210Error::UnexpectedReply { ref payload, .. } if payload == "NG030"),
+        "{e:?}"
+    );
+    assert_eq!(e.class(), FaultClass::Transient);
+    c.conditions().await.unwrap();
+    finish(c, h, n).await;
+
+    // On a fresh link the same answers name the table as the cause.
+    for reply in [&b"OK000\r"[..], b"NG030\r"] {
+        let (io, h) = device(vec![("RDCON", Some(reply))]);
+        let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+        let e = c.conditions().await.unwrap_err();
+        assert_eq!(e.class(), FaultClass::Fatal, "{e:?}");
+        finish(c, h, 1).await;
+    }
+}

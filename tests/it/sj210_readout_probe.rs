@@ -145,6 +145,28 @@ async fn only_the_b_selector_form_answers_after_two_wrong_forms() {
 }
 
 #[tokio::test]
+async fn only_the_a_selector_form_answers_after_the_sj210_form() {
+    let cfg = InstrumentConfig {
+        readout_form: SimForm::Only(Some(0)),
+        ..InstrumentConfig::default()
+    };
+    let p = probe(cfg, None, true).await;
+    let v = verdicts(&p);
+    // Stops at the form that reads: RDEVA100 is never sent.
+    assert_eq!(v.len(), 2, "{v:?}");
+    assert_eq!(
+        v[0],
+        ("RDEVA00", &FormVerdict::WrongForm(NgCode::InvalidFormat))
+    );
+    assert!(matches!(v[1], ("RDEVA000", FormVerdict::Read(_))), "{v:?}");
+    assert_eq!(p.conclusion(), Conclusion::Works(form("RDEVA000")));
+    assert!(p
+        .snippet()
+        .unwrap()
+        .contains("profile-total = \"RDEVA000\"\nprofile-block = \"RDEVA0{n}\""));
+}
+
+#[tokio::test]
 async fn no_readout_is_ng030_on_every_form_and_the_guidance_names_what_remains() {
     let cfg = InstrumentConfig {
         profile_readout: false,
@@ -317,6 +339,38 @@ async fn probe_readout_binary_prints_verdicts_and_a_snippet_that_works() {
     assert_eq!(line.profile.heights_um.len(), 1067);
     drop(c);
     sim.shutdown().await;
+
+    // The transcript is a fixture: the simulator replaying it answers a second probe the
+    // same way, verdict for verdict.
+    let replay_dir = tempfile::tempdir().unwrap();
+    let replay_link = replay_dir.path().join("sj210");
+    let mut replay = Simulator::new(&replay_link)
+        .replay(surfscan_sim::replay::Transcript::parse(&text).unwrap(), 1.0)
+        .pacing_time_scale(0.0)
+        .start()
+        .unwrap();
+    match tokio::time::timeout(EVENT_WAIT, replay.next_event()).await {
+        Ok(Some(SimEvent::Ready(_))) => {}
+        other => panic!("expected the ready event, got {other:?}"),
+    }
+    let cfg_replay = config(replay_dir.path(), "probe.toml", &replay_link, "");
+    let (code, again, stderr) = run_probe(&[
+        "--config",
+        cfg_replay.to_str().unwrap(),
+        "--trace",
+        "--readout",
+    ])
+    .await;
+    assert_eq!(code, Some(0), "stdout:\n{again}\nstderr:\n{stderr}");
+    let verdicts = |out: &str| -> Vec<String> {
+        out.lines()
+            .filter(|l| l.starts_with("readout ") || l.starts_with("verdict "))
+            .map(str::to_owned)
+            .collect()
+    };
+    assert_eq!(verdicts(&again), verdicts(&stdout));
+    assert_eq!(verdicts(&stdout).len(), 5, "{stdout}");
+    replay.shutdown().await;
 }
 
 #[tokio::test]
@@ -436,4 +490,118 @@ async fn passthrough_relays_the_pc_tools_session_and_records_it() {
         ]
     );
     sim.shutdown().await;
+}
+
+/// A config whose port does not exist: a probe that got as far as opening it would exit 69,
+/// so a 78 shows the value was refused before any device was touched.
+fn absent_port_config(dir: &Path, text: &str) -> PathBuf {
+    let p = dir.join("bad.toml");
+    std::fs::write(
+        &p,
+        format!("[instrument]\nport = \"/nonexistent/sj210\"\n{text}"),
+    )
+    .unwrap();
+    p
+}
+
+#[tokio::test]
+async fn probe_refuses_out_of_range_instrument_values_before_opening_the_port() {
+    let dir = tempfile::tempdir().unwrap();
+    // The timeouts would have overflowed a deadline (a panic); the pitches make every count
+    // and Ra check meaningless.
+    for (text, key) in [
+        ("baud = 38400\npitch-x-um = 1e-9\n", "instrument.pitch-x-um"),
+        (
+            "baud = 38400\npitch-x-um = 1e300\n",
+            "instrument.pitch-x-um",
+        ),
+        (
+            "baud = 38400\n[instrument.timeouts]\nfirst-byte-ms = 9000000000000000000\n",
+            "instrument.timeouts.first-byte-ms",
+        ),
+        (
+            "baud = 38400\n[instrument.timeouts]\ntrace-deadline-ms = 9000000000000000000\n",
+            "instrument.timeouts.trace-deadline-ms",
+        ),
+        ("baud = 7\n", "instrument.baud"),
+    ] {
+        let cfg = absent_port_config(dir.path(), text);
+        let (code, stdout, stderr) =
+            run_probe(&["--config", cfg.to_str().unwrap(), "--readout"]).await;
+        assert_eq!(
+            code,
+            Some(78),
+            "{key}: stdout:\n{stdout}\nstderr:\n{stderr}"
+        );
+        assert!(
+            stderr.contains(key) && stderr.contains("valid range"),
+            "{key}: {stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+}
+
+#[tokio::test]
+async fn probe_refuses_bad_arguments_as_usage_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = absent_port_config(dir.path(), "baud = 38400\n");
+    let cfg = cfg.to_str().unwrap();
+    for (args, says) in [
+        (
+            vec![
+                "--config",
+                cfg,
+                "--passthrough",
+                "/dev/null",
+                "--record",
+                "x",
+                "--for-s",
+                "1e300",
+            ],
+            "--for-s",
+        ),
+        (
+            vec![
+                "--config",
+                cfg,
+                "--passthrough",
+                "/dev/null",
+                "--record",
+                "x",
+                "--for-s",
+                "0",
+            ],
+            "--for-s",
+        ),
+        (
+            vec![
+                "--config",
+                cfg,
+                "--passthrough",
+                "/dev/null",
+                "--record",
+                "x",
+                "--for-s",
+                "nan",
+            ],
+            "--for-s",
+        ),
+        (
+            vec!["--config", cfg, "--readout", "--form", "RDEVA"],
+            "does not end in 00",
+        ),
+        (
+            vec!["--config", cfg, "--readout", "--form", "RDX00=RDX"],
+            "must hold {n}",
+        ),
+    ] {
+        let (code, stdout, stderr) = run_probe(&args).await;
+        assert_eq!(
+            code,
+            Some(2),
+            "{args:?}: stdout:\n{stdout}\nstderr:\n{stderr}"
+        );
+        assert!(stderr.contains(says), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
 }

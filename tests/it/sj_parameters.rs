@@ -1,5 +1,5 @@
 //! The SJ series' parameters beyond Ra/Rq/Rz, against values derived by hand:
-//! profile elements (RSm, Rc, RPc with the 10 % Rz / 1 % lr discrimination), the material
+//! profile elements (RSm, Rc, RPc, Rppi with the 10 % Rz / 1 % lr discrimination), RΔa, the material
 //! ratio parameters at the instrument's reference levels (Rmr(c) peak reference, Rδc, Rmr),
 //! and the comparison with the instrument's own values, its tolerance flag included.
 
@@ -37,8 +37,15 @@ fn a_sine_has_elements_of_its_wavelength_and_twice_its_amplitude() {
     // period put the samples within 2.5e-4 of the crest.
     let rc = p.rc_um.unwrap();
     assert!((rc - 2.0 * amp).abs() < 2e-3, "Rc {rc}");
-    // RPc = 1 cm / RSm = 10 mm / 0.1 mm.
+    // RPc = 1 cm / RSm = 10 mm / 0.1 mm; Rppi = 1 inch / RSm = 25.4 mm / 0.1 mm.
     assert!((p.rpc_per_cm.unwrap() - 100.0).abs() < 1e-5);
+    assert!((p.rppi_per_inch.unwrap() - 254.0).abs() < 1e-5);
+    // The slope is (2πA/λ)·cos: its mean modulus is (2/π)·2πA/λ = 4A/λ (λ = 100 µm), its
+    // rms 2πA/(λ√2), so RΔq / RΔa = π / (2√2) for any sine.
+    let rda = 4.0 * amp / 100.0;
+    assert!((p.rda - rda).abs() < 1e-3 * rda, "RΔa {} vs {rda}", p.rda);
+    let ratio = p.rdq / p.rda;
+    assert!((ratio - PI / (2.0 * 2f64.sqrt())).abs() < 2e-3, "{ratio}");
 }
 
 #[test]
@@ -162,6 +169,8 @@ fn the_instruments_values_are_compared_within_a_documented_tolerance() {
             r("Rmr", p.rmr_pct, "%"),
             r("Ra", p.ra_um + 0.004, "um"),
             r("Ra", p.ra_um * 1.05, "um"),
+            r("RΔa", p.rda * 1.02, ""),
+            r("Ppi", p.rppi_per_inch.unwrap() * 1.2, "/in"),
         ],
     );
     let names: Vec<&str> = c
@@ -178,12 +187,15 @@ fn the_instruments_values_are_compared_within_a_documented_tolerance() {
             "Rdc",
             "Rmr",
             "Ra",
-            "Ra"
+            "Ra",
+            "Rda",
+            "Rppi"
         ]
     );
     let within: Vec<Option<bool>> = c.iter().map(|c| c.within_tolerance).collect();
     // Rc 1 % off (tolerance 5 % + 5 nm): in; RPc 20 % off: out; Rmr(c) 0.5 point: in;
-    // 3 points: out; exact: in; Ra 4 nm: in (2 % + 5 nm); Ra 5 %: out.
+    // 3 points: out; exact: in; Ra 4 nm: in (2 % + 5 nm); Ra 5 %: out; RΔa 2 %: in (3 %);
+    // Ppi 20 %: out (5 %).
     assert_eq!(
         within,
         [
@@ -193,6 +205,8 @@ fn the_instruments_values_are_compared_within_a_documented_tolerance() {
             Some(false),
             Some(true),
             Some(true),
+            Some(true),
+            Some(false),
             Some(true),
             Some(false)
         ]

@@ -326,7 +326,8 @@ async fn a_board_with_blank_settings_is_refused_by_its_steps_per_mm() {
     });
     let e = a.connect().await.unwrap_err();
     assert!(
-        matches!(&e, StageError::ControllerSetup(m) if m.contains("$101 is 250") && m.contains("400")),
+        matches!(&e, StageError::ControllerSetup(m)
+            if m.contains("error:7") && m.contains("$101 is 250") && m.contains("400")),
         "{e}"
     );
     assert_eq!(e.class(), FaultClass::Fatal);
@@ -414,4 +415,52 @@ async fn a_scan_step_is_polled_when_its_trapezoid_ends() {
         took < device + 0.010,
         "{took} s for {device} s of device time"
     );
+}
+
+/// `$J=` outside Idle/Jog is `error:8`; in Alarm that means the position needs a home, so the
+/// driver says position lost (the scan re-homes) rather than a refusal to retry as it is.
+#[tokio::test(start_paused = true)]
+async fn a_jog_refused_in_alarm_with_error_8_is_position_lost() {
+    use surfscan::stage::Stage;
+    // Just powered up with homing enabled: the board is in Alarm.
+    let (mut a, shared) = start(sim_cfg());
+    assert!(!a.connect().await.unwrap().position_trusted);
+    let e = a.stage_mut().begin_move_abs(-4_000).await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::PositionLost { reason }
+            if reason.contains("error:8") && reason.contains("Alarm")),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::PositionLost);
+    assert_eq!(shared.moves_started(), 0);
+    a.home().await.unwrap();
+    assert_eq!(
+        a.move_to(Nm(-10_000_000)).await.unwrap().readback,
+        Nm(-10_000_000)
+    );
+}
+
+/// Stopping cancels the jog (0x85) and returns once GRBL has decelerated at `$121` to Idle,
+/// so the next move starts from rest at a position read back.
+#[tokio::test(start_paused = true)]
+async fn stop_cancels_a_jog_and_returns_once_it_is_at_rest() {
+    use surfscan::stage::{Motion, Stage};
+    let (mut a, _shared) = homed().await;
+    let s = a.stage_mut();
+    // From MPos −1 (−$27) towards −50 mm at 1 mm/s: after 2 s it has covered the 0.05 mm
+    // ramp and 1.9 mm of cruise; braking at 10 mm/s² takes 0.1 s over 0.05 mm more.
+    s.begin_move_abs(-20_000).await.unwrap();
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let t0 = tokio::time::Instant::now();
+    s.stop().await.unwrap();
+    let took = t0.elapsed();
+    assert!(
+        took >= Duration::from_millis(100),
+        "returned after {took:?}"
+    );
+    assert!(took < Duration::from_millis(200), "returned after {took:?}");
+    let st = s.status().await.unwrap();
+    assert_eq!(st.motion, Motion::Idle);
+    // −3.000 mm = −1200 steps, give or take the step the cancel lands on.
+    assert!((st.position_units + 1_200).abs() <= 2, "{st:?}");
 }

@@ -313,3 +313,75 @@ async fn a_microstep_that_makes_the_step_inexact_is_refused_or_rounded_once_per_
         assert!(off <= 47.625 / 2.0 + 0.5, "line {k}: {off} nm off");
     }
 }
+
+/// The step is polled when its trapezoid (the axis's `maxspeed` and `accel`, read at
+/// connect) says it is over, not a poll interval later.
+#[tokio::test(start_paused = true)]
+async fn a_scan_step_is_polled_when_its_trapezoid_ends() {
+    let (mut a, _shared) = homed().await;
+    a.move_to(Nm(10_000_000)).await.unwrap();
+    let t0 = tokio::time::Instant::now();
+    a.move_to(Nm(10_010_000)).await.unwrap();
+    let took = t0.elapsed().as_secs_f64();
+    // 80 microsteps at 10⁵/s and 10⁶/s²: a triangle of 2·sqrt(80/10⁶) = 17.9 ms, then the
+    // 50 ms settle. Polling every 100 ms would make it 150 ms.
+    let device = 0.017_889 + 0.050;
+    assert!(took >= device, "{took}");
+    assert!(
+        took < device + 0.010,
+        "{took} s for {device} s of device time"
+    );
+}
+
+/// The travel the device enforces (`limit.min`/`limit.max`) is read at connect: a plan
+/// leaving it is refused before anything moves, not by `BADDATA` in the middle of a scan.
+#[tokio::test(start_paused = true)]
+async fn a_plan_beyond_the_devices_own_travel_is_refused_before_anything_moves() {
+    // The device's travel ends at 50 mm; the host limits reach to 100 mm.
+    let (mut a, shared) = start_with(
+        SETTINGS,
+        ZaberSimConfig {
+            limit_max: 400_000,
+            ..sim_cfg()
+        },
+    );
+    a.connect().await.unwrap();
+    a.home().await.unwrap();
+    let before = shared.bytes_received();
+    let plan: Vec<Nm> = (0..31).map(|k| Nm(60_000_000 + k * 10_000)).collect();
+    let e = a.check_targets(&plan).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            StageError::OutsideControllerTravel {
+                min: Nm(0),
+                max: Nm(50_000_000),
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert_eq!(e.class(), FaultClass::Fatal);
+    tokio::task::yield_now().await;
+    assert_eq!(shared.bytes_received(), before);
+    let plan: Vec<Nm> = (0..31).map(|k| Nm(40_000_000 + k * 10_000)).collect();
+    assert!(a.check_targets(&plan).unwrap().is_empty());
+}
+
+/// A move answered with `WR` (the axis lost its reference) is stopped at once: the device
+/// would otherwise run to the target counted from wherever it powered up.
+#[tokio::test(start_paused = true)]
+async fn a_move_answered_with_wr_is_stopped_where_it_stands() {
+    let (mut a, shared) = homed().await;
+    a.move_to(Nm(10_000_000)).await.unwrap();
+    shared.inject(StageFault::PositionLostWr);
+    let e = a.move_to(Nm(10_010_000)).await.unwrap_err();
+    assert_eq!(e.class(), FaultClass::PositionLost, "{e}");
+    // Counted from the power cycle, 10.01 mm would be 10 mm further up.
+    tokio::time::sleep(std::time::Duration::from_secs(2)).await;
+    let off = (shared.true_position_nm() - 10_000_000).abs();
+    assert!(
+        off < 100_000,
+        "the carriage ran {off} nm on a lost reference"
+    );
+}

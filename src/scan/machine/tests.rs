@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::devices::FaultClass;
+use crate::scan::command::StartMode;
 
 const LINES: u32 = 3;
 
@@ -754,6 +755,7 @@ fn a_scan_with_every_line_committed_writes_its_outputs_without_opening_devices()
             scan_id: "S".into(),
             dir: "/out/S".into(),
             committed: LINES,
+            ahead: Default::default(),
             columns: Some(100),
             pitch_x_mm: Some(0.0005),
             conditions: Conditions::default(),
@@ -776,6 +778,7 @@ fn a_resumed_scan_reopens_its_devices_and_goes_on_at_its_first_missing_line() {
             scan_id: "S".into(),
             dir: "/out/S".into(),
             committed: 2,
+            ahead: Default::default(),
             columns: Some(100),
             pitch_x_mm: Some(0.0005),
             conditions: Conditions::default(),
@@ -924,6 +927,7 @@ fn commands_answer_while_running_and_start_is_refused() {
             specimen: String::new(),
             operator: String::new(),
             notes: String::new(),
+            mode: StartMode::Auto,
         },
         peer: peer(),
     });
@@ -943,4 +947,58 @@ fn commands_answer_while_running_and_start_is_refused() {
             "scan S is not paused; it goes on scanning".into()
         ))]
     );
+}
+
+#[test]
+fn a_line_moved_aside_at_resume_is_traced_again_and_the_lines_committed_after_it_are_not() {
+    let resumed = |committed: u32, ahead: &[u32]| {
+        Machine::resumed(
+            plan(),
+            policy(),
+            Status::idle(),
+            Resumed {
+                scan_id: "S".into(),
+                dir: "/out/S".into(),
+                committed,
+                ahead: ahead.iter().copied().collect(),
+                columns: Some(100),
+                pitch_x_mm: Some(0.0005),
+                conditions: Conditions::default(),
+                points_per_line: 100,
+            },
+        )
+    };
+    // Line 0 moved aside, line 1 committed after it, line 2 never traced.
+    let mut r = Rig::with(resumed(0, &[1]));
+    r.start();
+    r.feed(opened(Device::Instrument));
+    r.feed(opened(Device::Stage));
+    let a = r.feed(Event::Idle);
+    assert_eq!(effect(&a), Some(&Action::Move(plan().target(0))));
+    assert_eq!(last_status(&r.log).map(|s| s.lines_done), Some(1));
+    r.feed(Event::Arrived);
+    r.feed(Event::Traced(good_line()));
+    let a = r.feed(Event::Committed);
+    assert_eq!(effect(&a), Some(&Action::Push { line: 0 }));
+    r.feed(Event::Pushed);
+    let a = r.feed(Event::Idle);
+    assert_eq!(
+        effect(&a),
+        Some(&Action::Move(plan().target(2))),
+        "line 1 is not traced again"
+    );
+    assert_eq!(last_status(&r.log).map(|s| s.lines_done), Some(2));
+
+    // Line 1 moved aside, line 2 committed after it: once line 1 is back, the outputs.
+    let mut r = Rig::with(resumed(1, &[2]));
+    r.start();
+    r.feed(opened(Device::Instrument));
+    r.feed(opened(Device::Stage));
+    let a = r.feed(Event::Idle);
+    assert_eq!(effect(&a), Some(&Action::Move(plan().target(1))));
+    r.feed(Event::Arrived);
+    r.feed(Event::Traced(good_line()));
+    r.feed(Event::Committed);
+    let a = r.feed(Event::Pushed);
+    assert_eq!(effect(&a), Some(&Action::WriteOutputs));
 }

@@ -118,7 +118,26 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         let started = Instant::now();
         loop {
             match self.transact(command).await {
-                Ok(Reply::Ok(payload)) => return Ok(payload),
+                Ok(Reply::Ok(payload)) => {
+                    let mnemonic = mnemonic(command);
+                    if !self.answered.contains(mnemonic) {
+                        self.answered.insert(mnemonic.to_owned());
+                    }
+                    return Ok(payload);
+                }
+                Ok(Reply::Ng { code, .. })
+                    if (30..=32).contains(&code.code())
+                        && self.answered.contains(mnemonic(command)) =>
+                {
+                    // The instrument understood this command before on this link: the
+                    // conversation went wrong (a stray or late reply), the table is not wrong.
+                    self.recover().await;
+                    return Err(Sj210Error::UnexpectedReply {
+                        command: command.to_string(),
+                        payload: format!("NG{:03}", code.code()),
+                        expected: "the reply this command was given earlier on this link (a stray or late reply was taken for the answer)",
+                    });
+                }
                 Ok(Reply::Ng { code, byte_pos }) => {
                     if retry
                         && code.is_retryable_read()
@@ -157,4 +176,10 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             }
         }
     }
+}
+
+/// The command's mnemonic: its first five characters (`RDEVA05` → `RDEVA`), all of it when
+/// shorter.
+fn mnemonic(command: &str) -> &str {
+    command.get(..5).unwrap_or(command)
 }

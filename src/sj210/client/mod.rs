@@ -64,6 +64,10 @@ pub struct Sj210Client<S> {
     in_flight: bool,
     /// Traces whose start command the instrument accepted.
     traces_started: u64,
+    /// Command mnemonics (`RDCON`, `RDSTU`, …) the instrument has answered `OK` on this
+    /// link: a "command not understood" answer to one of them is a stray or late reply, not
+    /// a model table that is wrong for the firmware.
+    answered: std::collections::BTreeSet<String>,
 }
 
 impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
@@ -79,6 +83,7 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             conditions: None,
             in_flight: false,
             traces_started: 0,
+            answered: std::collections::BTreeSet::new(),
         }
     }
 

@@ -44,7 +44,19 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
     pub async fn conditions(&mut self) -> Result<Conditions, Sj210Error> {
         let c = self.table.commands.conditions.plain();
         let payload = self.command(&c, true).await?;
-        let cond = self.table.parse_conditions(&payload)?;
+        let cond = match self.table.parse_conditions(&payload) {
+            Ok(cond) => cond,
+            // Read fine before on this link: this payload is a stray or late reply taken for
+            // the answer, not a layout the configured model does not know.
+            Err(_) if self.conditions.is_some() => {
+                return Err(Sj210Error::UnexpectedReply {
+                    command: c,
+                    payload,
+                    expected: "a conditions record like the one read before on this link",
+                })
+            }
+            Err(e) => return Err(e.into()),
+        };
         self.conditions = Some(cond.clone());
         Ok(cond)
     }

@@ -11,7 +11,9 @@
 //! The first poll comes when the planner's trapezoid (feed capped at `$111`, ramps at `$121`)
 //! says the jog is over, and each later one when the rest should be done, from the reported
 //! position and real speed (`FS:`), never more than the poll interval apart.
-//! A banner or `ALARM:1`/`ALARM:3` not caused by our own reset means the position is lost.
+//! A banner or `ALARM:1`/`ALARM:3` not caused by our own reset means the position is lost, and
+//! so does a report in `Alarm` or a jog refused with `error:8` because the board is in Alarm.
+//! Stopping cancels the jog (0x85) and waits while GRBL decelerates at `$121` to `Idle`.
 //! Reports in work coordinates (`$10=0`) are turned into machine coordinates with the `WCO:`
 //! GRBL sends every few reports; the driver waits for one at connect.
 //!
@@ -22,7 +24,7 @@ pub mod codec;
 pub mod controller;
 
 use super::link::LineLink;
-use super::ramp::move_time;
+use super::ramp::{move_time, MIN_POLL_GAP, POLL_MARGIN};
 use super::{Identity, Motion, Stage, StageError, StageStatus};
 use crate::devices::FaultClass;
 use codec::{
@@ -49,11 +51,6 @@ pub struct GrblConfig {
     pub open_grace: Duration,
 }
 
-/// How late after the planned end of a jog the status is polled: the USB round trip and the
-/// stepper's last segment.
-const POLL_MARGIN: Duration = Duration::from_millis(5);
-/// The shortest wait between two polls of a jog that is still running.
-const MIN_POLL_GAP: Duration = Duration::from_millis(20);
 /// GRBL sends `WCO:` at least every 30th report (every 10th at rest).
 const REPORTS_PER_WCO: usize = 31;
 
@@ -304,6 +301,11 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
                 })
             }
         };
+        if r.state == GrblState::Alarm {
+            // Alarm locks the board until $H (or $X): whatever caused it (a reset in motion, a
+            // power-up with homing enabled, a limit), the position needs a home.
+            self.trusted = false;
+        }
         let motion = match r.state {
             GrblState::Idle | GrblState::Sleep | GrblState::Check => Motion::Idle,
             GrblState::Run | GrblState::Jog | GrblState::Hold(_) | GrblState::Door(_) => {
@@ -418,7 +420,17 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
                     .into(),
             );
         }
-        warnings.extend(self.read_settings().await?);
+        match self.read_settings().await {
+            Ok(w) => warnings.extend(w),
+            Err(StageError::ControllerSetup(why)) if eeprom_reset => {
+                return Err(StageError::ControllerSetup(format!(
+                    "the controller reported error:7 at start-up (its EEPROM settings were \
+                     unreadable and GRBL's defaults are in force): program the board's settings \
+                     again ($$ lists them); {why}"
+                )))
+            }
+            Err(e) => return Err(e),
+        }
         let mut r = self.query_status().await?;
         // Work-coordinate reports: wait for the WCO GRBL sends every few reports.
         let mut polls = 1;
@@ -487,7 +499,23 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
         let line = encode_jog_y(y_mm, self.cfg.feed_mm_min);
         let sent = Instant::now();
         self.jog = None;
-        self.command(&line, self.cfg.reply_timeout).await?;
+        match self.command(&line, self.cfg.reply_timeout).await {
+            Ok(_) => {}
+            Err(e @ StageError::Rejected { code: Some(8), .. }) => {
+                // `$J=` outside Idle/Jog is error:8. In Alarm (a reset or power-up whose banner
+                // was missed, a limit) the position needs a home; anything else (a hold) is
+                // the refusal itself.
+                let r = self.query_status().await?;
+                if r.state == GrblState::Alarm {
+                    self.trusted = false;
+                    return Err(StageError::PositionLost {
+                        reason: format!("{e}: the controller is in Alarm"),
+                    });
+                }
+                return Err(e);
+            }
+            Err(e) => return Err(e),
+        }
         self.jog = Some(Jog {
             target_units,
             from_units: self.last_units,
@@ -551,7 +579,34 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
     }
 
     async fn stop(&mut self) -> Result<(), StageError> {
-        self.jog = None;
-        self.write(&[RT_JOG_CANCEL]).await
+        let moving = self.jog.take().is_some();
+        self.write(&[RT_JOG_CANCEL]).await?;
+        if !moving {
+            return Ok(());
+        }
+        // GRBL decelerates at $121 and reports Jog until at rest: wait for Idle, so the next
+        // move starts from rest at a position read back.
+        let feed = self.effective_feed_mm_min() / 60.0;
+        let braking = self
+            .board
+            .acceleration_mm_s2()
+            .map_or(Duration::ZERO, |a| Duration::from_secs_f64(feed / a));
+        let deadline = Instant::now() + braking + self.cfg.reply_timeout;
+        let mut wake = Instant::now() + braking + POLL_MARGIN;
+        loop {
+            tokio::time::sleep_until(wake.min(deadline)).await;
+            let r = self.query_status().await?;
+            let st = self.status_from(&r)?;
+            if st.motion != Motion::Moving {
+                return Ok(());
+            }
+            if Instant::now() >= deadline {
+                return Err(StageError::Timeout {
+                    waiting_for: "the cancelled jog to come to rest (state Idle)".into(),
+                    timeout_ms: (braking + self.cfg.reply_timeout).as_millis() as u64,
+                });
+            }
+            wake = Instant::now() + MIN_POLL_GAP;
+        }
     }
 }

@@ -1,21 +1,34 @@
 //! Zaber ASCII: a [`Stage`] driver generic over `AsyncRead + AsyncWrite + Unpin`, over the
 //! pure codec in [`codec`].
 //!
-//! Positions are integer microsteps; completion is seen by polling until `IDLE`. Every reply
-//! carries the device's worst warning flag and a move fails on a fault flag as soon as one is
-//! seen; a home is the exception: an axis that powered up without a reference carries `WR`
-//! (or `WH`) on every reply until its home has completed, status polls included, so while
-//! homing those two are expected and the flags are judged once the device is idle.
+//! Positions are integer microsteps; completion is seen by polling `get pos` (whose reply
+//! carries `BUSY`/`IDLE`, the worst warning flag and the position in one round trip) until
+//! `IDLE`. At connect the driver reads the axis's `maxspeed` and `accel`, so the first poll of
+//! a move comes when its trapezoid says it is over and each later one when the rest should be
+//! done, never more than the poll interval apart; and `limit.min`/`limit.max`, the travel the
+//! device enforces, so a plan leaving it is refused before anything moves.
 //!
-//! Layer 2: depends on [`codec`], [`super::link`] and the stage vocabulary in [`super`].
+//! A move fails on a fault flag as soon as one is seen; a home is the exception: an axis that
+//! powered up without a reference carries `WR` (or `WH`) on every reply until its home has
+//! completed, status polls included, so while homing those two are expected and the flags
+//! are judged once the device is idle.
+//!
+//! Layer 2: depends on [`codec`], [`super::link`], [`super::ramp`] and the stage vocabulary
+//! in [`super`].
 
 pub mod codec;
 
 use super::link::LineLink;
+use super::ramp::{move_time, MIN_POLL_GAP, POLL_MARGIN};
 use super::{Identity, Motion, Stage, StageError, StageStatus};
 use codec::{encode_command, flag_fault, parse_line, Reply, ZaberMessage, ZaberParseError};
 use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncWrite};
+use tokio::time::Instant;
+
+/// Zaber's speed unit: one microstep per second is 1.6384 data units; one microstep per s² of
+/// acceleration is 0.16384.
+const SPEED_DATA_PER_MICROSTEP_S: f64 = 1.6384;
 
 /// Settings of the Zaber driver.
 #[derive(Debug, Clone)]
@@ -35,6 +48,14 @@ pub struct ZaberConfig {
     pub checksums: bool,
 }
 
+/// A move sent and not yet seen to end.
+#[derive(Debug, Clone, Copy)]
+struct PendingMove {
+    target: i64,
+    from: Option<i64>,
+    sent: Instant,
+}
+
 /// The Zaber driver.
 pub struct ZaberStage<T> {
     link: LineLink<T>,
@@ -42,6 +63,13 @@ pub struct ZaberStage<T> {
     /// A reply may still be in flight from an interrupted exchange: drain before talking.
     dirty: bool,
     next_id: u8,
+    /// The axis's `maxspeed`, microsteps/s, when it reported one.
+    speed: Option<f64>,
+    /// The axis's `accel`, microsteps/s², when it reported one.
+    accel: Option<f64>,
+    /// The position of the last reply to `get pos`, microsteps.
+    last_pos: Option<i64>,
+    pending: Option<PendingMove>,
 }
 
 impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
@@ -52,6 +80,31 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
             cfg,
             dirty: false,
             next_id: 0,
+            speed: None,
+            accel: None,
+            last_pos: None,
+            pending: None,
+        }
+    }
+
+    /// How long `distance` microsteps take from `v0` microsteps/s to rest, at the axis's
+    /// speed and acceleration; `None` when the axis did not report its speed.
+    fn travel_time(&self, distance: i64, v0: f64) -> Option<Duration> {
+        let speed = self.speed?;
+        Some(move_time(
+            distance.unsigned_abs() as f64,
+            v0,
+            speed,
+            self.accel,
+        ))
+    }
+
+    /// An axis setting by name, `None` when the device rejects it (older firmware).
+    async fn get_setting(&mut self, name: &str) -> Result<Option<f64>, StageError> {
+        match self.command(&format!("get {name}")).await {
+            Ok(r) => Ok(r.data.trim().parse::<f64>().ok().filter(|v| v.is_finite())),
+            Err(StageError::Rejected { .. }) => Ok(None),
+            Err(e) => Err(e),
         }
     }
 
@@ -176,6 +229,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
                 line: format!("{r:?}"),
                 why: "get pos did not return an integer".into(),
             })?;
+        self.last_pos = Some(pos);
         Ok((r, pos))
     }
 
@@ -190,22 +244,43 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
     }
 
     async fn poll_idle(&mut self, timeout: Duration) -> Result<StageStatus, StageError> {
-        let deadline = tokio::time::Instant::now() + timeout;
+        let deadline = Instant::now() + timeout;
+        // First look when the trapezoid says the move is over.
+        let mut wake = match self.pending {
+            Some(PendingMove {
+                target,
+                from: Some(from),
+                sent,
+            }) => self
+                .travel_time(target - from, 0.0)
+                .map_or_else(Instant::now, |t| sent + t + POLL_MARGIN),
+            _ => Instant::now(),
+        };
         loop {
-            let r = self.command("").await?;
+            let at = wake
+                .min(Instant::now() + self.cfg.poll_interval)
+                .min(deadline);
+            tokio::time::sleep_until(at).await;
+            let (r, pos) = self.get_pos().await?;
             Self::check_flag(&r)?;
             if !r.busy {
-                let (r, pos) = self.get_pos().await?;
-                Self::check_flag(&r)?;
+                self.pending = None;
                 return Ok(Self::status_of(&r, pos));
             }
-            if tokio::time::Instant::now() >= deadline {
+            if Instant::now() >= deadline {
                 return Err(StageError::Timeout {
                     waiting_for: "the axis to become IDLE".into(),
                     timeout_ms: timeout.as_millis() as u64,
                 });
             }
-            tokio::time::sleep(self.cfg.poll_interval).await;
+            // Still busy: look again when the rest should be done at the axis's speed.
+            let left = self
+                .pending
+                .and_then(|m| self.travel_time(m.target - pos, self.speed.unwrap_or(0.0)));
+            wake = match left {
+                Some(left) => Instant::now() + (left + POLL_MARGIN).max(MIN_POLL_GAP),
+                None => Instant::now() + self.cfg.poll_interval,
+            };
         }
     }
 }
@@ -218,9 +293,33 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for ZaberStage<T> {
         self.cfg.axis = axis;
         let id = id?;
         let (r, pos) = self.get_pos().await?;
+        self.speed = self
+            .get_setting("maxspeed")
+            .await?
+            .map(|v| v / SPEED_DATA_PER_MICROSTEP_S)
+            .filter(|v| *v > 0.0);
+        self.accel = self
+            .get_setting("accel")
+            .await?
+            .map(|v| v * 10.0 / SPEED_DATA_PER_MICROSTEP_S)
+            .filter(|v| *v > 0.0);
+        let lo = self.get_setting("limit.min").await?;
+        let hi = self.get_setting("limit.max").await?;
+        let travel_units = match (lo, hi) {
+            (Some(lo), Some(hi)) if lo < hi => Some((lo.ceil() as i64, hi.floor() as i64)),
+            _ => None,
+        };
+        let mut warnings = Vec::new();
+        if self.speed.is_none() {
+            warnings.push(
+                "the axis did not report its maxspeed: moves are polled every poll-interval-ms"
+                    .into(),
+            );
+        }
         let identity = Identity {
             text: format!("zaber device {} id {}", self.cfg.device, id.data),
-            ..Identity::default()
+            travel_units,
+            warnings,
         };
         Ok((identity, Self::status_of(&r, pos)))
     }
@@ -256,7 +355,8 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for ZaberStage<T> {
         match r.flag.as_deref() {
             Some(f @ ("WR" | "WH")) => Err(StageError::PositionLost {
                 reason: format!(
-                    "{f} after the home completed: the device is still not referenced; check                      the home sensor and its cable"
+                    "{f} after the home completed: the device is still not referenced; check \
+                     the home sensor and its cable"
                 ),
             }),
             _ => {
@@ -267,8 +367,25 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for ZaberStage<T> {
     }
 
     async fn begin_move_abs(&mut self, target_units: i64) -> Result<(), StageError> {
+        self.pending = None;
+        let sent = Instant::now();
         let r = self.command(&format!("move abs {target_units}")).await?;
-        Self::check_flag(&r)
+        if let Err(e) = Self::check_flag(&r) {
+            if r.busy {
+                // Accepted on a lost reference (WR after a power cycle): it would run to the
+                // target counted from wherever the axis powered up. Stop it where it stands.
+                if let Err(stop) = self.command("stop").await {
+                    tracing::warn!(error = %stop, "stopping a move on a lost reference failed");
+                }
+            }
+            return Err(e);
+        }
+        self.pending = Some(PendingMove {
+            target: target_units,
+            from: self.last_pos,
+            sent,
+        });
+        Ok(())
     }
 
     async fn wait_done(&mut self, timeout: Duration) -> Result<StageStatus, StageError> {
@@ -276,7 +393,26 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for ZaberStage<T> {
     }
 
     async fn stop(&mut self) -> Result<(), StageError> {
-        self.command("stop").await?;
+        self.pending = None;
+        let r = self.command("stop").await?;
+        if r.busy {
+            // The axis decelerates after `stop`: wait until it is at rest, so the next move
+            // starts from a position read back.
+            let deadline = Instant::now() + self.cfg.reply_timeout;
+            loop {
+                tokio::time::sleep(MIN_POLL_GAP).await;
+                let (r, _) = self.get_pos().await?;
+                if !r.busy {
+                    break;
+                }
+                if Instant::now() >= deadline {
+                    return Err(StageError::Timeout {
+                        waiting_for: "the stopped axis to come to rest (IDLE)".into(),
+                        timeout_ms: self.cfg.reply_timeout.as_millis() as u64,
+                    });
+                }
+            }
+        }
         // Our own stop raises NI (movement interrupted); clear it so it is not read later
         // as a fault.
         self.command("warnings clear").await.map(|_| ())

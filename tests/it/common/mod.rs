@@ -162,19 +162,7 @@ impl Rig {
     pub fn config_with(&self, out: &str, extra: &str) -> PathBuf {
         let dir = self.tmp.path().join(out);
         let text = format!(
-            r#"[instrument]
-port = {instrument:?}
-model = "sj210"
-baud = 38400
-pitch-x-um = 1.5
-
-[instrument.timeouts]
-poll-interval-ms = 5
-
-[instrument.commands]
-profile-total = "RDEVA00"
-profile-block = "RDEVA{{n}}"
-
+            r#"{instrument}
 [stage]
 port = {stage:?}
 protocol = "grbl"
@@ -205,7 +193,7 @@ dir = {dir:?}
 [control]
 socket = {sock:?}
 "#,
-            instrument = self.instrument_link.display().to_string(),
+            instrument = instrument_section(&self.instrument_link),
             stage = self.stage_link.display().to_string(),
             lines = self.options.lines,
             attempts = self.options.max_line_attempts,
@@ -231,6 +219,26 @@ socket = {sock:?}
             h.shutdown().await;
         }
     }
+}
+
+/// The `[instrument]` tables of the rigs' configurations: the simulated SJ-210 at `link`.
+pub fn instrument_section(link: &Path) -> String {
+    format!(
+        r#"[instrument]
+port = {link:?}
+model = "sj210"
+baud = 38400
+pitch-x-um = 1.5
+
+[instrument.timeouts]
+poll-interval-ms = 5
+
+[instrument.commands]
+profile-total = "RDEVA00"
+profile-block = "RDEVA{{n}}"
+"#,
+        link = link.display().to_string()
+    )
 }
 
 /// `surfscan scan --config CONFIG` with the traceability arguments and `env`.
