@@ -552,7 +552,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     };
     let read_s = t_read.elapsed().as_secs_f64();
     let Input {
-        grid,
+        mut grid,
         pitch_x_mm,
         pitch_y_mm,
         y_mm,
@@ -624,6 +624,9 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let t_res = Instant::now();
     let residual_mm = max_residual_mm(&fit, pitch_x_mm, &y_mm, &grid.heights_um, grid.cols);
     let residual_s = t_res.elapsed().as_secs_f64();
+    // The heights are not needed past the residual check: free them before the IGES files
+    // are planned and written, which is when a large surface needs the most memory.
+    grid.heights_um = Vec::new();
 
     let now = chrono::Utc::now().naive_utc();
     let file_name = output

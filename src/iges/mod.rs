@@ -18,10 +18,10 @@ pub mod split;
 pub mod writer;
 
 pub use reader::{read_iges, IgesFile};
-pub use split::{split_v, split_v_middle};
+pub use split::{split_v, split_v_middle, split_v_middle_side, split_v_side, Side};
 pub use writer::{
-    parameter_lines_bound, plan_files, plan_parts, write_iges, write_iges_seekable, IgesOptions,
-    IgesStats, MAX_SECTION_LINES,
+    parameter_lines_bound, plan_files, plan_layout, plan_parts, write_iges, write_iges_seekable,
+    IgesOptions, IgesStats, PartPlan, MAX_SECTION_LINES,
 };
 
 use thiserror::Error;

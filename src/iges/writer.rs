@@ -14,7 +14,7 @@
 //! entity), never by formatting the surface first.
 
 use super::format::{ascii_printable, hollerith, push_real, push_right, push_uint, FieldPacker};
-use super::split::split_v_middle;
+use super::split::{split_middle_shapes, split_v_middle, split_v_middle_side, PatchShape, Side};
 use super::IgesError;
 use crate::nurbs::NurbsSurface;
 use std::borrow::Cow;
@@ -321,9 +321,19 @@ const MAX_REAL_TOKEN: usize = 25;
 /// segment may end with one partial record. Exceeds the real count by at most about 60 %
 /// (worst-case 17-digit tokens; about 25 % for a fit's poles).
 pub fn parameter_lines_bound(s: &NurbsSurface) -> usize {
-    let poles = s.count_u().saturating_mul(s.count_v());
+    lines_bound(
+        s.count_u(),
+        s.count_v(),
+        s.knots_u().len(),
+        s.knots_v().len(),
+    )
+}
+
+/// [`parameter_lines_bound`] from the pole counts and knot vector lengths.
+fn lines_bound(count_u: usize, count_v: usize, knots_u: usize, knots_v: usize) -> usize {
+    let poles = count_u.saturating_mul(count_v);
     let per_record = 64 / MAX_REAL_TOKEN;
-    let head_tokens = 10 + s.knots_u().len() + s.knots_v().len();
+    let head_tokens = 10 + knots_u + knots_v;
     let chunks = if poles >= PARALLEL_POLES {
         POLE_CHUNKS
     } else {
@@ -337,44 +347,151 @@ pub fn parameter_lines_bound(s: &NurbsSurface) -> usize {
         + 1
 }
 
+/// How a surface is laid out in IGES files, planned from the knots and token counts alone:
+/// each patch is named by the halves ([`split_v_middle`], recursively) that lead to it from the
+/// surface, and [`PartPlan::part`] builds one file's patches only when it is written, so a
+/// surface split into several files never has all its patches in memory at once.
+#[derive(Debug, Clone)]
+pub struct PartPlan<'a> {
+    surface: &'a NurbsSurface,
+    /// Per file, per patch: the halves taken from the surface, outermost split first.
+    files: Vec<Vec<Vec<Side>>>,
+}
+
+impl<'a> PartPlan<'a> {
+    /// Number of files.
+    pub fn len(&self) -> usize {
+        self.files.len()
+    }
+
+    /// Whether there are no files (never for a plan [`plan_layout`] returns).
+    pub fn is_empty(&self) -> bool {
+        self.files.is_empty()
+    }
+
+    /// Patches in file `k` (0-based).
+    pub fn patches_in(&self, k: usize) -> usize {
+        self.files.get(k).map_or(0, Vec::len)
+    }
+
+    /// The patches of file `k` (0-based), built now: the same bits as splitting the surface
+    /// recursively ([`split_v_middle`]) and keeping every patch. The whole surface is
+    /// borrowed when it fits one entity.
+    pub fn part(&self, k: usize) -> Result<Cow<'a, [NurbsSurface]>, IgesError> {
+        let Some(paths) = self.files.get(k) else {
+            return Err(IgesError::NoSurfaces);
+        };
+        if let [path] = paths.as_slice() {
+            if path.is_empty() {
+                return Ok(Cow::Borrowed(std::slice::from_ref(self.surface)));
+            }
+        }
+        let mut patches = Vec::with_capacity(paths.len());
+        for path in paths {
+            let mut current = Cow::Borrowed(self.surface);
+            for &side in path {
+                let half = split_v_middle_side(&current, side).ok_or_else(|| {
+                    IgesError::EntityTooLarge {
+                        lines: parameter_lines_bound(&current),
+                        max_lines: MAX_SECTION_LINES,
+                        count_u: current.count_u(),
+                        count_v: current.count_v(),
+                    }
+                })?;
+                current = Cow::Owned(half);
+            }
+            patches.push(current.into_owned());
+        }
+        Ok(Cow::Owned(patches))
+    }
+}
+
+/// Appends (path, bound) of each patch of a surface of shape `shape` split until each bound
+/// is at most `max_lines`, in v order: [`split_to_fit`] on the knots alone.
+fn layout_to_fit(
+    s: &NurbsSurface,
+    shape: PatchShape,
+    path: &mut Vec<Side>,
+    max_lines: usize,
+    out: &mut Vec<(Vec<Side>, usize)>,
+) -> Result<(), IgesError> {
+    let lines = lines_bound(
+        s.count_u(),
+        shape.count_v,
+        s.knots_u().len(),
+        shape.knots_v.len(),
+    );
+    if lines <= max_lines {
+        out.push((path.clone(), lines));
+        return Ok(());
+    }
+    match split_middle_shapes(s.degree_v(), &shape) {
+        Some((_, lower, upper)) => {
+            for (side, half) in [(Side::Lower, lower), (Side::Upper, upper)] {
+                path.push(side);
+                layout_to_fit(s, half, path, max_lines, out)?;
+                path.pop();
+            }
+            Ok(())
+        }
+        None => Err(IgesError::EntityTooLarge {
+            lines,
+            max_lines,
+            count_u: s.count_u(),
+            count_v: shape.count_v,
+        }),
+    }
+}
+
 /// Plans how `surface` is written: splits it along v into exact patches (adjacent patches
 /// share their boundary pole row, so their union is exactly the surface) whose P lines are
 /// bounded ([`parameter_lines_bound`]) by `opts.max_parameter_lines_per_entity` and
 /// `opts.max_parameter_lines_per_file`, then groups consecutive patches greedily into files
 /// whose bounds add up to at most `opts.max_parameter_lines_per_file` (never more than
-/// [`MAX_SECTION_LINES`]). Returns one group per file, in v order; a surface that fits one
-/// file is borrowed whole. Nothing is formatted: the bound is computed from token counts.
-pub fn plan_parts<'a>(
+/// [`MAX_SECTION_LINES`]). Nothing is formatted and no patch is built: the bounds come from
+/// token counts and the patches' shapes from their knots.
+pub fn plan_layout<'a>(
     surface: &'a NurbsSurface,
     opts: &IgesOptions,
-) -> Result<Vec<Cow<'a, [NurbsSurface]>>, IgesError> {
+) -> Result<PartPlan<'a>, IgesError> {
     let file_cap = opts
         .max_parameter_lines_per_file
         .clamp(1, MAX_SECTION_LINES);
     let entity_cap = opts.max_parameter_lines_per_entity.clamp(1, file_cap);
-    if parameter_lines_bound(surface) <= entity_cap {
-        return Ok(vec![Cow::Borrowed(std::slice::from_ref(surface))]);
-    }
     let mut patches = Vec::new();
-    split_to_fit(Cow::Borrowed(surface), entity_cap, &mut patches)?;
-    let mut files: Vec<Cow<'a, [NurbsSurface]>> = Vec::new();
-    let mut current: Vec<NurbsSurface> = Vec::new();
+    let shape = PatchShape {
+        knots_v: surface.knots_v().to_vec(),
+        count_v: surface.count_v(),
+    };
+    layout_to_fit(surface, shape, &mut Vec::new(), entity_cap, &mut patches)?;
+    let mut files = Vec::new();
+    let mut current: Vec<Vec<Side>> = Vec::new();
     let mut current_lines = 0usize;
-    for (patch, lines) in patches {
+    for (path, lines) in patches {
         // Two DE lines per entity; the DE section shares the same 7-digit cap.
         let fits =
             current_lines + lines <= file_cap && 2 * (current.len() + 1) <= MAX_SECTION_LINES;
         if !current.is_empty() && !fits {
-            files.push(Cow::Owned(std::mem::take(&mut current)));
+            files.push(std::mem::take(&mut current));
             current_lines = 0;
         }
         current_lines += lines;
-        current.push(patch.into_owned());
+        current.push(path);
     }
     if !current.is_empty() {
-        files.push(Cow::Owned(current));
+        files.push(current);
     }
-    Ok(files)
+    Ok(PartPlan { surface, files })
+}
+
+/// [`plan_layout`] with every file's patches built: one group per file, in v order; a surface
+/// that fits one file is borrowed whole.
+pub fn plan_parts<'a>(
+    surface: &'a NurbsSurface,
+    opts: &IgesOptions,
+) -> Result<Vec<Cow<'a, [NurbsSurface]>>, IgesError> {
+    let plan = plan_layout(surface, opts)?;
+    (0..plan.len()).map(|k| plan.part(k)).collect()
 }
 
 /// [`plan_parts`] with every group owned.

@@ -5,7 +5,7 @@
 //! Layer 3 (session): depends on [`crate::iges`], [`crate::nurbs`] and [`crate::atomic`].
 
 use crate::atomic::write_atomically;
-use crate::iges::{plan_parts, write_iges_seekable, IgesError, IgesOptions};
+use crate::iges::{plan_layout, write_iges_seekable, IgesError, IgesOptions};
 use crate::nurbs::NurbsSurface;
 use std::path::{Path, PathBuf};
 
@@ -102,13 +102,17 @@ pub fn write_surface_files(
     surface: &NurbsSurface,
     opts: &IgesOptions,
 ) -> Result<Vec<WrittenIges>, SurfaceWriteError> {
-    let groups = plan_parts(surface, opts).map_err(|e| SurfaceWriteError::Format {
+    let format_error = |e: IgesError| SurfaceWriteError::Format {
         path: output.to_path_buf(),
         message: e.to_string(),
-    })?;
-    let n_files = groups.len();
+    };
+    // Each file's patches are built just before it is written and freed after.
+    let plan = plan_layout(surface, opts).map_err(format_error)?;
+    let n_files = plan.len();
     let mut files = Vec::with_capacity(n_files);
-    for (k, group) in groups.iter().enumerate() {
+    for k in 0..n_files {
+        let group = plan.part(k).map_err(format_error)?;
+        let group = &group[..];
         let range = v_range(group);
         let path = if n_files == 1 {
             output.to_path_buf()

@@ -17,6 +17,7 @@ mod fuzz_parsers;
 mod iges_fit_cli;
 mod iges_occt;
 mod iges_roundtrip;
+mod iges_split;
 mod metrology_areal;
 mod metrology_cli;
 mod metrology_model;
