@@ -624,8 +624,69 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let t_res = Instant::now();
     let residual_mm = max_residual_mm(&fit, pitch_x_mm, &y_mm, &grid.heights_um, grid.cols);
     let residual_s = t_res.elapsed().as_secs_f64();
-    // The heights are not needed past the residual check: free them before the IGES files
-    // are planned and written, which is when a large surface needs the most memory.
+    // The verdict on the model between lines, on the data the surface was fitted to.
+    let t_holdout = Instant::now();
+    let fitted_z = if replaced.is_empty() {
+        std::borrow::Cow::Borrowed(&grid.heights_um)
+    } else {
+        std::borrow::Cow::Owned(bridged_grid(&grid.heights_um, grid.cols, &index, &replaced).0)
+    };
+    let mean_py = match (y_mm.first(), y_mm.last()) {
+        (Some(a), Some(b)) if grid.rows > 1 => (b - a).abs() / (grid.rows - 1) as f64,
+        _ => pitch_y_mm.unwrap_or(1.0),
+    };
+    let sq = areal_params(&ArealGrid {
+        heights_um: &fitted_z,
+        rows: grid.rows,
+        cols: grid.cols,
+        pitch_x_mm,
+        pitch_y_mm: mean_py,
+    })
+    .map(|a| a.sq_um)
+    .map_err(|e| e.to_string());
+    // Every 2nd line left out, or every k-th when too few lines remain for that (as the
+    // report does).
+    let threshold = args.model.holdout_threshold()?;
+    let every = holdout_every(grid.rows, recipe.degrees.degree_v).ok_or_else(|| {
+        format!(
+            "{} lines cannot verify the surface between them: leaving one out leaves at most degree-v + 1 = {} for the refit; trace more lines or lower degree-v",
+            grid.rows,
+            recipe.degrees.degree_v + 1
+        )
+    });
+    let verdict = sq.clone().and_then(|sq| {
+        let every = every.clone()?;
+        between_lines(
+            &fitted_z,
+            grid.cols,
+            pitch_x_mm,
+            &y_mm,
+            recipe.degrees,
+            recipe.method,
+            every,
+            sq,
+            threshold,
+        )
+        .map_err(|e| e.to_string())
+    });
+    let alternatives = match (&sq, &every, args.compare) {
+        (Ok(sq), Ok(every), true) => Some(compare_alternatives(
+            &fitted_z,
+            grid.cols,
+            pitch_x_mm,
+            &y_mm,
+            recipe.degrees,
+            *every,
+            *sq,
+            threshold,
+        )),
+        _ => None,
+    };
+    let holdout_s = t_holdout.elapsed().as_secs_f64();
+    // The heights are not needed past the residual check and the verdict: free them before
+    // the IGES files are planned and written, which is when a large surface needs the most
+    // memory.
+    drop(fitted_z);
     grid.heights_um = Vec::new();
 
     let now = chrono::Utc::now().naive_utc();
@@ -702,66 +763,6 @@ pub fn run(args: Args) -> Result<(), CliError> {
         })
         .collect();
     let write_s = t_write.elapsed().as_secs_f64();
-
-    // The verdict on the model between lines, on the data the surface was fitted to.
-    let t_holdout = Instant::now();
-    let fitted_z = if replaced.is_empty() {
-        std::borrow::Cow::Borrowed(&grid.heights_um)
-    } else {
-        std::borrow::Cow::Owned(bridged_grid(&grid.heights_um, grid.cols, &index, &replaced).0)
-    };
-    let mean_py = match (y_mm.first(), y_mm.last()) {
-        (Some(a), Some(b)) if grid.rows > 1 => (b - a).abs() / (grid.rows - 1) as f64,
-        _ => pitch_y_mm.unwrap_or(1.0),
-    };
-    let sq = areal_params(&ArealGrid {
-        heights_um: &fitted_z,
-        rows: grid.rows,
-        cols: grid.cols,
-        pitch_x_mm,
-        pitch_y_mm: mean_py,
-    })
-    .map(|a| a.sq_um)
-    .map_err(|e| e.to_string());
-    // Every 2nd line left out, or every k-th when too few lines remain for that (as the
-    // report does).
-    let threshold = args.model.holdout_threshold()?;
-    let every = holdout_every(grid.rows, recipe.degrees.degree_v).ok_or_else(|| {
-        format!(
-            "{} lines cannot verify the surface between them: leaving one out leaves at most degree-v + 1 = {} for the refit; trace more lines or lower degree-v",
-            grid.rows,
-            recipe.degrees.degree_v + 1
-        )
-    });
-    let verdict = sq.clone().and_then(|sq| {
-        let every = every.clone()?;
-        between_lines(
-            &fitted_z,
-            grid.cols,
-            pitch_x_mm,
-            &y_mm,
-            recipe.degrees,
-            recipe.method,
-            every,
-            sq,
-            threshold,
-        )
-        .map_err(|e| e.to_string())
-    });
-    let alternatives = match (&sq, &every, args.compare) {
-        (Ok(sq), Ok(every), true) => Some(compare_alternatives(
-            &fitted_z,
-            grid.cols,
-            pitch_x_mm,
-            &y_mm,
-            recipe.degrees,
-            *every,
-            *sq,
-            threshold,
-        )),
-        _ => None,
-    };
-    let holdout_s = t_holdout.elapsed().as_secs_f64();
 
     let s = &fit.surface;
     let mut report = serde_json::json!({

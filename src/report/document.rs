@@ -245,8 +245,9 @@ pub struct Traceability {
     pub scan_id: String,
     /// When the scan started (ISO 8601).
     pub started_at: String,
-    /// When it finished (ISO 8601): its stop record's time, or the time the runner completed
-    /// it; `None` while it has neither (still running, or stopped without a record).
+    /// When it finished (ISO 8601): for a complete scan, when its last line was read out;
+    /// for one stopped otherwise (abort, fail), its stop record's time; `None` while it has
+    /// neither (still running, or stopped without a record).
     pub finished_at: Option<String>,
     /// From start to finish, s (`None` without a finish).
     pub duration_s: Option<f64>,

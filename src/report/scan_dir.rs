@@ -251,11 +251,15 @@ pub fn characterise_scan_lines(
             ));
         }
     }
-    // A scan finished when its stop record says, or now when the runner is completing it.
-    let finished_at = facts.and_then(|f| {
-        f.stop
-            .map(|s| s.time)
-            .or_else(|| f.completing.then(chrono::Utc::now))
+    // A complete scan finished when its last line was read out (the runner writing its
+    // outputs and `analyze` reading the directory afterwards give the same time); one that
+    // stopped otherwise, when its stop record says.
+    let last_line = lines.iter().map(|l| l.meta.finished_at).max();
+    let finished_at = facts.and_then(|f| match f.stop {
+        Some(s) if s.status != StopStatus::Success => Some(s.time),
+        Some(s) => last_line.or(Some(s.time)),
+        None if f.completing => last_line,
+        None => None,
     });
     let ctx = ReportContext {
         input: dir.display().to_string(),
