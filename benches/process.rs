@@ -316,6 +316,8 @@ fn write_scan(parent: &Path, kind: ProfileKind, cols: usize) -> PathBuf {
                 degree_u: 5,
                 degree_v: 5,
                 max_line_attempts: 3,
+                v_method: Default::default(),
+                replace_spikes: None,
             },
             config: serde_json::json!({}),
             config_hash: "0".repeat(64),

@@ -108,6 +108,12 @@ pub fn line_number(index: u32) -> u64 {
     u64::from(index) + 1
 }
 
+/// A line as a person names it: its 1-based number with the file index beside it,
+/// `7 (0006)`.
+pub fn line_label(index: u32) -> String {
+    format!("{} ({index:04})", line_number(index))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -10,14 +10,22 @@
 //! holding invalid (not measured) points is left out with a warning rather than filled in,
 //! and a one-line X3P profile is characterised as a profile.
 //!
-//! The model is fitted once at `--degree-u/--degree-v` (default: a scan's frozen plan, else
-//! the paper's 5/5); the report's model sections describe that surface and the hold-out
-//! refits use the same degrees, so a scan directory gives the report its scan wrote.
+//! The model is fitted once at `--degree-u/--degree-v` and `--v-method` (default: a scan's
+//! frozen plan, else the paper's 5/5 interpolation); the report's model sections describe
+//! that surface and the hold-out refits are made the same way, so a scan directory gives the
+//! report its scan wrote. Spikes are named in the warnings and report.json; `--outliers
+//! exclude` leaves them out of the per-line and measured-grid parameters, `--replace-spikes`
+//! replaces them before fitting.
+//!
+//! The summary printed names the verdict on the model between lines. Exit status: 0 done,
+//! 3 done but part of the characterisation could not be made (report.json's
+//! `characterisation.failed_sections` says which and why), 1 the input cannot be
+//! characterised at all, 2 usage, 74 I/O.
 //!
 //! Layer 5 (composition): reads files, calls [`crate::report`] and [`crate::metrology`].
 
+use super::model_args::ModelArgs;
 use super::{CliError, Exit};
-use crate::fit::FitOptions;
 use crate::metrology::params::{analyze_line, Options, Recipe, RoughnessParams};
 use crate::report::scan_dir::fit_for_report;
 use crate::report::{
@@ -66,6 +74,22 @@ pub struct Args {
     /// Degree of the model along v (y). Default: a scan's frozen plan, else 5 (the paper).
     #[arg(long)]
     pub degree_v: Option<usize>,
+    /// Spikes: flag (named, the data as measured) or exclude (also left out of the per-line
+    /// and measured-grid parameters, bridged by the straight line between neighbours).
+    #[arg(long, value_enum, default_value_t = OutliersArg::Flag)]
+    pub outliers: OutliersArg,
+    /// The surface and the spike rule.
+    #[command(flatten)]
+    pub model: ModelArgs,
+}
+
+/// What characterisation does with the spikes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OutliersArg {
+    /// Name them; the data stay as measured.
+    Flag,
+    /// Also leave them out of the per-line and measured-grid parameters.
+    Exclude,
 }
 
 /// Default λc in mm for CSV input.
@@ -203,6 +227,31 @@ fn report_error(e: ReportError) -> CliError {
     CliError::new(exit, e.to_string())
 }
 
+/// Prints the warnings and the summary, and maps a partial characterisation to exit 3.
+fn finish(o: &ScanOutputs) -> Result<(), CliError> {
+    print_outputs(o);
+    println!("{}", o.verdict_line());
+    if o.complete() {
+        Ok(())
+    } else {
+        let failed: Vec<String> = o
+            .report
+            .characterisation
+            .failed_sections
+            .iter()
+            .map(|f| f.section.clone())
+            .collect();
+        Err(CliError::new(
+            Exit::Partial,
+            format!(
+                "the characterisation is partial: {} could not be made (the reasons are in the warnings above and in {}); every other output is written",
+                failed.join(", "),
+                o.report_json.display()
+            ),
+        ))
+    }
+}
+
 fn print_outputs(o: &ScanOutputs) {
     for w in &o.warnings {
         eprintln!("surfscan: warning: {w}");
@@ -230,6 +279,10 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 "--pitch-x/--pitch-y are for a grid CSV; a scan directory's pitch and y come from its line metadata",
             ));
         }
+        // The method's default control rows depend on the line count, known once read.
+        let lines = crate::report::scan_dir::load_scan_lines(&args.input)
+            .map(|(l, _)| l.len())
+            .unwrap_or(0);
         let options = ScanAnalysisOptions {
             curves: args.curves,
             levels: args.levels,
@@ -239,10 +292,14 @@ pub fn run(args: Args) -> Result<(), CliError> {
             degree_u: args.degree_u,
             degree_v: args.degree_v,
             out_dir: args.out.clone(),
+            spikes: args.model.spikes()?,
+            exclude_spikes: args.outliers == OutliersArg::Exclude,
+            holdout_threshold: args.model.holdout_threshold()?,
+            v_method: args.model.v_method(lines, args.degree_v.unwrap_or(5))?,
+            replace_spikes: args.model.replace(),
         };
         let outputs = characterise_scan(&args.input, &options).map_err(report_error)?;
-        print_outputs(&outputs);
-        return Ok(());
+        return finish(&outputs);
     }
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from("."));
     let bytes = std::fs::read(&args.input).map_err(|e| {
@@ -329,18 +386,11 @@ pub fn run(args: Args) -> Result<(), CliError> {
         traceability: None,
         scan: None,
         fit: None,
-        options: ScanAnalysisOptions {
-            curves: args.curves,
-            levels: args.levels,
-            overlay_line: args.overlay_line,
-            ..ScanAnalysisOptions::default()
-        },
+        options: ScanAnalysisOptions::default(),
         warnings: Vec::new(),
-        finished_at: None,
     };
     let outputs = fit_and_characterise(&grid, ctx, &args, &out)?;
-    print_outputs(&outputs);
-    Ok(())
+    finish(&outputs)
 }
 
 /// `analyze FILE.x3p`: the grid read with its pitches; lines with invalid points left out.
@@ -469,38 +519,49 @@ fn run_x3p(args: &Args, bytes: &[u8], out: &Path) -> Result<(), CliError> {
         traceability: None,
         scan: None,
         fit: None,
-        options: ScanAnalysisOptions {
-            curves: args.curves,
-            levels: args.levels,
-            overlay_line: args.overlay_line,
-            ..ScanAnalysisOptions::default()
-        },
+        options: ScanAnalysisOptions::default(),
         warnings,
-        finished_at: None,
     };
     let outputs = fit_and_characterise(&grid, ctx, args, out)?;
-    print_outputs(&outputs);
-    Ok(())
+    finish(&outputs)
 }
 
-/// Fits `grid` once at `--degree-u/--degree-v` (default 5/5) and characterises it with that
-/// surface (the model sections and the hold-out refits use the same degrees).
+/// Fits `grid` once the way the arguments ask (`--degree-u/--degree-v`, default the paper's
+/// 5/5; `--v-method`; spikes replaced only with `--replace-spikes`) and characterises it with
+/// that surface (the model sections and the hold-out refits are made the same way).
 fn fit_and_characterise(
     grid: &LineGrid,
     mut ctx: ReportContext,
     args: &Args,
     out: &Path,
 ) -> Result<ScanOutputs, CliError> {
-    let paper = FitOptions::default();
-    let degrees = FitOptions {
-        degree_u: args.degree_u.unwrap_or(paper.degree_u),
-        degree_v: args.degree_v.unwrap_or(paper.degree_v),
+    let analysis = ScanAnalysisOptions {
+        curves: args.curves,
+        levels: args.levels,
+        overlay_line: args.overlay_line,
+        degree_u: args.degree_u,
+        degree_v: args.degree_v,
+        spikes: args.model.spikes()?,
+        exclude_spikes: args.outliers == OutliersArg::Exclude,
+        holdout_threshold: args.model.holdout_threshold()?,
+        v_method: args
+            .model
+            .v_method(grid.rows(), args.degree_v.unwrap_or(5))?,
+        replace_spikes: args.model.replace(),
+        ..ScanAnalysisOptions::default()
     };
-    let (fit, summary, fit_s) = fit_for_report(grid, degrees);
+    let mut recipe = crate::report::scan_dir::scan_recipe(&analysis, None, &[]);
+    recipe.lambda_c_mm = ctx
+        .line_options
+        .apply_lambda_c
+        .then_some(ctx.line_options.lambda_c_mm);
+    let (fitted, summary, fit_s) = fit_for_report(grid, &recipe);
     ctx.fit = summary;
+    ctx.options = analysis;
     let model = Model {
-        degrees,
-        fit: fit.as_ref(),
+        recipe,
+        fit: fitted.as_ref().map(|m| &m.fit),
+        replaced: fitted.as_ref().map_or(&[][..], |m| &m.replaced[..]),
     };
     let mut outputs = characterise(grid, model, ctx, out).map_err(report_error)?;
     outputs.elapsed_s += fit_s;

@@ -22,14 +22,32 @@
 //! section names the part and its v range, and the report lists every file.
 //!
 //! The degrees are `--degree-u/--degree-v`, by default those of a scan's frozen plan (its
-//! journal's start record), else the paper's 5/5.
+//! journal's start record), else the paper's 5/5; likewise the method across the lines
+//! (`--v-method`, the paper's interpolation by default) and spike replacement before fitting
+//! (`--replace-spikes`, only when asked; for a grid CSV the spike rule judges the heights
+//! minus their least-squares line). The IGES Start section and the report name the method
+//! and every replaced spike.
+//!
+//! The summary printed is the verdict on the model between lines (every 2nd line left out,
+//! refitted the same way, judged against Sq), not the residual at the data points, which an
+//! interpolant makes zero by construction (the report keeps it). `--compare` prints the
+//! hold-out figures of the paper's interpolation and of least-squares alternatives side by
+//! side, so the method is chosen with numbers.
 //!
 //! Layer 5 (composition).
 
+use super::model_args::ModelArgs;
 use super::{CliError, Exit};
 use crate::atomic::write_atomically;
 use crate::fit::{max_residual_mm, FitOptions, IncrementalFitter};
 use crate::iges::{IgesOptions, MAX_SECTION_LINES};
+use crate::metrology::alternatives::{
+    compare as compare_alternatives, table as alternatives_table,
+};
+use crate::metrology::areal::{areal_params, Grid as ArealGrid};
+use crate::metrology::holdout::{between_lines, holdout_every, ordinal};
+use crate::metrology::outliers::bridged_grid;
+use crate::metrology::surface_model::{fit_model, ModelRecipe};
 use crate::scan::outputs::SurfaceShape;
 use crate::scan::surface_files::{write_surface_files, SurfaceWriteError};
 use std::io::IsTerminal;
@@ -68,6 +86,13 @@ pub struct Args {
     /// along v into exact patches.
     #[arg(long, default_value_t = MAX_SECTION_LINES)]
     pub max_iges_lines_per_entity: usize,
+    /// Also print the between-line hold-out of the paper's interpolation and of least-squares
+    /// alternatives side by side.
+    #[arg(long)]
+    pub compare: bool,
+    /// The surface and the spike rule.
+    #[command(flatten)]
+    pub model: ModelArgs,
     /// Replace an existing SCAN_DIR/surface.igs (by default it is kept: it is the surface the
     /// scan wrote when it completed).
     #[arg(long)]
@@ -214,6 +239,10 @@ struct Input {
     kind: &'static str,
     /// The degrees to fit with.
     degrees: FitOptions,
+    /// The scan's frozen plan, when the input is a scan with a readable journal.
+    plan: Option<crate::scan::plan::Plan>,
+    /// λc of the roughness the spike rule judges (a scan of primary profiles).
+    lambda_c_mm: Option<f64>,
 }
 
 fn read_scan(args: &Args) -> Result<Input, CliError> {
@@ -230,15 +259,16 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             ));
         }
     }
-    let (mut lines, _, incomplete) = crate::report::load_scan_grid(&args.input).map_err(|e| {
-        let exit = match &e {
-            crate::report::ReportError::Store(crate::scan::store_error::StoreError::Io {
-                ..
-            }) => Exit::Io,
-            _ => Exit::Failed,
-        };
-        CliError::new(exit, e.to_string())
-    })?;
+    let (mut lines, stored, incomplete) =
+        crate::report::load_scan_grid(&args.input).map_err(|e| {
+            let exit = match &e {
+                crate::report::ReportError::Store(crate::scan::store_error::StoreError::Io {
+                    ..
+                }) => Exit::Io,
+                _ => Exit::Failed,
+            };
+            CliError::new(exit, e.to_string())
+        })?;
     if !incomplete.is_empty() {
         eprintln!(
             "surfscan: warning: lines {} have only one of their two files in {} and were left out",
@@ -280,6 +310,8 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             ));
         }
     }
+    let journal = crate::report::scan_dir::read_scan_journal(&args.input).ok();
+    let start = journal.as_ref().map(|s| &s.start);
     Ok(Input {
         grid: Grid {
             rows: lines.y_mm.len(),
@@ -295,14 +327,12 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             .clone()
             .unwrap_or_else(|| args.input.join("surface.igs")),
         kind: "scan",
-        degrees: crate::report::scan_dir::scan_degrees(
-            args.degree_u,
-            args.degree_v,
-            crate::report::scan_dir::read_scan_journal(&args.input)
-                .ok()
-                .as_ref()
-                .map(|s| &s.start),
-        ),
+        degrees: crate::report::scan_dir::scan_degrees(args.degree_u, args.degree_v, start),
+        plan: start.map(|s| s.plan),
+        lambda_c_mm: stored.first().and_then(|l| {
+            let o = crate::metrology::params::Options::from_profile(&l.profile);
+            o.apply_lambda_c.then_some(o.lambda_c_mm)
+        }),
     })
 }
 
@@ -454,6 +484,8 @@ fn read_csv(args: &Args) -> Result<Input, CliError> {
         output,
         kind: "grid",
         degrees: crate::report::scan_dir::scan_degrees(args.degree_u, args.degree_v, None),
+        plan: None,
+        lambda_c_mm: None,
     })
 }
 
@@ -528,7 +560,24 @@ pub fn run(args: Args) -> Result<(), CliError> {
         output,
         kind,
         degrees: options,
+        plan,
+        lambda_c_mm,
     } = input;
+    let method = args
+        .model
+        .v_method(grid.rows, options.degree_v)?
+        .or(plan.map(|p| p.v_method))
+        .unwrap_or_default();
+    let replace_spikes = match args.model.replace() {
+        Some(true) => Some(args.model.spikes()?),
+        _ => plan.and_then(|p| p.replace_spikes),
+    };
+    let recipe = ModelRecipe {
+        degrees: options,
+        method,
+        replace_spikes,
+        lambda_c_mm,
+    };
 
     let progress = if std::io::stderr().is_terminal() && grid.heights_um.len() >= 1_000_000 {
         indicatif::ProgressBar::new(grid.rows as u64)
@@ -536,23 +585,108 @@ pub fn run(args: Args) -> Result<(), CliError> {
         indicatif::ProgressBar::hidden()
     };
     let t_fit = Instant::now();
-    let mut fitter = IncrementalFitter::new(options);
-    for (row, &y) in grid.heights_um.chunks_exact(grid.cols).zip(&y_mm) {
-        fitter
-            .push_row(y, pitch_x_mm, row)
-            .map_err(|e| CliError::new(Exit::Failed, format!("{}: {e}", args.input.display())))?;
-        progress.inc(1);
-    }
-    let fit = fitter
-        .finish()
-        .map_err(|e| CliError::new(Exit::Failed, format!("{}: {e}", args.input.display())))?;
+    let failed = |e: &dyn std::fmt::Display| {
+        CliError::new(Exit::Failed, format!("{}: {e}", args.input.display()))
+    };
+    // The paper's surface goes through the incremental fitter line by line (with progress);
+    // anything else is fitted from the whole grid as the recipe says.
+    let (fit, replaced) = if recipe.is_paper() {
+        let mut fitter = IncrementalFitter::new(options);
+        for (row, &y) in grid.heights_um.chunks_exact(grid.cols).zip(&y_mm) {
+            fitter
+                .push_row(y, pitch_x_mm, row)
+                .map_err(|e| failed(&e))?;
+            progress.inc(1);
+        }
+        (fitter.finish().map_err(|e| failed(&e))?, Vec::new())
+    } else {
+        let m = fit_model(
+            &grid.heights_um,
+            grid.cols,
+            &index,
+            pitch_x_mm,
+            &y_mm,
+            &recipe,
+        )
+        .map_err(|e| failed(&e))?;
+        (m.fit, m.replaced)
+    };
     progress.finish_and_clear();
     let fit_s = t_fit.elapsed().as_secs_f64();
+    for r in &replaced {
+        eprintln!(
+            "surfscan: replaced before fitting (asked for): spike in line {} at x = {} mm, height {} µm",
+            crate::numfmt::line_label(r.line),
+            crate::numfmt::fmt(r.spike.x_mm, crate::numfmt::Quantity::PositionMm),
+            crate::numfmt::fmt(r.spike.height_um, crate::numfmt::Quantity::HeightUm)
+        );
+    }
     let t_res = Instant::now();
     let residual_mm = max_residual_mm(&fit, pitch_x_mm, &y_mm, &grid.heights_um, grid.cols);
     let residual_s = t_res.elapsed().as_secs_f64();
-    // The heights are not needed past the residual check: free them before the IGES files
-    // are planned and written, which is when a large surface needs the most memory.
+    // The verdict on the model between lines, on the data the surface was fitted to.
+    let t_holdout = Instant::now();
+    let fitted_z = if replaced.is_empty() {
+        std::borrow::Cow::Borrowed(&grid.heights_um)
+    } else {
+        std::borrow::Cow::Owned(bridged_grid(&grid.heights_um, grid.cols, &index, &replaced).0)
+    };
+    let mean_py = match (y_mm.first(), y_mm.last()) {
+        (Some(a), Some(b)) if grid.rows > 1 => (b - a).abs() / (grid.rows - 1) as f64,
+        _ => pitch_y_mm.unwrap_or(1.0),
+    };
+    let sq = areal_params(&ArealGrid {
+        heights_um: &fitted_z,
+        rows: grid.rows,
+        cols: grid.cols,
+        pitch_x_mm,
+        pitch_y_mm: mean_py,
+    })
+    .map(|a| a.sq_um)
+    .map_err(|e| e.to_string());
+    // Every 2nd line left out, or every k-th when too few lines remain for that (as the
+    // report does).
+    let threshold = args.model.holdout_threshold()?;
+    let every = holdout_every(grid.rows, recipe.degrees.degree_v).ok_or_else(|| {
+        format!(
+            "{} lines cannot verify the surface between them: leaving one out leaves at most degree-v + 1 = {} for the refit; trace more lines or lower degree-v",
+            grid.rows,
+            recipe.degrees.degree_v + 1
+        )
+    });
+    let verdict = sq.clone().and_then(|sq| {
+        let every = every.clone()?;
+        between_lines(
+            &fitted_z,
+            grid.cols,
+            pitch_x_mm,
+            &y_mm,
+            recipe.degrees,
+            recipe.method,
+            every,
+            sq,
+            threshold,
+        )
+        .map_err(|e| e.to_string())
+    });
+    let alternatives = match (&sq, &every, args.compare) {
+        (Ok(sq), Ok(every), true) => Some(compare_alternatives(
+            &fitted_z,
+            grid.cols,
+            pitch_x_mm,
+            &y_mm,
+            recipe.degrees,
+            *every,
+            *sq,
+            threshold,
+        )),
+        _ => None,
+    };
+    let holdout_s = t_holdout.elapsed().as_secs_f64();
+    // The heights are not needed past the residual check and the verdict: free them before
+    // the IGES files are planned and written, which is when a large surface needs the most
+    // memory.
+    drop(fitted_z);
     grid.heights_um = Vec::new();
 
     let now = chrono::Utc::now().naive_utc();
@@ -564,8 +698,14 @@ pub fn run(args: Args) -> Result<(), CliError> {
         file_name,
         start_lines: vec![
             format!(
-                "Surface fitted by surfscan {} (global B-spline interpolation, p={}, q={}); units mm.",
+                "Surface fitted by surfscan {} ({}, p={}, q={}); units mm.",
                 env!("CARGO_PKG_VERSION"),
+                match recipe.method {
+                    crate::fit::VMethod::Interpolate => "global B-spline interpolation".to_string(),
+                    crate::fit::VMethod::LeastSquares { control_rows } => format!(
+                        "B-spline interpolation along x, least squares across the lines with {control_rows} control rows"
+                    ),
+                },
                 options.degree_u,
                 options.degree_v
             ),
@@ -592,6 +732,8 @@ pub fn run(args: Args) -> Result<(), CliError> {
         timestamp: now,
         ..IgesOptions::default()
     };
+    let mut opts = opts;
+    opts.start_lines.extend(recipe.start_lines(&replaced));
     let opts = IgesOptions {
         max_parameter_lines_per_file: args.max_iges_lines_per_file,
         max_parameter_lines_per_entity: args.max_iges_lines_per_entity,
@@ -637,7 +779,26 @@ pub fn run(args: Args) -> Result<(), CliError> {
         "iges_bytes": stats.bytes,
         "iges_parameter_lines": stats.parameter_lines,
         "iges_files": files,
+        "model": {
+            "description": recipe.describe(),
+            "v_method": recipe.method,
+            "spikes_replaced": replaced,
+        },
+        "between_lines": verdict.as_ref().ok(),
+        "between_lines_error": verdict.as_ref().err(),
+        "alternatives": alternatives.as_ref().map(|alts| alts
+            .iter()
+            .map(|a| serde_json::json!({
+                "degree_u": a.options.degree_u,
+                "degree_v": a.options.degree_v,
+                "v_method": a.method,
+                "poles_v": a.poles_v,
+                "between_lines": a.holdout.as_ref().ok(),
+                "error": a.holdout.as_ref().err(),
+            }))
+            .collect::<Vec<_>>()),
         "timings_s": {
+            "holdout": holdout_s,
             "read": read_s,
             "fit_params": fit.timings.params_s,
             "fit_knots_factor": fit.timings.knots_factor_s,
@@ -674,18 +835,34 @@ pub fn run(args: Args) -> Result<(), CliError> {
         )
     };
     println!(
-        "{}: {}x{} grid, {}x{} poles, max residual {:.3e} mm, {} patch(es), {} bytes; fit {:.1} ms, write {:.1} ms",
+        "{}: {}x{} grid, {}x{} poles, {} patch(es), {} bytes; fit {:.1} ms, write {:.1} ms",
         written,
         grid.rows,
         grid.cols,
         s.count_u(),
         s.count_v(),
-        residual_mm,
         stats.patches,
         stats.bytes,
         fit_s * 1e3,
         write_s * 1e3
     );
+    match &verdict {
+        Ok(b) => println!("{}", b.short()),
+        Err(e) => println!("no verdict on the model between lines: {e}"),
+    }
+    if let Some(alts) = &alternatives {
+        println!(
+            "\nhold-out of the alternatives (every {} line left out and refitted; supported means rms ≤ {threshold} × Sq):",
+            ordinal(*every.as_ref().unwrap_or(&2))
+        );
+        print!("{}", alternatives_table(alts));
+    } else if args.compare {
+        match (&sq, &every) {
+            (Err(e), _) => println!("no comparison: the grid has no Sq ({e})"),
+            (_, Err(e)) => println!("no comparison: {e}"),
+            _ => {}
+        }
+    }
     Ok(())
 }
 

@@ -3,9 +3,15 @@
 //! ETA, the last line's Ra). Ctrl-C abandons the current line and leaves the scan
 //! resumable, as SIGTERM does for the daemon.
 //!
-//! Exit status: 0 success, 1 the scan failed or was aborted, 2 usage, 69 a device is
-//! unavailable (or another `scan` or the daemon holds the station: its pid and scan are
-//! named), 74 I/O error, 78 bad configuration.
+//! Exit status: 0 success, 1 the scan failed or was aborted, 2 usage, 3 the scan completed
+//! but its characterisation is partial (every line, the IGES and every output that could be
+//! made are written; report.json names the sections that could not be made and why), 69 a
+//! device is unavailable (or another `scan` or the daemon holds the station: its pid and scan
+//! are named), 74 I/O error, 78 bad configuration.
+//!
+//! The end-of-scan summary prints the result (lines, Ra, Sa) and the verdict on the model
+//! between lines (the hold-out of [`crate::metrology::holdout`]), not the residual at the data
+//! points, which an interpolant makes zero by construction.
 //!
 //! Layer 5 (composition): config, station, runner, signals, terminal; turns the configuration
 //! into the runner's typed settings.
@@ -105,6 +111,9 @@ pub fn plan_of(config: &Config) -> Result<Plan, ConfigError> {
         degree_u: config.fit.degree_u,
         degree_v: config.fit.degree_v,
         max_line_attempts: config.scan.max_line_attempts,
+        v_method: config.fit.v_method_for(config.scan.lines as usize),
+        replace_spikes: (config.fit.outliers == crate::config::FitOutliers::Replace)
+            .then(|| config.analysis.spike_options()),
     })
 }
 
@@ -124,6 +133,9 @@ pub fn run_settings(
             levels: a.levels,
             lambda_c_mm: a.lambda_c_mm,
             no_filter: a.no_filter,
+            spikes: a.spike_options(),
+            exclude_spikes: a.outliers == crate::config::OutlierPolicy::Exclude,
+            holdout_threshold: a.holdout_threshold,
             ..ScanAnalysisOptions::default()
         },
     };
@@ -305,22 +317,36 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
             if let Some(e) = &outputs.characterisation_error {
                 println!("  characterisation failed: {e}; the report holds the fit and the instrument's results");
             }
-            match std::fs::read(&outputs.report)
+            let report = std::fs::read(&outputs.report)
                 .ok()
-                .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
-            {
+                .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok());
+            match &report {
                 Some(report) => {
-                    for (k, v) in result_summary(&report) {
+                    for (k, v) in result_summary(report) {
                         println!("  {k:<8} {v}");
                     }
                 }
                 None => println!("  (the report cannot be read back for a summary)"),
             }
-            println!(
-                "  fit      passes through every measured point (largest residual {} mm)",
-                crate::numfmt::sig(outputs.max_residual_mm, 2)
-            );
-            Ok(())
+            // Without a verdict in the report, say why there is none.
+            if report
+                .as_ref()
+                .and_then(crate::report::html::verdict)
+                .is_none()
+            {
+                println!("  model    {}", outputs.verdict);
+            }
+            if outputs.characterisation_complete {
+                Ok(())
+            } else {
+                Err(CliError::new(
+                    Exit::Partial,
+                    format!(
+                        "scan complete, but its characterisation is partial (report.json's characterisation and warnings say which sections could not be made and why): {}",
+                        outputs.report.display()
+                    ),
+                ))
+            }
         }
         Outcome::Aborted { dir } => Err(CliError::new(
             Exit::Failed,
@@ -571,7 +597,7 @@ mod tests {
             "scan": {"lines_planned": 31},
             "surface": {"Sa_um": 0.4444444},
             "surface_grid": {"Sa_um": 0.43},
-            "model_vs_measured": {"between_lines": {"verdict": "supported by the data"}},
+            "between_lines": {"summary": "the model between lines is supported by the data"},
         });
         let s = result_summary(&report);
         assert_eq!(s[0], ("lines", "3 of 31 planned characterised".to_string()));
@@ -589,7 +615,13 @@ mod tests {
                 "0.4444 µm (model), 0.4300 µm (measured grid)".to_string()
             )
         );
-        assert_eq!(s[3], ("model", "supported by the data".to_string()));
+        assert_eq!(
+            s[3],
+            (
+                "model",
+                "the model between lines is supported by the data".to_string()
+            )
+        );
         // Nothing characterised: only the count.
         assert_eq!(result_summary(&serde_json::json!({})).len(), 1);
     }

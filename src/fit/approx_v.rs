@@ -31,15 +31,16 @@
 
 use super::{fit_grid, BandLu, FitError, FitOptions, FitResult, FitTimings};
 use crate::nurbs::{basis_funs, find_span, NurbsSurface};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::time::Instant;
 use thiserror::Error;
 
 /// How the surface is made across the traced lines (along v, y).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case", tag = "method")]
 pub enum VMethod {
     /// The paper: interpolation through every line (bit-identical to [`super::fit_grid`]).
+    #[default]
     Interpolate,
     /// Least squares across the lines with `control_rows` poles along v (module docs).
     LeastSquares {

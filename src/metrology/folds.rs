@@ -18,8 +18,9 @@
 //!   above plus below) is reported in µm and in % of the measured range, and named as a
 //!   warning beyond [`OVERSHOOT_WARN_PCT`].
 //!
-//! Depends on [`crate::nurbs`] only.
+//! Depends on [`crate::nurbs`] and [`crate::numfmt`] (the warnings' figures).
 
+use crate::numfmt::{fmt, Quantity};
 use crate::nurbs::{BSplineCurve, NurbsSurface};
 use serde::Serialize;
 
@@ -139,15 +140,15 @@ impl ModelChecks {
                 ("y", "x")
             };
             w.push(format!(
-                "model fold: {c} runs backwards along {} by up to {:.3} µm ({c} {:.4} … {:.4} mm) on {} of {} iso-curves (worst at {} = {:.4} mm); the surface is not a height map there",
+                "model fold: {c} runs backwards along {} by up to {} µm ({c} {} … {} mm) on {} of {} iso-curves (worst at {} = {} mm); the surface is not a height map there",
                 f.direction,
-                f.back_mm * 1000.0,
-                f.range_mm[0],
-                f.range_mm[1],
+                fmt(f.back_mm * 1000.0, Quantity::HeightUm),
+                fmt(f.range_mm[0], Quantity::PositionMm),
+                fmt(f.range_mm[1], Quantity::PositionMm),
                 f.affected,
                 f.checked,
                 other,
-                f.at_mm
+                fmt(f.at_mm, Quantity::PositionMm)
             ));
         }
         for f in &self.net {
@@ -157,29 +158,30 @@ impl ModelChecks {
                 ("y", "pole columns")
             };
             w.push(format!(
-                "control net fold: {c} decreases from pole {} to {} ({:.4} → {:.4} mm) in {} of {} {what} (largest step back {:.3} µm)",
-                f.at_pole,
+                "control net fold: {c} decreases from pole {} to {} ({} → {} mm) in {} of {} {what} (largest step back {} µm)",
                 f.at_pole + 1,
-                f.from_mm,
-                f.to_mm,
+                f.at_pole + 2,
+                fmt(f.from_mm, Quantity::PositionMm),
+                fmt(f.to_mm, Quantity::PositionMm),
                 f.affected,
                 f.checked,
-                f.worst_back_mm * 1000.0
+                fmt(f.worst_back_mm * 1000.0, Quantity::HeightUm)
             ));
         }
         let h = &self.height_range;
         if h.overshoot_pct > OVERSHOOT_WARN_PCT {
+            let (um, mm) = (Quantity::HeightUm, Quantity::PositionMm);
             w.push(format!(
-                "model overshoot: sampled densely, the model spans {:.2} … {:.2} µm where the measured heights span {:.2} … {:.2} µm ({:.0} % beyond the measured range; highest at x = {:.4}, y = {:.4} mm, lowest at x = {:.4}, y = {:.4} mm)",
-                h.model_min_um,
-                h.model_max_um,
-                h.measured_min_um,
-                h.measured_max_um,
-                h.overshoot_pct,
-                h.model_max_at_mm[0],
-                h.model_max_at_mm[1],
-                h.model_min_at_mm[0],
-                h.model_min_at_mm[1]
+                "model overshoot: sampled densely, the model spans {} … {} µm where the measured heights span {} … {} µm ({} % beyond the measured range; highest at x = {}, y = {} mm, lowest at x = {}, y = {} mm)",
+                fmt(h.model_min_um, um),
+                fmt(h.model_max_um, um),
+                fmt(h.measured_min_um, um),
+                fmt(h.measured_max_um, um),
+                fmt(h.overshoot_pct, Quantity::Percent),
+                fmt(h.model_max_at_mm[0], mm),
+                fmt(h.model_max_at_mm[1], mm),
+                fmt(h.model_min_at_mm[0], mm),
+                fmt(h.model_min_at_mm[1], mm)
             ));
         }
         w

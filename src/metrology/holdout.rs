@@ -16,15 +16,31 @@
 //! spikes are reported beside the verdict (and bridged first when characterisation excludes
 //! them).
 //!
-//! Depends on [`crate::fit`] (refits), [`super::model`] (sampling) and [`crate::nurbs`].
+//! Depends on [`crate::fit`] (refits), [`super::model`] (sampling), [`crate::nurbs`] and
+//! [`crate::numfmt`] (the figures in the verdict's words).
 
 use super::model::sample_model_grid;
 use super::MetrologyError;
-use crate::fit::{fit_grid, fit_grid_with, FitOptions, VMethod};
+use crate::fit::{fit_grid_with, FitOptions, VMethod};
+use crate::numfmt::{fmt, sig, Quantity};
 use serde::Serialize;
 
 /// The largest hold-out rms, in units of Sq, for which the model between lines is supported.
 pub const SUPPORTED_BELOW_SQ: f64 = 0.5;
+
+/// Every how many lines one is left out for `rows` lines and a refit of degree `degree_v`:
+/// 2 (every 2nd line) when the other half can carry the refit, else the smallest k that
+/// keeps degree_v + 1 lines and still holds one out between kept lines (7 lines at degree 5:
+/// every 4th, i.e. line 3 alone); `None` when no line can be held out (at most
+/// degree_v + 1 lines).
+pub fn holdout_every(rows: usize, degree_v: usize) -> Option<usize> {
+    (2..=rows).find(|&k| {
+        let held: Vec<usize> = (0..rows).filter(|r| r % k == k - 1).collect();
+        let kept = rows - held.len();
+        let last_kept = (0..rows).rev().find(|r| r % k != k - 1).unwrap_or(0);
+        kept > degree_v && held.iter().any(|&r| r > 0 && r < last_kept)
+    })
+}
 
 /// Differences at the held-out points of one line.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -46,7 +62,8 @@ pub struct HoldoutLine {
 pub struct Holdout {
     /// Every 2nd point (odd columns) of every line left out, per line.
     pub points_left_out: Vec<HoldoutLine>,
-    /// Every 2nd line (odd rows inside the kept range) left out, per held-out line.
+    /// Every k-th line left out (k = 2 unless too few lines remain for the refit, see
+    /// [`holdout_every`]), per held-out line inside the kept range.
     pub lines_left_out: Vec<HoldoutLine>,
 }
 
@@ -98,6 +115,25 @@ pub fn holdout(
     y_mm: &[f64],
     options: FitOptions,
 ) -> Result<Holdout, MetrologyError> {
+    holdout_with(
+        heights_um,
+        cols,
+        pitch_x_mm,
+        y_mm,
+        options,
+        VMethod::Interpolate,
+    )
+}
+
+/// [`holdout`] with `method` across the lines for both refits.
+pub fn holdout_with(
+    heights_um: &[f64],
+    cols: usize,
+    pitch_x_mm: f64,
+    y_mm: &[f64],
+    options: FitOptions,
+    method: VMethod,
+) -> Result<Holdout, MetrologyError> {
     check_grid(heights_um, cols, pitch_x_mm, y_mm)?;
     let rows = y_mm.len();
     let row = |r: usize| heights_um.get(r * cols..(r + 1) * cols).unwrap_or(&[]);
@@ -108,7 +144,7 @@ pub fn holdout(
     let sub: Vec<f64> = (0..rows)
         .flat_map(|r| row(r).iter().step_by(2).copied().collect::<Vec<f64>>())
         .collect();
-    let fit = fit_grid(2.0 * pitch_x_mm, y, &sub, kept_cols, options)?;
+    let fit = fit_grid_with(2.0 * pitch_x_mm, y, &sub, kept_cols, options, method)?;
     let held = (cols.saturating_sub(1)) / 2;
     let model = sample_model_grid(
         &fit.surface,
@@ -131,18 +167,16 @@ pub fn holdout(
         })
         .collect();
 
-    let lines_left_out = refit_without_lines(
-        heights_um,
-        cols,
-        pitch_x_mm,
-        y_mm,
-        options,
-        VMethod::Interpolate,
-        2,
-    )?
-    .into_iter()
-    .map(|(line, _)| line)
-    .collect();
+    let every = holdout_every(rows, options.degree_v).ok_or(MetrologyError::BadParameter {
+        what: "lines for a hold-out refit",
+        value: rows as f64,
+        hint: "leaving a line out needs more lines than degree_v + 1; trace more lines or lower degree_v",
+    })?;
+    let lines_left_out =
+        refit_without_lines(heights_um, cols, pitch_x_mm, y_mm, options, method, every)?
+            .into_iter()
+            .map(|(line, _)| line)
+            .collect();
     Ok(Holdout {
         points_left_out,
         lines_left_out,
@@ -173,8 +207,24 @@ fn v_at_y(surface: &crate::nurbs::NurbsSurface, target: f64) -> Result<f64, Metr
     Ok(v)
 }
 
+/// The method of a refit through `kept` of `rows` lines: a least-squares surface keeps its
+/// lines per control row (control rows scaled by kept/rows, at least degree_v + 1), as the
+/// interpolant keeps one pole row per line, so a refit has the full model's smoothing.
+fn refit_method(method: VMethod, rows: usize, kept: usize, degree_v: usize) -> VMethod {
+    match method {
+        VMethod::LeastSquares { control_rows } => {
+            let scaled = (control_rows as f64 * kept as f64 / rows.max(1) as f64).round() as usize;
+            VMethod::LeastSquares {
+                control_rows: scaled.max(degree_v + 1).min(kept),
+            }
+        }
+        m => m,
+    }
+}
+
 /// Leaves every `every`-th line out (rows every−1, 2·every−1, …), refits the others with
-/// `method` across the lines (least squares with at most as many control rows as lines kept)
+/// `method` across the lines (least squares with the control rows scaled as
+/// [`refit_method`] says)
 /// and returns, per held-out line inside the kept y range, its statistics and the model's
 /// heights at its x.
 fn refit_without_lines(
@@ -202,12 +252,7 @@ fn refit_without_lines(
         .iter()
         .map(|&r| y_mm.get(r).copied().unwrap_or(f64::NAN))
         .collect();
-    let method = match method {
-        VMethod::LeastSquares { control_rows } => VMethod::LeastSquares {
-            control_rows: control_rows.min(kept_rows.len()),
-        },
-        m => m,
-    };
+    let method = refit_method(method, rows, kept_rows.len(), options.degree_v);
     let fit = fit_grid_with(pitch_x_mm, &ky, &sub, cols, options, method)?;
     let (first_kept, last_kept) = (
         kept_rows.first().copied().unwrap_or(0),
@@ -221,6 +266,58 @@ fn refit_without_lines(
         out.push((stats(r, target, &m, row(r)), m));
     }
     Ok(out)
+}
+
+/// The model at line `row` refitted without it (all other lines kept, `method` across the
+/// lines), sampled at the line's y and the data x: what an overlay of that line shows. The
+/// line must lie between two others (no extrapolation).
+#[allow(clippy::too_many_arguments)]
+pub fn model_without_line(
+    heights_um: &[f64],
+    cols: usize,
+    pitch_x_mm: f64,
+    y_mm: &[f64],
+    options: FitOptions,
+    method: VMethod,
+    row: usize,
+) -> Result<HoldoutLineModel, MetrologyError> {
+    check_grid(heights_um, cols, pitch_x_mm, y_mm)?;
+    let rows = y_mm.len();
+    if row == 0 || row + 1 >= rows {
+        return Err(MetrologyError::BadParameter {
+            what: "line to leave out (row)",
+            value: row as f64,
+            hint: "only a line between two others can be left out and predicted",
+        });
+    }
+    let sub: Vec<f64> = (0..rows)
+        .filter(|&r| r != row)
+        .flat_map(|r| heights_um[r * cols..(r + 1) * cols].iter().copied())
+        .collect();
+    let ky: Vec<f64> = (0..rows).filter(|&r| r != row).map(|r| y_mm[r]).collect();
+    let method = refit_method(method, rows, rows - 1, options.degree_v);
+    let fit = fit_grid_with(pitch_x_mm, &ky, &sub, cols, options, method)?;
+    let v = v_at_y(&fit.surface, y_mm[row])?;
+    let model = sample_model_grid(&fit.surface, &[v], 0.0, pitch_x_mm, cols)?;
+    let line = stats(
+        row,
+        y_mm[row],
+        &model,
+        &heights_um[row * cols..(row + 1) * cols],
+    );
+    Ok(HoldoutLineModel {
+        line,
+        model_um: model,
+    })
+}
+
+/// One line left out: its statistics and the refit's heights at its x.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HoldoutLineModel {
+    /// The statistics (index = the row).
+    pub line: HoldoutLine,
+    /// The refit at the line, µm.
+    pub model_um: Vec<f64>,
 }
 
 /// The between-line hold-out and its verdict (module docs).
@@ -248,6 +345,8 @@ pub struct BetweenLines {
     pub threshold: f64,
     /// rms / Sq ≤ threshold.
     pub supported: bool,
+    /// The short verdict ([`BetweenLines::short`]), for summaries.
+    pub summary: String,
     /// The verdict in one sentence.
     pub verdict: String,
     /// The model's heights at the held-out lines (per held-out line, at the data x), µm; not
@@ -260,19 +359,20 @@ impl BetweenLines {
     /// The short verdict: "supported / not supported by the data (hold-out rms X µm = Y × Sq)".
     pub fn short(&self) -> String {
         format!(
-            "the model between lines is {} by the data (hold-out rms {:.3} µm = {:.2} × Sq)",
+            "the model between lines is {} by the data (hold-out rms {} µm = {} × Sq)",
             if self.supported {
                 "supported"
             } else {
                 "not supported"
             },
-            self.rms_um,
-            self.rms_over_sq
+            fmt(self.rms_um, Quantity::HeightUm),
+            sig(self.rms_over_sq, 2)
         )
     }
 }
 
-fn ordinal(k: usize) -> String {
+/// `2nd`, `3rd`, `11th`: how the verdict names every k-th line.
+pub fn ordinal(k: usize) -> String {
     let suffix = match (k % 10, k % 100) {
         (1, 11) | (2, 12) | (3, 13) => "th",
         (1, _) => "st",
@@ -342,19 +442,21 @@ pub fn between_lines(
         rms_over_sq: ratio,
         threshold,
         supported,
+        summary: String::new(),
         verdict: String::new(),
         model_um,
         lines,
     };
+    out.summary = out.short();
     out.verdict = format!(
-        "{}: every {} line left out ({} lines) and the rest refitted ({}), the refit misses them by {:.3} µm rms and {:.3} µm at worst, against Sq {:.3} µm; supported means rms ≤ {} × Sq",
-        out.short(),
+        "{}: every {} line left out ({} lines) and the rest refitted ({}), the refit misses them by {} µm rms and {} µm at worst, against Sq {} µm; supported means rms ≤ {} × Sq",
+        out.summary,
         ordinal(every),
         out.lines.len(),
         method.name(),
-        rms,
-        max_abs,
-        sq_um,
+        fmt(rms, Quantity::HeightUm),
+        fmt(max_abs, Quantity::HeightUm),
+        fmt(sq_um, Quantity::HeightUm),
         threshold
     );
     Ok(out)
@@ -394,6 +496,16 @@ mod tests {
     }
 
     #[test]
+    fn few_lines_hold_out_every_kth_and_too_few_none() {
+        assert_eq!(holdout_every(31, 5), Some(2));
+        assert_eq!(holdout_every(12, 5), Some(2));
+        assert_eq!(holdout_every(8, 5), Some(3));
+        assert_eq!(holdout_every(7, 5), Some(4));
+        assert_eq!(holdout_every(6, 5), None);
+        assert_eq!(holdout_every(5, 3), Some(3));
+    }
+
+    #[test]
     fn pooled_rms_decides_against_the_threshold() {
         // Lines alternate +1/−1: a held-out (odd) line is −1 where every refitted line is +1.
         let (y, z) = grid(13, 30, |r, _| if r % 2 == 0 { 1.0 } else { -1.0 });
@@ -416,7 +528,7 @@ mod tests {
         assert!(!b.supported);
         assert!(
             b.short()
-                .contains("not supported by the data (hold-out rms 2.000 µm = 2.00 × Sq)"),
+                .contains("not supported by the data (hold-out rms 2.000 µm = 2.0 × Sq)"),
             "{}",
             b.short()
         );

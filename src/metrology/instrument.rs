@@ -2,24 +2,26 @@
 //! difference and whether it lies within a documented tolerance, so a user can see at a glance
 //! where the two agree.
 //!
-//! **Tolerances** ([`tolerance_for`]): |ours − instrument| ≤ max(rel · |instrument|, abs).
-//! They allow for what legitimately separates our number from the instrument's on the same
-//! trace: the printed resolution of its result (3 decimals), and, for a primary profile we
-//! filter ourselves, the λc filter near the ends (the instrument filters its whole traverse,
-//! run-up and run-out included; the exported evaluation length lacks them, so our mean line
-//! differs within λc/2 of each end). On the instrument's own R profile our heights, Rp/Rv/Rz/
-//! Rt and lr-averaged moments reproduce its values (see the metrology reference notes), so a
-//! value outside its tolerance points at a wrong condition, a read-out error or a different
+//! **Tolerances** ([`tolerance_for`]): |ours − instrument| ≤ rel · |instrument| + abs, the
+//! same form and, for the amplitude parameters, the same numbers as the read-out's Ra check
+//! ([`crate::sj210::sanity`]). They allow for what legitimately separates our number from the
+//! instrument's on the same trace: the printed resolution of the heights and of its result
+//! (0.001 µm each) and where the sampling lengths split, and, for a primary profile we
+//! filter ourselves (`filtered_here`), the λc filter near the ends (the instrument filters its
+//! whole traverse, run-up and run-out included, which the exported evaluation length lacks).
+//! On the instrument's own R profile our heights, Rp/Rv/Rz/Rt and lr-averaged moments
+//! reproduce its values (Mitutoyo's export agrees to the last printed digit), so a value
+//! outside its tolerance points at a wrong condition, a read-out error or a different
 //! definition, not at rounding.
 //!
-//! | parameters | rel | abs |
-//! |---|---|---|
-//! | Ra Rq Rp Rv Rz Rt Rz1max RzJIS | 2 % | 0.002 µm |
-//! | Rsk Rku | 5 % | 0.02 |
-//! | RΔq RΔa | 3 % | 0.002 |
-//! | RSm Rc RPc Rppi (element rules: hysteresis and end elements differ between implementations) | 5 % | 0.5 µm, 0.005 µm, 1 /cm, 2.5 /in |
-//! | Rk Rpk Rvk Rδc (the instrument's material ratio curve is binned at 1 % of Rt) | 5 % | 0.005 µm |
-//! | Mr1 Mr2 Rmr Rmr(c) | — | 1 percentage point |
+//! | parameters | rel (R profile) | rel (filtered here) | abs |
+//! |---|---|---|---|
+//! | Ra Rq Rp Rv Rz Rt Rz1max RzJIS | 2 % | 10 % | 0.005 µm |
+//! | Rsk Rku | 5 % | 15 % | 0.02 |
+//! | RΔq RΔa | 3 % | 10 % | 0.002 |
+//! | RSm Rc RPc Rppi (element rules: hysteresis and end elements differ between implementations) | 5 % | 10 % | 0.5 µm, 0.005 µm, 1 /cm, 2.5 /in |
+//! | Rk Rpk Rvk Rδc (the instrument's material ratio curve is binned at 1 % of Rt) | 5 % | 10 % | 0.005 µm |
+//! | Mr1 Mr2 Rmr Rmr(c) | — | — | 1 (R) or 2 (filtered here) percentage points |
 //!
 //! Depends on [`super::params`] and [`crate::profile`].
 
@@ -52,7 +54,7 @@ pub struct Comparison {
     pub within_tolerance: Option<bool>,
 }
 
-/// A tolerance: |ours − instrument| ≤ max(rel · |instrument|, abs).
+/// A tolerance: |ours − instrument| ≤ rel · |instrument| + abs.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Tolerance {
     /// Relative part (0.02 = 2 %).
@@ -64,7 +66,7 @@ pub struct Tolerance {
 impl Tolerance {
     /// The allowed |difference| at the instrument's value `instrument`.
     pub fn allowed(&self, instrument: f64) -> f64 {
-        (self.rel * instrument.abs()).max(self.abs)
+        self.rel * instrument.abs() + self.abs
     }
 }
 
@@ -76,21 +78,27 @@ fn key(name: &str) -> String {
 }
 
 /// The tolerance of the module docs for our parameter `name` (as in `compared_with`, e.g.
-/// "Ra", "Rmr(c)@10%Rt"); `None` for names without one.
-pub fn tolerance_for(name: &str) -> Option<Tolerance> {
+/// "Ra", "Rmr(c)@10%Rt"), for a profile we filtered ourselves (`filtered_here`) or the
+/// instrument's own R profile; `None` for names without one.
+pub fn tolerance_for(name: &str, filtered_here: bool) -> Option<Tolerance> {
     let k = key(name);
     let base = k.split('@').next().unwrap_or("");
-    let t = |rel, abs| Some(Tolerance { rel, abs });
+    let t = |rel_r: f64, rel_p: f64, abs: f64| {
+        Some(Tolerance {
+            rel: if filtered_here { rel_p } else { rel_r },
+            abs,
+        })
+    };
     match base {
-        "ra" | "rq" | "rp" | "rv" | "rz" | "rt" | "rz1max" | "rzjis" => t(0.02, 0.002),
-        "rsk" | "rku" => t(0.05, 0.02),
-        "rdq" | "rda" => t(0.03, 0.002),
-        "rsm" => t(0.05, 0.5),
-        "rc" => t(0.05, 0.005),
-        "rpc" => t(0.05, 1.0),
-        "rppi" => t(0.05, 2.5),
-        "rk" | "rpk" | "rvk" | "rdc" => t(0.05, 0.005),
-        "mr1" | "mr2" | "rmr" | "rmr(c)" => t(0.0, 1.0),
+        "ra" | "rq" | "rp" | "rv" | "rz" | "rt" | "rz1max" | "rzjis" => t(0.02, 0.10, 0.005),
+        "rsk" | "rku" => t(0.05, 0.15, 0.02),
+        "rdq" | "rda" => t(0.03, 0.10, 0.002),
+        "rsm" => t(0.05, 0.10, 0.5),
+        "rc" => t(0.05, 0.10, 0.005),
+        "rpc" => t(0.05, 0.10, 1.0),
+        "rppi" => t(0.05, 0.10, 2.5),
+        "rk" | "rpk" | "rvk" | "rdc" => t(0.05, 0.10, 0.005),
+        "mr1" | "mr2" | "rmr" | "rmr(c)" => t(0.0, 0.0, if filtered_here { 2.0 } else { 1.0 }),
         _ => None,
     }
 }
@@ -170,11 +178,23 @@ pub fn compare(params: &RoughnessParams, instrument: &[InstrumentResult]) -> Vec
 
 /// Like [`compare`] for results evaluated under the instrument's `standard` (as recorded in
 /// its conditions, e.g. "ISO1997", "JIS1994"): under JIS1982 and JIS1994 the instrument's `Rz`
-/// is the ten-point height and is compared with our `RzJIS`.
+/// is the ten-point height and is compared with our `RzJIS`. The tolerances are those of the
+/// instrument's own R profile (see [`compare_profile`]).
 pub fn compare_under(
     params: &RoughnessParams,
     instrument: &[InstrumentResult],
     standard: Option<&str>,
+) -> Vec<Comparison> {
+    compare_profile(params, instrument, standard, false)
+}
+
+/// Like [`compare_under`], with the tolerances for a profile we filtered ourselves when
+/// `filtered_here` (a primary profile) instead of the instrument's own R profile.
+pub fn compare_profile(
+    params: &RoughnessParams,
+    instrument: &[InstrumentResult],
+    standard: Option<&str>,
+    filtered_here: bool,
 ) -> Vec<Comparison> {
     let jis = standard.is_some_and(|s| {
         let s: String = s
@@ -195,7 +215,7 @@ pub fn compare_under(
                 Some((ours, unit, ours_name)) => {
                     let inst = r.value.zip(factor(&r.unit, unit)).map(|(v, f)| v * f);
                     let difference = ours.zip(inst).map(|(o, i)| o - i);
-                    let tolerance = tolerance_for(&ours_name)
+                    let tolerance = tolerance_for(&ours_name, filtered_here)
                         .zip(inst)
                         .filter(|_| difference.is_some())
                         .map(|(t, i)| t.allowed(i));

@@ -11,6 +11,7 @@
 //! a directory the caller gives; depends only on [`crate::profile`] and
 //! [`crate::nurbs`], and [`crate::fit`] for the hold-out refits. No I/O.
 
+pub mod alternatives;
 pub mod anisotropy;
 pub mod areal;
 pub mod bearing;
@@ -22,6 +23,7 @@ pub mod model;
 pub mod outliers;
 pub mod params;
 pub mod plots;
+pub mod surface_model;
 pub mod x3p;
 
 use thiserror::Error;

@@ -35,7 +35,7 @@ pub const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 const MEAN_ABS_TO_SIGMA: f64 = 1.253_314_137_315_500_3;
 
 /// How spikes are found. [`Default`]: k = 10 robust σ, at most 5 consecutive points.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct SpikeOptions {
     /// k: a point deviating from the median of the roughness profile by more than k robust σ
     /// (1.4826 · MAD) is a candidate.
@@ -76,7 +76,7 @@ impl SpikeOptions {
     /// The rule in words, for recipes.
     pub fn describe(&self) -> String {
         format!(
-            "isolated spike: a run of at most {} consecutive points whose roughness ordinate deviates from the line's median by more than {} x 1.4826 x MAD (MAD of the line's roughness profile: the λc Gaussian roughness of a primary profile, else the heights minus their least-squares line)",
+            "isolated spike: a run of at most {} consecutive points whose roughness ordinate deviates from the line's median by more than {} x 1.4826 x MAD (MAD of the line's roughness profile: the lambda-c Gaussian roughness of a primary profile, else the heights minus their least-squares line)",
             self.max_points, self.threshold_sigma
         )
     }
@@ -263,6 +263,63 @@ pub fn bridge(heights_um: &mut [f64], spikes: &[Spike]) -> usize {
     changed
 }
 
+/// A spike with the line it was found on, as the report lists it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LineSpike {
+    /// Line index (a scan's `NNNN`, a grid's row).
+    pub line: u32,
+    /// The spike.
+    #[serde(flatten)]
+    pub spike: Spike,
+}
+
+/// The spikes of every line of a row-major grid (`index` names the lines), judged on each
+/// line's roughness profile ([`spike_roughness`] with `lambda_c_mm`). A line that cannot be
+/// judged (e.g. shorter than the filter needs) is named in the second list with the reason.
+pub fn find_grid_spikes(
+    heights_um: &[f64],
+    cols: usize,
+    index: &[u32],
+    pitch_mm: f64,
+    lambda_c_mm: Option<f64>,
+    options: &SpikeOptions,
+) -> (Vec<LineSpike>, Vec<(u32, String)>) {
+    let mut spikes = Vec::new();
+    let mut failed = Vec::new();
+    for (row, z) in heights_um.chunks(cols.max(1)).enumerate() {
+        let line = index.get(row).copied().unwrap_or(row as u32);
+        let found = spike_roughness(z, pitch_mm, lambda_c_mm)
+            .and_then(|r| find_spikes(&r, z, pitch_mm, options));
+        match found {
+            Ok(s) => spikes.extend(s.spikes.into_iter().map(|spike| LineSpike { line, spike })),
+            Err(e) => failed.push((line, e.to_string())),
+        }
+    }
+    (spikes, failed)
+}
+
+/// A copy of the grid with every spike of `spikes` bridged ([`bridge`]); `index` maps the
+/// spikes' line numbers to rows. Returns the grid and how many points changed.
+pub fn bridged_grid(
+    heights_um: &[f64],
+    cols: usize,
+    index: &[u32],
+    spikes: &[LineSpike],
+) -> (Vec<f64>, usize) {
+    let mut out = heights_um.to_vec();
+    let mut changed = 0;
+    for (row, z) in out.chunks_mut(cols.max(1)).enumerate() {
+        let line = index.get(row).copied().unwrap_or(row as u32);
+        let mine: Vec<Spike> = spikes
+            .iter()
+            .filter(|s| s.line == line)
+            .map(|s| s.spike.clone())
+            .collect();
+        changed += bridge(z, &mine);
+    }
+    (out, changed)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -353,6 +410,33 @@ mod tests {
         };
         bridge(&mut e, &[at_start]);
         assert_eq!(e, vec![1.0, 1.0, 2.0]);
+    }
+
+    #[test]
+    fn grid_spikes_are_named_by_line_and_bridged_in_a_copy() {
+        let cols = 500;
+        let mut z: Vec<f64> = (0..3).flat_map(|_| rough(cols)).collect();
+        z[cols + 200] += 80.0;
+        let index = [7, 8, 9];
+        let (spikes, failed) =
+            find_grid_spikes(&z, cols, &index, 0.001, None, &SpikeOptions::default());
+        assert!(failed.is_empty());
+        assert_eq!(spikes.len(), 1);
+        assert_eq!((spikes[0].line, spikes[0].spike.peak), (8, 200));
+        let (bridged, changed) = bridged_grid(&z, cols, &index, &spikes);
+        assert_eq!(changed, 1);
+        assert_eq!(bridged[cols + 200], 0.5 * (z[cols + 199] + z[cols + 201]));
+        assert!(z[cols + 200] - bridged[cols + 200] > 70.0);
+        // A line too short for its filter is named, not dropped silently.
+        let (_, failed) = find_grid_spikes(
+            &z,
+            cols,
+            &index,
+            0.001,
+            Some(f64::NAN),
+            &SpikeOptions::default(),
+        );
+        assert_eq!(failed.len(), 3);
     }
 
     #[test]

@@ -665,6 +665,8 @@ fn exaggeration_note(e: f64) -> String {
 
 /// Figure size of a profile plot.
 const PROFILE_SIZE: (u32, u32) = (1000, 520);
+/// Figure size of a profile plot with its residual panel.
+const PROFILE_WITH_RESIDUAL_SIZE: (u32, u32) = (1000, 680);
 
 fn draw_overlay<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
@@ -691,14 +693,16 @@ where
     let (z0, z1) = padded_range(measured.iter().chain(model).map(|p| p.1), (-1.0, 1.0));
     let probe_frame = |subtitle: &str| Frame::new(root.dim_in_pixel().0, title, subtitle, caption);
     let (margin, x_area, y_area) = (12u32, 50u32, 80u32);
-    // With a residual panel the profile takes the upper 70 % of the body.
-    let share = |h: u32| if residual.is_empty() { h } else { h * 7 / 10 };
+    // With a residual panel the profile takes the upper 65 % of the body and names x only
+    // once, below the residual.
+    let share = |h: u32| if residual.is_empty() { h } else { h * 65 / 100 };
+    let upper_x_area = if residual.is_empty() { x_area } else { 28 };
     let plot_size = |frame: &Frame| {
         let (w, h) = root.dim_in_pixel();
         let body = h.saturating_sub(frame.top_px() + frame.bottom_px());
         (
             w.saturating_sub(2 * margin + y_area),
-            share(body).saturating_sub(2 * margin + x_area),
+            share(body).saturating_sub(2 * margin + upper_x_area),
         )
     };
     let first = probe_frame("measured points and the model's curve");
@@ -725,13 +729,13 @@ where
     };
     let mut chart = ChartBuilder::on(&upper)
         .margin(margin)
-        .x_label_area_size(x_area)
+        .x_label_area_size(upper_x_area)
         .y_label_area_size(y_area)
         .build_cartesian_2d(x0..x1, z0..z1)
         .map_err(|e| e.to_string())?;
     chart
         .configure_mesh()
-        .x_desc("x (mm)")
+        .x_desc(if residual.is_empty() { "x (mm)" } else { "" })
         .y_desc("height (µm)")
         .label_style(font(13))
         .axis_desc_style(font(14))
@@ -781,7 +785,7 @@ where
             .map_err(|e| e.to_string())?;
         res.configure_mesh()
             .x_desc("x (mm)")
-            .y_desc("model − measured (µm)")
+            .y_desc("model − data (µm)")
             .label_style(font(13))
             .axis_desc_style(font(14))
             .x_label_formatter(&|v| tick(*v))
@@ -818,7 +822,12 @@ pub fn plot_profile_overlay(
     title: &str,
     caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
-    png_and_svg!(dir, "overlay", PROFILE_SIZE, |root| draw_overlay(
+    let size = if residual.is_empty() {
+        PROFILE_SIZE
+    } else {
+        PROFILE_WITH_RESIDUAL_SIZE
+    };
+    png_and_svg!(dir, "overlay", size, |root| draw_overlay(
         &root, measured, model, residual, title, caption
     ))
 }

@@ -4,8 +4,11 @@
 //! Layer 4 (reporting): depends on [`crate::fit`] and [`crate::metrology::params`].
 
 use super::document::{ScanStatus, Traceability};
-use crate::fit::{FitError, FitOptions, FitResult};
+use crate::fit::{FitResult, MethodError, VMethod};
+use crate::metrology::holdout::SUPPORTED_BELOW_SQ;
+use crate::metrology::outliers::{LineSpike, SpikeOptions};
 use crate::metrology::params::Options;
+use crate::metrology::surface_model::ModelRecipe;
 use crate::scan::outputs::FitSummary;
 use std::path::PathBuf;
 
@@ -31,6 +34,20 @@ pub struct ScanAnalysisOptions {
     pub degree_v: Option<usize>,
     /// Where the files go (default `None`: the scan directory itself).
     pub out_dir: Option<PathBuf>,
+    /// The spike rule (default: 10 robust σ, at most 5 points).
+    pub spikes: SpikeOptions,
+    /// Leave the spikes out of the per-line and measured-grid parameters, bridged by the
+    /// straight line between their neighbours (default `false`: flag them only).
+    pub exclude_spikes: bool,
+    /// The model between lines is supported when the hold-out rms is at most this × Sq
+    /// (default [`SUPPORTED_BELOW_SQ`]).
+    pub holdout_threshold: f64,
+    /// The method across the lines of the model (default `None`: the scan's frozen plan,
+    /// else the paper's interpolation).
+    pub v_method: Option<VMethod>,
+    /// Replace the spikes before fitting (default `None`: as the scan's frozen plan says,
+    /// else no).
+    pub replace_spikes: Option<bool>,
 }
 
 impl Default for ScanAnalysisOptions {
@@ -44,18 +61,26 @@ impl Default for ScanAnalysisOptions {
             degree_u: None,
             degree_v: None,
             out_dir: None,
+            spikes: SpikeOptions::default(),
+            exclude_spikes: false,
+            holdout_threshold: SUPPORTED_BELOW_SQ,
+            v_method: None,
+            replace_spikes: None,
         }
     }
 }
 
-/// The surface the model sections describe: the fit (or why there is none) and its degrees,
-/// which the hold-out refits use too.
+/// The surface the model sections describe: the fit (or why there is none) and how it was
+/// made (degrees, method across the lines, spikes replaced), which the hold-out refits
+/// follow too.
 #[derive(Debug, Clone, Copy)]
 pub struct Model<'a> {
-    /// Degrees of the surface.
-    pub degrees: FitOptions,
+    /// How the surface was made.
+    pub recipe: ModelRecipe,
     /// The fitted surface with its data parameters, or why the grid could not be fitted.
-    pub fit: Result<&'a FitResult, &'a FitError>,
+    pub fit: Result<&'a FitResult, &'a MethodError>,
+    /// The spikes replaced before fitting (empty unless the recipe asks for it).
+    pub replaced: &'a [LineSpike],
 }
 
 /// Everything besides the grid and the model that goes into a report.
@@ -81,6 +106,4 @@ pub struct ReportContext {
     pub options: ScanAnalysisOptions,
     /// Warnings gathered so far (e.g. while reading the lines).
     pub warnings: Vec<String>,
-    /// When the scan finished, when the runner is completing it (the report says so).
-    pub finished_at: Option<chrono::DateTime<chrono::Utc>>,
 }

@@ -4,10 +4,14 @@
 //! Layer 4 (reporting): depends on the metrology result types, the scan's journal records
 //! ([`crate::scan::journal`]) and the fit summary of [`crate::scan::outputs`].
 
+use crate::fit::VMethod;
+use crate::metrology::anisotropy::Anisotropy;
 use crate::metrology::areal::ArealParams;
-use crate::metrology::holdout::{Holdout, HoldoutLine};
+use crate::metrology::folds::ModelChecks;
+use crate::metrology::holdout::{BetweenLines, Holdout, HoldoutLine};
 use crate::metrology::instrument::Comparison;
 use crate::metrology::model::ModelCurveBac;
+use crate::metrology::outliers::LineSpike;
 use crate::metrology::params::{Recipe, RoughnessParams};
 use crate::profile::Conditions;
 use crate::scan::journal::{StartRecord, StopRecord};
@@ -45,6 +49,25 @@ pub struct Report {
     /// Why the hold-out comparison could not be made (e.g. too few lines to refit half).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub model_vs_measured_error: Option<String>,
+    /// How far the surface between lines can be trusted: every 2nd line left out, refitted,
+    /// judged against Sq.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub between_lines: Option<BetweenLines>,
+    /// Why `between_lines` is missing.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub between_lines_error: Option<String>,
+    /// The surface the model sections describe: method, recipe, spikes replaced.
+    pub model: ModelReport,
+    /// Folds of the control net and the surface, and its height range against the data's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub model_checks: Option<ModelChecks>,
+    /// The spikes found in the lines and what was done with them.
+    pub outliers: OutliersReport,
+    /// The grid's anisotropy and what it does to Sdq and Sdr.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub anisotropy: Option<Anisotropy>,
+    /// Whether every section could be made.
+    pub characterisation: Characterisation,
     /// Traceability of a scan, from its journal's start record.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub traceability: Option<Traceability>,
@@ -61,6 +84,68 @@ pub struct Report {
     pub timings_s: Timings,
 }
 
+/// The surface the model sections describe.
+#[derive(Debug, Clone, Serialize)]
+pub struct ModelReport {
+    /// The method across the lines (with its control rows when least squares).
+    pub v_method: VMethod,
+    /// The recipe in one sentence.
+    pub description: String,
+    /// Degrees.
+    pub degree_u: usize,
+    /// Degrees.
+    pub degree_v: usize,
+    /// The spikes replaced before fitting (only when asked for).
+    pub spikes_replaced: Vec<LineSpike>,
+}
+
+/// The spikes of the lines.
+#[derive(Debug, Clone, Serialize)]
+pub struct OutliersReport {
+    /// The rule.
+    pub rule: String,
+    /// `flag` (data as measured) or `exclude` (bridged in the per-line and measured-grid
+    /// parameters).
+    pub policy: &'static str,
+    /// Every spike: line, points, x, measured height, deviation.
+    pub spikes: Vec<LineSpike>,
+    /// Lines the rule could not judge, with the reason.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub lines_not_judged: Vec<LineNotJudged>,
+}
+
+/// A line the spike rule could not judge.
+#[derive(Debug, Clone, Serialize)]
+pub struct LineNotJudged {
+    /// Line index.
+    pub line: u32,
+    /// Why.
+    pub reason: String,
+}
+
+/// Whether the characterisation is complete, and which sections failed and why.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Characterisation {
+    /// Every section was made.
+    pub complete: bool,
+    /// The sections that failed, each with its reason (each also in `warnings`).
+    pub failed_sections: Vec<FailedSection>,
+    /// The sections the grid has too few lines for (the fit needs degree-v + 1 lines, a
+    /// hold-out more than that after leaving lines out), each with its reason (also in
+    /// `warnings`). They are not failures: a complete characterisation of so few lines has
+    /// none of them.
+    pub sections_not_possible: Vec<FailedSection>,
+}
+
+/// A section that could not be made.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FailedSection {
+    /// Its key in the report (e.g. `surface`, `between_lines`).
+    pub section: String,
+    /// Why.
+    pub reason: String,
+}
+
 /// The recipe of the report: the lines' recipe, where λc came from and why the filter was or
 /// was not applied; `definitions` holds the profile and the areal definition ids.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -72,6 +157,14 @@ pub struct ReportRecipe {
     pub lambda_c_source: String,
     /// Why the λc filter was or was not applied.
     pub filter_reason: String,
+    /// The spike rule (its threshold in robust σ and longest run of points).
+    pub spike_rule: String,
+    /// What characterisation does with the spikes: `flag` (named, the data as measured) or
+    /// `exclude` (bridged for the per-line and measured-grid parameters).
+    pub outliers: &'static str,
+    /// The model between lines is supported by the data when the hold-out rms is at most
+    /// this × Sq.
+    pub holdout_threshold_sq: f64,
 }
 
 /// One line's entry in the report.
@@ -152,6 +245,12 @@ pub struct Traceability {
     pub scan_id: String,
     /// When the scan started (ISO 8601).
     pub started_at: String,
+    /// When it finished (ISO 8601): for a complete scan, when its last line was read out;
+    /// for one stopped otherwise (abort, fail), its stop record's time; `None` while it has
+    /// neither (still running, or stopped without a record).
+    pub finished_at: Option<String>,
+    /// From start to finish, s (`None` without a finish).
+    pub duration_s: Option<f64>,
     /// Specimen id.
     pub specimen: String,
     /// Operator.
@@ -186,6 +285,8 @@ impl From<&StartRecord> for Traceability {
         Traceability {
             scan_id: s.scan_id.clone(),
             started_at: s.time.to_rfc3339(),
+            finished_at: None,
+            duration_s: None,
             specimen: s.specimen.clone(),
             operator: s.operator.clone(),
             notes: s.notes.clone(),
@@ -203,6 +304,18 @@ impl From<&StartRecord> for Traceability {
                 .and_then(|v| v.as_str().map(str::to_owned)),
             conditions: s.conditions.clone(),
         }
+    }
+}
+
+impl Traceability {
+    /// Traceability of a scan started as `start` says and finished at `finished`.
+    pub fn of_scan(start: &StartRecord, finished: Option<chrono::DateTime<chrono::Utc>>) -> Self {
+        let mut t = Traceability::from(start);
+        if let Some(f) = finished {
+            t.finished_at = Some(f.to_rfc3339());
+            t.duration_s = Some((f - start.time).num_milliseconds() as f64 / 1000.0);
+        }
+        t
     }
 }
 

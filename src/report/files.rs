@@ -21,7 +21,7 @@ use crate::metrology::plots::{
 };
 use crate::metrology::x3p::{to_x3p, X3pMeta};
 use crate::metrology::MetrologyError;
-use crate::numfmt::{fmt as nfmt, line_number, Quantity};
+use crate::numfmt::{fmt as nfmt, line_label, line_number, Quantity};
 use crate::scan::journal::{read_journal, ResumeState};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -162,13 +162,101 @@ fn overlay_row(grid: &LineGrid, ctx: &mut ReportContext) -> usize {
     }
 }
 
+/// The overlay of a held-out line: its measured heights, the model refitted without it and
+/// the residual, as `(x_mm, z_um)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Overlay {
+    /// Measured heights.
+    pub measured: Vec<(f64, f64)>,
+    /// The refit at the line.
+    pub model: Vec<(f64, f64)>,
+    /// Model − measured.
+    pub residual: Vec<(f64, f64)>,
+    /// Title naming the line and what the curve is.
+    pub title: String,
+}
+
+/// The paper's Figure 2 made honest: the requested overlay line (or the middle one) left
+/// out, the surface refitted without it the way the model was made, and drawn against the
+/// line's measured heights. When that line cannot be left out (the first or last line) or
+/// its refit fails, the held-out line of the verdict `b` nearest it is drawn instead, and a
+/// warning says so. `heights_um` are the grid's rows as characterised.
+pub fn held_out_overlay(
+    grid: &LineGrid,
+    heights_um: &[f64],
+    recipe: &crate::metrology::surface_model::ModelRecipe,
+    b: Option<&crate::metrology::holdout::BetweenLines>,
+    ctx: &mut ReportContext,
+) -> Option<Overlay> {
+    let wanted = overlay_row(grid, ctx);
+    let own = crate::metrology::holdout::model_without_line(
+        heights_um,
+        grid.cols,
+        grid.pitch_x_mm,
+        &grid.y_mm,
+        recipe.degrees,
+        recipe.method,
+        wanted,
+    );
+    let (row, rms, model) = match own {
+        Ok(m) => (wanted, m.line.rms_um, m.model_um),
+        Err(e) => {
+            let b = b?;
+            let (k, line) = b
+                .lines
+                .iter()
+                .enumerate()
+                .min_by_key(|(_, l)| l.index.abs_diff(wanted))?;
+            ctx.warnings.push(format!(
+                "the overlay shows line {} (left out of the hold-out refit) instead of line {}: {e}",
+                line_label(grid.index_of(line.index)),
+                line_label(grid.index_of(wanted))
+            ));
+            (line.index, line.rms_um, b.model_um.get(k)?.clone())
+        }
+    };
+    let px = grid.pitch_x_mm;
+    let measured = heights_um.get(row * grid.cols..(row + 1) * grid.cols)?;
+    Some(Overlay {
+        measured: measured
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i as f64 * px, *v))
+            .collect(),
+        model: model
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i as f64 * px, *v))
+            .collect(),
+        residual: model
+            .iter()
+            .zip(measured)
+            .enumerate()
+            .map(|(i, (m, z))| (i as f64 * px, m - z))
+            .collect(),
+        title: format!(
+            "Line {} ({:04}, y = {} mm) left out: its measured heights and the model refitted without it (rms {} µm)",
+            line_number(grid.index_of(row)),
+            grid.index_of(row),
+            nfmt(
+                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
+                Quantity::PositionMm
+            ),
+            nfmt(rms, Quantity::HeightUm)
+        ),
+    })
+}
+
 /// The plots: bearing curves (the model's when there are any, else the measured grid's
-/// pooled curve), the measured height map and, with a model, the overlay of one line.
+/// pooled curve), the measured height map and the overlay of one line: a held-out line with
+/// the model refitted without it when the hold-out could be made, else (with a model) a data
+/// line, which the model interpolates by construction.
 fn write_plots(
     out: &Path,
     grid: &LineGrid,
     measured: &Grid<'_>,
     sampled: Option<&SampledModel>,
+    overlay: Option<&Overlay>,
     report: &Report,
     ctx: &mut ReportContext,
 ) -> Result<Vec<PathBuf>, ReportError> {
@@ -196,7 +284,12 @@ fn write_plots(
         plot_bearing_curves(out, bac_curves, pooled, &bac_title, &caption).map_err(plot_err)?,
     );
     plots.extend(plot_height_map(out, measured, "Measured heights", &caption).map_err(plot_err)?);
-    if let Some(model) = sampled {
+    if let Some(o) = overlay {
+        plots.extend(
+            plot_profile_overlay(out, &o.measured, &o.model, &o.residual, &o.title, &caption)
+                .map_err(plot_err)?,
+        );
+    } else if let Some(model) = sampled {
         let row = overlay_row(grid, ctx);
         let px = grid.pitch_x_mm;
         let measured_pts: Vec<(f64, f64)> = grid
@@ -215,7 +308,7 @@ fn write_plots(
             .collect();
         let index = grid.index.get(row).copied().unwrap_or(0);
         let title = format!(
-            "Line {} ({index:04}, y = {} mm): measured and model",
+            "Line {} ({index:04}, y = {} mm): measured and model (fitted through these points; no line could be held out)",
             line_number(index),
             nfmt(
                 grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
@@ -281,16 +374,18 @@ fn write_rk_plots(
 /// Writes the plots and X3P files (which may add warnings to `ctx`), then `summary.csv`;
 /// `report.json` and `report.html` are written last by [`write_report`], once the warnings
 /// are final.
+#[allow(clippy::too_many_arguments)]
 pub fn write_data_files(
     out: &Path,
     grid: &LineGrid,
     analyses: &[LineAnalysis],
     measured: &Grid<'_>,
     sampled: Option<&SampledModel>,
+    overlay: Option<&Overlay>,
     report: &Report,
     ctx: &mut ReportContext,
 ) -> Result<Files, ReportError> {
-    let plots = write_plots(out, grid, measured, sampled, report, ctx)?;
+    let plots = write_plots(out, grid, measured, sampled, overlay, report, ctx)?;
     let rk_plots = write_rk_plots(out, grid, analyses, ctx)?;
     let measured_x3p = out.join("measured.x3p");
     let bytes = to_x3p(
@@ -376,6 +471,6 @@ pub fn write_report(
     let value = serde_json::to_value(report)?;
     write_file(
         &files.report_html,
-        html::render(&value, journal.as_ref(), &figures, ctx.finished_at).as_bytes(),
+        html::render(&value, journal.as_ref(), &figures).as_bytes(),
     )
 }

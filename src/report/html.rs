@@ -217,22 +217,13 @@ const AREAL_ROWS: &[(&str, &str, Quantity)] = &[
     ("Sdr_pct", "Sdr %", Quantity::Percent),
 ];
 
-/// The model's verdict (whether the data support the surface between the lines), where the
-/// report carries one.
+/// The model's verdict (whether the data support the surface between the lines) in short,
+/// where the report carries one.
 pub fn verdict(report: &Value) -> Option<String> {
-    fn find(v: &Value) -> Option<String> {
-        match v {
-            Value::Object(m) => m
-                .get("verdict")
-                .and_then(Value::as_str)
-                .filter(|s| !s.is_empty())
-                .map(str::to_owned)
-                .or_else(|| m.values().find_map(find)),
-            Value::Array(a) => a.iter().find_map(find),
-            _ => None,
-        }
-    }
-    find(&report["model_vs_measured"])
+    report["between_lines"]["summary"]
+        .as_str()
+        .filter(|s| !s.is_empty())
+        .map(str::to_owned)
 }
 
 /// The result in a few `(what, value)` pairs: lines characterised (of those planned), the
@@ -285,14 +276,8 @@ pub fn result_summary(report: &Value) -> Vec<(&'static str, String)> {
 }
 
 /// Renders the report. `report` is the report as serialized into `report.json`; `journal`
-/// the scan's journal when it could be read; `figures` are embedded in order; `completed`
-/// the time a scan being completed ends (its stop record is written after the report).
-pub fn render(
-    report: &Value,
-    journal: Option<&ResumeState>,
-    figures: &[Figure],
-    completed: Option<chrono::DateTime<chrono::Utc>>,
-) -> String {
+/// the scan's journal when it could be read; `figures` are embedded in order.
+pub fn render(report: &Value, journal: Option<&ResumeState>, figures: &[Figure]) -> String {
     let mut h = String::with_capacity(
         64 * 1024 + figures.iter().map(|f| f.bytes.len() * 4 / 3).sum::<usize>(),
     );
@@ -324,7 +309,7 @@ pub fn render(
         kv(&mut h, k, &esc(&v));
     }
     h.push_str("</table>\n");
-    traceability(&mut h, report, journal, completed);
+    traceability(&mut h, report);
     if let Some(j) = journal {
         events(&mut h, j);
     }
@@ -366,12 +351,7 @@ fn warnings(h: &mut String, report: &Value) {
     }
 }
 
-fn traceability(
-    h: &mut String,
-    report: &Value,
-    journal: Option<&ResumeState>,
-    completed: Option<chrono::DateTime<chrono::Utc>>,
-) {
+fn traceability(h: &mut String, report: &Value) {
     let t = &report["traceability"];
     if t.is_null() {
         return;
@@ -386,30 +366,17 @@ fn traceability(
     ] {
         kv(h, k, &esc(&text(&t[key])));
     }
-    let stop_time = journal
-        .and_then(|j| j.stop.as_ref().map(|s| s.time))
-        .or_else(|| {
-            report["scan"]["stop"]["time"]
-                .as_str()
-                .and_then(|s| chrono::DateTime::parse_from_rfc3339(s).ok())
-                .map(|d| d.with_timezone(&chrono::Utc))
-        })
-        .or(completed);
-    match stop_time {
+    match t["finished_at"].as_str() {
         Some(stop) => {
-            kv(h, "finished", &esc(&stop.to_rfc3339()));
-            if let Some(start) = t["started_at"]
-                .as_str()
-                .and_then(|s| chrono::DateTime::parse_from_rfc3339(s).ok())
-            {
-                let d = (stop - start.with_timezone(&chrono::Utc)).num_seconds();
-                kv(h, "duration", &esc(&duration(d)));
+            kv(h, "finished", &esc(stop));
+            if let Some(d) = t["duration_s"].as_f64() {
+                kv(h, "duration", &esc(&duration(d.round() as i64)));
             }
         }
         None => kv(
             h,
             "finished",
-            "<span class=\"muted\">no stop record (being completed, still running, or stopped without one)</span>",
+            "<span class=\"muted\">no stop record (still running, or stopped without one)</span>",
         ),
     }
     let na = "<span class=\"muted\">not recorded</span>";
@@ -699,12 +666,51 @@ fn instrument(h: &mut String, report: &Value) {
 
 fn holdout(h: &mut String, report: &Value) {
     let m = &report["model_vs_measured"];
-    if !m.is_object() {
+    let b = &report["between_lines"];
+    if !m.is_object() && !b.is_object() {
         return;
     }
     h.push_str("<h2 id=\"model\">The model against data it was not fitted to</h2>\n");
-    if let Some(v) = verdict(report) {
-        let _ = writeln!(h, "<p><b>{}</b></p>", esc(&v));
+    if let Some(v) = b["verdict"].as_str() {
+        let _ = writeln!(h, "<p id=\"verdict\"><b>{}</b></p>", esc(v));
+    }
+    let r = &report["model_checks"]["height_range"];
+    if let (Some(lo), Some(hi), Some(mlo), Some(mhi), Some(pct)) = (
+        r["model_min_um"].as_f64(),
+        r["model_max_um"].as_f64(),
+        r["measured_min_um"].as_f64(),
+        r["measured_max_um"].as_f64(),
+        r["overshoot_pct"].as_f64(),
+    ) {
+        let q = Quantity::HeightUm;
+        let _ = writeln!(
+            h,
+            "<p id=\"height-range\">Sampled densely, the model spans {} … {} µm where the measured heights span {} … {} µm ({} % beyond the measured range).</p>",
+            fmt(lo, q),
+            fmt(hi, q),
+            fmt(mlo, q),
+            fmt(mhi, q),
+            fmt(pct, Quantity::Percent)
+        );
+    }
+    let a = &report["anisotropy"];
+    if let (Some(ratio), Some(r), Some(share), Some(dom)) = (
+        a["pitch_ratio_y_over_x"].as_f64(),
+        a["line_correlation_at_pitch_y"].as_f64(),
+        a["sdq_y_share_pct"].as_f64(),
+        a["dominant"].as_str(),
+    ) {
+        let _ = writeln!(
+            h,
+            "<p id=\"anisotropy\">The lines are {} × the x pitch apart; neighbouring lines correlate at r = {}; the slopes along {} dominate Sdq and Sdr ({} % of Sdq² comes from dz/dy, across the lines).</p>",
+            sig(ratio, 3),
+            sig(r, 2),
+            esc(dom),
+            fmt(share, Quantity::Percent)
+        );
+    }
+    if !m.is_object() {
+        return;
     }
     h.push_str("<table id=\"t-model\">\n<tr><th class=\"t\">left out and predicted</th><th>lines</th><th>largest |model − measured| µm</th><th>largest rms µm</th></tr>\n");
     for (what, key) in [
@@ -778,6 +784,30 @@ fn recipe(h: &mut String, report: &Value) {
         &format!("{} mm", num(&r["pitch_mm"], Quantity::LengthMm)),
     );
     kv(h, "mean line", &esc(&text(&r["mean_line"])));
+    kv(h, "surface", &esc(&text(&report["model"]["description"])));
+    kv(
+        h,
+        "spikes",
+        &esc(&format!(
+            "{} — {}",
+            text(&r["spike_rule"]),
+            match r["outliers"].as_str() {
+                Some("exclude") =>
+                    "excluded (bridged) from the per-line and measured-grid parameters",
+                _ => "flagged only, the data as measured",
+            }
+        )),
+    );
+    if let Some(t) = r["holdout_threshold_sq"].as_f64() {
+        kv(
+            h,
+            "model between lines",
+            &esc(&format!(
+                "supported by the data when the hold-out rms is at most {} × Sq",
+                sig(t, 2)
+            )),
+        );
+    }
     h.push_str("</table>\n");
     if let Some(defs) = r["definitions"].as_object() {
         h.push_str("<details><summary>Definition of every parameter</summary><table id=\"t-definitions\">\n");
@@ -820,10 +850,16 @@ mod tests {
                  "instrument": [{"name": "Ra", "instrument": 0.5, "ours": 0.6, "difference": 0.1, "compared_with": "Ra", "unit": "um"}]},
                 {"index": 1, "y_mm": 0.01, "Ra_um": 0.5}
             ],
-            "model_vs_measured": {"between_lines": {"verdict": "not supported by the data"}},
-            "recipe": {"lambda_c_mm": 0.8}
+            "model_vs_measured": {"points_left_out": [], "lines_left_out": []},
+            "between_lines": {"summary": "the model between lines is not supported by the data",
+                              "verdict": "the model between lines is not supported by the data: every 2nd line left out"},
+            "model_checks": {"height_range": {"model_min_um": -21.4, "model_max_um": 19.0,
+                             "measured_min_um": -13.1, "measured_max_um": 9.1, "overshoot_pct": 82.0}},
+            "model": {"description": "global B-spline interpolation (the paper)"},
+            "recipe": {"lambda_c_mm": 0.8, "spike_rule": "isolated spike: at most 5 points", "outliers": "flag",
+                       "holdout_threshold_sq": 0.5}
         });
-        let h = render(&report, None, &[], None);
+        let h = render(&report, None, &[]);
         let warn = h.find("id=\"warnings\"").unwrap();
         assert!(warn < h.find("id=\"result\"").unwrap());
         assert!(warn < h.find("id=\"lines\"").unwrap());
@@ -836,6 +872,15 @@ mod tests {
         assert!(h.contains("<span class=\"flag\">NO</span>"));
         assert!(h.contains("1 comparison(s) outside the tolerance"));
         assert!(h.contains("not supported by the data"));
+        // The verdict in full, the model's height range against the data's, and the recipe of
+        // the model and of the spikes.
+        assert!(h.contains(
+            "<b>the model between lines is not supported by the data: every 2nd line left out</b>"
+        ));
+        assert!(h.contains("the model spans -21.40 … 19.00 µm where the measured heights span -13.10 … 9.100 µm (82.0 % beyond"));
+        assert!(h.contains("global B-spline interpolation (the paper)"));
+        assert!(h.contains("isolated spike: at most 5 points — flagged only, the data as measured"));
+        assert!(h.contains("at most 0.50 × Sq"));
         assert!(!h.contains("<script"), "no script in the report");
     }
 }

@@ -9,7 +9,7 @@ use super::document::{LineReport, ReportRecipe};
 use super::error::{metrology, ReportError};
 use super::grid::LineGrid;
 use crate::metrology::areal;
-use crate::metrology::instrument::compare_under;
+use crate::metrology::instrument::compare_profile;
 use crate::metrology::params::{analyze_line, LineAnalysis, Options};
 use crate::metrology::MetrologyError;
 use crate::numfmt::line_number;
@@ -108,10 +108,11 @@ pub fn characterise(grid: &LineGrid, ctx: &ReportContext) -> Result<LinesSection
             params: a.params.clone(),
             rmr_table: rmr_table(a),
             instrument: grid.instrument.as_ref().map(|all| {
-                compare_under(
+                compare_profile(
                     &a.params,
                     all.get(row).map_or(&[][..], |v| &v[..]),
                     grid.standard.get(row).and_then(|s| s.as_deref()),
+                    ctx.line_options.apply_lambda_c,
                 )
             }),
             model_vs_measured: None,
@@ -122,6 +123,13 @@ pub fn characterise(grid: &LineGrid, ctx: &ReportContext) -> Result<LinesSection
             lines: recipe,
             lambda_c_source: ctx.lambda_c_source.clone(),
             filter_reason: ctx.filter_reason.clone(),
+            spike_rule: ctx.options.spikes.describe(),
+            outliers: if ctx.options.exclude_spikes {
+                "exclude"
+            } else {
+                "flag"
+            },
+            holdout_threshold_sq: ctx.options.holdout_threshold,
         },
         lines,
         analyses,

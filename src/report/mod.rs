@@ -40,6 +40,7 @@ pub mod holdout;
 pub mod html;
 pub mod lines;
 pub mod model;
+pub mod outliers;
 pub mod scan_dir;
 pub mod summary;
 
@@ -49,8 +50,9 @@ pub use error::ReportError;
 pub use grid::LineGrid;
 pub use scan_dir::{characterise_scan, load_scan_grid, scan_line_options, ScanCharacteriser};
 
+use crate::metrology::anisotropy::anisotropy;
 use crate::metrology::MetrologyError;
-use document::Timings;
+use document::{Characterisation, FailedSection, ModelReport, Timings};
 use files::software;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -85,6 +87,14 @@ pub struct ScanOutputs {
 /// Characterises a grid of lines with `model` (the surface fitted through them, or why there
 /// is none) and writes every output into `out`: the work behind the scan entry points of
 /// [`scan_dir`] and `surfscan analyze GRID.csv`.
+///
+/// Sections fail alone: a failure in a model section (the fit, the model's bearing curves or
+/// areal parameters, the hold-out refits, the verdict) never removes the per-line
+/// parameters, the measured grid's areal parameters, `measured.x3p` or the plots of the
+/// data; each failure is named in `warnings` and in `characterisation.failed_sections`, and
+/// [`ScanOutputs::complete`] is false. A section the grid has too few lines for (no fit
+/// below degree-v + 1 lines, no hold-out without lines to spare) is named in `warnings` and
+/// `characterisation.sections_not_possible` instead: it is not a failure.
 pub fn characterise(
     grid: &LineGrid,
     model: Model<'_>,
@@ -109,53 +119,161 @@ pub fn characterise(
         path: out.to_path_buf(),
         source,
     })?;
+    let mut failed_sections: Vec<FailedSection> = Vec::new();
 
+    // Spikes, judged on each line's roughness profile; bridged for characterisation only
+    // when asked for.
     let t = Instant::now();
+    let outliers = outliers::characterise(grid, &ctx);
+    outliers::warn(
+        &outliers,
+        model.replaced,
+        grid.pitch_x_mm,
+        &mut ctx.warnings,
+    );
+    let bridged = if ctx.options.exclude_spikes && !outliers.spikes.is_empty() {
+        Some(outliers::bridged(grid, &outliers.spikes))
+    } else {
+        None
+    };
+    let cgrid = bridged.as_ref().unwrap_or(grid);
+
     let lines::LinesSection {
         recipe,
         lines: mut line_reports,
         analyses,
-    } = lines::characterise(grid, &ctx)?;
+    } = lines::characterise(cgrid, &ctx)?;
     timings.lines = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
     let (py, evenly) = grid::mean_pitch_y(&grid.y_mm);
     if !evenly {
+        let y: Vec<String> = grid
+            .y_mm
+            .iter()
+            .map(|y| crate::numfmt::fmt(*y, crate::numfmt::Quantity::PositionMm))
+            .collect();
         ctx.warnings.push(format!(
-            "the lines are not equally spaced in y (y = {:?} mm); the areal parameters, the height map and the X3P files use the mean pitch {py} mm",
-            grid.y_mm
+            "the lines are not equally spaced in y (y = {} mm); the areal parameters, the height map and the X3P files use the mean pitch {} mm",
+            y.join(", "),
+            crate::numfmt::fmt(py, crate::numfmt::Quantity::LengthMm)
         ));
     }
     let measured = areal::measured(grid, py);
-    let surface_grid = areal::characterise(&measured, ctx.options.levels);
+    let characterised = areal::measured(cgrid, py);
+    let surface_grid = areal::characterise(&characterised, ctx.options.levels);
+    if let Err(e) = &surface_grid {
+        failed_sections.push(FailedSection {
+            section: "surface_grid".into(),
+            reason: e.clone(),
+        });
+    }
+    let anisotropy = match anisotropy(&characterised) {
+        Ok(a) => {
+            if a.slopes_untrustworthy() {
+                if let Some(c) = a.caveats.last() {
+                    ctx.warnings.push(c.clone());
+                }
+            }
+            Some(a)
+        }
+        Err(e) => {
+            failed_sections.push(FailedSection {
+                section: "anisotropy".into(),
+                reason: e.to_string(),
+            });
+            None
+        }
+    };
     timings.surface_grid = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
     let model_section = model::characterise(
         &model,
+        &grid.heights_um,
         rows,
         cols,
         grid.pitch_x_mm,
         py,
         &ctx.options,
-        &ctx.input,
-    )?;
-    if let Err(e) = &model_section.surface {
-        ctx.warnings
-            .push(format!("no model surface parameters: {e}"));
+    );
+    failed_sections.extend(model_section.failed.iter().cloned());
+    if let Some(c) = &model_section.checks {
+        ctx.warnings.extend(c.warnings());
     }
     timings.model = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let model_vs_measured = holdout::characterise(grid, model.degrees);
+    let model_vs_measured = holdout::characterise(grid, &cgrid.heights_um, &model.recipe);
     if let Ok(h) = &model_vs_measured {
         holdout::attach(&mut line_reports, h);
     }
+    let sq = surface_grid.as_ref().map(|s| s.params.sq_um).ok();
+    let verdict = match sq {
+        Some(sq) => holdout::verdict(
+            grid,
+            &cgrid.heights_um,
+            &model.recipe,
+            sq,
+            ctx.options.holdout_threshold,
+        ),
+        None => Err("the measured grid has no Sq to judge the hold-out against".to_string()),
+    };
     timings.holdout = t.elapsed().as_secs_f64();
+    for (section, r) in [
+        ("model_vs_measured", model_vs_measured.as_ref().err()),
+        ("between_lines", verdict.as_ref().err()),
+    ] {
+        if let Some(e) = r {
+            failed_sections.push(FailedSection {
+                section: section.into(),
+                reason: e.clone(),
+            });
+        }
+    }
+    // The overlay draws the model at a held-out line: the rows are still the grid's here.
+    let overlay = files::held_out_overlay(
+        grid,
+        &cgrid.heights_um,
+        &model.recipe,
+        verdict.as_ref().ok(),
+        &mut ctx,
+    );
+    let mut verdict = verdict;
+    if let Ok(b) = &mut verdict {
+        holdout::rows_to_lines(grid, b);
+        if !b.supported {
+            ctx.warnings.push(b.verdict.clone());
+        }
+    }
+    // What the line count rules out is not a failure: the fit needs degree-v + 1 lines, the
+    // hold-outs more than that once lines are left out.
+    let q = model.recipe.degrees.degree_v;
+    let fit_possible = rows > q;
+    let holdout_possible =
+        fit_possible && crate::metrology::holdout::holdout_every(rows, q).is_some();
+    let (not_possible, failed_sections): (Vec<FailedSection>, Vec<FailedSection>) = failed_sections
+        .into_iter()
+        .partition(|f| match f.section.split('.').next().unwrap_or_default() {
+            "surface" => !fit_possible,
+            "model_vs_measured" | "between_lines" => !holdout_possible,
+            _ => false,
+        });
+    for f in &not_possible {
+        ctx.warnings.push(format!(
+            "{} not made ({rows} lines are too few): {}",
+            f.section, f.reason
+        ));
+    }
+    for f in &failed_sections {
+        ctx.warnings
+            .push(format!("{} could not be made: {}", f.section, f.reason));
+    }
 
     let (surface, surface_error) = split(model_section.surface);
     let (surface_grid, surface_grid_error) = split(surface_grid);
     let (model_vs_measured, model_vs_measured_error) = split(model_vs_measured);
+    let (between_lines, between_lines_error) = split(verdict);
     let mut report = Report {
         software: software(),
         input: ctx.input.clone(),
@@ -168,6 +286,23 @@ pub fn characterise(
         surface_grid_error,
         model_vs_measured,
         model_vs_measured_error,
+        between_lines,
+        between_lines_error,
+        model: ModelReport {
+            v_method: model.recipe.method,
+            description: model.recipe.describe(),
+            degree_u: model.recipe.degrees.degree_u,
+            degree_v: model.recipe.degrees.degree_v,
+            spikes_replaced: model.replaced.to_vec(),
+        },
+        model_checks: model_section.checks,
+        outliers,
+        anisotropy,
+        characterisation: Characterisation {
+            complete: failed_sections.is_empty(),
+            failed_sections,
+            sections_not_possible: not_possible,
+        },
         traceability: ctx.traceability.clone(),
         scan: ctx.scan.clone(),
         fit: ctx.fit.clone(),
@@ -182,6 +317,7 @@ pub fn characterise(
         &analyses,
         &measured,
         model_section.sampled.as_ref(),
+        overlay.as_ref(),
         &report,
         &mut ctx,
     )?;
@@ -193,7 +329,6 @@ pub fn characterise(
     let mut plots = written.plots;
     plots.extend(written.rk_plots.into_iter().flat_map(|(_, files)| files));
     Ok(ScanOutputs {
-        report,
         report_json: written.report_json,
         report_html: written.report_html,
         summary_csv: written.summary_csv,
@@ -208,7 +343,25 @@ pub fn characterise(
             .unwrap_or_default(),
         warnings: ctx.warnings,
         elapsed_s: t_all.elapsed().as_secs_f64(),
+        report,
     })
+}
+
+impl ScanOutputs {
+    /// True when every section of the characterisation was made.
+    pub fn complete(&self) -> bool {
+        self.report.characterisation.complete
+    }
+
+    /// The verdict on the surface between lines in one line for a terminal, or why there is
+    /// none.
+    pub fn verdict_line(&self) -> String {
+        match (&self.report.between_lines, &self.report.between_lines_error) {
+            (Some(b), _) => b.short(),
+            (None, Some(e)) => format!("no verdict on the model between lines: {e}"),
+            (None, None) => "no verdict on the model between lines".to_string(),
+        }
+    }
 }
 
 fn split<T>(r: Result<T, String>) -> (Option<T>, Option<String>) {

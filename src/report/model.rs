@@ -1,19 +1,22 @@
-//! Section: the NURBS model — the paper's bearing area curves of iso-curves of the surface,
-//! and the areal parameters of the surface sampled on the data lines. The surface is the one
-//! the caller fitted (for a scan, the same one written to `surface.igs`); nothing is refitted
-//! here.
+//! Section: the NURBS model — its checks (folds of the control net and of the surface, its
+//! height range against the data's), the paper's bearing area curves of iso-curves of the
+//! surface, and the areal parameters of the surface sampled on the data lines. The surface is
+//! the one the caller fitted (for a scan, the same one written to `surface.igs`); nothing is
+//! refitted here. Each part fails alone: a surface that folds has no bearing curves and
+//! cannot be sampled as a height map, and says so, but its checks are still reported.
 //!
-//! Layer 4 (reporting): depends on [`crate::metrology::model`] and the areal section.
+//! Layer 4 (reporting): depends on [`crate::metrology::model`] and
+//! [`crate::metrology::folds`] and the areal section.
 
 use super::areal::surface_report;
 use super::context::{Model, ScanAnalysisOptions};
-use super::document::SurfaceReport;
-use super::error::{metrology, ReportError};
+use super::document::{FailedSection, SurfaceReport};
 use crate::metrology::areal::Grid;
+use crate::metrology::folds::{check_model, FoldOptions, ModelChecks};
 use crate::metrology::model::{model_bearing_curves, sample_model_grid, ModelBacOptions};
 
 /// The model sampled on the data lines (their v) at half the x pitch, row-major: what
-/// `model.x3p` and the overlay plot show.
+/// `model.x3p` shows.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SampledModel {
     /// Heights in µm, `rows × cols`.
@@ -31,45 +34,112 @@ pub struct ModelSection {
     pub surface: Result<SurfaceReport, String>,
     /// The sampled model, when the surface could be sampled.
     pub sampled: Option<SampledModel>,
+    /// The checks, when there is a surface.
+    pub checks: Option<ModelChecks>,
+    /// The parts that failed.
+    pub failed: Vec<FailedSection>,
+}
+
+fn failed(section: &str, reason: impl Into<String>) -> FailedSection {
+    FailedSection {
+        section: section.to_string(),
+        reason: reason.into(),
+    }
 }
 
 /// Runs the section for a grid of `rows` lines of `cols` points at `pitch_x_mm`, its lines
-/// `pitch_y_mm` apart on average.
+/// `pitch_y_mm` apart on average, measured heights `heights_um`.
 pub fn characterise(
     model: &Model<'_>,
+    heights_um: &[f64],
     rows: usize,
     cols: usize,
     pitch_x_mm: f64,
     pitch_y_mm: f64,
     options: &ScanAnalysisOptions,
-    input: &str,
-) -> Result<ModelSection, ReportError> {
+) -> ModelSection {
     let fit = match model.fit {
         Ok(fit) => fit,
         Err(e) => {
-            return Ok(ModelSection {
-                surface: Err(format!("the NURBS fit failed: {e}")),
+            let reason = format!("the NURBS fit failed: {e}");
+            return ModelSection {
+                surface: Err(reason.clone()),
                 sampled: None,
-            })
+                checks: None,
+                failed: vec![failed("surface", reason)],
+            };
         }
     };
-    let (p, q) = (model.degrees.degree_u, model.degrees.degree_v);
+    let mut fails = Vec::new();
+    let checks = check_model(
+        &fit.surface,
+        &fit.params_v,
+        heights_um,
+        &FoldOptions::default(),
+    );
+    let folds = checks.folds();
+    let (p, q) = (model.recipe.degrees.degree_u, model.recipe.degrees.degree_v);
+    let what = match model.recipe.method {
+        crate::fit::VMethod::Interpolate => format!("degree {p}/{q} interpolating"),
+        crate::fit::VMethod::LeastSquares { control_rows } => {
+            format!("degree {p}/{q} (least squares across the lines, {control_rows} control rows)")
+        }
+    };
     let bac_options = ModelBacOptions {
         curves: options.curves,
         levels: options.levels,
         samples_per_curve: None,
     };
-    let curves = model_bearing_curves(&fit.surface, &bac_options)
-        .map_err(metrology(format!("{input}: model bearing curves")))?;
+    let curves = match model_bearing_curves(&fit.surface, &bac_options) {
+        Ok(c) => Some(c),
+        Err(e) => {
+            fails.push(failed(
+                "surface.bac_curves",
+                if folds {
+                    format!("the model folds (x runs backwards along its iso-curves, see model_checks), so its profile curves have no bearing area curve: {e}")
+                } else {
+                    format!("the model's bearing area curves: {e}")
+                },
+            ));
+            None
+        }
+    };
     let model_cols = 2 * cols - 1;
-    let heights = sample_model_grid(
+    if folds {
+        // Over a fold the surface has several heights at one x: no grid of heights describes
+        // it, whichever branch an inversion of x(u) would pick.
+        let reason = "the model folds (x runs backwards along its iso-curves, see model_checks), so it is not a height map: no model.x3p and no areal parameters of the model".to_string();
+        fails.push(failed("surface", reason.clone()));
+        return ModelSection {
+            surface: Err(reason),
+            sampled: None,
+            checks: Some(checks),
+            failed: fails,
+        };
+    }
+    let heights = match sample_model_grid(
         &fit.surface,
         &fit.params_v,
         0.0,
         pitch_x_mm / 2.0,
         model_cols,
-    )
-    .map_err(metrology(format!("{input}: sampling the model")))?;
+    ) {
+        Ok(h) => h,
+        Err(e) => {
+            let reason = if folds {
+                format!("the model folds (see model_checks), so it is not a height map and cannot be sampled on a grid (no model.x3p, no areal parameters of the model): {e}")
+            } else {
+                format!("sampling the model on the data lines: {e}")
+            };
+            fails.push(failed("surface", reason.clone()));
+            return ModelSection {
+                surface: Err(reason),
+                sampled: None,
+                checks: Some(checks),
+                failed: fails,
+            };
+        }
+    };
     let g = Grid {
         heights_um: &heights,
         rows,
@@ -81,23 +151,30 @@ pub fn characterise(
         &g,
         options.levels,
         format!(
-            "the degree {p}/{q} interpolating NURBS surface sampled on the data lines (their v) at half the x pitch ({model_cols} points per line, x(u) inverted numerically), then levelled and evaluated as surface_grid"
+            "the {what} NURBS surface sampled on the data lines (their v) at half the x pitch ({model_cols} points per line, x(u) inverted numerically), then levelled and evaluated as surface_grid"
         ),
     )
     .map(|mut s| {
-        s.bac_curves_recipe = Some(format!(
-            "paper Appendix A: {} iso-curves along x of the degree {p}/{q} interpolating surface at equally spaced v, each sampled at 8 points per control point along u, referenced to its x-weighted mean line, {} equal levels, crossings linear along x",
-            options.curves, options.levels
-        ));
-        s.bac_curves = Some(curves);
+        if let Some(curves) = curves {
+            s.bac_curves_recipe = Some(format!(
+                "paper Appendix A: {} iso-curves along x of the {what} surface at equally spaced v, each sampled at 8 points per control point along u, referenced to its x-weighted mean line, {} equal levels, crossings linear along x",
+                options.curves, options.levels
+            ));
+            s.bac_curves = Some(curves);
+        }
         s
     });
-    Ok(ModelSection {
+    if let Err(e) = &surface {
+        fails.push(failed("surface", e.clone()));
+    }
+    ModelSection {
         surface,
         sampled: Some(SampledModel {
             heights_um: heights,
             cols: model_cols,
             pitch_x_mm: pitch_x_mm / 2.0,
         }),
-    })
+        checks: Some(checks),
+        failed: fails,
+    }
 }

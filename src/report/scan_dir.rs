@@ -15,8 +15,10 @@ use super::document::{Completeness, ScanStatus, Traceability};
 use super::error::ReportError;
 use super::grid::LineGrid;
 use super::{characterise, ScanOutputs};
-use crate::fit::{fit_grid, max_residual_mm, FitOptions, FitResult};
+use crate::fit::{max_residual_mm, FitOptions, MethodError};
 use crate::metrology::params::Options;
+use crate::metrology::surface_model::{fit_model, FittedModel, ModelRecipe};
+use crate::numfmt::line_label;
 use crate::profile::{FilterKind, ProfileKind};
 use crate::scan::faults::NoFaults;
 use crate::scan::journal::{
@@ -78,6 +80,38 @@ pub fn scan_degrees(
         degree_v: degree_v
             .or(start.map(|s| s.plan.degree_v))
             .unwrap_or(paper.degree_v),
+    }
+}
+
+/// How to fit a scan's `lines`: degrees by [`scan_degrees`], the method across the lines and
+/// the spike replacement as `options` ask, else as the scan's frozen plan says, else the
+/// paper (interpolation, data as measured). Replaced spikes are found with `options.spikes`
+/// (the plan's own rule when the plan asks for the replacement and `options` do not say).
+pub fn scan_recipe(
+    options: &ScanAnalysisOptions,
+    start: Option<&StartRecord>,
+    lines: &[StoredLine],
+) -> ModelRecipe {
+    let degrees = scan_degrees(options.degree_u, options.degree_v, start);
+    let plan = start.map(|s| s.plan);
+    let method = options
+        .v_method
+        .or(plan.map(|p| p.v_method))
+        .unwrap_or_default();
+    let replace_spikes = match options.replace_spikes {
+        Some(true) => Some(options.spikes),
+        Some(false) => None,
+        None => plan.and_then(|p| p.replace_spikes),
+    };
+    let lambda_c_mm = lines.first().and_then(|l| {
+        let (o, _, _) = scan_line_options(l, options);
+        o.apply_lambda_c.then_some(o.lambda_c_mm)
+    });
+    ModelRecipe {
+        degrees,
+        method,
+        replace_spikes,
+        lambda_c_mm,
     }
 }
 
@@ -159,8 +193,10 @@ pub fn characterise_scan_lines(
 ) -> Result<ScanOutputs, ReportError> {
     let grid = LineGrid::of_scan(lines, &dir.join("lines"))?;
     if !incomplete.is_empty() {
+        let labels: Vec<String> = incomplete.iter().map(|&i| line_label(i)).collect();
         warnings.push(format!(
-            "lines {incomplete:?} have only one of their two files in {} and were left out",
+            "lines {} have only one of their two files in {} and were left out",
+            labels.join(", "),
             dir.join("lines").display()
         ));
     }
@@ -175,7 +211,10 @@ pub fn characterise_scan_lines(
     {
         warnings.push(format!(
             "line {} was traced under other conditions than line {}; every line is evaluated as line {} ({})",
-            l.meta.index, first.meta.index, first.meta.index, filter_reason
+            line_label(l.meta.index),
+            line_label(first.meta.index),
+            line_label(first.meta.index),
+            filter_reason
         ));
     }
     let lines_used: Vec<u32> = grid.index.clone();
@@ -212,18 +251,27 @@ pub fn characterise_scan_lines(
             ));
         }
     }
+    // A complete scan finished when its last line was read out (the runner writing its
+    // outputs and `analyze` reading the directory afterwards give the same time); one that
+    // stopped otherwise, when its stop record says.
+    let last_line = lines.iter().map(|l| l.meta.finished_at).max();
+    let finished_at = facts.and_then(|f| match f.stop {
+        Some(s) if s.status != StopStatus::Success => Some(s.time),
+        Some(s) => last_line.or(Some(s.time)),
+        None if f.completing => last_line,
+        None => None,
+    });
     let ctx = ReportContext {
         input: dir.display().to_string(),
         kind: "scan",
         line_options,
         lambda_c_source,
         filter_reason,
-        traceability: facts.map(|f| Traceability::from(f.start)),
+        traceability: facts.map(|f| Traceability::of_scan(f.start, finished_at)),
         scan,
         fit,
         options: options.clone(),
         warnings,
-        finished_at: facts.filter(|f| f.completing).map(|_| chrono::Utc::now()),
     };
     let out = options.out_dir.clone().unwrap_or_else(|| dir.to_path_buf());
     let mut outputs = characterise(&grid, model, ctx, &out)?;
@@ -231,25 +279,23 @@ pub fn characterise_scan_lines(
     Ok(outputs)
 }
 
-/// Fits `grid` with `degrees` and summarises the fit (no IGES written).
+/// Fits `grid` as `recipe` says and summarises the fit (no IGES written).
 pub fn fit_for_report(
     grid: &LineGrid,
-    degrees: FitOptions,
-) -> (
-    Result<FitResult, crate::fit::FitError>,
-    Option<FitSummary>,
-    f64,
-) {
+    recipe: &ModelRecipe,
+) -> (Result<FittedModel, MethodError>, Option<FitSummary>, f64) {
     let t = Instant::now();
-    let fit = fit_grid(
-        grid.pitch_x_mm,
-        &grid.y_mm,
+    let fit = fit_model(
         &grid.heights_um,
         grid.cols,
-        degrees,
+        &grid.index,
+        grid.pitch_x_mm,
+        &grid.y_mm,
+        recipe,
     );
     let fit_s = t.elapsed().as_secs_f64();
-    let summary = fit.as_ref().ok().map(|f| {
+    let summary = fit.as_ref().ok().map(|m| {
+        let f = &m.fit;
         let residual = max_residual_mm(f, grid.pitch_x_mm, &grid.y_mm, &grid.heights_um, grid.cols);
         FitSummary::new(
             f,
@@ -285,13 +331,9 @@ pub fn characterise_scan(
             None
         }
     };
-    let degrees = scan_degrees(
-        options.degree_u,
-        options.degree_v,
-        state.as_ref().map(|s| &s.start),
-    );
+    let recipe = scan_recipe(options, state.as_ref().map(|s| &s.start), &lines);
     let grid = LineGrid::of_scan(&lines, &dir.join("lines"))?;
-    let (fit, summary, fit_s) = fit_for_report(&grid, degrees);
+    let (fitted, summary, fit_s) = fit_for_report(&grid, &recipe);
     drop(grid);
     let journal_lines: Vec<u32> = state
         .as_ref()
@@ -304,8 +346,9 @@ pub fn characterise_scan(
         completing: false,
     });
     let model = Model {
-        degrees,
-        fit: fit.as_ref(),
+        recipe,
+        fit: fitted.as_ref().map(|m| &m.fit),
+        replaced: fitted.as_ref().map_or(&[][..], |m| &m.replaced[..]),
     };
     let load_s = t.elapsed().as_secs_f64() - fit_s;
     let mut outputs = characterise_scan_lines(
@@ -344,8 +387,9 @@ impl Characterise for ScanCharacteriser {
             completing: true,
         };
         let model = Model {
-            degrees: scan.degrees,
+            recipe: scan.recipe,
             fit: Ok(scan.fit),
+            replaced: scan.replaced,
         };
         let out = characterise_scan_lines(
             scan.dir,
@@ -357,6 +401,8 @@ impl Characterise for ScanCharacteriser {
             &self.options,
             Vec::new(),
         )?;
+        let complete = out.complete();
+        let verdict = out.verdict_line();
         let mut files = vec![out.report_html, out.summary_csv];
         files.extend(out.plots);
         files.extend(out.measured_x3p);
@@ -364,6 +410,8 @@ impl Characterise for ScanCharacteriser {
         Ok(Characterised {
             files,
             warnings: out.warnings,
+            complete,
+            verdict,
         })
     }
 }

@@ -14,8 +14,12 @@ use super::plan::Plan;
 use super::surface_files::{write_surface_files, SurfaceWriteError, WrittenIges};
 use super::traceability::{traceability_json, traceability_lines};
 use crate::atomic::write_atomically;
-use crate::fit::{max_residual_mm, FitError, FitOptions, FitResult, IncrementalFitter};
+use crate::fit::{
+    max_residual_mm, FitError, FitOptions, FitResult, IncrementalFitter, MethodError,
+};
 use crate::iges::IgesOptions;
+use crate::metrology::outliers::LineSpike;
+use crate::metrology::surface_model::{fit_model, ModelRecipe};
 use crate::nurbs::NurbsSurface;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -133,8 +137,11 @@ pub struct CompletedScan<'a> {
     pub lines: &'a [StoredLine],
     /// The surface written to `surface.igs`, with its data parameters.
     pub fit: &'a FitResult,
-    /// The degrees of that surface (the plan's), which the hold-out refits use too.
-    pub degrees: FitOptions,
+    /// How that surface was made (the plan's degrees, method across the lines and spike
+    /// replacement), which the hold-out refits follow too.
+    pub recipe: ModelRecipe,
+    /// The spikes replaced before fitting (empty unless the plan asks for it).
+    pub replaced: &'a [LineSpike],
     /// The fit summary for the report.
     pub summary: &'a FitSummary,
 }
@@ -146,6 +153,11 @@ pub struct Characterised {
     pub files: Vec<PathBuf>,
     /// What was left out or approximated, for the operator.
     pub warnings: Vec<String>,
+    /// Every section was made (`false`: report.json's `characterisation` names the failed
+    /// ones).
+    pub complete: bool,
+    /// The verdict on the surface between lines in one line, or why there is none.
+    pub verdict: String,
 }
 
 /// The characterisation of a completed scan, supplied by the composition layer: it writes
@@ -170,6 +182,11 @@ pub struct Outputs {
     /// Why the characterisation could not be made, when it could not (the report then
     /// holds the fit and the instrument's own results only).
     pub characterisation_error: Option<String>,
+    /// The characterisation was made and every section of it (`false` when it failed or
+    /// some section failed).
+    pub characterisation_complete: bool,
+    /// The verdict on the surface between lines in one line, or why there is none.
+    pub verdict: String,
     /// Largest distance between the surface and a measured point, mm.
     pub max_residual_mm: f64,
 }
@@ -180,6 +197,9 @@ pub enum OutputsError {
     /// The lines cannot be interpolated.
     #[error("fit: {0}")]
     Fit(#[from] FitError),
+    /// The lines cannot be fitted with the plan's method across the lines.
+    #[error("fit: {0}")]
+    Method(#[from] MethodError),
     /// The IGES file(s) cannot be written.
     #[error(transparent)]
     Iges(#[from] SurfaceWriteError),
@@ -205,6 +225,24 @@ impl OutputsError {
 }
 
 /// The heights of `lines` as one row-major grid (µm) and their y (mm).
+/// How the plan says the surface is made; the spike rule judges the roughness profile the
+/// lines are evaluated on (λc-filtered when they are primary profiles).
+pub fn recipe_of(plan: &Plan, lines: &[StoredLine]) -> ModelRecipe {
+    let lambda_c_mm = lines.first().and_then(|l| {
+        let o = crate::metrology::params::Options::from_profile(&l.profile);
+        o.apply_lambda_c.then_some(o.lambda_c_mm)
+    });
+    ModelRecipe {
+        degrees: FitOptions {
+            degree_u: plan.degree_u,
+            degree_v: plan.degree_v,
+        },
+        method: plan.v_method,
+        replace_spikes: plan.replace_spikes,
+        lambda_c_mm,
+    }
+}
+
 fn grid_of(lines: &[StoredLine]) -> (Vec<f64>, Vec<f64>, usize) {
     let cols = lines.first().map_or(0, |l| l.profile.len());
     let mut z = Vec::with_capacity(lines.len() * cols);
@@ -226,10 +264,20 @@ pub fn write_outputs(
     characterise: Option<&dyn Characterise>,
 ) -> Result<Outputs, OutputsError> {
     let t_fit = Instant::now();
-    let fit = fitter.finish()?;
-    let finish_s = t_fit.elapsed().as_secs_f64();
     let (z, y, cols) = grid_of(lines);
     let pitch_x_mm = lines.first().map_or(f64::NAN, |l| l.profile.pitch_x_mm);
+    let recipe = recipe_of(plan, lines);
+    // The paper's surface is the incremental fitter's; anything else is fitted here from the
+    // lines as committed.
+    let (fit, replaced) = if recipe.is_paper() {
+        (fitter.finish()?, Vec::new())
+    } else {
+        drop(fitter);
+        let index: Vec<u32> = lines.iter().map(|l| l.meta.index).collect();
+        let m = fit_model(&z, cols, &index, pitch_x_mm, &y, &recipe)?;
+        (m.fit, m.replaced)
+    };
+    let finish_s = t_fit.elapsed().as_secs_f64();
     let residual = if lines.is_empty() {
         f64::NAN
     } else {
@@ -237,8 +285,10 @@ pub fn write_outputs(
     };
     drop(z);
     let iges_path = dir.join("surface.igs");
+    let mut start_lines = traceability_lines(start, plan);
+    start_lines.extend(recipe.start_lines(&replaced));
     let opts = IgesOptions {
-        start_lines: traceability_lines(start, plan),
+        start_lines,
         timestamp: chrono::Utc::now().naive_utc(),
         ..IgesOptions::default()
     };
@@ -265,10 +315,8 @@ pub fn write_outputs(
             start,
             lines,
             fit: &fit,
-            degrees: FitOptions {
-                degree_u: plan.degree_u,
-                degree_v: plan.degree_v,
-            },
+            recipe,
+            replaced: &replaced,
             summary: &summary,
         };
         match ch.characterise(&scan) {
@@ -281,6 +329,8 @@ pub fn write_outputs(
                     report: report_path,
                     files: done.files,
                     characterisation_error: None,
+                    characterisation_complete: done.complete,
+                    verdict: done.verdict,
                     max_residual_mm: residual,
                 });
             }
@@ -307,6 +357,11 @@ pub fn write_outputs(
         "software": start.software_version,
         "traceability": traceability_json(start),
         "fit": summary,
+        "model": {
+            "description": recipe.describe(),
+            "v_method": recipe.method,
+            "spikes_replaced": replaced,
+        },
         "lines": line_json,
         "characterisation_error": characterisation_error,
     });
@@ -322,7 +377,14 @@ pub fn write_outputs(
         iges: iges_files,
         report: report_path,
         files: Vec::new(),
+        verdict: format!(
+            "no verdict on the model between lines: {}",
+            characterisation_error
+                .as_deref()
+                .unwrap_or("no characterisation was run")
+        ),
         characterisation_error,
+        characterisation_complete: false,
         max_residual_mm: residual,
     })
 }

@@ -1,14 +1,17 @@
 //! The plan of a scan: the lines to trace and the surface to fit, frozen in the journal's
 //! start record so that a resumed scan follows it even when the configuration was edited.
 //!
-//! Layer 0 (vocabulary): depends on [`crate::units`] only.
+//! Layer 0 (vocabulary): depends on [`crate::units`], and on the two value types that say
+//! how the surface is made ([`crate::fit::VMethod`], [`crate::metrology::outliers::SpikeOptions`]).
 
+use crate::fit::VMethod;
+use crate::metrology::outliers::SpikeOptions;
 use crate::units::Nm;
 use serde::{Deserialize, Serialize};
 
 /// The plan of a scan as frozen in its start record: what a resumed scan follows even
 /// when the configuration was edited since.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Plan {
     /// Number of lines.
@@ -23,6 +26,14 @@ pub struct Plan {
     pub degree_v: usize,
     /// Attempts per line.
     pub max_line_attempts: u32,
+    /// How the surface is made across the lines (journals written before the key existed
+    /// read as the paper's interpolation).
+    #[serde(default)]
+    pub v_method: VMethod,
+    /// Replace the spikes this rule finds before fitting (`None`, the default and what older
+    /// journals read as: fit the data as measured).
+    #[serde(default)]
+    pub replace_spikes: Option<SpikeOptions>,
 }
 
 impl Plan {

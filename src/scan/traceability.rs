@@ -11,8 +11,16 @@ pub fn traceability_lines(start: &StartRecord, plan: &Plan) -> Vec<String> {
     let c = &start.conditions;
     vec![
         format!(
-            "Surface fitted by {} (global B-spline interpolation, p={}, q={}); units mm.",
-            start.software_version, plan.degree_u, plan.degree_v
+            "Surface fitted by {} ({}, p={}, q={}); units mm.",
+            start.software_version,
+            match plan.v_method {
+                crate::fit::VMethod::Interpolate => "global B-spline interpolation".to_string(),
+                crate::fit::VMethod::LeastSquares { control_rows } => format!(
+                    "B-spline interpolation along x, least squares across the lines with {control_rows} control rows"
+                ),
+            },
+            plan.degree_u,
+            plan.degree_v
         ),
         format!(
             "Scan {}: specimen {:?}, operator {:?}, notes {:?}.",

@@ -190,7 +190,24 @@ async fn bytes_without_line_ends_for_a_window_suspend_the_scan_which_then_comple
 async fn a_flood_of_stray_replies_for_a_window_suspends_the_scan_which_then_completes() {
     let fault = "flood:4000@CTSTA#3";
     let (notes, took) = scan_through(fault).await;
-    assert_suspended_on_line_3(fault, &notes);
+    // Strays that arrive between exchanges are set aside before the next command, so which
+    // line the flood first breaks (a stray inside an exchange) depends on timing: line 3 at
+    // the earliest.
+    assert!(
+        notes
+            .iter()
+            .any(|r| r.starts_with("suspended: instrument busy since")),
+        "{fault}: {notes:?}"
+    );
+    let recovered: Vec<u32> = notes
+        .iter()
+        .filter(|r| r.ends_with("scan continues"))
+        .filter_map(|r| r.strip_prefix("line ")?.split(' ').next()?.parse().ok())
+        .collect();
+    assert!(
+        !recovered.is_empty() && recovered.iter().all(|&k| k >= 3),
+        "{fault}: {notes:?}"
+    );
     assert!(took >= Duration::from_secs(4), "{took:?}");
 }
 

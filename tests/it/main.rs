@@ -26,6 +26,7 @@ mod metrology_profile;
 mod metrology_reference;
 mod metrology_x3p;
 mod model_honesty;
+mod model_report;
 mod scan_dir_analysis;
 mod scan_e2e;
 mod scan_runner;

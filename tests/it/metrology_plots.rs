@@ -165,7 +165,7 @@ fn every_plot_is_png_and_svg_in_iso_words_with_a_key_for_every_colour() {
     .unwrap();
     assert_nothing_at_the_edge(&png);
     let text = std::fs::read_to_string(&svg).unwrap();
-    assert!(text.contains("model − measured (µm)"), "{}", svg.display());
+    assert!(text.contains("model − data (µm)"), "{}", svg.display());
     assert!(text.contains("lower panel: model − measured"));
 
     let a = analyze_line(&z[..COLS], PX, &Options::default()).unwrap();

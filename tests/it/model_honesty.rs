@@ -89,14 +89,15 @@ fn verdict(z: &[f64], method: VMethod) -> surfscan::metrology::holdout::BetweenL
 #[test]
 fn a_smooth_sine_grid_is_supported_between_lines() {
     let z = sine_grid();
-    for method in [
-        VMethod::Interpolate,
-        VMethod::LeastSquares { control_rows: 12 },
+    // The interpolant predicts the sine between lines to a tiny fraction of its height; the
+    // least-squares refit (12 control rows scaled to the 16 lines kept: 6) less closely.
+    for (method, within) in [
+        (VMethod::Interpolate, 0.01),
+        (VMethod::LeastSquares { control_rows: 12 }, 0.1),
     ] {
         let b = verdict(&z, method);
         assert!(b.supported, "{}", b.verdict);
-        // The sine between lines is predicted to a small fraction of its height.
-        assert!(b.rms_over_sq < 0.05, "{}", b.verdict);
+        assert!(b.rms_over_sq < within, "{}", b.verdict);
         assert_eq!(b.lines.len(), 15);
         assert!(
             b.short()

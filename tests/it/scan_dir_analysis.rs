@@ -84,6 +84,8 @@ fn plan(lines: u32) -> Plan {
         degree_u: 5,
         degree_v: 5,
         max_line_attempts: 3,
+        v_method: Default::default(),
+        replace_spikes: None,
     }
 }
 
@@ -174,7 +176,8 @@ fn build_scan(
             ],
             readout_warnings: Vec::new(),
             started_at: start,
-            finished_at: start,
+            // One line read out every 7.5 minutes.
+            finished_at: start + chrono::Duration::seconds(450 * (r as i64 + 1)),
             attempt: 1,
         };
         store.commit_line(&mut journal, &meta, &profile).unwrap();
@@ -482,7 +485,7 @@ fn partial_scan_is_analysed_with_the_lines_it_has_and_names_the_incomplete_one()
     ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        stderr.contains("warning") && stderr.contains("[4]"),
+        stderr.contains("warning") && stderr.contains("lines 5 (0004)"),
         "{stderr}"
     );
     let r = report(&tmp.path().join("out"));
@@ -501,7 +504,7 @@ fn partial_scan_is_analysed_with_the_lines_it_has_and_names_the_incomplete_one()
         .as_array()
         .unwrap()
         .iter()
-        .any(|w| w.as_str().unwrap().contains("[4]")));
+        .any(|w| w.as_str().unwrap().contains("lines 5 (0004)")));
     // Line 5 keeps its own y although line 4 is missing.
     assert!(
         (r["lines"][4]["y_mm"].as_f64().unwrap() - 5.0 * STEP_Y_NM as f64 * 1e-6).abs() < 1e-15
@@ -714,7 +717,7 @@ fn characterise_scan_reports_the_fit_it_describes_and_returns_the_paths() {
         curves: 5,
         levels: 21,
         lambda_c_mm: Some(0.25),
-        overlay_line: Some(6),
+        overlay_line: Some(5),
         degree_v: Some(3),
         ..ScanAnalysisOptions::default()
     };
@@ -764,11 +767,12 @@ fn characterise_scan_reports_the_fit_it_describes_and_returns_the_paths() {
     .unwrap()
     .params;
     assert!((r["lines"][3]["Rq_um"].as_f64().unwrap() - ours.rq_um).abs() < 1e-12);
+    // The overlay draws the requested line left out of a refit, against its measured heights.
     let overlay = std::fs::read_to_string(scan.join("overlay.svg")).unwrap();
-    // Index 6 is the 7th line: people count from 1, the file index is beside it.
+    // Index 5 is the 6th line: people count from 1, the file index is beside it.
     assert!(
-        overlay.contains("Line 7 (0006, "),
-        "overlay does not draw index 6"
+        overlay.contains("Line 6 (0005, ") && overlay.contains("left out"),
+        "overlay does not draw index 5 left out"
     );
 }
 
@@ -813,6 +817,20 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
         .unwrap();
     drop(journal);
     run_ok(&["analyze", scan.to_str().unwrap()]);
+    // report.json carries the finish and the duration too: a complete scan finished when its
+    // 8th line was read out (09:15:00 + 8 × 7.5 min = 10:15:00), not when its stop record was
+    // written after the outputs (10:17:30).
+    let r = report(&scan);
+    // The recipe names the spike rule, what was done with the spikes and the verdict's threshold.
+    assert!(r["recipe"]["spike_rule"]
+        .as_str()
+        .unwrap()
+        .contains("10 x 1.4826 x MAD"));
+    assert_eq!(r["recipe"]["outliers"], "flag");
+    assert_eq!(r["recipe"]["holdout_threshold_sq"], 0.5);
+    let t = &r["traceability"];
+    assert_eq!(t["finished_at"], "2026-11-30T10:15:00+00:00");
+    assert_eq!(t["duration_s"].as_f64(), Some(3600.0));
     let page = scan.join("report.html");
     let html = std::fs::read_to_string(&page).unwrap();
     // Warnings first, numbers for people, the journal's events and the traceability.
@@ -829,7 +847,7 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
     );
     assert!(html.contains("SUR-2 brass &lt;B&amp;S&gt; #7"));
     assert!(
-        html.contains("<td class=\"t\">1 h 02 min</td>"),
+        html.contains("<td class=\"t\">1 h 00 min</td>"),
         "duration from the journal"
     );
     assert!(!html.contains("<script"), "the report runs no script");

@@ -67,6 +67,8 @@ fn start_record(id: &ScanId, lines: u32) -> StartRecord {
             degree_u: 5,
             degree_v: 5,
             max_line_attempts: 3,
+            v_method: Default::default(),
+            replace_spikes: None,
         },
         config: serde_json::json!({"scan": {"lines": lines}}),
         config_hash: "ab".repeat(32),

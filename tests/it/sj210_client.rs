@@ -648,3 +648,45 @@ async fn a_table_error_after_the_command_worked_is_a_stray_reply_not_a_wrong_tab
         finish(c, h, 1).await;
     }
 }
+
+/// A stray or late reply that arrives between two commands (the flood of a confused device, a
+/// reply later than its timeout) waits in the port's buffer, not yet read: it must be set
+/// aside before the next command, or that command takes it for its answer and every later
+/// answer on the link is shifted by one.
+#[tokio::test(start_paused = true)]
+async fn a_stray_reply_between_commands_is_not_taken_as_the_next_answer() {
+    let (io, mut dev) = tokio::io::duplex(4096);
+    let device = tokio::spawn(async move {
+        let mut seen = Vec::new();
+        let mut line = Vec::new();
+        let mut b = [0u8; 1];
+        while let Ok(1) = dev.read(&mut b).await {
+            if b[0] != b'\r' {
+                line.push(b[0]);
+                continue;
+            }
+            let cmd = String::from_utf8_lossy(&line).to_string();
+            line.clear();
+            match cmd.as_str() {
+                "RDCON" => {
+                    dev.write_all(b"OK3120504.0012\r").await.unwrap();
+                    if seen.is_empty() {
+                        // Then, unasked, once the host has its answer: a status reply.
+                        tokio::time::sleep(Duration::from_millis(200)).await;
+                        dev.write_all(b"OK000\r").await.unwrap();
+                    }
+                }
+                other => panic!("unexpected command {other:?}"),
+            }
+            seen.push(cmd);
+        }
+        seen
+    });
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let first = c.conditions().await.unwrap();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let second = c.conditions().await.unwrap();
+    assert_eq!(first, second);
+    drop(c);
+    assert_eq!(device.await.unwrap(), ["RDCON", "RDCON"]);
+}

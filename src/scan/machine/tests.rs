@@ -15,6 +15,8 @@ fn plan() -> Plan {
         degree_u: 3,
         degree_v: 2,
         max_line_attempts: 3,
+        v_method: Default::default(),
+        replace_spikes: None,
     }
 }
 

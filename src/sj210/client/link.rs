@@ -20,6 +20,7 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             tracing::info!("the previous command was cancelled before its reply; draining the link before {command:?}");
             self.drain().await;
         }
+        self.take_pending().await;
         if !self.buf.is_empty() {
             tracing::warn!(stale = %escape_bytes(&self.buf), "discarding unsolicited bytes before {command:?}");
             self.buf.clear();
@@ -88,6 +89,22 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         }
         self.buf.clear();
         self.codec.reset();
+    }
+
+    /// Moves the bytes that arrived since the last exchange (a reply later than its timeout, a
+    /// stray line) from the port into `buf` without waiting. They sit in the port's buffer, not
+    /// yet read; left there, the next command would take the first of them for its own answer
+    /// and every later answer on the link would be shifted by one.
+    async fn take_pending(&mut self) {
+        use futures::FutureExt;
+        let mut chunk = [0u8; 512];
+        // Bounded, so a device that never stops talking cannot hold the command back forever.
+        for _ in 0..64 {
+            match self.io.read(&mut chunk).now_or_never() {
+                Some(Ok(n)) if n > 0 => self.buf.extend_from_slice(&chunk[..n]),
+                _ => break,
+            }
+        }
     }
 
     /// After a timeout or malformed reply: drain what is still arriving, forget partial

@@ -1,0 +1,102 @@
+//! Section: the spikes of every line ([`crate::metrology::outliers`]), named in `outliers`
+//! and in the warnings with line, x and height. By default the data stay as measured; when
+//! characterisation excludes them, the per-line and measured-grid parameters (and the
+//! hold-out) use a copy of the grid with each spike bridged by the straight line between its
+//! neighbours, and the files of the data (`measured.x3p`, the height map) stay as traced.
+//!
+//! Layer 4 (reporting): depends on [`crate::metrology::outliers`] and [`crate::numfmt`].
+
+use super::context::ReportContext;
+use super::document::{LineNotJudged, OutliersReport};
+use super::grid::LineGrid;
+use crate::metrology::outliers::{bridged_grid, find_grid_spikes, LineSpike};
+use crate::numfmt::{fmt, line_label, sig, Quantity};
+
+/// At most this many spikes are listed one by one in the warnings (all are in the report).
+const LISTED: usize = 20;
+
+/// Finds the spikes of `grid`'s lines on the roughness profile the lines are evaluated on
+/// (the λc roughness when the lines are filtered, else the heights minus their line).
+pub fn characterise(grid: &LineGrid, ctx: &ReportContext) -> OutliersReport {
+    let o = &ctx.line_options;
+    let lambda_c = o.apply_lambda_c.then_some(o.lambda_c_mm);
+    let rule = &ctx.options.spikes;
+    let (spikes, failed) = find_grid_spikes(
+        &grid.heights_um,
+        grid.cols,
+        &grid.index,
+        grid.pitch_x_mm,
+        lambda_c,
+        rule,
+    );
+    OutliersReport {
+        rule: rule.describe(),
+        policy: if ctx.options.exclude_spikes {
+            "exclude"
+        } else {
+            "flag"
+        },
+        spikes,
+        lines_not_judged: failed
+            .into_iter()
+            .map(|(line, reason)| LineNotJudged { line, reason })
+            .collect(),
+    }
+}
+
+/// The warnings: every spike (the first [`LISTED`], then a count) with its line (1-based,
+/// the file index beside it), x and height, what was done with them, and the lines that could
+/// not be judged. `pitch_x_mm` places the points of a spike along x.
+pub fn warn(
+    o: &OutliersReport,
+    replaced: &[LineSpike],
+    pitch_x_mm: f64,
+    warnings: &mut Vec<String>,
+) {
+    let px = pitch_x_mm;
+    for s in o.spikes.iter().take(LISTED) {
+        warnings.push(format!(
+            "spike in line {} at x = {} mm: height {} µm, {} robust σ from the line's median roughness ({} point(s), x = {} … {} mm); {}",
+            line_label(s.line),
+            fmt(s.spike.x_mm, Quantity::PositionMm),
+            fmt(s.spike.height_um, Quantity::HeightUm),
+            sig(s.spike.deviation_sigma, 3),
+            s.spike.last - s.spike.first + 1,
+            fmt(s.spike.first as f64 * px, Quantity::PositionMm),
+            fmt(s.spike.last as f64 * px, Quantity::PositionMm),
+            match o.policy {
+                "exclude" => "left out of the per-line and measured-grid parameters (bridged)",
+                _ => "flagged only, the data stay as measured",
+            }
+        ));
+    }
+    if o.spikes.len() > LISTED {
+        warnings.push(format!(
+            "{} more spikes (report.json's outliers lists all {})",
+            o.spikes.len() - LISTED,
+            o.spikes.len()
+        ));
+    }
+    if !replaced.is_empty() {
+        warnings.push(format!(
+            "{} spike(s) were replaced by the straight line between their neighbours before fitting, as asked for; the IGES Start section and report.json's model name them",
+            replaced.len()
+        ));
+    }
+    for l in &o.lines_not_judged {
+        warnings.push(format!(
+            "line {} could not be checked for spikes: {}",
+            line_label(l.line),
+            l.reason
+        ));
+    }
+}
+
+/// A copy of `grid` with `spikes` bridged.
+pub fn bridged(grid: &LineGrid, spikes: &[LineSpike]) -> LineGrid {
+    let (heights_um, _) = bridged_grid(&grid.heights_um, grid.cols, &grid.index, spikes);
+    LineGrid {
+        heights_um,
+        ..grid.clone()
+    }
+}
