@@ -56,6 +56,35 @@ fn device(script: Vec<Step>) -> (DuplexStream, JoinHandle<Result<usize, String>>
     (host, h)
 }
 
+/// A device that answers each command (without CR) by `respond(command, commands seen
+/// before)`: writes to send in order, each after its delay. Its task returns the commands it
+/// saw once the link closes.
+fn responder(
+    mut respond: impl FnMut(&str, usize) -> Vec<(Duration, &'static [u8])> + Send + 'static,
+) -> (DuplexStream, JoinHandle<Vec<String>>) {
+    let (io, mut dev) = tokio::io::duplex(4096);
+    let device = tokio::spawn(async move {
+        let mut seen = Vec::new();
+        let mut line = Vec::new();
+        let mut b = [0u8; 1];
+        while let Ok(1) = dev.read(&mut b).await {
+            if b[0] != b'\r' {
+                line.push(b[0]);
+                continue;
+            }
+            let cmd = String::from_utf8_lossy(&line).to_string();
+            line.clear();
+            for (delay, bytes) in respond(&cmd, seen.len()) {
+                tokio::time::sleep(delay).await;
+                dev.write_all(bytes).await.unwrap();
+            }
+            seen.push(cmd);
+        }
+        seen
+    });
+    (io, device)
+}
+
 fn opts() -> ClientOptions {
     ClientOptions {
         first_byte: Duration::from_millis(2000),
@@ -572,30 +601,11 @@ async fn trace_refuses_to_start_unless_idle() {
 /// shutdown cancels it) must not leave that reply to be taken as the next command's answer.
 #[tokio::test(start_paused = true)]
 async fn a_reply_to_a_cancelled_command_is_not_taken_as_the_next_answer() {
-    let (io, mut dev) = tokio::io::duplex(4096);
-    let device = tokio::spawn(async move {
-        let mut seen = Vec::new();
-        let mut line = Vec::new();
-        let mut b = [0u8; 1];
-        while let Ok(1) = dev.read(&mut b).await {
-            if b[0] != b'\r' {
-                line.push(b[0]);
-                continue;
-            }
-            let cmd = String::from_utf8_lossy(&line).to_string();
-            line.clear();
-            match cmd.as_str() {
-                // Slow: the host gives up waiting before this arrives.
-                "RDSTU00" => {
-                    tokio::time::sleep(Duration::from_millis(500)).await;
-                    dev.write_all(b"OK001\r").await.unwrap();
-                }
-                "RDSJ 01" => dev.write_all(b"OKV1.00\r").await.unwrap(),
-                other => panic!("unexpected command {other:?}"),
-            }
-            seen.push(cmd);
-        }
-        seen
+    let (io, device) = responder(|cmd, _| match cmd {
+        // Slow: the host gives up waiting before this arrives.
+        "RDSTU00" => vec![(Duration::from_millis(500), b"OK001\r")],
+        "RDSJ 01" => vec![(Duration::ZERO, b"OKV1.00\r")],
+        other => panic!("unexpected command {other:?}"),
     });
     let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
     let cancelled = tokio::time::timeout(Duration::from_millis(100), c.status()).await;
@@ -655,32 +665,14 @@ async fn a_table_error_after_the_command_worked_is_a_stray_reply_not_a_wrong_tab
 /// answer on the link is shifted by one.
 #[tokio::test(start_paused = true)]
 async fn a_stray_reply_between_commands_is_not_taken_as_the_next_answer() {
-    let (io, mut dev) = tokio::io::duplex(4096);
-    let device = tokio::spawn(async move {
-        let mut seen = Vec::new();
-        let mut line = Vec::new();
-        let mut b = [0u8; 1];
-        while let Ok(1) = dev.read(&mut b).await {
-            if b[0] != b'\r' {
-                line.push(b[0]);
-                continue;
-            }
-            let cmd = String::from_utf8_lossy(&line).to_string();
-            line.clear();
-            match cmd.as_str() {
-                "RDCON" => {
-                    dev.write_all(b"OK3120504.0012\r").await.unwrap();
-                    if seen.is_empty() {
-                        // Then, unasked, once the host has its answer: a status reply.
-                        tokio::time::sleep(Duration::from_millis(200)).await;
-                        dev.write_all(b"OK000\r").await.unwrap();
-                    }
-                }
-                other => panic!("unexpected command {other:?}"),
-            }
-            seen.push(cmd);
-        }
-        seen
+    let (io, device) = responder(|cmd, seen| match cmd {
+        "RDCON" if seen == 0 => vec![
+            (Duration::ZERO, b"OK3120504.0012\r"),
+            // Then, unasked, once the host has its answer: a status reply.
+            (Duration::from_millis(200), b"OK000\r"),
+        ],
+        "RDCON" => vec![(Duration::ZERO, b"OK3120504.0012\r")],
+        other => panic!("unexpected command {other:?}"),
     });
     let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
     let first = c.conditions().await.unwrap();
