@@ -140,7 +140,7 @@ pub fn scan_line_options(
             o.lambda_c_mm
         ),
     };
-    let kind = line.meta.kind;
+    let kind = line.meta.profile.kind;
     let (apply, filter_reason) = if options.no_filter {
         (false, "no λc filter: asked for (--no-filter)".to_string())
     } else if kind == ProfileKind::R {
@@ -205,15 +205,15 @@ pub fn characterise_scan_lines(
         incomplete: incomplete.to_vec(),
     })?;
     let (line_options, lambda_c_source, filter_reason) = scan_line_options(first, options);
-    if let Some(l) = lines
-        .iter()
-        .find(|l| l.meta.conditions != first.meta.conditions || l.meta.kind != first.meta.kind)
-    {
+    if let Some(l) = lines.iter().find(|l| {
+        l.meta.profile.conditions != first.meta.profile.conditions
+            || l.meta.profile.kind != first.meta.profile.kind
+    }) {
         warnings.push(format!(
             "line {} was traced under other conditions than line {}; every line is evaluated as line {} ({})",
-            line_label(l.meta.index),
-            line_label(first.meta.index),
-            line_label(first.meta.index),
+            line_label(l.meta.id.index),
+            line_label(first.meta.id.index),
+            line_label(first.meta.id.index),
             filter_reason
         ));
     }
@@ -337,7 +337,7 @@ pub fn characterise_scan(
     drop(grid);
     let journal_lines: Vec<u32> = state
         .as_ref()
-        .map(|s| s.lines.iter().map(|l| l.index).collect())
+        .map(|s| s.lines.iter().map(|l| l.id.index).collect())
         .unwrap_or_default();
     let facts = state.as_ref().map(|s| ScanFacts {
         start: &s.start,
@@ -379,7 +379,7 @@ impl Characterise for ScanCharacteriser {
         &self,
         scan: &CompletedScan<'_>,
     ) -> Result<Characterised, Box<dyn std::error::Error + Send + Sync>> {
-        let journal_lines: Vec<u32> = scan.lines.iter().map(|l| l.meta.index).collect();
+        let journal_lines: Vec<u32> = scan.lines.iter().map(|l| l.meta.id.index).collect();
         let facts = ScanFacts {
             start: scan.start,
             stop: None,
@@ -419,8 +419,8 @@ impl Characterise for ScanCharacteriser {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::profile::{Conditions, Profile};
-    use crate::scan::line::LineMeta;
+    use crate::profile::{Conditions, NoHeights, Profile};
+    use crate::scan::line::{LineIdentity, LineMeta};
     use crate::units::Nm;
 
     fn line(kind: ProfileKind, lambda_c_mm: Option<f64>, filter: Option<FilterKind>) -> StoredLine {
@@ -432,18 +432,23 @@ mod tests {
         let t = chrono::Utc::now();
         StoredLine {
             meta: LineMeta {
-                index: 0,
-                y_target_nm: Nm(0),
-                y_readback_nm: None,
-                pitch_x_mm: 0.001,
-                points: 3,
-                kind,
-                conditions: conditions.clone(),
+                id: LineIdentity {
+                    index: 0,
+                    y_target_nm: Nm(0),
+                    y_readback_nm: None,
+                    attempt: 1,
+                    points: 3,
+                },
+                profile: Profile {
+                    pitch_x_mm: 0.001,
+                    heights_um: NoHeights,
+                    kind,
+                    conditions: conditions.clone(),
+                },
                 results: Vec::new(),
                 readout_warnings: Vec::new(),
                 started_at: t,
                 finished_at: t,
-                attempt: 1,
             },
             profile: Profile {
                 pitch_x_mm: 0.001,

@@ -369,7 +369,7 @@ async fn a_journal_torn_anywhere_in_its_last_record_resumes_cleanly() {
         .map_or(0, |p| p + 1);
     let last: Record = serde_json::from_slice(&bytes[last_start..]).unwrap();
     assert!(
-        matches!(&last, Record::Line(l) if l.index == K as u32),
+        matches!(&last, Record::Line(l) if l.id.index == K as u32),
         "last record is line {K}'s: {last:?}"
     );
 
@@ -619,7 +619,7 @@ async fn ng_codes_on_a_trace_are_retried_within_the_transient_budget() {
         let attempts: Vec<u32> = records
             .iter()
             .filter_map(|r| match r {
-                Record::Line(l) => Some(l.attempt),
+                Record::Line(l) => Some(l.id.attempt),
                 _ => None,
             })
             .collect();

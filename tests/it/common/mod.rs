@@ -312,7 +312,7 @@ pub fn line_record_indices(records: &[Record]) -> Vec<u32> {
     records
         .iter()
         .filter_map(|r| match r {
-            Record::Line(l) => Some(l.index),
+            Record::Line(l) => Some(l.id.index),
             _ => None,
         })
         .collect()
