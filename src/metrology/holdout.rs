@@ -258,14 +258,22 @@ fn refit_without_lines(
         kept_rows.first().copied().unwrap_or(0),
         kept_rows.last().copied().unwrap_or(0),
     );
-    let mut out = Vec::new();
-    for r in (first_kept + 1..last_kept).filter(|&r| is_held(r)) {
-        let target = y_mm.get(r).copied().unwrap_or(f64::NAN);
-        let v = v_at_y(&fit.surface, target)?;
-        let m = sample_model_grid(&fit.surface, &[v], 0.0, pitch_x_mm, cols)?;
-        out.push((stats(r, target, &m, row(r)), m));
-    }
-    Ok(out)
+    let held: Vec<(usize, f64)> = (first_kept + 1..last_kept)
+        .filter(|&r| is_held(r))
+        .map(|r| (r, y_mm.get(r).copied().unwrap_or(f64::NAN)))
+        .collect();
+    let vs = held
+        .iter()
+        .map(|&(_, target)| v_at_y(&fit.surface, target))
+        .collect::<Result<Vec<f64>, _>>()?;
+    // All held-out lines in one call: x(u) is inverted once for all of them (the rows are
+    // those of one call per line, to the bit).
+    let model = sample_model_grid(&fit.surface, &vs, 0.0, pitch_x_mm, cols)?;
+    Ok(held
+        .iter()
+        .zip(model.chunks_exact(cols.max(1)))
+        .map(|(&(r, target), m)| (stats(r, target, m, row(r)), m.to_vec()))
+        .collect())
 }
 
 /// The model at line `row` refitted without it (all other lines kept, `method` across the

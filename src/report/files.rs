@@ -385,8 +385,25 @@ pub fn write_data_files(
     report: &Report,
     ctx: &mut ReportContext,
 ) -> Result<Files, ReportError> {
-    let plots = write_plots(out, grid, measured, sampled, overlay, report, ctx)?;
-    let rk_plots = write_rk_plots(out, grid, analyses, ctx)?;
+    // The Rk figures (one per line) are drawn beside the other plots: they read only the
+    // analyses and the caption. Errors are reported in the order the files are listed.
+    let rk_ctx = ctx.clone();
+    let (plots, rk_plots) = std::thread::scope(|s| {
+        let rk = s.spawn(|| write_rk_plots(out, grid, analyses, &rk_ctx));
+        let plots = write_plots(out, grid, measured, sampled, overlay, report, ctx);
+        let rk = rk.join().unwrap_or_else(|_| {
+            Err(ReportError::Metrology {
+                what: format!("{}: plots", rk_ctx.input),
+                source: MetrologyError::BadParameter {
+                    what: "Rk plot thread",
+                    value: f64::NAN,
+                    hint: "drawing the Rk figures panicked; report this with the input",
+                },
+            })
+        });
+        (plots, rk)
+    });
+    let (plots, rk_plots) = (plots?, rk_plots?);
     let measured_x3p = out.join("measured.x3p");
     let bytes = to_x3p(
         &grid.heights_um,

@@ -187,39 +187,71 @@ pub fn characterise(
     };
     timings.surface_grid = t.elapsed().as_secs_f64();
 
-    let t = Instant::now();
-    let model_section = model::characterise(
-        &model,
-        &grid.heights_um,
-        rows,
-        cols,
-        grid.pitch_x_mm,
-        py,
-        &ctx.options,
-    );
+    // The model section and the two hold-out sections are independent of each other (each
+    // reads the grid and the model, none writes anything): they run side by side, the
+    // results joined in the order the sections are reported.
+    let sq = surface_grid.as_ref().map(|s| s.params.sq_um).ok();
+    let options = &ctx.options;
+    let ((model_section, model_s), (model_vs_measured, verdict, holdout_s)) =
+        std::thread::scope(|s| {
+            let model_thread = s.spawn(|| {
+                let t = Instant::now();
+                let m = model::characterise(
+                    &model,
+                    &grid.heights_um,
+                    rows,
+                    cols,
+                    grid.pitch_x_mm,
+                    py,
+                    options,
+                );
+                (m, t.elapsed().as_secs_f64())
+            });
+            let t = Instant::now();
+            let verdict_thread = s.spawn(|| match sq {
+                Some(sq) => holdout::verdict(
+                    grid,
+                    &cgrid.heights_um,
+                    &model.recipe,
+                    sq,
+                    options.holdout_threshold,
+                ),
+                None => {
+                    Err("the measured grid has no Sq to judge the hold-out against".to_string())
+                }
+            });
+            let model_vs_measured = holdout::characterise(grid, &cgrid.heights_um, &model.recipe);
+            let verdict = verdict_thread.join().unwrap_or_else(|_| {
+                Err("internal: the between-lines refit panicked; report this with the input".into())
+            });
+            let holdout_s = t.elapsed().as_secs_f64();
+            let model = model_thread.join().unwrap_or_else(|_| {
+                let reason =
+                    "internal: the model section panicked; report this with the input".to_string();
+                (
+                    model::ModelSection {
+                        surface: Err(reason.clone()),
+                        sampled: None,
+                        checks: None,
+                        failed: vec![FailedSection {
+                            section: "surface".into(),
+                            reason,
+                        }],
+                    },
+                    0.0,
+                )
+            });
+            (model, (model_vs_measured, verdict, holdout_s))
+        });
     failed_sections.extend(model_section.failed.iter().cloned());
     if let Some(c) = &model_section.checks {
         ctx.warnings.extend(c.warnings());
     }
-    timings.model = t.elapsed().as_secs_f64();
-
-    let t = Instant::now();
-    let model_vs_measured = holdout::characterise(grid, &cgrid.heights_um, &model.recipe);
+    timings.model = model_s;
     if let Ok(h) = &model_vs_measured {
         holdout::attach(&mut line_reports, h);
     }
-    let sq = surface_grid.as_ref().map(|s| s.params.sq_um).ok();
-    let verdict = match sq {
-        Some(sq) => holdout::verdict(
-            grid,
-            &cgrid.heights_um,
-            &model.recipe,
-            sq,
-            ctx.options.holdout_threshold,
-        ),
-        None => Err("the measured grid has no Sq to judge the hold-out against".to_string()),
-    };
-    timings.holdout = t.elapsed().as_secs_f64();
+    timings.holdout = holdout_s;
     for (section, r) in [
         ("model_vs_measured", model_vs_measured.as_ref().err()),
         ("between_lines", verdict.as_ref().err()),
