@@ -327,9 +327,22 @@ fn write_plots(
     Ok(plots)
 }
 
+/// The error of an Rk figure thread that panicked.
+pub(crate) fn rk_plot_panic(ctx: &ReportContext) -> ReportError {
+    ReportError::Metrology {
+        what: format!("{}: plots", ctx.input),
+        source: MetrologyError::BadParameter {
+            what: "Rk plot thread",
+            value: f64::NAN,
+            hint: "drawing the Rk figures panicked; report this with the input",
+        },
+    }
+}
+
 /// The ISO 13565-2 construction of every line, from the ordinates its Rk family came from:
-/// `rk/NNNN.png|svg`, with each figure's title.
-fn write_rk_plots(
+/// `rk/NNNN.png|svg`, with each figure's title (drawn by the caller beside the other
+/// sections, handed to [`write_data_files`]).
+pub(crate) fn write_rk_plots(
     out: &Path,
     grid: &LineGrid,
     analyses: &[LineAnalysis],
@@ -378,32 +391,15 @@ fn write_rk_plots(
 pub fn write_data_files(
     out: &Path,
     grid: &LineGrid,
-    analyses: &[LineAnalysis],
+    rk_plots: Result<Vec<(String, [PathBuf; 2])>, ReportError>,
     measured: &Grid<'_>,
     sampled: Option<&SampledModel>,
     overlay: Option<&Overlay>,
     report: &Report,
     ctx: &mut ReportContext,
 ) -> Result<Files, ReportError> {
-    // The Rk figures (one per line) are drawn beside the other plots: they read only the
-    // analyses and the caption. Errors are reported in the order the files are listed.
-    let rk_ctx = ctx.clone();
-    let (plots, rk_plots) = std::thread::scope(|s| {
-        let rk = s.spawn(|| write_rk_plots(out, grid, analyses, &rk_ctx));
-        let plots = write_plots(out, grid, measured, sampled, overlay, report, ctx);
-        let rk = rk.join().unwrap_or_else(|_| {
-            Err(ReportError::Metrology {
-                what: format!("{}: plots", rk_ctx.input),
-                source: MetrologyError::BadParameter {
-                    what: "Rk plot thread",
-                    value: f64::NAN,
-                    hint: "drawing the Rk figures panicked; report this with the input",
-                },
-            })
-        });
-        (plots, rk)
-    });
-    let (plots, rk_plots) = (plots?, rk_plots?);
+    let plots = write_plots(out, grid, measured, sampled, overlay, report, ctx)?;
+    let rk_plots = rk_plots?;
     let measured_x3p = out.join("measured.x3p");
     let bytes = to_x3p(
         &grid.heights_um,
