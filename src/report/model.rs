@@ -114,13 +114,11 @@ pub fn characterise(
             };
         }
     };
-    let sampled = sampled.unwrap_or_else(|_| {
-        Err(crate::metrology::MetrologyError::BadParameter {
-            what: "model sampling thread",
-            value: f64::NAN,
-            hint: "sampling the model panicked; report this with the input",
-        })
-    });
+    let sampled = sampled.unwrap_or(Err(crate::metrology::MetrologyError::BadParameter {
+        what: "model sampling thread",
+        value: f64::NAN,
+        hint: "sampling the model panicked; report this with the input",
+    }));
     let folds = checks.folds();
     let (p, q) = (model.recipe.degrees.degree_u, model.recipe.degrees.degree_v);
     let what = match model.recipe.method {
