@@ -27,7 +27,7 @@ use crate::scan::journal::{
     JOURNAL_FILE,
 };
 use crate::scan::outcome::{FailKind, Outcome, ScanRequest};
-use crate::scan::plan::Plan;
+use crate::scan::plan::{AnalysisPlan, Plan};
 use crate::scan::runner::run_scan;
 use crate::scan::settings::{Backoff, RunSettings};
 use crate::scan::station::SerialStation;
@@ -114,7 +114,21 @@ pub fn plan_of(config: &Config) -> Result<Plan, ConfigError> {
         v_method: config.fit.v_method_for(config.scan.lines as usize),
         replace_spikes: (config.fit.outliers == crate::config::FitOutliers::Replace)
             .then(|| config.analysis.spike_options()),
+        analysis: Some(analysis_of(&config.analysis)),
     })
+}
+
+/// The characterisation of `[analysis]`, as a scan's plan freezes it.
+pub fn analysis_of(a: &crate::config::AnalysisSettings) -> AnalysisPlan {
+    AnalysisPlan {
+        curves: a.curves,
+        levels: a.levels,
+        lambda_c_mm: a.lambda_c_mm,
+        no_filter: a.no_filter,
+        spikes: a.spike_options(),
+        exclude_spikes: a.outliers == crate::config::OutlierPolicy::Exclude,
+        holdout_threshold: a.holdout_threshold,
+    }
 }
 
 /// The runner's settings for a station: the plan and session settings of the configuration,
@@ -126,18 +140,10 @@ pub fn run_settings(
     hooks: TestHooks,
 ) -> Result<RunSettings, CliError> {
     let plan = plan_of(config).map_err(|e| CliError::new(Exit::Config, e.to_string()))?;
-    let a = &config.analysis;
+    // A new scan freezes this in its plan; a resumed scan of an older version, which froze
+    // none, is characterised with it.
     let characterise = ScanCharacteriser {
-        options: ScanAnalysisOptions {
-            curves: a.curves,
-            levels: a.levels,
-            lambda_c_mm: a.lambda_c_mm,
-            no_filter: a.no_filter,
-            spikes: a.spike_options(),
-            exclude_spikes: a.outliers == crate::config::OutlierPolicy::Exclude,
-            holdout_threshold: a.holdout_threshold,
-            ..ScanAnalysisOptions::default()
-        },
+        options: ScanAnalysisOptions::default().with_frozen(&analysis_of(&config.analysis)),
     };
     Ok(RunSettings {
         plan,
