@@ -163,6 +163,15 @@ pub fn run_settings(
     })
 }
 
+/// Where the device locks go: [`station_lock::DEVICE_LOCK_DIR`], or the directory
+/// `SURFSCAN_TEST_LOCK_DIR` names (see [`lock_station`]).
+fn device_lock_dir() -> PathBuf {
+    std::env::var_os("SURFSCAN_TEST_LOCK_DIR").map_or_else(
+        || PathBuf::from(station_lock::DEVICE_LOCK_DIR),
+        PathBuf::from,
+    )
+}
+
 /// The scan to run for this configuration, as `mode` asks: the unfinished one (no stop
 /// record) started last, by its journal, else a new one; with [`StartMode::Resume`] a failed
 /// one is continued too (refused when there is none); with [`StartMode::New`] unfinished scans
@@ -483,21 +492,22 @@ pub async fn run_foreground(
 /// Takes the station's lock for the life of the process (exit 69 when another process holds
 /// the output directory or a device, naming it), then sweeps the leftovers of interrupted
 /// writes from the output directory.
+///
+/// The device locks go to the system's lock directory, unless `SURFSCAN_TEST_LOCK_DIR` names
+/// another: the end-to-end tests run many simulated stations on one machine, whose
+/// pseudo-terminal numbers are reused as soon as a simulated device is unplugged, so each
+/// station gets its own lock directory, as separate machines would have. Nothing else sets
+/// it.
 pub fn lock_station(config: &Config, command: &str) -> Result<Arc<StationLock>, CliError> {
     let devices = [
         Path::new(&config.instrument.port),
         Path::new(&config.stage.port),
     ];
-    let lock = StationLock::acquire(
-        command,
-        &config.output.dir,
-        &devices,
-        Path::new(station_lock::DEVICE_LOCK_DIR),
-    )
-    .map_err(|e| match e {
-        LockError::Held { .. } => CliError::new(Exit::Unavailable, e.to_string()),
-        LockError::Io { .. } => CliError::new(Exit::Io, e.to_string()),
-    })?;
+    let lock = StationLock::acquire(command, &config.output.dir, &devices, &device_lock_dir())
+        .map_err(|e| match e {
+            LockError::Held { .. } => CliError::new(Exit::Unavailable, e.to_string()),
+            LockError::Io { .. } => CliError::new(Exit::Io, e.to_string()),
+        })?;
     lock.sweep_leftovers();
     Ok(Arc::new(lock))
 }
