@@ -26,11 +26,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::Arc;
 use std::time::Instant;
-use surfscan::profile::{Conditions, FilterKind, Profile, ProfileKind};
+use surfscan::profile::{Conditions, FilterKind, NoHeights, Profile, ProfileKind};
 use surfscan::report::{characterise_scan, ScanAnalysisOptions};
 use surfscan::scan::faults::NoFaults;
 use surfscan::scan::journal::{Journal, StartRecord};
-use surfscan::scan::line::LineMeta;
+use surfscan::scan::line::{LineIdentity, LineMeta};
 use surfscan::scan::scan_id::ScanId;
 use surfscan::scan::store::ScanStore;
 use surfscan::units::Nm;
@@ -318,6 +318,7 @@ fn write_scan(parent: &Path, kind: ProfileKind, cols: usize) -> PathBuf {
                 max_line_attempts: 3,
                 v_method: Default::default(),
                 replace_spikes: None,
+                analysis: None,
             },
             config: serde_json::json!({}),
             config_hash: "0".repeat(64),
@@ -352,18 +353,23 @@ fn write_scan(parent: &Path, kind: ProfileKind, cols: usize) -> PathBuf {
             conditions: conditions.clone(),
         };
         let meta = LineMeta {
-            index: r,
-            y_target_nm: Nm(r as i64 * 10_000),
-            y_readback_nm: None,
-            pitch_x_mm: PITCH_X_MM,
-            points: cols,
-            kind,
-            conditions: conditions.clone(),
+            id: LineIdentity {
+                index: r,
+                y_target_nm: Nm(r as i64 * 10_000),
+                y_readback_nm: None,
+                attempt: 1,
+                points: cols,
+            },
+            profile: Profile {
+                pitch_x_mm: PITCH_X_MM,
+                heights_um: NoHeights,
+                kind,
+                conditions: conditions.clone(),
+            },
             results: vec![],
             readout_warnings: Vec::new(),
             started_at: start,
             finished_at: start,
-            attempt: 1,
         };
         store
             .commit_line(&mut journal, &meta, &profile)

@@ -246,7 +246,7 @@ async fn run(a: Args) {
         .records
         .iter()
         .filter_map(|r| match r {
-            Record::Line(l) => Some((l.index, l.time.timestamp_micros() as f64 / 1e6)),
+            Record::Line(l) => Some((l.id.index, l.time.timestamp_micros() as f64 / 1e6)),
             _ => None,
         })
         .collect();

@@ -6,11 +6,42 @@
 //! device is absent, abandon and re-trace the line on a transient fault, re-home when the
 //! stage position is lost, fail the scan on a fatal fault.
 //!
+//! [`Device`] names the instrument or the stage wherever the scan says which one (a fault, a
+//! journal's interruption record).
+//!
 //! Layer 0 (vocabulary): depends on [`crate::profile`] and [`crate::units`]; no I/O.
 
 use crate::profile::{Conditions, InstrumentResult, Profile};
 use crate::units::Nm;
 use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// Which device of the station: what a fault concerns, what an interruption record names
+/// (`"instrument"` / `"stage"` in the journal).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Device {
+    /// The profiler.
+    Instrument,
+    /// The y stage.
+    Stage,
+}
+
+impl Device {
+    /// `instrument` / `stage`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Device::Instrument => "instrument",
+            Device::Stage => "stage",
+        }
+    }
+}
+
+impl fmt::Display for Device {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 /// How the scan layer must react to a device error.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -1,7 +1,8 @@
 //! One traced line: heights along x with the metadata that makes it traceable.
 //!
 //! A [`Profile`] is what the instrument driver produces, what the scan stores per line,
-//! what the fitter consumes and what the metrology characterises. Heights are µm exactly as
+//! what the fitter consumes and what the metrology characterises; its [`ProfileHeader`]
+//! (the same struct without the heights) is the profile part of a stored line's metadata. Heights are µm exactly as
 //! received; x is implied by the pitch (x_i = i × pitch_x_mm, first point at x = 0).
 //!
 //! Layer 0 (vocabulary): depends only on [`crate::units`]; no I/O.
@@ -90,17 +91,77 @@ pub struct InstrumentResult {
     pub ng_code: Option<u16>,
 }
 
-/// A traced line of heights at a constant x pitch.
+/// A traced line of heights at a constant x pitch, with its kind and conditions.
+///
+/// `H` is where the heights are. By default they are in memory (`Vec<f64>`): what the
+/// instrument driver produces, the fitter consumes and the metrology characterises. A
+/// [`ProfileHeader`] (`Profile<NoHeights>`) is the same description with the heights kept
+/// elsewhere: a stored line's metadata file, whose heights are in the CSV beside it. Both are
+/// this one struct, so a field added here is in both; in JSON a header has no `heights_um`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Profile {
+#[serde(bound(
+    serialize = "H: Serialize + Heights",
+    deserialize = "H: Deserialize<'de> + Default"
+))]
+pub struct Profile<H = Vec<f64>> {
     /// Distance between consecutive points along x, in mm.
     pub pitch_x_mm: f64,
     /// Heights in µm, exactly as received, first point at x = 0.
-    pub heights_um: Vec<f64>,
+    #[serde(default, skip_serializing_if = "Heights::elsewhere")]
+    pub heights_um: H,
     /// Profile kind (P, R, …).
     pub kind: ProfileKind,
     /// Conditions of the trace when known.
     pub conditions: Conditions,
+}
+
+/// Where a [`Profile`]'s heights are: in memory, or elsewhere ([`NoHeights`]).
+pub trait Heights {
+    /// True when the heights are not held here (they are left out of the JSON form).
+    fn elsewhere(&self) -> bool;
+}
+
+impl Heights for Vec<f64> {
+    fn elsewhere(&self) -> bool {
+        false
+    }
+}
+
+/// The heights of a [`ProfileHeader`]: kept elsewhere.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct NoHeights;
+
+impl Heights for NoHeights {
+    fn elsewhere(&self) -> bool {
+        true
+    }
+}
+
+/// A profile's pitch, kind and conditions without its heights.
+pub type ProfileHeader = Profile<NoHeights>;
+
+impl<H> Profile<H> {
+    /// The profile's description without its heights.
+    pub fn header(&self) -> ProfileHeader {
+        Profile {
+            pitch_x_mm: self.pitch_x_mm,
+            heights_um: NoHeights,
+            kind: self.kind,
+            conditions: self.conditions.clone(),
+        }
+    }
+}
+
+impl ProfileHeader {
+    /// The profile these heights make with this description.
+    pub fn with_heights(self, heights_um: Vec<f64>) -> Profile {
+        Profile {
+            pitch_x_mm: self.pitch_x_mm,
+            heights_um,
+            kind: self.kind,
+            conditions: self.conditions,
+        }
+    }
 }
 
 impl Profile {

@@ -421,7 +421,7 @@ fn check_against_journal(dir: &Path, index: &[u32]) -> Result<JournalCheck, CliE
     };
     let mut uncommitted = Vec::new();
     for &i in index {
-        let Some(record) = state.lines.iter().find(|l| l.index == i) else {
+        let Some(record) = state.lines.iter().find(|l| l.id.index == i) else {
             uncommitted.push(i);
             continue;
         };

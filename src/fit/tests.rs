@@ -347,7 +347,13 @@ fn residual_by_curve_evaluation(r: &FitResult, pitch: f64, y: &[f64], h: &[f64])
 
 #[test]
 fn residual_reusing_the_basis_equals_per_point_evaluation_to_the_bit() {
-    for (rows, cols, p, q) in [(31, 700, 5, 5), (9, 40, 3, 2), (6, 6, 5, 5)] {
+    // The last grid is large enough to be split by columns over threads.
+    for (rows, cols, p, q) in [
+        (31, 700, 5, 5),
+        (9, 40, 3, 2),
+        (6, 6, 5, 5),
+        (31, 3300, 5, 5),
+    ] {
         let h = rough_grid(rows, cols, (rows * cols) as u64);
         let y = ys(rows, 0.01);
         let r = fit_grid(

@@ -101,25 +101,147 @@ struct Tokens {
     lens: Vec<u8>,
 }
 
-/// Formats every coordinate of `poles` (the first being pole `first` of its patch) into
-/// `tokens`; a non-finite coordinate is returned as (pole index, value).
+/// The IGES text of one coordinate per column (x) or per row (y) of a net, with the bits it
+/// was formatted from: a fitted net's x depends on the column alone and its y on the row
+/// alone, so the writer formats those once and copies the text wherever a pole carries the
+/// same bits (the same bits give the same text), and formats any other value itself.
+struct RepeatedTexts {
+    bits: Vec<u64>,
+    /// `TEXT_STRIDE` bytes per entry, the first `lens[i]` of them the text.
+    text: Vec<u8>,
+    /// 0 for a value that is not finite (never reused: formatting it reports the pole).
+    lens: Vec<u8>,
+}
+
+/// Room per reused text: any real is at most 24 bytes.
+const TEXT_STRIDE: usize = 32;
+
+impl RepeatedTexts {
+    /// The texts of `values` (finite or not).
+    fn of(values: impl Iterator<Item = f64>) -> RepeatedTexts {
+        let (lower, _) = values.size_hint();
+        let mut t = RepeatedTexts {
+            bits: Vec::with_capacity(lower),
+            text: Vec::with_capacity(lower * TEXT_STRIDE),
+            lens: Vec::with_capacity(lower),
+        };
+        for v in values {
+            let base = t.text.len();
+            let ok = push_real(&mut t.text, v);
+            let len = t.text.len() - base;
+            t.text.resize(base + TEXT_STRIDE, b' ');
+            t.bits.push(v.to_bits());
+            t.lens.push(if ok { len as u8 } else { 0 });
+        }
+        t
+    }
+
+    /// Appends the text of entry `i` to `out` if it was formatted from `value`'s bits, and
+    /// tells whether it did.
+    #[inline(always)]
+    fn push_if_same(&self, i: usize, value: f64, out: &mut Vec<u8>) -> bool {
+        match (self.bits.get(i), self.lens.get(i)) {
+            (Some(&bits), Some(&len)) if bits == value.to_bits() && len != 0 => {
+                let at = i * TEXT_STRIDE;
+                let entry: &[u8; TEXT_STRIDE] = self.text[at..at + TEXT_STRIDE]
+                    .try_into()
+                    .expect("stride-sized entry");
+                // One fixed-size copy (a few register moves), then cut to the text's length.
+                let end = out.len() + usize::from(len);
+                out.extend_from_slice(entry);
+                out.truncate(end);
+                true
+            }
+            _ => false,
+        }
+    }
+}
+
+/// The reusable texts of a net: the x of row 0 per column and the y of column 0 per row.
+struct NetTexts {
+    count_u: usize,
+    x: RepeatedTexts,
+    y: RepeatedTexts,
+}
+
+impl NetTexts {
+    fn of(s: &NurbsSurface) -> NetTexts {
+        let (nu, poles) = (s.count_u(), s.poles());
+        NetTexts {
+            count_u: nu,
+            x: RepeatedTexts::of(poles[..nu.min(poles.len())].iter().map(|p| p[0])),
+            y: RepeatedTexts::of(poles.iter().step_by(nu.max(1)).map(|p| p[1])),
+        }
+    }
+
+    /// Texts that match nothing (every coordinate is formatted).
+    #[cfg(test)]
+    fn none(count_u: usize) -> NetTexts {
+        NetTexts {
+            count_u,
+            x: RepeatedTexts::of(std::iter::empty()),
+            y: RepeatedTexts::of(std::iter::empty()),
+        }
+    }
+}
+
+/// Formats every coordinate of `poles` (the first being pole `first` of its patch, whose
+/// repeated texts are `texts`) into `tokens`; a non-finite coordinate is returned as (pole
+/// index, value).
 fn format_pole_tokens(
     poles: &[[f64; 3]],
     first: usize,
+    texts: &NetTexts,
     tokens: &mut Tokens,
 ) -> Result<(), (usize, f64)> {
     tokens.text.clear();
     tokens.lens.clear();
+    tokens.text.reserve(poles.len() * 3 * TEXT_STRIDE);
+    tokens.lens.reserve(poles.len() * 3);
+    let nu = texts.count_u.max(1);
+    let (mut col, mut row) = (first % nu, first / nu);
     for (k, pole) in poles.iter().enumerate() {
-        for &c in pole {
+        for (c, &value) in pole.iter().enumerate() {
             let before = tokens.text.len();
-            if !push_real(&mut tokens.text, c) {
-                return Err((first + k, c));
+            let reused = match c {
+                0 => texts.x.push_if_same(col, value, &mut tokens.text),
+                1 => texts.y.push_if_same(row, value, &mut tokens.text),
+                _ => false,
+            };
+            if !reused && !push_real(&mut tokens.text, value) {
+                return Err((first + k, value));
             }
             tokens.lens.push((tokens.text.len() - before) as u8);
         }
+        col += 1;
+        if col == nu {
+            col = 0;
+            row += 1;
+        }
     }
     Ok(())
+}
+
+/// The IGES texts of every pole coordinate of `s` in file order (x, y, z of each pole, v
+/// outer), concatenated without delimiters, formatted on the calling thread as the writer
+/// formats them (the text of a column's x and a row's y reused where the bits repeat).
+/// Returns the number of coordinates. For measuring and checking the formatter; the writer
+/// itself packs the same texts into records.
+pub fn format_net_reals(s: &NurbsSurface, out: &mut Vec<u8>) -> Result<usize, IgesError> {
+    let texts = NetTexts::of(s);
+    let mut tokens = Tokens::default();
+    for (i, piece) in s.poles().chunks(PIECE_POLES).enumerate() {
+        format_pole_tokens(piece, i * PIECE_POLES, &texts, &mut tokens).map_err(
+            |(index, value)| IgesError::NonFinite {
+                patch: 0,
+                what: "pole coordinate",
+                index,
+                value,
+            },
+        )?;
+        out.extend_from_slice(&tokens.text);
+    }
+    Ok(s.poles().len() * 3)
 }
 
 /// Threads that format reals while the calling thread packs and writes.
@@ -136,6 +258,7 @@ fn worker_count() -> usize {
 fn for_each_piece_in_order(
     poles: &[[f64; 3]],
     first: usize,
+    texts: &NetTexts,
     patch: usize,
     workers: usize,
     consume: &mut dyn FnMut(&Tokens) -> Result<(), IgesError>,
@@ -150,7 +273,8 @@ fn for_each_piece_in_order(
     if workers <= 1 || pieces.len() <= 1 {
         let mut tokens = Tokens::default();
         for (i, piece) in pieces.iter().enumerate() {
-            format_pole_tokens(piece, first + i * PIECE_POLES, &mut tokens).map_err(non_finite)?;
+            format_pole_tokens(piece, first + i * PIECE_POLES, texts, &mut tokens)
+                .map_err(non_finite)?;
             consume(&tokens)?;
         }
         return Ok(());
@@ -164,8 +288,9 @@ fn for_each_piece_in_order(
             scope.spawn(move || {
                 for i in (w..pieces.len()).step_by(workers) {
                     let mut tokens = Tokens::default();
-                    let r = format_pole_tokens(pieces[i], first + i * PIECE_POLES, &mut tokens)
-                        .map(|()| tokens);
+                    let r =
+                        format_pole_tokens(pieces[i], first + i * PIECE_POLES, texts, &mut tokens)
+                            .map(|()| tokens);
                     let failed = r.is_err();
                     // A closed channel means the consumer stopped (an error): stop too.
                     if tx.send(r).is_err() || failed {
@@ -257,15 +382,23 @@ fn stream_entity_128(
     } else {
         poles.len().max(1)
     };
+    let texts = NetTexts::of(s);
     for (n, part) in poles.chunks(chunk).enumerate() {
         let mut q = FieldPacker::with_capacity(64, BLOCK_BYTES + 4096);
-        for_each_piece_in_order(part, n * chunk, patch, workers, &mut |t: &Tokens| {
-            q.push_tokens(&t.text, &t.lens, b',');
-            if q.bytes() >= BLOCK_BYTES {
-                hand_on(&mut q, false)?;
-            }
-            Ok(())
-        })?;
+        for_each_piece_in_order(
+            part,
+            n * chunk,
+            &texts,
+            patch,
+            workers,
+            &mut |t: &Tokens| {
+                q.push_tokens(&t.text, &t.lens, b',');
+                if q.bytes() >= BLOCK_BYTES {
+                    hand_on(&mut q, false)?;
+                }
+                Ok(())
+            },
+        )?;
         hand_on(&mut q, true)?;
     }
     let mut tail = FieldPacker::new(64);
@@ -909,6 +1042,10 @@ mod tests {
             vec![big.clone()],
             vec![fit_like(30, 9), fit_like(12, 6), longest_tokens(9, 5)],
             vec![longest_tokens(PARALLEL_POLES / 8 + 1, 8)],
+            vec![
+                fit_like_with_breaks(30, 9),
+                fit_like_with_breaks(PARALLEL_POLES / 8 + 3, 9),
+            ],
         ];
         for patches in &cases {
             let want = reference_file(patches, &opts);
@@ -949,6 +1086,91 @@ mod tests {
         }
     }
 
+    /// [`fit_like`] with some coordinates that break the per-column x and per-row y pattern
+    /// (a perturbed x in one pole, a row whose y varies, `-0.` beside `0.`, a tiny and a
+    /// huge value), so a writer that reuses the text of repeated values must notice each.
+    fn fit_like_with_breaks(nu: usize, nv: usize) -> NurbsSurface {
+        let s = fit_like(nu, nv);
+        let mut poles = s.poles().to_vec();
+        poles[nu + 3][0] = f64::from_bits(poles[nu + 3][0].to_bits() + 1);
+        for (i, p) in poles[2 * nu..3 * nu].iter_mut().enumerate() {
+            p[1] += i as f64 * 1e-9;
+        }
+        poles[3 * nu][0] = -0.0;
+        poles[3 * nu + 1][1] = -0.0;
+        poles[4 * nu + 2][0] = 1.5e-300;
+        poles[4 * nu + 5][1] = -2.5e300;
+        NurbsSurface::try_new(
+            s.degree_u(),
+            s.degree_v(),
+            s.knots_u().to_vec(),
+            s.knots_v().to_vec(),
+            nu,
+            nv,
+            poles,
+        )
+        .unwrap()
+    }
+
+    /// SHA-256 of the file written for `patches`, in hex.
+    fn file_sha256(patches: &[NurbsSurface]) -> String {
+        use sha2::Digest;
+        let opts = IgesOptions {
+            start_lines: vec!["golden".into()],
+            ..IgesOptions::default()
+        };
+        let mut out = Vec::new();
+        write_iges(&mut out, patches, &opts).unwrap();
+        sha2::Sha256::digest(&out)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect()
+    }
+
+    #[test]
+    fn files_keep_the_bytes_the_writer_gave_before_it_reused_repeated_texts() {
+        // Digests of files written by the writer that formatted every coordinate, before it
+        // reused the text of a column's x and a row's y: one small entity, one past the
+        // chunking threshold, and nets that break the pattern.
+        let cases: [(Vec<NurbsSurface>, &str); 3] = [
+            (
+                vec![fit_like(40, 7)],
+                "8d708d5cabf7b9487394f4a7e556be710f562326ab1378bd0351c9ea84ffa8d2",
+            ),
+            (
+                vec![fit_like(PARALLEL_POLES / 16 + 7, 17)],
+                "227a174bb9dffebdce5cb32c050eafb3c10f7a96715bd7564dda02edf4e6e079",
+            ),
+            (
+                vec![
+                    fit_like_with_breaks(30, 9),
+                    fit_like_with_breaks(PARALLEL_POLES / 8 + 3, 9),
+                ],
+                "c9e58a039541f9b4b64d312afb3fdcee174af2dc57a109c223505169995e0c2d",
+            ),
+        ];
+        let got: Vec<String> = cases.iter().map(|(p, _)| file_sha256(p)).collect();
+        for (k, (_, want)) in cases.iter().enumerate() {
+            assert_eq!(&got[k], want, "case {k}");
+        }
+    }
+
+    #[test]
+    fn net_reals_are_the_texts_of_each_coordinate_formatted_alone() {
+        for s in [
+            fit_like_with_breaks(PARALLEL_POLES / 8 + 3, 9),
+            longest_tokens(9, 5),
+        ] {
+            let mut want = Vec::new();
+            for &c in s.poles().iter().flatten() {
+                assert!(push_real(&mut want, c));
+            }
+            let mut got = Vec::new();
+            assert_eq!(format_net_reals(&s, &mut got).unwrap(), s.poles().len() * 3);
+            assert!(got == want);
+        }
+    }
+
     #[test]
     fn a_non_finite_coordinate_is_named_by_its_pole() {
         // A surface refuses non-finite poles (try_new), so this guards the formatter alone:
@@ -957,10 +1179,13 @@ mod tests {
         poles[7][1] = f64::INFINITY;
         let mut t = Tokens::default();
         assert_eq!(
-            format_pole_tokens(&poles[2..], 100, &mut t),
+            format_pole_tokens(&poles[2..], 100, &NetTexts::none(5), &mut t),
             Err((105, f64::INFINITY))
         );
-        assert_eq!(format_pole_tokens(&poles[..7], 0, &mut t), Ok(()));
+        assert_eq!(
+            format_pole_tokens(&poles[..7], 0, &NetTexts::none(5), &mut t),
+            Ok(())
+        );
         assert_eq!(t.lens.len(), 21);
         assert_eq!(&t.text[..t.lens[0] as usize], b"0.25");
     }

@@ -258,22 +258,37 @@ fn refit_without_lines(
         kept_rows.first().copied().unwrap_or(0),
         kept_rows.last().copied().unwrap_or(0),
     );
-    let held: Vec<(usize, f64)> = (first_kept + 1..last_kept)
-        .filter(|&r| is_held(r))
-        .map(|r| (r, y_mm.get(r).copied().unwrap_or(f64::NAN)))
-        .collect();
-    let vs = held
-        .iter()
-        .map(|&(_, target)| v_at_y(&fit.surface, target))
-        .collect::<Result<Vec<f64>, _>>()?;
-    // All held-out lines in one call: x(u) is inverted once for all of them (the rows are
-    // those of one call per line, to the bit).
-    let model = sample_model_grid(&fit.surface, &vs, 0.0, pitch_x_mm, cols)?;
-    Ok(held
-        .iter()
-        .zip(model.chunks_exact(cols.max(1)))
-        .map(|(&(r, target), m)| (stats(r, target, m, row(r)), m.to_vec()))
-        .collect())
+    // The held-out lines' v first, then one sampling of all of them (x(u) is inverted once,
+    // not once per line; each line's heights are the bits a sampling of it alone gives). A
+    // line whose v is not found ends the list: the lines before it are sampled first, so an
+    // error of theirs is reported before it, as a line-by-line pass would.
+    let mut held = Vec::new();
+    let mut vs = Vec::new();
+    let mut unreached = None;
+    for r in (first_kept + 1..last_kept).filter(|&r| is_held(r)) {
+        let target = y_mm.get(r).copied().unwrap_or(f64::NAN);
+        match v_at_y(&fit.surface, target) {
+            Ok(v) => {
+                held.push((r, target));
+                vs.push(v);
+            }
+            Err(e) => {
+                unreached = Some(e);
+                break;
+            }
+        }
+    }
+    let mut out = Vec::with_capacity(held.len());
+    if !vs.is_empty() {
+        let m = sample_model_grid(&fit.surface, &vs, 0.0, pitch_x_mm, cols)?;
+        for (&(r, target), m) in held.iter().zip(m.chunks_exact(cols.max(1))) {
+            out.push((stats(r, target, m, row(r)), m.to_vec()));
+        }
+    }
+    match unreached {
+        Some(e) => Err(e),
+        None => Ok(out),
+    }
 }
 
 /// The model at line `row` refitted without it (all other lines kept, `method` across the
@@ -501,6 +516,51 @@ mod tests {
         assert_eq!(b.points, 4 * 40);
         assert!(b.supported, "{}", b.verdict);
         assert!(b.verdict.contains("every 3rd line"), "{}", b.verdict);
+    }
+
+    #[test]
+    fn held_out_lines_sampled_together_equal_each_sampled_alone_to_the_bit() {
+        // The refit is sampled at all held-out lines in one call; each line's heights must
+        // be those a sampling of that line alone gives (the model an overlay shows).
+        let (y, z) = grid(15, 64, |r, c| {
+            (c as f64 * 0.21 + r as f64 * 0.7).sin() + 0.05 * ((r * 64 + c) % 7) as f64
+        });
+        let held = refit_without_lines(
+            &z,
+            64,
+            0.0005,
+            &y,
+            FitOptions::default(),
+            VMethod::Interpolate,
+            2,
+        )
+        .unwrap();
+        let kept: Vec<usize> = (0..15).filter(|r| r % 2 == 0).collect();
+        let sub: Vec<f64> = kept
+            .iter()
+            .flat_map(|&r| z[r * 64..(r + 1) * 64].to_vec())
+            .collect();
+        let ky: Vec<f64> = kept.iter().map(|&r| y[r]).collect();
+        let fit = fit_grid_with(
+            0.0005,
+            &ky,
+            &sub,
+            64,
+            FitOptions::default(),
+            VMethod::Interpolate,
+        )
+        .unwrap();
+        assert_eq!(held.len(), 7);
+        for (line, model) in &held {
+            let v = v_at_y(&fit.surface, line.y_mm).unwrap();
+            let alone = sample_model_grid(&fit.surface, &[v], 0.0, 0.0005, 64).unwrap();
+            let bits = |m: &[f64]| m.iter().map(|h| h.to_bits()).collect::<Vec<u64>>();
+            assert_eq!(bits(model), bits(&alone), "line {}", line.index);
+            assert_eq!(
+                *line,
+                stats(line.index, line.y_mm, &alone, &z[line.index * 64..][..64])
+            );
+        }
     }
 
     #[test]

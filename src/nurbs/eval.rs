@@ -155,7 +155,19 @@ impl UBasis {
     /// `curve` (as [`NurbsSurface::iso_poles_u_padded`] makes them; lane 3 is zero), in the
     /// arithmetic of [`BSplineCurve::evaluate`]: Σ basis·pole from zero, in pole order.
     #[inline(always)]
-    pub fn for_each_point(&self, curve: &[[f64; 4]], mut f: impl FnMut(usize, [f64; 4])) {
+    pub fn for_each_point(&self, curve: &[[f64; 4]], f: impl FnMut(usize, [f64; 4])) {
+        self.for_each_point_from(0, curve, f);
+    }
+
+    /// [`UBasis::for_each_point`] with `curve` holding the poles from index `offset` on (as
+    /// [`NurbsSurface::iso_poles_u_padded_range`] makes them for [`UBasis::pole_range`]).
+    #[inline(always)]
+    pub fn for_each_point_from(
+        &self,
+        offset: usize,
+        curve: &[[f64; 4]],
+        mut f: impl FnMut(usize, [f64; 4]),
+    ) {
         let n = self.degree + 1;
         for (k, (&base, b)) in self
             .first
@@ -163,7 +175,7 @@ impl UBasis {
             .zip(self.values.chunks_exact(n))
             .enumerate()
         {
-            let poles = &curve[base..base + n];
+            let poles = &curve[base - offset..base - offset + n];
             let mut p = [0.0f64; 4];
             for (q, &nu) in poles.iter().zip(b) {
                 for c in 0..4 {
@@ -172,6 +184,19 @@ impl UBasis {
             }
             f(k, p);
         }
+    }
+
+    /// The poles (along u) the basis functions touch: from the first parameter's first pole
+    /// to the last one's last (parameters in increasing order touch only these).
+    pub fn pole_range(&self) -> std::ops::Range<usize> {
+        let lo = self.first.iter().copied().min().unwrap_or(0);
+        let hi = self
+            .first
+            .iter()
+            .copied()
+            .max()
+            .map_or(0, |f| f + self.degree + 1);
+        lo..hi
     }
 }
 
@@ -263,30 +288,52 @@ impl NurbsSurface {
     /// computes them, to the bit) into `out`, each padded to four lanes with a zero so that a
     /// point's three coordinates are one vector.
     pub fn iso_poles_u_padded(&self, v: f64, out: &mut Vec<[f64; 4]>) {
-        let mut bv = [0.0; MAX_STACK_DEGREE + 1];
-        let sv = if self.degree_v <= MAX_STACK_DEGREE {
-            span_basis_into(self.degree_v, &self.knots_v, self.count_v, v, &mut bv)
-        } else {
-            let (sv, b) = span_basis(self.degree_v, &self.knots_v, self.count_v, v);
-            out.clear();
-            out.resize(self.count_u, [0.0; 4]);
-            self.accumulate_rows(sv, &b, out);
-            return;
-        };
-        out.clear();
-        out.resize(self.count_u, [0.0; 4]);
-        self.accumulate_rows(sv, &bv[..=self.degree_v], out);
+        self.iso_poles_u_padded_range(v, 0..self.count_u, out);
     }
 
-    /// Adds Σ_l bv[l] · (pole row sv − degree_v + l) into `out`, row by row.
-    fn accumulate_rows(&self, sv: usize, bv: &[f64], out: &mut [[f64; 4]]) {
-        for (l, nv) in bv.iter().enumerate() {
-            let row = (sv - self.degree_v + l) * self.count_u;
-            for (o, q) in out.iter_mut().zip(&self.poles[row..row + self.count_u]) {
-                o[0] += nv * q[0];
-                o[1] += nv * q[1];
-                o[2] += nv * q[2];
+    /// [`NurbsSurface::iso_poles_u_padded`] for the poles `columns` only (`out[0]` is pole
+    /// `columns.start`), to the bit.
+    pub fn iso_poles_u_padded_range(
+        &self,
+        v: f64,
+        columns: std::ops::Range<usize>,
+        out: &mut Vec<[f64; 4]>,
+    ) {
+        let columns = columns.start.min(self.count_u)..columns.end.min(self.count_u);
+        out.clear();
+        out.resize(columns.len(), [0.0; 4]);
+        let mut bv = [0.0; MAX_STACK_DEGREE + 1];
+        if self.degree_v <= MAX_STACK_DEGREE {
+            let sv = span_basis_into(self.degree_v, &self.knots_v, self.count_v, v, &mut bv);
+            self.accumulate_rows(sv, &bv[..=self.degree_v], columns, out);
+        } else {
+            let (sv, b) = span_basis(self.degree_v, &self.knots_v, self.count_v, v);
+            self.accumulate_rows(sv, &b, columns, out);
+        }
+    }
+
+    /// Adds Σ_l bv[l] · (pole row sv − degree_v + l) into `out`, over the poles `columns`: each
+    /// output pole gets its products added in row order, as a pass per row would (one pass
+    /// over the output instead of one per row; the same operations in the same order).
+    fn accumulate_rows(
+        &self,
+        sv: usize,
+        bv: &[f64],
+        columns: std::ops::Range<usize>,
+        out: &mut [[f64; 4]],
+    ) {
+        let nu = self.count_u;
+        let first = (sv - self.degree_v) * nu;
+        let net = &self.poles[first..first + bv.len() * nu];
+        for (o, i) in out.iter_mut().zip(columns) {
+            let mut acc = *o;
+            for (l, &nv) in bv.iter().enumerate() {
+                let q = net[l * nu + i];
+                acc[0] += nv * q[0];
+                acc[1] += nv * q[1];
+                acc[2] += nv * q[2];
             }
+            *o = acc;
         }
     }
 

@@ -43,25 +43,25 @@ impl LineGrid {
                 incomplete: Vec::new(),
             });
         };
-        let (cols, px) = (first.meta.points, first.meta.pitch_x_mm);
+        let (cols, px) = (first.meta.id.points, first.meta.profile.pitch_x_mm);
         let mut heights_um = Vec::with_capacity(cols * lines.len());
         for l in lines {
-            let path = lines_dir.join(csv_name(l.meta.index));
-            if l.meta.points != cols {
+            let path = lines_dir.join(csv_name(l.meta.id.index));
+            if l.meta.id.points != cols {
                 return Err(ReportError::Lines {
                     path,
                     reason: format!(
                         "has {} points, line {} has {cols}; every line of a scan must have the same number of points to form a grid",
-                        l.meta.points, first.meta.index
+                        l.meta.id.points, first.meta.id.index
                     ),
                 });
             }
-            if (l.meta.pitch_x_mm - px).abs() > 1e-12 * px.abs().max(1.0) {
+            if (l.meta.profile.pitch_x_mm - px).abs() > 1e-12 * px.abs().max(1.0) {
                 return Err(ReportError::Lines {
                     path,
                     reason: format!(
                         "pitch x {} mm differs from line {}'s {px} mm; every line of a scan must share the x pitch",
-                        l.meta.pitch_x_mm, first.meta.index
+                        l.meta.profile.pitch_x_mm, first.meta.id.index
                     ),
                 });
             }
@@ -72,15 +72,15 @@ impl LineGrid {
             cols,
             pitch_x_mm: px,
             y_mm: lines.iter().map(StoredLine::y_mm).collect(),
-            index: lines.iter().map(|l| l.meta.index).collect(),
+            index: lines.iter().map(|l| l.meta.id.index).collect(),
             y_readback_mm: lines
                 .iter()
-                .map(|l| l.meta.y_readback_nm.map(|n| n.to_mm()))
+                .map(|l| l.meta.id.y_readback_nm.map(|n| n.to_mm()))
                 .collect(),
             instrument: Some(lines.iter().map(|l| l.meta.results.clone()).collect()),
             standard: lines
                 .iter()
-                .map(|l| l.meta.conditions.standard.clone())
+                .map(|l| l.meta.profile.conditions.standard.clone())
                 .collect(),
         })
     }

@@ -441,7 +441,7 @@ fn traceability(h: &mut String, report: &Value) {
 
 fn events(h: &mut String, j: &ResumeState) {
     h.push_str("<h2 id=\"events\">During the scan</h2>\n");
-    let retraced: Vec<_> = j.lines.iter().filter(|l| l.attempt > 1).collect();
+    let retraced: Vec<_> = j.lines.iter().filter(|l| l.id.attempt > 1).collect();
     if j.interruptions.is_empty() && retraced.is_empty() {
         h.push_str(
             "<p class=\"ok\" id=\"no-events\">No interruption, re-trace or resume: every line was traced on its first attempt.</p>\n",
@@ -455,7 +455,7 @@ fn events(h: &mut String, j: &ResumeState) {
                 (
                     i.time,
                     i.line.map(|l| line_label(u64::from(l))).unwrap_or_default(),
-                    esc(i.device.as_deref().unwrap_or("")),
+                    i.device.map(|d| d.name()).unwrap_or("").to_string(),
                     esc(&i.reason),
                 )
             })
@@ -463,9 +463,9 @@ fn events(h: &mut String, j: &ResumeState) {
         rows.extend(retraced.iter().map(|l| {
             (
                 l.time,
-                line_label(u64::from(l.index)),
+                line_label(u64::from(l.id.index)),
                 String::new(),
-                format!("traced on attempt {} (re-traced)", l.attempt),
+                format!("traced on attempt {} (re-traced)", l.id.attempt),
             )
         }));
         rows.sort_by_key(|r| r.0);

@@ -140,7 +140,7 @@ pub fn scan_line_options(
             o.lambda_c_mm
         ),
     };
-    let kind = line.meta.kind;
+    let kind = line.meta.profile.kind;
     let (apply, filter_reason) = if options.no_filter {
         (false, "no λc filter: asked for (--no-filter)".to_string())
     } else if kind == ProfileKind::R {
@@ -205,15 +205,15 @@ pub fn characterise_scan_lines(
         incomplete: incomplete.to_vec(),
     })?;
     let (line_options, lambda_c_source, filter_reason) = scan_line_options(first, options);
-    if let Some(l) = lines
-        .iter()
-        .find(|l| l.meta.conditions != first.meta.conditions || l.meta.kind != first.meta.kind)
-    {
+    if let Some(l) = lines.iter().find(|l| {
+        l.meta.profile.conditions != first.meta.profile.conditions
+            || l.meta.profile.kind != first.meta.profile.kind
+    }) {
         warnings.push(format!(
             "line {} was traced under other conditions than line {}; every line is evaluated as line {} ({})",
-            line_label(l.meta.index),
-            line_label(first.meta.index),
-            line_label(first.meta.index),
+            line_label(l.meta.id.index),
+            line_label(first.meta.id.index),
+            line_label(first.meta.id.index),
             filter_reason
         ));
     }
@@ -337,7 +337,7 @@ pub fn characterise_scan(
     drop(grid);
     let journal_lines: Vec<u32> = state
         .as_ref()
-        .map(|s| s.lines.iter().map(|l| l.index).collect())
+        .map(|s| s.lines.iter().map(|l| l.id.index).collect())
         .unwrap_or_default();
     let facts = state.as_ref().map(|s| ScanFacts {
         start: &s.start,
@@ -370,7 +370,9 @@ pub fn characterise_scan(
 /// them, the surface it fitted and wrote as IGES, and `[analysis]`'s options.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ScanCharacteriser {
-    /// Curves, levels, λc and filter (the degrees are the scan's own surface's).
+    /// Curves, levels, λc, filter and spikes for a scan whose plan froze none (journals of
+    /// older versions); a plan's frozen analysis wins over them. The degrees are the scan's
+    /// own surface's.
     pub options: ScanAnalysisOptions,
 }
 
@@ -379,7 +381,11 @@ impl Characterise for ScanCharacteriser {
         &self,
         scan: &CompletedScan<'_>,
     ) -> Result<Characterised, Box<dyn std::error::Error + Send + Sync>> {
-        let journal_lines: Vec<u32> = scan.lines.iter().map(|l| l.meta.index).collect();
+        let journal_lines: Vec<u32> = scan.lines.iter().map(|l| l.meta.id.index).collect();
+        let options = match &scan.start.plan.analysis {
+            Some(a) => self.options.clone().with_frozen(a),
+            None => self.options.clone(),
+        };
         let facts = ScanFacts {
             start: scan.start,
             stop: None,
@@ -398,7 +404,7 @@ impl Characterise for ScanCharacteriser {
             Some(facts),
             model,
             Some(scan.summary.clone()),
-            &self.options,
+            &options,
             Vec::new(),
         )?;
         let complete = out.complete();
@@ -419,8 +425,8 @@ impl Characterise for ScanCharacteriser {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::profile::{Conditions, Profile};
-    use crate::scan::line::LineMeta;
+    use crate::profile::{Conditions, NoHeights, Profile};
+    use crate::scan::line::{LineIdentity, LineMeta};
     use crate::units::Nm;
 
     fn line(kind: ProfileKind, lambda_c_mm: Option<f64>, filter: Option<FilterKind>) -> StoredLine {
@@ -432,18 +438,23 @@ mod tests {
         let t = chrono::Utc::now();
         StoredLine {
             meta: LineMeta {
-                index: 0,
-                y_target_nm: Nm(0),
-                y_readback_nm: None,
-                pitch_x_mm: 0.001,
-                points: 3,
-                kind,
-                conditions: conditions.clone(),
+                id: LineIdentity {
+                    index: 0,
+                    y_target_nm: Nm(0),
+                    y_readback_nm: None,
+                    attempt: 1,
+                    points: 3,
+                },
+                profile: Profile {
+                    pitch_x_mm: 0.001,
+                    heights_um: NoHeights,
+                    kind,
+                    conditions: conditions.clone(),
+                },
                 results: Vec::new(),
                 readout_warnings: Vec::new(),
                 started_at: t,
                 finished_at: t,
-                attempt: 1,
             },
             profile: Profile {
                 pitch_x_mm: 0.001,

@@ -11,7 +11,7 @@ use super::device_ops::Held;
 use super::disk::free_bytes;
 use super::journal::StopStatus;
 use super::ledger::Ledger;
-use super::line::{LineMeta, StoredLine};
+use super::line::{LineIdentity, LineMeta, StoredLine};
 use super::machine::{Action, End, Event, StorageFailure};
 use super::opening::{self, NewScan};
 use super::outputs::Outputs;
@@ -24,6 +24,8 @@ pub(super) struct Books<'a> {
     pub(super) ledger: Option<Ledger>,
     pub(super) new_scan: Option<NewScan>,
     pub(super) held: Option<Held>,
+    /// The metadata of the held line once it is committed, for its push into the fitter.
+    pub(super) committed: Option<LineMeta>,
     pub(super) outputs: Option<Outputs>,
     /// The reply channel of the command being fed.
     pub(super) reply: Option<tokio::sync::oneshot::Sender<Result<String, String>>>,
@@ -100,46 +102,41 @@ impl Books<'_> {
                 };
                 let p = &h.traced.profile;
                 let meta = LineMeta {
-                    index: *line,
-                    y_target_nm: l.plan.target(*line),
-                    y_readback_nm: h.readback,
-                    pitch_x_mm: p.pitch_x_mm,
-                    points: p.len(),
-                    kind: p.kind,
-                    conditions: p.conditions.clone(),
+                    id: LineIdentity {
+                        index: *line,
+                        y_target_nm: l.plan.target(*line),
+                        y_readback_nm: h.readback,
+                        attempt: *attempt,
+                        points: p.len(),
+                    },
+                    profile: p.header(),
                     results: h.traced.results.clone(),
                     readout_warnings: h.traced.readout_warnings.clone(),
                     started_at: h.started_at,
                     finished_at: h.finished_at,
-                    attempt: *attempt,
                 };
                 for w in &h.traced.warnings {
                     tracing::warn!(scan_id = %l.id, line = line + 1, "{w}");
                 }
                 match l.commit(&meta, p) {
-                    Ok(()) => Event::Committed,
+                    Ok(()) => {
+                        self.committed = Some(meta);
+                        Event::Committed
+                    }
                     Err(e) => storage_event(e.is_disk_full(), e.to_string()),
                 }
             }
             Action::Push { line } => {
-                let (Some(l), Some(h)) = (self.ledger.as_mut(), self.held.take()) else {
+                let (Some(l), Some(h), Some(meta)) = (
+                    self.ledger.as_mut(),
+                    self.held.take(),
+                    self.committed.take().filter(|m| m.id.index == *line),
+                ) else {
                     return Event::PushRefused("internal: no committed line to push".into());
                 };
+                // The line as committed (its metadata file's contents) with its profile.
                 let meta_line = StoredLine {
-                    meta: LineMeta {
-                        index: *line,
-                        y_target_nm: l.plan.target(*line),
-                        y_readback_nm: h.readback,
-                        pitch_x_mm: h.traced.profile.pitch_x_mm,
-                        points: h.traced.profile.len(),
-                        kind: h.traced.profile.kind,
-                        conditions: h.traced.profile.conditions.clone(),
-                        results: h.traced.results,
-                        readout_warnings: h.traced.readout_warnings,
-                        started_at: h.started_at,
-                        finished_at: h.finished_at,
-                        attempt: 0,
-                    },
+                    meta,
                     profile: h.traced.profile,
                 };
                 let y_mm = meta_line.y_mm();

@@ -14,8 +14,10 @@
 //! [`ResumeState`] derives what a restarted scan needs; [`survey`] finds the scan to resume
 //! from the journals themselves and names the damaged ones, which are skipped.
 //!
-//! Layer 3 (session): depends on [`crate::profile`], [`crate::units`], the plan, the operator's
-//! [`Peer`] and the storage fault hook ([`super::faults`]); file I/O only.
+//! Layer 3 (session): depends on [`crate::profile`], [`crate::devices`] (which device an
+//! interruption concerns), the plan, the line identity it shares with the line files
+//! ([`super::line`]), the operator's [`Peer`] and the storage fault hook
+//! ([`super::faults`]); file I/O only.
 
 use std::collections::BTreeSet;
 use std::fs::{self, OpenOptions};
@@ -27,11 +29,12 @@ use chrono::{DateTime, Utc};
 use serde::{Deserialize, Serialize};
 
 use crate::profile::Conditions;
-use crate::units::Nm;
 
 use super::command::Peer;
 use super::faults::{StorageFaults, WriteStep};
+use super::line::LineIdentity;
 use super::plan::Plan;
+use super::station::Device;
 
 /// The journal's file name inside a scan directory.
 pub const JOURNAL_FILE: &str = "journal.jsonl";
@@ -134,16 +137,9 @@ pub struct StartRecord {
 /// A completed, durably stored line.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LineRecord {
-    /// 0-based line index.
-    pub index: u32,
-    /// Target y.
-    pub y_target_nm: Nm,
-    /// y read back after settling.
-    pub y_readback_nm: Option<Nm>,
-    /// 1-based attempt that produced the line.
-    pub attempt: u32,
-    /// Number of points.
-    pub points: usize,
+    /// Index, target and read-back y, attempt and points, as in the line's metadata file.
+    #[serde(flatten)]
+    pub id: LineIdentity,
     /// SHA-256 of the heights file, hex.
     pub csv_sha256: String,
     /// When the line was read out.
@@ -155,8 +151,8 @@ pub struct LineRecord {
 pub struct InterruptionRecord {
     /// What happened, for people.
     pub reason: String,
-    /// The device concerned ("instrument", "stage"), if any.
-    pub device: Option<String>,
+    /// The device concerned, if any (`"instrument"` or `"stage"` in JSON).
+    pub device: Option<Device>,
     /// The line being worked on, if any.
     pub line: Option<u32>,
     /// When.
@@ -562,17 +558,17 @@ impl ResumeState {
                     })
                 }
                 Record::Line(l) => {
-                    if seen.insert(l.index) {
+                    if seen.insert(l.id.index) {
                         state.lines.push(l.clone());
                     } else {
-                        state.duplicates.push(l.index);
+                        state.duplicates.push(l.id.index);
                     }
                 }
                 Record::Interruption(x) => state.interruptions.push(x.clone()),
                 Record::Quarantine(q) => {
                     // The line's record no longer counts: the line is traced again.
                     if seen.remove(&q.index) {
-                        state.lines.retain(|l| l.index != q.index);
+                        state.lines.retain(|l| l.id.index != q.index);
                     }
                     state.quarantined.push(q.clone());
                 }
@@ -585,7 +581,7 @@ impl ResumeState {
 
     /// The set of completed line indices.
     pub fn completed(&self) -> BTreeSet<u32> {
-        self.lines.iter().map(|l| l.index).collect()
+        self.lines.iter().map(|l| l.id.index).collect()
     }
 
     /// The first line index in `0..total` that is not completed, `None` when all are.
@@ -753,5 +749,52 @@ mod tests {
         fs::create_dir(&d).unwrap();
         fs::write(d.join(JOURNAL_FILE), b"{\"class\":\"start\",\"sc").unwrap();
         assert!(find_unfinished(tmp.path()).unwrap().is_empty());
+    }
+
+    #[test]
+    fn a_line_record_is_written_as_before_its_identity_was_shared() {
+        let r = Record::Line(LineRecord {
+            id: LineIdentity {
+                index: 3,
+                y_target_nm: crate::units::Nm(-19_970_000),
+                y_readback_nm: None,
+                attempt: 2,
+                points: 160,
+            },
+            csv_sha256: "ab".repeat(32),
+            time: "2026-12-02T03:22:45.411448018Z".parse().unwrap(),
+        });
+        let body = serde_json::to_string(&r).unwrap();
+        let want = format!(
+            r#"{{"class":"line","index":3,"y_target_nm":-19970000,"y_readback_nm":null,"attempt":2,"points":160,"csv_sha256":"{}","time":"2026-12-02T03:22:45.411448018Z"}}"#,
+            "ab".repeat(32)
+        );
+        assert_eq!(body, want);
+        let (back, crc) = decode_line(&encode_record(&r).unwrap()).unwrap();
+        assert!(crc);
+        assert_eq!(back, r);
+    }
+
+    #[test]
+    fn an_interruption_names_its_device_as_older_journals_spell_it() {
+        let line = |device: &str| {
+            format!(
+                r#"{{"class":"interruption","reason":"r","device":{device},"line":2,"time":"2026-12-02T03:22:43Z"}}"#
+            )
+        };
+        for (json, want) in [
+            (r#""instrument""#, Some(Device::Instrument)),
+            (r#""stage""#, Some(Device::Stage)),
+            ("null", None),
+        ] {
+            let (r, _) = decode_line(line(json).as_bytes()).unwrap();
+            let Record::Interruption(i) = &r else {
+                panic!("{r:?}")
+            };
+            assert_eq!(i.device, want, "{json}");
+            assert_eq!(serde_json::to_string(&r).unwrap(), line(json), "{json}");
+        }
+        let e = decode_line(line(r#""disk""#).as_bytes()).unwrap_err();
+        assert!(e.contains("unknown variant `disk`"), "{e}");
     }
 }

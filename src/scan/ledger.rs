@@ -72,7 +72,7 @@ impl Ledger {
         tracing::warn!(scan_id = %self.id, line = n.line.map(|l| l + 1), "interruption: {}", n.reason);
         let r = Record::Interruption(InterruptionRecord {
             reason: n.reason.clone(),
-            device: n.device.map(|d| d.name().to_owned()),
+            device: n.device,
             line: n.line,
             time: Utc::now(),
             peer: n.peer,
@@ -117,9 +117,9 @@ impl Ledger {
     /// journal does not vouch for are removed.
     pub fn commit(&mut self, meta: &LineMeta, profile: &Profile) -> Result<(), StoreError> {
         // The hook learns the line before any of its writes.
-        self.hooks.set_line(meta.index);
+        self.hooks.set_line(meta.id.index);
         if let Err(e) = self.store.commit_line(&mut self.journal, meta, profile) {
-            self.discard_uncommitted(meta.index);
+            self.discard_uncommitted(meta.id.index);
             return Err(e);
         }
         self.hooks.at(Step::AfterCommit);
@@ -134,7 +134,7 @@ impl Ledger {
         let recorded = super::journal::read_journal(self.journal.path()).is_ok_and(|r| {
             r.records
                 .iter()
-                .any(|rec| matches!(rec, Record::Line(l) if l.index == index))
+                .any(|rec| matches!(rec, Record::Line(l) if l.id.index == index))
         });
         if recorded {
             return;
@@ -162,7 +162,7 @@ impl Ledger {
         while let Some(line) = next.take() {
             let fitter = self.fitter.get_or_insert_with(|| fitter_of(&self.plan));
             fitter.push_line(line.y_mm(), &line.profile)?;
-            let following = line.meta.index.saturating_add(1);
+            let following = line.meta.id.index.saturating_add(1);
             self.lines.push(line);
             next = self.ahead.remove(&following);
         }

@@ -176,25 +176,25 @@ pub(super) fn reopen(
             .map_err(|e| format!("cannot record the line moved aside: {e}"))?;
     }
     let mut lines = checked.lines;
-    lines.sort_by_key(|l| l.meta.index);
+    lines.sort_by_key(|l| l.meta.id.index);
     let columns = lines.first().map(|l| l.profile.len());
     let pitch_x_mm = lines.first().map(|l| l.profile.pitch_x_mm);
     // The fitter takes lines in order: those after the first gap wait in the ledger.
     let committed = lines
         .iter()
         .zip(0u32..)
-        .take_while(|(l, k)| l.meta.index == *k)
+        .take_while(|(l, k)| l.meta.id.index == *k)
         .count();
     ledger.ahead = lines
         .split_off(committed)
         .into_iter()
-        .map(|l| (l.meta.index, l))
+        .map(|l| (l.meta.id.index, l))
         .collect();
     let ahead = ledger.ahead.keys().copied().collect();
     let on_disk = committed + ledger.ahead.len();
     let committed = committed as u32;
     for l in lines {
-        let index = l.meta.index;
+        let index = l.meta.id.index;
         ledger
             .push(l)
             .map_err(|e| format!("cannot rebuild the fit from line {}: {e}", index + 1))?;

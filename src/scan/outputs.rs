@@ -273,7 +273,7 @@ pub fn write_outputs(
         (fitter.finish()?, Vec::new())
     } else {
         drop(fitter);
-        let index: Vec<u32> = lines.iter().map(|l| l.meta.index).collect();
+        let index: Vec<u32> = lines.iter().map(|l| l.meta.id.index).collect();
         let m = fit_model(&z, cols, &index, pitch_x_mm, &y, &recipe)?;
         (m.fit, m.replaced)
     };
@@ -344,11 +344,11 @@ pub fn write_outputs(
         .iter()
         .map(|l| {
             serde_json::json!({
-                "index": l.meta.index,
+                "index": l.meta.id.index,
                 "y_mm": l.y_mm(),
-                "y_readback_mm": l.meta.y_readback_nm.map(|n| n.to_mm()),
-                "points": l.meta.points,
-                "attempt": l.meta.attempt,
+                "y_readback_mm": l.meta.id.y_readback_nm.map(|n| n.to_mm()),
+                "points": l.meta.id.points,
+                "attempt": l.meta.id.attempt,
                 "instrument": l.meta.results,
             })
         })

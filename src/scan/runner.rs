@@ -58,6 +58,7 @@ pub async fn run_scan<S: Station>(
         ledger: None,
         new_scan: None,
         held: None,
+        committed: None,
         outputs: None,
         reply: None,
         end: None,

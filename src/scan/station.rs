@@ -16,36 +16,11 @@ use crate::sj210::models::ModelTable;
 use crate::sj210::sampling::pitch_from_lambda_s;
 use crate::sj210::settings::InstrumentSettings;
 use crate::stage::{AnyYAxis, ScanDirection, StageError, StageSettings};
-use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::Path;
 use tokio_serial::SerialStream;
 
-/// Which device a fault concerns.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Device {
-    /// The profiler.
-    Instrument,
-    /// The y stage.
-    Stage,
-}
-
-impl Device {
-    /// `instrument` / `stage`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Device::Instrument => "instrument",
-            Device::Stage => "stage",
-        }
-    }
-}
-
-impl fmt::Display for Device {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
+pub use crate::devices::Device;
 
 /// A device error as the runner handles it.
 #[derive(Debug, Clone, PartialEq, Eq)]

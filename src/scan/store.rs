@@ -118,24 +118,24 @@ impl ScanStore {
     pub fn write_line(&self, meta: &LineMeta, profile: &Profile) -> Result<String, StoreError> {
         let dir = self.lines_dir();
         let csv = render_csv(profile);
-        if meta.points != profile.heights_um.len() {
+        if meta.id.points != profile.heights_um.len() {
             return Err(StoreError::Inconsistent {
-                path: dir.join(meta_name(meta.index)),
+                path: dir.join(meta_name(meta.id.index)),
                 reason: format!(
                     "metadata says {} points but the profile has {}",
-                    meta.points,
+                    meta.id.points,
                     profile.heights_um.len()
                 ),
             });
         }
         let json = serde_json::to_vec_pretty(meta).map_err(|source| StoreError::MetaJson {
-            path: dir.join(meta_name(meta.index)),
+            path: dir.join(meta_name(meta.id.index)),
             source,
         })?;
-        self.write_file(&csv_name(meta.index), csv.as_bytes(), WriteStep::LineCsv)?;
-        if let Err(e) = self.write_file(&meta_name(meta.index), &json, WriteStep::LineJson) {
+        self.write_file(&csv_name(meta.id.index), csv.as_bytes(), WriteStep::LineCsv)?;
+        if let Err(e) = self.write_file(&meta_name(meta.id.index), &json, WriteStep::LineJson) {
             // Never half-keep a line: without its metadata the heights file goes too.
-            let _ = fs::remove_file(dir.join(csv_name(meta.index)));
+            let _ = fs::remove_file(dir.join(csv_name(meta.id.index)));
             let _ = sync_dir(&dir);
             return Err(e);
         }
@@ -152,11 +152,7 @@ impl ScanStore {
     ) -> Result<(), StoreError> {
         let sha = self.write_line(meta, profile)?;
         journal.append(&Record::Line(LineRecord {
-            index: meta.index,
-            y_target_nm: meta.y_target_nm,
-            y_readback_nm: meta.y_readback_nm,
-            attempt: meta.attempt,
-            points: meta.points,
+            id: meta.id,
             csv_sha256: sha,
             time: meta.finished_at,
         }))?;
@@ -187,10 +183,13 @@ impl ScanStore {
                 path: meta_path.clone(),
                 source,
             })?;
-        if meta.index != index {
+        if meta.id.index != index {
             return Err(StoreError::Inconsistent {
                 path: meta_path,
-                reason: format!("holds line index {} but is named for {index}", meta.index),
+                reason: format!(
+                    "holds line index {} but is named for {index}",
+                    meta.id.index
+                ),
             });
         }
         let csv_text = fs::read_to_string(&csv_path).map_err(|e| {
@@ -207,23 +206,18 @@ impl ScanStore {
                 }
             }
         })?;
-        let heights = parse_csv(&csv_path, &csv_text, meta.pitch_x_mm)?;
-        if heights.len() != meta.points {
+        let heights = parse_csv(&csv_path, &csv_text, meta.profile.pitch_x_mm)?;
+        if heights.len() != meta.id.points {
             return Err(StoreError::Inconsistent {
                 path: csv_path,
                 reason: format!(
                     "has {} points, its metadata says {}",
                     heights.len(),
-                    meta.points
+                    meta.id.points
                 ),
             });
         }
-        let profile = Profile {
-            pitch_x_mm: meta.pitch_x_mm,
-            heights_um: heights,
-            kind: meta.kind,
-            conditions: meta.conditions.clone(),
-        };
+        let profile = meta.profile.clone().with_heights(heights);
         Ok(StoredLine { meta, profile })
     }
 
@@ -276,8 +270,8 @@ impl ScanStore {
     pub fn load_committed(&self, records: &[LineRecord]) -> Result<Vec<StoredLine>, StoreError> {
         let mut out = Vec::with_capacity(records.len());
         for r in records {
-            let line = self.load_line(r.index)?;
-            let csv_path = self.lines_dir().join(csv_name(r.index));
+            let line = self.load_line(r.id.index)?;
+            let csv_path = self.lines_dir().join(csv_name(r.id.index));
             let bytes = fs::read(&csv_path).map_err(io_err("read", &csv_path))?;
             let sha = hex_sha256(&bytes);
             if sha != r.csv_sha256 {
@@ -325,7 +319,7 @@ impl ScanStore {
             quarantined: Vec::new(),
         };
         for r in records {
-            let csv_path = self.lines_dir().join(csv_name(r.index));
+            let csv_path = self.lines_dir().join(csv_name(r.id.index));
             let found = match fs::read(&csv_path) {
                 Ok(bytes) => Some(hex_sha256(&bytes)),
                 Err(e) if e.kind() == io::ErrorKind::NotFound => None,
@@ -337,7 +331,7 @@ impl ScanStore {
                     "its heights file has SHA-256 {sha}, the journal's line record {}: the file was changed after the line was committed",
                     r.csv_sha256
                 )),
-                Some(_) => match self.load_line(r.index) {
+                Some(_) => match self.load_line(r.id.index) {
                     Ok(line) => {
                         out.lines.push(line);
                         None
@@ -352,15 +346,15 @@ impl ScanStore {
                 },
             };
             if let Some(reason) = problem {
-                let moved_to = self.quarantine(r.index)?;
+                let moved_to = self.quarantine(r.id.index)?;
                 out.quarantined.push(QuarantineRecord {
-                    index: r.index,
+                    index: r.id.index,
                     expected_sha256: r.csv_sha256.clone(),
                     found_sha256: found.unwrap_or_default(),
                     moved_to,
                     reason: format!(
                         "line {}: {reason}; moved aside, it is traced again",
-                        r.index + 1
+                        r.id.index + 1
                     ),
                     time: now,
                 });

@@ -216,7 +216,7 @@ fn records(dir: &Path) -> Vec<Record> {
 fn line_indices(recs: &[Record]) -> Vec<u32> {
     recs.iter()
         .filter_map(|r| match r {
-            Record::Line(l) => Some(l.index),
+            Record::Line(l) => Some(l.id.index),
             _ => None,
         })
         .collect()

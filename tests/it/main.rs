@@ -27,6 +27,7 @@ mod metrology_reference;
 mod metrology_x3p;
 mod model_honesty;
 mod model_report;
+mod older_scans;
 mod scan_dir_analysis;
 mod scan_e2e;
 mod scan_runner;

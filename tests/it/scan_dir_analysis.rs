@@ -10,10 +10,12 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
 use surfscan::metrology::params::{analyze_line, Options};
-use surfscan::profile::{Conditions, FilterKind, InstrumentResult, Profile, ProfileKind};
+use surfscan::profile::{
+    Conditions, FilterKind, InstrumentResult, NoHeights, Profile, ProfileKind,
+};
 use surfscan::scan::faults::NoFaults;
 use surfscan::scan::journal::{Journal, Record, StartRecord, StopRecord, StopStatus};
-use surfscan::scan::line::LineMeta;
+use surfscan::scan::line::{LineIdentity, LineMeta};
 use surfscan::scan::plan::Plan;
 use surfscan::scan::scan_id::ScanId;
 use surfscan::scan::store::ScanStore;
@@ -86,6 +88,7 @@ fn plan(lines: u32) -> Plan {
         max_line_attempts: 3,
         v_method: Default::default(),
         replace_spikes: None,
+        analysis: None,
     }
 }
 
@@ -144,13 +147,19 @@ fn build_scan(
             conditions: conditions(kind),
         };
         let meta = LineMeta {
-            index: r as u32,
-            y_target_nm: Nm(r as i64 * STEP_Y_NM),
-            y_readback_nm: Some(Nm(r as i64 * STEP_Y_NM + 3)),
-            pitch_x_mm: PITCH_X_MM,
-            points: profile.heights_um.len(),
-            kind,
-            conditions: conditions(kind),
+            id: LineIdentity {
+                index: r as u32,
+                y_target_nm: Nm(r as i64 * STEP_Y_NM),
+                y_readback_nm: Some(Nm(r as i64 * STEP_Y_NM + 3)),
+                attempt: 1,
+                points: profile.heights_um.len(),
+            },
+            profile: Profile {
+                pitch_x_mm: PITCH_X_MM,
+                heights_um: NoHeights,
+                kind,
+                conditions: conditions(kind),
+            },
             results: vec![
                 InstrumentResult {
                     name: "Ra".into(),
@@ -178,7 +187,6 @@ fn build_scan(
             started_at: start,
             // One line read out every 7.5 minutes.
             finished_at: start + chrono::Duration::seconds(450 * (r as i64 + 1)),
-            attempt: 1,
         };
         store.commit_line(&mut journal, &meta, &profile).unwrap();
     }
@@ -784,6 +792,7 @@ const CHECK_BODY: &str = "<script>addEventListener('load',function(){var t={};[]
 #[test]
 fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
     use surfscan::scan::journal::InterruptionRecord;
+    use surfscan::scan::station::Device;
     let tmp = tempfile::tempdir().unwrap();
     let rows: Vec<usize> = (0..8).collect();
     let scan = build_scan(tmp.path(), &rows, ProfileKind::P, None);
@@ -791,7 +800,11 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
     let (mut journal, _) = Journal::open(&scan.join("journal.jsonl"), Arc::new(NoFaults)).unwrap();
     let t = Utc.with_ymd_and_hms(2026, 11, 30, 9, 45, 0).unwrap();
     for (reason, device, line) in [
-        ("instrument unplugged <USB>", Some("instrument"), Some(3)),
+        (
+            "instrument unplugged <USB>",
+            Some(Device::Instrument),
+            Some(3),
+        ),
         (
             "resumed after a restart with 4 of 8 lines on disk",
             None,
@@ -801,7 +814,7 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
         journal
             .append(&Record::Interruption(InterruptionRecord {
                 reason: reason.into(),
-                device: device.map(str::to_owned),
+                device,
                 line,
                 time: t,
                 peer: None,

@@ -343,7 +343,7 @@ fn line_indices(records: &[Record]) -> Vec<u32> {
     records
         .iter()
         .filter_map(|r| match r {
-            Record::Line(l) => Some(l.index),
+            Record::Line(l) => Some(l.id.index),
             _ => None,
         })
         .collect()
@@ -518,7 +518,7 @@ async fn transient_faults_are_retried_within_the_time_budget() {
     let attempts: Vec<u32> = recs
         .iter()
         .filter_map(|r| match r {
-            Record::Line(l) => Some(l.attempt),
+            Record::Line(l) => Some(l.id.attempt),
             _ => None,
         })
         .collect();
@@ -630,7 +630,7 @@ async fn a_vanished_instrument_is_reopened_with_exponential_backoff() {
     let attempts: Vec<u32> = recs
         .iter()
         .filter_map(|r| match r {
-            Record::Line(l) => Some(l.attempt),
+            Record::Line(l) => Some(l.id.attempt),
             _ => None,
         })
         .collect();

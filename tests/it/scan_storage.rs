@@ -7,13 +7,13 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use chrono::{TimeZone, Utc};
-use surfscan::profile::{Conditions, InstrumentResult, Profile, ProfileKind};
+use surfscan::profile::{Conditions, InstrumentResult, NoHeights, Profile, ProfileKind};
 use surfscan::scan::faults::{NoFaults, StorageFaults, WriteStep};
 use surfscan::scan::journal::{
     find_unfinished, parse_journal, InterruptionRecord, Journal, JournalError, Record, ResumeState,
     StartRecord, StopRecord, StopStatus,
 };
-use surfscan::scan::line::LineMeta;
+use surfscan::scan::line::{LineIdentity, LineMeta};
 use surfscan::scan::metrics::{write_metrics, ScanMetrics};
 use surfscan::scan::scan_id::ScanId;
 use surfscan::scan::store::ScanStore;
@@ -69,6 +69,7 @@ fn start_record(id: &ScanId, lines: u32) -> StartRecord {
             max_line_attempts: 3,
             v_method: Default::default(),
             replace_spikes: None,
+            analysis: None,
         },
         config: serde_json::json!({"scan": {"lines": lines}}),
         config_hash: "ab".repeat(32),
@@ -93,13 +94,19 @@ fn line(k: u32) -> (LineMeta, Profile) {
     p.kind = ProfileKind::R;
     let t = Utc.with_ymd_and_hms(2026, 1, 2, 3, 10, k).unwrap();
     let meta = LineMeta {
-        index: k,
-        y_target_nm: Nm(i64::from(k) * 10_000),
-        y_readback_nm: Some(Nm(i64::from(k) * 10_000 + 3)),
-        pitch_x_mm: 0.0005,
-        points: 5,
-        kind: ProfileKind::R,
-        conditions: Conditions::default(),
+        id: LineIdentity {
+            index: k,
+            y_target_nm: Nm(i64::from(k) * 10_000),
+            y_readback_nm: Some(Nm(i64::from(k) * 10_000 + 3)),
+            attempt: 1,
+            points: 5,
+        },
+        profile: Profile {
+            pitch_x_mm: 0.0005,
+            heights_um: NoHeights,
+            kind: ProfileKind::R,
+            conditions: Conditions::default(),
+        },
         results: vec![InstrumentResult {
             name: "Ra".into(),
             value: Some(0.123),
@@ -110,7 +117,6 @@ fn line(k: u32) -> (LineMeta, Profile) {
         readout_warnings: Vec::new(),
         started_at: t,
         finished_at: t,
-        attempt: 1,
     };
     (meta, p)
 }
@@ -211,7 +217,7 @@ fn journal_write_failure_leaves_the_line_file_but_resume_retraces_it_exactly_onc
     let (mut journal, rec) = Journal::open(&store.journal_path(), Arc::new(NoFaults)).unwrap();
     assert_eq!(rec.torn_bytes, 0);
     let (mut m1b, mut p1b) = line(1);
-    m1b.attempt = 2;
+    m1b.id.attempt = 2;
     p1b.heights_um[0] = 42.0;
     store.commit_line(&mut journal, &m1b, &p1b).unwrap();
     let (m2, p2) = line(2);
@@ -219,10 +225,10 @@ fn journal_write_failure_leaves_the_line_file_but_resume_retraces_it_exactly_onc
 
     let st = state_of(&store);
     assert!(st.duplicates.is_empty());
-    let idx: Vec<u32> = st.lines.iter().map(|l| l.index).collect();
+    let idx: Vec<u32> = st.lines.iter().map(|l| l.id.index).collect();
     assert_eq!(idx, vec![0, 1, 2], "every line exactly once");
     let lines = store.load_committed(&st.lines).unwrap();
-    assert_eq!(lines[1].meta.attempt, 2);
+    assert_eq!(lines[1].meta.id.attempt, 2);
     assert_eq!(lines[1].profile.heights_um[0], 42.0);
 }
 
@@ -303,11 +309,7 @@ fn journal_bytes_with_records(dir: &Path) -> (Vec<u8>, usize) {
     for k in 0..2u32 {
         let (m, _) = line(k);
         j.append(&Record::Line(surfscan::scan::journal::LineRecord {
-            index: k,
-            y_target_nm: m.y_target_nm,
-            y_readback_nm: m.y_readback_nm,
-            attempt: 1,
-            points: 5,
+            id: m.id,
             csv_sha256: "00".repeat(32),
             time: m.finished_at,
         }))
@@ -316,7 +318,7 @@ fn journal_bytes_with_records(dir: &Path) -> (Vec<u8>, usize) {
     let before_last = std::fs::read(dir.join("journal.jsonl")).unwrap().len();
     j.append(&Record::Interruption(InterruptionRecord {
         reason: "instrument unplugged".into(),
-        device: Some("instrument".into()),
+        device: Some(surfscan::scan::station::Device::Instrument),
         line: Some(2),
         time: Utc.with_ymd_and_hms(2026, 1, 2, 4, 0, 0).unwrap(),
         peer: None,
@@ -395,13 +397,13 @@ fn duplicate_line_records_keep_the_first_and_are_reported() {
     store.commit_line(&mut journal, &m1, &p1).unwrap();
     let first_l1 = state_of(&store).lines[1].clone();
     let (mut m1b, p1b) = line(1);
-    m1b.attempt = 3;
+    m1b.id.attempt = 3;
     store.commit_line(&mut journal, &m1b, &p1b).unwrap();
     let st = state_of(&store);
     assert_eq!(st.duplicates, vec![1]);
     assert_eq!(st.lines.len(), 2);
     assert_eq!(st.lines[1], first_l1);
-    assert_eq!(st.lines[1].attempt, 1);
+    assert_eq!(st.lines[1].id.attempt, 1);
     assert_eq!(st.first_missing(3), Some(2));
 }
 
@@ -896,7 +898,7 @@ fn a_committed_line_changed_on_disk_is_moved_aside_with_both_hashes_and_traced_a
 
     let now = Utc.with_ymd_and_hms(2026, 1, 3, 0, 0, 0).unwrap();
     let got = store.load_committed_repairing(&st.lines, now).unwrap();
-    let kept: Vec<u32> = got.lines.iter().map(|l| l.meta.index).collect();
+    let kept: Vec<u32> = got.lines.iter().map(|l| l.meta.id.index).collect();
     assert_eq!(kept, vec![0, 2]);
     assert_eq!(got.quarantined.len(), 2);
     let q = &got.quarantined[0];
@@ -926,7 +928,7 @@ fn a_committed_line_changed_on_disk_is_moved_aside_with_both_hashes_and_traced_a
     assert_eq!(st.quarantined.len(), 2);
     for k in [1, 3] {
         let (mut m, p) = line(k);
-        m.attempt = 2;
+        m.id.attempt = 2;
         store.commit_line(&mut journal, &m, &p).unwrap();
     }
     let st = state_of(&store);
