@@ -318,6 +318,7 @@ fn write_scan(parent: &Path, kind: ProfileKind, cols: usize) -> PathBuf {
                 max_line_attempts: 3,
                 v_method: Default::default(),
                 replace_spikes: None,
+                analysis: None,
             },
             config: serde_json::json!({}),
             config_hash: "0".repeat(64),

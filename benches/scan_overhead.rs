@@ -119,8 +119,9 @@ fn main() {
     rt.block_on(run(a));
 }
 
-/// The simulated board at real speed, just powered up 1 mm above the scan's first line.
-fn board(sim: Simulator, link: &Path) -> Simulator {
+/// The simulated board at real speed, just powered up 1 mm above the scan's first line;
+/// `shared` counts its homing cycles and moves.
+fn board(sim: Simulator, link: &Path, shared: std::sync::Arc<StageShared>) -> Simulator {
     sim.grbl_stage(
         link,
         GrblSimConfig {
@@ -128,7 +129,7 @@ fn board(sim: Simulator, link: &Path) -> Simulator {
             start_mm: Y_START_MM + 1.0,
             ..GrblSimConfig::default()
         },
-        StageShared::new(),
+        shared,
     )
 }
 
@@ -144,7 +145,12 @@ async fn ready(sim: Simulator) -> SimHandle {
 async fn stage_alone() {
     let tmp = tempfile::tempdir().expect("temp dir");
     let link = tmp.path().join("ystage");
-    let h = ready(board(Simulator::without_instrument(), &link)).await;
+    let h = ready(board(
+        Simulator::without_instrument(),
+        &link,
+        StageShared::new(),
+    ))
+    .await;
     let text = format!(
         "port = {:?}\nprotocol = \"grbl\"\nsteps-per-mm = 400\nsoft-limit-min-mm = -100\n\
          soft-limit-max-mm = 0\nbacklash-mm = 0.05\nsettle-ms = {SETTLE_MS}\n\
@@ -195,7 +201,8 @@ async fn run(a: Args) {
         .instrument(instrument)
         .profiles(profiles)
         .baud(BAUD);
-    let h = ready(board(sim, &stage_link)).await;
+    let stage = StageShared::new();
+    let h = ready(board(sim, &stage_link, stage.clone())).await;
     let cfg = tmp.path().join("bench.toml");
     let text = demo_config(&inst_link, &stage_link, &out)
         .replace("lines = 31", &format!("lines = {}", a.lines));
@@ -307,6 +314,17 @@ async fn run(a: Args) {
          median {:.1} ms",
         median(&mut instrument_over),
         median(&mut between_over)
+    );
+    let homes = stage
+        .homing_cycles
+        .load(std::sync::atomic::Ordering::SeqCst);
+    let moves = stage
+        .moves_started
+        .load(std::sync::atomic::Ordering::SeqCst);
+    println!(
+        "  the board saw {homes} homing cycle(s) and {moves} moves for {} lines (home once: {})",
+        a.lines,
+        if homes == 1 { "yes" } else { "NO" }
     );
     println!("  target {}", if med <= 50.0 { "met" } else { "NOT met" });
 }

@@ -13,12 +13,13 @@
 //!    writer/reader), [`metrology`] (ISO roughness, bearing area curves, areal parameters),
 //!    the codecs inside [`sj210`] and [`stage`].
 //! 2. I/O adapters: [`transport`] (the only code that opens a serial port), the clients in
-//!    [`sj210`] and [`stage`], generic over `AsyncRead + AsyncWrite`.
+//!    [`sj210`] and [`stage`], generic over `AsyncRead + AsyncWrite`, and [`atomic`] (durable
+//!    file replacement, the one write primitive of the scan's files and the outputs).
 //! 3. The session: [`scan`] (plan, station, durable storage and journal, resume, the sans-IO
 //!    session machine and the runner that performs its actions, the outputs of a completed
 //!    scan).
 //! 4. Process edges: [`config`] (the station's TOML, validated), [`telemetry`] (logging),
-//!    [`atomic`] (durable file replacement), [`control`] (the operator's control socket),
+//!    [`control`] (the operator's control socket),
 //!    [`service`] (systemd notifications), [`hook`] (the notification command),
 //!    [`report`] (characterisation of a completed scan, a scan directory or a grid into
 //!    report.json, report.html, summary.csv, plots and X3P, section by section; the runner

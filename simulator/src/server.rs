@@ -85,6 +85,14 @@ impl Responder {
 /// `time_scale`. A pseudo-terminal delivers the command at once, so the command's own time on
 /// a real wire is spent here; the exchange then ends when its last reply byte would have
 /// arrived.
+///
+/// A timer fires up to a tick (1 ms) after its deadline, which on a fast-paced link with
+/// dozens of short exchanges per profile adds more than the wire itself: so each reply is
+/// timed on the wire's own timeline. How late the previous reply went out is taken off the
+/// next one's start (at most [`MAX_PACING_CATCH_UP`]), and a command that arrives while the
+/// previous reply is still on the wire starts after it. A reply is never sent before the
+/// wire time of its exchange counted from where that timeline puts the command, so over a
+/// read-out the link runs at its baud rate, not slower.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pacing {
     /// Baud rate.
@@ -92,6 +100,10 @@ pub struct Pacing {
     /// Multiplies the transfer time (0 = no pacing).
     pub time_scale: f64,
 }
+
+/// The most a reply may be sent before its own transfer time is up, to make up for the
+/// previous reply sent late (below).
+pub const MAX_PACING_CATCH_UP: Duration = Duration::from_millis(2);
 
 impl Pacing {
     fn delay(&self, bytes: usize) -> Duration {
@@ -130,6 +142,10 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
     // While a `noeol` or `flood` window is open, unsolicited bytes flow between replies on a
     // steady cadence that frames arriving in between do not reset.
     let mut next_chatter: Option<Instant> = None;
+    // Pacing on the wire's timeline (see [`Pacing`]): how late the last reply went out, and
+    // when the wire is free of it.
+    let mut late = Duration::ZERO;
+    let mut wire_free: Option<Instant> = None;
     loop {
         if *shutdown.borrow() {
             return Ok(Outcome::Shutdown);
@@ -161,6 +177,7 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
         if n == 0 {
             return Ok(Outcome::Closed);
         }
+        let arrived = Instant::now();
         for frame in splitter.push(buf.get(..n).unwrap_or(&[])) {
             let line = match frame {
                 Frame::Line(l) => l,
@@ -184,7 +201,21 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
             if verdict.strip_line_end {
                 reply.retain(|&b| b != b'\r' && b != b'\n');
             }
-            tokio::time::sleep(pacing.delay(line.len() + 1 + reply.len())).await;
+            let delay = pacing.delay(line.len() + 1 + reply.len());
+            if delay.is_zero() {
+                tokio::time::sleep(delay).await;
+            } else {
+                let from = arrived.checked_sub(late).unwrap_or(arrived);
+                let from = wire_free.map_or(from, |w| w.max(from));
+                let due = from + delay;
+                wire_free = Some(due);
+                if due > Instant::now() {
+                    tokio::time::sleep_until(due).await;
+                }
+                late = Instant::now()
+                    .saturating_duration_since(due)
+                    .min(MAX_PACING_CATCH_UP);
+            }
             match fault {
                 Some(FaultKind::Drop) => {}
                 Some(FaultKind::Truncate) => {

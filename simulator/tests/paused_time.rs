@@ -80,3 +80,46 @@ async fn timeline_and_pacing_follow_the_clock() {
     drop(host);
     assert_eq!(server.await.unwrap().unwrap(), Outcome::Closed);
 }
+
+#[tokio::test(start_paused = true)]
+async fn many_short_exchanges_run_at_the_baud_rate_not_at_the_timer_tick() {
+    // 40 status reads back to back, 14 bytes each at 9600 baud: 14.583 ms of wire each,
+    // 583.3 ms in all. A timer rounds each wait up to the next millisecond (15 ms, 600 ms in
+    // all when every reply waits its own rounded time); on the wire's timeline the lateness
+    // of one reply is taken off the next, so the read-out ends within a tick of the wire
+    // time, and no reply comes before the wire time counted from the first command.
+    let set = ProfileSet::new(vec![ServedProfile {
+        y_mm: 0.0,
+        pitch_x_mm: 0.001,
+        z_um: vec![0.0; 100],
+    }])
+    .unwrap();
+    let inst = Instrument::new(InstrumentConfig::default(), set, None);
+    let (mut host, mut dev) = tokio::io::duplex(4096);
+    let (_stop_tx, mut stop) = tokio::sync::watch::channel(false);
+    let epoch = Instant::now();
+    let server = tokio::spawn(async move {
+        let mut r = Responder::Emulate(Box::new(inst));
+        let mut faults = FaultPlan::default();
+        let pacing = Pacing {
+            baud: 9600,
+            time_scale: 1.0,
+        };
+        serve_connection(&mut dev, &mut r, &mut faults, pacing, epoch, &mut stop).await
+    });
+    let wire = Duration::from_secs_f64(14.0 * 10.0 / 9600.0);
+    let t0 = Instant::now();
+    for k in 1..=40u32 {
+        let (reply, _) = ask(&mut host, "RDSTU00").await;
+        assert_eq!(reply, "OK000\r");
+        assert!(
+            t0.elapsed() >= wire * k,
+            "reply {k} after {:?}",
+            t0.elapsed()
+        );
+    }
+    let took = t0.elapsed();
+    assert!(took <= wire * 40 + Duration::from_millis(1), "{took:?}");
+    drop(host);
+    assert_eq!(server.await.unwrap().unwrap(), Outcome::Closed);
+}

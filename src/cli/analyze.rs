@@ -12,8 +12,10 @@
 //!
 //! The model is fitted once at `--degree-u/--degree-v` and `--v-method` (default: a scan's
 //! frozen plan, else the paper's 5/5 interpolation); the report's model sections describe
-//! that surface and the hold-out refits are made the same way, so a scan directory gives the
-//! report its scan wrote. Spikes are named in the warnings and report.json; `--outliers
+//! that surface and the hold-out refits are made the same way. The characterisation's own
+//! settings (curves, levels, λc, filter, spike rule and policy, hold-out threshold) default
+//! to the `[analysis]` the scan froze in its plan, each flag overriding its part, so a scan
+//! directory gives the report its scan wrote. Spikes are named in the warnings and report.json; `--outliers
 //! exclude` leaves them out of the per-line and measured-grid parameters, `--replace-spikes`
 //! replaces them before fitting.
 //!
@@ -41,12 +43,13 @@ pub struct Args {
     /// Scan directory, X3P file, profile CSV (`x_mm,z_um` header) or grid CSV of heights in
     /// µm.
     pub input: PathBuf,
-    /// Cut-off λc in mm (also the sampling length). Default: for a scan the λc the instrument
-    /// recorded (else 0.8 mm), for a CSV 0.8 mm.
+    /// Cut-off λc in mm (also the sampling length). Default: for a scan its frozen
+    /// `[analysis]` λc, else the λc the instrument recorded (else 0.8 mm); for a CSV 0.8 mm.
     #[arg(long)]
     pub lc: Option<f64>,
-    /// No λc filter (the input already is an R profile). Default: for a scan, filter unless
-    /// the instrument exported an R profile; for a CSV, filter.
+    /// No λc filter (the input already is an R profile). Default: for a scan as its frozen
+    /// `[analysis]` says, else filter unless the instrument exported an R profile; for a CSV,
+    /// filter.
     #[arg(long)]
     pub no_filter: bool,
     /// Grid pitch along x (between columns), mm.
@@ -55,12 +58,14 @@ pub struct Args {
     /// Grid pitch along y (between rows), mm.
     #[arg(long)]
     pub pitch_y: Option<f64>,
-    /// Profile curves extracted from the model for the bearing area curves.
-    #[arg(long, default_value_t = 31)]
-    pub curves: usize,
-    /// Equal height levels per bearing area curve.
-    #[arg(long, default_value_t = 101)]
-    pub levels: usize,
+    /// Profile curves extracted from the model for the bearing area curves. Default: a
+    /// scan's frozen `[analysis]`, else 31.
+    #[arg(long)]
+    pub curves: Option<usize>,
+    /// Equal height levels per bearing area curve. Default: a scan's frozen `[analysis]`,
+    /// else 101.
+    #[arg(long)]
+    pub levels: Option<usize>,
     /// Line drawn in the measured-vs-model overlay (a scan's line index, a grid's 0-based
     /// row); default the middle line.
     #[arg(long)]
@@ -76,8 +81,9 @@ pub struct Args {
     pub degree_v: Option<usize>,
     /// Spikes: flag (named, the data as measured) or exclude (also left out of the per-line
     /// and measured-grid parameters, bridged by the straight line between neighbours).
-    #[arg(long, value_enum, default_value_t = OutliersArg::Flag)]
-    pub outliers: OutliersArg,
+    /// Default: a scan's frozen `[analysis]`, else flag.
+    #[arg(long, value_enum)]
+    pub outliers: Option<OutliersArg>,
     /// The surface and the spike rule.
     #[command(flatten)]
     pub model: ModelArgs,
@@ -264,6 +270,19 @@ fn print_outputs(o: &ScanOutputs) {
     );
 }
 
+/// The characterisation settings a scan directory's plan froze (its `[analysis]` when it
+/// started), else the defaults: for a journal of an older version, which froze none, or one
+/// that cannot be read (characterising the scan names that problem).
+fn scan_analysis_defaults(dir: &Path) -> ScanAnalysisOptions {
+    let frozen = crate::report::scan_dir::read_scan_journal(dir)
+        .ok()
+        .and_then(|s| s.start.plan.analysis);
+    match frozen {
+        Some(a) => ScanAnalysisOptions::default().with_frozen(&a),
+        None => ScanAnalysisOptions::default(),
+    }
+}
+
 /// Runs `surfscan analyze`.
 pub fn run(args: Args) -> Result<(), CliError> {
     if args.degree_u == Some(0) || args.degree_v == Some(0) {
@@ -283,18 +302,21 @@ pub fn run(args: Args) -> Result<(), CliError> {
         let lines = crate::report::scan_dir::load_scan_lines(&args.input)
             .map(|(l, _)| l.len())
             .unwrap_or(0);
+        let frozen = scan_analysis_defaults(&args.input);
         let options = ScanAnalysisOptions {
-            curves: args.curves,
-            levels: args.levels,
-            lambda_c_mm: args.lc,
-            no_filter: args.no_filter,
+            curves: args.curves.unwrap_or(frozen.curves),
+            levels: args.levels.unwrap_or(frozen.levels),
+            lambda_c_mm: args.lc.or(frozen.lambda_c_mm),
+            no_filter: args.no_filter || frozen.no_filter,
             overlay_line: args.overlay_line,
             degree_u: args.degree_u,
             degree_v: args.degree_v,
             out_dir: args.out.clone(),
-            spikes: args.model.spikes()?,
-            exclude_spikes: args.outliers == OutliersArg::Exclude,
-            holdout_threshold: args.model.holdout_threshold()?,
+            spikes: args.model.spikes_or(frozen.spikes)?,
+            exclude_spikes: args
+                .outliers
+                .map_or(frozen.exclude_spikes, |o| o == OutliersArg::Exclude),
+            holdout_threshold: args.model.holdout_threshold_or(frozen.holdout_threshold)?,
             v_method: args.model.v_method(lines, args.degree_v.unwrap_or(5))?,
             replace_spikes: args.model.replace(),
         };
@@ -535,14 +557,15 @@ fn fit_and_characterise(
     args: &Args,
     out: &Path,
 ) -> Result<ScanOutputs, CliError> {
+    let defaults = ScanAnalysisOptions::default();
     let analysis = ScanAnalysisOptions {
-        curves: args.curves,
-        levels: args.levels,
+        curves: args.curves.unwrap_or(defaults.curves),
+        levels: args.levels.unwrap_or(defaults.levels),
         overlay_line: args.overlay_line,
         degree_u: args.degree_u,
         degree_v: args.degree_v,
         spikes: args.model.spikes()?,
-        exclude_spikes: args.outliers == OutliersArg::Exclude,
+        exclude_spikes: args.outliers == Some(OutliersArg::Exclude),
         holdout_threshold: args.model.holdout_threshold()?,
         v_method: args
             .model

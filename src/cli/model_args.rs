@@ -35,24 +35,30 @@ pub struct ModelArgs {
     #[arg(long)]
     pub replace_spikes: bool,
     /// A spike deviates from its line's median roughness by more than this many robust σ
-    /// (1.4826 · MAD).
-    #[arg(long, default_value_t = SpikeOptions::default().threshold_sigma)]
-    pub spike_threshold_sigma: f64,
-    /// The longest run of points that counts as a spike.
-    #[arg(long, default_value_t = SpikeOptions::default().max_points)]
-    pub spike_max_points: usize,
+    /// (1.4826 · MAD). Default: a scan's frozen `[analysis]` (for `analyze`), else 10.
+    #[arg(long)]
+    pub spike_threshold_sigma: Option<f64>,
+    /// The longest run of points that counts as a spike. Default: a scan's frozen
+    /// `[analysis]` (for `analyze`), else 5.
+    #[arg(long)]
+    pub spike_max_points: Option<usize>,
     /// The model between lines is supported by the data when the hold-out rms is at most
-    /// this × Sq.
-    #[arg(long, default_value_t = crate::metrology::holdout::SUPPORTED_BELOW_SQ)]
-    pub holdout_threshold: f64,
+    /// this × Sq. Default: a scan's frozen `[analysis]` (for `analyze`), else 0.5.
+    #[arg(long)]
+    pub holdout_threshold: Option<f64>,
 }
 
 impl ModelArgs {
-    /// The spike rule, checked.
+    /// The spike rule, checked: as given, else the default rule.
     pub fn spikes(&self) -> Result<SpikeOptions, CliError> {
+        self.spikes_or(SpikeOptions::default())
+    }
+
+    /// The spike rule, checked: each part as given, else as `base` has it.
+    pub fn spikes_or(&self, base: SpikeOptions) -> Result<SpikeOptions, CliError> {
         let s = SpikeOptions {
-            threshold_sigma: self.spike_threshold_sigma,
-            max_points: self.spike_max_points,
+            threshold_sigma: self.spike_threshold_sigma.unwrap_or(base.threshold_sigma),
+            max_points: self.spike_max_points.unwrap_or(base.max_points),
         };
         s.validate()
             .map_err(|e| CliError::new(Exit::Usage, format!("--spike-*: {e}")))?;
@@ -78,9 +84,14 @@ impl ModelArgs {
         }
     }
 
-    /// The hold-out threshold (× Sq), checked.
+    /// The hold-out threshold (× Sq), checked: as given, else the default.
     pub fn holdout_threshold(&self) -> Result<f64, CliError> {
-        let v = self.holdout_threshold;
+        self.holdout_threshold_or(crate::metrology::holdout::SUPPORTED_BELOW_SQ)
+    }
+
+    /// The hold-out threshold (× Sq), checked: as given, else `base`.
+    pub fn holdout_threshold_or(&self, base: f64) -> Result<f64, CliError> {
+        let v = self.holdout_threshold.unwrap_or(base);
         if v.is_finite() && v > 0.0 {
             Ok(v)
         } else {

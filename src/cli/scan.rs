@@ -27,7 +27,7 @@ use crate::scan::journal::{
     JOURNAL_FILE,
 };
 use crate::scan::outcome::{FailKind, Outcome, ScanRequest};
-use crate::scan::plan::Plan;
+use crate::scan::plan::{AnalysisPlan, Plan};
 use crate::scan::runner::run_scan;
 use crate::scan::settings::{Backoff, RunSettings};
 use crate::scan::station::SerialStation;
@@ -114,7 +114,21 @@ pub fn plan_of(config: &Config) -> Result<Plan, ConfigError> {
         v_method: config.fit.v_method_for(config.scan.lines as usize),
         replace_spikes: (config.fit.outliers == crate::config::FitOutliers::Replace)
             .then(|| config.analysis.spike_options()),
+        analysis: Some(analysis_of(&config.analysis)),
     })
+}
+
+/// The characterisation of `[analysis]`, as a scan's plan freezes it.
+pub fn analysis_of(a: &crate::config::AnalysisSettings) -> AnalysisPlan {
+    AnalysisPlan {
+        curves: a.curves,
+        levels: a.levels,
+        lambda_c_mm: a.lambda_c_mm,
+        no_filter: a.no_filter,
+        spikes: a.spike_options(),
+        exclude_spikes: a.outliers == crate::config::OutlierPolicy::Exclude,
+        holdout_threshold: a.holdout_threshold,
+    }
 }
 
 /// The runner's settings for a station: the plan and session settings of the configuration,
@@ -126,18 +140,10 @@ pub fn run_settings(
     hooks: TestHooks,
 ) -> Result<RunSettings, CliError> {
     let plan = plan_of(config).map_err(|e| CliError::new(Exit::Config, e.to_string()))?;
-    let a = &config.analysis;
+    // A new scan freezes this in its plan; a resumed scan of an older version, which froze
+    // none, is characterised with it.
     let characterise = ScanCharacteriser {
-        options: ScanAnalysisOptions {
-            curves: a.curves,
-            levels: a.levels,
-            lambda_c_mm: a.lambda_c_mm,
-            no_filter: a.no_filter,
-            spikes: a.spike_options(),
-            exclude_spikes: a.outliers == crate::config::OutlierPolicy::Exclude,
-            holdout_threshold: a.holdout_threshold,
-            ..ScanAnalysisOptions::default()
-        },
+        options: ScanAnalysisOptions::default().with_frozen(&analysis_of(&config.analysis)),
     };
     Ok(RunSettings {
         plan,
@@ -155,6 +161,15 @@ pub fn run_settings(
         hooks: Arc::new(hooks),
         characterise: Some(Arc::new(characterise)),
     })
+}
+
+/// Where the device locks go: [`station_lock::DEVICE_LOCK_DIR`], or the directory
+/// `SURFSCAN_TEST_LOCK_DIR` names (see [`lock_station`]).
+fn device_lock_dir() -> PathBuf {
+    std::env::var_os("SURFSCAN_TEST_LOCK_DIR").map_or_else(
+        || PathBuf::from(station_lock::DEVICE_LOCK_DIR),
+        PathBuf::from,
+    )
 }
 
 /// The scan to run for this configuration, as `mode` asks: the unfinished one (no stop
@@ -477,21 +492,22 @@ pub async fn run_foreground(
 /// Takes the station's lock for the life of the process (exit 69 when another process holds
 /// the output directory or a device, naming it), then sweeps the leftovers of interrupted
 /// writes from the output directory.
+///
+/// The device locks go to the system's lock directory, unless `SURFSCAN_TEST_LOCK_DIR` names
+/// another: the end-to-end tests run many simulated stations on one machine, whose
+/// pseudo-terminal numbers are reused as soon as a simulated device is unplugged, so each
+/// station gets its own lock directory, as separate machines would have. Nothing else sets
+/// it.
 pub fn lock_station(config: &Config, command: &str) -> Result<Arc<StationLock>, CliError> {
     let devices = [
         Path::new(&config.instrument.port),
         Path::new(&config.stage.port),
     ];
-    let lock = StationLock::acquire(
-        command,
-        &config.output.dir,
-        &devices,
-        Path::new(station_lock::DEVICE_LOCK_DIR),
-    )
-    .map_err(|e| match e {
-        LockError::Held { .. } => CliError::new(Exit::Unavailable, e.to_string()),
-        LockError::Io { .. } => CliError::new(Exit::Io, e.to_string()),
-    })?;
+    let lock = StationLock::acquire(command, &config.output.dir, &devices, &device_lock_dir())
+        .map_err(|e| match e {
+            LockError::Held { .. } => CliError::new(Exit::Unavailable, e.to_string()),
+            LockError::Io { .. } => CliError::new(Exit::Io, e.to_string()),
+        })?;
     lock.sweep_leftovers();
     Ok(Arc::new(lock))
 }

@@ -246,9 +246,13 @@ fn is_non_increasing(levels: &[f64]) -> bool {
 fn inside_lengths(zs: &[f64], weight: impl Fn(usize) -> f64, levels: &[f64]) -> Vec<f64> {
     let l = levels.len();
     // first_at_or_below(z): the first level index k with levels[k] <= z; first_below(z): the
-    // first with levels[k] < z.
-    let first_at_or_below = |z: f64| levels.partition_point(|&h| h > z);
-    let first_below = |z: f64| levels.partition_point(|&h| h >= z);
+    // first with levels[k] < z. Both are partition points of a monotone predicate, found from
+    // where equally spaced levels would put z and then stepped to the exact point (the
+    // predicate decides, so the index is the binary search's); a guess more than a few
+    // steps off (levels far from equally spaced) falls back to the binary search.
+    let guess = guesser(levels);
+    let first_at_or_below = |z: f64| partition_near(levels, guess(z), |h| h > z);
+    let first_below = |z: f64| partition_near(levels, guess(z), |h| h >= z);
     let mut whole = vec![0.0f64; l + 1];
     let mut cut = vec![0.0f64; l];
     let Some(&z0) = zs.first() else {
@@ -277,6 +281,49 @@ fn inside_lengths(zs: &[f64], weight: impl Fn(usize) -> f64, levels: &[f64]) -> 
         *c += running;
     }
     cut
+}
+
+/// Where z would fall among `levels` (non-increasing) if they were equally spaced from the
+/// first to the last: an index in 0..=len, only a starting point for [`partition_near`].
+fn guesser(levels: &[f64]) -> impl Fn(f64) -> usize {
+    let n = levels.len();
+    let (first, last) = (
+        levels.first().copied().unwrap_or(0.0),
+        levels.last().copied().unwrap_or(0.0),
+    );
+    let span = first - last;
+    let scale = if n > 1 && span > 0.0 && span.is_finite() {
+        (n - 1) as f64 / span
+    } else {
+        0.0
+    };
+    move |z: f64| {
+        let k = (first - z) * scale;
+        if k.is_nan() || k <= 0.0 {
+            0
+        } else {
+            (k.ceil() as usize).min(n)
+        }
+    }
+}
+
+/// The partition point of `pred` over `levels` (true then false), searched from `start`
+/// outwards for a few steps, then by bisection: the same index as `partition_point`.
+#[inline(always)]
+fn partition_near(levels: &[f64], start: usize, pred: impl Fn(f64) -> bool) -> usize {
+    const STEPS: usize = 4;
+    let n = levels.len();
+    let mut k = start.min(n);
+    for _ in 0..STEPS {
+        let left_ok = k == 0 || pred(levels[k - 1]);
+        let here_false = k == n || !pred(levels[k]);
+        match (left_ok, here_false) {
+            (true, true) => return k,
+            (false, _) => k -= 1,
+            (true, false) => k += 1,
+        }
+    }
+    levels.partition_point(|&h| pred(h))
 }
 
 /// One bearing area curve: levels from the highest to the lowest point, with their ratios.
@@ -459,6 +506,38 @@ mod tests {
         out.push((uniform(plateau.len()), plateau));
         out.push((uniform(40), vec![0.25; 40]));
         out
+    }
+
+    #[test]
+    fn the_guessed_partition_point_is_the_binary_searchs() {
+        // Equally spaced levels (the guess lands at once), unevenly spaced and repeated ones
+        // (stepped or bisected), single and empty lists; heights on, between and outside
+        // the levels.
+        let mut lists = vec![
+            equal_levels(3.0, -2.0, 99),
+            equal_levels(1e-3, -1e-3, 7),
+            vec![5.0, 4.9, 4.8, 0.0, -0.1, -7.0],
+            vec![1.0, 1.0, 1.0, 0.0, 0.0, -1.0],
+            vec![2.0],
+            vec![],
+        ];
+        lists.push((0..50).map(|k| -((k * k) as f64) * 0.01).collect());
+        for levels in &lists {
+            let guess = guesser(levels);
+            let mut zs: Vec<f64> = levels.clone();
+            zs.extend(levels.windows(2).map(|w| 0.5 * (w[0] + w[1])));
+            zs.extend([1e9, -1e9, 0.0, f64::NAN, f64::INFINITY, f64::NEG_INFINITY]);
+            for &z in &zs {
+                for pred in [|h: f64, z: f64| h > z, |h: f64, z: f64| h >= z] {
+                    let want = levels.partition_point(|&h| pred(h, z));
+                    assert_eq!(
+                        partition_near(levels, guess(z), |h| pred(h, z)),
+                        want,
+                        "z = {z} in {levels:?}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

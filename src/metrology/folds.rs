@@ -21,7 +21,7 @@
 //! Depends on [`crate::nurbs`] and [`crate::numfmt`] (the warnings' figures).
 
 use crate::numfmt::{fmt, Quantity};
-use crate::nurbs::{BSplineCurve, NurbsSurface};
+use crate::nurbs::{basis_funs, find_span, BSplineCurve, NurbsSurface, UBasis};
 use serde::Serialize;
 
 /// An overshoot beyond this share of the measured height range is named as a warning (%).
@@ -188,6 +188,72 @@ impl ModelChecks {
     }
 }
 
+/// The basis functions of a curve's knot vector at `n` equally spaced parameters in [0, 1],
+/// computed once for many curves on the same knots (the iso-curves along v of one surface all
+/// have its v knots), applied as [`BSplineCurve::evaluate`] applies them: the same clamped
+/// parameter, span and basis values, Σ basis·pole from zero in pole order, so each point is
+/// the one [`samples`] gives, to the bit.
+struct SampleBasis {
+    degree: usize,
+    /// Index of the first pole of each parameter's basis (span − degree).
+    first: Vec<usize>,
+    /// `degree + 1` values per parameter.
+    values: Vec<f64>,
+}
+
+/// Degrees up to this have their basis values computed in stack buffers.
+const MAX_SAMPLE_DEGREE: usize = 15;
+
+impl SampleBasis {
+    /// `None` where [`samples`] must be used instead (a degree above the stack buffers, a knot
+    /// vector that does not fit `count` poles, fewer than two samples).
+    fn new(degree: usize, knots: &[f64], count: usize, n: usize) -> Option<SampleBasis> {
+        if degree > MAX_SAMPLE_DEGREE
+            || count < degree + 1
+            || knots.len() != count + degree + 1
+            || n < 2
+        {
+            return None;
+        }
+        let (lo, hi) = (knots[degree], knots[count]);
+        let mut first = Vec::with_capacity(n);
+        let mut values = Vec::with_capacity(n * (degree + 1));
+        let (mut b, mut left, mut right) = (
+            [0.0; MAX_SAMPLE_DEGREE + 1],
+            [0.0; MAX_SAMPLE_DEGREE + 1],
+            [0.0; MAX_SAMPLE_DEGREE + 1],
+        );
+        for k in 0..n {
+            let t = k as f64 / (n - 1) as f64;
+            let t = if t.is_nan() { lo } else { t.clamp(lo, hi) };
+            let span = find_span(degree, knots, count, t);
+            basis_funs(span, t, degree, knots, &mut b, &mut left, &mut right);
+            first.push(span - degree);
+            values.extend_from_slice(&b[..=degree]);
+        }
+        Some(SampleBasis {
+            degree,
+            first,
+            values,
+        })
+    }
+
+    /// The curve with `poles` at every parameter, into `out`.
+    fn points(&self, poles: &[[f64; 3]], out: &mut Vec<[f64; 3]>) {
+        out.clear();
+        let n = self.degree + 1;
+        for (&base, b) in self.first.iter().zip(self.values.chunks_exact(n)) {
+            let mut p = [0.0; 3];
+            for (q, b) in poles[base..base + n].iter().zip(b) {
+                p[0] += b * q[0];
+                p[1] += b * q[1];
+                p[2] += b * q[2];
+            }
+            out.push(p);
+        }
+    }
+}
+
 /// Samples of a curve at `n` equally spaced parameters in [0, 1].
 fn samples(curve: &BSplineCurve, n: usize) -> Vec<[f64; 3]> {
     (0..n)
@@ -288,10 +354,17 @@ pub fn check_model(
     let mut range = (f64::INFINITY, [0.0; 2], f64::NEG_INFINITY, [0.0; 2]);
     let mut iso = Vec::new();
     let mut fold_u: (usize, Option<Worst>) = (0, None);
-    // A few iso-curves at a time: the u basis is computed once per chunk, memory stays small.
-    for chunk in vs.chunks(16) {
-        let grid = surface.evaluate_grid(&us, chunk);
-        for (&v, pts) in chunk.iter().zip(grid.chunks_exact(n_u)) {
+    // The u basis is computed once for every iso-curve (all are sampled at the same u), and
+    // one curve's points are held at a time: the points of `evaluate_grid`, to the bit.
+    let basis = UBasis::new(surface, &us);
+    let mut poles = Vec::new();
+    let mut pts: Vec<[f64; 3]> = Vec::with_capacity(n_u);
+    {
+        for &v in &vs {
+            surface.iso_poles_u_padded(v, &mut poles);
+            pts.clear();
+            basis.for_each_point(&poles, |_, p| pts.push([p[0], p[1], p[2]]));
+            let pts = &pts[..];
             for p in pts {
                 let z = p[2] * 1000.0;
                 if z < range.0 {
@@ -325,9 +398,15 @@ pub fn check_model(
     let n_v = (per * nv).max(2);
     let mut fold_v: (usize, Option<Worst>) = (0, None);
     let curves_v = nu.max(2);
+    let v_basis = SampleBasis::new(surface.degree_v(), surface.knots_v(), nv, n_v);
+    let mut pts = Vec::with_capacity(n_v);
     for k in 0..curves_v {
         let u = k as f64 / (curves_v - 1) as f64;
-        let pts = samples(&surface.iso_curve_v(u), n_v);
+        let iso = surface.iso_curve_v(u);
+        match &v_basis {
+            Some(b) => b.points(&iso.poles, &mut pts),
+            None => pts = samples(&iso, n_v),
+        }
         if let Some(run) = backward_run(&pts, 1) {
             fold_v.0 += 1;
             if fold_v.1.is_none_or(|(_, _, w)| run.2 > w.2) {
@@ -384,6 +463,39 @@ pub fn check_model(
 mod tests {
     use super::*;
     use crate::fit::{fit_grid, FitOptions};
+
+    #[test]
+    fn iso_curves_along_v_sampled_once_equal_each_curve_evaluated() {
+        // The basis along v computed once, applied to every iso-curve along v, gives each
+        // point as the curve's own evaluation does, to the bit.
+        let (rows, cols) = (11, 90);
+        let y: Vec<f64> = (0..rows)
+            .map(|r| r as f64 * 0.01 + (r as f64 * 0.7).sin() * 0.002)
+            .collect();
+        let z: Vec<f64> = (0..rows * cols)
+            .map(|k| 2.0 * ((k % cols) as f64 * 0.31).sin() + ((k / cols) as f64 * 1.3).cos())
+            .collect();
+        let fit = fit_grid(0.002, &y, &z, cols, FitOptions::default()).unwrap();
+        let s = &fit.surface;
+        for n in [2, 7, 8 * s.count_v()] {
+            let b = SampleBasis::new(s.degree_v(), s.knots_v(), s.count_v(), n).unwrap();
+            let mut pts = Vec::new();
+            for k in 0..s.count_u() {
+                let iso = s.iso_curve_v(k as f64 / (s.count_u() - 1) as f64);
+                b.points(&iso.poles, &mut pts);
+                let want = samples(&iso, n);
+                assert_eq!(pts.len(), want.len());
+                for (p, q) in pts.iter().zip(&want) {
+                    assert_eq!(
+                        p.map(f64::to_bits),
+                        q.map(f64::to_bits),
+                        "curve {k}, {n} samples"
+                    );
+                }
+            }
+        }
+        assert!(SampleBasis::new(s.degree_v(), s.knots_v(), s.count_v() + 1, 10).is_none());
+    }
 
     #[test]
     fn a_smooth_surface_neither_folds_nor_overshoots() {

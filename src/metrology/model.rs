@@ -8,7 +8,7 @@
 
 use super::bearing::{bearing_curve_xz, BearingCurve};
 use super::MetrologyError;
-use crate::nurbs::{BSplineCurve, NurbsSurface, UBasis};
+use crate::nurbs::{basis_funs, find_span, BSplineCurve, NurbsSurface, UBasis};
 use serde::Serialize;
 
 /// Options for the model's bearing area curves, with the paper's defaults.
@@ -134,14 +134,8 @@ fn sample_shared_u(
     // Every iso-curve along u has the same x(u) (the net's x is constant down each column,
     // as in every fit), so x(u) is inverted once and the basis at the found u serves every
     // line.
-    let x_curve = BSplineCurve {
-        degree: surface.degree_u(),
-        knots: surface.knots_u().to_vec(),
-        poles: (0..surface.count_u())
-            .map(|i| [surface.pole(i, 0)[0], 0.0, 0.0])
-            .collect(),
-    };
-    let x_at = |u: f64| x_curve.evaluate(u).map_or(f64::NAN, |p| p[0]);
+    let x_curve = XOfU::new(surface);
+    let x_at = |u: f64| x_curve.at(u);
     let us = invert_row(&x_at, x0_mm, pitch_x_mm, cols)?;
     let basis = UBasis::new(surface, &us);
     for &v in vs {
@@ -149,6 +143,87 @@ fn sample_shared_u(
         basis.for_each_point(&poles, |_, p| out.push(p[2] * 1000.0));
     }
     Ok(out)
+}
+
+/// x(u) of a surface whose x depends on u alone: the x of the iso-curve along u through the
+/// first pole row, evaluated as [`BSplineCurve::evaluate`] evaluates it (the same span, the same
+/// basis values, Σ basis·x from zero in pole order, so the same bits) but for x alone and with
+/// the knot span of the previous call tried first: the inversion evaluates x(u) a few times
+/// per target at nearby u, and a binary search over thousands of knots per evaluation cost as
+/// much as the rest of it.
+struct XOfU {
+    degree: usize,
+    knots: Vec<f64>,
+    x: Vec<f64>,
+    /// The curve for degrees above the stack buffers (evaluated the general way).
+    general: Option<BSplineCurve>,
+    /// The span of the last evaluation.
+    hint: std::cell::Cell<usize>,
+}
+
+/// Degrees up to this use stack buffers for the basis values.
+const MAX_FAST_DEGREE: usize = 15;
+
+impl XOfU {
+    fn new(surface: &NurbsSurface) -> XOfU {
+        let degree = surface.degree_u();
+        let x: Vec<f64> = (0..surface.count_u())
+            .map(|i| surface.pole(i, 0)[0])
+            .collect();
+        let general = (degree > MAX_FAST_DEGREE).then(|| BSplineCurve {
+            degree,
+            knots: surface.knots_u().to_vec(),
+            poles: x.iter().map(|&x| [x, 0.0, 0.0]).collect(),
+        });
+        XOfU {
+            degree,
+            knots: surface.knots_u().to_vec(),
+            x,
+            general,
+            hint: std::cell::Cell::new(degree),
+        }
+    }
+
+    /// x at `u` (clamped into the knot range), mm.
+    fn at(&self, u: f64) -> f64 {
+        if let Some(c) = &self.general {
+            return c.evaluate(u).map_or(f64::NAN, |p| p[0]);
+        }
+        let (d, n) = (self.degree, self.x.len());
+        if n < d + 1 || self.knots.len() != n + d + 1 {
+            return f64::NAN;
+        }
+        let (lo, hi) = (self.knots[d], self.knots[n]);
+        let t = if u.is_nan() { lo } else { u.clamp(lo, hi) };
+        let span = self.span(t);
+        self.hint.set(span);
+        let mut b = [0.0; MAX_FAST_DEGREE + 1];
+        let mut left = [0.0; MAX_FAST_DEGREE + 1];
+        let mut right = [0.0; MAX_FAST_DEGREE + 1];
+        basis_funs(span, t, d, &self.knots, &mut b, &mut left, &mut right);
+        let mut p = 0.0;
+        for (r, b) in b[..=d].iter().enumerate() {
+            p += b * self.x[span - d + r];
+        }
+        p
+    }
+
+    /// [`find_span`] of `t` (inside the knot range), the last span or its neighbours tried
+    /// first: inside the domain the span is the one `s` with `knots[s] <= t < knots[s + 1]`,
+    /// so a candidate that satisfies it is the span the search would find.
+    fn span(&self, t: f64) -> usize {
+        let (d, n) = (self.degree, self.x.len());
+        let (lo, hi) = (self.knots[d], self.knots[n]);
+        if t > lo && t < hi {
+            let h = self.hint.get();
+            for s in [h, h + 1, h.wrapping_sub(1)] {
+                if (d..n).contains(&s) && self.knots[s] <= t && t < self.knots[s + 1] {
+                    return s;
+                }
+            }
+        }
+        find_span(d, &self.knots, n, t)
+    }
 }
 
 /// [`sample_model_grid`] for any net: x(u) inverted along each line's own iso-curve.
@@ -259,6 +334,43 @@ fn invert_x<F: Fn(f64) -> f64>(at: &F, x_mm: f64, u_from: f64, x_at_1: f64) -> f
 mod tests {
     use super::*;
     use crate::fit::{fit_grid, FitOptions};
+
+    #[test]
+    fn x_of_u_is_the_curves_x_to_the_bit() {
+        // A fitted net's x(u) against the general evaluation of the same curve, at the
+        // knots, between them in increasing and in jumping order (the span hint is stale),
+        // at the ends, outside the domain and at NaN.
+        let (rows, cols, px) = (7, 300, 0.0005);
+        let h: Vec<f64> = (0..rows * cols)
+            .map(|k| ((k % cols) as f64 * 0.17).sin() + 0.3 * (k as f64 * 0.013).cos())
+            .collect();
+        let y: Vec<f64> = (0..rows).map(|l| l as f64 * 0.01).collect();
+        let fit = fit_grid(px, &y, &h, cols, FitOptions::default()).unwrap();
+        let s = &fit.surface;
+        let general = BSplineCurve {
+            degree: s.degree_u(),
+            knots: s.knots_u().to_vec(),
+            poles: (0..s.count_u())
+                .map(|i| [s.pole(i, 0)[0], 0.0, 0.0])
+                .collect(),
+        };
+        let fast = XOfU::new(s);
+        let mut us: Vec<f64> = s.knots_u().to_vec();
+        us.extend((0..5000).map(|k| k as f64 / 4999.0));
+        us.extend((0..5000).map(|k| (k as f64 * 0.618_033_988_7).fract()));
+        us.extend([
+            -0.5,
+            1.5,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            1e-300,
+        ]);
+        for u in us {
+            let want = general.evaluate(u).unwrap()[0];
+            assert_eq!(fast.at(u).to_bits(), want.to_bits(), "x({u})");
+        }
+    }
 
     #[test]
     fn one_inversion_for_all_lines_equals_one_per_line() {

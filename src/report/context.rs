@@ -1,7 +1,8 @@
 //! What the characterisation is given besides the grid: how to evaluate the lines, the
 //! model to describe, and what is known about the scan.
 //!
-//! Layer 4 (reporting): depends on [`crate::fit`] and [`crate::metrology::params`].
+//! Layer 4 (reporting): depends on [`crate::fit`], [`crate::metrology::params`] and the
+//! scan's frozen plan and fit summary ([`crate::scan`]).
 
 use super::document::{ScanStatus, Traceability};
 use crate::fit::{FitResult, MethodError, VMethod};
@@ -10,6 +11,7 @@ use crate::metrology::outliers::{LineSpike, SpikeOptions};
 use crate::metrology::params::Options;
 use crate::metrology::surface_model::ModelRecipe;
 use crate::scan::outputs::FitSummary;
+use crate::scan::plan::AnalysisPlan;
 use std::path::PathBuf;
 
 /// How a scan or grid is characterised. [`Default`]: 31 model curves, 101 levels, λc and
@@ -48,6 +50,23 @@ pub struct ScanAnalysisOptions {
     /// Replace the spikes before fitting (default `None`: as the scan's frozen plan says,
     /// else no).
     pub replace_spikes: Option<bool>,
+}
+
+impl ScanAnalysisOptions {
+    /// These options with the characterisation a scan froze in its plan: curves, levels,
+    /// λc, filter, spike rule, what is done with the spikes and the hold-out threshold.
+    pub fn with_frozen(self, a: &AnalysisPlan) -> ScanAnalysisOptions {
+        ScanAnalysisOptions {
+            curves: a.curves,
+            levels: a.levels,
+            lambda_c_mm: a.lambda_c_mm,
+            no_filter: a.no_filter,
+            spikes: a.spikes,
+            exclude_spikes: a.exclude_spikes,
+            holdout_threshold: a.holdout_threshold,
+            ..self
+        }
+    }
 }
 
 impl Default for ScanAnalysisOptions {

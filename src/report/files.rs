@@ -327,9 +327,22 @@ fn write_plots(
     Ok(plots)
 }
 
+/// The error of an Rk figure thread that panicked.
+pub(crate) fn rk_plot_panic(ctx: &ReportContext) -> ReportError {
+    ReportError::Metrology {
+        what: format!("{}: plots", ctx.input),
+        source: MetrologyError::BadParameter {
+            what: "Rk plot thread",
+            value: f64::NAN,
+            hint: "drawing the Rk figures panicked; report this with the input",
+        },
+    }
+}
+
 /// The ISO 13565-2 construction of every line, from the ordinates its Rk family came from:
-/// `rk/NNNN.png|svg`, with each figure's title.
-fn write_rk_plots(
+/// `rk/NNNN.png|svg`, with each figure's title (drawn by the caller beside the other
+/// sections, handed to [`write_data_files`]).
+pub(crate) fn write_rk_plots(
     out: &Path,
     grid: &LineGrid,
     analyses: &[LineAnalysis],
@@ -378,7 +391,7 @@ fn write_rk_plots(
 pub fn write_data_files(
     out: &Path,
     grid: &LineGrid,
-    analyses: &[LineAnalysis],
+    rk_plots: Result<Vec<(String, [PathBuf; 2])>, ReportError>,
     measured: &Grid<'_>,
     sampled: Option<&SampledModel>,
     overlay: Option<&Overlay>,
@@ -386,7 +399,7 @@ pub fn write_data_files(
     ctx: &mut ReportContext,
 ) -> Result<Files, ReportError> {
     let plots = write_plots(out, grid, measured, sampled, overlay, report, ctx)?;
-    let rk_plots = write_rk_plots(out, grid, analyses, ctx)?;
+    let rk_plots = rk_plots?;
     let measured_x3p = out.join("measured.x3p");
     let bytes = to_x3p(
         &grid.heights_um,

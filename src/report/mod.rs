@@ -144,206 +144,251 @@ pub fn characterise(
         analyses,
     } = lines::characterise(cgrid, &ctx)?;
     timings.lines = t.elapsed().as_secs_f64();
+    // The Rk figures need only the line analyses: they are drawn while the sections below
+    // are made.
+    let rk_ctx = ctx.clone();
+    std::thread::scope(|scope| {
+        let rk_plots = scope.spawn(|| files::write_rk_plots(out, grid, &analyses, &rk_ctx));
 
-    let t = Instant::now();
-    let (py, evenly) = grid::mean_pitch_y(&grid.y_mm);
-    if !evenly {
-        let y: Vec<String> = grid
-            .y_mm
-            .iter()
-            .map(|y| crate::numfmt::fmt(*y, crate::numfmt::Quantity::PositionMm))
-            .collect();
-        ctx.warnings.push(format!(
+        let t = Instant::now();
+        let (py, evenly) = grid::mean_pitch_y(&grid.y_mm);
+        if !evenly {
+            let y: Vec<String> = grid
+                .y_mm
+                .iter()
+                .map(|y| crate::numfmt::fmt(*y, crate::numfmt::Quantity::PositionMm))
+                .collect();
+            ctx.warnings.push(format!(
             "the lines are not equally spaced in y (y = {} mm); the areal parameters, the height map and the X3P files use the mean pitch {} mm",
             y.join(", "),
             crate::numfmt::fmt(py, crate::numfmt::Quantity::LengthMm)
         ));
-    }
-    let measured = areal::measured(grid, py);
-    let characterised = areal::measured(cgrid, py);
-    let surface_grid = areal::characterise(&characterised, ctx.options.levels);
-    if let Err(e) = &surface_grid {
-        failed_sections.push(FailedSection {
-            section: "surface_grid".into(),
-            reason: e.clone(),
-        });
-    }
-    let anisotropy = match anisotropy(&characterised) {
-        Ok(a) => {
-            if a.slopes_untrustworthy() {
-                if let Some(c) = a.caveats.last() {
-                    ctx.warnings.push(c.clone());
-                }
-            }
-            Some(a)
         }
-        Err(e) => {
+        let measured = areal::measured(grid, py);
+        let characterised = areal::measured(cgrid, py);
+        let surface_grid = areal::characterise(&characterised, ctx.options.levels);
+        if let Err(e) = &surface_grid {
             failed_sections.push(FailedSection {
-                section: "anisotropy".into(),
-                reason: e.to_string(),
-            });
-            None
-        }
-    };
-    timings.surface_grid = t.elapsed().as_secs_f64();
-
-    let t = Instant::now();
-    let model_section = model::characterise(
-        &model,
-        &grid.heights_um,
-        rows,
-        cols,
-        grid.pitch_x_mm,
-        py,
-        &ctx.options,
-    );
-    failed_sections.extend(model_section.failed.iter().cloned());
-    if let Some(c) = &model_section.checks {
-        ctx.warnings.extend(c.warnings());
-    }
-    timings.model = t.elapsed().as_secs_f64();
-
-    let t = Instant::now();
-    let model_vs_measured = holdout::characterise(grid, &cgrid.heights_um, &model.recipe);
-    if let Ok(h) = &model_vs_measured {
-        holdout::attach(&mut line_reports, h);
-    }
-    let sq = surface_grid.as_ref().map(|s| s.params.sq_um).ok();
-    let verdict = match sq {
-        Some(sq) => holdout::verdict(
-            grid,
-            &cgrid.heights_um,
-            &model.recipe,
-            sq,
-            ctx.options.holdout_threshold,
-        ),
-        None => Err("the measured grid has no Sq to judge the hold-out against".to_string()),
-    };
-    timings.holdout = t.elapsed().as_secs_f64();
-    for (section, r) in [
-        ("model_vs_measured", model_vs_measured.as_ref().err()),
-        ("between_lines", verdict.as_ref().err()),
-    ] {
-        if let Some(e) = r {
-            failed_sections.push(FailedSection {
-                section: section.into(),
+                section: "surface_grid".into(),
                 reason: e.clone(),
             });
         }
-    }
-    // The overlay draws the model at a held-out line: the rows are still the grid's here.
-    let overlay = files::held_out_overlay(
-        grid,
-        &cgrid.heights_um,
-        &model.recipe,
-        verdict.as_ref().ok(),
-        &mut ctx,
-    );
-    let mut verdict = verdict;
-    if let Ok(b) = &mut verdict {
-        holdout::rows_to_lines(grid, b);
-        if !b.supported {
-            ctx.warnings.push(b.verdict.clone());
+        let anisotropy = match anisotropy(&characterised) {
+            Ok(a) => {
+                if a.slopes_untrustworthy() {
+                    if let Some(c) = a.caveats.last() {
+                        ctx.warnings.push(c.clone());
+                    }
+                }
+                Some(a)
+            }
+            Err(e) => {
+                failed_sections.push(FailedSection {
+                    section: "anisotropy".into(),
+                    reason: e.to_string(),
+                });
+                None
+            }
+        };
+        timings.surface_grid = t.elapsed().as_secs_f64();
+
+        // The model section and the two hold-out sections are independent of each other (each
+        // reads the grid and the model, none writes anything): they run side by side, the
+        // results joined in the order the sections are reported.
+        let sq = surface_grid.as_ref().map(|s| s.params.sq_um).ok();
+        let options = &ctx.options;
+        let ((model_section, model_s), (model_vs_measured, verdict, holdout_s)) =
+            std::thread::scope(|s| {
+                let model_thread = s.spawn(|| {
+                    let t = Instant::now();
+                    let m = model::characterise(
+                        &model,
+                        &grid.heights_um,
+                        rows,
+                        cols,
+                        grid.pitch_x_mm,
+                        py,
+                        options,
+                    );
+                    (m, t.elapsed().as_secs_f64())
+                });
+                let t = Instant::now();
+                let verdict_thread = s.spawn(|| match sq {
+                    Some(sq) => holdout::verdict(
+                        grid,
+                        &cgrid.heights_um,
+                        &model.recipe,
+                        sq,
+                        options.holdout_threshold,
+                    ),
+                    None => {
+                        Err("the measured grid has no Sq to judge the hold-out against".to_string())
+                    }
+                });
+                let model_vs_measured =
+                    holdout::characterise(grid, &cgrid.heights_um, &model.recipe);
+                let verdict = verdict_thread.join().unwrap_or_else(|_| {
+                    Err(
+                        "internal: the between-lines refit panicked; report this with the input"
+                            .into(),
+                    )
+                });
+                let holdout_s = t.elapsed().as_secs_f64();
+                let model = model_thread.join().unwrap_or_else(|_| {
+                    let reason = "internal: the model section panicked; report this with the input"
+                        .to_string();
+                    (
+                        model::ModelSection {
+                            surface: Err(reason.clone()),
+                            sampled: None,
+                            checks: None,
+                            failed: vec![FailedSection {
+                                section: "surface".into(),
+                                reason,
+                            }],
+                        },
+                        0.0,
+                    )
+                });
+                (model, (model_vs_measured, verdict, holdout_s))
+            });
+        failed_sections.extend(model_section.failed.iter().cloned());
+        if let Some(c) = &model_section.checks {
+            ctx.warnings.extend(c.warnings());
         }
-    }
-    // What the line count rules out is not a failure: the fit needs degree-v + 1 lines, the
-    // hold-outs more than that once lines are left out.
-    let q = model.recipe.degrees.degree_v;
-    let fit_possible = rows > q;
-    let holdout_possible =
-        fit_possible && crate::metrology::holdout::holdout_every(rows, q).is_some();
-    let (not_possible, failed_sections): (Vec<FailedSection>, Vec<FailedSection>) = failed_sections
-        .into_iter()
-        .partition(|f| match f.section.split('.').next().unwrap_or_default() {
-            "surface" => !fit_possible,
-            "model_vs_measured" | "between_lines" => !holdout_possible,
-            _ => false,
-        });
-    for f in &not_possible {
-        ctx.warnings.push(format!(
-            "{} not made ({rows} lines are too few): {}",
-            f.section, f.reason
-        ));
-    }
-    for f in &failed_sections {
-        ctx.warnings
-            .push(format!("{} could not be made: {}", f.section, f.reason));
-    }
+        timings.model = model_s;
+        if let Ok(h) = &model_vs_measured {
+            holdout::attach(&mut line_reports, h);
+        }
+        timings.holdout = holdout_s;
+        for (section, r) in [
+            ("model_vs_measured", model_vs_measured.as_ref().err()),
+            ("between_lines", verdict.as_ref().err()),
+        ] {
+            if let Some(e) = r {
+                failed_sections.push(FailedSection {
+                    section: section.into(),
+                    reason: e.clone(),
+                });
+            }
+        }
+        // The overlay draws the model at a held-out line: the rows are still the grid's here.
+        let overlay = files::held_out_overlay(
+            grid,
+            &cgrid.heights_um,
+            &model.recipe,
+            verdict.as_ref().ok(),
+            &mut ctx,
+        );
+        let mut verdict = verdict;
+        if let Ok(b) = &mut verdict {
+            holdout::rows_to_lines(grid, b);
+            if !b.supported {
+                ctx.warnings.push(b.verdict.clone());
+            }
+        }
+        // What the line count rules out is not a failure: the fit needs degree-v + 1 lines, the
+        // hold-outs more than that once lines are left out.
+        let q = model.recipe.degrees.degree_v;
+        let fit_possible = rows > q;
+        let holdout_possible =
+            fit_possible && crate::metrology::holdout::holdout_every(rows, q).is_some();
+        let (not_possible, failed_sections): (Vec<FailedSection>, Vec<FailedSection>) =
+            failed_sections.into_iter().partition(|f| {
+                match f.section.split('.').next().unwrap_or_default() {
+                    "surface" => !fit_possible,
+                    "model_vs_measured" | "between_lines" => !holdout_possible,
+                    _ => false,
+                }
+            });
+        for f in &not_possible {
+            ctx.warnings.push(format!(
+                "{} not made ({rows} lines are too few): {}",
+                f.section, f.reason
+            ));
+        }
+        for f in &failed_sections {
+            ctx.warnings
+                .push(format!("{} could not be made: {}", f.section, f.reason));
+        }
 
-    let (surface, surface_error) = split(model_section.surface);
-    let (surface_grid, surface_grid_error) = split(surface_grid);
-    let (model_vs_measured, model_vs_measured_error) = split(model_vs_measured);
-    let (between_lines, between_lines_error) = split(verdict);
-    let mut report = Report {
-        software: software(),
-        input: ctx.input.clone(),
-        kind: ctx.kind,
-        recipe,
-        lines: line_reports,
-        surface,
-        surface_error,
-        surface_grid,
-        surface_grid_error,
-        model_vs_measured,
-        model_vs_measured_error,
-        between_lines,
-        between_lines_error,
-        model: ModelReport {
-            v_method: model.recipe.method,
-            description: model.recipe.describe(),
-            degree_u: model.recipe.degrees.degree_u,
-            degree_v: model.recipe.degrees.degree_v,
-            spikes_replaced: model.replaced.to_vec(),
-        },
-        model_checks: model_section.checks,
-        outliers,
-        anisotropy,
-        characterisation: Characterisation {
-            complete: failed_sections.is_empty(),
-            failed_sections,
-            sections_not_possible: not_possible,
-        },
-        traceability: ctx.traceability.clone(),
-        scan: ctx.scan.clone(),
-        fit: ctx.fit.clone(),
-        warnings: Vec::new(),
-        timings_s: Timings::default(),
-    };
+        let (surface, surface_error) = split(model_section.surface);
+        let (surface_grid, surface_grid_error) = split(surface_grid);
+        let (model_vs_measured, model_vs_measured_error) = split(model_vs_measured);
+        let (between_lines, between_lines_error) = split(verdict);
+        let mut report = Report {
+            software: software(),
+            input: ctx.input.clone(),
+            kind: ctx.kind,
+            recipe,
+            lines: line_reports,
+            surface,
+            surface_error,
+            surface_grid,
+            surface_grid_error,
+            model_vs_measured,
+            model_vs_measured_error,
+            between_lines,
+            between_lines_error,
+            model: ModelReport {
+                v_method: model.recipe.method,
+                description: model.recipe.describe(),
+                degree_u: model.recipe.degrees.degree_u,
+                degree_v: model.recipe.degrees.degree_v,
+                spikes_replaced: model.replaced.to_vec(),
+            },
+            model_checks: model_section.checks,
+            outliers,
+            anisotropy,
+            characterisation: Characterisation {
+                complete: failed_sections.is_empty(),
+                failed_sections,
+                sections_not_possible: not_possible,
+            },
+            traceability: ctx.traceability.clone(),
+            scan: ctx.scan.clone(),
+            fit: ctx.fit.clone(),
+            warnings: Vec::new(),
+            timings_s: Timings::default(),
+        };
 
-    let t = Instant::now();
-    let written = files::write_data_files(
-        out,
-        grid,
-        &analyses,
-        &measured,
-        model_section.sampled.as_ref(),
-        overlay.as_ref(),
-        &report,
-        &mut ctx,
-    )?;
-    timings.write = t.elapsed().as_secs_f64();
-    timings.total = t_all.elapsed().as_secs_f64();
-    report.warnings = ctx.warnings.clone();
-    report.timings_s = timings;
-    files::write_report(out, &written, &report, &ctx)?;
-    let mut plots = written.plots;
-    plots.extend(written.rk_plots.into_iter().flat_map(|(_, files)| files));
-    Ok(ScanOutputs {
-        report_json: written.report_json,
-        report_html: written.report_html,
-        summary_csv: written.summary_csv,
-        plots,
-        measured_x3p: Some(written.measured_x3p),
-        model_x3p: written.model_x3p,
-        lines_used: grid.index.clone(),
-        incomplete_lines: ctx
-            .scan
-            .as_ref()
-            .map(|s| s.lines_incomplete.clone())
-            .unwrap_or_default(),
-        warnings: ctx.warnings,
-        elapsed_s: t_all.elapsed().as_secs_f64(),
-        report,
+        let t = Instant::now();
+        let written = files::write_data_files(
+            out,
+            grid,
+            rk_plots
+                .join()
+                .unwrap_or_else(|_| Err(files::rk_plot_panic(&ctx))),
+            &measured,
+            model_section.sampled.as_ref(),
+            overlay.as_ref(),
+            &report,
+            &mut ctx,
+        )?;
+        timings.write = t.elapsed().as_secs_f64();
+        timings.total = t_all.elapsed().as_secs_f64();
+        report.warnings = ctx.warnings.clone();
+        report.timings_s = timings;
+        files::write_report(out, &written, &report, &ctx)?;
+        let mut plots = written.plots;
+        plots.extend(written.rk_plots.into_iter().flat_map(|(_, files)| files));
+        Ok(ScanOutputs {
+            report_json: written.report_json,
+            report_html: written.report_html,
+            summary_csv: written.summary_csv,
+            plots,
+            measured_x3p: Some(written.measured_x3p),
+            model_x3p: written.model_x3p,
+            lines_used: grid.index.clone(),
+            incomplete_lines: ctx
+                .scan
+                .as_ref()
+                .map(|s| s.lines_incomplete.clone())
+                .unwrap_or_default(),
+            warnings: ctx.warnings,
+            elapsed_s: t_all.elapsed().as_secs_f64(),
+            report,
+        })
     })
 }
 

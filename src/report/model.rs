@@ -71,12 +71,54 @@ pub fn characterise(
         }
     };
     let mut fails = Vec::new();
-    let checks = check_model(
-        &fit.surface,
-        &fit.params_v,
-        heights_um,
-        &FoldOptions::default(),
-    );
+    let model_cols = 2 * cols - 1;
+    // The checks, the bearing curves and the sampling read the same surface: they run side
+    // by side. The curves and the samples of a surface that folds are dropped below, as the
+    // checks say.
+    let bac_options = ModelBacOptions {
+        curves: options.curves,
+        levels: options.levels,
+        samples_per_curve: None,
+    };
+    let (checks, bac, sampled) = std::thread::scope(|s| {
+        let checks = s.spawn(|| {
+            check_model(
+                &fit.surface,
+                &fit.params_v,
+                heights_um,
+                &FoldOptions::default(),
+            )
+        });
+        let sampled = s.spawn(|| {
+            sample_model_grid(
+                &fit.surface,
+                &fit.params_v,
+                0.0,
+                pitch_x_mm / 2.0,
+                model_cols,
+            )
+        });
+        let bac = model_bearing_curves(&fit.surface, &bac_options);
+        (checks.join(), bac, sampled.join())
+    });
+    let checks = match checks {
+        Ok(c) => c,
+        Err(_) => {
+            let reason =
+                "internal: the model checks panicked; report this with the input".to_string();
+            return ModelSection {
+                surface: Err(reason.clone()),
+                sampled: None,
+                checks: None,
+                failed: vec![failed("surface", reason)],
+            };
+        }
+    };
+    let sampled = sampled.unwrap_or(Err(crate::metrology::MetrologyError::BadParameter {
+        what: "model sampling thread",
+        value: f64::NAN,
+        hint: "sampling the model panicked; report this with the input",
+    }));
     let folds = checks.folds();
     let (p, q) = (model.recipe.degrees.degree_u, model.recipe.degrees.degree_v);
     let what = match model.recipe.method {
@@ -85,12 +127,7 @@ pub fn characterise(
             format!("degree {p}/{q} (least squares across the lines, {control_rows} control rows)")
         }
     };
-    let bac_options = ModelBacOptions {
-        curves: options.curves,
-        levels: options.levels,
-        samples_per_curve: None,
-    };
-    let curves = match model_bearing_curves(&fit.surface, &bac_options) {
+    let curves = match bac {
         Ok(c) => Some(c),
         Err(e) => {
             fails.push(failed(
@@ -104,7 +141,6 @@ pub fn characterise(
             None
         }
     };
-    let model_cols = 2 * cols - 1;
     if folds {
         // Over a fold the surface has several heights at one x: no grid of heights describes
         // it, whichever branch an inversion of x(u) would pick.
@@ -117,13 +153,7 @@ pub fn characterise(
             failed: fails,
         };
     }
-    let heights = match sample_model_grid(
-        &fit.surface,
-        &fit.params_v,
-        0.0,
-        pitch_x_mm / 2.0,
-        model_cols,
-    ) {
+    let heights = match sampled {
         Ok(h) => h,
         Err(e) => {
             let reason = if folds {

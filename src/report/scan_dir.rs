@@ -370,7 +370,9 @@ pub fn characterise_scan(
 /// them, the surface it fitted and wrote as IGES, and `[analysis]`'s options.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ScanCharacteriser {
-    /// Curves, levels, λc and filter (the degrees are the scan's own surface's).
+    /// Curves, levels, λc, filter and spikes for a scan whose plan froze none (journals of
+    /// older versions); a plan's frozen analysis wins over them. The degrees are the scan's
+    /// own surface's.
     pub options: ScanAnalysisOptions,
 }
 
@@ -380,6 +382,10 @@ impl Characterise for ScanCharacteriser {
         scan: &CompletedScan<'_>,
     ) -> Result<Characterised, Box<dyn std::error::Error + Send + Sync>> {
         let journal_lines: Vec<u32> = scan.lines.iter().map(|l| l.meta.id.index).collect();
+        let options = match &scan.start.plan.analysis {
+            Some(a) => self.options.clone().with_frozen(a),
+            None => self.options.clone(),
+        };
         let facts = ScanFacts {
             start: scan.start,
             stop: None,
@@ -398,7 +404,7 @@ impl Characterise for ScanCharacteriser {
             Some(facts),
             model,
             Some(scan.summary.clone()),
-            &self.options,
+            &options,
             Vec::new(),
         )?;
         let complete = out.complete();

@@ -6,7 +6,8 @@
 //! control socket (the composition layer hands the runner typed [`settings`], and the socket
 //! serves the runner's [`status`] and forwards [`command`]s).
 //!
-//! - [`plan`]: the lines to trace and the surface to fit, frozen in the journal.
+//! - [`plan`]: the lines to trace, the surface to fit and how the lines are characterised,
+//!   frozen in the journal.
 //! - [`settings`]: what the runner is told by the composition layer.
 //! - [`status`], [`command`], [`event`]: the snapshots the runner publishes, the operator
 //!   commands it takes, the events it reports (for the notification hook).

@@ -88,6 +88,7 @@ fn plan(lines: u32) -> Plan {
         max_line_attempts: 3,
         v_method: Default::default(),
         replace_spikes: None,
+        analysis: None,
     }
 }
 

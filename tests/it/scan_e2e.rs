@@ -251,6 +251,142 @@ async fn a_scan_at_degree_3_reports_and_samples_the_surface_it_wrote() {
     rig.shutdown().await;
 }
 
+/// `[analysis]` as a station might set it, every key away from its default.
+const ANALYSIS: &str = "\n[analysis]\ncurves = 9\nlevels = 41\nlambda-c-mm = 0.08\nno-filter = true\noutliers = \"exclude\"\nspike-threshold-sigma = 4.0\nspike-max-points = 3\nholdout-threshold = 0.9\n";
+
+/// report.json without what differs between two runs of the same characterisation: the
+/// timings, the input's and the files' paths, the IGES files (only the runner writes them)
+/// and the scan's stop record (the runner reports before it writes it).
+fn comparable(mut v: serde_json::Value, dirs: &[&std::path::Path]) -> serde_json::Value {
+    fn walk(v: &mut serde_json::Value, dirs: &[String]) {
+        match v {
+            serde_json::Value::Object(m) => {
+                for k in ["timings_s", "input", "files", "iges_files", "stop"] {
+                    m.remove(k);
+                }
+                m.values_mut().for_each(|x| walk(x, dirs));
+            }
+            serde_json::Value::Array(a) => a.iter_mut().for_each(|x| walk(x, dirs)),
+            serde_json::Value::String(s) => {
+                for d in dirs {
+                    *s = s.replace(d.as_str(), "<dir>");
+                }
+            }
+            _ => {}
+        }
+    }
+    let dirs: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
+    walk(&mut v, &dirs);
+    v
+}
+
+/// The paths at which two JSON values differ (at most 20).
+fn differences(a: &serde_json::Value, b: &serde_json::Value, at: &str, out: &mut Vec<String>) {
+    use serde_json::Value::{Array, Object};
+    if out.len() >= 20 {
+        return;
+    }
+    match (a, b) {
+        (Object(x), Object(y)) => {
+            for k in x.keys().chain(y.keys().filter(|k| !x.contains_key(*k))) {
+                let null = serde_json::Value::Null;
+                let (p, q) = (x.get(k).unwrap_or(&null), y.get(k).unwrap_or(&null));
+                differences(p, q, &format!("{at}.{k}"), out);
+            }
+        }
+        (Array(x), Array(y)) if x.len() == y.len() => {
+            for (i, (p, q)) in x.iter().zip(y).enumerate() {
+                differences(p, q, &format!("{at}[{i}]"), out);
+            }
+        }
+        _ if a != b => out.push(format!("{at}: {a} vs {b}")),
+        _ => {}
+    }
+}
+
+fn analyze_into(dir: &std::path::Path, out: &std::path::Path) -> serde_json::Value {
+    let a = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .arg("analyze")
+        .arg(dir)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(a.status.success(), "{}", describe(&a));
+    serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap()
+}
+
+/// A scan run with a non-default `[analysis]` freezes it in its plan: `analyze` of its
+/// directory gives the runner's report (all but timings and paths) without being told the
+/// settings, and a journal without them (as older versions wrote) is analysed with the
+/// defaults, which give another report.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn analyze_of_a_scan_directory_uses_the_analysis_settings_the_scan_ran_with() {
+    let rig = Rig::start(RigOptions::default()).await;
+    let o = run_scan(&rig.config_with("out", ANALYSIS), &[]).await;
+    assert!(o.status.success(), "{}", describe(&o));
+    let dir = scan_dir(&rig.out_dir("out"));
+    let runner: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap();
+    // The runner characterised with the station's settings.
+    assert_eq!(
+        runner["recipe"]["outliers"], "exclude",
+        "{}",
+        runner["recipe"]
+    );
+    assert_eq!(runner["recipe"]["holdout_threshold_sq"], 0.9);
+    assert!(
+        runner["recipe"]["lambda_c_source"]
+            .as_str()
+            .is_some_and(|s| s.contains("0.08")),
+        "{}",
+        runner["recipe"]
+    );
+
+    let again = rig.tmp.path().join("again");
+    let second = analyze_into(&dir, &again);
+    let mut differ = Vec::new();
+    differences(
+        &comparable(runner.clone(), &[&dir, &again]),
+        &comparable(second, &[&dir, &again]),
+        "report",
+        &mut differ,
+    );
+    assert!(
+        differ.is_empty(),
+        "analyze of the directory differs from the runner's report (runner vs analyze): {differ:#?}"
+    );
+
+    // The same directory with the settings taken out of its start record.
+    let old = rig.tmp.path().join("old").join(dir.file_name().unwrap());
+    std::fs::create_dir_all(old.join("lines")).unwrap();
+    for e in std::fs::read_dir(dir.join("lines")).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), old.join("lines").join(e.file_name())).unwrap();
+    }
+    let (records, _) = journal(&dir);
+    let mut bytes = Vec::new();
+    for mut r in records {
+        if let Record::Start(s) = &mut r {
+            assert!(s.plan.analysis.is_some(), "the plan froze [analysis]");
+            s.plan.analysis = None;
+        }
+        bytes.extend(surfscan::scan::journal::encode_record(&r).unwrap());
+        bytes.push(b'\n');
+    }
+    std::fs::write(old.join("journal.jsonl"), bytes).unwrap();
+    let defaults = analyze_into(&old, &rig.tmp.path().join("defaults"));
+    assert_eq!(defaults["recipe"]["outliers"], "flag");
+    assert_eq!(defaults["recipe"]["holdout_threshold_sq"], 0.5);
+    for key in ["recipe", "surface", "between_lines"] {
+        assert_ne!(
+            defaults[key], runner[key],
+            "{key}: the default settings give the same section"
+        );
+    }
+    rig.shutdown().await;
+}
+
 /// Runs an uninterrupted scan on `rig` into `out` and returns its surface's bits.
 async fn reference_surface(rig: &Rig, out: &str) -> Vec<Vec<u64>> {
     let o = run_scan(&rig.config(out), &[]).await;

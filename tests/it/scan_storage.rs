@@ -69,6 +69,7 @@ fn start_record(id: &ScanId, lines: u32) -> StartRecord {
             max_line_attempts: 3,
             v_method: Default::default(),
             replace_spikes: None,
+            analysis: None,
         },
         config: serde_json::json!({"scan": {"lines": lines}}),
         config_hash: "ab".repeat(32),

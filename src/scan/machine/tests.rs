@@ -17,6 +17,7 @@ fn plan() -> Plan {
         max_line_attempts: 3,
         v_method: Default::default(),
         replace_spikes: None,
+        analysis: None,
     }
 }
 

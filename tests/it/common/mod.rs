@@ -241,8 +241,13 @@ profile-block = "RDEVA{{n}}"
     )
 }
 
-/// `surfscan scan --config CONFIG` with the traceability arguments and `env`.
+/// `surfscan scan --config CONFIG` with the traceability arguments and `env`. Its device locks
+/// go to `locks/` beside the configuration: the rig is a station of its own, and another
+/// rig's scan that holds the lock of a pseudo-terminal number it no longer uses (its device
+/// was unplugged, the number given to this rig's device) must not refuse this one.
 pub fn scan_command(config: &Path, env: &[(&str, &str)]) -> tokio::process::Command {
+    let locks = config.parent().unwrap_or(Path::new(".")).join("locks");
+    std::fs::create_dir_all(&locks).expect("lock directory");
     let mut c = tokio::process::Command::new(env!("CARGO_BIN_EXE_surfscan"));
     c.arg("scan")
         .arg("--config")
@@ -250,6 +255,7 @@ pub fn scan_command(config: &Path, env: &[(&str, &str)]) -> tokio::process::Comm
         .args(["--specimen", "coupon A-17", "--operator", "R. Tester"])
         .env_remove("SURFSCAN_TEST_CRASH")
         .env_remove("SURFSCAN_TEST_ENOSPC")
+        .env("SURFSCAN_TEST_LOCK_DIR", &locks)
         .env("RUST_LOG", "info")
         .stdin(std::process::Stdio::null())
         .stdout(std::process::Stdio::piped())
