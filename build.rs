@@ -20,13 +20,26 @@ fn main() {
         .filter(|s| !s.trim().is_empty());
     let commit = given.or_else(|| {
         let commit = git(&["rev-parse", "--short=12", "HEAD"])?;
-        // Rebuild when HEAD moves: the worktree's HEAD, and the branch refs it points to.
+        // Rebuild when HEAD moves: the worktree's HEAD (a checkout of another branch or
+        // commit) and the one branch ref it points to (a commit on that branch). Watching
+        // every branch would rebuild the library whenever any other branch or worktree of
+        // the repository commits.
         if let Some(dir) = git(&["rev-parse", "--git-dir"]) {
             println!("cargo:rerun-if-changed={dir}/HEAD");
         }
         if let Some(common) = git(&["rev-parse", "--git-common-dir"]) {
-            println!("cargo:rerun-if-changed={common}/refs/heads");
-            println!("cargo:rerun-if-changed={common}/packed-refs");
+            // A path that does not exist would make every build rerun this script, so only
+            // existing files are watched: the loose ref, or packed-refs when the ref is packed
+            // (packing deletes the loose file, which is a change too).
+            let watch = |path: String| {
+                if std::path::Path::new(&path).exists() {
+                    println!("cargo:rerun-if-changed={path}");
+                }
+            };
+            if let Some(branch) = git(&["symbolic-ref", "-q", "HEAD"]) {
+                watch(format!("{common}/{branch}"));
+            }
+            watch(format!("{common}/packed-refs"));
         }
         Some(commit)
     });
