@@ -688,6 +688,27 @@ fn date_stamp(t: &chrono::NaiveDateTime) -> String {
     hollerith(&t.format("%Y%m%d.%H%M%S").to_string())
 }
 
+/// The largest |coordinate| of `poles` (0 for none): the maximum is exact whatever order it
+/// is taken in, so it is taken over twelve running maxima (four poles at a time) instead of
+/// one chain of dependent comparisons through the whole net.
+fn max_abs_coordinate(poles: &[[f64; 3]]) -> f64 {
+    let mut m = [0.0f64; 12];
+    let mut quads = poles.chunks_exact(4);
+    for quad in &mut quads {
+        for (j, p) in quad.iter().enumerate() {
+            for c in 0..3 {
+                m[3 * j + c] = m[3 * j + c].max(p[c].abs());
+            }
+        }
+    }
+    for p in quads.remainder() {
+        for c in 0..3 {
+            m[c] = m[c].max(p[c].abs());
+        }
+    }
+    m.into_iter().fold(0.0, f64::max)
+}
+
 /// The Start and Global sections as records; returns their line counts.
 fn start_and_global(
     out: &mut Vec<u8>,
@@ -696,9 +717,8 @@ fn start_and_global(
 ) -> (usize, usize) {
     let max_coord = surfaces
         .iter()
-        .flat_map(|s| s.poles().iter())
-        .flat_map(|p| p.iter())
-        .fold(0.0f64, |m, c| m.max(c.abs()));
+        .map(|s| max_abs_coordinate(s.poles()))
+        .fold(0.0f64, f64::max);
     let buf = out;
     // Start section.
     let start = wrap72(&opts.start_lines);

@@ -169,15 +169,34 @@ impl UBasis {
         mut f: impl FnMut(usize, [f64; 4]),
     ) {
         let n = self.degree + 1;
-        for (k, (&base, b)) in self
-            .first
-            .iter()
-            .zip(self.values.chunks_exact(n))
-            .enumerate()
-        {
-            let poles = &curve[base - offset..base - offset + n];
+        // Four parameters at a time, so that four independent sums are in flight instead of
+        // one chain of dependent additions; each sum is still Σ basis·pole from zero in pole
+        // order, and `f` still sees the parameters in order.
+        const BLOCK: usize = 4;
+        let blocks = self.first.len() / BLOCK;
+        for blk in 0..blocks {
+            let k0 = blk * BLOCK;
+            let bases: [usize; BLOCK] = std::array::from_fn(|j| self.first[k0 + j] - offset);
+            let b = &self.values[k0 * n..(k0 + BLOCK) * n];
+            let mut p = [[0.0f64; 4]; BLOCK];
+            for r in 0..n {
+                for j in 0..BLOCK {
+                    let q = curve[bases[j] + r];
+                    let nu = b[j * n + r];
+                    for c in 0..4 {
+                        p[j][c] += nu * q[c];
+                    }
+                }
+            }
+            for (j, p) in p.into_iter().enumerate() {
+                f(k0 + j, p);
+            }
+        }
+        for k in blocks * BLOCK..self.first.len() {
+            let base = self.first[k] - offset;
+            let poles = &curve[base..base + n];
             let mut p = [0.0f64; 4];
-            for (q, &nu) in poles.iter().zip(b) {
+            for (q, &nu) in poles.iter().zip(&self.values[k * n..(k + 1) * n]) {
                 for c in 0..4 {
                     p[c] += nu * q[c];
                 }
@@ -325,13 +344,32 @@ impl NurbsSurface {
         let nu = self.count_u;
         let first = (sv - self.degree_v) * nu;
         let net = &self.poles[first..first + bv.len() * nu];
-        for (o, i) in out.iter_mut().zip(columns) {
+        let add = |acc: &mut [f64; 4], nv: f64, q: [f64; 3]| {
+            acc[0] += nv * q[0];
+            acc[1] += nv * q[1];
+            acc[2] += nv * q[2];
+        };
+        // Four output poles at a time, so that four independent sums are in flight.
+        const BLOCK: usize = 4;
+        let start = columns.start;
+        let done = out.len() / BLOCK * BLOCK;
+        let mut blocks = out.chunks_exact_mut(BLOCK);
+        for (blk, o) in (&mut blocks).enumerate() {
+            let i0 = start + blk * BLOCK;
+            let mut acc: [[f64; 4]; BLOCK] = std::array::from_fn(|j| o[j]);
+            for (l, &nv) in bv.iter().enumerate() {
+                let row = &net[l * nu + i0..l * nu + i0 + BLOCK];
+                for j in 0..BLOCK {
+                    add(&mut acc[j], nv, row[j]);
+                }
+            }
+            o.copy_from_slice(&acc);
+        }
+        for (j, o) in blocks.into_remainder().iter_mut().enumerate() {
+            let i = start + done + j;
             let mut acc = *o;
             for (l, &nv) in bv.iter().enumerate() {
-                let q = net[l * nu + i];
-                acc[0] += nv * q[0];
-                acc[1] += nv * q[1];
-                acc[2] += nv * q[2];
+                add(&mut acc, nv, net[l * nu + i]);
             }
             *o = acc;
         }
