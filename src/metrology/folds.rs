@@ -238,6 +238,36 @@ impl SampleBasis {
         })
     }
 
+    /// x and z of the curve with `poles` (padded as [`NurbsSurface::iso_poles_u_padded`]
+    /// makes them) at every parameter, into `xs` and `zs`: each the sum [`Self::points`] and
+    /// `UBasis::for_each_point` make for that lane.
+    fn x_and_z(&self, poles: &[[f64; 4]], xs: &mut Vec<f64>, zs: &mut Vec<f64>) {
+        let n = self.degree + 1;
+        for (&base, b) in self.first.iter().zip(self.values.chunks_exact(n)) {
+            let (mut x, mut z) = (0.0, 0.0);
+            for (q, b) in poles[base..base + n].iter().zip(b) {
+                x += b * q[0];
+                z += b * q[2];
+            }
+            xs.push(x);
+            zs.push(z);
+        }
+    }
+
+    /// Lane `c` of the curve with `poles` at parameter `k`.
+    fn lane(&self, poles: &[[f64; 4]], k: usize, c: usize) -> f64 {
+        let n = self.degree + 1;
+        let base = self.first[k];
+        let mut p = 0.0;
+        for (q, b) in poles[base..base + n]
+            .iter()
+            .zip(&self.values[k * n..(k + 1) * n])
+        {
+            p += b * q[c];
+        }
+        p
+    }
+
     /// The curve with `poles` at every parameter, into `out`.
     fn points(&self, poles: &[[f64; 3]], out: &mut Vec<[f64; 3]>) {
         out.clear();
@@ -267,18 +297,24 @@ type Worst = (f64, f64, (f64, f64, f64));
 
 /// The worst backward run of coordinate `c` along `pts`: (lower, upper, back) in mm.
 fn backward_run(pts: &[[f64; 3]], c: usize) -> Option<(f64, f64, f64)> {
+    backward_run_by(pts.len(), |k| pts[k][c])
+}
+
+/// The worst backward run of the `n` values `at(0..n)`: (lower, upper, back) in mm.
+#[inline(always)]
+fn backward_run_by(n: usize, at: impl Fn(usize) -> f64) -> Option<(f64, f64, f64)> {
     let mut worst: Option<(f64, f64, f64)> = None;
     let mut k = 1;
-    while k < pts.len() {
-        if pts[k][c] > pts[k - 1][c] {
+    while k < n {
+        if at(k) > at(k - 1) {
             k += 1;
             continue;
         }
-        let top = pts[k - 1][c];
-        let mut bottom = pts[k][c];
-        while k + 1 < pts.len() && pts[k + 1][c] <= pts[k][c] {
+        let top = at(k - 1);
+        let mut bottom = at(k);
+        while k + 1 < n && at(k + 1) <= at(k) {
             k += 1;
-            bottom = pts[k][c];
+            bottom = at(k);
         }
         let back = top - bottom;
         if worst.is_none_or(|w| back > w.2) {
@@ -355,32 +391,58 @@ pub fn check_model(
     let mut iso = Vec::new();
     let mut fold_u: (usize, Option<Worst>) = (0, None);
     // The u basis is computed once for every iso-curve (all are sampled at the same u), and
-    // one curve's points are held at a time: the points of `evaluate_grid`, to the bit.
-    let basis = UBasis::new(surface, &us);
+    // one curve is held at a time. Only x (for the fold) and z (for the range) are summed at
+    // every sample; y where a sample becomes the highest or lowest, or starts a folding
+    // curve. Each lane is the sum `evaluate_grid` makes for it, to the bit.
+    let u_basis = SampleBasis::new(surface.degree_u(), surface.knots_u(), nu, n_u);
+    let general = if u_basis.is_none() {
+        Some(UBasis::new(surface, &us))
+    } else {
+        None
+    };
     let mut poles = Vec::new();
-    let mut pts: Vec<[f64; 3]> = Vec::with_capacity(n_u);
-    {
-        for &v in &vs {
-            surface.iso_poles_u_padded(v, &mut poles);
-            pts.clear();
-            basis.for_each_point(&poles, |_, p| pts.push([p[0], p[1], p[2]]));
-            let pts = &pts[..];
-            for p in pts {
-                let z = p[2] * 1000.0;
-                if z < range.0 {
-                    range.0 = z;
-                    range.1 = [p[0], p[1]];
-                }
-                if z > range.2 {
-                    range.2 = z;
-                    range.3 = [p[0], p[1]];
-                }
+    let (mut xs, mut zs): (Vec<f64>, Vec<f64>) = (Vec::with_capacity(n_u), Vec::with_capacity(n_u));
+    for &v in &vs {
+        surface.iso_poles_u_padded(v, &mut poles);
+        let y_at = |k: usize| match (&u_basis, &general) {
+            (Some(b), _) => b.lane(&poles, k, 1),
+            (None, Some(g)) => {
+                let mut y = f64::NAN;
+                g.for_each_point(&poles, |j, p| {
+                    if j == k {
+                        y = p[1];
+                    }
+                });
+                y
             }
-            if let Some(run) = backward_run(pts, 0) {
-                fold_u.0 += 1;
-                if fold_u.1.is_none_or(|(_, _, w)| run.2 > w.2) {
-                    fold_u.1 = Some((v, pts.first().map_or(f64::NAN, |p| p[1]), run));
-                }
+            (None, None) => f64::NAN,
+        };
+        xs.clear();
+        zs.clear();
+        match (&u_basis, &general) {
+            (Some(b), _) => b.x_and_z(&poles, &mut xs, &mut zs),
+            (None, Some(g)) => g.for_each_point(&poles, |_, p| {
+                xs.push(p[0]);
+                zs.push(p[2]);
+            }),
+            (None, None) => {}
+        }
+        for (k, (&x, &z)) in xs.iter().zip(&zs).enumerate() {
+            let z = z * 1000.0;
+            if z < range.0 {
+                range.0 = z;
+                range.1 = [x, y_at(k)];
+            }
+            if z > range.2 {
+                range.2 = z;
+                range.3 = [x, y_at(k)];
+            }
+        }
+        if let Some(run) = backward_run_by(xs.len(), |k| xs[k]) {
+            fold_u.0 += 1;
+            if fold_u.1.is_none_or(|(_, _, w)| run.2 > w.2) {
+                let y0 = if xs.is_empty() { f64::NAN } else { y_at(0) };
+                fold_u.1 = Some((v, y0, run));
             }
         }
     }
@@ -495,6 +557,92 @@ mod tests {
             }
         }
         assert!(SampleBasis::new(s.degree_v(), s.knots_v(), s.count_v() + 1, 10).is_none());
+    }
+
+    /// The u iso-curve part of [`check_model`] as it was first written: every point of
+    /// `evaluate_grid`, then the range and the fold. (fold count, worst, range.)
+    #[allow(clippy::type_complexity)]
+    fn u_checks_by_evaluate_grid(
+        surface: &NurbsSurface,
+        vs: &[f64],
+        n_u: usize,
+    ) -> ((usize, Option<Worst>), (f64, [f64; 2], f64, [f64; 2])) {
+        let us: Vec<f64> = (0..n_u).map(|k| k as f64 / (n_u - 1) as f64).collect();
+        let grid = surface.evaluate_grid(&us, vs);
+        let mut range = (f64::INFINITY, [0.0; 2], f64::NEG_INFINITY, [0.0; 2]);
+        let mut fold: (usize, Option<Worst>) = (0, None);
+        for (&v, pts) in vs.iter().zip(grid.chunks_exact(n_u)) {
+            for p in pts {
+                let z = p[2] * 1000.0;
+                if z < range.0 {
+                    range = (z, [p[0], p[1]], range.2, range.3);
+                }
+                if z > range.2 {
+                    range = (range.0, range.1, z, [p[0], p[1]]);
+                }
+            }
+            if let Some(run) = backward_run(pts, 0) {
+                fold.0 += 1;
+                if fold.1.is_none_or(|(_, _, w)| run.2 > w.2) {
+                    fold.1 = Some((v, pts[0][1], run));
+                }
+            }
+        }
+        (fold, range)
+    }
+
+    #[test]
+    fn the_u_checks_equal_those_of_every_point_evaluated() {
+        // A smooth fit and one that folds (a spike on one line): the range, its places and
+        // the folds are the bits of the straightforward evaluation.
+        let (rows, cols) = (9, 120);
+        let y: Vec<f64> = (0..rows).map(|r| r as f64 * 0.01).collect();
+        let mut z: Vec<f64> = (0..rows * cols)
+            .map(|k| 2.0 * ((k % cols) as f64 * 0.21).sin() + ((k / cols) as f64 * 0.9).cos())
+            .collect();
+        for spike in [false, true] {
+            if spike {
+                z[4 * cols + 60] += 400.0;
+            }
+            let fit = fit_grid(0.0005, &y, &z, cols, FitOptions::default()).unwrap();
+            let s = &fit.surface;
+            let options = FoldOptions::default();
+            let c = check_model(s, &fit.params_v, &z, &options);
+            let mut vs = Vec::new();
+            for (k, &v) in fit.params_v.iter().enumerate() {
+                vs.push(v);
+                if let Some(&next) = fit.params_v.get(k + 1) {
+                    for b in 1..=options.between {
+                        vs.push(v + (next - v) * b as f64 / (options.between + 1) as f64);
+                    }
+                }
+            }
+            let n_u = options.samples_per_pole * s.count_u();
+            let ((count, worst), range) = u_checks_by_evaluate_grid(s, &vs, n_u);
+            let h = &c.height_range;
+            assert_eq!(
+                (
+                    h.model_min_um,
+                    h.model_min_at_mm,
+                    h.model_max_um,
+                    h.model_max_at_mm
+                ),
+                range,
+                "spike {spike}"
+            );
+            let fold = c.iso_curves.iter().find(|f| f.direction == "u");
+            match worst {
+                None => assert!(fold.is_none(), "spike {spike}: {fold:?}"),
+                Some((v, y0, (lo, hi, back))) => {
+                    let f = fold.expect("a fold along u");
+                    assert_eq!(
+                        (f.affected, f.at_parameter, f.at_mm, f.range_mm, f.back_mm),
+                        (count, v, y0, [lo, hi], back)
+                    );
+                }
+            }
+            assert_eq!(spike, worst.is_some(), "the spike folds the surface");
+        }
     }
 
     #[test]

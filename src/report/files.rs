@@ -398,34 +398,55 @@ pub fn write_data_files(
     report: &Report,
     ctx: &mut ReportContext,
 ) -> Result<Files, ReportError> {
-    let plots = write_plots(out, grid, measured, sampled, overlay, report, ctx)?;
-    let rk_plots = rk_plots?;
-    let measured_x3p = out.join("measured.x3p");
-    let bytes = to_x3p(
-        &grid.heights_um,
-        measured.rows,
-        measured.cols,
-        measured.pitch_x_mm,
-        measured.pitch_y_mm,
-        &x3p_meta(ctx, "measured heights as traced"),
-    )
-    .map_err(metrology(format!("{}: measured.x3p", ctx.input)))?;
-    write_file(&measured_x3p, &bytes)?;
-    let model_x3p = match sampled {
-        Some(model) => {
-            let path = out.join("model.x3p");
-            let bytes = to_x3p(
-                &model.heights_um,
+    // The X3P files are encoded (MD5, deflate) beside the plots: they read only the heights
+    // and their metadata. Errors are reported in the order the files are written.
+    let measured_meta = x3p_meta(ctx, "measured heights as traced");
+    let model_meta = x3p_meta(
+        ctx,
+        "NURBS model sampled at half the x pitch on the data lines",
+    );
+    let (plots, x3p) = std::thread::scope(|s| {
+        let x3p = s.spawn(|| {
+            let measured_bytes = to_x3p(
+                &grid.heights_um,
                 measured.rows,
-                model.cols,
-                model.pitch_x_mm,
+                measured.cols,
+                measured.pitch_x_mm,
                 measured.pitch_y_mm,
-                &x3p_meta(
-                    ctx,
-                    "NURBS model sampled at half the x pitch on the data lines",
-                ),
-            )
-            .map_err(metrology(format!("{}: model.x3p", ctx.input)))?;
+                &measured_meta,
+            );
+            let model_bytes = sampled.map(|model| {
+                to_x3p(
+                    &model.heights_um,
+                    measured.rows,
+                    model.cols,
+                    model.pitch_x_mm,
+                    measured.pitch_y_mm,
+                    &model_meta,
+                )
+            });
+            (measured_bytes, model_bytes)
+        });
+        let plots = write_plots(out, grid, measured, sampled, overlay, report, ctx);
+        (plots, x3p.join())
+    });
+    let plots = plots?;
+    let rk_plots = rk_plots?;
+    let (measured_bytes, model_bytes) = x3p.map_err(|_| ReportError::Metrology {
+        what: format!("{}: measured.x3p", ctx.input),
+        source: MetrologyError::BadParameter {
+            what: "X3P encoding thread",
+            value: f64::NAN,
+            hint: "encoding the X3P files panicked; report this with the input",
+        },
+    })?;
+    let measured_x3p = out.join("measured.x3p");
+    let bytes = measured_bytes.map_err(metrology(format!("{}: measured.x3p", ctx.input)))?;
+    write_file(&measured_x3p, &bytes)?;
+    let model_x3p = match model_bytes {
+        Some(bytes) => {
+            let path = out.join("model.x3p");
+            let bytes = bytes.map_err(metrology(format!("{}: model.x3p", ctx.input)))?;
             write_file(&path, &bytes)?;
             Some(path)
         }
