@@ -156,11 +156,7 @@ pub fn characterise(
     let heights = match sampled {
         Ok(h) => h,
         Err(e) => {
-            let reason = if folds {
-                format!("the model folds (see model_checks), so it is not a height map and cannot be sampled on a grid (no model.x3p, no areal parameters of the model): {e}")
-            } else {
-                format!("sampling the model on the data lines: {e}")
-            };
+            let reason = format!("sampling the model on the data lines: {e}");
             fails.push(failed("surface", reason.clone()));
             return ModelSection {
                 surface: Err(reason),
