@@ -45,7 +45,7 @@ use crate::metrology::alternatives::{
     compare as compare_alternatives, table as alternatives_table,
 };
 use crate::metrology::areal::{areal_params, Grid as ArealGrid};
-use crate::metrology::holdout::{between_lines, holdout_every, ordinal};
+use crate::metrology::holdout::{between_lines, holdout_every_or_reason, ordinal};
 use crate::metrology::outliers::bridged_grid;
 use crate::metrology::surface_model::{fit_model, ModelRecipe};
 use crate::scan::outputs::SurfaceShape;
@@ -647,13 +647,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     // Every 2nd line left out, or every k-th when too few lines remain for that (as the
     // report does).
     let threshold = args.model.holdout_threshold()?;
-    let every = holdout_every(grid.rows, recipe.degrees.degree_v).ok_or_else(|| {
-        format!(
-            "{} lines cannot verify the surface between them: leaving one out leaves at most degree-v + 1 = {} for the refit; trace more lines or lower degree-v",
-            grid.rows,
-            recipe.degrees.degree_v + 1
-        )
-    });
+    let every = holdout_every_or_reason(grid.rows, recipe.degrees.degree_v);
     let verdict = sq.clone().and_then(|sq| {
         let every = every.clone()?;
         between_lines(

@@ -42,6 +42,17 @@ pub fn holdout_every(rows: usize, degree_v: usize) -> Option<usize> {
     })
 }
 
+/// [`holdout_every`], or the reason no line can be held out, in the words `fit` and the
+/// report both print.
+pub fn holdout_every_or_reason(rows: usize, degree_v: usize) -> Result<usize, String> {
+    holdout_every(rows, degree_v).ok_or_else(|| {
+        format!(
+            "{rows} lines cannot verify the surface between them: leaving one out leaves at most degree-v + 1 = {} for the refit; trace more lines or lower degree-v",
+            degree_v + 1
+        )
+    })
+}
+
 /// Differences at the held-out points of one line.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct HoldoutLine {

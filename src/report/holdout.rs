@@ -10,7 +10,7 @@
 use super::document::{LineHoldout, LineReport};
 use super::grid::LineGrid;
 use crate::metrology::holdout::{
-    between_lines, holdout_every, holdout_with, BetweenLines, Holdout, HoldoutLine,
+    between_lines, holdout_every_or_reason, holdout_with, BetweenLines, Holdout, HoldoutLine,
 };
 use crate::metrology::surface_model::ModelRecipe;
 
@@ -45,7 +45,7 @@ pub fn characterise(
 }
 
 /// The verdict on the surface between lines (every 2nd line left out, or every k-th when
-/// there are too few lines for that, [`holdout_every`]) against `sq_um`. The held-out lines
+/// there are too few lines for that, [`holdout_every`](crate::metrology::holdout::holdout_every)) against `sq_um`. The held-out lines
 /// keep their row in `BetweenLines::lines[i].index` until [`rows_to_lines`].
 pub fn verdict(
     grid: &LineGrid,
@@ -54,13 +54,7 @@ pub fn verdict(
     sq_um: f64,
     threshold: f64,
 ) -> Result<BetweenLines, String> {
-    let every = holdout_every(grid.rows(), recipe.degrees.degree_v).ok_or_else(|| {
-        format!(
-            "{} lines cannot verify the surface between them: leaving one out leaves at most degree-v + 1 = {} for the refit; trace more lines or lower degree-v",
-            grid.rows(),
-            recipe.degrees.degree_v + 1
-        )
-    })?;
+    let every = holdout_every_or_reason(grid.rows(), recipe.degrees.degree_v)?;
     between_lines(
         heights_um,
         grid.cols,
