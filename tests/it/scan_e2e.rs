@@ -565,19 +565,6 @@ async fn a_journal_torn_anywhere_in_its_last_record_resumes_cleanly() {
     rig.shutdown().await;
 }
 
-fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        let dest = to.join(e.file_name());
-        if e.file_type().unwrap().is_dir() {
-            copy_dir(&e.path(), &dest);
-        } else {
-            std::fs::copy(e.path(), dest).unwrap();
-        }
-    }
-}
-
 /// The stop record of a journal, if any.
 fn stop_record(records: &[Record]) -> Option<surfscan::scan::journal::StopRecord> {
     records.iter().find_map(|r| match r {
