@@ -23,6 +23,27 @@ async fn ask(host: &mut DuplexStream, cmd: &str) -> (String, Duration) {
     (String::from_utf8(out).unwrap(), t0.elapsed())
 }
 
+type Served = tokio::task::JoinHandle<std::io::Result<Outcome>>;
+
+/// Serves `inst` at 9600 baud, real pacing, over an in-memory duplex stream; returns the
+/// host's end and the serve loop, which ends `Closed` once the host's end is dropped.
+fn serve_at_9600(inst: Instrument) -> (DuplexStream, Served) {
+    let (host, mut dev) = tokio::io::duplex(4096);
+    let epoch = Instant::now();
+    let server = tokio::spawn(async move {
+        // The stop sender lives as long as the loop, so only the host's drop ends it.
+        let (_stop_tx, mut stop) = tokio::sync::watch::channel(false);
+        let mut r = Responder::Emulate(Box::new(inst));
+        let mut faults = FaultPlan::default();
+        let pacing = Pacing {
+            baud: 9600,
+            time_scale: 1.0,
+        };
+        serve_connection(&mut dev, &mut r, &mut faults, pacing, epoch, &mut stop).await
+    });
+    (host, server)
+}
+
 #[tokio::test(start_paused = true)]
 async fn timeline_and_pacing_follow_the_clock() {
     // One 2000-point profile at 1 µm pitch: 2 mm + λc 2.5 mm = 4.5 mm traverse:
@@ -41,18 +62,7 @@ async fn timeline_and_pacing_follow_the_clock() {
         ..InstrumentConfig::default()
     };
     let inst = Instrument::new(cfg, set, None);
-    let (mut host, mut dev) = tokio::io::duplex(4096);
-    let (_stop_tx, mut stop) = tokio::sync::watch::channel(false);
-    let epoch = Instant::now();
-    let server = tokio::spawn(async move {
-        let mut r = Responder::Emulate(Box::new(inst));
-        let mut faults = FaultPlan::default();
-        let pacing = Pacing {
-            baud: 9600,
-            time_scale: 1.0,
-        };
-        serve_connection(&mut dev, &mut r, &mut faults, pacing, epoch, &mut stop).await
-    });
+    let (mut host, server) = serve_at_9600(inst);
 
     // "RDSTU00\r" and "OK000\r" are 8 + 6 bytes = 140 bits at 9600 baud = 14.583 ms (tokio
     // timers round up to 1 ms): the command's time on the wire and the reply's.
@@ -95,18 +105,7 @@ async fn many_short_exchanges_run_at_the_baud_rate_not_at_the_timer_tick() {
     }])
     .unwrap();
     let inst = Instrument::new(InstrumentConfig::default(), set, None);
-    let (mut host, mut dev) = tokio::io::duplex(4096);
-    let (_stop_tx, mut stop) = tokio::sync::watch::channel(false);
-    let epoch = Instant::now();
-    let server = tokio::spawn(async move {
-        let mut r = Responder::Emulate(Box::new(inst));
-        let mut faults = FaultPlan::default();
-        let pacing = Pacing {
-            baud: 9600,
-            time_scale: 1.0,
-        };
-        serve_connection(&mut dev, &mut r, &mut faults, pacing, epoch, &mut stop).await
-    });
+    let (mut host, server) = serve_at_9600(inst);
     let wire = Duration::from_secs_f64(14.0 * 10.0 / 9600.0);
     let t0 = Instant::now();
     for k in 1..=40u32 {
