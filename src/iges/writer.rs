@@ -131,7 +131,13 @@ impl RepeatedTexts {
             let len = t.text.len() - base;
             t.text.resize(base + TEXT_STRIDE, b' ');
             t.bits.push(v.to_bits());
-            t.lens.push(if ok { len as u8 } else { 0 });
+            // A text longer than its slot (no shortest f64 text is) was cut by the resize
+            // above: it is marked unusable, so that coordinate is formatted anew.
+            t.lens.push(if ok && len <= TEXT_STRIDE {
+                len as u8
+            } else {
+                0
+            });
         }
         t
     }
