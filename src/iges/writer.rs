@@ -18,7 +18,7 @@ use super::format::{
 };
 use super::split::{split_middle_shapes, split_v_middle, split_v_middle_side, PatchShape, Side};
 use super::IgesError;
-use crate::nurbs::NurbsSurface;
+use crate::nurbs::{NurbsSurface, PoleNet, RowY};
 use std::borrow::Cow;
 use std::io::{self, Write};
 use std::io::{Seek, SeekFrom};
@@ -174,11 +174,12 @@ struct NetTexts {
 
 impl NetTexts {
     fn of(s: &NurbsSurface) -> NetTexts {
-        let (nu, poles) = (s.count_u(), s.poles());
+        let net = s.net();
+        let x = if net.count_v() > 0 { net.row(0).x } else { &[] };
         NetTexts {
-            count_u: nu,
-            x: RepeatedTexts::of(poles[..nu.min(poles.len())].iter().map(|p| p[0])),
-            y: RepeatedTexts::of(poles.iter().step_by(nu.max(1)).map(|p| p[1])),
+            count_u: s.count_u(),
+            x: RepeatedTexts::of(x.iter().copied()),
+            y: RepeatedTexts::of(net.rows().filter(|r| !r.is_empty()).map(|r| r.y.at(0))),
         }
     }
 
@@ -238,18 +239,23 @@ fn format_pole_tokens(
 pub fn format_net_reals(s: &NurbsSurface, out: &mut Vec<u8>) -> Result<usize, IgesError> {
     let texts = NetTexts::of(s);
     let mut tokens = Tokens::default();
-    for (i, piece) in s.poles().chunks(PIECE_POLES).enumerate() {
-        format_pole_tokens(piece, i * PIECE_POLES, &texts, &mut tokens).map_err(
-            |(index, value)| IgesError::NonFinite {
+    let mut piece = Vec::with_capacity(PIECE_POLES);
+    let n = s.net().len();
+    for first in (0..n).step_by(PIECE_POLES) {
+        piece.clear();
+        s.net()
+            .extend_poles(first..(first + PIECE_POLES).min(n), &mut piece);
+        format_pole_tokens(&piece, first, &texts, &mut tokens).map_err(|(index, value)| {
+            IgesError::NonFinite {
                 patch: 0,
                 what: "pole coordinate",
                 index,
                 value,
-            },
-        )?;
+            }
+        })?;
         out.extend_from_slice(&tokens.text);
     }
-    Ok(s.poles().len() * 3)
+    Ok(n * 3)
 }
 
 /// Threads that format reals while the calling thread packs and writes.
@@ -260,12 +266,12 @@ fn worker_count() -> usize {
         .clamp(1, 4)
 }
 
-/// Formats the coordinates of `poles` piece by piece on `workers` threads (worker w takes
-/// pieces w, w + workers, …, at most two ahead) and hands each piece's tokens to `consume` in
-/// pole order. `first` is the index of `poles[0]` in its patch (for errors).
+/// Formats the coordinates of the poles numbered `poles` of `net` piece by piece on `workers`
+/// threads (worker w takes pieces w, w + workers, …, at most two ahead; each copies its
+/// piece's poles out of the net) and hands each piece's tokens to `consume` in pole order.
 fn for_each_piece_in_order(
-    poles: &[[f64; 3]],
-    first: usize,
+    net: &PoleNet,
+    poles: std::ops::Range<usize>,
     texts: &NetTexts,
     patch: usize,
     workers: usize,
@@ -277,11 +283,22 @@ fn for_each_piece_in_order(
         index,
         value,
     };
-    let pieces: Vec<&[[f64; 3]]> = poles.chunks(PIECE_POLES).collect();
+    let first = poles.start;
+    let pieces: Vec<std::ops::Range<usize>> = poles
+        .clone()
+        .step_by(PIECE_POLES)
+        .map(|k| k..(k + PIECE_POLES).min(poles.end))
+        .collect();
+    let gather = |range: &std::ops::Range<usize>, buf: &mut Vec<[f64; 3]>| {
+        buf.clear();
+        net.extend_poles(range.clone(), buf);
+    };
     if workers <= 1 || pieces.len() <= 1 {
         let mut tokens = Tokens::default();
+        let mut buf = Vec::with_capacity(PIECE_POLES);
         for (i, piece) in pieces.iter().enumerate() {
-            format_pole_tokens(piece, first + i * PIECE_POLES, texts, &mut tokens)
+            gather(piece, &mut buf);
+            format_pole_tokens(&buf, first + i * PIECE_POLES, texts, &mut tokens)
                 .map_err(non_finite)?;
             consume(&tokens)?;
         }
@@ -293,12 +310,14 @@ fn for_each_piece_in_order(
             let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Tokens, (usize, f64)>>(2);
             receivers.push(rx);
             let pieces = &pieces;
+            let gather = &gather;
             scope.spawn(move || {
+                let mut buf = Vec::with_capacity(PIECE_POLES);
                 for i in (w..pieces.len()).step_by(workers) {
                     let mut tokens = Tokens::default();
-                    let r =
-                        format_pole_tokens(pieces[i], first + i * PIECE_POLES, texts, &mut tokens)
-                            .map(|()| tokens);
+                    gather(&pieces[i], &mut buf);
+                    let r = format_pole_tokens(&buf, first + i * PIECE_POLES, texts, &mut tokens)
+                        .map(|()| tokens);
                     let failed = r.is_err();
                     // A closed channel means the consumer stopped (an error): stop too.
                     if tx.send(r).is_err() || failed {
@@ -384,17 +403,18 @@ fn stream_entity_128(
         hand_on(p)?;
     }
     p.end_record();
-    let poles = s.poles();
-    let chunk = if poles.len() >= PARALLEL_POLES {
-        poles.len().div_ceil(POLE_CHUNKS)
+    let net = s.net();
+    let count = net.len();
+    let chunk = if count >= PARALLEL_POLES {
+        count.div_ceil(POLE_CHUNKS)
     } else {
-        poles.len().max(1)
+        count.max(1)
     };
     let texts = NetTexts::of(s);
-    for (n, part) in poles.chunks(chunk).enumerate() {
+    for first in (0..count).step_by(chunk) {
         for_each_piece_in_order(
-            part,
-            n * chunk,
+            net,
+            first..(first + chunk).min(count),
             &texts,
             patch,
             workers,
@@ -686,25 +706,43 @@ fn date_stamp(t: &chrono::NaiveDateTime) -> String {
     hollerith(&t.format("%Y%m%d.%H%M%S").to_string())
 }
 
-/// The largest |coordinate| of `poles` (0 for none): the maximum is exact whatever order it
-/// is taken in, so it is taken over twelve running maxima (four poles at a time) instead of
-/// one chain of dependent comparisons through the whole net.
-fn max_abs_coordinate(poles: &[[f64; 3]]) -> f64 {
-    let mut m = [0.0f64; 12];
-    let mut quads = poles.chunks_exact(4);
-    for quad in &mut quads {
-        for (j, p) in quad.iter().enumerate() {
-            for c in 0..3 {
-                m[3 * j + c] = m[3 * j + c].max(p[c].abs());
+/// The largest |coordinate| of the poles of `net` (0 for none): the maximum is exact
+/// whatever order it is taken in, so it is taken per coordinate as the net holds them (a
+/// row's shared x or y once, not once per pole) over eight running maxima at a time instead
+/// of one chain of dependent comparisons through the whole net.
+fn max_abs_coordinate(net: &PoleNet) -> f64 {
+    fn max_abs(v: &[f64]) -> f64 {
+        let mut m = [0.0f64; 8];
+        let mut blocks = v.chunks_exact(8);
+        for b in &mut blocks {
+            for (m, x) in m.iter_mut().zip(b) {
+                *m = m.max(x.abs());
             }
         }
+        let tail = blocks
+            .remainder()
+            .iter()
+            .fold(0.0f64, |a, x| a.max(x.abs()));
+        m.into_iter().fold(tail, f64::max)
     }
-    for p in quads.remainder() {
-        for c in 0..3 {
-            m[c] = m[c].max(p[c].abs());
+    let mut m = 0.0f64;
+    let mut column_x_seen = false;
+    for row in net.rows() {
+        if std::ptr::eq(row.x.as_ptr(), net.column_x().as_ptr()) {
+            if !column_x_seen {
+                m = m.max(max_abs(row.x));
+                column_x_seen = true;
+            }
+        } else {
+            m = m.max(max_abs(row.x));
         }
+        m = m.max(match row.y {
+            RowY::One(y) => y.abs(),
+            RowY::Each(ys) => max_abs(ys),
+        });
+        m = m.max(max_abs(row.z));
     }
-    m.into_iter().fold(0.0, f64::max)
+    m
 }
 
 /// The Start and Global sections as records; returns their line counts.
@@ -715,7 +753,7 @@ fn start_and_global(
 ) -> (usize, usize) {
     let max_coord = surfaces
         .iter()
-        .map(|s| max_abs_coordinate(s.poles()))
+        .map(|s| max_abs_coordinate(s.net()))
         .fold(0.0f64, f64::max);
     let buf = out;
     // Start section.
@@ -1314,7 +1352,7 @@ mod tests {
     /// huge value), so a writer that reuses the text of repeated values must notice each.
     fn fit_like_with_breaks(nu: usize, nv: usize) -> NurbsSurface {
         let s = fit_like(nu, nv);
-        let mut poles = s.poles().to_vec();
+        let mut poles = s.net().to_vec();
         poles[nu + 3][0] = f64::from_bits(poles[nu + 3][0].to_bits() + 1);
         for (i, p) in poles[2 * nu..3 * nu].iter_mut().enumerate() {
             p[1] += i as f64 * 1e-9;
@@ -1385,7 +1423,7 @@ mod tests {
             longest_tokens(9, 5),
         ] {
             let mut want = Vec::new();
-            for &c in s.poles().iter().flatten() {
+            for c in s.poles().flatten() {
                 assert!(push_real(&mut want, c));
             }
             let mut got = Vec::new();
