@@ -149,45 +149,123 @@ pub struct Grid {
     pub heights_um: Vec<f64>,
 }
 
+/// Grid CSVs of at least this many bytes are read in two halves side by side.
+const PARALLEL_CSV_BYTES: usize = 256 << 10;
+
 /// Parses the grid CSV: no header, `,` separated, one row per line; blank lines at the end
-/// are ignored. Errors name the 1-based line and column and the offending content.
+/// are ignored. Errors name the 1-based line and column and the offending content. A large
+/// file is read as two runs of whole lines on two threads; the values, and the error (the
+/// first in line order), are those of reading it line by line.
 pub fn parse_grid(text: &str) -> Result<Grid, String> {
+    parse_grid_split(text, PARALLEL_CSV_BYTES)
+}
+
+/// [`parse_grid`], reading in two runs when `text` has at least `parallel_bytes` bytes.
+fn parse_grid_split(text: &str, parallel_bytes: usize) -> Result<Grid, String> {
     // Room for every field at once (one per ',' plus one per line), so a large grid is not
     // copied while it grows.
     let fields = text.bytes().filter(|&b| b == b',' || b == b'\n').count() + 1;
     let mut heights_um = Vec::with_capacity(fields);
-    let mut cols = 0usize;
-    let mut rows = 0usize;
     let lines: Vec<&str> = text.lines().collect();
     let last = lines
         .iter()
         .rposition(|l| !l.trim().is_empty())
         .map_or(0, |i| i + 1);
-    for (li, line) in lines[..last].iter().enumerate() {
-        // Plain lines of finite numbers take one pass; anything else is read (and its error
-        // worded) field by field below.
-        let n = match crate::numbers::parse_csv_line(line.as_bytes(), &mut heights_um) {
-            Some(n) => n,
-            None => parse_grid_line(li, line, &mut heights_um)?,
-        };
-        if rows == 0 {
-            cols = n;
-        } else if n != cols {
-            return Err(format!(
-                "line {}: {n} values, but line 1 has {cols}; every row must have the same number of points",
-                li + 1
-            ));
+    let lines = &lines[..last];
+    // The second run starts at the first line past the middle byte.
+    let split = if text.len() >= parallel_bytes && lines.len() >= 2 {
+        let mut bytes = 0usize;
+        lines
+            .iter()
+            .position(|l| {
+                bytes += l.len() + 1;
+                bytes >= text.len() / 2
+            })
+            .map_or(lines.len(), |i| (i + 1).min(lines.len()))
+    } else {
+        lines.len()
+    };
+    let (head, tail) = lines.split_at(split);
+    let (first, second) = if tail.is_empty() {
+        (parse_grid_lines(0, head, &mut heights_um), None)
+    } else {
+        std::thread::scope(|s| {
+            let second = s.spawn(|| {
+                let mut values = Vec::new();
+                let run = parse_grid_lines(split, tail, &mut values);
+                (run, values)
+            });
+            let first = parse_grid_lines(0, head, &mut heights_um);
+            let second = second
+                .join()
+                .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+            (first, Some(second))
+        })
+    };
+    // Row lengths against line 1 and any unreadable line, in line order.
+    let cols = first.counts.first().copied().unwrap_or(0);
+    let mut rows = 0usize;
+    let runs = std::iter::once(&first).chain(second.as_ref().map(|(run, _)| run));
+    for run in runs {
+        for (k, &n) in run.counts.iter().enumerate() {
+            if n != cols {
+                return Err(format!(
+                    "line {}: {n} values, but line 1 has {cols}; every row must have the same number of points",
+                    run.first_line + k + 1
+                ));
+            }
+            rows += 1;
         }
-        rows += 1;
+        if let Some(e) = &run.error {
+            return Err(e.clone());
+        }
     }
     if rows == 0 {
         return Err("the file holds no data rows".into());
+    }
+    if let Some((_, values)) = second {
+        heights_um.extend_from_slice(&values);
     }
     Ok(Grid {
         rows,
         cols,
         heights_um,
     })
+}
+
+/// The lines of a run of grid lines read so far: each line's number of values, and the error
+/// of the first line that cannot be read (where the run stops).
+struct GridLines {
+    /// 0-based index of the run's first line in the file.
+    first_line: usize,
+    counts: Vec<usize>,
+    error: Option<String>,
+}
+
+/// Reads `lines` (the file's lines from 0-based index `first_line` on) into `heights_um`,
+/// stopping at the first line that cannot be read.
+fn parse_grid_lines(first_line: usize, lines: &[&str], heights_um: &mut Vec<f64>) -> GridLines {
+    let mut run = GridLines {
+        first_line,
+        counts: Vec::with_capacity(lines.len()),
+        error: None,
+    };
+    for (k, line) in lines.iter().enumerate() {
+        // Plain lines of finite numbers take one pass; anything else is read (and its error
+        // worded) field by field below.
+        let n = match crate::numbers::parse_csv_line(line.as_bytes(), heights_um) {
+            Some(n) => n,
+            None => match parse_grid_line(first_line + k, line, heights_um) {
+                Ok(n) => n,
+                Err(e) => {
+                    run.error = Some(e);
+                    break;
+                }
+            },
+        };
+        run.counts.push(n);
+    }
+    run
 }
 
 /// One grid line field by field with `str::parse`; errors name the 1-based line and column.
@@ -1067,5 +1145,57 @@ mod tests {
             "{e}"
         );
         assert!(parse_grid("\n\n").is_err());
+    }
+
+    #[test]
+    fn a_grid_read_in_two_runs_equals_it_read_line_by_line() {
+        let (rows, cols) = (40usize, 7usize);
+        let base: Vec<String> = (0..rows)
+            .map(|r| {
+                (0..cols)
+                    .map(|c| format!("{:.4}", (r * cols + c) as f64 * 0.37 - 5.0))
+                    .collect::<Vec<_>>()
+                    .join(",")
+            })
+            .collect();
+        let join = |t: &[String], end: &str| t.join(end) + end;
+        let mut texts = vec![
+            join(&base, "\n"),
+            join(&base, "\r\n"),
+            join(&base, "\n") + "\n \n",
+        ];
+        // A bad line (a non-number, a row too short or too long, a blank line) at the start,
+        // on either side of the split and at the end; and one in each run.
+        let spoil = |t: &mut Vec<String>, at: usize, how: usize| match how {
+            0 => t[at] = t[at].replacen(',', ",1e,", 1),
+            1 => t[at] = t[at].rsplit_once(',').unwrap().0.to_string(),
+            2 => t[at].push_str(",1.5"),
+            _ => t[at].clear(),
+        };
+        for at in [0, 1, 19, 20, 21, 38, 39] {
+            for how in 0..4 {
+                let mut t = base.clone();
+                spoil(&mut t, at, how);
+                texts.push(join(&t, "\n"));
+            }
+        }
+        for (a, b) in [(0, 1), (1, 0), (2, 3), (3, 2)] {
+            let mut t = base.clone();
+            spoil(&mut t, 5, a);
+            spoil(&mut t, 30, b);
+            texts.push(join(&t, "\n"));
+        }
+        for text in &texts {
+            let serial = parse_grid_split(text, usize::MAX);
+            assert_eq!(parse_grid_split(text, 0), serial, "{text:?}");
+        }
+        // And the values are the numbers written.
+        let g = parse_grid_split(&texts[0], 0).unwrap();
+        let want: Vec<f64> = base
+            .iter()
+            .flat_map(|l| l.split(',').map(|f| f.parse::<f64>().unwrap()))
+            .collect();
+        assert_eq!((g.rows, g.cols), (rows, cols));
+        assert_eq!(g.heights_um, want);
     }
 }

@@ -13,7 +13,9 @@
 //! Parts and patches are planned from token counts (an upper bound on the lines of each
 //! entity), never by formatting the surface first.
 
-use super::format::{ascii_printable, hollerith, push_real, push_right, push_uint, FieldPacker};
+use super::format::{
+    ascii_printable, hollerith, push_real, push_right, push_short_then, push_uint, FieldPacker,
+};
 use super::split::{split_middle_shapes, split_v_middle, split_v_middle_side, PatchShape, Side};
 use super::IgesError;
 use crate::nurbs::{NurbsSurface, PoleNet, RowY};
@@ -334,28 +336,27 @@ fn for_each_piece_in_order(
     })
 }
 
-/// Streams the parameter data (columns 1–64 of each P line) of one entity 128 to `emit` in
-/// blocks of whole 64-column records, and returns the number of records. The layout: header,
-/// knots and weights from one record on; the poles in one chunk, or [`POLE_CHUNKS`] chunks
-/// for large nets, each starting a fresh record; the parameter range on a fresh record.
+/// Streams the P lines of one entity 128 through `p` (whose DE back-pointer the caller has
+/// set), handing complete lines to `emit` in blocks of about [`BLOCK_BYTES`], and returns the
+/// number of lines. Lines still in `p` when it returns are the caller's to hand on. The
+/// layout: header, knots and weights from one record on; the poles in one chunk, or
+/// [`POLE_CHUNKS`] chunks for large nets, each starting a fresh record; the parameter range on
+/// a fresh record.
 fn stream_entity_128(
     s: &NurbsSurface,
     patch: usize,
     workers: usize,
+    p: &mut LinePacker,
     emit: &mut dyn FnMut(&[u8]) -> Result<(), IgesError>,
 ) -> Result<usize, IgesError> {
     let (nu, nv) = (s.count_u(), s.count_v());
-    let mut records = 0usize;
-    let mut hand_on = |p: &mut FieldPacker, all: bool| -> Result<(), IgesError> {
-        if all {
-            p.pad_last();
+    let first_line = p.lines();
+    let mut hand_on = |p: &mut LinePacker| -> Result<(), IgesError> {
+        if p.bytes() >= BLOCK_BYTES {
+            p.drain_lines(&mut *emit)?;
         }
-        p.drain_records(|block| {
-            records += block.len() / 64;
-            emit(block)
-        })
+        Ok(())
     };
-    let mut p = FieldPacker::with_capacity(64, BLOCK_BYTES + 128);
     let mut tok = Vec::with_capacity(32);
     let closed_u = (0..nv).all(|j| s.pole(0, j) == s.pole(nu - 1, j));
     let closed_v = (0..nu).all(|i| s.pole(i, 0) == s.pole(i, nv - 1));
@@ -376,7 +377,7 @@ fn stream_entity_128(
         push_uint(&mut tok, h);
         p.push(&tok, b',');
     }
-    let real = |p: &mut FieldPacker, v: f64, what: &'static str, index: usize, delim: u8| {
+    let real = |p: &mut LinePacker, v: f64, what: &'static str, index: usize, delim: u8| {
         if p.push_real(v, delim) {
             Ok(())
         } else {
@@ -389,18 +390,19 @@ fn stream_entity_128(
         }
     };
     for (i, &k) in s.knots_u().iter().enumerate() {
-        real(&mut p, k, "u knot", i, b',')?;
+        real(p, k, "u knot", i, b',')?;
     }
     for (i, &k) in s.knots_v().iter().enumerate() {
-        real(&mut p, k, "v knot", i, b',')?;
+        real(p, k, "v knot", i, b',')?;
     }
-    for n in 0..nu * nv {
-        p.push(b"1.", b',');
-        if n % 65_536 == 0 && p.bytes() >= BLOCK_BYTES {
-            hand_on(&mut p, false)?;
-        }
+    let mut weights = nu * nv;
+    while weights > 0 {
+        let n = weights.min(65_536);
+        p.push_repeated(b"1.", b',', n);
+        weights -= n;
+        hand_on(p)?;
     }
-    hand_on(&mut p, true)?;
+    p.end_record();
     let net = s.net();
     let count = net.len();
     let chunk = if count >= PARALLEL_POLES {
@@ -410,7 +412,6 @@ fn stream_entity_128(
     };
     let texts = NetTexts::of(s);
     for first in (0..count).step_by(chunk) {
-        let mut q = FieldPacker::with_capacity(64, BLOCK_BYTES + 4096);
         for_each_piece_in_order(
             net,
             first..(first + chunk).min(count),
@@ -418,29 +419,20 @@ fn stream_entity_128(
             patch,
             workers,
             &mut |t: &Tokens| {
-                q.push_tokens(&t.text, &t.lens, b',');
-                if q.bytes() >= BLOCK_BYTES {
-                    hand_on(&mut q, false)?;
-                }
-                Ok(())
+                p.push_tokens(&t.text, &t.lens, b',');
+                hand_on(p)
             },
         )?;
-        hand_on(&mut q, true)?;
+        p.end_record();
     }
-    let mut tail = FieldPacker::new(64);
     let (ku, kv) = (s.knots_u(), s.knots_v());
     let dom = [ku[s.degree_u()], ku[nu], kv[s.degree_v()], kv[nv]];
     for (i, &d) in dom.iter().enumerate() {
-        real(
-            &mut tail,
-            d,
-            "parameter range",
-            i,
-            if i == 3 { b';' } else { b',' },
-        )?;
+        real(p, d, "parameter range", i, if i == 3 { b';' } else { b',' })?;
     }
-    hand_on(&mut tail, true)?;
-    Ok(records)
+    p.end_record();
+    hand_on(p)?;
+    Ok(p.lines() - first_line)
 }
 
 /// Splits `surface` along v until each patch's P lines are bounded by `max_lines` (from
@@ -854,23 +846,39 @@ fn terminate(out: &mut Vec<u8>, counts: [usize; 4]) {
     record(out, &t, b'T', 1);
 }
 
-/// Turns 64-column parameter records into P lines: each is assembled in a fixed 81-byte
-/// template (columns 65–72 the DE back-pointer) with the sequence number counted up in place.
-struct ParameterLines {
-    line: [u8; 81],
+/// Bytes of one P line: 64 data columns, the DE back-pointer (8), `P`, the sequence number
+/// (7) and the newline.
+const LINE_BYTES: usize = 81;
+/// Data columns of a P line.
+const P_DATA: usize = 64;
+
+/// Packs the free-format parameters of entities straight into finished P lines (columns
+/// 1–64 the data, 65–72 the DE back-pointer, 73 `P`, 74–80 the sequence number counted up in
+/// place, newline), breaking only after a delimiter exactly as [`FieldPacker`] packs
+/// 64-column records: each record is written once, in its line, instead of packed and then
+/// copied into a line template.
+struct LinePacker {
+    /// Complete lines not yet drained, then the data of the line being filled.
+    data: Vec<u8>,
+    line_start: usize,
+    /// Columns 65–80 and the newline of the lines being written.
+    tail: [u8; LINE_BYTES - P_DATA],
     seq: SequenceField,
-    count: usize,
+    /// Lines completed so far.
+    lines: usize,
 }
 
-impl ParameterLines {
-    fn new() -> ParameterLines {
-        let mut line = [b' '; 81];
-        line[72] = b'P';
-        line[80] = b'\n';
-        ParameterLines {
-            line,
+impl LinePacker {
+    fn new(capacity: usize) -> LinePacker {
+        let mut tail = [b' '; LINE_BYTES - P_DATA];
+        tail[8] = b'P';
+        tail[16] = b'\n';
+        LinePacker {
+            data: Vec::with_capacity(capacity),
+            line_start: 0,
+            tail,
             seq: SequenceField::new(),
-            count: 0,
+            lines: 0,
         }
     }
 
@@ -878,19 +886,151 @@ impl ParameterLines {
     fn entity(&mut self, de: usize) {
         let mut back = Vec::with_capacity(8);
         push_right(&mut back, de as i64, 8);
-        self.line[64..72].copy_from_slice(&back);
+        self.tail[..8].copy_from_slice(&back);
     }
 
-    /// Appends the P lines of `records` (whole 64-column records) to `out`. Past the 7-digit
-    /// field the sequence number wraps; the writer refuses such a file before it is used.
-    fn push(&mut self, records: &[u8], out: &mut Vec<u8>) {
-        for chunk in records.chunks_exact(64) {
-            self.line[..64].copy_from_slice(chunk);
-            self.seq.increment();
-            self.line[73..80].copy_from_slice(&self.seq.digits);
-            out.extend_from_slice(&self.line);
+    /// Lines completed so far.
+    fn lines(&self) -> usize {
+        self.lines
+    }
+
+    /// Bytes held: complete lines not yet drained and the data of the line being filled.
+    fn bytes(&self) -> usize {
+        self.data.len()
+    }
+
+    /// Completes the line being filled: its data padded to 64 columns, then its columns
+    /// 65–80. Past the 7-digit field the sequence number wraps; the writer refuses such a
+    /// file before it is used.
+    #[inline]
+    fn end_line(&mut self) {
+        self.seq.increment();
+        self.tail[9..16].copy_from_slice(&self.seq.digits);
+        self.data.resize(self.line_start + P_DATA, b' ');
+        self.data.extend_from_slice(&self.tail);
+        self.line_start = self.data.len();
+        self.lines += 1;
+    }
+
+    /// Completes the line being filled, if it holds anything, so that what follows starts a
+    /// fresh record.
+    fn end_record(&mut self) {
+        if self.data.len() > self.line_start {
+            self.end_line();
         }
-        self.count += records.len() / 64;
+    }
+
+    /// Adds `token` followed by `delimiter`; starts a new line first if they do not fit.
+    fn push(&mut self, token: &[u8], delimiter: u8) {
+        let need = token.len() + 1;
+        if self.data.len() - self.line_start + need > P_DATA {
+            if need <= P_DATA {
+                self.end_line();
+            } else {
+                // Only Hollerith strings can be this long: fill lines with it.
+                let mut rest = token;
+                loop {
+                    let room = P_DATA - (self.data.len() - self.line_start);
+                    if rest.len() < room {
+                        break;
+                    }
+                    self.data.extend_from_slice(&rest[..room]);
+                    rest = &rest[room..];
+                    self.end_line();
+                }
+                self.data.extend_from_slice(rest);
+                self.data.push(delimiter);
+                return;
+            }
+        }
+        self.data.extend_from_slice(token);
+        self.data.push(delimiter);
+    }
+
+    /// Adds a real (see [`push_real`]) followed by `delimiter`, formatting it in place.
+    /// Returns `false` (adding nothing) for NaN or infinity.
+    fn push_real(&mut self, value: f64, delimiter: u8) -> bool {
+        let before = self.data.len();
+        if !push_real(&mut self.data, value) {
+            return false;
+        }
+        self.data.push(delimiter);
+        if self.data.len() - self.line_start > P_DATA {
+            let mut tmp = [0u8; 64];
+            let len = self.data.len() - before;
+            tmp[..len].copy_from_slice(&self.data[before..]);
+            self.data.truncate(before);
+            self.end_line();
+            self.data.extend_from_slice(&tmp[..len]);
+        }
+        true
+    }
+
+    /// Adds pre-formatted tokens (`lens[i]` bytes each, concatenated in `text`), each followed
+    /// by `delimiter`: exactly what one [`LinePacker::push`] per token gives.
+    fn push_tokens(&mut self, text: &[u8], lens: &[u8], delimiter: u8) {
+        let mut at = 0usize;
+        for &len in lens {
+            let n = usize::from(len);
+            let token = &text[at..at + n];
+            at += n;
+            if n + 1 > P_DATA {
+                self.push(token, delimiter);
+                continue;
+            }
+            if self.data.len() - self.line_start + n + 1 > P_DATA {
+                self.end_line();
+            }
+            push_short_then(&mut self.data, token, delimiter);
+        }
+    }
+
+    /// Adds `count` copies of `token` followed by `delimiter`: exactly what one
+    /// [`LinePacker::push`] per copy gives, with the whole lines between the first and the
+    /// last copied from one record.
+    fn push_repeated(&mut self, token: &[u8], delimiter: u8, count: usize) {
+        let need = token.len() + 1;
+        if need > P_DATA {
+            for _ in 0..count {
+                self.push(token, delimiter);
+            }
+            return;
+        }
+        let mut left = count;
+        // The line being filled takes what fits (at least one copy when it is empty).
+        while left > 0 && self.data.len() - self.line_start + need <= P_DATA {
+            self.data.extend_from_slice(token);
+            self.data.push(delimiter);
+            left -= 1;
+        }
+        if left == 0 {
+            return;
+        }
+        // Each further line holds `per` copies; the last one stays open, as after single
+        // pushes.
+        let per = P_DATA / need;
+        let mut record = [b' '; P_DATA];
+        for slot in record.chunks_exact_mut(need).take(per) {
+            slot[..token.len()].copy_from_slice(token);
+            slot[token.len()] = delimiter;
+        }
+        loop {
+            self.end_line();
+            let n = left.min(per);
+            self.data.extend_from_slice(&record[..n * need]);
+            left -= n;
+            if left == 0 {
+                return;
+            }
+        }
+    }
+
+    /// Hands the complete lines to `f` and keeps only the line being filled.
+    fn drain_lines<R>(&mut self, f: impl FnOnce(&[u8]) -> R) -> R {
+        let r = f(&self.data[..self.line_start]);
+        self.data.drain(..self.line_start);
+        self.line_start = 0;
+        r
     }
 }
 
@@ -943,22 +1083,21 @@ pub fn write_iges_seekable<W: Write + Seek>(
     let d_offset = buf.len() as u64;
     let d_lines = 2 * patches.len();
     directory(&mut buf, &vec![0; patches.len()]);
+    w.write_all(&buf)?;
+    buf.clear();
     let workers = worker_count();
-    let mut lines = ParameterLines::new();
+    let mut lines = LinePacker::new(BLOCK_BYTES + 64 * LINE_BYTES);
     let mut counts = Vec::with_capacity(patches.len());
     for (k, patch) in patches.iter().enumerate() {
         lines.entity(2 * k + 1);
-        let n = stream_entity_128(patch, k, workers, &mut |records| {
-            lines.push(records, &mut buf);
-            if buf.len() >= BLOCK_BYTES {
-                w.write_all(&buf)?;
-                buf.clear();
-            }
+        let n = stream_entity_128(patch, k, workers, &mut lines, &mut |block| {
+            w.write_all(block)?;
             Ok(())
         })?;
         counts.push(n);
     }
-    let p_lines = lines.count;
+    lines.drain_lines(|block| w.write_all(block))?;
+    let p_lines = lines.lines();
     if p_lines > file_cap {
         return Err(IgesError::SectionTooLong {
             section: 'P',
@@ -1032,6 +1171,47 @@ impl SequenceField {
 mod tests {
     use super::*;
     use crate::iges::reference::{entity_128_params, ParamText};
+
+    /// Turns 64-column parameter records into P lines (the writer's framing before it packed
+    /// into lines directly): each is assembled in a fixed 81-byte template with the sequence
+    /// number counted up in place.
+    struct ParameterLines {
+        line: [u8; 81],
+        seq: SequenceField,
+        count: usize,
+    }
+
+    impl ParameterLines {
+        fn new() -> ParameterLines {
+            let mut line = [b' '; 81];
+            line[72] = b'P';
+            line[80] = b'\n';
+            ParameterLines {
+                line,
+                seq: SequenceField::new(),
+                count: 0,
+            }
+        }
+
+        /// Sets the DE back-pointer of the lines that follow.
+        fn entity(&mut self, de: usize) {
+            let mut back = Vec::with_capacity(8);
+            push_right(&mut back, de as i64, 8);
+            self.line[64..72].copy_from_slice(&back);
+        }
+
+        /// Appends the P lines of `records` (whole 64-column records) to `out`. Past the 7-digit
+        /// field the sequence number wraps; the writer refuses such a file before it is used.
+        fn push(&mut self, records: &[u8], out: &mut Vec<u8>) {
+            for chunk in records.chunks_exact(64) {
+                self.line[..64].copy_from_slice(chunk);
+                self.seq.increment();
+                self.line[73..80].copy_from_slice(&self.seq.digits);
+                out.extend_from_slice(&self.line);
+            }
+            self.count += records.len() / 64;
+        }
+    }
 
     /// A degree-3 surface whose every real takes the longest form (`-d.dddddddddddddddE-3dd`).
     fn longest_tokens(nu: usize, nv: usize) -> NurbsSurface {
@@ -1121,17 +1301,8 @@ mod tests {
                 patches.len()
             );
             assert_eq!(stats.bytes, want.len() as u64);
-            // One formatting thread or several: the same bytes.
-            let mut single = io::Cursor::new(Vec::new());
-            let mut records = Vec::new();
-            for (k, p) in patches.iter().enumerate() {
-                let n = stream_entity_128(p, k, 1, &mut |r| {
-                    records.extend_from_slice(r);
-                    Ok(())
-                })
-                .unwrap();
-                assert_eq!(n, entity_128_params(p, k).unwrap().lines());
-            }
+            // One formatting thread or several: the same lines, each the reference's record
+            // with its DE back-pointer and sequence number.
             let expected: Vec<u8> = patches
                 .iter()
                 .enumerate()
@@ -1144,7 +1315,33 @@ mod tests {
                         .collect::<Vec<u8>>()
                 })
                 .collect();
-            assert!(records == expected);
+            for workers in [1, 2, 3] {
+                let mut packer = LinePacker::new(0);
+                let mut lines = Vec::new();
+                let mut des = Vec::new();
+                for (k, p) in patches.iter().enumerate() {
+                    packer.entity(2 * k + 1);
+                    let n = stream_entity_128(p, k, workers, &mut packer, &mut |block| {
+                        lines.extend_from_slice(block);
+                        Ok(())
+                    })
+                    .unwrap();
+                    packer.drain_lines(|block| lines.extend_from_slice(block));
+                    assert_eq!(n, entity_128_params(p, k).unwrap().lines());
+                    des.extend(std::iter::repeat_n(2 * k + 1, n));
+                }
+                assert_eq!(lines.len(), LINE_BYTES * des.len());
+                let data: Vec<u8> = lines
+                    .chunks_exact(LINE_BYTES)
+                    .flat_map(|l| l[..P_DATA].to_vec())
+                    .collect();
+                assert!(data == expected, "{workers} workers");
+                for (i, (line, de)) in lines.chunks_exact(LINE_BYTES).zip(&des).enumerate() {
+                    let tail = format!("{de:>8}P{:>7}\n", i + 1);
+                    assert_eq!(&line[P_DATA..], tail.as_bytes(), "line {}", i + 1);
+                }
+            }
+            let mut single = io::Cursor::new(Vec::new());
             write_iges_seekable(&mut single, patches, &opts).unwrap();
             assert!(single.into_inner() == want);
         }
@@ -1298,6 +1495,92 @@ mod tests {
         assert!(patches.len() >= 2);
         for p in patches {
             assert!(entity_128_params(p, 0).unwrap().lines() < bound);
+        }
+    }
+
+    #[test]
+    fn line_packer_gives_the_field_packer_records_in_their_lines() {
+        // Random streams of every kind of push, including tokens that just fit or just miss
+        // a record, Hollerith strings longer than a record, runs of repeated tokens that
+        // start mid-record and span many records, and records ended early; packed straight
+        // into lines, and packed into 64-column records then framed as the writer did before.
+        let mut s: u64 = 0x853C_49E6_748F_EA9B;
+        let mut next = move |n: u64| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s % n
+        };
+        for case in 0..300 {
+            let mut packer = LinePacker::new(0);
+            let mut records = FieldPacker::new(64);
+            let mut framed = Vec::new();
+            let mut frame = ParameterLines::new();
+            let mut lines = Vec::new();
+            let mut de = 1;
+            packer.entity(de);
+            frame.entity(de);
+            for _ in 0..next(60) {
+                match next(7) {
+                    0 => {
+                        let len = 1 + next(63) as usize;
+                        let token: Vec<u8> = (0..len).map(|i| b'0' + (i % 10) as u8).collect();
+                        packer.push(&token, b',');
+                        records.push(&token, b',');
+                    }
+                    1 => {
+                        let len = 64 + next(100) as usize;
+                        let token: Vec<u8> = (0..len).map(|i| b'A' + (i % 26) as u8).collect();
+                        packer.push(&token, b';');
+                        records.push(&token, b';');
+                    }
+                    2 => {
+                        let v = f64::from_bits(next(u64::MAX));
+                        let v = if v.is_finite() { v } else { 0.5 };
+                        assert!(packer.push_real(v, b','));
+                        assert!(records.push_real(v, b','));
+                    }
+                    3 => {
+                        let mut text = Vec::new();
+                        let mut lens = Vec::new();
+                        for _ in 0..next(40) {
+                            let len = 1 + next(24) as usize;
+                            text.extend((0..len).map(|i| b'a' + (i % 26) as u8));
+                            lens.push(len as u8);
+                        }
+                        packer.push_tokens(&text, &lens, b',');
+                        records.push_tokens(&text, &lens, b',');
+                    }
+                    4 => {
+                        let token: &[u8] =
+                            [&b"1."[..], b"12345", b"x", &[b'7'; 63]][next(4) as usize];
+                        let count = next(200) as usize;
+                        packer.push_repeated(token, b',', count);
+                        for _ in 0..count {
+                            records.push(token, b',');
+                        }
+                    }
+                    5 => {
+                        packer.end_record();
+                        records.pad_last();
+                    }
+                    _ => {
+                        // A new entity: the lines so far keep their back-pointer.
+                        packer.end_record();
+                        records.pad_last();
+                        packer.drain_lines(|b| lines.extend_from_slice(b));
+                        records.drain_records(|r| frame.push(r, &mut framed));
+                        de += 2;
+                        packer.entity(de);
+                        frame.entity(de);
+                    }
+                }
+            }
+            packer.end_record();
+            packer.drain_lines(|b| lines.extend_from_slice(b));
+            frame.push(&records.finish(), &mut framed);
+            assert_eq!(packer.lines(), frame.count, "case {case}");
+            assert!(lines == framed, "case {case}");
         }
     }
 
