@@ -357,6 +357,9 @@ pub struct FieldPacker {
     completed: usize,
 }
 
+/// A record's worth of blanks to pad with.
+const SPACES: [u8; 64] = [b' '; 64];
+
 /// Bytes after the 64 data columns of a P line: the DE back-pointer (8), `P`, the sequence
 /// number (7), the newline.
 pub const P_LINE_TAIL: usize = 17;
@@ -364,8 +367,33 @@ pub const P_LINE_TAIL: usize = 17;
 /// Columns 65–80 and the newline of the P lines being packed.
 #[derive(Debug)]
 struct LineFrame {
-    tail: [u8; P_LINE_TAIL],
-    seq: SequenceField,
+    /// Columns 65–72: the DE back-pointer.
+    back: [u8; 8],
+    /// Column 73 (`P`) and columns 74–80 (the sequence number) as one little-endian word, the
+    /// last digit in its top byte: counting up is one addition nine times in ten, and the
+    /// tail is stored as whole words instead of bytes that are then read back wider.
+    seq: u64,
+}
+
+/// `P` and a blank sequence field (before the first line).
+const P_BLANK_SEQUENCE: u64 = u64::from_le_bytes(*b"P       ");
+
+/// The word of [`LineFrame::seq`] for the next line.
+#[inline]
+fn next_sequence(word: u64) -> u64 {
+    let last = (word >> 56) as u8;
+    if last.is_ascii_digit() && last != b'9' {
+        return word + (1 << 56);
+    }
+    let mut bytes = word.to_le_bytes();
+    let mut field = SequenceField {
+        digits: [
+            bytes[1], bytes[2], bytes[3], bytes[4], bytes[5], bytes[6], bytes[7],
+        ],
+    };
+    field.increment();
+    bytes[1..].copy_from_slice(&field.digits);
+    u64::from_le_bytes(bytes)
 }
 
 /// A 7-column right-justified sequence number kept as text and counted up in place.
@@ -376,6 +404,7 @@ pub(crate) struct SequenceField {
 
 impl SequenceField {
     /// The field before the first line (blank; the first increment makes it 1).
+    #[cfg(test)]
     pub(crate) fn new() -> SequenceField {
         SequenceField { digits: [b' '; 7] }
     }
@@ -419,13 +448,10 @@ impl FieldPacker {
     /// A packer of finished P lines (64 data columns each), numbered from 1, reserving
     /// `bytes`; the DE back-pointer is set by [`FieldPacker::set_back_pointer`].
     pub fn parameter_lines(bytes: usize) -> FieldPacker {
-        let mut tail = [b' '; P_LINE_TAIL];
-        tail[8] = b'P';
-        tail[16] = b'\n';
         FieldPacker {
             frame: Some(LineFrame {
-                tail,
-                seq: SequenceField::new(),
+                back: [b' '; 8],
+                seq: P_BLANK_SEQUENCE,
             }),
             ..FieldPacker::with_capacity(64, bytes)
         }
@@ -437,7 +463,7 @@ impl FieldPacker {
         if let Some(f) = &mut self.frame {
             let mut back = Vec::with_capacity(8);
             push_right(&mut back, de as i64, 8);
-            f.tail[..8].copy_from_slice(&back);
+            f.back.copy_from_slice(&back);
         }
     }
 
@@ -573,11 +599,37 @@ impl FieldPacker {
     /// columns 65–80 and the newline.
     #[inline]
     fn pad_line(&mut self) {
-        self.data.resize(self.line_start + self.width, b' ');
+        let (len, end) = (self.data.len(), self.line_start + self.width);
+        if self.width <= SPACES.len() {
+            // One fixed-size store of spaces (its part past the record lands in spare
+            // capacity and is overwritten or never read) instead of a fill of variable length.
+            self.data.reserve(SPACES.len() + P_LINE_TAIL);
+            // SAFETY: `reserve` leaves at least 64 writable bytes from `len`; `end - len` is
+            // at most the width (≤ 64), so [len, end) is written with spaces before `set_len`
+            // makes it part of the vector.
+            unsafe {
+                let dst = self.data.as_mut_ptr().add(len);
+                std::ptr::copy_nonoverlapping(SPACES.as_ptr(), dst, SPACES.len());
+                self.data.set_len(end);
+            }
+        } else {
+            self.data.resize(end, b' ');
+        }
         if let Some(f) = &mut self.frame {
-            f.seq.increment();
-            f.tail[9..16].copy_from_slice(&f.seq.digits);
-            self.data.extend_from_slice(&f.tail);
+            f.seq = next_sequence(f.seq);
+            self.data.reserve(P_LINE_TAIL);
+            let len = self.data.len();
+            // SAFETY: `reserve` leaves P_LINE_TAIL writable bytes from `len`; all of them are
+            // written before `set_len` makes them part of the vector.
+            unsafe {
+                let dst = self.data.as_mut_ptr().add(len);
+                dst.cast::<[u8; 8]>().write_unaligned(f.back);
+                dst.add(8)
+                    .cast::<[u8; 8]>()
+                    .write_unaligned(f.seq.to_le_bytes());
+                *dst.add(16) = b'\n';
+                self.data.set_len(len + P_LINE_TAIL);
+            }
         }
         self.line_start = self.data.len();
         self.completed += 1;
@@ -752,6 +804,19 @@ mod tests {
                 assert_eq!(&out[2..2 + n], &src[..n], "length {n}");
                 assert_eq!(&out[2 + n..], b";");
             }
+        }
+    }
+
+    #[test]
+    fn the_sequence_word_counts_like_the_sequence_field() {
+        let mut word = P_BLANK_SEQUENCE;
+        let mut field = SequenceField::new();
+        for n in 1..=1_000_100u32 {
+            word = next_sequence(word);
+            field.increment();
+            let bytes = word.to_le_bytes();
+            assert_eq!(bytes[0], b'P');
+            assert_eq!(bytes[1..], field.digits, "{n}");
         }
     }
 
