@@ -87,7 +87,8 @@ fn digest(r: &FitResult) -> u64 {
         .knots_u()
         .iter()
         .chain(s.knots_v())
-        .chain(s.poles().iter().flatten());
+        .copied()
+        .chain(s.poles().flatten());
     for v in values {
         h = (h ^ v.to_bits()).wrapping_mul(0x0000_0100_0000_01b3);
     }

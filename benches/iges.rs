@@ -151,7 +151,7 @@ fn main() {
     }
     // The reals alone: every pole coordinate of the fit formatted into one buffer.
     let fit = fit_grid(pitch_x_mm, &y_mm, &heights_um, cols, FitOptions::default()).expect("fit");
-    let reals: Vec<f64> = fit.surface.poles().iter().flatten().copied().collect();
+    let reals: Vec<f64> = fit.surface.poles().flatten().collect();
     let mut text = Vec::with_capacity(reals.len() * 24);
     let (mut real_wall, mut real_cpu) = (Vec::new(), Vec::new());
     for _ in 0..runs {

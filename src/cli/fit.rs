@@ -39,14 +39,14 @@
 use super::model_args::ModelArgs;
 use super::{CliError, Exit};
 use crate::atomic::write_atomically;
-use crate::fit::{max_residual_mm, FitOptions, IncrementalFitter};
+use crate::fit::{max_residual_mm, FitOptions, FitResult, IncrementalFitter};
 use crate::iges::{IgesOptions, MAX_SECTION_LINES};
 use crate::metrology::alternatives::{
     compare as compare_alternatives, table as alternatives_table,
 };
 use crate::metrology::areal::{areal_params, Grid as ArealGrid};
 use crate::metrology::holdout::{between_lines, holdout_every_or_reason, ordinal};
-use crate::metrology::outliers::bridged_grid;
+use crate::metrology::outliers::{bridged_grid, LineSpike};
 use crate::metrology::surface_model::{fit_model, ModelRecipe};
 use crate::scan::outputs::SurfaceShape;
 use crate::scan::surface_files::{write_surface_files, SurfaceWriteError};
@@ -149,45 +149,123 @@ pub struct Grid {
     pub heights_um: Vec<f64>,
 }
 
+/// Grid CSVs of at least this many bytes are read in two halves side by side.
+const PARALLEL_CSV_BYTES: usize = 256 << 10;
+
 /// Parses the grid CSV: no header, `,` separated, one row per line; blank lines at the end
-/// are ignored. Errors name the 1-based line and column and the offending content.
+/// are ignored. Errors name the 1-based line and column and the offending content. A large
+/// file is read as two runs of whole lines on two threads; the values, and the error (the
+/// first in line order), are those of reading it line by line.
 pub fn parse_grid(text: &str) -> Result<Grid, String> {
+    parse_grid_split(text, PARALLEL_CSV_BYTES)
+}
+
+/// [`parse_grid`], reading in two runs when `text` has at least `parallel_bytes` bytes.
+fn parse_grid_split(text: &str, parallel_bytes: usize) -> Result<Grid, String> {
     // Room for every field at once (one per ',' plus one per line), so a large grid is not
     // copied while it grows.
     let fields = text.bytes().filter(|&b| b == b',' || b == b'\n').count() + 1;
     let mut heights_um = Vec::with_capacity(fields);
-    let mut cols = 0usize;
-    let mut rows = 0usize;
     let lines: Vec<&str> = text.lines().collect();
     let last = lines
         .iter()
         .rposition(|l| !l.trim().is_empty())
         .map_or(0, |i| i + 1);
-    for (li, line) in lines[..last].iter().enumerate() {
-        // Plain lines of finite numbers take one pass; anything else is read (and its error
-        // worded) field by field below.
-        let n = match crate::numbers::parse_csv_line(line.as_bytes(), &mut heights_um) {
-            Some(n) => n,
-            None => parse_grid_line(li, line, &mut heights_um)?,
-        };
-        if rows == 0 {
-            cols = n;
-        } else if n != cols {
-            return Err(format!(
-                "line {}: {n} values, but line 1 has {cols}; every row must have the same number of points",
-                li + 1
-            ));
+    let lines = &lines[..last];
+    // The second run starts at the first line past the middle byte.
+    let split = if text.len() >= parallel_bytes && lines.len() >= 2 {
+        let mut bytes = 0usize;
+        lines
+            .iter()
+            .position(|l| {
+                bytes += l.len() + 1;
+                bytes >= text.len() / 2
+            })
+            .map_or(lines.len(), |i| (i + 1).min(lines.len()))
+    } else {
+        lines.len()
+    };
+    let (head, tail) = lines.split_at(split);
+    let (first, second) = if tail.is_empty() {
+        (parse_grid_lines(0, head, &mut heights_um), None)
+    } else {
+        std::thread::scope(|s| {
+            let second = s.spawn(|| {
+                let mut values = Vec::new();
+                let run = parse_grid_lines(split, tail, &mut values);
+                (run, values)
+            });
+            let first = parse_grid_lines(0, head, &mut heights_um);
+            let second = second
+                .join()
+                .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+            (first, Some(second))
+        })
+    };
+    // Row lengths against line 1 and any unreadable line, in line order.
+    let cols = first.counts.first().copied().unwrap_or(0);
+    let mut rows = 0usize;
+    let runs = std::iter::once(&first).chain(second.as_ref().map(|(run, _)| run));
+    for run in runs {
+        for (k, &n) in run.counts.iter().enumerate() {
+            if n != cols {
+                return Err(format!(
+                    "line {}: {n} values, but line 1 has {cols}; every row must have the same number of points",
+                    run.first_line + k + 1
+                ));
+            }
+            rows += 1;
         }
-        rows += 1;
+        if let Some(e) = &run.error {
+            return Err(e.clone());
+        }
     }
     if rows == 0 {
         return Err("the file holds no data rows".into());
+    }
+    if let Some((_, values)) = second {
+        heights_um.extend_from_slice(&values);
     }
     Ok(Grid {
         rows,
         cols,
         heights_um,
     })
+}
+
+/// The lines of a run of grid lines read so far: each line's number of values, and the error
+/// of the first line that cannot be read (where the run stops).
+struct GridLines {
+    /// 0-based index of the run's first line in the file.
+    first_line: usize,
+    counts: Vec<usize>,
+    error: Option<String>,
+}
+
+/// Reads `lines` (the file's lines from 0-based index `first_line` on) into `heights_um`,
+/// stopping at the first line that cannot be read.
+fn parse_grid_lines(first_line: usize, lines: &[&str], heights_um: &mut Vec<f64>) -> GridLines {
+    let mut run = GridLines {
+        first_line,
+        counts: Vec::with_capacity(lines.len()),
+        error: None,
+    };
+    for (k, line) in lines.iter().enumerate() {
+        // Plain lines of finite numbers take one pass; anything else is read (and its error
+        // worded) field by field below.
+        let n = match crate::numbers::parse_csv_line(line.as_bytes(), heights_um) {
+            Some(n) => n,
+            None => match parse_grid_line(first_line + k, line, heights_um) {
+                Ok(n) => n,
+                Err(e) => {
+                    run.error = Some(e);
+                    break;
+                }
+            },
+        };
+        run.counts.push(n);
+    }
+    run
 }
 
 /// One grid line field by field with `str::parse`; errors name the 1-based line and column.
@@ -524,6 +602,215 @@ fn check_input_file(path: &Path) -> Result<(), CliError> {
     }
 }
 
+/// Grids up to this many heights have the verdict between lines and the residual check
+/// computed beside the fit and the IGES write (the heights then stay in memory while the file
+/// is written); larger ones run each step in turn and free the heights before the write.
+const SIDE_BY_SIDE_MAX_POINTS: usize = 1 << 22;
+
+/// The result of a scoped thread; a panic in it is carried on to the caller.
+fn joined<T>(h: std::thread::ScopedJoinHandle<'_, T>) -> T {
+    h.join()
+        .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+}
+
+/// The fit the recipe asks for: the paper's surface through the incremental fitter line by
+/// line (with progress), anything else from the whole grid; with the spikes it replaced.
+fn fit_surface(
+    input: &Path,
+    grid: &Grid,
+    pitch_x_mm: f64,
+    y_mm: &[f64],
+    index: &[u32],
+    recipe: &ModelRecipe,
+    progress: &indicatif::ProgressBar,
+) -> Result<(FitResult, Vec<LineSpike>), CliError> {
+    let failed = |e: &dyn std::fmt::Display| {
+        CliError::new(Exit::Failed, format!("{}: {e}", input.display()))
+    };
+    if recipe.is_paper() {
+        let mut fitter = IncrementalFitter::new(recipe.degrees);
+        // The stores at their final size at once: no regrowing (and copying) as lines come.
+        fitter.reserve_lines(grid.rows, grid.cols);
+        for (row, &y) in grid.heights_um.chunks_exact(grid.cols).zip(y_mm) {
+            fitter
+                .push_row(y, pitch_x_mm, row)
+                .map_err(|e| failed(&e))?;
+            progress.inc(1);
+        }
+        Ok((fitter.finish().map_err(|e| failed(&e))?, Vec::new()))
+    } else {
+        let m = fit_model(&grid.heights_um, grid.cols, index, pitch_x_mm, y_mm, recipe)
+            .map_err(|e| failed(&e))?;
+        Ok((m.fit, m.replaced))
+    }
+}
+
+/// Names every spike replaced before fitting (only ever when asked for).
+fn report_replaced(replaced: &[LineSpike]) {
+    for r in replaced {
+        eprintln!(
+            "surfscan: replaced before fitting (asked for): spike in line {} at x = {} mm, height {} µm",
+            crate::numfmt::line_label(r.line),
+            crate::numfmt::fmt(r.spike.x_mm, crate::numfmt::Quantity::PositionMm),
+            crate::numfmt::fmt(r.spike.height_um, crate::numfmt::Quantity::HeightUm)
+        );
+    }
+}
+
+/// The heights the surface was fitted to: the grid's, with any replaced spike bridged.
+fn fitted_heights<'a>(
+    heights_um: &'a [f64],
+    cols: usize,
+    index: &[u32],
+    replaced: &[LineSpike],
+) -> std::borrow::Cow<'a, [f64]> {
+    if replaced.is_empty() {
+        std::borrow::Cow::Borrowed(heights_um)
+    } else {
+        std::borrow::Cow::Owned(bridged_grid(heights_um, cols, index, replaced).0)
+    }
+}
+
+/// What the verdict on the model between lines is computed from (besides the heights).
+#[derive(Clone, Copy)]
+struct Judge<'a> {
+    cols: usize,
+    pitch_x_mm: f64,
+    pitch_y_mm: Option<f64>,
+    y_mm: &'a [f64],
+    recipe: &'a ModelRecipe,
+    compare: bool,
+}
+
+/// The verdict on the model between lines, and the alternatives when asked for.
+struct Judged {
+    threshold: f64,
+    sq: Result<f64, String>,
+    every: Result<usize, String>,
+    verdict: Result<crate::metrology::holdout::BetweenLines, String>,
+    alternatives: Option<Vec<crate::metrology::alternatives::Alternative>>,
+    holdout_s: f64,
+}
+
+impl Judge<'_> {
+    /// Every 2nd line left out (or every k-th when too few lines remain for that, as the
+    /// report does), refitted the same way and judged against Sq of `fitted_z`.
+    fn run(&self, fitted_z: &[f64], threshold: f64) -> Judged {
+        let t_holdout = Instant::now();
+        let rows = self.y_mm.len();
+        let mean_py = match (self.y_mm.first(), self.y_mm.last()) {
+            (Some(a), Some(b)) if rows > 1 => (b - a).abs() / (rows - 1) as f64,
+            _ => self.pitch_y_mm.unwrap_or(1.0),
+        };
+        let sq = areal_params(&ArealGrid {
+            heights_um: fitted_z,
+            rows,
+            cols: self.cols,
+            pitch_x_mm: self.pitch_x_mm,
+            pitch_y_mm: mean_py,
+        })
+        .map(|a| a.sq_um)
+        .map_err(|e| e.to_string());
+        let degrees = self.recipe.degrees;
+        let every = holdout_every_or_reason(rows, degrees.degree_v);
+        let verdict = sq.clone().and_then(|sq| {
+            let every = every.clone()?;
+            between_lines(
+                fitted_z,
+                self.cols,
+                self.pitch_x_mm,
+                self.y_mm,
+                degrees,
+                self.recipe.method,
+                every,
+                sq,
+                threshold,
+            )
+            .map_err(|e| e.to_string())
+        });
+        let alternatives = match (&sq, &every, self.compare) {
+            (Ok(sq), Ok(every), true) => Some(compare_alternatives(
+                fitted_z,
+                self.cols,
+                self.pitch_x_mm,
+                self.y_mm,
+                degrees,
+                *every,
+                *sq,
+                threshold,
+            )),
+            _ => None,
+        };
+        Judged {
+            threshold,
+            sq,
+            every,
+            verdict,
+            alternatives,
+            holdout_s: t_holdout.elapsed().as_secs_f64(),
+        }
+    }
+}
+
+/// The Start and Global section contents of the surface's IGES files (the replaced spikes
+/// are added by the caller).
+fn iges_options(
+    args: &Args,
+    output: &Path,
+    recipe: &ModelRecipe,
+    (rows, cols): (usize, usize),
+    pitch_x_mm: f64,
+    pitch_y_mm: Option<f64>,
+    y_mm: &[f64],
+) -> IgesOptions {
+    let options = recipe.degrees;
+    let now = chrono::Utc::now().naive_utc();
+    let file_name = output
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    IgesOptions {
+        file_name,
+        start_lines: vec![
+            format!(
+                "Surface fitted by surfscan {} ({}, p={}, q={}); units mm.",
+                env!("CARGO_PKG_VERSION"),
+                match recipe.method {
+                    crate::fit::VMethod::Interpolate => "global B-spline interpolation".to_string(),
+                    crate::fit::VMethod::LeastSquares { control_rows } => format!(
+                        "B-spline interpolation along x, least squares across the lines with {control_rows} control rows"
+                    ),
+                },
+                options.degree_u,
+                options.degree_v
+            ),
+            match pitch_y_mm {
+                Some(py) => format!(
+                    "Input: {} ({} lines x {} points, pitch x {} mm, pitch y {} mm, heights um).",
+                    args.input.display(),
+                    rows,
+                    cols,
+                    pitch_x_mm,
+                    py
+                ),
+                None => format!(
+                    "Input: scan {} ({} lines x {} points, pitch x {} mm, y {} .. {} mm, heights um).",
+                    args.input.display(),
+                    rows,
+                    cols,
+                    pitch_x_mm,
+                    y_mm.first().copied().unwrap_or(f64::NAN),
+                    y_mm.last().copied().unwrap_or(f64::NAN)
+                ),
+            },
+        ],
+        timestamp: now,
+        max_parameter_lines_per_file: args.max_iges_lines_per_file,
+        max_parameter_lines_per_entity: args.max_iges_lines_per_entity,
+        ..IgesOptions::default()
+    }
+}
+
 /// Runs `surfscan fit`.
 pub fn run(args: Args) -> Result<(), CliError> {
     if args.degree_u == Some(0) || args.degree_v == Some(0) {
@@ -584,158 +871,114 @@ pub fn run(args: Args) -> Result<(), CliError> {
     } else {
         indicatif::ProgressBar::hidden()
     };
-    let t_fit = Instant::now();
-    let failed = |e: &dyn std::fmt::Display| {
-        CliError::new(Exit::Failed, format!("{}: {e}", args.input.display()))
-    };
-    // The paper's surface goes through the incremental fitter line by line (with progress);
-    // anything else is fitted from the whole grid as the recipe says.
-    let (fit, replaced) = if recipe.is_paper() {
-        let mut fitter = IncrementalFitter::new(options);
-        for (row, &y) in grid.heights_um.chunks_exact(grid.cols).zip(&y_mm) {
-            fitter
-                .push_row(y, pitch_x_mm, row)
-                .map_err(|e| failed(&e))?;
-            progress.inc(1);
-        }
-        (fitter.finish().map_err(|e| failed(&e))?, Vec::new())
-    } else {
-        let m = fit_model(
-            &grid.heights_um,
-            grid.cols,
-            &index,
-            pitch_x_mm,
-            &y_mm,
-            &recipe,
-        )
-        .map_err(|e| failed(&e))?;
-        (m.fit, m.replaced)
-    };
-    progress.finish_and_clear();
-    let fit_s = t_fit.elapsed().as_secs_f64();
-    for r in &replaced {
-        eprintln!(
-            "surfscan: replaced before fitting (asked for): spike in line {} at x = {} mm, height {} µm",
-            crate::numfmt::line_label(r.line),
-            crate::numfmt::fmt(r.spike.x_mm, crate::numfmt::Quantity::PositionMm),
-            crate::numfmt::fmt(r.spike.height_um, crate::numfmt::Quantity::HeightUm)
-        );
-    }
-    let t_res = Instant::now();
-    let residual_mm = max_residual_mm(&fit, pitch_x_mm, &y_mm, &grid.heights_um, grid.cols);
-    let residual_s = t_res.elapsed().as_secs_f64();
-    // The verdict on the model between lines, on the data the surface was fitted to.
-    let t_holdout = Instant::now();
-    let fitted_z = if replaced.is_empty() {
-        std::borrow::Cow::Borrowed(&grid.heights_um)
-    } else {
-        std::borrow::Cow::Owned(bridged_grid(&grid.heights_um, grid.cols, &index, &replaced).0)
-    };
-    let mean_py = match (y_mm.first(), y_mm.last()) {
-        (Some(a), Some(b)) if grid.rows > 1 => (b - a).abs() / (grid.rows - 1) as f64,
-        _ => pitch_y_mm.unwrap_or(1.0),
-    };
-    let sq = areal_params(&ArealGrid {
-        heights_um: &fitted_z,
-        rows: grid.rows,
-        cols: grid.cols,
+    let (rows, cols) = (grid.rows, grid.cols);
+    let judge = Judge {
+        cols,
         pitch_x_mm,
-        pitch_y_mm: mean_py,
-    })
-    .map(|a| a.sq_um)
-    .map_err(|e| e.to_string());
-    // Every 2nd line left out, or every k-th when too few lines remain for that (as the
-    // report does).
-    let threshold = args.model.holdout_threshold()?;
-    let every = holdout_every_or_reason(grid.rows, recipe.degrees.degree_v);
-    let verdict = sq.clone().and_then(|sq| {
-        let every = every.clone()?;
-        between_lines(
-            &fitted_z,
-            grid.cols,
+        pitch_y_mm,
+        y_mm: &y_mm,
+        recipe: &recipe,
+        compare: args.compare,
+    };
+    let fit_step = || {
+        let t_fit = Instant::now();
+        let fitted = fit_surface(
+            &args.input,
+            &grid,
             pitch_x_mm,
             &y_mm,
-            recipe.degrees,
-            recipe.method,
-            every,
-            sq,
-            threshold,
-        )
-        .map_err(|e| e.to_string())
-    });
-    let alternatives = match (&sq, &every, args.compare) {
-        (Ok(sq), Ok(every), true) => Some(compare_alternatives(
-            &fitted_z,
-            grid.cols,
+            &index,
+            &recipe,
+            &progress,
+        );
+        progress.finish_and_clear();
+        let (fit, replaced) = fitted?;
+        report_replaced(&replaced);
+        Ok::<_, CliError>((fit, replaced, t_fit.elapsed().as_secs_f64()))
+    };
+    let residual_step = |fit: &FitResult, heights_um: &[f64]| {
+        let t_res = Instant::now();
+        let r = max_residual_mm(fit, pitch_x_mm, &y_mm, heights_um, cols);
+        (r, t_res.elapsed().as_secs_f64())
+    };
+    let write_step = |fit: &FitResult, replaced: &[LineSpike]| {
+        let mut opts = iges_options(
+            &args,
+            &output,
+            &recipe,
+            (rows, cols),
             pitch_x_mm,
+            pitch_y_mm,
             &y_mm,
-            recipe.degrees,
-            *every,
-            *sq,
-            threshold,
-        )),
-        _ => None,
+        );
+        opts.start_lines.extend(recipe.start_lines(replaced));
+        ensure_parent(&output)?;
+        let t_write = Instant::now();
+        let written =
+            write_surface_files(&output, &fit.surface, &opts).map_err(iges_write_error)?;
+        Ok::<_, CliError>((written, t_write.elapsed().as_secs_f64()))
     };
-    let holdout_s = t_holdout.elapsed().as_secs_f64();
-    // The heights are not needed past the residual check and the verdict: free them before
-    // the IGES files are planned and written, which is when a large surface needs the most
-    // memory.
-    drop(fitted_z);
-    grid.heights_um = Vec::new();
-
-    let now = chrono::Utc::now().naive_utc();
-    let file_name = output
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let opts = IgesOptions {
-        file_name,
-        start_lines: vec![
-            format!(
-                "Surface fitted by surfscan {} ({}, p={}, q={}); units mm.",
-                env!("CARGO_PKG_VERSION"),
-                match recipe.method {
-                    crate::fit::VMethod::Interpolate => "global B-spline interpolation".to_string(),
-                    crate::fit::VMethod::LeastSquares { control_rows } => format!(
-                        "B-spline interpolation along x, least squares across the lines with {control_rows} control rows"
-                    ),
-                },
-                options.degree_u,
-                options.degree_v
-            ),
-            match pitch_y_mm {
-                Some(py) => format!(
-                    "Input: {} ({} lines x {} points, pitch x {} mm, pitch y {} mm, heights um).",
-                    args.input.display(),
-                    grid.rows,
-                    grid.cols,
-                    pitch_x_mm,
-                    py
-                ),
-                None => format!(
-                    "Input: scan {} ({} lines x {} points, pitch x {} mm, y {} .. {} mm, heights um).",
-                    args.input.display(),
-                    grid.rows,
-                    grid.cols,
-                    pitch_x_mm,
-                    y_mm.first().copied().unwrap_or(f64::NAN),
-                    y_mm.last().copied().unwrap_or(f64::NAN)
-                ),
-            },
-        ],
-        timestamp: now,
-        ..IgesOptions::default()
-    };
-    let mut opts = opts;
-    opts.start_lines.extend(recipe.start_lines(&replaced));
-    let opts = IgesOptions {
-        max_parameter_lines_per_file: args.max_iges_lines_per_file,
-        max_parameter_lines_per_entity: args.max_iges_lines_per_entity,
-        ..opts
-    };
-    ensure_parent(&output)?;
-    let t_write = Instant::now();
-    let written = write_surface_files(&output, &fit.surface, &opts).map_err(iges_write_error)?;
+    // A threshold given wrongly is refused after the fit and before anything is written, as
+    // in the serial order below.
+    let threshold = args.model.holdout_threshold();
+    let (fit, replaced, fit_s, (residual_mm, residual_s), judged, (written, write_s)) =
+        match threshold {
+            Ok(threshold) if grid.heights_um.len() <= SIDE_BY_SIDE_MAX_POINTS => {
+                // The verdict between lines needs only the heights the surface is fitted to (the
+                // grid's own for the paper's fit, which replaces no spike), so it runs beside the
+                // fit and the IGES write, and the residual check runs while the file is formatted
+                // and synced: the same computations on the same inputs, so the same numbers, in
+                // about the time of the longest.
+                let (heights, index) = (&grid.heights_um, &index);
+                std::thread::scope(|outer| {
+                    let early = recipe
+                        .is_paper()
+                        .then(|| outer.spawn(move || judge.run(heights, threshold)));
+                    let (fit, replaced, fit_s) = fit_step()?;
+                    let judging = match early {
+                        Some(h) => h,
+                        None => {
+                            let replaced = replaced.clone();
+                            outer.spawn(move || {
+                                judge.run(
+                                    &fitted_heights(heights, cols, index, &replaced),
+                                    threshold,
+                                )
+                            })
+                        }
+                    };
+                    let (residual, written) = std::thread::scope(|inner| {
+                        let writing = inner.spawn(|| write_step(&fit, &replaced));
+                        let residual = residual_step(&fit, heights);
+                        (residual, joined(writing))
+                    });
+                    let written = written?;
+                    Ok::<_, CliError>((fit, replaced, fit_s, residual, joined(judging), written))
+                })?
+            }
+            threshold => {
+                let (fit, replaced, fit_s) = fit_step()?;
+                let residual = residual_step(&fit, &grid.heights_um);
+                let judged = judge.run(
+                    &fitted_heights(&grid.heights_um, cols, &index, &replaced),
+                    threshold?,
+                );
+                // The heights are not needed past the residual check and the verdict: free them
+                // before the IGES files are planned and written, which is when a large surface
+                // needs the most memory.
+                grid.heights_um = Vec::new();
+                let written = write_step(&fit, &replaced)?;
+                (fit, replaced, fit_s, residual, judged, written)
+            }
+        };
+    let Judged {
+        threshold,
+        sq,
+        every,
+        verdict,
+        alternatives,
+        holdout_s,
+    } = judged;
     let n_files = written.len();
     let mut stats = crate::iges::IgesStats::default();
     for w in &written {
@@ -756,7 +999,6 @@ pub fn run(args: Args) -> Result<(), CliError> {
             })
         })
         .collect();
-    let write_s = t_write.elapsed().as_secs_f64();
 
     let s = &fit.surface;
     let mut report = serde_json::json!({
@@ -886,5 +1128,57 @@ mod tests {
             "{e}"
         );
         assert!(parse_grid("\n\n").is_err());
+    }
+
+    #[test]
+    fn a_grid_read_in_two_runs_equals_it_read_line_by_line() {
+        let (rows, cols) = (40usize, 7usize);
+        let base: Vec<String> = (0..rows)
+            .map(|r| {
+                (0..cols)
+                    .map(|c| format!("{:.4}", (r * cols + c) as f64 * 0.37 - 5.0))
+                    .collect::<Vec<_>>()
+                    .join(",")
+            })
+            .collect();
+        let join = |t: &[String], end: &str| t.join(end) + end;
+        let mut texts = vec![
+            join(&base, "\n"),
+            join(&base, "\r\n"),
+            join(&base, "\n") + "\n \n",
+        ];
+        // A bad line (a non-number, a row too short or too long, a blank line) at the start,
+        // on either side of the split and at the end; and one in each run.
+        let spoil = |t: &mut Vec<String>, at: usize, how: usize| match how {
+            0 => t[at] = t[at].replacen(',', ",1e,", 1),
+            1 => t[at] = t[at].rsplit_once(',').unwrap().0.to_string(),
+            2 => t[at].push_str(",1.5"),
+            _ => t[at].clear(),
+        };
+        for at in [0, 1, 19, 20, 21, 38, 39] {
+            for how in 0..4 {
+                let mut t = base.clone();
+                spoil(&mut t, at, how);
+                texts.push(join(&t, "\n"));
+            }
+        }
+        for (a, b) in [(0, 1), (1, 0), (2, 3), (3, 2)] {
+            let mut t = base.clone();
+            spoil(&mut t, 5, a);
+            spoil(&mut t, 30, b);
+            texts.push(join(&t, "\n"));
+        }
+        for text in &texts {
+            let serial = parse_grid_split(text, usize::MAX);
+            assert_eq!(parse_grid_split(text, 0), serial, "{text:?}");
+        }
+        // And the values are the numbers written.
+        let g = parse_grid_split(&texts[0], 0).unwrap();
+        let want: Vec<f64> = base
+            .iter()
+            .flat_map(|l| l.split(',').map(|f| f.parse::<f64>().unwrap()))
+            .collect();
+        assert_eq!((g.rows, g.cols), (rows, cols));
+        assert_eq!(g.heights_um, want);
     }
 }

@@ -30,7 +30,7 @@
 //! and [`crate::nurbs`]; nalgebra for the small normal equations.
 
 use super::{fit_grid, BandLu, FitError, FitOptions, FitResult, FitTimings};
-use crate::nurbs::{basis_funs, find_span, NurbsSurface};
+use crate::nurbs::{basis_funs, find_span, NurbsSurface, PoleNet};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 use thiserror::Error;
@@ -231,15 +231,24 @@ pub fn approximate_v(
     }
     drop(c);
     let z = chol.solve(&rhs);
-    let mut poles = Vec::with_capacity(control_rows * cols);
-    for j in 0..control_rows {
-        let greville = knots_v[j + 1..=j + q].iter().sum::<f64>() / q as f64;
-        let y = y0 + (y1 - y0) * greville;
-        for i in 0..cols {
-            poles.push([paper.surface.pole(i, 0)[0], y, z[(j, i)]]);
-        }
-    }
-    let surface = NurbsSurface::try_new(p, q, knots_u, knots_v, cols, control_rows, poles)
+    // x per column (the paper's), y per control row, z per pole.
+    let px = paper.surface.row(0).x.to_vec();
+    let py: Vec<f64> = (0..control_rows)
+        .map(|j| {
+            let greville = knots_v[j + 1..=j + q].iter().sum::<f64>() / q as f64;
+            y0 + (y1 - y0) * greville
+        })
+        .collect();
+    let pz: Vec<f64> = (0..control_rows)
+        .flat_map(|j| (0..cols).map(move |i| (j, i)))
+        .map(|ji| z[ji])
+        .collect();
+    let net = PoleNet::separable(px, py, pz).ok_or(FitError::GridShape {
+        len: heights_um.len(),
+        rows,
+        cols,
+    })?;
+    let surface = NurbsSurface::try_from_net(p, q, knots_u, knots_v, cols, control_rows, net)
         .map_err(FitError::from)?;
     let solve_v_s = secs(t);
     Ok(FitResult {

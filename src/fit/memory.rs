@@ -33,14 +33,6 @@ pub(crate) fn advise_huge_pages<T>(v: &Vec<T>) {
     }
 }
 
-/// A zeroed vector of `n` values whose memory is advised for huge pages before it is first
-/// written (`vec![zero; n]` maps untouched zero pages; the advice then applies to them).
-pub(crate) fn zeroed_huge<T: Clone>(zero: T, n: usize) -> Vec<T> {
-    let v = vec![zero; n];
-    advise_huge_pages(&v);
-    v
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -52,8 +44,5 @@ mod tests {
         advise_huge_pages(&v);
         v.extend((1000..(3 << 20)).map(|i| i as f64));
         assert!(v.iter().enumerate().all(|(i, &x)| x == i as f64));
-        let z = zeroed_huge([0.0f64; 3], 1 << 20);
-        assert_eq!(z.len(), 1 << 20);
-        assert!(z.iter().all(|p| *p == [0.0; 3]));
     }
 }

@@ -5,10 +5,9 @@
 //! Layer 1 (pure logic): depends on [`crate::nurbs`] and the fit's own modules; no I/O.
 
 use super::incremental::secs;
-use super::memory::zeroed_huge;
 use super::params::{average_params_u, average_params_v, averaged_knots};
 use super::{simd, BandLu, FitError, FitOptions, FitResult, FitTimings, IncrementalFitter};
-use crate::nurbs::NurbsSurface;
+use crate::nurbs::{NurbsSurface, PoleNet};
 use std::time::Instant;
 
 impl IncrementalFitter {
@@ -69,20 +68,15 @@ impl IncrementalFitter {
         let t = Instant::now();
         let mut py = self.y_mm.clone();
         lu_v.solve_in_place(&mut py);
-        // Rows of the solution are final last to first; each goes straight into the net.
-        let mut poles = zeroed_huge([0.0f64; 3], rows * cols);
-        lu_v.solve_rows_in_place_then(&mut z, cols, |j, zrow| {
-            let y = py[j];
-            for ((out, &zz), &x) in poles[j * cols..(j + 1) * cols]
-                .iter_mut()
-                .zip(zrow)
-                .zip(&px)
-            {
-                *out = [x, y, zz];
-            }
-        });
-        drop(z);
-        let surface = NurbsSurface::try_new(p, q, knots_u, knots_v, cols, rows, poles)?;
+        // The heights solved in place are the poles' z; x is per column and y per row (module
+        // docs of `fit`), so the net is those three, not three coordinates per pole.
+        lu_v.solve_rows_in_place(&mut z, cols);
+        let net = PoleNet::separable(px, py, z).ok_or(FitError::GridShape {
+            len: rows * cols,
+            rows,
+            cols,
+        })?;
+        let surface = NurbsSurface::try_from_net(p, q, knots_u, knots_v, cols, rows, net)?;
         timings.solve_v_s = secs(t);
 
         Ok(FitResult {

@@ -20,7 +20,7 @@ pub fn push_real(out: &mut Vec<u8>, value: f64) -> bool {
     // the general path below shortens (`100.`, `1.E3`).
     let magnitude = value.abs();
     if (1e-3..1e15).contains(&magnitude) && text.last() != Some(&b'0') {
-        extend_short(out, text);
+        push_short(out, text);
         return true;
     }
     // Second fast path, the magnitude of most fitted heights in mm: for 1e-5 <= |v| < 1e-3
@@ -42,7 +42,7 @@ pub fn push_real(out: &mut Vec<u8>, value: f64) -> bool {
         tmp[len] = b'E';
         tmp[len + 1] = b'-';
         tmp[len + 2] = b'0' + (zeros + 1) as u8;
-        extend_short(out, &tmp[..len + 3]);
+        push_short(out, &tmp[..len + 3]);
         return true;
     }
     reformat(out, text);
@@ -191,12 +191,48 @@ fn extend_short(out: &mut Vec<u8>, bytes: &[u8]) {
     out.truncate(base + n);
 }
 
+/// Appends `bytes` (at most 32, as any formatted f64 is; longer input falls back to an
+/// ordinary copy) with one capacity check and fixed-size copies, inlined into the formatter:
+/// a real's text is appended without a call.
+#[inline(always)]
+fn push_short(out: &mut Vec<u8>, bytes: &[u8]) {
+    let n = bytes.len();
+    if n > 32 {
+        out.extend_from_slice(bytes);
+        return;
+    }
+    out.reserve(32);
+    let len = out.len();
+    let src = bytes.as_ptr();
+    // SAFETY: `reserve(32)` guarantees 32 writable bytes from `len`; every copy below writes
+    // within [len, len + n) (n <= 32) and reads within `bytes` (each overlapping pair covers
+    // [0, n) with both copies inside it); `set_len` then covers exactly the bytes written.
+    unsafe {
+        let dst = out.as_mut_ptr().add(len);
+        if n >= 16 {
+            std::ptr::copy_nonoverlapping(src, dst, 16);
+            std::ptr::copy_nonoverlapping(src.add(n - 16), dst.add(n - 16), 16);
+        } else if n >= 8 {
+            std::ptr::copy_nonoverlapping(src, dst, 8);
+            std::ptr::copy_nonoverlapping(src.add(n - 8), dst.add(n - 8), 8);
+        } else if n >= 4 {
+            std::ptr::copy_nonoverlapping(src, dst, 4);
+            std::ptr::copy_nonoverlapping(src.add(n - 4), dst.add(n - 4), 4);
+        } else {
+            for i in 0..n {
+                *dst.add(i) = *src.add(i);
+            }
+        }
+        out.set_len(len + n);
+    }
+}
+
 /// Appends `bytes` (at most 32) and then `last`, with one capacity check and fixed-size copies
 /// (two overlapping copies of a power-of-two size cover every length in its range): the
 /// packing of tokens into records, the formatter's innermost loop, is written by hand here
 /// because `extend_from_slice` of a short slice costs a `memcpy` call and a second check.
 #[inline]
-fn push_short_then(out: &mut Vec<u8>, bytes: &[u8], last: u8) {
+pub(crate) fn push_short_then(out: &mut Vec<u8>, bytes: &[u8], last: u8) {
     let n = bytes.len();
     assert!(n <= 32);
     out.reserve(33);
@@ -604,10 +640,12 @@ mod tests {
     fn short_copies_append_exactly_the_bytes() {
         let src: Vec<u8> = (0..40u8).map(|b| b'A' + b).collect();
         for n in 0..=40 {
-            let mut out = b"xy".to_vec();
-            extend_short(&mut out, &src[..n]);
-            assert_eq!(&out[..2], b"xy");
-            assert_eq!(&out[2..], &src[..n], "length {n}");
+            for push in [extend_short, push_short] {
+                let mut out = b"xy".to_vec();
+                push(&mut out, &src[..n]);
+                assert_eq!(&out[..2], b"xy");
+                assert_eq!(&out[2..], &src[..n], "length {n}");
+            }
         }
     }
 

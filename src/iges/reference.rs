@@ -82,7 +82,8 @@ pub(crate) fn entity_128_params(s: &NurbsSurface, patch: usize) -> Result<ParamT
     // Poles are most of the text: large nets are formatted in a fixed number of chunks on
     // scoped threads, each chunk starting a fresh record (a record may end early after any
     // delimiter), so the output does not depend on how many cores run it.
-    let poles = s.poles();
+    let poles = s.net().to_vec();
+    let poles = poles.as_slice();
     let chunk = if poles.len() >= PARALLEL_POLES {
         poles.len().div_ceil(POLE_CHUNKS)
     } else {

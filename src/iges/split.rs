@@ -9,24 +9,44 @@
 //! read from the original net: splitting a net of any size costs the two patches and a few
 //! rows, never a copy of the net per insertion.
 
-use crate::nurbs::NurbsSurface;
+use crate::nurbs::{NurbsSurface, PoleNet, PoleRow};
 
 /// The pole rows of a net during knot insertion: rows `[0, start)` are the original's rows
 /// `[0, start)`, rows `[start, start + changed.len())` are held here, and the rows after them
 /// are the original's from `resume` on.
 struct RowWindow<'a> {
-    original: &'a [[f64; 3]],
-    width: usize,
+    original: &'a NurbsSurface,
     start: usize,
     changed: Vec<Vec<[f64; 3]>>,
     resume: usize,
 }
 
+/// A row of the window: one of the original net's, or one held apart.
+enum WindowRow<'a> {
+    Original(PoleRow<'a>),
+    Changed(&'a [[f64; 3]]),
+}
+
+impl WindowRow<'_> {
+    fn get(&self, k: usize) -> [f64; 3] {
+        match self {
+            WindowRow::Original(row) => row.get(k),
+            WindowRow::Changed(row) => row[k],
+        }
+    }
+
+    fn to_vec(&self) -> Vec<[f64; 3]> {
+        match self {
+            WindowRow::Original(row) => (0..row.len()).map(|k| row.get(k)).collect(),
+            WindowRow::Changed(row) => row.to_vec(),
+        }
+    }
+}
+
 impl<'a> RowWindow<'a> {
     fn new(surface: &'a NurbsSurface) -> RowWindow<'a> {
         RowWindow {
-            original: surface.poles(),
-            width: surface.count_u(),
+            original: surface,
             start: 0,
             changed: Vec::new(),
             resume: 0,
@@ -34,18 +54,17 @@ impl<'a> RowWindow<'a> {
     }
 
     fn len(&self) -> usize {
-        self.start + self.changed.len() + self.original.len() / self.width - self.resume
+        self.start + self.changed.len() + self.original.count_v() - self.resume
     }
 
-    fn row(&self, i: usize) -> &[[f64; 3]] {
-        let w = self.width;
+    fn row(&self, i: usize) -> WindowRow<'_> {
         if i < self.start {
-            &self.original[i * w..(i + 1) * w]
+            WindowRow::Original(self.original.row(i))
         } else if i < self.start + self.changed.len() {
-            &self.changed[i - self.start]
+            WindowRow::Changed(&self.changed[i - self.start])
         } else {
             let r = i - self.start - self.changed.len() + self.resume;
-            &self.original[r * w..(r + 1) * w]
+            WindowRow::Original(self.original.row(r))
         }
     }
 
@@ -57,6 +76,7 @@ impl<'a> RowWindow<'a> {
         let blend_lo = (k + 1).saturating_sub(q);
         let lo = self.start.min(blend_lo);
         let hi = (self.start + self.changed.len() + 1).max(k + 1);
+        let width = self.original.count_u();
         let mut changed = Vec::with_capacity(hi - lo);
         for i in lo..hi {
             if i + q <= k {
@@ -65,11 +85,10 @@ impl<'a> RowWindow<'a> {
                 changed.push(self.row(i - 1).to_vec());
             } else {
                 let a = (v - knots[i]) / (knots[i + q] - knots[i]);
-                let row: Vec<[f64; 3]> = self
-                    .row(i)
-                    .iter()
-                    .zip(self.row(i - 1))
-                    .map(|(p, r)| {
+                let (pr, rr) = (self.row(i), self.row(i - 1));
+                let row: Vec<[f64; 3]> = (0..width)
+                    .map(|c| {
+                        let (p, r) = (pr.get(c), rr.get(c));
                         [
                             a * p[0] + (1.0 - a) * r[0],
                             a * p[1] + (1.0 - a) * r[1],
@@ -87,11 +106,17 @@ impl<'a> RowWindow<'a> {
         self.changed = changed;
     }
 
-    /// Rows `[from, to)` as one v-outer / u-inner net.
-    fn flat(&self, from: usize, to: usize) -> Vec<[f64; 3]> {
-        let mut out = Vec::with_capacity((to - from) * self.width);
+    /// Rows `[from, to)` as one net: the original's rows as they are laid out there (x per
+    /// column, y per row where that holds), the rows held apart laid out likewise where their
+    /// bits allow.
+    fn net(&self, from: usize, to: usize) -> PoleNet {
+        let column_x = self.original.net().column_x().to_vec();
+        let mut out = PoleNet::with_columns(column_x, to - from);
         for i in from..to {
-            out.extend_from_slice(self.row(i));
+            match self.row(i) {
+                WindowRow::Original(row) => out.push_row(row),
+                WindowRow::Changed(row) => out.push_poles(row),
+            }
         }
         out
     }
@@ -171,14 +196,14 @@ fn split_sides(
     debug_assert_eq!(rows.len(), n);
     let lower = if want[0] {
         Some(
-            NurbsSurface::try_new(
+            NurbsSurface::try_from_net(
                 surface.degree_u(),
                 q,
                 surface.knots_u().to_vec(),
                 plan.lower,
                 nu,
                 a,
-                rows.flat(0, a),
+                rows.net(0, a),
             )
             .ok()?,
         )
@@ -187,14 +212,14 @@ fn split_sides(
     };
     let upper = if want[1] {
         Some(
-            NurbsSurface::try_new(
+            NurbsSurface::try_from_net(
                 surface.degree_u(),
                 q,
                 surface.knots_u().to_vec(),
                 plan.upper,
                 nu,
                 n + 1 - a,
-                rows.flat(a - 1, n),
+                rows.net(a - 1, n),
             )
             .ok()?,
         )

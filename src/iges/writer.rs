@@ -13,10 +13,12 @@
 //! Parts and patches are planned from token counts (an upper bound on the lines of each
 //! entity), never by formatting the surface first.
 
-use super::format::{ascii_printable, hollerith, push_real, push_right, push_uint, FieldPacker};
+use super::format::{
+    ascii_printable, hollerith, push_real, push_right, push_short_then, push_uint, FieldPacker,
+};
 use super::split::{split_middle_shapes, split_v_middle, split_v_middle_side, PatchShape, Side};
 use super::IgesError;
-use crate::nurbs::NurbsSurface;
+use crate::nurbs::{NurbsSurface, PoleNet, RowY};
 use std::borrow::Cow;
 use std::io::{self, Write};
 use std::io::{Seek, SeekFrom};
@@ -172,11 +174,12 @@ struct NetTexts {
 
 impl NetTexts {
     fn of(s: &NurbsSurface) -> NetTexts {
-        let (nu, poles) = (s.count_u(), s.poles());
+        let net = s.net();
+        let x = if net.count_v() > 0 { net.row(0).x } else { &[] };
         NetTexts {
-            count_u: nu,
-            x: RepeatedTexts::of(poles[..nu.min(poles.len())].iter().map(|p| p[0])),
-            y: RepeatedTexts::of(poles.iter().step_by(nu.max(1)).map(|p| p[1])),
+            count_u: s.count_u(),
+            x: RepeatedTexts::of(x.iter().copied()),
+            y: RepeatedTexts::of(net.rows().filter(|r| !r.is_empty()).map(|r| r.y.at(0))),
         }
     }
 
@@ -236,18 +239,23 @@ fn format_pole_tokens(
 pub fn format_net_reals(s: &NurbsSurface, out: &mut Vec<u8>) -> Result<usize, IgesError> {
     let texts = NetTexts::of(s);
     let mut tokens = Tokens::default();
-    for (i, piece) in s.poles().chunks(PIECE_POLES).enumerate() {
-        format_pole_tokens(piece, i * PIECE_POLES, &texts, &mut tokens).map_err(
-            |(index, value)| IgesError::NonFinite {
+    let mut piece = Vec::with_capacity(PIECE_POLES);
+    let n = s.net().len();
+    for first in (0..n).step_by(PIECE_POLES) {
+        piece.clear();
+        s.net()
+            .extend_poles(first..(first + PIECE_POLES).min(n), &mut piece);
+        format_pole_tokens(&piece, first, &texts, &mut tokens).map_err(|(index, value)| {
+            IgesError::NonFinite {
                 patch: 0,
                 what: "pole coordinate",
                 index,
                 value,
-            },
-        )?;
+            }
+        })?;
         out.extend_from_slice(&tokens.text);
     }
-    Ok(s.poles().len() * 3)
+    Ok(n * 3)
 }
 
 /// Threads that format reals while the calling thread packs and writes.
@@ -258,12 +266,12 @@ fn worker_count() -> usize {
         .clamp(1, 4)
 }
 
-/// Formats the coordinates of `poles` piece by piece on `workers` threads (worker w takes
-/// pieces w, w + workers, …, at most two ahead) and hands each piece's tokens to `consume` in
-/// pole order. `first` is the index of `poles[0]` in its patch (for errors).
+/// Formats the coordinates of the poles numbered `poles` of `net` piece by piece on `workers`
+/// threads (worker w takes pieces w, w + workers, …, at most two ahead; each copies its
+/// piece's poles out of the net) and hands each piece's tokens to `consume` in pole order.
 fn for_each_piece_in_order(
-    poles: &[[f64; 3]],
-    first: usize,
+    net: &PoleNet,
+    poles: std::ops::Range<usize>,
     texts: &NetTexts,
     patch: usize,
     workers: usize,
@@ -275,11 +283,22 @@ fn for_each_piece_in_order(
         index,
         value,
     };
-    let pieces: Vec<&[[f64; 3]]> = poles.chunks(PIECE_POLES).collect();
+    let first = poles.start;
+    let pieces: Vec<std::ops::Range<usize>> = poles
+        .clone()
+        .step_by(PIECE_POLES)
+        .map(|k| k..(k + PIECE_POLES).min(poles.end))
+        .collect();
+    let gather = |range: &std::ops::Range<usize>, buf: &mut Vec<[f64; 3]>| {
+        buf.clear();
+        net.extend_poles(range.clone(), buf);
+    };
     if workers <= 1 || pieces.len() <= 1 {
         let mut tokens = Tokens::default();
+        let mut buf = Vec::with_capacity(PIECE_POLES);
         for (i, piece) in pieces.iter().enumerate() {
-            format_pole_tokens(piece, first + i * PIECE_POLES, texts, &mut tokens)
+            gather(piece, &mut buf);
+            format_pole_tokens(&buf, first + i * PIECE_POLES, texts, &mut tokens)
                 .map_err(non_finite)?;
             consume(&tokens)?;
         }
@@ -291,12 +310,14 @@ fn for_each_piece_in_order(
             let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Tokens, (usize, f64)>>(2);
             receivers.push(rx);
             let pieces = &pieces;
+            let gather = &gather;
             scope.spawn(move || {
+                let mut buf = Vec::with_capacity(PIECE_POLES);
                 for i in (w..pieces.len()).step_by(workers) {
                     let mut tokens = Tokens::default();
-                    let r =
-                        format_pole_tokens(pieces[i], first + i * PIECE_POLES, texts, &mut tokens)
-                            .map(|()| tokens);
+                    gather(&pieces[i], &mut buf);
+                    let r = format_pole_tokens(&buf, first + i * PIECE_POLES, texts, &mut tokens)
+                        .map(|()| tokens);
                     let failed = r.is_err();
                     // A closed channel means the consumer stopped (an error): stop too.
                     if tx.send(r).is_err() || failed {
@@ -315,28 +336,27 @@ fn for_each_piece_in_order(
     })
 }
 
-/// Streams the parameter data (columns 1–64 of each P line) of one entity 128 to `emit` in
-/// blocks of whole 64-column records, and returns the number of records. The layout: header,
-/// knots and weights from one record on; the poles in one chunk, or [`POLE_CHUNKS`] chunks
-/// for large nets, each starting a fresh record; the parameter range on a fresh record.
+/// Streams the P lines of one entity 128 through `p` (whose DE back-pointer the caller has
+/// set), handing complete lines to `emit` in blocks of about [`BLOCK_BYTES`], and returns the
+/// number of lines. Lines still in `p` when it returns are the caller's to hand on. The
+/// layout: header, knots and weights from one record on; the poles in one chunk, or
+/// [`POLE_CHUNKS`] chunks for large nets, each starting a fresh record; the parameter range on
+/// a fresh record.
 fn stream_entity_128(
     s: &NurbsSurface,
     patch: usize,
     workers: usize,
+    p: &mut LinePacker,
     emit: &mut dyn FnMut(&[u8]) -> Result<(), IgesError>,
 ) -> Result<usize, IgesError> {
     let (nu, nv) = (s.count_u(), s.count_v());
-    let mut records = 0usize;
-    let mut hand_on = |p: &mut FieldPacker, all: bool| -> Result<(), IgesError> {
-        if all {
-            p.pad_last();
+    let first_line = p.lines();
+    let mut hand_on = |p: &mut LinePacker| -> Result<(), IgesError> {
+        if p.bytes() >= BLOCK_BYTES {
+            p.drain_lines(&mut *emit)?;
         }
-        p.drain_records(|block| {
-            records += block.len() / 64;
-            emit(block)
-        })
+        Ok(())
     };
-    let mut p = FieldPacker::with_capacity(64, BLOCK_BYTES + 128);
     let mut tok = Vec::with_capacity(32);
     let closed_u = (0..nv).all(|j| s.pole(0, j) == s.pole(nu - 1, j));
     let closed_v = (0..nu).all(|i| s.pole(i, 0) == s.pole(i, nv - 1));
@@ -357,7 +377,7 @@ fn stream_entity_128(
         push_uint(&mut tok, h);
         p.push(&tok, b',');
     }
-    let real = |p: &mut FieldPacker, v: f64, what: &'static str, index: usize, delim: u8| {
+    let real = |p: &mut LinePacker, v: f64, what: &'static str, index: usize, delim: u8| {
         if p.push_real(v, delim) {
             Ok(())
         } else {
@@ -370,57 +390,49 @@ fn stream_entity_128(
         }
     };
     for (i, &k) in s.knots_u().iter().enumerate() {
-        real(&mut p, k, "u knot", i, b',')?;
+        real(p, k, "u knot", i, b',')?;
     }
     for (i, &k) in s.knots_v().iter().enumerate() {
-        real(&mut p, k, "v knot", i, b',')?;
+        real(p, k, "v knot", i, b',')?;
     }
-    for n in 0..nu * nv {
-        p.push(b"1.", b',');
-        if n % 65_536 == 0 && p.bytes() >= BLOCK_BYTES {
-            hand_on(&mut p, false)?;
-        }
+    let mut weights = nu * nv;
+    while weights > 0 {
+        let n = weights.min(65_536);
+        p.push_repeated(b"1.", b',', n);
+        weights -= n;
+        hand_on(p)?;
     }
-    hand_on(&mut p, true)?;
-    let poles = s.poles();
-    let chunk = if poles.len() >= PARALLEL_POLES {
-        poles.len().div_ceil(POLE_CHUNKS)
+    p.end_record();
+    let net = s.net();
+    let count = net.len();
+    let chunk = if count >= PARALLEL_POLES {
+        count.div_ceil(POLE_CHUNKS)
     } else {
-        poles.len().max(1)
+        count.max(1)
     };
     let texts = NetTexts::of(s);
-    for (n, part) in poles.chunks(chunk).enumerate() {
-        let mut q = FieldPacker::with_capacity(64, BLOCK_BYTES + 4096);
+    for first in (0..count).step_by(chunk) {
         for_each_piece_in_order(
-            part,
-            n * chunk,
+            net,
+            first..(first + chunk).min(count),
             &texts,
             patch,
             workers,
             &mut |t: &Tokens| {
-                q.push_tokens(&t.text, &t.lens, b',');
-                if q.bytes() >= BLOCK_BYTES {
-                    hand_on(&mut q, false)?;
-                }
-                Ok(())
+                p.push_tokens(&t.text, &t.lens, b',');
+                hand_on(p)
             },
         )?;
-        hand_on(&mut q, true)?;
+        p.end_record();
     }
-    let mut tail = FieldPacker::new(64);
     let (ku, kv) = (s.knots_u(), s.knots_v());
     let dom = [ku[s.degree_u()], ku[nu], kv[s.degree_v()], kv[nv]];
     for (i, &d) in dom.iter().enumerate() {
-        real(
-            &mut tail,
-            d,
-            "parameter range",
-            i,
-            if i == 3 { b';' } else { b',' },
-        )?;
+        real(p, d, "parameter range", i, if i == 3 { b';' } else { b',' })?;
     }
-    hand_on(&mut tail, true)?;
-    Ok(records)
+    p.end_record();
+    hand_on(p)?;
+    Ok(p.lines() - first_line)
 }
 
 /// Splits `surface` along v until each patch's P lines are bounded by `max_lines` (from
@@ -694,25 +706,43 @@ fn date_stamp(t: &chrono::NaiveDateTime) -> String {
     hollerith(&t.format("%Y%m%d.%H%M%S").to_string())
 }
 
-/// The largest |coordinate| of `poles` (0 for none): the maximum is exact whatever order it
-/// is taken in, so it is taken over twelve running maxima (four poles at a time) instead of
-/// one chain of dependent comparisons through the whole net.
-fn max_abs_coordinate(poles: &[[f64; 3]]) -> f64 {
-    let mut m = [0.0f64; 12];
-    let mut quads = poles.chunks_exact(4);
-    for quad in &mut quads {
-        for (j, p) in quad.iter().enumerate() {
-            for c in 0..3 {
-                m[3 * j + c] = m[3 * j + c].max(p[c].abs());
+/// The largest |coordinate| of the poles of `net` (0 for none): the maximum is exact
+/// whatever order it is taken in, so it is taken per coordinate as the net holds them (a
+/// row's shared x or y once, not once per pole) over eight running maxima at a time instead
+/// of one chain of dependent comparisons through the whole net.
+fn max_abs_coordinate(net: &PoleNet) -> f64 {
+    fn max_abs(v: &[f64]) -> f64 {
+        let mut m = [0.0f64; 8];
+        let mut blocks = v.chunks_exact(8);
+        for b in &mut blocks {
+            for (m, x) in m.iter_mut().zip(b) {
+                *m = m.max(x.abs());
             }
         }
+        let tail = blocks
+            .remainder()
+            .iter()
+            .fold(0.0f64, |a, x| a.max(x.abs()));
+        m.into_iter().fold(tail, f64::max)
     }
-    for p in quads.remainder() {
-        for c in 0..3 {
-            m[c] = m[c].max(p[c].abs());
+    let mut m = 0.0f64;
+    let mut column_x_seen = false;
+    for row in net.rows() {
+        if std::ptr::eq(row.x.as_ptr(), net.column_x().as_ptr()) {
+            if !column_x_seen {
+                m = m.max(max_abs(row.x));
+                column_x_seen = true;
+            }
+        } else {
+            m = m.max(max_abs(row.x));
         }
+        m = m.max(match row.y {
+            RowY::One(y) => y.abs(),
+            RowY::Each(ys) => max_abs(ys),
+        });
+        m = m.max(max_abs(row.z));
     }
-    m.into_iter().fold(0.0, f64::max)
+    m
 }
 
 /// The Start and Global sections as records; returns their line counts.
@@ -723,7 +753,7 @@ fn start_and_global(
 ) -> (usize, usize) {
     let max_coord = surfaces
         .iter()
-        .map(|s| max_abs_coordinate(s.poles()))
+        .map(|s| max_abs_coordinate(s.net()))
         .fold(0.0f64, f64::max);
     let buf = out;
     // Start section.
@@ -816,23 +846,39 @@ fn terminate(out: &mut Vec<u8>, counts: [usize; 4]) {
     record(out, &t, b'T', 1);
 }
 
-/// Turns 64-column parameter records into P lines: each is assembled in a fixed 81-byte
-/// template (columns 65–72 the DE back-pointer) with the sequence number counted up in place.
-struct ParameterLines {
-    line: [u8; 81],
+/// Bytes of one P line: 64 data columns, the DE back-pointer (8), `P`, the sequence number
+/// (7) and the newline.
+const LINE_BYTES: usize = 81;
+/// Data columns of a P line.
+const P_DATA: usize = 64;
+
+/// Packs the free-format parameters of entities straight into finished P lines (columns
+/// 1–64 the data, 65–72 the DE back-pointer, 73 `P`, 74–80 the sequence number counted up in
+/// place, newline), breaking only after a delimiter exactly as [`FieldPacker`] packs
+/// 64-column records: each record is written once, in its line, instead of packed and then
+/// copied into a line template.
+struct LinePacker {
+    /// Complete lines not yet drained, then the data of the line being filled.
+    data: Vec<u8>,
+    line_start: usize,
+    /// Columns 65–80 and the newline of the lines being written.
+    tail: [u8; LINE_BYTES - P_DATA],
     seq: SequenceField,
-    count: usize,
+    /// Lines completed so far.
+    lines: usize,
 }
 
-impl ParameterLines {
-    fn new() -> ParameterLines {
-        let mut line = [b' '; 81];
-        line[72] = b'P';
-        line[80] = b'\n';
-        ParameterLines {
-            line,
+impl LinePacker {
+    fn new(capacity: usize) -> LinePacker {
+        let mut tail = [b' '; LINE_BYTES - P_DATA];
+        tail[8] = b'P';
+        tail[16] = b'\n';
+        LinePacker {
+            data: Vec::with_capacity(capacity),
+            line_start: 0,
+            tail,
             seq: SequenceField::new(),
-            count: 0,
+            lines: 0,
         }
     }
 
@@ -840,19 +886,151 @@ impl ParameterLines {
     fn entity(&mut self, de: usize) {
         let mut back = Vec::with_capacity(8);
         push_right(&mut back, de as i64, 8);
-        self.line[64..72].copy_from_slice(&back);
+        self.tail[..8].copy_from_slice(&back);
     }
 
-    /// Appends the P lines of `records` (whole 64-column records) to `out`. Past the 7-digit
-    /// field the sequence number wraps; the writer refuses such a file before it is used.
-    fn push(&mut self, records: &[u8], out: &mut Vec<u8>) {
-        for chunk in records.chunks_exact(64) {
-            self.line[..64].copy_from_slice(chunk);
-            self.seq.increment();
-            self.line[73..80].copy_from_slice(&self.seq.digits);
-            out.extend_from_slice(&self.line);
+    /// Lines completed so far.
+    fn lines(&self) -> usize {
+        self.lines
+    }
+
+    /// Bytes held: complete lines not yet drained and the data of the line being filled.
+    fn bytes(&self) -> usize {
+        self.data.len()
+    }
+
+    /// Completes the line being filled: its data padded to 64 columns, then its columns
+    /// 65–80. Past the 7-digit field the sequence number wraps; the writer refuses such a
+    /// file before it is used.
+    #[inline]
+    fn end_line(&mut self) {
+        self.seq.increment();
+        self.tail[9..16].copy_from_slice(&self.seq.digits);
+        self.data.resize(self.line_start + P_DATA, b' ');
+        self.data.extend_from_slice(&self.tail);
+        self.line_start = self.data.len();
+        self.lines += 1;
+    }
+
+    /// Completes the line being filled, if it holds anything, so that what follows starts a
+    /// fresh record.
+    fn end_record(&mut self) {
+        if self.data.len() > self.line_start {
+            self.end_line();
         }
-        self.count += records.len() / 64;
+    }
+
+    /// Adds `token` followed by `delimiter`; starts a new line first if they do not fit.
+    fn push(&mut self, token: &[u8], delimiter: u8) {
+        let need = token.len() + 1;
+        if self.data.len() - self.line_start + need > P_DATA {
+            if need <= P_DATA {
+                self.end_line();
+            } else {
+                // Only Hollerith strings can be this long: fill lines with it.
+                let mut rest = token;
+                loop {
+                    let room = P_DATA - (self.data.len() - self.line_start);
+                    if rest.len() < room {
+                        break;
+                    }
+                    self.data.extend_from_slice(&rest[..room]);
+                    rest = &rest[room..];
+                    self.end_line();
+                }
+                self.data.extend_from_slice(rest);
+                self.data.push(delimiter);
+                return;
+            }
+        }
+        self.data.extend_from_slice(token);
+        self.data.push(delimiter);
+    }
+
+    /// Adds a real (see [`push_real`]) followed by `delimiter`, formatting it in place.
+    /// Returns `false` (adding nothing) for NaN or infinity.
+    fn push_real(&mut self, value: f64, delimiter: u8) -> bool {
+        let before = self.data.len();
+        if !push_real(&mut self.data, value) {
+            return false;
+        }
+        self.data.push(delimiter);
+        if self.data.len() - self.line_start > P_DATA {
+            let mut tmp = [0u8; 64];
+            let len = self.data.len() - before;
+            tmp[..len].copy_from_slice(&self.data[before..]);
+            self.data.truncate(before);
+            self.end_line();
+            self.data.extend_from_slice(&tmp[..len]);
+        }
+        true
+    }
+
+    /// Adds pre-formatted tokens (`lens[i]` bytes each, concatenated in `text`), each followed
+    /// by `delimiter`: exactly what one [`LinePacker::push`] per token gives.
+    fn push_tokens(&mut self, text: &[u8], lens: &[u8], delimiter: u8) {
+        let mut at = 0usize;
+        for &len in lens {
+            let n = usize::from(len);
+            let token = &text[at..at + n];
+            at += n;
+            if n + 1 > P_DATA {
+                self.push(token, delimiter);
+                continue;
+            }
+            if self.data.len() - self.line_start + n + 1 > P_DATA {
+                self.end_line();
+            }
+            push_short_then(&mut self.data, token, delimiter);
+        }
+    }
+
+    /// Adds `count` copies of `token` followed by `delimiter`: exactly what one
+    /// [`LinePacker::push`] per copy gives, with the whole lines between the first and the
+    /// last copied from one record.
+    fn push_repeated(&mut self, token: &[u8], delimiter: u8, count: usize) {
+        let need = token.len() + 1;
+        if need > P_DATA {
+            for _ in 0..count {
+                self.push(token, delimiter);
+            }
+            return;
+        }
+        let mut left = count;
+        // The line being filled takes what fits (at least one copy when it is empty).
+        while left > 0 && self.data.len() - self.line_start + need <= P_DATA {
+            self.data.extend_from_slice(token);
+            self.data.push(delimiter);
+            left -= 1;
+        }
+        if left == 0 {
+            return;
+        }
+        // Each further line holds `per` copies; the last one stays open, as after single
+        // pushes.
+        let per = P_DATA / need;
+        let mut record = [b' '; P_DATA];
+        for slot in record.chunks_exact_mut(need).take(per) {
+            slot[..token.len()].copy_from_slice(token);
+            slot[token.len()] = delimiter;
+        }
+        loop {
+            self.end_line();
+            let n = left.min(per);
+            self.data.extend_from_slice(&record[..n * need]);
+            left -= n;
+            if left == 0 {
+                return;
+            }
+        }
+    }
+
+    /// Hands the complete lines to `f` and keeps only the line being filled.
+    fn drain_lines<R>(&mut self, f: impl FnOnce(&[u8]) -> R) -> R {
+        let r = f(&self.data[..self.line_start]);
+        self.data.drain(..self.line_start);
+        self.line_start = 0;
+        r
     }
 }
 
@@ -905,22 +1083,21 @@ pub fn write_iges_seekable<W: Write + Seek>(
     let d_offset = buf.len() as u64;
     let d_lines = 2 * patches.len();
     directory(&mut buf, &vec![0; patches.len()]);
+    w.write_all(&buf)?;
+    buf.clear();
     let workers = worker_count();
-    let mut lines = ParameterLines::new();
+    let mut lines = LinePacker::new(BLOCK_BYTES + 64 * LINE_BYTES);
     let mut counts = Vec::with_capacity(patches.len());
     for (k, patch) in patches.iter().enumerate() {
         lines.entity(2 * k + 1);
-        let n = stream_entity_128(patch, k, workers, &mut |records| {
-            lines.push(records, &mut buf);
-            if buf.len() >= BLOCK_BYTES {
-                w.write_all(&buf)?;
-                buf.clear();
-            }
+        let n = stream_entity_128(patch, k, workers, &mut lines, &mut |block| {
+            w.write_all(block)?;
             Ok(())
         })?;
         counts.push(n);
     }
-    let p_lines = lines.count;
+    lines.drain_lines(|block| w.write_all(block))?;
+    let p_lines = lines.lines();
     if p_lines > file_cap {
         return Err(IgesError::SectionTooLong {
             section: 'P',
@@ -994,6 +1171,47 @@ impl SequenceField {
 mod tests {
     use super::*;
     use crate::iges::reference::{entity_128_params, ParamText};
+
+    /// Turns 64-column parameter records into P lines (the writer's framing before it packed
+    /// into lines directly): each is assembled in a fixed 81-byte template with the sequence
+    /// number counted up in place.
+    struct ParameterLines {
+        line: [u8; 81],
+        seq: SequenceField,
+        count: usize,
+    }
+
+    impl ParameterLines {
+        fn new() -> ParameterLines {
+            let mut line = [b' '; 81];
+            line[72] = b'P';
+            line[80] = b'\n';
+            ParameterLines {
+                line,
+                seq: SequenceField::new(),
+                count: 0,
+            }
+        }
+
+        /// Sets the DE back-pointer of the lines that follow.
+        fn entity(&mut self, de: usize) {
+            let mut back = Vec::with_capacity(8);
+            push_right(&mut back, de as i64, 8);
+            self.line[64..72].copy_from_slice(&back);
+        }
+
+        /// Appends the P lines of `records` (whole 64-column records) to `out`. Past the 7-digit
+        /// field the sequence number wraps; the writer refuses such a file before it is used.
+        fn push(&mut self, records: &[u8], out: &mut Vec<u8>) {
+            for chunk in records.chunks_exact(64) {
+                self.line[..64].copy_from_slice(chunk);
+                self.seq.increment();
+                self.line[73..80].copy_from_slice(&self.seq.digits);
+                out.extend_from_slice(&self.line);
+            }
+            self.count += records.len() / 64;
+        }
+    }
 
     /// A degree-3 surface whose every real takes the longest form (`-d.dddddddddddddddE-3dd`).
     fn longest_tokens(nu: usize, nv: usize) -> NurbsSurface {
@@ -1083,17 +1301,8 @@ mod tests {
                 patches.len()
             );
             assert_eq!(stats.bytes, want.len() as u64);
-            // One formatting thread or several: the same bytes.
-            let mut single = io::Cursor::new(Vec::new());
-            let mut records = Vec::new();
-            for (k, p) in patches.iter().enumerate() {
-                let n = stream_entity_128(p, k, 1, &mut |r| {
-                    records.extend_from_slice(r);
-                    Ok(())
-                })
-                .unwrap();
-                assert_eq!(n, entity_128_params(p, k).unwrap().lines());
-            }
+            // One formatting thread or several: the same lines, each the reference's record
+            // with its DE back-pointer and sequence number.
             let expected: Vec<u8> = patches
                 .iter()
                 .enumerate()
@@ -1106,7 +1315,33 @@ mod tests {
                         .collect::<Vec<u8>>()
                 })
                 .collect();
-            assert!(records == expected);
+            for workers in [1, 2, 3] {
+                let mut packer = LinePacker::new(0);
+                let mut lines = Vec::new();
+                let mut des = Vec::new();
+                for (k, p) in patches.iter().enumerate() {
+                    packer.entity(2 * k + 1);
+                    let n = stream_entity_128(p, k, workers, &mut packer, &mut |block| {
+                        lines.extend_from_slice(block);
+                        Ok(())
+                    })
+                    .unwrap();
+                    packer.drain_lines(|block| lines.extend_from_slice(block));
+                    assert_eq!(n, entity_128_params(p, k).unwrap().lines());
+                    des.extend(std::iter::repeat_n(2 * k + 1, n));
+                }
+                assert_eq!(lines.len(), LINE_BYTES * des.len());
+                let data: Vec<u8> = lines
+                    .chunks_exact(LINE_BYTES)
+                    .flat_map(|l| l[..P_DATA].to_vec())
+                    .collect();
+                assert!(data == expected, "{workers} workers");
+                for (i, (line, de)) in lines.chunks_exact(LINE_BYTES).zip(&des).enumerate() {
+                    let tail = format!("{de:>8}P{:>7}\n", i + 1);
+                    assert_eq!(&line[P_DATA..], tail.as_bytes(), "line {}", i + 1);
+                }
+            }
+            let mut single = io::Cursor::new(Vec::new());
             write_iges_seekable(&mut single, patches, &opts).unwrap();
             assert!(single.into_inner() == want);
         }
@@ -1117,7 +1352,7 @@ mod tests {
     /// huge value), so a writer that reuses the text of repeated values must notice each.
     fn fit_like_with_breaks(nu: usize, nv: usize) -> NurbsSurface {
         let s = fit_like(nu, nv);
-        let mut poles = s.poles().to_vec();
+        let mut poles = s.net().to_vec();
         poles[nu + 3][0] = f64::from_bits(poles[nu + 3][0].to_bits() + 1);
         for (i, p) in poles[2 * nu..3 * nu].iter_mut().enumerate() {
             p[1] += i as f64 * 1e-9;
@@ -1188,7 +1423,7 @@ mod tests {
             longest_tokens(9, 5),
         ] {
             let mut want = Vec::new();
-            for &c in s.poles().iter().flatten() {
+            for c in s.poles().flatten() {
                 assert!(push_real(&mut want, c));
             }
             let mut got = Vec::new();
@@ -1260,6 +1495,92 @@ mod tests {
         assert!(patches.len() >= 2);
         for p in patches {
             assert!(entity_128_params(p, 0).unwrap().lines() < bound);
+        }
+    }
+
+    #[test]
+    fn line_packer_gives_the_field_packer_records_in_their_lines() {
+        // Random streams of every kind of push, including tokens that just fit or just miss
+        // a record, Hollerith strings longer than a record, runs of repeated tokens that
+        // start mid-record and span many records, and records ended early; packed straight
+        // into lines, and packed into 64-column records then framed as the writer did before.
+        let mut s: u64 = 0x853C_49E6_748F_EA9B;
+        let mut next = move |n: u64| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s % n
+        };
+        for case in 0..300 {
+            let mut packer = LinePacker::new(0);
+            let mut records = FieldPacker::new(64);
+            let mut framed = Vec::new();
+            let mut frame = ParameterLines::new();
+            let mut lines = Vec::new();
+            let mut de = 1;
+            packer.entity(de);
+            frame.entity(de);
+            for _ in 0..next(60) {
+                match next(7) {
+                    0 => {
+                        let len = 1 + next(63) as usize;
+                        let token: Vec<u8> = (0..len).map(|i| b'0' + (i % 10) as u8).collect();
+                        packer.push(&token, b',');
+                        records.push(&token, b',');
+                    }
+                    1 => {
+                        let len = 64 + next(100) as usize;
+                        let token: Vec<u8> = (0..len).map(|i| b'A' + (i % 26) as u8).collect();
+                        packer.push(&token, b';');
+                        records.push(&token, b';');
+                    }
+                    2 => {
+                        let v = f64::from_bits(next(u64::MAX));
+                        let v = if v.is_finite() { v } else { 0.5 };
+                        assert!(packer.push_real(v, b','));
+                        assert!(records.push_real(v, b','));
+                    }
+                    3 => {
+                        let mut text = Vec::new();
+                        let mut lens = Vec::new();
+                        for _ in 0..next(40) {
+                            let len = 1 + next(24) as usize;
+                            text.extend((0..len).map(|i| b'a' + (i % 26) as u8));
+                            lens.push(len as u8);
+                        }
+                        packer.push_tokens(&text, &lens, b',');
+                        records.push_tokens(&text, &lens, b',');
+                    }
+                    4 => {
+                        let token: &[u8] =
+                            [&b"1."[..], b"12345", b"x", &[b'7'; 63]][next(4) as usize];
+                        let count = next(200) as usize;
+                        packer.push_repeated(token, b',', count);
+                        for _ in 0..count {
+                            records.push(token, b',');
+                        }
+                    }
+                    5 => {
+                        packer.end_record();
+                        records.pad_last();
+                    }
+                    _ => {
+                        // A new entity: the lines so far keep their back-pointer.
+                        packer.end_record();
+                        records.pad_last();
+                        packer.drain_lines(|b| lines.extend_from_slice(b));
+                        records.drain_records(|r| frame.push(r, &mut framed));
+                        de += 2;
+                        packer.entity(de);
+                        frame.entity(de);
+                    }
+                }
+            }
+            packer.end_record();
+            packer.drain_lines(|b| lines.extend_from_slice(b));
+            frame.push(&records.finish(), &mut framed);
+            assert_eq!(packer.lines(), frame.count, "case {case}");
+            assert!(lines == framed, "case {case}");
         }
     }
 

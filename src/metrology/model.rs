@@ -253,12 +253,9 @@ fn sample_per_line(
 /// Whether every pole's x equals the x of the pole below it in the first row, so that x on the
 /// surface depends on u alone.
 fn x_depends_on_u_only(surface: &NurbsSurface) -> bool {
-    let nu = surface.count_u();
-    let poles = surface.poles();
-    let first = &poles[..nu];
-    poles
-        .chunks_exact(nu)
-        .all(|row| row.iter().zip(first).all(|(p, q)| p[0] == q[0]))
+    let net = surface.net();
+    let first = net.row(0).x;
+    net.rows().all(|row| row.x == first)
 }
 
 /// The u of each target x = `x0_mm` + k·`pitch_x_mm`, k < `cols`, along a curve whose x is

@@ -311,10 +311,11 @@ impl NurbsSurface {
         let (sv, bv) = span_basis(self.degree_v, &self.knots_v, self.count_v, v);
         let mut p = [0.0; 3];
         for (l, nv) in bv.iter().enumerate() {
-            let row = (sv - self.degree_v + l) * self.count_u + su - self.degree_u;
+            let row = self.net.row(sv - self.degree_v + l);
+            let first = su - self.degree_u;
             let mut t = [0.0; 3];
             for (k, nu) in bu.iter().enumerate() {
-                let q = self.poles[row + k];
+                let q = row.get(first + k);
                 t[0] += nu * q[0];
                 t[1] += nu * q[1];
                 t[2] += nu * q[2];
@@ -331,8 +332,9 @@ impl NurbsSurface {
         let (sv, bv) = span_basis(self.degree_v, &self.knots_v, self.count_v, v);
         let mut poles = vec![[0.0; 3]; self.count_u];
         for (l, nv) in bv.iter().enumerate() {
-            let row = (sv - self.degree_v + l) * self.count_u;
-            for (out, q) in poles.iter_mut().zip(&self.poles[row..row + self.count_u]) {
+            let row = self.net.row(sv - self.degree_v + l);
+            for (i, out) in poles.iter_mut().enumerate() {
+                let q = row.get(i);
                 out[0] += nv * q[0];
                 out[1] += nv * q[1];
                 out[2] += nv * q[2];
@@ -383,9 +385,9 @@ impl NurbsSurface {
         columns: std::ops::Range<usize>,
         out: &mut [[f64; 4]],
     ) {
-        let nu = self.count_u;
-        let first = (sv - self.degree_v) * nu;
-        let net = &self.poles[first..first + bv.len() * nu];
+        let first = sv - self.degree_v;
+        let rows: Vec<super::PoleRow<'_>> =
+            (0..bv.len()).map(|l| self.net.row(first + l)).collect();
         let add = |acc: &mut [f64; 4], nv: f64, q: [f64; 3]| {
             acc[0] += nv * q[0];
             acc[1] += nv * q[1];
@@ -399,10 +401,9 @@ impl NurbsSurface {
         for (blk, o) in (&mut blocks).enumerate() {
             let i0 = start + blk * BLOCK;
             let mut acc: [[f64; 4]; BLOCK] = std::array::from_fn(|j| o[j]);
-            for (l, &nv) in bv.iter().enumerate() {
-                let row = &net[l * nu + i0..l * nu + i0 + BLOCK];
-                for j in 0..BLOCK {
-                    add(&mut acc[j], nv, row[j]);
+            for (row, &nv) in rows.iter().zip(bv) {
+                for (j, a) in acc.iter_mut().enumerate() {
+                    add(a, nv, row.get(i0 + j));
                 }
             }
             o.copy_from_slice(&acc);
@@ -410,8 +411,8 @@ impl NurbsSurface {
         for (j, o) in blocks.into_remainder().iter_mut().enumerate() {
             let i = start + done + j;
             let mut acc = *o;
-            for (l, &nv) in bv.iter().enumerate() {
-                add(&mut acc, nv, net[l * nu + i]);
+            for (row, &nv) in rows.iter().zip(bv) {
+                add(&mut acc, nv, row.get(i));
             }
             *o = acc;
         }
@@ -422,10 +423,11 @@ impl NurbsSurface {
         let (su, bu) = span_basis(self.degree_u, &self.knots_u, self.count_u, u);
         let poles = (0..self.count_v)
             .map(|j| {
-                let base = j * self.count_u + su - self.degree_u;
+                let row = self.net.row(j);
+                let base = su - self.degree_u;
                 let mut p = [0.0; 3];
                 for (k, nu) in bu.iter().enumerate() {
-                    let q = self.poles[base + k];
+                    let q = row.get(base + k);
                     p[0] += nu * q[0];
                     p[1] += nu * q[1];
                     p[2] += nu * q[2];
@@ -458,6 +460,122 @@ impl NurbsSurface {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// S(u, v) the way P&T A3.5 states it, from the full net of three coordinates per pole
+    /// (independent of how the surface holds its net): the same products in the same order
+    /// as [`NurbsSurface::evaluate`].
+    fn evaluate_full(s: &NurbsSurface, full: &[[f64; 3]], u: f64, v: f64) -> [f64; 3] {
+        let (su, bu) = span_basis(s.degree_u(), s.knots_u(), s.count_u(), u);
+        let (sv, bv) = span_basis(s.degree_v(), s.knots_v(), s.count_v(), v);
+        let mut p = [0.0; 3];
+        for (l, nv) in bv.iter().enumerate() {
+            let row = (sv - s.degree_v() + l) * s.count_u() + su - s.degree_u();
+            let mut t = [0.0; 3];
+            for (k, nu) in bu.iter().enumerate() {
+                for c in 0..3 {
+                    t[c] += nu * full[row + k][c];
+                }
+            }
+            for c in 0..3 {
+                p[c] += nv * t[c];
+            }
+        }
+        p
+    }
+
+    /// S(u, v) as [`NurbsSurface::evaluate_grid`] orders the arithmetic (the iso-curve at v
+    /// first, then the curve at u), from the full net.
+    fn evaluate_full_iso(s: &NurbsSurface, full: &[[f64; 3]], u: f64, v: f64) -> [f64; 3] {
+        let (su, bu) = span_basis(s.degree_u(), s.knots_u(), s.count_u(), u);
+        let (sv, bv) = span_basis(s.degree_v(), s.knots_v(), s.count_v(), v);
+        let mut p = [0.0; 3];
+        for (k, nu) in bu.iter().enumerate() {
+            let i = su - s.degree_u() + k;
+            let mut iso = [0.0; 3];
+            for (l, nv) in bv.iter().enumerate() {
+                let j = sv - s.degree_v() + l;
+                for c in 0..3 {
+                    iso[c] += nv * full[j * s.count_u() + i][c];
+                }
+            }
+            for c in 0..3 {
+                p[c] += nu * iso[c];
+            }
+        }
+        p
+    }
+
+    #[test]
+    fn a_compact_net_evaluates_as_the_full_net_does_to_the_bit() {
+        let (nu, nv, p, q) = (9usize, 7usize, 3usize, 2usize);
+        let clamped = |n: usize, d: usize| {
+            let mut k = vec![0.0; d + 1];
+            k.extend((1..n - d).map(|i| i as f64 / (n - d) as f64));
+            k.extend(vec![1.0; d + 1]);
+            k
+        };
+        let (ku, kv) = (clamped(nu, p), clamped(nv, q));
+        let x: Vec<f64> = (0..nu).map(|i| i as f64 * 0.0005 + 1e-4 / 3.0).collect();
+        let y: Vec<f64> = (0..nv).map(|j| j as f64 * 0.01 + 1e-5 / 7.0).collect();
+        let z = |i: usize, j: usize| ((i * 31 + j * 17) % 11) as f64 * 1.1e-4 - 3.7e-4;
+        let separable: Vec<[f64; 3]> = (0..nv)
+            .flat_map(|j| (0..nu).map(move |i| (i, j)))
+            .map(|(i, j)| [x[i], y[j], z(i, j)])
+            .collect();
+        // Not separable: row 3's x off by one bit in one column, row 5's y varying.
+        let mut general = separable.clone();
+        general[3 * nu + 4][0] = f64::from_bits(general[3 * nu + 4][0].to_bits() + 1);
+        for i in 0..nu {
+            general[5 * nu + i][1] += i as f64 * 1e-9;
+        }
+        let built = NurbsSurface::try_from_net(
+            p,
+            q,
+            ku.clone(),
+            kv.clone(),
+            nu,
+            nv,
+            super::super::PoleNet::separable(
+                x.clone(),
+                y.clone(),
+                separable.iter().map(|p| p[2]).collect(),
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        let us = [0.0, 0.13, 0.5, 0.77, 1.0];
+        let vs = [0.0, 0.31, 0.62, 1.0];
+        for full in [&separable, &general] {
+            let s =
+                NurbsSurface::try_new(p, q, ku.clone(), kv.clone(), nu, nv, full.clone()).unwrap();
+            assert_eq!(s.net().is_separable(), std::ptr::eq(full, &separable));
+            let bits = |p: [f64; 3]| p.map(f64::to_bits);
+            let grid = s.evaluate_grid(&us, &vs);
+            for (b, &v) in vs.iter().enumerate() {
+                let iso = s.iso_curve_u(v);
+                let mut padded = Vec::new();
+                s.iso_poles_u_padded_range(v, 2..7, &mut padded);
+                for (k, pad) in padded.iter().enumerate() {
+                    assert_eq!(pad[..3], iso.poles[2 + k][..]);
+                }
+                for (a, &u) in us.iter().enumerate() {
+                    let point = evaluate_full(&s, full, u, v);
+                    let want = bits(point);
+                    assert_eq!(bits(s.evaluate(u, v)), want, "u {u} v {v}");
+                    let iso_order = bits(evaluate_full_iso(&s, full, u, v));
+                    assert_eq!(bits(grid[b * us.len() + a]), iso_order, "grid u {u} v {v}");
+                    let along_v = s.iso_curve_v(u).evaluate(v).unwrap();
+                    assert!((0..3).all(|c| (along_v[c] - point[c]).abs() < 1e-15));
+                }
+            }
+            assert_eq!(
+                s.poles().map(bits).collect::<Vec<_>>(),
+                full.iter().map(|&p| bits(p)).collect::<Vec<_>>()
+            );
+        }
+        let s = NurbsSurface::try_new(p, q, ku, kv, nu, nv, separable.clone()).unwrap();
+        assert_eq!(built, s);
+    }
 
     #[test]
     fn stepping_on_from_the_previous_span_finds_the_binary_searchs_span() {

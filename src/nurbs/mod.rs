@@ -11,7 +11,9 @@
 //! Layer 0 (vocabulary): depends on nothing else in the crate; no I/O.
 
 mod eval;
+mod net;
 pub use eval::{basis_funs, find_span, BSplineCurve, UBasis};
+pub use net::{PoleNet, PoleRow, Poles, RowY};
 
 use thiserror::Error;
 
@@ -81,6 +83,9 @@ pub enum SurfaceError {
 }
 
 /// A non-rational (unit-weight) B-spline surface in millimetres.
+///
+/// Surfaces are equal when their degrees, knots and poles compare equal, whatever the layout
+/// of their nets ([`PoleNet`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct NurbsSurface {
     degree_u: usize,
@@ -89,8 +94,8 @@ pub struct NurbsSurface {
     knots_v: Vec<f64>,
     count_u: usize,
     count_v: usize,
-    /// Poles, v-outer / u-inner: pole (i, j) is at `j * count_u + i` (the IGES order).
-    poles: Vec<[f64; 3]>,
+    /// Poles, v-outer / u-inner: pole (i, j) is number `j * count_u + i` (the IGES order).
+    net: PoleNet,
 }
 
 fn check_knots(
@@ -126,9 +131,26 @@ fn check_knots(
     Ok(())
 }
 
+/// The checks of a surface's shape that need no poles: degrees and knots.
+fn check_shape(
+    degree_u: usize,
+    degree_v: usize,
+    knots_u: &[f64],
+    knots_v: &[f64],
+    count_u: usize,
+    count_v: usize,
+) -> Result<(), SurfaceError> {
+    if degree_u == 0 || degree_v == 0 {
+        return Err(SurfaceError::ZeroDegree { degree_u, degree_v });
+    }
+    check_knots("u", knots_u, count_u, degree_u)?;
+    check_knots("v", knots_v, count_v, degree_v)
+}
+
 impl NurbsSurface {
     /// Builds a surface after checking every invariant (degrees, knot counts and order,
-    /// net size, finite poles). `poles` is v-outer / u-inner (`j * count_u + i`).
+    /// net size, finite poles). `poles` is v-outer / u-inner (`j * count_u + i`); the net is
+    /// kept compactly where its coordinates repeat ([`PoleNet::from_poles`]).
     pub fn try_new(
         degree_u: usize,
         degree_v: usize,
@@ -138,11 +160,7 @@ impl NurbsSurface {
         count_v: usize,
         poles: Vec<[f64; 3]>,
     ) -> Result<NurbsSurface, SurfaceError> {
-        if degree_u == 0 || degree_v == 0 {
-            return Err(SurfaceError::ZeroDegree { degree_u, degree_v });
-        }
-        check_knots("u", &knots_u, count_u, degree_u)?;
-        check_knots("v", &knots_v, count_v, degree_v)?;
+        check_shape(degree_u, degree_v, &knots_u, &knots_v, count_u, count_v)?;
         if poles.len() != count_u * count_v {
             return Err(SurfaceError::NetSize {
                 got: poles.len(),
@@ -150,12 +168,46 @@ impl NurbsSurface {
                 count_v,
             });
         }
-        if let Some(k) = poles.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-            return Err(SurfaceError::NonFinitePole {
-                i: k % count_u,
-                j: k / count_u,
-                value: poles[k],
+        let net = PoleNet::from_poles(count_u, &poles);
+        drop(poles);
+        Self::try_from_net(degree_u, degree_v, knots_u, knots_v, count_u, count_v, net)
+    }
+
+    /// [`NurbsSurface::try_new`] from a net already built (e.g. [`PoleNet::separable`], as
+    /// the fit makes it: x per column, y per row, z per pole).
+    pub fn try_from_net(
+        degree_u: usize,
+        degree_v: usize,
+        knots_u: Vec<f64>,
+        knots_v: Vec<f64>,
+        count_u: usize,
+        count_v: usize,
+        net: PoleNet,
+    ) -> Result<NurbsSurface, SurfaceError> {
+        check_shape(degree_u, degree_v, &knots_u, &knots_v, count_u, count_v)?;
+        if net.len() != count_u * count_v || net.count_u() != count_u || net.count_v() != count_v {
+            return Err(SurfaceError::NetSize {
+                got: net.len(),
+                count_u,
+                count_v,
             });
+        }
+        let finite = |v: &[f64]| v.iter().fold(true, |ok, c| ok & c.is_finite());
+        for (j, row) in net.rows().enumerate() {
+            let y_finite = match row.y {
+                RowY::One(y) => y.is_finite(),
+                RowY::Each(ys) => finite(ys),
+            };
+            if y_finite && finite(row.x) && finite(row.z) {
+                continue;
+            }
+            if let Some(i) = (0..row.len()).find(|&i| !row.get(i).iter().all(|c| c.is_finite())) {
+                return Err(SurfaceError::NonFinitePole {
+                    i,
+                    j,
+                    value: row.get(i),
+                });
+            }
         }
         Ok(NurbsSurface {
             degree_u,
@@ -164,7 +216,7 @@ impl NurbsSurface {
             knots_v,
             count_u,
             count_v,
-            poles,
+            net,
         })
     }
 
@@ -193,11 +245,19 @@ impl NurbsSurface {
         self.count_v
     }
     /// All poles, v-outer / u-inner.
-    pub fn poles(&self) -> &[[f64; 3]] {
-        &self.poles
+    pub fn poles(&self) -> Poles<'_> {
+        self.net.iter()
+    }
+    /// The control net.
+    pub fn net(&self) -> &PoleNet {
+        &self.net
+    }
+    /// Pole row `j` (fixed v index).
+    pub fn row(&self, j: usize) -> PoleRow<'_> {
+        self.net.row(j)
     }
     /// Pole (i along u, j along v).
     pub fn pole(&self, i: usize, j: usize) -> [f64; 3] {
-        self.poles[j * self.count_u + i]
+        self.net.pole(i, j)
     }
 }

@@ -68,7 +68,7 @@ fn de_boor(degree: usize, knots: &[f64], ctrl: &[[f64; 3]], t: f64) -> [f64; 3] 
 fn eval(s: &NurbsSurface, u: f64, v: f64) -> [f64; 3] {
     let cols: Vec<[f64; 3]> = (0..s.count_v())
         .map(|j| {
-            let row = &s.poles()[j * s.count_u()..(j + 1) * s.count_u()];
+            let row = &s.net().to_vec()[j * s.count_u()..(j + 1) * s.count_u()];
             de_boor(s.degree_u(), s.knots_u(), row, u)
         })
         .collect();
@@ -140,13 +140,7 @@ fn write_read_round_trip_is_bit_identical() {
     let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(r.knots_u()), bits(s.knots_u()));
     assert_eq!(bits(r.knots_v()), bits(s.knots_v()));
-    let pb = |s: &NurbsSurface| {
-        s.poles()
-            .iter()
-            .flatten()
-            .map(|x| x.to_bits())
-            .collect::<Vec<_>>()
-    };
+    let pb = |s: &NurbsSurface| s.poles().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(pb(r), pb(&s));
     assert_eq!(file.global[14], "MM");
     assert_eq!(file.global[22], "11");
@@ -189,8 +183,8 @@ fn splitting_is_exact_and_shares_the_boundary_row() {
     let (lo, hi) = split_v(&s, v_split).unwrap();
     assert_eq!(lo.knots_v().last(), Some(&v_split));
     assert_eq!(hi.knots_v().first(), Some(&v_split));
-    let last_lo = &lo.poles()[(lo.count_v() - 1) * lo.count_u()..];
-    assert_eq!(last_lo, &hi.poles()[..hi.count_u()]);
+    let last_lo = &lo.net().to_vec()[(lo.count_v() - 1) * lo.count_u()..];
+    assert_eq!(last_lo, &hi.net().to_vec()[..hi.count_u()]);
     for a in 0..=20 {
         let u = a as f64 / 20.0;
         for b in 0..=40 {
@@ -283,13 +277,7 @@ fn large_nets_formatted_in_parallel_chunks_round_trip_bit_identical() {
     let stats = write_iges(&mut out, std::slice::from_ref(&s), &opts()).unwrap();
     assert_eq!(stats.patches, 1);
     let r = &read_iges(&out).unwrap().surfaces[0];
-    let pb = |s: &NurbsSurface| {
-        s.poles()
-            .iter()
-            .flatten()
-            .map(|x| x.to_bits())
-            .collect::<Vec<_>>()
-    };
+    let pb = |s: &NurbsSurface| s.poles().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(pb(r), pb(&s));
     assert_eq!(r.knots_v(), s.knots_v());
 }
@@ -402,8 +390,8 @@ fn plan_files_groups_exact_patches_into_capped_files_that_read_back() {
     );
     for w in all.windows(2) {
         assert_eq!(w[0].knots_v().last(), w[1].knots_v().first());
-        let top = &w[0].poles()[(w[0].count_v() - 1) * nu..];
-        let bottom = &w[1].poles()[..nu];
+        let top = &w[0].net().to_vec()[(w[0].count_v() - 1) * nu..];
+        let bottom = &w[1].net().to_vec()[..nu];
         assert_eq!(top, bottom);
     }
     // Each patch evaluates like the original over its v range, by the crate's evaluator and

@@ -16,7 +16,8 @@ fn split_v_copying(surface: &NurbsSurface, v_split: f64) -> Option<(NurbsSurface
     let nu = surface.count_u();
     let mut knots = surface.knots_v().to_vec();
     let mut rows: Vec<Vec<[f64; 3]>> = surface
-        .poles()
+        .net()
+        .to_vec()
         .chunks_exact(nu)
         .map(|r| r.to_vec())
         .collect();
@@ -125,7 +126,7 @@ fn same_bits(a: &NurbsSurface, b: &NurbsSurface) {
         s.knots_v()
             .iter()
             .copied()
-            .chain(s.poles().iter().flatten().copied())
+            .chain(s.poles().flatten())
             .map(f64::to_bits)
             .collect()
     };

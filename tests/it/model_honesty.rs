@@ -218,7 +218,7 @@ fn the_default_fit_is_the_papers_bit_for_bit() {
                 .iter()
                 .chain(s.knots_v())
                 .copied()
-                .chain(s.poles().iter().flatten().copied())
+                .chain(s.poles().flatten())
                 .map(f64::to_bits)
                 .collect()
         };

@@ -314,7 +314,7 @@ fn spikes_are_replaced_for_the_fit_only_when_asked_and_then_named() {
     let paper = fit_grid(PX, &y, &z, COLS, FitOptions::default()).unwrap();
     assert_eq!(plain.surfaces.len(), 1);
     let bits = |s: &surfscan::nurbs::NurbsSurface| -> Vec<u64> {
-        s.poles().iter().flatten().map(|v| v.to_bits()).collect()
+        s.poles().flatten().map(|v| v.to_bits()).collect()
     };
     assert_eq!(bits(&plain.surfaces[0]), bits(&paper.surface));
     assert!(!plain.start_lines.join(" ").contains("Spikes replaced"));

@@ -422,7 +422,7 @@ pub fn surface_bits(path: &Path) -> Vec<Vec<u64>> {
             let mut bits: Vec<u64> = vec![s.degree_u() as u64, s.degree_v() as u64];
             bits.extend(s.knots_u().iter().map(|v| v.to_bits()));
             bits.extend(s.knots_v().iter().map(|v| v.to_bits()));
-            bits.extend(s.poles().iter().flat_map(|p| p.iter().map(|v| v.to_bits())));
+            bits.extend(s.poles().flat_map(|p| p.map(|v| v.to_bits())));
             bits
         })
         .collect()
