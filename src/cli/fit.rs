@@ -726,6 +726,12 @@ impl Judge<'_> {
                 sq,
                 threshold,
             )
+            // The refit's heights at the held-out lines are not reported here; only the
+            // figures are kept.
+            .map(|mut b| {
+                b.model_um = Vec::new();
+                b
+            })
             .map_err(|e| e.to_string())
         });
         let alternatives = match (&sq, &every, self.compare) {
@@ -957,12 +963,23 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 })?
             }
             threshold => {
+                // The paper's surface (which replaces no spike) is judged on the heights as
+                // read before it is fitted, so the refit's memory is freed before the fitter
+                // takes its own; a recipe that replaces spikes is judged after its fit, on the
+                // grid with them bridged.
+                let early = match &threshold {
+                    Ok(t) if recipe.is_paper() => Some(judge.run(&grid.heights_um, *t)),
+                    _ => None,
+                };
                 let (fit, replaced, fit_s) = fit_step()?;
                 let residual = residual_step(&fit, &grid.heights_um);
-                let judged = judge.run(
-                    &fitted_heights(&grid.heights_um, cols, &index, &replaced),
-                    threshold?,
-                );
+                let judged = match early {
+                    Some(judged) => judged,
+                    None => judge.run(
+                        &fitted_heights(&grid.heights_um, cols, &index, &replaced),
+                        threshold?,
+                    ),
+                };
                 // The heights are not needed past the residual check and the verdict: free them
                 // before the IGES files are planned and written, which is when a large surface
                 // needs the most memory.

@@ -1,6 +1,12 @@
 //! The incremental fitter: each traced line's share of the work on arrival (validation, its
-//! chord-length parameters added to the running sums, the column chords to the previous line,
-//! heights stored in mm); the solve after the last line is in `solve.rs`.
+//! chord-length parameters added to the running sums, the column chords to the previous line
+//! checked and added to each column's running total, heights stored in mm); the solve after
+//! the last line is in `solve.rs`.
+//!
+//! Only the heights are stored per point: the cumulative column chords that v̄ needs are one
+//! row of running totals, and the averaging after the last line recomputes each row's chords
+//! from the stored heights with the same operations (so the same bits), instead of holding a
+//! second grid of them.
 //!
 //! Layer 1 (pure logic): depends on [`crate::profile`] and the fit's own modules; no I/O.
 
@@ -20,8 +26,10 @@ pub struct IncrementalFitter {
     pub(super) z_mm: Vec<f64>,
     /// Σ over rows of each row's normalised cumulative chord, per column.
     pub(super) sum_u: Vec<f64>,
-    /// Cumulative chord along v per column, row-major (row 0 is zeros).
+    /// Cumulative chord along v per column up to the last line (zeros after the first).
     pub(super) cum_v: Vec<f64>,
+    /// The next line's cumulative column chords while it is checked.
+    pub(super) next_cum_v: Vec<f64>,
     /// Scratch for one row's chords, then its cumulative chords.
     pub(super) scratch: Vec<f64>,
     pub(super) params_s: f64,
@@ -42,6 +50,7 @@ impl IncrementalFitter {
             z_mm: Vec::new(),
             sum_u: Vec::new(),
             cum_v: Vec::new(),
+            next_cum_v: Vec::new(),
             scratch: Vec::new(),
             params_s: 0.0,
         }
@@ -52,8 +61,6 @@ impl IncrementalFitter {
     pub fn reserve_lines(&mut self, lines: usize, cols: usize) {
         self.z_mm.reserve(lines.saturating_mul(cols));
         advise_huge_pages(&self.z_mm);
-        self.cum_v.reserve(lines.saturating_mul(cols));
-        advise_huge_pages(&self.cum_v);
         self.y_mm.reserve(lines);
     }
 
@@ -146,7 +153,6 @@ impl IncrementalFitter {
 
         // Heights in mm, once (the division, not a multiplication by 1e-3, fixes the bits).
         grow_for_row(&mut self.z_mm, n);
-        grow_for_row(&mut self.cum_v, n);
         let mut non_finite = false;
         self.z_mm.extend(heights_um.iter().map(|&h| {
             non_finite |= !h.is_finite();
@@ -178,13 +184,14 @@ impl IncrementalFitter {
                 bad_u |= (*d == 0.0) | !d.is_finite();
             }
             if line == 0 {
-                self.cum_v.resize(n, 0.0);
                 (bad_u, false, false, 0.0)
             } else {
                 let dy = y_mm - self.y_mm[line - 1];
                 let dy2 = dy * dy;
                 let prev_row = &stored[base - n..];
-                let (bad_v, bad_cum) = extend_column_chords(&mut self.cum_v, zrow, prev_row, dy2);
+                self.next_cum_v.resize(n, 0.0);
+                let (bad_v, bad_cum) =
+                    next_column_chords(&mut self.next_cum_v, &self.cum_v, zrow, prev_row, dy2);
                 (bad_u, bad_v, bad_cum, dy2)
             }
         };
@@ -199,7 +206,6 @@ impl IncrementalFitter {
         if bad_u || !acc.is_finite() || bad_v || bad_cum {
             let err = self.row_error(line, y_mm, pitch, dy2, bad_u, acc, bad_v);
             self.z_mm.truncate(base);
-            self.cum_v.truncate(base);
             return Err(err);
         }
 
@@ -208,6 +214,9 @@ impl IncrementalFitter {
             self.cols = n;
             self.pitch_x_mm = pitch_x_mm;
             self.sum_u = vec![0.0; n];
+            self.cum_v = vec![0.0; n];
+        } else {
+            std::mem::swap(&mut self.cum_v, &mut self.next_cum_v);
         }
         let total = acc;
         for (s, &c) in self.sum_u.iter_mut().zip(&self.scratch) {
@@ -219,8 +228,9 @@ impl IncrementalFitter {
     }
 
     /// The error for a row whose checks failed in [`IncrementalFitter::push_row`], with the
-    /// row still in the stores (`z_mm` and `cum_v` hold it as their last `n` values) and the
-    /// u chords in `scratch` (cumulated only when they were all valid). Reports the first
+    /// row still in the stores (`z_mm` holds it as its last `n` values, `next_cum_v` its
+    /// cumulative column chords) and the u chords in `scratch` (cumulated only when they were
+    /// all valid). Reports the first
     /// failure in the order: u chord, u total, v chord, v cumulative chord.
     #[allow(clippy::too_many_arguments)]
     #[cold]
@@ -283,7 +293,7 @@ impl IncrementalFitter {
                 [x, y_mm, zrow[k]],
             );
         }
-        let cum = &self.cum_v[base..base + n];
+        let cum = &self.next_cum_v[..n];
         let k = cum.iter().position(|c| !c.is_finite()).unwrap_or(0);
         FitError::ChordOverflow {
             direction: "v",
@@ -344,10 +354,8 @@ impl IncrementalFitter {
     /// The surface through all lines.
     pub fn finish(mut self) -> Result<FitResult, FitError> {
         self.check_ready()?;
-        let z = std::mem::take(&mut self.z_mm);
         let params = self.averaged_params();
-        // The column chords are only needed for v̄: freed before the net is allocated.
-        self.cum_v = Vec::new();
+        let z = std::mem::take(&mut self.z_mm);
         self.solve(z, params)
     }
 
@@ -376,22 +384,18 @@ pub(super) fn grow_for_row(store: &mut Vec<f64>, n: usize) {
     }
 }
 
-/// Appends one row of cumulative column chords to `cum_v` (whose last `zrow.len()` values are
-/// the previous line's): chord (√(dy² + Δz²), mm) to the previous line's height plus the
-/// previous cumulative value. Returns (some chord is zero or not finite, some cumulative value
-/// is not finite); branch-free so it vectorises.
+/// One row of cumulative column chords into `row`: chord (√(dy² + Δz²), mm) to the previous
+/// line's height plus the previous cumulative value `prev_cum`. Returns (some chord is zero or
+/// not finite, some cumulative value is not finite); branch-free so it vectorises. The
+/// averaging of v̄ recomputes the rows with this same function, so their bits agree.
 #[inline(always)]
-pub(super) fn extend_column_chords(
-    cum_v: &mut Vec<f64>,
+pub(super) fn next_column_chords(
+    row: &mut [f64],
+    prev_cum: &[f64],
     zrow: &[f64],
     prev_row: &[f64],
     dy2: f64,
 ) -> (bool, bool) {
-    let n = zrow.len();
-    let base = cum_v.len();
-    cum_v.resize(base + n, 0.0);
-    let (before, row) = cum_v.split_at_mut(base);
-    let prev_cum = &before[base - n..];
     let (mut bad_v, mut bad_cum) = (false, false);
     for (((c, &pc), &z), &pz) in row.iter_mut().zip(prev_cum).zip(zrow).zip(prev_row) {
         let dz = z - pz;

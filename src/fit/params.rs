@@ -1,7 +1,9 @@
 //! The paper's parameters and knots: averaged chord-length parameters (P&T eq. 9.5 with A9.3)
 //! from the fitter's running sums, and clamped knots by averaging (eq. 9.8).
 //!
-//! Layer 1 (pure logic): depends on nothing else in the crate.
+//! Layer 1 (pure logic): depends on the fitter's column chords only.
+
+use super::incremental::next_column_chords;
 
 /// ū_k: mean over rows of the normalised cumulative chords; exactly 0 and 1 at the ends.
 pub(super) fn average_params_u(sum_u: &[f64], rows: usize) -> Vec<f64> {
@@ -16,15 +18,31 @@ pub(super) fn average_params_u(sum_u: &[f64], rows: usize) -> Vec<f64> {
     out
 }
 
-/// v̄_l: mean over columns of each column's cumulative chord normalised by its total.
+/// v̄_l: mean over columns of each column's cumulative chord normalised by its total
+/// (`totals`, the last line's cumulative chords). The cumulative chords of each line are
+/// recomputed from the heights in mm (`z_mm`, row-major, `y_mm.len()` rows of `cols`) one row
+/// at a time, as the lines' arrival computed them.
 #[inline(always)]
-pub(super) fn average_params_v(cum_v: &[f64], rows: usize, cols: usize) -> Vec<f64> {
-    let totals = &cum_v[(rows - 1) * cols..rows * cols];
+pub(super) fn average_params_v(
+    z_mm: &[f64],
+    y_mm: &[f64],
+    cols: usize,
+    totals: &[f64],
+) -> Vec<f64> {
     let c = cols as f64;
-    let mut out: Vec<f64> = cum_v
-        .chunks_exact(cols)
-        .map(|row| sum_ratios(row, totals) / c)
-        .collect();
+    let mut cum = vec![0.0f64; cols];
+    let mut next = vec![0.0f64; cols];
+    let mut out = Vec::with_capacity(y_mm.len());
+    if !y_mm.is_empty() {
+        out.push(sum_ratios(&cum, totals) / c);
+    }
+    let rows: Vec<&[f64]> = z_mm.chunks_exact(cols).collect();
+    for (pair, y) in rows.windows(2).zip(y_mm.windows(2)) {
+        let dy = y[1] - y[0];
+        next_column_chords(&mut next, &cum, pair[1], pair[0], dy * dy);
+        std::mem::swap(&mut cum, &mut next);
+        out.push(sum_ratios(&cum, totals) / c);
+    }
     if let Some(f) = out.first_mut() {
         *f = 0.0;
     }
@@ -36,7 +54,7 @@ pub(super) fn average_params_v(cum_v: &[f64], rows: usize, cols: usize) -> Vec<f
 
 /// Σ a_k / t_k with four partial sums (a fixed order, so results are reproducible).
 #[inline(always)]
-fn sum_ratios(a: &[f64], t: &[f64]) -> f64 {
+pub(super) fn sum_ratios(a: &[f64], t: &[f64]) -> f64 {
     let mut acc = [0.0f64; 4];
     let (a4, t4) = (a.chunks_exact(4), t.chunks_exact(4));
     let (ar, tr) = (a4.remainder(), t4.remainder());

@@ -18,7 +18,9 @@ impl IncrementalFitter {
         let (rows, cols) = (self.lines(), self.cols);
         let t = Instant::now();
         let params_u = average_params_u(&self.sum_u, rows);
-        let params_v = simd::wide(|| average_params_v(&self.cum_v, rows, cols));
+        let params_v = simd::wide(|| {
+            average_params_v(&self.z_mm[..rows * cols], &self.y_mm, cols, &self.cum_v)
+        });
         (params_u, params_v, secs(t))
     }
 

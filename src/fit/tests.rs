@@ -390,3 +390,49 @@ fn residual_reusing_the_basis_equals_per_point_evaluation_to_the_bit() {
         f64::INFINITY
     );
 }
+
+#[test]
+fn v_parameters_recomputed_from_the_heights_equal_those_of_a_stored_chord_grid_to_the_bit() {
+    // The fitter keeps one row of running column chords and recomputes each line's chords
+    // from the stored heights when it averages; this is the grid of cumulative chords built
+    // line by line as they arrived (as a fitter storing them all would), averaged the same
+    // way. Uneven y steps and rough heights, with a line rejected on the way.
+    let (rows, cols) = (23, 37);
+    let h = rough_grid(rows, cols, 11);
+    let y: Vec<f64> = (0..rows)
+        .map(|l| l as f64 * 0.01 + (l * l) as f64 * 3e-4)
+        .collect();
+    let mut f = IncrementalFitter::new(FitOptions::default());
+    for (l, row) in h.chunks_exact(cols).enumerate() {
+        if l == 9 {
+            let mut bad = row.to_vec();
+            bad[5] = f64::NAN;
+            assert!(f.push_row(y[l], 0.0005, &bad).is_err());
+        }
+        f.push_row(y[l], 0.0005, row).unwrap();
+    }
+    let fit = f.finish().unwrap();
+    let z: Vec<f64> = h.iter().map(|v| v / 1000.0).collect();
+    let mut cum = vec![vec![0.0f64; cols]];
+    for l in 1..rows {
+        let dy = y[l] - y[l - 1];
+        let prev = cum[l - 1].clone();
+        cum.push(
+            (0..cols)
+                .map(|k| {
+                    let dz = z[l * cols + k] - z[(l - 1) * cols + k];
+                    (dy * dy + dz * dz).sqrt() + prev[k]
+                })
+                .collect(),
+        );
+    }
+    let totals = cum[rows - 1].clone();
+    let mut want: Vec<f64> = cum
+        .iter()
+        .map(|row| super::params::sum_ratios(row, &totals) / cols as f64)
+        .collect();
+    want[0] = 0.0;
+    want[rows - 1] = 1.0;
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&fit.params_v), bits(&want));
+}

@@ -175,22 +175,6 @@ fn reformat(out: &mut Vec<u8>, text: &[u8]) {
     }
 }
 
-/// Appends `bytes` (at most 32, as any formatted f64 is) with fixed-size copies only, which
-/// compile to a few register moves instead of a `memcpy` call per number; longer input falls
-/// back to an ordinary copy.
-#[inline]
-fn extend_short(out: &mut Vec<u8>, bytes: &[u8]) {
-    let n = bytes.len();
-    if n > 32 {
-        out.extend_from_slice(bytes);
-        return;
-    }
-    let base = out.len();
-    out.extend_from_slice(&[0u8; 32]);
-    copy_short(&mut out[base..base + 32], bytes);
-    out.truncate(base + n);
-}
-
 /// Appends `bytes` (at most 32, as any formatted f64 is; longer input falls back to an
 /// ordinary copy) with one capacity check and fixed-size copies, inlined into the formatter:
 /// a real's text is appended without a call.
@@ -203,33 +187,16 @@ fn push_short(out: &mut Vec<u8>, bytes: &[u8]) {
     }
     out.reserve(32);
     let len = out.len();
-    let src = bytes.as_ptr();
-    // SAFETY: `reserve(32)` guarantees 32 writable bytes from `len`; every copy below writes
-    // within [len, len + n) (n <= 32) and reads within `bytes` (each overlapping pair covers
-    // [0, n) with both copies inside it); `set_len` then covers exactly the bytes written.
+    // SAFETY: `reserve(32)` guarantees 32 writable bytes from `len`, and `n <= 32`;
+    // `set_len` then covers exactly the bytes written.
     unsafe {
-        let dst = out.as_mut_ptr().add(len);
-        if n >= 16 {
-            std::ptr::copy_nonoverlapping(src, dst, 16);
-            std::ptr::copy_nonoverlapping(src.add(n - 16), dst.add(n - 16), 16);
-        } else if n >= 8 {
-            std::ptr::copy_nonoverlapping(src, dst, 8);
-            std::ptr::copy_nonoverlapping(src.add(n - 8), dst.add(n - 8), 8);
-        } else if n >= 4 {
-            std::ptr::copy_nonoverlapping(src, dst, 4);
-            std::ptr::copy_nonoverlapping(src.add(n - 4), dst.add(n - 4), 4);
-        } else {
-            for i in 0..n {
-                *dst.add(i) = *src.add(i);
-            }
-        }
+        copy_at_most_32(bytes, out.as_mut_ptr().add(len));
         out.set_len(len + n);
     }
 }
 
-/// Appends `bytes` (at most 32) and then `last`, with one capacity check and fixed-size copies
-/// (two overlapping copies of a power-of-two size cover every length in its range): the
-/// packing of tokens into records, the formatter's innermost loop, is written by hand here
+/// Appends `bytes` (at most 32) and then `last`, with one capacity check and fixed-size copies:
+/// the packing of tokens into records, the formatter's innermost loop, is written by hand here
 /// because `extend_from_slice` of a short slice costs a `memcpy` call and a second check.
 #[inline]
 pub(crate) fn push_short_then(out: &mut Vec<u8>, bytes: &[u8], last: u8) {
@@ -237,12 +204,28 @@ pub(crate) fn push_short_then(out: &mut Vec<u8>, bytes: &[u8], last: u8) {
     assert!(n <= 32);
     out.reserve(33);
     let len = out.len();
-    let src = bytes.as_ptr();
-    // SAFETY: `reserve(33)` guarantees 33 writable bytes from `len`; every copy below writes
-    // within [len, len + n] (n <= 32) and reads within `bytes` (each overlapping pair covers
-    // [0, n) with both copies inside it); `set_len` then covers exactly the bytes written.
+    // SAFETY: `reserve(33)` guarantees 33 writable bytes from `len`, and `n <= 32`; `set_len`
+    // then covers exactly the bytes written.
     unsafe {
         let dst = out.as_mut_ptr().add(len);
+        copy_at_most_32(bytes, dst);
+        *dst.add(n) = last;
+        out.set_len(len + n + 1);
+    }
+}
+
+/// Copies `bytes` (at most 32) to `dst` with fixed-size copies: two overlapping copies of a
+/// power-of-two size cover every length in its range.
+///
+/// # Safety
+/// `bytes.len() <= 32` and `dst` is valid for writing `bytes.len()` bytes that do not overlap
+/// `bytes`.
+#[inline(always)]
+unsafe fn copy_at_most_32(bytes: &[u8], dst: *mut u8) {
+    let (src, n) = (bytes.as_ptr(), bytes.len());
+    // SAFETY: each copy reads within `bytes` and writes within [dst, dst + n), as the caller
+    // guarantees room for.
+    unsafe {
         if n >= 16 {
             std::ptr::copy_nonoverlapping(src, dst, 16);
             std::ptr::copy_nonoverlapping(src.add(n - 16), dst.add(n - 16), 16);
@@ -257,8 +240,6 @@ pub(crate) fn push_short_then(out: &mut Vec<u8>, bytes: &[u8], last: u8) {
                 *dst.add(i) = *src.add(i);
             }
         }
-        *dst.add(n) = last;
-        out.set_len(len + n + 1);
     }
 }
 
@@ -359,12 +340,63 @@ pub fn hollerith(text: &str) -> String {
 /// Each token is pushed together with the delimiter that follows it, so a number is never
 /// split from its delimiter nor across records. Hollerith strings longer than a whole field
 /// may continue on the next record (the only split IGES allows).
+///
+/// Records are either bare (`width` bytes each, [`FieldPacker::new`]) or finished P lines
+/// ([`FieldPacker::parameter_lines`]): each 64-column record followed by its DE back-pointer,
+/// `P`, the sequence number counted up in place and the newline, so a record is written
+/// once, in its line, instead of packed and then copied into a line.
 #[derive(Debug)]
 pub struct FieldPacker {
     width: usize,
     /// Records written so far; the last one may still be filling (from `line_start`).
     data: Vec<u8>,
     line_start: usize,
+    /// What follows each record's data in a P line, if the records are P lines.
+    frame: Option<LineFrame>,
+    /// Records completed so far, those handed on included.
+    completed: usize,
+}
+
+/// Bytes after the 64 data columns of a P line: the DE back-pointer (8), `P`, the sequence
+/// number (7), the newline.
+pub const P_LINE_TAIL: usize = 17;
+
+/// Columns 65–80 and the newline of the P lines being packed.
+#[derive(Debug)]
+struct LineFrame {
+    tail: [u8; P_LINE_TAIL],
+    seq: SequenceField,
+}
+
+/// A 7-column right-justified sequence number kept as text and counted up in place.
+#[derive(Debug)]
+pub(crate) struct SequenceField {
+    pub(crate) digits: [u8; 7],
+}
+
+impl SequenceField {
+    /// The field before the first line (blank; the first increment makes it 1).
+    pub(crate) fn new() -> SequenceField {
+        SequenceField { digits: [b' '; 7] }
+    }
+
+    /// Adds one. Past seven digits it wraps; the writer refuses such a file before it is
+    /// used.
+    pub(crate) fn increment(&mut self) {
+        for d in self.digits.iter_mut().rev() {
+            match *d {
+                b'9' => *d = b'0',
+                b' ' => {
+                    *d = b'1';
+                    return;
+                }
+                _ => {
+                    *d += 1;
+                    return;
+                }
+            }
+        }
+    }
 }
 
 impl FieldPacker {
@@ -379,6 +411,33 @@ impl FieldPacker {
             width,
             data: Vec::with_capacity(bytes),
             line_start: 0,
+            frame: None,
+            completed: 0,
+        }
+    }
+
+    /// A packer of finished P lines (64 data columns each), numbered from 1, reserving
+    /// `bytes`; the DE back-pointer is set by [`FieldPacker::set_back_pointer`].
+    pub fn parameter_lines(bytes: usize) -> FieldPacker {
+        let mut tail = [b' '; P_LINE_TAIL];
+        tail[8] = b'P';
+        tail[16] = b'\n';
+        FieldPacker {
+            frame: Some(LineFrame {
+                tail,
+                seq: SequenceField::new(),
+            }),
+            ..FieldPacker::with_capacity(64, bytes)
+        }
+    }
+
+    /// Sets the DE back-pointer (columns 65–72) of the P lines completed from now on; no
+    /// effect on bare records.
+    pub fn set_back_pointer(&mut self, de: usize) {
+        if let Some(f) = &mut self.frame {
+            let mut back = Vec::with_capacity(8);
+            push_right(&mut back, de as i64, 8);
+            f.tail[..8].copy_from_slice(&back);
         }
     }
 
@@ -399,14 +458,14 @@ impl FieldPacker {
                     }
                     self.data.extend_from_slice(&rest[..room]);
                     rest = &rest[room..];
-                    self.line_start = self.data.len();
+                    self.pad_line();
                 }
                 self.data.extend_from_slice(rest);
                 self.data.push(delimiter);
                 return;
             }
         }
-        extend_short(&mut self.data, token);
+        push_short(&mut self.data, token);
         self.data.push(delimiter);
     }
 
@@ -430,6 +489,46 @@ impl FieldPacker {
         }
     }
 
+    /// Adds `count` copies of `token` followed by `delimiter`: exactly what one
+    /// [`FieldPacker::push`] per copy gives, with the whole records between the first and
+    /// the last copied from one record.
+    pub fn push_repeated(&mut self, token: &[u8], delimiter: u8, count: usize) {
+        let need = token.len() + 1;
+        if need > self.width {
+            for _ in 0..count {
+                self.push(token, delimiter);
+            }
+            return;
+        }
+        let mut left = count;
+        // The record being filled takes what fits (at least one copy when it is empty).
+        while left > 0 && self.data.len() - self.line_start + need <= self.width {
+            self.data.extend_from_slice(token);
+            self.data.push(delimiter);
+            left -= 1;
+        }
+        if left == 0 {
+            return;
+        }
+        // Each further record holds `per` copies; the last one stays open, as after single
+        // pushes.
+        let per = self.width / need;
+        let mut record = vec![b' '; per * need];
+        for slot in record.chunks_exact_mut(need) {
+            slot[..token.len()].copy_from_slice(token);
+            slot[token.len()] = delimiter;
+        }
+        loop {
+            self.pad_line();
+            let n = left.min(per);
+            self.data.extend_from_slice(&record[..n * need]);
+            left -= n;
+            if left == 0 {
+                return;
+            }
+        }
+    }
+
     /// Adds a real (see [`push_real`]) followed by `delimiter`, formatting it in place.
     /// Returns `false` (adding nothing) for NaN or infinity.
     pub fn push_real(&mut self, value: f64, delimiter: u8) -> bool {
@@ -449,16 +548,6 @@ impl FieldPacker {
         true
     }
 
-    /// Ends the record being filled and appends whole records packed elsewhere (`records`
-    /// must be a multiple of the width, as [`FieldPacker::finish`] returns).
-    pub fn append_records(&mut self, records: &[u8]) {
-        if self.data.len() > self.line_start {
-            self.pad_line();
-        }
-        self.data.extend_from_slice(records);
-        self.line_start = self.data.len();
-    }
-
     /// Bytes held: the complete records not yet drained and the one being filled.
     pub fn bytes(&self) -> usize {
         self.data.len()
@@ -471,8 +560,8 @@ impl FieldPacker {
         }
     }
 
-    /// Hands the complete records (a multiple of the width) to `f` and keeps only the record
-    /// being filled, so a long entity can be written as it is packed.
+    /// Hands the complete records (or P lines) to `f` and keeps only the record being
+    /// filled, so a long entity can be written as it is packed.
     pub fn drain_records<R>(&mut self, f: impl FnOnce(&[u8]) -> R) -> R {
         let r = f(&self.data[..self.line_start]);
         self.data.drain(..self.line_start);
@@ -480,18 +569,31 @@ impl FieldPacker {
         r
     }
 
+    /// Completes the record being filled: padded to the full width, then, for a P line, its
+    /// columns 65–80 and the newline.
+    #[inline]
     fn pad_line(&mut self) {
-        let end = self.line_start + self.width;
-        self.data.resize(end, b' ');
-        self.line_start = end;
+        self.data.resize(self.line_start + self.width, b' ');
+        if let Some(f) = &mut self.frame {
+            f.seq.increment();
+            f.tail[9..16].copy_from_slice(&f.seq.digits);
+            self.data.extend_from_slice(&f.tail);
+        }
+        self.line_start = self.data.len();
+        self.completed += 1;
+    }
+
+    /// Number of records completed so far (those handed on included).
+    pub fn complete_records(&self) -> usize {
+        self.completed
     }
 
     /// Number of complete records so far plus the one being filled.
     pub fn records(&self) -> usize {
-        self.line_start / self.width + usize::from(self.data.len() > self.line_start)
+        self.completed + usize::from(self.data.len() > self.line_start)
     }
 
-    /// Finishes the last record and returns all records (`records() * width` bytes).
+    /// Finishes the last record and returns the records not yet drained.
     pub fn finish(mut self) -> Vec<u8> {
         if self.data.len() > self.line_start {
             self.pad_line();
@@ -640,11 +742,15 @@ mod tests {
     fn short_copies_append_exactly_the_bytes() {
         let src: Vec<u8> = (0..40u8).map(|b| b'A' + b).collect();
         for n in 0..=40 {
-            for push in [extend_short, push_short] {
-                let mut out = b"xy".to_vec();
-                push(&mut out, &src[..n]);
-                assert_eq!(&out[..2], b"xy");
-                assert_eq!(&out[2..], &src[..n], "length {n}");
+            let mut out = b"xy".to_vec();
+            push_short(&mut out, &src[..n]);
+            assert_eq!(&out[..2], b"xy");
+            assert_eq!(&out[2..], &src[..n], "length {n}");
+            let mut out = b"xy".to_vec();
+            if n <= 32 {
+                push_short_then(&mut out, &src[..n], b';');
+                assert_eq!(&out[2..2 + n], &src[..n], "length {n}");
+                assert_eq!(&out[2 + n..], b";");
             }
         }
     }

@@ -74,7 +74,14 @@ impl<'a> RowWindow<'a> {
     /// between (P&T A5.1).
     fn insert(&mut self, knots: &[f64], k: usize, q: usize, v: f64) {
         let blend_lo = (k + 1).saturating_sub(q);
-        let lo = self.start.min(blend_lo);
+        // While every row is still the original's in place (nothing held, nothing shifted),
+        // the window is the blended rows alone; after that it grows to cover what it held.
+        let untouched = self.changed.is_empty() && self.resume == self.start;
+        let lo = if untouched {
+            blend_lo
+        } else {
+            self.start.min(blend_lo)
+        };
         let hi = (self.start + self.changed.len() + 1).max(k + 1);
         let width = self.original.count_u();
         let mut changed = Vec::with_capacity(hi - lo);

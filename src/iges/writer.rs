@@ -14,7 +14,7 @@
 //! entity), never by formatting the surface first.
 
 use super::format::{
-    ascii_printable, hollerith, push_real, push_right, push_short_then, push_uint, FieldPacker,
+    ascii_printable, hollerith, push_real, push_right, push_uint, FieldPacker, P_LINE_TAIL,
 };
 use super::split::{split_middle_shapes, split_v_middle, split_v_middle_side, PatchShape, Side};
 use super::IgesError;
@@ -346,14 +346,14 @@ fn stream_entity_128(
     s: &NurbsSurface,
     patch: usize,
     workers: usize,
-    p: &mut LinePacker,
+    p: &mut FieldPacker,
     emit: &mut dyn FnMut(&[u8]) -> Result<(), IgesError>,
 ) -> Result<usize, IgesError> {
     let (nu, nv) = (s.count_u(), s.count_v());
-    let first_line = p.lines();
-    let mut hand_on = |p: &mut LinePacker| -> Result<(), IgesError> {
+    let first_line = p.complete_records();
+    let mut hand_on = |p: &mut FieldPacker| -> Result<(), IgesError> {
         if p.bytes() >= BLOCK_BYTES {
-            p.drain_lines(&mut *emit)?;
+            p.drain_records(&mut *emit)?;
         }
         Ok(())
     };
@@ -377,7 +377,7 @@ fn stream_entity_128(
         push_uint(&mut tok, h);
         p.push(&tok, b',');
     }
-    let real = |p: &mut LinePacker, v: f64, what: &'static str, index: usize, delim: u8| {
+    let real = |p: &mut FieldPacker, v: f64, what: &'static str, index: usize, delim: u8| {
         if p.push_real(v, delim) {
             Ok(())
         } else {
@@ -402,7 +402,7 @@ fn stream_entity_128(
         weights -= n;
         hand_on(p)?;
     }
-    p.end_record();
+    p.pad_last();
     let net = s.net();
     let count = net.len();
     let chunk = if count >= PARALLEL_POLES {
@@ -423,16 +423,16 @@ fn stream_entity_128(
                 hand_on(p)
             },
         )?;
-        p.end_record();
+        p.pad_last();
     }
     let (ku, kv) = (s.knots_u(), s.knots_v());
     let dom = [ku[s.degree_u()], ku[nu], kv[s.degree_v()], kv[nv]];
     for (i, &d) in dom.iter().enumerate() {
         real(p, d, "parameter range", i, if i == 3 { b';' } else { b',' })?;
     }
-    p.end_record();
+    p.pad_last();
     hand_on(p)?;
-    Ok(p.lines() - first_line)
+    Ok(p.complete_records() - first_line)
 }
 
 /// Splits `surface` along v until each patch's P lines are bounded by `max_lines` (from
@@ -846,193 +846,9 @@ fn terminate(out: &mut Vec<u8>, counts: [usize; 4]) {
     record(out, &t, b'T', 1);
 }
 
-/// Bytes of one P line: 64 data columns, the DE back-pointer (8), `P`, the sequence number
-/// (7) and the newline.
-const LINE_BYTES: usize = 81;
-/// Data columns of a P line.
-const P_DATA: usize = 64;
-
-/// Packs the free-format parameters of entities straight into finished P lines (columns
-/// 1–64 the data, 65–72 the DE back-pointer, 73 `P`, 74–80 the sequence number counted up in
-/// place, newline), breaking only after a delimiter exactly as [`FieldPacker`] packs
-/// 64-column records: each record is written once, in its line, instead of packed and then
-/// copied into a line template.
-struct LinePacker {
-    /// Complete lines not yet drained, then the data of the line being filled.
-    data: Vec<u8>,
-    line_start: usize,
-    /// Columns 65–80 and the newline of the lines being written.
-    tail: [u8; LINE_BYTES - P_DATA],
-    seq: SequenceField,
-    /// Lines completed so far.
-    lines: usize,
-}
-
-impl LinePacker {
-    fn new(capacity: usize) -> LinePacker {
-        let mut tail = [b' '; LINE_BYTES - P_DATA];
-        tail[8] = b'P';
-        tail[16] = b'\n';
-        LinePacker {
-            data: Vec::with_capacity(capacity),
-            line_start: 0,
-            tail,
-            seq: SequenceField::new(),
-            lines: 0,
-        }
-    }
-
-    /// Sets the DE back-pointer of the lines that follow.
-    fn entity(&mut self, de: usize) {
-        let mut back = Vec::with_capacity(8);
-        push_right(&mut back, de as i64, 8);
-        self.tail[..8].copy_from_slice(&back);
-    }
-
-    /// Lines completed so far.
-    fn lines(&self) -> usize {
-        self.lines
-    }
-
-    /// Bytes held: complete lines not yet drained and the data of the line being filled.
-    fn bytes(&self) -> usize {
-        self.data.len()
-    }
-
-    /// Completes the line being filled: its data padded to 64 columns, then its columns
-    /// 65–80. Past the 7-digit field the sequence number wraps; the writer refuses such a
-    /// file before it is used.
-    #[inline]
-    fn end_line(&mut self) {
-        self.seq.increment();
-        self.tail[9..16].copy_from_slice(&self.seq.digits);
-        self.data.resize(self.line_start + P_DATA, b' ');
-        self.data.extend_from_slice(&self.tail);
-        self.line_start = self.data.len();
-        self.lines += 1;
-    }
-
-    /// Completes the line being filled, if it holds anything, so that what follows starts a
-    /// fresh record.
-    fn end_record(&mut self) {
-        if self.data.len() > self.line_start {
-            self.end_line();
-        }
-    }
-
-    /// Adds `token` followed by `delimiter`; starts a new line first if they do not fit.
-    fn push(&mut self, token: &[u8], delimiter: u8) {
-        let need = token.len() + 1;
-        if self.data.len() - self.line_start + need > P_DATA {
-            if need <= P_DATA {
-                self.end_line();
-            } else {
-                // Only Hollerith strings can be this long: fill lines with it.
-                let mut rest = token;
-                loop {
-                    let room = P_DATA - (self.data.len() - self.line_start);
-                    if rest.len() < room {
-                        break;
-                    }
-                    self.data.extend_from_slice(&rest[..room]);
-                    rest = &rest[room..];
-                    self.end_line();
-                }
-                self.data.extend_from_slice(rest);
-                self.data.push(delimiter);
-                return;
-            }
-        }
-        self.data.extend_from_slice(token);
-        self.data.push(delimiter);
-    }
-
-    /// Adds a real (see [`push_real`]) followed by `delimiter`, formatting it in place.
-    /// Returns `false` (adding nothing) for NaN or infinity.
-    fn push_real(&mut self, value: f64, delimiter: u8) -> bool {
-        let before = self.data.len();
-        if !push_real(&mut self.data, value) {
-            return false;
-        }
-        self.data.push(delimiter);
-        if self.data.len() - self.line_start > P_DATA {
-            let mut tmp = [0u8; 64];
-            let len = self.data.len() - before;
-            tmp[..len].copy_from_slice(&self.data[before..]);
-            self.data.truncate(before);
-            self.end_line();
-            self.data.extend_from_slice(&tmp[..len]);
-        }
-        true
-    }
-
-    /// Adds pre-formatted tokens (`lens[i]` bytes each, concatenated in `text`), each followed
-    /// by `delimiter`: exactly what one [`LinePacker::push`] per token gives.
-    fn push_tokens(&mut self, text: &[u8], lens: &[u8], delimiter: u8) {
-        let mut at = 0usize;
-        for &len in lens {
-            let n = usize::from(len);
-            let token = &text[at..at + n];
-            at += n;
-            if n + 1 > P_DATA {
-                self.push(token, delimiter);
-                continue;
-            }
-            if self.data.len() - self.line_start + n + 1 > P_DATA {
-                self.end_line();
-            }
-            push_short_then(&mut self.data, token, delimiter);
-        }
-    }
-
-    /// Adds `count` copies of `token` followed by `delimiter`: exactly what one
-    /// [`LinePacker::push`] per copy gives, with the whole lines between the first and the
-    /// last copied from one record.
-    fn push_repeated(&mut self, token: &[u8], delimiter: u8, count: usize) {
-        let need = token.len() + 1;
-        if need > P_DATA {
-            for _ in 0..count {
-                self.push(token, delimiter);
-            }
-            return;
-        }
-        let mut left = count;
-        // The line being filled takes what fits (at least one copy when it is empty).
-        while left > 0 && self.data.len() - self.line_start + need <= P_DATA {
-            self.data.extend_from_slice(token);
-            self.data.push(delimiter);
-            left -= 1;
-        }
-        if left == 0 {
-            return;
-        }
-        // Each further line holds `per` copies; the last one stays open, as after single
-        // pushes.
-        let per = P_DATA / need;
-        let mut record = [b' '; P_DATA];
-        for slot in record.chunks_exact_mut(need).take(per) {
-            slot[..token.len()].copy_from_slice(token);
-            slot[token.len()] = delimiter;
-        }
-        loop {
-            self.end_line();
-            let n = left.min(per);
-            self.data.extend_from_slice(&record[..n * need]);
-            left -= n;
-            if left == 0 {
-                return;
-            }
-        }
-    }
-
-    /// Hands the complete lines to `f` and keeps only the line being filled.
-    fn drain_lines<R>(&mut self, f: impl FnOnce(&[u8]) -> R) -> R {
-        let r = f(&self.data[..self.line_start]);
-        self.data.drain(..self.line_start);
-        self.line_start = 0;
-        r
-    }
-}
+/// Bytes of one P line: 64 data columns, then the DE back-pointer, `P`, the sequence number
+/// and the newline.
+const LINE_BYTES: usize = 64 + P_LINE_TAIL;
 
 /// Splits each surface into the patches one file holds (bounded by
 /// `opts.max_parameter_lines_per_entity`), borrowing those that fit.
@@ -1086,18 +902,18 @@ pub fn write_iges_seekable<W: Write + Seek>(
     w.write_all(&buf)?;
     buf.clear();
     let workers = worker_count();
-    let mut lines = LinePacker::new(BLOCK_BYTES + 64 * LINE_BYTES);
+    let mut lines = FieldPacker::parameter_lines(BLOCK_BYTES + 64 * LINE_BYTES);
     let mut counts = Vec::with_capacity(patches.len());
     for (k, patch) in patches.iter().enumerate() {
-        lines.entity(2 * k + 1);
+        lines.set_back_pointer(2 * k + 1);
         let n = stream_entity_128(patch, k, workers, &mut lines, &mut |block| {
             w.write_all(block)?;
             Ok(())
         })?;
         counts.push(n);
     }
-    lines.drain_lines(|block| w.write_all(block))?;
-    let p_lines = lines.lines();
+    lines.drain_records(|block| w.write_all(block))?;
+    let p_lines = lines.complete_records();
     if p_lines > file_cap {
         return Err(IgesError::SectionTooLong {
             section: 'P',
@@ -1138,38 +954,10 @@ pub fn write_iges<W: Write>(
     Ok(stats)
 }
 
-/// A 7-column right-justified sequence number kept as text and counted up in place.
-struct SequenceField {
-    digits: [u8; 7],
-}
-
-impl SequenceField {
-    /// The field before the first line (blank; the first increment makes it 1).
-    fn new() -> SequenceField {
-        SequenceField { digits: [b' '; 7] }
-    }
-
-    /// Adds one (the caller keeps the count within seven digits).
-    fn increment(&mut self) {
-        for d in self.digits.iter_mut().rev() {
-            match *d {
-                b'9' => *d = b'0',
-                b' ' => {
-                    *d = b'1';
-                    return;
-                }
-                _ => {
-                    *d += 1;
-                    return;
-                }
-            }
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::iges::format::SequenceField;
     use crate::iges::reference::{entity_128_params, ParamText};
 
     /// Turns 64-column parameter records into P lines (the writer's framing before it packed
@@ -1316,29 +1104,29 @@ mod tests {
                 })
                 .collect();
             for workers in [1, 2, 3] {
-                let mut packer = LinePacker::new(0);
+                let mut packer = FieldPacker::parameter_lines(0);
                 let mut lines = Vec::new();
                 let mut des = Vec::new();
                 for (k, p) in patches.iter().enumerate() {
-                    packer.entity(2 * k + 1);
+                    packer.set_back_pointer(2 * k + 1);
                     let n = stream_entity_128(p, k, workers, &mut packer, &mut |block| {
                         lines.extend_from_slice(block);
                         Ok(())
                     })
                     .unwrap();
-                    packer.drain_lines(|block| lines.extend_from_slice(block));
+                    packer.drain_records(|block| lines.extend_from_slice(block));
                     assert_eq!(n, entity_128_params(p, k).unwrap().lines());
                     des.extend(std::iter::repeat_n(2 * k + 1, n));
                 }
                 assert_eq!(lines.len(), LINE_BYTES * des.len());
                 let data: Vec<u8> = lines
                     .chunks_exact(LINE_BYTES)
-                    .flat_map(|l| l[..P_DATA].to_vec())
+                    .flat_map(|l| l[..64].to_vec())
                     .collect();
                 assert!(data == expected, "{workers} workers");
                 for (i, (line, de)) in lines.chunks_exact(LINE_BYTES).zip(&des).enumerate() {
                     let tail = format!("{de:>8}P{:>7}\n", i + 1);
-                    assert_eq!(&line[P_DATA..], tail.as_bytes(), "line {}", i + 1);
+                    assert_eq!(&line[64..], tail.as_bytes(), "line {}", i + 1);
                 }
             }
             let mut single = io::Cursor::new(Vec::new());
@@ -1499,7 +1287,7 @@ mod tests {
     }
 
     #[test]
-    fn line_packer_gives_the_field_packer_records_in_their_lines() {
+    fn packed_p_lines_are_the_bare_records_in_their_lines() {
         // Random streams of every kind of push, including tokens that just fit or just miss
         // a record, Hollerith strings longer than a record, runs of repeated tokens that
         // start mid-record and span many records, and records ended early; packed straight
@@ -1512,13 +1300,13 @@ mod tests {
             s % n
         };
         for case in 0..300 {
-            let mut packer = LinePacker::new(0);
+            let mut packer = FieldPacker::parameter_lines(0);
             let mut records = FieldPacker::new(64);
             let mut framed = Vec::new();
             let mut frame = ParameterLines::new();
             let mut lines = Vec::new();
             let mut de = 1;
-            packer.entity(de);
+            packer.set_back_pointer(de);
             frame.entity(de);
             for _ in 0..next(60) {
                 match next(7) {
@@ -1561,25 +1349,25 @@ mod tests {
                         }
                     }
                     5 => {
-                        packer.end_record();
+                        packer.pad_last();
                         records.pad_last();
                     }
                     _ => {
                         // A new entity: the lines so far keep their back-pointer.
-                        packer.end_record();
+                        packer.pad_last();
                         records.pad_last();
-                        packer.drain_lines(|b| lines.extend_from_slice(b));
+                        packer.drain_records(|b| lines.extend_from_slice(b));
                         records.drain_records(|r| frame.push(r, &mut framed));
                         de += 2;
-                        packer.entity(de);
+                        packer.set_back_pointer(de);
                         frame.entity(de);
                     }
                 }
             }
-            packer.end_record();
-            packer.drain_lines(|b| lines.extend_from_slice(b));
+            packer.pad_last();
+            packer.drain_records(|b| lines.extend_from_slice(b));
             frame.push(&records.finish(), &mut framed);
-            assert_eq!(packer.lines(), frame.count, "case {case}");
+            assert_eq!(packer.complete_records(), frame.count, "case {case}");
             assert!(lines == framed, "case {case}");
         }
     }

@@ -258,13 +258,16 @@ fn refit_without_lines(
     let row = |r: usize| heights_um.get(r * cols..(r + 1) * cols).unwrap_or(&[]);
     let is_held = |r: usize| r % every == every - 1;
     let kept_rows: Vec<usize> = (0..rows).filter(|&r| !is_held(r)).collect();
-    let sub: Vec<f64> = kept_rows.iter().flat_map(|&r| row(r).to_vec()).collect();
     let ky: Vec<f64> = kept_rows
         .iter()
         .map(|&r| y_mm.get(r).copied().unwrap_or(f64::NAN))
         .collect();
     let method = refit_method(method, rows, kept_rows.len(), options.degree_v);
-    let fit = fit_grid_with(pitch_x_mm, &ky, &sub, cols, options, method)?;
+    // The kept lines' copy is freed as soon as the refit has them.
+    let fit = {
+        let sub: Vec<f64> = kept_rows.iter().flat_map(|&r| row(r).to_vec()).collect();
+        fit_grid_with(pitch_x_mm, &ky, &sub, cols, options, method)?
+    };
     let (first_kept, last_kept) = (
         kept_rows.first().copied().unwrap_or(0),
         kept_rows.last().copied().unwrap_or(0),

@@ -1,10 +1,12 @@
 //! Writing a fitted surface as IGES: `surface.igs`, or several complete files
 //! `surface.part<i>-of-<n>.igs` of whole exact patches when one file cannot hold it (the P
-//! section is capped at 9,999,999 lines). Each file is replaced atomically.
+//! section is capped at 9,999,999 lines). Each file is replaced atomically, its writeback to
+//! disk started as it is written ([`write_atomically_streamed`]), so the fsync that ends it is
+//! short.
 //!
 //! Layer 3 (session): depends on [`crate::iges`], [`crate::nurbs`] and [`crate::atomic`].
 
-use crate::atomic::write_atomically;
+use crate::atomic::write_atomically_streamed;
 use crate::iges::{plan_layout, write_iges_seekable, IgesError, IgesOptions};
 use crate::nurbs::NurbsSurface;
 use std::path::{Path, PathBuf};
@@ -134,7 +136,7 @@ pub fn write_surface_files(
                 group.len()
             ));
         }
-        let st = write_atomically(&path, |w| {
+        let st = write_atomically_streamed(&path, |w| {
             write_iges_seekable(w, group, &part_opts).map_err(std::io::Error::other)
         })
         .map_err(|e| write_error(&path, e))?;
