@@ -7,8 +7,10 @@
 //! Layer 1 (pure logic): depends on `std` only.
 
 /// Calls `f`, compiled with AVX2 enabled when the running CPU supports it. The work `f`
-/// does must be `#[inline(always)]` code (or a closure body) so it is compiled inside the
-/// AVX2 trampoline.
+/// does must be `#[inline(always)]` code so it is compiled inside the AVX2 trampoline; the
+/// body of a closure is a function of its own, which the compiler need not inline there (the
+/// residual check's closure was not: it ran as baseline code, which is why that loop is now
+/// written with the AVX2 intrinsics instead).
 #[inline(always)]
 pub(crate) fn wide<R>(f: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]

@@ -18,8 +18,10 @@
 //!   above plus below) is reported in µm and in % of the measured range, and named as a
 //!   warning beyond [`OVERSHOOT_WARN_PCT`].
 //!
-//! Depends on [`crate::nurbs`] and [`crate::numfmt`] (the warnings' figures).
+//! Depends on [`crate::nurbs`], [`super::sampling`] (the dense samples) and [`crate::numfmt`]
+//! (the warnings' figures).
 
+use super::sampling::Basis;
 use crate::numfmt::{fmt, Quantity};
 use crate::nurbs::{basis_funs, find_span, BSplineCurve, NurbsSurface, UBasis};
 use serde::Serialize;
@@ -238,49 +240,34 @@ impl SampleBasis {
         })
     }
 
+    /// The basis as the shared sampler takes it.
+    fn basis(&self) -> Basis<'_> {
+        Basis {
+            degree: self.degree,
+            first: &self.first,
+            values: &self.values,
+        }
+    }
+
     /// x and z of the curve with `poles` (padded as [`NurbsSurface::iso_poles_u_padded`]
     /// makes them) at every parameter, into `xs` and `zs`: each the sum [`Self::points`] and
     /// `UBasis::for_each_point` make for that lane.
     fn x_and_z(&self, poles: &[[f64; 4]], xs: &mut Vec<f64>, zs: &mut Vec<f64>) {
-        let n = self.degree + 1;
-        for (&base, b) in self.first.iter().zip(self.values.chunks_exact(n)) {
-            let (mut x, mut z) = (0.0, 0.0);
-            for (q, b) in poles[base..base + n].iter().zip(b) {
-                x += b * q[0];
-                z += b * q[2];
-            }
-            xs.push(x);
-            zs.push(z);
-        }
+        self.basis().points(poles, &mut (xs, zs));
     }
 
     /// Lane `c` of the curve with `poles` at parameter `k`.
     fn lane(&self, poles: &[[f64; 4]], k: usize, c: usize) -> f64 {
-        let n = self.degree + 1;
-        let base = self.first[k];
-        let mut p = 0.0;
-        for (q, b) in poles[base..base + n]
-            .iter()
-            .zip(&self.values[k * n..(k + 1) * n])
-        {
-            p += b * q[c];
-        }
-        p
+        self.basis().lane(poles, k, c)
     }
 
-    /// The curve with `poles` at every parameter, into `out`.
-    fn points(&self, poles: &[[f64; 3]], out: &mut Vec<[f64; 3]>) {
+    /// The curve with `poles` at every parameter, into `out` (`padded` is scratch space for
+    /// the poles padded to four lanes).
+    fn points(&self, poles: &[[f64; 3]], padded: &mut Vec<[f64; 4]>, out: &mut Vec<[f64; 3]>) {
         out.clear();
-        let n = self.degree + 1;
-        for (&base, b) in self.first.iter().zip(self.values.chunks_exact(n)) {
-            let mut p = [0.0; 3];
-            for (q, b) in poles[base..base + n].iter().zip(b) {
-                p[0] += b * q[0];
-                p[1] += b * q[1];
-                p[2] += b * q[2];
-            }
-            out.push(p);
-        }
+        padded.clear();
+        padded.extend(poles.iter().map(|q| [q[0], q[1], q[2], 0.0]));
+        self.basis().points(padded, out);
     }
 }
 
@@ -462,11 +449,12 @@ pub fn check_model(
     let curves_v = nu.max(2);
     let v_basis = SampleBasis::new(surface.degree_v(), surface.knots_v(), nv, n_v);
     let mut pts = Vec::with_capacity(n_v);
+    let mut padded = Vec::with_capacity(nv);
     for k in 0..curves_v {
         let u = k as f64 / (curves_v - 1) as f64;
         let iso = surface.iso_curve_v(u);
         match &v_basis {
-            Some(b) => b.points(&iso.poles, &mut pts),
+            Some(b) => b.points(&iso.poles, &mut padded, &mut pts),
             None => pts = samples(&iso, n_v),
         }
         if let Some(run) = backward_run(&pts, 1) {
@@ -541,10 +529,10 @@ mod tests {
         let s = &fit.surface;
         for n in [2, 7, 8 * s.count_v()] {
             let b = SampleBasis::new(s.degree_v(), s.knots_v(), s.count_v(), n).unwrap();
-            let mut pts = Vec::new();
+            let (mut pts, mut padded) = (Vec::new(), Vec::new());
             for k in 0..s.count_u() {
                 let iso = s.iso_curve_v(k as f64 / (s.count_u() - 1) as f64);
-                b.points(&iso.poles, &mut pts);
+                b.points(&iso.poles, &mut padded, &mut pts);
                 let want = samples(&iso, n);
                 assert_eq!(pts.len(), want.len());
                 for (p, q) in pts.iter().zip(&want) {

@@ -23,6 +23,7 @@ pub mod model;
 pub mod outliers;
 pub mod params;
 pub mod plots;
+mod sampling;
 pub mod surface_model;
 pub mod x3p;
 

@@ -4,9 +4,11 @@
 //! mean line and cut at equal height levels (101 by default); MAR(h) = ΣL_i / L0 × 100 % from the
 //! x-lengths of the cross lines, crossings interpolated linearly between the dense samples.
 //!
-//! Depends on [`crate::nurbs`] (evaluation) and [`super::bearing`].
+//! Depends on [`crate::nurbs`] (evaluation), [`super::sampling`] (dense samples) and
+//! [`super::bearing`].
 
 use super::bearing::{bearing_curve_xz, BearingCurve};
+use super::sampling::Basis;
 use super::MetrologyError;
 use crate::nurbs::{basis_funs, find_span, BSplineCurve, NurbsSurface, UBasis};
 use serde::Serialize;
@@ -67,6 +69,11 @@ pub fn model_bearing_curves(
         .map(|k| k as f64 / (samples - 1) as f64)
         .collect();
     let basis = UBasis::new(surface, &us);
+    let sampler = Basis {
+        degree: surface.degree_u(),
+        first: basis.first_poles(),
+        values: basis.values(),
+    };
     let mut poles = Vec::new();
     let mut out = Vec::with_capacity(options.curves);
     for j in 0..options.curves {
@@ -78,14 +85,11 @@ pub fn model_bearing_curves(
         surface.iso_poles_u_padded(v, &mut poles);
         let mut xs = Vec::with_capacity(samples);
         let mut zs = Vec::with_capacity(samples);
-        let mut y_mm = f64::NAN;
-        basis.for_each_point(&poles, |k, p| {
-            if k == 0 {
-                y_mm = p[1];
-            }
-            xs.push(p[0]);
-            zs.push(p[2] * 1000.0);
-        });
+        sampler.points(&poles, &mut (&mut xs, &mut zs));
+        for z in &mut zs {
+            *z *= 1000.0;
+        }
+        let y_mm = sampler.lane(&poles, 0, 1);
         let curve = bearing_curve_xz(&xs, &zs, options.levels)?;
         out.push(ModelCurveBac {
             v,

@@ -154,7 +154,9 @@ fn median(v: &mut [f64]) -> f64 {
     if n == 0 {
         return 0.0;
     }
-    v.sort_by(f64::total_cmp);
+    // Only identical bits compare equal under `total_cmp`: the unstable sort's order is the
+    // stable sort's.
+    v.sort_unstable_by(f64::total_cmp);
     if n % 2 == 1 {
         v[n / 2]
     } else {

@@ -737,7 +737,9 @@ pub fn rk_family(z: &[f64]) -> Result<RkFamily, MetrologyError> {
         });
     }
     let mut s = z.to_vec();
-    s.sort_by(|a, b| b.total_cmp(a));
+    // `total_cmp` is a total order in which only identical bits compare equal, so the
+    // unstable sort gives the stable sort's sequence.
+    s.sort_unstable_by(|a, b| b.total_cmp(a));
     const STEPS: usize = 1000; // 0.1 % grid
     let h: Vec<f64> = (0..=STEPS)
         .map(|k| rmc(&s, k as f64 * 100.0 / STEPS as f64))
@@ -805,7 +807,9 @@ pub fn material_ratio_curve(z: &[f64], points: usize) -> Vec<[f64; 2]> {
         return Vec::new();
     }
     let mut s = z.to_vec();
-    s.sort_by(|a, b| b.total_cmp(a));
+    // `total_cmp` is a total order in which only identical bits compare equal, so the
+    // unstable sort gives the stable sort's sequence.
+    s.sort_unstable_by(|a, b| b.total_cmp(a));
     (0..points)
         .map(|k| {
             let mr = 100.0 * k as f64 / (points - 1) as f64;

@@ -113,6 +113,32 @@ fn span_basis_into(degree: usize, knots: &[f64], count: usize, t: f64, out: &mut
     span
 }
 
+/// [`span_basis_into`] for a parameter at or after the one whose span was `previous` (the
+/// parameters of a grid or of dense samples increase): the span is found by stepping on from
+/// `previous` (a few steps at most, else the binary search), the same span since only one
+/// non-empty span holds an interior parameter. Degrees up to the stack limit only.
+fn span_basis_after(
+    degree: usize,
+    knots: &[f64],
+    count: usize,
+    t: f64,
+    previous: usize,
+    out: &mut [f64],
+) -> usize {
+    let (lo, hi) = (knots[degree], knots[count]);
+    let t = if t.is_nan() { lo } else { t.clamp(lo, hi) };
+    // From a span whose start is at or below t, the first span ending above t is the one
+    // holding t (t < hi = knots[count] stops the steps by count − 1).
+    let stepped = (lo < t && t < hi && previous < count && knots[previous] <= t)
+        .then(|| (previous..previous + 8).find(|&s| t < knots[s + 1]))
+        .flatten();
+    let span = stepped.unwrap_or_else(|| find_span(degree, knots, count, t));
+    let mut left = [0.0; MAX_STACK_DEGREE + 1];
+    let mut right = [0.0; MAX_STACK_DEGREE + 1];
+    basis_funs(span, t, degree, knots, out, &mut left, &mut right);
+    span
+}
+
 /// The non-vanishing basis functions along u of a surface at a list of parameters, computed
 /// once and applied to any number of iso-curves (every row of a grid shares its u values).
 #[derive(Debug, Clone)]
@@ -130,8 +156,14 @@ impl UBasis {
         let d = surface.degree_u;
         let mut first = Vec::with_capacity(us.len());
         let mut values = vec![0.0; us.len() * (d + 1)];
+        let (knots, count) = (&surface.knots_u, surface.count_u);
+        let mut last = None;
         for (&u, out) in us.iter().zip(values.chunks_exact_mut(d + 1)) {
-            let span = span_basis_into(d, &surface.knots_u, surface.count_u, u, out);
+            let span = match last {
+                Some(s) if d <= MAX_STACK_DEGREE => span_basis_after(d, knots, count, u, s, out),
+                _ => span_basis_into(d, knots, count, u, out),
+            };
+            last = Some(span);
             first.push(span - d);
         }
         UBasis {
@@ -149,6 +181,16 @@ impl UBasis {
     /// Whether there are no parameters.
     pub fn is_empty(&self) -> bool {
         self.first.is_empty()
+    }
+
+    /// For each parameter, the index of the first pole its basis functions apply to.
+    pub fn first_poles(&self) -> &[usize] {
+        &self.first
+    }
+
+    /// The `degree + 1` basis values of each parameter, one parameter after another.
+    pub fn values(&self) -> &[f64] {
+        &self.values
     }
 
     /// Calls `f(k, point)` for each parameter k with the point of the curve whose poles are
@@ -533,6 +575,44 @@ mod tests {
         }
         let s = NurbsSurface::try_new(p, q, ku, kv, nu, nv, separable.clone()).unwrap();
         assert_eq!(built, s);
+    }
+
+    #[test]
+    fn stepping_on_from_the_previous_span_finds_the_binary_searchs_span() {
+        // Repeated interior knots (empty spans), parameters on knots, at and beyond the ends,
+        // NaN, repeated and decreasing parameters, and jumps of many spans.
+        let knots = [
+            0.0, 0.0, 0.0, 0.0, 0.1, 0.2, 0.2, 0.3, 0.4, 0.5, 0.7, 0.7, 0.7, 0.8, 0.9, 1.0, 1.0,
+            1.0, 1.0,
+        ];
+        let (degree, count) = (3, knots.len() - 4);
+        let mut ts: Vec<f64> = (0..=400).map(|k| k as f64 / 400.0).collect();
+        ts.extend([
+            0.2,
+            0.2,
+            0.7,
+            0.05,
+            -1.0,
+            0.0,
+            f64::NAN,
+            0.95,
+            2.0,
+            1.0,
+            0.69,
+            0.7,
+        ]);
+        ts.extend([0.0, 0.99, 0.01, 0.6999999999999999, 0.7000000000000001]);
+        let mut checked = 0;
+        for w in ts.windows(2) {
+            let (mut a, mut b) = ([0.0; 4], [0.0; 4]);
+            let previous = span_basis_into(degree, &knots, count, w[0], &mut a);
+            let want = span_basis_into(degree, &knots, count, w[1], &mut a);
+            let got = span_basis_after(degree, &knots, count, w[1], previous, &mut b);
+            assert_eq!(got, want, "{} after {}", w[1], w[0]);
+            assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits), "{}", w[1]);
+            checked += 1;
+        }
+        assert_eq!(checked, ts.len() - 1);
     }
 
     #[test]
