@@ -369,14 +369,7 @@ mod tests {
         let compact = PoleNet::from_poles(3, &poles);
         let mut built = PoleNet::with_columns(vec![9.0, 9.0, 9.0], 2);
         for row in poles.chunks_exact(3) {
-            let x: Vec<f64> = row.iter().map(|p| p[0]).collect();
-            let y: Vec<f64> = row.iter().map(|p| p[1]).collect();
-            let z: Vec<f64> = row.iter().map(|p| p[2]).collect();
-            built.push_row(PoleRow {
-                x: &x,
-                y: RowY::Each(&y),
-                z: &z,
-            });
+            built.push_poles(row);
         }
         assert!(compact.is_separable() && !built.is_separable());
         assert_eq!(compact, built);
