@@ -218,25 +218,40 @@ mod avx2 {
                 };
                 // Four poles at a time, x, y and z each as a vector of the four (the net holds
                 // them so), then transposed into four padded poles (lane 3 unused).
+                // Where every row holds one y (a separable net), y is the same sum for every
+                // pole: Σ_l N_l(v)·y_l from zero in row order, taken once as a scalar (each
+                // lane's operations, so the same bits) instead of once per four poles.
+                let one_y =
+                    rows.iter()
+                        .zip(&bv[..=q])
+                        .try_fold(0.0f64, |acc, (row, &b)| match row.y {
+                            RowY::One(y) => Some(acc + b * y),
+                            RowY::Each(_) => None,
+                        });
                 let done = poles.start + curve.len() / 4 * 4;
                 let mut blocks = curve.chunks_exact_mut(4);
                 for (blk, out) in (&mut blocks).enumerate() {
                     let i0 = poles.start + blk * 4;
-                    let (mut ax, mut ay, mut az) = (
-                        _mm256_setzero_pd(),
-                        _mm256_setzero_pd(),
-                        _mm256_setzero_pd(),
-                    );
+                    let (mut ax, mut az) = (_mm256_setzero_pd(), _mm256_setzero_pd());
                     for (row, &b) in rows.iter().zip(&bv[..=q]) {
                         let b = _mm256_set1_pd(b);
-                        let y = match row.y {
-                            RowY::One(y) => _mm256_set1_pd(y),
-                            RowY::Each(ys) => load4(&ys[i0..]),
-                        };
                         ax = _mm256_add_pd(ax, _mm256_mul_pd(b, load4(&row.x[i0..])));
-                        ay = _mm256_add_pd(ay, _mm256_mul_pd(b, y));
                         az = _mm256_add_pd(az, _mm256_mul_pd(b, load4(&row.z[i0..])));
                     }
+                    let ay = match one_y {
+                        Some(y) => _mm256_set1_pd(y),
+                        None => {
+                            let mut ay = _mm256_setzero_pd();
+                            for (row, &b) in rows.iter().zip(&bv[..=q]) {
+                                let y = match row.y {
+                                    RowY::One(y) => _mm256_set1_pd(y),
+                                    RowY::Each(ys) => load4(&ys[i0..]),
+                                };
+                                ay = _mm256_add_pd(ay, _mm256_mul_pd(_mm256_set1_pd(b), y));
+                            }
+                            ay
+                        }
+                    };
                     let (xy_lo, xy_hi) = (_mm256_unpacklo_pd(ax, ay), _mm256_unpackhi_pd(ax, ay));
                     let (zz_lo, zz_hi) = (_mm256_unpacklo_pd(az, az), _mm256_unpackhi_pd(az, az));
                     let padded = [
