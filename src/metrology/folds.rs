@@ -210,11 +210,7 @@ impl SampleBasis {
     /// `None` where [`samples`] must be used instead (a degree above the stack buffers, a knot
     /// vector that does not fit `count` poles, fewer than two samples).
     fn new(degree: usize, knots: &[f64], count: usize, n: usize) -> Option<SampleBasis> {
-        if degree > MAX_SAMPLE_DEGREE
-            || count < degree + 1
-            || knots.len() != count + degree + 1
-            || n < 2
-        {
+        if !SampleBasis::fits(degree, knots, count, n) {
             return None;
         }
         let (lo, hi) = (knots[degree], knots[count]);
@@ -240,6 +236,11 @@ impl SampleBasis {
         })
     }
 
+    /// Whether [`SampleBasis::new`] makes a basis for these (else [`samples`] is used).
+    fn fits(degree: usize, knots: &[f64], count: usize, n: usize) -> bool {
+        degree <= MAX_SAMPLE_DEGREE && count > degree && knots.len() == count + degree + 1 && n >= 2
+    }
+
     /// The basis as the shared sampler takes it.
     fn basis(&self) -> Basis<'_> {
         Basis {
@@ -247,18 +248,6 @@ impl SampleBasis {
             first: &self.first,
             values: &self.values,
         }
-    }
-
-    /// x and z of the curve with `poles` (padded as [`NurbsSurface::iso_poles_u_padded`]
-    /// makes them) at every parameter, into `xs` and `zs`: each the sum [`Self::points`] and
-    /// `UBasis::for_each_point` make for that lane.
-    fn x_and_z(&self, poles: &[[f64; 4]], xs: &mut Vec<f64>, zs: &mut Vec<f64>) {
-        self.basis().points(poles, &mut (xs, zs));
-    }
-
-    /// Lane `c` of the curve with `poles` at parameter `k`.
-    fn lane(&self, poles: &[[f64; 4]], k: usize, c: usize) -> f64 {
-        self.basis().lane(poles, k, c)
     }
 
     /// The curve with `poles` at every parameter, into `out` (`padded` is scratch space for
@@ -319,6 +308,20 @@ pub fn check_model(
     line_vs: &[f64],
     heights_um: &[f64],
     options: &FoldOptions,
+) -> ModelChecks {
+    check_model_with(surface, line_vs, heights_um, options, None)
+}
+
+/// [`check_model`] with the u basis at the `samples_per_pole · count_u` equally spaced u of
+/// the iso-curves already computed (`UBasis::new` at `k / (n − 1)`, as the model's bearing
+/// curves sample them): used where it has that length and the degree is one the fold check
+/// builds its own basis for, so every sum is the one [`check_model`] makes, to the bit.
+pub fn check_model_with(
+    surface: &NurbsSurface,
+    line_vs: &[f64],
+    heights_um: &[f64],
+    options: &FoldOptions,
+    shared_u: Option<&UBasis>,
 ) -> ModelChecks {
     let (nu, nv) = (surface.count_u(), surface.count_v());
     let per = options.samples_per_pole.max(1);
@@ -381,8 +384,26 @@ pub fn check_model(
     // one curve is held at a time. Only x (for the fold) and z (for the range) are summed at
     // every sample; y where a sample becomes the highest or lowest, or starts a folding
     // curve. Each lane is the sum `evaluate_grid` makes for it, to the bit.
-    let u_basis = SampleBasis::new(surface.degree_u(), surface.knots_u(), nu, n_u);
-    let general = if u_basis.is_none() {
+    // `UBasis::new` and `SampleBasis::new` find the same span and call `basis_funs` with the
+    // same clamped parameter: a shared basis of the right length has the same values.
+    let shared_u = shared_u.filter(|b| {
+        b.len() == n_u
+            && surface.degree_u() <= MAX_SAMPLE_DEGREE
+            && SampleBasis::fits(surface.degree_u(), surface.knots_u(), nu, n_u)
+    });
+    let own_u = match shared_u {
+        Some(_) => None,
+        None => SampleBasis::new(surface.degree_u(), surface.knots_u(), nu, n_u),
+    };
+    let u_sampler: Option<Basis<'_>> = match shared_u {
+        Some(b) => Some(Basis {
+            degree: surface.degree_u(),
+            first: b.first_poles(),
+            values: b.values(),
+        }),
+        None => own_u.as_ref().map(SampleBasis::basis),
+    };
+    let general = if u_sampler.is_none() {
         Some(UBasis::new(surface, &us))
     } else {
         None
@@ -391,7 +412,7 @@ pub fn check_model(
     let (mut xs, mut zs): (Vec<f64>, Vec<f64>) = (Vec::with_capacity(n_u), Vec::with_capacity(n_u));
     for &v in &vs {
         surface.iso_poles_u_padded(v, &mut poles);
-        let y_at = |k: usize| match (&u_basis, &general) {
+        let y_at = |k: usize| match (&u_sampler, &general) {
             (Some(b), _) => b.lane(&poles, k, 1),
             (None, Some(g)) => {
                 let mut y = f64::NAN;
@@ -406,8 +427,8 @@ pub fn check_model(
         };
         xs.clear();
         zs.clear();
-        match (&u_basis, &general) {
-            (Some(b), _) => b.x_and_z(&poles, &mut xs, &mut zs),
+        match (&u_sampler, &general) {
+            (Some(b), _) => b.points(&poles, &mut (&mut xs, &mut zs)),
             (None, Some(g)) => g.for_each_point(&poles, |_, p| {
                 xs.push(p[0]);
                 zs.push(p[2]);
@@ -630,6 +651,40 @@ mod tests {
                 }
             }
             assert_eq!(spike, worst.is_some(), "the spike folds the surface");
+        }
+    }
+
+    #[test]
+    fn a_shared_u_basis_gives_the_checks_of_the_own_one() {
+        // The u basis computed elsewhere (as the bearing curves compute theirs) for the same
+        // samples: every figure is the bits of the fold check's own basis, on a smooth fit and
+        // on one that folds; a basis of another length is not used.
+        let (rows, cols) = (9, 120);
+        let y: Vec<f64> = (0..rows).map(|r| r as f64 * 0.01).collect();
+        let mut z: Vec<f64> = (0..rows * cols)
+            .map(|k| 2.0 * ((k % cols) as f64 * 0.21).sin() + ((k / cols) as f64 * 0.9).cos())
+            .collect();
+        for spike in [false, true] {
+            if spike {
+                z[4 * cols + 60] += 400.0;
+            }
+            let fit = fit_grid(0.0005, &y, &z, cols, FitOptions::default()).unwrap();
+            let s = &fit.surface;
+            let options = FoldOptions::default();
+            let own = check_model(s, &fit.params_v, &z, &options);
+            assert_eq!(spike, own.folds(), "{own:?}");
+            let n_u = options.samples_per_pole * s.count_u();
+            for n in [n_u, n_u - 1] {
+                let us: Vec<f64> = (0..n).map(|k| k as f64 / (n - 1) as f64).collect();
+                let basis = UBasis::new(s, &us);
+                let shared = check_model_with(s, &fit.params_v, &z, &options, Some(&basis));
+                assert_eq!(
+                    format!("{shared:?}"),
+                    format!("{own:?}"),
+                    "spike {spike}, {n}"
+                );
+                assert_eq!(shared, own);
+            }
         }
     }
 

@@ -53,6 +53,28 @@ pub fn model_bearing_curves(
     surface: &NurbsSurface,
     options: &ModelBacOptions,
 ) -> Result<Vec<ModelCurveBac>, MetrologyError> {
+    model_bearing_curves_with(surface, options, None)
+}
+
+/// The u at which [`model_bearing_curves`] samples every curve: `samples` equally spaced
+/// from 0 to 1 (`k / (samples − 1)`), as the fold check samples its iso-curves.
+pub fn bearing_sample_us(surface: &NurbsSurface, options: &ModelBacOptions) -> Vec<f64> {
+    let samples = options
+        .samples_per_curve
+        .unwrap_or(8 * surface.count_u())
+        .max(2);
+    (0..samples)
+        .map(|k| k as f64 / (samples - 1) as f64)
+        .collect()
+}
+
+/// [`model_bearing_curves`] with the u basis at [`bearing_sample_us`] already computed
+/// (`UBasis::new` of exactly those u; one of another length is not used).
+pub fn model_bearing_curves_with(
+    surface: &NurbsSurface,
+    options: &ModelBacOptions,
+    shared_u: Option<&UBasis>,
+) -> Result<Vec<ModelCurveBac>, MetrologyError> {
     if options.curves == 0 {
         return Err(MetrologyError::BadParameter {
             what: "curves",
@@ -65,10 +87,14 @@ pub fn model_bearing_curves(
         .unwrap_or(8 * surface.count_u())
         .max(2);
     // Every curve is sampled at the same u, so the basis along u is computed once.
-    let us: Vec<f64> = (0..samples)
-        .map(|k| k as f64 / (samples - 1) as f64)
-        .collect();
-    let basis = UBasis::new(surface, &us);
+    let own;
+    let basis = match shared_u.filter(|b| b.len() == samples) {
+        Some(b) => b,
+        None => {
+            own = UBasis::new(surface, &bearing_sample_us(surface, options));
+            &own
+        }
+    };
     let sampler = Basis {
         degree: surface.degree_u(),
         first: basis.first_poles(),
@@ -335,6 +361,34 @@ fn invert_x<F: Fn(f64) -> f64>(at: &F, x_mm: f64, u_from: f64, x_at_1: f64) -> f
 mod tests {
     use super::*;
     use crate::fit::{fit_grid, FitOptions};
+
+    #[test]
+    fn bearing_curves_from_a_shared_u_basis_are_those_of_their_own() {
+        // The basis at `bearing_sample_us` made by the caller gives the curves to the bit; one
+        // of another length is ignored.
+        let (rows, cols, px) = (7, 300, 0.0005);
+        let h: Vec<f64> = (0..rows * cols)
+            .map(|k| ((k % cols) as f64 * 0.17).sin() + 0.3 * (k as f64 * 0.013).cos())
+            .collect();
+        let y: Vec<f64> = (0..rows).map(|l| l as f64 * 0.01).collect();
+        let fit = fit_grid(px, &y, &h, cols, FitOptions::default()).unwrap();
+        let s = &fit.surface;
+        let options = ModelBacOptions {
+            curves: 5,
+            levels: 21,
+            samples_per_curve: None,
+        };
+        let own = model_bearing_curves(s, &options).unwrap();
+        let us = bearing_sample_us(s, &options);
+        assert_eq!(us.len(), 8 * s.count_u());
+        assert_eq!((us[0], us[us.len() - 1]), (0.0, 1.0));
+        let wrong = UBasis::new(s, &us[1..]);
+        for basis in [UBasis::new(s, &us), wrong] {
+            let shared = model_bearing_curves_with(s, &options, Some(&basis)).unwrap();
+            assert_eq!(format!("{shared:?}"), format!("{own:?}"));
+            assert_eq!(shared, own);
+        }
+    }
 
     #[test]
     fn x_of_u_is_the_curves_x_to_the_bit() {

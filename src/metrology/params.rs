@@ -736,13 +736,41 @@ pub fn rk_family(z: &[f64]) -> Result<RkFamily, MetrologyError> {
             min_points: 2,
         });
     }
+    Ok(rk_of_sorted(&sorted_desc(z)))
+}
+
+/// The ordinates highest first. `total_cmp` is a total order in which only identical bits
+/// compare equal, so the unstable sort gives the stable sort's sequence.
+fn sorted_desc(z: &[f64]) -> Vec<f64> {
     let mut s = z.to_vec();
-    // `total_cmp` is a total order in which only identical bits compare equal, so the
-    // unstable sort gives the stable sort's sequence.
     s.sort_unstable_by(|a, b| b.total_cmp(a));
+    s
+}
+
+/// [`rk_family`] and [`material_ratio_curve`] of the same ordinates, from one sort of them
+/// (what the Rk construction plot of a line draws): the same values as the two calls.
+pub fn rk_family_and_curve(
+    z: &[f64],
+    points: usize,
+) -> Result<(RkFamily, Vec<[f64; 2]>), MetrologyError> {
+    check_finite(z)?;
+    if z.len() < 2 {
+        return Err(MetrologyError::TooShort {
+            points: z.len(),
+            length_mm: 0.0,
+            sampling_length_mm: 0.0,
+            min_points: 2,
+        });
+    }
+    let s = sorted_desc(z);
+    Ok((rk_of_sorted(&s), curve_of_sorted(&s, points)))
+}
+
+/// [`rk_family`] of at least two ordinates sorted highest first.
+fn rk_of_sorted(s: &[f64]) -> RkFamily {
     const STEPS: usize = 1000; // 0.1 % grid
     let h: Vec<f64> = (0..=STEPS)
-        .map(|k| rmc(&s, k as f64 * 100.0 / STEPS as f64))
+        .map(|k| rmc(s, k as f64 * 100.0 / STEPS as f64))
         .collect();
     let win = STEPS * 40 / 100;
     let mut best: Option<(f64, usize)> = None;
@@ -763,8 +791,8 @@ pub fn rk_family(z: &[f64]) -> Result<RkFamily, MetrologyError> {
     let h_a = h.get(best.1).copied().unwrap_or(0.0);
     let c = h_a - slope * a_pct;
     let d = h_a + slope * (100.0 - a_pct);
-    let mr1 = mr_at(&s, c);
-    let mr2 = mr_at(&s, d);
+    let mr1 = mr_at(s, c);
+    let mr2 = mr_at(s, d);
     // Areas by trapezoids on a fine grid of the quantile curve.
     let area = |from: f64, to: f64, f: &dyn Fn(f64) -> f64| -> f64 {
         if to <= from {
@@ -779,9 +807,9 @@ pub fn rk_family(z: &[f64]) -> Result<RkFamily, MetrologyError> {
             })
             .sum()
     };
-    let a1 = area(0.0, mr1, &|mr| (rmc(&s, mr) - c).max(0.0));
-    let a2 = area(mr2, 100.0, &|mr| (d - rmc(&s, mr)).max(0.0));
-    Ok(RkFamily {
+    let a1 = area(0.0, mr1, &|mr| (rmc(s, mr) - c).max(0.0));
+    let a2 = area(mr2, 100.0, &|mr| (d - rmc(s, mr)).max(0.0));
+    RkFamily {
         rk_um: c - d,
         rpk_um: if mr1 > 0.0 { 2.0 * a1 / mr1 } else { 0.0 },
         rvk_um: if mr2 < 100.0 {
@@ -796,7 +824,7 @@ pub fn rk_family(z: &[f64]) -> Result<RkFamily, MetrologyError> {
         upper_level_um: c,
         lower_level_um: d,
         secant_start_pct: a_pct,
-    })
+    }
 }
 
 /// The material ratio curve Rmc(mr) that [`rk_family`] works on, as `points` pairs
@@ -806,14 +834,49 @@ pub fn material_ratio_curve(z: &[f64], points: usize) -> Vec<[f64; 2]> {
     if z.len() < 2 || points < 2 {
         return Vec::new();
     }
-    let mut s = z.to_vec();
-    // `total_cmp` is a total order in which only identical bits compare equal, so the
-    // unstable sort gives the stable sort's sequence.
-    s.sort_unstable_by(|a, b| b.total_cmp(a));
+    curve_of_sorted(&sorted_desc(z), points)
+}
+
+/// [`material_ratio_curve`] of ordinates sorted highest first.
+fn curve_of_sorted(s: &[f64], points: usize) -> Vec<[f64; 2]> {
+    if s.len() < 2 || points < 2 {
+        return Vec::new();
+    }
     (0..points)
         .map(|k| {
             let mr = 100.0 * k as f64 / (points - 1) as f64;
-            [mr, rmc(&s, mr)]
+            [mr, rmc(s, mr)]
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rk_family_and_curve_from_one_sort_equal_the_two_calls() {
+        // Ties, a constant run, negative heights and a short line: the figures and the curve
+        // are the bits of `rk_family` and `material_ratio_curve`; the errors are its errors.
+        let mut z: Vec<f64> = (0..5000)
+            .map(|k| ((k as f64 * 0.37).sin() * 2.0 + (k as f64 * 0.011).cos()).round() / 8.0)
+            .collect();
+        z.extend(std::iter::repeat_n(0.25, 300));
+        for (zs, points) in [(&z[..], 1001), (&z[..], 2), (&z[..], 1), (&z[..7], 1001)] {
+            let (rk, curve) = rk_family_and_curve(zs, points).unwrap();
+            assert_eq!(format!("{rk:?}"), format!("{:?}", rk_family(zs).unwrap()));
+            assert_eq!(rk, rk_family(zs).unwrap());
+            let want = material_ratio_curve(zs, points);
+            assert_eq!(curve.len(), want.len());
+            for (a, b) in curve.iter().zip(&want) {
+                assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+            }
+        }
+        for bad in [&[1.0][..], &[], &[1.0, f64::NAN, 2.0]] {
+            assert_eq!(
+                format!("{:?}", rk_family_and_curve(bad, 11).unwrap_err()),
+                format!("{:?}", rk_family(bad).unwrap_err())
+            );
+        }
+    }
 }

@@ -15,7 +15,7 @@ use super::summary::summary_csv;
 use crate::atomic::write_atomically;
 use crate::metrology::areal::Grid;
 use crate::metrology::model::ModelCurveBac;
-use crate::metrology::params::{material_ratio_curve, rk_family, LineAnalysis};
+use crate::metrology::params::{rk_family_and_curve, LineAnalysis};
 use crate::metrology::plots::{
     plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction,
 };
@@ -361,7 +361,7 @@ pub(crate) fn write_rk_plots(
     let mut rk_plots = Vec::new();
     for (row, a) in analyses.iter().enumerate() {
         let index = grid.index_of(row);
-        let rk = rk_family(&a.roughness_um).map_err(plot_err)?;
+        let (rk, curve) = rk_family_and_curve(&a.roughness_um, 1001).map_err(plot_err)?;
         let title = format!(
             "Line {} ({index:04}, y = {} mm): ISO 13565-2 Rk construction",
             line_number(index),
@@ -373,7 +373,7 @@ pub(crate) fn write_rk_plots(
         let files = plot_rk_construction(
             &rk_dir,
             &format!("{index:04}"),
-            &material_ratio_curve(&a.roughness_um, 1001),
+            &curve,
             &rk,
             &title,
             &caption,

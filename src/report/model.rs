@@ -12,8 +12,11 @@ use super::areal::surface_report;
 use super::context::{Model, ScanAnalysisOptions};
 use super::document::{FailedSection, SurfaceReport};
 use crate::metrology::areal::Grid;
-use crate::metrology::folds::{check_model, FoldOptions, ModelChecks};
-use crate::metrology::model::{model_bearing_curves, sample_model_grid, ModelBacOptions};
+use crate::metrology::folds::{check_model_with, FoldOptions, ModelChecks};
+use crate::metrology::model::{
+    bearing_sample_us, model_bearing_curves_with, sample_model_grid, ModelBacOptions,
+};
+use crate::nurbs::UBasis;
 
 /// The model sampled on the data lines (their v) at half the x pitch, row-major: what
 /// `model.x3p` shows.
@@ -80,15 +83,8 @@ pub fn characterise(
         levels: options.levels,
         samples_per_curve: None,
     };
+    let fold_options = FoldOptions::default();
     let (checks, bac, sampled) = std::thread::scope(|s| {
-        let checks = s.spawn(|| {
-            check_model(
-                &fit.surface,
-                &fit.params_v,
-                heights_um,
-                &FoldOptions::default(),
-            )
-        });
         let sampled = s.spawn(|| {
             sample_model_grid(
                 &fit.surface,
@@ -98,8 +94,26 @@ pub fn characterise(
                 model_cols,
             )
         });
-        let bac = model_bearing_curves(&fit.surface, &bac_options);
-        (checks.join(), bac, sampled.join())
+        // The fold check's iso-curves and the bearing curves are sampled at the same u when
+        // their densities agree (the defaults do): the u basis is computed once for both.
+        let us = bearing_sample_us(&fit.surface, &bac_options);
+        let fold_n_u = (fold_options.samples_per_pole.max(1) * fit.surface.count_u()).max(2);
+        let shared = (us.len() == fold_n_u).then(|| UBasis::new(&fit.surface, &us));
+        let shared = shared.as_ref();
+        let (checks, bac) = std::thread::scope(|inner| {
+            let checks = inner.spawn(|| {
+                check_model_with(
+                    &fit.surface,
+                    &fit.params_v,
+                    heights_um,
+                    &fold_options,
+                    shared,
+                )
+            });
+            let bac = model_bearing_curves_with(&fit.surface, &bac_options, shared);
+            (checks.join(), bac)
+        });
+        (checks, bac, sampled.join())
     });
     let checks = match checks {
         Ok(c) => c,
