@@ -301,6 +301,12 @@ fn backward_run_by(n: usize, at: impl Fn(usize) -> f64) -> Option<(f64, f64, f64
     worst
 }
 
+/// How many equally spaced u the fold check samples each iso-curve at: `samples_per_pole`
+/// per pole (at least one), and never fewer than two.
+pub fn iso_curve_sample_count(surface: &NurbsSurface, options: &FoldOptions) -> usize {
+    (options.samples_per_pole.max(1) * surface.count_u()).max(2)
+}
+
 /// Checks the control net, the sampled iso-curves and the height range of `surface` fitted to
 /// data lines at parameters `line_vs` (increasing), against the measured `heights_um`.
 pub fn check_model(
@@ -375,7 +381,7 @@ pub fn check_model_with(
     if vs.is_empty() {
         vs = vec![0.0, 1.0];
     }
-    let n_u = (per * nu).max(2);
+    let n_u = iso_curve_sample_count(surface, options);
     let us: Vec<f64> = (0..n_u).map(|k| k as f64 / (n_u - 1) as f64).collect();
     let mut range = (f64::INFINITY, [0.0; 2], f64::NEG_INFINITY, [0.0; 2]);
     let mut iso = Vec::new();
@@ -600,20 +606,30 @@ mod tests {
         (fold, range)
     }
 
-    #[test]
-    fn the_u_checks_equal_those_of_every_point_evaluated() {
-        // A smooth fit and one that folds (a spike on one line): the range, its places and
-        // the folds are the bits of the straightforward evaluation.
+    /// A 9×120 grid fitted as it is (smooth) and with a 400 µm spike on one line (the fit
+    /// folds): whether it has the spike, its heights and the fit.
+    fn smooth_and_folding_fits() -> Vec<(bool, Vec<f64>, crate::fit::FitResult)> {
         let (rows, cols) = (9, 120);
         let y: Vec<f64> = (0..rows).map(|r| r as f64 * 0.01).collect();
         let mut z: Vec<f64> = (0..rows * cols)
             .map(|k| 2.0 * ((k % cols) as f64 * 0.21).sin() + ((k / cols) as f64 * 0.9).cos())
             .collect();
+        let mut fits = Vec::new();
         for spike in [false, true] {
             if spike {
                 z[4 * cols + 60] += 400.0;
             }
             let fit = fit_grid(0.0005, &y, &z, cols, FitOptions::default()).unwrap();
+            fits.push((spike, z.clone(), fit));
+        }
+        fits
+    }
+
+    #[test]
+    fn the_u_checks_equal_those_of_every_point_evaluated() {
+        // A smooth fit and one that folds (a spike on one line): the range, its places and
+        // the folds are the bits of the straightforward evaluation.
+        for (spike, z, fit) in smooth_and_folding_fits() {
             let s = &fit.surface;
             let options = FoldOptions::default();
             let c = check_model(s, &fit.params_v, &z, &options);
@@ -659,16 +675,7 @@ mod tests {
         // The u basis computed elsewhere (as the bearing curves compute theirs) for the same
         // samples: every figure is the bits of the fold check's own basis, on a smooth fit and
         // on one that folds; a basis of another length is not used.
-        let (rows, cols) = (9, 120);
-        let y: Vec<f64> = (0..rows).map(|r| r as f64 * 0.01).collect();
-        let mut z: Vec<f64> = (0..rows * cols)
-            .map(|k| 2.0 * ((k % cols) as f64 * 0.21).sin() + ((k / cols) as f64 * 0.9).cos())
-            .collect();
-        for spike in [false, true] {
-            if spike {
-                z[4 * cols + 60] += 400.0;
-            }
-            let fit = fit_grid(0.0005, &y, &z, cols, FitOptions::default()).unwrap();
+        for (spike, z, fit) in smooth_and_folding_fits() {
             let s = &fit.surface;
             let options = FoldOptions::default();
             let own = check_model(s, &fit.params_v, &z, &options);

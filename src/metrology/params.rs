@@ -727,6 +727,11 @@ fn mr_at(sorted_desc: &[f64], c: f64) -> f64 {
 /// The ISO 13565-2 Rk family from ordinates (µm): minimum-gradient 40 % secant on the
 /// linear-quantile material ratio curve, searched in 0.1 % steps.
 pub fn rk_family(z: &[f64]) -> Result<RkFamily, MetrologyError> {
+    Ok(rk_of_sorted(&checked_sorted_desc(z)?))
+}
+
+/// The ordinates highest first, after the checks the Rk family needs: all finite, at least two.
+fn checked_sorted_desc(z: &[f64]) -> Result<Vec<f64>, MetrologyError> {
     check_finite(z)?;
     if z.len() < 2 {
         return Err(MetrologyError::TooShort {
@@ -736,7 +741,7 @@ pub fn rk_family(z: &[f64]) -> Result<RkFamily, MetrologyError> {
             min_points: 2,
         });
     }
-    Ok(rk_of_sorted(&sorted_desc(z)))
+    Ok(sorted_desc(z))
 }
 
 /// The ordinates highest first. `total_cmp` is a total order in which only identical bits
@@ -753,16 +758,7 @@ pub fn rk_family_and_curve(
     z: &[f64],
     points: usize,
 ) -> Result<(RkFamily, Vec<[f64; 2]>), MetrologyError> {
-    check_finite(z)?;
-    if z.len() < 2 {
-        return Err(MetrologyError::TooShort {
-            points: z.len(),
-            length_mm: 0.0,
-            sampling_length_mm: 0.0,
-            min_points: 2,
-        });
-    }
-    let s = sorted_desc(z);
+    let s = checked_sorted_desc(z)?;
     Ok((rk_of_sorted(&s), curve_of_sorted(&s, points)))
 }
 

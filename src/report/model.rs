@@ -12,7 +12,7 @@ use super::areal::surface_report;
 use super::context::{Model, ScanAnalysisOptions};
 use super::document::{FailedSection, SurfaceReport};
 use crate::metrology::areal::Grid;
-use crate::metrology::folds::{check_model_with, FoldOptions, ModelChecks};
+use crate::metrology::folds::{check_model_with, iso_curve_sample_count, FoldOptions, ModelChecks};
 use crate::metrology::model::{
     bearing_sample_us, model_bearing_curves_with, sample_model_grid, ModelBacOptions,
 };
@@ -97,7 +97,7 @@ pub fn characterise(
         // The fold check's iso-curves and the bearing curves are sampled at the same u when
         // their densities agree (the defaults do): the u basis is computed once for both.
         let us = bearing_sample_us(&fit.surface, &bac_options);
-        let fold_n_u = (fold_options.samples_per_pole.max(1) * fit.surface.count_u()).max(2);
+        let fold_n_u = iso_curve_sample_count(&fit.surface, &fold_options);
         let shared = (us.len() == fold_n_u).then(|| UBasis::new(&fit.surface, &us));
         let shared = shared.as_ref();
         let (checks, bac) = std::thread::scope(|inner| {
