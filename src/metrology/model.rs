@@ -362,16 +362,21 @@ mod tests {
     use super::*;
     use crate::fit::{fit_grid, FitOptions};
 
-    #[test]
-    fn bearing_curves_from_a_shared_u_basis_are_those_of_their_own() {
-        // The basis at `bearing_sample_us` made by the caller gives the curves to the bit; one
-        // of another length is ignored.
+    /// A smooth wavy 7×300 grid at 0.5 µm pitch, fitted.
+    fn wavy_fit() -> crate::fit::FitResult {
         let (rows, cols, px) = (7, 300, 0.0005);
         let h: Vec<f64> = (0..rows * cols)
             .map(|k| ((k % cols) as f64 * 0.17).sin() + 0.3 * (k as f64 * 0.013).cos())
             .collect();
         let y: Vec<f64> = (0..rows).map(|l| l as f64 * 0.01).collect();
-        let fit = fit_grid(px, &y, &h, cols, FitOptions::default()).unwrap();
+        fit_grid(px, &y, &h, cols, FitOptions::default()).unwrap()
+    }
+
+    #[test]
+    fn bearing_curves_from_a_shared_u_basis_are_those_of_their_own() {
+        // The basis at `bearing_sample_us` made by the caller gives the curves to the bit; one
+        // of another length is ignored.
+        let fit = wavy_fit();
         let s = &fit.surface;
         let options = ModelBacOptions {
             curves: 5,
@@ -395,12 +400,7 @@ mod tests {
         // A fitted net's x(u) against the general evaluation of the same curve, at the
         // knots, between them in increasing and in jumping order (the span hint is stale),
         // at the ends, outside the domain and at NaN.
-        let (rows, cols, px) = (7, 300, 0.0005);
-        let h: Vec<f64> = (0..rows * cols)
-            .map(|k| ((k % cols) as f64 * 0.17).sin() + 0.3 * (k as f64 * 0.013).cos())
-            .collect();
-        let y: Vec<f64> = (0..rows).map(|l| l as f64 * 0.01).collect();
-        let fit = fit_grid(px, &y, &h, cols, FitOptions::default()).unwrap();
+        let fit = wavy_fit();
         let s = &fit.surface;
         let general = BSplineCurve {
             degree: s.degree_u(),
