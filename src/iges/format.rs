@@ -4,6 +4,9 @@
 //!
 //! Layer 1 (pure logic): no dependencies inside the crate; writes into byte buffers.
 
+/// Room reserved for a height-band real (`-d.` + 16 digits + `E-z` is 22 bytes).
+const HEIGHT_TEXT_MAX: usize = 32;
+
 /// Appends `value` to `out` as an IGES real: the shortest decimal that reads back to the same
 /// f64, always with a `.`, with an upper-case `E` exponent when that is shorter than the plain
 /// form (`1.`, `0.`, `-0.25`, `1.2345E-4`, `1.E-7`). Returns `false` (and appends nothing) for
@@ -29,20 +32,49 @@ pub fn push_real(out: &mut Vec<u8>, value: f64) -> bool {
     if (1e-5..1e-3).contains(&magnitude) {
         let negative = usize::from(value.is_sign_negative());
         let body = &text[negative..];
-        let zeros = body[2..].iter().take_while(|&&c| c == b'0').count();
-        let sig = &body[2 + zeros..];
-        let mut tmp = [0u8; 64];
-        tmp[0] = b'-';
-        let mut len = negative;
-        tmp[len] = sig[0];
-        tmp[len + 1] = b'.';
-        len += 2;
-        copy_short(&mut tmp[len..len + 32], &sig[1..]);
-        len += sig.len() - 1;
-        tmp[len] = b'E';
-        tmp[len + 1] = b'-';
-        tmp[len + 2] = b'0' + (zeros + 1) as u8;
-        push_short(out, &tmp[..len + 3]);
+        // Zeros after the point: 3 from 1e-4 up, else 4. The shortest digits read back to the
+        // value, so they lie on the same side of 0.0001 as it does; the count is taken from the
+        // magnitude (no loop over the text to mispredict) and checked against the text.
+        let zeros = 3 + usize::from(magnitude < 1e-4);
+        // `0.000` then, for 4 zeros, one more `0`; then a non-zero digit and at most 16 more
+        // (fixed-size comparisons: a slice comparison of varying length is a `memcmp` call).
+        let (lead, rest) = match (body.first_chunk::<6>(), body.get(2 + zeros..)) {
+            (Some(head), Some(sig))
+                if head[..5] == *b"0.000" && (head[5] == b'0') == (zeros == 4) =>
+            {
+                match sig.split_first() {
+                    Some((&d, rest)) if d != b'0' && rest.len() <= 16 => (d, rest),
+                    _ => {
+                        reformat(out, text);
+                        return true;
+                    }
+                }
+            }
+            _ => {
+                reformat(out, text);
+                return true;
+            }
+        };
+        // The text is `[-]d.dddE-z`, written straight into `out`: at most 17 significant
+        // digits, so 1 + 1 + 1 + 16 + 3 = 22 bytes.
+        out.reserve(HEIGHT_TEXT_MAX);
+        let len = out.len();
+        let n = negative + 2 + rest.len() + 3;
+        // SAFETY: `reserve` leaves HEIGHT_TEXT_MAX (32) writable bytes from `len`; the writes
+        // below cover [len, len + n) with n <= 22 (`rest` is at most 16 bytes, checked above,
+        // and `copy_at_most_16` writes exactly its length), all before `set_len`.
+        unsafe {
+            let dst = out.as_mut_ptr().add(len);
+            *dst = b'-';
+            *dst.add(negative) = lead;
+            *dst.add(negative + 1) = b'.';
+            copy_at_most_16(rest, dst.add(negative + 2));
+            let e = dst.add(negative + 2 + rest.len());
+            *e = b'E';
+            *e.add(1) = b'-';
+            *e.add(2) = b'0' + (zeros + 1) as u8;
+            out.set_len(len + n);
+        }
         return true;
     }
     reformat(out, text);
@@ -214,6 +246,33 @@ pub(crate) fn push_short_then(out: &mut Vec<u8>, bytes: &[u8], last: u8) {
     }
 }
 
+/// Copies `bytes` (at most 16) to `dst`: the 8 to 16 bytes of most significands in one branch
+/// of two overlapping 8-byte copies (a fitted height's 15 or 16 digits after the first do not
+/// alternate between branches as they would at the 16-byte step of [`copy_at_most_32`]).
+///
+/// # Safety
+/// `bytes.len() <= 16` and `dst` is valid for writing `bytes.len()` bytes that do not overlap
+/// `bytes`.
+#[inline(always)]
+unsafe fn copy_at_most_16(bytes: &[u8], dst: *mut u8) {
+    let (src, n) = (bytes.as_ptr(), bytes.len());
+    // SAFETY: each copy reads within `bytes` and writes within [dst, dst + n), as the caller
+    // guarantees room for.
+    unsafe {
+        if n >= 8 {
+            std::ptr::copy_nonoverlapping(src, dst, 8);
+            std::ptr::copy_nonoverlapping(src.add(n - 8), dst.add(n - 8), 8);
+        } else if n >= 4 {
+            std::ptr::copy_nonoverlapping(src, dst, 4);
+            std::ptr::copy_nonoverlapping(src.add(n - 4), dst.add(n - 4), 4);
+        } else {
+            for i in 0..n {
+                *dst.add(i) = *src.add(i);
+            }
+        }
+    }
+}
+
 /// Copies `bytes` (at most 32) to `dst` with fixed-size copies: two overlapping copies of a
 /// power-of-two size cover every length in its range.
 ///
@@ -239,27 +298,6 @@ unsafe fn copy_at_most_32(bytes: &[u8], dst: *mut u8) {
             for i in 0..n {
                 *dst.add(i) = *src.add(i);
             }
-        }
-    }
-}
-
-/// Copies `src` (at most 32 bytes) to the start of the 32-byte `dst` with fixed-size copies.
-#[inline]
-fn copy_short(dst: &mut [u8], src: &[u8]) {
-    let (dst, bytes, n) = (&mut dst[..32], src, src.len());
-    // Two overlapping copies of a power-of-two size cover every length in its range.
-    if n >= 16 {
-        dst[..16].copy_from_slice(&bytes[..16]);
-        dst[n - 16..n].copy_from_slice(&bytes[n - 16..]);
-    } else if n >= 8 {
-        dst[..8].copy_from_slice(&bytes[..8]);
-        dst[n - 8..n].copy_from_slice(&bytes[n - 8..]);
-    } else if n >= 4 {
-        dst[..4].copy_from_slice(&bytes[..4]);
-        dst[n - 4..n].copy_from_slice(&bytes[n - 4..]);
-    } else {
-        for (d, &b) in dst.iter_mut().zip(bytes) {
-            *d = b;
         }
     }
 }
@@ -787,6 +825,46 @@ mod tests {
                     "{fast}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn height_band_reals_are_written_in_place_as_the_general_path_writes_them() {
+        // The magnitudes of fitted heights in mm (1e-5 <= |v| < 1e-3) are written straight
+        // into the buffer: appended one after another to a buffer that already holds text,
+        // they must be what the general path writes, byte for byte, and nothing before them
+        // may change. Short (`1.5E-4`) and 17-digit texts, both signs, the band's edges.
+        let mut values = vec![1e-5, 1e-4, 9.999999999999999e-4, 1.0000000000000001e-5];
+        values.push(f64::from_bits(1e-3f64.to_bits() - 1));
+        let mut s: u64 = 0x1234_5678_9ABC_DEF1;
+        for _ in 0..200_000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let unit = 1.0 + 9.0 * ((s >> 11) as f64 / (1u64 << 53) as f64);
+            let exp = if s & 1 == 0 { -4 } else { -5 };
+            values.push(unit * 10f64.powi(exp));
+            values.push(((s >> 20) % 10_000) as f64 * 10f64.powi(exp - 3));
+        }
+        let (mut fast, mut general) = (b"P,".to_vec(), b"P,".to_vec());
+        let mut count = 0;
+        for v in values {
+            for v in [v, -v] {
+                if !(1e-5..1e-3).contains(&v.abs()) {
+                    continue;
+                }
+                assert!(push_real(&mut fast, v));
+                fast.push(b',');
+                reformat(&mut general, zmij::Buffer::new().format_finite(v).as_bytes());
+                general.push(b',');
+                count += 1;
+            }
+        }
+        assert!(count > 700_000, "{count}");
+        assert!(fast == general, "the in-place texts differ from the general path's");
+        // Spot checks written out by hand.
+        for (v, t) in [(1.5e-4, "1.5E-4"), (-2.25e-5, "-2.25E-5"), (1e-4, "1.E-4")] {
+            assert_eq!(real(v), t);
         }
     }
 
