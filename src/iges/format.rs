@@ -38,22 +38,17 @@ pub fn push_real(out: &mut Vec<u8>, value: f64) -> bool {
         let zeros = 3 + usize::from(magnitude < 1e-4);
         // `0.000` then, for 4 zeros, one more `0`; then a non-zero digit and at most 16 more
         // (fixed-size comparisons: a slice comparison of varying length is a `memcmp` call).
-        let (lead, rest) = match (body.first_chunk::<6>(), body.get(2 + zeros..)) {
-            (Some(head), Some(sig))
-                if head[..5] == *b"0.000" && (head[5] == b'0') == (zeros == 4) =>
-            {
-                match sig.split_first() {
-                    Some((&d, rest)) if d != b'0' && rest.len() <= 16 => (d, rest),
-                    _ => {
-                        reformat(out, text);
-                        return true;
-                    }
-                }
-            }
-            _ => {
-                reformat(out, text);
-                return true;
-            }
+        let head_ok = body
+            .first_chunk::<6>()
+            .is_some_and(|h| h[..5] == *b"0.000" && (h[5] == b'0') == (zeros == 4));
+        let Some((&lead, rest)) = body
+            .get(2 + zeros..)
+            .filter(|_| head_ok)
+            .and_then(|sig| sig.split_first())
+            .filter(|(&d, rest)| d != b'0' && rest.len() <= 16)
+        else {
+            reformat(out, text);
+            return true;
         };
         // The text is `[-]d.dddE-z`, written straight into `out`: at most 17 significant
         // digits, so 1 + 1 + 1 + 16 + 3 = 22 bytes.
@@ -283,21 +278,13 @@ unsafe fn copy_at_most_16(bytes: &[u8], dst: *mut u8) {
 unsafe fn copy_at_most_32(bytes: &[u8], dst: *mut u8) {
     let (src, n) = (bytes.as_ptr(), bytes.len());
     // SAFETY: each copy reads within `bytes` and writes within [dst, dst + n), as the caller
-    // guarantees room for.
+    // guarantees room for; below 16 bytes the caller's guarantee is `copy_at_most_16`'s.
     unsafe {
         if n >= 16 {
             std::ptr::copy_nonoverlapping(src, dst, 16);
             std::ptr::copy_nonoverlapping(src.add(n - 16), dst.add(n - 16), 16);
-        } else if n >= 8 {
-            std::ptr::copy_nonoverlapping(src, dst, 8);
-            std::ptr::copy_nonoverlapping(src.add(n - 8), dst.add(n - 8), 8);
-        } else if n >= 4 {
-            std::ptr::copy_nonoverlapping(src, dst, 4);
-            std::ptr::copy_nonoverlapping(src.add(n - 4), dst.add(n - 4), 4);
         } else {
-            for i in 0..n {
-                *dst.add(i) = *src.add(i);
-            }
+            copy_at_most_16(bytes, dst);
         }
     }
 }
