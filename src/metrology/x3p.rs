@@ -3,8 +3,8 @@
 //!
 //! The writer produces a zip archive (stored, uncompressed) holding `main.xml`,
 //! `bindata/data.bin` (little-endian f64 heights in metres, x fastest) and `md5checksum.hex`;
-//! the MD5 and CRC-32 it needs are RustCrypto's `md-5` and `crc32fast` (the tests check them
-//! against the RFC 1321 vectors and the zip CRC's check value).
+//! the MD5 it needs is RustCrypto's `md-5` and the CRC-32 is `crc32fast` (the tests check
+//! them against the RFC 1321 vectors and the zip CRC's check value).
 //!
 //! The reader takes X3P files of other software too: stored or deflated zip entries (found
 //! through the central directory, so data descriptors do not matter), surfaces (`SUR`) and
