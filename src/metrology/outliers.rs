@@ -154,13 +154,16 @@ fn median(v: &mut [f64]) -> f64 {
     if n == 0 {
         return 0.0;
     }
-    // Only identical bits compare equal under `total_cmp`: the unstable sort's order is the
-    // stable sort's.
-    v.sort_unstable_by(f64::total_cmp);
+    // Selection, not a sort: under `total_cmp` only identical bits compare equal, so the
+    // element at n/2 and the largest one below it are exactly the sorted sequence's v[n/2]
+    // and v[n/2 - 1], found in O(n) instead of O(n log n).
+    let (below, mid, _) = v.select_nth_unstable_by(n / 2, f64::total_cmp);
+    let mid = *mid;
     if n % 2 == 1 {
-        v[n / 2]
+        mid
     } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
+        let lower = below.iter().copied().max_by(f64::total_cmp).unwrap_or(mid);
+        0.5 * (lower + mid)
     }
 }
 
@@ -286,15 +289,55 @@ pub fn find_grid_spikes(
     lambda_c_mm: Option<f64>,
     options: &SpikeOptions,
 ) -> (Vec<LineSpike>, Vec<(u32, String)>) {
+    // Lines are independent: they are judged in parallel over the available cores, one run
+    // of consecutive rows per thread, and the results joined in row order.
+    let rows: Vec<(usize, &[f64])> = heights_um.chunks(cols.max(1)).enumerate().collect();
+    let judge = |part: &[(usize, &[f64])]| -> Vec<(u32, Result<SpikeScan, String>)> {
+        part.iter()
+            .map(|&(row, z)| {
+                let line = index.get(row).copied().unwrap_or(row as u32);
+                let found = spike_roughness(z, pitch_mm, lambda_c_mm)
+                    .and_then(|r| find_spikes(&r, z, pitch_mm, options))
+                    .map_err(|e| e.to_string());
+                (line, found)
+            })
+            .collect()
+    };
+    let workers = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+        .clamp(1, rows.len().max(1));
+    let judged: Vec<(u32, Result<SpikeScan, String>)> = if workers == 1 {
+        judge(&rows)
+    } else {
+        let chunk = rows.len().div_ceil(workers).max(1);
+        std::thread::scope(|s| {
+            let handles: Vec<_> = rows
+                .chunks(chunk)
+                .map(|part| (part, s.spawn(move || judge(part))))
+                .collect();
+            handles
+                .into_iter()
+                .flat_map(|(part, h)| {
+                    h.join().unwrap_or_else(|_| {
+                        part.iter()
+                            .map(|&(row, _)| {
+                                let line = index.get(row).copied().unwrap_or(row as u32);
+                                let reason = "internal: the spike check panicked; report this with the input";
+                                (line, Err(reason.to_string()))
+                            })
+                            .collect()
+                    })
+                })
+                .collect()
+        })
+    };
     let mut spikes = Vec::new();
     let mut failed = Vec::new();
-    for (row, z) in heights_um.chunks(cols.max(1)).enumerate() {
-        let line = index.get(row).copied().unwrap_or(row as u32);
-        let found = spike_roughness(z, pitch_mm, lambda_c_mm)
-            .and_then(|r| find_spikes(&r, z, pitch_mm, options));
+    for (line, found) in judged {
         match found {
             Ok(s) => spikes.extend(s.spikes.into_iter().map(|spike| LineSpike { line, spike })),
-            Err(e) => failed.push((line, e.to_string())),
+            Err(e) => failed.push((line, e)),
         }
     }
     (spikes, failed)
@@ -441,6 +484,44 @@ mod tests {
         assert_eq!(failed.len(), 3);
     }
 
+    /// The parallel judgement gives what judging the lines one by one in row order gives: the
+    /// same spikes under the same line names, the failures in line order.
+    #[test]
+    fn grid_spikes_in_parallel_are_the_lines_judged_one_by_one() {
+        let cols = 700;
+        let rows = 7;
+        let mut z: Vec<f64> = (0..rows)
+            .flat_map(|r| rough(cols + r).into_iter().take(cols))
+            .collect();
+        z[cols + 100] += 90.0;
+        z[4 * cols + 650] -= 70.0;
+        z[6 * cols + 3] += 60.0;
+        z[6 * cols + 400] += 60.0;
+        z[3 * cols + 10] = f64::NAN;
+        z[5 * cols + 20] = f64::INFINITY;
+        let index: Vec<u32> = (0..rows as u32).map(|r| 40 + 2 * r).collect();
+        let options = SpikeOptions::default();
+        let (spikes, failed) = find_grid_spikes(&z, cols, &index, 0.001, None, &options);
+        let mut want_spikes = Vec::new();
+        let mut want_failed = Vec::new();
+        for (row, line) in z.chunks(cols).zip(index.iter().copied()) {
+            match spike_roughness(row, 0.001, None)
+                .and_then(|r| find_spikes(&r, row, 0.001, &options))
+            {
+                Ok(s) => {
+                    want_spikes.extend(s.spikes.into_iter().map(|spike| LineSpike { line, spike }))
+                }
+                Err(e) => want_failed.push((line, e.to_string())),
+            }
+        }
+        assert_eq!(spikes, want_spikes);
+        assert_eq!(failed, want_failed);
+        let named: Vec<u32> = spikes.iter().map(|s| s.line).collect();
+        assert_eq!(named, vec![42, 48, 52, 52]);
+        let failed_lines: Vec<u32> = failed.iter().map(|f| f.0).collect();
+        assert_eq!(failed_lines, vec![46, 50]);
+    }
+
     #[test]
     fn least_squares_line_is_removed_without_a_filter() {
         let z: Vec<f64> = (0..100).map(|i| 3.0 + 0.5 * i as f64).collect();
@@ -451,5 +532,48 @@ mod tests {
             ..SpikeOptions::default()
         };
         assert!(find_spikes(&r, &z, 0.001, &bad).is_err());
+    }
+
+    /// The median by selection is the sorted sequence's middle (or the mean of its two middle
+    /// values) to the bit: odd and even lengths, repeated values, both zeros, negative values.
+    #[test]
+    fn median_by_selection_is_the_sorted_median_to_the_bit() {
+        let sorted_median = |v: &[f64]| {
+            let mut s = v.to_vec();
+            s.sort_by(f64::total_cmp);
+            let n = s.len();
+            if n % 2 == 1 {
+                s[n / 2]
+            } else {
+                0.5 * (s[n / 2 - 1] + s[n / 2])
+            }
+        };
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        for n in (1..40).chain([999, 1000, 8000, 8001]) {
+            for round in 0..20 {
+                let v: Vec<f64> = (0..n)
+                    .map(|_| {
+                        let r = next();
+                        match round % 4 {
+                            // Few distinct values: many ties around the middle.
+                            0 => (r % 5) as f64 - 2.0,
+                            // Both zeros among the ties.
+                            1 => [0.0, -0.0, 1.0, -1.0][(r % 4) as usize],
+                            _ => (r >> 11) as f64 / (1u64 << 53) as f64 * 20.0 - 10.0,
+                        }
+                    })
+                    .collect();
+                let want = sorted_median(&v);
+                let got = median(&mut v.clone());
+                assert_eq!(got.to_bits(), want.to_bits(), "n {n}, round {round}");
+            }
+        }
+        assert_eq!(median(&mut []), 0.0);
     }
 }
