@@ -112,6 +112,29 @@ fn wrap(text: &str, style: &TextStyle<'_>, width: u32) -> Vec<String> {
     lines
 }
 
+/// [`wrap`] of `text` in the bundled font at `px`, remembered: a report draws every figure
+/// twice (PNG and SVG) and its Rk figures share one subtitle and one footer, so the same
+/// texts come back at the same size and width, and measuring them word by word is most of
+/// the cost of a frame. std has no bounded memo; this one is cleared past 64 entries, so a
+/// long-running daemon's titles cannot grow it.
+fn wrapped(text: &str, px: u32, width: u32) -> Vec<String> {
+    type Memo = std::collections::HashMap<(String, u32, u32), Vec<String>>;
+    static MEMO: std::sync::LazyLock<std::sync::Mutex<Memo>> =
+        std::sync::LazyLock::new(|| std::sync::Mutex::new(Memo::new()));
+    let key = (text.to_string(), px, width);
+    if let Some(lines) = MEMO.lock().ok().and_then(|m| m.get(&key).cloned()) {
+        return lines;
+    }
+    let lines = wrap(text, &font(px), width);
+    if let Ok(mut m) = MEMO.lock() {
+        if m.len() >= 64 {
+            m.clear();
+        }
+        m.insert(key, lines.clone());
+    }
+    lines
+}
+
 /// Title size, subtitle size, footer size and the line spacing factor.
 const TITLE_PX: u32 = 20;
 const SUBTITLE_PX: u32 = 14;
@@ -130,9 +153,9 @@ impl Frame {
     fn new(figure_w: u32, title: &str, subtitle: &str, footer: &str) -> Frame {
         let width = figure_w.saturating_sub(2 * SIDE_PAD);
         Frame {
-            title: wrap(title, &font(TITLE_PX), width),
-            subtitle: wrap(subtitle, &font(SUBTITLE_PX), width),
-            footer: wrap(footer, &font(FOOTER_PX), width),
+            title: wrapped(title, TITLE_PX, width),
+            subtitle: wrapped(subtitle, SUBTITLE_PX, width),
+            footer: wrapped(footer, FOOTER_PX, width),
         }
     }
 
@@ -1090,6 +1113,49 @@ mod tests {
             lines.join(" "),
             text.split_whitespace().collect::<Vec<_>>().join(" ")
         );
+    }
+
+    /// The remembered wrap is the wrap: on first and repeated use, at other sizes and widths,
+    /// and after more distinct texts than the memo keeps.
+    #[test]
+    fn remembered_wrap_is_the_wrap() {
+        ensure_font().unwrap();
+        let text = "ISO 13565-2: the equivalent straight line is the 40 % secant of least gradient of the material ratio curve, extended to 0 % (level C) and 100 % (level D)";
+        for round in 0..3 {
+            for (px, width) in [
+                (FOOTER_PX, 400),
+                (SUBTITLE_PX, 400),
+                (SUBTITLE_PX, 976),
+                (TITLE_PX, 250),
+            ] {
+                assert_eq!(
+                    wrapped(text, px, width),
+                    wrap(text, &font(px), width),
+                    "round {round}, {px} px, {width} px wide"
+                );
+            }
+        }
+        for k in 0..150 {
+            let t = format!(
+                "line {k} of the grid, y = {} mm: measured and model",
+                k as f64 * 0.01
+            );
+            assert_eq!(
+                wrapped(&t, TITLE_PX, 200),
+                wrap(&t, &font(TITLE_PX), 200),
+                "{t}"
+            );
+            assert_eq!(
+                wrapped(&t, TITLE_PX, 200),
+                wrap(&t, &font(TITLE_PX), 200),
+                "{t}"
+            );
+        }
+        assert_eq!(
+            wrapped(text, FOOTER_PX, 400),
+            wrap(text, &font(FOOTER_PX), 400)
+        );
+        assert!(wrapped(text, FOOTER_PX, 400).len() >= 2);
     }
 
     #[test]
