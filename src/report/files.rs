@@ -254,7 +254,7 @@ pub fn held_out_overlay(
 fn write_plots(
     out: &Path,
     grid: &LineGrid,
-    measured: &Grid<'_>,
+    height_map: Result<[PathBuf; 2], ReportError>,
     sampled: Option<&SampledModel>,
     overlay: Option<&Overlay>,
     report: &Report,
@@ -283,7 +283,7 @@ fn write_plots(
     plots.extend(
         plot_bearing_curves(out, bac_curves, pooled, &bac_title, &caption).map_err(plot_err)?,
     );
-    plots.extend(plot_height_map(out, measured, "Measured heights", &caption).map_err(plot_err)?);
+    plots.extend(height_map?);
     if let Some(o) = overlay {
         plots.extend(
             plot_profile_overlay(out, &o.measured, &o.model, &o.residual, &o.title, &caption)
@@ -327,6 +327,18 @@ fn write_plots(
     Ok(plots)
 }
 
+/// The error of the height map thread when it panicked.
+pub(crate) fn height_map_panic(ctx: &ReportContext) -> ReportError {
+    ReportError::Metrology {
+        what: format!("{}: plots", ctx.input),
+        source: MetrologyError::BadParameter {
+            what: "height map thread",
+            value: f64::NAN,
+            hint: "drawing the height map panicked; report this with the input",
+        },
+    }
+}
+
 /// The error of an Rk figure thread that panicked.
 pub(crate) fn rk_plot_panic(ctx: &ReportContext) -> ReportError {
     ReportError::Metrology {
@@ -337,6 +349,22 @@ pub(crate) fn rk_plot_panic(ctx: &ReportContext) -> ReportError {
             hint: "drawing the Rk figures panicked; report this with the input",
         },
     }
+}
+
+/// The height map of the measured grid, `heightmap.png|svg`: it needs only the data, so the
+/// caller draws it while the model's sections are made and hands the result to
+/// [`write_data_files`], which lists it between the bearing area curves and the overlay.
+pub(crate) fn draw_height_map(
+    out: &Path,
+    measured: &Grid<'_>,
+    ctx: &ReportContext,
+) -> Result<[PathBuf; 2], ReportError> {
+    plot_height_map(out, measured, "Measured heights", &caption(ctx)).map_err(|source| {
+        ReportError::Metrology {
+            what: format!("{}: plots", ctx.input),
+            source,
+        }
+    })
 }
 
 /// The ISO 13565-2 construction of every line, from the ordinates its Rk family came from:
@@ -358,8 +386,50 @@ pub(crate) fn write_rk_plots(
         path: rk_dir.clone(),
         source,
     })?;
-    let mut rk_plots = Vec::new();
-    for (row, a) in analyses.iter().enumerate() {
+    // The figures are independent: drawn in parallel over the available cores, one run of
+    // consecutive lines per thread, joined in line order (the first error in line order wins).
+    let workers = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+        .clamp(1, analyses.len().max(1));
+    let chunk = analyses.len().div_ceil(workers).max(1);
+    let draw = |first_row: usize, part: &[LineAnalysis]| {
+        draw_rk_run(&rk_dir, grid, first_row, part, &caption, &plot_err)
+    };
+    if workers == 1 {
+        return draw(0, analyses);
+    }
+    let parts: Vec<_> = std::thread::scope(|s| {
+        let handles: Vec<_> = analyses
+            .chunks(chunk)
+            .enumerate()
+            .map(|(k, part)| s.spawn(move || draw(k * chunk, part)))
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_else(|_| Err(rk_plot_panic(ctx))))
+            .collect()
+    });
+    let mut rk_plots = Vec::with_capacity(analyses.len());
+    for part in parts {
+        rk_plots.extend(part?);
+    }
+    Ok(rk_plots)
+}
+
+/// The Rk figures of the consecutive lines `part`, the first of them grid row `first_row`,
+/// with their titles; stops at the first error.
+fn draw_rk_run(
+    rk_dir: &Path,
+    grid: &LineGrid,
+    first_row: usize,
+    part: &[LineAnalysis],
+    caption: &str,
+    plot_err: &dyn Fn(MetrologyError) -> ReportError,
+) -> Result<Vec<(String, [PathBuf; 2])>, ReportError> {
+    let mut rk_plots = Vec::with_capacity(part.len());
+    for (k, a) in part.iter().enumerate() {
+        let row = first_row + k;
         let index = grid.index_of(row);
         let (rk, curve) = rk_family_and_curve(&a.roughness_um, 1001).map_err(plot_err)?;
         let title = format!(
@@ -370,15 +440,9 @@ pub(crate) fn write_rk_plots(
                 Quantity::PositionMm
             )
         );
-        let files = plot_rk_construction(
-            &rk_dir,
-            &format!("{index:04}"),
-            &curve,
-            &rk,
-            &title,
-            &caption,
-        )
-        .map_err(plot_err)?;
+        let files =
+            plot_rk_construction(rk_dir, &format!("{index:04}"), &curve, &rk, &title, caption)
+                .map_err(plot_err)?;
         rk_plots.push((title, files));
     }
     Ok(rk_plots)
@@ -386,12 +450,15 @@ pub(crate) fn write_rk_plots(
 
 /// Writes the plots and X3P files (which may add warnings to `ctx`), then `summary.csv`;
 /// `report.json` and `report.html` are written last by [`write_report`], once the warnings
-/// are final.
+/// are final. `height_map` is [`draw_height_map`]'s result. `rk_plots` gives the Rk figures'
+/// result; it is asked for only once the other plots are drawn, so that a caller drawing the
+/// Rk figures on another thread lets the two run side by side.
 #[allow(clippy::too_many_arguments)]
 pub fn write_data_files(
     out: &Path,
     grid: &LineGrid,
-    rk_plots: Result<Vec<(String, [PathBuf; 2])>, ReportError>,
+    height_map: Result<[PathBuf; 2], ReportError>,
+    rk_plots: impl FnOnce() -> Result<Vec<(String, [PathBuf; 2])>, ReportError>,
     measured: &Grid<'_>,
     sampled: Option<&SampledModel>,
     overlay: Option<&Overlay>,
@@ -427,9 +494,10 @@ pub fn write_data_files(
             });
             (measured_bytes, model_bytes)
         });
-        let plots = write_plots(out, grid, measured, sampled, overlay, report, ctx);
+        let plots = write_plots(out, grid, height_map, sampled, overlay, report, ctx);
         (plots, x3p.join())
     });
+    let rk_plots = rk_plots();
     let plots = plots?;
     let rk_plots = rk_plots?;
     let (measured_bytes, model_bytes) = x3p.map_err(|_| ReportError::Metrology {

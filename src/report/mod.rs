@@ -120,38 +120,63 @@ pub fn characterise(
         source,
     })?;
     let mut failed_sections: Vec<FailedSection> = Vec::new();
-
-    // Spikes, judged on each line's roughness profile; bridged for characterisation only
-    // when asked for.
-    let t = Instant::now();
-    let outliers = outliers::characterise(grid, &ctx);
-    outliers::warn(
-        &outliers,
-        model.replaced,
-        grid.pitch_x_mm,
-        &mut ctx.warnings,
-    );
-    let bridged = if ctx.options.exclude_spikes && !outliers.spikes.is_empty() {
-        Some(outliers::bridged(grid, &outliers.spikes))
-    } else {
-        None
-    };
-    let cgrid = bridged.as_ref().unwrap_or(grid);
-
-    let lines::LinesSection {
-        recipe,
-        lines: mut line_reports,
-        analyses,
-    } = lines::characterise(cgrid, &ctx)?;
-    timings.lines = t.elapsed().as_secs_f64();
-    // The Rk figures need only the line analyses: they are drawn while the sections below
-    // are made.
-    let rk_ctx = ctx.clone();
+    let (py, evenly) = grid::mean_pitch_y(&grid.y_mm);
+    // The model section (the densest work: the fold check, the model's bearing curves, the
+    // sampled model) reads only the grid and the model: it runs beside every section below,
+    // from the start. It never unwinds (a panic becomes its failure), so an early error
+    // return below, which joins it, cannot turn into a panic.
+    let model_options = ctx.options.clone();
     std::thread::scope(|scope| {
-        let rk_plots = scope.spawn(|| files::write_rk_plots(out, grid, &analyses, &rk_ctx));
+        let model_thread = scope.spawn(|| {
+            let t = Instant::now();
+            let m = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                model::characterise(
+                    &model,
+                    &grid.heights_um,
+                    rows,
+                    cols,
+                    grid.pitch_x_mm,
+                    py,
+                    &model_options,
+                )
+            }))
+            .unwrap_or_else(|_| model_section_panicked());
+            (m, t.elapsed().as_secs_f64())
+        });
+
+        // Spikes, judged on each line's roughness profile; bridged for characterisation only
+        // when asked for.
+        let t = Instant::now();
+        let outliers = outliers::characterise(grid, &ctx);
+        outliers::warn(
+            &outliers,
+            model.replaced,
+            grid.pitch_x_mm,
+            &mut ctx.warnings,
+        );
+        let bridged = if ctx.options.exclude_spikes && !outliers.spikes.is_empty() {
+            Some(outliers::bridged(grid, &outliers.spikes))
+        } else {
+            None
+        };
+        let cgrid = bridged.as_ref().unwrap_or(grid);
+
+        let lines::LinesSection {
+            recipe,
+            lines: mut line_reports,
+            analyses,
+        } = lines::characterise(cgrid, &ctx)?;
+        timings.lines = t.elapsed().as_secs_f64();
+        // The Rk figures need only the line analyses: they are drawn while the sections below
+        // are made.
+        let rk_ctx = ctx.clone();
+        let map_ctx = ctx.clone();
+        let rk_plots = scope.spawn(move || files::write_rk_plots(out, grid, &analyses, &rk_ctx));
+        // So is the height map, which needs only the data.
+        let map_grid = areal::measured(grid, py);
+        let height_map = scope.spawn(move || files::draw_height_map(out, &map_grid, &map_ctx));
 
         let t = Instant::now();
-        let (py, evenly) = grid::mean_pitch_y(&grid.y_mm);
         if !evenly {
             let y: Vec<String> = grid
                 .y_mm
@@ -192,26 +217,13 @@ pub fn characterise(
         };
         timings.surface_grid = t.elapsed().as_secs_f64();
 
-        // The model section and the two hold-out sections are independent of each other (each
-        // reads the grid and the model, none writes anything): they run side by side, the
-        // results joined in the order the sections are reported.
+        // The two hold-out sections are independent of each other and of the model section
+        // (each reads the grid and the model, none writes anything): they run side by side,
+        // the results joined in the order the sections are reported.
         let sq = surface_grid.as_ref().map(|s| s.params.sq_um).ok();
         let options = &ctx.options;
         let ((model_section, model_s), (model_vs_measured, verdict, holdout_s)) =
             std::thread::scope(|s| {
-                let model_thread = s.spawn(|| {
-                    let t = Instant::now();
-                    let m = model::characterise(
-                        &model,
-                        &grid.heights_um,
-                        rows,
-                        cols,
-                        grid.pitch_x_mm,
-                        py,
-                        options,
-                    );
-                    (m, t.elapsed().as_secs_f64())
-                });
                 let t = Instant::now();
                 let verdict_thread = s.spawn(|| match sq {
                     Some(sq) => holdout::verdict(
@@ -234,22 +246,9 @@ pub fn characterise(
                     )
                 });
                 let holdout_s = t.elapsed().as_secs_f64();
-                let model = model_thread.join().unwrap_or_else(|_| {
-                    let reason = "internal: the model section panicked; report this with the input"
-                        .to_string();
-                    (
-                        model::ModelSection {
-                            surface: Err(reason.clone()),
-                            sampled: None,
-                            checks: None,
-                            failed: vec![FailedSection {
-                                section: "surface".into(),
-                                reason,
-                            }],
-                        },
-                        0.0,
-                    )
-                });
+                let model = model_thread
+                    .join()
+                    .unwrap_or_else(|_| (model_section_panicked(), 0.0));
                 (model, (model_vs_measured, verdict, holdout_s))
             });
         failed_sections.extend(model_section.failed.iter().cloned());
@@ -353,12 +352,15 @@ pub fn characterise(
         };
 
         let t = Instant::now();
+        let rk_panic = files::rk_plot_panic(&ctx);
+        let height_map = height_map
+            .join()
+            .unwrap_or_else(|_| Err(files::height_map_panic(&ctx)));
         let written = files::write_data_files(
             out,
             grid,
-            rk_plots
-                .join()
-                .unwrap_or_else(|_| Err(files::rk_plot_panic(&ctx))),
+            height_map,
+            move || rk_plots.join().unwrap_or(Err(rk_panic)),
             &measured,
             model_section.sampled.as_ref(),
             overlay.as_ref(),
@@ -390,6 +392,20 @@ pub fn characterise(
             report,
         })
     })
+}
+
+/// The model section when it panicked: a failed `surface` section that says so.
+fn model_section_panicked() -> model::ModelSection {
+    let reason = "internal: the model section panicked; report this with the input".to_string();
+    model::ModelSection {
+        surface: Err(reason.clone()),
+        sampled: None,
+        checks: None,
+        failed: vec![FailedSection {
+            section: "surface".into(),
+            reason,
+        }],
+    }
 }
 
 impl ScanOutputs {
