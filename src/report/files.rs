@@ -465,34 +465,46 @@ pub fn write_data_files(
     report: &Report,
     ctx: &mut ReportContext,
 ) -> Result<Files, ReportError> {
-    // The X3P files are encoded (MD5, deflate) beside the plots: they read only the heights
-    // and their metadata. Errors are reported in the order the files are written.
+    // The X3P files are encoded (MD5, deflate) and written beside the plots: they read only
+    // the heights and their metadata. Errors are reported in the order the files were
+    // written before: the plots, the Rk figures, then the X3P files.
     let measured_meta = x3p_meta(ctx, "measured heights as traced");
     let model_meta = x3p_meta(
         ctx,
         "NURBS model sampled at half the x pitch on the data lines",
     );
+    let input = ctx.input.clone();
     let (plots, x3p) = std::thread::scope(|s| {
-        let x3p = s.spawn(|| {
-            let measured_bytes = to_x3p(
+        let x3p = s.spawn(|| -> Result<(PathBuf, Option<PathBuf>), ReportError> {
+            let measured_x3p = out.join("measured.x3p");
+            let bytes = to_x3p(
                 &grid.heights_um,
                 measured.rows,
                 measured.cols,
                 measured.pitch_x_mm,
                 measured.pitch_y_mm,
                 &measured_meta,
-            );
-            let model_bytes = sampled.map(|model| {
-                to_x3p(
-                    &model.heights_um,
-                    measured.rows,
-                    model.cols,
-                    model.pitch_x_mm,
-                    measured.pitch_y_mm,
-                    &model_meta,
-                )
-            });
-            (measured_bytes, model_bytes)
+            )
+            .map_err(metrology(format!("{input}: measured.x3p")))?;
+            write_file(&measured_x3p, &bytes)?;
+            let model_x3p = match sampled {
+                Some(model) => {
+                    let path = out.join("model.x3p");
+                    let bytes = to_x3p(
+                        &model.heights_um,
+                        measured.rows,
+                        model.cols,
+                        model.pitch_x_mm,
+                        measured.pitch_y_mm,
+                        &model_meta,
+                    )
+                    .map_err(metrology(format!("{input}: model.x3p")))?;
+                    write_file(&path, &bytes)?;
+                    Some(path)
+                }
+                None => None,
+            };
+            Ok((measured_x3p, model_x3p))
         });
         let plots = write_plots(out, grid, height_map, sampled, overlay, report, ctx);
         (plots, x3p.join())
@@ -500,26 +512,14 @@ pub fn write_data_files(
     let rk_plots = rk_plots();
     let plots = plots?;
     let rk_plots = rk_plots?;
-    let (measured_bytes, model_bytes) = x3p.map_err(|_| ReportError::Metrology {
-        what: format!("{}: measured.x3p", ctx.input),
+    let (measured_x3p, model_x3p) = x3p.map_err(|_| ReportError::Metrology {
+        what: format!("{input}: measured.x3p"),
         source: MetrologyError::BadParameter {
             what: "X3P encoding thread",
             value: f64::NAN,
             hint: "encoding the X3P files panicked; report this with the input",
         },
-    })?;
-    let measured_x3p = out.join("measured.x3p");
-    let bytes = measured_bytes.map_err(metrology(format!("{}: measured.x3p", ctx.input)))?;
-    write_file(&measured_x3p, &bytes)?;
-    let model_x3p = match model_bytes {
-        Some(bytes) => {
-            let path = out.join("model.x3p");
-            let bytes = bytes.map_err(metrology(format!("{}: model.x3p", ctx.input)))?;
-            write_file(&path, &bytes)?;
-            Some(path)
-        }
-        None => None,
-    };
+    })??;
     let summary = out.join("summary.csv");
     write_file(&summary, summary_csv(&report.lines).as_bytes())?;
     Ok(Files {
