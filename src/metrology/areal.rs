@@ -95,28 +95,30 @@ pub fn level_plane(grid: &Grid<'_>) -> Result<(Vec<f64>, [f64; 3]), MetrologyErr
     // Centred coordinates make the normal equations diagonal on a full regular grid.
     let xc = (grid.cols - 1) as f64 * 0.5;
     let yc = (grid.rows - 1) as f64 * 0.5;
+    // Row by row, point by point: the same x, y and sums, in the same order, as indexing
+    // k = row·cols + col, without two integer divisions per point.
     let (mut sz, mut sxz, mut syz, mut sxx, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for (k, z) in grid.heights_um.iter().enumerate() {
-        let x = (k % grid.cols) as f64 - xc;
-        let y = (k / grid.cols) as f64 - yc;
-        sz += z;
-        sxz += x * z;
-        syz += y * z;
-        sxx += x * x;
-        syy += y * y;
+    for (row, line) in grid.heights_um.chunks_exact(grid.cols).enumerate() {
+        let y = row as f64 - yc;
+        for (col, z) in line.iter().enumerate() {
+            let x = col as f64 - xc;
+            sz += z;
+            sxz += x * z;
+            syz += y * z;
+            sxx += x * x;
+            syy += y * y;
+        }
     }
     let n = grid.heights_um.len() as f64;
     let (a, b, c) = (sz / n, sxz / sxx, syz / syy);
-    let levelled = grid
-        .heights_um
-        .iter()
-        .enumerate()
-        .map(|(k, z)| {
-            let x = (k % grid.cols) as f64 - xc;
-            let y = (k / grid.cols) as f64 - yc;
+    let mut levelled = Vec::with_capacity(grid.heights_um.len());
+    for (row, line) in grid.heights_um.chunks_exact(grid.cols).enumerate() {
+        let y = row as f64 - yc;
+        levelled.extend(line.iter().enumerate().map(|(col, z)| {
+            let x = col as f64 - xc;
             z - (a + b * x + c * y)
-        })
-        .collect();
+        }));
+    }
     // In mm from the first point: z = a' + b'·x_mm + c'·y_mm.
     let b_mm = b / grid.pitch_x_mm;
     let c_mm = c / grid.pitch_y_mm;
@@ -283,6 +285,49 @@ mod tests {
                     p[1]
                 );
             }
+        }
+    }
+
+    /// The row-by-row levelling is the plane of the point-by-point definition with k = row·cols
+    /// + col, to the bit: residuals and coefficients, on grids that are not square.
+    #[test]
+    fn levelling_row_by_row_is_the_indexed_definition_to_the_bit() {
+        for (rows, cols) in [(2, 2), (3, 7), (31, 50), (5, 1001)] {
+            let heights: Vec<f64> = (0..rows * cols)
+                .map(|k| ((k as f64) * 0.37).sin() + 0.01 * k as f64 - 2.0)
+                .collect();
+            let grid = Grid {
+                heights_um: &heights,
+                rows,
+                cols,
+                pitch_x_mm: 0.0005,
+                pitch_y_mm: 0.01,
+            };
+            let (xc, yc) = ((cols - 1) as f64 * 0.5, (rows - 1) as f64 * 0.5);
+            let (mut sz, mut sxz, mut syz, mut sxx, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for (k, z) in heights.iter().enumerate() {
+                let x = (k % cols) as f64 - xc;
+                let y = (k / cols) as f64 - yc;
+                sz += z;
+                sxz += x * z;
+                syz += y * z;
+                sxx += x * x;
+                syy += y * y;
+            }
+            let (a, b, c) = (sz / heights.len() as f64, sxz / sxx, syz / syy);
+            let want: Vec<u64> = heights
+                .iter()
+                .enumerate()
+                .map(|(k, z)| {
+                    let (x, y) = ((k % cols) as f64 - xc, (k / cols) as f64 - yc);
+                    (z - (a + b * x + c * y)).to_bits()
+                })
+                .collect();
+            let (got, plane) = level_plane(&grid).unwrap();
+            let got: Vec<u64> = got.iter().map(|v| v.to_bits()).collect();
+            assert_eq!(got, want, "{rows}×{cols}");
+            let want_plane = [a - b * xc - c * yc, b / 0.0005, c / 0.01];
+            assert_eq!(plane.map(f64::to_bits), want_plane.map(f64::to_bits));
         }
     }
 }
