@@ -245,7 +245,15 @@ pub struct LineAnalysis {
     pub recipe: Recipe,
     /// The evaluated roughness ordinates (evaluation length only) in µm.
     pub roughness_um: Vec<f64>,
+    /// The ISO 13565-2 Rk family of those ordinates (the Rk values of `params` come from it).
+    pub rk: RkFamily,
+    /// Their material ratio curve, [Mr %, height µm] at [`RK_CURVE_POINTS`] equal steps of
+    /// Mr, from the same sort as `rk`: what the Rk construction plot draws.
+    pub rk_curve: Vec<[f64; 2]>,
 }
+
+/// Points of [`LineAnalysis::rk_curve`] (0.1 % steps of Mr).
+pub const RK_CURVE_POINTS: usize = 1001;
 
 impl LineAnalysis {
     /// Rmr(c): material ratio in % at `depth_um` below the highest peak of the evaluation length,
@@ -396,7 +404,7 @@ pub fn analyze_line(
     let k = n_sec as f64;
     let max = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let min = r.iter().copied().fold(f64::INFINITY, f64::min);
-    let rk = rk_family(&r)?;
+    let (rk, rk_curve) = rk_family_and_curve(&r, RK_CURVE_POINTS)?;
     let levels = MaterialLevels::default();
     let rt = max - min;
     let rmr_c = levels
@@ -483,6 +491,8 @@ pub fn analyze_line(
         params,
         recipe,
         roughness_um: r,
+        rk,
+        rk_curve,
     })
 }
 
@@ -873,6 +883,23 @@ mod tests {
                 format!("{:?}", rk_family_and_curve(bad, 11).unwrap_err()),
                 format!("{:?}", rk_family(bad).unwrap_err())
             );
+        }
+    }
+
+    /// A line's stored Rk family and curve are those of its roughness ordinates, as the two
+    /// functions give them from the ordinates, and its Rk parameters are that family's.
+    #[test]
+    fn a_line_carries_the_rk_family_and_curve_of_its_roughness() {
+        let z: Vec<f64> = (0..6000)
+            .map(|k| (k as f64 * 0.0123).sin() + 0.3 * (k as f64 * 0.21).cos())
+            .collect();
+        let a = analyze_line(&z, 0.0005, &Options::default()).unwrap();
+        assert_eq!(a.rk, rk_family(&a.roughness_um).unwrap());
+        assert_eq!(a.params.rk_um.to_bits(), a.rk.rk_um.to_bits());
+        let want = material_ratio_curve(&a.roughness_um, RK_CURVE_POINTS);
+        assert_eq!(a.rk_curve.len(), RK_CURVE_POINTS);
+        for (got, want) in a.rk_curve.iter().zip(&want) {
+            assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits));
         }
     }
 }

@@ -15,7 +15,7 @@ use super::summary::summary_csv;
 use crate::atomic::write_atomically;
 use crate::metrology::areal::Grid;
 use crate::metrology::model::ModelCurveBac;
-use crate::metrology::params::{rk_family_and_curve, LineAnalysis};
+use crate::metrology::params::LineAnalysis;
 use crate::metrology::plots::{
     plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction,
 };
@@ -431,7 +431,6 @@ fn draw_rk_run(
     for (k, a) in part.iter().enumerate() {
         let row = first_row + k;
         let index = grid.index_of(row);
-        let (rk, curve) = rk_family_and_curve(&a.roughness_um, 1001).map_err(plot_err)?;
         let title = format!(
             "Line {} ({index:04}, y = {} mm): ISO 13565-2 Rk construction",
             line_number(index),
@@ -440,9 +439,15 @@ fn draw_rk_run(
                 Quantity::PositionMm
             )
         );
-        let files =
-            plot_rk_construction(rk_dir, &format!("{index:04}"), &curve, &rk, &title, caption)
-                .map_err(plot_err)?;
+        let files = plot_rk_construction(
+            rk_dir,
+            &format!("{index:04}"),
+            &a.rk_curve,
+            &a.rk,
+            &title,
+            caption,
+        )
+        .map_err(plot_err)?;
         rk_plots.push((title, files));
     }
     Ok(rk_plots)
