@@ -25,6 +25,7 @@ pub mod params;
 pub mod plots;
 mod sampling;
 pub mod surface_model;
+pub mod text_cache;
 pub mod x3p;
 
 use thiserror::Error;

@@ -15,11 +15,13 @@
 //!
 //! The only file-writing part of the metrology: the caller gives the directory. Depends on
 //! [`super::model`] (the curves), [`super::areal::Grid`], [`super::params::RkFamily`],
-//! [`crate::numfmt`] and [`super::MetrologyError`].
+//! [`super::text_cache`] (the PNGs' text memo), [`crate::numfmt`] and
+//! [`super::MetrologyError`].
 
 use super::areal::Grid;
 use super::model::ModelCurveBac;
 use super::params::RkFamily;
+use super::text_cache::TextCache;
 use super::MetrologyError;
 use crate::numfmt::{fmt, Quantity};
 use plotters::coord::Shift;
@@ -283,7 +285,8 @@ macro_rules! png_and_svg {
         let svg = $dir.join(format!("{}.svg", $stem));
         ensure_font().map_err(|e| plot_err(&png, e))?;
         {
-            let $root = BitMapBackend::new(&png, $size).into_drawing_area();
+            // Texts repeated across figures are rasterised once per thread (the same pixels).
+            let $root = TextCache::new(BitMapBackend::new(&png, $size)).into_drawing_area();
             let drawn: Result<(), String> = $draw;
             drawn.map_err(|e| plot_err(&png, e))?;
             $root.present().map_err(|e| plot_err(&png, e))?;
@@ -1079,6 +1082,87 @@ mod tests {
         assert!((vertical_exaggeration(1.0, 1.0, 1000, 1) - 1.0).abs() < 1e-12);
         // 1.6 mm across 800 px, 4 µm across 400 px: 100 px/µm against 0.5 px/µm.
         assert!((vertical_exaggeration(1.6, 4.0, 800, 400) - 200.0).abs() < 1e-9);
+    }
+
+    /// An Rk figure and texts at every anchor, turned, clipped, half and fully transparent.
+    fn draw_test_figure<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>)
+    where
+        DB::ErrorType: 'static,
+    {
+        use plotters::style::text_anchor::{HPos, Pos, VPos};
+        let z: Vec<f64> = (0..4000)
+            .map(|k| (k as f64 * 0.013).sin() + 0.3 * (k as f64 * 0.37).cos())
+            .collect();
+        let (rk, curve) = crate::metrology::params::rk_family_and_curve(&z, 1001).unwrap();
+        draw_rk(
+            root,
+            &curve,
+            &rk,
+            "Line 3 (0002, y = 0.02 mm): Rk",
+            "specimen A · surfscan",
+        )
+        .unwrap();
+        let turned = [
+            FontTransform::None,
+            FontTransform::Rotate90,
+            FontTransform::Rotate270,
+        ];
+        for (k, t) in turned.into_iter().enumerate() {
+            for (i, (hp, vp)) in [
+                (HPos::Left, VPos::Top),
+                (HPos::Center, VPos::Center),
+                (HPos::Right, VPos::Bottom),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let colour = RGBColor(200, 30, 90).mix(0.5 + 0.25 * i as f64);
+                let style = font(17)
+                    .transform(t.clone())
+                    .pos(Pos::new(hp, vp))
+                    .color(&colour);
+                let at = (40 + 300 * k as i32, 60 + 150 * i as i32);
+                root.draw_text("µm Rk 0.1 % λc", &style, at).unwrap();
+            }
+        }
+        // Partly off the figure, and invisible.
+        let (w, h) = root.dim_in_pixel();
+        root.draw_text("off the edge µ", &font(30), (w as i32 - 60, h as i32 - 10))
+            .unwrap();
+        root.draw_text("invisible", &font(30).color(&BLACK.mix(0.0)), (100, 100))
+            .unwrap();
+    }
+
+    /// The test figure's RGB pixels, drawn on the plain bitmap or through the text memo.
+    fn figure_pixels(cached: bool) -> Vec<u8> {
+        ensure_font().unwrap();
+        let (w, h) = RK_SIZE;
+        let mut buf = vec![0u8; (w * h * 3) as usize];
+        {
+            let bitmap = BitMapBackend::with_buffer(&mut buf, (w, h));
+            if cached {
+                let root = TextCache::new(bitmap).into_drawing_area();
+                draw_test_figure(&root);
+                root.present().unwrap();
+            } else {
+                let root = bitmap.into_drawing_area();
+                draw_test_figure(&root);
+                root.present().unwrap();
+            }
+        }
+        buf
+    }
+
+    /// Texts drawn from the memo, the first time and again, give the plain bitmap's pixels.
+    #[test]
+    fn the_text_memo_draws_the_plain_bitmaps_pixels() {
+        let plain = figure_pixels(false);
+        let first = figure_pixels(true);
+        let again = figure_pixels(true);
+        let differing = |a: &[u8]| a.iter().zip(&plain).filter(|(x, y)| x != y).count();
+        assert_eq!(differing(&first), 0, "first use of the memo");
+        assert_eq!(differing(&again), 0, "drawn from the memo");
+        assert!(plain.iter().any(|&v| v != 255), "the figure drew something");
     }
 
     /// Renders `text` in the bundled font into a small RGB buffer.
