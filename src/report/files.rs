@@ -546,38 +546,52 @@ pub fn write_report(
     report: &Report,
     ctx: &ReportContext,
 ) -> Result<(), ReportError> {
-    let mut json = serde_json::to_vec_pretty(report)?;
-    json.push(b'\n');
-    write_file(&files.report_json, &json)?;
-    let journal = (ctx.kind == "scan")
-        .then(|| {
-            let path = Path::new(&ctx.input).join(crate::scan::journal::JOURNAL_FILE);
-            read_journal(&path)
-                .and_then(|r| ResumeState::from_records(&path, &r.records))
-                .ok()
-        })
-        .flatten();
-    let pair = |stem: &str| {
-        (
-            out.join(format!("{stem}.png")),
-            out.join(format!("{stem}.svg")),
-        )
-    };
-    let mut figures = Vec::new();
-    for (stem, title) in [
-        ("heightmap", "Measured heights"),
-        ("bac", "Material ratio curves"),
-        ("overlay", "One line: measured and model"),
-    ] {
-        let (png, svg) = pair(stem);
-        figures.extend(html::Figure::from_files(title, &png, &svg, false));
-    }
-    for (title, [png, svg]) in &files.rk_plots {
-        figures.extend(html::Figure::from_files(title.clone(), png, svg, true));
-    }
-    let value = serde_json::to_value(report)?;
-    write_file(
-        &files.report_html,
-        html::render(&value, journal.as_ref(), &figures).as_bytes(),
-    )
+    // report.json is encoded and written (and synced) while the HTML page is put together; the
+    // page is written only once report.json is on disk, and the errors come in that order.
+    std::thread::scope(|s| {
+        let json = s.spawn(|| -> Result<(), ReportError> {
+            let mut json = serde_json::to_vec_pretty(report)?;
+            json.push(b'\n');
+            write_file(&files.report_json, &json)
+        });
+        let journal = (ctx.kind == "scan")
+            .then(|| {
+                let path = Path::new(&ctx.input).join(crate::scan::journal::JOURNAL_FILE);
+                read_journal(&path)
+                    .and_then(|r| ResumeState::from_records(&path, &r.records))
+                    .ok()
+            })
+            .flatten();
+        let pair = |stem: &str| {
+            (
+                out.join(format!("{stem}.png")),
+                out.join(format!("{stem}.svg")),
+            )
+        };
+        let mut figures = Vec::new();
+        for (stem, title) in [
+            ("heightmap", "Measured heights"),
+            ("bac", "Material ratio curves"),
+            ("overlay", "One line: measured and model"),
+        ] {
+            let (png, svg) = pair(stem);
+            figures.extend(html::Figure::from_files(title, &png, &svg, false));
+        }
+        for (title, [png, svg]) in &files.rk_plots {
+            figures.extend(html::Figure::from_files(title.clone(), png, svg, true));
+        }
+        let page =
+            serde_json::to_value(report).map(|v| html::render(&v, journal.as_ref(), &figures));
+        json.join().unwrap_or_else(|_| {
+            Err(ReportError::Metrology {
+                what: format!("{}: report.json", ctx.input),
+                source: MetrologyError::BadParameter {
+                    what: "report.json thread",
+                    value: f64::NAN,
+                    hint: "writing report.json panicked; report this with the input",
+                },
+            })
+        })?;
+        write_file(&files.report_html, page?.as_bytes())
+    })
 }
