@@ -54,7 +54,12 @@ fn plot_err(path: &Path, e: impl std::fmt::Display) -> MetrologyError {
     }
 }
 
+/// The bundled font at `size` px. The font is registered first: plotters binds a style to
+/// its font when the style is made, so a style made before registration (e.g. to lay out a
+/// frame before any figure is drawn) would measure every text as 0 px wide. A font that
+/// cannot be registered is reported where the figure is drawn ([`ensure_font`]).
 fn font(size: u32) -> TextStyle<'static> {
+    let _ = ensure_font();
     TextStyle::from((FAMILY, size).into_font()).color(&BLACK)
 }
 
@@ -119,14 +124,7 @@ fn wrap(text: &str, style: &TextStyle<'_>, width: u32) -> Vec<String> {
 /// texts come back at the same size and width, and measuring them word by word is most of
 /// the cost of a frame. std has no bounded memo; this one is cleared past 64 entries, so a
 /// long-running daemon's titles cannot grow it.
-///
-/// Text is measured with the bundled font, so it is registered first (a frame may be laid
-/// out before any figure is drawn, e.g. to size the height map); were it unreadable, every
-/// width would read 0, so nothing is remembered then.
 fn wrapped(text: &str, px: u32, width: u32) -> Vec<String> {
-    if ensure_font().is_err() {
-        return wrap(text, &font(px), width);
-    }
     type Memo = std::collections::HashMap<(String, u32, u32), Vec<String>>;
     static MEMO: std::sync::LazyLock<std::sync::Mutex<Memo>> =
         std::sync::LazyLock::new(|| std::sync::Mutex::new(Memo::new()));
