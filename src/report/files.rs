@@ -481,34 +481,39 @@ pub fn write_data_files(
     let input = ctx.input.clone();
     let (plots, x3p) = std::thread::scope(|s| {
         let x3p = s.spawn(|| -> Result<(PathBuf, Option<PathBuf>), ReportError> {
-            let measured_x3p = out.join("measured.x3p");
-            let bytes = to_x3p(
+            // Encodes one grid of heights at the grid's y pitch and writes it as `name`.
+            let write = |name: &str, heights: &[f64], cols, pitch_x_mm, meta: &X3pMeta| {
+                let path = out.join(name);
+                let bytes = to_x3p(
+                    heights,
+                    measured.rows,
+                    cols,
+                    pitch_x_mm,
+                    measured.pitch_y_mm,
+                    meta,
+                )
+                .map_err(metrology(format!("{input}: {name}")))?;
+                write_file(&path, &bytes)?;
+                Ok::<_, ReportError>(path)
+            };
+            let measured_x3p = write(
+                "measured.x3p",
                 &grid.heights_um,
-                measured.rows,
                 measured.cols,
                 measured.pitch_x_mm,
-                measured.pitch_y_mm,
                 &measured_meta,
-            )
-            .map_err(metrology(format!("{input}: measured.x3p")))?;
-            write_file(&measured_x3p, &bytes)?;
-            let model_x3p = match sampled {
-                Some(model) => {
-                    let path = out.join("model.x3p");
-                    let bytes = to_x3p(
-                        &model.heights_um,
-                        measured.rows,
-                        model.cols,
-                        model.pitch_x_mm,
-                        measured.pitch_y_mm,
+            )?;
+            let model_x3p = sampled
+                .map(|m| {
+                    write(
+                        "model.x3p",
+                        &m.heights_um,
+                        m.cols,
+                        m.pitch_x_mm,
                         &model_meta,
                     )
-                    .map_err(metrology(format!("{input}: model.x3p")))?;
-                    write_file(&path, &bytes)?;
-                    Some(path)
-                }
-                None => None,
-            };
+                })
+                .transpose()?;
             Ok((measured_x3p, model_x3p))
         });
         let plots = write_plots(out, grid, height_map, sampled, overlay, report, ctx);
