@@ -21,7 +21,7 @@
 //! Depends on [`crate::nurbs`], [`super::sampling`] (the dense samples) and [`crate::numfmt`]
 //! (the warnings' figures).
 
-use super::sampling::Basis;
+use super::sampling::{Basis, TwoLanes};
 use crate::numfmt::{fmt, Quantity};
 use crate::nurbs::{basis_funs, find_span, BSplineCurve, NurbsSurface, UBasis};
 use serde::Serialize;
@@ -249,15 +249,6 @@ impl SampleBasis {
             values: &self.values,
         }
     }
-
-    /// The curve with `poles` at every parameter, into `out` (`padded` is scratch space for
-    /// the poles padded to four lanes).
-    fn points(&self, poles: &[[f64; 3]], padded: &mut Vec<[f64; 4]>, out: &mut Vec<[f64; 3]>) {
-        out.clear();
-        padded.clear();
-        padded.extend(poles.iter().map(|q| [q[0], q[1], q[2], 0.0]));
-        self.basis().points(padded, out);
-    }
 }
 
 /// Samples of a curve at `n` equally spaced parameters in [0, 1].
@@ -270,11 +261,6 @@ fn samples(curve: &BSplineCurve, n: usize) -> Vec<[f64; 3]> {
 /// The worst backward run of an iso-curve so far: (fixed parameter, the other coordinate at
 /// its start in mm, (lower, upper, back) in mm).
 type Worst = (f64, f64, (f64, f64, f64));
-
-/// The worst backward run of coordinate `c` along `pts`: (lower, upper, back) in mm.
-fn backward_run(pts: &[[f64; 3]], c: usize) -> Option<(f64, f64, f64)> {
-    backward_run_by(pts.len(), |k| pts[k][c])
-}
 
 /// The worst backward run of the `n` values `at(0..n)`: (lower, upper, back) in mm.
 #[inline(always)]
@@ -409,6 +395,7 @@ pub fn check_model_with(
         }),
         None => own_u.as_ref().map(SampleBasis::basis),
     };
+    let xz_sampler = u_sampler.map(TwoLanes::new);
     let general = if u_sampler.is_none() {
         Some(UBasis::new(surface, &us))
     } else {
@@ -433,8 +420,8 @@ pub fn check_model_with(
         };
         xs.clear();
         zs.clear();
-        match (&u_sampler, &general) {
-            (Some(b), _) => b.points(&poles, &mut (&mut xs, &mut zs)),
+        match (&xz_sampler, &general) {
+            (Some(b), _) => b.points(&poles, [0, 2], &mut xs, &mut zs),
             (None, Some(g)) => g.for_each_point(&poles, |_, p| {
                 xs.push(p[0]);
                 zs.push(p[2]);
@@ -475,19 +462,30 @@ pub fn check_model_with(
     let mut fold_v: (usize, Option<Worst>) = (0, None);
     let curves_v = nu.max(2);
     let v_basis = SampleBasis::new(surface.degree_v(), surface.knots_v(), nv, n_v);
-    let mut pts = Vec::with_capacity(n_v);
+    // Only y (for the fold) and x (where a folding curve starts) of each sample are needed.
+    let v_lanes = v_basis.as_ref().map(|b| TwoLanes::new(b.basis()));
+    let (mut ys, mut xs) = (Vec::with_capacity(n_v), Vec::with_capacity(n_v));
     let mut padded = Vec::with_capacity(nv);
     for k in 0..curves_v {
         let u = k as f64 / (curves_v - 1) as f64;
         let iso = surface.iso_curve_v(u);
-        match &v_basis {
-            Some(b) => b.points(&iso.poles, &mut padded, &mut pts),
-            None => pts = samples(&iso, n_v),
+        ys.clear();
+        xs.clear();
+        match &v_lanes {
+            Some(b) => {
+                padded.clear();
+                padded.extend(iso.poles.iter().map(|q| [q[0], q[1], q[2], 0.0]));
+                b.points(&padded, [1, 0], &mut ys, &mut xs);
+            }
+            None => samples(&iso, n_v).into_iter().for_each(|p| {
+                ys.push(p[1]);
+                xs.push(p[0]);
+            }),
         }
-        if let Some(run) = backward_run(&pts, 1) {
+        if let Some(run) = backward_run_by(ys.len(), |k| ys[k]) {
             fold_v.0 += 1;
             if fold_v.1.is_none_or(|(_, _, w)| run.2 > w.2) {
-                fold_v.1 = Some((u, pts.first().map_or(f64::NAN, |p| p[0]), run));
+                fold_v.1 = Some((u, xs.first().copied().unwrap_or(f64::NAN), run));
             }
         }
     }
@@ -556,22 +554,32 @@ mod tests {
         let s = &fit.surface;
         for n in [2, 7, 8 * s.count_v()] {
             let b = SampleBasis::new(s.degree_v(), s.knots_v(), s.count_v(), n).unwrap();
-            let (mut pts, mut padded) = (Vec::new(), Vec::new());
+            let lanes = TwoLanes::new(b.basis());
             for k in 0..s.count_u() {
                 let iso = s.iso_curve_v(k as f64 / (s.count_u() - 1) as f64);
-                b.points(&iso.poles, &mut padded, &mut pts);
+                let padded: Vec<[f64; 4]> =
+                    iso.poles.iter().map(|q| [q[0], q[1], q[2], 0.0]).collect();
                 let want = samples(&iso, n);
-                assert_eq!(pts.len(), want.len());
-                for (p, q) in pts.iter().zip(&want) {
-                    assert_eq!(
-                        p.map(f64::to_bits),
-                        q.map(f64::to_bits),
-                        "curve {k}, {n} samples"
-                    );
+                for pair in [[1, 0], [2, 1]] {
+                    let (mut a, mut c) = (Vec::new(), Vec::new());
+                    lanes.points(&padded, pair, &mut a, &mut c);
+                    assert_eq!((a.len(), c.len()), (want.len(), want.len()));
+                    for (j, q) in want.iter().enumerate() {
+                        assert_eq!(
+                            [a[j].to_bits(), c[j].to_bits()],
+                            [q[pair[0]].to_bits(), q[pair[1]].to_bits()],
+                            "curve {k}, {n} samples, point {j}, lanes {pair:?}"
+                        );
+                    }
                 }
             }
         }
         assert!(SampleBasis::new(s.degree_v(), s.knots_v(), s.count_v() + 1, 10).is_none());
+    }
+
+    /// The worst backward run of coordinate `c` along `pts`: (lower, upper, back) in mm.
+    fn backward_run(pts: &[[f64; 3]], c: usize) -> Option<(f64, f64, f64)> {
+        backward_run_by(pts.len(), |k| pts[k][c])
     }
 
     /// The u iso-curve part of [`check_model`] as it was first written: every point of

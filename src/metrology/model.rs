@@ -8,7 +8,7 @@
 //! [`super::bearing`].
 
 use super::bearing::{bearing_curve_xz, BearingCurve};
-use super::sampling::Basis;
+use super::sampling::{Basis, TwoLanes};
 use super::MetrologyError;
 use crate::nurbs::{basis_funs, find_span, BSplineCurve, NurbsSurface, UBasis};
 use serde::Serialize;
@@ -100,6 +100,7 @@ pub fn model_bearing_curves_with(
         first: basis.first_poles(),
         values: basis.values(),
     };
+    let xz = TwoLanes::new(sampler);
     let mut poles = Vec::new();
     let mut out = Vec::with_capacity(options.curves);
     for j in 0..options.curves {
@@ -111,7 +112,7 @@ pub fn model_bearing_curves_with(
         surface.iso_poles_u_padded(v, &mut poles);
         let mut xs = Vec::with_capacity(samples);
         let mut zs = Vec::with_capacity(samples);
-        sampler.points(&poles, &mut (&mut xs, &mut zs));
+        xz.points(&poles, [0, 2], &mut xs, &mut zs);
         for z in &mut zs {
             *z *= 1000.0;
         }
