@@ -145,6 +145,29 @@ pub fn holdout_with(
     options: FitOptions,
     method: VMethod,
 ) -> Result<Holdout, MetrologyError> {
+    let points_left_out = points_left_out(heights_um, cols, pitch_x_mm, y_mm, options, method)?;
+    let every = lines_every(y_mm.len(), options.degree_v)?;
+    let lines_left_out =
+        refit_without_lines(heights_um, cols, pitch_x_mm, y_mm, options, method, every)?
+            .into_iter()
+            .map(|(line, _)| line)
+            .collect();
+    Ok(Holdout {
+        points_left_out,
+        lines_left_out,
+    })
+}
+
+/// The first refit of [`holdout_with`]: every 2nd point of each line left out, the even
+/// columns fitted at twice the pitch and the model compared at the odd ones, per line.
+pub fn points_left_out(
+    heights_um: &[f64],
+    cols: usize,
+    pitch_x_mm: f64,
+    y_mm: &[f64],
+    options: FitOptions,
+    method: VMethod,
+) -> Result<Vec<HoldoutLine>, MetrologyError> {
     check_grid(heights_um, cols, pitch_x_mm, y_mm)?;
     let rows = y_mm.len();
     let row = |r: usize| heights_um.get(r * cols..(r + 1) * cols).unwrap_or(&[]);
@@ -164,7 +187,7 @@ pub fn holdout_with(
         2.0 * pitch_x_mm,
         held,
     )?;
-    let points_left_out = (0..rows)
+    Ok((0..rows)
         .map(|r| {
             let measured: Vec<f64> = row(r)
                 .iter()
@@ -176,22 +199,35 @@ pub fn holdout_with(
             let m = model.get(r * held..(r + 1) * held).unwrap_or(&[]);
             stats(r, y.get(r).copied().unwrap_or(0.0), m, &measured)
         })
-        .collect();
+        .collect())
+}
 
-    let every = holdout_every(rows, options.degree_v).ok_or(MetrologyError::BadParameter {
+/// [`holdout_every`] for the lines-left-out refit of [`holdout_with`], or why no line can be
+/// left out.
+pub fn lines_every(rows: usize, degree_v: usize) -> Result<usize, MetrologyError> {
+    holdout_every(rows, degree_v).ok_or(MetrologyError::BadParameter {
         what: "lines for a hold-out refit",
         value: rows as f64,
         hint: "leaving a line out needs more lines than degree_v + 1; trace more lines or lower degree_v",
-    })?;
-    let lines_left_out =
-        refit_without_lines(heights_um, cols, pitch_x_mm, y_mm, options, method, every)?
-            .into_iter()
-            .map(|(line, _)| line)
-            .collect();
-    Ok(Holdout {
-        points_left_out,
-        lines_left_out,
     })
+}
+
+/// The refit that both [`holdout_with`] (its second part) and [`between_lines`] make: every
+/// `every`-th line left out, the others refitted with `method` across the lines, and per
+/// held-out line inside the kept y range its statistics and the model's heights at its x. A
+/// caller that needs both computes it once and hands it to [`between_lines_given`].
+#[allow(clippy::type_complexity)]
+pub fn lines_left_out(
+    heights_um: &[f64],
+    cols: usize,
+    pitch_x_mm: f64,
+    y_mm: &[f64],
+    options: FitOptions,
+    method: VMethod,
+    every: usize,
+) -> Result<Vec<(HoldoutLine, Vec<f64>)>, MetrologyError> {
+    check_grid(heights_um, cols, pitch_x_mm, y_mm)?;
+    refit_without_lines(heights_um, cols, pitch_x_mm, y_mm, options, method, every)
 }
 
 /// The v where the surface's y equals `target` (y depends on v only; bisection of y(0, v)),
@@ -435,6 +471,34 @@ pub fn between_lines(
     sq_um: f64,
     threshold: f64,
 ) -> Result<BetweenLines, MetrologyError> {
+    between_lines_given(
+        heights_um,
+        cols,
+        pitch_x_mm,
+        y_mm,
+        method,
+        every,
+        sq_um,
+        threshold,
+        || refit_without_lines(heights_um, cols, pitch_x_mm, y_mm, options, method, every),
+    )
+}
+
+/// [`between_lines`] with its refit made by `held` (the result of [`lines_left_out`] with the
+/// same grid, `method` and `every`), called only once the grid, `sq_um` and `threshold` have
+/// passed their checks, so that the errors come in the same order.
+#[allow(clippy::too_many_arguments)]
+pub fn between_lines_given(
+    heights_um: &[f64],
+    cols: usize,
+    pitch_x_mm: f64,
+    y_mm: &[f64],
+    method: VMethod,
+    every: usize,
+    sq_um: f64,
+    threshold: f64,
+    held: impl FnOnce() -> Result<Vec<(HoldoutLine, Vec<f64>)>, MetrologyError>,
+) -> Result<BetweenLines, MetrologyError> {
     check_grid(heights_um, cols, pitch_x_mm, y_mm)?;
     if !(sq_um.is_finite() && sq_um > 0.0) {
         return Err(MetrologyError::BadParameter {
@@ -450,7 +514,7 @@ pub fn between_lines(
             hint: "give a positive multiple of Sq, e.g. 0.3",
         });
     }
-    let held = refit_without_lines(heights_um, cols, pitch_x_mm, y_mm, options, method, every)?;
+    let held = held()?;
     if held.is_empty() {
         return Err(MetrologyError::BadParameter {
             what: "lines inside the refitted range",

@@ -10,7 +10,8 @@
 use super::document::{LineHoldout, LineReport};
 use super::grid::LineGrid;
 use crate::metrology::holdout::{
-    between_lines, holdout_every_or_reason, holdout_with, BetweenLines, Holdout, HoldoutLine,
+    between_lines, between_lines_given, holdout_every, holdout_every_or_reason, holdout_with,
+    lines_every, lines_left_out, points_left_out, BetweenLines, Holdout, HoldoutLine,
 };
 use crate::metrology::surface_model::ModelRecipe;
 
@@ -69,6 +70,82 @@ pub fn verdict(
     .map_err(|e| e.to_string())
 }
 
+/// What a panic in the shared lines-left-out refit becomes.
+const LINES_REFIT_PANICKED: &str =
+    "internal: the between-lines refit panicked; report this with the input";
+
+/// [`characterise`] and [`verdict`] (`None` for `sq_um`: the grid has no Sq) with the refit
+/// they share, every k-th line left out, made once, beside the every-2nd-point refit: the same
+/// computations on the same inputs, so the same results and the same errors, in the order each
+/// function reports them.
+pub fn characterise_and_judge(
+    grid: &LineGrid,
+    heights_um: &[f64],
+    recipe: &ModelRecipe,
+    sq_um: Option<f64>,
+    threshold: f64,
+) -> (Result<Holdout, String>, Result<BetweenLines, String>) {
+    let (cols, pitch_x_mm, y_mm) = (grid.cols, grid.pitch_x_mm, &grid.y_mm[..]);
+    let (degrees, method) = (recipe.degrees, recipe.method);
+    let every = holdout_every(grid.rows(), degrees.degree_v);
+    let (points, lines) = std::thread::scope(|s| {
+        let lines = every.map(|every| {
+            s.spawn(move || {
+                lines_left_out(heights_um, cols, pitch_x_mm, y_mm, degrees, method, every)
+            })
+        });
+        let points = points_left_out(heights_um, cols, pitch_x_mm, y_mm, degrees, method);
+        // `Err(())`: the refit panicked.
+        (points, lines.map(|h| h.join().map_err(|_| ())))
+    });
+    let model_vs_measured = (|| {
+        let points_left_out = points.map_err(|e| e.to_string())?;
+        lines_every(grid.rows(), degrees.degree_v).map_err(|e| e.to_string())?;
+        let lines_left_out = match &lines {
+            Some(Ok(Ok(held))) => held.iter().map(|(line, _)| line.clone()).collect(),
+            Some(Ok(Err(e))) => return Err(e.to_string()),
+            Some(Err(())) => return Err(LINES_REFIT_PANICKED.to_string()),
+            // `lines_every` found no k either.
+            None => Vec::new(),
+        };
+        let mut h = Holdout {
+            points_left_out,
+            lines_left_out,
+        };
+        for l in h
+            .points_left_out
+            .iter_mut()
+            .chain(h.lines_left_out.iter_mut())
+        {
+            l.index = line_index(grid, l.index);
+        }
+        Ok(h)
+    })();
+    let verdict = match sq_um {
+        None => Err("the measured grid has no Sq to judge the hold-out against".to_string()),
+        Some(_) if matches!(lines, Some(Err(()))) => Err(LINES_REFIT_PANICKED.to_string()),
+        Some(sq_um) => holdout_every_or_reason(grid.rows(), degrees.degree_v).and_then(|every| {
+            between_lines_given(
+                heights_um,
+                cols,
+                pitch_x_mm,
+                y_mm,
+                method,
+                every,
+                sq_um,
+                threshold,
+                || match lines {
+                    Some(Ok(held)) => held,
+                    // Not reached: `every` was found above as it was for the refit.
+                    _ => lines_left_out(heights_um, cols, pitch_x_mm, y_mm, degrees, method, every),
+                },
+            )
+            .map_err(|e| e.to_string())
+        }),
+    };
+    (model_vs_measured, verdict)
+}
+
 /// Maps the verdict's held-out rows to the grid's line indices.
 pub fn rows_to_lines(grid: &LineGrid, b: &mut BetweenLines) {
     for l in &mut b.lines {
@@ -85,5 +162,129 @@ pub fn attach(lines: &mut [LineReport], h: &Holdout) {
             points_left_out: find(&h.points_left_out, line.index),
             line_left_out: find(&h.lines_left_out, line.index),
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::{FitOptions, VMethod};
+
+    fn grid(rows: usize, cols: usize, y_mm: Vec<f64>, f: impl Fn(usize, usize) -> f64) -> LineGrid {
+        LineGrid {
+            heights_um: (0..rows * cols).map(|k| f(k / cols, k % cols)).collect(),
+            cols,
+            pitch_x_mm: 0.002,
+            index: (0..rows as u32).map(|r| 3 + 2 * r).collect(),
+            y_readback_mm: vec![None; rows],
+            instrument: None,
+            standard: vec![None; rows],
+            y_mm,
+        }
+    }
+
+    fn recipe(method: VMethod) -> ModelRecipe {
+        ModelRecipe {
+            degrees: FitOptions::default(),
+            method,
+            replace_spikes: None,
+            lambda_c_mm: None,
+        }
+    }
+
+    /// The shared refit gives both sections exactly what [`characterise`] and [`verdict`]
+    /// give on their own (every figure to the bit, the line indices mapped), and the same
+    /// error where one fails: a good grid with either method, too few lines to leave one out,
+    /// a flat grid (no Sq to judge against), no Sq, a bad threshold, a grid whose heights do
+    /// not fill it, and y that does not increase.
+    #[test]
+    fn one_lines_refit_gives_both_sections_their_own_results() {
+        let rough = |r: usize, c: usize| {
+            (c as f64 * 0.37).sin() + 0.4 * ((r * 7 + c * 3) % 11) as f64 + 0.05 * r as f64
+        };
+        let ys = |rows: usize| (0..rows).map(|r| r as f64 * 0.01).collect::<Vec<f64>>();
+        let mut short = grid(12, 50, ys(12), rough);
+        short.heights_um.pop();
+        let mut backwards = ys(12);
+        backwards.swap(4, 5);
+        let cases: Vec<(&str, LineGrid, ModelRecipe, Option<f64>, f64)> = vec![
+            (
+                "rough",
+                grid(13, 50, ys(13), rough),
+                recipe(VMethod::Interpolate),
+                Some(1.1),
+                0.5,
+            ),
+            (
+                "least squares",
+                grid(15, 40, ys(15), rough),
+                recipe(VMethod::LeastSquares { control_rows: 9 }),
+                Some(1.1),
+                0.5,
+            ),
+            (
+                "six lines",
+                grid(6, 40, ys(6), rough),
+                recipe(VMethod::Interpolate),
+                Some(1.0),
+                0.5,
+            ),
+            (
+                "flat",
+                grid(12, 40, ys(12), |_, _| 0.25),
+                recipe(VMethod::Interpolate),
+                Some(0.0),
+                0.5,
+            ),
+            (
+                "no Sq",
+                grid(12, 40, ys(12), rough),
+                recipe(VMethod::Interpolate),
+                None,
+                0.5,
+            ),
+            (
+                "bad threshold",
+                grid(12, 40, ys(12), rough),
+                recipe(VMethod::Interpolate),
+                Some(1.0),
+                -1.0,
+            ),
+            ("short", short, recipe(VMethod::Interpolate), Some(1.0), 0.5),
+            (
+                "backwards",
+                grid(12, 40, backwards, rough),
+                recipe(VMethod::Interpolate),
+                Some(1.0),
+                0.5,
+            ),
+        ];
+        let mut seen_ok = [0; 2];
+        for (what, g, recipe, sq, threshold) in cases {
+            let own = (
+                characterise(&g, &g.heights_um, &recipe),
+                match sq {
+                    Some(sq) => verdict(&g, &g.heights_um, &recipe, sq, threshold),
+                    None => Err("the measured grid has no Sq to judge the hold-out against".into()),
+                },
+            );
+            let shared = characterise_and_judge(&g, &g.heights_um, &recipe, sq, threshold);
+            // Debug prints every f64 in its shortest round-trip form (−0.0 included), so equal
+            // texts are equal bits.
+            assert_eq!(
+                format!("{:?}", shared.0),
+                format!("{:?}", own.0),
+                "{what}: model vs measured"
+            );
+            assert_eq!(
+                format!("{:?}", shared.1),
+                format!("{:?}", own.1),
+                "{what}: verdict"
+            );
+            seen_ok[0] += usize::from(own.0.is_ok());
+            seen_ok[1] += usize::from(own.1.is_ok());
+        }
+        // The good grids are judged, so both sides were compared on figures, not only errors.
+        assert!(seen_ok[0] >= 3 && seen_ok[1] >= 2, "{seen_ok:?}");
     }
 }

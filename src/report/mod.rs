@@ -217,40 +217,26 @@ pub fn characterise(
         };
         timings.surface_grid = t.elapsed().as_secs_f64();
 
-        // The two hold-out sections are independent of each other and of the model section
-        // (each reads the grid and the model, none writes anything): they run side by side,
-        // the results joined in the order the sections are reported.
+        // The two hold-out sections are independent of the model section (each reads the
+        // grid and the model, none writes anything) and run beside it. They share one refit
+        // (every k-th line left out), made once beside the every-2nd-point refit.
         let sq = surface_grid.as_ref().map(|s| s.params.sq_um).ok();
         let options = &ctx.options;
-        let ((model_section, model_s), (model_vs_measured, verdict, holdout_s)) =
-            std::thread::scope(|s| {
-                let t = Instant::now();
-                let verdict_thread = s.spawn(|| match sq {
-                    Some(sq) => holdout::verdict(
-                        grid,
-                        &cgrid.heights_um,
-                        &model.recipe,
-                        sq,
-                        options.holdout_threshold,
-                    ),
-                    None => {
-                        Err("the measured grid has no Sq to judge the hold-out against".to_string())
-                    }
-                });
-                let model_vs_measured =
-                    holdout::characterise(grid, &cgrid.heights_um, &model.recipe);
-                let verdict = verdict_thread.join().unwrap_or_else(|_| {
-                    Err(
-                        "internal: the between-lines refit panicked; report this with the input"
-                            .into(),
-                    )
-                });
-                let holdout_s = t.elapsed().as_secs_f64();
-                let model = model_thread
-                    .join()
-                    .unwrap_or_else(|_| (model_section_panicked(), 0.0));
-                (model, (model_vs_measured, verdict, holdout_s))
-            });
+        let ((model_section, model_s), (model_vs_measured, verdict, holdout_s)) = {
+            let t = Instant::now();
+            let (model_vs_measured, verdict) = holdout::characterise_and_judge(
+                grid,
+                &cgrid.heights_um,
+                &model.recipe,
+                sq,
+                options.holdout_threshold,
+            );
+            let holdout_s = t.elapsed().as_secs_f64();
+            let model = model_thread
+                .join()
+                .unwrap_or_else(|_| (model_section_panicked(), 0.0));
+            (model, (model_vs_measured, verdict, holdout_s))
+        };
         failed_sections.extend(model_section.failed.iter().cloned());
         if let Some(c) = &model_section.checks {
             ctx.warnings.extend(c.warnings());
