@@ -44,7 +44,7 @@ use crate::iges::{IgesOptions, MAX_SECTION_LINES};
 use crate::metrology::alternatives::{
     compare as compare_alternatives, table as alternatives_table,
 };
-use crate::metrology::areal::{areal_params, Grid as ArealGrid};
+use crate::metrology::areal::{sq_um as areal_sq_um, Grid as ArealGrid};
 use crate::metrology::holdout::{between_lines, holdout_every_or_reason, ordinal};
 use crate::metrology::outliers::{bridged_grid, LineSpike};
 use crate::metrology::surface_model::{fit_model, ModelRecipe};
@@ -702,14 +702,13 @@ impl Judge<'_> {
             (Some(a), Some(b)) if rows > 1 => (b - a).abs() / (rows - 1) as f64,
             _ => self.pitch_y_mm.unwrap_or(1.0),
         };
-        let sq = areal_params(&ArealGrid {
+        let sq = areal_sq_um(&ArealGrid {
             heights_um: fitted_z,
             rows,
             cols: self.cols,
             pitch_x_mm: self.pitch_x_mm,
             pitch_y_mm: mean_py,
         })
-        .map(|a| a.sq_um)
         .map_err(|e| e.to_string());
         let degrees = self.recipe.degrees;
         let every = holdout_every_or_reason(rows, degrees.degree_v);

@@ -203,6 +203,16 @@ pub fn areal_params(grid: &Grid<'_>) -> Result<ArealParams, MetrologyError> {
     })
 }
 
+/// Sq alone of a grid after plane levelling: the bits of [`areal_params`]' `sq_um` (the same
+/// levelling and the same sum), without the other parameters' passes, for callers that need
+/// only Sq (the verdict between lines in `surfscan fit`).
+pub fn sq_um(grid: &Grid<'_>) -> Result<f64, MetrologyError> {
+    let (z, _) = level_plane(grid)?;
+    let n = z.len() as f64;
+    let m2 = z.iter().map(|v| v * v).sum::<f64>() / n;
+    Ok(m2.sqrt())
+}
+
 /// The pooled areal material ratio curve Smr(c) of the levelled grid: `levels` equal steps from
 /// the highest to the lowest point, as `[height_um, material_ratio_pct]` pairs.
 pub fn smr_curve(grid: &Grid<'_>, levels: usize) -> Result<Vec<[f64; 2]>, MetrologyError> {
@@ -286,6 +296,39 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// Sq alone is Sq of all the parameters, to the bit, and fails where they fail.
+    #[test]
+    fn sq_alone_is_the_sq_of_all_parameters() {
+        for (rows, cols, tilt) in [(2, 2, 0.0), (3, 7, 0.3), (31, 500, -0.01), (5, 1001, 2.0)] {
+            let heights: Vec<f64> = (0..rows * cols)
+                .map(|k| ((k as f64) * 0.71).sin() * 3.0 + tilt * k as f64 + 40.0)
+                .collect();
+            let grid = Grid {
+                heights_um: &heights,
+                rows,
+                cols,
+                pitch_x_mm: 0.0005,
+                pitch_y_mm: 0.01,
+            };
+            let all = areal_params(&grid).unwrap().sq_um;
+            assert!(all > 0.1, "{rows}×{cols}: Sq {all}");
+            assert_eq!(
+                sq_um(&grid).unwrap().to_bits(),
+                all.to_bits(),
+                "{rows}×{cols}"
+            );
+        }
+        let short = [1.0; 5];
+        let bad = Grid {
+            heights_um: &short,
+            rows: 2,
+            cols: 3,
+            pitch_x_mm: 0.0005,
+            pitch_y_mm: 0.01,
+        };
+        assert_eq!(sq_um(&bad).unwrap_err(), areal_params(&bad).unwrap_err());
     }
 
     /// The row-by-row levelling is the plane of the point-by-point definition with k = row·cols
