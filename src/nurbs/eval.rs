@@ -388,6 +388,14 @@ impl NurbsSurface {
         let first = sv - self.degree_v;
         let rows: Vec<super::PoleRow<'_>> =
             (0..bv.len()).map(|l| self.net.row(first + l)).collect();
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2, checked just above.
+                unsafe { accumulate_rows_avx2(&rows, bv, columns, out) };
+                return;
+            }
+        }
         let add = |acc: &mut [f64; 4], nv: f64, q: [f64; 3]| {
             acc[0] += nv * q[0];
             acc[1] += nv * q[1];
@@ -454,6 +462,92 @@ impl NurbsSurface {
             basis.for_each_point(&curve, |_, p| out.push([p[0], p[1], p[2]]));
         }
         out
+    }
+}
+
+/// [`NurbsSurface::accumulate_rows`] four output poles at a time, one coordinate per 256-bit
+/// vector: the x, y and z of four neighbouring poles of a row are contiguous in the net, so
+/// each product and sum of the scalar loop is made in its own lane (`_mm256_mul_pd` then
+/// `_mm256_add_pd`, no FMA, in row order from the value already in `out`): the same bits.
+/// The fourth lane of `out` is left as it is, as the scalar loop leaves it.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn accumulate_rows_avx2(
+    rows: &[super::PoleRow<'_>],
+    bv: &[f64],
+    columns: std::ops::Range<usize>,
+    out: &mut [[f64; 4]],
+) {
+    use std::arch::x86_64::*;
+    let start = columns.start;
+    let done = out.len() / 4 * 4;
+    // Each row's x, y and z from `start` on, as long as `out` (the rows hold the columns).
+    let len = out.len();
+    let four = |v: &[f64], i: usize| -> __m256d {
+        let v = &v[i..i + 4];
+        // SAFETY: `v` holds four readable f64.
+        unsafe { _mm256_loadu_pd(v.as_ptr()) }
+    };
+    let store = |v: __m256d| {
+        let mut a = [0.0f64; 4];
+        // SAFETY: `a` holds four writable f64.
+        unsafe { _mm256_storeu_pd(a.as_mut_ptr(), v) };
+        a
+    };
+    /// A row's coordinates over the columns: y as one value unless the row has its own.
+    struct Slices<'a> {
+        x: &'a [f64],
+        ys: Option<&'a [f64]>,
+        y: f64,
+        z: &'a [f64],
+    }
+    let parts: Vec<Slices<'_>> = rows
+        .iter()
+        .map(|row| {
+            let (ys, y) = match row.y {
+                super::RowY::One(y) => (None, y),
+                super::RowY::Each(ys) => (Some(&ys[start..start + len]), 0.0),
+            };
+            Slices {
+                x: &row.x[start..start + len],
+                ys,
+                y,
+                z: &row.z[start..start + len],
+            }
+        })
+        .collect();
+    for (blk, o) in out[..done].chunks_exact_mut(4).enumerate() {
+        let i = blk * 4;
+        let lane = |c: usize| _mm256_setr_pd(o[0][c], o[1][c], o[2][c], o[3][c]);
+        let (mut ax, mut ay, mut az) = (lane(0), lane(1), lane(2));
+        for (r, &nv) in parts.iter().zip(bv) {
+            let n = _mm256_set1_pd(nv);
+            let yv = match r.ys {
+                Some(ys) => four(ys, i),
+                None => _mm256_set1_pd(r.y),
+            };
+            ax = _mm256_add_pd(ax, _mm256_mul_pd(n, four(r.x, i)));
+            ay = _mm256_add_pd(ay, _mm256_mul_pd(n, yv));
+            az = _mm256_add_pd(az, _mm256_mul_pd(n, four(r.z, i)));
+        }
+        let (x, y, z) = (store(ax), store(ay), store(az));
+        for (j, o) in o.iter_mut().enumerate() {
+            o[0] = x[j];
+            o[1] = y[j];
+            o[2] = z[j];
+        }
+    }
+    for (j, o) in out[done..].iter_mut().enumerate() {
+        let i = done + j;
+        for (r, &nv) in parts.iter().zip(bv) {
+            let y = r.ys.map_or(r.y, |ys| ys[i]);
+            o[0] += nv * r.x[i];
+            o[1] += nv * y;
+            o[2] += nv * r.z[i];
+        }
     }
 }
 
@@ -575,6 +669,64 @@ mod tests {
         }
         let s = NurbsSurface::try_new(p, q, ku, kv, nu, nv, separable.clone()).unwrap();
         assert_eq!(built, s);
+    }
+
+    /// The padded poles of an iso-curve along u (four columns at a time on AVX2, one by one
+    /// at the ends) are Σ_l basis·pole of the full net in row order, to the bit: on a
+    /// separable net and on one with a row of its own x (one bit off) and a row of its own y,
+    /// for whole and partial column ranges, with the fourth lane zero.
+    #[test]
+    fn padded_iso_poles_are_the_row_sums_of_the_full_net_to_the_bit() {
+        let (nu, nv, p, q) = (23usize, 8usize, 3usize, 5usize);
+        let clamped = |n: usize, d: usize| {
+            let mut k = vec![0.0; d + 1];
+            k.extend((1..n - d).map(|i| (i as f64 / (n - d) as f64).powf(1.3)));
+            k.extend(vec![1.0; d + 1]);
+            k
+        };
+        let (ku, kv) = (clamped(nu, p), clamped(nv, q));
+        let mut full: Vec<[f64; 3]> = (0..nv)
+            .flat_map(|j| (0..nu).map(move |i| (i, j)))
+            .map(|(i, j)| {
+                [
+                    i as f64 * 0.0005 + 1e-4 / 3.0,
+                    j as f64 * 0.01 + 1e-5 / 7.0,
+                    ((i * 31 + j * 17) % 11) as f64 * 1.1e-4 - 3.7e-4,
+                ]
+            })
+            .collect();
+        let separable = full.clone();
+        full[3 * nu + 9][0] = f64::from_bits(full[3 * nu + 9][0].to_bits() + 1);
+        for i in 0..nu {
+            full[5 * nu + i][1] += i as f64 * 1e-9;
+        }
+        for net in [separable, full] {
+            let s =
+                NurbsSurface::try_new(p, q, ku.clone(), kv.clone(), nu, nv, net.clone()).unwrap();
+            for v in [0.0, 0.17, 0.5, 0.93, 1.0] {
+                let (sv, bv) = span_basis(q, s.knots_v(), nv, v);
+                for range in [0..nu, 1..nu, 3..14, 5..6, 8..12, nu - 2..nu + 3] {
+                    let mut padded = Vec::new();
+                    s.iso_poles_u_padded_range(v, range.clone(), &mut padded);
+                    let cols = range.start..range.end.min(nu);
+                    assert_eq!(padded.len(), cols.len(), "{range:?}");
+                    for (k, i) in cols.enumerate() {
+                        let mut want = [0.0f64; 4];
+                        for (l, nv_l) in bv.iter().enumerate() {
+                            let pole = net[(sv - q + l) * nu + i];
+                            for c in 0..3 {
+                                want[c] += nv_l * pole[c];
+                            }
+                        }
+                        assert_eq!(
+                            padded[k].map(f64::to_bits),
+                            want.map(f64::to_bits),
+                            "v {v}, columns {range:?}, column {i}"
+                        );
+                    }
+                }
+            }
+        }
     }
 
     #[test]
