@@ -287,6 +287,107 @@ fn backward_run_by(n: usize, at: impl Fn(usize) -> f64) -> Option<(f64, f64, f64
     worst
 }
 
+/// The lowest and the highest of `v·scale` over `values` by strict comparison (NaN never
+/// lower or higher; +∞ and −∞ when none is). Where the two are equal in value but not in
+/// sign (±0), either may come back: callers look up where the first equal value is.
+fn lowest_highest(values: &[f64], scale: f64) -> (f64, f64) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2, checked just above.
+            return unsafe { lowest_highest_avx2(values, scale) };
+        }
+    }
+    lowest_highest_from(values, scale, (f64::INFINITY, f64::NEG_INFINITY))
+}
+
+/// [`lowest_highest`] over `values`, starting from `(lo, hi)`.
+fn lowest_highest_from(values: &[f64], scale: f64, (mut lo, mut hi): (f64, f64)) -> (f64, f64) {
+    for &v in values {
+        let v = v * scale;
+        if v < lo {
+            lo = v;
+        }
+        if v > hi {
+            hi = v;
+        }
+    }
+    (lo, hi)
+}
+
+/// [`lowest_highest`], four values at a time.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn lowest_highest_avx2(values: &[f64], scale: f64) -> (f64, f64) {
+    use std::arch::x86_64::*;
+    let s = _mm256_set1_pd(scale);
+    let (mut lo, mut hi) = (
+        _mm256_set1_pd(f64::INFINITY),
+        _mm256_set1_pd(f64::NEG_INFINITY),
+    );
+    let chunks = values.chunks_exact(4);
+    let rest = chunks.remainder();
+    for c in chunks {
+        // SAFETY: `c` holds four readable f64.
+        let v = _mm256_mul_pd(unsafe { _mm256_loadu_pd(c.as_ptr()) }, s);
+        lo = _mm256_blendv_pd(lo, v, _mm256_cmp_pd::<_CMP_LT_OQ>(v, lo));
+        hi = _mm256_blendv_pd(hi, v, _mm256_cmp_pd::<_CMP_GT_OQ>(v, hi));
+    }
+    let (mut l, mut h) = ([0.0f64; 4], [0.0f64; 4]);
+    // SAFETY: `l` and `h` hold four writable f64 each.
+    unsafe {
+        _mm256_storeu_pd(l.as_mut_ptr(), lo);
+        _mm256_storeu_pd(h.as_mut_ptr(), hi);
+    }
+    // The lanes' lowest among the lowest, highest among the highest, compared as the values
+    // are (1.0 is the identity of the scale).
+    let lo = lowest_highest_from(&l, 1.0, (f64::INFINITY, f64::NEG_INFINITY)).0;
+    let hi = lowest_highest_from(&h, 1.0, (f64::INFINITY, f64::NEG_INFINITY)).1;
+    lowest_highest_from(rest, scale, (lo, hi))
+}
+
+/// Whether every value is greater than the one before it (NaN never is).
+fn strictly_increasing(values: &[f64]) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2, checked just above.
+            return unsafe { strictly_increasing_avx2(values) };
+        }
+    }
+    values.windows(2).all(|w| w[1] > w[0])
+}
+
+/// [`strictly_increasing`], four pairs at a time.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn strictly_increasing_avx2(values: &[f64]) -> bool {
+    use std::arch::x86_64::*;
+    let Some(pairs) = values.len().checked_sub(1) else {
+        return true;
+    };
+    let whole = pairs / 4 * 4;
+    let mut k = 0;
+    while k < whole {
+        let (a, b) = (&values[k..k + 4], &values[k + 1..k + 5]);
+        // SAFETY: `a` and `b` hold four readable f64 each.
+        let gt = unsafe {
+            _mm256_cmp_pd::<_CMP_GT_OQ>(_mm256_loadu_pd(b.as_ptr()), _mm256_loadu_pd(a.as_ptr()))
+        };
+        if _mm256_movemask_pd(gt) != 0b1111 {
+            return false;
+        }
+        k += 4;
+    }
+    values[k..].windows(2).all(|w| w[1] > w[0])
+}
+
 /// How many equally spaced u the fold check samples each iso-curve at: `samples_per_pole`
 /// per pole (at least one), and never fewer than two.
 pub fn iso_curve_sample_count(surface: &NurbsSurface, options: &FoldOptions) -> usize {
@@ -428,18 +529,27 @@ pub fn check_model_with(
             }),
             (None, None) => {}
         }
-        for (k, (&x, &z)) in xs.iter().zip(&zs).enumerate() {
-            let z = z * 1000.0;
-            if z < range.0 {
-                range.0 = z;
-                range.1 = [x, y_at(k)];
-            }
-            if z > range.2 {
-                range.2 = z;
-                range.3 = [x, y_at(k)];
-            }
+        // The lowest and highest sample in µm, each where it first occurs: what a running
+        // strict comparison over the samples, carried from curve to curve, keeps.
+        let (lo, hi) = lowest_highest(&zs, 1000.0);
+        let first_equal = |h: f64| zs.iter().position(|&z| z * 1000.0 == h).unwrap_or(0);
+        if lo < range.0 {
+            let k = first_equal(lo);
+            range.0 = zs[k] * 1000.0;
+            range.1 = [xs[k], y_at(k)];
         }
-        if let Some(run) = backward_run_by(xs.len(), |k| xs[k]) {
+        if hi > range.2 {
+            let k = first_equal(hi);
+            range.2 = zs[k] * 1000.0;
+            range.3 = [xs[k], y_at(k)];
+        }
+        // Most curves do not fold: one vector pass says so.
+        let run = if strictly_increasing(&xs) {
+            None
+        } else {
+            backward_run_by(xs.len(), |k| xs[k])
+        };
+        if let Some(run) = run {
             fold_u.0 += 1;
             if fold_u.1.is_none_or(|(_, _, w)| run.2 > w.2) {
                 let y0 = if xs.is_empty() { f64::NAN } else { y_at(0) };
@@ -575,6 +685,75 @@ mod tests {
             }
         }
         assert!(SampleBasis::new(s.degree_v(), s.knots_v(), s.count_v() + 1, 10).is_none());
+    }
+
+    /// The vector extremes and the increase test agree with the running strict comparisons
+    /// they replace: on every length up to 13 (whole vectors and remainders), with NaN,
+    /// signed zeros, infinities, ties and values that the scale rounds together; the first
+    /// index holding the extreme is the one the running comparison keeps, with its bits.
+    #[test]
+    fn vector_extremes_and_increase_test_are_the_running_comparisons() {
+        let specials = [
+            f64::NAN,
+            0.0,
+            -0.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            1e308,
+            -1e308,
+            1.0,
+            1.0 + f64::EPSILON,
+            -3.5,
+        ];
+        let mut s = 7u64;
+        let mut pick = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 33) as usize
+        };
+        for len in 0..=13 {
+            for _ in 0..400 {
+                let v: Vec<f64> = (0..len)
+                    .map(|_| match pick() % 3 {
+                        0 => specials[pick() % specials.len()],
+                        1 => (pick() % 7) as f64 * 0.25 - 0.5,
+                        _ => (pick() % 1000) as f64 * 1e-3,
+                    })
+                    .collect();
+                // The loop that the check ran over each curve, from an empty range.
+                let (mut lo, mut lo_at, mut hi, mut hi_at) =
+                    (f64::INFINITY, None, f64::NEG_INFINITY, None);
+                for (k, &z) in v.iter().enumerate() {
+                    let z = z * 1000.0;
+                    if z < lo {
+                        (lo, lo_at) = (z, Some(k));
+                    }
+                    if z > hi {
+                        (hi, hi_at) = (z, Some(k));
+                    }
+                }
+                let (l, h) = lowest_highest(&v, 1000.0);
+                let first = |x: f64| v.iter().position(|&z| z * 1000.0 == x);
+                let at = |found: f64| (found < f64::INFINITY).then(|| first(found)).flatten();
+                assert_eq!(at(l), lo_at, "{v:?}: lowest at");
+                let first_hi = (h > f64::NEG_INFINITY).then(|| first(h)).flatten();
+                assert_eq!(first_hi, hi_at, "{v:?}: highest at");
+                if let Some(k) = lo_at {
+                    assert_eq!((v[k] * 1000.0).to_bits(), lo.to_bits(), "{v:?}");
+                }
+                let increasing = v.windows(2).all(|w| w[1] > w[0]);
+                assert_eq!(strictly_increasing(&v), increasing, "{v:?}");
+                assert_eq!(
+                    increasing,
+                    backward_run_by(v.len(), |k| v[k]).is_none(),
+                    "{v:?}: the increase test stands for the backward run"
+                );
+            }
+        }
+        assert!(strictly_increasing(
+            &(0..1000).map(f64::from).collect::<Vec<_>>()
+        ));
     }
 
     /// The worst backward run of coordinate `c` along `pts`: (lower, upper, back) in mm.
