@@ -348,10 +348,10 @@ fn inside_lengths_wide(zs: &[f64], weight: impl Fn(usize) -> f64, levels: &[f64]
 fn inside_lengths(zs: &[f64], weight: impl Fn(usize) -> f64, levels: &[f64]) -> Vec<f64> {
     let l = levels.len();
     // first_at_or_below(z): the first level index k with levels[k] <= z; first_below(z): the
-    // first with levels[k] < z. Both are partition points of a monotone predicate, found from
-    // where equally spaced levels would put z and then stepped to the exact point (the
-    // predicate decides, so the index is the binary search's); a guess more than a few
-    // steps off (levels far from equally spaced) falls back to the binary search.
+    // first with levels[k] < z. Both are partition points of a monotone predicate. The first
+    // is found from where equally spaced levels would put z and then stepped to the exact
+    // point (the predicate decides, so the index is the binary search's); a guess more than a
+    // few steps off (levels far from equally spaced) falls back to the binary search.
     let guess = Guesser::new(levels);
     // Written out at each use (not as closures), so that all of it is compiled inline.
     macro_rules! first_at_or_below {
@@ -361,9 +361,8 @@ fn inside_lengths(zs: &[f64], weight: impl Fn(usize) -> f64, levels: &[f64]) -> 
         }};
     }
     macro_rules! first_below {
-        ($z:expr) => {{
-            let z = $z;
-            partition_near(levels, guess.at(z), |h| h >= z)
+        ($z:expr, $at:expr) => {{
+            step_over_equal(levels, $at, $z)
         }};
     }
     let mut whole = vec![0.0f64; l + 1];
@@ -371,9 +370,11 @@ fn inside_lengths(zs: &[f64], weight: impl Fn(usize) -> f64, levels: &[f64]) -> 
     let Some(&z0) = zs.first() else {
         return cut;
     };
-    let mut prev = (z0, first_at_or_below!(z0), first_below!(z0));
+    let at0 = first_at_or_below!(z0);
+    let mut prev = (z0, at0, first_below!(z0, at0));
     for (i, &z) in zs.iter().enumerate().skip(1) {
-        let next = (z, first_at_or_below!(z), first_below!(z));
+        let at = first_at_or_below!(z);
+        let next = (z, at, first_below!(z, at));
         let ((lo, lo_at, _), (hi, _, hi_below)) = if prev.0 >= next.0 {
             (next, prev)
         } else {
@@ -394,6 +395,19 @@ fn inside_lengths(zs: &[f64], weight: impl Fn(usize) -> f64, levels: &[f64]) -> 
         *c += running;
     }
     cut
+}
+
+/// The first level below `z` (the partition point of `h >= z`) from `at`, the first level at
+/// or below it (the partition point of `h > z`), over non-increasing `levels`: the levels from
+/// `at` on are at or below z and those equal to z come first, so stepping over them reaches
+/// it, without a second search.
+#[inline(always)]
+fn step_over_equal(levels: &[f64], at: usize, z: f64) -> usize {
+    let mut k = at;
+    while k < levels.len() && levels[k] >= z {
+        k += 1;
+    }
+    k
 }
 
 /// Where z would fall among `levels` (non-increasing) if they were equally spaced from the
@@ -642,6 +656,7 @@ mod tests {
             equal_levels(1e-3, -1e-3, 7),
             vec![5.0, 4.9, 4.8, 0.0, -0.1, -7.0],
             vec![1.0, 1.0, 1.0, 0.0, 0.0, -1.0],
+            vec![0.5; 9],
             vec![2.0],
             vec![],
         ];
@@ -660,6 +675,13 @@ mod tests {
                         "z = {z} in {levels:?}"
                     );
                 }
+                // The first level below z, stepped to from the first at or below it.
+                let at = levels.partition_point(|&h| h > z);
+                assert_eq!(
+                    step_over_equal(levels, at, z),
+                    levels.partition_point(|&h| h >= z),
+                    "below z = {z} in {levels:?}"
+                );
             }
         }
     }
