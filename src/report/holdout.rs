@@ -35,6 +35,12 @@ pub fn characterise(
         recipe.method,
     )
     .map_err(|e| e.to_string())?;
+    rows_of_holdout_to_lines(grid, &mut h);
+    Ok(h)
+}
+
+/// Maps the hold-out's rows to the grid's line indices.
+fn rows_of_holdout_to_lines(grid: &LineGrid, h: &mut Holdout) {
     for l in h
         .points_left_out
         .iter_mut()
@@ -42,7 +48,6 @@ pub fn characterise(
     {
         l.index = line_index(grid, l.index);
     }
-    Ok(h)
 }
 
 /// The verdict on the surface between lines (every 2nd line left out, or every k-th when
@@ -112,13 +117,7 @@ pub fn characterise_and_judge(
             points_left_out,
             lines_left_out,
         };
-        for l in h
-            .points_left_out
-            .iter_mut()
-            .chain(h.lines_left_out.iter_mut())
-        {
-            l.index = line_index(grid, l.index);
-        }
+        rows_of_holdout_to_lines(grid, &mut h);
         Ok(h)
     })();
     let verdict = match sq_um {
