@@ -169,9 +169,22 @@ fn sample_shared_u(
     let x_at = |u: f64| x_curve.at(u);
     let us = invert_row(&x_at, x0_mm, pitch_x_mm, cols)?;
     let basis = UBasis::new(surface, &us);
+    // Only z is kept; the two-lane sampler sums z (and x, unused) with the bits of
+    // `UBasis::for_each_point`, without the y and padding lanes.
+    let lanes = TwoLanes::new(Basis {
+        degree: surface.degree_u(),
+        first: basis.first_poles(),
+        values: basis.values(),
+    });
+    let mut xs = Vec::with_capacity(cols);
     for &v in vs {
         surface.iso_poles_u_padded(v, &mut poles);
-        basis.for_each_point(&poles, |_, p| out.push(p[2] * 1000.0));
+        let start = out.len();
+        xs.clear();
+        lanes.points(&poles, [2, 0], &mut out, &mut xs);
+        for z in &mut out[start..] {
+            *z *= 1000.0;
+        }
     }
     Ok(out)
 }
@@ -448,6 +461,20 @@ mod tests {
         assert!(x_depends_on_u_only(&fit.surface));
         for (x0, pitch, n) in [(0.0, px / 2.0, 2 * cols - 1), (0.00013, 0.00071, 250)] {
             let shared = sample_shared_u(&fit.surface, &fit.params_v, x0, pitch, n).unwrap();
+            // The heights are the whole points' z, as `UBasis::for_each_point` sums them, to
+            // the bit.
+            let x_curve = XOfU::new(&fit.surface);
+            let us = invert_row(&|u| x_curve.at(u), x0, pitch, n).unwrap();
+            let basis = UBasis::new(&fit.surface, &us);
+            let (mut whole, mut poles) = (Vec::new(), Vec::new());
+            for &v in &fit.params_v {
+                fit.surface.iso_poles_u_padded(v, &mut poles);
+                basis.for_each_point(&poles, |_, p| whole.push((p[2] * 1000.0).to_bits()));
+            }
+            assert_eq!(
+                shared.iter().map(|z| z.to_bits()).collect::<Vec<_>>(),
+                whole
+            );
             let per_line = sample_per_line(&fit.surface, &fit.params_v, x0, pitch, n).unwrap();
             let scale = per_line.iter().map(|z| z.abs()).fold(0.0, f64::max);
             for (k, (a, b)) in shared.iter().zip(&per_line).enumerate() {
