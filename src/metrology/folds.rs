@@ -489,11 +489,7 @@ pub fn check_model_with(
         None => SampleBasis::new(surface.degree_u(), surface.knots_u(), nu, n_u),
     };
     let u_sampler: Option<Basis<'_>> = match shared_u {
-        Some(b) => Some(Basis {
-            degree: surface.degree_u(),
-            first: b.first_poles(),
-            values: b.values(),
-        }),
+        Some(b) => Some(Basis::of(b)),
         None => own_u.as_ref().map(SampleBasis::basis),
     };
     let xz_sampler = u_sampler.map(TwoLanes::new);

@@ -95,11 +95,7 @@ pub fn model_bearing_curves_with(
             &own
         }
     };
-    let sampler = Basis {
-        degree: surface.degree_u(),
-        first: basis.first_poles(),
-        values: basis.values(),
-    };
+    let sampler = Basis::of(basis);
     let xz = TwoLanes::new(sampler);
     let mut poles = Vec::new();
     let mut out = Vec::with_capacity(options.curves);
@@ -171,11 +167,7 @@ fn sample_shared_u(
     let basis = UBasis::new(surface, &us);
     // Only z is kept; the two-lane sampler sums z (and x, unused) with the bits of
     // `UBasis::for_each_point`, without the y and padding lanes.
-    let lanes = TwoLanes::new(Basis {
-        degree: surface.degree_u(),
-        first: basis.first_poles(),
-        values: basis.values(),
-    });
+    let lanes = TwoLanes::new(Basis::of(&basis));
     let mut xs = Vec::with_capacity(cols);
     for &v in vs {
         surface.iso_poles_u_padded(v, &mut poles);

@@ -7,7 +7,7 @@
 //! coordinate: every lane is multiplied and added as in the scalar loop (`_mm256_mul_pd` then
 //! `_mm256_add_pd`, no FMA, the same order), so the bits are the same.
 //!
-//! Layer 1 (pure logic): depends on `std` only.
+//! Layer 1 (pure logic): depends on `std` and, for the basis it takes, [`crate::nurbs::UBasis`].
 
 /// A basis along u at many parameters: for parameter k, `first[k]` is the first pole its
 /// `degree + 1` values `values[k·(degree+1)..]` apply to.
@@ -21,7 +21,15 @@ pub(crate) struct Basis<'a> {
     pub values: &'a [f64],
 }
 
-impl Basis<'_> {
+impl<'a> Basis<'a> {
+    /// The basis `u` holds, as the samplers here take it.
+    pub(crate) fn of(u: &'a crate::nurbs::UBasis) -> Basis<'a> {
+        Basis {
+            degree: u.degree(),
+            first: u.first_poles(),
+            values: u.values(),
+        }
+    }
     /// Lane `c` (0 x, 1 y, 2 z) of the point at parameter `k`: Σ basis·pole from zero in pole
     /// order, the sum every sampler here must reproduce to the bit.
     pub(crate) fn lane(&self, poles: &[[f64; 4]], k: usize, c: usize) -> f64 {

@@ -178,6 +178,11 @@ impl UBasis {
         self.first.len()
     }
 
+    /// Degree of the basis (the surface's degree along u).
+    pub fn degree(&self) -> usize {
+        self.degree
+    }
+
     /// Whether there are no parameters.
     pub fn is_empty(&self) -> bool {
         self.first.is_empty()
