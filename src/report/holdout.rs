@@ -10,33 +10,13 @@
 use super::document::{LineHoldout, LineReport};
 use super::grid::LineGrid;
 use crate::metrology::holdout::{
-    between_lines, between_lines_given, holdout_every, holdout_every_or_reason, holdout_with,
-    lines_every, lines_left_out, points_left_out, BetweenLines, Holdout, HoldoutLine,
+    between_lines_given, holdout_every, holdout_every_or_reason, lines_every, lines_left_out,
+    points_left_out, BetweenLines, Holdout, HoldoutLine,
 };
 use crate::metrology::surface_model::ModelRecipe;
 
 fn line_index(grid: &LineGrid, row: usize) -> usize {
     grid.index.get(row).copied().unwrap_or(row as u32) as usize
-}
-
-/// Runs the refits of `model_vs_measured` on `heights_um` (the grid's rows; the spikes
-/// bridged when characterisation excludes them), with line indices mapped to the grid's.
-pub fn characterise(
-    grid: &LineGrid,
-    heights_um: &[f64],
-    recipe: &ModelRecipe,
-) -> Result<Holdout, String> {
-    let mut h = holdout_with(
-        heights_um,
-        grid.cols,
-        grid.pitch_x_mm,
-        &grid.y_mm,
-        recipe.degrees,
-        recipe.method,
-    )
-    .map_err(|e| e.to_string())?;
-    rows_of_holdout_to_lines(grid, &mut h);
-    Ok(h)
 }
 
 /// Maps the hold-out's rows to the grid's line indices.
@@ -50,39 +30,18 @@ fn rows_of_holdout_to_lines(grid: &LineGrid, h: &mut Holdout) {
     }
 }
 
-/// The verdict on the surface between lines (every 2nd line left out, or every k-th when
-/// there are too few lines for that, [`holdout_every`](crate::metrology::holdout::holdout_every)) against `sq_um`. The held-out lines
-/// keep their row in `BetweenLines::lines[i].index` until [`rows_to_lines`].
-pub fn verdict(
-    grid: &LineGrid,
-    heights_um: &[f64],
-    recipe: &ModelRecipe,
-    sq_um: f64,
-    threshold: f64,
-) -> Result<BetweenLines, String> {
-    let every = holdout_every_or_reason(grid.rows(), recipe.degrees.degree_v)?;
-    between_lines(
-        heights_um,
-        grid.cols,
-        grid.pitch_x_mm,
-        &grid.y_mm,
-        recipe.degrees,
-        recipe.method,
-        every,
-        sq_um,
-        threshold,
-    )
-    .map_err(|e| e.to_string())
-}
-
 /// What a panic in the shared lines-left-out refit becomes.
 const LINES_REFIT_PANICKED: &str =
     "internal: the between-lines refit panicked; report this with the input";
 
-/// [`characterise`] and [`verdict`] (`None` for `sq_um`: the grid has no Sq) with the refit
-/// they share, every k-th line left out, made once, beside the every-2nd-point refit: the same
+/// Both hold-out sections: `model_vs_measured` (the refits of
+/// [`holdout_with`](crate::metrology::holdout::holdout_with), the line indices mapped to the
+/// grid's) and the verdict between lines
+/// ([`between_lines`](crate::metrology::holdout::between_lines) with k from
+/// [`holdout_every_or_reason`]; `None` for `sq_um`: the grid has no Sq). The refit they share,
+/// every k-th line left out, is made once, beside the every-2nd-point refit: the same
 /// computations on the same inputs, so the same results and the same errors, in the order each
-/// function reports them.
+/// of those functions reports them.
 pub fn characterise_and_judge(
     grid: &LineGrid,
     heights_um: &[f64],
@@ -168,6 +127,51 @@ pub fn attach(lines: &mut [LineReport], h: &Holdout) {
 mod tests {
     use super::*;
     use crate::fit::{FitOptions, VMethod};
+    use crate::metrology::holdout::{between_lines, holdout_with};
+
+    /// `model_vs_measured` on its own: both refits of [`holdout_with`], the line indices
+    /// mapped to the grid's.
+    fn characterise(
+        grid: &LineGrid,
+        heights_um: &[f64],
+        recipe: &ModelRecipe,
+    ) -> Result<Holdout, String> {
+        let mut h = holdout_with(
+            heights_um,
+            grid.cols,
+            grid.pitch_x_mm,
+            &grid.y_mm,
+            recipe.degrees,
+            recipe.method,
+        )
+        .map_err(|e| e.to_string())?;
+        rows_of_holdout_to_lines(grid, &mut h);
+        Ok(h)
+    }
+
+    /// The verdict between lines on its own: [`between_lines`] with k from
+    /// [`holdout_every_or_reason`].
+    fn verdict(
+        grid: &LineGrid,
+        heights_um: &[f64],
+        recipe: &ModelRecipe,
+        sq_um: f64,
+        threshold: f64,
+    ) -> Result<BetweenLines, String> {
+        let every = holdout_every_or_reason(grid.rows(), recipe.degrees.degree_v)?;
+        between_lines(
+            heights_um,
+            grid.cols,
+            grid.pitch_x_mm,
+            &grid.y_mm,
+            recipe.degrees,
+            recipe.method,
+            every,
+            sq_um,
+            threshold,
+        )
+        .map_err(|e| e.to_string())
+    }
 
     fn grid(rows: usize, cols: usize, y_mm: Vec<f64>, f: impl Fn(usize, usize) -> f64) -> LineGrid {
         LineGrid {
