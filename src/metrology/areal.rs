@@ -253,6 +253,17 @@ mod tests {
     use super::*;
     use crate::metrology::bearing::material_ratio_pct;
 
+    /// A grid at 0.5 µm along x and 10 µm between lines.
+    fn test_grid(heights_um: &[f64], rows: usize, cols: usize) -> Grid<'_> {
+        Grid {
+            heights_um,
+            rows,
+            cols,
+            pitch_x_mm: 0.0005,
+            pitch_y_mm: 0.01,
+        }
+    }
+
     #[test]
     fn smr_curve_equals_the_per_level_pooled_ratio() {
         // A rough tilted grid, and one of quantised heights whose levels fall on samples.
@@ -269,13 +280,7 @@ mod tests {
             .collect();
         let steps: Vec<f64> = (0..rows * cols).map(|_| (noise() * 6.0).floor()).collect();
         for heights in [rough, steps] {
-            let grid = Grid {
-                heights_um: &heights,
-                rows,
-                cols,
-                pitch_x_mm: 0.0005,
-                pitch_y_mm: 0.01,
-            };
+            let grid = test_grid(&heights, rows, cols);
             let curve = smr_curve(&grid, 101).unwrap();
             let (z, _) = level_plane(&grid).unwrap();
             for (k, p) in curve.iter().enumerate() {
@@ -305,13 +310,7 @@ mod tests {
             let heights: Vec<f64> = (0..rows * cols)
                 .map(|k| ((k as f64) * 0.71).sin() * 3.0 + tilt * k as f64 + 40.0)
                 .collect();
-            let grid = Grid {
-                heights_um: &heights,
-                rows,
-                cols,
-                pitch_x_mm: 0.0005,
-                pitch_y_mm: 0.01,
-            };
+            let grid = test_grid(&heights, rows, cols);
             let all = areal_params(&grid).unwrap().sq_um;
             assert!(all > 0.1, "{rows}×{cols}: Sq {all}");
             assert_eq!(
@@ -321,13 +320,7 @@ mod tests {
             );
         }
         let short = [1.0; 5];
-        let bad = Grid {
-            heights_um: &short,
-            rows: 2,
-            cols: 3,
-            pitch_x_mm: 0.0005,
-            pitch_y_mm: 0.01,
-        };
+        let bad = test_grid(&short, 2, 3);
         assert_eq!(sq_um(&bad).unwrap_err(), areal_params(&bad).unwrap_err());
     }
 
@@ -339,13 +332,7 @@ mod tests {
             let heights: Vec<f64> = (0..rows * cols)
                 .map(|k| ((k as f64) * 0.37).sin() + 0.01 * k as f64 - 2.0)
                 .collect();
-            let grid = Grid {
-                heights_um: &heights,
-                rows,
-                cols,
-                pitch_x_mm: 0.0005,
-                pitch_y_mm: 0.01,
-            };
+            let grid = test_grid(&heights, rows, cols);
             let (xc, yc) = ((cols - 1) as f64 * 0.5, (rows - 1) as f64 * 0.5);
             let (mut sz, mut sxz, mut syz, mut sxx, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0);
             for (k, z) in heights.iter().enumerate() {
