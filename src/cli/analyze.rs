@@ -585,10 +585,9 @@ fn fit_and_characterise(
         recipe,
         fit: fitted.as_ref().map(|m| &m.fit),
         replaced: fitted.as_ref().map_or(&[][..], |m| &m.replaced[..]),
+        fit_s,
     };
-    let mut outputs = characterise(grid, model, ctx, out).map_err(report_error)?;
-    outputs.elapsed_s += fit_s;
-    Ok(outputs)
+    characterise(grid, model, ctx, out).map_err(report_error)
 }
 
 fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {

@@ -100,6 +100,9 @@ pub struct Model<'a> {
     pub fit: Result<&'a FitResult, &'a MethodError>,
     /// The spikes replaced before fitting (empty unless the recipe asks for it).
     pub replaced: &'a [LineSpike],
+    /// Seconds the caller spent fitting the surface for this report, counted in the report's
+    /// timings; 0 for a surface fitted before (the runner's, fitted as its lines arrived).
+    pub fit_s: f64,
 }
 
 /// Everything besides the grid and the model that goes into a report.

@@ -226,7 +226,8 @@ pub struct Timings {
     pub lines: f64,
     /// Areal parameters of the measured grid.
     pub surface_grid: f64,
-    /// The fit (0 when the caller supplied the surface).
+    /// Fitting the surface for this report (0 for a surface fitted before, as the runner's is
+    /// while its lines arrive).
     pub fit: f64,
     /// The model sections.
     pub model: f64,

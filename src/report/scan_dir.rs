@@ -349,6 +349,7 @@ pub fn characterise_scan(
         recipe,
         fit: fitted.as_ref().map(|m| &m.fit),
         replaced: fitted.as_ref().map_or(&[][..], |m| &m.replaced[..]),
+        fit_s,
     };
     let load_s = t.elapsed().as_secs_f64() - fit_s;
     let mut outputs = characterise_scan_lines(
@@ -361,8 +362,7 @@ pub fn characterise_scan(
         options,
         warnings,
     )?;
-    outputs.report.timings_s.fit = fit_s;
-    outputs.elapsed_s += load_s + fit_s;
+    outputs.elapsed_s += load_s;
     Ok(outputs)
 }
 
@@ -396,6 +396,7 @@ impl Characterise for ScanCharacteriser {
             recipe: scan.recipe,
             fit: Ok(scan.fit),
             replaced: scan.replaced,
+            fit_s: 0.0,
         };
         let out = characterise_scan_lines(
             scan.dir,
