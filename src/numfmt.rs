@@ -25,6 +25,8 @@ pub enum Quantity {
     Difference,
     /// Durations in seconds: 3 significant digits.
     Seconds,
+    /// Counts per unit length (RPc per cm, Rppi per inch): 3 significant digits.
+    PerLength,
 }
 
 impl Quantity {
@@ -32,7 +34,11 @@ impl Quantity {
     pub fn digits(self) -> usize {
         match self {
             Quantity::HeightUm | Quantity::LengthMm | Quantity::PositionMm => 4,
-            Quantity::Percent | Quantity::Ratio | Quantity::Area | Quantity::Seconds => 3,
+            Quantity::Percent
+            | Quantity::Ratio
+            | Quantity::Area
+            | Quantity::Seconds
+            | Quantity::PerLength => 3,
             Quantity::Difference => 2,
         }
     }

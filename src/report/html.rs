@@ -196,12 +196,20 @@ const LINE_COLUMNS: &[(&str, &str, Quantity)] = &[
     ("Rsk", "Rsk", Quantity::Ratio),
     ("Rku", "Rku", Quantity::Ratio),
     ("Rdq", "RΔq", Quantity::Ratio),
+    ("Rda", "RΔa", Quantity::Ratio),
     ("RSm_um", "RSm µm", Quantity::HeightUm),
+    ("Rc_um", "Rc µm", Quantity::HeightUm),
+    ("RPc_per_cm", "RPc /cm", Quantity::PerLength),
+    ("Rppi_per_inch", "Rppi /in", Quantity::PerLength),
+    ("Rdc_um", "Rδc µm", Quantity::HeightUm),
+    ("Rmr_pct", "Rmr %", Quantity::Percent),
     ("Rk_um", "Rk µm", Quantity::HeightUm),
     ("Rpk_um", "Rpk µm", Quantity::HeightUm),
     ("Rvk_um", "Rvk µm", Quantity::HeightUm),
     ("Mr1_pct", "Mr1 %", Quantity::Percent),
     ("Mr2_pct", "Mr2 %", Quantity::Percent),
+    ("A1", "A1 µm·%", Quantity::Area),
+    ("A2", "A2 µm·%", Quantity::Area),
 ];
 
 /// Areal rows: report key, heading, quantity.
@@ -836,6 +844,54 @@ mod tests {
         assert_eq!(tolerance(0.1, "um"), 0.005);
         assert_eq!(tolerance(50.0, "%"), 1.0);
         assert_eq!(tolerance(0.2, ""), 0.05);
+    }
+
+    /// Every single-number parameter a line carries in report.json has a column in the
+    /// per-line table, and every column names a key the line has: a parameter added to the
+    /// report, or a key misspelt here, would otherwise leave the table short or blank.
+    #[test]
+    fn the_line_table_shows_every_scalar_line_parameter() {
+        // 4 mm of a 0.1 mm-period wave with a second tone, 0.5 µm pitch: every parameter,
+        // RSm and its element family included, has a value.
+        let heights: Vec<f64> = (0..8000)
+            .map(|k| {
+                let x = k as f64 * 0.0005;
+                (x / 0.1 * std::f64::consts::TAU).sin() + 0.3 * (x / 0.037).cos()
+            })
+            .collect();
+        let a = crate::metrology::params::analyze_line(
+            &heights,
+            0.0005,
+            &crate::metrology::params::Options::default(),
+        )
+        .unwrap();
+        let params = serde_json::to_value(&a.params).unwrap();
+        let params = params.as_object().unwrap();
+        let scalar: Vec<&String> = params
+            .iter()
+            .filter(|(_, v)| v.is_number() || v.is_null())
+            .map(|(k, _)| k)
+            .collect();
+        assert!(scalar.len() >= 20, "{scalar:?}");
+        let shown: Vec<&str> = LINE_COLUMNS.iter().map(|(k, _, _)| *k).collect();
+        for k in &scalar {
+            assert!(shown.contains(&k.as_str()), "{k} has no column");
+        }
+        for k in &shown {
+            assert!(
+                params.get(*k).is_some_and(|v| v.is_number()),
+                "column {k} is not a number of the line"
+            );
+        }
+        // And the page shows them, RPc among them.
+        let mut line = serde_json::Value::Object(params.clone());
+        line["index"] = 0.into();
+        line["y_mm"] = 0.0.into();
+        let report = serde_json::json!({"kind": "grid", "lines": [line]});
+        let h = render(&report, None, &[]);
+        let rpc = params["RPc_per_cm"].as_f64().unwrap();
+        assert!(h.contains("<th>RPc /cm</th>"));
+        assert!(h.contains(&format!("<td>{}</td>", fmt(rpc, Quantity::PerLength))));
     }
 
     #[test]
