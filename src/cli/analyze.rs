@@ -317,7 +317,11 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 .outliers
                 .map_or(frozen.exclude_spikes, |o| o == OutliersArg::Exclude),
             holdout_threshold: args.model.holdout_threshold_or(frozen.holdout_threshold)?,
-            v_method: args.model.v_method(lines, args.degree_v.unwrap_or(5))?,
+            v_method: args.model.v_method(
+                lines,
+                args.degree_v
+                    .unwrap_or(crate::fit::FitOptions::default().degree_v),
+            )?,
             replace_spikes: args.model.replace(),
         };
         let outputs = characterise_scan(&args.input, &options).map_err(report_error)?;
@@ -567,9 +571,11 @@ fn fit_and_characterise(
         spikes: args.model.spikes()?,
         exclude_spikes: args.outliers == Some(OutliersArg::Exclude),
         holdout_threshold: args.model.holdout_threshold()?,
-        v_method: args
-            .model
-            .v_method(grid.rows(), args.degree_v.unwrap_or(5))?,
+        v_method: args.model.v_method(
+            grid.rows(),
+            args.degree_v
+                .unwrap_or(crate::fit::FitOptions::default().degree_v),
+        )?,
         replace_spikes: args.model.replace(),
         ..ScanAnalysisOptions::default()
     };
@@ -638,4 +644,104 @@ fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
     crate::atomic::write_atomically(&path, |w| std::io::Write::write_all(w, csv.as_bytes()))
         .map_err(|e| io(&path, e))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// The help text of option `id` of subcommand `sub`.
+    fn help(sub: &str, id: &str) -> String {
+        let cli = crate::cli::Cli::command();
+        let sub = cli.find_subcommand(sub).expect("subcommand");
+        let text = sub
+            .get_arguments()
+            .find(|a| a.get_id() == id)
+            .and_then(|a| a.get_help())
+            .map(|h| h.to_string());
+        text.unwrap_or_else(|| panic!("no help for {id}"))
+    }
+
+    /// Whether `rest` continues the number before it ("0" after "else 31", ".5" after
+    /// "else 0"): "else 31" must not pass for "else 310".
+    fn continues_a_number(rest: &str) -> bool {
+        let mut c = rest.chars();
+        match c.next() {
+            Some(d) if d.is_ascii_digit() => true,
+            Some('.') => c.next().is_some_and(|d| d.is_ascii_digit()),
+            _ => false,
+        }
+    }
+
+    /// The defaults the help text states are written out as text; each is checked against the
+    /// value the code falls back to, so changing one without the other fails here.
+    #[test]
+    fn the_help_states_the_defaults_the_code_uses() {
+        let d = ScanAnalysisOptions::default();
+        let paper = crate::fit::FitOptions::default();
+        let checks = [
+            ("analyze", "curves", format!("else {}", d.curves)),
+            ("analyze", "levels", format!("else {}", d.levels)),
+            ("analyze", "lc", format!("(else {DEFAULT_LC_MM} mm)")),
+            ("analyze", "lc", format!("for a CSV {DEFAULT_LC_MM} mm")),
+            (
+                "analyze",
+                "degree_u",
+                format!("else {} (the paper)", paper.degree_u),
+            ),
+            (
+                "analyze",
+                "degree_v",
+                format!("else {} (the paper)", paper.degree_v),
+            ),
+            (
+                "analyze",
+                "spike_threshold_sigma",
+                format!("else {}", d.spikes.threshold_sigma),
+            ),
+            (
+                "analyze",
+                "spike_max_points",
+                format!("else {}", d.spikes.max_points),
+            ),
+            (
+                "analyze",
+                "holdout_threshold",
+                format!("else {}", d.holdout_threshold),
+            ),
+            (
+                "fit",
+                "degree_u",
+                format!("else {} (the paper)", paper.degree_u),
+            ),
+            (
+                "fit",
+                "degree_v",
+                format!("else {} (the paper)", paper.degree_v),
+            ),
+            (
+                "fit",
+                "spike_threshold_sigma",
+                format!("else {}", d.spikes.threshold_sigma),
+            ),
+            (
+                "fit",
+                "spike_max_points",
+                format!("else {}", d.spikes.max_points),
+            ),
+            (
+                "fit",
+                "holdout_threshold",
+                format!("else {}", d.holdout_threshold),
+            ),
+        ];
+        for (sub, id, want) in checks {
+            let h = help(sub, id);
+            let whole = h
+                .match_indices(&want)
+                .any(|(at, _)| !continues_a_number(&h[at + want.len()..]));
+            assert!(whole, "{sub} --{id}: {h:?} lacks {want:?}");
+        }
+    }
 }
