@@ -450,9 +450,9 @@ fn traceability(h: &mut String, report: &Value) {
 fn events(h: &mut String, j: &ResumeState) {
     h.push_str("<h2 id=\"events\">During the scan</h2>\n");
     let retraced: Vec<_> = j.lines.iter().filter(|l| l.id.attempt > 1).collect();
-    if j.interruptions.is_empty() && retraced.is_empty() {
+    if j.interruptions.is_empty() && retraced.is_empty() && j.quarantined.is_empty() {
         h.push_str(
-            "<p class=\"ok\" id=\"no-events\">No interruption, re-trace or resume: every line was traced on its first attempt.</p>\n",
+            "<p class=\"ok\" id=\"no-events\">No interruption, re-trace, resume or line moved aside: every line was traced on its first attempt.</p>\n",
         );
     } else {
         h.push_str("<table id=\"t-events\">\n<tr><th class=\"t\">time (UTC)</th><th>line</th><th class=\"t\">device</th><th class=\"t\">what</th></tr>\n");
@@ -468,6 +468,16 @@ fn events(h: &mut String, j: &ResumeState) {
                 )
             })
             .collect();
+        // A committed line whose file no longer matched its record when the scan resumed:
+        // moved aside (both hashes are in the journal) and traced again. The reason says so.
+        rows.extend(j.quarantined.iter().map(|q| {
+            (
+                q.time,
+                line_label(u64::from(q.index)),
+                String::new(),
+                esc(&format!("{} (now {})", q.reason, q.moved_to)),
+            )
+        }));
         rows.extend(retraced.iter().map(|l| {
             (
                 l.time,

@@ -799,14 +799,37 @@ const CHECK_BODY: &str = "<script>addEventListener('load',function(){var t={};[]
 
 #[test]
 fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
-    use surfscan::scan::journal::InterruptionRecord;
+    use surfscan::scan::journal::{InterruptionRecord, QuarantineRecord};
     use surfscan::scan::station::Device;
     let tmp = tempfile::tempdir().unwrap();
     let rows: Vec<usize> = (0..8).collect();
     let scan = build_scan(tmp.path(), &rows, ProfileKind::P, None);
     // What happened during the scan, as the runner records it.
-    let (mut journal, _) = Journal::open(&scan.join("journal.jsonl"), Arc::new(NoFaults)).unwrap();
+    let (mut journal, recovery) =
+        Journal::open(&scan.join("journal.jsonl"), Arc::new(NoFaults)).unwrap();
     let t = Utc.with_ymd_and_hms(2026, 11, 30, 9, 45, 0).unwrap();
+    // Line 6 (0005) found changed on a resume: moved aside, then traced again (attempt 2).
+    let mut line6 = recovery
+        .records
+        .iter()
+        .find_map(|r| match r {
+            Record::Line(l) if l.id.index == 5 => Some(l.clone()),
+            _ => None,
+        })
+        .unwrap();
+    journal
+        .append(&Record::Quarantine(QuarantineRecord {
+            index: 5,
+            expected_sha256: line6.csv_sha256.clone(),
+            found_sha256: "00".repeat(32),
+            moved_to: "quarantine/0005.csv".into(),
+            reason: "line 6: its heights file has SHA-256 00…, the journal's line record <x>; moved aside, it is traced again".into(),
+            time: Utc.with_ymd_and_hms(2026, 11, 30, 9, 50, 0).unwrap(),
+        }))
+        .unwrap();
+    line6.id.attempt = 2;
+    line6.time = Utc.with_ymd_and_hms(2026, 11, 30, 9, 55, 0).unwrap();
+    journal.append(&Record::Line(line6)).unwrap();
     for (reason, device, line) in [
         (
             "instrument unplugged <USB>",
@@ -866,6 +889,11 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
         html.contains("<td>4 <span class=\"muted\">(0003)</span></td>"),
         "line 4 of the event"
     );
+    assert!(
+        html.contains("<td>6 <span class=\"muted\">(0005)</span></td><td class=\"t\"></td><td class=\"t\">line 6: its heights file has SHA-256 00…, the journal&#39;s line record &lt;x&gt;; moved aside, it is traced again (now quarantine/0005.csv)</td>"),
+        "the line moved aside, escaped, with where it went"
+    );
+    assert!(html.contains("traced on attempt 2 (re-traced)"));
     assert!(html.contains("SUR-2 brass &lt;B&amp;S&gt; #7"));
     assert!(
         html.contains("<td class=\"t\">1 h 00 min</td>"),
@@ -908,7 +936,11 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
         json!(1 + rows.len() + 2),
         "header, lines, mean, s.d."
     );
-    assert_eq!(tables["t-events"], json!(3), "header and two events");
+    assert_eq!(
+        tables["t-events"],
+        json!(5),
+        "header, two interruptions, the line moved aside and its re-trace"
+    );
     assert!(tables["t-traceability"].as_u64().unwrap() >= 10);
     assert!(tables["t-instrument"].as_u64().unwrap() > rows.len() as u64);
     assert!(tables["t-areal"].as_u64().unwrap() >= 10);
