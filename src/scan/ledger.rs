@@ -41,6 +41,9 @@ pub(super) struct Ledger {
     pub ahead: BTreeMap<u32, StoredLine>,
     hooks: Arc<TestHooks>,
     metrics_path: Option<PathBuf>,
+    /// Interruptions whose journal append failed (a full disk, mostly: the very condition
+    /// they report), oldest first, with their own times: appended before the next record.
+    unrecorded: Vec<InterruptionRecord>,
 }
 
 impl Ledger {
@@ -64,26 +67,48 @@ impl Ledger {
             start,
             hooks,
             metrics_path,
+            unrecorded: Vec::new(),
         }
     }
 
-    /// Appends an interruption record; a failure is logged (the scan goes on).
+    /// Appends an interruption record. One that cannot be appended (the scan goes on) is kept
+    /// and appended, with its own time, before the next record of the journal, so the
+    /// journal still tells what happened once the disk has room again.
     pub fn note(&mut self, n: &Note) {
         tracing::warn!(scan_id = %self.id, line = n.line.map(|l| l + 1), "interruption: {}", n.reason);
-        let r = Record::Interruption(InterruptionRecord {
+        self.unrecorded.push(InterruptionRecord {
             reason: n.reason.clone(),
             device: n.device,
             line: n.line,
             time: Utc::now(),
             peer: n.peer,
         });
-        if let Err(e) = self.journal.append(&r) {
-            tracing::error!(scan_id = %self.id, "cannot record the interruption in the journal: {e}");
+        self.record_unrecorded();
+    }
+
+    /// Appends the interruptions not yet in the journal, oldest first; stops at the first
+    /// that fails (logged), keeping it and those after it for the next try.
+    fn record_unrecorded(&mut self) {
+        while let Some(first) = self.unrecorded.first() {
+            match self.journal.append(&Record::Interruption(first.clone())) {
+                Ok(()) => {
+                    self.unrecorded.remove(0);
+                }
+                Err(e) => {
+                    tracing::error!(
+                        scan_id = %self.id,
+                        "cannot record the interruption in the journal yet ({} waiting; each is recorded with its own time once it can be): {e}",
+                        self.unrecorded.len()
+                    );
+                    return;
+                }
+            }
         }
     }
 
-    /// Appends the stop record.
+    /// Appends the stop record (after any interruption still waiting to be recorded).
     pub fn stop(&mut self, status: StopStatus, reason: &str) -> Result<(), JournalError> {
+        self.record_unrecorded();
         self.journal.append(&Record::Stop(StopRecord {
             status,
             reason: reason.to_owned(),
@@ -105,6 +130,7 @@ impl Ledger {
                 })
             })
             .unwrap_or_default();
+        self.record_unrecorded();
         self.journal
             .append(&Record::Continue(super::journal::ContinueRecord {
                 after,
@@ -118,6 +144,7 @@ impl Ledger {
     pub fn commit(&mut self, meta: &LineMeta, profile: &Profile) -> Result<(), StoreError> {
         // The hook learns the line before any of its writes.
         self.hooks.set_line(meta.id.index);
+        self.record_unrecorded();
         if let Err(e) = self.store.commit_line(&mut self.journal, meta, profile) {
             self.discard_uncommitted(meta.id.index);
             return Err(e);
@@ -210,4 +237,138 @@ fn fitter_of(plan: &Plan) -> IncrementalFitter {
         degree_u: plan.degree_u,
         degree_v: plan.degree_v,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scan::faults::{StorageFaults, WriteStep};
+    use crate::scan::journal::read_journal;
+    use crate::scan::scan_id::ScanId;
+    use crate::units::Nm;
+    use chrono::TimeZone;
+    use std::path::Path;
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    /// A disk that refuses every journal append (ENOSPC) while `full` is set.
+    #[derive(Default)]
+    struct Disk {
+        full: AtomicBool,
+    }
+
+    impl StorageFaults for Disk {
+        fn before_write(&self, step: WriteStep, _path: &Path) -> std::io::Result<()> {
+            if step == WriteStep::Journal && self.full.load(Ordering::SeqCst) {
+                return Err(std::io::Error::from_raw_os_error(libc::ENOSPC));
+            }
+            Ok(())
+        }
+    }
+
+    fn ledger(dir: &Path, disk: Arc<Disk>) -> Ledger {
+        let time = Utc.with_ymd_and_hms(2026, 12, 1, 22, 0, 0).unwrap();
+        let id = ScanId::new(time, "block");
+        let store = ScanStore::create(dir, &id, disk.clone()).unwrap();
+        let start = StartRecord {
+            scan_id: id.0.clone(),
+            sequence: 1,
+            time,
+            plan: Plan {
+                lines: 3,
+                y_start_nm: Nm(0),
+                y_step_nm: Nm(10_000),
+                degree_u: 5,
+                degree_v: 5,
+                max_line_attempts: 3,
+                v_method: Default::default(),
+                replace_spikes: None,
+                analysis: None,
+            },
+            config: serde_json::json!({}),
+            config_hash: "ab".repeat(32),
+            specimen: "block".into(),
+            operator: String::new(),
+            notes: String::new(),
+            software_version: "test".into(),
+            instrument_model: "SJ-210".into(),
+            firmware: String::new(),
+            drive_unit: String::new(),
+            conditions: Default::default(),
+            peer: None,
+        };
+        let journal = Journal::create(store.root(), start.clone(), disk).unwrap();
+        Ledger::new(store, journal, start, Arc::default(), None)
+    }
+
+    fn note(reason: &str) -> Note {
+        Note {
+            reason: reason.into(),
+            device: None,
+            line: Some(1),
+            peer: None,
+        }
+    }
+
+    /// The journal's records after the start record, as (class, reason).
+    fn records(l: &Ledger) -> Vec<(&'static str, String)> {
+        read_journal(l.journal.path())
+            .unwrap()
+            .records
+            .iter()
+            .skip(1)
+            .map(|r| match r {
+                Record::Interruption(i) => ("interruption", i.reason.clone()),
+                Record::Stop(s) => ("stop", s.reason.clone()),
+                _ => ("other", String::new()),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn an_interruption_the_full_disk_refused_is_recorded_once_it_has_room() {
+        let dir = tempfile::tempdir().unwrap();
+        let disk = Arc::new(Disk::default());
+        let mut l = ledger(dir.path(), disk.clone());
+        disk.full.store(true, Ordering::SeqCst);
+        l.note(&note("suspended: disk full"));
+        l.note(&note("still full"));
+        assert!(records(&l).is_empty(), "nothing could be written");
+        let first_time = l.unrecorded[0].time;
+        disk.full.store(false, Ordering::SeqCst);
+        l.note(&note("space is back"));
+        assert_eq!(
+            records(&l),
+            [
+                ("interruption", "suspended: disk full".to_string()),
+                ("interruption", "still full".to_string()),
+                ("interruption", "space is back".to_string()),
+            ]
+        );
+        // With the time it happened, not the time it was written.
+        let state = read_journal(l.journal.path()).unwrap();
+        let Record::Interruption(i) = &state.records[1] else {
+            panic!("not an interruption")
+        };
+        assert_eq!(i.time, first_time);
+        assert!(l.unrecorded.is_empty());
+    }
+
+    #[test]
+    fn the_stop_record_follows_the_interruptions_waiting_to_be_recorded() {
+        let dir = tempfile::tempdir().unwrap();
+        let disk = Arc::new(Disk::default());
+        let mut l = ledger(dir.path(), disk.clone());
+        disk.full.store(true, Ordering::SeqCst);
+        l.note(&note("suspended: disk full"));
+        assert!(l.stop(StopStatus::Abort, "aborted").is_err());
+        disk.full.store(false, Ordering::SeqCst);
+        l.stop(StopStatus::Abort, "aborted").unwrap();
+        assert_eq!(
+            records(&l),
+            [
+                ("interruption", "suspended: disk full".to_string()),
+                ("stop", "aborted".to_string()),
+            ]
+        );
+    }
 }

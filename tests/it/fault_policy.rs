@@ -318,12 +318,16 @@ async fn a_really_full_disk_suspends_the_scan_which_goes_on_when_space_is_freed(
     let dir = scan_dir(&out);
     assert_lines_exactly(&dir, N);
     let records = assert_journal_complete(&dir, N);
+    // The suspension itself is in the journal (written once there was room), before the
+    // note that space is back.
+    let notes = interruptions(&records);
+    let back = notes.iter().position(|r| r.starts_with("space is back"));
+    let full = notes
+        .iter()
+        .position(|r| r.starts_with("suspended: disk full while writing"));
     assert!(
-        interruptions(&records)
-            .iter()
-            .any(|r| r.starts_with("space is back")),
-        "{:?}",
-        interruptions(&records)
+        matches!((full, back), (Some(f), Some(b)) if f < b),
+        "{notes:?}"
     );
     drop(mount);
     rig.shutdown().await;
