@@ -57,6 +57,18 @@ pub enum MetrologyError {
         /// Its value.
         value: f64,
     },
+    /// A height is finite but beyond any surface ([`MAX_HEIGHT_UM`]): a file in other units or
+    /// with damaged numbers. Refused before the parameters' squares and sums overflow.
+    #[error(
+        "height at index {index} is {value:e} µm, beyond ±{max:e} µm (1 km): no surface height; check the data's units (heights in µm) and whether the file is damaged",
+        max = MAX_HEIGHT_UM
+    )]
+    HeightOutOfRange {
+        /// Index of the point.
+        index: usize,
+        /// Its value, µm.
+        value: f64,
+    },
     /// The profile is shorter than one sampling length, or too short for the 7-point slope.
     #[error("profile of {points} points ({length_mm} mm) is shorter than one sampling length of {sampling_length_mm} mm or than {min_points} points; trace a longer profile or choose a shorter λc")]
     TooShort {
@@ -131,13 +143,25 @@ pub enum MetrologyError {
     },
 }
 
-/// Checks that every height is finite.
+/// The largest height magnitude characterised, µm (1 km): far beyond anything a stylus
+/// traces, and small enough that fourth powers and sums over any grid stay finite.
+pub const MAX_HEIGHT_UM: f64 = 1e9;
+
+/// Checks that every height is finite and within ±[`MAX_HEIGHT_UM`]; the first that is not is
+/// named.
 pub(crate) fn check_finite(heights: &[f64]) -> Result<(), MetrologyError> {
-    match heights.iter().position(|z| !z.is_finite()) {
-        Some(index) => Err(MetrologyError::NonFiniteHeight {
-            index,
-            value: heights.get(index).copied().unwrap_or(f64::NAN),
-        }),
+    match heights
+        .iter()
+        .position(|z| !(z.is_finite() && z.abs() <= MAX_HEIGHT_UM))
+    {
+        Some(index) => {
+            let value = heights.get(index).copied().unwrap_or(f64::NAN);
+            Err(if value.is_finite() {
+                MetrologyError::HeightOutOfRange { index, value }
+            } else {
+                MetrologyError::NonFiniteHeight { index, value }
+            })
+        }
         None => Ok(()),
     }
 }

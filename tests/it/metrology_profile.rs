@@ -308,6 +308,28 @@ fn bad_input_gets_named_errors() {
         analyze_line(&z, 0.001, &Options::default()),
         Err(MetrologyError::NonFiniteHeight { index: 17, .. })
     ));
+    // A finite height no surface has (a file in other units, or damaged numbers) is named as
+    // itself, not as the infinity its square would become inside the parameters.
+    let mut z = sine(2000, 0.001, 0.1, 1.0);
+    z[40] = -7.5e298;
+    let e = analyze_line(&z, 0.001, &Options::default()).unwrap_err();
+    assert_eq!(
+        e,
+        MetrologyError::HeightOutOfRange {
+            index: 40,
+            value: -7.5e298
+        }
+    );
+    assert!(e.to_string().contains("-7.5e298 µm, beyond ±1e9 µm"), "{e}");
+    // The bound itself is a height (1 km); just past it is not.
+    let mut z = sine(2000, 0.001, 0.1, 1.0);
+    z[3] = 1e9;
+    assert!(analyze_line(&z, 0.001, &Options::default()).is_ok());
+    z[3] = 1.000_000_1e9;
+    assert!(matches!(
+        analyze_line(&z, 0.001, &Options::default()),
+        Err(MetrologyError::HeightOutOfRange { index: 3, .. })
+    ));
     let z = sine(2000, 0.001, 0.1, 1.0);
     assert_eq!(
         analyze_line(&z, 0.0, &Options::default()),
