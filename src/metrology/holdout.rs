@@ -148,10 +148,7 @@ pub fn holdout_with(
     let points_left_out = points_left_out(heights_um, cols, pitch_x_mm, y_mm, options, method)?;
     let every = lines_every(y_mm.len(), options.degree_v)?;
     let lines_left_out =
-        refit_without_lines(heights_um, cols, pitch_x_mm, y_mm, options, method, every)?
-            .into_iter()
-            .map(|(line, _)| line)
-            .collect();
+        refit_without_lines(heights_um, cols, pitch_x_mm, y_mm, options, method, every)?.lines;
     Ok(Holdout {
         points_left_out,
         lines_left_out,
@@ -225,7 +222,7 @@ pub fn lines_left_out(
     options: FitOptions,
     method: VMethod,
     every: usize,
-) -> Result<Vec<(HoldoutLine, Vec<f64>)>, MetrologyError> {
+) -> Result<HeldLines, MetrologyError> {
     check_grid(heights_um, cols, pitch_x_mm, y_mm)?;
     refit_without_lines(heights_um, cols, pitch_x_mm, y_mm, options, method, every)
 }
@@ -282,7 +279,7 @@ fn refit_without_lines(
     options: FitOptions,
     method: VMethod,
     every: usize,
-) -> Result<Vec<(HoldoutLine, Vec<f64>)>, MetrologyError> {
+) -> Result<HeldLines, MetrologyError> {
     if every < 2 {
         return Err(MetrologyError::BadParameter {
             what: "hold-out: every k-th line",
@@ -328,11 +325,16 @@ fn refit_without_lines(
             }
         }
     }
-    let mut out = Vec::with_capacity(held.len());
+    let mut out = HeldLines {
+        lines: Vec::with_capacity(held.len()),
+        model_um: Vec::new(),
+        cols,
+    };
     if !vs.is_empty() {
-        let m = sample_model_grid(&fit.surface, &vs, 0.0, pitch_x_mm, cols)?;
-        for (&(r, target), m) in held.iter().zip(m.chunks_exact(cols.max(1))) {
-            out.push((stats(r, target, m, row(r)), m.to_vec()));
+        // The sampled heights are kept as sampled, line after line (no copy per line).
+        out.model_um = sample_model_grid(&fit.surface, &vs, 0.0, pitch_x_mm, cols)?;
+        for (&(r, target), m) in held.iter().zip(out.model_um.chunks_exact(cols.max(1))) {
+            out.lines.push(stats(r, target, m, row(r)));
         }
     }
     match unreached {
@@ -384,6 +386,18 @@ pub fn model_without_line(
     })
 }
 
+/// The lines-left-out refit at its held-out lines: their statistics, and the refit's heights
+/// at their x, line after line.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HeldLines {
+    /// Per held-out line inside the kept y range (index = the row).
+    pub lines: Vec<HoldoutLine>,
+    /// The refit's heights, µm: `cols` per line of `lines`, in their order.
+    pub model_um: Vec<f64>,
+    /// Heights per line.
+    pub cols: usize,
+}
+
 /// One line left out: its statistics and the refit's heights at its x.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HoldoutLineModel {
@@ -422,13 +436,25 @@ pub struct BetweenLines {
     pub summary: String,
     /// The verdict in one sentence.
     pub verdict: String,
-    /// The model's heights at the held-out lines (per held-out line, at the data x), µm; not
-    /// serialised (the report plots one of them).
+    /// The model's heights at the held-out lines, µm: `model_cols` per line of `lines`, in
+    /// their order, at the data x; not serialised (the report plots one of them; see
+    /// [`BetweenLines::model_line`]).
     #[serde(skip)]
-    pub model_um: Vec<Vec<f64>>,
+    pub model_um: Vec<f64>,
+    /// Heights per line in `model_um`.
+    #[serde(skip)]
+    pub model_cols: usize,
 }
 
 impl BetweenLines {
+    /// The model's heights at the `k`-th held-out line (`lines[k]`), µm; `None` past the
+    /// lines or once `model_um` has been dropped.
+    pub fn model_line(&self, k: usize) -> Option<&[f64]> {
+        let n = self.model_cols;
+        self.model_um
+            .get(k.checked_mul(n)?..k.checked_add(1)?.checked_mul(n)?)
+    }
+
     /// The short verdict: "supported / not supported by the data (hold-out rms X µm = Y × Sq)".
     pub fn short(&self) -> String {
         format!(
@@ -497,7 +523,7 @@ pub fn between_lines_given(
     every: usize,
     sq_um: f64,
     threshold: f64,
-    held: impl FnOnce() -> Result<Vec<(HoldoutLine, Vec<f64>)>, MetrologyError>,
+    held: impl FnOnce() -> Result<HeldLines, MetrologyError>,
 ) -> Result<BetweenLines, MetrologyError> {
     check_grid(heights_um, cols, pitch_x_mm, y_mm)?;
     if !(sq_um.is_finite() && sq_um > 0.0) {
@@ -515,7 +541,7 @@ pub fn between_lines_given(
         });
     }
     let held = held()?;
-    if held.is_empty() {
+    if held.lines.is_empty() {
         return Err(MetrologyError::BadParameter {
             what: "lines inside the refitted range",
             value: 0.0,
@@ -523,7 +549,7 @@ pub fn between_lines_given(
         });
     }
     let (mut sum2, mut points, mut max_abs) = (0.0f64, 0usize, 0.0f64);
-    for (line, _) in &held {
+    for line in &held.lines {
         sum2 += line.rms_um * line.rms_um * line.points as f64;
         points += line.points;
         max_abs = max_abs.max(line.max_abs_um);
@@ -531,7 +557,11 @@ pub fn between_lines_given(
     let rms = (sum2 / points.max(1) as f64).sqrt();
     let ratio = rms / sq_um;
     let supported = ratio <= threshold;
-    let (lines, model_um): (Vec<HoldoutLine>, Vec<Vec<f64>>) = held.into_iter().unzip();
+    let HeldLines {
+        lines,
+        model_um,
+        cols: model_cols,
+    } = held;
     let mut out = BetweenLines {
         method: method.name(),
         v_method: method,
@@ -546,6 +576,7 @@ pub fn between_lines_given(
         summary: String::new(),
         verdict: String::new(),
         model_um,
+        model_cols,
         lines,
     };
     out.summary = out.short();
@@ -591,6 +622,10 @@ mod tests {
         let held: Vec<usize> = b.lines.iter().map(|l| l.index).collect();
         // Rows 2, 5, 8, 11 are left out; 13 is kept, so 11 lies inside the kept range.
         assert_eq!(held, vec![2, 5, 8, 11]);
+        // The refit's heights, one line of 40 per held-out line, in their order.
+        assert_eq!(b.model_um.len(), 4 * 40);
+        assert_eq!(b.model_line(3), Some(&b.model_um[120..160]));
+        assert_eq!(b.model_line(4), None);
         assert_eq!(b.points, 4 * 40);
         assert!(b.supported, "{}", b.verdict);
         assert!(b.verdict.contains("every 3rd line"), "{}", b.verdict);
@@ -628,8 +663,9 @@ mod tests {
             VMethod::Interpolate,
         )
         .unwrap();
-        assert_eq!(held.len(), 7);
-        for (line, model) in &held {
+        assert_eq!(held.lines.len(), 7);
+        assert_eq!(held.model_um.len(), 7 * 64);
+        for (line, model) in held.lines.iter().zip(held.model_um.chunks_exact(64)) {
             let v = v_at_y(&fit.surface, line.y_mm).unwrap();
             let alone = sample_model_grid(&fit.surface, &[v], 0.0, 0.0005, 64).unwrap();
             let bits = |m: &[f64]| m.iter().map(|h| h.to_bits()).collect::<Vec<u64>>();

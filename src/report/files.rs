@@ -212,7 +212,7 @@ pub fn held_out_overlay(
                 line_label(grid.index_of(line.index)),
                 line_label(grid.index_of(wanted))
             ));
-            (line.index, line.rms_um, b.model_um.get(k)?.clone())
+            (line.index, line.rms_um, b.model_line(k)?.to_vec())
         }
     };
     let px = grid.pitch_x_mm;

@@ -66,7 +66,7 @@ pub fn characterise_and_judge(
         let points_left_out = points.map_err(|e| e.to_string())?;
         lines_every(grid.rows(), degrees.degree_v).map_err(|e| e.to_string())?;
         let lines_left_out = match &lines {
-            Some(Ok(Ok(held))) => held.iter().map(|(line, _)| line.clone()).collect(),
+            Some(Ok(Ok(held))) => held.lines.clone(),
             Some(Ok(Err(e))) => return Err(e.to_string()),
             Some(Err(())) => return Err(LINES_REFIT_PANICKED.to_string()),
             // `lines_every` found no k either.
