@@ -160,8 +160,36 @@ pub fn parse_grid(text: &str) -> Result<Grid, String> {
     parse_grid_split(text, PARALLEL_CSV_BYTES)
 }
 
+/// [`parse_grid`] of a text it takes over: the text is freed once both runs have read it,
+/// before the second run's values join the first's, so the text and the grid whole are never
+/// in memory beside the second run's own copy (the large fit's peak).
+pub fn parse_grid_owned(text: String) -> Result<Grid, String> {
+    parse_grid_owned_split(text, PARALLEL_CSV_BYTES)
+}
+
+/// [`parse_grid_owned`], reading in two runs when `text` has at least `parallel_bytes` bytes.
+fn parse_grid_owned_split(text: String, parallel_bytes: usize) -> Result<Grid, String> {
+    let runs = read_runs(&text, parallel_bytes);
+    drop(text);
+    runs.into_grid()
+}
+
 /// [`parse_grid`], reading in two runs when `text` has at least `parallel_bytes` bytes.
 fn parse_grid_split(text: &str, parallel_bytes: usize) -> Result<Grid, String> {
+    read_runs(text, parallel_bytes).into_grid()
+}
+
+/// What the runs of [`read_runs`] read: the first run's values (with room for all), its
+/// lines, and the second run's lines and values when there is one.
+struct Runs {
+    heights_um: Vec<f64>,
+    first: GridLines,
+    second: Option<(GridLines, Vec<f64>)>,
+}
+
+/// Reads `text` in one run, or in two side by side when it has at least `parallel_bytes`
+/// bytes; nothing of the result borrows `text`.
+fn read_runs(text: &str, parallel_bytes: usize) -> Runs {
     // Room for every field at once (one per ',' plus one per line), so a large grid is not
     // copied while it grows.
     let fields = text.bytes().filter(|&b| b == b',' || b == b'\n').count() + 1;
@@ -189,9 +217,17 @@ fn parse_grid_split(text: &str, parallel_bytes: usize) -> Result<Grid, String> {
     let (first, second) = if tail.is_empty() {
         (parse_grid_lines(0, head, &mut heights_um), None)
     } else {
+        // The second run's values are counted as the whole file's were, so its buffer is
+        // made once at its size, not grown by doubling.
+        let tail_start = tail[0].as_ptr() as usize - text.as_ptr() as usize;
+        let tail_fields = text.as_bytes()[tail_start..]
+            .iter()
+            .filter(|&&b| b == b',' || b == b'\n')
+            .count()
+            + 1;
         std::thread::scope(|s| {
             let second = s.spawn(|| {
-                let mut values = Vec::new();
+                let mut values = Vec::with_capacity(tail_fields);
                 let run = parse_grid_lines(split, tail, &mut values);
                 (run, values)
             });
@@ -202,35 +238,51 @@ fn parse_grid_split(text: &str, parallel_bytes: usize) -> Result<Grid, String> {
             (first, Some(second))
         })
     };
-    // Row lengths against line 1 and any unreadable line, in line order.
-    let cols = first.counts.first().copied().unwrap_or(0);
-    let mut rows = 0usize;
-    let runs = std::iter::once(&first).chain(second.as_ref().map(|(run, _)| run));
-    for run in runs {
-        for (k, &n) in run.counts.iter().enumerate() {
-            if n != cols {
-                return Err(format!(
-                    "line {}: {n} values, but line 1 has {cols}; every row must have the same number of points",
-                    run.first_line + k + 1
-                ));
-            }
-            rows += 1;
-        }
-        if let Some(e) = &run.error {
-            return Err(e.clone());
-        }
-    }
-    if rows == 0 {
-        return Err("the file holds no data rows".into());
-    }
-    if let Some((_, values)) = second {
-        heights_um.extend_from_slice(&values);
-    }
-    Ok(Grid {
-        rows,
-        cols,
+    Runs {
         heights_um,
-    })
+        first,
+        second,
+    }
+}
+
+impl Runs {
+    /// The grid: row lengths checked against line 1 and any unreadable line reported, in
+    /// line order; then the second run's values after the first's.
+    fn into_grid(self) -> Result<Grid, String> {
+        let Runs {
+            mut heights_um,
+            first,
+            second,
+        } = self;
+        let cols = first.counts.first().copied().unwrap_or(0);
+        let mut rows = 0usize;
+        let runs = std::iter::once(&first).chain(second.as_ref().map(|(run, _)| run));
+        for run in runs {
+            for (k, &n) in run.counts.iter().enumerate() {
+                if n != cols {
+                    return Err(format!(
+                        "line {}: {n} values, but line 1 has {cols}; every row must have the same number of points",
+                        run.first_line + k + 1
+                    ));
+                }
+                rows += 1;
+            }
+            if let Some(e) = &run.error {
+                return Err(e.clone());
+            }
+        }
+        if rows == 0 {
+            return Err("the file holds no data rows".into());
+        }
+        if let Some((_, values)) = second {
+            heights_um.extend_from_slice(&values);
+        }
+        Ok(Grid {
+            rows,
+            cols,
+            heights_um,
+        })
+    }
 }
 
 /// The lines of a run of grid lines read so far: each line's number of values, and the error
@@ -550,7 +602,7 @@ fn read_csv(args: &Args) -> Result<Input, CliError> {
     };
     let text = std::fs::read_to_string(&args.input)
         .map_err(|e| io_err("cannot read grid", &args.input, e))?;
-    let grid = parse_grid(&text)
+    let grid = parse_grid_owned(text)
         .map_err(|m| CliError::new(Exit::Failed, format!("{}: {m}", args.input.display())))?;
     let rows = grid.rows;
     Ok(Input {
@@ -1187,6 +1239,8 @@ mod tests {
         for text in &texts {
             let serial = parse_grid_split(text, usize::MAX);
             assert_eq!(parse_grid_split(text, 0), serial, "{text:?}");
+            // The owned form (the text freed before the runs are joined) too.
+            assert_eq!(parse_grid_owned_split(text.clone(), 0), serial, "{text:?}");
         }
         // And the values are the numbers written.
         let g = parse_grid_split(&texts[0], 0).unwrap();
