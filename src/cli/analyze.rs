@@ -680,62 +680,42 @@ mod tests {
     fn the_help_states_the_defaults_the_code_uses() {
         let d = ScanAnalysisOptions::default();
         let paper = crate::fit::FitOptions::default();
-        let checks = [
+        let mut checks = vec![
             ("analyze", "curves", format!("else {}", d.curves)),
             ("analyze", "levels", format!("else {}", d.levels)),
             ("analyze", "lc", format!("(else {DEFAULT_LC_MM} mm)")),
             ("analyze", "lc", format!("for a CSV {DEFAULT_LC_MM} mm")),
-            (
-                "analyze",
-                "degree_u",
-                format!("else {} (the paper)", paper.degree_u),
-            ),
-            (
-                "analyze",
-                "degree_v",
-                format!("else {} (the paper)", paper.degree_v),
-            ),
-            (
-                "analyze",
-                "spike_threshold_sigma",
-                format!("else {}", d.spikes.threshold_sigma),
-            ),
-            (
-                "analyze",
-                "spike_max_points",
-                format!("else {}", d.spikes.max_points),
-            ),
-            (
-                "analyze",
-                "holdout_threshold",
-                format!("else {}", d.holdout_threshold),
-            ),
-            (
-                "fit",
-                "degree_u",
-                format!("else {} (the paper)", paper.degree_u),
-            ),
-            (
-                "fit",
-                "degree_v",
-                format!("else {} (the paper)", paper.degree_v),
-            ),
-            (
-                "fit",
-                "spike_threshold_sigma",
-                format!("else {}", d.spikes.threshold_sigma),
-            ),
-            (
-                "fit",
-                "spike_max_points",
-                format!("else {}", d.spikes.max_points),
-            ),
-            (
-                "fit",
-                "holdout_threshold",
-                format!("else {}", d.holdout_threshold),
-            ),
         ];
+        // The options both commands have, with the same defaults.
+        for sub in ["analyze", "fit"] {
+            checks.extend([
+                (
+                    sub,
+                    "degree_u",
+                    format!("else {} (the paper)", paper.degree_u),
+                ),
+                (
+                    sub,
+                    "degree_v",
+                    format!("else {} (the paper)", paper.degree_v),
+                ),
+                (
+                    sub,
+                    "spike_threshold_sigma",
+                    format!("else {}", d.spikes.threshold_sigma),
+                ),
+                (
+                    sub,
+                    "spike_max_points",
+                    format!("else {}", d.spikes.max_points),
+                ),
+                (
+                    sub,
+                    "holdout_threshold",
+                    format!("else {}", d.holdout_threshold),
+                ),
+            ]);
+        }
         for (sub, id, want) in checks {
             let h = help(sub, id);
             let whole = h
