@@ -100,13 +100,7 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
     assert_eq!(report["lines"].as_array().unwrap().len(), rows);
     assert!((report["lines"][12]["y_mm"].as_f64().unwrap() - 0.12).abs() < 1e-12);
     // analyze fitted the surface itself: the fit is timed in report.json and in its total.
-    let t = &report["timings_s"];
-    let fit_s = t["fit"].as_f64().unwrap();
-    assert!(fit_s > 0.0, "{t}");
-    assert!(
-        t["total"].as_f64().unwrap() >= fit_s + t["model"].as_f64().unwrap(),
-        "{t}"
-    );
+    crate::common::assert_fit_timed(&report);
     // Levelled grid: the plane takes the samples' mean A/cols; Sz = 2A.
     let sz = report["surface_grid"]["Sz_um"].as_f64().unwrap();
     assert!((sz - 2.0 * amp).abs() < 1e-9, "Sz {sz}");

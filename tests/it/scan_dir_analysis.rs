@@ -241,13 +241,7 @@ fn analyze_scan_dir_writes_every_file_with_traceability_and_instrument_differenc
     let r = report(&scan);
     assert_eq!(r["kind"], "scan");
     // The surface was fitted for this report: the fit is in the timings written to disk.
-    let t = &r["timings_s"];
-    let fit_s = t["fit"].as_f64().unwrap();
-    assert!(fit_s > 0.0, "{t}");
-    assert!(
-        t["total"].as_f64().unwrap() >= fit_s + t["model"].as_f64().unwrap(),
-        "{t}"
-    );
+    crate::common::assert_fit_timed(&r);
 
     // Traceability equals what the start record holds.
     let t = &r["traceability"];

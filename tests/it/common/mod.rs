@@ -482,3 +482,15 @@ pub fn copy_dir(from: &Path, to: &Path) {
         }
     }
 }
+
+/// Checks a report.json's timings for a surface the characterisation fitted itself: the fit
+/// is timed, and counted in the total with the model sections.
+pub fn assert_fit_timed(report: &serde_json::Value) {
+    let t = &report["timings_s"];
+    let fit_s = t["fit"].as_f64().unwrap();
+    assert!(fit_s > 0.0, "{t}");
+    assert!(
+        t["total"].as_f64().unwrap() >= fit_s + t["model"].as_f64().unwrap(),
+        "{t}"
+    );
+}
