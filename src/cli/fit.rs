@@ -190,10 +190,6 @@ struct Runs {
 /// Reads `text` in one run, or in two side by side when it has at least `parallel_bytes`
 /// bytes; nothing of the result borrows `text`.
 fn read_runs(text: &str, parallel_bytes: usize) -> Runs {
-    // Room for every field at once (one per ',' plus one per line), so a large grid is not
-    // copied while it grows.
-    let fields = text.bytes().filter(|&b| b == b',' || b == b'\n').count() + 1;
-    let mut heights_um = Vec::with_capacity(fields);
     let lines: Vec<&str> = text.lines().collect();
     let last = lines
         .iter()
@@ -214,17 +210,22 @@ fn read_runs(text: &str, parallel_bytes: usize) -> Runs {
         lines.len()
     };
     let (head, tail) = lines.split_at(split);
+    // Room for every field at once (one per ',' plus one per line), so a large grid is not
+    // copied while it grows; the second run's share is counted apart (one pass over the text
+    // in all), so its buffer too is made once at its size.
+    let separators = |b: &[u8]| b.iter().filter(|&&b| b == b',' || b == b'\n').count();
+    let tail_start = tail
+        .first()
+        .map_or(text.len(), |l| l.as_ptr() as usize - text.as_ptr() as usize);
+    let (head_seps, tail_seps) = (
+        separators(&text.as_bytes()[..tail_start]),
+        separators(&text.as_bytes()[tail_start..]),
+    );
+    let mut heights_um = Vec::with_capacity(head_seps + tail_seps + 1);
     let (first, second) = if tail.is_empty() {
         (parse_grid_lines(0, head, &mut heights_um), None)
     } else {
-        // The second run's values are counted as the whole file's were, so its buffer is
-        // made once at its size, not grown by doubling.
-        let tail_start = tail[0].as_ptr() as usize - text.as_ptr() as usize;
-        let tail_fields = text.as_bytes()[tail_start..]
-            .iter()
-            .filter(|&&b| b == b',' || b == b'\n')
-            .count()
-            + 1;
+        let tail_fields = tail_seps + 1;
         std::thread::scope(|s| {
             let second = s.spawn(|| {
                 let mut values = Vec::with_capacity(tail_fields);
