@@ -11,7 +11,7 @@
 //! Depends on [`super::bearing`] and [`super::MetrologyError`].
 
 use super::bearing::{equal_levels, material_ratios_pct};
-use super::{check_finite, check_pitch, MetrologyError};
+use super::{check_heights, check_pitch, MetrologyError};
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -85,7 +85,7 @@ impl Grid<'_> {
                 cols: self.cols,
             });
         }
-        check_finite(self.heights_um)
+        check_heights(self.heights_um)
     }
 }
 

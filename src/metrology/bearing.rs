@@ -10,7 +10,7 @@
 //!
 //! Depends on [`super::MetrologyError`] only.
 
-use super::{check_finite, MetrologyError};
+use super::{check_heights, MetrologyError};
 use serde::Serialize;
 
 /// Material ratio in % of a piecewise-linear curve through `heights` (uniform spacing) at
@@ -185,8 +185,8 @@ pub fn bearing_curve_xz(
     zs: &[f64],
     levels: usize,
 ) -> Result<BearingCurve, MetrologyError> {
-    check_finite(zs)?;
-    check_finite(xs)?;
+    check_heights(zs)?;
+    check_heights(xs)?;
     if xs.len() != zs.len() || xs.len() < 2 {
         return Err(MetrologyError::BadParameter {
             what: "points",
@@ -478,7 +478,7 @@ pub struct BearingCurve {
 /// (101 in the paper) spanning its range. The mean line is the mean of the piecewise-linear
 /// curve (trapezoidal rule).
 pub fn bearing_curve(heights: &[f64], levels: usize) -> Result<BearingCurve, MetrologyError> {
-    check_finite(heights)?;
+    check_heights(heights)?;
     if heights.len() < 2 {
         return Err(MetrologyError::TooShort {
             points: heights.len(),

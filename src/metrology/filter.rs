@@ -14,7 +14,7 @@
 //!
 //! Depends on [`super::MetrologyError`] only.
 
-use super::{check_finite, check_pitch, MetrologyError};
+use super::{check_heights, check_pitch, MetrologyError};
 
 /// α = sqrt(ln 2 / π), the constant that puts 50 % transmission at the cut-off.
 pub const ALPHA: f64 = 0.469_718_639_349_825_8;
@@ -66,7 +66,7 @@ pub fn gaussian_mean_line(
     if !(cutoff_mm.is_finite() && cutoff_mm > 0.0) {
         return Err(MetrologyError::BadCutoff { cutoff_mm });
     }
-    check_finite(heights_um)?;
+    check_heights(heights_um)?;
     let w = weights(cutoff_mm, pitch_mm);
     if w.len() - 1 <= DIRECT_MAX_HALF {
         Ok(mean_line_direct(heights_um, &w))

@@ -149,7 +149,7 @@ pub const MAX_HEIGHT_UM: f64 = 1e9;
 
 /// Checks that every height is finite and within ±[`MAX_HEIGHT_UM`]; the first that is not is
 /// named.
-pub(crate) fn check_finite(heights: &[f64]) -> Result<(), MetrologyError> {
+pub(crate) fn check_heights(heights: &[f64]) -> Result<(), MetrologyError> {
     // One comparison per height: false for NaN and ±∞ as for a finite height out of range.
     match heights.iter().position(|z| !z.abs().le(&MAX_HEIGHT_UM)) {
         Some(index) => {

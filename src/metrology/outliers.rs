@@ -25,7 +25,7 @@
 //! Depends on [`super::filter`] and [`super::MetrologyError`].
 
 use super::filter;
-use super::{check_finite, check_pitch, MetrologyError};
+use super::{check_heights, check_pitch, MetrologyError};
 use serde::Serialize;
 
 /// 1.4826 = 1/Φ⁻¹(3/4): MAD × this is σ for Gaussian data.
@@ -124,7 +124,7 @@ pub fn spike_roughness(
     lambda_c_mm: Option<f64>,
 ) -> Result<Vec<f64>, MetrologyError> {
     check_pitch(pitch_mm)?;
-    check_finite(heights_um)?;
+    check_heights(heights_um)?;
     if let Some(lc) = lambda_c_mm {
         return Ok(filter::split(heights_um, pitch_mm, lc)?.roughness_um);
     }
@@ -178,7 +178,7 @@ pub fn find_spikes(
 ) -> Result<SpikeScan, MetrologyError> {
     options.validate()?;
     check_pitch(pitch_mm)?;
-    check_finite(roughness_um)?;
+    check_heights(roughness_um)?;
     if roughness_um.len() != heights_um.len() {
         return Err(MetrologyError::BadParameter {
             what: "roughness ordinates",

@@ -32,7 +32,7 @@
 
 use super::bearing::{level_at_material_ratio, material_ratio_pct};
 use super::filter::{self, END_TREATMENT};
-use super::{check_finite, check_pitch, MetrologyError};
+use super::{check_heights, check_pitch, MetrologyError};
 use crate::profile::{FilterKind, Profile, ProfileKind};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -314,7 +314,7 @@ pub fn analyze_line(
     options: &Options,
 ) -> Result<LineAnalysis, MetrologyError> {
     check_pitch(pitch_mm)?;
-    check_finite(heights_um)?;
+    check_heights(heights_um)?;
     let lc = options.lambda_c_mm;
     if !(lc.is_finite() && lc > 0.0) {
         return Err(MetrologyError::BadCutoff { cutoff_mm: lc });
@@ -742,7 +742,7 @@ pub fn rk_family(z: &[f64]) -> Result<RkFamily, MetrologyError> {
 
 /// The ordinates highest first, after the checks the Rk family needs: all finite, at least two.
 fn checked_sorted_desc(z: &[f64]) -> Result<Vec<f64>, MetrologyError> {
-    check_finite(z)?;
+    check_heights(z)?;
     if z.len() < 2 {
         return Err(MetrologyError::TooShort {
             points: z.len(),

@@ -15,7 +15,7 @@
 //!
 //! Depends on [`super::MetrologyError`] only; takes and returns bytes, the caller does the I/O.
 
-use super::{check_finite, check_pitch, MetrologyError};
+use super::{check_heights, check_pitch, MetrologyError};
 
 /// Traceability written into Record2 (free text; empty fields are written as "not available").
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -164,7 +164,7 @@ pub fn to_x3p(
             got: heights_um.len(),
         });
     }
-    check_finite(heights_um)?;
+    check_heights(heights_um)?;
     let data: Vec<u8> = heights_um
         .iter()
         .flat_map(|z| (z * 1e-6).to_le_bytes())
