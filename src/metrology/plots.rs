@@ -16,7 +16,7 @@
 //! The only file-writing part of the metrology: the caller gives the directory. Depends on
 //! [`super::model`] (the curves), [`super::areal::Grid`], [`super::params::RkFamily`],
 //! [`super::text_cache`] (the PNGs' text memo), [`crate::numfmt`] and
-//! [`super::MetrologyError`].
+//! [`super::MetrologyError`]; plotters draws, and `image` encodes the PNG files.
 
 use super::areal::Grid;
 use super::model::ModelCurveBac;
@@ -283,11 +283,18 @@ macro_rules! png_and_svg {
         let svg = $dir.join(format!("{}.svg", $stem));
         ensure_font().map_err(|e| plot_err(&png, e))?;
         {
-            // Texts repeated across figures are rasterised once per thread (the same pixels).
-            let $root = TextCache::new(BitMapBackend::new(&png, $size)).into_drawing_area();
-            let drawn: Result<(), String> = $draw;
-            drawn.map_err(|e| plot_err(&png, e))?;
-            $root.present().map_err(|e| plot_err(&png, e))?;
+            let (w, h): (u32, u32) = $size;
+            let mut rgb = vec![0u8; w as usize * h as usize * 3];
+            {
+                // Texts repeated across figures are rasterised once per thread (the same
+                // pixels).
+                let bitmap = BitMapBackend::with_buffer(&mut rgb, (w, h));
+                let $root = TextCache::new(bitmap).into_drawing_area();
+                let drawn: Result<(), String> = $draw;
+                drawn.map_err(|e| plot_err(&png, e))?;
+                $root.present().map_err(|e| plot_err(&png, e))?;
+            }
+            write_png(&png, &rgb, (w, h))?;
         }
         {
             let $root = SVGBackend::new(&svg, $size).into_drawing_area();
@@ -297,6 +304,26 @@ macro_rules! png_and_svg {
         }
         Ok([png, svg])
     }};
+}
+
+/// Writes an RGB bitmap as `path`: fast deflate, every row Paeth-filtered.
+///
+/// The pixels are those plotters draws; only their encoding is chosen here. Per-row adaptive
+/// filtering (plotters' own `present`, through `image`'s default) tries all five PNG filters
+/// on every row: on the 34 figures of a 31-line analysis (white ground, thin lines, flat
+/// colour fields) it took 693 M instructions against 421 M for 6.3 MB of files against
+/// 7.3 MB. The write is flushed and its error reported (a full disk), where a dropped
+/// buffered writer would lose the error.
+fn write_png(path: &Path, rgb: &[u8], (w, h): (u32, u32)) -> Result<(), MetrologyError> {
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    use image::ImageEncoder;
+    use std::io::Write;
+    let file = std::fs::File::create(path).map_err(|e| plot_err(path, e))?;
+    let mut out = std::io::BufWriter::new(file);
+    PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Paeth)
+        .write_image(rgb, w, h, image::ColorType::Rgb8)
+        .map_err(|e| plot_err(path, e))?;
+    out.flush().map_err(|e| plot_err(path, e))
 }
 
 /// The range of `values` padded by 5 % (a unit range around a constant, `fallback` when
@@ -1161,6 +1188,59 @@ mod tests {
         assert_eq!(differing(&first), 0, "first use of the memo");
         assert_eq!(differing(&again), 0, "drawn from the memo");
         assert!(plain.iter().any(|&v| v != 255), "the figure drew something");
+    }
+
+    /// The test figure written as a figure is: its PNG and SVG through [`png_and_svg`].
+    fn write_test_figure(dir: &Path) -> Result<[PathBuf; 2], MetrologyError> {
+        png_and_svg!(dir, "test", RK_SIZE, |root| {
+            draw_test_figure(&root);
+            Ok(())
+        })
+    }
+
+    /// The filter byte of every row of an 8-bit RGB PNG, read from its chunks.
+    fn row_filters(png: &[u8]) -> Vec<u8> {
+        let (mut at, mut idat, mut width) = (8, Vec::new(), 0usize);
+        while at + 12 <= png.len() {
+            let n = u32::from_be_bytes(png[at..at + 4].try_into().unwrap()) as usize;
+            let (kind, data) = (&png[at + 4..at + 8], &png[at + 8..at + 8 + n]);
+            if kind == b"IHDR" {
+                width = u32::from_be_bytes(data[..4].try_into().unwrap()) as usize;
+                assert_eq!(&data[8..10], &[8, 2], "8-bit RGB");
+            } else if kind == b"IDAT" {
+                idat.extend_from_slice(data);
+            }
+            at += 12 + n;
+        }
+        let raw = miniz_oxide::inflate::decompress_to_vec_zlib(&idat).unwrap();
+        raw.chunks(1 + 3 * width).map(|row| row[0]).collect()
+    }
+
+    /// A figure's PNG holds the pixels plotters drew, as a decoder reads them back, every
+    /// row Paeth-filtered (the encoding [`write_png`] chooses for speed).
+    #[test]
+    fn a_figures_png_holds_the_drawn_pixels_paeth_filtered() {
+        let dir = tempfile::tempdir().unwrap();
+        let [png, svg] = write_test_figure(dir.path()).unwrap();
+        let decoded = image::open(&png).unwrap().to_rgb8();
+        assert_eq!(decoded.dimensions(), RK_SIZE);
+        let drawn = figure_pixels(false);
+        let differing = decoded.as_raw().iter().zip(&drawn).filter(|(a, b)| a != b);
+        assert_eq!(differing.count(), 0, "pixels differ from the drawn bitmap");
+        let filters = row_filters(&std::fs::read(&png).unwrap());
+        assert_eq!(filters.len(), RK_SIZE.1 as usize);
+        assert!(filters.iter().all(|&f| f == 4), "{filters:?}");
+        assert!(std::fs::read_to_string(svg).unwrap().contains("<svg"));
+    }
+
+    /// A figure that cannot be written names its file.
+    #[test]
+    fn a_figure_that_cannot_be_written_names_its_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let gone = dir.path().join("no such directory");
+        let e = write_test_figure(&gone).unwrap_err().to_string();
+        assert!(e.contains("no such directory/test.png"), "{e}");
+        assert!(e.contains("free space"), "{e}");
     }
 
     /// Renders `text` in the bundled font into a small RGB buffer.
