@@ -1,6 +1,7 @@
 //! `surfscan analyze`: surface characterisation of a scan directory (as the scan daemon writes
 //! it), of a profile CSV (header `x_mm,z_um`) or of a grid CSV of heights in µm (rows = traced
-//! lines along y, columns = points along x, as `surfscan fit` reads; pitches required).
+//! lines along y, columns = points along x, as `surfscan fit` reads; pitches required; a
+//! row that cannot be used is left out with a warning, the others keep their y).
 //! A scan directory and a grid go through [`crate::report`] (the daemon's entry point
 //! [`crate::report::characterise_scan`] for scans): `report.json`, `summary.csv`,
 //! `measured.x3p`, `model.x3p` (ISO 25178-72), `bac.png|svg`, `heightmap.png|svg` and
@@ -185,39 +186,160 @@ fn read_profile(path: &Path, text: &str) -> Result<(f64, Vec<f64>), CliError> {
     Ok((pitch, z))
 }
 
-/// Reads a grid CSV: rows of equal length (a non-numeric first line is taken as a header).
-fn read_grid(path: &Path, text: &str) -> Result<(Vec<f64>, usize, usize), CliError> {
-    let mut z = Vec::new();
-    let mut cols = 0;
-    let mut rows = 0;
+/// A grid CSV as read: the readable rows' heights, and the rows left out.
+#[derive(Debug, PartialEq)]
+struct GridCsv {
+    /// Heights in µm of the rows kept, row-major.
+    heights_um: Vec<f64>,
+    /// Points per row.
+    cols: usize,
+    /// 0-based row of each kept row in the file (its y position is row × pitch y).
+    rows: Vec<usize>,
+    /// Each row left out: its 1-based line in the file and why.
+    left_out: Vec<(usize, String)>,
+}
+
+/// At most this many left-out rows are named one by one in the warning.
+const LEFT_OUT_NAMED: usize = 10;
+
+impl GridCsv {
+    /// The warning naming the rows left out, or `None` when every row was read.
+    fn warning(&self) -> Option<String> {
+        if self.left_out.is_empty() {
+            return None;
+        }
+        let named: Vec<String> = self
+            .left_out
+            .iter()
+            .take(LEFT_OUT_NAMED)
+            .map(|(line, why)| format!("line {line} {why}"))
+            .collect();
+        let more = self.left_out.len().saturating_sub(LEFT_OUT_NAMED);
+        Some(format!(
+            "{} of {} rows of the grid CSV cannot be used and were left out (nothing is filled in; the other rows keep their y): {}{}",
+            self.left_out.len(),
+            self.left_out.len() + self.rows.len(),
+            named.join("; "),
+            if more > 0 {
+                format!("; and {more} more")
+            } else {
+                String::new()
+            }
+        ))
+    }
+}
+
+/// A grid CSV row as read, beside its 1-based line: where its values start in the heights
+/// read and how many there are, or why it cannot be used.
+type RowRead = Result<(usize, usize), String>;
+
+/// Reads a grid CSV: one row of heights per line, `,` separated; a non-numeric first line
+/// is taken as a header and blank lines are skipped. Every other line is a row at the next
+/// y. A row that holds a value that is not a number, a non-finite height (NaN, as some
+/// software writes for a point not measured) or a number of points unlike the other rows'
+/// is left out and named, as an X3P file's lines with invalid points are: one damaged line
+/// does not take down the rest. The rows' length is the one most rows have (the first such
+/// on a tie). An error only when no row can be used.
+fn read_grid(text: &str) -> Result<GridCsv, String> {
+    let mut heights_um = Vec::new();
+    let mut read: Vec<(usize, RowRead)> = Vec::new();
     for (n, line) in text.lines().enumerate() {
         if line.trim().is_empty() {
             continue;
         }
-        let Some(values) = parse_numbers(line) else {
-            if n == 0 {
-                continue;
+        let start = heights_um.len();
+        if crate::numbers::parse_csv_line(line.as_bytes(), &mut heights_um).is_none() {
+            heights_um.truncate(start);
+            match line
+                .split(',')
+                .enumerate()
+                .map(|(k, f)| (k, f.trim()))
+                .find(|(_, f)| f.parse::<f64>().is_err())
+            {
+                Some(_) if n == 0 => continue,
+                Some((k, f)) => {
+                    read.push((
+                        n + 1,
+                        Err(format!("(column {}: {f:?} is not a number)", k + 1)),
+                    ));
+                    continue;
+                }
+                None => {
+                    for f in line.split(',') {
+                        heights_um.push(f.trim().parse::<f64>().unwrap_or(f64::NAN));
+                    }
+                }
             }
-            return Err(failed(format!(
-                "{}: line {} holds a value that is not a number",
-                path.display(),
-                n + 1
-            )));
-        };
-        if rows == 0 {
-            cols = values.len();
-        } else if values.len() != cols {
-            return Err(failed(format!(
-                "{}: line {} has {} values, the first row had {cols}; all rows must be equally long",
-                path.display(),
-                n + 1,
-                values.len()
-            )));
         }
-        z.extend(values);
-        rows += 1;
+        let count = heights_um.len() - start;
+        let values = &heights_um[start..];
+        let not_finite = values.iter().filter(|v| !v.is_finite()).count();
+        if not_finite > 0 {
+            heights_um.truncate(start);
+            read.push((
+                n + 1,
+                Err(format!(
+                    "({not_finite} of its {count} heights are not finite: NaN or infinite, not measured)"
+                )),
+            ));
+        } else {
+            read.push((n + 1, Ok((start, count))));
+        }
     }
-    Ok((z, rows, cols))
+    // The rows' length: the most common, the first such on a tie.
+    let mut counts: Vec<(usize, usize)> = Vec::new();
+    for (_, r) in &read {
+        if let Ok((_, c)) = r {
+            match counts.iter_mut().find(|(len, _)| len == c) {
+                Some((_, times)) => *times += 1,
+                None => counts.push((*c, 1)),
+            }
+        }
+    }
+    let cols = counts
+        .iter()
+        .fold(None::<(usize, usize)>, |best, &(len, times)| match best {
+            Some((_, t)) if t >= times => best,
+            _ => Some((len, times)),
+        })
+        .map(|(len, _)| len);
+    let Some(cols) = cols else {
+        // No row was read, so each is an error.
+        return Err(
+            match read
+                .iter()
+                .find_map(|(l, r)| r.as_ref().err().map(|w| (l, w)))
+            {
+                None => "no lines".to_string(),
+                Some((line, why)) => format!("no row can be used; the first, line {line} {why}"),
+            },
+        );
+    };
+    // Compact the kept rows to the front, in file order.
+    let mut grid = GridCsv {
+        heights_um: Vec::new(),
+        cols,
+        rows: Vec::new(),
+        left_out: Vec::new(),
+    };
+    let mut kept = 0usize;
+    for (row, (line, r)) in read.into_iter().enumerate() {
+        match r {
+            Ok((start, count)) if count == cols => {
+                heights_um.copy_within(start..start + cols, kept);
+                kept += cols;
+                grid.rows.push(row);
+            }
+            Ok((_, count)) => grid.left_out.push((
+                line,
+                format!("(it has {count} values where the rows have {cols})"),
+            )),
+            Err(why) => grid.left_out.push((line, why)),
+        }
+    }
+    heights_um.truncate(kept);
+    grid.heights_um = heights_um;
+    Ok(grid)
 }
 
 fn report_error(e: ReportError) -> CliError {
@@ -389,16 +511,20 @@ pub fn run(args: Args) -> Result<(), CliError> {
             "a grid CSV needs --pitch-x MM and --pitch-y MM (a profile CSV starts with the header x_mm,z_um; a scan is a directory)",
         ));
     };
-    let (z, rows, cols) = read_grid(&args.input, &text)?;
-    if rows == 0 {
-        return Err(failed(format!("{}: no lines", args.input.display())));
-    }
+    let csv = read_grid(&text).map_err(|e| {
+        failed(format!(
+            "{}: {e}; a grid CSV holds one row of heights in µm per line, ',' separated",
+            args.input.display()
+        ))
+    })?;
+    let warnings: Vec<String> = csv.warning().into_iter().collect();
+    let rows = csv.rows.len();
     let grid = LineGrid {
-        heights_um: z,
-        cols,
+        y_mm: csv.rows.iter().map(|&j| j as f64 * py).collect(),
+        index: csv.rows.iter().map(|&j| j as u32).collect(),
+        heights_um: csv.heights_um,
+        cols: csv.cols,
         pitch_x_mm: px,
-        y_mm: (0..rows).map(|j| j as f64 * py).collect(),
-        index: (0..rows as u32).collect(),
         y_readback_mm: vec![None; rows],
         instrument: None,
         standard: vec![None; rows],
@@ -413,7 +539,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         scan: None,
         fit: None,
         options: ScanAnalysisOptions::default(),
-        warnings: Vec::new(),
+        warnings,
     };
     let outputs = fit_and_characterise(&grid, ctx, &args, &out)?;
     finish(&outputs)
@@ -649,6 +775,81 @@ fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_grid_csv_is_read_with_its_header_and_blank_lines_skipped() {
+        let g = read_grid("a,b,c\n1,2,3\n\n4.5,-6e-1,+7\n\n").unwrap();
+        assert_eq!(g.heights_um, vec![1.0, 2.0, 3.0, 4.5, -0.6, 7.0]);
+        assert_eq!((g.cols, g.rows.clone()), (3, vec![0, 1]));
+        assert!(g.left_out.is_empty());
+        assert_eq!(g.warning(), None);
+    }
+
+    #[test]
+    fn damaged_grid_rows_are_left_out_and_named_and_the_others_keep_their_y() {
+        let text = "1,2,3,4\n1,2,x,4\n1,2,3\n1,NaN,3,inf\n5,6,7,8\n\n9,10,11,12\n";
+        let g = read_grid(text).unwrap();
+        assert_eq!(g.cols, 4);
+        assert_eq!(g.rows, vec![0, 4, 5], "rows keep their place in the file");
+        assert_eq!(
+            g.heights_um,
+            vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0]
+        );
+        let lines: Vec<usize> = g.left_out.iter().map(|(l, _)| *l).collect();
+        assert_eq!(lines, vec![2, 3, 4]);
+        let w = g.warning().unwrap();
+        assert!(w.starts_with("3 of 6 rows of the grid CSV"), "{w}");
+        assert!(
+            w.contains("line 2 (column 3: \"x\" is not a number)"),
+            "{w}"
+        );
+        assert!(
+            w.contains("line 3 (it has 3 values where the rows have 4)"),
+            "{w}"
+        );
+        assert!(
+            w.contains("line 4 (2 of its 4 heights are not finite"),
+            "{w}"
+        );
+    }
+
+    #[test]
+    fn the_rows_length_is_the_one_most_rows_have() {
+        // A short first row does not make every full row wrong.
+        let g = read_grid("1,2\n1,2,3\n4,5,6\n7,8,9\n").unwrap();
+        assert_eq!((g.cols, g.rows.clone()), (3, vec![1, 2, 3]));
+        assert_eq!(g.left_out.len(), 1);
+        assert!(g.left_out[0]
+            .1
+            .contains("has 2 values where the rows have 3"));
+        // On a tie, the first length.
+        let g = read_grid("1,2\n1,2,3\n").unwrap();
+        assert_eq!((g.cols, g.rows.clone()), (2, vec![0]));
+    }
+
+    #[test]
+    fn many_rows_left_out_are_counted_past_the_first_ten() {
+        let mut text = String::from("1,2\n");
+        for _ in 0..12 {
+            text.push_str("1,?\n");
+        }
+        let w = read_grid(&text).unwrap().warning().unwrap();
+        assert!(w.starts_with("12 of 13 rows"), "{w}");
+        assert_eq!(w.matches("is not a number").count(), 10, "{w}");
+        assert!(w.ends_with("; and 2 more"), "{w}");
+    }
+
+    #[test]
+    fn a_grid_csv_with_no_usable_row_is_an_error_naming_the_first() {
+        // The first line is taken as a header; every row after it is damaged.
+        let e = read_grid("1,x\n2,y\n3,NaN\n").unwrap_err();
+        assert_eq!(
+            e,
+            "no row can be used; the first, line 2 (column 2: \"y\" is not a number)"
+        );
+        assert_eq!(read_grid("x_um,y_um\n\n").unwrap_err(), "no lines");
+        assert_eq!(read_grid("").unwrap_err(), "no lines");
+    }
     use clap::CommandFactory;
 
     /// The help text of option `id` of subcommand `sub`.

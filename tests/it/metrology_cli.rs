@@ -183,3 +183,109 @@ fn analyze_grid_without_pitches_is_a_usage_error() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--pitch-x"));
 }
+
+/// Runs `analyze` on a grid CSV of `text` (401 points at 1 µm, 10 µm between rows) and
+/// returns its exit code, stderr and report.json.
+fn analyze_grid_text(dir: &std::path::Path, name: &str, text: &str) -> (i32, String, Value) {
+    let input = dir.join(format!("{name}.csv"));
+    std::fs::write(&input, text).unwrap();
+    let out = dir.join(name);
+    let o = surfscan()
+        .args(["analyze", input.to_str().unwrap(), "--lc", "0.08"])
+        .args(["--pitch-x", "0.001", "--pitch-y", "0.01", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let report = std::fs::read_to_string(out.join("report.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or(Value::Null);
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+        report,
+    )
+}
+
+#[test]
+fn analyze_leaves_out_damaged_rows_of_a_grid_csv_and_keeps_the_others() {
+    let dir = tempfile::tempdir().unwrap();
+    // 9 distinct rows: each line's own parameters depend on that line alone.
+    let rows: Vec<String> = (0..9)
+        .map(|r| {
+            (0..401)
+                .map(|c| {
+                    let x = c as f64 * 0.001;
+                    let a = 0.3 + 0.05 * r as f64;
+                    format!("{:.9}", a * (2.0 * PI * x / 0.02 + r as f64).sin())
+                })
+                .collect::<Vec<_>>()
+                .join(",")
+        })
+        .collect();
+    let clean = rows.join("\n") + "\n";
+    let mut damaged = rows.clone();
+    damaged[2] = damaged[2].replacen(',', ",12..5,", 1); // a value that is no number
+    damaged[5] = damaged[5].rsplit_once(',').unwrap().0.to_string(); // one point short
+    damaged[6] = damaged[6].replacen(',', ",NaN,", 1); // a point not measured, one too many
+    let (code, stderr, whole) = analyze_grid_text(dir.path(), "clean", &clean);
+    assert_eq!(code, 0, "{stderr}");
+    // Line 7 now has 402 values; the others 401.
+    let (code, stderr, report) =
+        analyze_grid_text(dir.path(), "damaged", &(damaged.join("\n") + "\n"));
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("3 of 9 rows of the grid CSV cannot be used"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("line 3 (column 2: \"12..5\" is not a number)"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("line 6 (it has 400 values where the rows have 401)"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("line 7 (1 of its 402 heights are not finite"),
+        "{stderr}"
+    );
+    assert!(
+        report["warnings"]
+            .to_string()
+            .contains("line 6 (it has 400 values"),
+        "{}",
+        report["warnings"]
+    );
+    let lines = report["lines"].as_array().unwrap();
+    let index: Vec<u64> = lines.iter().map(|l| l["index"].as_u64().unwrap()).collect();
+    assert_eq!(index, vec![0, 1, 3, 4, 7, 8]);
+    for l in lines {
+        let k = l["index"].as_u64().unwrap() as usize;
+        let y = l["y_mm"].as_f64().unwrap();
+        assert!((y - k as f64 * 0.01).abs() < 1e-12, "line {k} at y {y}");
+        // The same line's parameters as in the whole grid's analysis.
+        let same = &whole["lines"][k];
+        for p in ["Ra_um", "Rq_um", "Rz_um", "Rsk"] {
+            assert_eq!(l[p], same[p], "line {k} {p}");
+        }
+    }
+    // The surface interpolates the six rows kept: one pole row per line.
+    assert_eq!(report["fit"]["poles_v"], 6, "{}", report["fit"]);
+}
+
+#[test]
+fn analyze_of_a_grid_csv_without_a_usable_row_names_the_first_problem() {
+    let dir = tempfile::tempdir().unwrap();
+    let (code, stderr, _) =
+        analyze_grid_text(dir.path(), "bad", "z_um,z_um\n1.5,NaN\n0.5,-0.25x\n");
+    assert_eq!(code, 1, "{stderr}");
+    assert!(
+        stderr.contains("no row can be used; the first, line 2 (1 of its 2 heights are not finite"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("one row of heights in µm per line"),
+        "{stderr}"
+    );
+}
