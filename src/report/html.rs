@@ -589,8 +589,18 @@ fn lines(h: &mut String, report: &Value) {
         return;
     };
     h.push_str("<h2 id=\"lines\">Per line (ISO 4287, ISO 13565-2)</h2>\n<div class=\"scroll\"><table id=\"t-lines\">\n<tr><th>line</th><th>y mm</th>");
-    for (_, head, _) in LINE_COLUMNS {
-        let _ = write!(h, "<th>{}</th>", esc(head));
+    let definitions = &report["recipe"]["definitions"];
+    // A parameter's definition, by the stem of its key ("Rdc_um" → "Rdc").
+    let definition = |key: &str| definitions[key.split('_').next().unwrap_or(key)].as_str();
+    for (key, head, _) in LINE_COLUMNS {
+        match definition(key) {
+            Some(d) => {
+                let _ = write!(h, "<th title=\"{}\">{}</th>", esc(d), esc(head));
+            }
+            None => {
+                let _ = write!(h, "<th>{}</th>", esc(head));
+            }
+        }
     }
     h.push_str("</tr>\n");
     for l in lines {
@@ -620,6 +630,15 @@ fn lines(h: &mut String, report: &Value) {
         row(h, &cells);
     }
     h.push_str("</table></div>\n");
+    // Rδc and Rmr depend on levels chosen per instrument and recipe: said on the page, not
+    // only in a heading's tooltip.
+    let levels: Vec<String> = [("Rdc_um", "Rδc"), ("Rmr_pct", "Rmr")]
+        .iter()
+        .filter_map(|(key, name)| definition(key).map(|d| format!("{name}: {}", esc(d))))
+        .collect();
+    if !levels.is_empty() {
+        let _ = writeln!(h, "<p id=\"line-levels\">{}.</p>", levels.join("; "));
+    }
 }
 
 fn instrument(h: &mut String, report: &Value) {
@@ -902,6 +921,36 @@ mod tests {
         let rpc = params["RPc_per_cm"].as_f64().unwrap();
         assert!(h.contains("<th>RPc /cm</th>"));
         assert!(h.contains(&format!("<td>{}</td>", fmt(rpc, Quantity::PerLength))));
+    }
+
+    /// The per-line headings carry the recipe's definitions, and the levels of Rδc and Rmr
+    /// are stated under the table: the same numbers mean different things at other levels.
+    #[test]
+    fn the_line_table_states_the_definitions_and_the_levels_of_rdc_and_rmr() {
+        let report = serde_json::json!({
+            "kind": "grid",
+            "recipe": {"definitions": {
+                "Ra": "ISO4287:1997/Ra <mean>",
+                "Rdc": "Rdc = C(Rmr1) - C(Rmr2); levels 10% and 25%",
+                "Rmr": "Rmr at C(Rmr0) - Rdc; Rmr0 = 0%, Rdc = 0.10 um",
+            }},
+            "lines": [{"index": 0, "y_mm": 0.0, "Ra_um": 0.5, "Rdc_um": 0.2, "Rmr_pct": 12.0}],
+        });
+        let h = render(&report, None, &[]);
+        assert!(
+            h.contains("<th title=\"ISO4287:1997/Ra &lt;mean&gt;\">Ra µm</th>"),
+            "{h}"
+        );
+        assert!(
+            h.contains("<th>Rq µm</th>"),
+            "a heading without a definition stays plain"
+        );
+        assert!(h.contains(
+            "<p id=\"line-levels\">Rδc: Rdc = C(Rmr1) - C(Rmr2); levels 10% and 25%; Rmr: Rmr at C(Rmr0) - Rdc; Rmr0 = 0%, Rdc = 0.10 um.</p>"
+        ), "{h}");
+        // Without a recipe, no sentence of levels.
+        let bare = serde_json::json!({"kind": "grid", "lines": [{"index": 0, "y_mm": 0.0}]});
+        assert!(!render(&bare, None, &[]).contains("line-levels"));
     }
 
     #[test]
