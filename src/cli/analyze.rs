@@ -839,6 +839,75 @@ mod tests {
         assert!(w.ends_with("; and 2 more"), "{w}");
     }
 
+    /// Random grids of good and damaged rows against a plain reading of the same lines: the
+    /// rows kept, their place in the file, their heights and the rows left out.
+    #[test]
+    fn random_damaged_grids_keep_exactly_the_usable_rows() {
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let mut next = |n: u64| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 33) % n
+        };
+        for case in 0..2000 {
+            let mut lines: Vec<String> = Vec::new();
+            if next(4) == 0 {
+                lines.push("z_um,z_um,z_um".into());
+            }
+            for _ in 0..next(9) {
+                let len = 3 + next(3) as usize;
+                let mut fields: Vec<String> = (0..len)
+                    .map(|_| format!("{}", next(2001) as f64 / 100.0 - 10.0))
+                    .collect();
+                match next(8) {
+                    0 => fields[next(len as u64) as usize] = "1.2.3".into(),
+                    1 => fields[next(len as u64) as usize] = "NaN".into(),
+                    2 => fields = vec![String::new()],
+                    3 => fields[0] = format!(" {} ", fields[0]),
+                    _ => {}
+                }
+                lines.push(fields.join(","));
+            }
+            let text = lines.join("\n");
+            // The plain reading: each non-blank line after a header is a row.
+            let mut rows: Vec<Option<Vec<f64>>> = Vec::new();
+            for (n, l) in text.lines().enumerate() {
+                if l.trim().is_empty() {
+                    continue;
+                }
+                let v: Result<Vec<f64>, _> = l.split(',').map(|f| f.trim().parse()).collect();
+                match v {
+                    Err(_) if n == 0 => {}
+                    Err(_) => rows.push(None),
+                    Ok(v) if v.iter().all(|x: &f64| x.is_finite()) => rows.push(Some(v)),
+                    Ok(_) => rows.push(None),
+                }
+            }
+            let lens: Vec<usize> = rows.iter().flatten().map(Vec::len).collect();
+            let cols = lens.iter().copied().max_by_key(|&c| {
+                let first = lens.iter().position(|&x| x == c).unwrap();
+                (lens.iter().filter(|&&x| x == c).count(), usize::MAX - first)
+            });
+            let got = read_grid(&text);
+            let Some(cols) = cols else {
+                assert!(got.is_err(), "case {case}: {text:?}");
+                continue;
+            };
+            let g = got.unwrap_or_else(|e| panic!("case {case}: {e}: {text:?}"));
+            let kept: Vec<usize> = (0..rows.len())
+                .filter(|&r| rows[r].as_ref().is_some_and(|v| v.len() == cols))
+                .collect();
+            assert_eq!((g.cols, &g.rows), (cols, &kept), "case {case}: {text:?}");
+            let heights: Vec<f64> = kept
+                .iter()
+                .flat_map(|&r| rows[r].clone().unwrap())
+                .collect();
+            assert_eq!(g.heights_um, heights, "case {case}: {text:?}");
+            assert_eq!(g.left_out.len(), rows.len() - kept.len(), "case {case}");
+        }
+    }
+
     #[test]
     fn a_grid_csv_with_no_usable_row_is_an_error_naming_the_first() {
         // The first line is taken as a header; every row after it is damaged.
