@@ -286,23 +286,18 @@ fn read_grid(text: &str) -> Result<GridCsv, String> {
             read.push((n + 1, Ok((start, count))));
         }
     }
-    // The rows' length: the most common, the first such on a tie.
-    let mut counts: Vec<(usize, usize)> = Vec::new();
-    for (_, r) in &read {
+    // The rows' length: the most common, the first such on a tie. Counted in a map, so a
+    // file of many different lengths costs no more than one of few.
+    let mut counts: std::collections::HashMap<usize, (usize, usize)> = Default::default();
+    for (at, (_, r)) in read.iter().enumerate() {
         if let Ok((_, c)) = r {
-            match counts.iter_mut().find(|(len, _)| len == c) {
-                Some((_, times)) => *times += 1,
-                None => counts.push((*c, 1)),
-            }
+            counts.entry(*c).or_insert((0, at)).0 += 1;
         }
     }
     let cols = counts
         .iter()
-        .fold(None::<(usize, usize)>, |best, &(len, times)| match best {
-            Some((_, t)) if t >= times => best,
-            _ => Some((len, times)),
-        })
-        .map(|(len, _)| len);
+        .max_by_key(|(_, &(times, first))| (times, std::cmp::Reverse(first)))
+        .map(|(&len, _)| len);
     let Some(cols) = cols else {
         // No row was read, so each is an error.
         return Err(
