@@ -105,7 +105,7 @@ const DEFAULT_LC_MM: f64 = 0.8;
 /// One line's entry in the report.
 #[derive(Debug, Serialize)]
 struct LineReport {
-    index: usize,
+    index: u32,
     y_mm: f64,
     #[serde(flatten)]
     params: RoughnessParams,
@@ -727,37 +727,13 @@ fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
     let path = out.join("report.json");
     crate::atomic::write_atomically(&path, |w| std::io::Write::write_all(w, json.as_bytes()))
         .map_err(|e| io(&path, e))?;
-    // As a scan's summary.csv: 1-based line, values with the digits of their quantity.
-    use crate::numfmt::{fmt as f, fmt_opt as fo, Quantity::*};
-    let mut csv = String::from(
-        "line,index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um,Rp_um,Rv_um,Rt_um,Rz1max_um,Rsk,Rku,Rdq,RSm_um,Rk_um,Rpk_um,Rvk_um,Mr1_pct,Mr2_pct,A1_um_pct,A2_um_pct\n",
-    );
+    // As a scan's summary.csv (without the instrument's columns): 1-based line, values with
+    // the digits of their quantity.
+    use crate::report::summary::{line_cells, more_cells, LINE_HEADER, MORE_HEADER};
+    let mut csv = format!("{LINE_HEADER},{MORE_HEADER}\n");
     for l in &report.lines {
-        let p = &l.params;
-        let row = [
-            (l.index + 1).to_string(),
-            format!("{:04}", l.index),
-            f(l.y_mm, PositionMm),
-            f(p.ra_um, HeightUm),
-            f(p.rq_um, HeightUm),
-            f(p.rz_um, HeightUm),
-            fo(p.rzjis_um, HeightUm),
-            f(p.rp_um, HeightUm),
-            f(p.rv_um, HeightUm),
-            f(p.rt_um, HeightUm),
-            f(p.rz1max_um, HeightUm),
-            f(p.rsk, Ratio),
-            f(p.rku, Ratio),
-            f(p.rdq, Ratio),
-            fo(p.rsm_um, HeightUm),
-            f(p.rk_um, HeightUm),
-            f(p.rpk_um, HeightUm),
-            f(p.rvk_um, HeightUm),
-            f(p.mr1_pct, Percent),
-            f(p.mr2_pct, Percent),
-            f(p.a1_um_pct, Area),
-            f(p.a2_um_pct, Area),
-        ];
+        let mut row = line_cells(l.index, l.y_mm, &l.params);
+        row.extend(more_cells(&l.params));
         csv.push_str(&row.join(","));
         csv.push('\n');
     }

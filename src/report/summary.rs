@@ -1,9 +1,12 @@
 //! `summary.csv`: one row per line with our ISO parameters and the instrument's Ra, Rq and Rz,
-//! each value with the significant digits of its quantity.
+//! each value with the significant digits of its quantity; also the columns of `analyze`'s
+//! summary of a single profile.
 //!
-//! Layer 4 (reporting): a formatter over the report's line entries; no I/O.
+//! Layer 4 (reporting): a formatter over the report's line entries and the metrology's
+//! parameters; no I/O.
 
 use super::document::LineReport;
+use crate::metrology::params::RoughnessParams;
 use crate::numfmt::{fmt as nfmt, fmt_opt as nfmt_opt, line_number, Quantity};
 
 /// The instrument's value of `name` in our unit, from a line's comparisons.
@@ -15,43 +18,69 @@ fn instrument_value(line: &LineReport, name: &str) -> Option<f64> {
         .and_then(|c| c.instrument)
 }
 
+/// The columns every summary.csv starts with: the line, its file index, y, and the
+/// parameters summary.csv has always had, in that order.
+pub const LINE_HEADER: &str = "line,index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um,Rp_um,Rv_um,Rt_um,Rz1max_um,Rsk,Rku,Rdq,RSm_um,Rk_um,Rpk_um,Rvk_um,Mr1_pct,Mr2_pct,A1_um_pct,A2_um_pct";
+
+/// The columns after those (and after a scan's instrument columns): the parameters added
+/// since, at the end so a reader that goes by position finds the others where they were.
+pub const MORE_HEADER: &str = "Rda,Rc_um,RPc_per_cm,Rppi_per_inch,Rdc_um,Rmr_pct";
+
+/// The cells of [`LINE_HEADER`] for the line of file index `index` at `y_mm`.
+pub fn line_cells(index: u32, y_mm: f64, p: &RoughnessParams) -> Vec<String> {
+    use Quantity::{Area, HeightUm as H, Percent, PositionMm, Ratio};
+    vec![
+        line_number(index).to_string(),
+        format!("{index:04}"),
+        nfmt(y_mm, PositionMm),
+        nfmt(p.ra_um, H),
+        nfmt(p.rq_um, H),
+        nfmt(p.rz_um, H),
+        nfmt_opt(p.rzjis_um, H),
+        nfmt(p.rp_um, H),
+        nfmt(p.rv_um, H),
+        nfmt(p.rt_um, H),
+        nfmt(p.rz1max_um, H),
+        nfmt(p.rsk, Ratio),
+        nfmt(p.rku, Ratio),
+        nfmt(p.rdq, Ratio),
+        nfmt_opt(p.rsm_um, H),
+        nfmt(p.rk_um, H),
+        nfmt(p.rpk_um, H),
+        nfmt(p.rvk_um, H),
+        nfmt(p.mr1_pct, Percent),
+        nfmt(p.mr2_pct, Percent),
+        nfmt(p.a1_um_pct, Area),
+        nfmt(p.a2_um_pct, Area),
+    ]
+}
+
+/// The cells of [`MORE_HEADER`], with the digits the HTML report gives them.
+pub fn more_cells(p: &RoughnessParams) -> Vec<String> {
+    use Quantity::{HeightUm as H, PerLength, Percent, Ratio};
+    vec![
+        nfmt(p.rda, Ratio),
+        nfmt_opt(p.rc_um, H),
+        nfmt_opt(p.rpc_per_cm, PerLength),
+        nfmt_opt(p.rppi_per_inch, PerLength),
+        nfmt(p.rdc_um, H),
+        nfmt(p.rmr_pct, Percent),
+    ]
+}
+
 /// `summary.csv` for people and spreadsheets: one row per line, `line` 1-based and `index`
 /// the NNNN of its files, every value with the significant digits of its quantity
-/// ([`crate::numfmt`]; `report.json` keeps full precision).
+/// ([`crate::numfmt`]; `report.json` keeps full precision). The instrument's Ra, Rq and Rz
+/// follow [`LINE_HEADER`], then [`MORE_HEADER`].
 pub fn summary_csv(lines: &[LineReport]) -> String {
-    use Quantity::{Area, HeightUm as H, Percent, PositionMm, Ratio};
-    let mut csv = String::from(
-        "line,index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um,Rp_um,Rv_um,Rt_um,Rz1max_um,Rsk,Rku,Rdq,RSm_um,Rk_um,Rpk_um,Rvk_um,Mr1_pct,Mr2_pct,A1_um_pct,A2_um_pct,instrument_Ra_um,instrument_Rq_um,instrument_Rz_um\n",
-    );
+    let mut csv =
+        format!("{LINE_HEADER},instrument_Ra_um,instrument_Rq_um,instrument_Rz_um,{MORE_HEADER}\n");
     for l in lines {
-        let p = &l.params;
-        let row: Vec<String> = vec![
-            line_number(l.index).to_string(),
-            format!("{:04}", l.index),
-            nfmt(l.y_mm, PositionMm),
-            nfmt(p.ra_um, H),
-            nfmt(p.rq_um, H),
-            nfmt(p.rz_um, H),
-            nfmt_opt(p.rzjis_um, H),
-            nfmt(p.rp_um, H),
-            nfmt(p.rv_um, H),
-            nfmt(p.rt_um, H),
-            nfmt(p.rz1max_um, H),
-            nfmt(p.rsk, Ratio),
-            nfmt(p.rku, Ratio),
-            nfmt(p.rdq, Ratio),
-            nfmt_opt(p.rsm_um, H),
-            nfmt(p.rk_um, H),
-            nfmt(p.rpk_um, H),
-            nfmt(p.rvk_um, H),
-            nfmt(p.mr1_pct, Percent),
-            nfmt(p.mr2_pct, Percent),
-            nfmt(p.a1_um_pct, Area),
-            nfmt(p.a2_um_pct, Area),
-            nfmt_opt(instrument_value(l, "Ra"), H),
-            nfmt_opt(instrument_value(l, "Rq"), H),
-            nfmt_opt(instrument_value(l, "Rz"), H),
-        ];
+        let mut row = line_cells(l.index, l.y_mm, &l.params);
+        for name in ["Ra", "Rq", "Rz"] {
+            row.push(nfmt_opt(instrument_value(l, name), Quantity::HeightUm));
+        }
+        row.extend(more_cells(&l.params));
         csv.push_str(&row.join(","));
         csv.push('\n');
     }

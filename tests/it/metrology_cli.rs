@@ -62,7 +62,16 @@ fn analyze_profile_csv_writes_report_and_summary() {
     let rows: Vec<&str> = summary.lines().collect();
     assert_eq!(rows.len(), 2);
     assert!(rows[0].starts_with("line,index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um"));
+    assert!(
+        rows[0].ends_with(",A2_um_pct,Rda,Rc_um,RPc_per_cm,Rppi_per_inch,Rdc_um,Rmr_pct"),
+        "{}",
+        rows[0]
+    );
     assert!(rows[1].starts_with("1,0000,0.0000,"), "{}", rows[1]);
+    // The sine has one profile element per period of 0.1 mm: RPc = 100 peaks /cm.
+    let cells: Vec<&str> = rows[1].split(',').collect();
+    assert_eq!(cells.len(), rows[0].split(',').count());
+    assert_eq!(cells[cells.len() - 4], "100", "RPc /cm: {}", rows[1]);
 }
 
 #[test]

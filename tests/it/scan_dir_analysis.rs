@@ -382,6 +382,37 @@ fn analyze_scan_dir_writes_every_file_with_traceability_and_instrument_differenc
         fmt(ours5.rz_um - RZ_OFFSET_UM, HeightUm)
     );
     assert_eq!(rows_csv[5][col("Ra_um")], fmt(ours5.ra_um, HeightUm));
+    // The columns summary.csv has always had keep their places (the instrument's Ra at
+    // 23rd); the parameters added since follow them, with the digits of their quantity.
+    assert_eq!((col("A2_um_pct"), col("instrument_Ra_um")), (21, 22));
+    assert_eq!(
+        &header[25..],
+        [
+            "Rda",
+            "Rc_um",
+            "RPc_per_cm",
+            "Rppi_per_inch",
+            "Rdc_um",
+            "Rmr_pct"
+        ]
+    );
+    use surfscan::numfmt::{fmt_opt, Quantity};
+    let expect = [
+        ("Rda", fmt(ours5.rda, Quantity::Ratio)),
+        ("Rc_um", fmt_opt(ours5.rc_um, HeightUm)),
+        ("RPc_per_cm", fmt_opt(ours5.rpc_per_cm, Quantity::PerLength)),
+        (
+            "Rppi_per_inch",
+            fmt_opt(ours5.rppi_per_inch, Quantity::PerLength),
+        ),
+        ("Rdc_um", fmt(ours5.rdc_um, HeightUm)),
+        ("Rmr_pct", fmt(ours5.rmr_pct, Quantity::Percent)),
+    ];
+    for (name, value) in expect {
+        assert!(!value.is_empty(), "{name} has a value on this line");
+        assert_eq!(rows_csv[5][col(name)], value, "{name}");
+    }
+    assert!(rows_csv.iter().all(|r| r.len() == header.len()));
     assert_eq!(
         (rows_csv[5][col("line")], rows_csv[5][col("index")]),
         ("6", "0005")
