@@ -141,9 +141,17 @@ fn parse_numbers(line: &str) -> Option<Vec<f64>> {
     if crate::numbers::parse_csv_line(line.as_bytes(), &mut fast).is_some() {
         return Some(fast);
     }
+    parse_fields(line).ok()
+}
+
+/// A line field by field with `str::parse` (padded fields, NaN: what the fast reader
+/// declines), or its first field that is not a number: 0-based column and the field.
+fn parse_fields(line: &str) -> Result<Vec<f64>, (usize, &str)> {
     line.split(',')
-        .map(|f| f.trim().parse::<f64>().ok())
-        .collect::<Option<Vec<f64>>>()
+        .map(str::trim)
+        .enumerate()
+        .map(|(k, f)| f.parse::<f64>().map_err(|_| (k, f)))
+        .collect()
 }
 
 /// Reads a profile CSV: returns pitch (mm) and heights (µm). x must be uniformly spaced.
@@ -250,24 +258,13 @@ fn read_grid(text: &str) -> Result<GridCsv, String> {
         let start = heights_um.len();
         if crate::numbers::parse_csv_line(line.as_bytes(), &mut heights_um).is_none() {
             heights_um.truncate(start);
-            match line
-                .split(',')
-                .enumerate()
-                .map(|(k, f)| (k, f.trim()))
-                .find(|(_, f)| f.parse::<f64>().is_err())
-            {
-                Some(_) if n == 0 => continue,
-                Some((k, f)) => {
-                    read.push((
-                        n + 1,
-                        Err(format!("(column {}: {f:?} is not a number)", k + 1)),
-                    ));
+            match parse_fields(line) {
+                Ok(values) => heights_um.extend(values),
+                Err(_) if n == 0 => continue, // a header
+                Err((k, f)) => {
+                    let why = format!("(column {}: {f:?} is not a number)", k + 1);
+                    read.push((n + 1, Err(why)));
                     continue;
-                }
-                None => {
-                    for f in line.split(',') {
-                        heights_um.push(f.trim().parse::<f64>().unwrap_or(f64::NAN));
-                    }
                 }
             }
         }
