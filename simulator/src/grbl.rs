@@ -42,6 +42,7 @@
 //! reads).
 
 use std::collections::VecDeque;
+use std::future::Future;
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
@@ -291,12 +292,22 @@ impl Default for GrblSimConfig {
 }
 
 /// Serves the GRBL protocol on `io` until the host closes it or a `Vanish` fault.
-pub async fn serve<T: AsyncRead + AsyncWrite + Unpin>(
-    mut io: T,
+///
+/// The controller is built, and its start position published through `shared`, when this is
+/// called, not when the returned future is first polled.
+pub fn serve<T: AsyncRead + AsyncWrite + Unpin>(
+    io: T,
     config: GrblSimConfig,
     shared: Arc<StageShared>,
+) -> impl Future<Output = std::io::Result<()>> {
+    let m = Machine::new(config, shared);
+    serve_machine(io, m)
+}
+
+async fn serve_machine<T: AsyncRead + AsyncWrite + Unpin>(
+    mut io: T,
+    mut m: Machine,
 ) -> std::io::Result<()> {
-    let mut m = Machine::new(config, shared);
     let mut buf = [0u8; 256];
     loop {
         let now = m.clock.sim(Instant::now());

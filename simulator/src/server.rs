@@ -512,11 +512,13 @@ impl Simulator {
         if let Some((link, serve)) = self.stage {
             let stage_pty = Pty::create(&link)?;
             stage_link = Some(link);
-            let y = self.y.clone();
-            // The pty (and with it the link) lives as long as the serve function: a
-            // vanishing stage removes its link.
+            // The serve function is called here, before the ready line: it publishes the
+            // stage's start position, which the instrument's first trace already reads. The
+            // pty (and with it the link) lives as long as the returned future: a vanishing
+            // stage removes its link.
+            let serving = serve(stage_pty, self.y.clone());
             stage_task = Some(tokio::spawn(async move {
-                if let Err(e) = serve(stage_pty, y).await {
+                if let Err(e) = serving.await {
                     tracing::warn!("stage emulator stopped: {e}");
                 }
             }));

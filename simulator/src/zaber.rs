@@ -19,6 +19,7 @@
 
 use crate::grbl::{StageFault, StageShared};
 use crate::motion::Profile;
+use std::future::Future;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
@@ -351,11 +352,14 @@ impl Dev {
 }
 
 /// Serves the Zaber ASCII protocol on `io` until the host closes it or a `Vanish` fault.
-pub async fn serve<T: AsyncRead + AsyncWrite + Unpin>(
-    mut io: T,
+///
+/// The device is built, and its start position published through `shared`, when this is
+/// called, not when the returned future is first polled.
+pub fn serve<T: AsyncRead + AsyncWrite + Unpin>(
+    io: T,
     config: ZaberSimConfig,
     shared: Arc<StageShared>,
-) -> std::io::Result<()> {
+) -> impl Future<Output = std::io::Result<()>> {
     let scale = if config.time_scale.is_finite() && config.time_scale > 0.0 {
         config.time_scale
     } else {
@@ -381,6 +385,13 @@ pub async fn serve<T: AsyncRead + AsyncWrite + Unpin>(
         cfg: config,
     };
     d.set_phys(d.phys);
+    serve_device(io, d)
+}
+
+async fn serve_device<T: AsyncRead + AsyncWrite + Unpin>(
+    mut io: T,
+    mut d: Dev,
+) -> std::io::Result<()> {
     let mut silent = false;
     let mut line = Vec::new();
     let mut buf = [0u8; 256];

@@ -71,6 +71,17 @@ async fn sleep(secs: f64) {
     tokio::time::sleep(Duration::from_secs_f64(secs)).await;
 }
 
+/// The start position is published when the controller is created, before its task first
+/// runs: the simulated instrument's first trace reads it (on a single-threaded runtime the
+/// spawned task has not run yet here).
+#[tokio::test(start_paused = true)]
+async fn the_start_position_is_published_before_the_controller_first_runs() {
+    let h = start(GrblSimConfig::default());
+    assert_eq!(h.shared.true_position_nm(), -50_000_000);
+    let h = start(homed());
+    assert_eq!(h.shared.true_position_nm(), -1_000_000);
+}
+
 #[tokio::test(start_paused = true)]
 async fn powers_up_in_alarm_at_zero_with_wco_and_ov_on_their_own_cadence() {
     let mut h = start(GrblSimConfig::default());

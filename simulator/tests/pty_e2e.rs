@@ -584,6 +584,8 @@ async fn simulated_zaber_position_selects_the_served_line() {
         .profiles(set)
         .zaber_stage(&stage_link, zaber, shared.clone());
     let h = start(sim).await;
+    // Published by the time the simulator is ready, so the first trace serves line 1.
+    assert_eq!(shared.true_position_nm(), 1_020_000);
     assert_eq!(h.ready().stage.as_deref(), Some(stage_link.as_path()));
     assert_eq!(h.ready().instrument.as_deref(), Some(link(&dir).as_path()));
     let mut inst = Client::open(&link(&dir));

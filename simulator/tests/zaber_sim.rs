@@ -40,6 +40,15 @@ async fn sleep(secs: f64) {
     tokio::time::sleep(Duration::from_secs_f64(secs)).await;
 }
 
+/// The start position is published when the device is created, before its task first runs:
+/// the simulated instrument's first trace reads it (on a single-threaded runtime the spawned
+/// task has not run yet here).
+#[tokio::test(start_paused = true)]
+async fn the_start_position_is_published_before_the_device_first_runs() {
+    let h = start(powered_up());
+    assert_eq!(h.shared.true_position_nm(), 40_000 * 125);
+}
+
 #[tokio::test(start_paused = true)]
 async fn wr_on_every_reply_until_the_home_has_completed() {
     let mut h = start(powered_up());
