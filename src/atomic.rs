@@ -3,7 +3,7 @@
 //! the complete new one, never a partial file under the final name.
 //!
 //! A large file can be written through [`write_atomically_streamed`], which asks the kernel to
-//! start writing each few MB to disk as soon as they are written (Linux `sync_file_range`
+//! start writing each MiB to disk as soon as it is written (Linux `sync_file_range`
 //! with `SYNC_FILE_RANGE_WRITE`; elsewhere nothing), so the disk works while the rest is
 //! still being produced and the final fsync waits only for the tail. The durability is the
 //! fsync's, as for every other file: starting writeback early changes only when the disk
@@ -84,8 +84,12 @@ pub fn write_atomically<T>(
     write_impl(path, true, body)
 }
 
-/// Writeback is started once this many bytes have been written since the last start.
-const WRITEBACK_BYTES: u64 = 8 << 20;
+/// Writeback is started once this many bytes have been written since the last start. The
+/// final fsync waits for what was written after the last start, so a small step shortens it:
+/// on a 21 MB IGES file (`surfscan fit` 31×8000) 1 MiB took the whole process from 45.8 to
+/// 43.1 ms (medians of 25 alternating runs) against 8 MiB, and the 853 MB of the 1000×10000
+/// fit took the same time within the disk's spread.
+const WRITEBACK_BYTES: u64 = 1 << 20;
 
 /// A file that starts writeback of every [`WRITEBACK_BYTES`] written (module docs).
 pub struct StreamedFile {
@@ -201,7 +205,7 @@ mod tests {
 
     #[test]
     fn a_streamed_file_holds_every_byte_written_and_rewritten_in_place() {
-        // Several writeback starts (more than 8 MiB in pieces of odd sizes), then a rewrite
+        // Several writeback starts (19 MB in pieces of odd sizes), then a rewrite
         // near the start after seeking back, as the IGES writer fills in its directory.
         use std::io::{Seek, SeekFrom};
         let dir = tempfile::tempdir().unwrap();
