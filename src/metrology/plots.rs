@@ -15,8 +15,9 @@
 //!
 //! The only file-writing part of the metrology: the caller gives the directory. Depends on
 //! [`super::model`] (the curves), [`super::areal::Grid`], [`super::params::RkFamily`],
-//! [`super::text_cache`] (the PNGs' text memo), [`crate::numfmt`] and
-//! [`super::MetrologyError`]; plotters draws, and `image` encodes the PNG files.
+//! [`super::text_cache`] (the PNGs' text memo), [`crate::numfmt`], [`crate::atomic`] (each
+//! file replaced whole) and [`super::MetrologyError`]; plotters draws, and `image` encodes
+//! the PNG files.
 
 use super::areal::Grid;
 use super::model::ModelCurveBac;
@@ -297,10 +298,14 @@ macro_rules! png_and_svg {
             write_png(&png, &rgb, (w, h))?;
         }
         {
-            let $root = SVGBackend::new(&svg, $size).into_drawing_area();
-            let drawn: Result<(), String> = $draw;
-            drawn.map_err(|e| plot_err(&svg, e))?;
-            $root.present().map_err(|e| plot_err(&svg, e))?;
+            let mut text = String::new();
+            {
+                let $root = SVGBackend::with_string(&mut text, $size).into_drawing_area();
+                let drawn: Result<(), String> = $draw;
+                drawn.map_err(|e| plot_err(&svg, e))?;
+                $root.present().map_err(|e| plot_err(&svg, e))?;
+            }
+            replace_figure(&svg, |w| std::io::Write::write_all(w, text.as_bytes()))?;
         }
         Ok([png, svg])
     }};
@@ -312,18 +317,27 @@ macro_rules! png_and_svg {
 /// filtering (plotters' own `present`, through `image`'s default) tries all five PNG filters
 /// on every row: on the 34 figures of a 31-line analysis (white ground, thin lines, flat
 /// colour fields) it took 693 M instructions against 421 M for 6.3 MB of files against
-/// 7.3 MB. The write is flushed and its error reported (a full disk), where a dropped
-/// buffered writer would lose the error.
+/// 7.3 MB. The file is replaced whole ([`replace_figure`]).
 fn write_png(path: &Path, rgb: &[u8], (w, h): (u32, u32)) -> Result<(), MetrologyError> {
     use image::codecs::png::{CompressionType, FilterType, PngEncoder};
     use image::ImageEncoder;
-    use std::io::Write;
-    let file = std::fs::File::create(path).map_err(|e| plot_err(path, e))?;
-    let mut out = std::io::BufWriter::new(file);
-    PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Paeth)
-        .write_image(rgb, w, h, image::ColorType::Rgb8)
-        .map_err(|e| plot_err(path, e))?;
-    out.flush().map_err(|e| plot_err(path, e))
+    replace_figure(path, |out| {
+        PngEncoder::new_with_quality(out, CompressionType::Fast, FilterType::Paeth)
+            .write_image(rgb, w, h, image::ColorType::Rgb8)
+            .map_err(std::io::Error::other)
+    })
+}
+
+/// Writes a figure file through a temporary file beside it, renamed over `path` once it is
+/// complete and flushed: a write that fails (a full disk) or is interrupted leaves the
+/// previous figure, never part of one, and a reader of the old file keeps it whole. Not
+/// fsynced: a figure is derived, made again by `surfscan analyze`, and 34 fsyncs would cost
+/// an analysis more than all its other writes.
+fn replace_figure(
+    path: &Path,
+    body: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
+) -> Result<(), MetrologyError> {
+    crate::atomic::write_atomically_without_sync(path, body).map_err(|e| plot_err(path, e))
 }
 
 /// The range of `values` padded by 5 % (a unit range around a constant, `fallback` when
@@ -1231,6 +1245,74 @@ mod tests {
         assert_eq!(filters.len(), RK_SIZE.1 as usize);
         assert!(filters.iter().all(|&f| f == 4), "{filters:?}");
         assert!(std::fs::read_to_string(svg).unwrap().contains("<svg"));
+    }
+
+    /// A figure is replaced whole, never rewritten in place: a reader that holds the previous
+    /// files (here hard links to them) keeps them as they were, the new files are complete, and
+    /// no temporary file is left beside them. Writing in place (`File::create` on the path)
+    /// would truncate and rewrite the linked files.
+    #[test]
+    fn figures_are_replaced_whole_not_rewritten_in_place() {
+        let dir = tempfile::tempdir().unwrap();
+        let keep = tempfile::tempdir_in(dir.path()).unwrap();
+        let mut held = Vec::new();
+        for name in ["test.png", "test.svg"] {
+            let (path, link) = (dir.path().join(name), keep.path().join(name));
+            std::fs::write(&path, b"the previous figure").unwrap();
+            std::fs::hard_link(&path, &link).unwrap();
+            held.push((path, link));
+        }
+        let [png, svg] = write_test_figure(dir.path()).unwrap();
+        for (path, link) in &held {
+            let old = std::fs::read(link).unwrap();
+            assert!(
+                old == b"the previous figure",
+                "{link:?} was rewritten in place ({} bytes)",
+                old.len()
+            );
+            assert!(std::fs::read(path).unwrap() != old, "{path:?} not replaced");
+        }
+        let decoded = image::open(&png).unwrap().to_rgb8();
+        assert!(
+            decoded.as_raw() == &figure_pixels(false),
+            "PNG pixels differ"
+        );
+        // The SVG is plotters' own text, as its file target would have written it.
+        let by_plotters = dir.path().join("by-plotters.svg");
+        {
+            let root = SVGBackend::new(&by_plotters, RK_SIZE).into_drawing_area();
+            draw_test_figure(&root);
+            root.present().unwrap();
+        }
+        let (ours, theirs) = (
+            std::fs::read(&svg).unwrap(),
+            std::fs::read(&by_plotters).unwrap(),
+        );
+        assert!(
+            ours == theirs,
+            "SVG of {} bytes, plotters' {}",
+            ours.len(),
+            theirs.len()
+        );
+        let mut names: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        let keep_name = keep
+            .path()
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
+        let mut want = vec![
+            "by-plotters.svg".to_string(),
+            keep_name,
+            "test.png".to_string(),
+            "test.svg".to_string(),
+        ];
+        want.sort();
+        assert_eq!(names, want);
     }
 
     /// A figure that cannot be written names its file.
