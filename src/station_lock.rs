@@ -313,7 +313,7 @@ impl StationLock {
     }
 
     /// Removes what interrupted writes left in the output directory, its scan directories
-    /// and their `lines/`: files named like the project's temporary files, `.<name>.tmp<pid>`
+    /// and their `lines/` and `rk/` (the per-line figures): files named like the project's temporary files, `.<name>.tmp<pid>`
     /// (atomic replacement) when that pid is not alive, and `.<name>.tmp` (the scan's own
     /// durable writes, made only by the holder of this lock). Each removal is logged; the
     /// paths removed are returned.
@@ -324,6 +324,7 @@ impl StationLock {
                 let p = e.path();
                 if e.file_type().is_ok_and(|t| t.is_dir()) {
                     dirs.push(p.join("lines"));
+                    dirs.push(p.join("rk"));
                     dirs.push(p);
                 }
             }
@@ -533,6 +534,7 @@ mod tests {
         let out = tmp.path().join("scans");
         let scan = out.join("20260101T000000Z-A17");
         fs::create_dir_all(scan.join("lines")).unwrap();
+        fs::create_dir_all(scan.join("rk")).unwrap();
         let dead = dead_pid();
         let write = |p: PathBuf| {
             fs::write(&p, b"x").unwrap();
@@ -542,10 +544,13 @@ mod tests {
             write(scan.join(format!(".surface.igs.tmp{dead}"))),
             write(scan.join("lines").join(".0003.csv.tmp")),
             write(out.join(format!(".metrics.prom.tmp{dead}"))),
+            write(scan.join(format!(".bac.png.tmp{dead}"))),
+            write(scan.join("rk").join(format!(".0004.svg.tmp{dead}"))),
         ];
         let kept = [
             write(scan.join("surface.igs")),
             write(scan.join("lines").join("0003.csv")),
+            write(scan.join("rk").join("0004.svg")),
             // A live process's write in progress (pid 1 is always alive), and our own.
             write(scan.join(".report.json.tmp1")),
             write(scan.join(format!(".summary.csv.tmp{}", std::process::id()))),
