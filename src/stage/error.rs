@@ -71,7 +71,7 @@ pub enum StageError {
     /// A target outside the travel the controller itself enforces (GRBL soft limits, Zaber
     /// `limit.min`/`limit.max`): it would be refused in the middle of the scan, so the plan
     /// is refused before anything moves.
-    #[error("target {target} is outside the travel the stage controller enforces [{min}, {max}]; nothing was sent. Change y-start/step/lines, or the controller's travel (GRBL: $131 with soft limits $20=1 give machine space [-$131, 0]; Zaber: limit.min, limit.max)")]
+    #[error("target {target} is outside the travel the stage controller enforces [{min}, {max}]; nothing was sent. Change y-start/step/lines, or the controller's travel (GRBL: $131 with soft limits $20=1 give machine space [-$131, 0], or [0, $131] for a Y axis homing toward negative ($23) on a firmware built with HOMING_FORCE_SET_ORIGIN; Zaber: limit.min, limit.max)")]
     OutsideControllerTravel {
         /// The refused position.
         target: Nm,

@@ -381,6 +381,81 @@ async fn a_plan_beyond_the_boards_own_travel_is_refused_before_anything_moves() 
     assert!(a.check_targets(&plan).unwrap().is_empty());
 }
 
+/// A board whose firmware was built with `HOMING_FORCE_SET_ORIGIN` (`Z` in `[OPT:…]`) and
+/// whose Y axis homes toward negative (`$23=2`) holds Y to [0, `$131`] (GRBL 1.1's
+/// `system_check_travel_limits`): a plan in positive space is accepted, one below 0 is
+/// refused before anything moves. The simulator does not emulate such a build, so a scripted
+/// board answers `$I`, `$$` and `?`.
+#[tokio::test(start_paused = true)]
+async fn a_force_origin_board_homing_toward_negative_holds_y_to_positive_space() {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let positive = SETTINGS
+        .replace("soft-limit-min-mm = -100", "soft-limit-min-mm = -20")
+        .replace("soft-limit-max-mm = 0", "soft-limit-max-mm = 100");
+    let settings: StageSettings = toml::from_str(&positive).unwrap();
+    let (host, mut dev) = tokio::io::duplex(4096);
+    let mut g = settings.grbl_config().unwrap();
+    g.open_grace = Duration::from_millis(300);
+    let mut a = MotionPolicy::new(GrblStage::new(host, g), settings.policy_config().unwrap());
+    let board = tokio::spawn(async move {
+        let (mut line, mut b, mut commands) = (Vec::new(), [0u8; 1], Vec::new());
+        while dev.read_exact(&mut b).await.is_ok() {
+            let reply: &[u8] = match b[0] {
+                b'?' => b"<Idle|MPos:0.000,1.000,0.000|FS:0,0>\r\n",
+                b'\n' => {
+                    let cmd = String::from_utf8_lossy(&line).trim().to_string();
+                    line.clear();
+                    let reply: &[u8] = match cmd.as_str() {
+                        "$I" => b"[VER:1.1h.20190825:]\r\n[OPT:VZ,15,128]\r\nok\r\n",
+                        "$$" => {
+                            b"$10=1\r\n$13=0\r\n$20=1\r\n$22=1\r\n$23=2\r\n$27=1.000\r\n\
+                                  $101=400.000\r\n$111=500.000\r\n$121=10.000\r\n\
+                                  $131=100.000\r\nok\r\n"
+                        }
+                        _ => b"ok\r\n",
+                    };
+                    commands.push(cmd);
+                    reply
+                }
+                c => {
+                    line.push(c);
+                    continue;
+                }
+            };
+            if dev.write_all(reply).await.is_err() {
+                break;
+            }
+        }
+        commands
+    });
+    let r = a.connect().await.unwrap();
+    assert!(r.identity.contains("OPT:VZ"), "{}", r.identity);
+    let plan: Vec<Nm> = (0..31).map(|k| Nm(50_000_000 + k * 10_000)).collect();
+    assert!(a.check_targets(&plan).unwrap().is_empty());
+    let plan: Vec<Nm> = (0..31).map(|k| Nm(-10_000_000 + k * 10_000)).collect();
+    let e = a.check_targets(&plan).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            StageError::OutsideControllerTravel {
+                min: Nm(0),
+                max: Nm(100_000_000),
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("HOMING_FORCE_SET_ORIGIN"), "{e}");
+    drop(a);
+    let commands = board.await.unwrap();
+    assert!(
+        commands
+            .iter()
+            .all(|c| !c.starts_with("$J") && !c.starts_with("$H")),
+        "{commands:?}"
+    );
+}
+
 #[tokio::test(start_paused = true)]
 async fn work_coordinate_reports_are_turned_into_machine_positions() {
     // $10=0: WPos in the reports, WCO only on every tenth; G54 Y offset −5 mm.

@@ -31,7 +31,7 @@ use codec::{
     alarm_text, encode_jog_y, error_text, parse_line, GrblMessage, GrblState, StatusReport,
     RT_JOG_CANCEL, RT_SOFT_RESET, RT_STATUS,
 };
-use controller::ControllerSettings;
+use controller::{BuildOptions, ControllerSettings};
 use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::time::Instant;
@@ -399,10 +399,14 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
         }
         let lines = self.command("$I", self.cfg.reply_timeout).await?;
         let mut ident = Vec::new();
+        let mut build = BuildOptions::default();
         for m in lines {
             match m {
                 GrblMessage::Ver(v) => ident.push(format!("VER:{v}")),
-                GrblMessage::Opt(o) => ident.push(format!("OPT:{o}")),
+                GrblMessage::Opt(o) => {
+                    build = BuildOptions::from_opt(&o);
+                    ident.push(format!("OPT:{o}"));
+                }
                 _ => {}
             }
         }
@@ -450,7 +454,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
             );
         }
         let spm = self.cfg.steps_per_mm;
-        let travel_units = self.board.enforced_travel_mm().map(|(lo, hi)| {
+        let travel_units = self.board.enforced_travel_mm(build).map(|(lo, hi)| {
             (
                 (lo * spm).ceil() as i64, // whole steps inside the travel
                 (hi * spm).floor() as i64,
