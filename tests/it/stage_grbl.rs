@@ -362,17 +362,7 @@ async fn a_plan_beyond_the_boards_own_travel_is_refused_before_anything_moves() 
     let before = shared.bytes_received();
     let plan: Vec<Nm> = (0..31).map(|k| Nm(-120_000_000 + k * 10_000)).collect();
     let e = a.check_targets(&plan).unwrap_err();
-    assert!(
-        matches!(
-            e,
-            StageError::OutsideControllerTravel {
-                min: Nm(-100_000_000),
-                max: Nm(0),
-                ..
-            }
-        ),
-        "{e}"
-    );
+    crate::common::assert_outside_controller_travel(&e, Nm(-100_000_000), Nm(0));
     assert_eq!(e.class(), FaultClass::Fatal);
     tokio::task::yield_now().await;
     assert_eq!(shared.bytes_received(), before);
@@ -434,17 +424,7 @@ async fn a_force_origin_board_homing_toward_negative_holds_y_to_positive_space()
     assert!(a.check_targets(&plan).unwrap().is_empty());
     let plan: Vec<Nm> = (0..31).map(|k| Nm(-10_000_000 + k * 10_000)).collect();
     let e = a.check_targets(&plan).unwrap_err();
-    assert!(
-        matches!(
-            e,
-            StageError::OutsideControllerTravel {
-                min: Nm(0),
-                max: Nm(100_000_000),
-                ..
-            }
-        ),
-        "{e}"
-    );
+    crate::common::assert_outside_controller_travel(&e, Nm(0), Nm(100_000_000));
     assert!(e.to_string().contains("HOMING_FORCE_SET_ORIGIN"), "{e}");
     drop(a);
     let commands = board.await.unwrap();

@@ -494,3 +494,20 @@ pub fn assert_fit_timed(report: &serde_json::Value) {
         "{t}"
     );
 }
+
+/// Asserts that `e` refuses a plan as outside the travel the stage controller itself
+/// enforces, [`min`, `max`].
+pub fn assert_outside_controller_travel(
+    e: &surfscan::stage::StageError,
+    min: surfscan::units::Nm,
+    max: surfscan::units::Nm,
+) {
+    assert!(
+        matches!(
+            e,
+            surfscan::stage::StageError::OutsideControllerTravel { min: lo, max: hi, .. }
+                if *lo == min && *hi == max
+        ),
+        "{e}"
+    );
+}
