@@ -175,8 +175,8 @@ pub fn write_atomically_streamed<T>(
     write_impl(path, true, body)
 }
 
-/// Like [`write_atomically`] (temporary file and rename) but without the fsyncs: for
-/// benchmarks and scratch output where durability does not matter.
+/// Like [`write_atomically`] (temporary file and rename) but without the fsyncs: for output
+/// that must never be seen half-written but can be made again (the figures, benchmarks).
 pub fn write_atomically_without_sync<T>(
     path: &Path,
     body: impl FnOnce(&mut BufWriter<File>) -> io::Result<T>,
