@@ -1,7 +1,7 @@
 //! What a GRBL board's `$$` settings say, and whether the driver's configuration agrees with
 //! them: steps per mm (`$101`), report units (`$13`), homing (`$22`, `$27`), soft limits and
-//! travel (`$20`, `$131`, with `$23` and the build's `HOMING_FORCE_SET_ORIGIN`), the Y axis's maximum rate and acceleration (`$111`, `$121`) and
-//! the status report mask (`$10`).
+//! travel (`$20`, `$131`, with `$23` and the build's `HOMING_FORCE_SET_ORIGIN`), the Y axis's
+//! maximum rate and acceleration (`$111`, `$121`) and the status report mask (`$10`).
 //!
 //! Pure (layer 1): parsed settings in, a verdict out; depends on [`crate::stage::StageError`].
 
