@@ -1,4 +1,4 @@
-//! `surfscan check-config [FILE]`: validates a station configuration exactly as the daemon
+//! `surfscan check-config [FILE | --config FILE]`: validates a station configuration exactly as the daemon
 //! and `scan` load it (every table, every key, the plan), without opening any device, and
 //! prints what it would do. Device paths that are absent or are not device nodes are noted
 //! (a device may be plugged in later); a port that is a regular file, a directory or another
@@ -19,9 +19,22 @@ use std::path::PathBuf;
 /// Arguments of `surfscan check-config`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Station configuration (TOML).
-    #[arg(default_value = DEFAULT_CONFIG)]
-    pub config: PathBuf,
+    /// Station configuration (TOML) [default: /etc/surfscan/surfscan.toml].
+    #[arg(value_name = "CONFIG", conflicts_with = "config_flag")]
+    pub config: Option<PathBuf>,
+    /// The same file, given the way `scan`, `daemon` and the operator's commands take it.
+    #[arg(long = "config", value_name = "FILE", id = "config_flag")]
+    pub config_flag: Option<PathBuf>,
+}
+
+impl Args {
+    /// The file to check: the one given either way, else the station's default.
+    pub fn path(&self) -> PathBuf {
+        self.config
+            .clone()
+            .or_else(|| self.config_flag.clone())
+            .unwrap_or_else(|| PathBuf::from(DEFAULT_CONFIG))
+    }
 }
 
 /// The name a setting has in the file (its serde name), e.g. `sj210`, `grbl`.
@@ -85,16 +98,13 @@ pub fn check_ports(config: &Config) -> Result<Vec<String>, String> {
 
 /// Runs `surfscan check-config`.
 pub fn run(args: Args) -> Result<(), CliError> {
-    let (config, hash) = load_config(&args.config)?;
-    let notes = check_ports(&config).map_err(|e| {
-        CliError::new(
-            Exit::Config,
-            format!("config {}: {e}", args.config.display()),
-        )
-    })?;
+    let path = args.path();
+    let (config, hash) = load_config(&path)?;
+    let notes = check_ports(&config)
+        .map_err(|e| CliError::new(Exit::Config, format!("config {}: {e}", path.display())))?;
     println!(
         "{}: valid (sha256 {})",
-        args.config.display(),
+        path.display(),
         hash.get(..12).unwrap_or(&hash)
     );
     print!("{}", summary(&config));

@@ -141,6 +141,23 @@ fn check_config_validates_without_opening_devices() {
         "{stdout}"
     );
 
+    // The file given as `--config FILE`, as `scan` and `daemon` take it: the same check; a
+    // path given both ways is a usage error, not a silent choice of one.
+    let out = surfscan(&["check-config", "--config", cfg.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).starts_with(&format!("{}: valid", cfg.display())),
+        "{}",
+        text(&out.stdout)
+    );
+    let out = surfscan(&[
+        "check-config",
+        cfg.to_str().unwrap(),
+        "--config",
+        "/elsewhere.toml",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+
     // An absent device is a note, not a failure: it may be plugged in later.
     let absent = dir.path().join("ttyUSB7");
     let cfg = demo_config(dir.path(), &absent, Path::new("/dev/null"));
