@@ -46,10 +46,21 @@ impl Clock {
         at.saturating_duration_since(self.t0).as_secs_f64() * self.scale
     }
 
-    /// The real instant of simulated time `t`; `None` when it cannot be represented.
+    /// The first real instant at which simulated time has reached `t`; `None` when it cannot
+    /// be represented. Whole nanoseconds can fall a hair short of `t` (56.659000000000006 s
+    /// becomes 56.659 s): woken there, the controller would find nothing due and sleep until
+    /// the same instant again, for ever. So the instant is stepped up until it is not short.
     fn real(&self, t: f64) -> Option<Instant> {
         let d = Duration::try_from_secs_f64(t / self.scale).ok()?;
-        self.t0.checked_add(d)
+        let mut at = self.t0.checked_add(d)?;
+        for _ in 0..64 {
+            if self.sim(at) >= t {
+                return Some(at);
+            }
+            at = at.checked_add(Duration::from_nanos(1))?;
+        }
+        // Past 64 ns of rounding (a time scale far below 1): a microsecond later is enough.
+        at.checked_add(Duration::from_micros(1))
     }
 }
 
@@ -1048,5 +1059,34 @@ impl Machine {
             }
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Clock;
+    use tokio::time::Instant;
+
+    /// Every event's wake-up instant is at or after the event in simulated time, or the
+    /// controller would spin on an event it never finds due (a jog ending at
+    /// 56.659000000000006 s did, at real speed).
+    #[test]
+    fn a_wake_up_is_never_before_its_event() {
+        for scale in [1.0, 0.5, 3.0, 50.0, 1e9] {
+            let clock = Clock {
+                t0: Instant::now(),
+                scale,
+            };
+            let mut ts = vec![56.659000000000006, 0.1 + 0.2, 1e-9, 1234.5678901234];
+            ts.extend((1..2000).map(|k| f64::from(k) * 0.0283 + 1e-13 * f64::from(k % 7)));
+            for t in ts {
+                let at = clock.real(t).expect("representable");
+                assert!(
+                    clock.sim(at) >= t,
+                    "scale {scale}: {t} woken at {}",
+                    clock.sim(at)
+                );
+            }
+        }
     }
 }
