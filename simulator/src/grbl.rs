@@ -222,7 +222,8 @@ pub struct GrblSimConfig {
     pub max_rate_mm_min: f64,
     /// `$121`: acceleration, mm/s².
     pub acceleration_mm_s2: f64,
-    /// `$131`: maximum travel, mm; machine space is [−travel, 0] after homing.
+    /// `$131`: maximum travel, mm; machine space is [−travel, 0] after homing (or [0, travel]
+    /// in a `force_set_origin` build homing toward negative).
     pub max_travel_mm: f64,
     /// `$22`: homing cycle enabled (the board then powers up in Alarm).
     pub homing_enabled: bool,
@@ -260,6 +261,15 @@ pub struct GrblSimConfig {
     pub blank_settings: bool,
     /// The `$I` build-info string (settable with `$I=`).
     pub build_info: String,
+    /// The Y home switch is at the negative end of travel, and `$23` is programmed with the
+    /// Y bit (2) so that homing approaches it moving negative. `start_mm` is then positive
+    /// (above the switch). A `$23` written later changes only the firmware's direction, not
+    /// where the switch is: homing away from it ends in `ALARM:9`, as on a real board.
+    pub home_switch_at_negative_end: bool,
+    /// The firmware was built with `HOMING_FORCE_SET_ORIGIN` (`Z` among the `[OPT:…]`
+    /// letters): homing ends with the counter at 0, and soft limits hold an axis that homes
+    /// toward negative to [0, `$131`] instead of [−`$131`, 0].
+    pub force_set_origin: bool,
 }
 
 impl Default for GrblSimConfig {
@@ -287,6 +297,8 @@ impl Default for GrblSimConfig {
             homed_at_start: false,
             blank_settings: false,
             build_info: String::new(),
+            home_switch_at_negative_end: false,
+            force_set_origin: false,
         }
     }
 }

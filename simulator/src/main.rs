@@ -17,7 +17,7 @@ use surfscan_sim::zaber::ZaberSimConfig;
 use surfscan_sim::{Battery, FaultSpec, InstrumentConfig, Model, ProfileSet, Simulator};
 use tokio::io::AsyncReadExt;
 
-#[derive(Debug, Clone, Copy, ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, ValueEnum)]
 enum StageProtocolArg {
     Grbl,
     Zaber,
@@ -60,6 +60,14 @@ struct Args {
     /// Backlash between motor and carriage of the simulated stage, µm.
     #[arg(long, default_value_t = 0.0)]
     stage_backlash_um: f64,
+    /// GRBL: the home switch is at the bottom of the travel and `$23=2` (Y homes toward
+    /// negative); the stage powers up 50 mm above it.
+    #[arg(long)]
+    stage_home_at_bottom: bool,
+    /// GRBL: firmware built with `HOMING_FORCE_SET_ORIGIN` (`Z` in `[OPT:…]`): homing sets
+    /// the counter to 0.
+    #[arg(long)]
+    stage_force_origin: bool,
     /// Stage fault, KIND[@MS] queued MS ms after ready (repeatable); KIND is reset-banner,
     /// alarm2, error15, reject, stall, position-lost, silence or vanish.
     #[arg(long = "stage-fault")]
@@ -177,6 +185,13 @@ fn build(args: Args, shared: &Arc<StageShared>) -> Result<Simulator, String> {
             args.stage_backlash_um
         ));
     }
+    if (args.stage_home_at_bottom || args.stage_force_origin)
+        && args.stage_protocol != Some(StageProtocolArg::Grbl)
+    {
+        return Err(
+            "--stage-home-at-bottom and --stage-force-origin describe a GRBL board; give them with --stage-protocol grbl".into(),
+        );
+    }
     // The instrument's time scale multiplies durations; the stages' is a speed-up factor.
     let speed_up = if args.time_scale > 0.0 {
         1.0 / args.time_scale
@@ -186,10 +201,19 @@ fn build(args: Args, shared: &Arc<StageShared>) -> Result<Simulator, String> {
     if let (Some(link), Some(protocol)) = (&args.stage_link, args.stage_protocol) {
         match protocol {
             StageProtocolArg::Grbl => {
+                let defaults = GrblSimConfig::default();
                 let cfg = GrblSimConfig {
                     backlash_mm: args.stage_backlash_um / 1000.0,
                     time_scale: speed_up,
-                    ..GrblSimConfig::default()
+                    home_switch_at_negative_end: args.stage_home_at_bottom,
+                    force_set_origin: args.stage_force_origin,
+                    // As far from the switch as by default, on the side the travel is.
+                    start_mm: if args.stage_home_at_bottom {
+                        -defaults.start_mm
+                    } else {
+                        defaults.start_mm
+                    },
+                    ..defaults
                 };
                 sim = sim.grbl_stage(link, cfg, shared.clone());
             }

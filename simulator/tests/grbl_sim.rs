@@ -152,6 +152,118 @@ async fn homing_seeks_pulls_off_locates_and_ends_at_minus_pulloff() {
     assert_eq!(h.ask("$J=G53 G90 Y-200 F100").await, "ok");
 }
 
+/// The Y home switch at the negative end, `$23=2`: homing approaches it moving down and
+/// GRBL 1.1's `limits_go_home` sets the counter to −`$131` + pull-off, so machine space is
+/// still [−`$131`, 0] with the axis near its bottom.
+#[tokio::test(start_paused = true)]
+async fn homing_toward_negative_ends_at_pulloff_above_minus_travel() {
+    let mut h = start(GrblSimConfig {
+        home_switch_at_negative_end: true,
+        start_mm: 50.0,
+        backlash_mm: 0.05,
+        ..GrblSimConfig::default()
+    });
+    assert!(h.lines_until_ok("$$").await.contains(&"$23=2".to_string()));
+    assert_eq!(h.ask("$H").await, "ok");
+    let r = h.status().await;
+    assert!(r.starts_with("<Idle|MPos:0.000,-199.000,0.000|"), "{r}");
+    assert_eq!(field(&r, "Pn:"), None, "pulled off the switch: {r}");
+    // The locate stopped with the carriage on the switch, trailing the motor by the
+    // backlash; the 1 mm pull-off up first takes the backlash up, so the carriage rises
+    // 1 − 0.05 mm.
+    assert_eq!(h.shared.true_position_nm(), 950_000);
+    assert_eq!(h.ask("$J=G53 G90 Y0.001 F100").await, "error:15");
+    assert_eq!(h.ask("$J=G53 G90 Y-200.001 F100").await, "error:15");
+    // 49 mm up from −199 (MPos −150): the carriage, pushed up, moves with the motor.
+    assert_eq!(h.ask("$J=G53 G90 Y-150 F500").await, "ok");
+    sleep(30.0).await;
+    assert!(h.status().await.starts_with("<Idle|MPos:0.000,-150.000,"));
+    assert_eq!(h.shared.true_position_nm(), 49_950_000);
+}
+
+/// A `HOMING_FORCE_SET_ORIGIN` build (`Z` in `[OPT:…]`): homing ends with the counter at 0;
+/// homing toward negative, soft limits then hold Y to [0, `$131`]; homing toward positive,
+/// to [−`$131`, 0] as usual.
+#[tokio::test(start_paused = true)]
+async fn a_force_origin_build_homes_to_zero_and_keeps_travel_on_the_far_side() {
+    let mut h = start(GrblSimConfig {
+        home_switch_at_negative_end: true,
+        force_set_origin: true,
+        start_mm: 50.0,
+        ..GrblSimConfig::default()
+    });
+    let info = h.lines_until_ok("$I").await;
+    assert_eq!(info.get(1).map(String::as_str), Some("[OPT:VZ,15,128]"));
+    assert_eq!(h.ask("$H").await, "ok");
+    assert!(h
+        .status()
+        .await
+        .starts_with("<Idle|MPos:0.000,0.000,0.000|"));
+    // Pulled 1 mm up off the switch at the bottom.
+    assert_eq!(h.shared.true_position_nm(), 1_000_000);
+    assert_eq!(h.ask("$J=G53 G90 Y-0.001 F100").await, "error:15");
+    assert_eq!(h.ask("$J=G53 G90 Y200.001 F100").await, "error:15");
+    assert_eq!(h.ask("$J=G53 G90 Y20 F500").await, "ok");
+    sleep(10.0).await;
+    assert!(h.status().await.starts_with("<Idle|MPos:0.000,20.000,"));
+    assert_eq!(h.shared.true_position_nm(), 21_000_000);
+
+    let mut h = start(GrblSimConfig {
+        force_set_origin: true,
+        ..GrblSimConfig::default()
+    });
+    assert_eq!(h.ask("$H").await, "ok");
+    assert!(h
+        .status()
+        .await
+        .starts_with("<Idle|MPos:0.000,0.000,0.000|"));
+    assert_eq!(h.shared.true_position_nm(), -1_000_000);
+    assert_eq!(h.ask("$J=G53 G90 Y0.001 F100").await, "error:15");
+    assert_eq!(h.ask("$J=G53 G90 Y-200 F100").await, "ok");
+}
+
+/// `$23` is the firmware's direction, not the machine's: written so that homing runs away
+/// from the switch, the seek finds nothing within 1.5 × `$131` (`ALARM:9`); homed the right
+/// way, a board already resting on the switch stops the approach at once, and the pull-off
+/// away from it succeeds.
+#[tokio::test(start_paused = true)]
+async fn homing_away_from_the_switch_is_alarm_9() {
+    let mut h = start(GrblSimConfig {
+        home_switch_at_negative_end: true,
+        start_mm: 50.0,
+        ..GrblSimConfig::default()
+    });
+    assert_eq!(h.ask("$23=0").await, "ok");
+    h.send(b"$H\n").await;
+    assert_eq!(h.line().await, "ALARM:9");
+    assert_eq!(h.line().await, "ok");
+    // It ran 300 mm up, away from the switch at the bottom.
+    assert_eq!(h.shared.true_position_nm(), 350_000_000);
+
+    let mut h = start(GrblSimConfig {
+        home_switch_at_negative_end: true,
+        start_mm: 0.0,
+        ..GrblSimConfig::default()
+    });
+    assert_eq!(field(&h.status().await, "Pn:"), Some("Y"));
+    assert_eq!(h.ask("$H").await, "ok");
+    assert!(h.status().await.starts_with("<Idle|MPos:0.000,-199.000,"));
+    assert_eq!(h.shared.true_position_nm(), 1_000_000);
+}
+
+/// A board homed toward negative before the link opened reports the counter homing set.
+#[tokio::test(start_paused = true)]
+async fn a_board_homed_toward_negative_at_start_reports_its_machine_position() {
+    let mut h = start(GrblSimConfig {
+        home_switch_at_negative_end: true,
+        homed_at_start: true,
+        start_mm: 10.0,
+        ..GrblSimConfig::default()
+    });
+    // 10 mm above the switch, which is 1 mm (the pull-off) below MPos −199.
+    assert!(h.status().await.starts_with("<Idle|MPos:0.000,-190.000,"));
+}
+
 #[tokio::test(start_paused = true)]
 async fn homing_without_a_switch_in_reach_is_alarm_9_then_a_reset() {
     // 200 mm travel, searched over 1.5 × 200 = 300 mm; the switch is 400 mm away.

@@ -551,6 +551,72 @@ fn reply_crlf(c: &mut Client) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
+/// GRBL replies up to and including their `ok` (several lines may come in one read).
+fn until_ok(c: &mut Client) -> String {
+    let deadline = Instant::now() + T;
+    let mut out = Vec::new();
+    while !out.ends_with(b"ok\r\n") {
+        assert!(Instant::now() < deadline, "no ok within {T:?}; got {out:?}");
+        out.extend(c.read_some(Duration::from_millis(100)).unwrap());
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// The binary's GRBL board with its home switch at the bottom and a force-origin build: the
+/// build letter and `$23=2` are what a host reads, and homing zeroes the counter. The two
+/// flags describe a GRBL board only, so with a Zaber stage they are refused.
+#[test]
+fn binary_serves_a_grbl_board_homing_to_a_switch_at_the_bottom() {
+    let dir = tempfile::tempdir().unwrap();
+    let l = dir.path().join("ystage");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan-sim"))
+        .args([
+            "--stage-link",
+            l.to_str().unwrap(),
+            "--stage-protocol",
+            "grbl",
+            "--stage-home-at-bottom",
+            "--stage-force-origin",
+            "--time-scale",
+            "0",
+        ])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let mut ready = String::new();
+    out.read_line(&mut ready).unwrap();
+    assert!(ready.contains("\"ready\""), "{ready}");
+    let mut c = Client::open(&l);
+    c.send("$I");
+    assert!(until_ok(&mut c).contains("[OPT:VZ,15,128]"));
+    c.send("$$");
+    assert!(until_ok(&mut c).contains("$23=2\r\n"));
+    c.send("$H");
+    assert_eq!(until_ok(&mut c), "ok\r\n");
+    c.port.write_all(b"?").unwrap();
+    let r = reply_crlf(&mut c);
+    assert!(r.starts_with("<Idle|MPos:0.000,0.000,0.000|"), "{r}");
+    drop(child.stdin.take());
+    assert!(child.wait().unwrap().success());
+
+    let refused = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan-sim"))
+        .args([
+            "--stage-link",
+            dir.path().join("zaber").to_str().unwrap(),
+            "--stage-protocol",
+            "zaber",
+            "--stage-force-origin",
+        ])
+        .output()
+        .unwrap();
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(err.contains("--stage-protocol grbl"), "{err}");
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn simulated_zaber_position_selects_the_served_line() {
     let dir = tempfile::tempdir().unwrap();

@@ -372,68 +372,50 @@ async fn a_plan_beyond_the_boards_own_travel_is_refused_before_anything_moves() 
 }
 
 /// A board whose firmware was built with `HOMING_FORCE_SET_ORIGIN` (`Z` in `[OPT:…]`) and
-/// whose Y axis homes toward negative (`$23=2`) holds Y to [0, `$131`] (GRBL 1.1's
-/// `system_check_travel_limits`): a plan in positive space is accepted, one below 0 is
-/// refused before anything moves. The simulator does not emulate such a build, so a scripted
-/// board answers `$I`, `$$` and `?`.
+/// whose Y axis homes toward a switch at the bottom (`$23=2`) holds Y to [0, `$131`] (GRBL
+/// 1.1's `system_check_travel_limits`): a plan below 0 is refused before anything moves, one
+/// in positive space is scanned, each line landing where the counter says above the point
+/// homing zeroed it.
 #[tokio::test(start_paused = true)]
 async fn a_force_origin_board_homing_toward_negative_holds_y_to_positive_space() {
-    use tokio::io::{AsyncReadExt, AsyncWriteExt};
     let positive = SETTINGS
         .replace("soft-limit-min-mm = -100", "soft-limit-min-mm = -20")
         .replace("soft-limit-max-mm = 0", "soft-limit-max-mm = 100");
-    let settings: StageSettings = toml::from_str(&positive).unwrap();
-    let (host, mut dev) = tokio::io::duplex(4096);
-    let mut g = settings.grbl_config().unwrap();
-    g.open_grace = Duration::from_millis(300);
-    let mut a = MotionPolicy::new(GrblStage::new(host, g), settings.policy_config().unwrap());
-    let board = tokio::spawn(async move {
-        let (mut line, mut b, mut commands) = (Vec::new(), [0u8; 1], Vec::new());
-        while dev.read_exact(&mut b).await.is_ok() {
-            let reply: &[u8] = match b[0] {
-                b'?' => b"<Idle|MPos:0.000,1.000,0.000|FS:0,0>\r\n",
-                b'\n' => {
-                    let cmd = String::from_utf8_lossy(&line).trim().to_string();
-                    line.clear();
-                    let reply: &[u8] = match cmd.as_str() {
-                        "$I" => b"[VER:1.1h.20190825:]\r\n[OPT:VZ,15,128]\r\nok\r\n",
-                        "$$" => {
-                            b"$10=1\r\n$13=0\r\n$20=1\r\n$22=1\r\n$23=2\r\n$27=1.000\r\n\
-                                  $101=400.000\r\n$111=500.000\r\n$121=10.000\r\n\
-                                  $131=100.000\r\nok\r\n"
-                        }
-                        _ => b"ok\r\n",
-                    };
-                    commands.push(cmd);
-                    reply
-                }
-                c => {
-                    line.push(c);
-                    continue;
-                }
-            };
-            if dev.write_all(reply).await.is_err() {
-                break;
-            }
-        }
-        commands
-    });
+    let (mut a, shared) = start_with(
+        &positive,
+        GrblSimConfig {
+            home_switch_at_negative_end: true,
+            force_set_origin: true,
+            start_mm: 10.0,
+            ..sim_cfg()
+        },
+    );
     let r = a.connect().await.unwrap();
     assert!(r.identity.contains("OPT:VZ"), "{}", r.identity);
-    let plan: Vec<Nm> = (0..31).map(|k| Nm(50_000_000 + k * 10_000)).collect();
-    assert!(a.check_targets(&plan).unwrap().is_empty());
-    let plan: Vec<Nm> = (0..31).map(|k| Nm(-10_000_000 + k * 10_000)).collect();
-    let e = a.check_targets(&plan).unwrap_err();
+    let before = shared.bytes_received();
+    let below: Vec<Nm> = (0..31).map(|k| Nm(-10_000_000 + k * 10_000)).collect();
+    let e = a.check_targets(&below).unwrap_err();
     crate::common::assert_outside_controller_travel(&e, Nm(0), Nm(100_000_000));
     assert!(e.to_string().contains("HOMING_FORCE_SET_ORIGIN"), "{e}");
-    drop(a);
-    let commands = board.await.unwrap();
-    assert!(
-        commands
-            .iter()
-            .all(|c| !c.starts_with("$J") && !c.starts_with("$H")),
-        "{commands:?}"
-    );
+    assert_eq!(e.class(), FaultClass::Fatal);
+    tokio::task::yield_now().await;
+    assert_eq!(shared.bytes_received(), before);
+
+    a.home().await.unwrap();
+    assert!(a.position_trusted());
+    let plan: Vec<Nm> = (0..31).map(|k| Nm(50_000_000 + k * 10_000)).collect();
+    assert!(a.check_targets(&plan).unwrap().is_empty());
+    for (k, &t) in plan.iter().enumerate() {
+        let arr = a.move_to(t).await.unwrap();
+        assert_eq!(arr.readback, t, "line {k}");
+        // Homing pulled the carriage 1 mm ($27) up off the switch, less the 0.05 mm of
+        // backlash the motor took up first; counter 0 is there.
+        assert_eq!(
+            shared.true_position_nm(),
+            t.0 + 1_000_000 - BACKLASH_NM,
+            "carriage at line {k}"
+        );
+    }
 }
 
 #[tokio::test(start_paused = true)]

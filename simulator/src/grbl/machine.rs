@@ -132,8 +132,12 @@ pub(super) struct Machine {
     settings: Settings,
     pub(super) clock: Clock,
     state: State,
-    /// Motor position, physical steps (0 = the switch trips).
+    /// Motor position, physical steps (0 = the switch trips, moving toward it with the
+    /// backlash taken up).
     motor: i64,
+    /// Which end of travel the home switch is at: +1 the positive end (travel below it), −1
+    /// the negative end (travel above it).
+    switch_side: i64,
     /// Motor minus GRBL's position counter.
     offset: i64,
     /// Carriage position, physical steps: within [motor, motor + backlash].
@@ -241,7 +245,12 @@ impl Machine {
             },
             state: State::Idle,
             motor,
-            offset: if homed { 0 } else { motor },
+            offset: 0,
+            switch_side: if cfg.home_switch_at_negative_end {
+                -1
+            } else {
+                1
+            },
             carriage: motor,
             backlash,
             mv: None,
@@ -267,6 +276,7 @@ impl Machine {
             settings,
             cfg,
         };
+        m.offset = if homed { m.home_offset() } else { motor };
         m.planned = m.counter();
         m.set_motor(motor);
         m.state = if !homed && m.settings.flag(22) {
@@ -315,7 +325,64 @@ impl Machine {
     }
 
     fn switch_pressed(&self) -> bool {
-        self.carriage >= 0
+        self.carriage * self.switch_side >= 0
+    }
+
+    /// Where the motor stands when the carriage trips the switch moving toward it: the
+    /// carriage is pushed by the motor moving up, and trails it by the backlash moving down.
+    fn trip_motor(&self) -> i64 {
+        if self.switch_side > 0 {
+            0
+        } else {
+            -self.backlash
+        }
+    }
+
+    /// How far the motor moves from `from` in direction `sign` until the carriage trips the
+    /// switch, steps; `None` when that direction leads away from it.
+    fn switch_distance(&self, from: i64, sign: i64) -> Option<f64> {
+        (sign == self.switch_side).then(|| ((self.trip_motor() - from) * sign).max(0) as f64)
+    }
+
+    /// The direction GRBL's homing cycle approaches the switch in: `$23` bit 1 (Y) set is
+    /// negative.
+    fn homing_sign(&self) -> i64 {
+        if (self.settings.get(23) as u32) & 2 != 0 {
+            -1
+        } else {
+            1
+        }
+    }
+
+    /// GRBL's counter once a homing cycle has ended (`limits_go_home`): 0 in a
+    /// `HOMING_FORCE_SET_ORIGIN` build; otherwise −pull-off, or −`$131` + pull-off for an
+    /// axis homing toward negative.
+    fn homed_counter(&self) -> i64 {
+        let spm = self.spm();
+        if self.cfg.force_set_origin {
+            0
+        } else if self.homing_sign() < 0 {
+            ((self.settings.get(27) - self.settings.get(131)) * spm).round() as i64
+        } else {
+            -(self.settings.get(27) * spm).round() as i64
+        }
+    }
+
+    /// Motor minus counter after a homing cycle that ended where it should: pulled off the
+    /// switch by `$27`.
+    fn home_offset(&self) -> i64 {
+        let pulloff = (self.settings.get(27) * self.spm()).round() as i64;
+        self.trip_motor() - self.switch_side * pulloff - self.homed_counter()
+    }
+
+    /// The machine space soft limits hold jog targets to, mm (`system_check_travel_limits`).
+    fn soft_travel_mm(&self) -> (f64, f64) {
+        let travel = self.settings.get(131);
+        if self.cfg.force_set_origin && self.homing_sign() < 0 {
+            (0.0, travel)
+        } else {
+            (-travel, 0.0)
+        }
     }
 
     fn set_motor(&mut self, m: i64) {
@@ -348,11 +415,11 @@ impl Machine {
         let d = q.target - self.counter();
         let (accel, speed) = self.rates(q.feed_mm_min);
         self.start_move(t, d.unsigned_abs() as f64, d.signum(), speed, accel);
-        // Moving up, the carriage is pushed by the motor: it trips the switch (a pin change)
-        // when the motor reaches physical 0.
-        if self.settings.flag(21) && d > 0 && !self.switch_pressed() {
+        // Moving toward the switch, the carriage trips it (a pin change) when the motor
+        // reaches the trip point.
+        let toward = self.switch_distance(self.motor, d.signum());
+        if let (true, false, Some(dist)) = (self.settings.flag(21), self.switch_pressed(), toward) {
             if let Some(mv) = self.mv.as_mut() {
-                let dist = (-mv.from) as f64;
                 if dist <= mv.stop_at {
                     mv.hard_limit_at = Some(mv.start + mv.prof.time_at(dist));
                 }
@@ -425,7 +492,7 @@ impl Machine {
         }
         if let Some(h) = self.hard_limit_time().filter(|&h| h <= t) {
             // Hard limit: the steppers are killed on the switch.
-            self.set_motor(0);
+            self.set_motor(self.trip_motor());
             self.mv = None;
             self.queue.clear();
             self.lock(h, 1);
@@ -483,21 +550,28 @@ impl Machine {
         let pulloff = self.settings.get(27) * spm;
         // Each phase starts with the counter at 0.
         self.offset = self.motor;
+        let toward = self.homing_sign();
         let (rate, dist, sign) = match phase {
-            HomePhase::Seek => (self.settings.get(25), 1.5 * self.settings.get(131) * spm, 1),
-            HomePhase::PullOff1 | HomePhase::PullOff2 => (self.settings.get(25), pulloff, -1),
-            HomePhase::Locate => (self.settings.get(24), 5.0 * pulloff, 1),
+            HomePhase::Seek => (
+                self.settings.get(25),
+                1.5 * self.settings.get(131) * spm,
+                toward,
+            ),
+            HomePhase::PullOff1 | HomePhase::PullOff2 => (self.settings.get(25), pulloff, -toward),
+            HomePhase::Locate => (self.settings.get(24), 5.0 * pulloff, toward),
         };
         let speed = rate / 60.0 * spm;
         self.start_move(t, dist.round(), sign, speed, accel);
-        if sign > 0 {
-            // An approach stops where the carriage trips the switch (at once if pressed).
+        // An approach stops when the pin reads the switch pressed: at once if it is, else
+        // where the carriage trips it. One away from the switch (`$23` not matching the
+        // machine) runs its whole distance.
+        if sign == toward {
             let trip = if self.switch_pressed() {
-                0.0
+                Some(0.0)
             } else {
-                (-self.motor) as f64
+                self.switch_distance(self.motor, sign)
             };
-            if let Some(mv) = self.mv.as_mut() {
+            if let (Some(trip), Some(mv)) = (trip, self.mv.as_mut()) {
                 mv.stop_at = mv.stop_at.min(trip);
             }
         }
@@ -528,8 +602,8 @@ impl Machine {
             HomePhase::PullOff1 => HomePhase::Locate,
             HomePhase::Locate => HomePhase::PullOff2,
             HomePhase::PullOff2 => {
-                // Machine zero is the switch: the axis stands at −pull-off.
-                let c = -(self.settings.get(27) * self.spm()).round() as i64;
+                // The counter is set as `limits_go_home` sets it.
+                let c = self.homed_counter();
                 self.offset = self.motor - c;
                 self.planned = c;
                 if h.status_requested {
@@ -820,8 +894,9 @@ impl Machine {
                 String::new()
             }
             [b'I'] => reply(&format!(
-                "[VER:1.1h.20190825:{}]\r\n[OPT:V,{PLANNER_BLOCKS},{RX_BUFFER}]\r\nok",
-                self.build_info
+                "[VER:1.1h.20190825:{}]\r\n[OPT:V{},{PLANNER_BLOCKS},{RX_BUFFER}]\r\nok",
+                self.build_info,
+                if self.cfg.force_set_origin { "Z" } else { "" }
             )),
             [b'I', b'=', info @ ..] => {
                 self.build_info = String::from_utf8_lossy(info).into_owned();
@@ -938,7 +1013,10 @@ impl Machine {
             yv * unit + wco
         };
         if self.error15_next
-            || (self.settings.flag(20) && (target_mm > 0.0 || target_mm < -self.settings.get(131)))
+            || (self.settings.flag(20) && {
+                let (lo, hi) = self.soft_travel_mm();
+                target_mm > hi || target_mm < lo
+            })
         {
             self.error15_next = false;
             return error(15); // jog target exceeds machine travel

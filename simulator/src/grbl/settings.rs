@@ -61,6 +61,15 @@ impl Settings {
             (20, b(c.soft_limits && c.homing_enabled)),
             (21, b(c.hard_limits)),
             (22, b(c.homing_enabled)),
+            // Bit 1: the Y axis homes toward negative.
+            (
+                23,
+                if c.home_switch_at_negative_end {
+                    2.0
+                } else {
+                    0.0
+                },
+            ),
             (24, c.homing_feed_mm_min),
             (25, c.homing_seek_mm_min),
             (26, f64::from(c.homing_debounce_ms)),
