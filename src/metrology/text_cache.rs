@@ -11,7 +11,9 @@
 //! such a cache, hence this one.
 //!
 //! The memo is per thread (each figure thread has its own) and bounded: it is emptied when it
-//! would hold more than [`MAX_PIXELS`] pixels, so a long-running daemon cannot grow it.
+//! would hold more than [`MAX_PIXELS`] pixels. A report's texts are mostly its own (the scan
+//! id, the values), so a thread that draws one report after another, as the daemon's does,
+//! [`forget`]s them once a report is written rather than holding them up to the bound.
 //!
 //! Layer 1 (drawing support): depends on `plotters-backend` only.
 
@@ -48,6 +50,19 @@ struct Memo {
 
 thread_local! {
     static MEMO: RefCell<Memo> = RefCell::new(Memo::default());
+}
+
+/// Empties this thread's memo and gives its memory back.
+pub fn forget() {
+    MEMO.with(|m| *m.borrow_mut() = Memo::default());
+}
+
+/// How many texts, and how many of their pixels, this thread remembers.
+pub fn remembered() -> (usize, usize) {
+    MEMO.with(|m| {
+        let m = m.borrow();
+        (m.texts.len(), m.pixels)
+    })
 }
 
 /// A bitmap backend (or any backend that draws text pixel by pixel) whose texts are

@@ -101,6 +101,15 @@ pub fn characterise(
     mut ctx: ReportContext,
     out: &Path,
 ) -> Result<ScanOutputs, ReportError> {
+    // The figures drawn on this thread leave their texts in its memo; the next report (the
+    // daemon's next scan) shares few of them, so they are forgotten however this returns.
+    struct ForgetTexts;
+    impl Drop for ForgetTexts {
+        fn drop(&mut self) {
+            crate::metrology::text_cache::forget();
+        }
+    }
+    let _forget = ForgetTexts;
     let t_all = Instant::now();
     let mut timings = Timings::default();
     let (rows, cols) = (grid.rows(), grid.cols);

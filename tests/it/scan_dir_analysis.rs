@@ -763,6 +763,9 @@ fn characterise_scan_reports_the_fit_it_describes_and_returns_the_paths() {
         ..ScanAnalysisOptions::default()
     };
     let out = characterise_scan(&scan, &options).unwrap();
+    // The figures drawn on this thread leave no texts behind for the next report: a daemon
+    // characterising scan after scan holds no memory for the ones before.
+    assert_eq!(surfscan::metrology::text_cache::remembered(), (0, 0));
     assert_eq!(out.report_json, scan.join("report.json"));
     assert_eq!(out.lines_used, (0..7).collect::<Vec<u32>>());
     assert!(out.incomplete_lines.is_empty());
