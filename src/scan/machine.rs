@@ -19,7 +19,8 @@
 //!   while suspended ("instrument unavailable"); it costs no attempt;
 //! - **transient** fault (NG code, timeout, garbage, busy, a line that a re-trace may fix):
 //!   retried with backoff while the time budget lasts, which runs from the first such fault
-//!   and starts again when a line commits; status and journal say "suspended: instrument
+//!   and starts again when a line commits (a device's absence meanwhile is not spent from
+//!   it: that suspension has no time limit); status and journal say "suspended: instrument
 //!   busy since …"; an attempt is counted only when a trace was really started; an exhausted
 //!   budget fails the scan naming the last fault;
 //! - **position lost**: re-home, then re-trace, at most `max-line-attempts` times a line;
@@ -541,6 +542,9 @@ struct Suspension {
 struct Budget {
     since: Now,
     last: String,
+    /// Time since `since` that a device was absent: a suspension without a time limit,
+    /// so not spent from the budget.
+    absent: Duration,
 }
 
 /// The session core.
@@ -896,7 +900,11 @@ impl Machine {
         }
         if let Some(s) = &self.suspension {
             if s.cause == Cause::Absent(device) {
-                let secs = (now.mono - s.since.mono).as_secs_f64();
+                let absent = now.mono.saturating_duration_since(s.since.mono);
+                if let Some(b) = &mut self.budget {
+                    b.absent += absent;
+                }
+                let secs = absent.as_secs_f64();
                 out.push(self.note(
                     format!("{device} back after {secs:.0} s; scan continues"),
                     Some(device),
@@ -1025,10 +1033,14 @@ impl Machine {
         let budget = self.budget.get_or_insert(Budget {
             since: now,
             last: String::new(),
+            absent: Duration::ZERO,
         });
         budget.last = why.clone();
         let since = budget.since;
-        let spent = now.mono.saturating_duration_since(since.mono);
+        let spent = now
+            .mono
+            .saturating_duration_since(since.mono)
+            .saturating_sub(budget.absent);
         if spent >= self.policy.transient_budget {
             return self.fail(
                 FailReason::BudgetExhausted {

@@ -455,6 +455,59 @@ fn the_budget_starts_again_when_a_line_commits() {
     ));
 }
 
+/// A device unplugged for longer than the budget, after a transient fault on the same line:
+/// the absence has no time limit, so the first transient fault after the reconnection is
+/// retried with what was left of the budget, not taken as the budget spent.
+#[test]
+fn time_a_device_was_absent_is_not_spent_from_the_transient_budget() {
+    let mut r = Rig::started();
+    r.up_to_trace();
+    let a = r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Transient,
+        "NG007 over-range",
+        false,
+    ));
+    assert_eq!(reaction(&a), Reaction::RetryAfter(Duration::from_secs(1)));
+    r.wait(Duration::from_secs(1));
+    r.feed(Event::TimerFired);
+    r.up_to_trace();
+    // Unplugged mid-trace, back after two hours (the budget is 60 s).
+    let a = r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Absent,
+        "EOF",
+        true,
+    ));
+    assert_eq!(reaction(&a), Reaction::Reopen(Device::Instrument));
+    r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Absent,
+        "no such port",
+        false,
+    ));
+    r.wait(Duration::from_secs(7200));
+    r.feed(Event::TimerFired);
+    let a = r.feed(opened(Device::Instrument));
+    assert_eq!(effect(&a), Some(&Action::EnsureIdle));
+    r.up_to_trace();
+    let a = r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Transient,
+        "NG007 over-range",
+        false,
+    ));
+    assert!(stop_of(&a).is_none(), "the scan goes on: {a:?}");
+    assert!(matches!(reaction(&a), Reaction::RetryAfter(_)), "{a:?}");
+    let s = last_status(&a).expect("status");
+    assert!(
+        s.reason
+            .as_deref()
+            .is_some_and(|r| r.contains("budget left 59 s")),
+        "{s:?}"
+    );
+}
+
 #[test]
 fn an_attempt_counts_only_when_a_trace_was_really_started() {
     let mut r = Rig::started();
