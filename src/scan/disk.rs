@@ -1,7 +1,9 @@
 //! The disk pre-flight: how many bytes a planned scan writes, and whether the output
-//! directory's file system can hold them before the first line is traced.
+//! directory's file system can hold them before the first line is traced; and, while a full
+//! disk suspends the scan, the space its own earlier outputs take.
 //!
-//! Layer 3 (session): depends on [`super::store_error`] and `statvfs`.
+//! Layer 3 (session): depends on [`super::store_error`], the file names of [`super::store`]
+//! and [`super::journal`], and `statvfs`.
 
 use std::io;
 use std::path::Path;
@@ -61,6 +63,37 @@ pub fn free_bytes(dir: &Path) -> Result<u64, StoreError> {
     Ok(blocks.saturating_mul(size))
 }
 
+/// Bytes of the files in scan directory `scan_dir` besides its lines (`lines/`,
+/// `quarantine/`) and its journal: the surface, report, plots and X3P files of an earlier try
+/// at the outputs, which the next try replaces. Files that cannot be read count 0.
+pub fn outputs_bytes(scan_dir: &Path) -> u64 {
+    fn walk(dir: &Path, top: bool) -> u64 {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return 0;
+        };
+        let mut n = 0u64;
+        for e in entries.flatten() {
+            let name = e.file_name();
+            if top
+                && matches!(
+                    name.to_str(),
+                    Some("lines" | super::store::QUARANTINE_DIR | super::journal::JOURNAL_FILE)
+                )
+            {
+                continue;
+            }
+            let Ok(t) = e.file_type() else { continue };
+            if t.is_dir() {
+                n = n.saturating_add(walk(&e.path(), false));
+            } else if t.is_file() {
+                n = n.saturating_add(e.metadata().map_or(0, |m| m.len()));
+            }
+        }
+        n
+    }
+    walk(scan_dir, true)
+}
+
 /// Refuses (with [`StoreError::DiskTooSmall`]) when `available_bytes` cannot hold
 /// `needed_bytes`; pure so that it can be tested without filling a disk.
 pub fn check_space(path: &Path, needed_bytes: u64, available_bytes: u64) -> Result<(), StoreError> {
@@ -118,5 +151,22 @@ mod tests {
             remaining_scan_bytes(31, 31, 8000),
             31 * 8000 * 125 + 4 * 1024 * 1024
         );
+    }
+
+    #[test]
+    fn the_outputs_are_what_the_scan_directory_holds_besides_lines_and_journal() {
+        let d = tempfile::tempdir().unwrap();
+        let dir = d.path();
+        std::fs::create_dir_all(dir.join("lines")).unwrap();
+        std::fs::create_dir_all(dir.join("quarantine")).unwrap();
+        std::fs::create_dir_all(dir.join("rk")).unwrap();
+        std::fs::write(dir.join("lines/0000.csv"), [0u8; 1000]).unwrap();
+        std::fs::write(dir.join("quarantine/0001.csv"), [0u8; 1000]).unwrap();
+        std::fs::write(dir.join("journal.jsonl"), [0u8; 1000]).unwrap();
+        assert_eq!(outputs_bytes(dir), 0);
+        std::fs::write(dir.join("surface.igs"), [0u8; 300]).unwrap();
+        std::fs::write(dir.join("rk/0001.png"), [0u8; 20]).unwrap();
+        assert_eq!(outputs_bytes(dir), 320);
+        assert_eq!(outputs_bytes(&dir.join("absent")), 0);
     }
 }

@@ -8,7 +8,7 @@
 
 use super::channels::Control;
 use super::device_ops::Held;
-use super::disk::free_bytes;
+use super::disk::{free_bytes, outputs_bytes};
 use super::journal::StopStatus;
 use super::ledger::Ledger;
 use super::line::{LineIdentity, LineMeta, StoredLine};
@@ -197,7 +197,11 @@ impl Books<'_> {
                     tracing::warn!("cannot read the free space of {}: {e}", dir.display());
                     0
                 });
-                Event::SpaceChecked { free_bytes }
+                let outputs_bytes = self.ledger.as_ref().map_or(0, |l| outputs_bytes(&l.dir));
+                Event::SpaceChecked {
+                    free_bytes,
+                    outputs_bytes,
+                }
             }
             other => {
                 tracing::error!("internal: {other:?} performed as a disk effect");

@@ -393,6 +393,9 @@ pub enum Event {
     SpaceChecked {
         /// Bytes free (0 when it could not be read).
         free_bytes: u64,
+        /// Bytes the scan's own outputs already take (an earlier try's surface, report and
+        /// plots, which the next try replaces); 0 before the outputs.
+        outputs_bytes: u64,
     },
     /// The timer set by [`Action::SetTimer`] fired.
     TimerFired,
@@ -808,9 +811,13 @@ impl Machine {
                 self.stop(End::Success { summary }, out)
             }
             (Doing::Outputs, Event::StorageFailed(s)) => self.storage_failed(s, true, now, out),
-            (Doing::CheckSpace, Event::SpaceChecked { free_bytes }) => {
-                self.space_checked(free_bytes, now, out)
-            }
+            (
+                Doing::CheckSpace,
+                Event::SpaceChecked {
+                    free_bytes,
+                    outputs_bytes,
+                },
+            ) => self.space_checked(free_bytes, outputs_bytes, now, out),
             (Doing::Wait(after), Event::TimerFired) => match after {
                 AfterWait::Open(d) => self.effect(out, Doing::Open(d)),
                 AfterWait::Retry => self.next_step(now, out),
@@ -1148,7 +1155,7 @@ impl Machine {
         self.wait(out, wait, AfterWait::CheckSpace);
     }
 
-    fn space_checked(&mut self, free: u64, now: Now, out: &mut Vec<Action>) {
+    fn space_checked(&mut self, free: u64, outputs_bytes: u64, now: Now, out: &mut Vec<Action>) {
         let Some(Suspension {
             cause:
                 Cause::DiskFull {
@@ -1161,7 +1168,14 @@ impl Machine {
         else {
             return;
         };
-        if free < needed_bytes {
+        // The outputs' estimate covers the whole surface and report: what an earlier try
+        // already wrote of them is space they keep when written again.
+        let available = if outputs {
+            free.saturating_add(outputs_bytes)
+        } else {
+            free
+        };
+        if available < needed_bytes {
             let next = self.policy.backoff.next(wait);
             if let Some(s) = &mut self.suspension {
                 s.wait = next;

@@ -748,10 +748,14 @@ fn a_full_disk_suspends_checks_space_with_backoff_and_commits_the_held_line() {
     // Still too little: the next check waits longer.
     let a = r.feed(Event::SpaceChecked {
         free_bytes: need - 1,
+        outputs_bytes: 0,
     });
     assert_eq!(effect(&a), Some(&Action::SetTimer(Duration::from_secs(2))));
     r.feed(Event::TimerFired);
-    let a = r.feed(Event::SpaceChecked { free_bytes: need });
+    let a = r.feed(Event::SpaceChecked {
+        free_bytes: need,
+        outputs_bytes: 0,
+    });
     assert_eq!(
         effect(&a),
         Some(&Action::Commit {
@@ -780,8 +784,59 @@ fn a_full_disk_while_writing_the_outputs_waits_and_writes_them_again() {
     r.feed(Event::TimerFired);
     let a = r.feed(Event::SpaceChecked {
         free_bytes: u64::MAX,
+        outputs_bytes: 0,
     });
     assert_eq!(effect(&a), Some(&Action::WriteOutputs));
+}
+
+/// The outputs' estimate is the whole surface and report; an earlier try that filled the
+/// disk already wrote part of them, and that space is theirs again when they are written
+/// anew. Otherwise a disk that held the scan at its start could never hold enough again.
+#[test]
+fn the_space_an_earlier_try_at_the_outputs_took_counts_as_theirs() {
+    let mut r = Rig::started();
+    for _ in 0..LINES {
+        r.line_ok();
+    }
+    r.feed(Event::StorageFailed(StorageFailure {
+        disk_full: true,
+        message: "report.json: No space left on device".into(),
+    }));
+    let need = remaining_scan_bytes(LINES, LINES, 100);
+    r.feed(Event::TimerFired);
+    let a = r.feed(Event::SpaceChecked {
+        free_bytes: need / 4,
+        outputs_bytes: need / 2,
+    });
+    assert!(
+        matches!(effect(&a), Some(Action::SetTimer(_))),
+        "still too little: {a:?}"
+    );
+    r.feed(Event::TimerFired);
+    let a = r.feed(Event::SpaceChecked {
+        free_bytes: need / 2,
+        outputs_bytes: need / 2,
+    });
+    assert_eq!(effect(&a), Some(&Action::WriteOutputs));
+}
+
+/// While lines are still to be traced there are no outputs to count.
+#[test]
+fn a_line_held_for_space_waits_for_the_free_space_alone() {
+    let mut r = Rig::started();
+    r.up_to_trace();
+    r.feed(Event::Traced(good_line()));
+    r.feed(Event::StorageFailed(StorageFailure {
+        disk_full: true,
+        message: "write lines/0000.csv: No space left on device".into(),
+    }));
+    let need = remaining_scan_bytes(LINES, 0, 100);
+    r.feed(Event::TimerFired);
+    let a = r.feed(Event::SpaceChecked {
+        free_bytes: need - 1,
+        outputs_bytes: need,
+    });
+    assert!(matches!(effect(&a), Some(Action::SetTimer(_))), "{a:?}");
 }
 
 #[test]
