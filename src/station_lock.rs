@@ -169,6 +169,11 @@ fn read_all(mut file: &File) -> String {
     s
 }
 
+/// True for the errors of a full file system or an exhausted quota.
+fn is_disk_full(e: &io::Error) -> bool {
+    matches!(e.raw_os_error(), Some(libc::ENOSPC) | Some(libc::EDQUOT))
+}
+
 fn rewrite(held: &Held, content: &str) -> io::Result<()> {
     held.file.write_all_at(content.as_bytes(), 0)?;
     held.file.set_len(content.len() as u64)?;
@@ -244,11 +249,18 @@ impl StationLock {
             command: command.to_owned(),
             scan_id: None,
         };
-        rewrite(&output, &holder_json(&holder)).map_err(io_err(
-            "write the lock file",
-            &path,
-            OUTPUT_HINT,
-        ))?;
+        // The holder record only names who holds the lock; the flock is the lock. A full
+        // disk (a scan suspended for space, then a restart) must not keep the scan from
+        // resuming, so the record then stays empty until it can be written.
+        match rewrite(&output, &holder_json(&holder)) {
+            Ok(()) => {}
+            Err(e) if is_disk_full(&e) => tracing::warn!(
+                path = %path.display(),
+                error = %e,
+                "the disk is full: the station lock is held without naming its holder"
+            ),
+            Err(e) => return Err(io_err("write the lock file", &path, OUTPUT_HINT)(e)),
+        }
         let mut lock = StationLock {
             output,
             devices: Vec::new(),

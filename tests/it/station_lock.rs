@@ -1,7 +1,8 @@
 //! One process per station, end to end: a second `surfscan scan` or `surfscan daemon` on a
 //! station that another process drives exits 69 naming that process's pid and scan id, touches
-//! nothing, and the first finishes its scan with every line once. The tests run as root, as
-//! on a station, where the serial port's exclusive mode would not have stopped the second.
+//! nothing, and the first finishes its scan with every line once; a full disk does not keep
+//! the lock from being taken. The tests run as root, as on a station, where the serial
+//! port's exclusive mode would not have stopped the second.
 
 use crate::common::*;
 use std::time::Duration;
@@ -129,4 +130,54 @@ async fn leftovers_of_a_killed_write_are_removed_at_start_and_named_in_the_log()
         "{stderr}"
     );
     rig.shutdown().await;
+}
+
+/// A scan suspended because its output directory's file system is full, then a restart
+/// (power loss, the service restarted): the station lock is taken on the full disk, so the
+/// scan can resume and wait for space instead of the process exiting 74. The lock still
+/// refuses a second process.
+#[test]
+fn the_station_lock_is_taken_on_a_full_disk_and_still_refuses_a_second_process() {
+    use surfscan::station_lock::{LockError, StationLock};
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    std::fs::create_dir_all(&out).unwrap();
+    let o = std::process::Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=64k", "tmpfs"])
+        .arg(&out)
+        .output()
+        .expect("run mount");
+    assert!(
+        o.status.success(),
+        "this test mounts a small tmpfs to fill it for real and needs root (as .ci/run runs): {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    struct Unmount<'a>(&'a std::path::Path);
+    impl Drop for Unmount<'_> {
+        fn drop(&mut self) {
+            let _ = std::process::Command::new("umount")
+                .arg("-l")
+                .arg(self.0)
+                .status();
+        }
+    }
+    let _unmount = Unmount(&out);
+    {
+        use std::io::Write;
+        let mut f = std::fs::File::create(out.join("ballast")).unwrap();
+        let chunk = vec![0u8; 4096];
+        while f.write(&chunk).is_ok_and(|n| n > 0) {}
+    }
+    let locks = tmp.path().join("locks");
+    std::fs::create_dir_all(&locks).unwrap();
+    let first = StationLock::acquire("daemon", &out, &[], &locks);
+    let first = match first {
+        Ok(l) => l,
+        Err(e) => panic!("the lock is refused on a full disk: {e}"),
+    };
+    match StationLock::acquire("scan", &out, &[], &locks) {
+        Err(LockError::Held { .. }) => {}
+        other => panic!("a second process must be refused: {other:?}"),
+    }
+    drop(first);
 }
