@@ -20,6 +20,16 @@ pub enum StartMode {
     New,
 }
 
+/// The operator's pause as the journal's interruption records mark it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PauseMark {
+    /// The scan paused after a line (nothing moves until it is resumed).
+    Paused,
+    /// The paused scan was resumed.
+    Resumed,
+}
+
 /// A command for the runner.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum OperatorCommand {

@@ -30,7 +30,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::profile::Conditions;
 
-use super::command::Peer;
+use super::command::{PauseMark, Peer};
 use super::faults::{StorageFaults, WriteStep};
 use super::line::LineIdentity;
 use super::plan::Plan;
@@ -160,6 +160,10 @@ pub struct InterruptionRecord {
     /// Who asked, for an operator's command (pause, resume, abort, continue, start over).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub peer: Option<Peer>,
+    /// Set on the record of a pause taking effect and on that of the resumption, so that a
+    /// scan paused when its process stopped is reopened paused.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pause: Option<PauseMark>,
 }
 
 /// A committed line whose heights file no longer matches the SHA-256 of its line record:
@@ -527,7 +531,36 @@ pub struct ResumeState {
     pub stop: Option<StopRecord>,
 }
 
+/// Whether the last pause mark among `interruptions` is a pause (see
+/// [`ResumeState::paused`]).
+fn pause_in_force(interruptions: &[InterruptionRecord]) -> bool {
+    let mut paused = false;
+    for x in interruptions {
+        let mark = x.pause.or_else(|| {
+            if x.reason.starts_with("paused by the operator after line") {
+                Some(PauseMark::Paused)
+            } else if x.reason.starts_with("resumed by the operator") {
+                Some(PauseMark::Resumed)
+            } else {
+                None
+            }
+        });
+        match mark {
+            Some(PauseMark::Paused) => paused = true,
+            Some(PauseMark::Resumed) => paused = false,
+            None => {}
+        }
+    }
+    paused
+}
+
 impl ResumeState {
+    /// Whether the operator's pause was in force when the journal ends: the last pause mark
+    /// says so. Journals written before the marks existed are read by their reasons.
+    pub fn paused(&self) -> bool {
+        pause_in_force(&self.interruptions)
+    }
+
     /// Derives the state from a record sequence; `path` names the journal in errors.
     pub fn from_records(path: &Path, records: &[Record]) -> Result<ResumeState, JournalError> {
         let mut it = records.iter();
@@ -716,6 +749,42 @@ pub fn find_unfinished(output_dir: &Path) -> Result<Vec<PathBuf>, JournalError> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_last_pause_mark_says_whether_the_scan_was_paused() {
+        let rec = |reason: &str, pause: Option<PauseMark>| InterruptionRecord {
+            reason: reason.into(),
+            device: None,
+            line: Some(2),
+            time: "2026-12-02T03:22:45Z".parse().unwrap(),
+            peer: None,
+            pause,
+        };
+        let paused = rec(
+            "paused by the operator after line 3",
+            Some(PauseMark::Paused),
+        );
+        let resumed = rec("resumed by the operator (uid 0)", Some(PauseMark::Resumed));
+        let shutdown = rec("shutdown: current line abandoned", None);
+        assert!(!pause_in_force(&[]));
+        assert!(pause_in_force(&[paused.clone(), shutdown.clone()]));
+        assert!(!pause_in_force(&[paused.clone(), resumed.clone()]));
+        assert!(pause_in_force(&[paused.clone(), resumed, paused.clone()]));
+        // Journals written before the marks: read by the reasons.
+        let old_paused = rec("paused by the operator after line 3", None);
+        let old_resumed = rec("resumed by the operator (uid 0 gid 0 pid 7)", None);
+        assert!(pause_in_force(&[old_paused.clone(), shutdown]));
+        assert!(!pause_in_force(&[old_paused, old_resumed]));
+        // The mark is written only where it is set, and read back.
+        let line =
+            String::from_utf8(encode_record(&Record::Interruption(paused)).unwrap()).unwrap();
+        assert!(line.contains(r#""pause":"paused""#), "{line}");
+        let (back, _) = decode_line(line.as_bytes()).unwrap();
+        assert!(matches!(back, Record::Interruption(x) if x.pause == Some(PauseMark::Paused)));
+        let line = String::from_utf8(encode_record(&Record::Interruption(rec("x", None))).unwrap())
+            .unwrap();
+        assert!(!line.contains("pause"), "{line}");
+    }
 
     #[test]
     fn empty_and_unterminated_journals() {

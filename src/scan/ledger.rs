@@ -82,6 +82,7 @@ impl Ledger {
             line: n.line,
             time: Utc::now(),
             peer: n.peer,
+            pause: n.pause,
         });
         self.record_unrecorded();
     }
@@ -306,6 +307,7 @@ mod tests {
             device: None,
             line: Some(1),
             peer: None,
+            pause: None,
         }
     }
 

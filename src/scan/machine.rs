@@ -38,7 +38,7 @@
 //! pure size estimate, and [`crate::devices`]'s fault classes. No tokio, no files, no
 //! clock reads: time is an input.
 
-use super::command::{OperatorCommand, Peer};
+use super::command::{OperatorCommand, PauseMark, Peer};
 use super::disk::remaining_scan_bytes;
 use super::event::ScanEventKind;
 use super::metrics::ScanMetrics;
@@ -97,6 +97,9 @@ pub struct Resumed {
     pub conditions: Conditions,
     /// Estimated points per line, for the disk-space need.
     pub points_per_line: u64,
+    /// The operator's pause was in force when the scan's process stopped: the scan is
+    /// reopened paused, and nothing moves until it is resumed.
+    pub paused: bool,
 }
 
 /// A traced line as the machine checks it (the heights stay with the runner).
@@ -336,6 +339,8 @@ pub struct Note {
     pub line: Option<u32>,
     /// The operator's connection, for commands.
     pub peer: Option<Peer>,
+    /// The pause taking effect, or its resumption.
+    pub pause: Option<PauseMark>,
 }
 
 /// An event of the session.
@@ -568,6 +573,8 @@ pub struct Machine {
     stage_open: bool,
     need_home: bool,
     pause_requested: bool,
+    /// A resumed scan that was paused when its process stopped: it starts paused.
+    paused_at_start: bool,
     /// Traces started for the current line.
     traces: u32,
     /// Re-homes after a lost position on the current line.
@@ -620,6 +627,7 @@ impl Machine {
             stage_open: false,
             need_home: false,
             pause_requested: false,
+            paused_at_start: false,
             traces: 0,
             rehomes: 0,
             line_began: None,
@@ -645,6 +653,7 @@ impl Machine {
             m.pitch_x_mm = r.pitch_x_mm;
             m.conditions = Some(r.conditions);
             m.points_per_line = r.points_per_line;
+            m.paused_at_start = r.paused;
             m.metrics.scan_id = r.scan_id.clone();
             m.metrics.lines_done = m.done();
             m.status.scan_id = Some(r.scan_id);
@@ -677,7 +686,17 @@ impl Machine {
     /// scan stands.
     pub fn start(&mut self, now: Now) -> Vec<Action> {
         let mut out = Vec::new();
-        if self.created {
+        if self.created && self.paused_at_start {
+            // Paused by the operator before the process stopped: it stays paused, with no
+            // device opened, until the operator resumes it.
+            self.status.state = State::Paused;
+            self.status.reason = Some(
+                "paused by the operator before a restart; `surfscan resume` continues it"
+                    .to_owned(),
+            );
+            self.publish_progress(&mut out, None);
+            self.doing = Doing::Paused;
+        } else if self.created {
             self.publish_progress(&mut out, None);
             self.next_step(now, &mut out);
         } else {
@@ -1255,6 +1274,7 @@ impl Machine {
                 device: None,
                 line: Some(k),
                 peer: None,
+                pause: Some(PauseMark::Paused),
             }));
             self.status.state = State::Paused;
             self.status.reason = Some(reason);
@@ -1316,6 +1336,7 @@ impl Machine {
                 device: None,
                 line,
                 peer: Some(peer),
+                pause: None,
             })
         };
         if self.ending.is_some() {
@@ -1341,10 +1362,13 @@ impl Machine {
             }
             OperatorCommand::Resume if paused => {
                 out.push(Action::Reply(Ok(format!("{scan} resumes"))));
-                out.push(note(
-                    format!("resumed by the operator ({by})"),
-                    Some(self.line),
-                ));
+                out.push(Action::Record(Note {
+                    reason: format!("resumed by the operator ({by})"),
+                    device: None,
+                    line: Some(self.line),
+                    peer: Some(peer),
+                    pause: Some(PauseMark::Resumed),
+                }));
                 self.status.state = State::Scanning;
                 self.status.reason = None;
                 self.next_step(now, out);
@@ -1459,6 +1483,7 @@ impl Machine {
             device,
             line: self.current(),
             peer: None,
+            pause: None,
         })
     }
 

@@ -240,6 +240,7 @@ pub(super) fn reopen(
         pitch_x_mm,
         conditions: state.start.conditions.clone(),
         points_per_line: columns.map_or(LONGEST_PROFILE_POINTS, |c| c as u64),
+        paused: state.paused(),
     };
     Ok(Reopened {
         ledger,

@@ -13,7 +13,7 @@
 //! [`super::channels`], and the session's own settings, status, command and outcome types.
 
 use super::channels::Control;
-use super::command::{OperatorRequest, Peer};
+use super::command::{OperatorRequest, PauseMark, Peer};
 use super::device_ops::{is_device_effect, Hands};
 use super::disk_ops::Books;
 use super::ledger::Ledger;
@@ -120,11 +120,26 @@ fn reopen(
 ) -> Result<(super::machine::Resumed, Ledger), (String, FailKind)> {
     let r =
         opening::reopen(settings, dir, after_failure).map_err(|reason| (reason, FailKind::Scan))?;
-    let mut ledger = r.ledger;
-    let note = match &r.failed {
+    let (mut ledger, mut resumed) = (r.ledger, r.resumed);
+    let mut note = match &r.failed {
         Some(reason) => format!("{}; it had failed: {reason}", r.note),
         None => r.note.clone(),
     };
+    // A scan the operator had paused stays paused when the daemon reopens it by itself at
+    // start-up (no peer); an operator's own start (`surfscan scan`, `surfscan start`) is the
+    // resumption.
+    let mut pause = None;
+    if resumed.paused {
+        if peer.is_some() {
+            resumed.paused = false;
+            pause = Some(PauseMark::Resumed);
+            note.push_str("; it had been paused by the operator, and this start resumes it");
+        } else {
+            note.push_str(
+                "; it had been paused by the operator and stays paused until `surfscan resume`",
+            );
+        }
+    }
     if r.failed.is_some() {
         ledger
             .reopen_failed(peer)
@@ -135,8 +150,9 @@ fn reopen(
         device: None,
         line: None,
         peer,
+        pause,
     });
-    Ok((r.resumed, ledger))
+    Ok((resumed, ledger))
 }
 
 fn refused(ctl: &Control, reason: String, kind: FailKind) -> Outcome {
@@ -198,6 +214,7 @@ async fn drive<S: Station>(
                             device: None,
                             line: None,
                             peer: None,
+                            pause: None,
                         });
                     }
                 }

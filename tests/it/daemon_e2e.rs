@@ -414,6 +414,65 @@ async fn sigterm_mid_scan_records_an_interruption_and_the_restart_resumes_by_its
     r.sim.shutdown().await;
 }
 
+/// A scan the operator paused (to take the specimen off, say) and a restart of the daemon:
+/// the restart reopens it paused, nothing is traced or moved, until the operator resumes it;
+/// then it completes with every line once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_paused_scan_stays_paused_across_a_restart_until_resumed() {
+    let r = rig().await;
+    let mut d = spawn_daemon(&r);
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    client(&r)
+        .await
+        .request(&Request::Start {
+            specimen: "paused".into(),
+            operator: String::new(),
+            notes: String::new(),
+            mode: StartMode::Auto,
+        })
+        .await
+        .unwrap();
+    wait_status(&r, "scanning", |s| s.state == State::Scanning).await;
+    client(&r).await.request(&Request::Pause).await.unwrap();
+    let paused = wait_status(&r, "paused", |s| s.state == State::Paused).await;
+    sigterm(&d);
+    assert!(wait_exit(&mut d).success());
+    let dir = scan_dir(&r);
+    let done = line_indices(&records(&dir));
+    assert_eq!(done.len() as u32, paused.lines_done);
+
+    let mut d = spawn_daemon(&r);
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    let s = wait_status(&r, "paused after the restart", |s| s.state == State::Paused).await;
+    assert!(
+        s.reason
+            .as_deref()
+            .is_some_and(|r| r.contains("surfscan resume")),
+        "{s:?}"
+    );
+    tokio::time::sleep(Duration::from_millis(800)).await;
+    assert_eq!(status(&r).await.state, State::Paused);
+    assert_eq!(
+        line_indices(&records(&dir)),
+        done,
+        "nothing traced while paused"
+    );
+    assert!(records(&dir).iter().any(|r| matches!(r,
+        Record::Interruption(i) if i.reason.contains("stays paused until `surfscan resume`"))));
+
+    client(&r).await.request(&Request::Resume).await.unwrap();
+    wait_status(&r, "complete after resume", |s| {
+        s.last_stop
+            .as_ref()
+            .is_some_and(|l| l.status == Ending::Success)
+    })
+    .await;
+    assert_eq!(line_indices(&records(&dir)), (0..LINES).collect::<Vec<_>>());
+    sigterm(&d);
+    assert!(wait_exit(&mut d).success());
+    r.sim.shutdown().await;
+}
+
 #[test]
 fn a_bad_config_exits_78_naming_the_key() {
     let dir = tempfile::tempdir().unwrap();

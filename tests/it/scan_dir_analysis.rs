@@ -877,6 +877,7 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
                 line,
                 time: t,
                 peer: None,
+                pause: None,
             }))
             .unwrap();
     }

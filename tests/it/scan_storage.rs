@@ -322,6 +322,7 @@ fn journal_bytes_with_records(dir: &Path) -> (Vec<u8>, usize) {
         line: Some(2),
         time: Utc.with_ymd_and_hms(2026, 1, 2, 4, 0, 0).unwrap(),
         peer: None,
+        pause: None,
     }))
     .unwrap();
     (
@@ -435,6 +436,7 @@ fn resume_state_and_unfinished_scan_discovery() {
         line: Some(3),
         time: Utc::now(),
         peer: None,
+        pause: None,
     }))
     .unwrap();
     // a directory without a journal is ignored

@@ -869,12 +869,59 @@ fn a_scan_with_every_line_committed_writes_its_outputs_without_opening_devices()
             pitch_x_mm: Some(0.0005),
             conditions: Conditions::default(),
             points_per_line: 100,
+            paused: false,
         },
     );
     let mut r = Rig::with(m);
     let a = r.start();
     assert_eq!(effect(&a), Some(&Action::WriteOutputs));
     assert!(!a.iter().any(|a| matches!(a, Action::Open(_))));
+}
+
+/// A scan the operator paused, reopened after a restart: it stays paused, with no device
+/// opened and nothing moved, until the operator resumes it; then it goes on at its first
+/// missing line and the resumption is marked in the journal.
+#[test]
+fn a_scan_paused_when_its_process_stopped_is_reopened_paused() {
+    let m = Machine::resumed(
+        plan(),
+        policy(),
+        Status::idle(),
+        Resumed {
+            scan_id: "S".into(),
+            dir: "/out/S".into(),
+            committed: 2,
+            ahead: Default::default(),
+            columns: Some(100),
+            pitch_x_mm: Some(0.0005),
+            conditions: Conditions::default(),
+            points_per_line: 100,
+            paused: true,
+        },
+    );
+    let mut r = Rig::with(m);
+    let a = r.start();
+    assert_eq!(effect(&a), None, "nothing is done while paused: {a:?}");
+    assert!(!a.iter().any(|a| matches!(a, Action::Open(_))), "{a:?}");
+    let s = last_status(&a).expect("status");
+    assert_eq!(s.state, State::Paused);
+    assert!(s
+        .reason
+        .as_deref()
+        .is_some_and(|r| r.contains("surfscan resume")));
+    let a = r.feed(Event::Command {
+        command: OperatorCommand::Resume,
+        peer: peer(),
+    });
+    assert_eq!(effect(&a), Some(&Action::Open(Device::Instrument)), "{a:?}");
+    assert!(
+        a.iter().any(|a| matches!(
+            a,
+            Action::Record(Note { pause: Some(PauseMark::Resumed), reason, .. })
+                if reason.starts_with("resumed by the operator")
+        )),
+        "{a:?}"
+    );
 }
 
 #[test]
@@ -892,6 +939,7 @@ fn a_resumed_scan_reopens_its_devices_and_goes_on_at_its_first_missing_line() {
             pitch_x_mm: Some(0.0005),
             conditions: Conditions::default(),
             points_per_line: 100,
+            paused: false,
         },
     );
     let mut r = Rig::with(m);
@@ -934,6 +982,17 @@ fn pause_waits_for_the_line_on_disk_and_resume_goes_on() {
     let a = r.feed(Event::Pushed);
     assert_eq!(effect(&a), None, "paused: nothing in flight");
     assert_eq!(last_status(&a).map(|s| s.state), Some(State::Paused));
+    // The journal marks the pause, so that a restart reopens the scan paused.
+    assert!(
+        a.iter().any(|a| matches!(
+            a,
+            Action::Record(Note {
+                pause: Some(PauseMark::Paused),
+                ..
+            })
+        )),
+        "{a:?}"
+    );
     let a = r.feed(Event::Command {
         command: OperatorCommand::Pause,
         peer: peer(),
@@ -1074,6 +1133,7 @@ fn a_line_moved_aside_at_resume_is_traced_again_and_the_lines_committed_after_it
                 pitch_x_mm: Some(0.0005),
                 conditions: Conditions::default(),
                 points_per_line: 100,
+                paused: false,
             },
         )
     };
