@@ -33,10 +33,18 @@ pub struct Split {
 }
 
 /// The sampled, truncated (±`cutoff_mm`) and unnormalised Gaussian weights w_k for offsets
-/// k = 0, 1, …, half (the kernel is symmetric).
-fn weights(cutoff_mm: f64, pitch_mm: f64) -> Vec<f64> {
+/// k = 0, 1, …, half (the kernel is symmetric), for a profile of `points` points: taps farther
+/// than `points` samples meet no data, so half is at most `points`. Without that bound a pitch
+/// far below the cut-off (1e-9 mm against 0.8 mm: 8e8 taps) would ask for more memory than a
+/// station has, whatever the profile's length.
+fn weights(cutoff_mm: f64, pitch_mm: f64, points: usize) -> Vec<f64> {
     // The small epsilon keeps e.g. 0.8 / 0.0005 at 1600 despite rounding of the quotient.
-    let half = (cutoff_mm / pitch_mm + 1e-9).floor() as usize;
+    let taps = (cutoff_mm / pitch_mm + 1e-9).floor();
+    let half = if taps < points as f64 {
+        taps as usize
+    } else {
+        points
+    };
     let scale = ALPHA * cutoff_mm;
     (0..=half)
         .map(|k| {
@@ -67,7 +75,7 @@ pub fn gaussian_mean_line(
         return Err(MetrologyError::BadCutoff { cutoff_mm });
     }
     check_heights(heights_um)?;
-    let w = weights(cutoff_mm, pitch_mm);
+    let w = weights(cutoff_mm, pitch_mm, heights_um.len());
     if w.len() - 1 <= DIRECT_MAX_HALF {
         Ok(mean_line_direct(heights_um, &w))
     } else {
@@ -344,7 +352,7 @@ mod tests {
             (321, 0.08, 0.0, 1e-3),
         ] {
             let z = profile(n, offset, tilt);
-            let w = weights(cutoff, 0.0005);
+            let w = weights(cutoff, 0.0005, usize::MAX);
             assert!(w.len() - 1 > DIRECT_MAX_HALF);
             let direct = mean_line_direct(&z, &w);
             let fft = mean_line_fft(&z, &w);
@@ -367,6 +375,24 @@ mod tests {
         let m = gaussian_mean_line(&z, 0.0005, 0.8).unwrap();
         for (i, (a, b)) in z.iter().zip(&m).enumerate() {
             assert!((a - b).abs() < 1e-11, "point {i}: {a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn a_pitch_far_below_the_cut_off_takes_no_more_taps_than_the_profile_has_points() {
+        // 0.8 mm at 1e-300 mm would be 8e299 taps (capacity overflow), at 1e-9 mm 8e8 taps
+        // (6.4 GB): the taps beyond the profile's points meet no data and are not made.
+        let z = profile(300, 1.0, 1e-3);
+        for pitch in [1e-300, 1e-9, f64::MIN_POSITIVE] {
+            assert_eq!(weights(0.8, pitch, z.len()).len(), z.len() + 1);
+            let m = gaussian_mean_line(&z, pitch, 0.8).unwrap();
+            assert_eq!(m.len(), z.len());
+        }
+        // The same mean line as the full kernel gives, the kernel being wider than the data.
+        let full = mean_line_fft(&z, &weights(0.8, 0.0005, usize::MAX));
+        let capped = gaussian_mean_line(&z, 0.0005, 0.8).unwrap();
+        for (i, (a, b)) in full.iter().zip(&capped).enumerate() {
+            assert!((a - b).abs() <= 1e-12, "point {i}: {a} vs {b}");
         }
     }
 

@@ -288,3 +288,32 @@ fn analyze_of_a_grid_csv_without_a_usable_row_names_the_first_problem() {
         assert!(stderr.contains(said), "{said:?} not in {stderr}");
     }
 }
+
+#[test]
+fn analyze_of_a_profile_at_a_pitch_far_below_the_cut_off_is_an_error_not_a_crash() {
+    // x written in a unit far below mm (here 1e-300 mm a point): a profile far shorter than
+    // λc, refused as such; the λc kernel at that pitch would be 8e299 taps.
+    let dir = tempfile::tempdir().unwrap();
+    let mut csv = String::from("x_mm,z_um\n");
+    for i in 0..400 {
+        csv.push_str(&format!(
+            "{:e},{}\n",
+            i as f64 * 1e-300,
+            (i as f64 / 9.0).sin()
+        ));
+    }
+    let input = dir.path().join("line.csv");
+    std::fs::write(&input, csv).unwrap();
+    let o = surfscan()
+        .args(["analyze", input.to_str().unwrap(), "--out"])
+        .arg(dir.path().join("out"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        stderr.contains("shorter than one sampling length of 0.8 mm"),
+        "{stderr}"
+    );
+}
