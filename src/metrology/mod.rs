@@ -81,6 +81,19 @@ pub enum MetrologyError {
         /// Minimum points per sampling length.
         min_points: usize,
     },
+    /// The profile is longer than a sampling length, but the pitch leaves fewer points in one
+    /// than the parameters need: typically x or the pitch given in µm where mm are meant.
+    #[error("pitch {pitch_mm} mm leaves {points_per_sampling_length} points in a sampling length of {sampling_length_mm} mm, fewer than {min_points}; check that the pitch (x) is in mm, or choose a longer λc")]
+    PitchTooCoarse {
+        /// The pitch, mm.
+        pitch_mm: f64,
+        /// Whole points in one sampling length at that pitch.
+        points_per_sampling_length: usize,
+        /// The sampling length asked for, in mm.
+        sampling_length_mm: f64,
+        /// Minimum points per sampling length.
+        min_points: usize,
+    },
     /// The requested number of sampling lengths is zero.
     #[error("number of sampling lengths must be at least 1 (got {got})")]
     ZeroSections {

@@ -374,6 +374,14 @@ pub fn analyze_line(
         }
     };
     if per < MIN_POINTS_PER_SECTION {
+        if options.sampling_lengths.is_none() && ratio >= 1.0 {
+            return Err(MetrologyError::PitchTooCoarse {
+                pitch_mm,
+                points_per_sampling_length: per,
+                sampling_length_mm: lc,
+                min_points: MIN_POINTS_PER_SECTION,
+            });
+        }
         return Err(too_short);
     }
     let used = n_sec * per;

@@ -430,3 +430,39 @@ fn instrument_results_are_paired_with_ours_in_our_units() {
     let rzjis = p.rzjis_um.unwrap();
     assert!((jis[0].difference.unwrap() - (rzjis - 1.0)).abs() < 1e-12);
 }
+
+#[test]
+fn a_pitch_coarser_than_a_sampling_length_needs_is_named_not_called_too_short() {
+    // 2000 points at 0.5 "mm" (a pitch in µm taken as mm): 1000 mm of profile, but one
+    // point per 0.8 mm sampling length. The profile is not short; the pitch is the cause.
+    let z = sine(2000, 0.5, 100.0, 1.0);
+    let e = analyze_line(&z, 0.5, &Options::default()).unwrap_err();
+    assert_eq!(
+        e,
+        MetrologyError::PitchTooCoarse {
+            pitch_mm: 0.5,
+            points_per_sampling_length: 1,
+            sampling_length_mm: 0.8,
+            min_points: 8,
+        }
+    );
+    let said = e.to_string();
+    assert!(
+        said.contains("pitch 0.5 mm leaves 1 points in a sampling length of 0.8 mm"),
+        "{said}"
+    );
+    assert!(said.contains("check that the pitch (x) is in mm"), "{said}");
+    // A pitch so coarse that L/λc is beyond any count of sampling lengths: the same cause.
+    assert!(matches!(
+        analyze_line(&z, 1e300, &Options::default()),
+        Err(MetrologyError::PitchTooCoarse {
+            points_per_sampling_length: 0,
+            ..
+        })
+    ));
+    // A profile shorter than one sampling length is still called short.
+    assert!(matches!(
+        analyze_line(&z[..1], 0.5, &Options::default()),
+        Err(MetrologyError::TooShort { .. })
+    ));
+}
