@@ -164,7 +164,7 @@ impl ScanStore {
         let dir = self.lines_dir();
         let csv_path = dir.join(csv_name(index));
         let meta_path = dir.join(meta_name(index));
-        let meta_text = fs::read_to_string(&meta_path).map_err(|e| {
+        let meta_text = fs::read(&meta_path).map_err(|e| {
             if e.kind() == io::ErrorKind::NotFound && csv_path.exists() {
                 StoreError::MissingCompanion {
                     path: csv_path.clone(),
@@ -178,6 +178,7 @@ impl ScanStore {
                 }
             }
         })?;
+        let meta_text = text(&meta_path, meta_text)?;
         let meta: LineMeta =
             serde_json::from_str(&meta_text).map_err(|source| StoreError::MetaJson {
                 path: meta_path.clone(),
@@ -192,7 +193,7 @@ impl ScanStore {
                 ),
             });
         }
-        let csv_text = fs::read_to_string(&csv_path).map_err(|e| {
+        let csv_text = fs::read(&csv_path).map_err(|e| {
             if e.kind() == io::ErrorKind::NotFound {
                 StoreError::MissingCompanion {
                     path: meta_path.clone(),
@@ -206,6 +207,7 @@ impl ScanStore {
                 }
             }
         })?;
+        let csv_text = text(&csv_path, csv_text)?;
         let heights = parse_csv(&csv_path, &csv_text, meta.profile.pitch_x_mm)?;
         if heights.len() != meta.id.points {
             return Err(StoreError::Inconsistent {
@@ -394,6 +396,15 @@ impl ScanStore {
         sync_dir(&self.root)?;
         Ok(format!("{QUARANTINE_DIR}/{stem}.csv"))
     }
+}
+
+/// A line file's bytes as text; bytes that are not UTF-8 are damage to the file, not a
+/// failure to read it (so the line is set aside at resume like any other damaged line).
+fn text(path: &Path, bytes: Vec<u8>) -> Result<String, StoreError> {
+    String::from_utf8(bytes).map_err(|e| StoreError::NotText {
+        path: path.to_path_buf(),
+        byte: e.utf8_error().valid_up_to(),
+    })
 }
 
 /// Hex SHA-256 of `bytes`.

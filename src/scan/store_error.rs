@@ -42,6 +42,17 @@ pub enum StoreError {
         /// What is wrong with it.
         reason: String,
     },
+    /// A line's file holds bytes that are not UTF-8: the file was damaged after it was
+    /// written (the store writes both files as ASCII text).
+    #[error(
+        "{path}: byte {byte} is not UTF-8 text: the file was damaged after the line was written"
+    )]
+    NotText {
+        /// The file.
+        path: PathBuf,
+        /// Offset of the first byte that is not UTF-8.
+        byte: usize,
+    },
     /// A metadata file is not valid line metadata.
     #[error("{path}: not valid line metadata: {source}")]
     MetaJson {

@@ -945,3 +945,39 @@ fn a_committed_line_changed_on_disk_is_moved_aside_with_both_hashes_and_traced_a
     let third = store.load_committed_repairing(&st.lines, now).unwrap();
     assert_eq!(third.quarantined[0].moved_to, "quarantine/0001-2.csv");
 }
+
+#[test]
+fn a_byte_that_is_not_utf8_in_a_line_file_is_damage_set_aside_not_a_read_failure() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (store, mut journal, _) = new_scan(tmp.path(), 3, Arc::new(NoFaults));
+    for k in 0..3 {
+        let (m, p) = line(k);
+        store.commit_line(&mut journal, &m, &p).unwrap();
+    }
+    let st = state_of(&store);
+    // One byte of line 1's metadata turned into 0xFF: its heights file still matches its
+    // journal record, but the line cannot be read. The scan resumes without it.
+    let meta = store.lines_dir().join("0001.json");
+    let mut bytes = std::fs::read(&meta).unwrap();
+    bytes[7] = 0xFF;
+    std::fs::write(&meta, &bytes).unwrap();
+    // Read for fit or analyze: a damaged file, named with the byte, not an I/O error.
+    let e = store.load_all().unwrap_err();
+    assert!(
+        matches!(&e, StoreError::NotText { path, byte: 7 } if *path == meta),
+        "{e:?}"
+    );
+    assert!(e.to_string().contains("byte 7 is not UTF-8 text"), "{e}");
+    let now = Utc.with_ymd_and_hms(2026, 1, 3, 0, 0, 0).unwrap();
+    let got = store.load_committed_repairing(&st.lines, now).unwrap();
+    let kept: Vec<u32> = got.lines.iter().map(|l| l.meta.id.index).collect();
+    assert_eq!(kept, vec![0, 2]);
+    assert_eq!(got.quarantined.len(), 1);
+    assert_eq!(got.quarantined[0].index, 1);
+    assert!(
+        got.quarantined[0].reason.contains("is not UTF-8 text"),
+        "{}",
+        got.quarantined[0].reason
+    );
+    assert!(store.root().join("quarantine/0001.json").exists());
+}
