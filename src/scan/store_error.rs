@@ -12,7 +12,7 @@ use super::journal::JournalError;
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
     /// A file system operation failed.
-    #[error("{op} {path}: {source} (check the output directory's permissions and free space)")]
+    #[error("{op} {path}: {source} ({})", io_hint(op))]
     Io {
         /// What was being done ("create", "write", "rename", …).
         op: &'static str,
@@ -106,6 +106,16 @@ impl StoreError {
     }
 }
 
+/// What to check after a failed `op`: a read needs a readable file (free space has nothing
+/// to do with it), a listing a readable directory; whatever writes needs permission and space.
+fn io_hint(op: &str) -> &'static str {
+    match op {
+        "read" => "check that it is a readable file",
+        "list" | "open directory" => "check that it is a readable directory",
+        _ => "check the output directory's permissions and free space",
+    }
+}
+
 /// Maps an I/O error of `op` on `path` to [`StoreError::Io`].
 pub(crate) fn io_err<'a>(
     op: &'static str,
@@ -115,5 +125,33 @@ pub(crate) fn io_err<'a>(
         op,
         path: path.to_path_buf(),
         source,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failed_read_asks_for_a_readable_file_not_for_free_space() {
+        let read =
+            io_err("read", Path::new("lines/0003.csv"))(io::Error::from_raw_os_error(libc::EISDIR))
+                .to_string();
+        assert!(read.starts_with("read lines/0003.csv: "), "{read}");
+        assert!(
+            read.ends_with("(check that it is a readable file)"),
+            "{read}"
+        );
+        let list = io_err("list", Path::new("lines"))(io::Error::from_raw_os_error(libc::EACCES))
+            .to_string();
+        assert!(list.contains("a readable directory"), "{list}");
+        let write = io_err("write", Path::new("lines/.0003.csv.tmp"))(
+            io::Error::from_raw_os_error(libc::EROFS),
+        )
+        .to_string();
+        assert!(
+            write.contains("output directory's permissions and free space"),
+            "{write}"
+        );
     }
 }
