@@ -451,13 +451,11 @@ pub fn run(args: Args) -> Result<(), CliError> {
     if super::fit::sniff_input(&args.input, &bytes) == super::fit::InputKind::X3p {
         return run_x3p(&args, &bytes, &out);
     }
-    let text = String::from_utf8(bytes).map_err(|e| {
-        failed(format!(
-            "{}: not text (byte {} is not UTF-8); analyze reads a scan directory, an X3P file or a CSV",
-            args.input.display(),
-            e.utf8_error().valid_up_to()
-        ))
-    })?;
+    let text = super::fit::csv_text(
+        &args.input,
+        bytes,
+        "analyze reads a scan directory, an X3P file or a CSV",
+    )?;
     let lc = args.lc.unwrap_or(DEFAULT_LC_MM);
     let options = Options {
         lambda_c_mm: lc,

@@ -110,6 +110,27 @@ pub enum InputKind {
     X3p,
 }
 
+/// A CSV file's bytes as text, without the byte-order mark that spreadsheet programs put
+/// before "UTF-8 CSV" (it is no part of the first value or header). Bytes that are not UTF-8
+/// are a file that is not such a CSV (exit 1, not an I/O error), named with their offset;
+/// `reads` says what the command reads instead.
+pub(crate) fn csv_text(path: &Path, bytes: Vec<u8>, reads: &str) -> Result<String, CliError> {
+    let mut text = String::from_utf8(bytes).map_err(|e| {
+        CliError::new(
+            Exit::Failed,
+            format!(
+                "{}: not text (byte {} is not UTF-8); {reads}",
+                path.display(),
+                e.utf8_error().valid_up_to()
+            ),
+        )
+    })?;
+    if text.starts_with('\u{feff}') {
+        text.drain(..'\u{feff}'.len_utf8());
+    }
+    Ok(text)
+}
+
 /// Classifies a file from its name and its first bytes (at least the first line).
 pub fn sniff_input(path: &Path, head: &[u8]) -> InputKind {
     let ext = path
@@ -601,8 +622,13 @@ fn read_csv(args: &Args) -> Result<Input, CliError> {
             "a grid CSV needs -o OUT.igs (only a scan directory has a default output)",
         ));
     };
-    let text = std::fs::read_to_string(&args.input)
-        .map_err(|e| io_err("cannot read grid", &args.input, e))?;
+    let bytes =
+        std::fs::read(&args.input).map_err(|e| io_err("cannot read grid", &args.input, e))?;
+    let text = csv_text(
+        &args.input,
+        bytes,
+        "fit reads a grid CSV or a scan directory",
+    )?;
     let grid = parse_grid_owned(text)
         .map_err(|m| CliError::new(Exit::Failed, format!("{}: {m}", args.input.display())))?;
     let rows = grid.rows;

@@ -91,6 +91,54 @@ fn malformed_csv_names_line_and_column_and_exits_1() {
 }
 
 #[test]
+fn a_grid_csv_with_a_byte_order_mark_is_read_and_one_not_utf8_exits_1_naming_the_byte() {
+    let dir = tempfile::tempdir().unwrap();
+    let grid = plane_grid(7, 9, 0.01, 0.02);
+    let fit = |name: &str, bytes: &[u8]| {
+        let input = dir.path().join(format!("{name}.csv"));
+        std::fs::write(&input, bytes).unwrap();
+        let out = dir.path().join(format!("{name}.igs"));
+        let o = surfscan()
+            .arg("fit")
+            .arg(&input)
+            .arg("-o")
+            .arg(&out)
+            .args(["--pitch-x", "0.01", "--pitch-y", "0.02"])
+            .output()
+            .unwrap();
+        let data = std::fs::read_to_string(&out).ok().map(|t| {
+            // The Directory Entry and Parameter Data sections: the surface itself.
+            t.lines()
+                .filter(|l| matches!(l.as_bytes().get(72), Some(b'D' | b'P')))
+                .collect::<Vec<_>>()
+                .join("\n")
+        });
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+            data,
+        )
+    };
+    let (code, err, plain) = fit("plain", grid.as_bytes());
+    assert_eq!(code, Some(0), "{err}");
+    // "UTF-8 CSV" as spreadsheet programs save it: the same surface.
+    let (code, err, bom) = fit("bom", &[b"\xEF\xBB\xBF", grid.as_bytes()].concat());
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!(bom, plain);
+    // A Latin-1 byte in the second row: not a grid CSV, not an I/O error.
+    let mut bytes = grid.into_bytes();
+    let at = bytes.iter().position(|&b| b == b'\n').unwrap() + 2;
+    bytes[at] = 0xE9;
+    let (code, err, out) = fit("latin1", &bytes);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains(&format!("not text (byte {at} is not UTF-8)")),
+        "{err}"
+    );
+    assert_eq!(out, None);
+}
+
+#[test]
 fn missing_input_exits_74_and_bad_pitch_exits_2() {
     let dir = tempfile::tempdir().unwrap();
     let st = surfscan()

@@ -317,3 +317,35 @@ fn analyze_of_a_profile_at_a_pitch_far_below_the_cut_off_is_an_error_not_a_crash
         "{stderr}"
     );
 }
+
+#[test]
+fn a_profile_csv_with_a_byte_order_mark_is_read_as_a_profile() {
+    // Saved as "UTF-8 CSV" by a spreadsheet program: the mark before the header is no part
+    // of it, and the file is no grid needing pitches.
+    let dir = tempfile::tempdir().unwrap();
+    let mut csv = String::from("\u{feff}x_mm,z_um\n");
+    for i in 0..4000 {
+        let x = i as f64 * 0.0005;
+        csv.push_str(&format!(
+            "{x:.7},{:.12}\n",
+            (2.0 * PI * i as f64 / 200.0).sin()
+        ));
+    }
+    let input = dir.path().join("line.csv");
+    std::fs::write(&input, csv).unwrap();
+    let out = dir.path().join("out");
+    let o = surfscan()
+        .args(["analyze", input.to_str().unwrap(), "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["kind"], "profile");
+}
