@@ -563,6 +563,14 @@ pub async fn run_foreground_locked(
 /// Runs `surfscan scan`.
 pub fn run(args: Args) -> Result<(), CliError> {
     let (config, config_hash) = load_config(&args.config)?;
+    // A port that can never be a serial device (a directory, a regular file) is a
+    // configuration to correct, as `check-config` says, not a scan that failed.
+    super::check_config::check_ports(&config).map_err(|e| {
+        CliError::new(
+            Exit::Config,
+            format!("config {}: {e}", args.config.display()),
+        )
+    })?;
     let lock = lock_station(&config, "scan")?;
     refuse_if_daemon(&config)?;
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;

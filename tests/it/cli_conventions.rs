@@ -1,6 +1,6 @@
 //! What a daemon's users expect of its command line: `--version` naming the commit, man
 //! pages and shell completions generated from the same definition as the parser, and
-//! `check-config`.
+//! `check-config` (and `scan` refusing what it refuses).
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -203,6 +203,26 @@ fn check_config_validates_without_opening_devices() {
             text(&out.stderr)
         );
     }
+}
+
+#[test]
+fn scan_refuses_a_port_that_can_never_be_a_serial_device_as_bad_configuration() {
+    // What check-config calls a bad configuration (exit 78) is one for scan as well, before
+    // anything is locked or created, not a scan that failed (exit 1).
+    let dir = tempfile::tempdir().unwrap();
+    let not_a_port = dir.path().join("ports");
+    std::fs::create_dir(&not_a_port).unwrap();
+    let cfg = demo_config(dir.path(), &not_a_port, Path::new("/dev/null"));
+    let check = surfscan(&["check-config", cfg.to_str().unwrap()]);
+    assert_eq!(check.status.code(), Some(78), "{}", text(&check.stderr));
+    let out = surfscan(&["scan", "--config", cfg.to_str().unwrap()]);
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(78), "{err}");
+    assert!(
+        err.contains("[instrument] port: ") && err.contains("is a directory, not a serial device"),
+        "{err}"
+    );
+    assert!(!dir.path().join("out").exists(), "nothing is created");
 }
 
 #[test]
