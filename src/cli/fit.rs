@@ -903,6 +903,21 @@ pub fn run(args: Args) -> Result<(), CliError> {
             "--degree-u and --degree-v must be at least 1 (the paper uses 5)",
         ));
     }
+    // 0 lines would be taken as 1 and the refusal would then name a limit never given.
+    for (name, v) in [
+        ("--max-iges-lines-per-file", args.max_iges_lines_per_file),
+        (
+            "--max-iges-lines-per-entity",
+            args.max_iges_lines_per_entity,
+        ),
+    ] {
+        if v == 0 {
+            return Err(CliError::new(
+                Exit::Usage,
+                format!("{name} must be at least 1 (default and largest {MAX_SECTION_LINES})"),
+            ));
+        }
+    }
     let t_read = Instant::now();
     let input = if args.input.is_dir() {
         read_scan(&args)?

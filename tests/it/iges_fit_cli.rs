@@ -139,6 +139,28 @@ fn a_grid_csv_with_a_byte_order_mark_is_read_and_one_not_utf8_exits_1_naming_the
 }
 
 #[test]
+fn a_limit_of_zero_iges_lines_is_a_usage_error_not_a_limit_of_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("plane.csv");
+    std::fs::write(&input, plane_grid(7, 9, 0.01, 0.02)).unwrap();
+    for flag in ["--max-iges-lines-per-file", "--max-iges-lines-per-entity"] {
+        let o = surfscan()
+            .arg("fit")
+            .arg(&input)
+            .arg("-o")
+            .arg(dir.path().join("x.igs"))
+            .args(["--pitch-x", "0.01", "--pitch-y", "0.02", flag, "0"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(err.contains(&format!("{flag} must be at least 1")), "{err}");
+        assert!(!err.contains("limit 1"), "{err}");
+        assert!(!dir.path().join("x.igs").exists());
+    }
+}
+
+#[test]
 fn missing_input_exits_74_and_bad_pitch_exits_2() {
     let dir = tempfile::tempdir().unwrap();
     let st = surfscan()
