@@ -41,7 +41,8 @@ pub struct Args {
     #[arg(long)]
     pub readout: bool,
     /// Another read-out form for --readout, tried after the candidates: TOTAL ending in 00
-    /// (the block command is TOTAL with {n} for the 00), or TOTAL=BLOCK (repeatable).
+    /// (the block command is TOTAL with the block's two-digit count in place of the 00), or
+    /// TOTAL=BLOCK (repeatable).
     #[arg(long = "form", requires = "readout", value_parser = parse_form)]
     pub forms: Vec<ReadoutForm>,
     /// Relay between Mitutoyo's PC software on this serial port and the instrument, recording
