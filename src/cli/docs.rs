@@ -59,6 +59,8 @@ pub fn write_manpages(dir: &Path) -> Result<Vec<PathBuf>, CliError> {
         let sub = sub
             .clone()
             .version(crate::build_info::LONG_VERSION)
+            // The version goes on the page, but a subcommand takes no -V/--version.
+            .disable_version_flag(true)
             .args(cmd.get_arguments().filter(|a| a.is_global_set()).cloned());
         page(sub, name)?;
     }

@@ -110,6 +110,14 @@ fn man_pages_cover_the_command_and_every_subcommand() {
         scan.contains("verbose"),
         "the global option is on the subcommand's page"
     );
+    assert!(
+        scan.contains(env!("CARGO_PKG_VERSION")),
+        "the version on the subcommand's page"
+    );
+    assert!(
+        !scan.contains("--version"),
+        "a subcommand takes no --version, so its page offers none: {scan}"
+    );
 }
 
 fn demo_config(dir: &Path, instrument: &Path, stage: &Path) -> std::path::PathBuf {
