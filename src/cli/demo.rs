@@ -50,8 +50,8 @@ pitch-x-um = 1.5
 poll-interval-ms = 10
 
 [instrument.commands]
-# The SJ-210 manual documents no profile read-out; these are the SJ-410's RDEVA commands,
-# which the simulator answers (see config/surfscan.toml).
+# The SJ-210 manual documents no profile read-out; these are the SJ-410's RDEVA commands
+# without its profile selector, which the simulated SJ-210 answers (see config/surfscan.toml).
 profile-total = "RDEVA00"
 profile-block = "RDEVA{{n}}"
 
