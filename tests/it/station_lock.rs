@@ -141,33 +141,8 @@ fn the_station_lock_is_taken_on_a_full_disk_and_still_refuses_a_second_process()
     use surfscan::station_lock::{LockError, StationLock};
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");
-    std::fs::create_dir_all(&out).unwrap();
-    let o = std::process::Command::new("mount")
-        .args(["-t", "tmpfs", "-o", "size=64k", "tmpfs"])
-        .arg(&out)
-        .output()
-        .expect("run mount");
-    assert!(
-        o.status.success(),
-        "this test mounts a small tmpfs to fill it for real and needs root (as .ci/run runs): {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    struct Unmount<'a>(&'a std::path::Path);
-    impl Drop for Unmount<'_> {
-        fn drop(&mut self) {
-            let _ = std::process::Command::new("umount")
-                .arg("-l")
-                .arg(self.0)
-                .status();
-        }
-    }
-    let _unmount = Unmount(&out);
-    {
-        use std::io::Write;
-        let mut f = std::fs::File::create(out.join("ballast")).unwrap();
-        let chunk = vec![0u8; 4096];
-        while f.write(&chunk).is_ok_and(|n| n > 0) {}
-    }
+    let _mount = Mount::tmpfs(&out, 64 << 10);
+    assert!(fill(&out.join("ballast")) > 0);
     let locks = tmp.path().join("locks");
     std::fs::create_dir_all(&locks).unwrap();
     let first = StationLock::acquire("daemon", &out, &[], &locks);

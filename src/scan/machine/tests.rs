@@ -222,6 +222,27 @@ type ToStep = fn(&mut Rig);
 
 /// The README's fault table, per fault class and per step of a line: every class in every
 /// state it can arise in.
+/// A resumed scan of the test plan: `committed` lines on disk without a gap, `ahead` after
+/// the first gap, paused or not when its process stopped.
+fn resumed_scan(committed: u32, ahead: &[u32], paused: bool) -> Machine {
+    Machine::resumed(
+        plan(),
+        policy(),
+        Status::idle(),
+        Resumed {
+            scan_id: "S".into(),
+            dir: "/out/S".into(),
+            committed,
+            ahead: ahead.iter().copied().collect(),
+            columns: Some(100),
+            pitch_x_mm: Some(0.0005),
+            conditions: Conditions::default(),
+            points_per_line: 100,
+            paused,
+        },
+    )
+}
+
 #[test]
 fn every_fault_class_in_every_step_of_a_line_gets_its_reaction() {
     use FaultClass::*;
@@ -856,22 +877,7 @@ fn a_storage_failure_that_cannot_clear_fails_as_io() {
 
 #[test]
 fn a_scan_with_every_line_committed_writes_its_outputs_without_opening_devices() {
-    let m = Machine::resumed(
-        plan(),
-        policy(),
-        Status::idle(),
-        Resumed {
-            scan_id: "S".into(),
-            dir: "/out/S".into(),
-            committed: LINES,
-            ahead: Default::default(),
-            columns: Some(100),
-            pitch_x_mm: Some(0.0005),
-            conditions: Conditions::default(),
-            points_per_line: 100,
-            paused: false,
-        },
-    );
+    let m = resumed_scan(LINES, &[], false);
     let mut r = Rig::with(m);
     let a = r.start();
     assert_eq!(effect(&a), Some(&Action::WriteOutputs));
@@ -883,22 +889,7 @@ fn a_scan_with_every_line_committed_writes_its_outputs_without_opening_devices()
 /// missing line and the resumption is marked in the journal.
 #[test]
 fn a_scan_paused_when_its_process_stopped_is_reopened_paused() {
-    let m = Machine::resumed(
-        plan(),
-        policy(),
-        Status::idle(),
-        Resumed {
-            scan_id: "S".into(),
-            dir: "/out/S".into(),
-            committed: 2,
-            ahead: Default::default(),
-            columns: Some(100),
-            pitch_x_mm: Some(0.0005),
-            conditions: Conditions::default(),
-            points_per_line: 100,
-            paused: true,
-        },
-    );
+    let m = resumed_scan(2, &[], true);
     let mut r = Rig::with(m);
     let a = r.start();
     assert_eq!(effect(&a), None, "nothing is done while paused: {a:?}");
@@ -926,22 +917,7 @@ fn a_scan_paused_when_its_process_stopped_is_reopened_paused() {
 
 #[test]
 fn a_resumed_scan_reopens_its_devices_and_goes_on_at_its_first_missing_line() {
-    let m = Machine::resumed(
-        plan(),
-        policy(),
-        Status::idle(),
-        Resumed {
-            scan_id: "S".into(),
-            dir: "/out/S".into(),
-            committed: 2,
-            ahead: Default::default(),
-            columns: Some(100),
-            pitch_x_mm: Some(0.0005),
-            conditions: Conditions::default(),
-            points_per_line: 100,
-            paused: false,
-        },
-    );
+    let m = resumed_scan(2, &[], false);
     let mut r = Rig::with(m);
     let a = r.start();
     assert_eq!(effect(&a), Some(&Action::Open(Device::Instrument)));
@@ -1119,26 +1095,8 @@ fn commands_answer_while_running_and_start_is_refused() {
 
 #[test]
 fn a_line_moved_aside_at_resume_is_traced_again_and_the_lines_committed_after_it_are_not() {
-    let resumed = |committed: u32, ahead: &[u32]| {
-        Machine::resumed(
-            plan(),
-            policy(),
-            Status::idle(),
-            Resumed {
-                scan_id: "S".into(),
-                dir: "/out/S".into(),
-                committed,
-                ahead: ahead.iter().copied().collect(),
-                columns: Some(100),
-                pitch_x_mm: Some(0.0005),
-                conditions: Conditions::default(),
-                points_per_line: 100,
-                paused: false,
-            },
-        )
-    };
     // Line 0 moved aside, line 1 committed after it, line 2 never traced.
-    let mut r = Rig::with(resumed(0, &[1]));
+    let mut r = Rig::with(resumed_scan(0, &[1], false));
     r.start();
     r.feed(opened(Device::Instrument));
     r.feed(opened(Device::Stage));
@@ -1159,7 +1117,7 @@ fn a_line_moved_aside_at_resume_is_traced_again_and_the_lines_committed_after_it
     assert_eq!(last_status(&r.log).map(|s| s.lines_done), Some(2));
 
     // Line 1 moved aside, line 2 committed after it: once line 1 is back, the outputs.
-    let mut r = Rig::with(resumed(1, &[2]));
+    let mut r = Rig::with(resumed_scan(1, &[2], false));
     r.start();
     r.feed(opened(Device::Instrument));
     r.feed(opened(Device::Stage));

@@ -511,3 +511,52 @@ pub fn assert_outside_controller_travel(
         "{e}"
     );
 }
+
+/// A file system mounted for one test and unmounted when the test ends (also on failure).
+pub struct Mount(PathBuf);
+
+impl Mount {
+    /// A tmpfs of `bytes` at `dir` (created). The tests run as root, as `.ci/run` does.
+    pub fn tmpfs(dir: &std::path::Path, bytes: u64) -> Mount {
+        std::fs::create_dir_all(dir).unwrap();
+        let o = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={bytes}")])
+            .arg("tmpfs")
+            .arg(dir)
+            .output()
+            .expect("run mount");
+        assert!(
+            o.status.success(),
+            "this test mounts a small tmpfs to fill it for real and needs root (as .ci/run runs): {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        Mount(dir.to_path_buf())
+    }
+}
+
+impl Drop for Mount {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount")
+            .arg("-l")
+            .arg(&self.0)
+            .status();
+    }
+}
+
+/// Writes zeros into `path` until the file system refuses (ENOSPC); returns the bytes written.
+pub fn fill(path: &std::path::Path) -> u64 {
+    use std::io::Write;
+    let mut f = std::fs::File::create(path).unwrap();
+    let chunk = vec![0u8; 64 * 1024];
+    let mut n = 0u64;
+    loop {
+        match f.write(&chunk) {
+            Ok(0) => break,
+            Ok(k) => n += k as u64,
+            Err(e) if e.raw_os_error() == Some(libc::ENOSPC) => break,
+            Err(e) => panic!("filling {}: {e}", path.display()),
+        }
+    }
+    let _ = f.sync_all();
+    n
+}
