@@ -575,6 +575,8 @@ pub struct Machine {
     pause_requested: bool,
     /// A resumed scan that was paused when its process stopped: it starts paused.
     paused_at_start: bool,
+    /// The scan was paused when it was interrupted (no line was being worked on).
+    interrupted_paused: bool,
     /// Traces started for the current line.
     traces: u32,
     /// Re-homes after a lost position on the current line.
@@ -628,6 +630,7 @@ impl Machine {
             need_home: false,
             pause_requested: false,
             paused_at_start: false,
+            interrupted_paused: false,
             traces: 0,
             rehomes: 0,
             line_began: None,
@@ -762,7 +765,12 @@ impl Machine {
                 self.conditions = Some(conditions);
                 self.points_per_line = points_per_line;
                 self.publish_progress(out, None);
-                self.status.state = State::Scanning;
+                // A pause asked for while the scan was being started still stands.
+                self.status.state = if self.pause_requested {
+                    State::Pausing
+                } else {
+                    State::Scanning
+                };
                 self.next_step(now, out);
             }
             (Doing::Create, Event::StorageFailed(s)) => {
@@ -1410,6 +1418,7 @@ impl Machine {
         if self.ending.is_some() {
             return;
         }
+        self.interrupted_paused = self.doing == Doing::Paused;
         if self.doing.is_effect() {
             out.push(Action::Cancel);
         }
@@ -1451,7 +1460,20 @@ impl Machine {
                 r.to_string(),
             ),
         };
-        if matches!(end, End::Shutdown) && self.created {
+        if matches!(end, End::Shutdown) && self.created && self.interrupted_paused {
+            // Paused, nothing was in progress: no line to abandon, and the pause stands.
+            out.push(Action::Record(Note {
+                reason: format!(
+                    "shutdown (SIGTERM/SIGINT) while paused with {} of {} lines on disk; the scan is reopened paused at the next start",
+                    self.done(),
+                    self.plan.lines
+                ),
+                device: None,
+                line: None,
+                peer: None,
+                pause: None,
+            }));
+        } else if matches!(end, End::Shutdown) && self.created {
             out.push(self.note(
                 "shutdown (SIGTERM/SIGINT): current line abandoned; the scan resumes at the next start"
                     .to_owned(),

@@ -890,6 +890,27 @@ fn a_scan_with_every_line_committed_writes_its_outputs_without_opening_devices()
 #[test]
 fn a_scan_paused_when_its_process_stopped_is_reopened_paused() {
     let m = resumed_scan(2, &[], true);
+    let mut r = Rig::with(resumed_scan(2, &[], true));
+    r.start();
+    // A shutdown while paused abandons no line, and says the pause stands.
+    let a = r.feed(Event::Shutdown);
+    let notes: Vec<&Note> = a
+        .iter()
+        .filter_map(|a| match a {
+            Action::Record(n) => Some(n),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(notes.len(), 1, "{a:?}");
+    assert_eq!(notes[0].line, None);
+    assert!(
+        notes[0].reason.contains("while paused with 2 of")
+            && notes[0].reason.contains("reopened paused")
+            && !notes[0].reason.contains("abandoned"),
+        "{}",
+        notes[0].reason
+    );
+
     let mut r = Rig::with(m);
     let a = r.start();
     assert_eq!(effect(&a), None, "nothing is done while paused: {a:?}");
@@ -996,6 +1017,35 @@ fn pause_waits_for_the_line_on_disk_and_resume_goes_on() {
         "pause requested by uid 1000 gid 100 pid 4242"
     );
     assert!(notes[1].reason.starts_with("resumed by the operator"));
+}
+
+/// A pause asked for while the scan is being started (devices opening, no directory yet) is
+/// shown as pausing once the scan exists, not as scanning, and takes effect after line 1.
+#[test]
+fn a_pause_asked_for_during_start_up_shows_as_pausing_until_it_takes_effect() {
+    let mut r = Rig::fresh();
+    r.start();
+    let a = r.feed(Event::Command {
+        command: OperatorCommand::Pause,
+        peer: peer(),
+    });
+    assert!(
+        a.iter()
+            .any(|a| matches!(a, Action::Reply(Ok(m)) if m.contains("pauses once"))),
+        "{a:?}"
+    );
+    r.feed(opened(Device::Instrument));
+    r.feed(opened(Device::Stage));
+    let a = r.feed(Event::Created {
+        scan_id: "S".into(),
+        dir: "/out/S".into(),
+        conditions: Conditions::default(),
+        points_per_line: 100,
+    });
+    assert_eq!(effect(&a), Some(&Action::EnsureIdle));
+    assert_eq!(last_status(&a).map(|s| s.state), Some(State::Pausing));
+    r.line_ok();
+    assert_eq!(r.m.status().state, State::Paused);
 }
 
 #[test]
