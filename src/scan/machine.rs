@@ -1464,7 +1464,7 @@ impl Machine {
             // Paused, nothing was in progress: no line to abandon, and the pause stands.
             out.push(Action::Record(Note {
                 reason: format!(
-                    "shutdown (SIGTERM/SIGINT) while paused with {} of {} lines on disk; the scan is reopened paused at the next start",
+                    "shutdown (SIGTERM/SIGINT) while paused with {} of {} lines on disk; the daemon reopens it paused at its next start",
                     self.done(),
                     self.plan.lines
                 ),

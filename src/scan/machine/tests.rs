@@ -905,7 +905,7 @@ fn a_scan_paused_when_its_process_stopped_is_reopened_paused() {
     assert_eq!(notes[0].line, None);
     assert!(
         notes[0].reason.contains("while paused with 2 of")
-            && notes[0].reason.contains("reopened paused")
+            && notes[0].reason.contains("reopens it paused")
             && !notes[0].reason.contains("abandoned"),
         "{}",
         notes[0].reason
