@@ -423,9 +423,12 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
         })?;
     if !incomplete.is_empty() {
         eprintln!(
-            "surfscan: warning: lines {} have only one of their two files in {} and were left out",
-            line_list(&incomplete),
-            args.input.join("lines").display()
+            "surfscan: warning: {}",
+            crate::report::scan_dir::incomplete_lines_warning(
+                &line_list(&incomplete),
+                incomplete.len(),
+                &args.input.join("lines"),
+            )
         );
     }
     let check = check_against_journal(&args.input, &lines.index)?;

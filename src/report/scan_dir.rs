@@ -194,10 +194,10 @@ pub fn characterise_scan_lines(
     let grid = LineGrid::of_scan(lines, &dir.join("lines"))?;
     if !incomplete.is_empty() {
         let labels: Vec<String> = incomplete.iter().map(|&i| line_label(i)).collect();
-        warnings.push(format!(
-            "lines {} have only one of their two files in {} and were left out",
-            labels.join(", "),
-            dir.join("lines").display()
+        warnings.push(incomplete_lines_warning(
+            &labels.join(", "),
+            incomplete.len(),
+            &dir.join("lines"),
         ));
     }
     let first = lines.first().ok_or_else(|| ReportError::NoLines {
@@ -423,8 +423,35 @@ impl Characterise for ScanCharacteriser {
     }
 }
 
+/// The warning for `count` lines (listed in `list`) that have only one of their two files in
+/// `lines_dir` and were left out, in the singular for one.
+pub fn incomplete_lines_warning(list: &str, count: usize, lines_dir: &Path) -> String {
+    let (noun, has, their, were) = if count == 1 {
+        ("line", "has", "its", "was")
+    } else {
+        ("lines", "have", "their", "were")
+    };
+    format!(
+        "{noun} {list} {has} only one of {their} two files in {} and {were} left out",
+        lines_dir.display()
+    )
+}
+
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn a_single_incomplete_line_is_named_in_the_singular() {
+        let d = std::path::Path::new("/scan/lines");
+        assert_eq!(
+            super::incomplete_lines_warning("6 (0005.csv)", 1, d),
+            "line 6 (0005.csv) has only one of its two files in /scan/lines and was left out"
+        );
+        assert_eq!(
+            super::incomplete_lines_warning("6, 7", 2, d),
+            "lines 6, 7 have only one of their two files in /scan/lines and were left out"
+        );
+    }
     use super::*;
     use crate::profile::{Conditions, NoHeights, Profile};
     use crate::scan::line::{LineIdentity, LineMeta};
