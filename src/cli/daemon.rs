@@ -48,6 +48,16 @@ const IDLE_TICK: Duration = Duration::from_secs(2);
 /// Runs `surfscan daemon`.
 pub fn run(args: Args) -> Result<(), CliError> {
     let (config, config_hash) = load_config(&args.config)?;
+    // A port that can never be a serial device (a directory, a regular file) is a
+    // configuration to correct, as `check-config` and `scan` say: exit 78, which the unit's
+    // RestartPreventExitStatus= keeps from restarting in a loop. An absent device is not: it
+    // may be plugged in later.
+    super::check_config::check_ports(&config).map_err(|e| {
+        CliError::new(
+            Exit::Config,
+            format!("config {}: {e}", args.config.display()),
+        )
+    })?;
     let control = server::ServerOptions {
         allowed_groups: match &config.control.allowed_groups {
             Some(names) => Some(server::resolve_groups(names).map_err(|e| {

@@ -492,6 +492,30 @@ fn a_bad_config_exits_78_naming_the_key() {
     assert_eq!(out.status.code(), Some(78));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("y-stepp-mm"), "{err}");
+
+    // A port that can never be a serial device: 78 naming it, as check-config says.
+    let text = surfscan::cli::demo::demo_config(dir.path(), Path::new("/dev/null"), dir.path());
+    std::fs::write(&p, text).unwrap();
+    let mut d = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(["daemon", "--config"])
+        .arg(&p)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while d.try_wait().unwrap().is_none() && start.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    if d.try_wait().unwrap().is_none() {
+        let _ = d.kill();
+        let _ = d.wait();
+        panic!("the daemon started on a port that is a directory");
+    }
+    let out = d.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(78));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("is a directory, not a serial device"), "{err}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
