@@ -505,11 +505,15 @@ impl Config {
             )
         })?;
         if y_step_nm.0 == 0 {
-            return Err(Config::invalid(
-                path,
-                "scan.y-step-mm",
-                "must not be 0 (the paper steps 0.01 mm)".into(),
-            ));
+            let why = if s.y_step_mm == 0.0 {
+                "must not be 0 (the paper steps 0.01 mm)".to_owned()
+            } else {
+                format!(
+                    "{} mm rounds to 0 nm: a step must be at least 1 nm (the paper steps 0.01 mm)",
+                    s.y_step_mm
+                )
+            };
+            return Err(Config::invalid(path, "scan.y-step-mm", why));
         }
         Ok((y_start_nm, y_step_nm))
     }
@@ -858,6 +862,16 @@ dir = "/var/lib/surfscan/scans"
             .unwrap_err()
             .to_string();
         assert!(e.contains("must not be 0"), "{e}");
+        // A step that is not 0 but rounds to 0 nm is told as such, not as a 0 typed.
+        let e = parse(&MINIMAL.replace("y-step-mm = 0.01", "y-step-mm = 1e-12"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("scan.y-step-mm")
+                && e.contains("rounds to 0 nm")
+                && !e.contains("must not be 0"),
+            "{e}"
+        );
     }
 
     #[test]
