@@ -90,7 +90,7 @@ pub enum MethodError {
     #[error(transparent)]
     Fit(#[from] FitError),
     /// Control rows outside [degree_v + 1, lines].
-    #[error("{got} control rows across {lines} lines: a least-squares surface of degree-v {degree_v} needs between {min} and {lines}; set [fit] v-control-rows in that range")]
+    #[error("{got} control rows across {lines} lines: a least-squares surface of degree-v {degree_v} needs between {min} and {lines}; set the control rows in that range (`--v-control-rows`, or `v-control-rows` in `[fit]`)")]
     ControlRows {
         /// Control rows asked for.
         got: usize,
@@ -367,6 +367,11 @@ mod tests {
         );
         let e = approximate_v(0.002, &y, &z, 20, FitOptions::default(), 11).unwrap_err();
         assert!(e.to_string().contains("between 6 and 10"), "{e}");
+        // Named both ways it can be given: `fit`'s flag and the station's key.
+        assert!(
+            e.to_string().contains("--v-control-rows") && e.to_string().contains("[fit]"),
+            "{e}"
+        );
         assert_eq!(default_control_rows(31, 5), 8);
         assert_eq!(default_control_rows(8, 5), 6);
         assert_eq!(default_control_rows(31, 3), 8);
