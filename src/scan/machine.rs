@@ -573,10 +573,6 @@ pub struct Machine {
     stage_open: bool,
     need_home: bool,
     pause_requested: bool,
-    /// A resumed scan that was paused when its process stopped: it starts paused.
-    paused_at_start: bool,
-    /// The scan was paused when it was interrupted (no line was being worked on).
-    interrupted_paused: bool,
     /// Traces started for the current line.
     traces: u32,
     /// Re-homes after a lost position on the current line.
@@ -629,8 +625,6 @@ impl Machine {
             stage_open: false,
             need_home: false,
             pause_requested: false,
-            paused_at_start: false,
-            interrupted_paused: false,
             traces: 0,
             rehomes: 0,
             line_began: None,
@@ -656,7 +650,9 @@ impl Machine {
             m.pitch_x_mm = r.pitch_x_mm;
             m.conditions = Some(r.conditions);
             m.points_per_line = r.points_per_line;
-            m.paused_at_start = r.paused;
+            if r.paused {
+                m.doing = Doing::Paused;
+            }
             m.metrics.scan_id = r.scan_id.clone();
             m.metrics.lines_done = m.done();
             m.status.scan_id = Some(r.scan_id);
@@ -689,7 +685,7 @@ impl Machine {
     /// scan stands.
     pub fn start(&mut self, now: Now) -> Vec<Action> {
         let mut out = Vec::new();
-        if self.created && self.paused_at_start {
+        if self.created && self.doing == Doing::Paused {
             // Paused by the operator before the process stopped: it stays paused, with no
             // device opened, until the operator resumes it.
             self.status.state = State::Paused;
@@ -698,7 +694,6 @@ impl Machine {
                     .to_owned(),
             );
             self.publish_progress(&mut out, None);
-            self.doing = Doing::Paused;
         } else if self.created {
             self.publish_progress(&mut out, None);
             self.next_step(now, &mut out);
@@ -1418,7 +1413,6 @@ impl Machine {
         if self.ending.is_some() {
             return;
         }
-        self.interrupted_paused = self.doing == Doing::Paused;
         if self.doing.is_effect() {
             out.push(Action::Cancel);
         }
@@ -1460,7 +1454,8 @@ impl Machine {
                 r.to_string(),
             ),
         };
-        if matches!(end, End::Shutdown) && self.created && self.interrupted_paused {
+        // The state stays `Paused` through the clean-up: nothing is in progress then.
+        if matches!(end, End::Shutdown) && self.created && self.status.state == State::Paused {
             // Paused, nothing was in progress: no line to abandon, and the pause stands.
             out.push(Action::Record(Note {
                 reason: format!(
