@@ -432,27 +432,48 @@ async fn replays_a_recorded_transcript_over_the_pty() {
     h.shutdown().await;
 }
 
-#[test]
-fn binary_prints_ready_line_and_exits_when_stdin_closes() {
-    let dir = tempfile::tempdir().unwrap();
-    let l = link(&dir);
+/// The simulator binary with `args` and `stdin`, its output piped, once it has printed its
+/// ready line: the child, the rest of its output, and the ready line parsed.
+fn spawn_sim(
+    args: &[&str],
+    stdin: std::process::Stdio,
+) -> (
+    std::process::Child,
+    BufReader<std::process::ChildStdout>,
+    serde_json::Value,
+) {
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan-sim"))
-        .args([
-            "--instrument-link",
-            l.to_str().unwrap(),
-            "--time-scale",
-            "0",
-        ])
-        .args(["--fault", "battery:abnormal", "--model", "sj410"])
-        .stdin(std::process::Stdio::piped())
+        .args(args)
+        .stdin(stdin)
         .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
     let mut out = BufReader::new(child.stdout.take().unwrap());
     let mut ready = String::new();
     out.read_line(&mut ready).unwrap();
     let v: serde_json::Value = serde_json::from_str(&ready).unwrap();
-    assert_eq!(v["event"], "ready");
+    assert_eq!(v["event"], "ready", "{ready}");
+    (child, out, v)
+}
+
+#[test]
+fn binary_prints_ready_line_and_exits_when_stdin_closes() {
+    let dir = tempfile::tempdir().unwrap();
+    let l = link(&dir);
+    let (mut child, _out, v) = spawn_sim(
+        &[
+            "--instrument-link",
+            l.to_str().unwrap(),
+            "--time-scale",
+            "0",
+            "--fault",
+            "battery:abnormal",
+            "--model",
+            "sj410",
+        ],
+        std::process::Stdio::piped(),
+    );
     assert_eq!(v["instrument"], l.to_str().unwrap());
     assert_eq!(v["stage"], serde_json::Value::Null);
     assert_eq!(v["model"], "sj410");
@@ -479,23 +500,15 @@ fn binary_prints_ready_line_and_exits_when_stdin_closes() {
 fn binary_with_stdin_from_dev_null_keeps_running_until_sigterm() {
     let dir = tempfile::tempdir().unwrap();
     let l = link(&dir);
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan-sim"))
-        .args([
+    let (mut child, _out, _) = spawn_sim(
+        &[
             "--instrument-link",
             l.to_str().unwrap(),
             "--time-scale",
             "0",
-        ])
-        .stdin(std::process::Stdio::null())
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut out = BufReader::new(child.stdout.take().unwrap());
-    let mut ready = String::new();
-    out.read_line(&mut ready).unwrap();
-    let v: serde_json::Value = serde_json::from_str(&ready).unwrap();
-    assert_eq!(v["event"], "ready");
+        ],
+        std::process::Stdio::null(),
+    );
     // Still serving well after the ready line: /dev/null's end of file is no stop signal.
     std::thread::sleep(Duration::from_millis(500));
     assert!(
@@ -569,8 +582,8 @@ fn until_ok(c: &mut Client) -> String {
 fn binary_serves_a_grbl_board_homing_to_a_switch_at_the_bottom() {
     let dir = tempfile::tempdir().unwrap();
     let l = dir.path().join("ystage");
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan-sim"))
-        .args([
+    let (mut child, _out, _) = spawn_sim(
+        &[
             "--stage-link",
             l.to_str().unwrap(),
             "--stage-protocol",
@@ -579,16 +592,9 @@ fn binary_serves_a_grbl_board_homing_to_a_switch_at_the_bottom() {
             "--stage-force-origin",
             "--time-scale",
             "0",
-        ])
-        .stdin(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut out = BufReader::new(child.stdout.take().unwrap());
-    let mut ready = String::new();
-    out.read_line(&mut ready).unwrap();
-    assert!(ready.contains("\"ready\""), "{ready}");
+        ],
+        std::process::Stdio::piped(),
+    );
     let mut c = Client::open(&l);
     c.send("$I");
     assert!(until_ok(&mut c).contains("[OPT:VZ,15,128]"));
@@ -681,23 +687,19 @@ async fn simulated_zaber_position_selects_the_served_line() {
 fn binary_runs_a_grbl_stage_alone_with_an_injected_fault() {
     let dir = tempfile::tempdir().unwrap();
     let l = dir.path().join("grbl");
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan-sim"))
-        .args([
+    let (mut child, _out, v) = spawn_sim(
+        &[
             "--stage-link",
             l.to_str().unwrap(),
             "--stage-protocol",
             "grbl",
-        ])
-        .args(["--time-scale", "0.001", "--stage-fault", "error15"])
-        .stdin(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut out = BufReader::new(child.stdout.take().unwrap());
-    let mut ready = String::new();
-    out.read_line(&mut ready).unwrap();
-    let v: serde_json::Value = serde_json::from_str(&ready).unwrap();
-    assert_eq!(v["event"], "ready");
+            "--time-scale",
+            "0.001",
+            "--stage-fault",
+            "error15",
+        ],
+        std::process::Stdio::piped(),
+    );
     assert_eq!(v["instrument"], serde_json::Value::Null);
     assert_eq!(v["stage"], l.to_str().unwrap());
     let mut c = Client::open(&l);

@@ -186,6 +186,20 @@ async fn status(r: &Rig) -> Status {
     }
 }
 
+/// Asks the daemon to start a scan of `specimen` (resuming an unfinished one, as by default).
+async fn start_scan(r: &Rig, specimen: &str) {
+    client(r)
+        .await
+        .request(&Request::Start {
+            specimen: specimen.into(),
+            operator: String::new(),
+            notes: String::new(),
+            mode: StartMode::Auto,
+        })
+        .await
+        .unwrap();
+}
+
 async fn wait_status(r: &Rig, what: &str, f: impl Fn(&Status) -> bool) -> Status {
     let start = Instant::now();
     loop {
@@ -343,16 +357,7 @@ async fn sigterm_mid_scan_records_an_interruption_and_the_restart_resumes_by_its
     let r = rig().await;
     let mut d = spawn_daemon(&r);
     notify_until(&r, &mut d, |m| m.contains("READY=1"));
-    client(&r)
-        .await
-        .request(&Request::Start {
-            specimen: "resume".into(),
-            operator: String::new(),
-            notes: String::new(),
-            mode: StartMode::Auto,
-        })
-        .await
-        .unwrap();
+    start_scan(&r, "resume").await;
     wait_status(&r, "two lines", |s| s.lines_done >= 2).await;
     sigterm(&d);
     notify_until(&r, &mut d, |m| m.contains("STOPPING=1"));
@@ -422,16 +427,7 @@ async fn a_paused_scan_stays_paused_across_a_restart_until_resumed() {
     let r = rig().await;
     let mut d = spawn_daemon(&r);
     notify_until(&r, &mut d, |m| m.contains("READY=1"));
-    client(&r)
-        .await
-        .request(&Request::Start {
-            specimen: "paused".into(),
-            operator: String::new(),
-            notes: String::new(),
-            mode: StartMode::Auto,
-        })
-        .await
-        .unwrap();
+    start_scan(&r, "paused").await;
     wait_status(&r, "scanning", |s| s.state == State::Scanning).await;
     client(&r).await.request(&Request::Pause).await.unwrap();
     let paused = wait_status(&r, "paused", |s| s.state == State::Paused).await;

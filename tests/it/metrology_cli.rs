@@ -8,18 +8,25 @@ fn surfscan() -> Command {
     Command::new(env!("CARGO_BIN_EXE_surfscan"))
 }
 
-#[test]
-fn analyze_profile_csv_writes_report_and_summary() {
-    let dir = tempfile::tempdir().unwrap();
-    // A = 1 µm, λ = 0.1 mm, 200 points per period, 4 mm: N = 5 at λc 0.8, whole periods.
+/// A profile CSV of `points` points at 0.5 µm: a sine of 1 µm amplitude and 0.1 mm period
+/// (200 points a period).
+fn sine_profile_csv(points: usize) -> String {
     let mut csv = String::from("x_mm,z_um\n");
-    for i in 0..8000 {
+    for i in 0..points {
         let x = i as f64 * 0.0005;
         csv.push_str(&format!(
             "{x:.7},{:.12}\n",
             (2.0 * PI * i as f64 / 200.0).sin()
         ));
     }
+    csv
+}
+
+#[test]
+fn analyze_profile_csv_writes_report_and_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    // A = 1 µm, λ = 0.1 mm, 200 points per period, 4 mm: N = 5 at λc 0.8, whole periods.
+    let csv = sine_profile_csv(8000);
     let input = dir.path().join("line.csv");
     std::fs::write(&input, csv).unwrap();
     let out = dir.path().join("out");
@@ -323,14 +330,7 @@ fn a_profile_csv_with_a_byte_order_mark_is_read_as_a_profile() {
     // Saved as "UTF-8 CSV" by a spreadsheet program: the mark before the header is no part
     // of it, and the file is no grid needing pitches.
     let dir = tempfile::tempdir().unwrap();
-    let mut csv = String::from("\u{feff}x_mm,z_um\n");
-    for i in 0..4000 {
-        let x = i as f64 * 0.0005;
-        csv.push_str(&format!(
-            "{x:.7},{:.12}\n",
-            (2.0 * PI * i as f64 / 200.0).sin()
-        ));
-    }
+    let csv = format!("\u{feff}{}", sine_profile_csv(4000));
     let input = dir.path().join("line.csv");
     std::fs::write(&input, csv).unwrap();
     let out = dir.path().join("out");
