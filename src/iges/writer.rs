@@ -150,10 +150,15 @@ impl RepeatedTexts {
     fn push_if_same(&self, i: usize, value: f64, out: &mut Vec<u8>) -> bool {
         match (self.bits.get(i), self.lens.get(i)) {
             (Some(&bits), Some(&len)) if bits == value.to_bits() && len != 0 => {
-                let at = i * TEXT_STRIDE;
-                let entry: &[u8; TEXT_STRIDE] = self.text[at..at + TEXT_STRIDE]
-                    .try_into()
-                    .expect("stride-sized entry");
+                // Every remembered value has its stride-sized entry; were one missing, the
+                // value would simply be formatted again.
+                let Some(entry) = self
+                    .text
+                    .get(i * TEXT_STRIDE..)
+                    .and_then(|t| t.first_chunk::<TEXT_STRIDE>())
+                else {
+                    return false;
+                };
                 // One fixed-size copy (a few register moves), then cut to the text's length.
                 let end = out.len() + usize::from(len);
                 out.extend_from_slice(entry);

@@ -238,18 +238,15 @@ fn mean_line_fft(heights_um: &[f64], w: &[f64]) -> Vec<f64> {
     let len = fft_len(n + half);
     PREPARED.with(|cell| {
         let mut cell = cell.borrow_mut();
-        let fresh = match cell.as_ref() {
-            Some(p) => {
-                p.key.0 != len
-                    || p.key.1.len() != w.len()
-                    || p.key.1.iter().zip(w).any(|(a, b)| *a != b.to_bits())
-            }
-            None => true,
+        let same = |p: &Prepared| {
+            p.key.0 == len
+                && p.key.1.len() == w.len()
+                && p.key.1.iter().zip(w).all(|(a, b)| *a == b.to_bits())
         };
-        if fresh {
-            *cell = Some(prepare(len, w));
-        }
-        let prep = cell.as_ref().expect("prepared just above");
+        let prep: &Prepared = match &mut *cell {
+            Some(p) if same(p) => p,
+            slot => slot.insert(prepare(len, w)),
+        };
         let offset = heights_um.iter().sum::<f64>() / n as f64;
         let mut input = vec![0.0; len];
         for (x, &z) in input.iter_mut().zip(heights_um) {
