@@ -20,7 +20,7 @@ fn main() {
     match cli::run(cli) {
         Ok(()) => {}
         Err(e) => {
-            eprintln!("surfscan: {e}");
+            cli::console::err(format_args!("surfscan: {e}"));
             std::process::exit(e.exit as i32);
         }
     }

@@ -84,7 +84,11 @@ pub fn init(verbose: bool) {
                     std::io::stderr().is_terminal(),
                     std::env::var_os("NO_COLOR").as_deref(),
                 ))
-                .with_target(false),
+                .with_target(false)
+                // A log line that cannot be written (stderr's reader has gone, a terminal
+                // hung up) is dropped: reporting that on stderr would panic, and the scan
+                // must go on.
+                .log_internal_errors(false),
         )
         .try_init();
 }

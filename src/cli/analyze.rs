@@ -350,7 +350,7 @@ fn report_error(e: ReportError) -> CliError {
 /// Prints the warnings and the summary, and maps a partial characterisation to exit 3.
 fn finish(o: &ScanOutputs) -> Result<(), CliError> {
     print_outputs(o);
-    println!("{}", o.verdict_line());
+    say!("{}", o.verdict_line());
     if o.complete() {
         Ok(())
     } else {
@@ -374,9 +374,9 @@ fn finish(o: &ScanOutputs) -> Result<(), CliError> {
 
 fn print_outputs(o: &ScanOutputs) {
     for w in &o.warnings {
-        eprintln!("surfscan: warning: {w}");
+        tell!("surfscan: warning: {w}");
     }
-    println!(
+    say!(
         "{}: {} lines characterised in {:.2} s",
         o.report_json.display(),
         o.lines_used.len(),

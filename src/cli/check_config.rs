@@ -102,14 +102,14 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let (config, hash) = load_config(&path)?;
     let notes = check_ports(&config)
         .map_err(|e| CliError::new(Exit::Config, format!("config {}: {e}", path.display())))?;
-    println!(
+    say!(
         "{}: valid (sha256 {})",
         path.display(),
         hash.get(..12).unwrap_or(&hash)
     );
-    print!("{}", summary(&config));
+    say_text!("{}", summary(&config));
     for note in notes {
-        eprintln!("surfscan: note: {note}");
+        tell!("surfscan: note: {note}");
     }
     Ok(())
 }

@@ -120,7 +120,7 @@ pub fn socket_path_with_default(
         None if default_config.exists() => match config_socket(default_config) {
             Ok(s) => s,
             Err(e) => {
-                eprintln!("surfscan: warning: {e}; trying {DEFAULT_SOCKET}");
+                tell!("surfscan: warning: {e}; trying {DEFAULT_SOCKET}");
                 None
             }
         },
@@ -179,7 +179,9 @@ pub fn run_status(args: StatusArgs) -> Result<(), CliError> {
             .await
             .map_err(client_error)?;
         print_reply(&first, json, false)?;
-        loop {
+        // Watching is only printing: once nobody reads the output (`status --watch | head`),
+        // the watch ends.
+        while !super::console::stdout_gone() {
             let why = match client.next().await {
                 Ok(Some(m)) => {
                     print_reply(&m, json, true)?;
@@ -188,12 +190,13 @@ pub fn run_status(args: StatusArgs) -> Result<(), CliError> {
                 Ok(None) => "closed the connection".to_string(),
                 Err(e) => e.to_string(),
             };
-            eprintln!(
+            tell!(
                 "surfscan: the daemon at {} {why} (stopped or restarted?); reconnecting",
                 path.display()
             );
             client = reconnect_watch(&path, json).await?;
         }
+        Ok(())
     })
 }
 
@@ -212,7 +215,7 @@ async fn reconnect_watch(path: &Path, json: bool) -> Result<ControlClient, CliEr
         };
         match client.request(&Request::Watch).await {
             Ok(first) => {
-                eprintln!("surfscan: reconnected to the daemon at {}", path.display());
+                tell!("surfscan: reconnected to the daemon at {}", path.display());
                 print_reply(&first, json, true)?;
                 return Ok(client);
             }
@@ -276,7 +279,7 @@ fn client_error(e: ClientError) -> CliError {
 /// Prints one reply; an `Error` from the daemon becomes exit status 1.
 fn print_reply(m: &Received, json: bool, compact: bool) -> Result<(), CliError> {
     if json {
-        println!("{}", m.raw);
+        say!("{}", m.raw);
     }
     match &m.message {
         Message::Error { message } => Err(CliError::new(
@@ -285,7 +288,7 @@ fn print_reply(m: &Received, json: bool, compact: bool) -> Result<(), CliError> 
         )),
         _ if json => Ok(()),
         Message::Status(s) if compact => {
-            println!(
+            say!(
                 "{} {}",
                 chrono::Local::now().format("%H:%M:%S"),
                 render_status_line(s)
@@ -293,11 +296,11 @@ fn print_reply(m: &Received, json: bool, compact: bool) -> Result<(), CliError> 
             Ok(())
         }
         Message::Status(s) => {
-            print!("{}", render_status(s));
+            say_text!("{}", render_status(s));
             Ok(())
         }
         Message::Ack { command, detail } => {
-            println!("{command}: {detail}");
+            say!("{command}: {detail}");
             Ok(())
         }
         Message::Hello { .. } => Err(CliError::new(

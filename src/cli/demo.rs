@@ -159,7 +159,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 ))
             }
         }
-        println!(
+        say!(
             "simulator: SJ-210 on {}, GRBL stage on {}; configuration {}",
             instrument_link.display(),
             stage_link.display(),

@@ -29,7 +29,11 @@ pub struct ManpagesArgs {
 /// Runs `surfscan completions SHELL`: the script on standard output.
 pub fn run_completions(args: CompletionsArgs) -> Result<(), CliError> {
     let mut cmd = Cli::command();
-    clap_complete::generate(args.shell, &mut cmd, "surfscan", &mut std::io::stdout());
+    // Rendered in memory (a write to a closed stdout would panic inside the generator),
+    // then printed as any other output is.
+    let mut script = Vec::new();
+    clap_complete::generate(args.shell, &mut cmd, "surfscan", &mut script);
+    super::console::out_bytes(&script);
     Ok(())
 }
 
@@ -71,7 +75,7 @@ pub fn write_manpages(dir: &Path) -> Result<Vec<PathBuf>, CliError> {
 /// Runs `surfscan manpages DIR`.
 pub fn run_manpages(args: ManpagesArgs) -> Result<(), CliError> {
     let written = write_manpages(&args.dir)?;
-    println!(
+    say!(
         "wrote {} man pages into {} (surfscan.1 and one per subcommand)",
         written.len(),
         args.dir.display()

@@ -422,7 +422,7 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             CliError::new(exit, e.to_string())
         })?;
     if !incomplete.is_empty() {
-        eprintln!(
+        tell!(
             "surfscan: warning: {}",
             crate::report::scan_dir::incomplete_lines_warning(
                 &line_list(&incomplete),
@@ -433,7 +433,7 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
     }
     let check = check_against_journal(&args.input, &lines.index)?;
     if !check.uncommitted.is_empty() {
-        eprintln!(
+        tell!(
             "surfscan: warning: lines {} are on disk but the journal never committed them (the scan stopped before their record); they were left out",
             line_list(&check.uncommitted)
         );
@@ -565,7 +565,7 @@ fn check_against_journal(dir: &Path, index: &[u32]) -> Result<JournalCheck, CliE
     {
         Ok(s) => s,
         Err(e) => {
-            eprintln!(
+            tell!(
                 "surfscan: warning: the line files cannot be checked against the journal ({e}); they are fitted as they are"
             );
             return Ok(JournalCheck {
@@ -730,7 +730,7 @@ fn fit_surface(
 /// Names every spike replaced before fitting (only ever when asked for).
 fn report_replaced(replaced: &[LineSpike]) {
     for r in replaced {
-        eprintln!(
+        tell!(
             "surfscan: replaced before fitting (asked for): spike in line {} at x = {} mm, height {} µm",
             crate::numfmt::line_label(r.line),
             crate::numfmt::fmt(r.spike.x_mm, crate::numfmt::Quantity::PositionMm),
@@ -1183,7 +1183,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             part_path(&output, n_files, n_files).display()
         )
     };
-    println!(
+    say!(
         "{}: {}x{} grid, {}x{} poles, {} patch(es), {} bytes; fit {:.1} ms, write {:.1} ms",
         written,
         grid.rows,
@@ -1196,19 +1196,19 @@ pub fn run(args: Args) -> Result<(), CliError> {
         write_s * 1e3
     );
     match &verdict {
-        Ok(b) => println!("{}", b.short()),
-        Err(e) => println!("no verdict on the model between lines: {e}"),
+        Ok(b) => say!("{}", b.short()),
+        Err(e) => say!("no verdict on the model between lines: {e}"),
     }
     if let Some(alts) = &alternatives {
-        println!(
+        say!(
             "\nhold-out of the alternatives (every {} line left out and refitted; supported means rms ≤ {threshold} × Sq):",
             ordinal(*every.as_ref().unwrap_or(&2))
         );
-        print!("{}", alternatives_table(alts));
+        say_text!("{}", alternatives_table(alts));
     } else if args.compare {
         match (&sq, &every) {
-            (Err(e), _) => println!("no comparison: the grid has no Sq ({e})"),
-            (_, Err(e)) => println!("no comparison: {e}"),
+            (Err(e), _) => say!("no comparison: the grid has no Sq ({e})"),
+            (_, Err(e)) => say!("no comparison: {e}"),
             _ => {}
         }
     }

@@ -11,8 +11,33 @@
 use clap::{Parser, Subcommand};
 use std::fmt;
 
+/// A line on standard output that never panics ([`console`]).
+macro_rules! say {
+    () => {
+        $crate::cli::console::out(format_args!(""), true)
+    };
+    ($($arg:tt)*) => {
+        $crate::cli::console::out(format_args!($($arg)*), true)
+    };
+}
+
+/// Text on standard output as it is, without a newline ([`console`]).
+macro_rules! say_text {
+    ($($arg:tt)*) => {
+        $crate::cli::console::out(format_args!($($arg)*), false)
+    };
+}
+
+/// A line on standard error that never panics ([`console`]).
+macro_rules! tell {
+    ($($arg:tt)*) => {
+        $crate::cli::console::err(format_args!($($arg)*))
+    };
+}
+
 pub mod analyze;
 pub mod check_config;
+pub mod console;
 pub mod control;
 pub mod daemon;
 #[cfg(feature = "sim")]

@@ -189,7 +189,7 @@ fn write_transcript(
             format!("cannot write transcript {}: {e}", path.display()),
         )
     })?;
-    println!("transcript written to {}", path.display());
+    say!("transcript written to {}", path.display());
     Ok(())
 }
 
@@ -223,7 +223,7 @@ where
         ..settings.serial()
     })
     .map_err(|e| CliError::new(Exit::Unavailable, format!("PC side: {e}")))?;
-    println!(
+    say!(
         "passthrough relaying {} (PC software) <-> {} (instrument) at {} baud; pull a profile in the PC software, then stop with Ctrl-C",
         pc_port.display(),
         settings.port,
@@ -242,43 +242,43 @@ where
     // Whichever direction ends first (a side closed or failed) ends the relay.
     tokio::select! {
         r = tokio::io::copy(&mut pc_rx, &mut inst_tx) => match r {
-            Ok(n) => println!("passthrough the PC side closed after {n} bytes to the instrument"),
-            Err(e) => println!("passthrough the PC side ended: {e}"),
+            Ok(n) => say!("passthrough the PC side closed after {n} bytes to the instrument"),
+            Err(e) => say!("passthrough the PC side ended: {e}"),
         },
         r = tokio::io::copy(&mut inst_rx, &mut pc_tx) => match r {
-            Ok(n) => println!("passthrough the instrument side closed after {n} bytes to the PC"),
-            Err(e) => println!("passthrough the instrument side ended: {e}"),
+            Ok(n) => say!("passthrough the instrument side closed after {n} bytes to the PC"),
+            Err(e) => say!("passthrough the instrument side ended: {e}"),
         },
-        _ = tokio::signal::ctrl_c() => println!("passthrough stopped (interrupt)"),
-        _ = term.recv() => println!("passthrough stopped (SIGTERM)"),
-        _ = until => println!("passthrough stopped after --for-s"),
+        _ = tokio::signal::ctrl_c() => say!("passthrough stopped (interrupt)"),
+        _ = term.recv() => say!("passthrough stopped (SIGTERM)"),
+        _ = until => say!("passthrough stopped after --for-s"),
     }
     Ok(())
 }
 
 fn print_readout(p: &ReadoutProbe) {
     match &p.pitch {
-        Some((pitch, source)) => println!("readout   x pitch {pitch} um ({source})"),
-        None => println!("readout   x pitch unknown: no count or Ra check (set pitch-x-um)"),
+        Some((pitch, source)) => say!("readout   x pitch {pitch} um ({source})"),
+        None => say!("readout   x pitch unknown: no count or Ra check (set pitch-x-um)"),
     }
     for r in &p.results {
-        println!("readout   {}: {}", r.form, r.verdict.describe());
+        say!("readout   {}: {}", r.form, r.verdict.describe());
     }
     match p.conclusion() {
-        Conclusion::Works(f) => println!("verdict   {} reads the profile", f.total),
+        Conclusion::Works(f) => say!("verdict   {} reads the profile", f.total),
         Conclusion::WorksWithDoubts(f, _) => {
-            println!("verdict   {} reads the profile, with doubts", f.total)
+            say!("verdict   {} reads the profile, with doubts", f.total)
         }
-        Conclusion::NeedsTrace => println!("verdict   no profile held"),
-        Conclusion::NotSupported => println!("verdict   no read-out command (NG030 on every form)"),
-        Conclusion::NoFormFound => println!("verdict   no form read the profile"),
+        Conclusion::NeedsTrace => say!("verdict   no profile held"),
+        Conclusion::NotSupported => say!("verdict   no read-out command (NG030 on every form)"),
+        Conclusion::NoFormFound => say!("verdict   no form read the profile"),
     }
     if let Some(s) = p.snippet() {
-        println!("snippet   paste into the station config:");
-        print!("{s}");
+        say!("snippet   paste into the station config:");
+        say_text!("{s}");
     }
     if let Some(g) = p.guidance() {
-        println!("next      {g}");
+        say!("next      {g}");
     }
 }
 
@@ -290,12 +290,16 @@ async fn checklist<S>(
 where
     S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin,
 {
-    println!(
+    say!(
         "link      {} {} baud, parity {:?}, flow control {:?}, model {}",
-        settings.port, settings.baud, settings.parity, settings.flow_control, settings.model
+        settings.port,
+        settings.baud,
+        settings.parity,
+        settings.flow_control,
+        settings.model
     );
     let status = c.status().await?;
-    println!(
+    say!(
         "status    {status:03} ({}): the link answers",
         c.table().status_meaning(status)
     );
@@ -303,18 +307,18 @@ where
     print_report(&report);
     let pos_cmd = c.table().commands.position.plain();
     match c.command(&pos_cmd, true).await {
-        Ok(p) => println!("position  {} (detector, {pos_cmd})", p.trim()),
-        Err(e) => println!("position  unreadable: {e}"),
+        Ok(p) => say!("position  {} (detector, {pos_cmd})", p.trim()),
+        Err(e) => say!("position  unreadable: {e}"),
     }
     if trace {
         if report.battery == crate::devices::Battery::Abnormal {
             return Err(Sj210Error::BatteryAbnormal);
         }
-        println!("trace     starting one trace (the stylus moves)");
+        say!("trace     starting one trace (the stylus moves)");
         match &report.profile_readout {
             ProfileReadout::Supported { .. } => {
                 let line = c.trace_line().await?;
-                println!(
+                say!(
                     "trace     {} points at {} mm pitch ({}), kind {:?}",
                     line.profile.len(),
                     line.profile.pitch_x_mm,
@@ -323,17 +327,17 @@ where
                 );
                 print_results(&line.results);
                 for w in &line.warnings {
-                    println!("warning   {w}");
+                    say!("warning   {w}");
                 }
             }
             ProfileReadout::Unsupported { .. } => {
                 c.run_trace().await?;
                 let mut warnings = Vec::new();
                 let results = c.read_results(&mut warnings).await?;
-                println!("trace     done; results only (profile read-out unavailable)");
+                say!("trace     done; results only (profile read-out unavailable)");
                 print_results(&results);
                 for w in &warnings {
-                    println!("warning   {w}");
+                    say!("warning   {w}");
                 }
             }
         }
@@ -344,20 +348,22 @@ where
 fn print_results(results: &[crate::profile::InstrumentResult]) {
     for r in results {
         match r.value {
-            Some(v) => println!("result    {:<6} {v} {}", r.name, r.unit),
-            None => println!("result    {:<6} (no value) {}", r.name, r.unit),
+            Some(v) => say!("result    {:<6} {v} {}", r.name, r.unit),
+            None => say!("result    {:<6} (no value) {}", r.name, r.unit),
         }
     }
 }
 
 fn print_report(r: &ProbeReport) {
-    println!(
+    say!(
         "identity  model {}, firmware {:?}, drive unit {}",
-        r.identity.model, r.identity.firmware, r.identity.drive_unit
+        r.identity.model,
+        r.identity.firmware,
+        r.identity.drive_unit
     );
-    println!("battery   {:?}", r.battery);
+    say!("battery   {:?}", r.battery);
     let c = &r.conditions;
-    println!(
+    say!(
         "conditions standard {}, profile {:?}, filter {:?}, lambda-c {} mm, lambda-s {} um, N {}, evaluation length {} mm (raw {:?})",
         c.standard.as_deref().unwrap_or("?"),
         c.profile_kind,
@@ -368,15 +374,15 @@ fn print_report(r: &ProbeReport) {
         fmt_opt(c.evaluation_length_mm),
         c.raw.as_deref().unwrap_or("")
     );
-    println!("parameters {}", r.parameter_count);
+    say!("parameters {}", r.parameter_count);
     match &r.profile_readout {
         ProfileReadout::Supported { points_now } => {
-            println!("profile   read-out supported ({points_now} points held now)")
+            say!("profile   read-out supported ({points_now} points held now)")
         }
-        ProfileReadout::Unsupported { advice, .. } => println!("profile   UNSUPPORTED: {advice}"),
+        ProfileReadout::Unsupported { advice, .. } => say!("profile   UNSUPPORTED: {advice}"),
     }
     for w in &r.warnings {
-        println!("warning   {w}");
+        say!("warning   {w}");
     }
 }
 

@@ -309,28 +309,28 @@ fn abandon(dir: &Path, peer: Peer) -> Result<(), CliError> {
 pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
     match outcome {
         Outcome::Success { dir, outputs } => {
-            println!("scan complete: {}", dir.display());
+            say!("scan complete: {}", dir.display());
             for p in &outputs.iges {
-                println!("  surface  {}", p.display());
+                say!("  surface  {}", p.display());
             }
-            println!("  report   {}", outputs.report.display());
+            say!("  report   {}", outputs.report.display());
             // The report for people first; the per-line Rk plots as one entry.
             let (rk, files): (Vec<&PathBuf>, Vec<&PathBuf>) = outputs
                 .files
                 .iter()
                 .partition(|p| p.parent().and_then(|d| d.file_name()) == Some("rk".as_ref()));
             for p in files {
-                println!("  file     {}", p.display());
+                say!("  file     {}", p.display());
             }
             if let Some(dir) = rk.first().and_then(|p| p.parent()) {
-                println!(
+                say!(
                     "  file     {}/ ({} Rk construction plots, one PNG and SVG per line)",
                     dir.display(),
                     rk.len()
                 );
             }
             if let Some(e) = &outputs.characterisation_error {
-                println!("  characterisation failed: {e}; the report holds the fit and the instrument's results");
+                say!("  characterisation failed: {e}; the report holds the fit and the instrument's results");
             }
             let report = std::fs::read(&outputs.report)
                 .ok()
@@ -338,10 +338,10 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
             match &report {
                 Some(report) => {
                     for (k, v) in result_summary(report) {
-                        println!("  {k:<8} {v}");
+                        say!("  {k:<8} {v}");
                     }
                 }
-                None => println!("  (the report cannot be read back for a summary)"),
+                None => say!("  (the report cannot be read back for a summary)"),
             }
             // Without a verdict in the report, say why there is none.
             if report
@@ -349,7 +349,7 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
                 .and_then(crate::report::html::verdict)
                 .is_none()
             {
-                println!("  model    {}", outputs.verdict);
+                say!("  model    {}", outputs.verdict);
             }
             if outputs.characterisation_complete {
                 Ok(())
@@ -559,6 +559,7 @@ pub async fn run_foreground_locked(
     let _ = bar.await;
     outcome
 }
+
 
 /// Runs `surfscan scan`.
 pub fn run(args: Args) -> Result<(), CliError> {

@@ -276,3 +276,63 @@ fn fit_names_the_real_cause_for_a_missing_or_wrong_input() {
         assert!(err.contains("is an IGES file"), "{err}");
     }
 }
+
+/// Runs `surfscan ARGS` with standard output and standard error on a pipe whose reader has
+/// already gone (`surfscan … | head -0`, a closed terminal).
+fn surfscan_unread(args: &[&str]) -> std::process::ExitStatus {
+    let writer = crate::common::unread_pipe();
+    Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(args)
+        .env("RUST_LOG", "info")
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::from(writer.try_clone().unwrap()))
+        .stderr(std::process::Stdio::from(writer))
+        .status()
+        .unwrap()
+}
+
+#[test]
+fn output_nobody_reads_neither_aborts_a_command_nor_stops_its_work() {
+    // Each of these prints on both streams (a warning, the verdict, the summary); the
+    // release build aborted at the first write with "failed printing to stdout".
+    let dir = tempfile::tempdir().unwrap();
+    let grid = dir.path().join("grid.csv");
+    let rows: Vec<String> = (0..7)
+        .map(|r| {
+            (0..1800)
+                .map(|k| format!("{:.4}", ((k as f64) * 0.037 + r as f64).sin()))
+                .collect::<Vec<_>>()
+                .join(",")
+        })
+        .collect();
+    std::fs::write(&grid, rows.join("\n")).unwrap();
+    let (grid, iges, out) = (
+        grid.to_str().unwrap(),
+        dir.path().join("s.igs"),
+        dir.path().join("analysis"),
+    );
+    let pitches = ["--pitch-x", "0.0005", "--pitch-y", "0.01"];
+    let fit = [&["fit", grid, "-o", iges.to_str().unwrap()][..], &pitches].concat();
+    assert_eq!(surfscan_unread(&fit).code(), Some(0));
+    assert!(iges.exists());
+    let analyze = [
+        &["analyze", grid, "--out", out.to_str().unwrap()][..],
+        &pitches,
+    ]
+    .concat();
+    assert_eq!(surfscan_unread(&analyze).code(), Some(0));
+    assert!(out.join("report.json").exists());
+    assert_eq!(surfscan_unread(&["completions", "bash"]).code(), Some(0));
+    assert_eq!(
+        surfscan_unread(&["check-config", "config/surfscan.toml"]).code(),
+        Some(0)
+    );
+    // A failure keeps its own exit status (74: the input cannot be read), not an abort.
+    let missing = dir.path().join("missing.csv");
+    let fit = [
+        &["fit", missing.to_str().unwrap(), "-o", "x.igs"][..],
+        &pitches,
+    ]
+    .concat();
+    assert_eq!(surfscan_unread(&fit).code(), Some(74));
+}

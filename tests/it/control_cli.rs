@@ -366,3 +366,41 @@ async fn watch_prints_every_change_and_reconnects_when_the_daemon_restarts() {
     let _ = stop.send(());
     task.await.unwrap();
 }
+
+/// `status --watch | head -1`: once nobody reads what it prints, watching ends (exit 0);
+/// `status` alone likewise exits 0. Neither aborts on the write to a closed pipe.
+#[tokio::test]
+async fn status_and_watch_end_quietly_when_nobody_reads_them() {
+    let d = Daemon::start().await;
+    for args in [
+        &["status"][..],
+        &["status", "--watch"],
+        &["status", "--json"],
+    ] {
+        // Spawned, not `output()`, which would capture stdout through a pipe of its own.
+        let child = surfscan()
+            .args(args)
+            .arg("--socket")
+            .arg(&d.path)
+            .stdout(std::process::Stdio::from(crate::common::unread_pipe()))
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let out = tokio::time::timeout(Duration::from_secs(30), child.wait_with_output())
+            .await
+            .unwrap_or_else(|_| panic!("{args:?} did not end once its output was unread"))
+            .unwrap();
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{args:?}: {}",
+            text(&out.stderr)
+        );
+        assert!(
+            !text(&out.stderr).contains("panicked"),
+            "{}",
+            text(&out.stderr)
+        );
+    }
+    d.shutdown().await;
+}

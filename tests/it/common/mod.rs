@@ -19,6 +19,16 @@ use surfscan_sim::data::ServedProfile;
 use surfscan_sim::grbl::{GrblSimConfig, StageShared};
 use surfscan_sim::{FaultSpec, InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
 
+/// The writing end of a pipe whose reader has already gone, to stand for a terminal that
+/// hung up or a `| head` that exited: a write to it fails with EPIPE. Both ends are
+/// close-on-exec, so no process another test starts meanwhile keeps the reader open (the
+/// child given it as stdout or stderr gets its own copy).
+pub fn unread_pipe() -> std::os::fd::OwnedFd {
+    let (reader, writer) = nix::unistd::pipe2(nix::fcntl::OFlag::O_CLOEXEC).expect("pipe");
+    drop(reader);
+    writer
+}
+
 /// y of line 0 (GRBL machine coordinates are negative after homing), mm.
 pub const Y_START_MM: f64 = -20.0;
 /// y step of the plan and of the served lines, mm.
