@@ -7,7 +7,8 @@
 //! waits for `surfscan start`, and never starts a scan by itself. Every status change is
 //! sent as `STATUS=`; `WATCHDOG=1` comes from the scan loop itself (and the idle loop).
 //! SIGTERM/SIGINT: `STOPPING=1`, the current line is abandoned cleanly and an interruption
-//! (not a stop) is recorded, so the scan resumes at the next start. The notification hook
+//! (not a stop) is recorded, so the scan resumes at the next start. SIGHUP is logged and
+//! otherwise ignored: the configuration is read only at start. The notification hook
 //! runs when a scan completes, fails, is aborted or suspends.
 //!
 //! Layer 5 (composition): config, control server, runner, service notifications, hook.
@@ -147,6 +148,11 @@ async fn daemon(
             }
         }
     });
+
+    // SIGHUP changes nothing: the configuration is read once, at start.
+    tokio::spawn(super::scan::ignore_hangups(
+        "ignored; the daemon reads its configuration only at start (systemctl restart surfscan applies a change; an unfinished scan resumes)",
+    ));
 
     // SIGTERM / SIGINT.
     let n = notifier.clone();

@@ -1,7 +1,9 @@
 //! `surfscan scan`: one scan in the foreground, exactly as the daemon runs it — an
 //! unfinished scan of this configuration is resumed first — with a progress bar (line k/N,
 //! ETA, the last line's Ra). Ctrl-C abandons the current line and leaves the scan
-//! resumable, as SIGTERM does for the daemon.
+//! resumable, as SIGTERM does for the daemon. A hang-up (SIGHUP: the terminal or SSH session
+//! went away) does not stop it: the scan goes on without its terminal, and what it would have
+//! printed is dropped.
 //!
 //! Exit status: 0 success, 1 the scan failed or was aborted, 2 usage, 3 the scan completed
 //! but its characterisation is partial (every line, the IGES and every output that could be
@@ -537,6 +539,9 @@ pub async fn run_foreground_locked(
         tokio::spawn(record_scan_in_lock(lock, status_rx.clone()));
     }
     let bar = tokio::spawn(progress(status_rx));
+    let hangups = tokio::spawn(ignore_hangups(
+        "the scan goes on; SIGTERM (kill PID) or Ctrl-C in a terminal interrupts it resumably",
+    ));
     let signals = tokio::spawn(async move {
         use tokio::signal::unix::{signal, SignalKind};
         let (Ok(mut term), Ok(mut int)) = (
@@ -556,10 +561,28 @@ pub async fn run_foreground_locked(
     let outcome = run_scan(station, &mut ctl, settings, request).await;
     drop(ctl);
     signals.abort();
+    hangups.abort();
     let _ = bar.await;
     outcome
 }
 
+/// Takes SIGHUP for as long as it runs, logging each with `then`, instead of letting it end
+/// the process. A foreground scan gets one when the terminal or SSH session it was started
+/// from goes away: the instrument and the stage are mid-scan, and nobody is left to resume
+/// it, so it goes on (its output is dropped, [`super::console`]). The daemon reads its
+/// configuration only at start, so a reload request changes nothing either.
+pub async fn ignore_hangups(then: &'static str) {
+    use tokio::signal::unix::{signal, SignalKind};
+    let Ok(mut hangup) = signal(SignalKind::hangup()) else {
+        tracing::warn!("cannot watch SIGHUP: a hang-up of the terminal would end the process");
+        return;
+    };
+    while hangup.recv().await.is_some() {
+        tracing::warn!(
+            "SIGHUP received (a terminal or session hung up, or a reload request): {then}"
+        );
+    }
+}
 
 /// Runs `surfscan scan`.
 pub fn run(args: Args) -> Result<(), CliError> {

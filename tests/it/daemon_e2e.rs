@@ -553,3 +553,42 @@ async fn a_damaged_journal_is_named_in_the_status_and_does_not_hold_up_the_daemo
     assert!(!s.scan_id.unwrap().contains("old"));
     drop(d);
 }
+
+/// A hang-up (SIGHUP: a reload request, or the session of a daemon started by hand went
+/// away) with nobody reading the daemon's output: the scan under way goes on to the end and
+/// the daemon keeps serving, instead of ending on the signal or aborting on a log line it
+/// cannot write.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_hang_up_leaves_the_daemon_scanning_with_nobody_reading_its_log() {
+    let r = rig().await;
+    let writer = crate::common::unread_pipe();
+    let mut d = Daemon(
+        Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(["daemon", "--config"])
+            .arg(&r.config)
+            .env("NOTIFY_SOCKET", r.dir.path().join("notify.sock"))
+            .env_remove("WATCHDOG_USEC")
+            .env("RUST_LOG", "info")
+            .stdin(Stdio::null())
+            .stdout(Stdio::from(writer.try_clone().unwrap()))
+            .stderr(Stdio::from(writer))
+            .spawn()
+            .unwrap(),
+    );
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    start_scan(&r, "hang-up").await;
+    let s = wait_status(&r, "a line on disk", |s| s.lines_done >= 1).await;
+    assert!(s.lines_done < LINES, "the scan ended before the hang-up");
+    let pid = nix::unistd::Pid::from_raw(d.id() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGHUP).unwrap();
+    let s = wait_status(&r, "the scan's end", |s| s.last_stop.is_some()).await;
+    assert_eq!(
+        s.last_stop.as_ref().unwrap().status,
+        Ending::Success,
+        "{s:?}"
+    );
+    assert_eq!(line_indices(&records(&scan_dir(&r))).len() as u32, LINES);
+    assert!(d.try_wait().unwrap().is_none(), "the daemon exited");
+    sigterm(&d);
+    assert!(wait_exit(&mut d).success());
+}

@@ -817,3 +817,42 @@ async fn a_stage_reset_mid_scan_rehomes_and_completes() {
     assert_eq!(rig.stage.true_position_nm(), target_nm(n - 1));
     rig.shutdown().await;
 }
+
+/// The terminal a foreground scan was started from goes away mid-scan (an SSH session that
+/// dropped at night): SIGHUP arrives and nothing reads its output any more. The scan goes
+/// on to the last line and its outputs, exit 0, instead of dying on the hang-up or aborting
+/// on a write to a closed pipe.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_foreground_scan_outlives_the_terminal_it_was_started_from() {
+    let rig = Rig::start(RigOptions::default()).await;
+    let n = rig.options.lines;
+    let cfg = rig.config("out");
+    // Standard output and error are a pipe whose reader has already gone.
+    let writer = crate::common::unread_pipe();
+    let mut child = scan_command(&cfg, &[])
+        .stdout(std::process::Stdio::from(writer.try_clone().unwrap()))
+        .stderr(std::process::Stdio::from(writer))
+        .spawn()
+        .unwrap();
+    let out = rig.out_dir("out");
+    wait_until(Duration::from_secs(60), "a committed line", || {
+        committed_lines(&out) >= 1
+    })
+    .await;
+    assert!(
+        committed_lines(&out) < n,
+        "the scan ended before the hang-up could reach it mid-scan"
+    );
+    let pid = nix::unistd::Pid::from_raw(child.id().unwrap() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGHUP).unwrap();
+    let status = tokio::time::timeout(Duration::from_secs(120), child.wait())
+        .await
+        .unwrap()
+        .unwrap();
+    assert!(status.success(), "the scan ended with {status}");
+    let dir = scan_dir(&out);
+    assert_lines_exactly(&dir, n);
+    assert_journal_complete(&dir, n);
+    assert!(dir.join("surface.igs").exists() && dir.join("report.json").exists());
+    rig.shutdown().await;
+}
