@@ -11,12 +11,14 @@
 //! Layer 5 (composition): depends on [`crate::sj210`] and [`crate::transport`].
 
 use super::{CliError, Exit};
-use crate::devices::{DeviceFault, FaultClass, ProbeReport, ProfileReadout};
+use crate::devices::{Battery, DeviceFault, FaultClass, ProbeReport, ProfileReadout};
+use crate::profile::{FilterKind, ProfileKind};
 use crate::sj210::client::Sj210Client;
 use crate::sj210::error::Sj210Error;
 use crate::sj210::readout_probe::{Conclusion, ReadoutForm, ReadoutProbe};
 use crate::sj210::recorder::{Recorder, SharedTranscript, Transcript, TranscriptHeader};
 use crate::sj210::settings::InstrumentSettings;
+use crate::transport::{FlowControl, Parity};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
@@ -290,12 +292,11 @@ async fn checklist<S>(
 where
     S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin,
 {
+    let (parity, flow) = link_names(settings);
     say!(
-        "link      {} {} baud, parity {:?}, flow control {:?}, model {}",
+        "link      {} {} baud, parity {parity}, flow control {flow}, model {}",
         settings.port,
         settings.baud,
-        settings.parity,
-        settings.flow_control,
         settings.model
     );
     let status = c.status().await?;
@@ -319,11 +320,11 @@ where
             ProfileReadout::Supported { .. } => {
                 let line = c.trace_line().await?;
                 say!(
-                    "trace     {} points at {} mm pitch ({}), kind {:?}",
+                    "trace     {} points at {} mm pitch ({}), profile {}",
                     line.profile.len(),
                     line.profile.pitch_x_mm,
                     line.pitch_source,
-                    line.profile.kind
+                    profile_kind_name(line.profile.kind)
                 );
                 print_results(&line.results);
                 for w in &line.warnings {
@@ -355,35 +356,89 @@ fn print_results(results: &[crate::profile::InstrumentResult]) {
 }
 
 fn print_report(r: &ProbeReport) {
-    say!(
-        "identity  model {}, firmware {:?}, drive unit {}",
-        r.identity.model,
-        r.identity.firmware,
-        r.identity.drive_unit
-    );
-    say!("battery   {:?}", r.battery);
+    for line in report_lines(r) {
+        say!("{line}");
+    }
+}
+
+/// The checklist's lines for what the instrument reported, in the words an operator reads
+/// them in (a value the instrument did not give is `?`, never a program's `None`).
+fn report_lines(r: &ProbeReport) -> Vec<String> {
     let c = &r.conditions;
-    say!(
-        "conditions standard {}, profile {:?}, filter {:?}, lambda-c {} mm, lambda-s {} um, N {}, evaluation length {} mm (raw {:?})",
-        c.standard.as_deref().unwrap_or("?"),
-        c.profile_kind,
-        c.filter,
-        fmt_opt(c.lambda_c_mm),
-        fmt_opt(c.lambda_s_um),
-        c.sampling_lengths.map(|n| n.to_string()).unwrap_or_else(|| "?".into()),
-        fmt_opt(c.evaluation_length_mm),
-        c.raw.as_deref().unwrap_or("")
-    );
-    say!("parameters {}", r.parameter_count);
-    match &r.profile_readout {
+    let mut lines = vec![
+        format!(
+            "identity  model {}, firmware {}, drive unit {}",
+            r.identity.model, r.identity.firmware, r.identity.drive_unit
+        ),
+        format!("battery   {}", battery_name(r.battery)),
+        format!(
+            "conditions standard {}, profile {}, filter {}, lambda-c {} mm, lambda-s {} um, N {}, evaluation length {} mm (raw {})",
+            c.standard.as_deref().unwrap_or("?"),
+            c.profile_kind.map_or("?", profile_kind_name),
+            c.filter.map_or("?", filter_name),
+            fmt_opt(c.lambda_c_mm),
+            fmt_opt(c.lambda_s_um),
+            c.sampling_lengths.map(|n| n.to_string()).unwrap_or_else(|| "?".into()),
+            fmt_opt(c.evaluation_length_mm),
+            c.raw.as_deref().unwrap_or("?")
+        ),
+        format!("parameters {}", r.parameter_count),
+    ];
+    lines.push(match &r.profile_readout {
         ProfileReadout::Supported { points_now } => {
-            say!("profile   read-out supported ({points_now} points held now)")
+            format!("profile   read-out supported ({points_now} points held now)")
         }
-        ProfileReadout::Unsupported { advice, .. } => say!("profile   UNSUPPORTED: {advice}"),
+        ProfileReadout::Unsupported { advice, .. } => format!("profile   UNSUPPORTED: {advice}"),
+    });
+    lines.extend(r.warnings.iter().map(|w| format!("warning   {w}")));
+    lines
+}
+
+/// A profile kind as the instrument names it (ISO 4287).
+fn profile_kind_name(k: ProfileKind) -> &'static str {
+    match k {
+        ProfileKind::P => "P",
+        ProfileKind::R => "R",
+        ProfileKind::W => "W",
+        ProfileKind::Other => "other",
     }
-    for w in &r.warnings {
-        say!("warning   {w}");
+}
+
+/// A filter as the instrument names it on its display.
+fn filter_name(f: FilterKind) -> &'static str {
+    match f {
+        FilterKind::Gaussian => "GAUSS",
+        FilterKind::TwoRc => "2CR75",
+        FilterKind::Pc75 => "PC75",
+        FilterKind::None => "none",
     }
+}
+
+fn battery_name(b: Battery) -> String {
+    match b {
+        Battery::Good => "good (above 60 %)".into(),
+        Battery::Low => "low (below 60 %): charge it before a long scan".into(),
+        Battery::Abnormal => {
+            "ABNORMAL (temperature, voltage or no battery): scans are refused".into()
+        }
+        Battery::Charging => "charging".into(),
+        Battery::Unknown(code) => format!("unknown state (code {code:03})"),
+    }
+}
+
+/// Parity and flow control as the configuration spells them.
+fn link_names(settings: &InstrumentSettings) -> (&'static str, &'static str) {
+    (
+        match settings.parity {
+            Parity::None => "none",
+            Parity::Even => "even",
+            Parity::Odd => "odd",
+        },
+        match settings.flow_control {
+            FlowControl::None => "none",
+            FlowControl::RtsCts => "rts-cts",
+        },
+    )
 }
 
 fn fmt_opt(v: Option<f64>) -> String {
@@ -411,5 +466,50 @@ mod tests {
         assert!(e.message.contains("no [instrument] section"));
         std::fs::write(&p, "[instrument]\nport = \"x\"\nspeed = 1\n").unwrap();
         assert_eq!(load_instrument_settings(&p).unwrap_err().exit, Exit::Config);
+    }
+
+    #[test]
+    fn the_checklist_names_what_the_instrument_reported_in_its_own_words() {
+        use crate::devices::InstrumentIdentity;
+        use crate::profile::Conditions;
+        let mut report = ProbeReport {
+            identity: InstrumentIdentity {
+                model: "sj210".into(),
+                firmware: "V1.01".into(),
+                drive_unit: "standard".into(),
+            },
+            battery: Battery::Low,
+            conditions: Conditions {
+                standard: Some("ISO1997".into()),
+                profile_kind: Some(ProfileKind::R),
+                filter: Some(FilterKind::TwoRc),
+                lambda_c_mm: Some(0.8),
+                sampling_lengths: Some(5),
+                evaluation_length_mm: Some(4.0),
+                raw: Some("3120504.0012".into()),
+                ..Conditions::default()
+            },
+            parameter_count: 2,
+            profile_readout: ProfileReadout::Supported { points_now: 0 },
+            warnings: vec![],
+        };
+        let lines = report_lines(&report);
+        assert_eq!(
+            lines[..3],
+            [
+                "identity  model sj210, firmware V1.01, drive unit standard",
+                "battery   low (below 60 %): charge it before a long scan",
+                "conditions standard ISO1997, profile R, filter 2CR75, lambda-c 0.8 mm, lambda-s ? um, N 5, evaluation length 4 mm (raw 3120504.0012)",
+            ]
+        );
+        // What the instrument did not report is `?`, never a program's `None`.
+        report.conditions = Conditions::default();
+        report.battery = Battery::Unknown(7);
+        let text = report_lines(&report).join("\n");
+        assert!(text.contains("profile ?, filter ?"), "{text}");
+        assert!(text.contains("unknown state (code 007)"), "{text}");
+        for debug in ["Some(", "None", "\""] {
+            assert!(!text.contains(debug), "{debug} in {text}");
+        }
     }
 }

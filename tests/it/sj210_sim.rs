@@ -467,7 +467,7 @@ async fn probe_binary_summarises_and_its_transcript_replays() {
     let (code, stdout, stderr) = run_probe_binary(&config, &record).await;
     assert_eq!(code, Some(0), "stdout:\n{stdout}\nstderr:\n{stderr}");
     assert!(stdout.contains("V2.34"), "{stdout}");
-    assert!(stdout.contains("Low"), "{stdout}");
+    assert!(stdout.contains("battery   low (below 60 %)"), "{stdout}");
     assert!(stdout.contains("read-out supported"), "{stdout}");
     assert!(stdout.contains("parameters 9"), "{stdout}");
     assert!(stdout.contains("transcript written"), "{stdout}");
