@@ -642,6 +642,28 @@ impl NumericKey {
         ))
     }
 
+    /// Checks `v` given on the command line as `flag`, which sets what this key sets: the
+    /// same range, and a message that names the flag and the key.
+    pub fn check_flag(&self, flag: &str, v: Num) -> Result<(), String> {
+        if self.contains(v) {
+            return Ok(());
+        }
+        Err(format!(
+            "{flag} {v}{} is outside its valid range {} to {}{} (as `{}` in a station's configuration); {}",
+            self.unit_suffix(),
+            self.min,
+            self.max,
+            self.unit_suffix(),
+            self.key,
+            self.hint
+        ))
+    }
+
+    /// The key named `key` in [`NUMERIC_KEYS`].
+    pub fn named(key: &str) -> Option<&'static NumericKey> {
+        NUMERIC_KEYS.iter().find(|k| k.key == key)
+    }
+
     /// Whether `v` lies within the range (NaN never does).
     pub fn contains(&self, v: Num) -> bool {
         match (v, self.min, self.max) {

@@ -397,6 +397,33 @@ fn scan_analysis_defaults(dir: &Path) -> ScanAnalysisOptions {
     }
 }
 
+/// Refuses a `--lc`, `--curves` or `--levels` outside the range the same setting has in a
+/// station's `[analysis]` (λc 0 or NaN, one level, a hundred million levels that would run for
+/// minutes) as a usage error, before anything is read.
+fn check_analysis_flags(args: &Args) -> Result<(), CliError> {
+    use crate::config::{Num, NumericKey};
+    let flags = [
+        ("--lc", "analysis.lambda-c-mm", args.lc.map(Num::Real)),
+        (
+            "--curves",
+            "analysis.curves",
+            args.curves.map(|v| Num::Int(v as i128)),
+        ),
+        (
+            "--levels",
+            "analysis.levels",
+            args.levels.map(|v| Num::Int(v as i128)),
+        ),
+    ];
+    for (flag, key, value) in flags {
+        if let (Some(v), Some(k)) = (value, NumericKey::named(key)) {
+            k.check_flag(flag, v)
+                .map_err(|m| CliError::new(Exit::Usage, m))?;
+        }
+    }
+    Ok(())
+}
+
 /// Runs `surfscan analyze`.
 pub fn run(args: Args) -> Result<(), CliError> {
     if args.degree_u == Some(0) || args.degree_v == Some(0) {
@@ -405,6 +432,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             "--degree-u and --degree-v must be at least 1 (the paper uses 5)",
         ));
     }
+    check_analysis_flags(&args)?;
     if args.input.is_dir() {
         if args.pitch_x.is_some() || args.pitch_y.is_some() {
             return Err(CliError::new(

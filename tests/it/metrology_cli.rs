@@ -349,3 +349,51 @@ fn a_profile_csv_with_a_byte_order_mark_is_read_as_a_profile() {
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["kind"], "profile");
 }
+
+#[test]
+fn analysis_flags_outside_the_configurations_ranges_are_usage_errors() {
+    // λc 0 or NaN, one level, a hundred million levels (minutes of work), no curve: refused
+    // before anything is read or written, naming the flag and the station key it mirrors.
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("line.csv");
+    std::fs::write(&input, sine_profile_csv(4000)).unwrap();
+    let out = dir.path().join("out");
+    for (flag, value, key) in [
+        ("--lc", "0", "analysis.lambda-c-mm"),
+        ("--lc", "NaN", "analysis.lambda-c-mm"),
+        ("--lc", "1e300", "analysis.lambda-c-mm"),
+        ("--levels", "1", "analysis.levels"),
+        ("--levels", "100000000", "analysis.levels"),
+        ("--curves", "0", "analysis.curves"),
+    ] {
+        let run = surfscan()
+            .args(["analyze", input.to_str().unwrap(), flag, value, "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(2), "{flag} {value}: {err}");
+        assert!(err.contains(flag) && err.contains(key), "{err}");
+        assert!(!out.exists(), "{flag} {value} wrote {}", out.display());
+    }
+    // The ends of the ranges are accepted.
+    let run = surfscan()
+        .args([
+            "analyze",
+            input.to_str().unwrap(),
+            "--lc",
+            "0.8",
+            "--levels",
+            "2",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(
+        run.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+}
