@@ -509,6 +509,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         let a = analyze_line(&z, pitch, &options)
             .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
         let rmr = rmr_table(&a);
+        let summary = profile_summary(z.len(), pitch, &a.params, &options);
         let report = Report {
             software: crate::build_info::software(),
             input: args.input.display().to_string(),
@@ -521,7 +522,9 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 params: a.params,
             }],
         };
-        return write_outputs(&out, &report);
+        write_outputs(&out, &report)?;
+        say!("{}: {summary}", out.join("report.json").display());
+        return Ok(());
     }
     let (Some(px), Some(py)) = (args.pitch_x, args.pitch_y) else {
         return Err(CliError::new(
@@ -738,6 +741,24 @@ fn fit_and_characterise(
         fit_s,
     };
     characterise(grid, model, ctx, out).map_err(report_error)
+}
+
+/// What `analyze` of a profile CSV says it found, as the instrument's display would show it:
+/// `profile of 2000 points (1 mm), λc 0.8 mm filter applied: Ra 0.2345 µm, Rq …, Rz …`.
+fn profile_summary(points: usize, pitch_mm: f64, p: &RoughnessParams, options: &Options) -> String {
+    use crate::numfmt::{fmt, Quantity};
+    let filter = if options.apply_lambda_c {
+        format!("λc {} mm filter applied", options.lambda_c_mm)
+    } else {
+        "no λc filter".to_string()
+    };
+    format!(
+        "profile of {points} points ({} mm), {filter}: Ra {} µm, Rq {} µm, Rz {} µm",
+        fmt(points as f64 * pitch_mm, Quantity::LengthMm),
+        fmt(p.ra_um, Quantity::HeightUm),
+        fmt(p.rq_um, Quantity::HeightUm),
+        fmt(p.rz_um, Quantity::HeightUm)
+    )
 }
 
 fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {

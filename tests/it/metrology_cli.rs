@@ -30,7 +30,7 @@ fn analyze_profile_csv_writes_report_and_summary() {
     let input = dir.path().join("line.csv");
     std::fs::write(&input, csv).unwrap();
     let out = dir.path().join("out");
-    let status = surfscan()
+    let run = surfscan()
         .args([
             "analyze",
             input.to_str().unwrap(),
@@ -40,9 +40,18 @@ fn analyze_profile_csv_writes_report_and_summary() {
             "--out",
         ])
         .arg(&out)
-        .status()
+        .output()
         .unwrap();
-    assert!(status.success());
+    assert!(run.status.success());
+    // What it found is said, with 4 significant digits (the values below): Ra 0.63659, Rq
+    // 0.70711, Rz 2.
+    assert_eq!(
+        String::from_utf8_lossy(&run.stdout),
+        format!(
+            "{}: profile of 8000 points (4.000 mm), no λc filter: Ra 0.6366 µm, Rq 0.7071 µm, Rz 2.000 µm\n",
+            out.join("report.json").display()
+        )
+    );
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     let line = &report["lines"][0];
