@@ -9,7 +9,11 @@
 //! fsync's, as for every other file: starting writeback early changes only when the disk
 //! works, never what is on it.
 //!
-//! Layer 2 (I/O adapter): depends on std and `libc` (one advisory call on Linux).
+//! [`write_hint`] turns a failed write into what to do about it (a full disk, a read-only
+//! file system, a file where a directory must be).
+//!
+//! Layer 2 (I/O adapter): depends on std and `libc` (one advisory call on Linux, and the
+//! error numbers the hints tell apart).
 
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
@@ -184,9 +188,70 @@ pub fn write_atomically_without_sync<T>(
     write_impl(path, false, body)
 }
 
+/// What the operator should do after writing `path` (or creating it as a directory) failed
+/// with `e`: the cause named where it can be told from the error and the path, instead of a
+/// list of everything it might be. A part of the path that is a file where a directory must
+/// be is named.
+pub fn write_hint(path: &Path, e: &io::Error) -> String {
+    match e.raw_os_error() {
+        Some(libc::ENOSPC) | Some(libc::EDQUOT) => {
+            "the disk (or the quota) is full; free some space".to_string()
+        }
+        Some(libc::EROFS) => "the file system is read-only; choose another place".to_string(),
+        Some(libc::EACCES) | Some(libc::EPERM) => {
+            "permission denied; check who may write the directory".to_string()
+        }
+        Some(libc::ENOTDIR) | Some(libc::EEXIST) => match not_a_directory(path) {
+            Some(file) => format!(
+                "{} is a file, not a directory; choose a path under a directory",
+                file.display()
+            ),
+            None => "check the directory's permissions and free space".to_string(),
+        },
+        _ => "check the directory's permissions and free space".to_string(),
+    }
+}
+
+/// The first ancestor of `path` (or `path` itself when a directory was to be made there) that
+/// exists and is not a directory.
+fn not_a_directory(path: &Path) -> Option<PathBuf> {
+    path.ancestors()
+        .filter(|p| !p.as_os_str().is_empty())
+        .find(|p| p.symlink_metadata().is_ok())
+        .filter(|p| !p.is_dir())
+        .map(Path::to_path_buf)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_file_in_the_way_of_a_directory_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("afile");
+        fs::write(&file, "x").unwrap();
+        // As `fit -o afile/x.igs` meets it (create_dir_all: EEXIST), and a write below it
+        // (ENOTDIR).
+        let target = file.join("x.igs");
+        for e in [
+            fs::create_dir_all(&file).unwrap_err(),
+            fs::write(&target, "y").unwrap_err(),
+        ] {
+            assert_eq!(
+                write_hint(&target, &e),
+                format!(
+                    "{} is a file, not a directory; choose a path under a directory",
+                    file.display()
+                ),
+                "{e}"
+            );
+        }
+        let full = io::Error::from_raw_os_error(libc::ENOSPC);
+        assert!(write_hint(&target, &full).contains("full"));
+        let other = io::Error::from_raw_os_error(libc::EIO);
+        assert!(write_hint(&target, &other).contains("permissions and free space"));
+    }
 
     #[test]
     fn replaces_the_file_and_leaves_no_temporary() {

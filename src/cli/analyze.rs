@@ -763,7 +763,11 @@ fn profile_summary(points: usize, pitch_mm: f64, p: &RoughnessParams, options: &
 
 fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
     let io = |p: &Path, e: std::io::Error| {
-        CliError::new(Exit::Io, format!("cannot write {}: {e}", p.display()))
+        let hint = crate::atomic::write_hint(p, &e);
+        CliError::new(
+            Exit::Io,
+            format!("cannot write {}: {e}; {hint}", p.display()),
+        )
     };
     std::fs::create_dir_all(out).map_err(|e| io(out, e))?;
     let json = serde_json::to_string_pretty(report)

@@ -373,7 +373,10 @@ fn io_err(what: &str, path: &Path, e: impl std::fmt::Display) -> CliError {
 
 fn ensure_parent(path: &Path) -> Result<(), CliError> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| io_err("cannot create directory", dir, e))?;
+        std::fs::create_dir_all(dir).map_err(|e| {
+            let hint = crate::atomic::write_hint(dir, &e);
+            io_err("cannot create directory", dir, format!("{e}; {hint}"))
+        })?;
     }
     Ok(())
 }

@@ -39,7 +39,7 @@ pub enum ReportError {
         source: MetrologyError,
     },
     /// An output cannot be written.
-    #[error("cannot write {path}: {source}; check the directory's permissions and free space")]
+    #[error("cannot write {path}: {source}; {}", crate::atomic::write_hint(.path, .source))]
     Io {
         /// The file.
         path: PathBuf,

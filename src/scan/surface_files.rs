@@ -68,7 +68,7 @@ pub enum SurfaceWriteError {
         message: String,
     },
     /// The file system refused (full disk, permissions).
-    #[error("cannot write IGES {path}: {source}")]
+    #[error("cannot write IGES {path}: {source}; {}", crate::atomic::write_hint(.path, .source))]
     Io {
         /// The file.
         path: PathBuf,

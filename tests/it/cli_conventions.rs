@@ -336,3 +336,32 @@ fn output_nobody_reads_neither_aborts_a_command_nor_stops_its_work() {
     .concat();
     assert_eq!(surfscan_unread(&fit).code(), Some(74));
 }
+
+#[test]
+fn an_output_under_a_file_names_the_file_in_the_way() {
+    // `-o notes.txt/surface.igs` where notes.txt is a file: "File exists" and "Not a
+    // directory" alone leave the operator guessing which part of the path is wrong.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("notes.txt");
+    std::fs::write(&file, "x").unwrap();
+    let grid = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sur-2.grid.csv");
+    let (iges, analysis) = (file.join("s.igs"), file.join("analysis"));
+    let (iges, analysis) = (iges.to_str().unwrap(), analysis.to_str().unwrap());
+    let pitches = ["--pitch-x", "0.003484", "--pitch-y", "0.010452"];
+    let fit = [&["fit", grid.to_str().unwrap(), "-o", iges][..], &pitches].concat();
+    let analyze = [
+        &["analyze", grid.to_str().unwrap(), "--out", analysis][..],
+        &pitches,
+    ]
+    .concat();
+    for args in [fit, analyze] {
+        let out = surfscan(&args);
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(74), "{args:?}: {err}");
+        assert!(
+            err.contains(&format!("{} is a file, not a directory", file.display())),
+            "{args:?}: {err}"
+        );
+    }
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "x");
+}
