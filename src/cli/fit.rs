@@ -371,6 +371,19 @@ fn io_err(what: &str, path: &Path, e: impl std::fmt::Display) -> CliError {
     CliError::new(Exit::Io, format!("{what} {}: {e}", path.display()))
 }
 
+/// The warning for `count` lines (`list`) on disk that the journal never committed.
+fn uncommitted_lines_warning(list: &str, count: usize) -> String {
+    let (noun, are, them, were) = if count == 1 {
+        ("line", "is", "it", "it was")
+    } else {
+        ("lines", "are", "them", "they were")
+    };
+    format!(
+        "{noun} {list} {are} on disk but the journal never committed {them} (the scan stopped before {} record); {were} left out",
+        if count == 1 { "its" } else { "their" }
+    )
+}
+
 fn ensure_parent(path: &Path) -> Result<(), CliError> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| {
@@ -437,8 +450,8 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
     let check = check_against_journal(&args.input, &lines.index)?;
     if !check.uncommitted.is_empty() {
         tell!(
-            "surfscan: warning: lines {} are on disk but the journal never committed them (the scan stopped before their record); they were left out",
-            line_list(&check.uncommitted)
+            "surfscan: warning: {}",
+            uncommitted_lines_warning(&line_list(&check.uncommitted), check.uncommitted.len())
         );
         keep_rows(&mut lines, |i| !check.uncommitted.contains(&i));
         if lines.index.is_empty() {
@@ -1221,6 +1234,18 @@ pub fn run(args: Args) -> Result<(), CliError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lines_the_journal_never_committed_are_counted_in_the_warning() {
+        assert_eq!(
+            uncommitted_lines_warning("21 (0020.csv)", 1),
+            "line 21 (0020.csv) is on disk but the journal never committed it (the scan stopped before its record); it was left out"
+        );
+        assert_eq!(
+            uncommitted_lines_warning("21, 22", 2),
+            "lines 21, 22 are on disk but the journal never committed them (the scan stopped before their record); they were left out"
+        );
+    }
 
     #[test]
     fn parses_a_grid_and_ignores_trailing_blank_lines() {

@@ -677,7 +677,7 @@ fn fit_scan_dir_checks_the_journal_and_keeps_a_completed_surface() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(0), "{stderr}");
     assert!(
-        stderr.contains("lines 21 (0020.csv) are on disk but the journal never committed them"),
+        stderr.contains("warning: line 21 (0020.csv) is on disk but the journal never committed it (the scan stopped before its record); it was left out"),
         "{stderr}"
     );
     let rep: Value = serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
