@@ -70,7 +70,7 @@ pub enum Command {
     Fit(fit::Args),
     /// Read-only first-hour checklist on the instrument (moves the stylus only with --trace).
     Probe(probe::Args),
-    /// Characterise a profile CSV, grid CSV or scan directory: ISO roughness per line, areal parameters, bearing area curves, plots, X3P.
+    /// Characterise a scan directory, an X3P file, or a profile or grid CSV: ISO roughness per line, areal parameters, bearing area curves, plots, X3P.
     Analyze(analyze::Args),
     /// Run one scan in the foreground (resuming an unfinished scan of this configuration).
     Scan(scan::Args),

@@ -118,6 +118,15 @@ fn man_pages_cover_the_command_and_every_subcommand() {
         !scan.contains("--version"),
         "a subcommand takes no --version, so its page offers none: {scan}"
     );
+    // The one-line summary of analyze names every input it reads.
+    let help = text(&surfscan(&["--help"]).stdout);
+    let analyze = help
+        .lines()
+        .find(|l| l.trim_start().starts_with("analyze"))
+        .unwrap_or_else(|| panic!("no analyze line in {help}"));
+    for input in ["scan directory", "X3P file", "profile", "grid CSV"] {
+        assert!(analyze.contains(input), "{input} missing from {analyze:?}");
+    }
 }
 
 fn demo_config(dir: &Path, instrument: &Path, stage: &Path) -> std::path::PathBuf {
