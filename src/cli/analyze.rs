@@ -30,6 +30,7 @@
 use super::model_args::ModelArgs;
 use super::{CliError, Exit};
 use crate::metrology::params::{analyze_line, Options, Recipe, RoughnessParams};
+use crate::metrology::MAX_HEIGHT_UM;
 use crate::report::scan_dir::fit_for_report;
 use crate::report::{
     characterise, characterise_scan, LineGrid, Model, ReportContext, ReportError,
@@ -271,12 +272,26 @@ fn read_grid(text: &str) -> Result<GridCsv, String> {
         let count = heights_um.len() - start;
         let values = &heights_um[start..];
         let not_finite = values.iter().filter(|v| !v.is_finite()).count();
+        // A height beyond any surface (a value in other units, a damaged digit) leaves its row
+        // out as a NaN does, instead of ending the characterisation of every row.
+        let beyond = values
+            .iter()
+            .filter(|v| v.is_finite() && v.abs() > MAX_HEIGHT_UM)
+            .count();
         if not_finite > 0 {
             heights_um.truncate(start);
             read.push((
                 n + 1,
                 Err(format!(
                     "({not_finite} of its {count} heights are not finite: NaN or infinite, not measured)"
+                )),
+            ));
+        } else if beyond > 0 {
+            heights_um.truncate(start);
+            read.push((
+                n + 1,
+                Err(format!(
+                    "({beyond} of its {count} heights are beyond ±{MAX_HEIGHT_UM:e} µm, no surface height: check the units, heights in µm)"
                 )),
             ));
         } else {
@@ -806,18 +821,22 @@ mod tests {
 
     #[test]
     fn damaged_grid_rows_are_left_out_and_named_and_the_others_keep_their_y() {
-        let text = "1,2,3,4\n1,2,x,4\n1,2,3\n1,NaN,3,inf\n5,6,7,8\n\n9,10,11,12\n";
+        let text = "1,2,3,4\n1,2,x,4\n1,2,3\n1,NaN,3,inf\n5,6,7,8\n1,2e9,3,-4e12\n\n9,10,11,12\n";
         let g = read_grid(text).unwrap();
         assert_eq!(g.cols, 4);
-        assert_eq!(g.rows, vec![0, 4, 5], "rows keep their place in the file");
+        assert_eq!(g.rows, vec![0, 4, 6], "rows keep their place in the file");
         assert_eq!(
             g.heights_um,
             vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0]
         );
         let lines: Vec<usize> = g.left_out.iter().map(|(l, _)| *l).collect();
-        assert_eq!(lines, vec![2, 3, 4]);
+        assert_eq!(lines, vec![2, 3, 4, 6]);
         let w = g.warning().unwrap();
-        assert!(w.starts_with("3 of 6 rows of the grid CSV"), "{w}");
+        assert!(w.starts_with("4 of 7 rows of the grid CSV"), "{w}");
+        assert!(
+            w.contains("line 6 (2 of its 4 heights are beyond ±1e9 µm"),
+            "{w}"
+        );
         assert!(
             w.contains("line 2 (column 3: \"x\" is not a number)"),
             "{w}"
