@@ -20,7 +20,8 @@
 //! interrupted writes there ([`StationLock::sweep_leftovers`]), and the directory is created
 //! (with its parent fsynced) if missing.
 //!
-//! Layer 4 (process edge): depends on std, nix (flock, kill) and serde_json; no other module.
+//! Layer 4 (process edge): depends on std, nix (flock, kill), libc (the clock tick of a
+//! process's start time) and serde_json; no other module.
 
 use nix::errno::Errno;
 use nix::fcntl::{Flock, FlockArg};
@@ -326,7 +327,8 @@ impl StationLock {
 
     /// Removes what interrupted writes left in the output directory, its scan directories
     /// and their `lines/` and `rk/` (the per-line figures): files named like the project's temporary files, `.<name>.tmp<pid>`
-    /// (atomic replacement) when that pid is not alive, and `.<name>.tmp` (the scan's own
+    /// (atomic replacement) when that pid is not alive or its process started after the file was
+    /// last written (the pid was reused), and `.<name>.tmp` (the scan's own
     /// durable writes, made only by the holder of this lock). Each removal is logged; the
     /// paths removed are returned.
     pub fn sweep_leftovers(&self) -> Vec<PathBuf> {
@@ -355,7 +357,12 @@ impl StationLock {
                     continue;
                 };
                 if let Some(pid) = pid {
-                    if pid == std::process::id() || pid_alive(pid) {
+                    // A live process may still be writing it, unless it started after the
+                    // file was last written: then the pid was reused (after a reboot, say)
+                    // and the writer is long gone.
+                    let modified = e.metadata().and_then(|m| m.modified()).ok();
+                    let reused = modified.is_some_and(|m| started_after(pid, m));
+                    if pid == std::process::id() || (pid_alive(pid) && !reused) {
                         continue;
                     }
                 }
@@ -374,6 +381,47 @@ impl StationLock {
         }
         removed
     }
+}
+
+/// Whether process `pid` certainly started after `time` (by more than the 2 s the start
+/// time's rounding and clock steps may blur), so it cannot have written a file last changed
+/// at `time`. `false` when its start cannot be read (another system than Linux, a process
+/// gone meanwhile): a file is then never taken from a process that may be writing it.
+fn started_after(pid: u32, time: std::time::SystemTime) -> bool {
+    process_start(pid).is_some_and(|start| {
+        start
+            .duration_since(time)
+            .is_ok_and(|d| d > std::time::Duration::from_secs(2))
+    })
+}
+
+/// When process `pid` started: the boot time (`btime` of `/proc/stat`) plus its start in
+/// clock ticks since boot (field 22 of `/proc/PID/stat`, counted after the command name,
+/// which may itself hold spaces and parentheses).
+#[cfg(target_os = "linux")]
+fn process_start(pid: u32) -> Option<std::time::SystemTime> {
+    let stat = fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let after_comm = &stat[stat.rfind(')')? + 1..];
+    let ticks: u64 = after_comm.split_whitespace().nth(19)?.parse().ok()?;
+    let boot: u64 = fs::read_to_string("/proc/stat")
+        .ok()?
+        .lines()
+        .find_map(|l| l.strip_prefix("btime "))?
+        .trim()
+        .parse()
+        .ok()?;
+    // SAFETY: sysconf reads a system constant; no memory of ours is involved.
+    let per_second = u64::try_from(unsafe { libc::sysconf(libc::_SC_CLK_TCK) }).ok()?;
+    if per_second == 0 {
+        return None;
+    }
+    let since_boot = std::time::Duration::from_secs_f64(ticks as f64 / per_second as f64);
+    Some(std::time::UNIX_EPOCH + std::time::Duration::from_secs(boot) + since_boot)
+}
+
+#[cfg(not(target_os = "linux"))]
+fn process_start(_pid: u32) -> Option<std::time::SystemTime> {
+    None
 }
 
 /// For a project temporary file name, `Some(Some(pid))` (`.<name>.tmp<pid>`) or `Some(None)`
@@ -583,6 +631,41 @@ mod tests {
             assert!(p.exists(), "{p:?}");
         }
         assert!(out.join(OUTPUT_LOCK_FILE).exists());
+    }
+
+    #[test]
+    fn a_leftover_named_by_a_pid_reused_since_is_swept() {
+        // After a reboot the pid in `.surface.igs.tmp<pid>` may belong to an unrelated
+        // process started since: the file, last written before it started, is a leftover.
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("scans");
+        fs::create_dir_all(&out).unwrap();
+        let an_hour_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
+        let mut newcomer = std::process::Command::new("sleep")
+            .arg("30")
+            .spawn()
+            .unwrap();
+        let reused = out.join(format!(".surface.igs.tmp{}", newcomer.id()));
+        // Our parent (the test runner's launcher) started before the file was written.
+        let older = out.join(format!(
+            ".report.json.tmp{}",
+            std::os::unix::process::parent_id()
+        ));
+        for p in [&reused, &older] {
+            fs::write(p, b"x").unwrap();
+        }
+        fs::File::options()
+            .write(true)
+            .open(&reused)
+            .unwrap()
+            .set_modified(an_hour_ago)
+            .unwrap();
+        let lock = StationLock::acquire("scan", &out, &[], tmp.path()).unwrap();
+        let removed = lock.sweep_leftovers();
+        let _ = newcomer.kill();
+        let _ = newcomer.wait();
+        assert_eq!(removed, vec![reused.clone()]);
+        assert!(!reused.exists() && older.exists());
     }
 
     #[test]
