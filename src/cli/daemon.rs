@@ -222,6 +222,10 @@ async fn daemon(
             Ok(()) = shutdown.changed() => {}
             req = ctl.commands.recv() => {
                 let Some(req) = req else { break };
+                if req.abandoned() {
+                    crate::scan::runner::log_abandoned(&req);
+                    continue;
+                }
                 match req.command {
                     OperatorCommand::Start { specimen, operator, notes, mode } => {
                         let busy = ctl.status.borrow().state != State::Idle;

@@ -813,7 +813,7 @@ async fn forward(
         ),
     }
     };
-    let (reply, answer) = oneshot::channel();
+    let (reply, mut answer) = oneshot::channel();
     let exchange = async {
         channels
             .commands
@@ -824,21 +824,34 @@ async fn forward(
             })
             .await
             .map_err(|_| ())?;
-        answer.await.map_err(|_| ())
+        (&mut answer).await.map_err(|_| ())
     };
-    match tokio::time::timeout(reply_timeout, exchange).await {
-        Ok(Ok(Ok(detail))) => Message::Ack {
+    let answered = |r: Result<String, String>| match r {
+        Ok(detail) => Message::Ack {
             command: name.to_owned(),
             detail,
         },
-        Ok(Ok(Err(message))) => Message::Error { message },
+        Err(message) => Message::Error { message },
+    };
+    match tokio::time::timeout(reply_timeout, exchange).await {
+        Ok(Ok(r)) => answered(r),
         Ok(Err(())) => gone(),
-        Err(_elapsed) => Message::Error {
-            message: format!(
-                "the scan runner did not answer {name} within {} s; it may be busy with a device, try again or see `journalctl -u surfscan`",
-                reply_timeout.as_secs_f64()
-            ),
-        },
+        Err(_elapsed) => {
+            // The operator is told the command was not carried out, so it must not be: a
+            // closed channel tells the runner, when it comes to the command, that its
+            // requester has gone ([`OperatorRequest::abandoned`]). An answer sent before the
+            // close still counts.
+            answer.close();
+            match answer.try_recv() {
+                Ok(r) => answered(r),
+                Err(_) => Message::Error {
+                    message: format!(
+                        "the scan runner did not answer {name} within {} s (it is busy with a device, or writing a scan's outputs); {name} was not carried out: try again, or see `journalctl -u surfscan`",
+                        reply_timeout.as_secs_f64()
+                    ),
+                },
+            }
+        }
     }
 }
 

@@ -87,3 +87,13 @@ pub struct OperatorRequest {
     /// Where the runner answers.
     pub reply: oneshot::Sender<Result<String, String>>,
 }
+
+impl OperatorRequest {
+    /// Whether whoever sent it has stopped waiting for the answer: the control socket gave
+    /// up on the runner and told the operator the command was not carried out. Such a
+    /// command is dropped, never carried out late (a `start` queued while the runner was
+    /// busy would otherwise begin a scan the operator was told had not started).
+    pub fn abandoned(&self) -> bool {
+        self.reply.is_closed()
+    }
+}

@@ -270,7 +270,10 @@ async fn guarded(
                 *shutdown_fed = true;
                 Event::Shutdown
             }
-            Some(req) = ctl.commands.recv() => command_event(books, req),
+            Some(req) = ctl.commands.recv() => match command_event(books, req) {
+                Some(ev) => ev,
+                None => continue,
+            },
             _ = tick.tick() => {
                 ctl.pet();
                 continue;
@@ -298,12 +301,28 @@ async fn guarded(
     }
 }
 
-fn command_event(books: &mut Books<'_>, req: OperatorRequest) -> Event {
+/// The machine's event for a command; `None` (and the command dropped, with a log line)
+/// when its requester was already told it was not carried out.
+fn command_event(books: &mut Books<'_>, req: OperatorRequest) -> Option<Event> {
+    if req.abandoned() {
+        log_abandoned(&req);
+        return None;
+    }
     books.reply = Some(req.reply);
-    Event::Command {
+    Some(Event::Command {
         command: req.command,
         peer: req.peer,
-    }
+    })
+}
+
+/// Logs a command dropped because its requester stopped waiting.
+pub fn log_abandoned(req: &OperatorRequest) {
+    tracing::warn!(
+        "dropped {:?} from uid {} (pid {}): the control socket stopped waiting for it and told the operator it was not carried out",
+        req.command,
+        req.peer.uid,
+        req.peer.pid.map_or("unknown".to_owned(), |p| p.to_string())
+    );
 }
 
 /// Waits (nothing in flight) for a command or the shutdown, feeding the watchdog.
@@ -321,7 +340,11 @@ async fn wait_for_operator(
         tokio::select! {
             Ok(()) = ctl.shutdown.changed() => {}
             req = ctl.commands.recv() => match req {
-                Some(req) => return command_event(books, req),
+                Some(req) => {
+                    if let Some(ev) = command_event(books, req) {
+                        return ev;
+                    }
+                }
                 // Nobody can ever command (no control channel): wait for shutdown only.
                 None => {
                     let _ = ctl.shutdown.wait_for(|v| *v).await;

@@ -833,3 +833,48 @@ async fn a_supplementary_group_of_the_peer_counts_for_allowed_groups() {
     assert_eq!(runner.seen.lock().unwrap().len(), 1);
     served.shutdown().await;
 }
+
+/// A runner busy past the reply timeout (writing a large scan's outputs) comes to a queued
+/// `start` only after the operator was told it was not carried out: the request then says its
+/// requester has gone, so the runner drops it instead of starting a scan nobody expects. One
+/// answered in time is not marked so.
+#[tokio::test]
+async fn a_command_the_operator_was_told_failed_reaches_the_runner_marked_abandoned() {
+    let (_status_tx, status_rx) = watch::channel(Status::idle());
+    let (cmd_tx, mut cmd_rx) = mpsc::channel::<OperatorRequest>(4);
+    let options = ServerOptions {
+        reply_timeout: Duration::from_millis(200),
+        ..ServerOptions::default()
+    };
+    let served = serve(
+        ControlChannels {
+            status: status_rx,
+            commands: cmd_tx,
+        },
+        options,
+    )
+    .await;
+    let mut c = Conn::greeted(&served.path).await;
+    let e = c
+        .ask(json!({"class":"start","specimen":"GHOST","operator":"","notes":""}))
+        .await;
+    assert_eq!(e["class"], "error", "{e}");
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("start was not carried out"),
+        "{e}"
+    );
+    // The runner is free again and takes the queued command.
+    let late = cmd_rx.recv().await.unwrap();
+    assert!(matches!(late.command, OperatorCommand::Start { .. }));
+    assert!(late.abandoned(), "the operator was told it failed");
+    // A command answered in time is a live one.
+    let asking = tokio::spawn(async move { c.ask(json!({"class":"pause"})).await });
+    let live = cmd_rx.recv().await.unwrap();
+    assert!(!live.abandoned());
+    live.reply.send(Ok("pausing".into())).unwrap();
+    assert_eq!(asking.await.unwrap()["class"], "ack");
+    served.shutdown().await;
+}

@@ -417,6 +417,21 @@ async fn pause_waits_for_the_line_on_disk_and_resume_continues() {
             .filter(|e| matches!(e, Event::Move(_)))
             .collect();
         assert_eq!(moves, vec![Event::Move(target(0)), Event::Move(target(1))]);
+        // A resume whose requester stopped waiting (the control socket told the operator it
+        // was not carried out) is dropped: the scan stays paused.
+        let (reply, gone) = oneshot::channel();
+        drop(gone);
+        commands
+            .send(OperatorRequest {
+                command: OperatorCommand::Resume,
+                peer: surfscan::scan::command::Peer::this_process(),
+                reply,
+            })
+            .await
+            .expect("runner listens");
+        tokio::time::sleep(Duration::from_secs(60)).await;
+        assert_eq!(status.borrow().state, State::Paused);
+        assert_eq!(line_indices(&records(&dir)), vec![0, 1]);
         // Repeated commands are answered alike (exit 0 at the command line): the scan is
         // in the state asked for, and the reply names it by its id.
         let id = status.borrow().scan_id.clone().expect("id");
