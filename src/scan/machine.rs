@@ -38,7 +38,7 @@
 //! pure size estimate, and [`crate::devices`]'s fault classes. No tokio, no files, no
 //! clock reads: time is an input.
 
-use super::command::{OperatorCommand, PauseMark, Peer};
+use super::command::{OperatorCommand, PauseMark, Peer, StartMode};
 use super::disk::remaining_scan_bytes;
 use super::event::ScanEventKind;
 use super::metrics::ScanMetrics;
@@ -1363,19 +1363,13 @@ impl Machine {
                 }
                 self.publish(out);
             }
-            OperatorCommand::Resume if paused => {
-                out.push(Action::Reply(Ok(format!("{scan} resumes"))));
-                out.push(Action::Record(Note {
-                    reason: format!("resumed by the operator ({by})"),
-                    device: None,
-                    line: Some(self.line),
-                    peer: Some(peer),
-                    pause: Some(PauseMark::Resumed),
-                }));
-                self.status.state = State::Scanning;
-                self.status.reason = None;
-                self.next_step(now, out);
-            }
+            OperatorCommand::Resume if paused => self.resume_paused(
+                format!("{scan} resumes"),
+                format!("resumed by the operator ({by})"),
+                peer,
+                now,
+                out,
+            ),
             OperatorCommand::Resume if self.pause_requested => {
                 self.pause_requested = false;
                 if self.status.state == State::Pausing {
@@ -1402,10 +1396,46 @@ impl Machine {
                 }
                 self.interrupt(End::Abort { peer: Some(peer) }, out);
             }
+            // A start while paused is the operator's resumption (as `surfscan scan` or a
+            // start resumes a scan paused before a restart); a new scan needs this one
+            // aborted first.
+            OperatorCommand::Start { mode, .. } if paused && mode != StartMode::New => self
+                .resume_paused(
+                    format!("{scan} was paused; this start resumes it"),
+                    format!("resumed by the operator's start ({by})"),
+                    peer,
+                    now,
+                    out,
+                ),
+            OperatorCommand::Start { .. } if paused => out.push(Action::Reply(Err(format!(
+                "{scan} is paused; `surfscan resume` continues it, or `surfscan abort` ends it (its lines are kept) before a new scan can start"
+            )))),
             OperatorCommand::Start { .. } => out.push(Action::Reply(Err(format!(
                 "{scan} is running; abort it first or wait until it ends"
             )))),
         }
+    }
+
+    /// Leaves the pause: answers `reply`, records `reason` as the resumption, and goes on.
+    fn resume_paused(
+        &mut self,
+        reply: String,
+        reason: String,
+        peer: Peer,
+        now: Now,
+        out: &mut Vec<Action>,
+    ) {
+        out.push(Action::Reply(Ok(reply)));
+        out.push(Action::Record(Note {
+            reason,
+            device: None,
+            line: Some(self.line),
+            peer: Some(peer),
+            pause: Some(PauseMark::Resumed),
+        }));
+        self.status.state = State::Scanning;
+        self.status.reason = None;
+        self.next_step(now, out);
     }
 
     /// Abort or shutdown: cancel what is in flight, clean up the devices, then stop.

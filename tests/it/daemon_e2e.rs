@@ -592,3 +592,62 @@ async fn a_hang_up_leaves_the_daemon_scanning_with_nobody_reading_its_log() {
     sigterm(&d);
     assert!(wait_exit(&mut d).success());
 }
+
+/// After a restart a paused scan stays paused; the README tells the operator that `surfscan
+/// start` goes on with it, as `surfscan resume` does. It was refused as "running; abort it
+/// first", and following that advice would have ended the scan.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_start_resumes_a_scan_paused_before_a_restart() {
+    let r = rig().await;
+    let mut d = spawn_daemon(&r);
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    start_scan(&r, "paused").await;
+    wait_status(&r, "scanning", |s| s.state == State::Scanning).await;
+    client(&r).await.request(&Request::Pause).await.unwrap();
+    wait_status(&r, "paused", |s| s.state == State::Paused).await;
+    sigterm(&d);
+    assert!(wait_exit(&mut d).success());
+
+    let mut d = spawn_daemon(&r);
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    wait_status(&r, "paused after the restart", |s| s.state == State::Paused).await;
+    let start = |mode| Request::Start {
+        specimen: "paused".into(),
+        operator: String::new(),
+        notes: String::new(),
+        mode,
+    };
+    // A new scan is refused, saying how to go on with this one.
+    let refused = client(&r)
+        .await
+        .request(&start(StartMode::New))
+        .await
+        .unwrap();
+    match refused.message {
+        Message::Error { message } => assert!(message.contains("surfscan resume"), "{message}"),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(status(&r).await.state, State::Paused);
+    let ack = client(&r)
+        .await
+        .request(&start(StartMode::Auto))
+        .await
+        .unwrap();
+    match ack.message {
+        Message::Ack { detail, .. } => assert!(detail.contains("resumes"), "{detail}"),
+        other => panic!("{other:?}"),
+    }
+    wait_status(&r, "complete after the start", |s| {
+        s.last_stop
+            .as_ref()
+            .is_some_and(|l| l.status == Ending::Success)
+    })
+    .await;
+    let dir = scan_dir(&r);
+    assert_eq!(line_indices(&records(&dir)), (0..LINES).collect::<Vec<_>>());
+    assert!(records(&dir).iter().any(|r| matches!(r,
+        Record::Interruption(i) if i.reason.starts_with("resumed by the operator's start"))));
+    sigterm(&d);
+    assert!(wait_exit(&mut d).success());
+    r.sim.shutdown().await;
+}

@@ -936,6 +936,51 @@ fn a_scan_paused_when_its_process_stopped_is_reopened_paused() {
     );
 }
 
+/// A start asked for while a scan is paused (the way the README tells an operator to go on
+/// after a restart) resumes it; a start of a new scan is refused with what to do instead.
+#[test]
+fn a_start_while_paused_resumes_the_scan_and_a_new_one_is_refused_with_guidance() {
+    let start = |mode: StartMode| Event::Command {
+        command: OperatorCommand::Start {
+            specimen: String::new(),
+            operator: String::new(),
+            notes: String::new(),
+            mode,
+        },
+        peer: peer(),
+    };
+    let mut r = Rig::with(resumed_scan(2, &[], true));
+    r.start();
+    let a = r.feed(start(StartMode::New));
+    assert_eq!(effect(&a), None, "a refused start moves nothing: {a:?}");
+    match a.iter().find(|a| matches!(a, Action::Reply(_))) {
+        Some(Action::Reply(Err(m))) => assert!(
+            m.contains("is paused") && m.contains("surfscan resume") && m.contains("abort"),
+            "{m}"
+        ),
+        other => panic!("{other:?}"),
+    }
+    for mode in [StartMode::Auto, StartMode::Resume] {
+        let mut r = Rig::with(resumed_scan(2, &[], true));
+        r.start();
+        let a = r.feed(start(mode));
+        assert!(
+            matches!(a.iter().find(|a| matches!(a, Action::Reply(_))),
+                Some(Action::Reply(Ok(m))) if m.contains("this start resumes it")),
+            "{mode:?}: {a:?}"
+        );
+        assert_eq!(effect(&a), Some(&Action::Open(Device::Instrument)), "{a:?}");
+        assert!(
+            a.iter().any(|a| matches!(
+                a,
+                Action::Record(Note { pause: Some(PauseMark::Resumed), reason, .. })
+                    if reason.starts_with("resumed by the operator's start")
+            )),
+            "{a:?}"
+        );
+    }
+}
+
 #[test]
 fn a_resumed_scan_reopens_its_devices_and_goes_on_at_its_first_missing_line() {
     let m = resumed_scan(2, &[], false);
