@@ -5,7 +5,8 @@
 //! interrupted writes swept, the control socket bound, then `READY=1` — devices may appear later and are reported in
 //! `STATUS=`. An unfinished scan in `output.dir` is resumed at once; otherwise the daemon
 //! waits for `surfscan start`, and never starts a scan by itself. Every status change is
-//! sent as `STATUS=`; `WATCHDOG=1` comes from the scan loop itself (and the idle loop).
+//! sent as `STATUS=`; `WATCHDOG=1` comes from the scan loop itself (also while it reopens a
+//! scan or writes its outputs, beside that work) and the idle loop.
 //! SIGTERM/SIGINT: `STOPPING=1`, the current line is abandoned cleanly and an interruption
 //! (not a stop) is recorded, so the scan resumes at the next start. SIGHUP is logged and
 //! otherwise ignored: the configuration is read only at start. The notification hook

@@ -14,7 +14,7 @@ use super::ledger::Ledger;
 use super::line::{LineIdentity, LineMeta, StoredLine};
 use super::machine::{Action, End, Event, StorageFailure};
 use super::opening::{self, NewScan};
-use super::outputs::Outputs;
+use super::outputs::{Outputs, OutputsError};
 use super::settings::RunSettings;
 use crate::devices::ProbeReport;
 
@@ -64,6 +64,41 @@ impl Books<'_> {
             }
             Action::Close(_) | Action::Cancel => {}
             other => tracing::error!("internal: {other:?} performed as an immediate action"),
+        }
+    }
+
+    /// The machine's event for the outputs written (or not) by the scan's ledger.
+    pub(super) fn outputs_event(&mut self, written: Result<Outputs, OutputsError>) -> Event {
+        let Some(l) = self.ledger.as_ref() else {
+            return storage_event(false, "internal: no scan to finish".into());
+        };
+        match written {
+            Ok(outputs) => {
+                let summary = format!(
+                    "{} lines; surface {}",
+                    l.plan.lines,
+                    outputs
+                        .iges
+                        .first()
+                        .map(|p| p.display().to_string())
+                        .unwrap_or_default()
+                );
+                self.outputs = Some(outputs);
+                Event::OutputsWritten { summary }
+            }
+            Err(e) => {
+                let full = e.is_io() && is_disk_full_text(&e);
+                let message = if full {
+                    e.to_string()
+                } else {
+                    format!(
+                        "all lines are on disk but the outputs could not be written: {e}; run `surfscan fit {}` and `surfscan analyze {}` once the cause is cleared",
+                        l.dir.display(),
+                        l.dir.display()
+                    )
+                };
+                storage_event(full, message)
+            }
         }
     }
 
@@ -159,34 +194,8 @@ impl Books<'_> {
                 let Some(l) = self.ledger.as_mut() else {
                     return storage_event(false, "internal: no scan to finish".into());
                 };
-                match l.write_outputs(self.settings.characterise.as_deref()) {
-                    Ok(outputs) => {
-                        let summary = format!(
-                            "{} lines; surface {}",
-                            l.plan.lines,
-                            outputs
-                                .iges
-                                .first()
-                                .map(|p| p.display().to_string())
-                                .unwrap_or_default()
-                        );
-                        self.outputs = Some(outputs);
-                        Event::OutputsWritten { summary }
-                    }
-                    Err(e) => {
-                        let full = e.is_io() && is_disk_full_text(&e);
-                        let message = if full {
-                            e.to_string()
-                        } else {
-                            format!(
-                                "all lines are on disk but the outputs could not be written: {e}; run `surfscan fit {}` and `surfscan analyze {}` once the cause is cleared",
-                                l.dir.display(),
-                                l.dir.display()
-                            )
-                        };
-                        storage_event(full, message)
-                    }
-                }
+                let written = l.write_outputs(self.settings.characterise.as_deref());
+                self.outputs_event(written)
             }
             Action::CheckSpace => {
                 let dir = self

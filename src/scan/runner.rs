@@ -17,7 +17,9 @@ use super::command::{OperatorRequest, PauseMark, Peer};
 use super::device_ops::{is_device_effect, Hands};
 use super::disk_ops::Books;
 use super::ledger::Ledger;
-use super::machine::{ended_status, Action, End, Event, FailKind, Machine, Now, Policy};
+use super::machine::{
+    ended_status, Action, End, Event, FailKind, Machine, Now, Policy, StorageFailure,
+};
 use super::opening::{self, NewScan};
 use super::outcome::{Outcome, ScanRequest};
 use super::settings::RunSettings;
@@ -96,7 +98,15 @@ pub async fn run_scan<S: Station>(
     };
     let mut machine = match reopening {
         None => Machine::new_scan(settings.plan, policy, before),
-        Some((dir, peer, after_failure)) => match reopen(settings, &dir, peer, after_failure) {
+        Some((dir, peer, after_failure)) => match watched(ctl, "reopening the scan", {
+            // Reading back every committed line and refitting them takes seconds for a large
+            // scan: done beside the loop, which meanwhile feeds the watchdog.
+            let settings = settings.clone();
+            move || reopen(&settings, &dir, peer, after_failure)
+        })
+        .await
+        .unwrap_or_else(|e| Err((e, FailKind::Scan)))
+        {
             Ok((resumed, l)) => {
                 hands.attach(&l);
                 let plan = l.plan;
@@ -196,6 +206,11 @@ async fn drive<S: Station>(
             books.immediate(ctl, action);
             continue;
         }
+        if action == Action::WriteOutputs {
+            let ev = write_outputs_watched(books, ctl).await;
+            queue.extend(machine.handle(ev, now()));
+            continue;
+        }
         if !is_device_effect(&action) {
             let points = hands.points();
             let ev = books.disk(&action, hands.probe.as_ref(), points);
@@ -245,6 +260,74 @@ async fn drive<S: Station>(
         if let Some(ev) = ev {
             queue.extend(machine.handle(ev, now()));
         }
+    }
+}
+
+/// How long [`watched`] work may keep the watchdog fed. Writing the outputs of the largest
+/// scans (10⁷ points: the IGES parts, the report, the plots) takes minutes; work that runs
+/// longer than this is taken for hung, and systemd restarts the daemon (an unfinished scan
+/// then resumes).
+const WATCHED_LIMIT: std::time::Duration = std::time::Duration::from_secs(3600);
+
+/// Runs `work` (disk and CPU work of seconds: reopening a scan, writing its outputs) on a
+/// blocking thread of its own while this loop goes on feeding the watchdog, so that systemd
+/// does not take a long piece of work for a hung daemon; for at most [`WATCHED_LIMIT`]. A
+/// panic in `work` goes on as if it had happened here; `Err` only if the runtime cancelled
+/// the work (it shuts down).
+async fn watched<T: Send + 'static>(
+    ctl: &Control,
+    what: &str,
+    work: impl FnOnce() -> T + Send + 'static,
+) -> Result<T, String> {
+    let mut task = tokio::task::spawn_blocking(work);
+    let mut tick = ctl.watchdog_tick();
+    let started = tokio::time::Instant::now();
+    let mut warned = false;
+    loop {
+        tokio::select! {
+            done = &mut task => {
+                return match done {
+                    Ok(v) => Ok(v),
+                    Err(e) if e.is_panic() => std::panic::resume_unwind(e.into_panic()),
+                    Err(e) => Err(format!("internal: {what} was cancelled: {e}")),
+                };
+            }
+            _ = tick.tick() => {
+                if started.elapsed() < WATCHED_LIMIT {
+                    ctl.pet();
+                } else if !warned {
+                    warned = true;
+                    tracing::error!(
+                        "{what} has taken over {} s; no longer feeding the watchdog, so systemd restarts the daemon if it is hung",
+                        WATCHED_LIMIT.as_secs()
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Writes the scan's outputs [`watched`], with the ledger moved to the worker and back.
+async fn write_outputs_watched(books: &mut Books<'_>, ctl: &Control) -> Event {
+    let Some(mut ledger) = books.ledger.take() else {
+        // Says so as the effect itself does.
+        return books.disk(&Action::WriteOutputs, None, 0);
+    };
+    let characterise = books.settings.characterise.clone();
+    let done = watched(ctl, "writing the outputs", move || {
+        let written = ledger.write_outputs(characterise.as_deref());
+        (ledger, written)
+    })
+    .await;
+    match done {
+        Ok((ledger, written)) => {
+            books.ledger = Some(ledger);
+            books.outputs_event(written)
+        }
+        Err(message) => Event::StorageFailed(StorageFailure {
+            disk_full: false,
+            message,
+        }),
     }
 }
 

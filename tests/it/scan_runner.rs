@@ -477,6 +477,81 @@ async fn pause_waits_for_the_line_on_disk_and_resume_continues() {
     assert_moves_follow_idle(&with(&h.world, |w| w.log.clone()));
 }
 
+/// A characterisation that takes a while (a large scan's report, plots and X3P) and notes
+/// how often the watchdog was fed when it began and when it ended.
+struct SlowCharacterisation {
+    pets: Arc<Mutex<u32>>,
+    seen: Arc<Mutex<Option<(u32, u32)>>>,
+}
+
+impl surfscan::scan::outputs::Characterise for SlowCharacterisation {
+    fn characterise(
+        &self,
+        _scan: &surfscan::scan::outputs::CompletedScan<'_>,
+    ) -> Result<surfscan::scan::outputs::Characterised, Box<dyn std::error::Error + Send + Sync>>
+    {
+        let before = *self.pets.lock().unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        let after = *self.pets.lock().unwrap();
+        *self.seen.lock().unwrap() = Some((before, after));
+        Err("a characterisation that only takes time".into())
+    }
+}
+
+/// While a scan's outputs are written, the runner goes on feeding systemd's watchdog: the
+/// daemon of a large scan was killed as hung while it wrote them (and then resumed into the
+/// same outputs, again and again). Before, the loop stood still for the whole write.
+#[test]
+fn the_watchdog_is_fed_while_the_outputs_are_written() {
+    let mut h = harness();
+    // Every line on disk, the stop record not yet written (as after a power loss then): the
+    // scan resumes straight into its outputs, with no device to wait for.
+    let paused = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .start_paused(true)
+        .build()
+        .unwrap();
+    let plain = settings(h.tmp.path());
+    let mut station = FakeStation(h.world.clone());
+    let outcome = paused.block_on(run_scan(&mut station, &mut h.ctl, &plain, new_scan()));
+    let dir = scan_dir_of(&outcome);
+    let journal = dir.join("journal.jsonl");
+    let text = std::fs::read_to_string(&journal).unwrap();
+    let kept = &text[..text.trim_end().rfind('\n').unwrap() + 1];
+    assert!(
+        text[kept.len()..].contains("stop"),
+        "the last record is the stop"
+    );
+    std::fs::write(&journal, kept).unwrap();
+
+    let pets = Arc::new(Mutex::new(0u32));
+    let seen = Arc::new(Mutex::new(None));
+    let settings = RunSettings {
+        characterise: Some(Arc::new(SlowCharacterisation {
+            pets: pets.clone(),
+            seen: seen.clone(),
+        })),
+        ..plain
+    };
+    let counter = pets.clone();
+    h.ctl.watchdog = Some((
+        Duration::from_millis(20),
+        Arc::new(move || *counter.lock().unwrap() += 1),
+    ));
+    let real_time = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let request = ScanRequest::Resume { dir, peer: None };
+    let outcome = real_time.block_on(run_scan(&mut station, &mut h.ctl, &settings, request));
+    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    let (before, after) = seen.lock().unwrap().expect("the characterisation ran");
+    assert!(
+        after > before,
+        "the watchdog was not fed while the outputs were written ({before} before, {after} after)"
+    );
+}
+
 #[tokio::test(start_paused = true)]
 async fn abort_mid_trace_stops_the_devices_and_records_abort() {
     let mut h = harness();
