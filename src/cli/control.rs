@@ -270,7 +270,9 @@ fn block_on<F: std::future::Future<Output = Result<(), CliError>>>(f: F) -> Resu
 
 fn client_error(e: ClientError) -> CliError {
     let exit = match &e {
-        ClientError::Unreachable { .. } | ClientError::Incompatible { .. } => Exit::Unavailable,
+        ClientError::Unreachable { .. }
+        | ClientError::Incompatible { .. }
+        | ClientError::Refused { .. } => Exit::Unavailable,
         ClientError::Io { .. } => Exit::Io,
     };
     CliError::new(exit, e.to_string())

@@ -48,6 +48,15 @@ pub enum ClientError {
         /// The daemon's software string.
         software: String,
     },
+    /// The daemon answered the connection with an error instead of its greeting (every
+    /// connection slot is taken): it is there but cannot serve this one now.
+    #[error("the surfscan daemon at {path} cannot serve this connection now: {message}")]
+    Refused {
+        /// The socket path.
+        path: PathBuf,
+        /// The daemon's own words.
+        message: String,
+    },
     /// The conversation broke off or the daemon sent something unreadable.
     #[error("control conversation with {path} failed: {cause}")]
     Io {
@@ -122,6 +131,10 @@ impl ControlClient {
                 client.hello = hello;
                 Ok(client)
             }
+            Message::Error { message } => Err(ClientError::Refused {
+                path: path.to_owned(),
+                message: message.clone(),
+            }),
             _ => Err(client.io(format!(
                 "expected a hello greeting first, got {}",
                 hello.raw

@@ -6,6 +6,7 @@ use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
+use surfscan::control::client::{ClientError, ControlClient};
 use surfscan::control::protocol::{ControlChannels, PROTOCOL_VERSION};
 use surfscan::control::server::{self, ControlError, ServerOptions};
 use surfscan::scan::command::{OperatorCommand, OperatorRequest, Peer, StartMode};
@@ -470,6 +471,13 @@ async fn connections_beyond_the_limit_are_told_so_and_closed() {
         .unwrap()
         .unwrap();
     assert_eq!(eof, None);
+    // The command line's client says so in the daemon's words, not as a broken protocol.
+    match ControlClient::connect(&served.path).await {
+        Err(e @ ClientError::Refused { .. }) => {
+            assert!(e.to_string().contains("already serves 1"), "{e}")
+        }
+        other => panic!("{other:?}"),
+    }
     // The first is unaffected, and its slot is free again once it leaves.
     assert_eq!(
         first.ask(json!({"class":"status"})).await["class"],
