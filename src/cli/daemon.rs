@@ -105,9 +105,13 @@ async fn daemon(
     let srv = server::bind_with_options(&config.control.socket, control)
         .await
         .map_err(|e| CliError::new(Exit::Unavailable, e.to_string()))?;
-    // The scans skipped for a damaged journal are in the status from the first request on.
+    // The scans skipped for a damaged journal are in the status from the first request on,
+    // and so are the devices: a scan reopened at once (paused, or straight into its outputs)
+    // would otherwise show them absent until the idle loop first looks.
     let (status_tx, status_rx) = watch::channel(Status {
         damaged_journals: damaged_journal_warnings(config),
+        instrument: presence(station.instrument_present()),
+        stage: presence(station.stage_present()),
         ..Status::idle()
     });
     let (cmd_tx, cmd_rx) = mpsc::channel::<OperatorRequest>(16);

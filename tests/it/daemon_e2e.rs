@@ -12,7 +12,7 @@ use surfscan::control::client::ControlClient;
 use surfscan::control::protocol::{Message, Request};
 use surfscan::scan::command::StartMode;
 use surfscan::scan::journal::{read_journal, Record, StopStatus};
-use surfscan::scan::status::{Ending, State, Status};
+use surfscan::scan::status::{DeviceState, Ending, State, Status};
 use surfscan_sim::grbl::{GrblSimConfig, StageShared};
 use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
 
@@ -610,7 +610,13 @@ async fn a_start_resumes_a_scan_paused_before_a_restart() {
 
     let mut d = spawn_daemon(&r);
     notify_until(&r, &mut d, |m| m.contains("READY=1"));
-    wait_status(&r, "paused after the restart", |s| s.state == State::Paused).await;
+    let s = wait_status(&r, "paused after the restart", |s| s.state == State::Paused).await;
+    // Not opened while paused, but there: not shown as absent.
+    assert_eq!(
+        (s.instrument, s.stage),
+        (DeviceState::Present, DeviceState::Present),
+        "{s:?}"
+    );
     let start = |mode| Request::Start {
         specimen: "paused".into(),
         operator: String::new(),
