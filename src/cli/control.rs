@@ -325,6 +325,18 @@ fn devices(s: &Status) -> String {
 }
 
 /// A duration for people: `45 s`, `12 min 30 s`, `2 h 05 min`.
+/// The ETA as people read it, only while lines are being traced: paused, suspended or
+/// starting, the estimate (the scanning time still needed) does not count down, and a clock
+/// time shown then would be wrong by however long the scan waits.
+pub fn eta_while_scanning(s: &Status) -> Option<String> {
+    if s.state == State::Scanning {
+        s.eta_s.and_then(format_eta)
+    } else {
+        None
+    }
+}
+
+/// Seconds as people read a duration: `42 s`, `12 min 30 s`, `2 h 05 min`.
 pub fn format_eta(seconds: f64) -> Option<String> {
     if !seconds.is_finite() || seconds < 0.0 {
         return None;
@@ -369,7 +381,7 @@ pub fn render_status(s: &Status) -> String {
     if let Some(ra) = s.last_ra_um {
         let _ = writeln!(out, "  last Ra    {ra:.3} µm");
     }
-    if let Some(eta) = s.eta_s.and_then(format_eta) {
+    if let Some(eta) = eta_while_scanning(s) {
         let _ = writeln!(out, "  ETA        {eta}");
     }
     let _ = writeln!(out, "  devices    {}", devices(s));
@@ -400,7 +412,7 @@ pub fn render_status_line(s: &Status) -> String {
     if let Some(ra) = s.last_ra_um {
         let _ = write!(out, "; last Ra {ra:.3} µm");
     }
-    if let Some(eta) = s.eta_s.and_then(format_eta) {
+    if let Some(eta) = eta_while_scanning(s) {
         let _ = write!(out, "; ETA {eta}");
     }
     let _ = write!(out, "; {}", devices(s));
@@ -465,6 +477,23 @@ mod tests {
         assert_eq!(format_eta(7530.0).as_deref(), Some("2 h 05 min"));
         assert_eq!(format_eta(-1.0), None);
         assert_eq!(format_eta(f64::NAN), None);
+    }
+
+    #[test]
+    fn no_eta_is_shown_while_the_scan_waits() {
+        // Paused or suspended, the estimate does not count down: shown, it would promise an
+        // end that moves away while the scan waits.
+        for state in [
+            State::Paused,
+            State::Suspended,
+            State::Pausing,
+            State::Starting,
+        ] {
+            let mut s = scanning();
+            s.state = state;
+            assert!(!render_status(&s).contains("ETA"), "{state:?}");
+            assert!(!render_status_line(&s).contains("ETA"), "{state:?}");
+        }
     }
 
     #[test]

@@ -420,10 +420,8 @@ pub fn refuse_if_daemon(config: &Config) -> Result<(), CliError> {
 /// scanning.
 pub fn progress_message(s: &Status) -> String {
     let mut parts = Vec::new();
-    if s.state == State::Scanning {
-        if let Some(eta) = s.eta_s.and_then(super::control::format_eta) {
-            parts.push(format!("ETA {eta}"));
-        }
+    if let Some(eta) = super::control::eta_while_scanning(s) {
+        parts.push(format!("ETA {eta}"));
     }
     if let Some(ra) = s.last_ra_um {
         parts.push(format!(

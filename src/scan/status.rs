@@ -105,7 +105,9 @@ pub struct Status {
     pub y_mm: Option<f64>,
     /// Ra of the last completed line as the instrument reported it, µm.
     pub last_ra_um: Option<f64>,
-    /// Estimated seconds until the scan completes.
+    /// Estimated scanning time still needed, s: the mean line time so far times the lines
+    /// left, as of the last line. It counts down only while scanning; paused or suspended,
+    /// it is the time still needed once the scan goes on.
     pub eta_s: Option<f64>,
     /// Why the scan is suspended/paused/stopping, or the last error.
     pub reason: Option<String>,
