@@ -238,6 +238,129 @@ fn bench_fit(dir: &Path, rows: usize, cols: usize, runs: usize, count_instructio
         disk_s / rw
     );
     print_instructions("surfscan fit", &fit_command(&csv, &out), count_instructions);
+    print_floor(&csv, rw, disk_s, runs);
+}
+
+/// Median wall and CPU time of `f` over `runs` calls on this thread (after one call to warm
+/// it up): (wall s, CPU s).
+fn timed<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, f64) {
+    std::hint::black_box(f());
+    let (mut wall, mut cpu) = (Vec::new(), Vec::new());
+    for _ in 0..runs {
+        let (t, c) = (Instant::now(), process_cpu_s());
+        std::hint::black_box(f());
+        wall.push(t.elapsed().as_secs_f64());
+        cpu.push(process_cpu_s() - c);
+    }
+    (median(wall), median(cpu))
+}
+
+/// What no `surfscan fit` of this grid can go below on this machine, from its parts measured
+/// one at a time, against the time the target leaves (the reference's fit ÷ 1.3):
+///
+/// * the chain: the process must start, read the grid, fit it (every pole depends on every
+///   line), and only then can the disk take the surface's bytes, which takes the disk floor
+///   measured above even when they are ready at once;
+/// * the CPU: everything `fit` computes (the parse, the fit, the exact reals of every pole,
+///   the verdict between lines that issue 12's honest model prints, the residual check)
+///   plus the kernel's copy of the bytes, shared by this machine's cores at best perfectly.
+///
+/// Each part is measured warm and alone, so both bounds are below anything a real process
+/// reaches (it pays page faults, thread start-ups and contention on top).
+fn print_floor(csv: &Path, reference_s: f64, disk_s: f64, runs: usize) {
+    use surfscan::fit::{fit_grid, max_residual_mm, FitOptions, VMethod};
+    use surfscan::metrology::areal::{sq_um, Grid};
+    use surfscan::metrology::holdout::between_lines;
+    let text = std::fs::read_to_string(csv).expect("read grid csv");
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as f64;
+    let start_s = median(
+        (0..runs)
+            .map(|_| run(surfscan().arg("--version")).wall_s)
+            .collect(),
+    );
+    let (parse_s, parse_cpu) = timed(runs, || {
+        surfscan::cli::fit::parse_grid(&text).expect("parse grid")
+    });
+    let grid = surfscan::cli::fit::parse_grid(&text).expect("parse grid");
+    let y: Vec<f64> = (0..grid.rows).map(|r| r as f64 * PITCH_Y_MM).collect();
+    let options = FitOptions::default();
+    let (fit_s, fit_cpu) = timed(runs, || {
+        fit_grid(PITCH_X_MM, &y, &grid.heights_um, grid.cols, options).expect("fit")
+    });
+    let fit = fit_grid(PITCH_X_MM, &y, &grid.heights_um, grid.cols, options).expect("fit");
+    let (_, format_cpu) = timed(runs, || {
+        let mut text = Vec::with_capacity(16 << 20);
+        surfscan::iges::writer::format_net_reals(&fit.surface, &mut text).expect("format")
+    });
+    // Every 2nd line held out, as `fit` does for this grid (fewer lines hold out fewer).
+    let every = surfscan::metrology::holdout::holdout_every(grid.rows, options.degree_v)
+        .expect("enough lines for the verdict");
+    let (_, verdict_cpu) = timed(runs, || {
+        let g = Grid {
+            heights_um: &grid.heights_um,
+            rows: grid.rows,
+            cols: grid.cols,
+            pitch_x_mm: PITCH_X_MM,
+            pitch_y_mm: PITCH_Y_MM,
+        };
+        let sq = sq_um(&g).expect("Sq");
+        between_lines(
+            &grid.heights_um,
+            grid.cols,
+            PITCH_X_MM,
+            &y,
+            options,
+            VMethod::Interpolate,
+            every,
+            sq,
+            0.5,
+        )
+        .expect("verdict")
+    });
+    let (_, residual_cpu) = timed(runs, || {
+        max_residual_mm(&fit, PITCH_X_MM, &y, &grid.heights_um, grid.cols)
+    });
+    let (_, copy_cpu) = timed(runs, || {
+        // The bytes the disk floor wrote, copied once more through a write() into the page
+        // cache of a new file (not synced): the kernel's share of the CPU.
+        let bytes = vec![b' '; 21 << 20];
+        let path = csv.with_extension("copy");
+        let mut f = std::fs::File::create(&path).expect("create");
+        for piece in bytes.chunks(1 << 20) {
+            std::io::Write::write_all(&mut f, piece).expect("write");
+        }
+        drop(f);
+        std::fs::remove_file(&path).expect("remove");
+    });
+    let target_s = reference_s / 1.3;
+    let chain = start_s + parse_s + fit_s + disk_s;
+    let cpu = start_s + parse_cpu + fit_cpu + format_cpu + verdict_cpu + residual_cpu + copy_cpu;
+    println!(
+        "  floor on this machine ({cores} cores), from each part warm and alone (medians of {runs}); the target leaves {:.1} ms (reference fit / 1.3):",
+        target_s * 1e3
+    );
+    println!(
+        "    chain: start {:.1} + read {:.1} + fit {:.1} + disk {:.1} = {:.1} ms ({:.0} % of what the target leaves), before any real is formatted",
+        start_s * 1e3,
+        parse_s * 1e3,
+        fit_s * 1e3,
+        disk_s * 1e3,
+        chain * 1e3,
+        100.0 * chain / target_s
+    );
+    println!(
+        "    CPU: start {:.1} + read {:.1} + fit {:.1} + exact reals {:.1} + verdict between lines {:.1} + residual {:.1} + kernel copy {:.1} = {:.1} ms; on {cores} cores at least {:.1} ms ({:.0} % of what the target leaves)",
+        start_s * 1e3,
+        parse_cpu * 1e3,
+        fit_cpu * 1e3,
+        format_cpu * 1e3,
+        verdict_cpu * 1e3,
+        residual_cpu * 1e3,
+        copy_cpu * 1e3,
+        cpu * 1e3,
+        cpu / cores * 1e3,
+        100.0 * cpu / cores / target_s
+    );
 }
 
 /// The time the disk takes to make `file`'s bytes durable, as `fit` must: the bytes (already
