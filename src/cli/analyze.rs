@@ -456,8 +456,8 @@ pub fn run(args: Args) -> Result<(), CliError> {
             ));
         }
         // The method's default control rows depend on the line count, known once read.
-        let lines = crate::report::scan_dir::load_scan_lines(&args.input)
-            .map(|(l, _)| l.len())
+        let lines = crate::report::load_vouched_lines(&args.input)
+            .map(|v| v.lines.len())
             .unwrap_or(0);
         let frozen = scan_analysis_defaults(&args.input);
         let options = ScanAnalysisOptions {

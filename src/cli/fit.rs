@@ -5,9 +5,9 @@
 //! from its complete lines in index order: y of each line is its target `y_target_nm`, the x
 //! pitch is the one stored with the lines, the default output is `SCAN_DIR/surface.igs`.
 //! Lines with only one of their two files are left out and named in a warning. Each line's
-//! heights file is checked against the SHA-256 its journal record holds: a file changed after
-//! it was traced is refused (naming it), a line the journal never committed is left out with a
-//! warning. An existing `SCAN_DIR/surface.igs` (a completed scan's surface) is not replaced
+//! heights file is checked against the SHA-256 its journal record holds before it is read: a
+//! file changed after it was traced, and a line the journal never committed, are left out and
+//! named in a warning, and the other lines are fitted. An existing `SCAN_DIR/surface.igs` (a completed scan's surface) is not replaced
 //! unless `--force` is given or `-o` names the output. A grid CSV needs `--pitch-x`,
 //! `--pitch-y` and `-o`; an IGES file or another non-grid input is named as such.
 //!
@@ -371,19 +371,6 @@ fn io_err(what: &str, path: &Path, e: impl std::fmt::Display) -> CliError {
     CliError::new(Exit::Io, format!("{what} {}: {e}", path.display()))
 }
 
-/// The warning for `count` lines (`list`) on disk that the journal never committed.
-fn uncommitted_lines_warning(list: &str, count: usize) -> String {
-    let (noun, are, them, were) = if count == 1 {
-        ("line", "is", "it", "it was")
-    } else {
-        ("lines", "are", "them", "they were")
-    };
-    format!(
-        "{noun} {list} {are} on disk but the journal never committed {them} (the scan stopped before {} record); {were} left out",
-        if count == 1 { "its" } else { "their" }
-    )
-}
-
 fn ensure_parent(path: &Path) -> Result<(), CliError> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| {
@@ -427,16 +414,24 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             ));
         }
     }
-    let (mut lines, stored, incomplete) =
-        crate::report::load_scan_grid(&args.input).map_err(|e| {
-            let exit = match &e {
-                crate::report::ReportError::Store(crate::scan::store_error::StoreError::Io {
-                    ..
-                }) => Exit::Io,
-                _ => Exit::Failed,
-            };
-            CliError::new(exit, e.to_string())
-        })?;
+    let report_error = |e: crate::report::ReportError| {
+        let exit = match &e {
+            crate::report::ReportError::Store(crate::scan::store_error::StoreError::Io {
+                ..
+            }) => Exit::Io,
+            _ => Exit::Failed,
+        };
+        CliError::new(exit, e.to_string())
+    };
+    // Only the lines the journal vouches for are fitted; the others are named below.
+    let crate::report::VouchedLines {
+        lines: stored,
+        incomplete,
+        check,
+        journal: _,
+    } = crate::report::load_vouched_lines(&args.input).map_err(report_error)?;
+    let lines = crate::report::grid::LineGrid::of_scan(&stored, &args.input.join("lines"))
+        .map_err(report_error)?;
     if !incomplete.is_empty() {
         tell!(
             "surfscan: warning: {}",
@@ -447,22 +442,8 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             )
         );
     }
-    let check = check_against_journal(&args.input, &lines.index)?;
-    if !check.uncommitted.is_empty() {
-        tell!(
-            "surfscan: warning: {}",
-            uncommitted_lines_warning(&line_list(&check.uncommitted), check.uncommitted.len())
-        );
-        keep_rows(&mut lines, |i| !check.uncommitted.contains(&i));
-        if lines.index.is_empty() {
-            return Err(CliError::new(
-                Exit::Failed,
-                format!(
-                    "{}: no line the journal committed; nothing to fit",
-                    args.input.display()
-                ),
-            ));
-        }
+    for w in check.warnings(&args.input.join("lines")) {
+        tell!("surfscan: warning: {w}");
     }
     let default_output = args.input.join("surface.igs");
     if args.output.is_none() && !args.force {
@@ -522,26 +503,6 @@ fn line_list(indices: &[u32]) -> String {
         .join(", ")
 }
 
-/// Keeps the rows of `lines` whose index passes `keep`.
-fn keep_rows(lines: &mut crate::report::LineGrid, keep: impl Fn(u32) -> bool) {
-    let cols = lines.cols;
-    let rows: Vec<usize> = (0..lines.index.len())
-        .filter(|&r| keep(lines.index[r]))
-        .collect();
-    let pick = |v: &Vec<f64>| rows.iter().map(|&r| v[r]).collect::<Vec<f64>>();
-    lines.heights_um = rows
-        .iter()
-        .flat_map(|&r| lines.heights_um[r * cols..(r + 1) * cols].to_vec())
-        .collect();
-    lines.y_mm = pick(&lines.y_mm);
-    lines.index = rows.iter().map(|&r| lines.index[r]).collect();
-    lines.y_readback_mm = rows.iter().map(|&r| lines.y_readback_mm[r]).collect();
-    lines.standard = rows.iter().map(|&r| lines.standard[r].clone()).collect();
-    if let Some(inst) = &lines.instrument {
-        lines.instrument = Some(rows.iter().map(|&r| inst[r].clone()).collect());
-    }
-}
-
 /// The existing surface at `output` (or the first part of a split one), if any.
 fn existing_surface(output: &Path) -> Option<PathBuf> {
     if output.exists() {
@@ -561,63 +522,6 @@ fn existing_surface(output: &Path) -> Option<PathBuf> {
                 })
                 .unwrap_or(false)
         })
-}
-
-/// What the journal says about the lines to fit.
-struct JournalCheck {
-    /// Lines on disk without a journal record (never committed).
-    uncommitted: Vec<u32>,
-    /// The scan stopped with success.
-    completed: bool,
-}
-
-/// Checks every line file against the SHA-256 of its journal record. A scan without a
-/// readable journal is fitted as it is, with a warning; a file that differs from its record
-/// is an error naming it.
-fn check_against_journal(dir: &Path, index: &[u32]) -> Result<JournalCheck, CliError> {
-    use crate::scan::journal::{read_journal, ResumeState, StopStatus, JOURNAL_FILE};
-    let path = dir.join(JOURNAL_FILE);
-    let state = match read_journal(&path).and_then(|r| ResumeState::from_records(&path, &r.records))
-    {
-        Ok(s) => s,
-        Err(e) => {
-            tell!(
-                "surfscan: warning: the line files cannot be checked against the journal ({e}); they are fitted as they are"
-            );
-            return Ok(JournalCheck {
-                uncommitted: Vec::new(),
-                completed: false,
-            });
-        }
-    };
-    let mut uncommitted = Vec::new();
-    for &i in index {
-        let Some(record) = state.lines.iter().find(|l| l.id.index == i) else {
-            uncommitted.push(i);
-            continue;
-        };
-        let file = dir.join("lines").join(crate::scan::store::csv_name(i));
-        let bytes = std::fs::read(&file).map_err(|e| io_err("cannot read", &file, e))?;
-        let sha = crate::scan::store::hex_sha256(&bytes);
-        if sha != record.csv_sha256 {
-            return Err(CliError::new(
-                Exit::Failed,
-                format!(
-                    "{}: line {} was changed after it was traced: its SHA-256 {sha} differs from the journal's {}; restore the file (the journal holds no copy), or fit the edited heights as a grid CSV",
-                    file.display(),
-                    crate::numfmt::line_number(i),
-                    record.csv_sha256
-                ),
-            ));
-        }
-    }
-    Ok(JournalCheck {
-        uncommitted,
-        completed: state
-            .stop
-            .as_ref()
-            .is_some_and(|s| s.status == StopStatus::Success),
-    })
 }
 
 fn read_csv(args: &Args) -> Result<Input, CliError> {
@@ -1237,6 +1141,7 @@ mod tests {
 
     #[test]
     fn lines_the_journal_never_committed_are_counted_in_the_warning() {
+        use crate::report::scan_dir::uncommitted_lines_warning;
         assert_eq!(
             uncommitted_lines_warning("21 (0020.csv)", 1),
             "line 21 (0020.csv) is on disk but the journal never committed it (the scan stopped before its record); it was left out"

@@ -48,7 +48,9 @@ pub use context::{Model, ReportContext, ScanAnalysisOptions};
 pub use document::{manufacturer_of, Report, ScanStatus, Traceability};
 pub use error::ReportError;
 pub use grid::LineGrid;
-pub use scan_dir::{characterise_scan, load_scan_grid, scan_line_options, ScanCharacteriser};
+pub use scan_dir::{
+    characterise_scan, load_vouched_lines, scan_line_options, ScanCharacteriser, VouchedLines,
+};
 
 use crate::metrology::anisotropy::anisotropy;
 use crate::metrology::MetrologyError;

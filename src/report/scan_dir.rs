@@ -4,8 +4,10 @@
 //! [`characterise_scan_lines`], so the same lines give the same report.
 //!
 //! A partial, aborted or failed scan is characterised with the complete lines it has; lines
-//! with only one of their two files are named in a warning. A complete but malformed line
-//! file is an error naming the file.
+//! with only one of their two files are named in a warning, and so are the lines the journal
+//! does not vouch for (a file changed since it was traced, a line never committed), which are
+//! left out before they are read ([`load_vouched_lines`]). A line file that matches its
+//! record but cannot be read is an error naming the file.
 //!
 //! Layer 4 (reporting): depends on [`crate::scan`] (its journal, store and line types, and
 //! the [`Characterise`] contract the runner calls), [`crate::fit`] and the sections.
@@ -31,8 +33,143 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
-/// The complete lines of a scan directory, in index order, and the incomplete ones.
-pub fn load_scan_lines(dir: &Path) -> Result<(Vec<StoredLine>, Vec<u32>), ReportError> {
+/// What a scan's journal says of the line files found in its directory.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct JournalCheck {
+    /// Lines on disk that the journal never committed (the scan stopped before their record).
+    pub uncommitted: Vec<u32>,
+    /// Lines whose heights file differs from its journal record: (line, the file's SHA-256,
+    /// the journal's).
+    pub changed: Vec<(u32, String, String)>,
+    /// The scan stopped with success.
+    pub completed: bool,
+    /// Why nothing could be checked (the journal cannot be read), when nothing could.
+    pub unchecked: Option<String>,
+}
+
+impl JournalCheck {
+    /// Whether line `index` is one the journal vouches for, as it is on disk (every line
+    /// when the journal cannot be read).
+    pub fn keeps(&self, index: u32) -> bool {
+        !self.uncommitted.contains(&index) && !self.changed.iter().any(|(i, _, _)| *i == index)
+    }
+
+    /// The warnings for the lines left out (and for a journal that could not be used), in
+    /// the operator's words, each naming what to do.
+    pub fn warnings(&self, lines_dir: &Path) -> Vec<String> {
+        let mut out = Vec::new();
+        if let Some(why) = &self.unchecked {
+            out.push(format!(
+                "the line files cannot be checked against the journal ({why}); they are used as they are"
+            ));
+        }
+        if !self.uncommitted.is_empty() {
+            let labels: Vec<String> = self
+                .uncommitted
+                .iter()
+                .map(|&i| {
+                    format!(
+                        "{} ({})",
+                        crate::numfmt::line_number(i),
+                        crate::scan::store::csv_name(i)
+                    )
+                })
+                .collect();
+            out.push(uncommitted_lines_warning(
+                &labels.join(", "),
+                self.uncommitted.len(),
+            ));
+        }
+        for (i, file, journal) in &self.changed {
+            out.push(format!(
+                "line {} ({}) was changed after it was traced: its SHA-256 {file} differs from the journal's {journal}; it was left out (restore the file to use it, or fit the edited heights as a grid CSV)",
+                crate::numfmt::line_number(*i),
+                lines_dir.join(crate::scan::store::csv_name(*i)).display()
+            ));
+        }
+        out
+    }
+}
+
+/// The warning for `count` lines (`list`) on disk that the journal never committed.
+pub fn uncommitted_lines_warning(list: &str, count: usize) -> String {
+    let (noun, are, them, their, were) = if count == 1 {
+        ("line", "is", "it", "its", "it was")
+    } else {
+        ("lines", "are", "them", "their", "they were")
+    };
+    format!(
+        "{noun} {list} {are} on disk but the journal never committed {them} (the scan stopped before {their} record); {were} left out"
+    )
+}
+
+/// Checks the heights file of each line of `index` in scan directory `dir` against the
+/// SHA-256 its journal record holds (`state`, the journal as read, or why it cannot be):
+/// a line without a record, or whose file changed since, is one the journal does not vouch
+/// for. A file that cannot be read is an error.
+pub fn check_against_journal(
+    dir: &Path,
+    state: Result<&ResumeState, String>,
+    index: &[u32],
+) -> Result<JournalCheck, ReportError> {
+    let state = match state {
+        Ok(s) => s,
+        Err(why) => {
+            return Ok(JournalCheck {
+                unchecked: Some(why),
+                ..JournalCheck::default()
+            })
+        }
+    };
+    let mut check = JournalCheck {
+        completed: state
+            .stop
+            .as_ref()
+            .is_some_and(|s| s.status == StopStatus::Success),
+        ..JournalCheck::default()
+    };
+    for &i in index {
+        let Some(record) = state.lines.iter().find(|l| l.id.index == i) else {
+            check.uncommitted.push(i);
+            continue;
+        };
+        let file = dir.join("lines").join(crate::scan::store::csv_name(i));
+        let bytes = std::fs::read(&file).map_err(|source| {
+            ReportError::Store(crate::scan::store_error::StoreError::Io {
+                op: "read",
+                path: file.clone(),
+                source,
+            })
+        })?;
+        let sha = crate::scan::store::hex_sha256(&bytes);
+        if sha != record.csv_sha256 {
+            check.changed.push((i, sha, record.csv_sha256.clone()));
+        }
+    }
+    Ok(check)
+}
+
+/// The lines of a scan directory that its journal vouches for, read after their check.
+#[derive(Debug)]
+pub struct VouchedLines {
+    /// The complete lines whose heights file is as the journal recorded it (every complete
+    /// line when the journal cannot be read), in index order.
+    pub lines: Vec<StoredLine>,
+    /// Indices with only one of their two files (not read).
+    pub incomplete: Vec<u32>,
+    /// What the journal said of the others (left out, not read).
+    pub check: JournalCheck,
+    /// The journal, or why it cannot be read.
+    pub journal: Result<ResumeState, crate::scan::journal::JournalError>,
+}
+
+/// The complete lines of scan directory `dir` checked against its journal before they are
+/// read ([`check_against_journal`]): a line file changed since it was traced (a bit flip, an
+/// edit) or never committed is left out and named, never characterised as measured, and
+/// one bad line does not take down the others. A file that matches its record and still
+/// cannot be read is an error naming it. Without a readable journal every complete line is
+/// read as it is.
+pub fn load_vouched_lines(dir: &Path) -> Result<VouchedLines, ReportError> {
     if !dir.join("lines").is_dir() {
         return Err(ReportError::Lines {
             path: dir.to_path_buf(),
@@ -40,23 +177,38 @@ pub fn load_scan_lines(dir: &Path) -> Result<(Vec<StoredLine>, Vec<u32>), Report
         });
     }
     let store = ScanStore::open(dir, Arc::new(NoFaults))?;
-    let loaded = store.load_all()?;
-    if loaded.lines.is_empty() {
-        return Err(ReportError::NoLines {
-            dir: dir.to_path_buf(),
-            incomplete: loaded.incomplete,
+    let (complete, incomplete) = store.stored_indices()?;
+    let complete: Vec<u32> = complete.into_iter().collect();
+    let journal = read_scan_journal(dir);
+    let check = check_against_journal(dir, journal.as_ref().map_err(|e| e.to_string()), &complete)?;
+    let lines = complete
+        .iter()
+        .filter(|&&i| check.keeps(i))
+        .map(|&i| store.load_line(i))
+        .collect::<Result<Vec<_>, _>>()?;
+    let incomplete: Vec<u32> = incomplete.into_iter().collect();
+    if lines.is_empty() {
+        return Err(if complete.is_empty() {
+            ReportError::NoLines {
+                dir: dir.to_path_buf(),
+                incomplete,
+            }
+        } else {
+            ReportError::Lines {
+                path: dir.to_path_buf(),
+                reason: format!(
+                    "no line is as its journal recorded it: {}",
+                    check.warnings(&dir.join("lines")).join("; ")
+                ),
+            }
         });
     }
-    Ok((loaded.lines, loaded.incomplete))
-}
-
-/// The complete lines of a scan directory as one grid, with the lines themselves and the
-/// incomplete ones named. Every line must have the same number of points and the same x
-/// pitch (they are one grid); a line that differs is named.
-pub fn load_scan_grid(dir: &Path) -> Result<(LineGrid, Vec<StoredLine>, Vec<u32>), ReportError> {
-    let (lines, incomplete) = load_scan_lines(dir)?;
-    let grid = LineGrid::of_scan(&lines, &dir.join("lines"))?;
-    Ok((grid, lines, incomplete))
+    Ok(VouchedLines {
+        lines,
+        incomplete,
+        check,
+        journal,
+    })
 }
 
 /// The journal of a scan directory, when it can be read.
@@ -322,15 +474,20 @@ pub fn characterise_scan(
     options: &ScanAnalysisOptions,
 ) -> Result<ScanOutputs, ReportError> {
     let t = Instant::now();
-    let (lines, incomplete) = load_scan_lines(dir)?;
+    // Only what the journal vouches for is characterised, as `fit` fits it; the others are
+    // named.
+    let VouchedLines {
+        lines,
+        incomplete,
+        check,
+        journal,
+    } = load_vouched_lines(dir)?;
     let mut warnings = Vec::new();
-    let state = match read_scan_journal(dir) {
-        Ok(s) => Some(s),
-        Err(e) => {
-            warnings.push(format!("no traceability: the journal cannot be used ({e})"));
-            None
-        }
-    };
+    match &journal {
+        Ok(_) => warnings.extend(check.warnings(&dir.join("lines"))),
+        Err(e) => warnings.push(format!("no traceability: the journal cannot be used ({e})")),
+    }
+    let state = journal.as_ref().ok();
     let recipe = scan_recipe(options, state.as_ref().map(|s| &s.start), &lines);
     let grid = LineGrid::of_scan(&lines, &dir.join("lines"))?;
     let (fitted, summary, fit_s) = fit_for_report(&grid, &recipe);

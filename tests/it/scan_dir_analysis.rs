@@ -683,8 +683,32 @@ fn fit_scan_dir_checks_the_journal_and_keeps_a_completed_surface() {
     let rep: Value = serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
     assert_eq!(rep["lines"], json!([0, 1, 2, 3, 4, 5, 6]));
     assert_eq!(poles(&surface), first, "the same lines, the same surface");
+    // analyze leaves it out the same way.
+    let analysis = tmp.path().join("analysis");
+    let out = surfscan()
+        .args(["analyze", scan_s, "--out"])
+        .arg(&analysis)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains("line 21 (0020.csv) is on disk but the journal never committed it"),
+        "{stderr}"
+    );
+    let rep: Value =
+        serde_json::from_str(&std::fs::read_to_string(analysis.join("report.json")).unwrap())
+            .unwrap();
+    let used: Vec<u64> = rep["lines"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["index"].as_u64().unwrap())
+        .collect();
+    assert_eq!(used, vec![0, 1, 2, 3, 4, 5, 6]);
 
-    // A height edited after the line was traced is refused, naming the file and the line.
+    // A height edited after the line was traced: that line is left out, named with its
+    // file, and the others are fitted (one bad line does not take down the rest).
     let csv = lines.join("0002.csv");
     let text = std::fs::read_to_string(&csv).unwrap();
     // One more digit on the first height: still a valid file, a different number.
@@ -694,16 +718,21 @@ fn fit_scan_dir_checks_the_journal_and_keeps_a_completed_surface() {
     assert_ne!(edited, text);
     std::fs::write(&csv, edited).unwrap();
     let out = surfscan()
-        .args(["fit", scan_s, "--force"])
+        .args(["fit", scan_s, "--force", "--report"])
+        .arg(&report_path)
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
     assert!(
-        stderr.contains("0002.csv") && stderr.contains("line 3 was changed"),
+        stderr.contains("line 3 (")
+            && stderr.contains("0002.csv) was changed after it was traced")
+            && stderr.contains("it was left out"),
         "{stderr}"
     );
-    assert_eq!(poles(&surface), first, "nothing was written");
+    let rep: Value = serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
+    assert_eq!(rep["lines"], json!([0, 1, 3, 4, 5, 6]));
+    assert_ne!(poles(&surface), first, "a surface through the other lines");
 }
 
 #[test]
@@ -714,9 +743,33 @@ fn a_malformed_line_file_is_a_clear_error_naming_the_file() {
     let csv = scan.join("lines/0002.csv");
     let text = std::fs::read_to_string(&csv).unwrap();
     std::fs::write(&csv, text.replacen("\n0.003484,", "\n0.003484,12..5x", 1)).unwrap();
+    // The journal's SHA-256 shows the file was damaged after it was traced: the line is left
+    // out and named, and the others are characterised and fitted.
     for cmd in ["analyze", "fit"] {
         let out = surfscan()
-            .args([cmd, scan.to_str().unwrap()])
+            .args(
+                [cmd, scan.to_str().unwrap(), "--force"][..if cmd == "fit" { 3 } else { 2 }]
+                    .to_vec(),
+            )
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{cmd}: {stderr}");
+        assert!(
+            stderr.contains("line 3 (") && stderr.contains("0002.csv) was changed"),
+            "{cmd}: {stderr}"
+        );
+    }
+    // Without a journal to check it against, the damaged file is an error naming it.
+    let journal = scan.join("journal.jsonl");
+    let journal_text = std::fs::read(&journal).unwrap();
+    std::fs::remove_file(&journal).unwrap();
+    for cmd in ["analyze", "fit"] {
+        let out = surfscan()
+            .args(
+                [cmd, scan.to_str().unwrap(), "--force"][..if cmd == "fit" { 3 } else { 2 }]
+                    .to_vec(),
+            )
             .output()
             .unwrap();
         let stderr = String::from_utf8_lossy(&out.stderr);
@@ -727,6 +780,7 @@ fn a_malformed_line_file_is_a_clear_error_naming_the_file() {
         );
         assert!(!stderr.contains("panicked"), "{cmd}: {stderr}");
     }
+    std::fs::write(&journal, journal_text).unwrap();
     std::fs::write(&csv, text).unwrap();
     // A directory that is not a scan is named as such.
     let out = surfscan()
