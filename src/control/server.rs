@@ -734,6 +734,15 @@ async fn answer(
 /// has when serialised, so a field added to a request is known without a second list.
 pub fn parse_request(line: &str) -> Result<Request, Message> {
     let value: serde_json::Value = serde_json::from_str(line).map_err(|e| malformed(line, &e))?;
+    // JSON readers keep the last of a repeated key, so `{"class":"status","class":"abort"}`
+    // would be an abort; a request naming a field twice is refused instead.
+    if let Some(key) = repeated_key(line) {
+        return Err(Message::Error {
+            message: format!(
+                "the request names {key:?} more than once; send each field once, and nothing is carried out"
+            ),
+        });
+    }
     let request = Request::deserialize(&value).map_err(|e| malformed(line, &e))?;
     let known = serde_json::to_value(&request).unwrap_or_default();
     if let (Some(given), Some(known)) = (value.as_object(), known.as_object()) {
@@ -758,6 +767,34 @@ pub fn parse_request(line: &str) -> Result<Request, Message> {
         }
     }
     Ok(request)
+}
+
+/// The first key a JSON object line names twice at its top level (requests are flat), if
+/// any. `serde_json` keeps the last of repeated keys without a word, so the keys are walked
+/// here one by one.
+fn repeated_key(line: &str) -> Option<String> {
+    use serde::de::{Deserializer, IgnoredAny, MapAccess, Visitor};
+    struct Keys;
+    impl<'de> Visitor<'de> for Keys {
+        type Value = Option<String>;
+        fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.write_str("a JSON object")
+        }
+        fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Option<String>, A::Error> {
+            let mut seen = std::collections::HashSet::new();
+            while let Some(key) = map.next_key::<String>()? {
+                map.next_value::<IgnoredAny>()?;
+                if !seen.insert(key.clone()) {
+                    return Ok(Some(key));
+                }
+            }
+            Ok(None)
+        }
+    }
+    serde_json::Deserializer::from_str(line)
+        .deserialize_map(Keys)
+        .ok()
+        .flatten()
 }
 
 /// The error for a line that is not a valid request, naming what was wrong.
@@ -1032,6 +1069,27 @@ mod tests {
         let mut c = RequestCodec::new(64);
         let frames = decode_all(&mut c, &[b"\xff\xfe\n{}\n"]);
         assert_eq!(frames, vec![Frame::NotUtf8, Frame::Line("{}".into())]);
+    }
+
+    #[test]
+    fn a_field_named_twice_is_refused_not_taken_from_its_last_value() {
+        for (line, key) in [
+            (r#"{"class":"status","class":"abort"}"#, "class"),
+            (
+                r#"{"class":"start","specimen":"A","specimen":"B"}"#,
+                "specimen",
+            ),
+        ] {
+            let Err(Message::Error { message }) = parse_request(line) else {
+                panic!("{line} accepted")
+            };
+            assert!(
+                message.contains(&format!("{key:?} more than once")),
+                "{message}"
+            );
+        }
+        // A request naming each field once passes.
+        assert!(parse_request(r#"{"class":"abort"}"#).is_ok());
     }
 
     #[test]
