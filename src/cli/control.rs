@@ -179,12 +179,21 @@ pub fn run_status(args: StatusArgs) -> Result<(), CliError> {
             .await
             .map_err(client_error)?;
         print_reply(&first, json, false)?;
+        // A snapshot that reads as the line printed last (the daemon publishes on every step,
+        // not only on a change people see) is not printed again.
+        let mut last = status_line(&first);
         // Watching is only printing: once nobody reads the output (`status --watch | head`),
         // the watch ends.
         while !super::console::stdout_gone() {
             let why = match client.next().await {
                 Ok(Some(m)) => {
-                    print_reply(&m, json, true)?;
+                    let line = status_line(&m);
+                    if json || line.is_none() || line != last {
+                        print_reply(&m, json, true)?;
+                    }
+                    if line.is_some() {
+                        last = line;
+                    }
                     continue;
                 }
                 Ok(None) => "closed the connection".to_string(),
@@ -194,16 +203,18 @@ pub fn run_status(args: StatusArgs) -> Result<(), CliError> {
                 "surfscan: the daemon at {} {why} (stopped or restarted?); reconnecting",
                 path.display()
             );
-            client = reconnect_watch(&path, json).await?;
+            let (again, first) = reconnect_watch(&path, json).await?;
+            client = again;
+            last = status_line(&first);
         }
         Ok(())
     })
 }
 
 /// Connects again until the daemon answers, then asks to watch and prints the first status
-/// (with a note that the connection is back); a daemon of another protocol version is an
-/// error, as at the first connection.
-async fn reconnect_watch(path: &Path, json: bool) -> Result<ControlClient, CliError> {
+/// (with a note that the connection is back), which it returns with the client; a daemon of
+/// another protocol version is an error, as at the first connection.
+async fn reconnect_watch(path: &Path, json: bool) -> Result<(ControlClient, Received), CliError> {
     let (mut wait, max) = WATCH_RECONNECT;
     loop {
         tokio::time::sleep(wait).await;
@@ -217,7 +228,7 @@ async fn reconnect_watch(path: &Path, json: bool) -> Result<ControlClient, CliEr
             Ok(first) => {
                 tell!("surfscan: reconnected to the daemon at {}", path.display());
                 print_reply(&first, json, true)?;
-                return Ok(client);
+                return Ok((client, first));
             }
             Err(e @ ClientError::Incompatible { .. }) => return Err(client_error(e)),
             Err(_) => continue,
@@ -276,6 +287,14 @@ fn client_error(e: ClientError) -> CliError {
         ClientError::Io { .. } => Exit::Io,
     };
     CliError::new(exit, e.to_string())
+}
+
+/// The one-line form of a status message ([`render_status_line`]), `None` for other messages.
+fn status_line(m: &Received) -> Option<String> {
+    match &m.message {
+        Message::Status(s) => Some(render_status_line(s)),
+        _ => None,
+    }
 }
 
 /// Prints one reply; an `Error` from the daemon becomes exit status 1.

@@ -404,3 +404,53 @@ async fn status_and_watch_end_quietly_when_nobody_reads_them() {
     }
     d.shutdown().await;
 }
+
+/// The daemon publishes on every step of a scan, and many steps change nothing a person sees
+/// on the watch's line: such a snapshot is not printed again (it was, once per step).
+#[tokio::test]
+async fn watch_prints_a_line_only_when_it_reads_differently() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("control.sock");
+    let (status, stop, task) = serve_at(&path, scanning()).await;
+    let mut child = surfscan()
+        .args(["status", "--watch", "--socket"])
+        .arg(&path)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let mut next = async || {
+        tokio::time::timeout(Duration::from_secs(20), lines.next_line())
+            .await
+            .expect("a line within 20 s")
+            .unwrap()
+            .expect("still running")
+    };
+    // The first status is the block; wait for its last line.
+    loop {
+        if next().await.starts_with("  devices") {
+            break;
+        }
+    }
+    // Three snapshots that read the same (one sent unchanged, one whose change the line does
+    // not show), then one that reads differently: only that one is printed.
+    // (Apart in time, so the daemon's side sends each rather than only the latest.)
+    for change in [
+        (|_: &mut Status| {}) as fn(&mut Status),
+        |s| s.scan_dir = Some("/elsewhere/G-0142".into()),
+        |_| {},
+    ] {
+        status.send_modify(change);
+        tokio::time::sleep(Duration::from_millis(150)).await;
+    }
+    status.send_modify(|s| {
+        s.lines_done = 12;
+        s.current_line = Some(13);
+    });
+    let line = next().await;
+    assert!(line.contains("line 13/31"), "{line}");
+    child.kill().await.unwrap();
+    let _ = stop.send(());
+    task.await.unwrap();
+}
