@@ -14,7 +14,7 @@
 //!
 //! Layer 5 (composition): config, control server, runner, service notifications, hook.
 
-use super::scan::{choose_request, load_config};
+use super::scan::{choose_request, decide_request, load_config};
 use super::{CliError, Exit};
 use crate::config::Config;
 use crate::control::protocol::ControlChannels;
@@ -23,11 +23,12 @@ use crate::hook::Hook;
 use crate::scan::channels::Control;
 use crate::scan::command::{OperatorCommand, OperatorRequest, Peer, StartMode};
 use crate::scan::event::ScanEvent;
+use crate::scan::machine::ended_status;
 use crate::scan::outcome::{Outcome, ScanRequest};
 use crate::scan::runner::run_scan;
 use crate::scan::settings::RunSettings;
 use crate::scan::station::{SerialStation, Station};
-use crate::scan::status::{DeviceState, State, Status};
+use crate::scan::status::{DeviceState, Ending, State, Status};
 use crate::scan::testhooks::TestHooks;
 use crate::service::Notifier;
 use crate::station_lock::StationLock;
@@ -244,22 +245,36 @@ async fn daemon(
                             )));
                             continue;
                         }
-                        let request = match choose_request(config, specimen, operator, notes, mode, req.peer) {
-                            Ok(r) => r,
+                        let choice = match decide_request(config, specimen, operator, notes, mode, req.peer) {
+                            Ok(c) => c,
                             Err(e) => {
                                 tracing::error!("{e}");
                                 let _ = req.reply.send(Err(e.to_string()));
                                 continue;
                             }
                         };
-                        let what = match &request {
+                        let what = match &choice.request {
                             ScanRequest::New { .. } => format!("starting a scan of {} lines", config.scan.lines),
                             ScanRequest::Resume { dir, .. } => format!("resuming the unfinished scan {}", dir.display()),
                             ScanRequest::Continue { dir, .. } => format!("continuing the failed scan {}", dir.display()),
                         };
-                        let _ = req.reply.send(Ok(format!(
+                        // Nothing is changed, on disk or at the station, unless the operator
+                        // is told the start goes ahead.
+                        let told = req.reply.send(Ok(format!(
                             "{what}; follow it with `surfscan status --watch`"
                         )));
+                        if told.is_err() {
+                            tracing::warn!("dropped a start: the control socket stopped waiting for it and told the operator it was not carried out");
+                            continue;
+                        }
+                                    if let Err(e) = choice.commit() {
+                            tracing::error!("{e}");
+                            let ended = ended_status(&ctl.status.borrow(), Ending::Fail, &e.to_string());
+                            ctl.status.send_replace(ended);
+                            note_damaged_journals(config, &ctl.status);
+                            continue;
+                        }
+                        let request = choice.request;
                         let outcome = run_scan(&mut station, &mut ctl, &settings, request).await;
                         stop = matches!(outcome, Outcome::Interrupted { .. });
                         note_damaged_journals(config, &ctl.status);

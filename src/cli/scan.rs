@@ -187,6 +187,50 @@ pub fn choose_request(
     mode: StartMode,
     peer: Peer,
 ) -> Result<ScanRequest, CliError> {
+    let choice = decide_request(config, specimen, operator, notes, mode, peer)?;
+    choice.commit()?;
+    Ok(choice.request)
+}
+
+/// A start decided on and not yet carried out: the scan to run, and the unfinished scans to
+/// record as abandoned first (a start with [`StartMode::New`]).
+#[derive(Debug)]
+pub struct StartChoice {
+    /// The scan to run.
+    pub request: ScanRequest,
+    /// Unfinished scans a new one replaces.
+    pub abandon: Vec<PathBuf>,
+    /// Who asked.
+    pub peer: Peer,
+}
+
+impl StartChoice {
+    /// Records the replaced scans as abandoned (the start's only change on disk before the
+    /// scan itself).
+    pub fn commit(&self) -> Result<(), CliError> {
+        for dir in &self.abandon {
+            abandon(dir, self.peer)?;
+        }
+        Ok(())
+    }
+}
+
+/// [`choose_request`] without changing anything: the decision, to be carried out with
+/// [`StartChoice::commit`] once the start is sure to go ahead (the daemon first tells the
+/// operator so, and a start the operator was told had not happened changes nothing).
+pub fn decide_request(
+    config: &Config,
+    specimen: String,
+    operator: String,
+    notes: String,
+    mode: StartMode,
+    peer: Peer,
+) -> Result<StartChoice, CliError> {
+    let decided = |request: ScanRequest, abandon: Vec<PathBuf>| StartChoice {
+        request,
+        abandon,
+        peer,
+    };
     let out = &config.output.dir;
     let unfinished = find_unfinished(out).map_err(|e| {
         CliError::new(
@@ -201,10 +245,7 @@ pub fn choose_request(
         peer: Some(peer),
     };
     if mode == StartMode::New {
-        for dir in &unfinished {
-            abandon(dir, peer)?;
-        }
-        return Ok(new);
+        return Ok(decided(new, unfinished));
     }
     if let Some((last, older)) = unfinished.split_last() {
         for o in older {
@@ -214,19 +255,25 @@ pub fn choose_request(
             );
         }
         tracing::info!("resuming the unfinished scan {}", last.display());
-        return Ok(ScanRequest::Resume {
-            dir: last.clone(),
-            peer: Some(peer),
-        });
+        return Ok(decided(
+            ScanRequest::Resume {
+                dir: last.clone(),
+                peer: Some(peer),
+            },
+            Vec::new(),
+        ));
     }
     let failed = newest_failed(out);
     match (mode, failed) {
         (StartMode::Resume, Some(dir)) => {
             tracing::info!("continuing the failed scan {}", dir.display());
-            Ok(ScanRequest::Continue {
-                dir,
-                peer: Some(peer),
-            })
+            Ok(decided(
+                ScanRequest::Continue {
+                    dir,
+                    peer: Some(peer),
+                },
+                Vec::new(),
+            ))
         }
         (StartMode::Resume, None) => Err(CliError::new(
             Exit::Failed,
@@ -240,9 +287,9 @@ pub fn choose_request(
                 "the last scan {} failed; a new scan starts (`--resume` continues the failed one at its first missing line)",
                 dir.display()
             );
-            Ok(new)
+            Ok(decided(new, Vec::new()))
         }
-        (_, None) => Ok(new),
+        (_, None) => Ok(decided(new, Vec::new())),
     }
 }
 
