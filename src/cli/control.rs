@@ -8,7 +8,9 @@
 //! `pause` and `resume` are idempotent: both exit 0 when the scan ends up in the state asked
 //! for, including when it already was (`already paused`, `not paused; it goes on scanning`),
 //! and 1 when there is no scan to pause or resume. `start` while a scan runs exits 1 with the
-//! running scan's id. `status --watch` outlives the daemon: when the connection closes it
+//! running scan's id; an accepted start is followed until the scan is under way (exit 0) or
+//! ended (a scan that cannot begin, a device missing, is exit 1 with its reason), for up to
+//! [`START_WAIT`]. `status --watch` outlives the daemon: when the connection closes it
 //! says so on standard error and reconnects (every 0.5 s at first, then every 5 s) until
 //! the daemon is back or it is interrupted.
 //!
@@ -20,7 +22,7 @@
 use super::{CliError, Exit};
 use crate::control::client::{ClientError, ControlClient, Received};
 use crate::control::protocol::{Message, Request};
-use crate::scan::status::{DeviceState, State, Status};
+use crate::scan::status::{DeviceState, Ending, State, Status};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -258,7 +260,85 @@ pub fn run_start(args: StartArgs) -> Result<(), CliError> {
         notes: args.notes,
         mode: super::scan::start_mode(args.resume, args.new),
     };
-    send_command(&args.target, request)
+    let path = socket_path(&args.target)?;
+    let json = args.target.json;
+    block_on(async move {
+        let mut client = ControlClient::connect(&path).await.map_err(client_error)?;
+        let before = match client
+            .request(&Request::Status)
+            .await
+            .map_err(client_error)?
+        {
+            Received {
+                message: Message::Status(s),
+                ..
+            } => s.starts,
+            other => {
+                return Err(CliError::new(
+                    Exit::Io,
+                    format!("the daemon answered status with {}", other.raw),
+                ))
+            }
+        };
+        let reply = client.request(&request).await.map_err(client_error)?;
+        print_reply(&reply, json, false)?;
+        confirm_start(&path, before, json).await
+    })
+}
+
+/// How long `surfscan start` waits to see its scan under way (the devices opened and the scan
+/// directory made, or the paused scan going on) or ended, before it leaves the rest to
+/// `surfscan status --watch`.
+pub const START_WAIT: Duration = Duration::from_secs(120);
+
+/// Follows the status after a start the daemon accepted until it shows that start's outcome
+/// (the daemon's count of scans begun has grown past `before`): under way, or ended (a scan
+/// that cannot start, the devices missing say, is exit 1 with the reason) — so an operator
+/// who walks away after `surfscan start` knows the scan really began.
+async fn confirm_start(path: &Path, before: u64, json: bool) -> Result<(), CliError> {
+    let mut client = ControlClient::connect(path).await.map_err(client_error)?;
+    let mut m = client
+        .request(&Request::Watch)
+        .await
+        .map_err(client_error)?;
+    let deadline = tokio::time::Instant::now() + START_WAIT;
+    loop {
+        if let Message::Status(s) = &m.message {
+            if s.starts > before && s.state != State::Starting {
+                if json {
+                    say!("{}", m.raw);
+                }
+                return match (&s.state, &s.last_stop) {
+                    (State::Idle, Some(stop)) if stop.status == Ending::Fail => Err(CliError::new(
+                        Exit::Failed,
+                        format!("the scan did not start: {}", stop.reason),
+                    )),
+                    _ => {
+                        if !json {
+                            say!("{}", s.summary());
+                        }
+                        Ok(())
+                    }
+                };
+            }
+        }
+        m = match tokio::time::timeout_at(deadline, client.next()).await {
+            Ok(Ok(Some(next))) => next,
+            Ok(Ok(None)) | Ok(Err(_)) => {
+                return Err(CliError::new(
+                    Exit::Io,
+                    "the daemon stopped answering before the scan was under way; see `surfscan status` and `journalctl -u surfscan`",
+                ))
+            }
+            Err(_) => {
+                say!(
+                    "still starting after {} s (opening the devices, homing); follow it with `surfscan status --watch`",
+                    START_WAIT.as_secs()
+                );
+                return Ok(());
+            }
+        };
+    }
 }
 
 fn send_command(target: &Target, request: Request) -> Result<(), CliError> {
@@ -343,10 +423,9 @@ fn devices(s: &Status) -> String {
     format!("instrument {}, stage {}", name(s.instrument), name(s.stage))
 }
 
-/// A duration for people: `45 s`, `12 min 30 s`, `2 h 05 min`.
 /// The ETA as people read it, only while lines are being traced: paused, suspended or
-/// starting, the estimate (the scanning time still needed) does not count down, and a clock
-/// time shown then would be wrong by however long the scan waits.
+/// starting, the estimate (the scanning time still needed) does not count down, and shown
+/// then it would promise an end that recedes for as long as the scan waits.
 pub fn eta_while_scanning(s: &Status) -> Option<String> {
     if s.state == State::Scanning {
         s.eta_s.and_then(format_eta)
@@ -355,7 +434,7 @@ pub fn eta_while_scanning(s: &Status) -> Option<String> {
     }
 }
 
-/// Seconds as people read a duration: `42 s`, `12 min 30 s`, `2 h 05 min`.
+/// A duration for people: `45 s`, `12 min 30 s`, `2 h 05 min`.
 pub fn format_eta(seconds: f64) -> Option<String> {
     if !seconds.is_finite() || seconds < 0.0 {
         return None;

@@ -209,6 +209,7 @@ async fn daemon(
     ) {
         Ok(ScanRequest::Resume { dir, .. }) => {
             let req = ScanRequest::Resume { dir, peer: None };
+            ctl.status.send_modify(|s| s.starts += 1);
             let outcome = run_scan(&mut station, &mut ctl, &settings, req).await;
             stop = matches!(outcome, Outcome::Interrupted { .. });
             note_damaged_journals(config, &ctl.status);
@@ -267,7 +268,8 @@ async fn daemon(
                             tracing::warn!("dropped a start: the control socket stopped waiting for it and told the operator it was not carried out");
                             continue;
                         }
-                                    if let Err(e) = choice.commit() {
+                        ctl.status.send_modify(|s| s.starts += 1);
+                        if let Err(e) = choice.commit() {
                             tracing::error!("{e}");
                             let ended = ended_status(&ctl.status.borrow(), Ending::Fail, &e.to_string());
                             ctl.status.send_replace(ended);

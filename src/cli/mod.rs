@@ -87,7 +87,7 @@ pub enum Command {
     Resume(control::CommandArgs),
     /// Abort the running scan (recorded as abort).
     Abort(control::CommandArgs),
-    /// Start a scan of the configured plan.
+    /// Start a scan of the configured plan, and wait until it is under way (exit 1 with the reason when it cannot begin).
     Start(control::StartArgs),
     /// Check a station configuration without opening any device (exit 78 when invalid).
     CheckConfig(check_config::Args),

@@ -1585,6 +1585,7 @@ pub fn ended_status(s: &Status, ending: Ending, reason: &str) -> Status {
         }),
         instrument: downgrade(s.instrument),
         stage: downgrade(s.stage),
+        starts: s.starts,
         ..Status::idle()
     }
 }

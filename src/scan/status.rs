@@ -120,6 +120,10 @@ pub struct Status {
     /// Scans skipped because their journal is damaged, one message each (path, record, why).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub damaged_journals: Vec<String>,
+    /// Scans the daemon has begun since it started (a resumption at start-up included):
+    /// `surfscan start` knows the status shows its own start's outcome once this has grown.
+    #[serde(default)]
+    pub starts: u64,
 }
 
 impl Status {
@@ -140,6 +144,7 @@ impl Status {
             stage: DeviceState::Absent,
             last_stop: None,
             damaged_journals: Vec::new(),
+            starts: 0,
         }
     }
 

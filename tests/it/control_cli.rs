@@ -44,16 +44,28 @@ impl Daemon {
         let (cmd_tx, mut cmd_rx) = mpsc::channel::<OperatorRequest>(4);
         let seen = Arc::new(Mutex::new(Vec::new()));
         let log = Arc::clone(&seen);
+        let publish = status_tx.clone();
         tokio::spawn(async move {
             while let Some(req) = cmd_rx.recv().await {
                 log.lock().unwrap().push(req.command.clone());
-                let answer = match req.command {
+                let answer = match &req.command {
                     OperatorCommand::Pause => Ok("pausing after line 12 is on disk".to_owned()),
                     OperatorCommand::Resume => Err("the scan is not paused".to_owned()),
                     OperatorCommand::Abort => Ok("aborting".to_owned()),
                     OperatorCommand::Start { specimen, .. } => Ok(format!("starting {specimen}")),
                 };
+                let started = matches!(req.command, OperatorCommand::Start { .. });
                 let _ = req.reply.send(answer);
+                if started {
+                    // As the daemon does: the start is counted, the scan begins (here, at
+                    // once, on a new line).
+                    publish.send_modify(|s| {
+                        s.starts += 1;
+                        s.current_line = Some(1);
+                        s.lines_done = 0;
+                        s.y_mm = Some(0.0);
+                    });
+                }
             }
         });
         let dir = tempfile::tempdir().unwrap();
@@ -168,7 +180,11 @@ async fn commands_are_acked_or_refused_with_the_daemons_message() {
     )
     .await;
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
-    assert_eq!(text(&out.stdout), "start: starting B12\n");
+    // The ack, then the scan seen under way.
+    assert_eq!(
+        text(&out.stdout),
+        "start: starting B12\nscan G-0142: line 1/31, y=0.000 mm\n"
+    );
     assert_eq!(
         *d.seen.lock().unwrap(),
         vec![
@@ -451,6 +467,62 @@ async fn watch_prints_a_line_only_when_it_reads_differently() {
     let line = next().await;
     assert!(line.contains("line 13/31"), "{line}");
     child.kill().await.unwrap();
+    let _ = stop.send(());
+    task.await.unwrap();
+}
+
+/// `surfscan start` follows its start to the scan under way or to its end: a scan that
+/// cannot begin (its devices missing) is exit 1 with the daemon's reason, not a silent exit 0
+/// an operator walks away from.
+#[tokio::test]
+async fn a_start_that_fails_at_once_is_reported_as_failed() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("control.sock");
+    let (status_tx, status_rx) = watch::channel(Status::idle());
+    let (cmd_tx, mut cmd_rx) = mpsc::channel::<OperatorRequest>(4);
+    let publish = status_tx.clone();
+    tokio::spawn(async move {
+        while let Some(req) = cmd_rx.recv().await {
+            let _ = req.reply.send(Ok("starting a scan of 31 lines".to_owned()));
+            // Starting, then ended: the instrument is not plugged in.
+            publish.send_modify(|s| {
+                s.starts += 1;
+                s.state = State::Starting;
+            });
+            tokio::time::sleep(Duration::from_millis(100)).await;
+            publish.send_modify(|s| {
+                s.state = State::Idle;
+                s.last_stop = Some(surfscan::scan::status::LastStop {
+                    scan_id: String::new(),
+                    status: surfscan::scan::status::Ending::Fail,
+                    reason: "instrument unavailable: /dev/sj210 is absent".into(),
+                    dir: String::new(),
+                });
+            });
+        }
+    });
+    let server = server::bind_with_options(&path, ServerOptions::default())
+        .await
+        .unwrap();
+    let (stop, stopped) = oneshot::channel::<()>();
+    let task = tokio::spawn(server.serve(
+        ControlChannels {
+            status: status_rx,
+            commands: cmd_tx,
+        },
+        async {
+            let _ = stopped.await;
+        },
+    ));
+    let out = run(&["start", "--specimen", "B13"], &path).await;
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("the scan did not start: instrument unavailable: /dev/sj210 is absent"),
+        "{stderr}"
+    );
+    assert_eq!(text(&out.stdout), "start: starting a scan of 31 lines\n");
+    drop(status_tx);
     let _ = stop.send(());
     task.await.unwrap();
 }

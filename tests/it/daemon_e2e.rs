@@ -657,3 +657,56 @@ async fn a_start_resumes_a_scan_paused_before_a_restart() {
     assert!(wait_exit(&mut d).success());
     r.sim.shutdown().await;
 }
+
+/// `surfscan start` against a station whose instrument is not plugged in: the daemon
+/// accepts the start, the scan cannot begin, and the command says so with the reason, exit
+/// 1 (it said "starting a scan" and exit 0 before, and the operator walked away).
+#[test]
+fn a_start_the_devices_cannot_serve_is_reported_by_the_start_command() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inst, stage) = (dir.path().join("no-sj210"), dir.path().join("no-ystage"));
+    let socket = dir.path().join("control.sock");
+    let text = surfscan::cli::demo::demo_config(&inst, &stage, &dir.path().join("scans")).replace(
+        &format!(
+            "{:?}",
+            dir.path()
+                .join("scans/sim/control.sock")
+                .display()
+                .to_string()
+        ),
+        &format!("{:?}", socket.display().to_string()),
+    );
+    let config = dir.path().join("station.toml");
+    std::fs::write(&config, text).unwrap();
+    let locks = dir.path().join("locks");
+    std::fs::create_dir_all(&locks).unwrap();
+    let _d = Daemon(
+        Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(["daemon", "--config"])
+            .arg(&config)
+            .env("SURFSCAN_TEST_LOCK_DIR", &locks)
+            .env_remove("NOTIFY_SOCKET")
+            .env_remove("WATCHDOG_USEC")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let start = Instant::now();
+    while !socket.exists() {
+        assert!(start.elapsed() < DEADLINE, "no control socket");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(["start", "--specimen", "B14", "--config"])
+        .arg(&config)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("the scan did not start: instrument") && stderr.contains("no-sj210"),
+        "{stderr}"
+    );
+}
