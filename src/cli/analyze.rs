@@ -456,9 +456,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             ));
         }
         // The method's default control rows depend on the line count, known once read.
-        let lines = crate::report::load_vouched_lines(&args.input)
-            .map(|v| v.lines.len())
-            .unwrap_or(0);
+        let lines = crate::report::scan_dir::complete_line_count(&args.input);
         let frozen = scan_analysis_defaults(&args.input);
         let options = ScanAnalysisOptions {
             curves: args.curves.unwrap_or(frozen.curves),

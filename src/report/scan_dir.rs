@@ -41,6 +41,8 @@ pub struct JournalCheck {
     /// Lines whose heights file differs from its journal record: (line, the file's SHA-256,
     /// the journal's).
     pub changed: Vec<(u32, String, String)>,
+    /// Lines whose heights file cannot be read (a bad sector, no permission), with why.
+    pub unreadable: Vec<(u32, String)>,
     /// The scan stopped with success.
     pub completed: bool,
     /// Why nothing could be checked (the journal cannot be read), when nothing could.
@@ -51,7 +53,9 @@ impl JournalCheck {
     /// Whether line `index` is one the journal vouches for, as it is on disk (every line
     /// when the journal cannot be read).
     pub fn keeps(&self, index: u32) -> bool {
-        !self.uncommitted.contains(&index) && !self.changed.iter().any(|(i, _, _)| *i == index)
+        !self.uncommitted.contains(&index)
+            && !self.changed.iter().any(|(i, _, _)| *i == index)
+            && !self.unreadable.iter().any(|(i, _)| *i == index)
     }
 
     /// The warnings for the lines left out (and for a journal that could not be used), in
@@ -87,6 +91,13 @@ impl JournalCheck {
                 lines_dir.join(crate::scan::store::csv_name(*i)).display()
             ));
         }
+        for (i, why) in &self.unreadable {
+            out.push(format!(
+                "line {} ({}) cannot be read ({why}); it was left out (check the disk and the file's permissions)",
+                crate::numfmt::line_number(*i),
+                lines_dir.join(crate::scan::store::csv_name(*i)).display()
+            ));
+        }
         out
     }
 }
@@ -105,20 +116,20 @@ pub fn uncommitted_lines_warning(list: &str, count: usize) -> String {
 
 /// Checks the heights file of each line of `index` in scan directory `dir` against the
 /// SHA-256 its journal record holds (`state`, the journal as read, or why it cannot be):
-/// a line without a record, or whose file changed since, is one the journal does not vouch
-/// for. A file that cannot be read is an error.
+/// a line without a record, whose file changed since, or whose file cannot be read, is one
+/// the journal does not vouch for.
 pub fn check_against_journal(
     dir: &Path,
     state: Result<&ResumeState, String>,
     index: &[u32],
-) -> Result<JournalCheck, ReportError> {
+) -> JournalCheck {
     let state = match state {
         Ok(s) => s,
         Err(why) => {
-            return Ok(JournalCheck {
+            return JournalCheck {
                 unchecked: Some(why),
                 ..JournalCheck::default()
-            })
+            }
         }
     };
     let mut check = JournalCheck {
@@ -134,19 +145,25 @@ pub fn check_against_journal(
             continue;
         };
         let file = dir.join("lines").join(crate::scan::store::csv_name(i));
-        let bytes = std::fs::read(&file).map_err(|source| {
-            ReportError::Store(crate::scan::store_error::StoreError::Io {
-                op: "read",
-                path: file.clone(),
-                source,
-            })
-        })?;
-        let sha = crate::scan::store::hex_sha256(&bytes);
-        if sha != record.csv_sha256 {
-            check.changed.push((i, sha, record.csv_sha256.clone()));
+        match std::fs::read(&file) {
+            Ok(bytes) => {
+                let sha = crate::scan::store::hex_sha256(&bytes);
+                if sha != record.csv_sha256 {
+                    check.changed.push((i, sha, record.csv_sha256.clone()));
+                }
+            }
+            Err(e) => check.unreadable.push((i, e.to_string())),
         }
     }
-    Ok(check)
+    check
+}
+
+/// How many lines of scan directory `dir` have both their files (0 when it is not a scan
+/// directory): a count, without reading a line.
+pub fn complete_line_count(dir: &Path) -> usize {
+    ScanStore::open(dir, Arc::new(NoFaults))
+        .and_then(|s| s.stored_indices())
+        .map_or(0, |(complete, _)| complete.len())
 }
 
 /// The lines of a scan directory that its journal vouches for, read after their check.
@@ -180,7 +197,7 @@ pub fn load_vouched_lines(dir: &Path) -> Result<VouchedLines, ReportError> {
     let (complete, incomplete) = store.stored_indices()?;
     let complete: Vec<u32> = complete.into_iter().collect();
     let journal = read_scan_journal(dir);
-    let check = check_against_journal(dir, journal.as_ref().map_err(|e| e.to_string()), &complete)?;
+    let check = check_against_journal(dir, journal.as_ref().map_err(|e| e.to_string()), &complete);
     let lines = complete
         .iter()
         .filter(|&&i| check.keeps(i))

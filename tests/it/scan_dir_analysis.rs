@@ -782,6 +782,29 @@ fn a_malformed_line_file_is_a_clear_error_naming_the_file() {
     }
     std::fs::write(&journal, journal_text).unwrap();
     std::fs::write(&csv, text).unwrap();
+    // A heights file that cannot be read at all (here a directory where the file was; on a
+    // station a bad sector) is left out and named the same way.
+    let other = scan.join("lines/0004.csv");
+    let kept = std::fs::read(&other).unwrap();
+    std::fs::remove_file(&other).unwrap();
+    std::fs::create_dir(&other).unwrap();
+    for cmd in ["analyze", "fit"] {
+        let out = surfscan()
+            .args(
+                [cmd, scan.to_str().unwrap(), "--force"][..if cmd == "fit" { 3 } else { 2 }]
+                    .to_vec(),
+            )
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{cmd}: {stderr}");
+        assert!(
+            stderr.contains("line 5 (") && stderr.contains("0004.csv) cannot be read"),
+            "{cmd}: {stderr}"
+        );
+    }
+    std::fs::remove_dir(&other).unwrap();
+    std::fs::write(&other, kept).unwrap();
     // A directory that is not a scan is named as such.
     let out = surfscan()
         .args(["analyze", tmp.path().to_str().unwrap()])
