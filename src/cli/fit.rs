@@ -398,6 +398,41 @@ struct Input {
     plan: Option<crate::scan::plan::Plan>,
     /// λc of the roughness the spike rule judges (a scan of primary profiles).
     lambda_c_mm: Option<f64>,
+    /// A scan's lines left out, each with its file and why (none for a grid CSV).
+    left_out: Vec<LeftOut>,
+}
+
+/// A line of a scan that the fit leaves out.
+#[derive(Debug, Clone, serde::Serialize)]
+struct LeftOut {
+    /// 1-based line number.
+    line: u64,
+    /// Its heights file, as named in `lines/`.
+    file: String,
+    /// Why, in a few words.
+    why: &'static str,
+}
+
+impl LeftOut {
+    fn of(index: u32, why: &'static str) -> LeftOut {
+        LeftOut {
+            line: crate::numfmt::line_number(index),
+            file: crate::scan::store::csv_name(index),
+            why,
+        }
+    }
+}
+
+/// The IGES Start section's words for the lines a fit of a scan left out, so the file itself
+/// says which lines its surface does not pass through.
+fn left_out_start_line(left_out: &[LeftOut]) -> Option<String> {
+    (!left_out.is_empty()).then(|| {
+        let each: Vec<String> = left_out
+            .iter()
+            .map(|l| format!("{} ({}, {})", l.line, l.file, l.why))
+            .collect();
+        format!("Lines left out: {}.", each.join("; "))
+    })
 }
 
 fn read_scan(args: &Args) -> Result<Input, CliError> {
@@ -445,6 +480,29 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
     for w in check.warnings(&args.input.join("lines")) {
         tell!("surfscan: warning: {w}");
     }
+    let mut left_out: Vec<LeftOut> = incomplete
+        .iter()
+        .map(|&i| LeftOut::of(i, "one of its two files missing"))
+        .chain(
+            check
+                .uncommitted
+                .iter()
+                .map(|&i| LeftOut::of(i, "never committed to the journal")),
+        )
+        .chain(
+            check
+                .changed
+                .iter()
+                .map(|(i, _, _)| LeftOut::of(*i, "changed after it was traced")),
+        )
+        .chain(
+            check
+                .unreadable
+                .iter()
+                .map(|(i, _)| LeftOut::of(*i, "cannot be read")),
+        )
+        .collect();
+    left_out.sort_by_key(|l| l.line);
     let default_output = args.input.join("surface.igs");
     if args.output.is_none() && !args.force {
         if let Some(existing) = existing_surface(&default_output) {
@@ -485,6 +543,7 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             let o = crate::metrology::params::Options::from_profile(&l.profile);
             o.apply_lambda_c.then_some(o.lambda_c_mm)
         }),
+        left_out,
     })
 }
 
@@ -566,6 +625,7 @@ fn read_csv(args: &Args) -> Result<Input, CliError> {
         degrees: crate::report::scan_dir::scan_degrees(args.degree_u, args.degree_v, None),
         plan: None,
         lambda_c_mm: None,
+        left_out: Vec::new(),
     })
 }
 
@@ -871,6 +931,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         degrees: options,
         plan,
         lambda_c_mm,
+        left_out,
     } = input;
     let method = args
         .model
@@ -934,6 +995,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             &y_mm,
         );
         opts.start_lines.extend(recipe.start_lines(replaced));
+        opts.start_lines.extend(left_out_start_line(&left_out));
         ensure_parent(&output)?;
         let t_write = Instant::now();
         let written =
@@ -1043,6 +1105,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         "pitch_y_mm": pitch_y_mm,
         "y_mm": y_mm,
         "lines": index,
+        "lines_left_out": left_out,
         "max_residual_mm": residual_mm,
         "patches": stats.patches,
         "iges_bytes": stats.bytes,

@@ -732,7 +732,26 @@ fn fit_scan_dir_checks_the_journal_and_keeps_a_completed_surface() {
     );
     let rep: Value = serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
     assert_eq!(rep["lines"], json!([0, 1, 3, 4, 5, 6]));
+    assert_eq!(
+        rep["lines_left_out"],
+        json!([
+            {"line": 3, "file": "0002.csv", "why": "changed after it was traced"},
+            {"line": 21, "file": "0020.csv", "why": "never committed to the journal"}
+        ])
+    );
     assert_ne!(poles(&surface), first, "a surface through the other lines");
+    // The IGES file itself says which line its surface does not pass through.
+    let iges = std::fs::read_to_string(&surface).unwrap();
+    let start: String = iges
+        .lines()
+        .filter(|l| l.get(72..73) == Some("S"))
+        .map(|l| l[..72].trim_end())
+        .collect::<Vec<_>>()
+        .join(" ");
+    assert!(
+        start.contains("Lines left out: 3 (0002.csv, changed after it was traced); 21 (0020.csv, never committed to the journal)."),
+        "{start}"
+    );
 }
 
 #[test]
