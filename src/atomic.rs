@@ -197,14 +197,22 @@ pub fn write_hint(path: &Path, e: &io::Error) -> String {
         Some(libc::ENOSPC) | Some(libc::EDQUOT) => {
             "the disk (or the quota) is full; free some space".to_string()
         }
-        Some(libc::EROFS) => "the file system is read-only; choose another place".to_string(),
+        Some(libc::EROFS) => {
+            "the file system is read-only; write to another one (for a station, its output.dir)"
+                .to_string()
+        }
         Some(libc::EACCES) | Some(libc::EPERM) => {
             "permission denied; check who may write the directory".to_string()
         }
         Some(libc::ENOTDIR) | Some(libc::EEXIST) => match not_a_directory(path) {
             Some(file) => format!(
-                "{} is a file, not a directory; choose a path under a directory",
-                file.display()
+                "{} is {}, not a directory; choose a path under a directory",
+                file.display(),
+                if file.is_symlink() && !file.exists() {
+                    "a link to nothing"
+                } else {
+                    "a file"
+                }
             ),
             None => "check the directory's permissions and free space".to_string(),
         },

@@ -384,9 +384,17 @@ impl StationLock {
 }
 
 /// Whether process `pid` certainly started after `time` (by more than the 2 s the start
-/// time's rounding and clock steps may blur), so it cannot have written a file last changed
-/// at `time`. `false` when its start cannot be read (another system than Linux, a process
-/// gone meanwhile): a file is then never taken from a process that may be writing it.
+/// time's rounding may blur), so it cannot have written a file last changed at `time`.
+/// `false` when its start cannot be read (another system than Linux, a process gone
+/// meanwhile): a file is then never taken from a process that may be writing it.
+///
+/// Both times are read on the wall clock, and a process's start is the boot time plus its
+/// ticks since boot, where the boot time follows the clock when it is stepped. A station PC
+/// without a battery-backed clock that NTP sets long after boot could therefore see a file
+/// written before the step by a process still running as older than that process. The sweep
+/// runs when the station lock is taken, before this process writes anything, so only a
+/// `fit` or `analyze` of the operator's writing into the output directory across such a
+/// step could lose its temporary file; it would then report the failed write.
 fn started_after(pid: u32, time: std::time::SystemTime) -> bool {
     process_start(pid).is_some_and(|start| {
         start
@@ -641,11 +649,21 @@ mod tests {
         let out = tmp.path().join("scans");
         fs::create_dir_all(&out).unwrap();
         let an_hour_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
-        let mut newcomer = std::process::Command::new("sleep")
-            .arg("30")
-            .spawn()
-            .unwrap();
-        let reused = out.join(format!(".surface.igs.tmp{}", newcomer.id()));
+        // Killed however the test ends.
+        struct Reaped(std::process::Child);
+        impl Drop for Reaped {
+            fn drop(&mut self) {
+                let _ = self.0.kill();
+                let _ = self.0.wait();
+            }
+        }
+        let newcomer = Reaped(
+            std::process::Command::new("sleep")
+                .arg("30")
+                .spawn()
+                .unwrap(),
+        );
+        let reused = out.join(format!(".surface.igs.tmp{}", newcomer.0.id()));
         // Our parent (the test runner's launcher) started before the file was written.
         let older = out.join(format!(
             ".report.json.tmp{}",
@@ -662,8 +680,7 @@ mod tests {
             .unwrap();
         let lock = StationLock::acquire("scan", &out, &[], tmp.path()).unwrap();
         let removed = lock.sweep_leftovers();
-        let _ = newcomer.kill();
-        let _ = newcomer.wait();
+        drop(newcomer);
         assert_eq!(removed, vec![reused.clone()]);
         assert!(!reused.exists() && older.exists());
     }

@@ -8,7 +8,8 @@
 //! between Mitutoyo's PC software on a second serial port and the instrument, recording
 //! every exchange.
 //!
-//! Layer 5 (composition): depends on [`crate::sj210`] and [`crate::transport`].
+//! Layer 5 (composition): depends on [`crate::sj210`], [`crate::transport`], and the
+//! vocabulary of [`crate::devices`] and [`crate::profile`] it prints.
 
 use super::{CliError, Exit};
 use crate::devices::{Battery, DeviceFault, FaultClass, ProbeReport, ProfileReadout};

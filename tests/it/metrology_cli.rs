@@ -385,17 +385,31 @@ fn analysis_flags_outside_the_configurations_ranges_are_usage_errors() {
         assert!(err.contains(flag) && err.contains(key), "{err}");
         assert!(!out.exists(), "{flag} {value} wrote {}", out.display());
     }
-    // The ends of the ranges are accepted.
+    // The ends of the ranges are not refused as usage (a λc of 100 mm is then too long for
+    // this 2 mm profile, which is another matter, exit 1).
+    for (flag, value) in [
+        ("--lc", "0.001"),
+        ("--lc", "100"),
+        ("--levels", "2"),
+        ("--levels", "100000"),
+        ("--curves", "1"),
+        ("--curves", "10000"),
+    ] {
+        let run = surfscan()
+            .args(["analyze", input.to_str().unwrap(), flag, value, "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_ne!(run.status.code(), Some(2), "{flag} {value}: {err}");
+        assert!(
+            !err.contains("outside its valid range"),
+            "{flag} {value}: {err}"
+        );
+    }
+    // A plain value characterises the profile.
     let run = surfscan()
-        .args([
-            "analyze",
-            input.to_str().unwrap(),
-            "--lc",
-            "0.8",
-            "--levels",
-            "2",
-            "--out",
-        ])
+        .args(["analyze", input.to_str().unwrap(), "--lc", "0.8", "--out"])
         .arg(&out)
         .output()
         .unwrap();
