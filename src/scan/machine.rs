@@ -1399,14 +1399,18 @@ impl Machine {
             // A start while paused is the operator's resumption (as `surfscan scan` or a
             // start resumes a scan paused before a restart); a new scan needs this one
             // aborted first.
-            OperatorCommand::Start { mode, .. } if paused && mode != StartMode::New => self
-                .resume_paused(
+            OperatorCommand::Start { mode, .. } if paused && mode != StartMode::New => {
+                // Counted as a start, as the daemon counts the scans it begins, so that
+                // `surfscan start` sees its outcome in the status.
+                self.status.starts += 1;
+                self.resume_paused(
                     format!("{scan} was paused; this start resumes it"),
                     format!("resumed by the operator's start ({by})"),
                     peer,
                     now,
                     out,
-                ),
+                );
+            }
             OperatorCommand::Start { .. } if paused => out.push(Action::Reply(Err(format!(
                 "{scan} is paused; `surfscan resume` continues it, or `surfscan abort` ends it (its lines are kept) before a new scan can start"
             )))),
@@ -1435,6 +1439,7 @@ impl Machine {
         }));
         self.status.state = State::Scanning;
         self.status.reason = None;
+        self.publish(out);
         self.next_step(now, out);
     }
 

@@ -634,15 +634,28 @@ async fn a_start_resumes_a_scan_paused_before_a_restart() {
         other => panic!("{other:?}"),
     }
     assert_eq!(status(&r).await.state, State::Paused);
-    let ack = client(&r)
+    // The operator's own command: it answers that the start resumes the scan and sees it
+    // under way (it waited its 2 minutes and said "still starting" when a start while
+    // paused was not counted).
+    let out = tokio::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(["start", "--specimen", "paused", "--socket"])
+        .arg(&r.socket)
+        .output();
+    let out = tokio::time::timeout(Duration::from_secs(60), out)
         .await
-        .request(&start(StartMode::Auto))
-        .await
+        .expect("start ends")
         .unwrap();
-    match ack.message {
-        Message::Ack { detail, .. } => assert!(detail.contains("resumes"), "{detail}"),
-        other => panic!("{other:?}"),
-    }
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("this start resumes it") && !stdout.contains("still starting"),
+        "{stdout}"
+    );
     wait_status(&r, "complete after the start", |s| {
         s.last_stop
             .as_ref()

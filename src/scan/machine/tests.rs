@@ -978,6 +978,9 @@ fn a_start_while_paused_resumes_the_scan_and_a_new_one_is_refused_with_guidance(
             )),
             "{a:?}"
         );
+        // Counted as a start, so `surfscan start` sees its outcome.
+        let s = last_status(&a).expect("status");
+        assert_eq!((s.starts, s.state), (1, State::Scanning), "{a:?}");
     }
 }
 
