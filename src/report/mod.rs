@@ -165,6 +165,14 @@ pub fn characterise(
             grid.pitch_x_mm,
             &mut ctx.warnings,
         );
+        // The lines are filtered; the surface as traced is not (no areal λc filter fits the
+        // few tenths of a mm a scan covers in y): say so where the two kinds of numbers meet.
+        if ctx.line_options.apply_lambda_c {
+            ctx.warnings.push(format!(
+                "the line parameters are of the λc {} mm roughness profiles, but the areal parameters, the surface model and its bearing area curves, the height map and the X3P files are of the heights as traced, levelled by a plane: form and waviness longer than λc are in them",
+                ctx.line_options.lambda_c_mm
+            ));
+        }
         let bridged = if ctx.options.exclude_spikes && !outliers.spikes.is_empty() {
             Some(outliers::bridged(grid, &outliers.spikes))
         } else {

@@ -124,6 +124,16 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["lines"].as_array().unwrap().len(), rows);
     assert!((report["lines"][12]["y_mm"].as_f64().unwrap() - 0.12).abs() < 1e-12);
+    // The lines are λc-filtered (a grid CSV is taken as primary profiles), the surface's
+    // areal numbers are not: the report says so.
+    assert!(
+        report["warnings"].as_array().unwrap().iter().any(|w| w
+            .as_str()
+            .unwrap()
+            .contains("form and waviness longer than λc are in them")),
+        "{}",
+        report["warnings"]
+    );
     // analyze fitted the surface itself: the fit is timed in report.json and in its total.
     crate::common::assert_fit_timed(&report);
     // Levelled grid: the plane takes the samples' mean A/cols; Sz = 2A.
