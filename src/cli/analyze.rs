@@ -131,6 +131,104 @@ struct Report {
     kind: &'static str,
     recipe: Recipe,
     lines: Vec<LineReport>,
+    /// The spike rule, its policy and every spike found.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    outliers: Option<crate::report::document::OutliersReport>,
+    /// What the operator should know about these numbers.
+    warnings: Vec<String>,
+}
+
+/// One profile (a profile CSV, an X3P file of one line): its spikes found (and bridged when
+/// asked for), its parameters, the warnings printed and in the report, the outputs written
+/// and what they say printed.
+fn characterise_profile(
+    args: &Args,
+    input: String,
+    mut z: Vec<f64>,
+    pitch: f64,
+    options: &Options,
+    mut warnings: Vec<String>,
+    out: &Path,
+) -> Result<(), CliError> {
+    // Spikes, judged as a grid's lines are, and bridged when asked for.
+    let rule = args.model.spikes()?;
+    let exclude = args.outliers == Some(OutliersArg::Exclude);
+    let lambda_c = options.apply_lambda_c.then_some(options.lambda_c_mm);
+    let (spikes, not_judged) =
+        crate::metrology::outliers::find_grid_spikes(&z, z.len(), &[0], pitch, lambda_c, &rule);
+    let outliers = crate::report::document::OutliersReport {
+        rule: rule.describe(),
+        policy: if exclude { "exclude" } else { "flag" },
+        spikes,
+        lines_not_judged: not_judged
+            .into_iter()
+            .map(|(line, reason)| crate::report::document::LineNotJudged { line, reason })
+            .collect(),
+    };
+    crate::report::outliers::warn(&outliers, &[], pitch, &mut warnings);
+    if exclude && !outliers.spikes.is_empty() {
+        z = crate::metrology::outliers::bridged_grid(&z, z.len(), &[0], &outliers.spikes).0;
+    }
+    let a = analyze_line(&z, pitch, options)
+        .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
+    if !options.apply_lambda_c {
+        warnings.extend(uncentred(&z, &a.params));
+    }
+    for w in &warnings {
+        tell!("surfscan: warning: {w}");
+    }
+    let summary = profile_summary(z.len(), pitch, &a.params, options);
+    let report = Report {
+        software: crate::build_info::software(),
+        input,
+        kind: "profile",
+        recipe: a.recipe.clone(),
+        lines: vec![LineReport {
+            index: 0,
+            y_mm: 0.0,
+            rmr_table: rmr_table(&a),
+            params: a.params,
+        }],
+        outliers: Some(outliers),
+        warnings,
+    };
+    write_outputs(out, &report)?;
+    say!("{}: {summary}", out.join("report.json").display());
+    Ok(())
+}
+
+/// Longest profile taken at face value, mm: far beyond a stylus instrument's traverse (the
+/// SJ-210's is 17.5 mm), so a longer one most likely has its x in µm.
+const PLAUSIBLE_LENGTH_MM: f64 = 100.0;
+
+/// A warning when `points` at `pitch_mm` make a profile longer than [`PLAUSIBLE_LENGTH_MM`].
+fn implausible_length(points: usize, pitch_mm: f64) -> Option<String> {
+    let length = points.saturating_sub(1) as f64 * pitch_mm;
+    (length > PLAUSIBLE_LENGTH_MM).then(|| {
+        format!(
+            "the profile is {} mm long ({points} points {} mm apart), longer than any stylus traverse: check that x is in mm",
+            crate::numfmt::fmt(length, crate::numfmt::Quantity::LengthMm),
+            crate::numfmt::fmt(pitch_mm, crate::numfmt::Quantity::LengthMm)
+        )
+    })
+}
+
+/// With `--no-filter` the heights are taken as a roughness profile about its mean line; a
+/// warning when they are not centred (an offset or a form the filter would have removed):
+/// their mean is more than half of Rq away from zero, or a peak height or valley depth comes
+/// out negative.
+fn uncentred(z: &[f64], p: &RoughnessParams) -> Option<String> {
+    use crate::numfmt::{fmt, Quantity};
+    let mean = z.iter().sum::<f64>() / z.len().max(1) as f64;
+    (mean.abs() > 0.5 * p.rq_um || p.rp_um < 0.0 || p.rv_um < 0.0).then(|| {
+        format!(
+            "with --no-filter the heights are taken as a roughness profile about its mean line, but their mean is {} µm against Rq {} µm (Rp {} µm, Rv {} µm): an offset or form remains; leave out --no-filter to apply the λc filter",
+            fmt(mean, Quantity::HeightUm),
+            fmt(p.rq_um, Quantity::HeightUm),
+            fmt(p.rp_um, Quantity::HeightUm),
+            fmt(p.rv_um, Quantity::HeightUm)
+        )
+    })
 }
 
 fn failed(msg: impl Into<String>) -> CliError {
@@ -157,6 +255,18 @@ fn parse_fields(line: &str) -> Result<Vec<f64>, (usize, &str)> {
 
 /// Reads a profile CSV: returns pitch (mm) and heights (µm). x must be uniformly spaced.
 fn read_profile(path: &Path, text: &str) -> Result<(f64, Vec<f64>), CliError> {
+    // The header states the units: exactly x in mm and z in µm. Anything else (heights in
+    // nm, a third column) would be read as something it is not, a thousand times off or the
+    // wrong column, without a word.
+    let header = text.lines().next().unwrap_or_default();
+    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+    if columns != ["x_mm", "z_um"] {
+        return Err(failed(format!(
+            "{}: a profile CSV's header is x_mm,z_um (x in mm, heights in µm, two columns); this one is {:?}: convert the heights to µm and keep only those two columns",
+            path.display(),
+            header.trim()
+        )));
+    }
     let mut x = Vec::new();
     let mut z = Vec::new();
     for (n, line) in text.lines().enumerate().skip(1) {
@@ -164,7 +274,7 @@ fn read_profile(path: &Path, text: &str) -> Result<(f64, Vec<f64>), CliError> {
             continue;
         }
         match parse_numbers(line).as_deref() {
-            Some([xv, zv, ..]) => {
+            Some([xv, zv]) => {
                 x.push(*xv);
                 z.push(*zv);
             }
@@ -519,25 +629,9 @@ pub fn run(args: Args) -> Result<(), CliError> {
         .is_some_and(|h| h.trim_start().starts_with("x_mm"));
     if is_profile {
         let (pitch, z) = read_profile(&args.input, &text)?;
-        let a = analyze_line(&z, pitch, &options)
-            .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
-        let rmr = rmr_table(&a);
-        let summary = profile_summary(z.len(), pitch, &a.params, &options);
-        let report = Report {
-            software: crate::build_info::software(),
-            input: args.input.display().to_string(),
-            kind: "profile",
-            recipe: a.recipe,
-            lines: vec![LineReport {
-                index: 0,
-                y_mm: 0.0,
-                rmr_table: rmr,
-                params: a.params,
-            }],
-        };
-        write_outputs(&out, &report)?;
-        say!("{}: {summary}", out.join("report.json").display());
-        return Ok(());
+        let warnings: Vec<String> = implausible_length(z.len(), pitch).into_iter().collect();
+        let input = args.input.display().to_string();
+        return characterise_profile(&args, input, z, pitch, &options, warnings, &out);
     }
     let (Some(px), Some(py)) = (args.pitch_x, args.pitch_y) else {
         return Err(CliError::new(
@@ -551,7 +645,8 @@ pub fn run(args: Args) -> Result<(), CliError> {
             args.input.display()
         ))
     })?;
-    let warnings: Vec<String> = csv.warning().into_iter().collect();
+    let mut warnings: Vec<String> = csv.warning().into_iter().collect();
+    warnings.extend(implausible_length(csv.cols, px));
     let rows = csv.rows.len();
     let grid = LineGrid {
         y_mm: csv.rows.iter().map(|&j| j as f64 * py).collect(),
@@ -664,22 +759,8 @@ fn run_x3p(args: &Args, bytes: &[u8], out: &Path) -> Result<(), CliError> {
             .to_string()
     };
     if x.rows == 1 {
-        let z = &x.heights_um;
-        let a = analyze_line(z, x.pitch_x_mm, &options)
-            .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
-        let report = Report {
-            software: crate::build_info::software(),
-            input,
-            kind: "profile",
-            recipe: a.recipe.clone(),
-            lines: vec![LineReport {
-                index: 0,
-                y_mm: 0.0,
-                rmr_table: rmr_table(&a),
-                params: a.params,
-            }],
-        };
-        return write_outputs(out, &report);
+        let z = x.heights_um.clone();
+        return characterise_profile(args, input, z, x.pitch_x_mm, &options, warnings, out);
     }
     let heights_um: Vec<f64> = complete
         .iter()

@@ -430,3 +430,148 @@ fn analysis_flags_outside_the_configurations_ranges_are_usage_errors() {
         String::from_utf8_lossy(&run.stderr)
     );
 }
+
+/// A profile CSV's header states its units; one that says otherwise (heights in nm, a third
+/// column) is refused instead of read a thousand times off or from the wrong column.
+#[test]
+fn a_profile_csv_whose_header_is_not_x_mm_z_um_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let body: String = sine_profile_csv(4000)
+        .lines()
+        .skip(1)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    for (name, text, says) in [
+        ("nm.csv", format!("x_mm,z_nm\n{body}"), "\"x_mm,z_nm\""),
+        (
+            "xyz.csv",
+            format!(
+                "x_mm,y_mm,z_um\n{}",
+                body.lines()
+                    .map(|l| l.replacen(',', ",0.01,", 1) + "\n")
+                    .collect::<String>()
+            ),
+            "\"x_mm,y_mm,z_um\"",
+        ),
+        (
+            "extra.csv",
+            format!(
+                "x_mm,z_um\n{}",
+                body.lines().map(|l| format!("{l},7\n")).collect::<String>()
+            ),
+            "is not two numbers",
+        ),
+    ] {
+        let input = dir.path().join(name);
+        std::fs::write(&input, text).unwrap();
+        let out = dir.path().join(format!("out-{name}"));
+        let run = surfscan()
+            .args(["analyze", input.to_str().unwrap(), "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(1), "{name}: {err}");
+        assert!(err.contains(says), "{name}: {err}");
+        assert!(!out.join("report.json").exists(), "{name}");
+    }
+}
+
+/// A profile CSV is searched for spikes as a grid's lines are: one point 50 µm off a 1 µm
+/// sine is named, and with --outliers exclude it is bridged, so Rz is the sine's own 2 µm
+/// again (the bridge of one point on a 200-point period is within 1e-3 µm of the sine).
+#[test]
+fn a_profile_csvs_spike_is_named_and_excluded_when_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rows: Vec<String> = sine_profile_csv(8000).lines().map(str::to_owned).collect();
+    // Point 4050 (x = 2.025 mm), at a peak of the sine: 1 + 49 µm.
+    rows[1 + 4050] = format!("{:.7},50", 4050.0 * 0.0005);
+    let input = dir.path().join("spike.csv");
+    std::fs::write(&input, rows.join("\n") + "\n").unwrap();
+    let rz = |outliers: &str| {
+        let out = dir.path().join(format!("out-{outliers}"));
+        let run = surfscan()
+            .args([
+                "analyze",
+                input.to_str().unwrap(),
+                "--no-filter",
+                "--outliers",
+            ])
+            .arg(outliers)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr).into_owned();
+        assert_eq!(run.status.code(), Some(0), "{err}");
+        assert!(
+            err.contains("spike in line 1") && err.contains("x = 2.0250 mm"),
+            "{err}"
+        );
+        let report: Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
+                .unwrap();
+        assert_eq!(report["outliers"]["policy"], outliers);
+        assert_eq!(report["outliers"]["spikes"].as_array().unwrap().len(), 1);
+        report["lines"][0]["Rz_um"].as_f64().unwrap()
+    };
+    assert!(
+        rz("flag") > 10.0,
+        "the spike stays in the data when only flagged"
+    );
+    let excluded = rz("exclude");
+    assert!((excluded - 2.0).abs() < 1e-3, "Rz {excluded}");
+}
+
+/// Numbers that cannot be what the operator meant are said: with --no-filter an offset
+/// profile (a sine 100 µm up) is not centred on a mean line, and a profile whose x was
+/// written in µm is a kilometre long.
+#[test]
+fn an_uncentred_unfiltered_profile_and_an_x_in_micrometres_are_warned_of() {
+    let dir = tempfile::tempdir().unwrap();
+    let body: Vec<(f64, f64)> = sine_profile_csv(4000)
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let (x, z) = l.split_once(',').unwrap();
+            (x.parse().unwrap(), z.parse().unwrap())
+        })
+        .collect();
+    let write = |name: &str, f: &dyn Fn(f64, f64) -> (f64, f64)| {
+        let text: String = std::iter::once("x_mm,z_um\n".to_owned())
+            .chain(body.iter().map(|&(x, z)| {
+                let (x, z) = f(x, z);
+                format!("{x:.7},{z:.12}\n")
+            }))
+            .collect();
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let run = |input: &std::path::Path, extra: &[&str]| {
+        let out = dir.path().join("out");
+        let r = surfscan()
+            .args(["analyze", input.to_str().unwrap()])
+            .args(extra)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert_eq!(
+            r.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&r.stderr)
+        );
+        String::from_utf8_lossy(&r.stderr).into_owned()
+    };
+    let offset = write("offset.csv", &|x, z| (x, z + 100.0));
+    let err = run(&offset, &["--no-filter"]);
+    assert!(err.contains("an offset or form remains"), "{err}");
+    let plain = write("plain.csv", &|x, z| (x, z));
+    assert!(!run(&plain, &["--no-filter"]).contains("offset or form"));
+    let micrometres = write("um.csv", &|x, z| (x * 1000.0, z));
+    let err = run(&micrometres, &["--lc", "100"]);
+    assert!(err.contains("check that x is in mm"), "{err}");
+    assert!(!run(&plain, &[]).contains("check that x is in mm"));
+}
