@@ -54,6 +54,12 @@ pub struct Args {
     /// filter.
     #[arg(long)]
     pub no_filter: bool,
+    /// Evaluate the central N sampling lengths (λc each) of every line, leaving the rest at
+    /// each end out as the filter's run-up and run-out, as an instrument traces N·λc plus λc
+    /// (CSV and X3P inputs; a scan's lines carry the instrument's N). Default: the whole
+    /// line, N = its length / λc.
+    #[arg(long, value_name = "N")]
+    pub sampling_lengths: Option<u32>,
     /// Grid pitch along x (between columns), mm.
     #[arg(long)]
     pub pitch_x: Option<f64>,
@@ -546,6 +552,12 @@ fn check_analysis_flags(args: &Args) -> Result<(), CliError> {
                 .map_err(|m| CliError::new(Exit::Usage, m))?;
         }
     }
+    if args.sampling_lengths == Some(0) {
+        return Err(CliError::new(
+            Exit::Usage,
+            "--sampling-lengths 0: give at least 1 sampling length (ISO 4288's default is 5)",
+        ));
+    }
     Ok(())
 }
 
@@ -559,6 +571,12 @@ pub fn run(args: Args) -> Result<(), CliError> {
     }
     check_analysis_flags(&args)?;
     if args.input.is_dir() {
+        if args.sampling_lengths.is_some() {
+            return Err(CliError::new(
+                Exit::Usage,
+                "--sampling-lengths is for CSV and X3P inputs; a scan's lines are evaluated with the N the instrument recorded",
+            ));
+        }
         if args.pitch_x.is_some() || args.pitch_y.is_some() {
             return Err(CliError::new(
                 Exit::Usage,
@@ -613,6 +631,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         apply_lambda_c: !args.no_filter,
         lambda_s_um: None,
         sampling_lengths: None,
+        central_sections: args.sampling_lengths,
     };
     let lambda_c_source = match args.lc {
         Some(v) => format!("given ({v} mm)"),
@@ -690,6 +709,7 @@ fn run_x3p(args: &Args, bytes: &[u8], out: &Path) -> Result<(), CliError> {
         apply_lambda_c: !args.no_filter,
         lambda_s_um: None,
         sampling_lengths: None,
+        central_sections: args.sampling_lengths,
     };
     let m = &x.meta;
     let source = [

@@ -7,6 +7,9 @@
 //! * N = L/λc (L = points × pitch), rounded to the nearest whole number when within 1 % of it,
 //!   else truncated and the central N·lr evaluated; each sampling length holds an equal share
 //!   ⌊n/N⌋ of the points (a remainder of fewer than N points at the end is not evaluated);
+//!   a recorded N (the instrument's) takes the whole line as N equal sections, and a given
+//!   central N ([`Options::central_sections`]) the middle N·λc of a longer traverse, the
+//!   filter having run over all of it;
 //! * Ra, Rq, Rp, Rv, Rz, Rsk, Rku, RΔq, RSm and RzJIS per sampling length, then averaged;
 //!   Rt, Rz1max and the Rk family over the evaluation length;
 //! * RΔq (and RΔa, the mean |slope| the SJ series also reports) from the ISO 4287 7-point
@@ -49,6 +52,11 @@ pub struct Options {
     pub lambda_s_um: Option<f64>,
     /// Number of sampling lengths; `None` derives it from the length (see module docs).
     pub sampling_lengths: Option<u32>,
+    /// Evaluate only the central this many sampling lengths (each λc long) of a longer
+    /// traverse, leaving the rest at each end out as the filter's run-up and run-out, as an
+    /// instrument traces N·λc plus λc (`analyze --sampling-lengths`); takes precedence over
+    /// `sampling_lengths`.
+    pub central_sections: Option<u32>,
 }
 
 impl Default for Options {
@@ -58,6 +66,7 @@ impl Default for Options {
             apply_lambda_c: true,
             lambda_s_um: None,
             sampling_lengths: None,
+            central_sections: None,
         }
     }
 }
@@ -80,6 +89,7 @@ impl Options {
             // The SJ series reports N = 0 for an arbitrary evaluation length: its
             // parameters are then taken over the whole length as one section.
             sampling_lengths: c.sampling_lengths.map(|n| n.max(1)),
+            central_sections: None,
         }
     }
 }
@@ -341,13 +351,31 @@ pub fn analyze_line(
     // Sampling lengths.
     let length_mm = n_all as f64 * pitch_mm;
     let ratio = length_mm / lc;
-    let (n_sec, rule, start, per) = match options.sampling_lengths {
-        Some(0) => return Err(MetrologyError::ZeroSections { got: 0 }),
-        Some(k) => {
+    let (n_sec, rule, start, per) = match (options.central_sections, options.sampling_lengths) {
+        (Some(0), _) | (None, Some(0)) => return Err(MetrologyError::ZeroSections { got: 0 }),
+        (Some(k), _) => {
+            let k = k as usize;
+            let per = (lc / pitch_mm).round() as usize;
+            let used = k.saturating_mul(per);
+            if used > n_all {
+                return Err(too_short);
+            }
+            let left = (n_all - used) / 2;
+            (
+                k,
+                format!(
+                    "given N = {k}: the central N·lr of the traverse, {left} points before it and {} after left out (the filter's run-up and run-out)",
+                    n_all - used - left
+                ),
+                left,
+                per,
+            )
+        }
+        (None, Some(k)) => {
             let k = k as usize;
             (k, format!("given N = {k}, ⌊n/N⌋ points each"), 0, n_all / k)
         }
-        None => {
+        (None, None) => {
             let nearest = ratio.round();
             if nearest >= 1.0 && (ratio - nearest).abs() <= 0.01 * nearest {
                 let k = nearest as usize;
@@ -374,7 +402,8 @@ pub fn analyze_line(
         }
     };
     if per < MIN_POINTS_PER_SECTION {
-        if options.sampling_lengths.is_none() && ratio >= 1.0 {
+        if options.sampling_lengths.is_none() && options.central_sections.is_none() && ratio >= 1.0
+        {
             return Err(MetrologyError::PitchTooCoarse {
                 pitch_mm,
                 points_per_sampling_length: per,

@@ -575,3 +575,67 @@ fn an_uncentred_unfiltered_profile_and_an_x_in_micrometres_are_warned_of() {
     assert!(err.contains("check that x is in mm"), "{err}");
     assert!(!run(&plain, &[]).contains("check that x is in mm"));
 }
+
+/// `--sampling-lengths N` evaluates the central N·λc of a longer traverse, as an instrument
+/// traces N·λc plus λc for the filter: 9600 points of a 1 µm sine (4.8 mm) at λc 0.8 mm with
+/// N = 5 leave 800 points out at each end, and the five 0.8 mm sections of 8 whole periods
+/// give the sine's own Ra = (2/M)·cot(π/M), M = 200, and Rz = 2 µm.
+#[test]
+fn sampling_lengths_evaluates_the_central_sections_of_a_traverse() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("traverse.csv");
+    std::fs::write(&input, sine_profile_csv(9600)).unwrap();
+    let run = |extra: &[&str]| {
+        let out = dir.path().join("out");
+        let _ = std::fs::remove_dir_all(&out);
+        let r = surfscan()
+            .args([
+                "analyze",
+                input.to_str().unwrap(),
+                "--no-filter",
+                "--lc",
+                "0.8",
+            ])
+            .args(extra)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let report = std::fs::read_to_string(out.join("report.json"))
+            .ok()
+            .map(|t| serde_json::from_str::<Value>(&t).unwrap());
+        (r, report)
+    };
+    let (r, report) = run(&["--sampling-lengths", "5"]);
+    assert_eq!(
+        r.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    let report = report.unwrap();
+    assert_eq!(report["recipe"]["sampling_lengths"], 5);
+    assert_eq!(report["recipe"]["points_not_evaluated"], 1600);
+    let line = &report["lines"][0];
+    let ra = 2.0 / 200.0 / (PI / 200.0).tan();
+    assert!(
+        (line["Ra_um"].as_f64().unwrap() - ra).abs() < 1e-9,
+        "{line}"
+    );
+    assert!(
+        (line["Rz_um"].as_f64().unwrap() - 2.0).abs() < 1e-9,
+        "{line}"
+    );
+    // More sections than the traverse holds: the profile is too short for them.
+    let (r, _) = run(&["--sampling-lengths", "7"]);
+    assert_eq!(
+        r.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    assert!(String::from_utf8_lossy(&r.stderr).contains("shorter than"));
+    // None is not a number of sections.
+    let (r, _) = run(&["--sampling-lengths", "0"]);
+    assert_eq!(r.status.code(), Some(2));
+}

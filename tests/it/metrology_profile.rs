@@ -97,6 +97,7 @@ fn no_filter(lc: f64) -> Options {
         apply_lambda_c: false,
         lambda_s_um: None,
         sampling_lengths: None,
+        central_sections: None,
     }
 }
 

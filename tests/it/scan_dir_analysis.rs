@@ -74,6 +74,7 @@ fn expected_options() -> Options {
         apply_lambda_c: true,
         lambda_s_um: None,
         sampling_lengths: None,
+        central_sections: None,
     }
 }
 

@@ -14,6 +14,7 @@ fn no_filter() -> Options {
         apply_lambda_c: false,
         lambda_s_um: None,
         sampling_lengths: None,
+        central_sections: None,
     }
 }
 
