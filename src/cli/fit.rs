@@ -471,7 +471,7 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
         tell!(
             "surfscan: warning: {}",
             crate::report::scan_dir::incomplete_lines_warning(
-                &line_list(&incomplete),
+                &crate::report::scan_dir::line_files(&incomplete),
                 incomplete.len(),
                 &args.input.join("lines"),
             )
@@ -545,21 +545,6 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
         }),
         left_out,
     })
-}
-
-/// Line indices as a person reads them: 1-based, with the file names they are stored in.
-fn line_list(indices: &[u32]) -> String {
-    indices
-        .iter()
-        .map(|&i| {
-            format!(
-                "{} ({})",
-                crate::numfmt::line_number(i),
-                crate::scan::store::csv_name(i)
-            )
-        })
-        .collect::<Vec<_>>()
-        .join(", ")
 }
 
 /// The existing surface at `output` (or the first part of a split one), if any.

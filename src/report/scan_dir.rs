@@ -68,19 +68,8 @@ impl JournalCheck {
             ));
         }
         if !self.uncommitted.is_empty() {
-            let labels: Vec<String> = self
-                .uncommitted
-                .iter()
-                .map(|&i| {
-                    format!(
-                        "{} ({})",
-                        crate::numfmt::line_number(i),
-                        crate::scan::store::csv_name(i)
-                    )
-                })
-                .collect();
             out.push(uncommitted_lines_warning(
-                &labels.join(", "),
+                &line_files(&self.uncommitted),
                 self.uncommitted.len(),
             ));
         }
@@ -100,6 +89,22 @@ impl JournalCheck {
         }
         out
     }
+}
+
+/// Line indices as a person reads them: 1-based, each with the heights file it is stored
+/// in, `21 (0020.csv), 22 (0021.csv)`.
+pub fn line_files(indices: &[u32]) -> String {
+    indices
+        .iter()
+        .map(|&i| {
+            format!(
+                "{} ({})",
+                crate::numfmt::line_number(i),
+                crate::scan::store::csv_name(i)
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// The warning for `count` lines (`list`) on disk that the journal never committed.

@@ -763,42 +763,38 @@ fn a_malformed_line_file_is_a_clear_error_naming_the_file() {
     let csv = scan.join("lines/0002.csv");
     let text = std::fs::read_to_string(&csv).unwrap();
     std::fs::write(&csv, text.replacen("\n0.003484,", "\n0.003484,12..5x", 1)).unwrap();
+    // `analyze SCAN` and `fit SCAN --force`: (exit status, stderr) of each.
+    let both = || {
+        [
+            &["analyze", scan.to_str().unwrap()][..],
+            &["fit", scan.to_str().unwrap(), "--force"],
+        ]
+        .map(|args| {
+            let out = surfscan().args(args).output().unwrap();
+            let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+            assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+            (out.status.code(), stderr)
+        })
+    };
     // The journal's SHA-256 shows the file was damaged after it was traced: the line is left
     // out and named, and the others are characterised and fitted.
-    for cmd in ["analyze", "fit"] {
-        let out = surfscan()
-            .args(
-                [cmd, scan.to_str().unwrap(), "--force"][..if cmd == "fit" { 3 } else { 2 }]
-                    .to_vec(),
-            )
-            .output()
-            .unwrap();
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(0), "{cmd}: {stderr}");
+    for (code, stderr) in both() {
+        assert_eq!(code, Some(0), "{stderr}");
         assert!(
             stderr.contains("line 3 (") && stderr.contains("0002.csv) was changed"),
-            "{cmd}: {stderr}"
+            "{stderr}"
         );
     }
     // Without a journal to check it against, the damaged file is an error naming it.
     let journal = scan.join("journal.jsonl");
     let journal_text = std::fs::read(&journal).unwrap();
     std::fs::remove_file(&journal).unwrap();
-    for cmd in ["analyze", "fit"] {
-        let out = surfscan()
-            .args(
-                [cmd, scan.to_str().unwrap(), "--force"][..if cmd == "fit" { 3 } else { 2 }]
-                    .to_vec(),
-            )
-            .output()
-            .unwrap();
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{cmd}: {stderr}");
+    for (code, stderr) in both() {
+        assert_eq!(code, Some(1), "{stderr}");
         assert!(
             stderr.contains("0002.csv") && stderr.contains("line 3"),
-            "{cmd}: {stderr}"
+            "{stderr}"
         );
-        assert!(!stderr.contains("panicked"), "{cmd}: {stderr}");
     }
     std::fs::write(&journal, journal_text).unwrap();
     std::fs::write(&csv, text).unwrap();
@@ -808,19 +804,11 @@ fn a_malformed_line_file_is_a_clear_error_naming_the_file() {
     let kept = std::fs::read(&other).unwrap();
     std::fs::remove_file(&other).unwrap();
     std::fs::create_dir(&other).unwrap();
-    for cmd in ["analyze", "fit"] {
-        let out = surfscan()
-            .args(
-                [cmd, scan.to_str().unwrap(), "--force"][..if cmd == "fit" { 3 } else { 2 }]
-                    .to_vec(),
-            )
-            .output()
-            .unwrap();
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(0), "{cmd}: {stderr}");
+    for (code, stderr) in both() {
+        assert_eq!(code, Some(0), "{stderr}");
         assert!(
             stderr.contains("line 5 (") && stderr.contains("0004.csv) cannot be read"),
-            "{cmd}: {stderr}"
+            "{stderr}"
         );
     }
     std::fs::remove_dir(&other).unwrap();
