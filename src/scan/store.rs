@@ -274,8 +274,9 @@ impl ScanStore {
         for r in records {
             let line = self.load_line(r.id.index)?;
             let csv_path = self.lines_dir().join(csv_name(r.id.index));
-            let bytes = fs::read(&csv_path).map_err(io_err("read", &csv_path))?;
-            let sha = hex_sha256(&bytes);
+            let sha = self
+                .heights_sha256(r.id.index)
+                .map_err(io_err("read", &csv_path))?;
             if sha != r.csv_sha256 {
                 return Err(StoreError::Inconsistent {
                     path: csv_path,
@@ -288,6 +289,12 @@ impl ScanStore {
             out.push(line);
         }
         Ok(out)
+    }
+
+    /// The SHA-256 of line `index`'s heights file as it is on disk, what its journal record
+    /// is checked against; the read's own error when it cannot be read (missing included).
+    pub fn heights_sha256(&self, index: u32) -> io::Result<String> {
+        fs::read(self.lines_dir().join(csv_name(index))).map(|bytes| hex_sha256(&bytes))
     }
 }
 
@@ -321,11 +328,13 @@ impl ScanStore {
             quarantined: Vec::new(),
         };
         for r in records {
-            let csv_path = self.lines_dir().join(csv_name(r.id.index));
-            let found = match fs::read(&csv_path) {
-                Ok(bytes) => Some(hex_sha256(&bytes)),
+            let found = match self.heights_sha256(r.id.index) {
+                Ok(sha) => Some(sha),
                 Err(e) if e.kind() == io::ErrorKind::NotFound => None,
-                Err(e) => return Err(io_err("read", &csv_path)(e)),
+                Err(e) => {
+                    let csv_path = self.lines_dir().join(csv_name(r.id.index));
+                    return Err(io_err("read", &csv_path)(e));
+                }
             };
             let problem = match &found {
                 None => Some("its heights file is missing".to_owned()),
