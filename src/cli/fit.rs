@@ -399,33 +399,12 @@ struct Input {
     /// λc of the roughness the spike rule judges (a scan of primary profiles).
     lambda_c_mm: Option<f64>,
     /// A scan's lines left out, each with its file and why (none for a grid CSV).
-    left_out: Vec<LeftOut>,
-}
-
-/// A line of a scan that the fit leaves out.
-#[derive(Debug, Clone, serde::Serialize)]
-struct LeftOut {
-    /// 1-based line number.
-    line: u64,
-    /// Its heights file, as named in `lines/`.
-    file: String,
-    /// Why, in a few words.
-    why: &'static str,
-}
-
-impl LeftOut {
-    fn of(index: u32, why: &'static str) -> LeftOut {
-        LeftOut {
-            line: crate::numfmt::line_number(index),
-            file: crate::scan::store::csv_name(index),
-            why,
-        }
-    }
+    left_out: Vec<crate::report::scan_dir::LeftOut>,
 }
 
 /// The IGES Start section's words for the lines a fit of a scan left out, so the file itself
 /// says which lines its surface does not pass through.
-fn left_out_start_line(left_out: &[LeftOut]) -> Option<String> {
+fn left_out_start_line(left_out: &[crate::report::scan_dir::LeftOut]) -> Option<String> {
     (!left_out.is_empty()).then(|| {
         let each: Vec<String> = left_out
             .iter()
@@ -459,50 +438,28 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
         CliError::new(exit, e.to_string())
     };
     // Only the lines the journal vouches for are fitted; the others are named below.
-    let crate::report::VouchedLines {
-        lines: stored,
-        incomplete,
-        check,
-        journal: _,
-    } = crate::report::load_vouched_lines(&args.input).map_err(report_error)?;
-    let lines = crate::report::grid::LineGrid::of_scan(&stored, &args.input.join("lines"))
+    let vouched = crate::report::load_vouched_lines(&args.input).map_err(report_error)?;
+    let stored = &vouched.lines;
+    let lines = crate::report::grid::LineGrid::of_scan(stored, &args.input.join("lines"))
         .map_err(report_error)?;
-    if !incomplete.is_empty() {
+    if !vouched.incomplete.is_empty() {
         tell!(
             "surfscan: warning: {}",
             crate::report::scan_dir::incomplete_lines_warning(
-                &crate::report::scan_dir::line_files(&incomplete),
-                incomplete.len(),
+                &crate::report::scan_dir::line_files(&vouched.incomplete),
+                vouched.incomplete.len(),
                 &args.input.join("lines"),
             )
         );
     }
-    for w in check.warnings(&args.input.join("lines")) {
+    if let Err(e) = &vouched.journal {
+        tell!(
+            "surfscan: warning: the line files cannot be checked against the journal ({e}); they are used as they are"
+        );
+    }
+    for w in vouched.warnings(&args.input.join("lines")) {
         tell!("surfscan: warning: {w}");
     }
-    let mut left_out: Vec<LeftOut> = incomplete
-        .iter()
-        .map(|&i| LeftOut::of(i, "one of its two files missing"))
-        .chain(
-            check
-                .uncommitted
-                .iter()
-                .map(|&i| LeftOut::of(i, "never committed to the journal")),
-        )
-        .chain(
-            check
-                .changed
-                .iter()
-                .map(|(i, _, _)| LeftOut::of(*i, "changed after it was traced")),
-        )
-        .chain(
-            check
-                .unreadable
-                .iter()
-                .map(|(i, _)| LeftOut::of(*i, "cannot be read")),
-        )
-        .collect();
-    left_out.sort_by_key(|l| l.line);
     let default_output = args.input.join("surface.igs");
     if args.output.is_none() && !args.force {
         if let Some(existing) = existing_surface(&default_output) {
@@ -511,7 +468,7 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
                 format!(
                     "{} exists ({}); it is kept: pass --force to replace it, or -o OTHER.igs to write the new fit elsewhere",
                     existing.display(),
-                    if check.completed {
+                    if vouched.completed() {
                         "the surface the completed scan wrote"
                     } else {
                         "an earlier fit of this scan"
@@ -520,8 +477,7 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             ));
         }
     }
-    let journal = crate::report::scan_dir::read_scan_journal(&args.input).ok();
-    let start = journal.as_ref().map(|s| &s.start);
+    let start = vouched.journal.as_ref().ok().map(|s| &s.start);
     Ok(Input {
         grid: Grid {
             rows: lines.y_mm.len(),
@@ -543,7 +499,7 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
             let o = crate::metrology::params::Options::from_profile(&l.profile);
             o.apply_lambda_c.then_some(o.lambda_c_mm)
         }),
-        left_out,
+        left_out: vouched.left_out(),
     })
 }
 
@@ -1186,19 +1142,6 @@ pub fn run(args: Args) -> Result<(), CliError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn lines_the_journal_never_committed_are_counted_in_the_warning() {
-        use crate::report::scan_dir::uncommitted_lines_warning;
-        assert_eq!(
-            uncommitted_lines_warning("21 (0020.csv)", 1),
-            "line 21 (0020.csv) is on disk but the journal never committed it (the scan stopped before its record); it was left out"
-        );
-        assert_eq!(
-            uncommitted_lines_warning("21, 22", 2),
-            "lines 21, 22 are on disk but the journal never committed them (the scan stopped before their record); they were left out"
-        );
-    }
 
     #[test]
     fn parses_a_grid_and_ignores_trailing_blank_lines() {

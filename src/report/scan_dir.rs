@@ -33,61 +33,51 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
-/// What a scan's journal says of the line files found in its directory.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct JournalCheck {
-    /// Lines on disk that the journal never committed (the scan stopped before their record).
-    pub uncommitted: Vec<u32>,
-    /// Lines whose heights file differs from its journal record: (line, the file's SHA-256,
-    /// the journal's).
-    pub changed: Vec<(u32, String, String)>,
-    /// Lines whose heights file cannot be read (a bad sector, no permission), with why.
-    pub unreadable: Vec<(u32, String)>,
-    /// The scan stopped with success.
-    pub completed: bool,
-    /// Why nothing could be checked (the journal cannot be read), when nothing could.
-    pub unchecked: Option<String>,
+/// Why a complete line of a scan is left out: its journal does not vouch for it as it is.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NotVouched {
+    /// On disk, but the journal never committed it (the scan stopped before its record).
+    Uncommitted,
+    /// Its heights file differs from its journal record.
+    Changed {
+        /// The file's SHA-256.
+        file_sha256: String,
+        /// The journal's.
+        journal_sha256: String,
+    },
+    /// Its heights file cannot be read (a bad sector, no permission), with why.
+    Unreadable(String),
 }
 
-impl JournalCheck {
-    /// Whether line `index` is one the journal vouches for, as it is on disk (every line
-    /// when the journal cannot be read).
-    pub fn keeps(&self, index: u32) -> bool {
-        !self.uncommitted.contains(&index)
-            && !self.changed.iter().any(|(i, _, _)| *i == index)
-            && !self.unreadable.iter().any(|(i, _)| *i == index)
+impl NotVouched {
+    /// The reason in a few words, as the IGES Start section and `fit --report` give it.
+    pub fn short(&self) -> &'static str {
+        match self {
+            NotVouched::Uncommitted => "never committed to the journal",
+            NotVouched::Changed { .. } => "changed after it was traced",
+            NotVouched::Unreadable(_) => "cannot be read",
+        }
     }
+}
 
-    /// The warnings for the lines left out (and for a journal that could not be used), in
-    /// the operator's words, each naming what to do.
-    pub fn warnings(&self, lines_dir: &Path) -> Vec<String> {
-        let mut out = Vec::new();
-        if let Some(why) = &self.unchecked {
-            out.push(format!(
-                "the line files cannot be checked against the journal ({why}); they are used as they are"
-            ));
+/// A line of a scan left out, as `fit --report` lists it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct LeftOut {
+    /// 1-based line number.
+    pub line: u64,
+    /// Its heights file, as named in `lines/`.
+    pub file: String,
+    /// Why, in a few words.
+    pub why: &'static str,
+}
+
+impl LeftOut {
+    fn of(index: u32, why: &'static str) -> LeftOut {
+        LeftOut {
+            line: crate::numfmt::line_number(index),
+            file: crate::scan::store::csv_name(index),
+            why,
         }
-        if !self.uncommitted.is_empty() {
-            out.push(uncommitted_lines_warning(
-                &line_files(&self.uncommitted),
-                self.uncommitted.len(),
-            ));
-        }
-        for (i, file, journal) in &self.changed {
-            out.push(format!(
-                "line {} ({}) was changed after it was traced: its SHA-256 {file} differs from the journal's {journal}; it was left out (restore the file to use it, or fit the edited heights as a grid CSV)",
-                crate::numfmt::line_number(*i),
-                lines_dir.join(crate::scan::store::csv_name(*i)).display()
-            ));
-        }
-        for (i, why) in &self.unreadable {
-            out.push(format!(
-                "line {} ({}) cannot be read ({why}); it was left out (check the disk and the file's permissions)",
-                crate::numfmt::line_number(*i),
-                lines_dir.join(crate::scan::store::csv_name(*i)).display()
-            ));
-        }
-        out
     }
 }
 
@@ -119,48 +109,35 @@ pub fn uncommitted_lines_warning(list: &str, count: usize) -> String {
     )
 }
 
-/// Checks the heights file of each line of `index` in scan directory `dir` against the
-/// SHA-256 its journal record holds (`state`, the journal as read, or why it cannot be):
-/// a line without a record, whose file changed since, or whose file cannot be read, is one
-/// the journal does not vouch for.
-pub fn check_against_journal(
-    dir: &Path,
-    state: Result<&ResumeState, String>,
+/// Checks the heights file of each line of `index` in `store` against the SHA-256 its
+/// journal record holds (`state`): the lines without a record, whose file changed since, or
+/// whose file cannot be read, each with why. A journal that cannot be read vouches for
+/// nothing and leaves nothing out.
+fn not_vouched(
+    store: &ScanStore,
+    state: Option<&ResumeState>,
     index: &[u32],
-) -> JournalCheck {
-    let state = match state {
-        Ok(s) => s,
-        Err(why) => {
-            return JournalCheck {
-                unchecked: Some(why),
-                ..JournalCheck::default()
-            }
-        }
+) -> Vec<(u32, NotVouched)> {
+    let Some(state) = state else {
+        return Vec::new();
     };
-    let mut check = JournalCheck {
-        completed: state
-            .stop
-            .as_ref()
-            .is_some_and(|s| s.status == StopStatus::Success),
-        ..JournalCheck::default()
-    };
+    let mut out = Vec::new();
     for &i in index {
         let Some(record) = state.lines.iter().find(|l| l.id.index == i) else {
-            check.uncommitted.push(i);
+            out.push((i, NotVouched::Uncommitted));
             continue;
         };
-        let file = dir.join("lines").join(crate::scan::store::csv_name(i));
-        match std::fs::read(&file) {
-            Ok(bytes) => {
-                let sha = crate::scan::store::hex_sha256(&bytes);
-                if sha != record.csv_sha256 {
-                    check.changed.push((i, sha, record.csv_sha256.clone()));
-                }
-            }
-            Err(e) => check.unreadable.push((i, e.to_string())),
-        }
+        let why = match store.heights_sha256(i) {
+            Ok(sha) if sha == record.csv_sha256 => continue,
+            Ok(sha) => NotVouched::Changed {
+                file_sha256: sha,
+                journal_sha256: record.csv_sha256.clone(),
+            },
+            Err(e) => NotVouched::Unreadable(e.to_string()),
+        };
+        out.push((i, why));
     }
-    check
+    out
 }
 
 /// How many lines of scan directory `dir` have both their files (0 when it is not a scan
@@ -179,14 +156,84 @@ pub struct VouchedLines {
     pub lines: Vec<StoredLine>,
     /// Indices with only one of their two files (not read).
     pub incomplete: Vec<u32>,
-    /// What the journal said of the others (left out, not read).
-    pub check: JournalCheck,
+    /// The complete lines the journal does not vouch for (not read), each with why.
+    pub not_vouched: Vec<(u32, NotVouched)>,
     /// The journal, or why it cannot be read.
     pub journal: Result<ResumeState, crate::scan::journal::JournalError>,
 }
 
+impl VouchedLines {
+    /// The warnings for the lines the journal does not vouch for, in the operator's words,
+    /// each naming what to do.
+    pub fn warnings(&self, lines_dir: &Path) -> Vec<String> {
+        let uncommitted: Vec<u32> = self
+            .not_vouched
+            .iter()
+            .filter(|(_, why)| *why == NotVouched::Uncommitted)
+            .map(|(i, _)| *i)
+            .collect();
+        let mut out = Vec::new();
+        if !uncommitted.is_empty() {
+            out.push(uncommitted_lines_warning(
+                &line_files(&uncommitted),
+                uncommitted.len(),
+            ));
+        }
+        let file = |i: u32| lines_dir.join(crate::scan::store::csv_name(i));
+        // The changed lines first, then the unreadable ones.
+        for (i, why) in &self.not_vouched {
+            if let NotVouched::Changed {
+                file_sha256,
+                journal_sha256,
+            } = why
+            {
+                out.push(format!(
+                    "line {} ({}) was changed after it was traced: its SHA-256 {file_sha256} differs from the journal's {journal_sha256}; it was left out (restore the file to use it, or fit the edited heights as a grid CSV)",
+                    crate::numfmt::line_number(*i),
+                    file(*i).display()
+                ));
+            }
+        }
+        for (i, why) in &self.not_vouched {
+            if let NotVouched::Unreadable(e) = why {
+                out.push(format!(
+                    "line {} ({}) cannot be read ({e}); it was left out (check the disk and the file's permissions)",
+                    crate::numfmt::line_number(*i),
+                    file(*i).display()
+                ));
+            }
+        }
+        out
+    }
+
+    /// Every line left out, incomplete or not vouched for, in line order.
+    pub fn left_out(&self) -> Vec<LeftOut> {
+        let mut out: Vec<LeftOut> = self
+            .incomplete
+            .iter()
+            .map(|&i| LeftOut::of(i, "one of its two files missing"))
+            .chain(
+                self.not_vouched
+                    .iter()
+                    .map(|(i, why)| LeftOut::of(*i, why.short())),
+            )
+            .collect();
+        out.sort_by_key(|l| l.line);
+        out
+    }
+
+    /// The scan stopped with success, by its journal.
+    pub fn completed(&self) -> bool {
+        self.journal.as_ref().is_ok_and(|s| {
+            s.stop
+                .as_ref()
+                .is_some_and(|s| s.status == StopStatus::Success)
+        })
+    }
+}
+
 /// The complete lines of scan directory `dir` checked against its journal before they are
-/// read ([`check_against_journal`]): a line file changed since it was traced (a bit flip, an
+/// read: a line file changed since it was traced (a bit flip, an
 /// edit) or never committed is left out and named, never characterised as measured, and
 /// one bad line does not take down the others. A file that matches its record and still
 /// cannot be read is an error naming it. Without a readable journal every complete line is
@@ -202,35 +249,35 @@ pub fn load_vouched_lines(dir: &Path) -> Result<VouchedLines, ReportError> {
     let (complete, incomplete) = store.stored_indices()?;
     let complete: Vec<u32> = complete.into_iter().collect();
     let journal = read_scan_journal(dir);
-    let check = check_against_journal(dir, journal.as_ref().map_err(|e| e.to_string()), &complete);
+    let not_vouched = not_vouched(&store, journal.as_ref().ok(), &complete);
     let lines = complete
         .iter()
-        .filter(|&&i| check.keeps(i))
+        .filter(|&&i| !not_vouched.iter().any(|(j, _)| *j == i))
         .map(|&i| store.load_line(i))
         .collect::<Result<Vec<_>, _>>()?;
-    let incomplete: Vec<u32> = incomplete.into_iter().collect();
-    if lines.is_empty() {
+    let vouched = VouchedLines {
+        lines,
+        incomplete: incomplete.into_iter().collect(),
+        not_vouched,
+        journal,
+    };
+    if vouched.lines.is_empty() {
         return Err(if complete.is_empty() {
             ReportError::NoLines {
                 dir: dir.to_path_buf(),
-                incomplete,
+                incomplete: vouched.incomplete,
             }
         } else {
             ReportError::Lines {
                 path: dir.to_path_buf(),
                 reason: format!(
                     "no line is as its journal recorded it: {}",
-                    check.warnings(&dir.join("lines")).join("; ")
+                    vouched.warnings(&dir.join("lines")).join("; ")
                 ),
             }
         });
     }
-    Ok(VouchedLines {
-        lines,
-        incomplete,
-        check,
-        journal,
-    })
+    Ok(vouched)
 }
 
 /// The journal of a scan directory, when it can be read.
@@ -498,17 +545,17 @@ pub fn characterise_scan(
     let t = Instant::now();
     // Only what the journal vouches for is characterised, as `fit` fits it; the others are
     // named.
+    let vouched = load_vouched_lines(dir)?;
+    let mut warnings = vouched.warnings(&dir.join("lines"));
+    if let Err(e) = &vouched.journal {
+        warnings.push(format!("no traceability: the journal cannot be used ({e})"));
+    }
     let VouchedLines {
         lines,
         incomplete,
-        check,
         journal,
-    } = load_vouched_lines(dir)?;
-    let mut warnings = Vec::new();
-    match &journal {
-        Ok(_) => warnings.extend(check.warnings(&dir.join("lines"))),
-        Err(e) => warnings.push(format!("no traceability: the journal cannot be used ({e})")),
-    }
+        ..
+    } = vouched;
     let state = journal.as_ref().ok();
     let recipe = scan_recipe(options, state.as_ref().map(|s| &s.start), &lines);
     let grid = LineGrid::of_scan(&lines, &dir.join("lines"))?;
@@ -618,6 +665,18 @@ pub fn incomplete_lines_warning(list: &str, count: usize, lines_dir: &Path) -> S
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn lines_the_journal_never_committed_are_counted_in_the_warning() {
+        assert_eq!(
+            super::uncommitted_lines_warning("21 (0020.csv)", 1),
+            "line 21 (0020.csv) is on disk but the journal never committed it (the scan stopped before its record); it was left out"
+        );
+        assert_eq!(
+            super::uncommitted_lines_warning("21, 22", 2),
+            "lines 21, 22 are on disk but the journal never committed them (the scan stopped before their record); they were left out"
+        );
+    }
 
     #[test]
     fn a_single_incomplete_line_is_named_in_the_singular() {
