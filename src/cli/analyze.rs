@@ -160,17 +160,8 @@ fn characterise_profile(
     let rule = args.model.spikes()?;
     let exclude = args.outliers == Some(OutliersArg::Exclude);
     let lambda_c = options.apply_lambda_c.then_some(options.lambda_c_mm);
-    let (spikes, not_judged) =
-        crate::metrology::outliers::find_grid_spikes(&z, z.len(), &[0], pitch, lambda_c, &rule);
-    let outliers = crate::report::document::OutliersReport {
-        rule: rule.describe(),
-        policy: if exclude { "exclude" } else { "flag" },
-        spikes,
-        lines_not_judged: not_judged
-            .into_iter()
-            .map(|(line, reason)| crate::report::document::LineNotJudged { line, reason })
-            .collect(),
-    };
+    let outliers =
+        crate::report::outliers::find(&z, z.len(), &[0], pitch, lambda_c, &rule, exclude);
     crate::report::outliers::warn(&outliers, &[], pitch, &mut warnings);
     if exclude && !outliers.spikes.is_empty() {
         z = crate::metrology::outliers::bridged_grid(&z, z.len(), &[0], &outliers.spikes).0;

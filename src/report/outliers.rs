@@ -9,7 +9,7 @@
 use super::context::ReportContext;
 use super::document::{LineNotJudged, OutliersReport};
 use super::grid::LineGrid;
-use crate::metrology::outliers::{bridged_grid, find_grid_spikes, LineSpike};
+use crate::metrology::outliers::{bridged_grid, find_grid_spikes, LineSpike, SpikeOptions};
 use crate::numfmt::{fmt, line_label, sig, Quantity};
 
 /// At most this many spikes are listed one by one in the warnings (all are in the report).
@@ -19,23 +19,34 @@ const LISTED: usize = 20;
 /// (the λc roughness when the lines are filtered, else the heights minus their line).
 pub fn characterise(grid: &LineGrid, ctx: &ReportContext) -> OutliersReport {
     let o = &ctx.line_options;
-    let lambda_c = o.apply_lambda_c.then_some(o.lambda_c_mm);
-    let rule = &ctx.options.spikes;
-    let (spikes, failed) = find_grid_spikes(
+    find(
         &grid.heights_um,
         grid.cols,
         &grid.index,
         grid.pitch_x_mm,
-        lambda_c,
-        rule,
-    );
+        o.apply_lambda_c.then_some(o.lambda_c_mm),
+        &ctx.options.spikes,
+        ctx.options.exclude_spikes,
+    )
+}
+
+/// The spikes of the rows of `heights_um` (`cols` points each, line indices `index`, `pitch_mm`
+/// apart) by `rule`, judged on the λc roughness when `lambda_c_mm` is given, as the report
+/// names them: the rule, the policy (`exclude` when they are to be bridged, else `flag`),
+/// every spike and the lines that could not be judged.
+pub fn find(
+    heights_um: &[f64],
+    cols: usize,
+    index: &[u32],
+    pitch_mm: f64,
+    lambda_c_mm: Option<f64>,
+    rule: &SpikeOptions,
+    exclude: bool,
+) -> OutliersReport {
+    let (spikes, failed) = find_grid_spikes(heights_um, cols, index, pitch_mm, lambda_c_mm, rule);
     OutliersReport {
         rule: rule.describe(),
-        policy: if ctx.options.exclude_spikes {
-            "exclude"
-        } else {
-            "flag"
-        },
+        policy: if exclude { "exclude" } else { "flag" },
         spikes,
         lines_not_judged: failed
             .into_iter()
