@@ -229,10 +229,7 @@ async fn daemon(
             Ok(()) = shutdown.changed() => {}
             req = ctl.commands.recv() => {
                 let Some(req) = req else { break };
-                if req.abandoned() {
-                    crate::scan::runner::log_abandoned(&req);
-                    continue;
-                }
+                let Some(req) = req.unless_abandoned() else { continue };
                 match req.command {
                     OperatorCommand::Start { specimen, operator, notes, mode } => {
                         let busy = ctl.status.borrow().state != State::Idle;

@@ -1,8 +1,8 @@
 //! Operator commands as the scan runner receives them: the control socket (or any other
 //! front end) forwards each with a channel for the runner's answer.
 //!
-//! Layer 3 (session): depends on tokio's oneshot channel, serde, and nix for this process's
-//! credentials.
+//! Layer 3 (session): depends on tokio's oneshot channel, serde, nix for this process's
+//! credentials, and tracing.
 
 use tokio::sync::oneshot;
 
@@ -95,5 +95,20 @@ impl OperatorRequest {
     /// busy would otherwise begin a scan the operator was told had not started).
     pub fn abandoned(&self) -> bool {
         self.reply.is_closed()
+    }
+
+    /// The request, unless it is [abandoned](Self::abandoned): then it is dropped and the
+    /// drop logged with the command and its sender.
+    pub fn unless_abandoned(self) -> Option<OperatorRequest> {
+        if !self.abandoned() {
+            return Some(self);
+        }
+        tracing::warn!(
+            "dropped {:?} from uid {} (pid {}): the control socket stopped waiting for it and told the operator it was not carried out",
+            self.command,
+            self.peer.uid,
+            self.peer.pid.map_or("unknown".to_owned(), |p| p.to_string())
+        );
+        None
     }
 }

@@ -387,25 +387,12 @@ async fn guarded(
 /// The machine's event for a command; `None` (and the command dropped, with a log line)
 /// when its requester was already told it was not carried out.
 fn command_event(books: &mut Books<'_>, req: OperatorRequest) -> Option<Event> {
-    if req.abandoned() {
-        log_abandoned(&req);
-        return None;
-    }
+    let req = req.unless_abandoned()?;
     books.reply = Some(req.reply);
     Some(Event::Command {
         command: req.command,
         peer: req.peer,
     })
-}
-
-/// Logs a command dropped because its requester stopped waiting.
-pub fn log_abandoned(req: &OperatorRequest) {
-    tracing::warn!(
-        "dropped {:?} from uid {} (pid {}): the control socket stopped waiting for it and told the operator it was not carried out",
-        req.command,
-        req.peer.uid,
-        req.peer.pid.map_or("unknown".to_owned(), |p| p.to_string())
-    );
 }
 
 /// Waits (nothing in flight) for a command or the shutdown, feeding the watchdog.
