@@ -14,7 +14,7 @@
 //!
 //! Layer 5 (composition): config, control server, runner, service notifications, hook.
 
-use super::scan::{choose_request, decide_request, load_config};
+use super::scan::{decide_request, load_config, StartChoice};
 use super::{CliError, Exit};
 use crate::config::Config;
 use crate::control::protocol::ControlChannels;
@@ -199,14 +199,16 @@ async fn daemon(
 
     // Resume an unfinished scan at start-up.
     let mut stop = false;
-    match choose_request(
+    match decide_request(
         config,
         String::new(),
         String::new(),
         String::new(),
         StartMode::Auto,
         Peer::this_process(),
-    ) {
+    )
+    .and_then(StartChoice::commit)
+    {
         Ok(ScanRequest::Resume { dir, .. }) => {
             let req = ScanRequest::Resume { dir, peer: None };
             ctl.status.send_modify(|s| s.starts += 1);
@@ -266,14 +268,16 @@ async fn daemon(
                             continue;
                         }
                         ctl.status.send_modify(|s| s.starts += 1);
-                        if let Err(e) = choice.commit() {
-                            tracing::error!("{e}");
-                            let ended = ended_status(&ctl.status.borrow(), Ending::Fail, &e.to_string());
-                            ctl.status.send_replace(ended);
-                            note_damaged_journals(config, &ctl.status);
-                            continue;
-                        }
-                        let request = choice.request;
+                        let request = match choice.commit() {
+                            Ok(r) => r,
+                            Err(e) => {
+                                tracing::error!("{e}");
+                                let ended = ended_status(&ctl.status.borrow(), Ending::Fail, &e.to_string());
+                                ctl.status.send_replace(ended);
+                                note_damaged_journals(config, &ctl.status);
+                                continue;
+                            }
+                        };
                         let outcome = run_scan(&mut station, &mut ctl, &settings, request).await;
                         stop = matches!(outcome, Outcome::Interrupted { .. });
                         note_damaged_journals(config, &ctl.status);

@@ -174,24 +174,6 @@ fn device_lock_dir() -> PathBuf {
     )
 }
 
-/// The scan to run for this configuration, as `mode` asks: the unfinished one (no stop
-/// record) started last, by its journal, else a new one; with [`StartMode::Resume`] a failed
-/// one is continued too (refused when there is none); with [`StartMode::New`] unfinished scans
-/// are recorded as abandoned and a new one starts. A scan whose journal is damaged is skipped
-/// with a warning. `peer` is who asked, for the journal.
-pub fn choose_request(
-    config: &Config,
-    specimen: String,
-    operator: String,
-    notes: String,
-    mode: StartMode,
-    peer: Peer,
-) -> Result<ScanRequest, CliError> {
-    let choice = decide_request(config, specimen, operator, notes, mode, peer)?;
-    choice.commit()?;
-    Ok(choice.request)
-}
-
 /// A start decided on and not yet carried out: the scan to run, and the unfinished scans to
 /// record as abandoned first (a start with [`StartMode::New`]).
 #[derive(Debug)]
@@ -206,18 +188,24 @@ pub struct StartChoice {
 
 impl StartChoice {
     /// Records the replaced scans as abandoned (the start's only change on disk before the
-    /// scan itself).
-    pub fn commit(&self) -> Result<(), CliError> {
+    /// scan itself), and hands over the scan to run.
+    pub fn commit(self) -> Result<ScanRequest, CliError> {
         for dir in &self.abandon {
             abandon(dir, self.peer)?;
         }
-        Ok(())
+        Ok(self.request)
     }
 }
 
-/// [`choose_request`] without changing anything: the decision, to be carried out with
-/// [`StartChoice::commit`] once the start is sure to go ahead (the daemon first tells the
-/// operator so, and a start the operator was told had not happened changes nothing).
+/// The scan to run for this configuration, as `mode` asks: the unfinished one (no stop
+/// record) started last, by its journal, else a new one; with [`StartMode::Resume`] a failed
+/// one is continued too (refused when there is none); with [`StartMode::New`] unfinished scans
+/// are recorded as abandoned and a new one starts. A scan whose journal is damaged is skipped
+/// with a warning. `peer` is who asked, for the journal.
+///
+/// Nothing is changed by the decision: it is carried out with [`StartChoice::commit`] once
+/// the start is sure to go ahead (the daemon first tells the operator so, and a start the
+/// operator was told had not happened changes nothing).
 pub fn decide_request(
     config: &Config,
     specimen: String,
@@ -645,14 +633,15 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
     let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
-    let request = choose_request(
+    let request = decide_request(
         &config,
         args.specimen,
         args.operator,
         args.notes,
         start_mode(args.resume, args.new),
         Peer::this_process(),
-    )?;
+    )?
+    .commit()?;
     let settings = run_settings(&config, config_hash, hooks)?;
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()

@@ -7,7 +7,7 @@ use std::collections::VecDeque;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use surfscan::cli::scan::choose_request;
+use surfscan::cli::scan::{decide_request, StartChoice};
 use surfscan::config::Config;
 use surfscan::devices::{
     Arrival, Battery, DeviceFault, FaultClass, Instrument, InstrumentIdentity, ProbeReport,
@@ -765,7 +765,7 @@ async fn a_failed_scan_continues_at_its_first_missing_line() {
 
     // Without asking for it, a failed scan is not resumed: a new one would start.
     let config = runner_config(h.tmp.path());
-    let auto = choose_request(
+    let auto = decide_request(
         &config,
         String::new(),
         String::new(),
@@ -773,9 +773,10 @@ async fn a_failed_scan_continues_at_its_first_missing_line() {
         StartMode::Auto,
         Peer::this_process(),
     )
+    .and_then(StartChoice::commit)
     .expect("request");
     assert!(matches!(auto, ScanRequest::New { .. }), "{auto:?}");
-    let request = choose_request(
+    let request = decide_request(
         &config,
         String::new(),
         String::new(),
@@ -783,6 +784,7 @@ async fn a_failed_scan_continues_at_its_first_missing_line() {
         StartMode::Resume,
         Peer::this_process(),
     )
+    .and_then(StartChoice::commit)
     .expect("request");
     assert_eq!(
         request,
@@ -834,7 +836,7 @@ async fn starting_over_records_the_unfinished_scan_as_abandoned() {
         "{outcome:?}"
     );
     let config = runner_config(h.tmp.path());
-    let request = choose_request(
+    let request = decide_request(
         &config,
         String::new(),
         String::new(),
@@ -842,6 +844,7 @@ async fn starting_over_records_the_unfinished_scan_as_abandoned() {
         StartMode::New,
         Peer::this_process(),
     )
+    .and_then(StartChoice::commit)
     .expect("request");
     assert!(matches!(request, ScanRequest::New { .. }), "{request:?}");
     let recs = records(&dir);
