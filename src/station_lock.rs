@@ -356,18 +356,23 @@ impl StationLock {
                 let Some(pid) = leftover_pid(&name.to_string_lossy()) else {
                     continue;
                 };
+                let meta = e.metadata().ok();
                 if let Some(pid) = pid {
+                    if pid == std::process::id() {
+                        continue;
+                    }
                     // A live process may still be writing it, unless it started after the
                     // file was last written: then the pid was reused (after a reboot, say)
                     // and the writer is long gone.
-                    let modified = e.metadata().and_then(|m| m.modified()).ok();
-                    let reused = modified.is_some_and(|m| started_after(pid, m));
-                    if pid == std::process::id() || (pid_alive(pid) && !reused) {
-                        continue;
+                    if pid_alive(pid) {
+                        let modified = meta.as_ref().and_then(|m| m.modified().ok());
+                        if !modified.is_some_and(|m| started_after(pid, m)) {
+                            continue;
+                        }
                     }
                 }
                 let path = e.path();
-                let bytes = e.metadata().map(|m| m.len()).unwrap_or(0);
+                let bytes = meta.map_or(0, |m| m.len());
                 match fs::remove_file(&path) {
                     Ok(()) => {
                         tracing::info!(path = %path.display(), bytes, "removed the leftover of an interrupted write");
