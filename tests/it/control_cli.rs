@@ -70,19 +70,14 @@ impl Daemon {
         });
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("control.sock");
-        let server = server::bind_with_options(&path, ServerOptions::default())
-            .await
-            .unwrap();
-        let (stop, stopped) = oneshot::channel::<()>();
-        let task = tokio::spawn(server.serve(
+        let (stop, task) = serve_with(
+            &path,
             ControlChannels {
                 status: status_rx,
                 commands: cmd_tx,
             },
-            async {
-                let _ = stopped.await;
-            },
-        ));
+        )
+        .await;
         Daemon {
             _dir: dir,
             path,
@@ -308,20 +303,30 @@ async fn serve_at(
 ) {
     let (status_tx, status_rx) = watch::channel(status);
     let (cmd_tx, _cmd_rx) = mpsc::channel::<OperatorRequest>(4);
-    let server = server::bind_with_options(path, ServerOptions::default())
-        .await
-        .unwrap();
-    let (stop, stopped) = oneshot::channel::<()>();
-    let task = tokio::spawn(server.serve(
+    let (stop, task) = serve_with(
+        path,
         ControlChannels {
             status: status_rx,
             commands: cmd_tx,
         },
-        async {
-            let _ = stopped.await;
-        },
-    ));
+    )
+    .await;
     (status_tx, stop, task)
+}
+
+/// Serves `channels` at `path`; sending on the stop channel ends the server.
+async fn serve_with(
+    path: &Path,
+    channels: ControlChannels,
+) -> (oneshot::Sender<()>, tokio::task::JoinHandle<()>) {
+    let server = server::bind_with_options(path, ServerOptions::default())
+        .await
+        .unwrap();
+    let (stop, stopped) = oneshot::channel::<()>();
+    let task = tokio::spawn(server.serve(channels, async {
+        let _ = stopped.await;
+    }));
+    (stop, task)
 }
 
 #[tokio::test]
@@ -501,19 +506,14 @@ async fn a_start_that_fails_at_once_is_reported_as_failed() {
             });
         }
     });
-    let server = server::bind_with_options(&path, ServerOptions::default())
-        .await
-        .unwrap();
-    let (stop, stopped) = oneshot::channel::<()>();
-    let task = tokio::spawn(server.serve(
+    let (stop, task) = serve_with(
+        &path,
         ControlChannels {
             status: status_rx,
             commands: cmd_tx,
         },
-        async {
-            let _ = stopped.await;
-        },
-    ));
+    )
+    .await;
     let out = run(&["start", "--specimen", "B13"], &path).await;
     let stderr = text(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
