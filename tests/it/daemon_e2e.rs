@@ -63,18 +63,8 @@ async fn rig() -> Rig {
         other => panic!("simulator not ready: {other:?}"),
     }
     let socket = dir.path().join("run").join("control.sock");
-    let text = surfscan::cli::demo::demo_config(&inst, &stage, &dir.path().join("scans"))
-        .replace("lines = 31", &format!("lines = {LINES}"))
-        .replace(
-            &format!(
-                "{:?}",
-                dir.path()
-                    .join("scans/sim/control.sock")
-                    .display()
-                    .to_string()
-            ),
-            &format!("{:?}", socket.display().to_string()),
-        );
+    let text = demo_config_at(&inst, &stage, &dir.path().join("scans"), &socket)
+        .replace("lines = 31", &format!("lines = {LINES}"));
     let hook_log = dir.path().join("hook.log");
     let text = format!(
         "{text}\n[fit]\ndegree-v = 3\n[metrics]\nfile = {:?}\n[notify]\ncommand = [\"/bin/sh\", \"-c\", \"env | grep ^SURFSCAN_ | sort >> {}\"]\n",
@@ -94,6 +84,15 @@ async fn rig() -> Rig {
         socket,
         notify,
     }
+}
+
+/// The demo configuration for devices `inst` and `stage`, scans under `scans`, with its
+/// control socket at `socket`.
+fn demo_config_at(inst: &Path, stage: &Path, scans: &Path, socket: &Path) -> String {
+    surfscan::cli::demo::demo_config(inst, stage, scans).replace(
+        &format!("{:?}", scans.join("sim/control.sock").display().to_string()),
+        &format!("{:?}", socket.display().to_string()),
+    )
 }
 
 /// The daemon process; killed if the test fails before it exits, so no daemon outlives it.
@@ -419,27 +418,34 @@ async fn sigterm_mid_scan_records_an_interruption_and_the_restart_resumes_by_its
     r.sim.shutdown().await;
 }
 
+/// Starts a scan (specimen `paused`), pauses it, stops the daemon and starts it again: the
+/// new daemon, the status once paused, and the status once the restart reopened it paused.
+async fn pause_and_restart(r: &Rig) -> (Daemon, Status, Status) {
+    let mut d = spawn_daemon(r);
+    notify_until(r, &mut d, |m| m.contains("READY=1"));
+    start_scan(r, "paused").await;
+    wait_status(r, "scanning", |s| s.state == State::Scanning).await;
+    client(r).await.request(&Request::Pause).await.unwrap();
+    let paused = wait_status(r, "paused", |s| s.state == State::Paused).await;
+    sigterm(&d);
+    assert!(wait_exit(&mut d).success());
+
+    let mut d = spawn_daemon(r);
+    notify_until(r, &mut d, |m| m.contains("READY=1"));
+    let restarted = wait_status(r, "paused after the restart", |s| s.state == State::Paused).await;
+    (d, paused, restarted)
+}
+
 /// A scan the operator paused (to take the specimen off, say) and a restart of the daemon:
 /// the restart reopens it paused, nothing is traced or moved, until the operator resumes it;
 /// then it completes with every line once.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_paused_scan_stays_paused_across_a_restart_until_resumed() {
     let r = rig().await;
-    let mut d = spawn_daemon(&r);
-    notify_until(&r, &mut d, |m| m.contains("READY=1"));
-    start_scan(&r, "paused").await;
-    wait_status(&r, "scanning", |s| s.state == State::Scanning).await;
-    client(&r).await.request(&Request::Pause).await.unwrap();
-    let paused = wait_status(&r, "paused", |s| s.state == State::Paused).await;
-    sigterm(&d);
-    assert!(wait_exit(&mut d).success());
+    let (mut d, paused, s) = pause_and_restart(&r).await;
     let dir = scan_dir(&r);
     let done = line_indices(&records(&dir));
     assert_eq!(done.len() as u32, paused.lines_done);
-
-    let mut d = spawn_daemon(&r);
-    notify_until(&r, &mut d, |m| m.contains("READY=1"));
-    let s = wait_status(&r, "paused after the restart", |s| s.state == State::Paused).await;
     assert!(
         s.reason
             .as_deref()
@@ -599,18 +605,7 @@ async fn a_hang_up_leaves_the_daemon_scanning_with_nobody_reading_its_log() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_start_resumes_a_scan_paused_before_a_restart() {
     let r = rig().await;
-    let mut d = spawn_daemon(&r);
-    notify_until(&r, &mut d, |m| m.contains("READY=1"));
-    start_scan(&r, "paused").await;
-    wait_status(&r, "scanning", |s| s.state == State::Scanning).await;
-    client(&r).await.request(&Request::Pause).await.unwrap();
-    wait_status(&r, "paused", |s| s.state == State::Paused).await;
-    sigterm(&d);
-    assert!(wait_exit(&mut d).success());
-
-    let mut d = spawn_daemon(&r);
-    notify_until(&r, &mut d, |m| m.contains("READY=1"));
-    let s = wait_status(&r, "paused after the restart", |s| s.state == State::Paused).await;
+    let (mut d, _, s) = pause_and_restart(&r).await;
     // Not opened while paused, but there: not shown as absent.
     assert_eq!(
         (s.instrument, s.stage),
@@ -679,16 +674,7 @@ fn a_start_the_devices_cannot_serve_is_reported_by_the_start_command() {
     let dir = tempfile::tempdir().unwrap();
     let (inst, stage) = (dir.path().join("no-sj210"), dir.path().join("no-ystage"));
     let socket = dir.path().join("control.sock");
-    let text = surfscan::cli::demo::demo_config(&inst, &stage, &dir.path().join("scans")).replace(
-        &format!(
-            "{:?}",
-            dir.path()
-                .join("scans/sim/control.sock")
-                .display()
-                .to_string()
-        ),
-        &format!("{:?}", socket.display().to_string()),
-    );
+    let text = demo_config_at(&inst, &stage, &dir.path().join("scans"), &socket);
     let config = dir.path().join("station.toml");
     std::fs::write(&config, text).unwrap();
     let locks = dir.path().join("locks");
