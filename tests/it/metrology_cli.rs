@@ -377,6 +377,15 @@ fn analysis_flags_outside_the_configurations_ranges_are_usage_errors() {
     let input = dir.path().join("line.csv");
     std::fs::write(&input, sine_profile_csv(4000)).unwrap();
     let out = dir.path().join("out");
+    let analyze = |args: &[&str]| {
+        surfscan()
+            .args(["analyze", input.to_str().unwrap()])
+            .args(args)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap()
+    };
     for (flag, value, key) in [
         ("--lc", "0", "analysis.lambda-c-mm"),
         ("--lc", "NaN", "analysis.lambda-c-mm"),
@@ -385,11 +394,7 @@ fn analysis_flags_outside_the_configurations_ranges_are_usage_errors() {
         ("--levels", "100000000", "analysis.levels"),
         ("--curves", "0", "analysis.curves"),
     ] {
-        let run = surfscan()
-            .args(["analyze", input.to_str().unwrap(), flag, value, "--out"])
-            .arg(&out)
-            .output()
-            .unwrap();
+        let run = analyze(&[flag, value]);
         let err = String::from_utf8_lossy(&run.stderr);
         assert_eq!(run.status.code(), Some(2), "{flag} {value}: {err}");
         assert!(err.contains(flag) && err.contains(key), "{err}");
@@ -405,11 +410,7 @@ fn analysis_flags_outside_the_configurations_ranges_are_usage_errors() {
         ("--curves", "1"),
         ("--curves", "10000"),
     ] {
-        let run = surfscan()
-            .args(["analyze", input.to_str().unwrap(), flag, value, "--out"])
-            .arg(&out)
-            .output()
-            .unwrap();
+        let run = analyze(&[flag, value]);
         let err = String::from_utf8_lossy(&run.stderr);
         assert_ne!(run.status.code(), Some(2), "{flag} {value}: {err}");
         assert!(
@@ -418,11 +419,7 @@ fn analysis_flags_outside_the_configurations_ranges_are_usage_errors() {
         );
     }
     // A plain value characterises the profile.
-    let run = surfscan()
-        .args(["analyze", input.to_str().unwrap(), "--lc", "0.8", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
+    let run = analyze(&["--lc", "0.8"]);
     assert_eq!(
         run.status.code(),
         Some(0),
