@@ -11,7 +11,8 @@
 //!    scan runner and the drivers), [`numbers`] (decimal numbers in CSV text, read fast).
 //! 1. Pure logic: [`fit`] (the paper's interpolation, incremental), [`iges`] (IGES 5.3
 //!    writer/reader), [`metrology`] (ISO roughness, bearing area curves, areal parameters),
-//!    the codecs inside [`sj210`] and [`stage`].
+//!    [`specification`] (a part's limits, the 16 % and max rules, the uncertainty of a mean
+//!    and the verdict), the codecs inside [`sj210`] and [`stage`].
 //! 2. I/O adapters: [`transport`] (the only code that opens a serial port), the clients in
 //!    [`sj210`] and [`stage`], generic over `AsyncRead + AsyncWrite`, and [`atomic`] (durable
 //!    file replacement, the one write primitive of the scan's files and the outputs).
@@ -50,6 +51,7 @@ pub mod report;
 pub mod scan;
 pub mod service;
 pub mod sj210;
+pub mod specification;
 pub mod stage;
 pub mod station_lock;
 pub mod telemetry;
