@@ -118,6 +118,61 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
     assert!(std::fs::read_to_string(dir.join("report.html"))
         .unwrap()
         .contains("31 of 31 planned characterised"));
+    // The demo's grid gives the results pinned before the characterisation was reorganised:
+    // the scan's own report and surface, `fit` and `analyze` of its directory, and `analyze`
+    // of its measured.x3p.
+    let scan = [(dir.as_path(), "{SCAN}")];
+    crate::results_unchanged::check(
+        "demo",
+        serde_json::json!({
+            "report": crate::results_unchanged::json_file(&dir.join("report.json")),
+            "iges": crate::results_unchanged::iges_fingerprint(&dir.join("surface.igs"), &scan),
+        }),
+        &[],
+    );
+    let x3p = dir.join("measured.x3p").display().to_string();
+    for (name, args) in [
+        (
+            "fit-demo",
+            vec![
+                "fit",
+                dir.to_str().unwrap(),
+                "-o",
+                "{T}/s.igs",
+                "--report",
+                "{T}/fit.json",
+            ],
+        ),
+        (
+            "analyze-demo",
+            vec!["analyze", dir.to_str().unwrap(), "--out", "{T}/out"],
+        ),
+        (
+            "analyze-demo-x3p",
+            vec!["analyze", &x3p, "--out", "{T}/out"],
+        ),
+    ] {
+        let t = tempfile::tempdir().unwrap();
+        let args: Vec<String> = args
+            .iter()
+            .map(|a| a.replace("{T}", &t.path().display().to_string()))
+            .collect();
+        let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        crate::results_unchanged::check(
+            name,
+            crate::results_unchanged::outputs_of(t.path(), &scan),
+            &[],
+        );
+    }
+
     // The measured X3P holds exactly the stored heights.
     let x = read_x3p(&std::fs::read(dir.join("measured.x3p")).unwrap()).unwrap();
     assert_eq!((x.rows, x.cols), (31, cols));

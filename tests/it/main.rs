@@ -28,6 +28,7 @@ mod metrology_x3p;
 mod model_honesty;
 mod model_report;
 mod older_scans;
+mod results_unchanged;
 mod scan_dir_analysis;
 mod scan_e2e;
 mod scan_runner;
