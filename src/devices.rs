@@ -7,7 +7,8 @@
 //! stage position is lost, fail the scan on a fatal fault.
 //!
 //! [`Device`] names the instrument or the stage wherever the scan says which one (a fault, a
-//! journal's interruption record).
+//! journal's interruption record); [`Fault`] is a driver's error reduced to what the scan
+//! decides on (which device, its class, the NG code, the message).
 //!
 //! Layer 0 (vocabulary): depends on [`crate::profile`] and [`crate::units`]; no I/O.
 
@@ -69,6 +70,43 @@ pub trait DeviceFault: std::error::Error + Send + Sync + 'static {
     /// The instrument's NG code, when the device answered with one.
     fn ng_code(&self) -> Option<u16> {
         None
+    }
+}
+
+/// A device error as the runner handles it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Fault {
+    /// The device.
+    pub device: Device,
+    /// How to react.
+    pub class: FaultClass,
+    /// The instrument's NG code, when it answered with one.
+    pub ng_code: Option<u16>,
+    /// The driver's message (names the command and the cause).
+    pub message: String,
+}
+
+impl Fault {
+    /// Reduces a driver error.
+    pub fn of<E: DeviceFault>(device: Device, e: &E) -> Fault {
+        Fault {
+            device,
+            class: e.class(),
+            ng_code: e.ng_code(),
+            message: e.to_string(),
+        }
+    }
+}
+
+impl fmt::Display for Fault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.device, self.message)?;
+        if let Some(c) = self.ng_code {
+            if !self.message.contains(&format!("NG{c:03}")) {
+                write!(f, " (NG{c:03})")?;
+            }
+        }
+        Ok(())
     }
 }
 

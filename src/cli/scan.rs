@@ -30,8 +30,9 @@ use crate::scan::journal::{
 };
 use crate::scan::outcome::{FailKind, Outcome, ScanRequest};
 use crate::scan::plan::{AnalysisPlan, Plan};
+use crate::scan::policy::Backoff;
 use crate::scan::runner::run_scan;
-use crate::scan::settings::{Backoff, RunSettings};
+use crate::scan::settings::RunSettings;
 use crate::scan::station::SerialStation;
 use crate::scan::status::{State, Status};
 use crate::scan::testhooks::TestHooks;

@@ -10,7 +10,8 @@ use super::journal::{
 };
 use super::line::{LineMeta, StoredLine};
 use super::machine::Note;
-use super::metrics::{write_metrics, ScanMetrics};
+use super::metrics::ScanMetrics;
+use super::metrics_file::write_metrics;
 use super::outputs::{write_outputs, Characterise, Outputs, OutputsError};
 use super::plan::Plan;
 use super::store::{csv_name, meta_name, sync_dir, ScanStore};

@@ -67,7 +67,7 @@ pub fn parse_csv(path: &Path, text: &str, pitch_x_mm: f64) -> Result<Vec<f64>, S
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scan::disk::CSV_BYTES_PER_POINT;
+    use crate::scan::plan::CSV_BYTES_PER_POINT;
 
     #[test]
     fn csv_round_trips_bit_identically() {

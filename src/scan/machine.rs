@@ -12,44 +12,36 @@
 //! flight) followed by a new effect. After [`Action::Stop`] the machine takes no more
 //! events.
 //!
-//! The policy, per line k (the README's fault table):
-//! - the instrument must read idle before the stage moves; then move, trace, check the line
-//!   against the scan, commit it durably, push it into the fitter; only then line k+1;
-//! - **absent** device: close it, record, reopen at once and then with exponential backoff
-//!   while suspended ("instrument unavailable"); it costs no attempt;
-//! - **transient** fault (NG code, timeout, garbage, busy, a line that a re-trace may fix):
-//!   retried with backoff while the time budget lasts, which runs from the first such fault
-//!   and starts again when a line commits (a device's absence meanwhile is not spent from
-//!   it: that suspension has no time limit); status and journal say "suspended: instrument
-//!   busy since …"; an attempt is counted only when a trace was really started; an exhausted
-//!   budget fails the scan naming the last fault;
-//! - **position lost**: re-home, then re-trace, at most `max-line-attempts` times a line;
-//! - **fatal** fault or a line that cannot belong to the scan: the scan fails, named;
-//! - **disk full** while committing or writing the outputs: suspended ("disk full: the
-//!   remaining lines need about … MB"), free space checked with backoff, then the held line
-//!   is committed (or the outputs written) and the scan goes on by itself;
-//! - a scan whose lines are all committed writes its outputs without opening any device;
-//! - pause is deferred until the current line is on disk; abort and shutdown cancel what is
-//!   in flight, make a best-effort device clean-up, then end (shutdown leaves the scan
-//!   resumable: no stop record).
+//! The order of a line k: the instrument must read idle before the stage moves; then move,
+//! trace, check the line against the scan, commit it durably, push it into the fitter; only
+//! then line k+1. A scan whose lines are all committed writes its outputs without opening any
+//! device. Pause is deferred until the current line is on disk; abort and shutdown cancel what
+//! is in flight, make a best-effort device clean-up, then end (shutdown leaves the scan
+//! resumable: no stop record).
 //!
-//! Layer 3 (session): depends on the session's own plan, settings (backoff), station
-//! ([`Device`], [`Fault`]), status, command, event and metrics types, [`super::disk`]'s
-//! pure size estimate, and [`crate::devices`]'s fault classes. No tokio, no files, no
-//! clock reads: time is an input.
+//! Every fault goes through one door ([`Machine`]'s `trouble`): the transient budget is
+//! charged when the fault is one it bounds (it runs from the first such fault of a line and
+//! starts again when a line commits; time a device was waited for is not spent from it), the
+//! table [`policy::react`] decides, and the reaction is carried out: reopen a device (no time
+//! limit, no attempt spent), retry the line with backoff, re-home, wait for the storage with
+//! the traced line held in memory, refuse a start, or fail naming the fault. The texts are
+//! [`reasons`]'.
+//!
+//! Layer 3 (session), pure: depends on the session's own plan (and its disk estimate),
+//! policy, reasons, status, command, event and metrics types, and [`crate::devices`]' device
+//! and fault vocabulary. No tokio, no files, no clock reads: time is an input.
 
 use super::command::{OperatorCommand, PauseMark, Peer, StartMode};
-use super::disk::remaining_scan_bytes;
 use super::event::ScanEventKind;
 use super::metrics::ScanMetrics;
-use super::plan::Plan;
-use super::settings::Backoff;
-use super::station::{Device, Fault};
+use super::plan::{remaining_scan_bytes, Plan};
+use super::policy::{self, Backoff, FailRule, FaultKind, Reaction, Situation, Step, StorageClass};
+use super::reasons::{self, stamp};
 use super::status::{DeviceState, Ending, LastStop, State, Status};
-use crate::devices::FaultClass;
+use crate::devices::{Device, Fault, FaultClass};
 use crate::profile::Conditions;
 use crate::units::Nm;
-use chrono::{DateTime, SecondsFormat, Utc};
+use chrono::{DateTime, Utc};
 use std::collections::BTreeSet;
 use std::fmt;
 use std::time::{Duration, Instant};
@@ -192,6 +184,52 @@ pub struct StorageFailure {
     pub message: String,
 }
 
+/// A fault as the machine holds it: its kind for the policy's table, its details for the
+/// reasons.
+#[derive(Debug, Clone, PartialEq)]
+enum Trouble {
+    /// A device operation failed.
+    Device(Fault),
+    /// The traced line does not fit the scan.
+    Line(LineProblem),
+    /// The fitter refused the committed line.
+    Fitter(String),
+    /// A durable write failed.
+    Storage(StorageFailure),
+}
+
+impl Trouble {
+    fn kind(&self) -> FaultKind {
+        match self {
+            Trouble::Device(f) => FaultKind::Device(f.class),
+            Trouble::Line(p) if p.retry_may_help() => FaultKind::LineRetryable,
+            Trouble::Line(_) => FaultKind::LineForeign,
+            Trouble::Fitter(_) => FaultKind::FitterRefused,
+            Trouble::Storage(s) if s.disk_full => FaultKind::Storage(StorageClass::Full),
+            Trouble::Storage(_) => FaultKind::Storage(StorageClass::Other),
+        }
+    }
+
+    /// The device concerned, if one is.
+    fn device(&self) -> Option<Device> {
+        match self {
+            Trouble::Device(f) => Some(f.device),
+            Trouble::Line(_) => Some(Device::Instrument),
+            Trouble::Fitter(_) | Trouble::Storage(_) => None,
+        }
+    }
+
+    /// The fault as the last one of a retried line names it.
+    fn on_line(&self, line: u32) -> String {
+        match self {
+            Trouble::Device(f) => reasons::on_line(line, f),
+            Trouble::Line(p) => reasons::on_line(line, p),
+            Trouble::Fitter(m) => reasons::on_line(line, m),
+            Trouble::Storage(s) => reasons::on_line(line, &s.message),
+        }
+    }
+}
+
 /// Why a scan failed: what the operator must clear before continuing it.
 #[derive(Debug, Clone, PartialEq)]
 pub enum FailReason {
@@ -278,7 +316,7 @@ impl fmt::Display for FailReason {
                 f,
                 "line {}: transient faults since {} outlasted the {budget_s} s budget ({traces} trace(s) started); last: {last}",
                 line + 1,
-                since.to_rfc3339_opts(SecondsFormat::Secs, true)
+                stamp(*since)
             ),
             FailReason::PositionLostRepeatedly { line, times, last } => write!(
                 f,
@@ -553,6 +591,8 @@ struct Budget {
     /// Time since `since` that a device was absent: a suspension without a time limit,
     /// so not spent from the budget.
     absent: Duration,
+    /// The suspension was announced (counted, the hook told) at the budget's first retry.
+    announced: bool,
 }
 
 /// The session core.
@@ -689,10 +729,7 @@ impl Machine {
             // Paused by the operator before the process stopped: it stays paused, with no
             // device opened, until the operator resumes it.
             self.status.state = State::Paused;
-            self.status.reason = Some(
-                "paused by the operator before a restart; `surfscan resume` continues it"
-                    .to_owned(),
-            );
+            self.status.reason = Some(reasons::paused_before_restart());
             self.publish_progress(&mut out, None);
         } else if self.created {
             self.publish_progress(&mut out, None);
@@ -743,7 +780,9 @@ impl Machine {
                     position_trusted,
                 },
             ) if d == device => self.opened(device, position_trusted, now, out),
-            (Doing::Open(d), Event::Fault { fault, .. }) => self.open_failed(d, fault, now, out),
+            (Doing::Open(_), Event::Fault { fault, .. }) => {
+                self.trouble(Step::Opening, Trouble::Device(fault), now, out)
+            }
             (
                 Doing::Create,
                 Event::Created {
@@ -769,7 +808,7 @@ impl Machine {
                 self.next_step(now, out);
             }
             (Doing::Create, Event::StorageFailed(s)) => {
-                self.fail(FailReason::Storage(s.message), out)
+                self.trouble(Step::Creating, Trouble::Storage(s), now, out)
             }
             (Doing::Home, Event::Homed) => {
                 self.need_home = false;
@@ -790,17 +829,7 @@ impl Machine {
                         self.pitch_x_mm.get_or_insert(t.pitch_x_mm);
                         self.commit(out);
                     }
-                    Some(p) if p.retry_may_help() => {
-                        let why = format!("line {}: {p}", self.line + 1);
-                        self.transient(why, Device::Instrument, now, out);
-                    }
-                    Some(problem) => self.fail(
-                        FailReason::LineRefused {
-                            line: self.line,
-                            problem,
-                        },
-                        out,
-                    ),
+                    Some(problem) => self.trouble(Step::Checking, Trouble::Line(problem), now, out),
                 }
             }
             (
@@ -815,24 +844,30 @@ impl Machine {
                 {
                     self.traces += 1;
                 }
-                self.line_fault(fault, now, out);
+                let step = match self.doing {
+                    Doing::Home => Step::Homing,
+                    Doing::Idle => Step::EnsuringIdle,
+                    Doing::Move => Step::Moving,
+                    _ => Step::Tracing,
+                };
+                self.trouble(step, Trouble::Device(fault), now, out);
             }
             (Doing::Commit, Event::Committed) => {
                 self.effect_push(out);
             }
-            (Doing::Commit, Event::StorageFailed(s)) => self.storage_failed(s, false, now, out),
+            (Doing::Commit, Event::StorageFailed(s)) => {
+                self.trouble(Step::Committing, Trouble::Storage(s), now, out)
+            }
             (Doing::Push, Event::Pushed) => self.line_done(now, out),
-            (Doing::Push, Event::PushRefused(message)) => self.fail(
-                FailReason::FitterRefused {
-                    line: self.line,
-                    message,
-                },
-                out,
-            ),
+            (Doing::Push, Event::PushRefused(message)) => {
+                self.trouble(Step::Pushing, Trouble::Fitter(message), now, out)
+            }
             (Doing::Outputs, Event::OutputsWritten { summary }) => {
                 self.stop(End::Success { summary }, out)
             }
-            (Doing::Outputs, Event::StorageFailed(s)) => self.storage_failed(s, true, now, out),
+            (Doing::Outputs, Event::StorageFailed(s)) => {
+                self.trouble(Step::Outputs, Trouble::Storage(s), now, out)
+            }
             (
                 Doing::CheckSpace,
                 Event::SpaceChecked {
@@ -933,11 +968,7 @@ impl Machine {
                 if let Some(b) = &mut self.budget {
                     b.absent += absent;
                 }
-                let secs = absent.as_secs_f64();
-                out.push(self.note(
-                    format!("{device} back after {secs:.0} s; scan continues"),
-                    Some(device),
-                ));
+                out.push(self.note(reasons::back_after(device, absent), Some(device)));
                 *self
                     .metrics
                     .reconnects
@@ -959,26 +990,109 @@ impl Machine {
         self.next_step(now, out);
     }
 
-    fn open_failed(&mut self, device: Device, fault: Fault, now: Now, out: &mut Vec<Action>) {
-        if !self.created {
-            return self.fail(FailReason::NotStarted(fault), out);
+    // ---- faults: the policy's table decides, these carry its reactions out -------------
+
+    /// A fault in `step`: the budget is charged when the fault is one it bounds, the table
+    /// ([`policy::react`]) is asked, and its reaction carried out.
+    fn trouble(&mut self, step: Step, t: Trouble, now: Now, out: &mut Vec<Action>) {
+        let kind = t.kind();
+        let budget_spent = match kind {
+            FaultKind::Device(FaultClass::Transient) | FaultKind::LineRetryable if self.created => {
+                let why = t.on_line(self.line);
+                self.charge_budget(why, now)
+            }
+            _ => false,
+        };
+        let situation = Situation {
+            step,
+            created: self.created,
+            budget_spent,
+            rehomes: self.rehomes,
+            rehomes_allowed: self.plan.max_line_attempts.saturating_sub(1),
+        };
+        match (policy::react(kind, &situation), t) {
+            (Reaction::Reopen, Trouble::Device(fault)) if step == Step::Opening => {
+                self.wait_for_device(fault, now, out)
+            }
+            (Reaction::Reopen, Trouble::Device(fault)) => self.reopen(fault, out),
+            (Reaction::Retry, t) => {
+                let device = t.device().unwrap_or(Device::Instrument);
+                self.retry(device, now, out)
+            }
+            (Reaction::Rehome, Trouble::Device(fault)) => self.rehome(fault, now, out),
+            (Reaction::WaitForStorage, Trouble::Storage(s)) => {
+                self.wait_for_storage(s, step == Step::Outputs, now, out)
+            }
+            (Reaction::Refuse, t) => {
+                let reason = self.start_refused(t);
+                self.fail(reason, out)
+            }
+            (Reaction::Fail(rule), t) => {
+                let reason = self.failure(rule, step, t);
+                self.fail(reason, out)
+            }
+            // A reaction the table gives no such fault: ended, named, rather than guessed.
+            (reaction, t) => {
+                let reason = self.failure(FailRule::Fatal, step, t);
+                tracing::error!("internal: the fault policy gave {reaction:?}; the scan ends");
+                self.fail(reason, out)
+            }
         }
-        if !matches!(fault.class, FaultClass::Absent | FaultClass::Transient) {
-            return self.fail(
-                FailReason::Fatal {
-                    line: self.current(),
-                    fault,
-                },
-                out,
-            );
+    }
+
+    /// Why a start is refused.
+    fn start_refused(&self, t: Trouble) -> FailReason {
+        match t {
+            Trouble::Device(fault) => FailReason::NotStarted(fault),
+            Trouble::Storage(s) => FailReason::Storage(s.message),
+            t => self.failure(FailRule::Fatal, Step::Creating, t),
         }
+    }
+
+    /// Why a scan fails under `rule`.
+    fn failure(&self, rule: FailRule, step: Step, t: Trouble) -> FailReason {
+        let line = self.line;
+        match (rule, t) {
+            (FailRule::BudgetSpent, t) => {
+                let (since, last) = match &self.budget {
+                    Some(b) => (b.since.wall, b.last.clone()),
+                    None => (chrono::DateTime::<Utc>::UNIX_EPOCH, t.on_line(line)),
+                };
+                FailReason::BudgetExhausted {
+                    line,
+                    budget_s: self.policy.transient_budget.as_secs(),
+                    since,
+                    traces: self.traces,
+                    last,
+                }
+            }
+            (FailRule::RehomesSpent, Trouble::Device(last)) => FailReason::PositionLostRepeatedly {
+                line,
+                times: self.rehomes + 1,
+                last,
+            },
+            (_, Trouble::Line(problem)) => FailReason::LineRefused { line, problem },
+            (_, Trouble::Fitter(message)) => FailReason::FitterRefused { line, message },
+            (_, Trouble::Storage(s)) if step == Step::Outputs => FailReason::Outputs(s.message),
+            (_, Trouble::Storage(s)) => FailReason::Storage(s.message),
+            (_, Trouble::Device(fault)) => FailReason::Fatal {
+                line: self.current(),
+                fault,
+            },
+        }
+    }
+
+    /// A device that cannot be opened again: suspended (once), then tried again with
+    /// backoff, without a time limit.
+    fn wait_for_device(&mut self, fault: Fault, now: Now, out: &mut Vec<Action>) {
+        let device = fault.device;
         let wait = match &mut self.suspension {
             Some(s) if s.cause == Cause::Absent(device) => {
                 s.wait = self.policy.backoff.next(s.wait);
                 s.wait
             }
             _ => {
-                let reason = format!("{device} unavailable ({fault}); reconnecting");
+                let reason = reasons::unavailable(device, &fault);
                 out.push(self.note(reason.clone(), Some(device)));
                 out.push(Action::Notify(ScanEventKind::Suspended, reason.clone()));
                 self.metrics.suspensions += 1;
@@ -1002,101 +1116,78 @@ impl Machine {
         self.wait(out, wait, AfterWait::Open(device));
     }
 
-    fn line_fault(&mut self, fault: Fault, now: Now, out: &mut Vec<Action>) {
-        let k = self.line;
-        match fault.class {
-            FaultClass::Absent => {
-                out.push(Action::Close(fault.device));
-                match fault.device {
-                    Device::Instrument => self.instrument_open = false,
-                    Device::Stage => self.stage_open = false,
-                }
-                out.push(self.note(
-                    format!("line {} abandoned: {fault}", k + 1),
-                    Some(fault.device),
-                ));
-                self.effect(out, Doing::Open(fault.device));
-            }
-            FaultClass::Transient => {
-                let why = format!("line {}: {fault}", k + 1);
-                self.transient(why, fault.device, now, out);
-            }
-            FaultClass::PositionLost => {
-                self.rehomes += 1;
-                if self.rehomes >= self.plan.max_line_attempts {
-                    return self.fail(
-                        FailReason::PositionLostRepeatedly {
-                            line: k,
-                            times: self.rehomes,
-                            last: fault,
-                        },
-                        out,
-                    );
-                }
-                self.need_home = true;
-                self.metrics.retries += 1;
-                out.push(self.note(
-                    format!(
-                        "line {} abandoned: {fault}; re-homing ({} of {} allowed)",
-                        k + 1,
-                        self.rehomes,
-                        self.plan.max_line_attempts - 1
-                    ),
-                    Some(fault.device),
-                ));
-                self.next_step(now, out);
-            }
-            FaultClass::Fatal => self.fail(
-                FailReason::Fatal {
-                    line: Some(k),
-                    fault,
-                },
-                out,
-            ),
+    /// A device that vanished in a line: closed, the line abandoned, reopened at once.
+    fn reopen(&mut self, fault: Fault, out: &mut Vec<Action>) {
+        out.push(Action::Close(fault.device));
+        match fault.device {
+            Device::Instrument => self.instrument_open = false,
+            Device::Stage => self.stage_open = false,
         }
+        out.push(self.note(
+            reasons::line_abandoned(self.line, &fault),
+            Some(fault.device),
+        ));
+        self.effect(out, Doing::Open(fault.device));
     }
 
-    /// A fault that may clear by itself: retried with backoff while the budget lasts.
-    fn transient(&mut self, why: String, device: Device, now: Now, out: &mut Vec<Action>) {
-        let first = self.budget.is_none();
+    /// The stage lost its position: re-homed before the line is tried again.
+    fn rehome(&mut self, fault: Fault, now: Now, out: &mut Vec<Action>) {
+        self.rehomes += 1;
+        self.need_home = true;
+        self.metrics.retries += 1;
+        out.push(self.note(
+            reasons::rehoming(
+                self.line,
+                &fault,
+                self.rehomes,
+                self.plan.max_line_attempts.saturating_sub(1),
+            ),
+            Some(fault.device),
+        ));
+        self.next_step(now, out);
+    }
+
+    /// Charges the transient budget of the current line with a fault (`why`); true when
+    /// it is spent.
+    fn charge_budget(&mut self, why: String, now: Now) -> bool {
         let budget = self.budget.get_or_insert(Budget {
             since: now,
             last: String::new(),
             absent: Duration::ZERO,
+            announced: false,
         });
-        budget.last = why.clone();
-        let since = budget.since;
-        let spent = now
-            .mono
-            .saturating_duration_since(since.mono)
-            .saturating_sub(budget.absent);
-        if spent >= self.policy.transient_budget {
-            return self.fail(
-                FailReason::BudgetExhausted {
-                    line: self.line,
-                    budget_s: self.policy.transient_budget.as_secs(),
-                    since: since.wall,
-                    traces: self.traces,
-                    last: why,
-                },
-                out,
-            );
-        }
-        self.retry_wait = self.policy.backoff.next(self.retry_wait);
-        let left = self.policy.transient_budget - spent;
-        let wait = self.retry_wait.min(left);
-        let reason = format!(
-            "{device} busy since {}; retrying the line (budget left {} s); last: {why}",
-            stamp(since.wall),
-            left.as_secs()
-        );
-        out.push(self.note(
-            format!(
-                "suspended: {reason}; trying again in {:.1} s",
-                wait.as_secs_f64()
+        budget.last = why;
+        self.budget_spent(now) >= self.policy.transient_budget
+    }
+
+    /// Time spent from the transient budget by `now` (zero before its first fault).
+    fn budget_spent(&self, now: Now) -> Duration {
+        self.budget.as_ref().map_or(Duration::ZERO, |b| {
+            now.mono
+                .saturating_duration_since(b.since.mono)
+                .saturating_sub(b.absent)
+        })
+    }
+
+    /// A fault that may clear by itself: the line retried with backoff while the budget
+    /// lasts (the budget already charged with it).
+    fn retry(&mut self, device: Device, now: Now, out: &mut Vec<Action>) {
+        let (since, why, first) = match &mut self.budget {
+            Some(b) => (
+                b.since,
+                b.last.clone(),
+                !std::mem::replace(&mut b.announced, true),
             ),
-            Some(device),
-        ));
+            None => (now, String::new(), true),
+        };
+        self.retry_wait = self.policy.backoff.next(self.retry_wait);
+        let left = self
+            .policy
+            .transient_budget
+            .saturating_sub(self.budget_spent(now));
+        let wait = self.retry_wait.min(left);
+        let reason = reasons::busy(device, since.wall, left, &why);
+        out.push(self.note(reasons::retrying(&reason, wait), Some(device)));
         self.metrics.retries += 1;
         if first {
             self.metrics.suspensions += 1;
@@ -1114,34 +1205,22 @@ impl Machine {
         self.wait(out, wait, AfterWait::Retry);
     }
 
-    fn storage_failed(
+    /// Storage that refused a write: what is in memory is kept, the storage checked with
+    /// backoff, the write made again when it can succeed.
+    fn wait_for_storage(
         &mut self,
         s: StorageFailure,
         outputs: bool,
         now: Now,
         out: &mut Vec<Action>,
     ) {
-        if !s.disk_full {
-            return self.fail(
-                if outputs {
-                    FailReason::Outputs(s.message)
-                } else {
-                    FailReason::Storage(s.message)
-                },
-                out,
-            );
-        }
         let committed = self.line;
         let needed_bytes = remaining_scan_bytes(
             self.plan.lines,
             committed,
             self.columns.map_or(self.points_per_line, |c| c as u64),
         );
-        let what = if outputs {
-            "the surface and report".to_owned()
-        } else {
-            format!("line {}", self.line + 1)
-        };
+        let what = reasons::held_up(outputs, self.line);
         let wait = match &mut self.suspension {
             Some(sus) if matches!(sus.cause, Cause::DiskFull { .. }) => {
                 sus.wait = self.policy.backoff.next(sus.wait);
@@ -1149,11 +1228,7 @@ impl Machine {
             }
             _ => self.policy.backoff.next(Duration::ZERO),
         };
-        let reason = format!(
-            "disk full while writing {what} ({}); the remaining lines need about {} MB; waiting for space",
-            s.message,
-            mb(needed_bytes)
-        );
+        let reason = reasons::disk_full(&what, &s.message, needed_bytes);
         out.push(self.note(format!("suspended: {reason}"), None));
         if !matches!(
             self.suspension.as_ref().map(|s| &s.cause),
@@ -1202,21 +1277,12 @@ impl Machine {
             if let Some(s) = &mut self.suspension {
                 s.wait = next;
             }
-            self.status.reason = Some(format!(
-                "disk full since {}: {} MB free, the remaining lines need about {} MB; free space in the output directory",
-                stamp(since.wall),
-                mb(free),
-                mb(needed_bytes)
-            ));
+            self.status.reason = Some(reasons::still_full(since.wall, free, needed_bytes));
             self.publish(out);
             return self.wait(out, next, AfterWait::CheckSpace);
         }
-        let secs = (now.mono - since.mono).as_secs_f64();
         out.push(self.note(
-            format!(
-                "space is back ({} MB free) after {secs:.0} s; scan continues",
-                mb(free)
-            ),
+            reasons::space_back(free, now.mono.saturating_duration_since(since.mono)),
             None,
         ));
         self.suspension = None;
@@ -1235,12 +1301,8 @@ impl Machine {
     fn line_done(&mut self, now: Now, out: &mut Vec<Action>) {
         let k = self.line;
         if let Some(s) = self.suspension.take() {
-            let secs = (now.mono - s.since.mono).as_secs_f64();
             out.push(self.note(
-                format!(
-                    "line {} on disk after {secs:.0} s of faults; scan continues",
-                    k + 1
-                ),
+                reasons::on_disk_after_faults(k, now.mono.saturating_duration_since(s.since.mono)),
                 None,
             ));
             self.status.reason = None;
@@ -1271,7 +1333,7 @@ impl Machine {
         self.publish_progress(out, None);
         if self.pause_requested && self.line < self.plan.lines {
             self.pause_requested = false;
-            let reason = format!("paused by the operator after line {}", k + 1);
+            let reason = reasons::paused_after(k);
             out.push(Action::Record(Note {
                 reason: reason.clone(),
                 device: None,
@@ -1493,22 +1555,14 @@ impl Machine {
         if matches!(end, End::Shutdown) && self.created && self.status.state == State::Paused {
             // Paused, nothing was in progress: no line to abandon, and the pause stands.
             out.push(Action::Record(Note {
-                reason: format!(
-                    "shutdown (SIGTERM/SIGINT) while paused with {} of {} lines on disk; the daemon reopens it paused at its next start",
-                    self.done(),
-                    self.plan.lines
-                ),
+                reason: reasons::shutdown_while_paused(self.done(), self.plan.lines),
                 device: None,
                 line: None,
                 peer: None,
                 pause: None,
             }));
         } else if matches!(end, End::Shutdown) && self.created {
-            out.push(self.note(
-                "shutdown (SIGTERM/SIGINT): current line abandoned; the scan resumes at the next start"
-                    .to_owned(),
-                None,
-            ));
+            out.push(self.note(reasons::shutdown_mid_line(), None));
         }
         out.push(Action::Stop(end.clone()));
         if let Some(kind) = kind {
@@ -1630,14 +1684,6 @@ pub fn conditions_difference(scan: &Conditions, line: &Conditions) -> Option<Str
             )
         })
         .or_else(|| differs("speed mm/s", &a.speed_mm_s, &b.speed_mm_s))
-}
-
-fn stamp(t: DateTime<Utc>) -> String {
-    t.to_rfc3339_opts(SecondsFormat::Secs, true)
-}
-
-fn mb(bytes: u64) -> String {
-    format!("{:.1}", bytes as f64 / 1e6)
 }
 
 #[cfg(test)]

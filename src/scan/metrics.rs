@@ -1,18 +1,13 @@
 //! Scan metrics in the Prometheus text exposition format, written atomically to a file for
 //! node_exporter's textfile collector (no network listener).
 //!
-//! [`ScanMetrics::render`] is a pure formatter; [`write_metrics`] writes it with temp file,
-//! fsync and rename so the collector never reads a half-written file.
+//! The numbers and their text only: [`ScanMetrics::render`] is a pure formatter, and
+//! [`super::metrics_file::write_metrics`] writes the text durably.
 //!
-//! Layer 3 (session): depends on [`super::faults`] for the durable write and
-//! [`super::store_error`].
+//! Layer 3 (session), pure: std only.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::path::Path;
-
-use super::faults::{write_file_durably, StorageFaults, WriteStep};
-use super::store_error::{io_err, StoreError};
 
 /// The numbers a station is monitored by.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -158,21 +153,6 @@ impl ScanMetrics {
         }
         out
     }
-}
-
-/// Writes the metrics to `path` atomically (temp, fsync, rename, fsync of the directory).
-pub fn write_metrics(
-    path: &Path,
-    metrics: &ScanMetrics,
-    faults: &dyn StorageFaults,
-) -> Result<(), StoreError> {
-    write_file_durably(
-        path,
-        metrics.render().as_bytes(),
-        WriteStep::Metrics,
-        faults,
-    )
-    .map_err(io_err("write", path))
 }
 
 #[cfg(test)]

@@ -7,13 +7,15 @@
 //! serves the runner's [`status`] and forwards [`command`]s).
 //!
 //! - [`plan`]: the lines to trace, the surface to fit and how the lines are characterised,
-//!   frozen in the journal.
+//!   frozen in the journal, and its disk estimate.
 //! - [`settings`]: what the runner is told by the composition layer.
 //! - [`status`], [`command`], [`event`]: the snapshots the runner publishes, the operator
 //!   commands it takes, the events it reports (for the notification hook).
 //! - [`station`]: opening the instrument and the stage; device errors reduced to a `Fault`.
-//! - [`machine`]: the sans-IO session core: events (with the time) in, actions out; the
-//!   fault policy (classes, transient budget, suspension, disk full, pause/abort, shutdown).
+//! - [`machine`]: the sans-IO session core: events (with the time) in, actions out (the
+//!   transient budget, suspension, disk full, pause/abort, shutdown); [`policy`]: the fault
+//!   policy as one table (fault kind × situation → reaction) the machine asks, and the
+//!   backoff; [`reasons`]: the texts of faults and suspensions, apart from the decisions.
 //! - [`runner`]: performs the machine's actions on devices ([`device_ops`]), disk
 //!   ([`disk_ops`]) and channels;
 //!   [`channels`]: its connection to the outside; [`outcome`]: what it is asked and how a
@@ -25,7 +27,8 @@
 //! - [`journal`]: `journal.jsonl` records, torn-tail recovery, resume state.
 //! - [`outputs`]: what a completed scan writes from memory (IGES via [`surface_files`], with
 //!   [`traceability`]; the report through the [`outputs::Characterise`] contract).
-//! - [`metrics`]: the Prometheus text-format metrics file.
+//! - [`metrics`]: the numbers a station is monitored by, as Prometheus text;
+//!   [`metrics_file`]: that text written durably.
 //! - [`testhooks`]: crash and full-disk injection for end-to-end tests.
 
 pub mod channels;
@@ -41,10 +44,13 @@ pub mod line;
 pub mod line_csv;
 pub mod machine;
 pub mod metrics;
+pub mod metrics_file;
 pub mod opening;
 pub mod outcome;
 pub mod outputs;
 pub mod plan;
+pub mod policy;
+pub mod reasons;
 pub mod runner;
 pub mod scan_id;
 pub mod settings;

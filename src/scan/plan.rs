@@ -3,6 +3,9 @@
 //! when the configuration was edited, and `surfscan analyze` of the scan's directory reports
 //! as the scan did.
 //!
+//! Also the plan's disk estimate: the bytes a scan writes and those still to come (pure: the
+//! pre-flight and the full-disk suspension compare them with the free space).
+//!
 //! Layer 0 (vocabulary): depends on [`crate::units`], and on the two value types that say
 //! how the surface is made ([`crate::fit::VMethod`], [`crate::metrology::outliers::SpikeOptions`]).
 
@@ -73,5 +76,73 @@ impl Plan {
     /// Every target, in line order.
     pub fn targets(&self) -> Vec<Nm> {
         (0..self.lines).map(|k| self.target(k)).collect()
+    }
+}
+
+/// Bytes budgeted per stored point in the heights CSV (`x_mm,z_um` shortest round-trip:
+/// up to ~22 + ~22 characters, comma, newline).
+pub const CSV_BYTES_PER_POINT: u64 = 48;
+/// Bytes budgeted per point in the IGES surface (three coordinates of a pole plus a weight
+/// at up to ~24 characters each, in 64-column parameter lines with 16-column tails).
+pub const IGES_BYTES_PER_POINT: u64 = 125;
+/// Bytes budgeted per line for its metadata JSON and journal record.
+pub const META_BYTES_PER_LINE: u64 = 8 * 1024;
+/// Fixed allowance for the start record, report, plots and metrics.
+pub const FIXED_BYTES: u64 = 4 * 1024 * 1024;
+
+/// Estimated bytes a scan of `lines` lines of `points_per_line` points writes.
+pub fn estimate_scan_bytes(lines: u32, points_per_line: u64) -> u64 {
+    let points = points_per_line.saturating_mul(u64::from(lines));
+    points
+        .saturating_mul(CSV_BYTES_PER_POINT + IGES_BYTES_PER_POINT)
+        .saturating_add(u64::from(lines).saturating_mul(META_BYTES_PER_LINE))
+        .saturating_add(FIXED_BYTES)
+}
+
+/// Estimated bytes still to be written by a scan of `lines` lines of which `committed` are
+/// on disk: the remaining lines' files and records, the surface of the whole grid, and the
+/// report.
+pub fn remaining_scan_bytes(lines: u32, committed: u32, points_per_line: u64) -> u64 {
+    let left = u64::from(lines.saturating_sub(committed));
+    points_per_line
+        .saturating_mul(left)
+        .saturating_mul(CSV_BYTES_PER_POINT)
+        .saturating_add(left.saturating_mul(META_BYTES_PER_LINE))
+        .saturating_add(
+            points_per_line
+                .saturating_mul(u64::from(lines))
+                .saturating_mul(IGES_BYTES_PER_POINT),
+        )
+        .saturating_add(FIXED_BYTES)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_disk_estimate_is_points_times_their_bytes_plus_per_line_and_fixed_parts() {
+        // 31 lines × 8000 points: 248000 × 173 B + 31 × 8 KiB + 4 MiB.
+        let e = estimate_scan_bytes(31, 8000);
+        assert_eq!(e, 248_000 * 173 + 31 * 8192 + 4 * 1024 * 1024);
+    }
+
+    #[test]
+    fn what_remains_is_the_missing_lines_plus_the_whole_surface() {
+        // Nothing committed: the whole scan.
+        assert_eq!(
+            remaining_scan_bytes(31, 0, 8000),
+            estimate_scan_bytes(31, 8000)
+        );
+        // 30 of 31 committed: one line's files, the surface of all 31, the fixed part.
+        assert_eq!(
+            remaining_scan_bytes(31, 30, 8000),
+            8000 * 48 + 8192 + 31 * 8000 * 125 + 4 * 1024 * 1024
+        );
+        // All committed: the surface and report only.
+        assert_eq!(
+            remaining_scan_bytes(31, 31, 8000),
+            31 * 8000 * 125 + 4 * 1024 * 1024
+        );
     }
 }

@@ -3,36 +3,16 @@
 //! sees the configuration file; the frozen copy of it in the start record is opaque
 //! traceability.
 //!
-//! Layer 3 (session): depends on [`super::plan`], [`super::outputs`] and [`super::testhooks`].
+//! Layer 3 (session): depends on [`super::plan`], [`super::policy`] (the backoff),
+//! [`super::outputs`] and [`super::testhooks`].
 
 use super::outputs::Characterise;
 use super::plan::Plan;
+use super::policy::Backoff;
 use super::testhooks::TestHooks;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
-
-/// Exponential backoff between reconnection tries, transient retries and free-space checks:
-/// the first wait, doubling up to `max`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Backoff {
-    /// First wait.
-    pub initial: Duration,
-    /// Longest wait.
-    pub max: Duration,
-}
-
-impl Backoff {
-    /// The wait after `current` (zero before the first wait): `initial`, then doubling, at
-    /// most `max`.
-    pub fn next(&self, current: Duration) -> Duration {
-        if current.is_zero() {
-            self.initial
-        } else {
-            (current * 2).min(self.max)
-        }
-    }
-}
 
 /// What the runner needs besides devices and control.
 #[derive(Clone)]
@@ -78,26 +58,5 @@ impl std::fmt::Debug for RunSettings {
             .field("hooks", &self.hooks)
             .field("characterise", &self.characterise.is_some())
             .finish_non_exhaustive()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn backoff_doubles_up_to_its_limit() {
-        let b = Backoff {
-            initial: Duration::from_secs(1),
-            max: Duration::from_secs(4),
-        };
-        let mut d = Duration::ZERO;
-        let waits: Vec<u64> = (0..5)
-            .map(|_| {
-                d = b.next(d);
-                d.as_secs()
-            })
-            .collect();
-        assert_eq!(waits, vec![1, 2, 4, 4, 4]);
     }
 }

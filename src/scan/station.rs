@@ -9,55 +9,17 @@
 //! Layer 3 (session): depends on [`crate::devices`], the driver settings and
 //! [`crate::transport`] (through the drivers' constructors).
 
-use crate::devices::{DeviceFault, FaultClass, Instrument, YAxis};
+use crate::devices::{FaultClass, Instrument, YAxis};
 use crate::profile::Conditions;
 use crate::sj210::client::Sj210Client;
 use crate::sj210::models::ModelTable;
 use crate::sj210::sampling::pitch_from_lambda_s;
 use crate::sj210::settings::InstrumentSettings;
 use crate::stage::{AnyYAxis, ScanDirection, StageError, StageSettings};
-use std::fmt;
 use std::path::Path;
 use tokio_serial::SerialStream;
 
-pub use crate::devices::Device;
-
-/// A device error as the runner handles it.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Fault {
-    /// The device.
-    pub device: Device,
-    /// How to react.
-    pub class: FaultClass,
-    /// The instrument's NG code, when it answered with one.
-    pub ng_code: Option<u16>,
-    /// The driver's message (names the command and the cause).
-    pub message: String,
-}
-
-impl Fault {
-    /// Reduces a driver error.
-    pub fn of<E: DeviceFault>(device: Device, e: &E) -> Fault {
-        Fault {
-            device,
-            class: e.class(),
-            ng_code: e.ng_code(),
-            message: e.to_string(),
-        }
-    }
-}
-
-impl fmt::Display for Fault {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}: {}", self.device, self.message)?;
-        if let Some(c) = self.ng_code {
-            if !self.message.contains(&format!("NG{c:03}")) {
-                write!(f, " (NG{c:03})")?;
-            }
-        }
-        Ok(())
-    }
-}
+pub use crate::devices::{Device, Fault};
 
 /// Opens the devices of a station.
 #[allow(async_fn_in_trait)]

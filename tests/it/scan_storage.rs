@@ -14,7 +14,8 @@ use surfscan::scan::journal::{
     StartRecord, StopRecord, StopStatus,
 };
 use surfscan::scan::line::{LineIdentity, LineMeta};
-use surfscan::scan::metrics::{write_metrics, ScanMetrics};
+use surfscan::scan::metrics::ScanMetrics;
+use surfscan::scan::metrics_file::write_metrics;
 use surfscan::scan::scan_id::ScanId;
 use surfscan::scan::store::ScanStore;
 use surfscan::scan::store_error::StoreError;

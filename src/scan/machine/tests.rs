@@ -4,6 +4,7 @@
 use super::*;
 use crate::devices::FaultClass;
 use crate::scan::command::StartMode;
+use crate::scan::reasons::mb;
 
 const LINES: u32 = 3;
 

@@ -1,0 +1,137 @@
+//! The texts people read about a scan's faults and suspensions — the status's reason, the
+//! journal's interruption notes, the notification hook's reason — made apart from the
+//! decisions ([`super::policy`]), so that a wording can change without touching a rule and
+//! a rule without touching a wording. Each function says what one text is for.
+//!
+//! Layer 3 (session), pure: depends on [`crate::devices`] and chrono for the time stamps.
+
+use crate::devices::{Device, Fault};
+use chrono::{DateTime, SecondsFormat, Utc};
+use std::time::Duration;
+
+/// A time stamp as the texts show it (RFC 3339, seconds, `Z`).
+pub fn stamp(t: DateTime<Utc>) -> String {
+    t.to_rfc3339_opts(SecondsFormat::Secs, true)
+}
+
+/// Bytes as megabytes with one decimal.
+pub fn mb(bytes: u64) -> String {
+    format!("{:.1}", bytes as f64 / 1e6)
+}
+
+/// A fault on line `line` (0-based), as the last fault of a retried line names it.
+pub fn on_line(line: u32, what: &dyn std::fmt::Display) -> String {
+    format!("line {}: {what}", line + 1)
+}
+
+/// The status reason (and first journal note) while a device cannot be opened again.
+pub fn unavailable(device: Device, fault: &Fault) -> String {
+    format!("{device} unavailable ({fault}); reconnecting")
+}
+
+/// The note when a device the scan waited for is back.
+pub fn back_after(device: Device, waited: Duration) -> String {
+    format!(
+        "{device} back after {:.0} s; scan continues",
+        waited.as_secs_f64()
+    )
+}
+
+/// The note when a device vanished in the middle of line `line` (0-based).
+pub fn line_abandoned(line: u32, fault: &Fault) -> String {
+    format!("line {} abandoned: {fault}", line + 1)
+}
+
+/// The note when the stage lost its position on line `line` and is re-homed (the
+/// `done`-th re-home of `allowed`).
+pub fn rehoming(line: u32, fault: &Fault, done: u32, allowed: u32) -> String {
+    format!(
+        "line {} abandoned: {fault}; re-homing ({done} of {allowed} allowed)",
+        line + 1
+    )
+}
+
+/// The status reason while a line is retried within the transient budget.
+pub fn busy(device: Device, since: DateTime<Utc>, left: Duration, last: &str) -> String {
+    format!(
+        "{device} busy since {}; retrying the line (budget left {} s); last: {last}",
+        stamp(since),
+        left.as_secs()
+    )
+}
+
+/// The journal note of one retry.
+pub fn retrying(reason: &str, wait: Duration) -> String {
+    format!(
+        "suspended: {reason}; trying again in {:.1} s",
+        wait.as_secs_f64()
+    )
+}
+
+/// The note when line `line` is on disk after a suspension of `waited`.
+pub fn on_disk_after_faults(line: u32, waited: Duration) -> String {
+    format!(
+        "line {} on disk after {:.0} s of faults; scan continues",
+        line + 1,
+        waited.as_secs_f64()
+    )
+}
+
+/// What a full disk held up: the outputs, or line `line` (0-based).
+pub fn held_up(outputs: bool, line: u32) -> String {
+    if outputs {
+        "the surface and report".to_owned()
+    } else {
+        format!("line {}", line + 1)
+    }
+}
+
+/// The status reason (and the note, after `suspended: `) when the disk is full.
+pub fn disk_full(what: &str, message: &str, needed_bytes: u64) -> String {
+    format!(
+        "disk full while writing {what} ({message}); the remaining lines need about {} MB; waiting for space",
+        mb(needed_bytes)
+    )
+}
+
+/// The status reason while the disk stays too full.
+pub fn still_full(since: DateTime<Utc>, free_bytes: u64, needed_bytes: u64) -> String {
+    format!(
+        "disk full since {}: {} MB free, the remaining lines need about {} MB; free space in the output directory",
+        stamp(since),
+        mb(free_bytes),
+        mb(needed_bytes)
+    )
+}
+
+/// The note when space is back.
+pub fn space_back(free_bytes: u64, waited: Duration) -> String {
+    format!(
+        "space is back ({} MB free) after {:.0} s; scan continues",
+        mb(free_bytes),
+        waited.as_secs_f64()
+    )
+}
+
+/// The note and status reason when the operator's pause takes effect after line `line`.
+pub fn paused_after(line: u32) -> String {
+    format!("paused by the operator after line {}", line + 1)
+}
+
+/// The status reason of a scan reopened paused after a restart.
+pub fn paused_before_restart() -> String {
+    "paused by the operator before a restart; `surfscan resume` continues it".to_owned()
+}
+
+/// The note of a shutdown while paused, `done` of `total` lines on disk.
+pub fn shutdown_while_paused(done: u32, total: u32) -> String {
+    format!(
+        "shutdown (SIGTERM/SIGINT) while paused with {done} of {total} lines on disk; the daemon reopens it paused at its next start"
+    )
+}
+
+/// The note of a shutdown in the middle of a line.
+pub fn shutdown_mid_line() -> String {
+    "shutdown (SIGTERM/SIGINT): current line abandoned; the scan resumes at the next start"
+        .to_owned()
+}
