@@ -12,9 +12,12 @@
 
 use std::time::Duration;
 
+use std::sync::Arc;
+
 use crate::command::{parse, Command};
 use crate::data::{ProfileSet, YPosition};
 use crate::roughness::{Roughness, PARAMETERS};
+use crate::stats::SimStats;
 
 /// Which instrument is emulated; it decides the `{ab}` selector and field widths.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -119,7 +122,8 @@ pub enum ReadoutForm {
 }
 
 /// Configuration of the emulated instrument. Defaults: SJ-210 with profile read-out, 3 height
-/// decimals, auto-return on, battery good, 0.5 mm/s measuring, 1 mm/s return, real time.
+/// decimals, auto-return on, reads refused busy while the drive returns, battery good,
+/// 0.5 mm/s measuring, 1 mm/s return, real time.
 #[derive(Debug, Clone, PartialEq)]
 pub struct InstrumentConfig {
     /// The model.
@@ -134,6 +138,10 @@ pub struct InstrumentConfig {
     pub decimals: u8,
     /// Auto-return after a trace (`000`), or stop at the end of travel (`005`).
     pub auto_return: bool,
+    /// Whether results and the profile can be read while the drive returns (status `002`);
+    /// otherwise they are refused `NG011` (busy) until it is back. Which one a real SJ-210
+    /// does is not documented.
+    pub reads_during_return: bool,
     /// Battery state for `RDSTU01`.
     pub battery: Battery,
     /// Firmware string for `RDSJ 01`, 5 characters.
@@ -157,6 +165,7 @@ impl Default for InstrumentConfig {
             result_layout: ResultLayout::Export,
             decimals: 3,
             auto_return: true,
+            reads_during_return: false,
             battery: Battery::Good,
             firmware: "V1.00".to_string(),
             conditions: Conditions::default(),
@@ -225,6 +234,8 @@ pub struct Instrument {
     last_line: Option<usize>,
     /// Percent by which the result being answered is off (a `skew` fault), 0 normally.
     skew_pct: i32,
+    /// Counters shared with the simulator's host.
+    stats: Arc<SimStats>,
 }
 
 fn secs(s: f64) -> Duration {
@@ -248,7 +259,14 @@ impl Instrument {
             results: None,
             last_line: None,
             skew_pct: 0,
+            stats: Arc::new(SimStats::default()),
         }
+    }
+
+    /// Counts what it is asked into `stats` (shared with the simulator's host).
+    pub fn with_stats(mut self, stats: Arc<SimStats>) -> Self {
+        self.stats = stats;
+        self
     }
 
     /// Answers a frame as if the read-out cursor had gone back by the last block first: an
@@ -361,11 +379,23 @@ impl Instrument {
         }
     }
 
-    fn busy(&self) -> bool {
-        matches!(
-            self.phase,
-            Phase::Measuring { .. } | Phase::Returning { .. } | Phase::Retracting { .. }
-        )
+    /// Whether a result or profile read is refused busy now: always while measuring or
+    /// retracting, while returning unless the firmware reads during the return. Reads during
+    /// the return are counted both ways.
+    fn refuses_read(&self) -> bool {
+        match self.phase {
+            Phase::Measuring { .. } | Phase::Retracting { .. } => true,
+            Phase::Returning { .. } => {
+                let refused = !self.cfg.reads_during_return;
+                SimStats::bump(if refused {
+                    &self.stats.reads_refused_returning
+                } else {
+                    &self.stats.reads_answered_returning
+                });
+                refused
+            }
+            Phase::Idle | Phase::AtEnd | Phase::Retracted => false,
+        }
     }
 
     /// Handles one frame (terminator removed) at `now`; returns the framed reply bytes.
@@ -553,7 +583,7 @@ impl Instrument {
         if !self.selector_ok(ab) {
             return Reply::Ng(31);
         }
-        if self.busy() {
+        if self.refuses_read() {
             return Reply::Ng(11);
         }
         let Some(res) = &self.results else {
@@ -595,7 +625,7 @@ impl Instrument {
         if !form_ok {
             return Reply::Ng(31);
         }
-        if self.busy() {
+        if self.refuses_read() {
             return Reply::Ng(11);
         }
         let decimals = usize::from(self.cfg.decimals);
@@ -708,6 +738,47 @@ mod tests {
         assert_eq!(ask(&mut i, "RDRES02,07,00", 14500), "OKRsk     0.000   \r");
         assert_eq!(ask(&mut i, "RDRES02,10,00", 14500), "NG032\r");
         assert_eq!(ask(&mut i, "RDPAR", 14500), "OK09\r");
+    }
+
+    #[test]
+    fn reads_during_the_return_are_refused_busy_or_answered_as_configured() {
+        // 9 s measuring from 1 s, returning 10 s to 14.5 s (see the timeline test).
+        for during in [false, true] {
+            let cfg = InstrumentConfig {
+                reads_during_return: during,
+                result_layout: ResultLayout::Manual,
+                ..InstrumentConfig::default()
+            };
+            let stats = Arc::new(SimStats::default());
+            let mut i = Instrument::new(cfg, set(), None).with_stats(stats.clone());
+            assert_eq!(ask(&mut i, "CTSTA", 1000), "OK\r");
+            // Measuring: busy either way, and not counted as a read during the return.
+            assert_eq!(ask(&mut i, "RDEVA00", 9999), "NG011\r");
+            assert_eq!(ask(&mut i, "RDSTU00", 10000), "OK002\r");
+            let total = ask(&mut i, "RDEVA00", 10001);
+            let ra = ask(&mut i, "RDRES00,01,00", 10002);
+            if during {
+                assert_eq!(total, "OK00004\r");
+                assert_eq!(ra, "OK  2.000\r");
+                assert_eq!(
+                    ask(&mut i, "RDEVA04", 10003),
+                    "OK04,    1.000,   -1.000,    3.000,   -3.000\r"
+                );
+                assert_eq!(SimStats::get(&stats.reads_answered_returning), 3);
+                assert_eq!(SimStats::get(&stats.reads_refused_returning), 0);
+            } else {
+                assert_eq!(total, "NG011\r");
+                assert_eq!(ra, "NG011\r");
+                assert_eq!(SimStats::get(&stats.reads_answered_returning), 0);
+                assert_eq!(SimStats::get(&stats.reads_refused_returning), 2);
+            }
+            // Back at the start, the same answers either way; the status still says 002
+            // until the return is over, whatever was read meanwhile.
+            assert_eq!(ask(&mut i, "RDSTU00", 14499), "OK002\r");
+            assert_eq!(ask(&mut i, "RDSTU00", 14500), "OK000\r");
+            assert_eq!(ask(&mut i, "RDEVA00", 14501), "OK00004\r");
+            assert_eq!(ask(&mut i, "RDRES00,01,00", 14502), "OK  2.000\r");
+        }
     }
 
     #[test]

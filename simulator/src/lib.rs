@@ -14,6 +14,9 @@
 //! * [`replay`]: transcript format v1 and replay of recorded exchanges;
 //! * [`fault`]: fault-injection specs;
 //! * [`pty`]: the pseudo-terminals the simulator owns;
+//! * [`line`]: the rate the host set on the instrument's pty, and what a host at the wrong
+//!   rate gets (silence or noise);
+//! * [`stats`]: counters of what the emulated instrument was asked, for tests and benches;
 //! * [`server`]: the serve loop (pacing, faults, unplug/replug) and the [`Simulator`] builder.
 //! * [`grbl`], [`zaber`]: the simulated y stages (motion, backlash, stage faults), attached
 //!   with [`Simulator::grbl_stage`] / [`Simulator::zaber_stage`]; [`motion`]: their
@@ -24,11 +27,13 @@ pub mod command;
 pub mod data;
 pub mod fault;
 pub mod instrument;
+pub mod line;
 pub mod motion;
 pub mod pty;
 pub mod replay;
 pub mod roughness;
 pub mod server;
+pub mod stats;
 
 pub use data::{ProfileSet, YPosition};
 pub use fault::{Fault, FaultKind, FaultSpec};

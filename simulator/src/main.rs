@@ -12,6 +12,7 @@ use std::sync::Arc;
 use clap::{Parser, ValueEnum};
 use surfscan_sim::grbl::{GrblSimConfig, StageFaultSpec, StageShared};
 use surfscan_sim::instrument::{ReadoutForm, ResultLayout};
+use surfscan_sim::line::Mismatch;
 use surfscan_sim::replay::Transcript;
 use surfscan_sim::zaber::ZaberSimConfig;
 use surfscan_sim::{Battery, FaultSpec, InstrumentConfig, Model, ProfileSet, Simulator};
@@ -36,6 +37,12 @@ fn parse_readout_form(s: &str) -> Result<ReadoutForm, String> {
         "RDEVA1" => Ok(ReadoutForm::Only(Some(1))),
         _ => Err(format!("{s:?} is not RDEVA, RDEVA0 or RDEVA1")),
     }
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum LineCheckArg {
+    Silent,
+    Noise,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -117,6 +124,14 @@ struct Args {
     /// Stop at the end of travel (status 005) instead of returning.
     #[arg(long)]
     no_auto_return: bool,
+    /// Answer result and profile reads while the drive returns (status 002) instead of
+    /// refusing them NG011 (busy) until it is back.
+    #[arg(long)]
+    reads_during_return: bool,
+    /// Answer only a host whose line speed is --baud, as an instrument set to one rate does;
+    /// a host at another rate gets `silent` (nothing) or `noise` (bytes that are no reply).
+    #[arg(long, value_enum)]
+    line_check: Option<LineCheckArg>,
     /// Fault to inject, KIND[:ARG]@COMMAND[%TRACE][#N][xK] or battery:low|abnormal (repeatable);
     /// busy:MS, noeol:MS and flood:MS open a time window at the matching frame.
     #[arg(long = "fault")]
@@ -162,6 +177,7 @@ fn build(args: Args, shared: &Arc<StageShared>) -> Result<Simulator, String> {
         },
         decimals: args.decimals,
         auto_return: !args.no_auto_return,
+        reads_during_return: args.reads_during_return,
         time_scale: args.time_scale,
         measure_speed_mm_s: args.speed_mm_s,
         conditions: surfscan_sim::instrument::Conditions {
@@ -179,6 +195,12 @@ fn build(args: Args, shared: &Arc<StageShared>) -> Result<Simulator, String> {
         None => Simulator::without_instrument(),
     }
     .baud(args.baud);
+    if let Some(check) = args.line_check {
+        sim = sim.line_check(match check {
+            LineCheckArg::Silent => Mismatch::Silent,
+            LineCheckArg::Noise => Mismatch::Noise,
+        });
+    }
     if !(args.stage_backlash_um >= 0.0 && args.stage_backlash_um.is_finite()) {
         return Err(format!(
             "--stage-backlash-um {} must be a finite number ≥ 0",

@@ -136,6 +136,12 @@ impl Pty {
         &self.link
     }
 
+    /// A second descriptor of the slave side, to read the line settings the client set
+    /// ([`crate::line::HostLine`]).
+    pub fn slave_dup(&self) -> io::Result<OwnedFd> {
+        self.slave.try_clone()
+    }
+
     /// Bytes written by the simulator that the client has not read yet (the slave's input
     /// queue, `FIONREAD`).
     pub fn unread_by_client(&self) -> io::Result<usize> {

@@ -25,8 +25,10 @@ use crate::data::{DataError, ProfileSet, YPosition};
 use crate::fault::{Fault, FaultKind, FaultPlan, CHATTER_PERIOD};
 use crate::grbl::StageShared;
 use crate::instrument::{Instrument, InstrumentConfig};
+use crate::line::{HostLine, LineGate, Mismatch};
 use crate::pty::{Pty, PtyError};
 use crate::replay::{Replay, Transcript};
+use crate::stats::SimStats;
 
 /// Bytes written before a reply by the `garbage` fault.
 pub const GARBAGE: &[u8] = b"\xfe\x00\x7f#";
@@ -127,7 +129,8 @@ pub enum Outcome {
 }
 
 /// Serves `responder` over `io` until the stream ends, an unplug fault fires or `shutdown`
-/// becomes true. `epoch` is time zero of the responder's timeline.
+/// becomes true. `epoch` is time zero of the responder's timeline. With a `gate`, a frame
+/// sent at another rate than the instrument's never reaches the responder.
 pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
     io: &mut T,
     responder: &mut Responder,
@@ -135,6 +138,7 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
     pacing: Pacing,
     epoch: Instant,
     shutdown: &mut watch::Receiver<bool>,
+    gate: Option<&LineGate>,
 ) -> io::Result<Outcome> {
     let mut splitter = FrameSplitter::new();
     let mut buf = [0u8; 512];
@@ -186,6 +190,13 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
                     continue;
                 }
             };
+            if let Some(noise) = gate.and_then(LineGate::garbled) {
+                if !noise.is_empty() {
+                    io.write_all(&noise).await?;
+                    io.flush().await?;
+                }
+                continue;
+            }
             let text: String = line.iter().map(|&b| b as char).collect();
             let now = clock();
             let verdict = faults.check_at(&text, now);
@@ -349,6 +360,8 @@ pub struct Simulator {
     pacing_scale: Option<f64>,
     y: YPosition,
     stage: Option<(PathBuf, StageServe)>,
+    line_check: Option<Mismatch>,
+    stats: Arc<SimStats>,
 }
 
 impl std::fmt::Debug for Simulator {
@@ -374,6 +387,8 @@ impl Simulator {
             pacing_scale: None,
             y: YPosition::new(),
             stage: None,
+            line_check: None,
+            stats: Arc::new(SimStats::default()),
         }
     }
 
@@ -458,6 +473,13 @@ impl Simulator {
         self
     }
 
+    /// Answers only a host whose line speed is the instrument's rate ([`Simulator::baud`]), as
+    /// a real instrument set to one rate does; a host at another rate gets `mismatch`.
+    pub fn line_check(mut self, mismatch: Mismatch) -> Self {
+        self.line_check = Some(mismatch);
+        self
+    }
+
     /// Paces the link with its own time scale instead of the instrument's (1 = the wire's real
     /// speed): e.g. an instantaneous trace whose read-out still takes real time.
     pub fn pacing_time_scale(mut self, time_scale: f64) -> Self {
@@ -493,7 +515,7 @@ impl Simulator {
                     crate::instrument::Model::Sj410 => "sj410",
                 };
                 let (readout, scale) = (cfg.profile_readout, cfg.time_scale);
-                let inst = Instrument::new(cfg, profiles, y);
+                let inst = Instrument::new(cfg, profiles, y).with_stats(self.stats.clone());
                 (Responder::Emulate(Box::new(inst)), model, readout, scale)
             }
             Source::Replay(t, scale) => (
@@ -537,6 +559,24 @@ impl Simulator {
             baud: self.baud,
             time_scale: self.pacing_scale.unwrap_or(time_scale),
         };
+        let line_check = self.line_check;
+        let baud = self.baud;
+        let stats = self.stats.clone();
+        let gate_of = move |pty: &Pty| -> Option<LineGate> {
+            let mismatch = line_check?;
+            match pty.slave_dup() {
+                Ok(fd) => Some(LineGate {
+                    baud,
+                    mismatch,
+                    host: HostLine::new(fd),
+                    stats: stats.clone(),
+                }),
+                Err(e) => {
+                    tracing::warn!("cannot check the host's line speed: {e}");
+                    None
+                }
+            }
+        };
         let task = tokio::spawn(async move {
             let (Some(link), Some(mut pty)) = (self.instrument_link, pty) else {
                 // Stage only: run until shutdown.
@@ -545,6 +585,7 @@ impl Simulator {
             };
             let epoch = Instant::now();
             loop {
+                let gate = gate_of(&pty);
                 let outcome = serve_connection(
                     &mut pty,
                     &mut responder,
@@ -552,6 +593,7 @@ impl Simulator {
                     pacing,
                     epoch,
                     &mut shutdown,
+                    gate.as_ref(),
                 )
                 .await;
                 match outcome {
@@ -598,6 +640,7 @@ impl Simulator {
             shutdown: shutdown_tx,
             task,
             stage_task,
+            stats: self.stats,
         })
     }
 }
@@ -611,9 +654,15 @@ pub struct SimHandle {
     shutdown: watch::Sender<bool>,
     task: tokio::task::JoinHandle<()>,
     stage_task: Option<tokio::task::JoinHandle<()>>,
+    stats: Arc<SimStats>,
 }
 
 impl SimHandle {
+    /// What the emulated instrument was asked and how it answered so far.
+    pub fn stats(&self) -> Arc<SimStats> {
+        self.stats.clone()
+    }
+
     /// The paths announced on the ready line.
     pub fn ready(&self) -> &ReadyInfo {
         &self.ready

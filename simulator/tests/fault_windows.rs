@@ -34,7 +34,7 @@ fn serve(faults: &[&str]) -> (DuplexStream, JoinHandle<std::io::Result<Outcome>>
             baud: 0,
             time_scale: 0.0,
         };
-        serve_connection(&mut dev, &mut r, &mut plan, pacing, epoch, &mut stop).await
+        serve_connection(&mut dev, &mut r, &mut plan, pacing, epoch, &mut stop, None).await
     });
     (host, task)
 }

@@ -39,7 +39,16 @@ fn serve_at_9600(inst: Instrument) -> (DuplexStream, Served) {
             baud: 9600,
             time_scale: 1.0,
         };
-        serve_connection(&mut dev, &mut r, &mut faults, pacing, epoch, &mut stop).await
+        serve_connection(
+            &mut dev,
+            &mut r,
+            &mut faults,
+            pacing,
+            epoch,
+            &mut stop,
+            None,
+        )
+        .await
     });
     (host, server)
 }
