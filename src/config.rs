@@ -752,7 +752,7 @@ pub fn check_instrument_ranges(
 /// soft-limit-min < soft-limit-max, the model's baud rates) are checked afterwards.
 #[rustfmt::skip]
 pub const NUMERIC_KEYS: &[NumericKey] = &[
-    int_key!(instrument "instrument.baud", 300, 115_200, "baud", "set the rate the instrument is set to (9600, 19200, 38400)", |c| Some(c.baud)),
+    int_key!(instrument "instrument.baud", 300, 115_200, "baud", "set the rate the instrument is set to (9600, 19200, 38400; `surfscan probe` finds it)", |c| Some(c.baud)),
     real_key!(instrument "instrument.pitch-x-um", 0.001, 1000.0, "µm", "the SJ-210 exports 0.5 to 1.5 µm; remove the key to derive it from λs", |c| c.pitch_x_um),
     int_key!(instrument "instrument.timeouts.first-byte-ms", 1, 600_000, "ms", "the default is 2000", |c| Some(c.timeouts.first_byte_ms)),
     int_key!(instrument "instrument.timeouts.inter-byte-ms", 1, 60_000, "ms", "the default is 200", |c| Some(c.timeouts.inter_byte_ms)),

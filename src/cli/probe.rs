@@ -2,6 +2,11 @@
 //! link check, conditions, parameters, profile capability, battery — printed as a summary
 //! and optionally recorded as a replayable transcript. The stylus only moves with `--trace`.
 //!
+//! When the configured baud rate and parity get no answer, the status command alone is asked
+//! at the model's other settings ([`crate::sj210::rate_search`] orders them and reads each
+//! outcome); the checklist goes on at the one that answers, the `[instrument]` lines to paste
+//! are printed, and the exit status is 78 (the configuration is wrong).
+//!
 //! `--readout` then looks for the profile read-out command on the trace the instrument holds
 //! (candidate forms, verdicts, a ready-to-paste `[instrument.commands]` snippet, and what
 //! remains when every form is refused); `--passthrough PC_PORT` instead relays a session
@@ -16,12 +21,14 @@ use crate::devices::{Battery, DeviceFault, FaultClass, ProbeReport, ProfileReado
 use crate::profile::{FilterKind, ProfileKind};
 use crate::sj210::client::Sj210Client;
 use crate::sj210::error::Sj210Error;
+use crate::sj210::rate_search::{self, Attempt, LineSetting, RateSearch};
 use crate::sj210::readout_probe::{Conclusion, ReadoutForm, ReadoutProbe};
 use crate::sj210::recorder::{Recorder, SharedTranscript, Transcript, TranscriptHeader};
 use crate::sj210::settings::InstrumentSettings;
-use crate::transport::{FlowControl, Parity};
+use crate::transport::{FlowControl, SerialSettings};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
+use tokio_serial::SerialStream;
 
 /// Arguments of `surfscan probe`.
 #[derive(Debug, clap::Args)]
@@ -97,6 +104,9 @@ pub fn load_instrument_settings(path: &Path) -> Result<InstrumentSettings, CliEr
     Ok(settings)
 }
 
+/// The profile length the wire-time note speaks of: 4 mm (λc 0.8 mm × 5) at 0.5 µm.
+const TYPICAL_POINTS: u32 = 8000;
+
 /// Runs `surfscan probe`.
 pub fn run(args: Args) -> Result<(), CliError> {
     let settings = load_instrument_settings(&args.config)?;
@@ -109,12 +119,12 @@ pub fn run(args: Args) -> Result<(), CliError> {
         .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
     // The serial stream registers with the reactor, so it is opened inside the runtime.
     let _guard = rt.enter();
-    let port = crate::transport::open(&settings.serial())
-        .map_err(|e| CliError::new(Exit::Unavailable, e.to_string()))?;
     let log: SharedTranscript = Arc::new(Mutex::new(Transcript::new()));
     let date = chrono::Utc::now().to_rfc3339();
-    let io = Recorder::new(port, Arc::clone(&log));
     if let Some(pc_port) = &args.passthrough {
+        let port = crate::transport::open(&settings.serial())
+            .map_err(|e| CliError::new(Exit::Unavailable, e.to_string()))?;
+        let io = Recorder::new(port, Arc::clone(&log));
         let outcome = rt.block_on(passthrough(io, &settings, pc_port, args.for_s));
         let header = TranscriptHeader {
             instrument: format!(
@@ -131,8 +141,26 @@ pub fn run(args: Args) -> Result<(), CliError> {
         write_transcript(args.record.as_deref(), &log, &header)?;
         return outcome;
     }
-    let mut client = Sj210Client::new(io, table, settings.client_options());
-    let outcome = rt.block_on(checklist(&mut client, &settings, args.trace));
+    let reached = rt.block_on(reach(&settings, &table, &log));
+    let (mut client, status, search) = match reached {
+        Ok(r) => r,
+        Err(e) => {
+            let header = TranscriptHeader {
+                instrument: format!("{}: no answer at any link setting", settings.port),
+                model: settings.model.to_string(),
+                firmware: None,
+                date,
+                notes: args.notes.clone(),
+            };
+            write_transcript(args.record.as_deref(), &log, &header)?;
+            return Err(e);
+        }
+    };
+    let link = search.found().unwrap_or(search.configured);
+    if let Some(note) = rate_search::slower_than_fastest(link, &table.baud_rates, TYPICAL_POINTS) {
+        say!("note      {note}");
+    }
+    let outcome = rt.block_on(checklist(&mut client, status, args.trace));
     let mut readout = None;
     let outcome = match outcome {
         Ok(report) if args.readout => {
@@ -151,7 +179,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     if args.record.is_some() {
         let firmware = outcome.as_ref().ok().map(|r| r.identity.firmware.clone());
         let header = TranscriptHeader {
-            instrument: format!("{} at {} baud", settings.port, settings.baud),
+            instrument: format!("{} at {link}", settings.port),
             model: settings.model.to_string(),
             firmware,
             date,
@@ -167,12 +195,94 @@ pub fn run(args: Args) -> Result<(), CliError> {
         CliError::new(exit, format!("probe failed: {e}"))
     })?;
     match readout.map(|p| p.conclusion()) {
-        None | Some(Conclusion::Works(_)) | Some(Conclusion::WorksWithDoubts(..)) => Ok(()),
-        Some(_) => Err(CliError::new(
-            Exit::Failed,
-            "probe: no profile read-out form works on this instrument (see the verdicts above)",
-        )),
+        None | Some(Conclusion::Works(_)) | Some(Conclusion::WorksWithDoubts(..)) => {}
+        Some(_) => {
+            return Err(CliError::new(
+                Exit::Failed,
+                "probe: no profile read-out form works on this instrument (see the verdicts above)",
+            ))
+        }
     }
+    match search.snippet() {
+        None => Ok(()),
+        Some(snippet) => {
+            Err(CliError::new(
+                Exit::Config,
+                format!(
+                    "probe: the instrument answers at {link}, not at the configured {}; set {} in [instrument] of {}",
+                    search.configured,
+                    snippet.trim_end().replace('\n', " and "),
+                    args.config.display()
+                ),
+            ))
+        }
+    }
+}
+
+/// Opens the port at the configured link settings and asks the status; when that gets no
+/// answer, tries the model's other baud rates and parities (read-only: the status command
+/// only) until one answers. Every exchange goes into the transcript. Returns the client on
+/// the link that answered, the status it read, and the search.
+async fn reach(
+    settings: &InstrumentSettings,
+    table: &crate::sj210::models::ModelTable,
+    log: &SharedTranscript,
+) -> Result<(Sj210Client<Recorder<SerialStream>>, u16, RateSearch), CliError> {
+    let configured = LineSetting {
+        baud: settings.baud,
+        parity: settings.parity,
+    };
+    let flow = flow_name(settings.flow_control);
+    say!(
+        "link      {} {configured}, flow control {flow}, model {}",
+        settings.port,
+        settings.model
+    );
+    let mut search = RateSearch::new(configured);
+    let status_cmd = table.commands.status.plain();
+    for candidate in rate_search::candidates(configured, &table.baud_rates) {
+        let port = crate::transport::open(&SerialSettings {
+            baud: candidate.baud,
+            parity: candidate.parity,
+            ..settings.serial()
+        })
+        .map_err(|e| CliError::new(Exit::Unavailable, e.to_string()))?;
+        let io = Recorder::new(port, Arc::clone(log));
+        let mut client = Sj210Client::new(io, table.clone(), settings.client_options());
+        let asked = client.status().await;
+        let status = asked.as_ref().ok().copied();
+        let attempt = rate_search::attempt_of(asked)
+            .map_err(|e| CliError::new(Exit::Unavailable, format!("probe failed: {e}")))?;
+        search.record(candidate, attempt.clone());
+        match attempt {
+            Attempt::Answered { .. } => {
+                if let Some(snippet) = search.snippet() {
+                    say!("rate      {candidate}: the instrument answers");
+                    say!("snippet   the instrument is set to {candidate}; paste into [instrument] of the station config:");
+                    say_text!("{snippet}");
+                }
+                return match status {
+                    Some(s) => Ok((client, s, search)),
+                    // An NG to the status command at the right rate: the checklist cannot go on.
+                    None => Err(CliError::new(
+                        Exit::Failed,
+                        format!(
+                            "probe: the instrument answers at {candidate} but refuses {status_cmd:?}; record a transcript with --record and check the model"
+                        ),
+                    )),
+                };
+            }
+            Attempt::NoAnswer { why } if candidate == configured => say!(
+                "link      no answer at {candidate} ({why}); trying the {}'s other rates and parities (read-only: {status_cmd})",
+                settings.model
+            ),
+            Attempt::NoAnswer { why } => say!("rate      {candidate}: no answer ({why})"),
+        }
+    }
+    Err(CliError::new(
+        Exit::Unavailable,
+        format!("probe: {}", search.guidance().unwrap_or_default()),
+    ))
 }
 
 /// Writes the transcript to `path` when one was asked for.
@@ -287,20 +397,12 @@ fn print_readout(p: &ReadoutProbe) {
 
 async fn checklist<S>(
     c: &mut Sj210Client<S>,
-    settings: &InstrumentSettings,
+    status: u16,
     trace: bool,
 ) -> Result<ProbeReport, Sj210Error>
 where
     S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin,
 {
-    let (parity, flow) = link_names(settings);
-    say!(
-        "link      {} {} baud, parity {parity}, flow control {flow}, model {}",
-        settings.port,
-        settings.baud,
-        settings.model
-    );
-    let status = c.status().await?;
     say!(
         "status    {status:03} ({}): the link answers",
         c.table().status_meaning(status)
@@ -427,19 +529,12 @@ fn battery_name(b: Battery) -> String {
     }
 }
 
-/// Parity and flow control as the configuration spells them.
-fn link_names(settings: &InstrumentSettings) -> (&'static str, &'static str) {
-    (
-        match settings.parity {
-            Parity::None => "none",
-            Parity::Even => "even",
-            Parity::Odd => "odd",
-        },
-        match settings.flow_control {
-            FlowControl::None => "none",
-            FlowControl::RtsCts => "rts-cts",
-        },
-    )
+/// Flow control as the configuration spells it.
+fn flow_name(flow: FlowControl) -> &'static str {
+    match flow {
+        FlowControl::None => "none",
+        FlowControl::RtsCts => "rts-cts",
+    }
 }
 
 fn fmt_opt(v: Option<f64>) -> String {

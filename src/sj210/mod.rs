@@ -7,6 +7,8 @@
 //! - [`sampling`]: the x pitch of the exported profile and the point count a trace must have.
 //! - [`sanity`]: checks of a read-out (repeated blocks, the instrument's Ra against ours).
 //! - [`readout_probe`]: judging the candidate read-out forms and what to configure.
+//! - [`rate_search`]: the baud rates and parities to try when the configured ones get no
+//!   answer, the lines to paste, and a read-out's wire time at each rate.
 //! - [`models`]: per-model command strings and code tables, config overrides, `RDCON`.
 //! - [`sources`]: the documents the tables cite.
 //! - [`error`]: the two-layer error (conversation failed / instrument said NG) and trace
@@ -23,6 +25,7 @@ pub mod codec;
 pub mod error;
 pub mod models;
 pub mod ng;
+pub mod rate_search;
 pub mod readout_probe;
 pub mod recorder;
 pub mod replies;

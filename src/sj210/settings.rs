@@ -19,7 +19,8 @@ pub struct InstrumentSettings {
     /// Model: `sj210` (default), `sj220`, `sj310`, `sj410`.
     #[serde(default)]
     pub model: ModelId,
-    /// Baud rate as set on the instrument (default 9600).
+    /// Baud rate as set on the instrument (default 38400, the SJ-210's fastest: the
+    /// read-out of a profile runs at this rate).
     #[serde(default = "default_baud")]
     pub baud: u32,
     /// Parity as set on the instrument: `none` (default), `even`, `odd`.
@@ -45,7 +46,7 @@ pub struct InstrumentSettings {
 }
 
 fn default_baud() -> u32 {
-    9600
+    38_400
 }
 
 fn default_true() -> bool {
@@ -213,7 +214,7 @@ mod tests {
     fn minimal_section_gets_defaults() {
         let s: InstrumentSettings = toml::from_str("port = \"/dev/ttyUSB0\"").unwrap();
         assert_eq!(s.model, ModelId::Sj210);
-        assert_eq!(s.baud, 9600);
+        assert_eq!(s.baud, 38400);
         assert_eq!(s.timeouts.poll_interval_ms, 250);
         assert!(s.validate().is_ok());
     }

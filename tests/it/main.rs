@@ -34,6 +34,7 @@ mod scan_e2e;
 mod scan_runner;
 mod scan_storage;
 mod sj210_client;
+mod sj210_link_rate;
 mod sj210_probe_cli;
 mod sj210_readout_probe;
 mod sj210_sim;
