@@ -5,6 +5,10 @@
 //! can stand in for the port. A device that disappears (EOF, EIO, ENXIO, ENODEV) is reported
 //! as [`TransportError::Vanished`] so the scan layer can suspend and reconnect.
 //!
+//! Both drivers write through [`send`]: every write to a device has a deadline, and none
+//! waits for the bytes to leave the wire (`flush` of a serial port is a blocking `tcdrain`,
+//! which would hold a runtime thread for as long as the link takes no bytes).
+//!
 //! Layer 2 (I/O adapter): depends on tokio-serial only; nothing in the crate above layer 0.
 
 use serde::{Deserialize, Serialize};
@@ -114,6 +118,54 @@ impl TransportError {
     }
 }
 
+/// Why [`send`] could not hand a command's bytes to the link.
+#[derive(Debug, Error)]
+pub enum SendError {
+    /// The link stopped taking bytes: flow control holding the host back (CTS low with
+    /// `flow-control = "rts-cts"`), a wedged USB-serial adapter, a device that reads nothing.
+    #[error("the link took {written} of the command's {len} byte(s) and then none for {waited_ms} ms (flow control holding the host back: check the cable, the CTS line and the device's power; or a wedged USB-serial adapter: replug it)")]
+    Stalled {
+        /// Bytes the link took.
+        written: usize,
+        /// Bytes of the command.
+        len: usize,
+        /// The deadline, ms.
+        waited_ms: u64,
+    },
+    /// The write failed.
+    #[error(transparent)]
+    Io(io::Error),
+}
+
+/// Hands `bytes` to the link within `deadline`, or says how far it got. It does not flush:
+/// the bytes are the kernel's to send once written, and a reply's timeout covers their time
+/// on the wire; waiting for the wire to drain (`tcdrain`) would block a thread without a
+/// deadline.
+pub async fn send<W: tokio::io::AsyncWrite + Unpin>(
+    io: &mut W,
+    bytes: &[u8],
+    deadline: Duration,
+) -> Result<(), SendError> {
+    use tokio::io::AsyncWriteExt;
+    let end = tokio::time::Instant::now() + deadline;
+    let mut written = 0;
+    while let Some(rest) = bytes.get(written..).filter(|r| !r.is_empty()) {
+        match tokio::time::timeout_at(end, io.write(rest)).await {
+            Err(_) => {
+                return Err(SendError::Stalled {
+                    written,
+                    len: bytes.len(),
+                    waited_ms: u64::try_from(deadline.as_millis()).unwrap_or(u64::MAX),
+                })
+            }
+            Ok(Ok(0)) => return Err(SendError::Io(io::ErrorKind::WriteZero.into())),
+            Ok(Ok(n)) => written += n,
+            Ok(Err(e)) => return Err(SendError::Io(e)),
+        }
+    }
+    Ok(())
+}
+
 /// True when an I/O error on an open port means the device has gone away.
 pub fn is_vanished_io(e: &io::Error) -> bool {
     matches!(
@@ -210,6 +262,40 @@ pub fn open(settings: &SerialSettings) -> Result<SerialStream, TransportError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A link that takes 4 bytes and then none (its reader stopped): the send gives up at the
+    /// deadline and says how far it got; once the reader takes bytes again a send goes through.
+    #[tokio::test(start_paused = true)]
+    async fn a_link_that_stops_taking_bytes_fails_the_send_at_its_deadline() {
+        use tokio::io::AsyncReadExt;
+        let (mut host, mut device) = tokio::io::duplex(4);
+        let t0 = tokio::time::Instant::now();
+        let e = send(&mut host, b"RDSTU01\r", Duration::from_millis(500))
+            .await
+            .unwrap_err();
+        assert!(
+            matches!(
+                e,
+                SendError::Stalled {
+                    written: 4,
+                    len: 8,
+                    waited_ms: 500
+                }
+            ),
+            "{e:?}"
+        );
+        assert_eq!(t0.elapsed(), Duration::from_millis(500));
+        assert!(
+            e.to_string().contains("took 4 of the command's 8 byte(s)"),
+            "{e}"
+        );
+        let mut got = [0u8; 4];
+        device.read_exact(&mut got).await.unwrap();
+        assert_eq!(&got, b"RDST");
+        send(&mut host, b"OK\r", Duration::from_millis(500))
+            .await
+            .unwrap();
+    }
 
     #[test]
     fn a_regular_file_or_directory_is_named_as_such_not_as_not_a_typewriter() {

@@ -198,9 +198,11 @@ async fn drive<S: Station>(
         };
         if !action.is_effect() {
             if let Action::Close(d) = action {
+                // Closing a serial port waits for its unsent bytes to drain (up to the
+                // driver's closing wait, 30 s by default): never on this loop's thread.
                 match d {
-                    Device::Instrument => hands.instrument = None,
-                    Device::Stage => hands.stage = None,
+                    Device::Instrument => close_aside(hands.instrument.take()),
+                    Device::Stage => close_aside(hands.stage.take()),
                 }
             }
             books.immediate(ctl, action);
@@ -260,6 +262,14 @@ async fn drive<S: Station>(
         if let Some(ev) = ev {
             queue.extend(machine.handle(ev, now()));
         }
+    }
+}
+
+/// Drops a device on a blocking thread: a port whose link takes no bytes can hold `close`
+/// for the driver's closing wait.
+fn close_aside<T: Send + 'static>(device: Option<T>) {
+    if let Some(d) = device {
+        tokio::task::spawn_blocking(move || drop(d));
     }
 }
 

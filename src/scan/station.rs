@@ -24,10 +24,10 @@ pub use crate::devices::{Device, Fault};
 /// Opens the devices of a station.
 #[allow(async_fn_in_trait)]
 pub trait Station {
-    /// The profiler type.
-    type Instrument: Instrument;
-    /// The y axis type.
-    type Stage: YAxis;
+    /// The profiler type (sent to a blocking thread to be closed).
+    type Instrument: Instrument + Send + 'static;
+    /// The y axis type (sent to a blocking thread to be closed).
+    type Stage: YAxis + Send + 'static;
     /// Opens the instrument's link (the conversation starts with `probe`).
     async fn open_instrument(&mut self) -> Result<Self::Instrument, Fault>;
     /// Opens the stage's link for a scan in `direction` (the conversation starts with

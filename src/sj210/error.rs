@@ -20,6 +20,10 @@ pub enum LinkError {
         /// How long it waited.
         waited_ms: u64,
     },
+    /// The link did not take the command's bytes within the first-byte timeout: as silent as
+    /// a device that answers nothing.
+    #[error("{0}")]
+    WriteStalled(crate::transport::SendError),
     /// The reply stopped before its CR.
     #[error("reply stalled after {partial:?} with no byte for {waited_ms} ms")]
     InterByteTimeout {

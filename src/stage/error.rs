@@ -22,6 +22,9 @@ pub enum StageError {
     /// The port could not be opened.
     #[error(transparent)]
     Transport(#[from] crate::transport::TransportError),
+    /// The link did not take a command's bytes in time (flow control, a wedged adapter).
+    #[error("stage controller link: {0}")]
+    Stalled(crate::transport::SendError),
     /// No answer in time.
     #[error("stage controller did not answer {waiting_for} within {timeout_ms} ms")]
     Timeout {
@@ -132,6 +135,7 @@ impl DeviceFault for StageError {
             StageError::Transport(t) if t.is_absent() => FaultClass::Absent,
             StageError::Transport(_) => FaultClass::Fatal,
             StageError::Timeout { .. }
+            | StageError::Stalled(_)
             | StageError::Protocol { .. }
             | StageError::Rejected { .. }
             | StageError::MissedTarget { .. } => FaultClass::Transient,

@@ -1,15 +1,15 @@
 //! The line-reading loop both stage drivers share: bytes from the stream go through a
 //! [`LineFramer`], complete lines queue up, and the driver takes them one at a time with a
 //! deadline. Garbled or over-long lines are logged and skipped here, so each driver only
-//! parses text it can understand.
+//! parses text it can understand. Writes have a deadline too.
 //!
 //! Layer 2 (I/O adapter): generic over `AsyncRead + AsyncWrite + Unpin`; depends on
-//! [`super::framer`] and [`super::error`].
+//! [`super::framer`], [`super::error`] and [`crate::transport::send`].
 
 use super::framer::LineFramer;
 use super::StageError;
 use std::collections::VecDeque;
-use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite};
 use tokio::time::Instant;
 
 /// A text-line link to a controller over any byte stream.
@@ -20,29 +20,41 @@ pub struct LineLink<T> {
     lines: VecDeque<String>,
     /// Who is on the other end, for the log ("GRBL", "Zaber").
     peer: &'static str,
+    /// How long the link may take to accept one command's bytes.
+    write_deadline: std::time::Duration,
 }
 
 impl<T: AsyncRead + AsyncWrite + Unpin> LineLink<T> {
-    /// A link over `io` that refuses lines longer than `max_line` bytes.
-    pub fn new(io: T, max_line: usize, peer: &'static str) -> Self {
+    /// A link over `io` that refuses lines longer than `max_line` bytes and gives a command
+    /// `write_deadline` to be taken.
+    pub fn new(
+        io: T,
+        max_line: usize,
+        peer: &'static str,
+        write_deadline: std::time::Duration,
+    ) -> Self {
         LineLink {
             io,
             framer: LineFramer::new(max_line),
             lines: VecDeque::new(),
             peer,
+            write_deadline,
         }
     }
 
-    /// Writes and flushes; a failure means the controller is gone.
+    /// Hands a command to the link within the write deadline ([`crate::transport::send`]:
+    /// no flush, which would block a thread while the link takes no bytes). A link that
+    /// stopped taking bytes is [`StageError::Stalled`]; a write error means the controller
+    /// is gone.
     pub async fn write(&mut self, bytes: &[u8]) -> Result<(), StageError> {
-        let r = async {
-            self.io.write_all(bytes).await?;
-            self.io.flush().await
-        }
-        .await;
-        r.map_err(|e| StageError::Vanished {
-            detail: format!("write failed: {e}"),
-        })
+        crate::transport::send(&mut self.io, bytes, self.write_deadline)
+            .await
+            .map_err(|e| match e {
+                crate::transport::SendError::Io(e) => StageError::Vanished {
+                    detail: format!("write failed: {e}"),
+                },
+                stalled => StageError::Stalled(stalled),
+            })
     }
 
     /// The next complete line, `Ok(None)` when none arrived by `deadline`. End of stream
@@ -91,12 +103,31 @@ impl<T: AsyncRead + AsyncWrite + Unpin> LineLink<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::devices::{DeviceFault, FaultClass};
     use std::time::Duration;
+    use tokio::io::AsyncWriteExt;
+
+    /// A controller whose link stops taking bytes: the write ends at its deadline as a
+    /// stall (a fault the scan handles), not a hang and not a vanished controller.
+    #[tokio::test(start_paused = true)]
+    async fn a_write_the_link_does_not_take_ends_at_its_deadline() {
+        let (host, _dev) = tokio::io::duplex(2);
+        let mut link = LineLink::new(host, 16, "test", Duration::from_millis(300));
+        let t0 = Instant::now();
+        let e = link.write(b"$J=G90Y-1\n").await.unwrap_err();
+        assert_eq!(t0.elapsed(), Duration::from_millis(300));
+        assert!(matches!(e, StageError::Stalled(_)), "{e:?}");
+        assert_eq!(e.class(), FaultClass::Transient);
+        assert!(
+            e.to_string().contains("took 2 of the command's 10 byte(s)"),
+            "{e}"
+        );
+    }
 
     #[tokio::test(start_paused = true)]
     async fn lines_split_across_reads_garbage_skipped_timeout_and_eof() {
         let (host, mut dev) = tokio::io::duplex(1024);
-        let mut link = LineLink::new(host, 16, "test");
+        let mut link = LineLink::new(host, 16, "test", Duration::from_secs(1));
         dev.write_all(b"o").await.unwrap();
         dev.write_all(b"k\r\n\xff\x01\r\nsecond\n").await.unwrap();
         let soon = || Instant::now() + Duration::from_millis(50);

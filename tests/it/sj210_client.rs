@@ -682,3 +682,34 @@ async fn a_stray_reply_between_commands_is_not_taken_as_the_next_answer() {
     drop(c);
     assert_eq!(device.await.unwrap(), ["RDCON", "RDCON"]);
 }
+
+/// A link that stops taking the host's bytes (CTS held low, a wedged adapter; here a pipe
+/// whose reader stopped): the command ends at the first-byte timeout as a named stall, its
+/// recovery's status request too, and nothing hangs.
+#[tokio::test(start_paused = true)]
+async fn a_link_that_takes_no_bytes_ends_the_command_at_its_deadline() {
+    let (io, _deaf) = tokio::io::duplex(1);
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let t0 = tokio::time::Instant::now();
+    let e = c.command("RDSTU01", true).await.unwrap_err();
+    let took = t0.elapsed();
+    assert!(
+        matches!(
+            &e,
+            Sj210Error::Link {
+                source: LinkError::WriteStalled(_),
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+    assert!(
+        e.to_string()
+            .contains("took 1 of the command's 8 byte(s) and then none for 2000 ms"),
+        "{e}"
+    );
+    // The command's deadline, the drain and the recovery's own status request: bounded.
+    assert!(took >= Duration::from_millis(2000), "{took:?}");
+    assert!(took <= Duration::from_millis(3 * 2000), "{took:?}");
+    assert_eq!(e.class(), FaultClass::Transient);
+}

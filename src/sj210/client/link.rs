@@ -1,5 +1,6 @@
-//! The conversation with the instrument: one command in flight, first-byte and inter-byte
-//! timeouts, recovery after a garbled or late reply (drain, re-read status), and bounded
+//! The conversation with the instrument: one command in flight, a write deadline (the
+//! first-byte timeout: a link that takes no bytes is as silent as one that gives none),
+//! first-byte and inter-byte timeouts, recovery after a garbled or late reply (drain, re-read status), and bounded
 //! retries of idempotent reads on "not now" codes. Never retries a `CT` command.
 //!
 //! Layer 2: part of [`super::Sj210Client`]; depends on [`crate::sj210::codec`] and
@@ -8,7 +9,7 @@
 use super::{io_err, millis, Sj210Client};
 use crate::sj210::codec::{encode_command, escape_bytes, Reply};
 use crate::sj210::error::{LinkError, Sj210Error};
-use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite};
 use tokio::time::{sleep, timeout, Instant};
 use tokio_util::codec::Decoder;
 
@@ -33,10 +34,15 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         reply
     }
 
-    /// Writes one encoded command and reads its reply line.
+    /// Writes one encoded command (the link must take it within the first-byte timeout; see
+    /// [`crate::transport::send`]) and reads its reply line.
     async fn exchange(&mut self, bytes: &[u8]) -> Result<Reply, LinkError> {
-        self.io.write_all(bytes).await.map_err(io_err)?;
-        self.io.flush().await.map_err(io_err)?;
+        crate::transport::send(&mut self.io, bytes, self.opts.first_byte)
+            .await
+            .map_err(|e| match e {
+                crate::transport::SendError::Io(e) => io_err(e),
+                stalled => LinkError::WriteStalled(stalled),
+            })?;
         let mut got_any = false;
         loop {
             if let Some(reply) = self.codec.decode(&mut self.buf).map_err(io_err)? {

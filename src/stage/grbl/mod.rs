@@ -84,7 +84,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
     /// Wraps an open link.
     pub fn new(io: T, cfg: GrblConfig) -> Self {
         GrblStage {
-            link: LineLink::new(io, 256, "GRBL"),
+            link: LineLink::new(io, 256, "GRBL", cfg.reply_timeout),
             cfg,
             wco_mm: None,
             trusted: false,

@@ -76,7 +76,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
     /// Wraps an open link.
     pub fn new(io: T, cfg: ZaberConfig) -> Self {
         ZaberStage {
-            link: LineLink::new(io, 512, "Zaber"),
+            link: LineLink::new(io, 512, "Zaber", cfg.reply_timeout),
             cfg,
             dirty: false,
             next_id: 0,
