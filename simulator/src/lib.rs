@@ -21,6 +21,8 @@
 //! * [`grbl`], [`zaber`]: the simulated y stages (motion, backlash, stage faults), attached
 //!   with [`Simulator::grbl_stage`] / [`Simulator::zaber_stage`]; [`motion`]: their
 //!   trapezoidal motion profiles (pure).
+//! * [`station_config`]: the `surfscan` station configuration for the simulator's own links
+//!   (pure).
 #![warn(missing_docs)]
 
 pub mod command;
@@ -33,6 +35,7 @@ pub mod pty;
 pub mod replay;
 pub mod roughness;
 pub mod server;
+pub mod station_config;
 pub mod stats;
 
 pub use data::{ProfileSet, YPosition};

@@ -3,7 +3,9 @@
 //! opened) and runs until SIGTERM, SIGINT or, when its standard input is a pipe or a
 //! terminal, that input closing (so a test harness stops it by closing the pipe). Standard
 //! input that can never deliver a byte (`/dev/null`, a file, as under systemd or `nohup`)
-//! is not watched. The reason it stops is printed on standard error.
+//! is not watched. The reason it stops is printed on standard error. With `--write-config
+//! FILE` it first writes the station configuration for its own links
+//! ([`surfscan_sim::station_config`]).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -14,6 +16,7 @@ use surfscan_sim::grbl::{GrblSimConfig, StageFaultSpec, StageShared};
 use surfscan_sim::instrument::{ReadoutForm, ResultLayout};
 use surfscan_sim::line::Mismatch;
 use surfscan_sim::replay::Transcript;
+use surfscan_sim::station_config::{station_config, SimStage, StationConfigRequest};
 use surfscan_sim::zaber::ZaberSimConfig;
 use surfscan_sim::{Battery, FaultSpec, InstrumentConfig, Model, ProfileSet, Simulator};
 use tokio::io::AsyncReadExt;
@@ -137,11 +140,27 @@ struct Args {
     #[arg(long = "fault")]
     faults: Vec<FaultSpec>,
     /// Replay this recorded transcript (v1) instead of emulating.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "write_config")]
     transcript: Option<PathBuf>,
+    /// Write a surfscan station configuration for these links to FILE before serving (its
+    /// scans go to `scans/` and its control socket to `control.sock` beside FILE); the
+    /// served profiles are placed on its scan's y grid.
+    #[arg(long, value_name = "FILE", requires_all = ["instrument_link", "stage_link"])]
+    write_config: Option<PathBuf>,
 }
 
-fn build(args: Args, shared: &Arc<StageShared>) -> Result<Simulator, String> {
+/// The simulator to start and, with `--write-config`, the configuration to write first.
+struct Built {
+    sim: Simulator,
+    config: Option<(PathBuf, String)>,
+}
+
+/// An absolute form of `p` (the configuration is read from another working directory).
+fn absolute(p: &std::path::Path) -> Result<PathBuf, String> {
+    std::path::absolute(p).map_err(|e| format!("cannot resolve {}: {e}", p.display()))
+}
+
+fn build(args: Args, shared: &Arc<StageShared>) -> Result<Built, String> {
     if !(args.time_scale >= 0.0 && args.time_scale.is_finite()) {
         return Err(format!(
             "--time-scale {} must be a finite number ≥ 0",
@@ -220,6 +239,8 @@ fn build(args: Args, shared: &Arc<StageShared>) -> Result<Simulator, String> {
     } else {
         1e9
     };
+    let mut grbl = None;
+    let mut zaber = None;
     if let (Some(link), Some(protocol)) = (&args.stage_link, args.stage_protocol) {
         match protocol {
             StageProtocolArg::Grbl => {
@@ -237,7 +258,8 @@ fn build(args: Args, shared: &Arc<StageShared>) -> Result<Simulator, String> {
                     },
                     ..defaults
                 };
-                sim = sim.grbl_stage(link, cfg, shared.clone());
+                sim = sim.grbl_stage(link, cfg.clone(), shared.clone());
+                grbl = Some(cfg);
             }
             StageProtocolArg::Zaber => {
                 let defaults = ZaberSimConfig::default();
@@ -247,7 +269,8 @@ fn build(args: Args, shared: &Arc<StageShared>) -> Result<Simulator, String> {
                     time_scale: speed_up,
                     ..defaults
                 };
-                sim = sim.zaber_stage(link, cfg, shared.clone());
+                sim = sim.zaber_stage(link, cfg.clone(), shared.clone());
+                zaber = Some(cfg);
             }
         }
     }
@@ -258,12 +281,49 @@ fn build(args: Args, shared: &Arc<StageShared>) -> Result<Simulator, String> {
             FaultSpec::BatteryAbnormal => cfg.battery = Battery::Abnormal,
         }
     }
-    sim = sim.instrument(cfg);
-    if args.mitutoyo_r {
-        sim = sim.profiles(ProfileSet::bundled_mitutoyo_r().map_err(|e| e.to_string())?);
+    sim = sim.instrument(cfg.clone());
+    let profiles = if args.mitutoyo_r {
+        Some(ProfileSet::bundled_mitutoyo_r().map_err(|e| e.to_string())?)
     } else if let Some(p) = &args.profiles {
-        let set = ProfileSet::load(p, args.pitch_x_mm).map_err(|e| e.to_string())?;
-        sim = sim.profiles(set);
+        Some(ProfileSet::load(p, args.pitch_x_mm).map_err(|e| e.to_string())?)
+    } else {
+        None
+    };
+    let mut config = None;
+    if let (Some(file), Some(instrument_link), Some(stage_link)) =
+        (&args.write_config, &args.instrument_link, &args.stage_link)
+    {
+        let profiles = match profiles {
+            Some(p) => p,
+            None => ProfileSet::bundled().map_err(|e| e.to_string())?,
+        };
+        let file = absolute(file)?;
+        let dir = file.parent().unwrap_or(std::path::Path::new("/"));
+        let (instrument_link, stage_link) = (absolute(instrument_link)?, absolute(stage_link)?);
+        let (output_dir, control_socket) = (dir.join("scans"), dir.join("control.sock"));
+        let stage = match (&grbl, &zaber) {
+            (Some(g), _) => SimStage::Grbl(g),
+            (None, Some(z)) => SimStage::Zaber(z),
+            (None, None) => return Err("--write-config needs --stage-protocol".into()),
+        };
+        let written = station_config(
+            &StationConfigRequest {
+                instrument_link: &instrument_link,
+                instrument: &cfg,
+                baud: args.baud,
+                line_check: args.line_check.is_some(),
+                stage_link: &stage_link,
+                stage,
+                output_dir: &output_dir,
+                control_socket: &control_socket,
+            },
+            &profiles,
+        )
+        .map_err(|e| format!("--write-config: {e}"))?;
+        sim = sim.profiles(written.profiles);
+        config = Some((file, written.toml));
+    } else if let Some(p) = profiles {
+        sim = sim.profiles(p);
     }
     if let Some(t) = &args.transcript {
         let text = std::fs::read_to_string(t)
@@ -272,7 +332,15 @@ fn build(args: Args, shared: &Arc<StageShared>) -> Result<Simulator, String> {
             Transcript::parse(&text).map_err(|e| format!("transcript {}: {e}", t.display()))?;
         sim = sim.replay(transcript, args.time_scale);
     }
-    Ok(sim)
+    Ok(Built { sim, config })
+}
+
+/// Writes `text` to `file` whole or not at all (a temporary file beside it, renamed).
+fn write_config(file: &std::path::Path, text: &str) -> Result<(), String> {
+    let tmp = file.with_extension("toml.tmp");
+    std::fs::write(&tmp, text)
+        .and_then(|()| std::fs::rename(&tmp, file))
+        .map_err(|e| format!("cannot write {}: {e}", file.display()))
 }
 
 #[tokio::main]
@@ -280,13 +348,24 @@ async fn main() -> ExitCode {
     let args = Args::parse();
     let shared = StageShared::new();
     let stage_faults = args.stage_faults.clone();
-    let sim = match build(args, &shared) {
-        Ok(s) => s,
+    let Built { sim, config } = match build(args, &shared) {
+        Ok(b) => b,
         Err(e) => {
             eprintln!("surfscan-sim: {e}");
             return ExitCode::from(2);
         }
     };
+    if let Some((file, text)) = config {
+        if let Err(e) = write_config(&file, &text) {
+            eprintln!("surfscan-sim: {e}");
+            return ExitCode::from(1);
+        }
+        eprintln!(
+            "surfscan-sim: station configuration written to {}; run `surfscan scan --config {}`",
+            file.display(),
+            file.display()
+        );
+    }
     let mut handle = match sim.start() {
         Ok(h) => h,
         Err(e) => {

@@ -726,3 +726,100 @@ fn binary_runs_a_grbl_stage_alone_with_an_injected_fault() {
     }
     assert!(!l.exists(), "exit removes the stage link");
 }
+
+/// `--write-config FILE` writes the station configuration for the binary's own links before
+/// its ready line, with absolute paths (the links were given relative to the simulator's
+/// working directory) and the scans and control socket beside FILE; settings no scan can use
+/// are refused before anything is served.
+#[test]
+fn binary_writes_the_station_config_for_its_own_links() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = |args: &[&str]| {
+        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan-sim"));
+        c.current_dir(dir.path()).args(args);
+        c
+    };
+    let mut child = sim(&[
+        "--instrument-link",
+        "sj210",
+        "--stage-link",
+        "ystage",
+        "--stage-protocol",
+        "zaber",
+        "--model",
+        "sj410",
+        "--time-scale",
+        "0.02",
+        "--write-config",
+        "station.toml",
+    ])
+    .stdin(std::process::Stdio::piped())
+    .stdout(std::process::Stdio::piped())
+    .stderr(std::process::Stdio::piped())
+    .spawn()
+    .unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let mut ready = String::new();
+    out.read_line(&mut ready).unwrap();
+    assert!(ready.contains("\"event\":\"ready\""), "{ready}");
+    let text = std::fs::read_to_string(dir.path().join("station.toml")).unwrap();
+    let toml: std::collections::BTreeMap<String, toml::Value> = toml::from_str(&text).unwrap();
+    let path = |p: &str| dir.path().join(p).display().to_string();
+    assert_eq!(
+        toml["instrument"]["port"].as_str(),
+        Some(path("sj210").as_str())
+    );
+    assert_eq!(toml["instrument"]["model"].as_str(), Some("sj410"));
+    assert_eq!(
+        toml["instrument"]["commands"]["profile-total"].as_str(),
+        Some("RDEVA000")
+    );
+    assert_eq!(
+        toml["stage"]["port"].as_str(),
+        Some(path("ystage").as_str())
+    );
+    assert_eq!(toml["stage"]["protocol"].as_str(), Some("zaber"));
+    assert_eq!(toml["stage"]["nm-per-microstep"].as_float(), Some(125.0));
+    assert_eq!(toml["scan"]["lines"].as_integer(), Some(31));
+    assert_eq!(toml["output"]["dir"].as_str(), Some(path("scans").as_str()));
+    assert_eq!(
+        toml["control"]["socket"].as_str(),
+        Some(path("control.sock").as_str())
+    );
+    // The links the configuration names are served (battery good).
+    let mut c = Client::open(&dir.path().join("sj210"));
+    assert_eq!(c.ask("RDSTU01"), "OK000\r");
+    drop(child.stdin.take());
+    assert!(child.wait().unwrap().success());
+
+    for (args, why) in [
+        (&["--no-profile-readout"][..], "--no-profile-readout"),
+        (&["--time-scale", "0"][..], "time scale of at least 0.0061"),
+    ] {
+        let mut all = vec![
+            "--instrument-link",
+            "sj210b",
+            "--stage-link",
+            "ystageb",
+            "--stage-protocol",
+            "grbl",
+            "--write-config",
+            "refused.toml",
+        ];
+        all.extend_from_slice(args);
+        let o = sim(&all)
+            .stdin(std::process::Stdio::null())
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(why), "{args:?}: {err}");
+        assert!(!dir.path().join("refused.toml").exists());
+        assert!(!dir.path().join("sj210b").exists());
+    }
+    let no_stage = sim(&["--instrument-link", "sj210c", "--write-config", "x.toml"])
+        .output()
+        .unwrap();
+    assert_eq!(no_stage.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&no_stage.stderr).contains("--stage-link"));
+}

@@ -33,6 +33,7 @@ mod scan_dir_analysis;
 mod scan_e2e;
 mod scan_runner;
 mod scan_storage;
+mod sim_station_config;
 mod sj210_client;
 mod sj210_link_rate;
 mod sj210_probe_cli;
