@@ -5,6 +5,7 @@
 //! - [`ng`]: the NG code table (one for every model) and [`ng::NgCode`].
 //! - [`replies`]: what an `OK` payload means (codes, counts, results, profile blocks).
 //! - [`sampling`]: the x pitch of the exported profile and the point count a trace must have.
+//! - [`timing`]: how long a trace's phases take, when to ask the status, the deadline.
 //! - [`sanity`]: checks of a read-out (repeated blocks, the instrument's Ra against ours).
 //! - [`readout_probe`]: judging the candidate read-out forms and what to configure.
 //! - [`rate_search`]: the baud rates and parities to try when the configured ones get no
@@ -33,3 +34,4 @@ pub mod sampling;
 pub mod sanity;
 pub mod settings;
 pub mod sources;
+pub mod timing;

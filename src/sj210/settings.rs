@@ -5,6 +5,7 @@
 //! [`super::models`]; no I/O.
 
 use super::models::{CommandOverrides, ModelError, ModelId, ModelTable};
+use super::timing::DriveSpeeds;
 use crate::transport::{FlowControl, Parity, SerialSettings};
 use serde::{Deserialize, Serialize};
 use std::time::Duration;
@@ -37,6 +38,13 @@ pub struct InstrumentSettings {
     /// only for a firmware whose export is known to follow another rule.
     #[serde(default = "default_true")]
     pub check_point_count: bool,
+    /// Measuring speed of the drive as set on the instrument, mm/s (default 0.5): with the
+    /// traverse it gives when a trace is expected to end, where its status is asked.
+    #[serde(default = "default_measuring_speed")]
+    pub measuring_speed_mm_s: f64,
+    /// Return speed of the drive, mm/s (default 1.0).
+    #[serde(default = "default_return_speed")]
+    pub return_speed_mm_s: f64,
     /// Timeouts and pacing.
     #[serde(default)]
     pub timeouts: TimeoutSettings,
@@ -51,6 +59,14 @@ fn default_baud() -> u32 {
 
 fn default_true() -> bool {
     true
+}
+
+fn default_measuring_speed() -> f64 {
+    0.5
+}
+
+fn default_return_speed() -> f64 {
+    1.0
 }
 
 /// `[instrument.timeouts]`, all in milliseconds.
@@ -103,6 +119,8 @@ pub struct ClientOptions {
     pub pitch_x_um: Option<f64>,
     /// Refuse a profile whose point count is not the one its conditions give.
     pub check_point_count: bool,
+    /// The drive's speeds, for when a trace is expected to end.
+    pub speeds: DriveSpeeds,
     /// Longest accepted reply line in bytes.
     pub max_line: usize,
 }
@@ -125,6 +143,10 @@ impl ClientOptions {
             trace_deadline: t.trace_deadline_ms.map(Duration::from_millis),
             pitch_x_um,
             check_point_count: true,
+            speeds: DriveSpeeds {
+                measuring_mm_s: default_measuring_speed(),
+                return_mm_s: default_return_speed(),
+            },
             max_line: super::codec::DEFAULT_MAX_LINE,
         }
     }
@@ -146,6 +168,9 @@ pub enum SettingsError {
     /// The pitch is not a positive finite number.
     #[error("[instrument] pitch-x-um = {0} must be a positive number of micrometres")]
     Pitch(f64),
+    /// A drive speed is not a positive finite number.
+    #[error("[instrument] {0} = {1} must be a positive number of mm/s (the SJ-210 measures at 0.25, 0.5 or 0.75 mm/s)")]
+    Speed(&'static str, f64),
     /// A timeout is zero.
     #[error("[instrument.timeouts] {0} must be greater than zero")]
     ZeroTimeout(&'static str),
@@ -168,6 +193,14 @@ impl InstrumentSettings {
         if let Some(p) = self.pitch_x_um {
             if !(p.is_finite() && p > 0.0) {
                 return Err(SettingsError::Pitch(p));
+            }
+        }
+        for (v, name) in [
+            (self.measuring_speed_mm_s, "measuring-speed-mm-s"),
+            (self.return_speed_mm_s, "return-speed-mm-s"),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(SettingsError::Speed(name, v));
             }
         }
         let t = &self.timeouts;
@@ -201,6 +234,10 @@ impl InstrumentSettings {
     pub fn client_options(&self) -> ClientOptions {
         ClientOptions {
             check_point_count: self.check_point_count,
+            speeds: DriveSpeeds {
+                measuring_mm_s: self.measuring_speed_mm_s,
+                return_mm_s: self.return_speed_mm_s,
+            },
             ..ClientOptions::from_timeouts(&self.timeouts, self.pitch_x_um)
         }
     }
@@ -217,6 +254,13 @@ mod tests {
         assert_eq!(s.baud, 38400);
         assert_eq!(s.timeouts.poll_interval_ms, 250);
         assert!(s.validate().is_ok());
+        assert_eq!(
+            s.client_options().speeds,
+            DriveSpeeds {
+                measuring_mm_s: 0.5,
+                return_mm_s: 1.0
+            }
+        );
     }
 
     #[test]
@@ -242,5 +286,11 @@ mod tests {
         ));
         let s: InstrumentSettings = toml::from_str("port = \"x\"\npitch-x-um = -1.0").unwrap();
         assert_eq!(s.validate(), Err(SettingsError::Pitch(-1.0)));
+        let s: InstrumentSettings =
+            toml::from_str("port = \"x\"\nreturn-speed-mm-s = 0.0").unwrap();
+        assert_eq!(
+            s.validate(),
+            Err(SettingsError::Speed("return-speed-mm-s", 0.0))
+        );
     }
 }

@@ -35,6 +35,7 @@ mod scan_runner;
 mod scan_storage;
 mod sim_station_config;
 mod sj210_client;
+mod sj210_drive_timeline;
 mod sj210_link_rate;
 mod sj210_probe_cli;
 mod sj210_readout_probe;

@@ -95,6 +95,10 @@ fn opts() -> ClientOptions {
         trace_deadline: Some(Duration::from_secs(60)),
         pitch_x_um: None,
         check_point_count: true,
+        speeds: surfscan::sj210::timing::DriveSpeeds {
+            measuring_mm_s: 0.5,
+            return_mm_s: 1.0,
+        },
         max_line: 4096,
     }
 }

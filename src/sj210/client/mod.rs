@@ -64,6 +64,9 @@ pub struct Sj210Client<S> {
     in_flight: bool,
     /// Traces whose start command the instrument accepted.
     traces_started: u64,
+    /// When the drive of the last trace is expected back at its start, once seen returning:
+    /// the next wait for idle asks the status then.
+    back_at: Option<tokio::time::Instant>,
     /// Command mnemonics (`RDCON`, `RDSTU`, …) the instrument has answered `OK` on this
     /// link: a "command not understood" answer to one of them is a stray or late reply, not
     /// a model table that is wrong for the firmware.
@@ -83,6 +86,7 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             conditions: None,
             in_flight: false,
             traces_started: 0,
+            back_at: None,
             answered: std::collections::BTreeSet::new(),
         }
     }

@@ -1,5 +1,6 @@
 //! One trace's motion: waiting for idle (returning the detector from `005`), starting the
-//! measurement, polling the status until it is back, the deadline from the conditions,
+//! measurement, polling the status until it is back — on the poll interval, and at each
+//! phase's expected end ([`crate::sj210::timing`]) — the deadline from the conditions,
 //! over-range with the detector position, and the best-effort abort.
 //!
 //! Layer 2: part of [`super::Sj210Client`]. Time comes from `tokio::time`.
@@ -7,23 +8,35 @@
 use super::{millis, status, Sj210Client};
 use crate::sj210::codec::NgCode;
 use crate::sj210::error::{LinkError, Sj210Error};
+use crate::sj210::timing::{self, PhaseWatch, TraceTiming};
+use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::time::{sleep, Instant};
 
 impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
     /// Status must be idle; on `005` the detector is returned first, on `002` the return
-    /// is awaited.
+    /// is awaited, its status asked when the last trace's return is expected to end.
     pub async fn wait_idle(&mut self) -> Result<(), Sj210Error> {
-        let deadline = Instant::now() + self.trace_deadline();
+        let origin = Instant::now();
+        let deadline = origin + self.trace_deadline();
+        let back_at = self
+            .back_at
+            .take()
+            .map(|t| t.saturating_duration_since(origin));
+        let mut watch = PhaseWatch::returning(Duration::ZERO, back_at);
         let mut returned = false;
         loop {
             let s = self.status().await?;
+            watch.saw_other(origin.elapsed());
             match s {
                 status::IDLE => return Ok(()),
                 status::INTERMEDIATE if !returned => {
                     let c = self.table.commands.return_to_start.plain();
                     self.command(&c, false).await?;
                     returned = true;
+                    let at = origin.elapsed();
+                    let back = self.timing().map(|t| at.saturating_add(t.returning));
+                    watch = PhaseWatch::returning(at, back);
                 }
                 status::RETURNING | status::INTERMEDIATE => {}
                 status::RETRACTING | status::RETRACTED => {
@@ -42,7 +55,7 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
                     meaning: self.table.status_meaning(s),
                 });
             }
-            sleep(self.opts.poll_interval).await;
+            sleep(watch.next_poll(origin.elapsed(), self.opts.poll_interval)).await;
         }
     }
 
@@ -51,13 +64,13 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             return d;
         }
         let c = self.conditions.clone().unwrap_or_default();
-        // Traverse = evaluation length + pre/post travel (≈ λc); the SJ-210 drive range
-        // (17.5 mm) when unknown. Speed 0.5 mm/s measuring, 1 mm/s returning unless known.
-        let lc = c.lambda_c_mm.unwrap_or(2.5);
-        let traverse = c.evaluation_length_mm.map(|l| l + lc).unwrap_or(17.5);
-        let speed = c.speed_mm_s.filter(|s| *s > 0.0).unwrap_or(0.5);
-        let secs = (traverse / speed + traverse / 1.0 + 10.0) * 2.0;
-        std::time::Duration::from_secs_f64(secs.clamp(1.0, 3600.0))
+        timing::trace_deadline(&c, self.opts.speeds)
+    }
+
+    /// How long the drive measures and returns under the conditions read last.
+    fn timing(&self) -> Option<TraceTiming> {
+        let c = self.conditions.as_ref()?;
+        timing::trace_timing(c, self.opts.speeds)
     }
 
     /// Over-range: read the detector position for the log, then the named error.
@@ -99,10 +112,12 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         self.traces_started += 1;
         let started = Instant::now();
         let deadline = self.trace_deadline();
+        let mut watch = PhaseWatch::started(self.timing());
+        self.back_at = None;
         let mut active = false;
         let mut link_failures = 0u32;
         loop {
-            sleep(self.opts.poll_interval).await;
+            sleep(watch.next_poll(started.elapsed(), self.opts.poll_interval)).await;
             let s = match self.status().await {
                 Ok(s) => {
                     link_failures = 0;
@@ -120,6 +135,12 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
                 }
                 Err(e) => return Err(e),
             };
+            let at = started.elapsed();
+            match s {
+                status::MEASURING => watch.saw_measuring(at),
+                status::RETURNING => watch.saw_returning(at),
+                _ => watch.saw_other(at),
+            }
             match s {
                 status::MEASURING | status::RETURNING => active = true,
                 status::IDLE | status::INTERMEDIATE if active => return Ok(()),
