@@ -504,6 +504,7 @@ fn write_scan(parent: &Path, kind: ProfileKind, cols: usize) -> PathBuf {
             drive_unit: "standard".into(),
             conditions: conditions.clone(),
             peer: None,
+            job: None,
         },
         faults,
     )

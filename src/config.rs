@@ -49,6 +49,31 @@ pub struct Config {
     /// it reports itself.
     #[serde(default)]
     pub traceability: TraceabilitySettings,
+    /// `[jobs]`: where the recipes are.
+    #[serde(default)]
+    pub jobs: JobsSettings,
+}
+
+/// `[jobs]`: recipes (named plans with their measuring conditions, analysis and
+/// specification; see [`crate::jobs::recipe`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub struct JobsSettings {
+    /// Directory of the recipe files, `NAME.toml` each (default `/etc/surfscan/recipes`).
+    #[serde(default = "d_recipes")]
+    pub recipes: PathBuf,
+}
+
+impl Default for JobsSettings {
+    fn default() -> Self {
+        JobsSettings {
+            recipes: d_recipes(),
+        }
+    }
+}
+
+fn d_recipes() -> PathBuf {
+    PathBuf::from("/etc/surfscan/recipes")
 }
 
 /// `[traceability]`: facts about the instrument that it does not report over its link, for
@@ -64,6 +89,11 @@ pub struct TraceabilitySettings {
     pub stylus_tip_radius_um: Option<f64>,
     /// Date of the instrument's last calibration, ISO 8601 (`YYYY-MM-DD`).
     pub calibration_date: Option<String>,
+    /// The expanded (k = 2) relative uncertainty of the instrument's height scale stated by
+    /// its calibration certificate, %: combined with the spread of the lines in every mean's
+    /// uncertainty, and each line's uncertainty in a specification's verdict. Absent: the
+    /// reports say that the instrument's uncertainty is not accounted for.
+    pub calibration_uncertainty_pct: Option<f64>,
 }
 
 fn d_attempts() -> u32 {
@@ -794,6 +824,7 @@ pub const NUMERIC_KEYS: &[NumericKey] = &[
     int_key!("fit.v-control-rows", 2, 100_000, "", "pole rows across the lines, at most the number of lines; remove the key for a quarter of the lines", |c| c.fit.v_control_rows),
     int_key!("notify.timeout-s", 1, 86_400, "s", "the default is 30", |c| c.notify.as_ref().map(|n| n.timeout_s)),
     real_key!("traceability.stylus-tip-radius-um", 0.01, 100.0, "µm", "the SJ-210's standard styli have 2 or 5 µm", |c| c.traceability.stylus_tip_radius_um),
+    real_key!("traceability.calibration-uncertainty-pct", 0.001, 100.0, "%", "the expanded (k = 2) relative uncertainty on the calibration certificate, e.g. 3.0", |c| c.traceability.calibration_uncertainty_pct),
 ];
 
 #[cfg(test)]

@@ -25,7 +25,7 @@
 //!    [`report`] (characterisation of a completed scan, a scan directory or a grid into
 //!    report.json, report.html, summary.csv, plots and X3P, section by section; the runner
 //!    reaches it through the scan's `Characterise` contract, supplied by the composition),
-//!    [`station_lock`] (one process per station).
+//!    [`station_lock`] (one process per station), [`jobs`] (recipes).
 //! 5. Composition: [`cli`] (one file per subcommand) and `main.rs`.
 //!
 //! The simulator (`simulator/`, crate `surfscan-sim`) speaks the instrument's and the
@@ -42,6 +42,7 @@ pub mod devices;
 pub mod fit;
 pub mod hook;
 pub mod iges;
+pub mod jobs;
 pub mod metrology;
 pub mod numbers;
 pub mod numfmt;

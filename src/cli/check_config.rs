@@ -1,13 +1,15 @@
 //! `surfscan check-config [FILE | --config FILE]`: validates a station configuration exactly as the daemon
-//! and `scan` load it (every table, every key, the plan), without opening any device, and
-//! prints what it would do. Device paths that are absent or are not device nodes are noted
+//! and `scan` load it (every table, every key, the plan), and every recipe in its `[jobs]
+//! recipes` directory as a start would read it, without opening any device, and prints what
+//! it would do. Device paths that are absent or are not device nodes are noted
 //! (a device may be plugged in later); a port that is a regular file, a directory or another
 //! node that can never be a serial port makes the file invalid.
 //!
 //! Exit status: 0 valid (notes are printed on standard error), 78 invalid or unreadable,
 //! with the message naming the file, the key and the fix.
 //!
-//! Layer 5 (composition): depends on [`crate::config`] and [`crate::transport`].
+//! Layer 5 (composition): depends on [`crate::config`], [`crate::jobs::recipe`] and
+//! [`crate::transport`].
 
 use super::scan::load_config;
 use super::{CliError, Exit, DEFAULT_CONFIG};
@@ -96,6 +98,35 @@ pub fn check_ports(config: &Config) -> Result<Vec<String>, String> {
     Ok(notes)
 }
 
+/// Every recipe of the station's `[jobs] recipes` directory, read and validated as a start
+/// reads it: their lines for people and notes, or the first invalid one (exit 78).
+pub fn check_recipes(config: &Config) -> Result<(String, Vec<String>), CliError> {
+    let dir = &config.jobs.recipes;
+    let names = crate::jobs::recipe::names(dir).map_err(|e| {
+        CliError::new(
+            Exit::Config,
+            format!(
+                "[jobs] recipes = {}: cannot list the directory: {e}",
+                dir.display()
+            ),
+        )
+    })?;
+    let mut notes = Vec::new();
+    if names.is_empty() {
+        notes.push(format!(
+            "[jobs] recipes: no recipe (NAME.toml) in {}; scans run the station's [scan] plan",
+            dir.display()
+        ));
+    }
+    let mut out = String::new();
+    for name in names {
+        let r = crate::jobs::recipe::Recipe::load(dir, &name, config)
+            .map_err(|e| CliError::new(Exit::Config, e.to_string()))?;
+        let _ = writeln!(out, "  recipe      {name}: {}", r.summary(config));
+    }
+    Ok((out, notes))
+}
+
 /// Runs `surfscan check-config`.
 pub fn run(args: Args) -> Result<(), CliError> {
     let path = args.path();
@@ -108,7 +139,9 @@ pub fn run(args: Args) -> Result<(), CliError> {
         hash.get(..12).unwrap_or(&hash)
     );
     say_text!("{}", summary(&config));
-    for note in notes {
+    let (recipes, recipe_notes) = check_recipes(&config)?;
+    say_text!("{recipes}");
+    for note in notes.into_iter().chain(recipe_notes) {
         tell!("surfscan: note: {note}");
     }
     Ok(())

@@ -44,6 +44,7 @@ pub mod daemon;
 pub mod demo;
 pub mod docs;
 pub mod fit;
+pub mod list;
 pub mod model_args;
 pub mod probe;
 pub mod scan;
@@ -89,8 +90,10 @@ pub enum Command {
     Abort(control::CommandArgs),
     /// Start a scan of the configured plan, and wait until it is under way (exit 1 with the reason when it cannot begin).
     Start(control::StartArgs),
-    /// Check a station configuration without opening any device (exit 78 when invalid).
+    /// Check a station configuration and its recipes without opening any device (exit 78 when invalid).
     CheckConfig(check_config::Args),
+    /// List the scans on the station: state, recipe, specimen, verdict, Ra and Sa, warnings.
+    List(list::Args),
     /// Print the shell completion script for bash, zsh, fish, elvish or powershell.
     Completions(docs::CompletionsArgs),
     /// Write the man pages (surfscan.1 and one per subcommand) into a directory.
@@ -175,6 +178,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Abort(args) => control::run_command(control::Verb::Abort, args),
         Command::Start(args) => control::run_start(args),
         Command::CheckConfig(args) => check_config::run(args),
+        Command::List(args) => list::run(args),
         Command::Completions(args) => docs::run_completions(args),
         Command::Manpages(args) => docs::run_manpages(args),
     }

@@ -132,6 +132,24 @@ pub struct StartRecord {
     /// Who started the scan (the control socket's peer, or this process).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub peer: Option<Peer>,
+    /// The job the scan was made for: its recipe frozen (`None` for a scan of the station's
+    /// own plan).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub job: Option<JobRecord>,
+}
+
+/// The job a scan was made for: a recipe's scan, queued or started with `--recipe`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct JobRecord {
+    /// The queue's job number; `None` for a scan started with `--recipe` outside the queue.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub id: Option<u64>,
+    /// The recipe's name.
+    pub recipe: String,
+    /// SHA-256 of the recipe's text, hex.
+    pub recipe_sha256: String,
+    /// The recipe's text as the job froze it: what the scan follows and is judged by.
+    pub recipe_text: String,
 }
 
 /// A completed, durably stored line.

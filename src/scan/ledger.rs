@@ -297,6 +297,7 @@ mod tests {
             drive_unit: String::new(),
             conditions: Default::default(),
             peer: None,
+            job: None,
         };
         let journal = Journal::create(store.root(), start.clone(), disk).unwrap();
         Ledger::new(store, journal, start, Arc::default(), None)

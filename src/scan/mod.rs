@@ -7,7 +7,8 @@
 //! serves the runner's [`status`] and forwards [`command`]s).
 //!
 //! - [`plan`]: the lines to trace, the surface to fit and how the lines are characterised,
-//!   frozen in the journal, and its disk estimate.
+//!   frozen in the journal, and its disk estimate; [`expected`]: the measuring conditions a
+//!   job expects.
 //! - [`settings`]: what the runner is told by the composition layer.
 //! - [`status`], [`command`], [`event`]: the snapshots the runner publishes, the operator
 //!   commands it takes, the events it reports (for the notification hook).
@@ -37,6 +38,7 @@ pub mod device_ops;
 pub mod disk;
 pub mod disk_ops;
 pub mod event;
+pub mod expected;
 pub mod faults;
 pub mod journal;
 pub mod ledger;

@@ -97,6 +97,7 @@ pub(super) fn create(
         drive_unit: report.identity.drive_unit.clone(),
         conditions: report.conditions.clone(),
         peer: who.peer,
+        job: None,
     };
     let journal =
         Journal::create(store.root(), start.clone(), faults).map_err(StoreError::Journal)?;

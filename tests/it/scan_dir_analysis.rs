@@ -132,6 +132,7 @@ fn build_scan(
             drive_unit: DRIVE.into(),
             conditions: conditions(kind),
             peer: None,
+            job: None,
         },
         faults,
     )

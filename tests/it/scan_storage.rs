@@ -83,6 +83,7 @@ fn start_record(id: &ScanId, lines: u32) -> StartRecord {
         drive_unit: "standard".into(),
         conditions: Conditions::default(),
         peer: None,
+        job: None,
     }
 }
 

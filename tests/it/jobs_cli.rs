@@ -1,0 +1,190 @@
+//! Recipes, the queue's commands and the list of scans, through the real binary: what an
+//! operator types and what a program reads.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use surfscan::jobs::synthetic::{write, SyntheticReport, SyntheticScan};
+use surfscan::scan::journal::StopStatus;
+use surfscan::specification::Verdict;
+
+fn surfscan(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(args)
+        .env_remove("RUST_LOG")
+        .output()
+        .unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// A station configuration (the demo's, with character devices as ports) whose recipes are
+/// in `dir/recipes`.
+fn station(dir: &Path) -> PathBuf {
+    let p = dir.join("station.toml");
+    let mut t = surfscan::cli::demo::demo_config(
+        Path::new("/dev/null"),
+        Path::new("/dev/zero"),
+        &dir.join("out"),
+    );
+    t.push_str(&format!(
+        "\n[jobs]\nrecipes = \"{}\"\n",
+        dir.join("recipes").display()
+    ));
+    std::fs::write(&p, t).unwrap();
+    std::fs::create_dir_all(dir.join("recipes")).unwrap();
+    p
+}
+
+const BRASS: &str = r#"description = "brass coupon, turned face"
+[plan]
+lines = 11
+y-step-mm = 0.01
+[conditions]
+lambda-c-mm = 0.8
+[specification]
+limits = ["Ra 0.8", "Rz max 6.3"]
+"#;
+
+#[test]
+fn check_config_checks_every_recipe_and_names_a_bad_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = station(dir.path());
+    let cfg = cfg.to_str().unwrap();
+    let out = surfscan(&["check-config", cfg]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("no recipe (NAME.toml)"),
+        "{}",
+        text(&out.stderr)
+    );
+
+    std::fs::write(dir.path().join("recipes/brass.toml"), BRASS).unwrap();
+    let out = surfscan(&["check-config", cfg]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(
+        stdout.contains("recipe      brass: 11 lines from y = -20.0000 mm (the station's; --y-start-mm sets it per job) in steps of 0.0100 mm, 2 limits (Ra 0.8, Rz max 6.3)"),
+        "{stdout}"
+    );
+
+    // Each malformed recipe: exit 78 naming the file, the key and what is accepted.
+    let bad = dir.path().join("recipes/steel.toml");
+    for (text_of, says) in [
+        (BRASS.replace("\"Ra 0.8\"", "\"Ra0.8x\""), "specification.limits: limits[0]: \"Ra0.8x\": put a space between the parameter and the limit"),
+        (BRASS.replace("\"Ra 0.8\"", "\"Ra 0.8 mm\""), "the limit is in mm: limits are written in µm"),
+        (BRASS.replace("\"Rz max 6.3\"", "\"L Ra 1.2\""), "is not below the upper limit"),
+        (BRASS.replace("\"Rz max 6.3\"", "\"Sq 1\""), "not a parameter a scan computes (accepted: Ra, Rq"),
+        (BRASS.replace("lines = 11", "lines = 11\ny-start-mm = 400.0"), "plan: line 1 at y = 400 mm lies outside the stage's soft limits"),
+        (BRASS.replace("lambda-c-mm = 0.8", "lambda-c-mm = 0.8\nspeed = 1"), "unknown field `speed`"),
+    ] {
+        std::fs::write(&bad, &text_of).unwrap();
+        let out = surfscan(&["check-config", cfg]);
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(78), "{err}");
+        assert!(err.contains(&format!("recipe {}", bad.display())), "{err}");
+        assert!(err.contains(says), "{says}: {err}");
+    }
+}
+
+fn synthetic(k: u64, specimen: &str, recipe: &str, verdict: Verdict) -> SyntheticScan {
+    SyntheticScan {
+        id: format!("2026031{k}T220000Z-{specimen}"),
+        sequence: k,
+        started: chrono::DateTime::parse_from_rfc3339(&format!("2026-03-1{k}T22:00:00Z"))
+            .unwrap()
+            .into(),
+        specimen: specimen.into(),
+        recipe: Some((recipe.into(), Some(k))),
+        lines: 31,
+        done: 31,
+        stop: Some(StopStatus::Success),
+        report: Some(SyntheticReport {
+            verdict: Some(verdict),
+            ra_um: vec![0.61, 0.63],
+            sa_um: 0.75,
+            warnings: k as usize,
+        }),
+    }
+}
+
+#[test]
+fn list_shows_the_scans_and_filters_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("out");
+    write(&out_dir, &synthetic(1, "C-1", "brass", Verdict::Conforms)).unwrap();
+    write(
+        &out_dir,
+        &synthetic(2, "C-2", "brass", Verdict::DoesNotConform),
+    )
+    .unwrap();
+    write(
+        &out_dir,
+        &synthetic(3, "S-1", "steel", Verdict::NotDecidable),
+    )
+    .unwrap();
+    let d = out_dir.to_str().unwrap();
+    let out = surfscan(&["list", "--dir", d]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let t = text(&out.stdout);
+    let lines: Vec<&str> = t.lines().collect();
+    assert_eq!(lines.len(), 4, "{t}");
+    assert!(
+        lines[0].starts_with("SCAN") && lines[0].contains("VERDICT"),
+        "{t}"
+    );
+    assert!(
+        lines[2].contains("20260312T220000Z-C-2")
+            && lines[2].contains("success")
+            && lines[2].contains("brass")
+            && lines[2].contains("does not conform")
+            && lines[2].contains("0.6200")
+            && lines[2].contains("0.7500"),
+        "{t}"
+    );
+    // The configuration's [output] dir is listed the same; filters combine.
+    let cfg = station(dir.path());
+    let out = surfscan(&[
+        "list",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--recipe",
+        "brass",
+        "--verdict",
+        "does-not-conform",
+        "--json",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = v.as_array().unwrap();
+    assert_eq!(rows.len(), 1, "{v}");
+    assert_eq!(rows[0]["specimen"], "C-2");
+    assert_eq!(rows[0]["verdict"], "does not conform");
+    assert_eq!(rows[0]["warnings"], 2);
+    let out = surfscan(&[
+        "list",
+        "--dir",
+        d,
+        "--since",
+        "2026-03-12",
+        "--specimen",
+        "*-1",
+    ]);
+    let t = text(&out.stdout);
+    assert!(
+        t.contains("S-1") && !t.contains("C-1") && !t.contains("C-2"),
+        "{t}"
+    );
+    // What cannot be read is a usage error naming the accepted forms.
+    let out = surfscan(&["list", "--dir", d, "--since", "12/03/2026"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("YYYY-MM-DD"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = surfscan(&["list", "--dir", d, "--verdict", "pass"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("does-not-conform"));
+}
