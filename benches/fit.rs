@@ -163,9 +163,17 @@ fn bench_residual_and_csv(rows: usize, cols: usize, runs: usize) {
         }
     }
     let (mut wall, mut cpu) = (Vec::new(), Vec::new());
+    let options = surfscan::input::ReadOptions {
+        pitch_x_mm: Some(0.0005),
+        pitch_y_mm: Some(0.01),
+        z_unit: None,
+    };
     for _ in 0..runs {
+        let bytes = text.clone().into_bytes();
         let (t, c) = (Instant::now(), cpu_s());
-        let g = surfscan::cli::fit::parse_grid(&text).expect("parse");
+        let g = surfscan::input::read_csv(std::path::Path::new("bench.csv"), bytes, &options)
+            .expect("parse")
+            .grid;
         wall.push(t.elapsed().as_secs_f64());
         cpu.push(cpu_s() - c);
         assert_eq!(g.heights_um.len(), rows * cols);

@@ -269,20 +269,28 @@ fn timed<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, f64) {
 /// reaches (it pays page faults, thread start-ups and contention on top).
 fn print_floor(csv: &Path, reference_s: f64, disk_s: f64, runs: usize) {
     use surfscan::fit::{fit_grid, max_residual_mm, FitOptions, VMethod};
-    use surfscan::metrology::areal::{sq_um, Grid};
+    use surfscan::metrology::areal::{sq_um, HeightMap};
     use surfscan::metrology::holdout::between_lines;
-    let text = std::fs::read_to_string(csv).expect("read grid csv");
+    let bytes = std::fs::read(csv).expect("read grid csv");
+    let read_options = surfscan::input::ReadOptions {
+        pitch_x_mm: Some(PITCH_X_MM),
+        pitch_y_mm: Some(PITCH_Y_MM),
+        z_unit: None,
+    };
+    let read = || {
+        surfscan::input::read_csv(csv, bytes.clone(), &read_options)
+            .expect("read grid csv")
+            .grid
+    };
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as f64;
     let start_s = median(
         (0..runs)
             .map(|_| run(surfscan().arg("--version")).wall_s)
             .collect(),
     );
-    let (parse_s, parse_cpu) = timed(runs, || {
-        surfscan::cli::fit::parse_grid(&text).expect("parse grid")
-    });
-    let grid = surfscan::cli::fit::parse_grid(&text).expect("parse grid");
-    let y: Vec<f64> = (0..grid.rows).map(|r| r as f64 * PITCH_Y_MM).collect();
+    let (parse_s, parse_cpu) = timed(runs, read);
+    let grid = read();
+    let y = grid.y_mm.clone();
     let options = FitOptions::default();
     let (fit_s, fit_cpu) = timed(runs, || {
         fit_grid(PITCH_X_MM, &y, &grid.heights_um, grid.cols, options).expect("fit")
@@ -293,12 +301,12 @@ fn print_floor(csv: &Path, reference_s: f64, disk_s: f64, runs: usize) {
         surfscan::iges::writer::format_net_reals(&fit.surface, &mut text).expect("format")
     });
     // Every 2nd line held out, as `fit` does for this grid (fewer lines hold out fewer).
-    let every = surfscan::metrology::holdout::holdout_every(grid.rows, options.degree_v)
+    let every = surfscan::metrology::holdout::holdout_every(grid.rows(), options.degree_v)
         .expect("enough lines for the verdict");
     let (_, verdict_cpu) = timed(runs, || {
-        let g = Grid {
+        let g = HeightMap {
             heights_um: &grid.heights_um,
-            rows: grid.rows,
+            rows: grid.rows(),
             cols: grid.cols,
             pitch_x_mm: PITCH_X_MM,
             pitch_y_mm: PITCH_Y_MM,
@@ -575,7 +583,8 @@ fn bench_scan(dir: &Path, cols: usize, runs: usize, kinds: &[ProfileKind]) {
         let mut stages = serde_json::Value::Null;
         for _ in 0..runs {
             let (t, c) = (Instant::now(), process_cpu_s());
-            let out = characterise_scan(&scan, &ScanAnalysisOptions::default())
+            let input = surfscan::input::read(&scan, &Default::default()).expect("read scan");
+            let out = characterise_scan(&input, &ScanAnalysisOptions::default())
                 .expect("characterise scan");
             wall.push(t.elapsed().as_secs_f64());
             cpu.push(process_cpu_s() - c);

@@ -7,7 +7,8 @@
 //!
 //! 0. Vocabulary, no I/O: [`units`] (mm, µm, integer nm), [`numfmt`] (numbers written for
 //!    people), [`build_info`] (version and commit), [`profile`] (a traced line with its
-//!    metadata), [`nurbs`] (the surface as a value), [`devices`] (the contracts between the
+//!    metadata), [`grid`] (the one grid of traced lines every analysis reads), [`nurbs`] (the
+//!    surface as a value), [`devices`] (the contracts between the
 //!    scan runner and the drivers), [`numbers`] (decimal numbers in CSV text, read fast).
 //! 1. Pure logic: [`fit`] (the paper's interpolation, incremental), [`iges`] (IGES 5.3
 //!    writer/reader), [`metrology`] (ISO roughness, bearing area curves, areal parameters),
@@ -20,6 +21,7 @@
 //!    session machine and the runner that performs its actions, the outputs of a completed
 //!    scan).
 //! 4. Process edges: [`config`] (the station's TOML, validated), [`telemetry`] (logging),
+//!    [`input`] (the one reader of scan directories, grid and profile CSVs and X3P files),
 //!    [`control`] (the operator's control socket),
 //!    [`service`] (systemd notifications), [`hook`] (the notification command),
 //!    [`report`] (characterisation of a completed scan, a scan directory or a grid into
@@ -40,8 +42,10 @@ pub mod config;
 pub mod control;
 pub mod devices;
 pub mod fit;
+pub mod grid;
 pub mod hook;
 pub mod iges;
+pub mod input;
 pub mod jobs;
 pub mod metrology;
 pub mod numbers;

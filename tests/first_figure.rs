@@ -3,7 +3,7 @@
 //! before those texts are measured, not only when drawing starts. This test is a binary of its
 //! own so that no other test has drawn a figure, and so registered the font, before it runs.
 
-use surfscan::metrology::areal::Grid;
+use surfscan::metrology::areal::HeightMap;
 use surfscan::metrology::plots::plot_height_map;
 
 /// The contents of the SVG's `<text>` elements, in document order.
@@ -25,7 +25,7 @@ fn the_first_height_map_of_a_process_wraps_its_footer_to_the_figure() {
     let heights: Vec<f64> = (0..rows * cols)
         .map(|k| (k as f64 * 0.013).sin() + 0.2 * (k as f64 * 0.31).cos())
         .collect();
-    let grid = Grid {
+    let grid = HeightMap {
         heights_um: &heights,
         rows,
         cols,

@@ -1,20 +1,17 @@
-//! `surfscan fit`: CSV grid of heights, or a scan directory, → NURBS surface → IGES file and
-//! fit report.
+//! `surfscan fit`: the heights of a scan directory, a grid CSV or an X3P file, read by the one
+//! reader ([`crate::input`], whose findings it prints), → NURBS surface → IGES file and fit
+//! report.
 //!
-//! A scan directory (`lines/NNNN.csv` + `NNNN.json`, as the scan daemon writes it) is fitted
-//! from its complete lines in index order: y of each line is its target `y_target_nm`, the x
-//! pitch is the one stored with the lines, the default output is `SCAN_DIR/surface.igs`.
-//! Lines with only one of their two files are left out and named in a warning. Each line's
-//! heights file is checked against the SHA-256 its journal record holds before it is read: a
-//! file changed after it was traced, and a line the journal never committed, are left out and
-//! named in a warning, and the other lines are fitted. An existing `SCAN_DIR/surface.igs` (a completed scan's surface) is not replaced
-//! unless `--force` is given or `-o` names the output. A grid CSV needs `--pitch-x`,
-//! `--pitch-y` and `-o`; an IGES file or another non-grid input is named as such.
+//! A scan's lines are fitted at their y (the target `y_target_nm`) with the x pitch stored
+//! with them; the default output is `SCAN_DIR/surface.igs`, and an existing one (a completed
+//! scan's surface) is not replaced unless `--force` is given or `-o` names the output. Other
+//! inputs need `-o`. The lines the reader leaves out are named in the IGES Start section and
+//! the report, and the fit is partial: "N of M lines", exit 3, the surface written.
 //!
-//! Exit status: 0 done; 2 bad pitch or degree arguments, an input of the wrong kind, or an
-//! existing surface not to be replaced; 74 the input cannot be read or an output cannot be
-//! written; 1 the data are malformed (the message names line, column and content), a line
-//! file does not match its journal record, or the data cannot be interpolated.
+//! Exit status: 0 done; 3 done from fewer lines than the input holds; 2 bad pitch or degree
+//! arguments, an input of the wrong kind, or an existing surface not to be replaced; 74 the
+//! input cannot be read or an output cannot be written; 1 the data cannot be used (the
+//! message names what and where) or cannot be interpolated.
 //!
 //! A surface whose IGES text does not fit one file (the P section is capped at 9,999,999
 //! lines) is written as several complete IGES files of whole exact patches: `OUT.igs` is then
@@ -36,15 +33,18 @@
 //!
 //! Layer 5 (composition).
 
+use super::input_args::{tell_findings, InputArgs};
 use super::model_args::ModelArgs;
 use super::{CliError, Exit};
 use crate::atomic::write_atomically;
 use crate::fit::{max_residual_mm, FitOptions, FitResult, IncrementalFitter};
+use crate::grid::{Grid, LeftOut};
 use crate::iges::{IgesOptions, MAX_SECTION_LINES};
+use crate::input::{GridInput, Source};
 use crate::metrology::alternatives::{
     compare as compare_alternatives, table as alternatives_table,
 };
-use crate::metrology::areal::{sq_um as areal_sq_um, Grid as ArealGrid};
+use crate::metrology::areal::{sq_um as areal_sq_um, HeightMap};
 use crate::metrology::holdout::{between_lines, holdout_every_or_reason, ordinal};
 use crate::metrology::outliers::{bridged_grid, LineSpike};
 use crate::metrology::surface_model::{fit_model, ModelRecipe};
@@ -57,18 +57,15 @@ use std::time::Instant;
 /// Arguments of `surfscan fit`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Scan directory, or grid CSV of heights in µm (rows = traced lines along y, columns =
-    /// points along x).
+    /// Scan directory, grid CSV of heights (rows = traced lines along y, columns = points
+    /// along x) or X3P file.
     pub input: PathBuf,
     /// Output IGES file (required for a grid CSV; default `SCAN_DIR/surface.igs`).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
-    /// Pitch along x (between columns), mm (grid CSV only; a scan stores its own).
-    #[arg(long)]
-    pub pitch_x: Option<f64>,
-    /// Pitch along y (between rows), mm (grid CSV only; a scan's lines are at their stored y).
-    #[arg(long)]
-    pub pitch_y: Option<f64>,
+    /// The pitches of a grid CSV and the unit of a CSV's heights.
+    #[command(flatten)]
+    pub read: InputArgs,
     /// Degree along u (x). Default: a scan's frozen plan, else 5 (the paper).
     #[arg(long)]
     pub degree_u: Option<usize>,
@@ -99,56 +96,6 @@ pub struct Args {
     pub force: bool,
 }
 
-/// What a file given to `fit` is, from its name and first bytes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum InputKind {
-    /// Text that may be a grid CSV.
-    GridCsv,
-    /// An IGES file (`.igs`/`.iges`, or 80-column lines with `S` in column 73).
-    Iges,
-    /// A zip archive or an `.x3p` file.
-    X3p,
-}
-
-/// A CSV file's bytes as text, without the byte-order mark that spreadsheet programs put
-/// before "UTF-8 CSV" (it is no part of the first value or header). Bytes that are not UTF-8
-/// are a file that is not such a CSV (exit 1, not an I/O error), named with their offset;
-/// `reads` says what the command reads instead.
-pub(crate) fn csv_text(path: &Path, bytes: Vec<u8>, reads: &str) -> Result<String, CliError> {
-    let mut text = String::from_utf8(bytes).map_err(|e| {
-        CliError::new(
-            Exit::Failed,
-            format!(
-                "{}: not text (byte {} is not UTF-8); {reads}",
-                path.display(),
-                e.utf8_error().valid_up_to()
-            ),
-        )
-    })?;
-    if text.starts_with('\u{feff}') {
-        text.drain(..'\u{feff}'.len_utf8());
-    }
-    Ok(text)
-}
-
-/// Classifies a file from its name and its first bytes (at least the first line).
-pub fn sniff_input(path: &Path, head: &[u8]) -> InputKind {
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    if ext == "x3p" || head.starts_with(b"PK\x03\x04") {
-        return InputKind::X3p;
-    }
-    let first = head.split(|b| *b == b'\n').next().unwrap_or(&[]);
-    let first = first.strip_suffix(b"\r").unwrap_or(first);
-    let iges_line = first.len() == 80 && first.get(72) == Some(&b'S');
-    if ext == "igs" || ext == "iges" || iges_line {
-        return InputKind::Iges;
-    }
-    InputKind::GridCsv
-}
-
 pub use crate::scan::surface_files::part_path;
 
 fn iges_write_error(e: SurfaceWriteError) -> CliError {
@@ -157,214 +104,6 @@ fn iges_write_error(e: SurfaceWriteError) -> CliError {
         SurfaceWriteError::Io { .. } => Exit::Io,
     };
     CliError::new(exit, e.to_string())
-}
-
-/// A height grid read from CSV: row-major heights in µm.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Grid {
-    /// Number of rows (traced lines).
-    pub rows: usize,
-    /// Number of columns (points per line).
-    pub cols: usize,
-    /// Heights in µm, row-major.
-    pub heights_um: Vec<f64>,
-}
-
-/// Grid CSVs of at least this many bytes are read in two halves side by side.
-const PARALLEL_CSV_BYTES: usize = 256 << 10;
-
-/// Parses the grid CSV: no header, `,` separated, one row per line; blank lines at the end
-/// are ignored. Errors name the 1-based line and column and the offending content. A large
-/// file is read as two runs of whole lines on two threads; the values, and the error (the
-/// first in line order), are those of reading it line by line.
-pub fn parse_grid(text: &str) -> Result<Grid, String> {
-    parse_grid_split(text, PARALLEL_CSV_BYTES)
-}
-
-/// [`parse_grid`] of a text it takes over: the text is freed once both runs have read it,
-/// before the second run's values join the first's, so the text and the grid whole are never
-/// in memory beside the second run's own copy (the large fit's peak).
-pub fn parse_grid_owned(text: String) -> Result<Grid, String> {
-    parse_grid_owned_split(text, PARALLEL_CSV_BYTES)
-}
-
-/// [`parse_grid_owned`], reading in two runs when `text` has at least `parallel_bytes` bytes.
-fn parse_grid_owned_split(text: String, parallel_bytes: usize) -> Result<Grid, String> {
-    let runs = read_runs(&text, parallel_bytes);
-    drop(text);
-    runs.into_grid()
-}
-
-/// [`parse_grid`], reading in two runs when `text` has at least `parallel_bytes` bytes.
-fn parse_grid_split(text: &str, parallel_bytes: usize) -> Result<Grid, String> {
-    read_runs(text, parallel_bytes).into_grid()
-}
-
-/// What the runs of [`read_runs`] read: the first run's values (with room for all), its
-/// lines, and the second run's lines and values when there is one.
-struct Runs {
-    heights_um: Vec<f64>,
-    first: GridLines,
-    second: Option<(GridLines, Vec<f64>)>,
-}
-
-/// Reads `text` in one run, or in two side by side when it has at least `parallel_bytes`
-/// bytes; nothing of the result borrows `text`.
-fn read_runs(text: &str, parallel_bytes: usize) -> Runs {
-    let lines: Vec<&str> = text.lines().collect();
-    let last = lines
-        .iter()
-        .rposition(|l| !l.trim().is_empty())
-        .map_or(0, |i| i + 1);
-    let lines = &lines[..last];
-    // The second run starts at the first line past the middle byte.
-    let split = if text.len() >= parallel_bytes && lines.len() >= 2 {
-        let mut bytes = 0usize;
-        lines
-            .iter()
-            .position(|l| {
-                bytes += l.len() + 1;
-                bytes >= text.len() / 2
-            })
-            .map_or(lines.len(), |i| (i + 1).min(lines.len()))
-    } else {
-        lines.len()
-    };
-    let (head, tail) = lines.split_at(split);
-    // Room for every field at once (one per ',' plus one per line), so a large grid is not
-    // copied while it grows; the second run's share is counted apart (one pass over the text
-    // in all), so its buffer too is made once at its size.
-    let separators = |b: &[u8]| b.iter().filter(|&&b| b == b',' || b == b'\n').count();
-    let tail_start = tail
-        .first()
-        .map_or(text.len(), |l| l.as_ptr() as usize - text.as_ptr() as usize);
-    let (head_seps, tail_seps) = (
-        separators(&text.as_bytes()[..tail_start]),
-        separators(&text.as_bytes()[tail_start..]),
-    );
-    let mut heights_um = Vec::with_capacity(head_seps + tail_seps + 1);
-    let (first, second) = if tail.is_empty() {
-        (parse_grid_lines(0, head, &mut heights_um), None)
-    } else {
-        let tail_fields = tail_seps + 1;
-        std::thread::scope(|s| {
-            let second = s.spawn(|| {
-                let mut values = Vec::with_capacity(tail_fields);
-                let run = parse_grid_lines(split, tail, &mut values);
-                (run, values)
-            });
-            let first = parse_grid_lines(0, head, &mut heights_um);
-            let second = second
-                .join()
-                .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
-            (first, Some(second))
-        })
-    };
-    Runs {
-        heights_um,
-        first,
-        second,
-    }
-}
-
-impl Runs {
-    /// The grid: row lengths checked against line 1 and any unreadable line reported, in
-    /// line order; then the second run's values after the first's.
-    fn into_grid(self) -> Result<Grid, String> {
-        let Runs {
-            mut heights_um,
-            first,
-            second,
-        } = self;
-        let cols = first.counts.first().copied().unwrap_or(0);
-        let mut rows = 0usize;
-        let runs = std::iter::once(&first).chain(second.as_ref().map(|(run, _)| run));
-        for run in runs {
-            for (k, &n) in run.counts.iter().enumerate() {
-                if n != cols {
-                    return Err(format!(
-                        "line {}: {n} values, but line 1 has {cols}; every row must have the same number of points",
-                        run.first_line + k + 1
-                    ));
-                }
-                rows += 1;
-            }
-            if let Some(e) = &run.error {
-                return Err(e.clone());
-            }
-        }
-        if rows == 0 {
-            return Err("the file holds no data rows".into());
-        }
-        if let Some((_, values)) = second {
-            heights_um.extend_from_slice(&values);
-        }
-        Ok(Grid {
-            rows,
-            cols,
-            heights_um,
-        })
-    }
-}
-
-/// The lines of a run of grid lines read so far: each line's number of values, and the error
-/// of the first line that cannot be read (where the run stops).
-struct GridLines {
-    /// 0-based index of the run's first line in the file.
-    first_line: usize,
-    counts: Vec<usize>,
-    error: Option<String>,
-}
-
-/// Reads `lines` (the file's lines from 0-based index `first_line` on) into `heights_um`,
-/// stopping at the first line that cannot be read.
-fn parse_grid_lines(first_line: usize, lines: &[&str], heights_um: &mut Vec<f64>) -> GridLines {
-    let mut run = GridLines {
-        first_line,
-        counts: Vec::with_capacity(lines.len()),
-        error: None,
-    };
-    for (k, line) in lines.iter().enumerate() {
-        // Plain lines of finite numbers take one pass; anything else is read (and its error
-        // worded) field by field below.
-        let n = match crate::numbers::parse_csv_line(line.as_bytes(), heights_um) {
-            Some(n) => n,
-            None => match parse_grid_line(first_line + k, line, heights_um) {
-                Ok(n) => n,
-                Err(e) => {
-                    run.error = Some(e);
-                    break;
-                }
-            },
-        };
-        run.counts.push(n);
-    }
-    run
-}
-
-/// One grid line field by field with `str::parse`; errors name the 1-based line and column.
-fn parse_grid_line(li: usize, line: &str, heights_um: &mut Vec<f64>) -> Result<usize, String> {
-    let mut n = 0usize;
-    for (ci, field) in line.split(',').enumerate() {
-        let f = field.trim();
-        let v: f64 = f.parse().map_err(|_| {
-            format!(
-                "line {}, column {}: {f:?} is not a number (expected heights in µm, ',' separated, no header)",
-                li + 1,
-                ci + 1
-            )
-        })?;
-        if !v.is_finite() {
-            return Err(format!(
-                "line {}, column {}: {f:?} is not a finite height",
-                li + 1,
-                ci + 1
-            ));
-        }
-        heights_um.push(v);
-        n += 1;
-    }
-    Ok(n)
 }
 
 fn io_err(what: &str, path: &Path, e: impl std::fmt::Display) -> CliError {
@@ -381,85 +120,62 @@ fn ensure_parent(path: &Path) -> Result<(), CliError> {
     Ok(())
 }
 
-/// The lines to fit, however they were read.
+/// The lines to fit, however they were read, and what the fit follows.
 struct Input {
-    grid: Grid,
-    pitch_x_mm: f64,
-    /// `Some` for a grid CSV (equally spaced rows).
-    pitch_y_mm: Option<f64>,
-    y_mm: Vec<f64>,
-    /// Line indices (a scan's `NNNN`; rows for a CSV).
-    index: Vec<u32>,
+    input: GridInput,
     output: PathBuf,
-    kind: &'static str,
     /// The degrees to fit with.
     degrees: FitOptions,
     /// The scan's frozen plan, when the input is a scan with a readable journal.
     plan: Option<crate::scan::plan::Plan>,
     /// λc of the roughness the spike rule judges (a scan of primary profiles).
     lambda_c_mm: Option<f64>,
-    /// A scan's lines left out, each with its file and why (none for a grid CSV).
-    left_out: Vec<crate::report::scan_dir::LeftOut>,
 }
 
-/// The IGES Start section's words for the lines a fit of a scan left out, so the file itself
-/// says which lines its surface does not pass through.
-fn left_out_start_line(left_out: &[crate::report::scan_dir::LeftOut]) -> Option<String> {
+/// The IGES Start section's words for the lines of the input a fit left out, so the file
+/// itself says which lines its surface does not pass through.
+fn left_out_start_line(left_out: &[LeftOut]) -> Option<String> {
     (!left_out.is_empty()).then(|| {
         let each: Vec<String> = left_out
             .iter()
-            .map(|l| format!("{} ({}, {})", l.line, l.file, l.why))
+            .map(|l| match &l.file {
+                Some(f) => format!("{} ({f}, {})", l.line, l.why),
+                None => format!("{} ({})", l.line, l.why),
+            })
             .collect();
         format!("Lines left out: {}.", each.join("; "))
     })
 }
 
-fn read_scan(args: &Args) -> Result<Input, CliError> {
-    for (name, given) in [
-        ("--pitch-x", args.pitch_x.is_some()),
-        ("--pitch-y", args.pitch_y.is_some()),
-    ] {
-        if given {
+/// Reads the input, prints what the reader found, and decides the output and the degrees: a
+/// scan's own (its frozen plan; `SCAN_DIR/surface.igs`, kept unless `--force` or `-o`),
+/// else the paper's and `-o`.
+fn read_input(args: &Args) -> Result<Input, CliError> {
+    let input = args.read.read(&args.input)?;
+    let Source::Scan(vouched) = &input.source else {
+        let Some(output) = args.output.clone() else {
             return Err(CliError::new(
                 Exit::Usage,
                 format!(
-                    "{name} is for a grid CSV; a scan directory's pitch and y come from its line metadata"
+                    "a {} needs -o OUT.igs (only a scan directory has a default output)",
+                    match input.source {
+                        Source::X3p { .. } => "an X3P file",
+                        Source::ProfileCsv => "profile CSV",
+                        _ => "grid CSV",
+                    }
+                    .trim_start_matches("a ")
                 ),
             ));
-        }
-    }
-    let report_error = |e: crate::report::ReportError| {
-        let exit = match &e {
-            crate::report::ReportError::Store(crate::scan::store_error::StoreError::Io {
-                ..
-            }) => Exit::Io,
-            _ => Exit::Failed,
         };
-        CliError::new(exit, e.to_string())
+        tell_findings(&input);
+        return Ok(Input {
+            input,
+            output,
+            degrees: crate::report::scan_dir::scan_degrees(args.degree_u, args.degree_v, None),
+            plan: None,
+            lambda_c_mm: None,
+        });
     };
-    // Only the lines the journal vouches for are fitted; the others are named below.
-    let vouched = crate::report::load_vouched_lines(&args.input).map_err(report_error)?;
-    let stored = &vouched.lines;
-    let lines = crate::report::grid::LineGrid::of_scan(stored, &args.input.join("lines"))
-        .map_err(report_error)?;
-    if !vouched.incomplete.is_empty() {
-        tell!(
-            "surfscan: warning: {}",
-            crate::report::scan_dir::incomplete_lines_warning(
-                &crate::report::scan_dir::line_files(&vouched.incomplete),
-                vouched.incomplete.len(),
-                &args.input.join("lines"),
-            )
-        );
-    }
-    if let Err(e) = &vouched.journal {
-        tell!(
-            "surfscan: warning: the line files cannot be checked against the journal ({e}); they are used as they are"
-        );
-    }
-    for w in vouched.warnings(&args.input.join("lines")) {
-        tell!("surfscan: warning: {w}");
-    }
     let default_output = args.input.join("surface.igs");
     if args.output.is_none() && !args.force {
         if let Some(existing) = existing_surface(&default_output) {
@@ -478,28 +194,19 @@ fn read_scan(args: &Args) -> Result<Input, CliError> {
         }
     }
     let start = vouched.journal.as_ref().ok().map(|s| &s.start);
+    let degrees = crate::report::scan_dir::scan_degrees(args.degree_u, args.degree_v, start);
+    let plan = start.map(|s| s.plan);
+    let lambda_c_mm = vouched.lines.first().and_then(|l| {
+        let o = crate::metrology::params::Options::from_profile(&l.profile);
+        o.apply_lambda_c.then_some(o.lambda_c_mm)
+    });
+    tell_findings(&input);
     Ok(Input {
-        grid: Grid {
-            rows: lines.y_mm.len(),
-            cols: lines.cols,
-            heights_um: lines.heights_um,
-        },
-        pitch_x_mm: lines.pitch_x_mm,
-        pitch_y_mm: None,
-        y_mm: lines.y_mm,
-        index: lines.index,
-        output: args
-            .output
-            .clone()
-            .unwrap_or_else(|| args.input.join("surface.igs")),
-        kind: "scan",
-        degrees: crate::report::scan_dir::scan_degrees(args.degree_u, args.degree_v, start),
-        plan: start.map(|s| s.plan),
-        lambda_c_mm: stored.first().and_then(|l| {
-            let o = crate::metrology::params::Options::from_profile(&l.profile);
-            o.apply_lambda_c.then_some(o.lambda_c_mm)
-        }),
-        left_out: vouched.left_out(),
+        input,
+        output: args.output.clone().unwrap_or(default_output),
+        degrees,
+        plan,
+        lambda_c_mm,
     })
 }
 
@@ -524,87 +231,6 @@ fn existing_surface(output: &Path) -> Option<PathBuf> {
         })
 }
 
-fn read_csv(args: &Args) -> Result<Input, CliError> {
-    let (Some(pitch_x), Some(pitch_y)) = (args.pitch_x, args.pitch_y) else {
-        return Err(CliError::new(
-            Exit::Usage,
-            "a grid CSV needs --pitch-x MM and --pitch-y MM (a scan directory stores its own)",
-        ));
-    };
-    for (name, v) in [("--pitch-x", pitch_x), ("--pitch-y", pitch_y)] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(CliError::new(
-                Exit::Usage,
-                format!("{name} {v} mm must be a positive number of millimetres"),
-            ));
-        }
-    }
-    let Some(output) = args.output.clone() else {
-        return Err(CliError::new(
-            Exit::Usage,
-            "a grid CSV needs -o OUT.igs (only a scan directory has a default output)",
-        ));
-    };
-    let bytes =
-        std::fs::read(&args.input).map_err(|e| io_err("cannot read grid", &args.input, e))?;
-    let text = csv_text(
-        &args.input,
-        bytes,
-        "fit reads a grid CSV or a scan directory",
-    )?;
-    let grid = parse_grid_owned(text)
-        .map_err(|m| CliError::new(Exit::Failed, format!("{}: {m}", args.input.display())))?;
-    let rows = grid.rows;
-    Ok(Input {
-        grid,
-        pitch_x_mm: pitch_x,
-        pitch_y_mm: Some(pitch_y),
-        y_mm: (0..rows).map(|r| r as f64 * pitch_y).collect(),
-        index: (0..rows as u32).collect(),
-        output,
-        kind: "grid",
-        degrees: crate::report::scan_dir::scan_degrees(args.degree_u, args.degree_v, None),
-        plan: None,
-        lambda_c_mm: None,
-        left_out: Vec::new(),
-    })
-}
-
-/// Refuses a file that is absent, or that is not a grid CSV, naming what it is.
-fn check_input_file(path: &Path) -> Result<(), CliError> {
-    use std::io::Read;
-    let mut head = vec![0u8; 256];
-    let n = std::fs::File::open(path)
-        .and_then(|mut f| f.read(&mut head))
-        .map_err(|e| {
-            CliError::new(
-                Exit::Io,
-                format!(
-                    "cannot read {}: {e}; fit reads a grid CSV of heights in µm or a scan directory",
-                    path.display()
-                ),
-            )
-        })?;
-    head.truncate(n);
-    match sniff_input(path, &head) {
-        InputKind::GridCsv => Ok(()),
-        InputKind::Iges => Err(CliError::new(
-            Exit::Usage,
-            format!(
-                "{} is an IGES file (a fitted surface), not heights to fit; fit reads a grid CSV of heights in µm or a scan directory",
-                path.display()
-            ),
-        )),
-        InputKind::X3p => Err(CliError::new(
-            Exit::Usage,
-            format!(
-                "{} is an X3P archive; fit reads a grid CSV of heights in µm or a scan directory (`surfscan analyze` reads X3P)",
-                path.display()
-            ),
-        )),
-    }
-}
-
 /// Grids up to this many heights have the verdict between lines and the residual check
 /// computed beside the fit and the IGES write (the heights then stay in memory while the file
 /// is written); larger ones run each step in turn and free the heights before the write.
@@ -621,9 +247,6 @@ fn joined<T>(h: std::thread::ScopedJoinHandle<'_, T>) -> T {
 fn fit_surface(
     input: &Path,
     grid: &Grid,
-    pitch_x_mm: f64,
-    y_mm: &[f64],
-    index: &[u32],
     recipe: &ModelRecipe,
     progress: &indicatif::ProgressBar,
 ) -> Result<(FitResult, Vec<LineSpike>), CliError> {
@@ -633,17 +256,16 @@ fn fit_surface(
     if recipe.is_paper() {
         let mut fitter = IncrementalFitter::new(recipe.degrees);
         // The stores at their final size at once: no regrowing (and copying) as lines come.
-        fitter.reserve_lines(grid.rows, grid.cols);
-        for (row, &y) in grid.heights_um.chunks_exact(grid.cols).zip(y_mm) {
+        fitter.reserve_lines(grid.rows(), grid.cols);
+        for (row, &y) in grid.heights_um.chunks_exact(grid.cols).zip(&grid.y_mm) {
             fitter
-                .push_row(y, pitch_x_mm, row)
+                .push_row(y, grid.pitch_x_mm, row)
                 .map_err(|e| failed(&e))?;
             progress.inc(1);
         }
         Ok((fitter.finish().map_err(|e| failed(&e))?, Vec::new()))
     } else {
-        let m = fit_model(&grid.heights_um, grid.cols, index, pitch_x_mm, y_mm, recipe)
-            .map_err(|e| failed(&e))?;
+        let m = fit_model(grid, recipe).map_err(|e| failed(&e))?;
         Ok((m.fit, m.replaced))
     }
 }
@@ -705,7 +327,7 @@ impl Judge<'_> {
             (Some(a), Some(b)) if rows > 1 => (b - a).abs() / (rows - 1) as f64,
             _ => self.pitch_y_mm.unwrap_or(1.0),
         };
-        let sq = areal_sq_um(&ArealGrid {
+        let sq = areal_sq_um(&HeightMap {
             heights_um: fitted_z,
             rows,
             cols: self.cols,
@@ -843,40 +465,20 @@ pub fn run(args: Args) -> Result<(), CliError> {
         }
     }
     let t_read = Instant::now();
-    let input = if args.input.is_dir() {
-        read_scan(&args)?
-    } else {
-        // Arguments first (a bad value is a usage error whatever the file), then the file
-        // itself, then what a grid CSV needs: a missing file is never reported as a
-        // missing pitch.
-        for (name, v) in [("--pitch-x", args.pitch_x), ("--pitch-y", args.pitch_y)] {
-            if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
-                return Err(CliError::new(
-                    Exit::Usage,
-                    format!("{name} {v} mm must be a positive number of millimetres"),
-                ));
-            }
-        }
-        check_input_file(&args.input)?;
-        read_csv(&args)?
-    };
-    let read_s = t_read.elapsed().as_secs_f64();
     let Input {
-        mut grid,
-        pitch_x_mm,
-        pitch_y_mm,
-        y_mm,
-        index,
+        input,
         output,
-        kind,
         degrees: options,
         plan,
         lambda_c_mm,
-        left_out,
-    } = input;
+    } = read_input(&args)?;
+    let read_s = t_read.elapsed().as_secs_f64();
+    let (kind, pitch_y_mm) = (input.kind(), input.pitch_y_mm());
+    let mut grid = input.grid;
+    let (pitch_x_mm, y_mm, index) = (grid.pitch_x_mm, grid.y_mm.clone(), grid.index.clone());
     let method = args
         .model
-        .v_method(grid.rows, options.degree_v)?
+        .v_method(grid.rows(), options.degree_v)?
         .or(plan.map(|p| p.v_method))
         .unwrap_or_default();
     let replace_spikes = match args.model.replace() {
@@ -891,11 +493,11 @@ pub fn run(args: Args) -> Result<(), CliError> {
     };
 
     let progress = if std::io::stderr().is_terminal() && grid.heights_um.len() >= 1_000_000 {
-        indicatif::ProgressBar::new(grid.rows as u64)
+        indicatif::ProgressBar::new(grid.rows() as u64)
     } else {
         indicatif::ProgressBar::hidden()
     };
-    let (rows, cols) = (grid.rows, grid.cols);
+    let (rows, cols) = (grid.rows(), grid.cols);
     let judge = Judge {
         cols,
         pitch_x_mm,
@@ -906,15 +508,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     };
     let fit_step = || {
         let t_fit = Instant::now();
-        let fitted = fit_surface(
-            &args.input,
-            &grid,
-            pitch_x_mm,
-            &y_mm,
-            &index,
-            &recipe,
-            &progress,
-        );
+        let fitted = fit_surface(&args.input, &grid, &recipe, &progress);
         progress.finish_and_clear();
         let (fit, replaced) = fitted?;
         report_replaced(&replaced);
@@ -936,7 +530,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             &y_mm,
         );
         opts.start_lines.extend(recipe.start_lines(replaced));
-        opts.start_lines.extend(left_out_start_line(&left_out));
+        opts.start_lines.extend(left_out_start_line(&grid.left_out));
         ensure_parent(&output)?;
         let t_write = Instant::now();
         let written =
@@ -1041,12 +635,13 @@ pub fn run(args: Args) -> Result<(), CliError> {
         "input": args.input.display().to_string(),
         "input_kind": kind,
         "output": output.display().to_string(),
-        "grid": { "rows": grid.rows, "cols": grid.cols },
+        "grid": { "rows": rows, "cols": cols },
+        "lines_in_input": grid.lines_in_input(),
         "pitch_x_mm": pitch_x_mm,
         "pitch_y_mm": pitch_y_mm,
         "y_mm": y_mm,
         "lines": index,
-        "lines_left_out": left_out,
+        "lines_left_out": grid.left_out,
         "max_residual_mm": residual_mm,
         "patches": stats.patches,
         "iges_bytes": stats.bytes,
@@ -1110,8 +705,8 @@ pub fn run(args: Args) -> Result<(), CliError> {
     say!(
         "{}: {}x{} grid, {}x{} poles, {} patch(es), {} bytes; fit {:.1} ms, write {:.1} ms",
         written,
-        grid.rows,
-        grid.cols,
+        rows,
+        cols,
         s.count_u(),
         s.count_v(),
         stats.patches,
@@ -1136,88 +731,14 @@ pub fn run(args: Args) -> Result<(), CliError> {
             _ => {}
         }
     }
+    if grid.is_partial() {
+        return Err(CliError::new(
+            Exit::Partial,
+            format!(
+                "the surface is partial: fitted from {} (the others cannot be used, see the warnings above; the IGES Start section names them); it is written",
+                grid.lines_used()
+            ),
+        ));
+    }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn parses_a_grid_and_ignores_trailing_blank_lines() {
-        let g = parse_grid("1, 2.5,3\n-4,5e-1,6\n\n").unwrap();
-        assert_eq!((g.rows, g.cols), (2, 3));
-        assert_eq!(g.heights_um, vec![1.0, 2.5, 3.0, -4.0, 0.5, 6.0]);
-    }
-
-    #[test]
-    fn names_line_column_and_content_of_bad_values() {
-        let e = parse_grid("1,2,3\n4,x5,6\n").unwrap_err();
-        assert!(
-            e.contains("line 2, column 2") && e.contains("\"x5\""),
-            "{e}"
-        );
-        let e = parse_grid("1,2,3\n4,NaN,6\n").unwrap_err();
-        assert!(e.contains("line 2, column 2"), "{e}");
-        let e = parse_grid("1,2,3\n4,5\n").unwrap_err();
-        assert!(
-            e.contains("line 2: 2 values") && e.contains("line 1 has 3"),
-            "{e}"
-        );
-        assert!(parse_grid("\n\n").is_err());
-    }
-
-    #[test]
-    fn a_grid_read_in_two_runs_equals_it_read_line_by_line() {
-        let (rows, cols) = (40usize, 7usize);
-        let base: Vec<String> = (0..rows)
-            .map(|r| {
-                (0..cols)
-                    .map(|c| format!("{:.4}", (r * cols + c) as f64 * 0.37 - 5.0))
-                    .collect::<Vec<_>>()
-                    .join(",")
-            })
-            .collect();
-        let join = |t: &[String], end: &str| t.join(end) + end;
-        let mut texts = vec![
-            join(&base, "\n"),
-            join(&base, "\r\n"),
-            join(&base, "\n") + "\n \n",
-        ];
-        // A bad line (a non-number, a row too short or too long, a blank line) at the start,
-        // on either side of the split and at the end; and one in each run.
-        let spoil = |t: &mut Vec<String>, at: usize, how: usize| match how {
-            0 => t[at] = t[at].replacen(',', ",1e,", 1),
-            1 => t[at] = t[at].rsplit_once(',').unwrap().0.to_string(),
-            2 => t[at].push_str(",1.5"),
-            _ => t[at].clear(),
-        };
-        for at in [0, 1, 19, 20, 21, 38, 39] {
-            for how in 0..4 {
-                let mut t = base.clone();
-                spoil(&mut t, at, how);
-                texts.push(join(&t, "\n"));
-            }
-        }
-        for (a, b) in [(0, 1), (1, 0), (2, 3), (3, 2)] {
-            let mut t = base.clone();
-            spoil(&mut t, 5, a);
-            spoil(&mut t, 30, b);
-            texts.push(join(&t, "\n"));
-        }
-        for text in &texts {
-            let serial = parse_grid_split(text, usize::MAX);
-            assert_eq!(parse_grid_split(text, 0), serial, "{text:?}");
-            // The owned form (the text freed before the runs are joined) too.
-            assert_eq!(parse_grid_owned_split(text.clone(), 0), serial, "{text:?}");
-        }
-        // And the values are the numbers written.
-        let g = parse_grid_split(&texts[0], 0).unwrap();
-        let want: Vec<f64> = base
-            .iter()
-            .flat_map(|l| l.split(',').map(|f| f.parse::<f64>().unwrap()))
-            .collect();
-        assert_eq!((g.rows, g.cols), (rows, cols));
-        assert_eq!(g.heights_um, want);
-    }
 }

@@ -1,9 +1,10 @@
 //! The command line: one subcommand per file, each with its own arguments and `run`.
 //!
 //! Exit codes follow sysexits(3) so scripts and systemd can tell causes apart: 0 success,
-//! 1 the job failed, 2 usage, 3 done but the characterisation is partial (`scan`, `demo`,
-//! `analyze`: every output that could be made is written, and report.json's
-//! `characterisation.failed_sections` names each section that could not be made and why),
+//! 1 the job failed, 2 usage, 3 done but the result is partial (`scan`, `demo`, `analyze`,
+//! `fit`: every output that could be made is written; made from fewer lines than the input
+//! holds, "N of M lines", or report.json's `characterisation.failed_sections` names each
+//! section that could not be made and why),
 //! 69 device unavailable, 74 I/O error, 78 bad configuration.
 //!
 //! Layer 5 (composition): may depend on everything.
@@ -44,6 +45,7 @@ pub mod daemon;
 pub mod demo;
 pub mod docs;
 pub mod fit;
+pub mod input_args;
 pub mod list;
 pub mod model_args;
 pub mod probe;
@@ -109,8 +111,9 @@ pub enum Exit {
     Failed = 1,
     /// 2: usage error.
     Usage = 2,
-    /// 3: the job is done and its outputs are written, but part of the characterisation
-    /// could not be made (report.json's `characterisation.failed_sections` says which and why).
+    /// 3: the job is done and its outputs are written, but the result is partial: made from
+    /// fewer lines than the input holds, or part of the characterisation could not be made
+    /// (report.json's `characterisation` says which and why).
     Partial = 3,
     /// 69: a device is unavailable.
     Unavailable = 69,

@@ -20,7 +20,7 @@
 //!
 //! Depends on [`super::areal`] and [`super::MetrologyError`].
 
-use super::areal::{level_plane, Grid};
+use super::areal::{level_plane, HeightMap};
 use super::MetrologyError;
 use serde::Serialize;
 
@@ -88,7 +88,7 @@ fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
 }
 
 /// The anisotropy of `grid` (see the module docs).
-pub fn anisotropy(grid: &Grid<'_>) -> Result<Anisotropy, MetrologyError> {
+pub fn anisotropy(grid: &HeightMap<'_>) -> Result<Anisotropy, MetrologyError> {
     let (z, _) = level_plane(grid)?;
     let (rows, cols) = (grid.rows, grid.cols);
     let (px, py) = (grid.pitch_x_mm, grid.pitch_y_mm);
@@ -192,7 +192,7 @@ mod tests {
     #[test]
     fn identical_lines_correlate_fully_and_have_no_y_slope() {
         let z = make(10, 200, |_, c| (c as f64 * 0.3).sin());
-        let g = Grid {
+        let g = HeightMap {
             heights_um: &z,
             rows: 10,
             cols: 200,
@@ -220,7 +220,7 @@ mod tests {
             let sign = if r % 2 == 0 { 1.0 } else { -1.0 };
             sign * (1.0 + 0.01 * (c as f64 * 0.7).sin())
         });
-        let g = Grid {
+        let g = HeightMap {
             heights_um: &z,
             rows: 12,
             cols: 100,

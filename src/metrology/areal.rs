@@ -52,9 +52,11 @@ pub struct ArealParams {
     pub definitions: BTreeMap<String, String>,
 }
 
-/// A row-major height grid with its pitches.
+/// Heights on a regular lattice, borrowed, as the areal parameters read them: the measured
+/// grid's lines at their mean y pitch ([`crate::grid::Grid`] holds them), the model sampled,
+/// a grid with its spikes bridged.
 #[derive(Debug, Clone, Copy)]
-pub struct Grid<'a> {
+pub struct HeightMap<'a> {
     /// Heights in µm, `rows × cols`, row-major.
     pub heights_um: &'a [f64],
     /// Lines along y.
@@ -67,7 +69,7 @@ pub struct Grid<'a> {
     pub pitch_y_mm: f64,
 }
 
-impl Grid<'_> {
+impl HeightMap<'_> {
     fn check(&self) -> Result<(), MetrologyError> {
         check_pitch(self.pitch_x_mm)?;
         check_pitch(self.pitch_y_mm)?;
@@ -90,7 +92,7 @@ impl Grid<'_> {
 }
 
 /// Removes the least-squares plane z = a + b·x + c·y; returns the residual heights and (a, b, c).
-pub fn level_plane(grid: &Grid<'_>) -> Result<(Vec<f64>, [f64; 3]), MetrologyError> {
+pub fn level_plane(grid: &HeightMap<'_>) -> Result<(Vec<f64>, [f64; 3]), MetrologyError> {
     grid.check()?;
     // Centred coordinates make the normal equations diagonal on a full regular grid.
     let xc = (grid.cols - 1) as f64 * 0.5;
@@ -146,7 +148,7 @@ pub fn definitions() -> BTreeMap<String, String> {
 }
 
 /// Sa … Sdr of a grid after plane levelling.
-pub fn areal_params(grid: &Grid<'_>) -> Result<ArealParams, MetrologyError> {
+pub fn areal_params(grid: &HeightMap<'_>) -> Result<ArealParams, MetrologyError> {
     let (z, plane) = level_plane(grid)?;
     let n = z.len() as f64;
     let sa = z.iter().map(|v| v.abs()).sum::<f64>() / n;
@@ -206,7 +208,7 @@ pub fn areal_params(grid: &Grid<'_>) -> Result<ArealParams, MetrologyError> {
 /// Sq alone of a grid after plane levelling: the bits of [`areal_params`]' `sq_um` (the same
 /// levelling and the same sum), without the other parameters' passes, for callers that need
 /// only Sq (the verdict between lines in `surfscan fit`).
-pub fn sq_um(grid: &Grid<'_>) -> Result<f64, MetrologyError> {
+pub fn sq_um(grid: &HeightMap<'_>) -> Result<f64, MetrologyError> {
     let (z, _) = level_plane(grid)?;
     let n = z.len() as f64;
     let m2 = z.iter().map(|v| v * v).sum::<f64>() / n;
@@ -215,7 +217,7 @@ pub fn sq_um(grid: &Grid<'_>) -> Result<f64, MetrologyError> {
 
 /// The pooled areal material ratio curve Smr(c) of the levelled grid: `levels` equal steps from
 /// the highest to the lowest point, as `[height_um, material_ratio_pct]` pairs.
-pub fn smr_curve(grid: &Grid<'_>, levels: usize) -> Result<Vec<[f64; 2]>, MetrologyError> {
+pub fn smr_curve(grid: &HeightMap<'_>, levels: usize) -> Result<Vec<[f64; 2]>, MetrologyError> {
     let (z, _) = level_plane(grid)?;
     if levels < 2 {
         return Err(MetrologyError::BadParameter {
@@ -254,8 +256,8 @@ mod tests {
     use crate::metrology::bearing::material_ratio_pct;
 
     /// A grid at 0.5 µm along x and 10 µm between lines.
-    fn test_grid(heights_um: &[f64], rows: usize, cols: usize) -> Grid<'_> {
-        Grid {
+    fn test_grid(heights_um: &[f64], rows: usize, cols: usize) -> HeightMap<'_> {
+        HeightMap {
             heights_um,
             rows,
             cols,

@@ -14,12 +14,12 @@
 //! * the title and the traceability footer wrap rather than run off the edge.
 //!
 //! The only file-writing part of the metrology: the caller gives the directory. Depends on
-//! [`super::model`] (the curves), [`super::areal::Grid`], [`super::params::RkFamily`],
+//! [`super::model`] (the curves), [`super::areal::HeightMap`], [`super::params::RkFamily`],
 //! [`super::text_cache`] (the PNGs' text memo), [`crate::numfmt`], [`crate::atomic`] (each
 //! file replaced whole) and [`super::MetrologyError`]; plotters draws, and `image` encodes
 //! the PNG files.
 
-use super::areal::Grid;
+use super::areal::HeightMap;
 use super::model::ModelCurveBac;
 use super::params::RkFamily;
 use super::text_cache::TextCache;
@@ -557,7 +557,7 @@ fn map_note(scale: &MapScale) -> String {
 }
 
 /// The subtitle of a map: size, points, height range and scale.
-fn map_subtitle(grid: &Grid<'_>, scale: &MapScale) -> String {
+fn map_subtitle(grid: &HeightMap<'_>, scale: &MapScale) -> String {
     let (lo, hi) = height_range(grid.heights_um);
     format!(
         "{} × {} mm, {} lines × {} points; heights {} … {} µm; {}",
@@ -580,7 +580,7 @@ fn height_range(z: &[f64]) -> (f64, f64) {
 
 fn draw_map<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
-    grid: &Grid<'_>,
+    grid: &HeightMap<'_>,
     scale: &MapScale,
     frame: &Frame,
 ) -> Result<(), String>
@@ -649,7 +649,7 @@ const MAP_MIN_BAR_H: u32 = 160;
 /// traceability footer.
 pub fn plot_height_map(
     dir: &Path,
-    grid: &Grid<'_>,
+    grid: &HeightMap<'_>,
     title: &str,
     caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
@@ -690,7 +690,7 @@ pub fn plot_height_map(
             title.to_string(),
         )
     };
-    let shown = Grid {
+    let shown = HeightMap {
         heights_um: &binned,
         rows,
         cols,

@@ -5,10 +5,11 @@
 //! reports, [`ModelRecipe::start_lines`] for the IGES Start section, with every replaced
 //! spike named.
 //!
-//! Depends on [`crate::fit`], [`super::outliers`] and [`crate::numfmt`].
+//! Depends on [`crate::grid`], [`crate::fit`], [`super::outliers`] and [`crate::numfmt`].
 
 use super::outliers::{bridged_grid, find_grid_spikes, LineSpike, SpikeOptions};
 use crate::fit::{fit_grid_with, FitOptions, FitResult, MethodError, VMethod};
+use crate::grid::Grid;
 use crate::numfmt::{fmt, line_number, Quantity};
 
 /// How the surface is made. [`Default`]: the paper (5/5, interpolation, data as measured).
@@ -87,32 +88,33 @@ pub struct FittedModel {
     pub replaced: Vec<LineSpike>,
 }
 
-/// Fits the row-major grid (`index` names the lines) as `recipe` says.
-pub fn fit_model(
-    heights_um: &[f64],
-    cols: usize,
-    index: &[u32],
-    pitch_x_mm: f64,
-    y_mm: &[f64],
-    recipe: &ModelRecipe,
-) -> Result<FittedModel, MethodError> {
-    let (grid, replaced) = match &recipe.replace_spikes {
+/// Fits `grid` as `recipe` says.
+pub fn fit_model(grid: &Grid, recipe: &ModelRecipe) -> Result<FittedModel, MethodError> {
+    let (heights_um, cols) = (&grid.heights_um[..], grid.cols);
+    let (bridged, replaced) = match &recipe.replace_spikes {
         Some(rule) => {
             let (spikes, _) = find_grid_spikes(
                 heights_um,
                 cols,
-                index,
-                pitch_x_mm,
+                &grid.index,
+                grid.pitch_x_mm,
                 recipe.lambda_c_mm,
                 rule,
             );
-            let (grid, _) = bridged_grid(heights_um, cols, index, &spikes);
-            (Some(grid), spikes)
+            let (bridged, _) = bridged_grid(heights_um, cols, &grid.index, &spikes);
+            (Some(bridged), spikes)
         }
         None => (None, Vec::new()),
     };
-    let z = grid.as_deref().unwrap_or(heights_um);
-    let fit = fit_grid_with(pitch_x_mm, y_mm, z, cols, recipe.degrees, recipe.method)?;
+    let z = bridged.as_deref().unwrap_or(heights_um);
+    let fit = fit_grid_with(
+        grid.pitch_x_mm,
+        &grid.y_mm,
+        z,
+        cols,
+        recipe.degrees,
+        recipe.method,
+    )?;
     Ok(FittedModel { fit, replaced })
 }
 
@@ -121,22 +123,21 @@ mod tests {
     use super::*;
     use crate::fit::fit_grid;
 
-    fn grid(rows: usize, cols: usize) -> (Vec<f64>, Vec<f64>, Vec<u32>) {
+    fn grid(rows: usize, cols: usize) -> Grid {
         let z = (0..rows * cols)
             .map(|k| ((k % cols) as f64 * 0.21).sin() + 0.5 * ((k / cols) as f64 * 0.7).cos())
             .collect();
-        let y = (0..rows).map(|r| r as f64 * 0.01).collect();
-        (z, y, (0..rows as u32).collect())
+        Grid::new(z, cols, 0.002, (0..rows).map(|r| r as f64 * 0.01).collect())
     }
 
     #[test]
     fn the_default_recipe_is_the_papers_fit() {
-        let (mut z, y, index) = grid(8, 200);
-        z[3 * 200 + 50] += 100.0;
+        let mut g = grid(8, 200);
+        g.heights_um[3 * 200 + 50] += 100.0;
         let r = ModelRecipe::default();
         assert!(r.is_paper());
-        let m = fit_model(&z, 200, &index, 0.002, &y, &r).unwrap();
-        let paper = fit_grid(0.002, &y, &z, 200, FitOptions::default()).unwrap();
+        let m = fit_model(&g, &r).unwrap();
+        let paper = fit_grid(0.002, &g.y_mm, &g.heights_um, 200, FitOptions::default()).unwrap();
         assert_eq!(m.fit.surface, paper.surface);
         assert_eq!(
             (&m.fit.params_u, &m.fit.params_v),
@@ -148,15 +149,15 @@ mod tests {
 
     #[test]
     fn replacing_spikes_is_asked_for_named_and_recorded() {
-        let (mut z, y, index) = grid(8, 200);
-        let clean = z.clone();
-        z[3 * 200 + 50] += 100.0;
+        let mut g = grid(8, 200);
+        let clean = g.heights_um.clone();
+        g.heights_um[3 * 200 + 50] += 100.0;
         let r = ModelRecipe {
             replace_spikes: Some(SpikeOptions::default()),
             ..ModelRecipe::default()
         };
         assert!(!r.is_paper());
-        let m = fit_model(&z, 200, &index, 0.002, &y, &r).unwrap();
+        let m = fit_model(&g, &r).unwrap();
         assert_eq!(m.replaced.len(), 1);
         assert_eq!((m.replaced[0].line, m.replaced[0].spike.peak), (3, 50));
         // The replaced point lies on the line between its neighbours, not at the spike.

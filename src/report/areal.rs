@@ -4,12 +4,12 @@
 //! Layer 4 (reporting): depends on [`crate::metrology::areal`].
 
 use super::document::SurfaceReport;
-use crate::metrology::areal::{areal_params, smr_curve, Grid};
+use crate::metrology::areal::{areal_params, smr_curve, HeightMap};
 
 /// The measured heights as a grid for the areal parameters, plots and X3P: the grid's rows
 /// at the mean y pitch.
-pub fn measured(grid: &super::grid::LineGrid, pitch_y_mm: f64) -> Grid<'_> {
-    Grid {
+pub fn measured(grid: &crate::grid::Grid, pitch_y_mm: f64) -> HeightMap<'_> {
+    HeightMap {
         heights_um: &grid.heights_um,
         rows: grid.rows(),
         cols: grid.cols,
@@ -20,7 +20,7 @@ pub fn measured(grid: &super::grid::LineGrid, pitch_y_mm: f64) -> Grid<'_> {
 
 /// Areal parameters and the pooled Smr curve of `g` at `levels` levels.
 pub fn surface_report(
-    g: &Grid<'_>,
+    g: &HeightMap<'_>,
     levels: usize,
     recipe: String,
 ) -> Result<SurfaceReport, String> {
@@ -36,7 +36,7 @@ pub fn surface_report(
 }
 
 /// Runs the section on the measured grid.
-pub fn characterise(measured: &Grid<'_>, levels: usize) -> Result<SurfaceReport, String> {
+pub fn characterise(measured: &HeightMap<'_>, levels: usize) -> Result<SurfaceReport, String> {
     surface_report(
         measured,
         levels,

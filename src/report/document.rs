@@ -123,11 +123,16 @@ pub struct LineNotJudged {
     pub reason: String,
 }
 
-/// Whether the characterisation is complete, and which sections failed and why.
+/// Whether the characterisation is complete: made from every line of the input, every
+/// section made; and which lines were left out and which sections failed, and why.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Characterisation {
-    /// Every section was made.
+    /// Every line of the input was used and every section was made.
     pub complete: bool,
+    /// Lines the input holds (those used and those left out).
+    pub lines_in_input: usize,
+    /// The lines of the input left out, each with why (each also in `warnings`).
+    pub lines_left_out: Vec<crate::grid::LeftOut>,
     /// The sections that failed, each with its reason (each also in `warnings`).
     pub failed_sections: Vec<FailedSection>,
     /// The sections the grid has too few lines for (the fit needs degree-v + 1 lines, a
@@ -135,6 +140,17 @@ pub struct Characterisation {
     /// `warnings`). They are not failures: a complete characterisation of so few lines has
     /// none of them.
     pub sections_not_possible: Vec<FailedSection>,
+}
+
+impl Characterisation {
+    /// "29 of 31 lines": the lines used of those the input holds.
+    pub fn lines_used(&self) -> String {
+        format!(
+            "{} of {} lines",
+            self.lines_in_input - self.lines_left_out.len(),
+            self.lines_in_input
+        )
+    }
 }
 
 /// A section that could not be made.

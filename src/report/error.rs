@@ -1,34 +1,18 @@
 //! Why a scan directory or grid cannot be characterised.
 //!
-//! Layer 4 (reporting): depends on [`crate::scan::store_error`] and [`crate::metrology`].
+//! Layer 4 (reporting): depends on [`crate::input`] and [`crate::metrology`].
 
+use crate::input::InputError;
 use crate::metrology::MetrologyError;
-use crate::scan::store_error::StoreError;
 use std::path::PathBuf;
 use thiserror::Error;
 
 /// Why a scan directory or grid cannot be characterised.
 #[derive(Debug, Error)]
 pub enum ReportError {
-    /// The scan directory or one of its line files cannot be read or is malformed.
+    /// The input cannot be read, or its lines cannot form one grid.
     #[error(transparent)]
-    Store(#[from] StoreError),
-    /// No complete line to characterise.
-    #[error("{dir}: no complete line to characterise (incomplete: {incomplete:?}); a scan needs at least one line with both NNNN.csv and NNNN.json")]
-    NoLines {
-        /// The scan directory.
-        dir: PathBuf,
-        /// Lines with one file only.
-        incomplete: Vec<u32>,
-    },
-    /// The lines cannot form one grid.
-    #[error("{path}: {reason}")]
-    Lines {
-        /// The offending line file.
-        path: PathBuf,
-        /// What differs, with both values.
-        reason: String,
-    },
+    Input(#[from] InputError),
     /// A line or the grid cannot be characterised.
     #[error("{what}: {source}")]
     Metrology {

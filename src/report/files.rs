@@ -8,12 +8,12 @@
 use super::context::ReportContext;
 use super::document::Report;
 use super::error::{metrology, ReportError};
-use super::grid::LineGrid;
 use super::html;
 use super::model::SampledModel;
 use super::summary::summary_csv;
 use crate::atomic::write_atomically;
-use crate::metrology::areal::Grid;
+use crate::grid::Grid;
+use crate::metrology::areal::HeightMap;
 use crate::metrology::model::ModelCurveBac;
 use crate::metrology::params::LineAnalysis;
 use crate::metrology::plots::{
@@ -145,7 +145,7 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
 
 /// The overlay's row: the requested line when it is among the rows (else a warning and the
 /// middle row).
-fn overlay_row(grid: &LineGrid, ctx: &mut ReportContext) -> usize {
+fn overlay_row(grid: &Grid, ctx: &mut ReportContext) -> usize {
     let rows = grid.rows();
     match ctx.options.overlay_line {
         Some(i) => match grid.index.iter().position(|&k| k == i) {
@@ -182,7 +182,7 @@ pub struct Overlay {
 /// its refit fails, the held-out line of the verdict `b` nearest it is drawn instead, and a
 /// warning says so. `heights_um` are the grid's rows as characterised.
 pub fn held_out_overlay(
-    grid: &LineGrid,
+    grid: &Grid,
     heights_um: &[f64],
     recipe: &crate::metrology::surface_model::ModelRecipe,
     b: Option<&crate::metrology::holdout::BetweenLines>,
@@ -253,7 +253,7 @@ pub fn held_out_overlay(
 /// line, which the model interpolates by construction.
 fn write_plots(
     out: &Path,
-    grid: &LineGrid,
+    grid: &Grid,
     height_map: Result<[PathBuf; 2], ReportError>,
     sampled: Option<&SampledModel>,
     overlay: Option<&Overlay>,
@@ -356,7 +356,7 @@ pub(crate) fn rk_plot_panic(ctx: &ReportContext) -> ReportError {
 /// [`write_data_files`], which lists it between the bearing area curves and the overlay.
 pub(crate) fn draw_height_map(
     out: &Path,
-    measured: &Grid<'_>,
+    measured: &HeightMap<'_>,
     ctx: &ReportContext,
 ) -> Result<[PathBuf; 2], ReportError> {
     plot_height_map(out, measured, "Measured heights", &caption(ctx)).map_err(|source| {
@@ -372,7 +372,7 @@ pub(crate) fn draw_height_map(
 /// sections, handed to [`write_data_files`]).
 pub(crate) fn write_rk_plots(
     out: &Path,
-    grid: &LineGrid,
+    grid: &Grid,
     analyses: &[LineAnalysis],
     ctx: &ReportContext,
 ) -> Result<Vec<(String, [PathBuf; 2])>, ReportError> {
@@ -421,7 +421,7 @@ pub(crate) fn write_rk_plots(
 /// with their titles; stops at the first error.
 fn draw_rk_run(
     rk_dir: &Path,
-    grid: &LineGrid,
+    grid: &Grid,
     first_row: usize,
     part: &[LineAnalysis],
     caption: &str,
@@ -461,10 +461,10 @@ fn draw_rk_run(
 #[allow(clippy::too_many_arguments)]
 pub fn write_data_files(
     out: &Path,
-    grid: &LineGrid,
+    grid: &Grid,
     height_map: Result<[PathBuf; 2], ReportError>,
     rk_plots: impl FnOnce() -> Result<Vec<(String, [PathBuf; 2])>, ReportError>,
-    measured: &Grid<'_>,
+    measured: &HeightMap<'_>,
     sampled: Option<&SampledModel>,
     overlay: Option<&Overlay>,
     report: &Report,

@@ -8,19 +8,19 @@
 //! Layer 4 (reporting): depends on [`crate::metrology::holdout`].
 
 use super::document::{LineHoldout, LineReport};
-use super::grid::LineGrid;
+use crate::grid::Grid;
 use crate::metrology::holdout::{
     between_lines_given, holdout_every, holdout_every_or_reason, lines_every, lines_left_out,
     points_left_out, BetweenLines, Holdout, HoldoutLine,
 };
 use crate::metrology::surface_model::ModelRecipe;
 
-fn line_index(grid: &LineGrid, row: usize) -> usize {
+fn line_index(grid: &Grid, row: usize) -> usize {
     grid.index.get(row).copied().unwrap_or(row as u32) as usize
 }
 
 /// Maps the hold-out's rows to the grid's line indices.
-fn rows_of_holdout_to_lines(grid: &LineGrid, h: &mut Holdout) {
+fn rows_of_holdout_to_lines(grid: &Grid, h: &mut Holdout) {
     for l in h
         .points_left_out
         .iter_mut()
@@ -43,7 +43,7 @@ const LINES_REFIT_PANICKED: &str =
 /// computations on the same inputs, so the same results and the same errors, in the order each
 /// of those functions reports them.
 pub fn characterise_and_judge(
-    grid: &LineGrid,
+    grid: &Grid,
     heights_um: &[f64],
     recipe: &ModelRecipe,
     sq_um: Option<f64>,
@@ -105,7 +105,7 @@ pub fn characterise_and_judge(
 }
 
 /// Maps the verdict's held-out rows to the grid's line indices.
-pub fn rows_to_lines(grid: &LineGrid, b: &mut BetweenLines) {
+pub fn rows_to_lines(grid: &Grid, b: &mut BetweenLines) {
     for l in &mut b.lines {
         l.index = line_index(grid, l.index);
     }
@@ -132,7 +132,7 @@ mod tests {
     /// `model_vs_measured` on its own: both refits of [`holdout_with`], the line indices
     /// mapped to the grid's.
     fn characterise(
-        grid: &LineGrid,
+        grid: &Grid,
         heights_um: &[f64],
         recipe: &ModelRecipe,
     ) -> Result<Holdout, String> {
@@ -152,7 +152,7 @@ mod tests {
     /// The verdict between lines on its own: [`between_lines`] with k from
     /// [`holdout_every_or_reason`].
     fn verdict(
-        grid: &LineGrid,
+        grid: &Grid,
         heights_um: &[f64],
         recipe: &ModelRecipe,
         sq_um: f64,
@@ -173,16 +173,15 @@ mod tests {
         .map_err(|e| e.to_string())
     }
 
-    fn grid(rows: usize, cols: usize, y_mm: Vec<f64>, f: impl Fn(usize, usize) -> f64) -> LineGrid {
-        LineGrid {
-            heights_um: (0..rows * cols).map(|k| f(k / cols, k % cols)).collect(),
-            cols,
-            pitch_x_mm: 0.002,
+    fn grid(rows: usize, cols: usize, y_mm: Vec<f64>, f: impl Fn(usize, usize) -> f64) -> Grid {
+        Grid {
             index: (0..rows as u32).map(|r| 3 + 2 * r).collect(),
-            y_readback_mm: vec![None; rows],
-            instrument: None,
-            standard: vec![None; rows],
-            y_mm,
+            ..Grid::new(
+                (0..rows * cols).map(|k| f(k / cols, k % cols)).collect(),
+                cols,
+                0.002,
+                y_mm,
+            )
         }
     }
 
@@ -210,7 +209,7 @@ mod tests {
         short.heights_um.pop();
         let mut backwards = ys(12);
         backwards.swap(4, 5);
-        let cases: Vec<(&str, LineGrid, ModelRecipe, Option<f64>, f64)> = vec![
+        let cases: Vec<(&str, Grid, ModelRecipe, Option<f64>, f64)> = vec![
             (
                 "rough",
                 grid(13, 50, ys(13), rough),

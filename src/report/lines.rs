@@ -7,7 +7,7 @@
 use super::context::ReportContext;
 use super::document::{LineReport, ReportRecipe};
 use super::error::{metrology, ReportError};
-use super::grid::LineGrid;
+use crate::grid::Grid;
 use crate::metrology::areal;
 use crate::metrology::instrument::compare_profile;
 use crate::metrology::params::{analyze_line, LineAnalysis, Options};
@@ -38,7 +38,7 @@ pub fn rmr_table(a: &LineAnalysis) -> Vec<[f64; 2]> {
 
 /// Characterises every line, in parallel over the available cores (lines are independent).
 fn analyse_lines(
-    grid: &LineGrid,
+    grid: &Grid,
     options: &Options,
     label: &str,
 ) -> Result<Vec<LineAnalysis>, ReportError> {
@@ -87,16 +87,14 @@ fn analyse_lines(
 }
 
 /// Runs the section.
-pub fn characterise(grid: &LineGrid, ctx: &ReportContext) -> Result<LinesSection, ReportError> {
+pub fn characterise(grid: &Grid, ctx: &ReportContext) -> Result<LinesSection, ReportError> {
     let analyses = analyse_lines(grid, &ctx.line_options, &ctx.input)?;
-    let mut recipe =
-        analyses
-            .first()
-            .map(|a| a.recipe.clone())
-            .ok_or_else(|| ReportError::NoLines {
-                dir: PathBuf::from(&ctx.input),
-                incomplete: Vec::new(),
-            })?;
+    let mut recipe = analyses.first().map(|a| a.recipe.clone()).ok_or_else(|| {
+        crate::input::InputError::NoLines {
+            dir: PathBuf::from(&ctx.input),
+            incomplete: Vec::new(),
+        }
+    })?;
     recipe.definitions.extend(areal::definitions());
     let lines = analyses
         .iter()

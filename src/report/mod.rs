@@ -35,7 +35,6 @@ pub mod context;
 pub mod document;
 pub mod error;
 pub mod files;
-pub mod grid;
 pub mod holdout;
 pub mod html;
 pub mod lines;
@@ -47,11 +46,9 @@ pub mod summary;
 pub use context::{Model, ReportContext, ScanAnalysisOptions};
 pub use document::{manufacturer_of, Report, ScanStatus, Traceability};
 pub use error::ReportError;
-pub use grid::LineGrid;
-pub use scan_dir::{
-    characterise_scan, load_vouched_lines, scan_line_options, ScanCharacteriser, VouchedLines,
-};
+pub use scan_dir::{characterise_scan, scan_line_options, ScanCharacteriser};
 
+use crate::grid::Grid;
 use crate::metrology::anisotropy::anisotropy;
 use crate::metrology::MetrologyError;
 use document::{Characterisation, FailedSection, ModelReport, Timings};
@@ -98,7 +95,7 @@ pub struct ScanOutputs {
 /// below degree-v + 1 lines, no hold-out without lines to spare) is named in `warnings` and
 /// `characterisation.sections_not_possible` instead: it is not a failure.
 pub fn characterise(
-    grid: &LineGrid,
+    grid: &Grid,
     model: Model<'_>,
     mut ctx: ReportContext,
     out: &Path,
@@ -131,7 +128,7 @@ pub fn characterise(
         source,
     })?;
     let mut failed_sections: Vec<FailedSection> = Vec::new();
-    let (py, evenly) = grid::mean_pitch_y(&grid.y_mm);
+    let (py, evenly) = grid.mean_pitch_y();
     // The model section (the densest work: the fold check, the model's bearing curves, the
     // sampled model) reads only the grid and the model: it runs beside every section below,
     // from the start. It never unwinds (a panic becomes its failure), so an early error
@@ -345,7 +342,9 @@ pub fn characterise(
             outliers,
             anisotropy,
             characterisation: Characterisation {
-                complete: failed_sections.is_empty(),
+                complete: failed_sections.is_empty() && !grid.is_partial(),
+                lines_in_input: grid.lines_in_input(),
+                lines_left_out: grid.left_out.clone(),
                 failed_sections,
                 sections_not_possible: not_possible,
             },

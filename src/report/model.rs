@@ -11,7 +11,7 @@
 use super::areal::surface_report;
 use super::context::{Model, ScanAnalysisOptions};
 use super::document::{FailedSection, SurfaceReport};
-use crate::metrology::areal::Grid;
+use crate::metrology::areal::HeightMap;
 use crate::metrology::folds::{check_model_with, iso_curve_sample_count, FoldOptions, ModelChecks};
 use crate::metrology::model::{
     bearing_sample_us, model_bearing_curves_with, sample_model_grid, ModelBacOptions,
@@ -180,7 +180,7 @@ pub fn characterise(
             };
         }
     };
-    let g = Grid {
+    let g = HeightMap {
         heights_um: &heights,
         rows,
         cols: model_cols,

@@ -8,7 +8,7 @@
 
 use super::context::ReportContext;
 use super::document::{LineNotJudged, OutliersReport};
-use super::grid::LineGrid;
+use crate::grid::Grid;
 use crate::metrology::outliers::{bridged_grid, find_grid_spikes, LineSpike, SpikeOptions};
 use crate::numfmt::{fmt, line_label, sig, Quantity};
 
@@ -17,7 +17,7 @@ const LISTED: usize = 20;
 
 /// Finds the spikes of `grid`'s lines on the roughness profile the lines are evaluated on
 /// (the λc roughness when the lines are filtered, else the heights minus their line).
-pub fn characterise(grid: &LineGrid, ctx: &ReportContext) -> OutliersReport {
+pub fn characterise(grid: &Grid, ctx: &ReportContext) -> OutliersReport {
     let o = &ctx.line_options;
     find(
         &grid.heights_um,
@@ -104,9 +104,9 @@ pub fn warn(
 }
 
 /// A copy of `grid` with `spikes` bridged.
-pub fn bridged(grid: &LineGrid, spikes: &[LineSpike]) -> LineGrid {
+pub fn bridged(grid: &Grid, spikes: &[LineSpike]) -> Grid {
     let (heights_um, _) = bridged_grid(&grid.heights_um, grid.cols, &grid.index, spikes);
-    LineGrid {
+    Grid {
         heights_um,
         ..grid.clone()
     }

@@ -3,288 +3,31 @@
 //! (`surfscan analyze SCAN_DIR`, which fits them with the same degrees). Both go through
 //! [`characterise_scan_lines`], so the same lines give the same report.
 //!
-//! A partial, aborted or failed scan is characterised with the complete lines it has; lines
-//! with only one of their two files are named in a warning, and so are the lines the journal
-//! does not vouch for (a file changed since it was traced, a line never committed), which are
-//! left out before they are read ([`load_vouched_lines`]). A line file that matches its
-//! record but cannot be read is an error naming the file.
+//! A partial, aborted or failed scan is characterised with the complete lines it has; the
+//! lines [`crate::input`] left out (one of their two files missing, not vouched for by the
+//! journal) are named in its findings, which become the report's first warnings.
 //!
-//! Layer 4 (reporting): depends on [`crate::scan`] (its journal, store and line types, and
-//! the [`Characterise`] contract the runner calls), [`crate::fit`] and the sections.
+//! Layer 4 (reporting): depends on [`crate::scan`] (its journal and line types, and the
+//! [`Characterise`] contract the runner calls), [`crate::input`], [`crate::fit`] and the
+//! sections.
 
 use super::context::{Model, ReportContext, ScanAnalysisOptions};
 use super::document::{Completeness, ScanStatus, Traceability};
 use super::error::ReportError;
-use super::grid::LineGrid;
 use super::{characterise, ScanOutputs};
 use crate::fit::{max_residual_mm, FitOptions, MethodError};
+use crate::grid::Grid;
+use crate::input::scan::grid_of_lines;
+use crate::input::{GridInput, InputError, Source, VouchedLines};
 use crate::metrology::params::Options;
 use crate::metrology::surface_model::{fit_model, FittedModel, ModelRecipe};
 use crate::numfmt::line_label;
 use crate::profile::{FilterKind, ProfileKind};
-use crate::scan::faults::NoFaults;
-use crate::scan::journal::{
-    read_journal, ResumeState, StartRecord, StopRecord, StopStatus, JOURNAL_FILE,
-};
+use crate::scan::journal::{StartRecord, StopRecord, StopStatus};
 use crate::scan::line::StoredLine;
 use crate::scan::outputs::{Characterise, Characterised, CompletedScan, FitSummary, GridShape};
-use crate::scan::store::ScanStore;
 use std::path::Path;
-use std::sync::Arc;
 use std::time::Instant;
-
-/// Why a complete line of a scan is left out: its journal does not vouch for it as it is.
-#[derive(Debug, Clone, PartialEq)]
-pub enum NotVouched {
-    /// On disk, but the journal never committed it (the scan stopped before its record).
-    Uncommitted,
-    /// Its heights file differs from its journal record.
-    Changed {
-        /// The file's SHA-256.
-        file_sha256: String,
-        /// The journal's.
-        journal_sha256: String,
-    },
-    /// Its heights file cannot be read (a bad sector, no permission), with why.
-    Unreadable(String),
-}
-
-impl NotVouched {
-    /// The reason in a few words, as the IGES Start section and `fit --report` give it.
-    pub fn short(&self) -> &'static str {
-        match self {
-            NotVouched::Uncommitted => "never committed to the journal",
-            NotVouched::Changed { .. } => "changed after it was traced",
-            NotVouched::Unreadable(_) => "cannot be read",
-        }
-    }
-}
-
-/// A line of a scan left out, as `fit --report` lists it.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct LeftOut {
-    /// 1-based line number.
-    pub line: u64,
-    /// Its heights file, as named in `lines/`.
-    pub file: String,
-    /// Why, in a few words.
-    pub why: &'static str,
-}
-
-impl LeftOut {
-    fn of(index: u32, why: &'static str) -> LeftOut {
-        LeftOut {
-            line: crate::numfmt::line_number(index),
-            file: crate::scan::store::csv_name(index),
-            why,
-        }
-    }
-}
-
-/// Line indices as a person reads them: 1-based, each with the heights file it is stored
-/// in, `21 (0020.csv), 22 (0021.csv)`.
-pub fn line_files(indices: &[u32]) -> String {
-    indices
-        .iter()
-        .map(|&i| {
-            format!(
-                "{} ({})",
-                crate::numfmt::line_number(i),
-                crate::scan::store::csv_name(i)
-            )
-        })
-        .collect::<Vec<_>>()
-        .join(", ")
-}
-
-/// The warning for `count` lines (`list`) on disk that the journal never committed.
-pub fn uncommitted_lines_warning(list: &str, count: usize) -> String {
-    let (noun, are, them, their, were) = if count == 1 {
-        ("line", "is", "it", "its", "it was")
-    } else {
-        ("lines", "are", "them", "their", "they were")
-    };
-    format!(
-        "{noun} {list} {are} on disk but the journal never committed {them} (the scan stopped before {their} record); {were} left out"
-    )
-}
-
-/// Checks the heights file of each line of `index` in `store` against the SHA-256 its
-/// journal record holds (`state`): the lines without a record, whose file changed since, or
-/// whose file cannot be read, each with why. A journal that cannot be read vouches for
-/// nothing and leaves nothing out.
-fn not_vouched(
-    store: &ScanStore,
-    state: Option<&ResumeState>,
-    index: &[u32],
-) -> Vec<(u32, NotVouched)> {
-    let Some(state) = state else {
-        return Vec::new();
-    };
-    let mut out = Vec::new();
-    for &i in index {
-        let Some(record) = state.lines.iter().find(|l| l.id.index == i) else {
-            out.push((i, NotVouched::Uncommitted));
-            continue;
-        };
-        let why = match store.heights_sha256(i) {
-            Ok(sha) if sha == record.csv_sha256 => continue,
-            Ok(sha) => NotVouched::Changed {
-                file_sha256: sha,
-                journal_sha256: record.csv_sha256.clone(),
-            },
-            Err(e) => NotVouched::Unreadable(e.to_string()),
-        };
-        out.push((i, why));
-    }
-    out
-}
-
-/// How many lines of scan directory `dir` have both their files (0 when it is not a scan
-/// directory): a count, without reading a line.
-pub fn complete_line_count(dir: &Path) -> usize {
-    ScanStore::open(dir, Arc::new(NoFaults))
-        .and_then(|s| s.stored_indices())
-        .map_or(0, |(complete, _)| complete.len())
-}
-
-/// The lines of a scan directory that its journal vouches for, read after their check.
-#[derive(Debug)]
-pub struct VouchedLines {
-    /// The complete lines whose heights file is as the journal recorded it (every complete
-    /// line when the journal cannot be read), in index order.
-    pub lines: Vec<StoredLine>,
-    /// Indices with only one of their two files (not read).
-    pub incomplete: Vec<u32>,
-    /// The complete lines the journal does not vouch for (not read), each with why.
-    pub not_vouched: Vec<(u32, NotVouched)>,
-    /// The journal, or why it cannot be read.
-    pub journal: Result<ResumeState, crate::scan::journal::JournalError>,
-}
-
-impl VouchedLines {
-    /// The warnings for the lines the journal does not vouch for, in the operator's words,
-    /// each naming what to do.
-    pub fn warnings(&self, lines_dir: &Path) -> Vec<String> {
-        let uncommitted: Vec<u32> = self
-            .not_vouched
-            .iter()
-            .filter(|(_, why)| *why == NotVouched::Uncommitted)
-            .map(|(i, _)| *i)
-            .collect();
-        let mut out = Vec::new();
-        if !uncommitted.is_empty() {
-            out.push(uncommitted_lines_warning(
-                &line_files(&uncommitted),
-                uncommitted.len(),
-            ));
-        }
-        let file = |i: u32| lines_dir.join(crate::scan::store::csv_name(i));
-        // The changed lines first, then the unreadable ones.
-        for (i, why) in &self.not_vouched {
-            if let NotVouched::Changed {
-                file_sha256,
-                journal_sha256,
-            } = why
-            {
-                out.push(format!(
-                    "line {} ({}) was changed after it was traced: its SHA-256 {file_sha256} differs from the journal's {journal_sha256}; it was left out (restore the file to use it, or fit the edited heights as a grid CSV)",
-                    crate::numfmt::line_number(*i),
-                    file(*i).display()
-                ));
-            }
-        }
-        for (i, why) in &self.not_vouched {
-            if let NotVouched::Unreadable(e) = why {
-                out.push(format!(
-                    "line {} ({}) cannot be read ({e}); it was left out (check the disk and the file's permissions)",
-                    crate::numfmt::line_number(*i),
-                    file(*i).display()
-                ));
-            }
-        }
-        out
-    }
-
-    /// Every line left out, incomplete or not vouched for, in line order.
-    pub fn left_out(&self) -> Vec<LeftOut> {
-        let mut out: Vec<LeftOut> = self
-            .incomplete
-            .iter()
-            .map(|&i| LeftOut::of(i, "one of its two files missing"))
-            .chain(
-                self.not_vouched
-                    .iter()
-                    .map(|(i, why)| LeftOut::of(*i, why.short())),
-            )
-            .collect();
-        out.sort_by_key(|l| l.line);
-        out
-    }
-
-    /// The scan stopped with success, by its journal.
-    pub fn completed(&self) -> bool {
-        self.journal.as_ref().is_ok_and(|s| {
-            s.stop
-                .as_ref()
-                .is_some_and(|s| s.status == StopStatus::Success)
-        })
-    }
-}
-
-/// The complete lines of scan directory `dir` checked against its journal before they are
-/// read: a line file changed since it was traced (a bit flip, an
-/// edit) or never committed is left out and named, never characterised as measured, and
-/// one bad line does not take down the others. A file that matches its record and still
-/// cannot be read is an error naming it. Without a readable journal every complete line is
-/// read as it is.
-pub fn load_vouched_lines(dir: &Path) -> Result<VouchedLines, ReportError> {
-    if !dir.join("lines").is_dir() {
-        return Err(ReportError::Lines {
-            path: dir.to_path_buf(),
-            reason: "is not a scan directory: it has no lines/ folder (a scan holds lines/NNNN.csv + NNNN.json and journal.jsonl)".to_string(),
-        });
-    }
-    let store = ScanStore::open(dir, Arc::new(NoFaults))?;
-    let (complete, incomplete) = store.stored_indices()?;
-    let complete: Vec<u32> = complete.into_iter().collect();
-    let journal = read_scan_journal(dir);
-    let not_vouched = not_vouched(&store, journal.as_ref().ok(), &complete);
-    let lines = complete
-        .iter()
-        .filter(|&&i| !not_vouched.iter().any(|(j, _)| *j == i))
-        .map(|&i| store.load_line(i))
-        .collect::<Result<Vec<_>, _>>()?;
-    let vouched = VouchedLines {
-        lines,
-        incomplete: incomplete.into_iter().collect(),
-        not_vouched,
-        journal,
-    };
-    if vouched.lines.is_empty() {
-        return Err(if complete.is_empty() {
-            ReportError::NoLines {
-                dir: dir.to_path_buf(),
-                incomplete: vouched.incomplete,
-            }
-        } else {
-            ReportError::Lines {
-                path: dir.to_path_buf(),
-                reason: format!(
-                    "no line is as its journal recorded it: {}",
-                    vouched.warnings(&dir.join("lines")).join("; ")
-                ),
-            }
-        });
-    }
-    Ok(vouched)
-}
-
-/// The journal of a scan directory, when it can be read.
-pub fn read_scan_journal(dir: &Path) -> Result<ResumeState, crate::scan::journal::JournalError> {
-    let path = dir.join(JOURNAL_FILE);
-    read_journal(&path).and_then(|rec| ResumeState::from_records(&path, &rec.records))
-}
 
 /// The degrees to fit a scan with: each as asked for, else the scan's frozen plan (from
 /// its start record), else the paper's 5.
@@ -404,6 +147,7 @@ pub struct ScanFacts<'a> {
 #[allow(clippy::too_many_arguments)]
 pub fn characterise_scan_lines(
     dir: &Path,
+    grid: &Grid,
     lines: &[StoredLine],
     incomplete: &[u32],
     facts: Option<ScanFacts<'_>>,
@@ -412,16 +156,7 @@ pub fn characterise_scan_lines(
     options: &ScanAnalysisOptions,
     mut warnings: Vec<String>,
 ) -> Result<ScanOutputs, ReportError> {
-    let grid = LineGrid::of_scan(lines, &dir.join("lines"))?;
-    if !incomplete.is_empty() {
-        let labels: Vec<String> = incomplete.iter().map(|&i| line_label(i)).collect();
-        warnings.push(incomplete_lines_warning(
-            &labels.join(", "),
-            incomplete.len(),
-            &dir.join("lines"),
-        ));
-    }
-    let first = lines.first().ok_or_else(|| ReportError::NoLines {
+    let first = lines.first().ok_or_else(|| InputError::NoLines {
         dir: dir.to_path_buf(),
         incomplete: incomplete.to_vec(),
     })?;
@@ -495,25 +230,18 @@ pub fn characterise_scan_lines(
         warnings,
     };
     let out = options.out_dir.clone().unwrap_or_else(|| dir.to_path_buf());
-    let mut outputs = characterise(&grid, model, ctx, &out)?;
+    let mut outputs = characterise(grid, model, ctx, &out)?;
     outputs.incomplete_lines = incomplete.to_vec();
     Ok(outputs)
 }
 
 /// Fits `grid` as `recipe` says and summarises the fit (no IGES written).
 pub fn fit_for_report(
-    grid: &LineGrid,
+    grid: &Grid,
     recipe: &ModelRecipe,
 ) -> (Result<FittedModel, MethodError>, Option<FitSummary>, f64) {
     let t = Instant::now();
-    let fit = fit_model(
-        &grid.heights_um,
-        grid.cols,
-        &grid.index,
-        grid.pitch_x_mm,
-        &grid.y_mm,
-        recipe,
-    );
+    let fit = fit_model(grid, recipe);
     let fit_s = t.elapsed().as_secs_f64();
     let summary = fit.as_ref().ok().map(|m| {
         let f = &m.fit;
@@ -539,33 +267,26 @@ pub fn fit_for_report(
 /// `model.x3p` into the scan directory (or `options.out_dir`). Returns the paths and the
 /// warnings.
 pub fn characterise_scan(
-    dir: &Path,
+    input: &GridInput,
     options: &ScanAnalysisOptions,
 ) -> Result<ScanOutputs, ReportError> {
-    let t = Instant::now();
-    // Only what the journal vouches for is characterised, as `fit` fits it; the others are
-    // named.
-    let vouched = load_vouched_lines(dir)?;
-    let mut warnings = vouched.warnings(&dir.join("lines"));
-    if let Err(e) = &vouched.journal {
-        warnings.push(format!("no traceability: the journal cannot be used ({e})"));
-    }
+    let (dir, grid) = (Path::new(&input.described), &input.grid);
+    let Source::Scan(vouched) = &input.source else {
+        return Err(InputError::Usage(format!("{} is not a scan directory", dir.display())).into());
+    };
     let VouchedLines {
         lines,
         incomplete,
         journal,
         ..
-    } = vouched;
+    } = vouched.as_ref();
     let state = journal.as_ref().ok();
-    let recipe = scan_recipe(options, state.as_ref().map(|s| &s.start), &lines);
-    let grid = LineGrid::of_scan(&lines, &dir.join("lines"))?;
-    let (fitted, summary, fit_s) = fit_for_report(&grid, &recipe);
-    drop(grid);
+    let recipe = scan_recipe(options, state.map(|s| &s.start), lines);
+    let (fitted, summary, fit_s) = fit_for_report(grid, &recipe);
     let journal_lines: Vec<u32> = state
-        .as_ref()
         .map(|s| s.lines.iter().map(|l| l.id.index).collect())
         .unwrap_or_default();
-    let facts = state.as_ref().map(|s| ScanFacts {
+    let facts = state.map(|s| ScanFacts {
         start: &s.start,
         stop: s.stop.as_ref(),
         journal_lines: &journal_lines,
@@ -577,19 +298,17 @@ pub fn characterise_scan(
         replaced: fitted.as_ref().map_or(&[][..], |m| &m.replaced[..]),
         fit_s,
     };
-    let load_s = t.elapsed().as_secs_f64() - fit_s;
-    let mut outputs = characterise_scan_lines(
+    characterise_scan_lines(
         dir,
-        &lines,
-        &incomplete,
+        grid,
+        lines,
+        incomplete,
         facts,
         model,
         summary,
         options,
-        warnings,
-    )?;
-    outputs.elapsed_s += load_s;
-    Ok(outputs)
+        input.findings.clone(),
+    )
 }
 
 /// The characterisation the runner calls when a scan completes: the scan's lines as it holds
@@ -624,8 +343,10 @@ impl Characterise for ScanCharacteriser {
             replaced: scan.replaced,
             fit_s: 0.0,
         };
+        let grid = grid_of_lines(scan.lines, &scan.dir.join("lines"))?;
         let out = characterise_scan_lines(
             scan.dir,
+            &grid,
             scan.lines,
             &[],
             Some(facts),
@@ -649,47 +370,8 @@ impl Characterise for ScanCharacteriser {
     }
 }
 
-/// The warning for `count` lines (listed in `list`) that have only one of their two files in
-/// `lines_dir` and were left out, in the singular for one.
-pub fn incomplete_lines_warning(list: &str, count: usize, lines_dir: &Path) -> String {
-    let (noun, has, their, were) = if count == 1 {
-        ("line", "has", "its", "was")
-    } else {
-        ("lines", "have", "their", "were")
-    };
-    format!(
-        "{noun} {list} {has} only one of {their} two files in {} and {were} left out",
-        lines_dir.display()
-    )
-}
-
 #[cfg(test)]
 mod tests {
-
-    #[test]
-    fn lines_the_journal_never_committed_are_counted_in_the_warning() {
-        assert_eq!(
-            super::uncommitted_lines_warning("21 (0020.csv)", 1),
-            "line 21 (0020.csv) is on disk but the journal never committed it (the scan stopped before its record); it was left out"
-        );
-        assert_eq!(
-            super::uncommitted_lines_warning("21, 22", 2),
-            "lines 21, 22 are on disk but the journal never committed them (the scan stopped before their record); they were left out"
-        );
-    }
-
-    #[test]
-    fn a_single_incomplete_line_is_named_in_the_singular() {
-        let d = std::path::Path::new("/scan/lines");
-        assert_eq!(
-            super::incomplete_lines_warning("6 (0005.csv)", 1, d),
-            "line 6 (0005.csv) has only one of its two files in /scan/lines and was left out"
-        );
-        assert_eq!(
-            super::incomplete_lines_warning("6, 7", 2, d),
-            "lines 6, 7 have only one of their two files in /scan/lines and were left out"
-        );
-    }
     use super::*;
     use crate::profile::{Conditions, NoHeights, Profile};
     use crate::scan::line::{LineIdentity, LineMeta};

@@ -264,7 +264,7 @@ pub fn write_outputs(
     characterise: Option<&dyn Characterise>,
 ) -> Result<Outputs, OutputsError> {
     let t_fit = Instant::now();
-    let (z, y, cols) = grid_of(lines);
+    let (mut z, mut y, cols) = grid_of(lines);
     let pitch_x_mm = lines.first().map_or(f64::NAN, |l| l.profile.pitch_x_mm);
     let recipe = recipe_of(plan, lines);
     // The paper's surface is the incremental fitter's; anything else is fitted here from the
@@ -273,8 +273,10 @@ pub fn write_outputs(
         (fitter.finish()?, Vec::new())
     } else {
         drop(fitter);
-        let index: Vec<u32> = lines.iter().map(|l| l.meta.id.index).collect();
-        let m = fit_model(&z, cols, &index, pitch_x_mm, &y, &recipe)?;
+        let mut grid = crate::grid::Grid::new(z, cols, pitch_x_mm, y);
+        grid.index = lines.iter().map(|l| l.meta.id.index).collect();
+        let m = fit_model(&grid, &recipe)?;
+        (z, y) = (grid.heights_um, grid.y_mm);
         (m.fit, m.replaced)
     };
     let finish_s = t_fit.elapsed().as_secs_f64();

@@ -511,7 +511,12 @@ fn grid_and_profile_csv() {
     fuzz(3000, (inputs(seeds, EXTRA), 0..4u8), |(b, pitch)| {
         let t = text(&b);
         let pitch_mm = [0.0015, 0.0, -1.0, f64::NAN][pitch as usize];
-        let _ = surfscan::cli::fit::parse_grid(&t);
+        let grid_csv = surfscan::input::ReadOptions {
+            pitch_x_mm: Some(0.0015),
+            pitch_y_mm: Some(0.01),
+            z_unit: None,
+        };
+        let _ = surfscan::input::read_csv(Path::new("fuzz.csv"), b.to_vec(), &grid_csv);
         let _ = surfscan::scan::line_csv::parse_csv(Path::new("fuzz.csv"), &t, pitch_mm);
         // The simulator's own reader of the traces it serves.
         let _ = surfscan_sim::ProfileSet::parse(&t, Some(pitch_mm));

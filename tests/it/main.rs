@@ -18,6 +18,7 @@ mod iges_fit_cli;
 mod iges_occt;
 mod iges_roundtrip;
 mod iges_split;
+mod input_policy;
 mod jobs_cli;
 mod metrology_areal;
 mod metrology_cli;

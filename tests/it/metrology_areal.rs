@@ -1,7 +1,7 @@
 //! Areal parameters of a tilted cosine grid against closed forms.
 
 use std::f64::consts::PI;
-use surfscan::metrology::areal::{areal_params, smr_curve, Grid};
+use surfscan::metrology::areal::{areal_params, smr_curve, HeightMap};
 use surfscan::metrology::MetrologyError;
 
 /// z = 2 + 0.5·x_mm − 0.3·y_mm + A·cos(2πx/λ): 200 points per period, 4 periods plus the
@@ -25,7 +25,7 @@ fn grid() -> (Vec<f64>, usize, usize, f64, f64, f64, usize) {
 #[test]
 fn tilted_cosine_grid_matches_closed_forms() {
     let (z, rows, cols, px, py, amp, m) = grid();
-    let g = Grid {
+    let g = HeightMap {
         heights_um: &z,
         rows,
         cols,
@@ -70,7 +70,7 @@ fn tilted_cosine_grid_matches_closed_forms() {
 #[test]
 fn smr_curve_of_a_cosine_grid_is_arccos() {
     let (z, rows, cols, px, py, amp, _) = grid();
-    let g = Grid {
+    let g = HeightMap {
         heights_um: &z,
         rows,
         cols,
@@ -90,7 +90,7 @@ fn smr_curve_of_a_cosine_grid_is_arccos() {
 #[test]
 fn grid_shape_errors_are_named() {
     let z = vec![0.0; 10];
-    let g = Grid {
+    let g = HeightMap {
         heights_um: &z,
         rows: 3,
         cols: 4,
@@ -106,7 +106,7 @@ fn grid_shape_errors_are_named() {
             got: 10
         }
     );
-    let g = Grid {
+    let g = HeightMap {
         heights_um: &z,
         rows: 1,
         cols: 10,

@@ -57,7 +57,7 @@ fn model_bac_of_a_sinusoidal_grid_is_arccos() {
 
 #[test]
 fn model_sampled_on_the_real_31_line_grid_reproduces_data_and_keeps_sa_sq() {
-    use surfscan::metrology::areal::{areal_params, Grid};
+    use surfscan::metrology::areal::{areal_params, HeightMap};
     use surfscan::metrology::model::sample_model_grid;
     let dir = match std::env::var_os("SURFSCAN_REAL_DATA") {
         Some(d) => std::path::PathBuf::from(d),
@@ -89,7 +89,7 @@ fn model_sampled_on_the_real_31_line_grid_reproduces_data_and_keeps_sa_sq() {
             );
         }
     }
-    let raw = areal_params(&Grid {
+    let raw = areal_params(&HeightMap {
         heights_um: &z,
         rows,
         cols,
@@ -97,7 +97,7 @@ fn model_sampled_on_the_real_31_line_grid_reproduces_data_and_keeps_sa_sq() {
         pitch_y_mm: py,
     })
     .unwrap();
-    let dense = areal_params(&Grid {
+    let dense = areal_params(&HeightMap {
         heights_um: &model,
         rows,
         cols: 2 * cols - 1,

@@ -5,7 +5,7 @@
 //! `SURFSCAN_PLOT_DIR=DIR` keeps the figures in DIR to look at them.
 
 use surfscan::fit::{fit_grid, FitOptions};
-use surfscan::metrology::areal::{smr_curve, Grid};
+use surfscan::metrology::areal::{smr_curve, HeightMap};
 use surfscan::metrology::model::{model_bearing_curves, ModelBacOptions};
 use surfscan::metrology::params::{analyze_line, material_ratio_curve, rk_family, Options};
 use surfscan::metrology::plots::{
@@ -100,7 +100,7 @@ fn every_plot_is_png_and_svg_in_iso_words_with_a_key_for_every_colour() {
     let y: Vec<f64> = (0..ROWS).map(|r| r as f64 * PY).collect();
     let fit = fit_grid(PX, &y, &z, COLS, FitOptions::default()).unwrap();
     let curves = model_bearing_curves(&fit.surface, &ModelBacOptions::default()).unwrap();
-    let g = Grid {
+    let g = HeightMap {
         heights_um: &z,
         rows: ROWS,
         cols: COLS,

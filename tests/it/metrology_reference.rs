@@ -22,7 +22,7 @@
 
 use serde_json::Value;
 use std::path::PathBuf;
-use surfscan::metrology::areal::{areal_params, Grid};
+use surfscan::metrology::areal::{areal_params, HeightMap};
 use surfscan::metrology::filter::split;
 use surfscan::metrology::params::{analyze_line, Options};
 
@@ -230,7 +230,7 @@ fn areal_parameters_of_the_31_profile_grid_agree_with_surfalize() {
         .collect();
     let (rows, cols) = (num(a, "rows") as usize, num(a, "cols") as usize);
     assert_eq!(rows * cols, z.len());
-    let grid = Grid {
+    let grid = HeightMap {
         heights_um: &z,
         rows,
         cols,

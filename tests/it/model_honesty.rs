@@ -5,7 +5,7 @@
 
 use surfscan::config::FitSettings;
 use surfscan::fit::{fit_grid, fit_grid_with, FitOptions, VMethod};
-use surfscan::metrology::areal::{areal_params, Grid};
+use surfscan::metrology::areal::{areal_params, HeightMap};
 use surfscan::metrology::folds::{check_model, FoldOptions};
 use surfscan::metrology::holdout::{between_lines, SUPPORTED_BELOW_SQ};
 use surfscan::metrology::outliers::{find_spikes, spike_roughness, SpikeOptions};
@@ -60,7 +60,7 @@ fn uncorrelated_grid(seed: u64) -> Vec<f64> {
 }
 
 fn sq(z: &[f64], rows: usize, cols: usize) -> f64 {
-    areal_params(&Grid {
+    areal_params(&HeightMap {
         heights_um: z,
         rows,
         cols,

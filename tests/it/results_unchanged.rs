@@ -117,8 +117,8 @@ pub fn iges_fingerprint(path: &Path, paths: &[(&Path, &str)]) -> Value {
 }
 
 /// Every difference between `want` (the fixture) and `got` at `path` and below: numbers,
-/// booleans and nulls must be equal, arrays as long; strings are not compared, except the
-/// words of the IGES Start section.
+/// booleans and nulls must be equal, arrays as long (but for lists of words); strings are not
+/// compared, except the words of the IGES Start section.
 fn differences(path: &str, want: &Value, got: Option<&Value>, out: &mut Vec<String>) {
     let Some(got) = got else {
         if !matches!(want, Value::String(_)) || path.ends_with("/iges/start") {
@@ -133,6 +133,11 @@ fn differences(path: &str, want: &Value, got: Option<&Value>, out: &mut Vec<Stri
             }
         }
         (Value::Array(w), Value::Array(g)) => {
+            // Words (the warnings) are not results: their number is free.
+            let words = |a: &[Value]| a.iter().all(Value::is_string);
+            if words(w) && words(g) {
+                return;
+            }
             if w.len() != g.len() {
                 out.push(format!("{path}: {} elements, was {}", g.len(), w.len()));
             }
@@ -273,11 +278,15 @@ fn cases() -> Vec<Case> {
         ),
         analyze("analyze-dektak-1", "{D}/real/dektak-1.x_mm_z_um.csv", &[]),
         analyze("analyze-hfm-1", "{D}/real/hfm-1.x_mm_z_um.csv", &[]),
-        analyze(
-            "analyze-opdx-3",
-            "{D}/real/opdx-3.x_mm_z_um.csv",
-            &["--lc", "0.008"],
-        ),
+        Case {
+            // Real nanoscale data (Sq 2.8 nm): read only when the unit is stated.
+            added: &["--z-unit", "um"],
+            ..analyze(
+                "analyze-opdx-3",
+                "{D}/real/opdx-3.x_mm_z_um.csv",
+                &["--lc", "0.008"],
+            )
+        },
         Case {
             name: "analyze-sur-2",
             args: with(&["analyze", "--out", "{T}/out"], SUR2),

@@ -520,16 +520,18 @@ fn partial_scan_is_analysed_with_the_lines_it_has_and_names_the_incomplete_one()
     let scan = build_scan(tmp.path(), &rows, ProfileKind::P, Some(StopStatus::Abort));
     // Line 4 lost its metadata (a crash between the two renames).
     std::fs::remove_file(scan.join("lines/0004.json")).unwrap();
-    let out = run_ok(&[
-        "analyze",
-        scan.to_str().unwrap(),
-        "--out",
-        tmp.path().join("out").to_str().unwrap(),
-    ]);
+    let out = surfscan()
+        .args(["analyze", scan.to_str().unwrap(), "--out"])
+        .arg(tmp.path().join("out"))
+        .output()
+        .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
+    // 12 of the 13 lines on disk: partial, exit 3, every output written.
+    assert_eq!(out.status.code(), Some(3), "{stderr}");
     assert!(
         stderr.contains("warning")
-            && stderr.contains("line 5 (0004) has only one of its two files"),
+            && stderr.contains("line 5 (0004.csv) has only one of its two files")
+            && stderr.contains("it is made from 12 of 13 lines"),
         "{stderr}"
     );
     let r = report(&tmp.path().join("out"));
@@ -547,7 +549,7 @@ fn partial_scan_is_analysed_with_the_lines_it_has_and_names_the_incomplete_one()
     assert!(r["warnings"].as_array().unwrap().iter().any(|w| w
         .as_str()
         .unwrap()
-        .contains("line 5 (0004) has only one of its two files")));
+        .contains("line 5 (0004.csv) has only one of its two files")));
     // Line 5 keeps its own y although line 4 is missing.
     assert!(
         (r["lines"][4]["y_mm"].as_f64().unwrap() - 5.0 * STEP_Y_NM as f64 * 1e-6).abs() < 1e-15
@@ -677,9 +679,11 @@ fn fit_scan_dir_checks_the_journal_and_keeps_a_completed_surface() {
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    // A surface of 7 of the 8 lines on disk is partial: exit 3, the surface written.
+    assert_eq!(out.status.code(), Some(3), "{stderr}");
     assert!(
-        stderr.contains("warning: line 21 (0020.csv) is on disk but the journal never committed it (the scan stopped before its record); it was left out"),
+        stderr.contains("warning: line 21 (0020.csv) is on disk but the journal never committed it (the scan stopped before its record); it was left out")
+            && stderr.contains("the surface is partial: fitted from 7 of 8 lines"),
         "{stderr}"
     );
     let rep: Value = serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
@@ -693,7 +697,11 @@ fn fit_scan_dir_checks_the_journal_and_keeps_a_completed_surface() {
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert_eq!(
+        out.status.code(),
+        Some(3),
+        "the same exit status as fit: {stderr}"
+    );
     assert!(
         stderr.contains("line 21 (0020.csv) is on disk but the journal never committed it"),
         "{stderr}"
@@ -725,7 +733,7 @@ fn fit_scan_dir_checks_the_journal_and_keeps_a_completed_surface() {
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert_eq!(out.status.code(), Some(3), "{stderr}");
     assert!(
         stderr.contains("line 3 (")
             && stderr.contains("0002.csv) was changed after it was traced")
@@ -778,9 +786,9 @@ fn a_malformed_line_file_is_a_clear_error_naming_the_file() {
         })
     };
     // The journal's SHA-256 shows the file was damaged after it was traced: the line is left
-    // out and named, and the others are characterised and fitted.
+    // out and named, and the others are characterised and fitted: partial, exit 3 in both.
     for (code, stderr) in both() {
-        assert_eq!(code, Some(0), "{stderr}");
+        assert_eq!(code, Some(3), "{stderr}");
         assert!(
             stderr.contains("line 3 (") && stderr.contains("0002.csv) was changed"),
             "{stderr}"
@@ -806,7 +814,7 @@ fn a_malformed_line_file_is_a_clear_error_naming_the_file() {
     std::fs::remove_file(&other).unwrap();
     std::fs::create_dir(&other).unwrap();
     for (code, stderr) in both() {
-        assert_eq!(code, Some(0), "{stderr}");
+        assert_eq!(code, Some(3), "{stderr}");
         assert!(
             stderr.contains("line 5 (") && stderr.contains("0004.csv) cannot be read"),
             "{stderr}"
@@ -848,7 +856,8 @@ fn characterise_scan_reports_the_fit_it_describes_and_returns_the_paths() {
         degree_v: Some(3),
         ..ScanAnalysisOptions::default()
     };
-    let out = characterise_scan(&scan, &options).unwrap();
+    let input = surfscan::input::read(&scan, &Default::default()).unwrap();
+    let out = characterise_scan(&input, &options).unwrap();
     // The figures drawn on this thread leave no texts behind for the next report: a daemon
     // characterising scan after scan holds no memory for the ones before.
     assert_eq!(surfscan::metrology::text_cache::remembered(), (0, 0));
