@@ -4,8 +4,8 @@
 //!
 //! Every key is derived from what the simulator serves: the links as ports, the model and the
 //! `RDEVA` form it answers, the served profiles' x pitch, the stage's protocol, resolution and
-//! machine space (soft limits inside it, one millimetre clear of each end), and status polls
-//! fast enough for the time scale. The scan's first line sits 20 mm inside the travel from
+//! machine space (soft limits inside it, one millimetre clear of each end), and the drive's
+//! speeds and status polls at the time scale. The scan's first line sits 20 mm inside the travel from
 //! the home switch, and the served profiles are placed on the scan's y grid
 //! ([`StationConfig::profiles`]), so line k of the scan is served profile k.
 //!
@@ -269,6 +269,17 @@ pub fn station_config(
         s,
         "# The served profiles' x pitch.\npitch-x-um = {}",
         num(pitch_mm * 1000.0, 6)
+    );
+    // The drive's speeds as the host sees them: the simulator's, sped up by the time scale.
+    let _ = writeln!(
+        s,
+        "# The simulated drive's speeds, {} and {} mm/s, at time scale {}.\n\
+         measuring-speed-mm-s = {}\nreturn-speed-mm-s = {}",
+        inst.measure_speed_mm_s,
+        inst.return_speed_mm_s,
+        inst.time_scale,
+        num(inst.measure_speed_mm_s / inst.time_scale, 6),
+        num(inst.return_speed_mm_s / inst.time_scale, 6),
     );
     let n = u32::from(inst.conditions.sampling_lengths);
     if n > 0 {
@@ -541,7 +552,14 @@ mod tests {
             station_config(&request(&inst, SimStage::Grbl(&g)), &set(100, 0.0015, 8))
         };
         let poll = |c: StationConfig| key(&c.toml, "poll-interval-ms")[0].to_string();
-        assert_eq!(poll(at(1.0).unwrap()), "250");
+        let real = at(1.0).unwrap();
+        assert_eq!(key(&real.toml, "measuring-speed-mm-s"), ["0.5"]);
+        assert_eq!(key(&real.toml, "return-speed-mm-s"), ["1.0"]);
+        assert_eq!(poll(real), "250");
+        // 50 times faster: the drive moves at 25 mm/s and returns at 50 mm/s.
+        let fast = at(0.02).unwrap();
+        assert_eq!(key(&fast.toml, "measuring-speed-mm-s"), ["25.0"]);
+        assert_eq!(key(&fast.toml, "return-speed-mm-s"), ["50.0"]);
         assert_eq!(poll(at(0.02).unwrap()), "10"); // 106 ms of measuring
         assert_eq!(poll(at(0.01).unwrap()), "5"); // 53 ms
         match at(0.0) {
