@@ -8,10 +8,11 @@
 //! Exit status: 0 valid (notes are printed on standard error), 78 invalid or unreadable,
 //! with the message naming the file, the key and the fix.
 //!
-//! Layer 5 (composition): depends on [`crate::config`], [`crate::jobs::recipe`] and
-//! [`crate::transport`].
+//! Layer 5 (composition): depends on [`crate::config`], [`crate::jobs::recipe`],
+//! [`crate::transport`] and [`super::station`] (the configuration loaded as the commands that
+//! run the station load it).
 
-use super::scan::load_config;
+use super::station::load_config;
 use super::{CliError, Exit, DEFAULT_CONFIG};
 use crate::config::Config;
 use crate::numfmt::{fmt, Quantity};

@@ -22,7 +22,9 @@
 use super::{CliError, Exit};
 use crate::control::client::{ClientError, ControlClient, Received};
 use crate::control::protocol::{Message, Request};
-use crate::scan::status::{DeviceState, Ending, State, Status};
+use crate::scan::command::StartMode;
+use crate::scan::ending::StopStatus;
+use crate::scan::status::{DeviceState, State, Status};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -258,7 +260,7 @@ pub fn run_start(args: StartArgs) -> Result<(), CliError> {
         specimen: args.specimen,
         operator,
         notes: args.notes,
-        mode: super::scan::start_mode(args.resume, args.new),
+        mode: StartMode::from_flags(args.resume, args.new),
     };
     let path = socket_path(&args.target)?;
     let json = args.target.json;
@@ -309,10 +311,12 @@ async fn confirm_start(path: &Path, before: u64, json: bool) -> Result<(), CliEr
                     say!("{}", m.raw);
                 }
                 return match (&s.state, &s.last_stop) {
-                    (State::Idle, Some(stop)) if stop.status == Ending::Fail => Err(CliError::new(
-                        Exit::Failed,
-                        format!("the scan did not start: {}", stop.reason),
-                    )),
+                    (State::Idle, Some(stop)) if stop.status == StopStatus::Fail => {
+                        Err(CliError::new(
+                            Exit::Failed,
+                            format!("the scan did not start: {}", stop.reason),
+                        ))
+                    }
                     _ => {
                         if !json {
                             say!("{}", s.summary());
@@ -520,7 +524,7 @@ pub fn render_status_line(s: &Status) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scan::status::{Ending, LastStop};
+    use crate::scan::status::LastStop;
 
     fn scanning() -> Status {
         let mut s = Status::idle();
@@ -550,7 +554,7 @@ mod tests {
         let mut s = Status::idle();
         s.last_stop = Some(LastStop {
             scan_id: "G-0141".into(),
-            status: Ending::Fail,
+            status: StopStatus::Fail,
             reason: "stage following error".into(),
             dir: "/d/G-0141".into(),
         });

@@ -12,23 +12,30 @@
 //! otherwise ignored: the configuration is read only at start. The notification hook
 //! runs when a scan completes, fails, is aborted or suspends.
 //!
-//! Layer 5 (composition): config, control server, runner, service notifications, hook.
+//! Which scan a start runs (and which one the daemon resumes at its own start) is
+//! [`crate::scan::choice`]'s decision.
+//!
+//! Layer 5 (composition): [`super::station`], control server, runner, service
+//! notifications, hook.
 
-use super::scan::{decide_request, load_config, StartChoice};
+use super::station::{
+    ignore_hangups, load_config, lock_station, record_scan_in_lock, run_settings,
+};
 use super::{CliError, Exit};
 use crate::config::Config;
 use crate::control::protocol::ControlChannels;
 use crate::control::server;
 use crate::hook::Hook;
 use crate::scan::channels::Control;
-use crate::scan::command::{OperatorCommand, OperatorRequest, Peer, StartMode};
+use crate::scan::choice::{self, Asker};
+use crate::scan::command::{OperatorCommand, OperatorRequest, Peer};
+use crate::scan::ending::{End, StopStatus};
 use crate::scan::event::ScanEvent;
-use crate::scan::machine::ended_status;
-use crate::scan::outcome::{Outcome, ScanRequest};
+use crate::scan::outcome::ScanRequest;
 use crate::scan::runner::run_scan;
 use crate::scan::settings::RunSettings;
 use crate::scan::station::{SerialStation, Station};
-use crate::scan::status::{DeviceState, Ending, State, Status};
+use crate::scan::status::{ended_status, DeviceState, State, Status};
 use crate::scan::testhooks::TestHooks;
 use crate::service::Notifier;
 use crate::station_lock::StationLock;
@@ -74,11 +81,11 @@ pub fn run(args: Args) -> Result<(), CliError> {
         },
         ..server::ServerOptions::default()
     };
-    let lock = super::scan::lock_station(&config, "daemon")?;
+    let lock = lock_station(&config, "daemon")?;
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
     let station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
-    let settings = super::scan::run_settings(&config, config_hash, hooks)?;
+    let settings = run_settings(&config, config_hash, hooks)?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -136,7 +143,7 @@ async fn daemon(
     );
     notifier.ready();
 
-    tokio::spawn(super::scan::record_scan_in_lock(lock, status_rx.clone()));
+    tokio::spawn(record_scan_in_lock(lock, status_rx.clone()));
 
     // STATUS= on every change.
     let n = notifier.clone();
@@ -156,7 +163,7 @@ async fn daemon(
     });
 
     // SIGHUP changes nothing: the configuration is read once, at start.
-    tokio::spawn(super::scan::ignore_hangups(
+    tokio::spawn(ignore_hangups(
         "ignored; the daemon reads its configuration only at start (systemctl restart surfscan applies a change; an unfinished scan resumes)",
     ));
 
@@ -199,24 +206,27 @@ async fn daemon(
 
     // Resume an unfinished scan at start-up.
     let mut stop = false;
-    match decide_request(
-        config,
-        String::new(),
-        String::new(),
-        String::new(),
-        StartMode::Auto,
+    match choice::choose(
+        &config.output.dir,
+        Asker::DaemonStartUp,
         Peer::this_process(),
+        Default::default(),
     )
-    .and_then(StartChoice::commit)
+    .and_then(choice::Choice::commit)
     {
-        Ok(ScanRequest::Resume { dir, .. }) => {
-            let req = ScanRequest::Resume { dir, peer: None };
+        Ok(Some(request)) => {
+            // Reopened by the daemon itself: no operator asked (a paused scan stays paused).
+            let req = match request {
+                ScanRequest::Resume { dir, .. } => ScanRequest::Resume { dir, peer: None },
+                ScanRequest::Continue { dir, .. } => ScanRequest::Continue { dir, peer: None },
+                other => other,
+            };
             ctl.status.send_modify(|s| s.starts += 1);
             let outcome = run_scan(&mut station, &mut ctl, &settings, req).await;
-            stop = matches!(outcome, Outcome::Interrupted { .. });
+            stop = outcome.end == End::Shutdown;
             note_damaged_journals(config, &ctl.status);
         }
-        Ok(_) => {}
+        Ok(None) => {}
         Err(e) => tracing::error!("{e}"),
     }
 
@@ -245,19 +255,21 @@ async fn daemon(
                             )));
                             continue;
                         }
-                        let choice = match decide_request(config, specimen, operator, notes, mode, req.peer) {
-                            Ok(c) => c,
+                        let choice = match choice::choose(&config.output.dir, Asker::Operator(mode), req.peer, (specimen, operator, notes)) {
+                            Ok(c) if !matches!(c.decision, choice::Decision::Refuse(_)) => c,
+                            Ok(c) => {
+                                let why = c.describe(config.scan.lines);
+                                tracing::error!("{why}");
+                                let _ = req.reply.send(Err(why));
+                                continue;
+                            }
                             Err(e) => {
                                 tracing::error!("{e}");
                                 let _ = req.reply.send(Err(e.to_string()));
                                 continue;
                             }
                         };
-                        let what = match &choice.request {
-                            ScanRequest::New { .. } => format!("starting a scan of {} lines", config.scan.lines),
-                            ScanRequest::Resume { dir, .. } => format!("resuming the unfinished scan {}", dir.display()),
-                            ScanRequest::Continue { dir, .. } => format!("continuing the failed scan {}", dir.display()),
-                        };
+                        let what = choice.describe(config.scan.lines);
                         // Nothing is changed, on disk or at the station, unless the operator
                         // is told the start goes ahead.
                         let told = req.reply.send(Ok(format!(
@@ -268,18 +280,19 @@ async fn daemon(
                             continue;
                         }
                         ctl.status.send_modify(|s| s.starts += 1);
-                        let request = match choice.commit() {
-                            Ok(r) => r,
+                        let request = match choice.commit().map_err(CliError::from) {
+                            Ok(Some(r)) => r,
+                            Ok(None) => continue,
                             Err(e) => {
                                 tracing::error!("{e}");
-                                let ended = ended_status(&ctl.status.borrow(), Ending::Fail, &e.to_string());
+                                let ended = ended_status(&ctl.status.borrow(), StopStatus::Fail, &e.to_string());
                                 ctl.status.send_replace(ended);
                                 note_damaged_journals(config, &ctl.status);
                                 continue;
                             }
                         };
                         let outcome = run_scan(&mut station, &mut ctl, &settings, request).await;
-                        stop = matches!(outcome, Outcome::Interrupted { .. });
+                        stop = outcome.end == End::Shutdown;
                         note_damaged_journals(config, &ctl.status);
                     }
                     OperatorCommand::Pause | OperatorCommand::Resume | OperatorCommand::Abort => {

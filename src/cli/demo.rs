@@ -9,7 +9,8 @@
 //! Layer 5 (composition): the simulator crate, config, station, runner. Built with the
 //! default `sim` feature; a station build (`--no-default-features`) leaves it out.
 
-use super::scan::{load_config, outcome_result, run_foreground};
+use super::scan::{outcome_result, run_foreground};
+use super::station::load_config;
 use super::{CliError, Exit};
 use crate::scan::outcome::ScanRequest;
 use crate::scan::station::SerialStation;
@@ -121,7 +122,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let (config, config_hash) = load_config(&config_path)?;
     let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
-    let settings = super::scan::run_settings(&config, config_hash, TestHooks::none())?;
+    let settings = super::station::run_settings(&config, config_hash, TestHooks::none())?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()

@@ -50,6 +50,7 @@ pub mod list;
 pub mod model_args;
 pub mod probe;
 pub mod scan;
+pub mod station;
 
 /// The station configuration read when `--config` is not given.
 pub const DEFAULT_CONFIG: &str = "/etc/surfscan/surfscan.toml";
@@ -138,6 +139,18 @@ impl CliError {
         CliError {
             exit,
             message: message.into(),
+        }
+    }
+}
+
+/// A start that could not be decided or carried out: an I/O error (exit 74) or a refusal
+/// (exit 1), named.
+impl From<crate::scan::choice::ChoiceError> for CliError {
+    fn from(e: crate::scan::choice::ChoiceError) -> CliError {
+        use crate::scan::choice::ChoiceError;
+        match e {
+            ChoiceError::Io(m) => CliError::new(Exit::Io, m),
+            ChoiceError::Refused(m) => CliError::new(Exit::Failed, m),
         }
     }
 }

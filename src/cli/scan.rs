@@ -15,32 +15,30 @@
 //! between lines (the hold-out of [`crate::metrology::holdout`]), not the residual at the data
 //! points, which an interpolant makes zero by construction.
 //!
-//! Layer 5 (composition): config, station, runner, signals, terminal; turns the configuration
-//! into the runner's typed settings.
+//! Which scan runs is [`crate::scan::choice`]'s decision, as for the daemon.
+//!
+//! Layer 5 (composition): [`super::station`] (the configuration as the runner's settings, the
+//! station's lock), [`super::check_config`]'s port check, the runner, signals, terminal.
 
-use super::{CliError, Exit};
-use crate::config::{Config, ConfigError};
-use crate::report::{ScanAnalysisOptions, ScanCharacteriser};
-use crate::scan::channels::Control;
-use crate::scan::command::{Peer, StartMode};
-use crate::scan::faults::NoFaults;
-use crate::scan::journal::{
-    find_unfinished, read_journal, Journal, Record, ResumeState, StopRecord, StopStatus,
-    JOURNAL_FILE,
+use super::station::{
+    ignore_hangups, load_config, lock_station, record_scan_in_lock, run_settings,
 };
-use crate::scan::outcome::{FailKind, Outcome, ScanRequest};
-use crate::scan::plan::{AnalysisPlan, Plan};
-use crate::scan::policy::Backoff;
+use super::{CliError, Exit};
+use crate::config::Config;
+use crate::scan::channels::Control;
+use crate::scan::choice::{self, Asker};
+use crate::scan::command::{Peer, StartMode};
+use crate::scan::ending::{End, FailKind};
+use crate::scan::outcome::{Outcome, ScanRequest};
 use crate::scan::runner::run_scan;
 use crate::scan::settings::RunSettings;
 use crate::scan::station::SerialStation;
 use crate::scan::status::{State, Status};
 use crate::scan::testhooks::TestHooks;
-use crate::station_lock::{self, LockError, StationLock};
+use crate::station_lock::StationLock;
 use std::io::IsTerminal;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 
 /// Arguments of `surfscan scan`.
@@ -67,366 +65,118 @@ pub struct Args {
     pub new: bool,
 }
 
-/// The start mode of `--resume` / `--new` (neither: resume an unfinished scan, else new).
-pub fn start_mode(resume: bool, new: bool) -> StartMode {
-    match (resume, new) {
-        (true, _) => StartMode::Resume,
-        (_, true) => StartMode::New,
-        _ => StartMode::Auto,
-    }
-}
-
-/// Loads the configuration and the SHA-256 of its bytes; a bad file is exit 78.
-pub fn load_config(path: &Path) -> Result<(Config, String), CliError> {
-    let bytes = std::fs::read(path).map_err(|e| {
-        CliError::new(
-            Exit::Config,
-            ConfigError::Read {
-                path: path.to_path_buf(),
-                source: e,
-            }
-            .to_string(),
-        )
-    })?;
-    let hash = crate::scan::store::hex_sha256(&bytes);
-    let text = String::from_utf8(bytes).map_err(|e| {
-        CliError::new(
-            Exit::Config,
-            format!(
-                "config {}: not UTF-8 text (byte {})",
-                path.display(),
-                e.utf8_error().valid_up_to()
-            ),
-        )
-    })?;
-    let config =
-        Config::parse(path, &text).map_err(|e| CliError::new(Exit::Config, e.to_string()))?;
-    Ok((config, hash))
-}
-
-/// The plan of a new scan of this configuration.
-pub fn plan_of(config: &Config) -> Result<Plan, ConfigError> {
-    let (y_start_nm, y_step_nm) = config.y_grid_nm()?;
-    Ok(Plan {
-        lines: config.scan.lines,
-        y_start_nm,
-        y_step_nm,
-        degree_u: config.fit.degree_u,
-        degree_v: config.fit.degree_v,
-        max_line_attempts: config.scan.max_line_attempts,
-        v_method: config.fit.v_method_for(config.scan.lines as usize),
-        replace_spikes: (config.fit.outliers == crate::config::FitOutliers::Replace)
-            .then(|| config.analysis.spike_options()),
-        analysis: Some(analysis_of(&config.analysis)),
-    })
-}
-
-/// The characterisation of `[analysis]`, as a scan's plan freezes it.
-pub fn analysis_of(a: &crate::config::AnalysisSettings) -> AnalysisPlan {
-    AnalysisPlan {
-        curves: a.curves,
-        levels: a.levels,
-        lambda_c_mm: a.lambda_c_mm,
-        no_filter: a.no_filter,
-        spikes: a.spike_options(),
-        exclude_spikes: a.outliers == crate::config::OutlierPolicy::Exclude,
-        holdout_threshold: a.holdout_threshold,
-    }
-}
-
-/// The runner's settings for a station: the plan and session settings of the configuration,
-/// a frozen copy of it and its hash, the test hooks, and the characterisation of `[analysis]`
-/// run when a scan completes. A configuration whose plan cannot be made is exit 78.
-pub fn run_settings(
-    config: &Config,
-    config_hash: String,
-    hooks: TestHooks,
-) -> Result<RunSettings, CliError> {
-    let plan = plan_of(config).map_err(|e| CliError::new(Exit::Config, e.to_string()))?;
-    // A new scan freezes this in its plan; a resumed scan of an older version, which froze
-    // none, is characterised with it.
-    let characterise = ScanCharacteriser {
-        options: ScanAnalysisOptions::default().with_frozen(&analysis_of(&config.analysis)),
-    };
-    Ok(RunSettings {
-        plan,
-        output_dir: config.output.dir.clone(),
-        home_on_start: config.stage.home_on_start,
-        instrument_baud: config.instrument.baud,
-        backoff: Backoff {
-            initial: Duration::from_millis(config.scan.reconnect_initial_ms),
-            max: Duration::from_millis(config.scan.reconnect_max_ms),
-        },
-        transient_budget: Duration::from_secs(config.scan.transient_budget_s),
-        metrics_file: config.metrics.file.clone(),
-        config: serde_json::to_value(config).unwrap_or_default(),
-        config_hash,
-        hooks: Arc::new(hooks),
-        characterise: Some(Arc::new(characterise)),
-    })
-}
-
-/// Where the device locks go: [`station_lock::DEVICE_LOCK_DIR`], or the directory
-/// `SURFSCAN_TEST_LOCK_DIR` names (see [`lock_station`]).
-fn device_lock_dir() -> PathBuf {
-    std::env::var_os("SURFSCAN_TEST_LOCK_DIR").map_or_else(
-        || PathBuf::from(station_lock::DEVICE_LOCK_DIR),
-        PathBuf::from,
-    )
-}
-
-/// A start decided on and not yet carried out: the scan to run, and the unfinished scans to
-/// record as abandoned first (a start with [`StartMode::New`]).
-#[derive(Debug)]
-pub struct StartChoice {
-    /// The scan to run.
-    pub request: ScanRequest,
-    /// Unfinished scans a new one replaces.
-    pub abandon: Vec<PathBuf>,
-    /// Who asked.
-    pub peer: Peer,
-}
-
-impl StartChoice {
-    /// Records the replaced scans as abandoned (the start's only change on disk before the
-    /// scan itself), and hands over the scan to run.
-    pub fn commit(self) -> Result<ScanRequest, CliError> {
-        for dir in &self.abandon {
-            abandon(dir, self.peer)?;
-        }
-        Ok(self.request)
-    }
-}
-
-/// The scan to run for this configuration, as `mode` asks: the unfinished one (no stop
-/// record) started last, by its journal, else a new one; with [`StartMode::Resume`] a failed
-/// one is continued too (refused when there is none); with [`StartMode::New`] unfinished scans
-/// are recorded as abandoned and a new one starts. A scan whose journal is damaged is skipped
-/// with a warning. `peer` is who asked, for the journal.
-///
-/// Nothing is changed by the decision: it is carried out with [`StartChoice::commit`] once
-/// the start is sure to go ahead (the daemon first tells the operator so, and a start the
-/// operator was told had not happened changes nothing).
-pub fn decide_request(
-    config: &Config,
-    specimen: String,
-    operator: String,
-    notes: String,
-    mode: StartMode,
-    peer: Peer,
-) -> Result<StartChoice, CliError> {
-    let decided = |request: ScanRequest, abandon: Vec<PathBuf>| StartChoice {
-        request,
-        abandon,
-        peer,
-    };
-    let out = &config.output.dir;
-    let unfinished = find_unfinished(out).map_err(|e| {
-        CliError::new(
-            Exit::Io,
-            format!("cannot look for unfinished scans in {}: {e}", out.display()),
-        )
-    })?;
-    let new = ScanRequest::New {
-        specimen,
-        operator,
-        notes,
-        peer: Some(peer),
-    };
-    if mode == StartMode::New {
-        return Ok(decided(new, unfinished));
-    }
-    if let Some((last, older)) = unfinished.split_last() {
-        for o in older {
-            tracing::warn!(
-                "{} is also unfinished; only the one started last is resumed (resume it by hand with `surfscan fit`/`analyze`, or add a stop record)",
-                o.display()
-            );
-        }
-        tracing::info!("resuming the unfinished scan {}", last.display());
-        return Ok(decided(
-            ScanRequest::Resume {
-                dir: last.clone(),
-                peer: Some(peer),
-            },
-            Vec::new(),
-        ));
-    }
-    let failed = newest_failed(out);
-    match (mode, failed) {
-        (StartMode::Resume, Some(dir)) => {
-            tracing::info!("continuing the failed scan {}", dir.display());
-            Ok(decided(
-                ScanRequest::Continue {
-                    dir,
-                    peer: Some(peer),
-                },
-                Vec::new(),
-            ))
-        }
-        (StartMode::Resume, None) => Err(CliError::new(
-            Exit::Failed,
-            format!(
-                "no unfinished or failed scan in {} to resume; start without --resume for a new one",
-                out.display()
-            ),
-        )),
-        (_, Some(dir)) => {
-            tracing::warn!(
-                "the last scan {} failed; a new scan starts (`--resume` continues the failed one at its first missing line)",
-                dir.display()
-            );
-            Ok(decided(new, Vec::new()))
-        }
-        (_, None) => Ok(decided(new, Vec::new())),
-    }
-}
-
-/// The failed scan (stop record `fail`) under `output_dir` that started last, by its start
-/// record's sequence number (then its time); scans whose journal cannot be read are skipped
-/// with a warning.
-fn newest_failed(output_dir: &Path) -> Option<PathBuf> {
-    let entries = std::fs::read_dir(output_dir).ok()?;
-    let mut best: Option<((u64, chrono::DateTime<chrono::Utc>), PathBuf)> = None;
-    for dir in entries.filter_map(|e| e.ok().map(|e| e.path())) {
-        let path = dir.join(JOURNAL_FILE);
-        if !path.is_file() {
-            continue;
-        }
-        let state =
-            match read_journal(&path).and_then(|r| ResumeState::from_records(&path, &r.records)) {
-                Ok(s) => s,
-                Err(e) => {
-                    tracing::warn!("skipping {}: {e}", dir.display());
-                    continue;
-                }
-            };
-        if state.stop.as_ref().map(|s| s.status) != Some(StopStatus::Fail) {
-            continue;
-        }
-        // Started last by the sequence number no clock reorders, then (older journals) time.
-        let key = (state.start.sequence, state.start.time);
-        if best.as_ref().is_none_or(|(k, _)| key > *k) {
-            best = Some((key, dir));
-        }
-    }
-    best.map(|(_, d)| d)
-}
-
-/// Records in an unfinished scan's journal that it was abandoned for a new one.
-fn abandon(dir: &Path, peer: Peer) -> Result<(), CliError> {
-    let path = dir.join(JOURNAL_FILE);
-    let io = |e: String| {
-        CliError::new(
-            Exit::Io,
-            format!(
-                "cannot record that the scan in {} is abandoned: {e}",
-                dir.display()
-            ),
-        )
-    };
-    let (mut journal, _) =
-        Journal::open(&path, Arc::new(NoFaults)).map_err(|e| io(e.to_string()))?;
-    let reason = format!(
-        "abandoned: a new scan was started instead (--new, by uid {} pid {})",
-        peer.uid,
-        peer.pid.map_or("unknown".to_owned(), |p| p.to_string())
-    );
-    journal
-        .append(&Record::Stop(StopRecord {
-            status: StopStatus::Abandoned,
-            reason: reason.clone(),
-            time: chrono::Utc::now(),
-        }))
-        .map_err(|e| io(e.to_string()))?;
-    tracing::warn!("{}: {reason}", dir.display());
-    Ok(())
-}
-
 /// Maps a scan's outcome to the exit status and message of a foreground command.
 pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
-    match outcome {
-        Outcome::Success { dir, outputs } => {
-            say!("scan complete: {}", dir.display());
-            for p in &outputs.iges {
-                say!("  surface  {}", p.display());
-            }
-            say!("  report   {}", outputs.report.display());
-            // The report for people first; the per-line Rk plots as one entry.
-            let (rk, files): (Vec<&PathBuf>, Vec<&PathBuf>) = outputs
-                .files
-                .iter()
-                .partition(|p| p.parent().and_then(|d| d.file_name()) == Some("rk".as_ref()));
-            for p in files {
-                say!("  file     {}", p.display());
-            }
-            if let Some(dir) = rk.first().and_then(|p| p.parent()) {
-                say!(
-                    "  file     {}/ ({} Rk construction plots, one PNG and SVG per line)",
-                    dir.display(),
-                    rk.len()
-                );
-            }
-            if let Some(e) = &outputs.characterisation_error {
-                say!("  characterisation failed: {e}; the report holds the fit and the instrument's results");
-            }
-            let report = std::fs::read(&outputs.report)
-                .ok()
-                .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok());
-            match &report {
-                Some(report) => {
-                    for (k, v) in result_summary(report) {
-                        say!("  {k:<8} {v}");
-                    }
-                }
-                None => say!("  (the report cannot be read back for a summary)"),
-            }
-            // Without a verdict in the report, say why there is none.
-            if report
-                .as_ref()
-                .and_then(crate::report::html::verdict)
-                .is_none()
-            {
-                say!("  model    {}", outputs.verdict);
-            }
-            if outputs.characterisation_complete {
-                Ok(())
-            } else {
-                Err(CliError::new(
-                    Exit::Partial,
-                    format!(
-                        "scan complete, but its characterisation is partial (report.json's characterisation and warnings say which sections could not be made and why): {}",
-                        outputs.report.display()
-                    ),
-                ))
-            }
-        }
-        Outcome::Aborted { dir } => Err(CliError::new(
+    let kept = |d: &Option<PathBuf>| match d {
+        Some(d) => format!(" (lines kept in {})", d.display()),
+        None => String::new(),
+    };
+    match (&outcome.end, &outcome.outputs, &outcome.dir) {
+        (End::Success { .. }, Some(outputs), Some(dir)) => success_summary(dir, outputs),
+        (End::Abort { .. }, _, Some(dir)) => Err(CliError::new(
             Exit::Failed,
             format!(
                 "scan aborted; the lines traced are kept in {}",
                 dir.display()
             ),
         )),
-        Outcome::Interrupted { dir } => Err(CliError::new(
+        (End::Abort { .. }, _, None) => Err(CliError::new(
+            Exit::Failed,
+            "scan not started: aborted before the scan started".to_owned(),
+        )),
+        (End::Shutdown, _, Some(dir)) => Err(CliError::new(
             Exit::Failed,
             format!(
                 "scan interrupted; run the same command again to resume it ({})",
                 dir.display()
             ),
         )),
-        Outcome::Failed { dir, reason, kind } => {
-            let exit = match kind {
+        (End::Shutdown, _, None) => Err(CliError::new(
+            Exit::Failed,
+            "scan not started: shut down before the scan started".to_owned(),
+        )),
+        (End::Fail(reason), _, dir) => {
+            let exit = match reason.kind() {
                 FailKind::Scan => Exit::Failed,
                 FailKind::Unavailable => Exit::Unavailable,
                 FailKind::Io => Exit::Io,
             };
             let msg = match dir {
-                Some(d) => format!("scan failed: {reason} (lines kept in {})", d.display()),
+                Some(_) => format!("scan failed: {reason}{}", kept(dir)),
                 None => format!("scan not started: {reason}"),
             };
             Err(CliError::new(exit, msg))
         }
+        (End::Success { .. }, _, dir) => Err(CliError::new(
+            Exit::Io,
+            format!(
+                "internal: a scan that succeeded without its outputs{}",
+                kept(dir)
+            ),
+        )),
+    }
+}
+
+/// What a completed scan prints: the files it wrote and its result in a few lines; exit 3
+/// when its characterisation is partial.
+fn success_summary(
+    dir: &std::path::Path,
+    outputs: &crate::scan::outputs::Outputs,
+) -> Result<(), CliError> {
+    say!("scan complete: {}", dir.display());
+    for p in &outputs.iges {
+        say!("  surface  {}", p.display());
+    }
+    say!("  report   {}", outputs.report.display());
+    // The report for people first; the per-line Rk plots as one entry.
+    let (rk, files): (Vec<&PathBuf>, Vec<&PathBuf>) = outputs
+        .files
+        .iter()
+        .partition(|p| p.parent().and_then(|d| d.file_name()) == Some("rk".as_ref()));
+    for p in files {
+        say!("  file     {}", p.display());
+    }
+    if let Some(dir) = rk.first().and_then(|p| p.parent()) {
+        say!(
+            "  file     {}/ ({} Rk construction plots, one PNG and SVG per line)",
+            dir.display(),
+            rk.len()
+        );
+    }
+    if let Some(e) = &outputs.characterisation_error {
+        say!(
+            "  characterisation failed: {e}; the report holds the fit and the instrument's results"
+        );
+    }
+    let report = std::fs::read(&outputs.report)
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok());
+    match &report {
+        Some(report) => {
+            for (k, v) in result_summary(report) {
+                say!("  {k:<8} {v}");
+            }
+        }
+        None => say!("  (the report cannot be read back for a summary)"),
+    }
+    // Without a verdict in the report, say why there is none.
+    if report
+        .as_ref()
+        .and_then(crate::report::html::verdict)
+        .is_none()
+    {
+        say!("  model    {}", outputs.verdict);
+    }
+    if outputs.characterisation_complete {
+        Ok(())
+    } else {
+        Err(CliError::new(
+            Exit::Partial,
+            format!(
+                "scan complete, but its characterisation is partial (report.json's characterisation and warnings say which sections could not be made and why): {}",
+                outputs.report.display()
+            ),
+        ))
     }
 }
 
@@ -525,40 +275,6 @@ pub async fn run_foreground(
     run_foreground_locked(station, settings, request, None).await
 }
 
-/// Takes the station's lock for the life of the process (exit 69 when another process holds
-/// the output directory or a device, naming it), then sweeps the leftovers of interrupted
-/// writes from the output directory.
-///
-/// The device locks go to the system's lock directory, unless `SURFSCAN_TEST_LOCK_DIR` names
-/// another: the end-to-end tests run many simulated stations on one machine, whose
-/// pseudo-terminal numbers are reused as soon as a simulated device is unplugged, so each
-/// station gets its own lock directory, as separate machines would have. Nothing else sets
-/// it.
-pub fn lock_station(config: &Config, command: &str) -> Result<Arc<StationLock>, CliError> {
-    let devices = [
-        Path::new(&config.instrument.port),
-        Path::new(&config.stage.port),
-    ];
-    let lock = StationLock::acquire(command, &config.output.dir, &devices, &device_lock_dir())
-        .map_err(|e| match e {
-            LockError::Held { .. } => CliError::new(Exit::Unavailable, e.to_string()),
-            LockError::Io { .. } => CliError::new(Exit::Io, e.to_string()),
-        })?;
-    lock.sweep_leftovers();
-    Ok(Arc::new(lock))
-}
-
-/// Keeps the scan id in the station's lock up to date from the status, until it closes.
-pub async fn record_scan_in_lock(lock: Arc<StationLock>, mut status: watch::Receiver<Status>) {
-    loop {
-        let id = status.borrow_and_update().scan_id.clone();
-        lock.set_scan(id.as_deref());
-        if status.changed().await.is_err() {
-            break;
-        }
-    }
-}
-
 /// [`run_foreground`], recording the scan in the station's `lock` when given.
 pub async fn run_foreground_locked(
     station: &mut SerialStation,
@@ -600,24 +316,6 @@ pub async fn run_foreground_locked(
     outcome
 }
 
-/// Takes SIGHUP for as long as it runs, logging each with `then`, instead of letting it end
-/// the process. A foreground scan gets one when the terminal or SSH session it was started
-/// from goes away: the instrument and the stage are mid-scan, and nobody is left to resume
-/// it, so it goes on (its output is dropped, [`super::console`]). The daemon reads its
-/// configuration only at start, so a reload request changes nothing either.
-pub async fn ignore_hangups(then: &'static str) {
-    use tokio::signal::unix::{signal, SignalKind};
-    let Ok(mut hangup) = signal(SignalKind::hangup()) else {
-        tracing::warn!("cannot watch SIGHUP: a hang-up of the terminal would end the process");
-        return;
-    };
-    while hangup.recv().await.is_some() {
-        tracing::warn!(
-            "SIGHUP received (a terminal or session hung up, or a reload request): {then}"
-        );
-    }
-}
-
 /// Runs `surfscan scan`.
 pub fn run(args: Args) -> Result<(), CliError> {
     let (config, config_hash) = load_config(&args.config)?;
@@ -634,15 +332,15 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
     let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
-    let request = decide_request(
-        &config,
-        args.specimen,
-        args.operator,
-        args.notes,
-        start_mode(args.resume, args.new),
+    let request = choice::choose(
+        &config.output.dir,
+        Asker::Operator(StartMode::from_flags(args.resume, args.new)),
         Peer::this_process(),
-    )?
-    .commit()?;
+        (args.specimen, args.operator, args.notes),
+    )
+    .and_then(choice::Choice::commit)
+    .map_err(CliError::from)?
+    .ok_or_else(|| CliError::new(Exit::Failed, "internal: an operator's start chose nothing"))?;
     let settings = run_settings(&config, config_hash, hooks)?;
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()

@@ -112,6 +112,7 @@ pub fn write(output_dir: &Path, scan: &SyntheticScan) -> std::io::Result<PathBuf
         put(&Record::Stop(StopRecord {
             status,
             reason: "synthetic".into(),
+            cause: None,
             time: scan.started + chrono::Duration::minutes(30),
         }))?;
     }

@@ -20,6 +20,18 @@ pub enum StartMode {
     New,
 }
 
+impl StartMode {
+    /// The mode of the `--resume` / `--new` flags (neither: resume an unfinished scan, else
+    /// a new one).
+    pub fn from_flags(resume: bool, new: bool) -> StartMode {
+        match (resume, new) {
+            (true, _) => StartMode::Resume,
+            (_, true) => StartMode::New,
+            _ => StartMode::Auto,
+        }
+    }
+}
+
 /// The operator's pause as the journal's interruption records mark it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]

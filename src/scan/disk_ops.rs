@@ -9,10 +9,10 @@
 use super::channels::Control;
 use super::device_ops::Held;
 use super::disk::{free_bytes, outputs_bytes};
-use super::journal::StopStatus;
+use super::ending::End;
 use super::ledger::Ledger;
 use super::line::{LineIdentity, LineMeta, StoredLine};
-use super::machine::{Action, End, Event, StorageFailure};
+use super::machine::{Action, Event, StorageFailure};
 use super::opening::{self, NewScan};
 use super::outputs::{Outputs, OutputsError};
 use super::settings::RunSettings;
@@ -249,16 +249,15 @@ impl Books<'_> {
         let Some(l) = self.ledger.as_mut() else {
             return;
         };
-        let written = match end {
-            End::Success { summary } => l.stop(StopStatus::Success, summary),
-            End::Abort { .. } => l.stop(StopStatus::Abort, "aborted by the operator"),
-            End::Fail(r) => {
-                tracing::error!(scan_id = %l.id, "scan failed: {r}");
-                l.stop(StopStatus::Fail, &r.to_string())
-            }
-            // The machine recorded the interruption: no stop record, the scan resumes.
-            End::Shutdown => Ok(()),
+        if let End::Fail(r) = end {
+            tracing::error!(scan_id = %l.id, "scan failed: {r}");
+        }
+        // After a shutdown the machine recorded the interruption: no stop record, the scan
+        // resumes.
+        let Some((status, reason, cause)) = end.stop_record() else {
+            return;
         };
+        let written = l.stop(status, &reason, cause);
         if let Err(e) = written {
             tracing::error!(scan_id = %l.id, "cannot write the stop record: {e}");
             self.stop_error = Some(e.to_string());

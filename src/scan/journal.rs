@@ -34,7 +34,7 @@ use super::command::{PauseMark, Peer};
 use super::faults::{StorageFaults, WriteStep};
 use super::line::LineIdentity;
 use super::plan::Plan;
-use super::station::Device;
+use crate::devices::Device;
 
 /// The journal's file name inside a scan directory.
 pub const JOURNAL_FILE: &str = "journal.jsonl";
@@ -203,31 +203,9 @@ pub struct QuarantineRecord {
     pub time: DateTime<Utc>,
 }
 
-/// How a scan ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum StopStatus {
-    /// All lines traced, fit and IGES written.
-    Success,
-    /// Aborted by the operator.
-    Abort,
-    /// Ended by a fault the operator must clear (`--resume` continues it).
-    Fail,
-    /// Left unfinished and given up for a new scan (`--new`).
-    Abandoned,
-}
-
-impl StopStatus {
-    /// `success`, `abort`, `fail` or `abandoned`, as the journal spells it.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            StopStatus::Success => "success",
-            StopStatus::Abort => "abort",
-            StopStatus::Fail => "fail",
-            StopStatus::Abandoned => "abandoned",
-        }
-    }
-}
+use super::ending::FailCause;
+/// How a scan ended, the stop record's word (defined with the scan's ending).
+pub use super::ending::StopStatus;
 
 /// The final record of a scan.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -236,8 +214,23 @@ pub struct StopRecord {
     pub status: StopStatus,
     /// Why, for people.
     pub reason: String,
+    /// What ended a failed scan (records of earlier versions have none: see
+    /// [`StopRecord::fail_cause`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cause: Option<FailCause>,
     /// When.
     pub time: DateTime<Utc>,
+}
+
+impl StopRecord {
+    /// What ended the scan, when it failed: the record's cause, or (earlier versions) the
+    /// one its reason names.
+    pub fn fail_cause(&self) -> Option<FailCause> {
+        (self.status == StopStatus::Fail).then(|| {
+            self.cause
+                .unwrap_or_else(|| FailCause::of_reason(&self.reason))
+        })
+    }
 }
 
 /// The operator continued a failed scan after clearing the cause: the stop record before
@@ -660,6 +653,19 @@ pub struct Unfinished {
     pub started: DateTime<Utc>,
 }
 
+/// A scan directory whose journal ends with a `fail` stop record.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Failed {
+    /// The scan directory.
+    pub dir: PathBuf,
+    /// Its sequence number, from the start record.
+    pub sequence: u64,
+    /// Its start time, from the start record.
+    pub started: DateTime<Utc>,
+    /// What ended it.
+    pub cause: FailCause,
+}
+
 /// What the journals under an output directory say.
 #[derive(Debug, Default)]
 pub struct Survey {
@@ -667,6 +673,8 @@ pub struct Survey {
     /// number (which no clock can reorder), then its time (journals of older versions have
     /// sequence 0), then its scan id. The last is the one to resume.
     pub unfinished: Vec<Unfinished>,
+    /// Scans whose stop record says they failed, in the same order.
+    pub failed: Vec<Failed>,
     /// Journals that cannot be read or hold a damaged record: those scans are skipped.
     pub damaged: Vec<JournalError>,
     /// The highest sequence number of the readable journals (0 when there are none).
@@ -725,6 +733,14 @@ pub fn survey(output_dir: &Path) -> Result<Survey, JournalError> {
         match state {
             Ok(Some(st)) => {
                 out.max_sequence = out.max_sequence.max(st.start.sequence);
+                if let Some(cause) = st.stop.as_ref().and_then(StopRecord::fail_cause) {
+                    out.failed.push(Failed {
+                        dir: dir.clone(),
+                        sequence: st.start.sequence,
+                        started: st.start.time,
+                        cause,
+                    });
+                }
                 if !st.is_stopped() {
                     out.unfinished.push(Unfinished {
                         dir,
@@ -742,6 +758,8 @@ pub fn survey(output_dir: &Path) -> Result<Survey, JournalError> {
         (a.sequence, a.started, &a.scan_id, &a.dir)
             .cmp(&(b.sequence, b.started, &b.scan_id, &b.dir))
     });
+    out.failed
+        .sort_by(|a, b| (a.sequence, a.started, &a.dir).cmp(&(b.sequence, b.started, &b.dir)));
     Ok(out)
 }
 

@@ -109,11 +109,17 @@ impl Ledger {
     }
 
     /// Appends the stop record (after any interruption still waiting to be recorded).
-    pub fn stop(&mut self, status: StopStatus, reason: &str) -> Result<(), JournalError> {
+    pub fn stop(
+        &mut self,
+        status: StopStatus,
+        reason: &str,
+        cause: Option<super::ending::FailCause>,
+    ) -> Result<(), JournalError> {
         self.record_unrecorded();
         self.journal.append(&Record::Stop(StopRecord {
             status,
             reason: reason.to_owned(),
+            cause,
             time: Utc::now(),
         }))
     }
@@ -364,9 +370,9 @@ mod tests {
         let mut l = ledger(dir.path(), disk.clone());
         disk.full.store(true, Ordering::SeqCst);
         l.note(&note("suspended: disk full"));
-        assert!(l.stop(StopStatus::Abort, "aborted").is_err());
+        assert!(l.stop(StopStatus::Abort, "aborted", None).is_err());
         disk.full.store(false, Ordering::SeqCst);
-        l.stop(StopStatus::Abort, "aborted").unwrap();
+        l.stop(StopStatus::Abort, "aborted", None).unwrap();
         assert_eq!(
             records(&l),
             [

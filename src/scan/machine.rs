@@ -32,18 +32,19 @@
 //! and fault vocabulary. No tokio, no files, no clock reads: time is an input.
 
 use super::command::{OperatorCommand, PauseMark, Peer, StartMode};
+use super::ending::{End, FailReason};
 use super::event::ScanEventKind;
+use super::line_check::{conditions_difference, LineProblem};
 use super::metrics::ScanMetrics;
 use super::plan::{remaining_scan_bytes, Plan};
 use super::policy::{self, Backoff, FailRule, FaultKind, Reaction, Situation, Step, StorageClass};
-use super::reasons::{self, stamp};
-use super::status::{DeviceState, Ending, LastStop, State, Status};
+use super::reasons;
+use super::status::{ended_status, DeviceState, State, Status};
 use crate::devices::{Device, Fault, FaultClass};
 use crate::profile::Conditions;
 use crate::units::Nm;
 use chrono::{DateTime, Utc};
 use std::collections::BTreeSet;
-use std::fmt;
 use std::time::{Duration, Instant};
 
 /// When an event happened: a monotonic instant (for budgets and durations) and the wall
@@ -109,72 +110,6 @@ pub struct TracedSummary {
     pub ra_um: Option<f64>,
 }
 
-/// Why a traced line does not fit the scan.
-#[derive(Debug, Clone, PartialEq)]
-pub enum LineProblem {
-    /// A height is not a finite number (a re-trace may give a good line).
-    NotFinite {
-        /// 0-based index of the point.
-        point: usize,
-        /// Points of the line.
-        points: usize,
-        /// The value.
-        value: f64,
-    },
-    /// Another point count than the scan's lines (a re-trace may give a good line).
-    PointCount {
-        /// Points of this line.
-        points: usize,
-        /// Points of the scan's lines.
-        scan: usize,
-    },
-    /// Another x pitch than the scan's.
-    Pitch {
-        /// This line's pitch, mm.
-        pitch_x_mm: f64,
-        /// The scan's, mm.
-        scan: f64,
-    },
-    /// The measurement conditions changed on the instrument (what changed, named).
-    ConditionsChanged(String),
-}
-
-impl LineProblem {
-    /// True when tracing the line again may give an acceptable one.
-    pub fn retry_may_help(&self) -> bool {
-        matches!(
-            self,
-            LineProblem::NotFinite { .. } | LineProblem::PointCount { .. }
-        )
-    }
-}
-
-impl fmt::Display for LineProblem {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            LineProblem::NotFinite {
-                point,
-                points,
-                value,
-            } => write!(
-                f,
-                "point {} of {points} is {value} (not a finite height)",
-                point + 1
-            ),
-            LineProblem::PointCount { points, scan } => {
-                write!(f, "{points} points, but the scan's lines have {scan}")
-            }
-            LineProblem::Pitch { pitch_x_mm, scan } => {
-                write!(f, "x pitch {pitch_x_mm} mm differs from the scan's {scan} mm")
-            }
-            LineProblem::ConditionsChanged(d) => write!(
-                f,
-                "measurement conditions changed on the instrument: {d}; restore them and continue the scan with --resume (the lines so far are kept)"
-            ),
-        }
-    }
-}
-
 /// What a storage failure was.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct StorageFailure {
@@ -228,141 +163,6 @@ impl Trouble {
             Trouble::Storage(s) => reasons::on_line(line, &s.message),
         }
     }
-}
-
-/// Why a scan failed: what the operator must clear before continuing it.
-#[derive(Debug, Clone, PartialEq)]
-pub enum FailReason {
-    /// A device could not be opened or verified when a new scan was to start.
-    NotStarted(Fault),
-    /// A fault the operator must fix.
-    Fatal {
-        /// The line being worked on (0-based), if any.
-        line: Option<u32>,
-        /// The fault.
-        fault: Fault,
-    },
-    /// Transient faults went on for longer than the budget.
-    BudgetExhausted {
-        /// The line (0-based).
-        line: u32,
-        /// The budget, seconds.
-        budget_s: u64,
-        /// When the first fault of the run happened.
-        since: DateTime<Utc>,
-        /// Traces started for the line in that time.
-        traces: u32,
-        /// The last fault.
-        last: String,
-    },
-    /// The stage lost its position again and again on one line.
-    PositionLostRepeatedly {
-        /// The line (0-based).
-        line: u32,
-        /// How often.
-        times: u32,
-        /// The last fault.
-        last: Fault,
-    },
-    /// The traced line cannot belong to this scan.
-    LineRefused {
-        /// The line (0-based).
-        line: u32,
-        /// Why.
-        problem: LineProblem,
-    },
-    /// The fitter refused a committed line.
-    FitterRefused {
-        /// The line (0-based).
-        line: u32,
-        /// The fitter's message.
-        message: String,
-    },
-    /// The disk refused for a reason that does not clear by itself (permissions,
-    /// read-only file system, damage).
-    Storage(String),
-    /// Every line is on disk but the outputs could not be made (the message says how to
-    /// make them by hand).
-    Outputs(String),
-}
-
-impl FailReason {
-    /// The exit-code class of the failure.
-    pub fn kind(&self) -> FailKind {
-        match self {
-            FailReason::NotStarted(f) if f.class == FaultClass::Absent => FailKind::Unavailable,
-            FailReason::Storage(_) | FailReason::Outputs(_) => FailKind::Io,
-            _ => FailKind::Scan,
-        }
-    }
-}
-
-impl fmt::Display for FailReason {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            FailReason::NotStarted(fault) => write!(f, "{fault}"),
-            FailReason::Fatal {
-                line: Some(k),
-                fault,
-            } => write!(f, "line {}: {fault}", k + 1),
-            FailReason::Fatal { line: None, fault } => write!(f, "{fault}"),
-            FailReason::BudgetExhausted {
-                line,
-                budget_s,
-                since,
-                traces,
-                last,
-            } => write!(
-                f,
-                "line {}: transient faults since {} outlasted the {budget_s} s budget ({traces} trace(s) started); last: {last}",
-                line + 1,
-                stamp(*since)
-            ),
-            FailReason::PositionLostRepeatedly { line, times, last } => write!(
-                f,
-                "line {}: the stage lost its position {times} time(s); last: {last}",
-                line + 1
-            ),
-            FailReason::LineRefused { line, problem } => write!(f, "line {}: {problem}", line + 1),
-            FailReason::FitterRefused { line, message } => write!(
-                f,
-                "line {}: the fitter refused the stored line: {message}",
-                line + 1
-            ),
-            FailReason::Storage(m) => write!(f, "storage: {m}"),
-            FailReason::Outputs(m) => f.write_str(m),
-        }
-    }
-}
-
-/// Why a scan could not complete, for exit codes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FailKind {
-    /// The scan ran and failed (device fault, exhausted budget, changed conditions).
-    Scan,
-    /// A device was not there when a new scan was to start.
-    Unavailable,
-    /// The disk refused (read-only, permissions).
-    Io,
-}
-
-/// How the scan ends.
-#[derive(Debug, Clone, PartialEq)]
-pub enum End {
-    /// Every line committed and the outputs written.
-    Success {
-        /// What was written, for the stop record.
-        summary: String,
-    },
-    /// The operator aborted it.
-    Abort {
-        /// Who.
-        peer: Option<Peer>,
-    },
-    /// Shut down (SIGTERM): no stop record, it resumes at the next start.
-    Shutdown,
-    /// It failed.
-    Fail(FailReason),
 }
 
 /// An interruption for the journal: what happened, to which device, on which line, asked
@@ -1528,29 +1328,11 @@ impl Machine {
     fn stop(&mut self, end: End, out: &mut Vec<Action>) {
         self.ended = true;
         self.doing = Doing::Nothing;
-        let (ending, kind, reason) = match &end {
-            End::Success { summary } => (
-                Ending::Success,
-                Some(ScanEventKind::Success),
-                summary.clone(),
-            ),
-            End::Abort { .. } if self.created => (
-                Ending::Abort,
-                Some(ScanEventKind::Abort),
-                "aborted by the operator".to_owned(),
-            ),
-            End::Abort { .. } => (
-                Ending::Abort,
-                None,
-                "aborted before the first line".to_owned(),
-            ),
-            End::Shutdown => (Ending::Interrupted, None, "shutdown".to_owned()),
-            End::Fail(r) => (
-                Ending::Fail,
-                self.created.then_some(ScanEventKind::Fail),
-                r.to_string(),
-            ),
-        };
+        let (ending, kind, reason) = (
+            end.status(),
+            end.event(self.created),
+            end.reason(self.created),
+        );
         // The state stays `Paused` through the clean-up: nothing is in progress then.
         if matches!(end, End::Shutdown) && self.created && self.status.state == State::Paused {
             // Paused, nothing was in progress: no line to abandon, and the pause stands.
@@ -1626,64 +1408,6 @@ impl Doing {
     fn is_effect(self) -> bool {
         !matches!(self, Doing::Paused | Doing::Nothing)
     }
-}
-
-/// The snapshot after a scan (or an attempt to start one) ended: idle, the last stop named,
-/// the devices no longer connected.
-pub fn ended_status(s: &Status, ending: Ending, reason: &str) -> Status {
-    let downgrade = |d: DeviceState| match d {
-        DeviceState::Connected | DeviceState::Reconnecting => DeviceState::Present,
-        other => other,
-    };
-    Status {
-        last_stop: Some(LastStop {
-            scan_id: s.scan_id.clone().unwrap_or_default(),
-            status: ending,
-            reason: reason.to_owned(),
-            dir: s.scan_dir.clone().unwrap_or_default(),
-        }),
-        instrument: downgrade(s.instrument),
-        stage: downgrade(s.stage),
-        starts: s.starts,
-        ..Status::idle()
-    }
-}
-
-/// Compares the conditions a line was traced under with the scan's; the first difference,
-/// named, when they differ.
-pub fn conditions_difference(scan: &Conditions, line: &Conditions) -> Option<String> {
-    fn differs<T: PartialEq + fmt::Debug>(
-        name: &str,
-        at_start: &Option<T>,
-        now: &Option<T>,
-    ) -> Option<String> {
-        let show = |v: &Option<T>| {
-            v.as_ref()
-                .map_or("unknown".to_owned(), |x| format!("{x:?}"))
-        };
-        (at_start != now).then(|| {
-            format!(
-                "{name} was {} at the start of the scan, now {}",
-                show(at_start),
-                show(now)
-            )
-        })
-    }
-    let (a, b) = (scan, line);
-    differs("standard", &a.standard, &b.standard)
-        .or_else(|| differs("profile", &a.profile_kind, &b.profile_kind))
-        .or_else(|| differs("filter", &a.filter, &b.filter))
-        .or_else(|| differs("lambda-c mm", &a.lambda_c_mm, &b.lambda_c_mm))
-        .or_else(|| differs("lambda-s um", &a.lambda_s_um, &b.lambda_s_um))
-        .or_else(|| differs("sampling lengths", &a.sampling_lengths, &b.sampling_lengths))
-        .or_else(|| {
-            differs(
-                "evaluation length mm",
-                &a.evaluation_length_mm,
-                &b.evaluation_length_mm,
-            )
-        })
-        .or_else(|| differs("speed mm/s", &a.speed_mm_s, &b.speed_mm_s))
 }
 
 #[cfg(test)]

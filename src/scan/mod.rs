@@ -19,8 +19,9 @@
 //!   backoff; [`reasons`]: the texts of faults and suspensions, apart from the decisions.
 //! - [`runner`]: performs the machine's actions on devices ([`device_ops`]), disk
 //!   ([`disk_ops`]) and channels;
-//!   [`channels`]: its connection to the outside; [`outcome`]: what it is asked and how a
-//!   scan ended; [`opening`]: creating or reopening a scan directory; [`ledger`]: the
+//!   [`channels`]: its connection to the outside; [`outcome`]: what it is asked and what it
+//!   returns; [`ending`]: how a scan ended, the one value the stop record, the status, the
+//!   events and the exit status derive from; [`line_check`]: whether a traced line fits; [`opening`]: creating or reopening a scan directory; [`ledger`]: the
 //!   running scan's journal, lines and fitter.
 //! - [`store`]: the scan directory; [`line`](mod@line) and [`line_csv`]: a stored line's metadata and
 //!   heights file; [`scan_id`]: the scan's name; [`store_error`]: what can go wrong there;
@@ -33,16 +34,19 @@
 //! - [`testhooks`]: crash and full-disk injection for end-to-end tests.
 
 pub mod channels;
+pub mod choice;
 pub mod command;
 pub mod device_ops;
 pub mod disk;
 pub mod disk_ops;
+pub mod ending;
 pub mod event;
 pub mod expected;
 pub mod faults;
 pub mod journal;
 pub mod ledger;
 pub mod line;
+pub mod line_check;
 pub mod line_csv;
 pub mod machine;
 pub mod metrics;

@@ -1,14 +1,14 @@
-//! What the runner is asked to run and how a run ended, for the front ends (exit codes,
+//! What the runner is asked to run and what it gives back, for the front ends (exit codes,
 //! messages).
 //!
-//! Layer 3 (session): plain data; depends on the session's command, outputs and machine
+//! Layer 3 (session): plain data; depends on the session's command, outputs and ending
 //! types.
 
 use super::command::Peer;
 use super::outputs::Outputs;
 use std::path::PathBuf;
 
-pub use super::machine::FailKind;
+use super::ending::End;
 
 /// What to run.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -41,33 +41,24 @@ pub enum ScanRequest {
     },
 }
 
-/// How a scan ended.
+/// What a run of the runner gives back: how the scan ended, where it is, what it wrote.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Outcome {
-    /// All lines traced, surface and report written.
-    Success {
-        /// Scan directory.
-        dir: PathBuf,
-        /// Files written at the end.
-        outputs: Outputs,
-    },
-    /// The operator aborted it.
-    Aborted {
-        /// Scan directory.
-        dir: PathBuf,
-    },
-    /// It failed; the reason is in the journal's stop record when `dir` is set.
-    Failed {
-        /// Scan directory, when one was created.
-        dir: Option<PathBuf>,
-        /// Why.
-        reason: String,
-        /// For the exit code.
-        kind: FailKind,
-    },
-    /// Shut down (SIGTERM) mid-scan: no stop record, it resumes at the next start.
-    Interrupted {
-        /// Scan directory.
-        dir: PathBuf,
-    },
+pub struct Outcome {
+    /// How it ended (a shutdown leaves it resumable: no stop record).
+    pub end: End,
+    /// The scan directory, when one was created or reopened.
+    pub dir: Option<PathBuf>,
+    /// The files written at the end, after a success.
+    pub outputs: Option<Outputs>,
+}
+
+impl Outcome {
+    /// An end before any scan directory was created or reopened.
+    pub fn without_scan(end: End) -> Outcome {
+        Outcome {
+            end,
+            dir: None,
+            outputs: None,
+        }
+    }
 }

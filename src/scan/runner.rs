@@ -16,15 +16,14 @@ use super::channels::Control;
 use super::command::{OperatorRequest, PauseMark, Peer};
 use super::device_ops::{is_device_effect, Hands};
 use super::disk_ops::Books;
+use super::ending::{End, FailKind, FailReason, StopStatus};
 use super::ledger::Ledger;
-use super::machine::{
-    ended_status, Action, End, Event, FailKind, Machine, Now, Policy, StorageFailure,
-};
+use super::machine::{Action, Event, Machine, Now, Policy, StorageFailure};
 use super::opening::{self, NewScan};
 use super::outcome::{Outcome, ScanRequest};
 use super::settings::RunSettings;
 use super::station::{Device, Station};
-use super::status::Ending;
+use super::status::ended_status;
 use crate::devices::InstrumentIdentity;
 use crate::stage::policy::ScanDirection;
 use chrono::Utc;
@@ -32,7 +31,7 @@ use std::collections::VecDeque;
 use std::future::Future;
 use std::path::PathBuf;
 
-pub use super::machine::conditions_difference;
+pub use super::line_check::conditions_difference;
 pub use super::opening::estimate_line_seconds;
 
 fn now() -> Now {
@@ -165,15 +164,11 @@ fn reopen(
     Ok((resumed, ledger))
 }
 
-fn refused(ctl: &Control, reason: String, kind: FailKind) -> Outcome {
-    tracing::error!("scan cannot start: {reason}");
-    let s = ended_status(&ctl.status.borrow(), Ending::Fail, &reason);
+fn refused(ctl: &Control, message: String, kind: FailKind) -> Outcome {
+    tracing::error!("scan cannot start: {message}");
+    let s = ended_status(&ctl.status.borrow(), StopStatus::Fail, &message);
     ctl.publish(s);
-    Outcome::Failed {
-        dir: None,
-        reason,
-        kind,
-    }
+    Outcome::without_scan(End::Fail(FailReason::Refused { message, kind }))
 }
 
 /// The executor loop: actions out of the machine performed, results fed back, commands and
@@ -440,64 +435,49 @@ fn finish(ctl: &Control, machine: &Machine, mut books: Books<'_>) -> Outcome {
     let end = books.end.take().unwrap_or(End::Shutdown);
     let Some(l) = books.ledger.take() else {
         // Ended before the scan had a directory.
-        return match end {
-            End::Fail(r) => {
-                let reason = r.to_string();
-                tracing::error!("scan cannot start: {reason}");
-                Outcome::Failed {
-                    dir: None,
-                    kind: r.kind(),
-                    reason,
-                }
-            }
-            End::Abort { .. } => Outcome::Failed {
-                dir: None,
-                reason: "aborted before the scan started".into(),
+        if let End::Fail(r) = &end {
+            tracing::error!("scan cannot start: {r}");
+        }
+        let end = match end {
+            End::Success { .. } => End::Fail(FailReason::Refused {
+                message: "internal: a scan without a directory cannot succeed".into(),
                 kind: FailKind::Scan,
-            },
-            End::Shutdown => Outcome::Failed {
-                dir: None,
-                reason: "shut down before the scan started".into(),
-                kind: FailKind::Scan,
-            },
-            End::Success { .. } => Outcome::Failed {
-                dir: None,
-                reason: "internal: a scan without a directory cannot succeed".into(),
-                kind: FailKind::Scan,
-            },
+            }),
+            end => end,
         };
+        return Outcome::without_scan(end);
     };
     let dir: PathBuf = l.dir.clone();
-    match end {
+    let outputs = books.outputs.take();
+    let end = match end {
+        End::Success { .. } if books.stop_error.is_some() => {
+            let message = format!(
+                "cannot write the stop record: {}",
+                books.stop_error.take().unwrap_or_default()
+            );
+            ctl.publish(ended_status(machine.status(), StopStatus::Fail, &message));
+            End::Fail(FailReason::Refused {
+                message,
+                kind: FailKind::Io,
+            })
+        }
+        End::Success { .. } if outputs.is_none() => End::Fail(FailReason::Refused {
+            message: "internal: the outputs were not kept".into(),
+            kind: FailKind::Io,
+        }),
         End::Success { summary } => {
-            if let Some(e) = books.stop_error.take() {
-                let reason = format!("cannot write the stop record: {e}");
-                ctl.publish(ended_status(machine.status(), Ending::Fail, &reason));
-                return Outcome::Failed {
-                    dir: Some(dir),
-                    reason,
-                    kind: FailKind::Io,
-                };
-            }
             tracing::info!(scan_id = %l.id, "scan complete: {summary}");
-            match books.outputs.take() {
-                Some(outputs) => Outcome::Success { dir, outputs },
-                None => Outcome::Failed {
-                    dir: Some(dir),
-                    reason: "internal: the outputs were not kept".into(),
-                    kind: FailKind::Io,
-                },
-            }
+            End::Success { summary }
         }
-        End::Abort { .. } => {
-            tracing::warn!(scan_id = %l.id, "scan aborted; {} lines kept", l.lines.len());
-            Outcome::Aborted { dir }
+        End::Abort { peer } => {
+            tracing::info!(scan_id = %l.id, "scan aborted; {} lines kept", l.lines.len());
+            End::Abort { peer }
         }
-        End::Shutdown => Outcome::Interrupted { dir },
-        End::Fail(r) => Outcome::Failed {
-            dir: Some(dir),
-            kind: r.kind(),
-            reason: r.to_string(),
-        },
+        end => end,
+    };
+    Outcome {
+        end,
+        dir: Some(dir),
+        outputs,
     }
 }

@@ -1,8 +1,10 @@
 //! The status snapshot a running scan publishes (what the control socket serves, what
 //! systemd's `STATUS=` shows, what the progress bar draws).
 //!
-//! Layer 3 (session): serde types only; the control socket serves them, it does not own them.
+//! Layer 3 (session): serde types only (and the snapshot after an end); the control socket
+//! serves them, it does not own them.
 
+use super::ending::StopStatus;
 use serde::{Deserialize, Serialize};
 
 /// What the daemon is doing.
@@ -41,45 +43,13 @@ pub enum DeviceState {
     Reconnecting,
 }
 
-/// How a scan (or an attempt to start one) ended, as the status snapshot reports it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Ending {
-    /// All lines traced, surface and report written.
-    Success,
-    /// Aborted by the operator.
-    Abort,
-    /// Ended by a fault the operator must clear.
-    Fail,
-    /// Shut down before it started; it resumes at the next start.
-    Interrupted,
-}
-
-impl Ending {
-    /// `success`, `abort`, `fail` or `interrupted`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Ending::Success => "success",
-            Ending::Abort => "abort",
-            Ending::Fail => "fail",
-            Ending::Interrupted => "interrupted",
-        }
-    }
-}
-
-impl std::fmt::Display for Ending {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
 /// How the last scan ended.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct LastStop {
     /// Scan id (empty when the scan never started).
     pub scan_id: String,
     /// How it ended.
-    pub status: Ending,
+    pub status: StopStatus,
     /// Why.
     pub reason: String,
     /// Scan directory.
@@ -186,6 +156,27 @@ impl Status {
     }
 }
 
+/// The snapshot after a scan (or an attempt to start one) ended: idle, the last stop named,
+/// the devices no longer connected.
+pub fn ended_status(s: &Status, ending: StopStatus, reason: &str) -> Status {
+    let downgrade = |d: DeviceState| match d {
+        DeviceState::Connected | DeviceState::Reconnecting => DeviceState::Present,
+        other => other,
+    };
+    Status {
+        last_stop: Some(LastStop {
+            scan_id: s.scan_id.clone().unwrap_or_default(),
+            status: ending,
+            reason: reason.to_owned(),
+            dir: s.scan_dir.clone().unwrap_or_default(),
+        }),
+        instrument: downgrade(s.instrument),
+        stage: downgrade(s.stage),
+        starts: s.starts,
+        ..Status::idle()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -215,7 +206,7 @@ mod tests {
     fn last_stop_status_is_a_lowercase_word_on_the_wire() {
         let stop = LastStop {
             scan_id: "X".into(),
-            status: Ending::Interrupted,
+            status: StopStatus::Interrupted,
             reason: "shutdown".into(),
             dir: String::new(),
         };

@@ -499,7 +499,7 @@ async fn a_start_that_fails_at_once_is_reported_as_failed() {
                 s.state = State::Idle;
                 s.last_stop = Some(surfscan::scan::status::LastStop {
                     scan_id: String::new(),
-                    status: surfscan::scan::status::Ending::Fail,
+                    status: surfscan::scan::ending::StopStatus::Fail,
                     reason: "instrument unavailable: /dev/sj210 is absent".into(),
                     dir: String::new(),
                 });

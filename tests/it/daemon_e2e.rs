@@ -12,7 +12,7 @@ use surfscan::control::client::ControlClient;
 use surfscan::control::protocol::{Message, Request};
 use surfscan::scan::command::StartMode;
 use surfscan::scan::journal::{read_journal, Record, StopStatus};
-use surfscan::scan::status::{DeviceState, Ending, State, Status};
+use surfscan::scan::status::{DeviceState, State, Status};
 use surfscan_sim::grbl::{GrblSimConfig, StageShared};
 use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
 
@@ -312,7 +312,7 @@ async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket()
     let ack = client(&r).await.request(&Request::Abort).await.unwrap();
     assert!(matches!(ack.message, Message::Ack { .. }), "{ack:?}");
     let s = wait_status(&r, "idle after abort", |s| s.state == State::Idle).await;
-    assert_eq!(s.last_stop.as_ref().unwrap().status, Ending::Abort);
+    assert_eq!(s.last_stop.as_ref().unwrap().status, StopStatus::Abort);
     let recs = records(&dir);
     match recs.last().unwrap() {
         Record::Stop(s) => assert_eq!(s.status, StopStatus::Abort),
@@ -379,7 +379,7 @@ async fn sigterm_mid_scan_records_an_interruption_and_the_restart_resumes_by_its
     let s = wait_status(&r, "complete after restart", |s| {
         s.last_stop
             .as_ref()
-            .is_some_and(|l| l.status == Ending::Success)
+            .is_some_and(|l| l.status == StopStatus::Success)
     })
     .await;
     assert_eq!(s.state, State::Idle);
@@ -466,7 +466,7 @@ async fn a_paused_scan_stays_paused_across_a_restart_until_resumed() {
     wait_status(&r, "complete after resume", |s| {
         s.last_stop
             .as_ref()
-            .is_some_and(|l| l.status == Ending::Success)
+            .is_some_and(|l| l.status == StopStatus::Success)
     })
     .await;
     assert_eq!(line_indices(&records(&dir)), (0..LINES).collect::<Vec<_>>());
@@ -590,7 +590,7 @@ async fn a_hang_up_leaves_the_daemon_scanning_with_nobody_reading_its_log() {
     let s = wait_status(&r, "the scan's end", |s| s.last_stop.is_some()).await;
     assert_eq!(
         s.last_stop.as_ref().unwrap().status,
-        Ending::Success,
+        StopStatus::Success,
         "{s:?}"
     );
     assert_eq!(line_indices(&records(&scan_dir(&r))).len() as u32, LINES);
@@ -654,7 +654,7 @@ async fn a_start_resumes_a_scan_paused_before_a_restart() {
     wait_status(&r, "complete after the start", |s| {
         s.last_stop
             .as_ref()
-            .is_some_and(|l| l.status == Ending::Success)
+            .is_some_and(|l| l.status == StopStatus::Success)
     })
     .await;
     let dir = scan_dir(&r);

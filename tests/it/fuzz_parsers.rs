@@ -330,7 +330,7 @@ fn config_loader() {
         // What start-up does with a file: parse, validate, then derive every driver's
         // settings and the plan from it.
         if let Ok(c) = surfscan::config::Config::parse(Path::new("fuzz.toml"), &text(&b)) {
-            let _ = surfscan::cli::scan::plan_of(&c);
+            let _ = surfscan::cli::station::plan_of(&c);
             let _ = c.y_grid_nm();
             let _ = c.fit.v_method_for(c.scan.lines as usize);
             let _ = c.analysis.spike_options();

@@ -197,6 +197,7 @@ fn build_scan(
             .append(&Record::Stop(StopRecord {
                 status,
                 reason: "test".into(),
+                cause: None,
                 time: start,
             }))
             .unwrap();
@@ -980,6 +981,7 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
         .append(&Record::Stop(StopRecord {
             status: StopStatus::Success,
             reason: "all lines traced".into(),
+            cause: None,
             time: Utc.with_ymd_and_hms(2026, 11, 30, 10, 17, 30).unwrap(),
         }))
         .unwrap();

@@ -7,7 +7,6 @@ use std::collections::VecDeque;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use surfscan::cli::scan::{decide_request, StartChoice};
 use surfscan::config::Config;
 use surfscan::devices::{
     Arrival, Battery, DeviceFault, FaultClass, Instrument, InstrumentIdentity, ProbeReport,
@@ -15,7 +14,9 @@ use surfscan::devices::{
 };
 use surfscan::profile::{Conditions, Profile, ProfileKind};
 use surfscan::scan::channels::Control;
+use surfscan::scan::choice::{choose, Asker, Choice};
 use surfscan::scan::command::{OperatorCommand, OperatorRequest, Peer, StartMode};
+use surfscan::scan::ending::End;
 use surfscan::scan::journal::{read_journal, Record, StopStatus};
 use surfscan::scan::outcome::{Outcome, ScanRequest};
 use surfscan::scan::runner::run_scan;
@@ -245,7 +246,7 @@ fn settings(out: &Path) -> RunSettings {
     let config = runner_config(out);
     RunSettings {
         characterise: None,
-        ..surfscan::cli::scan::run_settings(&config, "0".repeat(64), TestHooks::none())
+        ..surfscan::cli::station::run_settings(&config, "0".repeat(64), TestHooks::none())
             .expect("settings")
     }
 }
@@ -357,12 +358,7 @@ fn stop_status(records: &[Record]) -> Option<StopStatus> {
 }
 
 fn scan_dir_of(outcome: &Outcome) -> std::path::PathBuf {
-    match outcome {
-        Outcome::Success { dir, .. } | Outcome::Aborted { dir } | Outcome::Interrupted { dir } => {
-            dir.clone()
-        }
-        Outcome::Failed { dir, .. } => dir.clone().expect("scan dir"),
-    }
+    outcome.dir.clone().expect("scan dir")
 }
 
 /// Every move is preceded, since the previous move, by an `ensure_idle` that succeeded, and
@@ -453,7 +449,7 @@ async fn pause_waits_for_the_line_on_disk_and_resume_continues() {
         run_scan(&mut station, &mut h.ctl, &settings, new_scan()),
         driver
     );
-    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    assert!(matches!(outcome.end, End::Success { .. }), "{outcome:?}");
     let recs = records(&scan_dir_of(&outcome));
     assert_eq!(line_indices(&recs), (0..LINES).collect::<Vec<_>>());
     assert_eq!(stop_status(&recs), Some(StopStatus::Success));
@@ -544,7 +540,7 @@ fn the_watchdog_is_fed_while_the_outputs_are_written() {
         .unwrap();
     let request = ScanRequest::Resume { dir, peer: None };
     let outcome = real_time.block_on(run_scan(&mut station, &mut h.ctl, &settings, request));
-    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    assert!(matches!(outcome.end, End::Success { .. }), "{outcome:?}");
     let (before, after) = seen.lock().unwrap().expect("the characterisation ran");
     assert!(
         after > before,
@@ -569,7 +565,7 @@ async fn abort_mid_trace_stops_the_devices_and_records_abort() {
         run_scan(&mut station, &mut h.ctl, &settings, new_scan()),
         driver
     );
-    assert!(matches!(outcome, Outcome::Aborted { .. }), "{outcome:?}");
+    assert!(matches!(outcome.end, End::Abort { .. }), "{outcome:?}");
     let dir = scan_dir_of(&outcome);
     let recs = records(&dir);
     assert_eq!(line_indices(&recs), vec![0, 1]);
@@ -603,7 +599,7 @@ async fn transient_faults_are_retried_within_the_time_budget() {
     let settings = settings(h.tmp.path());
     let mut station = FakeStation(h.world.clone());
     let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
-    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    assert!(matches!(outcome.end, End::Success { .. }), "{outcome:?}");
     let recs = records(&scan_dir_of(&outcome));
     let attempts: Vec<u32> = recs
         .iter()
@@ -630,8 +626,9 @@ async fn transient_faults_are_retried_within_the_time_budget() {
     };
     let mut station = FakeStation(h.world.clone());
     let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
-    match &outcome {
-        Outcome::Failed { reason, .. } => {
+    match &outcome.end {
+        End::Fail(reason) => {
+            let reason = reason.to_string();
             assert!(
                 reason.contains("line 2: transient faults since")
                     && reason.contains("outlasted the 30 s budget"),
@@ -663,7 +660,7 @@ async fn the_stage_moves_only_after_the_instrument_read_idle() {
     let settings = settings(h.tmp.path());
     let mut station = FakeStation(h.world.clone());
     let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
-    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    assert!(matches!(outcome.end, End::Success { .. }), "{outcome:?}");
     let log = with(&h.world, |w| w.log.clone());
     assert_moves_follow_idle(&log);
     let moves = log.iter().filter(|e| matches!(e, Event::Move(_))).count();
@@ -694,7 +691,7 @@ async fn a_vanished_instrument_is_reopened_with_exponential_backoff() {
     let settings = settings(h.tmp.path());
     let mut station = FakeStation(h.world.clone());
     let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
-    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    assert!(matches!(outcome.end, End::Success { .. }), "{outcome:?}");
     let opens: Vec<(Instant, bool)> = with(&h.world, |w| {
         w.log
             .iter()
@@ -758,34 +755,32 @@ async fn a_failed_scan_continues_at_its_first_missing_line() {
     let settings = settings_for(&h);
     let mut station = FakeStation(h.world.clone());
     let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
-    assert!(matches!(outcome, Outcome::Failed { .. }), "{outcome:?}");
+    assert!(matches!(outcome.end, End::Fail(_)), "{outcome:?}");
     let dir = scan_dir_of(&outcome);
     assert_eq!(stop_status(&records(&dir)), Some(StopStatus::Fail));
     let csv0 = std::fs::read(dir.join("lines/0000.csv")).expect("line 1");
 
     // Without asking for it, a failed scan is not resumed: a new one would start.
     let config = runner_config(h.tmp.path());
-    let auto = decide_request(
-        &config,
-        String::new(),
-        String::new(),
-        String::new(),
-        StartMode::Auto,
+    let auto = choose(
+        &config.output.dir,
+        Asker::Operator(StartMode::Auto),
         Peer::this_process(),
+        Default::default(),
     )
-    .and_then(StartChoice::commit)
-    .expect("request");
+    .and_then(Choice::commit)
+    .expect("request")
+    .expect("a scan to run");
     assert!(matches!(auto, ScanRequest::New { .. }), "{auto:?}");
-    let request = decide_request(
-        &config,
-        String::new(),
-        String::new(),
-        String::new(),
-        StartMode::Resume,
+    let request = choose(
+        &config.output.dir,
+        Asker::Operator(StartMode::Resume),
         Peer::this_process(),
+        Default::default(),
     )
-    .and_then(StartChoice::commit)
-    .expect("request");
+    .and_then(Choice::commit)
+    .expect("request")
+    .expect("a scan to run");
     assert_eq!(
         request,
         ScanRequest::Continue {
@@ -797,7 +792,7 @@ async fn a_failed_scan_continues_at_its_first_missing_line() {
         w.log.iter().filter(|e| **e == Event::TraceStart).count()
     });
     let outcome = run_scan(&mut station, &mut h.ctl, &settings, request).await;
-    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    assert!(matches!(outcome.end, End::Success { .. }), "{outcome:?}");
     let recs = records(&dir);
     assert_eq!(line_indices(&recs), (0..LINES).collect::<Vec<_>>());
     assert!(recs
@@ -831,21 +826,17 @@ async fn starting_over_records_the_unfinished_scan_as_abandoned() {
     })
     .0;
     let dir = scan_dir_of(&outcome);
-    assert!(
-        matches!(outcome, Outcome::Interrupted { .. }),
-        "{outcome:?}"
-    );
+    assert!(matches!(outcome.end, End::Shutdown), "{outcome:?}");
     let config = runner_config(h.tmp.path());
-    let request = decide_request(
-        &config,
-        String::new(),
-        String::new(),
-        String::new(),
-        StartMode::New,
+    let request = choose(
+        &config.output.dir,
+        Asker::Operator(StartMode::New),
         Peer::this_process(),
+        Default::default(),
     )
-    .and_then(StartChoice::commit)
-    .expect("request");
+    .and_then(Choice::commit)
+    .expect("request")
+    .expect("a scan to run");
     assert!(matches!(request, ScanRequest::New { .. }), "{request:?}");
     let recs = records(&dir);
     match recs.last() {
@@ -889,7 +880,7 @@ async fn a_scan_with_every_line_committed_writes_its_outputs_without_devices() {
         peer: None,
     };
     let outcome = run_scan(&mut station, &mut h.ctl, &settings, request).await;
-    assert!(matches!(outcome, Outcome::Success { .. }), "{outcome:?}");
+    assert!(matches!(outcome.end, End::Success { .. }), "{outcome:?}");
     assert!(dir.join("surface.igs").exists());
     assert_eq!(
         with(&h.world, |w| w.log.clone()),

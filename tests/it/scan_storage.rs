@@ -276,6 +276,7 @@ fn disk_full_during_a_line_fails_cleanly_with_earlier_lines_intact() {
             .append(&Record::Stop(StopRecord {
                 status: StopStatus::Fail,
                 reason: format!("disk full: {err}"),
+                cause: None,
                 time: Utc::now(),
             }))
             .unwrap();
@@ -421,6 +422,7 @@ fn resume_state_and_unfinished_scan_discovery() {
     ja.append(&Record::Stop(StopRecord {
         status: StopStatus::Success,
         reason: "complete".into(),
+        cause: None,
         time: Utc::now(),
     }))
     .unwrap();
@@ -830,6 +832,7 @@ fn the_scan_to_resume_comes_from_the_journals_and_a_damaged_one_is_skipped_and_n
             j.append(&Record::Stop(StopRecord {
                 status: StopStatus::Success,
                 reason: "complete".into(),
+                cause: None,
                 time: Utc::now(),
             }))
             .unwrap();

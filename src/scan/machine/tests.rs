@@ -4,6 +4,7 @@
 use super::*;
 use crate::devices::FaultClass;
 use crate::scan::command::StartMode;
+use crate::scan::ending::{FailKind, StopStatus};
 use crate::scan::reasons::mb;
 
 const LINES: u32 = 3;
@@ -352,7 +353,7 @@ fn a_scan_traces_idle_move_trace_commit_push_per_line_then_writes_its_outputs() 
     assert_eq!(s.state, State::Idle);
     assert_eq!(
         s.last_stop.as_ref().map(|l| (l.status, l.scan_id.as_str())),
-        Some((Ending::Success, "S"))
+        Some((StopStatus::Success, "S"))
     );
     assert!(r.m.ended());
     // No move was ever asked for before its line's idle.
@@ -1116,7 +1117,7 @@ fn abort_cancels_the_trace_cleans_up_and_records_abort() {
         last_status(&a)
             .and_then(|s| s.last_stop.as_ref())
             .map(|l| l.status),
-        Some(Ending::Abort)
+        Some(StopStatus::Abort)
     );
 }
 

@@ -1,0 +1,377 @@
+//! How a scan ended — the one value ([`End`]) from which the journal's stop record, the
+//! status's last stop, the notification hook's event and a command's exit status are
+//! derived; and the word for it ([`StopStatus`]) as the journal and the status spell it.
+//!
+//! Layer 3 (session), pure: depends on the session's command (who aborted), event and status
+//! vocabulary, [`super::line_check`]'s line problems and [`crate::devices`]' faults.
+
+use super::command::Peer;
+use super::event::ScanEventKind;
+use super::line_check::LineProblem;
+use super::reasons::stamp;
+use crate::devices::{Fault, FaultClass};
+use chrono::{DateTime, Utc};
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// How a scan ended, as its journal's stop record and the status's last stop spell it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StopStatus {
+    /// All lines traced, fit and IGES written.
+    Success,
+    /// Aborted by the operator.
+    Abort,
+    /// Ended by a fault the operator must clear (`--resume` continues it).
+    Fail,
+    /// Left unfinished and given up for a new scan (`--new`).
+    Abandoned,
+    /// Shut down (SIGTERM) before it started, or mid-scan: it resumes at the next start.
+    /// Never a stop record (a shut-down scan has none); the status's word for it.
+    Interrupted,
+}
+
+impl StopStatus {
+    /// `success`, `abort`, `fail`, `abandoned` or `interrupted`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            StopStatus::Success => "success",
+            StopStatus::Abort => "abort",
+            StopStatus::Fail => "fail",
+            StopStatus::Abandoned => "abandoned",
+            StopStatus::Interrupted => "interrupted",
+        }
+    }
+}
+
+impl fmt::Display for StopStatus {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Why a scan failed: what the operator must clear before continuing it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FailReason {
+    /// A device could not be opened or verified when a new scan was to start.
+    NotStarted(Fault),
+    /// A fault the operator must fix.
+    Fatal {
+        /// The line being worked on (0-based), if any.
+        line: Option<u32>,
+        /// The fault.
+        fault: Fault,
+    },
+    /// Transient faults went on for longer than the budget.
+    BudgetExhausted {
+        /// The line (0-based).
+        line: u32,
+        /// The budget, seconds.
+        budget_s: u64,
+        /// When the first fault of the run happened.
+        since: DateTime<Utc>,
+        /// Traces started for the line in that time.
+        traces: u32,
+        /// The last fault.
+        last: String,
+    },
+    /// The stage lost its position again and again on one line.
+    PositionLostRepeatedly {
+        /// The line (0-based).
+        line: u32,
+        /// How often.
+        times: u32,
+        /// The last fault.
+        last: Fault,
+    },
+    /// The traced line cannot belong to this scan.
+    LineRefused {
+        /// The line (0-based).
+        line: u32,
+        /// Why.
+        problem: LineProblem,
+    },
+    /// The fitter refused a committed line.
+    FitterRefused {
+        /// The line (0-based).
+        line: u32,
+        /// The fitter's message.
+        message: String,
+    },
+    /// The disk refused for a reason that does not clear by itself (permissions,
+    /// read-only file system, damage).
+    Storage(String),
+    /// Every line is on disk but the outputs could not be made (the message says how to
+    /// make them by hand).
+    Outputs(String),
+    /// The scan could not be begun or reopened, or its end not recorded: the message says
+    /// why.
+    Refused {
+        /// Why.
+        message: String,
+        /// The exit class.
+        kind: FailKind,
+    },
+}
+
+impl FailReason {
+    /// What may continue the scan.
+    pub fn cause(&self) -> FailCause {
+        match self {
+            FailReason::BudgetExhausted { .. } => FailCause::Budget,
+            FailReason::Storage(_) | FailReason::Outputs(_) => FailCause::Storage,
+            _ => FailCause::Operator,
+        }
+    }
+
+    /// The exit-code class of the failure.
+    pub fn kind(&self) -> FailKind {
+        match self {
+            FailReason::NotStarted(f) if f.class == FaultClass::Absent => FailKind::Unavailable,
+            FailReason::Storage(_) | FailReason::Outputs(_) => FailKind::Io,
+            FailReason::Refused { kind, .. } => *kind,
+            _ => FailKind::Scan,
+        }
+    }
+}
+
+impl fmt::Display for FailReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FailReason::NotStarted(fault) => write!(f, "{fault}"),
+            FailReason::Fatal {
+                line: Some(k),
+                fault,
+            } => write!(f, "line {}: {fault}", k + 1),
+            FailReason::Fatal { line: None, fault } => write!(f, "{fault}"),
+            FailReason::BudgetExhausted {
+                line,
+                budget_s,
+                since,
+                traces,
+                last,
+            } => write!(
+                f,
+                "line {}: transient faults since {} outlasted the {budget_s} s budget ({traces} trace(s) started); last: {last}",
+                line + 1,
+                stamp(*since)
+            ),
+            FailReason::PositionLostRepeatedly { line, times, last } => write!(
+                f,
+                "line {}: the stage lost its position {times} time(s); last: {last}",
+                line + 1
+            ),
+            FailReason::LineRefused { line, problem } => write!(f, "line {}: {problem}", line + 1),
+            FailReason::FitterRefused { line, message } => write!(
+                f,
+                "line {}: the fitter refused the stored line: {message}",
+                line + 1
+            ),
+            FailReason::Storage(m) => write!(f, "storage: {m}"),
+            FailReason::Outputs(m) => f.write_str(m),
+            FailReason::Refused { message, .. } => f.write_str(message),
+        }
+    }
+}
+
+/// What ended a failed scan, as far as what may continue it depends on it (the stop
+/// record's `cause`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FailCause {
+    /// Transient faults outlasted the budget: the device kept answering wrongly. The daemon
+    /// continues the scan once its devices answer properly again.
+    Budget,
+    /// The file system refused a write (only earlier versions ended a scan for it; this one
+    /// waits): a plain start continues the scan.
+    Storage,
+    /// A fault the operator must clear; `--resume` continues the scan after.
+    Operator,
+}
+
+impl FailCause {
+    /// The cause of a stop record written before records named it, read from its reason.
+    pub fn of_reason(reason: &str) -> FailCause {
+        if reason.starts_with("storage: ")
+            || reason.starts_with("all lines are on disk but the outputs could not be written")
+        {
+            FailCause::Storage
+        } else if reason.contains("transient faults since") && reason.contains("budget") {
+            FailCause::Budget
+        } else {
+            FailCause::Operator
+        }
+    }
+}
+
+/// Why a scan could not complete, for exit codes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FailKind {
+    /// The scan ran and failed (device fault, exhausted budget, changed conditions).
+    Scan,
+    /// A device was not there when a new scan was to start.
+    Unavailable,
+    /// The disk refused (read-only, permissions).
+    Io,
+}
+
+/// How the scan ends.
+#[derive(Debug, Clone, PartialEq)]
+pub enum End {
+    /// Every line committed and the outputs written.
+    Success {
+        /// What was written, for the stop record.
+        summary: String,
+    },
+    /// The operator aborted it.
+    Abort {
+        /// Who.
+        peer: Option<Peer>,
+    },
+    /// Shut down (SIGTERM): no stop record, it resumes at the next start.
+    Shutdown,
+    /// It failed.
+    Fail(FailReason),
+}
+
+impl End {
+    /// The word for it: the stop record's status, the status's last stop.
+    pub fn status(&self) -> StopStatus {
+        match self {
+            End::Success { .. } => StopStatus::Success,
+            End::Abort { .. } => StopStatus::Abort,
+            End::Shutdown => StopStatus::Interrupted,
+            End::Fail(_) => StopStatus::Fail,
+        }
+    }
+
+    /// Why, for people: the stop record's and the last stop's reason. `created`: the scan's
+    /// directory existed (an abort before it is an abort before the first line).
+    pub fn reason(&self, created: bool) -> String {
+        match self {
+            End::Success { summary } => summary.clone(),
+            End::Abort { .. } if created => "aborted by the operator".to_owned(),
+            End::Abort { .. } => "aborted before the first line".to_owned(),
+            End::Shutdown => "shutdown".to_owned(),
+            End::Fail(r) => r.to_string(),
+        }
+    }
+
+    /// The journal's stop record (status, reason and, for a failure, its cause); none after
+    /// a shutdown, which leaves the scan resumable.
+    pub fn stop_record(&self) -> Option<(StopStatus, String, Option<FailCause>)> {
+        match self {
+            End::Shutdown => None,
+            End::Fail(r) => Some((StopStatus::Fail, r.to_string(), Some(r.cause()))),
+            end => Some((end.status(), end.reason(true), None)),
+        }
+    }
+
+    /// The notification hook's event, for a scan that was created (a start that failed
+    /// before has no scan to tell of).
+    pub fn event(&self, created: bool) -> Option<ScanEventKind> {
+        match self {
+            _ if !created => None,
+            End::Success { .. } => Some(ScanEventKind::Success),
+            End::Abort { .. } => Some(ScanEventKind::Abort),
+            End::Fail(_) => Some(ScanEventKind::Fail),
+            End::Shutdown => None,
+        }
+    }
+
+    /// The exit class of an end that is no success (`None` for a success).
+    pub fn fail_kind(&self) -> Option<FailKind> {
+        match self {
+            End::Success { .. } => None,
+            End::Fail(r) => Some(r.kind()),
+            End::Abort { .. } | End::Shutdown => Some(FailKind::Scan),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn budget() -> FailReason {
+        FailReason::BudgetExhausted {
+            line: 2,
+            budget_s: 600,
+            since: "2026-12-02T01:00:00Z".parse().unwrap(),
+            traces: 4,
+            last: "line 3: instrument: NG011".into(),
+        }
+    }
+
+    /// The journal's stop record, the status's last stop and the hook's event all come from
+    /// the one ending.
+    #[test]
+    fn every_spelling_of_an_ending_is_derived_from_it() {
+        let fail = End::Fail(budget());
+        assert_eq!(fail.status(), StopStatus::Fail);
+        assert_eq!(fail.event(true), Some(ScanEventKind::Fail));
+        assert_eq!(
+            fail.event(false),
+            None,
+            "a start that failed has no scan to tell of"
+        );
+        let (status, reason, cause) = fail.stop_record().unwrap();
+        assert_eq!((status, cause), (StopStatus::Fail, Some(FailCause::Budget)));
+        assert_eq!(
+            reason,
+            "line 3: transient faults since 2026-12-02T01:00:00Z outlasted the 600 s budget (4 trace(s) started); last: line 3: instrument: NG011"
+        );
+        assert_eq!(fail.fail_kind(), Some(FailKind::Scan));
+
+        let abort = End::Abort { peer: None };
+        assert_eq!(abort.reason(true), "aborted by the operator");
+        assert_eq!(abort.reason(false), "aborted before the first line");
+        assert_eq!(
+            abort.stop_record(),
+            Some((StopStatus::Abort, "aborted by the operator".into(), None))
+        );
+        assert_eq!(abort.event(true), Some(ScanEventKind::Abort));
+
+        assert_eq!(
+            End::Shutdown.stop_record(),
+            None,
+            "a shutdown stays resumable"
+        );
+        assert_eq!(End::Shutdown.status(), StopStatus::Interrupted);
+        assert_eq!(End::Shutdown.event(true), None);
+
+        let ok = End::Success {
+            summary: "3 lines".into(),
+        };
+        assert_eq!(
+            ok.stop_record(),
+            Some((StopStatus::Success, "3 lines".into(), None))
+        );
+        assert_eq!(ok.fail_kind(), None);
+    }
+
+    #[test]
+    fn the_cause_of_a_stop_record_of_an_earlier_version_is_read_from_its_reason() {
+        assert_eq!(
+            FailCause::of_reason("storage: write lines/0003.csv: Operation not permitted"),
+            FailCause::Storage
+        );
+        assert_eq!(
+            FailCause::of_reason(
+                "all lines are on disk but the outputs could not be written: report.json: Read-only file system"
+            ),
+            FailCause::Storage
+        );
+        assert_eq!(
+            FailCause::of_reason(&budget().to_string()),
+            FailCause::Budget
+        );
+        assert_eq!(
+            FailCause::of_reason("line 2: instrument: battery abnormal"),
+            FailCause::Operator
+        );
+        let storage = FailReason::Storage("x".into());
+        assert_eq!(storage.cause(), FailCause::Storage);
+        assert_eq!(storage.kind(), FailKind::Io);
+    }
+}
