@@ -8,7 +8,12 @@
 //! inputs need `-o`. The lines the reader leaves out are named in the IGES Start section and
 //! the report, and the fit is partial: "N of M lines", exit 3, the surface written.
 //!
-//! Exit status: 0 done; 3 done from fewer lines than the input holds; 2 bad pitch or degree
+//! The surface is checked to be a height map as the report's model checks check it (the
+//! control net first: one that runs forwards everywhere rules a fold out; else the sampled
+//! iso-curves): a fold is named on stderr, in the report's `height_map` and in the IGES Start
+//! section, the surface is written as fitted, and the exit status is 3.
+//!
+//! Exit status: 0 done; 3 done from fewer lines than the input holds, or the surface folds; 2 bad pitch or degree
 //! arguments, an input of the wrong kind, or an existing surface not to be replaced; 74 the
 //! input cannot be read or an output cannot be written; 1 the data cannot be used (the
 //! message names what and where) or cannot be interpolated.
@@ -45,6 +50,7 @@ use crate::metrology::alternatives::{
     compare as compare_alternatives, table as alternatives_table,
 };
 use crate::metrology::areal::{sq_um as areal_sq_um, HeightMap};
+use crate::metrology::folds::{check_model, net_folds, FoldOptions, IsoFold, ModelChecks};
 use crate::metrology::holdout::{between_lines, holdout_every_or_reason, ordinal};
 use crate::metrology::outliers::{bridged_grid, LineSpike};
 use crate::metrology::surface_model::{fit_model, ModelRecipe};
@@ -268,6 +274,39 @@ fn fit_surface(
         let m = fit_model(grid, recipe).map_err(|e| failed(&e))?;
         Ok((m.fit, m.replaced))
     }
+}
+
+/// The checks that decide whether the surface is a height map: none when its control net runs
+/// forwards everywhere (then no iso-curve can run back, [`net_folds`]), else the report's
+/// model checks on the sampled iso-curves, which say whether, where and by how much it folds.
+fn shape_checks(fit: &FitResult, fitted_heights_um: &[f64]) -> Option<ModelChecks> {
+    (!net_folds(&fit.surface).is_empty()).then(|| {
+        check_model(
+            &fit.surface,
+            &fit.params_v,
+            fitted_heights_um,
+            &FoldOptions::default(),
+        )
+    })
+}
+
+/// The IGES Start section's words for a fold of the surface (ASCII, as the section is).
+fn fold_start_line(f: &IsoFold) -> String {
+    let (c, other) = if f.direction == "u" {
+        ("x", "y")
+    } else {
+        ("y", "x")
+    };
+    format!(
+        "NOT A HEIGHT MAP: the surface folds, {c} runs backwards along {} by up to {} um ({c} {} .. {} mm) on {} of {} iso-curves (worst at {other} = {} mm).",
+        f.direction,
+        crate::numfmt::fmt(f.back_mm * 1000.0, crate::numfmt::Quantity::HeightUm),
+        crate::numfmt::fmt(f.range_mm[0], crate::numfmt::Quantity::PositionMm),
+        crate::numfmt::fmt(f.range_mm[1], crate::numfmt::Quantity::PositionMm),
+        f.affected,
+        f.checked,
+        crate::numfmt::fmt(f.at_mm, crate::numfmt::Quantity::PositionMm)
+    )
 }
 
 /// Names every spike replaced before fitting (only ever when asked for).
@@ -512,14 +551,24 @@ pub fn run(args: Args) -> Result<(), CliError> {
         progress.finish_and_clear();
         let (fit, replaced) = fitted?;
         report_replaced(&replaced);
-        Ok::<_, CliError>((fit, replaced, t_fit.elapsed().as_secs_f64()))
+        let fit_s = t_fit.elapsed().as_secs_f64();
+        let t_shape = Instant::now();
+        let shape = shape_checks(
+            &fit,
+            &fitted_heights(&grid.heights_um, cols, &index, &replaced),
+        );
+        for w in shape.iter().flat_map(ModelChecks::fold_warnings) {
+            tell!("surfscan: warning: {w}");
+        }
+        let shape_s = t_shape.elapsed().as_secs_f64();
+        Ok::<_, CliError>((fit, replaced, fit_s, (shape, shape_s)))
     };
     let residual_step = |fit: &FitResult, heights_um: &[f64]| {
         let t_res = Instant::now();
         let r = max_residual_mm(fit, pitch_x_mm, &y_mm, heights_um, cols);
         (r, t_res.elapsed().as_secs_f64())
     };
-    let write_step = |fit: &FitResult, replaced: &[LineSpike]| {
+    let write_step = |fit: &FitResult, replaced: &[LineSpike], shape: &Option<ModelChecks>| {
         let mut opts = iges_options(
             &args,
             &output,
@@ -531,6 +580,11 @@ pub fn run(args: Args) -> Result<(), CliError> {
         );
         opts.start_lines.extend(recipe.start_lines(replaced));
         opts.start_lines.extend(left_out_start_line(&grid.left_out));
+        opts.start_lines.extend(
+            shape
+                .iter()
+                .flat_map(|c| c.iso_curves.iter().map(fold_start_line)),
+        );
         ensure_parent(&output)?;
         let t_write = Instant::now();
         let written =
@@ -540,7 +594,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     // A threshold given wrongly is refused after the fit and before anything is written, as
     // in the serial order below.
     let threshold = args.model.holdout_threshold();
-    let (fit, replaced, fit_s, (residual_mm, residual_s), judged, (written, write_s)) =
+    let (fit, replaced, (fit_s, shape), (residual_mm, residual_s), judged, (written, write_s)) =
         match threshold {
             Ok(threshold) if grid.heights_um.len() <= SIDE_BY_SIDE_MAX_POINTS => {
                 // The verdict between lines needs only the heights the surface is fitted to (the
@@ -553,7 +607,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
                     let early = recipe
                         .is_paper()
                         .then(|| outer.spawn(move || judge.run(heights, threshold)));
-                    let (fit, replaced, fit_s) = fit_step()?;
+                    let (fit, replaced, fit_s, shape) = fit_step()?;
                     let judging = match early {
                         Some(h) => h,
                         None => {
@@ -567,12 +621,19 @@ pub fn run(args: Args) -> Result<(), CliError> {
                         }
                     };
                     let (residual, written) = std::thread::scope(|inner| {
-                        let writing = inner.spawn(|| write_step(&fit, &replaced));
+                        let writing = inner.spawn(|| write_step(&fit, &replaced, &shape.0));
                         let residual = residual_step(&fit, heights);
                         (residual, joined(writing))
                     });
                     let written = written?;
-                    Ok::<_, CliError>((fit, replaced, fit_s, residual, joined(judging), written))
+                    Ok::<_, CliError>((
+                        fit,
+                        replaced,
+                        (fit_s, shape),
+                        residual,
+                        joined(judging),
+                        written,
+                    ))
                 })?
             }
             threshold => {
@@ -584,7 +645,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
                     Ok(t) if recipe.is_paper() => Some(judge.run(&grid.heights_um, *t)),
                     _ => None,
                 };
-                let (fit, replaced, fit_s) = fit_step()?;
+                let (fit, replaced, fit_s, shape) = fit_step()?;
                 let residual = residual_step(&fit, &grid.heights_um);
                 let judged = match early {
                     Some(judged) => judged,
@@ -597,8 +658,8 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 // before the IGES files are planned and written, which is when a large surface
                 // needs the most memory.
                 grid.heights_um = Vec::new();
-                let written = write_step(&fit, &replaced)?;
-                (fit, replaced, fit_s, residual, judged, written)
+                let written = write_step(&fit, &replaced, &shape.0)?;
+                (fit, replaced, (fit_s, shape), residual, judged, written)
             }
         };
     let Judged {
@@ -609,6 +670,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         alternatives,
         holdout_s,
     } = judged;
+    let folds = shape.0.as_ref().is_some_and(ModelChecks::folds);
     let n_files = written.len();
     let mut stats = crate::iges::IgesStats::default();
     for w in &written {
@@ -652,6 +714,14 @@ pub fn run(args: Args) -> Result<(), CliError> {
             "v_method": recipe.method,
             "spikes_replaced": replaced,
         },
+        "height_map": {
+            "folds": folds,
+            "checked": match &shape.0 {
+                None => "the control net runs forwards in u and v everywhere, so the surface cannot fold (its iso-curves were not sampled)",
+                Some(_) => "the control net runs back somewhere: the iso-curves were sampled as the report's model checks sample them",
+            },
+            "model_checks": &shape.0,
+        },
         "between_lines": verdict.as_ref().ok(),
         "between_lines_error": verdict.as_ref().err(),
         "alternatives": alternatives.as_ref().map(|alts| alts
@@ -673,6 +743,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             "fit_solve_u": fit.timings.solve_u_s,
             "fit_solve_v": fit.timings.solve_v_s,
             "fit_total": fit_s,
+            "shape_check": shape.1,
             "residual": residual_s,
             "write_iges": write_s,
         },
@@ -731,14 +802,23 @@ pub fn run(args: Args) -> Result<(), CliError> {
             _ => {}
         }
     }
+    let mut partial = Vec::new();
     if grid.is_partial() {
-        return Err(CliError::new(
-            Exit::Partial,
-            format!(
-                "the surface is partial: fitted from {} (the others cannot be used, see the warnings above; the IGES Start section names them); it is written",
-                grid.lines_used()
-            ),
+        partial.push(format!(
+            "the surface is partial: fitted from {} (the others cannot be used, see the warnings above; the IGES Start section names them)",
+            grid.lines_used()
         ));
     }
-    Ok(())
+    if folds {
+        partial.push(
+            "the surface folds (see the model fold warning above; the IGES Start section and the report name it): it is not a height map there".to_string(),
+        );
+    }
+    if partial.is_empty() {
+        return Ok(());
+    }
+    Err(CliError::new(
+        Exit::Partial,
+        format!("{}; it is written", partial.join("; ")),
+    ))
 }

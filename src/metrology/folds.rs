@@ -131,6 +131,13 @@ impl ModelChecks {
         !self.iso_curves.is_empty()
     }
 
+    /// The warnings of [`ModelChecks::warnings`] that name a fold, of the surface or of its net.
+    pub fn fold_warnings(&self) -> Vec<String> {
+        let mut w = self.warnings();
+        w.truncate(self.iso_curves.len() + self.net.len());
+        w
+    }
+
     /// One warning per finding: folds of the surface and of its net, and an overshoot beyond
     /// [`OVERSHOOT_WARN_PCT`].
     pub fn warnings(&self) -> Vec<String> {
@@ -388,38 +395,14 @@ unsafe fn strictly_increasing_avx2(values: &[f64]) -> bool {
     values[k..].windows(2).all(|w| w[1] > w[0])
 }
 
-/// How many equally spaced u the fold check samples each iso-curve at: `samples_per_pole`
-/// per pole (at least one), and never fewer than two.
-pub fn iso_curve_sample_count(surface: &NurbsSurface, options: &FoldOptions) -> usize {
-    (options.samples_per_pole.max(1) * surface.count_u()).max(2)
-}
-
-/// Checks the control net, the sampled iso-curves and the height range of `surface` fitted to
-/// data lines at parameters `line_vs` (increasing), against the measured `heights_um`.
-pub fn check_model(
-    surface: &NurbsSurface,
-    line_vs: &[f64],
-    heights_um: &[f64],
-    options: &FoldOptions,
-) -> ModelChecks {
-    check_model_with(surface, line_vs, heights_um, options, None)
-}
-
-/// [`check_model`] with the u basis at the `samples_per_pole · count_u` equally spaced u of
-/// the iso-curves already computed (`UBasis::new` at `k / (n − 1)`, as the model's bearing
-/// curves sample them): used where it has that length and the degree is one the fold check
-/// builds its own basis for, so every sum is the one [`check_model`] makes, to the bit.
-pub fn check_model_with(
-    surface: &NurbsSurface,
-    line_vs: &[f64],
-    heights_um: &[f64],
-    options: &FoldOptions,
-    shared_u: Option<&UBasis>,
-) -> ModelChecks {
+/// Where the control net of `surface` runs backwards: x from pole to pole along u in a pole
+/// row, y along v in a pole column (absent: none). A net that runs forwards everywhere makes a
+/// surface that does (every iso-curve is a convex combination of the pole rows, its
+/// derivative a positive combination of their steps), so a clean net rules a fold out at the
+/// cost of one pass over the poles; only a net with a backward step needs the sampled
+/// iso-curves of [`check_model`] to say whether and where the surface itself folds.
+pub fn net_folds(surface: &NurbsSurface) -> Vec<NetFold> {
     let (nu, nv) = (surface.count_u(), surface.count_v());
-    let per = options.samples_per_pole.max(1);
-
-    // Control net.
     let mut net = Vec::new();
     for (direction, lines, along) in [("u", nv, nu), ("v", nu, nv)] {
         let (mut affected, mut first, mut worst) = (0usize, None, 0.0f64);
@@ -454,6 +437,41 @@ pub fn check_model_with(
             });
         }
     }
+    net
+}
+
+/// How many equally spaced u the fold check samples each iso-curve at: `samples_per_pole`
+/// per pole (at least one), and never fewer than two.
+pub fn iso_curve_sample_count(surface: &NurbsSurface, options: &FoldOptions) -> usize {
+    (options.samples_per_pole.max(1) * surface.count_u()).max(2)
+}
+
+/// Checks the control net, the sampled iso-curves and the height range of `surface` fitted to
+/// data lines at parameters `line_vs` (increasing), against the measured `heights_um`.
+pub fn check_model(
+    surface: &NurbsSurface,
+    line_vs: &[f64],
+    heights_um: &[f64],
+    options: &FoldOptions,
+) -> ModelChecks {
+    check_model_with(surface, line_vs, heights_um, options, None)
+}
+
+/// [`check_model`] with the u basis at the `samples_per_pole · count_u` equally spaced u of
+/// the iso-curves already computed (`UBasis::new` at `k / (n − 1)`, as the model's bearing
+/// curves sample them): used where it has that length and the degree is one the fold check
+/// builds its own basis for, so every sum is the one [`check_model`] makes, to the bit.
+pub fn check_model_with(
+    surface: &NurbsSurface,
+    line_vs: &[f64],
+    heights_um: &[f64],
+    options: &FoldOptions,
+    shared_u: Option<&UBasis>,
+) -> ModelChecks {
+    let (nu, nv) = (surface.count_u(), surface.count_v());
+    let per = options.samples_per_pole.max(1);
+
+    let net = net_folds(surface);
 
     // Iso-curves along u at and between the lines; they also give the height range.
     let mut vs: Vec<f64> = Vec::new();

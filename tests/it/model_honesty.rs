@@ -6,7 +6,7 @@
 use surfscan::config::FitSettings;
 use surfscan::fit::{fit_grid, fit_grid_with, FitOptions, VMethod};
 use surfscan::metrology::areal::{areal_params, HeightMap};
-use surfscan::metrology::folds::{check_model, FoldOptions};
+use surfscan::metrology::folds::{check_model, net_folds, FoldOptions};
 use surfscan::metrology::holdout::{between_lines, SUPPORTED_BELOW_SQ};
 use surfscan::metrology::outliers::{find_spikes, spike_roughness, SpikeOptions};
 
@@ -182,6 +182,36 @@ fn a_100_um_spike_is_named_and_the_default_surface_folds_with_a_named_warning() 
     assert!(w.iter().any(|w| w.starts_with("control net fold")), "{w:?}");
 }
 
+/// `fit` samples the surface for folds only when its control net runs backwards somewhere:
+/// on smooth grids and on grids with spikes of every size up to 150 µm, a net that runs
+/// forwards everywhere never comes with a folding surface, and every folding surface has a
+/// net that runs back.
+#[test]
+fn a_surface_folds_only_where_its_control_net_runs_back() {
+    let mut rng = Rng(77);
+    let (mut clean, mut folding) = (0, 0);
+    for case in 0..16u64 {
+        let mut z = uncorrelated_grid(100 + case);
+        for _ in 0..(case % 4) {
+            let at = (rng.next() * (ROWS * COLS) as f64) as usize;
+            z[at] += rng.next() * 150.0;
+        }
+        let fit = fit_grid(PX, &y_mm(ROWS), &z, COLS, FitOptions::default()).unwrap();
+        let net = net_folds(&fit.surface);
+        let c = check_model(&fit.surface, &fit.params_v, &z, &FoldOptions::default());
+        assert_eq!(net, c.net, "case {case}: the same net findings");
+        if net.is_empty() {
+            assert!(!c.folds(), "case {case}: {c:?}");
+            clean += 1;
+        }
+        if c.folds() {
+            assert!(!net.is_empty(), "case {case}");
+            folding += 1;
+        }
+    }
+    assert!(clean > 0 && folding > 0, "{clean} clean, {folding} folding");
+}
+
 #[test]
 fn the_default_fit_is_the_papers_bit_for_bit() {
     // Property: for random grids (sizes, heights, spikes, unequal line spacing), the fit the
@@ -230,4 +260,91 @@ fn the_default_fit_is_the_papers_bit_for_bit() {
         assert_eq!(paper.params_u, ours.params_u);
         assert_eq!(paper.params_v, ours.params_v);
     }
+}
+
+/// The folding surface above through the binaries: `fit` names the fold as `analyze` does
+/// (the same words), in its report and in the IGES Start section, writes the surface anyway
+/// (the paper's bits) and exits 3, as `analyze` does.
+#[test]
+fn fit_names_a_folding_surface_as_analyze_does_and_exits_3_with_the_surface_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut z = uncorrelated_grid(11);
+    z[12 * COLS + 233] += 100.0;
+    let csv: String = z
+        .chunks(COLS)
+        .map(|r| {
+            r.iter()
+                .map(|v| format!("{v:.6}"))
+                .collect::<Vec<_>>()
+                .join(",")
+                + "\n"
+        })
+        .collect();
+    let input = dir.path().join("spike.csv");
+    std::fs::write(&input, csv).unwrap();
+    let pitches = ["--pitch-x", &PX.to_string(), "--pitch-y", &PY.to_string()].map(str::to_owned);
+    let run = |args: &[&str]| {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(args)
+            .arg(&input)
+            .args(&pitches)
+            .output()
+            .unwrap();
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let (igs, report) = (dir.path().join("s.igs"), dir.path().join("fit.json"));
+    let (code, fit_err) = run(&[
+        "fit",
+        "-o",
+        igs.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(3), "{fit_err}");
+    let fold: Vec<&str> = fit_err
+        .lines()
+        .filter(|l| l.starts_with("surfscan: warning: model fold: x runs backwards along u"))
+        .collect();
+    assert_eq!(fold.len(), 1, "{fit_err}");
+    assert!(fit_err.contains("the surface folds"), "{fit_err}");
+    // The report says where and by how much.
+    let rep: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(rep["height_map"]["folds"], true, "{}", rep["height_map"]);
+    let f = &rep["height_map"]["model_checks"]["iso_curves"][0];
+    let (x, lo, hi) = (
+        233.0 * PX,
+        f["range_mm"][0].as_f64().unwrap(),
+        f["range_mm"][1].as_f64().unwrap(),
+    );
+    assert!(
+        lo <= x + PX && hi >= x - PX,
+        "fold at {lo} .. {hi}, spike at {x}"
+    );
+    assert!(f["back_mm"].as_f64().unwrap() > 0.0);
+    // The surface is written, and its Start section says it folds.
+    let text = std::fs::read_to_string(&igs).unwrap();
+    let start: String = text
+        .lines()
+        .filter(|l| l.get(72..73) == Some("S"))
+        .map(|l| l[..72].trim_end())
+        .collect::<Vec<_>>()
+        .join(" ");
+    assert!(
+        start.contains("NOT A HEIGHT MAP: the surface folds, x runs backwards along u"),
+        "{start}"
+    );
+    let iges = surfscan::iges::reader::read_iges(text.as_bytes()).unwrap();
+    assert_eq!(
+        (iges.surfaces[0].count_u(), iges.surfaces[0].count_v()),
+        (COLS, ROWS)
+    );
+    // analyze of the same file: the same fold in the same words, exit 3.
+    let out = dir.path().join("analysis");
+    let (code, analyze_err) = run(&["analyze", "--lc", "0.08", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, Some(3), "{analyze_err}");
+    assert!(analyze_err.contains(fold[0]), "{analyze_err}");
 }
