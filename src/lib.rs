@@ -62,3 +62,4 @@ pub mod station_lock;
 pub mod telemetry;
 pub mod transport;
 pub mod units;
+pub mod x3p;

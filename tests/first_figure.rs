@@ -4,7 +4,7 @@
 //! own so that no other test has drawn a figure, and so registered the font, before it runs.
 
 use surfscan::metrology::areal::HeightMap;
-use surfscan::metrology::plots::plot_height_map;
+use surfscan::report::render::plots::plot_height_map;
 
 /// The contents of the SVG's `<text>` elements, in document order.
 fn texts(svg: &str) -> Vec<String> {

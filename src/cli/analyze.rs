@@ -460,7 +460,7 @@ fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
         .map_err(|e| io(&path, e))?;
     // As a scan's summary.csv (without the instrument's columns): 1-based line, values with
     // the digits of their quantity.
-    use crate::report::summary::{line_cells, more_cells, LINE_HEADER, MORE_HEADER};
+    use crate::report::render::summary::{line_cells, more_cells, LINE_HEADER, MORE_HEADER};
     let mut csv = format!("{LINE_HEADER},{MORE_HEADER}\n");
     for l in &report.lines {
         let mut row = line_cells(l.index, l.y_mm, &l.params);

@@ -162,7 +162,7 @@ fn success_summary(
     // Without a verdict in the report, say why there is none.
     if report
         .as_ref()
-        .and_then(crate::report::html::verdict)
+        .and_then(crate::report::render::html::verdict)
         .is_none()
     {
         say!("  model    {}", outputs.verdict);
@@ -181,9 +181,9 @@ fn success_summary(
 }
 
 /// The result of a characterised scan in a few lines, from its `report.json` (see
-/// [`crate::report::html::result_summary`]).
+/// [`crate::report::render::html::result_summary`]).
 pub fn result_summary(report: &serde_json::Value) -> Vec<(&'static str, String)> {
-    crate::report::html::result_summary(report)
+    crate::report::render::html::result_summary(report)
 }
 
 /// Refuses when a daemon answers on the configured control socket: it holds the ports.

@@ -30,7 +30,7 @@
 //!   metres by the format: there it is a warning.
 //!
 //! Layer 4 (reading at the process edge): depends on [`crate::grid`], [`crate::scan`] (a scan
-//! directory's store and journal) and the X3P reader of [`crate::metrology::x3p`].
+//! directory's store and journal) and the X3P reader of [`crate::x3p`].
 
 pub mod profile;
 pub mod rows;
@@ -451,7 +451,7 @@ fn finish(
 
 /// An X3P file: the grid with its own pitches, lines holding invalid points left out.
 fn read_x3p(path: &Path, bytes: &[u8]) -> Result<GridInput, InputError> {
-    let x = crate::metrology::x3p::read_x3p(bytes).map_err(|e| data_error(path, e.to_string()))?;
+    let x = crate::x3p::read_x3p(bytes).map_err(|e| data_error(path, e.to_string()))?;
     let m = &x.meta;
     let source = [
         m.manufacturer.as_str(),

@@ -7,9 +7,9 @@
 //! [`Recipe`](params::Recipe) naming the filter, λc, λs, N, the standard and a definition id per
 //! parameter, so it can be compared honestly with other software.
 //!
-//! Layer 1 (pure logic): numbers in, values out, except [`plots`], which writes PNG/SVG files into
-//! a directory the caller gives; depends only on [`crate::profile`] and
-//! [`crate::nurbs`], and [`crate::fit`] for the hold-out refits. No I/O.
+//! Layer 1 (pure logic): numbers in, values out, no I/O: what the report shows is drawn and
+//! written by [`crate::report`]'s renderers. Depends only on [`crate::profile`],
+//! [`crate::grid`] and [`crate::nurbs`], and [`crate::fit`] for the hold-out refits.
 
 pub mod alternatives;
 pub mod anisotropy;
@@ -22,11 +22,8 @@ pub mod instrument;
 pub mod model;
 pub mod outliers;
 pub mod params;
-pub mod plots;
 mod sampling;
 pub mod surface_model;
-pub mod text_cache;
-pub mod x3p;
 
 use thiserror::Error;
 

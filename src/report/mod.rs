@@ -34,14 +34,12 @@ pub mod areal;
 pub mod context;
 pub mod document;
 pub mod error;
-pub mod files;
 pub mod holdout;
-pub mod html;
 pub mod lines;
 pub mod model;
 pub mod outliers;
+pub mod render;
 pub mod scan_dir;
-pub mod summary;
 
 pub use context::{Model, ReportContext, ScanAnalysisOptions};
 pub use document::{manufacturer_of, Report, ScanStatus, Traceability};
@@ -52,7 +50,7 @@ use crate::grid::Grid;
 use crate::metrology::anisotropy::anisotropy;
 use crate::metrology::MetrologyError;
 use document::{Characterisation, FailedSection, ModelReport, Timings};
-use files::software;
+use render::software;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -105,7 +103,7 @@ pub fn characterise(
     struct ForgetTexts;
     impl Drop for ForgetTexts {
         fn drop(&mut self) {
-            crate::metrology::text_cache::forget();
+            crate::report::render::text_cache::forget();
         }
     }
     let _forget = ForgetTexts;
@@ -187,10 +185,10 @@ pub fn characterise(
         // are made.
         let rk_ctx = ctx.clone();
         let map_ctx = ctx.clone();
-        let rk_plots = scope.spawn(move || files::write_rk_plots(out, grid, &analyses, &rk_ctx));
+        let rk_plots = scope.spawn(move || render::write_rk_plots(out, grid, &analyses, &rk_ctx));
         // So is the height map, which needs only the data.
         let map_grid = areal::measured(grid, py);
-        let height_map = scope.spawn(move || files::draw_height_map(out, &map_grid, &map_ctx));
+        let height_map = scope.spawn(move || render::draw_height_map(out, &map_grid, &map_ctx));
 
         let t = Instant::now();
         if !evenly {
@@ -274,7 +272,7 @@ pub fn characterise(
             }
         }
         // The overlay draws the model at a held-out line: the rows are still the grid's here.
-        let overlay = files::held_out_overlay(
+        let overlay = render::held_out_overlay(
             grid,
             &cgrid.heights_um,
             &model.recipe,
@@ -356,11 +354,11 @@ pub fn characterise(
         };
 
         let t = Instant::now();
-        let rk_panic = files::rk_plot_panic(&ctx);
+        let rk_panic = render::rk_plot_panic(&ctx);
         let height_map = height_map
             .join()
-            .unwrap_or_else(|_| Err(files::height_map_panic(&ctx)));
-        let written = files::write_data_files(
+            .unwrap_or_else(|_| Err(render::height_map_panic(&ctx)));
+        let written = render::write_data_files(
             out,
             grid,
             height_map,
@@ -377,7 +375,7 @@ pub fn characterise(
         timings.total = t_all.elapsed().as_secs_f64() + model.fit_s;
         report.warnings = ctx.warnings.clone();
         report.timings_s = timings;
-        files::write_report(out, &written, &report, &ctx)?;
+        render::write_report(out, &written, &report, &ctx)?;
         let mut plots = written.plots;
         plots.extend(written.rk_plots.into_iter().flat_map(|(_, files)| files));
         Ok(ScanOutputs {

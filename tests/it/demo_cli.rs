@@ -8,9 +8,9 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::sync::Arc;
 use surfscan::iges::reader::read_iges;
-use surfscan::metrology::x3p::read_x3p;
 use surfscan::scan::faults::NoFaults;
 use surfscan::scan::store::ScanStore;
+use surfscan::x3p::read_x3p;
 
 #[test]
 fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {

@@ -782,7 +782,7 @@ fn zip_local(entries: &[(&str, &[u8])]) -> Vec<u8> {
     for (name, data) in entries {
         out.extend_from_slice(&0x0403_4b50u32.to_le_bytes());
         out.extend_from_slice(&[20, 0, 0, 0, 0, 0, 0, 0, 0x21, 0]);
-        out.extend_from_slice(&surfscan::metrology::x3p::crc32(data).to_le_bytes());
+        out.extend_from_slice(&surfscan::x3p::crc32(data).to_le_bytes());
         out.extend_from_slice(&(data.len() as u32).to_le_bytes());
         out.extend_from_slice(&(data.len() as u32).to_le_bytes());
         out.extend_from_slice(&(name.len() as u16).to_le_bytes());
@@ -795,7 +795,7 @@ fn zip_local(entries: &[(&str, &[u8])]) -> Vec<u8> {
 
 /// The XML of an archive written by `to_x3p` (3 × 4 heights) and its point data.
 fn x3p_parts() -> (Vec<u8>, Vec<u8>, Vec<u8>) {
-    use surfscan::metrology::x3p::{to_x3p, X3pMeta};
+    use surfscan::x3p::{to_x3p, X3pMeta};
     let heights: Vec<f64> = (0..12).map(|i| i as f64 * 0.1 - 0.3).collect();
     let meta = X3pMeta {
         creator: "fuzz".into(),
@@ -820,7 +820,7 @@ fn x3p_parts() -> (Vec<u8>, Vec<u8>, Vec<u8>) {
 /// An archive of `xml` and `data` whose two MD5 sums are correct (the XML's data sum is
 /// rewritten to match `data`), so the reader gets past them to the XML itself.
 fn x3p_with(xml: &str, data: &[u8]) -> Vec<u8> {
-    use surfscan::metrology::x3p::md5;
+    use surfscan::x3p::md5;
     let hex = |d: &[u8]| {
         md5(d)
             .iter()
@@ -844,7 +844,7 @@ fn x3p_with(xml: &str, data: &[u8]) -> Vec<u8> {
 
 #[test]
 fn x3p_reader() {
-    use surfscan::metrology::x3p::read_x3p;
+    use surfscan::x3p::read_x3p;
     let (archive, xml, data) = x3p_parts();
     const EXTRA: &[&[u8]] = &[
         b"<SizeX>",
@@ -875,7 +875,7 @@ fn x3p_reader() {
 
 #[test]
 fn x3p_size_y_1e300_is_an_error_not_an_overflow() {
-    use surfscan::metrology::x3p::read_x3p;
+    use surfscan::x3p::read_x3p;
     let (_, xml, data) = x3p_parts();
     let xml = text(&xml).replace("<SizeY>3</SizeY>", "<SizeY>1e300</SizeY>");
     assert!(read_x3p(&x3p_with(&xml, &data)).is_err());

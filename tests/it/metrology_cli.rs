@@ -174,11 +174,9 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{name}");
     }
     let measured =
-        surfscan::metrology::x3p::read_x3p(&std::fs::read(out.join("measured.x3p")).unwrap())
-            .unwrap();
+        surfscan::x3p::read_x3p(&std::fs::read(out.join("measured.x3p")).unwrap()).unwrap();
     assert_eq!((measured.rows, measured.cols), (rows, cols));
-    let model =
-        surfscan::metrology::x3p::read_x3p(&std::fs::read(out.join("model.x3p")).unwrap()).unwrap();
+    let model = surfscan::x3p::read_x3p(&std::fs::read(out.join("model.x3p")).unwrap()).unwrap();
     assert_eq!((model.rows, model.cols), (rows, 2 * cols - 1));
     assert!((model.pitch_x_mm - 0.0005).abs() < 1e-12);
     // The model passes through the data: every 2nd model column is a measured point.

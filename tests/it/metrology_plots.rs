@@ -8,7 +8,7 @@ use surfscan::fit::{fit_grid, FitOptions};
 use surfscan::metrology::areal::{smr_curve, HeightMap};
 use surfscan::metrology::model::{model_bearing_curves, ModelBacOptions};
 use surfscan::metrology::params::{analyze_line, material_ratio_curve, rk_family, Options};
-use surfscan::metrology::plots::{
+use surfscan::report::render::plots::{
     plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction,
 };
 

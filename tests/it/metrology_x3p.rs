@@ -2,7 +2,7 @@
 //! the file read by an independent reader (surfalize; the test fails when it is missing:
 //! `bash .ci/run` (tests/python/requirements.txt in .venv/)).
 
-use surfscan::metrology::x3p::{crc32, md5, read_x3p, to_x3p, X3pMeta};
+use surfscan::x3p::{crc32, md5, read_x3p, to_x3p, X3pMeta};
 
 fn hex(b: &[u8]) -> String {
     b.iter().map(|v| format!("{v:02x}")).collect()

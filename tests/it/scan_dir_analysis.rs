@@ -435,7 +435,7 @@ fn analyze_scan_dir_writes_every_file_with_traceability_and_instrument_differenc
 
 #[test]
 fn x3p_of_a_scan_carries_the_traceability_and_surfalize_reads_it() {
-    use surfscan::metrology::x3p::read_x3p;
+    use surfscan::x3p::read_x3p;
     let tmp = tempfile::tempdir().unwrap();
     let rows: Vec<usize> = (0..8).collect();
     let scan = build_scan(tmp.path(), &rows, ProfileKind::R, Some(StopStatus::Success));
@@ -861,7 +861,7 @@ fn characterise_scan_reports_the_fit_it_describes_and_returns_the_paths() {
     let out = characterise_scan(&input, &options).unwrap();
     // The figures drawn on this thread leave no texts behind for the next report: a daemon
     // characterising scan after scan holds no memory for the ones before.
-    assert_eq!(surfscan::metrology::text_cache::remembered(), (0, 0));
+    assert_eq!(surfscan::report::render::text_cache::remembered(), (0, 0));
     assert_eq!(out.report_json, scan.join("report.json"));
     assert_eq!(out.lines_used, (0..7).collect::<Vec<u32>>());
     assert!(out.incomplete_lines.is_empty());

@@ -171,8 +171,7 @@ async fn a_scan_at_degree_3_reports_and_samples_the_surface_it_wrote() {
     assert_eq!((s.degree_u(), s.degree_v()), (3, 3));
 
     // model.x3p: the IGES surface at x = i * pitch/2 on every data line, evaluated here.
-    let x3p =
-        surfscan::metrology::x3p::read_x3p(&std::fs::read(dir.join("model.x3p")).unwrap()).unwrap();
+    let x3p = surfscan::x3p::read_x3p(&std::fs::read(dir.join("model.x3p")).unwrap()).unwrap();
     assert_eq!((x3p.rows, x3p.cols), (n, 2 * POINTS - 1));
     let mut worst = 0.0f64;
     for l in 0..n {

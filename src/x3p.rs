@@ -13,9 +13,11 @@
 //! offset, invalid points from `ValidPointsLink` or non-finite values (returned as NaN), and
 //! both MD5 sums checked when present. Deflate is miniz_oxide's, XML roxmltree's.
 //!
-//! Depends on [`super::MetrologyError`] only; takes and returns bytes, the caller does the I/O.
+//! Layer 1 (pure logic, a file format as [`crate::iges`] is): depends on
+//! [`crate::metrology`]'s checks of heights and pitches only; takes and returns bytes, the
+//! caller does the I/O.
 
-use super::{check_heights, check_pitch, MetrologyError};
+use crate::metrology::{check_heights, check_pitch, MetrologyError};
 
 /// Traceability written into Record2 (free text; empty fields are written as "not available").
 #[derive(Debug, Clone, Default, PartialEq)]

@@ -1,30 +1,33 @@
-//! Section: the files of a characterisation — plots (bearing curves, height map, measured vs
-//! model of one line, the Rk construction of each line), `measured.x3p`, `model.x3p`,
-//! `summary.csv`, `report.json` and `report.html`, each replaced atomically.
+//! The renderers: every file of a characterisation, made from the section results — plots
+//! (bearing curves, height map, measured vs model of one line, the Rk construction of each
+//! line: [`plots`]), `measured.x3p` and `model.x3p` ([`crate::x3p`]), `summary.csv`
+//! ([`summary`]), `report.json` and `report.html` ([`html`]), each replaced atomically. Nothing
+//! here computes a result; the numbers come from the sections.
 //!
-//! Layer 4 (reporting): depends on [`crate::metrology::plots`], [`crate::metrology::x3p`]
-//! and [`crate::atomic`].
+//! Layer 4 (reporting): depends on [`crate::x3p`], [`crate::atomic`] and the report's types.
+
+pub mod html;
+pub mod plots;
+pub mod summary;
+pub mod text_cache;
 
 use super::context::ReportContext;
 use super::document::Report;
 use super::error::{metrology, ReportError};
-use super::html;
 use super::model::SampledModel;
-use super::summary::summary_csv;
 use crate::atomic::write_atomically;
 use crate::grid::Grid;
 use crate::metrology::areal::HeightMap;
 use crate::metrology::model::ModelCurveBac;
 use crate::metrology::params::LineAnalysis;
-use crate::metrology::plots::{
-    plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction,
-};
-use crate::metrology::x3p::{to_x3p, X3pMeta};
 use crate::metrology::MetrologyError;
 use crate::numfmt::{fmt as nfmt, line_label, line_number, Quantity};
 use crate::scan::journal::{read_journal, ResumeState};
+use crate::x3p::{to_x3p, X3pMeta};
+use plots::{plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction};
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use summary::summary_csv;
 
 /// The files written.
 #[derive(Debug, Clone, PartialEq)]

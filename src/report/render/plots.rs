@@ -13,24 +13,24 @@
 //! * ISO vocabulary: Rmr(c) for a profile's material ratio, Smr(c) for the areal one;
 //! * the title and the traceability footer wrap rather than run off the edge.
 //!
-//! The only file-writing part of the metrology: the caller gives the directory. Depends on
-//! [`super::model`] (the curves), [`super::areal::HeightMap`], [`super::params::RkFamily`],
-//! [`super::text_cache`] (the PNGs' text memo), [`crate::numfmt`], [`crate::atomic`] (each
-//! file replaced whole) and [`super::MetrologyError`]; plotters draws, and `image` encodes
-//! the PNG files.
+//! A renderer: numbers in, files out, into the directory the caller gives. Depends on
+//! [`crate::metrology`] (the curves, the height map, the Rk family, the checks of a grid and
+//! its errors), [`super::text_cache`] (the PNGs' text memo), [`crate::numfmt`] and
+//! [`crate::atomic`] (each file replaced whole); plotters draws, and `image` encodes the PNG
+//! files.
 
-use super::areal::HeightMap;
-use super::model::ModelCurveBac;
-use super::params::RkFamily;
 use super::text_cache::TextCache;
-use super::MetrologyError;
+use crate::metrology::areal::HeightMap;
+use crate::metrology::model::ModelCurveBac;
+use crate::metrology::params::RkFamily;
+use crate::metrology::{check_pitch, MetrologyError};
 use crate::numfmt::{fmt, Quantity};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// DejaVu Sans 2.37, unmodified (Bitstream Vera licence, `assets/fonts/LICENSE-DejaVu.txt`).
-const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+const FONT: &[u8] = include_bytes!("../../../assets/fonts/DejaVuSans.ttf");
 
 /// The family the bundled font is registered under: the generic name, so the SVG files ask
 /// their viewer for a sans-serif face rather than one it may not have.
@@ -663,8 +663,8 @@ pub fn plot_height_map(
             got: heights_um.len(),
         });
     }
-    super::check_pitch(pitch_x_mm)?;
-    super::check_pitch(pitch_y_mm)?;
+    check_pitch(pitch_x_mm)?;
+    check_pitch(pitch_y_mm)?;
     let (binned, cols, pitch_x_mm, title) = if cols > MAX_MAP_COLUMNS {
         let bin = cols.div_ceil(MAX_MAP_COLUMNS);
         let out_cols = cols / bin;
@@ -1077,7 +1077,7 @@ where
 
 /// Writes `STEM.png` and `STEM.svg` into `dir`: the ISO 13565-2 construction of one line —
 /// its material ratio curve (`[mr_pct, height_um]` pairs, e.g. from
-/// [`super::params::material_ratio_curve`]), the equivalent straight line and its 40 %
+/// [`crate::metrology::params::material_ratio_curve`]), the equivalent straight line and its 40 %
 /// secant, the levels C and D, Mr1 and Mr2, and the Rpk/Rvk triangles — with the values in a
 /// side panel. `caption` (may be empty) is the traceability footer.
 pub fn plot_rk_construction(

@@ -5,9 +5,9 @@
 //! Layer 4 (reporting): a formatter over the report's line entries and the metrology's
 //! parameters; no I/O.
 
-use super::document::LineReport;
 use crate::metrology::params::RoughnessParams;
 use crate::numfmt::{fmt as nfmt, fmt_opt as nfmt_opt, line_number, Quantity};
+use crate::report::document::LineReport;
 
 /// The instrument's value of `name` in our unit, from a line's comparisons.
 fn instrument_value(line: &LineReport, name: &str) -> Option<f64> {
