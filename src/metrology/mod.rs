@@ -23,6 +23,7 @@ pub mod model;
 pub mod outliers;
 pub mod params;
 mod sampling;
+pub mod sj_material_ratio;
 pub mod surface_model;
 
 use thiserror::Error;

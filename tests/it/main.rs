@@ -42,6 +42,7 @@ mod sj210_link_rate;
 mod sj210_probe_cli;
 mod sj210_readout_probe;
 mod sj210_sim;
+mod sj_material_ratio;
 mod sj_parameters;
 mod stage_grbl;
 mod stage_pty;

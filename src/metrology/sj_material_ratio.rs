@@ -1,0 +1,238 @@
+//! The material-ratio family as the Mitutoyo SJ series evaluates it, beside the ISO reading
+//! of [`super::params`]: the numbers an operator compares with the instrument's display.
+//!
+//! ISO 4287, ISO 13565-2 and ISO 21920-2 define the material ratio on the continuous profile
+//! (crossings interpolated between ordinates) with no height classes; that is the reading
+//! [`super::params`] reports. The SJ series works on a grid (reproduced from a Mitutoyo
+//! SurfTest export and the printed results beside it, `docs/metrology.md`):
+//!
+//! * **Counted ordinates.** Rmr(c) and Rmr are the share of the evaluated ordinates at or above
+//!   the level (`z ≥ c`), not a length of the interpolated profile.
+//! * **A 100-level bearing area curve.** Levels `L_k = zmin + k·Rt/100`, k = 0 … 100, and at each
+//!   the counted share `mr_k = #(z ≥ L_k)/n`.
+//! * **The Rk family on that curve.** The curve is the polyline through `(mr_k, L_k)`; the
+//!   equivalent straight line is the secant between two of its points 40 % apart in mr with
+//!   the least gradient, its start searched in 1 % steps of mr (the curve's own resolution;
+//!   the first if tied). Its heights at mr = 0 and 100 % are C and D, Rk = C − D. The core
+//!   limits are then snapped to the grid: C and D in % of Rt rounded to the nearest level,
+//!   plus one level (`kc`, `kd`). Mr1 counts the ordinates strictly above `L_kc`, Mr2 those
+//!   at or above `L_kd`; A1 = Σ_{k ≥ kc} mr_k(>)·Rt/100 and A2 = Σ_{k ≤ kd} (100 − mr_k(≥))·Rt/100
+//!   in µm·% (the areas of the curve's classes), Rpk = 2·A1/Mr1 and Rvk = 2·A2/(100 − Mr2).
+//!
+//! On the Mitutoyo export this reproduces the printed Rmr(c), Rmr, Mr1, Mr2, A1, A2, Rpk and
+//! Rvk to the last printed digit; Rk comes out 0.19 % below the printed value (no reading of
+//! the manual's secant on this curve tried reaches it, `docs/metrology.md` lists them). The
+//! "plus one level" snap rests on two data points (the export's C and D) and is stated as
+//! such.
+//!
+//! Depends on [`super::params`] (the levels of the material ratio parameters) and
+//! [`super::MetrologyError`].
+
+use super::params::{MaterialLevels, RmrC};
+use super::{check_heights, MetrologyError};
+use serde::Serialize;
+
+/// Height classes of the SJ series' bearing area curve (1 % of Rt each).
+pub const LEVELS: usize = 100;
+
+/// The convention in words, written beside the values in the report.
+pub const CONVENTION: &str = "Mitutoyo SJ series: ordinates counted (z >= level); bearing area curve on 100 levels of 1 % Rt; Rk from the least-gradient 40 % secant on that curve searched in 1 % steps of mr; core limits snapped to round(% Rt) + 1 level; A1/A2 summed over the levels";
+
+/// The material-ratio family as the SJ series computes it, under the ISO parameter names.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SjMaterialRatio {
+    /// How the values were obtained ([`CONVENTION`]).
+    pub convention: &'static str,
+    /// Rmr(c) at the peak-reference depths of [`MaterialLevels`], counted ordinates.
+    #[serde(rename = "Rmr(c)")]
+    pub rmr_c: Vec<RmrC>,
+    /// Relative material ratio at δc below C(Rmr0), counted ordinates, %.
+    #[serde(rename = "Rmr_pct")]
+    pub rmr_pct: f64,
+    /// Core roughness depth, µm.
+    #[serde(rename = "Rk_um")]
+    pub rk_um: f64,
+    /// Reduced peak height, µm.
+    #[serde(rename = "Rpk_um")]
+    pub rpk_um: f64,
+    /// Reduced valley depth, µm.
+    #[serde(rename = "Rvk_um")]
+    pub rvk_um: f64,
+    /// Material ratio at the upper core limit (snapped to the grid), %.
+    #[serde(rename = "Mr1_pct")]
+    pub mr1_pct: f64,
+    /// Material ratio at the lower core limit (snapped to the grid), %.
+    #[serde(rename = "Mr2_pct")]
+    pub mr2_pct: f64,
+    /// Peak area above the core, µm·%.
+    #[serde(rename = "A1")]
+    pub a1_um_pct: f64,
+    /// Valley area below the core, µm·%.
+    #[serde(rename = "A2")]
+    pub a2_um_pct: f64,
+    /// The upper core level C in % of Rt above the lowest point (before the snap).
+    pub upper_level_pct_rt: f64,
+    /// The lower core level D in % of Rt above the lowest point (before the snap).
+    pub lower_level_pct_rt: f64,
+    /// Where the least-gradient secant starts, % (it ends 40 % later).
+    pub secant_start_pct: f64,
+    /// The bearing area curve, `[mr_pct, height_um]` at the 101 levels from the lowest point
+    /// (k = 0, 100 %) to the highest (k = 100), heights above the lowest point.
+    pub curve: Vec<[f64; 2]>,
+}
+
+/// The SJ series' reading of the material-ratio family of the evaluated ordinates `z` (µm,
+/// about the mean line), at `levels` (the Rmr(c) depths and Rmr's reference and δc).
+pub fn sj_material_ratio(
+    z: &[f64],
+    levels: &MaterialLevels,
+) -> Result<SjMaterialRatio, MetrologyError> {
+    check_heights(z)?;
+    if z.len() < 2 {
+        return Err(MetrologyError::TooShort {
+            points: z.len(),
+            length_mm: 0.0,
+            sampling_length_mm: 0.0,
+            min_points: 2,
+        });
+    }
+    let mut sorted = z.to_vec();
+    sorted.sort_unstable_by(f64::total_cmp);
+    let n = sorted.len() as f64;
+    let bottom = sorted.first().copied().unwrap_or(0.0);
+    let top = sorted.last().copied().unwrap_or(0.0);
+    let rt = top - bottom;
+    // Shares at or above / strictly above a level, by binary search in the ascending sort.
+    let at_or_above = |c: f64| (sorted.len() - sorted.partition_point(|v| *v < c)) as f64 / n;
+    let above = |c: f64| (sorted.len() - sorted.partition_point(|v| *v <= c)) as f64 / n;
+    let level = |k: usize| bottom + k as f64 * rt / LEVELS as f64;
+    let mr_ge: Vec<f64> = (0..=LEVELS)
+        .map(|k| 100.0 * at_or_above(level(k)))
+        .collect();
+    let mr_gt: Vec<f64> = (0..=LEVELS).map(|k| 100.0 * above(level(k))).collect();
+
+    let rmr_c = levels
+        .rmr_c_depths_pct_rt
+        .iter()
+        .map(|&d| {
+            let depth_um = rt * d / 100.0;
+            RmrC {
+                depth_pct_rt: d,
+                depth_um,
+                value_pct: 100.0 * at_or_above(top - depth_um),
+            }
+        })
+        .collect();
+    let reference = level_at(&mr_ge, levels.rmr_reference_pct).map_or(top, level);
+    let rmr_pct = 100.0 * at_or_above(reference - levels.rmr_delta_um);
+
+    let (start, gradient) = least_gradient_secant(&mr_ge, rt);
+    let h_start = height_at(&mr_ge, start) * rt;
+    let c = h_start + gradient * start;
+    let d = c - gradient * 100.0;
+    let (c_pct, d_pct) = if rt > 0.0 {
+        (c / rt * 100.0, d / rt * 100.0)
+    } else {
+        (0.0, 0.0)
+    };
+    let snap = |pct: f64| (pct.round().max(0.0) as usize + 1).min(LEVELS);
+    let (kc, kd) = (snap(c_pct), snap(d_pct));
+    let mr1 = mr_gt.get(kc).copied().unwrap_or(0.0);
+    let mr2 = mr_ge.get(kd).copied().unwrap_or(100.0);
+    let class = rt / LEVELS as f64;
+    let a1 = mr_gt.iter().skip(kc).sum::<f64>() * class;
+    let a2 = mr_ge.iter().take(kd + 1).map(|m| 100.0 - m).sum::<f64>() * class;
+    Ok(SjMaterialRatio {
+        convention: CONVENTION,
+        rmr_c,
+        rmr_pct,
+        rk_um: gradient * 100.0,
+        rpk_um: if mr1 > 0.0 { 2.0 * a1 / mr1 } else { 0.0 },
+        rvk_um: if mr2 < 100.0 {
+            2.0 * a2 / (100.0 - mr2)
+        } else {
+            0.0
+        },
+        mr1_pct: mr1,
+        mr2_pct: mr2,
+        a1_um_pct: a1,
+        a2_um_pct: a2,
+        upper_level_pct_rt: c_pct,
+        lower_level_pct_rt: d_pct,
+        secant_start_pct: start,
+        curve: (0..=LEVELS)
+            .map(|k| [mr_ge.get(k).copied().unwrap_or(0.0), k as f64 * class])
+            .collect(),
+    })
+}
+
+/// C(mr) on the grid: the lowest level whose counted share is at most `mr_pct` (the highest
+/// point for 0 %), as a level index; `None` when no level qualifies.
+fn level_at(mr_ge: &[f64], mr_pct: f64) -> Option<usize> {
+    if mr_pct <= 0.0 {
+        return None;
+    }
+    mr_ge.iter().position(|m| *m <= mr_pct)
+}
+
+/// The curve's height at `mr` in units of Rt above the lowest point: the polyline through
+/// `(mr_k, k/100)`, mr falling as k rises; where several levels share one mr (no ordinate
+/// between them) the lowest of them is taken, so the polyline is a function of mr.
+fn height_at(mr_ge: &[f64], mr: f64) -> f64 {
+    // The lowest level k whose share is at most mr, and the level below it.
+    let k = mr_ge.iter().position(|m| *m <= mr).unwrap_or(LEVELS);
+    if k == 0 {
+        return 0.0;
+    }
+    let (m_hi, m_lo) = (
+        mr_ge.get(k).copied().unwrap_or(0.0),
+        mr_ge.get(k - 1).copied().unwrap_or(100.0),
+    );
+    let t = if m_lo > m_hi {
+        (m_lo - mr) / (m_lo - m_hi)
+    } else {
+        1.0
+    };
+    ((k - 1) as f64 + t) / LEVELS as f64
+}
+
+/// The least-gradient 40 % secant: its start in % (1 % steps, the first if tied) and its
+/// gradient in µm per % of mr.
+fn least_gradient_secant(mr_ge: &[f64], rt: f64) -> (f64, f64) {
+    let mut best: Option<(f64, f64)> = None;
+    for a in 0..=60u32 {
+        let a = f64::from(a);
+        let drop = (height_at(mr_ge, a) - height_at(mr_ge, a + 40.0)) * rt;
+        if best.is_none_or(|(b, _)| drop < b - 1e-12 * b.abs()) {
+            best = Some((drop, a));
+        }
+    }
+    let (drop, start) = best.unwrap_or((0.0, 0.0));
+    (start, drop / 40.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A uniform ramp: every level holds the same share, the curve is the straight line from
+    /// (0 %, top) to (100 %, bottom), Rk = Rt. The snap puts D one level above the bottom, so
+    /// the valley zone holds the lowest class: Rvk = 2 classes (0.2 µm), and C above the top
+    /// leaves no peak zone.
+    #[test]
+    fn a_ramp_is_all_core() {
+        let z: Vec<f64> = (0..=10_000).map(|i| i as f64 * 1e-3).collect();
+        let m = sj_material_ratio(&z, &MaterialLevels::default()).unwrap();
+        assert!((m.rk_um - 10.0).abs() < 2e-3, "{}", m.rk_um);
+        assert!(m.rpk_um == 0.0 && (m.rvk_um - 0.2).abs() < 1e-9, "{m:?}");
+        // 10 % of Rt below the top: the top 1001 ordinates of 10001.
+        assert!((m.rmr_c[0].value_pct - 100.0 * 1001.0 / 10_001.0).abs() < 1e-9);
+        assert_eq!(m.curve.len(), 101);
+    }
+
+    #[test]
+    fn one_point_is_refused() {
+        assert!(sj_material_ratio(&[1.0], &MaterialLevels::default()).is_err());
+        assert!(sj_material_ratio(&[1.0, f64::NAN], &MaterialLevels::default()).is_err());
+    }
+}
