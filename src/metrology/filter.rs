@@ -157,7 +157,7 @@ thread_local! {
 }
 
 /// The smallest even length ≥ `min` whose only prime factors are 2, 3 and 5 (fast for the FFT).
-fn fft_len(min: usize) -> usize {
+pub(super) fn fft_len(min: usize) -> usize {
     let mut len = min.max(2);
     loop {
         let mut m = len;

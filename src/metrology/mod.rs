@@ -17,6 +17,7 @@ pub mod areal;
 pub mod bearing;
 pub mod filter;
 pub mod folds;
+pub mod functional;
 pub mod holdout;
 pub mod instrument;
 pub mod model;
@@ -24,6 +25,7 @@ pub mod outliers;
 pub mod params;
 mod sampling;
 pub mod sj_material_ratio;
+pub mod spatial;
 pub mod surface_model;
 
 use thiserror::Error;

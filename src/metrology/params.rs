@@ -738,7 +738,7 @@ pub struct RkFamily {
 }
 
 /// Rmc(mr): height at material ratio `mr_pct` by linear quantiles of `sorted_desc`.
-fn rmc(sorted_desc: &[f64], mr_pct: f64) -> f64 {
+pub(super) fn rmc(sorted_desc: &[f64], mr_pct: f64) -> f64 {
     let n = sorted_desc.len();
     let p = (mr_pct / 100.0).clamp(0.0, 1.0) * (n.saturating_sub(1)) as f64;
     let i = p.floor() as usize;
@@ -778,7 +778,7 @@ pub fn rk_family(z: &[f64]) -> Result<RkFamily, MetrologyError> {
 }
 
 /// The ordinates highest first, after the checks the Rk family needs: all finite, at least two.
-fn checked_sorted_desc(z: &[f64]) -> Result<Vec<f64>, MetrologyError> {
+pub(super) fn checked_sorted_desc(z: &[f64]) -> Result<Vec<f64>, MetrologyError> {
     check_heights(z)?;
     if z.len() < 2 {
         return Err(MetrologyError::TooShort {
@@ -810,7 +810,7 @@ pub fn rk_family_and_curve(
 }
 
 /// [`rk_family`] of at least two ordinates sorted highest first.
-fn rk_of_sorted(s: &[f64]) -> RkFamily {
+pub(super) fn rk_of_sorted(s: &[f64]) -> RkFamily {
     const STEPS: usize = 1000; // 0.1 % grid
     let h: Vec<f64> = (0..=STEPS)
         .map(|k| rmc(s, k as f64 * 100.0 / STEPS as f64))

@@ -185,4 +185,19 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
             );
         }
     }
+    // The areal cross-checks read the demo's grid from tests/data/demo.grid.csv: it must be
+    // this grid.
+    let fixture = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/demo.grid.csv"),
+    )
+    .unwrap();
+    let rows: Vec<&str> = fixture.lines().filter(|l| !l.is_empty()).collect();
+    assert_eq!(rows.len(), lines.lines.len());
+    for (row, l) in rows.iter().zip(&lines.lines) {
+        let z: Vec<f64> = row.split(',').map(|v| v.parse().unwrap()).collect();
+        assert_eq!(z.len(), l.profile.heights_um.len());
+        for (a, b) in z.iter().zip(&l.profile.heights_um) {
+            assert!((a - b).abs() <= 1e-6, "demo.grid.csv {a} vs the demo's {b}");
+        }
+    }
 }

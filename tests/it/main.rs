@@ -21,6 +21,7 @@ mod iges_split;
 mod input_policy;
 mod jobs_cli;
 mod metrology_areal;
+mod metrology_areal_reference;
 mod metrology_cli;
 mod metrology_model;
 mod metrology_plots;

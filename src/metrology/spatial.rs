@@ -1,0 +1,545 @@
+//! ISO 25178-2 spatial parameters of a levelled height grid (Sal, Str, Std) and the curves
+//! behind them: the areal autocorrelation function and the power spectral densities along x
+//! and y.
+//!
+//! **Autocorrelation.** f_ACF(τx, τy) of the plane-levelled heights, the unbiased linear
+//! estimator: the sum of z(x, y)·z(x + τx, y + τy) over the pairs inside the grid divided by
+//! their number (no wrap-around), by a zero-padded FFT; normalised to 1 at zero lag.
+//!
+//! **Sal and Str** (s = 0.2, ISO 25178-3's default). Along rays from zero lag every 0.5°
+//! (the function is point-symmetric, so 0° ≤ θ < 180°), the ACF interpolated bilinearly
+//! between lags is followed outwards in steps of a quarter of the finer pitch until it first
+//! falls below s; the crossing is interpolated linearly. Sal is the shortest of those decay
+//! lengths, Str the shortest over the longest. A ray that leaves the lags the grid holds
+//! before decaying has no length: Sal is then the shortest of the others (none: blank, with
+//! the reason), and Str is blank with the reason (its slowest decay is not in the field).
+//!
+//! **Std** is the angle of the largest value of the angular amplitude spectrum, in degrees
+//! counter-clockwise from the +x axis with y increasing along the scan (ISO 25178-2:2021,
+//! 4.3.4 with the angular amplitude density): the |DFT| of the levelled heights summed into
+//! 0.5° bins of the frequency direction, folded into [0°, 180°), each bin named by its lower
+//! edge. It is the direction of the dominant spatial frequency; the lay runs perpendicular to
+//! it.
+//!
+//! **PSD along x (y).** Each line (column) windowed by the periodic Hann window scaled to mean
+//! square 1, C(q) = |Δx·DFT(z)|² / L with L = n·Δx, the ±q branches averaged, q = 2πk/L, then
+//! averaged over the lines (columns); heights in µm, q in 1/µm, C in µm³ — the convention of
+//! SurfaceTopography's `power_spectrum_from_profile`.
+//!
+//! Depends on [`super::areal`] (levelling), [`super::filter`] (FFT lengths) and
+//! [`super::MetrologyError`].
+
+use super::areal::{level_plane, HeightMap};
+use super::filter::fft_len;
+use super::MetrologyError;
+use rustfft::num_complex::Complex64;
+use rustfft::FftPlanner;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::f64::consts::PI;
+
+/// The ACF threshold s of Sal and Str (ISO 25178-3 default).
+pub const S_THRESHOLD: f64 = 0.2;
+/// Angular step of the decay rays and of Std's bins, degrees.
+pub const ANGLE_STEP_DEG: f64 = 0.5;
+
+/// The areal autocorrelation function, normalised to 1 at zero lag.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Acf {
+    /// Values, `(2·rows − 1) × (2·cols − 1)` row-major; zero lag at `(rows − 1, cols − 1)`.
+    pub values: Vec<f64>,
+    /// Lines of the grid (lags −(rows − 1) … rows − 1 along y).
+    pub rows: usize,
+    /// Points per line (lags −(cols − 1) … cols − 1 along x).
+    pub cols: usize,
+    /// Lag step along x, µm.
+    pub pitch_x_um: f64,
+    /// Lag step along y, µm.
+    pub pitch_y_um: f64,
+}
+
+impl Acf {
+    /// The value at integer lags (ky, kx), `None` outside the grid's lags.
+    pub fn at(&self, ky: isize, kx: isize) -> Option<f64> {
+        let (r, c) = (self.rows as isize, self.cols as isize);
+        if ky.abs() >= r || kx.abs() >= c {
+            return None;
+        }
+        let w = 2 * c - 1;
+        self.values
+            .get(((ky + r - 1) * w + kx + c - 1) as usize)
+            .copied()
+    }
+
+    /// Bilinear interpolation at the lag (τx, τy) in µm; `None` outside the grid's lags.
+    pub fn interpolate(&self, tx_um: f64, ty_um: f64) -> Option<f64> {
+        let fx = tx_um / self.pitch_x_um;
+        let fy = ty_um / self.pitch_y_um;
+        let (mx, my) = ((self.cols - 1) as f64, (self.rows - 1) as f64);
+        if !(fx.abs() <= mx && fy.abs() <= my) {
+            return None;
+        }
+        let (x0, y0) = (fx.floor(), fy.floor());
+        let (tx, ty) = (fx - x0, fy - y0);
+        let (x0, y0) = (x0 as isize, y0 as isize);
+        let v = |dy: isize, dx: isize, w: f64| -> Option<f64> {
+            if w == 0.0 {
+                Some(0.0)
+            } else {
+                self.at(y0 + dy, x0 + dx).map(|a| a * w)
+            }
+        };
+        Some(
+            v(0, 0, (1.0 - tx) * (1.0 - ty))?
+                + v(0, 1, tx * (1.0 - ty))?
+                + v(1, 0, (1.0 - tx) * ty)?
+                + v(1, 1, tx * ty)?,
+        )
+    }
+
+    /// The ACF along +x at zero y lag: `[τx_um, value]`.
+    pub fn along_x(&self) -> Vec<[f64; 2]> {
+        (0..self.cols as isize)
+            .filter_map(|k| Some([k as f64 * self.pitch_x_um, self.at(0, k)?]))
+            .collect()
+    }
+
+    /// The ACF along +y at zero x lag: `[τy_um, value]`.
+    pub fn along_y(&self) -> Vec<[f64; 2]> {
+        (0..self.rows as isize)
+            .filter_map(|k| Some([k as f64 * self.pitch_y_um, self.at(k, 0)?]))
+            .collect()
+    }
+}
+
+/// Sal, Str and Std of a grid, with what limits them.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SpatialParams {
+    /// Autocorrelation length (fastest decay to s), µm; `None` when the ACF decays to s in no
+    /// direction within the field (`blank_reasons` says so).
+    #[serde(rename = "Sal_um")]
+    pub sal_um: Option<f64>,
+    /// Texture aspect ratio, fastest over slowest decay length; `None` when some direction
+    /// does not decay to s within the field.
+    #[serde(rename = "Str")]
+    pub str_ratio: Option<f64>,
+    /// Texture direction, degrees in [0, 180).
+    #[serde(rename = "Std_deg")]
+    pub std_deg: f64,
+    /// The threshold s.
+    pub s: f64,
+    /// Direction of the fastest decay, degrees from +x.
+    pub fastest_decay_direction_deg: Option<f64>,
+    /// Direction of the slowest decay, degrees from +x, when every direction decays.
+    pub slowest_decay_direction_deg: Option<f64>,
+    /// The longest decay length, µm, when every direction decays.
+    pub slowest_decay_um: Option<f64>,
+    /// Why a value is blank, by parameter name.
+    pub blank_reasons: BTreeMap<String, String>,
+    /// What limits the values on this grid, in words.
+    pub caveats: Vec<String>,
+    /// Definition id per parameter.
+    pub definitions: BTreeMap<String, String>,
+}
+
+/// The definition ids of the spatial parameters.
+pub fn definitions() -> BTreeMap<String, String> {
+    [
+        ("ACF", "ISO25178-2/f_ACF unbiased linear estimator (sum over overlapping pairs / their number, zero-padded FFT) of the plane-levelled grid, normalised to 1 at zero lag"),
+        ("Sal", "ISO25178-2/Sal shortest lag at which f_ACF first falls below s = 0.2, along rays every 0.5 deg, bilinear ACF, linear crossing, um"),
+        ("Str", "ISO25178-2/Str fastest / slowest decay length to s = 0.2 (blank when a direction does not decay within the field)"),
+        ("Std", "ISO25178-2:2021/Std angle of the maximum of the angular amplitude spectrum (|DFT| in 0.5 deg bins of the frequency direction, lower bin edge), deg counter-clockwise from +x, y along the scan"),
+        ("PSD", "1D PSD along x (y): periodic Hann window scaled to mean square 1, C(q) = |dx DFT|^2 / L, +-q averaged, mean over lines (columns), um^3 vs q = 2 pi k / L in 1/um (SurfaceTopography's convention)"),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v.to_string()))
+    .collect()
+}
+
+/// A complex 2-D DFT in place, `rows × cols` row-major.
+fn fft2(data: &mut [Complex64], rows: usize, cols: usize, inverse: bool) {
+    let mut planner = FftPlanner::<f64>::new();
+    let (row_fft, col_fft) = if inverse {
+        (
+            planner.plan_fft_inverse(cols),
+            planner.plan_fft_inverse(rows),
+        )
+    } else {
+        (
+            planner.plan_fft_forward(cols),
+            planner.plan_fft_forward(rows),
+        )
+    };
+    for line in data.chunks_exact_mut(cols) {
+        row_fft.process(line);
+    }
+    let mut column = vec![Complex64::new(0.0, 0.0); rows];
+    for c in 0..cols {
+        for (r, v) in column.iter_mut().enumerate() {
+            *v = data.get(r * cols + c).copied().unwrap_or_default();
+        }
+        col_fft.process(&mut column);
+        for (r, v) in column.iter().enumerate() {
+            if let Some(d) = data.get_mut(r * cols + c) {
+                *d = *v;
+            }
+        }
+    }
+}
+
+/// The areal autocorrelation function of `grid` after plane levelling.
+pub fn autocorrelation(grid: &HeightMap<'_>) -> Result<Acf, MetrologyError> {
+    let (z, _) = level_plane(grid)?;
+    Ok(acf_of_levelled(&z, grid))
+}
+
+fn acf_of_levelled(z: &[f64], grid: &HeightMap<'_>) -> Acf {
+    let (rows, cols) = (grid.rows, grid.cols);
+    let (pr, pc) = (fft_len(2 * rows - 1), fft_len(2 * cols - 1));
+    let mut buf = vec![Complex64::new(0.0, 0.0); pr * pc];
+    for (r, line) in z.chunks_exact(cols).enumerate() {
+        for (c, v) in line.iter().enumerate() {
+            if let Some(b) = buf.get_mut(r * pc + c) {
+                *b = Complex64::new(*v, 0.0);
+            }
+        }
+    }
+    fft2(&mut buf, pr, pc, false);
+    for v in buf.iter_mut() {
+        *v = Complex64::new(v.norm_sqr(), 0.0);
+    }
+    fft2(&mut buf, pr, pc, true);
+    let scale = 1.0 / (pr * pc) as f64;
+    let (h, w) = (2 * rows - 1, 2 * cols - 1);
+    let mut values = vec![0.0; h * w];
+    for (i, v) in values.iter_mut().enumerate() {
+        let ky = (i / w) as isize - (rows as isize - 1);
+        let kx = (i % w) as isize - (cols as isize - 1);
+        let r = ky.rem_euclid(pr as isize) as usize;
+        let c = kx.rem_euclid(pc as isize) as usize;
+        let pairs = (rows - ky.unsigned_abs()) * (cols - kx.unsigned_abs());
+        *v = buf.get(r * pc + c).map_or(0.0, |b| b.re) * scale / pairs as f64;
+    }
+    let zero = values
+        .get((rows - 1) * w + cols - 1)
+        .copied()
+        .unwrap_or(0.0);
+    if zero > 0.0 {
+        values.iter_mut().for_each(|v| *v /= zero);
+    }
+    Acf {
+        values,
+        rows,
+        cols,
+        pitch_x_um: grid.pitch_x_mm * 1000.0,
+        pitch_y_um: grid.pitch_y_mm * 1000.0,
+    }
+}
+
+/// The decay length along the ray at `theta` (radians) to `s`, µm; `None` when the ray leaves
+/// the lags before the ACF falls below `s`.
+fn decay_length(acf: &Acf, theta: f64, s: f64) -> Option<f64> {
+    let (ct, st) = (theta.cos(), theta.sin());
+    let step = 0.25 * acf.pitch_x_um.min(acf.pitch_y_um);
+    let (mut t_prev, mut v_prev) = (0.0, 1.0);
+    let mut k = 1u64;
+    loop {
+        let t = k as f64 * step;
+        let v = acf.interpolate(t * ct, t * st)?;
+        if v < s {
+            return Some(t_prev + (v_prev - s) / (v_prev - v) * (t - t_prev));
+        }
+        (t_prev, v_prev) = (t, v);
+        k += 1;
+    }
+}
+
+/// The angular amplitude spectrum's maximum: Std in degrees (lower edge of its 0.5° bin).
+fn texture_direction(z: &[f64], grid: &HeightMap<'_>) -> f64 {
+    let (rows, cols) = (grid.rows, grid.cols);
+    let mut buf: Vec<Complex64> = z.iter().map(|v| Complex64::new(*v, 0.0)).collect();
+    fft2(&mut buf, rows, cols, false);
+    let freq = |k: usize, n: usize, d: f64| {
+        let k = if k < n.div_ceil(2) {
+            k as f64
+        } else {
+            k as f64 - n as f64
+        };
+        k / (n as f64 * d)
+    };
+    let bins = (180.0 / ANGLE_STEP_DEG) as usize;
+    let mut spectrum = vec![0.0; bins];
+    for (i, v) in buf.iter().enumerate() {
+        let (r, c) = (i / cols, i % cols);
+        if r == 0 && c == 0 {
+            continue;
+        }
+        let fy = freq(r, rows, grid.pitch_y_mm);
+        let fx = freq(c, cols, grid.pitch_x_mm);
+        let theta = fy.atan2(fx).to_degrees().rem_euclid(180.0);
+        let bin = ((theta / ANGLE_STEP_DEG) as usize).min(bins - 1);
+        if let Some(b) = spectrum.get_mut(bin) {
+            *b += v.norm();
+        }
+    }
+    let (best, _) = spectrum
+        .iter()
+        .enumerate()
+        .fold((0, f64::NEG_INFINITY), |(bi, bv), (i, v)| {
+            if *v > bv {
+                (i, *v)
+            } else {
+                (bi, bv)
+            }
+        });
+    best as f64 * ANGLE_STEP_DEG
+}
+
+/// Sal, Str and Std of `grid` after plane levelling.
+pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyError> {
+    let (z, _) = level_plane(grid)?;
+    let acf = acf_of_levelled(&z, grid);
+    let rays = (180.0 / ANGLE_STEP_DEG) as usize;
+    let lengths: Vec<(f64, Option<f64>)> = (0..rays)
+        .map(|i| {
+            let deg = i as f64 * ANGLE_STEP_DEG;
+            (deg, decay_length(&acf, deg.to_radians(), S_THRESHOLD))
+        })
+        .collect();
+    let decayed = lengths.iter().filter_map(|(d, l)| l.map(|l| (*d, l)));
+    let fastest = decayed
+        .clone()
+        .fold(None, |b: Option<(f64, f64)>, (d, l)| match b {
+            Some((_, bl)) if bl <= l => b,
+            _ => Some((d, l)),
+        });
+    let slowest = decayed.fold(None, |b: Option<(f64, f64)>, (d, l)| match b {
+        Some((_, bl)) if bl >= l => b,
+        _ => Some((d, l)),
+    });
+    let undecayed: Vec<f64> = lengths
+        .iter()
+        .filter(|(_, l)| l.is_none())
+        .map(|(d, _)| *d)
+        .collect();
+    let mut blank_reasons = BTreeMap::new();
+    let mut caveats = Vec::new();
+    let (dx, dy) = (acf.pitch_x_um, acf.pitch_y_um);
+    let (wx, wy) = ((grid.cols - 1) as f64 * dx, (grid.rows - 1) as f64 * dy);
+    if fastest.is_none() {
+        blank_reasons.insert(
+            "Sal".to_string(),
+            format!("the autocorrelation does not fall to s = {S_THRESHOLD} in any direction within the field ({wx:.1} × {wy:.1} µm of lags): the field is too small for the correlation length"),
+        );
+    }
+    let str_ratio = match (fastest, slowest, undecayed.first()) {
+        (Some((_, f)), Some((_, s)), None) if s > 0.0 => Some(f / s),
+        (_, _, Some(first)) => {
+            blank_reasons.insert(
+                "Str".to_string(),
+                format!(
+                    "the autocorrelation does not fall to s = {S_THRESHOLD} within the field in {} of {rays} directions (from {first}°): the slowest decay is longer than the field",
+                    undecayed.len()
+                ),
+            );
+            None
+        }
+        _ => None,
+    };
+    if let Some((_, sal)) = fastest {
+        if sal < dy && dy > 2.0 * dx {
+            caveats.push(format!(
+                "Sal {sal:.2} µm is shorter than the line spacing {dy:.2} µm: the lines are barely correlated and the decay across them is interpolated between adjacent lines, so Sal and Str are limited by the line spacing, not measured"
+            ));
+        }
+    }
+    Ok(SpatialParams {
+        sal_um: fastest.map(|(_, l)| l),
+        str_ratio,
+        std_deg: texture_direction(&z, grid),
+        s: S_THRESHOLD,
+        fastest_decay_direction_deg: fastest.map(|(d, _)| d),
+        slowest_decay_direction_deg: str_ratio.and(slowest.map(|(d, _)| d)),
+        slowest_decay_um: str_ratio.and(slowest.map(|(_, l)| l)),
+        blank_reasons,
+        caveats,
+        definitions: definitions(),
+    })
+}
+
+/// A one-dimensional power spectral density averaged over profiles.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Psd {
+    /// Wavevectors q = 2πk/L, 1/µm (k = 0 … n/2 − 1).
+    pub q_per_um: Vec<f64>,
+    /// C(q), µm³.
+    pub c_um3: Vec<f64>,
+}
+
+/// The PSD along x, averaged over the lines of the plane-levelled grid.
+pub fn psd_along_x(grid: &HeightMap<'_>) -> Result<Psd, MetrologyError> {
+    let (z, _) = level_plane(grid)?;
+    let lines: Vec<&[f64]> = z.chunks_exact(grid.cols).collect();
+    Ok(psd_of_profiles(&lines, grid.pitch_x_mm * 1000.0))
+}
+
+/// The PSD along y, averaged over the columns of the plane-levelled grid.
+pub fn psd_along_y(grid: &HeightMap<'_>) -> Result<Psd, MetrologyError> {
+    let (z, _) = level_plane(grid)?;
+    let columns: Vec<Vec<f64>> = (0..grid.cols)
+        .map(|c| {
+            (0..grid.rows)
+                .filter_map(|r| z.get(r * grid.cols + c).copied())
+                .collect()
+        })
+        .collect();
+    let columns: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
+    Ok(psd_of_profiles(&columns, grid.pitch_y_mm * 1000.0))
+}
+
+fn psd_of_profiles(profiles: &[&[f64]], pitch_um: f64) -> Psd {
+    let n = profiles.first().map_or(0, |p| p.len());
+    if n < 2 || profiles.is_empty() {
+        return Psd {
+            q_per_um: Vec::new(),
+            c_um3: Vec::new(),
+        };
+    }
+    // Periodic Hann, scaled to mean square 1.
+    let mut window: Vec<f64> = (0..n)
+        .map(|i| 0.5 - 0.5 * (2.0 * PI * i as f64 / n as f64).cos())
+        .collect();
+    let norm = (n as f64 / window.iter().map(|w| w * w).sum::<f64>()).sqrt();
+    window.iter_mut().for_each(|w| *w *= norm);
+    let length = n as f64 * pitch_um;
+    let fft = FftPlanner::<f64>::new().plan_fft_forward(n);
+    let half = n / 2;
+    let mut sum = vec![0.0; half];
+    let mut buf = vec![Complex64::new(0.0, 0.0); n];
+    for p in profiles {
+        for ((b, z), w) in buf.iter_mut().zip(p.iter()).zip(&window) {
+            *b = Complex64::new(z * w * pitch_um, 0.0);
+        }
+        fft.process(&mut buf);
+        let raw = |k: usize| buf.get(k).map_or(0.0, |v| v.norm_sqr()) / length;
+        for (k, s) in sum.iter_mut().enumerate() {
+            *s += if k == 0 {
+                raw(0)
+            } else {
+                0.5 * (raw(k) + raw(n - k))
+            };
+        }
+    }
+    let count = profiles.len() as f64;
+    Psd {
+        q_per_um: (0..half).map(|k| 2.0 * PI * k as f64 / length).collect(),
+        c_um3: sum.into_iter().map(|s| s / count).collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid_of<'a>(z: &'a [f64], rows: usize, cols: usize, px: f64, py: f64) -> HeightMap<'a> {
+        HeightMap {
+            heights_um: z,
+            rows,
+            cols,
+            pitch_x_mm: px,
+            pitch_y_mm: py,
+        }
+    }
+
+    /// The FFT estimator equals the direct sum over the overlapping pairs.
+    #[test]
+    fn the_acf_is_the_unbiased_sum_over_overlapping_pairs() {
+        let (rows, cols) = (5usize, 13usize);
+        let z: Vec<f64> = (0..rows * cols)
+            .map(|k| ((k * 37 % 11) as f64 - 5.0) * 0.3 + (k as f64 * 0.7).sin())
+            .collect();
+        let g = grid_of(&z, rows, cols, 0.001, 0.002);
+        let acf = autocorrelation(&g).unwrap();
+        let (l, _) = level_plane(&g).unwrap();
+        let at = |r: isize, c: isize| l[(r as usize) * cols + c as usize];
+        let direct = |ky: isize, kx: isize| {
+            let (mut s, mut n) = (0.0, 0.0);
+            for r in 0..rows as isize {
+                for c in 0..cols as isize {
+                    let (r2, c2) = (r + ky, c + kx);
+                    if r2 >= 0 && r2 < rows as isize && c2 >= 0 && c2 < cols as isize {
+                        s += at(r, c) * at(r2, c2);
+                        n += 1.0;
+                    }
+                }
+            }
+            s / n
+        };
+        let zero = direct(0, 0);
+        for ky in -4..=4 {
+            for kx in -12..=12 {
+                let want = direct(ky, kx) / zero;
+                let got = acf.at(ky, kx).unwrap();
+                assert!((got - want).abs() < 1e-12, "({ky},{kx}) {got} vs {want}");
+            }
+        }
+    }
+
+    /// Ridges along y (z = cos(2πx/λ)): the ACF along x is cos(2πτ/λ)-like and falls to 0.2
+    /// at τ = λ·acos(0.2)/2π, while along y it never decays: Sal is that length, Str is blank,
+    /// Std is 0° (the frequency points along x; the lay runs along y).
+    #[test]
+    fn ridges_along_y_decay_along_x_only() {
+        let (rows, cols, px, py) = (21usize, 400usize, 0.001, 0.002);
+        let lambda_um = 50.0;
+        let z: Vec<f64> = (0..rows * cols)
+            .map(|k| (2.0 * PI * (k % cols) as f64 * px * 1000.0 / lambda_um).cos())
+            .collect();
+        let g = grid_of(&z, rows, cols, px, py);
+        let p = spatial_params(&g).unwrap();
+        let want = lambda_um * 0.2f64.acos() / (2.0 * PI);
+        let sal = p.sal_um.unwrap();
+        assert!((sal - want).abs() < 0.02 * want, "Sal {sal} vs {want}");
+        assert_eq!(p.fastest_decay_direction_deg, Some(0.0));
+        assert!(
+            p.str_ratio.is_none() && p.blank_reasons.contains_key("Str"),
+            "{p:?}"
+        );
+        assert_eq!(p.std_deg, 0.0);
+    }
+
+    /// A plane wave with 7 periods along x and 4 along y of a square field: its frequency
+    /// points at atan(4/7) = 29.74°, in the bin from 29.5°.
+    #[test]
+    fn std_finds_the_direction_of_a_plane_wave() {
+        let (rows, cols, p) = (128usize, 128usize, 0.001);
+        let (fx, fy) = (7.0 / 128.0, 4.0 / 128.0);
+        let z: Vec<f64> = (0..rows * cols)
+            .map(|k| {
+                let (r, c) = ((k / cols) as f64, (k % cols) as f64);
+                (2.0 * PI * (fx * c + fy * r)).cos()
+            })
+            .collect();
+        let s = spatial_params(&grid_of(&z, rows, cols, p, p)).unwrap();
+        assert_eq!(s.std_deg, 29.5);
+    }
+
+    /// A sine of k0 periods over the line: the PSD peaks at k0, at q = 2π·k0/L.
+    #[test]
+    fn the_psd_of_a_sine_peaks_at_its_wavevector() {
+        let (rows, cols, px) = (3usize, 512usize, 0.0005);
+        let k0 = 32usize;
+        let z: Vec<f64> = (0..rows * cols)
+            .map(|k| (2.0 * PI * k0 as f64 * (k % cols) as f64 / cols as f64).sin())
+            .collect();
+        let psd = psd_along_x(&grid_of(&z, rows, cols, px, 0.01)).unwrap();
+        let (imax, _) =
+            psd.c_um3
+                .iter()
+                .enumerate()
+                .fold((0, 0.0), |b, (i, v)| if *v > b.1 { (i, *v) } else { b });
+        assert_eq!(imax, k0);
+        let length = cols as f64 * px * 1000.0;
+        assert!((psd.q_per_um[k0] - 2.0 * PI * k0 as f64 / length).abs() < 1e-12);
+    }
+}
