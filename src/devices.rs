@@ -51,9 +51,14 @@ pub enum FaultClass {
     /// The device is gone (unplugged, EOF/EIO) or cannot be opened: suspend the scan,
     /// reconnect with backoff, re-verify identity, then re-trace the current line.
     Absent,
-    /// The conversation failed or the device refused for now (timeout, garbled reply,
-    /// busy NG code, missed target): abandon the current line and re-trace it with backoff,
-    /// within the session's transient-fault time budget.
+    /// The device says nothing: no byte came back after a command, or the link took none of
+    /// the command's bytes (powered off or asleep behind its adapter, a hung adapter, flow
+    /// control holding the host back). Waited for like an absent device, without a time
+    /// limit: the port is closed and opened again with backoff until it answers.
+    Silent,
+    /// The device answered, but wrongly or not yet (garbled or cut-off reply, busy NG code,
+    /// a trace or motion that does not end in time, a missed target): abandon the current
+    /// line and re-trace it with backoff, within the session's transient-fault time budget.
     Transient,
     /// The stage position can no longer be trusted (reset, alarm, not referenced): re-home
     /// before the next move (a bounded number of times per line).

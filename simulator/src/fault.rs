@@ -12,6 +12,9 @@
 //! * `split` — the reply is written in two writes with a short pause between;
 //! * `silence:MS` — the reply comes after MS milliseconds of silence;
 //! * `lf` — an extra LF after the reply's CR;
+//! * `deaf:MS` — no reply, and for MS milliseconds the link takes none of the host's bytes
+//!   (software flow control holds the host back, as CTS held low or a wedged adapter
+//!   would): the host's writes stall; what it sent before is discarded;
 //! * `unplug:MS` — the reply is sent, then the device vanishes (pty closed, link removed) and
 //!   comes back after MS milliseconds as a freshly powered-up instrument (e.g.
 //!   `unplug:2000@CTSTA#2`: vanishes mid-trace 2);
@@ -53,6 +56,8 @@ pub enum FaultKind {
     ExtraLf,
     /// Reply, then unplug for the given time.
     Unplug(Duration),
+    /// No reply, and the link takes no bytes for the given time.
+    Deaf(Duration),
     /// An `RDEVA` block answered with the previous block again.
     RepeatBlock,
     /// An `RDRES` value off by this many percent.
@@ -117,7 +122,7 @@ pub enum FaultSpec {
 
 /// A fault spec that could not be parsed.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("bad fault spec {spec:?}: {why}; expected KIND[:ARG]@COMMAND[%TRACE][#N][xK] (kinds ng:CODE, drop, truncate, garbage, split, lf, silence:MS, unplug:MS, repeat, skew:PCT; windows busy:MS, noeol:MS, flood:MS without xK) or battery:low|abnormal")]
+#[error("bad fault spec {spec:?}: {why}; expected KIND[:ARG]@COMMAND[%TRACE][#N][xK] (kinds ng:CODE, drop, truncate, garbage, split, lf, silence:MS, deaf:MS, unplug:MS, repeat, skew:PCT; windows busy:MS, noeol:MS, flood:MS without xK) or battery:low|abnormal")]
 pub struct FaultSpecError {
     /// The spec as given.
     pub spec: String,
@@ -165,6 +170,7 @@ impl std::str::FromStr for FaultSpec {
             "silence" => FaultKind::Silence(millis(arg)?),
             "lf" => FaultKind::ExtraLf,
             "unplug" => FaultKind::Unplug(millis(arg)?),
+            "deaf" => FaultKind::Deaf(millis(arg)?),
             "repeat" => FaultKind::RepeatBlock,
             "skew" => FaultKind::Skew(
                 arg.and_then(|a| a.parse::<i32>().ok())

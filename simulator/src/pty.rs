@@ -155,6 +155,34 @@ impl Pty {
         Ok(usize::try_from(n).unwrap_or(0))
     }
 
+    /// For `d`, the link takes none of the host's bytes: the slave's output is stopped by
+    /// software flow control (IXON set on it, then XOFF sent to it), so the host's writes
+    /// stall as they do behind CTS held low; bytes that arrive meanwhile are discarded. A host
+    /// that reopens the port (its termios clears IXON) is held back again within 50 ms.
+    /// Afterwards IXON is cleared, which lets the output flow again.
+    pub async fn hold_host(&mut self, d: std::time::Duration) -> io::Result<()> {
+        use nix::sys::termios::InputFlags;
+        use tokio::io::AsyncReadExt;
+        fn set_ixon(slave: &OwnedFd, on: bool) -> io::Result<()> {
+            let mut t = tcgetattr(slave.as_fd()).map_err(io_err)?;
+            t.input_flags.set(InputFlags::IXON, on);
+            tcsetattr(slave.as_fd(), SetArg::TCSANOW, &t).map_err(io_err)
+        }
+        let end = tokio::time::Instant::now() + d;
+        let mut buf = [0u8; 512];
+        while tokio::time::Instant::now() < end {
+            set_ixon(&self.slave, true)?;
+            nix::unistd::write(self.master.get_ref(), &[0x13]).map_err(io_err)?;
+            let left = end.saturating_duration_since(tokio::time::Instant::now());
+            let _ = tokio::time::timeout(
+                std::time::Duration::from_millis(50).min(left),
+                self.read(&mut buf),
+            )
+            .await;
+        }
+        set_ixon(&self.slave, false)
+    }
+
     /// Waits (up to `limit`) until the client has read everything written, so that closing the
     /// pty does not discard a reply the real device would already have transmitted.
     pub async fn wait_drained(&self, limit: std::time::Duration) {
@@ -255,6 +283,35 @@ impl AsyncWrite for Pty {
 mod tests {
     use super::*;
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+    /// While the pty holds the host back, a non-blocking write of the host's is refused
+    /// (EAGAIN: its bytes are not taken); afterwards it goes through.
+    #[tokio::test]
+    async fn holding_the_host_back_stops_its_writes_until_released() {
+        use std::os::unix::fs::OpenOptionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let link = dir.path().join("dev");
+        let mut pty = Pty::create(&link).unwrap();
+        let mut host = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(&link)
+            .unwrap();
+        let hold = std::time::Duration::from_millis(300);
+        let held = tokio::spawn(async move {
+            pty.hold_host(hold).await.unwrap();
+            pty
+        });
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+        let e = std::io::Write::write(&mut host, b"CTSTA\r").unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::WouldBlock, "{e}");
+        let mut pty = held.await.unwrap();
+        assert_eq!(std::io::Write::write(&mut host, b"RDSJ 01\r").unwrap(), 8);
+        let mut got = [0u8; 8];
+        pty.read_exact(&mut got).await.unwrap();
+        assert_eq!(&got, b"RDSJ 01\r");
+    }
 
     #[tokio::test]
     async fn replaces_a_stale_link_refuses_a_file_and_survives_client_reconnects() {

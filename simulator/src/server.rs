@@ -124,6 +124,8 @@ pub enum Outcome {
     Closed,
     /// An `unplug` fault fired: the device must vanish for this long.
     Unplug(Duration),
+    /// A `deaf` fault fired: the link must take no bytes for this long.
+    Deaf(Duration),
     /// Shutdown was requested.
     Shutdown,
 }
@@ -259,6 +261,7 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
                     io.flush().await?;
                     return Ok(Outcome::Unplug(d));
                 }
+                Some(FaultKind::Deaf(d)) => return Ok(Outcome::Deaf(d)),
                 Some(
                     FaultKind::Ng(_)
                     | FaultKind::RepeatBlock
@@ -623,6 +626,14 @@ impl Simulator {
                         let _ = events_tx.send(SimEvent::Replugged {
                             instrument: link.clone(),
                         });
+                    }
+                    Ok(Outcome::Deaf(d)) => {
+                        if let Err(e) = pty.hold_host(d).await {
+                            let _ = events_tx.send(SimEvent::Failed {
+                                error: e.to_string(),
+                            });
+                            return;
+                        }
                     }
                     Ok(Outcome::Closed) | Ok(Outcome::Shutdown) => return,
                     Err(e) => {

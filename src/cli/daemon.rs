@@ -25,19 +25,22 @@ use super::{CliError, Exit};
 use crate::config::Config;
 use crate::control::protocol::ControlChannels;
 use crate::control::server;
+use crate::devices::Fault;
 use crate::hook::Hook;
 use crate::scan::channels::Control;
 use crate::scan::choice::{self, Asker};
 use crate::scan::command::{OperatorCommand, OperatorRequest, Peer};
-use crate::scan::ending::{End, StopStatus};
+use crate::scan::ending::{End, FailCause, StopStatus};
 use crate::scan::event::ScanEvent;
+use crate::scan::outcome::Outcome;
 use crate::scan::outcome::ScanRequest;
 use crate::scan::runner::run_scan;
 use crate::scan::settings::RunSettings;
-use crate::scan::station::{SerialStation, Station};
+use crate::scan::station::{devices_answer, SerialStation, Station};
 use crate::scan::status::{ended_status, DeviceState, State, Status};
 use crate::scan::testhooks::TestHooks;
 use crate::service::Notifier;
+use crate::stage::ScanDirection;
 use crate::station_lock::StationLock;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -206,14 +209,20 @@ async fn daemon(
 
     // Resume an unfinished scan at start-up.
     let mut stop = false;
+    let mut awaiting: Option<Awaiting> = None;
     match choice::choose(
         &config.output.dir,
         Asker::DaemonStartUp,
         Peer::this_process(),
         Default::default(),
     )
-    .and_then(choice::Choice::commit)
-    {
+    .and_then(|c| match &c.decision {
+        choice::Decision::AwaitDevices(dir) => {
+            awaiting = Some(Awaiting::new(dir.clone(), &settings));
+            Ok(None)
+        }
+        _ => c.commit(),
+    }) {
         Ok(Some(request)) => {
             // Reopened by the daemon itself: no operator asked (a paused scan stays paused).
             let req = match request {
@@ -224,6 +233,7 @@ async fn daemon(
             ctl.status.send_modify(|s| s.starts += 1);
             let outcome = run_scan(&mut station, &mut ctl, &settings, req).await;
             stop = outcome.end == End::Shutdown;
+            awaiting = Awaiting::after(&outcome, &settings);
             note_damaged_journals(config, &ctl.status);
         }
         Ok(None) => {}
@@ -280,6 +290,9 @@ async fn daemon(
                             continue;
                         }
                         ctl.status.send_modify(|s| s.starts += 1);
+                        // The operator's start takes over from a continuation the daemon
+                        // was waiting to make.
+                        awaiting = None;
                         let request = match choice.commit().map_err(CliError::from) {
                             Ok(Some(r)) => r,
                             Ok(None) => continue,
@@ -293,6 +306,7 @@ async fn daemon(
                         };
                         let outcome = run_scan(&mut station, &mut ctl, &settings, request).await;
                         stop = outcome.end == End::Shutdown;
+                        awaiting = Awaiting::after(&outcome, &settings);
                         note_damaged_journals(config, &ctl.status);
                     }
                     OperatorCommand::Pause | OperatorCommand::Resume | OperatorCommand::Abort => {
@@ -311,6 +325,29 @@ async fn daemon(
                     st.stage = s;
                     changed
                 });
+                let due = awaiting.as_ref().is_some_and(|a| tokio::time::Instant::now() >= a.next);
+                if let (true, Some(a)) = (due, awaiting.as_mut()) {
+                    let answered = watched_probe(&mut station, &settings, &notifier).await;
+                    match answered {
+                        Ok(()) => {
+                            let dir = a.dir.clone();
+                            tracing::info!("the devices answer again: continuing the scan {} that failed for its transient budget", dir.display());
+                            ctl.status.send_modify(|s| {
+                                s.starts += 1;
+                                s.reason = None;
+                            });
+                            let req = ScanRequest::Continue { dir, peer: None };
+                            let outcome = run_scan(&mut station, &mut ctl, &settings, req).await;
+                            stop = outcome.end == End::Shutdown;
+                            awaiting = Awaiting::after(&outcome, &settings);
+                            note_damaged_journals(config, &ctl.status);
+                        }
+                        Err(fault) => {
+                            let reason = a.not_yet(&fault, &settings);
+                            ctl.status.send_modify(|s| s.reason = Some(reason));
+                        }
+                    }
+                }
             }
         }
     }
@@ -322,6 +359,70 @@ async fn daemon(
     }
     tracing::info!("surfscan daemon stopped");
     Ok(())
+}
+
+/// A scan that failed for its transient budget (a device kept answering wrongly), which the
+/// daemon continues by itself once both devices answer properly again; they are asked with
+/// the scan's backoff.
+struct Awaiting {
+    dir: PathBuf,
+    next: tokio::time::Instant,
+    wait: Duration,
+}
+
+impl Awaiting {
+    fn new(dir: PathBuf, settings: &RunSettings) -> Awaiting {
+        let wait = settings.backoff.next(Duration::ZERO);
+        tracing::info!(
+            "the scan {} failed for its transient budget; it is continued once its devices answer again",
+            dir.display()
+        );
+        Awaiting {
+            dir,
+            next: tokio::time::Instant::now() + wait,
+            wait,
+        }
+    }
+
+    /// What to wait for after a scan ended: its continuation when it failed for its budget.
+    fn after(outcome: &Outcome, settings: &RunSettings) -> Option<Awaiting> {
+        match (&outcome.end, &outcome.dir) {
+            (End::Fail(r), Some(dir)) if r.cause() == FailCause::Budget => {
+                Some(Awaiting::new(dir.clone(), settings))
+            }
+            _ => None,
+        }
+    }
+
+    /// The devices did not answer yet: the next try after a longer wait; the status's reason.
+    fn not_yet(&mut self, fault: &Fault, settings: &RunSettings) -> String {
+        self.wait = settings.backoff.next(self.wait);
+        self.next = tokio::time::Instant::now() + self.wait;
+        tracing::debug!("devices not answering yet: {fault}");
+        format!(
+            "the scan {} failed for its transient budget and is continued once the devices answer again; last try: {fault}",
+            self.dir.display()
+        )
+    }
+}
+
+/// Asks both devices whether they answer ([`crate::scan::station::devices_answer`]), feeding
+/// the watchdog meanwhile.
+async fn watched_probe(
+    station: &mut SerialStation,
+    settings: &RunSettings,
+    notifier: &Notifier,
+) -> Result<(), Fault> {
+    let direction = ScanDirection::of_step(settings.plan.y_step_nm);
+    let probe = devices_answer(station, direction);
+    tokio::pin!(probe);
+    let mut tick = tokio::time::interval(IDLE_TICK);
+    loop {
+        tokio::select! {
+            r = &mut probe => return r,
+            _ = tick.tick() => notifier.watchdog(),
+        }
+    }
 }
 
 /// Shows in the status the scans skipped because their journal is damaged (the snapshot a

@@ -103,12 +103,29 @@ pub fn run_settings(
             max: Duration::from_millis(config.scan.reconnect_max_ms),
         },
         transient_budget: Duration::from_secs(config.scan.transient_budget_s),
+        longest_effect: longest_effect(config),
         metrics_file: config.metrics.file.clone(),
         config: serde_json::to_value(config).unwrap_or_default(),
         config_hash,
         hooks: Arc::new(hooks),
         characterise: Some(Arc::new(characterise)),
     })
+}
+
+/// The longest one device operation of the station can take: a trace over the drive's whole
+/// range with two read-outs of the longest profile at the instrument's baud, or the stage's
+/// home or moves with all their attempts; and a minute for the conversation around them.
+pub fn longest_effect(config: &Config) -> Duration {
+    let trace = crate::sj210::timing::longest_trace(
+        config.instrument.client_options().speeds,
+        config.instrument.baud,
+        crate::scan::opening::LONGEST_PROFILE_POINTS,
+    );
+    let stage = config.stage.policy_config().map_or(Duration::ZERO, |p| {
+        p.home_timeout
+            .max(p.move_timeout * p.max_attempts.saturating_add(1))
+    });
+    trace.max(stage) + Duration::from_secs(60)
 }
 
 /// Where the device locks go: [`station_lock::DEVICE_LOCK_DIR`], or the directory

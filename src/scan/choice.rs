@@ -11,8 +11,10 @@
 //! - the scan started last failed for a cause that clears by itself (a storage error, which
 //!   earlier versions ended a scan for): it is continued;
 //! - `--resume`: the failed scan started last is continued; refused when there is none;
-//! - the daemon at start-up starts nothing else; an operator's plain start begins a new
-//!   scan, warning when the scan started last failed.
+//! - the daemon at start-up continues the scan started last when it failed for its transient
+//!   budget (a device that kept answering wrongly), once its devices answer properly again,
+//!   and starts nothing else; an operator's plain start begins a new scan, warning when the
+//!   scan started last failed.
 //!
 //! Layer 3 (session): the decision is pure; [`choose`] reads the journals and
 //! [`Choice::commit`] appends to them ([`super::journal`]).
@@ -45,6 +47,9 @@ pub enum Decision {
         /// The unfinished scans the new one replaces.
         abandon: Vec<PathBuf>,
     },
+    /// Continue this scan, which failed for its transient budget, once its devices answer
+    /// properly again (the daemon at start-up; it asks them with backoff).
+    AwaitDevices(PathBuf),
     /// Nothing to run (the daemon at start-up with nothing unfinished).
     Nothing,
     /// The start is refused: why.
@@ -93,7 +98,10 @@ pub fn decide(s: &Survey, asker: Asker, out: &Path) -> Decided {
                 out.display()
             )),
         },
-        Asker::DaemonStartUp => Decision::Nothing,
+        Asker::DaemonStartUp => match last_failed {
+            Some(f) if f.cause == FailCause::Budget => Decision::AwaitDevices(f.dir.clone()),
+            _ => Decision::Nothing,
+        },
         Asker::Operator(StartMode::Auto) => {
             if let Some(f) = last_failed {
                 warnings.push(format!(
@@ -138,6 +146,10 @@ impl Choice {
             Decision::New { .. } => format!("starting a scan of {lines} lines"),
             Decision::Resume(dir) => format!("resuming the unfinished scan {}", dir.display()),
             Decision::Continue(dir) => format!("continuing the failed scan {}", dir.display()),
+            Decision::AwaitDevices(dir) => format!(
+                "continuing the scan {} once its devices answer again",
+                dir.display()
+            ),
             Decision::Nothing => "nothing to resume".to_owned(),
             Decision::Refuse(why) => why.clone(),
         }
@@ -169,7 +181,7 @@ impl Choice {
                 tracing::info!("continuing the failed scan {}", dir.display());
                 Ok(Some(ScanRequest::Continue { dir, peer }))
             }
-            Decision::Nothing => Ok(None),
+            Decision::AwaitDevices(_) | Decision::Nothing => Ok(None),
             Decision::Refuse(why) => Err(ChoiceError::Refused(why)),
         }
     }
@@ -362,6 +374,18 @@ mod tests {
     }
 
     #[test]
+    fn a_scan_failed_for_its_budget_is_awaited_by_the_daemon() {
+        let s = survey_of(Vec::new(), vec![failed("f", 2, FailCause::Budget)], 2);
+        assert_eq!(
+            decision(&s, Asker::DaemonStartUp),
+            Decision::AwaitDevices("f".into())
+        );
+        // Not when a newer scan ran since.
+        let s = survey_of(Vec::new(), vec![failed("f", 2, FailCause::Budget)], 3);
+        assert_eq!(decision(&s, Asker::DaemonStartUp), Decision::Nothing);
+    }
+
+    #[test]
     fn a_scan_failed_for_the_operator_is_continued_only_by_resume() {
         for cause in [FailCause::Operator, FailCause::Budget] {
             let s = survey_of(
@@ -370,7 +394,9 @@ mod tests {
                 2,
             );
             assert_eq!(decision(&s, RESUME), Decision::Continue("f".into()));
-            assert_eq!(decision(&s, Asker::DaemonStartUp), Decision::Nothing);
+            if cause == FailCause::Operator {
+                assert_eq!(decision(&s, Asker::DaemonStartUp), Decision::Nothing);
+            }
             let d = decide(&s, AUTO, Path::new("/out"));
             assert_eq!(
                 d.decision,

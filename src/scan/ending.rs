@@ -127,7 +127,11 @@ impl FailReason {
     /// The exit-code class of the failure.
     pub fn kind(&self) -> FailKind {
         match self {
-            FailReason::NotStarted(f) if f.class == FaultClass::Absent => FailKind::Unavailable,
+            FailReason::NotStarted(f)
+                if matches!(f.class, FaultClass::Absent | FaultClass::Silent) =>
+            {
+                FailKind::Unavailable
+            }
             FailReason::Storage(_) | FailReason::Outputs(_) => FailKind::Io,
             FailReason::Refused { kind, .. } => *kind,
             _ => FailKind::Scan,

@@ -639,8 +639,11 @@ impl Machine {
                     trace_started,
                 },
             ) => {
-                // A trace cut off by a vanished device is the suspension's, not an attempt.
-                if self.doing == Doing::Trace && trace_started && fault.class != FaultClass::Absent
+                // A trace cut off by a vanished or silent device is the suspension's, not an
+                // attempt.
+                if self.doing == Doing::Trace
+                    && trace_started
+                    && !matches!(fault.class, FaultClass::Absent | FaultClass::Silent)
                 {
                     self.traces += 1;
                 }

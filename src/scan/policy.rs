@@ -153,9 +153,11 @@ pub fn react(kind: FaultKind, s: &Situation) -> Reaction {
     }
     match (kind, s.step) {
         // A device that cannot be opened again while its scan exists: waited for.
-        (FaultKind::Device(Absent | Transient), Opening) => Reopen,
+        (FaultKind::Device(Absent | Silent | Transient), Opening) => Reopen,
         (FaultKind::Device(PositionLost | Fatal), Opening) => Fail(FailRule::Fatal),
-        (FaultKind::Device(Absent), _) => Reopen,
+        // A device gone or silent in a line: waited for without a time limit, whatever the
+        // transient budget says (it bounds only a device that answers wrongly).
+        (FaultKind::Device(Absent | Silent), _) => Reopen,
         (FaultKind::Device(Transient), _) | (FaultKind::LineRetryable, _) => {
             if s.budget_spent {
                 Fail(FailRule::BudgetSpent)
@@ -217,6 +219,7 @@ mod tests {
     fn before_the_scan_exists_every_fault_refuses_the_start() {
         let kinds = [
             FaultKind::Device(Absent),
+            FaultKind::Device(Silent),
             FaultKind::Device(Transient),
             FaultKind::Device(PositionLost),
             FaultKind::Device(Fatal),
@@ -237,6 +240,7 @@ mod tests {
     #[test]
     fn a_device_that_cannot_be_opened_again_is_waited_for_unless_it_needs_the_operator() {
         assert_eq!(react(FaultKind::Device(Absent), &at(Opening)), Reopen);
+        assert_eq!(react(FaultKind::Device(Silent), &at(Opening)), Reopen);
         assert_eq!(react(FaultKind::Device(Transient), &at(Opening)), Reopen);
         assert_eq!(
             react(FaultKind::Device(Fatal), &at(Opening)),
@@ -273,8 +277,10 @@ mod tests {
                 Fail(FailRule::BudgetSpent),
                 "{step:?}"
             );
-            // A spent budget changes nothing for an absent device.
+            // A spent budget changes nothing for an absent or a silent device.
             assert_eq!(react(FaultKind::Device(Absent), &spent), Reopen, "{step:?}");
+            assert_eq!(react(FaultKind::Device(Silent), &s), Reopen, "{step:?}");
+            assert_eq!(react(FaultKind::Device(Silent), &spent), Reopen, "{step:?}");
             let rehomed = Situation { rehomes: 2, ..s };
             assert_eq!(
                 react(FaultKind::Device(PositionLost), &rehomed),

@@ -5,7 +5,7 @@
 //!
 //! Layer 3 (session), pure: depends on [`crate::devices`] and chrono for the time stamps.
 
-use crate::devices::{Device, Fault};
+use crate::devices::{Device, Fault, FaultClass};
 use chrono::{DateTime, SecondsFormat, Utc};
 use std::time::Duration;
 
@@ -24,9 +24,15 @@ pub fn on_line(line: u32, what: &dyn std::fmt::Display) -> String {
     format!("line {}: {what}", line + 1)
 }
 
-/// The status reason (and first journal note) while a device cannot be opened again.
+/// The status reason (and first journal note) while a device cannot be opened again, or
+/// does not answer.
 pub fn unavailable(device: Device, fault: &Fault) -> String {
-    format!("{device} unavailable ({fault}); reconnecting")
+    match fault.class {
+        FaultClass::Silent => {
+            format!("{device} not answering ({fault}); trying it again, without a time limit")
+        }
+        _ => format!("{device} unavailable ({fault}); reconnecting"),
+    }
 }
 
 /// The note when a device the scan waited for is back.

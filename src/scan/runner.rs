@@ -22,7 +22,7 @@ use super::machine::{Action, Event, Machine, Now, Policy, StorageFailure};
 use super::opening::{self, NewScan};
 use super::outcome::{Outcome, ScanRequest};
 use super::settings::RunSettings;
-use super::station::{Device, Station};
+use super::station::{close_aside, Device, Station};
 use super::status::ended_status;
 use crate::devices::InstrumentIdentity;
 use crate::stage::policy::ScanDirection;
@@ -247,7 +247,17 @@ async fn drive<S: Station>(
             let out = if cleanup {
                 Some(fut.await)
             } else {
-                guarded(fut, machine, books, ctl, &mut queue, &mut shutdown_fed).await
+                let limit = books.settings.longest_effect;
+                guarded(
+                    fut,
+                    limit,
+                    machine,
+                    books,
+                    ctl,
+                    &mut queue,
+                    &mut shutdown_fed,
+                )
+                .await
             };
             if held.is_some() {
                 books.held = held;
@@ -257,14 +267,6 @@ async fn drive<S: Station>(
         if let Some(ev) = ev {
             queue.extend(machine.handle(ev, now()));
         }
-    }
-}
-
-/// Drops a device on a blocking thread: a port whose link takes no bytes can hold `close`
-/// for the driver's closing wait.
-fn close_aside<T: Send + 'static>(device: Option<T>) {
-    if let Some(d) = device {
-        tokio::task::spawn_blocking(move || drop(d));
     }
 }
 
@@ -337,9 +339,13 @@ async fn write_outputs_watched(books: &mut Books<'_>, ctl: &Control) -> Event {
 }
 
 /// Awaits a device effect while feeding commands and shutdown to the machine; `None` when
-/// the machine cancelled it (the actions that follow the cancel are queued).
+/// the machine cancelled it (the actions that follow the cancel are queued). The watchdog is
+/// fed while the effect is within `limit`, the longest any device effect can take (every
+/// device operation has its own deadline): an effect that outlasts it is a stuck future,
+/// and the unfed watchdog gets the daemon restarted (the scan then resumes).
 async fn guarded(
     fut: impl Future<Output = Event>,
+    limit: std::time::Duration,
     machine: &mut Machine,
     books: &mut Books<'_>,
     ctl: &mut Control,
@@ -348,6 +354,8 @@ async fn guarded(
 ) -> Option<Event> {
     tokio::pin!(fut);
     let mut tick = ctl.watchdog_tick();
+    let started = tokio::time::Instant::now();
+    let mut stuck = false;
     loop {
         let ev = tokio::select! {
             out = &mut fut => return Some(out),
@@ -363,7 +371,15 @@ async fn guarded(
                 None => continue,
             },
             _ = tick.tick() => {
-                ctl.pet();
+                if started.elapsed() < limit {
+                    ctl.pet();
+                } else if !stuck {
+                    stuck = true;
+                    tracing::error!(
+                        "a device operation has taken over {} s, longer than any can; no longer feeding the watchdog, so systemd restarts the daemon and the scan resumes",
+                        limit.as_secs()
+                    );
+                }
                 continue;
             }
         };

@@ -30,6 +30,9 @@ pub struct RunSettings {
     /// How long transient faults may go on, from the first one since the last committed
     /// line, before the scan fails (`[scan] transient-budget-s`).
     pub transient_budget: Duration,
+    /// The longest one device operation can take (a trace with its read-out at the link's
+    /// baud, a move, a home): one that outlasts it is stuck, and the watchdog goes unfed.
+    pub longest_effect: Duration,
     /// The Prometheus textfile written after every line, if any.
     pub metrics_file: Option<PathBuf>,
     /// The configuration as loaded, frozen into the start record for traceability (opaque
@@ -53,6 +56,7 @@ impl std::fmt::Debug for RunSettings {
             .field("instrument_baud", &self.instrument_baud)
             .field("backoff", &self.backoff)
             .field("transient_budget", &self.transient_budget)
+            .field("longest_effect", &self.longest_effect)
             .field("metrics_file", &self.metrics_file)
             .field("config_hash", &self.config_hash)
             .field("hooks", &self.hooks)

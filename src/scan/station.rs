@@ -42,6 +42,31 @@ pub trait Station {
     fn expected_pitch_um(&self, conditions: &Conditions) -> Option<f64>;
 }
 
+/// Whether both devices answer properly: the instrument probed, the stage connected and
+/// its state read (nothing moves); each closed again. The first fault, when one does not.
+pub async fn devices_answer<S: Station>(
+    station: &mut S,
+    direction: ScanDirection,
+) -> Result<(), Fault> {
+    let mut instrument = station.open_instrument().await?;
+    let probed = instrument.probe().await;
+    close_aside(Some(instrument));
+    probed.map_err(|e| Fault::of(Device::Instrument, &e))?;
+    let mut stage = station.open_stage(direction).await?;
+    let connected = stage.connect().await;
+    close_aside(Some(stage));
+    connected.map_err(|e| Fault::of(Device::Stage, &e))?;
+    Ok(())
+}
+
+/// Drops a device on a blocking thread: closing a port whose link takes no bytes waits for
+/// the driver's closing wait (30 s by default), which must not hold a runtime thread.
+pub fn close_aside<T: Send + 'static>(device: Option<T>) {
+    if let Some(d) = device {
+        tokio::task::spawn_blocking(move || drop(d));
+    }
+}
+
 /// The real station: serial ports from the configuration.
 #[derive(Debug, Clone)]
 pub struct SerialStation {

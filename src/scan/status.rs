@@ -126,13 +126,23 @@ impl Status {
             .and_then(|v| v.as_str().map(str::to_owned))
             .unwrap_or_default();
         match (&self.scan_id, self.state) {
-            (None, State::Idle) => match &self.last_stop {
-                Some(s) if s.scan_id.is_empty() => {
-                    format!("idle; last start: {} ({})", s.status, s.reason)
+            (None, State::Idle) => {
+                let mut s = match &self.last_stop {
+                    Some(s) if s.scan_id.is_empty() => {
+                        format!("idle; last start: {} ({})", s.status, s.reason)
+                    }
+                    Some(s) => {
+                        format!("idle; last scan {}: {} ({})", s.scan_id, s.status, s.reason)
+                    }
+                    None => "idle".to_owned(),
+                };
+                // What the idle daemon waits for (a failed scan's continuation).
+                if let Some(r) = &self.reason {
+                    s.push_str("; ");
+                    s.push_str(r);
                 }
-                Some(s) => format!("idle; last scan {}: {} ({})", s.scan_id, s.status, s.reason),
-                None => "idle".to_owned(),
-            },
+                s
+            }
             (Some(id), State::Scanning) => {
                 let line = self.current_line.unwrap_or(self.lines_done + 1);
                 match self.y_mm {

@@ -190,6 +190,9 @@ impl DeviceFault for Sj210Error {
         match self {
             Sj210Error::Link { source, .. } => match source {
                 LinkError::Vanished { .. } => FaultClass::Absent,
+                LinkError::FirstByteTimeout { .. } | LinkError::WriteStalled(_) => {
+                    FaultClass::Silent
+                }
                 LinkError::Encode(_) => FaultClass::Fatal,
                 _ => FaultClass::Transient,
             },
@@ -201,7 +204,7 @@ impl DeviceFault for Sj210Error {
                 _ => FaultClass::Transient,
             },
             Sj210Error::ProfileReadoutFailed { second, .. } => match second.class() {
-                FaultClass::Absent => FaultClass::Absent,
+                c @ (FaultClass::Absent | FaultClass::Silent) => c,
                 _ => FaultClass::Transient,
             },
             Sj210Error::UnexpectedReply { .. }

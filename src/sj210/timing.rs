@@ -91,6 +91,25 @@ pub fn trace_deadline(c: &Conditions, speeds: DriveSpeeds) -> Duration {
     Duration::from_secs_f64(secs.clamp(1.0, 3600.0))
 }
 
+/// Characters the instrument sends per height in a profile read-out (value, separator and
+/// the block's share of its framing), as the read-out's duration is estimated.
+pub const READOUT_CHARS_PER_POINT: u64 = 12;
+
+/// How long reading `points` heights out takes at `baud` (10 bits a character).
+pub fn readout_time(points: u64, baud: u32) -> Duration {
+    let bits = points
+        .saturating_mul(READOUT_CHARS_PER_POINT)
+        .saturating_mul(10);
+    Duration::from_secs_f64(bits as f64 / f64::from(baud.max(1)))
+}
+
+/// The longest one trace can take with its read-out: the deadline of a trace over the whole
+/// drive range ([`trace_deadline`] without conditions) and the read-out of `points` heights
+/// twice (the driver reads a profile again once when the first read-out fails).
+pub fn longest_trace(speeds: DriveSpeeds, baud: u32, points: u64) -> Duration {
+    trace_deadline(&Conditions::default(), speeds) + readout_time(points, baud) * 2
+}
+
 /// How long to wait before asking the status again, at `now`, while a phase expected to end
 /// at `expected_end` runs (both from the same origin); `late_polls` is how many polls were
 /// already made after that end. Without an expected end, the plain interval.
@@ -254,6 +273,10 @@ mod tests {
         assert!(trace_timing(&cond(4.0, 0.8), stopped).is_none());
         // The deadline: 2 × (9.6 + 4.8 + 10) s; without conditions the 17.5 mm drive range.
         assert_eq!(trace_deadline(&cond(4.0, 0.8), SJ210), ms(48_800));
+        // 8000 heights at 9600 baud: 8000 × 12 × 10 bits = 100 s; twice, plus the whole
+        // drive range's deadline: 2 × (17.5 / 0.5 + 17.5 / 1 + 10) = 125 s.
+        assert_eq!(readout_time(8000, 9600), ms(100_000));
+        assert_eq!(longest_trace(SJ210, 9600, 8000), ms(325_000));
         assert_eq!(
             trace_deadline(&Conditions::default(), SJ210),
             ms(2 * (35_000 + 17_500 + 10_000))

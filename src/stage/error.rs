@@ -25,8 +25,16 @@ pub enum StageError {
     /// The link did not take a command's bytes in time (flow control, a wedged adapter).
     #[error("stage controller link: {0}")]
     Stalled(crate::transport::SendError),
-    /// No answer in time.
-    #[error("stage controller did not answer {waiting_for} within {timeout_ms} ms")]
+    /// Nothing came back in time: the controller is silent.
+    #[error("stage controller did not answer {waiting_for} within {timeout_ms} ms (check its power and cable; the scan waits for it)")]
+    NoReply {
+        /// What was awaited.
+        waiting_for: String,
+        /// The bound.
+        timeout_ms: u64,
+    },
+    /// The controller answers, but a motion did not end in time.
+    #[error("stage controller did not report {waiting_for} within {timeout_ms} ms")]
     Timeout {
         /// What was awaited.
         waiting_for: String,
@@ -134,8 +142,8 @@ impl DeviceFault for StageError {
             StageError::Vanished { .. } => FaultClass::Absent,
             StageError::Transport(t) if t.is_absent() => FaultClass::Absent,
             StageError::Transport(_) => FaultClass::Fatal,
+            StageError::NoReply { .. } | StageError::Stalled(_) => FaultClass::Silent,
             StageError::Timeout { .. }
-            | StageError::Stalled(_)
             | StageError::Protocol { .. }
             | StageError::Rejected { .. }
             | StageError::MissedTarget { .. } => FaultClass::Transient,

@@ -117,7 +117,7 @@ mod tests {
         let e = link.write(b"$J=G90Y-1\n").await.unwrap_err();
         assert_eq!(t0.elapsed(), Duration::from_millis(300));
         assert!(matches!(e, StageError::Stalled(_)), "{e:?}");
-        assert_eq!(e.class(), FaultClass::Transient);
+        assert_eq!(e.class(), FaultClass::Silent);
         assert!(
             e.to_string().contains("took 2 of the command's 10 byte(s)"),
             "{e}"

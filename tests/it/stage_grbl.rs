@@ -201,8 +201,8 @@ async fn silence_times_out_and_vanishing_is_absent() {
     let (mut a, shared) = homed().await;
     shared.inject(StageFault::Silence);
     let e = a.move_to(Nm(-1_000_000)).await.unwrap_err();
-    assert!(matches!(e, StageError::Timeout { .. }), "{e}");
-    assert_eq!(e.class(), FaultClass::Transient);
+    assert!(matches!(e, StageError::NoReply { .. }), "{e}");
+    assert_eq!(e.class(), FaultClass::Silent);
 
     let (mut a, shared) = homed().await;
     shared.inject(StageFault::Vanish);

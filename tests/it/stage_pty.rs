@@ -264,8 +264,8 @@ async fn grbl_silence_is_a_transient_timeout() {
     a.home().await.unwrap();
     shared.inject(StageFault::Silence);
     let e = a.move_to(Nm(-1_000_000)).await.unwrap_err();
-    assert!(matches!(e, StageError::Timeout { .. }), "{e}");
-    assert_eq!(e.class(), FaultClass::Transient);
+    assert!(matches!(e, StageError::NoReply { .. }), "{e}");
+    assert_eq!(e.class(), FaultClass::Silent);
     h.shutdown().await;
 }
 

@@ -143,7 +143,8 @@ async fn soft_limit_violation_sends_nothing_and_silence_and_vanishing_are_named(
 
     shared.inject(StageFault::Silence);
     let e = a.move_to(Nm(1_000_000)).await.unwrap_err();
-    assert!(matches!(e, StageError::Timeout { .. }), "{e}");
+    assert!(matches!(e, StageError::NoReply { .. }), "{e}");
+    assert_eq!(e.class(), FaultClass::Silent);
 
     let (mut a, shared) = homed().await;
     shared.inject(StageFault::Vanish);

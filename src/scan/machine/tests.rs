@@ -267,6 +267,7 @@ fn every_fault_class_in_every_step_of_a_line_gets_its_reaction() {
     ];
     let table = [
         (Absent, Reaction::Reopen(Device::Instrument)),
+        (Silent, Reaction::Reopen(Device::Instrument)),
         (Transient, Reaction::RetryAfter(Duration::from_secs(1))),
         (PositionLost, Reaction::Rehome),
         (Fatal, Reaction::Fails),
@@ -308,6 +309,82 @@ fn every_fault_class_in_every_step_of_a_line_gets_its_reaction() {
             }
         }
     }
+}
+
+/// An instrument that says nothing (no reply, or a link that takes no bytes) is waited for
+/// like an unplugged one: closed, reopened with backoff, suspended "not answering", for far
+/// longer than the transient budget, and the scan goes on when it answers; the time it was
+/// waited for is not spent from the budget.
+#[test]
+fn a_silent_instrument_is_waited_for_past_the_budget_and_the_scan_goes_on() {
+    let mut r = Rig::started();
+    r.up_to_trace();
+    let a = r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Silent,
+        "\"CTSTA\": no reply within 2000 ms",
+        true,
+    ));
+    assert_eq!(stop_of(&a), None);
+    assert!(a.contains(&Action::Close(Device::Instrument)), "{a:?}");
+    assert_eq!(effect(&a), Some(&Action::Open(Device::Instrument)));
+    // Reopening finds it silent again and again, for ten budgets.
+    let budget = policy().transient_budget;
+    let mut waits = Vec::new();
+    while r.elapsed < budget * 10 {
+        let a = r.feed(fault_event(
+            Device::Instrument,
+            FaultClass::Silent,
+            "\"RDSJ 01\": no reply within 2000 ms",
+            false,
+        ));
+        assert_eq!(stop_of(&a), None, "a silent device never ends the scan");
+        let Some(Action::SetTimer(d)) = effect(&a) else {
+            panic!("{a:?}")
+        };
+        waits.push(*d);
+        let s = r.m.status();
+        assert_eq!(s.state, State::Suspended);
+        assert!(
+            s.reason
+                .as_deref()
+                .is_some_and(|m| m.starts_with("instrument not answering")),
+            "{:?}",
+            s.reason
+        );
+        r.wait(*d);
+        let a = r.feed(Event::TimerFired);
+        assert_eq!(effect(&a), Some(&Action::Open(Device::Instrument)));
+    }
+    assert_eq!(&waits[..4], &[1, 2, 4, 8].map(Duration::from_secs));
+    // One suspension, not one per try.
+    let suspended = r
+        .log
+        .iter()
+        .filter(|a| matches!(a, Action::Notify(ScanEventKind::Suspended, _)))
+        .count();
+    assert_eq!(suspended, 1);
+    // It answers: the line is traced again, and a transient fault now has the whole budget.
+    r.feed(opened(Device::Instrument));
+    r.up_to_trace();
+    let a = r.feed(fault_event(
+        Device::Instrument,
+        FaultClass::Transient,
+        "NG011",
+        true,
+    ));
+    assert_eq!(
+        effect(&a),
+        Some(&Action::SetTimer(Duration::from_secs(1))),
+        "{a:?}"
+    );
+    assert!(
+        r.records()
+            .iter()
+            .any(|n| n.starts_with("instrument back after")),
+        "{:?}",
+        r.records()
+    );
 }
 
 #[test]

@@ -227,7 +227,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
         loop {
             match self.next(timeout).await? {
                 None => {
-                    return Err(StageError::Timeout {
+                    return Err(StageError::NoReply {
                         waiting_for: format!("the reply to {line:?}"),
                         timeout_ms: timeout.as_millis() as u64,
                     })
@@ -268,7 +268,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
         loop {
             match self.next(self.cfg.reply_timeout).await? {
                 None => {
-                    return Err(StageError::Timeout {
+                    return Err(StageError::NoReply {
                         waiting_for: "a status report to '?'".into(),
                         timeout_ms: self.cfg.reply_timeout.as_millis() as u64,
                     })
@@ -340,7 +340,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
             let left = deadline.saturating_duration_since(Instant::now());
             match self.next_raw(left).await? {
                 None => {
-                    return Err(StageError::Timeout {
+                    return Err(StageError::NoReply {
                         waiting_for: "the banner after a soft reset".into(),
                         timeout_ms: timeout.as_millis() as u64,
                     })

@@ -112,7 +112,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
         self.link
             .next_line(deadline)
             .await?
-            .ok_or_else(|| StageError::Timeout {
+            .ok_or_else(|| StageError::NoReply {
                 waiting_for: "a Zaber reply".into(),
                 timeout_ms: self.cfg.reply_timeout.as_millis() as u64,
             })
@@ -128,7 +128,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> ZaberStage<T> {
                 let quiet = tokio::time::Instant::now() + self.cfg.reply_timeout / 10;
                 match self.next_line(quiet).await {
                     Ok(l) => tracing::debug!(line = %l, "discarded stale Zaber line"),
-                    Err(StageError::Timeout { .. }) => break,
+                    Err(StageError::NoReply { .. }) => break,
                     Err(e) => return Err(e),
                 }
             }

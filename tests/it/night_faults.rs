@@ -1,0 +1,356 @@
+//! An operator's worst night, end to end: each finding of the adversarial campaign as the
+//! real binaries meet it. The simulator runs in-process where a wire fault is enough, and as
+//! its own `surfscan-sim` process where the test stops and continues it with signals.
+//!
+//! Every test here runs in CI (as root on Debian, as `.ci/run` does); one that needs a
+//! capability checks for it and fails loudly without it.
+
+use crate::common::*;
+use std::path::{Path, PathBuf};
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+use surfscan::control::client::ControlClient;
+use surfscan::control::protocol::{Message, Request};
+use surfscan::scan::command::StartMode;
+use surfscan::scan::ending::{FailCause, StopStatus};
+use surfscan::scan::journal::Record;
+use surfscan::scan::status::{State, Status};
+use tokio::io::AsyncBufReadExt;
+
+/// A link that stops taking the host's bytes for longer than the write deadline (the
+/// instrument holds the host back by flow control for 5 s, from the third trace on), with a
+/// transient budget of 2 s: the scan suspends, the stalled write is named, nothing fails for
+/// the budget, and the scan completes with every line once and on target.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_link_that_takes_no_bytes_suspends_the_scan_which_then_completes() {
+    let rig = Rig::start(RigOptions {
+        faults: vec!["deaf:5000@CTSTA#3".into()],
+        extra_scan: "transient-budget-s = 2\n".into(),
+        ..RigOptions::default()
+    })
+    .await;
+    let n = rig.options.lines;
+    let t0 = Instant::now();
+    let o = run_scan(&rig.config("out"), &[]).await;
+    assert!(o.status.success(), "{}", describe(&o));
+    assert!(t0.elapsed() >= Duration::from_secs(5), "{:?}", t0.elapsed());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains("byte(s) and then none for 2000 ms"),
+        "the stalled write is named: {stderr}"
+    );
+    let dir = scan_dir(&rig.out_dir("out"));
+    assert_lines_exactly(&dir, n);
+    let notes = interruptions(&assert_journal_complete(&dir, n));
+    assert!(
+        notes
+            .iter()
+            .any(|r| r.starts_with("line 3 abandoned: instrument:")),
+        "{notes:?}"
+    );
+    assert!(
+        notes
+            .iter()
+            .any(|r| r.starts_with("instrument not answering (")),
+        "{notes:?}"
+    );
+    assert!(
+        notes.iter().any(|r| r.starts_with("instrument back after")),
+        "{notes:?}"
+    );
+    rig.shutdown().await;
+}
+
+/// The `surfscan-sim` binary beside `surfscan` (built by `cargo test --workspace`, as
+/// `.ci/run` runs it).
+fn simulator_binary() -> PathBuf {
+    let p = Path::new(env!("CARGO_BIN_EXE_surfscan")).with_file_name("surfscan-sim");
+    assert!(
+        p.is_file(),
+        "{} is missing: this test runs the simulator as a process of its own; build it with `cargo build -p surfscan-sim` (`cargo test --workspace` does)",
+        p.display()
+    );
+    p
+}
+
+/// A station of two processes: `surfscan-sim` serving the devices and `surfscan daemon`
+/// scanning them, both killed when the test ends.
+struct Station {
+    dir: tempfile::TempDir,
+    sim: tokio::process::Child,
+    daemon: tokio::process::Child,
+    socket: PathBuf,
+}
+
+impl Station {
+    /// Starts the simulator (with `sim_args`) writing its station configuration, sets `scan`
+    /// and `[instrument.timeouts]` keys into it, and starts the daemon on it.
+    async fn start(sim_args: &[&str], scan: &str, timeouts: &str) -> Station {
+        let dir = tempfile::tempdir().unwrap();
+        let config = dir.path().join("station.toml");
+        let mut sim = tokio::process::Command::new(simulator_binary())
+            .arg("--instrument-link")
+            .arg(dir.path().join("sj210"))
+            .arg("--stage-link")
+            .arg(dir.path().join("ystage"))
+            .args(["--stage-protocol", "grbl", "--time-scale", "0.02"])
+            .args(sim_args)
+            .arg("--write-config")
+            .arg(&config)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .kill_on_drop(true)
+            .spawn()
+            .expect("surfscan-sim starts");
+        let mut lines = tokio::io::BufReader::new(sim.stdout.take().unwrap()).lines();
+        let ready = tokio::time::timeout(Duration::from_secs(20), lines.next_line())
+            .await
+            .expect("the simulator is ready within 20 s")
+            .unwrap()
+            .unwrap_or_default();
+        assert!(ready.contains("\"event\":\"ready\""), "{ready}");
+        tokio::spawn(async move { while let Ok(Some(_)) = lines.next_line().await {} });
+        let text = std::fs::read_to_string(&config).expect("the station configuration");
+        let text = text
+            .replacen("[scan]\n", &format!("[scan]\n{scan}"), 1)
+            .replacen("lines = 31\n", "lines = 8\n", 1);
+        let text = text.replacen(
+            "[instrument.timeouts]\n",
+            &format!("[instrument.timeouts]\n{timeouts}"),
+            1,
+        );
+        std::fs::write(&config, text).unwrap();
+        let locks = dir.path().join("locks");
+        std::fs::create_dir_all(&locks).unwrap();
+        let daemon = tokio::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(["daemon", "--config"])
+            .arg(&config)
+            .env("SURFSCAN_TEST_LOCK_DIR", &locks)
+            .env("RUST_LOG", "info")
+            .env_remove("NOTIFY_SOCKET")
+            .env_remove("WATCHDOG_USEC")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(dir.path().join("daemon.log")).unwrap())
+            .kill_on_drop(true)
+            .spawn()
+            .expect("the daemon starts");
+        let socket = dir.path().join("control.sock");
+        let s = Station {
+            dir,
+            sim,
+            daemon,
+            socket,
+        };
+        s.wait("the control socket", Duration::from_secs(20), |_| true)
+            .await;
+        s
+    }
+
+    fn out(&self) -> PathBuf {
+        self.dir.path().join("scans")
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(self.dir.path().join("daemon.log")).unwrap_or_default()
+    }
+
+    async fn status(&self) -> Option<Status> {
+        let mut c = ControlClient::connect(&self.socket).await.ok()?;
+        match c.request(&Request::Status).await.ok()?.message {
+            Message::Status(s) => Some(*s),
+            _ => None,
+        }
+    }
+
+    /// Waits until the daemon's status satisfies `f`, for at most `limit`.
+    async fn wait(&self, what: &str, limit: Duration, f: impl Fn(&Status) -> bool) -> Status {
+        let t0 = Instant::now();
+        loop {
+            if let Some(s) = self.status().await {
+                if f(&s) {
+                    return s;
+                }
+            }
+            assert!(
+                t0.elapsed() < limit,
+                "{what}: last status {:?}\n--- daemon log\n{}",
+                self.status().await,
+                self.log()
+            );
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    }
+
+    async fn start_scan(&self) {
+        let ack = ControlClient::connect(&self.socket)
+            .await
+            .unwrap()
+            .request(&Request::Start {
+                specimen: "night".into(),
+                operator: String::new(),
+                notes: String::new(),
+                mode: StartMode::Auto,
+            })
+            .await
+            .unwrap();
+        assert!(matches!(ack.message, Message::Ack { .. }), "{ack:?}");
+    }
+
+    fn signal_simulator(&self, sig: nix::sys::signal::Signal) {
+        let pid = nix::unistd::Pid::from_raw(self.sim.id().expect("simulator runs") as i32);
+        nix::sys::signal::kill(pid, sig).unwrap();
+    }
+
+    async fn stop(mut self) {
+        if let Some(pid) = self.daemon.id() {
+            let _ = nix::sys::signal::kill(
+                nix::unistd::Pid::from_raw(pid as i32),
+                nix::sys::signal::Signal::SIGTERM,
+            );
+        }
+        let _ = tokio::time::timeout(Duration::from_secs(20), self.daemon.wait()).await;
+        let _ = self.sim.kill().await;
+    }
+}
+
+/// The records of the one scan under `out`.
+fn the_scan(out: &Path) -> (PathBuf, Vec<Record>) {
+    let dir = scan_dir(out);
+    let (records, _) = journal(&dir);
+    (dir, records)
+}
+
+/// The simulator stopped (SIGSTOP) mid-scan for four times the transient budget, then
+/// continued (SIGCONT): a silent instrument and stage are waited for without a time limit,
+/// the daemon shows the scan suspended "not answering" meanwhile, and the same scan goes on
+/// by itself and completes; nothing fails, no new scan starts.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stopped_simulator_past_the_budget_is_waited_for_and_the_scan_completes() {
+    let station = Station::start(
+        &[],
+        "transient-budget-s = 2\nreconnect-initial-ms = 200\nreconnect-max-ms = 1000\n",
+        "",
+    )
+    .await;
+    station.start_scan().await;
+    station
+        .wait("two lines on disk", Duration::from_secs(60), |s| {
+            s.lines_done >= 2
+        })
+        .await;
+    station.signal_simulator(nix::sys::signal::Signal::SIGSTOP);
+    let s = station
+        .wait("suspended, not answering", Duration::from_secs(30), |s| {
+            s.state == State::Suspended
+                && s.reason
+                    .as_deref()
+                    .is_some_and(|r| r.contains("not answering"))
+        })
+        .await;
+    let held = s.lines_done;
+    tokio::time::sleep(Duration::from_secs(8)).await;
+    let s = station.status().await.expect("status");
+    assert_eq!(s.state, State::Suspended, "{s:?}");
+    assert_eq!(
+        s.lines_done, held,
+        "nothing is traced while the devices are silent"
+    );
+    assert!(s.last_stop.is_none(), "nothing ended: {s:?}");
+    station.signal_simulator(nix::sys::signal::Signal::SIGCONT);
+    let s = station
+        .wait("the scan completes", Duration::from_secs(120), |s| {
+            s.state == State::Idle && s.last_stop.is_some()
+        })
+        .await;
+    let stop = s.last_stop.expect("last stop");
+    assert_eq!(
+        stop.status,
+        StopStatus::Success,
+        "{stop:?}\n{}",
+        station.log()
+    );
+    let (_, records) = the_scan(&station.out());
+    let stops: Vec<&Record> = records
+        .iter()
+        .filter(|r| matches!(r, Record::Stop(_)))
+        .collect();
+    assert_eq!(stops.len(), 1, "one stop record, the success: {stops:?}");
+    let notes = interruptions(&records);
+    assert!(
+        notes.iter().any(|r| r.contains("not answering")),
+        "{notes:?}"
+    );
+    station.stop().await;
+}
+
+/// An instrument that answers busy (NG011) for longer than the transient budget (and the
+/// driver's own read retries, 0.5 s here) fails the scan for its budget; the daemon then asks
+/// the devices with backoff and, once they answer properly again, continues the same scan by
+/// itself to its end.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_scan_failed_for_its_budget_is_continued_by_the_daemon_when_the_devices_answer() {
+    let station = Station::start(
+        &["--fault", "busy:6000@CTSTA#3"],
+        "transient-budget-s = 2\nreconnect-initial-ms = 200\nreconnect-max-ms = 1000\n",
+        "read-retry-budget-ms = 500\n",
+    )
+    .await;
+    station.start_scan().await;
+    let s = station
+        .wait(
+            "the scan fails for its budget",
+            Duration::from_secs(60),
+            |s| {
+                s.last_stop
+                    .as_ref()
+                    .is_some_and(|l| l.status == StopStatus::Fail)
+            },
+        )
+        .await;
+    assert!(
+        s.last_stop
+            .as_ref()
+            .is_some_and(|l| l.reason.contains("outlasted the 2 s budget")),
+        "{s:?}"
+    );
+    let s = station
+        .wait(
+            "the continued scan completes",
+            Duration::from_secs(120),
+            |s| {
+                s.state == State::Idle
+                    && s.last_stop
+                        .as_ref()
+                        .is_some_and(|l| l.status == StopStatus::Success)
+            },
+        )
+        .await;
+    assert_eq!(s.lines_total, 0, "idle: {s:?}");
+    let (_, records) = the_scan(&station.out());
+    let fail = records
+        .iter()
+        .position(|r| matches!(r, Record::Stop(s) if s.status == StopStatus::Fail))
+        .expect("the fail stop record");
+    match &records[fail] {
+        Record::Stop(s) => assert_eq!(s.fail_cause(), Some(FailCause::Budget), "{s:?}"),
+        _ => unreachable!(),
+    }
+    assert!(
+        matches!(records.get(fail + 1), Some(Record::Continue(c)) if c.peer.is_none()),
+        "continued by the daemon itself: {:?}",
+        records.get(fail + 1)
+    );
+    assert!(
+        matches!(records.last(), Some(Record::Stop(s)) if s.status == StopStatus::Success),
+        "{:?}",
+        records.last()
+    );
+    let n = line_record_indices(&records);
+    let mut sorted = n.clone();
+    sorted.sort();
+    sorted.dedup();
+    assert_eq!(n.len(), sorted.len(), "each line once: {n:?}");
+    station.stop().await;
+}
