@@ -612,13 +612,12 @@ impl Machine {
             }
             (Doing::Home, Event::Homed) => {
                 self.need_home = false;
-                self.next_step(now, out);
+                self.effect(out, Doing::Move);
             }
-            (Doing::Idle, Event::Idle) => {
-                let target = self.plan.target(self.line);
-                self.doing = Doing::Move;
-                out.push(Action::Move(target));
-            }
+            // The drive is at rest (a trace's return may still run when its read-out ended
+            // first): only now may the stage move, to home or to the line.
+            (Doing::Idle, Event::Idle) if self.need_home => self.effect(out, Doing::Home),
+            (Doing::Idle, Event::Idle) => self.effect(out, Doing::Move),
             (Doing::Move, Event::Arrived) => self.effect(out, Doing::Trace),
             (Doing::Trace, Event::Traced(t)) => {
                 self.traces += 1;
@@ -745,9 +744,6 @@ impl Machine {
             self.status.state = State::Scanning;
         }
         self.publish_progress(out, Some(self.line));
-        if self.need_home {
-            return self.effect(out, Doing::Home);
-        }
         self.effect(out, Doing::Idle);
     }
 

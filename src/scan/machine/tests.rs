@@ -198,7 +198,8 @@ enum Reaction {
     Reopen(Device),
     /// Waits (backoff) and tries the line again; the scan is suspended meanwhile.
     RetryAfter(Duration),
-    /// Homes the stage before the line is tried again.
+    /// Homes the stage before the line is tried again, once the drive is at rest: the
+    /// machine asks for idle first, and its `Idle` leads to the home.
     Rehome,
     /// The scan fails.
     Fails,
@@ -214,7 +215,7 @@ fn reaction(actions: &[Action]) -> Reaction {
             Reaction::Reopen(*d)
         }
         Some(Action::SetTimer(d)) => Reaction::RetryAfter(*d),
-        Some(Action::Home) => Reaction::Rehome,
+        Some(Action::EnsureIdle) => Reaction::Rehome,
         other => panic!("unexpected reaction {other:?} in {actions:?}"),
     }
 }
@@ -256,6 +257,9 @@ fn every_fault_class_in_every_step_of_a_line_gets_its_reaction() {
                 device: Device::Stage,
                 position_trusted: false,
             });
+            // Not before the drive is at rest.
+            assert_eq!(effect(&a), Some(&Action::EnsureIdle));
+            let a = r.feed(Event::Idle);
             assert_eq!(effect(&a), Some(&Action::Home));
         }),
         ("ensuring idle", |_| {}),
@@ -278,6 +282,10 @@ fn every_fault_class_in_every_step_of_a_line_gets_its_reaction() {
             to_step(&mut r);
             let a = r.feed(fault_event(Device::Instrument, *class, "boom", false));
             assert_eq!(&reaction(&a), want, "{class:?} while {step}");
+            if *want == Reaction::Rehome {
+                let a = r.feed(Event::Idle);
+                assert_eq!(effect(&a), Some(&Action::Home), "{step}");
+            }
             if *class == Fatal {
                 assert_eq!(
                     stop_of(&a),
@@ -743,8 +751,9 @@ fn a_different_instrument_after_a_reconnect_fails_the_scan() {
 #[test]
 fn a_lost_position_rehomes_within_the_attempt_bound() {
     let mut r = Rig::started();
+    let a = r.feed(Event::Idle);
+    assert_eq!(effect(&a), Some(&Action::Move(plan().target(0))));
     for n in 1..3 {
-        r.feed(Event::Idle);
         let a = r.feed(fault_event(
             Device::Stage,
             FaultClass::PositionLost,
@@ -752,10 +761,12 @@ fn a_lost_position_rehomes_within_the_attempt_bound() {
             false,
         ));
         assert_eq!(reaction(&a), Reaction::Rehome, "loss {n}");
+        // The drive is at rest before the stage homes; then the stage goes to the line.
+        let a = r.feed(Event::Idle);
+        assert_eq!(effect(&a), Some(&Action::Home), "loss {n}");
         let a = r.feed(Event::Homed);
-        assert_eq!(effect(&a), Some(&Action::EnsureIdle));
+        assert_eq!(effect(&a), Some(&Action::Move(plan().target(0))));
     }
-    r.feed(Event::Idle);
     let a = r.feed(fault_event(
         Device::Stage,
         FaultClass::PositionLost,
