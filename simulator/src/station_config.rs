@@ -3,9 +3,10 @@
 //! FILE` and nothing edited by hand.
 //!
 //! Every key is derived from what the simulator serves: the links as ports, the model and the
-//! `RDEVA` form it answers, the served profiles' x pitch, the stage's protocol, resolution and
-//! machine space (soft limits inside it, one millimetre clear of each end), and the drive's
-//! speeds and status polls at the time scale. The scan's first line sits 20 mm inside the travel from
+//! `RDEVA` form it answers and whether it reads during the drive's return, the served
+//! profiles' x pitch, the stage's protocol, resolution and machine space (soft limits inside
+//! it, one millimetre clear of each end), and the drive's speeds and status polls at the time
+//! scale. The scan's first line sits 20 mm inside the travel from
 //! the home switch, and the served profiles are placed on the scan's y grid
 //! ([`StationConfig::profiles`]), so line k of the scan is served profile k.
 //!
@@ -314,6 +315,12 @@ pub fn station_config(
          # The profile read-out form the simulated firmware answers.\n\
          profile-total = \"{total}\"\nprofile-block = \"{block}\""
     );
+    if inst.reads_during_return {
+        let _ = writeln!(
+            s,
+            "# The simulated firmware answers reads while its drive returns.\nreads-during-return = true"
+        );
+    }
 
     let _ = writeln!(s, "\n[stage]\nport = {}", q(req.stage_link));
     let (unit_mm, protocol_keys) = match req.stage {
@@ -537,6 +544,22 @@ mod tests {
                 station_config(&request(&inst, SimStage::Grbl(&g)), &set(100, 0.0015, 8)).unwrap();
             assert_eq!(key(&c.toml, "profile-total"), [format!("\"{total}\"")]);
             assert_eq!(key(&c.toml, "profile-block"), [format!("\"{block}\"")]);
+        }
+    }
+
+    #[test]
+    fn a_firmware_that_reads_during_the_return_is_said_so() {
+        let g = GrblSimConfig::default();
+        for during in [false, true] {
+            let inst = InstrumentConfig {
+                time_scale: 0.02,
+                reads_during_return: during,
+                ..InstrumentConfig::default()
+            };
+            let c =
+                station_config(&request(&inst, SimStage::Grbl(&g)), &set(100, 0.0015, 8)).unwrap();
+            let said = key(&c.toml, "reads-during-return");
+            assert_eq!(said, if during { vec!["true"] } else { vec![] });
         }
     }
 

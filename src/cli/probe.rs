@@ -9,7 +9,9 @@
 //!
 //! `--readout` then looks for the profile read-out command on the trace the instrument holds
 //! (candidate forms, verdicts, a ready-to-paste `[instrument.commands]` snippet, and what
-//! remains when every form is refused); `--passthrough PC_PORT` instead relays a session
+//! remains when every form is refused); with `--trace` it also asks a result, a read-out total
+//! and a block while the drive returns ([`crate::sj210::return_reads`]), and adds
+//! `reads-during-return = true` to the snippet when they were answered; `--passthrough PC_PORT` instead relays a session
 //! between Mitutoyo's PC software on a second serial port and the instrument, recording
 //! every exchange.
 //!
@@ -20,10 +22,12 @@ use super::{CliError, Exit};
 use crate::devices::{Battery, DeviceFault, FaultClass, ProbeReport, ProfileReadout};
 use crate::profile::{FilterKind, ProfileKind};
 use crate::sj210::client::Sj210Client;
+use crate::sj210::client::{TraceEnd, TraceUntil};
 use crate::sj210::error::Sj210Error;
 use crate::sj210::rate_search::{self, Attempt, LineSetting, RateSearch};
 use crate::sj210::readout_probe::{Conclusion, ReadoutForm, ReadoutProbe};
 use crate::sj210::recorder::{Recorder, SharedTranscript, Transcript, TranscriptHeader};
+use crate::sj210::return_reads::ReturnProbe;
 use crate::sj210::settings::InstrumentSettings;
 use crate::transport::{FlowControl, SerialSettings};
 use std::path::{Path, PathBuf};
@@ -47,7 +51,9 @@ pub struct Args {
     pub notes: String,
     /// Look for the profile read-out command on the trace the instrument holds (status 000
     /// or 005 after a finished trace; with --trace, after that one): tries RDEVA00, RDEVA000,
-    /// RDEVA100 and every --form, and prints the verdicts and the config snippet. Read-only.
+    /// RDEVA100 and every --form, and prints the verdicts and the config snippet. With
+    /// --trace, also finds out whether a result and the read-out are answered while that
+    /// trace's drive returns (reads-during-return). Read-only.
     #[arg(long)]
     pub readout: bool,
     /// Another read-out form for --readout, tried after the candidates: TOTAL ending in 00
@@ -160,21 +166,26 @@ pub fn run(args: Args) -> Result<(), CliError> {
     if let Some(note) = rate_search::slower_than_fastest(link, &table.baud_rates, TYPICAL_POINTS) {
         say!("note      {note}");
     }
-    let outcome = rt.block_on(checklist(&mut client, status, args.trace));
+    let forms = ReadoutForm::candidates(&args.forms);
+    let outcome = rt.block_on(checklist(
+        &mut client,
+        status,
+        args.trace,
+        args.readout.then_some(forms.as_slice()),
+    ));
     let mut readout = None;
     let outcome = match outcome {
-        Ok(report) if args.readout => {
-            let forms = ReadoutForm::candidates(&args.forms);
+        Ok((report, during_return)) if args.readout => {
             match rt.block_on(client.probe_readout_forms(&forms)) {
                 Ok(p) => {
-                    print_readout(&p);
+                    print_readout(&p, during_return.as_ref());
                     readout = Some(p);
                     Ok(report)
                 }
                 Err(e) => Err(e),
             }
         }
-        other => other,
+        other => other.map(|(report, _)| report),
     };
     if args.record.is_some() {
         let firmware = outcome.as_ref().ok().map(|r| r.identity.firmware.clone());
@@ -369,13 +380,24 @@ where
     Ok(())
 }
 
-fn print_readout(p: &ReadoutProbe) {
+fn print_readout(p: &ReadoutProbe, during_return: Option<&ReturnProbe>) {
     match &p.pitch {
         Some((pitch, source)) => say!("readout   x pitch {pitch} um ({source})"),
         None => say!("readout   x pitch unknown: no count or Ra check (set pitch-x-um)"),
     }
     for r in &p.results {
         say!("readout   {}: {}", r.form, r.verdict.describe());
+    }
+    match during_return {
+        Some(r) => {
+            for line in r.lines() {
+                say!("return    {line}");
+            }
+            say!("return    {}", r.describe());
+        }
+        None => say!(
+            "return    not tried: whether the read-out is answered while the drive returns needs a trace (--trace)"
+        ),
     }
     match p.conclusion() {
         Conclusion::Works(f) => say!("verdict   {} reads the profile", f.total),
@@ -386,7 +408,10 @@ fn print_readout(p: &ReadoutProbe) {
         Conclusion::NotSupported => say!("verdict   no read-out command (NG030 on every form)"),
         Conclusion::NoFormFound => say!("verdict   no form read the profile"),
     }
-    if let Some(s) = p.snippet() {
+    if let Some(mut s) = p.snippet() {
+        if let Some(line) = during_return.and_then(ReturnProbe::snippet_line) {
+            s.push_str(line);
+        }
         say!("snippet   paste into the station config:");
         say_text!("{s}");
     }
@@ -399,7 +424,8 @@ async fn checklist<S>(
     c: &mut Sj210Client<S>,
     status: u16,
     trace: bool,
-) -> Result<ProbeReport, Sj210Error>
+    readout: Option<&[ReadoutForm]>,
+) -> Result<(ProbeReport, Option<ReturnProbe>), Sj210Error>
 where
     S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin,
 {
@@ -414,39 +440,63 @@ where
         Ok(p) => say!("position  {} (detector, {pos_cmd})", p.trim()),
         Err(e) => say!("position  unreadable: {e}"),
     }
-    if trace {
-        if report.battery == crate::devices::Battery::Abnormal {
-            return Err(Sj210Error::BatteryAbnormal);
+    if !trace {
+        return Ok((report, None));
+    }
+    if report.battery == crate::devices::Battery::Abnormal {
+        return Err(Sj210Error::BatteryAbnormal);
+    }
+    say!("trace     starting one trace (the stylus moves)");
+    // With --readout, the trace stops being waited for once it is measured, and the reads
+    // are asked while the drive returns; the line is read once it is back.
+    let during_return = match readout {
+        Some(forms) => {
+            let returning = c.run_trace_until(TraceUntil::Measured).await?;
+            let probe = if returning == TraceEnd::Returning {
+                c.probe_reads_during_return(forms).await?
+            } else {
+                ReturnProbe::NotSeenReturning {
+                    status: c.status().await?,
+                }
+            };
+            c.wait_idle().await?;
+            Some(probe)
         }
-        say!("trace     starting one trace (the stylus moves)");
-        match &report.profile_readout {
-            ProfileReadout::Supported { .. } => {
-                let line = c.trace_line().await?;
-                say!(
-                    "trace     {} points at {} mm pitch ({}), profile {}",
-                    line.profile.len(),
-                    line.profile.pitch_x_mm,
-                    line.pitch_source,
-                    profile_kind_name(line.profile.kind)
-                );
-                print_results(&line.results);
-                for w in &line.warnings {
-                    say!("warning   {w}");
-                }
+        None => None,
+    };
+    match (&report.profile_readout, during_return.is_some()) {
+        (ProfileReadout::Supported { .. }, traced) => {
+            let line = if traced {
+                c.read_held_line().await?
+            } else {
+                c.trace_line().await?
+            };
+            say!(
+                "trace     {} points at {} mm pitch ({}), profile {}",
+                line.profile.len(),
+                line.profile.pitch_x_mm,
+                line.pitch_source,
+                profile_kind_name(line.profile.kind)
+            );
+            print_results(&line.results);
+            for w in &line.warnings {
+                say!("warning   {w}");
             }
-            ProfileReadout::Unsupported { .. } => {
+        }
+        (ProfileReadout::Unsupported { .. }, traced) => {
+            if !traced {
                 c.run_trace().await?;
-                let mut warnings = Vec::new();
-                let results = c.read_results(&mut warnings).await?;
-                say!("trace     done; results only (profile read-out unavailable)");
-                print_results(&results);
-                for w in &warnings {
-                    say!("warning   {w}");
-                }
+            }
+            let mut warnings = Vec::new();
+            let results = c.read_results(&mut warnings).await?;
+            say!("trace     done; results only (profile read-out unavailable)");
+            print_results(&results);
+            for w in &warnings {
+                say!("warning   {w}");
             }
         }
     }
-    Ok(report)
+    Ok((report, during_return))
 }
 
 fn print_results(results: &[crate::profile::InstrumentResult]) {

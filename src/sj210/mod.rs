@@ -8,6 +8,7 @@
 //! - [`timing`]: how long a trace's phases take, when to ask the status, the deadline.
 //! - [`sanity`]: checks of a read-out (repeated blocks, the instrument's Ra against ours).
 //! - [`readout_probe`]: judging the candidate read-out forms and what to configure.
+//! - [`return_reads`]: judging whether reads are answered while the drive returns.
 //! - [`rate_search`]: the baud rates and parities to try when the configured ones get no
 //!   answer, the lines to paste, and a read-out's wire time at each rate.
 //! - [`models`]: per-model command strings and code tables, config overrides, `RDCON`.
@@ -30,6 +31,7 @@ pub mod rate_search;
 pub mod readout_probe;
 pub mod recorder;
 pub mod replies;
+pub mod return_reads;
 pub mod sampling;
 pub mod sanity;
 pub mod settings;

@@ -27,3 +27,6 @@ pub const M2_CON: &str = "M2 p.22 (SJ-410 CON write layout)";
 pub const C2: &str = "C2 sj220_exceptions.py (SJ-220 device table)";
 /// The public SJ-410 program.
 pub const C3: &str = "C3 Main.cs (SJ-410 program)";
+/// What no document says and no instrument was seen doing yet.
+pub const UNSEEN: &str =
+    "not documented, not yet seen on an instrument (surfscan probe --trace --readout finds out)";

@@ -35,6 +35,7 @@ mod older_scans;
 mod results_unchanged;
 mod scan_dir_analysis;
 mod scan_e2e;
+mod scan_reads_during_return;
 mod scan_runner;
 mod scan_storage;
 mod sim_station_config;

@@ -3,6 +3,10 @@
 //! answers every command from the time since `CTSTA` and records when each came, so the
 //! tests assert the moments, not only the order.
 //!
+//! Where the table says reads are answered during the return, the line is read then and the
+//! next wait for idle asks the status when the return is expected to end; a firmware that
+//! refuses them busy is read after the return, from then on.
+//!
 //! Conditions `3120504.0012`: λc 0.8 mm, N 5, 4 mm evaluation length; the traverse is 4.8 mm
 //! (one λc of pre- and post-travel), 9.6 s at 0.5 mm/s and 4.8 s back at 1 mm/s — worked out
 //! here from the conditions, as the client must.
@@ -10,7 +14,7 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use surfscan::sj210::client::Sj210Client;
-use surfscan::sj210::models::{ModelId, ModelTable};
+use surfscan::sj210::models::{CommandOverrides, ModelId, ModelTable};
 use surfscan::sj210::settings::ClientOptions;
 use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
 use tokio::time::Instant;
@@ -26,6 +30,18 @@ struct Drive {
     measure_ms: u64,
     /// The drive is back this long after `CTSTA`, ms.
     back_ms: u64,
+    /// Whether reads are answered while the drive returns (else `NG011`).
+    reads_during_return: bool,
+}
+
+impl Drive {
+    fn on_time(reads_during_return: bool) -> Drive {
+        Drive {
+            measure_ms: MEASURE_MS,
+            back_ms: MEASURE_MS + RETURN_MS,
+            reads_during_return,
+        }
+    }
 }
 
 /// One command as the device saw it: ms since `CTSTA` (`None` before it), the command, the
@@ -54,6 +70,7 @@ fn drive(d: Drive) -> (DuplexStream, Arc<Mutex<Vec<Seen>>>) {
                 Some(t) if t < d.back_ms => "002",
                 Some(_) => "000",
             };
+            let busy = status == "001" || (status == "002" && !d.reads_during_return);
             let reply: String = match cmd.as_str() {
                 "RDCON" => String::from_utf8_lossy(CONDITIONS).into_owned(),
                 "RDSTU00" => format!("OK{status}\r"),
@@ -61,6 +78,11 @@ fn drive(d: Drive) -> (DuplexStream, Arc<Mutex<Vec<Seen>>>) {
                     started = Some(Instant::now());
                     "OK\r".into()
                 }
+                _ if busy => "NG011\r".into(),
+                "RDPAR" => "OK01\r".into(),
+                "RDRES02,01,00" => "OKRa      1.234 um\r".into(),
+                "RDEVA00" => "OK00003\r".into(),
+                "RDEVA03" => "OK03,    0.125,   -0.250,    0.500\r".into(),
                 other => panic!("unexpected command {other:?}"),
             };
             log.lock()
@@ -90,10 +112,7 @@ fn first(seen: &[Seen], reply: &str) -> u64 {
 
 #[tokio::test(start_paused = true)]
 async fn the_status_is_asked_when_the_trace_and_its_return_are_expected_to_end() {
-    let (io, seen) = drive(Drive {
-        measure_ms: MEASURE_MS,
-        back_ms: MEASURE_MS + RETURN_MS,
-    });
+    let (io, seen) = drive(Drive::on_time(false));
     let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
     c.conditions().await.unwrap();
     let t0 = Instant::now();
@@ -124,6 +143,7 @@ async fn a_drive_slower_than_its_speed_is_seen_within_the_back_off() {
     let (io, seen) = drive(Drive {
         measure_ms: MEASURE_MS + 40,
         back_ms: MEASURE_MS + 40 + RETURN_MS,
+        reads_during_return: false,
     });
     let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
     c.conditions().await.unwrap();
@@ -139,13 +159,121 @@ async fn a_drive_slower_than_its_speed_is_seen_within_the_back_off() {
 #[tokio::test(start_paused = true)]
 async fn without_the_conditions_the_status_is_asked_on_the_interval() {
     // No RDCON read first: the client knows no traverse, so it keeps to the 250 ms grid.
-    let (io, seen) = drive(Drive {
-        measure_ms: MEASURE_MS,
-        back_ms: MEASURE_MS + RETURN_MS,
-    });
+    let (io, seen) = drive(Drive::on_time(false));
     let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
     c.run_trace().await.unwrap();
     let seen = seen.lock().unwrap().clone();
     assert_eq!(first(&seen, "OK002"), 9750);
     assert_eq!(first(&seen, "OK000"), 14_500);
+}
+
+/// The SJ-210 table with the read-out configured, reading during the return when `during`.
+fn table(during: bool) -> ModelTable {
+    let o = CommandOverrides {
+        profile_total: Some("RDEVA00".into()),
+        profile_block: Some("RDEVA{n}".into()),
+        reads_during_return: Some(during),
+        ..CommandOverrides::default()
+    };
+    ModelTable::with_overrides(ModelId::Sj210, &o).unwrap()
+}
+
+/// Three points do not make N × λc / pitch: the count rule has its own tests.
+fn line_opts() -> ClientOptions {
+    ClientOptions {
+        check_point_count: false,
+        ..opts()
+    }
+}
+
+/// The read commands and when they came, ms since `CTSTA`.
+fn reads(seen: &[Seen]) -> Vec<(u64, String, String)> {
+    seen.iter()
+        .filter(|(t, c, _)| t.is_some() && c.starts_with("RD") && c != "RDSTU00" && c != "RDCON")
+        .map(|(t, c, r)| (t.unwrap_or(0), c.clone(), r.clone()))
+        .collect()
+}
+
+const HEIGHTS: [f64; 3] = [0.125, -0.25, 0.5];
+
+#[tokio::test(start_paused = true)]
+async fn the_line_is_read_while_the_drive_returns_and_the_next_idle_is_asked_when_it_is_back() {
+    let (io, seen) = drive(Drive::on_time(true));
+    let mut c = Sj210Client::new(io, table(true), line_opts());
+    let t0 = Instant::now();
+    let line = c.trace_line().await.unwrap();
+    // The whole line is in hand when measuring ends, 4.8 s before the drive is back.
+    assert_eq!(t0.elapsed(), Duration::from_millis(MEASURE_MS));
+    assert_eq!(line.profile.heights_um, HEIGHTS);
+    assert_eq!(line.results[0].value, Some(1.234));
+    let during = reads(&seen.lock().unwrap());
+    // RDPAR, one RDRES, the total and one block.
+    assert_eq!(during.len(), 4, "{during:?}");
+    assert!(
+        during
+            .iter()
+            .all(|(t, _, r)| *t == MEASURE_MS && r.starts_with("OK")),
+        "{during:?}"
+    );
+    // The stage may move only once the drive is back: asked exactly then.
+    c.wait_idle().await.unwrap();
+    assert_eq!(t0.elapsed(), Duration::from_millis(MEASURE_MS + RETURN_MS));
+    let seen = seen.lock().unwrap().clone();
+    assert_eq!(first(&seen, "OK000"), MEASURE_MS + RETURN_MS);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_firmware_that_refuses_reads_during_the_return_is_read_after_it_from_then_on() {
+    let (io, seen) = drive(Drive::on_time(false));
+    let mut c = Sj210Client::new(io, table(true), line_opts());
+    let t0 = Instant::now();
+    let line = c.trace_line().await.unwrap();
+    // Refused busy at 9600, read once the drive was back: the same line.
+    assert_eq!(t0.elapsed(), Duration::from_millis(MEASURE_MS + RETURN_MS));
+    assert_eq!(line.profile.heights_um, HEIGHTS);
+    assert_eq!(line.results[0].value, Some(1.234));
+    let said: Vec<&String> = line
+        .warnings
+        .iter()
+        .filter(|w| w.contains("refused a read while its drive returned"))
+        .collect();
+    assert_eq!(said.len(), 1, "{:?}", line.warnings);
+    assert!(said[0].contains("NG011"), "{said:?}");
+    assert!(said[0].contains("remove reads-during-return"), "{said:?}");
+    let first_trace = reads(&seen.lock().unwrap());
+    // One refused read (not retried), then the four reads after the return.
+    assert_eq!(first_trace[0], (MEASURE_MS, "RDPAR".into(), "NG011".into()));
+    assert_eq!(first_trace.len(), 5, "{first_trace:?}");
+    assert!(first_trace[1..]
+        .iter()
+        .all(|(t, _, r)| *t == MEASURE_MS + RETURN_MS && r.starts_with("OK")));
+    // The next line: no read is tried during its return, and nothing more is said.
+    seen.lock().unwrap().clear();
+    c.wait_idle().await.unwrap();
+    let line = c.trace_line().await.unwrap();
+    assert!(
+        !line.warnings.iter().any(|w| w.contains("refused a read")),
+        "{:?}",
+        line.warnings
+    );
+    let second = reads(&seen.lock().unwrap());
+    assert_eq!(second.len(), 4, "{second:?}");
+    assert!(second.iter().all(|(t, ..)| *t == MEASURE_MS + RETURN_MS));
+}
+
+#[tokio::test(start_paused = true)]
+async fn reads_wait_for_the_drive_unless_the_table_says_otherwise() {
+    // An instrument that would answer during the return, with the table's default (off):
+    // nothing is read before the drive is back.
+    let (io, seen) = drive(Drive::on_time(true));
+    let mut c = Sj210Client::new(io, table(false), line_opts());
+    let t0 = Instant::now();
+    let line = c.trace_line().await.unwrap();
+    assert_eq!(t0.elapsed(), Duration::from_millis(MEASURE_MS + RETURN_MS));
+    assert_eq!(line.profile.heights_um, HEIGHTS);
+    let r = reads(&seen.lock().unwrap());
+    assert!(
+        r.iter().all(|(t, ..)| *t == MEASURE_MS + RETURN_MS),
+        "{r:?}"
+    );
 }

@@ -605,3 +605,114 @@ async fn probe_refuses_bad_arguments_as_usage_errors() {
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
 }
+
+/// A simulator whose drive runs at a tenth of real time (a trace of the bundled window:
+/// 1.6 mm + λc 2.5 mm, 0.82 s out and 0.41 s back), long enough for the reads asked during
+/// the return to come back before it ends; and a config whose speeds say so.
+async fn start_slow(dir: &Path, reads_during_return: bool) -> (SimHandle, PathBuf) {
+    let link = dir.join("sj210");
+    let mut sim = Simulator::new(&link)
+        .instrument(InstrumentConfig {
+            time_scale: 0.1,
+            reads_during_return,
+            ..InstrumentConfig::default()
+        })
+        .start()
+        .unwrap();
+    match tokio::time::timeout(EVENT_WAIT, sim.next_event()).await {
+        Ok(Some(SimEvent::Ready(_))) => {}
+        other => panic!("expected the ready event, got {other:?}"),
+    }
+    let cfg = dir.join("slow.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[instrument]\nport = \"{}\"\nmeasuring-speed-mm-s = 5.0\nreturn-speed-mm-s = 10.0\n[instrument.timeouts]\npoll-interval-ms = 20\nread-retry-budget-ms = 2000\n",
+            link.display()
+        ),
+    )
+    .unwrap();
+    (sim, cfg)
+}
+
+#[tokio::test]
+async fn probe_readout_finds_an_instrument_that_answers_during_the_return_and_says_what_to_paste() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, cfg) = start_slow(dir.path(), true).await;
+    let stats = sim.stats();
+    let (code, stdout, stderr) =
+        run_probe(&["--config", cfg.to_str().unwrap(), "--trace", "--readout"]).await;
+    assert_eq!(code, Some(0), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    // The SJ-210 table has no read-out: the first candidate form is tried during the return.
+    for read in ["RDRES02,01,00", "RDEVA00", "RDEVA50"] {
+        assert!(
+            stdout.contains(&format!(
+                "return    {read} while the drive returned: answered"
+            )),
+            "{read}: {stdout}"
+        );
+    }
+    assert!(
+        stdout.contains("status after the reads: 002, still returning"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("answers the read-out while its drive returns"),
+        "{stdout}"
+    );
+    // The instrument itself says the three reads came while it returned.
+    assert!(
+        surfscan_sim::stats::SimStats::get(&stats.reads_answered_returning) >= 3,
+        "{stats:?}"
+    );
+    // One snippet: the read-out form and the return key, in one [instrument.commands] table
+    // that parses as the config's own.
+    let at = stdout.find("\n[instrument.commands]\n").expect("snippet") + 1;
+    let snippet: String = stdout[at..]
+        .lines()
+        .take_while(|l| !l.starts_with("transcript") && !l.starts_with("next"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    assert!(
+        snippet.ends_with("reads-during-return = true\n"),
+        "{snippet}"
+    );
+    let doc: toml::Table = toml::from_str(&snippet).unwrap();
+    let o: CommandOverrides = doc["instrument"]["commands"].clone().try_into().unwrap();
+    let t = ModelTable::with_overrides(ModelId::Sj210, &o).unwrap();
+    assert!(t.reads_during_return);
+    assert_eq!(t.commands.profile_total.unwrap().template, "RDEVA00");
+    sim.shutdown().await;
+}
+
+#[tokio::test]
+async fn probe_readout_finds_an_instrument_that_refuses_reads_during_the_return() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, cfg) = start_slow(dir.path(), false).await;
+    let stats = sim.stats();
+    let (code, stdout, stderr) =
+        run_probe(&["--config", cfg.to_str().unwrap(), "--trace", "--readout"]).await;
+    // The read-out itself works once the drive is back.
+    assert_eq!(code, Some(0), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert!(
+        stdout.contains("return    RDRES02,01,00 while the drive returned: refused NG011"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains(
+            "refuses reads while its drive returns (NG011): leave reads-during-return off"
+        ),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("verdict   RDEVA00 reads the profile"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("reads-during-return = true"), "{stdout}");
+    assert!(surfscan_sim::stats::SimStats::get(&stats.reads_refused_returning) >= 1);
+    assert_eq!(
+        surfscan_sim::stats::SimStats::get(&stats.reads_answered_returning),
+        0
+    );
+    sim.shutdown().await;
+}

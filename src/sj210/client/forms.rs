@@ -1,16 +1,19 @@
 //! The read-out probe on the instrument: reads the conditions and the results of the trace
 //! it holds, then tries each read-out form until one reads the profile, and checks what it
-//! read. Read-only: nothing moves the stylus. The judging is in
-//! [`crate::sj210::readout_probe`].
+//! read; and, during a trace's return, whether reads are answered then. Read-only: nothing
+//! moves the stylus. The judging is in [`crate::sj210::readout_probe`] and
+//! [`crate::sj210::return_reads`].
 //!
 //! Layer 2: part of [`super::Sj210Client`].
 
 use super::{status, Sj210Client};
 use crate::profile::Profile;
 use crate::sj210::error::Sj210Error;
+use crate::sj210::models::CommandSpec;
 use crate::sj210::ng::NgCode;
 use crate::sj210::readout_probe::{FormResult, FormVerdict, ReadCheck, ReadoutForm, ReadoutProbe};
 use crate::sj210::replies::leading_number;
+use crate::sj210::return_reads::{ReadAnswer, ReturnProbe};
 use crate::sj210::sampling::expected_points;
 use crate::sj210::sanity::check_ra;
 use tokio::io::{AsyncRead, AsyncWrite};
@@ -104,6 +107,68 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             ra,
             repeated_blocks: pass.repeated_blocks,
         }))
+    }
+}
+
+impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
+    /// Asks, while the drive returns from the trace just measured (right after
+    /// [`Sj210Client::run_trace_until`] ended [`super::TraceEnd::Returning`]), one result, a
+    /// read-out total and one block, then the status. The read-out form is the table's when it
+    /// has one, else the first of `forms` the firmware understands. Nothing is retried: a busy
+    /// answer is the finding. Read-only.
+    pub async fn probe_reads_during_return(
+        &mut self,
+        forms: &[ReadoutForm],
+    ) -> Result<ReturnProbe, Sj210Error> {
+        let mut reads = Vec::new();
+        let result = self.table.commands.result.render(1, 0, 0);
+        let (answer, _) = self.ask_during_return(&result).await?;
+        reads.push((result, answer));
+        let candidates: Vec<(CommandSpec, CommandSpec)> = match (
+            &self.table.commands.profile_total,
+            &self.table.commands.profile_block,
+        ) {
+            (Some(t), Some(b)) => vec![(t.clone(), b.clone())],
+            _ => forms.iter().map(ReadoutForm::specs).collect(),
+        };
+        for (total_c, block_c) in candidates {
+            let total = total_c.plain();
+            let (answer, payload) = self.ask_during_return(&total).await?;
+            reads.push((total, answer.clone()));
+            match answer {
+                ReadAnswer::NotUnderstood(_) => continue,
+                ReadAnswer::Answered => {
+                    let n = leading_number(&payload)
+                        .unwrap_or(1)
+                        .clamp(1, super::MAX_BLOCK);
+                    let block = block_c.render(0, 0, n);
+                    let (answer, _) = self.ask_during_return(&block).await?;
+                    reads.push((block, answer));
+                }
+                ReadAnswer::NotNow(_) | ReadAnswer::Failed(_) => {}
+            }
+            break;
+        }
+        let s = self.status().await?;
+        Ok(ReturnProbe::Asked {
+            reads,
+            still_returning: s == status::RETURNING,
+        })
+    }
+
+    /// One read during the return, not retried: its answer and payload; a vanished device is
+    /// an error.
+    async fn ask_during_return(&mut self, cmd: &str) -> Result<(ReadAnswer, String), Sj210Error> {
+        use crate::devices::{DeviceFault, FaultClass};
+        match self.command(cmd, false).await {
+            Ok(payload) => Ok((ReadAnswer::Answered, payload)),
+            Err(e) if e.class() == FaultClass::Absent => Err(e),
+            Err(e) => Ok((
+                e.code()
+                    .map_or_else(|| ReadAnswer::Failed(e.to_string()), ReadAnswer::of_code),
+                String::new(),
+            )),
+        }
     }
 }
 

@@ -6,7 +6,8 @@
 //! - `probe.rs`: the capability probe;
 //! - `trace.rs`: waiting for idle, one trace, abort;
 //! - `readout.rs`: the profile read-out;
-//! - `line.rs`: one complete line (trace, results, profile);
+//! - `line.rs`: one complete line (trace, results, profile), read during the drive's return
+//!   where the model table says the instrument answers then;
 //! - `forms.rs`: the read-out probe that finds the read-out command.
 //!
 //! Reply payloads are read by the pure parsers in [`super::replies`], beside the codec.
@@ -25,6 +26,7 @@ mod reads;
 mod trace;
 
 pub use readout::ReadoutPass;
+pub use trace::{TraceEnd, TraceUntil};
 
 use super::codec::Sj210Codec;
 use super::error::{LinkError, Sj210Error};

@@ -114,7 +114,18 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         &mut self,
         warnings: &mut Vec<String>,
     ) -> Result<ReadoutPass, Sj210Error> {
-        match self.read_profile_once().await {
+        let first = self.read_profile_once().await;
+        self.read_profile_after(first, warnings).await
+    }
+
+    /// The read-out after its first pass: kept when it worked, else restarted once from the
+    /// total (not when the model has no read-out or the device vanished).
+    pub(super) async fn read_profile_after(
+        &mut self,
+        first: Result<ReadoutPass, Sj210Error>,
+        warnings: &mut Vec<String>,
+    ) -> Result<ReadoutPass, Sj210Error> {
+        match first {
             Ok(h) => Ok(h),
             Err(e @ Sj210Error::ProfileUnsupported { .. }) => Err(e),
             Err(

@@ -63,8 +63,13 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
 
     /// Number of customised parameters (`RDPAR`).
     pub async fn parameter_count(&mut self) -> Result<u32, Sj210Error> {
+        self.parameter_count_with(true).await
+    }
+
+    /// [`Sj210Client::parameter_count`], retried on busy codes only when `retry` is true.
+    async fn parameter_count_with(&mut self, retry: bool) -> Result<u32, Sj210Error> {
         let c = self.table.commands.param_count.plain();
-        let payload = self.command(&c, true).await?;
+        let payload = self.command(&c, retry).await?;
         parse_param_count(&payload).ok_or(Sj210Error::UnexpectedReply {
             command: c,
             payload,
@@ -80,12 +85,23 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         &mut self,
         warnings: &mut Vec<String>,
     ) -> Result<Vec<InstrumentResult>, Sj210Error> {
-        let n = self.parameter_count().await?;
+        self.read_results_with(warnings, true).await
+    }
+
+    /// [`Sj210Client::read_results`]; with `retry` false a busy answer (`NG011`, `NG033`) is
+    /// returned at once instead of retried, as while the drive returns it means "not during
+    /// the return", not "not yet".
+    pub(super) async fn read_results_with(
+        &mut self,
+        warnings: &mut Vec<String>,
+        retry: bool,
+    ) -> Result<Vec<InstrumentResult>, Sj210Error> {
+        let n = self.parameter_count_with(retry).await?;
         let width = self.table.result_value_width;
         let mut out = Vec::with_capacity(n as usize);
         for aa in 1..=n {
             let cmd = self.table.commands.result.render(aa, 0, 0);
-            match self.command(&cmd, true).await {
+            match self.command(&cmd, retry).await {
                 Ok(payload) => out.push(parse_result(&cmd, &payload, width)?),
                 // Calculation errors of one parameter: record it without a value.
                 Err(Sj210Error::Device { code, meaning, .. })

@@ -13,6 +13,26 @@ use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::time::{sleep, Instant};
 
+/// What a trace's wait waits for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TraceUntil {
+    /// The drive back at its start (`000`), or stopped at the end of travel (`005`).
+    Back,
+    /// The measurement done: the drive returning (`002`) is enough.
+    Measured,
+}
+
+/// How a trace's wait ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TraceEnd {
+    /// Back at the start (`000`).
+    Back,
+    /// Stopped at the end of travel (`005`, auto-return off).
+    AtEnd,
+    /// Measured, and the drive returning (`002`).
+    Returning,
+}
+
 impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
     /// Status must be idle; on `005` the detector is returned first, on `002` the return
     /// is awaited, its status asked when the last trace's return is expected to end.
@@ -89,6 +109,14 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
 
     /// Starts a trace and polls the status until the instrument is back (idle or `005`).
     pub async fn run_trace(&mut self) -> Result<(), Sj210Error> {
+        self.run_trace_until(TraceUntil::Back).await.map(|_| ())
+    }
+
+    /// Starts a trace and polls the status until the drive is back (idle or `005`), or, with
+    /// [`TraceUntil::Measured`], until the measurement is done and the drive returns (`002`):
+    /// then the next [`Sj210Client::wait_idle`] asks the status when the return is expected
+    /// to end.
+    pub async fn run_trace_until(&mut self, until: TraceUntil) -> Result<TraceEnd, Sj210Error> {
         let s = self.status().await?;
         if s != status::IDLE {
             return Err(Sj210Error::NotIdle {
@@ -142,8 +170,13 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
                 _ => watch.saw_other(at),
             }
             match s {
+                status::RETURNING if until == TraceUntil::Measured => {
+                    self.back_at = watch.back_at().map(|d| started + d);
+                    return Ok(TraceEnd::Returning);
+                }
                 status::MEASURING | status::RETURNING => active = true,
-                status::IDLE | status::INTERMEDIATE if active => return Ok(()),
+                status::IDLE if active => return Ok(TraceEnd::Back),
+                status::INTERMEDIATE if active => return Ok(TraceEnd::AtEnd),
                 status::IDLE | status::INTERMEDIATE => {
                     if started.elapsed() >= self.opts.start_deadline {
                         return Err(Sj210Error::StylusNotOnWorkpiece {

@@ -197,4 +197,7 @@ pub struct CommandOverrides {
     pub profile_block: Option<String>,
     /// Width of the result value field.
     pub result_value_width: Option<usize>,
+    /// Read the results and the profile while the drive returns (only once seen answered on
+    /// this instrument by `surfscan probe --trace --readout`).
+    pub reads_during_return: Option<bool>,
 }

@@ -60,6 +60,12 @@ pub struct ModelTable {
     pub commands: Commands,
     /// Width of the value field in `RDRES…02` replies (7 on the SJ-210, 8 on the SJ-410).
     pub result_value_width: usize,
+    /// Whether the results and the profile can be read while the drive returns after a
+    /// trace (status `002`), so the read-out overlaps the return. Off in every built-in
+    /// table: no manual says, and no instrument was seen doing it
+    /// ([`crate::sj210::sources::UNSEEN`]); `reads-during-return = true` in
+    /// `[instrument.commands]` turns it on once `surfscan probe --trace --readout` saw it.
+    pub reads_during_return: bool,
     /// Baud rates the instrument can be set to.
     pub baud_rates: Vec<u32>,
     /// `RDCON` layout.
@@ -90,6 +96,7 @@ impl ModelTable {
                 model,
                 commands: commands::sj210_commands(),
                 result_value_width: 7,
+                reads_during_return: false,
                 baud_rates: vec![9600, 19200, 38400],
                 condition_layout: ConditionLayout::Sj210,
                 status_codes: codes::status_codes(),
@@ -114,6 +121,7 @@ impl ModelTable {
                     model,
                     commands,
                     result_value_width: 8,
+                    reads_during_return: false,
                     baud_rates: vec![9600, 19200, 38400, 57600],
                     condition_layout: ConditionLayout::Sj410,
                     status_codes: codes::status_codes(),
@@ -136,10 +144,13 @@ impl ModelTable {
         Ok(t)
     }
 
-    /// Merges a config override: the command strings ([`Commands::apply`]) and the result
-    /// value width.
+    /// Merges a config override: the command strings ([`Commands::apply`]), the result
+    /// value width and whether reads are answered during the return.
     pub fn apply(&mut self, o: &CommandOverrides) -> Result<(), ModelError> {
         self.commands.apply(o)?;
+        if let Some(r) = o.reads_during_return {
+            self.reads_during_return = r;
+        }
         if let Some(w) = o.result_value_width {
             if !(1..=20).contains(&w) {
                 return Err(ModelError::BadWidth(w));
@@ -237,7 +248,17 @@ mod tests {
         );
         assert_eq!(t.commands.profile_block.as_ref().unwrap().source, "config");
         assert_eq!(t.commands.status.template, "RDSTU00");
+        assert!(!t.reads_during_return, "off until seen on an instrument");
         assert!(toml::from_str::<CommandOverrides>("statuss = \"X\"").is_err());
+        let o: CommandOverrides = toml::from_str("reads-during-return = true").unwrap();
+        for model in [ModelId::Sj210, ModelId::Sj410] {
+            assert!(!ModelTable::builtin(model).reads_during_return);
+            assert!(
+                ModelTable::with_overrides(model, &o)
+                    .unwrap()
+                    .reads_during_return
+            );
+        }
     }
 
     #[test]

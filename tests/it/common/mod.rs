@@ -94,6 +94,8 @@ pub struct RigOptions {
     pub extra_scan: String,
     /// `[fit]` degree-u and degree-v.
     pub degrees: (usize, usize),
+    /// Changes the emulated instrument's configuration (its drive, how it answers).
+    pub instrument: fn(InstrumentConfig) -> InstrumentConfig,
 }
 
 impl Default for RigOptions {
@@ -104,6 +106,7 @@ impl Default for RigOptions {
             max_line_attempts: 3,
             extra_scan: String::new(),
             degrees: (5, 3),
+            instrument: |c| c,
         }
     }
 }
@@ -125,10 +128,10 @@ impl Rig {
         let instrument_link = tmp.path().join("sj210");
         let stage_link = tmp.path().join("ystage");
         let stage = StageShared::new();
-        let instrument = InstrumentConfig {
+        let instrument = (options.instrument)(InstrumentConfig {
             time_scale: 1.0 / SPEED_UP,
             ..InstrumentConfig::default()
-        };
+        });
         let grbl = GrblSimConfig {
             steps_per_mm: 400.0,
             max_travel_mm: 100.0,
