@@ -350,6 +350,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         lambda_s_um: None,
         sampling_lengths: None,
         central_sections: args.sampling_lengths,
+        form: None,
     };
     if input.is_profile() {
         return characterise_profile(&args, input, &options, &out);

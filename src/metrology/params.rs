@@ -35,6 +35,7 @@
 
 use super::bearing::{level_at_material_ratio, material_ratio_pct};
 use super::filter::{self, END_TREATMENT};
+use super::form::{remove_form, Form};
 use super::{check_heights, check_pitch, MetrologyError};
 use crate::profile::{FilterKind, Profile, ProfileKind};
 use serde::Serialize;
@@ -57,6 +58,11 @@ pub struct Options {
     /// instrument traces N·λc plus λc (`analyze --sampling-lengths`); takes precedence over
     /// `sampling_lengths`.
     pub central_sections: Option<u32>,
+    /// Form-only evaluation (`analyze --form-only`): the primary profile with this form
+    /// removed by least squares and no λc filter, evaluated as P parameters over the whole
+    /// length as one section (ISO 4287: for P the sampling length is the evaluation length)
+    /// unless `sampling_lengths` says otherwise. `apply_lambda_c` is then ignored.
+    pub form: Option<Form>,
 }
 
 impl Default for Options {
@@ -67,6 +73,7 @@ impl Default for Options {
             lambda_s_um: None,
             sampling_lengths: None,
             central_sections: None,
+            form: None,
         }
     }
 }
@@ -90,6 +97,7 @@ impl Options {
             // parameters are then taken over the whole length as one section.
             sampling_lengths: c.sampling_lengths.map(|n| n.max(1)),
             central_sections: None,
+            form: None,
         }
     }
 }
@@ -119,6 +127,17 @@ pub struct Recipe {
     pub pitch_mm: f64,
     /// Reference line for heights.
     pub mean_line: String,
+    /// The profile evaluated: "R" (roughness) or "P" (primary, form-only evaluation: the
+    /// parameters are P parameters, Pa … under the R names).
+    pub profile: &'static str,
+    /// The form removed in a form-only evaluation, in words.
+    pub form: Option<String>,
+    /// Length of one section (sampling length as evaluated), mm; shorter than λc when the
+    /// line is (a plain statement is in `sampling_lengths_rule`).
+    pub section_length_mm: f64,
+    /// Which parameters are averaged over the sampling lengths and which are over the
+    /// evaluation length.
+    pub averaging: String,
     /// Definition id per parameter name.
     pub definitions: BTreeMap<String, String>,
 }
@@ -260,7 +279,62 @@ pub struct LineAnalysis {
     /// Their material ratio curve, [Mr %, height µm] at [`RK_CURVE_POINTS`] equal steps of
     /// Mr, from the same sort as `rk`: what the Rk construction plot draws.
     pub rk_curve: Vec<[f64; 2]>,
+    /// Ra, Rq, Rsk, Rku over the whole evaluation length (ISO 21920-2, ANSI), beside the
+    /// per-sampling-length means of `params` (ISO 4287:1997, the SJ series).
+    pub evaluation_length: EvaluationLengthMoments,
+    /// Why a parameter of `params` is blank, by its name (`RzJIS`, `RSm`, …).
+    pub blank_reasons: BTreeMap<String, String>,
+    /// Index of the first evaluated point in the input line (the run-up left out before it).
+    pub evaluated_from: usize,
+    /// The profile as given after λs (and the form, in a form-only evaluation), the whole
+    /// traced length, µm: the primary profile an instrument prints above the R profile.
+    pub primary_um: Vec<f64>,
+    /// The λc mean line over the whole traced length when the filter ran here, µm.
+    pub mean_line_um: Option<Vec<f64>>,
 }
+
+/// Amplitude parameters over the whole evaluation length, heights about the same reference
+/// line as `params` (no further mean removal).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EvaluationLengthMoments {
+    /// mean |Z| over ln.
+    #[serde(rename = "Ra_ln_um")]
+    pub ra_um: f64,
+    /// rms Z over ln.
+    #[serde(rename = "Rq_ln_um")]
+    pub rq_um: f64,
+    /// mean Z³ / Rq³ over ln.
+    #[serde(rename = "Rsk_ln")]
+    pub rsk: f64,
+    /// mean Z⁴ / Rq⁴ over ln.
+    #[serde(rename = "Rku_ln")]
+    pub rku: f64,
+}
+
+impl EvaluationLengthMoments {
+    fn of(z: &[f64]) -> EvaluationLengthMoments {
+        let n = z.len().max(1) as f64;
+        let m2 = z.iter().map(|v| v * v).sum::<f64>() / n;
+        let rq = m2.sqrt();
+        EvaluationLengthMoments {
+            ra_um: z.iter().map(|v| v.abs()).sum::<f64>() / n,
+            rq_um: rq,
+            rsk: if rq > 0.0 {
+                z.iter().map(|v| v * v * v).sum::<f64>() / n / rq.powi(3)
+            } else {
+                0.0
+            },
+            rku: if rq > 0.0 {
+                z.iter().map(|v| v * v * v * v).sum::<f64>() / n / (m2 * m2)
+            } else {
+                0.0
+            },
+        }
+    }
+}
+
+/// The averaging convention, as written into every recipe.
+pub const AVERAGING: &str = "Ra Rq Rp Rv Rz Rsk Rku RDq RDa RSm Rc RzJIS: per sampling length, then averaged over the N lengths (ISO 4287:1997, the SJ series); Rt Rz1max Rmr(c) Rdc Rmr and the Rk family: over the evaluation length; Ra_ln Rq_ln Rsk_ln Rku_ln: over the evaluation length (ISO 21920-2, ANSI)";
 
 /// Points of [`LineAnalysis::rk_curve`] (0.1 % steps of Mr).
 pub const RK_CURVE_POINTS: usize = 1001;
@@ -337,21 +411,32 @@ pub fn analyze_line(
         min_points: MIN_POINTS_PER_SECTION,
     };
 
-    // λs then λc.
+    // λs, then λc or (form-only) the stated form.
     let primary = match options.lambda_s_um {
         Some(ls) => filter::gaussian_mean_line(heights_um, pitch_mm, ls / 1000.0)?,
         None => heights_um.to_vec(),
     };
-    let r_all = if options.apply_lambda_c {
-        filter::split(&primary, pitch_mm, lc)?.roughness_um
+    let primary = match options.form {
+        Some(form) => remove_form(&primary, form)?,
+        None => primary,
+    };
+    let filtered = options.apply_lambda_c && options.form.is_none();
+    let (r_all, mean_line_um) = if filtered {
+        let split = filter::split(&primary, pitch_mm, lc)?;
+        (split.roughness_um, Some(split.mean_line_um))
     } else {
-        primary
+        (primary.clone(), None)
+    };
+    // Form-only: P parameters, the whole length one section unless N is given.
+    let sampling_lengths = match (options.form, options.sampling_lengths) {
+        (Some(_), None) => Some(1),
+        (_, n) => n,
     };
 
     // Sampling lengths.
     let length_mm = n_all as f64 * pitch_mm;
     let ratio = length_mm / lc;
-    let (n_sec, rule, start, per) = match (options.central_sections, options.sampling_lengths) {
+    let (n_sec, rule, start, per) = match (options.central_sections, sampling_lengths) {
         (Some(0), _) | (None, Some(0)) => return Err(MetrologyError::ZeroSections { got: 0 }),
         (Some(k), _) => {
             let k = k as usize;
@@ -402,8 +487,7 @@ pub fn analyze_line(
         }
     };
     if per < MIN_POINTS_PER_SECTION {
-        if options.sampling_lengths.is_none() && options.central_sections.is_none() && ratio >= 1.0
-        {
+        if sampling_lengths.is_none() && options.central_sections.is_none() && ratio >= 1.0 {
             return Err(MetrologyError::PitchTooCoarse {
                 pitch_mm,
                 points_per_sampling_length: per,
@@ -415,6 +499,17 @@ pub fn analyze_line(
     }
     let used = n_sec * per;
     let r: Vec<f64> = r_all.get(start..start + used).ok_or(too_short)?.to_vec();
+    let section_length_mm = per as f64 * pitch_mm;
+    // Say plainly when a section is not a sampling length of λc (an instrument's arbitrary
+    // evaluation length shorter than λc, a short form-only trace).
+    let rule = if section_length_mm < lc * 0.99 {
+        format!(
+            "{rule}; each section is {} mm long, shorter than λc {lc} mm: the parameters are over that length, not over a sampling length of λc",
+            crate::numfmt::fmt(section_length_mm, crate::numfmt::Quantity::LengthMm)
+        )
+    } else {
+        rule
+    };
 
     // 7-point slope over the evaluation length.
     let slopes: Vec<Option<f64>> = (0..used)
@@ -437,6 +532,27 @@ pub fn analyze_line(
         let sec = r.get(s * per..(s + 1) * per).unwrap_or(&[]);
         let sl = slopes.get(s * per..(s + 1) * per).unwrap_or(&[]);
         acc.add_section(sec, sl, pitch_mm * 1000.0, lr_um);
+        if let (Some((peaks, valleys)), None) = (acc.ten_point_short, acc.rzjis_short_section) {
+            acc.rzjis_short_section = Some((s, peaks, valleys));
+        }
+    }
+    let mut blank_reasons = BTreeMap::new();
+    if let Some((s, peaks, valleys)) = acc.rzjis_short_section {
+        blank_reasons.insert(
+            "RzJIS".to_string(),
+            format!(
+                "sampling length {} of {n_sec} has {peaks} peaks and {valleys} valleys between mean-line crossings, fewer than the 5 of each the ten-point height needs",
+                s + 1
+            ),
+        );
+    }
+    if acc.rsm_n == 0 {
+        for name in ["RSm", "Rc", "RPc", "Rppi"] {
+            blank_reasons.insert(
+                name.to_string(),
+                format!("no sampling length holds a profile element (a peak reaching +10 % and a valley reaching −10 % of its Rz between upward mean-line crossings, at least 1 % of the sampling length wide), so {name} is undefined"),
+            );
+        }
     }
     let k = n_sec as f64;
     let max = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -500,12 +616,15 @@ pub fn analyze_line(
     let recipe = Recipe {
         standard: "ISO 4287:1997 (as the SJ series, standard ISO1997), ISO 13565-2, ISO 16610-21"
             .to_string(),
-        filter: if options.apply_lambda_c {
-            "ISO 16610-21 Gaussian, kernel truncated at ±λc".to_string()
-        } else {
-            "none (input is an R profile)".to_string()
+        filter: match (options.form, filtered) {
+            (Some(form), _) => format!(
+                "none: form-only evaluation of the primary profile, {} removed",
+                form.describe()
+            ),
+            (None, true) => "ISO 16610-21 Gaussian, kernel truncated at ±λc".to_string(),
+            (None, false) => "none (input is an R profile)".to_string(),
         },
-        end_treatment: if options.apply_lambda_c {
+        end_treatment: if filtered {
             END_TREATMENT.to_string()
         } else {
             "none".to_string()
@@ -517,19 +636,28 @@ pub fn analyze_line(
         points_per_section: per,
         points_not_evaluated: n_all - used,
         pitch_mm,
-        mean_line: if options.apply_lambda_c {
-            "λc Gaussian filter mean line".to_string()
-        } else {
-            "zero line of the R profile as given".to_string()
+        mean_line: match (options.form, filtered) {
+            (Some(form), _) => format!("the {} of the primary profile", form.describe()),
+            (None, true) => "λc Gaussian filter mean line".to_string(),
+            (None, false) => "zero line of the R profile as given".to_string(),
         },
+        profile: if options.form.is_some() { "P" } else { "R" },
+        form: options.form.map(Form::describe),
+        section_length_mm,
+        averaging: AVERAGING.to_string(),
         definitions: definitions(),
     };
     Ok(LineAnalysis {
         params,
         recipe,
+        evaluation_length: EvaluationLengthMoments::of(&r),
         roughness_um: r,
         rk,
         rk_curve,
+        blank_reasons,
+        evaluated_from: start,
+        primary_um: primary,
+        mean_line_um,
     })
 }
 
@@ -553,6 +681,10 @@ struct Acc {
     rz1max: f64,
     rzjis: Option<f64>,
     rzjis_missing: bool,
+    /// Peaks and valleys of the last section when it had too few for RzJIS.
+    ten_point_short: Option<(usize, usize)>,
+    /// The first section with too few peaks or valleys for RzJIS: (index, peaks, valleys).
+    rzjis_short_section: Option<(usize, usize, usize)>,
     rsk: f64,
     rku: f64,
     rdq: f64,
@@ -587,9 +719,12 @@ impl Acc {
             self.rdq += (sl.iter().map(|s| s * s).sum::<f64>() / sl.len() as f64).sqrt();
             self.rda += sl.iter().map(|s| s.abs()).sum::<f64>() / sl.len() as f64;
         }
+        self.ten_point_short = None;
         match ten_point(z) {
-            Some(v) if !self.rzjis_missing => self.rzjis = Some(self.rzjis.unwrap_or(0.0) + v),
-            _ => {
+            Ok(v) if !self.rzjis_missing => self.rzjis = Some(self.rzjis.unwrap_or(0.0) + v),
+            Ok(_) => {}
+            Err(counts) => {
+                self.ten_point_short = Some(counts);
                 self.rzjis_missing = true;
                 self.rzjis = None;
             }
@@ -606,7 +741,8 @@ impl Acc {
 
 /// Ten-point height of a section: peaks are the maxima of the portions above the mean line,
 /// valleys the minima of the portions below; mean of the 5 highest plus mean of the 5 deepest.
-fn ten_point(z: &[f64]) -> Option<f64> {
+/// Fewer than 5 of either: the counts of peaks and valleys found.
+fn ten_point(z: &[f64]) -> Result<f64, (usize, usize)> {
     let mut peaks = Vec::new();
     let mut valleys = Vec::new();
     let mut cur: Option<(bool, f64)> = None;
@@ -643,13 +779,13 @@ fn ten_point(z: &[f64]) -> Option<f64> {
         }
     }
     if peaks.len() < 5 || valleys.len() < 5 {
-        return None;
+        return Err((peaks.len(), valleys.len()));
     }
     peaks.sort_by(|a, b| b.total_cmp(a));
     valleys.sort_by(|a, b| a.total_cmp(b));
     let p: f64 = peaks.iter().take(5).sum::<f64>() / 5.0;
     let v: f64 = valleys.iter().take(5).sum::<f64>() / 5.0;
-    Some(p - v)
+    Ok(p - v)
 }
 
 /// A profile element of a section: a peak and the valley after it.

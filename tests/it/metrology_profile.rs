@@ -98,6 +98,7 @@ fn no_filter(lc: f64) -> Options {
         lambda_s_um: None,
         sampling_lengths: None,
         central_sections: None,
+        form: None,
     }
 }
 
@@ -466,4 +467,133 @@ fn a_pitch_coarser_than_a_sampling_length_needs_is_named_not_called_too_short() 
         analyze_line(&z[..1], 0.5, &Options::default()),
         Err(MetrologyError::TooShort { .. })
     ));
+}
+
+/// Sections of different amplitude: the per-section means and the whole-length values differ
+/// by closed forms. Five sections of 8 sine periods with amplitudes a_i: lr-mean
+/// Rq = Σ(a_i/√2)/5, whole-length Rq = √(Σ a_i²/2 / 5); Ra likewise with 2a/π.
+#[test]
+fn whole_length_moments_stand_beside_the_per_section_means() {
+    let (lambda, pitch) = (0.1, 0.0005);
+    let amps = [0.5, 1.0, 1.5, 2.0, 4.0];
+    let z: Vec<f64> = amps
+        .iter()
+        .flat_map(|a| sine(1600, pitch, lambda, *a))
+        .collect();
+    let a = analyze_line(&z, pitch, &no_filter(0.8)).unwrap();
+    let s2 = std::f64::consts::SQRT_2;
+    let mean_rq = amps.iter().map(|a| a / s2).sum::<f64>() / 5.0;
+    let ln_rq = (amps.iter().map(|a| a * a / 2.0).sum::<f64>() / 5.0).sqrt();
+    let ln_ra = amps.iter().map(|a| 2.0 * a / PI).sum::<f64>() / 5.0;
+    assert!(
+        (a.params.rq_um - mean_rq).abs() < 1e-3,
+        "{}",
+        a.params.rq_um
+    );
+    assert!(
+        (a.evaluation_length.rq_um - ln_rq).abs() < 1e-3,
+        "{:?}",
+        a.evaluation_length
+    );
+    assert!((a.evaluation_length.ra_um - ln_ra).abs() < 1e-3);
+    // Each section is a symmetric sine (Rku 1.5); the mixture over the length is heavier
+    // tailed: Rku_ln = (Σ 3a⁴/8 / 5) / Rq_ln⁴.
+    let ln_rku = amps.iter().map(|a| 3.0 * a.powi(4) / 8.0).sum::<f64>() / 5.0 / ln_rq.powi(4);
+    assert!((a.params.rku - 1.5).abs() < 1e-3 && (a.evaluation_length.rku - ln_rku).abs() < 1e-3);
+    assert!(a
+        .recipe
+        .averaging
+        .contains("per sampling length, then averaged"));
+}
+
+/// A section with fewer than 5 peaks leaves RzJIS blank with the reason; a profile without
+/// two elements in any section leaves RSm blank with the reason.
+#[test]
+fn a_blank_parameter_carries_its_reason() {
+    // 8 periods per section, but section 3 holds only 3 (a slow wave there).
+    let pitch = 0.0005;
+    let mut z = Vec::new();
+    for s in 0..5 {
+        let periods = if s == 2 { 3.0 } else { 8.0 };
+        z.extend((0..1600).map(|i| (2.0 * PI * periods * i as f64 / 1600.0).sin()));
+    }
+    let a = analyze_line(&z, pitch, &no_filter(0.8)).unwrap();
+    assert!(a.params.rzjis_um.is_none());
+    let why = &a.blank_reasons["RzJIS"];
+    assert!(why.starts_with("sampling length 3 of 5 has "), "{why}");
+    assert!(why.contains("fewer than the 5"), "{why}");
+    assert!(a.params.rsm_um.is_some() && !a.blank_reasons.contains_key("RSm"));
+    // A straight ramp about zero: no element anywhere.
+    let ramp: Vec<f64> = (0..8000).map(|i| (i as f64 - 4000.0) * 1e-4).collect();
+    let b = analyze_line(&ramp, pitch, &no_filter(0.8)).unwrap();
+    assert!(
+        b.params.rsm_um.is_none()
+            && b.blank_reasons["RSm"].contains("no sampling length holds a profile element")
+    );
+}
+
+/// Form-only: a tilted, curved sine evaluated with the stated form removed and no λc filter
+/// gives the sine's own parameters as P parameters over the whole length as one section.
+#[test]
+fn form_only_evaluates_the_primary_profile_about_its_form() {
+    use surfscan::metrology::form::Form;
+    let (amp, lambda, pitch) = (1.0, 0.1, 0.0005);
+    let z: Vec<f64> = sine(8000, pitch, lambda, amp)
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let x = i as f64 * pitch;
+            v + 40.0 + 3.0 * x - 2.0 * (x - 2.0) * (x - 2.0)
+        })
+        .collect();
+    let options = Options {
+        form: Some(Form::Polynomial(2)),
+        ..Options::default()
+    };
+    let a = analyze_line(&z, pitch, &options).unwrap();
+    assert_eq!(a.recipe.profile, "P");
+    assert_eq!(a.recipe.sampling_lengths, 1);
+    assert!(
+        a.recipe.filter.starts_with("none: form-only"),
+        "{}",
+        a.recipe.filter
+    );
+    assert!(a.mean_line_um.is_none());
+    // Pa = 2A/π, Pq = A/√2, Pt = 2A, but for what the least-squares form takes of the sine
+    // itself: over whole periods ∫x·sin = −L·λ/2π, so the fitted line tilts by
+    // 12·A·λ/(2π·L²) per mm, ±0.024 µm at the ends of 4 mm, which Pt gains (2.3 %).
+    assert!(
+        (a.params.ra_um - 2.0 * amp / PI).abs() < 2e-3,
+        "{}",
+        a.params.ra_um
+    );
+    assert!((a.params.rq_um - amp / 2f64.sqrt()).abs() < 2e-3);
+    let tilt = 12.0 * amp * lambda / (2.0 * PI * 16.0) * 4.0;
+    assert!(
+        (a.params.rt_um - (2.0 * amp + tilt)).abs() < 0.01,
+        "{} vs {}",
+        a.params.rt_um,
+        2.0 * amp + tilt
+    );
+}
+
+/// A section shorter than λc (an instrument's arbitrary evaluation length) is said plainly.
+#[test]
+fn a_section_shorter_than_lambda_c_is_said_plainly() {
+    let z = sine(1067, 0.0015, 0.1, 1.0);
+    let options = Options {
+        lambda_c_mm: 2.5,
+        apply_lambda_c: false,
+        sampling_lengths: Some(1),
+        ..Options::default()
+    };
+    let a = analyze_line(&z, 0.0015, &options).unwrap();
+    assert!((a.recipe.section_length_mm - 1.6005).abs() < 1e-9);
+    assert!(
+        a.recipe
+            .sampling_lengths_rule
+            .contains("each section is 1.601 mm long, shorter than λc 2.5 mm"),
+        "{}",
+        a.recipe.sampling_lengths_rule
+    );
 }

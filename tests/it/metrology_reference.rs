@@ -90,6 +90,7 @@ fn real_profiles_agree_with_surfalize_and_scipy_where_conventions_agree() {
         lambda_s_um: None,
         sampling_lengths: None,
         central_sections: None,
+        form: None,
     };
     let ours = analyze_line(&z, pitch, &options).unwrap();
     assert_eq!(ours.recipe.sampling_lengths, 4);

@@ -75,6 +75,7 @@ fn expected_options() -> Options {
         lambda_s_um: None,
         sampling_lengths: None,
         central_sections: None,
+        form: None,
     }
 }
 

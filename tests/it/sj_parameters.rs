@@ -15,6 +15,7 @@ fn no_filter() -> Options {
         lambda_s_um: None,
         sampling_lengths: None,
         central_sections: None,
+        form: None,
     }
 }
 
