@@ -37,6 +37,9 @@ pub(super) struct Hands<'s, S: Station> {
     pub(super) identity: Option<InstrumentIdentity>,
     /// Read back by the last move.
     pub(super) readback: Option<Nm>,
+    /// Devices being closed on a blocking thread: a device is opened again only once its
+    /// old port is closed (the port is opened exclusively).
+    pub(super) closing: Vec<(Device, tokio::task::JoinHandle<()>)>,
 }
 
 /// A traced line waiting for its commit.
@@ -51,7 +54,10 @@ impl<S: Station> Hands<'_, S> {
     /// Performs a device effect; its result as the machine's event.
     pub(super) async fn perform(&mut self, action: &Action, held: &mut Option<Held>) -> Event {
         match action {
-            Action::Open(d) => self.open(*d).await,
+            Action::Open(d) => {
+                self.closed(*d).await;
+                self.open(*d).await
+            }
             Action::Home => {
                 let Some(stage) = self.stage.as_mut() else {
                     return not_open(Device::Stage);
@@ -304,6 +310,29 @@ pub(super) fn is_device_effect(a: &Action) -> bool {
 }
 
 impl<S: Station> Hands<'_, S> {
+    /// Closes a device aside ([`super::station::close_aside`]); it is opened again only once
+    /// that is done.
+    pub(super) fn close(&mut self, device: Device) {
+        let handle = match device {
+            Device::Instrument => super::station::close_aside(self.instrument.take()),
+            Device::Stage => super::station::close_aside(self.stage.take()),
+        };
+        if let Some(h) = handle {
+            self.closing.push((device, h));
+        }
+    }
+
+    /// Waits until the earlier port of `device` is closed.
+    async fn closed(&mut self, device: Device) {
+        let (mine, others): (Vec<_>, Vec<_>) = std::mem::take(&mut self.closing)
+            .into_iter()
+            .partition(|(d, _)| *d == device);
+        self.closing = others;
+        for (_, h) in mine {
+            let _ = h.await;
+        }
+    }
+
     /// Takes the identities of the scan's start record: reopened devices must match them.
     pub(super) fn attach(&mut self, l: &Ledger) {
         self.identity = Some(InstrumentIdentity {

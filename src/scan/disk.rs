@@ -12,8 +12,9 @@ use std::path::Path;
 use super::plan::estimate_scan_bytes;
 use super::store_error::StoreError;
 
-/// Bytes available to an unprivileged writer on the file system holding `dir`.
-pub fn free_bytes(dir: &Path) -> Result<u64, StoreError> {
+/// Bytes and inodes available to an unprivileged writer on the file system holding `dir`
+/// (inodes `u64::MAX` when the file system does not count them).
+pub fn free_space(dir: &Path) -> Result<(u64, u64), StoreError> {
     let st = nix::sys::statvfs::statvfs(dir).map_err(|e| StoreError::Io {
         op: "statvfs",
         path: dir.to_path_buf(),
@@ -21,11 +22,19 @@ pub fn free_bytes(dir: &Path) -> Result<u64, StoreError> {
     })?;
     // The libc types are u64 on 64-bit Linux but narrower elsewhere: keep the widening.
     #[allow(clippy::useless_conversion)]
-    let (blocks, size) = (
+    let (blocks, size, files, files_free) = (
         u64::from(st.blocks_available()),
         u64::from(st.fragment_size()),
+        u64::from(st.files()),
+        u64::from(st.files_available()),
     );
-    Ok(blocks.saturating_mul(size))
+    let inodes = if files == 0 { u64::MAX } else { files_free };
+    Ok((blocks.saturating_mul(size), inodes))
+}
+
+/// Bytes available to an unprivileged writer on the file system holding `dir`.
+pub fn free_bytes(dir: &Path) -> Result<u64, StoreError> {
+    free_space(dir).map(|(bytes, _)| bytes)
 }
 
 /// Bytes of the files in scan directory `scan_dir` besides its lines (`lines/`,
@@ -80,7 +89,16 @@ pub fn preflight_disk(
     points_per_line: u64,
 ) -> Result<u64, StoreError> {
     let needed = estimate_scan_bytes(lines, points_per_line);
-    check_space(output_dir, needed, free_bytes(output_dir)?)?;
+    let (free, inodes) = free_space(output_dir)?;
+    check_space(output_dir, needed, free)?;
+    let needed_inodes = super::plan::remaining_scan_inodes(lines, 0);
+    if inodes < needed_inodes {
+        return Err(StoreError::TooFewInodes {
+            path: output_dir.to_path_buf(),
+            needed: needed_inodes,
+            available: inodes,
+        });
+    }
     Ok(needed)
 }
 

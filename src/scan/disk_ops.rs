@@ -8,13 +8,14 @@
 
 use super::channels::Control;
 use super::device_ops::Held;
-use super::disk::{free_bytes, outputs_bytes};
+use super::disk::{free_space, outputs_bytes};
 use super::ending::End;
 use super::ledger::Ledger;
 use super::line::{LineIdentity, LineMeta, StoredLine};
 use super::machine::{Action, Event, StorageFailure};
 use super::opening::{self, NewScan};
 use super::outputs::{Outputs, OutputsError};
+use super::policy::StorageClass;
 use super::settings::RunSettings;
 use crate::devices::ProbeReport;
 
@@ -70,7 +71,7 @@ impl Books<'_> {
     /// The machine's event for the outputs written (or not) by the scan's ledger.
     pub(super) fn outputs_event(&mut self, written: Result<Outputs, OutputsError>) -> Event {
         let Some(l) = self.ledger.as_ref() else {
-            return storage_event(false, "internal: no scan to finish".into());
+            return internal("internal: no scan to finish");
         };
         match written {
             Ok(outputs) => {
@@ -86,19 +87,12 @@ impl Books<'_> {
                 self.outputs = Some(outputs);
                 Event::OutputsWritten { summary }
             }
-            Err(e) => {
-                let full = e.is_io() && is_disk_full_text(&e);
-                let message = if full {
-                    e.to_string()
-                } else {
-                    format!(
-                        "all lines are on disk but the outputs could not be written: {e}; run `surfscan fit {}` and `surfscan analyze {}` once the cause is cleared",
-                        l.dir.display(),
-                        l.dir.display()
-                    )
-                };
-                storage_event(full, message)
-            }
+            Err(e) if e.is_io() => Event::StorageFailed(storage_failure(&e)),
+            Err(e) => internal(&format!(
+                "all lines are on disk but the outputs could not be made: {e}; run `surfscan fit {}` and `surfscan analyze {}` to see why",
+                l.dir.display(),
+                l.dir.display()
+            )),
         }
     }
 
@@ -112,10 +106,7 @@ impl Books<'_> {
         match a {
             Action::CreateScan => {
                 let (Some(who), Some(report)) = (self.new_scan.take(), probe) else {
-                    return storage_event(
-                        false,
-                        "internal: no probe report for the new scan".into(),
-                    );
+                    return internal("internal: no probe report for the new scan");
                 };
                 match opening::create(self.settings, who, report, station_points) {
                     Ok(l) => {
@@ -128,12 +119,12 @@ impl Books<'_> {
                         self.ledger = Some(l);
                         ev
                     }
-                    Err(e) => storage_event(e.is_disk_full(), e.to_string()),
+                    Err(e) => Event::StorageFailed(storage_failure(&e)),
                 }
             }
             Action::Commit { line, attempt } => {
                 let (Some(l), Some(h)) = (self.ledger.as_mut(), self.held.as_ref()) else {
-                    return storage_event(false, "internal: no line to commit".into());
+                    return internal("internal: no line to commit");
                 };
                 let p = &h.traced.profile;
                 let meta = LineMeta {
@@ -158,7 +149,7 @@ impl Books<'_> {
                         self.committed = Some(meta);
                         Event::Committed
                     }
-                    Err(e) => storage_event(e.is_disk_full(), e.to_string()),
+                    Err(e) => Event::StorageFailed(storage_failure(&e)),
                 }
             }
             Action::Push { line } => {
@@ -192,7 +183,7 @@ impl Books<'_> {
             }
             Action::WriteOutputs => {
                 let Some(l) = self.ledger.as_mut() else {
-                    return storage_event(false, "internal: no scan to finish".into());
+                    return internal("internal: no scan to finish");
                 };
                 let written = l.write_outputs(self.settings.characterise.as_deref());
                 self.outputs_event(written)
@@ -202,43 +193,62 @@ impl Books<'_> {
                     .ledger
                     .as_ref()
                     .map_or_else(|| self.settings.output_dir.clone(), |l| l.dir.clone());
-                let free_bytes = free_bytes(&dir).unwrap_or_else(|e| {
+                let (free_bytes, free_inodes) = free_space(&dir).unwrap_or_else(|e| {
                     tracing::warn!("cannot read the free space of {}: {e}", dir.display());
-                    0
+                    (0, 0)
                 });
                 let outputs_bytes = self.ledger.as_ref().map_or(0, |l| outputs_bytes(&l.dir));
                 Event::SpaceChecked {
                     free_bytes,
+                    free_inodes,
                     outputs_bytes,
                 }
             }
             other => {
                 tracing::error!("internal: {other:?} performed as a disk effect");
-                storage_event(
-                    false,
-                    format!("internal: {other:?} is not a disk operation"),
-                )
+                internal(&format!("internal: {other:?} is not a disk operation"))
             }
         }
     }
 }
 
-fn storage_event(disk_full: bool, message: String) -> Event {
-    Event::StorageFailed(StorageFailure { disk_full, message })
+/// A failed write that no file system refused (an internal error, outputs the lines cannot
+/// make).
+fn internal(message: &str) -> Event {
+    Event::StorageFailed(StorageFailure::not_storage(message.to_owned()))
 }
 
-/// Whether an outputs error is the disk being full (the error chain carries `ENOSPC`).
-fn is_disk_full_text(e: &(dyn std::error::Error + 'static)) -> bool {
+/// How the file system refused a write, from the error chain: its first operating-system
+/// error; a full disk (`ENOSPC`, `EDQUOT`, or the pre-flight finding too little room) apart.
+fn storage_failure(e: &(dyn std::error::Error + 'static)) -> StorageFailure {
+    let mut errno = None;
     let mut cur: Option<&(dyn std::error::Error + 'static)> = Some(e);
     while let Some(err) = cur {
-        if let Some(io) = err.downcast_ref::<std::io::Error>() {
-            if io.raw_os_error() == Some(libc::ENOSPC) || io.raw_os_error() == Some(libc::EDQUOT) {
-                return true;
-            }
+        if let Some(
+            super::store_error::StoreError::DiskTooSmall { .. }
+            | super::store_error::StoreError::TooFewInodes { .. },
+        ) = err.downcast_ref()
+        {
+            return StorageFailure::full(e.to_string());
+        }
+        if let Some(code) = err
+            .downcast_ref::<std::io::Error>()
+            .and_then(std::io::Error::raw_os_error)
+        {
+            errno = Some(code);
+            break;
         }
         cur = err.source();
     }
-    false
+    let class = match errno {
+        Some(libc::ENOSPC | libc::EDQUOT) => StorageClass::Full,
+        _ => StorageClass::Refused,
+    };
+    StorageFailure {
+        class: Some(class),
+        errno,
+        message: e.to_string(),
+    }
 }
 
 impl Books<'_> {
@@ -272,16 +282,37 @@ mod tests {
     use crate::scan::surface_files::SurfaceWriteError;
 
     #[test]
-    fn a_full_disk_is_found_through_the_outputs_error_chain() {
+    fn a_refused_write_is_classed_by_the_first_os_error_of_its_chain() {
         let full = OutputsError::Iges(SurfaceWriteError::Io {
             path: "surface.igs".into(),
             source: std::io::Error::from_raw_os_error(libc::ENOSPC),
         });
-        assert!(is_disk_full_text(&full));
+        let f = storage_failure(&full);
+        assert_eq!(
+            (f.class, f.errno),
+            (Some(StorageClass::Full), Some(libc::ENOSPC))
+        );
         let denied = OutputsError::Report {
             path: "report.json".into(),
-            source: std::io::Error::from_raw_os_error(libc::EACCES),
+            source: std::io::Error::from_raw_os_error(libc::EROFS),
         };
-        assert!(!is_disk_full_text(&denied));
+        let f = storage_failure(&denied);
+        assert_eq!(
+            (f.class, f.errno),
+            (Some(StorageClass::Refused), Some(libc::EROFS))
+        );
+        assert!(f.message.contains("report.json"), "{}", f.message);
+        let line = crate::scan::store_error::StoreError::Io {
+            op: "write",
+            path: "lines/0003.csv".into(),
+            source: std::io::Error::from_raw_os_error(libc::EDQUOT),
+        };
+        assert_eq!(storage_failure(&line).class, Some(StorageClass::Full));
+        let small = crate::scan::store_error::StoreError::DiskTooSmall {
+            path: "/out".into(),
+            needed_bytes: 10,
+            available_bytes: 1,
+        };
+        assert_eq!(storage_failure(&small).class, Some(StorageClass::Full));
     }
 }

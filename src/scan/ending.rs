@@ -119,7 +119,7 @@ impl FailReason {
     pub fn cause(&self) -> FailCause {
         match self {
             FailReason::BudgetExhausted { .. } => FailCause::Budget,
-            FailReason::Storage(_) | FailReason::Outputs(_) => FailCause::Storage,
+            FailReason::Storage(_) => FailCause::Storage,
             _ => FailCause::Operator,
         }
     }

@@ -36,7 +36,7 @@ use super::ending::{End, FailReason};
 use super::event::ScanEventKind;
 use super::line_check::{conditions_difference, LineProblem};
 use super::metrics::ScanMetrics;
-use super::plan::{remaining_scan_bytes, Plan};
+use super::plan::{remaining_scan_bytes, remaining_scan_inodes, Plan};
 use super::policy::{self, Backoff, FailRule, FaultKind, Reaction, Situation, Step, StorageClass};
 use super::reasons;
 use super::status::{ended_status, DeviceState, State, Status};
@@ -110,13 +110,36 @@ pub struct TracedSummary {
     pub ra_um: Option<f64>,
 }
 
-/// What a storage failure was.
+/// What a failed durable write was.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct StorageFailure {
-    /// The file system has no space left (`ENOSPC`, quota): it can clear by itself.
-    pub disk_full: bool,
+    /// How the file system refused it; `None` when no file system did (the outputs cannot be
+    /// made from the lines, or an internal error).
+    pub class: Option<StorageClass>,
+    /// The operating system's error number, when it gave one.
+    pub errno: Option<i32>,
     /// The error, naming the file.
     pub message: String,
+}
+
+impl StorageFailure {
+    /// The disk (or a quota) is full.
+    pub fn full(message: String) -> StorageFailure {
+        StorageFailure {
+            class: Some(StorageClass::Full),
+            errno: Some(libc::ENOSPC),
+            message,
+        }
+    }
+
+    /// A failure that is no refusal of the file system.
+    pub fn not_storage(message: String) -> StorageFailure {
+        StorageFailure {
+            class: None,
+            errno: None,
+            message,
+        }
+    }
 }
 
 /// A fault as the machine holds it: its kind for the policy's table, its details for the
@@ -140,8 +163,9 @@ impl Trouble {
             Trouble::Line(p) if p.retry_may_help() => FaultKind::LineRetryable,
             Trouble::Line(_) => FaultKind::LineForeign,
             Trouble::Fitter(_) => FaultKind::FitterRefused,
-            Trouble::Storage(s) if s.disk_full => FaultKind::Storage(StorageClass::Full),
-            Trouble::Storage(_) => FaultKind::Storage(StorageClass::Other),
+            Trouble::Storage(s) => s
+                .class
+                .map_or(FaultKind::OutputsImpossible, FaultKind::Storage),
         }
     }
 
@@ -236,6 +260,9 @@ pub enum Event {
     SpaceChecked {
         /// Bytes free (0 when it could not be read).
         free_bytes: u64,
+        /// Inodes free (`u64::MAX` when the file system does not count them, 0 when they
+        /// could not be read).
+        free_inodes: u64,
         /// Bytes the scan's own outputs already take (an earlier try's surface, report and
         /// plots, which the next try replaces); 0 before the outputs.
         outputs_bytes: u64,
@@ -361,6 +388,8 @@ enum AfterWait {
     Retry,
     /// Check the free space.
     CheckSpace,
+    /// Make the refused write again.
+    Rewrite,
 }
 
 /// Why the scan is suspended.
@@ -368,10 +397,15 @@ enum AfterWait {
 enum Cause {
     Absent(Device),
     Busy(Device),
-    /// Disk full while committing the held line (`outputs` false) or writing the outputs.
-    DiskFull {
+    /// The file system refused committing the held line (`outputs` false) or writing the
+    /// outputs; for a full disk, the space and inodes the rest of the scan needs.
+    Storage {
+        class: StorageClass,
         needed_bytes: u64,
+        needed_inodes: u64,
         outputs: bool,
+        /// Free bytes at the last check.
+        free_bytes: Option<u64>,
     },
 }
 
@@ -655,6 +689,7 @@ impl Machine {
                 self.trouble(step, Trouble::Device(fault), now, out);
             }
             (Doing::Commit, Event::Committed) => {
+                self.storage_back(now, out);
                 self.effect_push(out);
             }
             (Doing::Commit, Event::StorageFailed(s)) => {
@@ -674,13 +709,15 @@ impl Machine {
                 Doing::CheckSpace,
                 Event::SpaceChecked {
                     free_bytes,
+                    free_inodes,
                     outputs_bytes,
                 },
-            ) => self.space_checked(free_bytes, outputs_bytes, now, out),
+            ) => self.space_checked(free_bytes, free_inodes, outputs_bytes, out),
             (Doing::Wait(after), Event::TimerFired) => match after {
                 AfterWait::Open(d) => self.effect(out, Doing::Open(d)),
                 AfterWait::Retry => self.next_step(now, out),
                 AfterWait::CheckSpace => self.effect(out, Doing::CheckSpace),
+                AfterWait::Rewrite => self.rewrite(out),
             },
             // An answer to something not asked (a late result after a cancel): ignored.
             _ => {}
@@ -1004,8 +1041,10 @@ impl Machine {
         self.wait(out, wait, AfterWait::Retry);
     }
 
-    /// Storage that refused a write: what is in memory is kept, the storage checked with
-    /// backoff, the write made again when it can succeed.
+    /// Storage that refused a write: what is in memory is kept, and the write is made again
+    /// with backoff (after checking the free space and inodes, when the disk was full). One
+    /// suspension is recorded however often the write fails again, and its backoff keeps
+    /// growing until a write succeeds.
     fn wait_for_storage(
         &mut self,
         s: StorageFailure,
@@ -1013,50 +1052,68 @@ impl Machine {
         now: Now,
         out: &mut Vec<Action>,
     ) {
-        let committed = self.line;
-        let needed_bytes = remaining_scan_bytes(
-            self.plan.lines,
-            committed,
-            self.columns.map_or(self.points_per_line, |c| c as u64),
-        );
+        let class = s.class.unwrap_or(StorageClass::Refused);
+        let columns = self.columns.map_or(self.points_per_line, |c| c as u64);
+        let needed_bytes = remaining_scan_bytes(self.plan.lines, self.line, columns);
+        let needed_inodes = remaining_scan_inodes(self.plan.lines, self.line);
         let what = reasons::held_up(outputs, self.line);
+        let reason = match class {
+            StorageClass::Full => reasons::disk_full(&what, &s.message, needed_bytes),
+            StorageClass::Refused => reasons::storage_refused(&what, s.errno, &s.message),
+        };
         let wait = match &mut self.suspension {
-            Some(sus) if matches!(sus.cause, Cause::DiskFull { .. }) => {
+            Some(sus) if matches!(sus.cause, Cause::Storage { .. }) => {
+                // The same suspension goes on: a longer wait, no new record.
                 sus.wait = self.policy.backoff.next(sus.wait);
+                if let Cause::Storage { class: c, .. } = &mut sus.cause {
+                    *c = class;
+                }
                 sus.wait
             }
-            _ => self.policy.backoff.next(Duration::ZERO),
+            _ => {
+                let wait = self.policy.backoff.next(Duration::ZERO);
+                out.push(self.note(format!("suspended: {reason}"), None));
+                self.metrics.suspensions += 1;
+                out.push(Action::Notify(ScanEventKind::Suspended, reason.clone()));
+                self.suspension = Some(Suspension {
+                    cause: Cause::Storage {
+                        class,
+                        needed_bytes,
+                        needed_inodes,
+                        outputs,
+                        free_bytes: None,
+                    },
+                    since: now,
+                    wait,
+                });
+                out.push(Action::Metrics(self.metrics.clone()));
+                wait
+            }
         };
-        let reason = reasons::disk_full(&what, &s.message, needed_bytes);
-        out.push(self.note(format!("suspended: {reason}"), None));
-        if !matches!(
-            self.suspension.as_ref().map(|s| &s.cause),
-            Some(Cause::DiskFull { .. })
-        ) {
-            self.metrics.suspensions += 1;
-            out.push(Action::Notify(ScanEventKind::Suspended, reason.clone()));
-            self.suspension = Some(Suspension {
-                cause: Cause::DiskFull {
-                    needed_bytes,
-                    outputs,
-                },
-                since: now,
-                wait,
-            });
-        }
         self.status.state = State::Suspended;
         self.status.reason = Some(reason);
         self.publish(out);
-        out.push(Action::Metrics(self.metrics.clone()));
-        self.wait(out, wait, AfterWait::CheckSpace);
+        let after = match class {
+            StorageClass::Full => AfterWait::CheckSpace,
+            StorageClass::Refused => AfterWait::Rewrite,
+        };
+        self.wait(out, wait, after);
     }
 
-    fn space_checked(&mut self, free: u64, outputs_bytes: u64, now: Now, out: &mut Vec<Action>) {
+    fn space_checked(
+        &mut self,
+        free: u64,
+        free_inodes: u64,
+        outputs_bytes: u64,
+        out: &mut Vec<Action>,
+    ) {
         let Some(Suspension {
             cause:
-                Cause::DiskFull {
+                Cause::Storage {
                     needed_bytes,
+                    needed_inodes,
                     outputs,
+                    ..
                 },
             since,
             wait,
@@ -1064,6 +1121,13 @@ impl Machine {
         else {
             return;
         };
+        if let Some(Suspension {
+            cause: Cause::Storage { free_bytes, .. },
+            ..
+        }) = &mut self.suspension
+        {
+            *free_bytes = Some(free);
+        }
         // The outputs' estimate covers the whole surface and report: what an earlier try
         // already wrote of them is space they keep when written again.
         let available = if outputs {
@@ -1071,30 +1135,60 @@ impl Machine {
         } else {
             free
         };
-        if available < needed_bytes {
+        if available < needed_bytes || free_inodes < needed_inodes {
             let next = self.policy.backoff.next(wait);
             if let Some(s) = &mut self.suspension {
                 s.wait = next;
             }
-            self.status.reason = Some(reasons::still_full(since.wall, free, needed_bytes));
+            self.status.reason = Some(reasons::still_full(
+                since.wall,
+                free,
+                free_inodes,
+                needed_bytes,
+                needed_inodes,
+            ));
             self.publish(out);
             return self.wait(out, next, AfterWait::CheckSpace);
         }
-        out.push(self.note(
-            reasons::space_back(free, now.mono.saturating_duration_since(since.mono)),
-            None,
-        ));
+        // Room again: the write is made again; the suspension ends only when it succeeds.
+        self.rewrite(out);
+    }
+
+    /// Makes the refused write again: the held line's commit, or the outputs.
+    fn rewrite(&mut self, out: &mut Vec<Action>) {
+        let outputs = matches!(
+            self.suspension.as_ref().map(|s| &s.cause),
+            Some(Cause::Storage { outputs: true, .. })
+        );
+        if outputs {
+            self.effect(out, Doing::Outputs);
+        } else {
+            self.commit(out);
+        }
+    }
+
+    /// A write succeeded: a storage suspension ends, recorded once.
+    fn storage_back(&mut self, now: Now, out: &mut Vec<Action>) {
+        let Some(Suspension {
+            cause: Cause::Storage {
+                class, free_bytes, ..
+            },
+            since,
+            ..
+        }) = self.suspension.clone()
+        else {
+            return;
+        };
+        let waited = now.mono.saturating_duration_since(since.mono);
+        let note = match (class, free_bytes) {
+            (StorageClass::Full, Some(free)) => reasons::space_back(free, waited),
+            _ => reasons::storage_back(waited),
+        };
+        out.push(self.note(note, None));
         self.suspension = None;
         self.status.state = State::Scanning;
         self.status.reason = None;
-        if outputs {
-            self.status.state = State::Finishing;
-            self.publish(out);
-            self.effect(out, Doing::Outputs);
-        } else {
-            self.publish(out);
-            self.commit(out);
-        }
+        self.publish(out);
     }
 
     fn line_done(&mut self, now: Now, out: &mut Vec<Action>) {

@@ -116,6 +116,17 @@ pub fn remaining_scan_bytes(lines: u32, committed: u32, points_per_line: u64) ->
         .saturating_add(FIXED_BYTES)
 }
 
+/// Files a scan of `lines` lines of which `committed` are on disk still creates: two per
+/// remaining line (heights and metadata, each through a temporary file), the per-line plots
+/// of the report (a PNG and an SVG each), and an allowance for the surface, report and
+/// other outputs.
+pub fn remaining_scan_inodes(lines: u32, committed: u32) -> u64 {
+    let left = u64::from(lines.saturating_sub(committed));
+    left.saturating_mul(3)
+        .saturating_add(u64::from(lines).saturating_mul(2))
+        .saturating_add(64)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -125,6 +136,12 @@ mod tests {
         // 31 lines × 8000 points: 248000 × 173 B + 31 × 8 KiB + 4 MiB.
         let e = estimate_scan_bytes(31, 8000);
         assert_eq!(e, 248_000 * 173 + 31 * 8192 + 4 * 1024 * 1024);
+    }
+
+    #[test]
+    fn the_files_still_to_come_are_three_per_missing_line_two_plots_per_line_and_the_outputs() {
+        assert_eq!(remaining_scan_inodes(31, 0), 31 * 3 + 31 * 2 + 64);
+        assert_eq!(remaining_scan_inodes(31, 31), 31 * 2 + 64);
     }
 
     #[test]

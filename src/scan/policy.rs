@@ -51,17 +51,23 @@ pub enum FaultKind {
     LineForeign,
     /// The fitter refused a committed line.
     FitterRefused,
-    /// A durable write failed.
+    /// The file system refused a durable write.
     Storage(StorageClass),
+    /// The outputs cannot be made from the lines on disk (the fit refused them), though no
+    /// file system refused anything.
+    OutputsImpossible,
 }
 
-/// Which storage failure.
+/// How the file system refused a write.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StorageClass {
-    /// No space left (`ENOSPC`, `EDQUOT`).
+    /// No space, or no inode, left (`ENOSPC`, `EDQUOT`): the free space and inodes are
+    /// checked before the write is made again.
     Full,
-    /// Any other refusal of the file system (permissions, read-only, I/O error).
-    Other,
+    /// Any other refusal (`EPERM`, `EACCES`, `EROFS`, `EIO`: an immutable directory, a
+    /// permission repaired later, a remount, a USB disk or NFS hiccup): the write is made
+    /// again with backoff.
+    Refused,
 }
 
 /// Where in its work the scan is when the fault happens.
@@ -137,8 +143,10 @@ pub enum FailRule {
     LineRefused,
     /// The fitter refused a committed line.
     FitterRefused,
-    /// The file system refused a write.
+    /// The file system refused a write before the scan existed (a start refused).
     Storage,
+    /// The outputs cannot be made from the lines on disk.
+    Outputs,
 }
 
 /// The table: the reaction to a fault of `kind` in situation `s`.
@@ -175,8 +183,10 @@ pub fn react(kind: FaultKind, s: &Situation) -> Reaction {
         (FaultKind::Device(Fatal), _) => Fail(FailRule::Fatal),
         (FaultKind::LineForeign, _) => Fail(FailRule::LineRefused),
         (FaultKind::FitterRefused, _) => Fail(FailRule::FitterRefused),
-        (FaultKind::Storage(StorageClass::Full), _) => WaitForStorage,
-        (FaultKind::Storage(StorageClass::Other), _) => Fail(FailRule::Storage),
+        // Every refusal of the file system, a full disk or not: what is in memory is kept,
+        // and the write made again when it can succeed; no time limit.
+        (FaultKind::Storage(_), _) => WaitForStorage,
+        (FaultKind::OutputsImpossible, _) => Fail(FailRule::Outputs),
     }
 }
 
@@ -224,7 +234,7 @@ mod tests {
             FaultKind::Device(PositionLost),
             FaultKind::Device(Fatal),
             FaultKind::Storage(StorageClass::Full),
-            FaultKind::Storage(StorageClass::Other),
+            FaultKind::Storage(StorageClass::Refused),
         ];
         for step in [Opening, Creating] {
             for k in kinds {
@@ -321,18 +331,23 @@ mod tests {
     }
 
     #[test]
-    fn storage_failures_while_committing_and_writing_the_outputs() {
+    fn every_storage_failure_of_a_scan_is_waited_for_and_none_ends_it() {
         for step in [Committing, Outputs] {
-            assert_eq!(
-                react(FaultKind::Storage(StorageClass::Full), &at(step)),
-                WaitForStorage,
-                "{step:?}"
-            );
-            assert_eq!(
-                react(FaultKind::Storage(StorageClass::Other), &at(step)),
-                Fail(FailRule::Storage),
-                "{step:?}"
-            );
+            for class in [StorageClass::Full, StorageClass::Refused] {
+                let spent = Situation {
+                    budget_spent: true,
+                    ..at(step)
+                };
+                assert_eq!(
+                    react(FaultKind::Storage(class), &spent),
+                    WaitForStorage,
+                    "{class:?} while {step:?}"
+                );
+            }
         }
+        assert_eq!(
+            react(FaultKind::OutputsImpossible, &at(Outputs)),
+            Fail(FailRule::Outputs)
+        );
     }
 }

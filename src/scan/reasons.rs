@@ -100,13 +100,74 @@ pub fn disk_full(what: &str, message: &str, needed_bytes: u64) -> String {
     )
 }
 
-/// The status reason while the disk stays too full.
-pub fn still_full(since: DateTime<Utc>, free_bytes: u64, needed_bytes: u64) -> String {
+/// The status reason while the disk stays too full (of bytes or of inodes).
+pub fn still_full(
+    since: DateTime<Utc>,
+    free_bytes: u64,
+    free_inodes: u64,
+    needed_bytes: u64,
+    needed_inodes: u64,
+) -> String {
+    if free_inodes < needed_inodes {
+        format!(
+            "disk full since {}: {free_inodes} inodes (files) free, the remaining lines need about {needed_inodes}; delete files in the output directory's file system",
+            stamp(since)
+        )
+    } else {
+        format!(
+            "disk full since {}: {} MB free, the remaining lines need about {} MB; free space in the output directory",
+            stamp(since),
+            mb(free_bytes),
+            mb(needed_bytes)
+        )
+    }
+}
+
+/// The symbolic name of an error number the file system gives a refused write.
+pub fn errno_name(errno: i32) -> Option<&'static str> {
+    Some(match errno {
+        libc::EPERM => "EPERM",
+        libc::EACCES => "EACCES",
+        libc::EROFS => "EROFS",
+        libc::EIO => "EIO",
+        libc::ENOSPC => "ENOSPC",
+        libc::EDQUOT => "EDQUOT",
+        libc::ENOENT => "ENOENT",
+        libc::ENOTDIR => "ENOTDIR",
+        libc::EISDIR => "EISDIR",
+        libc::ESTALE => "ESTALE",
+        libc::ENODEV => "ENODEV",
+        libc::ENXIO => "ENXIO",
+        libc::ETIMEDOUT => "ETIMEDOUT",
+        _ => return None,
+    })
+}
+
+/// The status reason (and the note, after `suspended: `) when the file system refused a
+/// write for another reason than space.
+pub fn storage_refused(what: &str, errno: Option<i32>, message: &str) -> String {
+    let code = errno
+        .and_then(errno_name)
+        .map_or(String::new(), |n| format!("{n}: "));
+    let fix = match errno {
+        Some(libc::EROFS) => "remount the output directory's file system read-write",
+        Some(libc::EPERM) => {
+            "make the output directory writable (an immutable attribute: chattr -i)"
+        }
+        Some(libc::EACCES) => "give the daemon's user write permission on the output directory",
+        Some(libc::EIO) => "check the disk (a USB disk or a network file system that went away)",
+        _ => "make the output directory writable",
+    };
     format!(
-        "disk full since {}: {} MB free, the remaining lines need about {} MB; free space in the output directory",
-        stamp(since),
-        mb(free_bytes),
-        mb(needed_bytes)
+        "the file system refused writing {what} ({code}{message}); it is kept in memory and written again with backoff, and the scan goes on by itself; {fix}"
+    )
+}
+
+/// The note when the file system takes writes again after refusing them.
+pub fn storage_back(waited: Duration) -> String {
+    format!(
+        "the output directory takes writes again after {:.0} s; scan continues",
+        waited.as_secs_f64()
     )
 }
 

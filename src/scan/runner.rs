@@ -22,7 +22,7 @@ use super::machine::{Action, Event, Machine, Now, Policy, StorageFailure};
 use super::opening::{self, NewScan};
 use super::outcome::{Outcome, ScanRequest};
 use super::settings::RunSettings;
-use super::station::{close_aside, Device, Station};
+use super::station::Station;
 use super::status::ended_status;
 use crate::devices::InstrumentIdentity;
 use crate::stage::policy::ScanDirection;
@@ -76,6 +76,7 @@ pub async fn run_scan<S: Station>(
         stage_identity: None,
         identity: None,
         readback: None,
+        closing: Vec::new(),
     };
     let reopening = match request {
         ScanRequest::New {
@@ -195,10 +196,7 @@ async fn drive<S: Station>(
             if let Action::Close(d) = action {
                 // Closing a serial port waits for its unsent bytes to drain (up to the
                 // driver's closing wait, 30 s by default): never on this loop's thread.
-                match d {
-                    Device::Instrument => close_aside(hands.instrument.take()),
-                    Device::Stage => close_aside(hands.stage.take()),
-                }
+                hands.close(d);
             }
             books.immediate(ctl, action);
             continue;
@@ -331,10 +329,7 @@ async fn write_outputs_watched(books: &mut Books<'_>, ctl: &Control) -> Event {
             books.ledger = Some(ledger);
             books.outputs_event(written)
         }
-        Err(message) => Event::StorageFailed(StorageFailure {
-            disk_full: false,
-            message,
-        }),
+        Err(message) => Event::StorageFailed(StorageFailure::not_storage(message)),
     }
 }
 

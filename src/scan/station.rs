@@ -50,20 +50,25 @@ pub async fn devices_answer<S: Station>(
 ) -> Result<(), Fault> {
     let mut instrument = station.open_instrument().await?;
     let probed = instrument.probe().await;
-    close_aside(Some(instrument));
+    closed(close_aside(Some(instrument))).await;
     probed.map_err(|e| Fault::of(Device::Instrument, &e))?;
     let mut stage = station.open_stage(direction).await?;
     let connected = stage.connect().await;
-    close_aside(Some(stage));
+    closed(close_aside(Some(stage))).await;
     connected.map_err(|e| Fault::of(Device::Stage, &e))?;
     Ok(())
 }
 
 /// Drops a device on a blocking thread: closing a port whose link takes no bytes waits for
-/// the driver's closing wait (30 s by default), which must not hold a runtime thread.
-pub fn close_aside<T: Send + 'static>(device: Option<T>) {
-    if let Some(d) = device {
-        tokio::task::spawn_blocking(move || drop(d));
+/// the driver's closing wait (30 s by default), which must not hold a runtime thread. The
+/// port is opened exclusively: await the handle before opening it again.
+pub fn close_aside<T: Send + 'static>(device: Option<T>) -> Option<tokio::task::JoinHandle<()>> {
+    device.map(|d| tokio::task::spawn_blocking(move || drop(d)))
+}
+
+async fn closed(handle: Option<tokio::task::JoinHandle<()>>) {
+    if let Some(h) = handle {
+        let _ = h.await;
     }
 }
 

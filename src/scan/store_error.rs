@@ -81,6 +81,17 @@ pub enum StoreError {
     /// A journal operation failed.
     #[error(transparent)]
     Journal(#[from] JournalError),
+    /// The file system holding the output directory has fewer free inodes (files) than the
+    /// scan creates.
+    #[error("{path}: the scan creates about {needed} files but the file system has only {available} inodes free; delete files there or choose another output.dir")]
+    TooFewInodes {
+        /// The output directory checked.
+        path: PathBuf,
+        /// Files the scan creates.
+        needed: u64,
+        /// Inodes free.
+        available: u64,
+    },
     /// The file system cannot hold the planned scan.
     #[error("{path}: the scan needs about {needed_bytes} bytes but only {available_bytes} are free; free space or choose another output.dir")]
     DiskTooSmall {
@@ -99,7 +110,7 @@ impl StoreError {
         let code = match self {
             StoreError::Io { source, .. } => source.raw_os_error(),
             StoreError::Journal(JournalError::Io { source, .. }) => source.raw_os_error(),
-            StoreError::DiskTooSmall { .. } => return true,
+            StoreError::DiskTooSmall { .. } | StoreError::TooFewInodes { .. } => return true,
             _ => None,
         };
         matches!(code, Some(libc::ENOSPC) | Some(libc::EDQUOT))

@@ -354,3 +354,212 @@ async fn a_scan_failed_for_its_budget_is_continued_by_the_daemon_when_the_device
     assert_eq!(n.len(), sorted.len(), "each line once: {n:?}");
     station.stop().await;
 }
+
+/// Runs `cmd`, failing loudly (the tests run as root, as `.ci/run` does) when it fails.
+fn run(cmd: &[&str], path: &Path) {
+    let o = std::process::Command::new(cmd[0])
+        .args(&cmd[1..])
+        .arg(path)
+        .output()
+        .unwrap_or_else(|e| panic!("{} cannot run: {e}", cmd[0]));
+    assert!(
+        o.status.success(),
+        "{cmd:?} {}: {} (these tests need root and {}, as .ci/run provides)",
+        path.display(),
+        String::from_utf8_lossy(&o.stderr),
+        cmd[0]
+    );
+}
+
+/// How a test makes the scan's storage refuse writes mid-scan.
+#[derive(Debug, Clone, Copy)]
+enum Refuse {
+    /// The scan's `lines/` bind-mounted on itself and remounted read-only (`EROFS`; a file
+    /// system with a file open for writing cannot be remounted read-only but by force, which
+    /// the journal's would be).
+    ReadOnlyRemount,
+    /// The scan's `lines/` made immutable (`chattr +i`: `EPERM`).
+    Immutable,
+}
+
+/// A scan whose storage refuses writes after two lines and takes them again seconds later:
+/// the scan suspends (the traced line held in memory, the refusal named with its errno in
+/// the journal), never fails, and the same scan completes; no new scan starts.
+async fn storage_refuses_mid_scan(how: Refuse) {
+    const N: usize = 6;
+    let rig = Rig::start(RigOptions {
+        lines: N,
+        ..RigOptions::default()
+    })
+    .await;
+    let out = rig.out_dir("out");
+    std::fs::create_dir_all(&out).unwrap();
+    let metrics = rig.tmp.path().join("surfscan.prom");
+    let config = rig.config_with(
+        "out",
+        &format!("\n[metrics]\nfile = {:?}\n", metrics.display().to_string()),
+    );
+    let mut scan = scan_command(&config, &[]).spawn().expect("scan starts");
+    wait_until(Duration::from_secs(60), "two lines on disk", || {
+        committed_lines(&out) >= 2
+    })
+    .await;
+    let dir = scan_dir(&out);
+    let lines = dir.join("lines");
+    let bind = match how {
+        Refuse::ReadOnlyRemount => {
+            run(&["mount", "--bind", lines.to_str().expect("UTF-8")], &lines);
+            let bind = BindMount(lines.clone());
+            run(&["mount", "-o", "remount,ro,bind"], &lines);
+            Some(bind)
+        }
+        Refuse::Immutable => {
+            run(&["chattr", "+i"], &lines);
+            None
+        }
+    };
+    wait_until(Duration::from_secs(60), "the scan suspended", || {
+        std::fs::read_to_string(&metrics).is_ok_and(|m| {
+            m.lines()
+                .any(|l| l.starts_with("surfscan_suspensions_total{") && !l.ends_with(" 0"))
+        })
+    })
+    .await;
+    let held = committed_lines(&out);
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    assert_eq!(
+        committed_lines(&out),
+        held,
+        "nothing is committed meanwhile"
+    );
+    assert!(
+        scan.try_wait().unwrap().is_none(),
+        "{how:?}: the scan waits instead of ending"
+    );
+    match how {
+        Refuse::ReadOnlyRemount => run(&["mount", "-o", "remount,rw,bind"], &lines),
+        Refuse::Immutable => run(&["chattr", "-i"], &lines),
+    }
+    let o = tokio::time::timeout(Duration::from_secs(120), scan.wait_with_output())
+        .await
+        .expect("the scan ends")
+        .unwrap();
+    assert!(o.status.success(), "{how:?}: {}", describe(&o));
+    assert_eq!(scan_dir(&out), dir, "the same scan, no new one");
+    assert_lines_exactly(&dir, N);
+    let notes = interruptions(&assert_journal_complete(&dir, N));
+    let errno = match how {
+        Refuse::ReadOnlyRemount => "EROFS",
+        Refuse::Immutable => "EPERM",
+    };
+    let suspended: Vec<&String> = notes
+        .iter()
+        .filter(|r| r.starts_with("suspended:"))
+        .collect();
+    assert_eq!(suspended.len(), 1, "{how:?}: one suspension: {notes:?}");
+    assert!(
+        suspended[0].starts_with(&format!(
+            "suspended: the file system refused writing line {} ({errno}: ",
+            held + 1
+        )),
+        "{how:?}: {notes:?}"
+    );
+    assert!(
+        notes
+            .iter()
+            .any(|r| r.starts_with("the output directory takes writes again after")),
+        "{how:?}: {notes:?}"
+    );
+    drop(bind);
+    rig.shutdown().await;
+}
+
+/// A bind mount, unmounted when the test ends (also on failure).
+struct BindMount(PathBuf);
+
+impl Drop for BindMount {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount")
+            .arg("-l")
+            .arg(&self.0)
+            .status();
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_read_only_remount_mid_scan_suspends_the_scan_which_completes_when_writable() {
+    storage_refuses_mid_scan(Refuse::ReadOnlyRemount).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_immutable_lines_directory_mid_scan_suspends_the_scan_which_completes_after() {
+    storage_refuses_mid_scan(Refuse::Immutable).await;
+}
+
+/// The output directory's file system runs out of inodes mid-scan (a tmpfs with few, and
+/// empty ballast files taking the rest): the scan suspends without flapping — one
+/// suspension recorded, a handful of journal records at most while it waits — and completes
+/// when the ballast is deleted.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn out_of_inodes_suspends_without_flapping_and_completes_when_files_are_freed() {
+    const N: usize = 6;
+    let rig = Rig::start(RigOptions {
+        lines: N,
+        ..RigOptions::default()
+    })
+    .await;
+    let out = rig.out_dir("out");
+    let mount = Mount::tmpfs_with_inodes(&out, 64 << 20, 400);
+    let config = rig.config("out");
+    let mut scan = scan_command(&config, &[]).spawn().expect("scan starts");
+    wait_until(Duration::from_secs(60), "two lines on disk", || {
+        committed_lines(&out) >= 2 || scan.try_wait().is_ok_and(|s| s.is_some())
+    })
+    .await;
+    assert!(
+        scan.try_wait().unwrap().is_none(),
+        "the scan runs: {}",
+        describe(&scan.wait_with_output().await.unwrap())
+    );
+    let dir = scan_dir(&out);
+    // Empty ballast files beside the scan directory take every inode left.
+    let ballast = |k: usize| out.join(format!("ballast-{k}"));
+    let mut made = 0usize;
+    while std::fs::File::create(ballast(made)).is_ok() {
+        made += 1;
+    }
+    assert!(made > 0, "the ballast took the free inodes");
+    let records = || {
+        surfscan::scan::journal::read_journal(&dir.join("journal.jsonl"))
+            .map(|r| r.records.len())
+            .unwrap_or(0)
+    };
+    // Waiting for inodes for a while: the journal does not grow by a record per try.
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let before = records();
+    tokio::time::sleep(Duration::from_secs(4)).await;
+    let grown = records() - before;
+    assert!(
+        grown <= 2,
+        "{grown} journal records in 4 s while waiting for inodes"
+    );
+    assert!(scan.try_wait().unwrap().is_none(), "the scan waits");
+    for k in 0..made {
+        std::fs::remove_file(ballast(k)).unwrap();
+    }
+    let o = tokio::time::timeout(Duration::from_secs(120), scan.wait_with_output())
+        .await
+        .expect("the scan ends")
+        .unwrap();
+    assert!(o.status.success(), "{}", describe(&o));
+    assert_lines_exactly(&dir, N);
+    let notes = interruptions(&assert_journal_complete(&dir, N));
+    let suspended = notes.iter().filter(|r| r.starts_with("suspended:")).count();
+    assert_eq!(suspended, 1, "{notes:?}");
+    assert!(
+        notes.len() <= 4,
+        "a handful of records about the suspension: {notes:?}"
+    );
+    drop(mount);
+    rig.shutdown().await;
+}

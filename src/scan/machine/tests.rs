@@ -5,6 +5,7 @@ use super::*;
 use crate::devices::FaultClass;
 use crate::scan::command::StartMode;
 use crate::scan::ending::{FailKind, StopStatus};
+use crate::scan::policy::StorageClass;
 use crate::scan::reasons::mb;
 
 const LINES: u32 = 3;
@@ -189,6 +190,18 @@ fn last_status(actions: &[Action]) -> Option<&Status> {
         Action::Publish(s) => Some(s),
         _ => None,
     })
+}
+
+/// The wait of the last timer the machine set.
+fn last_timer(r: &Rig) -> Duration {
+    r.log
+        .iter()
+        .rev()
+        .find_map(|a| match a {
+            Action::SetTimer(d) => Some(*d),
+            _ => None,
+        })
+        .expect("a timer was set")
 }
 
 /// How the machine reacts to a fault.
@@ -837,10 +850,9 @@ fn a_full_disk_suspends_checks_space_with_backoff_and_commits_the_held_line() {
     r.line_ok();
     r.up_to_trace();
     r.feed(Event::Traced(good_line()));
-    let a = r.feed(Event::StorageFailed(StorageFailure {
-        disk_full: true,
-        message: "write lines/0001.csv: No space left on device".into(),
-    }));
+    let a = r.feed(Event::StorageFailed(StorageFailure::full(
+        "write lines/0001.csv: No space left on device".into(),
+    )));
     assert_eq!(stop_of(&a), None, "a full disk never ends the scan");
     let s = last_status(&a).expect("status");
     assert_eq!(s.state, State::Suspended);
@@ -859,12 +871,14 @@ fn a_full_disk_suspends_checks_space_with_backoff_and_commits_the_held_line() {
     // Still too little: the next check waits longer.
     let a = r.feed(Event::SpaceChecked {
         free_bytes: need - 1,
+        free_inodes: u64::MAX,
         outputs_bytes: 0,
     });
     assert_eq!(effect(&a), Some(&Action::SetTimer(Duration::from_secs(2))));
     r.feed(Event::TimerFired);
     let a = r.feed(Event::SpaceChecked {
         free_bytes: need,
+        free_inodes: u64::MAX,
         outputs_bytes: 0,
     });
     assert_eq!(
@@ -887,14 +901,14 @@ fn a_full_disk_while_writing_the_outputs_waits_and_writes_them_again() {
     for _ in 0..LINES {
         r.line_ok();
     }
-    let a = r.feed(Event::StorageFailed(StorageFailure {
-        disk_full: true,
-        message: "surface.igs: No space left on device".into(),
-    }));
+    let a = r.feed(Event::StorageFailed(StorageFailure::full(
+        "surface.igs: No space left on device".into(),
+    )));
     assert_eq!(stop_of(&a), None);
     r.feed(Event::TimerFired);
     let a = r.feed(Event::SpaceChecked {
         free_bytes: u64::MAX,
+        free_inodes: u64::MAX,
         outputs_bytes: 0,
     });
     assert_eq!(effect(&a), Some(&Action::WriteOutputs));
@@ -909,14 +923,14 @@ fn the_space_an_earlier_try_at_the_outputs_took_counts_as_theirs() {
     for _ in 0..LINES {
         r.line_ok();
     }
-    r.feed(Event::StorageFailed(StorageFailure {
-        disk_full: true,
-        message: "report.json: No space left on device".into(),
-    }));
+    r.feed(Event::StorageFailed(StorageFailure::full(
+        "report.json: No space left on device".into(),
+    )));
     let need = remaining_scan_bytes(LINES, LINES, 100);
     r.feed(Event::TimerFired);
     let a = r.feed(Event::SpaceChecked {
         free_bytes: need / 4,
+        free_inodes: u64::MAX,
         outputs_bytes: need / 2,
     });
     assert!(
@@ -926,6 +940,7 @@ fn the_space_an_earlier_try_at_the_outputs_took_counts_as_theirs() {
     r.feed(Event::TimerFired);
     let a = r.feed(Event::SpaceChecked {
         free_bytes: need / 2,
+        free_inodes: u64::MAX,
         outputs_bytes: need / 2,
     });
     assert_eq!(effect(&a), Some(&Action::WriteOutputs));
@@ -937,32 +952,132 @@ fn a_line_held_for_space_waits_for_the_free_space_alone() {
     let mut r = Rig::started();
     r.up_to_trace();
     r.feed(Event::Traced(good_line()));
-    r.feed(Event::StorageFailed(StorageFailure {
-        disk_full: true,
-        message: "write lines/0000.csv: No space left on device".into(),
-    }));
+    r.feed(Event::StorageFailed(StorageFailure::full(
+        "write lines/0000.csv: No space left on device".into(),
+    )));
     let need = remaining_scan_bytes(LINES, 0, 100);
     r.feed(Event::TimerFired);
     let a = r.feed(Event::SpaceChecked {
         free_bytes: need - 1,
+        free_inodes: u64::MAX,
         outputs_bytes: need,
     });
     assert!(matches!(effect(&a), Some(Action::SetTimer(_))), "{a:?}");
 }
 
+/// A file system that refuses for another reason than space (read-only, an immutable
+/// directory, a permission, an I/O error) suspends the scan like a full disk: the traced line
+/// is kept in memory and written again with a growing backoff; one suspension is recorded
+/// however often the write fails, and the scan goes on when it succeeds.
 #[test]
-fn a_storage_failure_that_cannot_clear_fails_as_io() {
+fn a_refused_write_suspends_and_the_held_line_is_written_again_with_backoff() {
     let mut r = Rig::started();
     r.up_to_trace();
     r.feed(Event::Traced(good_line()));
-    let a = r.feed(Event::StorageFailed(StorageFailure {
-        disk_full: false,
-        message: "Read-only file system".into(),
-    }));
-    let Some(End::Fail(reason)) = stop_of(&a) else {
-        panic!("{a:?}")
+    let refused = || {
+        Event::StorageFailed(StorageFailure {
+            class: Some(StorageClass::Refused),
+            errno: Some(libc::EROFS),
+            message: "write /out/S/lines/.0000.csv.tmp: Read-only file system (os error 30)".into(),
+        })
     };
-    assert_eq!(reason.kind(), FailKind::Io);
+    let a = r.feed(refused());
+    assert_eq!(stop_of(&a), None, "a storage error never ends the scan");
+    let s = last_status(&a).expect("status");
+    assert_eq!(s.state, State::Suspended);
+    let reason = s.reason.clone().unwrap_or_default();
+    assert!(
+        reason.starts_with("the file system refused writing line 1 (EROFS: write /out/S/lines/")
+            && reason.contains("remount"),
+        "{reason}"
+    );
+    let mut waits = Vec::new();
+    for _ in 0..5 {
+        let d = last_timer(&r);
+        waits.push(d);
+        r.wait(d);
+        let a = r.feed(Event::TimerFired);
+        assert_eq!(
+            effect(&a),
+            Some(&Action::Commit {
+                line: 0,
+                attempt: 1
+            }),
+            "the held line is written again, not traced again"
+        );
+        r.feed(refused());
+    }
+    assert_eq!(waits, [1, 2, 4, 8, 8].map(Duration::from_secs));
+    let suspended: Vec<String> = r
+        .records()
+        .into_iter()
+        .filter(|n| n.starts_with("suspended:"))
+        .collect();
+    assert_eq!(suspended.len(), 1, "one suspension recorded: {suspended:?}");
+    let d = last_timer(&r);
+    r.wait(d);
+    r.feed(Event::TimerFired);
+    let a = r.feed(Event::Committed);
+    assert!(
+        a.iter().any(|a| matches!(a, Action::Record(n)
+            if n.reason.starts_with("the output directory takes writes again after"))),
+        "{a:?}"
+    );
+    assert_eq!(effect(&a), Some(&Action::Push { line: 0 }));
+    let a = r.feed(Event::Pushed);
+    assert_eq!(effect(&a), Some(&Action::EnsureIdle));
+    assert!(!r.log.iter().any(|a| matches!(a, Action::Stop(_))));
+}
+
+/// Out of inodes (the disk has bytes but no file can be made): the space check looks at
+/// the free inodes too, so it keeps waiting instead of flapping; and when the first write
+/// after the check fails again, the backoff is kept and nothing new is recorded.
+#[test]
+fn out_of_inodes_waits_without_flapping() {
+    let mut r = Rig::started();
+    r.up_to_trace();
+    r.feed(Event::Traced(good_line()));
+    r.feed(Event::StorageFailed(StorageFailure::full(
+        "write lines/.0000.csv.tmp: No space left on device".into(),
+    )));
+    r.wait(Duration::from_secs(1));
+    let a = r.feed(Event::TimerFired);
+    assert_eq!(effect(&a), Some(&Action::CheckSpace));
+    let a = r.feed(Event::SpaceChecked {
+        free_bytes: u64::MAX,
+        free_inodes: 3,
+        outputs_bytes: 0,
+    });
+    assert_eq!(effect(&a), Some(&Action::SetTimer(Duration::from_secs(2))));
+    let reason = r.m.status().reason.clone().unwrap_or_default();
+    assert!(reason.contains("3 inodes (files) free"), "{reason}");
+    r.wait(Duration::from_secs(2));
+    r.feed(Event::TimerFired);
+    // Inodes enough by the count, but the write fails again (a quota, a race): same
+    // suspension, a longer wait.
+    let a = r.feed(Event::SpaceChecked {
+        free_bytes: u64::MAX,
+        free_inodes: u64::MAX,
+        outputs_bytes: 0,
+    });
+    assert!(
+        matches!(effect(&a), Some(Action::Commit { line: 0, .. })),
+        "{a:?}"
+    );
+    let a = r.feed(Event::StorageFailed(StorageFailure::full(
+        "write lines/.0000.csv.tmp: Disk quota exceeded".into(),
+    )));
+    assert_eq!(effect(&a), Some(&Action::SetTimer(Duration::from_secs(4))));
+    let notes = r.records();
+    assert_eq!(
+        notes.iter().filter(|n| n.starts_with("suspended:")).count(),
+        1,
+        "{notes:?}"
+    );
+    assert!(
+        !notes.iter().any(|n| n.starts_with("space is back")),
+        "{notes:?}"
+    );
 }
 
 #[test]

@@ -531,9 +531,18 @@ pub struct Mount(PathBuf);
 impl Mount {
     /// A tmpfs of `bytes` at `dir` (created). The tests run as root, as `.ci/run` does.
     pub fn tmpfs(dir: &std::path::Path, bytes: u64) -> Mount {
+        Mount::mount_tmpfs(dir, &format!("size={bytes}"))
+    }
+
+    /// A tmpfs of `bytes` with room for `inodes` files at `dir` (created).
+    pub fn tmpfs_with_inodes(dir: &std::path::Path, bytes: u64, inodes: u64) -> Mount {
+        Mount::mount_tmpfs(dir, &format!("size={bytes},nr_inodes={inodes}"))
+    }
+
+    fn mount_tmpfs(dir: &std::path::Path, options: &str) -> Mount {
         std::fs::create_dir_all(dir).unwrap();
         let o = std::process::Command::new("mount")
-            .args(["-t", "tmpfs", "-o", &format!("size={bytes}")])
+            .args(["-t", "tmpfs", "-o", options])
             .arg("tmpfs")
             .arg(dir)
             .output()
