@@ -18,6 +18,9 @@
 //! Without `--bench` (as `cargo test --all-targets` runs it) one short line each way, only to
 //! check that it runs.
 
+#[path = "shared/mod.rs"]
+mod shared;
+
 use std::time::{Duration, Instant};
 use surfscan::sj210::client::Sj210Client;
 use surfscan::sj210::models::{CommandOverrides, ModelId, ModelTable};
@@ -77,17 +80,6 @@ fn args() -> Args {
     a
 }
 
-/// A rough profile within ±150 µm, 3 decimals (a deterministic sum of sines).
-fn heights(n: usize) -> Vec<f64> {
-    (0..n)
-        .map(|i| {
-            let x = i as f64;
-            let z = 80.0 * (x * 0.013).sin() + 40.0 * (x * 0.171).sin() + 9.0 * (x * 1.37).cos();
-            (z * 1000.0).round() / 1000.0
-        })
-        .collect()
-}
-
 /// Bytes of the results on the wire: `RDPAR` and its count, then per parameter `RDRES02,aa,00`
 /// and its `OK` + name 6 + value 7 + unit 3.
 fn results_bytes() -> u64 {
@@ -106,7 +98,7 @@ async fn measure(a: &Args, baud: u32, during: bool) -> Measured {
     let set = ProfileSet::new(vec![ServedProfile {
         y_mm: 0.0,
         pitch_x_mm: PITCH_MM,
-        z_um: heights(a.points),
+        z_um: shared::rough_heights_um(a.points),
     }])
     .expect("profile");
     let cfg = InstrumentConfig {
@@ -180,16 +172,6 @@ async fn measure(a: &Args, baud: u32, during: bool) -> Measured {
     }
 }
 
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
-}
-
 fn main() {
     let a = args();
     let rt = tokio::runtime::Builder::new_multi_thread()
@@ -221,7 +203,7 @@ fn main() {
                 trace_s + return_s + wire_s
             };
             let mut c = m.cycles_s.clone();
-            let software = median(&mut c) - device / a.speed_up;
+            let software = shared::median(&mut c) - device / a.speed_up;
             let period = device + software;
             row.push(period);
             println!(

@@ -8,6 +8,9 @@
 //! reads a 500-point profile at a hundredth of the pacing, only to check that it runs.
 //! `-- --baud B` and `-- --points N` change the link speed and the profile length.
 
+#[path = "shared/mod.rs"]
+mod shared;
+
 use std::pin::Pin;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -63,18 +66,6 @@ impl<S: AsyncWrite + Unpin> AsyncWrite for Counting<S> {
     }
 }
 
-/// A rough profile of `n` heights within ±150 µm, 3 decimals, every one printed in the
-/// simulator's 9-character field (a deterministic sum of sines, no randomness).
-fn heights(n: usize) -> Vec<f64> {
-    (0..n)
-        .map(|i| {
-            let x = i as f64;
-            let z = 80.0 * (x * 0.013).sin() + 40.0 * (x * 0.171).sin() + 9.0 * (x * 1.37).cos();
-            (z * 1000.0).round() / 1000.0
-        })
-        .collect()
-}
-
 struct Figures {
     points: usize,
     exchanges: u64,
@@ -87,7 +78,7 @@ struct Figures {
 async fn read_out(points: usize, baud: u32, pacing: f64) -> Figures {
     let dir = tempfile::tempdir().expect("temp dir");
     let link = dir.path().join("sj210");
-    let served = heights(points);
+    let served = shared::rough_heights_um(points);
     let set = ProfileSet::new(vec![ServedProfile {
         y_mm: 0.0,
         pitch_x_mm: 0.0005,

@@ -25,6 +25,9 @@
 //! instrument 50× faster than real time). Short status and result replies are counted as
 //! overhead, not device time, so the figure errs high.
 
+#[path = "shared/mod.rs"]
+mod shared;
+
 use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
@@ -98,16 +101,6 @@ fn step_move_s() -> f64 {
     }
 }
 
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
-}
-
 fn main() {
     let a = args();
     let rt = tokio::runtime::Builder::new_multi_thread()
@@ -178,7 +171,7 @@ async fn stage_alone() {
         device * 1000.0,
         step_move_s() * 1000.0,
         SETTLE_MS as f64,
-        median(&mut over)
+        shared::median(&mut over)
     );
 }
 
@@ -287,7 +280,7 @@ async fn run(a: Args) {
     let mut over: Vec<f64> = periods.iter().map(|p| (p - device_s) * 1000.0).collect();
     let mean = over.iter().sum::<f64>() / over.len() as f64;
     let max = over.iter().copied().fold(f64::MIN, f64::max);
-    let med = median(&mut over);
+    let med = shared::median(&mut over);
     let mut p = periods.clone();
     println!(
         "scan_overhead: {} lines, instrument {}x real time, stage at real speed",
@@ -304,7 +297,7 @@ async fn run(a: Args) {
     );
     println!(
         "  line period median {:.1} ms over {} periods",
-        median(&mut p) * 1000.0,
+        shared::median(&mut p) * 1000.0,
         periods.len()
     );
     println!("  overhead per line: median {med:.1} ms, mean {mean:.1} ms, max {max:.1} ms (target <= 50 ms median)");
@@ -312,8 +305,8 @@ async fn run(a: Args) {
         "    of which: trace start to profile read beyond trace + wire, median {:.1} ms; \
          profile read to the next trace start beyond move + settle (commit, fit, step), \
          median {:.1} ms",
-        median(&mut instrument_over),
-        median(&mut between_over)
+        shared::median(&mut instrument_over),
+        shared::median(&mut between_over)
     );
     let homes = stage
         .homing_cycles

@@ -41,34 +41,18 @@ fn config(dir: &Path, baud: u32) -> PathBuf {
 }
 
 async fn probe(config: &Path, record: &Path) -> (Option<i32>, String, String) {
-    let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
-        .arg("probe")
-        .arg("--config")
-        .arg(config)
-        .arg("--record")
-        .arg(record)
-        .kill_on_drop(true)
-        .output();
-    let out = tokio::time::timeout(Duration::from_secs(90), child)
-        .await
-        .expect("surfscan probe did not finish within 90 s")
-        .unwrap();
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let args = [
+        "--config".as_ref(),
+        config.as_os_str(),
+        "--record".as_ref(),
+        record.as_os_str(),
+    ];
+    crate::common::run_probe::<&std::ffi::OsStr>(&args, 90).await
 }
 
 /// The commands the probe sent, from its transcript.
 fn sent(record: &Path) -> Vec<String> {
-    let text = std::fs::read_to_string(record).unwrap();
-    let t = surfscan_sim::replay::Transcript::parse(&text).unwrap();
-    t.entries
-        .iter()
-        .filter(|e| e.dir == surfscan_sim::replay::Dir::ToDevice)
-        .map(|e| String::from_utf8_lossy(&e.bytes).trim_end().to_string())
-        .collect()
+    crate::common::sent_commands(&std::fs::read_to_string(record).unwrap())
 }
 
 /// The lines printed under the `snippet` line.

@@ -234,20 +234,7 @@ async fn the_mitutoyo_r_profile_passes_the_count_and_the_ra_check() {
 }
 
 async fn run_probe(args: &[&str]) -> (Option<i32>, String, String) {
-    let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
-        .arg("probe")
-        .args(args)
-        .kill_on_drop(true)
-        .output();
-    let out = tokio::time::timeout(Duration::from_secs(60), child)
-        .await
-        .expect("surfscan probe did not finish within 60 s")
-        .unwrap();
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    crate::common::run_probe(args, 60).await
 }
 
 fn config(dir: &Path, name: &str, link: &Path, extra: &str) -> PathBuf {
@@ -264,12 +251,7 @@ fn config(dir: &Path, name: &str, link: &Path, extra: &str) -> PathBuf {
 }
 
 fn sent(transcript: &str) -> Vec<String> {
-    let t = surfscan_sim::replay::Transcript::parse(transcript).unwrap();
-    t.entries
-        .iter()
-        .filter(|e| e.dir == surfscan_sim::replay::Dir::ToDevice)
-        .map(|e| String::from_utf8_lossy(&e.bytes).trim_end().to_string())
-        .collect()
+    crate::common::sent_commands(transcript)
 }
 
 #[tokio::test]

@@ -413,23 +413,13 @@ async fn model_without_profile_readout_fails_at_probe_naming_the_code() {
 /// Runs `surfscan probe --config CONFIG --record RECORD` (the real binary) and returns its exit
 /// code and standard output.
 async fn run_probe_binary(config: &Path, record: &Path) -> (Option<i32>, String, String) {
-    let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
-        .arg("probe")
-        .arg("--config")
-        .arg(config)
-        .arg("--record")
-        .arg(record)
-        .kill_on_drop(true)
-        .output();
-    let out = tokio::time::timeout(Duration::from_secs(30), child)
-        .await
-        .expect("surfscan probe did not finish within 30 s")
-        .unwrap();
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let args = [
+        "--config".as_ref(),
+        config.as_os_str(),
+        "--record".as_ref(),
+        record.as_os_str(),
+    ];
+    crate::common::run_probe::<&std::ffi::OsStr>(&args, 30).await
 }
 
 fn probe_config(dir: &Path, name: &str, link: &Path) -> PathBuf {

@@ -582,3 +582,35 @@ pub fn fill(path: &std::path::Path) -> u64 {
     let _ = f.sync_all();
     n
 }
+
+/// Runs the real `surfscan probe` with `args` (at most `limit_s` seconds): its exit code,
+/// standard output and standard error.
+pub async fn run_probe<S: AsRef<std::ffi::OsStr>>(
+    args: &[S],
+    limit_s: u64,
+) -> (Option<i32>, String, String) {
+    let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .arg("probe")
+        .args(args)
+        .kill_on_drop(true)
+        .output();
+    let out = tokio::time::timeout(Duration::from_secs(limit_s), child)
+        .await
+        .unwrap_or_else(|_| panic!("surfscan probe did not finish within {limit_s} s"))
+        .expect("surfscan probe ran");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// The commands a recorded transcript (format v1) sent to the instrument, in order.
+pub fn sent_commands(transcript: &str) -> Vec<String> {
+    let t = surfscan_sim::replay::Transcript::parse(transcript).expect("transcript parses");
+    t.entries
+        .iter()
+        .filter(|e| e.dir == surfscan_sim::replay::Dir::ToDevice)
+        .map(|e| String::from_utf8_lossy(&e.bytes).trim_end().to_string())
+        .collect()
+}
