@@ -52,6 +52,9 @@ pub struct Config {
     /// `[jobs]`: where the recipes are.
     #[serde(default)]
     pub jobs: JobsSettings,
+    /// `[mqtt]`: the station on the lab's MQTT broker; none by default.
+    #[serde(default)]
+    pub mqtt: Option<crate::publish::settings::MqttSettings>,
 }
 
 /// `[jobs]`: recipes (named plans with their measuring conditions, analysis and
@@ -494,6 +497,10 @@ impl Config {
                 ));
             }
         }
+        if let Some(m) = &self.mqtt {
+            m.validate()
+                .map_err(|(key, message)| Config::invalid(path, key, message))?;
+        }
         if let Some(n) = &self.notify {
             if n.command.is_empty() {
                 return Err(Config::invalid(
@@ -823,6 +830,8 @@ pub const NUMERIC_KEYS: &[NumericKey] = &[
     real_key!("analysis.holdout-threshold", 0.001, 100.0, "", "a multiple of Sq; the default is 0.5", |c| Some(c.analysis.holdout_threshold)),
     int_key!("fit.v-control-rows", 2, 100_000, "", "pole rows across the lines, at most the number of lines; remove the key for a quarter of the lines", |c| c.fit.v_control_rows),
     int_key!("notify.timeout-s", 1, 86_400, "s", "the default is 30", |c| c.notify.as_ref().map(|n| n.timeout_s)),
+    int_key!("mqtt.outbox-max", 1, 1_000_000, "", "messages kept while the broker is away; the default is 10000", |c| c.mqtt.as_ref().map(|m| m.outbox_max)),
+    int_key!("mqtt.keep-alive-s", 5, 3600, "s", "the default is 30", |c| c.mqtt.as_ref().map(|m| m.keep_alive_s)),
     real_key!("traceability.stylus-tip-radius-um", 0.01, 100.0, "µm", "the SJ-210's standard styli have 2 or 5 µm", |c| c.traceability.stylus_tip_radius_um),
     real_key!("traceability.calibration-uncertainty-pct", 0.001, 100.0, "%", "the expanded (k = 2) relative uncertainty on the calibration certificate, e.g. 3.0", |c| c.traceability.calibration_uncertainty_pct),
 ];

@@ -27,7 +27,8 @@
 //!    [`report`] (characterisation of a completed scan, a scan directory or a grid into
 //!    report.json, report.html, summary.csv, plots and X3P, section by section; the runner
 //!    reaches it through the scan's `Characterise` contract, supplied by the composition),
-//!    [`station_lock`] (one process per station), [`jobs`] (recipes).
+//!    [`station_lock`] (one process per station), [`jobs`] (recipes), [`publish`] (the scan's
+//!    status and events to the lab's MQTT broker through a durable outbox).
 //! 5. Composition: [`cli`] (one file per subcommand) and `main.rs`.
 //!
 //! The simulator (`simulator/`, crate `surfscan-sim`) speaks the instrument's and the
@@ -52,6 +53,7 @@ pub mod numbers;
 pub mod numfmt;
 pub mod nurbs;
 pub mod profile;
+pub mod publish;
 pub mod report;
 pub mod scan;
 pub mod service;

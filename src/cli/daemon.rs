@@ -10,7 +10,8 @@
 //! SIGTERM/SIGINT: `STOPPING=1`, the current line is abandoned cleanly and an interruption
 //! (not a stop) is recorded, so the scan resumes at the next start. SIGHUP is logged and
 //! otherwise ignored: the configuration is read only at start. The notification hook
-//! runs when a scan completes, fails, is aborted or suspends.
+//! runs when a scan completes, fails, is aborted or suspends; every event and the status go
+//! to the configured publishers ([`crate::publish`]).
 //!
 //! Which scan a start runs (and which one the daemon resumes at its own start) is
 //! [`crate::scan::choice`]'s decision.
@@ -27,6 +28,7 @@ use crate::control::protocol::ControlChannels;
 use crate::control::server;
 use crate::devices::Fault;
 use crate::hook::Hook;
+use crate::publish::Publishers;
 use crate::scan::channels::Control;
 use crate::scan::choice::{self, Asker};
 use crate::scan::command::{OperatorCommand, OperatorRequest, Peer};
@@ -189,13 +191,27 @@ async fn daemon(
         let _ = shutdown_tx.send(true);
     });
 
-    // Notification hook.
+    // The publishers (MQTT) and the notification hook. Neither is on the scan's path: the
+    // runner only sends into this channel.
+    let publishers = match Publishers::start(config, &status_tx) {
+        Ok(p) => Some(p),
+        Err(e) => {
+            tracing::error!(
+                "{e}; the station publishes nothing until this is fixed and the daemon restarted"
+            );
+            None
+        }
+    };
+    let to_publishers = publishers.as_ref().and_then(Publishers::sender);
     let (ev_tx, mut ev_rx) = mpsc::unbounded_channel::<ScanEvent>();
     let hook = config.notify.as_ref().and_then(Hook::new);
-    tokio::spawn(async move {
+    let events_task = tokio::spawn(async move {
         while let Some(ev) = ev_rx.recv().await {
-            if let Some(h) = &hook {
-                h.fire(ev);
+            if let Some(h) = hook.as_ref().filter(|_| ev.kind.runs_hook()) {
+                h.fire(ev.clone());
+            }
+            if let Some(tx) = &to_publishers {
+                let _ = tx.send(ev);
             }
         }
     });
@@ -356,6 +372,11 @@ async fn daemon(
     drop(ctl);
     if *shutdown_rx.borrow() {
         let _ = tokio::time::timeout(Duration::from_secs(5), server_task).await;
+    }
+    // What the scan told last is stored in the outbox before the links say `offline`.
+    let _ = tokio::time::timeout(Duration::from_secs(2), events_task).await;
+    if let Some(p) = publishers {
+        p.finish(Duration::from_secs(4)).await;
     }
     tracing::info!("surfscan daemon stopped");
     Ok(())

@@ -25,6 +25,7 @@ use super::station::{
 };
 use super::{CliError, Exit};
 use crate::config::Config;
+use crate::publish::Publishers;
 use crate::scan::channels::Control;
 use crate::scan::choice::{self, Asker};
 use crate::scan::command::{Peer, StartMode};
@@ -272,15 +273,17 @@ pub async fn run_foreground(
     settings: &RunSettings,
     request: ScanRequest,
 ) -> Outcome {
-    run_foreground_locked(station, settings, request, None).await
+    run_foreground_locked(station, settings, request, None, None).await
 }
 
-/// [`run_foreground`], recording the scan in the station's `lock` when given.
+/// [`run_foreground`], recording the scan in the station's `lock` when given, and publishing
+/// its status and events as `config` asks ([`crate::publish`]), as the daemon would.
 pub async fn run_foreground_locked(
     station: &mut SerialStation,
     settings: &RunSettings,
     request: ScanRequest,
     lock: Option<Arc<StationLock>>,
+    config: Option<&Config>,
 ) -> Outcome {
     let (_cmd_tx, cmd_rx) = mpsc::channel(8);
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
@@ -307,9 +310,21 @@ pub async fn run_foreground_locked(
         tracing::warn!("signal received: abandoning the current line; the scan stays resumable");
         let _ = shutdown_tx.send(true);
     });
+    let publishers = match config.map(|c| Publishers::start(c, &status_tx)) {
+        Some(Ok(p)) => Some(p),
+        Some(Err(e)) => {
+            tracing::error!("{e}; this scan is not published");
+            None
+        }
+        None => None,
+    };
     let mut ctl = Control::new(cmd_rx, shutdown_rx, status_tx);
+    ctl.events = publishers.as_ref().and_then(Publishers::sender);
     let outcome = run_scan(station, &mut ctl, settings, request).await;
     drop(ctl);
+    if let Some(p) = publishers {
+        p.finish(std::time::Duration::from_secs(4)).await;
+    }
     signals.abort();
     hangups.abort();
     let _ = bar.await;
@@ -351,6 +366,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         &settings,
         request,
         Some(lock),
+        Some(&config),
     ));
     outcome_result(&outcome)
 }

@@ -51,9 +51,12 @@ impl Control {
         }
     }
 
-    /// Publishes a snapshot.
-    pub(super) fn publish(&self, s: Status) {
-        self.status.send_replace(s);
+    /// Publishes a snapshot. The links' states are the publishers' and stay as they are.
+    pub(super) fn publish(&self, mut s: Status) {
+        self.status.send_modify(|cur| {
+            s.links = std::mem::take(&mut cur.links);
+            *cur = s;
+        });
     }
 
     /// Tells the notification hook.

@@ -1,6 +1,7 @@
 //! What a scan tells the outside world happened to it, besides its status snapshots: it
-//! completed, failed, was aborted or suspended. The daemon passes these to the notification
-//! hook ([`crate::hook`]).
+//! started, was suspended, resumed after a suspension, completed, failed or was aborted. The
+//! publishers ([`crate::publish`]) send every one; the notification hook ([`crate::hook`])
+//! runs for the endings and suspensions ([`ScanEventKind::runs_hook`]).
 //!
 //! Layer 3 (session): plain data, no I/O.
 
@@ -10,6 +11,10 @@ use std::path::PathBuf;
 /// What happened.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ScanEventKind {
+    /// The scan was created, or reopened to continue (the reason says which).
+    Started,
+    /// A suspension cleared by itself and the scan goes on.
+    Resumed,
     /// All lines done and the surface written.
     Success,
     /// The scan failed.
@@ -21,14 +26,25 @@ pub enum ScanEventKind {
 }
 
 impl ScanEventKind {
-    /// `success`, `fail`, `abort` or `suspended` (the hook's `SURFSCAN_STATUS`).
+    /// `started`, `resumed`, `success`, `fail`, `abort` or `suspended` (the hook's
+    /// `SURFSCAN_STATUS`, the events' `kind`).
     pub fn as_str(self) -> &'static str {
         match self {
+            ScanEventKind::Started => "started",
+            ScanEventKind::Resumed => "resumed",
             ScanEventKind::Success => "success",
             ScanEventKind::Fail => "fail",
             ScanEventKind::Abort => "abort",
             ScanEventKind::Suspended => "suspended",
         }
+    }
+}
+
+impl ScanEventKind {
+    /// True for what the notification hook is run for: an ending or a suspension (a start
+    /// and a resumption are not worth waking anyone for).
+    pub fn runs_hook(self) -> bool {
+        !matches!(self, ScanEventKind::Started | ScanEventKind::Resumed)
     }
 }
 

@@ -627,6 +627,10 @@ impl Machine {
                 },
             ) => {
                 self.created = true;
+                out.push(Action::Notify(
+                    ScanEventKind::Started,
+                    reasons::started(self.done(), self.plan.lines),
+                ));
                 self.metrics.scan_id = scan_id.clone();
                 self.status.scan_id = Some(scan_id);
                 self.status.scan_dir = Some(dir);
@@ -804,7 +808,9 @@ impl Machine {
                 if let Some(b) = &mut self.budget {
                     b.absent += absent;
                 }
-                out.push(self.note(reasons::back_after(device, absent), Some(device)));
+                let back = reasons::back_after(device, absent);
+                out.push(self.note(back.clone(), Some(device)));
+                out.push(Action::Notify(ScanEventKind::Resumed, back));
                 *self
                     .metrics
                     .reconnects
@@ -1184,7 +1190,8 @@ impl Machine {
             (StorageClass::Full, Some(free)) => reasons::space_back(free, waited),
             _ => reasons::storage_back(waited),
         };
-        out.push(self.note(note, None));
+        out.push(self.note(note.clone(), None));
+        out.push(Action::Notify(ScanEventKind::Resumed, note));
         self.suspension = None;
         self.status.state = State::Scanning;
         self.status.reason = None;
@@ -1194,10 +1201,10 @@ impl Machine {
     fn line_done(&mut self, now: Now, out: &mut Vec<Action>) {
         let k = self.line;
         if let Some(s) = self.suspension.take() {
-            out.push(self.note(
-                reasons::on_disk_after_faults(k, now.mono.saturating_duration_since(s.since.mono)),
-                None,
-            ));
+            let back =
+                reasons::on_disk_after_faults(k, now.mono.saturating_duration_since(s.since.mono));
+            out.push(self.note(back.clone(), None));
+            out.push(Action::Notify(ScanEventKind::Resumed, back));
             self.status.reason = None;
         }
         let secs = self

@@ -35,6 +35,15 @@ pub fn unavailable(device: Device, fault: &Fault) -> String {
     }
 }
 
+/// Why a scan started: a new one, or one reopened with `done` of its `total` lines on disk.
+pub fn started(done: u32, total: u32) -> String {
+    if done == 0 {
+        format!("a scan of {total} lines started")
+    } else {
+        format!("continued with {done} of {total} lines on disk")
+    }
+}
+
 /// The note when a device the scan waited for is back.
 pub fn back_after(device: Device, waited: Duration) -> String {
     format!(

@@ -6,6 +6,18 @@
 
 use super::ending::StopStatus;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// A link to the lab's systems (the MQTT broker, the archive) as its publisher sees it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LinkStatus {
+    /// Connected and delivering.
+    pub ok: bool,
+    /// What it is doing, or what is wrong and what to do.
+    pub message: String,
+    /// Messages waiting on disk to be delivered.
+    pub queued: u64,
+}
 
 /// What the daemon is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -90,6 +102,10 @@ pub struct Status {
     /// Scans skipped because their journal is damaged, one message each (path, record, why).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub damaged_journals: Vec<String>,
+    /// The links to the lab's systems (`mqtt`, …), each as its publisher last saw it; owned
+    /// by the publishers, carried through every snapshot the scan publishes.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub links: BTreeMap<String, LinkStatus>,
     /// Scans the daemon has begun since it started (a resumption at start-up included):
     /// `surfscan start` knows the status shows its own start's outcome once this has grown.
     #[serde(default)]
@@ -114,6 +130,7 @@ impl Status {
             stage: DeviceState::Absent,
             last_stop: None,
             damaged_journals: Vec::new(),
+            links: BTreeMap::new(),
             starts: 0,
         }
     }
@@ -183,6 +200,7 @@ pub fn ended_status(s: &Status, ending: StopStatus, reason: &str) -> Status {
         instrument: downgrade(s.instrument),
         stage: downgrade(s.stage),
         starts: s.starts,
+        links: s.links.clone(),
         ..Status::idle()
     }
 }

@@ -16,25 +16,25 @@ use surfscan::scan::status::{DeviceState, State, Status};
 use surfscan_sim::grbl::{GrblSimConfig, StageShared};
 use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
 
-const SPEED_UP: f64 = 50.0;
-const LINES: u32 = 8;
-const DEADLINE: Duration = Duration::from_secs(90);
+pub(crate) const SPEED_UP: f64 = 50.0;
+pub(crate) const LINES: u32 = 8;
+pub(crate) const DEADLINE: Duration = Duration::from_secs(90);
 
-struct Rig {
-    dir: tempfile::TempDir,
-    sim: SimHandle,
-    config: PathBuf,
-    socket: PathBuf,
-    notify: UnixDatagram,
+pub(crate) struct Rig {
+    pub(crate) dir: tempfile::TempDir,
+    pub(crate) sim: SimHandle,
+    pub(crate) config: PathBuf,
+    pub(crate) socket: PathBuf,
+    pub(crate) notify: UnixDatagram,
 }
 
 impl Rig {
-    fn out(&self) -> PathBuf {
+    pub(crate) fn out(&self) -> PathBuf {
         self.dir.path().join("scans")
     }
 }
 
-async fn rig() -> Rig {
+pub(crate) async fn rig() -> Rig {
     let dir = tempfile::tempdir().unwrap();
     let inst = dir.path().join("sj210");
     let stage = dir.path().join("ystage");
@@ -96,7 +96,7 @@ fn demo_config_at(inst: &Path, stage: &Path, scans: &Path, socket: &Path) -> Str
 }
 
 /// The daemon process; killed if the test fails before it exits, so no daemon outlives it.
-struct Daemon(Child);
+pub(crate) struct Daemon(pub(crate) Child);
 
 impl Drop for Daemon {
     fn drop(&mut self) {
@@ -172,7 +172,7 @@ async fn client(r: &Rig) -> ControlClient {
     ControlClient::connect(&r.socket).await.unwrap()
 }
 
-async fn status(r: &Rig) -> Status {
+pub(crate) async fn status(r: &Rig) -> Status {
     match client(r)
         .await
         .request(&Request::Status)
@@ -186,7 +186,7 @@ async fn status(r: &Rig) -> Status {
 }
 
 /// Asks the daemon to start a scan of `specimen` (resuming an unfinished one, as by default).
-async fn start_scan(r: &Rig, specimen: &str) {
+pub(crate) async fn start_scan(r: &Rig, specimen: &str) {
     client(r)
         .await
         .request(&Request::Start {
@@ -199,7 +199,7 @@ async fn start_scan(r: &Rig, specimen: &str) {
         .unwrap();
 }
 
-async fn wait_status(r: &Rig, what: &str, f: impl Fn(&Status) -> bool) -> Status {
+pub(crate) async fn wait_status(r: &Rig, what: &str, f: impl Fn(&Status) -> bool) -> Status {
     let start = Instant::now();
     loop {
         let s = status(r).await;
@@ -211,7 +211,7 @@ async fn wait_status(r: &Rig, what: &str, f: impl Fn(&Status) -> bool) -> Status
     }
 }
 
-fn scan_dir(r: &Rig) -> PathBuf {
+pub(crate) fn scan_dir(r: &Rig) -> PathBuf {
     let mut dirs: Vec<PathBuf> = std::fs::read_dir(r.out())
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -222,11 +222,11 @@ fn scan_dir(r: &Rig) -> PathBuf {
     dirs.pop().unwrap()
 }
 
-fn records(dir: &Path) -> Vec<Record> {
+pub(crate) fn records(dir: &Path) -> Vec<Record> {
     read_journal(&dir.join("journal.jsonl")).unwrap().records
 }
 
-fn line_indices(recs: &[Record]) -> Vec<u32> {
+pub(crate) fn line_indices(recs: &[Record]) -> Vec<u32> {
     recs.iter()
         .filter_map(|r| match r {
             Record::Line(l) => Some(l.id.index),
@@ -235,7 +235,7 @@ fn line_indices(recs: &[Record]) -> Vec<u32> {
         .collect()
 }
 
-fn wait_exit(child: &mut Child) -> std::process::ExitStatus {
+pub(crate) fn wait_exit(child: &mut Child) -> std::process::ExitStatus {
     let start = Instant::now();
     loop {
         if let Some(s) = child.try_wait().unwrap() {
@@ -246,7 +246,7 @@ fn wait_exit(child: &mut Child) -> std::process::ExitStatus {
     }
 }
 
-fn sigterm(child: &Child) {
+pub(crate) fn sigterm(child: &Child) {
     let pid = nix::unistd::Pid::from_raw(child.id() as i32);
     nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).unwrap();
 }

@@ -30,6 +30,7 @@ mod metrology_reference;
 mod metrology_x3p;
 mod model_honesty;
 mod model_report;
+mod mqtt_broker;
 mod night_faults;
 mod older_scans;
 mod results_unchanged;

@@ -447,6 +447,16 @@ fn a_scan_traces_idle_move_trace_commit_push_per_line_then_writes_its_outputs() 
         })
     );
     assert!(a.contains(&Action::Notify(ScanEventKind::Success, "3 lines".into())));
+    // The scan's events: started when its directory was created, then its ending.
+    let told: Vec<ScanEventKind> = r
+        .log
+        .iter()
+        .filter_map(|a| match a {
+            Action::Notify(k, _) => Some(*k),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(told, [ScanEventKind::Started, ScanEventKind::Success]);
     let s = last_status(&a).expect("status");
     assert_eq!(s.state, State::Idle);
     assert_eq!(
@@ -728,6 +738,16 @@ fn a_vanished_device_is_reopened_with_backoff_and_costs_no_attempt() {
         .filter(|a| matches!(a, Action::Notify(ScanEventKind::Suspended, _)))
         .count();
     assert_eq!(notices, 1);
+    // And its end once, with the reason the journal records.
+    let resumed: Vec<&String> = r
+        .log
+        .iter()
+        .filter_map(|a| match a {
+            Action::Notify(ScanEventKind::Resumed, why) => Some(why),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(resumed, ["instrument back after 15 s; scan continues"]);
     r.up_to_trace();
     let a = r.feed(Event::Traced(good_line()));
     assert_eq!(

@@ -9,6 +9,7 @@
 #![allow(dead_code)]
 
 pub mod chromium;
+pub mod mosquitto;
 
 use std::path::{Path, PathBuf};
 use std::process::Output;

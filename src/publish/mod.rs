@@ -1,0 +1,161 @@
+//! What leaves the station for the lab's systems: the scan's events through a durable outbox
+//! on disk to the publishers (the MQTT broker), off the scan's path.
+//!
+//! ```text
+//! scan runner ──events──► writer task ──► outbox/mqtt/ (disk) ──► MqttLink ──► broker
+//!      └──status (watch)────────────────────────────────────────────┘
+//! ```
+//!
+//! The runner only sends an event into an unbounded channel; the writer task stores it in
+//! the outbox (each publisher has its own, below `<output dir>/outbox/`) and wakes the
+//! publisher, which delivers it when it can. A broker that is down delays a message, never a
+//! line; a restart finds what was not yet delivered in the outbox and sends it.
+//!
+//! Layer 4 (process edge): depends on the configuration, the scan's events and status, and
+//! the publishers below.
+
+pub mod mqtt;
+pub mod outbox;
+pub mod settings;
+pub mod tls;
+
+use crate::config::Config;
+use crate::scan::event::ScanEvent;
+use crate::scan::status::Status;
+use outbox::Outbox;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use tokio::sync::{mpsc, watch, Notify};
+use tokio::task::JoinHandle;
+
+/// The outbox directory of a publisher, below the output directory.
+pub fn outbox_dir(config: &Config, publisher: &str) -> PathBuf {
+    config.output.dir.join("outbox").join(publisher)
+}
+
+/// The running publishers of a process (none when nothing is configured).
+pub struct Publishers {
+    events: Option<mpsc::UnboundedSender<ScanEvent>>,
+    writer: Option<JoinHandle<()>>,
+    links: Vec<JoinHandle<()>>,
+    stop: watch::Sender<bool>,
+}
+
+impl std::fmt::Debug for Publishers {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Publishers")
+            .field("links", &self.links.len())
+            .finish_non_exhaustive()
+    }
+}
+
+/// The JSON of an event as the publishers send it (the outbox adds its `id`).
+pub fn event_payload(
+    ev: &ScanEvent,
+    station: &str,
+    time: chrono::DateTime<chrono::Utc>,
+) -> serde_json::Map<String, serde_json::Value> {
+    let mut m = serde_json::Map::new();
+    m.insert("kind".into(), ev.kind.as_str().into());
+    m.insert("scan_id".into(), ev.scan_id.clone().into());
+    m.insert(
+        "time".into(),
+        time.to_rfc3339_opts(chrono::SecondsFormat::Millis, true)
+            .into(),
+    );
+    m.insert("reason".into(), ev.reason.clone().into());
+    m.insert("station".into(), station.into());
+    m.insert("scan_dir".into(), ev.dir.display().to_string().into());
+    m
+}
+
+impl Publishers {
+    /// Starts what `config` asks for, reporting into `status`'s links. Must run inside a
+    /// tokio runtime. An outbox that cannot be opened is an error naming the directory.
+    pub fn start(config: &Config, status: &watch::Sender<Status>) -> Result<Publishers, String> {
+        let (stop, stop_rx) = watch::channel(false);
+        let mut p = Publishers {
+            events: None,
+            writer: None,
+            links: Vec::new(),
+            stop,
+        };
+        let Some(m) = &config.mqtt else {
+            return Ok(p);
+        };
+        let dir = outbox_dir(config, "mqtt");
+        let outbox = Outbox::open(&dir, &m.station, m.outbox_max).map_err(|e| {
+            format!(
+                "mqtt: cannot open the outbox {}: {}",
+                dir.display(),
+                crate::atomic::write_hint(&dir, &e)
+            )
+        })?;
+        let outbox = Arc::new(Mutex::new(outbox));
+        let wake = Arc::new(Notify::new());
+        let link = mqtt::MqttLink::new(m.clone(), outbox.clone(), wake.clone(), status.clone())
+            .map_err(|e| format!("mqtt: {e}"))?;
+        p.links.push(tokio::spawn(link.run(stop_rx)));
+        let (tx, mut rx) = mpsc::unbounded_channel::<ScanEvent>();
+        let station = m.station.clone();
+        let status = status.clone();
+        p.writer = Some(tokio::spawn(async move {
+            while let Some(ev) = rx.recv().await {
+                let payload = event_payload(&ev, &station, chrono::Utc::now());
+                let o = outbox.clone();
+                let stored = tokio::task::spawn_blocking(move || {
+                    o.lock()
+                        .map_err(|_| std::io::Error::other("outbox lock poisoned"))?
+                        .push("events", payload)
+                })
+                .await
+                .map_err(std::io::Error::other)
+                .and_then(|r| r);
+                let queued = outbox.lock().map_or(0, |o| o.len());
+                status.send_if_modified(|s| match s.links.get_mut(mqtt::LINK) {
+                    Some(l) if l.queued != queued => {
+                        l.queued = queued;
+                        true
+                    }
+                    _ => false,
+                });
+                match stored {
+                    Ok(p) if p.dropped > 0 => tracing::warn!(
+                        "mqtt: the outbox is full; the {} oldest undelivered message(s) were dropped (raise [mqtt] outbox-max or bring the broker back)",
+                        p.dropped
+                    ),
+                    Ok(_) => {}
+                    Err(e) => tracing::error!(
+                        "mqtt: event {} of scan {} could not be stored in the outbox and will not be published: {e}",
+                        ev.kind,
+                        ev.scan_id
+                    ),
+                }
+                wake.notify_one();
+            }
+        }));
+        p.events = Some(tx);
+        Ok(p)
+    }
+
+    /// Where events for the publishers go (none when none runs). The writer stores what
+    /// arrives until every clone is dropped.
+    pub fn sender(&self) -> Option<mpsc::UnboundedSender<ScanEvent>> {
+        self.events.clone()
+    }
+
+    /// Stores what is still in the channel, then stops the links (each says `offline`),
+    /// within `deadline` in all.
+    pub async fn finish(mut self, deadline: Duration) {
+        let end = tokio::time::Instant::now() + deadline;
+        self.events = None;
+        if let Some(w) = self.writer.take() {
+            let _ = tokio::time::timeout_at(end, w).await;
+        }
+        let _ = self.stop.send(true);
+        for l in self.links.drain(..) {
+            let _ = tokio::time::timeout_at(end, l).await;
+        }
+    }
+}

@@ -1,0 +1,375 @@
+//! The station on the lab's MQTT broker: its status (retained, on every change and at most
+//! once a second), `online`/`offline` (the last will), and the outbox's events and results,
+//! each delivered with QoS 1 and removed from the outbox only when the broker acknowledged
+//! it.
+//!
+//! Topics, below `surfscan/<station>/`:
+//!
+//! | Topic | Retained | Payload |
+//! |---|---|---|
+//! | `status` | yes | the status as `surfscan status --json` has it, with `station` and `time` |
+//! | `online` | yes | `online` at connect; `offline` at a clean stop and, as the last will, when the broker loses the station |
+//! | `events` | no | `{"id","kind","scan_id","time","reason","station","scan_dir"}` |
+//! | `results` | no | a completed scan's results |
+//!
+//! The link never touches the scan: it reads the status from its watch channel and the
+//! messages from the outbox on disk, and reports its own state in the status's `links`. A
+//! broker that cannot be reached, refuses the credentials or presents a certificate that
+//! does not verify is named there and in the log, and tried again with backoff (1 s doubling
+//! to 30 s). Each connection starts a fresh client, so the outbox is the one place that knows
+//! what is still to be sent: the message in flight when a connection broke is sent again,
+//! with the same id.
+//!
+//! Layer 4 (process edge): depends on rumqttc, [`super::outbox`], [`super::settings`],
+//! [`super::tls`] and the scan's status type.
+
+use super::outbox::{Message, Outbox};
+use super::settings::{parse_broker_url, MqttSettings};
+use crate::scan::status::{LinkStatus, Status};
+use rumqttc::{
+    AsyncClient, ConnectReturnCode, ConnectionError, Event, LastWill, MqttOptions, Outgoing,
+    Packet, QoS, TlsConfiguration, Transport,
+};
+use std::collections::{HashMap, VecDeque};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use tokio::sync::{watch, Notify};
+use tokio::time::Instant;
+
+/// The link's name in the status's `links`.
+pub const LINK: &str = "mqtt";
+/// Least time between two status messages.
+const STATUS_EVERY: Duration = Duration::from_secs(1);
+/// First wait before connecting again; doubled up to [`MAX_WAIT`].
+const FIRST_WAIT: Duration = Duration::from_secs(1);
+const MAX_WAIT: Duration = Duration::from_secs(30);
+/// How long a clean stop may take to say `offline` and disconnect.
+const STOP_DEADLINE: Duration = Duration::from_secs(3);
+
+/// The topic root of a station, `surfscan/<station>`.
+pub fn root(station: &str) -> String {
+    format!("surfscan/{station}")
+}
+
+/// The station's link to its broker.
+pub struct MqttLink {
+    settings: MqttSettings,
+    outbox: Arc<Mutex<Outbox>>,
+    wake: Arc<Notify>,
+    status: watch::Sender<Status>,
+    tls: Option<Arc<rustls::ClientConfig>>,
+}
+
+/// What a published message was, so its acknowledgement can be matched.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Tag {
+    Other,
+    Outbox(u64),
+}
+
+enum Ended {
+    Shutdown,
+    Lost { message: String, connected: bool },
+}
+
+/// A connection error in words, with what to do.
+pub fn describe(url: &str, user: Option<&str>, e: &ConnectionError) -> String {
+    match e {
+        ConnectionError::ConnectionRefused(
+            ConnectReturnCode::BadUserNamePassword | ConnectReturnCode::NotAuthorized,
+        ) => format!(
+            "the broker {url} refused the station's credentials (user {}): check [mqtt] username and the password in password-file against the broker's password file",
+            user.map_or("none".to_owned(), |u| format!("{u:?}"))
+        ),
+        ConnectionError::ConnectionRefused(ConnectReturnCode::BadClientId) => format!(
+            "the broker {url} refused the client id: set [mqtt] client-id to one the broker accepts"
+        ),
+        ConnectionError::ConnectionRefused(code) => {
+            format!("the broker {url} refused the connection ({code:?}); trying again")
+        }
+        ConnectionError::Tls(t) => format!(
+            "TLS with {url} failed: {t}; check that the broker's certificate chains to [mqtt] ca-file (or the system's authorities) and names the host"
+        ),
+        ConnectionError::Io(io) if io.kind() == std::io::ErrorKind::ConnectionRefused => format!(
+            "the broker {url} is not listening (connection refused); is it running? trying again"
+        ),
+        ConnectionError::Io(io) => format!("the connection to {url} broke: {io}; trying again"),
+        ConnectionError::NetworkTimeout => {
+            format!("the broker {url} did not answer in time; trying again")
+        }
+        other => format!("the connection to {url} broke: {other}; trying again"),
+    }
+}
+
+impl MqttLink {
+    /// A link for these (validated) settings, delivering `outbox` (woken by `wake`) and the
+    /// status of `status`.
+    pub fn new(
+        settings: MqttSettings,
+        outbox: Arc<Mutex<Outbox>>,
+        wake: Arc<Notify>,
+        status: watch::Sender<Status>,
+    ) -> Result<MqttLink, String> {
+        let addr = parse_broker_url(&settings.url)?;
+        let tls = if addr.tls {
+            Some(super::tls::client_config(settings.ca_file.as_deref())?)
+        } else {
+            None
+        };
+        Ok(MqttLink {
+            settings,
+            outbox,
+            wake,
+            status,
+            tls,
+        })
+    }
+
+    fn topic(&self, leaf: &str) -> String {
+        format!("{}/{leaf}", root(&self.settings.station))
+    }
+
+    fn queued(&self) -> u64 {
+        self.outbox.lock().map_or(0, |o| o.len())
+    }
+
+    /// Shows the link's state in the status (and logs a change).
+    fn report(&self, ok: bool, message: String) {
+        let link = LinkStatus {
+            ok,
+            message,
+            queued: self.queued(),
+        };
+        self.status.send_if_modified(|s| {
+            if s.links.get(LINK) == Some(&link) {
+                return false;
+            }
+            if s.links.get(LINK).map(|l| (&l.message, l.ok)) != Some((&link.message, link.ok)) {
+                if link.ok {
+                    tracing::info!("mqtt: {}", link.message);
+                } else {
+                    tracing::warn!("mqtt: {}", link.message);
+                }
+            }
+            s.links.insert(LINK.to_owned(), link);
+            true
+        });
+    }
+
+    fn options(&self) -> Result<MqttOptions, String> {
+        let addr = parse_broker_url(&self.settings.url)?;
+        let mut o = MqttOptions::new(self.settings.client_id(), addr.host, addr.port);
+        o.set_keep_alive(Duration::from_secs(self.settings.keep_alive_s));
+        o.set_clean_session(true);
+        o.set_max_packet_size(1 << 20, 1 << 20);
+        o.set_last_will(LastWill::new(
+            self.topic("online"),
+            "offline",
+            QoS::AtLeastOnce,
+            true,
+        ));
+        if let Some(user) = &self.settings.username {
+            // Read at each connection: a corrected password file needs no restart.
+            let password = self.settings.password()?.unwrap_or_default();
+            o.set_credentials(user.clone(), password);
+        }
+        if let Some(tls) = &self.tls {
+            o.set_transport(Transport::tls_with_config(TlsConfiguration::Rustls(
+                tls.clone(),
+            )));
+        }
+        Ok(o)
+    }
+
+    /// Runs until `shutdown` becomes true: connects, delivers, reconnects with backoff.
+    pub async fn run(self, mut shutdown: watch::Receiver<bool>) {
+        let mut wait = FIRST_WAIT;
+        self.report(false, format!("connecting to {}", self.settings.url));
+        loop {
+            if *shutdown.borrow() {
+                return;
+            }
+            match self.session(&mut shutdown).await {
+                Ended::Shutdown => return,
+                Ended::Lost { message, connected } => {
+                    if connected {
+                        wait = FIRST_WAIT;
+                    }
+                    self.report(false, message);
+                    tokio::select! {
+                        _ = tokio::time::sleep(wait) => {}
+                        _ = shutdown.changed() => {}
+                    }
+                    wait = (wait * 2).min(MAX_WAIT);
+                }
+            }
+        }
+    }
+
+    async fn session(&self, shutdown: &mut watch::Receiver<bool>) -> Ended {
+        let options = match self.options() {
+            Ok(o) => o,
+            Err(message) => {
+                return Ended::Lost {
+                    message,
+                    connected: false,
+                }
+            }
+        };
+        let (client, mut events) = AsyncClient::new(options, 64);
+        let mut tags: VecDeque<Tag> = VecDeque::new();
+        let mut sent: HashMap<u16, Tag> = HashMap::new();
+        let mut connected = false;
+        let mut inflight: Option<u64> = None;
+        let mut status_rx = self.status.subscribe();
+        let mut status_open = true;
+        let mut last_status = String::new();
+        let mut last_status_at: Option<Instant> = None;
+        let mut status_due: Option<Instant> = None;
+        loop {
+            if connected && inflight.is_none() {
+                match self.head().await {
+                    Ok(Some(m)) => {
+                        let payload = serde_json::to_vec(&m.payload).unwrap_or_default();
+                        if client
+                            .try_publish(self.topic(&m.topic), QoS::AtLeastOnce, false, payload)
+                            .is_ok()
+                        {
+                            tags.push_back(Tag::Outbox(m.seq));
+                            inflight = Some(m.seq);
+                        }
+                    }
+                    Ok(None) => {}
+                    Err(e) => self.report(
+                        false,
+                        format!("cannot read the outbox: {e}; messages wait until it can be read"),
+                    ),
+                }
+            }
+            let due = status_due.filter(|_| connected);
+            tokio::select! {
+                r = events.poll() => match r {
+                    Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                        connected = true;
+                        self.report(true, format!("connected to {}", self.settings.url));
+                        if client.try_publish(self.topic("online"), QoS::AtLeastOnce, true, "online").is_ok() {
+                            tags.push_back(Tag::Other);
+                        }
+                        last_status.clear();
+                        status_due = Some(Instant::now());
+                    }
+                    Ok(Event::Outgoing(Outgoing::Publish(pkid))) => {
+                        if let Some(tag) = tags.pop_front() {
+                            sent.insert(pkid, tag);
+                        }
+                    }
+                    Ok(Event::Incoming(Packet::PubAck(ack))) => {
+                        if let Some(Tag::Outbox(seq)) = sent.remove(&ack.pkid) {
+                            if let Err(e) = self.ack(seq).await {
+                                tracing::error!("mqtt: cannot remove a delivered message from the outbox: {e}; it will be sent again");
+                            }
+                            inflight = None;
+                            self.report(true, format!("connected to {}", self.settings.url));
+                        }
+                    }
+                    Ok(_) => {}
+                    Err(e) => {
+                        let message = describe(&self.settings.url, self.settings.username.as_deref(), &e);
+                        return Ended::Lost { message, connected };
+                    }
+                },
+                changed = status_rx.changed(), if status_open => {
+                    if changed.is_err() {
+                        status_open = false;
+                    } else {
+                        let earliest = last_status_at.map_or_else(Instant::now, |t| t + STATUS_EVERY);
+                        status_due.get_or_insert(earliest.max(Instant::now()));
+                    }
+                }
+                _ = tokio::time::sleep_until(due.unwrap_or_else(Instant::now)), if due.is_some() => {
+                    status_due = None;
+                    let text = self.status_payload();
+                    if text != last_status
+                        && client.try_publish(self.topic("status"), QoS::AtLeastOnce, true, text.clone()).is_ok()
+                    {
+                        tags.push_back(Tag::Other);
+                        last_status = text;
+                        last_status_at = Some(Instant::now());
+                    }
+                }
+                _ = self.wake.notified() => {}
+                _ = shutdown.changed() => {
+                    if connected {
+                        self.stop(&client, &mut events).await;
+                    }
+                    return Ended::Shutdown;
+                }
+            }
+        }
+    }
+
+    /// Says `offline` (a clean disconnect sends no last will) and disconnects, within
+    /// [`STOP_DEADLINE`].
+    async fn stop(&self, client: &AsyncClient, events: &mut rumqttc::EventLoop) {
+        let _ = client.try_publish(
+            self.topic("status"),
+            QoS::AtLeastOnce,
+            true,
+            self.status_payload(),
+        );
+        let _ = client.try_publish(self.topic("online"), QoS::AtLeastOnce, true, "offline");
+        let _ = client.try_disconnect();
+        let _ = tokio::time::timeout(STOP_DEADLINE, async {
+            while let Ok(ev) = events.poll().await {
+                if matches!(ev, Event::Outgoing(Outgoing::Disconnect)) {
+                    break;
+                }
+            }
+        })
+        .await;
+    }
+
+    fn status_payload(&self) -> String {
+        let status = self.status.borrow().clone();
+        let mut v = serde_json::to_value(&status).unwrap_or_default();
+        if let Some(o) = v.as_object_mut() {
+            o.insert("station".into(), self.settings.station.clone().into());
+            o.insert(
+                "time".into(),
+                chrono::Utc::now()
+                    .to_rfc3339_opts(chrono::SecondsFormat::Millis, true)
+                    .into(),
+            );
+        }
+        v.to_string()
+    }
+
+    async fn head(&self) -> std::io::Result<Option<Message>> {
+        let o = self.outbox.clone();
+        let (m, damaged) = tokio::task::spawn_blocking(move || {
+            o.lock()
+                .map_err(|_| std::io::Error::other("outbox lock poisoned"))?
+                .head()
+        })
+        .await
+        .map_err(std::io::Error::other)??;
+        for d in damaged {
+            tracing::error!(
+                "mqtt: an outbox message could not be read back and was set aside: {}",
+                d.display()
+            );
+        }
+        Ok(m)
+    }
+
+    async fn ack(&self, seq: u64) -> std::io::Result<()> {
+        let o = self.outbox.clone();
+        tokio::task::spawn_blocking(move || {
+            o.lock()
+                .map_err(|_| std::io::Error::other("outbox lock poisoned"))?
+                .ack(seq)
+        })
+        .await
+        .map_err(std::io::Error::other)?
+    }
+}

@@ -1,0 +1,237 @@
+//! A real Mosquitto broker for the MQTT tests, started on a free loopback port in a test's
+//! directory with a password file and an ACL, and `mosquitto_sub` as the independent
+//! subscriber. Both are Debian packages (`mosquitto`, `mosquitto-clients`) that `.ci/run`
+//! installs.
+
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// The station's user on the broker.
+pub const STATION_USER: &str = "station";
+/// Its password.
+pub const STATION_PASSWORD: &str = "st4tion-pw";
+/// The subscriber's user (read only).
+pub const WATCHER_USER: &str = "watcher";
+const WATCHER_PASSWORD: &str = "w4tcher-pw";
+
+/// A free loopback TCP port (bound and released; the caller binds it next).
+pub fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// A child process killed when dropped.
+pub struct Killed(pub Child);
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        if let Ok(None) = self.0.try_wait() {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+}
+
+/// A broker and its files.
+pub struct Broker {
+    /// Its port on 127.0.0.1.
+    pub port: u16,
+    dir: PathBuf,
+    process: Option<Killed>,
+}
+
+fn which(program: &str) -> PathBuf {
+    for dir in ["/usr/sbin", "/usr/bin", "/usr/local/sbin", "/usr/local/bin"] {
+        let p = Path::new(dir).join(program);
+        if p.exists() {
+            return p;
+        }
+    }
+    panic!("{program} is not installed: `bash .ci/run` installs mosquitto and mosquitto-clients (apt-get install mosquitto mosquitto-clients)");
+}
+
+impl Broker {
+    /// Writes the configuration, password file and ACL below `dir` and starts the broker.
+    pub fn start(dir: &Path) -> Broker {
+        let dir = dir.join("broker");
+        std::fs::create_dir_all(dir.join("data")).unwrap();
+        let passwd = dir.join("passwd");
+        for (k, (user, pw)) in [
+            (STATION_USER, STATION_PASSWORD),
+            (WATCHER_USER, WATCHER_PASSWORD),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let mut c = Command::new(which("mosquitto_passwd"));
+            if k == 0 {
+                c.arg("-c");
+            }
+            let st = c.arg("-b").arg(&passwd).args([user, pw]).status().unwrap();
+            assert!(st.success(), "mosquitto_passwd failed");
+        }
+        std::fs::write(
+            dir.join("acl"),
+            format!(
+                "user {STATION_USER}\ntopic readwrite surfscan/#\n\nuser {WATCHER_USER}\ntopic read surfscan/#\n"
+            ),
+        )
+        .unwrap();
+        let port = free_port();
+        // Started as root, mosquitto drops to the user `mosquitto`, who cannot write the
+        // test's directory (its persistence and log): it stays root then (CI runs as root).
+        let user = if nix::unistd::geteuid().is_root() {
+            "user root\n"
+        } else {
+            ""
+        };
+        std::fs::write(
+            dir.join("mosquitto.conf"),
+            format!(
+                "{user}listener {port} 127.0.0.1\nallow_anonymous false\npassword_file {}\nacl_file {}\npersistence true\npersistence_location {}/\nlog_dest file {}\n",
+                passwd.display(),
+                dir.join("acl").display(),
+                dir.join("data").display(),
+                dir.join("mosquitto.log").display(),
+            ),
+        )
+        .unwrap();
+        let mut b = Broker {
+            port,
+            dir,
+            process: None,
+        };
+        b.restart();
+        b
+    }
+
+    /// The broker's URL.
+    pub fn url(&self) -> String {
+        format!("mqtt://127.0.0.1:{}", self.port)
+    }
+
+    /// Stops the broker (SIGTERM: it saves its persistent sessions and retained messages).
+    pub fn stop(&mut self) {
+        if let Some(mut p) = self.process.take() {
+            let pid = nix::unistd::Pid::from_raw(p.0.id() as i32);
+            nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).unwrap();
+            let start = Instant::now();
+            while p.0.try_wait().unwrap().is_none() {
+                assert!(
+                    start.elapsed() < Duration::from_secs(10),
+                    "mosquitto does not stop: {}",
+                    std::fs::read_to_string(self.dir.join("mosquitto.log")).unwrap_or_default()
+                );
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        }
+    }
+
+    /// Starts the broker again on the same port, with what it saved.
+    pub fn restart(&mut self) {
+        assert!(self.process.is_none(), "the broker is running");
+        let child = Command::new(which("mosquitto"))
+            .arg("-c")
+            .arg(self.dir.join("mosquitto.conf"))
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut child = Killed(child);
+        let start = Instant::now();
+        while std::net::TcpStream::connect(("127.0.0.1", self.port)).is_err() {
+            if let Some(st) = child.0.try_wait().unwrap() {
+                panic!(
+                    "mosquitto exited ({st}): {}",
+                    std::fs::read_to_string(self.dir.join("mosquitto.log")).unwrap_or_default()
+                );
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(10),
+                "mosquitto does not listen"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        self.process = Some(child);
+    }
+
+    /// Starts `mosquitto_sub` as the watcher with a persistent session (client id `id`,
+    /// QoS 1), writing each message as `RETAIN TOPIC PAYLOAD` to `out`. Messages published
+    /// while it is away are kept for it by the broker.
+    pub fn subscribe(&self, id: &str, out: &Path) -> Killed {
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(out)
+            .unwrap();
+        let child = Command::new(which("mosquitto_sub"))
+            .args(["-h", "127.0.0.1", "-p", &self.port.to_string()])
+            .args(["-u", WATCHER_USER, "-P", WATCHER_PASSWORD])
+            .args(["-i", id, "-c", "-q", "1", "-t", "surfscan/#"])
+            .args(["-F", "%r %t %p"])
+            .stdin(Stdio::null())
+            .stdout(file)
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        Killed(child)
+    }
+}
+
+/// One message as the subscriber saw it.
+#[derive(Debug, Clone)]
+pub struct Seen {
+    /// Retained flag.
+    pub retained: bool,
+    /// Topic.
+    pub topic: String,
+    /// Payload text.
+    pub payload: String,
+}
+
+impl Seen {
+    /// The payload as JSON.
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::from_str(&self.payload)
+            .unwrap_or_else(|e| panic!("{}: not JSON ({e}): {}", self.topic, self.payload))
+    }
+}
+
+/// Every message in a subscriber's output so far.
+pub fn seen(out: &Path) -> Vec<Seen> {
+    std::fs::read_to_string(out)
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| {
+            let (r, rest) = l.split_once(' ')?;
+            let (topic, payload) = rest.split_once(' ').unwrap_or((rest, ""));
+            Some(Seen {
+                retained: r == "1",
+                topic: topic.to_owned(),
+                payload: payload.to_owned(),
+            })
+        })
+        .collect()
+}
+
+/// Waits until the subscriber's messages satisfy `done`.
+pub async fn wait_seen(out: &Path, what: &str, done: impl Fn(&[Seen]) -> bool) -> Vec<Seen> {
+    let start = Instant::now();
+    loop {
+        let s = seen(out);
+        if done(&s) {
+            return s;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(90),
+            "{what}: the subscriber saw {s:#?}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}

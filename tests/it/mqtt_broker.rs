@@ -1,0 +1,413 @@
+//! The station on a real Mosquitto broker: the `surfscan daemon` binary against the
+//! simulator, publishing to a broker the test starts (password file and ACL), watched by
+//! `mosquitto_sub` as an independent subscriber. What a lab relies on: every event of a scan
+//! arrives once (by id) and in order, also when the broker was down for part of the scan,
+//! absent when the daemon started, or when the daemon was killed before it could deliver;
+//! the retained status and `online` say where the station is; a wrong password is named in
+//! the status and the log; and none of it touches the scan.
+
+use crate::common::mosquitto::{self, Broker, Seen};
+use crate::daemon_e2e::{self as e2e, Daemon, Rig};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+use surfscan::scan::ending::StopStatus;
+use surfscan::scan::journal::Record;
+use surfscan::scan::status::{State, Status};
+
+const STATION: &str = "st-1";
+
+/// Adds `[mqtt]` for `url` to the rig's configuration, with `password` in its file.
+fn with_mqtt(r: &Rig, url: &str, password: &str) {
+    let pw = r.dir.path().join("mqtt.pw");
+    std::fs::write(&pw, format!("{password}\n")).unwrap();
+    let mut text = std::fs::read_to_string(&r.config).unwrap();
+    text.push_str(&format!(
+        "\n[mqtt]\nurl = {url:?}\nstation = {STATION:?}\nusername = {:?}\npassword-file = {:?}\n",
+        mosquitto::STATION_USER,
+        pw.display().to_string()
+    ));
+    std::fs::write(&r.config, text).unwrap();
+}
+
+/// The daemon with its log in `daemon.log` of the rig's directory.
+fn spawn_logged(r: &Rig) -> Daemon {
+    let log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(log_path(r))
+        .unwrap();
+    Daemon(
+        Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(["daemon", "--config"])
+            .arg(&r.config)
+            .env_remove("NOTIFY_SOCKET")
+            .env_remove("WATCHDOG_USEC")
+            .env("RUST_LOG", "info")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .unwrap(),
+    )
+}
+
+fn log_path(r: &Rig) -> PathBuf {
+    r.dir.path().join("daemon.log")
+}
+
+async fn wait_socket(r: &Rig) {
+    let start = std::time::Instant::now();
+    while surfscan::control::client::ControlClient::connect(&r.socket)
+        .await
+        .is_err()
+    {
+        assert!(start.elapsed() < e2e::DEADLINE, "the daemon never listened");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+fn topic(leaf: &str) -> String {
+    format!("surfscan/{STATION}/{leaf}")
+}
+
+/// The events seen, each id once (a QoS 1 redelivery may repeat one), in arrival order.
+fn events(seen: &[Seen]) -> Vec<serde_json::Value> {
+    let mut ids = std::collections::HashSet::new();
+    seen.iter()
+        .filter(|m| m.topic == topic("events"))
+        .map(Seen::json)
+        .filter(|e| ids.insert(e["id"].as_str().unwrap().to_owned()))
+        .collect()
+}
+
+fn kinds(events: &[serde_json::Value]) -> Vec<String> {
+    events
+        .iter()
+        .map(|e| e["kind"].as_str().unwrap().to_owned())
+        .collect()
+}
+
+/// The outbox's sequence number of an event id `st-1-<n>`.
+fn seq(e: &serde_json::Value) -> u64 {
+    let id = e["id"].as_str().unwrap();
+    id.strip_prefix(&format!("{STATION}-"))
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("event id {id:?} is not {STATION}-<n>"))
+}
+
+fn has_kind(seen: &[Seen], kind: &str) -> bool {
+    kinds(&events(seen)).iter().any(|k| k == kind)
+}
+
+/// Asserts the scan's events arrived complete and in order: started first, success last,
+/// nothing in between but suspensions and resumptions, ids in increasing order, each event
+/// naming the scan.
+fn assert_complete_in_order(events: &[serde_json::Value], scan_id: &str) {
+    let k = kinds(events);
+    assert_eq!(
+        k.first().map(String::as_str),
+        Some("started"),
+        "{events:#?}"
+    );
+    assert_eq!(k.last().map(String::as_str), Some("success"), "{events:#?}");
+    assert!(
+        k[1..k.len() - 1]
+            .iter()
+            .all(|k| k == "suspended" || k == "resumed"),
+        "{k:?}"
+    );
+    let seqs: Vec<u64> = events.iter().map(seq).collect();
+    assert!(
+        seqs.windows(2).all(|w| w[0] < w[1]),
+        "events out of order: {seqs:?}"
+    );
+    for e in events {
+        assert_eq!(e["scan_id"], scan_id, "{e}");
+        assert!(e["time"].as_str().unwrap().ends_with('Z'), "{e}");
+        assert!(!e["reason"].as_str().unwrap().is_empty(), "{e}");
+    }
+}
+
+fn outbox_files(r: &Rig) -> usize {
+    std::fs::read_dir(r.out().join("outbox").join("mqtt"))
+        .map(|d| {
+            d.filter(|e| {
+                e.as_ref()
+                    .unwrap()
+                    .file_name()
+                    .to_string_lossy()
+                    .ends_with(".json")
+            })
+            .count()
+        })
+        .unwrap_or(0)
+}
+
+async fn scan_to_success(r: &Rig, specimen: &str) -> Status {
+    e2e::start_scan(r, specimen).await;
+    e2e::wait_status(r, "scan ended", |s| {
+        s.state == State::Idle && s.last_stop.is_some()
+    })
+    .await
+}
+
+fn line_seconds(dir: &Path) -> Vec<f64> {
+    let times: Vec<chrono::DateTime<chrono::Utc>> = e2e::records(dir)
+        .iter()
+        .filter_map(|r| match r {
+            Record::Line(l) => Some(l.time),
+            _ => None,
+        })
+        .collect();
+    times
+        .windows(2)
+        .map(|w| (w[1] - w[0]).num_milliseconds() as f64 / 1000.0)
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_scan_is_seen_by_a_subscriber_with_its_status_events_and_last_will() {
+    let r = e2e::rig().await;
+    let broker = Broker::start(r.dir.path());
+    with_mqtt(&r, &broker.url(), mosquitto::STATION_PASSWORD);
+    let out = r.dir.path().join("sub.txt");
+    let _sub = broker.subscribe("watcher-a", &out);
+    let mut d = spawn_logged(&r);
+    wait_socket(&r).await;
+    mosquitto::wait_seen(&out, "online", |s| {
+        s.iter()
+            .any(|m| m.topic == topic("online") && m.payload == "online")
+    })
+    .await;
+    let ended = scan_to_success(&r, "mqtt-1").await;
+    let stop = ended.last_stop.unwrap();
+    assert_eq!(stop.status, StopStatus::Success, "{}", stop.reason);
+    let seen = mosquitto::wait_seen(&out, "success event", |s| has_kind(s, "success")).await;
+    let ev = events(&seen);
+    assert_complete_in_order(&ev, &stop.scan_id);
+    assert_eq!(kinds(&ev), ["started", "success"]);
+    // The status: retained, the same fields as `surfscan status --json`; it showed the scan
+    // running and, once the scan ended, its ending.
+    let statuses: Vec<serde_json::Value> = seen
+        .iter()
+        .filter(|m| m.topic == topic("status"))
+        .map(Seen::json)
+        .collect();
+    assert!(
+        statuses
+            .iter()
+            .any(|s| s["state"] == "scanning" && s["scan_id"] == stop.scan_id.as_str()),
+        "{statuses:#?}"
+    );
+    let last = mosquitto::wait_seen(&out, "idle status", |s| {
+        s.iter()
+            .rev()
+            .find(|m| m.topic == topic("status"))
+            .is_some_and(|m| {
+                let v = m.json();
+                v["state"] == "idle" && v["last_stop"]["status"] == "success"
+            })
+    })
+    .await;
+    let status_msg = last
+        .iter()
+        .rev()
+        .find(|m| m.topic == topic("status"))
+        .unwrap()
+        .json();
+    let parsed: Status = serde_json::from_value(status_msg.clone()).unwrap();
+    assert_eq!(parsed.last_stop.unwrap().scan_id, stop.scan_id);
+    assert_eq!(status_msg["station"], STATION);
+    assert_eq!(status_msg["links"]["mqtt"]["ok"], true, "{status_msg}");
+    // Nothing is left to deliver.
+    assert_eq!(outbox_files(&r), 0);
+    // A new subscriber gets the retained status and online at once.
+    let late = r.dir.path().join("late.txt");
+    let _late = broker.subscribe("watcher-late", &late);
+    let s = mosquitto::wait_seen(&late, "retained", |s| {
+        s.iter().any(|m| m.topic == topic("status") && m.retained)
+            && s.iter().any(|m| m.topic == topic("online") && m.retained)
+    })
+    .await;
+    assert!(
+        s.iter().all(|m| m.topic != topic("events")),
+        "events are not retained"
+    );
+    // A clean stop says offline (a clean disconnect sends no last will).
+    e2e::sigterm(&d);
+    e2e::wait_exit(&mut d);
+    mosquitto::wait_seen(&out, "offline", |s| {
+        s.iter()
+            .rev()
+            .find(|m| m.topic == topic("online"))
+            .is_some_and(|m| m.payload == "offline")
+    })
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_broker_stopped_mid_scan_and_the_daemon_killed_lose_nothing_and_reorder_nothing() {
+    let r = e2e::rig().await;
+    let mut broker = Broker::start(r.dir.path());
+    with_mqtt(&r, &broker.url(), mosquitto::STATION_PASSWORD);
+    let out = r.dir.path().join("sub.txt");
+    let mut sub = broker.subscribe("watcher-b", &out);
+    let mut d = spawn_logged(&r);
+    wait_socket(&r).await;
+    mosquitto::wait_seen(&out, "online", |s| {
+        s.iter().any(|m| m.topic == topic("online"))
+    })
+    .await;
+    e2e::start_scan(&r, "mqtt-2").await;
+    mosquitto::wait_seen(&out, "started", |s| has_kind(s, "started")).await;
+    e2e::wait_status(&r, "a line done", |s| s.lines_done >= 1).await;
+    broker.stop();
+    let stopped_at = e2e::status(&r).await.lines_done;
+    // The scan goes on without the broker, and the status says what is wrong.
+    let ended = e2e::wait_status(&r, "scan ended", |s| {
+        s.state == State::Idle && s.last_stop.is_some()
+    })
+    .await;
+    let stop = ended.last_stop.clone().unwrap();
+    assert_eq!(stop.status, StopStatus::Success, "{}", stop.reason);
+    let link = e2e::wait_status(&r, "link down", |s| {
+        s.links.get("mqtt").is_some_and(|l| !l.ok)
+    })
+    .await
+    .links["mqtt"]
+        .clone();
+    assert!(
+        link.message.contains("not listening") || link.message.contains("broke"),
+        "{link:?}"
+    );
+    // The success event waits on disk (stored a moment after the scan's end). The daemon
+    // is killed before it could deliver it.
+    e2e::wait_status(&r, "the success event in the outbox", |s| {
+        s.links.get("mqtt").is_some_and(|l| l.queued >= 1)
+    })
+    .await;
+    assert!(
+        outbox_files(&r) >= 1,
+        "the success event is not in the outbox"
+    );
+    d.0.kill().unwrap();
+    e2e::wait_exit(&mut d);
+    let dir = e2e::scan_dir(&r);
+    println!(
+        "line periods, s (broker stopped after line {stopped_at}): {:?}",
+        line_seconds(&dir)
+    );
+    broker.restart();
+    if sub.0.try_wait().unwrap().is_some() {
+        sub = broker.subscribe("watcher-b", &out);
+    }
+    let mut d = spawn_logged(&r);
+    let seen = mosquitto::wait_seen(&out, "success after the restarts", |s| {
+        has_kind(s, "success")
+    })
+    .await;
+    assert_complete_in_order(&events(&seen), &stop.scan_id);
+    let start = std::time::Instant::now();
+    while outbox_files(&r) > 0 {
+        assert!(start.elapsed() < e2e::DEADLINE, "the outbox is not emptied");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    e2e::sigterm(&d);
+    e2e::wait_exit(&mut d);
+    drop(sub);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_broker_absent_when_the_daemon_starts_gets_the_scan_once_it_is_there() {
+    let r = e2e::rig().await;
+    let mut broker = Broker::start(r.dir.path());
+    broker.stop();
+    with_mqtt(&r, &broker.url(), mosquitto::STATION_PASSWORD);
+    let mut d = spawn_logged(&r);
+    wait_socket(&r).await;
+    let ended = scan_to_success(&r, "mqtt-3").await;
+    let stop = ended.last_stop.unwrap();
+    assert_eq!(stop.status, StopStatus::Success, "{}", stop.reason);
+    // Its events wait on disk, and the status says how many.
+    let s = e2e::wait_status(&r, "two events queued", |s| {
+        s.links.get("mqtt").is_some_and(|l| !l.ok && l.queued >= 2)
+    })
+    .await;
+    assert!(
+        s.links["mqtt"].message.contains("not listening"),
+        "{:?}",
+        s.links
+    );
+    assert_eq!(outbox_files(&r), 2);
+    broker.restart();
+    let out = r.dir.path().join("sub.txt");
+    // Events are not retained: a subscriber that is there when the broker comes back sees
+    // them. The daemon's next try is at most its backoff away.
+    let _sub = broker.subscribe("watcher-c", &out);
+    let seen = mosquitto::wait_seen(&out, "success", |s| has_kind(s, "success")).await;
+    assert_complete_in_order(&events(&seen), &stop.scan_id);
+    e2e::sigterm(&d);
+    e2e::wait_exit(&mut d);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_wrong_password_is_named_in_the_status_and_the_log_and_the_scan_is_unaffected() {
+    let r = e2e::rig().await;
+    let broker = Broker::start(r.dir.path());
+    with_mqtt(&r, &broker.url(), "not-the-password");
+    let mut d = spawn_logged(&r);
+    wait_socket(&r).await;
+    let s = e2e::wait_status(&r, "refusal in the status", |s| {
+        s.links
+            .get("mqtt")
+            .is_some_and(|l| !l.ok && l.message.contains("credentials"))
+    })
+    .await;
+    let message = s.links["mqtt"].message.clone();
+    assert!(message.contains("password-file"), "{message}");
+    let ended = scan_to_success(&r, "mqtt-4").await;
+    assert_eq!(ended.last_stop.unwrap().status, StopStatus::Success);
+    e2e::sigterm(&d);
+    e2e::wait_exit(&mut d);
+    let log = std::fs::read_to_string(log_path(&r)).unwrap();
+    assert!(
+        log.contains("refused the station's credentials"),
+        "the log does not name the refusal: {log}"
+    );
+    drop(broker);
+}
+
+#[test]
+fn a_bad_mqtt_table_exits_78_naming_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = surfscan::cli::demo::demo_config(
+        &dir.path().join("i"),
+        &dir.path().join("s"),
+        &dir.path().join("scans"),
+    );
+    for (table, key) in [
+        ("url = \"http://h\"\nstation = \"a\"", "mqtt.url"),
+        ("url = \"mqtt://h\"\nstation = \"a/b\"", "mqtt.station"),
+        (
+            "url = \"mqtt://h\"\nstation = \"a\"\nusername = \"u\"\npassword-file = \"/nonexistent/pw\"",
+            "mqtt.password-file",
+        ),
+        (
+            "url = \"mqtt://h\"\nstation = \"a\"\nca-file = \"/etc/hostname\"",
+            "mqtt.ca-file",
+        ),
+        ("url = \"mqtt://h\"\nstation = \"a\"\noutbox-max = 0", "mqtt.outbox-max"),
+    ] {
+        let config = dir.path().join("station.toml");
+        std::fs::write(&config, format!("{base}\n[mqtt]\n{table}\n")).unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(["check-config", "--config"])
+            .arg(&config)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(78), "{table}: {err}");
+        assert!(err.contains(key), "{table}: {err}");
+    }
+}
