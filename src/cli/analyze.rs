@@ -151,8 +151,8 @@ fn characterise_profile(
     let exclude = args.outliers == Some(OutliersArg::Exclude);
     let lambda_c = options.apply_lambda_c.then_some(options.lambda_c_mm);
     let outliers =
-        crate::report::outliers::find(&z, z.len(), &[0], pitch, lambda_c, &rule, exclude);
-    crate::report::outliers::warn(&outliers, &[], pitch, &mut warnings);
+        crate::report::sections::spikes::find(&z, z.len(), &[0], pitch, lambda_c, &rule, exclude);
+    crate::report::sections::spikes::warn(&outliers, &[], pitch, &mut warnings);
     if exclude && !outliers.spikes.is_empty() {
         z = crate::metrology::outliers::bridged_grid(&z, z.len(), &[0], &outliers.spikes).0;
     }
@@ -173,7 +173,7 @@ fn characterise_profile(
         lines: vec![LineReport {
             index: 0,
             y_mm: 0.0,
-            rmr_table: crate::report::lines::rmr_table(&a),
+            rmr_table: crate::report::sections::lines::rmr_table(&a),
             params: a.params,
         }],
         outliers: Some(outliers),

@@ -1,10 +1,11 @@
-//! The report as data: what `report.json` holds, as typed values a renderer (JSON today)
-//! reads. Every section of the characterisation fills its own part.
+//! The report as data: what `report.json` holds, as typed values the renderers read,
+//! [`assemble`]d from the sections' results.
 //!
 //! Layer 4 (reporting): depends on the metrology result types, the scan's journal records
 //! ([`crate::scan::journal`]) and the fit summary of [`crate::scan::outputs`].
 
 use crate::fit::VMethod;
+use crate::grid::Grid;
 use crate::metrology::anisotropy::Anisotropy;
 use crate::metrology::areal::ArealParams;
 use crate::metrology::folds::ModelChecks;
@@ -14,6 +15,10 @@ use crate::metrology::model::ModelCurveBac;
 use crate::metrology::outliers::LineSpike;
 use crate::metrology::params::{Recipe, RoughnessParams};
 use crate::profile::Conditions;
+use crate::report::context::{Model, ReportContext};
+use crate::report::sections::lines::LinesSection;
+use crate::report::sections::model_vs_measured::attach;
+use crate::report::sections::Sections;
 use crate::scan::journal::{StartRecord, StopRecord};
 use crate::scan::outputs::FitSummary;
 use serde::Serialize;
@@ -82,6 +87,107 @@ pub struct Report {
     pub warnings: Vec<String>,
     /// Seconds per section.
     pub timings_s: Timings,
+}
+
+/// What the figures are drawn from beyond the report: each line's analysis (its Rk
+/// construction), the model sampled on the data lines, the line drawn against the model.
+#[derive(Debug)]
+pub struct FigureData {
+    /// Each row's analysis, in grid order.
+    pub analyses: Vec<crate::metrology::params::LineAnalysis>,
+    /// The model sampled on the data lines, when it could be.
+    pub sampled: Option<crate::report::sections::surface::SampledModel>,
+    /// The line drawn against the model.
+    pub overlay: Option<crate::report::sections::overlay::Overlay>,
+}
+
+/// The report of `sections` (made from `grid` with `model`, as `ctx` says): each section's
+/// result in its place, each line with its share of the hold-out, the failures and the
+/// warnings; and the figures' data. The timings are the sections' (the caller adds the
+/// writing's).
+pub fn assemble(
+    sections: Sections,
+    grid: &Grid,
+    model: &Model<'_>,
+    ctx: &ReportContext,
+) -> (Report, FigureData) {
+    let Sections {
+        spikes,
+        lines,
+        surface_grid,
+        anisotropy,
+        surface,
+        model_vs_measured,
+        between_lines,
+        overlay,
+        failed,
+        not_possible,
+        warnings,
+        timings,
+    } = sections;
+    let LinesSection {
+        recipe,
+        lines: mut line_reports,
+        analyses,
+    } = lines;
+    if let Ok(h) = &model_vs_measured {
+        attach(&mut line_reports, h);
+    }
+    let (surface_report, surface_error) = split(surface.surface);
+    let (surface_grid, surface_grid_error) = split(surface_grid);
+    let (model_vs_measured, model_vs_measured_error) = split(model_vs_measured);
+    let (between_lines, between_lines_error) = split(between_lines);
+    let report = Report {
+        software: crate::build_info::software(),
+        input: ctx.input.clone(),
+        kind: ctx.kind,
+        recipe,
+        lines: line_reports,
+        surface: surface_report,
+        surface_error,
+        surface_grid,
+        surface_grid_error,
+        model_vs_measured,
+        model_vs_measured_error,
+        between_lines,
+        between_lines_error,
+        model: ModelReport {
+            v_method: model.recipe.method,
+            description: model.recipe.describe(),
+            degree_u: model.recipe.degrees.degree_u,
+            degree_v: model.recipe.degrees.degree_v,
+            spikes_replaced: model.replaced.to_vec(),
+        },
+        model_checks: surface.checks,
+        outliers: spikes,
+        anisotropy: anisotropy.ok(),
+        characterisation: Characterisation {
+            complete: failed.is_empty() && !grid.is_partial(),
+            lines_in_input: grid.lines_in_input(),
+            lines_left_out: grid.left_out.clone(),
+            failed_sections: failed,
+            sections_not_possible: not_possible,
+        },
+        traceability: ctx.traceability.clone(),
+        scan: ctx.scan.clone(),
+        fit: ctx.fit.clone(),
+        warnings,
+        timings_s: timings,
+    };
+    let figures = FigureData {
+        analyses,
+        sampled: surface.sampled,
+        overlay,
+    };
+    (report, figures)
+}
+
+/// A section's result as report.json holds it: the value, or why there is none.
+fn split<T>(r: Result<T, String>) -> (Option<T>, Option<String>) {
+    match r {
+        Ok(v) => (Some(v), None),
+        Err(e) => (None, Some(e)),
+    }
 }
 
 /// The surface the model sections describe.

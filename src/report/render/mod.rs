@@ -12,16 +12,16 @@ pub mod summary;
 pub mod text_cache;
 
 use super::context::ReportContext;
-use super::document::Report;
+use super::document::{FigureData, Report};
 use super::error::{metrology, ReportError};
-use super::model::SampledModel;
+use super::sections::overlay::Overlay;
 use crate::atomic::write_atomically;
 use crate::grid::Grid;
 use crate::metrology::areal::HeightMap;
 use crate::metrology::model::ModelCurveBac;
 use crate::metrology::params::LineAnalysis;
 use crate::metrology::MetrologyError;
-use crate::numfmt::{fmt as nfmt, line_label, line_number, Quantity};
+use crate::numfmt::{fmt as nfmt, line_number, Quantity};
 use crate::scan::journal::{read_journal, ResumeState};
 use crate::x3p::{to_x3p, X3pMeta};
 use plots::{plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction};
@@ -146,122 +146,16 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
     })
 }
 
-/// The overlay's row: the requested line when it is among the rows (else a warning and the
-/// middle row).
-fn overlay_row(grid: &Grid, ctx: &mut ReportContext) -> usize {
-    let rows = grid.rows();
-    match ctx.options.overlay_line {
-        Some(i) => match grid.index.iter().position(|&k| k == i) {
-            Some(r) => r,
-            None => {
-                ctx.warnings.push(format!(
-                    "overlay line {i} is not among the lines used ({:?}); the middle line is drawn",
-                    grid.index
-                ));
-                rows / 2
-            }
-        },
-        None => rows / 2,
-    }
-}
-
-/// The overlay of a held-out line: its measured heights, the model refitted without it and
-/// the residual, as `(x_mm, z_um)`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Overlay {
-    /// Measured heights.
-    pub measured: Vec<(f64, f64)>,
-    /// The refit at the line.
-    pub model: Vec<(f64, f64)>,
-    /// Model − measured.
-    pub residual: Vec<(f64, f64)>,
-    /// Title naming the line and what the curve is.
-    pub title: String,
-}
-
-/// The paper's Figure 2 made honest: the requested overlay line (or the middle one) left
-/// out, the surface refitted without it the way the model was made, and drawn against the
-/// line's measured heights. When that line cannot be left out (the first or last line) or
-/// its refit fails, the held-out line of the verdict `b` nearest it is drawn instead, and a
-/// warning says so. `heights_um` are the grid's rows as characterised.
-pub fn held_out_overlay(
-    grid: &Grid,
-    heights_um: &[f64],
-    recipe: &crate::metrology::surface_model::ModelRecipe,
-    b: Option<&crate::metrology::holdout::BetweenLines>,
-    ctx: &mut ReportContext,
-) -> Option<Overlay> {
-    let wanted = overlay_row(grid, ctx);
-    let own = crate::metrology::holdout::model_without_line(
-        heights_um,
-        grid.cols,
-        grid.pitch_x_mm,
-        &grid.y_mm,
-        recipe.degrees,
-        recipe.method,
-        wanted,
-    );
-    let (row, rms, model) = match own {
-        Ok(m) => (wanted, m.line.rms_um, m.model_um),
-        Err(e) => {
-            let b = b?;
-            let (k, line) = b
-                .lines
-                .iter()
-                .enumerate()
-                .min_by_key(|(_, l)| l.index.abs_diff(wanted))?;
-            ctx.warnings.push(format!(
-                "the overlay shows line {} (left out of the hold-out refit) instead of line {}: {e}",
-                line_label(grid.index_of(line.index)),
-                line_label(grid.index_of(wanted))
-            ));
-            (line.index, line.rms_um, b.model_line(k)?.to_vec())
-        }
-    };
-    let px = grid.pitch_x_mm;
-    let measured = heights_um.get(row * grid.cols..(row + 1) * grid.cols)?;
-    Some(Overlay {
-        measured: measured
-            .iter()
-            .enumerate()
-            .map(|(i, v)| (i as f64 * px, *v))
-            .collect(),
-        model: model
-            .iter()
-            .enumerate()
-            .map(|(i, v)| (i as f64 * px, *v))
-            .collect(),
-        residual: model
-            .iter()
-            .zip(measured)
-            .enumerate()
-            .map(|(i, (m, z))| (i as f64 * px, m - z))
-            .collect(),
-        title: format!(
-            "Line {} ({:04}, y = {} mm) left out: its measured heights and the model refitted without it (rms {} µm)",
-            line_number(grid.index_of(row)),
-            grid.index_of(row),
-            nfmt(
-                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
-                Quantity::PositionMm
-            ),
-            nfmt(rms, Quantity::HeightUm)
-        ),
-    })
-}
-
 /// The plots: bearing curves (the model's when there are any, else the measured grid's
 /// pooled curve), the measured height map and the overlay of one line: a held-out line with
 /// the model refitted without it when the hold-out could be made, else (with a model) a data
 /// line, which the model interpolates by construction.
 fn write_plots(
     out: &Path,
-    grid: &Grid,
-    height_map: Result<[PathBuf; 2], ReportError>,
-    sampled: Option<&SampledModel>,
+    height_map: impl FnOnce() -> Result<[PathBuf; 2], ReportError>,
     overlay: Option<&Overlay>,
     report: &Report,
-    ctx: &mut ReportContext,
+    ctx: &ReportContext,
 ) -> Result<Vec<PathBuf>, ReportError> {
     let caption = caption(ctx);
     let mut plots = Vec::new();
@@ -286,44 +180,10 @@ fn write_plots(
     plots.extend(
         plot_bearing_curves(out, bac_curves, pooled, &bac_title, &caption).map_err(plot_err)?,
     );
-    plots.extend(height_map?);
+    plots.extend(height_map()?);
     if let Some(o) = overlay {
         plots.extend(
             plot_profile_overlay(out, &o.measured, &o.model, &o.residual, &o.title, &caption)
-                .map_err(plot_err)?,
-        );
-    } else if let Some(model) = sampled {
-        let row = overlay_row(grid, ctx);
-        let px = grid.pitch_x_mm;
-        let measured_pts: Vec<(f64, f64)> = grid
-            .row(row)
-            .iter()
-            .enumerate()
-            .map(|(i, v)| (i as f64 * px, *v))
-            .collect();
-        let model_pts: Vec<(f64, f64)> = model
-            .heights_um
-            .get(row * model.cols..(row + 1) * model.cols)
-            .unwrap_or(&[])
-            .iter()
-            .enumerate()
-            .map(|(i, v)| (i as f64 * model.pitch_x_mm, *v))
-            .collect();
-        let index = grid.index.get(row).copied().unwrap_or(0);
-        let title = format!(
-            "Line {} ({index:04}, y = {} mm): measured and model (fitted through these points; no line could be held out)",
-            line_number(index),
-            nfmt(
-                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
-                Quantity::PositionMm
-            )
-        );
-        let plot_err = |e: MetrologyError| ReportError::Metrology {
-            what: format!("{}: plots", ctx.input),
-            source: e,
-        };
-        plots.extend(
-            plot_profile_overlay(out, &measured_pts, &model_pts, &[], &title, &caption)
                 .map_err(plot_err)?,
         );
     }
@@ -331,7 +191,7 @@ fn write_plots(
 }
 
 /// The error of the height map thread when it panicked.
-pub(crate) fn height_map_panic(ctx: &ReportContext) -> ReportError {
+fn height_map_panic(ctx: &ReportContext) -> ReportError {
     ReportError::Metrology {
         what: format!("{}: plots", ctx.input),
         source: MetrologyError::BadParameter {
@@ -343,7 +203,7 @@ pub(crate) fn height_map_panic(ctx: &ReportContext) -> ReportError {
 }
 
 /// The error of an Rk figure thread that panicked.
-pub(crate) fn rk_plot_panic(ctx: &ReportContext) -> ReportError {
+fn rk_plot_panic(ctx: &ReportContext) -> ReportError {
     ReportError::Metrology {
         what: format!("{}: plots", ctx.input),
         source: MetrologyError::BadParameter {
@@ -354,10 +214,9 @@ pub(crate) fn rk_plot_panic(ctx: &ReportContext) -> ReportError {
     }
 }
 
-/// The height map of the measured grid, `heightmap.png|svg`: it needs only the data, so the
-/// caller draws it while the model's sections are made and hands the result to
-/// [`write_data_files`], which lists it between the bearing area curves and the overlay.
-pub(crate) fn draw_height_map(
+/// The height map of the measured grid, `heightmap.png|svg` (listed between the bearing area
+/// curves and the overlay).
+fn draw_height_map(
     out: &Path,
     measured: &HeightMap<'_>,
     ctx: &ReportContext,
@@ -371,9 +230,8 @@ pub(crate) fn draw_height_map(
 }
 
 /// The ISO 13565-2 construction of every line, from the ordinates its Rk family came from:
-/// `rk/NNNN.png|svg`, with each figure's title (drawn by the caller beside the other
-/// sections, handed to [`write_data_files`]).
-pub(crate) fn write_rk_plots(
+/// `rk/NNNN.png|svg`, with each figure's title.
+fn write_rk_plots(
     out: &Path,
     grid: &Grid,
     analyses: &[LineAnalysis],
@@ -456,23 +314,24 @@ fn draw_rk_run(
     Ok(rk_plots)
 }
 
-/// Writes the plots and X3P files (which may add warnings to `ctx`), then `summary.csv`;
-/// `report.json` and `report.html` are written last by [`write_report`], once the warnings
-/// are final. `height_map` is [`draw_height_map`]'s result. `rk_plots` gives the Rk figures'
-/// result; it is asked for only once the other plots are drawn, so that a caller drawing the
-/// Rk figures on another thread lets the two run side by side.
-#[allow(clippy::too_many_arguments)]
+/// Writes the plots (the Rk figures and the height map on threads of their own), the X3P
+/// files beside them, then `summary.csv`; `report.json` and `report.html` are written last by
+/// [`write_report`], once the report's timings are final.
 pub fn write_data_files(
     out: &Path,
     grid: &Grid,
-    height_map: Result<[PathBuf; 2], ReportError>,
-    rk_plots: impl FnOnce() -> Result<Vec<(String, [PathBuf; 2])>, ReportError>,
-    measured: &HeightMap<'_>,
-    sampled: Option<&SampledModel>,
-    overlay: Option<&Overlay>,
     report: &Report,
-    ctx: &mut ReportContext,
+    figures: &FigureData,
+    ctx: &ReportContext,
 ) -> Result<Files, ReportError> {
+    let measured = &HeightMap {
+        heights_um: &grid.heights_um,
+        rows: grid.rows(),
+        cols: grid.cols,
+        pitch_x_mm: grid.pitch_x_mm,
+        pitch_y_mm: grid.mean_pitch_y().0,
+    };
+    let sampled = figures.sampled.as_ref();
     // The X3P files are encoded (MD5, deflate) and written beside the plots: they read only
     // the heights and their metadata. Errors are reported in the order the files were
     // written before: the plots, the Rk figures, then the X3P files.
@@ -482,7 +341,7 @@ pub fn write_data_files(
         "NURBS model sampled at half the x pitch on the data lines",
     );
     let input = ctx.input.clone();
-    let (plots, x3p) = std::thread::scope(|s| {
+    let (plots, rk_plots, x3p) = std::thread::scope(|s| {
         let x3p = s.spawn(|| -> Result<(PathBuf, Option<PathBuf>), ReportError> {
             // Encodes one grid of heights at the grid's y pitch and writes it as `name`.
             let write = |name: &str, heights: &[f64], cols, pitch_x_mm, meta: &X3pMeta| {
@@ -519,10 +378,17 @@ pub fn write_data_files(
                 .transpose()?;
             Ok((measured_x3p, model_x3p))
         });
-        let plots = write_plots(out, grid, height_map, sampled, overlay, report, ctx);
-        (plots, x3p.join())
+        let rk_plots = s.spawn(|| write_rk_plots(out, grid, &figures.analyses, ctx));
+        let height_map = s.spawn(|| draw_height_map(out, measured, ctx));
+        let height_map = || {
+            height_map
+                .join()
+                .unwrap_or_else(|_| Err(height_map_panic(ctx)))
+        };
+        let plots = write_plots(out, height_map, figures.overlay.as_ref(), report, ctx);
+        let rk_plots = rk_plots.join().unwrap_or_else(|_| Err(rk_plot_panic(ctx)));
+        (plots, rk_plots, x3p.join())
     });
-    let rk_plots = rk_plots();
     let plots = plots?;
     let rk_plots = rk_plots?;
     let (measured_x3p, model_x3p) = x3p.map_err(|_| ReportError::Metrology {

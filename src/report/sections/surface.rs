@@ -1,4 +1,4 @@
-//! Section: the NURBS model — its checks (folds of the control net and of the surface, its
+//! Sections `surface` and `model_checks`: the NURBS model — its checks (folds of the control net and of the surface, its
 //! height range against the data's), the paper's bearing area curves of iso-curves of the
 //! surface, and the areal parameters of the surface sampled on the data lines. The surface is
 //! the one the caller fitted (for a scan, the same one written to `surface.igs`); nothing is
@@ -8,15 +8,16 @@
 //! Layer 4 (reporting): depends on [`crate::metrology::model`] and
 //! [`crate::metrology::folds`] and the areal section.
 
-use super::areal::surface_report;
-use super::context::{Model, ScanAnalysisOptions};
-use super::document::{FailedSection, SurfaceReport};
+use super::surface_grid::surface_report;
+use super::SectionInput;
 use crate::metrology::areal::HeightMap;
 use crate::metrology::folds::{check_model_with, iso_curve_sample_count, FoldOptions, ModelChecks};
 use crate::metrology::model::{
     bearing_sample_us, model_bearing_curves_with, sample_model_grid, ModelBacOptions,
 };
 use crate::nurbs::UBasis;
+use crate::report::context::{Model, ScanAnalysisOptions};
+use crate::report::document::{FailedSection, SurfaceReport};
 
 /// The model sampled on the data lines (their v) at half the x pitch, row-major: what
 /// `model.x3p` shows.
@@ -50,9 +51,34 @@ fn failed(section: &str, reason: impl Into<String>) -> FailedSection {
     }
 }
 
-/// Runs the section for a grid of `rows` lines of `cols` points at `pitch_x_mm`, its lines
+/// Runs the section: the model of `input` against the grid's measured heights.
+pub fn section(input: &SectionInput<'_>) -> ModelSection {
+    let g = input.grid;
+    characterise(
+        input.model,
+        &g.heights_um,
+        g.rows(),
+        g.cols,
+        g.pitch_x_mm,
+        input.pitch_y_mm,
+        &input.ctx.options,
+    )
+}
+
+/// The section when it panicked: a failed `surface` section that says so.
+pub fn panicked() -> ModelSection {
+    let reason = "internal: the model section panicked; report this with the input".to_string();
+    ModelSection {
+        surface: Err(reason.clone()),
+        sampled: None,
+        checks: None,
+        failed: vec![failed("surface", reason)],
+    }
+}
+
+/// The section for a grid of `rows` lines of `cols` points at `pitch_x_mm`, its lines
 /// `pitch_y_mm` apart on average, measured heights `heights_um`.
-pub fn characterise(
+fn characterise(
     model: &Model<'_>,
     heights_um: &[f64],
     rows: usize,

@@ -1,18 +1,18 @@
-//! Section: the ISO 4287 / ISO 13565-2 parameters of every line as the instrument computes
+//! Section `lines`: the ISO 4287 / ISO 13565-2 parameters of every line as the instrument computes
 //! them, the Rmr table, and the instrument's own results beside ours. Needs no model.
 //!
 //! Layer 4 (reporting): depends on [`crate::metrology::params`] and
 //! [`crate::metrology::instrument`].
 
-use super::context::ReportContext;
-use super::document::{LineReport, ReportRecipe};
-use super::error::{metrology, ReportError};
+use super::SectionInput;
 use crate::grid::Grid;
 use crate::metrology::areal;
 use crate::metrology::instrument::compare_profile;
 use crate::metrology::params::{analyze_line, LineAnalysis, Options};
 use crate::metrology::MetrologyError;
 use crate::numfmt::line_number;
+use crate::report::document::{LineReport, ReportRecipe};
+use crate::report::error::{metrology, ReportError};
 use std::path::PathBuf;
 
 /// What the section produces.
@@ -86,8 +86,9 @@ fn analyse_lines(
         .collect()
 }
 
-/// Runs the section.
-pub fn characterise(grid: &Grid, ctx: &ReportContext) -> Result<LinesSection, ReportError> {
+/// Runs the section on the grid as characterised; an error when a line cannot be evaluated.
+pub fn section(input: &SectionInput<'_>) -> Result<LinesSection, ReportError> {
+    let (grid, ctx) = (input.characterised, input.ctx);
     let analyses = analyse_lines(grid, &ctx.line_options, &ctx.input)?;
     let mut recipe = analyses.first().map(|a| a.recipe.clone()).ok_or_else(|| {
         crate::input::InputError::NoLines {

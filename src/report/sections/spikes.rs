@@ -1,23 +1,24 @@
-//! Section: the spikes of every line ([`crate::metrology::outliers`]), named in `outliers`
-//! and in the warnings with line, x and height. By default the data stay as measured; when
+//! Section `outliers`: the spikes of every line ([`crate::metrology::outliers`]), named
+//! there and in the warnings with line, x and height. By default the data stay as measured; when
 //! characterisation excludes them, the per-line and measured-grid parameters (and the
 //! hold-out) use a copy of the grid with each spike bridged by the straight line between its
 //! neighbours, and the files of the data (`measured.x3p`, the height map) stay as traced.
 //!
 //! Layer 4 (reporting): depends on [`crate::metrology::outliers`] and [`crate::numfmt`].
 
-use super::context::ReportContext;
-use super::document::{LineNotJudged, OutliersReport};
+use super::SectionInput;
 use crate::grid::Grid;
 use crate::metrology::outliers::{bridged_grid, find_grid_spikes, LineSpike, SpikeOptions};
 use crate::numfmt::{fmt, line_label, sig, Quantity};
+use crate::report::document::{LineNotJudged, OutliersReport};
 
 /// At most this many spikes are listed one by one in the warnings (all are in the report).
 const LISTED: usize = 20;
 
 /// Finds the spikes of `grid`'s lines on the roughness profile the lines are evaluated on
 /// (the λc roughness when the lines are filtered, else the heights minus their line).
-pub fn characterise(grid: &Grid, ctx: &ReportContext) -> OutliersReport {
+pub fn section(input: &SectionInput<'_>) -> OutliersReport {
+    let (grid, ctx) = (input.grid, input.ctx);
     let o = &ctx.line_options;
     find(
         &grid.heights_um,

@@ -1,10 +1,13 @@
-//! Section: areal parameters (ISO 25178) and the pooled bearing area curve of the measured
-//! grid as traced. Needs no model.
+//! Sections `surface_grid` and `anisotropy`: areal parameters (ISO 25178), the pooled bearing
+//! area curve and the anisotropy of the measured grid as characterised. Need no model.
 //!
-//! Layer 4 (reporting): depends on [`crate::metrology::areal`].
+//! Layer 4 (reporting): depends on [`crate::metrology::areal`] and
+//! [`crate::metrology::anisotropy`].
 
-use super::document::SurfaceReport;
+use super::SectionInput;
+use crate::metrology::anisotropy::Anisotropy;
 use crate::metrology::areal::{areal_params, smr_curve, HeightMap};
+use crate::report::document::SurfaceReport;
 
 /// The measured heights as a grid for the areal parameters, plots and X3P: the grid's rows
 /// at the mean y pitch.
@@ -35,14 +38,21 @@ pub fn surface_report(
     })
 }
 
-/// Runs the section on the measured grid.
-pub fn characterise(measured: &HeightMap<'_>, levels: usize) -> Result<SurfaceReport, String> {
+/// The areal parameters and pooled bearing curve of the grid as characterised.
+pub fn section(input: &SectionInput<'_>) -> Result<SurfaceReport, String> {
+    let measured = measured(input.characterised, input.pitch_y_mm);
     surface_report(
-        measured,
-        levels,
+        &measured,
+        input.ctx.options.levels,
         format!(
             "the measured heights as traced ({} lines × {} points, pitch x {} mm, mean pitch y {} mm), no λc filter, least-squares plane removed",
             measured.rows, measured.cols, measured.pitch_x_mm, measured.pitch_y_mm
         ),
     )
+}
+
+/// The anisotropy of the grid as characterised, and what it does to Sdq and Sdr.
+pub fn anisotropy(input: &SectionInput<'_>) -> Result<Anisotropy, String> {
+    crate::metrology::anisotropy::anisotropy(&measured(input.characterised, input.pitch_y_mm))
+        .map_err(|e| e.to_string())
 }

@@ -1,4 +1,4 @@
-//! Section: model versus measured — the hold-out refits (every 2nd point, every 2nd line
+//! Sections `model_vs_measured` and `between_lines`: model versus measured — the hold-out refits (every 2nd point, every 2nd line
 //! left out) made the way the model was made (degrees and method across the lines), each
 //! line's share of them, and the verdict on the surface between lines: every 2nd line left
 //! out, the rest refitted, the refit judged against Sq of the measured grid
@@ -7,13 +7,14 @@
 //!
 //! Layer 4 (reporting): depends on [`crate::metrology::holdout`].
 
-use super::document::{LineHoldout, LineReport};
+use super::SectionInput;
 use crate::grid::Grid;
 use crate::metrology::holdout::{
     between_lines_given, holdout_every, holdout_every_or_reason, lines_every, lines_left_out,
     points_left_out, BetweenLines, Holdout, HoldoutLine,
 };
 use crate::metrology::surface_model::ModelRecipe;
+use crate::report::document::{LineHoldout, LineReport};
 
 fn line_index(grid: &Grid, row: usize) -> usize {
     grid.index.get(row).copied().unwrap_or(row as u32) as usize
@@ -33,6 +34,21 @@ fn rows_of_holdout_to_lines(grid: &Grid, h: &mut Holdout) {
 /// What a panic in the shared lines-left-out refit becomes.
 const LINES_REFIT_PANICKED: &str =
     "internal: the between-lines refit panicked; report this with the input";
+
+/// Both sections, on the grid as characterised with the model's recipe, judged against `sq_um`
+/// (the measured grid's Sq; `None`: it has none) at the options' threshold.
+pub fn section(
+    input: &SectionInput<'_>,
+    sq_um: Option<f64>,
+) -> (Result<Holdout, String>, Result<BetweenLines, String>) {
+    characterise_and_judge(
+        input.grid,
+        &input.characterised.heights_um,
+        &input.model.recipe,
+        sq_um,
+        input.ctx.options.holdout_threshold,
+    )
+}
 
 /// Both hold-out sections: `model_vs_measured` (the refits of
 /// [`holdout_with`](crate::metrology::holdout::holdout_with), the line indices mapped to the

@@ -1,0 +1,245 @@
+//! The sections of the characterisation: each a pure function of one [`SectionInput`] — the
+//! grid, the grid as characterised (spikes bridged when asked for), the model, the options —
+//! and, where it needs them, of the results of the sections before it, returning a typed
+//! result. Nothing here writes a file or prints; [`super::render`] makes every file from the
+//! results.
+//!
+//! | Section (its report.json key) | File | Reads |
+//! |---|---|---|
+//! | spikes (`outliers`) | [`spikes`] | the grid |
+//! | per-line parameters (`lines`, `recipe`) | [`lines`] | the grid as characterised |
+//! | the measured grid (`surface_grid`, `anisotropy`) | [`surface_grid`] | the grid as characterised |
+//! | the model (`surface`, `model_checks`) | [`surface`] | the model, the grid |
+//! | hold-out and the verdict between lines (`model_vs_measured`, `between_lines`) | [`model_vs_measured`] | the grid as characterised, Sq of `surface_grid` |
+//! | the line drawn against the model | [`overlay`] | the grid as characterised, `between_lines` |
+//!
+//! [`run`] composes them — the model section beside the others, as it needs only the grid
+//! and the model — and collects the warnings and what could not be made. A section that fails
+//! never takes another down: its error is its result, named in
+//! `characterisation.failed_sections`; what the number of lines rules out is named in
+//! `characterisation.sections_not_possible` instead.
+//!
+//! Adding a section: a file here with `pub fn section(input: &SectionInput<'_>, …) ->
+//! Result<T, String>` (its earlier results as further arguments), a field in [`Sections`], its
+//! line in [`run`], and its rows in the renderers (docs/architecture.md says where).
+//!
+//! Layer 4 (reporting): depends on [`crate::grid`], [`crate::metrology`] and the report's
+//! types.
+
+pub mod lines;
+pub mod model_vs_measured;
+pub mod overlay;
+pub mod spikes;
+pub mod surface;
+pub mod surface_grid;
+
+use super::context::{Model, ReportContext};
+use super::document::{FailedSection, OutliersReport, SurfaceReport, Timings};
+use super::error::ReportError;
+use crate::grid::Grid;
+use crate::metrology::anisotropy::Anisotropy;
+use crate::metrology::holdout::{BetweenLines, Holdout};
+use std::time::Instant;
+
+/// What every section reads.
+#[derive(Debug, Clone, Copy)]
+pub struct SectionInput<'a> {
+    /// The grid as read: what the data files and the height map show.
+    pub grid: &'a Grid,
+    /// The grid as characterised: `grid` with its spikes bridged when the options exclude
+    /// them, else `grid` itself.
+    pub characterised: &'a Grid,
+    /// The lines' mean y pitch, mm (the areal parameters, the height map and the X3P files
+    /// use it).
+    pub pitch_y_mm: f64,
+    /// The surface the model sections describe.
+    pub model: &'a Model<'a>,
+    /// How the lines are evaluated, the options, what is known of the scan.
+    pub ctx: &'a ReportContext,
+}
+
+/// Every section's result.
+#[derive(Debug)]
+pub struct Sections {
+    /// The spikes of the lines.
+    pub spikes: OutliersReport,
+    /// The per-line parameters (the section every report has).
+    pub lines: lines::LinesSection,
+    /// The measured grid's areal parameters and pooled bearing curve.
+    pub surface_grid: Result<SurfaceReport, String>,
+    /// The measured grid's anisotropy.
+    pub anisotropy: Result<Anisotropy, String>,
+    /// The model: its areal parameters and bearing curves, its samples, its checks.
+    pub surface: surface::ModelSection,
+    /// The hold-out refits.
+    pub model_vs_measured: Result<Holdout, String>,
+    /// The verdict on the model between lines.
+    pub between_lines: Result<BetweenLines, String>,
+    /// The line drawn against the model.
+    pub overlay: Option<overlay::Overlay>,
+    /// The sections that could not be made, and why.
+    pub failed: Vec<FailedSection>,
+    /// The sections the number of lines rules out, and why.
+    pub not_possible: Vec<FailedSection>,
+    /// What the operator should know, in order: the context's warnings, then the sections'.
+    pub warnings: Vec<String>,
+    /// Seconds per section.
+    pub timings: Timings,
+}
+
+/// Runs every section on `grid` with `model`. An error only when the lines cannot be
+/// characterised at all.
+pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sections, ReportError> {
+    let mut warnings = ctx.warnings.clone();
+    let mut timings = Timings::default();
+    let (pitch_y_mm, evenly) = grid.mean_pitch_y();
+    let input = SectionInput {
+        grid,
+        characterised: grid,
+        pitch_y_mm,
+        model,
+        ctx,
+    };
+    // The model section (the densest work: the fold check, the model's bearing curves, the
+    // sampled model) reads only the grid and the model: it runs beside every section below,
+    // from the start. It never unwinds (a panic becomes its failure), so an early error
+    // return below, which joins it, cannot turn into a panic.
+    std::thread::scope(|scope| {
+        let model_thread = scope.spawn(move || {
+            let t = Instant::now();
+            let m =
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| surface::section(&input)))
+                    .unwrap_or_else(|_| surface::panicked());
+            (m, t.elapsed().as_secs_f64())
+        });
+
+        let t = Instant::now();
+        let spikes = spikes::section(&input);
+        spikes::warn(&spikes, model.replaced, grid.pitch_x_mm, &mut warnings);
+        // The lines are filtered; the surface as traced is not (no areal λc filter fits the
+        // few tenths of a mm a scan covers in y): say so where the two kinds of numbers meet.
+        if ctx.line_options.apply_lambda_c {
+            warnings.push(format!(
+                "the line parameters are of the λc {} mm roughness profiles, but the areal parameters, the surface model and its bearing area curves, the height map and the X3P files are of the heights as traced, levelled by a plane: form and waviness longer than λc are in them",
+                ctx.line_options.lambda_c_mm
+            ));
+        }
+        let bridged = (ctx.options.exclude_spikes && !spikes.spikes.is_empty())
+            .then(|| spikes::bridged(grid, &spikes.spikes));
+        let input = SectionInput {
+            characterised: bridged.as_ref().unwrap_or(grid),
+            ..input
+        };
+        let lines = lines::section(&input)?;
+        timings.lines = t.elapsed().as_secs_f64();
+
+        let t = Instant::now();
+        if !evenly {
+            let y: Vec<String> = grid
+                .y_mm
+                .iter()
+                .map(|y| crate::numfmt::fmt(*y, crate::numfmt::Quantity::PositionMm))
+                .collect();
+            warnings.push(format!(
+                "the lines are not equally spaced in y (y = {} mm); the areal parameters, the height map and the X3P files use the mean pitch {} mm",
+                y.join(", "),
+                crate::numfmt::fmt(pitch_y_mm, crate::numfmt::Quantity::LengthMm)
+            ));
+        }
+        let surface_grid = surface_grid::section(&input);
+        let anisotropy = surface_grid::anisotropy(&input);
+        if let Ok(a) = &anisotropy {
+            if a.slopes_untrustworthy() {
+                warnings.extend(a.caveats.last().cloned());
+            }
+        }
+        timings.surface_grid = t.elapsed().as_secs_f64();
+
+        // The hold-out sections read the grid and the model, as the model section does, and
+        // run beside it.
+        let t = Instant::now();
+        let sq = surface_grid.as_ref().map(|s| s.params.sq_um).ok();
+        let (model_vs_measured, between_lines) = model_vs_measured::section(&input, sq);
+        timings.holdout = t.elapsed().as_secs_f64();
+        let (surface, model_s) = model_thread
+            .join()
+            .unwrap_or_else(|_| (surface::panicked(), 0.0));
+        timings.model = model_s;
+        if let Some(c) = &surface.checks {
+            warnings.extend(c.warnings());
+        }
+
+        // The overlay draws the model at a held-out line: the rows are still the grid's here.
+        let (overlay, said) = overlay::section(
+            &input,
+            between_lines.as_ref().ok(),
+            surface.sampled.as_ref(),
+        );
+        warnings.extend(said);
+        let between_lines = between_lines.map(|mut b| {
+            model_vs_measured::rows_to_lines(grid, &mut b);
+            if !b.supported {
+                warnings.push(b.verdict.clone());
+            }
+            b
+        });
+
+        // In the order the sections are made.
+        let failure = |section: &str, r: Option<&String>| {
+            r.map(|e| FailedSection {
+                section: section.into(),
+                reason: e.clone(),
+            })
+        };
+        let mut failed: Vec<FailedSection> = [
+            failure("surface_grid", surface_grid.as_ref().err()),
+            failure("anisotropy", anisotropy.as_ref().err()),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        failed.extend(surface.failed.iter().cloned());
+        failed.extend(failure(
+            "model_vs_measured",
+            model_vs_measured.as_ref().err(),
+        ));
+        failed.extend(failure("between_lines", between_lines.as_ref().err()));
+        // What the line count rules out is not a failure: the fit needs degree-v + 1 lines,
+        // the hold-outs more than that once lines are left out.
+        let rows = grid.rows();
+        let q = model.recipe.degrees.degree_v;
+        let fit_possible = rows > q;
+        let holdout_possible =
+            fit_possible && crate::metrology::holdout::holdout_every(rows, q).is_some();
+        let (not_possible, failed): (Vec<FailedSection>, Vec<FailedSection>) = failed
+            .into_iter()
+            .partition(|f| match f.section.split('.').next().unwrap_or_default() {
+                "surface" => !fit_possible,
+                "model_vs_measured" | "between_lines" => !holdout_possible,
+                _ => false,
+            });
+        for f in &not_possible {
+            warnings.push(format!(
+                "{} not made ({rows} lines are too few): {}",
+                f.section, f.reason
+            ));
+        }
+        for f in &failed {
+            warnings.push(format!("{} could not be made: {}", f.section, f.reason));
+        }
+        Ok(Sections {
+            spikes,
+            lines,
+            surface_grid,
+            anisotropy,
+            surface,
+            model_vs_measured,
+            between_lines,
+            overlay,
+            failed,
+            not_possible,
+            warnings,
+            timings,
+        })
+    })
+}

@@ -1,0 +1,169 @@
+//! The line drawn against the model (the paper's Figure 2 made honest): the requested line
+//! (or the middle one) left out, the surface refitted without it the way the model was made,
+//! beside the line's measured heights and the residual. Without a hold-out, a data line
+//! against the sampled model, which passes through it by construction (and says so).
+//!
+//! Layer 4 (reporting): depends on [`crate::metrology::holdout`] (the refit).
+
+use super::surface::SampledModel;
+use super::SectionInput;
+use crate::grid::Grid;
+use crate::metrology::holdout::BetweenLines;
+use crate::numfmt::{fmt as nfmt, line_label, line_number, Quantity};
+use crate::report::context::ReportContext;
+
+/// The curves of the figure, with its title.
+pub fn section(
+    input: &SectionInput<'_>,
+    verdict: Option<&BetweenLines>,
+    sampled: Option<&SampledModel>,
+) -> (Option<Overlay>, Vec<String>) {
+    let (grid, ctx) = (input.grid, input.ctx);
+    let mut warnings = Vec::new();
+    let row = overlay_row(grid, ctx, &mut warnings);
+    let held_out = held_out_overlay(
+        grid,
+        &input.characterised.heights_um,
+        &input.model.recipe,
+        verdict,
+        row,
+        &mut warnings,
+    );
+    let overlay = held_out.or_else(|| sampled.map(|m| data_line(grid, m, row)));
+    (overlay, warnings)
+}
+
+/// Line `row` of `grid` against the model sampled on it.
+fn data_line(grid: &Grid, model: &SampledModel, row: usize) -> Overlay {
+    let px = grid.pitch_x_mm;
+    let index = grid.index.get(row).copied().unwrap_or(0);
+    Overlay {
+        measured: grid
+            .row(row)
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i as f64 * px, *v))
+            .collect(),
+        model: model
+            .heights_um
+            .get(row * model.cols..(row + 1) * model.cols)
+            .unwrap_or(&[])
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i as f64 * model.pitch_x_mm, *v))
+            .collect(),
+        residual: Vec::new(),
+        title: format!(
+            "Line {} ({index:04}, y = {} mm): measured and model (fitted through these points; no line could be held out)",
+            line_number(index),
+            nfmt(
+                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
+                Quantity::PositionMm
+            )
+        ),
+    }
+}
+
+/// The overlay's row: the requested line when it is among the rows (else a warning and the
+/// middle row).
+fn overlay_row(grid: &Grid, ctx: &ReportContext, warnings: &mut Vec<String>) -> usize {
+    let rows = grid.rows();
+    match ctx.options.overlay_line {
+        Some(i) => match grid.index.iter().position(|&k| k == i) {
+            Some(r) => r,
+            None => {
+                warnings.push(format!(
+                    "overlay line {i} is not among the lines used ({:?}); the middle line is drawn",
+                    grid.index
+                ));
+                rows / 2
+            }
+        },
+        None => rows / 2,
+    }
+}
+
+/// The overlay of a held-out line: its measured heights, the model refitted without it and
+/// the residual, as `(x_mm, z_um)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Overlay {
+    /// Measured heights.
+    pub measured: Vec<(f64, f64)>,
+    /// The refit at the line.
+    pub model: Vec<(f64, f64)>,
+    /// Model − measured.
+    pub residual: Vec<(f64, f64)>,
+    /// Title naming the line and what the curve is.
+    pub title: String,
+}
+
+/// The paper's Figure 2 made honest: the requested overlay line (or the middle one) left
+/// out, the surface refitted without it the way the model was made, and drawn against the
+/// line's measured heights. When that line cannot be left out (the first or last line) or
+/// its refit fails, the held-out line of the verdict `b` nearest it is drawn instead, and a
+/// warning says so. `heights_um` are the grid's rows as characterised.
+fn held_out_overlay(
+    grid: &Grid,
+    heights_um: &[f64],
+    recipe: &crate::metrology::surface_model::ModelRecipe,
+    b: Option<&BetweenLines>,
+    wanted: usize,
+    warnings: &mut Vec<String>,
+) -> Option<Overlay> {
+    let own = crate::metrology::holdout::model_without_line(
+        heights_um,
+        grid.cols,
+        grid.pitch_x_mm,
+        &grid.y_mm,
+        recipe.degrees,
+        recipe.method,
+        wanted,
+    );
+    let (row, rms, model) = match own {
+        Ok(m) => (wanted, m.line.rms_um, m.model_um),
+        Err(e) => {
+            let b = b?;
+            let (k, line) = b
+                .lines
+                .iter()
+                .enumerate()
+                .min_by_key(|(_, l)| l.index.abs_diff(wanted))?;
+            warnings.push(format!(
+                "the overlay shows line {} (left out of the hold-out refit) instead of line {}: {e}",
+                line_label(grid.index_of(line.index)),
+                line_label(grid.index_of(wanted))
+            ));
+            (line.index, line.rms_um, b.model_line(k)?.to_vec())
+        }
+    };
+    let px = grid.pitch_x_mm;
+    let measured = heights_um.get(row * grid.cols..(row + 1) * grid.cols)?;
+    Some(Overlay {
+        measured: measured
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i as f64 * px, *v))
+            .collect(),
+        model: model
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i as f64 * px, *v))
+            .collect(),
+        residual: model
+            .iter()
+            .zip(measured)
+            .enumerate()
+            .map(|(i, (m, z))| (i as f64 * px, m - z))
+            .collect(),
+        title: format!(
+            "Line {} ({:04}, y = {} mm) left out: its measured heights and the model refitted without it (rms {} µm)",
+            line_number(grid.index_of(row)),
+            grid.index_of(row),
+            nfmt(
+                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
+                Quantity::PositionMm
+            ),
+            nfmt(rms, Quantity::HeightUm)
+        ),
+    })
+}
