@@ -472,7 +472,9 @@ fn write_scan(parent: &Path, kind: ProfileKind, cols: usize) -> PathBuf {
     let start = Utc.with_ymd_and_hms(2026, 11, 30, 9, 15, 0).unwrap();
     let id = ScanId::new(start, &format!("timing {kind:?}"));
     let faults = Arc::new(NoFaults);
-    let store = ScanStore::create(parent, &id, faults.clone()).expect("scan store");
+    let store = ScanStore::create(parent, &id, faults.clone())
+        .expect("scan store")
+        .0;
     let conditions = Conditions {
         standard: Some("ISO1997".into()),
         profile_kind: Some(kind),

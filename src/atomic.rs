@@ -2,6 +2,11 @@
 //! fsync, rename over the target, fsync the directory. A crash leaves either the old file or
 //! the complete new one, never a partial file under the final name.
 //!
+//! Only a regular file is ever replaced. A device or a FIFO at the path (or at the end of its
+//! symbolic links), or `-` for standard output, is written directly: `surfscan fit … -o
+//! /dev/null` leaves `/dev/null` a device. A scan's own files go through
+//! [`write_regular_atomically`], which refuses anything but a regular file there.
+//!
 //! A large file can be written through [`write_atomically_streamed`], which asks the kernel to
 //! start writing each MiB to disk as soon as it is written (Linux `sync_file_range`
 //! with `SYNC_FILE_RANGE_WRITE`; elsewhere nothing), so the disk works while the rest is
@@ -51,14 +56,176 @@ impl Target for File {
     }
 }
 
+/// Where a write goes.
+enum Destination {
+    /// A regular file, or nothing yet: replaced atomically (temporary file and rename).
+    Replace(PathBuf),
+    /// A device, a FIFO or standard output: written directly, never replaced. The body is
+    /// spooled first (it may seek), then copied in one go.
+    Stream(File),
+}
+
+/// Whether a path's symbolic links are followed to the file they name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Links {
+    /// Followed (a user's output path); a device or FIFO at the end is written directly.
+    Follow,
+    /// Refused, with anything but a regular file (a scan's own files).
+    Refuse,
+}
+
+/// What writing `path` means: `-` is standard output; a regular file or nothing is replaced;
+/// a symbolic link is followed (or refused); a character or block device or a FIFO is
+/// written directly (a FIFO without a reader is an error, not a wait); a directory or a
+/// socket is refused.
+fn destination(path: &Path, links: Links) -> io::Result<Destination> {
+    use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+    if path == Path::new("-") && links == Links::Follow {
+        let out = io::stdout();
+        let fd = std::os::fd::AsFd::as_fd(&out).try_clone_to_owned()?;
+        return Ok(Destination::Stream(File::from(fd)));
+    }
+    let refuse = |what: &str, p: &Path| {
+        io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!("{} is {what}", p.display()),
+        )
+    };
+    let mut p = path.to_path_buf();
+    for _ in 0..40 {
+        let meta = match fs::symlink_metadata(&p) {
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Destination::Replace(p)),
+            Err(e) => return Err(e),
+            Ok(m) => m,
+        };
+        let t = meta.file_type();
+        if t.is_file() {
+            return Ok(Destination::Replace(p));
+        }
+        if links == Links::Refuse {
+            return Err(refuse(
+                if t.is_symlink() {
+                    "a symbolic link; a scan's files are never written through one"
+                } else {
+                    "not a regular file; a scan's files are only ever regular files"
+                },
+                &p,
+            ));
+        }
+        if t.is_symlink() {
+            let target = fs::read_link(&p)?;
+            p = match p.parent() {
+                Some(dir) if target.is_relative() => dir.join(target),
+                _ => target,
+            };
+            continue;
+        }
+        if t.is_char_device() || t.is_block_device() {
+            let f = fs::OpenOptions::new().write(true).open(&p)?;
+            return Ok(Destination::Stream(f));
+        }
+        if t.is_fifo() {
+            let f = fs::OpenOptions::new()
+                .write(true)
+                .custom_flags(libc::O_NONBLOCK)
+                .open(&p)
+                .map_err(|e| match e.raw_os_error() {
+                    Some(libc::ENXIO) => io::Error::new(
+                        io::ErrorKind::BrokenPipe,
+                        format!(
+                            "{} is a FIFO with no reader; start its reader first",
+                            p.display()
+                        ),
+                    ),
+                    _ => e,
+                })?;
+            // Blocking again: the reader takes the bytes at its own pace.
+            let fd = std::os::fd::AsRawFd::as_raw_fd(&f);
+            // SAFETY: fcntl on a descriptor `f` owns and keeps open for the call.
+            unsafe {
+                let flags = libc::fcntl(fd, libc::F_GETFL);
+                if flags >= 0 {
+                    libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK);
+                }
+            }
+            return Ok(Destination::Stream(f));
+        }
+        if t.is_dir() {
+            return Err(refuse("a directory; give a file's path", &p));
+        }
+        return Err(refuse("a socket; give a file's path", &p));
+    }
+    Err(refuse("a loop of symbolic links", path))
+}
+
+/// Creates the temporary file exclusively: never through a link planted at its name. A
+/// leftover of an earlier process with this pid (a file or a link) is removed first.
+fn create_temp(tmp: &Path) -> io::Result<File> {
+    let create = || {
+        fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(tmp)
+    };
+    match create() {
+        Err(e) if e.kind() == io::ErrorKind::AlreadyExists => {
+            if fs::symlink_metadata(tmp).is_ok_and(|m| !m.is_dir()) {
+                fs::remove_file(tmp)?;
+            }
+            create()
+        }
+        other => other,
+    }
+}
+
+/// An unnamed temporary file the body of a direct write is spooled into.
+fn spool() -> io::Result<File> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let dir = std::env::temp_dir();
+    match fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .custom_flags(libc::O_TMPFILE)
+        .open(&dir)
+    {
+        Ok(f) => Ok(f),
+        Err(_) => {
+            // A file system without O_TMPFILE: a named file, removed at once.
+            let p = dir.join(format!(".surfscan-spool.{}", std::process::id()));
+            let f = fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create_new(true)
+                .open(&p)?;
+            fs::remove_file(&p)?;
+            Ok(f)
+        }
+    }
+}
+
 fn write_impl<W: Target, T>(
     path: &Path,
     sync: bool,
+    links: Links,
     body: impl FnOnce(&mut BufWriter<W>) -> io::Result<T>,
 ) -> io::Result<T> {
+    let path = match destination(path, links)? {
+        Destination::Replace(p) => p,
+        Destination::Stream(mut target) => {
+            let mut w = BufWriter::with_capacity(1 << 20, W::open(spool()?));
+            let value = body(&mut w)?;
+            w.flush()?;
+            let mut spooled = w.into_inner().map_err(|e| e.into_error())?.into_file();
+            io::Seek::seek(&mut spooled, io::SeekFrom::Start(0))?;
+            io::copy(&mut spooled, &mut target)?;
+            target.flush()?;
+            return Ok(value);
+        }
+    };
+    let path = path.as_path();
     let (tmp, dir) = temp_path(path)?;
     let result = (|| {
-        let mut w = BufWriter::with_capacity(1 << 20, W::open(File::create(&tmp)?));
+        let mut w = BufWriter::with_capacity(1 << 20, W::open(create_temp(&tmp)?));
         let value = body(&mut w)?;
         w.flush()?;
         let file = w.into_inner().map_err(|e| e.into_error())?.into_file();
@@ -85,7 +252,17 @@ pub fn write_atomically<T>(
     path: &Path,
     body: impl FnOnce(&mut BufWriter<File>) -> io::Result<T>,
 ) -> io::Result<T> {
-    write_impl(path, true, body)
+    write_impl(path, true, Links::Follow, body)
+}
+
+/// [`write_atomically`] for a scan's own files: the target must be a regular file or
+/// nothing; a symbolic link, a device or a FIFO there is refused (a planted link never
+/// redirects a scan's write).
+pub fn write_regular_atomically<T>(
+    path: &Path,
+    body: impl FnOnce(&mut BufWriter<File>) -> io::Result<T>,
+) -> io::Result<T> {
+    write_impl(path, true, Links::Refuse, body)
 }
 
 /// Writeback is started once this many bytes have been written since the last start. The
@@ -176,7 +353,7 @@ pub fn write_atomically_streamed<T>(
     path: &Path,
     body: impl FnOnce(&mut BufWriter<StreamedFile>) -> io::Result<T>,
 ) -> io::Result<T> {
-    write_impl(path, true, body)
+    write_impl(path, true, Links::Follow, body)
 }
 
 /// Like [`write_atomically`] (temporary file and rename) but without the fsyncs: for output
@@ -185,7 +362,7 @@ pub fn write_atomically_without_sync<T>(
     path: &Path,
     body: impl FnOnce(&mut BufWriter<File>) -> io::Result<T>,
 ) -> io::Result<T> {
-    write_impl(path, false, body)
+    write_impl(path, false, Links::Follow, body)
 }
 
 /// What the operator should do after writing `path` (or creating it as a directory) failed
@@ -313,6 +490,80 @@ mod tests {
         });
         assert!(r.is_err());
         assert_eq!(fs::read_to_string(&path).unwrap(), "old");
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn a_link_is_followed_for_an_output_path_and_refused_for_a_scans_file() {
+        use std::os::unix::fs::symlink;
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("real.txt");
+        fs::write(&target, "old").unwrap();
+        let link = dir.path().join("link.txt");
+        symlink("real.txt", &link).unwrap();
+        write_atomically(&link, |w| w.write_all(b"new")).unwrap();
+        assert!(fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(fs::read_to_string(&target).unwrap(), "new");
+        // A dangling link names the file to create; the link stays.
+        let dangling = dir.path().join("dangling.txt");
+        symlink(dir.path().join("made.txt"), &dangling).unwrap();
+        write_atomically(&dangling, |w| w.write_all(b"made")).unwrap();
+        assert!(fs::symlink_metadata(&dangling)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(
+            fs::read_to_string(dir.path().join("made.txt")).unwrap(),
+            "made"
+        );
+        // A scan's file is never written through a link, to anything.
+        let e = write_regular_atomically(&link, |w| w.write_all(b"scan")).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::InvalidInput);
+        assert!(e.to_string().contains("symbolic link"), "{e}");
+        assert_eq!(fs::read_to_string(&target).unwrap(), "new");
+        assert!(fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        // A directory is refused by name, and nothing is left behind.
+        let e = write_atomically(dir.path(), |w| w.write_all(b"x")).unwrap_err();
+        assert!(e.to_string().contains("a directory"), "{e}");
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 4);
+    }
+
+    #[test]
+    fn a_fifo_is_written_into_and_stays_a_fifo() {
+        use std::os::unix::fs::FileTypeExt;
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("pipe");
+        let c = std::ffi::CString::new(fifo.as_os_str().as_encoded_bytes()).unwrap();
+        // SAFETY: mkfifo on a NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        // Without a reader: an error naming what to do, at once (not a wait).
+        let e = write_atomically(&fifo, |w| w.write_all(b"x")).unwrap_err();
+        assert!(e.to_string().contains("no reader"), "{e}");
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || fs::read(fifo).unwrap())
+        };
+        // The reader opens the FIFO in its own time; retry until it has.
+        let body: Vec<u8> = (0..300_000u32).map(|i| (i % 253) as u8).collect();
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        loop {
+            match write_atomically_streamed(&fifo, |w| w.write_all(&body)) {
+                Ok(()) => break,
+                Err(e) if e.kind() == io::ErrorKind::BrokenPipe => {
+                    assert!(std::time::Instant::now() < deadline, "no reader came");
+                    std::thread::sleep(std::time::Duration::from_millis(10));
+                }
+                Err(e) => panic!("{e}"),
+            }
+        }
+        assert!(reader.join().unwrap() == body);
+        assert!(fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo());
         assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1);
     }
 

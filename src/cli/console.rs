@@ -17,9 +17,30 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// Set once a write to standard output has failed.
 static STDOUT_GONE: AtomicBool = AtomicBool::new(false);
 
-/// Writes `args` to standard output, followed by a newline when `newline`; a failure is
-/// remembered ([`stdout_gone`]) and the text dropped.
+/// Set when standard output carries a command's data (`fit -o -`): the operator's lines go
+/// to standard error instead.
+static STDOUT_IS_DATA: AtomicBool = AtomicBool::new(false);
+
+/// Sends every later `say!` line to standard error: standard output carries data.
+pub fn stdout_carries_data() {
+    STDOUT_IS_DATA.store(true, Ordering::Relaxed);
+}
+
+/// Writes `args` to standard output (standard error once [`stdout_carries_data`]), followed
+/// by a newline when `newline`; a failure is remembered ([`stdout_gone`]) and the text
+/// dropped.
 pub fn out(args: fmt::Arguments<'_>, newline: bool) {
+    if STDOUT_IS_DATA.load(Ordering::Relaxed) {
+        let mut stderr = std::io::stderr().lock();
+        let _ = stderr.write_fmt(args).and_then(|()| {
+            if newline {
+                stderr.write_all(b"\n")
+            } else {
+                Ok(())
+            }
+        });
+        return;
+    }
     let mut stdout = std::io::stdout().lock();
     let written = stdout
         .write_fmt(args)

@@ -13,6 +13,9 @@
 //! iso-curves): a fold is named on stderr, in the report's `height_map` and in the IGES Start
 //! section, the surface is written as fitted, and the exit status is 3.
 //!
+//! `-o -` writes the IGES to standard output and the summary to standard error; a device or
+//! a FIFO at the output path is written into, never replaced ([`crate::atomic`]).
+//!
 //! Exit status: 0 done; 3 done from fewer lines than the input holds, or the surface folds; 2 bad pitch or degree
 //! arguments, an input of the wrong kind, or an existing surface not to be replaced; 74 the
 //! input cannot be read or an output cannot be written; 1 the data cannot be used (the
@@ -66,7 +69,9 @@ pub struct Args {
     /// Scan directory, grid CSV of heights (rows = traced lines along y, columns = points
     /// along x) or X3P file.
     pub input: PathBuf,
-    /// Output IGES file (required for a grid CSV; default `SCAN_DIR/surface.igs`).
+    /// Output IGES file (required for a grid CSV; default `SCAN_DIR/surface.igs`). `-` is
+    /// standard output (the summary then goes to standard error); a device or a FIFO is
+    /// written into, never replaced.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// The pitches of a grid CSV and the unit of a CSV's heights.
@@ -482,6 +487,10 @@ fn iges_options(
 
 /// Runs `surfscan fit`.
 pub fn run(args: Args) -> Result<(), CliError> {
+    let dash = Path::new("-");
+    if args.output.as_deref() == Some(dash) || args.report.as_deref() == Some(dash) {
+        super::console::stdout_carries_data();
+    }
     if args.degree_u == Some(0) || args.degree_v == Some(0) {
         return Err(CliError::new(
             Exit::Usage,

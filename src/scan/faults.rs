@@ -38,7 +38,8 @@ impl StorageFaults for NoFaults {
     }
 }
 
-/// Replaces `path` with `bytes` durably ([`crate::atomic::write_atomically`]: temporary file,
+/// Replaces `path` with `bytes` durably ([`crate::atomic::write_regular_atomically`] for a
+/// scan's files: only a regular file is replaced, never through a link; temporary file,
 /// fsync, rename, fsync of the directory) after asking `faults` about `step`. On failure the
 /// target is untouched and no temporary file is left.
 pub fn write_file_durably(
@@ -48,5 +49,10 @@ pub fn write_file_durably(
     faults: &dyn StorageFaults,
 ) -> io::Result<()> {
     faults.before_write(step, path)?;
-    crate::atomic::write_atomically(path, |w| io::Write::write_all(w, bytes))
+    let body = |w: &mut io::BufWriter<std::fs::File>| io::Write::write_all(w, bytes);
+    match step {
+        // The operator's metrics path may be a link into the collector's directory.
+        WriteStep::Metrics => crate::atomic::write_atomically(path, body),
+        _ => crate::atomic::write_regular_atomically(path, body),
+    }
 }

@@ -717,7 +717,19 @@ pub fn survey(output_dir: &Path) -> Result<Survey, JournalError> {
     };
     let mut out = Survey::default();
     for entry in entries {
-        let dir = entry.map_err(io)?.path();
+        let entry = entry.map_err(io)?;
+        let dir = entry.path();
+        // A link in the output directory is no scan of this station: never followed (its
+        // scan would be written through it).
+        if entry.file_type().is_ok_and(|t| t.is_symlink()) {
+            if dir.join(JOURNAL_FILE).is_file() {
+                tracing::warn!(
+                    "{} is a symbolic link to a scan; it is not resumed nor written to (move the scan's directory here instead)",
+                    dir.display()
+                );
+            }
+            continue;
+        }
         let jpath = dir.join(JOURNAL_FILE);
         if !jpath.is_file() {
             continue;

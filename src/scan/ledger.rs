@@ -276,7 +276,7 @@ mod tests {
     fn ledger(dir: &Path, disk: Arc<Disk>) -> Ledger {
         let time = Utc.with_ymd_and_hms(2026, 12, 1, 22, 0, 0).unwrap();
         let id = ScanId::new(time, "block");
-        let store = ScanStore::create(dir, &id, disk.clone()).unwrap();
+        let store = ScanStore::create(dir, &id, disk.clone()).unwrap().0;
         let start = StartRecord {
             scan_id: id.0.clone(),
             sequence: 1,

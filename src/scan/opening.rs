@@ -16,7 +16,7 @@ use super::store::ScanStore;
 use super::store_error::StoreError;
 use crate::devices::ProbeReport;
 use crate::profile::Conditions;
-use chrono::{DateTime, Utc};
+use chrono::Utc;
 use std::path::Path;
 
 /// Points a line is assumed to have when nothing better is known: the SJ-210's longest
@@ -77,9 +77,9 @@ pub(super) fn create(
         needed as f64 / 1e6
     );
     let now = Utc::now();
-    let id = unique_id(output_dir, now, &who.specimen);
     let faults = settings.hooks.clone();
-    let store = ScanStore::create(output_dir, &id, faults.clone())?;
+    let (store, id) =
+        ScanStore::create(output_dir, &ScanId::new(now, &who.specimen), faults.clone())?;
     let start = StartRecord {
         scan_id: id.0.clone(),
         // Numbered by `Journal::create`.
@@ -249,15 +249,4 @@ pub(super) fn reopen(
         note,
         failed,
     })
-}
-
-fn unique_id(output_dir: &Path, now: DateTime<Utc>, specimen: &str) -> ScanId {
-    let base = ScanId::new(now, specimen);
-    if !output_dir.join(&base.0).exists() {
-        return base;
-    }
-    (2..)
-        .map(|n| ScanId(format!("{}-{n}", base.0)))
-        .find(|id| !output_dir.join(&id.0).exists())
-        .unwrap_or(base)
 }

@@ -62,24 +62,52 @@ impl std::fmt::Debug for ScanStore {
 }
 
 impl ScanStore {
-    /// Creates `<output_dir>/<id>/lines/` (the output directory too) and fsyncs the parents.
+    /// Creates the scan directory `<output_dir>/<id>` exclusively (nothing, not even a link
+    /// to nothing, may be there: then `<id>-2`, `<id>-3`, … is taken) with its `lines/` (the
+    /// output directory too), fsyncs the parents, and returns the store and the id it got.
     pub fn create(
         output_dir: &Path,
         id: &ScanId,
         faults: Arc<dyn StorageFaults>,
-    ) -> Result<ScanStore, StoreError> {
-        let root = output_dir.join(&id.0);
+    ) -> Result<(ScanStore, ScanId), StoreError> {
+        fs::create_dir_all(output_dir).map_err(io_err("create directory", output_dir))?;
+        let mut taken = id.clone();
+        let mut n = 1u32;
+        let root = loop {
+            let root = output_dir.join(&taken.0);
+            match fs::create_dir(&root) {
+                Ok(()) => break root,
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && n < 10_000 => {
+                    n += 1;
+                    taken = ScanId(format!("{}-{n}", id.0));
+                }
+                Err(e) => return Err(io_err("create directory", &root)(e)),
+            }
+        };
         let lines = root.join("lines");
-        fs::create_dir_all(&lines).map_err(io_err("create directory", &lines))?;
+        fs::create_dir(&lines).map_err(io_err("create directory", &lines))?;
         sync_dir(&root)?;
         sync_dir(output_dir)?;
-        Ok(ScanStore { root, faults })
+        Ok((ScanStore { root, faults }, taken))
     }
 
-    /// Opens an existing scan directory (which must hold `lines/`).
+    /// Opens an existing scan directory (which must hold `lines/`); the directory and its
+    /// `lines/` must be directories themselves, never symbolic links.
     pub fn open(root: &Path, faults: Arc<dyn StorageFaults>) -> Result<ScanStore, StoreError> {
         let lines = root.join("lines");
-        fs::metadata(&lines).map_err(io_err("open directory", &lines))?;
+        for dir in [root, lines.as_path()] {
+            let meta = fs::symlink_metadata(dir).map_err(io_err("open directory", dir))?;
+            if !meta.is_dir() {
+                return Err(StoreError::Inconsistent {
+                    path: dir.to_path_buf(),
+                    reason: if meta.file_type().is_symlink() {
+                        "is a symbolic link; a scan's directories are never followed through links (move the scan's directory there instead)".into()
+                    } else {
+                        "is not a directory".into()
+                    },
+                });
+            }
+        }
         Ok(ScanStore {
             root: root.to_path_buf(),
             faults,

@@ -301,3 +301,76 @@ fn a_surface_too_large_for_one_file_is_written_as_named_parts_with_a_report() {
         "{c:?}"
     );
 }
+
+/// `fit -o` onto a character device (a node like `/dev/null`, made with mknod in a temporary
+/// directory): the surface is written into the device, which stays a character device; the
+/// old writer renamed a regular file over it.
+#[test]
+fn fit_onto_a_character_device_writes_into_it_and_leaves_it_a_device() {
+    use std::os::unix::fs::{FileTypeExt, MetadataExt};
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("plane.csv");
+    std::fs::write(&input, plane_grid(7, 12, 0.01, 0.02)).unwrap();
+    let node = dir.path().join("null");
+    let c = std::ffi::CString::new(node.as_os_str().as_encoded_bytes()).unwrap();
+    // The same device as /dev/null: major 1, minor 3. CI runs as root; without the
+    // capability this fails loudly rather than skip.
+    // SAFETY: mknod on a NUL-terminated path.
+    let made = unsafe { libc::mknod(c.as_ptr(), libc::S_IFCHR | 0o666, libc::makedev(1, 3)) };
+    assert_eq!(
+        made,
+        0,
+        "mknod needs CAP_MKNOD (run the tests as root): {}",
+        std::io::Error::last_os_error()
+    );
+    let st = surfscan()
+        .arg("fit")
+        .arg(&input)
+        .arg("-o")
+        .arg(&node)
+        .args(["--pitch-x", "0.01", "--pitch-y", "0.02"])
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let meta = std::fs::symlink_metadata(&node).unwrap();
+    assert!(meta.file_type().is_char_device(), "{meta:?}");
+    assert_eq!(meta.rdev(), libc::makedev(1, 3));
+    // Nothing else was left in the directory (no temporary file beside the node).
+    let mut names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["null", "plane.csv"]);
+}
+
+/// `fit -o -`: the IGES file alone on standard output (it reads back as the surface), the
+/// summary on standard error.
+#[test]
+fn fit_onto_standard_output_keeps_the_summary_off_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("plane.csv");
+    std::fs::write(&input, plane_grid(7, 12, 0.01, 0.02)).unwrap();
+    let st = surfscan()
+        .arg("fit")
+        .arg(&input)
+        .args(["-o", "-", "--pitch-x", "0.01", "--pitch-y", "0.02"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&st.stderr);
+    assert!(st.status.success(), "{stderr}");
+    let file = surfscan::iges::read_iges(&st.stdout).unwrap();
+    assert_eq!(file.surfaces.len(), 1);
+    assert_eq!(
+        (file.surfaces[0].count_u(), file.surfaces[0].count_v()),
+        (12, 7)
+    );
+    assert!(stderr.contains("7x12 grid"), "{stderr}");
+    // No file named "-" was made.
+    assert!(!dir.path().join("-").exists());
+}

@@ -107,7 +107,7 @@ fn build_scan(
     let start = Utc.with_ymd_and_hms(2026, 11, 30, 9, 15, 0).unwrap();
     let id = ScanId::new(start, SPECIMEN);
     let faults = Arc::new(NoFaults);
-    let store = ScanStore::create(parent, &id, faults.clone()).unwrap();
+    let store = ScanStore::create(parent, &id, faults.clone()).unwrap().0;
     let mut journal = Journal::create(
         store.root(),
         StartRecord {

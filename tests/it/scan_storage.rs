@@ -132,7 +132,7 @@ fn new_scan(
         Utc.with_ymd_and_hms(2026, 1, 2, 3, 4, 5).unwrap(),
         "Block 7",
     );
-    let store = ScanStore::create(out, &id, faults.clone()).unwrap();
+    let store = ScanStore::create(out, &id, faults.clone()).unwrap().0;
     let journal = Journal::create(store.root(), start_record(&id, lines), faults).unwrap();
     (store, journal, id)
 }
@@ -417,7 +417,7 @@ fn resume_state_and_unfinished_scan_discovery() {
     let out = tmp.path();
     // finished scan
     let id_a = ScanId("20260101T000000Z-a".into());
-    let a = ScanStore::create(out, &id_a, Arc::new(NoFaults)).unwrap();
+    let a = ScanStore::create(out, &id_a, Arc::new(NoFaults)).unwrap().0;
     let mut ja = Journal::create(a.root(), start_record(&id_a, 1), Arc::new(NoFaults)).unwrap();
     ja.append(&Record::Stop(StopRecord {
         status: StopStatus::Success,
@@ -428,7 +428,7 @@ fn resume_state_and_unfinished_scan_discovery() {
     .unwrap();
     // unfinished scan with line 0 and 2 done (line 1 missing), an interruption
     let id_b = ScanId("20260102T000000Z-b".into());
-    let b = ScanStore::create(out, &id_b, Arc::new(NoFaults)).unwrap();
+    let b = ScanStore::create(out, &id_b, Arc::new(NoFaults)).unwrap().0;
     let mut jb = Journal::create(b.root(), start_record(&id_b, 4), Arc::new(NoFaults)).unwrap();
     for k in [0, 2] {
         let (m, p) = line(k);
@@ -824,7 +824,7 @@ fn the_scan_to_resume_comes_from_the_journals_and_a_damaged_one_is_skipped_and_n
     let out = tmp.path();
     let scan = |name: &str, stopped: bool| {
         let id = ScanId(name.into());
-        let s = ScanStore::create(out, &id, Arc::new(NoFaults)).unwrap();
+        let s = ScanStore::create(out, &id, Arc::new(NoFaults)).unwrap().0;
         let mut j = Journal::create(s.root(), start_record(&id, 3), Arc::new(NoFaults)).unwrap();
         let (m, p) = line(0);
         s.commit_line(&mut j, &m, &p).unwrap();
@@ -985,4 +985,54 @@ fn a_byte_that_is_not_utf8_in_a_line_file_is_damage_set_aside_not_a_read_failure
         got.quarantined[0].reason
     );
     assert!(store.root().join("quarantine/0001.json").exists());
+}
+
+/// A link planted in the output directory (at the next predictable scan id, dangling; or to a
+/// real scan elsewhere) neither keeps a scan from starting nor redirects its writes.
+#[test]
+fn a_planted_link_neither_blocks_a_new_scan_nor_is_written_through() {
+    use std::os::unix::fs::symlink;
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let elsewhere = tmp.path().join("elsewhere");
+    std::fs::create_dir_all(&out).unwrap();
+    let id = ScanId::new(
+        Utc.with_ymd_and_hms(2026, 1, 2, 3, 4, 5).unwrap(),
+        "Block 7",
+    );
+    // Dangling, to where the scan would then have been created.
+    symlink(elsewhere.join("victim"), out.join(&id.0)).unwrap();
+    let (store, got) = ScanStore::create(&out, &id, Arc::new(NoFaults)).unwrap();
+    assert_eq!(got.0, format!("{}-2", id.0));
+    assert_eq!(store.root(), out.join(&got.0));
+    assert!(std::fs::symlink_metadata(store.root()).unwrap().is_dir());
+    assert!(!elsewhere.exists(), "nothing was created through the link");
+
+    // An unfinished scan reached through a link in the output directory: not surveyed (so
+    // never resumed nor written to), and a store is never opened through it.
+    let real = ScanStore::create(
+        &elsewhere,
+        &ScanId("20260101T000000Z-b".into()),
+        Arc::new(NoFaults),
+    )
+    .unwrap()
+    .0;
+    let mut j = Journal::create(real.root(), start_record(&id, 4), Arc::new(NoFaults)).unwrap();
+    let (m, p) = line(0);
+    real.commit_line(&mut j, &m, &p).unwrap();
+    let linked = out.join("20260101T000000Z-b");
+    symlink(real.root(), &linked).unwrap();
+    let survey = surfscan::scan::journal::survey(&out).unwrap();
+    assert!(survey.unfinished.is_empty(), "{:?}", survey.unfinished);
+    let e = ScanStore::open(&linked, Arc::new(NoFaults)).unwrap_err();
+    assert!(e.to_string().contains("symbolic link"), "{e}");
+    // A link inside a scan's directory in place of a line's file is refused on write.
+    let lines = store.root().join("lines");
+    let planted = lines.join(surfscan::scan::store::csv_name(m.id.index));
+    symlink(tmp.path().join("target.csv"), &planted).unwrap();
+    let j2 = Journal::create(store.root(), start_record(&got, 4), Arc::new(NoFaults));
+    let mut j2 = j2.unwrap();
+    let e = store.commit_line(&mut j2, &m, &p).unwrap_err();
+    assert!(e.to_string().contains("symbolic link"), "{e}");
+    assert!(!tmp.path().join("target.csv").exists());
 }
