@@ -108,6 +108,22 @@ impl Grid {
         mean_pitch_y(&self.y_mm)
     }
 
+    /// Everything but the heights: what is known about the lines and those left out, for a
+    /// caller that frees the heights while it still needs the rest.
+    pub fn layout(&self) -> Grid {
+        Grid {
+            heights_um: Vec::new(),
+            cols: self.cols,
+            pitch_x_mm: self.pitch_x_mm,
+            y_mm: self.y_mm.clone(),
+            index: self.index.clone(),
+            y_readback_mm: self.y_readback_mm.clone(),
+            instrument: self.instrument.clone(),
+            standard: self.standard.clone(),
+            left_out: self.left_out.clone(),
+        }
+    }
+
     /// Only the rows `keep` (indices into this grid, increasing), with what is known about
     /// them; the lines left out stay as they are.
     pub fn select_rows(&self, keep: &[usize]) -> Grid {

@@ -58,7 +58,7 @@ use crate::metrology::holdout::{between_lines, holdout_every_or_reason, ordinal}
 use crate::metrology::outliers::{bridged_grid, LineSpike};
 use crate::metrology::surface_model::{fit_model, ModelRecipe};
 use crate::scan::outputs::SurfaceShape;
-use crate::scan::surface_files::{write_surface_files, SurfaceWriteError};
+use crate::scan::surface_files::{write_surface_files, SurfaceWriteError, WrittenIges};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -326,29 +326,36 @@ fn report_replaced(replaced: &[LineSpike]) {
     }
 }
 
-/// The heights the surface was fitted to: the grid's, with any replaced spike bridged.
-fn fitted_heights<'a>(
-    heights_um: &'a [f64],
-    cols: usize,
-    index: &[u32],
-    replaced: &[LineSpike],
-) -> std::borrow::Cow<'a, [f64]> {
-    if replaced.is_empty() {
-        std::borrow::Cow::Borrowed(heights_um)
-    } else {
-        std::borrow::Cow::Owned(bridged_grid(heights_um, cols, index, replaced).0)
-    }
+/// What a fit follows once the input is read: the arguments, the output, the recipe, and the
+/// grid's lines without their heights (each step is given the heights, so that a large grid's
+/// can be freed before the IGES write).
+struct Fitting<'a> {
+    args: &'a Args,
+    output: PathBuf,
+    recipe: ModelRecipe,
+    /// The grid as read, its heights left out ([`Grid::layout`]).
+    lines: Grid,
+    /// The input's kind, as the report names it.
+    kind: &'static str,
+    /// The input's y pitch (`None`: a scan's lines, each at its own y).
+    pitch_y_mm: Option<f64>,
+    progress: indicatif::ProgressBar,
 }
 
-/// What the verdict on the model between lines is computed from (besides the heights).
-#[derive(Clone, Copy)]
-struct Judge<'a> {
-    cols: usize,
-    pitch_x_mm: f64,
-    pitch_y_mm: Option<f64>,
-    y_mm: &'a [f64],
-    recipe: &'a ModelRecipe,
-    compare: bool,
+/// What the fit made, and how long each step took.
+struct Fitted {
+    fit: FitResult,
+    replaced: Vec<LineSpike>,
+    fit_s: f64,
+    /// The checks that decide whether the surface is a height map (`None`: its control net
+    /// rules a fold out).
+    shape: Option<ModelChecks>,
+    shape_s: f64,
+    residual_mm: f64,
+    residual_s: f64,
+    judged: Judged,
+    written: Vec<WrittenIges>,
+    write_s: f64,
 }
 
 /// The verdict on the model between lines, and the alternatives when asked for.
@@ -361,21 +368,232 @@ struct Judged {
     holdout_s: f64,
 }
 
-impl Judge<'_> {
+impl Fitted {
+    /// The surface is not a height map somewhere.
+    fn folds(&self) -> bool {
+        self.shape.as_ref().is_some_and(ModelChecks::folds)
+    }
+
+    /// The IGES files' patches, bytes and parameter lines, all parts together.
+    fn stats(&self) -> crate::iges::IgesStats {
+        let mut stats = crate::iges::IgesStats::default();
+        for w in &self.written {
+            stats.patches += w.patches;
+            stats.bytes += w.bytes;
+            stats.parameter_lines += w.parameter_lines;
+        }
+        stats
+    }
+}
+
+impl<'a> Fitting<'a> {
+    /// The recipe for `input`: the arguments' degrees, method and spike rule, else the scan's
+    /// frozen plan's, else the paper's.
+    fn new(args: &'a Args, input: &Input) -> Result<Fitting<'a>, CliError> {
+        let grid = &input.input.grid;
+        let method = args
+            .model
+            .v_method(grid.rows(), input.degrees.degree_v)?
+            .or(input.plan.map(|p| p.v_method))
+            .unwrap_or_default();
+        let replace_spikes = match args.model.replace() {
+            Some(true) => Some(args.model.spikes()?),
+            _ => input.plan.and_then(|p| p.replace_spikes),
+        };
+        let progress = if std::io::stderr().is_terminal() && grid.heights_um.len() >= 1_000_000 {
+            indicatif::ProgressBar::new(grid.rows() as u64)
+        } else {
+            indicatif::ProgressBar::hidden()
+        };
+        Ok(Fitting {
+            args,
+            output: input.output.clone(),
+            recipe: ModelRecipe {
+                degrees: input.degrees,
+                method,
+                replace_spikes,
+                lambda_c_mm: input.lambda_c_mm,
+            },
+            lines: grid.layout(),
+            kind: input.input.kind(),
+            pitch_y_mm: input.input.pitch_y_mm(),
+            progress,
+        })
+    }
+
+    /// Fits `grid`, checks the surface, judges it between lines and writes it. A grid up to
+    /// [`SIDE_BY_SIDE_MAX_POINTS`] has the verdict computed beside the fit and the write;
+    /// a larger one runs each step in turn and frees its heights before the write.
+    fn run(&self, mut grid: Grid) -> Result<Fitted, CliError> {
+        // A threshold given wrongly is refused after the fit and before anything is written,
+        // in both orders.
+        let threshold = self.args.model.holdout_threshold();
+        let (
+            (fit, replaced, fit_s, (shape, shape_s)),
+            (residual_mm, residual_s),
+            judged,
+            (written, write_s),
+        ) = match threshold {
+            Ok(threshold) if grid.heights_um.len() <= SIDE_BY_SIDE_MAX_POINTS => {
+                // The verdict between lines needs only the heights the surface is fitted
+                // to (the grid's own for the paper's fit, which replaces no spike), so it
+                // runs beside the fit and the IGES write, and the residual check runs while
+                // the file is formatted and synced: the same computations on the same
+                // inputs, so the same numbers, in about the time of the longest.
+                let heights = &grid.heights_um;
+                std::thread::scope(|outer| {
+                    let early = self
+                        .recipe
+                        .is_paper()
+                        .then(|| outer.spawn(move || self.judge(heights, threshold)));
+                    let fitted = self.fit(&grid)?;
+                    let judging = match early {
+                        Some(h) => h,
+                        None => {
+                            let replaced = fitted.1.clone();
+                            outer.spawn(move || {
+                                self.judge(&self.fitted_heights(heights, &replaced), threshold)
+                            })
+                        }
+                    };
+                    let (residual, written) = std::thread::scope(|inner| {
+                        let writing =
+                            inner.spawn(|| self.write(&fitted.0, &fitted.1, &fitted.3 .0));
+                        let residual = self.residual(&fitted.0, heights);
+                        (residual, joined(writing))
+                    });
+                    let written = written?;
+                    Ok::<_, CliError>((fitted, residual, joined(judging), written))
+                })?
+            }
+            threshold => {
+                // The paper's surface (which replaces no spike) is judged on the heights as
+                // read before it is fitted, so the refit's memory is freed before the fitter
+                // takes its own; a recipe that replaces spikes is judged after its fit, on
+                // the grid with them bridged.
+                let early = match &threshold {
+                    Ok(t) if self.recipe.is_paper() => Some(self.judge(&grid.heights_um, *t)),
+                    _ => None,
+                };
+                let fitted = self.fit(&grid)?;
+                let residual = self.residual(&fitted.0, &grid.heights_um);
+                let judged = match early {
+                    Some(judged) => judged,
+                    None => self.judge(
+                        &self.fitted_heights(&grid.heights_um, &fitted.1),
+                        threshold?,
+                    ),
+                };
+                // The heights are not needed past the residual check and the verdict: free
+                // them before the IGES files are planned and written, which is when a large
+                // surface needs the most memory.
+                grid.heights_um = Vec::new();
+                let written = self.write(&fitted.0, &fitted.1, &fitted.3 .0)?;
+                (fitted, residual, judged, written)
+            }
+        };
+        Ok(Fitted {
+            fit,
+            replaced,
+            fit_s,
+            shape,
+            shape_s,
+            residual_mm,
+            residual_s,
+            judged,
+            written,
+            write_s,
+        })
+    }
+
+    /// The fit (timed), the spikes it replaced (named), and the height-map checks (timed; a
+    /// fold named).
+    #[allow(clippy::type_complexity)]
+    fn fit(
+        &self,
+        grid: &Grid,
+    ) -> Result<(FitResult, Vec<LineSpike>, f64, (Option<ModelChecks>, f64)), CliError> {
+        let t_fit = Instant::now();
+        let fitted = fit_surface(&self.args.input, grid, &self.recipe, &self.progress);
+        self.progress.finish_and_clear();
+        let (fit, replaced) = fitted?;
+        report_replaced(&replaced);
+        let fit_s = t_fit.elapsed().as_secs_f64();
+        let t_shape = Instant::now();
+        let shape = shape_checks(&fit, &self.fitted_heights(&grid.heights_um, &replaced));
+        for w in shape.iter().flat_map(ModelChecks::fold_warnings) {
+            tell!("surfscan: warning: {w}");
+        }
+        Ok((
+            fit,
+            replaced,
+            fit_s,
+            (shape, t_shape.elapsed().as_secs_f64()),
+        ))
+    }
+
+    /// The largest residual of the surface at the data points (timed).
+    fn residual(&self, fit: &FitResult, heights_um: &[f64]) -> (f64, f64) {
+        let t_res = Instant::now();
+        let l = &self.lines;
+        let r = max_residual_mm(fit, l.pitch_x_mm, &l.y_mm, heights_um, l.cols);
+        (r, t_res.elapsed().as_secs_f64())
+    }
+
+    /// Writes the surface's IGES files (timed), their Start section naming the recipe, the
+    /// replaced spikes, the lines left out and any fold.
+    fn write(
+        &self,
+        fit: &FitResult,
+        replaced: &[LineSpike],
+        shape: &Option<ModelChecks>,
+    ) -> Result<(Vec<WrittenIges>, f64), CliError> {
+        let mut opts = self.iges_options();
+        opts.start_lines.extend(self.recipe.start_lines(replaced));
+        opts.start_lines
+            .extend(left_out_start_line(&self.lines.left_out));
+        opts.start_lines.extend(
+            shape
+                .iter()
+                .flat_map(|c| c.iso_curves.iter().map(fold_start_line)),
+        );
+        ensure_parent(&self.output)?;
+        let t_write = Instant::now();
+        let written =
+            write_surface_files(&self.output, &fit.surface, &opts).map_err(iges_write_error)?;
+        Ok((written, t_write.elapsed().as_secs_f64()))
+    }
+
+    /// The heights the surface was fitted to: the grid's, with any replaced spike bridged.
+    fn fitted_heights<'h>(
+        &self,
+        heights_um: &'h [f64],
+        replaced: &[LineSpike],
+    ) -> std::borrow::Cow<'h, [f64]> {
+        if replaced.is_empty() {
+            std::borrow::Cow::Borrowed(heights_um)
+        } else {
+            std::borrow::Cow::Owned(
+                bridged_grid(heights_um, self.lines.cols, &self.lines.index, replaced).0,
+            )
+        }
+    }
+
     /// Every 2nd line left out (or every k-th when too few lines remain for that, as the
     /// report does), refitted the same way and judged against Sq of `fitted_z`.
-    fn run(&self, fitted_z: &[f64], threshold: f64) -> Judged {
+    fn judge(&self, fitted_z: &[f64], threshold: f64) -> Judged {
         let t_holdout = Instant::now();
-        let rows = self.y_mm.len();
-        let mean_py = match (self.y_mm.first(), self.y_mm.last()) {
+        let l = &self.lines;
+        let (rows, y_mm) = (l.rows(), &l.y_mm[..]);
+        let mean_py = match (y_mm.first(), y_mm.last()) {
             (Some(a), Some(b)) if rows > 1 => (b - a).abs() / (rows - 1) as f64,
             _ => self.pitch_y_mm.unwrap_or(1.0),
         };
         let sq = areal_sq_um(&HeightMap {
             heights_um: fitted_z,
             rows,
-            cols: self.cols,
-            pitch_x_mm: self.pitch_x_mm,
+            cols: l.cols,
+            pitch_x_mm: l.pitch_x_mm,
             pitch_y_mm: mean_py,
         })
         .map_err(|e| e.to_string());
@@ -385,9 +603,9 @@ impl Judge<'_> {
             let every = every.clone()?;
             between_lines(
                 fitted_z,
-                self.cols,
-                self.pitch_x_mm,
-                self.y_mm,
+                l.cols,
+                l.pitch_x_mm,
+                y_mm,
                 degrees,
                 self.recipe.method,
                 every,
@@ -402,12 +620,12 @@ impl Judge<'_> {
             })
             .map_err(|e| e.to_string())
         });
-        let alternatives = match (&sq, &every, self.compare) {
+        let alternatives = match (&sq, &every, self.args.compare) {
             (Ok(sq), Ok(every), true) => Some(compare_alternatives(
                 fitted_z,
-                self.cols,
-                self.pitch_x_mm,
-                self.y_mm,
+                l.cols,
+                l.pitch_x_mm,
+                y_mm,
                 degrees,
                 *every,
                 *sq,
@@ -424,73 +642,217 @@ impl Judge<'_> {
             holdout_s: t_holdout.elapsed().as_secs_f64(),
         }
     }
-}
 
-/// The Start and Global section contents of the surface's IGES files (the replaced spikes
-/// are added by the caller).
-fn iges_options(
-    args: &Args,
-    output: &Path,
-    recipe: &ModelRecipe,
-    (rows, cols): (usize, usize),
-    pitch_x_mm: f64,
-    pitch_y_mm: Option<f64>,
-    y_mm: &[f64],
-) -> IgesOptions {
-    let options = recipe.degrees;
-    let now = chrono::Utc::now().naive_utc();
-    let file_name = output
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    IgesOptions {
-        file_name,
-        start_lines: vec![
-            format!(
-                "Surface fitted by surfscan {} ({}, p={}, q={}); units mm.",
-                env!("CARGO_PKG_VERSION"),
-                match recipe.method {
-                    crate::fit::VMethod::Interpolate => "global B-spline interpolation".to_string(),
-                    crate::fit::VMethod::LeastSquares { control_rows } => format!(
-                        "B-spline interpolation along x, least squares across the lines with {control_rows} control rows"
+    /// The Start and Global section contents of the surface's IGES files (the replaced spikes,
+    /// the lines left out and any fold are added by [`Fitting::write`]).
+    fn iges_options(&self) -> IgesOptions {
+        let (args, recipe, l) = (self.args, &self.recipe, &self.lines);
+        let options = recipe.degrees;
+        let (rows, cols, pitch_x_mm, y_mm) = (l.rows(), l.cols, l.pitch_x_mm, &l.y_mm);
+        let file_name = self
+            .output
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        IgesOptions {
+            file_name,
+            start_lines: vec![
+                format!(
+                    "Surface fitted by surfscan {} ({}, p={}, q={}); units mm.",
+                    env!("CARGO_PKG_VERSION"),
+                    match recipe.method {
+                        crate::fit::VMethod::Interpolate => "global B-spline interpolation".to_string(),
+                        crate::fit::VMethod::LeastSquares { control_rows } => format!(
+                            "B-spline interpolation along x, least squares across the lines with {control_rows} control rows"
+                        ),
+                    },
+                    options.degree_u,
+                    options.degree_v
+                ),
+                match self.pitch_y_mm {
+                    Some(py) => format!(
+                        "Input: {} ({} lines x {} points, pitch x {} mm, pitch y {} mm, heights um).",
+                        args.input.display(),
+                        rows,
+                        cols,
+                        pitch_x_mm,
+                        py
+                    ),
+                    None => format!(
+                        "Input: scan {} ({} lines x {} points, pitch x {} mm, y {} .. {} mm, heights um).",
+                        args.input.display(),
+                        rows,
+                        cols,
+                        pitch_x_mm,
+                        y_mm.first().copied().unwrap_or(f64::NAN),
+                        y_mm.last().copied().unwrap_or(f64::NAN)
                     ),
                 },
-                options.degree_u,
-                options.degree_v
-            ),
-            match pitch_y_mm {
-                Some(py) => format!(
-                    "Input: {} ({} lines x {} points, pitch x {} mm, pitch y {} mm, heights um).",
-                    args.input.display(),
-                    rows,
-                    cols,
-                    pitch_x_mm,
-                    py
-                ),
-                None => format!(
-                    "Input: scan {} ({} lines x {} points, pitch x {} mm, y {} .. {} mm, heights um).",
-                    args.input.display(),
-                    rows,
-                    cols,
-                    pitch_x_mm,
-                    y_mm.first().copied().unwrap_or(f64::NAN),
-                    y_mm.last().copied().unwrap_or(f64::NAN)
-                ),
+            ],
+            timestamp: chrono::Utc::now().naive_utc(),
+            max_parameter_lines_per_file: args.max_iges_lines_per_file,
+            max_parameter_lines_per_entity: args.max_iges_lines_per_entity,
+            ..IgesOptions::default()
+        }
+    }
+
+    /// The fit report (`--report`): the input, the surface's shape and files, the model and
+    /// its checks, the verdict between lines, the timings.
+    fn report(&self, f: &Fitted, read_s: f64) -> serde_json::Value {
+        let (l, judged, stats) = (&self.lines, &f.judged, f.stats());
+        let files: Vec<serde_json::Value> = f
+            .written
+            .iter()
+            .map(|w| {
+                serde_json::json!({
+                    "path": w.path.display().to_string(),
+                    "part": w.part,
+                    "v_range": w.v_range,
+                    "patches": w.patches,
+                    "bytes": w.bytes,
+                    "parameter_lines": w.parameter_lines,
+                })
+            })
+            .collect();
+        let mut report = serde_json::json!({
+            "input": self.args.input.display().to_string(),
+            "input_kind": self.kind,
+            "output": self.output.display().to_string(),
+            "grid": { "rows": l.rows(), "cols": l.cols },
+            "lines_in_input": l.lines_in_input(),
+            "pitch_x_mm": l.pitch_x_mm,
+            "pitch_y_mm": self.pitch_y_mm,
+            "y_mm": l.y_mm,
+            "lines": l.index,
+            "lines_left_out": l.left_out,
+            "max_residual_mm": f.residual_mm,
+            "patches": stats.patches,
+            "iges_bytes": stats.bytes,
+            "iges_parameter_lines": stats.parameter_lines,
+            "iges_files": files,
+            "model": {
+                "description": self.recipe.describe(),
+                "v_method": self.recipe.method,
+                "spikes_replaced": f.replaced,
             },
-        ],
-        timestamp: now,
-        max_parameter_lines_per_file: args.max_iges_lines_per_file,
-        max_parameter_lines_per_entity: args.max_iges_lines_per_entity,
-        ..IgesOptions::default()
+            "height_map": {
+                "folds": f.folds(),
+                "checked": match &f.shape {
+                    None => "the control net runs forwards in u and v everywhere, so the surface cannot fold (its iso-curves were not sampled)",
+                    Some(_) => "the control net runs back somewhere: the iso-curves were sampled as the report's model checks sample them",
+                },
+                "model_checks": &f.shape,
+            },
+            "between_lines": judged.verdict.as_ref().ok(),
+            "between_lines_error": judged.verdict.as_ref().err(),
+            "alternatives": judged.alternatives.as_ref().map(|alts| alts
+                .iter()
+                .map(|a| serde_json::json!({
+                    "degree_u": a.options.degree_u,
+                    "degree_v": a.options.degree_v,
+                    "v_method": a.method,
+                    "poles_v": a.poles_v,
+                    "between_lines": a.holdout.as_ref().ok(),
+                    "error": a.holdout.as_ref().err(),
+                }))
+                .collect::<Vec<_>>()),
+            "timings_s": {
+                "holdout": judged.holdout_s,
+                "read": read_s,
+                "fit_params": f.fit.timings.params_s,
+                "fit_knots_factor": f.fit.timings.knots_factor_s,
+                "fit_solve_u": f.fit.timings.solve_u_s,
+                "fit_solve_v": f.fit.timings.solve_v_s,
+                "fit_total": f.fit_s,
+                "shape_check": f.shape_s,
+                "residual": f.residual_s,
+                "write_iges": f.write_s,
+            },
+        });
+        if let (Some(o), Ok(serde_json::Value::Object(shape))) = (
+            report.as_object_mut(),
+            serde_json::to_value(SurfaceShape::of(&f.fit.surface)),
+        ) {
+            o.extend(shape);
+        }
+        report
+    }
+
+    /// Prints what was written and the verdict between lines (and the alternatives when
+    /// asked for).
+    fn tell(&self, f: &Fitted) {
+        let (output, n_files, judged, stats) =
+            (&self.output, f.written.len(), &f.judged, f.stats());
+        let s = &f.fit.surface;
+        let written = if n_files == 1 {
+            output.display().to_string()
+        } else {
+            format!(
+                "{} too large for one IGES file; wrote {} files {} .. {}",
+                output.display(),
+                n_files,
+                part_path(output, 1, n_files).display(),
+                part_path(output, n_files, n_files).display()
+            )
+        };
+        say!(
+            "{}: {}x{} grid, {}x{} poles, {} patch(es), {} bytes; fit {:.1} ms, write {:.1} ms",
+            written,
+            self.lines.rows(),
+            self.lines.cols,
+            s.count_u(),
+            s.count_v(),
+            stats.patches,
+            stats.bytes,
+            f.fit_s * 1e3,
+            f.write_s * 1e3
+        );
+        match &judged.verdict {
+            Ok(b) => say!("{}", b.short()),
+            Err(e) => say!("no verdict on the model between lines: {e}"),
+        }
+        if let Some(alts) = &judged.alternatives {
+            say!(
+                "\nhold-out of the alternatives (every {} line left out and refitted; supported means rms ≤ {} × Sq):",
+                ordinal(*judged.every.as_ref().unwrap_or(&2)),
+                judged.threshold
+            );
+            say_text!("{}", alternatives_table(alts));
+        } else if self.args.compare {
+            match (&judged.sq, &judged.every) {
+                (Err(e), _) => say!("no comparison: the grid has no Sq ({e})"),
+                (_, Err(e)) => say!("no comparison: {e}"),
+                _ => {}
+            }
+        }
+    }
+
+    /// Exit 3 when the surface is partial (lines left out) or folds, naming which; else 0.
+    fn status(&self, f: &Fitted) -> Result<(), CliError> {
+        let mut partial = Vec::new();
+        if self.lines.is_partial() {
+            partial.push(format!(
+                "the surface is partial: fitted from {} (the others cannot be used, see the warnings above; the IGES Start section names them)",
+                self.lines.lines_used()
+            ));
+        }
+        if f.folds() {
+            partial.push(
+                "the surface folds (see the model fold warning above; the IGES Start section and the report name it): it is not a height map there".to_string(),
+            );
+        }
+        if partial.is_empty() {
+            return Ok(());
+        }
+        Err(CliError::new(
+            Exit::Partial,
+            format!("{}; it is written", partial.join("; ")),
+        ))
     }
 }
 
-/// Runs `surfscan fit`.
-pub fn run(args: Args) -> Result<(), CliError> {
-    let dash = Path::new("-");
-    if args.output.as_deref() == Some(dash) || args.report.as_deref() == Some(dash) {
-        super::console::stdout_carries_data();
-    }
+/// The arguments no input could make valid: a degree of 0, a line limit of 0.
+fn check_args(args: &Args) -> Result<(), CliError> {
     if args.degree_u == Some(0) || args.degree_v == Some(0) {
         return Err(CliError::new(
             Exit::Usage,
@@ -512,322 +874,30 @@ pub fn run(args: Args) -> Result<(), CliError> {
             ));
         }
     }
+    Ok(())
+}
+
+/// Runs `surfscan fit`: read, fit, check, judge and write, report, say, exit status.
+pub fn run(args: Args) -> Result<(), CliError> {
+    let dash = Path::new("-");
+    if args.output.as_deref() == Some(dash) || args.report.as_deref() == Some(dash) {
+        super::console::stdout_carries_data();
+    }
+    check_args(&args)?;
     let t_read = Instant::now();
-    let Input {
-        input,
-        output,
-        degrees: options,
-        plan,
-        lambda_c_mm,
-    } = read_input(&args)?;
+    let input = read_input(&args)?;
     let read_s = t_read.elapsed().as_secs_f64();
-    let (kind, pitch_y_mm) = (input.kind(), input.pitch_y_mm());
-    let mut grid = input.grid;
-    let (pitch_x_mm, y_mm, index) = (grid.pitch_x_mm, grid.y_mm.clone(), grid.index.clone());
-    let method = args
-        .model
-        .v_method(grid.rows(), options.degree_v)?
-        .or(plan.map(|p| p.v_method))
-        .unwrap_or_default();
-    let replace_spikes = match args.model.replace() {
-        Some(true) => Some(args.model.spikes()?),
-        _ => plan.and_then(|p| p.replace_spikes),
-    };
-    let recipe = ModelRecipe {
-        degrees: options,
-        method,
-        replace_spikes,
-        lambda_c_mm,
-    };
-
-    let progress = if std::io::stderr().is_terminal() && grid.heights_um.len() >= 1_000_000 {
-        indicatif::ProgressBar::new(grid.rows() as u64)
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    let (rows, cols) = (grid.rows(), grid.cols);
-    let judge = Judge {
-        cols,
-        pitch_x_mm,
-        pitch_y_mm,
-        y_mm: &y_mm,
-        recipe: &recipe,
-        compare: args.compare,
-    };
-    let fit_step = || {
-        let t_fit = Instant::now();
-        let fitted = fit_surface(&args.input, &grid, &recipe, &progress);
-        progress.finish_and_clear();
-        let (fit, replaced) = fitted?;
-        report_replaced(&replaced);
-        let fit_s = t_fit.elapsed().as_secs_f64();
-        let t_shape = Instant::now();
-        let shape = shape_checks(
-            &fit,
-            &fitted_heights(&grid.heights_um, cols, &index, &replaced),
-        );
-        for w in shape.iter().flat_map(ModelChecks::fold_warnings) {
-            tell!("surfscan: warning: {w}");
-        }
-        let shape_s = t_shape.elapsed().as_secs_f64();
-        Ok::<_, CliError>((fit, replaced, fit_s, (shape, shape_s)))
-    };
-    let residual_step = |fit: &FitResult, heights_um: &[f64]| {
-        let t_res = Instant::now();
-        let r = max_residual_mm(fit, pitch_x_mm, &y_mm, heights_um, cols);
-        (r, t_res.elapsed().as_secs_f64())
-    };
-    let write_step = |fit: &FitResult, replaced: &[LineSpike], shape: &Option<ModelChecks>| {
-        let mut opts = iges_options(
-            &args,
-            &output,
-            &recipe,
-            (rows, cols),
-            pitch_x_mm,
-            pitch_y_mm,
-            &y_mm,
-        );
-        opts.start_lines.extend(recipe.start_lines(replaced));
-        opts.start_lines.extend(left_out_start_line(&grid.left_out));
-        opts.start_lines.extend(
-            shape
-                .iter()
-                .flat_map(|c| c.iso_curves.iter().map(fold_start_line)),
-        );
-        ensure_parent(&output)?;
-        let t_write = Instant::now();
-        let written =
-            write_surface_files(&output, &fit.surface, &opts).map_err(iges_write_error)?;
-        Ok::<_, CliError>((written, t_write.elapsed().as_secs_f64()))
-    };
-    // A threshold given wrongly is refused after the fit and before anything is written, as
-    // in the serial order below.
-    let threshold = args.model.holdout_threshold();
-    let (fit, replaced, (fit_s, shape), (residual_mm, residual_s), judged, (written, write_s)) =
-        match threshold {
-            Ok(threshold) if grid.heights_um.len() <= SIDE_BY_SIDE_MAX_POINTS => {
-                // The verdict between lines needs only the heights the surface is fitted to (the
-                // grid's own for the paper's fit, which replaces no spike), so it runs beside the
-                // fit and the IGES write, and the residual check runs while the file is formatted
-                // and synced: the same computations on the same inputs, so the same numbers, in
-                // about the time of the longest.
-                let (heights, index) = (&grid.heights_um, &index);
-                std::thread::scope(|outer| {
-                    let early = recipe
-                        .is_paper()
-                        .then(|| outer.spawn(move || judge.run(heights, threshold)));
-                    let (fit, replaced, fit_s, shape) = fit_step()?;
-                    let judging = match early {
-                        Some(h) => h,
-                        None => {
-                            let replaced = replaced.clone();
-                            outer.spawn(move || {
-                                judge.run(
-                                    &fitted_heights(heights, cols, index, &replaced),
-                                    threshold,
-                                )
-                            })
-                        }
-                    };
-                    let (residual, written) = std::thread::scope(|inner| {
-                        let writing = inner.spawn(|| write_step(&fit, &replaced, &shape.0));
-                        let residual = residual_step(&fit, heights);
-                        (residual, joined(writing))
-                    });
-                    let written = written?;
-                    Ok::<_, CliError>((
-                        fit,
-                        replaced,
-                        (fit_s, shape),
-                        residual,
-                        joined(judging),
-                        written,
-                    ))
-                })?
-            }
-            threshold => {
-                // The paper's surface (which replaces no spike) is judged on the heights as
-                // read before it is fitted, so the refit's memory is freed before the fitter
-                // takes its own; a recipe that replaces spikes is judged after its fit, on the
-                // grid with them bridged.
-                let early = match &threshold {
-                    Ok(t) if recipe.is_paper() => Some(judge.run(&grid.heights_um, *t)),
-                    _ => None,
-                };
-                let (fit, replaced, fit_s, shape) = fit_step()?;
-                let residual = residual_step(&fit, &grid.heights_um);
-                let judged = match early {
-                    Some(judged) => judged,
-                    None => judge.run(
-                        &fitted_heights(&grid.heights_um, cols, &index, &replaced),
-                        threshold?,
-                    ),
-                };
-                // The heights are not needed past the residual check and the verdict: free them
-                // before the IGES files are planned and written, which is when a large surface
-                // needs the most memory.
-                grid.heights_um = Vec::new();
-                let written = write_step(&fit, &replaced, &shape.0)?;
-                (fit, replaced, (fit_s, shape), residual, judged, written)
-            }
-        };
-    let Judged {
-        threshold,
-        sq,
-        every,
-        verdict,
-        alternatives,
-        holdout_s,
-    } = judged;
-    let folds = shape.0.as_ref().is_some_and(ModelChecks::folds);
-    let n_files = written.len();
-    let mut stats = crate::iges::IgesStats::default();
-    for w in &written {
-        stats.patches += w.patches;
-        stats.bytes += w.bytes;
-        stats.parameter_lines += w.parameter_lines;
-    }
-    let files: Vec<serde_json::Value> = written
-        .iter()
-        .map(|w| {
-            serde_json::json!({
-                "path": w.path.display().to_string(),
-                "part": w.part,
-                "v_range": w.v_range,
-                "patches": w.patches,
-                "bytes": w.bytes,
-                "parameter_lines": w.parameter_lines,
-            })
-        })
-        .collect();
-
-    let s = &fit.surface;
-    let mut report = serde_json::json!({
-        "input": args.input.display().to_string(),
-        "input_kind": kind,
-        "output": output.display().to_string(),
-        "grid": { "rows": rows, "cols": cols },
-        "lines_in_input": grid.lines_in_input(),
-        "pitch_x_mm": pitch_x_mm,
-        "pitch_y_mm": pitch_y_mm,
-        "y_mm": y_mm,
-        "lines": index,
-        "lines_left_out": grid.left_out,
-        "max_residual_mm": residual_mm,
-        "patches": stats.patches,
-        "iges_bytes": stats.bytes,
-        "iges_parameter_lines": stats.parameter_lines,
-        "iges_files": files,
-        "model": {
-            "description": recipe.describe(),
-            "v_method": recipe.method,
-            "spikes_replaced": replaced,
-        },
-        "height_map": {
-            "folds": folds,
-            "checked": match &shape.0 {
-                None => "the control net runs forwards in u and v everywhere, so the surface cannot fold (its iso-curves were not sampled)",
-                Some(_) => "the control net runs back somewhere: the iso-curves were sampled as the report's model checks sample them",
-            },
-            "model_checks": &shape.0,
-        },
-        "between_lines": verdict.as_ref().ok(),
-        "between_lines_error": verdict.as_ref().err(),
-        "alternatives": alternatives.as_ref().map(|alts| alts
-            .iter()
-            .map(|a| serde_json::json!({
-                "degree_u": a.options.degree_u,
-                "degree_v": a.options.degree_v,
-                "v_method": a.method,
-                "poles_v": a.poles_v,
-                "between_lines": a.holdout.as_ref().ok(),
-                "error": a.holdout.as_ref().err(),
-            }))
-            .collect::<Vec<_>>()),
-        "timings_s": {
-            "holdout": holdout_s,
-            "read": read_s,
-            "fit_params": fit.timings.params_s,
-            "fit_knots_factor": fit.timings.knots_factor_s,
-            "fit_solve_u": fit.timings.solve_u_s,
-            "fit_solve_v": fit.timings.solve_v_s,
-            "fit_total": fit_s,
-            "shape_check": shape.1,
-            "residual": residual_s,
-            "write_iges": write_s,
-        },
-    });
-    if let (Some(o), Ok(serde_json::Value::Object(shape))) = (
-        report.as_object_mut(),
-        serde_json::to_value(SurfaceShape::of(s)),
-    ) {
-        o.extend(shape);
-    }
+    let fitting = Fitting::new(&args, &input)?;
+    let fitted = fitting.run(input.input.grid)?;
     if let Some(path) = &args.report {
         ensure_parent(path)?;
+        let report = fitting.report(&fitted, read_s);
         write_atomically(path, |w| {
             serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)?;
             std::io::Write::write_all(w, b"\n")
         })
         .map_err(|e| io_err("cannot write report", path, e))?;
     }
-    let written = if n_files == 1 {
-        output.display().to_string()
-    } else {
-        format!(
-            "{} too large for one IGES file; wrote {} files {} .. {}",
-            output.display(),
-            n_files,
-            part_path(&output, 1, n_files).display(),
-            part_path(&output, n_files, n_files).display()
-        )
-    };
-    say!(
-        "{}: {}x{} grid, {}x{} poles, {} patch(es), {} bytes; fit {:.1} ms, write {:.1} ms",
-        written,
-        rows,
-        cols,
-        s.count_u(),
-        s.count_v(),
-        stats.patches,
-        stats.bytes,
-        fit_s * 1e3,
-        write_s * 1e3
-    );
-    match &verdict {
-        Ok(b) => say!("{}", b.short()),
-        Err(e) => say!("no verdict on the model between lines: {e}"),
-    }
-    if let Some(alts) = &alternatives {
-        say!(
-            "\nhold-out of the alternatives (every {} line left out and refitted; supported means rms ≤ {threshold} × Sq):",
-            ordinal(*every.as_ref().unwrap_or(&2))
-        );
-        say_text!("{}", alternatives_table(alts));
-    } else if args.compare {
-        match (&sq, &every) {
-            (Err(e), _) => say!("no comparison: the grid has no Sq ({e})"),
-            (_, Err(e)) => say!("no comparison: {e}"),
-            _ => {}
-        }
-    }
-    let mut partial = Vec::new();
-    if grid.is_partial() {
-        partial.push(format!(
-            "the surface is partial: fitted from {} (the others cannot be used, see the warnings above; the IGES Start section names them)",
-            grid.lines_used()
-        ));
-    }
-    if folds {
-        partial.push(
-            "the surface folds (see the model fold warning above; the IGES Start section and the report name it): it is not a height map there".to_string(),
-        );
-    }
-    if partial.is_empty() {
-        return Ok(());
-    }
-    Err(CliError::new(
-        Exit::Partial,
-        format!("{}; it is written", partial.join("; ")),
-    ))
+    fitting.tell(&fitted);
+    fitting.status(&fitted)
 }
