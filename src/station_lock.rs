@@ -13,8 +13,10 @@
 //!   locked instead by a file in the system's lock directory (FHS `/run/lock`) named
 //!   `LCK..<device>` after the device's resolved path, in the HDB UUCP format (the pid in ten
 //!   columns and a newline) that minicom, cu and similar tools honour, followed by a line
-//!   naming our output directory. A `LCK..` file of another program whose pid is alive is
-//!   respected too.
+//!   naming our output directory. A `LCK..` file of another program is respected while its
+//!   process has the device open, or, where that cannot be seen, while the file is root's or
+//!   the daemon's user's; any other is not obeyed, with a warning naming its pid, command and
+//!   owner, and taken over ([`foreign`]): `/run/lock` is writable by every local user.
 //!
 //! Holding the output directory's lock also makes it safe to sweep the leftovers of
 //! interrupted writes there ([`StationLock::sweep_leftovers`]), and the directory is created
@@ -30,6 +32,9 @@ use std::io::{self, Read};
 use std::os::unix::fs::{FileExt, MetadataExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
+
+mod foreign;
+use foreign::{ForeignLock, Verdict};
 
 /// Name of the lock file inside the output directory.
 pub const OUTPUT_LOCK_FILE: &str = ".surfscan.lock";
@@ -130,19 +135,36 @@ pub fn pid_alive(pid: u32) -> bool {
     )
 }
 
-/// Opens `path` (creating it) and takes an exclusive non-blocking lock on it. `Ok(Err(file))`:
-/// the lock is held by someone else, and the file is returned for reading who.
-fn try_lock(path: &Path, hint: &'static str) -> Result<Result<Held, File>, LockError> {
-    loop {
-        let file = OpenOptions::new()
+/// Opens lock file `path`, creating it if missing. Another user's file in a sticky
+/// world-writable directory such as `/run/lock` cannot be opened with `O_CREAT` under
+/// `fs.protected_regular` (`EACCES`, root too): it is then opened without, for writing, else
+/// for reading (a lock is taken on any descriptor).
+fn open_lock_file(path: &Path) -> io::Result<File> {
+    let open = |create: bool, write: bool| {
+        OpenOptions::new()
             .read(true)
-            .write(true)
-            .create(true)
+            .write(write)
+            .create(create)
             .truncate(false)
             .mode(0o644)
             .custom_flags(libc::O_CLOEXEC | libc::O_NOFOLLOW)
             .open(path)
-            .map_err(io_err("create the lock file", path, hint))?;
+    };
+    match open(true, true) {
+        Err(e) if e.kind() == io::ErrorKind::PermissionDenied && path.is_file() => {
+            open(false, true)
+                .or_else(|_| open(false, false))
+                .map_err(|_| e)
+        }
+        other => other,
+    }
+}
+
+/// Opens `path` (creating it) and takes an exclusive non-blocking lock on it. `Ok(Err(file))`:
+/// the lock is held by someone else, and the file is returned for reading who.
+fn try_lock(path: &Path, hint: &'static str) -> Result<Result<Held, File>, LockError> {
+    loop {
+        let file = open_lock_file(path).map_err(io_err("create the lock file", path, hint))?;
         let file = match Flock::lock(file, FlockArg::LockExclusiveNonblock) {
             Ok(locked) => locked,
             Err((file, Errno::EWOULDBLOCK)) => return Ok(Err(file)),
@@ -278,31 +300,92 @@ impl StationLock {
             let path = lock_dir.join(&name);
             let what = || format!("the device {}", device.display());
             let held = match try_lock(&path, DEVICE_HINT)? {
-                Ok(held) => held,
+                Ok(held) => {
+                    // A lock file of another program (HDB content, no flock).
+                    let existing = read_all(&held.file);
+                    if let Some(pid) = foreign_pid(&existing).filter(|p| *p != std::process::id()) {
+                        let meta = held.file.metadata().map_err(io_err(
+                            "read the lock file",
+                            &path,
+                            DEVICE_HINT,
+                        ))?;
+                        let lock = ForeignLock::inspect(pid, pid_alive(pid), &meta, device);
+                        match foreign::judge(&lock) {
+                            Verdict::Obey => return Err(foreign_held(what(), &lock, &path)),
+                            Verdict::Stale => {}
+                            Verdict::Ignore(why) => not_obeyed(&path, &lock.describe(), &why),
+                        }
+                    }
+                    held
+                }
                 Err(file) => {
-                    let holder = device_holder(&read_all(&file));
-                    return Err(held_error(what(), holder));
+                    let content = read_all(&file);
+                    if let Some(holder) = device_holder(&content) {
+                        return Err(held_error(what(), Some(holder)));
+                    }
+                    // Locked by a process that is not a surfscan of ours.
+                    let meta = file.metadata().map_err(io_err(
+                        "read the lock file",
+                        &path,
+                        DEVICE_HINT,
+                    ))?;
+                    let (who, why) = match foreign_pid(&content) {
+                        Some(pid) => {
+                            let lock = ForeignLock::inspect(pid, pid_alive(pid), &meta, device);
+                            match foreign::judge(&lock) {
+                                Verdict::Obey => return Err(foreign_held(what(), &lock, &path)),
+                                Verdict::Stale => {
+                                    (lock.describe(), "its process is gone".to_owned())
+                                }
+                                Verdict::Ignore(why) => (lock.describe(), why),
+                            }
+                        }
+                        // Empty: another surfscan between its lock and its write, unless
+                        // the file is a stranger's.
+                        None if meta.uid() == 0
+                            || meta.uid() == nix::unistd::geteuid().as_raw() =>
+                        {
+                            return Err(held_error(what(), None))
+                        }
+                        None => (
+                            format!(
+                                "a lock held on a file owned by {} that names no process",
+                                foreign::user_name(meta.uid())
+                            ),
+                            "the file's owner is neither root nor the daemon's user".to_owned(),
+                        ),
+                    };
+                    not_obeyed(&path, &who, &why);
+                    drop(file);
+                    match fs::remove_file(&path).map(|()| try_lock(&path, DEVICE_HINT)) {
+                        Ok(Ok(Ok(held))) => held,
+                        Ok(Err(e)) => return Err(e),
+                        _ => {
+                            tracing::warn!(
+                                path = %path.display(),
+                                "cannot replace the lock file; the device {} is used without one (its port is still opened exclusively)",
+                                device.display()
+                            );
+                            continue;
+                        }
+                    }
                 }
             };
-            // A lock file of another program (no flock, HDB content): respected while its
-            // process lives.
-            let existing = read_all(&held.file);
-            if let Some(pid) = foreign_pid(&existing) {
-                if pid != std::process::id() && pid_alive(pid) {
-                    return Err(LockError::Held {
-                        what: what(),
-                        holder: format!("pid {pid} (its lock file {})", path.display()),
-                        pid: Some(pid),
-                        scan_id: None,
-                    });
-                }
-            }
             let content = format!(
                 "{:>10}\nsurfscan {command} {}\n",
                 std::process::id(),
                 output_dir.display()
             );
-            rewrite(&held, &content).map_err(io_err("write the lock file", &path, DEVICE_HINT))?;
+            match rewrite(&held, &content) {
+                Ok(()) => {}
+                // Another user's file opened for reading only (fs.protected_regular): the
+                // lock is held all the same.
+                Err(e) if e.raw_os_error() == Some(libc::EBADF) => tracing::warn!(
+                    path = %path.display(),
+                    "the device's lock file is another user's and cannot be rewritten; it is held as it is"
+                ),
+                Err(e) => return Err(io_err("write the lock file", &path, DEVICE_HINT)(e)),
+            }
             lock.devices.push(held);
         }
         Ok(lock)
@@ -486,6 +569,25 @@ fn device_holder(content: &str) -> Option<Holder> {
     })
 }
 
+/// A respected foreign lock, naming its process, command and owner.
+fn foreign_held(what: String, lock: &ForeignLock, path: &Path) -> LockError {
+    LockError::Held {
+        what,
+        holder: format!("{} ({})", lock.describe(), path.display()),
+        pid: Some(lock.pid),
+        scan_id: None,
+    }
+}
+
+/// Says that a lock file is not obeyed, and why.
+fn not_obeyed(path: &Path, who: &str, why: &str) {
+    tracing::warn!(
+        path = %path.display(),
+        "the device lock {} of {who} is not obeyed: {why}; it is taken over",
+        path.display()
+    );
+}
+
 fn held_error(what: String, holder: Option<Holder>) -> LockError {
     match holder {
         Some(h) => LockError::Held {
@@ -586,19 +688,81 @@ mod tests {
     }
 
     #[test]
-    fn another_programs_uucp_lock_is_respected_while_its_process_lives() {
+    fn another_programs_uucp_lock_is_respected_while_its_process_has_the_device_open() {
         let tmp = tempfile::tempdir().unwrap();
-        let dev = Path::new("/nonexistent/ttyUSB9");
+        let dev = tmp.path().join("ttyFAKE9");
+        fs::write(&dev, "").unwrap();
+        let dev = dev.as_path();
         let lck = tmp.path().join(device_lock_name(dev));
-        // pid 1 is always alive.
+        // A terminal program holding the port.
+        let mut child = std::process::Command::new("sleep")
+            .arg("30")
+            .stdin(File::open(dev).unwrap())
+            .spawn()
+            .unwrap();
+        fs::write(&lck, format!("{:>10}\n", child.id())).unwrap();
+        let e = StationLock::acquire("scan", &tmp.path().join("o"), &[dev], tmp.path());
+        let _ = child.kill();
+        let _ = child.wait();
+        let e = e.unwrap_err();
+        assert!(
+            e.to_string().contains(&format!(
+                "pid {} (sleep), its lock file owned by ",
+                child.id()
+            )),
+            "{e}"
+        );
+        // pid 1 is alive but does not hold the port: not obeyed, taken over.
         fs::write(&lck, format!("{:>10}\n", 1)).unwrap();
-        let e =
-            StationLock::acquire("scan", &tmp.path().join("o"), &[dev], tmp.path()).unwrap_err();
-        assert!(e.to_string().contains("pid 1"), "{e}");
+        let held = StationLock::acquire("scan", &tmp.path().join("o"), &[dev], tmp.path()).unwrap();
+        assert!(fs::read_to_string(&lck)
+            .unwrap()
+            .contains(&format!("{}\nsurfscan scan ", std::process::id())));
+        drop(held);
         // A stale one (its process is gone) is taken over.
         fs::write(&lck, format!("{:>10}\n", dead_pid())).unwrap();
         let _held =
             StationLock::acquire("scan", &tmp.path().join("o"), &[dev], tmp.path()).unwrap();
+    }
+
+    #[test]
+    fn a_strangers_flock_on_a_device_lock_file_is_not_obeyed() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dev = Path::new("/nonexistent/ttyUSB8");
+        let lck = tmp.path().join(device_lock_name(dev));
+        fs::write(&lck, "").unwrap();
+        // Owned by nobody, flocked by another process: as a local user could hold it.
+        nix::unistd::chown(&lck, Some(nix::unistd::Uid::from_raw(65534)), None)
+            .expect("chown needs root (run the tests as root)");
+        let mut holder = std::process::Command::new("flock")
+            .arg("-x")
+            .arg(&lck)
+            .args(["sleep", "30"])
+            .spawn()
+            .unwrap();
+        // Wait until the lock is taken.
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        while Flock::lock(File::open(&lck).unwrap(), FlockArg::LockExclusiveNonblock).is_ok() {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "flock never took the lock"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        let got = StationLock::acquire("scan", &tmp.path().join("o"), &[dev], tmp.path());
+        let _ = holder.kill();
+        let _ = holder.wait();
+        let held = got.unwrap();
+        assert_eq!(held.devices.len(), 1);
+        assert!(fs::read_to_string(&lck).unwrap().contains("surfscan scan "));
+        // The same empty file, root's: another surfscan that is starting.
+        drop(held);
+        fs::write(&lck, "").unwrap();
+        let file = Flock::lock(File::open(&lck).unwrap(), FlockArg::LockExclusiveNonblock).unwrap();
+        let e =
+            StationLock::acquire("scan", &tmp.path().join("o2"), &[dev], tmp.path()).unwrap_err();
+        assert!(e.to_string().contains("another surfscan process"), "{e}");
+        drop(file);
     }
 
     #[test]

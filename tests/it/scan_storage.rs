@@ -677,6 +677,16 @@ fn service_unit_has_the_required_directives() {
     assert_eq!(get("NoNewPrivileges"), ["yes"]);
     assert_eq!(get("RestrictAddressFamilies"), ["AF_UNIX"]);
     assert_eq!(get("Restart"), ["on-failure"]);
+    // Neither a bad configuration nor a station held by another process is cleared by a
+    // restart: the unit must not loop on them.
+    let no_restart: Vec<&str> = get("RestartPreventExitStatus")
+        .iter()
+        .flat_map(|v| v.split_whitespace())
+        .collect();
+    assert!(
+        no_restart.contains(&"69") && no_restart.contains(&"78"),
+        "{no_restart:?}"
+    );
     assert!(seconds(get("TimeoutStopSec")[0]) >= 120);
 
     let sysusers = std::fs::read_to_string(

@@ -156,3 +156,35 @@ fn the_station_lock_is_taken_on_a_full_disk_and_still_refuses_a_second_process()
     }
     drop(first);
 }
+
+/// A `LCK..` file planted for the instrument's port by another local user (owned by nobody),
+/// naming pid 1, which is always alive: the scan is not kept from starting. The lock is not
+/// obeyed, with a warning naming the pid, its command and the file's owner; the scan
+/// completes and the lock file is then the scan's own.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_planted_device_lock_naming_pid_1_as_another_user_does_not_keep_a_scan_off() {
+    let rig = Rig::start(RigOptions::default()).await;
+    let config = rig.config("out");
+    let out = rig.out_dir("out");
+    let locks = config.parent().unwrap().join("locks");
+    std::fs::create_dir_all(&locks).unwrap();
+    let lck = locks.join(surfscan::station_lock::device_lock_name(
+        &rig.instrument_link,
+    ));
+    std::fs::write(&lck, format!("{:>10}\n", 1)).unwrap();
+    // CI runs as root, as a station's tests must: chown fails loudly otherwise.
+    nix::unistd::chown(&lck, Some(nix::unistd::Uid::from_raw(65534)), None)
+        .expect("chown needs root (run the tests as root)");
+    let o = run_scan(&config, &[]).await;
+    assert!(o.status.success(), "{}", describe(&o));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains("is not obeyed")
+            && stderr.contains("of pid 1 (")
+            && stderr.contains("owned by nobody (uid 65534)")
+            && stderr.contains("does not have the device open"),
+        "{stderr}"
+    );
+    assert_eq!(committed_lines(&out), RigOptions::default().lines);
+    rig.shutdown().await;
+}
