@@ -817,6 +817,40 @@ async fn a_stage_reset_mid_scan_rehomes_and_completes() {
     rig.shutdown().await;
 }
 
+/// A one-off `ALARM:2` (soft limit) on a target inside the limits, as a controller whose
+/// position went stale gives it: the scan re-homes once, moves again and completes, where it
+/// used to end; the served heights prove the carriage was truly at every target.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_one_off_alarm_2_inside_the_limits_rehomes_and_completes() {
+    let rig = Rig::start(RigOptions::default()).await;
+    let n = rig.options.lines;
+    let cfg = rig.config("out");
+    let child = scan_command(&cfg, &[]).spawn().unwrap();
+    let out = rig.out_dir("out");
+    wait_until(Duration::from_secs(60), "three committed lines", || {
+        committed_lines(&out) >= 3
+    })
+    .await;
+    rig.stage.inject(StageFault::Alarm2);
+    let o = tokio::time::timeout(Duration::from_secs(120), child.wait_with_output())
+        .await
+        .unwrap()
+        .unwrap();
+    assert!(o.status.success(), "{}", describe(&o));
+    let dir = scan_dir(&out);
+    assert_lines_exactly(&dir, n);
+    let records = assert_journal_complete(&dir, n);
+    let notes = interruptions(&records);
+    assert!(
+        notes
+            .iter()
+            .any(|r| r.contains("ALARM:2") && r.contains("re-homing")),
+        "the stale position and its re-homing are recorded: {notes:?}"
+    );
+    assert_eq!(rig.stage.true_position_nm(), target_nm(n - 1));
+    rig.shutdown().await;
+}
+
 /// The terminal a foreground scan was started from goes away mid-scan (an SSH session that
 /// dropped at night): SIGHUP arrives and nothing reads its output any more. The scan goes
 /// on to the last line and its outputs, exit 0, instead of dying on the hang-up or aborting

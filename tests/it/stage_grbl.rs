@@ -166,21 +166,34 @@ async fn reset_banner_mid_session_is_position_lost_until_rehomed() {
 }
 
 #[tokio::test(start_paused = true)]
-async fn alarm2_needs_reset_and_our_own_reset_banner_is_not_position_lost() {
+async fn alarm2_inside_the_limits_is_a_stale_position_once_and_real_the_second_time() {
     let (mut a, shared) = homed().await;
     a.move_to(Nm(-1_000_000)).await.unwrap();
     shared.inject(StageFault::Alarm2);
     let e = a.move_to(Nm(-990_000)).await.unwrap_err();
     assert!(
-        matches!(&e, StageError::Fault { reason, class: FaultClass::Fatal } if reason.contains("ALARM:2")),
+        matches!(&e, StageError::PositionLost { reason } if reason.contains("ALARM:2") && reason.contains("stale")),
         "{e}"
     );
-    assert!(a.position_trusted(), "ALARM:2 keeps the position");
-    // Recovery: soft reset (its banner is expected) then $H.
+    assert_eq!(e.class(), FaultClass::PositionLost);
+    assert!(!a.position_trusted(), "a stale position is re-homed");
+    // Recovery: soft reset (its banner is expected) then $H; the move then succeeds.
     a.home().await.unwrap();
     assert!(a.position_trusted());
     a.move_to(Nm(-990_000)).await.unwrap();
     assert_eq!(shared.true_position_nm(), -990_000);
+    // A move that ended at rest forgets it: a later one-off ALARM:2 is stale again.
+    shared.inject(StageFault::Alarm2);
+    let e = a.move_to(Nm(-980_000)).await.unwrap_err();
+    assert_eq!(e.class(), FaultClass::PositionLost, "{e}");
+    // Refused again right after the re-home: real, and named.
+    a.home().await.unwrap();
+    shared.inject(StageFault::Alarm2);
+    let e = a.move_to(Nm(-980_000)).await.unwrap_err();
+    assert!(
+        matches!(&e, StageError::Fault { reason, class: FaultClass::Fatal } if reason.contains("again after re-homing") && reason.contains("$130")),
+        "{e}"
+    );
 }
 
 #[tokio::test(start_paused = true)]

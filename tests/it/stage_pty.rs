@@ -222,18 +222,18 @@ async fn zaber_unplugged_is_absent() {
 }
 
 #[tokio::test]
-async fn grbl_alarm2_is_fatal_and_recovered_by_reset_and_home() {
+async fn grbl_alarm2_is_a_stale_position_recovered_by_reset_and_home() {
     let (_dir, h, mut a, shared) = grbl().await;
     a.home().await.unwrap();
     a.move_to(Nm(-1_000_000)).await.unwrap();
     shared.inject(StageFault::Alarm2);
     let e = a.move_to(Nm(-990_000)).await.unwrap_err();
     assert!(
-        matches!(&e, StageError::Fault { reason, class: FaultClass::Fatal } if reason.contains("ALARM:2")),
+        matches!(&e, StageError::PositionLost { reason } if reason.contains("ALARM:2")),
         "{e}"
     );
-    assert_eq!(e.class(), FaultClass::Fatal);
-    assert!(a.position_trusted(), "ALARM:2 keeps the position");
+    assert_eq!(e.class(), FaultClass::PositionLost);
+    assert!(!a.position_trusted(), "a stale position is re-homed");
     // Recovery: soft reset (its banner is expected, not a lost position) then $H.
     a.home().await.unwrap();
     assert!(a.position_trusted());

@@ -13,6 +13,9 @@
 //! position and real speed (`FS:`), never more than the poll interval apart.
 //! A banner or `ALARM:1`/`ALARM:3` not caused by our own reset means the position is lost, and
 //! so does a report in `Alarm` or a jog refused with `error:8` because the board is in Alarm.
+//! `ALARM:2` (soft limit) for a target inside the limits is a stale position the first time
+//! (re-homed, the move tried again) and the board's travel and the configuration disagreeing
+//! the second time in a row (fatal, named).
 //! Stopping cancels the jog (0x85) and waits while GRBL decelerates at `$121` to `Idle`.
 //! Reports in work coordinates (`$10=0`) are turned into machine coordinates with the `WCO:`
 //! GRBL sends every few reports; the driver waits for one at connect.
@@ -78,6 +81,8 @@ pub struct GrblStage<T> {
     /// The position of the last status report, steps.
     last_units: Option<i64>,
     jog: Option<Jog>,
+    /// An `ALARM:2` came since the last move that ended at rest: a second one is real.
+    alarm2_before: bool,
 }
 
 impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
@@ -95,6 +100,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
             board: ControllerSettings::default(),
             last_units: None,
             jog: None,
+            alarm2_before: false,
         }
     }
 
@@ -159,19 +165,29 @@ impl<T: AsyncRead + AsyncWrite + Unpin> GrblStage<T> {
                     reason: format!("ALARM:{n}: {}", alarm_text(*n)),
                 });
             }
+            Some(GrblMessage::Alarm(2)) => {
+                // Every target sent lies inside the configured limits and the board's own
+                // travel (checked before the plan starts): a soft-limit alarm then means the
+                // controller's position is stale, once; re-homed, the same refusal is real.
+                self.needs_reset = true;
+                if self.alarm2_before {
+                    return Err(StageError::Fault {
+                        reason: "ALARM:2 (soft limit) again after re-homing, for a target inside the configured limits: the controller's travel ($130/$131) and the stage's soft limits in the configuration disagree; make them agree".into(),
+                        class: FaultClass::Fatal,
+                    });
+                }
+                self.alarm2_before = true;
+                self.trusted = false;
+                return Err(StageError::PositionLost {
+                    reason: "ALARM:2 (soft limit) for a target inside the configured limits: the controller's position may be stale".into(),
+                });
+            }
             Some(GrblMessage::Alarm(n)) => {
                 self.needs_reset = true;
-                let class = if *n == 2 {
-                    FaultClass::Fatal
-                } else {
-                    FaultClass::PositionLost
-                };
-                if class == FaultClass::PositionLost {
-                    self.trusted = false;
-                }
+                self.trusted = false;
                 return Err(StageError::Fault {
                     reason: format!("ALARM:{n}: {}", alarm_text(*n)),
-                    class,
+                    class: FaultClass::PositionLost,
                 });
             }
             Some(GrblMessage::Msg(msg)) => self.warnings.push(msg.clone()),
@@ -549,7 +565,9 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
             let st = self.status_from(&r)?;
             match st.motion {
                 Motion::Idle => {
-                    self.jog = None;
+                    if self.jog.take().is_some() {
+                        self.alarm2_before = false;
+                    }
                     return Ok(st);
                 }
                 Motion::Alarm => {
