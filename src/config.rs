@@ -332,13 +332,17 @@ impl AnalysisSettings {
     }
 }
 
-/// `[metrics]`: the Prometheus textfile (node_exporter textfile collector).
+/// `[metrics]`: the Prometheus textfile (node_exporter textfile collector) and the `/metrics`
+/// endpoint.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub struct MetricsSettings {
     /// File written atomically after every line; none by default.
     #[serde(default)]
     pub file: Option<PathBuf>,
+    /// `HOST:PORT` to serve `/metrics` on (e.g. `0.0.0.0:9187`); none by default.
+    #[serde(default)]
+    pub listen: Option<String>,
 }
 
 /// A configuration that cannot be used.
@@ -496,6 +500,15 @@ impl Config {
                     format!("{groups:?} must name at least one group, none of them empty, e.g. [\"surfscan-operators\"]; remove the key to let everyone who can open the socket command"),
                 ));
             }
+        }
+        if let Some(l) = &self.metrics.listen {
+            l.parse::<std::net::SocketAddr>().map_err(|_| {
+                Config::invalid(
+                    path,
+                    "metrics.listen",
+                    format!("{l:?} is not an address and port; write e.g. \"0.0.0.0:9187\" (every interface) or \"127.0.0.1:9187\""),
+                )
+            })?;
         }
         if let Some(m) = &self.mqtt {
             m.validate()

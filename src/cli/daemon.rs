@@ -193,16 +193,8 @@ async fn daemon(
 
     // The publishers (MQTT) and the notification hook. Neither is on the scan's path: the
     // runner only sends into this channel.
-    let publishers = match Publishers::start(config, &status_tx) {
-        Ok(p) => Some(p),
-        Err(e) => {
-            tracing::error!(
-                "{e}; the station publishes nothing until this is fixed and the daemon restarted"
-            );
-            None
-        }
-    };
-    let to_publishers = publishers.as_ref().and_then(Publishers::sender);
+    let publishers = Publishers::start(config, &status_tx);
+    let to_publishers = publishers.sender();
     let (ev_tx, mut ev_rx) = mpsc::unbounded_channel::<ScanEvent>();
     let hook = config.notify.as_ref().and_then(Hook::new);
     let events_task = tokio::spawn(async move {
@@ -222,6 +214,7 @@ async fn daemon(
         ctl.watchdog = Some((period, Arc::new(move || n.watchdog())));
     }
     ctl.events = Some(ev_tx);
+    ctl.metrics = publishers.scan_metrics();
 
     // Resume an unfinished scan at start-up.
     let mut stop = false;
@@ -375,9 +368,7 @@ async fn daemon(
     }
     // What the scan told last is stored in the outbox before the links say `offline`.
     let _ = tokio::time::timeout(Duration::from_secs(2), events_task).await;
-    if let Some(p) = publishers {
-        p.finish(Duration::from_secs(4)).await;
-    }
+    publishers.finish(Duration::from_secs(4)).await;
     tracing::info!("surfscan daemon stopped");
     Ok(())
 }

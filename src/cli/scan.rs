@@ -310,16 +310,10 @@ pub async fn run_foreground_locked(
         tracing::warn!("signal received: abandoning the current line; the scan stays resumable");
         let _ = shutdown_tx.send(true);
     });
-    let publishers = match config.map(|c| Publishers::start(c, &status_tx)) {
-        Some(Ok(p)) => Some(p),
-        Some(Err(e)) => {
-            tracing::error!("{e}; this scan is not published");
-            None
-        }
-        None => None,
-    };
+    let publishers = config.map(|c| Publishers::start(c, &status_tx));
     let mut ctl = Control::new(cmd_rx, shutdown_rx, status_tx);
     ctl.events = publishers.as_ref().and_then(Publishers::sender);
+    ctl.metrics = publishers.as_ref().and_then(Publishers::scan_metrics);
     let outcome = run_scan(station, &mut ctl, settings, request).await;
     drop(ctl);
     if let Some(p) = publishers {

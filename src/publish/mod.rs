@@ -1,5 +1,6 @@
 //! What leaves the station for the lab's systems: the scan's events through a durable outbox
-//! on disk to the publishers (the MQTT broker), off the scan's path.
+//! on disk to the publishers (the MQTT broker), and the metrics on `/metrics`, all off the
+//! scan's path.
 //!
 //! ```text
 //! scan runner ──events──► writer task ──► outbox/mqtt/ (disk) ──► MqttLink ──► broker
@@ -14,6 +15,7 @@
 //! Layer 4 (process edge): depends on the configuration, the scan's events and status, and
 //! the publishers below.
 
+pub mod metrics;
 pub mod mqtt;
 pub mod outbox;
 pub mod settings;
@@ -21,7 +23,8 @@ pub mod tls;
 
 use crate::config::Config;
 use crate::scan::event::ScanEvent;
-use crate::scan::status::Status;
+use crate::scan::metrics::ScanMetrics;
+use crate::scan::status::{LinkStatus, Status};
 use outbox::Outbox;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
@@ -40,6 +43,31 @@ pub struct Publishers {
     writer: Option<JoinHandle<()>>,
     links: Vec<JoinHandle<()>>,
     stop: watch::Sender<bool>,
+    scan_metrics: Option<watch::Sender<ScanMetrics>>,
+}
+
+/// What to do about a socket the system refused, when the refusal is the service's sandbox.
+pub fn sandbox_hint(e: &std::io::Error) -> &'static str {
+    if e.raw_os_error() == Some(libc::EAFNOSUPPORT) {
+        " (the service's sandbox forbids network sockets: add the drop-in in systemd/README.md, RestrictAddressFamilies=AF_UNIX AF_INET AF_INET6)"
+    } else {
+        ""
+    }
+}
+
+/// Names a part that could not start, in the log and the status's links.
+fn fail(status: &watch::Sender<Status>, link: &str, message: String) {
+    tracing::error!("{link}: {message}");
+    status.send_modify(|s| {
+        s.links.insert(
+            link.to_owned(),
+            LinkStatus {
+                ok: false,
+                message,
+                queued: 0,
+            },
+        );
+    });
 }
 
 impl std::fmt::Debug for Publishers {
@@ -72,35 +100,74 @@ pub fn event_payload(
 
 impl Publishers {
     /// Starts what `config` asks for, reporting into `status`'s links. Must run inside a
-    /// tokio runtime. An outbox that cannot be opened is an error naming the directory.
-    pub fn start(config: &Config, status: &watch::Sender<Status>) -> Result<Publishers, String> {
+    /// tokio runtime. A part that cannot start (an outbox that cannot be opened, an address
+    /// already in use) is named in the log and in the status's links; the rest runs.
+    pub fn start(config: &Config, status: &watch::Sender<Status>) -> Publishers {
         let (stop, stop_rx) = watch::channel(false);
+        let (scan_metrics, scan_metrics_rx) = watch::channel(ScanMetrics::default());
         let mut p = Publishers {
             events: None,
             writer: None,
             links: Vec::new(),
             stop,
+            scan_metrics: None,
         };
-        let Some(m) = &config.mqtt else {
-            return Ok(p);
-        };
+        if let Some(listen) = &config.metrics.listen {
+            match std::net::TcpListener::bind(listen)
+                .and_then(|l| l.set_nonblocking(true).map(|()| l))
+                .and_then(tokio::net::TcpListener::from_std)
+            {
+                Ok(l) => {
+                    tracing::info!("metrics on http://{listen}/metrics");
+                    p.links.push(tokio::spawn(metrics::serve(
+                        l,
+                        status.subscribe(),
+                        scan_metrics_rx,
+                        stop_rx.clone(),
+                    )));
+                    p.scan_metrics = Some(scan_metrics);
+                }
+                Err(e) => fail(
+                    status,
+                    "metrics",
+                    format!(
+                        "cannot serve /metrics on {listen}: {e}{}; is another program using the port? ([metrics] listen)",
+                        sandbox_hint(&e)
+                    ),
+                ),
+            }
+        }
+        if let Some(m) = &config.mqtt {
+            if let Err(e) = p.start_mqtt(config, m, status, stop_rx) {
+                fail(status, mqtt::LINK, e);
+            }
+        }
+        p
+    }
+
+    fn start_mqtt(
+        &mut self,
+        config: &Config,
+        m: &settings::MqttSettings,
+        status: &watch::Sender<Status>,
+        stop_rx: watch::Receiver<bool>,
+    ) -> Result<(), String> {
         let dir = outbox_dir(config, "mqtt");
         let outbox = Outbox::open(&dir, &m.station, m.outbox_max).map_err(|e| {
             format!(
-                "mqtt: cannot open the outbox {}: {}",
+                "cannot open the outbox {}: {}; nothing is published until this is fixed and the process restarted",
                 dir.display(),
                 crate::atomic::write_hint(&dir, &e)
             )
         })?;
         let outbox = Arc::new(Mutex::new(outbox));
         let wake = Arc::new(Notify::new());
-        let link = mqtt::MqttLink::new(m.clone(), outbox.clone(), wake.clone(), status.clone())
-            .map_err(|e| format!("mqtt: {e}"))?;
-        p.links.push(tokio::spawn(link.run(stop_rx)));
+        let link = mqtt::MqttLink::new(m.clone(), outbox.clone(), wake.clone(), status.clone())?;
+        self.links.push(tokio::spawn(link.run(stop_rx)));
         let (tx, mut rx) = mpsc::unbounded_channel::<ScanEvent>();
         let station = m.station.clone();
         let status = status.clone();
-        p.writer = Some(tokio::spawn(async move {
+        self.writer = Some(tokio::spawn(async move {
             while let Some(ev) = rx.recv().await {
                 let payload = event_payload(&ev, &station, chrono::Utc::now());
                 let o = outbox.clone();
@@ -135,8 +202,13 @@ impl Publishers {
                 wake.notify_one();
             }
         }));
-        p.events = Some(tx);
-        Ok(p)
+        self.events = Some(tx);
+        Ok(())
+    }
+
+    /// Where the scan's metrics go (none without an endpoint).
+    pub fn scan_metrics(&self) -> Option<watch::Sender<ScanMetrics>> {
+        self.scan_metrics.clone()
     }
 
     /// Where events for the publishers go (none when none runs). The writer stores what

@@ -93,7 +93,10 @@ pub fn describe(url: &str, user: Option<&str>, e: &ConnectionError) -> String {
         ConnectionError::Io(io) if io.kind() == std::io::ErrorKind::ConnectionRefused => format!(
             "the broker {url} is not listening (connection refused); is it running? trying again"
         ),
-        ConnectionError::Io(io) => format!("the connection to {url} broke: {io}; trying again"),
+        ConnectionError::Io(io) => format!(
+            "the connection to {url} broke: {io}{}; trying again",
+            super::sandbox_hint(io)
+        ),
         ConnectionError::NetworkTimeout => {
             format!("the broker {url} did not answer in time; trying again")
         }

@@ -7,6 +7,7 @@
 
 use super::command::OperatorRequest;
 use super::event::{ScanEvent, ScanEventKind};
+use super::metrics::ScanMetrics;
 use super::status::Status;
 use std::path::Path;
 use std::sync::Arc;
@@ -23,8 +24,11 @@ pub struct Control {
     pub status: watch::Sender<Status>,
     /// Called at `watchdog_interval` from inside the scan loop (systemd `WATCHDOG=1`).
     pub watchdog: Option<(Duration, Arc<dyn Fn() + Send + Sync>)>,
-    /// Scan events (complete, fail, abort, suspended) for the notification hook.
+    /// Scan events (started, suspended, resumed, complete, fail, abort) for the
+    /// notification hook and the publishers.
     pub events: Option<mpsc::UnboundedSender<ScanEvent>>,
+    /// The scan's metrics as they change, for the `/metrics` endpoint.
+    pub metrics: Option<watch::Sender<ScanMetrics>>,
 }
 
 impl std::fmt::Debug for Control {
@@ -48,6 +52,7 @@ impl Control {
             status,
             watchdog: None,
             events: None,
+            metrics: None,
         }
     }
 
@@ -68,6 +73,13 @@ impl Control {
                 kind,
                 reason: reason.to_owned(),
             });
+        }
+    }
+
+    /// Hands the scan's metrics to the endpoint.
+    pub(super) fn metrics(&self, m: &ScanMetrics) {
+        if let Some(tx) = &self.metrics {
+            tx.send_replace(m.clone());
         }
     }
 

@@ -58,6 +58,7 @@ impl Books<'_> {
                 if let Some(l) = &self.ledger {
                     l.metrics(&m);
                 }
+                ctl.metrics(&m);
             }
             Action::Stop(end) => {
                 self.write_stop(&end);

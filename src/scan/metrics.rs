@@ -63,12 +63,17 @@ fn value(v: f64) -> String {
     }
 }
 
-/// Appends one metric family: HELP, TYPE and its samples (`labels` without braces).
-fn family(out: &mut String, name: &str, kind: &str, help: &str, samples: &[(String, f64)]) {
+/// Appends one metric family: HELP, TYPE and its samples (`labels` without braces; empty
+/// for none).
+pub fn family(out: &mut String, name: &str, kind: &str, help: &str, samples: &[(String, f64)]) {
     let _ = writeln!(out, "# HELP {name} {help}");
     let _ = writeln!(out, "# TYPE {name} {kind}");
     for (labels, v) in samples {
-        let _ = writeln!(out, "{name}{{{labels}}} {}", value(*v));
+        if labels.is_empty() {
+            let _ = writeln!(out, "{name} {}", value(*v));
+        } else {
+            let _ = writeln!(out, "{name}{{{labels}}} {}", value(*v));
+        }
     }
 }
 
@@ -87,7 +92,7 @@ impl ScanMetrics {
         );
         family(
             &mut out,
-            "surfscan_lines_total",
+            "surfscan_lines_planned",
             "gauge",
             "Lines planned for the current scan.",
             &[(scan.clone(), f64::from(self.lines_total))],

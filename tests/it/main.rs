@@ -33,6 +33,7 @@ mod model_report;
 mod mqtt_broker;
 mod night_faults;
 mod older_scans;
+mod prometheus_scrape;
 mod results_unchanged;
 mod scan_dir_analysis;
 mod scan_e2e;

@@ -31,7 +31,7 @@ fn with_mqtt(r: &Rig, url: &str, password: &str) {
 }
 
 /// The daemon with its log in `daemon.log` of the rig's directory.
-fn spawn_logged(r: &Rig) -> Daemon {
+pub(crate) fn spawn_logged(r: &Rig) -> Daemon {
     let log = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
@@ -56,7 +56,7 @@ fn log_path(r: &Rig) -> PathBuf {
     r.dir.path().join("daemon.log")
 }
 
-async fn wait_socket(r: &Rig) {
+pub(crate) async fn wait_socket(r: &Rig) {
     let start = std::time::Instant::now();
     while surfscan::control::client::ControlClient::connect(&r.socket)
         .await

@@ -539,7 +539,7 @@ fn metrics_file_is_prometheus_exposition_text() {
     for expected in [
         "# TYPE surfscan_lines_done gauge".to_string(),
         format!("surfscan_lines_done{{{l}}} 12"),
-        format!("surfscan_lines_total{{{l}}} 31"),
+        format!("surfscan_lines_planned{{{l}}} 31"),
         format!("surfscan_last_line_duration_seconds{{{l}}} 41.5"),
         "# TYPE surfscan_line_duration_seconds summary".to_string(),
         format!("surfscan_line_duration_seconds_sum{{{l}}} 498"),
