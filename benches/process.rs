@@ -312,18 +312,7 @@ fn print_floor(csv: &Path, reference_s: f64, disk_s: f64, runs: usize) {
             pitch_y_mm: PITCH_Y_MM,
         };
         let sq = sq_um(&g).expect("Sq");
-        between_lines(
-            &grid.heights_um,
-            grid.cols,
-            PITCH_X_MM,
-            &y,
-            options,
-            VMethod::Interpolate,
-            every,
-            sq,
-            0.5,
-        )
-        .expect("verdict")
+        between_lines(&grid, options, VMethod::Interpolate, every, sq, 0.5).expect("verdict")
     });
     let (_, residual_cpu) = timed(runs, || {
         max_residual_mm(&fit, PITCH_X_MM, &y, &grid.heights_um, grid.cols)

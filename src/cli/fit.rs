@@ -55,7 +55,7 @@ use crate::metrology::alternatives::{
 use crate::metrology::areal::{sq_um as areal_sq_um, HeightMap};
 use crate::metrology::folds::{check_model, net_folds, FoldOptions, IsoFold, ModelChecks};
 use crate::metrology::holdout::{between_lines, holdout_every_or_reason, ordinal};
-use crate::metrology::outliers::{bridged_grid, LineSpike};
+use crate::metrology::outliers::LineSpike;
 use crate::metrology::surface_model::{fit_model, ModelRecipe};
 use crate::scan::outputs::SurfaceShape;
 use crate::scan::surface_files::{write_surface_files, SurfaceWriteError, WrittenIges};
@@ -440,26 +440,25 @@ impl<'a> Fitting<'a> {
                 // runs beside the fit and the IGES write, and the residual check runs while
                 // the file is formatted and synced: the same computations on the same
                 // inputs, so the same numbers, in about the time of the longest.
-                let heights = &grid.heights_um;
+                let grid = &grid;
                 std::thread::scope(|outer| {
                     let early = self
                         .recipe
                         .is_paper()
-                        .then(|| outer.spawn(move || self.judge(heights, threshold)));
-                    let fitted = self.fit(&grid)?;
+                        .then(|| outer.spawn(move || self.judge(grid, threshold)));
+                    let fitted = self.fit(grid)?;
                     let judging = match early {
                         Some(h) => h,
                         None => {
                             let replaced = fitted.1.clone();
-                            outer.spawn(move || {
-                                self.judge(&self.fitted_heights(heights, &replaced), threshold)
-                            })
+                            outer
+                                .spawn(move || self.judge(&self.fitted(grid, &replaced), threshold))
                         }
                     };
                     let (residual, written) = std::thread::scope(|inner| {
                         let writing =
                             inner.spawn(|| self.write(&fitted.0, &fitted.1, &fitted.3 .0));
-                        let residual = self.residual(&fitted.0, heights);
+                        let residual = self.residual(&fitted.0, &grid.heights_um);
                         (residual, joined(writing))
                     });
                     let written = written?;
@@ -472,17 +471,14 @@ impl<'a> Fitting<'a> {
                 // takes its own; a recipe that replaces spikes is judged after its fit, on
                 // the grid with them bridged.
                 let early = match &threshold {
-                    Ok(t) if self.recipe.is_paper() => Some(self.judge(&grid.heights_um, *t)),
+                    Ok(t) if self.recipe.is_paper() => Some(self.judge(&grid, *t)),
                     _ => None,
                 };
                 let fitted = self.fit(&grid)?;
                 let residual = self.residual(&fitted.0, &grid.heights_um);
                 let judged = match early {
                     Some(judged) => judged,
-                    None => self.judge(
-                        &self.fitted_heights(&grid.heights_um, &fitted.1),
-                        threshold?,
-                    ),
+                    None => self.judge(&self.fitted(&grid, &fitted.1), threshold?),
                 };
                 // The heights are not needed past the residual check and the verdict: free
                 // them before the IGES files are planned and written, which is when a large
@@ -520,7 +516,7 @@ impl<'a> Fitting<'a> {
         report_replaced(&replaced);
         let fit_s = t_fit.elapsed().as_secs_f64();
         let t_shape = Instant::now();
-        let shape = shape_checks(&fit, &self.fitted_heights(&grid.heights_um, &replaced));
+        let shape = shape_checks(&fit, &self.fitted(grid, &replaced).heights_um);
         for w in shape.iter().flat_map(ModelChecks::fold_warnings) {
             tell!("surfscan: warning: {w}");
         }
@@ -564,36 +560,29 @@ impl<'a> Fitting<'a> {
         Ok((written, t_write.elapsed().as_secs_f64()))
     }
 
-    /// The heights the surface was fitted to: the grid's, with any replaced spike bridged.
-    fn fitted_heights<'h>(
-        &self,
-        heights_um: &'h [f64],
-        replaced: &[LineSpike],
-    ) -> std::borrow::Cow<'h, [f64]> {
+    /// The grid the surface was fitted to: `grid`, with any replaced spike bridged.
+    fn fitted<'g>(&self, grid: &'g Grid, replaced: &[LineSpike]) -> std::borrow::Cow<'g, Grid> {
         if replaced.is_empty() {
-            std::borrow::Cow::Borrowed(heights_um)
+            std::borrow::Cow::Borrowed(grid)
         } else {
-            std::borrow::Cow::Owned(
-                bridged_grid(heights_um, self.lines.cols, &self.lines.index, replaced).0,
-            )
+            std::borrow::Cow::Owned(crate::report::sections::spikes::bridged(grid, replaced))
         }
     }
 
     /// Every 2nd line left out (or every k-th when too few lines remain for that, as the
-    /// report does), refitted the same way and judged against Sq of `fitted_z`.
-    fn judge(&self, fitted_z: &[f64], threshold: f64) -> Judged {
+    /// report does), refitted the same way and judged against Sq of `fitted`.
+    fn judge(&self, fitted: &Grid, threshold: f64) -> Judged {
         let t_holdout = Instant::now();
-        let l = &self.lines;
-        let (rows, y_mm) = (l.rows(), &l.y_mm[..]);
+        let (rows, y_mm) = (fitted.rows(), &fitted.y_mm[..]);
         let mean_py = match (y_mm.first(), y_mm.last()) {
             (Some(a), Some(b)) if rows > 1 => (b - a).abs() / (rows - 1) as f64,
             _ => self.pitch_y_mm.unwrap_or(1.0),
         };
         let sq = areal_sq_um(&HeightMap {
-            heights_um: fitted_z,
+            heights_um: &fitted.heights_um,
             rows,
-            cols: l.cols,
-            pitch_x_mm: l.pitch_x_mm,
+            cols: fitted.cols,
+            pitch_x_mm: fitted.pitch_x_mm,
             pitch_y_mm: mean_py,
         })
         .map_err(|e| e.to_string());
@@ -601,35 +590,18 @@ impl<'a> Fitting<'a> {
         let every = holdout_every_or_reason(rows, degrees.degree_v);
         let verdict = sq.clone().and_then(|sq| {
             let every = every.clone()?;
-            between_lines(
-                fitted_z,
-                l.cols,
-                l.pitch_x_mm,
-                y_mm,
-                degrees,
-                self.recipe.method,
-                every,
-                sq,
-                threshold,
-            )
-            // The refit's heights at the held-out lines are not reported here; only the
-            // figures are kept.
-            .map(|mut b| {
-                b.model_um = Vec::new();
-                b
-            })
-            .map_err(|e| e.to_string())
+            between_lines(fitted, degrees, self.recipe.method, every, sq, threshold)
+                // The refit's heights at the held-out lines are not reported here; only the
+                // figures are kept.
+                .map(|mut b| {
+                    b.model_um = Vec::new();
+                    b
+                })
+                .map_err(|e| e.to_string())
         });
         let alternatives = match (&sq, &every, self.args.compare) {
             (Ok(sq), Ok(every), true) => Some(compare_alternatives(
-                fitted_z,
-                l.cols,
-                l.pitch_x_mm,
-                y_mm,
-                degrees,
-                *every,
-                *sq,
-                threshold,
+                fitted, degrees, *every, *sq, threshold,
             )),
             _ => None,
         };

@@ -4,11 +4,12 @@
 //! allows) at degree v and at degree 3 — so `surfscan fit --compare` can print their hold-out
 //! figures side by side and the choice is made with numbers.
 //!
-//! Depends on [`super::holdout`] and [`crate::fit`].
+//! Depends on [`super::holdout`], [`crate::fit`] and [`crate::grid`].
 
 use super::holdout::{between_lines, BetweenLines};
 use crate::fit::approx_v::default_control_rows;
 use crate::fit::{FitOptions, VMethod};
+use crate::grid::Grid;
 
 /// One candidate surface and how it held out.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,30 +57,24 @@ pub fn candidates(lines: usize, options: FitOptions) -> Vec<(FitOptions, VMethod
 
 /// Judges every candidate of [`candidates`] with [`between_lines`] (every `every`-th line
 /// left out, against `sq_um` and `threshold`).
-#[allow(clippy::too_many_arguments)]
 pub fn compare(
-    heights_um: &[f64],
-    cols: usize,
-    pitch_x_mm: f64,
-    y_mm: &[f64],
+    grid: &Grid,
     options: FitOptions,
     every: usize,
     sq_um: f64,
     threshold: f64,
 ) -> Vec<Alternative> {
-    candidates(y_mm.len(), options)
+    candidates(grid.rows(), options)
         .into_iter()
         .map(|(o, method)| Alternative {
             options: o,
             method,
             poles_v: match method {
-                VMethod::Interpolate => y_mm.len(),
+                VMethod::Interpolate => grid.rows(),
                 VMethod::LeastSquares { control_rows } => control_rows,
             },
-            holdout: between_lines(
-                heights_um, cols, pitch_x_mm, y_mm, o, method, every, sq_um, threshold,
-            )
-            .map_err(|e| e.to_string()),
+            holdout: between_lines(grid, o, method, every, sq_um, threshold)
+                .map_err(|e| e.to_string()),
         })
         .collect()
 }
@@ -154,7 +149,13 @@ mod tests {
         let z: Vec<f64> = (0..rows * cols)
             .map(|k| ((k % cols) as f64 * 0.3).sin() * (1.0 + 0.01 * (k / cols) as f64))
             .collect();
-        let alts = compare(&z, cols, 0.002, &y, FitOptions::default(), 2, 0.7, 0.5);
+        let alts = compare(
+            &Grid::new(z, cols, 0.002, y),
+            FitOptions::default(),
+            2,
+            0.7,
+            0.5,
+        );
         assert_eq!(alts.len(), candidates(rows, FitOptions::default()).len());
         let t = table(&alts);
         assert!(t.lines().count() == alts.len() + 1, "{t}");

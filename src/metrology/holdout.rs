@@ -16,12 +16,13 @@
 //! spikes are reported beside the verdict (and bridged first when characterisation excludes
 //! them).
 //!
-//! Depends on [`crate::fit`] (refits), [`super::model`] (sampling), [`crate::nurbs`] and
-//! [`crate::numfmt`] (the figures in the verdict's words).
+//! Depends on [`crate::grid`] (the lines), [`crate::fit`] (refits), [`super::model`]
+//! (sampling), [`crate::nurbs`] and [`crate::numfmt`] (the figures in the verdict's words).
 
 use super::model::sample_model_grid;
 use super::MetrologyError;
 use crate::fit::{fit_grid_with, FitOptions, VMethod};
+use crate::grid::Grid;
 use crate::numfmt::{fmt, sig, Quantity};
 use serde::Serialize;
 
@@ -90,12 +91,13 @@ fn stats(index: usize, y_mm: f64, model: &[f64], measured: &[f64]) -> HoldoutLin
     }
 }
 
-fn check_grid(
-    heights_um: &[f64],
-    cols: usize,
-    pitch_x_mm: f64,
-    y_mm: &[f64],
-) -> Result<(), MetrologyError> {
+fn check_grid(grid: &Grid) -> Result<(), MetrologyError> {
+    let (heights_um, cols, pitch_x_mm, y_mm) = (
+        &grid.heights_um[..],
+        grid.cols,
+        grid.pitch_x_mm,
+        &grid.y_mm[..],
+    );
     super::check_pitch(pitch_x_mm)?;
     let rows = y_mm.len();
     if let Some(w) = y_mm.windows(2).find(|w| !matches!(w, [a, b] if b > a)) {
@@ -119,36 +121,19 @@ fn check_grid(
 /// Runs both hold-out refits on a row-major grid (heights µm, one row per line at `y_mm[j]`,
 /// increasing; the lines need not be equally spaced, e.g. a scan with a line missing), with
 /// the paper's interpolation.
-pub fn holdout(
-    heights_um: &[f64],
-    cols: usize,
-    pitch_x_mm: f64,
-    y_mm: &[f64],
-    options: FitOptions,
-) -> Result<Holdout, MetrologyError> {
-    holdout_with(
-        heights_um,
-        cols,
-        pitch_x_mm,
-        y_mm,
-        options,
-        VMethod::Interpolate,
-    )
+pub fn holdout(grid: &Grid, options: FitOptions) -> Result<Holdout, MetrologyError> {
+    holdout_with(grid, options, VMethod::Interpolate)
 }
 
 /// [`holdout`] with `method` across the lines for both refits.
 pub fn holdout_with(
-    heights_um: &[f64],
-    cols: usize,
-    pitch_x_mm: f64,
-    y_mm: &[f64],
+    grid: &Grid,
     options: FitOptions,
     method: VMethod,
 ) -> Result<Holdout, MetrologyError> {
-    let points_left_out = points_left_out(heights_um, cols, pitch_x_mm, y_mm, options, method)?;
-    let every = lines_every(y_mm.len(), options.degree_v)?;
-    let lines_left_out =
-        refit_without_lines(heights_um, cols, pitch_x_mm, y_mm, options, method, every)?.lines;
+    let points_left_out = points_left_out(grid, options, method)?;
+    let every = lines_every(grid.rows(), options.degree_v)?;
+    let lines_left_out = refit_without_lines(grid, options, method, every)?.lines;
     Ok(Holdout {
         points_left_out,
         lines_left_out,
@@ -158,14 +143,18 @@ pub fn holdout_with(
 /// The first refit of [`holdout_with`]: every 2nd point of each line left out, the even
 /// columns fitted at twice the pitch and the model compared at the odd ones, per line.
 pub fn points_left_out(
-    heights_um: &[f64],
-    cols: usize,
-    pitch_x_mm: f64,
-    y_mm: &[f64],
+    grid: &Grid,
     options: FitOptions,
     method: VMethod,
 ) -> Result<Vec<HoldoutLine>, MetrologyError> {
-    check_grid(heights_um, cols, pitch_x_mm, y_mm)?;
+    check_grid(grid)?;
+    let (heights_um, cols, pitch_x_mm, y_mm) = (
+        &grid.heights_um[..],
+        grid.cols,
+        grid.pitch_x_mm,
+        &grid.y_mm[..],
+    );
+
     let rows = y_mm.len();
     let row = |r: usize| heights_um.get(r * cols..(r + 1) * cols).unwrap_or(&[]);
     let y = y_mm;
@@ -215,16 +204,13 @@ pub fn lines_every(rows: usize, degree_v: usize) -> Result<usize, MetrologyError
 /// caller that needs both computes it once and hands it to [`between_lines_given`].
 #[allow(clippy::type_complexity)]
 pub fn lines_left_out(
-    heights_um: &[f64],
-    cols: usize,
-    pitch_x_mm: f64,
-    y_mm: &[f64],
+    grid: &Grid,
     options: FitOptions,
     method: VMethod,
     every: usize,
 ) -> Result<HeldLines, MetrologyError> {
-    check_grid(heights_um, cols, pitch_x_mm, y_mm)?;
-    refit_without_lines(heights_um, cols, pitch_x_mm, y_mm, options, method, every)
+    check_grid(grid)?;
+    refit_without_lines(grid, options, method, every)
 }
 
 /// The v where the surface's y equals `target` (y depends on v only; bisection of y(0, v)),
@@ -272,14 +258,17 @@ fn refit_method(method: VMethod, rows: usize, kept: usize, degree_v: usize) -> V
 /// and returns, per held-out line inside the kept y range, its statistics and the model's
 /// heights at its x.
 fn refit_without_lines(
-    heights_um: &[f64],
-    cols: usize,
-    pitch_x_mm: f64,
-    y_mm: &[f64],
+    grid: &Grid,
     options: FitOptions,
     method: VMethod,
     every: usize,
 ) -> Result<HeldLines, MetrologyError> {
+    let (heights_um, cols, pitch_x_mm, y_mm) = (
+        &grid.heights_um[..],
+        grid.cols,
+        grid.pitch_x_mm,
+        &grid.y_mm[..],
+    );
     if every < 2 {
         return Err(MetrologyError::BadParameter {
             what: "hold-out: every k-th line",
@@ -346,17 +335,20 @@ fn refit_without_lines(
 /// The model at line `row` refitted without it (all other lines kept, `method` across the
 /// lines), sampled at the line's y and the data x: what an overlay of that line shows. The
 /// line must lie between two others (no extrapolation).
-#[allow(clippy::too_many_arguments)]
 pub fn model_without_line(
-    heights_um: &[f64],
-    cols: usize,
-    pitch_x_mm: f64,
-    y_mm: &[f64],
+    grid: &Grid,
     options: FitOptions,
     method: VMethod,
     row: usize,
 ) -> Result<HoldoutLineModel, MetrologyError> {
-    check_grid(heights_um, cols, pitch_x_mm, y_mm)?;
+    check_grid(grid)?;
+    let (heights_um, cols, pitch_x_mm, y_mm) = (
+        &grid.heights_um[..],
+        grid.cols,
+        grid.pitch_x_mm,
+        &grid.y_mm[..],
+    );
+
     let rows = y_mm.len();
     if row == 0 || row + 1 >= rows {
         return Err(MetrologyError::BadParameter {
@@ -485,47 +477,32 @@ pub fn ordinal(k: usize) -> String {
 /// Leaves every `every`-th line out, refits with `method` and judges the refit at the held-out
 /// lines against `sq_um` (Sq of the measured grid) and `threshold` (on rms / Sq; the default is
 /// [`SUPPORTED_BELOW_SQ`]).
-#[allow(clippy::too_many_arguments)]
 pub fn between_lines(
-    heights_um: &[f64],
-    cols: usize,
-    pitch_x_mm: f64,
-    y_mm: &[f64],
+    grid: &Grid,
     options: FitOptions,
     method: VMethod,
     every: usize,
     sq_um: f64,
     threshold: f64,
 ) -> Result<BetweenLines, MetrologyError> {
-    between_lines_given(
-        heights_um,
-        cols,
-        pitch_x_mm,
-        y_mm,
-        method,
-        every,
-        sq_um,
-        threshold,
-        || refit_without_lines(heights_um, cols, pitch_x_mm, y_mm, options, method, every),
-    )
+    between_lines_given(grid, method, every, sq_um, threshold, || {
+        refit_without_lines(grid, options, method, every)
+    })
 }
 
 /// [`between_lines`] with its refit made by `held` (the result of [`lines_left_out`] with the
 /// same grid, `method` and `every`), called only once the grid, `sq_um` and `threshold` have
 /// passed their checks, so that the errors come in the same order.
-#[allow(clippy::too_many_arguments)]
 pub fn between_lines_given(
-    heights_um: &[f64],
-    cols: usize,
-    pitch_x_mm: f64,
-    y_mm: &[f64],
+    grid: &Grid,
     method: VMethod,
     every: usize,
     sq_um: f64,
     threshold: f64,
     held: impl FnOnce() -> Result<HeldLines, MetrologyError>,
 ) -> Result<BetweenLines, MetrologyError> {
-    check_grid(heights_um, cols, pitch_x_mm, y_mm)?;
+    check_grid(grid)?;
+
     if !(sq_um.is_finite() && sq_um > 0.0) {
         return Err(MetrologyError::BadParameter {
             what: "Sq (µm) of the measured grid",
@@ -598,20 +575,20 @@ pub fn between_lines_given(
 mod tests {
     use super::*;
 
-    fn grid(rows: usize, cols: usize, f: impl Fn(usize, usize) -> f64) -> (Vec<f64>, Vec<f64>) {
+    /// `rows` lines 0.01 mm apart of `cols` points at `pitch_x_mm`, heights `f(row, col)`.
+    fn grid(rows: usize, cols: usize, pitch_x_mm: f64, f: impl Fn(usize, usize) -> f64) -> Grid {
         let y = (0..rows).map(|r| r as f64 * 0.01).collect();
         let z = (0..rows * cols).map(|k| f(k / cols, k % cols)).collect();
-        (y, z)
+        Grid::new(z, cols, pitch_x_mm, y)
     }
 
     #[test]
     fn every_kth_line_is_held_out_inside_the_kept_range() {
-        let (y, z) = grid(14, 40, |r, c| (c as f64 * 0.2).sin() + 0.1 * r as f64);
+        let g = grid(14, 40, 0.002, |r, c| {
+            (c as f64 * 0.2).sin() + 0.1 * r as f64
+        });
         let b = between_lines(
-            &z,
-            40,
-            0.002,
-            &y,
+            &g,
             FitOptions::default(),
             VMethod::Interpolate,
             3,
@@ -635,19 +612,11 @@ mod tests {
     fn held_out_lines_sampled_together_equal_each_sampled_alone_to_the_bit() {
         // The refit is sampled at all held-out lines in one call; each line's heights must
         // be those a sampling of that line alone gives (the model an overlay shows).
-        let (y, z) = grid(15, 64, |r, c| {
+        let g = grid(15, 64, 0.0005, |r, c| {
             (c as f64 * 0.21 + r as f64 * 0.7).sin() + 0.05 * ((r * 64 + c) % 7) as f64
         });
-        let held = refit_without_lines(
-            &z,
-            64,
-            0.0005,
-            &y,
-            FitOptions::default(),
-            VMethod::Interpolate,
-            2,
-        )
-        .unwrap();
+        let (y, z) = (&g.y_mm, &g.heights_um);
+        let held = refit_without_lines(&g, FitOptions::default(), VMethod::Interpolate, 2).unwrap();
         let kept: Vec<usize> = (0..15).filter(|r| r % 2 == 0).collect();
         let sub: Vec<f64> = kept
             .iter()
@@ -690,12 +659,9 @@ mod tests {
     #[test]
     fn pooled_rms_decides_against_the_threshold() {
         // Lines alternate +1/−1: a held-out (odd) line is −1 where every refitted line is +1.
-        let (y, z) = grid(13, 30, |r, _| if r % 2 == 0 { 1.0 } else { -1.0 });
+        let g = grid(13, 30, 0.002, |r, _| if r % 2 == 0 { 1.0 } else { -1.0 });
         let b = between_lines(
-            &z,
-            30,
-            0.002,
-            &y,
+            &g,
             FitOptions::default(),
             VMethod::Interpolate,
             2,
@@ -714,29 +680,11 @@ mod tests {
             "{}",
             b.short()
         );
-        assert!(between_lines(
-            &z,
-            30,
-            0.002,
-            &y,
-            FitOptions::default(),
-            VMethod::Interpolate,
-            1,
-            1.0,
-            0.3
-        )
-        .is_err());
-        assert!(between_lines(
-            &z,
-            30,
-            0.002,
-            &y,
-            FitOptions::default(),
-            VMethod::Interpolate,
-            2,
-            0.0,
-            0.3
-        )
-        .is_err());
+        assert!(
+            between_lines(&g, FitOptions::default(), VMethod::Interpolate, 1, 1.0, 0.3).is_err()
+        );
+        assert!(
+            between_lines(&g, FitOptions::default(), VMethod::Interpolate, 2, 0.0, 0.3).is_err()
+        );
     }
 }

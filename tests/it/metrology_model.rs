@@ -2,6 +2,7 @@
 
 use std::f64::consts::PI;
 use surfscan::fit::{fit_grid, FitOptions};
+use surfscan::grid::Grid;
 use surfscan::metrology::model::{model_bearing_curves, ModelBacOptions};
 
 #[test]
@@ -134,7 +135,11 @@ fn holdout_predicts_a_smooth_surface_and_misses_a_held_out_spike() {
         })
         .collect();
     let y: Vec<f64> = (0..rows).map(|r| r as f64 * py).collect();
-    let h = holdout(&z, cols, px, &y, FitOptions::default()).unwrap();
+    let h = holdout(
+        &Grid::new(z.clone(), cols, px, y.clone()),
+        FitOptions::default(),
+    )
+    .unwrap();
     assert_eq!(h.points_left_out.len(), rows);
     assert!(h.points_left_out.iter().all(|l| l.points == 80));
     // Odd rows between the first and last kept (even) rows: 1, 3, …, 19.
@@ -152,7 +157,11 @@ fn holdout_predicts_a_smooth_surface_and_misses_a_held_out_spike() {
     // A spike at a held-out point (line 3, column 81) is invisible to the refit: the difference
     // there is about the spike's height, and only line 3 sees it.
     z[3 * cols + 81] += 5.0;
-    let h = holdout(&z, cols, px, &y, FitOptions::default()).unwrap();
+    let h = holdout(
+        &Grid::new(z.clone(), cols, px, y.clone()),
+        FitOptions::default(),
+    )
+    .unwrap();
     assert!(
         (h.points_left_out[3].max_abs_um - 5.0).abs() < 0.1,
         "{}",

@@ -5,6 +5,7 @@
 
 use surfscan::config::FitSettings;
 use surfscan::fit::{fit_grid, fit_grid_with, FitOptions, VMethod};
+use surfscan::grid::Grid;
 use surfscan::metrology::areal::{areal_params, HeightMap};
 use surfscan::metrology::folds::{check_model, net_folds, FoldOptions};
 use surfscan::metrology::holdout::{between_lines, SUPPORTED_BELOW_SQ};
@@ -73,10 +74,7 @@ fn sq(z: &[f64], rows: usize, cols: usize) -> f64 {
 
 fn verdict(z: &[f64], method: VMethod) -> surfscan::metrology::holdout::BetweenLines {
     between_lines(
-        z,
-        COLS,
-        PX,
-        &y_mm(ROWS),
+        &Grid::new(z.to_vec(), COLS, PX, y_mm(ROWS)),
         FitOptions::default(),
         method,
         2,

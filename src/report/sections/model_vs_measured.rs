@@ -42,8 +42,7 @@ pub fn section(
     sq_um: Option<f64>,
 ) -> (Result<Holdout, String>, Result<BetweenLines, String>) {
     characterise_and_judge(
-        input.grid,
-        &input.characterised.heights_um,
+        input.characterised,
         &input.model.recipe,
         sq_um,
         input.ctx.options.holdout_threshold,
@@ -54,27 +53,23 @@ pub fn section(
 /// [`holdout_with`](crate::metrology::holdout::holdout_with), the line indices mapped to the
 /// grid's) and the verdict between lines
 /// ([`between_lines`](crate::metrology::holdout::between_lines) with k from
-/// [`holdout_every_or_reason`]; `None` for `sq_um`: the grid has no Sq). The refit they share,
+/// [`holdout_every_or_reason`]; `None` for `sq_um`: the grid has no Sq), on `grid` (the grid
+/// as characterised: its heights, the lines' indices). The refit they share,
 /// every k-th line left out, is made once, beside the every-2nd-point refit: the same
 /// computations on the same inputs, so the same results and the same errors, in the order each
 /// of those functions reports them.
 pub fn characterise_and_judge(
     grid: &Grid,
-    heights_um: &[f64],
     recipe: &ModelRecipe,
     sq_um: Option<f64>,
     threshold: f64,
 ) -> (Result<Holdout, String>, Result<BetweenLines, String>) {
-    let (cols, pitch_x_mm, y_mm) = (grid.cols, grid.pitch_x_mm, &grid.y_mm[..]);
     let (degrees, method) = (recipe.degrees, recipe.method);
     let every = holdout_every(grid.rows(), degrees.degree_v);
     let (points, lines) = std::thread::scope(|s| {
-        let lines = every.map(|every| {
-            s.spawn(move || {
-                lines_left_out(heights_um, cols, pitch_x_mm, y_mm, degrees, method, every)
-            })
-        });
-        let points = points_left_out(heights_um, cols, pitch_x_mm, y_mm, degrees, method);
+        let lines =
+            every.map(|every| s.spawn(move || lines_left_out(grid, degrees, method, every)));
+        let points = points_left_out(grid, degrees, method);
         // `Err(())`: the refit panicked.
         (points, lines.map(|h| h.join().map_err(|_| ())))
     });
@@ -99,21 +94,11 @@ pub fn characterise_and_judge(
         None => Err("the measured grid has no Sq to judge the hold-out against".to_string()),
         Some(_) if matches!(lines, Some(Err(()))) => Err(LINES_REFIT_PANICKED.to_string()),
         Some(sq_um) => holdout_every_or_reason(grid.rows(), degrees.degree_v).and_then(|every| {
-            between_lines_given(
-                heights_um,
-                cols,
-                pitch_x_mm,
-                y_mm,
-                method,
-                every,
-                sq_um,
-                threshold,
-                || match lines {
-                    Some(Ok(held)) => held,
-                    // Not reached: `every` was found above as it was for the refit.
-                    _ => lines_left_out(heights_um, cols, pitch_x_mm, y_mm, degrees, method, every),
-                },
-            )
+            between_lines_given(grid, method, every, sq_um, threshold, || match lines {
+                Some(Ok(held)) => held,
+                // Not reached: `every` was found above as it was for the refit.
+                _ => lines_left_out(grid, degrees, method, every),
+            })
             .map_err(|e| e.to_string())
         }),
     };
@@ -147,20 +132,8 @@ mod tests {
 
     /// `model_vs_measured` on its own: both refits of [`holdout_with`], the line indices
     /// mapped to the grid's.
-    fn characterise(
-        grid: &Grid,
-        heights_um: &[f64],
-        recipe: &ModelRecipe,
-    ) -> Result<Holdout, String> {
-        let mut h = holdout_with(
-            heights_um,
-            grid.cols,
-            grid.pitch_x_mm,
-            &grid.y_mm,
-            recipe.degrees,
-            recipe.method,
-        )
-        .map_err(|e| e.to_string())?;
+    fn characterise(grid: &Grid, recipe: &ModelRecipe) -> Result<Holdout, String> {
+        let mut h = holdout_with(grid, recipe.degrees, recipe.method).map_err(|e| e.to_string())?;
         rows_of_holdout_to_lines(grid, &mut h);
         Ok(h)
     }
@@ -169,24 +142,13 @@ mod tests {
     /// [`holdout_every_or_reason`].
     fn verdict(
         grid: &Grid,
-        heights_um: &[f64],
         recipe: &ModelRecipe,
         sq_um: f64,
         threshold: f64,
     ) -> Result<BetweenLines, String> {
         let every = holdout_every_or_reason(grid.rows(), recipe.degrees.degree_v)?;
-        between_lines(
-            heights_um,
-            grid.cols,
-            grid.pitch_x_mm,
-            &grid.y_mm,
-            recipe.degrees,
-            recipe.method,
-            every,
-            sq_um,
-            threshold,
-        )
-        .map_err(|e| e.to_string())
+        between_lines(grid, recipe.degrees, recipe.method, every, sq_um, threshold)
+            .map_err(|e| e.to_string())
     }
 
     fn grid(rows: usize, cols: usize, y_mm: Vec<f64>, f: impl Fn(usize, usize) -> f64) -> Grid {
@@ -280,13 +242,13 @@ mod tests {
         let mut seen_ok = [0; 2];
         for (what, g, recipe, sq, threshold) in cases {
             let own = (
-                characterise(&g, &g.heights_um, &recipe),
+                characterise(&g, &recipe),
                 match sq {
-                    Some(sq) => verdict(&g, &g.heights_um, &recipe, sq, threshold),
+                    Some(sq) => verdict(&g, &recipe, sq, threshold),
                     None => Err("the measured grid has no Sq to judge the hold-out against".into()),
                 },
             );
-            let shared = characterise_and_judge(&g, &g.heights_um, &recipe, sq, threshold);
+            let shared = characterise_and_judge(&g, &recipe, sq, threshold);
             // Debug prints every f64 in its shortest round-trip form (−0.0 included), so equal
             // texts are equal bits.
             assert_eq!(

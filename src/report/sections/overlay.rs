@@ -22,8 +22,7 @@ pub fn section(
     let mut warnings = Vec::new();
     let row = overlay_row(grid, ctx, &mut warnings);
     let held_out = held_out_overlay(
-        grid,
-        &input.characterised.heights_um,
+        input.characterised,
         &input.model.recipe,
         verdict,
         row,
@@ -101,24 +100,16 @@ pub struct Overlay {
 /// out, the surface refitted without it the way the model was made, and drawn against the
 /// line's measured heights. When that line cannot be left out (the first or last line) or
 /// its refit fails, the held-out line of the verdict `b` nearest it is drawn instead, and a
-/// warning says so. `heights_um` are the grid's rows as characterised.
+/// warning says so. `grid` is the grid as characterised.
 fn held_out_overlay(
     grid: &Grid,
-    heights_um: &[f64],
     recipe: &crate::metrology::surface_model::ModelRecipe,
     b: Option<&BetweenLines>,
     wanted: usize,
     warnings: &mut Vec<String>,
 ) -> Option<Overlay> {
-    let own = crate::metrology::holdout::model_without_line(
-        heights_um,
-        grid.cols,
-        grid.pitch_x_mm,
-        &grid.y_mm,
-        recipe.degrees,
-        recipe.method,
-        wanted,
-    );
+    let own =
+        crate::metrology::holdout::model_without_line(grid, recipe.degrees, recipe.method, wanted);
     let (row, rms, model) = match own {
         Ok(m) => (wanted, m.line.rms_um, m.model_um),
         Err(e) => {
@@ -137,7 +128,9 @@ fn held_out_overlay(
         }
     };
     let px = grid.pitch_x_mm;
-    let measured = heights_um.get(row * grid.cols..(row + 1) * grid.cols)?;
+    let measured = grid
+        .heights_um
+        .get(row * grid.cols..(row + 1) * grid.cols)?;
     Some(Overlay {
         measured: measured
             .iter()

@@ -109,6 +109,6 @@ pub fn bridged(grid: &Grid, spikes: &[LineSpike]) -> Grid {
     let (heights_um, _) = bridged_grid(&grid.heights_um, grid.cols, &grid.index, spikes);
     Grid {
         heights_um,
-        ..grid.clone()
+        ..grid.layout()
     }
 }
