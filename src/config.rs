@@ -8,10 +8,11 @@
 //! scan runner never sees this file's types).
 //!
 //! Layer 4 (process edge): depends on the settings types of [`crate::sj210`],
-//! [`crate::stage`] and [`crate::hook`], on [`crate::units`], and reads one file; nothing
+//! [`crate::stage`], [`crate::hook`] and [`crate::report::header`], on [`crate::units`], and reads one file; nothing
 //! from the scan session.
 
 use crate::hook::HookSettings;
+use crate::report::header::LabHeader;
 use crate::sj210::settings::InstrumentSettings;
 use crate::stage::settings::StageSettings;
 use crate::units::Nm;
@@ -55,6 +56,10 @@ pub struct Config {
     /// `[mqtt]`: the station on the lab's MQTT broker; none by default.
     #[serde(default)]
     pub mqtt: Option<crate::publish::settings::MqttSettings>,
+    /// `[report]`: the laboratory's header, the paper and the signature block of the printed
+    /// report.
+    #[serde(default)]
+    pub report: LabHeader,
 }
 
 /// `[jobs]`: recipes (named plans with their measuring conditions, analysis and
@@ -492,6 +497,15 @@ impl Config {
                 ));
             }
         }
+        if let Some(logo) = &self.report.logo {
+            if self.report.logo_media_type().is_none() {
+                return Err(Config::invalid(
+                    path,
+                    "report.logo",
+                    format!("{} must be a PNG, JPEG or SVG file (by its extension: .png, .jpg, .jpeg, .svg); remove the key to print no logo", logo.display()),
+                ));
+            }
+        }
         if let Some(groups) = &self.control.allowed_groups {
             if groups.is_empty() || groups.iter().any(|g| g.trim().is_empty()) {
                 return Err(Config::invalid(
@@ -887,6 +901,29 @@ dir = "/var/lib/surfscan/scans"
         assert_eq!(start, Nm(1_000_000));
         // 0.01 mm steps are exact integers: line 30 at 1.3 mm, no accumulated rounding.
         assert_eq!(Nm(start.0 + 30 * step.0), Nm(1_300_000));
+    }
+
+    #[test]
+    fn the_report_table_is_optional_and_its_logo_checked() {
+        assert_eq!(parse(MINIMAL).unwrap().report, LabHeader::default());
+        let with = format!(
+            "{MINIMAL}[report]\nlab = \"Lab\"\naddress = \"1 Road\\nTown\"\nlogo = \"/etc/surfscan/logo.png\"\npaper = \"Letter\"\nsignatures = [\"Measured by\", \"Checked by\", \"Approved by\"]\n"
+        );
+        let r = parse(&with).unwrap().report;
+        assert_eq!(r.address, "1 Road\nTown");
+        assert_eq!(r.paper, crate::report::header::Paper::Letter);
+        assert_eq!(r.signatures.len(), 3);
+        let e = parse(&with.replace("logo.png", "logo.bmp"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("report.logo") && e.contains("PNG, JPEG or SVG"),
+            "{e}"
+        );
+        let e = parse(&with.replace("\"Letter\"", "\"A3\""))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("A3") || e.contains("paper"), "{e}");
     }
 
     #[test]

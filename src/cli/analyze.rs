@@ -52,6 +52,11 @@ pub struct Args {
     /// filter.
     #[arg(long)]
     pub no_filter: bool,
+    /// A station configuration whose `[report]` table (laboratory, address, logo, paper,
+    /// signatures) heads the report. Default: for a scan the table its journal recorded; for
+    /// a file none.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
     /// Evaluate the central N sampling lengths (λc each) of every line, leaving the rest at
     /// each end out as the filter's run-up and run-out, as an instrument traces N·λc plus λc
     /// (CSV and X3P inputs; a scan's lines carry the instrument's N). Default: the whole
@@ -306,6 +311,10 @@ pub fn run(args: Args) -> Result<(), CliError> {
             "--sampling-lengths is for CSV and X3P inputs; a scan's lines are evaluated with the N the instrument recorded",
         ));
     }
+    let lab = match &args.config {
+        Some(path) => Some(super::station::load_config(path)?.0.report),
+        None => None,
+    };
     let input = args.read.read(&args.input)?;
     let lines = input.grid.rows();
     let paper_q = crate::fit::FitOptions::default().degree_v;
@@ -339,6 +348,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 .model
                 .v_method(lines, args.degree_v.unwrap_or(paper_q))?,
             replace_spikes: args.model.replace(),
+            lab,
         };
         let outputs = characterise_scan(&input, &options).map_err(report_error)?;
         return finish(&outputs);
@@ -378,6 +388,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         fit: None,
         options: ScanAnalysisOptions::default(),
         warnings: input.findings.clone(),
+        lab: lab.unwrap_or_default(),
     };
     let outputs = fit_and_characterise(&input.grid, ctx, &args, &out)?;
     finish(&outputs)

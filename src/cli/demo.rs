@@ -77,6 +77,13 @@ dir = {out:?}
 
 [control]
 socket = {sock:?}
+
+[report]
+# The printed report's header and signature block.
+lab = "surfscan demonstration"
+address = "A simulated SJ-210 and y stage\nNo part was measured"
+paper = "A4"
+signatures = ["Measured by", "Approved by"]
 "#,
         instrument = instrument.display().to_string(),
         stage = stage.display().to_string(),

@@ -50,6 +50,9 @@ pub struct ScanAnalysisOptions {
     /// Replace the spikes before fitting (default `None`: as the scan's frozen plan says,
     /// else no).
     pub replace_spikes: Option<bool>,
+    /// The laboratory's header overriding the one a scan's journal recorded (default `None`:
+    /// the recorded one, for a grid none).
+    pub lab: Option<super::header::LabHeader>,
 }
 
 impl ScanAnalysisOptions {
@@ -85,6 +88,7 @@ impl Default for ScanAnalysisOptions {
             holdout_threshold: SUPPORTED_BELOW_SQ,
             v_method: None,
             replace_spikes: None,
+            lab: None,
         }
     }
 }
@@ -128,4 +132,6 @@ pub struct ReportContext {
     pub options: ScanAnalysisOptions,
     /// Warnings gathered so far (e.g. while reading the lines).
     pub warnings: Vec<String>,
+    /// The laboratory's header and the printed layout (`[report]`).
+    pub lab: super::header::LabHeader,
 }

@@ -87,6 +87,8 @@ pub struct Report {
     pub warnings: Vec<String>,
     /// Seconds per section.
     pub timings_s: Timings,
+    /// The issuing laboratory and the printed layout (`[report]` of the configuration).
+    pub lab: super::header::LabHeader,
 }
 
 /// What the figures are drawn from beyond the report: each line's analysis (its Rk
@@ -173,6 +175,7 @@ pub fn assemble(
         fit: ctx.fit.clone(),
         warnings,
         timings_s: timings,
+        lab: ctx.lab.clone(),
     };
     let figures = FigureData {
         analyses,

@@ -25,6 +25,7 @@
 pub mod context;
 pub mod document;
 pub mod error;
+pub mod header;
 pub mod render;
 pub mod scan_dir;
 pub mod sections;
@@ -111,7 +112,8 @@ pub fn characterise(
     })?;
     let sections = sections::run(grid, &model, &ctx)?;
     let mut timings = sections.timings.clone();
-    let (report, figures) = document::assemble(sections, grid, &model, &ctx);
+    let (mut report, figures) = document::assemble(sections, grid, &model, &ctx);
+    let logo = render::read_logo(&report.lab, &mut report.warnings);
     let t = Instant::now();
     let written = render::write_data_files(out, grid, &report, &figures, &ctx)?;
     timings.write = t.elapsed().as_secs_f64();
@@ -122,7 +124,7 @@ pub fn characterise(
         timings_s: timings,
         ..report
     };
-    render::write_report(out, &written, &report, &ctx)?;
+    render::write_report(out, &written, &report, &ctx, logo.as_ref())?;
     let mut plots = written.plots;
     plots.extend(written.rk_plots.into_iter().flat_map(|(_, files)| files));
     Ok(ScanOutputs {

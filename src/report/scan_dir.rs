@@ -14,6 +14,7 @@
 use super::context::{Model, ReportContext, ScanAnalysisOptions};
 use super::document::{Completeness, ScanStatus, Traceability};
 use super::error::ReportError;
+use super::header::LabHeader;
 use super::{characterise, ScanOutputs};
 use crate::fit::{max_residual_mm, FitOptions, MethodError};
 use crate::grid::Grid;
@@ -228,6 +229,11 @@ pub fn characterise_scan_lines(
         fit,
         options: options.clone(),
         warnings,
+        lab: options.lab.clone().unwrap_or_else(|| {
+            facts
+                .map(|f| LabHeader::of_frozen_config(&f.start.config))
+                .unwrap_or_default()
+        }),
     };
     let out = options.out_dir.clone().unwrap_or_else(|| dir.to_path_buf());
     let mut outputs = characterise(grid, model, ctx, &out)?;

@@ -118,6 +118,55 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
     assert!(std::fs::read_to_string(dir.join("report.html"))
         .unwrap()
         .contains("31 of 31 planned characterised"));
+    // On paper: the demo's report printed by Chromium on the A4 of its [report] table; then
+    // `analyze --config` with another laboratory, a logo, Letter and three signatures.
+    let paper = tempfile::tempdir().unwrap();
+    let size = crate::report_print::check_printed(
+        dir,
+        &paper.path().join("report.pdf"),
+        "surfscan demonstration",
+        &["Measured by", "Approved by"],
+    );
+    assert!(size.ends_with("(A4)"), "{size}");
+    let logo = paper.path().join("logo.svg");
+    std::fs::write(
+        &logo,
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"40\" height=\"20\"><rect width=\"40\" height=\"20\" fill=\"#0072b2\"/></svg>",
+    )
+    .unwrap();
+    let letter = paper.path().join("letter.toml");
+    std::fs::write(
+        &letter,
+        crate::report_print::with_report_table(
+            &std::fs::read_to_string(out.path().join("demo.toml")).unwrap(),
+            &format!(
+                "[report]\nlab = \"Calibration lab <B&S>\"\naddress = \"2 Gauge Street\\nSpringfield\"\nlogo = {:?}\npaper = \"Letter\"\nsignatures = [\"Measured by\", \"Checked by\", \"Approved by\"]\n",
+                logo.display().to_string()
+            ),
+        ),
+    )
+    .unwrap();
+    let again = paper.path().join("letter");
+    let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .arg("analyze")
+        .arg(dir)
+        .arg("--config")
+        .arg(&letter)
+        .arg("--out")
+        .arg(&again)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let html = std::fs::read_to_string(again.join("report.html")).unwrap();
+    assert!(html.contains("class=\"logo\"") && html.contains("data:image/svg+xml;base64,"));
+    assert!(html.contains("Calibration lab &lt;B&amp;S&gt;"));
+    let size = crate::report_print::check_printed(
+        &again,
+        &paper.path().join("letter.pdf"),
+        "Calibration lab <B&S>",
+        &["Measured by", "Checked by", "Approved by"],
+    );
+    assert!(size.ends_with("(letter)"), "{size}");
     // The demo's grid gives the results pinned before the characterisation was reorganised:
     // the scan's own report and surface, `fit` and `analyze` of its directory, and `analyze`
     // of its measured.x3p.

@@ -34,6 +34,7 @@ mod mqtt_broker;
 mod night_faults;
 mod older_scans;
 mod prometheus_scrape;
+mod report_print;
 mod results_unchanged;
 mod scan_dir_analysis;
 mod scan_e2e;

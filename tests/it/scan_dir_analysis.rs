@@ -1004,13 +1004,14 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
     assert_eq!(t["duration_s"].as_f64(), Some(3600.0));
     let page = scan.join("report.html");
     let html = std::fs::read_to_string(&page).unwrap();
-    // Warnings first, numbers for people, the journal's events and the traceability.
+    // The result first, the warnings that qualify it next, numbers for people, the
+    // journal's events and the traceability.
     let at = |s: &str| {
         html.find(s)
             .unwrap_or_else(|| panic!("report.html lacks {s:?}"))
     };
-    assert!(at("id=\"warnings\"") < at("id=\"result\""));
-    assert!(at("id=\"result\"") < at("id=\"lines\""));
+    assert!(at("id=\"result\"") < at("id=\"warnings\""));
+    assert!(at("id=\"warnings\"") < at("id=\"lines\""));
     assert!(html.contains("instrument unplugged &lt;USB&gt;"));
     assert!(
         html.contains("<td>4 <span class=\"muted\">(0003)</span></td>"),

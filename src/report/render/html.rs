@@ -3,11 +3,14 @@
 //! so to the browser), rendered from the report as `report.json` holds it and, for a scan,
 //! the journal's record of what happened during it.
 //!
-//! Order, most urgent first: warnings; the result in brief; traceability; what happened
+//! Order, most urgent first: the laboratory's header (`[report]`); the result in brief; the
+//! warnings that qualify it; traceability; what happened
 //! during the scan (interruptions, re-traces, resumes, the stop); the plots; the areal
-//! parameters of the model and of the measured grid; the per-line ISO parameters; the
-//! instrument's own results beside ours with a tolerance flag; the model checked against
-//! data it was not fitted to; the recipe every number was computed with. Numbers carry the
+//! parameters of the model and of the measured grid; the per-line ISO parameters (one table
+//! per parameter family, so each fits a page); the instrument's own results beside ours in
+//! one sentence with the exceptions (every comparison in a collapsed table); the model
+//! checked against data it was not fitted to; the recipe every number was computed with; the
+//! signature block. [`super::print`] lays it out for paper. Numbers carry the
 //! significant digits of their quantity ([`crate::numfmt`]); line numbers are 1-based with
 //! the index of the files they are stored in; `report.json` keeps full precision.
 //!
@@ -17,6 +20,7 @@
 //! Layer 4 (reporting): depends on the scan's journal records ([`crate::scan::journal`]) and
 //! [`crate::numfmt`]; returns text, the caller writes it.
 
+use super::print;
 use crate::numfmt::{fmt, line_number, sig, Quantity};
 use crate::scan::journal::ResumeState;
 use base64::Engine as _;
@@ -89,6 +93,10 @@ th{background:#f2f2f2}td.t,th.t{text-align:left}
 figure{margin:1em 0}figcaption{font-weight:bold;margin-bottom:.3em}
 img{max-width:100%;height:auto;border:1px solid #ddd}
 .scroll{overflow-x:auto}summary{cursor:pointer;margin:.3em 0}
+h3{font-size:1em;margin:.8em 0 .2em}
+.lab-header{display:flex;gap:1em;align-items:center;margin-bottom:.6em;padding-bottom:.4em}
+.lab-header img.logo{max-height:18mm;max-width:50mm;border:none}.lab-name{font-weight:bold;font-size:1.15em}
+tr.sign td{height:2.6em;min-width:10em}
 ";
 
 /// The tolerance of the instrument-vs-ours flag for a unit: 2 % of the instrument's value,
@@ -182,6 +190,14 @@ fn row(h: &mut String, cells: &[(&str, String)]) {
     }
     h.push_str("</tr>\n");
 }
+
+/// The per-line tables, one per parameter family (so that each fits a printed page):
+/// element id, heading, columns.
+const LINE_FAMILIES: &[(&str, &str, std::ops::Range<usize>)] = &[
+    ("t-lines", "amplitude", 0..10),
+    ("t-lines-spacing", "spacing and slope", 10..16),
+    ("t-lines-material", "material ratio", 16..25),
+];
 
 /// Per-line columns: report key, heading, quantity.
 const LINE_COLUMNS: &[(&str, &str, Quantity)] = &[
@@ -285,7 +301,12 @@ pub fn result_summary(report: &Value) -> Vec<(&'static str, String)> {
 
 /// Renders the report. `report` is the report as serialized into `report.json`; `journal`
 /// the scan's journal when it could be read; `figures` are embedded in order.
-pub fn render(report: &Value, journal: Option<&ResumeState>, figures: &[Figure]) -> String {
+pub fn render(
+    report: &Value,
+    journal: Option<&ResumeState>,
+    figures: &[Figure],
+    logo: Option<&Figure>,
+) -> String {
     let mut h = String::with_capacity(
         64 * 1024 + figures.iter().map(|f| f.bytes.len() * 4 / 3).sum::<usize>(),
     );
@@ -297,8 +318,10 @@ pub fn render(report: &Value, journal: Option<&ResumeState>, figures: &[Figure])
     };
     let _ = write!(
         h,
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; img-src data:; style-src 'unsafe-inline'\">\n<title>Surface report: {t}</title>\n<style>{STYLE}</style>\n</head>\n<body>\n<h1>Surface report: {t}</h1>\n",
-        t = esc(&title)
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; img-src data:; style-src 'unsafe-inline'\">\n<title>Surface report: {t}</title>\n<style>{STYLE}{page}</style>\n</head>\n<body>\n{header}<h1>Surface report: {t}</h1>\n",
+        t = esc(&title),
+        page = print::page_style(report, &title),
+        header = print::lab_header(report, logo),
     );
     let status = match report["scan"]["status"].as_str() {
         Some(s) => format!("{s} scan"),
@@ -311,12 +334,12 @@ pub fn render(report: &Value, journal: Option<&ResumeState>, figures: &[Figure])
         esc(&status),
         esc(&text(&report["software"]))
     );
-    warnings(&mut h, report);
     h.push_str("<h2 id=\"result\">Result</h2>\n<table id=\"t-result\">\n");
     for (k, v) in result_summary(report) {
         kv(&mut h, k, &esc(&v));
     }
     h.push_str("</table>\n");
+    warnings(&mut h, report);
     traceability(&mut h, report);
     if let Some(j) = journal {
         events(&mut h, j);
@@ -327,6 +350,7 @@ pub fn render(report: &Value, journal: Option<&ResumeState>, figures: &[Figure])
     instrument(&mut h, report);
     holdout(&mut h, report);
     recipe(&mut h, report);
+    h.push_str(&print::signatures(report));
     h.push_str("</body>\n</html>\n");
     h
 }
@@ -370,13 +394,17 @@ fn traceability(h: &mut String, report: &Value) {
         ("specimen", "specimen"),
         ("operator", "operator"),
         ("notes", "notes"),
-        ("started", "started_at"),
     ] {
         kv(h, k, &esc(&text(&t[key])));
     }
+    kv(
+        h,
+        "started",
+        &esc(&print::to_the_second(&text(&t["started_at"]))),
+    );
     match t["finished_at"].as_str() {
         Some(stop) => {
-            kv(h, "finished", &esc(stop));
+            kv(h, "finished", &esc(&print::to_the_second(stop)));
             if let Some(d) = t["duration_s"].as_f64() {
                 kv(h, "duration", &esc(&duration(d.round() as i64)));
             }
@@ -455,7 +483,7 @@ fn events(h: &mut String, j: &ResumeState) {
             "<p class=\"ok\" id=\"no-events\">No interruption, re-trace, resume or line moved aside: every line was traced on its first attempt.</p>\n",
         );
     } else {
-        h.push_str("<table id=\"t-events\">\n<tr><th class=\"t\">time (UTC)</th><th>line</th><th class=\"t\">device</th><th class=\"t\">what</th></tr>\n");
+        h.push_str("<table id=\"t-events\">\n<thead><tr><th class=\"t\">time (UTC)</th><th>line</th><th class=\"t\">device</th><th class=\"t\">what</th></tr></thead>\n");
         let mut rows: Vec<(chrono::DateTime<chrono::Utc>, String, String, String)> = j
             .interruptions
             .iter()
@@ -515,7 +543,7 @@ fn events(h: &mut String, j: &ResumeState) {
         let _ = writeln!(
             h,
             "<p>Stopped {}: {} ({}).</p>",
-            esc(&stop.time.to_rfc3339()),
+            esc(&stop.time.format("%Y-%m-%d %H:%M:%S UTC").to_string()),
             esc(&format!("{:?}", stop.status).to_lowercase()),
             esc(&stop.reason)
         );
@@ -562,11 +590,11 @@ fn areal(h: &mut String, report: &Value) {
     if cols.is_empty() {
         return;
     }
-    h.push_str("<h2 id=\"areal\">Areal parameters (ISO 25178-2)</h2>\n<table id=\"t-areal\">\n<tr><th class=\"t\">parameter</th>");
+    h.push_str("<h2 id=\"areal\">Areal parameters (ISO 25178-2)</h2>\n<table id=\"t-areal\">\n<thead><tr><th class=\"t\">parameter</th>");
     for (n, _) in &cols {
         let _ = write!(h, "<th>{n}</th>");
     }
-    h.push_str("</tr>\n");
+    h.push_str("</tr></thead>\n");
     for (key, head, q) in AREAL_ROWS {
         let mut cells = vec![("t", esc(head))];
         for (_, s) in &cols {
@@ -588,48 +616,55 @@ fn lines(h: &mut String, report: &Value) {
     let Some(lines) = report["lines"].as_array() else {
         return;
     };
-    h.push_str("<h2 id=\"lines\">Per line (ISO 4287, ISO 13565-2)</h2>\n<div class=\"scroll\"><table id=\"t-lines\">\n<tr><th>line</th><th>y mm</th>");
+    h.push_str("<h2 id=\"lines\">Per line (ISO 4287, ISO 13565-2)</h2>\n");
     let definitions = &report["recipe"]["definitions"];
     // A parameter's definition, by the stem of its key ("Rdc_um" → "Rdc").
     let definition = |key: &str| definitions[key.split('_').next().unwrap_or(key)].as_str();
-    for (key, head, _) in LINE_COLUMNS {
-        match definition(key) {
-            Some(d) => {
-                let _ = write!(h, "<th title=\"{}\">{}</th>", esc(d), esc(head));
+    for (id, family, range) in LINE_FAMILIES {
+        let columns = &LINE_COLUMNS[range.clone()];
+        let _ = write!(
+            h,
+            "<h3>{family}</h3>\n<div class=\"scroll\"><table id=\"{id}\">\n<thead><tr><th>line</th><th>y mm</th>"
+        );
+        for (key, head, _) in columns {
+            match definition(key) {
+                Some(d) => {
+                    let _ = write!(h, "<th title=\"{}\">{}</th>", esc(d), esc(head));
+                }
+                None => {
+                    let _ = write!(h, "<th>{}</th>", esc(head));
+                }
             }
-            None => {
-                let _ = write!(h, "<th>{}</th>", esc(head));
+        }
+        h.push_str("</tr></thead>\n");
+        for l in lines {
+            let mut cells = vec![
+                ("", line_label(l["index"].as_u64().unwrap_or(0))),
+                ("", num(&l["y_mm"], Quantity::PositionMm)),
+            ];
+            for (key, _, q) in columns {
+                cells.push(("", num(&l[*key], *q)));
             }
+            row(h, &cells);
         }
-    }
-    h.push_str("</tr>\n");
-    for l in lines {
-        let mut cells = vec![
-            ("", line_label(l["index"].as_u64().unwrap_or(0))),
-            ("", num(&l["y_mm"], Quantity::PositionMm)),
-        ];
-        for (key, _, q) in LINE_COLUMNS {
-            cells.push(("", num(&l[*key], *q)));
+        for (name, mean) in [("mean", true), ("s.d.", false)] {
+            let mut cells = vec![("t", format!("<b>{name}</b>")), ("", String::new())];
+            for (key, _, q) in columns {
+                let v: Vec<f64> = lines.iter().filter_map(|l| l[*key].as_f64()).collect();
+                let (m, sd) = mean_sd(&v);
+                cells.push((
+                    "",
+                    if v.is_empty() {
+                        String::new()
+                    } else {
+                        fmt(if mean { m } else { sd }, *q)
+                    },
+                ));
+            }
+            row(h, &cells);
         }
-        row(h, &cells);
+        h.push_str("</table></div>\n");
     }
-    for (name, mean) in [("mean", true), ("s.d.", false)] {
-        let mut cells = vec![("t", format!("<b>{name}</b>")), ("", String::new())];
-        for (key, _, q) in LINE_COLUMNS {
-            let v: Vec<f64> = lines.iter().filter_map(|l| l[*key].as_f64()).collect();
-            let (m, sd) = mean_sd(&v);
-            cells.push((
-                "",
-                if v.is_empty() {
-                    String::new()
-                } else {
-                    fmt(if mean { m } else { sd }, *q)
-                },
-            ));
-        }
-        row(h, &cells);
-    }
-    h.push_str("</table></div>\n");
     // Rδc and Rmr depend on levels chosen per instrument and recipe: said on the page, not
     // only in a heading's tooltip.
     let levels: Vec<String> = [("Rdc_um", "Rδc"), ("Rmr_pct", "Rmr")]
@@ -641,18 +676,19 @@ fn lines(h: &mut String, report: &Value) {
     }
 }
 
-fn instrument(h: &mut String, report: &Value) {
-    let Some(lines) = report["lines"].as_array() else {
-        return;
-    };
-    if !lines
-        .iter()
-        .any(|l| l["instrument"].as_array().is_some_and(|c| !c.is_empty()))
-    {
-        return;
-    }
-    h.push_str("<h2 id=\"instrument\">The instrument's results beside ours</h2>\n<p>Flagged when |ours − instrument| exceeds 2 % of the instrument's value, or 0.005 µm, 1 % point or 0.05 for dimensionless parameters, whichever is larger.</p>\n<div class=\"scroll\"><table id=\"t-instrument\">\n<tr><th>line</th><th class=\"t\">parameter</th><th>instrument</th><th>ours</th><th>ours − instrument</th><th>tolerance</th><th class=\"t\">within</th></tr>\n");
-    let mut flagged = 0;
+/// One comparison of the instrument's result with ours, as the page shows it.
+struct Comparison {
+    line: String,
+    name: String,
+    cells: [String; 4],
+    /// |ours − instrument| ÷ tolerance, `None` when not compared.
+    share: Option<f64>,
+    /// |ours − instrument| with its unit.
+    abs_diff: String,
+}
+
+fn comparisons(lines: &[Value]) -> Vec<Comparison> {
+    let mut out = Vec::new();
     for l in lines {
         for c in l["instrument"].as_array().into_iter().flatten() {
             let unit = c["unit"].as_str().unwrap_or("");
@@ -664,14 +700,6 @@ fn instrument(h: &mut String, report: &Value) {
                 c["difference"].as_f64(),
             );
             let tol = inst.map(|i| tolerance(i, unit));
-            let within = match (diff, tol) {
-                (Some(d), Some(t)) if d.abs() <= t => "yes".to_string(),
-                (Some(_), Some(_)) => {
-                    flagged += 1;
-                    "<span class=\"flag\">NO</span>".to_string()
-                }
-                _ => "<span class=\"muted\">not compared</span>".to_string(),
-            };
             let name = text(&c["name"]).trim().to_string();
             let name = match c["compared_with"].as_str() {
                 Some(w) if !w.eq_ignore_ascii_case(&name) => format!("{name} (ours: {w})"),
@@ -680,21 +708,105 @@ fn instrument(h: &mut String, report: &Value) {
             let with_unit = |v: Option<f64>, q: Quantity| {
                 v.map(|v| format!("{} {u}", fmt(v, q))).unwrap_or_default()
             };
-            row(
-                h,
-                &[
-                    ("", line_label(l["index"].as_u64().unwrap_or(0))),
-                    ("t", esc(&name)),
-                    ("", with_unit(inst, q)),
-                    ("", with_unit(ours, q)),
-                    ("", with_unit(diff, Quantity::Difference)),
-                    ("", with_unit(tol, Quantity::Difference)),
-                    ("t", within),
+            out.push(Comparison {
+                line: line_label(l["index"].as_u64().unwrap_or(0)),
+                name,
+                cells: [
+                    with_unit(inst, q),
+                    with_unit(ours, q),
+                    with_unit(diff, Quantity::Difference),
+                    with_unit(tol, Quantity::Difference),
                 ],
-            );
+                share: match (diff, tol) {
+                    (Some(d), Some(t)) if t > 0.0 => Some(d.abs() / t),
+                    _ => None,
+                },
+                abs_diff: with_unit(diff.map(f64::abs), Quantity::Difference),
+            });
         }
     }
+    out
+}
+
+fn comparison_table(h: &mut String, id: &str, rows: &[&Comparison]) {
+    let _ = write!(
+        h,
+        "<div class=\"scroll\"><table id=\"{id}\">\n<thead><tr><th>line</th><th class=\"t\">parameter</th><th>instrument</th><th>ours</th><th>ours − instrument</th><th>tolerance</th><th class=\"t\">within</th></tr></thead>\n"
+    );
+    for c in rows {
+        let within = match c.share {
+            Some(s) if s <= 1.0 => "yes".to_string(),
+            Some(_) => "<span class=\"flag\">NO</span>".to_string(),
+            None => "<span class=\"muted\">not compared</span>".to_string(),
+        };
+        let [a, b, d, t] = &c.cells;
+        row(
+            h,
+            &[
+                ("", c.line.clone()),
+                ("t", esc(&c.name)),
+                ("", a.clone()),
+                ("", b.clone()),
+                ("", d.clone()),
+                ("", t.clone()),
+                ("t", within),
+            ],
+        );
+    }
     h.push_str("</table></div>\n");
+}
+
+/// The instrument's results beside ours: one sentence for all of them (how many within the
+/// tolerance, the largest difference relative to its tolerance), the exceptions in a table,
+/// and every comparison in a collapsed table a screen can open (left off paper).
+fn instrument(h: &mut String, report: &Value) {
+    let Some(lines) = report["lines"].as_array() else {
+        return;
+    };
+    let all = comparisons(lines);
+    if all.is_empty() {
+        return;
+    }
+    h.push_str("<h2 id=\"instrument\">The instrument's results beside ours</h2>\n<p>Flagged when |ours − instrument| exceeds 2 % of the instrument's value, or 0.005 µm, 1 % point or 0.05 for dimensionless parameters, whichever is larger.</p>\n");
+    let compared: Vec<&Comparison> = all.iter().filter(|c| c.share.is_some()).collect();
+    let within = compared
+        .iter()
+        .filter(|c| c.share.is_some_and(|s| s <= 1.0))
+        .count();
+    let flagged = compared.len() - within;
+    let largest = compared
+        .iter()
+        .max_by(|a, b| a.share.unwrap_or(0.0).total_cmp(&b.share.unwrap_or(0.0)));
+    let mut sentence = format!("{within} of {} within tolerance", compared.len());
+    if let Some(c) = largest {
+        let _ = write!(
+            sentence,
+            "; largest |Δ| relative to its tolerance: {} {} (line {})",
+            esc(&c.name),
+            c.abs_diff,
+            c.line
+        );
+    }
+    let not_compared = all.len() - compared.len();
+    if not_compared > 0 {
+        let _ = write!(sentence, "; {not_compared} not compared");
+    }
+    let _ = writeln!(h, "<p id=\"instrument-summary\"><b>{sentence}.</b></p>");
+    let exceptions: Vec<&Comparison> = all
+        .iter()
+        .filter(|c| c.share.is_none_or(|s| s > 1.0))
+        .collect();
+    if !exceptions.is_empty() {
+        h.push_str("<p>The exceptions:</p>\n");
+        comparison_table(h, "t-instrument-exceptions", &exceptions);
+    }
+    let _ = writeln!(
+        h,
+        "<details class=\"noprint\"><summary>All {} comparisons</summary>",
+        all.len()
+    );
+    comparison_table(h, "t-instrument", &all.iter().collect::<Vec<_>>());
+    h.push_str("</details>\n");
     let _ = writeln!(
         h,
         "<p id=\"instrument-flagged\">{flagged} comparison(s) outside the tolerance.</p>"
@@ -749,7 +861,7 @@ fn holdout(h: &mut String, report: &Value) {
     if !m.is_object() {
         return;
     }
-    h.push_str("<table id=\"t-model\">\n<tr><th class=\"t\">left out and predicted</th><th>lines</th><th>largest |model − measured| µm</th><th>largest rms µm</th></tr>\n");
+    h.push_str("<table id=\"t-model\">\n<thead><tr><th class=\"t\">left out and predicted</th><th>lines</th><th>largest |model − measured| µm</th><th>largest rms µm</th></tr></thead>\n");
     for (what, key) in [
         ("every 2nd point of each line", "points_left_out"),
         ("every 2nd line", "lines_left_out"),
@@ -860,6 +972,42 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_per_line_families_hold_every_column_once_in_order() {
+        let mut next = 0;
+        for (_, _, r) in LINE_FAMILIES {
+            assert_eq!(r.start, next);
+            assert!(r.len() <= 10, "a family of at most 10 columns fits a page");
+            next = r.end;
+        }
+        assert_eq!(next, LINE_COLUMNS.len());
+    }
+
+    #[test]
+    fn the_instrument_comparison_is_one_sentence_and_its_exceptions() {
+        let cmp = |name: &str, inst: f64, ours: f64| serde_json::json!({"name": name, "unit": "um", "instrument": inst, "ours": ours, "difference": ours - inst});
+        let report = serde_json::json!({"lines": [
+            {"index": 0, "instrument": [cmp("Ra", 1.0, 1.001), cmp("Rz", 5.0, 5.5)]},
+            {"index": 1, "instrument": [cmp("Ra", 1.0, 1.0005), {"name": "RzJIS", "unit": "um", "instrument": null}]},
+        ]});
+        let mut h = String::new();
+        instrument(&mut h, &report);
+        assert!(
+            h.contains("2 of 3 within tolerance; largest |Δ| relative to its tolerance: Rz 0.5"),
+            "{h}"
+        );
+        assert!(h.contains("; 1 not compared."), "{h}");
+        let exceptions =
+            &h[h.find("t-instrument-exceptions").unwrap()..h.find("<details").unwrap()];
+        assert_eq!(exceptions.matches("<tr>").count(), 1 + 2, "{exceptions}");
+        assert!(
+            exceptions.contains("Rz")
+                && exceptions.contains("RzJIS")
+                && !exceptions.contains(">Ra<")
+        );
+        assert!(h.contains("All 4 comparisons"));
+    }
+
+    #[test]
     fn text_is_escaped() {
         assert_eq!(
             esc("<B&S> \"x\" 'y'"),
@@ -917,7 +1065,7 @@ mod tests {
         line["index"] = 0.into();
         line["y_mm"] = 0.0.into();
         let report = serde_json::json!({"kind": "grid", "lines": [line]});
-        let h = render(&report, None, &[]);
+        let h = render(&report, None, &[], None);
         let rpc = params["RPc_per_cm"].as_f64().unwrap();
         assert!(h.contains("<th>RPc /cm</th>"));
         assert!(h.contains(&format!("<td>{}</td>", fmt(rpc, Quantity::PerLength))));
@@ -936,7 +1084,7 @@ mod tests {
             }},
             "lines": [{"index": 0, "y_mm": 0.0, "Ra_um": 0.5, "Rdc_um": 0.2, "Rmr_pct": 12.0}],
         });
-        let h = render(&report, None, &[]);
+        let h = render(&report, None, &[], None);
         assert!(
             h.contains("<th title=\"ISO4287:1997/Ra &lt;mean&gt;\">Ra µm</th>"),
             "{h}"
@@ -950,11 +1098,11 @@ mod tests {
         ), "{h}");
         // Without a recipe, no sentence of levels.
         let bare = serde_json::json!({"kind": "grid", "lines": [{"index": 0, "y_mm": 0.0}]});
-        assert!(!render(&bare, None, &[]).contains("line-levels"));
+        assert!(!render(&bare, None, &[], None).contains("line-levels"));
     }
 
     #[test]
-    fn a_report_renders_with_warnings_first_and_numbers_for_people() {
+    fn a_report_renders_its_result_then_its_warnings_and_numbers_for_people() {
         let report = serde_json::json!({
             "software": "surfscan 0.1.0 (commit abc)",
             "input": "/scans/x",
@@ -974,9 +1122,11 @@ mod tests {
             "recipe": {"lambda_c_mm": 0.8, "spike_rule": "isolated spike: at most 5 points", "outliers": "flag",
                        "holdout_threshold_sq": 0.5}
         });
-        let h = render(&report, None, &[]);
+        let h = render(&report, None, &[], None);
+        // The result first (what is signed), the warnings that qualify it right after.
         let warn = h.find("id=\"warnings\"").unwrap();
-        assert!(warn < h.find("id=\"result\"").unwrap());
+        assert!(h.find("id=\"result\"").unwrap() < warn);
+        assert!(warn < h.find("id=\"traceability\"").unwrap_or(usize::MAX));
         assert!(warn < h.find("id=\"lines\"").unwrap());
         assert!(h.contains("line 4 &lt;left out&gt;"));
         assert!(h.contains("<td>0.004500</td>"), "4 significant digits");

@@ -1,19 +1,22 @@
 //! The renderers: every file of a characterisation, made from the section results — plots
 //! (bearing curves, height map, measured vs model of one line, the Rk construction of each
 //! line: [`plots`]), `measured.x3p` and `model.x3p` ([`crate::x3p`]), `summary.csv`
-//! ([`summary`]), `report.json` and `report.html` ([`html`]), each replaced atomically. Nothing
+//! ([`summary`]), `report.json` and `report.html` ([`html`], laid out for paper by
+//! [`print`]), each replaced atomically. Nothing
 //! here computes a result; the numbers come from the sections.
 //!
 //! Layer 4 (reporting): depends on [`crate::x3p`], [`crate::atomic`] and the report's types.
 
 pub mod html;
 pub mod plots;
+pub mod print;
 pub mod summary;
 pub mod text_cache;
 
 use super::context::ReportContext;
 use super::document::{FigureData, Report};
 use super::error::{metrology, ReportError};
+use super::header::LabHeader;
 use super::sections::overlay::Overlay;
 use crate::atomic::write_atomically;
 use crate::grid::Grid;
@@ -412,13 +415,42 @@ pub fn write_data_files(
     })
 }
 
+/// The logo of `[report]`, read for embedding; a logo that cannot be read costs the logo
+/// and adds a warning that says why and what to do, never the report.
+pub fn read_logo(lab: &LabHeader, warnings: &mut Vec<String>) -> Option<html::Figure> {
+    let path = lab.logo.as_ref()?;
+    let Some(media_type) = lab.logo_media_type() else {
+        warnings.push(format!(
+            "[report] logo {}: not a PNG, JPEG or SVG file; the report is printed without a logo",
+            path.display()
+        ));
+        return None;
+    };
+    match std::fs::read(path) {
+        Ok(bytes) => Some(html::Figure {
+            title: "logo".into(),
+            media_type,
+            bytes,
+            collapsed: false,
+        }),
+        Err(e) => {
+            warnings.push(format!(
+                "[report] logo {}: cannot be read ({e}); the report is printed without a logo — put the file there or correct the path",
+                path.display()
+            ));
+            None
+        }
+    }
+}
+
 /// Writes `report.json`, then `report.html`, the report for people, with the plots embedded
-/// and what the scan's journal recorded.
+/// and what the scan's journal recorded, headed by the laboratory's `logo`.
 pub fn write_report(
     out: &Path,
     files: &Files,
     report: &Report,
     ctx: &ReportContext,
+    logo: Option<&html::Figure>,
 ) -> Result<(), ReportError> {
     // report.json is encoded and written (and synced) while the HTML page is put together; the
     // page is written only once report.json is on disk, and the errors come in that order.
@@ -454,8 +486,8 @@ pub fn write_report(
         for (title, [png, svg]) in &files.rk_plots {
             figures.extend(html::Figure::from_files(title.clone(), png, svg, true));
         }
-        let page =
-            serde_json::to_value(report).map(|v| html::render(&v, journal.as_ref(), &figures));
+        let page = serde_json::to_value(report)
+            .map(|v| html::render(&v, journal.as_ref(), &figures, logo));
         json.join().unwrap_or_else(|_| {
             Err(ReportError::Metrology {
                 what: format!("{}: report.json", ctx.input),
@@ -468,4 +500,33 @@ pub fn write_report(
         })?;
         write_file(&files.report_html, page?.as_bytes())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_logo_that_cannot_be_read_costs_the_logo_and_says_why() {
+        let dir = tempfile::tempdir().unwrap();
+        let png = dir.path().join("logo.png");
+        std::fs::write(&png, b"\x89PNG").unwrap();
+        let mut warnings = Vec::new();
+        let lab = |p: &Path| LabHeader {
+            logo: Some(p.to_path_buf()),
+            ..LabHeader::default()
+        };
+        let f = read_logo(&lab(&png), &mut warnings).unwrap();
+        assert_eq!((f.media_type, f.bytes.len()), ("image/png", 4));
+        assert!(warnings.is_empty());
+        let missing = dir.path().join("gone.svg");
+        assert!(read_logo(&lab(&missing), &mut warnings).is_none());
+        assert_eq!(warnings.len(), 1);
+        assert!(
+            warnings[0].contains("gone.svg") && warnings[0].contains("without a logo"),
+            "{warnings:?}"
+        );
+        assert!(read_logo(&LabHeader::default(), &mut warnings).is_none());
+        assert_eq!(warnings.len(), 1);
+    }
 }

@@ -58,3 +58,33 @@ pub fn render(page: &Path) -> Rendered {
             .collect(),
     }
 }
+
+/// Prints `page` to `pdf` as the browser's print does (headless, a fresh profile, without
+/// the browser's own header and footer: the page's CSS margin boxes are what is printed).
+pub fn print_to_pdf(page: &Path, pdf: &Path) {
+    let profile = tempfile::tempdir().unwrap();
+    let out = Command::new(chromium())
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--no-pdf-header-footer",
+            "--virtual-time-budget=10000",
+        ])
+        .arg(format!("--user-data-dir={}", profile.path().display()))
+        .arg(format!("--print-to-pdf={}", pdf.display()))
+        .arg(format!("file://{}", page.display()))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success() && pdf.exists(),
+        "chromium did not print {}: {}",
+        page.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -1,0 +1,184 @@
+//! The printed report: what `report.html` adds for paper — the page (A4 or Letter, margins,
+//! "page X of Y" and the report's name in the CSS paged-media margin boxes, which Chromium
+//! prints), the laboratory's header from `[report]`, the print rules (tables repeat their
+//! heading rows and keep rows whole, figures stay whole, what only a screen can use is left
+//! out) and the signature block a metrologist signs.
+//!
+//! The page's running header and footer are CSS strings: the report's words are escaped for
+//! a CSS string inside a `<style>` element ([`css_string`]).
+//!
+//! Layer 4 (reporting): depends on [`super::html`]'s escaping and figures; returns text.
+
+use super::html::{esc, Figure};
+use base64::Engine as _;
+use serde_json::Value;
+use std::fmt::Write as _;
+
+/// `s` as a CSS string literal (quotes included) that is safe inside `<style>`: quotes,
+/// backslashes, line breaks and `<` (which could close the element) as CSS escapes.
+pub fn css_string(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' | '\\' | '<' | '>' | '&' => {
+                let _ = write!(out, "\\{:x} ", c as u32);
+            }
+            '\n' | '\r' => out.push(' '),
+            c if c.is_control() => {}
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+/// The page rules and the print media rules: `title` runs along the top of every page,
+/// the laboratory (when `[report]` names one) on the left, "page X of Y" at the bottom.
+pub fn page_style(report: &Value, title: &str) -> String {
+    let lab = &report["lab"];
+    let size = match lab["paper"].as_str() {
+        Some("Letter") => "letter",
+        _ => "A4",
+    };
+    let name = lab["lab"].as_str().filter(|s| !s.is_empty());
+    let left = name.unwrap_or("Surface report");
+    format!(
+        "@page{{size:{size};margin:16mm 13mm 17mm 13mm;\
+@top-left{{content:{left};font-size:8pt;color:#555}}\
+@top-right{{content:{title};font-size:8pt;color:#555}}\
+@bottom-left{{content:{software};font-size:7pt;color:#777}}\
+@bottom-right{{content:\"page \" counter(page) \" of \" counter(pages);font-size:8pt}}}}\n\
+@media print{{\
+body{{max-width:none;margin:0;padding:0;font-size:9pt;line-height:1.3}}\
+h1{{font-size:14pt}}h2{{font-size:11pt;margin-top:1.1em;break-after:avoid}}\
+table{{font-size:7.5pt;margin:.4em 0}}th,td{{padding:.1em .3em}}\
+thead{{display:table-header-group}}tr{{break-inside:avoid}}\
+.scroll{{overflow:visible}}\
+figure{{break-inside:avoid;margin:.5em 0}}img{{max-height:105mm;max-width:100%}}\
+details,.noprint{{display:none}}\
+.keep{{break-inside:avoid}}\
+.signatures{{break-inside:avoid;margin-top:1.5em}}\
+.lab-header{{border-bottom:1px solid #999}}\
+}}\n",
+        left = css_string(left),
+        title = css_string(title),
+        software = css_string(&format!(
+            "written by {}",
+            report["software"].as_str().unwrap_or("surfscan")
+        )),
+    )
+}
+
+/// The laboratory's header (name, address lines, logo) when `[report]` names a laboratory
+/// or a logo; empty otherwise.
+pub fn lab_header(report: &Value, logo: Option<&Figure>) -> String {
+    let lab = &report["lab"];
+    let name = lab["lab"].as_str().unwrap_or("");
+    let address = lab["address"].as_str().unwrap_or("");
+    if name.is_empty() && address.is_empty() && logo.is_none() {
+        return String::new();
+    }
+    let mut h = String::from("<header class=\"lab-header\" id=\"lab-header\">");
+    if let Some(f) = logo {
+        let _ = write!(
+            h,
+            "<img class=\"logo\" alt=\"{} logo\" src=\"data:{};base64,{}\">",
+            esc(name),
+            f.media_type,
+            base64::engine::general_purpose::STANDARD.encode(&f.bytes)
+        );
+    }
+    h.push_str("<div>");
+    if !name.is_empty() {
+        let _ = write!(h, "<div class=\"lab-name\">{}</div>", esc(name));
+    }
+    for l in address.lines().filter(|l| !l.trim().is_empty()) {
+        let _ = write!(h, "<div class=\"muted\">{}</div>", esc(l.trim()));
+    }
+    h.push_str("</div></header>\n");
+    h
+}
+
+/// The signature block: one row per role of `[report] signatures` with room for the name,
+/// the signature and the date; empty when the list is.
+pub fn signatures(report: &Value) -> String {
+    let roles: Vec<&str> = report["lab"]["signatures"]
+        .as_array()
+        .map(|a| a.iter().filter_map(Value::as_str).collect())
+        .unwrap_or_default();
+    if roles.is_empty() {
+        return String::new();
+    }
+    let mut h = String::from(
+        "<section class=\"signatures\" id=\"signatures\">\n<h2 id=\"approval\">Approval</h2>\n<table id=\"t-signatures\">\n<thead><tr><th class=\"t\">role</th><th class=\"t\">name</th><th class=\"t\">signature</th><th class=\"t\">date</th></tr></thead>\n",
+    );
+    for r in roles {
+        let _ = writeln!(
+            h,
+            "<tr class=\"sign\"><td class=\"t\">{}</td><td></td><td></td><td></td></tr>",
+            esc(r)
+        );
+    }
+    h.push_str("</table>\n</section>\n");
+    h
+}
+
+/// A time for people: an RFC 3339 time to the second (`2026-11-30 10:15:00 UTC`, or with
+/// its offset when not UTC); the text as given when it is not one.
+pub fn to_the_second(s: &str) -> String {
+    match chrono::DateTime::parse_from_rfc3339(s) {
+        Ok(t) if t.offset().local_minus_utc() == 0 => t.format("%Y-%m-%d %H:%M:%S UTC").to_string(),
+        Ok(t) => t.format("%Y-%m-%d %H:%M:%S %:z").to_string(),
+        Err(_) => s.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn css_strings_cannot_leave_the_string_or_the_style_element() {
+        assert_eq!(css_string("Lab \"A\""), "\"Lab \\22 A\\22 \"");
+        let s = css_string("</style><script>x</script>\\\n");
+        assert!(!s.contains('<') && !s.contains('\n'), "{s}");
+        assert_eq!(s.matches('"').count(), 2, "{s}");
+    }
+
+    #[test]
+    fn the_page_follows_the_paper_and_numbers_its_pages() {
+        let letter = page_style(&json!({"lab": {"lab": "Lab", "paper": "Letter"}}), "scan 1");
+        assert!(letter.contains("size:letter"), "{letter}");
+        assert!(letter.contains("counter(page) \" of \" counter(pages)"));
+        assert!(letter.contains("content:\"Lab\""));
+        let a4 = page_style(&json!({}), "scan 1");
+        assert!(a4.contains("size:A4") && a4.contains("content:\"Surface report\""));
+    }
+
+    #[test]
+    fn the_header_and_the_signatures_follow_the_report_table() {
+        let r = json!({"lab": {"lab": "Lab <1>", "address": "1 Road\nTown", "signatures": ["Measured by", "Approved by"]}});
+        let h = lab_header(&r, None);
+        assert!(h.contains("Lab &lt;1&gt;") && h.contains(">Town<"), "{h}");
+        assert_eq!(lab_header(&json!({"lab": {"lab": ""}}), None), "");
+        let s = signatures(&r);
+        assert_eq!(s.matches("class=\"sign\"").count(), 2);
+        assert!(s.find("Measured by").unwrap() < s.find("Approved by").unwrap());
+        assert_eq!(signatures(&json!({"lab": {"signatures": []}})), "");
+    }
+
+    #[test]
+    fn times_for_people_stop_at_the_second() {
+        assert_eq!(
+            to_the_second("2026-11-30T10:15:00.123456789Z"),
+            "2026-11-30 10:15:00 UTC"
+        );
+        assert_eq!(
+            to_the_second("2026-11-30T10:15:00.9+01:00"),
+            "2026-11-30 10:15:00 +01:00"
+        );
+        assert_eq!(to_the_second("not a time"), "not a time");
+    }
+}

@@ -1,0 +1,241 @@
+//! The printed report: a scan's `report.html` printed to PDF by headless Chromium (as the
+//! browser's print does), read back with poppler's `pdfinfo` and `pdftotext` (Debian's
+//! `poppler-utils`, installed by `.ci/run`). What a metrologist signs: a few pages on the
+//! paper `[report]` names, "page X of Y" on every page agreeing with the document, the
+//! laboratory's header and the result on the first page, every printed table's column
+//! headers on the page (none cut off at the right margin), the instrument comparison in one
+//! sentence, and the signature block.
+
+use serde_json::Value;
+use std::path::Path;
+use std::process::Command;
+
+fn pdftotext(pdf: &Path) -> String {
+    let out = Command::new("pdftotext")
+        .arg("-layout")
+        .arg(pdf)
+        .arg("-")
+        .output()
+        .unwrap_or_else(|e| {
+            panic!("pdftotext: {e}; run `bash .ci/run` or `apt-get install poppler-utils`")
+        });
+    assert!(
+        out.status.success(),
+        "pdftotext: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The number of pages and the page size line of `pdfinfo`.
+fn info(pdf: &Path) -> (usize, String) {
+    let out = Command::new("pdfinfo")
+        .arg(pdf)
+        .output()
+        .unwrap_or_else(|e| {
+            panic!("pdfinfo: {e}; run `bash .ci/run` or `apt-get install poppler-utils`")
+        });
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    let field = |name: &str| {
+        text.lines()
+            .find_map(|l| l.strip_prefix(name))
+            .map(|v| v.trim().to_string())
+            .unwrap_or_else(|| panic!("pdfinfo gives no {name}: {text}"))
+    };
+    (field("Pages:").parse().unwrap(), field("Page size:"))
+}
+
+/// Text without tags, entities decoded, runs of white space as one space.
+fn plain(s: &str) -> String {
+    let mut out = String::new();
+    let mut in_tag = false;
+    for c in s.chars() {
+        match c {
+            '<' => in_tag = true,
+            '>' => in_tag = false,
+            c if !in_tag => out.push(c),
+            _ => {}
+        }
+    }
+    let out = out
+        .replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&quot;", "\"")
+        .replace("&#39;", "'")
+        .replace("&amp;", "&");
+    out.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// The tables a printout shows (not inside a `<details>`, which print leaves out), each with
+/// the texts of its heading row.
+fn printed_tables(html: &str) -> Vec<(String, Vec<String>)> {
+    let mut out = Vec::new();
+    let mut from = 0;
+    while let Some(at) = html[from..].find("<table id=\"").map(|i| i + from) {
+        from = at + 1;
+        let before = &html[..at];
+        if before.matches("<details").count() > before.matches("</details>").count() {
+            continue;
+        }
+        let id_start = at + "<table id=\"".len();
+        let id = html[id_start..id_start + html[id_start..].find('"').unwrap()].to_string();
+        let end = at + html[at..].find("</table>").unwrap();
+        let table = &html[at..end];
+        let Some(head) = table
+            .find("<thead>")
+            .map(|s| &table[s..s + table[s..].find("</thead>").unwrap()])
+        else {
+            continue;
+        };
+        let heads: Vec<String> = head
+            .split("</th>")
+            .filter_map(|cell| {
+                let open = cell.rfind("<th>").or_else(|| cell.rfind("<th "))?;
+                let body = &cell[open..];
+                Some(plain(&body[body.find('>')? + 1..]))
+            })
+            .collect();
+        out.push((id, heads));
+    }
+    out
+}
+
+/// The comparisons with the instrument, and how many are within the report's stated
+/// tolerance (2 % of the instrument's value, at least 0.005 µm, 1 % point or 0.05).
+fn instrument_within(report: &Value) -> (usize, usize) {
+    let mut compared = 0;
+    let mut within = 0;
+    for l in report["lines"].as_array().unwrap() {
+        for c in l["instrument"].as_array().into_iter().flatten() {
+            let (Some(i), Some(d)) = (c["instrument"].as_f64(), c["difference"].as_f64()) else {
+                continue;
+            };
+            compared += 1;
+            let floor = match c["unit"].as_str() {
+                Some("um") => 0.005,
+                Some("%") => 1.0,
+                _ => 0.05,
+            };
+            if d.abs() <= (0.02 * i.abs()).max(floor) {
+                within += 1;
+            }
+        }
+    }
+    (within, compared)
+}
+
+/// Prints `dir/report.html` to `pdf` and checks it as a metrologist reads it; returns the
+/// page size `pdfinfo` reports.
+pub fn check_printed(dir: &Path, pdf: &Path, lab: &str, roles: &[&str]) -> String {
+    let page = dir.join("report.html");
+    crate::common::chromium::print_to_pdf(&page, pdf);
+    let (pages, size) = info(pdf);
+    assert!(
+        (2..=8).contains(&pages),
+        "a few pages, not {pages} (the screen's page printed 17)"
+    );
+    let text = pdftotext(pdf).replace('\u{fb01}', "fi");
+    // "page X of Y" on every page, Y the document's page count: the paged-media margin boxes
+    // were printed and count what was printed.
+    for k in 1..=pages {
+        assert!(
+            text.contains(&format!("page {k} of {pages}")),
+            "no \"page {k} of {pages}\" in the printout"
+        );
+    }
+    assert!(!text.contains(&format!("of {}", pages + 1)));
+    let first = &text[..text.find("page 1 of").unwrap()];
+    assert!(first.contains(lab), "the laboratory heads page 1");
+    let result = first.find("Result").expect("the result on page 1");
+    assert!(result < first.find("Warnings").unwrap_or(usize::MAX));
+    assert!(first.contains("31 of 31 planned characterised"));
+
+    let html = std::fs::read_to_string(&page).unwrap();
+    let tables = printed_tables(&html);
+    for id in [
+        "t-lines",
+        "t-lines-spacing",
+        "t-lines-material",
+        "t-areal",
+        "t-signatures",
+    ] {
+        assert!(
+            tables.iter().any(|(t, _)| t == id),
+            "{id} is not printed: {tables:?}"
+        );
+    }
+    let lines: Vec<String> = text
+        .lines()
+        .map(|l| l.split_whitespace().collect::<Vec<_>>().join(" "))
+        .collect();
+    for (id, heads) in &tables {
+        // The heading row on one printed line, every column there in order: nothing cut off.
+        let found = lines.iter().any(|l| {
+            let mut at = 0;
+            heads.iter().all(|h| match l[at..].find(h.as_str()) {
+                Some(i) => {
+                    at += i + h.len();
+                    true
+                }
+                None => false,
+            })
+        });
+        assert!(
+            found,
+            "{id}: its column headers {heads:?} are not on the page"
+        );
+    }
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
+    let (within, compared) = instrument_within(&report);
+    assert!(compared > 0);
+    assert!(
+        text.contains(&format!(
+            "{within} of {compared} within tolerance; largest |Δ|"
+        )),
+        "the instrument comparison in one sentence"
+    );
+    let approval = text.rfind("Approval").expect("the signature block");
+    let mut at = approval;
+    for r in roles {
+        at += text[at..]
+            .find(r)
+            .unwrap_or_else(|| panic!("no {r} after Approval"));
+    }
+    size
+}
+
+/// A station configuration for `analyze --config`: `base` with its `[report]` table replaced.
+pub fn with_report_table(base: &str, table: &str) -> String {
+    let start = base.find("[report]").expect("a [report] table");
+    let end = base[start + 1..]
+        .find("\n[")
+        .map_or(base.len(), |i| start + 1 + i + 1);
+    format!("{}{table}\n{}", &base[..start], &base[end..])
+}
+
+#[test]
+fn a_report_table_is_replaced_whole() {
+    let base = "[a]\nx = 1\n\n[report]\nlab = \"A\"\npaper = \"A4\"\n\n[b]\ny = 2\n";
+    let got = with_report_table(base, "[report]\nlab = \"B\"\n");
+    assert_eq!(got, "[a]\nx = 1\n\n[report]\nlab = \"B\"\n\n[b]\ny = 2\n");
+    let tail = "[a]\nx = 1\n[report]\nlab = \"A\"\n";
+    assert_eq!(
+        with_report_table(tail, "[report]\nlab = \"B\"\n"),
+        "[a]\nx = 1\n[report]\nlab = \"B\"\n\n"
+    );
+}
+
+#[test]
+fn printed_tables_leave_out_the_collapsed_ones() {
+    let html = "<table id=\"a\"><thead><tr><th>x &amp; y</th><th class=\"t\">b <span>µm</span></th></tr></thead></table>\
+<details><summary>all</summary><table id=\"b\"><thead><tr><th>z</th></tr></thead></table></details>\
+<table id=\"c\"><tr><th>k</th><td>v</td></tr></table>";
+    assert_eq!(
+        printed_tables(html),
+        vec![(
+            "a".to_string(),
+            vec!["x & y".to_string(), "b µm".to_string()]
+        )]
+    );
+}
