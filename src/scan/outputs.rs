@@ -5,7 +5,8 @@
 //! back and nothing is refitted here. Without a characterisation, or when it fails,
 //! `report.json` holds the fit summary and the instrument's own results per line.
 //!
-//! Layer 3 (session): depends on [`crate::fit`], [`super::surface_files`],
+//! Layer 3 (session): depends on [`crate::fit`], [`crate::grid`] (the lines as one grid),
+//! [`crate::metrology::surface_model`] (a fit other than the paper's), [`super::surface_files`],
 //! [`super::traceability`], [`super::line`] and [`crate::atomic`].
 
 use super::journal::StartRecord;
@@ -17,6 +18,7 @@ use crate::atomic::write_atomically;
 use crate::fit::{
     max_residual_mm, FitError, FitOptions, FitResult, IncrementalFitter, MethodError,
 };
+use crate::grid::Grid;
 use crate::iges::IgesOptions;
 use crate::metrology::outliers::LineSpike;
 use crate::metrology::surface_model::{fit_model, ModelRecipe};
@@ -243,13 +245,24 @@ pub fn recipe_of(plan: &Plan, lines: &[StoredLine]) -> ModelRecipe {
     }
 }
 
-fn grid_of(lines: &[StoredLine]) -> (Vec<f64>, Vec<f64>, usize) {
+/// The scan's committed lines as the one [`Grid`] (each line was checked against the plan as
+/// it was committed, so they share their points and x pitch), for the fit and its residual.
+fn grid_of(lines: &[StoredLine]) -> Grid {
     let cols = lines.first().map_or(0, |l| l.profile.len());
     let mut z = Vec::with_capacity(lines.len() * cols);
     for l in lines {
         z.extend_from_slice(&l.profile.heights_um);
     }
-    (z, lines.iter().map(StoredLine::y_mm).collect(), cols)
+    let pitch_x_mm = lines.first().map_or(f64::NAN, |l| l.profile.pitch_x_mm);
+    Grid {
+        index: lines.iter().map(|l| l.meta.id.index).collect(),
+        ..Grid::new(
+            z,
+            cols,
+            pitch_x_mm,
+            lines.iter().map(StoredLine::y_mm).collect(),
+        )
+    }
 }
 
 /// Finishes the fit, writes the IGES, then the characterisation (or, without one or when it
@@ -264,8 +277,7 @@ pub fn write_outputs(
     characterise: Option<&dyn Characterise>,
 ) -> Result<Outputs, OutputsError> {
     let t_fit = Instant::now();
-    let (mut z, mut y, cols) = grid_of(lines);
-    let pitch_x_mm = lines.first().map_or(f64::NAN, |l| l.profile.pitch_x_mm);
+    let grid = grid_of(lines);
     let recipe = recipe_of(plan, lines);
     // The paper's surface is the incremental fitter's; anything else is fitted here from the
     // lines as committed.
@@ -273,19 +285,23 @@ pub fn write_outputs(
         (fitter.finish()?, Vec::new())
     } else {
         drop(fitter);
-        let mut grid = crate::grid::Grid::new(z, cols, pitch_x_mm, y);
-        grid.index = lines.iter().map(|l| l.meta.id.index).collect();
         let m = fit_model(&grid, &recipe)?;
-        (z, y) = (grid.heights_um, grid.y_mm);
         (m.fit, m.replaced)
     };
     let finish_s = t_fit.elapsed().as_secs_f64();
     let residual = if lines.is_empty() {
         f64::NAN
     } else {
-        max_residual_mm(&fit, pitch_x_mm, &y, &z, cols)
+        max_residual_mm(
+            &fit,
+            grid.pitch_x_mm,
+            &grid.y_mm,
+            &grid.heights_um,
+            grid.cols,
+        )
     };
-    drop(z);
+    let cols = grid.cols;
+    drop(grid);
     let iges_path = dir.join("surface.igs");
     let mut start_lines = traceability_lines(start, plan);
     start_lines.extend(recipe.start_lines(&replaced));
