@@ -8,8 +8,8 @@
 //! scan runner never sees this file's types).
 //!
 //! Layer 4 (process edge): depends on the settings types of [`crate::sj210`],
-//! [`crate::stage`], [`crate::hook`] and [`crate::report::header`], on [`crate::units`], and reads one file; nothing
-//! from the scan session.
+//! [`crate::stage`], [`crate::hook`], [`crate::report::header`] and [`crate::web`], on
+//! [`crate::units`], and reads one file; nothing from the scan session.
 
 use crate::hook::HookSettings;
 use crate::report::header::LabHeader;
@@ -60,6 +60,9 @@ pub struct Config {
     /// report.
     #[serde(default)]
     pub report: LabHeader,
+    /// `[web]`: the station's page; none unless the table is there.
+    #[serde(default)]
+    pub web: Option<crate::web::settings::WebSettings>,
 }
 
 /// `[jobs]`: recipes (named plans with their measuring conditions, analysis and
@@ -528,6 +531,10 @@ impl Config {
             m.validate()
                 .map_err(|(key, message)| Config::invalid(path, key, message))?;
         }
+        if let Some(w) = &self.web {
+            w.validate()
+                .map_err(|(key, message)| Config::invalid(path, key, message))?;
+        }
         if let Some(n) = &self.notify {
             if n.command.is_empty() {
                 return Err(Config::invalid(
@@ -859,6 +866,8 @@ pub const NUMERIC_KEYS: &[NumericKey] = &[
     int_key!("notify.timeout-s", 1, 86_400, "s", "the default is 30", |c| c.notify.as_ref().map(|n| n.timeout_s)),
     int_key!("mqtt.outbox-max", 1, 1_000_000, "", "messages kept while the broker is away; the default is 10000", |c| c.mqtt.as_ref().map(|m| m.outbox_max)),
     int_key!("mqtt.keep-alive-s", 5, 3600, "s", "the default is 30", |c| c.mqtt.as_ref().map(|m| m.keep_alive_s)),
+    int_key!("web.max-connections", 1, 4096, "", "connections the page serves at once; the default is 256", |c| c.web.as_ref().map(|w| w.max_connections)),
+    int_key!("web.session-hours", 1, 744, "h", "how long a browser stays signed in, at most 31 days; the default is 12", |c| c.web.as_ref().map(|w| w.session_hours)),
     real_key!("traceability.stylus-tip-radius-um", 0.01, 100.0, "µm", "the SJ-210's standard styli have 2 or 5 µm", |c| c.traceability.stylus_tip_radius_um),
     real_key!("traceability.calibration-uncertainty-pct", 0.001, 100.0, "%", "the expanded (k = 2) relative uncertainty on the calibration certificate, e.g. 3.0", |c| c.traceability.calibration_uncertainty_pct),
 ];

@@ -22,7 +22,8 @@
 //!    scan).
 //! 4. Process edges: [`config`] (the station's TOML, validated), [`telemetry`] (logging),
 //!    [`input`] (the one reader of scan directories, grid and profile CSVs and X3P files),
-//!    [`control`] (the operator's control socket),
+//!    [`control`] (the operator's control socket), [`web`] (the station's page and its HTTP
+//!    API, optional),
 //!    [`service`] (systemd notifications), [`hook`] (the notification command),
 //!    [`report`] (characterisation of a completed scan, a scan directory or a grid into
 //!    report.json, report.html, summary.csv, plots and X3P, section by section; the runner
@@ -64,4 +65,5 @@ pub mod station_lock;
 pub mod telemetry;
 pub mod transport;
 pub mod units;
+pub mod web;
 pub mod x3p;

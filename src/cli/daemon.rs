@@ -16,8 +16,12 @@
 //! Which scan a start runs (and which one the daemon resumes at its own start) is
 //! [`crate::scan::choice`]'s decision.
 //!
-//! Layer 5 (composition): [`super::station`], control server, runner, service
-//! notifications, hook.
+//! With `[web]`, the station's page ([`crate::web`]) is started beside the control socket,
+//! before READY (a token file or certificate it cannot use is exit 78, an address it cannot
+//! listen on exit 69), and stopped after the scan loop.
+//!
+//! Layer 5 (composition): [`super::station`], control server, the station's page, runner,
+//! service notifications, hook.
 
 use super::station::{
     ignore_hangups, load_config, lock_station, record_scan_in_lock, run_settings,
@@ -130,6 +134,26 @@ async fn daemon(
     let (cmd_tx, cmd_rx) = mpsc::channel::<OperatorRequest>(16);
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
 
+    // The station's page, when configured: its own thread, the same channels as the socket.
+    let web = match &config.web {
+        Some(w) => {
+            let channels = ControlChannels {
+                status: status_rx.clone(),
+                commands: cmd_tx.clone(),
+            };
+            let page = crate::web::start(w, channels, config.output.dir.clone()).map_err(|e| {
+                let exit = match e {
+                    crate::web::WebError::Config(_) => Exit::Config,
+                    crate::web::WebError::Listen(_) => Exit::Unavailable,
+                    crate::web::WebError::Start(_) => Exit::Failed,
+                };
+                CliError::new(exit, e.to_string())
+            })?;
+            tracing::info!("the station's page is at {}", page.url());
+            Some(page)
+        }
+        None => None,
+    };
     let mut srv_shutdown = shutdown_rx.clone();
     let server_task = tokio::spawn(srv.serve(
         ControlChannels {
@@ -361,6 +385,13 @@ async fn daemon(
         }
     }
     notifier.stopping();
+    if let Some(page) = web {
+        let _ = tokio::time::timeout(
+            Duration::from_secs(5),
+            tokio::task::spawn_blocking(move || page.stop()),
+        )
+        .await;
+    }
     // The server stops on the shutdown signal; on a closed command channel tell it too.
     drop(ctl);
     if *shutdown_rx.borrow() {

@@ -9,7 +9,7 @@
 //! `[output]` table.
 
 use super::{CliError, Exit};
-use crate::jobs::index::{Filter, ScanEntry, ScanIndex};
+use crate::jobs::index::{Filter, ScanEntry};
 use crate::numfmt::{fmt_opt, Quantity};
 use crate::specification::Verdict;
 use chrono::{DateTime, NaiveDate, Utc};
@@ -84,31 +84,12 @@ fn output_dir(args: &Args) -> Result<PathBuf, CliError> {
         })
 }
 
-/// The scans in `out` passing `filter`: from the index there, refreshed first. When the
-/// index cannot be written (a reader without write access), the listing is what it holds,
-/// with a note; when it cannot even be opened, one is built in memory from the journals.
+/// The scans in `out` passing `filter` ([`crate::jobs::index::listing`]).
 pub fn scans(
     out: &std::path::Path,
     filter: &Filter,
 ) -> Result<(Vec<ScanEntry>, Vec<String>), CliError> {
-    let io = |e: crate::jobs::index::IndexError| CliError::new(Exit::Io, e.to_string());
-    let mut notes = Vec::new();
-    let mut index = match ScanIndex::open(out) {
-        Ok(i) => i,
-        Err(e) => {
-            notes.push(format!("{e}; listing from the journals directly (slower)"));
-            ScanIndex::in_memory().map_err(io)?
-        }
-    };
-    if let Err(e) = index.refresh(out) {
-        if let crate::jobs::index::IndexError::List { .. } = e {
-            return Err(io(e));
-        }
-        notes.push(format!(
-            "{e}: the index was not brought up to date; the daemon updates it after each scan"
-        ));
-    }
-    Ok((index.query(filter).map_err(io)?, notes))
+    crate::jobs::index::listing(out, filter).map_err(|e| CliError::new(Exit::Io, e.to_string()))
 }
 
 fn text_table(rows: &[ScanEntry]) -> String {

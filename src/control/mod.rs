@@ -5,11 +5,14 @@
 //!   the status snapshots the runner publishes, [`crate::scan::status`]).
 //! - [`server`]: binds the socket (refusing a live daemon's, replacing a stale one) and serves
 //!   greetings, status, watch streams and forwarded commands with bounded writes and waits.
+//! - [`dispatch`]: one request carried out (a status, or a command forwarded to the runner
+//!   with a bounded wait), shared by the socket and the station's page ([`crate::web`]).
 //! - [`client`]: the command line's side: greeting check, requests, raw lines for `--json`.
 //!
 //! Layer 4 (process edge): depends on tokio, serde and the scan's status and command types; the
 //! scan never depends on this module.
 
 pub mod client;
+pub mod dispatch;
 pub mod protocol;
 pub mod server;

@@ -22,9 +22,9 @@
 //! tokio and tokio-util's codec, nix for group names, and libc for the peer's groups
 //! (`SO_PEERGROUPS`, which no crate wraps).
 
+use super::dispatch::{dispatch, snapshot};
 use super::protocol::{ControlChannels, Message, Request, PROTOCOL_VERSION};
-use crate::scan::command::{OperatorCommand, OperatorRequest, Peer};
-use crate::scan::status::Status;
+use crate::scan::command::Peer;
 use bytes::{Buf, BytesMut};
 use futures::StreamExt;
 use serde::Deserialize;
@@ -39,7 +39,7 @@ use std::time::Duration;
 use tokio::io::AsyncWriteExt;
 use tokio::net::unix::OwnedWriteHalf;
 use tokio::net::{UnixListener, UnixStream};
-use tokio::sync::{oneshot, watch, Notify};
+use tokio::sync::Notify;
 use tokio::task::JoinSet;
 use tokio::time::Instant;
 use tokio_util::codec::{Decoder, FramedRead};
@@ -487,6 +487,7 @@ fn peer_info(stream: &UnixStream) -> Option<PeerInfo> {
         uid: cred.uid(),
         gid: cred.gid(),
         pid: cred.pid().and_then(|p| u32::try_from(p).ok()),
+        web: None,
     };
     let groups = peer_groups(stream.as_raw_fd()).ok().map(|mut g| {
         g.push(peer.gid);
@@ -674,57 +675,51 @@ async fn answer(
         Ok(r) => r,
         Err(message) => return message,
     };
-    let command = match request {
-        Request::Status => return snapshot(&mut channels.status, false),
-        Request::Watch => {
-            if !ctx.slot.start_watching() {
-                return Message::Error {
-                    message: format!(
-                        "{} clients already watch, the most this daemon allows (the other slots are kept for requests); close a stray `surfscan status --watch` and retry",
-                        options.max_connections.saturating_sub(options.reserved_for_requests)
-                    ),
-                };
-            }
-            *watching = true;
-            return snapshot(&mut channels.status, true);
+    if matches!(request, Request::Watch) {
+        if !ctx.slot.start_watching() {
+            return Message::Error {
+                message: format!(
+                    "{} clients already watch, the most this daemon allows (the other slots are kept for requests); close a stray `surfscan status --watch` and retry",
+                    options.max_connections.saturating_sub(options.reserved_for_requests)
+                ),
+            };
         }
-        Request::Pause => OperatorCommand::Pause,
-        Request::Resume => OperatorCommand::Resume,
-        Request::Abort => OperatorCommand::Abort,
-        Request::Start {
-            specimen,
-            operator,
-            notes,
-            mode,
-        } => OperatorCommand::Start {
-            specimen,
-            operator,
-            notes,
-            mode,
-        },
-    };
-    let name = command_name(&command);
+        *watching = true;
+        return snapshot(&mut channels.status, true);
+    }
+    dispatch(
+        request,
+        channels,
+        |name| authorised(name, ctx),
+        options.reply_timeout,
+    )
+    .await
+}
+
+/// The peer of a command, when it may command: its credentials are known and, with
+/// `[control] allowed-groups`, it is in one of them; else the refusal to send back.
+fn authorised(name: &str, ctx: &Context<'_>) -> Result<Peer, Message> {
     let Some(info) = ctx.peer else {
-        return Message::Error {
+        return Err(Message::Error {
             message: format!("{name} refused: the kernel did not say who sent it (SO_PEERCRED failed), so it cannot be recorded"),
-        };
+        });
     };
-    if let Some(allowed) = &options.allowed_groups {
+    if let Some(allowed) = &ctx.options.allowed_groups {
         if !may_command(Some(info), allowed) {
             tracing::warn!(uid = info.peer.uid, pid = ?info.peer.pid, command = name, "control command refused: not in [control] allowed-groups");
             let groups = match &info.groups {
                 Some(g) => format!("groups {g:?}"),
                 None => format!("primary group {}", info.peer.gid),
             };
-            return Message::Error {
+            return Err(Message::Error {
                 message: format!(
                     "{name} refused: uid {} ({groups}) is in none of the groups [control] allowed-groups names (gids {allowed:?}); status and watch stay open, ask the station's administrator to add you to one of them",
                     info.peer.uid
                 ),
-            };
+            });
         }
     }
-    forward(command, info.peer, channels, options.reply_timeout).await
+    Ok(info.peer.clone())
 }
 
 /// Parses one request line strictly: besides what serde refuses (an unknown class, a
@@ -815,81 +810,6 @@ fn malformed(line: &str, e: &serde_json::Error) -> Message {
         _ => format!("request is not valid JSON: {e}; send one JSON object per line"),
     };
     Message::Error { message }
-}
-
-fn snapshot(status: &mut watch::Receiver<Status>, mark_seen: bool) -> Message {
-    let s = if mark_seen {
-        status.borrow_and_update().clone()
-    } else {
-        status.borrow().clone()
-    };
-    Message::Status(Box::new(s))
-}
-
-fn command_name(command: &OperatorCommand) -> &'static str {
-    match command {
-        OperatorCommand::Pause => "pause",
-        OperatorCommand::Resume => "resume",
-        OperatorCommand::Abort => "abort",
-        OperatorCommand::Start { .. } => "start",
-    }
-}
-
-/// Sends a command to the runner and turns its answer into `Ack` or `Error`.
-async fn forward(
-    command: OperatorCommand,
-    peer: Peer,
-    channels: &ControlChannels,
-    reply_timeout: Duration,
-) -> Message {
-    let name = command_name(&command);
-    let gone = || {
-        Message::Error {
-        message: format!(
-            "the scan runner is not running, so {name} cannot be carried out; see `journalctl -u surfscan` and restart the daemon"
-        ),
-    }
-    };
-    let (reply, mut answer) = oneshot::channel();
-    let exchange = async {
-        channels
-            .commands
-            .send(OperatorRequest {
-                command,
-                peer,
-                reply,
-            })
-            .await
-            .map_err(|_| ())?;
-        (&mut answer).await.map_err(|_| ())
-    };
-    let answered = |r: Result<String, String>| match r {
-        Ok(detail) => Message::Ack {
-            command: name.to_owned(),
-            detail,
-        },
-        Err(message) => Message::Error { message },
-    };
-    match tokio::time::timeout(reply_timeout, exchange).await {
-        Ok(Ok(r)) => answered(r),
-        Ok(Err(())) => gone(),
-        Err(_elapsed) => {
-            // The operator is told the command was not carried out, so it must not be: a
-            // closed channel tells the runner, when it comes to the command, that its
-            // requester has gone ([`OperatorRequest::abandoned`]). An answer sent before the
-            // close still counts.
-            answer.close();
-            match answer.try_recv() {
-                Ok(r) => answered(r),
-                Err(_) => Message::Error {
-                    message: format!(
-                        "the scan runner did not answer {name} within {} s (it is busy with a device, or writing a scan's outputs); {name} was not carried out: try again, or see `journalctl -u surfscan`",
-                        reply_timeout.as_secs_f64()
-                    ),
-                },
-            }
-        }
-    }
 }
 
 /// Writes one message as a JSON line, giving up after `timeout`.

@@ -485,6 +485,30 @@ struct GridHead {
     sa_um: Option<f64>,
 }
 
+/// The scans in `out` passing `filter`, with notes for people: from the index there,
+/// refreshed first. When the index cannot be written (a reader without write access), the
+/// listing is what it holds, with a note; when it cannot even be opened, one is built in
+/// memory from the journals. Only an output directory that cannot be listed is an error.
+pub fn listing(out: &Path, filter: &Filter) -> Result<(Vec<ScanEntry>, Vec<String>), IndexError> {
+    let mut notes = Vec::new();
+    let mut index = match ScanIndex::open(out) {
+        Ok(i) => i,
+        Err(e) => {
+            notes.push(format!("{e}; listing from the journals directly (slower)"));
+            ScanIndex::in_memory()?
+        }
+    };
+    if let Err(e) = index.refresh(out) {
+        if let IndexError::List { .. } = e {
+            return Err(e);
+        }
+        notes.push(format!(
+            "{e}: the index was not brought up to date; the daemon updates it after each scan"
+        ));
+    }
+    Ok((index.query(filter)?, notes))
+}
+
 /// Reads one scan directory: its journal (the truth for what the scan is and how far it
 /// got) and, when present, its report (verdict, means, warnings).
 pub fn read_entry(name: &str, dir: &Path) -> Result<(ScanEntry, i64), String> {

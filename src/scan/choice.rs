@@ -159,11 +159,11 @@ impl Choice {
     /// change on disk before the scan itself) and hands over the scan to run (`None`:
     /// nothing to run).
     pub fn commit(self) -> Result<Option<ScanRequest>, ChoiceError> {
-        let peer = Some(self.peer);
+        let peer = Some(self.peer.clone());
         match self.decision {
             Decision::New { abandon } => {
                 for dir in &abandon {
-                    record_abandoned(dir, self.peer)?;
+                    record_abandoned(dir, &self.peer)?;
                 }
                 let (specimen, operator, notes) = self.traceability;
                 Ok(Some(ScanRequest::New {
@@ -215,7 +215,7 @@ pub fn choose(
 }
 
 /// Records in an unfinished scan's journal that it was abandoned for a new one.
-fn record_abandoned(dir: &Path, peer: Peer) -> Result<(), ChoiceError> {
+fn record_abandoned(dir: &Path, peer: &Peer) -> Result<(), ChoiceError> {
     let path = dir.join(JOURNAL_FILE);
     let io = |e: String| {
         ChoiceError::Io(format!(
@@ -226,9 +226,8 @@ fn record_abandoned(dir: &Path, peer: Peer) -> Result<(), ChoiceError> {
     let (mut journal, _) =
         Journal::open(&path, Arc::new(super::faults::NoFaults)).map_err(|e| io(e.to_string()))?;
     let reason = format!(
-        "abandoned: a new scan was started instead (--new, by uid {} pid {})",
-        peer.uid,
-        peer.pid.map_or("unknown".to_owned(), |p| p.to_string())
+        "abandoned: a new scan was started instead (--new, by {})",
+        peer.describe_briefly()
     );
     journal
         .append(&Record::Stop(StopRecord {

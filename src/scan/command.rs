@@ -65,8 +65,10 @@ pub enum OperatorCommand {
 }
 
 /// Who sent a command: the peer's credentials as the kernel gave them when it connected
-/// to the control socket (`SO_PEERCRED`), for the journal.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+/// to the control socket (`SO_PEERCRED`), for the journal. A command given on the station's
+/// page is carried out by the daemon's own process on behalf of the page's user: its
+/// credentials are the daemon's, and [`Peer::web`] names the user and where they were.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Peer {
     /// User id.
     pub uid: u32,
@@ -75,6 +77,18 @@ pub struct Peer {
     /// Process id; `None` when the kernel could not name it (a peer in another PID
     /// namespace).
     pub pid: Option<u32>,
+    /// The page's user who gave the command, when it came from the station's page.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub web: Option<WebUser>,
+}
+
+/// The user of the station's page who gave a command, as the journal records it.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct WebUser {
+    /// The user's name in `[web] token-file`.
+    pub user: String,
+    /// The address the request came from (`IP:port`).
+    pub address: String,
 }
 
 impl Peer {
@@ -84,6 +98,44 @@ impl Peer {
             uid: nix::unistd::geteuid().as_raw(),
             gid: nix::unistd::getegid().as_raw(),
             pid: Some(std::process::id()),
+            web: None,
+        }
+    }
+
+    /// The daemon's process on behalf of the page's `user` at `address`.
+    pub fn on_behalf_of(user: &str, address: &str) -> Peer {
+        Peer {
+            web: Some(WebUser {
+                user: user.to_owned(),
+                address: address.to_owned(),
+            }),
+            ..Peer::this_process()
+        }
+    }
+
+    /// Who it is, for the journal's words and logs: `uid 1000 gid 100 pid 4242`, or
+    /// `web user alice from 10.0.0.7:51234`.
+    pub fn describe(&self) -> String {
+        match &self.web {
+            Some(w) => format!("web user {} from {}", w.user, w.address),
+            None => format!(
+                "uid {} gid {} pid {}",
+                self.uid,
+                self.gid,
+                self.pid.map_or("unknown".to_owned(), |p| p.to_string())
+            ),
+        }
+    }
+
+    /// The same without the group: `uid 1000 pid 4242`, or the web user.
+    pub fn describe_briefly(&self) -> String {
+        match &self.web {
+            Some(_) => self.describe(),
+            None => format!(
+                "uid {} pid {}",
+                self.uid,
+                self.pid.map_or("unknown".to_owned(), |p| p.to_string())
+            ),
         }
     }
 }
@@ -116,10 +168,9 @@ impl OperatorRequest {
             return Some(self);
         }
         tracing::warn!(
-            "dropped {:?} from uid {} (pid {}): the control socket stopped waiting for it and told the operator it was not carried out",
+            "dropped {:?} from {}: the control socket stopped waiting for it and told the operator it was not carried out",
             self.command,
-            self.peer.uid,
-            self.peer.pid.map_or("unknown".to_owned(), |p| p.to_string())
+            self.peer.describe_briefly()
         );
         None
     }

@@ -82,7 +82,7 @@ impl Ledger {
             device: n.device,
             line: n.line,
             time: Utc::now(),
-            peer: n.peer,
+            peer: n.peer.clone(),
             pause: n.pause,
         });
         self.record_unrecorded();

@@ -1289,18 +1289,13 @@ impl Machine {
             None => "the scan being started (no id yet)".to_owned(),
         };
         let paused = self.doing == Doing::Paused;
-        let by = format!(
-            "uid {} gid {} pid {}",
-            peer.uid,
-            peer.gid,
-            peer.pid.map_or("unknown".to_owned(), |p| p.to_string())
-        );
+        let by = peer.describe();
         let note = |reason: String, line: Option<u32>| {
             Action::Record(Note {
                 reason,
                 device: None,
                 line,
-                peer: Some(peer),
+                peer: Some(peer.clone()),
                 pause: None,
             })
         };

@@ -152,7 +152,7 @@ fn reopen(
     }
     if r.failed.is_some() {
         ledger
-            .reopen_failed(peer)
+            .reopen_failed(peer.clone())
             .map_err(|e| (format!("cannot record the continuation: {e}"), FailKind::Io))?;
     }
     ledger.note(&super::machine::Note {

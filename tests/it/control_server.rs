@@ -538,8 +538,9 @@ async fn each_command_carries_the_senders_uid_and_pid_to_the_runner() {
         uid: nix::unistd::geteuid().as_raw(),
         gid: nix::unistd::getegid().as_raw(),
         pid: Some(std::process::id()),
+        web: None,
     };
-    assert_eq!(*runner.peers.lock().unwrap(), vec![me, me]);
+    assert_eq!(*runner.peers.lock().unwrap(), vec![me.clone(), me]);
     served.shutdown().await;
 }
 

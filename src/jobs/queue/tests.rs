@@ -207,6 +207,7 @@ fn the_store_round_trips_and_keeps_a_damaged_file_aside() {
             uid: 1000,
             gid: 1000,
             pid: Some(42),
+            web: None,
         }),
     );
     q.add(request("B", false), at(1), None);
@@ -233,6 +234,7 @@ fn the_store_round_trips_and_keeps_a_damaged_file_aside() {
                 uid: 1000,
                 gid: 1000,
                 pid: Some(42),
+                web: None,
             }),
             detail: "job 1".into(),
         })

@@ -40,6 +40,7 @@ fn peer() -> Peer {
         uid: 1000,
         gid: 100,
         pid: Some(4242),
+        web: None,
     }
 }
 

@@ -1,0 +1,141 @@
+//! The station's page: an optional HTTP(S) server in the daemon (`[web]`, off unless
+//! configured, loopback by default) with the live view, the operator's controls, the history,
+//! and an HTTP JSON API mirroring the control socket.
+//!
+//! - [`settings`]: the `[web]` table.
+//! - [`auth`]: users and tokens, signed session cookies, CSRF checks (pure).
+//! - [`live`]: the live view fed from the runner's status and the scan's files.
+//! - [`history`]: the scans from the scan index, and a scan's files by checked name.
+//! - [`api`]: the routes.
+//! - [`page`]: the page's HTML, script and style, compiled in.
+//! - [`tls`]: rustls from PEM files.
+//! - [`server`]: the listener with its bounds and deadlines.
+//!
+//! The page is a consumer of the daemon's status, never on the scan's path: it runs on a
+//! thread and runtime of its own, reads the status from the runner's `watch` channel (latest
+//! value only), reads files the scan has already written, and sends commands through the same
+//! channel, dispatcher and checks as the control socket ([`crate::control::dispatch`]).
+//!
+//! Layer 4 (process edge): depends on [`crate::control`], the scan's status, store and command
+//! types, the scan index, axum/hyper/rustls and tokio.
+
+pub mod api;
+pub mod auth;
+pub mod history;
+pub mod live;
+pub mod page;
+pub mod server;
+pub mod settings;
+pub mod tls;
+
+use crate::control::protocol::ControlChannels;
+use settings::WebSettings;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use tokio::sync::watch;
+
+/// Why the page could not be started.
+#[derive(Debug, thiserror::Error)]
+pub enum WebError {
+    /// The token file or the certificate is not usable (exit 78).
+    #[error("[web]: {0}")]
+    Config(String),
+    /// The address cannot be listened on (exit 69).
+    #[error("[web] listen: {0}")]
+    Listen(String),
+    /// The page's thread or runtime could not be started.
+    #[error("the station's page cannot start: {0}")]
+    Start(String),
+}
+
+/// The running page; [`WebHandle::stop`] ends it.
+pub struct WebHandle {
+    addr: SocketAddr,
+    tls: bool,
+    shutdown: watch::Sender<bool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl WebHandle {
+    /// The address it listens on.
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// The page's address for people, `http://127.0.0.1:8210/`.
+    pub fn url(&self) -> String {
+        let scheme = if self.tls { "https" } else { "http" };
+        format!("{scheme}://{}/", self.addr)
+    }
+
+    /// Stops listening and closes the connections (each gets
+    /// [`server::SHUTDOWN_GRACE`] to finish what it is sending).
+    pub fn stop(mut self) {
+        let _ = self.shutdown.send(true);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// Starts the page for `settings` on a thread of its own: reads the token file and the
+/// certificate, binds the address (so every error is known before the daemon is ready), and
+/// serves the runner's `channels` and the scans of `out`.
+pub fn start(
+    settings: &WebSettings,
+    channels: ControlChannels,
+    out: PathBuf,
+) -> Result<WebHandle, WebError> {
+    let addr = settings.address().map_err(WebError::Listen)?;
+    let users = auth::Users::load(&settings.token_file).map_err(WebError::Config)?;
+    let acceptor = match (&settings.tls_cert, &settings.tls_key) {
+        (Some(c), Some(k)) => Some(tls::acceptor(c, k).map_err(WebError::Config)?),
+        _ => None,
+    };
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .max_blocking_threads(4)
+        .build()
+        .map_err(|e| WebError::Start(e.to_string()))?;
+    let listener = rt.block_on(async { server::bind(addr) }).map_err(|e| {
+        WebError::Listen(format!(
+            "cannot listen on {addr}: {e}; another program may use the port, or the address is not one of this PC's"
+        ))
+    })?;
+    let addr = listener
+        .local_addr()
+        .map_err(|e| WebError::Listen(e.to_string()))?;
+    let (view_tx, view_rx) = watch::channel(Arc::new(live::View::default()));
+    let (shutdown_tx, shutdown_rx) = watch::channel(false);
+    let status = channels.status.clone();
+    let app = Arc::new(api::App {
+        users,
+        sessions: auth::Sessions::default(),
+        channels,
+        view: view_rx,
+        out: out.clone(),
+        tls: acceptor.is_some(),
+        session_hours: settings.session_hours,
+        reply_timeout: crate::control::server::ServerOptions::default().reply_timeout,
+        history: tokio::sync::Mutex::new(None),
+    });
+    let max = settings.max_connections;
+    let tls = acceptor.is_some();
+    let thread = std::thread::Builder::new()
+        .name("surfscan-web".into())
+        .spawn(move || {
+            rt.block_on(async move {
+                let feed = tokio::spawn(live::run(status, out, view_tx));
+                server::serve(listener, acceptor, api::router(app), max, shutdown_rx).await;
+                feed.abort();
+            });
+        })
+        .map_err(|e| WebError::Start(e.to_string()))?;
+    Ok(WebHandle {
+        addr,
+        tls,
+        shutdown: shutdown_tx,
+        thread: Some(thread),
+    })
+}
