@@ -65,7 +65,7 @@ pub fn scan_files(dir: &Path) -> Vec<ScanFile> {
         .filter_map(|e| {
             let name = e.file_name().into_string().ok()?;
             let meta = e.metadata().ok()?;
-            (safe_name(&name) && e.file_type().ok()?.is_file()).then(|| ScanFile {
+            (safe_name(&name) && e.file_type().ok()?.is_file()).then_some(ScanFile {
                 name,
                 bytes: meta.len(),
             })

@@ -98,14 +98,21 @@ pub fn start(
         .max_blocking_threads(4)
         .build()
         .map_err(|e| WebError::Start(e.to_string()))?;
-    let listener = rt.block_on(async { server::bind(addr) }).map_err(|e| {
-        WebError::Listen(format!(
-            "cannot listen on {addr}: {e}; another program may use the port, or the address is not one of this PC's"
-        ))
-    })?;
-    let addr = listener
-        .local_addr()
-        .map_err(|e| WebError::Listen(e.to_string()))?;
+    // Entered, not blocked on: `start` may be called from within another runtime (and on
+    // failure the runtime is let go in the background, which is allowed there too).
+    let bound = {
+        let _in_rt = rt.enter();
+        server::bind(addr).and_then(|l| l.local_addr().map(|a| (l, a)))
+    };
+    let (listener, addr) = match bound {
+        Ok(b) => b,
+        Err(e) => {
+            rt.shutdown_background();
+            return Err(WebError::Listen(format!(
+                "cannot listen on {addr}: {e}; another program may use the port, or the address is not one of this PC's"
+            )));
+        }
+    };
     let (view_tx, view_rx) = watch::channel(Arc::new(live::View::default()));
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let status = channels.status.clone();

@@ -120,7 +120,7 @@ impl std::ops::DerefMut for Daemon {
     }
 }
 
-fn spawn_daemon(r: &Rig) -> Daemon {
+pub(crate) fn spawn_daemon(r: &Rig) -> Daemon {
     Daemon(
         Command::new(env!("CARGO_BIN_EXE_surfscan"))
             .args(["daemon", "--config"])
@@ -137,7 +137,7 @@ fn spawn_daemon(r: &Rig) -> Daemon {
 
 /// Reads notify datagrams until one satisfies `want`; returns all seen. Fails at once when
 /// the daemon has exited.
-fn notify_until(r: &Rig, d: &mut Child, want: impl Fn(&str) -> bool) -> Vec<String> {
+pub(crate) fn notify_until(r: &Rig, d: &mut Child, want: impl Fn(&str) -> bool) -> Vec<String> {
     let mut seen = Vec::new();
     let start = Instant::now();
     let mut buf = [0u8; 4096];

@@ -56,3 +56,5 @@ mod stage_scan;
 mod stage_zaber;
 mod stage_zaber_scan;
 mod station_lock;
+mod web_api;
+mod web_page;

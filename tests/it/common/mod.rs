@@ -8,7 +8,9 @@
 
 #![allow(dead_code)]
 
+pub mod cdp;
 pub mod chromium;
+pub mod http;
 pub mod mosquitto;
 
 use std::path::{Path, PathBuf};

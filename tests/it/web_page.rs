@@ -1,0 +1,333 @@
+//! The station's page in headless Chromium against the real `surfscan daemon` and the
+//! simulator: sign in, start a scan from the page and watch it to completion (the line
+//! counter and the height map advance, the result shows), pause and resume from the page
+//! (the journal names the page's user), a hundred open event streams that never read while
+//! the scan runs, and the page saying the daemon is away while it restarts, then carrying on.
+//!
+//! Depends on the daemon rig of `daemon_e2e`, the DevTools driver and the HTTP test client.
+
+use crate::common::cdp::{Browser, Tab};
+use crate::common::http::{request, Events};
+use crate::daemon_e2e::{
+    notify_until, records, rig, scan_dir, sigterm, spawn_daemon, wait_exit, Rig, LINES,
+};
+use serde_json::json;
+use std::os::unix::fs::PermissionsExt;
+use std::time::Duration;
+use surfscan::scan::journal::Record;
+
+const ALICE: &str = "alice-page-token-5f0c2a9e77d1";
+const WAIT: Duration = Duration::from_secs(90);
+
+/// A free loopback port (bound and let go; the daemon binds it right after).
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// Adds `[web]` to the rig's configuration, alice may operate; the page's address.
+fn with_page(r: &Rig) -> std::net::SocketAddr {
+    let tokens = r.dir.path().join("web-tokens");
+    std::fs::write(&tokens, format!("alice {ALICE}\n")).unwrap();
+    std::fs::set_permissions(&tokens, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let addr: std::net::SocketAddr = format!("127.0.0.1:{}", free_port()).parse().unwrap();
+    let mut text = std::fs::read_to_string(&r.config).unwrap();
+    text.push_str(&format!(
+        "\n[web]\nlisten = \"{addr}\"\ntoken-file = {:?}\n",
+        tokens.display().to_string()
+    ));
+    std::fs::write(&r.config, text).unwrap();
+    addr
+}
+
+/// `document.getElementById(id)` in the page's script.
+fn el(id: &str) -> String {
+    format!("document.getElementById({id:?})")
+}
+
+fn text_of(b: &mut Browser, tab: &Tab, id: &str) -> String {
+    b.eval(tab, &format!("{}.textContent", el(id)))
+        .as_str()
+        .unwrap_or_default()
+        .to_owned()
+}
+
+fn wait_text(b: &mut Browser, tab: &Tab, id: &str, want: &str) -> String {
+    let v = b.wait_for(
+        tab,
+        &format!("#{id} showing {want:?}"),
+        &format!("{}.textContent", el(id)),
+        WAIT,
+        |v| v.as_str().is_some_and(|s| s.contains(want)),
+    );
+    v.as_str().unwrap().to_owned()
+}
+
+fn click(b: &mut Browser, tab: &Tab, id: &str) {
+    let done = b.eval(
+        tab,
+        &format!(
+            "{}.disabled === false && ({}.click(), true)",
+            el(id),
+            el(id)
+        ),
+    );
+    assert_eq!(done, json!(true), "#{id} is not there or disabled");
+}
+
+/// The page's line counter and the map's committed rows.
+fn progress(b: &mut Browser, tab: &Tab) -> (u64, u64) {
+    let v = b.eval(
+        tab,
+        &format!(
+            "[Number({}.dataset.k || 0), Number({}.dataset.rows || 0)]",
+            el("line"),
+            el("map")
+        ),
+    );
+    (v[0].as_u64().unwrap_or(0), v[1].as_u64().unwrap_or(0))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_scan_started_paused_and_resumed_from_the_page_is_watched_to_its_result() {
+    let r = rig().await;
+    let addr = with_page(&r);
+    let mut d = spawn_daemon(&r);
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    let url = format!("http://{addr}/");
+
+    let mut b = Browser::launch();
+    let tab = b.open(&url);
+    // Not signed in: the sign-in form, nothing of the station.
+    b.wait_for(
+        &tab,
+        "the sign-in form",
+        &format!("{}.hidden", el("login")),
+        WAIT,
+        |v| v == &json!(false),
+    );
+    assert_eq!(b.eval(&tab, &format!("{}.hidden", el("main"))), json!(true));
+    b.eval(
+        &tab,
+        &format!(
+            "{}.value = {ALICE:?}; {}.requestSubmit(); true",
+            el("token"),
+            el("login-form")
+        ),
+    );
+    wait_text(&mut b, &tab, "who", "alice");
+    wait_text(&mut b, &tab, "state", "idle");
+    assert_eq!(
+        b.eval(&tab, &format!("{}.dataset.state", el("link"))),
+        json!("live")
+    );
+    // The token is not kept in the page.
+    assert_eq!(b.eval(&tab, &format!("{}.value", el("token"))), json!(""));
+
+    // A hundred more pages' streams, opened and never read, for the whole scan.
+    let mut streams = Vec::new();
+    for _ in 0..100 {
+        streams.push(
+            Events::open(
+                addr,
+                "/api/live",
+                &[("authorization", &format!("Bearer {ALICE}"))],
+            )
+            .await,
+        );
+    }
+    assert!(
+        streams.iter().all(|s| s.head.contains(" 200 ")),
+        "{}",
+        streams[0].head
+    );
+
+    // Start from the page.
+    b.eval(
+        &tab,
+        &format!(
+            "{}.value = 'B-12'; {}.value = 'ana'; {}.requestSubmit(); true",
+            el("specimen"),
+            el("operator"),
+            el("start-form")
+        ),
+    );
+    wait_text(&mut b, &tab, "state", "scanning");
+    // The counter and the map advance line by line.
+    let mut seen = vec![progress(&mut b, &tab)];
+    b.wait_for(
+        &tab,
+        "two lines on the map",
+        &format!("Number({}.dataset.rows)", el("map")),
+        WAIT,
+        |v| v.as_u64().is_some_and(|n| n >= 2),
+    );
+    seen.push(progress(&mut b, &tab));
+    let caption = text_of(&mut b, &tab, "map-caption");
+    assert!(caption.contains(&format!("of {LINES} lines")), "{caption}");
+
+    // Pause from the page: effective once the line in hand is on disk.
+    click(&mut b, &tab, "pause");
+    wait_text(&mut b, &tab, "state", "paused");
+    let paused = progress(&mut b, &tab);
+    seen.push(paused);
+    assert!(text_of(&mut b, &tab, "reply")
+        .to_lowercase()
+        .contains("paus"));
+    assert_eq!(
+        b.eval(&tab, &format!("{}.disabled", el("resume"))),
+        json!(false)
+    );
+    // Resume from the page.
+    click(&mut b, &tab, "resume");
+    b.wait_for(
+        &tab,
+        "a line after the resume",
+        &format!("Number({}.dataset.rows)", el("map")),
+        WAIT,
+        |v| v.as_u64().is_some_and(|n| n > paused.1),
+    );
+    seen.push(progress(&mut b, &tab));
+
+    // To its end: idle, the whole map, the result of this scan.
+    wait_text(&mut b, &tab, "state", "idle");
+    let dir = scan_dir(&r);
+    let id = dir.file_name().unwrap().to_string_lossy().into_owned();
+    b.wait_for(
+        &tab,
+        "the result",
+        &format!("{}.dataset.scan", el("result")),
+        WAIT,
+        |v| v.as_str() == Some(id.as_str()),
+    );
+    let result = text_of(&mut b, &tab, "result");
+    assert!(
+        result.contains(&format!("{LINES} of {LINES} lines")),
+        "{result}"
+    );
+    assert!(result.contains("(success, "), "{result}");
+    // No specification in the daemon's configuration: no verdict, and the page says so.
+    assert_eq!(
+        b.eval(&tab, "document.getElementById('verdict').dataset.verdict"),
+        json!("")
+    );
+    assert!(
+        result.contains("no specification given, no verdict"),
+        "{result}"
+    );
+    let ra: f64 = result
+        .split("Ra (mean of the lines) ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no Ra in {result}"));
+    assert!(ra > 0.0, "{result}");
+    assert_eq!(progress(&mut b, &tab).1, u64::from(LINES));
+    // The counter never went back, and moved.
+    seen.push(progress(&mut b, &tab));
+    assert!(seen.windows(2).all(|w| w[0].1 <= w[1].1), "{seen:?}");
+    assert!(seen.first().unwrap().1 < seen.last().unwrap().1, "{seen:?}");
+
+    // The history lists the scan with a link to its report.
+    b.wait_for(
+        &tab,
+        "the history's report link",
+        &format!(
+            "Array.from({}.querySelectorAll('a')).map(a => a.getAttribute('href')).join(' ')",
+            el("history")
+        ),
+        WAIT,
+        |v| {
+            v.as_str()
+                .is_some_and(|s| s.contains(&format!("/scans/{id}/report.html")))
+        },
+    );
+
+    // The journal names alice for the pause and the resume, with where she was.
+    let recs = records(&dir);
+    let by_page: Vec<(String, String)> = recs
+        .iter()
+        .filter_map(|r| match r {
+            Record::Interruption(i) => {
+                let w = i.peer.as_ref()?.web.as_ref()?;
+                Some((i.reason.clone(), w.user.clone()))
+            }
+            _ => None,
+        })
+        .collect();
+    assert!(
+        by_page.iter().any(|(why, who)| why
+            .starts_with("pause requested by web user alice from 127.0.0.1:")
+            && who == "alice"),
+        "{by_page:?}"
+    );
+    assert!(
+        by_page
+            .iter()
+            .any(|(why, who)| why.starts_with("resumed by the operator") && who == "alice"),
+        "{by_page:?}"
+    );
+    let start = match &recs[0] {
+        Record::Start(s) => s,
+        other => panic!("{other:?}"),
+    };
+    assert_eq!(
+        start
+            .peer
+            .as_ref()
+            .and_then(|p| p.web.as_ref())
+            .map(|w| w.user.as_str()),
+        Some("alice")
+    );
+    // The hundred streams left unread through the scan are still open and, read now,
+    // bring the scan's end (each stream sends the latest status, not a backlog).
+    for s in &mut streams {
+        loop {
+            let data = s.next_named("status").await;
+            if data.contains("\"success\"") {
+                break;
+            }
+        }
+    }
+    drop(streams);
+
+    // The daemon restarts: the page says it is away, then carries on signed in.
+    sigterm(&d);
+    assert!(wait_exit(&mut d).success());
+    b.wait_for(
+        &tab,
+        "the page saying the daemon is away",
+        &format!("{}.dataset.state", el("link")),
+        WAIT,
+        |v| v == &json!("down"),
+    );
+    assert!(text_of(&mut b, &tab, "link").contains("not reachable"));
+    let mut d = spawn_daemon(&r);
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    b.wait_for(
+        &tab,
+        "the page live again",
+        &format!("{}.dataset.state", el("link")),
+        WAIT,
+        |v| v == &json!("live"),
+    );
+    assert_eq!(
+        b.eval(&tab, &format!("{}.hidden", el("main"))),
+        json!(false)
+    );
+    wait_text(&mut b, &tab, "state", "idle");
+    // Without a token or session nothing but /healthz answers on the restarted daemon.
+    assert_eq!(
+        request(addr, "GET", "/api/status", &[], "").await.status,
+        401
+    );
+    let h = request(addr, "GET", "/healthz", &[], "").await;
+    assert_eq!((h.status, h.body.as_str()), (200, "ok\n"));
+
+    sigterm(&d);
+    assert!(wait_exit(&mut d).success());
+    r.sim.shutdown().await;
+}
