@@ -108,9 +108,7 @@ pub fn start(
         Ok(b) => b,
         Err(e) => {
             rt.shutdown_background();
-            return Err(WebError::Listen(format!(
-                "cannot listen on {addr}: {e}; another program may use the port, or the address is not one of this PC's"
-            )));
+            return Err(WebError::Listen(listen_error(addr, &e)));
         }
     };
     let (view_tx, view_rx) = watch::channel(Arc::new(live::View::default()));
@@ -145,4 +143,38 @@ pub fn start(
         shutdown: shutdown_tx,
         thread: Some(thread),
     })
+}
+
+/// Why `addr` cannot be listened on, and what to do.
+fn listen_error(addr: SocketAddr, e: &std::io::Error) -> String {
+    let hint = match e.raw_os_error() {
+        // What a systemd unit with `RestrictAddressFamilies=AF_UNIX` (as shipped) gives.
+        Some(libc::EAFNOSUPPORT) | Some(libc::EPERM) => {
+            "the service's sandbox allows no network sockets: add `RestrictAddressFamilies=AF_UNIX AF_INET AF_INET6` in a drop-in (`systemctl edit surfscan`)"
+        }
+        Some(libc::EACCES) => "ports below 1024 need privileges the daemon does not have; use a port above 1023",
+        _ => "another program may use the port, or the address is not one of this PC's",
+    };
+    format!("cannot listen on {addr}: {e}; {hint}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_listen_error_says_what_to_do_for_its_cause() {
+        let addr: SocketAddr = "0.0.0.0:8210".parse().unwrap();
+        let said = |errno| listen_error(addr, &std::io::Error::from_raw_os_error(errno));
+        assert!(
+            said(libc::EAFNOSUPPORT).contains("RestrictAddressFamilies=AF_UNIX AF_INET AF_INET6")
+        );
+        assert!(said(libc::EACCES).contains("above 1023"));
+        let taken = said(libc::EADDRINUSE);
+        assert!(
+            taken.starts_with("cannot listen on 0.0.0.0:8210: ")
+                && taken.contains("another program"),
+            "{taken}"
+        );
+    }
 }
