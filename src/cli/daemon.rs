@@ -135,22 +135,28 @@ async fn daemon(
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
 
     // The station's page, when configured: its own thread, the same channels as the socket.
+    // A token file or certificate that cannot be used is a configuration error; an address
+    // that cannot be listened on is named in the log and the status's links, and the station
+    // scans on without its page, as it does without /metrics.
     let web = match &config.web {
         Some(w) => {
             let channels = ControlChannels {
                 status: status_rx.clone(),
                 commands: cmd_tx.clone(),
             };
-            let page = crate::web::start(w, channels, config.output.dir.clone()).map_err(|e| {
-                let exit = match e {
-                    crate::web::WebError::Config(_) => Exit::Config,
-                    crate::web::WebError::Listen(_) => Exit::Unavailable,
-                    crate::web::WebError::Start(_) => Exit::Failed,
-                };
-                CliError::new(exit, e.to_string())
-            })?;
-            tracing::info!("the station's page is at {}", page.url());
-            Some(page)
+            match crate::web::start(w, channels, config.output.dir.clone()) {
+                Ok(page) => {
+                    tracing::info!("the station's page is at {}", page.url());
+                    Some(page)
+                }
+                Err(e @ crate::web::WebError::Config(_)) => {
+                    return Err(CliError::new(Exit::Config, e.to_string()))
+                }
+                Err(e) => {
+                    crate::publish::fail(&status_tx, crate::web::LINK, e.to_string());
+                    None
+                }
+            }
         }
         None => None,
     };

@@ -56,7 +56,7 @@ pub fn sandbox_hint(e: &std::io::Error) -> &'static str {
 }
 
 /// Names a part that could not start, in the log and the status's links.
-fn fail(status: &watch::Sender<Status>, link: &str, message: String) {
+pub fn fail(status: &watch::Sender<Status>, link: &str, message: String) {
     tracing::error!("{link}: {message}");
     status.send_modify(|s| {
         s.links.insert(

@@ -17,7 +17,7 @@
 //! channel, dispatcher and checks as the control socket ([`crate::control::dispatch`]).
 //!
 //! Layer 4 (process edge): depends on [`crate::control`], the scan's status, store and command
-//! types, the scan index, axum/hyper/rustls and tokio.
+//! types, the scan index, [`crate::publish::sandbox_hint`], axum/hyper/rustls and tokio.
 
 pub mod api;
 pub mod auth;
@@ -35,13 +35,16 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use tokio::sync::watch;
 
+/// The page's name among the status's links, where a page that cannot listen is named.
+pub const LINK: &str = "web";
+
 /// Why the page could not be started.
 #[derive(Debug, thiserror::Error)]
 pub enum WebError {
-    /// The token file or the certificate is not usable (exit 78).
+    /// The token file or the certificate is not usable (the daemon exits 78).
     #[error("[web]: {0}")]
     Config(String),
-    /// The address cannot be listened on (exit 69).
+    /// The address cannot be listened on (the daemon scans on without its page).
     #[error("[web] listen: {0}")]
     Listen(String),
     /// The page's thread or runtime could not be started.
@@ -147,15 +150,15 @@ pub fn start(
 
 /// Why `addr` cannot be listened on, and what to do.
 fn listen_error(addr: SocketAddr, e: &std::io::Error) -> String {
-    let hint = match e.raw_os_error() {
-        // What a systemd unit with `RestrictAddressFamilies=AF_UNIX` (as shipped) gives.
-        Some(libc::EAFNOSUPPORT) | Some(libc::EPERM) => {
-            "the service's sandbox allows no network sockets: add `RestrictAddressFamilies=AF_UNIX AF_INET AF_INET6` in a drop-in (`systemctl edit surfscan`)"
-        }
-        Some(libc::EACCES) => "ports below 1024 need privileges the daemon does not have; use a port above 1023",
-        _ => "another program may use the port, or the address is not one of this PC's",
+    let sandbox = crate::publish::sandbox_hint(e);
+    let hint = if !sandbox.is_empty() {
+        ""
+    } else if e.raw_os_error() == Some(libc::EACCES) {
+        "; ports below 1024 need privileges the daemon does not have: use a port above 1023 ([web] listen)"
+    } else {
+        "; another program may use the port, or the address is not one of this PC's ([web] listen)"
     };
-    format!("cannot listen on {addr}: {e}; {hint}")
+    format!("cannot listen on {addr}: {e}{sandbox}{hint}")
 }
 
 #[cfg(test)]

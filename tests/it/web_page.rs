@@ -2,14 +2,16 @@
 //! simulator: sign in, start a scan from the page and watch it to completion (the line
 //! counter and the height map advance, the result shows), pause and resume from the page
 //! (the journal names the page's user), a hundred open event streams that never read while
-//! the scan runs, and the page saying the daemon is away while it restarts, then carrying on.
+//! the scan runs, and the page saying the daemon is away while it restarts, then carrying on;
+//! a page that cannot listen leaves the station scanning.
 //!
 //! Depends on the daemon rig of `daemon_e2e`, the DevTools driver and the HTTP test client.
 
 use crate::common::cdp::{Browser, Tab};
 use crate::common::http::{request, Events};
 use crate::daemon_e2e::{
-    notify_until, records, rig, scan_dir, sigterm, spawn_daemon, wait_exit, Rig, LINES,
+    notify_until, records, rig, scan_dir, sigterm, spawn_daemon, start_scan, status, wait_exit,
+    wait_status, Rig, LINES,
 };
 use serde_json::json;
 use std::os::unix::fs::PermissionsExt;
@@ -327,6 +329,28 @@ async fn a_scan_started_paused_and_resumed_from_the_page_is_watched_to_its_resul
     let h = request(addr, "GET", "/healthz", &[], "").await;
     assert_eq!((h.status, h.body.as_str()), (200, "ok\n"));
 
+    sigterm(&d);
+    assert!(wait_exit(&mut d).success());
+    r.sim.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_page_that_cannot_listen_is_named_and_the_station_scans_on() {
+    let r = rig().await;
+    let addr = with_page(&r);
+    let _taken = std::net::TcpListener::bind(addr).unwrap();
+    let mut d = spawn_daemon(&r);
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    let s = status(&r).await;
+    let link = s.links.get("web").expect("the page named among the links");
+    assert!(!link.ok, "{link:?}");
+    assert!(
+        link.message.contains(&format!("cannot listen on {addr}"))
+            && link.message.contains("another program may use the port"),
+        "{link:?}"
+    );
+    start_scan(&r, "B-13").await;
+    wait_status(&r, "a line on disk without the page", |s| s.lines_done >= 1).await;
     sigterm(&d);
     assert!(wait_exit(&mut d).success());
     r.sim.shutdown().await;
