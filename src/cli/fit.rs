@@ -578,14 +578,7 @@ impl<'a> Fitting<'a> {
             (Some(a), Some(b)) if rows > 1 => (b - a).abs() / (rows - 1) as f64,
             _ => self.pitch_y_mm.unwrap_or(1.0),
         };
-        let sq = areal_sq_um(&HeightMap {
-            heights_um: &fitted.heights_um,
-            rows,
-            cols: fitted.cols,
-            pitch_x_mm: fitted.pitch_x_mm,
-            pitch_y_mm: mean_py,
-        })
-        .map_err(|e| e.to_string());
+        let sq = areal_sq_um(&HeightMap::of(fitted, mean_py)).map_err(|e| e.to_string());
         let degrees = self.recipe.degrees;
         let every = holdout_every_or_reason(rows, degrees.degree_v);
         let verdict = sq.clone().and_then(|sq| {

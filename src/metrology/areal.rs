@@ -70,6 +70,18 @@ pub struct HeightMap<'a> {
 }
 
 impl HeightMap<'_> {
+    /// `grid`'s heights, its rows taken `pitch_y_mm` apart (the lines' mean y pitch, or the
+    /// one the input states).
+    pub fn of(grid: &crate::grid::Grid, pitch_y_mm: f64) -> HeightMap<'_> {
+        HeightMap {
+            heights_um: &grid.heights_um,
+            rows: grid.rows(),
+            cols: grid.cols,
+            pitch_x_mm: grid.pitch_x_mm,
+            pitch_y_mm,
+        }
+    }
+
     fn check(&self) -> Result<(), MetrologyError> {
         check_pitch(self.pitch_x_mm)?;
         check_pitch(self.pitch_y_mm)?;

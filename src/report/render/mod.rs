@@ -327,13 +327,7 @@ pub fn write_data_files(
     figures: &FigureData,
     ctx: &ReportContext,
 ) -> Result<Files, ReportError> {
-    let measured = &HeightMap {
-        heights_um: &grid.heights_um,
-        rows: grid.rows(),
-        cols: grid.cols,
-        pitch_x_mm: grid.pitch_x_mm,
-        pitch_y_mm: grid.mean_pitch_y().0,
-    };
+    let measured = &HeightMap::of(grid, grid.mean_pitch_y().0);
     let sampled = figures.sampled.as_ref();
     // The X3P files are encoded (MD5, deflate) and written beside the plots: they read only
     // the heights and their metadata. Errors are reported in the order the files were

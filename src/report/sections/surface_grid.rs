@@ -9,18 +9,6 @@ use crate::metrology::anisotropy::Anisotropy;
 use crate::metrology::areal::{areal_params, smr_curve, HeightMap};
 use crate::report::document::SurfaceReport;
 
-/// The measured heights as a grid for the areal parameters, plots and X3P: the grid's rows
-/// at the mean y pitch.
-pub fn measured(grid: &crate::grid::Grid, pitch_y_mm: f64) -> HeightMap<'_> {
-    HeightMap {
-        heights_um: &grid.heights_um,
-        rows: grid.rows(),
-        cols: grid.cols,
-        pitch_x_mm: grid.pitch_x_mm,
-        pitch_y_mm,
-    }
-}
-
 /// Areal parameters and the pooled Smr curve of `g` at `levels` levels.
 pub fn surface_report(
     g: &HeightMap<'_>,
@@ -40,7 +28,7 @@ pub fn surface_report(
 
 /// The areal parameters and pooled bearing curve of the grid as characterised.
 pub fn section(input: &SectionInput<'_>) -> Result<SurfaceReport, String> {
-    let measured = measured(input.characterised, input.pitch_y_mm);
+    let measured = HeightMap::of(input.characterised, input.pitch_y_mm);
     surface_report(
         &measured,
         input.ctx.options.levels,
@@ -53,6 +41,6 @@ pub fn section(input: &SectionInput<'_>) -> Result<SurfaceReport, String> {
 
 /// The anisotropy of the grid as characterised, and what it does to Sdq and Sdr.
 pub fn anisotropy(input: &SectionInput<'_>) -> Result<Anisotropy, String> {
-    crate::metrology::anisotropy::anisotropy(&measured(input.characterised, input.pitch_y_mm))
+    crate::metrology::anisotropy::anisotropy(&HeightMap::of(input.characterised, input.pitch_y_mm))
         .map_err(|e| e.to_string())
 }
