@@ -826,6 +826,7 @@ pub const NUMERIC_KEYS: &[NumericKey] = &[
     int_key!(instrument "instrument.baud", 300, 115_200, "baud", "set the rate the instrument is set to (9600, 19200, 38400; `surfscan probe` finds it)", |c| Some(c.baud)),
     real_key!(instrument "instrument.pitch-x-um", 0.001, 1000.0, "µm", "the SJ-210 exports 0.5 to 1.5 µm; remove the key to derive it from λs", |c| c.pitch_x_um),
     real_key!(instrument "instrument.measuring-speed-mm-s", 0.01, 100.0, "mm/s", "set the instrument's measuring speed (the SJ-210's are 0.25, 0.5 and 0.75)", |c| Some(c.measuring_speed_mm_s)),
+    real_key!(instrument "instrument.detector-range-um", 1.0, 10_000.0, "µm", "the SJ-210's standard detector measures 360 µm (−200 to +160 µm); give the range of the detector fitted", |c| Some(c.detector_range_um)),
     real_key!(instrument "instrument.return-speed-mm-s", 0.01, 100.0, "mm/s", "the SJ-210 returns at 1 mm/s", |c| Some(c.return_speed_mm_s)),
     int_key!(instrument "instrument.timeouts.first-byte-ms", 1, 600_000, "ms", "the default is 2000", |c| Some(c.timeouts.first_byte_ms)),
     int_key!(instrument "instrument.timeouts.inter-byte-ms", 1, 60_000, "ms", "the default is 200", |c| Some(c.timeouts.inter_byte_ms)),

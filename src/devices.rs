@@ -208,7 +208,9 @@ pub struct RepeatedBlock {
 
 /// A named doubt about a line's profile read-out, kept with the line after one re-read of
 /// the profile did not clear it. JSON: `{"kind": "repeated-block", "blocks": [...]}` or
-/// `{"kind": "ra-disagrees", "instrument_um": …, "ours_um": …, "tolerance_um": …}`.
+/// `{"kind": "ra-disagrees", "instrument_um": …, "ours_um": …, "tolerance_um": …}`,
+/// `{"kind": "beyond-detector-range", "span_um": …, "range_um": …}` or
+/// `{"kind": "ra-unit-unknown", "unit": …}`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum ReadoutWarning {
@@ -226,6 +228,20 @@ pub enum ReadoutWarning {
         ours_um: f64,
         /// The allowed difference, µm.
         tolerance_um: f64,
+    },
+    /// The heights span more than the detector can measure: they cannot be the surface's
+    /// (heights in the wrong unit, nm read as µm).
+    BeyondDetectorRange {
+        /// Highest minus lowest height of the read-out, µm.
+        span_um: f64,
+        /// The detector's measuring range, µm (`[instrument] detector-range-um`).
+        range_um: f64,
+    },
+    /// The instrument's Ra is in a unit this program does not know, so the heights were
+    /// not checked against it.
+    RaUnitUnknown {
+        /// The unit as the instrument printed it.
+        unit: String,
     },
 }
 
@@ -250,6 +266,14 @@ impl std::fmt::Display for ReadoutWarning {
             } => write!(
                 f,
                 "the instrument's Ra {instrument_um} um and Ra {ours_um:.4} um from the read-out heights differ by more than {tolerance_um:.4} um"
+            ),
+            ReadoutWarning::BeyondDetectorRange { span_um, range_um } => write!(
+                f,
+                "the heights span {span_um:.1} um, more than the detector's measuring range of {range_um} um ([instrument] detector-range-um): they cannot be the surface's (heights in the wrong unit, nm read as um?)"
+            ),
+            ReadoutWarning::RaUnitUnknown { unit } => write!(
+                f,
+                "the instrument's Ra is in {unit:?}, a unit this program does not know: the heights were not checked against it"
             ),
         }
     }

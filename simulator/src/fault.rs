@@ -21,7 +21,9 @@
 //! * `repeat` — an `RDEVA` block request is answered with the previous block again (the
 //!   read-out cursor went back one block), e.g. `repeat@RDEVA50#3`;
 //! * `skew:PCT` — an `RDRES` answer's value is off by PCT percent (signed), so the
-//!   instrument's result disagrees with its own heights, e.g. `skew:20@RDRES02,01`.
+//!   instrument's result disagrees with its own heights, e.g. `skew:20@RDRES02,01`;
+//! * `scale:K` — the trace a `CTSTA` starts is served with its heights, and so its results,
+//!   K times too large (heights in the wrong unit), e.g. `scale:1000@CTSTA#3`.
 //!
 //! Time windows: the matching frame opens a window of MS milliseconds (of the serve loop's
 //! clock) during which the fault applies to every frame and to the idle line (no `xK`):
@@ -62,6 +64,9 @@ pub enum FaultKind {
     RepeatBlock,
     /// An `RDRES` value off by this many percent.
     Skew(i32),
+    /// The trace this `CTSTA` starts is served with every height (and so every result)
+    /// multiplied by this factor: heights in the wrong unit (nm read as µm is 1000).
+    Scale(u32),
     /// Opens a time window of this length (see [`Window`]).
     Window(Window, Duration),
 }
@@ -176,6 +181,13 @@ impl std::str::FromStr for FaultSpec {
                 arg.and_then(|a| a.parse::<i32>().ok())
                     .filter(|p| (-99..=1000).contains(p))
                     .ok_or_else(|| err("skew needs a percentage from -99 to 1000, e.g. skew:20"))?,
+            ),
+            "scale" => FaultKind::Scale(
+                arg.and_then(|a| a.parse::<u32>().ok())
+                    .filter(|k| (1..=1_000_000).contains(k))
+                    .ok_or_else(|| {
+                        err("scale needs a factor from 1 to 1000000, e.g. scale:1000")
+                    })?,
             ),
             "busy" => FaultKind::Window(Window::Busy, millis(arg)?),
             "noeol" => FaultKind::Window(Window::NoLineEnd, millis(arg)?),
@@ -349,6 +361,7 @@ mod tests {
         assert!("drop@RDRES#0".parse::<FaultSpec>().is_err());
         assert_eq!(wire("repeat@RDEVA50#3").kind, FaultKind::RepeatBlock);
         assert_eq!(wire("skew:-30@RDRES02,01").kind, FaultKind::Skew(-30));
+        assert_eq!(wire("scale:1000@CTSTA#3").kind, FaultKind::Scale(1000));
         assert!("skew@RDRES".parse::<FaultSpec>().is_err());
         assert!("skew:-100@RDRES".parse::<FaultSpec>().is_err());
     }

@@ -234,6 +234,9 @@ pub struct Instrument {
     last_line: Option<usize>,
     /// Percent by which the result being answered is off (a `skew` fault), 0 normally.
     skew_pct: i32,
+    /// Factor of the heights of the trace running or next finished (a `scale` fault), 1
+    /// normally.
+    scale: f64,
     /// Counters shared with the simulator's host.
     stats: Arc<SimStats>,
 }
@@ -259,6 +262,7 @@ impl Instrument {
             results: None,
             last_line: None,
             skew_pct: 0,
+            scale: 1.0,
             stats: Arc::new(SimStats::default()),
         }
     }
@@ -284,6 +288,13 @@ impl Instrument {
         let reply = self.respond(frame, now);
         self.skew_pct = 0;
         reply
+    }
+
+    /// Answers a frame (a trace's start) so that the trace it starts is served with every
+    /// height multiplied by `factor`.
+    pub fn respond_scaled(&mut self, frame: &[u8], now: Duration, factor: f64) -> Vec<u8> {
+        self.scale = factor;
+        self.respond(frame, now)
     }
 
     /// The configuration.
@@ -352,7 +363,12 @@ impl Instrument {
         let Some(p) = self.profiles.profiles().get(line) else {
             return;
         };
-        let heights_um: Vec<f64> = p.z_um.iter().map(|&z| round_to(z, decimals)).collect();
+        let scale = std::mem::replace(&mut self.scale, 1.0);
+        let heights_um: Vec<f64> = p
+            .z_um
+            .iter()
+            .map(|&z| round_to(z * scale, decimals))
+            .collect();
         let segments = usize::from(self.cfg.conditions.sampling_lengths).max(1);
         // An R profile is served as the instrument exports it, already relative to its mean
         // line; other kinds are taken about their arithmetic mean.

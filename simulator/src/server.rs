@@ -71,6 +71,9 @@ impl Responder {
             (Responder::Emulate(i), FaultKind::Skew(pct)) => {
                 Some(i.respond_skewed(frame, now, *pct))
             }
+            (Responder::Emulate(i), FaultKind::Scale(k)) => {
+                Some(i.respond_scaled(frame, now, f64::from(*k)))
+            }
             (r, _) => r.respond(frame, now),
         }
     }
@@ -205,7 +208,7 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
             let fault = verdict.kind;
             let reply = match &fault {
                 Some(FaultKind::Ng(code)) => Some(format!("NG{code:03}\r").into_bytes()),
-                Some(k @ (FaultKind::RepeatBlock | FaultKind::Skew(_))) => {
+                Some(k @ (FaultKind::RepeatBlock | FaultKind::Skew(_) | FaultKind::Scale(_))) => {
                     responder.respond_faulted(&line, now, k)
                 }
                 _ => responder.respond(&line, now),
@@ -266,6 +269,7 @@ pub async fn serve_connection<T: AsyncRead + AsyncWrite + Unpin>(
                     FaultKind::Ng(_)
                     | FaultKind::RepeatBlock
                     | FaultKind::Skew(_)
+                    | FaultKind::Scale(_)
                     | FaultKind::Window(..),
                 )
                 | None => io.write_all(&reply).await?,

@@ -174,6 +174,17 @@ pub fn characterise_scan_lines(
             filter_reason
         ));
     }
+    // A line kept with a doubt about its read-out (heights beyond the detector's range, the
+    // instrument's Ra disagreeing, a repeated block) is named: its heights may not be the
+    // surface's.
+    for l in lines {
+        for w in &l.meta.readout_warnings {
+            warnings.push(format!(
+                "line {} was kept with a read-out warning: {w}",
+                line_label(l.meta.id.index)
+            ));
+        }
+    }
     let lines_used: Vec<u32> = grid.index.clone();
     let scan = facts.map(|f| {
         let lines_planned = f.start.plan.lines;

@@ -17,7 +17,15 @@
 //!   never receive, so the ends of the mean line differ.
 //!
 //! Other profile kinds (W, motif, DF) are not compared, nor is a line without an instrument
-//! `Ra` in µm or too short for our evaluation. A larger disagreement means the heights are not
+//! `Ra` or too short for our evaluation; an `Ra` in µin or inches is converted, one in a unit
+//! not known here is named ([`ra_unit_unknown`]).
+//!
+//! # The detector's range
+//!
+//! Heights whose span (highest minus lowest) is wider than the detector's measuring range
+//! (the SJ-210's standard detector: 360 µm) cannot be the surface's: heights in the wrong
+//! unit (nm read as µm makes them 1000× too large, and the instrument's own Ra with them, so
+//! the Ra rule alone would not see it). A larger disagreement means the heights are not
 //! the ones the instrument evaluated (another trace's, a shifted or repeated block, wrong
 //! units).
 //!
@@ -66,12 +74,45 @@ pub fn instrument_ra_um(results: &[InstrumentResult]) -> Option<f64> {
         .iter()
         .find(|r| r.name.trim().eq_ignore_ascii_case("ra"))?;
     let v = r.value?;
-    match r.unit.trim() {
-        "um" | "µm" | "μm" | "" => Some(v),
-        "nm" => Some(v / 1000.0),
-        "mm" => Some(v * 1000.0),
+    Some(v * micrometres_per(&r.unit)?)
+}
+
+/// µm per unit of a result's `unit` as the instrument prints it (µm, nm, mm, µin, in);
+/// `None` for a unit this program does not know.
+fn micrometres_per(unit: &str) -> Option<f64> {
+    match unit.trim() {
+        "um" | "µm" | "μm" | "" => Some(1.0),
+        "nm" => Some(0.001),
+        "mm" => Some(1000.0),
+        "uin" | "µin" | "μin" | "uinch" | "µinch" | "μinch" => Some(0.0254),
+        "in" | "inch" => Some(25_400.0),
         _ => None,
     }
+}
+
+/// The unit of the instrument's `Ra`, when it has a value in a unit this program does not
+/// know (so it cannot be compared with the heights, which must be said).
+pub fn ra_unit_unknown(results: &[InstrumentResult]) -> Option<String> {
+    let r = results
+        .iter()
+        .find(|r| r.name.trim().eq_ignore_ascii_case("ra"))?;
+    r.value?;
+    micrometres_per(&r.unit)
+        .is_none()
+        .then(|| r.unit.trim().to_owned())
+}
+
+/// The span (highest minus lowest) of the finite `heights_um`, when it is wider than a
+/// detector of `range_um` can measure.
+pub fn span_beyond_range(heights_um: &[f64], range_um: f64) -> Option<f64> {
+    let (lo, hi) = heights_um
+        .iter()
+        .filter(|h| h.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &h| {
+            (lo.min(h), hi.max(h))
+        });
+    let span = hi - lo;
+    (span.is_finite() && span > range_um).then_some(span)
 }
 
 /// Compares the instrument's Ra with ours from `profile`; `None` when it cannot be compared
@@ -113,6 +154,33 @@ mod tests {
         }
     }
 
+    #[test]
+    fn inch_results_are_compared_and_an_unknown_unit_is_named() {
+        // 100 µin = 2.54 µm.
+        let got = instrument_ra_um(&[r("Ra", Some(100.0), "uin")]).unwrap();
+        assert!((got - 2.54).abs() < 1e-12, "{got}");
+        assert!((instrument_ra_um(&[r("Ra", Some(0.0001), "in")]).unwrap() - 2.54).abs() < 1e-9);
+        assert_eq!(ra_unit_unknown(&[r("Ra", Some(100.0), "uin")]), None);
+        assert_eq!(
+            ra_unit_unknown(&[r("Ra", Some(1.0), "furlong")]).as_deref(),
+            Some("furlong")
+        );
+        assert_eq!(instrument_ra_um(&[r("Ra", Some(1.0), "furlong")]), None);
+        // No value: nothing to compare, nothing to say.
+        assert_eq!(ra_unit_unknown(&[r("Ra", None, "furlong")]), None);
+    }
+
+    #[test]
+    fn a_span_wider_than_the_detector_is_found() {
+        // Within ±180 µm: 360 µm exactly is possible.
+        assert_eq!(span_beyond_range(&[-200.0, 160.0, 0.0], 360.0), None);
+        assert_eq!(
+            span_beyond_range(&[-1945.0, 2100.0, f64::NAN], 360.0),
+            Some(4045.0)
+        );
+        assert_eq!(span_beyond_range(&[], 360.0), None);
+    }
+
     fn r_profile(z: Vec<f64>) -> Profile {
         Profile {
             pitch_x_mm: 0.0015,
@@ -133,7 +201,11 @@ mod tests {
         assert_eq!(instrument_ra_um(&res), Some(1.5));
         assert_eq!(instrument_ra_um(&[r("Ra", Some(1500.0), "nm")]), Some(1.5));
         assert_eq!(instrument_ra_um(&[r("Ra", None, "um")]), None);
-        assert_eq!(instrument_ra_um(&[r("Ra", Some(1.0), "in")]), None);
+        // Inches are converted (the SJ-210 can be set to inch units), not skipped.
+        assert_eq!(
+            instrument_ra_um(&[r("Ra", Some(1.0), "in")]),
+            Some(25_400.0)
+        );
     }
 
     #[test]

@@ -38,6 +38,11 @@ pub struct InstrumentSettings {
     /// only for a firmware whose export is known to follow another rule.
     #[serde(default = "default_true")]
     pub check_point_count: bool,
+    /// Measuring range of the detector in µm (default 360, the SJ-210's standard detector,
+    /// −200 to +160 µm): a profile whose heights span more cannot be the surface's (heights
+    /// in the wrong unit, nm read as µm) and is read again, then kept with a named warning.
+    #[serde(default = "default_detector_range")]
+    pub detector_range_um: f64,
     /// Measuring speed of the drive as set on the instrument, mm/s (default 0.5): with the
     /// traverse it gives when a trace is expected to end, where its status is asked.
     #[serde(default = "default_measuring_speed")]
@@ -59,6 +64,13 @@ fn default_baud() -> u32 {
 
 fn default_true() -> bool {
     true
+}
+
+/// The SJ-210's standard detector (178-296): −200 to +160 µm.
+pub const STANDARD_DETECTOR_RANGE_UM: f64 = 360.0;
+
+fn default_detector_range() -> f64 {
+    STANDARD_DETECTOR_RANGE_UM
 }
 
 fn default_measuring_speed() -> f64 {
@@ -119,6 +131,8 @@ pub struct ClientOptions {
     pub pitch_x_um: Option<f64>,
     /// Refuse a profile whose point count is not the one its conditions give.
     pub check_point_count: bool,
+    /// The detector's measuring range, µm: the widest span a profile's heights can have.
+    pub detector_range_um: f64,
     /// The drive's speeds, for when a trace is expected to end.
     pub speeds: DriveSpeeds,
     /// Longest accepted reply line in bytes.
@@ -143,6 +157,7 @@ impl ClientOptions {
             trace_deadline: t.trace_deadline_ms.map(Duration::from_millis),
             pitch_x_um,
             check_point_count: true,
+            detector_range_um: STANDARD_DETECTOR_RANGE_UM,
             speeds: DriveSpeeds {
                 measuring_mm_s: default_measuring_speed(),
                 return_mm_s: default_return_speed(),
@@ -234,6 +249,7 @@ impl InstrumentSettings {
     pub fn client_options(&self) -> ClientOptions {
         ClientOptions {
             check_point_count: self.check_point_count,
+            detector_range_um: self.detector_range_um,
             speeds: DriveSpeeds {
                 measuring_mm_s: self.measuring_speed_mm_s,
                 return_mm_s: self.return_speed_mm_s,

@@ -95,6 +95,7 @@ fn opts() -> ClientOptions {
         trace_deadline: Some(Duration::from_secs(60)),
         pitch_x_um: None,
         check_point_count: true,
+        detector_range_um: surfscan::sj210::settings::STANDARD_DETECTOR_RANGE_UM,
         speeds: surfscan::sj210::timing::DriveSpeeds {
             measuring_mm_s: 0.5,
             return_mm_s: 1.0,

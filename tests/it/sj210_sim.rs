@@ -838,3 +838,78 @@ async fn a_read_out_warning_is_stored_with_the_line_it_belongs_to() {
     }
     rig.shutdown().await;
 }
+
+/// A line served 1000× too large (heights and the instrument's own results with them, as
+/// heights in nm read as µm): the Ra cross-check agrees, but the heights span far more than
+/// the SJ-210's standard detector can measure (360 µm). The line is read again, then kept
+/// with the named warning in its metadata and in the report; the other lines carry none.
+#[tokio::test]
+async fn a_line_1000_times_too_large_is_kept_with_a_named_warning_in_metadata_and_report() {
+    use crate::common::{run_scan, scan_dir, Rig, RigOptions};
+    let rig = Rig::start(RigOptions {
+        lines: 4,
+        // The third trace (line index 2).
+        faults: vec!["scale:1000@CTSTA#3".into()],
+        ..RigOptions::default()
+    })
+    .await;
+    let o = run_scan(&rig.config("out"), &[]).await;
+    // The scan completes; a model through a line 1000× the others' folds, so its
+    // characterisation is partial and says so (exit 3).
+    assert_eq!(o.status.code(), Some(3), "{}", crate::common::describe(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("scan complete"),
+        "{}",
+        crate::common::describe(&o)
+    );
+    let dir = scan_dir(&rig.out_dir("out"));
+    let meta = |k: u32| -> serde_json::Value {
+        let text = std::fs::read_to_string(dir.join(format!("lines/{k:04}.json"))).unwrap();
+        serde_json::from_str(&text).unwrap()
+    };
+    let third = meta(2);
+    let w = third["readout_warnings"].as_array().expect("warnings");
+    let beyond: Vec<_> = w
+        .iter()
+        .filter(|w| w["kind"] == "beyond-detector-range")
+        .collect();
+    assert_eq!(beyond.len(), 1, "{third}");
+    assert_eq!(beyond[0]["range_um"], 360.0, "{third}");
+    // Independently: the stored heights (as served, 1000× the set's) span more than 360 µm.
+    let csv = std::fs::read_to_string(dir.join("lines/0002.csv")).unwrap();
+    let z: Vec<f64> = csv
+        .lines()
+        .filter_map(|l| l.split(',').next_back()?.trim().parse().ok())
+        .collect();
+    let span = z.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+        - z.iter().cloned().fold(f64::INFINITY, f64::min);
+    assert!(span > 360.0, "span {span}");
+    assert!(
+        (beyond[0]["span_um"].as_f64().unwrap() - span).abs() < 1e-6 * span,
+        "{third} vs {span}"
+    );
+    // The instrument's own Ra came with the heights: no Ra disagreement hid the fault.
+    assert!(w.iter().all(|w| w["kind"] != "ra-disagrees"), "{third}");
+    for k in [0, 1, 3] {
+        assert!(
+            meta(k).get("readout_warnings").is_none(),
+            "line {k}: {}",
+            meta(k)
+        );
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
+    let warnings: Vec<&str> = report["warnings"]
+        .as_array()
+        .expect("report warnings")
+        .iter()
+        .filter_map(|w| w.as_str())
+        .collect();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("line 3 (0002)") && w.contains("detector's measuring range")),
+        "{warnings:?}"
+    );
+    rig.shutdown().await;
+}

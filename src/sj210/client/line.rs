@@ -3,8 +3,9 @@
 //! instrument answers then, else once it is back), its point count checked against the conditions
 //! ([`crate::sj210::sampling::check_point_count`]) and its length against the evaluation
 //! length, and its read-out checked for sanity ([`crate::sj210::sanity`]: a repeated block,
-//! the instrument's Ra against ours). A read-out in doubt is read again once; a doubt the
-//! re-read does not clear stays with the line as a [`ReadoutWarning`].
+//! the instrument's Ra against ours, the heights' span against the detector's range). A
+//! read-out in doubt is read again once; a doubt the re-read does not clear stays with the
+//! line as a [`ReadoutWarning`], as does an Ra in a unit not known here.
 //!
 //! Layer 2: part of [`super::Sj210Client`].
 
@@ -16,7 +17,7 @@ use crate::profile::{Conditions, InstrumentResult, Profile};
 use crate::sj210::error::Sj210Error;
 use crate::sj210::ng::NgCode;
 use crate::sj210::sampling::check_point_count;
-use crate::sj210::sanity::check_ra;
+use crate::sj210::sanity::{check_ra, ra_unit_unknown, span_beyond_range};
 use tokio::io::{AsyncRead, AsyncWrite};
 
 /// What a line needs before its trace: the conditions it is traced under, the pitch and
@@ -152,6 +153,7 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             pitch_um,
             pitch_source: &pitch_source,
             check_count: self.opts.check_point_count,
+            detector_range_um: self.opts.detector_range_um,
             results: &results,
         };
         let mut doubts = check.doubts(&pass)?;
@@ -190,6 +192,10 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
                 warnings.push(w);
             }
         }
+        // Not a doubt a re-read can clear, but said with the line all the same.
+        if let Some(unit) = ra_unit_unknown(&results) {
+            doubts.push(ReadoutWarning::RaUnitUnknown { unit });
+        }
         for d in &doubts {
             tracing::warn!("line kept with a read-out warning: {d}");
         }
@@ -221,6 +227,7 @@ struct LineCheck<'a> {
     pitch_um: f64,
     pitch_source: &'a str,
     check_count: bool,
+    detector_range_um: f64,
     results: &'a [InstrumentResult],
 }
 
@@ -240,6 +247,12 @@ impl LineCheck<'_> {
         if !pass.repeated_blocks.is_empty() {
             out.push(ReadoutWarning::RepeatedBlock {
                 blocks: pass.repeated_blocks.clone(),
+            });
+        }
+        if let Some(span_um) = span_beyond_range(&pass.heights_um, self.detector_range_um) {
+            out.push(ReadoutWarning::BeyondDetectorRange {
+                span_um,
+                range_um: self.detector_range_um,
             });
         }
         let profile = Profile {
