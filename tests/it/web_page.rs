@@ -1,7 +1,8 @@
 //! The station's page in headless Chromium against the real `surfscan daemon` and the
 //! simulator: sign in, start a scan from the page and watch it to completion (the line
 //! counter and the height map advance, the result shows), pause and resume from the page
-//! (the journal names the page's user), a hundred open event streams that never read while
+//! (the journal names the page's user), a request without the session and another site's
+//! forged commands refused, a hundred open event streams that never read while
 //! the scan runs, and the page saying the daemon is away while it restarts, then carrying on;
 //! a page that cannot listen leaves the station scanning.
 //!
@@ -17,6 +18,7 @@ use serde_json::json;
 use std::os::unix::fs::PermissionsExt;
 use std::time::Duration;
 use surfscan::scan::journal::Record;
+use surfscan::scan::status::State;
 
 const ALICE: &str = "alice-page-token-5f0c2a9e77d1";
 const WAIT: Duration = Duration::from_secs(90);
@@ -42,6 +44,34 @@ fn with_page(r: &Rig) -> std::net::SocketAddr {
         tokens.display().to_string()
     ));
     std::fs::write(&r.config, text).unwrap();
+    addr
+}
+
+/// Serves, on another port of the same host, a page that tries to pause the station at
+/// `target` with the visitor's cookie: a script's `fetch` and a form posted by itself.
+fn forging_site(target: std::net::SocketAddr) -> std::net::SocketAddr {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap();
+    let page = format!(
+        r#"<!doctype html><form id="f" method="POST" action="http://{target}/api/pause" enctype="text/plain"><input name='{{"a":"' value='"}}'></form>
+<script>
+fetch("http://{target}/api/pause", {{method: "POST", mode: "no-cors", credentials: "include", headers: {{"content-type": "text/plain"}}, body: "{{}}"}})
+  .catch(() => null)
+  .finally(() => document.getElementById("f").submit());
+</script>"#
+    );
+    std::thread::spawn(move || {
+        for stream in listener.incoming().take(8) {
+            let Ok(mut s) = stream else { continue };
+            let mut buf = [0u8; 4096];
+            let _ = std::io::Read::read(&mut s, &mut buf);
+            let reply = format!(
+                "HTTP/1.1 200 OK\r\ncontent-type: text/html\r\ncontent-length: {}\r\nconnection: close\r\n\r\n{page}",
+                page.len()
+            );
+            let _ = std::io::Write::write_all(&mut s, reply.as_bytes());
+        }
+    });
     addr
 }
 
@@ -126,6 +156,18 @@ async fn a_scan_started_paused_and_resumed_from_the_page_is_watched_to_its_resul
         b.eval(&tab, &format!("{}.dataset.state", el("link"))),
         json!("live")
     );
+    // The same request without the session (no cookie, no token) is refused.
+    assert_eq!(
+        b.eval(
+            &tab,
+            "fetch('/api/status', {credentials: 'omit'}).then(r => r.status)"
+        ),
+        json!(401)
+    );
+    assert_eq!(
+        b.eval(&tab, "fetch('/api/status').then(r => r.status)"),
+        json!(200)
+    );
     // The token is not kept in the page.
     assert_eq!(b.eval(&tab, &format!("{}.value", el("token"))), json!(""));
 
@@ -170,6 +212,32 @@ async fn a_scan_started_paused_and_resumed_from_the_page_is_watched_to_its_resul
     seen.push(progress(&mut b, &tab));
     let caption = text_of(&mut b, &tab, "map-caption");
     assert!(caption.contains(&format!("of {LINES} lines")), "{caption}");
+
+    // Another site's page in the same browser, which holds alice's session cookie: a page on
+    // another port of the same host is the same site, so the browser sends the cookie with
+    // its requests. Its script's POST and its form's are refused, and nothing pauses.
+    let evil = forging_site(addr);
+    let forger = b.open(&format!("http://{evil}/"));
+    let refused = b.wait_for(
+        &forger,
+        "the forged form's answer",
+        "document.body && document.body.innerText",
+        WAIT,
+        |v| v.as_str().is_some_and(|t| t.contains("\"class\"")),
+    );
+    let refused = refused.as_str().unwrap();
+    assert!(
+        refused.contains("\"class\":\"error\"")
+            && refused.contains("pause refused: ")
+            && refused.contains("nothing was carried out"),
+        "{refused}"
+    );
+    let st = status(&r).await;
+    assert_eq!(
+        st.state,
+        State::Scanning,
+        "a forged command took effect: {st:?}"
+    );
 
     // Pause from the page: effective once the line in hand is on disk.
     click(&mut b, &tab, "pause");
@@ -260,10 +328,17 @@ async fn a_scan_started_paused_and_resumed_from_the_page_is_watched_to_its_resul
             _ => None,
         })
         .collect();
+    // Exactly one pause: the page's own, none of the forged ones.
+    let pauses: Vec<_> = by_page
+        .iter()
+        .filter(|(why, _)| why.starts_with("pause requested by"))
+        .collect();
+    assert_eq!(pauses.len(), 1, "{by_page:?}");
     assert!(
-        by_page.iter().any(|(why, who)| why
+        pauses[0]
+            .0
             .starts_with("pause requested by web user alice from 127.0.0.1:")
-            && who == "alice"),
+            && pauses[0].1 == "alice",
         "{by_page:?}"
     );
     assert!(
