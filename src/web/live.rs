@@ -270,6 +270,7 @@ fn rfc3339(t: DateTime<Utc>) -> String {
 }
 
 /// The feed's state between publications.
+#[derive(Default)]
 struct Feed {
     seq: u64,
     view: View,
@@ -363,17 +364,7 @@ impl Feed {
 /// Runs the feed until the status channel closes: publishes into `tx` at most every
 /// [`MIN_INTERVAL`]. `out` is the output directory (its newest scan is shown at start).
 pub async fn run(mut status: watch::Receiver<Status>, out: PathBuf, tx: watch::Sender<Arc<View>>) {
-    let mut feed = Feed {
-        seq: 0,
-        view: View::default(),
-        dir: None,
-        lines_total: 0,
-        known: BTreeMap::new(),
-        lines_done: None,
-        since: None,
-        last_fault: None,
-        result_of: None,
-    };
+    let mut feed = Feed::default();
     // The newest scan on the station, until the runner names one.
     let newest = {
         let out = out.clone();
@@ -567,17 +558,7 @@ mod tests {
 
     #[test]
     fn the_status_part_says_since_when_and_keeps_the_last_fault() {
-        let mut feed = Feed {
-            seq: 0,
-            view: View::default(),
-            dir: None,
-            lines_total: 0,
-            known: BTreeMap::new(),
-            lines_done: None,
-            since: None,
-            last_fault: None,
-            result_of: None,
-        };
+        let mut feed = Feed::default();
         let t0: DateTime<Utc> = "2026-12-06T03:00:00Z".parse().unwrap();
         let t1: DateTime<Utc> = "2026-12-06T03:05:00Z".parse().unwrap();
         let t2: DateTime<Utc> = "2026-12-06T03:09:00Z".parse().unwrap();

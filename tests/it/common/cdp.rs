@@ -41,18 +41,8 @@ impl Browser {
         let (child_in, child_out) = (cmd_read.as_raw_fd(), ev_write.as_raw_fd());
         let mut command = Command::new(super::chromium::chromium());
         command
-            .args([
-                "--headless",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--disable-quic",
-                "--no-first-run",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-                "--disable-extensions",
-                "--remote-debugging-pipe",
-            ])
+            .args(super::chromium::HEADLESS)
+            .args(["--disable-extensions", "--remote-debugging-pipe"])
             .arg(format!("--user-data-dir={}", profile.path().display()))
             .arg("about:blank")
             .stdin(Stdio::null())

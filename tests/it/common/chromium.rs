@@ -17,6 +17,19 @@ pub fn chromium() -> PathBuf {
     p
 }
 
+/// The flags every headless run here starts with: no sandbox (containers), no GPU, nothing
+/// fetched or synchronised behind the test's back.
+pub const HEADLESS: &[&str] = &[
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+];
+
 /// What Chromium made of a page: the DOM after load and the browser's console lines.
 pub struct Rendered {
     /// `--dump-dom` output.
@@ -29,15 +42,8 @@ pub struct Rendered {
 pub fn render(page: &Path) -> Rendered {
     let profile = tempfile::tempdir().unwrap();
     let out = Command::new(chromium())
+        .args(HEADLESS)
         .args([
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--disable-quic",
-            "--no-first-run",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--disable-sync",
             "--enable-logging=stderr",
             "--v=0",
             "--virtual-time-budget=10000",
@@ -64,18 +70,8 @@ pub fn render(page: &Path) -> Rendered {
 pub fn print_to_pdf(page: &Path, pdf: &Path) {
     let profile = tempfile::tempdir().unwrap();
     let out = Command::new(chromium())
-        .args([
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--disable-quic",
-            "--no-first-run",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--disable-sync",
-            "--no-pdf-header-footer",
-            "--virtual-time-budget=10000",
-        ])
+        .args(HEADLESS)
+        .args(["--no-pdf-header-footer", "--virtual-time-budget=10000"])
         .arg(format!("--user-data-dir={}", profile.path().display()))
         .arg(format!("--print-to-pdf={}", pdf.display()))
         .arg(format!("file://{}", page.display()))
