@@ -83,6 +83,14 @@ pub fn summary(config: &Config) -> String {
 /// The device paths checked: notes for absent devices, or the first port that can never be
 /// a serial device as an error.
 pub fn check_ports(config: &Config) -> Result<Vec<String>, String> {
+    // One device under two names (a udev link and its node) is the same port too.
+    let resolve = |p: &str| std::fs::canonicalize(p).unwrap_or_else(|_| p.into());
+    let (instrument, stage) = (&config.instrument.port, &config.stage.port);
+    if resolve(instrument) == resolve(stage) {
+        return Err(format!(
+            "[instrument] port {instrument} and [stage] port {stage} are the same device; each device needs its own port (see `ls -l /dev/serial/by-id/`)"
+        ));
+    }
     let mut notes = Vec::new();
     for (what, port) in [
         ("instrument", &config.instrument.port),

@@ -158,10 +158,6 @@ impl DeviceFault for StageError {
         }
     }
 
-    fn ng_code(&self) -> Option<u16> {
-        match self {
-            StageError::Rejected { code, .. } | StageError::ControllerLimit { code, .. } => *code,
-            _ => None,
-        }
-    }
+    // No `ng_code`: NG codes are the SJ-210's; a controller's own code (GRBL `error:15`) is
+    // in the message, and labelled NG it read as the instrument's battery or system code.
 }

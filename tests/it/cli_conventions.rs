@@ -139,6 +139,26 @@ fn demo_config(dir: &Path, instrument: &Path, stage: &Path) -> std::path::PathBu
     p
 }
 
+/// The instrument and the stage on one port (also under two names): refused by
+/// `check-config` naming both (exit 78), where a scan used to say the port "is not present".
+#[test]
+fn check_config_refuses_one_port_for_both_devices() {
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("ystage");
+    std::os::unix::fs::symlink("/dev/null", &link).unwrap();
+    for stage in [Path::new("/dev/null"), link.as_path()] {
+        let cfg = demo_config(dir.path(), Path::new("/dev/null"), stage);
+        let out = surfscan(&["check-config", cfg.to_str().unwrap()]);
+        assert_eq!(out.status.code(), Some(78), "{}", text(&out.stderr));
+        let stderr = text(&out.stderr);
+        assert!(
+            stderr.contains("[instrument] port /dev/null and [stage] port")
+                && stderr.contains("are the same device"),
+            "{stderr}"
+        );
+    }
+}
+
 #[test]
 fn check_config_validates_without_opening_devices() {
     let dir = tempfile::tempdir().unwrap();
