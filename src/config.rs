@@ -63,6 +63,9 @@ pub struct Config {
     /// `[web]`: the station's page; none unless the table is there.
     #[serde(default)]
     pub web: Option<crate::web::settings::WebSettings>,
+    /// `[archive]`: each completed scan copied to the lab's object store; none by default.
+    #[serde(default)]
+    pub archive: Option<crate::publish::archive_settings::ArchiveSettings>,
 }
 
 /// `[jobs]`: recipes (named plans with their measuring conditions, analysis and
@@ -533,6 +536,10 @@ impl Config {
         }
         if let Some(w) = &self.web {
             w.validate()
+                .map_err(|(key, message)| Config::invalid(path, key, message))?;
+        }
+        if let Some(a) = &self.archive {
+            a.validate()
                 .map_err(|(key, message)| Config::invalid(path, key, message))?;
         }
         if let Some(n) = &self.notify {

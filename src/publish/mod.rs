@@ -15,6 +15,8 @@
 //! Layer 4 (process edge): depends on the configuration, the scan's events and status, and
 //! the publishers below.
 
+pub mod archive;
+pub mod archive_settings;
 pub mod metrics;
 pub mod mqtt;
 pub mod outbox;
@@ -40,7 +42,8 @@ pub fn outbox_dir(config: &Config, publisher: &str) -> PathBuf {
 /// The running publishers of a process (none when nothing is configured).
 pub struct Publishers {
     events: Option<mpsc::UnboundedSender<ScanEvent>>,
-    writer: Option<JoinHandle<()>>,
+    sinks: Vec<mpsc::UnboundedSender<ScanEvent>>,
+    writers: Vec<JoinHandle<()>>,
     links: Vec<JoinHandle<()>>,
     stop: watch::Sender<bool>,
     scan_metrics: Option<watch::Sender<ScanMetrics>>,
@@ -107,7 +110,8 @@ impl Publishers {
         let (scan_metrics, scan_metrics_rx) = watch::channel(ScanMetrics::default());
         let mut p = Publishers {
             events: None,
-            writer: None,
+            sinks: Vec::new(),
+            writers: Vec::new(),
             links: Vec::new(),
             stop,
             scan_metrics: None,
@@ -138,11 +142,81 @@ impl Publishers {
             }
         }
         if let Some(m) = &config.mqtt {
-            if let Err(e) = p.start_mqtt(config, m, status, stop_rx) {
+            if let Err(e) = p.start_mqtt(config, m, status, stop_rx.clone()) {
                 fail(status, mqtt::LINK, e);
             }
         }
+        if let Some(a) = &config.archive {
+            if let Err(e) = p.start_archive(config, a, status, stop_rx) {
+                fail(status, archive::LINK, e);
+            }
+        }
+        // One channel in, a copy of each event to every publisher's writer.
+        let sinks = std::mem::take(&mut p.sinks);
+        if !sinks.is_empty() {
+            let (tx, mut rx) = mpsc::unbounded_channel::<ScanEvent>();
+            p.writers.insert(
+                0,
+                tokio::spawn(async move {
+                    while let Some(ev) = rx.recv().await {
+                        for s in &sinks {
+                            let _ = s.send(ev.clone());
+                        }
+                    }
+                }),
+            );
+            p.events = Some(tx);
+        }
         p
+    }
+
+    fn start_archive(
+        &mut self,
+        config: &Config,
+        a: &archive_settings::ArchiveSettings,
+        status: &watch::Sender<Status>,
+        stop_rx: watch::Receiver<bool>,
+    ) -> Result<(), String> {
+        let target = a.validate().map_err(|(key, m)| format!("{key}: {m}"))?;
+        let dir = outbox_dir(config, "archive");
+        let queue = archive::Queue::open(&dir).map_err(|e| {
+            format!(
+                "cannot open the archive queue {}: {}; nothing is archived until this is fixed and the process restarted",
+                dir.display(),
+                crate::atomic::write_hint(&dir, &e)
+            )
+        })?;
+        let wake = Arc::new(Notify::new());
+        let archiver = archive::Archiver::new(
+            a.clone(),
+            target,
+            queue.clone(),
+            status.clone(),
+            wake.clone(),
+        );
+        self.links.push(tokio::spawn(archiver.run(stop_rx)));
+        let (tx, mut rx) = mpsc::unbounded_channel::<ScanEvent>();
+        self.writers.push(tokio::spawn(async move {
+            while let Some(ev) = rx.recv().await {
+                if ev.kind != crate::scan::event::ScanEventKind::Success {
+                    continue;
+                }
+                let q = queue.clone();
+                let (id, dir) = (ev.scan_id.clone(), ev.dir.clone());
+                let stored = tokio::task::spawn_blocking(move || q.push(&id, &dir)).await;
+                match stored {
+                    Ok(Ok(_)) => wake.notify_one(),
+                    Ok(Err(e)) => tracing::error!(
+                        "archive: scan {} could not be queued for the archive: {e}; copy {} by hand",
+                        ev.scan_id,
+                        ev.dir.display()
+                    ),
+                    Err(e) => tracing::error!("archive: {e}"),
+                }
+            }
+        }));
+        self.sinks.push(tx);
+        Ok(())
     }
 
     fn start_mqtt(
@@ -167,7 +241,7 @@ impl Publishers {
         let (tx, mut rx) = mpsc::unbounded_channel::<ScanEvent>();
         let station = m.station.clone();
         let status = status.clone();
-        self.writer = Some(tokio::spawn(async move {
+        self.writers.push(tokio::spawn(async move {
             while let Some(ev) = rx.recv().await {
                 let payload = event_payload(&ev, &station, chrono::Utc::now());
                 let o = outbox.clone();
@@ -202,7 +276,7 @@ impl Publishers {
                 wake.notify_one();
             }
         }));
-        self.events = Some(tx);
+        self.sinks.push(tx);
         Ok(())
     }
 
@@ -222,7 +296,7 @@ impl Publishers {
     pub async fn finish(mut self, deadline: Duration) {
         let end = tokio::time::Instant::now() + deadline;
         self.events = None;
-        if let Some(w) = self.writer.take() {
+        for w in self.writers.drain(..) {
             let _ = tokio::time::timeout_at(end, w).await;
         }
         let _ = self.stop.send(true);

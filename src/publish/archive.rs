@@ -1,0 +1,431 @@
+//! The raw-data archive: each completed scan directory copied to the lab's archive (a
+//! `file://` directory: a mounted share) off the scan's path, through `object_store`, every
+//! object read back and its SHA-256 compared, a `MANIFEST.sha256` (the `sha256sum -c` format)
+//! written last.
+//!
+//! ```text
+//! success event ──► queue entry in outbox/archive/ (disk) ──► Archiver ──► store
+//!                   (what is verified is recorded in it)      backoff while the store is away
+//! ```
+//!
+//! The queue entry of a scan lists each file once it is uploaded and verified, so a restart
+//! continues where the last process stopped; a finished entry moves to `outbox/archive/done/`
+//! (the record that the archive holds a verified copy). Nothing on the station is deleted.
+//!
+//! Layer 4 (process edge): depends on object_store, the status's links and the atomic writer.
+
+use super::archive_settings::ArchiveSettings;
+use crate::scan::status::{LinkStatus, Status};
+use object_store::path::Path as ObjectPath;
+use object_store::{ObjectStore, PutPayload};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::{watch, Notify};
+
+/// The name of the archive in the status's links.
+pub const LINK: &str = "archive";
+
+/// The object listing every file of a scan with its SHA-256, written last.
+pub const MANIFEST: &str = "MANIFEST.sha256";
+
+/// The longest wait between two tries while the store is away.
+const MAX_BACKOFF: Duration = Duration::from_secs(300);
+
+/// How long one request may take before it counts as failed.
+const REQUEST_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// One file archived and verified.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Archived {
+    /// Path inside the scan directory, `/`-separated.
+    pub path: String,
+    /// Its size.
+    pub bytes: u64,
+    /// Its SHA-256, lower-case hex.
+    pub sha256: String,
+}
+
+/// A scan waiting for the archive, and how far it got.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Entry {
+    /// The scan id (the objects' folder).
+    pub scan_id: String,
+    /// The scan directory on the station.
+    pub dir: PathBuf,
+    /// The files archived and verified so far.
+    #[serde(default)]
+    pub files: Vec<Archived>,
+}
+
+/// The `sha256sum` text of `files`: `HASH  PATH` lines, sorted by path.
+pub fn manifest_text(files: &[Archived]) -> String {
+    let mut sorted: Vec<&Archived> = files.iter().collect();
+    sorted.sort_by(|a, b| a.path.cmp(&b.path));
+    sorted
+        .iter()
+        .map(|f| format!("{}  {}\n", f.sha256, f.path))
+        .collect()
+}
+
+/// The next wait after `previous` failed (1 s, doubling, at most [`MAX_BACKOFF`]).
+pub fn next_backoff(previous: Option<Duration>) -> Duration {
+    previous.map_or(Duration::from_secs(1), |d| (d * 2).min(MAX_BACKOFF))
+}
+
+/// Every regular file below `dir`, as `/`-separated relative paths, sorted. Links are not
+/// followed (a scan's own files are regular).
+pub fn scan_files(dir: &Path) -> std::io::Result<Vec<String>> {
+    fn walk(root: &Path, dir: &Path, out: &mut Vec<String>) -> std::io::Result<()> {
+        for e in std::fs::read_dir(dir)? {
+            let e = e?;
+            let t = e.file_type()?;
+            if t.is_dir() {
+                walk(root, &e.path(), out)?;
+            } else if t.is_file() {
+                let rel = e.path();
+                let rel = rel.strip_prefix(root).unwrap_or(&rel);
+                out.push(
+                    rel.components()
+                        .map(|c| c.as_os_str().to_string_lossy())
+                        .collect::<Vec<_>>()
+                        .join("/"),
+                );
+            }
+        }
+        Ok(())
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out)?;
+    out.sort();
+    Ok(out)
+}
+
+fn sha256_hex(bytes: &[u8]) -> String {
+    crate::scan::store::hex_sha256(bytes)
+}
+
+/// The store behind `[archive]`: the directory, which must be there.
+fn open_store(dir: &Path) -> Result<Arc<dyn ObjectStore>, String> {
+    // Never created here: a directory missing is a share not mounted, and creating it would
+    // fill the station's own disk instead.
+    if !dir.is_dir() {
+        return Err(format!(
+            "{} is not a directory; is the share mounted? ([archive] url)",
+            dir.display()
+        ));
+    }
+    let store = object_store::local::LocalFileSystem::new_with_prefix(dir)
+        .map_err(|e| format!("{}: {e}", dir.display()))?;
+    Ok(Arc::new(store))
+}
+
+/// The queue of scans to archive on disk: one JSON file per scan, named so that they sort
+/// in the order the scans completed.
+#[derive(Debug, Clone)]
+pub struct Queue {
+    dir: PathBuf,
+}
+
+impl Queue {
+    /// The queue in `dir` (created when missing).
+    pub fn open(dir: &Path) -> std::io::Result<Queue> {
+        std::fs::create_dir_all(dir.join("done"))?;
+        Ok(Queue {
+            dir: dir.to_owned(),
+        })
+    }
+
+    /// Adds a completed scan; durable when this returns.
+    pub fn push(&self, scan_id: &str, dir: &Path) -> std::io::Result<PathBuf> {
+        let now = chrono::Utc::now();
+        let name = format!("{}-{scan_id}.json", now.format("%Y%m%dT%H%M%S%.9fZ"));
+        let path = self.dir.join(name);
+        let entry = Entry {
+            scan_id: scan_id.to_owned(),
+            dir: dir.to_owned(),
+            files: Vec::new(),
+        };
+        crate::atomic::write_atomically(&path, |w| {
+            serde_json::to_writer_pretty(&mut *w, &entry).map_err(std::io::Error::other)
+        })?;
+        Ok(path)
+    }
+
+    /// The entries waiting, oldest first.
+    pub fn pending(&self) -> std::io::Result<Vec<PathBuf>> {
+        let mut v: Vec<PathBuf> = std::fs::read_dir(&self.dir)?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
+            .collect();
+        v.sort();
+        Ok(v)
+    }
+
+    fn read(path: &Path) -> Result<Entry, String> {
+        let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        serde_json::from_slice(&bytes).map_err(|e| format!("{}: {e}", path.display()))
+    }
+
+    fn save(path: &Path, entry: &Entry) -> Result<(), String> {
+        crate::atomic::write_atomically(path, |w| {
+            serde_json::to_writer_pretty(&mut *w, entry).map_err(std::io::Error::other)
+        })
+        .map_err(|e| {
+            format!(
+                "{}: {}",
+                path.display(),
+                crate::atomic::write_hint(path, &e)
+            )
+        })
+    }
+
+    fn finish(&self, path: &Path) -> Result<(), String> {
+        let to = self
+            .dir
+            .join("done")
+            .join(path.file_name().unwrap_or_default());
+        std::fs::rename(path, &to).map_err(|e| format!("{}: {e}", path.display()))
+    }
+}
+
+/// What went wrong with one scan: the store (try again later) or the scan itself (a
+/// directory gone; set aside, the others go on).
+enum Failure {
+    Store(String),
+    Scan(String),
+}
+
+/// The task that empties the queue into the store.
+pub struct Archiver {
+    settings: ArchiveSettings,
+    target: PathBuf,
+    queue: Queue,
+    status: watch::Sender<Status>,
+    wake: Arc<Notify>,
+}
+
+impl Archiver {
+    /// An archiver for `settings` (already validated) over `queue`.
+    pub fn new(
+        settings: ArchiveSettings,
+        target: PathBuf,
+        queue: Queue,
+        status: watch::Sender<Status>,
+        wake: Arc<Notify>,
+    ) -> Archiver {
+        Archiver {
+            settings,
+            target,
+            queue,
+            status,
+            wake,
+        }
+    }
+
+    fn report(&self, ok: bool, message: String) {
+        let queued = self.queue.pending().map_or(0, |p| p.len() as u64);
+        self.status.send_modify(|s| {
+            s.links.insert(
+                LINK.to_owned(),
+                LinkStatus {
+                    ok,
+                    message,
+                    queued,
+                },
+            );
+        });
+    }
+
+    /// Archives until `stop` becomes true: the queue oldest first, waiting with backoff while
+    /// the store is away and for `wake` when the queue is empty.
+    pub async fn run(self, mut stop: watch::Receiver<bool>) {
+        let mut backoff: Option<Duration> = None;
+        self.report(true, format!("archiving to {}", self.settings.url));
+        loop {
+            if *stop.borrow() {
+                return;
+            }
+            let wait = match self.drain().await {
+                Ok(()) => {
+                    backoff = None;
+                    None
+                }
+                Err(e) => {
+                    let d = next_backoff(backoff);
+                    backoff = Some(d);
+                    let message = format!("{e}; trying again in {} s", d.as_secs());
+                    tracing::warn!("archive: {message}");
+                    self.report(false, message);
+                    Some(d)
+                }
+            };
+            let sleep = tokio::time::sleep(wait.unwrap_or(Duration::from_secs(3600)));
+            tokio::select! {
+                _ = stop.wait_for(|v| *v) => return,
+                () = self.wake.notified() => {}
+                () = sleep => {}
+            }
+        }
+    }
+
+    /// Archives every entry waiting; the first store error ends the round.
+    async fn drain(&self) -> Result<(), String> {
+        let pending = self
+            .queue
+            .pending()
+            .map_err(|e| format!("cannot read the archive queue: {e}"))?;
+        if pending.is_empty() {
+            return Ok(());
+        }
+        let store = open_store(&self.target)?;
+        for path in pending {
+            match self.archive_one(&*store, &path).await {
+                Ok(entry) => {
+                    self.queue.finish(&path)?;
+                    let bytes: u64 = entry.files.iter().map(|f| f.bytes).sum();
+                    tracing::info!(
+                        "archive: scan {} archived and verified ({} files, {bytes} bytes) in {}",
+                        entry.scan_id,
+                        entry.files.len(),
+                        self.settings.url
+                    );
+                    self.report(true, format!("scan {} archived", entry.scan_id));
+                }
+                Err(Failure::Scan(e)) => {
+                    // The scan cannot be archived as it is (its directory is gone): set aside
+                    // so that it does not hold up the others; the entry says what it was.
+                    tracing::error!("archive: {e}; this scan is left out of the archive (its entry is kept in {})", self.queue.dir.join("done").display());
+                    self.queue.finish(&path)?;
+                    self.report(false, e);
+                }
+                Err(Failure::Store(e)) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    async fn archive_one(&self, store: &dyn ObjectStore, path: &Path) -> Result<Entry, Failure> {
+        let mut entry = Queue::read(path).map_err(Failure::Scan)?;
+        let dir = entry.dir.clone();
+        let files = tokio::task::spawn_blocking(move || scan_files(&dir))
+            .await
+            .map_err(|e| Failure::Scan(e.to_string()))?
+            .map_err(|e| {
+                Failure::Scan(format!(
+                    "scan {}: cannot list {}: {e}",
+                    entry.scan_id,
+                    entry.dir.display()
+                ))
+            })?;
+        let object = |rel: &str| ObjectPath::from(format!("{}/{rel}", entry.scan_id));
+        for rel in files {
+            if entry.files.iter().any(|f| f.path == rel) {
+                continue;
+            }
+            let bytes = tokio::fs::read(entry.dir.join(&rel)).await.map_err(|e| {
+                Failure::Scan(format!("scan {}: cannot read {rel}: {e}", entry.scan_id))
+            })?;
+            let sha256 = put_verified(store, &object(&rel), bytes.clone().into()).await?;
+            entry.files.push(Archived {
+                path: rel,
+                bytes: bytes.len() as u64,
+                sha256,
+            });
+            Queue::save(path, &entry).map_err(Failure::Store)?;
+        }
+        let manifest = manifest_text(&entry.files);
+        put_verified(store, &object(MANIFEST), manifest.into_bytes().into()).await?;
+        Ok(entry)
+    }
+}
+
+/// Puts `bytes` at `at`, reads the object back and compares the SHA-256; returns it.
+async fn put_verified(
+    store: &dyn ObjectStore,
+    at: &ObjectPath,
+    bytes: bytes::Bytes,
+) -> Result<String, Failure> {
+    let want = sha256_hex(&bytes);
+    let deadline = |what: &str| {
+        format!(
+            "{what} {at} took longer than {} s",
+            REQUEST_TIMEOUT.as_secs()
+        )
+    };
+    tokio::time::timeout(
+        REQUEST_TIMEOUT,
+        store.put(at, PutPayload::from_bytes(bytes)),
+    )
+    .await
+    .map_err(|_| Failure::Store(deadline("storing")))?
+    .map_err(|e| Failure::Store(format!("storing {at}: {e}")))?;
+    let back = tokio::time::timeout(REQUEST_TIMEOUT, async {
+        store.get(at).await?.bytes().await
+    })
+    .await
+    .map_err(|_| Failure::Store(deadline("reading back")))?
+    .map_err(|e| Failure::Store(format!("reading back {at}: {e}")))?;
+    let got = sha256_hex(&back);
+    if got != want {
+        return Err(Failure::Store(format!(
+            "{at} read back differs from what was stored (SHA-256 {got}, not {want})"
+        )));
+    }
+    Ok(want)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_manifest_is_what_sha256sum_checks() {
+        let files = vec![
+            Archived {
+                path: "report.json".into(),
+                bytes: 3,
+                sha256: "b".repeat(64),
+            },
+            Archived {
+                path: "lines/0001.csv".into(),
+                bytes: 1,
+                sha256: "a".repeat(64),
+            },
+        ];
+        assert_eq!(
+            manifest_text(&files),
+            format!(
+                "{}  lines/0001.csv\n{}  report.json\n",
+                "a".repeat(64),
+                "b".repeat(64)
+            )
+        );
+    }
+
+    #[test]
+    fn the_backoff_doubles_up_to_five_minutes() {
+        let mut d = None;
+        let mut seen = Vec::new();
+        for _ in 0..12 {
+            let n = next_backoff(d);
+            seen.push(n.as_secs());
+            d = Some(n);
+        }
+        assert_eq!(seen, [1, 2, 4, 8, 16, 32, 64, 128, 256, 300, 300, 300]);
+    }
+
+    #[test]
+    fn a_scan_directory_is_listed_recursively_without_links() {
+        let t = tempfile::tempdir().unwrap();
+        std::fs::create_dir(t.path().join("lines")).unwrap();
+        std::fs::write(t.path().join("lines/0002.csv"), "2").unwrap();
+        std::fs::write(t.path().join("journal.jsonl"), "j").unwrap();
+        std::os::unix::fs::symlink("/etc/passwd", t.path().join("link")).unwrap();
+        assert_eq!(
+            scan_files(t.path()).unwrap(),
+            ["journal.jsonl", "lines/0002.csv"]
+        );
+    }
+}

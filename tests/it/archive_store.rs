@@ -1,0 +1,175 @@
+//! The raw-data archive through the `surfscan daemon` binary: a `file://` archive (a share)
+//! that is not there while two scans complete, then there after a restart; the copies checked
+//! byte for byte and the manifest by `sha256sum -c`, independently of the writer.
+
+use crate::daemon_e2e::{self as e2e, Rig};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use surfscan::scan::ending::StopStatus;
+use surfscan::scan::status::{State, Status};
+
+fn with_archive(r: &Rig, url: &str) {
+    let text = std::fs::read_to_string(&r.config).unwrap();
+    std::fs::write(&r.config, format!("{text}\n[archive]\nurl = {url:?}\n")).unwrap();
+}
+
+fn scan_dirs(r: &Rig) -> Vec<PathBuf> {
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(r.out())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.join("journal.jsonl").exists())
+        .collect();
+    dirs.sort();
+    dirs
+}
+
+/// Every regular file below `dir`, relative, sorted (written here, not taken from the code
+/// under test).
+fn files(dir: &Path) -> Vec<String> {
+    let o = Command::new("find")
+        .arg(".")
+        .args(["-type", "f"])
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    let mut v: Vec<String> = String::from_utf8(o.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| l.trim_start_matches("./").to_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+async fn scan_to_the_end(r: &Rig, specimen: &str, starts_before: u64) -> Status {
+    e2e::start_scan(r, specimen).await;
+    let s = e2e::wait_status(r, "scan ended", |s| {
+        s.starts > starts_before && s.state == State::Idle && s.last_stop.is_some()
+    })
+    .await;
+    assert_eq!(
+        s.last_stop.as_ref().unwrap().status,
+        StopStatus::Success,
+        "{s:?}"
+    );
+    s
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn scans_complete_while_the_share_is_away_and_are_archived_verified_after_a_restart() {
+    let r = e2e::rig().await;
+    let share = r.dir.path().join("share");
+    with_archive(&r, &format!("file://{}", share.display()));
+
+    let mut d = crate::mqtt_broker::spawn_logged(&r);
+    crate::mqtt_broker::wait_socket(&r).await;
+    scan_to_the_end(&r, "arch-1", 0).await;
+    // The share is not mounted: named, the scan waits in the queue, the next scan runs.
+    let s = e2e::wait_status(&r, "the archive's fault named", |s| {
+        s.links
+            .get("archive")
+            .is_some_and(|l| !l.ok && l.queued == 1)
+    })
+    .await;
+    let link = &s.links["archive"];
+    assert!(
+        link.message.contains(&share.display().to_string())
+            && link.message.contains("is the share mounted"),
+        "{link:?}"
+    );
+    scan_to_the_end(&r, "arch-2", s.starts).await;
+    e2e::wait_status(&r, "two scans queued", |s| {
+        s.links.get("archive").is_some_and(|l| l.queued == 2)
+    })
+    .await;
+    e2e::sigterm(&d);
+    assert!(e2e::wait_exit(&mut d).success());
+    assert!(
+        !share.exists(),
+        "the archive directory was created by the station"
+    );
+
+    // The share is back; a new process archives what the last one left.
+    std::fs::create_dir(&share).unwrap();
+    let mut d = crate::mqtt_broker::spawn_logged(&r);
+    crate::mqtt_broker::wait_socket(&r).await;
+    let s = e2e::wait_status(&r, "the queue emptied", |s| {
+        s.links
+            .get("archive")
+            .is_some_and(|l| l.ok && l.queued == 0)
+    })
+    .await;
+    assert!(s.links["archive"].message.contains("archived"), "{s:?}");
+
+    let dirs = scan_dirs(&r);
+    assert_eq!(dirs.len(), 2, "{dirs:?}");
+    for dir in &dirs {
+        let id = dir.file_name().unwrap().to_str().unwrap();
+        let copy = share.join(id);
+        let local = files(dir);
+        assert!(local.iter().any(|f| f == "journal.jsonl"), "{local:?}");
+        assert!(local.iter().any(|f| f == "report.json"), "{local:?}");
+        let mut archived = files(&copy);
+        archived.retain(|f| f != "MANIFEST.sha256");
+        assert_eq!(archived, local, "the archive of {id} holds other files");
+        for f in &local {
+            assert_eq!(
+                std::fs::read(copy.join(f)).unwrap(),
+                std::fs::read(dir.join(f)).unwrap(),
+                "{id}/{f} differs"
+            );
+        }
+        // The manifest names every file, and sha256sum agrees with every line of it.
+        let manifest = std::fs::read_to_string(copy.join("MANIFEST.sha256")).unwrap();
+        let mut named: Vec<&str> = manifest
+            .lines()
+            .map(|l| l.split_once("  ").unwrap().1)
+            .collect();
+        named.sort();
+        assert_eq!(named, local);
+        let check = Command::new("sha256sum")
+            .args(["--check", "--strict", "MANIFEST.sha256"])
+            .current_dir(&copy)
+            .output()
+            .unwrap();
+        assert!(
+            check.status.success(),
+            "{}",
+            String::from_utf8_lossy(&check.stdout)
+        );
+    }
+    // Nothing on the station was deleted; each scan is recorded as archived.
+    assert_eq!(scan_dirs(&r), dirs);
+    let done = std::fs::read_dir(r.out().join("outbox/archive/done"))
+        .unwrap()
+        .count();
+    assert_eq!(done, 2);
+    e2e::sigterm(&d);
+    e2e::wait_exit(&mut d);
+}
+
+#[test]
+fn a_bad_archive_table_exits_78_naming_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = surfscan::cli::demo::demo_config(
+        &dir.path().join("i"),
+        &dir.path().join("s"),
+        &dir.path().join("scans"),
+    );
+    for (table, key) in [
+        ("url = \"/mnt/archive\"", "archive.url"),
+        ("url = \"file://mnt/archive\"", "archive.url"),
+        ("url = \"s3://lab-archive/rough-3\"", "archive.url"),
+    ] {
+        let config = dir.path().join("station.toml");
+        std::fs::write(&config, format!("{base}\n[archive]\n{table}\n")).unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(["check-config", "--config"])
+            .arg(&config)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(78), "{table}: {err}");
+        assert!(err.contains(key), "{table}: {err}");
+    }
+}
