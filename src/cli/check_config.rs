@@ -5,8 +5,13 @@
 //! (a device may be plugged in later); a port that is a regular file, a directory or another
 //! node that can never be a serial port makes the file invalid.
 //!
+//! With `--require-devices` an absent device is not a note but a failure (exit 69): the
+//! package's install script starts the service only on a configuration whose ports are
+//! there, so a fresh install with the example's placeholder ports stays stopped.
+//!
 //! Exit status: 0 valid (notes are printed on standard error), 78 invalid or unreadable,
-//! with the message naming the file, the key and the fix.
+//! with the message naming the file, the key and the fix, 69 valid but a configured device
+//! is absent (only with `--require-devices`).
 //!
 //! Layer 5 (composition): depends on [`crate::config`], [`crate::jobs::recipe`],
 //! [`crate::transport`] and [`super::station`] (the configuration loaded as the commands that
@@ -28,6 +33,10 @@ pub struct Args {
     /// The same file, given the way `scan`, `daemon` and the operator's commands take it.
     #[arg(long = "config", value_name = "FILE", id = "config_flag")]
     pub config_flag: Option<PathBuf>,
+    /// Fail (exit 69) when a configured device is absent, instead of noting it: the ports
+    /// are configured and plugged in.
+    #[arg(long)]
+    pub require_devices: bool,
 }
 
 impl Args {
@@ -142,6 +151,14 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let (config, hash) = load_config(&path)?;
     let notes = check_ports(&config)
         .map_err(|e| CliError::new(Exit::Config, format!("config {}: {e}", path.display())))?;
+    if args.require_devices {
+        if let Some(absent) = notes.first() {
+            return Err(CliError::new(
+                Exit::Unavailable,
+                format!("config {}: valid, but {absent}", path.display()),
+            ));
+        }
+    }
     say!(
         "{}: valid (sha256 {})",
         path.display(),

@@ -205,6 +205,25 @@ fn check_config_validates_without_opening_devices() {
         "{}",
         text(&out.stderr)
     );
+    // With --require-devices (what the package's install script asks before it starts the
+    // service) the same absence is exit 69 naming the port; present devices pass.
+    let out = surfscan(&["check-config", "--require-devices", cfg.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(69), "{}", text(&out.stderr));
+    let err = text(&out.stderr);
+    assert!(
+        err.contains(&format!(
+            "[instrument] port {} is not present now",
+            absent.display()
+        )),
+        "{err}"
+    );
+    let present = demo_config(dir.path(), Path::new("/dev/null"), Path::new("/dev/null"));
+    let out = surfscan(&[
+        "check-config",
+        "--require-devices",
+        present.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
 
     // A regular file can never be a serial port: exit 78 naming the cause.
     let file = dir.path().join("port.txt");
