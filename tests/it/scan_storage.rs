@@ -653,7 +653,7 @@ fn service_unit_has_the_required_directives() {
     assert_eq!(get("Type"), ["notify"]);
     assert_eq!(
         get("ExecStart"),
-        ["/usr/local/bin/surfscan daemon --config /etc/surfscan/surfscan.toml"]
+        ["/usr/bin/surfscan daemon --config /etc/surfscan/surfscan.toml"]
     );
     assert!(seconds(get("WatchdogSec")[0]) > 0);
     assert!(
