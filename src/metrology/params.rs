@@ -391,6 +391,134 @@ pub fn definitions() -> BTreeMap<String, String> {
 /// Minimum points per sampling length (the 7-point slope and meaningful moments need some).
 const MIN_POINTS_PER_SECTION: usize = 8;
 
+/// How the evaluation length is divided: `n_sec` sections of `per` points from point `start`,
+/// the rule that chose them in words, and a section's length.
+struct SectionPlan {
+    n_sec: usize,
+    per: usize,
+    start: usize,
+    rule: String,
+    section_length_mm: f64,
+}
+
+/// The sections of `n_all` points at `pitch_mm` for the cut-off `lc`: the central `central`
+/// sampling lengths when given, else `sampling_lengths` of ⌊n/N⌋ points each when given, else
+/// N from L/λc (within 1 % of a whole number, or truncated with the central N·lr evaluated).
+fn plan_sections(
+    n_all: usize,
+    pitch_mm: f64,
+    lc: f64,
+    central: Option<u32>,
+    sampling_lengths: Option<u32>,
+) -> Result<SectionPlan, MetrologyError> {
+    let too_short = || MetrologyError::TooShort {
+        points: n_all,
+        length_mm: n_all as f64 * pitch_mm,
+        sampling_length_mm: lc,
+        min_points: MIN_POINTS_PER_SECTION,
+    };
+    let length_mm = n_all as f64 * pitch_mm;
+    let ratio = length_mm / lc;
+    let (n_sec, rule, start, per) = match (central, sampling_lengths) {
+        (Some(0), _) | (None, Some(0)) => return Err(MetrologyError::ZeroSections { got: 0 }),
+        (Some(k), _) => {
+            let k = k as usize;
+            let per = (lc / pitch_mm).round() as usize;
+            let used = k.saturating_mul(per);
+            if used > n_all {
+                return Err(too_short());
+            }
+            let left = (n_all - used) / 2;
+            (
+                k,
+                format!(
+                    "given N = {k}: the central N·lr of the traverse, {left} points before it and {} after left out (the filter's run-up and run-out)",
+                    n_all - used - left
+                ),
+                left,
+                per,
+            )
+        }
+        (None, Some(k)) => {
+            let k = k as usize;
+            (k, format!("given N = {k}, ⌊n/N⌋ points each"), 0, n_all / k)
+        }
+        (None, None) => {
+            let nearest = ratio.round();
+            if nearest >= 1.0 && (ratio - nearest).abs() <= 0.01 * nearest {
+                let k = nearest as usize;
+                (
+                    k,
+                    format!("L/λc = {ratio:.4} within 1 % of {k}, ⌊n/N⌋ points each"),
+                    0,
+                    n_all / k,
+                )
+            } else {
+                let k = ratio.floor() as usize;
+                if k == 0 {
+                    return Err(too_short());
+                }
+                let per = (lc / pitch_mm).round() as usize;
+                let used = (k * per).min(n_all);
+                (
+                    k,
+                    format!("L/λc = {ratio:.4} truncated to {k}, central N·lr evaluated"),
+                    (n_all - used) / 2,
+                    per,
+                )
+            }
+        }
+    };
+    if per < MIN_POINTS_PER_SECTION {
+        if sampling_lengths.is_none() && central.is_none() && ratio >= 1.0 {
+            return Err(MetrologyError::PitchTooCoarse {
+                pitch_mm,
+                points_per_sampling_length: per,
+                sampling_length_mm: lc,
+                min_points: MIN_POINTS_PER_SECTION,
+            });
+        }
+        return Err(too_short());
+    }
+    let section_length_mm = per as f64 * pitch_mm;
+    // Say plainly when a section is not a sampling length of λc (an instrument's arbitrary
+    // evaluation length shorter than λc, a short form-only trace).
+    let rule = if section_length_mm < lc * 0.99 {
+        format!(
+            "{rule}; each section is {} mm long, shorter than λc {lc} mm: the parameters are over that length, not over a sampling length of λc",
+            crate::numfmt::fmt(section_length_mm, crate::numfmt::Quantity::LengthMm)
+        )
+    } else {
+        rule
+    };
+    Ok(SectionPlan {
+        n_sec,
+        per,
+        start,
+        rule,
+        section_length_mm,
+    })
+}
+
+/// The local slope (µm/µm) at each point of the evaluated profile `r`, the 7-point central
+/// difference; `None` within three points of either end.
+fn slopes_7_point(r: &[f64], pitch_mm: f64) -> Vec<Option<f64>> {
+    let used = r.len();
+    (0..used)
+        .map(|i| {
+            if i < 3 || i + 3 >= used {
+                return None;
+            }
+            let z = |k: usize| r.get(k).copied().unwrap_or(0.0);
+            Some(
+                (z(i + 3) - 9.0 * z(i + 2) + 45.0 * z(i + 1) - 45.0 * z(i - 1) + 9.0 * z(i - 2)
+                    - z(i - 3))
+                    / (60.0 * pitch_mm * 1000.0),
+            )
+        })
+        .collect()
+}
+
 /// Characterises one line of heights (µm) sampled at `pitch_mm`.
 pub fn analyze_line(
     heights_um: &[f64],
@@ -433,98 +561,23 @@ pub fn analyze_line(
         (_, n) => n,
     };
 
-    // Sampling lengths.
-    let length_mm = n_all as f64 * pitch_mm;
-    let ratio = length_mm / lc;
-    let (n_sec, rule, start, per) = match (options.central_sections, sampling_lengths) {
-        (Some(0), _) | (None, Some(0)) => return Err(MetrologyError::ZeroSections { got: 0 }),
-        (Some(k), _) => {
-            let k = k as usize;
-            let per = (lc / pitch_mm).round() as usize;
-            let used = k.saturating_mul(per);
-            if used > n_all {
-                return Err(too_short);
-            }
-            let left = (n_all - used) / 2;
-            (
-                k,
-                format!(
-                    "given N = {k}: the central N·lr of the traverse, {left} points before it and {} after left out (the filter's run-up and run-out)",
-                    n_all - used - left
-                ),
-                left,
-                per,
-            )
-        }
-        (None, Some(k)) => {
-            let k = k as usize;
-            (k, format!("given N = {k}, ⌊n/N⌋ points each"), 0, n_all / k)
-        }
-        (None, None) => {
-            let nearest = ratio.round();
-            if nearest >= 1.0 && (ratio - nearest).abs() <= 0.01 * nearest {
-                let k = nearest as usize;
-                (
-                    k,
-                    format!("L/λc = {ratio:.4} within 1 % of {k}, ⌊n/N⌋ points each"),
-                    0,
-                    n_all / k,
-                )
-            } else {
-                let k = ratio.floor() as usize;
-                if k == 0 {
-                    return Err(too_short);
-                }
-                let per = (lc / pitch_mm).round() as usize;
-                let used = (k * per).min(n_all);
-                (
-                    k,
-                    format!("L/λc = {ratio:.4} truncated to {k}, central N·lr evaluated"),
-                    (n_all - used) / 2,
-                    per,
-                )
-            }
-        }
-    };
-    if per < MIN_POINTS_PER_SECTION {
-        if sampling_lengths.is_none() && options.central_sections.is_none() && ratio >= 1.0 {
-            return Err(MetrologyError::PitchTooCoarse {
-                pitch_mm,
-                points_per_sampling_length: per,
-                sampling_length_mm: lc,
-                min_points: MIN_POINTS_PER_SECTION,
-            });
-        }
-        return Err(too_short);
-    }
+    let SectionPlan {
+        n_sec,
+        per,
+        start,
+        rule,
+        section_length_mm,
+    } = plan_sections(
+        n_all,
+        pitch_mm,
+        lc,
+        options.central_sections,
+        sampling_lengths,
+    )?;
     let used = n_sec * per;
     let r: Vec<f64> = r_all.get(start..start + used).ok_or(too_short)?.to_vec();
-    let section_length_mm = per as f64 * pitch_mm;
-    // Say plainly when a section is not a sampling length of λc (an instrument's arbitrary
-    // evaluation length shorter than λc, a short form-only trace).
-    let rule = if section_length_mm < lc * 0.99 {
-        format!(
-            "{rule}; each section is {} mm long, shorter than λc {lc} mm: the parameters are over that length, not over a sampling length of λc",
-            crate::numfmt::fmt(section_length_mm, crate::numfmt::Quantity::LengthMm)
-        )
-    } else {
-        rule
-    };
 
-    // 7-point slope over the evaluation length.
-    let slopes: Vec<Option<f64>> = (0..used)
-        .map(|i| {
-            if i < 3 || i + 3 >= used {
-                return None;
-            }
-            let z = |k: usize| r.get(k).copied().unwrap_or(0.0);
-            Some(
-                (z(i + 3) - 9.0 * z(i + 2) + 45.0 * z(i + 1) - 45.0 * z(i - 1) + 9.0 * z(i - 2)
-                    - z(i - 3))
-                    / (60.0 * pitch_mm * 1000.0),
-            )
-        })
-        .collect();
+    let slopes = slopes_7_point(&r, pitch_mm);
 
     let mut acc = Acc::default();
     let lr_um = per as f64 * pitch_mm * 1000.0;
