@@ -100,7 +100,13 @@ pub fn iges_fingerprint(path: &Path, paths: &[(&Path, &str)]) -> Value {
                 dp.update(line.as_bytes());
                 dp.update(b"\n");
             }
-            Some(b'S') => start.push_str(&line[..72]),
+            // The writer breaks the Start text at a space; a line filled to column 72 has
+            // none left before its sequence field, so the lines are joined with one (the data
+            // directory's length, which differs between checkouts, decides where lines fill).
+            Some(b'S') => {
+                start.push_str(&line[..72]);
+                start.push(' ');
+            }
             _ => {}
         }
     }
@@ -145,12 +151,20 @@ fn differences(path: &str, want: &Value, got: Option<&Value>, out: &mut Vec<Stri
                 differences(&format!("{path}/{k}"), wv, g.get(k), out);
             }
         }
-        (Value::String(a), Value::String(b)) if a == b || !path.ends_with("/iges/start") => {}
+        // The Start section's words are compared without their spacing: fixtures captured
+        // before the lines were joined with a space hold words run together where a line was
+        // filled to column 72, which depends on the length of the checkout's path.
+        (Value::String(a), Value::String(b))
+            if !path.ends_with("/iges/start") || without_spaces(a) == without_spaces(b) => {}
         (Value::String(_), _) if !path.ends_with("/iges/start") => {}
         (Value::Number(a), Value::Number(b)) if a.as_f64() == b.as_f64() => {}
         (a, b) if a == b => {}
         (a, b) => out.push(format!("{path}: {} (was {})", short(b), short(a))),
     }
+}
+
+fn without_spaces(s: &str) -> String {
+    s.chars().filter(|c| !c.is_whitespace()).collect()
 }
 
 fn short(v: &Value) -> String {
