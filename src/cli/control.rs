@@ -345,7 +345,8 @@ async fn confirm_start(path: &Path, before: u64, json: bool) -> Result<(), CliEr
     }
 }
 
-fn send_command(target: &Target, request: Request) -> Result<(), CliError> {
+/// Sends one request and prints its reply (`--json`: as the daemon sent it).
+pub(super) fn send_command(target: &Target, request: Request) -> Result<(), CliError> {
     let path = socket_path(target)?;
     let json = target.json;
     block_on(async move {
@@ -391,7 +392,20 @@ fn print_reply(m: &Received, json: bool, compact: bool) -> Result<(), CliError> 
             Exit::Failed,
             format!("the daemon refused: {message}"),
         )),
+        Message::Refused { message, exit } => Err(CliError::new(
+            match exit {
+                2 => Exit::Usage,
+                74 => Exit::Io,
+                78 => Exit::Config,
+                _ => Exit::Failed,
+            },
+            format!("the daemon refused: {message}"),
+        )),
         _ if json => Ok(()),
+        Message::Queue(q) => {
+            say_text!("{}", super::queue::render(q));
+            Ok(())
+        }
         Message::Status(s) if compact => {
             say!(
                 "{} {}",

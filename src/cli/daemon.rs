@@ -143,6 +143,7 @@ async fn daemon(
             let channels = ControlChannels {
                 status: status_rx.clone(),
                 commands: cmd_tx.clone(),
+                queue: None,
             };
             match crate::web::start(w, channels, config.output.dir.clone()) {
                 Ok(page) => {
@@ -165,6 +166,7 @@ async fn daemon(
         ControlChannels {
             status: status_rx.clone(),
             commands: cmd_tx,
+            queue: None,
         },
         async move {
             let _ = srv_shutdown.wait_for(|v| *v).await;

@@ -49,6 +49,7 @@ pub mod input_args;
 pub mod list;
 pub mod model_args;
 pub mod probe;
+pub mod queue;
 pub mod scan;
 pub mod station;
 
@@ -97,6 +98,10 @@ pub enum Command {
     CheckConfig(check_config::Args),
     /// List the scans on the station: state, recipe, specimen, verdict, Ra and Sa, warnings.
     List(list::Args),
+    /// The job queue: add a recipe's scan of a specimen, list, remove, clear, continue.
+    Queue(queue::Args),
+    /// The specimen of the job waiting for loading is in place: let the job start.
+    Ready(queue::ReadyArgs),
     /// Print the shell completion script for bash, zsh, fish, elvish or powershell.
     Completions(docs::CompletionsArgs),
     /// Write the man pages (surfscan.1 and one per subcommand) into a directory.
@@ -195,6 +200,8 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Start(args) => control::run_start(args),
         Command::CheckConfig(args) => check_config::run(args),
         Command::List(args) => list::run(args),
+        Command::Queue(args) => queue::run(args),
+        Command::Ready(args) => queue::run_ready(args),
         Command::Completions(args) => docs::run_completions(args),
         Command::Manpages(args) => docs::run_manpages(args),
     }

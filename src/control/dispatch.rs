@@ -1,10 +1,11 @@
 //! One request carried out, whichever front end received it (the control socket, the
-//! station's page): a status snapshot, or an operator command forwarded to the scan runner
-//! with a bounded wait for its answer. The front end decides who sent it and whether they may
+//! station's page): a status snapshot, an operator command forwarded to the scan runner
+//! with a bounded wait for its answer, or a queue command carried out by the daemon's
+//! [`QueueService`](crate::jobs::service::QueueService). The front end decides who sent it and whether they may
 //! command; `watch` is the front end's own (a stream, not an answer).
 //!
-//! Layer 4 (process edge): depends on [`super::protocol`], the scan's status and command types
-//! and tokio's channels and timer.
+//! Layer 4 (process edge): depends on [`super::protocol`], the scan's status and command types,
+//! the job queue's service and tokio's channels and timer.
 
 use super::protocol::{ControlChannels, Message, Request};
 use crate::scan::command::{OperatorCommand, OperatorRequest, Peer};
@@ -28,6 +29,12 @@ pub async fn dispatch(
                 message: "watch is a stream of status messages, served by the front end".into(),
             }
         }
+        Request::QueueList => {
+            return match &channels.queue {
+                Some(q) => Message::Queue(Box::new(q.snapshot())),
+                None => no_queue("queue-list"),
+            }
+        }
         Request::Pause => OperatorCommand::Pause,
         Request::Resume => OperatorCommand::Resume,
         Request::Abort => OperatorCommand::Abort,
@@ -42,6 +49,7 @@ pub async fn dispatch(
             notes,
             mode,
         },
+        queue_request => return queue_command(queue_request, channels, who, reply_timeout).await,
     };
     let peer = match who(command_name(&command)) {
         Ok(peer) => peer,
@@ -124,5 +132,119 @@ async fn forward(
                 },
             }
         }
+    }
+}
+
+fn no_queue(name: &str) -> Message {
+    Message::Error {
+        message: format!(
+            "{name}: this process keeps no job queue; the station's daemon does (`surfscan daemon`)"
+        ),
+    }
+}
+
+/// A queue command carried out by the queue's keeper (blocking: it writes the queue
+/// durably), answered with `Ack`, or `Refused` with the exit status the command gives.
+async fn queue_command(
+    request: Request,
+    channels: &ControlChannels,
+    who: impl FnOnce(&'static str) -> Result<Peer, Message>,
+    reply_timeout: Duration,
+) -> Message {
+    use crate::jobs::service::{AddJob, QueueService, ServiceError};
+    type Work = Box<dyn FnOnce(&QueueService, Peer) -> Result<String, ServiceError> + Send>;
+    let (name, work): (&'static str, Work) = match request {
+        Request::QueueAdd {
+            recipe,
+            specimen,
+            operator,
+            notes,
+            y_start_mm,
+            needs_loading,
+        } => (
+            "queue-add",
+            Box::new(move |q: &QueueService, peer| {
+                let add = AddJob {
+                    recipe,
+                    specimen,
+                    operator,
+                    notes,
+                    y_start_mm,
+                    needs_loading,
+                };
+                q.add(add, Some(peer)).map(|j| {
+                    let ahead = q.snapshot().pending().filter(|p| p.id < j.id).count();
+                    let when = match ahead {
+                        0 => "it is next".to_owned(),
+                        n => format!("{n} before it"),
+                    };
+                    format!("queued {} ({when})", j.describe())
+                })
+            }),
+        ),
+        Request::QueueRemove { job } => (
+            "queue-remove",
+            Box::new(move |q: &QueueService, peer| {
+                q.remove(job, Some(peer))
+                    .map(|j| format!("removed {}", j.describe()))
+            }),
+        ),
+        Request::QueueClear => (
+            "queue-clear",
+            Box::new(|q: &QueueService, peer| {
+                q.clear(Some(peer)).map(|gone| match gone.len() {
+                    0 => "no job was queued".to_owned(),
+                    n => format!("{n} queued jobs removed (a running job goes on)"),
+                })
+            }),
+        ),
+        Request::QueueContinue => (
+            "queue-continue",
+            Box::new(|q: &QueueService, peer| {
+                q.release(Some(peer))
+                    .map(|()| "the queue runs on with its next job".to_owned())
+            }),
+        ),
+        Request::Ready { job } => {
+            (
+                "ready",
+                Box::new(move |q: &QueueService, peer| {
+                    q.ready(job, Some(peer))
+                    .map(|id| format!("job {id}: specimen loaded; the job starts as soon as the station is free"))
+                }),
+            )
+        }
+        other => {
+            return Message::Error {
+                message: format!("{other:?} is not a queue request"),
+            }
+        }
+    };
+    let peer = match who(name) {
+        Ok(p) => p,
+        Err(refusal) => return refusal,
+    };
+    let Some(queue) = channels.queue.clone() else {
+        return no_queue(name);
+    };
+    let done = tokio::task::spawn_blocking(move || work(&queue, peer));
+    match tokio::time::timeout(reply_timeout, done).await {
+        Ok(Ok(Ok(detail))) => Message::Ack {
+            command: name.to_owned(),
+            detail,
+        },
+        Ok(Ok(Err(e))) => Message::Refused {
+            message: e.to_string(),
+            exit: e.exit_code(),
+        },
+        Ok(Err(e)) => Message::Error {
+            message: format!("{name}: the queue's keeper failed ({e}); see `journalctl -u surfscan`"),
+        },
+        Err(_) => Message::Error {
+            message: format!(
+                "{name}: the queue did not answer within {} s (a slow disk?); the command may still be carried out — check `surfscan queue list`",
+                reply_timeout.as_secs()
+            ),
+        },
     }
 }

@@ -8,9 +8,15 @@
 //! The status snapshot and the operator commands are the scan's own types
 //! ([`crate::scan::status`], [`crate::scan::command`]); this module only puts them on the wire.
 //!
+//! The job queue's requests (`queue-add`, `queue-list`, `queue-remove`, `queue-clear`,
+//! `queue-continue`, `ready`) are served by the daemon's [`QueueService`], also while a scan
+//! runs; a refusal names its exit status ([`Message::Refused`]).
+//!
 //! Layer 4 (process edge): serde types plus tokio channel types; depends on the scan's status
-//! and command types; no I/O.
+//! and command types and the job queue's; no I/O.
 
+use crate::jobs::queue::Queue;
+use crate::jobs::service::QueueService;
 use crate::scan::command::{OperatorRequest, StartMode};
 use crate::scan::status::Status;
 use serde::{Deserialize, Serialize};
@@ -20,7 +26,7 @@ use tokio::sync::{mpsc, watch};
 pub const PROTOCOL_VERSION: u32 = 1;
 
 /// Client → daemon.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "class", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Request {
     /// One status snapshot.
@@ -48,6 +54,43 @@ pub enum Request {
         /// continue a failed one) or `new` (start over).
         #[serde(default)]
         mode: StartMode,
+    },
+    /// Queue a job of a recipe (`surfscan queue add`).
+    QueueAdd {
+        /// The recipe's name (`NAME.toml` in the station's recipe directory).
+        recipe: String,
+        /// Specimen id.
+        #[serde(default)]
+        specimen: String,
+        /// Operator name.
+        #[serde(default)]
+        operator: String,
+        /// Free-text notes.
+        #[serde(default)]
+        notes: String,
+        /// y of the first line, mm (overrides the recipe's).
+        #[serde(default)]
+        y_start_mm: Option<f64>,
+        /// Wait for `ready` before the job starts.
+        #[serde(default)]
+        needs_loading: bool,
+    },
+    /// The queue (answered with [`Message::Queue`]).
+    QueueList,
+    /// Remove a queued job.
+    QueueRemove {
+        /// Its number.
+        job: u64,
+    },
+    /// Remove every queued job (not the running one).
+    QueueClear,
+    /// Run the jobs after a failure that stopped the queue.
+    QueueContinue,
+    /// The specimen of the job waiting for loading is in place.
+    Ready {
+        /// That job's number (default: whichever is waiting).
+        #[serde(default)]
+        job: Option<u64>,
     },
 }
 
@@ -78,6 +121,16 @@ pub enum Message {
         /// For people.
         message: String,
     },
+    /// A queue request was refused; `exit` is the status its command exits with (2 usage,
+    /// 74 the queue could not be written, 78 the recipe is not valid).
+    Refused {
+        /// For people.
+        message: String,
+        /// Exit status.
+        exit: u8,
+    },
+    /// The job queue (reply to `queue-list`).
+    Queue(Box<Queue>),
 }
 
 /// The server's side of the contract: where it reads status and sends commands.
@@ -87,6 +140,8 @@ pub struct ControlChannels {
     pub status: watch::Receiver<Status>,
     /// Commands to the runner.
     pub commands: mpsc::Sender<OperatorRequest>,
+    /// The job queue, when this process keeps one (the daemon).
+    pub queue: Option<QueueService>,
 }
 
 #[cfg(test)]

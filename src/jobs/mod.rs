@@ -4,7 +4,8 @@
 //!   validated against the station's configuration;
 //! - [`queue`]: the durable job queue the daemon runs one job after another from;
 //! - [`index`]: the SQLite index of the station's scans behind `surfscan list`, rebuilt from
-//!   the journals; [`synthetic`]: scan directories for its tests and benchmark.
+//!   the journals; [`synthetic`]: scan directories for its tests and benchmark;
+//! - [`service`]: the daemon's keeper of the queue, serving the operator's queue commands.
 //!
 //! Layer 4 (process edge): depends on [`crate::config`], [`crate::specification`] and the
 //! scan's vocabulary; reads and writes files of its own.
@@ -12,4 +13,5 @@
 pub mod index;
 pub mod queue;
 pub mod recipe;
+pub mod service;
 pub mod synthetic;

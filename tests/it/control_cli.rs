@@ -75,6 +75,7 @@ impl Daemon {
             ControlChannels {
                 status: status_rx,
                 commands: cmd_tx,
+                queue: None,
             },
         )
         .await;
@@ -308,6 +309,7 @@ async fn serve_at(
         ControlChannels {
             status: status_rx,
             commands: cmd_tx,
+            queue: None,
         },
     )
     .await;
@@ -511,6 +513,7 @@ async fn a_start_that_fails_at_once_is_reported_as_failed() {
         ControlChannels {
             status: status_rx,
             commands: cmd_tx,
+            queue: None,
         },
     )
     .await;

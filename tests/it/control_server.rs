@@ -76,6 +76,7 @@ fn fake_runner(initial: Status) -> (ControlChannels, Runner) {
         ControlChannels {
             status: status_rx,
             commands: cmd_tx,
+            queue: None,
         },
         Runner {
             status: status_tx,
@@ -387,6 +388,7 @@ async fn a_runner_that_is_gone_or_silent_gives_an_error_not_a_hang() {
         ControlChannels {
             status: status_rx,
             commands: cmd_tx,
+            queue: None,
         },
         ServerOptions::default(),
     )
@@ -422,6 +424,7 @@ async fn a_runner_that_is_gone_or_silent_gives_an_error_not_a_hang() {
         ControlChannels {
             status: status_rx,
             commands: cmd_tx,
+            queue: None,
         },
         options,
     )
@@ -859,6 +862,7 @@ async fn a_command_the_operator_was_told_failed_reaches_the_runner_marked_abando
         ControlChannels {
             status: status_rx,
             commands: cmd_tx,
+            queue: None,
         },
         options,
     )

@@ -1,7 +1,7 @@
-//! Every parser of outside input never panics: the configuration loader, the SJ-210 codec and
-//! reply parsers, the GRBL and Zaber reply parsers and line framer, grid and profile CSV,
-//! recorded transcripts, journal records, the control protocol, the IGES reader and the X3P
-//! reader are fed mutated copies of valid input (bit flips, cut and repeated spans, and
+//! Every parser of outside input never panics: the configuration loader, recipes and limit
+//! callouts, the SJ-210 codec and reply parsers, the GRBL and Zaber reply parsers and line
+//! framer, grid and profile CSV, recorded transcripts, journal records, the control protocol,
+//! the IGES reader and the X3P reader are fed mutated copies of valid input (bit flips, cut and repeated spans, and
 //! tokens that break parsers: huge and negative numbers, NaN, separators, line ends, non-ASCII)
 //! and plain random bytes. A panic fails the case, and proptest shrinks it to a small input.
 //!
@@ -338,6 +338,66 @@ fn config_loader() {
             let _ = c.stage.nm_per_unit();
             let _ = c.instrument.client_options();
             let _ = c.instrument.validate();
+        }
+    });
+}
+
+// --- recipes and callouts -------------------------------------------------------------
+
+#[test]
+fn recipe_loader_and_callouts() {
+    const RECIPE: &[u8] = br#"description = "brass"
+[plan]
+lines = 8
+y-start-mm = 2.0
+y-step-mm = 0.01
+[conditions]
+lambda-c-mm = 0.8
+lambda-s-um = 2.5
+sampling-lengths = 5
+speed-mm-s = 0.5
+[analysis]
+outliers = "exclude"
+[specification]
+limits = ["Ra 0.8", "Rz max 6.3", "L Ra 0.2", "0.0025-0.8/Rz5 3.2", "U RSm 200 um"]
+[queue]
+stop-on-failure = true
+"#;
+    const EXTRA: &[&[u8]] = &[
+        b"Ra0.8x",
+        b" max ",
+        b"/",
+        b"-",
+        b"\"U ",
+        b"\"L ",
+        b"Rz1max",
+        b"0,8",
+        b" mm",
+        b"\xc2\xb5",
+        b" = nan\n",
+        b" = 1e300\n",
+        b"99999999999999999999",
+    ];
+    let station = surfscan::config::Config::parse(
+        Path::new("station.toml"),
+        std::str::from_utf8(&config_seeds()[1]).unwrap(),
+    )
+    .unwrap();
+    fuzz(3000, inputs(vec![RECIPE.to_vec()], EXTRA), |b| {
+        let text = text(&b);
+        // What a start does with a recipe: parse and validate it, then its configuration.
+        if let Ok(r) = surfscan::jobs::recipe::Recipe::from_text(
+            "fuzz",
+            Path::new("fuzz.toml"),
+            &text,
+            &station,
+        ) {
+            let _ = r.config_for(&station, Some(3.0));
+            let _ = r.summary(&station);
+        }
+        // Each line as a callout on its own.
+        for line in text.lines() {
+            let _ = line.parse::<surfscan::specification::Callout>();
         }
     });
 }

@@ -110,6 +110,7 @@ async fn station_with(extra: &str) -> Station {
     let channels = ControlChannels {
         status: status_rx,
         commands: cmd_tx,
+        queue: None,
     };
     let s = settings(dir.path(), extra);
     let page = web::start(&s, channels, dir.path().join("scans")).unwrap();
@@ -642,6 +643,7 @@ async fn a_token_file_others_can_read_a_bad_certificate_or_a_taken_port_is_named
     let channels = || ControlChannels {
         status: status_rx.clone(),
         commands: cmd_tx.clone(),
+        queue: None,
     };
     let mut s = settings(dir.path(), "");
     std::fs::set_permissions(&s.token_file, std::fs::Permissions::from_mode(0o644)).unwrap();

@@ -59,6 +59,7 @@ async fn a_watcher_that_never_reads_is_dropped_and_another_keeps_receiving() {
         ControlChannels {
             status: status_rx,
             commands: cmd_tx,
+            queue: None,
         },
         async {
             let _ = stopped.await;
