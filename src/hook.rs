@@ -8,8 +8,12 @@
 //! with the command and the cause and otherwise ignored.
 //!
 //! The command sees `SURFSCAN_SCAN_ID`, `SURFSCAN_STATUS` (`success|fail|abort|suspended`),
-//! `SURFSCAN_REASON` and `SURFSCAN_SCAN_DIR`; systemd's notification variables are removed
-//! so the hook cannot speak to the service manager on the daemon's behalf.
+//! `SURFSCAN_REASON` and `SURFSCAN_SCAN_DIR`, and a completed scan's results
+//! ([`crate::scan::results::ScanResults::env`]: `SURFSCAN_VERDICT`,
+//! `SURFSCAN_VERDICT_SUMMARY`, `SURFSCAN_WARNINGS`, `SURFSCAN_RA_MEAN_UM`,
+//! `SURFSCAN_RZ_MEAN_UM`, `SURFSCAN_SA_UM`; every one set, empty when it does not apply);
+//! systemd's notification variables are removed so the hook cannot speak to the service
+//! manager on the daemon's behalf.
 //!
 //! Layer 4 (process edge): depends on the scan's events ([`crate::scan::event`]), tokio's
 //! process support, nix for the process group and serde for [`HookSettings`].
@@ -153,6 +157,7 @@ impl Hook {
             .env("SURFSCAN_STATUS", event.kind.as_str())
             .env("SURFSCAN_REASON", &event.reason)
             .env("SURFSCAN_SCAN_DIR", &event.dir)
+            .envs(event.results.clone().unwrap_or_default().env())
             .env_remove("NOTIFY_SOCKET")
             .env_remove("WATCHDOG_USEC")
             .env_remove("WATCHDOG_PID")

@@ -89,6 +89,19 @@ pub struct StartArgs {
     /// Start a new scan even when one is unfinished (that one is recorded as abandoned).
     #[arg(long)]
     pub new: bool,
+    /// Scan with this recipe (`NAME.toml` in the station's `[jobs] recipes` directory): its
+    /// plan, measuring conditions, analysis and specification, instead of the station's plan.
+    #[arg(long, value_name = "NAME")]
+    pub recipe: Option<String>,
+    /// y of the first line, mm (machine coordinates), for the recipe's scan [default: the
+    /// recipe's, else the station's].
+    #[arg(
+        long,
+        value_name = "Y",
+        requires = "recipe",
+        allow_negative_numbers = true
+    )]
+    pub y_start_mm: Option<f64>,
 }
 
 /// Which operator command to send.
@@ -256,11 +269,19 @@ pub fn run_start(args: StartArgs) -> Result<(), CliError> {
         .operator
         .or_else(|| std::env::var("USER").ok())
         .unwrap_or_default();
+    if let Some(y) = args.y_start_mm.filter(|y| !y.is_finite()) {
+        return Err(CliError::new(
+            Exit::Usage,
+            format!("--y-start-mm {y} is not a position; give the y of the first line in mm"),
+        ));
+    }
     let request = Request::Start {
         specimen: args.specimen,
         operator,
         notes: args.notes,
         mode: StartMode::from_flags(args.resume, args.new),
+        recipe: args.recipe,
+        y_start_mm: args.y_start_mm,
     };
     let path = socket_path(&args.target)?;
     let json = args.target.json;
@@ -515,6 +536,19 @@ pub fn render_status(s: &Status) -> String {
                 l.scan_id, l.status, l.reason, l.dir
             )
         };
+        if let Some(v) = &l.verdict {
+            let _ = writeln!(out, "  verdict    {v}");
+        }
+    }
+    if let Some(q) = &s.queue {
+        let _ = write!(out, "  queue      {} job(s) queued", q.queued);
+        if let Some(j) = q.running {
+            let _ = write!(out, ", job {j} running");
+        }
+        out.push('\n');
+        if let Some(h) = &q.held {
+            let _ = writeln!(out, "  queue      stopped: {h}");
+        }
     }
     for d in &s.damaged_journals {
         let _ = writeln!(out, "  warning    {d}");
@@ -564,6 +598,52 @@ mod tests {
     }
 
     #[test]
+    fn the_last_scans_verdict_and_the_queue_are_shown() {
+        let mut s = Status::idle();
+        let results = crate::scan::results::ScanResults {
+            verdict: Some(crate::specification::Verdict::DoesNotConform),
+            verdict_summary: Some(
+                "does not conform (Rz 16 % rule: 9 of 31 lines above 6.3 µm)".into(),
+            ),
+            warnings: 3,
+            ..Default::default()
+        };
+        s.last_stop = Some(LastStop {
+            scan_id: "G-0141".into(),
+            status: StopStatus::Success,
+            reason: "31 lines".into(),
+            dir: "/d/G-0141".into(),
+            verdict: Some(results.line("success")),
+            results: Some(Box::new(results)),
+        });
+        s.queue = Some(Box::new(crate::scan::status::QueueStatus {
+            queued: 2,
+            running: None,
+            held: Some("job 4 (brass) ended fail".into()),
+        }));
+        let text = render_status(&s);
+        assert!(
+            text.contains("  verdict    success, 3 warnings: does not conform (Rz 16 % rule: 9 of 31 lines above 6.3 µm)\n"),
+            "{text}"
+        );
+        assert!(text.contains("  queue      2 job(s) queued\n"), "{text}");
+        assert!(text.contains("  queue      stopped: job 4"), "{text}");
+        let json = serde_json::to_value(&s).unwrap();
+        assert_eq!(json["last_stop"]["results"]["verdict"], "does not conform");
+        assert!(json["last_stop"]["verdict"]
+            .as_str()
+            .unwrap()
+            .starts_with("success, 3 warnings: does not conform"));
+        let mut w = Status::idle();
+        w.state = State::Waiting;
+        w.reason = Some("waiting for specimen to be loaded — job 5".into());
+        assert_eq!(
+            w.summary(),
+            "waiting: waiting for specimen to be loaded — job 5"
+        );
+    }
+
+    #[test]
     fn idle_block_shows_the_last_stop_and_no_scan_fields() {
         let mut s = Status::idle();
         s.last_stop = Some(LastStop {
@@ -571,6 +651,8 @@ mod tests {
             status: StopStatus::Fail,
             reason: "stage following error".into(),
             dir: "/d/G-0141".into(),
+            verdict: None,
+            results: None,
         });
         s.reason = Some("stage following error".into());
         let text = render_status(&s);

@@ -23,8 +23,10 @@
 //! Layer 5 (composition): [`super::station`], control server, the station's page, runner,
 //! service notifications, hook.
 
+use super::daemon_jobs::{Jobs, Turn};
 use super::station::{
-    ignore_hangups, load_config, lock_station, record_scan_in_lock, run_settings,
+    ignore_hangups, load_config, lock_station, recipe_conflict, record_scan_in_lock, run_settings,
+    with_job,
 };
 use super::{CliError, Exit};
 use crate::config::Config;
@@ -32,14 +34,14 @@ use crate::control::protocol::ControlChannels;
 use crate::control::server;
 use crate::devices::Fault;
 use crate::hook::Hook;
+use crate::jobs::service::QueueService;
 use crate::publish::Publishers;
 use crate::scan::channels::Control;
 use crate::scan::choice::{self, Asker};
-use crate::scan::command::{OperatorCommand, OperatorRequest, Peer};
+use crate::scan::command::{OperatorCommand, OperatorRequest, Peer, RecipeStart, StartMode};
 use crate::scan::ending::{End, FailCause, StopStatus};
 use crate::scan::event::ScanEvent;
-use crate::scan::outcome::Outcome;
-use crate::scan::outcome::ScanRequest;
+use crate::scan::outcome::{NewJob, Outcome, ScanRequest};
 use crate::scan::runner::run_scan;
 use crate::scan::settings::RunSettings;
 use crate::scan::station::{devices_answer, SerialStation, Station};
@@ -94,13 +96,25 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
     let station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
-    let settings = run_settings(&config, config_hash, hooks)?;
+    let settings = run_settings(&config, config_hash.clone(), hooks)?;
+    // The job queue: read (a damaged file is kept aside and named), and a job that was
+    // running when the daemon stopped settled by the journals.
+    let (queue, damaged) =
+        QueueService::open(config.clone()).map_err(|e| CliError::new(Exit::Io, e.to_string()))?;
+    if let Some(w) = damaged {
+        tracing::error!("{w}");
+    }
+    match queue.reconcile() {
+        Ok(notes) => notes.iter().for_each(|n| tracing::info!("queue: {n}")),
+        Err(e) => tracing::error!("queue: {e}"),
+    }
+    let jobs = Jobs::new(queue, config_hash);
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
         .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
-    rt.block_on(daemon(&config, settings, station, control, lock))
+    rt.block_on(daemon(&config, settings, jobs, station, control, lock))
 }
 
 fn presence(present: bool) -> DeviceState {
@@ -114,6 +128,7 @@ fn presence(present: bool) -> DeviceState {
 async fn daemon(
     config: &Config,
     settings: RunSettings,
+    mut jobs: Jobs,
     mut station: SerialStation,
     control: server::ServerOptions,
     lock: Arc<StationLock>,
@@ -143,7 +158,7 @@ async fn daemon(
             let channels = ControlChannels {
                 status: status_rx.clone(),
                 commands: cmd_tx.clone(),
-                queue: None,
+                queue: Some(jobs.queue.clone()),
             };
             match crate::web::start(w, channels, config.output.dir.clone()) {
                 Ok(page) => {
@@ -166,7 +181,7 @@ async fn daemon(
         ControlChannels {
             status: status_rx.clone(),
             commands: cmd_tx,
-            queue: None,
+            queue: Some(jobs.queue.clone()),
         },
         async move {
             let _ = srv_shutdown.wait_for(|v| *v).await;
@@ -248,7 +263,8 @@ async fn daemon(
     ctl.events = Some(ev_tx);
     ctl.metrics = publishers.scan_metrics();
 
-    // Resume an unfinished scan at start-up.
+    // Resume an unfinished scan at start-up (a job's scan among them: the queue then
+    // records its end).
     let mut stop = false;
     let mut awaiting: Option<Awaiting> = None;
     match choice::choose(
@@ -275,6 +291,7 @@ async fn daemon(
             let outcome = run_scan(&mut station, &mut ctl, &settings, req).await;
             stop = outcome.end == End::Shutdown;
             awaiting = Awaiting::after(&outcome, &settings);
+            tokio::task::block_in_place(|| jobs.settle_if_a_job(&outcome, &settings));
             note_damaged_journals(config, &ctl.status);
         }
         Ok(None) => {}
@@ -287,15 +304,53 @@ async fn daemon(
             .map_or(IDLE_TICK, |w| w.min(IDLE_TICK)),
     );
     let mut shutdown = shutdown_rx.clone();
+    let mut queue_changes = jobs.queue.subscribe();
     while !stop && !*shutdown.borrow() {
+        // No scan runs: the queue's turn, unless a failed scan waits to be continued (a
+        // job's among them: its job is not over).
+        if awaiting.is_none() {
+            let present = station.instrument_present() && station.stage_present();
+            let turn = tokio::task::block_in_place(|| {
+                jobs.turn(&settings, present, std::time::Instant::now())
+            });
+            match turn {
+                Turn::Run {
+                    job,
+                    request,
+                    settings: job_settings,
+                } => {
+                    waiting(&ctl.status, None);
+                    ctl.status.send_modify(|s| {
+                        s.starts += 1;
+                        s.queue = Some(Box::new(jobs.queue.status()));
+                    });
+                    let outcome = run_scan(&mut station, &mut ctl, &job_settings, request).await;
+                    stop = outcome.end == End::Shutdown;
+                    awaiting = Awaiting::after(&outcome, &job_settings);
+                    tokio::task::block_in_place(|| jobs.settle(job, &outcome, &settings));
+                    note_damaged_journals(config, &ctl.status);
+                    continue;
+                }
+                Turn::Wait(why) => waiting(&ctl.status, Some(why)),
+                Turn::Nothing => waiting(&ctl.status, None),
+            }
+        }
+        let q = jobs.queue.status();
+        ctl.status.send_if_modified(|s| {
+            let changed = s.queue.as_deref() != Some(&q);
+            s.queue = Some(Box::new(q));
+            changed
+        });
         tokio::select! {
             Ok(()) = shutdown.changed() => {}
+            // A job added, loaded or removed, or the queue continued: look at it again.
+            Ok(()) = queue_changes.changed() => {}
             req = ctl.commands.recv() => {
                 let Some(req) = req else { break };
                 let Some(req) = req.unless_abandoned() else { continue };
                 match req.command {
-                    OperatorCommand::Start { specimen, operator, notes, mode } => {
-                        let busy = ctl.status.borrow().state != State::Idle;
+                    OperatorCommand::Start { specimen, operator, notes, mode, recipe } => {
+                        let busy = !matches!(ctl.status.borrow().state, State::Idle | State::Waiting);
                         if busy {
                             let running = match ctl.status.borrow().scan_id.clone() {
                                 Some(id) => format!("scan {id} is running"),
@@ -306,36 +361,30 @@ async fn daemon(
                             )));
                             continue;
                         }
-                        let choice = match choice::choose(&config.output.dir, Asker::Operator(mode), req.peer, (specimen, operator, notes)) {
-                            Ok(c) if !matches!(c.decision, choice::Decision::Refuse(_)) => c,
-                            Ok(c) => {
-                                let why = c.describe(config.scan.lines);
+                        let start = match operator_start(config, &jobs, &settings, (specimen, operator, notes), mode, recipe, req.peer) {
+                            Ok(s) => s,
+                            Err(why) => {
                                 tracing::error!("{why}");
                                 let _ = req.reply.send(Err(why));
                                 continue;
                             }
-                            Err(e) => {
-                                tracing::error!("{e}");
-                                let _ = req.reply.send(Err(e.to_string()));
-                                continue;
-                            }
                         };
-                        let what = choice.describe(config.scan.lines);
                         // Nothing is changed, on disk or at the station, unless the operator
                         // is told the start goes ahead.
                         let told = req.reply.send(Ok(format!(
-                            "{what}; follow it with `surfscan status --watch`"
+                            "{}; follow it with `surfscan status --watch`", start.what
                         )));
                         if told.is_err() {
                             tracing::warn!("dropped a start: the control socket stopped waiting for it and told the operator it was not carried out");
                             continue;
                         }
+                        waiting(&ctl.status, None);
                         ctl.status.send_modify(|s| s.starts += 1);
                         // The operator's start takes over from a continuation the daemon
                         // was waiting to make.
                         awaiting = None;
-                        let request = match choice.commit().map_err(CliError::from) {
-                            Ok(Some(r)) => r,
+                        let request = match start.choice.commit().map_err(CliError::from) {
+                            Ok(Some(r)) => with_job(r, start.job),
                             Ok(None) => continue,
                             Err(e) => {
                                 tracing::error!("{e}");
@@ -345,9 +394,10 @@ async fn daemon(
                                 continue;
                             }
                         };
-                        let outcome = run_scan(&mut station, &mut ctl, &settings, request).await;
+                        let outcome = run_scan(&mut station, &mut ctl, &start.settings, request).await;
                         stop = outcome.end == End::Shutdown;
-                        awaiting = Awaiting::after(&outcome, &settings);
+                        awaiting = Awaiting::after(&outcome, &start.settings);
+                        tokio::task::block_in_place(|| jobs.settle_if_a_job(&outcome, &settings));
                         note_damaged_journals(config, &ctl.status);
                     }
                     OperatorCommand::Pause | OperatorCommand::Resume | OperatorCommand::Abort => {
@@ -381,6 +431,7 @@ async fn daemon(
                             let outcome = run_scan(&mut station, &mut ctl, &settings, req).await;
                             stop = outcome.end == End::Shutdown;
                             awaiting = Awaiting::after(&outcome, &settings);
+                            tokio::task::block_in_place(|| jobs.settle_if_a_job(&outcome, &settings));
                             note_damaged_journals(config, &ctl.status);
                         }
                         Err(fault) => {
@@ -474,6 +525,83 @@ async fn watched_probe(
             _ = tick.tick() => notifier.watchdog(),
         }
     }
+}
+
+/// A start the daemon will carry out: the choice, the settings it runs with, the recipe's
+/// job (for `start --recipe`) and what the operator is told.
+struct OperatorStart {
+    choice: choice::Choice,
+    settings: RunSettings,
+    job: Option<Box<NewJob>>,
+    what: String,
+}
+
+/// Decides an operator's start: the scan choice, and with `--recipe` the recipe's plan and
+/// job (an unfinished scan of another recipe, or of the station's plan, is not resumed under
+/// a recipe's name: the reason says what to do).
+fn operator_start(
+    config: &Config,
+    jobs: &Jobs,
+    base: &RunSettings,
+    traceability: (String, String, String),
+    mode: StartMode,
+    recipe: Option<Box<RecipeStart>>,
+    peer: Peer,
+) -> Result<OperatorStart, String> {
+    let choice = choice::choose(
+        &config.output.dir,
+        Asker::Operator(mode),
+        peer,
+        traceability,
+    )
+    .map_err(|e| e.to_string())?;
+    if let choice::Decision::Refuse(why) = &choice.decision {
+        return Err(why.clone());
+    }
+    let Some(r) = recipe else {
+        let what = choice.describe(config.scan.lines);
+        return Ok(OperatorStart {
+            choice,
+            settings: base.clone(),
+            job: None,
+            what,
+        });
+    };
+    let (settings, job) = jobs.recipe_settings(&r, base)?;
+    if let Some(why) = recipe_conflict(&choice.decision, &r.record.recipe, "surfscan start") {
+        return Err(why);
+    }
+    let what = match &choice.decision {
+        choice::Decision::New { .. } => format!(
+            "starting a scan of recipe {} ({} lines)",
+            r.record.recipe, settings.plan.lines
+        ),
+        _ => choice.describe(settings.plan.lines),
+    };
+    Ok(OperatorStart {
+        choice,
+        settings,
+        job: Some(Box::new(job)),
+        what,
+    })
+}
+
+/// Shows the queue's reason to wait (`Waiting`), or clears it, when no scan runs.
+fn waiting(status: &watch::Sender<Status>, why: Option<String>) {
+    status.send_if_modified(|s| match (&why, s.state) {
+        (Some(w), State::Idle | State::Waiting) => {
+            let changed = s.state != State::Waiting || s.reason.as_ref() != Some(w);
+            s.state = State::Waiting;
+            s.reason = Some(w.clone());
+            changed
+        }
+        (None, State::Waiting) => {
+            s.state = State::Idle;
+            s.reason = None;
+            true
+        }
+        _ => false,
+    });
 }
 
 /// Shows in the status the scans skipped because their journal is damaged (the snapshot a

@@ -178,6 +178,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             operator: "surfscan demo".into(),
             notes: "simulated station replaying real profiles".into(),
             peer: None,
+            job: None,
         };
         let outcome = run_foreground(&mut station, &settings, request).await;
         handle.shutdown().await;

@@ -41,6 +41,7 @@ pub mod check_config;
 pub mod console;
 pub mod control;
 pub mod daemon;
+mod daemon_jobs;
 #[cfg(feature = "sim")]
 pub mod demo;
 pub mod docs;

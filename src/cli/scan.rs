@@ -21,7 +21,8 @@
 //! station's lock), [`super::check_config`]'s port check, the runner, signals, terminal.
 
 use super::station::{
-    ignore_hangups, load_config, lock_station, record_scan_in_lock, run_settings,
+    ignore_hangups, load_config, lock_station, recipe_conflict, record_scan_in_lock, run_settings,
+    with_job,
 };
 use super::{CliError, Exit};
 use crate::config::Config;
@@ -64,6 +65,49 @@ pub struct Args {
     /// Start a new scan even when one is unfinished (that one is recorded as abandoned).
     #[arg(long)]
     pub new: bool,
+    /// Scan with this recipe (`NAME.toml` in the station's `[jobs] recipes` directory): its
+    /// plan, measuring conditions, analysis and specification, instead of the station's plan.
+    #[arg(long, value_name = "NAME")]
+    pub recipe: Option<String>,
+    /// y of the first line, mm (machine coordinates), for the recipe's scan [default: the
+    /// recipe's, else the station's].
+    #[arg(
+        long,
+        value_name = "Y",
+        requires = "recipe",
+        allow_negative_numbers = true
+    )]
+    pub y_start_mm: Option<f64>,
+}
+
+/// The station's configuration with the recipe's plan and analysis, and the recipe's job for
+/// a new scan; the station's own without `--recipe`. A bad recipe is exit 78, an unknown name
+/// or a bad `--y-start-mm` exit 2.
+fn with_recipe(
+    config: &Config,
+    recipe: Option<&str>,
+    y_start_mm: Option<f64>,
+) -> Result<(Config, Option<crate::jobs::recipe::Recipe>), CliError> {
+    let Some(name) = recipe else {
+        return Ok((config.clone(), None));
+    };
+    if let Some(y) = y_start_mm.filter(|y| !y.is_finite()) {
+        return Err(CliError::new(
+            Exit::Usage,
+            format!("--y-start-mm {y} is not a position; give the y of the first line in mm"),
+        ));
+    }
+    let err = |e: crate::jobs::recipe::RecipeError| {
+        let exit = if e.is_usage() {
+            Exit::Usage
+        } else {
+            Exit::Config
+        };
+        CliError::new(exit, e.to_string())
+    };
+    let r = crate::jobs::recipe::Recipe::load(&config.jobs.recipes, name, config).map_err(err)?;
+    let c = r.config_for(config, y_start_mm).map_err(err)?;
+    Ok((c, Some(r)))
 }
 
 /// Maps a scan's outcome to the exit status and message of a foreground command.
@@ -341,16 +385,24 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
     let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
-    let request = choice::choose(
+    let (run_config, recipe) = with_recipe(&config, args.recipe.as_deref(), args.y_start_mm)?;
+    let choice = choice::choose(
         &config.output.dir,
         Asker::Operator(StartMode::from_flags(args.resume, args.new)),
         Peer::this_process(),
         (args.specimen, args.operator, args.notes),
     )
-    .and_then(choice::Choice::commit)
-    .map_err(CliError::from)?
-    .ok_or_else(|| CliError::new(Exit::Failed, "internal: an operator's start chose nothing"))?;
-    let settings = run_settings(&config, config_hash, hooks)?;
+    .map_err(CliError::from)?;
+    if let Some(r) = &recipe {
+        if let Some(why) = recipe_conflict(&choice.decision, &r.name, "surfscan scan") {
+            return Err(CliError::new(Exit::Usage, why));
+        }
+    }
+    let request = choice.commit().map_err(CliError::from)?.ok_or_else(|| {
+        CliError::new(Exit::Failed, "internal: an operator's start chose nothing")
+    })?;
+    let request = with_job(request, recipe.map(|r| Box::new(r.new_job(None))));
+    let settings = run_settings(&run_config, config_hash, hooks)?;
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()

@@ -128,6 +128,62 @@ pub fn longest_effect(config: &Config) -> Duration {
     trace.max(stage) + Duration::from_secs(60)
 }
 
+/// The request with a recipe's job given to a new scan (a resumed scan keeps its own).
+pub fn with_job(
+    request: crate::scan::outcome::ScanRequest,
+    job: Option<Box<crate::scan::outcome::NewJob>>,
+) -> crate::scan::outcome::ScanRequest {
+    use crate::scan::outcome::ScanRequest;
+    match request {
+        ScanRequest::New {
+            specimen,
+            operator,
+            notes,
+            peer,
+            job: None,
+        } => ScanRequest::New {
+            specimen,
+            operator,
+            notes,
+            peer,
+            job,
+        },
+        other => other,
+    }
+}
+
+/// Why a start with recipe `recipe` must not go ahead with `decision`: it would resume or
+/// continue a scan of another recipe, or of the station's plan, under this recipe's name.
+/// `command` names the start for the way out.
+pub fn recipe_conflict(
+    decision: &crate::scan::choice::Decision,
+    recipe: &str,
+    command: &str,
+) -> Option<String> {
+    use crate::scan::choice::Decision;
+    use crate::scan::journal::{read_journal, ResumeState, JOURNAL_FILE};
+    let (Decision::Resume(dir) | Decision::Continue(dir)) = decision else {
+        return None;
+    };
+    let path = dir.join(JOURNAL_FILE);
+    let of = read_journal(&path)
+        .ok()
+        .and_then(|r| ResumeState::from_records(&path, &r.records).ok())
+        .and_then(|s| s.start.job)
+        .map(|j| j.recipe);
+    if of.as_deref() == Some(recipe) {
+        return None;
+    }
+    let what = match of {
+        Some(r) => format!("of recipe {r}"),
+        None => "of the station's plan".to_owned(),
+    };
+    Some(format!(
+        "the unfinished scan {} is {what}, not of recipe {recipe}: finish it first (`{command}` without --recipe resumes it) or give --new to abandon it",
+        dir.display()
+    ))
+}
+
 /// Where the device locks go: [`station_lock::DEVICE_LOCK_DIR`], or the directory
 /// `SURFSCAN_TEST_LOCK_DIR` names (see [`lock_station`]).
 fn device_lock_dir() -> PathBuf {

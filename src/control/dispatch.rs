@@ -23,7 +23,7 @@ pub async fn dispatch(
     reply_timeout: Duration,
 ) -> Message {
     let command = match request {
-        Request::Status => return Message::Status(Box::new(channels.status.borrow().clone())),
+        Request::Status => return with_queue(channels.status.borrow().clone(), channels),
         Request::Watch => {
             return Message::Error {
                 message: "watch is a stream of status messages, served by the front end".into(),
@@ -43,12 +43,30 @@ pub async fn dispatch(
             operator,
             notes,
             mode,
-        } => OperatorCommand::Start {
-            specimen,
-            operator,
-            notes,
-            mode,
-        },
+            recipe,
+            y_start_mm,
+        } => {
+            let recipe = match recipe {
+                None if y_start_mm.is_some() => {
+                    return Message::Refused {
+                        message: "--y-start-mm belongs to a recipe's scan: give --recipe NAME too (the station's plan has its own [scan] y-start-mm)".into(),
+                        exit: 2,
+                    }
+                }
+                None => None,
+                Some(name) => match recipe_start(name, y_start_mm, channels, reply_timeout).await {
+                    Ok(r) => Some(Box::new(r)),
+                    Err(refusal) => return refusal,
+                },
+            };
+            OperatorCommand::Start {
+                specimen,
+                operator,
+                notes,
+                mode,
+                recipe,
+            }
+        }
         queue_request => return queue_command(queue_request, channels, who, reply_timeout).await,
     };
     let peer = match who(command_name(&command)) {
@@ -66,6 +84,57 @@ pub fn snapshot(status: &mut watch::Receiver<Status>, mark_seen: bool) -> Messag
         status.borrow().clone()
     };
     Message::Status(Box::new(s))
+}
+
+/// `status` with the job queue's state as it is now (the queue changes while a scan runs;
+/// the runner's snapshots do not follow it).
+fn with_queue(mut s: Status, channels: &ControlChannels) -> Message {
+    if let Some(q) = &channels.queue {
+        s.queue = Some(Box::new(q.status()));
+    }
+    Message::Status(Box::new(s))
+}
+
+/// The latest status with the job queue's state; `mark_seen` marks it seen for a watcher's
+/// `changed()`.
+pub fn status_with_queue(channels: &mut ControlChannels, mark_seen: bool) -> Message {
+    let s = if mark_seen {
+        channels.status.borrow_and_update().clone()
+    } else {
+        channels.status.borrow().clone()
+    };
+    with_queue(s, channels)
+}
+
+/// `start --recipe NAME`: the recipe read and validated now by the queue's keeper (which
+/// knows the station's configuration), frozen for the daemon; else the refusal with its
+/// exit status.
+async fn recipe_start(
+    name: String,
+    y_start_mm: Option<f64>,
+    channels: &ControlChannels,
+    reply_timeout: Duration,
+) -> Result<crate::scan::command::RecipeStart, Message> {
+    let Some(queue) = channels.queue.clone() else {
+        return Err(no_queue("start --recipe"));
+    };
+    let done = tokio::task::spawn_blocking(move || queue.recipe_start(&name, y_start_mm));
+    match tokio::time::timeout(reply_timeout, done).await {
+        Ok(Ok(Ok(r))) => Ok(r),
+        Ok(Ok(Err(e))) => Err(Message::Refused {
+            message: e.to_string(),
+            exit: e.exit_code(),
+        }),
+        Ok(Err(e)) => Err(Message::Error {
+            message: format!("start --recipe: reading the recipe failed ({e})"),
+        }),
+        Err(_) => Err(Message::Error {
+            message: format!(
+                "start --recipe: the recipe could not be read within {} s (a slow disk?); nothing was started",
+                reply_timeout.as_secs()
+            ),
+        }),
+    }
 }
 
 /// The request class a command is sent as.

@@ -54,6 +54,13 @@ pub enum Request {
         /// continue a failed one) or `new` (start over).
         #[serde(default)]
         mode: StartMode,
+        /// A recipe's scan (`NAME.toml` in the station's recipe directory) instead of the
+        /// station's plan.
+        #[serde(default)]
+        recipe: Option<String>,
+        /// y of the first line for the recipe's scan, mm.
+        #[serde(default)]
+        y_start_mm: Option<f64>,
     },
     /// Queue a job of a recipe (`surfscan queue add`).
     QueueAdd {
@@ -158,6 +165,8 @@ mod tests {
                 operator: String::new(),
                 notes: String::new(),
                 mode: StartMode::Auto,
+                recipe: None,
+                y_start_mm: None,
             }
         );
         assert_eq!(

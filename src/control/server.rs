@@ -22,7 +22,7 @@
 //! tokio and tokio-util's codec, nix for group names, and libc for the peer's groups
 //! (`SO_PEERGROUPS`, which no crate wraps).
 
-use super::dispatch::{dispatch, snapshot};
+use super::dispatch::{dispatch, status_with_queue};
 use super::protocol::{ControlChannels, Message, Request, PROTOCOL_VERSION};
 use crate::scan::command::Peer;
 use bytes::{Buf, BytesMut};
@@ -575,6 +575,8 @@ async fn serve_connection(
         pid: std::process::id(),
     };
     let mut watching = false;
+    // Watchers see the queue's changes too (a job added during a scan).
+    let mut queue_changes = channels.queue.as_ref().map(|q| q.subscribe());
     let result: Result<(), Closed> = async {
         send(&mut writer, &hello, options.write_timeout).await?;
         let mut deadline = Instant::now() + options.request_timeout;
@@ -595,9 +597,16 @@ async fn serve_connection(
                         slot.waiting(!watching);
                     }
                 },
+                changed = async { queue_changes.as_mut().expect("guarded").changed().await }, if watching && queue_changes.is_some() => {
+                    match changed {
+                        Ok(()) => send(&mut writer, &status_with_queue(&mut channels, false), options.write_timeout).await?,
+                        // The queue's keeper is gone (the daemon is stopping).
+                        Err(_) => queue_changes = None,
+                    }
+                }
                 changed = channels.status.changed(), if watching => {
                     let msg = match changed {
-                        Ok(()) => snapshot(&mut channels.status, true),
+                        Ok(()) => status_with_queue(&mut channels, true),
                         Err(_) => {
                             watching = false;
                             Message::Error { message: "the scan runner stopped publishing status (the daemon is shutting down); reconnect when it is back".into() }
@@ -685,7 +694,7 @@ async fn answer(
             };
         }
         *watching = true;
-        return snapshot(&mut channels.status, true);
+        return status_with_queue(channels, true);
     }
     dispatch(
         request,

@@ -17,7 +17,7 @@ use crate::scan::journal::{read_journal, ResumeState, JOURNAL_FILE};
 use crate::specification::Verdict;
 use rusqlite::{params, Connection};
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -175,11 +175,7 @@ impl ScanIndex {
             Ok(i) => Ok(i),
             Err(e) => {
                 tracing::warn!("{e}; the index is rebuilt from the journals");
-                for suffix in ["", "-journal", "-wal", "-shm"] {
-                    let mut p = path.clone().into_os_string();
-                    p.push(suffix);
-                    let _ = std::fs::remove_file(PathBuf::from(p));
-                }
+                remove_index_files(&path);
                 ScanIndex::try_open(&path)
             }
         }
@@ -214,15 +210,6 @@ impl ScanIndex {
         let version: i32 = conn
             .query_row("PRAGMA user_version", [], |r| r.get(0))
             .map_err(sql)?;
-        let ok: String = conn
-            .query_row("PRAGMA quick_check", [], |r| r.get(0))
-            .map_err(sql)?;
-        if ok != "ok" {
-            return Err(IndexError::Unusable {
-                path: path.to_path_buf(),
-                what: format!("damaged ({ok})"),
-            });
-        }
         let i = ScanIndex {
             conn,
             path: path.to_path_buf(),
@@ -258,76 +245,93 @@ impl ScanIndex {
             .map_err(|e| self.err(e))
     }
 
-    /// Brings the index up to date with the scan directories under `output_dir`.
+    /// Opens the index of `output_dir` and brings it up to date; an index SQLite finds
+    /// damaged on the way (a page that does not read back) is removed and rebuilt once.
+    pub fn open_refreshed(output_dir: &Path) -> Result<(ScanIndex, Refreshed), IndexError> {
+        let mut index = ScanIndex::open(output_dir)?;
+        match index.refresh(output_dir) {
+            Ok(r) => Ok((index, r)),
+            Err(IndexError::Sqlite { source, .. }) if is_damage(&source) => {
+                tracing::warn!(
+                    "scan index {}: {source}; it is rebuilt from the journals",
+                    index.path.display()
+                );
+                drop(index);
+                remove_index_files(&output_dir.join(INDEX_FILE));
+                let mut index = ScanIndex::open(output_dir)?;
+                let r = index.refresh(output_dir)?;
+                Ok((index, r))
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Brings the index up to date with the scan directories under `output_dir`: the scans
+    /// whose journal or report changed (size or modification time) are read again, those
+    /// gone are dropped, all in one transaction.
     pub fn refresh(&mut self, output_dir: &Path) -> Result<Refreshed, IndexError> {
         let list_err = |source| IndexError::List {
             path: output_dir.to_path_buf(),
             source,
-        };
-        let entries = match std::fs::read_dir(output_dir) {
-            Ok(e) => e,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                return self.retain_only(&HashMap::new()).map(|removed| Refreshed {
-                    removed,
-                    ..Refreshed::default()
-                })
-            }
-            Err(e) => return Err(list_err(e)),
         };
         let known = self.stamps()?;
         let mut out = Refreshed {
             rebuilt: known.is_empty(),
             ..Refreshed::default()
         };
-        let mut seen: HashMap<String, ()> = HashMap::new();
+        let mut seen: HashSet<String> = HashSet::with_capacity(known.len());
         let mut changed: Vec<(String, PathBuf, Stamp, Option<Stamp>)> = Vec::new();
-        for entry in entries {
-            let entry = entry.map_err(list_err)?;
-            let Ok(name) = entry.file_name().into_string() else {
-                continue;
-            };
-            let dir = entry.path();
-            let Some(js) = stamp(&dir.join(JOURNAL_FILE)) else {
-                continue;
-            };
-            let rs = stamp(&dir.join("report.json"));
-            seen.insert(name.clone(), ());
-            if known.get(&name) != Some(&(js, rs)) {
-                changed.push((name, dir, js, rs));
+        match std::fs::read_dir(output_dir) {
+            Ok(entries) => {
+                for entry in entries {
+                    let entry = entry.map_err(list_err)?;
+                    let Ok(name) = entry.file_name().into_string() else {
+                        continue;
+                    };
+                    let dir = entry.path();
+                    let Some(js) = stamp(&dir.join(JOURNAL_FILE)) else {
+                        continue;
+                    };
+                    let rs = stamp(&dir.join("report.json"));
+                    if known.get(&name) != Some(&(js, rs)) {
+                        changed.push((name.clone(), dir, js, rs));
+                    }
+                    seen.insert(name);
+                }
             }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(list_err(e)),
         }
-        let tx = self
-            .conn
-            .transaction()
-            .map_err(|source| IndexError::Sqlite {
-                path: self.path.clone(),
-                source,
-            })?;
+        let gone: Vec<&String> = known.keys().filter(|k| !seen.contains(*k)).collect();
+        if changed.is_empty() && gone.is_empty() {
+            return Ok(out);
+        }
+        let path = self.path.clone();
+        let sql = |source| IndexError::Sqlite {
+            path: path.clone(),
+            source,
+        };
+        let tx = self.conn.transaction().map_err(sql)?;
         for (name, dir, js, rs) in changed {
             match read_entry(&name, &dir) {
                 Ok(e) => {
-                    upsert(&tx, &name, &e, js, rs).map_err(|source| IndexError::Sqlite {
-                        path: self.path.clone(),
-                        source,
-                    })?;
+                    upsert(&tx, &name, &e, js, rs).map_err(sql)?;
                     out.read += 1;
                 }
                 Err(why) => {
                     tracing::warn!("scan index: {} left out: {why}", dir.display());
                     out.unreadable += 1;
                     tx.execute("DELETE FROM scans WHERE dir = ?1", [&name])
-                        .map_err(|source| IndexError::Sqlite {
-                            path: self.path.clone(),
-                            source,
-                        })?;
+                        .map_err(sql)?;
                 }
             }
         }
-        tx.commit().map_err(|source| IndexError::Sqlite {
-            path: self.path.clone(),
-            source,
-        })?;
-        out.removed = self.retain_only(&seen)?;
+        for k in &gone {
+            tx.execute("DELETE FROM scans WHERE dir = ?1", [k])
+                .map_err(sql)?;
+        }
+        tx.commit().map_err(sql)?;
+        out.removed = gone.len();
         Ok(out)
     }
 
@@ -346,23 +350,6 @@ impl ScanIndex {
             })
             .map_err(|e| self.err(e))?;
         rows.collect::<Result<_, _>>().map_err(|e| self.err(e))
-    }
-
-    fn retain_only(&mut self, seen: &HashMap<String, ()>) -> Result<usize, IndexError> {
-        let known = self.stamps()?;
-        let gone: Vec<&String> = known.keys().filter(|k| !seen.contains_key(*k)).collect();
-        let path = self.path.clone();
-        let sql = |source| IndexError::Sqlite {
-            path: path.clone(),
-            source,
-        };
-        let tx = self.conn.transaction().map_err(sql)?;
-        for k in &gone {
-            tx.execute("DELETE FROM scans WHERE dir = ?1", [k])
-                .map_err(sql)?;
-        }
-        tx.commit().map_err(sql)?;
-        Ok(gone.len())
     }
 
     /// The scans that pass `filter`, oldest first.
@@ -413,6 +400,23 @@ impl ScanIndex {
             })
             .map_err(|e| self.err(e))?;
         rows.collect::<Result<_, _>>().map_err(|e| self.err(e))
+    }
+}
+
+/// Whether SQLite's error says the file is damaged or no database.
+fn is_damage(e: &rusqlite::Error) -> bool {
+    matches!(
+        e.sqlite_error_code(),
+        Some(rusqlite::ErrorCode::DatabaseCorrupt | rusqlite::ErrorCode::NotADatabase)
+    )
+}
+
+/// Removes the index file and SQLite's files beside it (a cache: the journals are the truth).
+fn remove_index_files(path: &Path) {
+    for suffix in ["", "-journal", "-wal", "-shm"] {
+        let mut p = path.as_os_str().to_owned();
+        p.push(suffix);
+        let _ = std::fs::remove_file(PathBuf::from(p));
     }
 }
 
@@ -491,21 +495,26 @@ struct GridHead {
 /// memory from the journals. Only an output directory that cannot be listed is an error.
 pub fn listing(out: &Path, filter: &Filter) -> Result<(Vec<ScanEntry>, Vec<String>), IndexError> {
     let mut notes = Vec::new();
-    let mut index = match ScanIndex::open(out) {
-        Ok(i) => i,
-        Err(e) => {
-            notes.push(format!("{e}; listing from the journals directly (slower)"));
-            ScanIndex::in_memory()?
-        }
+    let index = match ScanIndex::open_refreshed(out) {
+        Ok((index, _)) => index,
+        Err(e @ IndexError::List { .. }) => return Err(e),
+        Err(e) => match ScanIndex::open(out) {
+            // The index is there but cannot be written (a reader without write access): what
+            // it holds, said to be possibly behind.
+            Ok(index) => {
+                notes.push(format!(
+                    "{e}: the index was not brought up to date; the daemon updates it after each scan"
+                ));
+                index
+            }
+            Err(_) => {
+                notes.push(format!("{e}; listing from the journals directly (slower)"));
+                let mut index = ScanIndex::in_memory()?;
+                index.refresh(out)?;
+                index
+            }
+        },
     };
-    if let Err(e) = index.refresh(out) {
-        if let IndexError::List { .. } = e {
-            return Err(e);
-        }
-        notes.push(format!(
-            "{e}: the index was not brought up to date; the daemon updates it after each scan"
-        ));
-    }
     Ok((index.query(filter)?, notes))
 }
 

@@ -387,6 +387,29 @@ impl Queue {
         }
     }
 
+    /// Puts running job `id`, whose scan was never created (its devices were missing), back
+    /// in its place in the queue; a specimen loaded for it stays loaded.
+    pub fn requeue(&mut self, id: u64) {
+        if let Some(j) = self.get_mut(id) {
+            if matches!(j.state, JobState::Running { scan_id: None, .. }) {
+                j.state = JobState::Queued { loaded: true };
+            }
+        }
+    }
+
+    /// The queue in the status: jobs queued, the one running, why it is stopped.
+    pub fn status(&self) -> crate::scan::status::QueueStatus {
+        crate::scan::status::QueueStatus {
+            queued: self.jobs.iter().filter(|j| j.is_queued()).count(),
+            running: self
+                .jobs
+                .iter()
+                .find(|j| matches!(j.state, JobState::Running { .. }))
+                .map(|j| j.id),
+            held: self.held.clone(),
+        }
+    }
+
     /// Records the scan created for running job `id`.
     pub fn set_scan(&mut self, id: u64, scan: &str) {
         if let Some(j) = self.get_mut(id) {

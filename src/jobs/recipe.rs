@@ -392,6 +392,26 @@ impl Recipe {
         }
     }
 
+    /// The record a scan of this recipe carries in its start record (`id`: the queue's job
+    /// number, `None` for `start --recipe` and `scan --recipe`).
+    pub fn job_record(&self, id: Option<u64>) -> crate::scan::journal::JobRecord {
+        crate::scan::journal::JobRecord {
+            id,
+            recipe: self.name.clone(),
+            recipe_sha256: self.sha256.clone(),
+            recipe_text: self.text.clone(),
+        }
+    }
+
+    /// What a new scan of this recipe carries: its job record and the conditions the
+    /// instrument must be set to.
+    pub fn new_job(&self, id: Option<u64>) -> crate::scan::outcome::NewJob {
+        crate::scan::outcome::NewJob {
+            record: self.job_record(id),
+            expected: self.file.conditions,
+        }
+    }
+
     /// One line for people: `31 lines from y = 1.0000 mm in steps of 0.0100 mm, 2 limits`.
     pub fn summary(&self, station: &Config) -> String {
         use crate::numfmt::{fmt, Quantity};

@@ -232,6 +232,34 @@ impl QueueService {
         })
     }
 
+    /// `surfscan start --recipe NAME [--y-start-mm Y]`: the recipe read and validated now
+    /// (as for a job) and frozen for the start; no queue number.
+    pub fn recipe_start(
+        &self,
+        name: &str,
+        y_start_mm: Option<f64>,
+    ) -> Result<crate::scan::command::RecipeStart, ServiceError> {
+        let recipe = Recipe::load(&self.inner.station.jobs.recipes, name, &self.inner.station)?;
+        recipe.config_for(&self.inner.station, y_start_mm)?;
+        let y_start = match y_start_mm {
+            None => None,
+            Some(y) => Some(crate::units::Nm::try_from_mm(y).ok_or_else(|| {
+                ServiceError::Usage(format!(
+                    "--y-start-mm {y} is not a whole number of nanometres; round it"
+                ))
+            })?),
+        };
+        Ok(crate::scan::command::RecipeStart {
+            record: recipe.job_record(None),
+            y_start,
+        })
+    }
+
+    /// The station's configuration the daemon runs with.
+    pub fn station(&self) -> &Config {
+        &self.inner.station
+    }
+
     /// `surfscan queue remove JOB`.
     pub fn remove(&self, id: u64, peer: Option<Peer>) -> Result<Job, ServiceError> {
         self.change("remove", peer, |q| {
@@ -278,6 +306,19 @@ impl QueueService {
             q.mark_running(id, Utc::now());
             Ok(((), vec![id], format!("job {id} running")))
         })
+    }
+
+    /// Puts job `id` back in its place: its scan could not be created (a device missing).
+    pub fn requeue(&self, id: u64, why: &str) -> Result<(), ServiceError> {
+        self.change("requeue", None, |q| {
+            q.requeue(id);
+            Ok(((), vec![id], format!("job {id} waits: {why}")))
+        })
+    }
+
+    /// The queue in the status.
+    pub fn status(&self) -> crate::scan::status::QueueStatus {
+        self.lock().status()
     }
 
     /// Records the scan created for job `id`.
@@ -377,12 +418,9 @@ impl QueueService {
 
 /// The highest job number any journal under `out` names (0 for none), from the scan index.
 fn highest_job_in_journals(out: &Path) -> u64 {
-    let Ok(mut index) = ScanIndex::open(out) else {
+    let Ok((index, _)) = ScanIndex::open_refreshed(out) else {
         return 0;
     };
-    if index.refresh(out).is_err() {
-        return 0;
-    }
     index
         .query(&Default::default())
         .map(|rows| rows.iter().filter_map(|r| r.job).max().unwrap_or(0))
@@ -404,15 +442,19 @@ fn find_job_scan(out: &Path, id: u64, recorded: Option<&str>) -> Option<JobScan>
             .and_then(|(e, _)| e.verdict);
         Some(JobScan {
             scan_id: dir_name.to_owned(),
-            ended: st.stop.map(|s| (s.status, s.reason)),
+            // A scan failed for its transient budget is continued by the daemon once its
+            // devices answer: its job is not over.
+            ended: st
+                .stop
+                .filter(|s| s.fail_cause() != Some(crate::scan::ending::FailCause::Budget))
+                .map(|s| (s.status, s.reason)),
             verdict,
         })
     };
     if let Some(found) = recorded.and_then(read) {
         return Some(found);
     }
-    let mut index = ScanIndex::open(out).ok()?;
-    index.refresh(out).ok()?;
+    let (index, _) = ScanIndex::open_refreshed(out).ok()?;
     let rows = index.query(&Default::default()).ok()?;
     rows.iter()
         .rev()

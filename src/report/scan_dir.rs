@@ -12,7 +12,7 @@
 //! sections.
 
 use super::context::{Model, ReportContext, ScanAnalysisOptions};
-use super::document::{Completeness, ScanStatus, Traceability};
+use super::document::{Completeness, Report, ScanStatus, Traceability};
 use super::error::ReportError;
 use super::header::LabHeader;
 use super::{characterise, ScanOutputs};
@@ -27,6 +27,7 @@ use crate::profile::{FilterKind, ProfileKind};
 use crate::scan::journal::{StartRecord, StopRecord, StopStatus};
 use crate::scan::line::StoredLine;
 use crate::scan::outputs::{Characterise, Characterised, CompletedScan, FitSummary, GridShape};
+use crate::scan::results::ScanResults;
 use std::path::Path;
 use std::time::Instant;
 
@@ -338,6 +339,28 @@ pub struct ScanCharacteriser {
     pub options: ScanAnalysisOptions,
 }
 
+/// A report in a few figures for the status, the hook and the queue: the specification's
+/// verdict, the Ra and Rz means over the lines, the measured grid's Sa, the warnings.
+pub fn results_of(report: &Report) -> ScanResults {
+    let mean = |f: fn(&crate::metrology::params::RoughnessParams) -> f64| {
+        let v: Vec<f64> = report
+            .lines
+            .iter()
+            .map(|l| f(&l.params))
+            .filter(|v| v.is_finite())
+            .collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    };
+    ScanResults {
+        verdict: None,
+        verdict_summary: None,
+        ra_mean_um: mean(|p| p.ra_um),
+        rz_mean_um: mean(|p| p.rz_um),
+        sa_um: report.surface_grid.as_ref().map(|g| g.params.sa_um),
+        warnings: report.warnings.len(),
+    }
+}
+
 impl Characterise for ScanCharacteriser {
     fn characterise(
         &self,
@@ -378,11 +401,13 @@ impl Characterise for ScanCharacteriser {
         files.extend(out.plots);
         files.extend(out.measured_x3p);
         files.extend(out.model_x3p);
+        let results = results_of(&out.report);
         Ok(Characterised {
             files,
             warnings: out.warnings,
             complete,
             verdict,
+            results: Some(results),
         })
     }
 }

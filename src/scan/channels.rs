@@ -65,13 +65,21 @@ impl Control {
     }
 
     /// Tells the notification hook.
-    pub(super) fn event(&self, scan_id: &str, dir: &Path, kind: ScanEventKind, reason: &str) {
+    pub(super) fn event(
+        &self,
+        scan_id: &str,
+        dir: &Path,
+        kind: ScanEventKind,
+        reason: &str,
+        results: Option<super::results::ScanResults>,
+    ) {
         if let Some(tx) = &self.events {
             let _ = tx.send(ScanEvent {
                 scan_id: scan_id.to_owned(),
                 dir: dir.to_path_buf(),
                 kind,
                 reason: reason.to_owned(),
+                results,
             });
         }
     }

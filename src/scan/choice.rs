@@ -171,6 +171,7 @@ impl Choice {
                     operator,
                     notes,
                     peer,
+                    job: None,
                 }))
             }
             Decision::Resume(dir) => {

@@ -61,7 +61,20 @@ pub enum OperatorCommand {
         notes: String,
         /// Which scan.
         mode: StartMode,
+        /// A recipe's scan instead of the station's plan (`start --recipe`), validated by the
+        /// control socket before it is forwarded.
+        recipe: Option<Box<RecipeStart>>,
     },
+}
+
+/// `surfscan start --recipe`: the recipe as read when the command came, and the y of the
+/// first line the operator gave.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecipeStart {
+    /// The recipe, frozen (no queue number: it is not a queued job).
+    pub record: super::journal::JobRecord,
+    /// y of the first line (overrides the recipe's).
+    pub y_start: Option<crate::units::Nm>,
 }
 
 /// Who sent a command: the peer's credentials as the kernel gave them when it connected

@@ -39,14 +39,24 @@ impl Books<'_> {
     /// Performs an immediate action.
     pub(super) fn immediate(&mut self, ctl: &Control, a: Action) {
         match a {
-            Action::Publish(s) => ctl.publish(s),
+            Action::Publish(mut s) => {
+                // A completed scan's last stop carries what its characterisation found.
+                if let (Some(stop), Some(o)) = (s.last_stop.as_mut(), &self.outputs) {
+                    if stop.status == super::ending::StopStatus::Success {
+                        stop.verdict = o.results.as_ref().map(|r| r.line(stop.status.as_str()));
+                        stop.results = o.results.clone().map(Box::new);
+                    }
+                }
+                ctl.publish(s)
+            }
             Action::Record(n) => match &mut self.ledger {
                 Some(l) => l.note(&n),
                 None => tracing::warn!("{}", n.reason),
             },
             Action::Notify(kind, reason) => {
                 if let Some(l) = &self.ledger {
-                    ctl.event(&l.id, &l.dir, kind, &reason);
+                    let results = self.outputs.as_ref().and_then(|o| o.results.clone());
+                    ctl.event(&l.id, &l.dir, kind, &reason, results);
                 }
             }
             Action::Reply(r) => {
@@ -109,6 +119,16 @@ impl Books<'_> {
                 let (Some(who), Some(report)) = (self.new_scan.take(), probe) else {
                     return internal("internal: no probe report for the new scan");
                 };
+                if let Some(job) = &who.job {
+                    let differ = job.expected.mismatches(&report.conditions);
+                    if !differ.is_empty() {
+                        return Event::CreateRefused(format!(
+                            "the instrument is not set as recipe {} expects: {}; set it so (or correct the recipe) and start again",
+                            job.record.recipe,
+                            differ.join("; ")
+                        ));
+                    }
+                }
                 match opening::create(self.settings, who, report, station_points) {
                     Ok(l) => {
                         let ev = Event::Created {

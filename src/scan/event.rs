@@ -55,7 +55,7 @@ impl fmt::Display for ScanEventKind {
 }
 
 /// One event of a scan.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ScanEvent {
     /// Scan id.
     pub scan_id: String,
@@ -65,4 +65,6 @@ pub struct ScanEvent {
     pub kind: ScanEventKind,
     /// Why, for people (may be empty).
     pub reason: String,
+    /// A completed scan's verdict, means and warnings.
+    pub results: Option<super::results::ScanResults>,
 }

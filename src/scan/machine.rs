@@ -32,7 +32,7 @@
 //! and fault vocabulary. No tokio, no files, no clock reads: time is an input.
 
 use super::command::{OperatorCommand, PauseMark, Peer, StartMode};
-use super::ending::{End, FailReason};
+use super::ending::{End, FailKind, FailReason};
 use super::event::ScanEventKind;
 use super::line_check::{conditions_difference, LineProblem};
 use super::metrics::ScanMetrics;
@@ -256,6 +256,9 @@ pub enum Event {
     },
     /// A durable write failed (commit, or the outputs when finishing).
     StorageFailed(StorageFailure),
+    /// The new scan must not be made: the instrument is not set as its recipe expects
+    /// (what differs, named). The scan fails before its directory exists.
+    CreateRefused(String),
     /// The free space of the output directory, as asked by [`Action::CheckSpace`].
     SpaceChecked {
         /// Bytes free (0 when it could not be read).
@@ -291,7 +294,7 @@ pub enum Action {
     /// Drop a device that vanished (immediate).
     Close(Device),
     /// Pre-flight disk check, create the scan directory and its start record. Result:
-    /// [`Event::Created`] or [`Event::StorageFailed`].
+    /// [`Event::Created`], [`Event::StorageFailed`] or [`Event::CreateRefused`].
     CreateScan,
     /// Home the stage. Result: [`Event::Homed`] or [`Event::Fault`].
     Home,
@@ -645,6 +648,13 @@ impl Machine {
                 };
                 self.next_step(now, out);
             }
+            (Doing::Create, Event::CreateRefused(message)) => self.fail(
+                FailReason::Refused {
+                    message,
+                    kind: FailKind::Scan,
+                },
+                out,
+            ),
             (Doing::Create, Event::StorageFailed(s)) => {
                 self.trouble(Step::Creating, Trouble::Storage(s), now, out)
             }

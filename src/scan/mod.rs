@@ -27,6 +27,7 @@
 //!   heights file; [`scan_id`]: the scan's name; [`store_error`]: what can go wrong there;
 //!   [`disk`]: the pre-flight disk check; [`faults`]: the storage fault hook.
 //! - [`journal`]: `journal.jsonl` records, torn-tail recovery, resume state.
+//! - [`results`]: a completed scan's verdict, means and warnings in a few figures.
 //! - [`outputs`]: what a completed scan writes from memory (IGES via [`surface_files`], with
 //!   [`traceability`]; the report through the [`outputs::Characterise`] contract).
 //! - [`metrics`]: the numbers a station is monitored by, as Prometheus text;
@@ -57,6 +58,7 @@ pub mod outputs;
 pub mod plan;
 pub mod policy;
 pub mod reasons;
+pub mod results;
 pub mod runner;
 pub mod scan_id;
 pub mod settings;

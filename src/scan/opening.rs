@@ -30,6 +30,7 @@ pub(super) struct NewScan {
     pub operator: String,
     pub notes: String,
     pub peer: Option<Peer>,
+    pub job: Option<Box<super::outcome::NewJob>>,
 }
 
 /// Points per line the instrument will deliver under `conditions` at `pitch_um`.
@@ -97,7 +98,7 @@ pub(super) fn create(
         drive_unit: report.identity.drive_unit.clone(),
         conditions: report.conditions.clone(),
         peer: who.peer,
-        job: None,
+        job: who.job.map(|j| j.record),
     };
     let journal =
         Journal::create(store.root(), start.clone(), faults).map_err(StoreError::Journal)?;

@@ -5,13 +5,26 @@
 //! types.
 
 use super::command::Peer;
+use super::expected::ExpectedConditions;
+use super::journal::JobRecord;
 use super::outputs::Outputs;
 use std::path::PathBuf;
 
 use super::ending::End;
 
+/// What a recipe's new scan carries besides the plan: the job it is made for (frozen into
+/// its start record) and the measuring conditions the instrument must report at its start.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewJob {
+    /// The job, recorded in the start record.
+    pub record: JobRecord,
+    /// The conditions the recipe expects; a start whose instrument reports others is
+    /// refused before the scan's directory is made, naming both.
+    pub expected: ExpectedConditions,
+}
+
 /// What to run.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum ScanRequest {
     /// A new scan of the configured plan.
     New {
@@ -23,6 +36,8 @@ pub enum ScanRequest {
         notes: String,
         /// Who asked (recorded in the start record; this process when `None`).
         peer: Option<Peer>,
+        /// The recipe's job, when the scan is one (`None`: the station's own plan).
+        job: Option<Box<NewJob>>,
     },
     /// Resume the unfinished scan in this directory.
     Resume {

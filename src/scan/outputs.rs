@@ -160,6 +160,8 @@ pub struct Characterised {
     pub complete: bool,
     /// The verdict on the surface between lines in one line, or why there is none.
     pub verdict: String,
+    /// The verdict against the specification, the means and the warnings in a few figures.
+    pub results: Option<super::results::ScanResults>,
 }
 
 /// The characterisation of a completed scan, supplied by the composition layer: it writes
@@ -189,6 +191,8 @@ pub struct Outputs {
     pub characterisation_complete: bool,
     /// The verdict on the surface between lines in one line, or why there is none.
     pub verdict: String,
+    /// What the characterisation found in a few figures (none without one).
+    pub results: Option<super::results::ScanResults>,
     /// Largest distance between the surface and a measured point, mm.
     pub max_residual_mm: f64,
 }
@@ -349,6 +353,7 @@ pub fn write_outputs(
                     characterisation_error: None,
                     characterisation_complete: done.complete,
                     verdict: done.verdict,
+                    results: done.results,
                     max_residual_mm: residual,
                 });
             }
@@ -403,6 +408,7 @@ pub fn write_outputs(
         ),
         characterisation_error,
         characterisation_complete: false,
+        results: None,
         max_residual_mm: residual,
     })
 }

@@ -84,12 +84,14 @@ pub async fn run_scan<S: Station>(
             operator,
             notes,
             peer,
+            job,
         } => {
             books.new_scan = Some(NewScan {
                 specimen,
                 operator,
                 notes,
                 peer: peer.or_else(|| Some(Peer::this_process())),
+                job,
             });
             None
         }

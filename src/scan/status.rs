@@ -23,8 +23,11 @@ pub struct LinkStatus {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum State {
-    /// No scan running; waiting for `start`.
+    /// No scan running; waiting for `start` (or the queue's next job).
     Idle,
+    /// No scan running, and the queue's next job cannot begin yet: its specimen is to be
+    /// loaded (`surfscan ready`), or a device it needs is missing; `reason` says which.
+    Waiting,
     /// Probing devices, homing, pre-flight.
     Starting,
     /// Tracing lines.
@@ -56,7 +59,7 @@ pub enum DeviceState {
 }
 
 /// How the last scan ended.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LastStop {
     /// Scan id (empty when the scan never started).
     pub scan_id: String,
@@ -66,6 +69,13 @@ pub struct LastStop {
     pub reason: String,
     /// Scan directory.
     pub dir: String,
+    /// A completed scan in one line with its verdict and warnings: `success: does not
+    /// conform (Rz 16 % rule: 9 of 31 lines above 6.3 µm …)`, `success, 3 warnings`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<String>,
+    /// A completed scan's verdict, means and warnings.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub results: Option<Box<super::results::ScanResults>>,
 }
 
 /// The status snapshot the runner publishes on every state change.
@@ -110,6 +120,23 @@ pub struct Status {
     /// `surfscan start` knows the status shows its own start's outcome once this has grown.
     #[serde(default)]
     pub starts: u64,
+    /// The job queue, when the daemon keeps one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub queue: Option<Box<QueueStatus>>,
+}
+
+/// The job queue in the status: how many jobs wait their turn, the one running, and why the
+/// queue is stopped.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct QueueStatus {
+    /// Jobs queued (not running, not finished).
+    pub queued: usize,
+    /// The job whose scan is running.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub running: Option<u64>,
+    /// Why the queue is stopped (`surfscan queue continue` runs the next job).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held: Option<String>,
 }
 
 impl Status {
@@ -132,6 +159,7 @@ impl Status {
             damaged_journals: Vec::new(),
             links: BTreeMap::new(),
             starts: 0,
+            queue: None,
         }
     }
 
@@ -178,6 +206,10 @@ impl Status {
                 }
                 s
             }
+            (None, State::Waiting) => match &self.reason {
+                Some(r) => format!("waiting: {r}"),
+                None => state,
+            },
             (None, _) => state,
         }
     }
@@ -196,6 +228,8 @@ pub fn ended_status(s: &Status, ending: StopStatus, reason: &str) -> Status {
             status: ending,
             reason: reason.to_owned(),
             dir: s.scan_dir.clone().unwrap_or_default(),
+            verdict: None,
+            results: None,
         }),
         instrument: downgrade(s.instrument),
         stage: downgrade(s.stage),
@@ -237,6 +271,8 @@ mod tests {
             status: StopStatus::Interrupted,
             reason: "shutdown".into(),
             dir: String::new(),
+            verdict: None,
+            results: None,
         };
         let v = serde_json::to_value(&stop).unwrap();
         assert_eq!(v["status"], "interrupted");

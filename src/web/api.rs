@@ -710,6 +710,8 @@ mod tests {
                 operator: String::new(),
                 notes: String::new(),
                 mode: crate::scan::command::StartMode::New,
+                recipe: None,
+                y_start_mm: None,
             }
         );
         let line = request_line("pause", br#"{"force":true}"#).unwrap();

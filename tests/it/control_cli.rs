@@ -191,6 +191,7 @@ async fn commands_are_acked_or_refused_with_the_daemons_message() {
                 operator: "ana".into(),
                 notes: "lapped steel".into(),
                 mode: StartMode::Auto,
+                recipe: None,
             }
         ]
     );
@@ -504,6 +505,8 @@ async fn a_start_that_fails_at_once_is_reported_as_failed() {
                     status: surfscan::scan::ending::StopStatus::Fail,
                     reason: "instrument unavailable: /dev/sj210 is absent".into(),
                     dir: String::new(),
+                    verdict: None,
+                    results: None,
                 });
             });
         }

@@ -237,6 +237,7 @@ async fn pause_is_forwarded_and_acked_and_a_refusal_comes_back_as_error() {
                 operator: "ana".into(),
                 notes: "lapped".into(),
                 mode: StartMode::Auto,
+                recipe: None,
             }
         ]
     );

@@ -194,6 +194,8 @@ pub(crate) async fn start_scan(r: &Rig, specimen: &str) {
             operator: String::new(),
             notes: String::new(),
             mode: StartMode::Auto,
+            recipe: None,
+            y_start_mm: None,
         })
         .await
         .unwrap();
@@ -282,6 +284,8 @@ async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket()
             operator: "ana".into(),
             notes: "socket test".into(),
             mode: StartMode::Auto,
+            recipe: None,
+            y_start_mm: None,
         })
         .await
         .unwrap();
@@ -551,6 +555,8 @@ async fn a_damaged_journal_is_named_in_the_status_and_does_not_hold_up_the_daemo
             operator: "ana".into(),
             notes: String::new(),
             mode: StartMode::Auto,
+            recipe: None,
+            y_start_mm: None,
         })
         .await
         .unwrap();
@@ -617,6 +623,8 @@ async fn a_start_resumes_a_scan_paused_before_a_restart() {
         operator: String::new(),
         notes: String::new(),
         mode,
+        recipe: None,
+        y_start_mm: None,
     };
     // A new scan is refused, saying how to go on with this one.
     let refused = client(&r)

@@ -188,3 +188,199 @@ fn list_shows_the_scans_and_filters_them() {
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("does-not-conform"));
 }
+
+/// The daemon of a station whose devices are not plugged in: it serves the socket, queues
+/// jobs and says why they wait.
+struct IdleDaemon(std::process::Child);
+
+impl Drop for IdleDaemon {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn idle_daemon(dir: &Path) -> (IdleDaemon, PathBuf) {
+    let p = dir.join("station.toml");
+    let socket = dir.join("control.sock");
+    let out = dir.join("out");
+    let mut t =
+        surfscan::cli::demo::demo_config(&dir.join("no-sj210"), &dir.join("no-stage"), &out)
+            .replace(
+                &format!("{:?}", out.join("sim/control.sock").display().to_string()),
+                &format!("{:?}", socket.display().to_string()),
+            );
+    t.push_str(&format!(
+        "\n[jobs]\nrecipes = \"{}\"\n",
+        dir.join("recipes").display()
+    ));
+    std::fs::write(&p, t).unwrap();
+    std::fs::create_dir_all(dir.join("recipes")).unwrap();
+    std::fs::write(dir.join("recipes/brass.toml"), BRASS).unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(["daemon", "--config"])
+        .arg(&p)
+        .env("SURFSCAN_TEST_LOCK_DIR", dir)
+        .env_remove("NOTIFY_SOCKET")
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while !socket.exists() {
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(30),
+            "no socket"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    (IdleDaemon(child), socket)
+}
+
+#[test]
+fn the_queue_commands_add_list_remove_and_refuse_with_their_exit_status() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_d, socket) = idle_daemon(dir.path());
+    let s = socket.to_str().unwrap();
+    let q = |args: &[&str]| {
+        let mut v = args.to_vec();
+        v.extend(["--socket", s]);
+        surfscan(&v)
+    };
+    let out = q(&[
+        "queue",
+        "add",
+        "--recipe",
+        "brass",
+        "--specimen",
+        "C-1",
+        "--y-start-mm",
+        "-10",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout)
+            .contains("queued job 1: recipe brass, specimen \"C-1\" from y = -10 mm (it is next)"),
+        "{}",
+        text(&out.stdout)
+    );
+    let out = q(&[
+        "queue",
+        "add",
+        "--recipe",
+        "brass",
+        "--specimen",
+        "C-2",
+        "--needs-loading",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    // What cannot be queued, with the status a script tells apart.
+    let out = q(&["queue", "add", "--recipe", "bras", "--specimen", "C-3"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("the recipes there are brass"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = q(&[
+        "queue",
+        "add",
+        "--recipe",
+        "brass",
+        "--specimen",
+        "C-3",
+        "--y-start-mm",
+        "50",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("soft limits"),
+        "{}",
+        text(&out.stderr)
+    );
+    std::fs::write(
+        dir.path().join("recipes/bad.toml"),
+        BRASS.replace("\"Ra 0.8\"", "\"Ra0.8x\""),
+    )
+    .unwrap();
+    let out = q(&["queue", "add", "--recipe", "bad", "--specimen", "C-3"]);
+    assert_eq!(out.status.code(), Some(78), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("bad.toml: specification.limits"),
+        "{}",
+        text(&out.stderr)
+    );
+    // The list: job 1 first (its devices are missing: it waits), job 2 needs loading.
+    let out = q(&["queue", "list"]);
+    let t = text(&out.stdout);
+    assert!(t.starts_with("2 jobs, in the order they run:"), "{t}");
+    assert!(
+        t.contains("     1  brass \"C-1\" at y = -10.0000 mm — queued"),
+        "{t}"
+    );
+    assert!(
+        t.contains("     2  brass \"C-2\" — queued (needs loading)"),
+        "{t}"
+    );
+    // The status says why nothing runs.
+    let out = q(&["status", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["state"], "waiting", "{v}");
+    assert!(
+        v["reason"]
+            .as_str()
+            .unwrap()
+            .contains("waits for the instrument and the stage"),
+        "{v}"
+    );
+    assert_eq!(v["queue"]["queued"], 2, "{v}");
+    // `ready` names the job that runs first; removing and clearing.
+    let out = q(&["ready", "2"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("job 1 runs before it"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = q(&["queue", "remove", "1"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let out = q(&["queue", "remove", "1"]);
+    assert_eq!(out.status.code(), Some(2));
+    let out = q(&["ready"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let out = q(&["queue", "list", "--json"]);
+    let v: serde_json::Value = serde_json::from_str(text(&out.stdout).trim()).unwrap();
+    assert_eq!(v["class"], "queue");
+    assert_eq!(v["jobs"][0]["id"], 2);
+    assert_eq!(v["jobs"][0]["loaded"], true, "{v}");
+    assert_eq!(v["jobs"][0]["recipe"]["text"], BRASS);
+    let out = q(&["queue", "clear"]);
+    assert!(
+        text(&out.stdout).contains("1 queued jobs removed"),
+        "{}",
+        text(&out.stdout)
+    );
+    assert!(text(&q(&["queue", "list"]).stdout).starts_with("no job is queued"));
+    // Each command is logged with who sent it.
+    let log = std::fs::read_to_string(dir.path().join("out/queue-log.jsonl")).unwrap();
+    let commands: Vec<String> = log
+        .lines()
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["command"]
+                .as_str()
+                .unwrap()
+                .to_owned()
+        })
+        .collect();
+    assert_eq!(
+        commands,
+        vec!["add", "add", "remove", "ready", "clear"],
+        "{log}"
+    );
+    // `start --recipe` is validated by the daemon the same way.
+    let out = q(&["start", "--recipe", "bad", "--specimen", "X"]);
+    assert_eq!(out.status.code(), Some(78), "{}", text(&out.stderr));
+    let out = q(&["start", "--recipe", "nope", "--specimen", "X"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+}

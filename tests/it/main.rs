@@ -21,6 +21,7 @@ mod iges_roundtrip;
 mod iges_split;
 mod input_policy;
 mod jobs_cli;
+mod jobs_e2e;
 mod metrology_areal;
 mod metrology_areal_reference;
 mod metrology_cli;

@@ -192,6 +192,8 @@ impl Station {
                 operator: String::new(),
                 notes: String::new(),
                 mode: StartMode::Auto,
+                recipe: None,
+                y_start_mm: None,
             })
             .await
             .unwrap();

@@ -319,6 +319,7 @@ fn new_scan() -> ScanRequest {
         operator: "test".into(),
         notes: String::new(),
         peer: None,
+        job: None,
     }
 }
 

@@ -260,3 +260,35 @@ fn the_store_round_trips_and_keeps_a_damaged_file_aside() {
     assert_eq!(kept.len(), 1);
     assert_eq!(std::fs::read(kept[0].path()).unwrap(), b"{\"jobs\": [ torn");
 }
+
+#[test]
+fn a_job_whose_scan_could_not_begin_goes_back_to_its_place() {
+    let mut q = Queue::new();
+    q.add(request("A", true), at(0), None);
+    q.add(request("B", false), at(1), None);
+    q.ready(None).unwrap();
+    q.mark_running(1, at(2));
+    assert_eq!(q.status().running, Some(1));
+    q.requeue(1);
+    // First again, its specimen still loaded: it starts without another `ready`.
+    assert_eq!(q.next(), Next::Start(1));
+    assert_eq!(
+        q.status(),
+        crate::scan::status::QueueStatus {
+            queued: 2,
+            running: None,
+            held: None
+        }
+    );
+    // A job whose scan exists is not put back: it is continued.
+    q.mark_running(1, at(3));
+    q.set_scan(1, "s1");
+    q.requeue(1);
+    assert!(matches!(
+        q.next(),
+        Next::Continue {
+            id: 1,
+            scan_id: Some(_)
+        }
+    ));
+}

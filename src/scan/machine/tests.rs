@@ -1172,6 +1172,7 @@ fn a_start_while_paused_resumes_the_scan_and_a_new_one_is_refused_with_guidance(
             operator: String::new(),
             notes: String::new(),
             mode,
+            recipe: None,
         },
         peer: peer(),
     };
@@ -1396,6 +1397,7 @@ fn commands_answer_while_running_and_start_is_refused() {
             operator: String::new(),
             notes: String::new(),
             mode: StartMode::Auto,
+            recipe: None,
         },
         peer: peer(),
     });
@@ -1452,4 +1454,29 @@ fn a_line_moved_aside_at_resume_is_traced_again_and_the_lines_committed_after_it
     r.feed(Event::Committed);
     let a = r.feed(Event::Pushed);
     assert_eq!(effect(&a), Some(&Action::WriteOutputs));
+}
+
+#[test]
+fn a_new_scan_the_instrument_is_not_set_for_fails_before_its_directory_exists() {
+    let mut r = Rig::fresh();
+    r.start();
+    r.feed(opened(Device::Instrument));
+    let a = r.feed(opened(Device::Stage));
+    assert_eq!(effect(&a), Some(&Action::CreateScan));
+    let why = "the instrument is not set as recipe brass expects: λc: the recipe expects 0.8 mm, the instrument is set to 2.5 mm";
+    let a = r.feed(Event::CreateRefused(why.into()));
+    let Some(End::Fail(reason)) = stop_of(&a) else {
+        panic!("{a:?}")
+    };
+    assert_eq!(reason.to_string(), why);
+    assert!(r.m.ended());
+    // No scan was created: nothing is recorded in a journal, no line is traced.
+    assert!(r.records().is_empty(), "{:?}", r.records());
+    assert!(!r
+        .log
+        .iter()
+        .any(|a| matches!(a, Action::Trace | Action::Commit { .. })));
+    let s = last_status(&a).expect("the end is published");
+    let stop = s.last_stop.as_ref().expect("last stop");
+    assert!(stop.reason.contains("λc"), "{stop:?}");
 }

@@ -1,0 +1,339 @@
+//! The daemon's side of the job queue: when no scan runs, what the queue's next job needs
+//! (its scan to run, or a reason to wait), and, when its scan has ended, the job's ending
+//! recorded.
+//!
+//! A job's scan runs the recipe as frozen in the job, validated with the station's
+//! configuration as it is now: its plan, analysis and the measuring conditions it expects;
+//! its start record names the job. The job is marked running before its scan is created, and
+//! finished once its scan has ended, so a crash anywhere leaves the journals to settle it
+//! ([`crate::jobs::queue`]). A job whose scan could not begin because a device is missing
+//! goes back to its place and is tried again with the reconnection backoff: a condition
+//! that clears by itself never consumes a night's job. A scan that ends by a shutdown
+//! leaves its job running: the scan resumes at the next start.
+//!
+//! Layer 5 (composition): depends on [`crate::jobs`], [`crate::scan`]'s choice and
+//! settings, and [`super::station`].
+
+use super::station::run_settings;
+use crate::jobs::queue::{JobOutcome, Next};
+use crate::jobs::recipe::Recipe;
+use crate::jobs::service::QueueService;
+use crate::scan::choice::{self, Asker, Decision};
+use crate::scan::command::RecipeStart;
+use crate::scan::command::{Peer, StartMode};
+use crate::scan::ending::{End, FailCause, FailReason};
+use crate::scan::journal::{read_journal, ResumeState, JOURNAL_FILE};
+use crate::scan::outcome::{NewJob, Outcome, ScanRequest};
+use crate::scan::settings::RunSettings;
+use crate::scan::testhooks::TestHooks;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// What the daemon does with the queue when no scan runs.
+pub(super) enum Turn {
+    /// Run this scan for job `job`.
+    Run {
+        /// The job.
+        job: u64,
+        /// Its scan: a new one, or the one it had when the daemon stopped.
+        request: ScanRequest,
+        /// The runner's settings of its recipe.
+        settings: Box<RunSettings>,
+    },
+    /// The next job cannot begin yet: why, for the status.
+    Wait(String),
+    /// Nothing to run.
+    Nothing,
+}
+
+/// The queue's keeper and what the daemon remembers between turns.
+pub(super) struct Jobs {
+    /// The queue.
+    pub queue: QueueService,
+    config_hash: String,
+    /// A job whose devices were missing is tried again at this time, with this reason shown
+    /// meanwhile; the delay doubles up to the reconnection backoff's maximum.
+    retry: Option<(Instant, String)>,
+    delay: Duration,
+}
+
+impl Jobs {
+    /// The daemon's queue; `config_hash` is the station file's (frozen into each scan).
+    pub fn new(queue: QueueService, config_hash: String) -> Jobs {
+        Jobs {
+            queue,
+            config_hash,
+            retry: None,
+            delay: Duration::ZERO,
+        }
+    }
+
+    /// The runner's settings for a scan of `config` (a recipe's), sharing `base`'s hooks.
+    fn settings_of(
+        &self,
+        config: &crate::config::Config,
+        base: &RunSettings,
+    ) -> Result<RunSettings, String> {
+        let mut s = run_settings(config, self.config_hash.clone(), TestHooks::default())
+            .map_err(|e| e.message)?;
+        s.hooks = base.hooks.clone();
+        Ok(s)
+    }
+
+    /// What the queue's next job needs now. `devices_present`: both ports are there.
+    pub fn turn(&mut self, base: &RunSettings, devices_present: bool, now: Instant) -> Turn {
+        let out = base.output_dir.clone();
+        let (id, existing) = match self.queue.next() {
+            Next::Idle => return Turn::Nothing,
+            Next::Held(why) => return Turn::Wait(format!("the queue is stopped: {why}")),
+            Next::WaitForLoading(id) => {
+                let job = self.queue.snapshot().get(id).cloned();
+                let what = job.map_or_else(|| format!("job {id}"), |j| j.describe());
+                return Turn::Wait(format!(
+                    "waiting for specimen to be loaded — {what}: load it, then `surfscan ready`"
+                ));
+            }
+            Next::Start(id) => (id, None),
+            Next::Continue { id, scan_id } => (id, Some(scan_id)),
+        };
+        let plan = match self.queue.plan_of(id) {
+            Ok(p) => p,
+            Err(why) if matches!(existing, Some(Some(_))) => {
+                // Its scan exists and follows the plan frozen in its journal: it is
+                // continued with the station's settings.
+                tracing::warn!("job {id}: {why}; its scan is continued as its journal says");
+                let Some(Some(scan)) = existing else {
+                    unreachable!()
+                };
+                return Turn::Run {
+                    job: id,
+                    request: ScanRequest::Resume {
+                        dir: out.join(scan),
+                        peer: None,
+                    },
+                    settings: Box::new(base.clone()),
+                };
+            }
+            Err(why) => {
+                self.end(id, refused(why));
+                return Turn::Nothing;
+            }
+        };
+        let settings = match self.settings_of(&plan.config, base) {
+            Ok(s) => s,
+            Err(why) => {
+                self.end(id, refused(why));
+                return Turn::Nothing;
+            }
+        };
+        if let Some(Some(scan)) = existing {
+            return Turn::Run {
+                job: id,
+                request: ScanRequest::Resume {
+                    dir: out.join(scan),
+                    peer: None,
+                },
+                settings: Box::new(settings),
+            };
+        }
+        if let Some((at, why)) = &self.retry {
+            if now < *at {
+                return Turn::Wait(why.clone());
+            }
+        }
+        if !devices_present {
+            return Turn::Wait(format!(
+                "{} waits for the instrument and the stage to be present",
+                plan.job.describe()
+            ));
+        }
+        let r = &plan.job.request;
+        let choice = match choice::choose(
+            &out,
+            Asker::Operator(StartMode::Auto),
+            Peer::this_process(),
+            (r.specimen.clone(), r.operator.clone(), r.notes.clone()),
+        ) {
+            Ok(c) => c,
+            Err(e) => return Turn::Wait(format!("job {id} cannot begin: {e}")),
+        };
+        match &choice.decision {
+            Decision::New { .. } => {}
+            Decision::Resume(dir) | Decision::Continue(dir) if names_job(dir, id) => {
+                // Its scan was created before the queue recorded it.
+                let _ = self.queue.mark_running(id);
+                return Turn::Run {
+                    job: id,
+                    request: ScanRequest::Resume {
+                        dir: dir.clone(),
+                        peer: None,
+                    },
+                    settings: Box::new(settings),
+                };
+            }
+            Decision::Resume(dir) | Decision::Continue(dir) => {
+                return Turn::Wait(format!(
+                    "job {id} waits: the unfinished scan {} must end first (resume it with `surfscan resume` or `surfscan start`, or abort it)",
+                    dir.display()
+                ))
+            }
+            Decision::AwaitDevices(dir) => {
+                return Turn::Wait(format!(
+                    "job {id} waits: the scan {} is continued first, once its devices answer again",
+                    dir.display()
+                ))
+            }
+            Decision::Nothing | Decision::Refuse(_) => {
+                return Turn::Wait(format!(
+                    "job {id} cannot begin: {}",
+                    choice.describe(settings.plan.lines)
+                ))
+            }
+        }
+        if existing.is_none() {
+            if let Err(e) = self.queue.mark_running(id) {
+                return Turn::Wait(format!("job {id} cannot begin: {e}"));
+            }
+        }
+        let request = match choice.commit() {
+            Ok(Some(ScanRequest::New {
+                specimen,
+                operator,
+                notes,
+                peer,
+                ..
+            })) => ScanRequest::New {
+                specimen,
+                operator,
+                notes,
+                peer,
+                job: Some(Box::new(plan.recipe.new_job(Some(id)))),
+            },
+            Ok(other) => {
+                tracing::error!("job {id}: the scan choice changed under it: {other:?}");
+                return Turn::Nothing;
+            }
+            Err(e) => return Turn::Wait(format!("job {id} cannot begin: {e}")),
+        };
+        tracing::info!("{}: starting its scan", plan.job.describe());
+        Turn::Run {
+            job: id,
+            request,
+            settings: Box::new(settings),
+        }
+    }
+
+    /// Records how job `id`'s scan ended (see the module docs for what ends a job).
+    pub fn settle(&mut self, id: u64, outcome: &Outcome, base: &RunSettings) {
+        let scan_id = outcome
+            .dir
+            .as_ref()
+            .and_then(|d| d.file_name())
+            .map(|n| n.to_string_lossy().into_owned());
+        match (&outcome.end, &scan_id) {
+            // The scan resumes at the next start, or is continued by the daemon once its
+            // devices answer again: the job goes on.
+            (End::Shutdown, _) => {}
+            (End::Fail(r), Some(_)) if r.cause() == FailCause::Budget => {}
+            (End::Fail(FailReason::NotStarted(fault)), None) => {
+                self.delay = if self.delay.is_zero() {
+                    base.backoff.initial
+                } else {
+                    (self.delay * 2).min(base.backoff.max)
+                };
+                let why = format!(
+                    "job {id} waits for its devices: {fault}; tried again in {} s",
+                    self.delay.as_secs()
+                );
+                if let Err(e) = self.queue.requeue(id, &why) {
+                    tracing::error!("{e}");
+                }
+                self.retry = Some((Instant::now() + self.delay, why));
+            }
+            (end, _) => {
+                self.retry = None;
+                self.delay = Duration::ZERO;
+                let created = scan_id.is_some();
+                let verdict = outcome
+                    .outputs
+                    .as_ref()
+                    .and_then(|o| o.results.as_ref())
+                    .and_then(|r| r.verdict);
+                let outcome_word = match end {
+                    End::Fail(FailReason::Refused { .. }) if !created => "refused".to_owned(),
+                    e => e.status().as_str().to_owned(),
+                };
+                self.end(
+                    id,
+                    JobOutcome {
+                        scan_id,
+                        outcome: outcome_word,
+                        verdict,
+                        reason: end.reason(created),
+                    },
+                );
+            }
+        }
+    }
+
+    /// After a scan that was not started as a job (the daemon's resumption at start-up, an
+    /// operator's start): when it was the running job's scan, the job's ending is recorded.
+    pub fn settle_if_a_job(&mut self, outcome: &Outcome, base: &RunSettings) {
+        let Some(id) = self.queue.status().running else {
+            return;
+        };
+        if outcome.dir.as_deref().is_some_and(|d| names_job(d, id)) {
+            self.settle(id, outcome, base);
+        }
+    }
+
+    /// The settings and the new scan's job of `start --recipe`: the recipe's text as the
+    /// control socket read it, validated with the station's configuration.
+    pub fn recipe_settings(
+        &self,
+        r: &RecipeStart,
+        base: &RunSettings,
+    ) -> Result<(RunSettings, NewJob), String> {
+        let station = self.queue.station();
+        let recipe = Recipe::from_text(
+            &r.record.recipe,
+            &station
+                .jobs
+                .recipes
+                .join(format!("{}.toml", r.record.recipe)),
+            &r.record.recipe_text,
+            station,
+        )
+        .map_err(|e| e.to_string())?;
+        let config = recipe
+            .config_for(station, r.y_start.map(|y| y.to_mm()))
+            .map_err(|e| e.to_string())?;
+        Ok((self.settings_of(&config, base)?, recipe.new_job(None)))
+    }
+
+    fn end(&self, id: u64, end: JobOutcome) {
+        if let Err(e) = self.queue.finish(id, end) {
+            tracing::error!("job {id}: its ending could not be recorded in the queue: {e}");
+        }
+    }
+}
+
+fn refused(why: String) -> JobOutcome {
+    JobOutcome {
+        scan_id: None,
+        outcome: "refused".into(),
+        verdict: None,
+        reason: why,
+    }
+}
+
+/// Whether the scan in `dir` was made for job `id`.
+fn names_job(dir: &Path, id: u64) -> bool {
+    let path = dir.join(JOURNAL_FILE);
+    read_journal(&path)
+        .ok()
+        .and_then(|r| ResumeState::from_records(&path, &r.records).ok())
+        .and_then(|s| s.start.job)
+        .and_then(|j| j.id)
+        == Some(id)
+}

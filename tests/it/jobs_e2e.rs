@@ -1,0 +1,417 @@
+//! End to end: the job queue of the real `surfscan daemon` against the simulator — jobs of a
+//! recipe run one after another, each at its own y, a job that needs loading waits for
+//! `surfscan ready`, and the queue survives `kill -9` at random moments: every job runs
+//! once, in order, and a job that needs loading never starts without `ready`, across
+//! restarts.
+//!
+//! Depends on the `surfscan` binary, the `surfscan_sim` library and the control client.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+use surfscan::control::client::ControlClient;
+use surfscan::control::protocol::{Message, Request};
+use surfscan::jobs::queue::{JobState, Queue};
+use surfscan::scan::journal::{read_journal, ResumeState, StopStatus};
+use surfscan::scan::status::{State, Status};
+use surfscan_sim::grbl::{GrblSimConfig, StageShared};
+use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
+
+const SPEED_UP: f64 = 50.0;
+const LINES: u32 = 5;
+const KILL_MIN_MS: u64 = 300;
+const KILL_MAX_MS: u64 = 6_000;
+const DEADLINE: Duration = Duration::from_secs(240);
+
+struct Rig {
+    dir: tempfile::TempDir,
+    _sim: SimHandle,
+    config: PathBuf,
+    socket: PathBuf,
+}
+
+impl Rig {
+    fn out(&self) -> PathBuf {
+        self.dir.path().join("scans")
+    }
+}
+
+const RECIPE: &str = r#"description = "a coupon of the fixture"
+[plan]
+lines = 5
+y-step-mm = 0.01
+[specification]
+limits = ["Ra 50", "Rz max 400"]
+"#;
+
+async fn rig(recipes: &[(&str, &str)]) -> Rig {
+    let dir = tempfile::tempdir().unwrap();
+    let inst = dir.path().join("sj210");
+    let stage = dir.path().join("ystage");
+    let mut profiles = ProfileSet::bundled().unwrap();
+    profiles.y_first_mm = -20.0;
+    let mut sim = Simulator::new(&inst)
+        .instrument(InstrumentConfig {
+            time_scale: 1.0 / SPEED_UP,
+            ..InstrumentConfig::default()
+        })
+        .profiles(profiles)
+        .baud(1_000_000)
+        .grbl_stage(
+            &stage,
+            GrblSimConfig {
+                steps_per_mm: 400.0,
+                max_travel_mm: 100.0,
+                time_scale: SPEED_UP * 10.0,
+                ..GrblSimConfig::default()
+            },
+            StageShared::new(),
+        )
+        .start()
+        .unwrap();
+    match tokio::time::timeout(Duration::from_secs(10), sim.next_event()).await {
+        Ok(Some(SimEvent::Ready(_))) => {}
+        other => panic!("simulator not ready: {other:?}"),
+    }
+    let scans = dir.path().join("scans");
+    let socket = dir.path().join("run").join("control.sock");
+    let recipes_dir = dir.path().join("recipes");
+    std::fs::create_dir_all(&recipes_dir).unwrap();
+    for (name, text) in recipes {
+        std::fs::write(recipes_dir.join(format!("{name}.toml")), text).unwrap();
+    }
+    let text = surfscan::cli::demo::demo_config(&inst, &stage, &scans)
+        .replace(
+            &format!("{:?}", scans.join("sim/control.sock").display().to_string()),
+            &format!("{:?}", socket.display().to_string()),
+        )
+        .replace("lines = 31", &format!("lines = {LINES}"));
+    let text = format!(
+        "{text}\n[fit]\ndegree-v = 3\n[jobs]\nrecipes = {:?}\n[notify]\ncommand = [\"/bin/sh\", \"-c\", \"env | grep ^SURFSCAN_ | sort >> {}; echo >> {}\"]\n",
+        recipes_dir.display().to_string(),
+        dir.path().join("hook.log").display(),
+        dir.path().join("hook.log").display(),
+    );
+    let config = dir.path().join("station.toml");
+    std::fs::write(&config, text).unwrap();
+    Rig {
+        dir,
+        _sim: sim,
+        config,
+        socket,
+    }
+}
+
+/// The daemon process; killed if the test fails before it exits.
+struct Daemon(Child);
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        if let Ok(None) = self.0.try_wait() {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+}
+
+fn spawn_daemon(r: &Rig) -> Daemon {
+    let log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(r.dir.path().join("daemon.log"))
+        .unwrap();
+    Daemon(
+        Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(["daemon", "--config"])
+            .arg(&r.config)
+            .env("SURFSCAN_TEST_LOCK_DIR", r.dir.path())
+            .env_remove("NOTIFY_SOCKET")
+            .env_remove("WATCHDOG_USEC")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .unwrap(),
+    )
+}
+
+/// `kill -9` and wait for it to be gone.
+fn kill_9(mut d: Daemon) {
+    d.0.kill().unwrap();
+    d.0.wait().unwrap();
+}
+
+/// One request, answered; `None` while the daemon is not (yet) listening.
+async fn ask(r: &Rig, req: &Request) -> Option<Message> {
+    let mut c = ControlClient::connect(&r.socket).await.ok()?;
+    c.request(req).await.ok().map(|m| m.message)
+}
+
+async fn status(r: &Rig) -> Option<Status> {
+    match ask(r, &Request::Status).await? {
+        Message::Status(s) => Some(*s),
+        other => panic!("expected status, got {other:?}"),
+    }
+}
+
+async fn queue(r: &Rig) -> Option<Queue> {
+    match ask(r, &Request::QueueList).await? {
+        Message::Queue(q) => Some(*q),
+        other => panic!("expected the queue, got {other:?}"),
+    }
+}
+
+async fn wait_for<T>(r: &Rig, what: &str, mut f: impl FnMut(&Status, &Queue) -> Option<T>) -> T {
+    let start = Instant::now();
+    loop {
+        if let (Some(s), Some(q)) = (status(r).await, queue(r).await) {
+            if let Some(v) = f(&s, &q) {
+                return v;
+            }
+            assert!(
+                start.elapsed() < DEADLINE,
+                "{what}: last status {s:?}, queue {q:?}\n{}",
+                daemon_log(r)
+            );
+        } else {
+            assert!(
+                start.elapsed() < DEADLINE,
+                "{what}: the daemon never answered\n{}",
+                daemon_log(r)
+            );
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+fn daemon_log(r: &Rig) -> String {
+    let text = std::fs::read_to_string(r.dir.path().join("daemon.log")).unwrap_or_default();
+    let tail: Vec<&str> = text.lines().rev().take(40).collect();
+    tail.into_iter().rev().collect::<Vec<_>>().join("\n")
+}
+
+fn add(recipe: &str, specimen: &str, y: f64, needs_loading: bool) -> Request {
+    Request::QueueAdd {
+        recipe: recipe.into(),
+        specimen: specimen.into(),
+        operator: "night shift".into(),
+        notes: String::new(),
+        y_start_mm: Some(y),
+        needs_loading,
+    }
+}
+
+/// Every scan directory's start record and ending, by start order.
+fn scans(out: &Path) -> Vec<(String, ResumeState)> {
+    let mut v: Vec<(String, ResumeState)> = std::fs::read_dir(out)
+        .unwrap()
+        .filter_map(|e| {
+            let dir = e.unwrap().path();
+            let j = dir.join("journal.jsonl");
+            let rec = read_journal(&j).ok()?;
+            let st = ResumeState::from_records(&j, &rec.records).ok()?;
+            Some((dir.file_name().unwrap().to_string_lossy().into_owned(), st))
+        })
+        .collect();
+    v.sort_by_key(|(_, s)| s.start.sequence);
+    v
+}
+
+/// A small deterministic generator for the kill moments (the seed is printed, so a failure
+/// can be replayed with `SURFSCAN_TEST_SEED`).
+struct Moments(u64);
+
+impl Moments {
+    fn next_ms(&mut self, lo: u64, hi: u64) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        lo + self.0 % (hi - lo)
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_queue_runs_every_job_once_in_order_through_kill_9_at_random_moments() {
+    let seed: u64 = std::env::var("SURFSCAN_TEST_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .as_nanos() as u64
+                | 1
+        });
+    eprintln!("kill moments: SURFSCAN_TEST_SEED={seed}");
+    let mut moments = Moments(seed);
+    let r = rig(&[("coupon", RECIPE)]).await;
+    let mut d = spawn_daemon(&r);
+    // A fixture of four coupons along y; the third is loaded by hand.
+    let ys = [-20.0, -18.0, -16.0, -14.0];
+    for (k, y) in ys.iter().enumerate() {
+        let req = add("coupon", &format!("C-{}", k + 1), *y, k == 2);
+        let reply = loop {
+            if let Some(m) = ask(&r, &req).await {
+                break m;
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        };
+        assert!(matches!(reply, Message::Ack { .. }), "{reply:?}");
+    }
+    // Kill at random moments until the third job waits for its specimen.
+    let mut kills = 0;
+    loop {
+        let waiting = status(&r).await.is_some_and(|s| s.state == State::Waiting);
+        if waiting {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(
+            moments.next_ms(KILL_MIN_MS, KILL_MAX_MS),
+        ))
+        .await;
+        if status(&r).await.is_some_and(|s| s.state == State::Waiting) {
+            break;
+        }
+        kill_9(d);
+        kills += 1;
+        d = spawn_daemon(&r);
+        assert!(
+            kills < 60,
+            "too many restarts without progress\n{}",
+            daemon_log(&r)
+        );
+    }
+    let s = wait_for(&r, "job 3 waiting", |s, q| {
+        (s.state == State::Waiting && q.pending().next().map(|j| j.id) == Some(3))
+            .then(|| s.clone())
+    })
+    .await;
+    assert!(
+        s.reason
+            .as_deref()
+            .unwrap_or("")
+            .contains("specimen \"C-3\""),
+        "{s:?}"
+    );
+    // Across a restart it still waits: nothing starts without `ready`.
+    kill_9(d);
+    d = spawn_daemon(&r);
+    let s = wait_for(&r, "waiting again after the restart", |s, _| {
+        (s.state == State::Waiting).then(|| s.clone())
+    })
+    .await;
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    assert_eq!(status(&r).await.unwrap().state, State::Waiting, "{s:?}");
+    assert_eq!(
+        scans(&r.out()).len(),
+        2,
+        "only the first two jobs have scans before `ready`"
+    );
+    let ready_at = chrono::Utc::now();
+    let reply = ask(&r, &Request::Ready { job: None }).await.unwrap();
+    assert!(matches!(reply, Message::Ack { .. }), "{reply:?}");
+    // More kills at random moments until every job has finished.
+    loop {
+        let done = queue(&r)
+            .await
+            .is_some_and(|q| q.pending().next().is_none());
+        if done {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(
+            moments.next_ms(KILL_MIN_MS, KILL_MAX_MS),
+        ))
+        .await;
+        if queue(&r)
+            .await
+            .is_some_and(|q| q.pending().next().is_none())
+        {
+            break;
+        }
+        kill_9(d);
+        kills += 1;
+        d = spawn_daemon(&r);
+        assert!(
+            kills < 120,
+            "too many restarts without progress\n{}",
+            daemon_log(&r)
+        );
+    }
+    eprintln!("{kills} kill -9");
+    let q = queue(&r).await.unwrap();
+    // Every job finished once, successfully, in the order it was added.
+    let finished: Vec<(u64, String, Option<String>)> = q
+        .jobs
+        .iter()
+        .map(|j| match &j.state {
+            JobState::Finished {
+                outcome, scan_id, ..
+            } => (j.id, outcome.clone(), scan_id.clone()),
+            other => panic!("job {} not finished: {other:?}", j.id),
+        })
+        .collect();
+    assert_eq!(
+        finished
+            .iter()
+            .map(|f| (f.0, f.1.as_str()))
+            .collect::<Vec<_>>(),
+        vec![
+            (1, "success"),
+            (2, "success"),
+            (3, "success"),
+            (4, "success")
+        ],
+        "{q:?}"
+    );
+    // One scan per job, each complete, naming its job, at its own y, in job order.
+    let all = scans(&r.out());
+    for (dir, st) in &all {
+        let took = st
+            .stop
+            .as_ref()
+            .map(|s| (s.time - st.start.time).num_milliseconds());
+        eprintln!("{dir}: {took:?} ms from its start record to its stop record");
+    }
+    assert_eq!(
+        all.len(),
+        4,
+        "{:?}",
+        all.iter().map(|a| &a.0).collect::<Vec<_>>()
+    );
+    for (k, (dir, st)) in all.iter().enumerate() {
+        let job = st
+            .start
+            .job
+            .as_ref()
+            .expect("the start record names the job");
+        assert_eq!(job.id, Some(k as u64 + 1), "{dir}");
+        assert_eq!(job.recipe, "coupon");
+        assert_eq!(job.recipe_text, RECIPE);
+        assert_eq!(st.start.plan.lines, LINES);
+        assert_eq!(st.start.plan.y_start_nm.0, (ys[k] * 1e6) as i64, "{dir}");
+        assert_eq!(st.completed().len() as u32, LINES, "{dir}");
+        assert_eq!(
+            st.stop.as_ref().map(|s| s.status),
+            Some(StopStatus::Success),
+            "{dir}"
+        );
+        assert_eq!(Some(dir), finished[k].2.as_ref());
+    }
+    // The job that needed loading began only after `ready`.
+    assert!(
+        all[2].1.start.time > ready_at,
+        "{:?} vs {ready_at}",
+        all[2].1.start.time
+    );
+    // Every queue command is in the log with who sent it.
+    let log = std::fs::read_to_string(r.out().join("queue-log.jsonl")).unwrap();
+    let adds: Vec<serde_json::Value> = log
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|e| e["command"] == "add" || e["command"] == "ready")
+        .collect();
+    assert_eq!(adds.len(), 5, "{log}");
+    let me = nix::unistd::geteuid().as_raw();
+    assert!(adds.iter().all(|e| e["peer"]["uid"] == me), "{log}");
+    drop(d);
+}
