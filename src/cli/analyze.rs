@@ -349,6 +349,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 .v_method(lines, args.degree_v.unwrap_or(paper_q))?,
             replace_spikes: args.model.replace(),
             lab,
+            ..ScanAnalysisOptions::default()
         };
         let outputs = characterise_scan(&input, &options).map_err(report_error)?;
         return finish(&outputs);

@@ -1,8 +1,8 @@
 //! What the characterisation is given besides the grid: how to evaluate the lines, the
 //! model to describe, and what is known about the scan.
 //!
-//! Layer 4 (reporting): depends on [`crate::fit`], [`crate::metrology::params`] and the
-//! scan's frozen plan and fit summary ([`crate::scan`]).
+//! Layer 4 (reporting): depends on [`crate::fit`], [`crate::metrology::params`], the
+//! scan's frozen plan and fit summary ([`crate::scan`]) and [`crate::specification`].
 
 use super::document::{ScanStatus, Traceability};
 use crate::fit::{FitResult, MethodError, VMethod};
@@ -12,6 +12,7 @@ use crate::metrology::params::Options;
 use crate::metrology::surface_model::ModelRecipe;
 use crate::scan::outputs::FitSummary;
 use crate::scan::plan::AnalysisPlan;
+use crate::specification::{InstrumentUncertainty, Specification};
 use std::path::PathBuf;
 
 /// How a scan or grid is characterised. [`Default`]: 31 model curves, 101 levels, λc and
@@ -53,6 +54,12 @@ pub struct ScanAnalysisOptions {
     /// The laboratory's header overriding the one a scan's journal recorded (default `None`:
     /// the recorded one, for a grid none).
     pub lab: Option<super::header::LabHeader>,
+    /// The specification the lines are judged against (default `None`: a scan's own, the
+    /// limits of the recipe its job froze into its journal; none for a grid).
+    pub specification: Option<Specification>,
+    /// The instrument's stated uncertainty (default `None`: a scan's own, the
+    /// `[traceability] calibration-uncertainty-pct` its journal recorded; none for a grid).
+    pub instrument: Option<InstrumentUncertainty>,
 }
 
 impl ScanAnalysisOptions {
@@ -89,6 +96,8 @@ impl Default for ScanAnalysisOptions {
             v_method: None,
             replace_spikes: None,
             lab: None,
+            specification: None,
+            instrument: None,
         }
     }
 }

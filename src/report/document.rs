@@ -32,6 +32,12 @@ pub struct Report {
     pub input: String,
     /// `grid` or `scan`.
     pub kind: &'static str,
+    /// The verdict of the lines against the part's specification (a scan of a recipe with
+    /// limits): first, as it is what the report is read for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub specification: Option<crate::specification::SpecificationVerdict>,
+    /// Every line parameter's mean with its uncertainty.
+    pub uncertainty: super::sections::specification::UncertaintyReport,
     /// How the lines were evaluated.
     pub recipe: ReportRecipe,
     /// Per-line ISO parameters.
@@ -116,6 +122,7 @@ pub fn assemble(
     let Sections {
         spikes,
         lines,
+        specification,
         surface_grid,
         anisotropy,
         surface,
@@ -143,6 +150,8 @@ pub fn assemble(
         software: crate::build_info::software(),
         input: ctx.input.clone(),
         kind: ctx.kind,
+        specification: specification.verdict,
+        uncertainty: specification.uncertainty,
         recipe,
         lines: line_reports,
         surface: surface_report,

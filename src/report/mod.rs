@@ -8,8 +8,9 @@
 //!
 //! 1. [`sections`]: each section a pure function of the [`Grid`] (and the fitted surface)
 //!    returning a typed result — the spikes, the per-line parameters, the measured grid's areal
-//!    parameters and anisotropy, the model, the hold-out and the verdict between lines, the
-//!    line drawn against the model;
+//!    parameters and anisotropy, the means' uncertainty and the verdict against the part's
+//!    specification, the model, the hold-out and the verdict between lines, the line drawn
+//!    against the model;
 //! 2. [`document`]: the typed report (`report.json`'s shape) assembled from the results, with
 //!    `recipe`, for scans `traceability` and `scan`, `fit`, `characterisation`, `warnings`
 //!    and `timings_s`;
@@ -20,7 +21,8 @@
 //!
 //! Layer 4 (reporting at the process edge): depends on [`crate::grid`], [`crate::input`],
 //! [`crate::scan`] (its records, lines and the characterisation contract of its runner),
-//! [`crate::metrology`], [`crate::fit`], [`crate::x3p`] and [`crate::atomic`].
+//! [`crate::metrology`], [`crate::specification`], [`crate::fit`], [`crate::x3p`] and
+//! [`crate::atomic`].
 
 pub mod context;
 pub mod document;

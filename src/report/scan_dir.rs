@@ -28,6 +28,7 @@ use crate::scan::journal::{StartRecord, StopRecord, StopStatus};
 use crate::scan::line::StoredLine;
 use crate::scan::outputs::{Characterise, Characterised, CompletedScan, FitSummary, GridShape};
 use crate::scan::results::ScanResults;
+use crate::specification::{InstrumentUncertainty, Specification};
 use std::path::Path;
 use std::time::Instant;
 
@@ -230,6 +231,12 @@ pub fn characterise_scan_lines(
         None if f.completing => last_line,
         None => None,
     });
+    let mut options = options.clone();
+    if let Some(f) = facts {
+        let (specification, instrument) = judged_by(f.start, &mut warnings);
+        options.specification = options.specification.or(specification);
+        options.instrument = options.instrument.or(Some(instrument));
+    }
     let ctx = ReportContext {
         input: dir.display().to_string(),
         kind: "scan",
@@ -251,6 +258,37 @@ pub fn characterise_scan_lines(
     let mut outputs = characterise(grid, model, ctx, &out)?;
     outputs.incomplete_lines = incomplete.to_vec();
     Ok(outputs)
+}
+
+/// What a scan is judged by, from its start record: the limits of the recipe its job froze
+/// (none without a job or limits) and the calibration uncertainty its configuration stated.
+/// A frozen recipe that cannot be read again (a journal edited by hand) is named in the
+/// warnings and the scan is not judged.
+fn judged_by(
+    start: &crate::scan::journal::StartRecord,
+    warnings: &mut Vec<String>,
+) -> (Option<Specification>, InstrumentUncertainty) {
+    let instrument = InstrumentUncertainty {
+        expanded_relative_pct: start
+            .config
+            .get("traceability")
+            .and_then(|t| t.get("calibration-uncertainty-pct"))
+            .and_then(serde_json::Value::as_f64),
+    };
+    let specification = start.job.as_ref().and_then(|j| {
+        match Specification::of_recipe_text(&j.recipe_text) {
+            Ok(s) if s.is_empty() => None,
+            Ok(s) => Some(s),
+            Err(e) => {
+                warnings.push(format!(
+                    "the specification of recipe {:?} frozen in the journal cannot be read ({e}): the scan is not judged; analyze it with the limits again",
+                    j.recipe
+                ));
+                None
+            }
+        }
+    });
+    (specification, instrument)
 }
 
 /// Fits `grid` as `recipe` says and summarises the fit (no IGES written).
@@ -352,8 +390,8 @@ pub fn results_of(report: &Report) -> ScanResults {
         (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
     };
     ScanResults {
-        verdict: None,
-        verdict_summary: None,
+        verdict: report.specification.as_ref().map(|s| s.verdict),
+        verdict_summary: report.specification.as_ref().map(|s| s.summary.clone()),
         ra_mean_um: mean(|p| p.ra_um),
         rz_mean_um: mean(|p| p.rz_um),
         sa_um: report.surface_grid.as_ref().map(|g| g.params.sa_um),

@@ -13,8 +13,8 @@
 //! (its verdict is *not decidable*, the difference named): a verdict is never stronger than
 //! its values and their uncertainty allow.
 //!
-//! Layer 1 (pure): depends on [`crate::metrology::params`] (the per-line values) and
-//! [`crate::numfmt`]; no I/O.
+//! Layer 1 (pure): depends on [`crate::metrology::params`] (the per-line values),
+//! [`crate::numfmt`] and `toml` (a recipe's text); no I/O.
 
 pub mod callout;
 pub mod rule;
@@ -96,6 +96,23 @@ impl Specification {
             out.push(c);
         }
         Ok(Specification { limits: out })
+    }
+
+    /// The limits a recipe's text holds under `[specification] limits` (a job's frozen copy,
+    /// read back from a scan's journal): the same parse, the text already validated when the
+    /// job was made. An error names the key and what is wrong.
+    pub fn of_recipe_text(text: &str) -> Result<Specification, String> {
+        let table: toml::Table = text
+            .parse()
+            .map_err(|e: toml::de::Error| e.message().to_owned())?;
+        let Some(limits) = table.get("specification").and_then(|s| s.get("limits")) else {
+            return Ok(Specification::default());
+        };
+        let limits: Vec<&str> = limits
+            .as_array()
+            .and_then(|a| a.iter().map(toml::Value::as_str).collect())
+            .ok_or("specification.limits: not a list of callouts (\"Ra 0.8\")")?;
+        Specification::parse(&limits).map_err(|e| format!("specification.{e}"))
     }
 
     /// Whether there is nothing to judge.

@@ -219,3 +219,23 @@ fn limits_that_contradict_each_other_are_refused() {
     assert_eq!(e.index, 1);
     assert!(e.to_string().starts_with("limits[1]: \"Ra0.8x\""), "{e}");
 }
+
+#[test]
+fn a_frozen_recipe_text_gives_its_limits_or_names_what_is_wrong() {
+    let text = "description = \"x\"\n[plan]\nlines = 5\ny-step-mm = 0.01\n[specification]\nlimits = [\"Ra 0.8\", \"Rz max 6.3\"]\n";
+    let s = Specification::of_recipe_text(text).unwrap();
+    assert_eq!(
+        s.limits.iter().map(|c| c.text.as_str()).collect::<Vec<_>>(),
+        ["Ra 0.8", "Rz max 6.3"]
+    );
+    assert_eq!(s.limits[1].rule, Rule::Max);
+    // No [specification]: nothing to judge, not an error.
+    assert!(Specification::of_recipe_text("[plan]\nlines = 5\n")
+        .unwrap()
+        .is_empty());
+    let e = Specification::of_recipe_text("[specification]\nlimits = [\"Ra0.8x\"]\n").unwrap_err();
+    assert!(e.starts_with("specification.limits[0]:"), "{e}");
+    let e = Specification::of_recipe_text("[specification]\nlimits = \"Ra 0.8\"\n").unwrap_err();
+    assert!(e.contains("not a list of callouts"), "{e}");
+    assert!(Specification::of_recipe_text("[plan\n").is_err());
+}

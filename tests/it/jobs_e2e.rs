@@ -14,6 +14,7 @@ use surfscan::control::protocol::{Message, Request};
 use surfscan::jobs::queue::{JobState, Queue};
 use surfscan::scan::journal::{read_journal, ResumeState, StopStatus};
 use surfscan::scan::status::{State, Status};
+use surfscan::specification::Verdict;
 use surfscan_sim::grbl::{GrblSimConfig, StageShared};
 use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
 
@@ -36,12 +37,25 @@ impl Rig {
     }
 }
 
+// The simulated traces are one sampling length long: the callouts say so (`Ra1`), as a
+// drawing for such a short surface would; with the default five, the verdict would be not
+// decidable (a test of the section itself).
 const RECIPE: &str = r#"description = "a coupon of the fixture"
 [plan]
 lines = 5
 y-step-mm = 0.01
 [specification]
-limits = ["Ra 50", "Rz max 400"]
+limits = ["Ra1 50", "Rz1 max 400"]
+"#;
+
+/// The fourth coupon is held to a limit no turned surface meets: its scan succeeds and does
+/// not conform, and the queue goes on regardless.
+const TIGHT: &str = r#"description = "a coupon held to a mirror finish"
+[plan]
+lines = 5
+y-step-mm = 0.01
+[specification]
+limits = ["Ra1 max 0.001"]
 "#;
 
 async fn rig(recipes: &[(&str, &str)]) -> Rig {
@@ -244,12 +258,13 @@ async fn the_queue_runs_every_job_once_in_order_through_kill_9_at_random_moments
         });
     eprintln!("kill moments: SURFSCAN_TEST_SEED={seed}");
     let mut moments = Moments(seed);
-    let r = rig(&[("coupon", RECIPE)]).await;
+    let r = rig(&[("coupon", RECIPE), ("tight", TIGHT)]).await;
     let mut d = spawn_daemon(&r);
     // A fixture of four coupons along y; the third is loaded by hand.
     let ys = [-20.0, -18.0, -16.0, -14.0];
     for (k, y) in ys.iter().enumerate() {
-        let req = add("coupon", &format!("C-{}", k + 1), *y, k == 2);
+        let recipe = if k == 3 { "tight" } else { "coupon" };
+        let req = add(recipe, &format!("C-{}", k + 1), *y, k == 2);
         let reply = loop {
             if let Some(m) = ask(&r, &req).await {
                 break m;
@@ -385,8 +400,13 @@ async fn the_queue_runs_every_job_once_in_order_through_kill_9_at_random_moments
             .as_ref()
             .expect("the start record names the job");
         assert_eq!(job.id, Some(k as u64 + 1), "{dir}");
-        assert_eq!(job.recipe, "coupon");
-        assert_eq!(job.recipe_text, RECIPE);
+        let (name, text) = if k == 3 {
+            ("tight", TIGHT)
+        } else {
+            ("coupon", RECIPE)
+        };
+        assert_eq!(job.recipe, name);
+        assert_eq!(job.recipe_text, text);
         assert_eq!(st.start.plan.lines, LINES);
         assert_eq!(st.start.plan.y_start_nm.0, (ys[k] * 1e6) as i64, "{dir}");
         assert_eq!(st.completed().len() as u32, LINES, "{dir}");
@@ -397,6 +417,79 @@ async fn the_queue_runs_every_job_once_in_order_through_kill_9_at_random_moments
         );
         assert_eq!(Some(dir), finished[k].2.as_ref());
     }
+    // Each scan's verdict against its recipe's specification, recorded with its job: the
+    // fixture's coupons conform, the one held to a mirror finish does not, and its job still
+    // ended in success without stopping the queue.
+    let verdicts: Vec<Option<Verdict>> = q
+        .jobs
+        .iter()
+        .map(|j| match &j.state {
+            JobState::Finished { verdict, .. } => *verdict,
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        verdicts,
+        vec![
+            Some(Verdict::Conforms),
+            Some(Verdict::Conforms),
+            Some(Verdict::Conforms),
+            Some(Verdict::DoesNotConform)
+        ],
+        "{:?}",
+        status(&r).await.and_then(|s| s.last_stop)
+    );
+    // The status says the last scan's verdict with its reason.
+    let last = status(&r).await.unwrap().last_stop.expect("a last scan");
+    assert_eq!(last.scan_id, all[3].0);
+    let line = last.verdict.clone().unwrap_or_default();
+    assert!(
+        line.starts_with("success, ")
+            && line.contains(": does not conform (Ra1 max rule: 5 of 5 lines above 0.001 µm"),
+        "{last:?}"
+    );
+    assert_eq!(
+        last.results.as_ref().and_then(|r| r.verdict),
+        Some(Verdict::DoesNotConform),
+        "{last:?}"
+    );
+    // The hook saw it (the hook runs after the job is recorded: wait for it).
+    let hook_log = r.dir.path().join("hook.log");
+    let until = Instant::now() + Duration::from_secs(30);
+    let hooks = loop {
+        let t = std::fs::read_to_string(&hook_log).unwrap_or_default();
+        if t.contains(&format!("SURFSCAN_SCAN_ID={}", all[3].0)) || Instant::now() > until {
+            break t;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    let last_hook = hooks
+        .split("\n\n")
+        .find(|b| b.contains(&format!("SURFSCAN_SCAN_ID={}", all[3].0)))
+        .unwrap_or_else(|| panic!("no hook for {}:\n{hooks}", all[3].0));
+    assert!(
+        last_hook.contains("SURFSCAN_VERDICT=does not conform\n"),
+        "{last_hook}"
+    );
+    assert!(
+        last_hook.contains("SURFSCAN_STATUS=success\n"),
+        "{last_hook}"
+    );
+    // `surfscan list` reads them back from the index, filtered by verdict.
+    let listed = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(["list", "--json", "--verdict", "conforms", "--config"])
+        .arg(&r.config)
+        .output()
+        .unwrap();
+    assert_eq!(listed.status.code(), Some(0), "{listed:?}");
+    let rows: serde_json::Value = serde_json::from_slice(&listed.stdout).unwrap();
+    let ids: Vec<&str> = rows
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["scan_id"].as_str().unwrap())
+        .collect();
+    assert_eq!(ids, [&all[0].0, &all[1].0, &all[2].0], "{rows}");
     // The job that needed loading began only after `ready`.
     assert!(
         all[2].1.start.time > ready_at,

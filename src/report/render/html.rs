@@ -89,6 +89,7 @@ th,td{border:1px solid #ccc;padding:.2em .5em;text-align:right;vertical-align:to
 th{background:#f2f2f2}td.t,th.t{text-align:left}
 .warn{background:#fff4e5;border-left:4px solid #d55e00;padding:.5em 1em}
 .ok{background:#eef7f1;border-left:4px solid #009e73;padding:.5em 1em}
+.bad{background:#fdecea;border-left:4px solid #b2182b;padding:.5em 1em}
 .flag{color:#b00;font-weight:bold}.muted{color:#666}
 figure{margin:1em 0}figcaption{font-weight:bold;margin-bottom:.3em}
 img{max-width:100%;height:auto;border:1px solid #ddd}
@@ -254,6 +255,9 @@ pub fn verdict(report: &Value) -> Option<String> {
 /// Ra range with mean and s.d., Sa of the model and of the measured grid, the verdict.
 pub fn result_summary(report: &Value) -> Vec<(&'static str, String)> {
     let mut out = Vec::new();
+    if let Some(v) = report["specification"]["summary"].as_str() {
+        out.push(("verdict", v.to_owned()));
+    }
     let ra: Vec<f64> = report["lines"]
         .as_array()
         .map(|l| l.iter().filter_map(|l| l["Ra_um"].as_f64()).collect())
@@ -281,6 +285,13 @@ pub fn result_summary(report: &Value) -> Vec<(&'static str, String)> {
                 fmt(sd, h)
             ),
         ));
+    }
+    let table_1: Vec<&str> = report["uncertainty"]["table_1"]
+        .as_array()
+        .map(|a| a.iter().filter_map(Value::as_str).collect())
+        .unwrap_or_default();
+    if !table_1.is_empty() {
+        out.push(("mean ± s", table_1.join(", ")));
     }
     let sa: Vec<String> = [("model", "surface"), ("measured grid", "surface_grid")]
         .iter()
@@ -334,12 +345,14 @@ pub fn render(
         esc(&status),
         esc(&text(&report["software"]))
     );
+    specification(&mut h, report);
     h.push_str("<h2 id=\"result\">Result</h2>\n<table id=\"t-result\">\n");
     for (k, v) in result_summary(report) {
         kv(&mut h, k, &esc(&v));
     }
     h.push_str("</table>\n");
     warnings(&mut h, report);
+    uncertainty(&mut h, report);
     traceability(&mut h, report);
     if let Some(j) = journal {
         events(&mut h, j);
@@ -353,6 +366,100 @@ pub fn render(
     h.push_str(&print::signatures(report));
     h.push_str("</body>\n</html>\n");
     h
+}
+
+/// The verdict against the specification, first: what the report is read for.
+fn specification(h: &mut String, report: &Value) {
+    let spec = &report["specification"];
+    let Some(summary) = spec["summary"].as_str() else {
+        return;
+    };
+    let class = match spec["verdict"].as_str() {
+        Some("conforms") => "ok",
+        Some("does not conform") => "bad",
+        _ => "warn",
+    };
+    let _ = writeln!(
+        h,
+        "<h2 id=\"verdict\">Verdict</h2>\n<p id=\"p-verdict\" class=\"{class}\"><strong>{}</strong></p>\n<table id=\"t-verdict\">\n<tr><th class=\"t\">limit</th><th class=\"t\">verdict</th><th>values</th><th>beyond</th><th>undecided</th><th>allowed</th><th>min µm</th><th>max µm</th><th>U of a line %</th><th class=\"t\">why</th></tr>",
+        esc(summary)
+    );
+    for l in spec["limits"].as_array().map_or(&[][..], |a| &a[..]) {
+        let count = |k: &str| l[k].as_u64().map(|n| n.to_string()).unwrap_or_default();
+        let mut why = text(&l["reason"]);
+        for d in l["conditions_differ"]
+            .as_array()
+            .map_or(&[][..], |a| &a[..])
+        {
+            why.push_str("; ");
+            why.push_str(&text(d));
+        }
+        row(
+            h,
+            &[
+                ("t", esc(&text(&l["callout"]))),
+                ("t", esc(&text(&l["verdict"]))),
+                ("", count("n_values")),
+                ("", count("n_beyond")),
+                ("", count("n_undecided")),
+                ("", count("n_allowed")),
+                ("", num(&l["min_um"], Quantity::HeightUm)),
+                ("", num(&l["max_um"], Quantity::HeightUm)),
+                ("", num(&l["line_u_pct"], Quantity::Percent)),
+                ("t", esc(&why)),
+            ],
+        );
+    }
+    let _ = writeln!(
+        h,
+        "</table>\n<p class=\"muted\">{} {}</p>",
+        esc(&text(&spec["decision_rule"])),
+        esc(&text(&spec["instrument_uncertainty"]))
+    );
+}
+
+/// Every line parameter's mean with its uncertainty.
+fn uncertainty(h: &mut String, report: &Value) {
+    let u = &report["uncertainty"];
+    let params = u["parameters"].as_array().map_or(&[][..], |a| &a[..]);
+    if params.is_empty() {
+        return;
+    }
+    h.push_str("<h2 id=\"uncertainty\">Means and their uncertainty</h2>\n<table id=\"t-uncertainty\">\n<tr><th class=\"t\">parameter</th><th>n</th><th>mean</th><th>s</th><th>u of the mean</th><th>u instrument</th><th>u<sub>c</sub></th><th>U (k = 2)</th></tr>\n");
+    for p in params {
+        let name = text(&p["parameter"]);
+        let (label, unit, q) = [
+            ("_um", "µm", Quantity::HeightUm),
+            ("_pct", "%", Quantity::Percent),
+            ("_per_cm", "1/cm", Quantity::PerLength),
+            ("_per_inch", "1/inch", Quantity::PerLength),
+        ]
+        .iter()
+        .find_map(|(suffix, unit, q)| Some((name.strip_suffix(suffix)?, *unit, *q)))
+        .unwrap_or((name.as_str(), "", Quantity::Ratio));
+        let label = format!("{label} {unit}").trim_end().to_owned();
+        row(
+            h,
+            &[
+                ("t", esc(&label)),
+                (
+                    "",
+                    p["n"].as_u64().map(|n| n.to_string()).unwrap_or_default(),
+                ),
+                ("", num(&p["mean"], q)),
+                ("", num(&p["s"], q)),
+                ("", num(&p["u_mean"], q)),
+                ("", num(&p["u_instrument"], q)),
+                ("", num(&p["u_c"], q)),
+                ("", num(&p["U"], q)),
+            ],
+        );
+    }
+    let _ = writeln!(
+        h,
+        "</table>\n<p class=\"muted\">s over the lines, u of the mean s/√n, the instrument's u from its calibration, u<sub>c</sub> combined (GUM), U = 2·u<sub>c</sub>. {}</p>",
+        esc(&text(&u["instrument"]))
+    );
 }
 
 fn warnings(h: &mut String, report: &Value) {

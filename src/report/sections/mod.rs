@@ -12,6 +12,7 @@
 //! | the model (`surface`, `model_checks`) | [`surface`] | the model, the grid |
 //! | hold-out and the verdict between lines (`model_vs_measured`, `between_lines`) | [`model_vs_measured`] | the grid as characterised, Sq of `surface_grid` |
 //! | the line drawn against the model | [`overlay`] | the grid as characterised, `between_lines` |
+//! | the means' uncertainty and the verdict against the specification (`uncertainty`, `specification`) | [`specification`] | `lines`, the context's specification |
 //!
 //! [`run`] composes them — the model section beside the others, as it needs only the grid
 //! and the model — and collects the warnings and what could not be made. A section that fails
@@ -23,12 +24,13 @@
 //! Result<T, String>` (its earlier results as further arguments), a field in [`Sections`], its
 //! line in [`run`], and its rows in the renderers (docs/architecture.md says where).
 //!
-//! Layer 4 (reporting): depends on [`crate::grid`], [`crate::metrology`] and the report's
-//! types.
+//! Layer 4 (reporting): depends on [`crate::grid`], [`crate::metrology`],
+//! [`crate::specification`] and the report's types.
 
 pub mod lines;
 pub mod model_vs_measured;
 pub mod overlay;
+pub mod specification;
 pub mod spikes;
 pub mod surface;
 pub mod surface_grid;
@@ -65,6 +67,8 @@ pub struct Sections {
     pub spikes: OutliersReport,
     /// The per-line parameters (the section every report has).
     pub lines: lines::LinesSection,
+    /// The means with their uncertainty, and the verdict against the specification.
+    pub specification: specification::SpecificationSection,
     /// The measured grid's areal parameters and pooled bearing curve.
     pub surface_grid: Result<SurfaceReport, String>,
     /// The measured grid's anisotropy.
@@ -131,6 +135,7 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
             ..input
         };
         let lines = lines::section(&input)?;
+        let specification = specification::section(&input, &lines);
         timings.lines = t.elapsed().as_secs_f64();
 
         let t = Instant::now();
@@ -230,6 +235,7 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
         Ok(Sections {
             spikes,
             lines,
+            specification,
             surface_grid,
             anisotropy,
             surface,

@@ -1,0 +1,181 @@
+//! Section `uncertainty` and `specification`: every per-line parameter's mean with its uncertainty (n, s,
+//! the uncertainty of the mean, combined with the instrument's stated calibration
+//! uncertainty, U at k = 2; the paper's Table 1 `mean ± s` for Ra, Rq, Rz) and, when the
+//! scan is held to a specification, the verdict of its lines against each limit.
+//!
+//! The figures and the verdict are [`crate::specification`]'s pure functions; this section
+//! only hands them the lines as the [`lines`](super::lines) section evaluated them, the band
+//! they were evaluated in, and the specification and instrument uncertainty of the context.
+//!
+//! Layer 4 (reporting): depends on [`crate::specification`], [`crate::metrology::params`]
+//! and the report's line entries.
+
+use super::lines::LinesSection;
+use super::SectionInput;
+use crate::metrology::params::Recipe;
+use crate::report::document::LineReport;
+use crate::specification::uncertainty::{all_statistics, mean_pm_s, Statistics};
+use crate::specification::{
+    judge, EvaluatedBand, InstrumentUncertainty, LineValues, Specification, SpecificationVerdict,
+};
+use serde::Serialize;
+
+/// The means of the per-line parameters with their uncertainty.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct UncertaintyReport {
+    /// What the figures assume of the instrument's uncertainty.
+    pub instrument: String,
+    /// The paper's Table 1 form for Ra, Rq and Rz: `Ra 0.5770 ± 0.03100 µm` (mean ± s).
+    pub table_1: Vec<String>,
+    /// One entry per parameter a line has, in report.json's order of the line parameters.
+    pub parameters: Vec<ParameterStatistics>,
+}
+
+/// One parameter's mean and uncertainty.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ParameterStatistics {
+    /// The name of the line parameter in report.json (`Ra_um`).
+    pub parameter: &'static str,
+    /// n, mean, s, u of the mean, the instrument's u, u_c, U, k.
+    #[serde(flatten)]
+    pub statistics: Statistics,
+}
+
+/// What the section adds to the report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpecificationSection {
+    /// The verdict, when there is a specification.
+    pub verdict: Option<SpecificationVerdict>,
+    /// The means with their uncertainty.
+    pub uncertainty: UncertaintyReport,
+}
+
+/// The band the lines' values were computed in: `None` for P parameters (a form-only
+/// evaluation), which no roughness callout speaks of.
+fn band_of(recipe: &Recipe) -> Option<EvaluatedBand> {
+    (recipe.profile == "R").then_some(EvaluatedBand {
+        lambda_c_mm: recipe.lambda_c_mm,
+        lambda_s_um: recipe.lambda_s_um,
+        sampling_lengths: recipe.sampling_lengths,
+    })
+}
+
+/// Runs the section over the lines of the [`lines`](super::lines) section, against the
+/// context's specification.
+pub fn section(input: &SectionInput<'_>, lines: &LinesSection) -> SpecificationSection {
+    let options = &input.ctx.options;
+    characterise(
+        &lines.lines,
+        &lines.recipe.lines,
+        options.specification.as_ref(),
+        &options.instrument.unwrap_or_default(),
+    )
+}
+
+/// The section over `lines` as evaluated under `recipe`.
+pub fn characterise(
+    lines: &[LineReport],
+    recipe: &Recipe,
+    specification: Option<&Specification>,
+    instrument: &InstrumentUncertainty,
+) -> SpecificationSection {
+    let params: Vec<_> = lines.iter().map(|l| &l.params).collect();
+    let parameters: Vec<ParameterStatistics> = all_statistics(&params, instrument)
+        .into_iter()
+        .map(|(parameter, statistics)| ParameterStatistics {
+            parameter,
+            statistics,
+        })
+        .collect();
+    let table_1 = [("Ra_um", "Ra"), ("Rq_um", "Rq"), ("Rz_um", "Rz")]
+        .iter()
+        .filter_map(|(name, label)| {
+            let p = parameters.iter().find(|p| p.parameter == *name)?;
+            Some(mean_pm_s(label, &p.statistics, "µm"))
+        })
+        .collect();
+    let verdict = specification.filter(|s| !s.is_empty()).map(|s| {
+        let values: Vec<LineValues<'_>> = lines
+            .iter()
+            .map(|l| LineValues {
+                index: l.index,
+                params: &l.params,
+            })
+            .collect();
+        judge(s, &values, band_of(recipe).as_ref(), instrument)
+    });
+    SpecificationSection {
+        verdict,
+        uncertainty: UncertaintyReport {
+            instrument: instrument.statement(),
+            table_1,
+            parameters,
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::metrology::params::{analyze_profile, RoughnessParams};
+
+    fn line(index: u32, ra: f64, params: &RoughnessParams) -> LineReport {
+        LineReport {
+            index,
+            y_mm: index as f64 * 0.01,
+            y_readback_mm: None,
+            params: RoughnessParams {
+                ra_um: ra,
+                ..params.clone()
+            },
+            rmr_table: Vec::new(),
+            instrument: None,
+            model_vs_measured: None,
+        }
+    }
+
+    #[test]
+    fn the_lines_are_judged_in_their_band_and_p_parameters_are_not_compared() {
+        // A real line's analysis gives the recipe (λc, N) and the other parameters.
+        let heights: Vec<f64> = (0..2667)
+            .map(|i| (i as f64 * 0.0015 * std::f64::consts::TAU / 0.1).sin())
+            .collect();
+        let profile = crate::profile::Profile::new(0.0015, heights);
+        let a = analyze_profile(&profile).unwrap();
+        let n = a.recipe.sampling_lengths;
+        let lines: Vec<LineReport> = [0.5, 0.7, 0.9]
+            .iter()
+            .enumerate()
+            .map(|(i, ra)| line(i as u32, *ra, &a.params))
+            .collect();
+        let spec = Specification::parse(&[format!("Ra{n} max 0.8")]).unwrap();
+        let none = InstrumentUncertainty::default();
+        let s = characterise(&lines, &a.recipe, Some(&spec), &none);
+        let v = s.verdict.unwrap();
+        // Line 3 (index 2) is above 0.8 µm: the max rule fails, no uncertainty stated.
+        assert_eq!(v.verdict, crate::specification::Verdict::DoesNotConform);
+        assert_eq!(v.limits[0].lines_beyond, vec![3]);
+        // Mean 0.7, s = 0.2, u = 0.2/√3; Table 1 with mean ± s.
+        let ra = &s.uncertainty.parameters[0];
+        assert_eq!(ra.parameter, "Ra_um");
+        assert!((ra.statistics.mean - 0.7).abs() < 1e-12);
+        assert!((ra.statistics.s.unwrap() - 0.2).abs() < 1e-12);
+        assert!((ra.statistics.u_mean.unwrap() - 0.2 / 3f64.sqrt()).abs() < 1e-12);
+        assert!(
+            s.uncertainty.table_1[0].starts_with("Ra 0.7000 ± 0.2000 µm"),
+            "{:?}",
+            s.uncertainty.table_1
+        );
+        // The same values as P parameters (a form-only evaluation): no roughness band.
+        let mut p = a.recipe.clone();
+        p.profile = "P";
+        let v = characterise(&lines, &p, Some(&spec), &none)
+            .verdict
+            .unwrap();
+        assert_eq!(v.verdict, crate::specification::Verdict::NotDecidable);
+        // Without a specification: the uncertainty only.
+        assert!(characterise(&lines, &a.recipe, None, &none)
+            .verdict
+            .is_none());
+    }
+}
