@@ -52,6 +52,15 @@ pub struct Args {
     /// filter.
     #[arg(long)]
     pub no_filter: bool,
+    /// The λs short-wave filter in µm (ISO 3274's 2.5, 8 or 25 µm) applied to a CSV or X3P
+    /// file's profiles before λc (default none: a scan's lines are as the instrument filtered
+    /// them).
+    #[arg(long, value_name = "UM")]
+    pub ls: Option<f64>,
+    /// Form-only evaluation of a CSV or X3P file: remove this least-squares form (`line`, or
+    /// `poly2` … `poly6`) and no λc filter; P parameters over the whole length.
+    #[arg(long, value_name = "FORM", value_parser = crate::metrology::form::Form::parse)]
+    pub form: Option<crate::metrology::form::Form>,
     /// A station configuration whose `[report]` table (laboratory, address, logo, paper,
     /// signatures) heads the report. Default: for a scan the table its journal recorded; for
     /// a file none.
@@ -119,6 +128,14 @@ struct LineReport {
     /// Rmr(c) at depths c = 0, 10, …, 100 % of Rt below the highest peak: `[c_um, Rmr_pct]`.
     #[serde(rename = "Rmr_table")]
     rmr_table: Vec<[f64; 2]>,
+    /// Ra, Rq, Rsk, Rku over the whole evaluation length.
+    evaluation_length: crate::metrology::params::EvaluationLengthMoments,
+    /// Why a parameter is blank, by its name.
+    #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    blank_reasons: std::collections::BTreeMap<String, String>,
+    /// The material-ratio family as the Mitutoyo SJ series reads it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    material_ratio_sj_series: Option<crate::metrology::sj_material_ratio::SjMaterialRatio>,
 }
 
 #[derive(Debug, Serialize)]
@@ -166,6 +183,16 @@ fn characterise_profile(
     if !options.apply_lambda_c {
         warnings.extend(uncentred(&z, &a.params));
     }
+    if options.form.is_none() {
+        warnings.extend(
+            crate::metrology::cutoff::iso4288_check(
+                a.params.ra_um,
+                a.params.rz_um,
+                options.lambda_c_mm,
+            )
+            .warning,
+        );
+    }
     for w in &warnings {
         tell!("surfscan: warning: {w}");
     }
@@ -179,6 +206,13 @@ fn characterise_profile(
             index: 0,
             y_mm: 0.0,
             rmr_table: crate::report::sections::lines::rmr_table(&a),
+            evaluation_length: a.evaluation_length.clone(),
+            blank_reasons: a.blank_reasons.clone(),
+            material_ratio_sj_series: crate::metrology::sj_material_ratio::sj_material_ratio(
+                &a.roughness_um,
+                &crate::metrology::params::MaterialLevels::default(),
+            )
+            .ok(),
             params: a.params,
         }],
         outliers: Some(outliers),
@@ -305,6 +339,21 @@ pub fn run(args: Args) -> Result<(), CliError> {
         ));
     }
     check_analysis_flags(&args)?;
+    if args.input.is_dir() && (args.ls.is_some() || args.form.is_some()) {
+        return Err(CliError::new(
+            Exit::Usage,
+            "--ls and --form are for CSV and X3P inputs; a scan's lines are evaluated as the instrument filtered them (its λs is in the recorded conditions)",
+        ));
+    }
+    if args.ls.is_some_and(|l| !(l.is_finite() && l > 0.0)) {
+        return Err(CliError::new(
+            Exit::Usage,
+            format!(
+                "--ls {} must be a positive length in µm, e.g. 2.5 or 8",
+                args.ls.unwrap_or(f64::NAN)
+            ),
+        ));
+    }
     if args.input.is_dir() && args.sampling_lengths.is_some() {
         return Err(CliError::new(
             Exit::Usage,
@@ -358,10 +407,10 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let options = Options {
         lambda_c_mm: args.lc.unwrap_or(DEFAULT_LC_MM),
         apply_lambda_c: !args.no_filter,
-        lambda_s_um: None,
+        lambda_s_um: args.ls,
         sampling_lengths: None,
         central_sections: args.sampling_lengths,
-        form: None,
+        form: args.form,
     };
     if input.is_profile() {
         return characterise_profile(&args, input, &options, &out);
@@ -443,13 +492,20 @@ fn fit_and_characterise(
 /// `profile of 2000 points (1 mm), λc 0.8 mm filter applied: Ra 0.2345 µm, Rq …, Rz …`.
 fn profile_summary(points: usize, pitch_mm: f64, p: &RoughnessParams, options: &Options) -> String {
     use crate::numfmt::{fmt, Quantity};
-    let filter = if options.apply_lambda_c {
-        format!("λc {} mm filter applied", options.lambda_c_mm)
-    } else {
-        "no λc filter".to_string()
+    let ls = options
+        .lambda_s_um
+        .map(|l| format!("λs {l} µm, "))
+        .unwrap_or_default();
+    let (filter, name) = match options.form {
+        Some(f) => (format!("{ls}{} removed, no λc filter", f.describe()), "P"),
+        None if options.apply_lambda_c => (
+            format!("{ls}λc {} mm filter applied", options.lambda_c_mm),
+            "R",
+        ),
+        None => (format!("{ls}no λc filter"), "R"),
     };
     format!(
-        "profile of {points} points ({} mm), {filter}: Ra {} µm, Rq {} µm, Rz {} µm",
+        "profile of {points} points ({} mm), {filter}: {name}a {} µm, {name}q {} µm, {name}z {} µm",
         fmt(points as f64 * pitch_mm, Quantity::LengthMm),
         fmt(p.ra_um, Quantity::HeightUm),
         fmt(p.rq_um, Quantity::HeightUm),

@@ -9,11 +9,14 @@ use crate::grid::Grid;
 use crate::metrology::anisotropy::Anisotropy;
 use crate::metrology::areal::ArealParams;
 use crate::metrology::folds::ModelChecks;
+use crate::metrology::functional::ArealFunctional;
 use crate::metrology::holdout::{BetweenLines, Holdout, HoldoutLine};
 use crate::metrology::instrument::Comparison;
 use crate::metrology::model::ModelCurveBac;
 use crate::metrology::outliers::LineSpike;
-use crate::metrology::params::{Recipe, RoughnessParams};
+use crate::metrology::params::{EvaluationLengthMoments, Recipe, RoughnessParams};
+use crate::metrology::sj_material_ratio::SjMaterialRatio;
+use crate::metrology::spatial::SpatialParams;
 use crate::profile::Conditions;
 use crate::report::context::{Model, ReportContext};
 use crate::report::sections::lines::LinesSection;
@@ -22,6 +25,7 @@ use crate::report::sections::Sections;
 use crate::scan::journal::{StartRecord, StopRecord};
 use crate::scan::outputs::FitSummary;
 use serde::Serialize;
+use std::collections::BTreeMap;
 
 /// `report.json`.
 #[derive(Debug, Clone, Serialize)]
@@ -323,6 +327,17 @@ pub struct LineReport {
     /// This line's share of the hold-out comparison (when it could be made).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub model_vs_measured: Option<LineHoldout>,
+    /// Ra, Rq, Rsk, Rku over the whole evaluation length (`Ra_ln_um`, …), beside the
+    /// per-sampling-length means above.
+    pub evaluation_length: EvaluationLengthMoments,
+    /// Why a parameter above is blank, by its name.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub blank_reasons: BTreeMap<String, String>,
+    /// The material-ratio family as the Mitutoyo SJ series reads it (ordinates counted, a
+    /// 100-level curve, core limits snapped to it), under the ISO names; `None` when the line
+    /// has too few ordinates.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub material_ratio_sj_series: Option<SjMaterialRatio>,
 }
 
 /// The hold-out differences of one line: at its own left-out points, and (every 2nd line)
@@ -351,6 +366,24 @@ pub struct SurfaceReport {
     /// How the per-curve tables were made.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bac_curves_recipe: Option<String>,
+    /// ISO 25178-2 functional parameters: the Sk family (the profile Rk construction on the
+    /// areal material ratio curve) and the volumes (p 10 %, q 80 %, ml/m²).
+    #[serde(serialize_with = "ok_or_error")]
+    pub functional: Result<ArealFunctional, String>,
+    /// ISO 25178-2 spatial parameters: Sal (µm), Str (s = 0.2), Std (degrees).
+    #[serde(serialize_with = "ok_or_error")]
+    pub spatial: Result<SpatialParams, String>,
+}
+
+/// A result as itself, or `{"error": why}` when it could not be computed.
+fn ok_or_error<T: Serialize, S: serde::Serializer>(
+    r: &Result<T, String>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    match r {
+        Ok(v) => v.serialize(s),
+        Err(e) => serde_json::json!({ "error": e }).serialize(s),
+    }
 }
 
 /// Seconds spent per section.

@@ -35,6 +35,7 @@ mod model_report;
 mod mqtt_broker;
 mod night_faults;
 mod older_scans;
+mod profile_conditions_cli;
 mod prometheus_scrape;
 mod report_print;
 mod results_unchanged;

@@ -48,6 +48,31 @@ fn reference(path: &Path, px: f64, py: f64) -> Value {
     serde_json::from_slice(&out.stdout).expect("reference script prints JSON")
 }
 
+/// report.json of `surfscan analyze` of the grid at `path` with its pitches.
+fn analyze_report(path: &Path, px: f64, py: f64) -> Value {
+    let out = tempfile::tempdir().unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .arg("analyze")
+        .arg(path)
+        .args([
+            "--pitch-x",
+            &px.to_string(),
+            "--pitch-y",
+            &py.to_string(),
+            "--out",
+        ])
+        .arg(out.path())
+        .output()
+        .unwrap();
+    assert!(
+        o.status.code().is_some_and(|c| c == 0 || c == 3),
+        "analyze {}: {}",
+        path.display(),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(out.path().join("report.json")).unwrap()).unwrap()
+}
+
 fn num(v: &Value, key: &str) -> f64 {
     v[key]
         .as_f64()
@@ -106,6 +131,46 @@ fn check(name: &str, px: f64, py: f64, bounds: Bounds) {
             num(np, k),
             1e-9,
             1e-12,
+        );
+    }
+    // The report of that grid (`surfscan analyze`) carries the same numbers under their ISO
+    // names with the units in the key, as the references have them.
+    let report = analyze_report(&path, px, py);
+    let functional = &report["surface_grid"]["functional"];
+    for (k, unit) in [
+        ("Sk", "_um"),
+        ("Spk", "_um"),
+        ("Svk", "_um"),
+        ("Smr1", "_pct"),
+        ("Smr2", "_pct"),
+        ("Vmp", "_ml_per_m2"),
+        ("Vmc", "_ml_per_m2"),
+        ("Vvc", "_ml_per_m2"),
+        ("Vvv", "_ml_per_m2"),
+    ] {
+        close(
+            &format!("{name} report.json surface_grid.functional.{k}{unit} (numpy)"),
+            num(functional, &format!("{k}{unit}")),
+            num(np, k),
+            1e-9,
+            1e-12,
+        );
+    }
+    let spatial = &report["surface_grid"]["spatial"];
+    close(
+        &format!("{name} report.json Std_deg (surfalize)"),
+        num(spatial, "Std_deg"),
+        num(&r["surfalize"], "Std"),
+        0.0,
+        1e-9,
+    );
+    for (key, k) in [("Sal_um", "Sal"), ("Str", "Str")] {
+        close(
+            &format!("{name} report.json {key} (surfalize)"),
+            num(spatial, key),
+            num(&r["surfalize"], k),
+            bounds.sal_surfalize,
+            0.0,
         );
     }
     // surfalize: the same material ratio curve but its equivalent line is a least-squares fit

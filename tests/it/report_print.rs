@@ -131,7 +131,7 @@ pub fn check_printed(dir: &Path, pdf: &Path, lab: &str, roles: &[&str]) -> Strin
     crate::common::chromium::print_to_pdf(&page, pdf);
     let (pages, size) = info(pdf);
     assert!(
-        (2..=8).contains(&pages),
+        (2..=9).contains(&pages),
         "a few pages, not {pages} (the screen's page printed 17)"
     );
     let text = pdftotext(pdf).replace('\u{fb01}', "fi");

@@ -197,7 +197,17 @@ fn row(h: &mut String, cells: &[(&str, String)]) {
 const LINE_FAMILIES: &[(&str, &str, std::ops::Range<usize>)] = &[
     ("t-lines", "amplitude", 0..10),
     ("t-lines-spacing", "spacing and slope", 10..16),
-    ("t-lines-material", "material ratio", 16..25),
+    ("t-lines-material", "material ratio (ISO 13565-2)", 16..25),
+    (
+        "t-lines-sj",
+        "material ratio as the SJ series reads it (ordinates counted, 100-level curve)",
+        25..33,
+    ),
+    (
+        "t-lines-ln",
+        "over the whole evaluation length (ISO 21920-2) beside the sampling-length means",
+        33..41,
+    ),
 ];
 
 /// Per-line columns: report key, heading, quantity.
@@ -227,7 +237,52 @@ const LINE_COLUMNS: &[(&str, &str, Quantity)] = &[
     ("Mr2_pct", "Mr2 %", Quantity::Percent),
     ("A1", "A1 µm·%", Quantity::Area),
     ("A2", "A2 µm·%", Quantity::Area),
+    (
+        "material_ratio_sj_series.Rmr_pct",
+        "Rmr %",
+        Quantity::Percent,
+    ),
+    (
+        "material_ratio_sj_series.Rk_um",
+        "Rk µm",
+        Quantity::HeightUm,
+    ),
+    (
+        "material_ratio_sj_series.Rpk_um",
+        "Rpk µm",
+        Quantity::HeightUm,
+    ),
+    (
+        "material_ratio_sj_series.Rvk_um",
+        "Rvk µm",
+        Quantity::HeightUm,
+    ),
+    (
+        "material_ratio_sj_series.Mr1_pct",
+        "Mr1 %",
+        Quantity::Percent,
+    ),
+    (
+        "material_ratio_sj_series.Mr2_pct",
+        "Mr2 %",
+        Quantity::Percent,
+    ),
+    ("material_ratio_sj_series.A1", "A1 µm·%", Quantity::Area),
+    ("material_ratio_sj_series.A2", "A2 µm·%", Quantity::Area),
+    ("evaluation_length.Ra_ln_um", "Ra ln µm", Quantity::HeightUm),
+    ("Ra_um", "Ra µm", Quantity::HeightUm),
+    ("evaluation_length.Rq_ln_um", "Rq ln µm", Quantity::HeightUm),
+    ("Rq_um", "Rq µm", Quantity::HeightUm),
+    ("evaluation_length.Rsk_ln", "Rsk ln", Quantity::Ratio),
+    ("Rsk", "Rsk", Quantity::Ratio),
+    ("evaluation_length.Rku_ln", "Rku ln", Quantity::Ratio),
+    ("Rku", "Rku", Quantity::Ratio),
 ];
+
+/// The value at `key` of `v`, a `.` stepping into a member (`evaluation_length.Rq_ln_um`).
+fn field<'a>(v: &'a Value, key: &str) -> &'a Value {
+    key.split('.').fold(v, |v, k| &v[k])
+}
 
 /// Areal rows: report key, heading, quantity.
 const AREAL_ROWS: &[(&str, &str, Quantity)] = &[
@@ -240,6 +295,34 @@ const AREAL_ROWS: &[(&str, &str, Quantity)] = &[
     ("Sku", "Sku", Quantity::Ratio),
     ("Sdq", "Sdq", Quantity::Ratio),
     ("Sdr_pct", "Sdr %", Quantity::Percent),
+    ("functional.Sk_um", "Sk µm", Quantity::HeightUm),
+    ("functional.Spk_um", "Spk µm", Quantity::HeightUm),
+    ("functional.Svk_um", "Svk µm", Quantity::HeightUm),
+    ("functional.Smr1_pct", "Smr1 %", Quantity::Percent),
+    ("functional.Smr2_pct", "Smr2 %", Quantity::Percent),
+    (
+        "functional.Vmp_ml_per_m2",
+        "Vmp ml/m² (p 10 %)",
+        Quantity::HeightUm,
+    ),
+    (
+        "functional.Vmc_ml_per_m2",
+        "Vmc ml/m² (p 10 %, q 80 %)",
+        Quantity::HeightUm,
+    ),
+    (
+        "functional.Vvc_ml_per_m2",
+        "Vvc ml/m² (p 10 %, q 80 %)",
+        Quantity::HeightUm,
+    ),
+    (
+        "functional.Vvv_ml_per_m2",
+        "Vvv ml/m² (q 80 %)",
+        Quantity::HeightUm,
+    ),
+    ("spatial.Sal_um", "Sal µm (s 0.2)", Quantity::HeightUm),
+    ("spatial.Str", "Str (s 0.2)", Quantity::Ratio),
+    ("spatial.Std_deg", "Std °", Quantity::Ratio),
 ];
 
 /// The model's verdict (whether the data support the surface between the lines) in short,
@@ -705,7 +788,7 @@ fn areal(h: &mut String, report: &Value) {
     for (key, head, q) in AREAL_ROWS {
         let mut cells = vec![("t", esc(head))];
         for (_, s) in &cols {
-            cells.push(("", num(&s[*key], *q)));
+            cells.push(("", num(field(s, key), *q)));
         }
         row(h, &cells);
     }
@@ -715,8 +798,68 @@ fn areal(h: &mut String, report: &Value) {
         if let Some(r) = s["bac_curves_recipe"].as_str() {
             let _ = writeln!(h, "<li><b>{n}, bearing curves</b>: {}</li>", esc(r));
         }
+        for part in ["functional", "spatial"] {
+            if let Some(e) = s[part]["error"].as_str() {
+                let _ = writeln!(
+                    h,
+                    "<li><b>{n}, {part} parameters</b>: not computed: {}</li>",
+                    esc(e)
+                );
+            }
+        }
+        for (name, why) in s["spatial"]["blank_reasons"]
+            .as_object()
+            .into_iter()
+            .flatten()
+        {
+            let _ = writeln!(
+                h,
+                "<li><b>{n}, {}</b> blank: {}</li>",
+                esc(name),
+                esc(why.as_str().unwrap_or(""))
+            );
+        }
+        for c in s["spatial"]["caveats"].as_array().into_iter().flatten() {
+            let _ = writeln!(h, "<li><b>{n}</b>: {}</li>", esc(c.as_str().unwrap_or("")));
+        }
     }
     h.push_str("</ul>\n");
+}
+
+/// A line's value at `key`, or for a blank one a dash with its reason as the tooltip (the
+/// reasons are listed under the tables).
+fn blank_or(line: &Value, key: &str, q: Quantity) -> String {
+    let v = field(line, key);
+    if v.is_number() {
+        return num(v, q);
+    }
+    let stem = key.split('_').next().unwrap_or(key);
+    match line["blank_reasons"][stem].as_str() {
+        Some(why) => format!("<span class=\"blank\" title=\"{}\">—*</span>", esc(why)),
+        None => String::new(),
+    }
+}
+
+/// Every blank cell's reason, line by line.
+fn blank_reasons(h: &mut String, lines: &[Value]) {
+    let mut items = Vec::new();
+    for l in lines {
+        for (name, why) in l["blank_reasons"].as_object().into_iter().flatten() {
+            items.push(format!(
+                "<li>line {}: {} — {}</li>",
+                line_label(l["index"].as_u64().unwrap_or(0)),
+                esc(name),
+                esc(why.as_str().unwrap_or(""))
+            ));
+        }
+    }
+    if !items.is_empty() {
+        let _ = writeln!(
+            h,
+            "<p>—* a blank value, and why:</p>\n<ul id=\"blank-reasons\">\n{}\n</ul>",
+            items.join("\n")
+        );
+    }
 }
 
 fn lines(h: &mut String, report: &Value) {
@@ -750,14 +893,17 @@ fn lines(h: &mut String, report: &Value) {
                 ("", num(&l["y_mm"], Quantity::PositionMm)),
             ];
             for (key, _, q) in columns {
-                cells.push(("", num(&l[*key], *q)));
+                cells.push(("", blank_or(l, key, *q)));
             }
             row(h, &cells);
         }
         for (name, mean) in [("mean", true), ("s.d.", false)] {
             let mut cells = vec![("t", format!("<b>{name}</b>")), ("", String::new())];
             for (key, _, q) in columns {
-                let v: Vec<f64> = lines.iter().filter_map(|l| l[*key].as_f64()).collect();
+                let v: Vec<f64> = lines
+                    .iter()
+                    .filter_map(|l| field(l, key).as_f64())
+                    .collect();
                 let (m, sd) = mean_sd(&v);
                 cells.push((
                     "",
@@ -772,6 +918,7 @@ fn lines(h: &mut String, report: &Value) {
         }
         h.push_str("</table></div>\n");
     }
+    blank_reasons(h, lines);
     // Rδc and Rmr depend on levels chosen per instrument and recipe: said on the page, not
     // only in a heading's tooltip.
     let levels: Vec<String> = [("Rdc_um", "Rδc"), ("Rmr_pct", "Rmr")]
@@ -1084,6 +1231,13 @@ mod tests {
         for (_, _, r) in LINE_FAMILIES {
             assert_eq!(r.start, next);
             assert!(r.len() <= 10, "a family of at most 10 columns fits a page");
+            for (k, _, _) in &LINE_COLUMNS[r.clone()] {
+                let stem = k.split('.').next().unwrap();
+                assert!(
+                    stem == *k || ["material_ratio_sj_series", "evaluation_length"].contains(&stem),
+                    "{k}"
+                );
+            }
             next = r.end;
         }
         assert_eq!(next, LINE_COLUMNS.len());
@@ -1157,7 +1311,12 @@ mod tests {
             .map(|(k, _)| k)
             .collect();
         assert!(scalar.len() >= 20, "{scalar:?}");
-        let shown: Vec<&str> = LINE_COLUMNS.iter().map(|(k, _, _)| *k).collect();
+        // The columns of the line's own parameters (a `.` steps into another member).
+        let shown: Vec<&str> = LINE_COLUMNS
+            .iter()
+            .map(|(k, _, _)| *k)
+            .filter(|k| !k.contains('.'))
+            .collect();
         for k in &scalar {
             assert!(shown.contains(&k.as_str()), "{k} has no column");
         }

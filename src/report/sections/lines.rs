@@ -7,8 +7,10 @@
 use super::SectionInput;
 use crate::grid::Grid;
 use crate::metrology::areal;
+use crate::metrology::cutoff::iso4288_check;
 use crate::metrology::instrument::compare_profile;
-use crate::metrology::params::{analyze_line, LineAnalysis, Options};
+use crate::metrology::params::{analyze_line, LineAnalysis, MaterialLevels, Options};
+use crate::metrology::sj_material_ratio::sj_material_ratio;
 use crate::metrology::MetrologyError;
 use crate::numfmt::line_number;
 use crate::report::document::{LineReport, ReportRecipe};
@@ -115,6 +117,13 @@ pub fn section(input: &SectionInput<'_>) -> Result<LinesSection, ReportError> {
                 )
             }),
             model_vs_measured: None,
+            evaluation_length: a.evaluation_length.clone(),
+            blank_reasons: a.blank_reasons.clone(),
+            material_ratio_sj_series: sj_material_ratio(
+                &a.roughness_um,
+                &MaterialLevels::default(),
+            )
+            .ok(),
         })
         .collect();
     Ok(LinesSection {
@@ -133,4 +142,26 @@ pub fn section(input: &SectionInput<'_>) -> Result<LinesSection, ReportError> {
         lines,
         analyses,
     })
+}
+
+/// ISO 4288's check of λc against the result (the mean Ra and Rz of the lines): a warning
+/// naming the band the result falls in when λc does not fit it; none for a form-only
+/// evaluation (no λc) or without lines.
+pub fn cutoff_warning(lines: &LinesSection, options: &Options) -> Option<String> {
+    if options.form.is_some() || lines.lines.is_empty() {
+        return None;
+    }
+    let mean = |f: fn(&LineReport) -> f64| {
+        let v: Vec<f64> = lines
+            .lines
+            .iter()
+            .map(f)
+            .filter(|v| v.is_finite())
+            .collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    };
+    let (ra, rz) = (mean(|l| l.params.ra_um)?, mean(|l| l.params.rz_um)?);
+    iso4288_check(ra, rz, options.lambda_c_mm)
+        .warning
+        .map(|w| format!("{w} (mean of the {} lines)", lines.lines.len()))
 }

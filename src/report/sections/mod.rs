@@ -137,6 +137,7 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
         let lines = lines::section(&input)?;
         let specification = specification::section(&input, &lines);
         timings.lines = t.elapsed().as_secs_f64();
+        warnings.extend(lines::cutoff_warning(&lines, &ctx.line_options));
 
         let t = Instant::now();
         if !evenly {

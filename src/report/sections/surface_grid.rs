@@ -1,12 +1,16 @@
-//! Sections `surface_grid` and `anisotropy`: areal parameters (ISO 25178), the pooled bearing
+//! Sections `surface_grid` and `anisotropy`: areal parameters (ISO 25178: height, functional,
+//! spatial), the pooled bearing
 //! area curve and the anisotropy of the measured grid as characterised. Need no model.
 //!
-//! Layer 4 (reporting): depends on [`crate::metrology::areal`] and
+//! Layer 4 (reporting): depends on [`crate::metrology::areal`],
+//! [`crate::metrology::functional`], [`crate::metrology::spatial`] and
 //! [`crate::metrology::anisotropy`].
 
 use super::SectionInput;
 use crate::metrology::anisotropy::Anisotropy;
 use crate::metrology::areal::{areal_params, smr_curve, HeightMap};
+use crate::metrology::functional::areal_functional;
+use crate::metrology::spatial::spatial_params;
 use crate::report::document::SurfaceReport;
 
 /// Areal parameters and the pooled Smr curve of `g` at `levels` levels.
@@ -23,6 +27,8 @@ pub fn surface_report(
         recipe,
         bac_curves: None,
         bac_curves_recipe: None,
+        functional: areal_functional(g).map_err(|e| e.to_string()),
+        spatial: spatial_params(g).map_err(|e| e.to_string()),
     })
 }
 
