@@ -117,18 +117,21 @@ pub fn characterise(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::metrology::params::{analyze_profile, RoughnessParams};
+    use crate::metrology::params::{analyze_profile, LineAnalysis, RoughnessParams};
 
-    fn line(index: u32, ra: f64, params: &RoughnessParams) -> LineReport {
+    fn line(index: u32, ra: f64, a: &LineAnalysis) -> LineReport {
         LineReport {
             index,
             y_mm: index as f64 * 0.01,
             y_readback_mm: None,
             params: RoughnessParams {
                 ra_um: ra,
-                ..params.clone()
+                ..a.params.clone()
             },
             rmr_table: Vec::new(),
+            evaluation_length: a.evaluation_length.clone(),
+            blank_reasons: a.blank_reasons.clone(),
+            material_ratio_sj_series: None,
             instrument: None,
             model_vs_measured: None,
         }
@@ -146,7 +149,7 @@ mod tests {
         let lines: Vec<LineReport> = [0.5, 0.7, 0.9]
             .iter()
             .enumerate()
-            .map(|(i, ra)| line(i as u32, *ra, &a.params))
+            .map(|(i, ra)| line(i as u32, *ra, &a))
             .collect();
         let spec = Specification::parse(&[format!("Ra{n} max 0.8")]).unwrap();
         let none = InstrumentUncertainty::default();
