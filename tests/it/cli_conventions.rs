@@ -217,7 +217,8 @@ fn check_config_validates_without_opening_devices() {
         )),
         "{err}"
     );
-    let present = demo_config(dir.path(), Path::new("/dev/null"), Path::new("/dev/null"));
+    // Two different device nodes: one port for both devices is refused on its own.
+    let present = demo_config(dir.path(), Path::new("/dev/null"), Path::new("/dev/zero"));
     let out = surfscan(&[
         "check-config",
         "--require-devices",
