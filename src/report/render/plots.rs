@@ -25,6 +25,7 @@ use crate::metrology::model::ModelCurveBac;
 use crate::metrology::params::RkFamily;
 use crate::metrology::{check_pitch, MetrologyError};
 use crate::numfmt::{fmt, Quantity};
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
@@ -362,6 +363,39 @@ fn padded_range(values: impl Iterator<Item = f64>, fallback: (f64, f64)) -> (f64
 /// Figure size of the bearing area curve plot.
 const BAC_SIZE: (u32, u32) = (1000, 640);
 
+/// The margin and the x label area of a material-ratio chart, in pixels.
+const RATIO_CHART_MARGIN: u32 = 12;
+const RATIO_CHART_X_AREA: u32 = 50;
+
+/// A material-ratio chart on `area`: 0–100 % across, heights `lo..hi` up, its mesh drawn with
+/// the axes described as `x_desc` and `y_desc` (the bearing area curves and the Rk
+/// construction share it).
+fn material_ratio_chart<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    (lo, hi): (f64, f64),
+    x_desc: &str,
+    y_desc: &str,
+) -> Result<ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>, String> {
+    let mut chart = ChartBuilder::on(area)
+        .margin(RATIO_CHART_MARGIN)
+        .x_label_area_size(RATIO_CHART_X_AREA)
+        .y_label_area_size(80)
+        .build_cartesian_2d(0f64..100f64, lo..hi)
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .x_label_formatter(&|v| tick(*v))
+        .y_desc(y_desc)
+        .label_style(font(13))
+        .axis_desc_style(font(14))
+        .y_label_formatter(&|v| tick(*v))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    Ok(chart)
+}
+
 fn draw_bac<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     curves: &[ModelCurveBac],
@@ -391,24 +425,13 @@ where
         .chain(pooled.iter())
         .map(|p| p[0]);
     let (lo, hi) = padded_range(all, (-1.0, 1.0));
-    let (margin, x_area) = (12u32, 50u32);
-    let mut chart = ChartBuilder::on(&plot_area)
-        .margin(margin)
-        .x_label_area_size(x_area)
-        .y_label_area_size(80)
-        .build_cartesian_2d(0f64..100f64, lo..hi)
-        .map_err(|e| e.to_string())?;
-    chart
-        .configure_mesh()
-        .x_desc("material ratio (%)")
-        .x_label_formatter(&|v| tick(*v))
-        .y_desc("height c from the mean line (µm)")
-        .label_style(font(13))
-        .axis_desc_style(font(14))
-        .y_label_formatter(&|v| tick(*v))
-        .light_line_style(RGBColor(235, 235, 235))
-        .draw()
-        .map_err(|e| e.to_string())?;
+    let (margin, x_area) = (RATIO_CHART_MARGIN, RATIO_CHART_X_AREA);
+    let mut chart = material_ratio_chart(
+        &plot_area,
+        (lo, hi),
+        "material ratio (%)",
+        "height c from the mean line (µm)",
+    )?;
     let (y_lo, y_hi) = curves
         .iter()
         .map(|c| c.y_mm)
@@ -934,23 +957,12 @@ where
         .map(|p| p[1])
         .chain([c + rk.rpk_um, d - rk.rvk_um, c, d]);
     let (lo, hi) = padded_range(heights, (-1.0, 1.0));
-    let mut chart = ChartBuilder::on(&plot_area)
-        .margin(12)
-        .x_label_area_size(50)
-        .y_label_area_size(80)
-        .build_cartesian_2d(0f64..100f64, lo..hi)
-        .map_err(|e| e.to_string())?;
-    chart
-        .configure_mesh()
-        .x_desc("material ratio Rmr (%)")
-        .x_label_formatter(&|v| tick(*v))
-        .y_desc("height c (µm)")
-        .label_style(font(13))
-        .axis_desc_style(font(14))
-        .y_label_formatter(&|v| tick(*v))
-        .light_line_style(RGBColor(235, 235, 235))
-        .draw()
-        .map_err(|e| e.to_string())?;
+    let mut chart = material_ratio_chart(
+        &plot_area,
+        (lo, hi),
+        "material ratio Rmr (%)",
+        "height c (µm)",
+    )?;
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     // Rpk and Rvk triangles (areas equal to A1 and A2).
     chart
