@@ -150,26 +150,12 @@ async fn scans_complete_while_the_share_is_away_and_are_archived_verified_after_
 
 #[test]
 fn a_bad_archive_table_exits_78_naming_the_key() {
-    let dir = tempfile::tempdir().unwrap();
-    let base = surfscan::cli::demo::demo_config(
-        &dir.path().join("i"),
-        &dir.path().join("s"),
-        &dir.path().join("scans"),
+    crate::common::assert_tables_refused(
+        "archive",
+        &[
+            ("url = \"/mnt/archive\"", "archive.url"),
+            ("url = \"file://mnt/archive\"", "archive.url"),
+            ("url = \"s3://lab-archive/rough-3\"", "archive.url"),
+        ],
     );
-    for (table, key) in [
-        ("url = \"/mnt/archive\"", "archive.url"),
-        ("url = \"file://mnt/archive\"", "archive.url"),
-        ("url = \"s3://lab-archive/rough-3\"", "archive.url"),
-    ] {
-        let config = dir.path().join("station.toml");
-        std::fs::write(&config, format!("{base}\n[archive]\n{table}\n")).unwrap();
-        let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
-            .args(["check-config", "--config"])
-            .arg(&config)
-            .output()
-            .unwrap();
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(o.status.code(), Some(78), "{table}: {err}");
-        assert!(err.contains(key), "{table}: {err}");
-    }
 }

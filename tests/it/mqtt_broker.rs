@@ -385,13 +385,9 @@ async fn a_wrong_password_is_named_in_the_status_and_the_log_and_the_scan_is_una
 
 #[test]
 fn a_bad_mqtt_table_exits_78_naming_the_key() {
-    let dir = tempfile::tempdir().unwrap();
-    let base = surfscan::cli::demo::demo_config(
-        &dir.path().join("i"),
-        &dir.path().join("s"),
-        &dir.path().join("scans"),
-    );
-    for (table, key) in [
+    crate::common::assert_tables_refused(
+        "mqtt",
+        &[
         ("url = \"http://h\"\nstation = \"a\"", "mqtt.url"),
         ("url = \"mqtt://h\"\nstation = \"a/b\"", "mqtt.station"),
         (
@@ -403,16 +399,6 @@ fn a_bad_mqtt_table_exits_78_naming_the_key() {
             "mqtt.ca-file",
         ),
         ("url = \"mqtt://h\"\nstation = \"a\"\noutbox-max = 0", "mqtt.outbox-max"),
-    ] {
-        let config = dir.path().join("station.toml");
-        std::fs::write(&config, format!("{base}\n[mqtt]\n{table}\n")).unwrap();
-        let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
-            .args(["check-config", "--config"])
-            .arg(&config)
-            .output()
-            .unwrap();
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(o.status.code(), Some(78), "{table}: {err}");
-        assert!(err.contains(key), "{table}: {err}");
-    }
+        ],
+    );
 }

@@ -215,26 +215,10 @@ async fn a_real_prometheus_scrapes_the_station_and_sees_the_scan_progress() {
 
 #[test]
 fn a_listen_address_that_is_no_address_exits_78_naming_the_key() {
-    let dir = tempfile::tempdir().unwrap();
-    let base = surfscan::cli::demo::demo_config(
-        &dir.path().join("i"),
-        &dir.path().join("s"),
-        &dir.path().join("scans"),
+    crate::common::assert_tables_refused(
+        "metrics",
+        &[("listen = \"localhost\"", "metrics.listen")],
     );
-    let config = dir.path().join("station.toml");
-    std::fs::write(
-        &config,
-        format!("{base}\n[metrics]\nlisten = \"localhost\"\n"),
-    )
-    .unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
-        .args(["check-config", "--config"])
-        .arg(&config)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(78), "{err}");
-    assert!(err.contains("metrics.listen"), "{err}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

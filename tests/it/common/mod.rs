@@ -617,3 +617,26 @@ pub fn sent_commands(transcript: &str) -> Vec<String> {
         .map(|e| String::from_utf8_lossy(&e.bytes).trim_end().to_string())
         .collect()
 }
+
+/// `check-config` of the demo's station configuration with `[section]` holding each `table`
+/// in turn must exit 78 and name its `key`.
+pub fn assert_tables_refused(section: &str, cases: &[(&str, &str)]) {
+    let dir = tempfile::tempdir().unwrap();
+    let base = surfscan::cli::demo::demo_config(
+        &dir.path().join("i"),
+        &dir.path().join("s"),
+        &dir.path().join("scans"),
+    );
+    for (table, key) in cases {
+        let config = dir.path().join("station.toml");
+        std::fs::write(&config, format!("{base}\n[{section}]\n{table}\n")).unwrap();
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(["check-config", "--config"])
+            .arg(&config)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(78), "{table}: {err}");
+        assert!(err.contains(key), "{table}: {err}");
+    }
+}
