@@ -881,7 +881,7 @@ pub const NUMERIC_KEYS: &[NumericKey] = &[
 ];
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     pub(crate) const MINIMAL: &str = r#"

@@ -2,22 +2,8 @@
 
 use super::*;
 
-const STATION: &str = r#"
-[instrument]
-port = "/dev/ttyUSB0"
-[stage]
-port = "/dev/ttyACM0"
-protocol = "grbl"
-steps-per-mm = 1000.0
-soft-limit-min-mm = 0.0
-soft-limit-max-mm = 50.0
-[scan]
-lines = 31
-y-start-mm = 1.0
-y-step-mm = 0.01
-[output]
-dir = "/var/lib/surfscan/scans"
-"#;
+/// The smallest station configuration, as the configuration's own tests use it.
+use crate::config::tests::MINIMAL as STATION;
 
 const RECIPE: &str = r#"
 description = "brass coupon"
