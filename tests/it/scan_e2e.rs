@@ -786,10 +786,14 @@ async fn an_instrument_unplugged_mid_trace_suspends_and_the_scan_completes() {
     rig.shutdown().await;
 }
 
-/// The stage controller resets (banner, position lost) mid-scan: the runner re-homes and
-/// completes; the served heights prove the carriage was truly at every target.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_stage_reset_mid_scan_rehomes_and_completes() {
+/// A scan in which the stage gets `fault` after three committed lines: it must complete with
+/// every line, a journal note for which `recorded` holds (`what` in the message), and the
+/// carriage truly at the last target (the served heights prove it was at every one).
+async fn stage_fault_mid_scan_is_recovered(
+    fault: StageFault,
+    recorded: impl Fn(&str) -> bool,
+    what: &str,
+) {
     let rig = Rig::start(RigOptions::default()).await;
     let n = rig.options.lines;
     let cfg = rig.config("out");
@@ -799,7 +803,7 @@ async fn a_stage_reset_mid_scan_rehomes_and_completes() {
         committed_lines(&out) >= 3
     })
     .await;
-    rig.stage.inject(StageFault::ResetBanner);
+    rig.stage.inject(fault);
     let o = tokio::time::timeout(Duration::from_secs(120), child.wait_with_output())
         .await
         .unwrap()
@@ -809,12 +813,21 @@ async fn a_stage_reset_mid_scan_rehomes_and_completes() {
     assert_lines_exactly(&dir, n);
     let records = assert_journal_complete(&dir, n);
     let notes = interruptions(&records);
-    assert!(
-        notes.iter().any(|r| r.contains("re-homing")),
-        "a re-homing is recorded: {notes:?}"
-    );
+    assert!(notes.iter().any(|r| recorded(r)), "{what}: {notes:?}");
     assert_eq!(rig.stage.true_position_nm(), target_nm(n - 1));
     rig.shutdown().await;
+}
+
+/// The stage controller resets (banner, position lost) mid-scan: the runner re-homes and
+/// completes; the served heights prove the carriage was truly at every target.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stage_reset_mid_scan_rehomes_and_completes() {
+    stage_fault_mid_scan_is_recovered(
+        StageFault::ResetBanner,
+        |r| r.contains("re-homing"),
+        "a re-homing is recorded",
+    )
+    .await;
 }
 
 /// A one-off `ALARM:2` (soft limit) on a target inside the limits, as a controller whose
@@ -822,33 +835,12 @@ async fn a_stage_reset_mid_scan_rehomes_and_completes() {
 /// used to end; the served heights prove the carriage was truly at every target.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_one_off_alarm_2_inside_the_limits_rehomes_and_completes() {
-    let rig = Rig::start(RigOptions::default()).await;
-    let n = rig.options.lines;
-    let cfg = rig.config("out");
-    let child = scan_command(&cfg, &[]).spawn().unwrap();
-    let out = rig.out_dir("out");
-    wait_until(Duration::from_secs(60), "three committed lines", || {
-        committed_lines(&out) >= 3
-    })
+    stage_fault_mid_scan_is_recovered(
+        StageFault::Alarm2,
+        |r| r.contains("ALARM:2") && r.contains("re-homing"),
+        "the stale position and its re-homing are recorded",
+    )
     .await;
-    rig.stage.inject(StageFault::Alarm2);
-    let o = tokio::time::timeout(Duration::from_secs(120), child.wait_with_output())
-        .await
-        .unwrap()
-        .unwrap();
-    assert!(o.status.success(), "{}", describe(&o));
-    let dir = scan_dir(&out);
-    assert_lines_exactly(&dir, n);
-    let records = assert_journal_complete(&dir, n);
-    let notes = interruptions(&records);
-    assert!(
-        notes
-            .iter()
-            .any(|r| r.contains("ALARM:2") && r.contains("re-homing")),
-        "the stale position and its re-homing are recorded: {notes:?}"
-    );
-    assert_eq!(rig.stage.true_position_nm(), target_nm(n - 1));
-    rig.shutdown().await;
 }
 
 /// The terminal a foreground scan was started from goes away mid-scan (an SSH session that
