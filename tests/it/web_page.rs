@@ -4,7 +4,9 @@
 //! (the journal names the page's user), a request without the session and another site's
 //! forged commands refused, a hundred open event streams that never read while
 //! the scan runs, and the page saying the daemon is away while it restarts, then carrying on;
-//! a page that cannot listen leaves the station scanning.
+//! a job queued from the page that waits for its specimen, is marked loaded from the page and
+//! runs to its verdict (another job removed, an unknown recipe refused), each command in the
+//! queue's log with its user; a page that cannot listen leaves the station scanning.
 //!
 //! Depends on the daemon rig of `daemon_e2e`, the DevTools driver and the HTTP test client.
 
@@ -17,6 +19,7 @@ use crate::daemon_e2e::{
 use serde_json::json;
 use std::os::unix::fs::PermissionsExt;
 use std::time::Duration;
+use surfscan::scan::ending::StopStatus;
 use surfscan::scan::journal::Record;
 use surfscan::scan::status::State;
 
@@ -75,6 +78,53 @@ fetch("http://{target}/api/pause", {{method: "POST", mode: "no-cors", credential
     addr
 }
 
+/// A recipe held to a mirror finish: the simulated turned surface does not conform. The
+/// traces are one sampling length long, so the callout says `Ra1`.
+const MIRROR: &str = r#"description = "a coupon held to a mirror finish"
+[plan]
+lines = 4
+y-step-mm = 0.01
+[specification]
+limits = ["Ra1 max 0.001"]
+"#;
+
+/// Adds the recipe directory with `mirror.toml` to the rig's configuration.
+fn with_recipes(r: &Rig) {
+    let dir = r.dir.path().join("recipes");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("mirror.toml"), MIRROR).unwrap();
+    let mut text = std::fs::read_to_string(&r.config).unwrap();
+    text.push_str(&format!(
+        "\n[jobs]\nrecipes = {:?}\n",
+        dir.display().to_string()
+    ));
+    std::fs::write(&r.config, text).unwrap();
+}
+
+/// Opens the page and signs in as alice; before, the page shows the sign-in form and
+/// nothing of the station.
+fn sign_in(b: &mut Browser, addr: std::net::SocketAddr) -> Tab {
+    let tab = b.open(&format!("http://{addr}/"));
+    b.wait_for(
+        &tab,
+        "the sign-in form",
+        &format!("{}.hidden", el("login")),
+        WAIT,
+        |v| v == &json!(false),
+    );
+    assert_eq!(b.eval(&tab, &format!("{}.hidden", el("main"))), json!(true));
+    b.eval(
+        &tab,
+        &format!(
+            "{}.value = {ALICE:?}; {}.requestSubmit(); true",
+            el("token"),
+            el("login-form")
+        ),
+    );
+    wait_text(b, &tab, "who", "alice");
+    tab
+}
+
 /// `document.getElementById(id)` in the page's script.
 fn el(id: &str) -> String {
     format!("document.getElementById({id:?})")
@@ -129,28 +179,9 @@ async fn a_scan_started_paused_and_resumed_from_the_page_is_watched_to_its_resul
     let addr = with_page(&r);
     let mut d = spawn_daemon(&r);
     notify_until(&r, &mut d, |m| m.contains("READY=1"));
-    let url = format!("http://{addr}/");
 
     let mut b = Browser::launch();
-    let tab = b.open(&url);
-    // Not signed in: the sign-in form, nothing of the station.
-    b.wait_for(
-        &tab,
-        "the sign-in form",
-        &format!("{}.hidden", el("login")),
-        WAIT,
-        |v| v == &json!(false),
-    );
-    assert_eq!(b.eval(&tab, &format!("{}.hidden", el("main"))), json!(true));
-    b.eval(
-        &tab,
-        &format!(
-            "{}.value = {ALICE:?}; {}.requestSubmit(); true",
-            el("token"),
-            el("login-form")
-        ),
-    );
-    wait_text(&mut b, &tab, "who", "alice");
+    let tab = sign_in(&mut b, addr);
     wait_text(&mut b, &tab, "state", "idle");
     assert_eq!(
         b.eval(&tab, &format!("{}.dataset.state", el("link"))),
@@ -426,6 +457,233 @@ async fn a_page_that_cannot_listen_is_named_and_the_station_scans_on() {
     );
     start_scan(&r, "B-13").await;
     wait_status(&r, "a line on disk without the page", |s| s.lines_done >= 1).await;
+    sigterm(&d);
+    assert!(wait_exit(&mut d).success());
+    r.sim.shutdown().await;
+}
+
+/// The script that reads the queue's row of job `id` on the page: its state, its state's
+/// text and verdict, and the ids of its buttons (`null` when the row is not there).
+fn job_row(id: u64) -> String {
+    format!(
+        "(() => {{ const tr = document.querySelector('#queue tr[data-job=\"{id}\"]'); \
+         if (!tr) return null; const st = tr.querySelector('.job-state'); \
+         return {{state: tr.dataset.state, text: st.textContent, verdict: st.dataset.verdict || null, \
+         buttons: Array.from(tr.querySelectorAll('button')).map(b => b.id)}}; }})()"
+    )
+}
+
+fn wait_row(
+    b: &mut Browser,
+    tab: &Tab,
+    id: u64,
+    what: &str,
+    f: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    b.wait_for(tab, what, &job_row(id), WAIT, f)
+}
+
+/// Fills the page's queue form and submits it.
+fn queue_from_page(b: &mut Browser, tab: &Tab, recipe: &str, specimen: &str, loading: bool) {
+    b.eval(
+        tab,
+        &format!(
+            "{}.value = {recipe:?}; {}.value = {specimen:?}; {}.checked = {loading}; {}.requestSubmit(); true",
+            el("queue-recipe"),
+            el("queue-specimen"),
+            el("queue-loading"),
+            el("queue-form")
+        ),
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_job_queued_from_the_page_waits_for_its_specimen_then_runs_to_its_verdict() {
+    let r = rig().await;
+    let addr = with_page(&r);
+    with_recipes(&r);
+    let mut d = spawn_daemon(&r);
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    let mut b = Browser::launch();
+    let tab = sign_in(&mut b, addr);
+    b.wait_for(
+        &tab,
+        "the queue on the page",
+        &format!("{}.hidden", el("queue-card")),
+        WAIT,
+        |v| v == &json!(false),
+    );
+
+    // A recipe the station does not have: refused with its cause, nothing queued.
+    queue_from_page(&mut b, &tab, "no-such-recipe", "C-6", false);
+    b.wait_for(
+        &tab,
+        "the refusal of an unknown recipe",
+        &format!("{}.dataset.class", el("queue-reply")),
+        WAIT,
+        |v| v == &json!("refused"),
+    );
+    let why = text_of(&mut b, &tab, "queue-reply");
+    assert!(why.contains("no-such-recipe"), "{why}");
+
+    // Job 1 waits for its specimen; job 2, behind it, is removed from the page.
+    queue_from_page(&mut b, &tab, "mirror", "C-7", true);
+    let row = wait_row(&mut b, &tab, 1, "job 1 on the page", |v| !v.is_null());
+    assert_eq!(row["state"], json!("queued"), "{row}");
+    assert!(
+        row["text"]
+            .as_str()
+            .unwrap()
+            .contains("waits for its specimen to be loaded"),
+        "{row}"
+    );
+    assert_eq!(row["buttons"], json!(["ready-1", "remove-1"]), "{row}");
+    wait_text(&mut b, &tab, "state", "waiting");
+    queue_from_page(&mut b, &tab, "mirror", "C-8", false);
+    let row = wait_row(&mut b, &tab, 2, "job 2 on the page", |v| !v.is_null());
+    assert_eq!(row["buttons"], json!(["remove-2"]), "{row}");
+    click(&mut b, &tab, "remove-2");
+    wait_row(&mut b, &tab, 2, "job 2 gone from the page", |v| v.is_null());
+    wait_text(&mut b, &tab, "queue-reply", "removed job 2");
+    // Still waiting: nothing started without the specimen.
+    assert_eq!(status(&r).await.state, State::Waiting);
+    assert!(std::fs::read_dir(r.out())
+        .unwrap()
+        .filter_map(Result::ok)
+        .all(|e| !e.path().join("journal.jsonl").exists()));
+
+    // Specimen loaded, from the page: the job runs, and the live view names it.
+    click(&mut b, &tab, "ready-1");
+    wait_text(&mut b, &tab, "job", "job 1: recipe mirror, specimen C-7");
+    wait_row(&mut b, &tab, 1, "job 1 running", |v| {
+        v["state"] == json!("running")
+    });
+
+    // Its scan ends: the verdict against the recipe in the live view, the queue and the
+    // history.
+    let v = b.wait_for(
+        &tab,
+        "the verdict in the live view",
+        "document.getElementById('verdict') && document.getElementById('verdict').dataset.verdict",
+        WAIT,
+        |v| v.as_str().is_some_and(|s| !s.is_empty()),
+    );
+    assert_eq!(v, json!("does not conform"));
+    let result = text_of(&mut b, &tab, "result");
+    assert!(
+        result.contains("recipe mirror, job 1") && result.contains("4 of 4 lines"),
+        "{result}"
+    );
+    // The summary names the limit the surface fails.
+    assert!(result.contains("Ra1"), "{result}");
+    let row = wait_row(&mut b, &tab, 1, "job 1 finished", |v| {
+        v["state"] == json!("finished")
+    });
+    assert_eq!(row["verdict"], json!("does not conform"), "{row}");
+    assert!(
+        row["text"]
+            .as_str()
+            .unwrap()
+            .starts_with("success, does not conform"),
+        "{row}"
+    );
+    assert_eq!(row["buttons"], json!([]), "{row}");
+    let history = b.wait_for(
+        &tab,
+        "the verdict in the history",
+        "Array.from(document.querySelectorAll('#history tbody tr')).map(tr => tr.innerText).join('\\n')",
+        WAIT,
+        |v| v.as_str().is_some_and(|s| s.contains("does not conform")),
+    );
+    assert!(history.as_str().unwrap().contains("mirror"), "{history}");
+
+    // The queue's log names alice, with where she was, for each of her commands.
+    let log = std::fs::read_to_string(r.out().join("queue-log.jsonl")).unwrap();
+    let by_alice: Vec<(String, Vec<u64>)> = log
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|e| e["peer"]["web"]["user"] == json!("alice"))
+        .map(|e| {
+            let from = e["peer"]["web"]["address"].as_str().unwrap_or_default();
+            assert!(from.starts_with("127.0.0.1:"), "{e}");
+            (
+                e["command"].as_str().unwrap().to_owned(),
+                serde_json::from_value(e["jobs"].clone()).unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        by_alice,
+        vec![
+            ("add".to_owned(), vec![1]),
+            ("add".to_owned(), vec![2]),
+            ("remove".to_owned(), vec![2]),
+            ("ready".to_owned(), vec![1]),
+        ],
+        "{log}"
+    );
+    // The scan is job 1's, of the recipe.
+    let dir = scan_dir(&r);
+    match &records(&dir)[0] {
+        Record::Start(s) => {
+            let job = s.job.as_ref().expect("the start names the job");
+            assert_eq!((job.id, job.recipe.as_str()), (Some(1), "mirror"));
+        }
+        other => panic!("{other:?}"),
+    }
+
+    // A scan started from the page by recipe and specimen, outside the queue, then paused
+    // (so that it cannot end by itself meanwhile) and aborted from the page after its
+    // confirmation.
+    b.eval(
+        &tab,
+        &format!(
+            "{}.value = 'mirror'; {}.value = 'C-9'; {}.requestSubmit(); true",
+            el("start-recipe"),
+            el("specimen"),
+            el("start-form")
+        ),
+    );
+    wait_text(&mut b, &tab, "state", "scanning");
+    click(&mut b, &tab, "pause");
+    wait_text(&mut b, &tab, "state", "paused");
+    click(&mut b, &tab, "abort");
+    assert_eq!(
+        b.eval(&tab, &format!("{}.hidden", el("abort-confirm"))),
+        json!(false)
+    );
+    click(&mut b, &tab, "abort-yes");
+    wait_text(&mut b, &tab, "reply", "abort: ");
+    wait_text(&mut b, &tab, "state", "idle");
+    let mut dirs: Vec<_> = std::fs::read_dir(r.out())
+        .unwrap()
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.join("journal.jsonl").exists())
+        .collect();
+    dirs.sort();
+    assert_eq!(dirs.len(), 2, "{dirs:?}");
+    let recs = records(&dirs[1]);
+    let Record::Start(start) = &recs[0] else {
+        panic!("{:?}", recs[0])
+    };
+    assert_eq!(start.specimen, "C-9");
+    let job = start.job.as_ref().expect("the start names the recipe");
+    assert_eq!((job.id, job.recipe.as_str()), (None, "mirror"));
+    assert_eq!(
+        start
+            .peer
+            .as_ref()
+            .and_then(|p| p.web.as_ref())
+            .map(|w| w.user.as_str()),
+        Some("alice")
+    );
+    let stop = recs.iter().rev().find_map(|r| match r {
+        Record::Stop(s) => Some(s.status),
+        _ => None,
+    });
+    assert_eq!(stop, Some(StopStatus::Abort), "{recs:?}");
+
     sigterm(&d);
     assert!(wait_exit(&mut d).success());
     r.sim.shutdown().await;

@@ -1,11 +1,12 @@
 // The station's page: signs in with a token, follows the daemon's live stream (/api/live),
 // sends the operator's commands as the control socket's requests (/api/CLASS) with the
-// session's CSRF token, and lists the history (/api/scans). Every text from the daemon is
+// session's CSRF token, shows the job queue (/api/queue-list) and lists the history
+// (/api/scans). Every text from the daemon is
 // set as text, never as markup.
 "use strict";
 
 const $ = (id) => document.getElementById(id);
-const page = { csrf: null, role: null, source: null, retry: null, downSince: null, rows: new Map(), scan: null, status: null };
+const page = { csrf: null, role: null, source: null, retry: null, downSince: null, rows: new Map(), scan: null, status: null, queue: null, queueKey: null, queueTimer: null };
 
 function text(id, value) { $(id).textContent = value; }
 
@@ -48,6 +49,7 @@ async function api(path, options) {
 
 function showLogin(message) {
   stopStream();
+  if (page.queueTimer) { clearInterval(page.queueTimer); page.queueTimer = null; }
   $("main").hidden = true;
   $("logout").hidden = true;
   $("login").hidden = false;
@@ -64,8 +66,11 @@ function signedIn(s) {
   $("logout").hidden = !page.csrf;
   text("who", s.user + (s.role === "view" ? " (view only)" : ""));
   $("controls").hidden = s.role !== "operate";
+  document.body.classList.toggle("viewer", s.role !== "operate");
   connect();
   loadHistory();
+  loadQueue();
+  if (!page.queueTimer) page.queueTimer = setInterval(loadQueue, 10000);
 }
 
 async function checkSession() {
@@ -168,17 +173,20 @@ function onStatus(v) {
   text("stage", s.stage);
   text("fault", v.last_fault ? v.last_fault.reason + " (" + fmtTime(v.last_fault.at) + ")" : "none");
   text("last-stop", s.last_stop ? (s.last_stop.scan_id || "start") + ": " + s.last_stop.status + " — " + s.last_stop.reason : "–");
+  showJob();
+  const key = JSON.stringify([s.queue || null, s.state, s.scan_id || null]);
+  if (key !== page.queueKey) { page.queueKey = key; loadQueue(); }
   const paused = s.state === "paused" || s.state === "pausing";
   $("pause").disabled = !(s.state === "scanning" || s.state === "suspended" || s.state === "starting");
   $("resume").disabled = !paused;
-  $("abort").disabled = s.state === "idle";
-  if (s.state === "idle") $("abort-confirm").hidden = true;
+  $("abort").disabled = s.state === "idle" || s.state === "waiting";
+  if ($("abort").disabled) $("abort-confirm").hidden = true;
 }
 
 // Commands: the control socket's requests.
 
-async function command(cls, body) {
-  const reply = $("reply");
+async function command(cls, body, replyId) {
+  const reply = $(replyId || "reply");
   reply.dataset.class = "pending";
   reply.textContent = cls + "…";
   try {
@@ -192,6 +200,7 @@ async function command(cls, body) {
     reply.dataset.class = "error";
     reply.textContent = cls + " not sent: the daemon is not reachable";
   }
+  if (cls.startsWith("queue") || cls === "ready") loadQueue();
 }
 
 $("pause").addEventListener("click", () => command("pause"));
@@ -201,10 +210,104 @@ $("abort-no").addEventListener("click", () => { $("abort-confirm").hidden = true
 $("abort-yes").addEventListener("click", () => { $("abort-confirm").hidden = true; command("abort"); });
 $("start-form").addEventListener("submit", (ev) => {
   ev.preventDefault();
-  command("start", {
+  const body = {
     specimen: $("specimen").value, operator: $("operator").value,
     notes: $("notes").value, mode: $("mode").value,
-  });
+  };
+  const recipe = $("start-recipe").value.trim();
+  if (recipe) body.recipe = recipe;
+  command("start", body);
+});
+
+// The job queue: the jobs waiting, the one running and the last ones finished.
+
+const FINISHED_SHOWN = 10;
+
+function who(peer) {
+  if (!peer) return "–";
+  if (peer.web) return peer.web.user;
+  return "uid " + peer.uid + " (control socket)";
+}
+
+function jobState(j) {
+  if (j.state === "queued") {
+    if (!j.needs_loading) return "waiting its turn";
+    return j.loaded ? "waiting its turn, specimen loaded" : "waits for its specimen to be loaded";
+  }
+  if (j.state === "running") return "running" + (j.scan_id ? ": " + j.scan_id : "");
+  return j.outcome + (j.verdict ? ", " + j.verdict : "") + (j.scan_id ? " (" + j.scan_id + ")" : "") + " — " + j.reason;
+}
+
+function jobButton(label, id, cls, onClick) {
+  const b = document.createElement("button");
+  b.textContent = label;
+  b.id = id;
+  b.className = "operate" + (cls ? " " + cls : "");
+  b.addEventListener("click", onClick);
+  return b;
+}
+
+async function loadQueue() {
+  let r;
+  try { r = await api("/api/queue-list"); } catch (e) { return; }
+  const card = $("queue-card");
+  if (r.status !== 200 || !r.body || r.body.class !== "queue") { card.hidden = true; page.queue = null; showJob(); return; }
+  card.hidden = false;
+  const q = r.body;
+  page.queue = q;
+  $("queue-held").hidden = !q.held;
+  text("queue-held-why", q.held ? "The queue is stopped: " + q.held + " " : "");
+  const open = q.jobs.filter((j) => j.state !== "finished");
+  const done = q.jobs.filter((j) => j.state === "finished").slice(-FINISHED_SHOWN).reverse();
+  const body = $("queue").tBodies[0];
+  body.textContent = "";
+  for (const j of open.concat(done)) {
+    const tr = document.createElement("tr");
+    tr.dataset.job = j.id;
+    tr.dataset.state = j.state;
+    const cell = (t) => { const td = document.createElement("td"); td.textContent = t; tr.append(td); return td; };
+    cell(String(j.id));
+    cell(j.recipe.name);
+    cell(j.specimen || "–");
+    const st = cell(jobState(j));
+    st.className = "job-state";
+    if (j.verdict) st.dataset.verdict = j.verdict;
+    cell(who(j.added_by));
+    const act = cell("");
+    if (j.state === "queued") {
+      if (j.needs_loading && !j.loaded) act.append(jobButton("Specimen loaded", "ready-" + j.id, "", () => command("ready", { job: j.id }, "queue-reply")));
+      act.append(jobButton("Remove", "remove-" + j.id, "danger", () => command("queue-remove", { job: j.id }, "queue-reply")));
+    }
+    body.append(tr);
+  }
+  $("queue-empty").hidden = open.length > 0;
+  showJob();
+}
+
+function showJob() {
+  const s = page.status, q = page.queue;
+  const running = s && s.queue && s.queue.running;
+  const j = running && q ? q.jobs.find((x) => x.id === running) : null;
+  let t = running ? "job " + running + (j ? ": recipe " + j.recipe.name + ", specimen " + (j.specimen || "–") : "") : "none";
+  if (s && s.queue) {
+    t += "; " + s.queue.queued + " waiting";
+    if (s.queue.held) t += "; the queue is stopped";
+  }
+  text("job", t);
+  $("job").dataset.job = running || "";
+}
+
+$("queue-continue").addEventListener("click", () => command("queue-continue", {}, "queue-reply"));
+$("queue-form").addEventListener("submit", (ev) => {
+  ev.preventDefault();
+  const body = {
+    recipe: $("queue-recipe").value.trim(), specimen: $("queue-specimen").value,
+    operator: $("queue-operator").value, notes: $("queue-notes").value,
+    needs_loading: $("queue-loading").checked,
+  };
+  const y = $("queue-y").value;
+  if (y !== "") body.y_start_mm = Number(y);
+  command("queue-add", body, "queue-reply");
 });
 
 // The last line's profile: the envelope of its heights.
@@ -302,7 +405,8 @@ function onResult(r) {
   v.className = "verdict";
   v.dataset.verdict = r.verdict || "";
   v.textContent = r.verdict ? r.verdict : "no specification given, no verdict";
-  head.append(r.scan_id + " (" + r.state + ", " + r.lines_done + " of " + r.lines_planned + " lines): ", v);
+  const job = (r.recipe ? ", recipe " + r.recipe : "") + (r.job ? ", job " + r.job : "");
+  head.append(r.scan_id + " (" + r.state + ", " + r.lines_done + " of " + r.lines_planned + " lines" + job + "): ", v);
   box.append(head);
   if (r.verdict_summary) {
     const s = document.createElement("div");
@@ -344,6 +448,7 @@ async function loadHistory() {
     const cell = (t, cls) => { const td = document.createElement("td"); td.textContent = t; if (cls) td.className = cls; tr.append(td); return td; };
     cell(s.scan_id);
     cell(s.state + (s.lines_done === s.lines_planned ? "" : " " + s.lines_done + "/" + s.lines_planned));
+    cell(s.recipe || "–");
     cell(s.specimen || "–");
     cell(s.verdict || "–");
     cell(fmtNum(s.ra_mean_um), "num");
