@@ -24,9 +24,9 @@ use crate::metrology::{check_heights, check_pitch, MetrologyError};
 pub struct X3pMeta {
     /// ISO 8601 date-time of the measurement.
     pub date: String,
-    /// The instrument's calibration date (ISO 8601 date or date-time). The format requires a
-    /// value: an empty one is written as [`UNKNOWN_CALIBRATION_DATE`] and the comment says
-    /// that it was not recorded.
+    /// The instrument's calibration date (ISO 8601 date or date-time). Empty: no
+    /// `CalibrationDate` element is written (a made-up date could be read as a real one) and
+    /// the comment says that none was stated.
     pub calibration_date: String,
     /// The probing system's identification (stylus, tip radius); empty: the model.
     pub probe: String,
@@ -133,9 +133,12 @@ fn zip_stored(entries: &[(&str, &[u8])]) -> Vec<u8> {
     out
 }
 
-/// What an unknown calibration date is written as: the format requires an xsd:dateTime, and
-/// the epoch cannot be mistaken for a real calibration.
-pub const UNKNOWN_CALIBRATION_DATE: &str = "1970-01-01T00:00:00Z";
+/// A length in mm as metres rounded to the picometre, so that a pitch of 0.01 mm is written
+/// `1e-5` and not with the float noise of the mean it came from (`1.0000000000000009e-5`).
+/// Integer picometres divided by 10¹² give the double nearest the decimal value.
+fn metres(mm: f64) -> f64 {
+    (mm * 1e9).round() / 1e12
+}
 
 /// An ISO 8601 date (`2025-03-14`) as the xsd:dateTime the format wants; a date-time as it is.
 fn as_datetime(d: &str) -> String {
@@ -148,14 +151,22 @@ fn as_datetime(d: &str) -> String {
 }
 
 /// The X3P archive of a row-major grid (heights µm, `rows` lines along y, `cols` points along x).
+/// `first_y_mm` is the machine y of the first line, written as the CY axis offset so that the
+/// file places the grid where the stage traced it.
 pub fn to_x3p(
     heights_um: &[f64],
     rows: usize,
     cols: usize,
     pitch_x_mm: f64,
     pitch_y_mm: f64,
+    first_y_mm: f64,
     meta: &X3pMeta,
 ) -> Result<Vec<u8>, MetrologyError> {
+    if !first_y_mm.is_finite() {
+        return Err(bad(format!(
+            "the y of the first line ({first_y_mm} mm) is not a finite number"
+        )));
+    }
     check_pitch(pitch_x_mm)?;
     check_pitch(pitch_y_mm)?;
     if rows.checked_mul(cols) != Some(heights_um.len()) || rows == 0 || cols == 0 {
@@ -177,16 +188,17 @@ pub fn to_x3p(
 <p:ISO5436_2 xmlns:p="http://www.opengps.eu/2008/ISO5436_2" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:schemaLocation="http://www.opengps.eu/2008/ISO5436_2 http://www.opengps.eu/2008/ISO5436_2/ISO5436_2.xsd">
 <Record1><Revision>ISO5436 - 2000</Revision><FeatureType>SUR</FeatureType><Axes>
 <CX><AxisType>I</AxisType><DataType>D</DataType><Increment>{ix:e}</Increment><Offset>0</Offset></CX>
-<CY><AxisType>I</AxisType><DataType>D</DataType><Increment>{iy:e}</Increment><Offset>0</Offset></CY>
+<CY><AxisType>I</AxisType><DataType>D</DataType><Increment>{iy:e}</Increment><Offset>{oy:e}</Offset></CY>
 <CZ><AxisType>A</AxisType><DataType>D</DataType><Increment>1</Increment><Offset>0</Offset></CZ>
 </Axes></Record1>
-<Record2><Date>{date}</Date><Creator>{creator}</Creator><Instrument><Manufacturer>{man}</Manufacturer><Model>{model}</Model><Serial>{serial}</Serial><Version>{version}</Version></Instrument><CalibrationDate>{calibration}</CalibrationDate><ProbingSystem><Type>Contacting</Type><Identification>{probe}</Identification></ProbingSystem><Comment>{comment}</Comment></Record2>
+<Record2><Date>{date}</Date><Creator>{creator}</Creator><Instrument><Manufacturer>{man}</Manufacturer><Model>{model}</Model><Serial>{serial}</Serial><Version>{version}</Version></Instrument>{calibration}<ProbingSystem><Type>Contacting</Type><Identification>{probe}</Identification></ProbingSystem><Comment>{comment}</Comment></Record2>
 <Record3><MatrixDimension><SizeX>{cols}</SizeX><SizeY>{rows}</SizeY><SizeZ>1</SizeZ></MatrixDimension><DataLink><PointDataLink>bindata/data.bin</PointDataLink><MD5ChecksumPointData>{data_md5}</MD5ChecksumPointData></DataLink></Record3>
 <Record4><ChecksumFile>md5checksum.hex</ChecksumFile></Record4>
 </p:ISO5436_2>
 "#,
-        ix = pitch_x_mm * 1e-3,
-        iy = pitch_y_mm * 1e-3,
+        ix = metres(pitch_x_mm),
+        iy = metres(pitch_y_mm),
+        oy = metres(first_y_mm),
         date = if meta.date.trim().is_empty() {
             "1970-01-01T00:00:00Z".to_string()
         } else {
@@ -198,9 +210,12 @@ pub fn to_x3p(
         serial = or_na(&meta.serial),
         version = or_na(&meta.version),
         calibration = if meta.calibration_date.trim().is_empty() {
-            UNKNOWN_CALIBRATION_DATE.to_string()
+            String::new()
         } else {
-            xml_escape(&as_datetime(&meta.calibration_date))
+            format!(
+                "<CalibrationDate>{}</CalibrationDate>",
+                xml_escape(&as_datetime(&meta.calibration_date))
+            )
         },
         probe = if meta.probe.trim().is_empty() {
             or_na(&meta.model)
@@ -213,7 +228,7 @@ pub fn to_x3p(
                 if !c.is_empty() {
                     c.push_str("; ");
                 }
-                c.push_str("calibration date not recorded (CalibrationDate is a placeholder)");
+                c.push_str("calibration date not stated ([traceability] calibration-date)");
             }
             or_na(&c)
         },
@@ -239,6 +254,8 @@ pub struct X3pGrid {
     pub pitch_x_mm: f64,
     /// y pitch, mm (1 for a profile without a y axis).
     pub pitch_y_mm: f64,
+    /// y of the first line, mm: the CY axis offset (0 when the file gives none).
+    pub offset_y_mm: f64,
     /// `SUR` (a surface) or `PRF` (a profile).
     pub feature_type: String,
     /// Points the file marks invalid (not measured), NaN in `heights_um`.
@@ -466,9 +483,9 @@ pub fn read_x3p(zip: &[u8]) -> Result<X3pGrid, MetrologyError> {
     }
     let cx = child(axes, "CX").ok_or_else(|| bad("main.xml has no CX axis"))?;
     let pitch_x_m = number(cx, &["Increment"])?.ok_or_else(|| bad("CX has no Increment"))?;
-    let pitch_y_m = match child(axes, "CY") {
-        Some(cy) => number(cy, &["Increment"])?,
-        None => None,
+    let (pitch_y_m, offset_y_m) = match child(axes, "CY") {
+        Some(cy) => (number(cy, &["Increment"])?, number(cy, &["Offset"])?),
+        None => (None, None),
     };
     let cz = child(axes, "CZ").ok_or_else(|| bad("main.xml has no CZ axis"))?;
     let z_type = text_at(cz, &["DataType"]).unwrap_or("D").to_string();
@@ -576,6 +593,12 @@ pub fn read_x3p(zip: &[u8]) -> Result<X3pGrid, MetrologyError> {
     };
     check_pitch(pitch_x_mm)?;
     check_pitch(pitch_y_mm)?;
+    let offset_y_mm = offset_y_m.unwrap_or(0.0) * 1e3;
+    if !offset_y_mm.is_finite() {
+        return Err(bad(format!(
+            "CY Offset {offset_y_mm} mm is not a finite number"
+        )));
+    }
     let meta = match child(root, "Record2") {
         Some(r2) => {
             let f = |path: &[&str]| from_na(text_at(r2, path));
@@ -599,6 +622,7 @@ pub fn read_x3p(zip: &[u8]) -> Result<X3pGrid, MetrologyError> {
         cols,
         pitch_x_mm,
         pitch_y_mm,
+        offset_y_mm,
         feature_type: feature,
         invalid_points,
         meta,

@@ -515,7 +515,10 @@ fn read_x3p(path: &Path, bytes: &[u8]) -> Result<GridInput, InputError> {
             .collect(),
         x.cols,
         x.pitch_x_mm,
-        complete.iter().map(|&r| r as f64 * x.pitch_y_mm).collect(),
+        complete
+            .iter()
+            .map(|&r| x.offset_y_mm + r as f64 * x.pitch_y_mm)
+            .collect(),
     );
     grid.index = complete.iter().map(|&r| r as u32).collect();
     grid.left_out = (0..x.rows)

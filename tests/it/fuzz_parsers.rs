@@ -861,7 +861,7 @@ fn x3p_parts() -> (Vec<u8>, Vec<u8>, Vec<u8>) {
         creator: "fuzz".into(),
         ..X3pMeta::default()
     };
-    let archive = to_x3p(&heights, 3, 4, 0.0015, 0.01, &meta).unwrap();
+    let archive = to_x3p(&heights, 3, 4, 0.0015, 0.01, 0.0, &meta).unwrap();
     let xml_start = archive.windows(5).position(|w| w == b"<?xml").unwrap();
     let end_tag = b"</p:ISO5436_2>\n";
     let xml_end = archive

@@ -38,7 +38,7 @@ fn x3p_round_trips_and_surfalize_reads_it() {
         comment: "measured grid <test> & more".to_string(),
         ..X3pMeta::default()
     };
-    let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, &meta).unwrap();
+    let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, 0.0, &meta).unwrap();
     let back = read_x3p(&bytes).unwrap();
     assert_eq!((back.rows, back.cols), (rows, cols));
     // Record2 comes back unescaped; empty fields were written as "not available"; the
@@ -46,7 +46,7 @@ fn x3p_round_trips_and_surfalize_reads_it() {
     assert!(
         back.meta
             .comment
-            .starts_with("measured grid <test> & more; calibration date not recorded"),
+            .starts_with("measured grid <test> & more; calibration date not stated"),
         "{}",
         back.meta.comment
     );
@@ -160,7 +160,7 @@ fn x3p_files_of_other_software_are_read() {
 #[test]
 fn damaged_or_unsupported_x3p_files_are_named_clearly() {
     let (z, rows, cols) = grid();
-    let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, &X3pMeta::default()).unwrap();
+    let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, 0.0, &X3pMeta::default()).unwrap();
     let e = read_x3p(&bytes[..bytes.len() / 2]).unwrap_err().to_string();
     assert!(e.contains("not a readable X3P file"), "{e}");
     let e = read_x3p(b"x_mm,z_um\n0,1\n").unwrap_err().to_string();
@@ -179,22 +179,56 @@ fn calibration_date_and_manufacturer_are_what_the_caller_gives() {
         probe: "SJ-210 stylus, tip radius 2 µm".into(),
         ..X3pMeta::default()
     };
-    let back = read_x3p(&to_x3p(&z, rows, cols, 0.0015, 0.01, &meta).unwrap()).unwrap();
+    let back = read_x3p(&to_x3p(&z, rows, cols, 0.0015, 0.01, 0.0, &meta).unwrap()).unwrap();
     // The calibration date, not the scan's start; a plain date becomes an xsd:dateTime.
     assert_eq!(back.meta.calibration_date, "2026-03-14T00:00:00");
     assert_eq!(back.meta.date, "2026-11-30T09:15:00+00:00");
     assert_eq!(back.meta.manufacturer, "Mitutoyo");
     assert_eq!(back.meta.serial, "123456");
     assert_eq!(back.meta.probe, "SJ-210 stylus, tip radius 2 µm");
-    // Unknown: the epoch placeholder, and the comment says so.
-    let back =
-        read_x3p(&to_x3p(&z, rows, cols, 0.0015, 0.01, &X3pMeta::default()).unwrap()).unwrap();
-    assert_eq!(back.meta.calibration_date, "1970-01-01T00:00:00Z");
+    // Unknown: no CalibrationDate at all (no made-up date a reader could take for a real
+    // one), and the comment says none was stated.
+    let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, 0.0, &X3pMeta::default()).unwrap();
+    assert!(!main_xml(&bytes).contains("CalibrationDate"));
+    let back = read_x3p(&bytes).unwrap();
+    assert_eq!(back.meta.calibration_date, "");
     assert!(
-        back.meta.comment.contains("calibration date not recorded"),
+        back.meta.comment.contains("calibration date not stated"),
         "{}",
         back.meta.comment
     );
+}
+
+/// main.xml of an archive we wrote (stored, so its text is in the bytes as it is).
+fn main_xml(bytes: &[u8]) -> String {
+    let text = String::from_utf8_lossy(bytes);
+    let start = text.find("<?xml").unwrap();
+    let end = text.find("</p:ISO5436_2>").unwrap();
+    text[start..end].to_string()
+}
+
+#[test]
+fn axes_carry_the_machine_y_of_the_first_line_and_pitches_without_float_noise() {
+    // 31 lines stepped 0.01 mm from y = 12.34 mm: their mean pitch carries float noise
+    // (12.64 − 12.34 is not 0.3 in binary), which the file must not.
+    let (z, _, cols) = grid();
+    let y: Vec<f64> = (0..31).map(|k| 12.34 + k as f64 * 0.01).collect();
+    let (pitch_y_mm, _) = surfscan::grid::mean_pitch_y(&y);
+    assert_ne!(pitch_y_mm, 0.01, "the test needs a noisy mean pitch");
+    let z: Vec<f64> = (0..31).flat_map(|_| z[..cols].to_vec()).collect();
+    let bytes = to_x3p(&z, 31, cols, 0.0015, pitch_y_mm, y[0], &X3pMeta::default()).unwrap();
+    let xml = main_xml(&bytes);
+    assert!(xml.contains("<CX><AxisType>I</AxisType><DataType>D</DataType><Increment>1.5e-6</Increment><Offset>0</Offset></CX>"), "{xml}");
+    assert!(xml.contains("<CY><AxisType>I</AxisType><DataType>D</DataType><Increment>1e-5</Increment><Offset>1.234e-2</Offset></CY>"), "{xml}");
+    let back = read_x3p(&bytes).unwrap();
+    assert!(
+        (back.offset_y_mm - 12.34).abs() < 1e-12,
+        "{}",
+        back.offset_y_mm
+    );
+    assert!((back.pitch_y_mm - 0.01).abs() < 1e-15);
+    // A non-finite first y is refused, not written.
+    assert!(to_x3p(&z, 31, cols, 0.0015, 0.01, f64::NAN, &X3pMeta::default()).is_err());
 }
 
 #[test]
@@ -221,6 +255,7 @@ fn analyze_reads_an_x3p_as_the_same_grid_as_its_csv() {
             cols,
             0.003484,
             0.010452,
+            0.0,
             &X3pMeta::default(),
         )
         .unwrap(),

@@ -40,7 +40,7 @@ const MODEL: &str = "SJ-210";
 const FIRMWARE: &str = "1.234";
 const DRIVE: &str = "standard drive unit 178-230";
 const CONFIG_HASH: &str = "9f2c0000000000000000000000000000000000000000000000000000000000aa";
-const SOFTWARE: &str = "0.9.1-test";
+const SOFTWARE: &str = "surfscan 0.9.1-test";
 const SERIAL: &str = "SJ210-00417";
 
 fn sur2_rows() -> Vec<Vec<f64>> {
@@ -438,7 +438,8 @@ fn analyze_scan_dir_writes_every_file_with_traceability_and_instrument_differenc
 fn x3p_of_a_scan_carries_the_traceability_and_surfalize_reads_it() {
     use surfscan::x3p::read_x3p;
     let tmp = tempfile::tempdir().unwrap();
-    let rows: Vec<usize> = (0..8).collect();
+    // Lines 3 to 10 of the data: the first traced line is not at y = 0.
+    let rows: Vec<usize> = (2..10).collect();
     let scan = build_scan(tmp.path(), &rows, ProfileKind::R, Some(StopStatus::Success));
     run_ok(&["analyze", scan.to_str().unwrap()]);
     let data = sur2_rows();
@@ -471,12 +472,30 @@ fn x3p_of_a_scan_carries_the_traceability_and_surfalize_reads_it() {
                 back.meta.comment
             );
         }
+        // The program is named once, by the version the scan recorded.
+        assert!(
+            !back.meta.comment.contains("surfscan surfscan"),
+            "{name}: {:?}",
+            back.meta.comment
+        );
         assert_eq!(back.rows, 8);
         assert!((back.pitch_y_mm - STEP_Y_NM as f64 * 1e-6).abs() < 1e-12);
+        // The CY offset is the machine y of the first line; the increments are written
+        // without the float noise of the mean pitch.
+        assert!(
+            (back.offset_y_mm - 2.0 * STEP_Y_NM as f64 * 1e-6).abs() < 1e-12,
+            "{name}: {}",
+            back.offset_y_mm
+        );
+        let xml = String::from_utf8_lossy(&std::fs::read(scan.join(name)).unwrap()).to_string();
+        assert!(
+            xml.contains("<Increment>1.0452e-5</Increment><Offset>2.0904e-5</Offset></CY>"),
+            "{name}: {xml}"
+        );
     }
     let measured = read_x3p(&std::fs::read(scan.join("measured.x3p")).unwrap()).unwrap();
     assert_eq!(measured.cols, data[0].len());
-    assert!((measured.heights_um[3 * measured.cols + 10] - data[3][10]).abs() < 1e-9);
+    assert!((measured.heights_um[3 * measured.cols + 10] - data[5][10]).abs() < 1e-9);
 
     let script =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/python/metrology_x3p_read.py");
@@ -493,7 +512,7 @@ fn x3p_of_a_scan_carries_the_traceability_and_surfalize_reads_it() {
     let v: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["rows"], 8);
     assert_eq!(v["cols"], data[0].len());
-    assert!((v["heights_um"][10].as_f64().unwrap() - data[0][10]).abs() < 1e-9);
+    assert!((v["heights_um"][10].as_f64().unwrap() - data[2][10]).abs() < 1e-9);
 
     // An R profile from the instrument is not filtered again, and the recipe says why.
     let r = report(&scan);
@@ -509,7 +528,7 @@ fn x3p_of_a_scan_carries_the_traceability_and_surfalize_reads_it() {
         apply_lambda_c: false,
         ..expected_options()
     };
-    let ours = analyze_line(&data[2], PITCH_X_MM, &unfiltered)
+    let ours = analyze_line(&data[4], PITCH_X_MM, &unfiltered)
         .unwrap()
         .params;
     assert!((r["lines"][2]["Ra_um"].as_f64().unwrap() - ours.ra_um).abs() < 1e-12);

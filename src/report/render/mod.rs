@@ -120,7 +120,7 @@ fn x3p_meta(ctx: &ReportContext, what: &str) -> X3pMeta {
                 serial: t.instrument_serial.clone().unwrap_or_default(),
                 version: t.firmware.clone(),
                 comment: format!(
-                    "{what}; specimen {}; scan {}; operator {}; notes: {}; drive unit {}; conditions {}; scanned by surfscan {}, config sha256 {}; written by {}",
+                    "{what}; specimen {}; scan {}; operator {}; notes: {}; drive unit {}; conditions {}; scanned by {}, config sha256 {}; written by {}",
                     t.specimen,
                     t.scan_id,
                     t.operator,
@@ -338,6 +338,8 @@ pub fn write_data_files(
         "NURBS model sampled at half the x pitch on the data lines",
     );
     let input = ctx.input.clone();
+    // Both files share the measured lines' y: the model is sampled on them.
+    let first_y_mm = grid.y_mm.first().copied().unwrap_or(0.0);
     let (plots, rk_plots, x3p) = std::thread::scope(|s| {
         let x3p = s.spawn(|| -> Result<(PathBuf, Option<PathBuf>), ReportError> {
             // Encodes one grid of heights at the grid's y pitch and writes it as `name`.
@@ -349,6 +351,7 @@ pub fn write_data_files(
                     cols,
                     pitch_x_mm,
                     measured.pitch_y_mm,
+                    first_y_mm,
                     meta,
                 )
                 .map_err(metrology(format!("{input}: {name}")))?;
