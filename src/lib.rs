@@ -41,6 +41,7 @@ pub mod atomic;
 pub mod build_info;
 pub mod cli;
 pub mod config;
+pub mod contact;
 pub mod control;
 pub mod devices;
 pub mod fit;
