@@ -63,6 +63,7 @@ pub mod sj210;
 pub mod specification;
 pub mod stage;
 pub mod station_lock;
+pub mod step;
 pub mod telemetry;
 pub mod transport;
 pub mod units;

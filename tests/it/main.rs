@@ -59,5 +59,6 @@ mod stage_scan;
 mod stage_zaber;
 mod stage_zaber_scan;
 mod station_lock;
+mod step_occt;
 mod web_api;
 mod web_page;
