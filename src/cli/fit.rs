@@ -39,6 +39,10 @@
 //! hold-out figures of the paper's interpolation and of least-squares alternatives side by
 //! side, so the method is chosen with numbers.
 //!
+//! `--step OUT.step --solid-depth-mm D` also writes the surface as the top face of a closed
+//! block (STEP AP214, [`crate::step`]) whose flat bottom is D mm below the surface's lowest
+//! point, for FE models; the report's `step` names its bottom and extent.
+//!
 //! Layer 5 (composition).
 
 use super::input_args::{tell_findings, InputArgs};
@@ -105,6 +109,63 @@ pub struct Args {
     /// scan wrote when it completed).
     #[arg(long)]
     pub force: bool,
+    /// Also write the surface as the top face of a closed solid (a block under the specimen's
+    /// area, flat bottom) to this STEP AP214 file, for FE models (needs --solid-depth-mm).
+    #[arg(long, value_name = "OUT.step", requires = "solid_depth_mm")]
+    pub step: Option<PathBuf>,
+    /// The solid's depth from the surface's lowest point to its flat bottom, mm (with
+    /// --step).
+    #[arg(long, value_name = "D", requires = "step")]
+    pub solid_depth_mm: Option<f64>,
+}
+
+/// Writes the STEP solid of `surface` when `--step` asks for it; `lowest_data_z_mm` is the
+/// lowest height the surface interpolates (None when it does not interpolate the heights as
+/// read).
+fn write_step_solid(
+    args: &Args,
+    surface: &crate::nurbs::NurbsSurface,
+    lowest_data_z_mm: Option<f64>,
+) -> Result<Option<serde_json::Value>, CliError> {
+    let (Some(path), Some(depth_mm)) = (&args.step, args.solid_depth_mm) else {
+        return Ok(None);
+    };
+    let opts = crate::step::StepOptions {
+        depth_mm,
+        file_name: path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        timestamp: chrono::Utc::now()
+            .naive_utc()
+            .format("%Y-%m-%dT%H:%M:%S")
+            .to_string(),
+        product_name: format!("surfscan solid of {}", args.input.display()),
+        description: format!(
+            "surface fitted by surfscan {} as the top face of a block {depth_mm} mm deep below its lowest point; units mm",
+            env!("CARGO_PKG_VERSION")
+        ),
+        lowest_data_z_mm,
+    };
+    // The surface is checked (and the text made) before the file is opened.
+    let mut text = Vec::new();
+    let stats = crate::step::write_solid_step(&mut text, surface, &opts).map_err(|e| match e {
+        crate::step::StepError::Io(e) => io_err("cannot write STEP", path, e),
+        e => CliError::new(Exit::Failed, format!("{}: {e}", path.display())),
+    })?;
+    ensure_parent(path)?;
+    write_atomically(path, |w| std::io::Write::write_all(w, &text))
+        .map_err(|e| io_err("cannot write STEP", path, e))?;
+    Ok(Some(serde_json::json!({
+        "path": path.display().to_string(),
+        "bytes": stats.bytes,
+        "entities": stats.entities,
+        "depth_mm": depth_mm,
+        "lowest_z_mm": stats.lowest_z_mm,
+        "bottom_z_mm": stats.bottom_z_mm,
+        "x_mm": stats.x_mm,
+        "y_mm": stats.y_mm,
+    })))
 }
 
 pub use crate::scan::surface_files::part_path;
@@ -356,6 +417,8 @@ struct Fitted {
     judged: Judged,
     written: Vec<WrittenIges>,
     write_s: f64,
+    /// The STEP solid written (`--step`): its report entry, and the seconds it took.
+    step: Option<(serde_json::Value, f64)>,
 }
 
 /// The verdict on the model between lines, and the alternatives when asked for.
@@ -425,6 +488,11 @@ impl<'a> Fitting<'a> {
     /// [`SIDE_BY_SIDE_MAX_POINTS`] has the verdict computed beside the fit and the write;
     /// a larger one runs each step in turn and frees its heights before the write.
     fn run(&self, mut grid: Grid) -> Result<Fitted, CliError> {
+        let lowest_data_um = grid
+            .heights_um
+            .iter()
+            .cloned()
+            .fold(f64::INFINITY, f64::min);
         // A threshold given wrongly is refused after the fit and before anything is written,
         // in both orders.
         let threshold = self.args.model.holdout_threshold();
@@ -488,7 +556,19 @@ impl<'a> Fitting<'a> {
                 (fitted, residual, judged, written)
             }
         };
+        // The surface passes through the heights only when it interpolates them as read.
+        let interpolates = matches!(self.recipe.method, crate::fit::VMethod::Interpolate)
+            && replaced.is_empty()
+            && lowest_data_um.is_finite();
+        let t_step = Instant::now();
+        let step = write_step_solid(
+            self.args,
+            &fit.surface,
+            interpolates.then_some(lowest_data_um / 1000.0),
+        )?
+        .map(|v| (v, t_step.elapsed().as_secs_f64()));
         Ok(Fitted {
+            step,
             fit,
             replaced,
             fit_s,
@@ -732,7 +812,9 @@ impl<'a> Fitting<'a> {
                 "shape_check": f.shape_s,
                 "residual": f.residual_s,
                 "write_iges": f.write_s,
+                "write_step": f.step.as_ref().map(|s| s.1),
             },
+            "step": f.step.as_ref().map(|s| &s.0),
         });
         if let (Some(o), Ok(serde_json::Value::Object(shape))) = (
             report.as_object_mut(),
@@ -772,6 +854,15 @@ impl<'a> Fitting<'a> {
             f.fit_s * 1e3,
             f.write_s * 1e3
         );
+        if let Some((step, _)) = &f.step {
+            say!(
+                "{}: the surface as the top face of a solid {} mm deep (bottom at z = {} mm), {} bytes",
+                step["path"].as_str().unwrap_or_default(),
+                step["depth_mm"],
+                step["bottom_z_mm"],
+                step["bytes"]
+            );
+        }
         match &judged.verdict {
             Ok(b) => say!("{}", b.short()),
             Err(e) => say!("no verdict on the model between lines: {e}"),
@@ -838,6 +929,12 @@ fn check_args(args: &Args) -> Result<(), CliError> {
                 format!("{name} must be at least 1 (default and largest {MAX_SECTION_LINES})"),
             ));
         }
+    }
+    if let Some(d) = args.solid_depth_mm.filter(|d| !(d.is_finite() && *d > 0.0)) {
+        return Err(CliError::new(
+            Exit::Usage,
+            format!("--solid-depth-mm {d} must be a positive number of millimetres (the block's depth below the surface's lowest point)"),
+        ));
     }
     Ok(())
 }

@@ -1,7 +1,7 @@
 //! The command line: one subcommand per file, each with its own arguments and `run`.
 //!
 //! Exit codes follow sysexits(3) so scripts and systemd can tell causes apart: 0 success,
-//! 1 the job failed, 2 usage, 3 done but the result is partial (`scan`, `demo`, `analyze`,
+//! 1 the job failed (`contact`: the contact cannot be computed), 2 usage, 3 done but the result is partial (`scan`, `demo`, `analyze`,
 //! `fit`: every output that could be made is written; made from fewer lines than the input
 //! holds, "N of M lines", or report.json's `characterisation.failed_sections` names each
 //! section that could not be made and why),
@@ -39,6 +39,7 @@ macro_rules! tell {
 pub mod analyze;
 pub mod check_config;
 pub mod console;
+pub mod contact;
 pub mod control;
 pub mod daemon;
 mod daemon_jobs;
@@ -78,6 +79,8 @@ pub enum Command {
     Probe(probe::Args),
     /// Characterise a scan directory, an X3P file, or a profile or grid CSV: ISO roughness per line, areal parameters, bearing area curves, plots, X3P.
     Analyze(analyze::Args),
+    /// The contact of a measured surface with a rigid flat or a second elastic body: load–area curve, pressure map (contact.json).
+    Contact(contact::Args),
     /// Run one scan in the foreground (resuming an unfinished scan of this configuration).
     Scan(scan::Args),
     /// The station service (systemd Type=notify): resumes unfinished scans, takes commands on the control socket.
@@ -190,6 +193,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Fit(args) => fit::run(args),
         Command::Probe(args) => probe::run(args),
         Command::Analyze(args) => analyze::run(args),
+        Command::Contact(args) => contact::run(args),
         Command::Scan(args) => scan::run(args),
         Command::Daemon(args) => daemon::run(args),
         #[cfg(feature = "sim")]

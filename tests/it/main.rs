@@ -7,6 +7,7 @@ mod archive_store;
 mod cli_conventions;
 mod common;
 mod config_ranges;
+mod contact_cli;
 mod control_cli;
 mod control_server;
 mod daemon_e2e;

@@ -504,6 +504,114 @@ pub fn plot_bearing_curves(
     ))
 }
 
+/// One point of a load–area curve as drawn: nominal pressure (MPa), real contact area (%),
+/// and whether the grid resolves the contact at that load.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoadAreaPoint {
+    /// Nominal pressure, MPa.
+    pub nominal_pressure_mpa: f64,
+    /// Real contact area, % of the nominal area.
+    pub area_pct: f64,
+    /// Whether the grid resolves the contact at this load.
+    pub resolved: bool,
+}
+
+/// Writes `load_area.png` and `load_area.svg` into `dir`: the real contact area against the
+/// nominal pressure (logarithmic), a filled dot per resolved load and a hollow one where the
+/// grid does not resolve the contact; `subtitle` says what was pressed against what.
+pub fn plot_load_area(
+    dir: &Path,
+    points: &[LoadAreaPoint],
+    title: &str,
+    subtitle: &str,
+    caption: &str,
+) -> Result<[PathBuf; 2], MetrologyError> {
+    png_and_svg!(dir, "load_area", BAC_SIZE, |root| draw_load_area(
+        &root, points, title, subtitle, caption
+    ))
+}
+
+fn draw_load_area<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    points: &[LoadAreaPoint],
+    title: &str,
+    subtitle: &str,
+    caption: &str,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let frame = Frame::new(root.dim_in_pixel().0, title, subtitle, caption);
+    let body = frame.draw(root)?;
+    let (p_lo, p_hi) = points
+        .iter()
+        .map(|p| p.nominal_pressure_mpa)
+        .filter(|p| p.is_finite() && *p > 0.0)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(p), b.max(p))
+        });
+    let (p_lo, p_hi) = if p_lo.is_finite() {
+        (p_lo / 1.5, p_hi * 1.5)
+    } else {
+        (0.1, 1000.0)
+    };
+    let (_, a_hi) = padded_range(points.iter().map(|p| p.area_pct).chain([0.0]), (0.0, 100.0));
+    let mut chart = ChartBuilder::on(&body)
+        .margin(12)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d((p_lo..p_hi).log_scale(), 0f64..a_hi.min(100.0))
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .x_desc("nominal pressure (MPa, logarithmic)")
+        .y_desc("real contact area (% of the nominal area)")
+        .label_style(font(13))
+        .axis_desc_style(font(14))
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    chart
+        .draw_series(LineSeries::new(
+            points.iter().map(|p| (p.nominal_pressure_mpa, p.area_pct)),
+            DATA.stroke_width(2),
+        ))
+        .map_err(|e| e.to_string())?;
+    chart
+        .draw_series(
+            points
+                .iter()
+                .filter(|p| p.resolved)
+                .map(|p| Circle::new((p.nominal_pressure_mpa, p.area_pct), 4, DATA.filled())),
+        )
+        .map_err(|e| e.to_string())?
+        .label("resolved by the grid")
+        .legend(|(x, y)| Circle::new((x + 12, y), 4, DATA.filled()));
+    if points.iter().any(|p| !p.resolved) {
+        chart
+            .draw_series(points.iter().filter(|p| !p.resolved).map(|p| {
+                Circle::new(
+                    (p.nominal_pressure_mpa, p.area_pct),
+                    4,
+                    MODEL.stroke_width(2),
+                )
+            }))
+            .map_err(|e| e.to_string())?
+            .label("not resolved: most contact points are isolated single points")
+            .legend(|(x, y)| Circle::new((x + 12, y), 4, MODEL.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .label_font(font(13))
+        .border_style(BLACK)
+        .background_style(WHITE.mix(0.9))
+        .draw()
+        .map_err(|e| e.to_string())
+}
+
 /// Largest number of columns drawn in a height map; wider grids are averaged over bins of
 /// equal width first (stated in the map's title), which keeps a 31 × 8000 scan's SVG small.
 pub const MAX_MAP_COLUMNS: usize = 800;
@@ -579,17 +687,41 @@ fn map_note(scale: &MapScale) -> String {
     }
 }
 
-/// The subtitle of a map: size, points, height range and scale.
-fn map_subtitle(grid: &HeightMap<'_>, scale: &MapScale) -> String {
+/// What a map shows: its files' stem, the values' name and unit in the subtitle, the colour
+/// bar's label.
+#[derive(Debug, Clone, Copy)]
+pub struct MapValues<'a> {
+    /// The files are `<stem>.png` and `<stem>.svg`.
+    pub stem: &'a str,
+    /// The values in the subtitle's range ("heights").
+    pub name: &'a str,
+    /// Their unit ("µm").
+    pub unit: &'a str,
+    /// The colour bar's label ("height (µm)").
+    pub bar: &'a str,
+}
+
+/// A height map's values.
+const HEIGHTS: MapValues<'static> = MapValues {
+    stem: "heightmap",
+    name: "heights",
+    unit: "µm",
+    bar: "height (µm)",
+};
+
+/// The subtitle of a map: size, points, value range and scale.
+fn map_subtitle(grid: &HeightMap<'_>, values: &MapValues<'_>, scale: &MapScale) -> String {
     let (lo, hi) = height_range(grid.heights_um);
     format!(
-        "{} × {} mm, {} lines × {} points; heights {} … {} µm; {}",
+        "{} × {} mm, {} lines × {} points; {} {} … {} {}; {}",
         fmt(grid.cols as f64 * grid.pitch_x_mm, Quantity::LengthMm),
         fmt(grid.rows as f64 * grid.pitch_y_mm, Quantity::LengthMm),
         grid.rows,
         grid.cols,
+        values.name,
         fmt(lo, Quantity::HeightUm),
         fmt(hi, Quantity::HeightUm),
+        values.unit,
         map_note(scale)
     )
 }
@@ -604,6 +736,7 @@ fn height_range(z: &[f64]) -> (f64, f64) {
 fn draw_map<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     grid: &HeightMap<'_>,
+    bar: &str,
     scale: &MapScale,
     frame: &Frame,
 ) -> Result<(), String>
@@ -657,7 +790,7 @@ where
         &bar_area,
         lo,
         hi,
-        "height (µm)",
+        bar,
         MAP_MARGIN,
         scale.plot_h.max(MAP_MIN_BAR_H),
     )
@@ -673,6 +806,19 @@ const MAP_MIN_BAR_H: u32 = 160;
 pub fn plot_height_map(
     dir: &Path,
     grid: &HeightMap<'_>,
+    title: &str,
+    caption: &str,
+) -> Result<[PathBuf; 2], MetrologyError> {
+    plot_map(dir, grid, &HEIGHTS, title, caption)
+}
+
+/// Writes `<values.stem>.png|svg` into `dir`: a map of any row-major values (the heights of
+/// [`HeightMap`] read as the values named by `values`) drawn as [`plot_height_map`] draws
+/// heights.
+pub fn plot_map(
+    dir: &Path,
+    grid: &HeightMap<'_>,
+    values: &MapValues<'_>,
     title: &str,
     caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
@@ -728,14 +874,19 @@ pub fn plot_height_map(
         520,
         160,
     );
-    let frame = Frame::new(MAP_WIDTH, &title, &map_subtitle(&shown, &scale), caption);
+    let frame = Frame::new(
+        MAP_WIDTH,
+        &title,
+        &map_subtitle(&shown, values, &scale),
+        caption,
+    );
     let height = frame.top_px()
         + frame.bottom_px()
         + scale.plot_h.max(MAP_MIN_BAR_H)
         + 2 * MAP_MARGIN
         + MAP_X_AREA;
-    png_and_svg!(dir, "heightmap", (MAP_WIDTH, height), |root| draw_map(
-        &root, &shown, &scale, &frame
+    png_and_svg!(dir, values.stem, (MAP_WIDTH, height), |root| draw_map(
+        &root, &shown, values.bar, &scale, &frame
     ))
 }
 
