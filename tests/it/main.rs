@@ -8,6 +8,7 @@ mod cli_conventions;
 mod common;
 mod config_ranges;
 mod contact_cli;
+mod contact_reference;
 mod control_cli;
 mod control_server;
 mod daemon_e2e;
