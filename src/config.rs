@@ -12,6 +12,7 @@
 //! [`crate::units`], and reads one file; nothing from the scan session.
 
 use crate::hook::HookSettings;
+use crate::metrology::sj_material_ratio::MaterialRatioReading;
 use crate::report::header::LabHeader;
 use crate::sj210::settings::InstrumentSettings;
 use crate::stage::settings::StageSettings;
@@ -316,6 +317,11 @@ pub struct AnalysisSettings {
     /// (default 0.5).
     #[serde(default = "d_holdout_threshold")]
     pub holdout_threshold: f64,
+    /// The reading of the material-ratio family (Rmr(c), Rmr, the Rk family) a verdict uses:
+    /// `iso` (default, ISO 13565-2 on the continuous profile) or `instrument` (the SJ
+    /// series' counted 100-level curve, as its display shows). Both are reported.
+    #[serde(default)]
+    pub material_ratio: MaterialRatioReading,
 }
 
 impl Default for AnalysisSettings {
@@ -329,6 +335,7 @@ impl Default for AnalysisSettings {
             spike_threshold_sigma: d_spike_sigma(),
             spike_max_points: d_spike_points(),
             holdout_threshold: d_holdout_threshold(),
+            material_ratio: MaterialRatioReading::Iso,
         }
     }
 }

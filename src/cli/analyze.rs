@@ -29,6 +29,7 @@ use super::{CliError, Exit};
 use crate::grid::Grid;
 use crate::input::{GridInput, Source};
 use crate::metrology::params::{analyze_line, Options, Recipe, RoughnessParams};
+use crate::metrology::sj_material_ratio::{sj_material_ratio, MaterialRatioReading};
 use crate::report::scan_dir::fit_for_report;
 use crate::report::{
     characterise, characterise_scan, Model, ReportContext, ReportError, ScanAnalysisOptions,
@@ -101,6 +102,12 @@ pub struct Args {
     /// Default: a scan's frozen `[analysis]`, else flag.
     #[arg(long, value_enum)]
     pub outliers: Option<OutliersArg>,
+    /// The reading of the material-ratio family (Rmr(c), Rmr, the Rk family) a verdict and
+    /// the summary line use: iso (ISO 13565-2 on the continuous profile) or instrument (the
+    /// SJ series' counted 100-level curve, as its display shows). Both are reported. Default:
+    /// a scan's frozen `[analysis] material-ratio`, else iso.
+    #[arg(long, value_name = "READING", value_parser = MaterialRatioReading::parse)]
+    pub material_ratio: Option<MaterialRatioReading>,
     /// The surface and the spike rule.
     #[command(flatten)]
     pub model: ModelArgs,
@@ -144,6 +151,8 @@ struct Report {
     input: String,
     kind: &'static str,
     recipe: Recipe,
+    /// The reading of the material-ratio family the summary line gives.
+    material_ratio: &'static str,
     lines: Vec<LineReport>,
     /// The spike rule, its policy and every spike found.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -196,23 +205,32 @@ fn characterise_profile(
     for w in &warnings {
         tell!("surfscan: warning: {w}");
     }
-    let summary = profile_summary(z.len(), pitch, &a.params, options);
+    let sj = sj_material_ratio(
+        &a.roughness_um,
+        &crate::metrology::params::MaterialLevels::default(),
+    )
+    .ok();
+    let reading = args.material_ratio.unwrap_or_default();
+    let summary = profile_summary(
+        z.len(),
+        pitch,
+        &reading.applied(&a.params, sj.as_ref()),
+        reading,
+        options,
+    );
     let report = Report {
         software: crate::build_info::software(),
         input: described,
         kind: "profile",
         recipe: a.recipe.clone(),
+        material_ratio: reading.statement(),
         lines: vec![LineReport {
             index: 0,
             y_mm: 0.0,
             rmr_table: crate::report::sections::lines::rmr_table(&a),
             evaluation_length: a.evaluation_length.clone(),
             blank_reasons: a.blank_reasons.clone(),
-            material_ratio_sj_series: crate::metrology::sj_material_ratio::sj_material_ratio(
-                &a.roughness_um,
-                &crate::metrology::params::MaterialLevels::default(),
-            )
-            .ok(),
+            material_ratio_sj_series: sj,
             params: a.params,
         }],
         outliers: Some(outliers),
@@ -398,6 +416,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
                 .v_method(lines, args.degree_v.unwrap_or(paper_q))?,
             replace_spikes: args.model.replace(),
             lab,
+            material_ratio: args.material_ratio.unwrap_or(frozen.material_ratio),
             ..ScanAnalysisOptions::default()
         };
         let outputs = characterise_scan(&input, &options).map_err(report_error)?;
@@ -469,6 +488,7 @@ fn fit_and_characterise(
                 .unwrap_or(crate::fit::FitOptions::default().degree_v),
         )?,
         replace_spikes: args.model.replace(),
+        material_ratio: args.material_ratio.unwrap_or_default(),
         ..ScanAnalysisOptions::default()
     };
     let mut recipe = crate::report::scan_dir::scan_recipe(&analysis, None, &[]);
@@ -490,7 +510,15 @@ fn fit_and_characterise(
 
 /// What `analyze` of a profile CSV says it found, as the instrument's display would show it:
 /// `profile of 2000 points (1 mm), λc 0.8 mm filter applied: Ra 0.2345 µm, Rq …, Rz …`.
-fn profile_summary(points: usize, pitch_mm: f64, p: &RoughnessParams, options: &Options) -> String {
+/// The summary line of a profile: its length, filter, the amplitude parameters and the Rk
+/// family of `p` in `reading` (named when it is the instrument's).
+fn profile_summary(
+    points: usize,
+    pitch_mm: f64,
+    p: &RoughnessParams,
+    reading: MaterialRatioReading,
+    options: &Options,
+) -> String {
     use crate::numfmt::{fmt, Quantity};
     let ls = options
         .lambda_s_um
@@ -504,12 +532,19 @@ fn profile_summary(points: usize, pitch_mm: f64, p: &RoughnessParams, options: &
         ),
         None => (format!("{ls}no λc filter"), "R"),
     };
+    let read_as = match reading {
+        MaterialRatioReading::Iso => "",
+        MaterialRatioReading::Instrument => " (as the SJ series reads them)",
+    };
     format!(
-        "profile of {points} points ({} mm), {filter}: {name}a {} µm, {name}q {} µm, {name}z {} µm",
+        "profile of {points} points ({} mm), {filter}: {name}a {} µm, {name}q {} µm, {name}z {} µm; {name}k {} µm, {name}pk {} µm, {name}vk {} µm{read_as}",
         fmt(points as f64 * pitch_mm, Quantity::LengthMm),
         fmt(p.ra_um, Quantity::HeightUm),
         fmt(p.rq_um, Quantity::HeightUm),
-        fmt(p.rz_um, Quantity::HeightUm)
+        fmt(p.rz_um, Quantity::HeightUm),
+        fmt(p.rk_um, Quantity::HeightUm),
+        fmt(p.rpk_um, Quantity::HeightUm),
+        fmt(p.rvk_um, Quantity::HeightUm)
     )
 }
 

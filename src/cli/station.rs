@@ -76,6 +76,7 @@ pub fn analysis_of(a: &crate::config::AnalysisSettings) -> AnalysisPlan {
         spikes: a.spike_options(),
         exclude_spikes: a.outliers == crate::config::OutlierPolicy::Exclude,
         holdout_threshold: a.holdout_threshold,
+        material_ratio: a.material_ratio,
     }
 }
 

@@ -25,12 +25,87 @@
 //! "plus one level" snap rests on two data points (the export's C and D) and is stated as
 //! such.
 //!
+//! Both readings are always reported (ISO's first); [`MaterialRatioReading`] (`[analysis]
+//! material-ratio`, `analyze --material-ratio`) picks the one a verdict and a summary line use.
+//!
 //! Depends on [`super::params`] (the levels of the material ratio parameters) and
 //! [`super::MetrologyError`].
 
-use super::params::{MaterialLevels, RmrC};
+use super::params::{MaterialLevels, RmrC, RoughnessParams};
 use super::{check_heights, MetrologyError};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+
+/// Which reading of the material-ratio family (Rmr(c), Rmr, Rk, Rpk, Rvk, Mr1, Mr2, A1, A2) a
+/// verdict against a drawing's limits and the summary line use. Both are reported either way.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum MaterialRatioReading {
+    /// ISO 13565-2 / ISO 4287 on the continuous profile (the default).
+    #[default]
+    Iso,
+    /// The instrument's own (the SJ series' 100-level curve and counted ordinates), so that
+    /// a verdict agrees with the SJ-210's display.
+    Instrument,
+}
+
+impl MaterialRatioReading {
+    /// The name as the configuration and the command line write it.
+    pub fn name(self) -> &'static str {
+        match self {
+            MaterialRatioReading::Iso => "iso",
+            MaterialRatioReading::Instrument => "instrument",
+        }
+    }
+
+    /// Parses `iso` or `instrument` (a command-line value), naming both when it is neither.
+    pub fn parse(s: &str) -> Result<MaterialRatioReading, String> {
+        match s.trim() {
+            "iso" => Ok(MaterialRatioReading::Iso),
+            "instrument" => Ok(MaterialRatioReading::Instrument),
+            other => Err(format!(
+                "{other:?} is not a material-ratio reading: use iso (ISO 13565-2 on the continuous profile) or instrument (the SJ series' counted 100-level curve)"
+            )),
+        }
+    }
+
+    /// What the reading is, for the report beside the verdict.
+    pub fn statement(self) -> &'static str {
+        match self {
+            MaterialRatioReading::Iso => {
+                "Rmr(c), Rmr and the Rk family as ISO 13565-2 defines them on the continuous profile"
+            }
+            MaterialRatioReading::Instrument => {
+                "Rmr(c), Rmr and the Rk family as the Mitutoyo SJ series reads them (100-level curve, counted ordinates), as its display shows them"
+            }
+        }
+    }
+
+    /// A line's parameters with the material-ratio family of this reading: `params` as they
+    /// are for ISO, or with the SJ series' values (`sj`, the line's reading) for
+    /// `instrument`. A line without the SJ reading (it exists wherever the ISO one does)
+    /// keeps ISO's.
+    pub fn applied(
+        self,
+        params: &RoughnessParams,
+        sj: Option<&SjMaterialRatio>,
+    ) -> RoughnessParams {
+        match (self, sj) {
+            (MaterialRatioReading::Instrument, Some(sj)) => RoughnessParams {
+                rmr_c: sj.rmr_c.clone(),
+                rmr_pct: sj.rmr_pct,
+                rk_um: sj.rk_um,
+                rpk_um: sj.rpk_um,
+                rvk_um: sj.rvk_um,
+                mr1_pct: sj.mr1_pct,
+                mr2_pct: sj.mr2_pct,
+                a1_um_pct: sj.a1_um_pct,
+                a2_um_pct: sj.a2_um_pct,
+                ..params.clone()
+            },
+            _ => params.clone(),
+        }
+    }
+}
 
 /// Height classes of the SJ series' bearing area curve (1 % of Rt each).
 pub const LEVELS: usize = 100;

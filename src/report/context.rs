@@ -9,6 +9,7 @@ use crate::fit::{FitResult, MethodError, VMethod};
 use crate::metrology::holdout::SUPPORTED_BELOW_SQ;
 use crate::metrology::outliers::{LineSpike, SpikeOptions};
 use crate::metrology::params::Options;
+use crate::metrology::sj_material_ratio::MaterialRatioReading;
 use crate::metrology::surface_model::ModelRecipe;
 use crate::scan::outputs::FitSummary;
 use crate::scan::plan::AnalysisPlan;
@@ -60,6 +61,9 @@ pub struct ScanAnalysisOptions {
     /// The instrument's stated uncertainty (default `None`: a scan's own, the
     /// `[traceability] calibration-uncertainty-pct` its journal recorded; none for a grid).
     pub instrument: Option<InstrumentUncertainty>,
+    /// The reading of the material-ratio family limits are judged in (default ISO's; both
+    /// readings are reported).
+    pub material_ratio: MaterialRatioReading,
 }
 
 impl ScanAnalysisOptions {
@@ -74,6 +78,7 @@ impl ScanAnalysisOptions {
             spikes: a.spikes,
             exclude_spikes: a.exclude_spikes,
             holdout_threshold: a.holdout_threshold,
+            material_ratio: a.material_ratio,
             ..self
         }
     }
@@ -98,6 +103,7 @@ impl Default for ScanAnalysisOptions {
             lab: None,
             specification: None,
             instrument: None,
+            material_ratio: MaterialRatioReading::Iso,
         }
     }
 }

@@ -303,6 +303,9 @@ pub struct ReportRecipe {
     /// The model between lines is supported by the data when the hold-out rms is at most
     /// this × Sq.
     pub holdout_threshold_sq: f64,
+    /// The reading of the material-ratio family limits are judged in: `iso` or
+    /// `instrument` (`[analysis] material-ratio`; both readings are in every line).
+    pub material_ratio: &'static str,
 }
 
 /// One line's entry in the report.

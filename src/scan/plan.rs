@@ -11,6 +11,7 @@
 
 use crate::fit::VMethod;
 use crate::metrology::outliers::SpikeOptions;
+use crate::metrology::sj_material_ratio::MaterialRatioReading;
 use crate::units::Nm;
 use serde::{Deserialize, Serialize};
 
@@ -65,6 +66,10 @@ pub struct AnalysisPlan {
     pub exclude_spikes: bool,
     /// The model between lines is supported when the hold-out rms is at most this × Sq.
     pub holdout_threshold: f64,
+    /// The reading of the material-ratio family limits are judged in (a plan of an older
+    /// version froze none: ISO's).
+    #[serde(default)]
+    pub material_ratio: MaterialRatioReading,
 }
 
 impl Plan {

@@ -208,6 +208,10 @@ pub struct SpecificationVerdict {
     pub instrument_uncertainty: String,
     /// One entry per limit, in the specification's order.
     pub limits: Vec<LimitVerdict>,
+    /// The reading of the material-ratio family the lines' Rk, Rpk and Rvk were judged in
+    /// (`[analysis] material-ratio`), stated by the caller that chose the values.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub material_ratio: Option<&'static str>,
 }
 
 /// The decision rule, stated in every verdict.
@@ -388,6 +392,7 @@ pub fn judge(
         decision_rule: DECISION_RULE,
         instrument_uncertainty: instrument.statement(),
         limits,
+        material_ratio: None,
     }
 }
 

@@ -77,3 +77,14 @@ fn an_unknown_allowed_group_exits_78_naming_the_key() {
     );
     assert!(!tmp.path().join("control.sock").exists());
 }
+
+#[test]
+fn a_material_ratio_reading_that_is_neither_iso_nor_instrument_exits_78_naming_the_key() {
+    crate::common::assert_tables_refused(
+        "analysis",
+        &[
+            ("material-ratio = \"sj\"", "material-ratio"),
+            ("material-ratio = 1", "material-ratio"),
+        ],
+    );
+}

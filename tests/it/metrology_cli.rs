@@ -43,18 +43,27 @@ fn analyze_profile_csv_writes_report_and_summary() {
         .output()
         .unwrap();
     assert!(run.status.success());
-    // What it found is said, with 4 significant digits (the values below): Ra 0.63659, Rq
-    // 0.70711, Rz 2.
-    assert_eq!(
-        String::from_utf8_lossy(&run.stdout),
-        format!(
-            "{}: profile of 8000 points (4.000 mm), no λc filter: Ra 0.6366 µm, Rq 0.7071 µm, Rz 2.000 µm\n",
-            out.join("report.json").display()
-        )
-    );
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     let line = &report["lines"][0];
+    // What it found is said, with 4 significant digits (the values below): Ra 0.63659, Rq
+    // 0.70711, Rz 2; then the Rk family in ISO's reading, as report.json has it.
+    let um = |k: &str| {
+        surfscan::numfmt::fmt(
+            line[k].as_f64().unwrap(),
+            surfscan::numfmt::Quantity::HeightUm,
+        )
+    };
+    assert_eq!(
+        String::from_utf8_lossy(&run.stdout),
+        format!(
+            "{}: profile of 8000 points (4.000 mm), no λc filter: Ra 0.6366 µm, Rq 0.7071 µm, Rz 2.000 µm; Rk {} µm, Rpk {} µm, Rvk {} µm\n",
+            out.join("report.json").display(),
+            um("Rk_um"),
+            um("Rpk_um"),
+            um("Rvk_um")
+        )
+    );
     assert_eq!(line["index"], 0);
     // Ra = (2/M)·cot(π/M) for M = 200 samples per period (→ 2A/π); Rq = A/√2; Rz = 2A.
     let ra = 2.0 / 200.0 / (PI / 200.0).tan();

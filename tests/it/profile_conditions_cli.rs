@@ -191,7 +191,7 @@ fn whole_length_moments_stand_beside_the_sampling_length_means() {
 fn both_material_ratio_readings_of_the_mitutoyo_export_are_reported_iso_first() {
     let csv = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data/real/mitutoyo_surftest_R.x_mm_z_um.csv");
-    let (r, _) = analyze(&csv, &["--no-filter", "--lc", "2.5"]);
+    let (r, summary) = analyze(&csv, &["--no-filter", "--lc", "2.5"]);
     let l = &r["lines"][0];
     // ISO's continuous reading as it was (docs/metrology.md: Rpk 2.722 µm) …
     close("ISO Rpk", l["Rpk_um"].as_f64().unwrap(), 2.722, 2e-4);
@@ -221,4 +221,46 @@ fn both_material_ratio_readings_of_the_mitutoyo_export_are_reported_iso_first() 
     assert!((rmr_c[0] - 2.911).abs() <= 1e-3 && (rmr_c[1] - 5.822).abs() <= 1e-3);
     close("SJ Rk", sj["Rk_um"].as_f64().unwrap(), 11.440, 2e-3);
     assert!(sj["convention"].as_str().unwrap().contains("100 levels"));
+    // The summary line gives ISO's reading by default …
+    assert!(
+        summary.contains("Rpk 2.722 µm") && !summary.contains("SJ series"),
+        "{summary}"
+    );
+    assert!(r["material_ratio"]
+        .as_str()
+        .unwrap()
+        .contains("ISO 13565-2"));
+    // … and the instrument's, as its display shows it, when asked for; report.json keeps
+    // both readings, ISO's under the plain names.
+    let (r, summary) = analyze(
+        &csv,
+        &[
+            "--no-filter",
+            "--lc",
+            "2.5",
+            "--material-ratio",
+            "instrument",
+        ],
+    );
+    assert!(
+        summary.contains("Rpk 2.912 µm, Rvk 3.980 µm (as the SJ series reads them)"),
+        "{summary}"
+    );
+    assert!(r["material_ratio"].as_str().unwrap().contains("SJ series"));
+    close(
+        "ISO Rpk",
+        r["lines"][0]["Rpk_um"].as_f64().unwrap(),
+        2.722,
+        2e-4,
+    );
+    // A reading that is neither is a usage error naming both.
+    let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .arg("analyze")
+        .arg(&csv)
+        .args(["--material-ratio", "sj"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("iso") && err.contains("instrument"), "{err}");
 }

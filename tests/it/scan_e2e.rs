@@ -251,7 +251,7 @@ async fn a_scan_at_degree_3_reports_and_samples_the_surface_it_wrote() {
 }
 
 /// `[analysis]` as a station might set it, every key away from its default.
-const ANALYSIS: &str = "\n[analysis]\ncurves = 9\nlevels = 41\nlambda-c-mm = 0.08\nno-filter = true\noutliers = \"exclude\"\nspike-threshold-sigma = 4.0\nspike-max-points = 3\nholdout-threshold = 0.9\n";
+const ANALYSIS: &str = "\n[analysis]\ncurves = 9\nlevels = 41\nlambda-c-mm = 0.08\nno-filter = true\noutliers = \"exclude\"\nspike-threshold-sigma = 4.0\nspike-max-points = 3\nholdout-threshold = 0.9\nmaterial-ratio = \"instrument\"\n";
 
 /// report.json without what differs between two runs of the same characterisation: the
 /// timings, the input's and the files' paths, the IGES files (only the runner writes them)
@@ -334,6 +334,7 @@ async fn analyze_of_a_scan_directory_uses_the_analysis_settings_the_scan_ran_wit
         runner["recipe"]
     );
     assert_eq!(runner["recipe"]["holdout_threshold_sq"], 0.9);
+    assert_eq!(runner["recipe"]["material_ratio"], "instrument");
     assert!(
         runner["recipe"]["lambda_c_source"]
             .as_str()
@@ -377,6 +378,7 @@ async fn analyze_of_a_scan_directory_uses_the_analysis_settings_the_scan_ran_wit
     let defaults = analyze_into(&old, &rig.tmp.path().join("defaults"));
     assert_eq!(defaults["recipe"]["outliers"], "flag");
     assert_eq!(defaults["recipe"]["holdout_threshold_sq"], 0.5);
+    assert_eq!(defaults["recipe"]["material_ratio"], "iso");
     for key in ["recipe", "surface", "between_lines"] {
         assert_ne!(
             defaults[key], runner[key],

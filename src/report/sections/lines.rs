@@ -138,6 +138,7 @@ pub fn section(input: &SectionInput<'_>) -> Result<LinesSection, ReportError> {
                 "flag"
             },
             holdout_threshold_sq: ctx.options.holdout_threshold,
+            material_ratio: ctx.options.material_ratio.name(),
         },
         lines,
         analyses,

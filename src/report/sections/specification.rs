@@ -13,6 +13,7 @@
 use super::lines::LinesSection;
 use super::SectionInput;
 use crate::metrology::params::Recipe;
+use crate::metrology::sj_material_ratio::MaterialRatioReading;
 use crate::report::document::LineReport;
 use crate::specification::uncertainty::{all_statistics, mean_pm_s, Statistics};
 use crate::specification::{
@@ -69,15 +70,19 @@ pub fn section(input: &SectionInput<'_>, lines: &LinesSection) -> SpecificationS
         &lines.recipe.lines,
         options.specification.as_ref(),
         &options.instrument.unwrap_or_default(),
+        options.material_ratio,
     )
 }
 
-/// The section over `lines` as evaluated under `recipe`.
+/// The section over `lines` as evaluated under `recipe`; limits on the material-ratio
+/// family are judged in `reading` (the means and their uncertainty stay ISO's, the
+/// instrument's reading being reported beside them per line).
 pub fn characterise(
     lines: &[LineReport],
     recipe: &Recipe,
     specification: Option<&Specification>,
     instrument: &InstrumentUncertainty,
+    reading: MaterialRatioReading,
 ) -> SpecificationSection {
     let params: Vec<_> = lines.iter().map(|l| &l.params).collect();
     let parameters: Vec<ParameterStatistics> = all_statistics(&params, instrument)
@@ -95,14 +100,29 @@ pub fn characterise(
         })
         .collect();
     let verdict = specification.filter(|s| !s.is_empty()).map(|s| {
+        let read: Vec<_> = lines
+            .iter()
+            .map(|l| reading.applied(&l.params, l.material_ratio_sj_series.as_ref()))
+            .collect();
         let values: Vec<LineValues<'_>> = lines
             .iter()
-            .map(|l| LineValues {
+            .zip(&read)
+            .map(|(l, params)| LineValues {
                 index: l.index,
-                params: &l.params,
+                params,
             })
             .collect();
-        judge(s, &values, band_of(recipe).as_ref(), instrument)
+        let mut v = judge(s, &values, band_of(recipe).as_ref(), instrument);
+        v.material_ratio = Some(reading.statement());
+        let on_material_ratio = s.limits.iter().any(|c| {
+            use crate::specification::Parameter::{Rk, Rpk, Rvk};
+            matches!(c.parameter, Rk | Rpk | Rvk)
+        });
+        if on_material_ratio && reading == MaterialRatioReading::Instrument {
+            v.summary
+                .push_str(" [Rk, Rpk, Rvk as the SJ series reads them]");
+        }
+        v
     });
     SpecificationSection {
         verdict,
@@ -153,7 +173,13 @@ mod tests {
             .collect();
         let spec = Specification::parse(&[format!("Ra{n} max 0.8")]).unwrap();
         let none = InstrumentUncertainty::default();
-        let s = characterise(&lines, &a.recipe, Some(&spec), &none);
+        let s = characterise(
+            &lines,
+            &a.recipe,
+            Some(&spec),
+            &none,
+            MaterialRatioReading::Iso,
+        );
         let v = s.verdict.unwrap();
         // Line 3 (index 2) is above 0.8 µm: the max rule fails, no uncertainty stated.
         assert_eq!(v.verdict, crate::specification::Verdict::DoesNotConform);
@@ -172,13 +198,104 @@ mod tests {
         // The same values as P parameters (a form-only evaluation): no roughness band.
         let mut p = a.recipe.clone();
         p.profile = "P";
-        let v = characterise(&lines, &p, Some(&spec), &none)
+        let v = characterise(&lines, &p, Some(&spec), &none, MaterialRatioReading::Iso)
             .verdict
             .unwrap();
         assert_eq!(v.verdict, crate::specification::Verdict::NotDecidable);
         // Without a specification: the uncertainty only.
-        assert!(characterise(&lines, &a.recipe, None, &none)
+        assert!(
+            characterise(&lines, &a.recipe, None, &none, MaterialRatioReading::Iso)
+                .verdict
+                .is_none()
+        );
+    }
+
+    /// The Mitutoyo export (an R profile, λc 2.5 mm): ISO's Rpk 2.722 µm, the SJ series'
+    /// 2.912 µm (its display). A limit of 2.8 µm between them conforms in ISO's reading and
+    /// does not in the instrument's; the verdict says which reading it used.
+    #[test]
+    fn a_limit_on_rpk_is_judged_in_the_reading_asked_for() {
+        let csv = std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/real/mitutoyo_surftest_R.x_mm_z_um.csv"
+        ))
+        .unwrap();
+        let rows: Vec<(f64, f64)> = csv
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let (x, z) = l.split_once(',').unwrap();
+                (x.parse().unwrap(), z.parse().unwrap())
+            })
+            .collect();
+        let z: Vec<f64> = rows.iter().map(|r| r.1).collect();
+        let pitch = (rows[rows.len() - 1].0 - rows[0].0) / (rows.len() - 1) as f64;
+        let options = crate::metrology::params::Options {
+            lambda_c_mm: 2.5,
+            apply_lambda_c: false,
+            ..Default::default()
+        };
+        let a = crate::metrology::params::analyze_line(&z, pitch, &options).unwrap();
+        let mut l = line(0, a.params.ra_um, &a);
+        l.material_ratio_sj_series = Some(
+            crate::metrology::sj_material_ratio::sj_material_ratio(
+                &a.roughness_um,
+                &Default::default(),
+            )
+            .unwrap(),
+        );
+        assert!(l.params.rpk_um < 2.8);
+        let n = a.recipe.sampling_lengths;
+        let spec = Specification::parse(&[format!("Rpk{n} max 2.8")]).unwrap();
+        let none = InstrumentUncertainty::default();
+        let judged = |reading| {
+            characterise(
+                std::slice::from_ref(&l),
+                &a.recipe,
+                Some(&spec),
+                &none,
+                reading,
+            )
             .verdict
-            .is_none());
+            .unwrap()
+        };
+        let iso = judged(MaterialRatioReading::Iso);
+        assert_eq!(
+            iso.verdict,
+            crate::specification::Verdict::Conforms,
+            "{iso:?}"
+        );
+        assert_eq!(
+            iso.material_ratio,
+            Some(MaterialRatioReading::Iso.statement())
+        );
+        let sj = judged(MaterialRatioReading::Instrument);
+        assert_eq!(
+            sj.verdict,
+            crate::specification::Verdict::DoesNotConform,
+            "{sj:?}"
+        );
+        assert!(sj
+            .summary
+            .ends_with("[Rk, Rpk, Rvk as the SJ series reads them]"));
+        assert_eq!(
+            sj.material_ratio,
+            Some(MaterialRatioReading::Instrument.statement())
+        );
+        // The means and their uncertainty stay ISO's whichever reading judges.
+        let rpk = |reading| {
+            characterise(std::slice::from_ref(&l), &a.recipe, None, &none, reading)
+                .uncertainty
+                .parameters
+                .into_iter()
+                .find(|p| p.parameter == "Rpk_um")
+                .unwrap()
+                .statistics
+                .mean
+        };
+        assert_eq!(
+            rpk(MaterialRatioReading::Iso),
+            rpk(MaterialRatioReading::Instrument)
+        );
     }
 }
