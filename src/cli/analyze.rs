@@ -189,9 +189,11 @@ fn characterise_profile(
     }
     let a = analyze_line(&z, pitch, options)
         .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
-    if !options.apply_lambda_c {
-        warnings.extend(uncentred(&z, &a.params));
-    }
+    warnings.extend(crate::report::sections::lines::uncentred_warning(
+        std::slice::from_ref(&a),
+        &[0],
+        options,
+    ));
     if options.form.is_none() {
         warnings.extend(
             crate::metrology::cutoff::iso4288_check(
@@ -239,24 +241,6 @@ fn characterise_profile(
     write_outputs(out, &report)?;
     say!("{}: {summary}", out.join("report.json").display());
     Ok(())
-}
-
-/// With `--no-filter` the heights are taken as a roughness profile about its mean line; a
-/// warning when they are not centred (an offset or a form the filter would have removed):
-/// their mean is more than half of Rq away from zero, or a peak height or valley depth comes
-/// out negative.
-fn uncentred(z: &[f64], p: &RoughnessParams) -> Option<String> {
-    use crate::numfmt::{fmt, Quantity};
-    let mean = z.iter().sum::<f64>() / z.len().max(1) as f64;
-    (mean.abs() > 0.5 * p.rq_um || p.rp_um < 0.0 || p.rv_um < 0.0).then(|| {
-        format!(
-            "with --no-filter the heights are taken as a roughness profile about its mean line, but their mean is {} µm against Rq {} µm (Rp {} µm, Rv {} µm): an offset or form remains; leave out --no-filter to apply the λc filter",
-            fmt(mean, Quantity::HeightUm),
-            fmt(p.rq_um, Quantity::HeightUm),
-            fmt(p.rp_um, Quantity::HeightUm),
-            fmt(p.rv_um, Quantity::HeightUm)
-        )
-    })
 }
 
 fn failed(msg: impl Into<String>) -> CliError {

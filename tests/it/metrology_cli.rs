@@ -660,3 +660,64 @@ fn sampling_lengths_evaluates_the_central_sections_of_a_traverse() {
     let (r, _) = run(&["--sampling-lengths", "0"]);
     assert_eq!(r.status.code(), Some(2));
 }
+
+/// `--no-filter` on a grid whose lines carry an offset (heights as traced, about 10 µm above
+/// zero, as the sur-2 grid): every line's Ra would be that offset, so the warning names how
+/// many lines are not centred and the worst; lines about zero are not warned of.
+#[test]
+fn no_filter_on_a_grid_of_uncentred_lines_is_warned_of() {
+    let dir = tempfile::tempdir().unwrap();
+    // 6 lines of a 0.1 mm cosine, 0.5 µm amplitude; line 4 (index 3) is 10 µm up.
+    let grid = |offset: f64| -> String {
+        (0..6)
+            .map(|r| {
+                let up = if r == 3 { offset } else { 0.0 };
+                (0..801)
+                    .map(|c| format!("{:.9}", up + 0.5 * (2.0 * PI * c as f64 / 100.0).cos()))
+                    .collect::<Vec<_>>()
+                    .join(",")
+                    + "\n"
+            })
+            .collect()
+    };
+    let run = |name: &str, text: &str, extra: &[&str]| {
+        let input = dir.path().join(format!("{name}.csv"));
+        std::fs::write(&input, text).unwrap();
+        let out = dir.path().join(name);
+        let o = surfscan()
+            .args(["analyze", input.to_str().unwrap(), "--curves", "3"])
+            .args(["--pitch-x", "0.001", "--pitch-y", "0.01", "--out"])
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let report: Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
+                .unwrap();
+        (String::from_utf8_lossy(&o.stderr).into_owned(), report)
+    };
+    let (err, report) = run("offset", &grid(10.0), &["--no-filter"]);
+    // Rq about z = 0 is √(10² + 0.5²/2) µm: the offset, not the roughness.
+    let want = "1 of 6 lines are not centred (line 4: mean 10.00 µm against Rq 10.01 µm (Rp 10.50 µm, Rv -9.500 µm))";
+    assert!(err.contains(want), "{err}");
+    assert!(
+        report["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| w.as_str().unwrap().contains(want)),
+        "{}",
+        report["warnings"]
+    );
+    // Centred lines, or the λc filter applied: no such warning.
+    let (err, _) = run("centred", &grid(0.0), &["--no-filter"]);
+    assert!(!err.contains("not centred"), "{err}");
+    let (err, _) = run("filtered", &grid(10.0), &["--lc", "0.08"]);
+    assert!(!err.contains("not centred"), "{err}");
+}

@@ -166,3 +166,53 @@ pub fn cutoff_warning(lines: &LinesSection, options: &Options) -> Option<String>
         .warning
         .map(|w| format!("{w} (mean of the {} lines)", lines.lines.len()))
 }
+
+/// Without the λc filter the heights are taken as a roughness profile about its mean line
+/// (z = 0). A line is not centred when the mean of its evaluated ordinates is more than half
+/// its Rq from zero, or its Rp or Rv comes out negative: an offset or form the filter would
+/// have removed remains, and its Ra, Rz … measure that. Returns the mean of such a line.
+pub fn uncentred_mean(a: &LineAnalysis) -> Option<f64> {
+    let z = &a.roughness_um;
+    let mean = z.iter().sum::<f64>() / z.len().max(1) as f64;
+    let p = &a.params;
+    (mean.abs() > 0.5 * p.rq_um || p.rp_um < 0.0 || p.rv_um < 0.0).then_some(mean)
+}
+
+/// The warning for unfiltered lines that are not centred ([`uncentred_mean`]): how many, the
+/// worst with its mean against its Rq, and what to do; none with the λc filter or a form
+/// removed.
+pub fn uncentred_warning(
+    analyses: &[LineAnalysis],
+    indices: &[u32],
+    options: &Options,
+) -> Option<String> {
+    use crate::numfmt::{fmt, Quantity};
+    if options.apply_lambda_c || options.form.is_some() {
+        return None;
+    }
+    let off: Vec<(usize, f64)> = analyses
+        .iter()
+        .enumerate()
+        .filter_map(|(k, a)| uncentred_mean(a).map(|m| (k, m)))
+        .collect();
+    let &(worst, mean) = off.iter().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))?;
+    let p = &analyses[worst].params;
+    let which = if analyses.len() == 1 {
+        "their mean is".to_owned()
+    } else {
+        format!(
+            "{} of {} lines are not centred (line {}: mean",
+            off.len(),
+            analyses.len(),
+            line_number(indices.get(worst).copied().unwrap_or(worst as u32))
+        )
+    };
+    Some(format!(
+        "without the λc filter (--no-filter, [analysis] no-filter) the heights are taken as a roughness profile about its mean line, but {which} {} µm against Rq {} µm (Rp {} µm, Rv {} µm){}: an offset or form remains and Ra, Rz … measure it; leave out --no-filter to apply the λc filter",
+        fmt(mean, Quantity::HeightUm),
+        fmt(p.rq_um, Quantity::HeightUm),
+        fmt(p.rp_um, Quantity::HeightUm),
+        fmt(p.rv_um, Quantity::HeightUm),
+        if analyses.len() == 1 { "" } else { ")" }
+    ))
+}

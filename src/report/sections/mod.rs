@@ -138,6 +138,11 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
         let specification = specification::section(&input, &lines);
         timings.lines = t.elapsed().as_secs_f64();
         warnings.extend(lines::cutoff_warning(&lines, &ctx.line_options));
+        warnings.extend(lines::uncentred_warning(
+            &lines.analyses,
+            &lines.lines.iter().map(|l| l.index).collect::<Vec<_>>(),
+            &ctx.line_options,
+        ));
 
         let t = Instant::now();
         if !evenly {
