@@ -20,6 +20,7 @@ pub mod archive_settings;
 pub mod metrics;
 pub mod mqtt;
 pub mod outbox;
+pub mod results;
 pub mod settings;
 pub mod tls;
 
@@ -27,7 +28,7 @@ use crate::config::Config;
 use crate::scan::event::ScanEvent;
 use crate::scan::metrics::ScanMetrics;
 use crate::scan::status::{LinkStatus, Status};
-use outbox::Outbox;
+use outbox::{Outbox, Pushed};
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -98,6 +99,28 @@ pub fn event_payload(
     m.insert("reason".into(), ev.reason.clone().into());
     m.insert("station".into(), station.into());
     m.insert("scan_dir".into(), ev.dir.display().to_string().into());
+    m
+}
+
+/// The results message of the completed scan `scan_id` in `dir` (see [`results`]), with the
+/// station and the time; what could not be read is logged.
+fn results_message(
+    scan_id: &str,
+    dir: &std::path::Path,
+    station: &str,
+    time: chrono::DateTime<chrono::Utc>,
+) -> serde_json::Map<String, serde_json::Value> {
+    let (mut m, problems) = results::read(scan_id, dir);
+    for p in problems {
+        tracing::warn!("mqtt: the results of scan {scan_id} lack what {p} would give");
+    }
+    m.insert(
+        "time".into(),
+        time.to_rfc3339_opts(chrono::SecondsFormat::Millis, true)
+            .into(),
+    );
+    m.insert("station".into(), station.into());
+    m.insert("scan_dir".into(), dir.display().to_string().into());
     m
 }
 
@@ -243,12 +266,25 @@ impl Publishers {
         let status = status.clone();
         self.writers.push(tokio::spawn(async move {
             while let Some(ev) = rx.recv().await {
-                let payload = event_payload(&ev, &station, chrono::Utc::now());
+                let now = chrono::Utc::now();
+                let payload = event_payload(&ev, &station, now);
                 let o = outbox.clone();
+                let (st, id, dir) = (station.clone(), ev.scan_id.clone(), ev.dir.clone());
+                let success = ev.kind == crate::scan::event::ScanEventKind::Success;
                 let stored = tokio::task::spawn_blocking(move || {
-                    o.lock()
-                        .map_err(|_| std::io::Error::other("outbox lock poisoned"))?
-                        .push("events", payload)
+                    let mut messages = vec![("events", payload)];
+                    if success {
+                        messages.push(("results", results_message(&id, &dir, &st, now)));
+                    }
+                    let mut pushed = Pushed::default();
+                    for (topic, payload) in messages {
+                        let p = o
+                            .lock()
+                            .map_err(|_| std::io::Error::other("outbox lock poisoned"))?
+                            .push(topic, payload)?;
+                        pushed.dropped += p.dropped;
+                    }
+                    Ok::<_, std::io::Error>(pushed)
                 })
                 .await
                 .map_err(std::io::Error::other)

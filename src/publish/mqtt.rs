@@ -10,7 +10,7 @@
 //! | `status` | yes | the status as `surfscan status --json` has it, with `station` and `time` |
 //! | `online` | yes | `online` at connect; `offline` at a clean stop and, as the last will, when the broker loses the station |
 //! | `events` | no | `{"id","kind","scan_id","time","reason","station","scan_dir"}` |
-//! | `results` | no | a completed scan's results |
+//! | `results` | no | a completed scan's results ([`super::results`]): `scan_id`, `recipe`, `specimen`, `verdict`, per parameter `mean`, `s`, `U`, `warnings`, `files` with SHA-256 |
 //!
 //! The link never touches the scan: it reads the status from its watch channel and the
 //! messages from the outbox on disk, and reports its own state in the status's `links`. A

@@ -3,8 +3,10 @@
 //! `mosquitto_sub` as an independent subscriber. What a lab relies on: every event of a scan
 //! arrives once (by id) and in order, also when the broker was down for part of the scan,
 //! absent when the daemon started, or when the daemon was killed before it could deliver;
-//! the retained status and `online` say where the station is; a wrong password is named in
-//! the status and the log; and none of it touches the scan.
+//! the retained status and `online` say where the station is; a completed scan's results
+//! (recipe, specimen, verdict, each parameter's mean, s and U, the files with their SHA-256)
+//! arrive once after its success event, checked against report.json and `sha256sum`; a wrong
+//! password is named in the status and the log; and none of it touches the scan.
 
 use crate::common::mosquitto::{self, Broker, Seen};
 use crate::daemon_e2e::{self as e2e, Daemon, Rig};
@@ -251,6 +253,165 @@ async fn a_scan_is_seen_by_a_subscriber_with_its_status_events_and_last_will() {
     .await;
 }
 
+/// A recipe whose limit no turned surface meets: its scan succeeds and does not conform.
+const MIRROR: &str = r#"description = "held to a mirror finish"
+[plan]
+lines = 5
+y-step-mm = 0.01
+[specification]
+limits = ["Ra1 max 0.001"]
+"#;
+
+/// The results messages seen, each id once, in arrival order.
+fn results(seen: &[Seen]) -> Vec<serde_json::Value> {
+    let mut ids = std::collections::HashSet::new();
+    seen.iter()
+        .filter(|m| m.topic == topic("results"))
+        .map(Seen::json)
+        .filter(|e| ids.insert(e["id"].as_str().unwrap().to_owned()))
+        .collect()
+}
+
+/// The SHA-256 of each top-level file of `dir`, by `sha256sum` (not the code under test).
+fn sha256sums(dir: &Path) -> Vec<(String, String)> {
+    let o = Command::new("sh")
+        .arg("-c")
+        .arg("find . -maxdepth 1 -type f ! -name '.*' -printf '%P\\0' | sort -z | xargs -0 sha256sum")
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    String::from_utf8(o.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let (h, n) = l.split_once("  ").unwrap();
+            (n.to_owned(), h.to_owned())
+        })
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_completed_scan_s_results_reach_the_subscriber_with_its_verdict_statistics_and_files() {
+    let r = e2e::rig().await;
+    let broker = Broker::start(r.dir.path());
+    with_mqtt(&r, &broker.url(), mosquitto::STATION_PASSWORD);
+    let recipes = r.dir.path().join("recipes");
+    std::fs::create_dir(&recipes).unwrap();
+    std::fs::write(recipes.join("mirror.toml"), MIRROR).unwrap();
+    let text = std::fs::read_to_string(&r.config).unwrap();
+    std::fs::write(
+        &r.config,
+        format!(
+            "{text}\n[jobs]\nrecipes = {:?}\n",
+            recipes.display().to_string()
+        ),
+    )
+    .unwrap();
+    let out = r.dir.path().join("sub.txt");
+    let _sub = broker.subscribe("watcher-r", &out);
+    let mut d = spawn_logged(&r);
+    wait_socket(&r).await;
+    let reply = surfscan::control::client::ControlClient::connect(&r.socket)
+        .await
+        .unwrap()
+        .request(&surfscan::control::protocol::Request::Start {
+            specimen: "coupon-7".into(),
+            operator: "kim".into(),
+            notes: String::new(),
+            mode: surfscan::scan::command::StartMode::Auto,
+            recipe: Some("mirror".into()),
+            y_start_mm: None,
+        })
+        .await
+        .unwrap();
+    assert!(
+        !matches!(
+            reply.message,
+            surfscan::control::protocol::Message::Refused { .. }
+        ),
+        "{reply:?}"
+    );
+    let ended = e2e::wait_status(&r, "scan ended", |s| {
+        s.state == State::Idle && s.last_stop.is_some()
+    })
+    .await;
+    let stop = ended.last_stop.unwrap();
+    assert_eq!(stop.status, StopStatus::Success, "{}", stop.reason);
+    let seen = mosquitto::wait_seen(&out, "results", |s| !results(s).is_empty()).await;
+    let res = results(&seen);
+    assert_eq!(res.len(), 1, "{res:#?}");
+    let m = &res[0];
+    // After its success event, in the same outbox order.
+    let success = events(&seen)
+        .into_iter()
+        .find(|e| e["kind"] == "success")
+        .expect("a success event before the results");
+    assert!(seq(m) > seq(&success), "{m}");
+    assert_eq!(m["scan_id"], stop.scan_id.as_str());
+    assert_eq!(m["station"], STATION);
+    assert_eq!(m["recipe"], "mirror");
+    assert_eq!(m["specimen"], "coupon-7");
+    assert_eq!(m["operator"], "kim");
+    assert_eq!(m["verdict"], "does not conform", "{m}");
+    assert!(
+        m["verdict_summary"]
+            .as_str()
+            .unwrap()
+            .contains("Ra1 max rule"),
+        "{m}"
+    );
+    // Each parameter's mean and s are those of the lines' values in report.json, worked out
+    // here; without a stated instrument uncertainty U = 2 s / sqrt(n).
+    let dir = PathBuf::from(m["scan_dir"].as_str().unwrap());
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap();
+    let ra: Vec<f64> = report["lines"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["Ra_um"].as_f64().unwrap())
+        .collect();
+    assert_eq!(ra.len(), 5);
+    let n = ra.len() as f64;
+    let mean = ra.iter().sum::<f64>() / n;
+    let s = (ra.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let p = m["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["parameter"] == "Ra_um")
+        .unwrap_or_else(|| panic!("no Ra_um in {m}"));
+    assert_eq!(p["n"], 5);
+    let close =
+        |a: &serde_json::Value, b: f64| (a.as_f64().unwrap() - b).abs() <= 1e-9 * b.abs().max(1e-6);
+    assert!(close(&p["mean"], mean), "{p} vs mean {mean}");
+    assert!(close(&p["s"], s), "{p} vs s {s}");
+    assert!(
+        close(&p["U"], 2.0 * s / n.sqrt()),
+        "{p} vs U {}",
+        2.0 * s / n.sqrt()
+    );
+    assert_eq!(m["warnings"], report["warnings"]);
+    // The files: every top-level file of the scan directory with the SHA-256 sha256sum gives.
+    let listed: Vec<(String, String)> = m["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| {
+            (
+                f["name"].as_str().unwrap().to_owned(),
+                f["sha256"].as_str().unwrap().to_owned(),
+            )
+        })
+        .collect();
+    let want = sha256sums(&dir);
+    assert!(want.iter().any(|(n, _)| n == "report.json"), "{want:?}");
+    assert_eq!(listed, want);
+    e2e::sigterm(&d);
+    e2e::wait_exit(&mut d);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_broker_stopped_mid_scan_and_the_daemon_killed_lose_nothing_and_reorder_nothing() {
     let r = e2e::rig().await;
@@ -313,6 +474,19 @@ async fn the_broker_stopped_mid_scan_and_the_daemon_killed_lose_nothing_and_reor
     })
     .await;
     assert_complete_in_order(&events(&seen), &stop.scan_id);
+    // The scan's results were kept in the outbox with its events: once, after its success.
+    let seen = mosquitto::wait_seen(&out, "results after the restarts", |s| {
+        !results(s).is_empty()
+    })
+    .await;
+    let res = results(&seen);
+    assert_eq!(res.len(), 1, "{res:#?}");
+    assert_eq!(res[0]["scan_id"], stop.scan_id.as_str());
+    let success = events(&seen)
+        .into_iter()
+        .find(|e| e["kind"] == "success")
+        .unwrap();
+    assert!(seq(&res[0]) > seq(&success));
     let start = std::time::Instant::now();
     while outbox_files(&r) > 0 {
         assert!(start.elapsed() < e2e::DEADLINE, "the outbox is not emptied");
@@ -334,9 +508,9 @@ async fn a_broker_absent_when_the_daemon_starts_gets_the_scan_once_it_is_there()
     let ended = scan_to_success(&r, "mqtt-3").await;
     let stop = ended.last_stop.unwrap();
     assert_eq!(stop.status, StopStatus::Success, "{}", stop.reason);
-    // Its events wait on disk, and the status says how many.
-    let s = e2e::wait_status(&r, "two events queued", |s| {
-        s.links.get("mqtt").is_some_and(|l| !l.ok && l.queued >= 2)
+    // Its events and results wait on disk, and the status says how many.
+    let s = e2e::wait_status(&r, "two events and the results queued", |s| {
+        s.links.get("mqtt").is_some_and(|l| !l.ok && l.queued >= 3)
     })
     .await;
     assert!(
@@ -344,7 +518,7 @@ async fn a_broker_absent_when_the_daemon_starts_gets_the_scan_once_it_is_there()
         "{:?}",
         s.links
     );
-    assert_eq!(outbox_files(&r), 2);
+    assert_eq!(outbox_files(&r), 3);
     broker.restart();
     let out = r.dir.path().join("sub.txt");
     // Events are not retained: a subscriber that is there when the broker comes back sees
