@@ -67,6 +67,10 @@ pub struct Config {
     /// `[archive]`: each completed scan copied to the lab's object store; none by default.
     #[serde(default)]
     pub archive: Option<crate::publish::archive_settings::ArchiveSettings>,
+    /// `[export]`: each completed scan's DFQ and QIF into the lab's drop directories; none
+    /// by default.
+    #[serde(default)]
+    pub export: Option<crate::publish::export_settings::ExportSettings>,
 }
 
 /// `[jobs]`: recipes (named plans with their measuring conditions, analysis and
@@ -547,6 +551,10 @@ impl Config {
         }
         if let Some(a) = &self.archive {
             a.validate()
+                .map_err(|(key, message)| Config::invalid(path, key, message))?;
+        }
+        if let Some(x) = &self.export {
+            x.validate()
                 .map_err(|(key, message)| Config::invalid(path, key, message))?;
         }
         if let Some(n) = &self.notify {

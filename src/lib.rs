@@ -29,7 +29,8 @@
 //!    report.json, report.html, summary.csv, plots and X3P, section by section; the runner
 //!    reaches it through the scan's `Characterise` contract, supplied by the composition),
 //!    [`station_lock`] (one process per station), [`jobs`] (recipes), [`publish`] (the scan's
-//!    status and events to the lab's MQTT broker through a durable outbox).
+//!    status and events to the lab's MQTT broker through a durable outbox, the raw-data
+//!    archive, the results into the lab's SPC and QIF drop directories).
 //! 5. Composition: [`cli`] (one file per subcommand) and `main.rs`.
 //!
 //! The simulator (`simulator/`, crate `surfscan-sim`) speaks the instrument's and the

@@ -46,6 +46,7 @@ mod daemon_jobs;
 #[cfg(feature = "sim")]
 pub mod demo;
 pub mod docs;
+pub mod export;
 pub mod fit;
 pub mod input_args;
 pub mod list;
@@ -102,6 +103,8 @@ pub enum Command {
     CheckConfig(check_config::Args),
     /// List the scans on the station: state, recipe, specimen, verdict, Ra and Sa, warnings.
     List(list::Args),
+    /// Write completed scans' Q-DAS (.dfq) and QIF (.qif) files into the drop directories again.
+    Export(export::Args),
     /// The job queue: add a recipe's scan of a specimen, list, remove, clear, continue.
     Queue(queue::Args),
     /// The specimen of the job waiting for loading is in place: let the job start.
@@ -205,6 +208,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Start(args) => control::run_start(args),
         Command::CheckConfig(args) => check_config::run(args),
         Command::List(args) => list::run(args),
+        Command::Export(args) => export::run(args),
         Command::Queue(args) => queue::run(args),
         Command::Ready(args) => queue::run_ready(args),
         Command::Completions(args) => docs::run_completions(args),

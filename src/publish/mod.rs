@@ -1,6 +1,7 @@
 //! What leaves the station for the lab's systems: the scan's events through a durable outbox
-//! on disk to the publishers (the MQTT broker), and the metrics on `/metrics`, all off the
-//! scan's path.
+//! on disk to the publishers (the MQTT broker), the completed scans to the raw-data archive
+//! ([`archive`]) and as DFQ and QIF files to the lab's drop directories ([`export`]), and the
+//! metrics on `/metrics`, all off the scan's path.
 //!
 //! ```text
 //! scan runner ──events──► writer task ──► outbox/mqtt/ (disk) ──► MqttLink ──► broker
@@ -17,6 +18,8 @@
 
 pub mod archive;
 pub mod archive_settings;
+pub mod export;
+pub mod export_settings;
 pub mod metrics;
 pub mod mqtt;
 pub mod outbox;
@@ -170,8 +173,13 @@ impl Publishers {
             }
         }
         if let Some(a) = &config.archive {
-            if let Err(e) = p.start_archive(config, a, status, stop_rx) {
+            if let Err(e) = p.start_archive(config, a, status, stop_rx.clone()) {
                 fail(status, archive::LINK, e);
+            }
+        }
+        if let Some(x) = &config.export {
+            if let Err(e) = p.start_export(config, x, status, stop_rx) {
+                fail(status, export::LINK, e);
             }
         }
         // One channel in, a copy of each event to every publisher's writer.
@@ -235,6 +243,48 @@ impl Publishers {
                         ev.dir.display()
                     ),
                     Err(e) => tracing::error!("archive: {e}"),
+                }
+            }
+        }));
+        self.sinks.push(tx);
+        Ok(())
+    }
+
+    fn start_export(
+        &mut self,
+        config: &Config,
+        x: &export_settings::ExportSettings,
+        status: &watch::Sender<Status>,
+        stop_rx: watch::Receiver<bool>,
+    ) -> Result<(), String> {
+        let dir = outbox_dir(config, "export");
+        let queue = export::Queue::open(&dir).map_err(|e| {
+            format!(
+                "cannot open the export queue {}: {}; nothing is exported until this is fixed and the process restarted",
+                dir.display(),
+                crate::atomic::write_hint(&dir, &e)
+            )
+        })?;
+        let wake = Arc::new(Notify::new());
+        let exporter =
+            export::Exporter::new(x.clone(), queue.clone(), status.clone(), wake.clone());
+        self.links.push(tokio::spawn(exporter.run(stop_rx)));
+        let (tx, mut rx) = mpsc::unbounded_channel::<ScanEvent>();
+        self.writers.push(tokio::spawn(async move {
+            while let Some(ev) = rx.recv().await {
+                if ev.kind != crate::scan::event::ScanEventKind::Success {
+                    continue;
+                }
+                let q = queue.clone();
+                let (id, dir) = (ev.scan_id.clone(), ev.dir.clone());
+                match tokio::task::spawn_blocking(move || q.push(&id, &dir)).await {
+                    Ok(Ok(_)) => wake.notify_one(),
+                    Ok(Err(e)) => tracing::error!(
+                        "export: scan {} could not be queued for export: {e}; export it by hand with `surfscan export {}`",
+                        ev.scan_id,
+                        ev.dir.display()
+                    ),
+                    Err(e) => tracing::error!("export: {e}"),
                 }
             }
         }));

@@ -13,6 +13,7 @@ mod control_cli;
 mod control_server;
 mod daemon_e2e;
 mod demo_cli;
+mod export_files;
 mod fault_policy;
 mod fit_geomdl;
 mod fit_scipy;

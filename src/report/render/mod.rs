@@ -2,14 +2,18 @@
 //! (bearing curves, height map, measured vs model of one line, the Rk construction of each
 //! line: [`plots`]), `measured.x3p` and `model.x3p` ([`crate::x3p`]), `summary.csv`
 //! ([`summary`]), `report.json` and `report.html` ([`html`], laid out for paper by
-//! [`print`]), each replaced atomically. Nothing
+//! [`print`]), each replaced atomically; and the files for the lab's quality systems, made
+//! from a completed scan's [`super::exported::Exported`]: the Q-DAS DFQ ([`dfq`]) and the
+//! QIF 3.0 Results document ([`qif`]), pure formatters whose bytes the caller writes. Nothing
 //! here computes a result; the numbers come from the sections.
 //!
 //! Layer 4 (reporting): depends on [`crate::x3p`], [`crate::atomic`] and the report's types.
 
+pub mod dfq;
 pub mod html;
 pub mod plots;
 pub mod print;
+pub mod qif;
 pub mod summary;
 pub mod text_cache;
 
