@@ -648,7 +648,49 @@ impl Config {
                 ));
             }
         }
-        Ok(())
+        self.steps_checked(path, y_start_nm, y_step_nm)
+    }
+
+    /// Every line's y a whole number of the stage's steps (unless
+    /// `stage.allow-inexact-step`): the same rule the stage applies when it connects,
+    /// named here, at `check-config`, with the steps that would do.
+    fn steps_checked(&self, path: &Path, y_start_nm: Nm, y_step_nm: Nm) -> Result<(), ConfigError> {
+        if self.stage.allow_inexact_step {
+            return Ok(());
+        }
+        let Ok(unit_nm) = self.stage.nm_per_unit() else {
+            return Ok(()); // Named by the stage's own check.
+        };
+        let unit_mm = unit_nm / Nm::PER_MM as f64;
+        let lines = self.scan.lines;
+        let (key, value_nm) = match crate::stage::policy::worst_inexact([y_step_nm], unit_nm) {
+            Some(_) => ("scan.y-step-mm", y_step_nm),
+            None => match crate::stage::policy::worst_inexact(
+                (0..lines).map(|k| Nm(y_start_nm.0 + i64::from(k) * y_step_nm.0)),
+                unit_nm,
+            ) {
+                Some(_) => ("scan.y-start-mm", y_start_nm),
+                None => return Ok(()),
+            },
+        };
+        let steps = value_nm.0 as f64 / unit_nm;
+        let whole = |n: f64| format!("{}", (n * unit_mm * 1e6).round() / 1e6);
+        let (below, above) = (steps.floor(), steps.ceil());
+        let choices = if key == "scan.y-step-mm" && steps.abs() < 1.0 {
+            // Less than one step: the smallest step the stage makes.
+            format!("{} mm", whole(steps.signum()))
+        } else {
+            format!("{} or {} mm", whole(below), whole(above))
+        };
+        Err(Config::invalid(
+            path,
+            key,
+            format!(
+                "{} mm is {steps:.4} of the stage's steps of {} mm ({unit_nm} nm, from [stage]): the stage cannot place the lines there exactly; use a whole number of steps ({choices}) or set stage.allow-inexact-step = true",
+                value_nm.to_mm(),
+                unit_mm
+            ),
+        ))
     }
 }
 

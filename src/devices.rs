@@ -101,6 +101,12 @@ impl Fault {
             message: e.to_string(),
         }
     }
+
+    /// Whether the device said "not now": the SJ-210's busy, still processing or no
+    /// results yet (NG011, NG033, NG101; `crate::sj210::ng`), as opposed to a wrong answer.
+    pub fn is_busy(&self) -> bool {
+        matches!(self.ng_code, Some(11 | 33 | 101))
+    }
 }
 
 impl fmt::Display for Fault {

@@ -3,7 +3,9 @@
 //! recipes` directory as a start would read it, without opening any device, and prints what
 //! it would do. Device paths that are absent or are not device nodes are noted
 //! (a device may be plugged in later); a port that is a regular file, a directory or another
-//! node that can never be a serial port makes the file invalid.
+//! node that can never be a serial port makes the file invalid, and so does an
+//! `output.dir` on a tree that keeps no files (`/proc`, `/sys`, `/dev`) or a control socket
+//! inside it.
 //!
 //! With `--require-devices` an absent device is not a note but a failure (exit 69): the
 //! package's install script starts the service only on a configuration whose ports are
@@ -22,7 +24,7 @@ use super::{CliError, Exit, DEFAULT_CONFIG};
 use crate::config::Config;
 use crate::numfmt::{fmt, Quantity};
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `surfscan check-config`.
 #[derive(Debug, clap::Args)]
@@ -89,9 +91,92 @@ pub fn summary(config: &Config) -> String {
     out
 }
 
+/// The path as the kernel would resolve it: its longest existing ancestor made canonical
+/// (links followed), the rest as written.
+fn resolved(path: &Path) -> PathBuf {
+    let mut rest = Vec::new();
+    let mut head = path;
+    loop {
+        if let Ok(c) = std::fs::canonicalize(head) {
+            return rest.iter().rev().fold(c, |acc, part| acc.join(part));
+        }
+        match (head.parent(), head.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name.to_owned());
+                head = parent;
+            }
+            _ => return path.to_path_buf(),
+        }
+    }
+}
+
+/// The kernel's own trees, which hold no storage: a scan written there is lost or refused.
+const NOT_STORAGE: [(nix::sys::statfs::FsType, &str); 9] = {
+    use nix::sys::statfs::*;
+    [
+        (PROC_SUPER_MAGIC, "proc (the kernel's view of processes)"),
+        (SYSFS_MAGIC, "sysfs (the kernel's view of devices)"),
+        (DEVPTS_SUPER_MAGIC, "devpts (terminals)"),
+        (CGROUP_SUPER_MAGIC, "cgroup"),
+        (CGROUP2_SUPER_MAGIC, "cgroup2"),
+        (DEBUGFS_MAGIC, "debugfs"),
+        (TRACEFS_MAGIC, "tracefs"),
+        (SECURITYFS_MAGIC, "securityfs"),
+        (BPF_FS_MAGIC, "bpf"),
+    ]
+};
+
+/// `output.dir` on storage and the control socket outside it: the directory (or, before it
+/// exists, its nearest existing ancestor) must be a directory on a file system that keeps
+/// files, not `/proc`, `/sys` or `/dev`; the socket must not lie inside the scans' tree,
+/// which is listed, archived and copied as scans.
+pub fn check_paths(config: &Config) -> Result<(), String> {
+    let out = &config.output.dir;
+    let real = resolved(out);
+    let mut existing = real.as_path();
+    while !existing.exists() {
+        match existing.parent() {
+            Some(p) => existing = p,
+            None => break,
+        }
+    }
+    let not_storage = |what: &str| {
+        format!(
+            "output.dir = {} lies on {what}, which keeps no files; name a directory on the station's disk, e.g. \"/var/lib/surfscan/scans\"",
+            out.display()
+        )
+    };
+    if real.starts_with("/dev") && !real.starts_with("/dev/shm") {
+        return Err(not_storage("/dev (device nodes)"));
+    }
+    if let Ok(st) = nix::sys::statfs::statfs(existing) {
+        let ty = st.filesystem_type();
+        if let Some((_, name)) = NOT_STORAGE.iter().find(|(t, _)| *t == ty) {
+            return Err(not_storage(&format!("a {name} file system")));
+        }
+    }
+    if existing == real && !real.is_dir() {
+        return Err(format!(
+            "output.dir = {} is not a directory; name the directory the scans are written to",
+            out.display()
+        ));
+    }
+    let socket = resolved(&config.control.socket);
+    if socket.starts_with(&real) {
+        return Err(format!(
+            "control.socket = {} lies inside output.dir = {}, the scans' tree (listed, archived and copied as scans); put it elsewhere, e.g. \"/run/surfscan/control.sock\"",
+            config.control.socket.display(),
+            out.display()
+        ));
+    }
+    Ok(())
+}
+
 /// The device paths checked: notes for absent devices, or the first port that can never be
-/// a serial device as an error.
+/// a serial device as an error. The output and socket paths are checked first
+/// ([`check_paths`]).
 pub fn check_ports(config: &Config) -> Result<Vec<String>, String> {
+    check_paths(config)?;
     // One device under two names (a udev link and its node) is the same port too.
     let resolve = |p: &str| std::fs::canonicalize(p).unwrap_or_else(|_| p.into());
     let (instrument, stage) = (&config.instrument.port, &config.stage.port);

@@ -88,8 +88,17 @@ signatures = ["Measured by", "Approved by"]
         instrument = instrument.display().to_string(),
         stage = stage.display().to_string(),
         out = out.display().to_string(),
-        sock = out.join("sim").join("control.sock").display().to_string(),
+        // Beside the scans' tree, never inside it (check-config refuses that).
+        sock = demo_socket(out).display().to_string(),
     )
+}
+
+/// The control socket of the demo's station: beside its output directory `out`
+/// (`demo-out.control.sock`), outside the scans' tree.
+pub fn demo_socket(out: &Path) -> std::path::PathBuf {
+    let mut name = out.file_name().unwrap_or_default().to_os_string();
+    name.push(".control.sock");
+    out.with_file_name(name)
 }
 
 /// Runs `surfscan demo`.

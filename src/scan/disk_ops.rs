@@ -51,6 +51,7 @@ impl Books<'_> {
             }
             Action::Record(n) => match &mut self.ledger {
                 Some(l) => l.note(&n),
+                None if n.is_operators() => tracing::info!("operator: {}", n.reason),
                 None => tracing::warn!("{}", n.reason),
             },
             Action::Notify(kind, reason) => {

@@ -76,7 +76,11 @@ impl Ledger {
     /// and appended, with its own time, before the next record of the journal, so the
     /// journal still tells what happened once the disk has room again.
     pub fn note(&mut self, n: &Note) {
-        tracing::warn!(scan_id = %self.id, line = n.line.map(|l| l + 1), "interruption: {}", n.reason);
+        if n.is_operators() {
+            tracing::info!(scan_id = %self.id, line = n.line.map(|l| l + 1), "operator: {}", n.reason);
+        } else {
+            tracing::warn!(scan_id = %self.id, line = n.line.map(|l| l + 1), "interruption: {}", n.reason);
+        }
         self.unrecorded.push(InterruptionRecord {
             reason: n.reason.clone(),
             device: n.device,

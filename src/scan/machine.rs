@@ -205,6 +205,15 @@ pub struct Note {
     pub pause: Option<PauseMark>,
 }
 
+impl Note {
+    /// Whether the note records what an operator asked for (a pause taking effect, a resume,
+    /// an abort, a command refused), which is the normal course of a scan and logged as
+    /// such, not as a fault.
+    pub fn is_operators(&self) -> bool {
+        self.peer.is_some() || self.pause.is_some()
+    }
+}
+
 /// An event of the session.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Event {
@@ -869,7 +878,12 @@ impl Machine {
             (Reaction::Reopen, Trouble::Device(fault)) => self.reopen(fault, out),
             (Reaction::Retry, t) => {
                 let device = t.device().unwrap_or(Device::Instrument);
-                self.retry(device, now, out)
+                let why = match &t {
+                    Trouble::Device(f) if f.is_busy() => reasons::Retried::Busy,
+                    Trouble::Line(_) => reasons::Retried::UnusableLine,
+                    _ => reasons::Retried::Wrong,
+                };
+                self.retry(device, why, now, out)
             }
             (Reaction::Rehome, Trouble::Device(fault)) => self.rehome(fault, now, out),
             (Reaction::WaitForStorage, Trouble::Storage(s)) => {
@@ -1023,8 +1037,8 @@ impl Machine {
 
     /// A fault that may clear by itself: the line retried with backoff while the budget
     /// lasts (the budget already charged with it).
-    fn retry(&mut self, device: Device, now: Now, out: &mut Vec<Action>) {
-        let (since, why, first) = match &mut self.budget {
+    fn retry(&mut self, device: Device, why: reasons::Retried, now: Now, out: &mut Vec<Action>) {
+        let (since, last, first) = match &mut self.budget {
             Some(b) => (
                 b.since,
                 b.last.clone(),
@@ -1038,7 +1052,7 @@ impl Machine {
             .transient_budget
             .saturating_sub(self.budget_spent(now));
         let wait = self.retry_wait.min(left);
-        let reason = reasons::busy(device, since.wall, left, &why);
+        let reason = reasons::retried(device, why, since.wall, left, &last);
         out.push(self.note(reasons::retrying(&reason, wait), Some(device)));
         self.metrics.retries += 1;
         if first {

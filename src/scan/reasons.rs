@@ -66,10 +66,34 @@ pub fn rehoming(line: u32, fault: &Fault, done: u32, allowed: u32) -> String {
     )
 }
 
-/// The status reason while a line is retried within the transient budget.
-pub fn busy(device: Device, since: DateTime<Utc>, left: Duration, last: &str) -> String {
+/// What a line is retried for within the transient budget, as its reason names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Retried {
+    /// The device said "not now" (busy, still processing).
+    Busy,
+    /// The device answered wrongly or not in time (garbled, cut off, a trace or move that
+    /// does not end, a missed target).
+    Wrong,
+    /// The traced line cannot be used as read (a height that is no number, another point
+    /// count than the scan's).
+    UnusableLine,
+}
+
+/// The status reason while a line is retried within the transient budget, for `why`.
+pub fn retried(
+    device: Device,
+    why: Retried,
+    since: DateTime<Utc>,
+    left: Duration,
+    last: &str,
+) -> String {
+    let what = match why {
+        Retried::Busy => "busy",
+        Retried::Wrong => "answering wrongly or not in time",
+        Retried::UnusableLine => "giving lines that cannot be used",
+    };
     format!(
-        "{device} busy since {}; retrying the line (budget left {} s); last: {last}",
+        "{device} {what} since {}; retrying the line (budget left {} s); last: {last}",
         stamp(since),
         left.as_secs()
     )

@@ -188,6 +188,15 @@ impl Status {
                 }
                 s
             }
+            (Some(id), State::Scanning)
+                if self.current_line.is_none() && self.lines_done >= self.lines_total =>
+            {
+                // Every line on disk, the outputs being written: no line is being traced.
+                format!(
+                    "scan {id}: all {} lines done, writing the outputs",
+                    self.lines_total
+                )
+            }
             (Some(id), State::Scanning) => {
                 let line = self.current_line.unwrap_or(self.lines_done + 1);
                 match self.y_mm {
@@ -262,6 +271,24 @@ mod tests {
         );
         let v = serde_json::to_value(&s).unwrap();
         assert_eq!(v["state"], "suspended");
+    }
+
+    #[test]
+    fn the_summary_after_the_last_line_names_no_line_past_the_end() {
+        let mut s = Status::idle();
+        s.state = State::Scanning;
+        s.scan_id = Some("X".into());
+        s.lines_total = 31;
+        s.lines_done = 31;
+        s.current_line = None;
+        s.y_mm = Some(0.30);
+        let text = s.summary();
+        assert!(!text.contains("32/31"), "{text}");
+        assert_eq!(text, "scan X: all 31 lines done, writing the outputs");
+        // The last line itself, while traced, is still line 31/31.
+        s.lines_done = 30;
+        s.current_line = Some(31);
+        assert_eq!(s.summary(), "scan X: line 31/31, y=0.300 mm");
     }
 
     #[test]

@@ -33,7 +33,7 @@ pub enum LinkError {
         waited_ms: u64,
     },
     /// The reply was neither `OK…` nor `NGnnn[,bb]`, or was over-long.
-    #[error("malformed reply {raw:?} (check baud and parity)")]
+    #[error("malformed reply {raw:?} ({})", crate::port_swap::instrument_port_hint(.raw))]
     Malformed {
         /// The raw bytes, escaped.
         raw: String,

@@ -42,7 +42,7 @@ pub enum StageError {
         timeout_ms: u64,
     },
     /// A line that the driver could not understand.
-    #[error("unexpected reply from the stage controller: {line:?} ({why})")]
+    #[error("unexpected reply from the stage controller: {line:?} ({why}){}", swapped_note(.line))]
     Protocol {
         /// The offending line.
         line: String,
@@ -160,4 +160,13 @@ impl DeviceFault for StageError {
 
     // No `ng_code`: NG codes are the SJ-210's; a controller's own code (GRBL `error:15`) is
     // in the message, and labelled NG it read as the instrument's battery or system code.
+}
+
+/// `; ` and the swapped-ports hint when a line the stage's driver cannot read is the
+/// instrument's (`OK000`, `NG011`).
+fn swapped_note(line: &str) -> String {
+    match crate::port_swap::stage_port_hint(line) {
+        "" => String::new(),
+        hint => format!("; {hint}"),
+    }
 }

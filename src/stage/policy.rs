@@ -70,6 +70,25 @@ pub struct PolicyConfig {
 /// Rounding error below which a target counts as exactly representable, nm.
 const EXACT_NM: f64 = 1e-3;
 
+/// The target among `targets` that a stage whose device unit is `nm_per_unit` nm reaches
+/// least exactly, with its exact value in device units and the rounding error in nm; `None`
+/// when every target is a whole number of device units. The same rule decides at
+/// `check-config` (from the configured plan) and when the stage connects.
+pub fn worst_inexact(
+    targets: impl IntoIterator<Item = Nm>,
+    nm_per_unit: f64,
+) -> Option<(Nm, f64, f64)> {
+    let mut worst: Option<(Nm, f64, f64)> = None;
+    for t in targets {
+        let exact = t.0 as f64 / nm_per_unit;
+        let err = (exact.round() - exact) * nm_per_unit;
+        if err.abs() > EXACT_NM && worst.is_none_or(|w| err.abs() > w.2.abs()) {
+            worst = Some((t, exact, err));
+        }
+    }
+    worst
+}
+
 /// The policy over one driver.
 pub struct MotionPolicy<S> {
     stage: S,
@@ -199,15 +218,10 @@ impl<S: Stage> YAxis for MotionPolicy<S> {
     type Error = StageError;
 
     fn check_targets(&self, targets: &[Nm]) -> Result<Vec<String>, StageError> {
-        let mut worst: Option<(Nm, f64, f64)> = None;
         for &t in targets {
             self.check_limits(t)?;
-            let (_, exact, err) = self.to_units(t);
-            if err.abs() > EXACT_NM && worst.is_none_or(|w| err.abs() > w.2.abs()) {
-                worst = Some((t, exact, err));
-            }
         }
-        match worst {
+        match worst_inexact(targets.iter().copied(), self.cfg.nm_per_unit) {
             None => Ok(Vec::new()),
             Some((target, units, error_nm)) if !self.cfg.allow_inexact_step => {
                 Err(StageError::InexactTarget {

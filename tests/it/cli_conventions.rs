@@ -159,6 +159,124 @@ fn check_config_refuses_one_port_for_both_devices() {
     }
 }
 
+/// `check-config` of the demo's station with `edit` applied to its text: the exit status and
+/// standard error.
+fn check_edited(edit: impl Fn(String) -> String) -> (Option<i32>, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = demo_config(dir.path(), Path::new("/dev/null"), Path::new("/dev/zero"));
+    let edited = edit(std::fs::read_to_string(&cfg).unwrap());
+    std::fs::write(&cfg, edited).unwrap();
+    let out = surfscan(&["check-config", cfg.to_str().unwrap()]);
+    (out.status.code(), text(&out.stderr))
+}
+
+/// A y step the stage cannot make exactly (the demo's stage: 400 steps/mm, a step of
+/// 2.5 µm): refused at `check-config` naming the key, the stage's step and whole-step
+/// choices, where the scan used to find out only when the stage connected.
+#[test]
+fn check_config_refuses_a_y_step_that_is_no_whole_number_of_stage_steps() {
+    // 0.011 mm is 4.4 steps of 0.0025 mm: 0.01 or 0.0125 mm would do.
+    let (code, err) = check_edited(|t| t.replace("y-step-mm = 0.01", "y-step-mm = 0.011"));
+    assert_eq!(code, Some(78), "{err}");
+    assert!(
+        err.contains("scan.y-step-mm")
+            && err.contains("0.011 mm is 4.4000 of the stage's steps of 0.0025 mm")
+            && err.contains("0.01 or 0.0125 mm")
+            && err.contains("allow-inexact-step"),
+        "{err}"
+    );
+    // Less than one step (it was printed as "steps of 0.0000 mm"): the smallest step named.
+    let (code, err) = check_edited(|t| t.replace("y-step-mm = 0.01", "y-step-mm = 0.001"));
+    assert_eq!(code, Some(78), "{err}");
+    assert!(
+        err.contains("0.001 mm is 0.4000 of the stage's steps") && err.contains("(0.0025 mm)"),
+        "{err}"
+    );
+    // A first line between two steps, with a whole step: named by its own key.
+    let (code, err) = check_edited(|t| {
+        let start = t
+            .lines()
+            .find(|l| l.starts_with("y-start-mm"))
+            .unwrap()
+            .to_owned();
+        t.replace(&start, "y-start-mm = -20.0001")
+    });
+    assert_eq!(code, Some(78), "{err}");
+    assert!(err.contains("scan.y-start-mm"), "{err}");
+    // Allowed explicitly: valid (the stage rounds each target once, with a warning).
+    let (code, err) = check_edited(|t| {
+        t.replace("y-step-mm = 0.01", "y-step-mm = 0.011").replace(
+            "home-on-start = true",
+            "home-on-start = true\nallow-inexact-step = true",
+        )
+    });
+    assert_eq!(code, Some(0), "{err}");
+}
+
+/// An output directory on a tree that keeps no files, or holding the control socket:
+/// refused by `check-config` (and so by `scan` and `daemon`), naming the key.
+#[test]
+fn check_config_refuses_output_dirs_that_keep_no_files_and_a_socket_inside_them() {
+    for bad in [
+        "/proc/self",
+        "/proc/self/scans",
+        "/sys/kernel",
+        "/dev/surfscan",
+    ] {
+        let (code, err) = check_edited(|t| {
+            let dir = t
+                .lines()
+                .skip_while(|l| *l != "[output]")
+                .nth(1)
+                .unwrap()
+                .to_owned();
+            t.replace(&dir, &format!("dir = {bad:?}"))
+        });
+        assert_eq!(code, Some(78), "{bad}: {err}");
+        assert!(
+            err.contains(&format!("output.dir = {bad} lies on")) && err.contains("keeps no files"),
+            "{bad}: {err}"
+        );
+    }
+    // A regular file named as the directory.
+    let (code, err) = check_edited(|t| {
+        let dir = t
+            .lines()
+            .skip_while(|l| *l != "[output]")
+            .nth(1)
+            .unwrap()
+            .to_owned();
+        t.replace(&dir, "dir = \"/etc/passwd\"")
+    });
+    assert_eq!(code, Some(78), "{err}");
+    assert!(err.contains("is not a directory"), "{err}");
+    // The socket inside the scans' tree, even in a directory not made yet.
+    let (code, err) = check_edited(|t| {
+        let dir = t
+            .lines()
+            .skip_while(|l| *l != "[output]")
+            .nth(1)
+            .unwrap()
+            .to_owned();
+        let out = dir
+            .trim_start_matches("dir = ")
+            .trim_matches('"')
+            .to_owned();
+        let sock = t
+            .lines()
+            .skip_while(|l| *l != "[control]")
+            .nth(1)
+            .unwrap()
+            .to_owned();
+        t.replace(&sock, &format!("socket = \"{out}/run/control.sock\""))
+    });
+    assert_eq!(code, Some(78), "{err}");
+    assert!(
+        err.contains("control.socket") && err.contains("lies inside output.dir"),
+        "{err}"
+    );
+}
+
 #[test]
 fn check_config_validates_without_opening_devices() {
     let dir = tempfile::tempdir().unwrap();

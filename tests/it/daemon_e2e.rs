@@ -90,7 +90,12 @@ pub(crate) async fn rig() -> Rig {
 /// control socket at `socket`.
 fn demo_config_at(inst: &Path, stage: &Path, scans: &Path, socket: &Path) -> String {
     surfscan::cli::demo::demo_config(inst, stage, scans).replace(
-        &format!("{:?}", scans.join("sim/control.sock").display().to_string()),
+        &format!(
+            "{:?}",
+            surfscan::cli::demo::demo_socket(scans)
+                .display()
+                .to_string()
+        ),
         &format!("{:?}", socket.display().to_string()),
     )
 }
@@ -121,15 +126,22 @@ impl std::ops::DerefMut for Daemon {
 }
 
 pub(crate) fn spawn_daemon(r: &Rig) -> Daemon {
+    spawn_daemon_to(r, Stdio::null())
+}
+
+/// The daemon with its log (stderr) going to `log`.
+pub(crate) fn spawn_daemon_to(r: &Rig, log: Stdio) -> Daemon {
     Daemon(
         Command::new(env!("CARGO_BIN_EXE_surfscan"))
             .args(["daemon", "--config"])
             .arg(&r.config)
             .env("NOTIFY_SOCKET", r.dir.path().join("notify.sock"))
             .env_remove("WATCHDOG_USEC")
+            .env_remove("RUST_LOG")
+            .env("NO_COLOR", "1")
             .stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(Stdio::null())
+            .stderr(log)
             .spawn()
             .unwrap(),
     )
@@ -256,7 +268,8 @@ pub(crate) fn sigterm(child: &Child) {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket() {
     let r = rig().await;
-    let mut d = spawn_daemon(&r);
+    let log_path = r.dir.path().join("daemon.log");
+    let mut d = spawn_daemon_to(&r, std::fs::File::create(&log_path).unwrap().into());
     let seen = notify_until(&r, &mut d, |m| m.contains("READY=1"));
     assert!(
         r.socket.exists(),
@@ -325,6 +338,20 @@ async fn ready_after_the_socket_then_pause_resume_and_abort_through_the_socket()
     assert!(recs.iter().any(
         |r| matches!(r, Record::Interruption(i) if i.reason.contains("paused by the operator"))
     ));
+    // The operator's pause, resume and abort are the normal course of a scan: logged at
+    // INFO, never as warnings a fault would give.
+    let log = std::fs::read_to_string(&log_path).unwrap();
+    let paused_at = |level: &str| {
+        log.lines()
+            .any(|l| l.contains(level) && l.contains("paused by the operator"))
+    };
+    assert!(paused_at(" INFO "), "{log}");
+    assert!(!paused_at(" WARN "), "{log}");
+    assert!(
+        !log.lines()
+            .any(|l| l.contains(" WARN ") && (l.contains("resume") || l.contains("abort"))),
+        "{log}"
+    );
     let idx = line_indices(&recs);
     let mut sorted = idx.clone();
     sorted.dedup();

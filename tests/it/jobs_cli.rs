@@ -207,7 +207,10 @@ fn idle_daemon(dir: &Path) -> (IdleDaemon, PathBuf) {
     let mut t =
         surfscan::cli::demo::demo_config(&dir.join("no-sj210"), &dir.join("no-stage"), &out)
             .replace(
-                &format!("{:?}", out.join("sim/control.sock").display().to_string()),
+                &format!(
+                    "{:?}",
+                    surfscan::cli::demo::demo_socket(&out).display().to_string()
+                ),
                 &format!("{:?}", socket.display().to_string()),
             );
     t.push_str(&format!(

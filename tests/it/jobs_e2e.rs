@@ -96,7 +96,12 @@ async fn rig(recipes: &[(&str, &str)]) -> Rig {
     }
     let text = surfscan::cli::demo::demo_config(&inst, &stage, &scans)
         .replace(
-            &format!("{:?}", scans.join("sim/control.sock").display().to_string()),
+            &format!(
+                "{:?}",
+                surfscan::cli::demo::demo_socket(&scans)
+                    .display()
+                    .to_string()
+            ),
             &format!("{:?}", socket.display().to_string()),
         )
         .replace("lines = 31", &format!("lines = {LINES}"));

@@ -565,3 +565,36 @@ async fn out_of_inodes_suspends_without_flapping_and_completes_when_files_are_fr
     drop(mount);
     rig.shutdown().await;
 }
+
+/// The instrument's and the stage's ports swapped in the configuration: the scan refuses to
+/// start and says the ports look swapped (the GRBL controller answered the instrument's
+/// command with `error:N`), instead of blaming the baud rate and parity.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn swapped_ports_are_named_as_swapped() {
+    let rig = Rig::start(RigOptions::default()).await;
+    let config = rig.config("out");
+    let (i, s) = (
+        format!("{:?}", rig.instrument_link.display().to_string()),
+        format!("{:?}", rig.stage_link.display().to_string()),
+    );
+    let text = std::fs::read_to_string(&config).unwrap();
+    assert!(text.contains(&i) && text.contains(&s), "{text}");
+    let swapped = text
+        .replace(&i, "\"@INSTRUMENT@\"")
+        .replace(&s, &i)
+        .replace("\"@INSTRUMENT@\"", &s);
+    std::fs::write(&config, swapped).unwrap();
+    let o = tokio::time::timeout(Duration::from_secs(120), run_scan(&config, &[]))
+        .await
+        .expect("the scan ends");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{}", describe(&o));
+    assert!(
+        err.contains("ports look swapped")
+            && err.contains("exchange [instrument] port and [stage] port"),
+        "{}",
+        describe(&o)
+    );
+    assert!(!err.contains("check baud and parity"), "{err}");
+    rig.shutdown().await;
+}

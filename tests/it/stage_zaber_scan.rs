@@ -219,7 +219,8 @@ async fn a_stall_mid_scan_rehomes_and_every_line_lands_at_its_y() {
 }
 
 /// 0.047625 µm microsteps (a fine lead-screw axis): 0.01 mm is 209.97 microsteps. Without
-/// `allow-inexact-step` the scan is refused before anything moves, naming the setting; with
+/// `allow-inexact-step` the configuration is refused (exit 78) before anything moves, naming
+/// the key, the microstep and the setting; with
 /// it every target is rounded once to the nearest microstep (never more than half of one
 /// off, no drift along the scan), and the rounding is recorded with the scan.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -227,10 +228,12 @@ async fn a_microstep_that_makes_the_step_inexact_is_refused_or_rounded_and_recor
     let fine = 47.625;
     let rig = ZaberRig::start(powered_up(fine)).await;
     let o = run_scan(&rig.config("refused", fine, ""), &[]).await;
-    assert!(!o.status.success(), "{}", describe(&o));
+    assert_eq!(o.status.code(), Some(78), "{}", describe(&o));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.contains("device units") && err.contains("allow-inexact-step"),
+        err.contains("scan.y-step-mm")
+            && err.contains("0.01 mm is 209.9738 of the stage's steps")
+            && err.contains("allow-inexact-step"),
         "{}",
         describe(&o)
     );

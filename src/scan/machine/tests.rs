@@ -314,17 +314,16 @@ fn every_fault_class_in_every_step_of_a_line_gets_its_reaction() {
                 let s = last_status(&a).expect("status");
                 assert_eq!(s.state, State::Suspended, "{step}");
                 assert!(
-                    s.reason
-                        .as_deref()
-                        .unwrap_or_default()
-                        .starts_with("instrument busy since 2026-12-02T01:00:00Z"),
+                    s.reason.as_deref().unwrap_or_default().starts_with(
+                        "instrument answering wrongly or not in time since 2026-12-02T01:00:00Z"
+                    ),
                     "{step}: {:?}",
                     s.reason
                 );
                 assert!(
-                    r.records()
-                        .iter()
-                        .any(|n| n.starts_with("suspended: instrument busy since")),
+                    r.records().iter().any(|n| n.starts_with(
+                        "suspended: instrument answering wrongly or not in time since"
+                    )),
                     "{step}: {:?}",
                     r.records()
                 );
@@ -1479,4 +1478,33 @@ fn a_new_scan_the_instrument_is_not_set_for_fails_before_its_directory_exists() 
     let s = last_status(&a).expect("the end is published");
     let stop = s.last_stop.as_ref().expect("last stop");
     assert!(stop.reason.contains("λc"), "{stop:?}");
+}
+
+/// A line retried within the budget is labelled by what went wrong: "busy" only when the
+/// device said so (NG011), never for a wrong answer or no answer in time.
+#[test]
+fn a_retried_line_names_busy_only_for_a_busy_device() {
+    for (ng_code, label) in [
+        (Some(11), "instrument busy since"),
+        (Some(33), "instrument busy since"),
+        (None, "instrument answering wrongly or not in time since"),
+        (
+            Some(12),
+            "instrument answering wrongly or not in time since",
+        ),
+    ] {
+        let mut r = Rig::started();
+        r.up_to_trace();
+        let a = r.feed(Event::Fault {
+            fault: Fault {
+                ng_code,
+                ..fault(Device::Instrument, FaultClass::Transient, "refused")
+            },
+            trace_started: false,
+        });
+        let reason = last_status(&a)
+            .and_then(|s| s.reason.clone())
+            .unwrap_or_default();
+        assert!(reason.starts_with(label), "{ng_code:?}: {reason}");
+    }
 }
