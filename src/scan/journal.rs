@@ -108,8 +108,9 @@ pub struct StartRecord {
     pub time: DateTime<Utc>,
     /// The plan frozen at start (it wins over a config edited since).
     pub plan: Plan,
-    /// The whole configuration as loaded, for traceability: its types belong to the process
-    /// edge above the session, which never reads this copy back.
+    /// The whole configuration as loaded, for traceability; the settings in it that shape
+    /// the lines (`[stage]`, the instrument's pitch and detector range) are what a resumed
+    /// scan runs with ([`super::frozen`], through the station), the rest is never read back.
     pub config: serde_json::Value,
     /// SHA-256 of the configuration file, hex.
     pub config_hash: String,

@@ -12,7 +12,8 @@
 //! - [`settings`]: what the runner is told by the composition layer.
 //! - [`status`], [`command`], [`event`]: the snapshots the runner publishes, the operator
 //!   commands it takes, the events it reports (for the notification hook).
-//! - [`station`]: opening the instrument and the stage; device errors reduced to a `Fault`.
+//! - [`station`]: opening the instrument and the stage; device errors reduced to a `Fault`;
+//!   [`frozen`]: the settings that shape a resumed scan's lines, taken from its start record.
 //! - [`machine`]: the sans-IO session core: events (with the time) in, actions out (the
 //!   transient budget, suspension, disk full, pause/abort, shutdown); [`policy`]: the fault
 //!   policy as one table (fault kind × situation → reaction) the machine asks, and the
@@ -44,6 +45,7 @@ pub mod ending;
 pub mod event;
 pub mod expected;
 pub mod faults;
+pub mod frozen;
 pub mod journal;
 pub mod ledger;
 pub mod line;

@@ -98,6 +98,9 @@ pub async fn run_scan<S: Station>(
         ScanRequest::Resume { dir, peer } => Some((dir, peer, false)),
         ScanRequest::Continue { dir, peer } => Some((dir, peer, true)),
     };
+    // A new scan runs with the configuration's settings; a resumed one with those its start
+    // record froze (set below, once its journal is read).
+    hands.station.freeze(None);
     let mut machine = match reopening {
         None => Machine::new_scan(settings.plan, policy, before),
         Some((dir, peer, after_failure)) => match watched(ctl, "reopening the scan", {
@@ -109,7 +112,16 @@ pub async fn run_scan<S: Station>(
         .await
         .unwrap_or_else(|e| Err((e, FailKind::Scan)))
         {
-            Ok((resumed, l)) => {
+            Ok((resumed, mut l)) => {
+                for kept in hands.station.freeze(Some(&l.start.config)) {
+                    l.note(&super::machine::Note {
+                        reason: kept,
+                        device: None,
+                        line: None,
+                        peer: None,
+                        pause: None,
+                    });
+                }
                 hands.attach(&l);
                 let plan = l.plan;
                 books.ledger = Some(l);

@@ -40,6 +40,14 @@ pub trait Station {
     /// The x pitch in µm the instrument's profile will have under `conditions`, when it
     /// can be known before a trace (for the pre-flight estimate).
     fn expected_pitch_um(&self, conditions: &Conditions) -> Option<f64>;
+    /// Sets up the next scan: with the settings that shape its lines as `recorded` (the
+    /// configuration frozen in a resumed scan's start record) holds them, or with the
+    /// station's configured ones (`None`: a new scan). Returns, for people, how the kept
+    /// settings differ from the configuration (or why the record's could not be used).
+    fn freeze(&mut self, recorded: Option<&serde_json::Value>) -> Vec<String> {
+        let _ = recorded;
+        Vec::new()
+    }
 }
 
 /// Whether both devices answer properly: the instrument probed, the stage connected and
@@ -81,6 +89,8 @@ pub struct SerialStation {
     pub table: ModelTable,
     /// `[stage]`.
     pub stage: StageSettings,
+    /// `[instrument]` and `[stage]` as configured, restored for a new scan.
+    configured: (InstrumentSettings, StageSettings),
 }
 
 impl SerialStation {
@@ -88,6 +98,7 @@ impl SerialStation {
     pub fn new(instrument: InstrumentSettings, stage: StageSettings) -> Result<Self, String> {
         let table = instrument.validate().map_err(|e| e.to_string())?;
         Ok(SerialStation {
+            configured: (instrument.clone(), stage.clone()),
             instrument,
             table,
             stage,
@@ -140,6 +151,27 @@ impl Station for SerialStation {
         self.instrument
             .pitch_x_um
             .or_else(|| c.lambda_s_um.and_then(pitch_from_lambda_s))
+    }
+
+    fn freeze(&mut self, recorded: Option<&serde_json::Value>) -> Vec<String> {
+        let (instrument, stage) = self.configured.clone();
+        let (instrument, stage, said) = match recorded {
+            None => (instrument, stage, Vec::new()),
+            Some(r) => match super::frozen::frozen(&instrument, &stage, r) {
+                Ok(kept) => kept,
+                Err(e) => (
+                    instrument,
+                    stage,
+                    vec![format!(
+                        "the scan's own settings are not used: {e}; the configuration's are"
+                    )],
+                ),
+            },
+        };
+        // The model table depends on nothing frozen here; validated once in `new`.
+        self.instrument = instrument;
+        self.stage = stage;
+        said
     }
 }
 

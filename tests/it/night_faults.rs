@@ -598,3 +598,46 @@ async fn swapped_ports_are_named_as_swapped() {
     assert!(!err.contains("check baud and parity"), "{err}");
     rig.shutdown().await;
 }
+
+/// Settings that shape a scan's lines are frozen with it: killed after line 3, its
+/// configuration's backlash edited, the scan resumed by a plain start keeps its own
+/// backlash (named in the journal and the log, with the edited value applied to the next
+/// scan) and completes; a new scan then starts with the edited configuration.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_resumed_scan_keeps_its_own_stage_settings_over_an_edited_configuration() {
+    let rig = Rig::start(RigOptions::default()).await;
+    let n = rig.options.lines;
+    let config = rig.config("out");
+    let o = run_scan(&config, &[("SURFSCAN_TEST_CRASH", "2:after-commit")]).await;
+    assert!(o.status.code().is_none(), "{}", describe(&o));
+    let text = std::fs::read_to_string(&config).unwrap();
+    assert!(text.contains("backlash-mm = 0.05"), "{text}");
+    std::fs::write(
+        &config,
+        text.replace("backlash-mm = 0.05", "backlash-mm = 0.08"),
+    )
+    .unwrap();
+
+    let o = run_scan(&config, &[]).await;
+    assert!(o.status.success(), "{}", describe(&o));
+    let dir = scan_dir(&rig.out_dir("out"));
+    assert_lines_exactly(&dir, n);
+    let records = assert_journal_complete(&dir, n);
+    let notes = interruptions(&records);
+    let kept = "[stage] backlash-mm: the scan keeps 0.05; the configuration now says 0.08";
+    assert!(notes.iter().any(|r| r.starts_with(kept)), "{notes:?}");
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains(kept),
+        "named in the log: {}",
+        describe(&o)
+    );
+    // One start record: the same scan, resumed, not a new one.
+    assert_eq!(
+        records
+            .iter()
+            .filter(|r| matches!(r, Record::Start(_)))
+            .count(),
+        1
+    );
+    rig.shutdown().await;
+}
