@@ -255,11 +255,22 @@ async fn drive<S: Station>(
         let cleanup = action == Action::Cleanup;
         let ev = {
             let mut held = books.held.take();
-            let fut = hands.perform(&action, &mut held);
+            // A test's stuck future (SURFSCAN_TEST_STALL), with its shorter limit.
+            let stall = match action {
+                Action::Trace => books.settings.hooks.trace_stalls(),
+                _ => None,
+            };
+            let perform = hands.perform(&action, &mut held);
+            let fut = async move {
+                if stall.is_some() {
+                    std::future::pending::<()>().await;
+                }
+                perform.await
+            };
             let out = if cleanup {
                 Some(fut.await)
             } else {
-                let limit = books.settings.longest_effect;
+                let limit = stall.unwrap_or(books.settings.longest_effect);
                 guarded(
                     fut,
                     limit,

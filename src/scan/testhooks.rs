@@ -8,6 +8,11 @@
 //!   STEP is `before-csv`, `before-json` or `before-journal`. Only that one write fails: the
 //!   records that follow it (the stop record saying why) are written.
 //!
+//! - `SURFSCAN_TEST_STALL=N:SECONDS` — the N-th trace of the process (1-based) never ends, a
+//!   stuck future that no deadline of the drivers bounds, and the longest a device effect may
+//!   take becomes SECONDS: the runner then stops feeding the systemd watchdog after SECONDS,
+//!   as it would after the longest real effect.
+//!
 //! Without those variables the hook does nothing. It is the [`StorageFaults`] the store
 //! and journal consult before every durable write.
 //!
@@ -65,6 +70,18 @@ fn parse_point(value: &str) -> Result<(u32, Step), String> {
     Ok((line, step))
 }
 
+fn parse_stall(value: &str) -> Result<(u32, u64), String> {
+    let (n, secs) = value
+        .split_once(':')
+        .ok_or_else(|| format!("{value:?}: expected N:SECONDS"))?;
+    match (n.parse::<u32>(), secs.parse::<u64>()) {
+        (Ok(n), Ok(secs)) if n >= 1 => Ok((n, secs)),
+        _ => Err(format!(
+            "{value:?}: N (from 1) and SECONDS must be whole numbers"
+        )),
+    }
+}
+
 /// The injected faults of one process.
 #[derive(Debug, Default)]
 pub struct TestHooks {
@@ -72,6 +89,8 @@ pub struct TestHooks {
     enospc: Option<(u32, Step)>,
     enospc_done: AtomicBool,
     line: AtomicU32,
+    stall: Option<(u32, u64)>,
+    traces: AtomicU32,
 }
 
 impl TestHooks {
@@ -96,7 +115,25 @@ impl TestHooks {
             enospc: get("SURFSCAN_TEST_ENOSPC")?,
             enospc_done: AtomicBool::new(false),
             line: AtomicU32::new(0),
+            stall: match std::env::var("SURFSCAN_TEST_STALL") {
+                Ok(v) => Some(parse_stall(&v).map_err(|e| format!("SURFSCAN_TEST_STALL: {e}"))?),
+                Err(_) => None,
+            },
+            traces: AtomicU32::new(0),
         })
+    }
+
+    /// Called as a trace begins: the longest the effect may take instead of the real one
+    /// when this trace is the one to stall (it then never ends), else `None`.
+    pub fn trace_stalls(&self) -> Option<std::time::Duration> {
+        let n = self.traces.fetch_add(1, Ordering::SeqCst) + 1;
+        match self.stall {
+            Some((at, secs)) if at == n => {
+                eprintln!("surfscan: SURFSCAN_TEST_STALL: trace {n} never ends");
+                Some(std::time::Duration::from_secs(secs))
+            }
+            _ => None,
+        }
     }
 
     /// Tells the hook which line the next writes belong to.
@@ -140,6 +177,20 @@ mod tests {
             .unwrap_err()
             .contains("line index"));
         assert!(parse_point("1:later").unwrap_err().contains("before-csv"));
+    }
+
+    #[test]
+    fn only_the_chosen_trace_stalls() {
+        assert_eq!(parse_stall("3:5"), Ok((3, 5)));
+        assert!(parse_stall("0:5").is_err() && parse_stall("3").is_err());
+        let h = TestHooks {
+            stall: Some((2, 5)),
+            ..TestHooks::default()
+        };
+        assert_eq!(h.trace_stalls(), None);
+        assert_eq!(h.trace_stalls(), Some(std::time::Duration::from_secs(5)));
+        assert_eq!(h.trace_stalls(), None);
+        assert_eq!(TestHooks::none().trace_stalls(), None);
     }
 
     #[test]

@@ -744,3 +744,78 @@ fn a_start_the_devices_cannot_serve_is_reported_by_the_start_command() {
         "{stderr}"
     );
 }
+
+/// The systemd watchdog is fed only while the session makes progress or knowingly waits:
+/// a trace that never ends (a stuck future no driver deadline bounds, injected with
+/// `SURFSCAN_TEST_STALL`) keeps it fed only up to the longest a device effect may take, then
+/// the pings stop, so that systemd kills the daemon; started again, it resumes the scan at
+/// its first missing line and completes it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stuck_trace_starves_the_watchdog_and_the_restarted_daemon_resumes_the_scan() {
+    let r = rig().await;
+    let log = r.dir.path().join("daemon.log");
+    // WATCHDOG_USEC of 1 s: a ping every 0.5 s while fed. The third trace never ends; the
+    // longest a device effect may take is then 3 s.
+    let mut d = Daemon(
+        Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(["daemon", "--config"])
+            .arg(&r.config)
+            .env("NOTIFY_SOCKET", r.dir.path().join("notify.sock"))
+            .env("WATCHDOG_USEC", "1000000")
+            .env_remove("WATCHDOG_PID")
+            .env("SURFSCAN_TEST_STALL", "3:3")
+            .env("NO_COLOR", "1")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&log).unwrap())
+            .spawn()
+            .unwrap(),
+    );
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    start_scan(&r, "stuck").await;
+    // Watch the datagrams until 6 s without a ping have passed, or the deadline.
+    let start = Instant::now();
+    let mut last_ping = Instant::now();
+    let mut pings = 0u32;
+    let mut buf = [0u8; 4096];
+    while last_ping.elapsed() < Duration::from_secs(6) {
+        assert!(
+            start.elapsed() < DEADLINE,
+            "the watchdog was fed all along ({pings} pings): {}",
+            std::fs::read_to_string(&log).unwrap_or_default()
+        );
+        if let Ok(n) = r.notify.recv(&mut buf) {
+            if String::from_utf8_lossy(&buf[..n]).contains("WATCHDOG=1") {
+                pings += 1;
+                last_ping = Instant::now();
+            }
+        }
+    }
+    // Fed while it worked (two lines at least), then starved with the daemon still up and
+    // the scan on its third line, with the reason in the log.
+    assert!(pings >= 4, "{pings} pings");
+    assert_eq!(d.try_wait().unwrap(), None, "the daemon is still running");
+    let s = status(&r).await;
+    assert_eq!(s.state, State::Scanning, "{s:?}");
+    // The third trace: line 3, unless a line before it was traced twice.
+    assert!((1..=2).contains(&s.lines_done), "{s:?}");
+    let text = std::fs::read_to_string(&log).unwrap();
+    assert!(
+        text.contains("no longer feeding the watchdog, so systemd restarts the daemon"),
+        "{text}"
+    );
+    // What systemd does then (SIGABRT, then SIGKILL), and its restart.
+    d.kill().unwrap();
+    d.wait().unwrap();
+    let mut d = spawn_daemon(&r);
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    let s = wait_status(&r, "the resumed scan completes", |s| {
+        s.state == State::Idle && s.last_stop.is_some()
+    })
+    .await;
+    assert_eq!(s.last_stop.unwrap().status, StopStatus::Success);
+    let dir = scan_dir(&r);
+    assert_eq!(line_indices(&records(&dir)), (0..LINES).collect::<Vec<_>>());
+    sigterm(&d);
+    d.wait().unwrap();
+}
