@@ -8,9 +8,12 @@
 //! metric and which `promtool check metrics` (Prometheus 2.42, Debian 12) rejects ("no help
 //! text" for every counter). The textfile and the endpoint must be the same text, and both
 //! must pass promtool, so the format is the 0.0.4 one, written by [`crate::scan::metrics`].
-//! The HTTP side is axum.
+//! The HTTP side is axum's router on the station page's listener ([`crate::web::server`]:
+//! at most a few connections, a deadline for a request's headers and for a stalled
+//! connection), so no client can hold a connection open for ever.
 //!
-//! Layer 4 (process edge): depends on axum, tokio and the scan's status and metrics types.
+//! Layer 4 (process edge): depends on axum, tokio, the page's listener and the scan's status
+//! and metrics types.
 
 use crate::scan::metrics::{family, ScanMetrics};
 use crate::scan::status::{DeviceState, State, Status};
@@ -131,24 +134,22 @@ async fn metrics(Extract(src): Extract<Sources>) -> impl IntoResponse {
     ([(header::CONTENT_TYPE, CONTENT_TYPE)], text)
 }
 
-/// Serves `/metrics` on `listener` until `shutdown` becomes true.
+/// Connections served at once; a scraper needs one, a few people looking a few more.
+const MAX_CONNECTIONS: usize = 16;
+
+/// Serves `/metrics` on `listener` until `shutdown` becomes true, under the station page's
+/// connection bound and deadlines ([`crate::web::server`]): a client that sends no request,
+/// or drips its headers, is closed after `HEADER_TIMEOUT`.
 pub async fn serve(
     listener: tokio::net::TcpListener,
     status: watch::Receiver<Status>,
     scan: watch::Receiver<ScanMetrics>,
-    mut shutdown: watch::Receiver<bool>,
+    shutdown: watch::Receiver<bool>,
 ) {
     let app = Router::new()
         .route("/metrics", get(metrics))
         .with_state(Sources { status, scan });
-    let served = axum::serve(listener, app)
-        .with_graceful_shutdown(async move {
-            let _ = shutdown.wait_for(|v| *v).await;
-        })
-        .await;
-    if let Err(e) = served {
-        tracing::error!("metrics endpoint stopped: {e}");
-    }
+    crate::web::server::serve(listener, None, app, MAX_CONNECTIONS, shutdown).await;
 }
 
 #[cfg(test)]

@@ -70,17 +70,20 @@ pub async fn serve(
 ) {
     let slots = Arc::new(Semaphore::new(max_connections));
     loop {
-        let (stream, addr) = tokio::select! {
+        // The select's output is left before anything else is awaited, so that the loop can
+        // run in a spawned task (a shutdown borrow held across an await would not be Send).
+        let accepted = tokio::select! {
             _ = shutdown.wait_for(|s| *s) => break,
-            accepted = listener.accept() => match accepted {
-                Ok(a) => a,
-                Err(e) => {
-                    // Out of file descriptors and the like: wait rather than spin.
-                    tracing::warn!("web: accept failed: {e}");
-                    tokio::time::sleep(Duration::from_millis(100)).await;
-                    continue;
-                }
-            },
+            accepted = listener.accept() => accepted,
+        };
+        let (stream, addr) = match accepted {
+            Ok(a) => a,
+            Err(e) => {
+                // Out of file descriptors and the like: wait rather than spin.
+                tracing::warn!("web: accept failed: {e}");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+                continue;
+            }
         };
         let Ok(permit) = slots.clone().try_acquire_owned() else {
             refuse_busy(&stream, max_connections);

@@ -252,3 +252,38 @@ async fn a_port_already_in_use_is_named_in_the_status_and_the_station_scans_on()
     e2e::sigterm(&d);
     e2e::wait_exit(&mut d);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_that_never_finishes_its_request_is_closed_and_others_are_still_served() {
+    let r = e2e::rig().await;
+    let port = free_port();
+    with_listen(&r, port);
+    let mut d = crate::mqtt_broker::spawn_logged(&r);
+    crate::mqtt_broker::wait_socket(&r).await;
+    let start = Instant::now();
+    while get(port, "/metrics").is_err() {
+        assert!(start.elapsed() < e2e::DEADLINE, "/metrics never answered");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    // Half a request line, then nothing: the server must hang up on its own.
+    let mut idle = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+    idle.write_all(b"GET /metr").unwrap();
+    let silent = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+    for s in [&idle, &silent] {
+        s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    }
+    // Meanwhile a scraper is served.
+    let (status, _, body) = get(port, "/metrics").unwrap();
+    assert!(status.contains("200"), "{status}");
+    assert!(body.contains("surfscan_"), "{body}");
+    for (what, mut s) in [("half a request", idle), ("nothing", silent)] {
+        let mut rest = Vec::new();
+        match s.read_to_end(&mut rest) {
+            Ok(_) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => {}
+            Err(e) => panic!("a client that sent {what} was not closed within 60 s: {e}"),
+        }
+    }
+    e2e::sigterm(&d);
+    e2e::wait_exit(&mut d);
+}
