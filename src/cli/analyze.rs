@@ -91,6 +91,32 @@ pub struct Args {
     /// Output directory. Default: the scan directory for a scan, `.` for a CSV.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Add the contact of the surface with a rigid flat to the report (`contact` in
+    /// report.json, a table in report.html): the load–area curve of the measured grid.
+    #[arg(long)]
+    pub contact: bool,
+    /// The contact's nominal pressures, MPa, comma-separated (default 1,2,5,10,20,50,100).
+    #[arg(
+        long,
+        value_name = "MPA,…",
+        value_delimiter = ',',
+        requires = "contact"
+    )]
+    pub contact_pressures: Vec<f64>,
+    /// Young's modulus of the measured body for the contact, GPa (default 210, steel).
+    #[arg(long, value_name = "GPA", requires = "contact")]
+    pub contact_young: Option<f64>,
+    /// Poisson's ratio of the measured body for the contact (default 0.30, steel).
+    #[arg(long, value_name = "NU", requires = "contact")]
+    pub contact_poisson: Option<f64>,
+    /// Hardness of the measured body, GPa: the contact is perfectly plastic at it (default:
+    /// elastic).
+    #[arg(long, value_name = "GPA", requires = "contact")]
+    pub contact_hardness: Option<f64>,
+    /// Also the contact of the model sampled at this y spacing between the lines, mm, with
+    /// the verdict between lines beside it.
+    #[arg(long, value_name = "MM", requires = "contact")]
+    pub contact_model_pitch_y: Option<f64>,
     /// Degree of the model along u (x). Default: a scan's frozen plan, else 5 (the paper).
     #[arg(long)]
     pub degree_u: Option<usize>,
@@ -247,6 +273,49 @@ fn failed(msg: impl Into<String>) -> CliError {
     CliError::new(Exit::Failed, msg)
 }
 
+/// The contact section's options from `--contact…`, every value checked (exit 2 naming the
+/// value); `None` without `--contact`.
+fn contact_options(
+    args: &Args,
+) -> Result<Option<crate::report::sections::contact::ContactSectionOptions>, CliError> {
+    use crate::contact::{check_options, Body, ContactOptions, DEFAULT_PRESSURES_MPA};
+    if !args.contact {
+        return Ok(None);
+    }
+    let usage = |e: crate::contact::ContactError| CliError::new(Exit::Usage, e.to_string());
+    let specimen = Body::try_new(
+        "specimen",
+        args.contact_young.unwrap_or(Body::STEEL.young_gpa),
+        args.contact_poisson.unwrap_or(Body::STEEL.poisson),
+    )
+    .map_err(usage)?;
+    let contact = ContactOptions {
+        specimen,
+        hardness_gpa: args.contact_hardness,
+        pressures_mpa: if args.contact_pressures.is_empty() {
+            DEFAULT_PRESSURES_MPA.to_vec()
+        } else {
+            args.contact_pressures.clone()
+        },
+        ..ContactOptions::default()
+    };
+    check_options(&contact).map_err(usage)?;
+    if let Some(s) = args.contact_model_pitch_y {
+        if !(s.is_finite() && s > 0.0) {
+            return Err(CliError::new(
+                Exit::Usage,
+                format!("--contact-model-pitch-y {s}: the model's y spacing must be a positive length in mm"),
+            ));
+        }
+    }
+    Ok(Some(
+        crate::report::sections::contact::ContactSectionOptions {
+            contact,
+            model_pitch_y_mm: args.contact_model_pitch_y,
+        },
+    ))
+}
+
 fn report_error(e: ReportError) -> CliError {
     match e {
         ReportError::Input(e) => super::input_args::input_error(e),
@@ -401,6 +470,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             replace_spikes: args.model.replace(),
             lab,
             material_ratio: args.material_ratio.unwrap_or(frozen.material_ratio),
+            contact: contact_options(&args)?,
             ..ScanAnalysisOptions::default()
         };
         let outputs = characterise_scan(&input, &options).map_err(report_error)?;
@@ -473,6 +543,7 @@ fn fit_and_characterise(
         )?,
         replace_spikes: args.model.replace(),
         material_ratio: args.material_ratio.unwrap_or_default(),
+        contact: contact_options(args)?,
         ..ScanAnalysisOptions::default()
     };
     let mut recipe = crate::report::scan_dir::scan_recipe(&analysis, None, &[]);

@@ -211,6 +211,12 @@ fn pressures(opts: &ContactOptions) -> Result<(Vec<f64>, f64), ContactError> {
     Ok((list, map))
 }
 
+/// Checks the loads, the map load and the hardness of `opts` against each other, as
+/// [`contact_curve`] does before it solves anything.
+pub fn check_options(opts: &ContactOptions) -> Result<(), ContactError> {
+    pressures(opts).map(|_| ())
+}
+
 /// Solves the contact of `grid` at every pressure of `opts` (see the module doc).
 pub fn contact_curve(
     grid: &ContactGrid<'_>,

@@ -30,8 +30,8 @@ pub mod patches;
 pub mod solver;
 
 pub use curve::{
-    contact_curve, ContactCurve, ContactGrid, ContactMap, ContactOptions, CurvePoint,
-    DEFAULT_PRESSURES_MPA,
+    check_options, contact_curve, ContactCurve, ContactGrid, ContactMap, ContactOptions,
+    CurvePoint, DEFAULT_PRESSURES_MPA,
 };
 pub use error::{ContactError, MAX_HARDNESS_GPA, MIN_HARDNESS_GPA};
 pub use modulus::{effective_modulus_gpa, Body};

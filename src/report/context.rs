@@ -64,6 +64,8 @@ pub struct ScanAnalysisOptions {
     /// The reading of the material-ratio family limits are judged in (default ISO's; both
     /// readings are reported).
     pub material_ratio: MaterialRatioReading,
+    /// The contact analysis to add to the report (default `None`: none).
+    pub contact: Option<super::sections::contact::ContactSectionOptions>,
 }
 
 impl ScanAnalysisOptions {
@@ -104,6 +106,7 @@ impl Default for ScanAnalysisOptions {
             specification: None,
             instrument: None,
             material_ratio: MaterialRatioReading::Iso,
+            contact: None,
         }
     }
 }

@@ -71,6 +71,9 @@ pub struct Report {
     /// Why `between_lines` is missing.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub between_lines_error: Option<String>,
+    /// The contact of the measured grid and of the model between lines (when asked for).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub contact: Option<crate::report::sections::contact::ContactSection>,
     /// The surface the model sections describe: method, recipe, spikes replaced.
     pub model: ModelReport,
     /// Folds of the control net and the surface, and its height range against the data's.
@@ -133,6 +136,7 @@ pub fn assemble(
         model_vs_measured,
         between_lines,
         overlay,
+        contact,
         failed,
         not_possible,
         warnings,
@@ -166,6 +170,7 @@ pub fn assemble(
         model_vs_measured_error,
         between_lines,
         between_lines_error,
+        contact,
         model: ModelReport {
             v_method: model.recipe.method,
             description: model.recipe.describe(),

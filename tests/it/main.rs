@@ -9,6 +9,7 @@ mod common;
 mod config_ranges;
 mod contact_cli;
 mod contact_reference;
+mod contact_report;
 mod control_cli;
 mod control_server;
 mod daemon_e2e;

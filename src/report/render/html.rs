@@ -445,6 +445,7 @@ pub fn render(
     lines(&mut h, report);
     instrument(&mut h, report);
     holdout(&mut h, report);
+    contact(&mut h, report);
     recipe(&mut h, report);
     h.push_str(&print::signatures(report));
     h.push_str("</body>\n</html>\n");
@@ -1137,6 +1138,92 @@ fn holdout(h: &mut String, report: &Value) {
         );
     }
     h.push_str("</table>\n");
+}
+
+/// The contact section: the load–area curve of the measured grid and, beside it, of the
+/// model between lines with the verdict between lines.
+fn contact(h: &mut String, report: &Value) {
+    let c = &report["contact"];
+    if !c.is_object() {
+        return;
+    }
+    h.push_str("<h2 id=\"contact\">Contact with a flat</h2>\n");
+    let hardness = c["hardness_gpa"]
+        .as_f64()
+        .map_or("elastic".to_string(), |v| {
+            format!("perfectly plastic at a hardness of {} GPa", sig(v, 4))
+        });
+    let _ = writeln!(
+        h,
+        "<p id=\"contact-bodies\">Composite modulus E* = {} GPa, {}; heights levelled by their least-squares plane.</p>",
+        c["effective_modulus_gpa"]
+            .as_f64()
+            .map_or("—".to_string(), |v| sig(v, 4)),
+        esc(&hardness)
+    );
+    let m = &c["model"];
+    if let Some(v) = m["verdict"].as_str() {
+        let supported = m["supported"].as_bool() == Some(true);
+        let _ = writeln!(
+            h,
+            "<p id=\"contact-verdict\"{}>The model between lines: <b>{}</b>{}</p>",
+            if supported { "" } else { " class=\"bad\"" },
+            esc(v),
+            if supported {
+                ""
+            } else {
+                " The contact of the model below is computed on a surface the data do not support."
+            }
+        );
+    }
+    h.push_str("<table id=\"t-contact\">\n<thead><tr><th class=\"t\">surface</th><th>nominal MPa</th><th>area %</th><th>mean gap µm</th><th>mean contact MPa</th><th>patches</th><th>flowing %</th><th class=\"t\">resolved</th></tr></thead>\n");
+    for (what, s) in [("measured grid", &c["measured"]), ("model", &m["contact"])] {
+        let Some(points) = s["curve"].as_array() else {
+            continue;
+        };
+        let label = format!(
+            "{what} ({} × {}, y pitch {} mm)",
+            s["rows"].as_u64().unwrap_or(0),
+            s["cols"].as_u64().unwrap_or(0),
+            s["pitch_y_mm"]
+                .as_f64()
+                .map_or("—".to_string(), |v| sig(v, 4))
+        );
+        for p in points {
+            let num = |k: &str| p[k].as_f64().unwrap_or(f64::NAN);
+            row(
+                h,
+                &[
+                    ("t", esc(&label)),
+                    ("", sig(num("nominal_pressure_mpa"), 4)),
+                    ("", fmt(100.0 * num("area_fraction"), Quantity::Percent)),
+                    ("", fmt(num("mean_gap_um"), Quantity::HeightUm)),
+                    ("", sig(num("mean_contact_pressure_mpa"), 4)),
+                    ("", p["patches"].as_u64().unwrap_or(0).to_string()),
+                    ("", fmt(100.0 * num("plastic_fraction"), Quantity::Percent)),
+                    (
+                        "t",
+                        if p["resolved"].as_bool() == Some(true) {
+                            "yes".into()
+                        } else {
+                            "no".into()
+                        },
+                    ),
+                ],
+            );
+        }
+    }
+    h.push_str("</table>\n");
+    if let Some(e) = c["measured_error"].as_str() {
+        let _ = writeln!(
+            h,
+            "<p class=\"bad\">The measured grid's contact: {}</p>",
+            esc(e)
+        );
+    }
+    if let Some(e) = m["error"].as_str() {
+        let _ = writeln!(h, "<p class=\"bad\">The model's contact: {}</p>", esc(e));
+    }
 }
 
 fn recipe(h: &mut String, report: &Value) {

@@ -12,6 +12,7 @@
 //! | the model (`surface`, `model_checks`) | [`surface`] | the model, the grid |
 //! | hold-out and the verdict between lines (`model_vs_measured`, `between_lines`) | [`model_vs_measured`] | the grid as characterised, Sq of `surface_grid` |
 //! | the line drawn against the model | [`overlay`] | the grid as characterised, `between_lines` |
+//! | the contact of the grid and of the model between lines (`contact`, when asked for) | [`contact`] | the grid as characterised, the model, `between_lines` |
 //! | the means' uncertainty and the verdict against the specification (`uncertainty`, `specification`) | [`specification`] | `lines`, the context's specification |
 //!
 //! [`run`] composes them — the model section beside the others, as it needs only the grid
@@ -27,6 +28,7 @@
 //! Layer 4 (reporting): depends on [`crate::grid`], [`crate::metrology`],
 //! [`crate::specification`] and the report's types.
 
+pub mod contact;
 pub mod lines;
 pub mod model_vs_measured;
 pub mod overlay;
@@ -81,6 +83,8 @@ pub struct Sections {
     pub between_lines: Result<BetweenLines, String>,
     /// The line drawn against the model.
     pub overlay: Option<overlay::Overlay>,
+    /// The contact analysis, when the options ask for it.
+    pub contact: Option<contact::ContactSection>,
     /// The sections that could not be made, and why.
     pub failed: Vec<FailedSection>,
     /// The sections the number of lines rules out, and why.
@@ -195,6 +199,14 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
             b
         });
 
+        // The contact (when asked for): of the grid as characterised, and of the model
+        // between lines with the verdict between lines beside it.
+        let contact = ctx.options.contact.as_ref().map(|opts| {
+            let c = contact::section(&input, opts, between_lines.as_ref());
+            warnings.extend(c.warnings());
+            c
+        });
+
         // In the order the sections are made.
         let failure = |section: &str, r: Option<&String>| {
             r.map(|e| FailedSection {
@@ -215,6 +227,13 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
             model_vs_measured.as_ref().err(),
         ));
         failed.extend(failure("between_lines", between_lines.as_ref().err()));
+        if let Some(c) = &contact {
+            failed.extend(failure("contact", c.measured_error.as_ref()));
+            failed.extend(failure(
+                "contact.model",
+                c.model.as_ref().and_then(|m| m.error.as_ref()),
+            ));
+        }
         // What the line count rules out is not a failure: the fit needs degree-v + 1 lines,
         // the hold-outs more than that once lines are left out.
         let rows = grid.rows();
@@ -248,6 +267,7 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
             model_vs_measured,
             between_lines,
             overlay,
+            contact,
             failed,
             not_possible,
             warnings,
