@@ -10,6 +10,7 @@ use surfscan::metrology::model::{model_bearing_curves, ModelBacOptions};
 use surfscan::metrology::params::{analyze_line, material_ratio_curve, rk_family, Options};
 use surfscan::report::render::plots::{
     plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction,
+    AssessedProfile,
 };
 
 /// A rough, plateau-honed looking profile: sines plus a deterministic noise, with deep
@@ -171,18 +172,38 @@ fn every_plot_is_png_and_svg_in_iso_words_with_a_key_for_every_colour() {
     let a = analyze_line(&z[..COLS], PX, &Options::default()).unwrap();
     let rk = rk_family(&a.roughness_um).unwrap();
     let curve = material_ratio_curve(&a.roughness_um, 1001);
+    let assessed = AssessedProfile {
+        z_um: &a.roughness_um,
+        pitch_mm: PX,
+        sampling_length_mm: a.recipe.section_length_mm,
+        sampling_lengths: a.recipe.sampling_lengths,
+        kind: "R",
+    };
     let [png, svg] = plot_rk_construction(
         &out.dir,
         "rk-0000",
         &curve,
         &rk,
-        "Line 1 (y = 0.0000 mm): ISO 13565-2 Rk construction",
+        Some(&assessed),
+        "Line 1 (y = 0.0000 mm): assessed profile and ISO 13565-2 Rk construction",
         LONG_CAPTION,
     )
     .unwrap();
     assert!(png.ends_with("rk-0000.png"));
     assert_nothing_at_the_edge(&png);
     let text = std::fs::read_to_string(&svg).unwrap();
+    // The assessed profile above it, its sampling lengths numbered.
+    let n = a.recipe.sampling_lengths;
+    assert!(n >= 2, "the test needs several sampling lengths");
+    assert!(
+        text.contains(&format!("Assessed R profile: {n} sampling lengths of")),
+        "{}",
+        svg.display()
+    );
+    for k in 1..=n {
+        assert!(text.contains(&format!("\nlr{k}\n")), "lr{k} not marked");
+    }
+    assert!(!text.contains(&format!("\nlr{}\n", n + 1)));
     for word in [
         "equivalent straight line",
         "40 % secant of least gradient",

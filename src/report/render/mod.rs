@@ -300,18 +300,26 @@ fn draw_rk_run(
         let row = first_row + k;
         let index = grid.index_of(row);
         let title = format!(
-            "Line {} ({index:04}, y = {} mm): ISO 13565-2 Rk construction",
+            "Line {} ({index:04}, y = {} mm): assessed profile and ISO 13565-2 Rk construction",
             line_number(index),
             nfmt(
                 grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
                 Quantity::PositionMm
             )
         );
+        let profile = plots::AssessedProfile {
+            z_um: &a.roughness_um,
+            pitch_mm: a.recipe.pitch_mm,
+            sampling_length_mm: a.recipe.section_length_mm,
+            sampling_lengths: a.recipe.sampling_lengths,
+            kind: a.recipe.profile,
+        };
         let files = plot_rk_construction(
             rk_dir,
             &format!("{index:04}"),
             &a.rk_curve,
             &a.rk,
+            Some(&profile),
             &title,
             caption,
         )

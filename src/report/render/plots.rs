@@ -1080,13 +1080,140 @@ pub fn plot_profile_overlay(
 
 /// Figure size of the Rk construction.
 const RK_SIZE: (u32, u32) = (1000, 560);
+/// The height added above the Rk construction for the assessed profile.
+const RK_PROFILE_H: u32 = 340;
 /// Width of the Rk plot's side panel holding the values.
 const RK_PANEL_W: u32 = 220;
+
+/// A line's assessed profile as the report draws it above its Rk construction: the
+/// evaluated ordinates (µm, about the mean line), their pitch, and the sampling lengths.
+#[derive(Debug, Clone, Copy)]
+pub struct AssessedProfile<'a> {
+    /// The evaluated ordinates, evaluation length only.
+    pub z_um: &'a [f64],
+    /// Their pitch, mm.
+    pub pitch_mm: f64,
+    /// The sampling length, mm.
+    pub sampling_length_mm: f64,
+    /// How many sampling lengths the evaluation length holds.
+    pub sampling_lengths: u32,
+    /// `R` (roughness) or `P` (primary, form removed).
+    pub kind: &'static str,
+}
+
+/// Points of a profile drawn across `buckets` columns: in each run of ordinates its lowest
+/// and highest, in the order they occur, so that no peak or valley is lost at display
+/// resolution; `(x_mm, z_um)` with x from the first ordinate. A profile of at most
+/// 2 × `buckets` ordinates is returned whole.
+pub fn decimate_keeping_extremes(z: &[f64], pitch_mm: f64, buckets: usize) -> Vec<(f64, f64)> {
+    let at = |i: usize| (i as f64 * pitch_mm, z[i]);
+    if z.len() <= 2 * buckets.max(1) {
+        return (0..z.len()).map(at).collect();
+    }
+    let run = z.len().div_ceil(buckets.max(1));
+    let mut out = Vec::with_capacity(2 * buckets);
+    for start in (0..z.len()).step_by(run) {
+        let end = (start + run).min(z.len());
+        let (mut lo, mut hi) = (start, start);
+        for i in start..end {
+            if z[i] < z[lo] {
+                lo = i;
+            }
+            if z[i] > z[hi] {
+                hi = i;
+            }
+        }
+        out.push(at(lo.min(hi)));
+        if lo != hi {
+            out.push(at(lo.max(hi)));
+        }
+    }
+    out
+}
+
+/// The assessed profile on `area`: the ordinates at display resolution (extremes kept), the
+/// mean line, and the sampling lengths marked and numbered.
+fn draw_assessed_profile<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    p: &AssessedProfile<'_>,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let length = p.z_um.len().saturating_sub(1) as f64 * p.pitch_mm;
+    let (lo, hi) = padded_range(p.z_um.iter().copied(), (-1.0, 1.0));
+    let mut chart = ChartBuilder::on(area)
+        .margin(RATIO_CHART_MARGIN)
+        .x_label_area_size(RATIO_CHART_X_AREA)
+        .y_label_area_size(80)
+        .caption(
+            format!(
+                "Assessed {} profile: {} sampling length{} of {} mm, evaluation length {} mm",
+                p.kind,
+                p.sampling_lengths,
+                if p.sampling_lengths == 1 { "" } else { "s" },
+                fmt(p.sampling_length_mm, Quantity::LengthMm),
+                fmt(length, Quantity::LengthMm)
+            ),
+            font(14),
+        )
+        .build_cartesian_2d(0f64..length.max(p.pitch_mm), lo..hi)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("x along the evaluation length (mm)")
+        .y_desc("height (µm)")
+        .label_style(font(13))
+        .axis_desc_style(font(14))
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()
+        .map_err(err)?;
+    let grey = RGBColor(110, 110, 110);
+    chart
+        .draw_series(LineSeries::new(
+            [(0.0, 0.0), (length, 0.0)],
+            grey.stroke_width(1),
+        ))
+        .map_err(err)?;
+    let columns = area.dim_in_pixel().0 as usize;
+    chart
+        .draw_series(LineSeries::new(
+            decimate_keeping_extremes(p.z_um, p.pitch_mm, columns),
+            DATA.stroke_width(1),
+        ))
+        .map_err(err)?;
+    let tag = font(13).color(&grey);
+    for k in 0..p.sampling_lengths {
+        let x0 = f64::from(k) * p.sampling_length_mm;
+        if k > 0 {
+            chart
+                .draw_series(DashedLineSeries::new(
+                    [(x0, lo), (x0, hi)],
+                    6,
+                    4,
+                    grey.stroke_width(1),
+                ))
+                .map_err(err)?;
+        }
+        chart
+            .draw_series(std::iter::once(Text::new(
+                format!("lr{}", k + 1),
+                (x0 + 0.5 * p.sampling_length_mm, hi),
+                tag.clone(),
+            )))
+            .map_err(err)?;
+    }
+    Ok(())
+}
 
 fn draw_rk<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     curve: &[[f64; 2]],
     rk: &RkFamily,
+    profile: Option<&AssessedProfile<'_>>,
     title: &str,
     caption: &str,
 ) -> Result<(), String>
@@ -1101,6 +1228,16 @@ where
         caption,
     );
     let body = frame.draw(root)?;
+    // The assessed profile above its construction, as an instrument prints them.
+    let body = match profile {
+        Some(p) => {
+            let (_, h) = body.dim_in_pixel();
+            let (top, rest) = body.split_vertically(h * 2 / 5);
+            draw_assessed_profile(&top, p)?;
+            rest
+        }
+        None => body,
+    };
     let (bw, _) = body.dim_in_pixel();
     let (plot_area, panel) = body.split_horizontally(bw.saturating_sub(RK_PANEL_W));
     let heights = curve
@@ -1242,17 +1379,23 @@ where
 /// its material ratio curve (`[mr_pct, height_um]` pairs, e.g. from
 /// [`crate::metrology::params::material_ratio_curve`]), the equivalent straight line and its 40 %
 /// secant, the levels C and D, Mr1 and Mr2, and the Rpk/Rvk triangles — with the values in a
-/// side panel. `caption` (may be empty) is the traceability footer.
+/// side panel, below the line's assessed profile with its sampling lengths when `profile` is
+/// given. `caption` (may be empty) is the traceability footer.
 pub fn plot_rk_construction(
     dir: &Path,
     stem: &str,
     curve: &[[f64; 2]],
     rk: &RkFamily,
+    profile: Option<&AssessedProfile<'_>>,
     title: &str,
     caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
-    png_and_svg!(dir, stem, RK_SIZE, |root| draw_rk(
-        &root, curve, rk, title, caption
+    let size = match profile {
+        Some(_) => (RK_SIZE.0, RK_SIZE.1 + RK_PROFILE_H),
+        None => RK_SIZE,
+    };
+    png_and_svg!(dir, stem, size, |root| draw_rk(
+        &root, curve, rk, profile, title, caption
     ))
 }
 
@@ -1278,6 +1421,30 @@ mod tests {
         assert!(map_note(&s).contains("x stretched"), "{}", map_note(&s));
     }
 
+    /// Decimated to display resolution, a profile keeps every run's lowest and highest
+    /// ordinate in order: its global extremes, a one-point spike, and at most two points per
+    /// column.
+    #[test]
+    fn decimation_keeps_the_extremes_of_every_column() {
+        let mut z: Vec<f64> = (0..100_000).map(|i| (i as f64 * 0.01).sin()).collect();
+        z[54_321] = 7.0;
+        z[12_345] = -9.0;
+        let d = decimate_keeping_extremes(&z, 0.0005, 1000);
+        assert!(d.len() <= 2000, "{}", d.len());
+        assert!(d.windows(2).all(|w| w[0].0 < w[1].0), "x in order");
+        assert!(d.contains(&(54_321.0 * 0.0005, 7.0)));
+        assert!(d.contains(&(12_345.0 * 0.0005, -9.0)));
+        let (lo, hi) = d
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.1), b.max(p.1)));
+        assert_eq!((lo, hi), (-9.0, 7.0));
+        // Short profiles are drawn whole.
+        assert_eq!(
+            decimate_keeping_extremes(&z[..1500], 0.0005, 1000).len(),
+            1500
+        );
+    }
+
     #[test]
     fn profile_exaggeration_is_pixels_per_micrometre_compared() {
         // 1 mm across 1000 px and 1 µm across 1 px: the same pixels per µm.
@@ -1300,6 +1467,7 @@ mod tests {
             root,
             &curve,
             &rk,
+            None,
             "Line 3 (0002, y = 0.02 mm): Rk",
             "specimen A · surfscan",
         )
