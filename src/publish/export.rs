@@ -111,7 +111,7 @@ pub fn drop_file(format: Format, dir: &Path, name: &str, bytes: &[u8]) -> Result
         )]));
     }
     let path = dir.join(name);
-    crate::atomic::write_atomically(&path, |w| w.write_all(bytes)).map_err(|e| {
+    crate::atomic::write_regular_atomically(&path, |w| w.write_all(bytes)).map_err(|e| {
         Failure::Targets(vec![(
             format,
             format!(

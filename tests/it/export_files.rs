@@ -3,8 +3,9 @@
 //! back by `tests/python/dfq_read.py` (written from the Q-DAS field list, not from the writer)
 //! and compared with report.json and the journal; the QIF is validated by xmllint against the
 //! official QIF 3.0 schemas (`tests/data/qif/`) and its numbers read with roxmltree. Drop
-//! directories that are away (missing, read-only) are named in the daemon's status and the
-//! files arrive once they are back; `surfscan export` writes a scan again.
+//! directories that are away (missing, read-only) are named in the daemon's status, the scan
+//! waits in the queue across a restart, and the files arrive once they are back; a full one
+//! is named and keeps no partial file; `surfscan export` writes a scan again.
 
 use crate::common::{python, scan_command, Rig, RigOptions};
 use crate::daemon_e2e as e2e;
@@ -491,6 +492,26 @@ async fn drop_directories_away_are_named_and_the_files_arrive_once_they_are_back
     assert!(dir.join("report.json").exists());
     let id = dir.file_name().unwrap().to_str().unwrap().to_owned();
 
+    // A restart while they are away: the scan waits in the queue on disk and the new
+    // process names the same faults.
+    e2e::sigterm(&d);
+    assert!(e2e::wait_exit(&mut d).success());
+    assert_eq!(
+        std::fs::read_dir(r.out().join("outbox/export"))
+            .unwrap()
+            .filter(|e| e.as_ref().unwrap().path().is_file())
+            .count(),
+        1
+    );
+    let mut d = crate::mqtt_broker::spawn_logged(&r);
+    crate::mqtt_broker::wait_socket(&r).await;
+    e2e::wait_status(&r, "the fault named after the restart", |s| {
+        s.links
+            .get("export")
+            .is_some_and(|l| !l.ok && l.queued == 1 && l.message.contains("[export] dfq-dir"))
+    })
+    .await;
+
     // Both back: the files arrive, the link is well again.
     std::fs::create_dir(&spc).unwrap();
     drop(mount);
@@ -521,6 +542,44 @@ async fn drop_directories_away_are_named_and_the_files_arrive_once_they_are_back
     assert_eq!(done, 1);
     e2e::sigterm(&d);
     e2e::wait_exit(&mut d);
+}
+
+/// A tmpfs mounted on a directory, unmounted when dropped.
+struct Tmpfs(PathBuf);
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(&self.0).output();
+    }
+}
+
+#[test]
+fn a_full_drop_directory_is_named_and_keeps_no_partial_file() {
+    let t = tempfile::tempdir().unwrap();
+    let dir = t.path().join("spc");
+    std::fs::create_dir(&dir).unwrap();
+    let o = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=8k", "tmpfs"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let _mount = Tmpfs(dir.clone());
+    let big = vec![b'K'; 64 * 1024];
+    let e = surfscan::publish::export::drop_file(
+        surfscan::publish::export::Format::Qif,
+        &dir,
+        "s.qif",
+        &big,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("full") && e.contains("[export] qif-dir"), "{e}");
+    assert_eq!(
+        std::fs::read_dir(&dir).unwrap().count(),
+        0,
+        "a file was left"
+    );
 }
 
 #[test]
