@@ -216,7 +216,9 @@ pub struct RepeatedBlock {
 /// the profile did not clear it. JSON: `{"kind": "repeated-block", "blocks": [...]}` or
 /// `{"kind": "ra-disagrees", "instrument_um": …, "ours_um": …, "tolerance_um": …}`,
 /// `{"kind": "beyond-detector-range", "span_um": …, "range_um": …}` or
-/// `{"kind": "ra-unit-unknown", "unit": …}`.
+/// `{"kind": "ra-unit-unknown", "unit": …}`, or (checked at commit against the lines before
+/// it, with no re-read) `{"kind": "ra-far-from-neighbours", "ra_um": …, "median_um": …,
+/// "lines": …, "factor": …}`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum ReadoutWarning {
@@ -249,6 +251,19 @@ pub enum ReadoutWarning {
         /// The unit as the instrument printed it.
         unit: String,
     },
+    /// The instrument's Ra of this line is far from the Ra of the lines traced before it
+    /// (the rule is in `crate::sj210::sanity`): heights in another unit, the stylus off the
+    /// part, another surface.
+    RaFarFromNeighbours {
+        /// This line's Ra, µm.
+        ra_um: f64,
+        /// The median Ra of the lines before it, µm.
+        median_um: f64,
+        /// How many lines before it the median is of.
+        lines: u32,
+        /// The ratio beyond which a line is flagged, either way.
+        factor: f64,
+    },
 }
 
 impl std::fmt::Display for ReadoutWarning {
@@ -276,6 +291,15 @@ impl std::fmt::Display for ReadoutWarning {
             ReadoutWarning::BeyondDetectorRange { span_um, range_um } => write!(
                 f,
                 "the heights span {span_um:.1} um, more than the detector's measuring range of {range_um} um ([instrument] detector-range-um): they cannot be the surface's (heights in the wrong unit, nm read as um?)"
+            ),
+            ReadoutWarning::RaFarFromNeighbours {
+                ra_um,
+                median_um,
+                lines,
+                factor,
+            } => write!(
+                f,
+                "its Ra {ra_um} um is more than {factor} times away from the median Ra {median_um} um of the {lines} lines before it: heights in another unit, the stylus off the part or another surface?"
             ),
             ReadoutWarning::RaUnitUnknown { unit } => write!(
                 f,

@@ -4,7 +4,8 @@
 //! [`Event`].
 //!
 //! Layer 3 (session): depends on [`super::ledger`], [`super::opening`], [`super::disk`],
-//! [`super::channels`], [`super::machine`] and the scan's line and outputs types.
+//! [`super::channels`], [`super::machine`], the scan's line and outputs types, and
+//! [`crate::sj210::sanity`] (a committed line's Ra against the lines before it).
 
 use super::channels::Control;
 use super::device_ops::Held;
@@ -149,6 +150,26 @@ impl Books<'_> {
                     return internal("internal: no line to commit");
                 };
                 let p = &h.traced.profile;
+                // The line's Ra against the lines before it (no re-read: the read-out itself
+                // agreed with the instrument's own Ra).
+                let mut readout_warnings = h.traced.readout_warnings.clone();
+                if let Some(ra) = crate::sj210::sanity::instrument_ra_um(&h.traced.results) {
+                    let mut earlier: Vec<(u32, f64)> = l
+                        .lines
+                        .iter()
+                        .filter(|s| s.meta.id.index < *line)
+                        .filter_map(|s| {
+                            let ra = crate::sj210::sanity::instrument_ra_um(&s.meta.results)?;
+                            Some((s.meta.id.index, ra))
+                        })
+                        .collect();
+                    earlier.sort_by_key(|e| e.0);
+                    let before: Vec<f64> = earlier.into_iter().map(|e| e.1).collect();
+                    if let Some(w) = crate::sj210::sanity::ra_far_from_neighbours(ra, &before) {
+                        tracing::warn!(scan_id = %l.id, line = line + 1, "line kept with a read-out warning: {w}");
+                        readout_warnings.push(w);
+                    }
+                }
                 let meta = LineMeta {
                     id: LineIdentity {
                         index: *line,
@@ -159,7 +180,7 @@ impl Books<'_> {
                     },
                     profile: p.header(),
                     results: h.traced.results.clone(),
-                    readout_warnings: h.traced.readout_warnings.clone(),
+                    readout_warnings,
                     started_at: h.started_at,
                     finished_at: h.finished_at,
                 };

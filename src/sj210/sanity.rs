@@ -38,6 +38,7 @@
 //! Pure (layer 1): depends on [`crate::metrology`], [`crate::profile`] and [`crate::devices`]
 //! (the warning types a line carries).
 
+use crate::devices::ReadoutWarning;
 pub use crate::devices::RepeatedBlock;
 use crate::metrology::params::analyze_profile;
 use crate::profile::{InstrumentResult, Profile, ProfileKind};
@@ -66,6 +67,54 @@ impl RaCheck {
     pub fn agrees(&self) -> bool {
         (self.ours_um - self.instrument_um).abs() <= self.tolerance_um
     }
+}
+
+/// How far, as a ratio either way, a line's Ra may be from the median Ra of the lines
+/// before it. Ra across one part's surface varies by tens of percent, a lay or a feature by
+/// a few times; a factor of 5 is none of that but a read-out in another unit (×1000), the
+/// stylus lifted off the part or another surface.
+pub const NEIGHBOUR_RA_FACTOR: f64 = 5.0;
+
+/// At least this many lines before it are needed to judge a line against its neighbours;
+/// the median is of at most [`NEIGHBOUR_RA_WINDOW`] of them, the latest.
+pub const NEIGHBOUR_RA_MIN_LINES: usize = 3;
+
+/// The most lines before it a line's Ra is compared with (the latest).
+pub const NEIGHBOUR_RA_WINDOW: usize = 5;
+
+/// The warning for a line whose Ra `ra_um` is more than [`NEIGHBOUR_RA_FACTOR`] times away
+/// from the median of `before` (the Ra of the lines traced before it, oldest first; the
+/// latest [`NEIGHBOUR_RA_WINDOW`] count), when at least [`NEIGHBOUR_RA_MIN_LINES`] are known.
+pub fn ra_far_from_neighbours(ra_um: f64, before: &[f64]) -> Option<ReadoutWarning> {
+    let mut window: Vec<f64> = before
+        .iter()
+        .rev()
+        .take(NEIGHBOUR_RA_WINDOW)
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    if window.len() < NEIGHBOUR_RA_MIN_LINES || !ra_um.is_finite() {
+        return None;
+    }
+    window.sort_by(f64::total_cmp);
+    let n = window.len();
+    let median_um = if n % 2 == 1 {
+        window[n / 2]
+    } else {
+        (window[n / 2 - 1] + window[n / 2]) / 2.0
+    };
+    let far = if median_um > 0.0 && ra_um > 0.0 {
+        ra_um / median_um > NEIGHBOUR_RA_FACTOR || median_um / ra_um > NEIGHBOUR_RA_FACTOR
+    } else {
+        // A zero Ra beside non-zero ones (or the reverse): nothing was measured.
+        (median_um > 0.0) != (ra_um > 0.0)
+    };
+    far.then_some(ReadoutWarning::RaFarFromNeighbours {
+        ra_um,
+        median_um,
+        lines: n as u32,
+        factor: NEIGHBOUR_RA_FACTOR,
+    })
 }
 
 /// The instrument's `Ra` in µm among its results, when it reported one with a value.
@@ -236,5 +285,34 @@ mod tests {
         assert!(!is_repeated_block(&[0.0, 0.0, 0.0], &[0.0, 0.0, 0.0]));
         assert!(!is_repeated_block(&[4.0], &[4.0]));
         assert!(!is_repeated_block(&[], &[]));
+    }
+
+    #[test]
+    fn a_line_far_from_its_neighbours_ra_is_flagged_either_way() {
+        let before = [1.0, 1.2, 0.9, 1.1];
+        // Median of the four: 1.05 µm.
+        assert_eq!(ra_far_from_neighbours(1.5, &before), None);
+        assert_eq!(ra_far_from_neighbours(5.0, &before), None, "4.8 times");
+        match ra_far_from_neighbours(1050.0, &before) {
+            Some(ReadoutWarning::RaFarFromNeighbours {
+                median_um, lines, ..
+            }) => {
+                assert!((median_um - 1.05).abs() < 1e-12);
+                assert_eq!(lines, 4);
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(
+            ra_far_from_neighbours(0.2, &before).is_some(),
+            "5.25 times smaller"
+        );
+        assert!(ra_far_from_neighbours(0.0, &before).is_some());
+        // Too few lines before it to judge.
+        assert_eq!(ra_far_from_neighbours(1000.0, &[1.0, 1.0]), None);
+        // Only the latest five count: the old, rougher lines are outside the window.
+        let drift = [50.0, 50.0, 50.0, 1.0, 1.0, 1.0, 1.0, 1.0];
+        assert!(ra_far_from_neighbours(50.0, &drift).is_some());
+        // One wild line among them does not move the median.
+        assert_eq!(ra_far_from_neighbours(1.0, &[1.0, 1000.0, 1.1, 0.9]), None);
     }
 }

@@ -913,3 +913,78 @@ async fn a_line_1000_times_too_large_is_kept_with_a_named_warning_in_metadata_an
     );
     rig.shutdown().await;
 }
+
+/// A line served 10× too large after four good ones: within the detector's range and
+/// agreeing with the instrument's own (equally scaled) Ra, so only its neighbours tell: its
+/// Ra is more than 5 times the median of the lines before it. It is kept with that warning,
+/// named in its metadata and the report; the lines around it carry none.
+#[tokio::test]
+async fn a_line_whose_ra_is_far_from_its_neighbours_is_kept_with_a_named_warning() {
+    use crate::common::{run_scan, scan_dir, Rig, RigOptions};
+    let rig = Rig::start(RigOptions {
+        lines: 6,
+        // The fifth trace (line index 4).
+        faults: vec!["scale:10@CTSTA#5".into()],
+        ..RigOptions::default()
+    })
+    .await;
+    let o = run_scan(&rig.config("out"), &[]).await;
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("scan complete"),
+        "{}",
+        crate::common::describe(&o)
+    );
+    let dir = scan_dir(&rig.out_dir("out"));
+    let meta = |k: u32| -> serde_json::Value {
+        let text = std::fs::read_to_string(dir.join(format!("lines/{k:04}.json"))).unwrap();
+        serde_json::from_str(&text).unwrap()
+    };
+    let fifth = meta(4);
+    let w = fifth["readout_warnings"].as_array().expect("warnings");
+    assert_eq!(w.len(), 1, "{fifth}");
+    assert_eq!(w[0]["kind"], "ra-far-from-neighbours", "{fifth}");
+    assert_eq!(w[0]["lines"], 4, "{fifth}");
+    // Independently: the instrument's Ra of each line as stored, the fifth against the
+    // median of the four before it.
+    let ra = |k: u32| -> f64 {
+        let m = meta(k);
+        let r = m["results"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["name"].as_str().unwrap().eq_ignore_ascii_case("ra"))
+            .unwrap()
+            .clone();
+        r["value"].as_f64().unwrap()
+    };
+    let mut before: Vec<f64> = (0..4).map(ra).collect();
+    before.sort_by(f64::total_cmp);
+    let median = (before[1] + before[2]) / 2.0;
+    assert!(ra(4) / median > 5.0, "{} vs {median}", ra(4));
+    assert!(
+        (w[0]["median_um"].as_f64().unwrap() - median).abs() < 1e-9,
+        "{fifth}"
+    );
+    for k in [0, 1, 2, 3, 5] {
+        assert!(
+            meta(k).get("readout_warnings").is_none(),
+            "line {k}: {}",
+            meta(k)
+        );
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
+    let warnings: Vec<&str> = report["warnings"]
+        .as_array()
+        .expect("report warnings")
+        .iter()
+        .filter_map(|w| w.as_str())
+        .collect();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("line 5 (0004)") && w.contains("median Ra")),
+        "{warnings:?}"
+    );
+    rig.shutdown().await;
+}
