@@ -1,7 +1,6 @@
-//! The raw-data archive: each completed scan directory copied to the lab's archive (a
-//! `file://` directory: a mounted share) off the scan's path, through `object_store`, every
-//! object read back and its SHA-256 compared, a `MANIFEST.sha256` (the `sha256sum -c` format)
-//! written last.
+//! The raw-data archive: each completed scan directory copied to the lab's object store (S3
+//! or a `file://` directory) off the scan's path, every object read back and its SHA-256
+//! compared, a `MANIFEST.sha256` (the `sha256sum -c` format) written last.
 //!
 //! ```text
 //! success event ──► queue entry in outbox/archive/ (disk) ──► Archiver ──► store
@@ -14,7 +13,7 @@
 //!
 //! Layer 4 (process edge): depends on object_store, the status's links and the atomic writer.
 
-use super::archive_settings::ArchiveSettings;
+use super::archive_settings::{read_secret, ArchiveSettings, Target};
 use crate::scan::status::{LinkStatus, Status};
 use object_store::path::Path as ObjectPath;
 use object_store::{ObjectStore, PutPayload};
@@ -106,19 +105,53 @@ fn sha256_hex(bytes: &[u8]) -> String {
     crate::scan::store::hex_sha256(bytes)
 }
 
-/// The store behind `[archive]`: the directory, which must be there.
-fn open_store(dir: &Path) -> Result<Arc<dyn ObjectStore>, String> {
-    // Never created here: a directory missing is a share not mounted, and creating it would
-    // fill the station's own disk instead.
-    if !dir.is_dir() {
-        return Err(format!(
-            "{} is not a directory; is the share mounted? ([archive] url)",
-            dir.display()
-        ));
+/// The store behind `[archive]`, and the prefix of every object.
+fn open_store(
+    s: &ArchiveSettings,
+    target: &Target,
+) -> Result<(Arc<dyn ObjectStore>, String), String> {
+    match target {
+        Target::S3 { bucket, prefix } => {
+            let mut b = object_store::aws::AmazonS3Builder::from_env()
+                .with_bucket_name(bucket)
+                .with_region(s.region.clone().unwrap_or_else(|| "us-east-1".into()))
+                .with_client_options(
+                    object_store::ClientOptions::new()
+                        .with_timeout(REQUEST_TIMEOUT)
+                        .with_connect_timeout(Duration::from_secs(10)),
+                )
+                .with_retry(object_store::RetryConfig {
+                    max_retries: 2,
+                    retry_timeout: Duration::from_secs(30),
+                    ..Default::default()
+                });
+            if let Some(e) = &s.endpoint {
+                b = b
+                    .with_endpoint(e.trim_end_matches('/'))
+                    .with_allow_http(e.starts_with("http://"));
+            }
+            if let (Some(id), Some(f)) = (&s.access_key_id, &s.secret_access_key_file) {
+                b = b
+                    .with_access_key_id(id)
+                    .with_secret_access_key(read_secret(f)?);
+            }
+            let store = b.build().map_err(|e| e.to_string())?;
+            Ok((Arc::new(store), prefix.clone()))
+        }
+        Target::File(dir) => {
+            // Never created here: a directory missing is a share not mounted, and creating it
+            // would fill the station's own disk instead.
+            if !dir.is_dir() {
+                return Err(format!(
+                    "{} is not a directory; is the share mounted? ([archive] url)",
+                    dir.display()
+                ));
+            }
+            let store = object_store::local::LocalFileSystem::new_with_prefix(dir)
+                .map_err(|e| e.to_string())?;
+            Ok((Arc::new(store), String::new()))
+        }
     }
-    let store = object_store::local::LocalFileSystem::new_with_prefix(dir)
-        .map_err(|e| format!("{}: {e}", dir.display()))?;
-    Ok(Arc::new(store))
 }
 
 /// The queue of scans to archive on disk: one JSON file per scan, named so that they sort
@@ -200,7 +233,7 @@ enum Failure {
 /// The task that empties the queue into the store.
 pub struct Archiver {
     settings: ArchiveSettings,
-    target: PathBuf,
+    target: Target,
     queue: Queue,
     status: watch::Sender<Status>,
     wake: Arc<Notify>,
@@ -210,7 +243,7 @@ impl Archiver {
     /// An archiver for `settings` (already validated) over `queue`.
     pub fn new(
         settings: ArchiveSettings,
-        target: PathBuf,
+        target: Target,
         queue: Queue,
         status: watch::Sender<Status>,
         wake: Arc<Notify>,
@@ -279,9 +312,9 @@ impl Archiver {
         if pending.is_empty() {
             return Ok(());
         }
-        let store = open_store(&self.target)?;
+        let (store, prefix) = open_store(&self.settings, &self.target)?;
         for path in pending {
-            match self.archive_one(&*store, &path).await {
+            match self.archive_one(&*store, &prefix, &path).await {
                 Ok(entry) => {
                     self.queue.finish(&path)?;
                     let bytes: u64 = entry.files.iter().map(|f| f.bytes).sum();
@@ -306,7 +339,12 @@ impl Archiver {
         Ok(())
     }
 
-    async fn archive_one(&self, store: &dyn ObjectStore, path: &Path) -> Result<Entry, Failure> {
+    async fn archive_one(
+        &self,
+        store: &dyn ObjectStore,
+        prefix: &str,
+        path: &Path,
+    ) -> Result<Entry, Failure> {
         let mut entry = Queue::read(path).map_err(Failure::Scan)?;
         let dir = entry.dir.clone();
         let files = tokio::task::spawn_blocking(move || scan_files(&dir))
@@ -319,7 +357,14 @@ impl Archiver {
                     entry.dir.display()
                 ))
             })?;
-        let object = |rel: &str| ObjectPath::from(format!("{}/{rel}", entry.scan_id));
+        let object = |rel: &str| {
+            let key = if prefix.is_empty() {
+                format!("{}/{rel}", entry.scan_id)
+            } else {
+                format!("{prefix}/{}/{rel}", entry.scan_id)
+            };
+            ObjectPath::from(key)
+        };
         for rel in files {
             if entry.files.iter().any(|f| f.path == rel) {
                 continue;
@@ -341,6 +386,22 @@ impl Archiver {
     }
 }
 
+/// What went wrong with a request, and what to check: a refused key names the two keys that
+/// make it, a bucket not found names the URL, anything else (the server away, a timeout, a
+/// full store) the endpoint.
+fn store_error(what: &str, at: &ObjectPath, e: &object_store::Error) -> String {
+    let hint = match e {
+        object_store::Error::PermissionDenied { .. } | object_store::Error::Unauthenticated { .. } => {
+            "the store refused the key: check [archive] access-key-id and the secret in secret-access-key-file, and that the key may write the bucket"
+        }
+        object_store::Error::NotFound { .. } => {
+            "not found: check that the bucket in [archive] url exists"
+        }
+        _ => "is the store reachable? check [archive] url and endpoint",
+    };
+    format!("{what} {at}: {hint} ({e})")
+}
+
 /// Puts `bytes` at `at`, reads the object back and compares the SHA-256; returns it.
 async fn put_verified(
     store: &dyn ObjectStore,
@@ -360,13 +421,13 @@ async fn put_verified(
     )
     .await
     .map_err(|_| Failure::Store(deadline("storing")))?
-    .map_err(|e| Failure::Store(format!("storing {at}: {e}")))?;
+    .map_err(|e| Failure::Store(store_error("storing", at, &e)))?;
     let back = tokio::time::timeout(REQUEST_TIMEOUT, async {
         store.get(at).await?.bytes().await
     })
     .await
     .map_err(|_| Failure::Store(deadline("reading back")))?
-    .map_err(|e| Failure::Store(format!("reading back {at}: {e}")))?;
+    .map_err(|e| Failure::Store(store_error("reading back", at, &e)))?;
     let got = sha256_hex(&back);
     if got != want {
         return Err(Failure::Store(format!(

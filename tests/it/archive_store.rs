@@ -13,7 +13,7 @@ fn with_archive(r: &Rig, url: &str) {
     std::fs::write(&r.config, format!("{text}\n[archive]\nurl = {url:?}\n")).unwrap();
 }
 
-fn scan_dirs(r: &Rig) -> Vec<PathBuf> {
+pub(crate) fn scan_dirs(r: &Rig) -> Vec<PathBuf> {
     let mut dirs: Vec<PathBuf> = std::fs::read_dir(r.out())
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -25,7 +25,7 @@ fn scan_dirs(r: &Rig) -> Vec<PathBuf> {
 
 /// Every regular file below `dir`, relative, sorted (written here, not taken from the code
 /// under test).
-fn files(dir: &Path) -> Vec<String> {
+pub(crate) fn files(dir: &Path) -> Vec<String> {
     let o = Command::new("find")
         .arg(".")
         .args(["-type", "f"])
@@ -41,7 +41,7 @@ fn files(dir: &Path) -> Vec<String> {
     v
 }
 
-async fn scan_to_the_end(r: &Rig, specimen: &str, starts_before: u64) -> Status {
+pub(crate) async fn scan_to_the_end(r: &Rig, specimen: &str, starts_before: u64) -> Status {
     e2e::start_scan(r, specimen).await;
     let s = e2e::wait_status(r, "scan ended", |s| {
         s.starts > starts_before && s.state == State::Idle && s.last_stop.is_some()
@@ -155,7 +155,14 @@ fn a_bad_archive_table_exits_78_naming_the_key() {
         &[
             ("url = \"/mnt/archive\"", "archive.url"),
             ("url = \"file://mnt/archive\"", "archive.url"),
-            ("url = \"s3://lab-archive/rough-3\"", "archive.url"),
+            (
+                "url = \"s3://lab-archive/rough-3\"\naccess-key-id = \"GK1\"",
+                "archive.secret-access-key-file",
+            ),
+            (
+                "url = \"s3://lab-archive/rough-3\"\nendpoint = \"127.0.0.1:3900\"",
+                "archive.endpoint",
+            ),
         ],
     );
 }

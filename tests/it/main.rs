@@ -3,6 +3,7 @@
 //! independent Python reference checks). Tests that change process-wide state (environment
 //! variables, resident memory) live in `tests/process_wide/` instead.
 
+mod archive_s3;
 mod archive_store;
 mod cli_conventions;
 mod common;

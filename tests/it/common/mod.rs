@@ -10,6 +10,7 @@
 
 pub mod cdp;
 pub mod chromium;
+pub mod garage;
 pub mod http;
 pub mod mosquitto;
 
