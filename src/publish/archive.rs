@@ -9,15 +9,19 @@
 //!
 //! The queue entry of a scan lists each file once it is uploaded and verified, so a restart
 //! continues where the last process stopped; a finished entry moves to `outbox/archive/done/`
-//! (the record that the archive holds a verified copy). Nothing on the station is deleted.
+//! (the record that the archive holds a verified copy). Nothing on the station is deleted
+//! unless `delete-after-days` says so, and then only after the copy is verified again
+//! ([`super::retention`] decides).
 //!
 //! Layer 4 (process edge): depends on object_store, the status's links and the atomic writer.
 
 use super::archive_settings::{read_secret, ArchiveSettings, Target};
+use super::retention;
 use crate::scan::status::{LinkStatus, Status};
 use object_store::path::Path as ObjectPath;
 use object_store::{ObjectStore, PutPayload};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
@@ -56,6 +60,10 @@ pub struct Entry {
     /// The files archived and verified so far.
     #[serde(default)]
     pub files: Vec<Archived>,
+    /// When the scan directory was deleted from the station under `delete-after-days`
+    /// (RFC 3339), after its archived copy was verified again.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub deleted: Option<String>,
 }
 
 /// The `sha256sum` text of `files`: `HASH  PATH` lines, sorted by path.
@@ -179,6 +187,7 @@ impl Queue {
             scan_id: scan_id.to_owned(),
             dir: dir.to_owned(),
             files: Vec::new(),
+            deleted: None,
         };
         crate::atomic::write_atomically(&path, |w| {
             serde_json::to_writer_pretty(&mut *w, &entry).map_err(std::io::Error::other)
@@ -214,11 +223,30 @@ impl Queue {
         })
     }
 
+    /// The entries of scans archived and verified, oldest first.
+    fn done(&self) -> std::io::Result<Vec<PathBuf>> {
+        let mut v: Vec<PathBuf> = std::fs::read_dir(self.dir.join("done"))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
+            .collect();
+        v.sort();
+        Ok(v)
+    }
+
     fn finish(&self, path: &Path) -> Result<(), String> {
         let to = self
             .dir
             .join("done")
             .join(path.file_name().unwrap_or_default());
+        std::fs::rename(path, &to).map_err(|e| format!("{}: {e}", path.display()))
+    }
+
+    /// Moves the entry of a scan that cannot be archived to `done/` under a `.failed` name:
+    /// kept as the record, never taken for a verified copy.
+    fn set_aside(&self, path: &Path) -> Result<(), String> {
+        let mut name = path.file_name().unwrap_or_default().to_owned();
+        name.push(".failed");
+        let to = self.dir.join("done").join(name);
         std::fs::rename(path, &to).map_err(|e| format!("{}: {e}", path.display()))
     }
 }
@@ -309,31 +337,163 @@ impl Archiver {
             .queue
             .pending()
             .map_err(|e| format!("cannot read the archive queue: {e}"))?;
-        if pending.is_empty() {
+        let mut opened = None;
+        if !pending.is_empty() {
+            let (store, prefix) = open_store(&self.settings, &self.target)?;
+            for path in pending {
+                self.archive_entry(&*store, &prefix, &path).await?;
+            }
+            opened = Some((store, prefix));
+        }
+        let due = self.due_for_deletion();
+        if due.is_empty() {
             return Ok(());
         }
-        let (store, prefix) = open_store(&self.settings, &self.target)?;
-        for path in pending {
-            match self.archive_one(&*store, &prefix, &path).await {
-                Ok(entry) => {
-                    self.queue.finish(&path)?;
-                    let bytes: u64 = entry.files.iter().map(|f| f.bytes).sum();
-                    tracing::info!(
-                        "archive: scan {} archived and verified ({} files, {bytes} bytes) in {}",
-                        entry.scan_id,
-                        entry.files.len(),
-                        self.settings.url
-                    );
-                    self.report(true, format!("scan {} archived", entry.scan_id));
-                }
-                Err(Failure::Scan(e)) => {
-                    // The scan cannot be archived as it is (its directory is gone): set aside
-                    // so that it does not hold up the others; the entry says what it was.
-                    tracing::error!("archive: {e}; this scan is left out of the archive (its entry is kept in {})", self.queue.dir.join("done").display());
-                    self.queue.finish(&path)?;
-                    self.report(false, e);
-                }
+        let (store, prefix) = match opened {
+            Some(o) => o,
+            None => open_store(&self.settings, &self.target)?,
+        };
+        self.prune(&*store, &prefix, due).await
+    }
+
+    /// Archives the scan of the queue entry at `path`; only a store error is returned.
+    async fn archive_entry(
+        &self,
+        store: &dyn ObjectStore,
+        prefix: &str,
+        path: &Path,
+    ) -> Result<(), String> {
+        match self.archive_one(store, prefix, path).await {
+            Ok(entry) => {
+                self.queue.finish(path)?;
+                let bytes: u64 = entry.files.iter().map(|f| f.bytes).sum();
+                tracing::info!(
+                    "archive: scan {} archived and verified ({} files, {bytes} bytes) in {}",
+                    entry.scan_id,
+                    entry.files.len(),
+                    self.settings.url
+                );
+                self.report(true, format!("scan {} archived", entry.scan_id));
+            }
+            Err(Failure::Scan(e)) => {
+                // The scan cannot be archived as it is (its directory is gone): set aside
+                // so that it does not hold up the others; the entry says what it was.
+                tracing::error!(
+                    "archive: {e}; this scan is left out of the archive (its entry is kept in {})",
+                    self.queue.dir.join("done").display()
+                );
+                self.queue.set_aside(path)?;
+                self.report(false, e);
+            }
+            Err(Failure::Store(e)) => return Err(e),
+        }
+        Ok(())
+    }
+
+    /// The record entries whose scans `delete-after-days` lets go now and are still on the
+    /// station (none without the setting).
+    fn due_for_deletion(&self) -> Vec<(PathBuf, Entry)> {
+        let Some(days) = self.settings.delete_after_days else {
+            return Vec::new();
+        };
+        let now = chrono::Utc::now();
+        let done = match self.queue.done() {
+            Ok(d) => d,
+            Err(e) => {
+                tracing::warn!("archive: cannot read the archive's record: {e}");
+                return Vec::new();
+            }
+        };
+        done.into_iter()
+            .filter(|p| {
+                let name = p.file_name().unwrap_or_default().to_string_lossy();
+                retention::completed_at(&name).is_some_and(|t| retention::due(t, now, days))
+            })
+            .filter_map(|p| Queue::read(&p).ok().map(|e| (p, e)))
+            .filter(|(_, e)| e.deleted.is_none() && e.dir.is_dir())
+            .collect()
+    }
+
+    /// Deletes from the station the scan directories `delete-after-days` old whose archived
+    /// copy is verified again now: the manifest read back names each file with the SHA-256
+    /// the file has on the station, and each object read back has it. A copy that does not
+    /// verify keeps its scan (named in the log and the status); a store error ends the round.
+    async fn prune(
+        &self,
+        store: &dyn ObjectStore,
+        prefix: &str,
+        due: Vec<(PathBuf, Entry)>,
+    ) -> Result<(), String> {
+        let days = self.settings.delete_after_days.unwrap_or(0);
+        let now = chrono::Utc::now();
+        for (path, mut entry) in due {
+            match self.verify_copy(store, prefix, &entry).await {
+                Ok(()) => {}
                 Err(Failure::Store(e)) => return Err(e),
+                Err(Failure::Scan(e)) => {
+                    let message = format!(
+                        "scan {} is kept on the station: {e}; archive it again or remove it by hand",
+                        entry.scan_id
+                    );
+                    tracing::error!("archive: {message}");
+                    self.report(false, message);
+                    continue;
+                }
+            }
+            let dir = entry.dir.clone();
+            tokio::task::spawn_blocking(move || std::fs::remove_dir_all(dir))
+                .await
+                .map_err(|e| e.to_string())?
+                .map_err(|e| {
+                    format!(
+                        "scan {}: cannot delete {}: {e}",
+                        entry.scan_id,
+                        entry.dir.display()
+                    )
+                })?;
+            entry.deleted = Some(now.to_rfc3339());
+            Queue::save(&path, &entry)?;
+            tracing::info!(
+                "archive: scan {} deleted from the station ({}), {days} days after it completed; its copy in {} was verified again",
+                entry.scan_id,
+                entry.dir.display(),
+                self.settings.url
+            );
+            self.report(
+                true,
+                format!(
+                    "scan {} deleted from the station (verified copy in the archive)",
+                    entry.scan_id
+                ),
+            );
+        }
+        Ok(())
+    }
+
+    /// Reads the manifest of `entry` back from the store and checks it against the scan
+    /// directory as it is now, then every object against the manifest.
+    async fn verify_copy(
+        &self,
+        store: &dyn ObjectStore,
+        prefix: &str,
+        entry: &Entry,
+    ) -> Result<(), Failure> {
+        let object = |rel: &str| object_path(prefix, &entry.scan_id, rel);
+        let text = get_bytes(store, &object(MANIFEST)).await?;
+        let manifest = retention::parse_manifest(&String::from_utf8_lossy(&text))
+            .map_err(|e| Failure::Scan(format!("its archived {MANIFEST}: {e}")))?;
+        let dir = entry.dir.clone();
+        let local = tokio::task::spawn_blocking(move || local_hashes(&dir))
+            .await
+            .map_err(|e| Failure::Scan(e.to_string()))?
+            .map_err(|e| Failure::Scan(format!("cannot read {}: {e}", entry.dir.display())))?;
+        retention::matches(&local, &manifest).map_err(Failure::Scan)?;
+        for (rel, want) in &manifest {
+            let got = sha256_hex(&get_bytes(store, &object(rel)).await?);
+            if &got != want {
+                return Err(Failure::Scan(format!(
+                    "the archived {rel} has SHA-256 {got}, not {want} as its manifest says"
+                )));
             }
         }
         Ok(())
@@ -357,14 +517,7 @@ impl Archiver {
                     entry.dir.display()
                 ))
             })?;
-        let object = |rel: &str| {
-            let key = if prefix.is_empty() {
-                format!("{}/{rel}", entry.scan_id)
-            } else {
-                format!("{prefix}/{}/{rel}", entry.scan_id)
-            };
-            ObjectPath::from(key)
-        };
+        let object = |rel: &str| object_path(prefix, &entry.scan_id, rel);
         for rel in files {
             if entry.files.iter().any(|f| f.path == rel) {
                 continue;
@@ -383,6 +536,48 @@ impl Archiver {
         let manifest = manifest_text(&entry.files);
         put_verified(store, &object(MANIFEST), manifest.into_bytes().into()).await?;
         Ok(entry)
+    }
+}
+
+/// The object of file `rel` of scan `scan_id` below `prefix`.
+fn object_path(prefix: &str, scan_id: &str, rel: &str) -> ObjectPath {
+    if prefix.is_empty() {
+        ObjectPath::from(format!("{scan_id}/{rel}"))
+    } else {
+        ObjectPath::from(format!("{prefix}/{scan_id}/{rel}"))
+    }
+}
+
+/// Path → SHA-256 of every file below `dir`, read now.
+fn local_hashes(dir: &Path) -> std::io::Result<BTreeMap<String, String>> {
+    scan_files(dir)?
+        .into_iter()
+        .map(|rel| {
+            let bytes = std::fs::read(dir.join(&rel))?;
+            Ok((rel, sha256_hex(&bytes)))
+        })
+        .collect()
+}
+
+/// The bytes of the object at `at`; an object missing is the copy's fault, anything else
+/// the store's.
+async fn get_bytes(store: &dyn ObjectStore, at: &ObjectPath) -> Result<bytes::Bytes, Failure> {
+    let got = tokio::time::timeout(REQUEST_TIMEOUT, async {
+        store.get(at).await?.bytes().await
+    })
+    .await
+    .map_err(|_| {
+        Failure::Store(format!(
+            "reading {at} took longer than {} s",
+            REQUEST_TIMEOUT.as_secs()
+        ))
+    })?;
+    match got {
+        Ok(b) => Ok(b),
+        Err(object_store::Error::NotFound { .. }) => {
+            Err(Failure::Scan(format!("{at} is missing from the archive")))
+        }
+        Err(e) => Err(Failure::Store(store_error("reading", at, &e))),
     }
 }
 

@@ -29,6 +29,10 @@ pub struct ArchiveSettings {
     /// which is recorded with every scan, holds no secret.
     #[serde(default)]
     pub secret_access_key_file: Option<PathBuf>,
+    /// Days after which a scan directory is deleted from the station, once the archive is
+    /// found again to hold a verified copy of it; none (the default) keeps every scan.
+    #[serde(default)]
+    pub delete_after_days: Option<u32>,
 }
 
 /// Where the archive is, as read from `url`.
@@ -149,6 +153,7 @@ mod tests {
             region: None,
             access_key_id: None,
             secret_access_key_file: None,
+            delete_after_days: None,
         }
     }
 

@@ -24,6 +24,7 @@ pub mod metrics;
 pub mod mqtt;
 pub mod outbox;
 pub mod results;
+pub mod retention;
 pub mod settings;
 pub mod tls;
 

@@ -1,6 +1,8 @@
 //! The raw-data archive through the `surfscan daemon` binary: a `file://` archive (a share)
 //! that is not there while two scans complete, then there after a restart; the copies checked
-//! byte for byte and the manifest by `sha256sum -c`, independently of the writer.
+//! byte for byte and the manifest by `sha256sum -c`, independently of the writer. Retention:
+//! nothing leaves the station without `delete-after-days`; with it, a scan whose archived
+//! copy verifies again is deleted and one whose copy was damaged is kept and named.
 
 use crate::daemon_e2e::{self as e2e, Rig};
 use std::path::{Path, PathBuf};
@@ -164,5 +166,90 @@ fn a_bad_archive_table_exits_78_naming_the_key() {
                 "archive.endpoint",
             ),
         ],
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn retention_deletes_a_scan_only_when_its_archived_copy_verifies_again() {
+    let r = e2e::rig().await;
+    let share = r.dir.path().join("share");
+    std::fs::create_dir(&share).unwrap();
+    with_archive(&r, &format!("file://{}", share.display()));
+
+    // Without a retention setting nothing leaves the station.
+    let mut d = crate::mqtt_broker::spawn_logged(&r);
+    crate::mqtt_broker::wait_socket(&r).await;
+    let s = scan_to_the_end(&r, "keep-1", 0).await;
+    scan_to_the_end(&r, "keep-2", s.starts).await;
+    let done = r.out().join("outbox/archive/done");
+    e2e::wait_status(&r, "both archived", |s| {
+        s.links
+            .get("archive")
+            .is_some_and(|l| l.ok && l.queued == 0)
+            && std::fs::read_dir(&done).map_or(0, |d| d.count()) == 2
+    })
+    .await;
+    e2e::sigterm(&d);
+    assert!(e2e::wait_exit(&mut d).success());
+    let dirs = scan_dirs(&r);
+    assert_eq!(dirs.len(), 2, "{dirs:?}");
+    let (first, second) = (&dirs[0], &dirs[1]);
+    let id = |p: &Path| p.file_name().unwrap().to_str().unwrap().to_owned();
+    let kept = r.dir.path().join("first-as-it-was");
+    assert!(Command::new("cp")
+        .arg("-a")
+        .arg(first)
+        .arg(&kept)
+        .status()
+        .unwrap()
+        .success());
+
+    let second_files = files(second);
+
+    // The second scan's copy is damaged in the archive after it was verified.
+    let damaged = share.join(id(second)).join("journal.jsonl");
+    let mut bytes = std::fs::read(&damaged).unwrap();
+    bytes[0] ^= 1;
+    std::fs::write(&damaged, bytes).unwrap();
+
+    let text = std::fs::read_to_string(&r.config).unwrap();
+    std::fs::write(&r.config, format!("{text}delete-after-days = 0\n")).unwrap();
+    let mut d = crate::mqtt_broker::spawn_logged(&r);
+    crate::mqtt_broker::wait_socket(&r).await;
+    let s = e2e::wait_status(&r, "the damaged copy named", |s| {
+        s.links.get("archive").is_some_and(|l| {
+            !l.ok && l.message.contains(&id(second)) && l.message.contains("kept on the station")
+        })
+    })
+    .await;
+    let message = &s.links["archive"].message;
+    assert!(message.contains("journal.jsonl"), "{message}");
+    e2e::sigterm(&d);
+    assert!(e2e::wait_exit(&mut d).success());
+
+    // The first scan is gone from the station and whole in the archive; the second is kept.
+    assert!(!first.exists(), "{} was not deleted", first.display());
+    assert_eq!(files(&share.join(id(first))).len(), files(&kept).len() + 1);
+    let diff = Command::new("diff")
+        .arg("-r")
+        .args(["--exclude", "MANIFEST.sha256"])
+        .arg(&kept)
+        .arg(share.join(id(first)))
+        .output()
+        .unwrap();
+    assert!(
+        diff.status.success(),
+        "{}",
+        String::from_utf8_lossy(&diff.stdout)
+    );
+    assert_eq!(files(second), second_files, "the second scan was touched");
+    let log = std::fs::read_to_string(r.dir.path().join("daemon.log")).unwrap();
+    assert!(
+        log.contains(&format!("scan {} deleted from the station", id(first))),
+        "{log}"
+    );
+    assert!(
+        !log.contains(&format!("scan {} deleted", id(second))),
+        "{log}"
     );
 }
