@@ -128,6 +128,9 @@ pub enum Exit {
     /// fewer lines than the input holds, or part of the characterisation could not be made
     /// (report.json's `characterisation` says which and why).
     Partial = 3,
+    /// 4: the scan is complete and characterised, and the part does not conform to its
+    /// recipe's specification (report.json's `specification` says which limits and lines).
+    DoesNotConform = 4,
     /// 69: a device is unavailable.
     Unavailable = 69,
     /// 74: input/output error (files, disk).

@@ -7,11 +7,13 @@
 //!
 //! Exit status: 0 success, 1 the scan failed or was aborted, 2 usage, 3 the scan completed
 //! but its characterisation is partial (every line, the IGES and every output that could be
-//! made are written; report.json names the sections that could not be made and why), 69 a
+//! made are written; report.json names the sections that could not be made and why), 4 the
+//! scan completed and the part does not conform to its recipe's specification, 69 a
 //! device is unavailable (or another `scan` or the daemon holds the station: its pid and scan
 //! are named), 74 I/O error, 78 bad configuration.
 //!
-//! The end-of-scan summary prints the result (lines, Ra, Sa) and the verdict on the model
+//! The end-of-scan summary prints the result (the verdict against the recipe's specification
+//! with each limit's, lines, Ra, Sa) and the verdict on the model
 //! between lines (the hold-out of [`crate::metrology::holdout`]), not the residual at the data
 //! points, which an interpolant makes zero by construction.
 //!
@@ -37,6 +39,7 @@ use crate::scan::settings::RunSettings;
 use crate::scan::station::SerialStation;
 use crate::scan::status::{State, Status};
 use crate::scan::testhooks::TestHooks;
+use crate::specification::Verdict;
 use crate::station_lock::StationLock;
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -83,7 +86,7 @@ pub struct Args {
 /// The station's configuration with the recipe's plan and analysis, and the recipe's job for
 /// a new scan; the station's own without `--recipe`. A bad recipe is exit 78, an unknown name
 /// or a bad `--y-start-mm` exit 2.
-fn with_recipe(
+pub(super) fn with_recipe(
     config: &Config,
     recipe: Option<&str>,
     y_start_mm: Option<f64>,
@@ -162,8 +165,9 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
     }
 }
 
-/// What a completed scan prints: the files it wrote and its result in a few lines; exit 3
-/// when its characterisation is partial.
+/// What a completed scan prints: the files it wrote and its result in a few lines (the verdict
+/// and each limit's first, for a recipe with limits); exit 4 when the part does not conform,
+/// else 3 when its characterisation is partial.
 fn success_summary(
     dir: &std::path::Path,
     outputs: &crate::scan::outputs::Outputs,
@@ -212,7 +216,18 @@ fn success_summary(
     {
         say!("  model    {}", outputs.verdict);
     }
-    if outputs.characterisation_complete {
+    let verdict = report
+        .as_ref()
+        .and_then(|r| r["specification"]["verdict"].as_str().map(str::to_owned));
+    if verdict.as_deref() == Some(Verdict::DoesNotConform.as_str()) {
+        Err(CliError::new(
+            Exit::DoesNotConform,
+            format!(
+                "scan complete; the part does not conform to its specification (report.json's specification names the limits and lines): {}",
+                outputs.report.display()
+            ),
+        ))
+    } else if outputs.characterisation_complete {
         Ok(())
     } else {
         Err(CliError::new(

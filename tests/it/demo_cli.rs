@@ -50,6 +50,20 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
         stdout.contains("  Sa       ") && stdout.contains("(model)"),
         "{stdout}"
     );
+    // The demo's recipe holds the surface to one limit it meets and one it does not: the
+    // verdict, each limit's with its reason, and exit 0 all the same. Ra is about 3 µm on
+    // every line, far below 6.3 µm even with the calibration's 3 %; Rz about 16 µm, above
+    // 12.5 µm by more than its 3 %.
+    assert!(stdout.contains("  verdict  does not conform\n"), "{stdout}");
+    assert!(
+        stdout
+            .contains("  limit    Ra1 6.3: conforms (Ra1 16 % rule: none of 31 lines above 6.3 µm"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("  limit    Rz1 max 12.5: does not conform (Rz1 max rule: "),
+        "{stdout}"
+    );
 
     let store = ScanStore::open(dir, Arc::new(NoFaults)).unwrap();
     let lines = store.load_all().unwrap();
@@ -87,6 +101,41 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
         "{first} {last}"
     );
     assert_eq!(report["scan"]["status"], "complete");
+    let spec = &report["specification"];
+    assert_eq!(spec["verdict"], "does not conform", "{spec}");
+    let limits = spec["limits"].as_array().unwrap();
+    assert_eq!(limits[0]["verdict"], "conforms");
+    assert_eq!(limits[0]["n_values"], 31);
+    assert_eq!(limits[0]["n_beyond"], 0);
+    // Every line's Rz is beyond 12.5 µm by more than its U (3 % of the value): counted from
+    // the lines themselves.
+    let rz_beyond = rl
+        .iter()
+        .filter(|l| l["Rz_um"].as_f64().unwrap() * (1.0 - 0.03) > 12.5)
+        .count();
+    assert!(rz_beyond > 0);
+    assert_eq!(limits[1]["verdict"], "does not conform");
+    assert_eq!(limits[1]["n_beyond"], rz_beyond, "{}", limits[1]);
+    assert!(spec["instrument_uncertainty"]
+        .as_str()
+        .unwrap()
+        .contains("3 %"));
+    // The Ra mean's uncertainty from the lines themselves: s/√31 combined with the
+    // calibration's 1.5 % (3 % at k = 2) of the mean, U = 2·u_c.
+    let ra: Vec<f64> = rl.iter().map(|l| l["Ra_um"].as_f64().unwrap()).collect();
+    let n = ra.len() as f64;
+    let mean = ra.iter().sum::<f64>() / n;
+    let s = (ra.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let u_c = (s / n.sqrt()).hypot(0.015 * mean);
+    let u = &report["uncertainty"]["parameters"][0];
+    assert_eq!(u["parameter"], "Ra_um");
+    assert!(
+        (u["U"].as_f64().unwrap() - 2.0 * u_c).abs() < 1e-9 * u_c,
+        "{u}"
+    );
+    assert!(std::fs::read_to_string(dir.join("report.html"))
+        .unwrap()
+        .contains("<h2 id=\"verdict\">Verdict</h2>"));
     assert_eq!(report["traceability"]["instrument_model"], "sj210");
     assert!(report["fit"]["max_residual_mm"].as_f64().unwrap() <= 1e-10);
 

@@ -523,3 +523,43 @@ async fn the_queue_runs_every_job_once_in_order_through_kill_9_at_random_moments
     assert!(adds.iter().all(|e| e["peer"]["uid"] == me), "{log}");
     drop(d);
 }
+
+/// `surfscan scan --recipe` in the foreground: a part that does not conform completes its
+/// scan and exits 4 (not 0–3), the verdict and each limit's reason printed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_foreground_scan_of_a_part_that_does_not_conform_exits_4() {
+    let r = rig(&[("tight", TIGHT)]).await;
+    let config = r.config.clone();
+    let lock_dir = r.dir.path().to_path_buf();
+    let o = tokio::task::spawn_blocking(move || {
+        Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(["scan", "--recipe", "tight", "--specimen", "M-1", "--config"])
+            .arg(&config)
+            .env("SURFSCAN_TEST_LOCK_DIR", &lock_dir)
+            .stdin(Stdio::null())
+            .output()
+            .unwrap()
+    })
+    .await
+    .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(4), "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("  verdict  does not conform\n")
+            && stdout.contains("  limit    Ra1 max 0.001: does not conform (Ra1 max rule: 5 of 5 lines above 0.001 µm"),
+        "{stdout}"
+    );
+    assert!(
+        stderr.contains("the part does not conform to its specification"),
+        "{stderr}"
+    );
+    // The scan itself is complete: every line on disk, the stop record a success.
+    let all = scans(&r.out());
+    assert_eq!(all.len(), 1);
+    assert_eq!(all[0].1.completed().len() as u32, LINES);
+    assert_eq!(
+        all[0].1.stop.as_ref().map(|s| s.status),
+        Some(StopStatus::Success)
+    );
+}

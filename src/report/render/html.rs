@@ -338,8 +338,22 @@ pub fn verdict(report: &Value) -> Option<String> {
 /// Ra range with mean and s.d., Sa of the model and of the measured grid, the verdict.
 pub fn result_summary(report: &Value) -> Vec<(&'static str, String)> {
     let mut out = Vec::new();
-    if let Some(v) = report["specification"]["summary"].as_str() {
+    if let Some(v) = report["specification"]["verdict"].as_str() {
         out.push(("verdict", v.to_owned()));
+        for l in report["specification"]["limits"]
+            .as_array()
+            .map_or(&[][..], |a| &a[..])
+        {
+            out.push((
+                "limit",
+                format!(
+                    "{}: {} ({})",
+                    text(&l["callout"]),
+                    text(&l["verdict"]),
+                    text(&l["reason"])
+                ),
+            ));
+        }
     }
     let ra: Vec<f64> = report["lines"]
         .as_array()
