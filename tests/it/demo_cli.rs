@@ -142,6 +142,29 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
     // Spreadsheet summary: a header and one row per line.
     let summary = std::fs::read_to_string(dir.join("summary.csv")).unwrap();
     assert_eq!(summary.lines().count(), 32);
+    // Its last columns: where each line stands against each limit, and the scan's verdict;
+    // the Rz column says `beyond` on exactly the lines report.json names.
+    let header: Vec<&str> = summary.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
+    let (ra_col, rz_col, v_col) = (
+        col("limit: Ra1 6.3"),
+        col("limit: Rz1 max 12.5"),
+        col("scan_verdict"),
+    );
+    assert_eq!(v_col, header.len() - 1);
+    let beyond: Vec<u64> = limits[1]["lines_beyond"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    for row in summary.lines().skip(1) {
+        let cells: Vec<&str> = row.split(',').collect();
+        let line: u64 = cells[0].parse().unwrap();
+        assert_eq!(cells[ra_col], "within", "{row}");
+        assert_eq!(cells[rz_col] == "beyond", beyond.contains(&line), "{row}");
+        assert_eq!(cells[v_col], "does not conform", "{row}");
+    }
     for plot in ["bac", "heightmap", "overlay"] {
         for ext in ["png", "svg"] {
             let p = dir.join(format!("{plot}.{ext}"));

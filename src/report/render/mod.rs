@@ -412,7 +412,10 @@ pub fn write_data_files(
         },
     })??;
     let summary = out.join("summary.csv");
-    write_file(&summary, summary_csv(&report.lines).as_bytes())?;
+    write_file(
+        &summary,
+        summary_csv(&report.lines, report.specification.as_ref()).as_bytes(),
+    )?;
     Ok(Files {
         report_json: out.join("report.json"),
         report_html: out.join("report.html"),
