@@ -16,10 +16,15 @@
 //! exclude` leaves them out of the per-line and measured-grid parameters, `--replace-spikes`
 //! replaces them before fitting.
 //!
-//! The summary printed names the verdict on the model between lines. Exit status: 0 done,
+//! `--recipe` judges a scan directory or a grid against a recipe's specification (a scan
+//! is otherwise judged by the recipe its job froze, a grid not at all).
+//!
+//! The summary printed names the verdict on the model between lines and, for a judged scan
+//! or grid, the verdict against the specification with each limit's. Exit status: 0 done,
 //! 3 done but partial (lines left out, or part of the characterisation could not be made:
-//! report.json's `characterisation` says which and why), 1 the input cannot be characterised
-//! at all, 2 usage, 74 I/O.
+//! report.json's `characterisation` says which and why), 4 (with `--recipe`) the part does
+//! not conform, 1 the input cannot be characterised at all, 2 usage, 74 I/O, 78 a bad
+//! configuration or recipe.
 //!
 //! Layer 5 (composition): reads files, calls [`crate::report`] and [`crate::metrology`].
 
@@ -28,13 +33,15 @@ use super::model_args::ModelArgs;
 use super::{CliError, Exit};
 use crate::grid::Grid;
 use crate::input::{GridInput, Source};
-use crate::metrology::params::{analyze_line, Options, Recipe, RoughnessParams};
+use crate::jobs::recipe::Recipe;
+use crate::metrology::params::{analyze_line, Options, Recipe as LineRecipe, RoughnessParams};
 use crate::metrology::sj_material_ratio::{sj_material_ratio, MaterialRatioReading};
 use crate::report::scan_dir::fit_for_report;
 use crate::report::{
     characterise, characterise_scan, Model, ReportContext, ReportError, ScanAnalysisOptions,
     ScanOutputs,
 };
+use crate::specification::InstrumentUncertainty;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -67,6 +74,15 @@ pub struct Args {
     /// a file none.
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
+    /// Judge the lines against this recipe's `[specification] limits` instead of those a
+    /// scan's job froze: a recipe file, or with `--config` a recipe name in its `[jobs]
+    /// recipes` directory (checked against that station as `check-config` checks it). Only
+    /// the limits are taken; a limit asking for another band or evaluation length than the
+    /// lines were evaluated with is named and not decidable. For a grid the calibration
+    /// uncertainty of `--config`'s `[traceability]` applies. Exit 4 when the part does not
+    /// conform.
+    #[arg(long, value_name = "FILE")]
+    pub recipe: Option<PathBuf>,
     /// Evaluate the central N sampling lengths (λc each) of every line, leaving the rest at
     /// each end out as the filter's run-up and run-out, as an instrument traces N·λc plus λc
     /// (CSV and X3P inputs; a scan's lines carry the instrument's N). Default: the whole
@@ -176,7 +192,7 @@ struct Report {
     software: String,
     input: String,
     kind: &'static str,
-    recipe: Recipe,
+    recipe: LineRecipe,
     /// The reading of the material-ratio family the summary line gives.
     material_ratio: &'static str,
     lines: Vec<LineReport>,
@@ -324,8 +340,10 @@ fn report_error(e: ReportError) -> CliError {
     }
 }
 
-/// Prints the warnings and the summary, and maps a partial characterisation to exit 3.
-fn finish(o: &ScanOutputs) -> Result<(), CliError> {
+/// Prints the warnings and the summary (the verdict against the specification first, with
+/// each limit's), and maps a part that does not conform to exit 4 when `judged` (`--recipe`),
+/// else a partial characterisation to exit 3.
+fn finish(o: &ScanOutputs, judged: bool) -> Result<(), CliError> {
     for w in &o.warnings {
         tell!("surfscan: warning: {w}");
     }
@@ -336,6 +354,22 @@ fn finish(o: &ScanOutputs) -> Result<(), CliError> {
         c.lines_used(),
         o.elapsed_s
     );
+    if let Some(spec) = &o.report.specification {
+        say!("verdict: {}", spec.verdict);
+        for l in &spec.limits {
+            say!("  {}: {} ({})", l.callout, l.verdict, l.reason);
+        }
+        if judged && spec.verdict == crate::specification::Verdict::DoesNotConform {
+            say!("{}", o.verdict_line());
+            return Err(CliError::new(
+                Exit::DoesNotConform,
+                format!(
+                    "the part does not conform to its specification (report.json's specification names the limits and lines): {}",
+                    o.report_json.display()
+                ),
+            ));
+        }
+    }
     say!("{}", o.verdict_line());
     if o.complete() {
         return Ok(());
@@ -431,11 +465,24 @@ pub fn run(args: Args) -> Result<(), CliError> {
             "--sampling-lengths is for CSV and X3P inputs; a scan's lines are evaluated with the N the instrument recorded",
         ));
     }
-    let lab = match &args.config {
-        Some(path) => Some(super::station::load_config(path)?.0.report),
+    let station = match &args.config {
+        Some(path) => Some(super::station::load_config(path)?.0),
         None => None,
     };
+    let lab = station.as_ref().map(|c| c.report.clone());
+    let recipe = match &args.recipe {
+        Some(r) => Some(recipe_of(r, station.as_ref())?),
+        None => None,
+    };
+    let judged = recipe.is_some();
     let input = args.read.read(&args.input)?;
+    if judged && input.is_profile() {
+        return Err(CliError::new(
+            Exit::Usage,
+            "--recipe is for scan directories and grids: a single profile is one value, and the 16 % and max rules judge a surface's lines",
+        ));
+    }
+    let specification = recipe.map(|r| r.specification);
     let lines = input.grid.rows();
     let paper_q = crate::fit::FitOptions::default().degree_v;
     if let Source::Scan(vouched) = &input.source {
@@ -471,10 +518,11 @@ pub fn run(args: Args) -> Result<(), CliError> {
             lab,
             material_ratio: args.material_ratio.unwrap_or(frozen.material_ratio),
             contact: contact_options(&args)?,
+            specification,
             ..ScanAnalysisOptions::default()
         };
         let outputs = characterise_scan(&input, &options).map_err(report_error)?;
-        return finish(&outputs);
+        return finish(&outputs, judged);
     }
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from("."));
     let options = Options {
@@ -509,12 +557,73 @@ pub fn run(args: Args) -> Result<(), CliError> {
         traceability: None,
         scan: None,
         fit: None,
-        options: ScanAnalysisOptions::default(),
+        options: ScanAnalysisOptions {
+            instrument: judged.then(|| InstrumentUncertainty {
+                expanded_relative_pct: station
+                    .as_ref()
+                    .and_then(|c| c.traceability.calibration_uncertainty_pct),
+            }),
+            specification,
+            ..ScanAnalysisOptions::default()
+        },
         warnings: input.findings.clone(),
         lab: lab.unwrap_or_default(),
     };
     let outputs = fit_and_characterise(&input.grid, ctx, &args, &out)?;
-    finish(&outputs)
+    finish(&outputs, judged)
+}
+
+/// The recipe `--recipe` names: a file (checked by itself, or against `station` when
+/// `--config` names one), else a name in `station`'s recipe directory. A recipe without limits
+/// is a usage error: there is nothing to judge.
+fn recipe_of(arg: &Path, station: Option<&crate::config::Config>) -> Result<Recipe, CliError> {
+    use crate::jobs::recipe::{valid_name, RecipeError};
+    let err = |e: RecipeError| {
+        let exit = if e.is_usage() {
+            Exit::Usage
+        } else {
+            Exit::Config
+        };
+        CliError::new(exit, e.to_string())
+    };
+    let name_arg = arg.to_str().filter(|n| valid_name(n) && !arg.exists());
+    let recipe = match (name_arg, station) {
+        (Some(name), Some(c)) => Recipe::load(&c.jobs.recipes, name, c).map_err(err)?,
+        (Some(name), None) if !name.ends_with(".toml") => {
+            return Err(CliError::new(
+                Exit::Usage,
+                format!("--recipe {name}: no such file; give a recipe file, or --config with a station whose [jobs] recipes directory holds {name}.toml"),
+            ))
+        }
+        _ => {
+            let text = std::fs::read_to_string(arg).map_err(|e| {
+                let exit = if e.kind() == std::io::ErrorKind::NotFound {
+                    Exit::Usage
+                } else {
+                    Exit::Io
+                };
+                CliError::new(exit, format!("cannot read recipe {}: {e}", arg.display()))
+            })?;
+            let name = arg
+                .file_stem()
+                .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+            match station {
+                Some(c) => Recipe::from_text(&name, arg, &text, c),
+                None => Recipe::parse(&name, arg, &text),
+            }
+            .map_err(err)?
+        }
+    };
+    if recipe.specification.is_empty() {
+        return Err(CliError::new(
+            Exit::Usage,
+            format!(
+                "recipe {}: its [specification] limits are empty, so there is nothing to judge; write the drawing's limits (limits = [\"Ra 0.8\"])",
+                recipe.path.display()
+            ),
+        ));
+    }
+    Ok(recipe)
 }
 
 /// Fits `grid` once the way the arguments ask (`--degree-u/--degree-v`, default the paper's
@@ -544,6 +653,8 @@ fn fit_and_characterise(
         replace_spikes: args.model.replace(),
         material_ratio: args.material_ratio.unwrap_or_default(),
         contact: contact_options(args)?,
+        specification: ctx.options.specification.take(),
+        instrument: ctx.options.instrument,
         ..ScanAnalysisOptions::default()
     };
     let mut recipe = crate::report::scan_dir::scan_recipe(&analysis, None, &[]);

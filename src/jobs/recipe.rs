@@ -288,6 +288,16 @@ impl Recipe {
         text: &str,
         station: &Config,
     ) -> Result<Recipe, RecipeError> {
+        let recipe = Recipe::parse(name, path, text)?;
+        recipe.config_for(station, None)?;
+        Ok(recipe)
+    }
+
+    /// Parses recipe text and checks what it says by itself (its keys and ranges, its
+    /// limits against each other and against its `[conditions]`), without a station: what
+    /// `analyze --recipe` needs to judge lines measured elsewhere. [`Recipe::from_text`] also
+    /// checks the plan against a station.
+    pub fn parse(name: &str, path: &Path, text: &str) -> Result<Recipe, RecipeError> {
         let invalid = |key: &str, message: String| RecipeError::Invalid {
             path: path.to_path_buf(),
             key: key.to_owned(),
@@ -326,16 +336,14 @@ impl Recipe {
                 ));
             }
         }
-        let recipe = Recipe {
+        Ok(Recipe {
             name: name.to_owned(),
             path: path.to_path_buf(),
             text: text.to_owned(),
             sha256: crate::scan::store::hex_sha256(text.as_bytes()),
             file,
             specification,
-        };
-        recipe.config_for(station, None)?;
-        Ok(recipe)
+        })
     }
 
     /// The station's configuration with this recipe's plan (y of the first line from

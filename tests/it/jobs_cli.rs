@@ -387,3 +387,162 @@ fn the_queue_commands_add_list_remove_and_refuse_with_their_exit_status() {
     let out = q(&["start", "--recipe", "nope", "--specimen", "X"]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
 }
+
+/// A grid CSV of `amplitudes.len()` lines, each a cosine of 50 µm period and its amplitude
+/// (µm), 1251 points at 1 µm: five λc of 0.25 mm, so the lines are evaluated over the five
+/// sampling lengths a callout means by default. Whole periods far below λc: each line's Ra is
+/// 2A/π.
+fn cosine_grid(path: &Path, amplitudes: &[f64]) {
+    let mut csv = String::new();
+    for a in amplitudes {
+        let row: Vec<String> = (0..1251)
+            .map(|c| {
+                format!(
+                    "{:.12}",
+                    a * (std::f64::consts::TAU * c as f64 / 50.0).cos()
+                )
+            })
+            .collect();
+        csv.push_str(&row.join(","));
+        csv.push('\n');
+    }
+    std::fs::write(path, csv).unwrap();
+}
+
+fn analyze_grid(grid: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "analyze",
+        grid.to_str().unwrap(),
+        "--lc",
+        "0.25",
+        "--pitch-x",
+        "0.001",
+        "--pitch-y",
+        "0.01",
+        "--curves",
+        "3",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    surfscan(&args)
+}
+
+#[test]
+fn analyze_recipe_judges_a_grid_and_exits_4_when_the_part_does_not_conform() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Ra = 2A/π: eight lines at A 0.5 µm (Ra 0.318), two at A 2 µm (Ra 1.27).
+    let mut amplitudes = vec![0.5; 10];
+    amplitudes[3] = 2.0;
+    amplitudes[8] = 2.0;
+    let grid = d.join("grid.csv");
+    cosine_grid(&grid, &amplitudes);
+    let recipe = d.join("flange.toml");
+    std::fs::write(
+        &recipe,
+        "[plan]\nlines = 10\ny-step-mm = 0.01\n\n[specification]\nlimits = [\"Ra 0.8\", \"Ra max 3.2\"]\n",
+    )
+    .unwrap();
+    // 2 of 10 lines (20 %) above 0.8 µm breaks the 16 % rule (at most 1 of 10); no line
+    // reaches 3.2 µm. No station: the instrument's uncertainty is not stated, U = 0.
+    let out = d.join("judged");
+    let o = analyze_grid(&grid, &out, &["--recipe", recipe.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(4), "{}", text(&o.stderr));
+    let stdout = text(&o.stdout);
+    assert!(stdout.contains("verdict: does not conform\n"), "{stdout}");
+    assert!(
+        stdout.contains("  Ra 0.8: does not conform (Ra 16 % rule: 2 of 10 lines above 0.8 µm (at most 1 allowed))"),
+        "{stdout}"
+    );
+    assert!(text(&o.stderr).contains("the part does not conform"));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let spec = &report["specification"];
+    assert_eq!(spec["verdict"], "does not conform");
+    assert_eq!(spec["limits"][0]["lines_beyond"], serde_json::json!([4, 9]));
+    assert_eq!(spec["limits"][1]["verdict"], "conforms");
+    for (l, a) in report["lines"].as_array().unwrap().iter().zip(&amplitudes) {
+        let ra = l["Ra_um"].as_f64().unwrap();
+        assert!(
+            (ra - 2.0 * a / std::f64::consts::PI).abs() < 0.01 * a,
+            "{l}"
+        );
+    }
+    let csv = std::fs::read_to_string(out.join("summary.csv")).unwrap();
+    assert!(csv
+        .lines()
+        .next()
+        .unwrap()
+        .ends_with(",limit: Ra 0.8,limit: Ra max 3.2,scan_verdict"));
+    assert!(csv
+        .lines()
+        .nth(4)
+        .unwrap()
+        .ends_with(",beyond,within,does not conform"));
+
+    // One line of ten above (10 %) meets the rule: exit 0, and without --recipe the grid is
+    // not judged at all.
+    amplitudes[8] = 0.5;
+    cosine_grid(&grid, &amplitudes);
+    let o = analyze_grid(
+        &grid,
+        &d.join("ok"),
+        &["--recipe", recipe.to_str().unwrap()],
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
+    assert!(text(&o.stdout).contains("verdict: conforms\n"));
+    let o = analyze_grid(&grid, &d.join("plain"), &[]);
+    assert_eq!(o.status.code(), Some(0));
+    let plain: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("plain/report.json")).unwrap())
+            .unwrap();
+    assert!(
+        plain["specification"].is_null(),
+        "{}",
+        plain["specification"]
+    );
+
+    // A station's recipe by name, with its calibration uncertainty: 3 % of 1.27 µm does not
+    // bring the line within 0.8 µm; the uncertainty is stated in the verdict.
+    let config = station(d);
+    let mut t = std::fs::read_to_string(&config).unwrap();
+    t.push_str("\n[traceability]\ncalibration-uncertainty-pct = 3.0\n");
+    std::fs::write(&config, t).unwrap();
+    std::fs::copy(&recipe, d.join("recipes/flange.toml")).unwrap();
+    let by_name = d.join("by-name");
+    let o = analyze_grid(
+        &grid,
+        &by_name,
+        &["--recipe", "flange", "--config", config.to_str().unwrap()],
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(by_name.join("report.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["specification"]["limits"][0]["line_u_pct"], 3.0);
+    assert_eq!(report["specification"]["limits"][0]["n_beyond"], 1);
+
+    // Refused before anything is read: a name without a station (2), a bad callout (78,
+    // naming the file and the key), a recipe without limits (2).
+    let o = analyze_grid(&grid, &d.join("x"), &["--recipe", "flange"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("--config"), "{}", text(&o.stderr));
+    std::fs::write(
+        &recipe,
+        "[plan]\nlines = 10\ny-step-mm = 0.01\n\n[specification]\nlimits = [\"Ra0.8x\"]\n",
+    )
+    .unwrap();
+    let o = analyze_grid(&grid, &d.join("x"), &["--recipe", recipe.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(78), "{}", text(&o.stderr));
+    let e = text(&o.stderr);
+    assert!(
+        e.contains("flange.toml") && e.contains("specification.limits") && e.contains("Ra0.8x"),
+        "{e}"
+    );
+    std::fs::write(&recipe, "[plan]\nlines = 5\ny-step-mm = 0.01\n").unwrap();
+    let o = analyze_grid(&grid, &d.join("x"), &["--recipe", recipe.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("nothing to judge"));
+    assert!(!d.join("x").exists());
+}
