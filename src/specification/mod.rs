@@ -171,8 +171,12 @@ pub struct LimitVerdict {
     pub n_beyond: usize,
     /// Values within their U of the limit (neither proven within nor beyond).
     pub n_undecided: usize,
-    /// How many values beyond the rule allows for `n_values` (16 % of them, rounded down;
-    /// 0 for the max rule).
+    /// Lines the scan's plan asks for that have no entry among the lines (not traced, or
+    /// left out as unusable): each counted as undecided, so that a partial scan's verdict is
+    /// never stronger than the lines it has (0 for a complete scan and for a grid).
+    pub n_not_measured: usize,
+    /// How many values beyond the rule allows for the `n_values + n_not_measured` values the
+    /// surface was to have (16 % of them, rounded down; 0 for the max rule).
     pub n_allowed: usize,
     /// The expanded uncertainty (k = 2) of one line's value, % of the value (0 when the
     /// station states none or it does not apply to the parameter).
@@ -276,6 +280,7 @@ fn count_phrase(k: usize, n: usize) -> String {
 fn judge_limit(
     c: &Callout,
     lines: &[LineValues<'_>],
+    not_measured: usize,
     band: Option<&EvaluatedBand>,
     instrument: &InstrumentUncertainty,
 ) -> LimitVerdict {
@@ -283,7 +288,10 @@ fn judge_limit(
         Parameter::RSm => uncertainty::Scaling::Lateral,
         _ => uncertainty::Scaling::Height,
     };
-    let mut t = Tally::default();
+    let mut t = Tally {
+        missing: not_measured,
+        ..Tally::default()
+    };
     let (mut beyond, mut undecided, mut without) = (Vec::new(), Vec::new(), Vec::new());
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for l in lines {
@@ -302,8 +310,9 @@ fn judge_limit(
             Standing::Within => {}
         }
     }
-    let n_allowed = (0..=t.n)
-        .take_while(|&k| meets(c.rule, k, t.n))
+    let planned = t.n + t.missing;
+    let n_allowed = (0..=planned)
+        .take_while(|&k| meets(c.rule, k, planned))
         .last()
         .unwrap_or(0);
     let differ = conditions_differ(c, band);
@@ -325,7 +334,15 @@ fn judge_limit(
         if t.undecided > 0 {
             r.push_str(&format!(", {} more within U of it", t.undecided));
         }
-        if c.rule == Rule::SixteenPercent {
+        if t.missing > 0 {
+            r.push_str(&format!(
+                ", {} of the {planned} planned lines not measured (counted as undecided)",
+                t.missing
+            ));
+        }
+        if c.rule == Rule::SixteenPercent && t.missing > 0 {
+            r.push_str(&format!(" (at most {n_allowed} of {planned} allowed)"));
+        } else if c.rule == Rule::SixteenPercent {
             r.push_str(&format!(" (at most {n_allowed} allowed)"));
         }
         r
@@ -348,6 +365,7 @@ fn judge_limit(
         n_values: t.n,
         n_beyond: t.beyond,
         n_undecided: t.undecided,
+        n_not_measured: t.missing,
         n_allowed,
         line_u_pct,
         min_um: lo.is_finite().then_some(lo),
@@ -362,18 +380,22 @@ fn judge_limit(
 
 /// The verdict of the lines against `spec`: one [`LimitVerdict`] per limit and the scan's
 /// (does not conform when any limit does not, conforms when all do, else not decidable).
+/// `planned_lines` is how many lines the scan's plan asks for (`None` for a grid: the lines
+/// given are the surface); the planned lines missing from `lines` count as undecided values.
 /// `band` is what the lines were evaluated with (`None` when they are not roughness
 /// profiles); `instrument` is the station's stated uncertainty.
 pub fn judge(
     spec: &Specification,
     lines: &[LineValues<'_>],
+    planned_lines: Option<usize>,
     band: Option<&EvaluatedBand>,
     instrument: &InstrumentUncertainty,
 ) -> SpecificationVerdict {
+    let not_measured = planned_lines.map_or(0, |p| p.saturating_sub(lines.len()));
     let limits: Vec<LimitVerdict> = spec
         .limits
         .iter()
-        .map(|c| judge_limit(c, lines, band, instrument))
+        .map(|c| judge_limit(c, lines, not_measured, band, instrument))
         .collect();
     let verdict = Verdict::all(limits.iter().map(|l| l.verdict));
     let deciding: Vec<&str> = limits

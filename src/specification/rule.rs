@@ -12,6 +12,12 @@
 //!   within;
 //! - is **not decidable** otherwise (and when there is no value at all).
 //!
+//! A scan that ended before its last line (or whose reader left lines out) has fewer values
+//! than the surface it was planned to measure: each planned line without a value is counted
+//! as undecided too, over the planned count. A partial scan therefore conforms only if its
+//! surface would conform whatever the missing lines hold, and does not conform only if it
+//! would not whatever they hold; under the max rule it never conforms.
+//!
 //! With U = 0 no value is undecided: a value exactly at an upper limit does not exceed it,
 //! and exactly 16 % of the values beyond still meets the 16 % rule ("not more than").
 //!
@@ -121,6 +127,9 @@ pub struct Tally {
     pub beyond: usize,
     /// Values whose uncertainty interval holds the limit.
     pub undecided: usize,
+    /// Values the plan asked for that were not measured (lines not traced, or left out):
+    /// undecided, beside the `n` measured.
+    pub missing: usize,
 }
 
 impl Tally {
@@ -144,13 +153,15 @@ pub fn meets(rule: Rule, beyond: usize, n: usize) -> bool {
     }
 }
 
-/// The verdict of `rule` on a tally, by ISO 14253-1's default decision rule.
+/// The verdict of `rule` on a tally, by ISO 14253-1's default decision rule, over the
+/// `n + missing` values the surface was to have.
 pub fn decide(rule: Rule, t: Tally) -> Verdict {
+    let planned = t.n + t.missing;
     if t.n == 0 {
         Verdict::NotDecidable
-    } else if meets(rule, t.beyond + t.undecided, t.n) {
+    } else if meets(rule, t.beyond + t.undecided + t.missing, planned) {
         Verdict::Conforms
-    } else if !meets(rule, t.beyond, t.n) {
+    } else if !meets(rule, t.beyond, planned) {
         Verdict::DoesNotConform
     } else {
         Verdict::NotDecidable
@@ -243,6 +254,7 @@ mod tests {
             n: 25,
             beyond: 3,
             undecided: 2,
+            missing: 0,
         };
         assert_eq!(decide(P16, t), ND);
         // 1 undecided: 4 of 25 at worst is exactly 16 %: conforms.
@@ -252,7 +264,8 @@ mod tests {
                 Tally {
                     n: 25,
                     beyond: 3,
-                    undecided: 1
+                    undecided: 1,
+                    missing: 0,
                 }
             ),
             C
@@ -264,7 +277,8 @@ mod tests {
                 Tally {
                     n: 25,
                     beyond: 5,
-                    undecided: 7
+                    undecided: 7,
+                    missing: 0,
                 }
             ),
             NC
@@ -277,7 +291,8 @@ mod tests {
                 Tally {
                     n: 25,
                     beyond: 0,
-                    undecided: 1
+                    undecided: 1,
+                    missing: 0,
                 }
             ),
             ND
@@ -288,7 +303,8 @@ mod tests {
                 Tally {
                     n: 25,
                     beyond: 1,
-                    undecided: 3
+                    undecided: 3,
+                    missing: 0,
                 }
             ),
             NC
@@ -299,7 +315,8 @@ mod tests {
                 Tally {
                     n: 25,
                     beyond: 0,
-                    undecided: 0
+                    undecided: 0,
+                    missing: 0,
                 }
             ),
             C
@@ -310,6 +327,37 @@ mod tests {
         let v = [6.25, 6.0, 5.9, 5.5, 5.8];
         assert_eq!(decide(Max, tally(&v, 0.0, 6.3, Side::Upper)), C);
         assert_eq!(decide(Max, tally(&v, 0.1, 6.3, Side::Upper)), ND);
+    }
+
+    #[test]
+    fn a_partial_scan_counts_its_missing_lines_as_undecided() {
+        let t = |n, beyond, undecided, missing| Tally {
+            n,
+            beyond,
+            undecided,
+            missing,
+        };
+        // 31 lines planned, 20 traced, none beyond: under the 16 % rule, 11 lines that might
+        // all be beyond are 35 % of 31, so it is not decidable; the traced 20 alone would
+        // conform.
+        assert_eq!(decide(P16, t(20, 0, 0, 0)), C);
+        assert_eq!(decide(P16, t(20, 0, 0, 11)), ND);
+        // 28 of 31 traced, one beyond: 1 + 3 = 4 of 31 (12.9 %) meets the rule whatever the
+        // three missing hold; one more undecided value (5 of 31, 16.1 %) leaves it open.
+        assert_eq!(decide(P16, t(28, 1, 0, 3)), C);
+        assert_eq!(decide(P16, t(28, 1, 1, 3)), ND);
+        // 20 of 31 traced, 5 beyond: 5 of 31 (16.1 %) breaks the rule even if the 11 missing
+        // are all within, so it does not conform; 4 beyond (4 of 31, 12.9 %) might still
+        // conform, though 4 of the 20 traced (20 %) would not.
+        assert_eq!(decide(P16, t(20, 5, 0, 11)), NC);
+        assert_eq!(decide(P16, t(20, 4, 0, 11)), ND);
+        assert_eq!(decide(P16, t(20, 4, 0, 0)), NC);
+        // The max rule: one value beyond decides it; a missing line keeps it from conforming.
+        assert_eq!(decide(Max, t(30, 1, 0, 1)), NC);
+        assert_eq!(decide(Max, t(30, 0, 0, 1)), ND);
+        assert_eq!(decide(Max, t(31, 0, 0, 0)), C);
+        // No value at all decides nothing.
+        assert_eq!(decide(P16, t(0, 0, 0, 31)), ND);
     }
 
     #[test]

@@ -65,7 +65,7 @@ fn a_surface_with_nine_of_31_lines_above_does_not_conform() {
     let mut p = surface();
     p[0].rz_um = 6.5;
     let spec = Specification::parse(&["Ra 0.8", "Rz 6.3"]).unwrap();
-    let v = judge(&spec, &lines(&p), Some(&BAND), &Default::default());
+    let v = judge(&spec, &lines(&p), None, Some(&BAND), &Default::default());
     assert_eq!(v.verdict, Verdict::DoesNotConform);
     let rz = &v.limits[1];
     assert_eq!(
@@ -99,12 +99,12 @@ fn four_of_25_lines_above_is_sixteen_percent_and_conforms() {
         l.ra_um = 0.9;
     }
     let spec = Specification::parse(&["Ra 0.8", "Ra max 1.0"]).unwrap();
-    let v = judge(&spec, &lines(&p), Some(&BAND), &Default::default());
+    let v = judge(&spec, &lines(&p), None, Some(&BAND), &Default::default());
     assert_eq!(v.limits[0].verdict, Verdict::Conforms);
     assert_eq!(v.limits[0].n_beyond, 4);
     assert_eq!(v.verdict, Verdict::Conforms);
     p[4].ra_um = 0.9;
-    let v = judge(&spec, &lines(&p), Some(&BAND), &Default::default());
+    let v = judge(&spec, &lines(&p), None, Some(&BAND), &Default::default());
     assert_eq!(v.verdict, Verdict::DoesNotConform, "5 of 25 is 20 %");
 }
 
@@ -115,12 +115,12 @@ fn the_instrument_uncertainty_makes_values_near_a_limit_undecided() {
     let mut p: Vec<RoughnessParams> = (0..10).map(|_| params(0.5, 5.0, None)).collect();
     p[5].rz_um = 6.2;
     let spec = Specification::parse(&["Rz max 6.3"]).unwrap();
-    let none = judge(&spec, &lines(&p), Some(&BAND), &Default::default());
+    let none = judge(&spec, &lines(&p), None, Some(&BAND), &Default::default());
     assert_eq!(none.verdict, Verdict::Conforms);
     let inst = InstrumentUncertainty {
         expanded_relative_pct: Some(3.0),
     };
-    let v = judge(&spec, &lines(&p), Some(&BAND), &inst);
+    let v = judge(&spec, &lines(&p), None, Some(&BAND), &inst);
     assert_eq!(v.verdict, Verdict::NotDecidable);
     assert_eq!(v.limits[0].lines_undecided, vec![6]);
     assert_eq!(v.limits[0].line_u_pct, 3.0);
@@ -131,14 +131,14 @@ fn the_instrument_uncertainty_makes_values_near_a_limit_undecided() {
     // 6.5 is beyond 6.3 by more than its U (0.195): proven non-conforming.
     p[5].rz_um = 6.5;
     assert_eq!(
-        judge(&spec, &lines(&p), Some(&BAND), &inst).verdict,
+        judge(&spec, &lines(&p), None, Some(&BAND), &inst).verdict,
         Verdict::DoesNotConform
     );
     // A lower limit alike: L Ra 0.4 with Ra 0.41 and 3 %: U = 0.0123, 0.41 − U < 0.4.
     let mut p: Vec<RoughnessParams> = (0..10).map(|_| params(0.6, 5.0, None)).collect();
     p[2].ra_um = 0.41;
     let spec = Specification::parse(&["L Ra max 0.4"]).unwrap();
-    let v = judge(&spec, &lines(&p), Some(&BAND), &inst);
+    let v = judge(&spec, &lines(&p), None, Some(&BAND), &inst);
     assert_eq!(v.verdict, Verdict::NotDecidable);
     assert!(
         v.limits[0].reason.contains("below 0.4 µm"),
@@ -152,7 +152,7 @@ fn a_callout_for_other_conditions_is_named_and_not_decided() {
     let p = surface();
     let spec = Specification::parse(&["0.0025-2.5/Ra 0.8", "Rz3 6.3", "0.008-0.8/Rq 1", "Ra 0.8"])
         .unwrap();
-    let v = judge(&spec, &lines(&p), Some(&BAND), &Default::default());
+    let v = judge(&spec, &lines(&p), None, Some(&BAND), &Default::default());
     assert_eq!(v.limits[0].verdict, Verdict::NotDecidable);
     assert!(
         v.limits[0].conditions_differ[0].contains("λc = 2.5 mm"),
@@ -173,11 +173,11 @@ fn a_callout_for_other_conditions_is_named_and_not_decided() {
         sampling_lengths: 3,
         ..BAND
     };
-    let v = judge(&spec, &lines(&p), Some(&three), &Default::default());
+    let v = judge(&spec, &lines(&p), None, Some(&three), &Default::default());
     assert!(v.limits[1].conditions_differ.is_empty());
     assert!(v.limits[3].conditions_differ[0].contains("the default, none written"));
     // Lines that are not roughness profiles decide nothing.
-    let v = judge(&spec, &lines(&p), None, &Default::default());
+    let v = judge(&spec, &lines(&p), None, None, &Default::default());
     assert!(v.limits.iter().all(|l| l.verdict == Verdict::NotDecidable));
 }
 
@@ -187,11 +187,11 @@ fn lines_without_a_value_are_not_measured_values() {
     p[3].rsm_um = None;
     p[4].rsm_um = None;
     let spec = Specification::parse(&["RSm 120"]).unwrap();
-    let v = judge(&spec, &lines(&p), Some(&BAND), &Default::default());
+    let v = judge(&spec, &lines(&p), None, Some(&BAND), &Default::default());
     assert_eq!(v.limits[0].n_values, 29);
     assert_eq!(v.limits[0].lines_without_value, vec![4, 5]);
     let p: Vec<RoughnessParams> = (0..6).map(|_| params(0.5, 5.0, None)).collect();
-    let v = judge(&spec, &lines(&p), Some(&BAND), &Default::default());
+    let v = judge(&spec, &lines(&p), None, Some(&BAND), &Default::default());
     assert_eq!(v.verdict, Verdict::NotDecidable);
     assert!(v.limits[0].reason.contains("no line has a value of RSm"));
 }
@@ -238,4 +238,50 @@ fn a_frozen_recipe_text_gives_its_limits_or_names_what_is_wrong() {
     let e = Specification::of_recipe_text("[specification]\nlimits = \"Ra 0.8\"\n").unwrap_err();
     assert!(e.contains("not a list of callouts"), "{e}");
     assert!(Specification::of_recipe_text("[plan\n").is_err());
+}
+
+#[test]
+fn a_scan_that_ended_after_20_of_31_lines_is_judged_over_the_31() {
+    // The first 20 lines of the surface: Rz 7.0 µm on lines 3, 7, 11, 15 and 19.
+    let p: Vec<RoughnessParams> = surface().into_iter().take(20).collect();
+    let spec = Specification::parse(&["Ra 0.8", "Rz 6.3"]).unwrap();
+    let v = judge(
+        &spec,
+        &lines(&p),
+        Some(31),
+        Some(&BAND),
+        &Default::default(),
+    );
+    let (ra, rz) = (&v.limits[0], &v.limits[1]);
+    // Ra: none of 20 above, but 11 lines not measured might all be (11 of 31 > 16 %).
+    assert_eq!(ra.verdict, Verdict::NotDecidable);
+    assert_eq!((ra.n_values, ra.n_not_measured, ra.n_allowed), (20, 11, 4));
+    // Rz: 5 of 31 (16.1 %) is beyond the rule whatever the 11 hold.
+    assert_eq!(rz.verdict, Verdict::DoesNotConform);
+    assert_eq!(
+        rz.reason,
+        "Rz 16 % rule: 5 of 20 lines above 6.3 µm, 11 of the 31 planned lines not measured (counted as undecided) (at most 4 of 31 allowed)"
+    );
+    assert_eq!(v.verdict, Verdict::DoesNotConform);
+    // Over the 20 lines alone Ra would conform: the plan is what keeps it open.
+    let alone = judge(&spec, &lines(&p), None, Some(&BAND), &Default::default());
+    assert_eq!(alone.limits[0].verdict, Verdict::Conforms);
+    assert_eq!(alone.limits[0].n_not_measured, 0);
+    // One line short of 21 planned, none above: 1 of 21 counted beyond still meets 16 %.
+    let v = judge(
+        &spec,
+        &lines(&p),
+        Some(21),
+        Some(&BAND),
+        &Default::default(),
+    );
+    assert_eq!(v.limits[0].verdict, Verdict::Conforms);
+    assert_eq!(
+        v.limits[0].reason,
+        "Ra 16 % rule: none of 20 lines above 0.8 µm, 1 of the 21 planned lines not measured (counted as undecided) (at most 3 of 21 allowed)"
+    );
+    // Under the max rule a missing line keeps the surface from conforming.
+    let max = Specification::parse(&["Ra max 0.8"]).unwrap();
+    let v = judge(&max, &lines(&p), Some(21), Some(&BAND), &Default::default());
+    assert_eq!(v.verdict, Verdict::NotDecidable);
 }

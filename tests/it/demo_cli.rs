@@ -321,4 +321,41 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
             assert!((a - b).abs() <= 1e-6, "demo.grid.csv {a} vs the demo's {b}");
         }
     }
+
+    // The same scan as if it had lost its last 11 lines (their metadata gone): judged over
+    // the 31 lines planned, the 11 counted as undecided. Ra, within its limit on all 20
+    // lines, is no longer proven (11 of 31 might be beyond, more than 16 %); Rz, beyond its
+    // max on lines it has, still does not conform. `analyze --recipe` with the demo's recipe
+    // says so and exits 4; without it the frozen recipe judges and the exit is 3 (partial).
+    for k in 20..31 {
+        std::fs::remove_file(dir.join(format!("lines/{k:04}.json"))).unwrap();
+    }
+    let rz_beyond_20 = rl[..20]
+        .iter()
+        .filter(|l| l["Rz_um"].as_f64().unwrap() * (1.0 - 0.03) > 12.5)
+        .count();
+    let recipe = out.path().join("recipes/demo.toml");
+    for (extra, exit) in [(vec![], 3), (vec!["--recipe", recipe.to_str().unwrap()], 4)] {
+        let t = tempfile::tempdir().unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .args(["analyze", dir.to_str().unwrap(), "--out"])
+            .arg(t.path())
+            .args(&extra)
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert_eq!(o.status.code(), Some(exit), "{extra:?} {stdout}");
+        assert!(stdout.contains("verdict: does not conform\n"), "{stdout}");
+        assert!(
+            stdout.contains("  Ra1 6.3: not decidable (Ra1 16 % rule: none of 20 lines above 6.3 µm, 11 of the 31 planned lines not measured (counted as undecided) (at most 4 of 31 allowed))"),
+            "{stdout}"
+        );
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(t.path().join("report.json")).unwrap())
+                .unwrap();
+        let limits = &r["specification"]["limits"];
+        assert_eq!(limits[0]["n_not_measured"], 11);
+        assert_eq!(limits[1]["verdict"], "does not conform");
+        assert_eq!(limits[1]["n_beyond"], rz_beyond_20);
+    }
 }

@@ -67,6 +67,7 @@ pub fn section(input: &SectionInput<'_>, lines: &LinesSection) -> SpecificationS
     let options = &input.ctx.options;
     characterise(
         &lines.lines,
+        input.ctx.scan.as_ref().map(|s| s.lines_planned as usize),
         &lines.recipe.lines,
         options.specification.as_ref(),
         &options.instrument.unwrap_or_default(),
@@ -74,11 +75,13 @@ pub fn section(input: &SectionInput<'_>, lines: &LinesSection) -> SpecificationS
     )
 }
 
-/// The section over `lines` as evaluated under `recipe`; limits on the material-ratio
-/// family are judged in `reading` (the means and their uncertainty stay ISO's, the
-/// instrument's reading being reported beside them per line).
+/// The section over `lines` as evaluated under `recipe`, of a scan whose plan asks for
+/// `planned_lines` (`None` for a grid); limits on the material-ratio family are judged in
+/// `reading` (the means and their uncertainty stay ISO's, the instrument's reading being
+/// reported beside them per line).
 pub fn characterise(
     lines: &[LineReport],
+    planned_lines: Option<usize>,
     recipe: &Recipe,
     specification: Option<&Specification>,
     instrument: &InstrumentUncertainty,
@@ -112,7 +115,13 @@ pub fn characterise(
                 params,
             })
             .collect();
-        let mut v = judge(s, &values, band_of(recipe).as_ref(), instrument);
+        let mut v = judge(
+            s,
+            &values,
+            planned_lines,
+            band_of(recipe).as_ref(),
+            instrument,
+        );
         v.material_ratio = Some(reading.statement());
         let on_material_ratio = s.limits.iter().any(|c| {
             use crate::specification::Parameter::{Rk, Rpk, Rvk};
@@ -175,6 +184,7 @@ mod tests {
         let none = InstrumentUncertainty::default();
         let s = characterise(
             &lines,
+            None,
             &a.recipe,
             Some(&spec),
             &none,
@@ -198,16 +208,28 @@ mod tests {
         // The same values as P parameters (a form-only evaluation): no roughness band.
         let mut p = a.recipe.clone();
         p.profile = "P";
-        let v = characterise(&lines, &p, Some(&spec), &none, MaterialRatioReading::Iso)
-            .verdict
-            .unwrap();
+        let v = characterise(
+            &lines,
+            None,
+            &p,
+            Some(&spec),
+            &none,
+            MaterialRatioReading::Iso,
+        )
+        .verdict
+        .unwrap();
         assert_eq!(v.verdict, crate::specification::Verdict::NotDecidable);
         // Without a specification: the uncertainty only.
-        assert!(
-            characterise(&lines, &a.recipe, None, &none, MaterialRatioReading::Iso)
-                .verdict
-                .is_none()
-        );
+        assert!(characterise(
+            &lines,
+            None,
+            &a.recipe,
+            None,
+            &none,
+            MaterialRatioReading::Iso
+        )
+        .verdict
+        .is_none());
     }
 
     /// The Mitutoyo export (an R profile, λc 2.5 mm): ISO's Rpk 2.722 µm, the SJ series'
@@ -251,6 +273,7 @@ mod tests {
         let judged = |reading| {
             characterise(
                 std::slice::from_ref(&l),
+                None,
                 &a.recipe,
                 Some(&spec),
                 &none,
@@ -284,14 +307,21 @@ mod tests {
         );
         // The means and their uncertainty stay ISO's whichever reading judges.
         let rpk = |reading| {
-            characterise(std::slice::from_ref(&l), &a.recipe, None, &none, reading)
-                .uncertainty
-                .parameters
-                .into_iter()
-                .find(|p| p.parameter == "Rpk_um")
-                .unwrap()
-                .statistics
-                .mean
+            characterise(
+                std::slice::from_ref(&l),
+                None,
+                &a.recipe,
+                None,
+                &none,
+                reading,
+            )
+            .uncertainty
+            .parameters
+            .into_iter()
+            .find(|p| p.parameter == "Rpk_um")
+            .unwrap()
+            .statistics
+            .mean
         };
         assert_eq!(
             rpk(MaterialRatioReading::Iso),
