@@ -39,6 +39,7 @@ mod model_honesty;
 mod model_report;
 mod mqtt_broker;
 mod night_faults;
+mod notify_apprise;
 mod older_scans;
 mod profile_conditions_cli;
 mod prometheus_scrape;
