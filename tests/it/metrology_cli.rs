@@ -210,7 +210,9 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
         "measured points missing"
     );
     let map = std::fs::read_to_string(out.join("heightmap.svg")).unwrap();
-    assert!(map.matches("<rect").count() >= rows * cols);
+    // The map is one bitmap at the figure's resolution, a PNG image inside the SVG.
+    assert_eq!(map.matches("<image").count(), 1);
+    assert!(map.contains(r#"href="data:image/png;base64,iVBORw0KGgo"#));
 }
 
 #[test]

@@ -250,3 +250,75 @@ fn rk_construction_is_consistent_with_the_parameters() {
     assert_eq!(curve[0], [0.0, max]);
     assert_eq!(curve[100_000], [100.0, min]);
 }
+
+/// A grid and a profile far denser than their figures: the files' size follows the figure,
+/// not the data. The height map is one embedded bitmap (its title says each pixel is a mean),
+/// the overlay keeps at most four points a pixel column, the spike among them.
+#[test]
+fn dense_data_is_drawn_at_the_figures_resolution() {
+    let out = out_dir();
+    let (rows, cols) = (400, 6000);
+    let z: Vec<f64> = (0..rows).flat_map(|r| profile(r, cols)).collect();
+    let g = HeightMap {
+        heights_um: &z,
+        rows,
+        cols,
+        pitch_x_mm: 0.0005,
+        pitch_y_mm: 0.01,
+    };
+    let [png, svg] = plot_height_map(&out.dir, &g, "Measured heights", LONG_CAPTION).unwrap();
+    assert_nothing_at_the_edge(&png);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    // At most 776 × 520 RGB pixels, as PNG in base64: under 2 MB even incompressible; the
+    // grid's 2.4 M points as rectangles took about 100 bytes each.
+    assert!(
+        text.len() < 2_000_000,
+        "heightmap.svg of {} bytes",
+        text.len()
+    );
+    assert_eq!(text.matches("<image").count(), 1);
+    assert!(text.contains(r#"href="data:image/png;base64,iVBORw0KGgo"#));
+    // The colour bar's steps only, not a rectangle per point (or per bin) of the map.
+    let rects = text.matches("<rect").count();
+    assert!(rects < 1000, "{rects} rectangles");
+    assert!(text.contains("each pixel the mean of the points under it"));
+
+    let spike_at = 7777;
+    let measured: Vec<(f64, f64)> = (0..10_000)
+        .map(|i| {
+            let z = if i == spike_at { 25.0 } else { z[i % cols] };
+            (i as f64 * 0.0005, z)
+        })
+        .collect();
+    let [png, svg] =
+        plot_profile_overlay(&out.dir, &measured, &measured, &measured, "Line 1", "").unwrap();
+    assert_nothing_at_the_edge(&png);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    let dots = text.matches("<circle").count();
+    // The legend's dot besides the data's; the plot is under 1000 px wide.
+    assert!((1000..=4001).contains(&dots), "{dots} dots");
+    assert!(text.contains("first, last, lowest and highest"));
+    assert!(
+        text.len() < 2_000_000,
+        "overlay.svg of {} bytes",
+        text.len()
+    );
+    // The spike is drawn: the highest dot is far above the others.
+    let cy: Vec<f64> = text
+        .split("<circle")
+        .skip(1)
+        // The data's dots (radius 2), not the legend's.
+        .filter(|c| c.split('>').next().is_some_and(|a| a.contains("r=\"2\"")))
+        .filter_map(|c| {
+            let at = c.find("cy=\"")? + 4;
+            c[at..].split('"').next()?.parse().ok()
+        })
+        .collect();
+    let top = cy.iter().copied().fold(f64::INFINITY, f64::min);
+    let next = cy
+        .iter()
+        .copied()
+        .filter(|&y| y > top)
+        .fold(f64::INFINITY, f64::min);
+    assert!(next - top > 50.0, "no spike drawn: top {top}, next {next}");
+}

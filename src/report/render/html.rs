@@ -39,6 +39,9 @@ pub struct Figure {
     pub bytes: Vec<u8>,
     /// Shown collapsed (the per-line figures) rather than open.
     pub collapsed: bool,
+    /// Not embedded but linked: the figure's file, relative to the report (`bytes` is then
+    /// empty). Per-line figures beyond what a page of a few MB holds are linked.
+    pub link: Option<String>,
 }
 
 impl Figure {
@@ -61,7 +64,19 @@ impl Figure {
             media_type,
             bytes,
             collapsed,
+            link: None,
         })
+    }
+
+    /// A figure shown as a link to its file `href` (relative to the report), not embedded.
+    pub fn linked(title: impl Into<String>, href: impl Into<String>, collapsed: bool) -> Figure {
+        Figure {
+            title: title.into(),
+            media_type: "",
+            bytes: Vec::new(),
+            collapsed,
+            link: Some(href.into()),
+        }
     }
 }
 
@@ -762,12 +777,18 @@ fn plots(h: &mut String, figures: &[Figure]) {
     h.push_str("<h2 id=\"plots\">Plots</h2>\n");
     let engine = base64::engine::general_purpose::STANDARD;
     for f in figures {
-        let img = format!(
-            "<img alt=\"{}\" src=\"data:{};base64,{}\">",
-            esc(&f.title),
-            f.media_type,
-            engine.encode(&f.bytes)
-        );
+        let img = match &f.link {
+            Some(href) => format!(
+                "<p class=\"muted\">Not embedded, to keep this page small: <a href=\"{h}\">{h}</a> beside this report.</p>",
+                h = esc(href)
+            ),
+            None => format!(
+                "<img alt=\"{}\" src=\"data:{};base64,{}\">",
+                esc(&f.title),
+                f.media_type,
+                engine.encode(&f.bytes)
+            ),
+        };
         if f.collapsed {
             let _ = writeln!(
                 h,

@@ -9,6 +9,7 @@
 //!
 //! Layer 4 (reporting): depends on [`crate::x3p`], [`crate::atomic`] and the report's types.
 
+pub mod decimate;
 pub mod dfq;
 pub mod html;
 pub mod plots;
@@ -444,6 +445,7 @@ pub fn read_logo(lab: &LabHeader, warnings: &mut Vec<String>) -> Option<html::Fi
             media_type,
             bytes,
             collapsed: false,
+            link: None,
         }),
         Err(e) => {
             warnings.push(format!(
@@ -453,6 +455,54 @@ pub fn read_logo(lab: &LabHeader, warnings: &mut Vec<String>) -> Option<html::Fi
             None
         }
     }
+}
+
+/// The size `report.html` keeps to when it embeds the per-line figures: those that would
+/// take it beyond are linked to their files instead. A 31-line scan's Rk figures take about
+/// 1.7 MB and are all embedded; a 1000-line grid's would make a page of tens of MB that a
+/// browser opens slowly and a mail server refuses.
+pub const REPORT_HTML_BYTES: usize = 4_500_000;
+
+/// What one linked per-line figure adds to the page, at most (its `<details>` element).
+const LINKED_FIGURE_HTML_BYTES: usize = 400;
+
+/// The bytes of per-line figure files (before base64) that fit in [`REPORT_HTML_BYTES`]
+/// beside a page of `page_bytes` without them, `lines` of them to link at most.
+fn per_line_budget(page_bytes: usize, lines: usize) -> usize {
+    REPORT_HTML_BYTES.saturating_sub(page_bytes + LINKED_FIGURE_HTML_BYTES * lines) / 4 * 3
+}
+
+/// The per-line figures of `report.html` in line order: each embedded while the file bytes
+/// embedded stay within `budget`, the rest linked to their SVG file (a path relative to
+/// `out`, where the report is).
+fn per_line_figures(
+    out: &Path,
+    plots: &[(String, [PathBuf; 2])],
+    budget: usize,
+) -> Vec<html::Figure> {
+    let mut embedded = 0usize;
+    let mut budget_left = true;
+    plots
+        .iter()
+        .filter_map(|(title, [png, svg])| {
+            if budget_left {
+                // A figure that cannot be read is left out, as any figure is.
+                let f = html::Figure::from_files(title.clone(), png, svg, true)?;
+                if embedded + f.bytes.len() <= budget {
+                    embedded += f.bytes.len();
+                    return Some(f);
+                }
+                budget_left = false;
+            }
+            let href = svg.strip_prefix(out).unwrap_or(svg);
+            let href = href
+                .components()
+                .map(|c| c.as_os_str().to_string_lossy().into_owned())
+                .collect::<Vec<_>>()
+                .join("/");
+            Some(html::Figure::linked(title.clone(), href, true))
+        })
+        .collect()
 }
 
 /// Writes `report.json`, then `report.html`, the report for people, with the plots embedded
@@ -495,11 +545,13 @@ pub fn write_report(
             let (png, svg) = pair(stem);
             figures.extend(html::Figure::from_files(title, &png, &svg, false));
         }
-        for (title, [png, svg]) in &files.rk_plots {
-            figures.extend(html::Figure::from_files(title.clone(), png, svg, true));
-        }
-        let page = serde_json::to_value(report)
-            .map(|v| html::render(&v, journal.as_ref(), &figures, logo));
+        let page = serde_json::to_value(report).map(|v| {
+            // The page without the per-line figures first, to know what room they have.
+            let bare = html::render(&v, journal.as_ref(), &figures, logo).len();
+            let budget = per_line_budget(bare, files.rk_plots.len());
+            figures.extend(per_line_figures(out, &files.rk_plots, budget));
+            html::render(&v, journal.as_ref(), &figures, logo)
+        });
         json.join().unwrap_or_else(|_| {
             Err(ReportError::Metrology {
                 what: format!("{}: report.json", ctx.input),
@@ -517,6 +569,63 @@ pub fn write_report(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Per-line figures are embedded in line order while they fit in the budget; the first
+    /// that does not and all after it are linked to their SVG file by a path relative to the
+    /// report; a figure with no file is left out as before.
+    #[test]
+    fn per_line_figures_beyond_the_budget_are_linked_to_their_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let rk = dir.path().join("rk");
+        std::fs::create_dir(&rk).unwrap();
+        let budget = 3_000_000;
+        let size = budget / 3 + 1;
+        let mut plots = Vec::new();
+        for k in 0..5 {
+            let (png, svg) = (
+                rk.join(format!("{k:04}.png")),
+                rk.join(format!("{k:04}.svg")),
+            );
+            if k != 1 {
+                std::fs::write(&png, vec![1u8; size]).unwrap();
+                std::fs::write(&svg, vec![b'<'; size + 10]).unwrap();
+            }
+            plots.push((format!("line {k}"), [png, svg]));
+        }
+        let figures = per_line_figures(dir.path(), &plots, budget);
+        let shown: Vec<(&str, Option<&str>, usize)> = figures
+            .iter()
+            .map(|f| (f.title.as_str(), f.link.as_deref(), f.bytes.len()))
+            .collect();
+        assert_eq!(
+            shown,
+            [
+                ("line 0", None, size),
+                ("line 2", None, size),
+                ("line 3", Some("rk/0003.svg"), 0),
+                ("line 4", Some("rk/0004.svg"), 0),
+            ]
+        );
+        assert!(figures.iter().all(|f| f.collapsed));
+        let page = html::render(&serde_json::json!({}), None, &figures, None);
+        assert!(
+            page.contains("<a href=\"rk/0003.svg\">rk/0003.svg</a>"),
+            "{page}"
+        );
+        assert_eq!(page.matches("data:image/png;base64,").count(), 2);
+    }
+
+    /// The room left for per-line figures: the page's limit less the page without them and a
+    /// link's worth for each line, in file bytes (base64 takes 4 for 3).
+    #[test]
+    fn the_per_line_budget_is_what_the_page_leaves_in_file_bytes() {
+        assert_eq!(per_line_budget(1_500_000, 0), 2_250_000);
+        assert_eq!(
+            per_line_budget(1_500_000, 1000),
+            (3_000_000 - 400_000) / 4 * 3
+        );
+        assert_eq!(per_line_budget(REPORT_HTML_BYTES + 1, 3), 0);
+    }
 
     #[test]
     fn a_logo_that_cannot_be_read_costs_the_logo_and_says_why() {

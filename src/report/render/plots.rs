@@ -11,14 +11,20 @@
 //!   labelled colour bar or a legend entry);
 //! * a map is drawn to true scale, or the exaggeration of its shorter axis is stated on it;
 //! * ISO vocabulary: Rmr(c) for a profile's material ratio, Smr(c) for the areal one;
-//! * the title and the traceability footer wrap rather than run off the edge.
+//! * the title and the traceability footer wrap rather than run off the edge;
+//! * a series is drawn at the figure's resolution: more than four points a pixel column are
+//!   reduced to each column's first, last, lowest and highest ([`super::decimate`]), and a
+//!   map is one bitmap of the pixels it covers, so the files' size and the drawing time follow
+//!   the figure, not the data.
 //!
 //! A renderer: numbers in, files out, into the directory the caller gives. Depends on
 //! [`crate::metrology`] (the curves, the height map, the Rk family, the checks of a grid and
-//! its errors), [`super::text_cache`] (the PNGs' text memo), [`crate::numfmt`] and
+//! its errors), [`super::text_cache`] (the PNGs' text memo), [`super::decimate`] (the series
+//! at display resolution), [`crate::numfmt`] and
 //! [`crate::atomic`] (each file replaced whole); plotters draws, and `image` encodes the PNG
 //! files.
 
+use super::decimate::{extremes_per_column, extremes_per_column_of_pairs};
 use super::text_cache::TextCache;
 use crate::metrology::areal::HeightMap;
 use crate::metrology::model::ModelCurveBac;
@@ -306,6 +312,11 @@ macro_rules! png_and_svg {
                 drawn.map_err(|e| plot_err(&svg, e))?;
                 $root.present().map_err(|e| plot_err(&svg, e))?;
             }
+            // plotters names an embedded bitmap's type `png`; a data URL's is `image/png`.
+            let text = text.replace(
+                r#"href="data:png;base64,"#,
+                r#"href="data:image/png;base64,"#,
+            );
             replace_figure(&svg, |w| std::io::Write::write_all(w, text.as_bytes()))?;
         }
         Ok([png, svg])
@@ -439,11 +450,17 @@ where
             (a.min(y), b.max(y))
         });
     let y_span = if y_hi > y_lo { y_hi - y_lo } else { 1.0 };
+    let columns = chart.plotting_area().dim_in_pixel().0;
+    // Drawn as (material ratio, height): decimated along the material ratio.
+    let drawn = |points: &[[f64; 2]]| {
+        let swapped: Vec<[f64; 2]> = points.iter().map(|p| [p[1], p[0]]).collect();
+        extremes_per_column_of_pairs(&swapped, (0.0, 100.0), columns)
+    };
     for (k, c) in curves.iter().enumerate() {
         let colour = viridis((c.y_mm - y_lo) / y_span);
         let series = chart
             .draw_series(LineSeries::new(
-                c.curve.points.iter().map(|p| (p[1], p[0])),
+                drawn(&c.curve.points),
                 colour.stroke_width(1),
             ))
             .map_err(|e| e.to_string())?;
@@ -457,10 +474,7 @@ where
     }
     if !pooled.is_empty() {
         chart
-            .draw_series(LineSeries::new(
-                pooled.iter().map(|p| (p[1], p[0])),
-                BLACK.stroke_width(3),
-            ))
+            .draw_series(LineSeries::new(drawn(pooled), BLACK.stroke_width(3)))
             .map_err(|e| e.to_string())?
             .label(if curves.is_empty() {
                 "Smr(c), measured grid"
@@ -612,10 +626,6 @@ where
         .map_err(|e| e.to_string())
 }
 
-/// Largest number of columns drawn in a height map; wider grids are averaged over bins of
-/// equal width first (stated in the map's title), which keeps a 31 × 8000 scan's SVG small.
-pub const MAX_MAP_COLUMNS: usize = 800;
-
 /// Exaggerations offered for the shorter axis of a map that would be too thin at true scale.
 const EXAGGERATIONS: [f64; 12] = [
     1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0, 5000.0,
@@ -733,6 +743,47 @@ fn height_range(z: &[f64]) -> (f64, f64) {
         })
 }
 
+/// The pixels of a height map `width` × `height` px over the whole grid, row 0 of the
+/// bitmap at the grid's last line (y up): each pixel the mean of the points whose cells
+/// start within it (the one point under it when the grid is coarser than the pixels), in
+/// viridis over `lo..hi`. RGB, row-major.
+fn map_pixels(grid: &HeightMap<'_>, (width, height): (u32, u32), (lo, hi): (f64, f64)) -> Vec<u8> {
+    let (z, rows, cols) = (grid.heights_um, grid.rows, grid.cols);
+    let (w, h) = (width.max(1) as usize, height.max(1) as usize);
+    // The points `a..b` along an axis of `n` under pixel `p` of `px`.
+    let under = |p: usize, n: usize, px: usize| {
+        let a = (p * n / px).min(n - 1);
+        (a, ((p + 1) * n / px).clamp(a + 1, n))
+    };
+    // Each line's sums over the pixel columns, then the lines under each pixel row.
+    let columns: Vec<(usize, usize)> = (0..w).map(|i| under(i, cols, w)).collect();
+    let mut sums = vec![0.0; rows * w];
+    for (r, line) in z.chunks_exact(cols).enumerate() {
+        for (i, &(a, b)) in columns.iter().enumerate() {
+            sums[r * w + i] = line[a..b].iter().sum();
+        }
+    }
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    let mut rgb = Vec::with_capacity(w * h * 3);
+    for j in 0..h {
+        let (a, b) = under(j, rows, h);
+        // Pixel row 0 is the top of the map: the last lines.
+        let (a, b) = (rows - b, rows - a);
+        for (i, &(c0, c1)) in columns.iter().enumerate() {
+            let total: f64 = (a..b).map(|r| sums[r * w + i]).sum();
+            let mean = total / ((b - a) * (c1 - c0)) as f64;
+            let RGBColor(r, g, bl) = viridis((mean - lo) / span);
+            rgb.extend_from_slice(&[r, g, bl]);
+        }
+    }
+    rgb
+}
+
+/// Whether a map `width` × `height` px shows more than one point in some pixel.
+fn map_is_averaged(grid: &HeightMap<'_>, (width, height): (u32, u32)) -> bool {
+    grid.cols > width as usize || grid.rows > height as usize
+}
+
 fn draw_map<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     grid: &HeightMap<'_>,
@@ -743,11 +794,9 @@ fn draw_map<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let (z, cols) = (grid.heights_um, grid.cols);
     let (px, py) = (grid.pitch_x_mm, grid.pitch_y_mm);
-    let (lo, hi) = height_range(z);
-    let span = if hi > lo { hi - lo } else { 1.0 };
-    let w = cols as f64 * px;
+    let (lo, hi) = height_range(grid.heights_um);
+    let w = grid.cols as f64 * px;
     let h = grid.rows as f64 * py;
     let body = frame.draw(root)?;
     let chart_w = scale.plot_w + MAP_Y_AREA + 2 * MAP_MARGIN;
@@ -777,14 +826,15 @@ where
         .y_labels(4)
         .draw()
         .map_err(|e| e.to_string())?;
+    // The map as one bitmap at the pixels it covers: its size follows the figure, not the
+    // grid (an SVG embeds it as one PNG image).
+    let size = map_size_px(&chart, w, h);
+    let pixels = map_pixels(grid, size, (lo, hi));
+    let bitmap = BitMapElement::with_owned_buffer((0.0, h), size, pixels)
+        .ok_or_else(|| "height map bitmap of the wrong size".to_string())?;
     chart
-        .draw_series(z.iter().enumerate().map(|(k, v)| {
-            let (r, c) = ((k / cols) as f64, (k % cols) as f64);
-            Rectangle::new(
-                [(c * px, r * py), ((c + 1.0) * px, (r + 1.0) * py)],
-                viridis((v - lo) / span).filled(),
-            )
-        }))
+        .plotting_area()
+        .draw(&bitmap)
         .map_err(|e| e.to_string())?;
     draw_colour_bar(
         &bar_area,
@@ -796,13 +846,25 @@ where
     )
 }
 
+/// The pixels the grid's `w_mm` × `h_mm` cover in `chart` (at least one each way).
+fn map_size_px<DB: DrawingBackend>(
+    chart: &ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    w_mm: f64,
+    h_mm: f64,
+) -> (u32, u32) {
+    let (x0, y0) = chart.backend_coord(&(0.0, h_mm));
+    let (x1, y1) = chart.backend_coord(&(w_mm, 0.0));
+    ((x1 - x0).max(1) as u32, (y1 - y0).max(1) as u32)
+}
+
 /// The colour bar is at least this tall even beside a thin map, px.
 const MAP_MIN_BAR_H: u32 = 160;
 
 /// Writes `heightmap.png` and `heightmap.svg` into `dir` for a row-major grid (heights µm)
-/// in viridis with a colour bar, to true scale or with the exaggeration stated; more than
-/// [`MAX_MAP_COLUMNS`] columns are averaged over bins first. `caption` (may be empty) is the
-/// traceability footer.
+/// in viridis with a colour bar, to true scale or with the exaggeration stated. The map is
+/// drawn at the figure's resolution: where a pixel covers several points it shows their mean
+/// (said in the title); the subtitle's range and the colour bar are the points' own.
+/// `caption` (may be empty) is the traceability footer.
 pub fn plot_height_map(
     dir: &Path,
     grid: &HeightMap<'_>,
@@ -834,38 +896,6 @@ pub fn plot_map(
     }
     check_pitch(pitch_x_mm)?;
     check_pitch(pitch_y_mm)?;
-    let (binned, cols, pitch_x_mm, title) = if cols > MAX_MAP_COLUMNS {
-        let bin = cols.div_ceil(MAX_MAP_COLUMNS);
-        let out_cols = cols / bin;
-        let z: Vec<f64> = (0..rows * out_cols)
-            .map(|k| {
-                let (r, c) = (k / out_cols, k % out_cols);
-                let start = r * cols + c * bin;
-                let part = heights_um.get(start..start + bin).unwrap_or(&[]);
-                part.iter().sum::<f64>() / part.len().max(1) as f64
-            })
-            .collect();
-        (
-            std::borrow::Cow::Owned(z),
-            out_cols,
-            pitch_x_mm * bin as f64,
-            format!("{title} (means of {bin} points along x)"),
-        )
-    } else {
-        (
-            std::borrow::Cow::Borrowed(heights_um),
-            cols,
-            pitch_x_mm,
-            title.to_string(),
-        )
-    };
-    let shown = HeightMap {
-        heights_um: &binned,
-        rows,
-        cols,
-        pitch_x_mm,
-        pitch_y_mm,
-    };
     let max_w = MAP_WIDTH - MAP_BAR_W - MAP_Y_AREA - 2 * MAP_MARGIN;
     let scale = map_scale(
         cols as f64 * pitch_x_mm,
@@ -874,10 +904,15 @@ pub fn plot_map(
         520,
         160,
     );
+    let title = if map_is_averaged(grid, (scale.plot_w, scale.plot_h)) {
+        format!("{title} (each pixel the mean of the points under it)")
+    } else {
+        title.to_string()
+    };
     let frame = Frame::new(
         MAP_WIDTH,
         &title,
-        &map_subtitle(&shown, values, &scale),
+        &map_subtitle(grid, values, &scale),
         caption,
     );
     let height = frame.top_px()
@@ -886,7 +921,7 @@ pub fn plot_map(
         + 2 * MAP_MARGIN
         + MAP_X_AREA;
     png_and_svg!(dir, values.stem, (MAP_WIDTH, height), |root| draw_map(
-        &root, &shown, values.bar, &scale, &frame
+        &root, grid, values.bar, &scale, &frame
     ))
 }
 
@@ -954,14 +989,23 @@ where
     let first = probe_frame("measured points and the model's curve");
     let (pw, ph) = plot_size(&first);
     let e = vertical_exaggeration(x1 - x0, z1 - z0, pw, ph);
+    // At the figure's resolution: each pixel column's first, last, lowest and highest.
+    let measured = extremes_per_column(measured, (x0, x1), pw);
+    let model = extremes_per_column(model, (x0, x1), pw);
+    let residual = extremes_per_column(residual, (x0, x1), pw);
+    let dots = if matches!(measured, std::borrow::Cow::Owned(_)) {
+        "Dots: the measured heights (of each pixel column, the first, last, lowest and highest)"
+    } else {
+        "Dots: the measured heights"
+    };
     let frame = probe_frame(&if residual.is_empty() {
         format!(
-            "Dots: the measured heights; line: the NURBS model evaluated between them; {}",
+            "{dots}; line: the NURBS model evaluated between them; {}",
             exaggeration_note(e)
         )
     } else {
         format!(
-            "Dots: the measured heights; line: the NURBS model at this line; lower panel: model − measured at the measured x; {}",
+            "{dots}; line: the NURBS model at this line; lower panel: model − measured at the measured x; {}",
             exaggeration_note(e)
         )
     });
@@ -1292,9 +1336,10 @@ where
             .map_err(err)?;
     }
     // The material ratio curve.
+    let columns = chart.plotting_area().dim_in_pixel().0;
     chart
         .draw_series(LineSeries::new(
-            curve.iter().map(|p| (p[0], p[1])),
+            extremes_per_column_of_pairs(curve, (0.0, 100.0), columns),
             DATA.stroke_width(2),
         ))
         .map_err(err)?
@@ -1442,6 +1487,47 @@ mod tests {
         assert_eq!(
             decimate_keeping_extremes(&z[..1500], 0.0005, 1000).len(),
             1500
+        );
+    }
+
+    /// A 4 × 6 grid on 3 × 2 pixels: each pixel the mean of a 2 × 2 block, the top pixel row
+    /// the last lines (y up); on 12 × 8 pixels each point fills a 2 × 2 block of pixels.
+    #[test]
+    fn a_map_pixel_is_the_mean_of_the_points_under_it_with_the_last_line_on_top() {
+        #[rustfmt::skip]
+        let z = [
+            0.0, 0.0, 4.0, 4.0, 8.0, 8.0,
+            0.0, 0.0, 4.0, 4.0, 8.0, 8.0,
+            1.0, 3.0, 2.0, 2.0, 6.0, 10.0,
+            3.0, 1.0, 2.0, 2.0, 6.0, 10.0,
+        ];
+        let grid = HeightMap {
+            heights_um: &z,
+            rows: 4,
+            cols: 6,
+            pitch_x_mm: 0.001,
+            pitch_y_mm: 0.001,
+        };
+        let colour = |v: f64| {
+            let RGBColor(r, g, b) = viridis(v / 10.0);
+            [r, g, b]
+        };
+        let px = map_pixels(&grid, (3, 2), (0.0, 10.0));
+        let want: Vec<u8> = [2.0, 2.0, 8.0, 0.0, 4.0, 8.0]
+            .into_iter()
+            .flat_map(colour)
+            .collect();
+        assert_eq!(px, want);
+        assert!(map_is_averaged(&grid, (3, 2)));
+        let fine = map_pixels(&grid, (12, 8), (0.0, 10.0));
+        assert!(!map_is_averaged(&grid, (12, 8)));
+        assert_eq!(fine.len(), 12 * 8 * 3);
+        // Pixel (x 2, y 0): the last line's second point, 1.0; (x 11, y 7): the first line's
+        // last point, 8.0.
+        assert_eq!(&fine[2 * 3..2 * 3 + 3], &colour(1.0));
+        assert_eq!(
+            &fine[(7 * 12 + 11) * 3..(7 * 12 + 11) * 3 + 3],
+            &colour(8.0)
         );
     }
 
