@@ -1,21 +1,26 @@
 //! Whole-process benchmark: the real `surfscan` binary on grid CSVs, timed from outside as an
-//! operator would see it, beside the paper-exact banded scipy reference measured in the same
-//! run (`tests/python/fit_scipy_banded.py`, the fit alone, CSV reading and imports excluded).
+//! operator would see it, beside the paper-exact banded scipy references measured in the same
+//! run (the fit alone, CSV reading and imports excluded): `tests/python/fit_scipy_banded_xyz.py`
+//! interpolates every point's x, y and z as the paper's P(x, y, z) does (the target's
+//! reference), `tests/python/fit_scipy_banded.py` the heights only.
 //!
 //! `cargo bench --bench process [-- CASE...] [--instructions]` with CASE among
 //! * `fit` — `surfscan fit` 31×8000, CSV in → a new IGES file fsynced; 15 runs alternating
-//!   with the reference, each followed by a run that replaces the file it wrote. Target: the
-//!   reference's fit time ÷ ours ≥ 1.3. Beside it, the time this disk takes to make the same
+//!   with the references, each followed by a run that replaces the file it wrote. Target: the
+//!   full-xyz reference's fit time ÷ ours ≥ 1.3. Beside it, the time this disk takes to make the same
 //!   bytes durable through the path `fit` writes them through (writeback started as they are
 //!   written, fsync, rename): the floor of any process that must.
 //! * `large` — `surfscan fit` 1000×10000 (several IGES files); 3 runs. Targets: ≤ 2.5 s and
 //!   peak RSS ≤ 3 × the grid's f64 bytes (80 MB).
 //! * `analyze` — `surfscan analyze` of the 31×8000 grid CSV (λc 0.8 mm filter, model, hold-out,
 //!   plots, X3P); 7 runs. Target ≤ 0.3 s.
+//! * `analyze-large` — `surfscan analyze` of the 1000×10000 grid beside `surfscan fit` of
+//!   it; 3 runs. Targets: ≤ 2× the fit's wall time, peak RSS ≤ 3 × the grid's f64 bytes,
+//!   report.html ≤ 5 MB, each figure file ≤ 2 MB.
 //! * `scan` — `characterise_scan` (the daemon's characterisation) of 31×8000 scan directories
 //!   with an R profile (no filter) and a P profile (λc filter), in-process; 5 runs each.
 //!
-//! Default: all four. Figures are medians; CPU time (user + system, all threads, of the child
+//! Default: all five. Figures are medians; CPU time (user + system, all threads, of the child
 //! from `wait4`) is printed beside wall time because the machine is shared: a run that waited
 //! for a core shows it in wall time only. `--instructions` also runs each binary case once
 //! under `valgrind --tool=callgrind` and prints the instruction count, the figure least moved
@@ -158,11 +163,17 @@ fn fit_command(csv: &Path, out: &Path) -> Command {
     c
 }
 
-fn reference_command(csv: &Path) -> Command {
-    let script = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/python/fit_scipy_banded.py"
-    );
+/// The z-only reference (`fit_scipy_banded.py`: the heights solved, x per pole column and y
+/// per pole row from one solve each).
+const Z_ONLY: &str = "fit_scipy_banded.py";
+/// The full reference (`fit_scipy_banded_xyz.py`: every point interpolated as (x, y, z), as
+/// the paper's P(x, y, z)), which the fit's target is set against.
+const FULL_XYZ: &str = "fit_scipy_banded_xyz.py";
+
+fn reference_command(script: &str, csv: &Path) -> Command {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/python")
+        .join(script);
     let mut c = Command::new(python());
     c.arg(script)
         .arg(csv)
@@ -172,9 +183,9 @@ fn reference_command(csv: &Path) -> Command {
     c
 }
 
-/// The reference's own figures for its fit: (wall s, CPU s).
-fn reference_fit(csv: &Path) -> (f64, f64) {
-    let r = run(&mut reference_command(csv));
+/// A reference's own figures for its fit: (wall s, CPU s).
+fn reference_fit(script: &str, csv: &Path) -> (f64, f64) {
+    let r = run(&mut reference_command(script, csv));
     let v: serde_json::Value = serde_json::from_str(&r.stdout)
         .unwrap_or_else(|e| panic!("reference printed no JSON ({e}): {}", r.stdout));
     (
@@ -199,6 +210,7 @@ fn bench_fit(dir: &Path, rows: usize, cols: usize, runs: usize, count_instructio
     let out = dir.join(format!("fit{rows}x{cols}.igs"));
     let (mut wall, mut cpu, mut ref_wall, mut ref_cpu, mut replacing) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut z_wall, mut z_cpu) = (Vec::new(), Vec::new());
     for _ in 0..runs {
         // Each timed run writes a new file, as a fit of a new grid does: the previous run's
         // output is removed first (untimed), since replacing a file also frees the old one's
@@ -212,19 +224,30 @@ fn bench_fit(dir: &Path, rows: usize, cols: usize, runs: usize, count_instructio
         wall.push(r.wall_s);
         cpu.push(r.cpu_s);
         replacing.push(run(&mut fit_command(&csv, &out)).wall_s);
-        let (w, c) = reference_fit(&csv);
+        let (w, c) = reference_fit(FULL_XYZ, &csv);
         ref_wall.push(w);
         ref_cpu.push(c);
+        let (w, c) = reference_fit(Z_ONLY, &csv);
+        z_wall.push(w);
+        z_cpu.push(c);
     }
     let (w, c, rw, rc) = (median(wall), median(cpu), median(ref_wall), median(ref_cpu));
     println!(
-        "fit {rows}x{cols} whole process, CSV in -> new IGES file fsynced (medians of {runs}): {:.1} ms wall, {:.1} ms CPU | scipy reference fit alone {:.1} ms wall, {:.1} ms CPU | reference/ours {:.2}x wall, {:.2}x CPU (target >= 1.3x)",
+        "fit {rows}x{cols} whole process, CSV in -> new IGES file fsynced (medians of {runs}): {:.1} ms wall, {:.1} ms CPU | full-xyz scipy reference fit alone {:.1} ms wall, {:.1} ms CPU | reference/ours {:.2}x wall, {:.2}x CPU (target >= 1.3x)",
         w * 1e3,
         c * 1e3,
         rw * 1e3,
         rc * 1e3,
         rw / w,
         rc / c
+    );
+    let (zw, zc) = (median(z_wall), median(z_cpu));
+    println!(
+        "  the z-only scipy reference (x per column, y per row) fit alone: {:.1} ms wall, {:.1} ms CPU; against ours {:.2}x wall, {:.2}x CPU",
+        zw * 1e3,
+        zc * 1e3,
+        zw / w,
+        zc / c
     );
     println!(
         "  replacing the previous run's file instead: {:.1} ms wall (median of {runs})",
@@ -455,6 +478,72 @@ fn bench_analyze(dir: &Path, rows: usize, cols: usize, runs: usize, count_instru
     print_instructions("surfscan analyze", &command(), count_instructions);
 }
 
+/// The largest figure file (`.png`, `.svg`) in `dir` and its `rk/`: (bytes, name).
+fn largest_figure(dir: &Path) -> (u64, String) {
+    let mut largest = (0, String::new());
+    for d in [dir.to_path_buf(), dir.join("rk")] {
+        for e in std::fs::read_dir(&d).into_iter().flatten().flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let len = e.metadata().map_or(0, |m| m.len());
+            if (name.ends_with(".png") || name.ends_with(".svg")) && len > largest.0 {
+                largest = (len, name);
+            }
+        }
+    }
+    largest
+}
+
+/// `surfscan analyze` of a large grid beside `surfscan fit` of the same grid: wall time
+/// against the fit's, peak RSS against the grid's f64 bytes, the size of report.html and of
+/// the largest figure.
+fn bench_analyze_large(dir: &Path, rows: usize, cols: usize, runs: usize) {
+    let csv = dir.join(format!("grid{rows}x{cols}.csv"));
+    if !csv.exists() {
+        write_grid_csv(&csv, rows, cols);
+    }
+    let out = dir.join(format!("analyze{rows}x{cols}"));
+    let grid_mb = (rows * cols * 8) as f64 / (1024.0 * 1024.0);
+    let (mut wall, mut cpu, mut rss, mut fit_wall) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..runs {
+        let igs = dir.join(format!("large-analyze{rows}x{cols}.igs"));
+        fit_wall.push(run(&mut fit_command(&csv, &igs)).wall_s);
+        for e in std::fs::read_dir(dir).expect("read bench dir").flatten() {
+            if e.file_name().to_string_lossy().starts_with("large-analyze") {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+        let r = run(surfscan()
+            .arg("analyze")
+            .arg(&csv)
+            .arg("--pitch-x")
+            .arg(PITCH_X_MM.to_string())
+            .arg("--pitch-y")
+            .arg(PITCH_Y_MM.to_string())
+            .arg("--out")
+            .arg(&out));
+        wall.push(r.wall_s);
+        cpu.push(r.cpu_s);
+        rss.push(r.max_rss_mb);
+    }
+    let (w, fw, rss) = (median(wall), median(fit_wall), median(rss));
+    let html = std::fs::metadata(out.join("report.html")).map_or(0, |m| m.len());
+    let (figure, figure_name) = largest_figure(&out);
+    println!(
+        "analyze {rows}x{cols} whole process (medians of {runs}): {w:.2} s wall = {:.2}x the fit's {fw:.2} s (target <= 2x), {:.2} s CPU, peak RSS {rss:.0} MiB = {:.2}x the grid's {grid_mb:.0} MiB of f64 (target <= 3x); report.html {:.2} MB (target <= 5 MB), largest figure {figure_name} {:.2} MB (target <= 2 MB)",
+        w / fw,
+        median(cpu),
+        rss / grid_mb,
+        html as f64 / 1e6,
+        figure as f64 / 1e6
+    );
+    let report: serde_json::Value = std::fs::read_to_string(out.join("report.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or_default();
+    println!("  stages of the last run {}", report["timings_s"]);
+}
+
 /// A daemon-sized scan directory, 31 lines × `cols` points at 0.5 µm of a synthetic rough
 /// profile, committed line by line through the scan store and journal as the runner does.
 fn write_scan(parent: &Path, kind: ProfileKind, cols: usize) -> PathBuf {
@@ -613,6 +702,7 @@ fn main() {
         bench_large(dir, 9, 70, 1, false);
         // At least one λc (0.8 mm = 1600 points) per line.
         bench_analyze(dir, 7, 1800, 1, false);
+        bench_analyze_large(dir, 9, 1800, 1);
         bench_scan(dir, 1800, 1, &[ProfileKind::P]);
         return;
     }
@@ -624,6 +714,9 @@ fn main() {
     }
     if want("analyze") {
         bench_analyze(dir, 31, 8000, 7, count_instructions);
+    }
+    if want("analyze-large") {
+        bench_analyze_large(dir, 1000, 10_000, 3);
     }
     if want("scan") {
         bench_scan(dir, 8000, 5, &[ProfileKind::R, ProfileKind::P]);

@@ -23,6 +23,48 @@ fn heights(rows: usize, cols: usize) -> Vec<f64> {
     out
 }
 
+/// The JSON `script` (in `tests/python/`) prints for the grid `h` with `--json`.
+fn reference_json(
+    script: &str,
+    h: &[f64],
+    cols: usize,
+    pitch_x: f64,
+    pitch_y: f64,
+    p: usize,
+    q: usize,
+) -> serde_json::Value {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let csv = dir.path().join("grid.csv");
+    let text: String = h
+        .chunks_exact(cols)
+        .map(|row| {
+            let cells: Vec<String> = row.iter().map(|v| format!("{v}")).collect();
+            cells.join(",") + "\n"
+        })
+        .collect();
+    std::fs::write(&csv, text).expect("write csv");
+    let path = format!("{}/tests/python/{script}", env!("CARGO_MANIFEST_DIR"));
+    let out = crate::common::python()
+        .arg(path)
+        .arg(&csv)
+        .arg(format!("{pitch_x:e}"))
+        .arg(format!("{pitch_y:e}"))
+        .arg(p.to_string())
+        .arg(q.to_string())
+        .arg("--json")
+        .output()
+        .unwrap_or_else(|e| {
+            panic!("cannot run python3 ({e}); run `bash .ci/run` to create .venv/")
+        });
+    assert!(
+        out.status.success(),
+        "{script} failed ({}); run `bash .ci/run` to create .venv/\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("JSON from the reference")
+}
+
 fn check(rows: usize, cols: usize, pitch_x: f64, pitch_y: f64, p: usize, q: usize) {
     let h = heights(rows, cols);
     let y: Vec<f64> = (0..rows).map(|l| l as f64 * pitch_y).collect();
@@ -37,40 +79,7 @@ fn check(rows: usize, cols: usize, pitch_x: f64, pitch_y: f64, p: usize, q: usiz
         },
     )
     .expect("fit");
-    let dir = tempfile::tempdir().expect("tempdir");
-    let csv = dir.path().join("grid.csv");
-    let text: String = h
-        .chunks_exact(cols)
-        .map(|row| {
-            let cells: Vec<String> = row.iter().map(|v| format!("{v}")).collect();
-            cells.join(",") + "\n"
-        })
-        .collect();
-    std::fs::write(&csv, text).expect("write csv");
-    let script = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/python/fit_scipy_banded.py"
-    );
-    let out = crate::common::python()
-        .arg(script)
-        .arg(&csv)
-        .arg(format!("{pitch_x:e}"))
-        .arg(format!("{pitch_y:e}"))
-        .arg(p.to_string())
-        .arg(q.to_string())
-        .arg("--json")
-        .output()
-        .unwrap_or_else(|e| {
-            panic!("cannot run python3 ({e}); run `bash .ci/run` to create .venv/")
-        });
-    assert!(
-        out.status.success(),
-        "fit_scipy_banded.py failed ({}); run `bash .ci/run` to create .venv/\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value =
-        serde_json::from_slice(&out.stdout).expect("JSON from the reference");
+    let v = reference_json("fit_scipy_banded.py", &h, cols, pitch_x, pitch_y, p, q);
     let nums = |value: &serde_json::Value| -> Vec<f64> {
         value
             .as_array()
@@ -130,4 +139,68 @@ fn matches_the_banded_reference_31x2000_degree_5() {
 #[test]
 fn matches_the_banded_reference_12x300_degree_3_2() {
     check(12, 300, 0.001, 0.02, 3, 2);
+}
+
+/// The fit against `fit_scipy_banded_xyz.py`, which interpolates the points as 3-vectors
+/// (every pole its own x, y and z, as the paper's P(x, y, z)): every coordinate of every pole
+/// agrees, so holding x per pole column and y per pole row loses nothing.
+fn check_xyz(rows: usize, cols: usize, pitch_x: f64, pitch_y: f64, p: usize, q: usize) {
+    let h = heights(rows, cols);
+    let y: Vec<f64> = (0..rows).map(|l| l as f64 * pitch_y).collect();
+    let options = FitOptions {
+        degree_u: p,
+        degree_v: q,
+    };
+    let ours = fit_grid(pitch_x, &y, &h, cols, options).expect("fit");
+    let v = reference_json("fit_scipy_banded_xyz.py", &h, cols, pitch_x, pitch_y, p, q);
+    let grid = |name: &str| -> Vec<Vec<f64>> {
+        v[name]
+            .as_array()
+            .unwrap_or_else(|| panic!("{name}"))
+            .iter()
+            .map(|row| {
+                row.as_array()
+                    .expect("row")
+                    .iter()
+                    .map(|x| x.as_f64().expect("number"))
+                    .collect()
+            })
+            .collect()
+    };
+    let s = &ours.surface;
+    let coords = [grid("x"), grid("y"), grid("z")];
+    for c in &coords {
+        assert_eq!(c.len(), rows);
+        assert!(c.iter().all(|r| r.len() == cols));
+    }
+    let mut worst = 0.0f64;
+    for (c, theirs) in coords.iter().enumerate() {
+        let scale = theirs
+            .iter()
+            .flatten()
+            .map(|v| v.abs())
+            .fold(f64::MIN_POSITIVE, f64::max);
+        for j in 0..rows {
+            for i in 0..cols {
+                let (mine, theirs) = (s.pole(i, j)[c], theirs[j][i]);
+                let rel = (mine - theirs).abs() / scale;
+                worst = worst.max(rel);
+                assert!(
+                    rel <= 1e-11,
+                    "{rows}x{cols} deg {p}/{q}: pole ({i},{j}) coord {c}: {mine} vs the xyz reference {theirs}"
+                );
+            }
+        }
+    }
+    eprintln!("{rows}x{cols} deg {p}/{q}: worst relative pole difference to the xyz fit {worst:e}");
+}
+
+#[test]
+fn matches_the_full_xyz_reference_31x2000_degree_5() {
+    check_xyz(31, 2000, 0.0005, 0.01, 5, 5);
+}
+
+#[test]
+fn matches_the_full_xyz_reference_12x300_degree_3_2() {
+    check_xyz(12, 300, 0.001, 0.02, 3, 2);
 }
