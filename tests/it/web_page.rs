@@ -3,7 +3,8 @@
 //! counter and the height map advance, the result shows), pause and resume from the page
 //! (the journal names the page's user), a request without the session and another site's
 //! forged commands refused, a hundred open event streams that never read while
-//! the scan runs, and the page saying the daemon is away while it restarts, then carrying on;
+//! the scan runs, and the page saying the daemon is away while it restarts, then carrying on
+//! (its updates and its commands) with the restarted daemon;
 //! a job queued from the page that waits for its specimen, is marked loaded from the page and
 //! runs to its verdict (another job removed, an unknown recipe refused), each command in the
 //! queue's log with its user; a page that cannot listen leaves the station scanning.
@@ -434,6 +435,29 @@ async fn a_scan_started_paused_and_resumed_from_the_page_is_watched_to_its_resul
     );
     let h = request(addr, "GET", "/healthz", &[], "").await;
     assert_eq!((h.status, h.body.as_str()), (200, "ok\n"));
+    // Its updates and commands carry on with the restarted daemon: a scan started now shows
+    // line by line, and the page pauses and aborts it.
+    start_scan(&r, "B-14").await;
+    wait_text(&mut b, &tab, "state", "scanning");
+    b.wait_for(
+        &tab,
+        "the new scan's first line on the map",
+        &format!(
+            "{}.dataset.scan !== {id:?} && Number({}.dataset.rows)",
+            el("map"),
+            el("map")
+        ),
+        WAIT,
+        |v| v.as_u64().is_some_and(|n| n >= 1),
+    );
+    click(&mut b, &tab, "pause");
+    wait_text(&mut b, &tab, "state", "paused");
+    click(&mut b, &tab, "abort");
+    click(&mut b, &tab, "abort-yes");
+    wait_text(&mut b, &tab, "state", "idle");
+    let last = status(&r).await.last_stop.expect("the aborted scan's stop");
+    assert_eq!(last.status, StopStatus::Abort, "{last:?}");
+    assert_ne!(last.scan_id, id);
 
     sigterm(&d);
     assert!(wait_exit(&mut d).success());
