@@ -25,7 +25,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use surfscan::cli::demo::demo_config;
+use surfscan::cli::demo::{demo_config, demo_socket};
 use surfscan::control::client::ControlClient;
 use surfscan::control::protocol::{Message, Request};
 use surfscan::scan::command::StartMode;
@@ -254,7 +254,7 @@ async fn run(a: Args) {
         other => panic!("simulator not ready: {other:?}"),
     }
     let (cfg, out, addr) = config(tmp.path(), &inst, &stage, a.lines);
-    let socket = out.join("sim").join("control.sock");
+    let socket = demo_socket(&out);
     let mut d = Daemon(
         Command::new(env!("CARGO_BIN_EXE_surfscan"))
             .args(["daemon", "--config"])
