@@ -931,6 +931,7 @@ pub const NUMERIC_KEYS: &[NumericKey] = &[
     int_key!("notify.timeout-s", 1, 86_400, "s", "the default is 30", |c| c.notify.as_ref().map(|n| n.timeout_s)),
     int_key!("mqtt.outbox-max", 1, 1_000_000, "", "messages kept while the broker is away; the default is 10000", |c| c.mqtt.as_ref().map(|m| m.outbox_max)),
     int_key!("mqtt.keep-alive-s", 5, 3600, "s", "the default is 30", |c| c.mqtt.as_ref().map(|m| m.keep_alive_s)),
+    int_key!("archive.delete-after-days", 0, 36_500, "days", "days after completion that an archived, verified scan leaves the station; remove the key to keep every scan", |c| c.archive.as_ref().and_then(|a| a.delete_after_days)),
     int_key!("web.max-connections", 1, 4096, "", "connections the page serves at once; the default is 256", |c| c.web.as_ref().map(|w| w.max_connections)),
     int_key!("web.session-hours", 1, 744, "h", "how long a browser stays signed in, at most 31 days; the default is 12", |c| c.web.as_ref().map(|w| w.session_hours)),
     real_key!("traceability.stylus-tip-radius-um", 0.01, 100.0, "µm", "the SJ-210's standard styli have 2 or 5 µm", |c| c.traceability.stylus_tip_radius_um),
