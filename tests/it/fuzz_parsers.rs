@@ -295,6 +295,7 @@ trace-deadline-ms = 60000
 port = "/dev/ystage"
 protocol = "zaber"
 nm-per-microstep = 47.625
+allow-inexact-step = true
 device = 1
 axis = 1
 soft-limit-min-mm = 0.0
