@@ -17,7 +17,7 @@
 
 use super::archive_settings::{read_secret, ArchiveSettings, Target};
 use super::retention;
-use crate::scan::status::{LinkStatus, Status};
+use crate::scan::status::Status;
 use object_store::path::Path as ObjectPath;
 use object_store::{ObjectStore, PutPayload};
 use serde::{Deserialize, Serialize};
@@ -287,16 +287,7 @@ impl Archiver {
 
     fn report(&self, ok: bool, message: String) {
         let queued = self.queue.pending().map_or(0, |p| p.len() as u64);
-        self.status.send_modify(|s| {
-            s.links.insert(
-                LINK.to_owned(),
-                LinkStatus {
-                    ok,
-                    message,
-                    queued,
-                },
-            );
-        });
+        super::set_link(&self.status, LINK, ok, message, queued);
     }
 
     /// Archives until `stop` becomes true: the queue oldest first, waiting with backoff while

@@ -21,7 +21,7 @@
 use super::export_settings::ExportSettings;
 use crate::report::exported::Exported;
 use crate::report::render::{dfq::dfq, qif::qif};
-use crate::scan::status::{LinkStatus, Status};
+use crate::scan::status::Status;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -343,16 +343,7 @@ impl Exporter {
 
     fn report(&self, ok: bool, message: String) {
         let queued = self.queue.pending().map_or(0, |p| p.len() as u64);
-        self.status.send_modify(|s| {
-            s.links.insert(
-                LINK.to_owned(),
-                LinkStatus {
-                    ok,
-                    message,
-                    queued,
-                },
-            );
-        });
+        super::set_link(&self.status, LINK, ok, message, queued);
     }
 
     async fn round(&self) -> Result<Vec<String>, String> {

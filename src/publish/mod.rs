@@ -33,7 +33,7 @@ use crate::scan::event::ScanEvent;
 use crate::scan::metrics::ScanMetrics;
 use crate::scan::status::{LinkStatus, Status};
 use outbox::{Outbox, Pushed};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::sync::{mpsc, watch, Notify};
@@ -66,13 +66,24 @@ pub fn sandbox_hint(e: &std::io::Error) -> &'static str {
 /// Names a part that could not start, in the log and the status's links.
 pub fn fail(status: &watch::Sender<Status>, link: &str, message: String) {
     tracing::error!("{link}: {message}");
+    set_link(status, link, false, message, 0);
+}
+
+/// Sets the status's entry for `link`: whether it works, what to say, how much waits.
+pub fn set_link(
+    status: &watch::Sender<Status>,
+    link: &str,
+    ok: bool,
+    message: String,
+    queued: u64,
+) {
     status.send_modify(|s| {
         s.links.insert(
             link.to_owned(),
             LinkStatus {
-                ok: false,
+                ok,
                 message,
-                queued: 0,
+                queued,
             },
         );
     });
@@ -227,28 +238,49 @@ impl Publishers {
             wake.clone(),
         );
         self.links.push(tokio::spawn(archiver.run(stop_rx)));
+        self.queue_successes(
+            "archive",
+            move |id, dir| queue.push(id, dir),
+            wake,
+            |ev, e| {
+                format!(
+                    "archive: scan {} could not be queued for the archive: {e}; copy {} by hand",
+                    ev.scan_id,
+                    ev.dir.display()
+                )
+            },
+        );
+        Ok(())
+    }
+
+    /// Queues each completed scan on disk with `push` (off the runtime's threads) and wakes
+    /// the worker that drains the queue; a scan that cannot be queued is logged with
+    /// `unqueued`'s words, which say what to do by hand.
+    fn queue_successes<P>(
+        &mut self,
+        link: &'static str,
+        push: P,
+        wake: Arc<Notify>,
+        unqueued: fn(&ScanEvent, &std::io::Error) -> String,
+    ) where
+        P: Fn(&str, &Path) -> std::io::Result<PathBuf> + Clone + Send + Sync + 'static,
+    {
         let (tx, mut rx) = mpsc::unbounded_channel::<ScanEvent>();
         self.writers.push(tokio::spawn(async move {
             while let Some(ev) = rx.recv().await {
                 if ev.kind != crate::scan::event::ScanEventKind::Success {
                     continue;
                 }
-                let q = queue.clone();
+                let push = push.clone();
                 let (id, dir) = (ev.scan_id.clone(), ev.dir.clone());
-                let stored = tokio::task::spawn_blocking(move || q.push(&id, &dir)).await;
-                match stored {
+                match tokio::task::spawn_blocking(move || push(&id, &dir)).await {
                     Ok(Ok(_)) => wake.notify_one(),
-                    Ok(Err(e)) => tracing::error!(
-                        "archive: scan {} could not be queued for the archive: {e}; copy {} by hand",
-                        ev.scan_id,
-                        ev.dir.display()
-                    ),
-                    Err(e) => tracing::error!("archive: {e}"),
+                    Ok(Err(e)) => tracing::error!("{}", unqueued(&ev, &e)),
+                    Err(e) => tracing::error!("{link}: {e}"),
                 }
             }
         }));
         self.sinks.push(tx);
-        Ok(())
     }
 
     fn start_export(
@@ -270,26 +302,18 @@ impl Publishers {
         let exporter =
             export::Exporter::new(x.clone(), queue.clone(), status.clone(), wake.clone());
         self.links.push(tokio::spawn(exporter.run(stop_rx)));
-        let (tx, mut rx) = mpsc::unbounded_channel::<ScanEvent>();
-        self.writers.push(tokio::spawn(async move {
-            while let Some(ev) = rx.recv().await {
-                if ev.kind != crate::scan::event::ScanEventKind::Success {
-                    continue;
-                }
-                let q = queue.clone();
-                let (id, dir) = (ev.scan_id.clone(), ev.dir.clone());
-                match tokio::task::spawn_blocking(move || q.push(&id, &dir)).await {
-                    Ok(Ok(_)) => wake.notify_one(),
-                    Ok(Err(e)) => tracing::error!(
-                        "export: scan {} could not be queued for export: {e}; export it by hand with `surfscan export {}`",
-                        ev.scan_id,
-                        ev.dir.display()
-                    ),
-                    Err(e) => tracing::error!("export: {e}"),
-                }
-            }
-        }));
-        self.sinks.push(tx);
+        self.queue_successes(
+            "export",
+            move |id, dir| queue.push(id, dir),
+            wake,
+            |ev, e| {
+                format!(
+                    "export: scan {} could not be queued for export: {e}; export it by hand with `surfscan export {}`",
+                    ev.scan_id,
+                    ev.dir.display()
+                )
+            },
+        );
         Ok(())
     }
 
