@@ -16,25 +16,9 @@ use surfscan::fit::{fit_grid, FitOptions};
 use surfscan::nurbs::NurbsSurface;
 use surfscan::step::{write_solid_step, StepOptions};
 
-const PITCH_X_MM: f64 = 0.003484;
-const PITCH_Y_MM: f64 = 0.010452;
-
-fn window(rows: usize, cols: usize) -> Vec<f64> {
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/data/sur-2.grid.csv"
-    ))
-    .unwrap();
-    text.lines()
-        .take(rows)
-        .flat_map(|l| {
-            l.split(',')
-                .take(cols)
-                .map(|f| f.trim().parse::<f64>().unwrap())
-                .collect::<Vec<_>>()
-        })
-        .collect()
-}
+use super::common::{
+    sur2_window as window, SUR2_PITCH_X_MM as PITCH_X_MM, SUR2_PITCH_Y_MM as PITCH_Y_MM,
+};
 
 fn options(depth_mm: f64, heights_um: &[f64]) -> StepOptions {
     StepOptions {

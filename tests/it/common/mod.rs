@@ -641,3 +641,25 @@ pub fn assert_tables_refused(section: &str, cases: &[(&str, &str)]) {
         assert!(err.contains(key), "{table}: {err}");
     }
 }
+
+/// The bundled sur-2 grid's pitches (mm).
+pub const SUR2_PITCH_X_MM: f64 = 0.003484;
+pub const SUR2_PITCH_Y_MM: f64 = 0.010452;
+
+/// The first `rows` lines and `cols` columns of the bundled sur-2 grid, row after row, in µm.
+pub fn sur2_window(rows: usize, cols: usize) -> Vec<f64> {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/sur-2.grid.csv"
+    ))
+    .unwrap();
+    text.lines()
+        .take(rows)
+        .flat_map(|l| {
+            l.split(',')
+                .take(cols)
+                .map(|f| f.trim().parse::<f64>().unwrap())
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
