@@ -20,13 +20,14 @@
 use crate::metrology::{check_heights, check_pitch, MetrologyError};
 
 /// Traceability written into Record2 (free text; empty fields are written as "not available").
+/// Record2 is written only when both `date` and `calibration_date` are stated (see [`to_x3p`]).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct X3pMeta {
     /// ISO 8601 date-time of the measurement.
     pub date: String,
-    /// The instrument's calibration date (ISO 8601 date or date-time). Empty: no
-    /// `CalibrationDate` element is written (a made-up date could be read as a real one) and
-    /// the comment says that none was stated.
+    /// The instrument's calibration date (ISO 8601 date or date-time). Empty: no Record2 is
+    /// written, since the schema requires a `CalibrationDate` in it and a made-up date could be
+    /// read as a real one.
     pub calibration_date: String,
     /// The probing system's identification (stylus, tip radius); empty: the model.
     pub probe: String,
@@ -150,9 +151,38 @@ fn as_datetime(d: &str) -> String {
     }
 }
 
+/// Record2, the metadata, with its line end; empty when `meta` states no calibration date or no
+/// date. ISO 5436-2's schema makes `Date` and `CalibrationDate` mandatory in Record2 and
+/// Record2 itself optional: without a stated calibration date the file carries no Record2
+/// rather than a made-up date that could be read as a real calibration (report.json keeps the
+/// instrument, operator and conditions of a scan either way).
+fn record2(meta: &X3pMeta) -> String {
+    if meta.calibration_date.trim().is_empty() || meta.date.trim().is_empty() {
+        return String::new();
+    }
+    format!(
+        "<Record2><Date>{date}</Date><Creator>{creator}</Creator><Instrument><Manufacturer>{man}</Manufacturer><Model>{model}</Model><Serial>{serial}</Serial><Version>{version}</Version></Instrument><CalibrationDate>{calibration}</CalibrationDate><ProbingSystem><Type>Contacting</Type><Identification>{probe}</Identification></ProbingSystem><Comment>{comment}</Comment></Record2>\n",
+        date = xml_escape(&meta.date),
+        creator = or_na(&meta.creator),
+        man = or_na(&meta.manufacturer),
+        model = or_na(&meta.model),
+        serial = or_na(&meta.serial),
+        version = or_na(&meta.version),
+        calibration = xml_escape(&as_datetime(&meta.calibration_date)),
+        probe = if meta.probe.trim().is_empty() {
+            or_na(&meta.model)
+        } else {
+            xml_escape(&meta.probe)
+        },
+        comment = or_na(&meta.comment),
+    )
+}
+
 /// The X3P archive of a row-major grid (heights µm, `rows` lines along y, `cols` points along x).
 /// `first_y_mm` is the machine y of the first line, written as the CY axis offset so that the
-/// file places the grid where the stage traced it.
+/// file places the grid where the stage traced it. `main.xml` is valid against the ISO 5436-2
+/// schema (`tests/data/x3p/iso5436_2.xsd`); Record2 is left out when `meta` states no
+/// calibration date.
 pub fn to_x3p(
     heights_um: &[f64],
     rows: usize,
@@ -191,47 +221,14 @@ pub fn to_x3p(
 <CY><AxisType>I</AxisType><DataType>D</DataType><Increment>{iy:e}</Increment><Offset>{oy:e}</Offset></CY>
 <CZ><AxisType>A</AxisType><DataType>D</DataType><Increment>1</Increment><Offset>0</Offset></CZ>
 </Axes></Record1>
-<Record2><Date>{date}</Date><Creator>{creator}</Creator><Instrument><Manufacturer>{man}</Manufacturer><Model>{model}</Model><Serial>{serial}</Serial><Version>{version}</Version></Instrument>{calibration}<ProbingSystem><Type>Contacting</Type><Identification>{probe}</Identification></ProbingSystem><Comment>{comment}</Comment></Record2>
-<Record3><MatrixDimension><SizeX>{cols}</SizeX><SizeY>{rows}</SizeY><SizeZ>1</SizeZ></MatrixDimension><DataLink><PointDataLink>bindata/data.bin</PointDataLink><MD5ChecksumPointData>{data_md5}</MD5ChecksumPointData></DataLink></Record3>
+{record2}<Record3><MatrixDimension><SizeX>{cols}</SizeX><SizeY>{rows}</SizeY><SizeZ>1</SizeZ></MatrixDimension><DataLink><PointDataLink>bindata/data.bin</PointDataLink><MD5ChecksumPointData>{data_md5}</MD5ChecksumPointData></DataLink></Record3>
 <Record4><ChecksumFile>md5checksum.hex</ChecksumFile></Record4>
 </p:ISO5436_2>
 "#,
         ix = metres(pitch_x_mm),
         iy = metres(pitch_y_mm),
         oy = metres(first_y_mm),
-        date = if meta.date.trim().is_empty() {
-            "1970-01-01T00:00:00Z".to_string()
-        } else {
-            xml_escape(&meta.date)
-        },
-        creator = or_na(&meta.creator),
-        man = or_na(&meta.manufacturer),
-        model = or_na(&meta.model),
-        serial = or_na(&meta.serial),
-        version = or_na(&meta.version),
-        calibration = if meta.calibration_date.trim().is_empty() {
-            String::new()
-        } else {
-            format!(
-                "<CalibrationDate>{}</CalibrationDate>",
-                xml_escape(&as_datetime(&meta.calibration_date))
-            )
-        },
-        probe = if meta.probe.trim().is_empty() {
-            or_na(&meta.model)
-        } else {
-            xml_escape(&meta.probe)
-        },
-        comment = {
-            let mut c = meta.comment.clone();
-            if meta.calibration_date.trim().is_empty() {
-                if !c.is_empty() {
-                    c.push_str("; ");
-                }
-                c.push_str("calibration date not stated ([traceability] calibration-date)");
-            }
-            or_na(&c)
-        },
+        record2 = record2(meta),
     );
     let checksum = format!("{} *main.xml\n", hex(&md5(xml.as_bytes())));
     Ok(zip_stored(&[

@@ -294,6 +294,10 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
         );
     }
 
+    // Both X3P files the scan wrote are valid ISO 5436-2 (no calibration date: no Record2).
+    for name in ["measured.x3p", "model.x3p"] {
+        crate::metrology_x3p::assert_valid_x3p(&dir.join(name));
+    }
     // The measured X3P holds exactly the stored heights.
     let x = read_x3p(&std::fs::read(dir.join("measured.x3p")).unwrap()).unwrap();
     assert_eq!((x.rows, x.cols), (31, cols));

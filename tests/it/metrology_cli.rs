@@ -182,6 +182,9 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
         let bytes = std::fs::read(out.join(name)).unwrap();
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{name}");
     }
+    for name in ["measured.x3p", "model.x3p"] {
+        crate::metrology_x3p::assert_valid_x3p(&out.join(name));
+    }
     let measured =
         surfscan::x3p::read_x3p(&std::fs::read(out.join("measured.x3p")).unwrap()).unwrap();
     assert_eq!((measured.rows, measured.cols), (rows, cols));

@@ -1,8 +1,79 @@
-//! X3P writer: digests against their published vectors, a round trip through our reader, and
-//! the file read by an independent reader (surfalize; the test fails when it is missing:
-//! `bash .ci/run` (tests/python/requirements.txt in .venv/)).
+//! X3P writer: digests against their published vectors, a round trip through our reader, the
+//! file read by an independent reader (surfalize; the test fails when it is missing:
+//! `bash .ci/run` (tests/python/requirements.txt in .venv/)), and `main.xml` validated by
+//! xmllint against the official ISO 5436-2 schema (`tests/data/x3p/`) with its MD5 files
+//! checked by `md5sum -c` ([`assert_valid_x3p`], used by every test that writes an X3P file).
 
+use std::path::Path;
+use std::process::Command;
 use surfscan::x3p::{crc32, md5, read_x3p, to_x3p, X3pMeta};
+
+/// Unpacks `file` with Python's zipfile (not our reader), validates `main.xml` against the
+/// ISO 5436-2 schema with xmllint, checks `md5checksum.hex` with `md5sum -c` and the point
+/// data's MD5 in `main.xml` against `md5sum` of the binary it links.
+pub fn assert_valid_x3p(file: &Path) {
+    let dir = tempfile::tempdir().unwrap();
+    let o = crate::common::python()
+        .args([
+            "-c",
+            "import sys, zipfile; zipfile.ZipFile(sys.argv[1]).extractall(sys.argv[2])",
+        ])
+        .arg(file)
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "{} is not a zip archive Python can unpack: {}",
+        file.display(),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let schema = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/x3p/iso5436_2.xsd");
+    let o = Command::new("xmllint")
+        .args(["--noout", "--schema"])
+        .arg(&schema)
+        .arg(dir.path().join("main.xml"))
+        .output()
+        .unwrap_or_else(|e| {
+            panic!("cannot run xmllint ({e}); `bash .ci/run` installs libxml2-utils")
+        });
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        o.status.success() && err.contains("validates"),
+        "{}: main.xml does not validate against ISO 5436-2:\n{err}",
+        file.display()
+    );
+    let o = Command::new("md5sum")
+        .args(["-c", "md5checksum.hex"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "{}: md5sum -c md5checksum.hex: {}{}",
+        file.display(),
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let xml = std::fs::read_to_string(dir.path().join("main.xml")).unwrap();
+    let link = xml
+        .split("<PointDataLink>")
+        .nth(1)
+        .and_then(|s| s.split("</PointDataLink>").next())
+        .unwrap();
+    let o = Command::new("md5sum")
+        .arg(dir.path().join(link))
+        .output()
+        .unwrap();
+    let sum = String::from_utf8_lossy(&o.stdout)[..32].to_string();
+    assert!(
+        xml.contains(&format!(
+            "<MD5ChecksumPointData>{sum}</MD5ChecksumPointData>"
+        )),
+        "{}: {link} has MD5 {sum}, main.xml says otherwise",
+        file.display()
+    );
+}
 
 fn hex(b: &[u8]) -> String {
     b.iter().map(|v| format!("{v:02x}")).collect()
@@ -35,21 +106,16 @@ fn grid() -> (Vec<f64>, usize, usize) {
 fn x3p_round_trips_and_surfalize_reads_it() {
     let (z, rows, cols) = grid();
     let meta = X3pMeta {
+        date: "2026-11-30T09:15:00.123456789Z".into(),
+        calibration_date: "2026-03-14".into(),
         comment: "measured grid <test> & more".to_string(),
         ..X3pMeta::default()
     };
     let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, 0.0, &meta).unwrap();
     let back = read_x3p(&bytes).unwrap();
     assert_eq!((back.rows, back.cols), (rows, cols));
-    // Record2 comes back unescaped; empty fields were written as "not available"; the
-    // missing calibration date is said in the comment.
-    assert!(
-        back.meta
-            .comment
-            .starts_with("measured grid <test> & more; calibration date not stated"),
-        "{}",
-        back.meta.comment
-    );
+    // Record2 comes back unescaped; empty fields were written as "not available".
+    assert_eq!(back.meta.comment, "measured grid <test> & more");
     assert_eq!(back.meta.creator, "");
     assert!((back.pitch_x_mm - 0.0015).abs() < 1e-15);
     assert!((back.pitch_y_mm - 0.01).abs() < 1e-15);
@@ -187,15 +253,75 @@ fn calibration_date_and_manufacturer_are_what_the_caller_gives() {
     assert_eq!(back.meta.serial, "123456");
     assert_eq!(back.meta.probe, "SJ-210 stylus, tip radius 2 µm");
     // Unknown: no CalibrationDate at all (no made-up date a reader could take for a real
-    // one), and the comment says none was stated.
-    let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, 0.0, &X3pMeta::default()).unwrap();
+    // one); ISO 5436-2 requires one in Record2, so Record2 is left out.
+    let unknown = X3pMeta {
+        calibration_date: String::new(),
+        ..meta
+    };
+    let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, 0.0, &unknown).unwrap();
     assert!(!main_xml(&bytes).contains("CalibrationDate"));
-    let back = read_x3p(&bytes).unwrap();
-    assert_eq!(back.meta.calibration_date, "");
+    assert!(!main_xml(&bytes).contains("Record2"));
+    assert_eq!(read_x3p(&bytes).unwrap().meta, X3pMeta::default());
+}
+
+#[test]
+fn every_x3p_written_validates_against_iso_5436_2() {
+    // With Record2 (escaped text, a fractional-second date, a plain calibration date), without
+    // it, and a grid whose first line sits at negative y: each main.xml validates, each MD5
+    // file checks.
+    let (z, rows, cols) = grid();
+    let full = X3pMeta {
+        date: "2026-11-30T09:15:00.123456789+00:00".into(),
+        calibration_date: "2026-03-14".into(),
+        creator: "A. Person & <Co>".into(),
+        manufacturer: "Mitutoyo".into(),
+        model: "SJ-210".into(),
+        serial: "".into(),
+        version: "1.00".into(),
+        probe: "SJ-210 stylus, tip radius 2 µm".into(),
+        comment: "measured heights \"as traced\"".into(),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    for (name, meta, first_y_mm) in [
+        ("full.x3p", full.clone(), 0.0),
+        ("bare.x3p", X3pMeta::default(), -20.0),
+        (
+            "undated.x3p",
+            X3pMeta {
+                calibration_date: String::new(),
+                ..full
+            },
+            12.34,
+        ),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(
+            &path,
+            to_x3p(&z, rows, cols, 0.0015, 0.01, first_y_mm, &meta).unwrap(),
+        )
+        .unwrap();
+        assert_valid_x3p(&path);
+    }
+    // The check catches a file the schema refuses: Record2 without its CalibrationDate (what
+    // this writer wrote before).
+    let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, 0.0, &X3pMeta::default()).unwrap();
+    let xml = main_xml(&bytes) + "</p:ISO5436_2>\n";
+    let broken = xml.replace(
+        "<Record3>",
+        "<Record2><Date>2026-11-30T09:15:00Z</Date><Instrument><Manufacturer>M</Manufacturer><Model>S</Model><Serial>1</Serial><Version>1</Version></Instrument><ProbingSystem><Type>Contacting</Type><Identification>x</Identification></ProbingSystem></Record2><Record3>",
+    );
+    let path = dir.path().join("main.xml");
+    std::fs::write(&path, broken).unwrap();
+    let o = Command::new("xmllint")
+        .args(["--noout", "--schema"])
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/x3p/iso5436_2.xsd"))
+        .arg(&path)
+        .output()
+        .unwrap();
     assert!(
-        back.meta.comment.contains("calibration date not stated"),
+        !o.status.success() && String::from_utf8_lossy(&o.stderr).contains("CalibrationDate"),
         "{}",
-        back.meta.comment
+        String::from_utf8_lossy(&o.stderr)
     );
 }
 

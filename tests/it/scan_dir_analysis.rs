@@ -444,6 +444,8 @@ fn x3p_of_a_scan_carries_the_traceability_and_surfalize_reads_it() {
     run_ok(&["analyze", scan.to_str().unwrap()]);
     let data = sur2_rows();
     for name in ["measured.x3p", "model.x3p"] {
+        // Valid ISO 5436-2 with Record2 (the scan states a calibration date).
+        crate::metrology_x3p::assert_valid_x3p(&scan.join(name));
         let back = read_x3p(&std::fs::read(scan.join(name)).unwrap()).unwrap();
         assert_eq!(back.meta.creator, OPERATOR, "{name}");
         assert_eq!(back.meta.model, MODEL);
