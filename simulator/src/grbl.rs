@@ -143,6 +143,9 @@ pub struct StageShared {
     pub moves_started: AtomicU64,
     /// Homing cycles started so far (GRBL `$H`, Zaber `home`).
     pub homing_cycles: AtomicU64,
+    /// The target of each move started, nm in the controller's reported frame (MPos, or the
+    /// Zaber's `pos`), in order: what a test asserts of the motion itself.
+    move_targets_nm: Mutex<Vec<i64>>,
     faults: Mutex<VecDeque<StageFault>>,
     /// Mirrors the true position for the simulated instrument's profile selection.
     y: OnceLock<YPosition>,
@@ -191,9 +194,20 @@ impl StageShared {
         self.bytes_received.load(Ordering::SeqCst)
     }
 
-    /// Records that a move was accepted and started.
-    pub fn note_move_started(&self) {
+    /// Records that a move to `target_nm` was accepted and started.
+    pub fn note_move_started(&self, target_nm: i64) {
         self.moves_started.fetch_add(1, Ordering::SeqCst);
+        if let Ok(mut m) = self.move_targets_nm.lock() {
+            m.push(target_nm);
+        }
+    }
+
+    /// The targets of the moves started so far, nm, in order.
+    pub fn move_targets_nm(&self) -> Vec<i64> {
+        self.move_targets_nm
+            .lock()
+            .map(|m| m.clone())
+            .unwrap_or_default()
     }
 
     /// Records that a homing cycle started.

@@ -209,7 +209,8 @@ impl Dev {
     fn start_move(&mut self, to: i64) {
         let now = self.now();
         self.start_motion(now, to + self.offset, Purpose::Move);
-        self.shared.note_move_started();
+        self.shared
+            .note_move_started((to as f64 * self.cfg.nm_per_microstep).round() as i64);
     }
 
     fn flag(&self) -> &'static str {

@@ -618,8 +618,13 @@ async fn a_resumed_scan_keeps_its_own_stage_settings_over_an_edited_configuratio
     )
     .unwrap();
 
+    let before = rig.stage.move_targets_nm().len();
     let o = run_scan(&config, &[]).await;
     assert!(o.status.success(), "{}", describe(&o));
+    // The motion itself: the resumed scan takes the backlash out once, approaching its
+    // first target from 0.05 mm before it (the frozen value), never from 0.08 mm.
+    let resumed = rig.stage.move_targets_nm()[before..].to_vec();
+    assert_approach_nm(&resumed, 50_000);
     let dir = scan_dir(&rig.out_dir("out"));
     assert_lines_exactly(&dir, n);
     let records = assert_journal_complete(&dir, n);
@@ -639,5 +644,31 @@ async fn a_resumed_scan_keeps_its_own_stage_settings_over_an_edited_configuratio
             .count(),
         1
     );
+    // A new scan moves with the edited backlash: the same measure sees the change.
+    let before = rig.stage.move_targets_nm().len();
+    let o = run_scan(&config, &[]).await;
+    assert!(o.status.success(), "{}", describe(&o));
+    assert_approach_nm(&rig.stage.move_targets_nm()[before..], 80_000);
+    let scans = std::fs::read_dir(rig.out_dir("out"))
+        .unwrap()
+        .filter(|e| e.as_ref().is_ok_and(|e| e.path().is_dir()))
+        .count();
+    assert_eq!(scans, 2, "the edited configuration started a new scan");
     rig.shutdown().await;
+}
+
+/// Asserts that a scan's stage moves (targets, nm) begin with one backlash approach of
+/// `backlash_nm` (the first target that far before the second) and take no other approach
+/// of any size: every later step goes on in the scan's direction by 0.01 mm, or returns.
+fn assert_approach_nm(moves: &[i64], backlash_nm: i64) {
+    assert!(moves.len() >= 3, "moves {moves:?}");
+    let d: Vec<i64> = moves.windows(2).map(|w| w[1] - w[0]).collect();
+    assert_eq!(d[0].abs(), backlash_nm, "approach then target: {moves:?}");
+    let sign = d[0].signum();
+    for (k, dk) in d.iter().enumerate().skip(1) {
+        assert!(
+            *dk == 10_000 * sign || dk.signum() == -sign,
+            "move {k} steps {dk} nm, neither a 0.01 mm line step nor a return: {moves:?}"
+        );
+    }
 }

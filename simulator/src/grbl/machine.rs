@@ -1039,7 +1039,8 @@ impl Machine {
             return reply("ok");
         }
         self.planned = target;
-        self.shared.note_move_started();
+        self.shared
+            .note_move_started((target as f64 * 1e6 / spm).round() as i64);
         if self.state == State::Jog {
             self.queue.push_back(q);
         } else {
