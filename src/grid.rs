@@ -2,14 +2,15 @@
 //! an X3P file, a profile CSV as a grid of one line) and every section of the
 //! characterisation, the fit and the contact analysis read. Heights in µm, row-major, one row
 //! per line used; what is known about each line (its index in the input, its y, the stage's
-//! read-back, the instrument's own results); and each line of the input left out, with why,
+//! read-back, the instrument's own results, the warnings it was kept with); and each line of the input left out, with why,
 //! so that a result made from fewer lines than the input holds says so ("29 of 31 lines").
 //!
 //! [`crate::input::read`] makes one from a file or a scan directory under one bad-data policy.
 //!
-//! Layer 0 (vocabulary): depends on [`crate::profile`] (the instrument's results) and
-//! [`crate::numfmt`] only; no I/O.
+//! Layer 0 (vocabulary): depends on [`crate::profile`] (the instrument's results),
+//! [`crate::devices`] (a line's read-out warnings) and [`crate::numfmt`] only; no I/O.
 
+use crate::devices::ReadoutWarning;
 use crate::profile::InstrumentResult;
 use serde::Serialize;
 
@@ -35,6 +36,8 @@ pub struct Grid {
     /// The standard the instrument evaluated each line to (its recorded conditions), which
     /// decides what its `Rz` means.
     pub standard: Vec<Option<String>>,
+    /// The doubts about each line's read-out it was kept with (empty but for a scan's).
+    pub readout_warnings: Vec<Vec<ReadoutWarning>>,
     /// The lines of the input that are not in the grid, in input order, each with why.
     pub left_out: Vec<LeftOut>,
 }
@@ -65,6 +68,7 @@ impl Grid {
             y_readback_mm: vec![None; rows],
             instrument: None,
             standard: vec![None; rows],
+            readout_warnings: vec![Vec::new(); rows],
             left_out: Vec::new(),
             y_mm,
         }
@@ -120,6 +124,7 @@ impl Grid {
             y_readback_mm: self.y_readback_mm.clone(),
             instrument: self.instrument.clone(),
             standard: self.standard.clone(),
+            readout_warnings: self.readout_warnings.clone(),
             left_out: self.left_out.clone(),
         }
     }
@@ -142,6 +147,10 @@ impl Grid {
                 .as_ref()
                 .map(|i| keep.iter().map(|&r| i[r].clone()).collect()),
             standard: keep.iter().map(|&r| self.standard[r].clone()).collect(),
+            readout_warnings: keep
+                .iter()
+                .map(|&r| self.readout_warnings[r].clone())
+                .collect(),
             left_out: self.left_out.clone(),
         }
     }

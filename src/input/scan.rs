@@ -319,6 +319,10 @@ pub fn grid_of_lines(lines: &[StoredLine], lines_dir: &Path) -> Result<Grid, Inp
             .iter()
             .map(|l| l.meta.profile.conditions.standard.clone())
             .collect(),
+        readout_warnings: lines
+            .iter()
+            .map(|l| l.meta.readout_warnings.clone())
+            .collect(),
         left_out: Vec::new(),
     })
 }

@@ -4,6 +4,7 @@
 //! Layer 4 (reporting): depends on the metrology result types, the scan's journal records
 //! ([`crate::scan::journal`]) and the fit summary of [`crate::scan::outputs`].
 
+use crate::devices::ReadoutWarning;
 use crate::fit::VMethod;
 use crate::grid::Grid;
 use crate::metrology::anisotropy::Anisotropy;
@@ -335,6 +336,10 @@ pub struct LineReport {
     /// This line's share of the hold-out comparison (when it could be made).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub model_vs_measured: Option<LineHoldout>,
+    /// The doubts about its read-out the line was kept with (a scan's line only): the
+    /// specification's verdict is weighed with and without it.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub readout_warnings: Vec<ReadoutWarning>,
     /// Ra, Rq, Rsk, Rku over the whole evaluation length (`Ra_ln_um`, …), beside the
     /// per-sampling-length means above.
     pub evaluation_length: EvaluationLengthMoments,

@@ -139,13 +139,16 @@ pub struct EvaluatedBand {
     pub sampling_lengths: u32,
 }
 
-/// One line's values: its file index and its parameters.
+/// One line's values: its file index, its parameters and whether it was kept with a
+/// warning about its read-out (its values then may not be the surface's).
 #[derive(Debug, Clone, Copy)]
 pub struct LineValues<'a> {
     /// The 0-based index of the line's files.
     pub index: u32,
     /// Its parameters.
     pub params: &'a RoughnessParams,
+    /// Kept with a read-out warning (`ra-far-from-neighbours`, `beyond-detector-range`, …).
+    pub flagged: bool,
 }
 
 /// The verdict on one limit with the figures it rests on.
@@ -194,6 +197,13 @@ pub struct LimitVerdict {
     /// Where the callout asks for other conditions than the lines were evaluated with
     /// (band, evaluation length); each makes the limit not decidable.
     pub conditions_differ: Vec<String>,
+    /// Lines (1-based) kept with a read-out warning.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub lines_with_warnings: Vec<u64>,
+    /// The verdict on the other lines alone, when some line has a read-out warning: when it
+    /// differs from the verdict on all of them, the limit is not decidable.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub verdict_without_them: Option<Verdict>,
     /// The verdict in words: `Rz 16 % rule: 9 of 31 lines above 6.3 µm (at most 4 allowed)`.
     pub reason: String,
 }
@@ -374,14 +384,54 @@ fn judge_limit(
         lines_undecided: undecided,
         lines_without_value: without,
         conditions_differ: differ,
+        lines_with_warnings: Vec::new(),
+        verdict_without_them: None,
         reason,
     }
+}
+
+/// Judges one limit on all the lines and on those without a read-out warning: a verdict
+/// that the flagged lines decide is not decidable, naming them (a verdict is never
+/// stronger than the lines support).
+fn judge_limit_weighing_warnings(
+    c: &Callout,
+    lines: &[LineValues<'_>],
+    not_measured: usize,
+    band: Option<&EvaluatedBand>,
+    instrument: &InstrumentUncertainty,
+) -> LimitVerdict {
+    let mut v = judge_limit(c, lines, not_measured, band, instrument);
+    let kept: Vec<LineValues<'_>> = lines.iter().filter(|l| !l.flagged).copied().collect();
+    if kept.len() == lines.len() {
+        return v;
+    }
+    let without = judge_limit(c, &kept, not_measured, band, instrument).verdict;
+    v.lines_with_warnings = lines
+        .iter()
+        .filter(|l| l.flagged)
+        .map(|l| line_number(l.index))
+        .collect();
+    v.verdict_without_them = Some(without);
+    if without != v.verdict {
+        let named: Vec<String> = v.lines_with_warnings.iter().map(u64::to_string).collect();
+        v.reason.push_str(&format!(
+            "; rests on line{} {} kept with a read-out warning: {} with {}, {without} without",
+            if named.len() == 1 { "" } else { "s" },
+            named.join(", "),
+            v.verdict,
+            if named.len() == 1 { "it" } else { "them" },
+        ));
+        v.verdict = Verdict::NotDecidable;
+    }
+    v
 }
 
 /// The verdict of the lines against `spec`: one [`LimitVerdict`] per limit and the scan's
 /// (does not conform when any limit does not, conforms when all do, else not decidable).
 /// `planned_lines` is how many lines the scan's plan asks for (`None` for a grid: the lines
 /// given are the surface); the planned lines missing from `lines` count as undecided values.
+/// A limit whose verdict changes when the lines kept with a read-out warning are left out
+/// is not decidable.
 /// `band` is what the lines were evaluated with (`None` when they are not roughness
 /// profiles); `instrument` is the station's stated uncertainty.
 pub fn judge(
@@ -395,7 +445,7 @@ pub fn judge(
     let limits: Vec<LimitVerdict> = spec
         .limits
         .iter()
-        .map(|c| judge_limit(c, lines, not_measured, band, instrument))
+        .map(|c| judge_limit_weighing_warnings(c, lines, not_measured, band, instrument))
         .collect();
     let verdict = Verdict::all(limits.iter().map(|l| l.verdict));
     let deciding: Vec<&str> = limits

@@ -45,6 +45,7 @@ fn lines(p: &[RoughnessParams]) -> Vec<LineValues<'_>> {
         .map(|(i, params)| LineValues {
             index: i as u32,
             params,
+            flagged: false,
         })
         .collect()
 }
@@ -284,4 +285,59 @@ fn a_scan_that_ended_after_20_of_31_lines_is_judged_over_the_31() {
     let max = Specification::parse(&["Ra max 0.8"]).unwrap();
     let v = judge(&max, &lines(&p), Some(21), Some(&BAND), &Default::default());
     assert_eq!(v.verdict, Verdict::NotDecidable);
+}
+
+#[test]
+fn a_verdict_that_lines_with_warnings_decide_is_not_decidable() {
+    // 31 lines, Ra 0.5 µm; under the max rule one line at 0.9 µm decides "does not conform".
+    let mut p = surface();
+    p[4].ra_um = 0.9;
+    let spec = Specification::parse(&["Ra max 0.8", "Rz 6.3"]).unwrap();
+    let flag = |flagged: &[usize]| -> Vec<LineValues<'_>> {
+        let mut l = lines(&p);
+        for &k in flagged {
+            l[k].flagged = true;
+        }
+        l
+    };
+    // Line 5 (index 4) is the one above, and it was kept with a warning: without it the
+    // surface conforms, with it it does not; the limit is not decidable, naming line 5.
+    let v = judge(&spec, &flag(&[4]), None, Some(&BAND), &Default::default());
+    let ra = &v.limits[0];
+    assert_eq!(ra.verdict, Verdict::NotDecidable);
+    assert_eq!(ra.lines_with_warnings, vec![5]);
+    assert_eq!(ra.verdict_without_them, Some(Verdict::Conforms));
+    assert!(
+        ra.reason.ends_with(
+            "; rests on line 5 kept with a read-out warning: does not conform with it, conforms without"
+        ),
+        "{}",
+        ra.reason
+    );
+    // Rz: 8 of 31 lines above 6.3 µm fails the 16 % rule whether line 5 counts or not.
+    assert_eq!(v.limits[1].verdict, Verdict::DoesNotConform);
+    assert_eq!(
+        v.limits[1].verdict_without_them,
+        Some(Verdict::DoesNotConform)
+    );
+    assert_eq!(v.verdict, Verdict::DoesNotConform);
+    // A flagged line that decides nothing leaves the verdict as it is.
+    let v = judge(&spec, &flag(&[0]), None, Some(&BAND), &Default::default());
+    assert_eq!(v.limits[0].verdict, Verdict::DoesNotConform);
+    assert_eq!(v.limits[0].lines_with_warnings, vec![1]);
+    // Every line flagged: nothing is left to judge without them.
+    let all: Vec<usize> = (0..31).collect();
+    let v = judge(
+        &Specification::parse(&["Ra max 0.8"]).unwrap(),
+        &flag(&all),
+        None,
+        Some(&BAND),
+        &Default::default(),
+    );
+    assert_eq!(v.verdict, Verdict::NotDecidable);
+    assert!(
+        v.summary.contains("rests on lines 1, 2, 3"),
+        "{}",
+        v.summary
+    );
 }

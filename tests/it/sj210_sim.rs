@@ -914,13 +914,20 @@ async fn a_line_1000_times_too_large_is_kept_with_a_named_warning_in_metadata_an
     rig.shutdown().await;
 }
 
+/// The limit of the test recipe below: above every line's Ra as served, below the Ra of a
+/// line served 10 times too large (both checked against report.json).
+const RA_MAX_UM: f64 = 3.0;
+
 /// A line served 10× too large after four good ones: within the detector's range and
 /// agreeing with the instrument's own (equally scaled) Ra, so only its neighbours tell: its
 /// Ra is more than 5 times the median of the lines before it. It is kept with that warning,
-/// named in its metadata and the report; the lines around it carry none.
+/// named in its metadata and the report; the lines around it carry none. The recipe's
+/// `Ra1 max` limit is exceeded by that line alone: without it the part conforms, with it
+/// it does not, so the verdict is "not decidable", naming line 5, in report.json, report.html,
+/// summary.csv and the scan's own summary.
 #[tokio::test]
 async fn a_line_whose_ra_is_far_from_its_neighbours_is_kept_with_a_named_warning() {
-    use crate::common::{run_scan, scan_dir, Rig, RigOptions};
+    use crate::common::{describe, scan_command, scan_dir, Rig, RigOptions};
     let rig = Rig::start(RigOptions {
         lines: 6,
         // The fifth trace (line index 4).
@@ -928,12 +935,34 @@ async fn a_line_whose_ra_is_far_from_its_neighbours_is_kept_with_a_named_warning
         ..RigOptions::default()
     })
     .await;
-    let o = run_scan(&rig.config("out"), &[]).await;
-    assert!(
-        String::from_utf8_lossy(&o.stdout).contains("scan complete"),
-        "{}",
-        crate::common::describe(&o)
-    );
+    let config = rig.config("out");
+    let recipes = rig.tmp.path().join("recipes");
+    std::fs::create_dir_all(&recipes).unwrap();
+    std::fs::write(
+        recipes.join("coupon.toml"),
+        format!("[plan]\nlines = 6\ny-step-mm = 0.01\n[specification]\nlimits = [\"Ra1 max {RA_MAX_UM}\"]\n"),
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(
+        &config,
+        format!(
+            "{text}\n[jobs]\nrecipes = {:?}\n",
+            recipes.display().to_string()
+        ),
+    )
+    .unwrap();
+    let o = tokio::time::timeout(
+        Duration::from_secs(120),
+        scan_command(&config, &[])
+            .args(["--recipe", "coupon"])
+            .output(),
+    )
+    .await
+    .expect("the scan ends within 120 s")
+    .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("scan complete"), "{}", describe(&o));
     let dir = scan_dir(&rig.out_dir("out"));
     let meta = |k: u32| -> serde_json::Value {
         let text = std::fs::read_to_string(dir.join(format!("lines/{k:04}.json"))).unwrap();
@@ -986,5 +1015,53 @@ async fn a_line_whose_ra_is_far_from_its_neighbours_is_kept_with_a_named_warning
             .any(|w| w.contains("line 5 (0004)") && w.contains("median Ra")),
         "{warnings:?}"
     );
+    // The verdict: line 5 alone is above the limit, and only it carries a warning.
+    let lines = report["lines"].as_array().expect("report lines");
+    let ours: Vec<f64> = lines.iter().map(|l| l["Ra_um"].as_f64().unwrap()).collect();
+    assert!(ours[4] > RA_MAX_UM, "{ours:?}");
+    for k in [0, 1, 2, 3, 5] {
+        assert!(ours[k] < RA_MAX_UM, "line {k}: {ours:?}");
+        assert!(lines[k].get("readout_warnings").is_none(), "{}", lines[k]);
+    }
+    assert_eq!(
+        lines[4]["readout_warnings"][0]["kind"], "ra-far-from-neighbours",
+        "{}",
+        lines[4]
+    );
+    let spec = &report["specification"];
+    assert_eq!(spec["verdict"], "not decidable", "{spec}");
+    let limit = &spec["limits"][0];
+    assert_eq!(limit["n_beyond"], 1, "{limit}");
+    assert_eq!(
+        limit["lines_with_warnings"],
+        serde_json::json!([5]),
+        "{limit}"
+    );
+    assert_eq!(limit["verdict_without_them"], "conforms", "{limit}");
+    let named =
+        "rests on line 5 kept with a read-out warning: does not conform with it, conforms without";
+    let summary = spec["summary"].as_str().unwrap();
+    assert!(
+        summary.starts_with("not decidable (") && summary.contains(named),
+        "{summary}"
+    );
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(html.contains(named), "report.html names line 5");
+    let csv = std::fs::read_to_string(dir.join("summary.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let col = header
+        .iter()
+        .position(|h| *h == "scan_verdict")
+        .expect("scan_verdict");
+    for row in csv.lines().skip(1) {
+        assert_eq!(row.split(',').nth(col), Some("not decidable"), "{csv}");
+    }
+    assert!(
+        stdout.contains(&format!("Ra1 max {RA_MAX_UM}: not decidable")) && stdout.contains(named),
+        "{}",
+        describe(&o)
+    );
+    // Not a failed part: the scan is complete, its exit is not "does not conform" (4).
+    assert_eq!(o.status.code(), Some(0), "{}", describe(&o));
     rig.shutdown().await;
 }

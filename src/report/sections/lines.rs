@@ -117,6 +117,7 @@ pub fn section(input: &SectionInput<'_>) -> Result<LinesSection, ReportError> {
                 )
             }),
             model_vs_measured: None,
+            readout_warnings: grid.readout_warnings.get(row).cloned().unwrap_or_default(),
             evaluation_length: a.evaluation_length.clone(),
             blank_reasons: a.blank_reasons.clone(),
             material_ratio_sj_series: sj_material_ratio(

@@ -113,6 +113,7 @@ pub fn characterise(
             .map(|(l, params)| LineValues {
                 index: l.index,
                 params,
+                flagged: !l.readout_warnings.is_empty(),
             })
             .collect();
         let mut v = judge(
@@ -163,6 +164,7 @@ mod tests {
             material_ratio_sj_series: None,
             instrument: None,
             model_vs_measured: None,
+            readout_warnings: Vec::new(),
         }
     }
 
