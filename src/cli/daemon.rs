@@ -180,7 +180,7 @@ async fn daemon(
     let server_task = tokio::spawn(srv.serve(
         ControlChannels {
             status: status_rx.clone(),
-            commands: cmd_tx,
+            commands: cmd_tx.clone(),
             queue: Some(jobs.queue.clone()),
         },
         async move {
@@ -240,7 +240,15 @@ async fn daemon(
 
     // The publishers (MQTT) and the notification hook. Neither is on the scan's path: the
     // runner only sends into this channel.
-    let publishers = Publishers::start(config, &status_tx);
+    let publishers = Publishers::start(
+        config,
+        &status_tx,
+        Some(ControlChannels {
+            status: status_rx.clone(),
+            commands: cmd_tx.clone(),
+            queue: Some(jobs.queue.clone()),
+        }),
+    );
     let to_publishers = publishers.sender();
     let (ev_tx, mut ev_rx) = mpsc::unbounded_channel::<ScanEvent>();
     let hook = config.notify.as_ref().and_then(Hook::new);

@@ -369,7 +369,7 @@ pub async fn run_foreground_locked(
         tracing::warn!("signal received: abandoning the current line; the scan stays resumable");
         let _ = shutdown_tx.send(true);
     });
-    let publishers = config.map(|c| Publishers::start(c, &status_tx));
+    let publishers = config.map(|c| Publishers::start(c, &status_tx, None));
     let mut ctl = Control::new(cmd_rx, shutdown_rx, status_tx);
     ctl.events = publishers.as_ref().and_then(Publishers::sender);
     ctl.metrics = publishers.as_ref().and_then(Publishers::scan_metrics);

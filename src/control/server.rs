@@ -488,6 +488,7 @@ fn peer_info(stream: &UnixStream) -> Option<PeerInfo> {
         gid: cred.gid(),
         pid: cred.pid().and_then(|p| u32::try_from(p).ok()),
         web: None,
+        mqtt: None,
     };
     let groups = peer_groups(stream.as_raw_fd()).ok().map(|mut g| {
         g.push(peer.gid);

@@ -18,6 +18,7 @@
 
 pub mod archive;
 pub mod archive_settings;
+pub mod commands;
 pub mod export;
 pub mod export_settings;
 pub mod metrics;
@@ -29,6 +30,7 @@ pub mod settings;
 pub mod tls;
 
 use crate::config::Config;
+use crate::control::protocol::ControlChannels;
 use crate::scan::event::ScanEvent;
 use crate::scan::metrics::ScanMetrics;
 use crate::scan::status::{LinkStatus, Status};
@@ -140,10 +142,16 @@ fn results_message(
 }
 
 impl Publishers {
-    /// Starts what `config` asks for, reporting into `status`'s links. Must run inside a
-    /// tokio runtime. A part that cannot start (an outbox that cannot be opened, an address
-    /// already in use) is named in the log and in the status's links; the rest runs.
-    pub fn start(config: &Config, status: &watch::Sender<Status>) -> Publishers {
+    /// Starts what `config` asks for, reporting into `status`'s links; `control` is where
+    /// the MQTT link carries out commands (a daemon's; none for a foreground scan, which
+    /// takes none). Must run inside a tokio runtime. A part that cannot start (an outbox that
+    /// cannot be opened, an address already in use) is named in the log and in the status's
+    /// links; the rest runs.
+    pub fn start(
+        config: &Config,
+        status: &watch::Sender<Status>,
+        control: Option<ControlChannels>,
+    ) -> Publishers {
         let (stop, stop_rx) = watch::channel(false);
         let (scan_metrics, scan_metrics_rx) = watch::channel(ScanMetrics::default());
         let mut p = Publishers {
@@ -180,7 +188,7 @@ impl Publishers {
             }
         }
         if let Some(m) = &config.mqtt {
-            if let Err(e) = p.start_mqtt(config, m, status, stop_rx.clone()) {
+            if let Err(e) = p.start_mqtt(config, m, status, control, stop_rx.clone()) {
                 fail(status, mqtt::LINK, e);
             }
         }
@@ -322,6 +330,7 @@ impl Publishers {
         config: &Config,
         m: &settings::MqttSettings,
         status: &watch::Sender<Status>,
+        control: Option<ControlChannels>,
         stop_rx: watch::Receiver<bool>,
     ) -> Result<(), String> {
         let dir = outbox_dir(config, "mqtt");
@@ -334,7 +343,15 @@ impl Publishers {
         })?;
         let outbox = Arc::new(Mutex::new(outbox));
         let wake = Arc::new(Notify::new());
-        let link = mqtt::MqttLink::new(m.clone(), outbox.clone(), wake.clone(), status.clone())?;
+        let commands =
+            control.map(|c| commands::Commands::new(mqtt::root(&m.station), m.commands, c));
+        let link = mqtt::MqttLink::new(
+            m.clone(),
+            outbox.clone(),
+            wake.clone(),
+            status.clone(),
+            commands,
+        )?;
         self.links.push(tokio::spawn(link.run(stop_rx)));
         let (tx, mut rx) = mpsc::unbounded_channel::<ScanEvent>();
         let station = m.station.clone();

@@ -11,6 +11,8 @@
 //! | `online` | yes | `online` at connect; `offline` at a clean stop and, as the last will, when the broker loses the station |
 //! | `events` | no | `{"id","kind","scan_id","time","reason","station","scan_dir"}` |
 //! | `results` | no | a completed scan's results ([`super::results`]): `scan_id`, `recipe`, `specimen`, `verdict`, per parameter `mean`, `s`, `U`, `warnings`, `files` with SHA-256 |
+//! | `commands/<client-id>` | — | read by the daemon: a control request ([`super::commands`]) |
+//! | `replies/<client-id>` | no | the answer to each command, as the control socket gives it |
 //!
 //! The link never touches the scan: it reads the status from its watch channel and the
 //! messages from the outbox on disk, and reports its own state in the status's `links`. A
@@ -20,9 +22,13 @@
 //! what is still to be sent: the message in flight when a connection broke is sent again,
 //! with the same id.
 //!
+//! Commands are carried out one at a time, in their order of arrival, by a task of their own
+//! ([`super::commands`]), so a command waiting for the runner never holds up the link.
+//!
 //! Layer 4 (process edge): depends on rumqttc, [`super::outbox`], [`super::settings`],
-//! [`super::tls`] and the scan's status type.
+//! [`super::tls`], [`super::commands`] and the scan's status type.
 
+use super::commands::{Commands, Incoming};
 use super::outbox::{Message, Outbox};
 use super::settings::{parse_broker_url, MqttSettings};
 use crate::scan::status::{LinkStatus, Status};
@@ -33,7 +39,7 @@ use rumqttc::{
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use tokio::sync::{watch, Notify};
+use tokio::sync::{mpsc, watch, Notify};
 use tokio::time::Instant;
 
 /// The link's name in the status's `links`.
@@ -45,6 +51,8 @@ const FIRST_WAIT: Duration = Duration::from_secs(1);
 const MAX_WAIT: Duration = Duration::from_secs(30);
 /// How long a clean stop may take to say `offline` and disconnect.
 const STOP_DEADLINE: Duration = Duration::from_secs(3);
+/// Commands that may wait for the one before them; beyond, a command is dropped and logged.
+const COMMANDS_WAITING: usize = 32;
 
 /// The topic root of a station, `surfscan/<station>`.
 pub fn root(station: &str) -> String {
@@ -58,6 +66,13 @@ pub struct MqttLink {
     wake: Arc<Notify>,
     status: watch::Sender<Status>,
     tls: Option<Arc<rustls::ClientConfig>>,
+    commands: Option<Commands>,
+}
+
+/// The ends of the command task the link talks to.
+struct CommandTask {
+    to: mpsc::Sender<Incoming>,
+    replies: mpsc::UnboundedReceiver<(String, String)>,
 }
 
 /// What a published message was, so its acknowledgement can be matched.
@@ -106,12 +121,13 @@ pub fn describe(url: &str, user: Option<&str>, e: &ConnectionError) -> String {
 
 impl MqttLink {
     /// A link for these (validated) settings, delivering `outbox` (woken by `wake`) and the
-    /// status of `status`.
+    /// status of `status`, and reading `commands` when given (only a daemon takes them).
     pub fn new(
         settings: MqttSettings,
         outbox: Arc<Mutex<Outbox>>,
         wake: Arc<Notify>,
         status: watch::Sender<Status>,
+        commands: Option<Commands>,
     ) -> Result<MqttLink, String> {
         let addr = parse_broker_url(&settings.url)?;
         let tls = if addr.tls {
@@ -125,6 +141,7 @@ impl MqttLink {
             wake,
             status,
             tls,
+            commands,
         })
     }
 
@@ -185,14 +202,26 @@ impl MqttLink {
     }
 
     /// Runs until `shutdown` becomes true: connects, delivers, reconnects with backoff.
-    pub async fn run(self, mut shutdown: watch::Receiver<bool>) {
+    pub async fn run(mut self, mut shutdown: watch::Receiver<bool>) {
+        let mut task = self.commands.take().map(|mut c| {
+            let (to, mut from) = mpsc::channel::<Incoming>(COMMANDS_WAITING);
+            let (reply, replies) = mpsc::unbounded_channel();
+            tokio::spawn(async move {
+                while let Some(m) = from.recv().await {
+                    if let Some(r) = c.answer(m).await {
+                        let _ = reply.send(r);
+                    }
+                }
+            });
+            CommandTask { to, replies }
+        });
         let mut wait = FIRST_WAIT;
         self.report(false, format!("connecting to {}", self.settings.url));
         loop {
             if *shutdown.borrow() {
                 return;
             }
-            match self.session(&mut shutdown).await {
+            match self.session(&mut shutdown, task.as_mut()).await {
                 Ended::Shutdown => return,
                 Ended::Lost { message, connected } => {
                     if connected {
@@ -209,7 +238,11 @@ impl MqttLink {
         }
     }
 
-    async fn session(&self, shutdown: &mut watch::Receiver<bool>) -> Ended {
+    async fn session(
+        &self,
+        shutdown: &mut watch::Receiver<bool>,
+        mut task: Option<&mut CommandTask>,
+    ) -> Ended {
         let options = match self.options() {
             Ok(o) => o,
             Err(message) => {
@@ -258,6 +291,12 @@ impl MqttLink {
                         if client.try_publish(self.topic("online"), QoS::AtLeastOnce, true, "online").is_ok() {
                             tags.push_back(Tag::Other);
                         }
+                        if task.is_some() {
+                            let filter = super::commands::filter(&root(&self.settings.station));
+                            if let Err(e) = client.try_subscribe(filter, QoS::AtLeastOnce) {
+                                tracing::error!("mqtt: cannot subscribe to the command topic: {e}; commands wait for the next connection");
+                            }
+                        }
                         last_status.clear();
                         status_due = Some(Instant::now());
                     }
@@ -273,6 +312,14 @@ impl MqttLink {
                             }
                             inflight = None;
                             self.report(true, format!("connected to {}", self.settings.url));
+                        }
+                    }
+                    Ok(Event::Incoming(Packet::Publish(p))) => {
+                        if let Some(t) = task.as_deref_mut() {
+                            let m = Incoming { topic: p.topic.clone(), payload: p.payload.to_vec(), retained: p.retain };
+                            if t.to.try_send(m).is_err() {
+                                tracing::warn!("mqtt: command on {} dropped: {COMMANDS_WAITING} commands wait already for the station's answer", p.topic);
+                            }
                         }
                     }
                     Ok(_) => {}
@@ -298,6 +345,11 @@ impl MqttLink {
                         tags.push_back(Tag::Other);
                         last_status = text;
                         last_status_at = Some(Instant::now());
+                    }
+                }
+                Some((topic, payload)) = next_reply(task.as_deref_mut()), if connected && task.is_some() => {
+                    if client.try_publish(topic, QoS::AtLeastOnce, false, payload).is_ok() {
+                        tags.push_back(Tag::Other);
                     }
                 }
                 _ = self.wake.notified() => {}
@@ -374,5 +426,13 @@ impl MqttLink {
         })
         .await
         .map_err(std::io::Error::other)?
+    }
+}
+
+/// The command task's next reply (never, without the task).
+async fn next_reply(task: Option<&mut CommandTask>) -> Option<(String, String)> {
+    match task {
+        Some(t) => t.replies.recv().await,
+        None => std::future::pending().await,
     }
 }

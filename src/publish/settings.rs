@@ -47,6 +47,12 @@ pub struct MqttSettings {
     /// its last will.
     #[serde(default = "default_keep_alive_s")]
     pub keep_alive_s: u64,
+    /// Whether the daemon carries out commands (start, pause, resume, abort, the queue's)
+    /// published on `surfscan/<station>/commands/<client-id>`; when false, each is refused
+    /// with a reply and nothing happens. Only with a broker ACL that lets a client write its
+    /// own command topic alone (docs/integration.md).
+    #[serde(default)]
+    pub commands: bool,
 }
 
 /// The broker's address as read from `url`.

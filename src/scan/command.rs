@@ -80,7 +80,8 @@ pub struct RecipeStart {
 /// Who sent a command: the peer's credentials as the kernel gave them when it connected
 /// to the control socket (`SO_PEERCRED`), for the journal. A command given on the station's
 /// page is carried out by the daemon's own process on behalf of the page's user: its
-/// credentials are the daemon's, and [`Peer::web`] names the user and where they were.
+/// credentials are the daemon's, and [`Peer::web`] names the user and where they were; one
+/// given over MQTT likewise, and [`Peer::mqtt`] names the client id it came from.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Peer {
     /// User id.
@@ -93,6 +94,10 @@ pub struct Peer {
     /// The page's user who gave the command, when it came from the station's page.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub web: Option<WebUser>,
+    /// The MQTT client id of the command's topic, when it came over MQTT (the broker's ACL
+    /// lets a client write only its own command topic).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mqtt: Option<String>,
 }
 
 /// The user of the station's page who gave a command, as the journal records it.
@@ -112,6 +117,7 @@ impl Peer {
             gid: nix::unistd::getegid().as_raw(),
             pid: Some(std::process::id()),
             web: None,
+            mqtt: None,
         }
     }
 
@@ -126,9 +132,20 @@ impl Peer {
         }
     }
 
-    /// Who it is, for the journal's words and logs: `uid 1000 gid 100 pid 4242`, or
-    /// `web user alice from 10.0.0.7:51234`.
+    /// The daemon's process on behalf of the MQTT client `client_id`.
+    pub fn mqtt_client(client_id: &str) -> Peer {
+        Peer {
+            mqtt: Some(client_id.to_owned()),
+            ..Peer::this_process()
+        }
+    }
+
+    /// Who it is, for the journal's words and logs: `uid 1000 gid 100 pid 4242`,
+    /// `web user alice from 10.0.0.7:51234`, or `MQTT client line-3-mes`.
     pub fn describe(&self) -> String {
+        if let Some(id) = &self.mqtt {
+            return format!("MQTT client {id}");
+        }
         match &self.web {
             Some(w) => format!("web user {} from {}", w.user, w.address),
             None => format!(
@@ -140,16 +157,16 @@ impl Peer {
         }
     }
 
-    /// The same without the group: `uid 1000 pid 4242`, or the web user.
+    /// The same without the group: `uid 1000 pid 4242`, or the web user or MQTT client.
     pub fn describe_briefly(&self) -> String {
-        match &self.web {
-            Some(_) => self.describe(),
-            None => format!(
-                "uid {} pid {}",
-                self.uid,
-                self.pid.map_or("unknown".to_owned(), |p| p.to_string())
-            ),
+        if self.web.is_some() || self.mqtt.is_some() {
+            return self.describe();
         }
+        format!(
+            "uid {} pid {}",
+            self.uid,
+            self.pid.map_or("unknown".to_owned(), |p| p.to_string())
+        )
     }
 }
 

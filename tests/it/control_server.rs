@@ -543,6 +543,7 @@ async fn each_command_carries_the_senders_uid_and_pid_to_the_runner() {
         gid: nix::unistd::getegid().as_raw(),
         pid: Some(std::process::id()),
         web: None,
+        mqtt: None,
     };
     assert_eq!(*runner.peers.lock().unwrap(), vec![me.clone(), me]);
     served.shutdown().await;

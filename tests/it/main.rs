@@ -38,6 +38,7 @@ mod metrology_x3p;
 mod model_honesty;
 mod model_report;
 mod mqtt_broker;
+mod mqtt_commands;
 mod night_faults;
 mod notify_apprise;
 mod older_scans;

@@ -17,10 +17,10 @@ use surfscan::scan::ending::StopStatus;
 use surfscan::scan::journal::Record;
 use surfscan::scan::status::{State, Status};
 
-const STATION: &str = "st-1";
+pub(crate) const STATION: &str = "st-1";
 
 /// Adds `[mqtt]` for `url` to the rig's configuration, with `password` in its file.
-fn with_mqtt(r: &Rig, url: &str, password: &str) {
+pub(crate) fn with_mqtt(r: &Rig, url: &str, password: &str) {
     let pw = r.dir.path().join("mqtt.pw");
     std::fs::write(&pw, format!("{password}\n")).unwrap();
     let mut text = std::fs::read_to_string(&r.config).unwrap();
@@ -54,7 +54,7 @@ pub(crate) fn spawn_logged(r: &Rig) -> Daemon {
     )
 }
 
-fn log_path(r: &Rig) -> PathBuf {
+pub(crate) fn log_path(r: &Rig) -> PathBuf {
     r.dir.path().join("daemon.log")
 }
 

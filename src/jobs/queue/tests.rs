@@ -208,6 +208,7 @@ fn the_store_round_trips_and_keeps_a_damaged_file_aside() {
             gid: 1000,
             pid: Some(42),
             web: None,
+            mqtt: None,
         }),
     );
     q.add(request("B", false), at(1), None);
@@ -235,6 +236,7 @@ fn the_store_round_trips_and_keeps_a_damaged_file_aside() {
                 gid: 1000,
                 pid: Some(42),
                 web: None,
+                mqtt: None,
             }),
             detail: "job 1".into(),
         })

@@ -56,6 +56,7 @@ const PEER: Peer = Peer {
     gid: 1000,
     pid: Some(4242),
     web: None,
+    mqtt: None,
 };
 
 #[test]

@@ -41,6 +41,7 @@ fn peer() -> Peer {
         gid: 100,
         pid: Some(4242),
         web: None,
+        mqtt: None,
     }
 }
 

@@ -1,6 +1,7 @@
 //! A real Mosquitto broker for the MQTT tests, started on a free loopback port in a test's
-//! directory with a password file and an ACL, and `mosquitto_sub` as the independent
-//! subscriber. Both are Debian packages (`mosquitto`, `mosquitto-clients`) that `.ci/run`
+//! directory with a password file and an ACL, `mosquitto_sub` as the independent
+//! subscriber and `mosquitto_pub` as a lab's client commanding the station. The ACL is the
+//! one docs/integration.md gives: a client writes only its own command topic. Both are Debian packages (`mosquitto`, `mosquitto-clients`) that `.ci/run`
 //! installs.
 
 use std::net::TcpListener;
@@ -15,6 +16,9 @@ pub const STATION_PASSWORD: &str = "st4tion-pw";
 /// The subscriber's user (read only).
 pub const WATCHER_USER: &str = "watcher";
 const WATCHER_PASSWORD: &str = "w4tcher-pw";
+/// A lab's client that commands stations (no topic of its own beyond the ACL's patterns).
+pub const OPERATOR_USER: &str = "operator";
+const OPERATOR_PASSWORD: &str = "op3rator-pw";
 
 /// A free loopback TCP port (bound and released; the caller binds it next).
 pub fn free_port() -> u16 {
@@ -64,6 +68,7 @@ impl Broker {
         for (k, (user, pw)) in [
             (STATION_USER, STATION_PASSWORD),
             (WATCHER_USER, WATCHER_PASSWORD),
+            (OPERATOR_USER, OPERATOR_PASSWORD),
         ]
         .into_iter()
         .enumerate()
@@ -78,7 +83,7 @@ impl Broker {
         std::fs::write(
             dir.join("acl"),
             format!(
-                "user {STATION_USER}\ntopic readwrite surfscan/#\n\nuser {WATCHER_USER}\ntopic read surfscan/#\n"
+                "pattern write surfscan/+/commands/%c\npattern read surfscan/+/replies/%c\n\nuser {STATION_USER}\ntopic readwrite surfscan/#\n\nuser {WATCHER_USER}\ntopic read surfscan/#\n"
             ),
         )
         .unwrap();
@@ -181,6 +186,26 @@ impl Broker {
             .spawn()
             .unwrap();
         Killed(child)
+    }
+}
+
+impl Broker {
+    /// Publishes `payload` on `topic` with `mosquitto_pub` as the operator with client id
+    /// `client_id` (QoS 1; retained when `retain`), and waits for it to be handed over.
+    pub fn publish(&self, client_id: &str, topic: &str, payload: &str, retain: bool) {
+        let mut c = Command::new(which("mosquitto_pub"));
+        c.args(["-h", "127.0.0.1", "-p", &self.port.to_string()])
+            .args(["-u", OPERATOR_USER, "-P", OPERATOR_PASSWORD])
+            .args(["-i", client_id, "-q", "1", "-t", topic, "-m", payload]);
+        if retain {
+            c.arg("-r");
+        }
+        let out = c.stdin(Stdio::null()).output().unwrap();
+        assert!(
+            out.status.success(),
+            "mosquitto_pub failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
     }
 }
 
