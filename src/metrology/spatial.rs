@@ -26,12 +26,18 @@
 //! averaged over the lines (columns); heights in µm, q in 1/µm, C in µm³ — the convention of
 //! SurfaceTopography's `power_spectrum_from_profile`.
 //!
-//! Depends on [`super::areal`] (levelling), [`super::filter`] (FFT lengths) and
-//! [`super::MetrologyError`].
+//! Memory: the ACF's lags ky ≥ 0 only (the rays of Sal and Str read no others), made in one
+//! buffer of about 2·rows·cols f64 by real-to-complex transforms (see [`autocorrelation`]);
+//! Std's spectrum is the lines' half spectra, rows·(cols/2 + 1) complex values.
+//!
+//! Depends on [`super::areal`] (levelling), [`super::filter`] (FFT lengths),
+//! [`super::MetrologyError`] and the FFT crates (`realfft`, `rustfft`, `bytemuck` to view
+//! one buffer as both).
 
 use super::areal::{level_plane, HeightMap};
 use super::filter::fft_len;
 use super::MetrologyError;
+use realfft::RealFftPlanner;
 use rustfft::num_complex::Complex64;
 use rustfft::FftPlanner;
 use serde::Serialize;
@@ -46,7 +52,8 @@ pub const ANGLE_STEP_DEG: f64 = 0.5;
 /// The areal autocorrelation function, normalised to 1 at zero lag.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Acf {
-    /// Values, `(2·rows − 1) × (2·cols − 1)` row-major; zero lag at `(rows − 1, cols − 1)`.
+    /// Values at the lags ky ≥ 0 (the function is point-symmetric, f(−τ) = f(τ)),
+    /// `rows × (2·cols − 1)` row-major; zero lag at `(0, cols − 1)`.
     pub values: Vec<f64>,
     /// Lines of the grid (lags −(rows − 1) … rows − 1 along y).
     pub rows: usize,
@@ -65,9 +72,10 @@ impl Acf {
         if ky.abs() >= r || kx.abs() >= c {
             return None;
         }
-        let w = 2 * c - 1;
+        // f(−τ) = f(τ): the lags ky < 0 are those of (−ky, −kx).
+        let (ky, kx) = if ky < 0 { (-ky, -kx) } else { (ky, kx) };
         self.values
-            .get(((ky + r - 1) * w + kx + c - 1) as usize)
+            .get((ky * (2 * c - 1) + kx + c - 1) as usize)
             .copied()
     }
 
@@ -156,32 +164,36 @@ pub fn definitions() -> BTreeMap<String, String> {
     .collect()
 }
 
-/// A complex 2-D DFT in place, `rows × cols` row-major.
-fn fft2(data: &mut [Complex64], rows: usize, cols: usize, inverse: bool) {
-    let mut planner = FftPlanner::<f64>::new();
-    let (row_fft, col_fft) = if inverse {
-        (
-            planner.plan_fft_inverse(cols),
-            planner.plan_fft_inverse(rows),
-        )
-    } else {
-        (
-            planner.plan_fft_forward(cols),
-            planner.plan_fft_forward(rows),
-        )
-    };
-    for line in data.chunks_exact_mut(cols) {
-        row_fft.process(line);
-    }
-    let mut column = vec![Complex64::new(0.0, 0.0); rows];
-    for c in 0..cols {
-        for (r, v) in column.iter_mut().enumerate() {
-            *v = data.get(r * cols + c).copied().unwrap_or_default();
+/// Each column of the row-major `data` (`width` values a row) run through `f` in a
+/// `len`-long buffer, zero beyond the column's values; written back (the first
+/// `data.len() / width` values) when `write_back`. A few adjacent columns are gathered at a
+/// time, so each row's cache line is read once per block rather than once per column.
+fn along_columns(
+    data: &mut [Complex64],
+    width: usize,
+    len: usize,
+    write_back: bool,
+    mut f: impl FnMut(usize, &mut [Complex64]),
+) {
+    const BLOCK: usize = 8;
+    let rows = data.len() / width;
+    let mut block = vec![Complex64::default(); BLOCK * len];
+    for k0 in (0..width).step_by(BLOCK) {
+        let n = BLOCK.min(width - k0);
+        for (r, line) in data.chunks_exact(width).enumerate() {
+            for (b, v) in line[k0..k0 + n].iter().enumerate() {
+                block[b * len + r] = *v;
+            }
         }
-        col_fft.process(&mut column);
-        for (r, v) in column.iter().enumerate() {
-            if let Some(d) = data.get_mut(r * cols + c) {
-                *d = *v;
+        for (b, column) in block.chunks_exact_mut(len).take(n).enumerate() {
+            column[rows..].fill(Complex64::default());
+            f(k0 + b, column);
+        }
+        if write_back {
+            for (r, line) in data.chunks_exact_mut(width).enumerate() {
+                for (b, v) in line[k0..k0 + n].iter_mut().enumerate() {
+                    *v = block[b * len + r];
+                }
             }
         }
     }
@@ -193,42 +205,71 @@ pub fn autocorrelation(grid: &HeightMap<'_>) -> Result<Acf, MetrologyError> {
     Ok(acf_of_levelled(&z, grid))
 }
 
+/// The ACF at lags ky ≥ 0 by a real-to-complex FFT of each line zero-padded to a 5-smooth
+/// length ≥ 2·cols − 1, a complex FFT along y padded likewise, the power, the inverse along
+/// y (keeping ky < rows) and a complex-to-real inverse along x. One f64 buffer holds the
+/// lines' half spectra, then in place their autocorrelation along y, then the values: about
+/// 2·rows·cols f64, where the full padded complex 2-D transform took eight times that.
 fn acf_of_levelled(z: &[f64], grid: &HeightMap<'_>) -> Acf {
     let (rows, cols) = (grid.rows, grid.cols);
     let (pr, pc) = (fft_len(2 * rows - 1), fft_len(2 * cols - 1));
-    let mut buf = vec![Complex64::new(0.0, 0.0); pr * pc];
-    for (r, line) in z.chunks_exact(cols).enumerate() {
-        for (c, v) in line.iter().enumerate() {
-            if let Some(b) = buf.get_mut(r * pc + c) {
-                *b = Complex64::new(*v, 0.0);
-            }
+    let nk = pc / 2 + 1;
+    let mut real = RealFftPlanner::<f64>::new();
+    let (r2c, c2r) = (real.plan_fft_forward(pc), real.plan_fft_inverse(pc));
+    let mut complex = FftPlanner::<f64>::new();
+    let (fwd, inv) = (complex.plan_fft_forward(pr), complex.plan_fft_inverse(pr));
+    let mut scratch = vec![
+        Complex64::default();
+        r2c.get_scratch_len()
+            .max(c2r.get_scratch_len())
+            .max(fwd.get_inplace_scratch_len())
+            .max(inv.get_inplace_scratch_len())
+    ];
+    let mut line = vec![0.0; pc];
+    let mut buf = vec![0.0f64; rows * 2 * nk];
+    {
+        let spectra: &mut [Complex64] = bytemuck::cast_slice_mut(&mut buf);
+        for (heights, spectrum) in z.chunks_exact(cols).zip(spectra.chunks_exact_mut(nk)) {
+            line[..cols].copy_from_slice(heights);
+            line[cols..].fill(0.0);
+            r2c.process_with_scratch(&mut line, spectrum, &mut scratch)
+                .expect("buffer sizes come from the plan");
+        }
+        along_columns(spectra, nk, pr, true, |_, column| {
+            fwd.process_with_scratch(column, &mut scratch);
+            column
+                .iter_mut()
+                .for_each(|v| *v = Complex64::new(v.norm_sqr(), 0.0));
+            inv.process_with_scratch(column, &mut scratch);
+        });
+    }
+    // Row ky of the values, (2·cols − 1) long, ends before row ky + 1 of the spectra starts
+    // (2·nk ≥ 2·cols + 1): each row is copied out before its place is written.
+    let scale = 1.0 / (pr * pc) as f64;
+    let w = 2 * cols - 1;
+    let mut row = vec![Complex64::default(); nk];
+    for ky in 0..rows {
+        row.copy_from_slice(&bytemuck::cast_slice::<f64, Complex64>(&buf)[ky * nk..(ky + 1) * nk]);
+        // Real input has real DC and Nyquist terms; rounding leaves a trace of imaginary
+        // part that the inverse real FFT refuses.
+        row[0].im = 0.0;
+        row[nk - 1].im = 0.0;
+        c2r.process_with_scratch(&mut row, &mut line, &mut scratch)
+            .expect("buffer sizes come from the plan");
+        for (i, v) in buf[ky * w..(ky + 1) * w].iter_mut().enumerate() {
+            let kx = i as isize - (cols as isize - 1);
+            let pairs = (rows - ky) * (cols - kx.unsigned_abs());
+            *v = line[kx.rem_euclid(pc as isize) as usize] * scale / pairs as f64;
         }
     }
-    fft2(&mut buf, pr, pc, false);
-    for v in buf.iter_mut() {
-        *v = Complex64::new(v.norm_sqr(), 0.0);
-    }
-    fft2(&mut buf, pr, pc, true);
-    let scale = 1.0 / (pr * pc) as f64;
-    let (h, w) = (2 * rows - 1, 2 * cols - 1);
-    let mut values = vec![0.0; h * w];
-    for (i, v) in values.iter_mut().enumerate() {
-        let ky = (i / w) as isize - (rows as isize - 1);
-        let kx = (i % w) as isize - (cols as isize - 1);
-        let r = ky.rem_euclid(pr as isize) as usize;
-        let c = kx.rem_euclid(pc as isize) as usize;
-        let pairs = (rows - ky.unsigned_abs()) * (cols - kx.unsigned_abs());
-        *v = buf.get(r * pc + c).map_or(0.0, |b| b.re) * scale / pairs as f64;
-    }
-    let zero = values
-        .get((rows - 1) * w + cols - 1)
-        .copied()
-        .unwrap_or(0.0);
+    buf.truncate(rows * w);
+    buf.shrink_to_fit();
+    let zero = buf.get(cols - 1).copied().unwrap_or(0.0);
     if zero > 0.0 {
-        values.iter_mut().for_each(|v| *v /= zero);
+        buf.iter_mut().for_each(|v| *v /= zero);
     }
     Acf {
-        values,
+        values: buf,
         rows,
         cols,
         pitch_x_um: grid.pitch_x_mm * 1000.0,
@@ -255,10 +296,22 @@ fn decay_length(acf: &Acf, theta: f64, s: f64) -> Option<f64> {
 }
 
 /// The angular amplitude spectrum's maximum: Std in degrees (lower edge of its 0.5° bin).
+/// The DFT of real heights is Hermitian: each line's real-to-complex half spectrum holds
+/// every value, and each stands for itself and for its conjugate partner at (−fy, −fx).
 fn texture_direction(z: &[f64], grid: &HeightMap<'_>) -> f64 {
     let (rows, cols) = (grid.rows, grid.cols);
-    let mut buf: Vec<Complex64> = z.iter().map(|v| Complex64::new(*v, 0.0)).collect();
-    fft2(&mut buf, rows, cols, false);
+    let nk = cols / 2 + 1;
+    let r2c = RealFftPlanner::<f64>::new().plan_fft_forward(cols);
+    let fwd = FftPlanner::<f64>::new().plan_fft_forward(rows);
+    let mut scratch =
+        vec![Complex64::default(); r2c.get_scratch_len().max(fwd.get_inplace_scratch_len())];
+    let mut line = vec![0.0; cols];
+    let mut spectra = vec![Complex64::default(); rows * nk];
+    for (heights, spectrum) in z.chunks_exact(cols).zip(spectra.chunks_exact_mut(nk)) {
+        line.copy_from_slice(heights);
+        r2c.process_with_scratch(&mut line, spectrum, &mut scratch)
+            .expect("buffer sizes come from the plan");
+    }
     let freq = |k: usize, n: usize, d: f64| {
         let k = if k < n.div_ceil(2) {
             k as f64
@@ -268,20 +321,28 @@ fn texture_direction(z: &[f64], grid: &HeightMap<'_>) -> f64 {
         k / (n as f64 * d)
     };
     let bins = (180.0 / ANGLE_STEP_DEG) as usize;
-    let mut spectrum = vec![0.0; bins];
-    for (i, v) in buf.iter().enumerate() {
-        let (r, c) = (i / cols, i % cols);
-        if r == 0 && c == 0 {
-            continue;
-        }
+    let bin = |r: usize, c: usize| {
         let fy = freq(r, rows, grid.pitch_y_mm);
         let fx = freq(c, cols, grid.pitch_x_mm);
         let theta = fy.atan2(fx).to_degrees().rem_euclid(180.0);
-        let bin = ((theta / ANGLE_STEP_DEG) as usize).min(bins - 1);
-        if let Some(b) = spectrum.get_mut(bin) {
-            *b += v.norm();
+        ((theta / ANGLE_STEP_DEG) as usize).min(bins - 1)
+    };
+    let mut spectrum = vec![0.0; bins];
+    along_columns(&mut spectra, nk, rows, false, |c, column| {
+        fwd.process_with_scratch(column, &mut scratch);
+        // Columns 0 and cols/2 are their own partners; the others' lie outside the half.
+        let partner_outside = c != 0 && 2 * c != cols;
+        for (r, v) in column.iter().enumerate() {
+            if r == 0 && c == 0 {
+                continue;
+            }
+            let a = v.norm();
+            spectrum[bin(r, c)] += a;
+            if partner_outside {
+                spectrum[bin((rows - r) % rows, cols - c)] += a;
+            }
         }
-    }
+    });
     let (best, _) = spectrum
         .iter()
         .enumerate()
@@ -306,6 +367,9 @@ pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyEr
             (deg, decay_length(&acf, deg.to_radians(), S_THRESHOLD))
         })
         .collect();
+    let (dx, dy) = (acf.pitch_x_um, acf.pitch_y_um);
+    // Its buffers are gone before the spectrum for Std takes its own.
+    drop(acf);
     let decayed = lengths.iter().filter_map(|(d, l)| l.map(|l| (*d, l)));
     let fastest = decayed
         .clone()
@@ -324,7 +388,6 @@ pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyEr
         .collect();
     let mut blank_reasons = BTreeMap::new();
     let mut caveats = Vec::new();
-    let (dx, dy) = (acf.pitch_x_um, acf.pitch_y_um);
     let (wx, wy) = ((grid.cols - 1) as f64 * dx, (grid.rows - 1) as f64 * dy);
     if fastest.is_none() {
         blank_reasons.insert(

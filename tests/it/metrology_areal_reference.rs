@@ -353,3 +353,65 @@ fn the_demos_grid_functional_and_spatial_parameters_agree_with_the_references() 
         },
     );
 }
+
+/// Sal, Str and Std as the full complex transform of the padded grid gave them (the whole
+/// two-sided ACF, 16 bytes a padded lag; `surfscan analyze` at fceb3a6, report.json's
+/// `surface_grid.spatial`), before the half-plane real-to-complex autocorrelation: the change
+/// of transform may move them by rounding only.
+#[test]
+fn sal_str_std_are_those_of_the_full_complex_transform() {
+    // (grid, px, py, Sal µm, Str, Std °, fastest °, slowest °, slowest decay µm)
+    let pinned = [
+        (
+            "sur-2.grid.csv",
+            0.003484,
+            0.010452,
+            7.495274668604162,
+            0.7864294670929525,
+            0.0,
+            13.0,
+            90.0,
+            9.530765290764789,
+        ),
+        (
+            "demo.grid.csv",
+            0.0015,
+            0.01,
+            5.612738093495181,
+            0.064942667330446,
+            0.0,
+            89.5,
+            0.0,
+            86.42604814699155,
+        ),
+    ];
+    for (name, px, py, sal, str_ratio, std, fastest, slowest, slowest_um) in pinned {
+        let (z, rows, cols) = read_grid(&data(name));
+        let s = spatial_params(&HeightMap {
+            heights_um: &z,
+            rows,
+            cols,
+            pitch_x_mm: px,
+            pitch_y_mm: py,
+        })
+        .unwrap();
+        close(&format!("{name} Sal"), s.sal_um.unwrap(), sal, 1e-9, 0.0);
+        close(
+            &format!("{name} Str"),
+            s.str_ratio.unwrap(),
+            str_ratio,
+            1e-9,
+            0.0,
+        );
+        close(
+            &format!("{name} slowest decay"),
+            s.slowest_decay_um.unwrap(),
+            slowest_um,
+            1e-9,
+            0.0,
+        );
+        assert_eq!(s.std_deg, std, "{name} Std");
+        assert_eq!(s.fastest_decay_direction_deg, Some(fastest), "{name}");
+        assert_eq!(s.slowest_decay_direction_deg, Some(slowest), "{name}");
+    }
+}
