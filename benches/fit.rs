@@ -141,11 +141,12 @@ fn bench_residual_and_csv(rows: usize, cols: usize, runs: usize) {
     let h = synthetic_grid(rows, cols);
     let y = y_positions(rows);
     let (r, _, _) = fit_once(&y, &h, cols);
+    let grid = surfscan::grid::Grid::new(h.clone(), cols, PITCH_X_MM, y.clone());
     let (mut wall, mut cpu) = (Vec::new(), Vec::new());
     let mut worst = 0.0;
     for _ in 0..runs {
         let (t, c) = (Instant::now(), cpu_s());
-        worst = max_residual_mm(&r, PITCH_X_MM, &y, &h, cols);
+        worst = max_residual_mm(&r, &grid);
         wall.push(t.elapsed().as_secs_f64());
         cpu.push(cpu_s() - c);
     }

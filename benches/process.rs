@@ -337,9 +337,7 @@ fn print_floor(csv: &Path, reference_s: f64, disk_s: f64, runs: usize) {
         let sq = sq_um(&g).expect("Sq");
         between_lines(&grid, options, VMethod::Interpolate, every, sq, 0.5).expect("verdict")
     });
-    let (_, residual_cpu) = timed(runs, || {
-        max_residual_mm(&fit, PITCH_X_MM, &y, &grid.heights_um, grid.cols)
-    });
+    let (_, residual_cpu) = timed(runs, || max_residual_mm(&fit, &grid));
     let (_, copy_cpu) = timed(runs, || {
         // The bytes the disk floor wrote, copied once more through a write() into the page
         // cache of a new file (not synced): the kernel's share of the CPU.

@@ -213,22 +213,22 @@ fn characterise_profile(
     out: &Path,
 ) -> Result<(), CliError> {
     let GridInput {
-        grid,
+        mut grid,
         described,
         findings: mut warnings,
         ..
     } = input;
-    let (mut z, pitch) = (grid.heights_um, grid.pitch_x_mm);
+    let pitch = grid.pitch_x_mm;
     // Spikes, judged as a grid's lines are, and bridged when asked for.
     let rule = args.model.spikes()?;
     let exclude = args.outliers == Some(OutliersArg::Exclude);
     let lambda_c = options.apply_lambda_c.then_some(options.lambda_c_mm);
-    let outliers =
-        crate::report::sections::spikes::find(&z, z.len(), &[0], pitch, lambda_c, &rule, exclude);
+    let outliers = crate::report::sections::spikes::find(&grid, lambda_c, &rule, exclude);
     crate::report::sections::spikes::warn(&outliers, &[], pitch, &mut warnings);
     if exclude && !outliers.spikes.is_empty() {
-        z = crate::metrology::outliers::bridged_grid(&z, z.len(), &[0], &outliers.spikes).0;
+        grid = crate::metrology::outliers::bridged_grid(&grid, &outliers.spikes).0;
     }
+    let z = grid.heights_um;
     let a = analyze_line(&z, pitch, options)
         .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
     warnings.extend(crate::report::sections::lines::uncentred_warning(

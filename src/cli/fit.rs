@@ -526,7 +526,7 @@ impl<'a> Fitting<'a> {
                     let (residual, written) = std::thread::scope(|inner| {
                         let writing =
                             inner.spawn(|| self.write(&fitted.0, &fitted.1, &fitted.3 .0));
-                        let residual = self.residual(&fitted.0, &grid.heights_um);
+                        let residual = self.residual(&fitted.0, grid);
                         (residual, joined(writing))
                     });
                     let written = written?;
@@ -543,7 +543,7 @@ impl<'a> Fitting<'a> {
                     _ => None,
                 };
                 let fitted = self.fit(&grid)?;
-                let residual = self.residual(&fitted.0, &grid.heights_um);
+                let residual = self.residual(&fitted.0, &grid);
                 let judged = match early {
                     Some(judged) => judged,
                     None => self.judge(&self.fitted(&grid, &fitted.1), threshold?),
@@ -609,10 +609,9 @@ impl<'a> Fitting<'a> {
     }
 
     /// The largest residual of the surface at the data points (timed).
-    fn residual(&self, fit: &FitResult, heights_um: &[f64]) -> (f64, f64) {
+    fn residual(&self, fit: &FitResult, grid: &Grid) -> (f64, f64) {
         let t_res = Instant::now();
-        let l = &self.lines;
-        let r = max_residual_mm(fit, l.pitch_x_mm, &l.y_mm, heights_um, l.cols);
+        let r = max_residual_mm(fit, grid);
         (r, t_res.elapsed().as_secs_f64())
     }
 
@@ -645,7 +644,7 @@ impl<'a> Fitting<'a> {
         if replaced.is_empty() {
             std::borrow::Cow::Borrowed(grid)
         } else {
-            std::borrow::Cow::Owned(crate::report::sections::spikes::bridged(grid, replaced))
+            std::borrow::Cow::Owned(crate::metrology::outliers::bridged_grid(grid, replaced).0)
         }
     }
 

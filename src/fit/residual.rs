@@ -1,6 +1,7 @@
 //! How well a fitted surface meets its data: the largest distance to a data point.
 //!
-//! Layer 1 (pure logic): depends on the fit's result type and [`crate::nurbs`] evaluation.
+//! Layer 1 (pure logic): depends on the fit's result type, [`crate::grid`] (the data) and
+//! [`crate::nurbs`] evaluation.
 //!
 //! The basis functions along u are the same for every row (the parameters ū_k are shared), so
 //! they are computed once; each row then reduces the net to its iso-curve and evaluates it at
@@ -18,24 +19,19 @@
 //! the scalar loop does it (no FMA, the same order), so the bits are the same.
 
 use super::FitResult;
+use crate::grid::Grid;
 use crate::nurbs::{NurbsSurface, UBasis};
 
 /// Grids with at least this many points are split over threads.
 const PARALLEL_POINTS: usize = 100_000;
 
-/// Largest distance |S(ū_k, v̄_l) − Q(k, l)| in mm over all data points of the grid the result
-/// was fitted to. Returns infinity when the grid's shape does not match the result.
-pub fn max_residual_mm(
-    result: &FitResult,
-    pitch_x_mm: f64,
-    y_mm: &[f64],
-    heights_um: &[f64],
-    cols: usize,
-) -> f64 {
-    let rows = y_mm.len();
+/// Largest distance |S(ū_k, v̄_l) − Q(k, l)| in mm over all data points of `grid`, the grid the
+/// result was fitted to. Returns infinity when the grid's shape does not match the result.
+pub fn max_residual_mm(result: &FitResult, grid: &Grid) -> f64 {
+    let (rows, cols) = (grid.y_mm.len(), grid.cols);
     if cols != result.params_u.len()
         || rows != result.params_v.len()
-        || heights_um.len() != rows * cols
+        || grid.heights_um.len() != rows * cols
     {
         return f64::INFINITY;
     }
@@ -48,24 +44,24 @@ pub fn max_residual_mm(
     } else {
         1
     };
-    let grid = Grid {
+    let beside = Beside {
         surface: &result.surface,
         params_u: &result.params_u,
         params_v: &result.params_v,
-        pitch_x_mm,
-        y_mm,
-        heights_um,
+        pitch_x_mm: grid.pitch_x_mm,
+        y_mm: &grid.y_mm,
+        heights_um: &grid.heights_um,
         cols,
     };
     let worst_sq = if threads <= 1 {
-        grid.worst_squared(0..cols)
+        beside.worst_squared(0..cols)
     } else {
         let chunk = cols.div_ceil(threads);
         std::thread::scope(|scope| {
-            let grid = &grid;
+            let beside = &beside;
             let handles: Vec<_> = (0..cols)
                 .step_by(chunk)
-                .map(|lo| scope.spawn(move || grid.worst_squared(lo..(lo + chunk).min(cols))))
+                .map(|lo| scope.spawn(move || beside.worst_squared(lo..(lo + chunk).min(cols))))
                 .collect();
             handles
                 .into_iter()
@@ -77,7 +73,7 @@ pub fn max_residual_mm(
 }
 
 /// The data grid beside the surface fitted to it.
-struct Grid<'a> {
+struct Beside<'a> {
     surface: &'a NurbsSurface,
     params_u: &'a [f64],
     params_v: &'a [f64],
@@ -87,7 +83,7 @@ struct Grid<'a> {
     cols: usize,
 }
 
-impl Grid<'_> {
+impl Beside<'_> {
     /// Largest squared distance over the data columns `columns` of every row, computed by the
     /// AVX2 loop when the running CPU has it.
     fn worst_squared(&self, columns: std::ops::Range<usize>) -> f64 {
@@ -151,18 +147,18 @@ fn parts<'a>(
 /// poles, or a padded point (x, y, z, 0), is one vector, and every lane is multiplied and
 /// added as the scalar loop does it
 /// (`_mm256_mul_pd` then `_mm256_add_pd`: two roundings, no FMA), in the same order, so each
-/// point has the bits of [`Grid::worst_squared_in`]'s.
+/// point has the bits of [`Beside::worst_squared_in`]'s.
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{parts, Grid};
+    use super::{parts, Beside};
     use crate::nurbs::{basis_funs, find_span, RowY, UBasis};
     use std::arch::x86_64::*;
 
     /// Degrees up to this have their basis along v in stack buffers (beyond: the scalar loop).
     const MAX_DEGREE: usize = 15;
 
-    impl Grid<'_> {
-        /// [`Grid::worst_squared_in`] in 256-bit vectors; `None` for a surface of a degree above
+    impl Beside<'_> {
+        /// [`Beside::worst_squared_in`] in 256-bit vectors; `None` for a surface of a degree above
         /// [`MAX_DEGREE`] (the caller then runs the scalar loop).
         ///
         /// # Safety
@@ -375,7 +371,7 @@ mod tests {
             })
             .collect();
         let r = fit_grid(pitch, &y, &h, cols, FitOptions::default()).unwrap();
-        let grid = Grid {
+        let grid = Beside {
             surface: &r.surface,
             params_u: &r.params_u,
             params_v: &r.params_v,
@@ -411,7 +407,7 @@ mod tests {
         )
         .unwrap();
         assert!(!general.net().is_separable());
-        let grid = Grid {
+        let grid = Beside {
             surface: &general,
             ..grid
         };

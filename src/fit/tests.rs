@@ -28,6 +28,17 @@ fn ys(rows: usize, pitch: f64) -> Vec<f64> {
     (0..rows).map(|l| l as f64 * pitch).collect()
 }
 
+/// The grid of heights `h` (µm, `y.len() × cols`) at x pitch `pitch_x_mm`.
+fn grid(pitch_x_mm: f64, y: &[f64], h: &[f64], cols: usize) -> crate::grid::Grid {
+    crate::grid::Grid {
+        heights_um: h.to_vec(),
+        cols,
+        pitch_x_mm,
+        y_mm: y.to_vec(),
+        ..Default::default()
+    }
+}
+
 #[test]
 fn averaged_knots_match_hand_values() {
     let k = averaged_knots(&[0.0, 0.25, 0.5, 0.75, 1.0], 2);
@@ -150,7 +161,7 @@ fn surface_passes_through_every_point_of_a_rough_grid() {
     let h = rough_grid(rows, cols, 42);
     let y = ys(rows, 0.01);
     let r = fit_grid(0.0005, &y, &h, cols, FitOptions::default()).unwrap();
-    let res = max_residual_mm(&r, 0.0005, &y, &h, cols);
+    let res = max_residual_mm(&r, &grid(0.0005, &y, &h, cols));
     assert!(res <= 1e-10, "max residual {res} mm");
     // Spot-check with the independent single-point evaluator.
     let s = r.surface.evaluate(r.params_u[777], r.params_v[13]);
@@ -179,7 +190,7 @@ fn incremental_equals_batch_bit_for_bit_and_provisional_after_q_plus_1_lines() {
             Ok(p) => {
                 assert!(l + 1 >= 6);
                 assert_eq!(p.surface.count_v(), l + 1);
-                let res = max_residual_mm(&p, 0.0005, &y[..=l], &h[..(l + 1) * cols], cols);
+                let res = max_residual_mm(&p, &grid(0.0005, &y[..=l], &h[..(l + 1) * cols], cols));
                 assert!(res <= 1e-10, "provisional residual {res}");
             }
             Err(e) => panic!("unexpected {e}"),
@@ -367,7 +378,7 @@ fn residual_reusing_the_basis_equals_per_point_evaluation_to_the_bit() {
             },
         )
         .unwrap();
-        let fast = max_residual_mm(&r, 0.0005, &y, &h, cols);
+        let fast = max_residual_mm(&r, &grid(0.0005, &y, &h, cols));
         let slow = residual_by_curve_evaluation(&r, 0.0005, &y, &h);
         assert_eq!(
             fast.to_bits(),
@@ -386,7 +397,7 @@ fn residual_reusing_the_basis_equals_per_point_evaluation_to_the_bit() {
     let h = rough_grid(7, 20, 1);
     let r = fit_grid(0.0005, &ys(7, 0.01), &h, 20, FitOptions::default()).unwrap();
     assert_eq!(
-        max_residual_mm(&r, 0.0005, &ys(7, 0.01), &h[..139], 20),
+        max_residual_mm(&r, &grid(0.0005, &ys(7, 0.01), &h[..139], 20)),
         f64::INFINITY
     );
 }

@@ -22,10 +22,11 @@
 //! its nearest unflagged neighbours (or holds the neighbour's height at an end of the line); the
 //! caller decides whether and where (characterisation, fit) and says so in its recipe.
 //!
-//! Depends on [`super::filter`] and [`super::MetrologyError`].
+//! Depends on [`super::filter`], [`super::MetrologyError`] and [`crate::grid`] (a grid's lines).
 
 use super::filter;
 use super::{check_heights, check_pitch, MetrologyError};
+use crate::grid::Grid;
 use serde::Serialize;
 
 /// 1.4826 = 1/Φ⁻¹(3/4): MAD × this is σ for Gaussian data.
@@ -278,24 +279,26 @@ pub struct LineSpike {
     pub spike: Spike,
 }
 
-/// The spikes of every line of a row-major grid (`index` names the lines), judged on each
-/// line's roughness profile ([`spike_roughness`] with `lambda_c_mm`). A line that cannot be
-/// judged (e.g. shorter than the filter needs) is named in the second list with the reason.
+/// The spikes of every line of `grid` (named by their index), judged on each line's
+/// roughness profile ([`spike_roughness`] with `lambda_c_mm`). A line that cannot be judged
+/// (e.g. shorter than the filter needs) is named in the second list with the reason.
 pub fn find_grid_spikes(
-    heights_um: &[f64],
-    cols: usize,
-    index: &[u32],
-    pitch_mm: f64,
+    grid: &Grid,
     lambda_c_mm: Option<f64>,
     options: &SpikeOptions,
 ) -> (Vec<LineSpike>, Vec<(u32, String)>) {
+    let pitch_mm = grid.pitch_x_mm;
     // Lines are independent: they are judged in parallel over the available cores, one run
     // of consecutive rows per thread, and the results joined in row order.
-    let rows: Vec<(usize, &[f64])> = heights_um.chunks(cols.max(1)).enumerate().collect();
+    let rows: Vec<(usize, &[f64])> = grid
+        .heights_um
+        .chunks(grid.cols.max(1))
+        .enumerate()
+        .collect();
     let judge = |part: &[(usize, &[f64])]| -> Vec<(u32, Result<SpikeScan, String>)> {
         part.iter()
             .map(|&(row, z)| {
-                let line = index.get(row).copied().unwrap_or(row as u32);
+                let line = grid.index_of(row);
                 let found = spike_roughness(z, pitch_mm, lambda_c_mm)
                     .and_then(|r| find_spikes(&r, z, pitch_mm, options))
                     .map_err(|e| e.to_string());
@@ -322,7 +325,7 @@ pub fn find_grid_spikes(
                     h.join().unwrap_or_else(|_| {
                         part.iter()
                             .map(|&(row, _)| {
-                                let line = index.get(row).copied().unwrap_or(row as u32);
+                                let line = grid.index_of(row);
                                 let reason = "internal: the spike check panicked; report this with the input";
                                 (line, Err(reason.to_string()))
                             })
@@ -343,18 +346,16 @@ pub fn find_grid_spikes(
     (spikes, failed)
 }
 
-/// A copy of the grid with every spike of `spikes` bridged ([`bridge`]); `index` maps the
-/// spikes' line numbers to rows. Returns the grid and how many points changed.
-pub fn bridged_grid(
-    heights_um: &[f64],
-    cols: usize,
-    index: &[u32],
-    spikes: &[LineSpike],
-) -> (Vec<f64>, usize) {
-    let mut out = heights_um.to_vec();
+/// A copy of `grid` with every spike of `spikes` bridged ([`bridge`]), found by the index of
+/// its line. Returns the grid and how many points changed.
+pub fn bridged_grid(grid: &Grid, spikes: &[LineSpike]) -> (Grid, usize) {
+    let mut out = Grid {
+        heights_um: grid.heights_um.clone(),
+        ..grid.layout()
+    };
     let mut changed = 0;
-    for (row, z) in out.chunks_mut(cols.max(1)).enumerate() {
-        let line = index.get(row).copied().unwrap_or(row as u32);
+    for (row, z) in out.heights_um.chunks_mut(grid.cols.max(1)).enumerate() {
+        let line = grid.index_of(row);
         let mine: Vec<Spike> = spikes
             .iter()
             .filter(|s| s.line == line)
@@ -462,25 +463,21 @@ mod tests {
         let cols = 500;
         let mut z: Vec<f64> = (0..3).flat_map(|_| rough(cols)).collect();
         z[cols + 200] += 80.0;
-        let index = [7, 8, 9];
-        let (spikes, failed) =
-            find_grid_spikes(&z, cols, &index, 0.001, None, &SpikeOptions::default());
+        let grid = Grid {
+            index: vec![7, 8, 9],
+            ..Grid::new(z.clone(), cols, 0.001, vec![0.0, 0.01, 0.02])
+        };
+        let (spikes, failed) = find_grid_spikes(&grid, None, &SpikeOptions::default());
         assert!(failed.is_empty());
         assert_eq!(spikes.len(), 1);
         assert_eq!((spikes[0].line, spikes[0].spike.peak), (8, 200));
-        let (bridged, changed) = bridged_grid(&z, cols, &index, &spikes);
+        let (bridged, changed) = bridged_grid(&grid, &spikes);
+        let bridged = bridged.heights_um;
         assert_eq!(changed, 1);
         assert_eq!(bridged[cols + 200], 0.5 * (z[cols + 199] + z[cols + 201]));
         assert!(z[cols + 200] - bridged[cols + 200] > 70.0);
         // A line too short for its filter is named, not dropped silently.
-        let (_, failed) = find_grid_spikes(
-            &z,
-            cols,
-            &index,
-            0.001,
-            Some(f64::NAN),
-            &SpikeOptions::default(),
-        );
+        let (_, failed) = find_grid_spikes(&grid, Some(f64::NAN), &SpikeOptions::default());
         assert_eq!(failed.len(), 3);
     }
 
@@ -501,7 +498,11 @@ mod tests {
         z[5 * cols + 20] = f64::INFINITY;
         let index: Vec<u32> = (0..rows as u32).map(|r| 40 + 2 * r).collect();
         let options = SpikeOptions::default();
-        let (spikes, failed) = find_grid_spikes(&z, cols, &index, 0.001, None, &options);
+        let grid = Grid {
+            index: index.clone(),
+            ..Grid::new(z.clone(), cols, 0.001, vec![0.0; rows])
+        };
+        let (spikes, failed) = find_grid_spikes(&grid, None, &options);
         let mut want_spikes = Vec::new();
         let mut want_failed = Vec::new();
         for (row, line) in z.chunks(cols).zip(index.iter().copied()) {

@@ -90,28 +90,19 @@ pub struct FittedModel {
 
 /// Fits `grid` as `recipe` says.
 pub fn fit_model(grid: &Grid, recipe: &ModelRecipe) -> Result<FittedModel, MethodError> {
-    let (heights_um, cols) = (&grid.heights_um[..], grid.cols);
     let (bridged, replaced) = match &recipe.replace_spikes {
         Some(rule) => {
-            let (spikes, _) = find_grid_spikes(
-                heights_um,
-                cols,
-                &grid.index,
-                grid.pitch_x_mm,
-                recipe.lambda_c_mm,
-                rule,
-            );
-            let (bridged, _) = bridged_grid(heights_um, cols, &grid.index, &spikes);
-            (Some(bridged), spikes)
+            let (spikes, _) = find_grid_spikes(grid, recipe.lambda_c_mm, rule);
+            (Some(bridged_grid(grid, &spikes).0), spikes)
         }
         None => (None, Vec::new()),
     };
-    let z = bridged.as_deref().unwrap_or(heights_um);
+    let z = &bridged.as_ref().unwrap_or(grid).heights_um;
     let fit = fit_grid_with(
         grid.pitch_x_mm,
         &grid.y_mm,
         z,
-        cols,
+        grid.cols,
         recipe.degrees,
         recipe.method,
     )?;

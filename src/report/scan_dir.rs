@@ -301,7 +301,7 @@ pub fn fit_for_report(
     let fit_s = t.elapsed().as_secs_f64();
     let summary = fit.as_ref().ok().map(|m| {
         let f = &m.fit;
-        let residual = max_residual_mm(f, grid.pitch_x_mm, &grid.y_mm, &grid.heights_um, grid.cols);
+        let residual = max_residual_mm(f, grid);
         FitSummary::new(
             f,
             GridShape {

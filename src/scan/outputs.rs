@@ -296,13 +296,7 @@ pub fn write_outputs(
     let residual = if lines.is_empty() {
         f64::NAN
     } else {
-        max_residual_mm(
-            &fit,
-            grid.pitch_x_mm,
-            &grid.y_mm,
-            &grid.heights_um,
-            grid.cols,
-        )
+        max_residual_mm(&fit, &grid)
     };
     let cols = grid.cols;
     drop(grid);

@@ -133,7 +133,7 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
             ));
         }
         let bridged = (ctx.options.exclude_spikes && !spikes.spikes.is_empty())
-            .then(|| spikes::bridged(grid, &spikes.spikes));
+            .then(|| crate::metrology::outliers::bridged_grid(grid, &spikes.spikes).0);
         let input = SectionInput {
             characterised: bridged.as_ref().unwrap_or(grid),
             ..input

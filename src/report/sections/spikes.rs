@@ -8,7 +8,7 @@
 
 use super::SectionInput;
 use crate::grid::Grid;
-use crate::metrology::outliers::{bridged_grid, find_grid_spikes, LineSpike, SpikeOptions};
+use crate::metrology::outliers::{find_grid_spikes, LineSpike, SpikeOptions};
 use crate::numfmt::{fmt, line_label, sig, Quantity};
 use crate::report::document::{LineNotJudged, OutliersReport};
 
@@ -18,33 +18,25 @@ const LISTED: usize = 20;
 /// Finds the spikes of `grid`'s lines on the roughness profile the lines are evaluated on
 /// (the λc roughness when the lines are filtered, else the heights minus their line).
 pub fn section(input: &SectionInput<'_>) -> OutliersReport {
-    let (grid, ctx) = (input.grid, input.ctx);
-    let o = &ctx.line_options;
+    let o = &input.ctx.line_options;
     find(
-        &grid.heights_um,
-        grid.cols,
-        &grid.index,
-        grid.pitch_x_mm,
+        input.grid,
         o.apply_lambda_c.then_some(o.lambda_c_mm),
-        &ctx.options.spikes,
-        ctx.options.exclude_spikes,
+        &input.ctx.options.spikes,
+        input.ctx.options.exclude_spikes,
     )
 }
 
-/// The spikes of the rows of `heights_um` (`cols` points each, line indices `index`, `pitch_mm`
-/// apart) by `rule`, judged on the λc roughness when `lambda_c_mm` is given, as the report
-/// names them: the rule, the policy (`exclude` when they are to be bridged, else `flag`),
-/// every spike and the lines that could not be judged.
+/// The spikes of `grid`'s lines by `rule`, judged on the λc roughness when `lambda_c_mm` is
+/// given, as the report names them: the rule, the policy (`exclude` when they are to be
+/// bridged, else `flag`), every spike and the lines that could not be judged.
 pub fn find(
-    heights_um: &[f64],
-    cols: usize,
-    index: &[u32],
-    pitch_mm: f64,
+    grid: &Grid,
     lambda_c_mm: Option<f64>,
     rule: &SpikeOptions,
     exclude: bool,
 ) -> OutliersReport {
-    let (spikes, failed) = find_grid_spikes(heights_um, cols, index, pitch_mm, lambda_c_mm, rule);
+    let (spikes, failed) = find_grid_spikes(grid, lambda_c_mm, rule);
     OutliersReport {
         rule: rule.describe(),
         policy: if exclude { "exclude" } else { "flag" },
@@ -101,14 +93,5 @@ pub fn warn(
             line_label(l.line),
             l.reason
         ));
-    }
-}
-
-/// A copy of `grid` with `spikes` bridged.
-pub fn bridged(grid: &Grid, spikes: &[LineSpike]) -> Grid {
-    let (heights_um, _) = bridged_grid(&grid.heights_um, grid.cols, &grid.index, spikes);
-    Grid {
-        heights_um,
-        ..grid.layout()
     }
 }
