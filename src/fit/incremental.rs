@@ -39,6 +39,19 @@ pub(super) fn secs(t: Instant) -> f64 {
     t.elapsed().as_secs_f64()
 }
 
+/// What the checks of one row found, for [`IncrementalFitter::row_error`].
+#[derive(Debug, Clone, Copy)]
+struct RowChecks {
+    /// A chord along u is zero or not finite.
+    bad_u: bool,
+    /// The cumulative u chord at the row's end (not finite when the chords overflowed).
+    u_total: f64,
+    /// A chord along v to the previous line is zero or not finite.
+    bad_v: bool,
+    /// The squared y step to the previous line, mm².
+    dy2: f64,
+}
+
 impl IncrementalFitter {
     /// A fitter with no lines.
     pub fn new(options: FitOptions) -> Self {
@@ -204,7 +217,13 @@ impl IncrementalFitter {
             }
         }
         if bad_u || !acc.is_finite() || bad_v || bad_cum {
-            let err = self.row_error(line, y_mm, pitch, dy2, bad_u, acc, bad_v);
+            let checks = RowChecks {
+                bad_u,
+                u_total: acc,
+                bad_v,
+                dy2,
+            };
+            let err = self.row_error(line, y_mm, pitch, checks);
             self.z_mm.truncate(base);
             return Err(err);
         }
@@ -232,18 +251,14 @@ impl IncrementalFitter {
     /// cumulative column chords) and the u chords in `scratch` (cumulated only when they were
     /// all valid). Reports the first
     /// failure in the order: u chord, u total, v chord, v cumulative chord.
-    #[allow(clippy::too_many_arguments)]
     #[cold]
-    fn row_error(
-        &self,
-        line: usize,
-        y_mm: f64,
-        pitch: f64,
-        dy2: f64,
-        bad_u: bool,
-        acc: f64,
-        bad_v: bool,
-    ) -> FitError {
+    fn row_error(&self, line: usize, y_mm: f64, pitch: f64, checks: RowChecks) -> FitError {
+        let RowChecks {
+            bad_u,
+            u_total: acc,
+            bad_v,
+            dy2,
+        } = checks;
         let n = self.scratch.len();
         let base = line * n;
         let zrow = &self.z_mm[base..base + n];

@@ -144,21 +144,38 @@ pub struct ScanFacts<'a> {
     pub completing: bool,
 }
 
+/// A scan's lines as they are characterised.
+#[derive(Debug, Clone, Copy)]
+pub struct ScanLines<'a> {
+    /// The scan directory.
+    pub dir: &'a Path,
+    /// The grid read from the lines.
+    pub grid: &'a Grid,
+    /// The lines whose files are complete.
+    pub lines: &'a [StoredLine],
+    /// The indices of the lines whose files are not.
+    pub incomplete: &'a [u32],
+    /// What the journal says of the scan, if it has one.
+    pub facts: Option<ScanFacts<'a>>,
+}
+
 /// Characterises a scan's lines with `model` (the surface fitted through them) and writes the
 /// files into `out`: the work behind both the runner's end of scan and
 /// [`characterise_scan`].
-#[allow(clippy::too_many_arguments)]
 pub fn characterise_scan_lines(
-    dir: &Path,
-    grid: &Grid,
-    lines: &[StoredLine],
-    incomplete: &[u32],
-    facts: Option<ScanFacts<'_>>,
+    scan_lines: ScanLines<'_>,
     model: Model<'_>,
     fit: Option<FitSummary>,
     options: &ScanAnalysisOptions,
     mut warnings: Vec<String>,
 ) -> Result<ScanOutputs, ReportError> {
+    let ScanLines {
+        dir,
+        grid,
+        lines,
+        incomplete,
+        facts,
+    } = scan_lines;
     let first = lines.first().ok_or_else(|| InputError::NoLines {
         dir: dir.to_path_buf(),
         incomplete: incomplete.to_vec(),
@@ -355,11 +372,13 @@ pub fn characterise_scan(
         fit_s,
     };
     characterise_scan_lines(
-        dir,
-        grid,
-        lines,
-        incomplete,
-        facts,
+        ScanLines {
+            dir,
+            grid,
+            lines,
+            incomplete,
+            facts,
+        },
         model,
         summary,
         options,
@@ -423,11 +442,13 @@ impl Characterise for ScanCharacteriser {
         };
         let grid = grid_of_lines(scan.lines, &scan.dir.join("lines"))?;
         let out = characterise_scan_lines(
-            scan.dir,
-            &grid,
-            scan.lines,
-            &[],
-            Some(facts),
+            ScanLines {
+                dir: scan.dir,
+                grid: &grid,
+                lines: scan.lines,
+                incomplete: &[],
+                facts: Some(facts),
+            },
             model,
             Some(scan.summary.clone()),
             &options,
