@@ -31,6 +31,8 @@ use crate::metrology::model::ModelCurveBac;
 use crate::metrology::params::RkFamily;
 use crate::metrology::{check_pitch, MetrologyError};
 use crate::numfmt::{fmt, Quantity};
+use plotters::chart::MeshStyle;
+use plotters::coord::ranged1d::ValueFormatter;
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -82,6 +84,36 @@ fn tick(v: f64) -> String {
         return s;
     }
     s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// The mesh every chart here draws on `chart`: the axes described as `x_desc` and `y_desc`,
+/// labels in the bundled font, ticks written by [`tick`], a light grid. A caller adds what
+/// its chart differs in (label counts, no grid) before drawing it.
+fn mesh<'a, 'b, X, Y, DB>(
+    chart: &'b mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    x_desc: &'b str,
+    y_desc: &'b str,
+) -> MeshStyle<'a, 'b, X, Y, DB>
+where
+    DB: DrawingBackend,
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    let mut style = chart.configure_mesh();
+    style
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .label_style(font(13))
+        .axis_desc_style(font(14))
+        .x_label_formatter(&tick_label)
+        .y_label_formatter(&tick_label)
+        .light_line_style(RGBColor(235, 235, 235));
+    style
+}
+
+/// [`tick`] as plotters' label formatter.
+fn tick_label(v: &f64) -> String {
+    tick(*v)
 }
 
 /// Dark blue of the measured data and curves (Okabe–Ito "blue").
@@ -259,7 +291,7 @@ where
         .disable_x_axis()
         .y_labels(6)
         .y_label_style(font(12))
-        .y_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&tick_label)
         .y_desc(label)
         .axis_desc_style(font(13))
         .draw()
@@ -393,15 +425,7 @@ fn material_ratio_chart<'a, DB: DrawingBackend>(
         .y_label_area_size(80)
         .build_cartesian_2d(0f64..100f64, lo..hi)
         .map_err(|e| e.to_string())?;
-    chart
-        .configure_mesh()
-        .x_desc(x_desc)
-        .x_label_formatter(&|v| tick(*v))
-        .y_desc(y_desc)
-        .label_style(font(13))
-        .axis_desc_style(font(14))
-        .y_label_formatter(&|v| tick(*v))
-        .light_line_style(RGBColor(235, 235, 235))
+    mesh(&mut chart, x_desc, y_desc)
         .draw()
         .map_err(|e| e.to_string())?;
     Ok(chart)
@@ -576,17 +600,13 @@ where
         .y_label_area_size(80)
         .build_cartesian_2d((p_lo..p_hi).log_scale(), 0f64..a_hi.min(100.0))
         .map_err(|e| e.to_string())?;
-    chart
-        .configure_mesh()
-        .x_desc("nominal pressure (MPa, logarithmic)")
-        .y_desc("real contact area (% of the nominal area)")
-        .label_style(font(13))
-        .axis_desc_style(font(14))
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| tick(*v))
-        .light_line_style(RGBColor(235, 235, 235))
-        .draw()
-        .map_err(|e| e.to_string())?;
+    mesh(
+        &mut chart,
+        "nominal pressure (MPa, logarithmic)",
+        "real contact area (% of the nominal area)",
+    )
+    .draw()
+    .map_err(|e| e.to_string())?;
     chart
         .draw_series(LineSeries::new(
             points.iter().map(|p| (p.nominal_pressure_mpa, p.area_pct)),
@@ -813,15 +833,8 @@ where
         .y_label_area_size(MAP_Y_AREA)
         .build_cartesian_2d(0f64..w, 0f64..y_top.max(h))
         .map_err(|e| e.to_string())?;
-    chart
-        .configure_mesh()
+    mesh(&mut chart, "x (mm)", "y (mm)")
         .disable_mesh()
-        .x_desc("x (mm)")
-        .y_desc("y (mm)")
-        .label_style(font(13))
-        .axis_desc_style(font(14))
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| tick(*v))
         .x_labels(8)
         .y_labels(4)
         .draw()
@@ -1023,17 +1036,13 @@ where
         .y_label_area_size(y_area)
         .build_cartesian_2d(x0..x1, z0..z1)
         .map_err(|e| e.to_string())?;
-    chart
-        .configure_mesh()
-        .x_desc(if residual.is_empty() { "x (mm)" } else { "" })
-        .y_desc("height (µm)")
-        .label_style(font(13))
-        .axis_desc_style(font(14))
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| tick(*v))
-        .light_line_style(RGBColor(235, 235, 235))
-        .draw()
-        .map_err(|e| e.to_string())?;
+    mesh(
+        &mut chart,
+        if residual.is_empty() { "x (mm)" } else { "" },
+        "height (µm)",
+    )
+    .draw()
+    .map_err(|e| e.to_string())?;
     chart
         .draw_series(LineSeries::new(
             model.iter().copied(),
@@ -1073,15 +1082,8 @@ where
             .y_label_area_size(y_area)
             .build_cartesian_2d(x0..x1, -r..r)
             .map_err(|e| e.to_string())?;
-        res.configure_mesh()
-            .x_desc("x (mm)")
-            .y_desc("model − data (µm)")
-            .label_style(font(13))
-            .axis_desc_style(font(14))
-            .x_label_formatter(&|v| tick(*v))
-            .y_label_formatter(&|v| tick(*v))
+        mesh(&mut res, "x (mm)", "model − data (µm)")
             .y_labels(5)
-            .light_line_style(RGBColor(235, 235, 235))
             .draw()
             .map_err(|e| e.to_string())?;
         res.draw_series(LineSeries::new(
@@ -1145,36 +1147,6 @@ pub struct AssessedProfile<'a> {
     pub kind: &'static str,
 }
 
-/// Points of a profile drawn across `buckets` columns: in each run of ordinates its lowest
-/// and highest, in the order they occur, so that no peak or valley is lost at display
-/// resolution; `(x_mm, z_um)` with x from the first ordinate. A profile of at most
-/// 2 × `buckets` ordinates is returned whole.
-pub fn decimate_keeping_extremes(z: &[f64], pitch_mm: f64, buckets: usize) -> Vec<(f64, f64)> {
-    let at = |i: usize| (i as f64 * pitch_mm, z[i]);
-    if z.len() <= 2 * buckets.max(1) {
-        return (0..z.len()).map(at).collect();
-    }
-    let run = z.len().div_ceil(buckets.max(1));
-    let mut out = Vec::with_capacity(2 * buckets);
-    for start in (0..z.len()).step_by(run) {
-        let end = (start + run).min(z.len());
-        let (mut lo, mut hi) = (start, start);
-        for i in start..end {
-            if z[i] < z[lo] {
-                lo = i;
-            }
-            if z[i] > z[hi] {
-                hi = i;
-            }
-        }
-        out.push(at(lo.min(hi)));
-        if lo != hi {
-            out.push(at(lo.max(hi)));
-        }
-    }
-    out
-}
-
 /// The assessed profile on `area`: the ordinates at display resolution (extremes kept), the
 /// mean line, and the sampling lengths marked and numbered.
 fn draw_assessed_profile<DB: DrawingBackend>(
@@ -1204,17 +1176,13 @@ where
         )
         .build_cartesian_2d(0f64..length.max(p.pitch_mm), lo..hi)
         .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("x along the evaluation length (mm)")
-        .y_desc("height (µm)")
-        .label_style(font(13))
-        .axis_desc_style(font(14))
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| tick(*v))
-        .light_line_style(RGBColor(235, 235, 235))
-        .draw()
-        .map_err(err)?;
+    mesh(
+        &mut chart,
+        "x along the evaluation length (mm)",
+        "height (µm)",
+    )
+    .draw()
+    .map_err(err)?;
     let grey = RGBColor(110, 110, 110);
     chart
         .draw_series(LineSeries::new(
@@ -1222,10 +1190,15 @@ where
             grey.stroke_width(1),
         ))
         .map_err(err)?;
-    let columns = area.dim_in_pixel().0 as usize;
+    let points: Vec<(f64, f64)> = (0..p.z_um.len())
+        .map(|i| (i as f64 * p.pitch_mm, p.z_um[i]))
+        .collect();
+    let columns = area.dim_in_pixel().0;
     chart
         .draw_series(LineSeries::new(
-            decimate_keeping_extremes(p.z_um, p.pitch_mm, columns),
+            extremes_per_column(&points, (0.0, length), columns)
+                .iter()
+                .copied(),
             DATA.stroke_width(1),
         ))
         .map_err(err)?;
@@ -1464,30 +1437,6 @@ mod tests {
         assert_eq!(s.plot_h, 520);
         assert!(s.y_over_x < 1.0 && s.plot_w >= 160, "{s:?}");
         assert!(map_note(&s).contains("x stretched"), "{}", map_note(&s));
-    }
-
-    /// Decimated to display resolution, a profile keeps every run's lowest and highest
-    /// ordinate in order: its global extremes, a one-point spike, and at most two points per
-    /// column.
-    #[test]
-    fn decimation_keeps_the_extremes_of_every_column() {
-        let mut z: Vec<f64> = (0..100_000).map(|i| (i as f64 * 0.01).sin()).collect();
-        z[54_321] = 7.0;
-        z[12_345] = -9.0;
-        let d = decimate_keeping_extremes(&z, 0.0005, 1000);
-        assert!(d.len() <= 2000, "{}", d.len());
-        assert!(d.windows(2).all(|w| w[0].0 < w[1].0), "x in order");
-        assert!(d.contains(&(54_321.0 * 0.0005, 7.0)));
-        assert!(d.contains(&(12_345.0 * 0.0005, -9.0)));
-        let (lo, hi) = d
-            .iter()
-            .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.1), b.max(p.1)));
-        assert_eq!((lo, hi), (-9.0, 7.0));
-        // Short profiles are drawn whole.
-        assert_eq!(
-            decimate_keeping_extremes(&z[..1500], 0.0005, 1000).len(),
-            1500
-        );
     }
 
     /// A 4 × 6 grid on 3 × 2 pixels: each pixel the mean of a 2 × 2 block, the top pixel row
