@@ -153,6 +153,20 @@ pub fn qif(r: &Exported) -> String {
             .format("%Y-%m-%dT%H:%M:%SZ")
             .to_string()
     };
+    // One measurement: its description, status, characteristic item, time and its value
+    // elements.
+    let mut measure = |description: String,
+                       status: &str,
+                       item: u64,
+                       time: String,
+                       value: String| {
+        n_measurements += 1;
+        let _ = write!(
+            measurements,
+            "          <UserDefinedLinearCharacteristicMeasurement id=\"{}\">\n            <Description>{description}</Description>\n            <Status><CharacteristicStatusEnum>{status}</CharacteristicStatusEnum></Status>\n            <CharacteristicItemId>{item}</CharacteristicItemId>\n            <TimeStamp>{time}</TimeStamp>\n            <MeasurementDeviceIds n=\"1\"><Id>{device}</Id></MeasurementDeviceIds>\n{value}          </UserDefinedLinearCharacteristicMeasurement>\n",
+            ids.next()
+        );
+    };
     for (c, ids_c) in r.characteristics.iter().zip(&ch) {
         let finite: Vec<f64> = c
             .values_um
@@ -160,45 +174,30 @@ pub fn qif(r: &Exported) -> String {
             .filter_map(|v| v.filter(|v| v.is_finite()))
             .collect();
         if let Some(mean) = c.mean_um.filter(|m| m.is_finite()) {
-            n_measurements += 1;
-            let m = &mut measurements;
-            let _ = writeln!(
-                m,
-                "          <UserDefinedLinearCharacteristicMeasurement id=\"{}\">",
-                ids.next()
-            );
-            let _ = writeln!(
-                m,
-                "            <Description>{} of the surface: the mean of {} lines</Description>",
-                esc(&c.parameter),
-                c.n
-            );
-            let _ = writeln!(m, "            <Status><CharacteristicStatusEnum>{}</CharacteristicStatusEnum></Status>", characteristic_status(c.verdict));
-            let _ = writeln!(
-                m,
-                "            <CharacteristicItemId>{}</CharacteristicItemId>",
-                ids_c.item
-            );
-            let _ = writeln!(
-                m,
-                "            <TimeStamp>{}</TimeStamp>",
-                time(r.finished_at)
-            );
-            let _ = writeln!(m, "            <MeasurementDeviceIds n=\"1\"><Id>{device}</Id></MeasurementDeviceIds>");
             let u = c
                 .expanded_u_um
                 .filter(|u| u.is_finite())
                 .map(|u| format!(" combinedUncertainty=\"{}\"", dec(u)))
                 .unwrap_or_default();
-            let _ = writeln!(m, "            <Value{u}>{}</Value>", dec(mean));
+            let mut value = format!("            <Value{u}>{}</Value>\n", dec(mean));
             if let (Some(hi), Some(lo)) = (
                 finite.iter().copied().reduce(f64::max),
                 finite.iter().copied().reduce(f64::min),
             ) {
-                let _ = writeln!(m, "            <MaxValue>{}</MaxValue>", dec(hi));
-                let _ = writeln!(m, "            <MinValue>{}</MinValue>", dec(lo));
+                let _ = writeln!(value, "            <MaxValue>{}</MaxValue>", dec(hi));
+                let _ = writeln!(value, "            <MinValue>{}</MinValue>", dec(lo));
             }
-            let _ = writeln!(m, "          </UserDefinedLinearCharacteristicMeasurement>");
+            measure(
+                format!(
+                    "{} of the surface: the mean of {} lines",
+                    esc(&c.parameter),
+                    c.n
+                ),
+                characteristic_status(c.verdict),
+                ids_c.item,
+                time(r.finished_at),
+                value,
+            );
         }
         for (k, line) in r.lines.iter().enumerate() {
             let Some(v) = c
@@ -210,30 +209,18 @@ pub fn qif(r: &Exported) -> String {
             else {
                 continue;
             };
-            n_measurements += 1;
-            let m = &mut measurements;
-            let _ = writeln!(
-                m,
-                "          <UserDefinedLinearCharacteristicMeasurement id=\"{}\">",
-                ids.next()
+            measure(
+                format!(
+                    "{} of line {} (y = {} mm)",
+                    esc(&c.parameter),
+                    line.number,
+                    dec(line.y_mm)
+                ),
+                line_status(c, line.number),
+                ids_c.item,
+                time(line.time),
+                format!("            <Value>{}</Value>\n", dec(v)),
             );
-            let _ = writeln!(
-                m,
-                "            <Description>{} of line {} (y = {} mm)</Description>",
-                esc(&c.parameter),
-                line.number,
-                dec(line.y_mm)
-            );
-            let _ = writeln!(m, "            <Status><CharacteristicStatusEnum>{}</CharacteristicStatusEnum></Status>", line_status(c, line.number));
-            let _ = writeln!(
-                m,
-                "            <CharacteristicItemId>{}</CharacteristicItemId>",
-                ids_c.item
-            );
-            let _ = writeln!(m, "            <TimeStamp>{}</TimeStamp>", time(line.time));
-            let _ = writeln!(m, "            <MeasurementDeviceIds n=\"1\"><Id>{device}</Id></MeasurementDeviceIds>");
-            let _ = writeln!(m, "            <Value>{}</Value>", dec(v));
-            let _ = writeln!(m, "          </UserDefinedLinearCharacteristicMeasurement>");
         }
     }
 
