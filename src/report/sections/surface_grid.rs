@@ -35,13 +35,15 @@ pub fn surface_report(
 /// The areal parameters and pooled bearing curve of the grid as characterised.
 pub fn section(input: &SectionInput<'_>) -> Result<SurfaceReport, String> {
     let measured = HeightMap::of(input.characterised, input.pitch_y_mm);
-    surface_report(
-        &measured,
-        input.ctx.options.levels,
-        format!(
-            "the measured heights as traced ({} lines × {} points, pitch x {} mm, mean pitch y {} mm), no λc filter, least-squares plane removed",
-            measured.rows, measured.cols, measured.pitch_x_mm, measured.pitch_y_mm
-        ),
+    surface_report(&measured, input.ctx.options.levels, grid_recipe(&measured))
+}
+
+/// How the grid's areal parameters were obtained, its pitches to the nanometre (the
+/// resolution of the stage's targets: a mean of y positions carries float noise below it).
+fn grid_recipe(measured: &HeightMap<'_>) -> String {
+    format!(
+        "the measured heights as traced ({} lines × {} points, pitch x {:.6} mm, mean pitch y {:.6} mm), no λc filter, least-squares plane removed",
+        measured.rows, measured.cols, measured.pitch_x_mm, measured.pitch_y_mm
     )
 }
 
@@ -49,4 +51,27 @@ pub fn section(input: &SectionInput<'_>) -> Result<SurfaceReport, String> {
 pub fn anisotropy(input: &SectionInput<'_>) -> Result<Anisotropy, String> {
     crate::metrology::anisotropy::anisotropy(&HeightMap::of(input.characterised, input.pitch_y_mm))
         .map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_recipe_states_the_pitches_to_the_nanometre() {
+        let z = [0.0; 6];
+        let map = HeightMap {
+            heights_um: &z,
+            rows: 3,
+            cols: 2,
+            pitch_x_mm: 0.0015,
+            // The demo's mean pitch: (y_last − y_first) / 30 of positions near −19.7 mm.
+            pitch_y_mm: 0.010000000000000024,
+        };
+        let recipe = grid_recipe(&map);
+        assert!(
+            recipe.contains("(3 lines × 2 points, pitch x 0.001500 mm, mean pitch y 0.010000 mm)"),
+            "{recipe}"
+        );
+    }
 }
