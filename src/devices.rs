@@ -325,6 +325,11 @@ pub trait Instrument {
     async fn trace(&mut self) -> Result<TracedLine, Self::Error>;
     /// Best-effort abort of a running measurement (only after reading "measuring").
     async fn abort(&mut self) -> Result<(), Self::Error>;
+    /// Reads the results and the profile of the trace the instrument holds once more,
+    /// checked as [`Instrument::trace`] checks them; `None` when the driver cannot.
+    async fn read_again(&mut self) -> Result<Option<TracedLine>, Self::Error> {
+        Ok(None)
+    }
     /// How many traces the instrument accepted the start command of since it was opened,
     /// when the driver knows: a trace refused before it began (busy) is no attempt.
     fn traces_started(&self) -> Option<u64> {

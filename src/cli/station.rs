@@ -114,7 +114,7 @@ pub fn run_settings(
 }
 
 /// The longest one device operation of the station can take: a trace over the drive's whole
-/// range with two read-outs of the longest profile at the instrument's baud, or the stage's
+/// range with four read-outs of the longest profile at the instrument's baud, or the stage's
 /// home or moves with all their attempts; and a minute for the conversation around them.
 pub fn longest_effect(config: &Config) -> Duration {
     let trace = crate::sj210::timing::longest_trace(

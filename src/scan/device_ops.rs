@@ -1,17 +1,19 @@
 //! The devices of a running scan as the runner performs the machine's device effects on
 //! them: open and verify (probe / connect, identity against the scan's), home, ensure idle,
-//! move, trace (with whether a trace really started), the best-effort clean-up, and timers.
+//! move, trace (with whether a trace really started, and a second read-out of a line whose Ra
+//! is far from its neighbours'), the best-effort clean-up, and timers.
 //! Each effect's result comes back as the machine's [`Event`].
 //!
 //! Layer 3 (session): depends on [`super::station`], [`super::machine`]'s events and actions,
-//! [`super::ledger`] (the scan's identities) and [`crate::devices`]' contracts; tokio for
-//! timeouts and timers.
+//! [`super::ledger`] (the scan's identities), [`crate::devices`]' contracts and
+//! [`crate::sj210::sanity`]'s neighbour rule; tokio for timeouts and timers.
 
 use super::ledger::Ledger;
 use super::machine::{Action, Event, TracedSummary};
 use super::opening::{self, expected_points};
 use super::station::{Device, Fault, Station};
 use crate::devices::{FaultClass, Instrument, InstrumentIdentity, ProbeReport, TracedLine, YAxis};
+use crate::sj210::sanity::{instrument_ra_um, ra_far_from_neighbours};
 use crate::stage::policy::ScanDirection;
 use crate::units::Nm;
 use chrono::{DateTime, Utc};
@@ -37,6 +39,8 @@ pub(super) struct Hands<'s, S: Station> {
     pub(super) identity: Option<InstrumentIdentity>,
     /// Read back by the last move.
     pub(super) readback: Option<Nm>,
+    /// The instrument's Ra, µm, of the committed lines before the line to trace, in order.
+    pub(super) ra_before: Vec<f64>,
     /// Devices being closed on a blocking thread: a device is opened again only once its
     /// old port is closed (the port is opened exclusively).
     pub(super) closing: Vec<(Device, tokio::task::JoinHandle<()>)>,
@@ -45,6 +49,8 @@ pub(super) struct Hands<'s, S: Station> {
 /// A traced line waiting for its commit.
 pub(super) struct Held {
     pub(super) traced: TracedLine,
+    /// For the journal: the line's second read-out differed from its first and was kept.
+    pub(super) read_again: Option<String>,
     pub(super) readback: Option<Nm>,
     pub(super) started_at: DateTime<Utc>,
     pub(super) finished_at: DateTime<Utc>,
@@ -97,6 +103,7 @@ impl<S: Station> Hands<'_, S> {
                 let started_at = Utc::now();
                 match i.trace().await {
                     Ok(traced) => {
+                        let (traced, read_again) = second_look(i, traced, &self.ra_before).await;
                         let p = &traced.profile;
                         let summary = TracedSummary {
                             points: p.len(),
@@ -115,6 +122,7 @@ impl<S: Station> Hands<'_, S> {
                         };
                         *held = Some(Held {
                             traced,
+                            read_again,
                             readback: self.readback,
                             started_at,
                             finished_at: Utc::now(),
@@ -352,6 +360,46 @@ impl<S: Station> Hands<'_, S> {
                 expected_points(self.station.expected_pitch_um(&r.conditions), &r.conditions)
             }
             None => opening::LONGEST_PROFILE_POINTS,
+        }
+    }
+}
+
+/// A line whose instrument Ra is far from the lines' before it
+/// ([`ra_far_from_neighbours`]) is read out a second time, once: one garbled read-out
+/// must not make a line look like another surface. When the second read-out gives the same
+/// Ra, the first is kept (and the commit keeps the line's warning); when it differs, the
+/// second is kept, with the words the journal records. A failed second read-out keeps the
+/// first.
+async fn second_look<I: Instrument>(
+    i: &mut I,
+    first: TracedLine,
+    before: &[f64],
+) -> (TracedLine, Option<String>) {
+    let Some(ra1) = instrument_ra_um(&first.results) else {
+        return (first, None);
+    };
+    let Some(w) = ra_far_from_neighbours(ra1, before) else {
+        return (first, None);
+    };
+    tracing::warn!("{w}; reading the line out a second time");
+    match i.read_again().await {
+        Ok(Some(second)) => match instrument_ra_um(&second.results) {
+            Some(ra2) if ra2 != ra1 => {
+                let said = format!(
+                    "the instrument's Ra read {ra1} um on the first read-out, far from the lines before it, and {ra2} um on a second: the second read-out is kept"
+                );
+                tracing::warn!("{said}");
+                (second, Some(said))
+            }
+            _ => {
+                tracing::info!("the second read-out gave the same Ra {ra1} um; the first is kept");
+                (first, None)
+            }
+        },
+        Ok(None) => (first, None),
+        Err(e) => {
+            tracing::warn!("the second read-out failed ({e}); the first is kept");
+            (first, None)
         }
     }
 }

@@ -13,7 +13,7 @@ use super::disk::{free_space, outputs_bytes};
 use super::ending::End;
 use super::ledger::Ledger;
 use super::line::{LineIdentity, LineMeta, StoredLine};
-use super::machine::{Action, Event, StorageFailure};
+use super::machine::{Action, Event, Note, StorageFailure};
 use super::opening::{self, NewScan};
 use super::outputs::{Outputs, OutputsError};
 use super::policy::StorageClass;
@@ -146,25 +146,27 @@ impl Books<'_> {
                 }
             }
             Action::Commit { line, attempt } => {
+                // A second read-out that replaced the first is said in the journal, once.
+                if let (Some(l), Some(h)) = (self.ledger.as_mut(), self.held.as_mut()) {
+                    if let Some(reason) = h.read_again.take() {
+                        l.note(&Note {
+                            reason,
+                            device: Some(crate::devices::Device::Instrument),
+                            line: Some(*line),
+                            peer: None,
+                            pause: None,
+                        });
+                    }
+                }
                 let (Some(l), Some(h)) = (self.ledger.as_mut(), self.held.as_ref()) else {
                     return internal("internal: no line to commit");
                 };
                 let p = &h.traced.profile;
-                // The line's Ra against the lines before it (no re-read: the read-out itself
-                // agreed with the instrument's own Ra).
+                // The line's Ra against the lines before it (the line was read out a second
+                // time when the first read-out's was far: this is the one kept).
                 let mut readout_warnings = h.traced.readout_warnings.clone();
                 if let Some(ra) = crate::sj210::sanity::instrument_ra_um(&h.traced.results) {
-                    let mut earlier: Vec<(u32, f64)> = l
-                        .lines
-                        .iter()
-                        .filter(|s| s.meta.id.index < *line)
-                        .filter_map(|s| {
-                            let ra = crate::sj210::sanity::instrument_ra_um(&s.meta.results)?;
-                            Some((s.meta.id.index, ra))
-                        })
-                        .collect();
-                    earlier.sort_by_key(|e| e.0);
-                    let before: Vec<f64> = earlier.into_iter().map(|e| e.1).collect();
+                    let before = l.ra_before(*line);
                     if let Some(w) = crate::sj210::sanity::ra_far_from_neighbours(ra, &before) {
                         tracing::warn!(scan_id = %l.id, line = line + 1, "line kept with a read-out warning: {w}");
                         readout_warnings.push(w);

@@ -151,6 +151,22 @@ impl Ledger {
             }))
     }
 
+    /// The instrument's Ra, µm, of the committed lines before line `line`, in line order
+    /// (for [`crate::sj210::sanity::ra_far_from_neighbours`]).
+    pub fn ra_before(&self, line: u32) -> Vec<f64> {
+        let mut earlier: Vec<(u32, f64)> = self
+            .lines
+            .iter()
+            .filter(|s| s.meta.id.index < line)
+            .filter_map(|s| {
+                let ra = crate::sj210::sanity::instrument_ra_um(&s.meta.results)?;
+                Some((s.meta.id.index, ra))
+            })
+            .collect();
+        earlier.sort_by_key(|e| e.0);
+        earlier.into_iter().map(|e| e.1).collect()
+    }
+
     /// Commits a line durably (files, then the journal record). On failure, files the
     /// journal does not vouch for are removed.
     pub fn commit(&mut self, meta: &LineMeta, profile: &Profile) -> Result<(), StoreError> {

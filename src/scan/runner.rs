@@ -76,6 +76,7 @@ pub async fn run_scan<S: Station>(
         stage_identity: None,
         identity: None,
         readback: None,
+        ra_before: Vec::new(),
         closing: Vec::new(),
     };
     let reopening = match request {
@@ -260,6 +261,13 @@ async fn drive<S: Station>(
                 Action::Trace => books.settings.hooks.trace_stalls(),
                 _ => None,
             };
+            if action == Action::Trace {
+                hands.ra_before = books
+                    .ledger
+                    .as_ref()
+                    .map(|l| l.ra_before(machine.line()))
+                    .unwrap_or_default();
+            }
             let perform = hands.perform(&action, &mut held);
             let fut = async move {
                 if stall.is_some() {

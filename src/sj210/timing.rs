@@ -105,9 +105,11 @@ pub fn readout_time(points: u64, baud: u32) -> Duration {
 
 /// The longest one trace can take with its read-out: the deadline of a trace over the whole
 /// drive range ([`trace_deadline`] without conditions) and the read-out of `points` heights
-/// twice (the driver reads a profile again once when the first read-out fails).
+/// four times (the driver reads a profile again once when the first read-out fails or is in
+/// doubt, and a line whose Ra is far from its neighbours' is read out a second time, which
+/// may be read again the same way).
 pub fn longest_trace(speeds: DriveSpeeds, baud: u32, points: u64) -> Duration {
-    trace_deadline(&Conditions::default(), speeds) + readout_time(points, baud) * 2
+    trace_deadline(&Conditions::default(), speeds) + readout_time(points, baud) * 4
 }
 
 /// How long to wait before asking the status again, at `now`, while a phase expected to end
@@ -273,10 +275,10 @@ mod tests {
         assert!(trace_timing(&cond(4.0, 0.8), stopped).is_none());
         // The deadline: 2 × (9.6 + 4.8 + 10) s; without conditions the 17.5 mm drive range.
         assert_eq!(trace_deadline(&cond(4.0, 0.8), SJ210), ms(48_800));
-        // 8000 heights at 9600 baud: 8000 × 12 × 10 bits = 100 s; twice, plus the whole
-        // drive range's deadline: 2 × (17.5 / 0.5 + 17.5 / 1 + 10) = 125 s.
+        // 8000 heights at 9600 baud: 8000 × 12 × 10 bits = 100 s; four times, plus the
+        // whole drive range's deadline: 2 × (17.5 / 0.5 + 17.5 / 1 + 10) = 125 s.
         assert_eq!(readout_time(8000, 9600), ms(100_000));
-        assert_eq!(longest_trace(SJ210, 9600, 8000), ms(325_000));
+        assert_eq!(longest_trace(SJ210, 9600, 8000), ms(525_000));
         assert_eq!(
             trace_deadline(&Conditions::default(), SJ210),
             ms(2 * (35_000 + 17_500 + 10_000))

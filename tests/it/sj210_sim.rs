@@ -1015,6 +1015,14 @@ async fn a_line_whose_ra_is_far_from_its_neighbours_is_kept_with_a_named_warning
             .any(|w| w.contains("line 5 (0004)") && w.contains("median Ra")),
         "{warnings:?}"
     );
+    // The line was read out a second time, which gave the same Ra: the first is kept.
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        log.contains("reading the line out a second time")
+            && log.contains("the second read-out gave the same Ra"),
+        "{}",
+        describe(&o)
+    );
     // The verdict: line 5 alone is above the limit, and only it carries a warning.
     let lines = report["lines"].as_array().expect("report lines");
     let ours: Vec<f64> = lines.iter().map(|l| l["Ra_um"].as_f64().unwrap()).collect();
@@ -1063,5 +1071,75 @@ async fn a_line_whose_ra_is_far_from_its_neighbours_is_kept_with_a_named_warning
     );
     // Not a failed part: the scan is complete, its exit is not "does not conform" (4).
     assert_eq!(o.status.code(), Some(0), "{}", describe(&o));
+    rig.shutdown().await;
+}
+
+/// One garbled read-out: the fifth line's Ra answer comes back 10 times too large (the
+/// heights and the trace are right). Its Ra is then far from its neighbours', so the line
+/// is read out a second time; the second read-out gives another Ra and is kept, with no
+/// warning left on the line, and the journal says which read-out was kept and why.
+#[tokio::test]
+async fn a_line_whose_ra_read_out_is_garbled_once_is_read_again_and_the_second_kept() {
+    use crate::common::{run_scan, scan_dir, Rig, RigOptions};
+    use surfscan::scan::journal::{read_journal, Record};
+    let rig = Rig::start(RigOptions {
+        lines: 6,
+        // The first Ra answer during the fifth trace (line index 4): +900 %, 10 times.
+        faults: vec!["skew:900@RDRES02,01%5".into()],
+        ..RigOptions::default()
+    })
+    .await;
+    let o = run_scan(&rig.config("out"), &[]).await;
+    assert!(o.status.success(), "{}", crate::common::describe(&o));
+    let dir = scan_dir(&rig.out_dir("out"));
+    let meta = |k: u32| -> serde_json::Value {
+        let text = std::fs::read_to_string(dir.join(format!("lines/{k:04}.json"))).unwrap();
+        serde_json::from_str(&text).unwrap()
+    };
+    let ra = |k: u32| -> f64 {
+        meta(k)["results"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["name"].as_str().unwrap().eq_ignore_ascii_case("ra"))
+            .unwrap()["value"]
+            .as_f64()
+            .unwrap()
+    };
+    // The kept read-out is the second: its Ra is like its neighbours' and the line carries
+    // no warning (neither the Ra disagreement of the first read-out nor its distance).
+    for k in 0..6 {
+        assert!(
+            meta(k).get("readout_warnings").is_none(),
+            "line {k}: {}",
+            meta(k)
+        );
+    }
+    let (before, kept) = ((ra(3) + ra(2)) / 2.0, ra(4));
+    assert!((kept / before - 1.0).abs() < 0.5, "{kept} vs {before}");
+    // The journal: one record for line 5 naming both Ra values, the first 10 times the
+    // second as the fault made it.
+    let records = read_journal(&dir.join("journal.jsonl")).unwrap().records;
+    let notes: Vec<_> = records
+        .iter()
+        .filter_map(|r| match r {
+            Record::Interruption(i) if i.reason.contains("second read-out") => Some(i),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(notes.len(), 1, "{records:?}");
+    assert_eq!(notes[0].line, Some(4));
+    let reason = &notes[0].reason;
+    assert!(reason.ends_with("the second read-out is kept"), "{reason}");
+    let numbers: Vec<f64> = reason
+        .split_whitespace()
+        .filter_map(|w| w.parse::<f64>().ok())
+        .collect();
+    assert_eq!(numbers.len(), 2, "{reason}");
+    assert_eq!(numbers[1], kept, "{reason}");
+    assert!(
+        (numbers[0] / kept - 10.0).abs() < 0.01,
+        "the first read-out's Ra is the skewed one: {reason}"
+    );
     rig.shutdown().await;
 }

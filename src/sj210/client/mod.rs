@@ -133,6 +133,10 @@ impl<S: AsyncRead + AsyncWrite + Unpin> crate::devices::Instrument for Sj210Clie
         self.abort_measurement().await
     }
 
+    async fn read_again(&mut self) -> Result<Option<TracedLine>, Sj210Error> {
+        self.read_held_line().await.map(Some)
+    }
+
     fn traces_started(&self) -> Option<u64> {
         Some(self.traces_started)
     }
