@@ -519,7 +519,9 @@ fn slopes_7_point(r: &[f64], pitch_mm: f64) -> Vec<Option<f64>> {
         .collect()
 }
 
-/// Characterises one line of heights (µm) sampled at `pitch_mm`.
+/// Characterises one line of heights (µm) sampled at `pitch_mm`: the profile filtered, its
+/// sampling lengths planned and evaluated, the material-ratio family of the evaluation
+/// length, and the recipe that says how.
 pub fn analyze_line(
     heights_um: &[f64],
     pitch_mm: f64,
@@ -531,15 +533,64 @@ pub fn analyze_line(
     if !(lc.is_finite() && lc > 0.0) {
         return Err(MetrologyError::BadCutoff { cutoff_mm: lc });
     }
-    let n_all = heights_um.len();
-    let too_short = MetrologyError::TooShort {
-        points: n_all,
-        length_mm: n_all as f64 * pitch_mm,
-        sampling_length_mm: lc,
-        min_points: MIN_POINTS_PER_SECTION,
+    let filtered = filtered_profiles(heights_um, pitch_mm, options)?;
+    // Form-only: P parameters, the whole length one section unless N is given.
+    let sampling_lengths = match (options.form, options.sampling_lengths) {
+        (Some(_), None) => Some(1),
+        (_, n) => n,
     };
+    let n_all = heights_um.len();
+    let plan = plan_sections(
+        n_all,
+        pitch_mm,
+        lc,
+        options.central_sections,
+        sampling_lengths,
+    )?;
+    let used = plan.n_sec * plan.per;
+    let r: Vec<f64> = match filtered.r_all.get(plan.start..plan.start + used) {
+        Some(r) => r.to_vec(),
+        None => {
+            return Err(MetrologyError::TooShort {
+                points: n_all,
+                length_mm: n_all as f64 * pitch_mm,
+                sampling_length_mm: lc,
+                min_points: MIN_POINTS_PER_SECTION,
+            })
+        }
+    };
+    let acc = Acc::of_sections(&r, &plan, pitch_mm);
+    let (rk, rk_curve) = rk_family_and_curve(&r, RK_CURVE_POINTS)?;
+    Ok(LineAnalysis {
+        params: acc.params(&r, plan.n_sec, &rk),
+        recipe: line_recipe(options, filtered.lambda_c, &plan, n_all - used, pitch_mm),
+        evaluation_length: EvaluationLengthMoments::of(&r),
+        blank_reasons: acc.blank_reasons(plan.n_sec),
+        roughness_um: r,
+        rk,
+        rk_curve,
+        evaluated_from: plan.start,
+        primary_um: filtered.primary,
+        mean_line_um: filtered.mean_line_um,
+    })
+}
 
-    // λs, then λc or (form-only) the stated form.
+/// A line's profiles before its sampling lengths are cut: the primary profile (λs, then the
+/// stated form removed), and the roughness profile with its λc mean line when λc applies.
+struct FilteredProfiles {
+    primary: Vec<f64>,
+    r_all: Vec<f64>,
+    mean_line_um: Option<Vec<f64>>,
+    /// Whether the λc filter made `r_all`.
+    lambda_c: bool,
+}
+
+/// λs, then λc or (form-only) the stated form, as `options` say.
+fn filtered_profiles(
+    heights_um: &[f64],
+    pitch_mm: f64,
+    options: &Options,
+) -> Result<FilteredProfiles, MetrologyError> {
     let primary = match options.lambda_s_um {
         Some(ls) => filter::gaussian_mean_line(heights_um, pitch_mm, ls / 1000.0)?,
         None => heights_um.to_vec(),
@@ -548,125 +599,31 @@ pub fn analyze_line(
         Some(form) => remove_form(&primary, form)?,
         None => primary,
     };
-    let filtered = options.apply_lambda_c && options.form.is_none();
-    let (r_all, mean_line_um) = if filtered {
-        let split = filter::split(&primary, pitch_mm, lc)?;
+    let lambda_c = options.apply_lambda_c && options.form.is_none();
+    let (r_all, mean_line_um) = if lambda_c {
+        let split = filter::split(&primary, pitch_mm, options.lambda_c_mm)?;
         (split.roughness_um, Some(split.mean_line_um))
     } else {
         (primary.clone(), None)
     };
-    // Form-only: P parameters, the whole length one section unless N is given.
-    let sampling_lengths = match (options.form, options.sampling_lengths) {
-        (Some(_), None) => Some(1),
-        (_, n) => n,
-    };
+    Ok(FilteredProfiles {
+        primary,
+        r_all,
+        mean_line_um,
+        lambda_c,
+    })
+}
 
-    let SectionPlan {
-        n_sec,
-        per,
-        start,
-        rule,
-        section_length_mm,
-    } = plan_sections(
-        n_all,
-        pitch_mm,
-        lc,
-        options.central_sections,
-        sampling_lengths,
-    )?;
-    let used = n_sec * per;
-    let r: Vec<f64> = r_all.get(start..start + used).ok_or(too_short)?.to_vec();
-
-    let slopes = slopes_7_point(&r, pitch_mm);
-
-    let mut acc = Acc::default();
-    let lr_um = per as f64 * pitch_mm * 1000.0;
-    for s in 0..n_sec {
-        let sec = r.get(s * per..(s + 1) * per).unwrap_or(&[]);
-        let sl = slopes.get(s * per..(s + 1) * per).unwrap_or(&[]);
-        acc.add_section(sec, sl, pitch_mm * 1000.0, lr_um);
-        if let (Some((peaks, valleys)), None) = (acc.ten_point_short, acc.rzjis_short_section) {
-            acc.rzjis_short_section = Some((s, peaks, valleys));
-        }
-    }
-    let mut blank_reasons = BTreeMap::new();
-    if let Some((s, peaks, valleys)) = acc.rzjis_short_section {
-        blank_reasons.insert(
-            "RzJIS".to_string(),
-            format!(
-                "sampling length {} of {n_sec} has {peaks} peaks and {valleys} valleys between mean-line crossings, fewer than the 5 of each the ten-point height needs",
-                s + 1
-            ),
-        );
-    }
-    if acc.rsm_n == 0 {
-        for name in ["RSm", "Rc", "RPc", "Rppi"] {
-            blank_reasons.insert(
-                name.to_string(),
-                format!("no sampling length holds a profile element (a peak reaching +10 % and a valley reaching −10 % of its Rz between upward mean-line crossings, at least 1 % of the sampling length wide), so {name} is undefined"),
-            );
-        }
-    }
-    let k = n_sec as f64;
-    let max = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let min = r.iter().copied().fold(f64::INFINITY, f64::min);
-    let (rk, rk_curve) = rk_family_and_curve(&r, RK_CURVE_POINTS)?;
-    let levels = MaterialLevels::default();
-    let rt = max - min;
-    let rmr_c = levels
-        .rmr_c_depths_pct_rt
-        .iter()
-        .map(|&d| {
-            let depth_um = rt * d / 100.0;
-            RmrC {
-                depth_pct_rt: d,
-                depth_um,
-                value_pct: material_ratio_pct(&r, max - depth_um),
-            }
-        })
-        .collect();
-    let rdc_um = level_at_material_ratio(&r, levels.rdc_pct[0])
-        - level_at_material_ratio(&r, levels.rdc_pct[1]);
-    let rmr_pct = material_ratio_pct(
-        &r,
-        level_at_material_ratio(&r, levels.rmr_reference_pct) - levels.rmr_delta_um,
-    );
-
-    let params = RoughnessParams {
-        ra_um: acc.ra / k,
-        rq_um: acc.rq / k,
-        rp_um: acc.rp / k,
-        rv_um: acc.rv / k,
-        rz_um: acc.rz / k,
-        rt_um: max - min,
-        rz1max_um: acc.rz1max,
-        rzjis_um: acc.rzjis.map(|v| v / k),
-        rsk: acc.rsk / k,
-        rku: acc.rku / k,
-        rdq: acc.rdq / k,
-        rda: acc.rda / k,
-        rsm_um: (acc.rsm_n > 0).then(|| acc.rsm / acc.rsm_n as f64),
-        rc_um: (acc.rsm_n > 0).then(|| acc.rc / acc.rsm_n as f64),
-        rpc_per_cm: (acc.rsm_n > 0)
-            .then(|| acc.rsm / acc.rsm_n as f64)
-            .filter(|w| *w > 0.0)
-            .map(|w| 10_000.0 / w),
-        rppi_per_inch: (acc.rsm_n > 0)
-            .then(|| acc.rsm / acc.rsm_n as f64)
-            .filter(|w| *w > 0.0)
-            .map(|w| 25_400.0 / w),
-        rmr_c,
-        rdc_um,
-        rmr_pct,
-        rk_um: rk.rk_um,
-        rpk_um: rk.rpk_um,
-        rvk_um: rk.rvk_um,
-        mr1_pct: rk.mr1_pct,
-        mr2_pct: rk.mr2_pct,
-        a1_um_pct: rk.a1_um_pct,
-        a2_um_pct: rk.a2_um_pct,
-    };
-    let recipe = Recipe {
+/// How a line was evaluated: the standard, the filter and its end treatment, the sampling
+/// lengths `plan` cut (`not_evaluated` points left out), the mean line, the definitions.
+fn line_recipe(
+    options: &Options,
+    filtered: bool,
+    plan: &SectionPlan,
+    not_evaluated: usize,
+    pitch_mm: f64,
+) -> Recipe {
+    Recipe {
         standard: "ISO 4287:1997 (as the SJ series, standard ISO1997), ISO 13565-2, ISO 16610-21"
             .to_string(),
         filter: match (options.form, filtered) {
@@ -682,12 +639,12 @@ pub fn analyze_line(
         } else {
             "none".to_string()
         },
-        lambda_c_mm: lc,
+        lambda_c_mm: options.lambda_c_mm,
         lambda_s_um: options.lambda_s_um,
-        sampling_lengths: n_sec as u32,
-        sampling_lengths_rule: rule,
-        points_per_section: per,
-        points_not_evaluated: n_all - used,
+        sampling_lengths: plan.n_sec as u32,
+        sampling_lengths_rule: plan.rule.clone(),
+        points_per_section: plan.per,
+        points_not_evaluated: not_evaluated,
         pitch_mm,
         mean_line: match (options.form, filtered) {
             (Some(form), _) => format!("the {} of the primary profile", form.describe()),
@@ -696,22 +653,10 @@ pub fn analyze_line(
         },
         profile: if options.form.is_some() { "P" } else { "R" },
         form: options.form.map(Form::describe),
-        section_length_mm,
+        section_length_mm: plan.section_length_mm,
         averaging: AVERAGING.to_string(),
         definitions: definitions(),
-    };
-    Ok(LineAnalysis {
-        params,
-        recipe,
-        evaluation_length: EvaluationLengthMoments::of(&r),
-        roughness_um: r,
-        rk,
-        rk_curve,
-        blank_reasons,
-        evaluated_from: start,
-        primary_um: primary,
-        mean_line_um,
-    })
+    }
 }
 
 /// Characterises a [`Profile`] with options from its conditions ([`Options::from_profile`]).
@@ -748,6 +693,90 @@ struct Acc {
 }
 
 impl Acc {
+    /// The sums over the sampling lengths of `plan` of the evaluated profile `r`.
+    fn of_sections(r: &[f64], plan: &SectionPlan, pitch_mm: f64) -> Acc {
+        let (n_sec, per) = (plan.n_sec, plan.per);
+        let slopes = slopes_7_point(r, pitch_mm);
+        let mut acc = Acc::default();
+        let lr_um = per as f64 * pitch_mm * 1000.0;
+        for s in 0..n_sec {
+            let sec = r.get(s * per..(s + 1) * per).unwrap_or(&[]);
+            let sl = slopes.get(s * per..(s + 1) * per).unwrap_or(&[]);
+            acc.add_section(sec, sl, pitch_mm * 1000.0, lr_um);
+            if let (Some((peaks, valleys)), None) = (acc.ten_point_short, acc.rzjis_short_section) {
+                acc.rzjis_short_section = Some((s, peaks, valleys));
+            }
+        }
+        acc
+    }
+
+    /// Why a parameter is blank, by name: RzJIS without five peaks and valleys in a sampling
+    /// length, the element parameters without a profile element.
+    fn blank_reasons(&self, n_sec: usize) -> BTreeMap<String, String> {
+        let mut blank_reasons = BTreeMap::new();
+        if let Some((s, peaks, valleys)) = self.rzjis_short_section {
+            blank_reasons.insert(
+                "RzJIS".to_string(),
+                format!(
+                    "sampling length {} of {n_sec} has {peaks} peaks and {valleys} valleys between mean-line crossings, fewer than the 5 of each the ten-point height needs",
+                    s + 1
+                ),
+            );
+        }
+        if self.rsm_n == 0 {
+            for name in ["RSm", "Rc", "RPc", "Rppi"] {
+                blank_reasons.insert(
+                    name.to_string(),
+                    format!("no sampling length holds a profile element (a peak reaching +10 % and a valley reaching −10 % of its Rz between upward mean-line crossings, at least 1 % of the sampling length wide), so {name} is undefined"),
+                );
+            }
+        }
+        blank_reasons
+    }
+
+    /// The parameters: the sums averaged over the `n_sec` sampling lengths, Rt and the
+    /// material-ratio family over the evaluation length `r`, the Rk family `rk`.
+    fn params(&self, r: &[f64], n_sec: usize, rk: &RkFamily) -> RoughnessParams {
+        let k = n_sec as f64;
+        let max = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let min = r.iter().copied().fold(f64::INFINITY, f64::min);
+        let levels = MaterialLevels::default();
+        let rt = max - min;
+        let rsm_um = (self.rsm_n > 0).then(|| self.rsm / self.rsm_n as f64);
+        RoughnessParams {
+            ra_um: self.ra / k,
+            rq_um: self.rq / k,
+            rp_um: self.rp / k,
+            rv_um: self.rv / k,
+            rz_um: self.rz / k,
+            rt_um: max - min,
+            rz1max_um: self.rz1max,
+            rzjis_um: self.rzjis.map(|v| v / k),
+            rsk: self.rsk / k,
+            rku: self.rku / k,
+            rdq: self.rdq / k,
+            rda: self.rda / k,
+            rsm_um,
+            rc_um: (self.rsm_n > 0).then(|| self.rc / self.rsm_n as f64),
+            rpc_per_cm: rsm_um.filter(|w| *w > 0.0).map(|w| 10_000.0 / w),
+            rppi_per_inch: rsm_um.filter(|w| *w > 0.0).map(|w| 25_400.0 / w),
+            rmr_c: rmr_c(&levels, max, rt, |c| material_ratio_pct(r, c)),
+            rdc_um: level_at_material_ratio(r, levels.rdc_pct[0])
+                - level_at_material_ratio(r, levels.rdc_pct[1]),
+            rmr_pct: material_ratio_pct(
+                r,
+                level_at_material_ratio(r, levels.rmr_reference_pct) - levels.rmr_delta_um,
+            ),
+            rk_um: rk.rk_um,
+            rpk_um: rk.rpk_um,
+            rvk_um: rk.rvk_um,
+            mr1_pct: rk.mr1_pct,
+            mr2_pct: rk.mr2_pct,
+            a1_um_pct: rk.a1_um_pct,
+            a2_um_pct: rk.a2_um_pct,
+        }
+    }
+
     fn add_section(&mut self, z: &[f64], slopes: &[Option<f64>], pitch_um: f64, lr_um: f64) {
         let n = z.len().max(1) as f64;
         let ra = z.iter().map(|v| v.abs()).sum::<f64>() / n;
@@ -924,6 +953,28 @@ pub struct RkFamily {
     pub lower_level_um: f64,
     /// Where the 40 % secant of least gradient starts, % (it ends 40 % later).
     pub secant_start_pct: f64,
+}
+
+/// Rmr(c) at the depths of `levels` below the highest peak `top` of a profile `rt` high, the
+/// material ratio at a level `c` read by `ratio_pct(c)`.
+pub(super) fn rmr_c(
+    levels: &MaterialLevels,
+    top: f64,
+    rt: f64,
+    ratio_pct: impl Fn(f64) -> f64,
+) -> Vec<RmrC> {
+    levels
+        .rmr_c_depths_pct_rt
+        .iter()
+        .map(|&d| {
+            let depth_um = rt * d / 100.0;
+            RmrC {
+                depth_pct_rt: d,
+                depth_um,
+                value_pct: ratio_pct(top - depth_um),
+            }
+        })
+        .collect()
 }
 
 /// Rmc(mr): height at material ratio `mr_pct` by linear quantiles of `sorted_desc`.

@@ -31,7 +31,7 @@
 //! Depends on [`super::params`] (the levels of the material ratio parameters) and
 //! [`super::MetrologyError`].
 
-use super::params::{MaterialLevels, RmrC, RoughnessParams};
+use super::params::{rmr_c, MaterialLevels, RmrC, RoughnessParams};
 use super::{check_heights, MetrologyError};
 use serde::{Deserialize, Serialize};
 
@@ -186,18 +186,7 @@ pub fn sj_material_ratio(
         .collect();
     let mr_gt: Vec<f64> = (0..=LEVELS).map(|k| 100.0 * above(level(k))).collect();
 
-    let rmr_c = levels
-        .rmr_c_depths_pct_rt
-        .iter()
-        .map(|&d| {
-            let depth_um = rt * d / 100.0;
-            RmrC {
-                depth_pct_rt: d,
-                depth_um,
-                value_pct: 100.0 * at_or_above(top - depth_um),
-            }
-        })
-        .collect();
+    let rmr_c = rmr_c(levels, top, rt, |c| 100.0 * at_or_above(c));
     let reference = level_at(&mr_ge, levels.rmr_reference_pct).map_or(top, level);
     let rmr_pct = 100.0 * at_or_above(reference - levels.rmr_delta_um);
 
