@@ -483,8 +483,6 @@ pub fn run(args: Args) -> Result<(), CliError> {
         ));
     }
     let specification = recipe.map(|r| r.specification);
-    let lines = input.grid.rows();
-    let paper_q = crate::fit::FitOptions::default().degree_v;
     if let Source::Scan(vouched) = &input.source {
         // The characterisation's settings the scan froze in its plan, each flag overriding its
         // part (a journal of an older version froze none).
@@ -497,30 +495,13 @@ pub fn run(args: Args) -> Result<(), CliError> {
             Some(a) => ScanAnalysisOptions::default().with_frozen(&a),
             None => ScanAnalysisOptions::default(),
         };
-        let options = ScanAnalysisOptions {
-            curves: args.curves.unwrap_or(frozen.curves),
-            levels: args.levels.unwrap_or(frozen.levels),
-            lambda_c_mm: args.lc.or(frozen.lambda_c_mm),
-            no_filter: args.no_filter || frozen.no_filter,
-            overlay_line: args.overlay_line,
-            degree_u: args.degree_u,
-            degree_v: args.degree_v,
+        let base = ScanAnalysisOptions {
             out_dir: args.out.clone(),
-            spikes: args.model.spikes_or(frozen.spikes)?,
-            exclude_spikes: args
-                .outliers
-                .map_or(frozen.exclude_spikes, |o| o == OutliersArg::Exclude),
-            holdout_threshold: args.model.holdout_threshold_or(frozen.holdout_threshold)?,
-            v_method: args
-                .model
-                .v_method(lines, args.degree_v.unwrap_or(paper_q))?,
-            replace_spikes: args.model.replace(),
             lab,
-            material_ratio: args.material_ratio.unwrap_or(frozen.material_ratio),
-            contact: contact_options(&args)?,
             specification,
-            ..ScanAnalysisOptions::default()
+            ..frozen
         };
+        let options = analysis_options(&args, base, input.grid.rows())?;
         let outputs = characterise_scan(&input, &options).map_err(report_error)?;
         return finish(&outputs, judged);
     }
@@ -626,6 +607,37 @@ fn recipe_of(arg: &Path, station: Option<&crate::config::Config>) -> Result<Reci
     Ok(recipe)
 }
 
+/// The characterisation's options: each flag given overrides its part of `base` (a scan's
+/// frozen plan, or the defaults); `lines` is the grid's, for the method across them.
+fn analysis_options(
+    args: &Args,
+    base: ScanAnalysisOptions,
+    lines: usize,
+) -> Result<ScanAnalysisOptions, CliError> {
+    let paper_q = crate::fit::FitOptions::default().degree_v;
+    Ok(ScanAnalysisOptions {
+        curves: args.curves.unwrap_or(base.curves),
+        levels: args.levels.unwrap_or(base.levels),
+        lambda_c_mm: args.lc.or(base.lambda_c_mm),
+        no_filter: args.no_filter || base.no_filter,
+        overlay_line: args.overlay_line,
+        degree_u: args.degree_u,
+        degree_v: args.degree_v,
+        spikes: args.model.spikes_or(base.spikes)?,
+        exclude_spikes: args
+            .outliers
+            .map_or(base.exclude_spikes, |o| o == OutliersArg::Exclude),
+        holdout_threshold: args.model.holdout_threshold_or(base.holdout_threshold)?,
+        v_method: args
+            .model
+            .v_method(lines, args.degree_v.unwrap_or(paper_q))?,
+        replace_spikes: args.model.replace(),
+        material_ratio: args.material_ratio.unwrap_or(base.material_ratio),
+        contact: contact_options(args)?,
+        ..base
+    })
+}
+
 /// Fits `grid` once the way the arguments ask (`--degree-u/--degree-v`, default the paper's
 /// 5/5; `--v-method`; spikes replaced only with `--replace-spikes`) and characterises it with
 /// that surface (the model sections and the hold-out refits are made the same way).
@@ -635,28 +647,7 @@ fn fit_and_characterise(
     args: &Args,
     out: &Path,
 ) -> Result<ScanOutputs, CliError> {
-    let defaults = ScanAnalysisOptions::default();
-    let analysis = ScanAnalysisOptions {
-        curves: args.curves.unwrap_or(defaults.curves),
-        levels: args.levels.unwrap_or(defaults.levels),
-        overlay_line: args.overlay_line,
-        degree_u: args.degree_u,
-        degree_v: args.degree_v,
-        spikes: args.model.spikes()?,
-        exclude_spikes: args.outliers == Some(OutliersArg::Exclude),
-        holdout_threshold: args.model.holdout_threshold()?,
-        v_method: args.model.v_method(
-            grid.rows(),
-            args.degree_v
-                .unwrap_or(crate::fit::FitOptions::default().degree_v),
-        )?,
-        replace_spikes: args.model.replace(),
-        material_ratio: args.material_ratio.unwrap_or_default(),
-        contact: contact_options(args)?,
-        specification: ctx.options.specification.take(),
-        instrument: ctx.options.instrument,
-        ..ScanAnalysisOptions::default()
-    };
+    let analysis = analysis_options(args, std::mem::take(&mut ctx.options), grid.rows())?;
     let mut recipe = crate::report::scan_dir::scan_recipe(&analysis, None, &[]);
     recipe.lambda_c_mm = ctx
         .line_options
