@@ -41,6 +41,9 @@ pub struct Config {
     /// `[analysis]`: characterisation at the end of a scan.
     #[serde(default)]
     pub analysis: AnalysisSettings,
+    /// `[contact]`: the contact analysis a scan's outputs include (off by default).
+    #[serde(default)]
+    pub contact: crate::contact::ContactSettings,
     /// `[notify]`: command run when a scan completes, fails or suspends.
     #[serde(default)]
     pub notify: Option<HookSettings>,
@@ -557,6 +560,9 @@ impl Config {
             x.validate()
                 .map_err(|(key, message)| Config::invalid(path, key, message))?;
         }
+        self.contact
+            .check()
+            .map_err(|(key, message)| Config::invalid(path, key, message))?;
         if let Some(n) = &self.notify {
             if n.command.is_empty() {
                 return Err(Config::invalid(
@@ -934,6 +940,12 @@ pub const NUMERIC_KEYS: &[NumericKey] = &[
     int_key!("archive.delete-after-days", 0, 36_500, "days", "days after completion that an archived, verified scan leaves the station; remove the key to keep every scan", |c| c.archive.as_ref().and_then(|a| a.delete_after_days)),
     int_key!("web.max-connections", 1, 4096, "", "connections the page serves at once; the default is 256", |c| c.web.as_ref().map(|w| w.max_connections)),
     int_key!("web.session-hours", 1, 744, "h", "how long a browser stays signed in, at most 31 days; the default is 12", |c| c.web.as_ref().map(|w| w.session_hours)),
+    real_key!("contact.young-gpa", 0.001, 1500.0, "GPa", "the specimen's Young's modulus (steel 210, brass 100, aluminium 70)", |c| Some(c.contact.young_gpa)),
+    real_key!("contact.poisson", 0.0, 0.5, "", "the specimen's Poisson's ratio (steel 0.30, brass 0.34)", |c| Some(c.contact.poisson)),
+    real_key!("contact.young2-gpa", 0.001, 1500.0, "GPa", "the counter-body's Young's modulus; remove the key for a rigid flat", |c| c.contact.young2_gpa),
+    real_key!("contact.poisson2", 0.0, 0.5, "", "the counter-body's Poisson's ratio; the default is 0.30", |c| c.contact.poisson2),
+    real_key!("contact.hardness-gpa", 0.001, 150.0, "GPa", "the specimen's indentation hardness (mild steel about 1.5, brass about 1); remove the key for an elastic contact", |c| c.contact.hardness_gpa),
+    real_key!("contact.model-pitch-y-mm", 0.0001, 100.0, "mm", "the y spacing the model is sampled at between the lines, e.g. 0.002; remove the key for the measured grid only", |c| c.contact.model_pitch_y_mm),
     real_key!("traceability.stylus-tip-radius-um", 0.01, 100.0, "µm", "the SJ-210's standard styli have 2 or 5 µm", |c| c.traceability.stylus_tip_radius_um),
     real_key!("traceability.calibration-uncertainty-pct", 0.001, 100.0, "%", "the expanded (k = 2) relative uncertainty on the calibration certificate, e.g. 3.0", |c| c.traceability.calibration_uncertainty_pct),
 ];
@@ -1095,7 +1107,9 @@ dir = "/var/lib/surfscan/scans"
             let body = line.strip_prefix("# ").unwrap_or("");
             let is_table = body.starts_with('[') && body.trim_end().ends_with(']');
             let is_key = body.split_once(" = ").is_some_and(|(k, _)| {
-                !k.is_empty() && k.chars().all(|c| c.is_ascii_lowercase() || c == '-')
+                !k.is_empty()
+                    && k.chars()
+                        .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-')
             });
             out.push_str(if is_table || is_key { body } else { line });
             out.push('\n');

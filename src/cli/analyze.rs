@@ -107,8 +107,9 @@ pub struct Args {
     /// Output directory. Default: the scan directory for a scan, `.` for a CSV.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Add the contact of the surface with a rigid flat to the report (`contact` in
-    /// report.json, a table in report.html): the load–area curve of the measured grid.
+    /// Add the contact of the surface with a flat (rigid or elastic) to the report (`contact` in
+    /// report.json, a table in report.html, contact.json and its plots): the load–area curve
+    /// of the measured grid. A scan whose plan froze an enabled `[contact]` has it without.
     #[arg(long)]
     pub contact: bool,
     /// The contact's nominal pressures, MPa, comma-separated (default 1,2,5,10,20,50,100).
@@ -125,6 +126,13 @@ pub struct Args {
     /// Poisson's ratio of the measured body for the contact (default 0.30, steel).
     #[arg(long, value_name = "NU", requires = "contact")]
     pub contact_poisson: Option<f64>,
+    /// Young's modulus of the counter-body, GPa (default: a rigid flat); the bodies act through
+    /// their composite modulus.
+    #[arg(long, value_name = "GPA", requires = "contact")]
+    pub contact_young2: Option<f64>,
+    /// Poisson's ratio of the counter-body (default 0.30; needs --contact-young2).
+    #[arg(long, value_name = "NU", requires = "contact_young2")]
+    pub contact_poisson2: Option<f64>,
     /// Hardness of the measured body, GPa: the contact is perfectly plastic at it (default:
     /// elastic).
     #[arg(long, value_name = "GPA", requires = "contact")]
@@ -294,28 +302,9 @@ fn failed(msg: impl Into<String>) -> CliError {
 fn contact_options(
     args: &Args,
 ) -> Result<Option<crate::report::sections::contact::ContactSectionOptions>, CliError> {
-    use crate::contact::{check_options, Body, ContactOptions, DEFAULT_PRESSURES_MPA};
     if !args.contact {
         return Ok(None);
     }
-    let usage = |e: crate::contact::ContactError| CliError::new(Exit::Usage, e.to_string());
-    let specimen = Body::try_new(
-        "specimen",
-        args.contact_young.unwrap_or(Body::STEEL.young_gpa),
-        args.contact_poisson.unwrap_or(Body::STEEL.poisson),
-    )
-    .map_err(usage)?;
-    let contact = ContactOptions {
-        specimen,
-        hardness_gpa: args.contact_hardness,
-        pressures_mpa: if args.contact_pressures.is_empty() {
-            DEFAULT_PRESSURES_MPA.to_vec()
-        } else {
-            args.contact_pressures.clone()
-        },
-        ..ContactOptions::default()
-    };
-    check_options(&contact).map_err(usage)?;
     if let Some(s) = args.contact_model_pitch_y {
         if !(s.is_finite() && s > 0.0) {
             return Err(CliError::new(
@@ -324,11 +313,26 @@ fn contact_options(
             ));
         }
     }
-    Ok(Some(
-        crate::report::sections::contact::ContactSectionOptions {
-            contact,
-            model_pitch_y_mm: args.contact_model_pitch_y,
+    let d = crate::contact::ContactSettings::default();
+    let settings = crate::contact::ContactSettings {
+        enabled: true,
+        pressures_mpa: if args.contact_pressures.is_empty() {
+            d.pressures_mpa
+        } else {
+            args.contact_pressures.clone()
         },
+        young_gpa: args.contact_young.unwrap_or(d.young_gpa),
+        poisson: args.contact_poisson.unwrap_or(d.poisson),
+        young2_gpa: args.contact_young2,
+        poisson2: args.contact_poisson2,
+        hardness_gpa: args.contact_hardness,
+        model_pitch_y_mm: args.contact_model_pitch_y,
+    };
+    settings
+        .check()
+        .map_err(|(_, message)| CliError::new(Exit::Usage, message))?;
+    Ok(Some(
+        crate::report::sections::contact::ContactSectionOptions::of(&settings),
     ))
 }
 
@@ -490,9 +494,9 @@ pub fn run(args: Args) -> Result<(), CliError> {
             .journal
             .as_ref()
             .ok()
-            .and_then(|s| s.start.plan.analysis)
+            .and_then(|s| s.start.plan.analysis.as_ref())
         {
-            Some(a) => ScanAnalysisOptions::default().with_frozen(&a),
+            Some(a) => ScanAnalysisOptions::default().with_frozen(a),
             None => ScanAnalysisOptions::default(),
         };
         let base = ScanAnalysisOptions {
@@ -633,7 +637,7 @@ fn analysis_options(
             .v_method(lines, args.degree_v.unwrap_or(paper_q))?,
         replace_spikes: args.model.replace(),
         material_ratio: args.material_ratio.unwrap_or(base.material_ratio),
-        contact: contact_options(args)?,
+        contact: contact_options(args)?.or(base.contact),
         ..base
     })
 }

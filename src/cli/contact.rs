@@ -15,18 +15,18 @@
 //! I/O.
 //!
 //! Layer 5 (composition): reads files, calls [`crate::contact`], [`crate::metrology`] (the
-//! levelling) and [`crate::report::render::plots`].
+//! levelling) and [`crate::report::render::contact`] (the files, as a characterisation with
+//! the contact section writes them).
 
 use super::input_args::{tell_findings, InputArgs};
 use super::{CliError, Exit};
 use crate::contact::{
-    contact_curve, Body, ContactCurve, ContactError, ContactGrid, ContactOptions,
-    DEFAULT_PRESSURES_MPA,
+    contact_curve, Body, ContactError, ContactGrid, ContactOptions, DEFAULT_PRESSURES_MPA,
 };
 use crate::metrology::areal::{level_plane, HeightMap};
-use crate::report::render::plots::{plot_load_area, plot_map, LoadAreaPoint, MapValues};
-use serde_json::json;
-use std::path::{Path, PathBuf};
+use crate::report::render::contact::write_contact_files;
+use crate::report::sections::contact::{ContactSection, ContactSurface};
+use std::path::PathBuf;
 
 /// Arguments of `surfscan contact`.
 #[derive(Debug, clap::Args)]
@@ -81,16 +81,7 @@ fn contact_error(e: ContactError) -> CliError {
 /// The options from the arguments, every value checked.
 pub fn options(args: &Args) -> Result<ContactOptions, ContactError> {
     let specimen = Body::try_new("specimen", args.young, args.poisson)?;
-    let counter = args
-        .young2
-        .map(|e| {
-            Body::try_new(
-                "counter-body",
-                e,
-                args.poisson2.unwrap_or(Body::STEEL.poisson),
-            )
-        })
-        .transpose()?;
+    let counter = Body::counter(args.young2, args.poisson2)?;
     Ok(ContactOptions {
         specimen,
         counter,
@@ -103,15 +94,6 @@ pub fn options(args: &Args) -> Result<ContactOptions, ContactError> {
         map_pressure_mpa: args.map_pressure,
         ..ContactOptions::default()
     })
-}
-
-/// What the contact was computed on, for `contact.json` and the figures.
-struct Solved {
-    curve: ContactCurve,
-    rows: usize,
-    cols: usize,
-    pitch_x_mm: f64,
-    pitch_y_mm: f64,
 }
 
 /// Runs `surfscan contact`.
@@ -168,12 +150,20 @@ pub fn run(args: Args) -> Result<(), CliError> {
         tell!("surfscan: warning: {w}");
         warnings.push(w);
     }
-    let solved = Solved {
-        curve,
-        rows,
-        cols: grid.cols,
-        pitch_x_mm: grid.pitch_x_mm,
-        pitch_y_mm,
+    let (cols, hardness_gpa) = (grid.cols, curve.hardness_gpa);
+    let section = ContactSection {
+        specimen: opts.specimen,
+        counter_body: opts.counter,
+        effective_modulus_gpa: curve.effective_modulus_gpa,
+        hardness_gpa,
+        measured: Some(ContactSurface::of(
+            curve,
+            (rows, cols),
+            grid.pitch_x_mm,
+            pitch_y_mm,
+        )),
+        measured_error: None,
+        model: None,
     };
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from("."));
     std::fs::create_dir_all(&out).map_err(|e| {
@@ -183,36 +173,22 @@ pub fn run(args: Args) -> Result<(), CliError> {
         )
     })?;
     let described = input.described.clone();
-    let figures = write_figures(&out, &solved, &opts, &described)?;
-    let doc = document(&solved, &opts, &described, &warnings, &figures);
+    write_contact_files(&out, &section, &described, &warnings)
+        .map_err(|e| CliError::new(Exit::Io, e.to_string()))?;
     let path = out.join("contact.json");
-    crate::atomic::write_atomically(&path, |w| {
-        serde_json::to_writer_pretty(&mut *w, &doc).map_err(std::io::Error::other)?;
-        std::io::Write::write_all(w, b"\n")
-    })
-    .map_err(|e| {
-        CliError::new(
-            Exit::Io,
-            format!(
-                "cannot write {}: {}",
-                path.display(),
-                crate::atomic::write_hint(&path, &e)
-            ),
-        )
-    })?;
     say!(
         "contact of {} ({} lines × {} points, pitches {} mm × {} mm), E* = {} GPa{}:",
         described,
         rows,
-        solved.cols,
-        solved.pitch_x_mm,
+        cols,
+        grid.pitch_x_mm,
         pitch_y_mm,
-        crate::numfmt::sig(solved.curve.effective_modulus_gpa, 4),
+        crate::numfmt::sig(section.effective_modulus_gpa, 4),
         opts.hardness_gpa
             .map_or(String::new(), |h| format!(", hardness {h} GPa"))
     );
     say!("  nominal MPa   area %   mean gap µm   patches");
-    for p in &solved.curve.points {
+    for p in section.measured.iter().flat_map(|m| &m.curve) {
         say!(
             "  {:>11}  {:>7.3}  {:>12.4}  {:>8}{}",
             p.nominal_pressure_mpa,
@@ -224,120 +200,4 @@ pub fn run(args: Args) -> Result<(), CliError> {
     }
     say!("wrote {}", path.display());
     Ok(())
-}
-
-/// Writes the load–area curve and the pressure map; returns their file names.
-fn write_figures(
-    out: &Path,
-    solved: &Solved,
-    opts: &ContactOptions,
-    described: &str,
-) -> Result<Vec<String>, CliError> {
-    let curve = &solved.curve;
-    let against = against(opts, curve.effective_modulus_gpa);
-    let points: Vec<LoadAreaPoint> = curve
-        .points
-        .iter()
-        .map(|p| LoadAreaPoint {
-            nominal_pressure_mpa: p.nominal_pressure_mpa,
-            area_pct: 100.0 * p.area_fraction,
-            resolved: p.resolved,
-        })
-        .collect();
-    let plot_error = |e: crate::metrology::MetrologyError| CliError::new(Exit::Io, e.to_string());
-    let mut files = Vec::new();
-    let written = plot_load_area(
-        out,
-        &points,
-        "Load–area curve",
-        &against,
-        &format!("{described}; heights levelled by their least-squares plane"),
-    )
-    .map_err(plot_error)?;
-    files.extend(written.iter().map(|p| file_name(p)));
-    let pressure_map = HeightMap {
-        heights_um: &curve.map.pressure_mpa,
-        rows: solved.rows,
-        cols: solved.cols,
-        pitch_x_mm: solved.pitch_x_mm,
-        pitch_y_mm: solved.pitch_y_mm,
-    };
-    let written = plot_map(
-        out,
-        &pressure_map,
-        &MapValues {
-            stem: "pressure",
-            name: "pressures",
-            unit: "MPa",
-            bar: "contact pressure (MPa)",
-        },
-        &format!(
-            "Contact pressure at {} MPa nominal (0: no contact)",
-            curve.map.nominal_pressure_mpa
-        ),
-        &format!("{described}; {against}"),
-    )
-    .map_err(plot_error)?;
-    files.extend(written.iter().map(|p| file_name(p)));
-    Ok(files)
-}
-
-fn file_name(p: &Path) -> String {
-    p.file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default()
-}
-
-/// "steel-like specimen (E 210 GPa, ν 0.3) against a rigid flat, E* 230.8 GPa, elastic".
-fn against(opts: &ContactOptions, e_star_gpa: f64) -> String {
-    let s = opts.specimen;
-    let counter = match opts.counter {
-        None => "a rigid flat".to_string(),
-        Some(c) => format!("an elastic flat (E {} GPa, ν {})", c.young_gpa, c.poisson),
-    };
-    let law = match opts.hardness_gpa {
-        None => "elastic".to_string(),
-        Some(h) => format!("elastic–perfectly plastic at hardness {h} GPa"),
-    };
-    format!(
-        "specimen (E {} GPa, ν {}) against {counter}: E* {} GPa, {law}",
-        s.young_gpa,
-        s.poisson,
-        crate::numfmt::sig(e_star_gpa, 4)
-    )
-}
-
-/// `contact.json`.
-fn document(
-    solved: &Solved,
-    opts: &ContactOptions,
-    described: &str,
-    warnings: &[String],
-    figures: &[String],
-) -> serde_json::Value {
-    let body = |b: Body| json!({"young_gpa": b.young_gpa, "poisson": b.poisson});
-    let curve = &solved.curve;
-    json!({
-        "input": described,
-        "surface": "measured grid",
-        "heights": "levelled by their least-squares plane",
-        "grid": {
-            "rows": solved.rows,
-            "cols": solved.cols,
-            "pitch_x_mm": solved.pitch_x_mm,
-            "pitch_y_mm": solved.pitch_y_mm,
-            "padded": [curve.padded.0, curve.padded.1],
-        },
-        "specimen": body(opts.specimen),
-        "counter_body": opts.counter.map(body),
-        "effective_modulus_gpa": curve.effective_modulus_gpa,
-        "hardness_gpa": curve.hardness_gpa,
-        "curve": curve.points,
-        "map": {
-            "nominal_pressure_mpa": curve.map.nominal_pressure_mpa,
-            "max_pressure_mpa": curve.map.pressure_mpa.iter().cloned().fold(0.0, f64::max),
-        },
-        "figures": figures,
-        "warnings": warnings,
-    })
 }

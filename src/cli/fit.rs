@@ -267,7 +267,7 @@ fn read_input(args: &Args) -> Result<Input, CliError> {
     }
     let start = vouched.journal.as_ref().ok().map(|s| &s.start);
     let degrees = crate::report::scan_dir::scan_degrees(args.degree_u, args.degree_v, start);
-    let plan = start.map(|s| s.plan);
+    let plan = start.map(|s| s.plan.clone());
     let lambda_c_mm = vouched.lines.first().and_then(|l| {
         let o = crate::metrology::params::Options::from_profile(&l.profile);
         o.apply_lambda_c.then_some(o.lambda_c_mm)
@@ -457,11 +457,11 @@ impl<'a> Fitting<'a> {
         let method = args
             .model
             .v_method(grid.rows(), input.degrees.degree_v)?
-            .or(input.plan.map(|p| p.v_method))
+            .or(input.plan.as_ref().map(|p| p.v_method))
             .unwrap_or_default();
         let replace_spikes = match args.model.replace() {
             Some(true) => Some(args.model.spikes()?),
-            _ => input.plan.and_then(|p| p.replace_spikes),
+            _ => input.plan.as_ref().and_then(|p| p.replace_spikes),
         };
         let progress = if std::io::stderr().is_terminal() && grid.heights_um.len() >= 1_000_000 {
             indicatif::ProgressBar::new(grid.rows() as u64)

@@ -62,12 +62,13 @@ pub fn plan_of(config: &Config) -> Result<Plan, ConfigError> {
         v_method: config.fit.v_method_for(config.scan.lines as usize),
         replace_spikes: (config.fit.outliers == crate::config::FitOutliers::Replace)
             .then(|| config.analysis.spike_options()),
-        analysis: Some(analysis_of(&config.analysis)),
+        analysis: Some(analysis_of(config)),
     })
 }
 
-/// The characterisation of `[analysis]`, as a scan's plan freezes it.
-pub fn analysis_of(a: &crate::config::AnalysisSettings) -> AnalysisPlan {
+/// The characterisation of `[analysis]` and `[contact]`, as a scan's plan freezes it.
+pub fn analysis_of(config: &Config) -> AnalysisPlan {
+    let a = &config.analysis;
     AnalysisPlan {
         curves: a.curves,
         levels: a.levels,
@@ -77,11 +78,13 @@ pub fn analysis_of(a: &crate::config::AnalysisSettings) -> AnalysisPlan {
         exclude_spikes: a.outliers == crate::config::OutlierPolicy::Exclude,
         holdout_threshold: a.holdout_threshold,
         material_ratio: a.material_ratio,
+        contact: config.contact.enabled.then(|| config.contact.clone()),
     }
 }
 
 /// The runner's settings for a station: the plan and session settings of the configuration,
 /// a frozen copy of it and its hash, the test hooks, and the characterisation of `[analysis]`
+/// and `[contact]`
 /// run when a scan completes. A configuration whose plan cannot be made is exit 78.
 pub fn run_settings(
     config: &Config,
@@ -92,7 +95,7 @@ pub fn run_settings(
     // A new scan freezes this in its plan; a resumed scan of an older version, which froze
     // none, is characterised with it.
     let characterise = ScanCharacteriser {
-        options: ScanAnalysisOptions::default().with_frozen(&analysis_of(&config.analysis)),
+        options: ScanAnalysisOptions::default().with_frozen(&analysis_of(config)),
     };
     Ok(RunSettings {
         plan,

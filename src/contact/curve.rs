@@ -174,6 +174,12 @@ pub fn check_grid(grid: &ContactGrid<'_>) -> Result<(), ContactError> {
 /// The sorted, de-duplicated pressures to solve (the map load included), checked against
 /// each other and the hardness.
 fn pressures(opts: &ContactOptions) -> Result<(Vec<f64>, f64), ContactError> {
+    // The bodies are checked where they are made; again here for options built from stored
+    // values (a scan's frozen plan).
+    Body::try_new("specimen", opts.specimen.young_gpa, opts.specimen.poisson)?;
+    if let Some(c) = opts.counter {
+        Body::try_new("counter-body", c.young_gpa, c.poisson)?;
+    }
     let mut list = opts.pressures_mpa.clone();
     if list.is_empty() {
         return Err(ContactError::Pressure {
@@ -211,7 +217,7 @@ fn pressures(opts: &ContactOptions) -> Result<(Vec<f64>, f64), ContactError> {
     Ok((list, map))
 }
 
-/// Checks the loads, the map load and the hardness of `opts` against each other, as
+/// Checks the bodies, the loads, the map load and the hardness of `opts`, as
 /// [`contact_curve`] does before it solves anything.
 pub fn check_options(opts: &ContactOptions) -> Result<(), ContactError> {
     pressures(opts).map(|_| ())

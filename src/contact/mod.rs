@@ -13,12 +13,14 @@
 //! - [`patches`]: connected contact patches.
 //! - [`modulus`]: the composite modulus of two bodies, with range checks.
 //! - [`curve`]: the load–area curve and the map of one load, with the resolution verdict.
+//! - [`settings`]: `[contact]` of a station or recipe, as a scan's plan freezes it.
 //! - [`error`]: why an analysis is refused.
 //!
 //! Units: heights µm, pitches mm at the boundary (µm inside), pressures MPa, moduli and
 //! hardness GPa at the boundary (MPa inside).
 //!
-//! Layer 1 (pure logic): numbers in, values out; depends only on the FFT crates and serde.
+//! Layer 1 (pure logic): numbers in, values out; depends only on the FFT crates and serde
+//! (toml in the tests).
 //! No I/O.
 
 pub mod curve;
@@ -27,6 +29,7 @@ pub mod halfspace;
 pub mod influence;
 pub mod modulus;
 pub mod patches;
+pub mod settings;
 pub mod solver;
 
 pub use curve::{
@@ -35,4 +38,5 @@ pub use curve::{
 };
 pub use error::{ContactError, MAX_HARDNESS_GPA, MIN_HARDNESS_GPA};
 pub use modulus::{effective_modulus_gpa, Body};
+pub use settings::ContactSettings;
 pub use solver::{Solution, SolveOptions};

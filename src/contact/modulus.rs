@@ -17,7 +17,7 @@ pub const MIN_YOUNG_GPA: f64 = 1e-3;
 pub const MAX_YOUNG_GPA: f64 = 1500.0;
 
 /// One elastic body: Young's modulus and Poisson's ratio.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Body {
     /// Young's modulus, GPa.
     pub young_gpa: f64,
@@ -52,6 +52,17 @@ impl Body {
             });
         }
         Ok(Body { young_gpa, poisson })
+    }
+
+    /// The counter-body of `young_gpa` (`None`: a rigid flat) and `poisson` (`None`: steel's
+    /// 0.30), checked.
+    pub fn counter(
+        young_gpa: Option<f64>,
+        poisson: Option<f64>,
+    ) -> Result<Option<Body>, ContactError> {
+        young_gpa
+            .map(|e| Body::try_new("counter-body", e, poisson.unwrap_or(Body::STEEL.poisson)))
+            .transpose()
     }
 
     /// (1 − ν²)/E, 1/GPa.

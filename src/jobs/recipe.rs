@@ -18,6 +18,10 @@
 //! [analysis]             # optional: keys of the station's [analysis] this part overrides
 //! outliers = "exclude"
 //!
+//! [contact]              # optional: keys of the station's [contact] this part overrides
+//! enabled = true
+//! young-gpa = 100.0
+//!
 //! [specification]        # optional: the drawing's limits (see crate::specification)
 //! limits = ["Ra 0.8", "Rz max 6.3"]
 //!
@@ -26,7 +30,7 @@
 //! ```
 //!
 //! A recipe is validated with the station's configuration it will run under: its plan and
-//! analysis replace the station's `[scan]` lines and y and `[analysis]` in a copy of the
+//! analysis replace the station's `[scan]` lines and y, `[analysis]` and `[contact]` in a copy of the
 //! configuration, which is validated as a whole (the same ranges, soft limits and messages
 //! as the station file, the keys named as the recipe writes them); its limits are parsed and
 //! checked against each other and against its stated conditions. A job freezes the recipe's
@@ -35,7 +39,7 @@
 //! Layer 4 (process edge): depends on [`crate::config`], [`crate::specification`] and the
 //! scan's [`ExpectedConditions`]; reads the recipe files.
 
-use crate::config::{AnalysisSettings, Config, ConfigError};
+use crate::config::{Config, ConfigError};
 use crate::scan::expected::ExpectedConditions;
 use crate::specification::callout::DEFAULT_SAMPLING_LENGTHS;
 use crate::specification::Specification;
@@ -57,6 +61,9 @@ pub struct RecipeFile {
     /// `[analysis]`: keys of the station's `[analysis]` overridden for this part.
     #[serde(default)]
     pub analysis: toml::Table,
+    /// `[contact]`: keys of the station's `[contact]` overridden for this part.
+    #[serde(default)]
+    pub contact: toml::Table,
     /// `[specification]`: the limits.
     #[serde(default)]
     pub specification: SpecificationTable,
@@ -253,7 +260,7 @@ fn recipe_key(station_key: &str) -> Option<String> {
         "scan.lines" | "scan.y-start-mm" | "scan.y-step-mm" => {
             Some(station_key.replacen("scan.", "plan.", 1))
         }
-        k if k.starts_with("analysis.") => Some(k.to_owned()),
+        k if k.starts_with("analysis.") || k.starts_with("contact.") => Some(k.to_owned()),
         _ => None,
     }
 }
@@ -360,13 +367,14 @@ impl Recipe {
         c.scan.y_start_mm = y_start_mm
             .or(self.file.plan.y_start_mm)
             .unwrap_or(station.scan.y_start_mm);
-        c.analysis = overlay_analysis(&station.analysis, &self.file.analysis).map_err(|m| {
-            RecipeError::Invalid {
-                path: self.path.clone(),
-                key: "analysis".into(),
-                message: m,
-            }
-        })?;
+        let invalid = |key: &str| {
+            let path = self.path.clone();
+            let key = key.to_owned();
+            move |message: String| RecipeError::Invalid { path, key, message }
+        };
+        c.analysis =
+            overlay(&station.analysis, &self.file.analysis).map_err(invalid("analysis"))?;
+        c.contact = overlay(&station.contact, &self.file.contact).map_err(invalid("contact"))?;
         match c.validate(&self.path) {
             Ok(()) => Ok(c),
             Err(ConfigError::Invalid { key, message, .. }) => {
@@ -490,10 +498,10 @@ fn conflicts_with_conditions(
 }
 
 /// The station's `[analysis]` with the recipe's keys written over it.
-fn overlay_analysis(
-    station: &AnalysisSettings,
+fn overlay<T: Serialize + serde::de::DeserializeOwned + Clone>(
+    station: &T,
     over: &toml::Table,
-) -> Result<AnalysisSettings, String> {
+) -> Result<T, String> {
     if over.is_empty() {
         return Ok(station.clone());
     }
@@ -501,8 +509,7 @@ fn overlay_analysis(
     for (k, v) in over {
         t.insert(k.clone(), v.clone());
     }
-    AnalysisSettings::deserialize(toml::Value::Table(t))
-        .map_err(|e| e.to_string().trim_end().to_owned())
+    T::deserialize(toml::Value::Table(t)).map_err(|e| e.to_string().trim_end().to_owned())
 }
 
 #[cfg(test)]

@@ -70,7 +70,8 @@ pub struct ScanAnalysisOptions {
 
 impl ScanAnalysisOptions {
     /// These options with the characterisation a scan froze in its plan: curves, levels,
-    /// λc, filter, spike rule, what is done with the spikes and the hold-out threshold.
+    /// λc, filter, spike rule, what is done with the spikes, the hold-out threshold and the
+    /// contact.
     pub fn with_frozen(self, a: &AnalysisPlan) -> ScanAnalysisOptions {
         ScanAnalysisOptions {
             curves: a.curves,
@@ -81,6 +82,10 @@ impl ScanAnalysisOptions {
             exclude_spikes: a.exclude_spikes,
             holdout_threshold: a.holdout_threshold,
             material_ratio: a.material_ratio,
+            contact: a
+                .contact
+                .as_ref()
+                .map(super::sections::contact::ContactSectionOptions::of),
             ..self
         }
     }

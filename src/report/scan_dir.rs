@@ -60,7 +60,7 @@ pub fn scan_recipe(
     lines: &[StoredLine],
 ) -> ModelRecipe {
     let degrees = scan_degrees(options.degree_u, options.degree_v, start);
-    let plan = start.map(|s| s.plan);
+    let plan = start.map(|s| &s.plan);
     let method = options
         .v_method
         .or(plan.map(|p| p.v_method))

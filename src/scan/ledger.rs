@@ -55,14 +55,14 @@ impl Ledger {
         hooks: Arc<TestHooks>,
         metrics_path: Option<PathBuf>,
     ) -> Ledger {
-        let plan = start.plan;
+        let plan = start.plan.clone();
         Ledger {
             id: start.scan_id.clone(),
             dir: store.root().to_path_buf(),
             store,
             journal,
-            plan,
             fitter: Some(fitter_of(&plan)),
+            plan,
             lines: Vec::new(),
             ahead: BTreeMap::new(),
             start,

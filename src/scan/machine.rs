@@ -496,12 +496,13 @@ impl Machine {
     fn build(plan: Plan, policy: Policy, mut status: Status, r: Option<Resumed>) -> Machine {
         status.state = State::Starting;
         status.reason = None;
+        let lines_total = plan.lines;
         let mut m = Machine {
             plan,
             policy,
             status,
             metrics: ScanMetrics {
-                lines_total: plan.lines,
+                lines_total,
                 ..ScanMetrics::default()
             },
             created: false,
@@ -529,7 +530,7 @@ impl Machine {
         };
         if let Some(r) = r {
             m.created = true;
-            m.line = r.committed.min(plan.lines);
+            m.line = r.committed.min(lines_total);
             m.ahead = r.ahead;
             m.skip_ahead();
             m.columns = r.columns;

@@ -61,7 +61,7 @@ pub(super) fn create(
     report: &ProbeReport,
     points: u64,
 ) -> Result<Ledger, StoreError> {
-    let plan = settings.plan;
+    let plan = settings.plan.clone();
     let output_dir = &settings.output_dir;
     std::fs::create_dir_all(output_dir).map_err(|e| StoreError::Io {
         op: "create output directory",
@@ -150,7 +150,7 @@ pub(super) fn reopen(
             ))
         }
     };
-    let plan = state.start.plan;
+    let plan = state.start.plan.clone();
     if state.start.config_hash != settings.config_hash {
         tracing::warn!(
             "the configuration changed since scan {} started; the plan frozen in its journal is followed",

@@ -6,9 +6,12 @@
 //! Also the plan's disk estimate: the bytes a scan writes and those still to come (pure: the
 //! pre-flight and the full-disk suspension compare them with the free space).
 //!
-//! Layer 0 (vocabulary): depends on [`crate::units`], and on the two value types that say
-//! how the surface is made ([`crate::fit::VMethod`], [`crate::metrology::outliers::SpikeOptions`]).
+//! Layer 0 (vocabulary): depends on [`crate::units`], on the two value types that say how
+//! the surface is made ([`crate::fit::VMethod`], [`crate::metrology::outliers::SpikeOptions`])
+//! and on those that say how it is characterised ([`MaterialRatioReading`],
+//! [`crate::contact::ContactSettings`]).
 
+use crate::contact::ContactSettings;
 use crate::fit::VMethod;
 use crate::metrology::outliers::SpikeOptions;
 use crate::metrology::sj_material_ratio::MaterialRatioReading;
@@ -17,7 +20,7 @@ use serde::{Deserialize, Serialize};
 
 /// The plan of a scan as frozen in its start record: what a resumed scan follows even
 /// when the configuration was edited since.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Plan {
     /// Number of lines.
@@ -49,7 +52,7 @@ pub struct Plan {
 
 /// How a scan's lines are characterised (the station's `[analysis]` when the scan started).
 /// The degrees, the method across the lines and the spike replacement are the plan's own.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AnalysisPlan {
     /// Profile curves extracted from the model for the bearing area curves.
@@ -70,6 +73,10 @@ pub struct AnalysisPlan {
     /// version froze none: ISO's).
     #[serde(default)]
     pub material_ratio: MaterialRatioReading,
+    /// The contact the outputs include (the station's or the recipe's `[contact]` when it is
+    /// enabled; `None`: none, also in plans of older versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact: Option<ContactSettings>,
 }
 
 impl Plan {

@@ -103,7 +103,7 @@ pub async fn run_scan<S: Station>(
     // record froze (set below, once its journal is read).
     hands.station.freeze(None);
     let mut machine = match reopening {
-        None => Machine::new_scan(settings.plan, policy, before),
+        None => Machine::new_scan(settings.plan.clone(), policy, before),
         Some((dir, peer, after_failure)) => match watched(ctl, "reopening the scan", {
             // Reading back every committed line and refitting them takes seconds for a large
             // scan: done beside the loop, which meanwhile feeds the watchdog.
@@ -124,7 +124,7 @@ pub async fn run_scan<S: Station>(
                     });
                 }
                 hands.attach(&l);
-                let plan = l.plan;
+                let plan = l.plan.clone();
                 books.ledger = Some(l);
                 Machine::resumed(plan, policy, before, resumed)
             }

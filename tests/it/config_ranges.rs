@@ -88,3 +88,25 @@ fn a_material_ratio_reading_that_is_neither_iso_nor_instrument_exits_78_naming_t
         ],
     );
 }
+
+#[test]
+fn a_malformed_contact_table_exits_78_naming_the_key() {
+    crate::common::assert_tables_refused(
+        "contact",
+        &[
+            ("enabled = true\nyoung-gpa = -1.0", "contact.young-gpa"),
+            ("poisson = 0.7", "contact.poisson"),
+            ("young2-gpa = 5000.0", "contact.young2-gpa"),
+            ("poisson2 = 0.3", "contact.poisson2"),
+            ("hardness-gpa = 0.0", "contact.hardness-gpa"),
+            ("pressures-mpa = [10.0, -5.0]", "contact.pressures-mpa"),
+            (
+                "hardness-gpa = 0.05\npressures-mpa = [10.0, 100.0]",
+                "contact.pressures-mpa",
+            ),
+            ("model-pitch-y-mm = 0.0", "contact.model-pitch-y-mm"),
+            ("enable = true", "enable"),
+            ("pressures-mpa = 10.0", "pressures-mpa"),
+        ],
+    );
+}

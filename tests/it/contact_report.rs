@@ -11,6 +11,8 @@
 //! - lines that are each a smooth crest but whose phases are unrelated from line to line: the
 //!   model between them is invented, the hold-out says so, and the contact of the model is
 //!   reported with that verdict and a warning;
+//! - the cap against an elastic flat: Hertz with the composite modulus of the two bodies
+//!   (Johnson eq. 4.22, computed here);
 //! - bad `--contact…` values are refused (exit 2) naming the value.
 use std::path::Path;
 use std::process::{Command, Output};
@@ -158,6 +160,52 @@ fn cap_contact_of_grid_and_model_between_lines_follow_hertz() {
 }
 
 #[test]
+fn cap_against_an_elastic_flat_follows_hertz_with_the_composite_modulus() {
+    // Aluminium (70 GPa, ν 0.33) against the steel cap: 1/E* = 0.91/210 + (1 − 0.33²)/70,
+    // about a quarter of steel on a rigid flat, so the same load makes a contact radius
+    // (E*_rigid/E*)^(1/3) ≈ 1.58 times larger (Hertz).
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("cap.csv");
+    write_grid(&input, cap);
+    let p = hertz_pressure_mpa();
+    let pressures = format!("{p}");
+    let report = analyze(
+        &input,
+        &dir.path().join("out"),
+        &[
+            "--contact-pressures",
+            &pressures,
+            "--contact-young2",
+            "70",
+            "--contact-poisson2",
+            "0.33",
+        ],
+    );
+    let c = &report["contact"];
+    let e_star_mpa = 1000.0 / (0.91 / 210.0 + (1.0 - 0.33 * 0.33) / 70.0);
+    assert!(
+        (c["effective_modulus_gpa"].as_f64().unwrap() - e_star_mpa / 1000.0).abs() < 1e-9,
+        "{c}"
+    );
+    assert_eq!(c["counter_body"]["young_gpa"], 70.0, "{c}");
+    assert_eq!(c["counter_body"]["poisson"], 0.33, "{c}");
+    assert_eq!(c["specimen"]["young_gpa"], 210.0, "{c}");
+    let area_um2 = (COLS as f64 * PITCH_X_UM) * (ROWS as f64 * PITCH_Y_UM);
+    let a = (3.0 * p * area_um2 * R_UM / (4.0 * e_star_mpa)).cbrt();
+    let hertz = std::f64::consts::PI * a * a / area_um2;
+    let got = c["measured"]["curve"][0]["area_fraction"].as_f64().unwrap();
+    assert!(
+        (got - hertz).abs() < 0.08 * hertz,
+        "measured {got}, Hertz with the composite modulus {hertz}"
+    );
+    let html = std::fs::read_to_string(dir.path().join("out/report.html")).unwrap();
+    assert!(
+        html.contains("against an elastic flat (E 70 GPa, ν 0.33)"),
+        "the counter-body in report.html"
+    );
+}
+
+#[test]
 fn model_sampled_at_the_lines_own_spacing_is_the_measured_grid_again() {
     // Not the cap: a shift along x or y would leave its levelled contact as it is.
     let dir = tempfile::tempdir().unwrap();
@@ -264,6 +312,14 @@ fn bad_contact_options_are_refused_naming_the_value() {
             "--contact-model-pitch-y",
         ),
         (vec!["--contact-pressures", "10"], "--contact"),
+        (
+            vec!["--contact", "--contact-young2", "5000"],
+            "Young's modulus of the counter-body",
+        ),
+        (
+            vec!["--contact", "--contact-poisson2", "0.3"],
+            "--contact-young2",
+        ),
     ] {
         let o = surfscan()
             .arg("analyze")

@@ -563,3 +563,134 @@ async fn a_foreground_scan_of_a_part_that_does_not_conform_exits_4() {
         Some(StopStatus::Success)
     );
 }
+
+/// A recipe whose `[contact]` is enabled: brass (100 GPa, ν 0.34) against an aluminium flat
+/// (70 GPa, ν 0.33) at two loads.
+const CONTACT: &str = r#"description = "a coupon whose contact the lab wants"
+[plan]
+lines = 5
+y-step-mm = 0.01
+[contact]
+enabled = true
+pressures-mpa = [5.0, 50.0]
+young-gpa = 100.0
+poisson = 0.34
+young2-gpa = 70.0
+poisson2 = 0.33
+"#;
+
+/// `surfscan scan --recipe` with an enabled `[contact]`: the scan's own outputs hold the
+/// contact (contact.json, its figures, report.json's section and report.html's table), the
+/// plan froze it, and `analyze` of the scan directory computes the same contact without
+/// being asked; a recipe with a malformed `[contact]` is refused (exit 78) naming the key,
+/// before any scan starts.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_recipes_contact_is_in_the_scans_outputs_and_frozen_in_its_plan() {
+    let bad = CONTACT.replace("young-gpa = 100.0", "young-gpa = -1.0");
+    let r = rig(&[("contact", CONTACT), ("bad", &bad)]).await;
+    let run = |args: Vec<String>| {
+        let config = r.config.clone();
+        let lock_dir = r.dir.path().to_path_buf();
+        tokio::task::spawn_blocking(move || {
+            Command::new(env!("CARGO_BIN_EXE_surfscan"))
+                .args(&args)
+                .arg("--config")
+                .arg(&config)
+                .env("SURFSCAN_TEST_LOCK_DIR", &lock_dir)
+                .stdin(Stdio::null())
+                .output()
+                .unwrap()
+        })
+    };
+    let scan = |recipe: &str| {
+        ["scan", "--recipe", recipe, "--specimen", "K-1"]
+            .map(String::from)
+            .to_vec()
+    };
+    let o = run(scan("bad")).await.unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(78), "{stderr}");
+    assert!(
+        stderr.contains("contact.young-gpa") && stderr.contains("-1"),
+        "{stderr}"
+    );
+    assert!(
+        scans(&r.out()).is_empty(),
+        "a refused recipe started a scan"
+    );
+
+    let o = run(scan("contact")).await.unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        matches!(o.status.code(), Some(0) | Some(3)),
+        "{stdout}\n{stderr}"
+    );
+    let all = scans(&r.out());
+    assert_eq!(all.len(), 1);
+    let (name, state) = &all[0];
+    assert_eq!(state.completed().len() as u32, LINES);
+    // The plan froze the recipe's [contact] over the station's defaults.
+    let frozen = state.start.plan.analysis.as_ref().unwrap();
+    let c = frozen
+        .contact
+        .as_ref()
+        .expect("the contact frozen in the plan");
+    assert_eq!((c.young_gpa, c.young2_gpa), (100.0, Some(70.0)));
+    assert_eq!(c.pressures_mpa, vec![5.0, 50.0]);
+
+    let dir = r.out().join(name);
+    let read = |p: &Path| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(p).unwrap()).unwrap()
+    };
+    let contact = read(&dir.join("contact.json"));
+    // 1/E* = (1 − 0.34²)/100 + (1 − 0.33²)/70 (Johnson eq. 4.22).
+    let e_star = 1.0 / ((1.0 - 0.34 * 0.34) / 100.0 + (1.0 - 0.33 * 0.33) / 70.0);
+    let e = contact["effective_modulus_gpa"].as_f64().unwrap();
+    assert!((e - e_star).abs() < 1e-9 * e_star, "{e} vs {e_star}");
+    let curve = contact["curve"].as_array().unwrap();
+    assert_eq!(curve.len(), 2, "{contact}");
+    let area = |p: &serde_json::Value| p["area_fraction"].as_f64().unwrap();
+    let gap = |p: &serde_json::Value| p["mean_gap_um"].as_f64().unwrap();
+    // More load, more contact and a closer gap; never the whole grid.
+    assert!(
+        0.0 < area(&curve[0]) && area(&curve[0]) < area(&curve[1]) && area(&curve[1]) < 1.0,
+        "{contact}"
+    );
+    assert!(
+        gap(&curve[0]) > gap(&curve[1]) && gap(&curve[1]) > 0.0,
+        "{contact}"
+    );
+    assert_eq!(contact["grid"]["rows"], LINES, "{contact}");
+    for f in [
+        "load_area.png",
+        "load_area.svg",
+        "pressure.png",
+        "pressure.svg",
+    ] {
+        assert!(dir.join(f).is_file(), "{f} in the scan directory");
+    }
+    let report = read(&dir.join("report.json"));
+    assert_eq!(report["contact"]["measured"]["curve"], contact["curve"]);
+    assert_eq!(report["contact"]["counter_body"]["young_gpa"], 70.0);
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(
+        html.contains("id=\"t-contact\"") && html.contains("Contact: load–area curve"),
+        "the contact's table and figure in report.html"
+    );
+
+    // `analyze` of the scan directory follows the frozen plan: the same contact, unasked.
+    let again = r.dir.path().join("again");
+    let mut args = vec!["analyze".to_string(), dir.display().to_string()];
+    args.extend(["--out".to_string(), again.display().to_string()]);
+    let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .args(&args)
+        .output()
+        .unwrap();
+    assert!(
+        matches!(o.status.code(), Some(0) | Some(3)),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert_eq!(read(&again.join("contact.json"))["curve"], contact["curve"]);
+}

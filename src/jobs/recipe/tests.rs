@@ -73,6 +73,26 @@ fn a_recipe_replaces_the_plan_and_the_analysis_keys_it_names() {
 }
 
 #[test]
+fn a_recipe_overrides_the_contact_keys_it_names() {
+    let text = format!("{RECIPE}[contact]\nenabled = true\nyoung-gpa = 100.0\n");
+    let c = recipe(&text).unwrap().config_for(&station(), None).unwrap();
+    assert!(c.contact.enabled);
+    assert_eq!(c.contact.young_gpa, 100.0);
+    // The keys it does not name stay the station's.
+    let d = station().contact;
+    assert_eq!(
+        (c.contact.poisson, &c.contact.pressures_mpa),
+        (d.poisson, &d.pressures_mpa)
+    );
+    // Without a [contact] table, the station's.
+    let c = recipe(RECIPE)
+        .unwrap()
+        .config_for(&station(), None)
+        .unwrap();
+    assert_eq!(c.contact, d);
+}
+
+#[test]
 fn bad_recipes_are_refused_naming_the_file_and_the_key() {
     for (text, key, says) in [
         (
@@ -139,6 +159,21 @@ fn bad_recipes_are_refused_naming_the_file_and_the_key() {
             RECIPE.replace("outliers = \"exclude\"", "outlier = \"exclude\""),
             "analysis",
             "unknown field `outlier`",
+        ),
+        (
+            format!("{RECIPE}[contact]\nenabled = true\nyoung-gpa = -1.0\n"),
+            "contact.young-gpa",
+            "valid range",
+        ),
+        (
+            format!("{RECIPE}[contact]\nhardness-gpa = 0.05\npressures-mpa = [100.0]\n"),
+            "contact.pressures-mpa",
+            "beyond full contact",
+        ),
+        (
+            format!("{RECIPE}[contact]\nyoung = 100.0\n"),
+            "contact",
+            "unknown field `young`",
         ),
         (
             RECIPE.replace("[conditions]", "[condition]"),

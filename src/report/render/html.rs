@@ -1188,9 +1188,26 @@ fn contact(h: &mut String, report: &Value) {
         .map_or("elastic".to_string(), |v| {
             format!("perfectly plastic at a hardness of {} GPa", sig(v, 4))
         });
+    let body = |b: &Value| {
+        format!(
+            "E {} GPa, ν {}",
+            b["young_gpa"]
+                .as_f64()
+                .map_or("—".to_string(), |v| v.to_string()),
+            b["poisson"]
+                .as_f64()
+                .map_or("—".to_string(), |v| v.to_string())
+        )
+    };
+    let counter = match &c["counter_body"] {
+        b if b.is_object() => format!("an elastic flat ({})", body(b)),
+        _ => "a rigid flat".to_string(),
+    };
     let _ = writeln!(
         h,
-        "<p id=\"contact-bodies\">Composite modulus E* = {} GPa, {}; heights levelled by their least-squares plane.</p>",
+        "<p id=\"contact-bodies\">The specimen ({}) against {}: composite modulus E* = {} GPa, {}; heights levelled by their least-squares plane.</p>",
+        esc(&body(&c["specimen"])),
+        esc(&counter),
         c["effective_modulus_gpa"]
             .as_f64()
             .map_or("—".to_string(), |v| sig(v, 4)),

@@ -1,6 +1,6 @@
 //! The renderers: every file of a characterisation, made from the section results — plots
 //! (bearing curves, height map, measured vs model of one line, the Rk construction of each
-//! line: [`plots`]), `measured.x3p` and `model.x3p` ([`crate::x3p`]), `summary.csv`
+//! line: [`plots`]), the contact's `contact.json` and figures ([`contact`]), `measured.x3p` and `model.x3p` ([`crate::x3p`]), `summary.csv`
 //! ([`summary`]), `report.json` and `report.html` ([`html`], laid out for paper by
 //! [`print`]), each replaced atomically; and the files for the lab's quality systems, made
 //! from a completed scan's [`super::exported::Exported`]: the Q-DAS DFQ ([`dfq`]) and the
@@ -9,6 +9,7 @@
 //!
 //! Layer 4 (reporting): depends on [`crate::x3p`], [`crate::atomic`] and the report's types.
 
+pub mod contact;
 pub mod decimate;
 pub mod dfq;
 pub mod html;
@@ -331,7 +332,8 @@ fn draw_rk_run(
 }
 
 /// Writes the plots (the Rk figures and the height map on threads of their own), the X3P
-/// files beside them, then `summary.csv`; `report.json` and `report.html` are written last by
+/// files beside them, the contact's files (when the report has a contact), then
+/// `summary.csv`; `report.json` and `report.html` are written last by
 /// [`write_report`], once the report's timings are final.
 pub fn write_data_files(
     out: &Path,
@@ -402,7 +404,7 @@ pub fn write_data_files(
         let rk_plots = rk_plots.join().unwrap_or_else(|_| Err(rk_plot_panic(ctx)));
         (plots, rk_plots, x3p.join())
     });
-    let plots = plots?;
+    let mut plots = plots?;
     let rk_plots = rk_plots?;
     let (measured_x3p, model_x3p) = x3p.map_err(|_| ReportError::Metrology {
         what: format!("{input}: measured.x3p"),
@@ -412,6 +414,14 @@ pub fn write_data_files(
             hint: "encoding the X3P files panicked; report this with the input",
         },
     })??;
+    if let Some(c) = &report.contact {
+        plots.extend(contact::write_contact_files(
+            out,
+            c,
+            &ctx.input,
+            &c.warnings(),
+        )?);
+    }
     let summary = out.join("summary.csv");
     write_file(
         &summary,
@@ -542,6 +552,20 @@ pub fn write_report(
             ("bac", "Material ratio curves"),
             ("overlay", "One line: measured and model"),
         ] {
+            let (png, svg) = pair(stem);
+            figures.extend(html::Figure::from_files(title, &png, &svg, false));
+        }
+        let contact = report
+            .contact
+            .as_ref()
+            .is_some_and(|c| c.measured.is_some());
+        for (stem, title) in [
+            ("load_area", "Contact: load–area curve"),
+            ("pressure", "Contact: pressure map"),
+        ]
+        .into_iter()
+        .filter(|_| contact)
+        {
             let (png, svg) = pair(stem);
             figures.extend(html::Figure::from_files(title, &png, &svg, false));
         }

@@ -1,5 +1,6 @@
 //! The contact section (`contact` in report.json): the load–area curve of the measured grid
-//! pressed against a rigid flat (or a second elastic body), and — when asked for — of the
+//! pressed against a rigid or an elastic flat (the two bodies through their composite
+//! modulus), and — when asked for — of the
 //! model sampled at a chosen y spacing between the lines, with the verdict between lines
 //! beside it: a contact computed on a model the data do not support says so.
 //!
@@ -29,6 +30,16 @@ pub struct ContactSectionOptions {
     pub model_pitch_y_mm: Option<f64>,
 }
 
+impl ContactSectionOptions {
+    /// The section of `[contact]` (a station's, a recipe's or a scan's frozen plan).
+    pub fn of(settings: &crate::contact::ContactSettings) -> ContactSectionOptions {
+        ContactSectionOptions {
+            contact: settings.options(),
+            model_pitch_y_mm: settings.model_pitch_y_mm,
+        }
+    }
+}
+
 /// One surface's contact, as report.json shows it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ContactSurface {
@@ -48,6 +59,37 @@ pub struct ContactSurface {
     pub map_pressure_mpa: f64,
     /// The largest pixel pressure at the map load, MPa.
     pub map_max_pressure_mpa: f64,
+    /// The pressure of each point at the map load, MPa, row-major (for the map's figure).
+    #[serde(skip)]
+    pub map_pressure_field_mpa: Vec<f64>,
+}
+
+impl ContactSurface {
+    /// The contact of a `rows` × `cols` grid at these pitches, as solved.
+    pub fn of(
+        curve: ContactCurve,
+        (rows, cols): (usize, usize),
+        pitch_x_mm: f64,
+        pitch_y_mm: f64,
+    ) -> ContactSurface {
+        let ContactCurve {
+            points,
+            map,
+            padded,
+            ..
+        } = curve;
+        ContactSurface {
+            rows,
+            cols,
+            pitch_x_mm,
+            pitch_y_mm,
+            padded,
+            curve: points,
+            map_pressure_mpa: map.nominal_pressure_mpa,
+            map_max_pressure_mpa: map.pressure_mpa.iter().cloned().fold(0.0, f64::max),
+            map_pressure_field_mpa: map.pressure_mpa,
+        }
+    }
 }
 
 /// The model's contact with the verdict between lines beside it.
@@ -69,6 +111,10 @@ pub struct ModelContact {
 /// The section's result.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ContactSection {
+    /// The measured body.
+    pub specimen: crate::contact::Body,
+    /// The counter-body (`None`: a rigid flat).
+    pub counter_body: Option<crate::contact::Body>,
     /// E* used, GPa.
     pub effective_modulus_gpa: f64,
     /// The specimen's hardness, GPa (None: elastic).
@@ -175,6 +221,8 @@ pub fn section(
         Err(e) => (None, Some(e)),
     };
     ContactSection {
+        specimen: opts.contact.specimen,
+        counter_body: opts.contact.counter,
         effective_modulus_gpa: e_gpa,
         hardness_gpa: opts.contact.hardness_gpa,
         measured,
@@ -207,22 +255,13 @@ fn solve(
         pitch_x_mm,
         pitch_y_mm,
     };
-    let ContactCurve {
-        points,
-        map,
-        padded,
-        ..
-    } = contact_curve(&grid, opts).map_err(|e| e.to_string())?;
-    Ok(ContactSurface {
-        rows,
-        cols,
+    let curve = contact_curve(&grid, opts).map_err(|e| e.to_string())?;
+    Ok(ContactSurface::of(
+        curve,
+        (rows, cols),
         pitch_x_mm,
         pitch_y_mm,
-        padded,
-        curve: points,
-        map_pressure_mpa: map.nominal_pressure_mpa,
-        map_max_pressure_mpa: map.pressure_mpa.iter().cloned().fold(0.0, f64::max),
-    })
+    ))
 }
 
 /// The v of each row `y₀ + k·s` (k = 0, 1, … while ≤ the last line's y): the surface's y(v)
