@@ -21,7 +21,8 @@
 use super::input_args::{tell_findings, InputArgs};
 use super::{CliError, Exit};
 use crate::contact::{
-    contact_curve, Body, ContactError, ContactGrid, ContactOptions, DEFAULT_PRESSURES_MPA,
+    contact_curve, Body, ContactError, ContactGrid, ContactOptions, SolveOptions,
+    DEFAULT_PRESSURES_MPA,
 };
 use crate::metrology::areal::{level_plane, HeightMap};
 use crate::report::render::contact::write_contact_files;
@@ -59,6 +60,10 @@ pub struct Args {
     /// to the curve when not among the pressures).
     #[arg(long, value_name = "MPA")]
     pub map_pressure: Option<f64>,
+    /// Iterations of each load's solve before it gives up, naming how far it got (default
+    /// 5000; a scan's grid converges in a few hundred to about 1500).
+    #[arg(long, value_name = "N", default_value_t = 5000, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub max_iterations: u32,
     /// Output directory (default `.`).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -92,7 +97,10 @@ pub fn options(args: &Args) -> Result<ContactOptions, ContactError> {
             args.pressures.clone()
         },
         map_pressure_mpa: args.map_pressure,
-        ..ContactOptions::default()
+        solve: SolveOptions {
+            max_iterations: args.max_iterations as usize,
+            ..SolveOptions::default()
+        },
     })
 }
 

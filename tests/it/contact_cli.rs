@@ -32,6 +32,20 @@ fn cap_csv(n: usize, r_um: f64) -> String {
     s
 }
 
+/// `n` × `n` heights in 0…1 µm, each from a multiplicative hash of its index: no correlation
+/// between neighbours.
+fn noise_csv(n: usize) -> String {
+    let mut s = String::new();
+    for i in 0..n {
+        let row: Vec<String> = (0..n)
+            .map(|j| format!("{}", ((i * n + j) * 2654435761 % 1000) as f64 / 1000.0))
+            .collect();
+        s.push_str(&row.join(","));
+        s.push('\n');
+    }
+    s
+}
+
 fn stderr(o: &std::process::Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
@@ -195,7 +209,9 @@ fn bad_input_is_refused_with_its_cause_and_status() {
     std::fs::write(&tiny, "0,1,0\n1,2,1\n0,1,0\n").unwrap();
     let flat = dir.path().join("flat.csv");
     std::fs::write(&flat, "1,1,1,1,1\n".repeat(5)).unwrap();
-    let cases: [(&std::path::Path, &[&str], i32, &str); 6] = [
+    let noise = dir.path().join("noise.csv");
+    std::fs::write(&noise, noise_csv(16)).unwrap();
+    let cases: [(&std::path::Path, &[&str], i32, &str); 9] = [
         (
             &cap,
             &["--young", "0"],
@@ -217,6 +233,28 @@ fn bad_input_is_refused_with_its_cause_and_status() {
         ),
         (&tiny, &[], 1, "too small to resolve contact"),
         (&flat, &[], 1, "whole grid is in contact"),
+        // A rough surface closes at a load far beyond its asperities' reach; the message
+        // names the last load that left part of it open.
+        (
+            &cap,
+            &["--pressures", "1,1000000"],
+            1,
+            "at 1000000 MPa the whole grid is in contact: the load is at or beyond full contact; give lower pressures (at 1 MPa part of the surface was still open)",
+        ),
+        // Heights uncorrelated from point to point touch at isolated points only.
+        (
+            &noise,
+            &["--pressures", "0.01,0.1"],
+            1,
+            "(16 × 16 points, pitch 0.001 mm along x, 0.001 mm between lines) is too coarse to resolve contact",
+        ),
+        // Three iterations cannot solve the cap: the message says how far they got.
+        (
+            &cap,
+            &["--max-iterations", "3", "--pressures", "1"],
+            1,
+            "the contact at 1 MPa did not converge in 3 iterations (complementarity residual",
+        ),
     ];
     for (input, extra, code, says) in cases {
         let o = surfscan()
@@ -235,6 +273,15 @@ fn bad_input_is_refused_with_its_cause_and_status() {
             "{extra:?} wrote a result"
         );
     }
+    // The iteration limit is at least 1.
+    let o = surfscan()
+        .arg("contact")
+        .arg(&cap)
+        .args(["--max-iterations", "0"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--max-iterations"), "{}", stderr(&o));
     // --poisson2 alone names the missing --young2.
     let o = surfscan()
         .arg("contact")

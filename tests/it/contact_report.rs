@@ -335,3 +335,45 @@ fn bad_contact_options_are_refused_naming_the_value() {
         assert!(!dir.path().join("bad/report.json").exists(), "{args:?}");
     }
 }
+
+/// A contact that cannot be computed costs the contact, not the report: uncorrelated heights
+/// are too coarse to resolve it, named in `failed_sections` and `measured_error` (exit 3,
+/// partial), and no contact.json is written.
+#[test]
+fn a_contact_the_grid_cannot_resolve_is_named_and_the_report_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("noise.csv");
+    write_grid(&input, |x, y| {
+        let k = (y / PITCH_Y_UM).round() as u64 * COLS as u64 + x.round() as u64;
+        (k * 2654435761 % 1000) as f64 / 1000.0
+    });
+    let out = dir.path().join("out");
+    let o = surfscan()
+        .arg("analyze")
+        .arg(&input)
+        .args(["--pitch-x", "0.001", "--pitch-y", "0.004", "--z-unit", "um"])
+        .args(["--no-filter", "--lc", "0.025", "--contact"])
+        .args(["--contact-pressures", "0.01,0.1", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let why = report["contact"]["measured_error"].as_str().unwrap();
+    assert!(why.contains("too coarse to resolve contact"), "{why}");
+    let failed = report["characterisation"]["failed_sections"]
+        .as_array()
+        .unwrap();
+    assert!(
+        failed
+            .iter()
+            .any(|f| f["section"] == "contact" && f["reason"].as_str() == Some(why)),
+        "named among the failed sections: {failed:?}"
+    );
+    assert!(
+        report["surface_grid"].is_object(),
+        "the rest of the report is there"
+    );
+    assert!(!out.join("contact.json").exists());
+}
