@@ -8,6 +8,17 @@
 /// The hint for a swapped configuration, appended to the driver's own message.
 pub const SWAPPED: &str = "the instrument's and the stage's ports look swapped: exchange [instrument] port and [stage] port (see `ls -l /dev/serial/by-id/`)";
 
+/// `message` with [`SWAPPED`] spelled out with the configured ports: both values and the
+/// keys that hold them, to be exchanged.
+pub fn name_ports(message: &str, instrument_port: &str, stage_port: &str) -> String {
+    message.replace(
+        SWAPPED,
+        &format!(
+            "the instrument's and the stage's ports look swapped (a device answers in the other one's language): exchange the values of [instrument] port = {instrument_port:?} and [stage] port = {stage_port:?} in the configuration, or the cables at the PC (see `ls -l /dev/serial/by-id/`)"
+        ),
+    )
+}
+
 /// Whether `reply` (as received, escaped or not) is a y stage controller's line: GRBL's
 /// `ok`, `error:N`, `ALARM:N`, its banner, a status report or a bracketed message; a Zaber
 /// ASCII reply (`@01 1 OK …`), alert (`!01 …`) or info line (`#01 …`).
@@ -80,6 +91,16 @@ mod tests {
             assert!(!is_stage_reply(instrument), "{instrument}");
             assert_eq!(stage_port_hint(instrument), SWAPPED, "{instrument}");
         }
+        let named = name_ports(
+            &format!("malformed reply \"ok\" ({SWAPPED})"),
+            "/dev/ttyUSB0",
+            "/dev/ttyACM0",
+        );
+        assert!(
+            named.contains("exchange the values of [instrument] port = \"/dev/ttyUSB0\" and [stage] port = \"/dev/ttyACM0\" in the configuration"),
+            "{named}"
+        );
+        assert_eq!(name_ports("no reply", "/a", "/b"), "no reply");
         // Noise (a wrong baud rate) is neither: the usual advice, no swap named.
         for noise in ["\\xff\\x00zz", "NG03", "okay", "error:x", "", "@A1"] {
             assert!(

@@ -62,7 +62,22 @@ impl<S: Station> Hands<'_, S> {
         match action {
             Action::Open(d) => {
                 self.closed(*d).await;
-                self.open(*d).await
+                match (self.open(*d).await, self.station.ports()) {
+                    (
+                        Event::Fault {
+                            mut fault,
+                            trace_started,
+                        },
+                        Some((i, s)),
+                    ) => {
+                        fault.message = crate::port_swap::name_ports(&fault.message, &i, &s);
+                        Event::Fault {
+                            fault,
+                            trace_started,
+                        }
+                    }
+                    (ev, _) => ev,
+                }
             }
             Action::Home => {
                 let Some(stage) = self.stage.as_mut() else {

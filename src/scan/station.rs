@@ -37,6 +37,11 @@ pub trait Station {
     fn instrument_present(&self) -> bool;
     /// Whether the stage's port is there (without opening it).
     fn stage_present(&self) -> bool;
+    /// The configured ports of the instrument and the stage, when they are device paths
+    /// (to name them when they look swapped).
+    fn ports(&self) -> Option<(String, String)> {
+        None
+    }
     /// The x pitch in µm the instrument's profile will have under `conditions`, when it
     /// can be known before a trace (for the pre-flight estimate).
     fn expected_pitch_um(&self, conditions: &Conditions) -> Option<f64>;
@@ -145,6 +150,10 @@ impl Station for SerialStation {
 
     fn stage_present(&self) -> bool {
         Path::new(&self.stage.port).exists()
+    }
+
+    fn ports(&self) -> Option<(String, String)> {
+        Some((self.instrument.port.clone(), self.stage.port.clone()))
     }
 
     fn expected_pitch_um(&self, c: &Conditions) -> Option<f64> {

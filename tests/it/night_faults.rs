@@ -589,9 +589,12 @@ async fn swapped_ports_are_named_as_swapped() {
         .expect("the scan ends");
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success(), "{}", describe(&o));
+    // Both configured ports named, with the keys that hold them.
     assert!(
         err.contains("ports look swapped")
-            && err.contains("exchange [instrument] port and [stage] port"),
+            && err.contains(&format!(
+                "exchange the values of [instrument] port = {s} and [stage] port = {i}"
+            )),
         "{}",
         describe(&o)
     );

@@ -254,3 +254,41 @@ async fn a_microstep_that_makes_the_step_inexact_is_refused_or_rounded_and_recor
     assert!(off <= 24, "the last line's carriage is {off} nm off");
     rig.shutdown().await;
 }
+
+/// The instrument's and the Zaber stage's ports swapped in the configuration. A Zaber
+/// ignores the SJ-210's lines (it answers only lines that begin with `/`), so the
+/// instrument's port is silent from the start; asked as a stage would be, it answers as a
+/// Zaber, and the scan refuses to start naming the swap with both configured ports and the
+/// keys that hold them, instead of waiting for a silent instrument. Nothing moves.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn swapped_ports_with_a_zaber_stage_are_named_as_swapped() {
+    let rig = ZaberRig::start(powered_up(125.0)).await;
+    let config = rig.config("out", 125.0, "");
+    let (i, s) = (
+        format!("{:?}", rig.instrument_link.display().to_string()),
+        format!("{:?}", rig.stage_link.display().to_string()),
+    );
+    let text = std::fs::read_to_string(&config).unwrap();
+    assert!(text.contains(&i) && text.contains(&s), "{text}");
+    let swapped = text
+        .replace(&i, "\"@INSTRUMENT@\"")
+        .replace(&s, &i)
+        .replace("\"@INSTRUMENT@\"", &s);
+    std::fs::write(&config, swapped).unwrap();
+    let o = tokio::time::timeout(Duration::from_secs(120), run_scan(&config, &[]))
+        .await
+        .expect("the scan ends");
+    assert!(!o.status.success(), "{}", describe(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("ports look swapped")
+            && err.contains(&format!(
+                "exchange the values of [instrument] port = {s} and [stage] port = {i}"
+            ))
+            && err.contains("\"@01 "),
+        "{}",
+        describe(&o)
+    );
+    assert_eq!(rig.stage.moves_started(), 0, "nothing moved");
+    rig.shutdown().await;
+}

@@ -1,7 +1,8 @@
 //! The conversation with the instrument: one command in flight, a write deadline (the
 //! first-byte timeout: a link that takes no bytes is as silent as one that gives none),
 //! first-byte and inter-byte timeouts, recovery after a garbled or late reply (drain, re-read status), and bounded
-//! retries of idempotent reads on "not now" codes. Never retries a `CT` command.
+//! retries of idempotent reads on "not now" codes. Never retries a `CT` command. For a probe
+//! met with silence, the questions a stage controller answers (the ports swapped).
 //!
 //! Layer 2: part of [`super::Sj210Client`]; depends on [`crate::sj210::codec`] and
 //! [`crate::sj210::error`].
@@ -111,6 +112,40 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
                 _ => break,
             }
         }
+    }
+
+    /// A stage controller's reply to the questions every one answers, when one is on this
+    /// link: GRBL's status request `?` (a real-time byte) and a Zaber's empty command `/`.
+    /// To an SJ-210 the bytes are one unknown command ending in CR (answered `NG`, drained
+    /// here), so nothing is left in its buffer for the next command.
+    pub(super) async fn stage_instead(&mut self) -> Option<String> {
+        self.drain().await;
+        if crate::transport::send(&mut self.io, b"?\n/\r", self.opts.first_byte)
+            .await
+            .is_err()
+        {
+            return None;
+        }
+        let mut heard = Vec::new();
+        let end = Instant::now() + self.opts.first_byte;
+        let mut chunk = [0u8; 512];
+        while Instant::now() < end && heard.len() < 4096 {
+            match timeout(end - Instant::now(), self.io.read(&mut chunk)).await {
+                Ok(Ok(n)) if n > 0 => heard.extend_from_slice(&chunk[..n]),
+                _ => break,
+            }
+            let text = String::from_utf8_lossy(&heard).into_owned();
+            if let Some(line) = text
+                .split(['\r', '\n'])
+                .find(|l| crate::port_swap::is_stage_reply(l))
+            {
+                let line = line.trim().to_owned();
+                self.drain().await;
+                return Some(line);
+            }
+        }
+        self.drain().await;
+        None
     }
 
     /// After a timeout or malformed reply: drain what is still arriving, forget partial

@@ -108,7 +108,23 @@ impl<S: AsyncRead + AsyncWrite + Unpin> crate::devices::Instrument for Sj210Clie
     type Error = Sj210Error;
 
     async fn probe(&mut self) -> Result<ProbeReport, Sj210Error> {
-        let report = self.probe_report().await?;
+        let report = match self.probe_report().await {
+            Ok(r) => r,
+            // Silent from the first command: a stage controller ignores the instrument's
+            // lines (a Zaber answers only lines that begin with `/`). Asked in its own
+            // language, it tells the ports are swapped.
+            Err(Sj210Error::Link {
+                command,
+                source: first @ LinkError::FirstByteTimeout { .. },
+            }) if self.answered.is_empty() => {
+                let source = match self.stage_instead().await {
+                    Some(raw) => LinkError::Malformed { raw },
+                    None => first,
+                };
+                return Err(Sj210Error::Link { command, source });
+            }
+            Err(e) => return Err(e),
+        };
         if report.battery == Battery::Abnormal {
             return Err(Sj210Error::BatteryAbnormal);
         }
