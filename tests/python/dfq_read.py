@@ -4,7 +4,7 @@ Written from the field list of the Q-DAS ASCII transfer format (AQDEF), independ
 surfscan's writer: each line is `Kxxxx[/i] content`; K0100 is the number of characteristics;
 K1xxx describe the part, K2xxx/i characteristic i; in the value part each K0001/i starts a new
 value of characteristic i and the K00xx/i fields after it (date/time K0004, batch K0006,
-operator K0008, part ident K0014) belong to that value. The text is ISO 8859-1, lines end with
+operator K0008, text K0009, part ident K0014) belong to that value. The text is ISO 8859-1, lines end with
 CR LF.
 
 Usage: dfq_read.py FILE  -> {"K0100": n, "part": {...}, "characteristics": {i: {...}},
