@@ -17,6 +17,7 @@
 
 use super::archive_settings::{read_secret, ArchiveSettings, Target};
 use super::retention;
+use super::scan_queue::next_backoff;
 use crate::scan::status::Status;
 use object_store::path::Path as ObjectPath;
 use object_store::{ObjectStore, PutPayload};
@@ -32,9 +33,6 @@ pub const LINK: &str = "archive";
 
 /// The object listing every file of a scan with its SHA-256, written last.
 pub const MANIFEST: &str = "MANIFEST.sha256";
-
-/// The longest wait between two tries while the store is away.
-const MAX_BACKOFF: Duration = Duration::from_secs(300);
 
 /// How long one request may take before it counts as failed.
 const REQUEST_TIMEOUT: Duration = Duration::from_secs(120);
@@ -74,11 +72,6 @@ pub fn manifest_text(files: &[Archived]) -> String {
         .iter()
         .map(|f| format!("{}  {}\n", f.sha256, f.path))
         .collect()
-}
-
-/// The next wait after `previous` failed (1 s, doubling, at most [`MAX_BACKOFF`]).
-pub fn next_backoff(previous: Option<Duration>) -> Duration {
-    previous.map_or(Duration::from_secs(1), |d| (d * 2).min(MAX_BACKOFF))
 }
 
 /// Every regular file below `dir`, as `/`-separated relative paths, sorted. Links are not
@@ -162,92 +155,17 @@ fn open_store(
     }
 }
 
-/// The queue of scans to archive on disk: one JSON file per scan, named so that they sort
-/// in the order the scans completed.
-#[derive(Debug, Clone)]
-pub struct Queue {
-    dir: PathBuf,
-}
+/// The queue of scans to archive on disk ([`super::scan_queue`]).
+pub type Queue = super::scan_queue::ScanQueue<Entry>;
 
-impl Queue {
-    /// The queue in `dir` (created when missing).
-    pub fn open(dir: &Path) -> std::io::Result<Queue> {
-        std::fs::create_dir_all(dir.join("done"))?;
-        Ok(Queue {
-            dir: dir.to_owned(),
-        })
-    }
-
-    /// Adds a completed scan; durable when this returns.
-    pub fn push(&self, scan_id: &str, dir: &Path) -> std::io::Result<PathBuf> {
-        let now = chrono::Utc::now();
-        let name = format!("{}-{scan_id}.json", now.format("%Y%m%dT%H%M%S%.9fZ"));
-        let path = self.dir.join(name);
-        let entry = Entry {
+impl super::scan_queue::ScanEntry for Entry {
+    fn queued(scan_id: &str, dir: &Path) -> Entry {
+        Entry {
             scan_id: scan_id.to_owned(),
             dir: dir.to_owned(),
             files: Vec::new(),
             deleted: None,
-        };
-        crate::atomic::write_atomically(&path, |w| {
-            serde_json::to_writer_pretty(&mut *w, &entry).map_err(std::io::Error::other)
-        })?;
-        Ok(path)
-    }
-
-    /// The entries waiting, oldest first.
-    pub fn pending(&self) -> std::io::Result<Vec<PathBuf>> {
-        let mut v: Vec<PathBuf> = std::fs::read_dir(&self.dir)?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
-            .collect();
-        v.sort();
-        Ok(v)
-    }
-
-    fn read(path: &Path) -> Result<Entry, String> {
-        let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        serde_json::from_slice(&bytes).map_err(|e| format!("{}: {e}", path.display()))
-    }
-
-    fn save(path: &Path, entry: &Entry) -> Result<(), String> {
-        crate::atomic::write_atomically(path, |w| {
-            serde_json::to_writer_pretty(&mut *w, entry).map_err(std::io::Error::other)
-        })
-        .map_err(|e| {
-            format!(
-                "{}: {}",
-                path.display(),
-                crate::atomic::write_hint(path, &e)
-            )
-        })
-    }
-
-    /// The entries of scans archived and verified, oldest first.
-    fn done(&self) -> std::io::Result<Vec<PathBuf>> {
-        let mut v: Vec<PathBuf> = std::fs::read_dir(self.dir.join("done"))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
-            .collect();
-        v.sort();
-        Ok(v)
-    }
-
-    fn finish(&self, path: &Path) -> Result<(), String> {
-        let to = self
-            .dir
-            .join("done")
-            .join(path.file_name().unwrap_or_default());
-        std::fs::rename(path, &to).map_err(|e| format!("{}: {e}", path.display()))
-    }
-
-    /// Moves the entry of a scan that cannot be archived to `done/` under a `.failed` name:
-    /// kept as the record, never taken for a verified copy.
-    fn set_aside(&self, path: &Path) -> Result<(), String> {
-        let mut name = path.file_name().unwrap_or_default().to_owned();
-        name.push(".failed");
-        let to = self.dir.join("done").join(name);
-        std::fs::rename(path, &to).map_err(|e| format!("{}: {e}", path.display()))
+        }
     }
 }
 
@@ -371,7 +289,7 @@ impl Archiver {
                 // so that it does not hold up the others; the entry says what it was.
                 tracing::error!(
                     "archive: {e}; this scan is left out of the archive (its entry is kept in {})",
-                    self.queue.dir.join("done").display()
+                    self.queue.dir().join("done").display()
                 );
                 self.queue.set_aside(path)?;
                 self.report(false, e);
@@ -649,18 +567,6 @@ mod tests {
                 "b".repeat(64)
             )
         );
-    }
-
-    #[test]
-    fn the_backoff_doubles_up_to_five_minutes() {
-        let mut d = None;
-        let mut seen = Vec::new();
-        for _ in 0..12 {
-            let n = next_backoff(d);
-            seen.push(n.as_secs());
-            d = Some(n);
-        }
-        assert_eq!(seen, [1, 2, 4, 8, 16, 32, 64, 128, 256, 300, 300, 300]);
     }
 
     #[test]

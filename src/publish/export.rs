@@ -19,6 +19,7 @@
 //! atomic writer.
 
 use super::export_settings::ExportSettings;
+use super::scan_queue::next_backoff;
 use crate::report::exported::Exported;
 use crate::report::render::{dfq::dfq, qif::qif};
 use crate::scan::status::Status;
@@ -31,9 +32,6 @@ use tokio::sync::{watch, Notify};
 
 /// The name of the exports in the status's links.
 pub const LINK: &str = "export";
-
-/// The longest wait between two tries while a drop directory is away.
-const MAX_BACKOFF: Duration = Duration::from_secs(300);
 
 /// A file format the lab's systems take.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -158,11 +156,6 @@ pub fn export_scan(
     }
 }
 
-/// The next wait after `previous` failed (1 s, doubling, at most [`MAX_BACKOFF`]).
-pub fn next_backoff(previous: Option<Duration>) -> Duration {
-    previous.map_or(Duration::from_secs(1), |d| (d * 2).min(MAX_BACKOFF))
-}
-
 /// A scan waiting for its exports, and which are written.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Entry {
@@ -178,77 +171,28 @@ pub struct Entry {
     pub error: Option<String>,
 }
 
-/// The queue of scans to export on disk: one JSON file per scan, named so that they sort in
-/// the order the scans completed.
-#[derive(Debug, Clone)]
-pub struct Queue {
-    dir: PathBuf,
-}
+/// The queue of scans to export on disk ([`super::scan_queue`]).
+pub type Queue = super::scan_queue::ScanQueue<Entry>;
 
-fn save(path: &Path, entry: &Entry) -> Result<(), String> {
-    crate::atomic::write_atomically(path, |w| {
-        serde_json::to_writer_pretty(&mut *w, entry).map_err(std::io::Error::other)
-    })
-    .map_err(|e| {
-        format!(
-            "{}: {}",
-            path.display(),
-            crate::atomic::write_hint(path, &e)
-        )
-    })
-}
-
-impl Queue {
-    /// The queue in `dir` (created when missing).
-    pub fn open(dir: &Path) -> std::io::Result<Queue> {
-        std::fs::create_dir_all(dir.join("done"))?;
-        Ok(Queue {
-            dir: dir.to_owned(),
-        })
-    }
-
-    /// Adds a completed scan; durable when this returns.
-    pub fn push(&self, scan_id: &str, dir: &Path) -> std::io::Result<PathBuf> {
-        let now = chrono::Utc::now();
-        let path = self.dir.join(format!(
-            "{}-{scan_id}.json",
-            now.format("%Y%m%dT%H%M%S%.9fZ")
-        ));
-        let entry = Entry {
+impl super::scan_queue::ScanEntry for Entry {
+    fn queued(scan_id: &str, dir: &Path) -> Entry {
+        Entry {
             scan_id: scan_id.to_owned(),
             dir: dir.to_owned(),
             done: Vec::new(),
             error: None,
-        };
-        save(&path, &entry).map_err(std::io::Error::other)?;
-        Ok(path)
+        }
     }
+}
 
-    /// The entries waiting, oldest first.
-    pub fn pending(&self) -> std::io::Result<Vec<PathBuf>> {
-        let mut v: Vec<PathBuf> = std::fs::read_dir(&self.dir)?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
-            .collect();
-        v.sort();
-        Ok(v)
-    }
-
-    fn finish(&self, path: &Path) -> Result<(), String> {
-        let to = self
-            .dir
-            .join("done")
-            .join(path.file_name().unwrap_or_default());
-        std::fs::rename(path, &to).map_err(|e| format!("{}: {e}", path.display()))
-    }
-
+impl Queue {
     /// Exports every entry waiting into `targets`. A format whose directory failed is not
     /// tried again in this round (the other goes on); the failures (one per format) are
     /// returned together, else the scans exported.
     pub fn drain(&self, targets: &[(Format, &Path)]) -> Result<Vec<String>, String> {
         let pending = self
             .pending()
-            .map_err(|e| format!("cannot read the export queue {}: {e}", self.dir.display()))?;
+            .map_err(|e| format!("cannot read the export queue {}: {e}", self.dir().display()))?;
         let mut failed: Vec<Format> = Vec::new();
         let mut errors: Vec<String> = Vec::new();
         let mut exported = Vec::new();
@@ -278,10 +222,10 @@ impl Queue {
                     tracing::error!(
                         "export: scan {}: {e}; it is left out of the exports (its entry is kept in {})",
                         entry.scan_id,
-                        self.dir.join("done").display()
+                        self.dir().join("done").display()
                     );
                     entry.error = Some(e);
-                    save(&path, &entry)?;
+                    Self::save(&path, &entry)?;
                     self.finish(&path)?;
                     continue;
                 }
@@ -306,7 +250,7 @@ impl Queue {
                 );
                 exported.push(entry.scan_id);
             } else if entry.done.len() != before {
-                save(&path, &entry)?;
+                Self::save(&path, &entry)?;
             }
         }
         if errors.is_empty() {
@@ -403,18 +347,6 @@ impl Exporter {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_backoff_doubles_up_to_five_minutes() {
-        let mut d = None;
-        let mut seen = Vec::new();
-        for _ in 0..11 {
-            let n = next_backoff(d);
-            seen.push(n.as_secs());
-            d = Some(n);
-        }
-        assert_eq!(seen, [1, 2, 4, 8, 16, 32, 64, 128, 256, 300, 300]);
-    }
 
     #[test]
     fn a_missing_drop_directory_is_named_with_its_key_and_never_created() {

@@ -26,7 +26,9 @@ pub mod mqtt;
 pub mod outbox;
 pub mod results;
 pub mod retention;
+pub mod scan_queue;
 pub mod settings;
+pub mod sweep;
 pub mod tls;
 
 use crate::config::Config;
@@ -49,11 +51,40 @@ pub fn outbox_dir(config: &Config, publisher: &str) -> PathBuf {
 /// The running publishers of a process (none when nothing is configured).
 pub struct Publishers {
     events: Option<mpsc::UnboundedSender<ScanEvent>>,
-    sinks: Vec<mpsc::UnboundedSender<ScanEvent>>,
+    sinks: Vec<Sink>,
     writers: Vec<JoinHandle<()>>,
     links: Vec<JoinHandle<()>>,
     stop: watch::Sender<bool>,
     scan_metrics: Option<watch::Sender<ScanMetrics>>,
+}
+
+/// A publisher's writer: where its events go, and what it knows for the start-up sweep
+/// (none when it keeps no record of the scans it queued).
+struct Sink {
+    link: &'static str,
+    tx: mpsc::UnboundedSender<ScanEvent>,
+    known: Option<sweep::Known>,
+}
+
+/// What the queue `q` of `link` knows for the start-up sweep; none (and a warning) when its
+/// directory cannot be read.
+fn known_of<E: scan_queue::ScanEntry>(
+    link: &str,
+    q: &scan_queue::ScanQueue<E>,
+) -> Option<sweep::Known> {
+    match q.known() {
+        Ok(scans) => Some(sweep::Known {
+            since: q.since(),
+            scans,
+        }),
+        Err(e) => {
+            tracing::warn!(
+                "{link}: cannot list {} ({e}); scans completed while the process was stopping are not looked for",
+                q.dir().display()
+            );
+            None
+        }
+    }
 }
 
 /// What to do about a socket the system refused, when the refusal is the service's sandbox.
@@ -202,6 +233,7 @@ impl Publishers {
                 fail(status, export::LINK, e);
             }
         }
+        p.sweep(config);
         // One channel in, a copy of each event to every publisher's writer.
         let sinks = std::mem::take(&mut p.sinks);
         if !sinks.is_empty() {
@@ -211,7 +243,7 @@ impl Publishers {
                 tokio::spawn(async move {
                     while let Some(ev) = rx.recv().await {
                         for s in &sinks {
-                            let _ = s.send(ev.clone());
+                            let _ = s.tx.send(ev.clone());
                         }
                     }
                 }),
@@ -219,6 +251,31 @@ impl Publishers {
             p.events = Some(tx);
         }
         p
+    }
+
+    /// Hands each publisher the success events it missed ([`sweep`]), before any new event.
+    fn sweep(&self, config: &Config) {
+        if self.sinks.iter().all(|s| s.known.is_none()) {
+            return;
+        }
+        let survey = match crate::scan::journal::survey(&config.output.dir) {
+            Ok(s) => s,
+            Err(e) => {
+                tracing::warn!("the scans could not be listed for the start-up sweep: {e}");
+                return;
+            }
+        };
+        for s in &self.sinks {
+            let Some(known) = &s.known else { continue };
+            for ev in sweep::missed(&survey.succeeded, known) {
+                tracing::warn!(
+                    "{}: scan {} succeeded, but the process stopped before it was queued; queued now",
+                    s.link,
+                    ev.scan_id
+                );
+                let _ = s.tx.send(ev);
+            }
+        }
     }
 
     fn start_archive(
@@ -248,6 +305,7 @@ impl Publishers {
         self.links.push(tokio::spawn(archiver.run(stop_rx)));
         self.queue_successes(
             "archive",
+            known_of(archive::LINK, &queue),
             move |id, dir| queue.push(id, dir),
             wake,
             |ev, e| {
@@ -267,6 +325,7 @@ impl Publishers {
     fn queue_successes<P>(
         &mut self,
         link: &'static str,
+        known: Option<sweep::Known>,
         push: P,
         wake: Arc<Notify>,
         unqueued: fn(&ScanEvent, &std::io::Error) -> String,
@@ -288,7 +347,7 @@ impl Publishers {
                 }
             }
         }));
-        self.sinks.push(tx);
+        self.sinks.push(Sink { link, tx, known });
     }
 
     fn start_export(
@@ -312,6 +371,7 @@ impl Publishers {
         self.links.push(tokio::spawn(exporter.run(stop_rx)));
         self.queue_successes(
             "export",
+            known_of(export::LINK, &queue),
             move |id, dir| queue.push(id, dir),
             wake,
             |ev, e| {
@@ -342,6 +402,16 @@ impl Publishers {
             )
         })?;
         let outbox = Arc::new(Mutex::new(outbox));
+        // The scans whose results were stored in the outbox, for the start-up sweep.
+        let ledger_dir = outbox_dir(config, "mqtt-results");
+        let ledger = sweep::ResultsLedger::open(&ledger_dir).map_err(|e| {
+            format!(
+                "cannot open {}: {}; nothing is published until this is fixed and the process restarted",
+                ledger_dir.display(),
+                crate::atomic::write_hint(&ledger_dir, &e)
+            )
+        })?;
+        let known = known_of(mqtt::LINK, &ledger);
         let wake = Arc::new(Notify::new());
         let commands =
             control.map(|c| commands::Commands::new(mqtt::root(&m.station), m.commands, c));
@@ -363,6 +433,7 @@ impl Publishers {
                 let o = outbox.clone();
                 let (st, id, dir) = (station.clone(), ev.scan_id.clone(), ev.dir.clone());
                 let success = ev.kind == crate::scan::event::ScanEventKind::Success;
+                let ledger = ledger.clone();
                 let stored = tokio::task::spawn_blocking(move || {
                     let mut messages = vec![("events", payload)];
                     if success {
@@ -375,6 +446,12 @@ impl Publishers {
                             .map_err(|_| std::io::Error::other("outbox lock poisoned"))?
                             .push(topic, payload)?;
                         pushed.dropped += p.dropped;
+                    }
+                    if success {
+                        // After the outbox: a process killed between the two sends the
+                        // results again at its next start rather than never.
+                        let entry = ledger.push(&id, &dir)?;
+                        ledger.finish(&entry).map_err(std::io::Error::other)?;
                     }
                     Ok::<_, std::io::Error>(pushed)
                 })
@@ -404,7 +481,11 @@ impl Publishers {
                 wake.notify_one();
             }
         }));
-        self.sinks.push(tx);
+        self.sinks.push(Sink {
+            link: mqtt::LINK,
+            tx,
+            known,
+        });
         Ok(())
     }
 

@@ -276,6 +276,7 @@ mod tests {
             failed,
             damaged: Vec::new(),
             max_sequence: max,
+            ..Survey::default()
         }
     }
 

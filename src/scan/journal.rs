@@ -667,9 +667,24 @@ pub struct Failed {
     pub cause: FailCause,
 }
 
+/// A scan whose stop record says it succeeded.
+#[derive(Debug, Clone)]
+pub struct Succeeded {
+    /// The scan directory.
+    pub dir: PathBuf,
+    /// Its scan id.
+    pub scan_id: String,
+    /// When it ended, from the stop record.
+    pub ended: DateTime<Utc>,
+    /// The stop record's reason.
+    pub reason: String,
+}
+
 /// What the journals under an output directory say.
 #[derive(Debug, Default)]
 pub struct Survey {
+    /// Scans that succeeded, in no particular order.
+    pub succeeded: Vec<Succeeded>,
     /// Scans without a stop record, started first first: by the start record's sequence
     /// number (which no clock can reorder), then its time (journals of older versions have
     /// sequence 0), then its scan id. The last is the one to resume.
@@ -752,6 +767,14 @@ pub fn survey(output_dir: &Path) -> Result<Survey, JournalError> {
                         sequence: st.start.sequence,
                         started: st.start.time,
                         cause,
+                    });
+                }
+                if let Some(stop) = st.stop.as_ref().filter(|s| s.status == StopStatus::Success) {
+                    out.succeeded.push(Succeeded {
+                        dir: dir.clone(),
+                        scan_id: st.start.scan_id.clone(),
+                        ended: stop.time,
+                        reason: stop.reason.clone(),
                     });
                 }
                 if !st.is_stopped() {

@@ -48,6 +48,7 @@ mod report_print;
 mod results_unchanged;
 mod scan_dir_analysis;
 mod scan_e2e;
+mod scan_queues;
 mod scan_reads_during_return;
 mod scan_runner;
 mod scan_storage;
