@@ -24,7 +24,8 @@ pub struct LinesSection {
     pub recipe: ReportRecipe,
     /// One entry per row of the grid.
     pub lines: Vec<LineReport>,
-    /// Each row's analysis (its roughness profile draws the Rk construction).
+    /// Each row's analysis (its roughness profile draws the Rk construction), without the
+    /// primary profile and the mean line, which no figure draws.
     pub analyses: Vec<LineAnalysis>,
 }
 
@@ -36,6 +37,17 @@ pub fn rmr_table(a: &LineAnalysis) -> Vec<[f64; 2]> {
             [c, a.rmr_pct(c)]
         })
         .collect()
+}
+
+/// `a` without the primary profile and the mean line: the report draws each line's
+/// roughness profile only, and a 1000-line grid would hold two more traced lengths a line
+/// (about 150 MB) until its files are written.
+fn unshown_dropped(a: LineAnalysis) -> LineAnalysis {
+    LineAnalysis {
+        primary_um: Vec::new(),
+        mean_line_um: None,
+        ..a
+    }
 }
 
 /// Characterises every line, in parallel over the available cores (lines are independent).
@@ -56,7 +68,7 @@ fn analyse_lines(
             .map(|part| {
                 s.spawn(move || {
                     part.iter()
-                        .map(|z| analyze_line(z, grid.pitch_x_mm, options))
+                        .map(|z| analyze_line(z, grid.pitch_x_mm, options).map(unshown_dropped))
                         .collect::<Vec<_>>()
                 })
             })
