@@ -103,40 +103,74 @@ impl HeightMap<'_> {
     }
 }
 
-/// Removes the least-squares plane z = a + b·x + c·y; returns the residual heights and (a, b, c).
-pub fn level_plane(grid: &HeightMap<'_>) -> Result<(Vec<f64>, [f64; 3]), MetrologyError> {
-    grid.check()?;
-    // Centred coordinates make the normal equations diagonal on a full regular grid.
-    let xc = (grid.cols - 1) as f64 * 0.5;
-    let yc = (grid.rows - 1) as f64 * 0.5;
-    // Row by row, point by point: the same x, y and sums, in the same order, as indexing
-    // k = row·cols + col, without two integer divisions per point.
-    let (mut sz, mut sxz, mut syz, mut sxx, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for (row, line) in grid.heights_um.chunks_exact(grid.cols).enumerate() {
-        let y = row as f64 - yc;
-        for (col, z) in line.iter().enumerate() {
-            let x = col as f64 - xc;
-            sz += z;
-            sxz += x * z;
-            syz += y * z;
-            sxx += x * x;
-            syy += y * y;
+/// The least-squares plane of a grid, z = a + b·x + c·y in points from the grid's centre.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plane {
+    a: f64,
+    b: f64,
+    c: f64,
+    xc: f64,
+    yc: f64,
+}
+
+impl Plane {
+    /// The plane of `grid`'s heights (checked first).
+    pub fn of(grid: &HeightMap<'_>) -> Result<Plane, MetrologyError> {
+        grid.check()?;
+        // Centred coordinates make the normal equations diagonal on a full regular grid.
+        let xc = (grid.cols - 1) as f64 * 0.5;
+        let yc = (grid.rows - 1) as f64 * 0.5;
+        // Row by row, point by point: the same x, y and sums, in the same order, as indexing
+        // k = row·cols + col, without two integer divisions per point.
+        let (mut sz, mut sxz, mut syz, mut sxx, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (row, line) in grid.heights_um.chunks_exact(grid.cols).enumerate() {
+            let y = row as f64 - yc;
+            for (col, z) in line.iter().enumerate() {
+                let x = col as f64 - xc;
+                sz += z;
+                sxz += x * z;
+                syz += y * z;
+                sxx += x * x;
+                syy += y * y;
+            }
+        }
+        let n = grid.heights_um.len() as f64;
+        Ok(Plane {
+            a: sz / n,
+            b: sxz / sxx,
+            c: syz / syy,
+            xc,
+            yc,
+        })
+    }
+
+    /// Row `row`'s heights `line` less the plane, into `out` (as long as `line`): a consumer
+    /// that reads the levelled grid a row at a time needs no levelled copy of it.
+    pub fn level_row(&self, row: usize, line: &[f64], out: &mut [f64]) {
+        let y = row as f64 - self.yc;
+        for (col, (o, z)) in out.iter_mut().zip(line).enumerate() {
+            let x = col as f64 - self.xc;
+            *o = z - (self.a + self.b * x + self.c * y);
         }
     }
-    let n = grid.heights_um.len() as f64;
-    let (a, b, c) = (sz / n, sxz / sxx, syz / syy);
-    let mut levelled = Vec::with_capacity(grid.heights_um.len());
-    for (row, line) in grid.heights_um.chunks_exact(grid.cols).enumerate() {
-        let y = row as f64 - yc;
-        levelled.extend(line.iter().enumerate().map(|(col, z)| {
-            let x = col as f64 - xc;
-            z - (a + b * x + c * y)
-        }));
+}
+
+/// Removes the least-squares plane z = a + b·x + c·y; returns the residual heights and (a, b, c).
+pub fn level_plane(grid: &HeightMap<'_>) -> Result<(Vec<f64>, [f64; 3]), MetrologyError> {
+    let p = Plane::of(grid)?;
+    let mut levelled = vec![0.0; grid.heights_um.len()];
+    for (row, (line, out)) in grid
+        .heights_um
+        .chunks_exact(grid.cols)
+        .zip(levelled.chunks_exact_mut(grid.cols))
+        .enumerate()
+    {
+        p.level_row(row, line, out);
     }
     // In mm from the first point: z = a' + b'·x_mm + c'·y_mm.
-    let b_mm = b / grid.pitch_x_mm;
-    let c_mm = c / grid.pitch_y_mm;
-    Ok((levelled, [a - b * xc - c * yc, b_mm, c_mm]))
+    let b_mm = p.b / grid.pitch_x_mm;
+    let c_mm = p.c / grid.pitch_y_mm;
+    Ok((levelled, [p.a - p.b * p.xc - p.c * p.yc, b_mm, c_mm]))
 }
 
 /// The definition ids of the areal parameters.

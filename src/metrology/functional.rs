@@ -91,7 +91,7 @@ pub fn definitions() -> BTreeMap<String, String> {
 /// The Sk family and the volume parameters of `grid` after plane levelling.
 pub fn areal_functional(grid: &HeightMap<'_>) -> Result<ArealFunctional, MetrologyError> {
     let (z, _) = level_plane(grid)?;
-    let s = checked_sorted_desc(&z)?;
+    let s = checked_sorted_desc(z)?;
     let rk = rk_of_sorted(&s);
     let curve = QuantileCurve::new(&s);
     let (vm_p, vm_q) = (curve.vm(P_PCT), curve.vm(Q_PCT));
@@ -112,12 +112,9 @@ pub fn areal_functional(grid: &HeightMap<'_>) -> Result<ArealFunctional, Metrolo
     })
 }
 
-/// The linear-quantile curve Smc(mr) of ordinates sorted highest first, with the running
-/// integral ∫₀^mr Smc at its nodes (µm·%).
+/// The linear-quantile curve Smc(mr) of ordinates sorted highest first.
 struct QuantileCurve<'a> {
     sorted_desc: &'a [f64],
-    /// ∫ from 0 to node i, µm·%.
-    prefix: Vec<f64>,
     /// Distance between nodes, %.
     step_pct: f64,
 }
@@ -126,31 +123,25 @@ impl<'a> QuantileCurve<'a> {
     /// At least two ordinates (as [`checked_sorted_desc`] guarantees).
     fn new(sorted_desc: &'a [f64]) -> QuantileCurve<'a> {
         let step_pct = 100.0 / (sorted_desc.len().max(2) - 1) as f64;
-        let mut prefix = Vec::with_capacity(sorted_desc.len());
-        let mut sum = 0.0;
-        prefix.push(0.0);
-        for w in sorted_desc.windows(2) {
-            if let [a, b] = w {
-                sum += 0.5 * (a + b) * step_pct;
-            }
-            prefix.push(sum);
-        }
         QuantileCurve {
             sorted_desc,
-            prefix,
             step_pct,
         }
     }
 
-    /// ∫₀^mr Smc(x) dx, µm·%.
+    /// ∫₀^mr Smc(x) dx, µm·%: the trapezoids up to the node below mr summed in order (a
+    /// pass over the ordinates per call, which the few volume levels afford, rather than a
+    /// running sum held for every node), then the part to mr.
     fn integral_to(&self, mr_pct: f64) -> f64 {
         let mr = mr_pct.clamp(0.0, 100.0);
-        let last = self.prefix.len() - 1;
+        let last = self.sorted_desc.len().max(1) - 1;
         let i = ((mr / self.step_pct).floor() as usize).min(last);
         let x_i = i as f64 * self.step_pct;
         let s_i = self.sorted_desc.get(i).copied().unwrap_or(0.0);
-        self.prefix.get(i).copied().unwrap_or(0.0)
-            + 0.5 * (mr - x_i) * (s_i + rmc(self.sorted_desc, mr))
+        let to_node = (self.sorted_desc.get(..=i).unwrap_or_default())
+            .windows(2)
+            .fold(0.0, |sum, w| sum + 0.5 * (w[0] + w[1]) * self.step_pct);
+        to_node + 0.5 * (mr - x_i) * (s_i + rmc(self.sorted_desc, mr))
     }
 
     /// Vm(mr), µm (= ml/m²).

@@ -1018,8 +1018,9 @@ pub fn rk_family(z: &[f64]) -> Result<RkFamily, MetrologyError> {
 }
 
 /// The ordinates highest first, after the checks the Rk family needs: all finite, at least two.
-pub(super) fn checked_sorted_desc(z: &[f64]) -> Result<Vec<f64>, MetrologyError> {
-    check_heights(z)?;
+pub(super) fn checked_sorted_desc(z: impl Into<Vec<f64>>) -> Result<Vec<f64>, MetrologyError> {
+    let z = z.into();
+    check_heights(&z)?;
     if z.len() < 2 {
         return Err(MetrologyError::TooShort {
             points: z.len(),
@@ -1031,10 +1032,10 @@ pub(super) fn checked_sorted_desc(z: &[f64]) -> Result<Vec<f64>, MetrologyError>
     Ok(sorted_desc(z))
 }
 
-/// The ordinates highest first. `total_cmp` is a total order in which only identical bits
-/// compare equal, so the unstable sort gives the stable sort's sequence.
-fn sorted_desc(z: &[f64]) -> Vec<f64> {
-    let mut s = z.to_vec();
+/// The ordinates highest first, sorted where they are (an owned grid is not copied).
+/// `total_cmp` is a total order in which only identical bits compare equal, so the unstable
+/// sort gives the stable sort's sequence.
+fn sorted_desc(mut s: Vec<f64>) -> Vec<f64> {
     s.sort_unstable_by(|a, b| b.total_cmp(a));
     s
 }
@@ -1117,7 +1118,7 @@ pub fn material_ratio_curve(z: &[f64], points: usize) -> Vec<[f64; 2]> {
     if z.len() < 2 || points < 2 {
         return Vec::new();
     }
-    curve_of_sorted(&sorted_desc(z), points)
+    curve_of_sorted(&sorted_desc(z.to_vec()), points)
 }
 
 /// [`material_ratio_curve`] of ordinates sorted highest first.

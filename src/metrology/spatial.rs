@@ -28,13 +28,14 @@
 //!
 //! Memory: the ACF's lags ky ≥ 0 only (the rays of Sal and Str read no others), made in one
 //! buffer of about 2·rows·cols f64 by real-to-complex transforms (see [`autocorrelation`]);
-//! Std's spectrum is the lines' half spectra, rows·(cols/2 + 1) complex values.
+//! Std's spectrum is the lines' half spectra, rows·(cols/2 + 1) complex values. Both read
+//! the lines levelled as they go ([`Plane::level_row`]): no levelled copy of the grid.
 //!
 //! Depends on [`super::areal`] (levelling), [`super::filter`] (FFT lengths),
 //! [`super::MetrologyError`] and the FFT crates (`realfft`, `rustfft`, `bytemuck` to view
 //! one buffer as both).
 
-use super::areal::{level_plane, HeightMap};
+use super::areal::{level_plane, HeightMap, Plane};
 use super::filter::fft_len;
 use super::MetrologyError;
 use realfft::RealFftPlanner;
@@ -201,16 +202,16 @@ fn along_columns(
 
 /// The areal autocorrelation function of `grid` after plane levelling.
 pub fn autocorrelation(grid: &HeightMap<'_>) -> Result<Acf, MetrologyError> {
-    let (z, _) = level_plane(grid)?;
-    Ok(acf_of_levelled(&z, grid))
+    Ok(acf_of_levelled(grid, &Plane::of(grid)?))
 }
 
 /// The ACF at lags ky ≥ 0 by a real-to-complex FFT of each line zero-padded to a 5-smooth
 /// length ≥ 2·cols − 1, a complex FFT along y padded likewise, the power, the inverse along
 /// y (keeping ky < rows) and a complex-to-real inverse along x. One f64 buffer holds the
 /// lines' half spectra, then in place their autocorrelation along y, then the values: about
-/// 2·rows·cols f64, where the full padded complex 2-D transform took eight times that.
-fn acf_of_levelled(z: &[f64], grid: &HeightMap<'_>) -> Acf {
+/// 2·rows·cols f64, where the full padded complex 2-D transform took eight times that. The
+/// lines are levelled by `plane` as they are read.
+fn acf_of_levelled(grid: &HeightMap<'_>, plane: &Plane) -> Acf {
     let (rows, cols) = (grid.rows, grid.cols);
     let (pr, pc) = (fft_len(2 * rows - 1), fft_len(2 * cols - 1));
     let nk = pc / 2 + 1;
@@ -229,8 +230,9 @@ fn acf_of_levelled(z: &[f64], grid: &HeightMap<'_>) -> Acf {
     let mut buf = vec![0.0f64; rows * 2 * nk];
     {
         let spectra: &mut [Complex64] = bytemuck::cast_slice_mut(&mut buf);
-        for (heights, spectrum) in z.chunks_exact(cols).zip(spectra.chunks_exact_mut(nk)) {
-            line[..cols].copy_from_slice(heights);
+        let lines = grid.heights_um.chunks_exact(cols);
+        for (r, (heights, spectrum)) in lines.zip(spectra.chunks_exact_mut(nk)).enumerate() {
+            plane.level_row(r, heights, &mut line[..cols]);
             line[cols..].fill(0.0);
             r2c.process_with_scratch(&mut line, spectrum, &mut scratch)
                 .expect("buffer sizes come from the plan");
@@ -298,7 +300,7 @@ fn decay_length(acf: &Acf, theta: f64, s: f64) -> Option<f64> {
 /// The angular amplitude spectrum's maximum: Std in degrees (lower edge of its 0.5° bin).
 /// The DFT of real heights is Hermitian: each line's real-to-complex half spectrum holds
 /// every value, and each stands for itself and for its conjugate partner at (−fy, −fx).
-fn texture_direction(z: &[f64], grid: &HeightMap<'_>) -> f64 {
+fn texture_direction(grid: &HeightMap<'_>, plane: &Plane) -> f64 {
     let (rows, cols) = (grid.rows, grid.cols);
     let nk = cols / 2 + 1;
     let r2c = RealFftPlanner::<f64>::new().plan_fft_forward(cols);
@@ -307,8 +309,9 @@ fn texture_direction(z: &[f64], grid: &HeightMap<'_>) -> f64 {
         vec![Complex64::default(); r2c.get_scratch_len().max(fwd.get_inplace_scratch_len())];
     let mut line = vec![0.0; cols];
     let mut spectra = vec![Complex64::default(); rows * nk];
-    for (heights, spectrum) in z.chunks_exact(cols).zip(spectra.chunks_exact_mut(nk)) {
-        line.copy_from_slice(heights);
+    let lines = grid.heights_um.chunks_exact(cols);
+    for (r, (heights, spectrum)) in lines.zip(spectra.chunks_exact_mut(nk)).enumerate() {
+        plane.level_row(r, heights, &mut line);
         r2c.process_with_scratch(&mut line, spectrum, &mut scratch)
             .expect("buffer sizes come from the plan");
     }
@@ -358,8 +361,8 @@ fn texture_direction(z: &[f64], grid: &HeightMap<'_>) -> f64 {
 
 /// Sal, Str and Std of `grid` after plane levelling.
 pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyError> {
-    let (z, _) = level_plane(grid)?;
-    let acf = acf_of_levelled(&z, grid);
+    let plane = Plane::of(grid)?;
+    let acf = acf_of_levelled(grid, &plane);
     let rays = (180.0 / ANGLE_STEP_DEG) as usize;
     let lengths: Vec<(f64, Option<f64>)> = (0..rays)
         .map(|i| {
@@ -419,7 +422,7 @@ pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyEr
     Ok(SpatialParams {
         sal_um: fastest.map(|(_, l)| l),
         str_ratio,
-        std_deg: texture_direction(&z, grid),
+        std_deg: texture_direction(grid, &plane),
         s: S_THRESHOLD,
         fastest_decay_direction_deg: fastest.map(|(d, _)| d),
         slowest_decay_direction_deg: str_ratio.and(slowest.map(|(d, _)| d)),
