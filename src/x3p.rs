@@ -14,10 +14,11 @@
 //! both MD5 sums checked when present. Deflate is miniz_oxide's, XML roxmltree's.
 //!
 //! Layer 1 (pure logic, a file format as [`crate::iges`] is): depends on
-//! [`crate::metrology`]'s checks of heights and pitches only; takes and returns bytes, the
-//! caller does the I/O.
+//! [`crate::metrology`]'s checks of heights and pitches only; takes and returns bytes (or
+//! writes them to the caller's writer, [`X3p::write_to`]), the caller does the I/O.
 
 use crate::metrology::{check_heights, check_pitch, MetrologyError};
+use std::io::Write;
 
 /// Traceability written into Record2 (free text; empty fields are written as "not available").
 /// Record2 is written only when both `date` and `calibration_date` are stated (see [`to_x3p`]).
@@ -82,14 +83,20 @@ fn or_na(s: &str) -> String {
     }
 }
 
-/// A zip archive of stored (uncompressed) entries.
-fn zip_stored(entries: &[(&str, &[u8])]) -> Vec<u8> {
-    let mut out = Vec::new();
+/// One entry of a stored zip archive: its name, CRC-32 and size, and what writes its bytes.
+struct ZipEntry<'a> {
+    name: &'a str,
+    crc: u32,
+    size: u32,
+    bytes: &'a dyn Fn(&mut dyn Write) -> std::io::Result<()>,
+}
+
+/// A zip archive of stored (uncompressed) entries, written to `w` entry by entry: no entry's
+/// bytes need be held whole.
+fn write_zip_stored(w: &mut dyn Write, entries: &[ZipEntry<'_>]) -> std::io::Result<()> {
+    let mut offset = 0u32;
     let mut central = Vec::new();
-    for (name, data) in entries {
-        let offset = out.len() as u32;
-        let crc = crc32(data);
-        let size = data.len() as u32;
+    for e in entries {
         let header = |sig: u32, central: bool| {
             let mut h = Vec::new();
             h.extend_from_slice(&sig.to_le_bytes());
@@ -101,10 +108,10 @@ fn zip_stored(entries: &[(&str, &[u8])]) -> Vec<u8> {
             h.extend_from_slice(&0u16.to_le_bytes()); // method: stored
             h.extend_from_slice(&0u16.to_le_bytes()); // time
             h.extend_from_slice(&0x21u16.to_le_bytes()); // date 1980-01-01
-            h.extend_from_slice(&crc.to_le_bytes());
-            h.extend_from_slice(&size.to_le_bytes());
-            h.extend_from_slice(&size.to_le_bytes());
-            h.extend_from_slice(&(name.len() as u16).to_le_bytes());
+            h.extend_from_slice(&e.crc.to_le_bytes());
+            h.extend_from_slice(&e.size.to_le_bytes());
+            h.extend_from_slice(&e.size.to_le_bytes());
+            h.extend_from_slice(&(e.name.len() as u16).to_le_bytes());
             h.extend_from_slice(&0u16.to_le_bytes()); // extra
             if central {
                 h.extend_from_slice(&0u16.to_le_bytes()); // comment
@@ -113,25 +120,41 @@ fn zip_stored(entries: &[(&str, &[u8])]) -> Vec<u8> {
                 h.extend_from_slice(&0u32.to_le_bytes()); // external attrs
                 h.extend_from_slice(&offset.to_le_bytes());
             }
-            h.extend_from_slice(name.as_bytes());
+            h.extend_from_slice(e.name.as_bytes());
             h
         };
-        out.extend(header(0x0403_4b50, false));
-        out.extend_from_slice(data);
+        let local = header(0x0403_4b50, false);
+        w.write_all(&local)?;
+        (e.bytes)(w)?;
         central.extend(header(0x0201_4b50, true));
+        offset += local.len() as u32 + e.size;
     }
-    let cd_offset = out.len() as u32;
-    let cd_size = central.len() as u32;
-    out.extend(central);
-    out.extend_from_slice(&0x0605_4b50u32.to_le_bytes());
-    out.extend_from_slice(&0u16.to_le_bytes());
-    out.extend_from_slice(&0u16.to_le_bytes());
-    out.extend_from_slice(&(entries.len() as u16).to_le_bytes());
-    out.extend_from_slice(&(entries.len() as u16).to_le_bytes());
-    out.extend_from_slice(&cd_size.to_le_bytes());
-    out.extend_from_slice(&cd_offset.to_le_bytes());
-    out.extend_from_slice(&0u16.to_le_bytes());
-    out
+    let mut end = Vec::new();
+    end.extend_from_slice(&0x0605_4b50u32.to_le_bytes());
+    end.extend_from_slice(&0u16.to_le_bytes());
+    end.extend_from_slice(&0u16.to_le_bytes());
+    end.extend_from_slice(&(entries.len() as u16).to_le_bytes());
+    end.extend_from_slice(&(entries.len() as u16).to_le_bytes());
+    end.extend_from_slice(&(central.len() as u32).to_le_bytes());
+    end.extend_from_slice(&offset.to_le_bytes());
+    end.extend_from_slice(&0u16.to_le_bytes());
+    w.write_all(&central)?;
+    w.write_all(&end)
+}
+
+/// `bindata/data.bin` of `heights_um` (little-endian f64 metres), passed to `f` a few
+/// thousand heights at a time.
+fn data_bin(
+    heights_um: &[f64],
+    mut f: impl FnMut(&[u8]) -> std::io::Result<()>,
+) -> std::io::Result<()> {
+    let mut buf = Vec::with_capacity(8 * 4096);
+    for chunk in heights_um.chunks(4096) {
+        buf.clear();
+        buf.extend(chunk.iter().flat_map(|z| (z * 1e-6).to_le_bytes()));
+        f(&buf)?;
+    }
+    Ok(())
 }
 
 /// A length in mm as metres rounded to the picometre, so that a pitch of 0.01 mm is written
@@ -183,15 +206,15 @@ fn record2(meta: &X3pMeta) -> String {
 /// file places the grid where the stage traced it. `main.xml` is valid against the ISO 5436-2
 /// schema (`tests/data/x3p/iso5436_2.xsd`); Record2 is left out when `meta` states no
 /// calibration date.
-pub fn to_x3p(
-    heights_um: &[f64],
+pub fn x3p<'a>(
+    heights_um: &'a [f64],
     rows: usize,
     cols: usize,
     pitch_x_mm: f64,
     pitch_y_mm: f64,
     first_y_mm: f64,
     meta: &X3pMeta,
-) -> Result<Vec<u8>, MetrologyError> {
+) -> Result<X3p<'a>, MetrologyError> {
     if !first_y_mm.is_finite() {
         return Err(bad(format!(
             "the y of the first line ({first_y_mm} mm) is not a finite number"
@@ -208,11 +231,14 @@ pub fn to_x3p(
         });
     }
     check_heights(heights_um)?;
-    let data: Vec<u8> = heights_um
-        .iter()
-        .flat_map(|z| (z * 1e-6).to_le_bytes())
-        .collect();
-    let data_md5 = hex(&md5(&data));
+    let (mut data_md5, mut crc) = (<md5::Md5 as md5::Digest>::new(), crc32fast::Hasher::new());
+    data_bin(heights_um, |b| {
+        md5::Digest::update(&mut data_md5, b);
+        crc.update(b);
+        Ok(())
+    })
+    .expect("hashing cannot fail");
+    let data_md5 = hex(&md5::Digest::finalize(data_md5));
     let xml = format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
 <p:ISO5436_2 xmlns:p="http://www.opengps.eu/2008/ISO5436_2" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:schemaLocation="http://www.opengps.eu/2008/ISO5436_2 http://www.opengps.eu/2008/ISO5436_2/ISO5436_2.xsd">
@@ -231,11 +257,75 @@ pub fn to_x3p(
         record2 = record2(meta),
     );
     let checksum = format!("{} *main.xml\n", hex(&md5(xml.as_bytes())));
-    Ok(zip_stored(&[
-        ("main.xml", xml.as_bytes()),
-        ("bindata/data.bin", &data),
-        ("md5checksum.hex", checksum.as_bytes()),
-    ]))
+    Ok(X3p {
+        heights_um,
+        data_crc: crc.finalize(),
+        xml,
+        checksum,
+    })
+}
+
+/// An X3P archive ready to be written ([`x3p`]): the checked grid, its `main.xml` and the
+/// checksums.
+#[derive(Debug, Clone)]
+pub struct X3p<'a> {
+    heights_um: &'a [f64],
+    data_crc: u32,
+    xml: String,
+    checksum: String,
+}
+
+impl X3p<'_> {
+    /// Writes the archive to `w`, the heights converted a few thousand at a time: a grid of
+    /// 10⁷ heights needs no 80 MB copy of its bytes.
+    pub fn write_to(&self, w: &mut dyn Write) -> std::io::Result<()> {
+        let size = |b: &[u8]| b.len() as u32;
+        let xml = |w: &mut dyn Write| w.write_all(self.xml.as_bytes());
+        let checksum = |w: &mut dyn Write| w.write_all(self.checksum.as_bytes());
+        let data = |w: &mut dyn Write| data_bin(self.heights_um, |b| w.write_all(b));
+        write_zip_stored(
+            w,
+            &[
+                ZipEntry {
+                    name: "main.xml",
+                    crc: crc32(self.xml.as_bytes()),
+                    size: size(self.xml.as_bytes()),
+                    bytes: &xml,
+                },
+                ZipEntry {
+                    name: "bindata/data.bin",
+                    crc: self.data_crc,
+                    size: (self.heights_um.len() * 8) as u32,
+                    bytes: &data,
+                },
+                ZipEntry {
+                    name: "md5checksum.hex",
+                    crc: crc32(self.checksum.as_bytes()),
+                    size: size(self.checksum.as_bytes()),
+                    bytes: &checksum,
+                },
+            ],
+        )
+    }
+}
+
+/// [`x3p`]'s archive as bytes.
+pub fn to_x3p(
+    heights_um: &[f64],
+    rows: usize,
+    cols: usize,
+    pitch_x_mm: f64,
+    pitch_y_mm: f64,
+    first_y_mm: f64,
+    meta: &X3pMeta,
+) -> Result<Vec<u8>, MetrologyError> {
+    let file = x3p(
+        heights_um, rows, cols, pitch_x_mm, pitch_y_mm, first_y_mm, meta,
+    )?;
+    let mut bytes = Vec::new();
+    file.write_to(&mut bytes)
+        .expect("writing to memory cannot fail");
+    Ok(bytes)
 }
 
 /// A grid read from an X3P file.

@@ -32,7 +32,7 @@ use crate::metrology::params::LineAnalysis;
 use crate::metrology::MetrologyError;
 use crate::numfmt::{fmt as nfmt, line_number, Quantity};
 use crate::scan::journal::{read_journal, ResumeState};
-use crate::x3p::{to_x3p, X3pMeta};
+use crate::x3p::{x3p, X3pMeta};
 use plots::{plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -357,10 +357,11 @@ pub fn write_data_files(
     let first_y_mm = grid.y_mm.first().copied().unwrap_or(0.0);
     let (plots, rk_plots, x3p) = std::thread::scope(|s| {
         let x3p = s.spawn(|| -> Result<(PathBuf, Option<PathBuf>), ReportError> {
-            // Encodes one grid of heights at the grid's y pitch and writes it as `name`.
+            // Encodes one grid of heights at the grid's y pitch and writes it as `name`,
+            // streamed: the archive's bytes are never held whole.
             let write = |name: &str, heights: &[f64], cols, pitch_x_mm, meta: &X3pMeta| {
                 let path = out.join(name);
-                let bytes = to_x3p(
+                let file = x3p(
                     heights,
                     measured.rows,
                     cols,
@@ -370,7 +371,12 @@ pub fn write_data_files(
                     meta,
                 )
                 .map_err(metrology(format!("{input}: {name}")))?;
-                write_file(&path, &bytes)?;
+                write_atomically(&path, |w| file.write_to(w)).map_err(|source| {
+                    ReportError::Io {
+                        path: path.clone(),
+                        source,
+                    }
+                })?;
                 Ok::<_, ReportError>(path)
             };
             let measured_x3p = write(
