@@ -17,27 +17,20 @@
 
 #[path = "shared/mod.rs"]
 mod shared;
+#[path = "shared/station.rs"]
+mod station;
 
+use station::{free_port, scan, status, summary, wait_status, Daemon};
 use std::net::SocketAddr;
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
 use surfscan::cli::demo::{demo_config, demo_socket};
-use surfscan::control::client::ControlClient;
-use surfscan::control::protocol::{Message, Request};
-use surfscan::scan::command::StartMode;
-use surfscan::scan::ending::StopStatus;
-use surfscan::scan::journal::{read_journal, Record};
-use surfscan::scan::status::{State, Status};
-use surfscan_sim::grbl::{GrblSimConfig, StageShared};
-use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, Simulator};
+use surfscan::scan::status::State;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 const TOKEN: &str = "bench-page-token-0b6f41d2c9";
-const DEADLINE: Duration = Duration::from_secs(600);
 
 struct Args {
     lines: usize,
@@ -80,96 +73,6 @@ fn args() -> Args {
     a
 }
 
-/// The daemon; killed if the benchmark fails before it exits.
-struct Daemon(Child);
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        if let Ok(None) = self.0.try_wait() {
-            let _ = self.0.kill();
-            let _ = self.0.wait();
-        }
-    }
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .expect("a free port")
-        .local_addr()
-        .expect("its address")
-        .port()
-}
-
-async fn status(socket: &Path) -> Option<Status> {
-    let mut c = ControlClient::connect(socket).await.ok()?;
-    match c.request(&Request::Status).await.ok()?.message {
-        Message::Status(s) => Some(*s),
-        _ => None,
-    }
-}
-
-async fn wait_status(socket: &Path, what: &str, f: impl Fn(&Status) -> bool) -> Status {
-    let t0 = Instant::now();
-    loop {
-        if let Some(s) = status(socket).await {
-            if f(&s) {
-                return s;
-            }
-        }
-        assert!(t0.elapsed() < DEADLINE, "{what}: not within {DEADLINE:?}");
-        tokio::time::sleep(Duration::from_millis(200)).await;
-    }
-}
-
-/// Starts a new scan and waits for its end; its line periods, s.
-async fn scan(socket: &Path, specimen: &str) -> Vec<f64> {
-    let before = status(socket).await.expect("the daemon answers").starts;
-    let mut c = ControlClient::connect(socket)
-        .await
-        .expect("control socket");
-    let reply = c
-        .request(&Request::Start {
-            specimen: specimen.into(),
-            operator: "bench".into(),
-            notes: String::new(),
-            mode: StartMode::New,
-            recipe: None,
-            y_start_mm: None,
-        })
-        .await
-        .expect("start answered");
-    assert!(
-        matches!(reply.message, Message::Ack { .. }),
-        "{:?}",
-        reply.message
-    );
-    let s = wait_status(socket, "the scan's end", |s| {
-        s.starts > before && s.state == State::Idle && s.last_stop.is_some()
-    })
-    .await;
-    let stop = s.last_stop.expect("a last stop");
-    assert_eq!(
-        stop.status,
-        StopStatus::Success,
-        "the scan did not succeed: {}",
-        stop.reason
-    );
-    periods(Path::new(&stop.dir))
-}
-
-fn periods(dir: &Path) -> Vec<f64> {
-    let rec = read_journal(&dir.join("journal.jsonl")).expect("journal reads");
-    let times: Vec<f64> = rec
-        .records
-        .iter()
-        .filter_map(|r| match r {
-            Record::Line(l) => Some(l.time.timestamp_micros() as f64 / 1e6),
-            _ => None,
-        })
-        .collect();
-    times.windows(2).map(|w| w[1] - w[0]).collect()
-}
-
 /// One open page: follows `/api/live` and reads everything; counts the bytes received.
 async fn open_page(addr: SocketAddr, bytes: Arc<AtomicU64>) -> tokio::task::JoinHandle<()> {
     let mut s = tokio::net::TcpStream::connect(addr)
@@ -194,18 +97,6 @@ async fn open_page(addr: SocketAddr, bytes: Arc<AtomicU64>) -> tokio::task::Join
     })
 }
 
-fn summary(label: &str, periods: &[f64]) -> (f64, f64) {
-    let mut p: Vec<f64> = periods.iter().map(|s| s * 1000.0).collect();
-    let mean = p.iter().sum::<f64>() / p.len() as f64;
-    let max = p.iter().copied().fold(f64::MIN, f64::max);
-    let med = shared::median(&mut p);
-    println!(
-        "  {label}: line period median {med:.1} ms, mean {mean:.1} ms, max {max:.1} ms over {} periods",
-        periods.len()
-    );
-    (med, mean)
-}
-
 fn config(dir: &Path, inst: &Path, stage: &Path, lines: usize) -> (PathBuf, PathBuf, SocketAddr) {
     let out = dir.join("scans");
     let tokens = dir.join("web-tokens");
@@ -226,47 +117,10 @@ fn config(dir: &Path, inst: &Path, stage: &Path, lines: usize) -> (PathBuf, Path
 
 async fn run(a: Args) {
     let tmp = tempfile::tempdir().expect("temp dir");
-    let inst = tmp.path().join("sj210");
-    let stage = tmp.path().join("ystage");
-    let mut profiles = ProfileSet::bundled().expect("bundled profiles");
-    profiles.y_first_mm = -20.0;
-    let mut sim = Simulator::new(&inst)
-        .instrument(InstrumentConfig {
-            time_scale: 1.0 / a.speed_up,
-            ..InstrumentConfig::default()
-        })
-        .profiles(profiles)
-        .baud(1_000_000)
-        .grbl_stage(
-            &stage,
-            GrblSimConfig {
-                steps_per_mm: 400.0,
-                max_travel_mm: 100.0,
-                time_scale: a.speed_up * 10.0,
-                ..GrblSimConfig::default()
-            },
-            StageShared::new(),
-        )
-        .start()
-        .expect("simulator starts");
-    match tokio::time::timeout(Duration::from_secs(10), sim.next_event()).await {
-        Ok(Some(SimEvent::Ready(_))) => {}
-        other => panic!("simulator not ready: {other:?}"),
-    }
+    let (sim, inst, stage) = station::simulator(tmp.path(), a.speed_up).await;
     let (cfg, out, addr) = config(tmp.path(), &inst, &stage, a.lines);
     let socket = demo_socket(&out);
-    let mut d = Daemon(
-        Command::new(env!("CARGO_BIN_EXE_surfscan"))
-            .args(["daemon", "--config"])
-            .arg(&cfg)
-            .env_remove("NOTIFY_SOCKET")
-            .env_remove("WATCHDOG_USEC")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("surfscan daemon runs"),
-    );
+    let d = Daemon::spawn(&cfg);
     wait_status(&socket, "the daemon idle", |s| s.state == State::Idle).await;
     let page_up = status(&socket)
         .await
@@ -285,14 +139,14 @@ async fn run(a: Args) {
     let (mut alone, mut watched) = (Vec::new(), Vec::new());
     let (mut sent, mut least) = (0u64, u64::MAX);
     for _ in 0..a.rounds {
-        alone.extend(scan(&socket, "no-page").await);
+        alone.extend(scan(&socket, "no-page").await.1);
         let bytes: Vec<Arc<AtomicU64>> = (0..a.pages).map(|_| Arc::default()).collect();
         let mut pages = Vec::new();
         for b in &bytes {
             pages.push(open_page(addr, b.clone()).await);
         }
         let before: u64 = bytes.iter().map(|b| b.load(Ordering::Relaxed)).sum();
-        watched.extend(scan(&socket, "pages").await);
+        watched.extend(scan(&socket, "pages").await.1);
         let got: Vec<u64> = bytes.iter().map(|b| b.load(Ordering::Relaxed)).collect();
         least = least.min(got.iter().copied().min().unwrap_or(0));
         sent += got.iter().sum::<u64>() - before;
@@ -316,14 +170,7 @@ async fn run(a: Args) {
         mean1 - mean0,
         (mean1 - mean0) / mean0 * 100.0
     );
-    let _ = nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(d.0.id() as i32),
-        nix::sys::signal::Signal::SIGTERM,
-    );
-    let t0 = Instant::now();
-    while d.0.try_wait().ok().flatten().is_none() && t0.elapsed() < Duration::from_secs(30) {
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    d.stop();
     sim.shutdown().await;
 }
 
