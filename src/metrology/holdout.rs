@@ -21,7 +21,7 @@
 
 use super::model::sample_model_grid;
 use super::MetrologyError;
-use crate::fit::{fit_grid_with, FitOptions, VMethod};
+use crate::fit::{fit_grid_with, FitOptions, FitResult, VMethod};
 use crate::grid::Grid;
 use crate::numfmt::{fmt, sig, Quantity};
 use serde::Serialize;
@@ -148,16 +148,8 @@ pub fn points_left_out(
     method: VMethod,
 ) -> Result<Vec<HoldoutLine>, MetrologyError> {
     check_grid(grid)?;
-    let (heights_um, cols, pitch_x_mm, y_mm) = (
-        &grid.heights_um[..],
-        grid.cols,
-        grid.pitch_x_mm,
-        &grid.y_mm[..],
-    );
-
-    let rows = y_mm.len();
-    let row = |r: usize| heights_um.get(r * cols..(r + 1) * cols).unwrap_or(&[]);
-    let y = y_mm;
+    let (rows, cols, pitch_x_mm, y) = (grid.rows(), grid.cols, grid.pitch_x_mm, &grid.y_mm[..]);
+    let row = |r: usize| grid.row(r);
 
     // Every 2nd point of each line out: fit the even columns at twice the pitch.
     let kept_cols = cols.div_ceil(2);
@@ -252,6 +244,26 @@ fn refit_method(method: VMethod, rows: usize, kept: usize, degree_v: usize) -> V
     }
 }
 
+/// The surface refitted through the rows of `grid` that `keep` keeps, with `method` across
+/// them as [`refit_method`] scales it, and the rows kept.
+fn refit_keeping(
+    grid: &Grid,
+    options: FitOptions,
+    method: VMethod,
+    keep: impl Fn(usize) -> bool,
+) -> Result<(FitResult, Vec<usize>), MetrologyError> {
+    let kept: Vec<usize> = (0..grid.rows()).filter(|&r| keep(r)).collect();
+    let ky: Vec<f64> = kept
+        .iter()
+        .map(|&r| grid.y_mm.get(r).copied().unwrap_or(f64::NAN))
+        .collect();
+    let method = refit_method(method, grid.rows(), kept.len(), options.degree_v);
+    // The kept lines' copy is freed as soon as the refit has them.
+    let sub: Vec<f64> = kept.iter().flat_map(|&r| grid.row(r).to_vec()).collect();
+    let fit = fit_grid_with(grid.pitch_x_mm, &ky, &sub, grid.cols, options, method)?;
+    Ok((fit, kept))
+}
+
 /// Leaves every `every`-th line out (rows every−1, 2·every−1, …), refits the others with
 /// `method` across the lines (least squares with the control rows scaled as
 /// [`refit_method`] says)
@@ -263,12 +275,7 @@ fn refit_without_lines(
     method: VMethod,
     every: usize,
 ) -> Result<HeldLines, MetrologyError> {
-    let (heights_um, cols, pitch_x_mm, y_mm) = (
-        &grid.heights_um[..],
-        grid.cols,
-        grid.pitch_x_mm,
-        &grid.y_mm[..],
-    );
+    let (cols, pitch_x_mm, y_mm) = (grid.cols, grid.pitch_x_mm, &grid.y_mm[..]);
     if every < 2 {
         return Err(MetrologyError::BadParameter {
             what: "hold-out: every k-th line",
@@ -276,20 +283,8 @@ fn refit_without_lines(
             hint: "leave out every 2nd line or fewer (k ≥ 2)",
         });
     }
-    let rows = y_mm.len();
-    let row = |r: usize| heights_um.get(r * cols..(r + 1) * cols).unwrap_or(&[]);
     let is_held = |r: usize| r % every == every - 1;
-    let kept_rows: Vec<usize> = (0..rows).filter(|&r| !is_held(r)).collect();
-    let ky: Vec<f64> = kept_rows
-        .iter()
-        .map(|&r| y_mm.get(r).copied().unwrap_or(f64::NAN))
-        .collect();
-    let method = refit_method(method, rows, kept_rows.len(), options.degree_v);
-    // The kept lines' copy is freed as soon as the refit has them.
-    let fit = {
-        let sub: Vec<f64> = kept_rows.iter().flat_map(|&r| row(r).to_vec()).collect();
-        fit_grid_with(pitch_x_mm, &ky, &sub, cols, options, method)?
-    };
+    let (fit, kept_rows) = refit_keeping(grid, options, method, |r| !is_held(r))?;
     let (first_kept, last_kept) = (
         kept_rows.first().copied().unwrap_or(0),
         kept_rows.last().copied().unwrap_or(0),
@@ -323,7 +318,7 @@ fn refit_without_lines(
         // The sampled heights are kept as sampled, line after line (no copy per line).
         out.model_um = sample_model_grid(&fit.surface, &vs, 0.0, pitch_x_mm, cols)?;
         for (&(r, target), m) in held.iter().zip(out.model_um.chunks_exact(cols.max(1))) {
-            out.lines.push(stats(r, target, m, row(r)));
+            out.lines.push(stats(r, target, m, grid.row(r)));
         }
     }
     match unreached {
@@ -342,36 +337,18 @@ pub fn model_without_line(
     row: usize,
 ) -> Result<HoldoutLineModel, MetrologyError> {
     check_grid(grid)?;
-    let (heights_um, cols, pitch_x_mm, y_mm) = (
-        &grid.heights_um[..],
-        grid.cols,
-        grid.pitch_x_mm,
-        &grid.y_mm[..],
-    );
-
-    let rows = y_mm.len();
-    if row == 0 || row + 1 >= rows {
+    if row == 0 || row + 1 >= grid.rows() {
         return Err(MetrologyError::BadParameter {
             what: "line to leave out (row)",
             value: row as f64,
             hint: "only a line between two others can be left out and predicted",
         });
     }
-    let sub: Vec<f64> = (0..rows)
-        .filter(|&r| r != row)
-        .flat_map(|r| heights_um[r * cols..(r + 1) * cols].iter().copied())
-        .collect();
-    let ky: Vec<f64> = (0..rows).filter(|&r| r != row).map(|r| y_mm[r]).collect();
-    let method = refit_method(method, rows, rows - 1, options.degree_v);
-    let fit = fit_grid_with(pitch_x_mm, &ky, &sub, cols, options, method)?;
-    let v = v_at_y(&fit.surface, y_mm[row])?;
-    let model = sample_model_grid(&fit.surface, &[v], 0.0, pitch_x_mm, cols)?;
-    let line = stats(
-        row,
-        y_mm[row],
-        &model,
-        &heights_um[row * cols..(row + 1) * cols],
-    );
+    let (fit, _) = refit_keeping(grid, options, method, |r| r != row)?;
+    let y = grid.y_mm[row];
+    let v = v_at_y(&fit.surface, y)?;
+    let model = sample_model_grid(&fit.surface, &[v], 0.0, grid.pitch_x_mm, grid.cols)?;
+    let line = stats(row, y, &model, grid.row(row));
     Ok(HoldoutLineModel {
         line,
         model_um: model,
