@@ -228,32 +228,21 @@ impl Frame {
         DB::ErrorType: 'static,
     {
         root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let mut y = 8i32;
-        for l in &self.title {
-            root.draw_text(l, &font(TITLE_PX), (SIDE_PAD as i32, y))
-                .map_err(|e| e.to_string())?;
-            y += (TITLE_PX + 6) as i32;
-        }
-        for l in &self.subtitle {
-            root.draw_text(
-                l,
-                &font(SUBTITLE_PX).color(&RGBColor(60, 60, 60)),
-                (SIDE_PAD as i32, y),
-            )
-            .map_err(|e| e.to_string())?;
-            y += (SUBTITLE_PX + 5) as i32;
-        }
+        // Lines of text `px` high and `gap` apart from `y` down; returns the y below them.
+        let text = |lines: &[String], px: u32, colour: RGBColor, gap: u32, mut y: i32| {
+            for l in lines {
+                root.draw_text(l, &font(px).color(&colour), (SIDE_PAD as i32, y))
+                    .map_err(|e| e.to_string())?;
+                y += (px + gap) as i32;
+            }
+            Ok::<i32, String>(y)
+        };
+        let grey = RGBColor(60, 60, 60);
+        let y = text(&self.title, TITLE_PX, BLACK, 6, 8)?;
+        text(&self.subtitle, SUBTITLE_PX, grey, 5, y)?;
         let (_, h) = root.dim_in_pixel();
-        let mut y = h.saturating_sub(self.bottom_px()) as i32 + 6;
-        for l in &self.footer {
-            root.draw_text(
-                l,
-                &font(FOOTER_PX).color(&RGBColor(60, 60, 60)),
-                (SIDE_PAD as i32, y),
-            )
-            .map_err(|e| e.to_string())?;
-            y += (FOOTER_PX + 5) as i32;
-        }
+        let y = h.saturating_sub(self.bottom_px()) as i32 + 6;
+        text(&self.footer, FOOTER_PX, grey, 5, y)?;
         let body_h = h
             .saturating_sub(self.top_px())
             .saturating_sub(self.bottom_px());
