@@ -29,6 +29,7 @@
 //!    [`report`] (characterisation of a completed scan, a scan directory or a grid into
 //!    report.json, report.html, summary.csv, plots and X3P, section by section; the runner
 //!    reaches it through the scan's `Characterise` contract, supplied by the composition),
+//!    [`pdf`] (a report's HTML page typeset as a PDF without a browser),
 //!    [`station_lock`] (one process per station), [`jobs`] (recipes), [`publish`] (the scan's
 //!    status and events to the lab's MQTT broker through a durable outbox, the raw-data
 //!    archive, the results into the lab's SPC and QIF drop directories).
@@ -56,6 +57,7 @@ pub mod metrology;
 pub mod numbers;
 pub mod numfmt;
 pub mod nurbs;
+pub mod pdf;
 pub mod port_swap;
 pub mod profile;
 pub mod publish;

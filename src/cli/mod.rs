@@ -53,6 +53,7 @@ pub mod list;
 pub mod model_args;
 pub mod probe;
 pub mod queue;
+pub mod report;
 pub mod scan;
 pub mod station;
 
@@ -105,6 +106,8 @@ pub enum Command {
     List(list::Args),
     /// Write completed scans' Q-DAS (.dfq) and QIF (.qif) files into the drop directories again.
     Export(export::Args),
+    /// Write a report as a PDF (`--pdf`): the printed report, without a browser.
+    Report(report::Args),
     /// The job queue: add a recipe's scan of a specimen, list, remove, clear, continue.
     Queue(queue::Args),
     /// The specimen of the job waiting for loading is in place: let the job start.
@@ -212,6 +215,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::CheckConfig(args) => check_config::run(args),
         Command::List(args) => list::run(args),
         Command::Export(args) => export::run(args),
+        Command::Report(args) => report::run(args),
         Command::Queue(args) => queue::run(args),
         Command::Ready(args) => queue::run_ready(args),
         Command::Completions(args) => docs::run_completions(args),

@@ -200,6 +200,14 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
         &["Measured by", "Approved by"],
     );
     assert!(size.ends_with("(A4)"), "{size}");
+    // The same without a browser: `surfscan report --pdf`, into the scan directory.
+    let size = crate::report_pdf::check_report_pdf(
+        dir,
+        None,
+        "surfscan demonstration",
+        &["Measured by", "Approved by"],
+    );
+    assert!(size.ends_with("(A4)"), "{size}");
     let logo = paper.path().join("logo.svg");
     std::fs::write(
         &logo,
@@ -235,6 +243,13 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
     let size = crate::report_print::check_printed(
         &again,
         &paper.path().join("letter.pdf"),
+        "Calibration lab <B&S>",
+        &["Measured by", "Checked by", "Approved by"],
+    );
+    assert!(size.ends_with("(letter)"), "{size}");
+    let size = crate::report_pdf::check_report_pdf(
+        &again,
+        Some(&paper.path().join("letter-surfscan.pdf")),
         "Calibration lab <B&S>",
         &["Measured by", "Checked by", "Approved by"],
     );

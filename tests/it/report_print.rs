@@ -10,7 +10,7 @@ use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
 
-fn pdftotext(pdf: &Path) -> String {
+pub fn pdftotext(pdf: &Path) -> String {
     let out = Command::new("pdftotext")
         .arg("-layout")
         .arg(pdf)
@@ -28,7 +28,7 @@ fn pdftotext(pdf: &Path) -> String {
 }
 
 /// The number of pages and the page size line of `pdfinfo`.
-fn info(pdf: &Path) -> (usize, String) {
+pub fn info(pdf: &Path) -> (usize, String) {
     let out = Command::new("pdfinfo")
         .arg(pdf)
         .output()
@@ -127,8 +127,14 @@ fn instrument_within(report: &Value) -> (usize, usize) {
 /// Prints `dir/report.html` to `pdf` and checks it as a metrologist reads it; returns the
 /// page size `pdfinfo` reports.
 pub fn check_printed(dir: &Path, pdf: &Path, lab: &str, roles: &[&str]) -> String {
+    crate::common::chromium::print_to_pdf(&dir.join("report.html"), pdf);
+    check_pdf(dir, pdf, lab, roles)
+}
+
+/// Checks `pdf`, the printed report of `dir` (by Chromium or by `surfscan report --pdf`), as
+/// a metrologist reads it; returns the page size `pdfinfo` reports.
+pub fn check_pdf(dir: &Path, pdf: &Path, lab: &str, roles: &[&str]) -> String {
     let page = dir.join("report.html");
-    crate::common::chromium::print_to_pdf(&page, pdf);
     let (pages, size) = info(pdf);
     assert!(
         (2..=9).contains(&pages),

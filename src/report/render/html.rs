@@ -422,6 +422,16 @@ pub fn result_summary(report: &Value) -> Vec<(&'static str, String)> {
     out
 }
 
+/// What the report is of: the specimen and the scan, or the input.
+pub fn title(report: &Value) -> String {
+    let t = &report["traceability"];
+    match (t["specimen"].as_str(), t["scan_id"].as_str()) {
+        (Some(s), Some(id)) if !s.is_empty() => format!("{s} — scan {id}"),
+        (_, Some(id)) => format!("scan {id}"),
+        _ => text(&report["input"]),
+    }
+}
+
 /// Renders the report. `report` is the report as serialized into `report.json`; `journal`
 /// the scan's journal when it could be read; `figures` are embedded in order.
 pub fn render(
@@ -433,12 +443,7 @@ pub fn render(
     let mut h = String::with_capacity(
         64 * 1024 + figures.iter().map(|f| f.bytes.len() * 4 / 3).sum::<usize>(),
     );
-    let t = &report["traceability"];
-    let title = match (t["specimen"].as_str(), t["scan_id"].as_str()) {
-        (Some(s), Some(id)) if !s.is_empty() => format!("{s} — scan {id}"),
-        (_, Some(id)) => format!("scan {id}"),
-        _ => text(&report["input"]),
-    };
+    let title = title(report);
     let _ = write!(
         h,
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; img-src data:; style-src 'unsafe-inline'\">\n<title>Surface report: {t}</title>\n<style>{STYLE}{page}</style>\n</head>\n<body>\n{header}<h1>Surface report: {t}</h1>\n",

@@ -521,6 +521,71 @@ fn per_line_figures(
         .collect()
 }
 
+/// The figures a report's page shows open, in order: file stem, title.
+const PAGE_FIGURES: [(&str, &str); 3] = [
+    ("heightmap", "Measured heights"),
+    ("bac", "Material ratio curves"),
+    ("overlay", "One line: measured and model"),
+];
+
+/// The report written into `dir` (`report` as its report.json holds it) as the PDF of its
+/// printed page, and what was left out of it: the page made again from the report, the
+/// scan's journal and the plots' SVG files (so the figures are vector drawings; a figure
+/// with only its PNG is an image), typeset by [`crate::pdf`]. The per-line figures stay
+/// out, as print leaves them out of the page.
+pub fn report_pdf(
+    dir: &Path,
+    report: &serde_json::Value,
+) -> Result<(Vec<u8>, Vec<String>), crate::pdf::PdfError> {
+    let mut warnings = Vec::new();
+    let journal = (report["kind"] == "scan")
+        .then(|| {
+            let path = dir.join(crate::scan::journal::JOURNAL_FILE);
+            read_journal(&path)
+                .and_then(|r| ResumeState::from_records(&path, &r.records))
+                .map_err(|e| {
+                    warnings.push(format!(
+                        "{}: {e}; the PDF says nothing of what happened during the scan",
+                        path.display()
+                    ))
+                })
+                .ok()
+        })
+        .flatten();
+    let figures: Vec<html::Figure> = PAGE_FIGURES
+        .iter()
+        .filter_map(|(stem, title)| {
+            let svg = dir.join(format!("{stem}.svg"));
+            match std::fs::read(&svg) {
+                Ok(bytes) => Some(html::Figure {
+                    title: title.to_string(),
+                    media_type: "image/svg+xml",
+                    bytes,
+                    collapsed: false,
+                    link: None,
+                }),
+                Err(_) => {
+                    html::Figure::from_files(*title, &dir.join(format!("{stem}.png")), &svg, false)
+                }
+            }
+        })
+        .collect();
+    let lab: LabHeader = serde_json::from_value(report["lab"].clone()).unwrap_or_default();
+    let logo = read_logo(&lab, &mut warnings);
+    let page = html::render(report, journal.as_ref(), &figures, logo.as_ref());
+    let (left, software) = print::running(report);
+    let running = crate::pdf::layout::Running {
+        top_left: left.to_string(),
+        top_right: html::title(report),
+        bottom_left: software,
+    };
+    let title = format!("Surface report: {}", running.top_right);
+    let letter = lab.paper == super::header::Paper::Letter;
+    let creator = report["software"].as_str().unwrap_or("surfscan");
+    let pdf = crate::pdf::html_to_pdf(&page, letter, &running, &title, creator)?;
+    Ok((pdf, warnings))
+}
+
 /// Writes `report.json`, then `report.html`, the report for people, with the plots embedded
 /// and what the scan's journal recorded, headed by the laboratory's `logo`.
 pub fn write_report(
@@ -553,11 +618,7 @@ pub fn write_report(
             )
         };
         let mut figures = Vec::new();
-        for (stem, title) in [
-            ("heightmap", "Measured heights"),
-            ("bac", "Material ratio curves"),
-            ("overlay", "One line: measured and model"),
-        ] {
+        for (stem, title) in PAGE_FIGURES {
             let (png, svg) = pair(stem);
             figures.extend(html::Figure::from_files(title, &png, &svg, false));
         }

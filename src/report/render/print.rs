@@ -41,8 +41,7 @@ pub fn page_style(report: &Value, title: &str) -> String {
         Some("Letter") => "letter",
         _ => "A4",
     };
-    let name = lab["lab"].as_str().filter(|s| !s.is_empty());
-    let left = name.unwrap_or("Surface report");
+    let (left, software) = running(report);
     format!(
         "@page{{size:{size};margin:16mm 13mm 17mm 13mm;\
 @top-left{{content:{left};font-size:8pt;color:#555}}\
@@ -63,11 +62,22 @@ details,.noprint{{display:none}}\
 }}\n",
         left = css_string(left),
         title = css_string(title),
-        software = css_string(&format!(
-            "written by {}",
-            report["software"].as_str().unwrap_or("surfscan")
-        )),
+        software = css_string(&software),
     )
+}
+
+/// The words the page runs with besides its title: the laboratory (or "Surface report")
+/// at the top left, the software that wrote it at the bottom left.
+pub fn running(report: &Value) -> (&str, String) {
+    let left = report["lab"]["lab"]
+        .as_str()
+        .filter(|s| !s.is_empty())
+        .unwrap_or("Surface report");
+    let software = format!(
+        "written by {}",
+        report["software"].as_str().unwrap_or("surfscan")
+    );
+    (left, software)
 }
 
 /// The laboratory's header (name, address lines, logo) when `[report]` names a laboratory
