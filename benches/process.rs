@@ -14,13 +14,17 @@
 //!   peak RSS ≤ 3 × the grid's f64 bytes (80 MB).
 //! * `analyze` — `surfscan analyze` of the 31×8000 grid CSV (λc 0.8 mm filter, model, hold-out,
 //!   plots, X3P); 7 runs. Target ≤ 0.3 s.
+//! * `analyze-1core` — `surfscan analyze` of the 31×8000 grid against surfalize's per-line
+//!   roughness of it (`tests/python/lines_surfalize.py`: each line's λc 0.8 mm Gaussian
+//!   high-pass and Ra, Rq, Rz, Rsk, Rku, timed alone), both pinned to one core with `taskset`;
+//!   7 runs alternating. Target: surfalize's time ÷ ours ≥ 1.3.
 //! * `analyze-large` — `surfscan analyze` of the 1000×10000 grid beside `surfscan fit` of
 //!   it; 3 runs. Targets: ≤ 2× the fit's wall time, peak RSS ≤ 3 × the grid's f64 bytes,
 //!   report.html ≤ 5 MB, each figure file ≤ 2 MB.
 //! * `scan` — `characterise_scan` (the daemon's characterisation) of 31×8000 scan directories
 //!   with an R profile (no filter) and a P profile (λc filter), in-process; 5 runs each.
 //!
-//! Default: all five. Figures are medians; CPU time (user + system, all threads, of the child
+//! Default: all six. Figures are medians; CPU time (user + system, all threads, of the child
 //! from `wait4`) is printed beside wall time because the machine is shared: a run that waited
 //! for a core shows it in wall time only. `--instructions` also runs each binary case once
 //! under `valgrind --tool=callgrind` and prints the instruction count, the figure least moved
@@ -439,24 +443,27 @@ fn bench_large(dir: &Path, rows: usize, cols: usize, runs: usize, count_instruct
     );
 }
 
+/// `surfscan analyze` of a grid CSV into `out`, with the defaults (λc 0.8 mm filter).
+fn analyze_command(csv: &Path, out: &Path) -> Command {
+    let mut c = surfscan();
+    c.arg("analyze")
+        .arg(csv)
+        .arg("--pitch-x")
+        .arg(PITCH_X_MM.to_string())
+        .arg("--pitch-y")
+        .arg(PITCH_Y_MM.to_string())
+        .arg("--out")
+        .arg(out);
+    c
+}
+
 fn bench_analyze(dir: &Path, rows: usize, cols: usize, runs: usize, count_instructions: bool) {
     let csv = dir.join(format!("grid{rows}x{cols}.csv"));
     if !csv.exists() {
         write_grid_csv(&csv, rows, cols);
     }
     let out = dir.join(format!("analyze{rows}x{cols}"));
-    let command = || {
-        let mut c = surfscan();
-        c.arg("analyze")
-            .arg(&csv)
-            .arg("--pitch-x")
-            .arg(PITCH_X_MM.to_string())
-            .arg("--pitch-y")
-            .arg(PITCH_Y_MM.to_string())
-            .arg("--out")
-            .arg(&out);
-        c
-    };
+    let command = || analyze_command(&csv, &out);
     let (mut wall, mut cpu) = (Vec::new(), Vec::new());
     for _ in 0..runs {
         let r = run(&mut command());
@@ -474,6 +481,70 @@ fn bench_analyze(dir: &Path, rows: usize, cols: usize, runs: usize, count_instru
         report["timings_s"]
     );
     print_instructions("surfscan analyze", &command(), count_instructions);
+}
+
+/// The λc of `analyze`'s default filter, mm, which surfalize's per-line reference uses too.
+const LAMBDA_C_MM: f64 = 0.8;
+
+/// The core both sides of the one-core comparison are pinned to: the second when there is
+/// one (the first takes more of the machine's interrupts), else the only one.
+fn one_core() -> String {
+    let n = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if n > 1 { "1" } else { "0" }.to_string()
+}
+
+/// `cmd` run by `taskset -c CORE`: the process and every thread it starts on that one core.
+fn pinned(cmd: &Command) -> Command {
+    let mut c = Command::new("taskset");
+    c.arg("-c")
+        .arg(one_core())
+        .arg(cmd.get_program())
+        .args(cmd.get_args());
+    c
+}
+
+/// `surfscan analyze` of the grid, whole process, against surfalize's per-line roughness of
+/// the same grid (`tests/python/lines_surfalize.py`: each line's Gaussian high-pass at λc and
+/// Ra, Rq, Rz, Rsk, Rku; its own timing of that work alone, imports and CSV reading
+/// excluded), both pinned to one core and alternating: (surfalize's time) ÷ (ours), wall and
+/// CPU. Wall time on a shared machine includes waiting for the core; CPU time does not.
+fn bench_analyze_one_core(dir: &Path, rows: usize, cols: usize, runs: usize) {
+    let csv = dir.join(format!("grid{rows}x{cols}.csv"));
+    if !csv.exists() {
+        write_grid_csv(&csv, rows, cols);
+    }
+    let out = dir.join(format!("analyze-one-core{rows}x{cols}"));
+    let mut reference = Command::new(python());
+    reference
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/lines_surfalize.py"))
+        .arg(&csv)
+        .arg(PITCH_X_MM.to_string())
+        .arg(LAMBDA_C_MM.to_string())
+        .args(["--repeat", "1"]);
+    let (mut wall, mut cpu, mut ref_wall, mut ref_cpu) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..runs {
+        let r = run(&mut pinned(&analyze_command(&csv, &out)));
+        wall.push(r.wall_s);
+        cpu.push(r.cpu_s);
+        let r = run(&mut pinned(&reference));
+        let v: serde_json::Value = serde_json::from_str(&r.stdout)
+            .unwrap_or_else(|e| panic!("lines_surfalize.py printed no JSON ({e}): {}", r.stdout));
+        assert_eq!(v["lines"].as_u64(), Some(rows as u64), "surfalize's lines");
+        ref_wall.push(v["lines_s"].as_f64().expect("lines_s"));
+        ref_cpu.push(v["lines_cpu_s"].as_f64().expect("lines_cpu_s"));
+    }
+    let (w, c, rw, rc) = (median(wall), median(cpu), median(ref_wall), median(ref_cpu));
+    println!(
+        "analyze {rows}x{cols} on one core (taskset -c {}), whole process (medians of {runs}): {:.3} s wall, {:.3} s CPU | surfalize per-line λc {LAMBDA_C_MM} mm filter + Ra Rq Rz Rsk Rku alone {:.3} s wall, {:.3} s CPU | surfalize/ours {:.2}x wall, {:.2}x CPU (target >= 1.3x)",
+        one_core(),
+        w,
+        c,
+        rw,
+        rc,
+        rw / w,
+        rc / c
+    );
 }
 
 /// The largest figure file (`.png`, `.svg`) in `dir` and its `rk/`: (bytes, name).
@@ -700,6 +771,7 @@ fn main() {
         bench_large(dir, 9, 70, 1, false);
         // At least one λc (0.8 mm = 1600 points) per line.
         bench_analyze(dir, 7, 1800, 1, false);
+        bench_analyze_one_core(dir, 7, 1800, 1);
         bench_analyze_large(dir, 9, 1800, 1);
         bench_scan(dir, 1800, 1, &[ProfileKind::P]);
         return;
@@ -712,6 +784,9 @@ fn main() {
     }
     if want("analyze") {
         bench_analyze(dir, 31, 8000, 7, count_instructions);
+    }
+    if want("analyze-1core") {
+        bench_analyze_one_core(dir, 31, 8000, 7);
     }
     if want("analyze-large") {
         bench_analyze_large(dir, 1000, 10_000, 3);
