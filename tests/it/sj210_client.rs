@@ -719,3 +719,44 @@ async fn a_link_that_takes_no_bytes_ends_the_command_at_its_deadline() {
     assert!(took <= Duration::from_millis(3 * 2000), "{took:?}");
     assert_eq!(e.class(), FaultClass::Silent);
 }
+
+/// The probe asks a silent port the questions a stage controller answers (the ports may be
+/// swapped), but only a port that never gave a byte: an instrument that is merely late (a
+/// loaded host, a slow adapter) has answered by the end of the recovery's status read, and
+/// asking it too would only leave one more late reply (NG030 to the question) for the next
+/// link's first command to take for its own answer, a "wrong model table" that ends a scan.
+#[tokio::test(start_paused = true)]
+async fn only_a_port_that_never_spoke_is_asked_whether_a_stage_is_on_it() {
+    let late = Duration::from_millis(2500);
+    let (io, device) = responder(move |cmd, _| match cmd {
+        "RDSJ 01" => vec![(late, b"OKV1.00\r")],
+        "RDSTU00" => vec![(late, b"OK000\r")],
+        // The stage's question, to an SJ-210 one unknown command.
+        _ => vec![(Duration::ZERO, b"NG030\r")],
+    });
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.probe().await.unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            Sj210Error::Link {
+                source: LinkError::FirstByteTimeout { .. },
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+    assert_eq!(e.class(), FaultClass::Silent);
+    // Let the late replies go out before the link closes.
+    tokio::time::sleep(Duration::from_secs(6)).await;
+    drop(c);
+    assert_eq!(device.await.unwrap(), ["RDSJ 01", "RDSTU00"]);
+
+    // A port that never says anything is asked, once, after the recovery's status read.
+    let (io, device) = responder(|_, _| Vec::new());
+    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let e = c.probe().await.unwrap_err();
+    assert_eq!(e.class(), FaultClass::Silent, "{e:?}");
+    drop(c);
+    assert_eq!(device.await.unwrap(), ["RDSJ 01", "RDSTU00", "?\n/"]);
+}

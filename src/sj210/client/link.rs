@@ -75,6 +75,7 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
                 }
                 Ok(Ok(n)) => {
                     got_any = true;
+                    self.heard = true;
                     self.buf.extend_from_slice(chunk.get(..n).unwrap_or(&[]));
                 }
                 Ok(Err(e)) => return Err(io_err(e)),
@@ -90,7 +91,7 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         let drain_end = Instant::now() + self.opts.first_byte;
         while Instant::now() < drain_end {
             match timeout(self.opts.inter_byte, self.io.read(&mut chunk)).await {
-                Ok(Ok(n)) if n > 0 => continue,
+                Ok(Ok(n)) if n > 0 => self.heard = true,
                 _ => break,
             }
         }
@@ -108,7 +109,10 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         // Bounded, so a device that never stops talking cannot hold the command back forever.
         for _ in 0..64 {
             match self.io.read(&mut chunk).now_or_never() {
-                Some(Ok(n)) if n > 0 => self.buf.extend_from_slice(&chunk[..n]),
+                Some(Ok(n)) if n > 0 => {
+                    self.heard = true;
+                    self.buf.extend_from_slice(&chunk[..n]);
+                }
                 _ => break,
             }
         }

@@ -73,6 +73,9 @@ pub struct Sj210Client<S> {
     /// link: a "command not understood" answer to one of them is a stray or late reply, not
     /// a model table that is wrong for the firmware.
     answered: std::collections::BTreeSet<String>,
+    /// Whether any byte at all has come from the port on this link (a reply, a late one,
+    /// noise): a link that has ever spoken is not a stage controller ignoring our lines.
+    heard: bool,
 }
 
 impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
@@ -90,6 +93,7 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             traces_started: 0,
             back_at: None,
             answered: std::collections::BTreeSet::new(),
+            heard: false,
         }
     }
 
@@ -112,11 +116,14 @@ impl<S: AsyncRead + AsyncWrite + Unpin> crate::devices::Instrument for Sj210Clie
             Ok(r) => r,
             // Silent from the first command: a stage controller ignores the instrument's
             // lines (a Zaber answers only lines that begin with `/`). Asked in its own
-            // language, it tells the ports are swapped.
+            // language, it tells the ports are swapped. Only a link that never gave a
+            // byte (neither the reply nor the recovery's status read) is asked: an
+            // instrument that is merely late has spoken by then, and the question would only
+            // leave it one more late reply (NG030) for the next command to take as its own.
             Err(Sj210Error::Link {
                 command,
                 source: first @ LinkError::FirstByteTimeout { .. },
-            }) if self.answered.is_empty() => {
+            }) if self.answered.is_empty() && !self.heard => {
                 let source = match self.stage_instead().await {
                     Some(raw) => LinkError::Malformed { raw },
                     None => first,
