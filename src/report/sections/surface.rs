@@ -181,22 +181,16 @@ fn characterise(
             None
         }
     };
-    if folds {
-        // Over a fold the surface has several heights at one x: no grid of heights describes
-        // it, whichever branch an inversion of x(u) would pick.
-        let reason = "the model folds (x runs backwards along its iso-curves, see model_checks), so it is not a height map: no model.x3p and no areal parameters of the model".to_string();
-        fails.push(failed("surface", reason.clone()));
-        return ModelSection {
-            surface: Err(reason),
-            sampled: None,
-            checks: Some(checks),
-            failed: fails,
-        };
-    }
+    // Over a fold the surface has several heights at one x: no grid of heights describes it,
+    // whichever branch an inversion of x(u) would pick.
+    let sampled = if folds {
+        Err("the model folds (x runs backwards along its iso-curves, see model_checks), so it is not a height map: no model.x3p and no areal parameters of the model".to_string())
+    } else {
+        sampled.map_err(|e| format!("sampling the model on the data lines: {e}"))
+    };
     let heights = match sampled {
         Ok(h) => h,
-        Err(e) => {
-            let reason = format!("sampling the model on the data lines: {e}");
+        Err(reason) => {
             fails.push(failed("surface", reason.clone()));
             return ModelSection {
                 surface: Err(reason),
