@@ -4,7 +4,8 @@
 //! from fewer lines than the input holds is partial, exit 3). A scan directory and a grid go
 //! through [`crate::report`] (the daemon's entry point [`crate::report::characterise_scan`]
 //! for scans): `report.json`, `summary.csv`, `measured.x3p`, `model.x3p` (ISO 25178-72),
-//! `bac.png|svg`, `heightmap.png|svg` and `overlay.png|svg` (measured vs model of one line). A
+//! `bac.png|svg`, `heightmap.png|svg`, `overlay.png|svg` (measured vs model of one line) and
+//! `psd|acf|surface3d.png|svg` (the areal PSD, ACF and 3D view). A
 //! profile (a profile CSV, an X3P file of one line) gets `report.json` and `summary.csv`.
 //!
 //! The model is fitted once at `--degree-u/--degree-v` and `--v-method` (default: a scan's

@@ -26,6 +26,10 @@
 //! averaged over the lines (columns); heights in µm, q in 1/µm, C in µm³ — the convention of
 //! SurfaceTopography's `power_spectrum_from_profile`.
 //!
+//! **The curves behind them** ([`SpatialCurves`], for the report's figures, not in
+//! `report.json`): the ACF sampled along the fastest and the slowest decay directions (from
+//! zero lag to five times the longer decay length, or the field's edge) and both PSDs.
+//!
 //! Memory: the ACF's lags ky ≥ 0 only (the rays of Sal and Str read no others), made in one
 //! buffer of about 2·rows·cols f64 by real-to-complex transforms (see [`autocorrelation`]);
 //! Std's spectrum is the lines' half spectra, rows·(cols/2 + 1) complex values. Both read
@@ -149,6 +153,53 @@ pub struct SpatialParams {
     pub caveats: Vec<String>,
     /// Definition id per parameter.
     pub definitions: BTreeMap<String, String>,
+    /// The ACF sections and PSDs the report draws (not in `report.json`).
+    #[serde(skip)]
+    pub curves: SpatialCurves,
+}
+
+/// The ACF through zero lag along one direction.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AcfSection {
+    /// Direction, degrees counter-clockwise from +x.
+    pub direction_deg: f64,
+    /// `[lag_um, f_ACF]` from zero lag outwards, [`SECTION_POINTS`] + 1 at most.
+    pub points: Vec<[f64; 2]>,
+    /// Where the ACF first falls below s along it, µm (`None`: not within the field).
+    pub decay_um: Option<f64>,
+}
+
+/// The curves behind Sal, Str and Std, for the figures.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SpatialCurves {
+    /// Along the fastest decay (Sal's direction); `None` when the ACF decays in no direction.
+    pub fastest: Option<AcfSection>,
+    /// Along the slowest decay (Str's), or the first direction that does not decay within
+    /// the field; `None` when that is the fastest's.
+    pub slowest: Option<AcfSection>,
+    /// PSD along x, averaged over the lines.
+    pub psd_x: Psd,
+    /// PSD along y, averaged over the columns.
+    pub psd_y: Psd,
+}
+
+/// Samples of an ACF section beyond zero lag.
+pub const SECTION_POINTS: usize = 1024;
+
+/// The ACF along `deg` from zero lag to `range_um` (or the field's edge), sampled evenly.
+fn section(acf: &Acf, deg: f64, range_um: f64, decay_um: Option<f64>) -> AcfSection {
+    let (ct, st) = (deg.to_radians().cos(), deg.to_radians().sin());
+    let points = (0..=SECTION_POINTS)
+        .map_while(|k| {
+            let t = range_um * k as f64 / SECTION_POINTS as f64;
+            acf.interpolate(t * ct, t * st).map(|v| [t, v])
+        })
+        .collect();
+    AcfSection {
+        direction_deg: deg,
+        points,
+        decay_um,
+    }
 }
 
 /// The definition ids of the spatial parameters.
@@ -371,8 +422,6 @@ pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyEr
         })
         .collect();
     let (dx, dy) = (acf.pitch_x_um, acf.pitch_y_um);
-    // Its buffers are gone before the spectrum for Std takes its own.
-    drop(acf);
     let decayed = lengths.iter().filter_map(|(d, l)| l.map(|l| (*d, l)));
     let fastest = decayed
         .clone()
@@ -412,6 +461,31 @@ pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyEr
         }
         _ => None,
     };
+    // The sections drawn: to five times the longer decay, or to the field's edge when a
+    // direction does not decay within it.
+    let slowest_drawn = match (str_ratio, undecayed.first()) {
+        (Some(_), _) => slowest.map(|(d, l)| (d, Some(l))),
+        (None, Some(first)) => Some((*first, None)),
+        (None, None) => None,
+    };
+    let range_um = match slowest_drawn {
+        Some((_, Some(l))) => 5.0 * l,
+        _ => wx.hypot(wy),
+    };
+    let mut curves = SpatialCurves {
+        fastest: fastest.map(|(d, l)| section(&acf, d, range_um, Some(l))),
+        slowest: slowest_drawn
+            .filter(|(d, _)| fastest.is_none_or(|(f, _)| f != *d))
+            .map(|(d, l)| section(&acf, d, range_um, l)),
+        ..SpatialCurves::default()
+    };
+    // Its buffers are gone before the PSDs and the spectrum for Std take their own.
+    drop(acf);
+    // The PSDs need the levelled heights: a copy held only while they are made.
+    let (z, _) = level_plane(grid)?;
+    curves.psd_x = psd_x_of(&z, grid);
+    curves.psd_y = psd_y_of(&z, grid);
+    drop(z);
     if let Some((_, sal)) = fastest {
         if sal < dy && dy > 2.0 * dx {
             caveats.push(format!(
@@ -430,11 +504,12 @@ pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyEr
         blank_reasons,
         caveats,
         definitions: definitions(),
+        curves,
     })
 }
 
 /// A one-dimensional power spectral density averaged over profiles.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Default)]
 pub struct Psd {
     /// Wavevectors q = 2πk/L, 1/µm (k = 0 … n/2 − 1).
     pub q_per_um: Vec<f64>,
@@ -444,14 +519,22 @@ pub struct Psd {
 
 /// The PSD along x, averaged over the lines of the plane-levelled grid.
 pub fn psd_along_x(grid: &HeightMap<'_>) -> Result<Psd, MetrologyError> {
-    let (z, _) = level_plane(grid)?;
-    let lines: Vec<&[f64]> = z.chunks_exact(grid.cols).collect();
-    Ok(psd_of_profiles(&lines, grid.pitch_x_mm * 1000.0))
+    Ok(psd_x_of(&level_plane(grid)?.0, grid))
 }
 
 /// The PSD along y, averaged over the columns of the plane-levelled grid.
 pub fn psd_along_y(grid: &HeightMap<'_>) -> Result<Psd, MetrologyError> {
-    let (z, _) = level_plane(grid)?;
+    Ok(psd_y_of(&level_plane(grid)?.0, grid))
+}
+
+/// The PSD along x of the levelled heights `z` of `grid`.
+fn psd_x_of(z: &[f64], grid: &HeightMap<'_>) -> Psd {
+    let lines: Vec<&[f64]> = z.chunks_exact(grid.cols).collect();
+    psd_of_profiles(&lines, grid.pitch_x_mm * 1000.0)
+}
+
+/// The PSD along y of the levelled heights `z` of `grid`.
+fn psd_y_of(z: &[f64], grid: &HeightMap<'_>) -> Psd {
     let columns: Vec<Vec<f64>> = (0..grid.cols)
         .map(|c| {
             (0..grid.rows)
@@ -460,7 +543,7 @@ pub fn psd_along_y(grid: &HeightMap<'_>) -> Result<Psd, MetrologyError> {
         })
         .collect();
     let columns: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
-    Ok(psd_of_profiles(&columns, grid.pitch_y_mm * 1000.0))
+    psd_of_profiles(&columns, grid.pitch_y_mm * 1000.0)
 }
 
 fn psd_of_profiles(profiles: &[&[f64]], pitch_um: f64) -> Psd {

@@ -2,7 +2,8 @@
 //! surface; or read back from its directory by `surfscan analyze SCAN_DIR`) or a grid is
 //! characterised line by line and as a surface, and the results are written next to the
 //! data: `report.json` (atomically), `report.html`, `summary.csv`,
-//! `bac|heightmap|overlay.png|svg`, `rk/NNNN.png|svg`, `measured.x3p` and `model.x3p`.
+//! `bac|heightmap|overlay.png|svg`, the areal figures `psd|acf|surface3d.png|svg`,
+//! `rk/NNNN.png|svg`, `measured.x3p` and `model.x3p`.
 //!
 //! One pipeline, in three steps ([`characterise`]):
 //!

@@ -44,6 +44,7 @@ mod notify_apprise;
 mod older_scans;
 mod profile_conditions_cli;
 mod prometheus_scrape;
+mod report_areal_figures;
 mod report_pdf;
 mod report_print;
 mod results_unchanged;

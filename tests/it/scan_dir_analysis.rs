@@ -887,8 +887,9 @@ fn characterise_scan_reports_the_fit_it_describes_and_returns_the_paths() {
     assert_eq!(out.report_json, scan.join("report.json"));
     assert_eq!(out.lines_used, (0..7).collect::<Vec<u32>>());
     assert!(out.incomplete_lines.is_empty());
-    // Bearing curves, height map, overlay, and the Rk construction of each of the 7 lines.
-    assert_eq!(out.plots.len(), 6 + 2 * 7);
+    // Bearing curves, height map and its 3D view, PSD, ACF, overlay, and the Rk construction
+    // of each of the 7 lines.
+    assert_eq!(out.plots.len(), 12 + 2 * 7);
     assert!(out.report_html.exists());
     for p in out.plots.iter().chain([&out.summary_csv]) {
         assert!(p.starts_with(&scan) && p.exists(), "{}", p.display());
@@ -1073,8 +1074,24 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
     let check: Value = serde_json::from_str(&r.dom[start..end].replace("&quot;", "\"")).unwrap();
     assert_eq!(check["errors"], json!([]), "{check}");
     let images = check["images"].as_array().unwrap();
-    // Height map, bearing curves, overlay and one Rk construction per line.
-    assert_eq!(images.len(), 3 + rows.len(), "{check}");
+    // Height map, bearing curves, overlay, one Rk construction per line, and beside the
+    // areal parameters the PSD, the ACF and the 3D view.
+    assert_eq!(images.len(), 6 + rows.len(), "{check}");
+    let areal = &html[at("id=\"t-areal\"")..];
+    let figures = &areal[areal
+        .find("id=\"areal-figures\"")
+        .expect("the areal figures follow the areal table")..];
+    let figures = &figures[..figures.find("</div>").unwrap()];
+    for title in [
+        "Power spectral density",
+        "Autocorrelation",
+        "3D view of the measured surface",
+    ] {
+        assert!(
+            figures.contains(&format!("<figcaption>{title}</figcaption><img")),
+            "{title} is not beside the areal parameters"
+        );
+    }
     assert!(
         images.iter().all(|i| i == true),
         "an image did not decode: {check}"

@@ -42,6 +42,9 @@ pub struct Figure {
     /// Not embedded but linked: the figure's file, relative to the report (`bytes` is then
     /// empty). Per-line figures beyond what a page of a few MB holds are linked.
     pub link: Option<String>,
+    /// Shown beside the areal parameters (the PSD, the ACF, the 3D view) rather than with
+    /// the plots.
+    pub beside_areal: bool,
 }
 
 impl Figure {
@@ -65,6 +68,7 @@ impl Figure {
             bytes,
             collapsed,
             link: None,
+            beside_areal: false,
         })
     }
 
@@ -76,6 +80,15 @@ impl Figure {
             bytes: Vec::new(),
             collapsed,
             link: Some(href.into()),
+            beside_areal: false,
+        }
+    }
+
+    /// The figure shown beside the areal parameters.
+    pub fn beside_areal_parameters(self) -> Figure {
+        Figure {
+            beside_areal: true,
+            ..self
         }
     }
 }
@@ -107,6 +120,7 @@ th{background:#f2f2f2}td.t,th.t{text-align:left}
 .bad{background:#fdecea;border-left:4px solid #b2182b;padding:.5em 1em}
 .flag{color:#b00;font-weight:bold}.muted{color:#666}
 figure{margin:1em 0}figcaption{font-weight:bold;margin-bottom:.3em}
+.areal-figures{display:flex;flex-wrap:wrap;gap:1em}.areal-figures figure{flex:1 1 45%;min-width:320px;margin:0}
 img{max-width:100%;height:auto;border:1px solid #ddd}
 .scroll{overflow-x:auto}summary{cursor:pointer;margin:.3em 0}
 h3{font-size:1em;margin:.8em 0 .2em}
@@ -474,8 +488,10 @@ pub fn render(
     if let Some(j) = journal {
         events(&mut h, j);
     }
-    plots(&mut h, figures);
-    areal(&mut h, report);
+    let (areal_figures, others): (Vec<Figure>, Vec<Figure>) =
+        figures.iter().cloned().partition(|f| f.beside_areal);
+    plots(&mut h, &others);
+    areal(&mut h, report, &areal_figures);
     lines(&mut h, report);
     instrument(&mut h, report);
     holdout(&mut h, report);
@@ -780,6 +796,11 @@ fn plots(h: &mut String, figures: &[Figure]) {
         return;
     }
     h.push_str("<h2 id=\"plots\">Plots</h2>\n");
+    embed(h, figures);
+}
+
+/// Each figure as an embedded image (or a link to its file), in order.
+fn embed(h: &mut String, figures: &[Figure]) {
     let engine = base64::engine::general_purpose::STANDARD;
     for f in figures {
         let img = match &f.link {
@@ -810,7 +831,7 @@ fn plots(h: &mut String, figures: &[Figure]) {
     }
 }
 
-fn areal(h: &mut String, report: &Value) {
+fn areal(h: &mut String, report: &Value, figures: &[Figure]) {
     let cols: Vec<(&str, &Value)> = [
         ("model surface", &report["surface"]),
         ("measured grid", &report["surface_grid"]),
@@ -865,6 +886,11 @@ fn areal(h: &mut String, report: &Value) {
         }
     }
     h.push_str("</ul>\n");
+    if !figures.is_empty() {
+        h.push_str("<div id=\"areal-figures\" class=\"areal-figures\">\n");
+        embed(h, figures);
+        h.push_str("</div>\n");
+    }
 }
 
 /// A line's value at `key`, or for a blank one a dash with its reason as the tooltip (the

@@ -1,6 +1,7 @@
 //! The renderers: every file of a characterisation, made from the section results — plots
 //! (bearing curves, height map, measured vs model of one line, the Rk construction of each
-//! line: [`plots`]), the contact's `contact.json` and figures ([`contact`]), `measured.x3p` and `model.x3p` ([`crate::x3p`]), `summary.csv`
+//! line: [`plots`]; the PSD, the ACF and the 3D view beside the areal parameters:
+//! [`areal_plots`]), the contact's `contact.json` and figures ([`contact`]), `measured.x3p` and `model.x3p` ([`crate::x3p`]), `summary.csv`
 //! ([`summary`]), `report.json` and `report.html` ([`html`], laid out for paper by
 //! [`print`]), each replaced atomically; and the files for the lab's quality systems, made
 //! from a completed scan's [`super::exported::Exported`]: the Q-DAS DFQ ([`dfq`]) and the
@@ -9,6 +10,7 @@
 //!
 //! Layer 4 (reporting): depends on [`crate::x3p`], [`crate::atomic`] and the report's types.
 
+pub mod areal_plots;
 pub mod contact;
 pub mod decimate;
 pub mod dfq;
@@ -161,7 +163,7 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
 /// line, which the model interpolates by construction.
 fn write_plots(
     out: &Path,
-    height_map: impl FnOnce() -> Result<[PathBuf; 2], ReportError>,
+    height_map: impl FnOnce() -> Result<Vec<PathBuf>, ReportError>,
     overlay: Option<&Overlay>,
     report: &Report,
     ctx: &ReportContext,
@@ -190,6 +192,29 @@ fn write_plots(
         plot_bearing_curves(out, bac_curves, pooled, &bac_title, &caption).map_err(plot_err)?,
     );
     plots.extend(height_map()?);
+    // The spatial curves of the measured grid, drawn beside its areal parameters.
+    if let Some(Ok(spatial)) = report.surface_grid.as_ref().map(|g| &g.spatial) {
+        let curves = &spatial.curves;
+        plots.extend(
+            areal_plots::plot_psd(
+                out,
+                curves,
+                "Power spectral density of the measured grid",
+                &caption,
+            )
+            .map_err(plot_err)?,
+        );
+        plots.extend(
+            areal_plots::plot_acf(
+                out,
+                curves,
+                spatial.s,
+                "Autocorrelation of the measured grid",
+                &caption,
+            )
+            .map_err(plot_err)?,
+        );
+    }
     if let Some(o) = overlay {
         plots.extend(
             plot_profile_overlay(out, &o.measured, &o.model, &o.residual, &o.title, &caption)
@@ -223,19 +248,32 @@ fn rk_plot_panic(ctx: &ReportContext) -> ReportError {
     }
 }
 
-/// The height map of the measured grid, `heightmap.png|svg` (listed between the bearing area
-/// curves and the overlay).
+/// The height map of the measured grid, `heightmap.png|svg`, and its 3D view,
+/// `surface3d.png|svg` (a grid of at least 2 × 2 points), listed between the bearing area
+/// curves and the overlay.
 fn draw_height_map(
     out: &Path,
     measured: &HeightMap<'_>,
     ctx: &ReportContext,
-) -> Result<[PathBuf; 2], ReportError> {
-    plot_height_map(out, measured, "Measured heights", &caption(ctx)).map_err(|source| {
-        ReportError::Metrology {
-            what: format!("{}: plots", ctx.input),
-            source,
-        }
-    })
+) -> Result<Vec<PathBuf>, ReportError> {
+    let err = |source| ReportError::Metrology {
+        what: format!("{}: plots", ctx.input),
+        source,
+    };
+    let mut files = plot_height_map(out, measured, "Measured heights", &caption(ctx))
+        .map_err(err)?
+        .to_vec();
+    if measured.rows >= 2 && measured.cols >= 2 {
+        let (view, _) = areal_plots::plot_surface_view(
+            out,
+            measured,
+            "Measured surface, 3D view",
+            &caption(ctx),
+        )
+        .map_err(err)?;
+        files.extend(view);
+    }
+    Ok(files)
 }
 
 /// The ISO 13565-2 construction of every line, from the ordinates its Rk family came from:
@@ -462,6 +500,7 @@ pub fn read_logo(lab: &LabHeader, warnings: &mut Vec<String>) -> Option<html::Fi
             bytes,
             collapsed: false,
             link: None,
+            beside_areal: false,
         }),
         Err(e) => {
             warnings.push(format!(
@@ -563,6 +602,7 @@ pub fn report_pdf(
                     bytes,
                     collapsed: false,
                     link: None,
+                    beside_areal: false,
                 }),
                 Err(_) => {
                     html::Figure::from_files(*title, &dir.join(format!("{stem}.png")), &svg, false)
@@ -635,6 +675,17 @@ pub fn write_report(
         {
             let (png, svg) = pair(stem);
             figures.extend(html::Figure::from_files(title, &png, &svg, false));
+        }
+        for (stem, title) in [
+            ("psd", "Power spectral density"),
+            ("acf", "Autocorrelation"),
+            ("surface3d", "3D view of the measured surface"),
+        ] {
+            let (png, svg) = pair(stem);
+            figures.extend(
+                html::Figure::from_files(title, &png, &svg, false)
+                    .map(html::Figure::beside_areal_parameters),
+            );
         }
         let page = serde_json::to_value(report).map(|v| {
             // The page without the per-line figures first, to know what room they have.

@@ -32,7 +32,7 @@ use crate::metrology::params::RkFamily;
 use crate::metrology::{check_pitch, MetrologyError};
 use crate::numfmt::{fmt, Quantity};
 use plotters::chart::MeshStyle;
-use plotters::coord::ranged1d::ValueFormatter;
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -46,7 +46,7 @@ const FONT: &[u8] = include_bytes!("../../../assets/fonts/DejaVuSans.ttf");
 const FAMILY: &str = "sans-serif";
 
 /// Registers the bundled font with plotters, once per process.
-fn ensure_font() -> Result<(), String> {
+pub(super) fn ensure_font() -> Result<(), String> {
     static REGISTERED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     let ok = *REGISTERED
         .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
@@ -57,7 +57,7 @@ fn ensure_font() -> Result<(), String> {
     }
 }
 
-fn plot_err(path: &Path, e: impl std::fmt::Display) -> MetrologyError {
+pub(super) fn plot_err(path: &Path, e: impl std::fmt::Display) -> MetrologyError {
     MetrologyError::Plot {
         path: path.display().to_string(),
         message: e.to_string(),
@@ -68,14 +68,14 @@ fn plot_err(path: &Path, e: impl std::fmt::Display) -> MetrologyError {
 /// its font when the style is made, so a style made before registration (e.g. to lay out a
 /// frame before any figure is drawn) would measure every text as 0 px wide. A font that
 /// cannot be registered is reported where the figure is drawn ([`ensure_font`]).
-fn font(size: u32) -> TextStyle<'static> {
+pub(super) fn font(size: u32) -> TextStyle<'static> {
     let _ = ensure_font();
     TextStyle::from((FAMILY, size).into_font()).color(&BLACK)
 }
 
 /// An axis tick label: up to 4 significant digits without trailing zeros (a tick's zeros
 /// carry no precision), float noise around zero written as 0.
-fn tick(v: f64) -> String {
+pub(super) fn tick(v: f64) -> String {
     if v.abs() < 1e-12 {
         return "0".to_string();
     }
@@ -117,9 +117,9 @@ fn tick_label(v: &f64) -> String {
 }
 
 /// Dark blue of the measured data and curves (Okabe–Ito "blue").
-const DATA: RGBColor = RGBColor(0, 114, 178);
+pub(super) const DATA: RGBColor = RGBColor(0, 114, 178);
 /// Vermillion of the model and of constructions (Okabe–Ito).
-const MODEL: RGBColor = RGBColor(213, 94, 0);
+pub(super) const MODEL: RGBColor = RGBColor(213, 94, 0);
 /// Bluish green (Okabe–Ito) for the second construction element.
 const SECOND: RGBColor = RGBColor(0, 158, 115);
 
@@ -189,7 +189,7 @@ const FOOTER_PX: u32 = 12;
 const SIDE_PAD: u32 = 12;
 
 /// Lines of the title band and of the footer, wrapped to the figure's width.
-struct Frame {
+pub(super) struct Frame {
     title: Vec<String>,
     subtitle: Vec<String>,
     footer: Vec<String>,
@@ -197,7 +197,7 @@ struct Frame {
 
 impl Frame {
     /// The frame of a figure `figure_w` px wide.
-    fn new(figure_w: u32, title: &str, subtitle: &str, footer: &str) -> Frame {
+    pub(super) fn new(figure_w: u32, title: &str, subtitle: &str, footer: &str) -> Frame {
         let width = figure_w.saturating_sub(2 * SIDE_PAD);
         Frame {
             title: wrapped(title, TITLE_PX, width),
@@ -206,12 +206,12 @@ impl Frame {
         }
     }
 
-    fn top_px(&self) -> u32 {
+    pub(super) fn top_px(&self) -> u32 {
         8 + self.title.len() as u32 * (TITLE_PX + 6)
             + self.subtitle.len() as u32 * (SUBTITLE_PX + 5)
     }
 
-    fn bottom_px(&self) -> u32 {
+    pub(super) fn bottom_px(&self) -> u32 {
         if self.footer.is_empty() {
             4
         } else {
@@ -220,7 +220,7 @@ impl Frame {
     }
 
     /// Fills the area white, draws the title band and the footer, returns the body between.
-    fn draw<DB: DrawingBackend>(
+    pub(super) fn draw<DB: DrawingBackend>(
         &self,
         root: &DrawingArea<DB, Shift>,
     ) -> Result<DrawingArea<DB, Shift>, String>
@@ -254,7 +254,7 @@ impl Frame {
 
 /// A vertical colour bar for values `lo..hi` with its label, filling `area`; `margin_top`
 /// and `plot_h` align the bar with the plotting area beside it.
-fn draw_colour_bar<DB: DrawingBackend>(
+pub(super) fn draw_colour_bar<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     lo: f64,
     hi: f64,
@@ -343,6 +343,7 @@ macro_rules! png_and_svg {
         Ok([png, svg])
     }};
 }
+pub(super) use png_and_svg;
 
 /// Writes an RGB bitmap as `path`: fast deflate, every row Paeth-filtered.
 ///
@@ -351,7 +352,7 @@ macro_rules! png_and_svg {
 /// on every row: on the 34 figures of a 31-line analysis (white ground, thin lines, flat
 /// colour fields) it took 693 M instructions against 421 M for 6.3 MB of files against
 /// 7.3 MB. The file is replaced whole ([`replace_figure`]).
-fn write_png(path: &Path, rgb: &[u8], (w, h): (u32, u32)) -> Result<(), MetrologyError> {
+pub(super) fn write_png(path: &Path, rgb: &[u8], (w, h): (u32, u32)) -> Result<(), MetrologyError> {
     use image::codecs::png::{CompressionType, FilterType, PngEncoder};
     use image::ImageEncoder;
     replace_figure(path, |out| {
@@ -366,7 +367,7 @@ fn write_png(path: &Path, rgb: &[u8], (w, h): (u32, u32)) -> Result<(), Metrolog
 /// previous figure, never part of one, and a reader of the old file keeps it whole. Not
 /// fsynced: a figure is derived, made again by `surfscan analyze`, and 34 fsyncs would cost
 /// an analysis more than all its other writes.
-fn replace_figure(
+pub(super) fn replace_figure(
     path: &Path,
     body: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
 ) -> Result<(), MetrologyError> {
@@ -375,7 +376,7 @@ fn replace_figure(
 
 /// The range of `values` padded by 5 % (a unit range around a constant, `fallback` when
 /// there is none).
-fn padded_range(values: impl Iterator<Item = f64>, fallback: (f64, f64)) -> (f64, f64) {
+pub(super) fn padded_range(values: impl Iterator<Item = f64>, fallback: (f64, f64)) -> (f64, f64) {
     let (lo, hi) = values
         .filter(|v| v.is_finite())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
@@ -408,13 +409,59 @@ fn material_ratio_chart<'a, DB: DrawingBackend>(
     x_desc: &str,
     y_desc: &str,
 ) -> Result<ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>, String> {
+    chart(area, 0f64..100f64, lo..hi, (x_desc, y_desc), &|v| tick(*v))
+}
+
+/// Draws the legend of `chart`'s labelled series at `position`, boxed on white.
+pub(super) fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .position(position)
+        .label_font(font(13))
+        .border_style(BLACK)
+        .background_style(WHITE.mix(0.9))
+        .draw()
+        .map_err(|e| e.to_string())
+}
+
+/// A chart of [`chart`]: its coordinates those of its two ranges.
+pub(super) type Chart<'a, DB, X, Y> = ChartContext<
+    'a,
+    DB,
+    Cartesian2d<<X as AsRangedCoord>::CoordDescType, <Y as AsRangedCoord>::CoordDescType>,
+>;
+
+/// A chart on `area` with the figures' margin, label areas and light mesh, over `x` and `y`
+/// (linear ranges or `.log_scale()` ones), its axes described by `desc` (x, y), the x ticks
+/// labelled by [`tick`] and the y ticks by `y_tick`. Every chart of the figures is built here.
+pub(super) fn chart<'a, DB, X, Y>(
+    area: &'a DrawingArea<DB, Shift>,
+    x: X,
+    y: Y,
+    (x_desc, y_desc): (&str, &str),
+    y_tick: &dyn Fn(&f64) -> String,
+) -> Result<Chart<'a, DB, X, Y>, String>
+where
+    DB: DrawingBackend,
+    X: AsRangedCoord<Value = f64>,
+    Y: AsRangedCoord<Value = f64>,
+    X::CoordDescType: ValueFormatter<f64>,
+    Y::CoordDescType: ValueFormatter<f64>,
+{
     let mut chart = ChartBuilder::on(area)
         .margin(RATIO_CHART_MARGIN)
         .x_label_area_size(RATIO_CHART_X_AREA)
         .y_label_area_size(80)
-        .build_cartesian_2d(0f64..100f64, lo..hi)
+        .build_cartesian_2d(x, y)
         .map_err(|e| e.to_string())?;
     mesh(&mut chart, x_desc, y_desc)
+        .y_label_formatter(y_tick)
         .draw()
         .map_err(|e| e.to_string())?;
     Ok(chart)
@@ -497,14 +544,7 @@ where
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], BLACK.stroke_width(3)));
     }
     if !curves.is_empty() || !pooled.is_empty() {
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font(font(13))
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.9))
-            .draw()
-            .map_err(|e| e.to_string())?;
+        legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     }
     if !curves.is_empty() {
         let plot_h = plot_area
@@ -583,19 +623,16 @@ where
         (0.1, 1000.0)
     };
     let (_, a_hi) = padded_range(points.iter().map(|p| p.area_pct).chain([0.0]), (0.0, 100.0));
-    let mut chart = ChartBuilder::on(&body)
-        .margin(12)
-        .x_label_area_size(50)
-        .y_label_area_size(80)
-        .build_cartesian_2d((p_lo..p_hi).log_scale(), 0f64..a_hi.min(100.0))
-        .map_err(|e| e.to_string())?;
-    mesh(
-        &mut chart,
-        "nominal pressure (MPa, logarithmic)",
-        "real contact area (% of the nominal area)",
-    )
-    .draw()
-    .map_err(|e| e.to_string())?;
+    let mut chart = chart(
+        &body,
+        (p_lo..p_hi).log_scale(),
+        0f64..a_hi.min(100.0),
+        (
+            "nominal pressure (MPa, logarithmic)",
+            "real contact area (% of the nominal area)",
+        ),
+        &|v| tick(*v),
+    )?;
     chart
         .draw_series(LineSeries::new(
             points.iter().map(|p| (p.nominal_pressure_mpa, p.area_pct)),
@@ -625,18 +662,11 @@ where
             .label("not resolved: most contact points are isolated single points")
             .legend(|(x, y)| Circle::new((x + 12, y), 4, MODEL.stroke_width(2)));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .label_font(font(13))
-        .border_style(BLACK)
-        .background_style(WHITE.mix(0.9))
-        .draw()
-        .map_err(|e| e.to_string())
+    legend(&mut chart, SeriesLabelPosition::UpperLeft)
 }
 
 /// Exaggerations offered for the shorter axis of a map that would be too thin at true scale.
-const EXAGGERATIONS: [f64; 12] = [
+pub(super) const EXAGGERATIONS: [f64; 12] = [
     1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0, 5000.0,
 ];
 
@@ -687,7 +717,7 @@ pub fn map_scale(w_mm: f64, h_mm: f64, max_w: u32, max_h: u32, min_px: u32) -> M
 const MAP_MARGIN: u32 = 14;
 const MAP_X_AREA: u32 = 50;
 const MAP_Y_AREA: u32 = 70;
-const MAP_BAR_W: u32 = 150;
+pub(super) const MAP_BAR_W: u32 = 150;
 const MAP_WIDTH: u32 = 1000;
 
 fn map_note(scale: &MapScale) -> String {
@@ -745,7 +775,7 @@ fn map_subtitle(grid: &HeightMap<'_>, values: &MapValues<'_>, scale: &MapScale) 
     )
 }
 
-fn height_range(z: &[f64]) -> (f64, f64) {
+pub(super) fn height_range(z: &[f64]) -> (f64, f64) {
     z.iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
             (lo.min(*v), hi.max(*v))
@@ -935,7 +965,7 @@ fn vertical_exaggeration(x_span_mm: f64, z_span_um: f64, plot_w: u32, plot_h: u3
     per_um_z / per_um_x
 }
 
-fn exaggeration_note(e: f64) -> String {
+pub(super) fn exaggeration_note(e: f64) -> String {
     if (e - 1.0).abs() < 0.005 {
         "heights and lengths at the same scale".to_string()
     } else {
@@ -1049,14 +1079,7 @@ where
         .map_err(|e| e.to_string())?
         .label("measured")
         .legend(|(x, y)| Circle::new((x + 12, y), 3, DATA.filled()));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font(font(13))
-        .border_style(BLACK)
-        .background_style(WHITE.mix(0.9))
-        .draw()
-        .map_err(|e| e.to_string())?;
+    legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     if let Some(lower) = lower {
         // Symmetric about zero, so the sign of a miss reads at a glance.
         let r = residual
@@ -1342,14 +1365,7 @@ where
         root.draw_text(text, &tag, (px + dx, py + dy))
             .map_err(err)?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font(font(13))
-        .border_style(BLACK)
-        .background_style(WHITE.mix(0.9))
-        .draw()
-        .map_err(err)?;
+    legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     // The values, in the side panel.
     let rows = [
         ("Rk", fmt(rk.rk_um, Quantity::HeightUm), "µm"),

@@ -55,6 +55,7 @@ table{{font-size:7.5pt;margin:.4em 0}}th,td{{padding:.1em .3em}}\
 thead{{display:table-header-group}}tr{{break-inside:avoid}}\
 .scroll{{overflow:visible}}\
 figure{{break-inside:avoid;margin:.5em 0}}img{{max-height:105mm;max-width:100%}}\
+.areal-figures{{gap:.5em}}.areal-figures figure{{flex:1 1 30%;min-width:0}}.areal-figures img{{max-height:48mm}}\
 details,.noprint{{display:none}}\
 .keep{{break-inside:avoid}}\
 .signatures{{break-inside:avoid;margin-top:1.5em}}\
