@@ -229,8 +229,8 @@ async fn a_really_full_disk_suspends_the_scan_which_goes_on_when_space_is_freed(
     })
     .await;
     let out = rig.out_dir("out");
-    // Room for the pre-flight estimate of 8 short lines (about 4.3 MB), not much more.
-    let mount = Mount::tmpfs(&out, 6 << 20);
+    // Room for the pre-flight estimate of 8 short lines (about 9.7 MB), not much more.
+    let mount = Mount::tmpfs(&out, 11 << 20);
     let metrics = rig.tmp.path().join("surfscan.prom");
     let config = rig.config_with(
         "out",
