@@ -23,25 +23,12 @@ y-step-mm = 0.01
 limits = ["U Ra1 50", "L Ra1 0.001", "Rz1 max 400"]
 "#;
 
-fn schema() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/qif/schema/QIFDocument.xsd")
-}
-
 /// xmllint's verdict on `file` against the QIF 3.0 schemas.
 fn assert_valid_qif(file: &Path) {
-    let o = Command::new("xmllint")
-        .args(["--noout", "--schema"])
-        .arg(schema())
-        .arg(file)
-        .output()
-        .unwrap_or_else(|e| {
-            panic!("cannot run xmllint ({e}); `bash .ci/run` installs libxml2-utils")
-        });
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        o.status.success() && err.contains("validates"),
-        "{} does not validate against the QIF 3.0 schemas:\n{err}",
-        file.display()
+    crate::common::assert_validates(
+        file,
+        "tests/data/qif/schema/QIFDocument.xsd",
+        "the QIF 3.0 schemas",
     );
 }
 

@@ -28,20 +28,10 @@ pub fn assert_valid_x3p(file: &Path) {
         file.display(),
         String::from_utf8_lossy(&o.stderr)
     );
-    let schema = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/x3p/iso5436_2.xsd");
-    let o = Command::new("xmllint")
-        .args(["--noout", "--schema"])
-        .arg(&schema)
-        .arg(dir.path().join("main.xml"))
-        .output()
-        .unwrap_or_else(|e| {
-            panic!("cannot run xmllint ({e}); `bash .ci/run` installs libxml2-utils")
-        });
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        o.status.success() && err.contains("validates"),
-        "{}: main.xml does not validate against ISO 5436-2:\n{err}",
-        file.display()
+    crate::common::assert_validates(
+        &dir.path().join("main.xml"),
+        "tests/data/x3p/iso5436_2.xsd",
+        &format!("ISO 5436-2 (the main.xml of {})", file.display()),
     );
     let o = Command::new("md5sum")
         .args(["-c", "md5checksum.hex"])

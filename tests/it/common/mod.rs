@@ -15,7 +15,7 @@ pub mod http;
 pub mod mosquitto;
 
 use std::path::{Path, PathBuf};
-use std::process::Output;
+use std::process::{Command, Output};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use surfscan::scan::journal::{read_journal, Record, ResumeState};
@@ -662,4 +662,23 @@ pub fn sur2_window(rows: usize, cols: usize) -> Vec<f64> {
                 .collect::<Vec<_>>()
         })
         .collect()
+}
+
+/// xmllint's verdict on `file` against the schema `xsd` (relative to the checkout), named
+/// `what` in the failure.
+pub fn assert_validates(file: &Path, xsd: &str, what: &str) {
+    let o = Command::new("xmllint")
+        .args(["--noout", "--schema"])
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join(xsd))
+        .arg(file)
+        .output()
+        .unwrap_or_else(|e| {
+            panic!("cannot run xmllint ({e}); `bash .ci/run` installs libxml2-utils")
+        });
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        o.status.success() && err.contains("validates"),
+        "{} does not validate against {what}:\n{err}",
+        file.display()
+    );
 }
