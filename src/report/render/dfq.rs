@@ -32,11 +32,11 @@
 //! 255, K0014 AN 40, K0100, K1001 AN 30, K1002 AN 80); Hexagon's Q-DAS community wiki, data
 //! format pages "Characteristic fields K2xxx and K8xxx" (K2001 40, K2002 80, K2004, K2022),
 //! "Defined contents K2xxx" (K2004 `0` variable) and "Defined contents K00xx" (K0004's
-//! `DD.MM.YYYY/HH:MM:SS`), qa.nexus.hexagon.com/community/public/q-das/w/data-format/. What
-//! those excerpts did not show, K2101, K2110, K2111 and K2142, is as AQDEF is commonly
-//! written (nominal, lower and upper specification limit, unit) and not confirmed from a
-//! Q-DAS document here; no Q-DAS product has read these files.
-//!
+//! `DD.MM.YYYY/HH:MM:SS`), qa.nexus.hexagon.com/community/public/q-das/w/data-format/. K2101,
+//! K2110, K2111, K2142: Q-DAS's reference-manual example QDAS_1AD.DFQ (github.com/zwq00000/
+//! AQDEF-Sharp, Examples/ENG/GC/Reference_manual/): nominal 20.300, limits 20.180 and 20.420
+//! (nominal ∓ the K2112/K2113 allowance 0.120), unit `mm`; diribet/aqdef-tools agrees (its
+//! KKeyRepository.java: K2101 nominal, K2110/K2111 absolute limits). No Q-DAS product read ours yet.
 //! Lines end with CR LF, and the text is ISO 8859-1 (the manual's character set; a character
 //! outside it becomes `?`). A line without a value of a parameter has no `K0001` for it.
 //!
