@@ -704,9 +704,9 @@ fn profile_summary(
         fmt(p.ra_um, Quantity::HeightUm),
         fmt(p.rq_um, Quantity::HeightUm),
         fmt(p.rz_um, Quantity::HeightUm),
-        fmt(p.rk_um, Quantity::HeightUm),
-        fmt(p.rpk_um, Quantity::HeightUm),
-        fmt(p.rvk_um, Quantity::HeightUm)
+        fmt(p.material.rk_um, Quantity::HeightUm),
+        fmt(p.material.rpk_um, Quantity::HeightUm),
+        fmt(p.material.rvk_um, Quantity::HeightUm)
     )
 }
 

@@ -134,15 +134,15 @@ fn ours_for(
         "rc" => named(p.rc_um, "um", "Rc"),
         "rpc" | "pc" => named(p.rpc_per_cm, "/cm", "RPc"),
         "rppi" | "ppi" => named(p.rppi_per_inch, "/in", "Rppi"),
-        "rk" => named(Some(p.rk_um), "um", "Rk"),
-        "rpk" => named(Some(p.rpk_um), "um", "Rpk"),
-        "rvk" => named(Some(p.rvk_um), "um", "Rvk"),
-        "mr1" => named(Some(p.mr1_pct), "%", "Mr1"),
-        "mr2" => named(Some(p.mr2_pct), "%", "Mr2"),
-        "rmr" => named(Some(p.rmr_pct), "%", "Rmr"),
+        "rk" => named(Some(p.material.rk_um), "um", "Rk"),
+        "rpk" => named(Some(p.material.rpk_um), "um", "Rpk"),
+        "rvk" => named(Some(p.material.rvk_um), "um", "Rvk"),
+        "mr1" => named(Some(p.material.mr1_pct), "%", "Mr1"),
+        "mr2" => named(Some(p.material.mr2_pct), "%", "Mr2"),
+        "rmr" => named(Some(p.material.rmr_pct), "%", "Rmr"),
         "rdc" | "rδc" | "rΔc" | "rdeltac" => named(Some(p.rdc_um), "um", "Rdc"),
         "rmr(c)" | "mr(c)" | "mr[c]" => {
-            let level = p.rmr_c.get(occurrence)?;
+            let level = p.material.rmr_c.get(occurrence)?;
             Some((
                 Some(level.value_pct),
                 "%",

@@ -195,28 +195,39 @@ pub struct RoughnessParams {
     /// inch); `None` as RSm.
     #[serde(rename = "Rppi_per_inch")]
     pub rppi_per_inch: Option<f64>,
-    /// Rmr(c) at the peak-reference depths of [`MaterialLevels::rmr_c_depths_pct_rt`].
-    #[serde(rename = "Rmr(c)")]
-    pub rmr_c: Vec<RmrC>,
     /// Rδc = C(Rmr1) − C(Rmr2) at [`MaterialLevels::rdc_pct`], µm.
     #[serde(rename = "Rdc_um")]
     pub rdc_um: f64,
+    /// Rmr(c), Rmr and the Rk family as ISO 13565-2 and ISO 4287 read them (the report's
+    /// keys at this level).
+    #[serde(flatten)]
+    pub material: MaterialRatio,
+}
+
+/// The material-ratio family of one evaluated profile under one reading: ISO's in
+/// [`RoughnessParams::material`], the SJ series' in
+/// [`super::sj_material_ratio::SjMaterialRatio`]. The same names and units either way.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MaterialRatio {
+    /// Rmr(c) at the peak-reference depths of [`MaterialLevels::rmr_c_depths_pct_rt`].
+    #[serde(rename = "Rmr(c)")]
+    pub rmr_c: Vec<RmrC>,
     /// Relative material ratio at [`MaterialLevels::rmr_delta_um`] below C(Rmr0), %.
     #[serde(rename = "Rmr_pct")]
     pub rmr_pct: f64,
-    /// Core roughness depth.
+    /// Core roughness depth, µm.
     #[serde(rename = "Rk_um")]
     pub rk_um: f64,
-    /// Reduced peak height.
+    /// Reduced peak height, µm.
     #[serde(rename = "Rpk_um")]
     pub rpk_um: f64,
-    /// Reduced valley depth.
+    /// Reduced valley depth, µm.
     #[serde(rename = "Rvk_um")]
     pub rvk_um: f64,
-    /// Material ratio at the upper core limit.
+    /// Material ratio at the upper core limit, %.
     #[serde(rename = "Mr1_pct")]
     pub mr1_pct: f64,
-    /// Material ratio at the lower core limit.
+    /// Material ratio at the lower core limit, %.
     #[serde(rename = "Mr2_pct")]
     pub mr2_pct: f64,
     /// Peak area above the core, µm·% (report key `A1`, unit in the recipe's definition).
@@ -225,6 +236,44 @@ pub struct RoughnessParams {
     /// Valley area below the core, µm·% (report key `A2`, unit in the recipe's definition).
     #[serde(rename = "A2")]
     pub a2_um_pct: f64,
+}
+
+impl MaterialRatio {
+    /// The family at `levels` of a profile whose highest point is `top` and whose height is
+    /// `rt`, under a reading: the material ratio at a height, `ratio_pct(c)`, the height at a
+    /// material ratio, `level_at(mr_pct)`, and `rk`, the Rk family it constructs, all on its
+    /// own material ratio curve.
+    pub(super) fn read(
+        levels: &MaterialLevels,
+        (top, rt): (f64, f64),
+        ratio_pct: impl Fn(f64) -> f64,
+        level_at: impl Fn(f64) -> f64,
+        rk: &RkFamily,
+    ) -> MaterialRatio {
+        let rmr_c = levels
+            .rmr_c_depths_pct_rt
+            .iter()
+            .map(|&d| {
+                let depth_um = rt * d / 100.0;
+                RmrC {
+                    depth_pct_rt: d,
+                    depth_um,
+                    value_pct: ratio_pct(top - depth_um),
+                }
+            })
+            .collect();
+        MaterialRatio {
+            rmr_c,
+            rmr_pct: ratio_pct(level_at(levels.rmr_reference_pct) - levels.rmr_delta_um),
+            rk_um: rk.rk_um,
+            rpk_um: rk.rpk_um,
+            rvk_um: rk.rvk_um,
+            mr1_pct: rk.mr1_pct,
+            mr2_pct: rk.mr2_pct,
+            a1_um_pct: rk.a1_um_pct,
+            a2_um_pct: rk.a2_um_pct,
+        }
+    }
 }
 
 /// One Rmr(c) value with its level.
@@ -760,20 +809,15 @@ impl Acc {
             rc_um: (self.rsm_n > 0).then(|| self.rc / self.rsm_n as f64),
             rpc_per_cm: rsm_um.filter(|w| *w > 0.0).map(|w| 10_000.0 / w),
             rppi_per_inch: rsm_um.filter(|w| *w > 0.0).map(|w| 25_400.0 / w),
-            rmr_c: rmr_c(&levels, max, rt, |c| material_ratio_pct(r, c)),
             rdc_um: level_at_material_ratio(r, levels.rdc_pct[0])
                 - level_at_material_ratio(r, levels.rdc_pct[1]),
-            rmr_pct: material_ratio_pct(
-                r,
-                level_at_material_ratio(r, levels.rmr_reference_pct) - levels.rmr_delta_um,
+            material: MaterialRatio::read(
+                &levels,
+                (max, rt),
+                |c| material_ratio_pct(r, c),
+                |mr| level_at_material_ratio(r, mr),
+                rk,
             ),
-            rk_um: rk.rk_um,
-            rpk_um: rk.rpk_um,
-            rvk_um: rk.rvk_um,
-            mr1_pct: rk.mr1_pct,
-            mr2_pct: rk.mr2_pct,
-            a1_um_pct: rk.a1_um_pct,
-            a2_um_pct: rk.a2_um_pct,
         }
     }
 
@@ -955,28 +999,6 @@ pub struct RkFamily {
     pub secant_start_pct: f64,
 }
 
-/// Rmr(c) at the depths of `levels` below the highest peak `top` of a profile `rt` high, the
-/// material ratio at a level `c` read by `ratio_pct(c)`.
-pub(super) fn rmr_c(
-    levels: &MaterialLevels,
-    top: f64,
-    rt: f64,
-    ratio_pct: impl Fn(f64) -> f64,
-) -> Vec<RmrC> {
-    levels
-        .rmr_c_depths_pct_rt
-        .iter()
-        .map(|&d| {
-            let depth_um = rt * d / 100.0;
-            RmrC {
-                depth_pct_rt: d,
-                depth_um,
-                value_pct: ratio_pct(top - depth_um),
-            }
-        })
-        .collect()
-}
-
 /// Rmc(mr): height at material ratio `mr_pct` by linear quantiles of `sorted_desc`.
 pub(super) fn rmc(sorted_desc: &[f64], mr_pct: f64) -> f64 {
     let n = sorted_desc.len();
@@ -1093,21 +1115,36 @@ pub(super) fn rk_of_sorted(s: &[f64]) -> RkFamily {
     };
     let a1 = area(0.0, mr1, &|mr| (rmc(s, mr) - c).max(0.0));
     let a2 = area(mr2, 100.0, &|mr| (d - rmc(s, mr)).max(0.0));
-    RkFamily {
-        rk_um: c - d,
-        rpk_um: if mr1 > 0.0 { 2.0 * a1 / mr1 } else { 0.0 },
-        rvk_um: if mr2 < 100.0 {
-            2.0 * a2 / (100.0 - mr2)
-        } else {
-            0.0
-        },
-        mr1_pct: mr1,
-        mr2_pct: mr2,
-        a1_um_pct: a1,
-        a2_um_pct: a2,
-        upper_level_um: c,
-        lower_level_um: d,
-        secant_start_pct: a_pct,
+    RkFamily::of_core(c - d, (c, d), a_pct, (mr1, a1), (mr2, a2))
+}
+
+impl RkFamily {
+    /// The family of a core `rk_um` deep between the levels `(c, d)` whose secant starts at
+    /// `start_pct`, from the material ratio and the area beyond each limit (`(Mr1, A1)` above
+    /// C, `(Mr2, A2)` below D): Rpk = 2·A1/Mr1, Rvk = 2·A2/(100 − Mr2).
+    pub(super) fn of_core(
+        rk_um: f64,
+        (c, d): (f64, f64),
+        start_pct: f64,
+        (mr1, a1): (f64, f64),
+        (mr2, a2): (f64, f64),
+    ) -> RkFamily {
+        RkFamily {
+            rk_um,
+            rpk_um: if mr1 > 0.0 { 2.0 * a1 / mr1 } else { 0.0 },
+            rvk_um: if mr2 < 100.0 {
+                2.0 * a2 / (100.0 - mr2)
+            } else {
+                0.0
+            },
+            mr1_pct: mr1,
+            mr2_pct: mr2,
+            a1_um_pct: a1,
+            a2_um_pct: a2,
+            upper_level_um: c,
+            lower_level_um: d,
+            secant_start_pct: start_pct,
+        }
     }
 }
 
@@ -1173,7 +1210,7 @@ mod tests {
             .collect();
         let a = analyze_line(&z, 0.0005, &Options::default()).unwrap();
         assert_eq!(a.rk, rk_family(&a.roughness_um).unwrap());
-        assert_eq!(a.params.rk_um.to_bits(), a.rk.rk_um.to_bits());
+        assert_eq!(a.params.material.rk_um.to_bits(), a.rk.rk_um.to_bits());
         let want = material_ratio_curve(&a.roughness_um, RK_CURVE_POINTS);
         assert_eq!(a.rk_curve.len(), RK_CURVE_POINTS);
         for (got, want) in a.rk_curve.iter().zip(&want) {

@@ -28,11 +28,14 @@
 //! Both readings are always reported (ISO's first); [`MaterialRatioReading`] (`[analysis]
 //! material-ratio`, `analyze --material-ratio`) picks the one a verdict and a summary line use.
 //!
-//! Depends on [`super::params`] (the levels of the material ratio parameters) and
+//! Depends on [`super::params`] (the levels of the material ratio parameters, the one
+//! [`MaterialRatio`] result both readings fill, the Rk family's assembly from its core) and
 //! [`super::MetrologyError`].
 
-use super::params::{rmr_c, MaterialLevels, RmrC, RoughnessParams};
-use super::{check_heights, MetrologyError};
+use super::params::{
+    checked_sorted_desc, MaterialLevels, MaterialRatio, RkFamily, RoughnessParams,
+};
+use super::MetrologyError;
 use serde::{Deserialize, Serialize};
 
 /// Which reading of the material-ratio family (Rmr(c), Rmr, Rk, Rpk, Rvk, Mr1, Mr2, A1, A2) a
@@ -91,15 +94,7 @@ impl MaterialRatioReading {
     ) -> RoughnessParams {
         match (self, sj) {
             (MaterialRatioReading::Instrument, Some(sj)) => RoughnessParams {
-                rmr_c: sj.rmr_c.clone(),
-                rmr_pct: sj.rmr_pct,
-                rk_um: sj.rk_um,
-                rpk_um: sj.rpk_um,
-                rvk_um: sj.rvk_um,
-                mr1_pct: sj.mr1_pct,
-                mr2_pct: sj.mr2_pct,
-                a1_um_pct: sj.a1_um_pct,
-                a2_um_pct: sj.a2_um_pct,
+                material: sj.material.clone(),
                 ..params.clone()
             },
             _ => params.clone(),
@@ -118,33 +113,9 @@ pub const CONVENTION: &str = "Mitutoyo SJ series: ordinates counted (z >= level)
 pub struct SjMaterialRatio {
     /// How the values were obtained ([`CONVENTION`]).
     pub convention: &'static str,
-    /// Rmr(c) at the peak-reference depths of [`MaterialLevels`], counted ordinates.
-    #[serde(rename = "Rmr(c)")]
-    pub rmr_c: Vec<RmrC>,
-    /// Relative material ratio at δc below C(Rmr0), counted ordinates, %.
-    #[serde(rename = "Rmr_pct")]
-    pub rmr_pct: f64,
-    /// Core roughness depth, µm.
-    #[serde(rename = "Rk_um")]
-    pub rk_um: f64,
-    /// Reduced peak height, µm.
-    #[serde(rename = "Rpk_um")]
-    pub rpk_um: f64,
-    /// Reduced valley depth, µm.
-    #[serde(rename = "Rvk_um")]
-    pub rvk_um: f64,
-    /// Material ratio at the upper core limit (snapped to the grid), %.
-    #[serde(rename = "Mr1_pct")]
-    pub mr1_pct: f64,
-    /// Material ratio at the lower core limit (snapped to the grid), %.
-    #[serde(rename = "Mr2_pct")]
-    pub mr2_pct: f64,
-    /// Peak area above the core, µm·%.
-    #[serde(rename = "A1")]
-    pub a1_um_pct: f64,
-    /// Valley area below the core, µm·%.
-    #[serde(rename = "A2")]
-    pub a2_um_pct: f64,
+    /// Rmr(c), Rmr and the Rk family, counted ordinates, the core limits snapped to the grid.
+    #[serde(flatten)]
+    pub material: MaterialRatio,
     /// The upper core level C in % of Rt above the lowest point (before the snap).
     pub upper_level_pct_rt: f64,
     /// The lower core level D in % of Rt above the lowest point (before the snap).
@@ -162,33 +133,19 @@ pub fn sj_material_ratio(
     z: &[f64],
     levels: &MaterialLevels,
 ) -> Result<SjMaterialRatio, MetrologyError> {
-    check_heights(z)?;
-    if z.len() < 2 {
-        return Err(MetrologyError::TooShort {
-            points: z.len(),
-            length_mm: 0.0,
-            sampling_length_mm: 0.0,
-            min_points: 2,
-        });
-    }
-    let mut sorted = z.to_vec();
-    sorted.sort_unstable_by(f64::total_cmp);
+    let sorted = checked_sorted_desc(z)?;
     let n = sorted.len() as f64;
-    let bottom = sorted.first().copied().unwrap_or(0.0);
-    let top = sorted.last().copied().unwrap_or(0.0);
+    let top = sorted.first().copied().unwrap_or(0.0);
+    let bottom = sorted.last().copied().unwrap_or(0.0);
     let rt = top - bottom;
-    // Shares at or above / strictly above a level, by binary search in the ascending sort.
-    let at_or_above = |c: f64| (sorted.len() - sorted.partition_point(|v| *v < c)) as f64 / n;
-    let above = |c: f64| (sorted.len() - sorted.partition_point(|v| *v <= c)) as f64 / n;
+    // Shares at or above / strictly above a level, by binary search in the descending sort.
+    let at_or_above = |c: f64| sorted.partition_point(|v| *v >= c) as f64 / n;
+    let above = |c: f64| sorted.partition_point(|v| *v > c) as f64 / n;
     let level = |k: usize| bottom + k as f64 * rt / LEVELS as f64;
     let mr_ge: Vec<f64> = (0..=LEVELS)
         .map(|k| 100.0 * at_or_above(level(k)))
         .collect();
     let mr_gt: Vec<f64> = (0..=LEVELS).map(|k| 100.0 * above(level(k))).collect();
-
-    let rmr_c = rmr_c(levels, top, rt, |c| 100.0 * at_or_above(c));
-    let reference = level_at(&mr_ge, levels.rmr_reference_pct).map_or(top, level);
-    let rmr_pct = 100.0 * at_or_above(reference - levels.rmr_delta_um);
 
     let (start, gradient) = least_gradient_secant(&mr_ge, rt);
     let h_start = height_at(&mr_ge, start) * rt;
@@ -206,21 +163,22 @@ pub fn sj_material_ratio(
     let class = rt / LEVELS as f64;
     let a1 = mr_gt.iter().skip(kc).sum::<f64>() * class;
     let a2 = mr_ge.iter().take(kd + 1).map(|m| 100.0 - m).sum::<f64>() * class;
+    let rk = RkFamily::of_core(
+        gradient * 100.0,
+        (bottom + c, bottom + d),
+        start,
+        (mr1, a1),
+        (mr2, a2),
+    );
     Ok(SjMaterialRatio {
         convention: CONVENTION,
-        rmr_c,
-        rmr_pct,
-        rk_um: gradient * 100.0,
-        rpk_um: if mr1 > 0.0 { 2.0 * a1 / mr1 } else { 0.0 },
-        rvk_um: if mr2 < 100.0 {
-            2.0 * a2 / (100.0 - mr2)
-        } else {
-            0.0
-        },
-        mr1_pct: mr1,
-        mr2_pct: mr2,
-        a1_um_pct: a1,
-        a2_um_pct: a2,
+        material: MaterialRatio::read(
+            levels,
+            (top, rt),
+            |c| 100.0 * at_or_above(c),
+            |mr| level_at(&mr_ge, mr).map_or(top, level),
+            &rk,
+        ),
         upper_level_pct_rt: c_pct,
         lower_level_pct_rt: d_pct,
         secant_start_pct: start,
@@ -287,10 +245,17 @@ mod tests {
     fn a_ramp_is_all_core() {
         let z: Vec<f64> = (0..=10_000).map(|i| i as f64 * 1e-3).collect();
         let m = sj_material_ratio(&z, &MaterialLevels::default()).unwrap();
-        assert!((m.rk_um - 10.0).abs() < 2e-3, "{}", m.rk_um);
-        assert!(m.rpk_um == 0.0 && (m.rvk_um - 0.2).abs() < 1e-9, "{m:?}");
+        assert!(
+            (m.material.rk_um - 10.0).abs() < 2e-3,
+            "{}",
+            m.material.rk_um
+        );
+        assert!(
+            m.material.rpk_um == 0.0 && (m.material.rvk_um - 0.2).abs() < 1e-9,
+            "{m:?}"
+        );
         // 10 % of Rt below the top: the top 1001 ordinates of 10001.
-        assert!((m.rmr_c[0].value_pct - 100.0 * 1001.0 / 10_001.0).abs() < 1e-9);
+        assert!((m.material.rmr_c[0].value_pct - 100.0 * 1001.0 / 10_001.0).abs() < 1e-9);
         assert_eq!(m.curve.len(), 101);
     }
 

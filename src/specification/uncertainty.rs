@@ -102,14 +102,14 @@ pub const COLUMNS: &[ParameterColumn] = &[
     col!("RPc_per_cm", Lateral, |p| p.rpc_per_cm),
     col!("Rppi_per_inch", Lateral, |p| p.rppi_per_inch),
     col!("Rdc_um", Height, |p| Some(p.rdc_um)),
-    col!("Rmr_pct", Other, |p| Some(p.rmr_pct)),
-    col!("Rk_um", Height, |p| Some(p.rk_um)),
-    col!("Rpk_um", Height, |p| Some(p.rpk_um)),
-    col!("Rvk_um", Height, |p| Some(p.rvk_um)),
-    col!("Mr1_pct", ScaleFree, |p| Some(p.mr1_pct)),
-    col!("Mr2_pct", ScaleFree, |p| Some(p.mr2_pct)),
-    col!("A1", Height, |p| Some(p.a1_um_pct)),
-    col!("A2", Height, |p| Some(p.a2_um_pct)),
+    col!("Rmr_pct", Other, |p| Some(p.material.rmr_pct)),
+    col!("Rk_um", Height, |p| Some(p.material.rk_um)),
+    col!("Rpk_um", Height, |p| Some(p.material.rpk_um)),
+    col!("Rvk_um", Height, |p| Some(p.material.rvk_um)),
+    col!("Mr1_pct", ScaleFree, |p| Some(p.material.mr1_pct)),
+    col!("Mr2_pct", ScaleFree, |p| Some(p.material.mr2_pct)),
+    col!("A1", Height, |p| Some(p.material.a1_um_pct)),
+    col!("A2", Height, |p| Some(p.material.a2_um_pct)),
 ];
 
 /// A parameter's mean over the lines with its uncertainty, in the parameter's unit.

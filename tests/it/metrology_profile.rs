@@ -160,11 +160,19 @@ fn sine_parameters_match_closed_forms() {
     let d = amp - rk;
     let mr2 = (d / amp).acos() / PI * 100.0;
     let a2 = d * (100.0 - mr2) + 100.0 * amp / PI * (PI * mr2 / 100.0).sin();
-    assert!((p.rk_um - rk).abs() < 1e-3, "Rk {} vs {rk}", p.rk_um);
-    assert_eq!(p.mr1_pct, 0.0);
-    assert_eq!(p.rpk_um, 0.0);
+    assert!(
+        (p.material.rk_um - rk).abs() < 1e-3,
+        "Rk {} vs {rk}",
+        p.material.rk_um
+    );
+    assert_eq!(p.material.mr1_pct, 0.0);
+    assert_eq!(p.material.rpk_um, 0.0);
     // 200 samples per period hit each height twice: mr is resolved to about 1 %.
-    assert!((p.mr2_pct - mr2).abs() < 0.6, "Mr2 {} vs {mr2}", p.mr2_pct);
+    assert!(
+        (p.material.mr2_pct - mr2).abs() < 0.6,
+        "Mr2 {} vs {mr2}",
+        p.material.mr2_pct
+    );
     // Densely: ordinates A·cos(π(k + ½)/n) are the sine's heights at uniform phase.
     let n = 200_000;
     let dense: Vec<f64> = (0..n)
@@ -217,7 +225,11 @@ fn triangle_wave_parameters_match_closed_forms() {
         p.rdq
     );
     // Uniform heights: Rmc is a straight line, every secant ties, Rk = full range.
-    assert!((p.rk_um - 2.0 * amp).abs() < 1e-3, "Rk {}", p.rk_um);
+    assert!(
+        (p.material.rk_um - 2.0 * amp).abs() < 1e-3,
+        "Rk {}",
+        p.material.rk_um
+    );
     assert!((p.rsm_um.unwrap() - lambda * 1000.0).abs() < 1e-6);
 }
 

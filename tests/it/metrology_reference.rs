@@ -150,6 +150,7 @@ fn real_profiles_agree_with_surfalize_and_scipy_where_conventions_agree() {
         "Rdc(10 %, 25 %)",
     );
     for (c, key) in p
+        .material
         .rmr_c
         .iter()
         .zip(["Rmr_c_peak_10pct_quantiles", "Rmr_c_peak_15pct_quantiles"])
@@ -166,21 +167,21 @@ fn real_profiles_agree_with_surfalize_and_scipy_where_conventions_agree() {
     println!(
         "Rk secant {:.4} vs least squares {:.4}; Mr1 {:.2} vs {:.2}; Mr2 {:.2} vs {:.2}; \
          Rpk {:.4} vs {:.4}; Rvk {:.4} vs {:.4}; Rdq 7-point {:.5} vs forward {:.5}",
-        p.rk_um,
+        p.material.rk_um,
         num(m, "Rk_least_squares"),
-        p.mr1_pct,
+        p.material.mr1_pct,
         num(m, "Mr1_least_squares"),
-        p.mr2_pct,
+        p.material.mr2_pct,
         num(m, "Mr2_least_squares"),
-        p.rpk_um,
+        p.material.rpk_um,
         num(m, "Rpk_least_squares"),
-        p.rvk_um,
+        p.material.rvk_um,
         num(m, "Rvk_least_squares"),
         p.rdq,
         num(m, "Rdq_forward_difference"),
     );
     close(
-        p.rk_um,
+        p.material.rk_um,
         num(m, "Rk_least_squares"),
         0.10,
         "Rk (secant vs least squares)",

@@ -105,8 +105,8 @@ fn material_ratio_parameters_of_a_sine_follow_the_arccos() {
     assert_eq!(levels.rmr_c_depths_pct_rt, vec![10.0, 15.0]);
     let rt = p.rt_um;
     assert!((rt - 2.0 * amp).abs() < 1e-3);
-    assert_eq!(p.rmr_c.len(), 2);
-    for c in &p.rmr_c {
+    assert_eq!(p.material.rmr_c.len(), 2);
+    for c in &p.material.rmr_c {
         let h = amp - c.depth_um;
         let expected = (h / amp).acos() / PI * 100.0;
         assert!((c.depth_um - rt * c.depth_pct_rt / 100.0).abs() < 1e-12);
@@ -120,7 +120,11 @@ fn material_ratio_parameters_of_a_sine_follow_the_arccos() {
     let rdc = amp * ((0.10 * PI).cos() - (0.25 * PI).cos());
     assert!((p.rdc_um - rdc).abs() < 1e-3, "Rdc {} vs {rdc}", p.rdc_um);
     let rmr = ((amp - 0.1) / amp).acos() / PI * 100.0;
-    assert!((p.rmr_pct - rmr).abs() < 0.05, "Rmr {} vs {rmr}", p.rmr_pct);
+    assert!(
+        (p.material.rmr_pct - rmr).abs() < 0.05,
+        "Rmr {} vs {rmr}",
+        p.material.rmr_pct
+    );
 }
 
 #[test]
@@ -143,10 +147,14 @@ fn material_ratio_parameters_of_a_triangle_wave_are_linear() {
     // C(10 %) − C(25 %) = (1 − 0.2) − (1 − 0.5) = 0.3 µm.
     assert!((p.rdc_um - 0.3).abs() < 2.0 * c_tol, "{}", p.rdc_um);
     // 0.1 µm below the top: 0.1/2 = 5 %.
-    assert!((p.rmr_pct - 5.0).abs() < mr_tol, "{}", p.rmr_pct);
+    assert!(
+        (p.material.rmr_pct - 5.0).abs() < mr_tol,
+        "{}",
+        p.material.rmr_pct
+    );
     // 10 % of Rt = 0.2 µm below the top: 10 %; 15 % of Rt: 15 %.
-    assert!((p.rmr_c[0].value_pct - 10.0).abs() < mr_tol);
-    assert!((p.rmr_c[1].value_pct - 15.0).abs() < mr_tol);
+    assert!((p.material.rmr_c[0].value_pct - 10.0).abs() < mr_tol);
+    assert!((p.material.rmr_c[1].value_pct - 15.0).abs() < mr_tol);
 }
 
 #[test]
@@ -165,10 +173,10 @@ fn the_instruments_values_are_compared_within_a_documented_tolerance() {
         &[
             r("Rc", p.rc_um.unwrap() * 1.01, "um"),
             r("RPc", p.rpc_per_cm.unwrap() * 1.2, "/cm"),
-            r("Rmr(c)", p.rmr_c[0].value_pct + 0.5, "%"),
-            r("Rmr(c)", p.rmr_c[1].value_pct - 3.0, "%"),
+            r("Rmr(c)", p.material.rmr_c[0].value_pct + 0.5, "%"),
+            r("Rmr(c)", p.material.rmr_c[1].value_pct - 3.0, "%"),
             r("Rdc", p.rdc_um, "um"),
-            r("Rmr", p.rmr_pct, "%"),
+            r("Rmr", p.material.rmr_pct, "%"),
             r("Ra", p.ra_um + 0.004, "um"),
             r("Ra", p.ra_um * 1.05, "um"),
             r("RΔa", p.rda * 1.02, ""),

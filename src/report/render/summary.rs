@@ -46,13 +46,13 @@ pub fn line_cells(index: u32, y_mm: f64, p: &RoughnessParams) -> Vec<String> {
         nfmt(p.rku, Ratio),
         nfmt(p.rdq, Ratio),
         nfmt_opt(p.rsm_um, H),
-        nfmt(p.rk_um, H),
-        nfmt(p.rpk_um, H),
-        nfmt(p.rvk_um, H),
-        nfmt(p.mr1_pct, Percent),
-        nfmt(p.mr2_pct, Percent),
-        nfmt(p.a1_um_pct, Area),
-        nfmt(p.a2_um_pct, Area),
+        nfmt(p.material.rk_um, H),
+        nfmt(p.material.rpk_um, H),
+        nfmt(p.material.rvk_um, H),
+        nfmt(p.material.mr1_pct, Percent),
+        nfmt(p.material.mr2_pct, Percent),
+        nfmt(p.material.a1_um_pct, Area),
+        nfmt(p.material.a2_um_pct, Area),
     ]
 }
 
@@ -65,7 +65,7 @@ pub fn more_cells(p: &RoughnessParams) -> Vec<String> {
         nfmt_opt(p.rpc_per_cm, PerLength),
         nfmt_opt(p.rppi_per_inch, PerLength),
         nfmt(p.rdc_um, H),
-        nfmt(p.rmr_pct, Percent),
+        nfmt(p.material.rmr_pct, Percent),
     ]
 }
 
