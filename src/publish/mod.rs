@@ -36,7 +36,7 @@ use crate::control::protocol::ControlChannels;
 use crate::scan::event::ScanEvent;
 use crate::scan::metrics::ScanMetrics;
 use crate::scan::status::{LinkStatus, Status};
-use outbox::{Outbox, Pushed};
+use outbox::Outbox;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -130,45 +130,67 @@ impl std::fmt::Debug for Publishers {
     }
 }
 
-/// The JSON of an event as the publishers send it (the outbox adds its `id`).
-pub fn event_payload(
-    ev: &ScanEvent,
+/// The id of a message about scan `scan_id`: `<station>/<scan id>/<kind>/<time>`, the kind
+/// being the event's (`success`, ...) or `results`, and the time when it happened (for an
+/// ending, its stop record's, to the microsecond). It is made from what the message reports,
+/// not from when it was sent, so the same ending told again (by the start-up sweep, after the
+/// process died before it recorded that it had stored it) has the same id, and a consumer
+/// that drops a repeated id sees it once.
+pub fn message_id(
     station: &str,
+    scan_id: &str,
+    kind: &str,
     time: chrono::DateTime<chrono::Utc>,
-) -> serde_json::Map<String, serde_json::Value> {
-    let mut m = serde_json::Map::new();
-    m.insert("kind".into(), ev.kind.as_str().into());
+) -> String {
+    format!(
+        "{station}/{scan_id}/{kind}/{}",
+        time.to_rfc3339_opts(chrono::SecondsFormat::Micros, true)
+    )
+}
+
+/// The members every message about `ev` carries besides its own: its id (for `kind`), the
+/// scan, when it happened, the station and the scan directory.
+fn about(
+    ev: &ScanEvent,
+    kind: &str,
+    station: &str,
+    m: &mut serde_json::Map<String, serde_json::Value>,
+) {
+    m.insert(
+        "id".into(),
+        message_id(station, &ev.scan_id, kind, ev.time).into(),
+    );
     m.insert("scan_id".into(), ev.scan_id.clone().into());
     m.insert(
         "time".into(),
-        time.to_rfc3339_opts(chrono::SecondsFormat::Millis, true)
+        ev.time
+            .to_rfc3339_opts(chrono::SecondsFormat::Millis, true)
             .into(),
     );
-    m.insert("reason".into(), ev.reason.clone().into());
     m.insert("station".into(), station.into());
     m.insert("scan_dir".into(), ev.dir.display().to_string().into());
+}
+
+/// The JSON of an event as the publishers send it.
+pub fn event_payload(ev: &ScanEvent, station: &str) -> serde_json::Map<String, serde_json::Value> {
+    let mut m = serde_json::Map::new();
+    m.insert("kind".into(), ev.kind.as_str().into());
+    m.insert("reason".into(), ev.reason.clone().into());
+    about(ev, ev.kind.as_str(), station, &mut m);
     m
 }
 
-/// The results message of the completed scan `scan_id` in `dir` (see [`results`]), with the
-/// station and the time; what could not be read is logged.
-fn results_message(
-    scan_id: &str,
-    dir: &std::path::Path,
-    station: &str,
-    time: chrono::DateTime<chrono::Utc>,
-) -> serde_json::Map<String, serde_json::Value> {
-    let (mut m, problems) = results::read(scan_id, dir);
+/// The results message of the completed scan of `ev` (see [`results`]); what could not be
+/// read is logged.
+fn results_message(ev: &ScanEvent, station: &str) -> serde_json::Map<String, serde_json::Value> {
+    let (mut m, problems) = results::read(&ev.scan_id, &ev.dir);
     for p in problems {
-        tracing::warn!("mqtt: the results of scan {scan_id} lack what {p} would give");
+        tracing::warn!(
+            "mqtt: the results of scan {} lack what {p} would give",
+            ev.scan_id
+        );
     }
-    m.insert(
-        "time".into(),
-        time.to_rfc3339_opts(chrono::SecondsFormat::Millis, true)
-            .into(),
-    );
-    m.insert("station".into(), station.into());
-    m.insert("scan_dir".into(), dir.display().to_string().into());
+    about(ev, "results", station, &mut m);
     m
 }
 
@@ -394,7 +416,7 @@ impl Publishers {
         stop_rx: watch::Receiver<bool>,
     ) -> Result<(), String> {
         let dir = outbox_dir(config, "mqtt");
-        let outbox = Outbox::open(&dir, &m.station, m.outbox_max).map_err(|e| {
+        let outbox = Outbox::open(&dir, m.outbox_max).map_err(|e| {
             format!(
                 "cannot open the outbox {}: {}; nothing is published until this is fixed and the process restarted",
                 dir.display(),
@@ -428,32 +450,30 @@ impl Publishers {
         let status = status.clone();
         self.writers.push(tokio::spawn(async move {
             while let Some(ev) = rx.recv().await {
-                let now = chrono::Utc::now();
-                let payload = event_payload(&ev, &station, now);
                 let o = outbox.clone();
-                let (st, id, dir) = (station.clone(), ev.scan_id.clone(), ev.dir.clone());
-                let success = ev.kind == crate::scan::event::ScanEventKind::Success;
+                let (st, e) = (station.clone(), ev.clone());
                 let ledger = ledger.clone();
                 let stored = tokio::task::spawn_blocking(move || {
-                    let mut messages = vec![("events", payload)];
+                    let success = e.kind == crate::scan::event::ScanEventKind::Success;
+                    let mut messages = vec![("events", event_payload(&e, &st))];
                     if success {
-                        messages.push(("results", results_message(&id, &dir, &st, now)));
+                        messages.push(("results", results_message(&e, &st)));
                     }
-                    let mut pushed = Pushed::default();
+                    let mut dropped = 0;
                     for (topic, payload) in messages {
-                        let p = o
+                        dropped += o
                             .lock()
                             .map_err(|_| std::io::Error::other("outbox lock poisoned"))?
                             .push(topic, payload)?;
-                        pushed.dropped += p.dropped;
                     }
                     if success {
                         // After the outbox: a process killed between the two sends the
-                        // results again at its next start rather than never.
-                        let entry = ledger.push(&id, &dir)?;
+                        // results again (with the same ids) at its next start rather than
+                        // never.
+                        let entry = ledger.push(&e.scan_id, &e.dir)?;
                         ledger.finish(&entry).map_err(std::io::Error::other)?;
                     }
-                    Ok::<_, std::io::Error>(pushed)
+                    Ok::<_, std::io::Error>(dropped)
                 })
                 .await
                 .map_err(std::io::Error::other)
@@ -467,9 +487,8 @@ impl Publishers {
                     _ => false,
                 });
                 match stored {
-                    Ok(p) if p.dropped > 0 => tracing::warn!(
-                        "mqtt: the outbox is full; the {} oldest undelivered message(s) were dropped (raise [mqtt] outbox-max or bring the broker back)",
-                        p.dropped
+                    Ok(dropped) if dropped > 0 => tracing::warn!(
+                        "mqtt: the outbox is full; the {dropped} oldest undelivered message(s) were dropped (raise [mqtt] outbox-max or bring the broker back)"
                     ),
                     Ok(_) => {}
                     Err(e) => tracing::error!(

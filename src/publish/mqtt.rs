@@ -9,7 +9,7 @@
 //! |---|---|---|
 //! | `status` | yes | the status as `surfscan status --json` has it, with `station` and `time` |
 //! | `online` | yes | `online` at connect; `offline` at a clean stop and, as the last will, when the broker loses the station |
-//! | `events` | no | `{"id","kind","scan_id","time","reason","station","scan_dir"}` |
+//! | `events` | no | `{"id","kind","scan_id","time","reason","station","scan_dir"}`, the `id` from what it reports ([`super::message_id`]) |
 //! | `results` | no | a completed scan's results ([`super::results`]): `scan_id`, `recipe`, `specimen`, `verdict`, per parameter `mean`, `s`, `U`, `warnings`, `files` with SHA-256 |
 //! | `commands/<client-id>` | — | read by the daemon: a control request ([`super::commands`]) |
 //! | `replies/<client-id>` | no | the answer to each command, as the control socket gives it |

@@ -5,10 +5,10 @@
 //! its sequence number (`0000000000000042.json`), written atomically and durably
 //! ([`crate::atomic`]) before the publisher is told of it, and removed only when the broker
 //! has acknowledged it (QoS 1 `PUBACK`). Messages go out oldest first, one at a time, so a
-//! subscriber sees them in the order they happened. Each carries an `id`
-//! (`<prefix>-<sequence>`) that stays the same when it is sent again after a reconnection,
-//! so a consumer can drop a duplicate; the next sequence number is kept in `next-id` so that
-//! an id is never reused, even after the outbox was emptied.
+//! subscriber sees them in the order they happened. The message's `id` is its sender's
+//! (see [`super::message_id`]), stored with it, so a message sent again after a reconnection
+//! carries the same one; the next sequence number is kept in `next-id` so that a file name is
+//! never reused, even after the outbox was emptied.
 //!
 //! Bounded: beyond `capacity` messages the oldest is removed (and the caller told, to log
 //! it). A file that cannot be read back (damaged by a crash of the disk) is moved to
@@ -34,20 +34,10 @@ pub struct Message {
     pub payload: serde_json::Value,
 }
 
-/// What a push did besides storing the message.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub struct Pushed {
-    /// The id given to the message.
-    pub id: String,
-    /// Oldest messages removed to stay within the capacity.
-    pub dropped: u64,
-}
-
 /// The outbox of one publisher.
 #[derive(Debug)]
 pub struct Outbox {
     dir: PathBuf,
-    prefix: String,
     capacity: u64,
     next: u64,
     waiting: VecDeque<u64>,
@@ -67,8 +57,8 @@ fn seq_of(name: &str) -> Option<u64> {
 }
 
 impl Outbox {
-    /// Opens (creating it if need be) the outbox in `dir`; ids are `<prefix>-<n>`.
-    pub fn open(dir: &Path, prefix: &str, capacity: u64) -> io::Result<Outbox> {
+    /// Opens (creating it if need be) the outbox in `dir`.
+    pub fn open(dir: &Path, capacity: u64) -> io::Result<Outbox> {
         fs::create_dir_all(dir)?;
         let mut waiting = Vec::new();
         for entry in fs::read_dir(dir)? {
@@ -91,7 +81,6 @@ impl Outbox {
         let next = stored.max(waiting.last().map_or(1, |s| s + 1)).max(1);
         Ok(Outbox {
             dir: dir.to_path_buf(),
-            prefix: prefix.to_owned(),
             capacity: capacity.max(1),
             next,
             waiting: waiting.into(),
@@ -108,16 +97,14 @@ impl Outbox {
         self.waiting.is_empty()
     }
 
-    /// Stores a message for `topic` durably; its `payload` (a JSON object) gets the `id`
-    /// member.
+    /// Stores a message for `topic` durably; returns how many of the oldest were removed to
+    /// stay within the capacity.
     pub fn push(
         &mut self,
         topic: &str,
-        mut payload: serde_json::Map<String, serde_json::Value>,
-    ) -> io::Result<Pushed> {
+        payload: serde_json::Map<String, serde_json::Value>,
+    ) -> io::Result<u64> {
         let seq = self.next;
-        let id = format!("{}-{seq}", self.prefix);
-        payload.insert("id".into(), id.clone().into());
         let message = Message {
             seq,
             topic: topic.to_owned(),
@@ -136,7 +123,7 @@ impl Outbox {
                 dropped += 1;
             }
         }
-        Ok(Pushed { id, dropped })
+        Ok(dropped)
     }
 
     /// The oldest message waiting. A file that cannot be read is moved to `damaged/` (its
@@ -196,36 +183,37 @@ mod tests {
     }
 
     #[test]
-    fn messages_come_back_in_order_across_a_reopen_and_ids_are_never_reused() {
+    fn messages_come_back_in_order_across_a_reopen_and_files_are_never_reused() {
         let d = tempfile::tempdir().unwrap();
-        let mut o = Outbox::open(d.path(), "st", 100).unwrap();
-        let a = o.push("events", obj(json!({"kind":"started"}))).unwrap();
-        let b = o.push("events", obj(json!({"kind":"success"}))).unwrap();
-        assert_eq!((a.id.as_str(), b.id.as_str()), ("st-1", "st-2"));
+        let mut o = Outbox::open(d.path(), 100).unwrap();
+        o.push("events", obj(json!({"kind":"started","id":"a"})))
+            .unwrap();
+        o.push("events", obj(json!({"kind":"success","id":"b"})))
+            .unwrap();
         drop(o);
-        let mut o = Outbox::open(d.path(), "st", 100).unwrap();
+        let mut o = Outbox::open(d.path(), 100).unwrap();
         let (m, _) = o.head().unwrap();
         let m = m.unwrap();
-        assert_eq!(m.payload["kind"], "started");
-        assert_eq!(m.payload["id"], "st-1");
+        assert_eq!((m.seq, &m.payload["kind"]), (1, &json!("started")));
+        assert_eq!(m.payload["id"], "a");
         o.ack(m.seq).unwrap();
         let m = o.head().unwrap().0.unwrap();
-        assert_eq!(m.payload["id"], "st-2");
+        assert_eq!((m.seq, &m.payload["id"]), (2, &json!("b")));
         o.ack(m.seq).unwrap();
         assert!(o.head().unwrap().0.is_none());
-        // Emptied and reopened: the next id is new, so a consumer that drops duplicates by
-        // id cannot drop it.
-        let mut o = Outbox::open(d.path(), "st", 100).unwrap();
-        assert_eq!(o.push("events", obj(json!({}))).unwrap().id, "st-3");
+        // Emptied and reopened: the next message gets a new file, after the last one.
+        let mut o = Outbox::open(d.path(), 100).unwrap();
+        o.push("events", obj(json!({"id":"c"}))).unwrap();
+        assert_eq!(o.head().unwrap().0.unwrap().seq, 3);
     }
 
     #[test]
     fn beyond_its_capacity_the_oldest_message_goes() {
         let d = tempfile::tempdir().unwrap();
-        let mut o = Outbox::open(d.path(), "st", 2).unwrap();
+        let mut o = Outbox::open(d.path(), 2).unwrap();
         for k in 0..3 {
-            let p = o.push("events", obj(json!({"k": k}))).unwrap();
-            assert_eq!(p.dropped, u64::from(k == 2));
+            let dropped = o.push("events", obj(json!({"k": k}))).unwrap();
+            assert_eq!(dropped, u64::from(k == 2));
         }
         assert_eq!(o.len(), 2);
         assert_eq!(o.head().unwrap().0.unwrap().payload["k"], 1);
@@ -234,12 +222,12 @@ mod tests {
     #[test]
     fn a_damaged_file_is_set_aside_and_the_next_is_delivered() {
         let d = tempfile::tempdir().unwrap();
-        let mut o = Outbox::open(d.path(), "st", 10).unwrap();
+        let mut o = Outbox::open(d.path(), 10).unwrap();
         o.push("events", obj(json!({"k": 1}))).unwrap();
         o.push("events", obj(json!({"k": 2}))).unwrap();
         fs::write(d.path().join(file_name(1)), b"{\"seq\":1,\"topi").unwrap();
         fs::write(d.path().join(".0000000000000009.json.tmp"), b"x").unwrap();
-        let mut o = Outbox::open(d.path(), "st", 10).unwrap();
+        let mut o = Outbox::open(d.path(), 10).unwrap();
         assert!(!d.path().join(".0000000000000009.json.tmp").exists());
         let (m, damaged) = o.head().unwrap();
         assert_eq!(m.unwrap().payload["k"], 2);

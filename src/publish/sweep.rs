@@ -60,6 +60,7 @@ pub fn missed(succeeded: &[Succeeded], known: &Known) -> Vec<ScanEvent> {
             dir: s.dir.clone(),
             kind: ScanEventKind::Success,
             reason: s.reason.clone(),
+            time: s.ended,
             results: None,
         })
         .collect()
@@ -96,5 +97,7 @@ mod tests {
         assert!(m.iter().all(|e| e.kind == ScanEventKind::Success));
         assert_eq!(m[0].dir, PathBuf::from("/scans/b"));
         assert_eq!(m[0].reason, "all lines traced");
+        // The stop record's time, which the live event carried too: the same message id.
+        assert_eq!(m[0].time, scans[3].ended);
     }
 }

@@ -71,6 +71,7 @@ impl Control {
         dir: &Path,
         kind: ScanEventKind,
         reason: &str,
+        time: chrono::DateTime<chrono::Utc>,
         results: Option<super::results::ScanResults>,
     ) {
         if let Some(tx) = &self.events {
@@ -79,6 +80,7 @@ impl Control {
                 dir: dir.to_path_buf(),
                 kind,
                 reason: reason.to_owned(),
+                time,
                 results,
             });
         }

@@ -58,7 +58,11 @@ impl Books<'_> {
             Action::Notify(kind, reason) => {
                 if let Some(l) = &self.ledger {
                     let results = self.outputs.as_ref().and_then(|o| o.results.clone());
-                    ctl.event(&l.id, &l.dir, kind, &reason, results);
+                    let time = l
+                        .stopped
+                        .filter(|_| kind.is_ending())
+                        .unwrap_or_else(chrono::Utc::now);
+                    ctl.event(&l.id, &l.dir, kind, &reason, time, results);
                 }
             }
             Action::Reply(r) => {

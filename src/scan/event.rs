@@ -38,6 +38,14 @@ impl ScanEventKind {
             ScanEventKind::Suspended => "suspended",
         }
     }
+
+    /// True for an ending (success, fail, abort): what a stop record says.
+    pub fn is_ending(self) -> bool {
+        matches!(
+            self,
+            ScanEventKind::Success | ScanEventKind::Fail | ScanEventKind::Abort
+        )
+    }
 }
 
 impl ScanEventKind {
@@ -65,6 +73,9 @@ pub struct ScanEvent {
     pub kind: ScanEventKind,
     /// Why, for people (may be empty).
     pub reason: String,
+    /// When it happened: for an ending, the time of the journal's stop record (so the same
+    /// ending read back from the journal is the same event); otherwise when it was told.
+    pub time: chrono::DateTime<chrono::Utc>,
     /// A completed scan's verdict, means and warnings.
     pub results: Option<super::results::ScanResults>,
 }

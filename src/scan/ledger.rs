@@ -19,7 +19,7 @@ use super::store_error::StoreError;
 use super::testhooks::{Step, TestHooks};
 use crate::fit::{FitError, FitOptions, IncrementalFitter};
 use crate::profile::Profile;
-use chrono::Utc;
+use chrono::{DateTime, Utc};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -45,6 +45,9 @@ pub(super) struct Ledger {
     /// Interruptions whose journal append failed (a full disk, mostly: the very condition
     /// they report), oldest first, with their own times: appended before the next record.
     unrecorded: Vec<InterruptionRecord>,
+    /// The time of the stop record last written (none before it, or when it could not be
+    /// written): the time of the ending's event.
+    pub stopped: Option<DateTime<Utc>>,
 }
 
 impl Ledger {
@@ -69,6 +72,7 @@ impl Ledger {
             hooks,
             metrics_path,
             unrecorded: Vec::new(),
+            stopped: None,
         }
     }
 
@@ -120,12 +124,15 @@ impl Ledger {
         cause: Option<super::ending::FailCause>,
     ) -> Result<(), JournalError> {
         self.record_unrecorded();
-        self.journal.append(&Record::Stop(StopRecord {
+        let time = Utc::now();
+        let written = self.journal.append(&Record::Stop(StopRecord {
             status,
             reason: reason.to_owned(),
             cause,
-            time: Utc::now(),
-        }))
+            time,
+        }));
+        self.stopped = written.is_ok().then_some(time);
+        written
     }
 
     /// Records that the failed scan is continued: its stop record no longer ends it.
@@ -143,6 +150,7 @@ impl Ledger {
             })
             .unwrap_or_default();
         self.record_unrecorded();
+        self.stopped = None;
         self.journal
             .append(&Record::Continue(super::journal::ContinueRecord {
                 after,

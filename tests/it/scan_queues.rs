@@ -4,8 +4,8 @@
 //! after the upgrade, each once. A scan that succeeded while the process was killed before
 //! the scan was queued (the journal's stop record written, the queue's entry not: the state
 //! on disk is made here by removing the entries a run wrote) is queued at the next start for
-//! the archive, the exports and its MQTT results, and a scan that was queued is not queued
-//! again.
+//! the archive, the exports and its MQTT results (with the same message ids as the first
+//! time), and a scan that was queued is not queued again.
 
 use crate::common::mosquitto::{self, Broker};
 use crate::daemon_e2e::{self as e2e, Rig};
@@ -88,6 +88,17 @@ async fn done_with(r: &Rig, scan_id: &str) {
         assert!(t0.elapsed() < e2e::DEADLINE, "{scan_id} never done");
         tokio::time::sleep(std::time::Duration::from_millis(50)).await;
     }
+}
+
+/// The ids of the messages on `surfscan/<station>/<leaf>` about `scan_id` (of `kind` if
+/// given), in arrival order.
+fn ids_of(seen: &[mosquitto::Seen], leaf: &str, scan_id: &str, kind: Option<&str>) -> Vec<String> {
+    seen.iter()
+        .filter(|m| m.topic == format!("surfscan/{STATION}/{leaf}"))
+        .map(mosquitto::Seen::json)
+        .filter(|v| v["scan_id"] == scan_id && kind.is_none_or(|k| v["kind"] == k))
+        .map(|v| v["id"].as_str().unwrap().to_owned())
+        .collect()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -179,7 +190,15 @@ async fn a_scan_completed_but_never_queued_is_queued_at_the_next_start() {
 
     let mut d = spawn_logged(&r);
     wait_socket(&r).await;
-    mosquitto::wait_seen(&out, "a's results again", |s| results_of(&a)(s) == 2).await;
+    let seen = mosquitto::wait_seen(&out, "a's results again", |s| results_of(&a)(s) == 2).await;
+    // Sent twice, with one id each time: a consumer that drops repeated ids sees them once.
+    for (leaf, kind) in [("results", None), ("events", Some("success"))] {
+        let ids = ids_of(&seen, leaf, &a, kind);
+        assert!(
+            ids.len() >= 2 && ids.iter().all(|i| *i == ids[0]),
+            "{leaf}: {ids:?}"
+        );
+    }
     done_with(&r, &a).await;
     settled(&r).await;
     assert!(spc.join(format!("{a}.dfq")).is_file());

@@ -13,6 +13,7 @@ fn event(kind: HookStatus) -> ScanEvent {
         kind,
         reason: "stage following error on line 12".into(),
         dir: PathBuf::from("/var/lib/surfscan/scans/G-0142"),
+        time: "2026-03-01T10:00:00Z".parse().unwrap(),
         results: None,
     }
 }
