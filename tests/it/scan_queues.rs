@@ -5,7 +5,8 @@
 //! the scan was queued (the journal's stop record written, the queue's entry not: the state
 //! on disk is made here by removing the entries a run wrote) is queued at the next start for
 //! the archive, the exports and its MQTT results (with the same message ids as the first
-//! time), and a scan that was queued is not queued again.
+//! time), and a scan that was queued is not queued again. And the real thing: the daemon
+//! killed by SIGKILL the moment its scan's stop record is in the journal, then restarted.
 
 use crate::common::mosquitto::{self, Broker};
 use crate::daemon_e2e::{self as e2e, Rig};
@@ -222,6 +223,116 @@ async fn a_scan_completed_but_never_queued_is_queued_at_the_next_start() {
     assert!(!log.contains(&format!("scan {b} succeeded, but")), "{log}");
     // b's results were not sent again.
     assert_eq!(results_of(&b)(&mosquitto::seen(&out)), 1);
+    e2e::sigterm(&d);
+    assert!(e2e::wait_exit(&mut d).success());
+}
+
+/// The daemon killed (SIGKILL) the moment its scan's journal holds the stop record, polled
+/// from here: what it had queued by then is whatever it was. After the restart the scan is
+/// archived and exported, each once, and its MQTT results and success event arrive with one
+/// id however many times they are sent.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_daemon_killed_as_its_scan_ends_delivers_the_scan_once_after_a_restart() {
+    let r = e2e::rig().await;
+    let broker = Broker::start(r.dir.path());
+    with_mqtt(&r, &broker.url(), mosquitto::STATION_PASSWORD);
+    let (spc, archive) = with_publishers(&r);
+    let out = r.dir.path().join("sub.txt");
+    let _sub = broker.subscribe("watcher-k", &out);
+    let mut d = spawn_logged(&r);
+    wait_socket(&r).await;
+    e2e::start_scan(&r, "killed").await;
+    let t0 = std::time::Instant::now();
+    let journal = loop {
+        if let Some(j) = std::fs::read_dir(r.out())
+            .into_iter()
+            .flatten()
+            .map(|e| e.unwrap().path().join("journal.jsonl"))
+            .find(|j| j.is_file())
+        {
+            break j;
+        }
+        assert!(t0.elapsed() < e2e::DEADLINE, "no journal");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    };
+    while !std::fs::read_to_string(&journal)
+        .unwrap()
+        .contains(r#""class":"stop""#)
+    {
+        assert!(t0.elapsed() < e2e::DEADLINE, "no stop record");
+        std::thread::sleep(std::time::Duration::from_micros(200));
+    }
+    d.0.kill().unwrap();
+    let killed = d.0.wait().unwrap();
+    assert!(!killed.success(), "{killed:?}");
+    let dir = journal.parent().unwrap().to_path_buf();
+    let id = dir.file_name().unwrap().to_string_lossy().into_owned();
+    let stop = e2e::records(&dir)
+        .into_iter()
+        .find_map(|rec| match rec {
+            surfscan::scan::journal::Record::Stop(s) => Some(s),
+            _ => None,
+        })
+        .unwrap();
+    assert_eq!(stop.status, StopStatus::Success, "{}", stop.reason);
+    // What the kill left queued, for the record (the test passes either way, and checks
+    // the same outcome).
+    let queued: Vec<(&str, usize)> = ["archive", "export", "mqtt-results"]
+        .into_iter()
+        .map(|q| {
+            let q_dir = r.out().join("outbox").join(q);
+            let n = [q_dir.clone(), q_dir.join("done")]
+                .iter()
+                .map(|d| entries(d).iter().filter(|n| n.contains(&id)).count())
+                .sum();
+            (q, n)
+        })
+        .collect();
+    eprintln!("queued when killed: {queued:?}");
+
+    let mut d = spawn_logged(&r);
+    wait_socket(&r).await;
+    let seen = mosquitto::wait_seen(&out, "the results", |s| {
+        !ids_of(s, "results", &id, None).is_empty()
+    })
+    .await;
+    done_with(&r, &id).await;
+    settled(&r).await;
+    assert!(spc.join(format!("{id}.dfq")).is_file());
+    let check = std::process::Command::new("sha256sum")
+        .args(["--check", "--quiet", "MANIFEST.sha256"])
+        .current_dir(archive.join(&id))
+        .output()
+        .unwrap();
+    assert!(check.status.success(), "{check:?}");
+    for q in ["archive", "export"] {
+        let q_dir = r.out().join("outbox").join(q);
+        assert_eq!(entries(&q_dir), Vec::<String>::new(), "{q}");
+        let done: Vec<String> = entries(&q_dir.join("done"))
+            .into_iter()
+            .filter(|n| n.contains(&id))
+            .collect();
+        assert_eq!(done.len(), 1, "{q}: done once: {done:?}");
+    }
+    let expected = format!(
+        "{STATION}/{id}/results/{}",
+        stop.time
+            .to_rfc3339_opts(chrono::SecondsFormat::Micros, true)
+    );
+    for (leaf, kind, want) in [
+        ("results", None, expected.clone()),
+        (
+            "events",
+            Some("success"),
+            expected.replace("/results/", "/success/"),
+        ),
+    ] {
+        let ids = ids_of(&seen, leaf, &id, kind);
+        assert!(
+            !ids.is_empty() && ids.iter().all(|i| *i == want),
+            "{leaf}: {ids:?}, want {want}"
+        );
+    }
     e2e::sigterm(&d);
     assert!(e2e::wait_exit(&mut d).success());
 }
