@@ -1000,6 +1000,13 @@ dir = "/var/lib/surfscan/scans"
         assert_eq!(r.address, "1 Road\nTown");
         assert_eq!(r.paper, crate::report::header::Paper::Letter);
         assert_eq!(r.signatures.len(), 3);
+        assert!(!r.line_png);
+        assert!(
+            parse(&format!("{with}line-png = true\n"))
+                .unwrap()
+                .report
+                .line_png
+        );
         let e = parse(&with.replace("logo.png", "logo.bmp"))
             .unwrap_err()
             .to_string();

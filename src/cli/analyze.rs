@@ -37,6 +37,7 @@ use crate::input::{GridInput, Source};
 use crate::jobs::recipe::Recipe;
 use crate::metrology::params::{analyze_line, Options, Recipe as LineRecipe, RoughnessParams};
 use crate::metrology::sj_material_ratio::{sj_material_ratio, MaterialRatioReading};
+use crate::report::header::LabHeader;
 use crate::report::scan_dir::fit_for_report;
 use crate::report::{
     characterise, characterise_scan, Model, ReportContext, ReportError, ScanAnalysisOptions,
@@ -108,6 +109,10 @@ pub struct Args {
     /// Output directory. Default: the scan directory for a scan, `.` for a CSV.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Also write each line's Rk figure as a PNG (`rk/NNNN.png`) beside its SVG, as
+    /// `[report] line-png = true` does.
+    #[arg(long)]
+    pub line_png: bool,
     /// Add the contact of the surface with a flat (rigid or elastic) to the report (`contact` in
     /// report.json, a table in report.html, contact.json and its plots): the load–area curve
     /// of the measured grid. A scan whose plan froze an enabled `[contact]` has it without.
@@ -475,6 +480,12 @@ pub fn run(args: Args) -> Result<(), CliError> {
         None => None,
     };
     let lab = station.as_ref().map(|c| c.report.clone());
+    // `--line-png` adds the per-line PNGs to the `[report]` of `--config`, else to the one a
+    // scan's journal recorded.
+    let line_png = |lab: LabHeader| LabHeader {
+        line_png: lab.line_png || args.line_png,
+        ..lab
+    };
     let recipe = match &args.recipe {
         Some(r) => Some(recipe_of(r, station.as_ref())?),
         None => None,
@@ -502,7 +513,15 @@ pub fn run(args: Args) -> Result<(), CliError> {
         };
         let base = ScanAnalysisOptions {
             out_dir: args.out.clone(),
-            lab,
+            lab: lab
+                .or_else(|| {
+                    vouched
+                        .journal
+                        .as_ref()
+                        .ok()
+                        .map(|s| LabHeader::of_frozen_config(&s.start.config))
+                })
+                .map(line_png),
             specification,
             ..frozen
         };
@@ -553,7 +572,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
             ..ScanAnalysisOptions::default()
         },
         warnings: input.findings.clone(),
-        lab: lab.unwrap_or_default(),
+        lab: line_png(lab.unwrap_or_default()),
     };
     let outputs = fit_and_characterise(&input.grid, ctx, &args, &out)?;
     finish(&outputs, judged)

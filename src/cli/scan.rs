@@ -186,10 +186,16 @@ fn success_summary(
         say!("  file     {}", p.display());
     }
     if let Some(dir) = rk.first().and_then(|p| p.parent()) {
+        let svg = rk.iter().filter(|p| p.extension() == Some("svg".as_ref()));
+        let lines = svg.count();
+        let each = if rk.len() > lines {
+            "a PNG and an SVG"
+        } else {
+            "an SVG"
+        };
         say!(
-            "  file     {}/ ({} Rk construction plots, one PNG and SVG per line)",
-            dir.display(),
-            rk.len()
+            "  file     {}/ ({lines} Rk construction plots, {each} per line)",
+            dir.display()
         );
     }
     if let Some(e) = &outputs.characterisation_error {

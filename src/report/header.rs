@@ -48,6 +48,10 @@ pub struct LabHeader {
     /// The roles of the signature block, in order (each gets name, signature and date).
     #[serde(default = "default_signatures")]
     pub signatures: Vec<String>,
+    /// Also write each line's Rk figure as a PNG (`rk/NNNN.png`) beside its SVG. Off by
+    /// default: the page embeds the SVG, and the PNGs cost most of a 31-line analysis's work.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub line_png: bool,
 }
 
 fn default_signatures() -> Vec<String> {
@@ -62,6 +66,7 @@ impl Default for LabHeader {
             logo: None,
             paper: Paper::default(),
             signatures: default_signatures(),
+            line_png: false,
         }
     }
 }

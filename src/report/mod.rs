@@ -3,7 +3,7 @@
 //! characterised line by line and as a surface, and the results are written next to the
 //! data: `report.json` (atomically), `report.html`, `summary.csv`,
 //! `bac|heightmap|overlay.png|svg`, the areal figures `psd|acf|surface3d.png|svg`,
-//! `rk/NNNN.png|svg`, `measured.x3p` and `model.x3p`.
+//! `rk/NNNN.svg` (and `.png` with `[report] line-png`), `measured.x3p` and `model.x3p`.
 //!
 //! One pipeline, in three steps ([`characterise`]):
 //!
@@ -131,7 +131,14 @@ pub fn characterise(
     };
     render::write_report(out, &written, &report, &ctx, logo.as_ref())?;
     let mut plots = written.plots;
-    plots.extend(written.rk_plots.into_iter().flat_map(|(_, files)| files));
+    let line_png = ctx.lab.line_png;
+    plots.extend(
+        written
+            .rk_plots
+            .into_iter()
+            .flat_map(|(_, [png, svg])| [line_png.then_some(png), Some(svg)])
+            .flatten(),
+    );
     Ok(ScanOutputs {
         report_json: written.report_json,
         report_html: written.report_html,

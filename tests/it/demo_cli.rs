@@ -184,8 +184,13 @@ fn demo_leaves_surface_report_plots_and_x3p_of_a_complete_scan() {
     );
     assert!(footer.contains("arbitrary evaluation length"));
     assert!(!footer.contains(" N 0"));
+    // Each line's as an SVG only: the PNGs are written when `[report] line-png` asks.
     for k in 0..31 {
-        assert!(dir.join(format!("rk/{k:04}.png")).exists(), "rk/{k:04}.png");
+        assert!(dir.join(format!("rk/{k:04}.svg")).exists(), "rk/{k:04}.svg");
+        assert!(
+            !dir.join(format!("rk/{k:04}.png")).exists(),
+            "rk/{k:04}.png"
+        );
     }
     assert!(std::fs::read_to_string(dir.join("report.html"))
         .unwrap()

@@ -218,6 +218,68 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
     assert!(map.contains(r#"href="data:image/png;base64,iVBORw0KGgo"#));
 }
 
+/// Each line's Rk construction is written as an SVG, which report.html embeds; its PNG only
+/// with `--line-png`, and then at the SVG's size in pixels. Analysed again without the flag,
+/// the old PNGs go.
+#[test]
+fn per_line_figures_are_svgs_and_their_pngs_are_written_when_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rows, cols) = (6usize, 401usize);
+    let mut csv = String::new();
+    for r in 0..rows {
+        let row: Vec<String> = (0..cols)
+            .map(|c| format!("{:.9}", (2.0 * PI * (c + 7 * r) as f64 / 100.0).cos()))
+            .collect();
+        csv.push_str(&row.join(","));
+        csv.push('\n');
+    }
+    let input = dir.path().join("grid.csv");
+    std::fs::write(&input, csv).unwrap();
+    let out = dir.path().join("out");
+    for line_png in [true, false] {
+        let mut cmd = surfscan();
+        cmd.arg("analyze").arg(&input);
+        cmd.args(["--lc", "0.25", "--pitch-x", "0.001", "--pitch-y", "0.01"]);
+        cmd.args(["--curves", "3", "--out"]).arg(&out);
+        if line_png {
+            cmd.arg("--line-png");
+        }
+        assert!(cmd.status().unwrap().success());
+        for k in 0..rows {
+            let svg = std::fs::read_to_string(out.join(format!("rk/{k:04}.svg"))).unwrap();
+            assert!(svg.contains("ISO 13565-2"), "rk/{k:04}.svg");
+            let png = out.join(format!("rk/{k:04}.png"));
+            assert_eq!(png.exists(), line_png, "{}", png.display());
+            if line_png {
+                let (w, h) = image::open(&png).unwrap().to_rgb8().dimensions();
+                assert!(
+                    svg.contains(&format!("width=\"{w}\" height=\"{h}\"")),
+                    "{}",
+                    &svg[..200]
+                );
+            }
+        }
+        // The whole-grid figures keep both.
+        for name in ["bac.png", "bac.svg", "heightmap.png", "overlay.png"] {
+            assert!(out.join(name).exists(), "{name}");
+        }
+        let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+        let lines: Vec<&str> = html.split("<details><summary>Line ").skip(1).collect();
+        assert_eq!(lines.len(), rows);
+        for l in lines {
+            let figure = &l[..l.find("</details>").unwrap()];
+            let media = figure.split("src=\"data:").nth(1).unwrap();
+            // Without PNGs the SVG is embedded; with them, the smaller of the two files.
+            assert!(
+                media.starts_with("image/svg+xml;base64,")
+                    || (line_png && media.starts_with("image/png;base64,")),
+                "{}",
+                &figure[..120]
+            );
+        }
+    }
+}
+
 #[test]
 fn analyze_grid_without_pitches_is_a_usage_error() {
     let dir = tempfile::tempdir().unwrap();

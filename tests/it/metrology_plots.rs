@@ -10,7 +10,7 @@ use surfscan::metrology::model::{model_bearing_curves, ModelBacOptions};
 use surfscan::metrology::params::{analyze_line, material_ratio_curve, rk_family, Options};
 use surfscan::report::render::plots::{
     plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction,
-    AssessedProfile,
+    AssessedProfile, FigureFiles,
 };
 
 /// A rough, plateau-honed looking profile: sines plus a deterministic noise, with deep
@@ -180,8 +180,11 @@ fn every_plot_is_png_and_svg_in_iso_words_with_a_key_for_every_colour() {
         kind: "R",
     };
     let [png, svg] = plot_rk_construction(
-        &out.dir,
-        "rk-0000",
+        FigureFiles {
+            dir: &out.dir,
+            stem: "rk-0000",
+            png: true,
+        },
         &curve,
         &rk,
         Some(&assessed),

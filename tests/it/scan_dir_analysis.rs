@@ -887,9 +887,9 @@ fn characterise_scan_reports_the_fit_it_describes_and_returns_the_paths() {
     assert_eq!(out.report_json, scan.join("report.json"));
     assert_eq!(out.lines_used, (0..7).collect::<Vec<u32>>());
     assert!(out.incomplete_lines.is_empty());
-    // Bearing curves, height map and its 3D view, PSD, ACF, overlay, and the Rk construction
-    // of each of the 7 lines.
-    assert_eq!(out.plots.len(), 12 + 2 * 7);
+    // Bearing curves, height map and its 3D view, PSD, ACF, overlay (PNG and SVG each), and
+    // the Rk construction of each of the 7 lines (an SVG: no `[report] line-png`).
+    assert_eq!(out.plots.len(), 12 + 7);
     assert!(out.report_html.exists());
     for p in out.plots.iter().chain([&out.summary_csv]) {
         assert!(p.starts_with(&scan) && p.exists(), "{}", p.display());

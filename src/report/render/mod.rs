@@ -51,7 +51,8 @@ pub struct Files {
     pub summary_csv: PathBuf,
     /// The PNG and SVG plots (the Rk constructions are in `rk_plots`).
     pub plots: Vec<PathBuf>,
-    /// The Rk construction of each line: its title and its PNG and SVG.
+    /// The Rk construction of each line: its title and its PNG (written only when
+    /// `[report] line-png` asks for it) and SVG.
     pub rk_plots: Vec<(String, [PathBuf; 2])>,
     /// `measured.x3p`.
     pub measured_x3p: PathBuf,
@@ -224,28 +225,22 @@ fn write_plots(
     Ok(plots)
 }
 
-/// The error of the height map thread when it panicked.
-fn height_map_panic(ctx: &ReportContext) -> ReportError {
-    ReportError::Metrology {
-        what: format!("{}: plots", ctx.input),
-        source: MetrologyError::BadParameter {
-            what: "height map thread",
-            value: f64::NAN,
-            hint: "drawing the height map panicked; report this with the input",
-        },
-    }
+/// The error of a renderer's `thread` that panicked making `file` of the input `input`;
+/// `hint` says what it was doing.
+fn panicked(input: &str, file: &str, thread: &'static str, hint: &'static str) -> ReportError {
+    let source = MetrologyError::BadParameter {
+        what: thread,
+        value: f64::NAN,
+        hint,
+    };
+    let what = format!("{input}: {file}");
+    ReportError::Metrology { what, source }
 }
 
 /// The error of an Rk figure thread that panicked.
 fn rk_plot_panic(ctx: &ReportContext) -> ReportError {
-    ReportError::Metrology {
-        what: format!("{}: plots", ctx.input),
-        source: MetrologyError::BadParameter {
-            what: "Rk plot thread",
-            value: f64::NAN,
-            hint: "drawing the Rk figures panicked; report this with the input",
-        },
-    }
+    let hint = "drawing the Rk figures panicked; report this with the input";
+    panicked(&ctx.input, "plots", "Rk plot thread", hint)
 }
 
 /// The height map of the measured grid, `heightmap.png|svg`, and its 3D view,
@@ -277,7 +272,8 @@ fn draw_height_map(
 }
 
 /// The ISO 13565-2 construction of every line, from the ordinates its Rk family came from:
-/// `rk/NNNN.png|svg`, with each figure's title.
+/// `rk/NNNN.svg` (and `rk/NNNN.png` when `[report] line-png` asks for it), with each figure's
+/// title.
 fn write_rk_plots(
     out: &Path,
     grid: &Grid,
@@ -302,7 +298,15 @@ fn write_rk_plots(
         .clamp(1, analyses.len().max(1));
     let chunk = analyses.len().div_ceil(workers).max(1);
     let draw = |first_row: usize, part: &[LineAnalysis]| {
-        draw_rk_run(&rk_dir, grid, first_row, part, &caption, &plot_err)
+        draw_rk_run(
+            &rk_dir,
+            grid,
+            first_row,
+            part,
+            &caption,
+            &plot_err,
+            ctx.lab.line_png,
+        )
     };
     if workers == 1 {
         return draw(0, analyses);
@@ -334,6 +338,7 @@ fn draw_rk_run(
     part: &[LineAnalysis],
     caption: &str,
     plot_err: &dyn Fn(MetrologyError) -> ReportError,
+    line_png: bool,
 ) -> Result<Vec<(String, [PathBuf; 2])>, ReportError> {
     let mut rk_plots = Vec::with_capacity(part.len());
     for (k, a) in part.iter().enumerate() {
@@ -355,8 +360,11 @@ fn draw_rk_run(
             kind: a.recipe.profile,
         };
         let files = plot_rk_construction(
-            rk_dir,
-            &format!("{index:04}"),
+            plots::FigureFiles {
+                dir: rk_dir,
+                stem: &format!("{index:04}"),
+                png: line_png,
+            },
             &a.rk_curve,
             &a.rk,
             Some(&profile),
@@ -440,9 +448,10 @@ pub fn write_data_files(
         let rk_plots = s.spawn(|| write_rk_plots(out, grid, &figures.analyses, ctx));
         let height_map = s.spawn(|| draw_height_map(out, measured, ctx));
         let height_map = || {
-            height_map
-                .join()
-                .unwrap_or_else(|_| Err(height_map_panic(ctx)))
+            height_map.join().unwrap_or_else(|_| {
+                let hint = "drawing the height map panicked; report this with the input";
+                Err(panicked(&ctx.input, "plots", "height map thread", hint))
+            })
         };
         let plots = write_plots(out, height_map, figures.overlay.as_ref(), report, ctx);
         let rk_plots = rk_plots.join().unwrap_or_else(|_| Err(rk_plot_panic(ctx)));
@@ -450,13 +459,9 @@ pub fn write_data_files(
     });
     let mut plots = plots?;
     let rk_plots = rk_plots?;
-    let (measured_x3p, model_x3p) = x3p.map_err(|_| ReportError::Metrology {
-        what: format!("{input}: measured.x3p"),
-        source: MetrologyError::BadParameter {
-            what: "X3P encoding thread",
-            value: f64::NAN,
-            hint: "encoding the X3P files panicked; report this with the input",
-        },
+    let (measured_x3p, model_x3p) = x3p.map_err(|_| {
+        let hint = "encoding the X3P files panicked; report this with the input";
+        panicked(&input, "measured.x3p", "X3P encoding thread", hint)
     })??;
     if let Some(c) = &report.contact {
         plots.extend(contact::write_contact_files(
@@ -651,42 +656,32 @@ pub fn write_report(
                     .ok()
             })
             .flatten();
-        let pair = |stem: &str| {
-            (
-                out.join(format!("{stem}.png")),
-                out.join(format!("{stem}.svg")),
-            )
+        // A figure of the page from its files beside the report (the smaller one embedded).
+        let figure = |(stem, title): (&str, &str)| {
+            let file = |ext: &str| out.join(format!("{stem}.{ext}"));
+            html::Figure::from_files(title, &file("png"), &file("svg"), false)
         };
-        let mut figures = Vec::new();
-        for (stem, title) in PAGE_FIGURES {
-            let (png, svg) = pair(stem);
-            figures.extend(html::Figure::from_files(title, &png, &svg, false));
-        }
         let contact = report
             .contact
             .as_ref()
             .is_some_and(|c| c.measured.is_some());
-        for (stem, title) in [
+        let contact_figures = [
             ("load_area", "Contact: load–area curve"),
             ("pressure", "Contact: pressure map"),
-        ]
-        .into_iter()
-        .filter(|_| contact)
-        {
-            let (png, svg) = pair(stem);
-            figures.extend(html::Figure::from_files(title, &png, &svg, false));
-        }
-        for (stem, title) in [
+        ];
+        let contact_figures = contact_figures.into_iter().filter(|_| contact);
+        let mut figures: Vec<_> = PAGE_FIGURES
+            .into_iter()
+            .chain(contact_figures)
+            .filter_map(figure)
+            .collect();
+        let areal = [
             ("psd", "Power spectral density"),
             ("acf", "Autocorrelation"),
             ("surface3d", "3D view of the measured surface"),
-        ] {
-            let (png, svg) = pair(stem);
-            figures.extend(
-                html::Figure::from_files(title, &png, &svg, false)
-                    .map(html::Figure::beside_areal_parameters),
-            );
-        }
+        ];
+        let areal = areal.into_iter().filter_map(figure);
+        figures.extend(areal.map(html::Figure::beside_areal_parameters));
         let page = serde_json::to_value(report).map(|v| {
             // The page without the per-line figures first, to know what room they have.
             let bare = html::render(&v, journal.as_ref(), &figures, logo).len();
@@ -695,14 +690,13 @@ pub fn write_report(
             html::render(&v, journal.as_ref(), &figures, logo)
         });
         json.join().unwrap_or_else(|_| {
-            Err(ReportError::Metrology {
-                what: format!("{}: report.json", ctx.input),
-                source: MetrologyError::BadParameter {
-                    what: "report.json thread",
-                    value: f64::NAN,
-                    hint: "writing report.json panicked; report this with the input",
-                },
-            })
+            let hint = "writing report.json panicked; report this with the input";
+            Err(panicked(
+                &ctx.input,
+                "report.json",
+                "report.json thread",
+                hint,
+            ))
         })?;
         write_file(&files.report_html, page?.as_bytes())
     })

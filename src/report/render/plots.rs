@@ -306,12 +306,16 @@ where
 /// Writes `STEM.png` and `STEM.svg` into `DIR`, running the drawing expression once with
 /// `root` a bitmap area and once with `root` an SVG area (the drawing code is generic over
 /// the backend; a closure cannot be). Returns the two paths from the enclosing function.
+/// With `png: false` after the size only the SVG is drawn and written (and an old PNG removed).
 macro_rules! png_and_svg {
-    ($dir:expr, $stem:expr, $size:expr, |$root:ident| $draw:expr) => {{
+    ($dir:expr, $stem:expr, $size:expr, |$root:ident| $draw:expr) => {
+        png_and_svg!($dir, $stem, $size, png: true, |$root| $draw)
+    };
+    ($dir:expr, $stem:expr, $size:expr, png: $with_png:expr, |$root:ident| $draw:expr) => {{
         let png = $dir.join(format!("{}.png", $stem));
         let svg = $dir.join(format!("{}.svg", $stem));
         ensure_font().map_err(|e| plot_err(&png, e))?;
-        {
+        if $with_png {
             let (w, h): (u32, u32) = $size;
             let mut rgb = vec![0u8; w as usize * h as usize * 3];
             {
@@ -324,6 +328,12 @@ macro_rules! png_and_svg {
                 $root.present().map_err(|e| plot_err(&png, e))?;
             }
             write_png(&png, &rgb, (w, h))?;
+        } else {
+            // A PNG an earlier analysis left would show other results than the new SVG.
+            match std::fs::remove_file(&png) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(plot_err(&png, e)),
+                _ => {}
+            }
         }
         {
             let mut text = String::new();
@@ -1300,24 +1310,14 @@ where
         .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 24, y + 5)], SECOND.mix(0.25).filled()));
     // Levels C and D, and Mr1, Mr2.
     let grey = RGBColor(110, 110, 110);
-    for level in [c, d] {
+    for ends in [
+        [(0.0, c), (100.0, c)],
+        [(0.0, d), (100.0, d)],
+        [(rk.mr1_pct, lo), (rk.mr1_pct, c)],
+        [(rk.mr2_pct, lo), (rk.mr2_pct, d)],
+    ] {
         chart
-            .draw_series(DashedLineSeries::new(
-                [(0.0, level), (100.0, level)],
-                6,
-                4,
-                grey.stroke_width(1),
-            ))
-            .map_err(err)?;
-    }
-    for (mr, level) in [(rk.mr1_pct, c), (rk.mr2_pct, d)] {
-        chart
-            .draw_series(DashedLineSeries::new(
-                [(mr, lo), (mr, level)],
-                6,
-                4,
-                grey.stroke_width(1),
-            ))
+            .draw_series(DashedLineSeries::new(ends, 6, 4, grey.stroke_width(1)))
             .map_err(err)?;
     }
     // The material ratio curve.
@@ -1398,15 +1398,25 @@ where
     Ok(())
 }
 
+/// Where a figure is written: `dir/stem.svg`, and `dir/stem.png` when `png` (else a PNG
+/// there is removed).
+#[allow(missing_docs)]
+#[derive(Debug, Clone, Copy)]
+pub struct FigureFiles<'a> {
+    pub dir: &'a Path,
+    pub stem: &'a str,
+    pub png: bool,
+}
+
 /// Writes `STEM.png` and `STEM.svg` into `dir`: the ISO 13565-2 construction of one line —
 /// its material ratio curve (`[mr_pct, height_um]` pairs, e.g. from
 /// [`crate::metrology::params::material_ratio_curve`]), the equivalent straight line and its 40 %
 /// secant, the levels C and D, Mr1 and Mr2, and the Rpk/Rvk triangles — with the values in a
 /// side panel, below the line's assessed profile with its sampling lengths when `profile` is
-/// given. `caption` (may be empty) is the traceability footer.
+/// given. `caption` (may be empty) is the traceability footer. Without `to.png` only the
+/// SVG is written (the PNG's path is still returned, first).
 pub fn plot_rk_construction(
-    dir: &Path,
-    stem: &str,
+    to: FigureFiles<'_>,
     curve: &[[f64; 2]],
     rk: &RkFamily,
     profile: Option<&AssessedProfile<'_>>,
@@ -1417,7 +1427,7 @@ pub fn plot_rk_construction(
         Some(_) => (RK_SIZE.0, RK_SIZE.1 + RK_PROFILE_H),
         None => RK_SIZE,
     };
-    png_and_svg!(dir, stem, size, |root| draw_rk(
+    png_and_svg!(to.dir, to.stem, size, png: to.png, |root| draw_rk(
         &root, curve, rk, profile, title, caption
     ))
 }
