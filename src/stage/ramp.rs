@@ -14,10 +14,34 @@ pub const MIN_POLL_GAP: Duration = Duration::from_millis(20);
 
 /// Time to cover `distance` (mm, ≥ 0) from speed `v0` (mm/s) to rest, cruising at no more
 /// than `feed` (mm/s), with acceleration `accel` (mm/s²; `None` or not positive: no ramp,
-/// `distance / feed`). Zero for an empty move or a feed that is not positive.
+/// `distance / feed`). Zero for an empty move or a feed that is not positive, and (see
+/// [`estimate`]) for one longer than [`LONGEST_ESTIMATE`].
 pub fn move_time(distance: f64, v0: f64, feed: f64, accel: Option<f64>) -> Duration {
-    let secs = move_secs(distance, v0, feed, accel);
-    Duration::try_from_secs_f64(secs).unwrap_or(Duration::ZERO)
+    estimate(move_secs(distance, v0, feed, accel))
+}
+
+/// Time to brake from `speed` (mm/s) to rest at `accel` (mm/s²): `speed / accel`; zero
+/// without a positive acceleration, and (see [`estimate`]) for one longer than
+/// [`LONGEST_ESTIMATE`].
+pub fn braking_time(speed: f64, accel: Option<f64>) -> Duration {
+    accel
+        .filter(|a| a.is_finite() && *a > 0.0)
+        .map_or(Duration::ZERO, |a| estimate(speed / a))
+}
+
+/// The longest time a move or a stop is predicted to take. A controller's reply can carry any
+/// number (a `$121` or `$111` of 1e-17 parses), and a prediction is added to the clock: one
+/// of 10¹⁹ s would overflow it.
+pub const LONGEST_ESTIMATE: Duration = Duration::from_secs(30 * 24 * 3600);
+
+/// `secs` as a duration; zero (no prediction: the stage is polled at once, and the move's own
+/// deadline still bounds the wait) when it is not a number, negative or beyond
+/// [`LONGEST_ESTIMATE`].
+fn estimate(secs: f64) -> Duration {
+    Duration::try_from_secs_f64(secs)
+        .ok()
+        .filter(|d| *d <= LONGEST_ESTIMATE)
+        .unwrap_or(Duration::ZERO)
 }
 
 fn move_secs(d: f64, v0: f64, feed: f64, accel: Option<f64>) -> f64 {
@@ -81,5 +105,29 @@ mod tests {
             assert!(t <= Duration::from_secs(1), "{d} {v0} {f} {a:?}: {t:?}");
         }
         assert_eq!(move_time(1e300, 0.0, 1e-300, None), Duration::ZERO);
+    }
+
+    /// Settings a controller's reply may carry: whatever they are, the prediction can be
+    /// added to the clock. 10 mm at a feed of 1e-18 mm/s (a `$111` of 6e-17 mm/min) would be
+    /// 10¹⁹ s, a representable duration that overflows an `Instant`.
+    #[test]
+    fn a_prediction_from_absurd_settings_is_zero_and_never_overflows_the_clock() {
+        let now = std::time::Instant::now();
+        for t in [
+            move_time(10.0, 0.0, 1e-18, None),
+            move_time(10.0, 0.0, 1e-18, Some(1e-300)),
+            move_time(10.0, 1e-9, 1.0, Some(1e-30)),
+            braking_time(1666.0, Some(1e-300)),
+            braking_time(1666.0, Some(1e-16)),
+        ] {
+            assert_eq!(t, Duration::ZERO);
+            let _ = now + t;
+        }
+        assert_eq!(braking_time(1.0, Some(10.0)), Duration::from_millis(100));
+        assert_eq!(braking_time(1.0, Some(0.0)), Duration::ZERO);
+        assert_eq!(braking_time(1.0, None), Duration::ZERO);
+        // Thirty days is still a prediction; a second more is none.
+        assert_eq!(braking_time(2_592_000.0, Some(1.0)), LONGEST_ESTIMATE);
+        assert_eq!(braking_time(2_592_001.0, Some(1.0)), Duration::ZERO);
     }
 }

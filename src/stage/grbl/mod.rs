@@ -27,7 +27,7 @@ pub mod codec;
 pub mod controller;
 
 use super::link::LineLink;
-use super::ramp::{move_time, MIN_POLL_GAP, POLL_MARGIN};
+use super::ramp::{braking_time, move_time, MIN_POLL_GAP, POLL_MARGIN};
 use super::{Identity, Motion, Stage, StageError, StageStatus};
 use crate::devices::FaultClass;
 use codec::{
@@ -609,10 +609,7 @@ impl<T: AsyncRead + AsyncWrite + Unpin> Stage for GrblStage<T> {
         // GRBL decelerates at $121 and reports Jog until at rest: wait for Idle, so the next
         // move starts from rest at a position read back.
         let feed = self.effective_feed_mm_min() / 60.0;
-        let braking = self
-            .board
-            .acceleration_mm_s2()
-            .map_or(Duration::ZERO, |a| Duration::from_secs_f64(feed / a));
+        let braking = braking_time(feed, self.board.acceleration_mm_s2());
         let deadline = Instant::now() + braking + self.cfg.reply_timeout;
         let mut wake = Instant::now() + braking + POLL_MARGIN;
         loop {
