@@ -48,36 +48,20 @@ struct Args {
 }
 
 fn args() -> Args {
-    let bench = std::env::args().any(|a| a == "--bench");
-    let mut a = if bench {
-        Args {
-            speed_up: 10.0,
-            points: 8000,
-            lines: 2,
-            bauds: vec![9600, 19200, 38400],
-        }
+    let (speed_up, points, lines, bauds) = if shared::full_run() {
+        (10.0, 8000, 2, vec![9600, 19200, 38400])
     } else {
-        Args {
-            speed_up: 100.0,
-            points: 1600,
-            lines: 1,
-            bauds: vec![38400],
-        }
+        (100.0, 1600, 1, vec![38400])
     };
-    let mut it = std::env::args().skip(1);
-    while let Some(k) = it.next() {
-        let mut num = || it.next().and_then(|v| v.parse::<f64>().ok());
-        match k.as_str() {
-            "--speed-up" => a.speed_up = num().unwrap_or(a.speed_up).max(1.0),
-            "--points" => a.points = num().map_or(a.points, |v| v as usize),
-            "--lines" => a.lines = num().map_or(a.lines, |v| v as usize).max(1),
-            "--baud" => a.bauds = num().map_or(a.bauds.clone(), |v| vec![v as u32]),
-            _ => {} // cargo bench passes --bench
-        }
+    let number = shared::number_arg;
+    let points = number("--points").map_or(points, |v| v as usize);
+    Args {
+        speed_up: number("--speed-up").unwrap_or(speed_up).max(1.0),
+        // Whole sampling lengths of λc 0.8 mm at 0.5 µm (1600 points each), 1 to 10.
+        points: (points / 1600).clamp(1, 10) * 1600,
+        lines: number("--lines").map_or(lines, |v| v as usize).max(1),
+        bauds: number("--baud").map_or(bauds, |v| vec![v as u32]),
     }
-    // Whole sampling lengths of λc 0.8 mm at 0.5 µm (1600 points each), 1 to 10.
-    a.points = (a.points / 1600).clamp(1, 10) * 1600;
-    a
 }
 
 /// Bytes of the results on the wire: `RDPAR` and its count, then per parameter `RDRES02,aa,00`

@@ -8,17 +8,14 @@
 //! `cargo test --all-targets` runs it) it uses 200 scans, only to check that it runs.
 //! `-- --scans N` changes the number.
 
+#[path = "shared/mod.rs"]
+mod shared;
+
 use std::process::Command;
 use std::time::Instant;
 use surfscan::jobs::synthetic::{write, SyntheticReport, SyntheticScan};
 use surfscan::scan::journal::StopStatus;
 use surfscan::specification::Verdict;
-
-fn arg(name: &str) -> Option<String> {
-    let mut it = std::env::args().skip_while(|a| a != name);
-    it.next()?;
-    it.next()
-}
 
 fn synthetic(k: u64) -> SyntheticScan {
     let verdict = [
@@ -67,16 +64,14 @@ fn list(dir: &std::path::Path, args: &[&str]) -> (f64, usize) {
     (s, out.stdout.iter().filter(|&&b| b == b'\n').count())
 }
 
+/// The median of an odd number of timings.
 fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    shared::median(&mut v)
 }
 
 fn main() {
-    let full = std::env::args().any(|a| a == "--bench");
-    let n: u64 = arg("--scans")
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(if full { 10_000 } else { 200 });
+    let full = shared::full_run();
+    let n = shared::number_arg("--scans").map_or(if full { 10_000 } else { 200 }, |v| v as u64);
     let tmp = tempfile::tempdir().expect("temporary directory");
     let dir = tmp.path();
     let t = Instant::now();

@@ -25,7 +25,7 @@ use station::{free_port, scan, status, summary, wait_status, Daemon};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
-use surfscan::cli::demo::{demo_config, demo_socket};
+use surfscan::cli::demo::demo_socket;
 use surfscan::scan::status::{LinkStatus, State};
 
 struct Args {
@@ -35,33 +35,14 @@ struct Args {
 }
 
 fn args() -> Args {
-    let bench = std::env::args().any(|a| a == "--bench");
-    let mut a = if bench {
-        Args {
-            lines: 16,
-            rounds: 3,
-            speed_up: 50.0,
-        }
-    } else {
-        Args {
-            lines: 6,
-            rounds: 1,
-            speed_up: 50.0,
-        }
-    };
-    let mut it = std::env::args().skip(1);
-    while let Some(k) = it.next() {
-        let mut value = || it.next().and_then(|v| v.parse::<f64>().ok());
-        match k.as_str() {
-            "--lines" => a.lines = value().map_or(a.lines, |v| v as usize),
-            "--rounds" => a.rounds = value().map_or(a.rounds, |v| v as usize),
-            "--speed-up" => a.speed_up = value().unwrap_or(a.speed_up),
-            _ => {} // cargo bench passes --bench
-        }
+    let (lines, rounds) = if shared::full_run() { (16, 3) } else { (6, 1) };
+    let number =
+        |name: &str, default: usize| shared::number_arg(name).map_or(default, |v| v as usize);
+    Args {
+        lines: number("--lines", lines).clamp(3, 200),
+        rounds: number("--rounds", rounds).clamp(1, 20),
+        speed_up: shared::number_arg("--speed-up").unwrap_or(50.0),
     }
-    a.lines = a.lines.clamp(3, 200);
-    a.rounds = a.rounds.clamp(1, 20);
-    a
 }
 
 /// A Mosquitto broker on a loopback port, started and stopped by the benchmark.
@@ -158,8 +139,7 @@ async fn run(a: Args) {
     let mut broker = Broker::new(tmp.path());
     broker.start();
     let out = tmp.path().join("scans");
-    let text =
-        demo_config(&inst, &stage, &out).replace("lines = 31", &format!("lines = {}", a.lines));
+    let text = shared::demo_config(&inst, &stage, &out, a.lines);
     let cfg = tmp.path().join("station.toml");
     std::fs::write(
         &cfg,

@@ -31,7 +31,6 @@ mod shared;
 use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
-use surfscan::cli::demo::demo_config;
 use surfscan::devices::YAxis;
 use surfscan::scan::journal::{read_journal, Record};
 use surfscan::scan::station::open_stage;
@@ -60,22 +59,12 @@ struct Args {
 }
 
 fn args() -> Args {
-    let mut a = Args {
-        lines: 31,
-        speed_up: 50.0,
-    };
-    let mut it = std::env::args().skip(1);
-    while let Some(k) = it.next() {
-        match k.as_str() {
-            "--lines" => a.lines = it.next().and_then(|v| v.parse().ok()).unwrap_or(a.lines),
-            "--speed-up" => {
-                a.speed_up = it.next().and_then(|v| v.parse().ok()).unwrap_or(a.speed_up)
-            }
-            _ => {} // cargo bench passes --bench
-        }
+    Args {
+        lines: shared::number_arg("--lines")
+            .map_or(31, |v| v as usize)
+            .clamp(6, 31),
+        speed_up: shared::number_arg("--speed-up").unwrap_or(50.0),
     }
-    a.lines = a.lines.clamp(6, 31);
-    a
 }
 
 /// Bytes on the wire for the read-out of `n` points: `RDEVA00` + CR → `OK` + 5 digits + CR,
@@ -197,8 +186,7 @@ async fn run(a: Args) {
     let stage = StageShared::new();
     let h = ready(board(sim, &stage_link, stage.clone())).await;
     let cfg = tmp.path().join("bench.toml");
-    let text = demo_config(&inst_link, &stage_link, &out)
-        .replace("lines = 31", &format!("lines = {}", a.lines));
+    let text = shared::demo_config(&inst_link, &stage_link, &out, a.lines);
     assert!(text.contains(&format!("baud = {BAUD}")), "{text}");
     std::fs::write(&cfg, text).expect("config");
     let run = tokio::task::spawn_blocking(move || {

@@ -26,7 +26,7 @@ use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
-use surfscan::cli::demo::{demo_config, demo_socket};
+use surfscan::cli::demo::demo_socket;
 use surfscan::scan::status::State;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
@@ -40,37 +40,19 @@ struct Args {
 }
 
 fn args() -> Args {
-    let bench = std::env::args().any(|a| a == "--bench");
-    let mut a = if bench {
-        Args {
-            lines: 16,
-            pages: 100,
-            rounds: 3,
-            speed_up: 50.0,
-        }
+    let (lines, pages, rounds) = if shared::full_run() {
+        (16, 100, 3)
     } else {
-        Args {
-            lines: 6,
-            pages: 5,
-            rounds: 1,
-            speed_up: 50.0,
-        }
+        (6, 5, 1)
     };
-    let mut it = std::env::args().skip(1);
-    while let Some(k) = it.next() {
-        let mut value = || it.next().and_then(|v| v.parse::<f64>().ok());
-        match k.as_str() {
-            "--lines" => a.lines = value().map_or(a.lines, |v| v as usize),
-            "--pages" => a.pages = value().map_or(a.pages, |v| v as usize),
-            "--rounds" => a.rounds = value().map_or(a.rounds, |v| v as usize),
-            "--speed-up" => a.speed_up = value().unwrap_or(a.speed_up),
-            _ => {} // cargo bench passes --bench
-        }
+    let number =
+        |name: &str, default: usize| shared::number_arg(name).map_or(default, |v| v as usize);
+    Args {
+        lines: number("--lines", lines).clamp(3, 200),
+        pages: number("--pages", pages).min(250),
+        rounds: number("--rounds", rounds).clamp(1, 20),
+        speed_up: shared::number_arg("--speed-up").unwrap_or(50.0),
     }
-    a.lines = a.lines.clamp(3, 200);
-    a.pages = a.pages.min(250);
-    a.rounds = a.rounds.clamp(1, 20);
-    a
 }
 
 /// One open page: follows `/api/live` and reads everything; counts the bytes received.
@@ -105,7 +87,7 @@ fn config(dir: &Path, inst: &Path, stage: &Path, lines: usize) -> (PathBuf, Path
     let addr: SocketAddr = format!("127.0.0.1:{}", free_port())
         .parse()
         .expect("address");
-    let text = demo_config(inst, stage, &out).replace("lines = 31", &format!("lines = {lines}"));
+    let text = shared::demo_config(inst, stage, &out, lines);
     let text = format!(
         "{text}\n[fit]\ndegree-v = 3\n[web]\nlisten = \"{addr}\"\ntoken-file = {:?}\n",
         tokens.display().to_string()

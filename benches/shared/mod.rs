@@ -1,7 +1,41 @@
-//! What more than one benchmark needs: the median of a sample and a rough synthetic profile.
+//! What more than one benchmark needs: its command-line options, the demo's station
+//! configuration, the median of a sample and a rough synthetic profile.
 //! Included by path (`#[path = "shared/mod.rs"] mod shared;`): each benchmark is its own crate.
 
 #![allow(dead_code)]
+
+/// Whether `cargo bench` runs the benchmark (it passes `--bench`); without it (as `cargo test
+/// --all-targets` runs every benchmark) a benchmark makes a short run, only to check that it
+/// runs.
+pub fn full_run() -> bool {
+    std::env::args().any(|a| a == "--bench")
+}
+
+/// The number after the option `name` on the command line (`-- --lines 8`); `None` when the
+/// option is not given or its value is no number.
+pub fn number_arg(name: &str) -> Option<f64> {
+    let args: Vec<String> = std::env::args().collect();
+    args.windows(2)
+        .rev()
+        .find(|w| w[0] == name)
+        .and_then(|w| w[1].parse().ok())
+}
+
+/// The demo's configuration (`surfscan demo`) for devices `instrument` and `stage`, scans
+/// under `out`, with `lines` lines a scan.
+pub fn demo_config(
+    instrument: &std::path::Path,
+    stage: &std::path::Path,
+    out: &std::path::Path,
+    lines: usize,
+) -> String {
+    let text = surfscan::cli::demo::demo_config(instrument, stage, out);
+    assert!(
+        text.contains("lines = 31"),
+        "the demo's config has changed:\n{text}"
+    );
+    text.replace("lines = 31", &format!("lines = {lines}"))
+}
 
 /// The median of `v` (sorted in place); the mean of the middle two for an even count.
 pub fn median(v: &mut [f64]) -> f64 {

@@ -15,8 +15,8 @@ use surfscan::scan::command::StartMode;
 use surfscan::scan::ending::StopStatus;
 use surfscan::scan::journal::{read_journal, Record};
 use surfscan::scan::status::{State, Status};
-use surfscan_sim::grbl::{GrblSimConfig, StageShared};
-use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
+use surfscan_sim::grbl::StageShared;
+use surfscan_sim::{SimEvent, SimHandle, Simulator};
 
 /// The longest a benchmark waits for one state of the daemon.
 pub const DEADLINE: Duration = Duration::from_secs(600);
@@ -26,26 +26,8 @@ pub const DEADLINE: Duration = Duration::from_secs(600);
 pub async fn simulator(dir: &Path, speed_up: f64) -> (SimHandle, PathBuf, PathBuf) {
     let inst = dir.join("sj210");
     let stage = dir.join("ystage");
-    let mut profiles = ProfileSet::bundled().expect("bundled profiles");
-    profiles.y_first_mm = -20.0;
-    let mut sim = Simulator::new(&inst)
-        .instrument(InstrumentConfig {
-            time_scale: 1.0 / speed_up,
-            ..InstrumentConfig::default()
-        })
-        .profiles(profiles)
-        .baud(1_000_000)
-        .grbl_stage(
-            &stage,
-            GrblSimConfig {
-                steps_per_mm: 400.0,
-                max_travel_mm: 100.0,
-                time_scale: speed_up * 10.0,
-                ..GrblSimConfig::default()
-            },
-            StageShared::new(),
-        )
-        .start()
+    let mut sim = Simulator::sped_up_station(&inst, &stage, speed_up, StageShared::new())
+        .and_then(Simulator::start)
         .expect("simulator starts");
     match tokio::time::timeout(Duration::from_secs(10), sim.next_event()).await {
         Ok(Some(SimEvent::Ready(_))) => {}

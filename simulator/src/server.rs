@@ -442,6 +442,36 @@ impl Simulator {
         )
     }
 
+    /// A lab station `speed_up` times faster than real, as the daemon's end-to-end tests and
+    /// benchmarks scan it: the SJ-210 at `instrument_link` serving the bundled profiles from
+    /// y = −20 mm over a 1 Mbaud link, and a GRBL stage at `stage_link` (400 steps/mm, 100 mm
+    /// of travel, otherwise [`crate::grbl::GrblSimConfig::default`]) whose moves run ten
+    /// times faster still, so that a line's period is the instrument's and the software's,
+    /// not the stage's. Faults are injected through `shared`.
+    pub fn sped_up_station(
+        instrument_link: impl Into<PathBuf>,
+        stage_link: impl Into<PathBuf>,
+        speed_up: f64,
+        shared: Arc<StageShared>,
+    ) -> Result<Self, SimError> {
+        let mut profiles = ProfileSet::bundled()?;
+        profiles.y_first_mm = -20.0;
+        let stage = crate::grbl::GrblSimConfig {
+            steps_per_mm: 400.0,
+            max_travel_mm: 100.0,
+            time_scale: speed_up * 10.0,
+            ..crate::grbl::GrblSimConfig::default()
+        };
+        Ok(Simulator::new(instrument_link)
+            .instrument(InstrumentConfig {
+                time_scale: 1.0 / speed_up,
+                ..InstrumentConfig::default()
+            })
+            .profiles(profiles)
+            .baud(1_000_000)
+            .grbl_stage(stage_link, stage, shared))
+    }
+
     /// Emulates an instrument with this configuration (keeps the profiles already set).
     pub fn instrument(mut self, cfg: InstrumentConfig) -> Self {
         let profiles = match self.source {
