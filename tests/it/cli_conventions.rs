@@ -2,6 +2,7 @@
 //! pages and shell completions generated from the same definition as the parser, and
 //! `check-config` (and `scan` refusing what it refuses).
 
+use crate::common::edited;
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -176,7 +177,7 @@ fn check_edited(edit: impl Fn(String) -> String) -> (Option<i32>, String) {
 #[test]
 fn check_config_refuses_a_y_step_that_is_no_whole_number_of_stage_steps() {
     // 0.011 mm is 4.4 steps of 0.0025 mm: 0.01 or 0.0125 mm would do.
-    let (code, err) = check_edited(|t| t.replace("y-step-mm = 0.01", "y-step-mm = 0.011"));
+    let (code, err) = check_edited(|t| edited(&t, "y-step-mm = 0.01", "y-step-mm = 0.011"));
     assert_eq!(code, Some(78), "{err}");
     assert!(
         err.contains("scan.y-step-mm")
@@ -186,7 +187,7 @@ fn check_config_refuses_a_y_step_that_is_no_whole_number_of_stage_steps() {
         "{err}"
     );
     // Less than one step (it was printed as "steps of 0.0000 mm"): the smallest step named.
-    let (code, err) = check_edited(|t| t.replace("y-step-mm = 0.01", "y-step-mm = 0.001"));
+    let (code, err) = check_edited(|t| edited(&t, "y-step-mm = 0.01", "y-step-mm = 0.001"));
     assert_eq!(code, Some(78), "{err}");
     assert!(
         err.contains("0.001 mm is 0.4000 of the stage's steps") && err.contains("(0.0025 mm)"),
@@ -199,13 +200,14 @@ fn check_config_refuses_a_y_step_that_is_no_whole_number_of_stage_steps() {
             .find(|l| l.starts_with("y-start-mm"))
             .unwrap()
             .to_owned();
-        t.replace(&start, "y-start-mm = -20.0001")
+        edited(&t, &start, "y-start-mm = -20.0001")
     });
     assert_eq!(code, Some(78), "{err}");
     assert!(err.contains("scan.y-start-mm"), "{err}");
     // Allowed explicitly: valid (the stage rounds each target once, with a warning).
     let (code, err) = check_edited(|t| {
-        t.replace("y-step-mm = 0.01", "y-step-mm = 0.011").replace(
+        edited(
+            &edited(&t, "y-step-mm = 0.01", "y-step-mm = 0.011"),
             "home-on-start = true",
             "home-on-start = true\nallow-inexact-step = true",
         )
@@ -230,7 +232,7 @@ fn check_config_refuses_output_dirs_that_keep_no_files_and_a_socket_inside_them(
                 .nth(1)
                 .unwrap()
                 .to_owned();
-            t.replace(&dir, &format!("dir = {bad:?}"))
+            edited(&t, &dir, &format!("dir = {bad:?}"))
         });
         assert_eq!(code, Some(78), "{bad}: {err}");
         assert!(
@@ -246,7 +248,7 @@ fn check_config_refuses_output_dirs_that_keep_no_files_and_a_socket_inside_them(
             .nth(1)
             .unwrap()
             .to_owned();
-        t.replace(&dir, "dir = \"/etc/passwd\"")
+        edited(&t, &dir, "dir = \"/etc/passwd\"")
     });
     assert_eq!(code, Some(78), "{err}");
     assert!(err.contains("is not a directory"), "{err}");
@@ -268,7 +270,7 @@ fn check_config_refuses_output_dirs_that_keep_no_files_and_a_socket_inside_them(
             .nth(1)
             .unwrap()
             .to_owned();
-        t.replace(&sock, &format!("socket = \"{out}/run/control.sock\""))
+        edited(&t, &sock, &format!("socket = \"{out}/run/control.sock\""))
     });
     assert_eq!(code, Some(78), "{err}");
     assert!(
@@ -359,7 +361,7 @@ fn check_config_validates_without_opening_devices() {
 
     // A misspelt key: exit 78 naming it.
     let text_ok = std::fs::read_to_string(&cfg).unwrap();
-    std::fs::write(&cfg, text_ok.replace("y-step-mm", "y-stepp-mm")).unwrap();
+    std::fs::write(&cfg, edited(&text_ok, "y-step-mm", "y-stepp-mm")).unwrap();
     let out = surfscan(&["check-config", cfg.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(78));
     assert!(

@@ -63,6 +63,23 @@ fn analyze(input: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap()
 }
 
+/// `analyze --contact` of the crests, written to `dir`/crests.csv, at `pressures` (MPa, comma
+/// separated) with the model sampled every `model_pitch_y` mm; the report (in `dir`/out).
+fn analyze_crests_model(dir: &Path, pressures: &str, model_pitch_y: &str) -> serde_json::Value {
+    let input = dir.join("crests.csv");
+    write_grid(&input, crests);
+    analyze(
+        &input,
+        &dir.join("out"),
+        &[
+            "--contact-pressures",
+            pressures,
+            "--contact-model-pitch-y",
+            model_pitch_y,
+        ],
+    )
+}
+
 /// Steel on a rigid flat: E* = 210 / (1 − 0.3²) GPa, in MPa.
 const E_STAR_MPA: f64 = 210_000.0 / 0.91;
 const R_UM: f64 = 2000.0;
@@ -209,18 +226,7 @@ fn cap_against_an_elastic_flat_follows_hertz_with_the_composite_modulus() {
 fn model_sampled_at_the_lines_own_spacing_is_the_measured_grid_again() {
     // Not the cap: a shift along x or y would leave its levelled contact as it is.
     let dir = tempfile::tempdir().unwrap();
-    let input = dir.path().join("crests.csv");
-    write_grid(&input, crests);
-    let report = analyze(
-        &input,
-        &dir.path().join("out"),
-        &[
-            "--contact-pressures",
-            "5,50",
-            "--contact-model-pitch-y",
-            "0.004",
-        ],
-    );
+    let report = analyze_crests_model(dir.path(), "5,50", "0.004");
     let c = &report["contact"];
     let (g, m) = (&c["measured"], &c["model"]["contact"]);
     assert_eq!(m["rows"], ROWS, "{c}");
@@ -246,18 +252,7 @@ fn model_sampled_at_the_lines_own_spacing_is_the_measured_grid_again() {
 #[test]
 fn contact_of_an_unsupported_model_is_reported_as_such() {
     let dir = tempfile::tempdir().unwrap();
-    let input = dir.path().join("crests.csv");
-    write_grid(&input, crests);
-    let report = analyze(
-        &input,
-        &dir.path().join("out"),
-        &[
-            "--contact-pressures",
-            "50",
-            "--contact-model-pitch-y",
-            "0.002",
-        ],
-    );
+    let report = analyze_crests_model(dir.path(), "50", "0.002");
     assert_eq!(
         report["between_lines"]["supported"], false,
         "{}",
@@ -270,12 +265,7 @@ fn contact_of_an_unsupported_model_is_reported_as_such() {
         m["contact"]["curve"][0]["area_fraction"].as_f64().unwrap() > 0.0,
         "{m}"
     );
-    let warnings: Vec<&str> = report["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|w| w.as_str())
-        .collect();
+    let warnings = crate::common::report_warnings(&report);
     assert!(
         warnings
             .iter()

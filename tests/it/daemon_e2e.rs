@@ -4,6 +4,7 @@
 //!
 //! Depends on the `surfscan` binary, the `surfscan_sim` library and the control client.
 
+use crate::common::{demo_config_at, edited};
 use std::os::unix::net::UnixDatagram;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -13,8 +14,8 @@ use surfscan::control::protocol::{Message, Request};
 use surfscan::scan::command::StartMode;
 use surfscan::scan::journal::{read_journal, Record, StopStatus};
 use surfscan::scan::status::{DeviceState, State, Status};
-use surfscan_sim::grbl::{GrblSimConfig, StageShared};
-use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
+use surfscan_sim::grbl::StageShared;
+use surfscan_sim::{SimEvent, SimHandle, Simulator};
 
 pub(crate) const SPEED_UP: f64 = 50.0;
 pub(crate) const LINES: u32 = 8;
@@ -38,33 +39,19 @@ pub(crate) async fn rig() -> Rig {
     let dir = tempfile::tempdir().unwrap();
     let inst = dir.path().join("sj210");
     let stage = dir.path().join("ystage");
-    let mut profiles = ProfileSet::bundled().unwrap();
-    profiles.y_first_mm = -20.0;
-    let sim = Simulator::new(&inst)
-        .instrument(InstrumentConfig {
-            time_scale: 1.0 / SPEED_UP,
-            ..InstrumentConfig::default()
-        })
-        .profiles(profiles)
-        .baud(1_000_000)
-        .grbl_stage(
-            &stage,
-            GrblSimConfig {
-                steps_per_mm: 400.0,
-                max_travel_mm: 100.0,
-                time_scale: SPEED_UP * 10.0,
-                ..GrblSimConfig::default()
-            },
-            StageShared::new(),
-        );
-    let mut sim = sim.start().unwrap();
+    let mut sim = Simulator::sped_up_station(&inst, &stage, SPEED_UP, StageShared::new())
+        .and_then(Simulator::start)
+        .unwrap();
     match tokio::time::timeout(Duration::from_secs(10), sim.next_event()).await {
         Ok(Some(SimEvent::Ready(_))) => {}
         other => panic!("simulator not ready: {other:?}"),
     }
     let socket = dir.path().join("run").join("control.sock");
-    let text = demo_config_at(&inst, &stage, &dir.path().join("scans"), &socket)
-        .replace("lines = 31", &format!("lines = {LINES}"));
+    let text = edited(
+        &demo_config_at(&inst, &stage, &dir.path().join("scans"), &socket),
+        "lines = 31",
+        &format!("lines = {LINES}"),
+    );
     let hook_log = dir.path().join("hook.log");
     let text = format!(
         "{text}\n[fit]\ndegree-v = 3\n[metrics]\nfile = {:?}\n[notify]\ncommand = [\"/bin/sh\", \"-c\", \"env | grep ^SURFSCAN_ | sort >> {}\"]\n",
@@ -84,20 +71,6 @@ pub(crate) async fn rig() -> Rig {
         socket,
         notify,
     }
-}
-
-/// The demo configuration for devices `inst` and `stage`, scans under `scans`, with its
-/// control socket at `socket`.
-fn demo_config_at(inst: &Path, stage: &Path, scans: &Path, socket: &Path) -> String {
-    surfscan::cli::demo::demo_config(inst, stage, scans).replace(
-        &format!(
-            "{:?}",
-            surfscan::cli::demo::demo_socket(scans)
-                .display()
-                .to_string()
-        ),
-        &format!("{:?}", socket.display().to_string()),
-    )
 }
 
 /// The daemon process; killed if the test fails before it exits, so no daemon outlives it.
@@ -510,12 +483,15 @@ async fn a_paused_scan_stays_paused_across_a_restart_until_resumed() {
 fn a_bad_config_exits_78_naming_the_key() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("bad.toml");
-    let text = surfscan::cli::demo::demo_config(
-        Path::new("/dev/null"),
-        Path::new("/dev/null"),
-        dir.path(),
-    )
-    .replace("y-step-mm = 0.01", "y-step-mm = 0.01\ny-stepp-mm = 1");
+    let text = edited(
+        &surfscan::cli::demo::demo_config(
+            Path::new("/dev/null"),
+            Path::new("/dev/null"),
+            dir.path(),
+        ),
+        "y-step-mm = 0.01",
+        "y-step-mm = 0.01\ny-stepp-mm = 1",
+    );
     std::fs::write(&p, text).unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_surfscan"))
         .args(["daemon", "--config"])

@@ -938,10 +938,11 @@ fn x3p_reader() {
 fn x3p_size_y_1e300_is_an_error_not_an_overflow() {
     use surfscan::x3p::read_x3p;
     let (_, xml, data) = x3p_parts();
-    let xml = text(&xml).replace("<SizeY>3</SizeY>", "<SizeY>1e300</SizeY>");
+    let xml = crate::common::edited(&text(&xml), "<SizeY>3</SizeY>", "<SizeY>1e300</SizeY>");
     assert!(read_x3p(&x3p_with(&xml, &data)).is_err());
     // Sizes are whole numbers; their product must not overflow either.
-    let xml = xml.replace(
+    let xml = crate::common::edited(
+        &xml,
         "<SizeY>1e300</SizeY>",
         &format!("<SizeY>{}</SizeY>", usize::MAX),
     );

@@ -1,6 +1,7 @@
 //! Recipes, the queue's commands and the list of scans, through the real binary: what an
 //! operator types and what a program reads.
 
+use crate::common::edited;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use surfscan::jobs::synthetic::{write, SyntheticReport, SyntheticScan};
@@ -72,12 +73,12 @@ fn check_config_checks_every_recipe_and_names_a_bad_one() {
     // Each malformed recipe: exit 78 naming the file, the key and what is accepted.
     let bad = dir.path().join("recipes/steel.toml");
     for (text_of, says) in [
-        (BRASS.replace("\"Ra 0.8\"", "\"Ra0.8x\""), "specification.limits: limits[0]: \"Ra0.8x\": put a space between the parameter and the limit"),
-        (BRASS.replace("\"Ra 0.8\"", "\"Ra 0.8 mm\""), "the limit is in mm: limits are written in µm"),
-        (BRASS.replace("\"Rz max 6.3\"", "\"L Ra 1.2\""), "is not below the upper limit"),
-        (BRASS.replace("\"Rz max 6.3\"", "\"Sq 1\""), "not a parameter a scan computes (accepted: Ra, Rq"),
-        (BRASS.replace("lines = 11", "lines = 11\ny-start-mm = 400.0"), "plan: line 1 at y = 400 mm lies outside the stage's soft limits"),
-        (BRASS.replace("lambda-c-mm = 0.8", "lambda-c-mm = 0.8\nspeed = 1"), "unknown field `speed`"),
+        (edited(BRASS, "\"Ra 0.8\"", "\"Ra0.8x\""), "specification.limits: limits[0]: \"Ra0.8x\": put a space between the parameter and the limit"),
+        (edited(BRASS, "\"Ra 0.8\"", "\"Ra 0.8 mm\""), "the limit is in mm: limits are written in µm"),
+        (edited(BRASS, "\"Rz max 6.3\"", "\"L Ra 1.2\""), "is not below the upper limit"),
+        (edited(BRASS, "\"Rz max 6.3\"", "\"Sq 1\""), "not a parameter a scan computes (accepted: Ra, Rq"),
+        (edited(BRASS, "lines = 11", "lines = 11\ny-start-mm = 400.0"), "plan: line 1 at y = 400 mm lies outside the stage's soft limits"),
+        (edited(BRASS, "lambda-c-mm = 0.8", "lambda-c-mm = 0.8\nspeed = 1"), "unknown field `speed`"),
     ] {
         std::fs::write(&bad, &text_of).unwrap();
         let out = surfscan(&["check-config", cfg]);
@@ -205,14 +206,7 @@ fn idle_daemon(dir: &Path) -> (IdleDaemon, PathBuf) {
     let socket = dir.join("control.sock");
     let out = dir.join("out");
     let mut t =
-        surfscan::cli::demo::demo_config(&dir.join("no-sj210"), &dir.join("no-stage"), &out)
-            .replace(
-                &format!(
-                    "{:?}",
-                    surfscan::cli::demo::demo_socket(&out).display().to_string()
-                ),
-                &format!("{:?}", socket.display().to_string()),
-            );
+        crate::common::demo_config_at(&dir.join("no-sj210"), &dir.join("no-stage"), &out, &socket);
     t.push_str(&format!(
         "\n[jobs]\nrecipes = \"{}\"\n",
         dir.join("recipes").display()
@@ -304,7 +298,7 @@ fn the_queue_commands_add_list_remove_and_refuse_with_their_exit_status() {
     );
     std::fs::write(
         dir.path().join("recipes/bad.toml"),
-        BRASS.replace("\"Ra 0.8\"", "\"Ra0.8x\""),
+        edited(BRASS, "\"Ra 0.8\"", "\"Ra0.8x\""),
     )
     .unwrap();
     let out = q(&["queue", "add", "--recipe", "bad", "--specimen", "C-3"]);

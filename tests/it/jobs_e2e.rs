@@ -6,6 +6,7 @@
 //!
 //! Depends on the `surfscan` binary, the `surfscan_sim` library and the control client.
 
+use crate::common::{demo_config_at, edited};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -15,8 +16,8 @@ use surfscan::jobs::queue::{JobState, Queue};
 use surfscan::scan::journal::{read_journal, ResumeState, StopStatus};
 use surfscan::scan::status::{State, Status};
 use surfscan::specification::Verdict;
-use surfscan_sim::grbl::{GrblSimConfig, StageShared};
-use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
+use surfscan_sim::grbl::StageShared;
+use surfscan_sim::{SimEvent, SimHandle, Simulator};
 
 const SPEED_UP: f64 = 50.0;
 const LINES: u32 = 5;
@@ -62,26 +63,8 @@ async fn rig(recipes: &[(&str, &str)]) -> Rig {
     let dir = tempfile::tempdir().unwrap();
     let inst = dir.path().join("sj210");
     let stage = dir.path().join("ystage");
-    let mut profiles = ProfileSet::bundled().unwrap();
-    profiles.y_first_mm = -20.0;
-    let mut sim = Simulator::new(&inst)
-        .instrument(InstrumentConfig {
-            time_scale: 1.0 / SPEED_UP,
-            ..InstrumentConfig::default()
-        })
-        .profiles(profiles)
-        .baud(1_000_000)
-        .grbl_stage(
-            &stage,
-            GrblSimConfig {
-                steps_per_mm: 400.0,
-                max_travel_mm: 100.0,
-                time_scale: SPEED_UP * 10.0,
-                ..GrblSimConfig::default()
-            },
-            StageShared::new(),
-        )
-        .start()
+    let mut sim = Simulator::sped_up_station(&inst, &stage, SPEED_UP, StageShared::new())
+        .and_then(Simulator::start)
         .unwrap();
     match tokio::time::timeout(Duration::from_secs(10), sim.next_event()).await {
         Ok(Some(SimEvent::Ready(_))) => {}
@@ -94,17 +77,11 @@ async fn rig(recipes: &[(&str, &str)]) -> Rig {
     for (name, text) in recipes {
         std::fs::write(recipes_dir.join(format!("{name}.toml")), text).unwrap();
     }
-    let text = surfscan::cli::demo::demo_config(&inst, &stage, &scans)
-        .replace(
-            &format!(
-                "{:?}",
-                surfscan::cli::demo::demo_socket(&scans)
-                    .display()
-                    .to_string()
-            ),
-            &format!("{:?}", socket.display().to_string()),
-        )
-        .replace("lines = 31", &format!("lines = {LINES}"));
+    let text = edited(
+        &demo_config_at(&inst, &stage, &scans, &socket),
+        "lines = 31",
+        &format!("lines = {LINES}"),
+    );
     let text = format!(
         "{text}\n[fit]\ndegree-v = 3\n[jobs]\nrecipes = {:?}\n[notify]\ncommand = [\"/bin/sh\", \"-c\", \"env | grep ^SURFSCAN_ | sort >> {}; echo >> {}\"]\n",
         recipes_dir.display().to_string(),
@@ -586,7 +563,7 @@ poisson2 = 0.33
 /// before any scan starts.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_recipes_contact_is_in_the_scans_outputs_and_frozen_in_its_plan() {
-    let bad = CONTACT.replace("young-gpa = 100.0", "young-gpa = -1.0");
+    let bad = edited(CONTACT, "young-gpa = 100.0", "young-gpa = -1.0");
     let r = rig(&[("contact", CONTACT), ("bad", &bad)]).await;
     let run = |args: Vec<String>| {
         let config = r.config.clone();

@@ -405,7 +405,8 @@ async fn a_scan_writes_the_configured_method_and_prints_the_verdict() {
     let rig = Rig::start(RigOptions::default()).await;
     let cfg = rig.config("out");
     let text = std::fs::read_to_string(&cfg).unwrap();
-    let text = text.replace(
+    let text = edited(
+        &text,
         "[output]",
         "v-method = \"least-squares\"\noutliers = \"replace\"\n\n[output]",
     );

@@ -573,17 +573,7 @@ async fn out_of_inodes_suspends_without_flapping_and_completes_when_files_are_fr
 async fn swapped_ports_are_named_as_swapped() {
     let rig = Rig::start(RigOptions::default()).await;
     let config = rig.config("out");
-    let (i, s) = (
-        format!("{:?}", rig.instrument_link.display().to_string()),
-        format!("{:?}", rig.stage_link.display().to_string()),
-    );
-    let text = std::fs::read_to_string(&config).unwrap();
-    assert!(text.contains(&i) && text.contains(&s), "{text}");
-    let swapped = text
-        .replace(&i, "\"@INSTRUMENT@\"")
-        .replace(&s, &i)
-        .replace("\"@INSTRUMENT@\"", &s);
-    std::fs::write(&config, swapped).unwrap();
+    let (i, s) = swap_ports(&config, &rig.instrument_link, &rig.stage_link);
     let o = tokio::time::timeout(Duration::from_secs(120), run_scan(&config, &[]))
         .await
         .expect("the scan ends");
@@ -614,10 +604,9 @@ async fn a_resumed_scan_keeps_its_own_stage_settings_over_an_edited_configuratio
     let o = run_scan(&config, &[("SURFSCAN_TEST_CRASH", "2:after-commit")]).await;
     assert!(o.status.code().is_none(), "{}", describe(&o));
     let text = std::fs::read_to_string(&config).unwrap();
-    assert!(text.contains("backlash-mm = 0.05"), "{text}");
     std::fs::write(
         &config,
-        text.replace("backlash-mm = 0.05", "backlash-mm = 0.08"),
+        edited(&text, "backlash-mm = 0.05", "backlash-mm = 0.08"),
     )
     .unwrap();
 

@@ -63,11 +63,8 @@ fn promtool(text: &str) -> (bool, String) {
 
 fn with_listen(r: &Rig, port: u16) {
     let text = std::fs::read_to_string(&r.config).unwrap();
-    assert!(
-        text.contains("[metrics]\n"),
-        "the rig has a [metrics] table"
-    );
-    let text = text.replace(
+    let text = crate::common::edited(
+        &text,
         "[metrics]\n",
         &format!("[metrics]\nlisten = \"127.0.0.1:{port}\"\n"),
     );

@@ -583,17 +583,17 @@ async fn a_bad_configuration_exits_78_naming_the_key() {
     let cases = [
         (
             "unknown key",
-            good.replace("[scan]\n", "[scan]\nline-count = 8\n"),
+            edited(&good, "[scan]\n", "[scan]\nline-count = 8\n"),
             "line-count",
         ),
         (
             "too few lines for degree-v 3",
-            good.replace("lines = 8", "lines = 3"),
+            edited(&good, "lines = 8", "lines = 3"),
             "scan.lines",
         ),
         (
             "inexact step",
-            good.replace("y-step-mm = 0.01", "y-step-mm = 0.0100004"),
+            edited(&good, "y-step-mm = 0.01", "y-step-mm = 0.0100004"),
             "scan.y-step-mm",
         ),
     ];

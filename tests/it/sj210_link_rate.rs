@@ -105,9 +105,11 @@ async fn a_silent_link_at_the_configured_rate_is_searched_and_the_pasted_line_wo
     let fixed = dir.path().join("fixed.toml");
     std::fs::write(
         &fixed,
-        std::fs::read_to_string(&cfg)
-            .unwrap()
-            .replace("baud = 9600\n", &paste),
+        crate::common::edited(
+            &std::fs::read_to_string(&cfg).unwrap(),
+            "baud = 9600\n",
+            &paste,
+        ),
     )
     .unwrap();
     let before = SimStats::get(&stats.frames_at_wrong_rate);

@@ -809,10 +809,7 @@ async fn a_read_out_warning_is_stored_with_the_line_it_belongs_to() {
     let o = run_scan(&rig.config("out"), &[]).await;
     assert!(o.status.success(), "{}", crate::common::describe(&o));
     let dir = scan_dir(&rig.out_dir("out"));
-    let meta = |k: u32| -> serde_json::Value {
-        let text = std::fs::read_to_string(dir.join(format!("lines/{k:04}.json"))).unwrap();
-        serde_json::from_str(&text).unwrap()
-    };
+    let meta = |k: u32| crate::common::line_meta(&dir, k);
     let first = meta(0);
     let w = &first["readout_warnings"];
     assert_eq!(w.as_array().map(Vec::len), Some(1), "{first}");
@@ -829,13 +826,7 @@ async fn a_read_out_warning_is_stored_with_the_line_it_belongs_to() {
         "{first}"
     );
     assert!(first["results"][0]["printed"].is_string(), "{first}");
-    for k in 1..3 {
-        assert!(
-            meta(k).get("readout_warnings").is_none(),
-            "line {k}: {}",
-            meta(k)
-        );
-    }
+    crate::common::assert_no_readout_warnings(&dir, 1..3);
     rig.shutdown().await;
 }
 
@@ -863,10 +854,7 @@ async fn a_line_1000_times_too_large_is_kept_with_a_named_warning_in_metadata_an
         crate::common::describe(&o)
     );
     let dir = scan_dir(&rig.out_dir("out"));
-    let meta = |k: u32| -> serde_json::Value {
-        let text = std::fs::read_to_string(dir.join(format!("lines/{k:04}.json"))).unwrap();
-        serde_json::from_str(&text).unwrap()
-    };
+    let meta = |k: u32| crate::common::line_meta(&dir, k);
     let third = meta(2);
     let w = third["readout_warnings"].as_array().expect("warnings");
     let beyond: Vec<_> = w
@@ -890,21 +878,10 @@ async fn a_line_1000_times_too_large_is_kept_with_a_named_warning_in_metadata_an
     );
     // The instrument's own Ra came with the heights: no Ra disagreement hid the fault.
     assert!(w.iter().all(|w| w["kind"] != "ra-disagrees"), "{third}");
-    for k in [0, 1, 3] {
-        assert!(
-            meta(k).get("readout_warnings").is_none(),
-            "line {k}: {}",
-            meta(k)
-        );
-    }
+    crate::common::assert_no_readout_warnings(&dir, [0, 1, 3]);
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
-    let warnings: Vec<&str> = report["warnings"]
-        .as_array()
-        .expect("report warnings")
-        .iter()
-        .filter_map(|w| w.as_str())
-        .collect();
+    let warnings = crate::common::report_warnings(&report);
     assert!(
         warnings
             .iter()
@@ -964,10 +941,7 @@ async fn a_line_whose_ra_is_far_from_its_neighbours_is_kept_with_a_named_warning
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(stdout.contains("scan complete"), "{}", describe(&o));
     let dir = scan_dir(&rig.out_dir("out"));
-    let meta = |k: u32| -> serde_json::Value {
-        let text = std::fs::read_to_string(dir.join(format!("lines/{k:04}.json"))).unwrap();
-        serde_json::from_str(&text).unwrap()
-    };
+    let meta = |k: u32| crate::common::line_meta(&dir, k);
     let fifth = meta(4);
     let w = fifth["readout_warnings"].as_array().expect("warnings");
     assert_eq!(w.len(), 1, "{fifth}");
@@ -994,21 +968,10 @@ async fn a_line_whose_ra_is_far_from_its_neighbours_is_kept_with_a_named_warning
         (w[0]["median_um"].as_f64().unwrap() - median).abs() < 1e-9,
         "{fifth}"
     );
-    for k in [0, 1, 2, 3, 5] {
-        assert!(
-            meta(k).get("readout_warnings").is_none(),
-            "line {k}: {}",
-            meta(k)
-        );
-    }
+    crate::common::assert_no_readout_warnings(&dir, [0, 1, 2, 3, 5]);
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
-    let warnings: Vec<&str> = report["warnings"]
-        .as_array()
-        .expect("report warnings")
-        .iter()
-        .filter_map(|w| w.as_str())
-        .collect();
+    let warnings = crate::common::report_warnings(&report);
     assert!(
         warnings
             .iter()
@@ -1092,10 +1055,7 @@ async fn a_line_whose_ra_read_out_is_garbled_once_is_read_again_and_the_second_k
     let o = run_scan(&rig.config("out"), &[]).await;
     assert!(o.status.success(), "{}", crate::common::describe(&o));
     let dir = scan_dir(&rig.out_dir("out"));
-    let meta = |k: u32| -> serde_json::Value {
-        let text = std::fs::read_to_string(dir.join(format!("lines/{k:04}.json"))).unwrap();
-        serde_json::from_str(&text).unwrap()
-    };
+    let meta = |k: u32| crate::common::line_meta(&dir, k);
     let ra = |k: u32| -> f64 {
         meta(k)["results"]
             .as_array()
@@ -1108,13 +1068,7 @@ async fn a_line_whose_ra_read_out_is_garbled_once_is_read_again_and_the_second_k
     };
     // The kept read-out is the second: its Ra is like its neighbours' and the line carries
     // no warning (neither the Ra disagreement of the first read-out nor its distance).
-    for k in 0..6 {
-        assert!(
-            meta(k).get("readout_warnings").is_none(),
-            "line {k}: {}",
-            meta(k)
-        );
-    }
+    crate::common::assert_no_readout_warnings(&dir, 0..6);
     let (before, kept) = ((ra(3) + ra(2)) / 2.0, ra(4));
     assert!((kept / before - 1.0).abs() < 0.5, "{kept} vs {before}");
     // The journal: one record for line 5 naming both Ra values, the first 10 times the

@@ -371,7 +371,11 @@ async fn homing_on_a_board_without_homing_is_a_named_error_not_a_retry() {
 #[tokio::test(start_paused = true)]
 async fn a_plan_beyond_the_boards_own_travel_is_refused_before_anything_moves() {
     // Host limits reach to −150 mm; the board enforces [−$131, 0] = [−100, 0].
-    let wide = SETTINGS.replace("soft-limit-min-mm = -100", "soft-limit-min-mm = -150");
+    let wide = crate::common::edited(
+        SETTINGS,
+        "soft-limit-min-mm = -100",
+        "soft-limit-min-mm = -150",
+    );
     let (mut a, shared) = start_with(&wide, sim_cfg());
     a.connect().await.unwrap();
     a.home().await.unwrap();
@@ -394,9 +398,15 @@ async fn a_plan_beyond_the_boards_own_travel_is_refused_before_anything_moves() 
 /// homing zeroed it.
 #[tokio::test(start_paused = true)]
 async fn a_force_origin_board_homing_toward_negative_holds_y_to_positive_space() {
-    let positive = SETTINGS
-        .replace("soft-limit-min-mm = -100", "soft-limit-min-mm = -20")
-        .replace("soft-limit-max-mm = 0", "soft-limit-max-mm = 100");
+    let positive = crate::common::edited(
+        &crate::common::edited(
+            SETTINGS,
+            "soft-limit-min-mm = -100",
+            "soft-limit-min-mm = -20",
+        ),
+        "soft-limit-max-mm = 0",
+        "soft-limit-max-mm = 100",
+    );
     let (mut a, shared) = start_with(
         &positive,
         GrblSimConfig {

@@ -18,7 +18,7 @@ async fn a_scan_homes_the_stage_exactly_once() {
             let text = std::fs::read_to_string(&cfg).unwrap();
             std::fs::write(
                 &cfg,
-                text.replace("home-on-start = true", "home-on-start = false"),
+                edited(&text, "home-on-start = true", "home-on-start = false"),
             )
             .unwrap();
         }

@@ -285,7 +285,11 @@ async fn a_stall_during_a_move_stops_the_carriage_there_and_is_position_lost() {
 /// A lead-screw stage with 0.047625 µm microsteps: 0.01 mm is 209.974 microsteps.
 #[tokio::test(start_paused = true)]
 async fn a_microstep_that_makes_the_step_inexact_is_refused_or_rounded_once_per_target() {
-    let fine = SETTINGS.replace("nm-per-microstep = 125", "nm-per-microstep = 47.625");
+    let fine = crate::common::edited(
+        SETTINGS,
+        "nm-per-microstep = 125",
+        "nm-per-microstep = 47.625",
+    );
     let sim = ZaberSimConfig {
         nm_per_microstep: 47.625,
         limit_max: 2_000_000,

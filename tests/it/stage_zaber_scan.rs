@@ -146,10 +146,7 @@ fn assert_scan_lands_every_line(dir: &Path, tolerance_nm: i64) -> Vec<Record> {
             served_heights_um(k),
             "line {k}: the heights of another y were stored"
         );
-        let meta: serde_json::Value = serde_json::from_str(
-            &std::fs::read_to_string(dir.join(format!("lines/{k:04}.json"))).expect("json"),
-        )
-        .expect("json parses");
+        let meta = line_meta(dir, k as u32);
         assert_eq!(meta["y_target_nm"], target_nm(k), "line {k}");
         let readback = meta["y_readback_nm"].as_i64().expect("a read-back");
         assert!(
@@ -264,17 +261,7 @@ async fn a_microstep_that_makes_the_step_inexact_is_refused_or_rounded_and_recor
 async fn swapped_ports_with_a_zaber_stage_are_named_as_swapped() {
     let rig = ZaberRig::start(powered_up(125.0)).await;
     let config = rig.config("out", 125.0, "");
-    let (i, s) = (
-        format!("{:?}", rig.instrument_link.display().to_string()),
-        format!("{:?}", rig.stage_link.display().to_string()),
-    );
-    let text = std::fs::read_to_string(&config).unwrap();
-    assert!(text.contains(&i) && text.contains(&s), "{text}");
-    let swapped = text
-        .replace(&i, "\"@INSTRUMENT@\"")
-        .replace(&s, &i)
-        .replace("\"@INSTRUMENT@\"", &s);
-    std::fs::write(&config, swapped).unwrap();
+    let (i, s) = swap_ports(&config, &rig.instrument_link, &rig.stage_link);
     let o = tokio::time::timeout(Duration::from_secs(120), run_scan(&config, &[]))
         .await
         .expect("the scan ends");

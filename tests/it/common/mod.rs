@@ -682,3 +682,70 @@ pub fn assert_validates(file: &Path, xsd: &str, what: &str) {
         file.display()
     );
 }
+
+/// `text` with every `from` replaced by `to`, failing when `text` has no `from`: an edit of a
+/// config, recipe or data file that matches nothing would leave a test checking the text as it
+/// was, and passing for the wrong reason.
+#[track_caller]
+pub fn edited(text: &str, from: &str, to: &str) -> String {
+    assert!(
+        text.contains(from),
+        "the text to edit has no {from:?}:\n{text}"
+    );
+    text.replace(from, to)
+}
+
+/// Swaps the instrument's and the stage's ports (`instrument`, `stage`) in the configuration
+/// file `config`; returns them as the file quotes them, the instrument's first.
+pub fn swap_ports(config: &Path, instrument: &Path, stage: &Path) -> (String, String) {
+    let (i, s) = (
+        format!("{:?}", instrument.display().to_string()),
+        format!("{:?}", stage.display().to_string()),
+    );
+    let text = std::fs::read_to_string(config).unwrap();
+    let held = "\"@INSTRUMENT@\"";
+    let swapped = edited(&edited(&edited(&text, &i, held), &s, &i), held, &s);
+    std::fs::write(config, swapped).unwrap();
+    (i, s)
+}
+
+/// Line `k`'s metadata (`lines/NNNN.json`) in the scan directory `dir`.
+pub fn line_meta(dir: &Path, k: u32) -> serde_json::Value {
+    let path = dir.join(format!("lines/{k:04}.json"));
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path:?}: {e}"));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{path:?}: {e}"))
+}
+
+/// Asserts that none of the lines `lines` of the scan directory `dir` carries a read-out
+/// warning in its metadata.
+pub fn assert_no_readout_warnings(dir: &Path, lines: impl IntoIterator<Item = u32>) {
+    for k in lines {
+        let m = line_meta(dir, k);
+        assert!(m.get("readout_warnings").is_none(), "line {k}: {m}");
+    }
+}
+
+/// The warnings of a report (report.json's `warnings`).
+pub fn report_warnings(report: &serde_json::Value) -> Vec<&str> {
+    report["warnings"]
+        .as_array()
+        .expect("report warnings")
+        .iter()
+        .filter_map(|w| w.as_str())
+        .collect()
+}
+
+/// The demo's configuration for devices `inst` and `stage`, scans under `scans`, with its
+/// control socket at `socket`.
+pub fn demo_config_at(inst: &Path, stage: &Path, scans: &Path, socket: &Path) -> String {
+    edited(
+        &surfscan::cli::demo::demo_config(inst, stage, scans),
+        &format!(
+            "{:?}",
+            surfscan::cli::demo::demo_socket(scans)
+                .display()
+                .to_string()
+        ),
+        &format!("{:?}", socket.display().to_string()),
+    )
+}
