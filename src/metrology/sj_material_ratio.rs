@@ -6,22 +6,26 @@
 //! [`super::params`] reports. The SJ series works on a grid (reproduced from a Mitutoyo
 //! SurfTest export and the printed results beside it, `docs/metrology.md`):
 //!
-//! * **Counted ordinates.** Rmr(c) and Rmr are the share of the evaluated ordinates at or above
-//!   the level (`z ≥ c`), not a length of the interpolated profile.
-//! * **A 100-level bearing area curve.** Levels `L_k = zmin + k·Rt/100`, k = 0 … 100, and at each
-//!   the counted share `mr_k = #(z ≥ L_k)/n`.
+//! * **Counted ordinates.** Rmr(c), Rmr and the curve are the share of the evaluated ordinates
+//!   strictly above the level (`z > c`), not a length of the interpolated profile: 0 % at the
+//!   highest point, as the instrument's exported curve has it.
+//! * **A 100-level bearing area curve.** Levels `L_k = zmin + k·Rt/100`, k = 1 … 100 (the
+//!   instrument's 100 points), and at each the counted share `mr_k = #(z > L_k)/n`; the lowest
+//!   point (k = 0) closes the curve at 100 %.
 //! * **The Rk family on that curve.** The curve is the polyline through `(mr_k, L_k)`; the
 //!   equivalent straight line is the secant between two of its points 40 % apart in mr with
 //!   the least gradient, its start searched in 1 % steps of mr (the curve's own resolution;
 //!   the first if tied). Its heights at mr = 0 and 100 % are C and D, Rk = C − D. The core
 //!   limits are then snapped to the grid: C and D in % of Rt rounded to the nearest level,
-//!   plus one level (`kc`, `kd`). Mr1 counts the ordinates strictly above `L_kc`, Mr2 those
-//!   at or above `L_kd`; A1 = Σ_{k ≥ kc} mr_k(>)·Rt/100 and A2 = Σ_{k ≤ kd} (100 − mr_k(≥))·Rt/100
-//!   in µm·% (the areas of the curve's classes), Rpk = 2·A1/Mr1 and Rvk = 2·A2/(100 − Mr2).
+//!   plus one level (`kc`, `kd`). Mr1 = mr_kc, Mr2 = mr_kd; A1 = Σ_{k ≥ kc} mr_k·Rt/100 and
+//!   A2 = Σ_{1 ≤ k ≤ kd} (100 − mr_k)·Rt/100 in µm·% (the areas of the curve's classes),
+//!   Rpk = 2·A1/Mr1 and Rvk = 2·A2/(100 − Mr2).
 //!
-//! On the Mitutoyo export this reproduces the printed Rmr(c), Rmr, Mr1, Mr2, A1, A2, Rpk and
-//! Rvk to the last printed digit; Rk comes out 0.19 % below the printed value (no reading of
-//! the manual's secant on this curve tried reaches it, `docs/metrology.md` lists them). The
+//! On the Mitutoyo export this reproduces the instrument's own exported curve at 97 of its 100
+//! levels (the other three by one ordinate lying within 0.012 nm of the level, below the
+//! export's 0.1 nm rounding) and the printed Rmr(c), Rmr, Mr1, Mr2, A1, A2, Rpk and Rvk to the
+//! last printed digit; Rk comes out 0.19 % below the printed value (no reading of the secant on
+//! this curve, nor any other convention tried, reaches it: `docs/metrology.md` lists them). The
 //! "plus one level" snap rests on two data points (the export's C and D) and is stated as
 //! such.
 //!
@@ -106,7 +110,7 @@ impl MaterialRatioReading {
 pub const LEVELS: usize = 100;
 
 /// The convention in words, written beside the values in the report.
-pub const CONVENTION: &str = "Mitutoyo SJ series: ordinates counted (z >= level); bearing area curve on 100 levels of 1 % Rt; Rk from the least-gradient 40 % secant on that curve searched in 1 % steps of mr; core limits snapped to round(% Rt) + 1 level; A1/A2 summed over the levels";
+pub const CONVENTION: &str = "Mitutoyo SJ series: ordinates counted (z > level); bearing area curve on 100 levels of 1 % Rt; Rk from the least-gradient 40 % secant on that curve searched in 1 % steps of mr; core limits snapped to round(% Rt) + 1 level; A1/A2 summed over the levels";
 
 /// The material-ratio family as the SJ series computes it, under the ISO parameter names.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -138,17 +142,15 @@ pub fn sj_material_ratio(
     let top = sorted.first().copied().unwrap_or(0.0);
     let bottom = sorted.last().copied().unwrap_or(0.0);
     let rt = top - bottom;
-    // Shares at or above / strictly above a level, by binary search in the descending sort.
-    let at_or_above = |c: f64| sorted.partition_point(|v| *v >= c) as f64 / n;
-    let above = |c: f64| sorted.partition_point(|v| *v > c) as f64 / n;
+    // The share strictly above a level, by binary search in the descending sort.
+    let above = |c: f64| 100.0 * sorted.partition_point(|v| *v > c) as f64 / n;
     let level = |k: usize| bottom + k as f64 * rt / LEVELS as f64;
-    let mr_ge: Vec<f64> = (0..=LEVELS)
-        .map(|k| 100.0 * at_or_above(level(k)))
+    let mr: Vec<f64> = (0..=LEVELS)
+        .map(|k| if k == 0 { 100.0 } else { above(level(k)) })
         .collect();
-    let mr_gt: Vec<f64> = (0..=LEVELS).map(|k| 100.0 * above(level(k))).collect();
 
-    let (start, gradient) = least_gradient_secant(&mr_ge, rt);
-    let h_start = height_at(&mr_ge, start) * rt;
+    let (start, gradient) = least_gradient_secant(&mr, rt);
+    let h_start = height_at(&mr, start) * rt;
     let c = h_start + gradient * start;
     let d = c - gradient * 100.0;
     let (c_pct, d_pct) = if rt > 0.0 {
@@ -158,11 +160,11 @@ pub fn sj_material_ratio(
     };
     let snap = |pct: f64| (pct.round().max(0.0) as usize + 1).min(LEVELS);
     let (kc, kd) = (snap(c_pct), snap(d_pct));
-    let mr1 = mr_gt.get(kc).copied().unwrap_or(0.0);
-    let mr2 = mr_ge.get(kd).copied().unwrap_or(100.0);
+    let mr1 = mr.get(kc).copied().unwrap_or(0.0);
+    let mr2 = mr.get(kd).copied().unwrap_or(100.0);
     let class = rt / LEVELS as f64;
-    let a1 = mr_gt.iter().skip(kc).sum::<f64>() * class;
-    let a2 = mr_ge.iter().take(kd + 1).map(|m| 100.0 - m).sum::<f64>() * class;
+    let a1 = mr.iter().skip(kc).sum::<f64>() * class;
+    let a2 = mr.iter().take(kd + 1).map(|m| 100.0 - m).sum::<f64>() * class;
     let rk = RkFamily::of_core(
         gradient * 100.0,
         (bottom + c, bottom + d),
@@ -175,40 +177,37 @@ pub fn sj_material_ratio(
         material: MaterialRatio::read(
             levels,
             (top, rt),
-            |c| 100.0 * at_or_above(c),
-            |mr| level_at(&mr_ge, mr).map_or(top, level),
+            above,
+            // C(mr) on the grid: the lowest level whose share is at most mr (the top for 0 %).
+            |m| {
+                (m > 0.0)
+                    .then(|| mr.iter().position(|v| *v <= m))
+                    .flatten()
+                    .map_or(top, level)
+            },
             &rk,
         ),
         upper_level_pct_rt: c_pct,
         lower_level_pct_rt: d_pct,
         secant_start_pct: start,
         curve: (0..=LEVELS)
-            .map(|k| [mr_ge.get(k).copied().unwrap_or(0.0), k as f64 * class])
+            .map(|k| [mr.get(k).copied().unwrap_or(0.0), k as f64 * class])
             .collect(),
     })
-}
-
-/// C(mr) on the grid: the lowest level whose counted share is at most `mr_pct` (the highest
-/// point for 0 %), as a level index; `None` when no level qualifies.
-fn level_at(mr_ge: &[f64], mr_pct: f64) -> Option<usize> {
-    if mr_pct <= 0.0 {
-        return None;
-    }
-    mr_ge.iter().position(|m| *m <= mr_pct)
 }
 
 /// The curve's height at `mr` in units of Rt above the lowest point: the polyline through
 /// `(mr_k, k/100)`, mr falling as k rises; where several levels share one mr (no ordinate
 /// between them) the lowest of them is taken, so the polyline is a function of mr.
-fn height_at(mr_ge: &[f64], mr: f64) -> f64 {
+fn height_at(curve: &[f64], mr: f64) -> f64 {
     // The lowest level k whose share is at most mr, and the level below it.
-    let k = mr_ge.iter().position(|m| *m <= mr).unwrap_or(LEVELS);
+    let k = curve.iter().position(|m| *m <= mr).unwrap_or(LEVELS);
     if k == 0 {
         return 0.0;
     }
     let (m_hi, m_lo) = (
-        mr_ge.get(k).copied().unwrap_or(0.0),
-        mr_ge.get(k - 1).copied().unwrap_or(100.0),
+        curve.get(k).copied().unwrap_or(0.0),
+        curve.get(k - 1).copied().unwrap_or(100.0),
     );
     let t = if m_lo > m_hi {
         (m_lo - mr) / (m_lo - m_hi)
@@ -220,11 +219,11 @@ fn height_at(mr_ge: &[f64], mr: f64) -> f64 {
 
 /// The least-gradient 40 % secant: its start in % (1 % steps, the first if tied) and its
 /// gradient in µm per % of mr.
-fn least_gradient_secant(mr_ge: &[f64], rt: f64) -> (f64, f64) {
+fn least_gradient_secant(curve: &[f64], rt: f64) -> (f64, f64) {
     let mut best: Option<(f64, f64)> = None;
     for a in 0..=60u32 {
         let a = f64::from(a);
-        let drop = (height_at(mr_ge, a) - height_at(mr_ge, a + 40.0)) * rt;
+        let drop = (height_at(curve, a) - height_at(curve, a + 40.0)) * rt;
         if best.is_none_or(|(b, _)| drop < b - 1e-12 * b.abs()) {
             best = Some((drop, a));
         }
@@ -254,8 +253,8 @@ mod tests {
             m.material.rpk_um == 0.0 && (m.material.rvk_um - 0.2).abs() < 1e-9,
             "{m:?}"
         );
-        // 10 % of Rt below the top: the top 1001 ordinates of 10001.
-        assert!((m.material.rmr_c[0].value_pct - 100.0 * 1001.0 / 10_001.0).abs() < 1e-9);
+        // 10 % of Rt below the top is 9 µm, an ordinate of its own: the 1000 above it count.
+        assert_eq!(m.material.rmr_c[0].value_pct, 100.0 * 1000.0 / 10_001.0);
         assert_eq!(m.curve.len(), 101);
     }
 
