@@ -10,7 +10,7 @@
 //!
 //! Depends on [`super::bearing`] and [`super::MetrologyError`].
 
-use super::bearing::{equal_levels, material_ratios_pct};
+use super::bearing::{curve_between_extremes, material_ratios_pct};
 use super::{check_heights, check_pitch, MetrologyError};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -265,35 +265,14 @@ pub fn sq_um(grid: &HeightMap<'_>) -> Result<f64, MetrologyError> {
 /// the highest to the lowest point, as `[height_um, material_ratio_pct]` pairs.
 pub fn smr_curve(grid: &HeightMap<'_>, levels: usize) -> Result<Vec<[f64; 2]>, MetrologyError> {
     let (z, _) = level_plane(grid)?;
-    if levels < 2 {
-        return Err(MetrologyError::BadParameter {
-            what: "levels",
-            value: levels as f64,
-            hint: "give at least 2 height levels (the paper uses 101)",
-        });
-    }
-    let top = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let bottom = z.iter().copied().fold(f64::INFINITY, f64::min);
-    let hs = equal_levels(top, bottom, levels);
-    let interior = &hs[1..levels - 1];
-    let rows: Vec<Vec<f64>> = z
-        .chunks_exact(grid.cols)
-        .map(|row| material_ratios_pct(row, interior))
-        .collect();
-    Ok(hs
-        .iter()
-        .enumerate()
-        .map(|(k, &h)| {
-            let mr = if k == 0 {
-                0.0
-            } else if k == levels - 1 {
-                100.0
-            } else {
-                rows.iter().map(|r| r[k - 1]).sum::<f64>() / grid.rows as f64
-            };
-            [h, mr]
-        })
-        .collect())
+    curve_between_extremes(&z, levels, |interior| {
+        let rows: Vec<Vec<f64>> = z
+            .chunks_exact(grid.cols)
+            .map(|row| material_ratios_pct(row, interior))
+            .collect();
+        let mean_of = |k: usize| rows.iter().map(|r| r[k]).sum::<f64>() / grid.rows as f64;
+        (0..interior.len()).map(mean_of).collect()
+    })
 }
 
 #[cfg(test)]

@@ -201,13 +201,6 @@ pub fn bearing_curve_xz(
             hint: "sample the curve at strictly increasing x",
         });
     }
-    if levels < 2 {
-        return Err(MetrologyError::BadParameter {
-            what: "levels",
-            value: levels as f64,
-            hint: "give at least 2 height levels (the paper uses 101)",
-        });
-    }
     let (mut area, mut total) = (0.0, 0.0);
     for (xw, zw) in xs.windows(2).zip(zs.windows(2)) {
         if let ([x0, x1], [a, b]) = (xw, zw) {
@@ -216,9 +209,7 @@ pub fn bearing_curve_xz(
         }
     }
     let mean = area / total;
-    Ok(curve_about_mean(zs, mean, levels, |z, hs| {
-        material_ratios_xz_pct(xs, z, hs)
-    }))
+    curve_about_mean(zs, mean, levels, |z, hs| material_ratios_xz_pct(xs, z, hs))
 }
 
 /// Heights referenced to `mean`, `levels` equal levels from the highest point (0 %) to the
@@ -228,13 +219,24 @@ fn curve_about_mean(
     mean: f64,
     levels: usize,
     ratios: impl Fn(&[f64], &[f64]) -> Vec<f64>,
-) -> BearingCurve {
+) -> Result<BearingCurve, MetrologyError> {
     let z: Vec<f64> = heights.iter().map(|h| h - mean).collect();
-    let top = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let bottom = z.iter().copied().fold(f64::INFINITY, f64::min);
-    let hs = equal_levels(top, bottom, levels);
-    let interior = ratios(&z, &hs[1..levels - 1]);
-    let points = hs
+    Ok(BearingCurve {
+        mean_line_um: mean,
+        points: curve_between_extremes(&z, levels, |hs| ratios(&z, hs))?,
+    })
+}
+
+/// The curve `[height, material ratio %]` of heights `z` at `levels` equal levels from the
+/// highest (0 %) to the lowest (100 %), the ratios at the levels between from `interior`.
+pub(crate) fn curve_between_extremes(
+    z: &[f64],
+    levels: usize,
+    interior: impl FnOnce(&[f64]) -> Vec<f64>,
+) -> Result<Vec<[f64; 2]>, MetrologyError> {
+    let hs = levels_spanning(z.iter().copied(), levels)?;
+    let inner = interior(&hs[1..levels - 1]);
+    Ok(hs
         .iter()
         .enumerate()
         .map(|(k, &h)| {
@@ -243,15 +245,28 @@ fn curve_about_mean(
             } else if k == levels - 1 {
                 100.0
             } else {
-                interior[k - 1]
+                inner[k - 1]
             };
             [h, mr]
         })
-        .collect();
-    BearingCurve {
-        mean_line_um: mean,
-        points,
+        .collect())
+}
+
+/// [`equal_levels`] from the highest of `z` to the lowest, refused for fewer than 2 levels.
+fn levels_spanning(
+    z: impl Iterator<Item = f64> + Clone,
+    levels: usize,
+) -> Result<Vec<f64>, MetrologyError> {
+    if levels < 2 {
+        return Err(MetrologyError::BadParameter {
+            what: "levels",
+            value: levels as f64,
+            hint: "give at least 2 height levels (the paper uses 101)",
+        });
     }
+    let top = z.clone().fold(f64::NEG_INFINITY, f64::max);
+    let bottom = z.fold(f64::INFINITY, f64::min);
+    Ok(equal_levels(top, bottom, levels))
 }
 
 /// `levels` (at least 2) equal steps from `top` down to `bottom`, level k at
@@ -487,18 +502,11 @@ pub fn bearing_curve(heights: &[f64], levels: usize) -> Result<BearingCurve, Met
             min_points: 2,
         });
     }
-    if levels < 2 {
-        return Err(MetrologyError::BadParameter {
-            what: "levels",
-            value: levels as f64,
-            hint: "give at least 2 height levels (the paper uses 101)",
-        });
-    }
     let n = heights.len();
     let first = heights.first().copied().unwrap_or(0.0);
     let last = heights.last().copied().unwrap_or(0.0);
     let mean = (heights.iter().sum::<f64>() - 0.5 * (first + last)) / (n - 1) as f64;
-    Ok(curve_about_mean(heights, mean, levels, material_ratios_pct))
+    curve_about_mean(heights, mean, levels, material_ratios_pct)
 }
 
 /// The bearing area curve of a curve given as a function of x (mm, heights in µm), sampled at
@@ -548,26 +556,9 @@ pub fn pooled_bearing_curve(
             hint: "give at least one curve",
         });
     }
-    if levels < 2 {
-        return Err(MetrologyError::BadParameter {
-            what: "levels",
-            value: levels as f64,
-            hint: "give at least 2 height levels (the paper uses 101)",
-        });
-    }
-    let top = centred
-        .iter()
-        .flatten()
-        .copied()
-        .fold(f64::NEG_INFINITY, f64::max);
-    let bottom = centred
-        .iter()
-        .flatten()
-        .copied()
-        .fold(f64::INFINITY, f64::min);
+    let hs = levels_spanning(centred.iter().flatten().copied(), levels)?;
     let weights: Vec<f64> = centred.iter().map(|c| (c.len() - 1) as f64).collect();
     let total: f64 = weights.iter().sum();
-    let hs = equal_levels(top, bottom, levels);
     let ratios: Vec<Vec<f64>> = centred
         .iter()
         .map(|c| material_ratios_pct(c, &hs))
