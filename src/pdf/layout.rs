@@ -86,7 +86,7 @@ pub enum Item {
         x: f32,
         y: f32,
         size: f32,
-        bold: bool,
+        face: Face,
         colour: Rgb,
         text: String,
     },
@@ -120,10 +120,40 @@ pub enum Item {
     },
 }
 
+/// Which of the bundled faces text is set in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Face {
+    /// DejaVu Sans.
+    Regular,
+    /// DejaVu Sans Bold: headings, captions, table headers, `<b>`.
+    Bold,
+    /// DejaVu Sans Mono: `<code>` (hashes, identifiers); bold inside it stays mono.
+    Mono,
+}
+
+impl Face {
+    /// The face `style` is set in.
+    pub fn of(style: Style) -> Face {
+        match (style.mono, style.bold) {
+            (true, _) => Face::Mono,
+            (false, true) => Face::Bold,
+            (false, false) => Face::Regular,
+        }
+    }
+}
+
 /// The width of text.
 pub trait Measure {
-    /// The advance of `text` at `size` points.
-    fn width(&self, text: &str, size: f32) -> f32;
+    /// The advance of `text` at `size` points in `face`.
+    fn width(&self, text: &str, size: f32, face: Face) -> f32;
+}
+
+/// `style` made bold (a heading's or a table header's runs).
+fn emboldened(style: Style, bold: bool) -> Style {
+    Style {
+        bold: style.bold || bold,
+        ..style
+    }
 }
 
 /// What the typesetter knows of an image: its size, or why it cannot be drawn.
@@ -225,7 +255,7 @@ pub fn wrap(runs: &[Run], size: f32, width: f32, m: &dyn Measure) -> Vec<Vec<Pie
         }
         push_word(&mut toks, &mut word);
     }
-    let w_of = |style: Style, t: &str| m.width(t, piece_size(size, style));
+    let w_of = |style: Style, t: &str| m.width(t, piece_size(size, style), Face::of(style));
     let mut lines: Vec<Vec<Piece>> = vec![vec![]];
     let mut x = 0.0f32;
     let mut pending_space: Option<Style> = None;
@@ -293,6 +323,39 @@ struct Setter<'a> {
     y: f32,
     /// Where the laboratory's text starts when a logo stands left of it, and the logo's foot.
     beside_logo: Option<(f32, f32)>,
+    /// The row of figures being set: how many it holds, how many it has, its top and foot.
+    row: Option<(u8, u8, f32, f32)>,
+    /// The column of that row the figure being set stands in: its left edge and width.
+    column: Option<(f32, f32)>,
+}
+
+impl Setter<'_> {
+    /// Starts a captioned figure `h` tall in a row of `across`: beside the row's last
+    /// figure when there is room, else a new row (on a new page when it does not fit).
+    fn cell(&mut self, across: u8, h: f32) {
+        let w = self.sheet.measure() / f32::from(across);
+        let row = match self.row {
+            Some((n, k, top, foot)) if n == across && k < n && top + h <= self.sheet.foot() => {
+                (n, k, top, foot)
+            }
+            _ => {
+                self.need(h);
+                (across, 0, self.y, self.y)
+            }
+        };
+        self.y = row.2;
+        self.column = Some((self.sheet.left + f32::from(row.1) * w, w));
+        self.row = Some(row);
+    }
+
+    /// Ends the figure [`Setter::cell`] started: the text goes on below the row.
+    fn end_cell(&mut self) {
+        if let (Some((n, k, top, foot)), Some(_)) = (self.row, self.column.take()) {
+            let foot = foot.max(self.y);
+            self.row = Some((n, k + 1, top, foot));
+            self.y = foot;
+        }
+    }
 }
 
 impl Setter<'_> {
@@ -316,7 +379,7 @@ impl Setter<'_> {
         }
     }
 
-    fn text_lines(&mut self, lines: &[Vec<Piece>], x: f32, size: f32, bold: bool) {
+    fn text_lines(&mut self, lines: &[Vec<Piece>], x: f32, size: f32) {
         let lead = size * LEADING;
         for line in lines {
             let base = self.y + size;
@@ -327,7 +390,7 @@ impl Setter<'_> {
                     x: x + p.dx,
                     y: base + drop,
                     size: s,
-                    bold: bold || p.style.bold,
+                    face: Face::of(p.style),
                     colour: colour(p.style),
                     text: p.text.clone(),
                 };
@@ -363,7 +426,7 @@ fn column_widths(rows: &[&Row], measure: f32, m: &dyn Measure) -> Vec<f32> {
             let full: f32 = c
                 .runs
                 .iter()
-                .map(|r| m.width(&r.text, piece_size(TABLE, r.style)))
+                .map(|r| m.width(&r.text, piece_size(TABLE, r.style), Face::of(r.style)))
                 .sum();
             let word = c
                 .runs
@@ -371,7 +434,7 @@ fn column_widths(rows: &[&Row], measure: f32, m: &dyn Measure) -> Vec<f32> {
                 .flat_map(|r| {
                     r.text
                         .split(' ')
-                        .map(move |w| m.width(w, piece_size(TABLE, r.style)))
+                        .map(move |w| m.width(w, piece_size(TABLE, r.style), Face::of(r.style)))
                 })
                 .fold(0.0f32, f32::max);
             natural[i] = natural[i].max(full + 2.0 * PAD_X + 0.5);
@@ -432,7 +495,9 @@ impl Setter<'_> {
             let y = self.y;
             for (k, line) in lines.iter().enumerate() {
                 let lw = line.last().map_or(0.0, |p| {
-                    p.dx + self.m.width(&p.text, piece_size(TABLE, p.style))
+                    p.dx + self
+                        .m
+                        .width(&p.text, piece_size(TABLE, p.style), Face::of(p.style))
                 });
                 let left = if cell.left || cell_is_wide(cell) {
                     x + PAD_X
@@ -446,7 +511,7 @@ impl Setter<'_> {
                         x: left + p.dx,
                         y: base + drop,
                         size: piece_size(TABLE, p.style),
-                        bold: cell.heading || p.style.bold,
+                        face: Face::of(emboldened(p.style, cell.heading)),
                         colour: colour(p.style),
                         text: p.text.clone(),
                     };
@@ -512,8 +577,11 @@ impl Setter<'_> {
         let bold = matches!(kind, Kind::Heading(_) | Kind::LabName | Kind::Caption);
         let (before, after) = spacing(kind);
         let bullet = kind == Kind::Bullet;
-        let mut x = self.sheet.left + if bullet { 10.0 } else { 0.0 };
-        let mut width = self.sheet.measure() - if bullet { 10.0 } else { 0.0 };
+        let (left, measure) = self
+            .column
+            .unwrap_or((self.sheet.left, self.sheet.measure()));
+        let mut x = left + if bullet { 10.0 } else { 0.0 };
+        let mut width = measure - if bullet { 10.0 } else { 0.0 };
         if let Some((indent, _)) = self.beside_logo {
             x += indent;
             width -= indent;
@@ -523,7 +591,14 @@ impl Setter<'_> {
             x += TONE_INDENT;
             width -= TONE_INDENT + 4.0;
         }
-        let lines = wrap(runs, size, width, self.m);
+        let runs: Vec<Run> = runs
+            .iter()
+            .map(|r| Run {
+                text: r.text.clone(),
+                style: emboldened(r.style, bold),
+            })
+            .collect();
+        let lines = wrap(&runs, size, width, self.m);
         let lead = size * LEADING;
         let h: f32 = lines.len() as f32 * lead;
         let pad = if tone_c.is_some() { 2.0 } else { 0.0 };
@@ -563,13 +638,13 @@ impl Setter<'_> {
                     x: x - 8.0,
                     y: self.y + size,
                     size,
-                    bold: false,
+                    face: Face::Regular,
                     colour: INK,
                     text: "•".into(),
                 };
                 self.page().push(item);
             }
-            self.text_lines(&lines[start..end], x, size, bold);
+            self.text_lines(&lines[start..end], x, size);
             self.y += pad;
             start = end;
             if start < lines.len() {
@@ -594,9 +669,12 @@ impl Setter<'_> {
         self.y += after;
     }
 
-    fn image(&mut self, index: usize, size: &ImageSize, logo: bool) {
+    /// Image `index`, as wide as one of `across` figures in a row (set one under another).
+    fn image(&mut self, index: usize, size: &ImageSize, logo: bool, across: u8) {
         let (w0, h0) = match size {
             Ok(s) if s.0 > 0.0 && s.1 > 0.0 => *s,
+            // A logo that cannot be drawn is left out (the caller says so).
+            _ if logo => return,
             Ok(_) => return,
             Err(e) => {
                 let runs = [Run {
@@ -610,11 +688,14 @@ impl Setter<'_> {
                 return;
             }
         };
+        let (left, measure) = self
+            .column
+            .unwrap_or((self.sheet.left, self.sheet.measure()));
         let (max_w, max_h) = if logo {
             LOGO_MAX
         } else {
             (
-                self.sheet.measure(),
+                measure.min(self.sheet.measure() / f32::from(across).max(1.0)),
                 FIGURE_MAX_H.min(self.sheet.foot() - self.sheet.top),
             )
         };
@@ -627,7 +708,7 @@ impl Setter<'_> {
             return;
         }
         self.need(h);
-        let (x, y) = (self.sheet.left, self.y);
+        let (x, y) = (left, self.y);
         self.page().push(Item::Image { index, x, y, w, h });
         self.y += h + 8.0;
     }
@@ -667,8 +748,14 @@ fn lead(block: Option<&Block>, sizes: &mut dyn Iterator<Item = &ImageSize>, meas
         Some(Block::Table { head, body, .. }) => {
             (head.len() + body.len().min(1)) as f32 * (TABLE * TABLE_LEADING * 2.0 + 2.0 * PAD_Y)
         }
-        Some(Block::Image { logo: false, .. }) => match sizes.next() {
-            Some(Ok((w, h))) if *w > 0.0 => (h * (measure / w)).min(FIGURE_MAX_H),
+        Some(Block::Image {
+            logo: false,
+            across,
+            ..
+        }) => match sizes.next() {
+            Some(Ok((w, h))) if *w > 0.0 => {
+                (h * (measure / f32::from(*across).max(1.0) / w)).min(FIGURE_MAX_H)
+            }
             _ => 0.0,
         },
         _ => 0.0,
@@ -689,9 +776,34 @@ pub fn typeset(
         pages: vec![Vec::new()],
         y: sheet.top,
         beside_logo: None,
+        row: None,
+        column: None,
     };
     let mut image = 0usize;
     for (i, b) in blocks.iter().enumerate() {
+        // A captioned figure of a row of several: set in its column, beside the one before.
+        if let (
+            Block::Para {
+                kind: Kind::Caption,
+                runs,
+                ..
+            },
+            Some(Block::Image {
+                logo: false,
+                across: 2..,
+                ..
+            }),
+        ) = (b, blocks.get(i + 1))
+        {
+            let mut rest = images[image..].iter();
+            let h = lead(blocks.get(i + 1), &mut rest, sheet.measure());
+            let caption = wrap(runs, BODY, sheet.measure(), m).len() as f32 * BODY * LEADING;
+            if let Some(Block::Image { across, .. }) = blocks.get(i + 1) {
+                s.cell(*across, caption * 2.0 + h + 14.0);
+            }
+        } else if !matches!(b, Block::Image { across: 2.., .. }) {
+            s.row = None;
+        }
         match b {
             Block::Para { kind, tone, runs } => {
                 let keep = match kind {
@@ -704,9 +816,10 @@ pub fn typeset(
                 s.para(*kind, *tone, runs, keep);
             }
             Block::Table { head, body, .. } => s.table(head, body),
-            Block::Image { logo, .. } => {
+            Block::Image { logo, across, .. } => {
                 let size = images.get(image).cloned().unwrap_or(Ok((0.0, 0.0)));
-                s.image(image, &size, *logo);
+                s.image(image, &size, *logo, *across);
+                s.end_cell();
                 image += 1;
             }
             Block::Rule => s.rule(),
@@ -737,19 +850,24 @@ fn running_items(
             x,
             y,
             size,
-            bold: false,
+            face: Face::Regular,
             colour: MUTED,
             text: t.to_string(),
         })
     };
     text(sheet.left, top, 8.0, &running.top_left);
-    let w = m.width(&running.top_right, 8.0);
-    let room = right - sheet.left - m.width(&running.top_left, 8.0) - 12.0;
+    let w = m.width(&running.top_right, 8.0, Face::Regular);
+    let room = right - sheet.left - m.width(&running.top_left, 8.0, Face::Regular) - 12.0;
     if w <= room {
         text(right - w, top, 8.0, &running.top_right);
     }
     text(sheet.left, foot, 7.0, &running.bottom_left);
-    text(right - m.width(&number, 8.0), foot, 8.0, &number);
+    text(
+        right - m.width(&number, 8.0, Face::Regular),
+        foot,
+        8.0,
+        &number,
+    );
 }
 
 #[cfg(test)]
@@ -759,7 +877,7 @@ mod tests {
     /// Every character 0.5 em wide.
     struct Mono;
     impl Measure for Mono {
-        fn width(&self, text: &str, size: f32) -> f32 {
+        fn width(&self, text: &str, size: f32, _: Face) -> f32 {
             text.chars().count() as f32 * size * 0.5
         }
     }

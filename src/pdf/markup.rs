@@ -1,7 +1,8 @@
 //! The page a report's HTML renderer writes, read back as blocks to typeset: headings,
 //! paragraphs, list items, tables (their heading rows apart) and figures. It reads the
 //! subset that renderer writes (well-formed, attribute values quoted, text escaped) as a
-//! browser prints it: what print hides (`<details>`, `.noprint`, the `<head>`) is left out.
+//! browser prints it: what print hides (`<details>` but those of class `print`, whose
+//! summary is a caption; `.noprint`; the `<head>`) is left out.
 //!
 //! Pure: text in, blocks out. Depends on nothing but `base64` (the embedded figures).
 
@@ -18,6 +19,8 @@ pub struct Style {
     pub flag: bool,
     /// Subscript (`<sub>`).
     pub sub: bool,
+    /// Monospaced (`<code>`, `<kbd>`, `<samp>`): hashes and identifiers.
+    pub mono: bool,
 }
 
 /// Text with one style.
@@ -103,9 +106,14 @@ pub enum Block {
         head: Vec<Row>,
         body: Vec<Row>,
     },
-    /// An image: a figure, or the laboratory's logo.
+    /// An image: a figure, or the laboratory's logo; `across` figures share a printed row
+    /// (3 beside the areal parameters, 2 of the per-line figures, else 1).
     #[allow(missing_docs)]
-    Image { image: Image, logo: bool },
+    Image {
+        image: Image,
+        logo: bool,
+        across: u8,
+    },
     /// A rule under the laboratory's header.
     Rule,
 }
@@ -238,6 +246,8 @@ struct Builder {
     table: Option<(String, Vec<Row>, Vec<Row>, bool)>,
     row: Option<Row>,
     cell: Option<Cell>,
+    /// The open rows of figures: where in `open` each began, how many figures it holds.
+    rows: Vec<(usize, u8)>,
 }
 
 impl Builder {
@@ -253,6 +263,7 @@ impl Builder {
                 muted: s.muted || o.muted,
                 flag: s.flag || o.flag,
                 sub: s.sub || o.sub,
+                mono: s.mono || o.mono,
             })
     }
 
@@ -317,12 +328,14 @@ impl Builder {
     fn open(&mut self, tag: &Tag<'_>) {
         let name = tag.name.as_str();
         let hides = self.hidden()
-            || matches!(name, "details" | "head" | "script" | "style" | "title")
+            || matches!(name, "head" | "script" | "style" | "title")
+            || (name == "details" && !tag.has_class("print"))
             || tag.has_class("noprint");
         let mut style = Style::default();
         match name {
             "b" | "strong" | "th" | "figcaption" | "summary" => style.bold = true,
             "sub" => style.sub = true,
+            "code" | "kbd" | "samp" => style.mono = true,
             _ => {}
         }
         if name == "div" && tag.has_class("lab-name") {
@@ -339,6 +352,14 @@ impl Builder {
         if !hides {
             self.block_start(tag);
         }
+        let across = match name {
+            "div" if tag.has_class("areal-figures") => 3,
+            "details" if tag.has_class("print") => 2,
+            _ => 0,
+        };
+        if across > 0 {
+            self.rows.push((self.open.len(), across));
+        }
         if !VOID.contains(&name) {
             self.open.push((tag.name.clone(), style, hides, tone));
         }
@@ -347,15 +368,15 @@ impl Builder {
     fn block_start(&mut self, tag: &Tag<'_>) {
         let name = tag.name.as_str();
         match name {
-            "h1" | "h2" | "h3" | "h4" | "p" | "li" | "div" | "figcaption" | "ul" | "ol"
-            | "figure" | "section" | "header" => {
+            "h1" | "h2" | "h3" | "h4" | "p" | "li" | "div" | "figcaption" | "summary" | "ul"
+            | "ol" | "figure" | "section" | "header" => {
                 self.flush();
                 self.kind = match name {
                     "h1" => Some(Kind::Heading(1)),
                     "h2" => Some(Kind::Heading(2)),
                     "h3" | "h4" => Some(Kind::Heading(3)),
                     "li" => Some(Kind::Bullet),
-                    "figcaption" => Some(Kind::Caption),
+                    "figcaption" | "summary" => Some(Kind::Caption),
                     "div" if tag.has_class("lab-name") => Some(Kind::LabName),
                     _ => None,
                 };
@@ -389,6 +410,7 @@ impl Builder {
                     self.out.push(Block::Image {
                         image,
                         logo: tag.has_class("logo"),
+                        across: self.rows.last().map_or(1, |r| r.1),
                     });
                 }
             }
@@ -405,6 +427,7 @@ impl Builder {
             self.block_end(name);
         }
         self.open.truncate(at);
+        self.rows.retain(|r| r.0 < at);
     }
 
     fn block_end(&mut self, name: &str) {
@@ -497,10 +520,38 @@ mod tests {
         let html = "<html><head><title>T</title><style>p{}</style></head><body>\
 <h1>Report</h1><p class=\"muted\">in   <b>bold</b>\n text</p>\
 <details><summary>hidden</summary><p>hidden too</p></details>\
-<p class=\"noprint\">screen only</p><div class=\"warn\"><ul><li>first</li><li>u<sub>c</sub></li></ul></div></body></html>";
+<p class=\"noprint\">screen only</p><div class=\"warn\"><ul><li>first</li><li>u<sub>c</sub></li></ul></div>\
+<details class=\"print\"><summary>Line 1</summary><p>sha256 <code>ab12</code></p></details></body></html>";
         let b = blocks(html);
         let t: Vec<String> = b.iter().map(texts).collect();
-        assert_eq!(t, ["Report", "in bold text", "first", "uc"]);
+        assert_eq!(
+            t,
+            [
+                "Report",
+                "in bold text",
+                "first",
+                "uc",
+                "Line 1",
+                "sha256 ab12"
+            ]
+        );
+        // A details element print shows: its summary is a caption, its content is read.
+        assert!(matches!(
+            b[4],
+            Block::Para {
+                kind: Kind::Caption,
+                ..
+            }
+        ));
+        let Block::Para { runs, .. } = &b[5] else {
+            panic!()
+        };
+        assert_eq!(
+            runs.iter()
+                .map(|r| (r.text.as_str(), r.style.mono))
+                .collect::<Vec<_>>(),
+            [("sha256 ", false), ("ab12", true)]
+        );
         let Block::Para { kind, runs, .. } = &b[1] else {
             panic!()
         };
@@ -556,8 +607,17 @@ mod tests {
                     media_type: "image/svg+xml".into(),
                     bytes: b"<svg/>".to_vec()
                 },
-                logo: false
+                logo: false,
+                across: 1
             }
         );
+        let b = blocks("<div class=\"areal-figures\"><figure><img src=\"data:image/svg+xml;base64,PHN2Zy8+\"></figure></div><img src=\"data:image/svg+xml;base64,PHN2Zy8+\">");
+        let across: Vec<u8> = (b.iter())
+            .filter_map(|b| match b {
+                Block::Image { across, .. } => Some(*across),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(across, [3, 1], "a row of three, then a figure of its own");
     }
 }

@@ -1,6 +1,7 @@
 //! A PDF of an HTML report page, made without a browser: the page's blocks
 //! ([`markup`]) typeset on A4 or Letter ([`layout`]) and drawn with krilla — text in the
-//! bundled DejaVu Sans, embedded and subset (every glyph the report uses: µ, λ, Δ, ≤, ·),
+//! bundled DejaVu Sans, Sans Bold (headings, table headers) and Sans Mono (`<code>`: hashes,
+//! identifiers), each embedded and subset (every glyph the report uses: µ, λ, Δ, ≤, ·),
 //! SVG figures as vector drawings through krilla-svg, PNG and JPEG images as images.
 //!
 //! Why krilla: it is the PDF writer of the Typst project, kept up with it, and writes what a
@@ -15,6 +16,11 @@
 //! What the browser's print of the page shows, this shows: the same page is read
 //! ([`markup`]), so the two never hold different things.
 //!
+//! The document is PDF/A-2b, the archival form a signed record is kept in: krilla's PDF/A-2b
+//! validator refuses what the standard forbids (a glyph missing from its font, interpolated
+//! images, device colours without the sRGB output intent it writes, a missing date or XMP),
+//! and a report it refuses is written as a plain PDF with the reason.
+//!
 //! Layer 4 (a renderer at the process edge): depends on krilla, krilla-svg, usvg and
 //! ab_glyph (the font's advances); bytes in, bytes out.
 
@@ -22,6 +28,8 @@ pub mod layout;
 pub mod markup;
 
 use krilla::color::rgb;
+use krilla::configure::Validator;
+use krilla::error::KrillaError;
 use krilla::geom::{PathBuilder, Point, Rect, Size, Transform};
 use krilla::metadata::Metadata;
 use krilla::num::NormalizedF32;
@@ -30,40 +38,67 @@ use krilla::surface::Surface;
 use krilla::text::{Font, GlyphId, KrillaGlyph};
 use krilla::Document;
 use krilla_svg::{SurfaceExt, SvgSettings};
-use layout::{Item, Measure, Rgb, Running, Sheet};
+use layout::{Face, Item, Measure, Rgb, Running, Sheet};
 use markup::Block;
 use std::sync::Arc;
 
-/// DejaVu Sans, the font the report's figures are drawn with (`assets/fonts/`).
-const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+/// DejaVu Sans (the font the report's figures are drawn with), its bold and its monospaced
+/// face (`assets/fonts/`), in the order of [`Face`].
+const FONTS: [(&str, &[u8]); 3] = [
+    (
+        "DejaVuSans.ttf",
+        include_bytes!("../../assets/fonts/DejaVuSans.ttf"),
+    ),
+    (
+        "DejaVuSans-Bold.ttf",
+        include_bytes!("../../assets/fonts/DejaVuSans-Bold.ttf"),
+    ),
+    (
+        "DejaVuSansMono.ttf",
+        include_bytes!("../../assets/fonts/DejaVuSansMono.ttf"),
+    ),
+];
 
 /// Why no PDF could be made.
 #[derive(Debug, thiserror::Error)]
 pub enum PdfError {
-    /// The font inside the binary cannot be read.
-    #[error("the bundled font cannot be read (assets/fonts/DejaVuSans.ttf is damaged)")]
-    Font,
+    /// A font inside the binary cannot be read.
+    #[error("the bundled font assets/fonts/{0} cannot be read (the binary is damaged)")]
+    Font(&'static str),
     /// krilla refused the document.
     #[error("the PDF could not be assembled: {0}")]
     Assemble(String),
 }
 
-/// The bundled font's advances.
-struct Advances<'a>(ab_glyph::FontRef<'a>);
+/// The bundled faces' advances, in the order of [`Face`].
+struct Advances<'a>([ab_glyph::FontRef<'a>; 3]);
 
 impl Advances<'_> {
-    fn glyph(&self, c: char) -> (u16, f32) {
+    fn glyph(&self, c: char, face: Face) -> (u16, f32) {
         use ab_glyph::Font as _;
-        let id = self.0.glyph_id(c);
-        let em = self.0.units_per_em().unwrap_or(2048.0);
-        (id.0, self.0.h_advance_unscaled(id) / em)
+        let f = &self.0[face as usize];
+        let id = f.glyph_id(c);
+        let em = f.units_per_em().unwrap_or(2048.0);
+        (id.0, f.h_advance_unscaled(id) / em)
     }
 }
 
 impl Measure for Advances<'_> {
-    fn width(&self, text: &str, size: f32) -> f32 {
-        text.chars().map(|c| self.glyph(c).1).sum::<f32>() * size
+    fn width(&self, text: &str, size: f32, face: Face) -> f32 {
+        text.chars().map(|c| self.glyph(c, face).1).sum::<f32>() * size
     }
+}
+
+/// The bundled faces, read for measuring and for krilla.
+fn faces() -> Result<(Advances<'static>, [Font; 3]), PdfError> {
+    let read = |(name, bytes): (&'static str, &'static [u8])| {
+        let face = ab_glyph::FontRef::try_from_slice(bytes).map_err(|_| PdfError::Font(name))?;
+        let font = Font::new(bytes.to_vec().into(), 0).ok_or(PdfError::Font(name))?;
+        Ok((face, font))
+    };
+    let [r, b, m] = FONTS.map(read);
+    let ((r, rf), (b, bf), (m, mf)) = (r?, b?, m?);
+    Ok((Advances([r, b, m]), [rf, bf, mf]))
 }
 
 /// One image prepared for drawing.
@@ -85,10 +120,10 @@ impl Prepared {
                     .map(|t| Prepared::Svg(Box::new(t)))
                     .map_err(|e| format!("its SVG cannot be read ({e})"))
             }
-            "image/png" => krilla::image::Image::from_png(data(), true)
+            "image/png" => krilla::image::Image::from_png(data(), false)
                 .map(Prepared::Raster)
                 .map_err(|e| format!("its PNG cannot be read ({e})")),
-            "image/jpeg" => krilla::image::Image::from_jpeg(data(), true)
+            "image/jpeg" => krilla::image::Image::from_jpeg(data(), false)
                 .map(Prepared::Raster)
                 .map_err(|e| format!("its JPEG cannot be read ({e})")),
             other => Err(format!("{other} is not an image a PDF can hold")),
@@ -106,23 +141,45 @@ impl Prepared {
     }
 }
 
-/// The page `html` (as a report's HTML renderer writes it) as a PDF on A4 (or Letter), with
-/// `running` along the top and bottom of every page and `title` and `creator` in the
-/// document's information.
+/// A PDF made, and what it lacks.
+pub struct Made {
+    /// The document.
+    pub pdf: Vec<u8>,
+    /// What kept it from PDF/A-2b, for the user (it is then a plain PDF of the same pages).
+    pub warnings: Vec<String>,
+}
+
+/// Why an image (`image/png`, `image/jpeg`, `image/svg+xml`) cannot be drawn into a PDF, or
+/// `None` when it can: a laboratory's logo is checked before it heads the report.
+pub fn image_error(media_type: &str, bytes: &[u8]) -> Option<String> {
+    let image = markup::Image {
+        media_type: media_type.to_string(),
+        bytes: bytes.to_vec(),
+    };
+    Prepared::read(&image, &Arc::new(usvg::fontdb::Database::new())).err()
+}
+
+/// The page `html` (as a report's HTML renderer writes it) as a PDF/A-2b (ISO 19005-2,
+/// level B: an archived record that renders the same in decades) on A4 (or Letter), with
+/// `running` along the top and bottom of every page and `title`, `creator` and `created` in
+/// the document's information and XMP. What PDF/A-2b forbids (a glyph no bundled face has,
+/// a CMYK logo with no profile) makes a plain PDF of the same pages instead, and says why.
 pub fn html_to_pdf(
     html: &str,
     letter: bool,
     running: &Running,
     title: &str,
     creator: &str,
-) -> Result<Vec<u8>, PdfError> {
+    created: chrono::DateTime<chrono::Utc>,
+) -> Result<Made, PdfError> {
     let blocks = markup::blocks(html);
-    let face = ab_glyph::FontRef::try_from_slice(FONT).map_err(|_| PdfError::Font)?;
-    let advances = Advances(face);
-    let font = Font::new(FONT.to_vec().into(), 0).ok_or(PdfError::Font)?;
+    let (advances, font) = faces()?;
     let mut fonts = usvg::fontdb::Database::new();
-    fonts.load_font_data(FONT.to_vec());
+    for (_, bytes) in FONTS {
+        fonts.load_font_data(bytes.to_vec());
+    }
     fonts.set_sans_serif_family("DejaVu Sans");
+    fonts.set_monospace_family("DejaVu Sans Mono");
     let fonts = Arc::new(fonts);
     let prepared: Vec<Result<Prepared, String>> = blocks
         .iter()
@@ -131,32 +188,72 @@ pub fn html_to_pdf(
             _ => None,
         })
         .collect();
+    let mut warnings = Vec::new();
     let sizes: Vec<layout::ImageSize> = prepared
         .iter()
         .map(|p| p.as_ref().map(Prepared::size).map_err(Clone::clone))
         .collect();
     let sheet = Sheet::new(letter);
     let laid = layout::typeset(&blocks, &sizes, sheet, running, &advances);
-    let mut doc = Document::new();
-    doc.set_metadata(
-        Metadata::new()
-            .title(title.to_string())
-            .creator(creator.to_string())
-            .producer(creator.to_string()),
-    );
-    for items in &laid.pages {
-        let settings = krilla::page::PageSettings::from_wh(sheet.width, sheet.height)
-            .ok_or_else(|| PdfError::Assemble("the sheet has no size".into()))?;
-        let mut page = doc.start_page_with(settings);
-        let mut surface = page.surface();
-        for item in items {
-            draw(&mut surface, item, &font, &advances, &prepared);
+    use chrono::{Datelike, Timelike};
+    let date = krilla::metadata::DateTime::new(created.year() as u16)
+        .month(created.month() as u8)
+        .day(created.day() as u8)
+        .hour(created.hour() as u8)
+        .minute(created.minute() as u8)
+        .second(created.second() as u8)
+        .utc_offset_hour(0)
+        .utc_offset_minute(0);
+    let settings = krilla::page::PageSettings::from_wh(sheet.width, sheet.height)
+        .ok_or_else(|| PdfError::Assemble("the sheet has no size".into()))?;
+    let write = |validator| {
+        let mut doc = Document::new_with(krilla::SerializeSettings {
+            configuration: krilla::configure::Configuration::new_with_validator(validator),
+            ..Default::default()
+        });
+        doc.set_metadata(
+            Metadata::new()
+                .title(title.to_string())
+                .creator(creator.to_string())
+                .producer(creator.to_string())
+                .language("en".to_string())
+                .creation_date(date),
+        );
+        for items in &laid.pages {
+            let mut page = doc.start_page_with(settings.clone());
+            let mut surface = page.surface();
+            for item in items {
+                draw(&mut surface, item, &font, &advances, &prepared);
+            }
+            surface.finish();
+            page.finish();
         }
-        surface.finish();
-        page.finish();
+        doc.finish()
+    };
+    let pdf = match write(Validator::A2_B) {
+        Err(KrillaError::Validation(why)) => {
+            let why: Vec<String> = why.iter().map(hindrance).collect();
+            warnings.push(format!("the PDF is not PDF/A-2b: {}", why.join("; ")));
+            write(Validator::None)
+        }
+        made => made,
+    };
+    Ok(Made {
+        pdf: pdf.map_err(|e| PdfError::Assemble(format!("{e:?}")))?,
+        warnings,
+    })
+}
+
+/// What a PDF/A-2b hindrance is, in words.
+fn hindrance(e: &krilla::configure::ValidationError) -> String {
+    use krilla::configure::ValidationError as V;
+    match e {
+        V::ContainsNotDefGlyph(_, _, text) => {
+            format!("the bundled fonts have no glyph for {text:?}")
+        }
+        V::MissingCMYKProfile => "an image is in CMYK without a colour profile".into(),
+        other => format!("{other:?}"),
     }
-    doc.finish()
-        .map_err(|e| PdfError::Assemble(format!("{e:?}")))
 }
 
 fn fill(c: Rgb) -> Fill {
@@ -170,7 +267,7 @@ fn fill(c: Rgb) -> Fill {
 fn draw(
     surface: &mut Surface<'_>,
     item: &Item,
-    font: &Font,
+    font: &[Font; 3],
     advances: &Advances<'_>,
     images: &[Result<Prepared, String>],
 ) {
@@ -179,14 +276,14 @@ fn draw(
             x,
             y,
             size,
-            bold,
+            face,
             colour,
             text,
         } => {
             let glyphs: Vec<KrillaGlyph> = text
                 .char_indices()
                 .map(|(i, c)| {
-                    let (id, adv) = advances.glyph(c);
+                    let (id, adv) = advances.glyph(c, *face);
                     KrillaGlyph::new(
                         GlyphId::new(id.into()),
                         adv,
@@ -199,21 +296,15 @@ fn draw(
                 })
                 .collect();
             surface.set_fill(Some(fill(*colour)));
-            // Bold is the regular face drawn with an outline of its own colour.
-            surface.set_stroke(bold.then(|| Stroke {
-                paint: rgb::Color::new(colour.0, colour.1, colour.2).into(),
-                width: size * 0.045,
-                ..Stroke::default()
-            }));
+            surface.set_stroke(None);
             surface.draw_glyphs(
                 Point::from_xy(*x, *y),
                 &glyphs,
-                font.clone(),
+                font[*face as usize].clone(),
                 text,
                 *size,
                 false,
             );
-            surface.set_stroke(None);
         }
         Item::Fill { x, y, w, h, colour } => {
             if let Some(path) = Rect::from_xywh(*x, *y, *w, *h).and_then(|r| {

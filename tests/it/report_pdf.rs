@@ -18,9 +18,9 @@ fn surfscan(args: &[&std::ffi::OsStr]) -> Output {
         .unwrap()
 }
 
-/// The images of `pdf` as `pdfimages -list` gives them: (width, height) of each image (soft
-/// masks left out).
-fn images(pdf: &Path) -> Vec<(u32, u32)> {
+/// The images of `pdf` as `pdfimages -list` gives them: width, height and encoding of each
+/// image (soft masks left out); none asks to be interpolated (PDF/A forbids it).
+fn images(pdf: &Path) -> Vec<(u32, u32, String)> {
     let out = Command::new("pdfimages")
         .arg("-list")
         .arg(pdf)
@@ -34,7 +34,117 @@ fn images(pdf: &Path) -> Vec<(u32, u32)> {
         .skip(2)
         .filter_map(|l| {
             let f: Vec<&str> = l.split_whitespace().collect();
-            (f.get(2) == Some(&"image")).then(|| (f[3].parse().unwrap(), f[4].parse().unwrap()))
+            (f.get(2) == Some(&"image")).then(|| {
+                assert_eq!(f[9], "no", "an image asks to be interpolated: {l}");
+                (
+                    f[3].parse().unwrap(),
+                    f[4].parse().unwrap(),
+                    f[8].to_string(),
+                )
+            })
+        })
+        .collect()
+}
+
+/// The fonts of `pdf` as `pdffonts` lists them: name (its subset tag removed), embedded,
+/// subset.
+pub fn fonts(pdf: &Path) -> Vec<(String, bool, bool)> {
+    let out = Command::new("pdffonts")
+        .arg(pdf)
+        .output()
+        .unwrap_or_else(|e| {
+            panic!("pdffonts: {e}; run `bash .ci/run` or `apt-get install poppler-utils`")
+        });
+    assert!(out.status.success());
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .skip(2)
+        .map(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            let n = f.len();
+            let (tag, name) = f[0].split_once('+').unwrap_or(("", f[0]));
+            // A subset's name carries a tag of six capitals.
+            let tagged = tag.len() == 6 && tag.chars().all(|c| c.is_ascii_uppercase());
+            (
+                name.to_string(),
+                f[n - 5] == "yes",
+                f[n - 4] == "yes" && tagged,
+            )
+        })
+        .collect()
+}
+
+/// The PDF/A part and conformance level `pdf` claims in its XMP metadata (`pdfinfo -meta`),
+/// if any.
+pub fn pdfa_claim(pdf: &Path) -> Option<(String, String)> {
+    let out = Command::new("pdfinfo")
+        .arg("-meta")
+        .arg(pdf)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let xmp = String::from_utf8_lossy(&out.stdout);
+    let start = xmp.find("<?xpacket")?;
+    let doc = roxmltree::Document::parse(xmp[start..].trim()).unwrap();
+    const NS: &str = "http://www.aiim.org/pdfa/ns/id/";
+    let get = |name: &str| {
+        doc.descendants().find_map(|n| {
+            if n.tag_name().namespace() == Some(NS) && n.tag_name().name() == name {
+                n.text().map(str::to_string)
+            } else {
+                n.attribute((NS, name)).map(str::to_string)
+            }
+        })
+    };
+    Some((get("part")?, get("conformance")?))
+}
+
+/// The output intents of `pdf`'s catalogue as `qpdf --json` reads them: each one's subtype
+/// and the number of colour components of its destination profile.
+pub fn output_intents(pdf: &Path) -> Vec<(String, i64)> {
+    let out = Command::new("qpdf")
+        .args(["--json=2", "--json-key=qpdf"])
+        .arg(pdf)
+        .output()
+        .unwrap_or_else(|e| panic!("qpdf: {e}; run `bash .ci/run` or `apt-get install qpdf`"));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let objects = &v["qpdf"][1];
+    // A reference ("5 0 R") as what it refers to (a stream's dictionary for a stream); any
+    // other value as it is.
+    let get = |r: &serde_json::Value| match r.as_str().filter(|r| r.ends_with(" R")) {
+        Some(r) => {
+            let o = &objects[format!("obj:{r}")];
+            if o["stream"].is_object() {
+                o["stream"]["dict"].clone()
+            } else {
+                o["value"].clone()
+            }
+        }
+        None => r.clone(),
+    };
+    let catalog = objects
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|o| &o["value"])
+        .find(|o| o["/Type"] == "/Catalog")
+        .expect("a catalogue");
+    get(&catalog["/OutputIntents"])
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|r| {
+            let intent = get(r);
+            let profile = get(&intent["/DestOutputProfile"]);
+            (
+                intent["/S"].as_str().unwrap_or_default().to_string(),
+                profile["/N"].as_i64().unwrap_or_default(),
+            )
         })
         .collect()
 }
@@ -74,6 +184,21 @@ pub fn check_report_pdf(dir: &Path, out: Option<&Path>, lab: &str, roles: &[&str
         ),
         "the limits' column headers on one line on page 1"
     );
+    // Headings and table headers in DejaVu Sans Bold, the configuration's hash and the scan's
+    // identifier in DejaVu Sans Mono, the rest in DejaVu Sans: each embedded and subset.
+    let fonts = fonts(&pdf);
+    for face in ["DejaVuSans", "DejaVuSans-Bold", "DejaVuSansMono"] {
+        assert!(
+            fonts.contains(&(face.to_string(), true, true)),
+            "{face} embedded and subset: {fonts:?}"
+        );
+    }
+    assert!(fonts.iter().all(|f| f.1), "every font embedded: {fonts:?}");
+    // An archival record: PDF/A-2b claimed in the XMP, with the sRGB (three-component) output
+    // intent PDF/A requires for device colours. (veraPDF is not run: it is not packaged for
+    // Debian; what it would check beyond this is krilla's validator's part.)
+    assert_eq!(pdfa_claim(&pdf), Some(("2".into(), "B".into())));
+    assert_eq!(output_intents(&pdf), [("/GTS_PDFA1".to_string(), 3)]);
     // The plots are drawings: their own words are text in the PDF (a picture of them would
     // have none) …
     assert!(
@@ -81,18 +206,26 @@ pub fn check_report_pdf(dir: &Path, out: Option<&Path>, lab: &str, roles: &[&str
         "the material ratio plot's title"
     );
     assert!(text.contains("Measured heights"));
-    // … and the one raster image is the height map's bitmap, drawn inside its vector axes.
+    assert!(text.contains("Power spectral density") && text.contains("Autocorrelation"));
+    // … and the only raster images are the bitmaps the height map and the 3D view hold
+    // inside their vector axes: the per-line figures and every other plot are drawings.
     let rasters = images(&pdf);
-    assert_eq!(
-        rasters.len(),
-        1,
-        "only the height map is a bitmap: {rasters:?}"
-    );
-    let map = std::fs::read_to_string(dir.join("heightmap.svg")).unwrap();
-    assert!(
-        map.contains("<image"),
-        "the height map's SVG holds its bitmap"
-    );
+    assert_eq!(rasters.len(), 2, "two bitmaps: {rasters:?}");
+    for stem in ["heightmap", "surface3d"] {
+        let svg = std::fs::read_to_string(dir.join(format!("{stem}.svg"))).unwrap();
+        assert_eq!(
+            svg.matches("<image").count(),
+            1,
+            "{stem}.svg holds its bitmap"
+        );
+    }
+    for entry in std::fs::read_dir(dir.join("rk")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "svg") {
+            let svg = std::fs::read_to_string(&path).unwrap();
+            assert!(!svg.contains("<image"), "{}: a drawing", path.display());
+        }
+    }
     size
 }
 
@@ -126,6 +259,84 @@ fn a_report_without_plots_prints_on_one_numbered_page() {
     ] {
         assert!(text.contains(want), "{want:?} not in {text}");
     }
+    assert!(
+        o.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert_eq!(pdfa_claim(&pdf), Some(("2".into(), "B".into())));
+}
+
+/// A character none of the bundled fonts has cannot be in a PDF/A-2b: the same pages as a
+/// plain PDF (no claim in its XMP), and a warning that names the character.
+#[test]
+fn a_character_no_bundled_font_has_makes_a_plain_pdf_and_says_why() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("report.json"),
+        r#"{"kind": "grid", "input": "grid.csv", "software": "surfscan test", "lab": {"lab": "計測室 Test lab", "signatures": ["Approved by"]}}"#,
+    )
+    .unwrap();
+    let o = surfscan(&["report".as_ref(), dir.path().as_os_str(), "--pdf".as_ref()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("the PDF is not PDF/A-2b: the bundled fonts have no glyph for \"")
+            && err.contains('計'),
+        "{err}"
+    );
+    let pdf = dir.path().join("report.pdf");
+    assert_eq!(pdfa_claim(&pdf), None);
+    assert!(crate::report_print::pdftotext(&pdf).contains("Test lab"));
+}
+
+/// A report headed by the logo `logo`.
+fn report_with_logo(logo: &Path) -> tempfile::TempDir {
+    let dir = small_report();
+    let json = serde_json::json!({"kind": "grid", "input": "grid.csv", "software": "surfscan test",
+        "lab": {"lab": "Test lab", "logo": logo, "signatures": ["Approved by"]}});
+    std::fs::write(dir.path().join("report.json"), json.to_string()).unwrap();
+    dir
+}
+
+#[test]
+fn png_and_jpeg_logos_are_embedded_once_at_their_size_and_a_corrupt_one_is_left_out_with_a_warning()
+{
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/logo");
+    // 120 × 40 pixels each; the JPEG's own DCT data is embedded (poppler lists it as jpeg),
+    // the PNG's pixels as a flate-compressed image.
+    for (file, enc) in [("logo.png", "image"), ("logo.jpg", "jpeg")] {
+        let dir = report_with_logo(&data.join(file));
+        let o = surfscan(&["report".as_ref(), dir.path().as_os_str(), "--pdf".as_ref()]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(
+            o.stderr.is_empty(),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let pdf = dir.path().join("report.pdf");
+        assert_eq!(images(&pdf), [(120, 40, enc.to_string())], "{file}");
+        assert!(crate::report_print::pdftotext(&pdf).contains("Test lab"));
+    }
+    // A file that says PNG and is not one: the PDF without the logo, a warning naming the file
+    // and the cause, exit 0 (the report is the record; the logo is decoration).
+    let bad = tempfile::tempdir().unwrap();
+    let png = bad.path().join("broken.png");
+    std::fs::write(&png, b"\x89PNG\r\n\x1a\nnot a PNG after all").unwrap();
+    let dir = report_with_logo(&png);
+    let o = surfscan(&["report".as_ref(), dir.path().as_os_str(), "--pdf".as_ref()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains(&format!(
+            "[report] logo {}: its PNG cannot be read",
+            png.display()
+        )) && err.contains("printed without a logo"),
+        "{err}"
+    );
+    let pdf = dir.path().join("report.pdf");
+    assert!(images(&pdf).is_empty());
+    assert!(crate::report_print::pdftotext(&pdf).contains("Test lab"));
 }
 
 #[test]

@@ -29,7 +29,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 /// One plot to embed: a title, and the PNG or SVG bytes with their media type.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Figure {
     /// Caption shown above the image (and its alt text).
     pub title: String,
@@ -39,6 +39,8 @@ pub struct Figure {
     pub bytes: Vec<u8>,
     /// Shown collapsed (the per-line figures) rather than open.
     pub collapsed: bool,
+    /// Collapsed on screen but printed (the per-line figures [`print::printed_lines`] names).
+    pub printed: bool,
     /// Not embedded but linked: the figure's file, relative to the report (`bytes` is then
     /// empty). Per-line figures beyond what a page of a few MB holds are linked.
     pub link: Option<String>,
@@ -67,8 +69,7 @@ impl Figure {
             media_type,
             bytes,
             collapsed,
-            link: None,
-            beside_areal: false,
+            ..Figure::default()
         })
     }
 
@@ -76,19 +77,9 @@ impl Figure {
     pub fn linked(title: impl Into<String>, href: impl Into<String>, collapsed: bool) -> Figure {
         Figure {
             title: title.into(),
-            media_type: "",
-            bytes: Vec::new(),
             collapsed,
             link: Some(href.into()),
-            beside_areal: false,
-        }
-    }
-
-    /// The figure shown beside the areal parameters.
-    pub fn beside_areal_parameters(self) -> Figure {
-        Figure {
-            beside_areal: true,
-            ..self
+            ..Figure::default()
         }
     }
 }
@@ -490,7 +481,7 @@ pub fn render(
     }
     let (areal_figures, others): (Vec<Figure>, Vec<Figure>) =
         figures.iter().cloned().partition(|f| f.beside_areal);
-    plots(&mut h, &others);
+    plots(&mut h, report, &others);
     areal(&mut h, report, &areal_figures);
     lines(&mut h, report);
     instrument(&mut h, report);
@@ -630,8 +621,9 @@ fn traceability(h: &mut String, report: &Value) {
         return;
     }
     h.push_str("<h2 id=\"traceability\">Traceability</h2>\n<table id=\"t-traceability\">\n");
+    let id = esc(&text(&t["scan_id"]));
+    kv(h, "scan", &format!("<code>{id}</code>"));
     for (k, key) in [
-        ("scan", "scan_id"),
         ("specimen", "specimen"),
         ("operator", "operator"),
         ("notes", "notes"),
@@ -791,12 +783,17 @@ fn events(h: &mut String, j: &ResumeState) {
     }
 }
 
-fn plots(h: &mut String, figures: &[Figure]) {
+fn plots(h: &mut String, report: &Value, figures: &[Figure]) {
     if figures.is_empty() {
         return;
     }
     h.push_str("<h2 id=\"plots\">Plots</h2>\n");
-    embed(h, figures);
+    let (open, lines) = figures.split_at(figures.partition_point(|f| !f.collapsed));
+    embed(h, open);
+    if let (false, Some(s)) = (lines.is_empty(), print::printed_lines_sentence(report)) {
+        let _ = writeln!(h, "<p>{}</p>", esc(&s));
+    }
+    embed(h, lines);
 }
 
 /// Each figure as an embedded image (or a link to its file), in order.
@@ -818,7 +815,8 @@ fn embed(h: &mut String, figures: &[Figure]) {
         if f.collapsed {
             let _ = writeln!(
                 h,
-                "<details><summary>{}</summary><figure>{img}</figure></details>",
+                "<details{}><summary>{}</summary><figure>{img}</figure></details>",
+                if f.printed { " class=\"print\"" } else { "" },
                 esc(&f.title)
             );
         } else {

@@ -329,6 +329,13 @@ fn write_rk_plots(
     Ok(rk_plots)
 }
 
+/// The title of line `index`'s figure (its assessed profile and Rk construction).
+fn rk_title(index: u32, y_mm: f64) -> String {
+    let y = nfmt(y_mm, Quantity::PositionMm);
+    let n = line_number(index);
+    format!("Line {n} ({index:04}, y = {y} mm): assessed profile and ISO 13565-2 Rk construction")
+}
+
 /// The Rk figures of the consecutive lines `part`, the first of them grid row `first_row`,
 /// with their titles; stops at the first error.
 fn draw_rk_run(
@@ -344,14 +351,7 @@ fn draw_rk_run(
     for (k, a) in part.iter().enumerate() {
         let row = first_row + k;
         let index = grid.index_of(row);
-        let title = format!(
-            "Line {} ({index:04}, y = {} mm): assessed profile and ISO 13565-2 Rk construction",
-            line_number(index),
-            nfmt(
-                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
-                Quantity::PositionMm
-            )
-        );
+        let title = rk_title(index, grid.y_mm.get(row).copied().unwrap_or(f64::NAN));
         let profile = plots::AssessedProfile {
             z_um: &a.roughness_um,
             pitch_mm: a.recipe.pitch_mm,
@@ -503,9 +503,7 @@ pub fn read_logo(lab: &LabHeader, warnings: &mut Vec<String>) -> Option<html::Fi
             title: "logo".into(),
             media_type,
             bytes,
-            collapsed: false,
-            link: None,
-            beside_areal: false,
+            ..html::Figure::default()
         }),
         Err(e) => {
             warnings.push(format!(
@@ -534,21 +532,28 @@ fn per_line_budget(page_bytes: usize, lines: usize) -> usize {
 
 /// The per-line figures of `report.html` in line order: each embedded while the file bytes
 /// embedded stay within `budget`, the rest linked to their SVG file (a path relative to
-/// `out`, where the report is).
+/// `out`, where the report is); those of the lines `printed` (file indices) always embedded
+/// and marked to print.
 fn per_line_figures(
     out: &Path,
     plots: &[(String, [PathBuf; 2])],
     budget: usize,
+    printed: &[u32],
 ) -> Vec<html::Figure> {
     let mut embedded = 0usize;
     let mut budget_left = true;
     plots
         .iter()
         .filter_map(|(title, [png, svg])| {
-            if budget_left {
+            let index = png
+                .file_stem()
+                .and_then(|s| s.to_str()?.parse::<u32>().ok());
+            let print = index.is_some_and(|i| printed.contains(&i));
+            if budget_left || print {
                 // A figure that cannot be read is left out, as any figure is.
-                let f = html::Figure::from_files(title.clone(), png, svg, true)?;
-                if embedded + f.bytes.len() <= budget {
+                let mut f = html::Figure::from_files(title.clone(), png, svg, true)?;
+                f.printed = print;
+                if print || embedded + f.bytes.len() <= budget {
                     embedded += f.bytes.len();
                     return Some(f);
                 }
@@ -565,18 +570,54 @@ fn per_line_figures(
         .collect()
 }
 
-/// The figures a report's page shows open, in order: file stem, title.
-const PAGE_FIGURES: [(&str, &str); 3] = [
-    ("heightmap", "Measured heights"),
-    ("bac", "Material ratio curves"),
-    ("overlay", "One line: measured and model"),
+/// The figures a report's page shows open, in order: file stem, title, whether it is shown
+/// beside the areal parameters, whether only a report with contact analysis has it.
+const PAGE_FIGURES: [(&str, &str, bool, bool); 8] = [
+    ("heightmap", "Measured heights", false, false),
+    ("bac", "Material ratio curves", false, false),
+    ("overlay", "One line: measured and model", false, false),
+    ("load_area", "Contact: load–area curve", false, true),
+    ("pressure", "Contact: pressure map", false, true),
+    ("psd", "Power spectral density", true, false),
+    ("acf", "Autocorrelation", true, false),
+    ("surface3d", "3D view of the measured surface", true, false),
 ];
+
+/// The figure `stem` of `dir` (`stem.png|svg`) titled `title`: its SVG file when `vector`
+/// and there is one, else the smaller file; `None` when neither can be read.
+fn figure_file(dir: &Path, stem: &str, title: String, vector: bool) -> Option<html::Figure> {
+    let svg = dir.join(format!("{stem}.svg"));
+    match vector.then(|| std::fs::read(&svg).ok()).flatten() {
+        Some(bytes) => Some(html::Figure {
+            title,
+            media_type: "image/svg+xml",
+            bytes,
+            ..html::Figure::default()
+        }),
+        None => html::Figure::from_files(title, &dir.join(format!("{stem}.png")), &svg, false),
+    }
+}
+
+/// The figures of [`PAGE_FIGURES`] that `dir` holds, the contact ones only when `contact`.
+fn page_figures(dir: &Path, contact: bool, vector: bool) -> Vec<html::Figure> {
+    PAGE_FIGURES
+        .iter()
+        .filter(|f| contact || !f.3)
+        .filter_map(|(stem, title, beside_areal, _)| {
+            let f = figure_file(dir, stem, title.to_string(), vector)?;
+            Some(html::Figure {
+                beside_areal: *beside_areal,
+                ..f
+            })
+        })
+        .collect()
+}
 
 /// The report written into `dir` (`report` as its report.json holds it) as the PDF of its
 /// printed page, and what was left out of it: the page made again from the report, the
 /// scan's journal and the plots' SVG files (so the figures are vector drawings; a figure
-/// with only its PNG is an image), typeset by [`crate::pdf`]. The per-line figures stay
-/// out, as print leaves them out of the page.
+/// with only its PNG is an image), typeset by [`crate::pdf`]. Of the per-line figures, those
+/// of the lines [`print::printed_lines`] names, as on the printed page.
 pub fn report_pdf(
     dir: &Path,
     report: &serde_json::Value,
@@ -596,27 +637,33 @@ pub fn report_pdf(
                 .ok()
         })
         .flatten();
-    let figures: Vec<html::Figure> = PAGE_FIGURES
-        .iter()
-        .filter_map(|(stem, title)| {
-            let svg = dir.join(format!("{stem}.svg"));
-            match std::fs::read(&svg) {
-                Ok(bytes) => Some(html::Figure {
-                    title: title.to_string(),
-                    media_type: "image/svg+xml",
-                    bytes,
-                    collapsed: false,
-                    link: None,
-                    beside_areal: false,
-                }),
-                Err(_) => {
-                    html::Figure::from_files(*title, &dir.join(format!("{stem}.png")), &svg, false)
-                }
-            }
-        })
-        .collect();
+    let contact = !report["contact"]["measured"].is_null();
+    let mut figures = page_figures(dir, contact, true);
+    let lines = report["lines"].as_array().map_or(&[][..], Vec::as_slice);
+    for (index, _) in print::printed_lines(report) {
+        let y = lines.iter().find(|l| l["index"] == index);
+        let title = rk_title(
+            index,
+            y.and_then(|l| l["y_mm"].as_f64()).unwrap_or(f64::NAN),
+        );
+        let f = figure_file(&dir.join("rk"), &format!("{index:04}"), title, true);
+        figures.extend(f.map(|f| html::Figure {
+            collapsed: true,
+            printed: true,
+            ..f
+        }));
+    }
     let lab: LabHeader = serde_json::from_value(report["lab"].clone()).unwrap_or_default();
-    let logo = read_logo(&lab, &mut warnings);
+    let mut logo = read_logo(&lab, &mut warnings);
+    if let (Some(f), Some(path)) = (&logo, &lab.logo) {
+        if let Some(e) = crate::pdf::image_error(f.media_type, &f.bytes) {
+            let path = path.display();
+            warnings.push(format!(
+                "[report] logo {path}: {e}; the report is printed without a logo"
+            ));
+            logo = None;
+        }
+    }
     let page = html::render(report, journal.as_ref(), &figures, logo.as_ref());
     let (left, software) = print::running(report);
     let running = crate::pdf::layout::Running {
@@ -627,8 +674,10 @@ pub fn report_pdf(
     let title = format!("Surface report: {}", running.top_right);
     let letter = lab.paper == super::header::Paper::Letter;
     let creator = report["software"].as_str().unwrap_or("surfscan");
-    let pdf = crate::pdf::html_to_pdf(&page, letter, &running, &title, creator)?;
-    Ok((pdf, warnings))
+    let made =
+        crate::pdf::html_to_pdf(&page, letter, &running, &title, creator, chrono::Utc::now())?;
+    warnings.extend(made.warnings);
+    Ok((made.pdf, warnings))
 }
 
 /// Writes `report.json`, then `report.html`, the report for people, with the plots embedded
@@ -656,37 +705,17 @@ pub fn write_report(
                     .ok()
             })
             .flatten();
-        // A figure of the page from its files beside the report (the smaller one embedded).
-        let figure = |(stem, title): (&str, &str)| {
-            let file = |ext: &str| out.join(format!("{stem}.{ext}"));
-            html::Figure::from_files(title, &file("png"), &file("svg"), false)
-        };
         let contact = report
             .contact
             .as_ref()
             .is_some_and(|c| c.measured.is_some());
-        let contact_figures = [
-            ("load_area", "Contact: load–area curve"),
-            ("pressure", "Contact: pressure map"),
-        ];
-        let contact_figures = contact_figures.into_iter().filter(|_| contact);
-        let mut figures: Vec<_> = PAGE_FIGURES
-            .into_iter()
-            .chain(contact_figures)
-            .filter_map(figure)
-            .collect();
-        let areal = [
-            ("psd", "Power spectral density"),
-            ("acf", "Autocorrelation"),
-            ("surface3d", "3D view of the measured surface"),
-        ];
-        let areal = areal.into_iter().filter_map(figure);
-        figures.extend(areal.map(html::Figure::beside_areal_parameters));
+        let mut figures = page_figures(out, contact, false);
         let page = serde_json::to_value(report).map(|v| {
             // The page without the per-line figures first, to know what room they have.
             let bare = html::render(&v, journal.as_ref(), &figures, logo).len();
             let budget = per_line_budget(bare, files.rk_plots.len());
-            figures.extend(per_line_figures(out, &files.rk_plots, budget));
+            let printed: Vec<u32> = print::printed_lines(&v).iter().map(|p| p.0).collect();
+            figures.extend(per_line_figures(out, &files.rk_plots, budget, &printed));
             html::render(&v, journal.as_ref(), &figures, logo)
         });
         json.join().unwrap_or_else(|_| {
@@ -728,18 +757,26 @@ mod tests {
             }
             plots.push((format!("line {k}"), [png, svg]));
         }
-        let figures = per_line_figures(dir.path(), &plots, budget);
-        let shown: Vec<(&str, Option<&str>, usize)> = figures
+        // Line 4 is one a print shows: embedded whatever the budget, and marked to print.
+        let figures = per_line_figures(dir.path(), &plots, budget, &[4]);
+        let shown: Vec<(&str, Option<&str>, usize, bool)> = figures
             .iter()
-            .map(|f| (f.title.as_str(), f.link.as_deref(), f.bytes.len()))
+            .map(|f| {
+                (
+                    f.title.as_str(),
+                    f.link.as_deref(),
+                    f.bytes.len(),
+                    f.printed,
+                )
+            })
             .collect();
         assert_eq!(
             shown,
             [
-                ("line 0", None, size),
-                ("line 2", None, size),
-                ("line 3", Some("rk/0003.svg"), 0),
-                ("line 4", Some("rk/0004.svg"), 0),
+                ("line 0", None, size, false),
+                ("line 2", None, size, false),
+                ("line 3", Some("rk/0003.svg"), 0, false),
+                ("line 4", None, size, true),
             ]
         );
         assert!(figures.iter().all(|f| f.collapsed));
@@ -748,7 +785,8 @@ mod tests {
             page.contains("<a href=\"rk/0003.svg\">rk/0003.svg</a>"),
             "{page}"
         );
-        assert_eq!(page.matches("data:image/png;base64,").count(), 2);
+        assert_eq!(page.matches("data:image/png;base64,").count(), 3);
+        assert_eq!(page.matches("<details class=\"print\">").count(), 1);
     }
 
     /// The room left for per-line figures: the page's limit less the page without them and a

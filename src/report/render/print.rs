@@ -56,7 +56,8 @@ thead{{display:table-header-group}}tr{{break-inside:avoid}}\
 .scroll{{overflow:visible}}\
 figure{{break-inside:avoid;margin:.5em 0}}img{{max-height:105mm;max-width:100%}}\
 .areal-figures{{gap:.5em}}.areal-figures figure{{flex:1 1 30%;min-width:0}}.areal-figures img{{max-height:48mm}}\
-details,.noprint{{display:none}}\
+details:not(.print),.noprint{{display:none}}\
+details.print{{display:inline-block;width:49%;vertical-align:top}}details.print::details-content{{content-visibility:visible;display:block}}details.print>summary{{list-style:none;font-weight:bold}}\
 .keep{{break-inside:avoid}}\
 .signatures{{break-inside:avoid;margin-top:1.5em}}\
 .lab-header{{border-bottom:1px solid #999}}\
@@ -145,10 +146,85 @@ pub fn to_the_second(s: &str) -> String {
     }
 }
 
+/// The lines whose assessed profile and Rk construction a print shows, by file index, with
+/// why: those of largest, median (the lower of two) and smallest Ra, each once, in that
+/// order — the lines that bound the result; every line when there are at most three. The
+/// rest are in `report.html` (opened on screen) and in `rk/NNNN.svg` beside it.
+pub fn printed_lines(report: &Value) -> Vec<(u32, &'static str)> {
+    let mut ra: Vec<(f64, u32)> = (report["lines"].as_array().into_iter().flatten())
+        .filter_map(|l| Some((l["Ra_um"].as_f64()?, l["index"].as_u64()?.try_into().ok()?)))
+        .collect();
+    ra.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    let n = ra.len();
+    let mut out: Vec<(u32, &'static str)> = Vec::with_capacity(3);
+    for (k, why) in [
+        (0, "largest Ra"),
+        (n / 2, "median Ra"),
+        (n.saturating_sub(1), "smallest Ra"),
+    ] {
+        match ra.get(k) {
+            Some(&(_, i)) if out.iter().all(|p| p.0 != i) => out.push((i, why)),
+            _ => {}
+        }
+    }
+    out
+}
+
+/// The sentence above the per-line figures saying which of them a print shows (none when
+/// no line has an Ra).
+pub fn printed_lines_sentence(report: &Value) -> Option<String> {
+    let n = report["lines"].as_array().map_or(0, Vec::len);
+    let which: Vec<String> = printed_lines(report)
+        .iter()
+        .map(|(i, why)| format!("{why}: line {}", crate::numfmt::line_label(*i)))
+        .collect();
+    (!which.is_empty()).then(|| format!(
+        "On paper, the assessed profile and Rk construction of {} of {n} lines ({}); every line's figure is in report.html and in rk/ beside it.",
+        which.len(),
+        which.join("; ")
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use serde_json::json;
+
+    #[test]
+    fn the_printed_lines_are_those_of_largest_median_and_smallest_ra_each_once() {
+        let lines = |ra: &[f64]| {
+            let l: Vec<Value> = (ra.iter().enumerate())
+                .map(|(i, r)| json!({"index": i + 10, "Ra_um": r}))
+                .collect();
+            json!({ "lines": l })
+        };
+        let indices = |ra: &[f64]| {
+            printed_lines(&lines(ra))
+                .iter()
+                .map(|p| p.0)
+                .collect::<Vec<_>>()
+        };
+        let five = lines(&[3.0, 1.0, 5.0, 2.0, 4.0]);
+        let why = ["largest Ra", "median Ra", "smallest Ra"];
+        assert_eq!(
+            printed_lines(&five),
+            [(12, why[0]), (10, why[1]), (11, why[2])]
+        );
+        // Of an even count, the lower middle value; equal values by line order; each once.
+        assert_eq!(indices(&[1.0, 2.0, 2.0, 4.0]), [13, 12, 10]);
+        assert_eq!(
+            printed_lines(&lines(&[1.0, 2.0])),
+            [(11, why[0]), (10, why[1])]
+        );
+        assert_eq!(indices(&[1.0]), [10]);
+        let mut no_ra = lines(&[1.0, 9.0]);
+        no_ra["lines"][1]["Ra_um"] = Value::Null;
+        assert_eq!(indices(&[]), [0u32; 0]);
+        assert_eq!(printed_lines(&no_ra), [(10, why[0])]);
+        assert_eq!(printed_lines_sentence(&json!({})), None);
+        let s = printed_lines_sentence(&five).unwrap();
+        assert!(s.contains("3 of 5 lines (largest Ra: line 13 (0012); median Ra: line 11 (0010); smallest Ra: line 12 (0011))"), "{s}");
+    }
 
     #[test]
     fn css_strings_cannot_leave_the_string_or_the_style_element() {
