@@ -14,9 +14,10 @@
 //! both MD5 sums checked when present. Deflate is miniz_oxide's, XML roxmltree's.
 //!
 //! Layer 1 (pure logic, a file format as [`crate::iges`] is): depends on
-//! [`crate::metrology`]'s checks of heights and pitches only; takes and returns bytes (or
+//! [`crate::metrology`]'s checks of heights and pitches and its height map only; takes and returns bytes (or
 //! writes them to the caller's writer, [`X3p::write_to`]), the caller does the I/O.
 
+use crate::metrology::areal::HeightMap;
 use crate::metrology::{check_heights, check_pitch, MetrologyError};
 use std::io::Write;
 
@@ -201,20 +202,23 @@ fn record2(meta: &X3pMeta) -> String {
     )
 }
 
-/// The X3P archive of a row-major grid (heights µm, `rows` lines along y, `cols` points along x).
-/// `first_y_mm` is the machine y of the first line, written as the CY axis offset so that the
-/// file places the grid where the stage traced it. `main.xml` is valid against the ISO 5436-2
-/// schema (`tests/data/x3p/iso5436_2.xsd`); Record2 is left out when `meta` states no
-/// calibration date.
+/// The X3P archive of a height map (heights µm, `rows` lines along y, `cols` points along x,
+/// row-major). `first_y_mm` is the machine y of the first line, written as the CY axis offset
+/// so that the file places the grid where the stage traced it. `main.xml` is valid against
+/// the ISO 5436-2 schema (`tests/data/x3p/iso5436_2.xsd`); Record2 is left out when `meta`
+/// states no calibration date.
 pub fn x3p<'a>(
-    heights_um: &'a [f64],
-    rows: usize,
-    cols: usize,
-    pitch_x_mm: f64,
-    pitch_y_mm: f64,
+    map: &HeightMap<'a>,
     first_y_mm: f64,
     meta: &X3pMeta,
 ) -> Result<X3p<'a>, MetrologyError> {
+    let &HeightMap {
+        heights_um,
+        rows,
+        cols,
+        pitch_x_mm,
+        pitch_y_mm,
+    } = map;
     if !first_y_mm.is_finite() {
         return Err(bad(format!(
             "the y of the first line ({first_y_mm} mm) is not a finite number"
@@ -311,17 +315,11 @@ impl X3p<'_> {
 
 /// [`x3p`]'s archive as bytes.
 pub fn to_x3p(
-    heights_um: &[f64],
-    rows: usize,
-    cols: usize,
-    pitch_x_mm: f64,
-    pitch_y_mm: f64,
+    map: &HeightMap<'_>,
     first_y_mm: f64,
     meta: &X3pMeta,
 ) -> Result<Vec<u8>, MetrologyError> {
-    let file = x3p(
-        heights_um, rows, cols, pitch_x_mm, pitch_y_mm, first_y_mm, meta,
-    )?;
+    let file = x3p(map, first_y_mm, meta)?;
     let mut bytes = Vec::new();
     file.write_to(&mut bytes)
         .expect("writing to memory cannot fail");

@@ -856,13 +856,25 @@ fn zip_local(entries: &[(&str, &[u8])]) -> Vec<u8> {
 
 /// The XML of an archive written by `to_x3p` (3 × 4 heights) and its point data.
 fn x3p_parts() -> (Vec<u8>, Vec<u8>, Vec<u8>) {
+    use surfscan::metrology::areal::HeightMap;
     use surfscan::x3p::{to_x3p, X3pMeta};
     let heights: Vec<f64> = (0..12).map(|i| i as f64 * 0.1 - 0.3).collect();
     let meta = X3pMeta {
         creator: "fuzz".into(),
         ..X3pMeta::default()
     };
-    let archive = to_x3p(&heights, 3, 4, 0.0015, 0.01, 0.0, &meta).unwrap();
+    let archive = to_x3p(
+        &HeightMap {
+            heights_um: &heights,
+            rows: 3,
+            cols: 4,
+            pitch_x_mm: 0.0015,
+            pitch_y_mm: 0.01,
+        },
+        0.0,
+        &meta,
+    )
+    .unwrap();
     let xml_start = archive.windows(5).position(|w| w == b"<?xml").unwrap();
     let end_tag = b"</p:ISO5436_2>\n";
     let xml_end = archive

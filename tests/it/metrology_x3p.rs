@@ -6,7 +6,19 @@
 
 use std::path::Path;
 use std::process::Command;
+use surfscan::metrology::areal::HeightMap;
 use surfscan::x3p::{crc32, md5, read_x3p, to_x3p, X3pMeta};
+
+/// `z` as `rows` lines of `cols` points, 1.5 µm apart along x and 10 µm along y.
+fn map(z: &[f64], rows: usize, cols: usize) -> HeightMap<'_> {
+    HeightMap {
+        heights_um: z,
+        rows,
+        cols,
+        pitch_x_mm: 0.0015,
+        pitch_y_mm: 0.01,
+    }
+}
 
 /// Unpacks `file` with Python's zipfile (not our reader), validates `main.xml` against the
 /// ISO 5436-2 schema with xmllint, checks `md5checksum.hex` with `md5sum -c` and the point
@@ -101,7 +113,7 @@ fn x3p_round_trips_and_surfalize_reads_it() {
         comment: "measured grid <test> & more".to_string(),
         ..X3pMeta::default()
     };
-    let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, 0.0, &meta).unwrap();
+    let bytes = to_x3p(&map(&z, rows, cols), 0.0, &meta).unwrap();
     let back = read_x3p(&bytes).unwrap();
     assert_eq!((back.rows, back.cols), (rows, cols));
     // Record2 comes back unescaped; empty fields were written as "not available".
@@ -216,7 +228,7 @@ fn x3p_files_of_other_software_are_read() {
 #[test]
 fn damaged_or_unsupported_x3p_files_are_named_clearly() {
     let (z, rows, cols) = grid();
-    let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, 0.0, &X3pMeta::default()).unwrap();
+    let bytes = to_x3p(&map(&z, rows, cols), 0.0, &X3pMeta::default()).unwrap();
     let e = read_x3p(&bytes[..bytes.len() / 2]).unwrap_err().to_string();
     assert!(e.contains("not a readable X3P file"), "{e}");
     let e = read_x3p(b"x_mm,z_um\n0,1\n").unwrap_err().to_string();
@@ -235,7 +247,7 @@ fn calibration_date_and_manufacturer_are_what_the_caller_gives() {
         probe: "SJ-210 stylus, tip radius 2 µm".into(),
         ..X3pMeta::default()
     };
-    let back = read_x3p(&to_x3p(&z, rows, cols, 0.0015, 0.01, 0.0, &meta).unwrap()).unwrap();
+    let back = read_x3p(&to_x3p(&map(&z, rows, cols), 0.0, &meta).unwrap()).unwrap();
     // The calibration date, not the scan's start; a plain date becomes an xsd:dateTime.
     assert_eq!(back.meta.calibration_date, "2026-03-14T00:00:00");
     assert_eq!(back.meta.date, "2026-11-30T09:15:00+00:00");
@@ -248,7 +260,7 @@ fn calibration_date_and_manufacturer_are_what_the_caller_gives() {
         calibration_date: String::new(),
         ..meta
     };
-    let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, 0.0, &unknown).unwrap();
+    let bytes = to_x3p(&map(&z, rows, cols), 0.0, &unknown).unwrap();
     assert!(!main_xml(&bytes).contains("CalibrationDate"));
     assert!(!main_xml(&bytes).contains("Record2"));
     assert_eq!(read_x3p(&bytes).unwrap().meta, X3pMeta::default());
@@ -287,14 +299,14 @@ fn every_x3p_written_validates_against_iso_5436_2() {
         let path = dir.path().join(name);
         std::fs::write(
             &path,
-            to_x3p(&z, rows, cols, 0.0015, 0.01, first_y_mm, &meta).unwrap(),
+            to_x3p(&map(&z, rows, cols), first_y_mm, &meta).unwrap(),
         )
         .unwrap();
         assert_valid_x3p(&path);
     }
     // The check catches a file the schema refuses: Record2 without its CalibrationDate (what
     // this writer wrote before).
-    let bytes = to_x3p(&z, rows, cols, 0.0015, 0.01, 0.0, &X3pMeta::default()).unwrap();
+    let bytes = to_x3p(&map(&z, rows, cols), 0.0, &X3pMeta::default()).unwrap();
     let xml = main_xml(&bytes) + "</p:ISO5436_2>\n";
     let broken = crate::common::edited(
         &xml,
@@ -333,7 +345,18 @@ fn axes_carry_the_machine_y_of_the_first_line_and_pitches_without_float_noise() 
     let (pitch_y_mm, _) = surfscan::grid::mean_pitch_y(&y);
     assert_ne!(pitch_y_mm, 0.01, "the test needs a noisy mean pitch");
     let z: Vec<f64> = (0..31).flat_map(|_| z[..cols].to_vec()).collect();
-    let bytes = to_x3p(&z, 31, cols, 0.0015, pitch_y_mm, y[0], &X3pMeta::default()).unwrap();
+    let bytes = to_x3p(
+        &HeightMap {
+            heights_um: &z,
+            rows: 31,
+            cols,
+            pitch_x_mm: 0.0015,
+            pitch_y_mm,
+        },
+        y[0],
+        &X3pMeta::default(),
+    )
+    .unwrap();
     let xml = main_xml(&bytes);
     assert!(xml.contains("<CX><AxisType>I</AxisType><DataType>D</DataType><Increment>1.5e-6</Increment><Offset>0</Offset></CX>"), "{xml}");
     assert!(xml.contains("<CY><AxisType>I</AxisType><DataType>D</DataType><Increment>1e-5</Increment><Offset>1.234e-2</Offset></CY>"), "{xml}");
@@ -345,7 +368,7 @@ fn axes_carry_the_machine_y_of_the_first_line_and_pitches_without_float_noise() 
     );
     assert!((back.pitch_y_mm - 0.01).abs() < 1e-15);
     // A non-finite first y is refused, not written.
-    assert!(to_x3p(&z, 31, cols, 0.0015, 0.01, f64::NAN, &X3pMeta::default()).is_err());
+    assert!(to_x3p(&map(&z, 31, cols), f64::NAN, &X3pMeta::default()).is_err());
 }
 
 #[test]
@@ -367,11 +390,13 @@ fn analyze_reads_an_x3p_as_the_same_grid_as_its_csv() {
     std::fs::write(
         &x3p,
         to_x3p(
-            &z,
-            rows.len(),
-            cols,
-            0.003484,
-            0.010452,
+            &HeightMap {
+                heights_um: &z,
+                rows: rows.len(),
+                cols,
+                pitch_x_mm: 0.003484,
+                pitch_y_mm: 0.010452,
+            },
             0.0,
             &X3pMeta::default(),
         )

@@ -403,20 +403,12 @@ pub fn write_data_files(
     let first_y_mm = grid.y_mm.first().copied().unwrap_or(0.0);
     let (plots, rk_plots, x3p) = std::thread::scope(|s| {
         let x3p = s.spawn(|| -> Result<(PathBuf, Option<PathBuf>), ReportError> {
-            // Encodes one grid of heights at the grid's y pitch and writes it as `name`,
-            // streamed: the archive's bytes are never held whole.
-            let write = |name: &str, heights: &[f64], cols, pitch_x_mm, meta: &X3pMeta| {
+            // Encodes one height map as `name` and writes it, streamed: the archive's bytes
+            // are never held whole.
+            let write = |name: &str, map: &HeightMap<'_>, meta: &X3pMeta| {
                 let path = out.join(name);
-                let file = x3p(
-                    heights,
-                    measured.rows,
-                    cols,
-                    pitch_x_mm,
-                    measured.pitch_y_mm,
-                    first_y_mm,
-                    meta,
-                )
-                .map_err(metrology(format!("{input}: {name}")))?;
+                let file =
+                    x3p(map, first_y_mm, meta).map_err(metrology(format!("{input}: {name}")))?;
                 write_atomically(&path, |w| file.write_to(w)).map_err(|source| {
                     ReportError::Io {
                         path: path.clone(),
@@ -425,22 +417,17 @@ pub fn write_data_files(
                 })?;
                 Ok::<_, ReportError>(path)
             };
-            let measured_x3p = write(
-                "measured.x3p",
-                &grid.heights_um,
-                measured.cols,
-                measured.pitch_x_mm,
-                &measured_meta,
-            )?;
+            let measured_x3p = write("measured.x3p", measured, &measured_meta)?;
+            // The model is sampled on the measured lines, at its own x pitch.
             let model_x3p = sampled
                 .map(|m| {
-                    write(
-                        "model.x3p",
-                        &m.heights_um,
-                        m.cols,
-                        m.pitch_x_mm,
-                        &model_meta,
-                    )
+                    let map = HeightMap {
+                        heights_um: &m.heights_um,
+                        cols: m.cols,
+                        pitch_x_mm: m.pitch_x_mm,
+                        ..*measured
+                    };
+                    write("model.x3p", &map, &model_meta)
                 })
                 .transpose()?;
             Ok((measured_x3p, model_x3p))
