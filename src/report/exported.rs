@@ -73,8 +73,8 @@ pub struct Characteristic {
     pub verdict: Option<Verdict>,
     /// The verdict in words, one per limit.
     pub reasons: Vec<String>,
-    /// Each line's value, µm, in the order of [`Exported::lines`] (`None`: the line has
-    /// none).
+    /// Each line's value, µm, in the order of [`Exported::lines`] (`None`: the line has no
+    /// finite one).
     pub values_um: Vec<Option<f64>>,
     /// Lines (1-based) beyond a limit by more than their uncertainty.
     pub lines_beyond: Vec<u64>,
@@ -218,7 +218,10 @@ impl Exported {
             .collect();
         let value_of = |parameter: &str| -> Vec<Option<f64>> {
             let key = format!("{parameter}_um");
-            line_values.iter().map(|l| l.get(&key)?.as_f64()).collect()
+            line_values
+                .iter()
+                .map(|l| l.get(&key)?.as_f64().filter(|v| v.is_finite()))
+                .collect()
         };
         let stats: BTreeMap<String, &Value> = report
             .get("uncertainty")

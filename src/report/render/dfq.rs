@@ -150,13 +150,7 @@ pub fn dfq_text(r: &Exported) -> String {
             .to_string();
         for (i, c) in r.characteristics.iter().enumerate() {
             let i = i + 1;
-            let Some(v) = c
-                .values_um
-                .get(k)
-                .copied()
-                .flatten()
-                .filter(|v| v.is_finite())
-            else {
+            let Some(v) = c.values_um.get(k).copied().flatten() else {
                 continue;
             };
             push(&format!("K0001/{i}"), number(v));

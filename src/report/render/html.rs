@@ -84,7 +84,9 @@ impl Figure {
     }
 }
 
-/// Text escaped for HTML element content and attribute values.
+/// Text escaped for HTML and XML element content and attribute values (`report.html`, the
+/// QIF document); control characters other than newline and tab, which XML does not allow,
+/// are left out.
 pub fn esc(s: &str) -> String {
     let mut out = String::with_capacity(s.len());
     for c in s.chars() {
@@ -94,6 +96,7 @@ pub fn esc(s: &str) -> String {
             '>' => out.push_str("&gt;"),
             '"' => out.push_str("&quot;"),
             '\'' => out.push_str("&#39;"),
+            c if c.is_control() && c != '\n' && c != '\t' => {}
             c => out.push(c),
         }
     }

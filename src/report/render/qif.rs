@@ -25,25 +25,10 @@
 //!
 //! Layer 4 (reporting): a pure formatter of [`Exported`]; the caller writes the bytes.
 
+use super::html::esc;
 use crate::report::exported::{Characteristic, Exported};
 use crate::specification::Verdict;
 use std::fmt::Write;
-
-/// XML text with `&`, `<`, `>` and `"` escaped, and control characters left out.
-fn esc(s: &str) -> String {
-    let mut o = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => o.push_str("&amp;"),
-            '<' => o.push_str("&lt;"),
-            '>' => o.push_str("&gt;"),
-            '"' => o.push_str("&quot;"),
-            c if c.is_control() && c != '\n' && c != '\t' => {}
-            c => o.push(c),
-        }
-    }
-    o
-}
 
 /// An `xs:decimal`: Rust's shortest round-trip form never has an exponent.
 fn dec(v: f64) -> String {
@@ -97,6 +82,12 @@ fn line_status(c: &Characteristic, number: u64) -> &'static str {
     } else {
         "PASS"
     }
+}
+
+/// Writes `<tag>value</tag>` on a line of its own, `indent` spaces in; `value` as given (text
+/// goes through [`esc`] first).
+fn element(b: &mut String, indent: usize, tag: &str, value: impl std::fmt::Display) {
+    let _ = writeln!(b, "{:indent$}<{tag}>{value}</{tag}>", "");
 }
 
 fn what_to_measure(c: &Characteristic, r: &Exported) -> String {
@@ -168,11 +159,7 @@ pub fn qif(r: &Exported) -> String {
         );
     };
     for (c, ids_c) in r.characteristics.iter().zip(&ch) {
-        let finite: Vec<f64> = c
-            .values_um
-            .iter()
-            .filter_map(|v| v.filter(|v| v.is_finite()))
-            .collect();
+        let finite: Vec<f64> = c.values_um.iter().flatten().copied().collect();
         if let Some(mean) = c.mean_um.filter(|m| m.is_finite()) {
             let u = c
                 .expanded_u_um
@@ -200,13 +187,7 @@ pub fn qif(r: &Exported) -> String {
             );
         }
         for (k, line) in r.lines.iter().enumerate() {
-            let Some(v) = c
-                .values_um
-                .get(k)
-                .copied()
-                .flatten()
-                .filter(|v| v.is_finite())
-            else {
+            let Some(v) = c.values_um.get(k).copied().flatten() else {
                 continue;
             };
             measure(
@@ -226,7 +207,7 @@ pub fn qif(r: &Exported) -> String {
 
     let _ = writeln!(b, "<?xml version=\"1.0\" encoding=\"UTF-8\"?>");
     let _ = writeln!(b, "<QIFDocument xmlns=\"http://qifstandards.org/xsd/qif3\" xmlns:xsi=\"http://www.w3.org/2001/XMLSchema-instance\" xsi:schemaLocation=\"http://qifstandards.org/xsd/qif3 QIFApplications/QIFDocument.xsd\" versionQIF=\"3.0.0\" idMax=\"{}\">", ids.0);
-    let _ = writeln!(b, "  <QPId>{}</QPId>", document_uuid(&r.scan_id));
+    element(b, 2, "QPId", document_uuid(&r.scan_id));
     let _ = writeln!(b, "  <StandardsDefinitions n=\"1\">\n    <Standard id=\"{standard}\">\n      <Organization><StandardsOrganizationEnum>ISO</StandardsOrganizationEnum></Organization>\n      <Designator>21920-2</Designator>\n      <Year>2021</Year>\n      <Title>Geometrical product specifications (GPS) — Surface texture: Profile — Part 2: Terms, definitions and surface texture parameters</Title>\n    </Standard>\n  </StandardsDefinitions>");
     let _ = writeln!(b, "  <FileUnits>\n    <PrimaryUnits>\n      <LinearUnit>\n        <SIUnitName>meter</SIUnitName>\n        <UnitName>micrometre</UnitName>\n        <UnitConversion><Factor>0.000001</Factor></UnitConversion>\n      </LinearUnit>\n    </PrimaryUnits>\n  </FileUnits>");
 
@@ -237,10 +218,11 @@ pub fn qif(r: &Exported) -> String {
     );
     let _ = writeln!(b, "      <MeasurementDevice id=\"{device}\">");
     let i = &r.instrument;
-    let _ = writeln!(
+    element(
         b,
-        "        <Name>{}</Name>",
-        esc(format!("{} {}", i.manufacturer, i.model).trim())
+        8,
+        "Name",
+        esc(format!("{} {}", i.manufacturer, i.model).trim()),
     );
     let _ = writeln!(
         b,
@@ -248,17 +230,13 @@ pub fn qif(r: &Exported) -> String {
         esc(&i.firmware)
     );
     if !i.manufacturer.is_empty() {
-        let _ = writeln!(
-            b,
-            "        <Manufacturer>{}</Manufacturer>",
-            esc(&i.manufacturer)
-        );
+        element(b, 8, "Manufacturer", esc(&i.manufacturer));
     }
     if !i.model.is_empty() {
-        let _ = writeln!(b, "        <ModelNumber>{}</ModelNumber>", esc(&i.model));
+        element(b, 8, "ModelNumber", esc(&i.model));
     }
     if let Some(s) = i.serial.as_deref().filter(|s| !s.is_empty()) {
-        let _ = writeln!(b, "        <SerialNumber>{}</SerialNumber>", esc(s));
+        element(b, 8, "SerialNumber", esc(s));
     }
     let _ = writeln!(
         b,
@@ -269,11 +247,7 @@ pub fn qif(r: &Exported) -> String {
     let _ = writeln!(b, "  <Product>\n    <PartSet n=\"1\">");
     let _ = writeln!(b, "      <Part id=\"{part}\">");
     let _ = writeln!(b, "        <Attributes n=\"1\"><AttributeStr name=\"description\" value=\"{}\"/></Attributes>", esc(&r.part.description));
-    let _ = writeln!(
-        b,
-        "        <ModelNumber>{}</ModelNumber>",
-        esc(&r.part.number)
-    );
+    element(b, 8, "ModelNumber", esc(&r.part.number));
     let _ = writeln!(b, "      </Part>\n    </PartSet>\n  </Product>");
 
     // The characteristics: definitions, nominals, items.
@@ -293,25 +267,19 @@ pub fn qif(r: &Exported) -> String {
                 "        <Attributes n=\"{}\">",
                 c.callouts.len() + c.reasons.len()
             );
-            for (k, callout) in c.callouts.iter().enumerate() {
+            // Each callout, then the verdict on each limit, numbered from 1.
+            let callouts = c.callouts.iter().map(|t| ("callout", t)).zip(1..);
+            let reasons = c.reasons.iter().map(|t| ("verdict", t)).zip(1..);
+            for ((name, text), k) in callouts.chain(reasons) {
                 let _ = writeln!(
                     b,
-                    "          <AttributeStr name=\"callout {}\" value=\"{}\"/>",
-                    k + 1,
-                    esc(callout)
-                );
-            }
-            for (k, reason) in c.reasons.iter().enumerate() {
-                let _ = writeln!(
-                    b,
-                    "          <AttributeStr name=\"verdict {}\" value=\"{}\"/>",
-                    k + 1,
-                    esc(reason)
+                    "          <AttributeStr name=\"{name} {k}\" value=\"{}\"/>",
+                    esc(text)
                 );
             }
             let _ = writeln!(b, "        </Attributes>");
         }
-        let _ = writeln!(b, "        <Name>{}</Name>", esc(&c.parameter));
+        element(b, 8, "Name", esc(&c.parameter));
         match (c.lower_um, c.upper_um) {
             (None, None) => {
                 let _ = writeln!(b, "        <NonTolerance>MEASURED</NonTolerance>");
@@ -319,10 +287,10 @@ pub fn qif(r: &Exported) -> String {
             (lo, hi) => {
                 let _ = writeln!(b, "        <Tolerance>");
                 if let Some(hi) = hi {
-                    let _ = writeln!(b, "          <MaxValue>{}</MaxValue>", dec(hi));
+                    element(b, 10, "MaxValue", dec(hi));
                 }
                 if let Some(lo) = lo {
-                    let _ = writeln!(b, "          <MinValue>{}</MinValue>", dec(lo));
+                    element(b, 10, "MinValue", dec(lo));
                 }
                 let _ = writeln!(
                     b,
@@ -330,11 +298,7 @@ pub fn qif(r: &Exported) -> String {
                 );
             }
         }
-        let _ = writeln!(
-            b,
-            "        <WhatToMeasure>{}</WhatToMeasure>",
-            esc(&what_to_measure(c, r))
-        );
+        element(b, 8, "WhatToMeasure", esc(&what_to_measure(c, r)));
         let _ = writeln!(b, "      </UserDefinedLinearCharacteristicDefinition>");
     }
     let _ = writeln!(b, "    </CharacteristicDefinitions>");
@@ -345,12 +309,8 @@ pub fn qif(r: &Exported) -> String {
             "      <UserDefinedLinearCharacteristicNominal id=\"{}\">",
             id.nom
         );
-        let _ = writeln!(
-            b,
-            "        <CharacteristicDefinitionId>{}</CharacteristicDefinitionId>",
-            id.def
-        );
-        let _ = writeln!(b, "        <Name>{}</Name>", esc(&c.parameter));
+        element(b, 8, "CharacteristicDefinitionId", id.def);
+        element(b, 8, "Name", esc(&c.parameter));
         let _ = writeln!(b, "      </UserDefinedLinearCharacteristicNominal>");
     }
     let _ = writeln!(b, "    </CharacteristicNominals>");
@@ -361,16 +321,12 @@ pub fn qif(r: &Exported) -> String {
             "      <UserDefinedLinearCharacteristicItem id=\"{}\">",
             id.item
         );
-        let _ = writeln!(b, "        <Name>{}</Name>", esc(&c.parameter));
+        element(b, 8, "Name", esc(&c.parameter));
         let _ = writeln!(
             b,
             "        <MeasurementDeviceIds n=\"1\"><Id>{device}</Id></MeasurementDeviceIds>"
         );
-        let _ = writeln!(
-            b,
-            "        <CharacteristicNominalId>{}</CharacteristicNominalId>",
-            id.nom
-        );
+        element(b, 8, "CharacteristicNominalId", id.nom);
         let _ = writeln!(b, "      </UserDefinedLinearCharacteristicItem>");
     }
     let _ = writeln!(b, "    </CharacteristicItems>");
@@ -383,22 +339,15 @@ pub fn qif(r: &Exported) -> String {
         let _ = writeln!(b, "        <Attributes n=\"1\"><AttributeStr name=\"verdict\" value=\"{}\"/></Attributes>", esc(summary));
     }
     let _ = writeln!(b, "        <InspectionTraceability>");
-    let _ = writeln!(
+    element(b, 10, "ReportNumber", esc(&r.scan_id));
+    element(
         b,
-        "          <ReportNumber>{}</ReportNumber>",
-        esc(&r.scan_id)
-    );
-    let _ = writeln!(
-        b,
-        "          <InspectionStart>{}</InspectionStart>",
-        r.started_at.format("%Y-%m-%dT%H:%M:%SZ")
+        10,
+        "InspectionStart",
+        r.started_at.format("%Y-%m-%dT%H:%M:%SZ"),
     );
     if let Some(f) = r.finished_at {
-        let _ = writeln!(
-            b,
-            "          <InspectionEnd>{}</InspectionEnd>",
-            f.format("%Y-%m-%dT%H:%M:%SZ")
-        );
+        element(b, 10, "InspectionEnd", f.format("%Y-%m-%dT%H:%M:%SZ"));
     }
     if !r.operator.is_empty() {
         let _ = writeln!(
@@ -431,11 +380,7 @@ pub fn qif(r: &Exported) -> String {
     );
     let _ = writeln!(b, "        <ActualComponent id=\"{component}\">");
     if !r.specimen.is_empty() {
-        let _ = writeln!(
-            b,
-            "          <SerialNumber>{}</SerialNumber>",
-            esc(&r.specimen)
-        );
+        element(b, 10, "SerialNumber", esc(&r.specimen));
     }
     let _ = writeln!(
         b,
