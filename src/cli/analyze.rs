@@ -32,7 +32,6 @@
 use super::input_args::InputArgs;
 use super::model_args::ModelArgs;
 use super::{CliError, Exit};
-use crate::grid::Grid;
 use crate::input::{GridInput, Source};
 use crate::jobs::recipe::Recipe;
 use crate::metrology::params::{analyze_line, Options, Recipe as LineRecipe, RoughnessParams};
@@ -147,12 +146,6 @@ pub struct Args {
     /// the verdict between lines beside it.
     #[arg(long, value_name = "MM", requires = "contact")]
     pub contact_model_pitch_y: Option<f64>,
-    /// Degree of the model along u (x). Default: a scan's frozen plan, else 5 (the paper).
-    #[arg(long)]
-    pub degree_u: Option<usize>,
-    /// Degree of the model along v (y). Default: a scan's frozen plan, else 5 (the paper).
-    #[arg(long)]
-    pub degree_v: Option<usize>,
     /// Spikes: flag (named, the data as measured) or exclude (also left out of the per-line
     /// and measured-grid parameters, bridged by the straight line between neighbours).
     /// Default: a scan's frozen `[analysis]`, else flag.
@@ -412,11 +405,13 @@ fn finish(o: &ScanOutputs, judged: bool) -> Result<(), CliError> {
     ))
 }
 
-/// Refuses a `--lc`, `--curves` or `--levels` outside the range the same setting has in a
-/// station's `[analysis]` (λc 0 or NaN, one level, a hundred million levels that would run for
-/// minutes) as a usage error, before anything is read.
-fn check_analysis_flags(args: &Args) -> Result<(), CliError> {
+/// Refuses, as a usage error before anything is read: a degree of 0; a `--lc`, `--curves` or
+/// `--levels` outside the range the same setting has in a station's `[analysis]` (λc 0 or NaN,
+/// one level, a hundred million levels that would run for minutes); `--sampling-lengths 0`, a
+/// `--ls` that is no length; and the flags for files given with a scan directory.
+fn check_args(args: &Args) -> Result<(), CliError> {
     use crate::config::{Num, NumericKey};
+    args.model.check_degrees()?;
     let flags = [
         ("--lc", "analysis.lambda-c-mm", args.lc.map(Num::Real)),
         (
@@ -436,55 +431,35 @@ fn check_analysis_flags(args: &Args) -> Result<(), CliError> {
                 .map_err(|m| CliError::new(Exit::Usage, m))?;
         }
     }
+    let usage = |m: String| Err(CliError::new(Exit::Usage, m));
     if args.sampling_lengths == Some(0) {
-        return Err(CliError::new(
-            Exit::Usage,
-            "--sampling-lengths 0: give at least 1 sampling length (ISO 4288's default is 5)",
+        return usage(
+            "--sampling-lengths 0: give at least 1 sampling length (ISO 4288's default is 5)"
+                .into(),
+        );
+    }
+    if args.input.is_dir() && (args.ls.is_some() || args.form.is_some()) {
+        return usage("--ls and --form are for CSV and X3P inputs; a scan's lines are evaluated as the instrument filtered them (its λs is in the recorded conditions)".into());
+    }
+    if let Some(l) = args.ls.filter(|l| !(l.is_finite() && *l > 0.0)) {
+        return usage(format!(
+            "--ls {l} must be a positive length in µm, e.g. 2.5 or 8"
         ));
+    }
+    if args.input.is_dir() && args.sampling_lengths.is_some() {
+        return usage("--sampling-lengths is for CSV and X3P inputs; a scan's lines are evaluated with the N the instrument recorded".into());
     }
     Ok(())
 }
 
-/// Runs `surfscan analyze`.
+/// Runs `surfscan analyze`: the flags checked, the station and recipe loaded, the input read
+/// by the one reader, then a profile's parameters, or the characterisation of a scan or a
+/// grid with the options the flags and the scan's frozen plan make.
 pub fn run(args: Args) -> Result<(), CliError> {
-    if args.degree_u == Some(0) || args.degree_v == Some(0) {
-        return Err(CliError::new(
-            Exit::Usage,
-            "--degree-u and --degree-v must be at least 1 (the paper uses 5)",
-        ));
-    }
-    check_analysis_flags(&args)?;
-    if args.input.is_dir() && (args.ls.is_some() || args.form.is_some()) {
-        return Err(CliError::new(
-            Exit::Usage,
-            "--ls and --form are for CSV and X3P inputs; a scan's lines are evaluated as the instrument filtered them (its λs is in the recorded conditions)",
-        ));
-    }
-    if args.ls.is_some_and(|l| !(l.is_finite() && l > 0.0)) {
-        return Err(CliError::new(
-            Exit::Usage,
-            format!(
-                "--ls {} must be a positive length in µm, e.g. 2.5 or 8",
-                args.ls.unwrap_or(f64::NAN)
-            ),
-        ));
-    }
-    if args.input.is_dir() && args.sampling_lengths.is_some() {
-        return Err(CliError::new(
-            Exit::Usage,
-            "--sampling-lengths is for CSV and X3P inputs; a scan's lines are evaluated with the N the instrument recorded",
-        ));
-    }
+    check_args(&args)?;
     let station = match &args.config {
         Some(path) => Some(super::station::load_config(path)?.0),
         None => None,
-    };
-    let lab = station.as_ref().map(|c| c.report.clone());
-    // `--line-png` adds the per-line PNGs to the `[report]` of `--config`, else to the one a
-    // scan's journal recorded.
-    let line_png = |lab: LabHeader| LabHeader {
-        line_png: lab.line_png || args.line_png,
-        ..lab
     };
     let recipe = match &args.recipe {
         Some(r) => Some(recipe_of(r, station.as_ref())?),
@@ -492,90 +467,39 @@ pub fn run(args: Args) -> Result<(), CliError> {
     };
     let judged = recipe.is_some();
     let input = args.read.read(&args.input)?;
-    if judged && input.is_profile() {
-        return Err(CliError::new(
-            Exit::Usage,
-            "--recipe is for scan directories and grids: a single profile is one value, and the 16 % and max rules judge a surface's lines",
-        ));
+    if input.is_profile() {
+        if judged {
+            return Err(CliError::new(
+                Exit::Usage,
+                "--recipe is for scan directories and grids: a single profile is one value, and the 16 % and max rules judge a surface's lines",
+            ));
+        }
+        return characterise_profile(&args, input, &line_options(&args), &out_dir(&args));
     }
-    let specification = recipe.map(|r| r.specification);
-    if let Source::Scan(vouched) = &input.source {
-        // The characterisation's settings the scan froze in its plan, each flag overriding its
-        // part (a journal of an older version froze none).
-        let frozen = match vouched
-            .journal
-            .as_ref()
-            .ok()
-            .and_then(|s| s.start.plan.analysis.as_ref())
-        {
-            Some(a) => ScanAnalysisOptions::default().with_frozen(a),
-            None => ScanAnalysisOptions::default(),
-        };
-        let base = ScanAnalysisOptions {
-            out_dir: args.out.clone(),
-            lab: lab
-                .or_else(|| {
-                    vouched
-                        .journal
-                        .as_ref()
-                        .ok()
-                        .map(|s| LabHeader::of_frozen_config(&s.start.config))
-                })
-                .map(line_png),
-            specification,
-            ..frozen
-        };
-        let options = analysis_options(&args, base, input.grid.rows())?;
-        let outputs = characterise_scan(&input, &options).map_err(report_error)?;
-        return finish(&outputs, judged);
-    }
-    let out = args.out.clone().unwrap_or_else(|| PathBuf::from("."));
-    let options = Options {
+    let options = analysis_options(&args, &input, station.as_ref(), recipe)?;
+    let outputs = match &input.source {
+        Source::Scan(_) => characterise_scan(&input, &options),
+        _ => characterise_grid(&args, &input, options),
+    };
+    finish(&outputs.map_err(report_error)?, judged)
+}
+
+/// Where a file's outputs go: `--out`, else the working directory.
+fn out_dir(args: &Args) -> PathBuf {
+    args.out.clone().unwrap_or_else(|| PathBuf::from("."))
+}
+
+/// How a file's lines are evaluated: `--lc` (default 0.8 mm), `--no-filter`, `--ls`,
+/// `--sampling-lengths` and `--form`.
+fn line_options(args: &Args) -> Options {
+    Options {
         lambda_c_mm: args.lc.unwrap_or(DEFAULT_LC_MM),
         apply_lambda_c: !args.no_filter,
         lambda_s_um: args.ls,
         sampling_lengths: None,
         central_sections: args.sampling_lengths,
         form: args.form,
-    };
-    if input.is_profile() {
-        return characterise_profile(&args, input, &options, &out);
     }
-    let lambda_c_source = match args.lc {
-        Some(v) => format!("given ({v} mm)"),
-        None => format!("default {DEFAULT_LC_MM} mm (set --lc to choose)"),
-    };
-    let filter_reason = if args.no_filter {
-        "no λc filter: asked for (--no-filter)".to_string()
-    } else if matches!(input.source, Source::X3p { .. }) {
-        "λc filter applied: an X3P file is taken as a primary surface unless --no-filter"
-            .to_string()
-    } else {
-        "λc filter applied: a CSV is taken as a primary profile unless --no-filter".to_string()
-    };
-    let ctx = ReportContext {
-        input: input.described.clone(),
-        kind: input.kind(),
-        line_options: options,
-        lambda_c_source,
-        filter_reason,
-        traceability: None,
-        scan: None,
-        fit: None,
-        options: ScanAnalysisOptions {
-            instrument: judged.then(|| InstrumentUncertainty {
-                expanded_relative_pct: station
-                    .as_ref()
-                    .and_then(|c| c.traceability.calibration_uncertainty_pct),
-            }),
-            specification,
-            ..ScanAnalysisOptions::default()
-        },
-        warnings: input.findings.clone(),
-        lab: line_png(lab.unwrap_or_default()),
-    };
-    let outputs = fit_and_characterise(&input.grid, ctx, &args, &out)?;
-    finish(&outputs, judged)
 }
 
 /// The recipe `--recipe` names: a file (checked by itself, or against `station` when
@@ -631,13 +555,26 @@ fn recipe_of(arg: &Path, station: Option<&crate::config::Config>) -> Result<Reci
     Ok(recipe)
 }
 
-/// The characterisation's options: each flag given overrides its part of `base` (a scan's
-/// frozen plan, or the defaults); `lines` is the grid's, for the method across them.
+/// The characterisation's options: a scan's frozen `[analysis]` (the defaults for a file or
+/// a journal of an older version), each flag given overriding its part; the output
+/// directory, `--config`'s laboratory header and `--recipe`'s limits. A judged grid takes the
+/// calibration uncertainty of `--config`'s `[traceability]` (a scan its journal's).
 fn analysis_options(
     args: &Args,
-    base: ScanAnalysisOptions,
-    lines: usize,
+    input: &GridInput,
+    station: Option<&crate::config::Config>,
+    recipe: Option<Recipe>,
 ) -> Result<ScanAnalysisOptions, CliError> {
+    let journal = match &input.source {
+        Source::Scan(v) => v.journal.as_ref().ok(),
+        _ => None,
+    };
+    let frozen = journal.and_then(|s| s.start.plan.analysis.as_ref());
+    let base = match frozen {
+        Some(a) => ScanAnalysisOptions::default().with_frozen(a),
+        None => ScanAnalysisOptions::default(),
+    };
+    let scan = matches!(input.source, Source::Scan(_));
     let paper_q = crate::fit::FitOptions::default().degree_v;
     Ok(ScanAnalysisOptions {
         curves: args.curves.unwrap_or(base.curves),
@@ -645,8 +582,8 @@ fn analysis_options(
         lambda_c_mm: args.lc.or(base.lambda_c_mm),
         no_filter: args.no_filter || base.no_filter,
         overlay_line: args.overlay_line,
-        degree_u: args.degree_u,
-        degree_v: args.degree_v,
+        degree_u: args.model.degree_u,
+        degree_v: args.model.degree_v,
         spikes: args.model.spikes_or(base.spikes)?,
         exclude_spikes: args
             .outliers
@@ -654,39 +591,74 @@ fn analysis_options(
         holdout_threshold: args.model.holdout_threshold_or(base.holdout_threshold)?,
         v_method: args
             .model
-            .v_method(lines, args.degree_v.unwrap_or(paper_q))?,
+            .v_method(input.grid.rows(), args.model.degree_v.unwrap_or(paper_q))?,
         replace_spikes: args.model.replace(),
         material_ratio: args.material_ratio.unwrap_or(base.material_ratio),
         contact: contact_options(args)?.or(base.contact),
-        ..base
+        out_dir: args.out.clone(),
+        // `--config`'s header, else the one a scan's journal recorded (a grid's default one),
+        // with the per-line PNGs when `--line-png` asks for them.
+        lab: station
+            .map(|c| c.report.clone())
+            .or_else(|| journal.map(|s| LabHeader::of_frozen_config(&s.start.config)))
+            .or_else(|| (!scan).then(LabHeader::default))
+            .map(|lab| LabHeader {
+                line_png: lab.line_png || args.line_png,
+                ..lab
+            }),
+        instrument: (recipe.is_some() && !scan).then(|| InstrumentUncertainty {
+            expanded_relative_pct: station.and_then(|c| c.traceability.calibration_uncertainty_pct),
+        }),
+        specification: recipe.map(|r| r.specification),
     })
 }
 
-/// Fits `grid` once the way the arguments ask (`--degree-u/--degree-v`, default the paper's
-/// 5/5; `--v-method`; spikes replaced only with `--replace-spikes`) and characterises it with
-/// that surface (the model sections and the hold-out refits are made the same way).
-fn fit_and_characterise(
-    grid: &Grid,
-    mut ctx: ReportContext,
+/// Characterises a grid CSV or an X3P file with `options`: fits it once the way they ask
+/// (`--degree-u/--degree-v`, default the paper's 5/5; `--v-method`; spikes replaced only with
+/// `--replace-spikes`) and describes that surface (the model sections and the hold-out refits
+/// are made the same way); the lines are evaluated as [`line_options`] says.
+fn characterise_grid(
     args: &Args,
-    out: &Path,
-) -> Result<ScanOutputs, CliError> {
-    let analysis = analysis_options(args, std::mem::take(&mut ctx.options), grid.rows())?;
-    let mut recipe = crate::report::scan_dir::scan_recipe(&analysis, None, &[]);
-    recipe.lambda_c_mm = ctx
-        .line_options
+    input: &GridInput,
+    options: ScanAnalysisOptions,
+) -> Result<ScanOutputs, ReportError> {
+    let line_options = line_options(args);
+    let mut recipe = crate::report::scan_dir::scan_recipe(&options, None, &[]);
+    recipe.lambda_c_mm = line_options
         .apply_lambda_c
-        .then_some(ctx.line_options.lambda_c_mm);
-    let (fitted, summary, fit_s) = fit_for_report(grid, &recipe);
-    ctx.fit = summary;
-    ctx.options = analysis;
+        .then_some(line_options.lambda_c_mm);
+    let (fitted, fit, fit_s) = fit_for_report(&input.grid, &recipe);
+    let lambda_c_source = match args.lc {
+        Some(v) => format!("given ({v} mm)"),
+        None => format!("default {DEFAULT_LC_MM} mm (set --lc to choose)"),
+    };
+    let filter_reason = match (args.no_filter, &input.source) {
+        (true, _) => "no λc filter: asked for (--no-filter)",
+        (false, Source::X3p { .. }) => {
+            "λc filter applied: an X3P file is taken as a primary surface unless --no-filter"
+        }
+        _ => "λc filter applied: a CSV is taken as a primary profile unless --no-filter",
+    };
+    let ctx = ReportContext {
+        input: input.described.clone(),
+        kind: input.kind(),
+        line_options,
+        lambda_c_source,
+        filter_reason: filter_reason.to_string(),
+        traceability: None,
+        scan: None,
+        fit,
+        lab: options.lab.clone().unwrap_or_default(),
+        options,
+        warnings: input.findings.clone(),
+    };
     let model = Model {
         recipe,
         fit: fitted.as_ref().map(|m| &m.fit),
         replaced: fitted.as_ref().map_or(&[][..], |m| &m.replaced[..]),
         fit_s,
     };
-    characterise(grid, model, ctx, out).map_err(report_error)
+    characterise(&input.grid, model, ctx, &out_dir(args))
 }
 
 /// What `analyze` of a profile CSV says it found, as the instrument's display would show it:

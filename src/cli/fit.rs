@@ -81,12 +81,6 @@ pub struct Args {
     /// The pitches of a grid CSV and the unit of a CSV's heights.
     #[command(flatten)]
     pub read: InputArgs,
-    /// Degree along u (x). Default: a scan's frozen plan, else 5 (the paper).
-    #[arg(long)]
-    pub degree_u: Option<usize>,
-    /// Degree along v (y). Default: a scan's frozen plan, else 5 (the paper).
-    #[arg(long)]
-    pub degree_v: Option<usize>,
     /// Write a JSON fit report here.
     #[arg(long)]
     pub report: Option<PathBuf>,
@@ -243,7 +237,11 @@ fn read_input(args: &Args) -> Result<Input, CliError> {
         return Ok(Input {
             input,
             output,
-            degrees: crate::report::scan_dir::scan_degrees(args.degree_u, args.degree_v, None),
+            degrees: crate::report::scan_dir::scan_degrees(
+                args.model.degree_u,
+                args.model.degree_v,
+                None,
+            ),
             plan: None,
             lambda_c_mm: None,
         });
@@ -266,7 +264,8 @@ fn read_input(args: &Args) -> Result<Input, CliError> {
         }
     }
     let start = vouched.journal.as_ref().ok().map(|s| &s.start);
-    let degrees = crate::report::scan_dir::scan_degrees(args.degree_u, args.degree_v, start);
+    let degrees =
+        crate::report::scan_dir::scan_degrees(args.model.degree_u, args.model.degree_v, start);
     let plan = start.map(|s| s.plan.clone());
     let lambda_c_mm = vouched.lines.first().and_then(|l| {
         let o = crate::metrology::params::Options::from_profile(&l.profile);
@@ -908,12 +907,7 @@ impl<'a> Fitting<'a> {
 
 /// The arguments no input could make valid: a degree of 0, a line limit of 0.
 fn check_args(args: &Args) -> Result<(), CliError> {
-    if args.degree_u == Some(0) || args.degree_v == Some(0) {
-        return Err(CliError::new(
-            Exit::Usage,
-            "--degree-u and --degree-v must be at least 1 (the paper uses 5)",
-        ));
-    }
+    args.model.check_degrees()?;
     // 0 lines would be taken as 1 and the refusal would then name a limit never given.
     for (name, v) in [
         ("--max-iges-lines-per-file", args.max_iges_lines_per_file),

@@ -1,5 +1,5 @@
 //! The options `surfscan fit` and `surfscan analyze` share for the surface and the spikes:
-//! the method across the lines, spike replacement before fitting (only when asked), the
+//! the degrees, the method across the lines, spike replacement before fitting (only when asked), the
 //! spike rule and the hold-out threshold of the verdict on the model between lines. Each
 //! defaults to a scan's frozen plan where it has one, else to the paper.
 //!
@@ -21,6 +21,12 @@ pub enum VMethodArg {
 /// Surface and spike options.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ModelArgs {
+    /// Degree of the model along u (x). Default: a scan's frozen plan, else 5 (the paper).
+    #[arg(long)]
+    pub degree_u: Option<usize>,
+    /// Degree of the model along v (y). Default: a scan's frozen plan, else 5 (the paper).
+    #[arg(long)]
+    pub degree_v: Option<usize>,
     /// Across the lines: interpolate (the paper) or least-squares. Default: a scan's frozen
     /// plan, else interpolate.
     #[arg(long, value_enum)]
@@ -49,6 +55,17 @@ pub struct ModelArgs {
 }
 
 impl ModelArgs {
+    /// Refuses a degree of 0, which no input could make valid.
+    pub fn check_degrees(&self) -> Result<(), CliError> {
+        if self.degree_u == Some(0) || self.degree_v == Some(0) {
+            return Err(CliError::new(
+                Exit::Usage,
+                "--degree-u and --degree-v must be at least 1 (the paper uses 5)",
+            ));
+        }
+        Ok(())
+    }
+
     /// The spike rule, checked: as given, else the default rule.
     pub fn spikes(&self) -> Result<SpikeOptions, CliError> {
         self.spikes_or(SpikeOptions::default())
