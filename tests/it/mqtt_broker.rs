@@ -6,7 +6,8 @@
 //! the retained status and `online` say where the station is; a completed scan's results
 //! (recipe, specimen, verdict, each parameter's mean, s and U, the files with their SHA-256)
 //! arrive once after its success event, checked against report.json and `sha256sum`; a wrong
-//! password is named in the status and the log; and none of it touches the scan.
+//! password, and a broker certificate that does not verify, are named in the status and
+//! the log; and none of it touches the scan.
 
 use crate::common::mosquitto::{self, Broker, Seen};
 use crate::daemon_e2e::{self as e2e, Daemon, Rig};
@@ -575,6 +576,53 @@ async fn a_wrong_password_is_named_in_the_status_and_the_log_and_the_scan_is_una
         "the log does not name the refusal: {log}"
     );
     drop(broker);
+}
+
+/// A broker whose certificate chains to no authority the station trusts: named in the status
+/// and the log with the setting that fixes it, the scan unaffected. The same broker with its
+/// CA in `[mqtt] ca-file` is trusted, so it was the verification that failed, not TLS.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_broker_certificate_that_does_not_verify_is_named_and_the_scan_is_unaffected() {
+    let r = e2e::rig().await;
+    let mut broker = Broker::start(r.dir.path());
+    let ca = broker.with_tls();
+    let url = format!("mqtts://127.0.0.1:{}", broker.port);
+    with_mqtt(&r, &url, mosquitto::STATION_PASSWORD);
+    let mut d = spawn_logged(&r);
+    wait_socket(&r).await;
+    let s = e2e::wait_status(&r, "the TLS failure in the status", |s| {
+        s.links
+            .get("mqtt")
+            .is_some_and(|l| !l.ok && l.message.contains("TLS"))
+    })
+    .await;
+    let message = s.links["mqtt"].message.clone();
+    assert!(message.contains("ca-file"), "{message}");
+    let ended = scan_to_success(&r, "mqtt-tls").await;
+    assert_eq!(ended.last_stop.unwrap().status, StopStatus::Success);
+    e2e::sigterm(&d);
+    e2e::wait_exit(&mut d);
+    let log = std::fs::read_to_string(log_path(&r)).unwrap();
+    assert!(
+        log.contains("TLS with"),
+        "the log does not name the TLS failure: {log}"
+    );
+
+    let text = std::fs::read_to_string(&r.config).unwrap();
+    let text = crate::common::edited(
+        &text,
+        &format!("url = {url:?}\n"),
+        &format!("url = {url:?}\nca-file = {:?}\n", ca.display().to_string()),
+    );
+    std::fs::write(&r.config, text).unwrap();
+    let mut d = spawn_logged(&r);
+    wait_socket(&r).await;
+    e2e::wait_status(&r, "the link up with the CA trusted", |s| {
+        s.links.get("mqtt").is_some_and(|l| l.ok)
+    })
+    .await;
+    e2e::sigterm(&d);
+    e2e::wait_exit(&mut d);
 }
 
 #[test]

@@ -749,3 +749,89 @@ pub fn demo_config_at(inst: &Path, stage: &Path, scans: &Path, socket: &Path) ->
         &format!("{:?}", socket.display().to_string()),
     )
 }
+
+/// A server certificate and key for IP 127.0.0.1, signed by a CA made for the test; no
+/// system authority knows that CA.
+pub struct ThrowawayTls {
+    /// The CA's certificate (PEM), the one a client must be told to trust.
+    pub ca: PathBuf,
+    /// The server's certificate (PEM).
+    pub certificate: PathBuf,
+    /// The server's private key (PEM).
+    pub key: PathBuf,
+}
+
+/// Makes a [`ThrowawayTls`] in `dir` with `openssl` (Debian package `openssl`, which
+/// `.ci/run` installs).
+pub fn throwaway_tls(dir: &Path) -> ThrowawayTls {
+    let openssl = |args: &[&str]| {
+        let out = std::process::Command::new("openssl")
+            .args(args)
+            .current_dir(dir)
+            .output()
+            .expect(
+                "openssl is not installed: `bash .ci/run` installs it (apt-get install openssl)",
+            );
+        assert!(
+            out.status.success(),
+            "openssl {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let rsa = ["-newkey", "rsa:2048", "-nodes"];
+    openssl(
+        &[
+            &["req", "-x509"][..],
+            &rsa,
+            &[
+                "-days",
+                "2",
+                "-subj",
+                "/CN=throwaway test CA",
+                "-keyout",
+                "ca.key",
+                "-out",
+                "ca.pem",
+            ],
+        ]
+        .concat(),
+    );
+    openssl(
+        &[
+            &["req"][..],
+            &rsa,
+            &[
+                "-subj",
+                "/CN=127.0.0.1",
+                "-keyout",
+                "server.key",
+                "-out",
+                "server.csr",
+            ],
+        ]
+        .concat(),
+    );
+    std::fs::write(dir.join("san.ext"), "subjectAltName = IP:127.0.0.1\n").unwrap();
+    openssl(&[
+        "x509",
+        "-req",
+        "-in",
+        "server.csr",
+        "-CA",
+        "ca.pem",
+        "-CAkey",
+        "ca.key",
+        "-CAcreateserial",
+        "-days",
+        "2",
+        "-extfile",
+        "san.ext",
+        "-out",
+        "server.pem",
+    ]);
+    ThrowawayTls {
+        ca: dir.join("ca.pem"),
+        certificate: dir.join("server.pem"),
+        key: dir.join("server.key"),
+    }
+}

@@ -137,6 +137,25 @@ impl Broker {
         }
     }
 
+    /// Restarts the broker with TLS on its port, with a certificate for 127.0.0.1 from
+    /// [`throwaway_tls`](crate::common::throwaway_tls). Returns the CA's PEM file, the one a
+    /// client must trust; no system authority knows it.
+    pub fn with_tls(&mut self) -> PathBuf {
+        self.stop();
+        let d = self.dir.clone();
+        let tls = crate::common::throwaway_tls(&d);
+        let conf = d.join("mosquitto.conf");
+        let mut text = std::fs::read_to_string(&conf).unwrap();
+        text.push_str(&format!(
+            "certfile {}\nkeyfile {}\n",
+            tls.certificate.display(),
+            tls.key.display()
+        ));
+        std::fs::write(&conf, text).unwrap();
+        self.restart();
+        tls.ca
+    }
+
     /// Starts the broker again on the same port, with what it saved.
     pub fn restart(&mut self) {
         assert!(self.process.is_none(), "the broker is running");
