@@ -107,6 +107,13 @@ fn sha256_hex(bytes: &[u8]) -> String {
 }
 
 /// The store behind `[archive]`, and the prefix of every object.
+/// The HTTP client's deadlines for every request to the store.
+fn client_options() -> object_store::ClientOptions {
+    object_store::ClientOptions::new()
+        .with_timeout(REQUEST_TIMEOUT)
+        .with_connect_timeout(Duration::from_secs(10))
+}
+
 fn open_store(
     s: &ArchiveSettings,
     target: &Target,
@@ -116,11 +123,7 @@ fn open_store(
             let mut b = object_store::aws::AmazonS3Builder::from_env()
                 .with_bucket_name(bucket)
                 .with_region(s.region.clone().unwrap_or_else(|| "us-east-1".into()))
-                .with_client_options(
-                    object_store::ClientOptions::new()
-                        .with_timeout(REQUEST_TIMEOUT)
-                        .with_connect_timeout(Duration::from_secs(10)),
-                )
+                .with_client_options(client_options())
                 .with_retry(object_store::RetryConfig {
                     max_retries: 2,
                     retry_timeout: Duration::from_secs(30),
@@ -130,6 +133,18 @@ fn open_store(
                 b = b
                     .with_endpoint(e.trim_end_matches('/'))
                     .with_allow_http(e.starts_with("http://"));
+            }
+            if let Some(ca) = &s.ca_file {
+                let pem = std::fs::read(ca).map_err(|e| {
+                    format!("cannot read {} ([archive] ca-file): {e}", ca.display())
+                })?;
+                let certificates = object_store::Certificate::from_pem_bundle(&pem)
+                    .map_err(|e| format!("{} ([archive] ca-file): {e}", ca.display()))?;
+                let mut options = client_options();
+                for c in certificates {
+                    options = options.with_root_certificate(c);
+                }
+                b = b.with_client_options(options);
             }
             if let (Some(id), Some(f)) = (&s.access_key_id, &s.secret_access_key_file) {
                 b = b
@@ -494,7 +509,21 @@ async fn get_bytes(store: &dyn ObjectStore, at: &ObjectPath) -> Result<bytes::By
 /// make it, a bucket not found names the URL, anything else (the server away, a timeout, a
 /// full store) the endpoint.
 fn store_error(what: &str, at: &ObjectPath, e: &object_store::Error) -> String {
+    // The cause of a failed connection (a certificate refused, a port closed) is at the end of
+    // the error's chain, not in its own text.
+    let mut cause = e.to_string();
+    let mut source = std::error::Error::source(e);
+    while let Some(s) = source {
+        let text = s.to_string();
+        if !cause.contains(&text) {
+            cause = format!("{cause}: {text}");
+        }
+        source = s.source();
+    }
     let hint = match e {
+        _ if cause.contains("certificate") => {
+            "the store's TLS certificate does not verify: check that it chains to [archive] ca-file (or the system's authorities) and names the host of [archive] endpoint"
+        }
         object_store::Error::PermissionDenied { .. } | object_store::Error::Unauthenticated { .. } => {
             "the store refused the key: check [archive] access-key-id and the secret in secret-access-key-file, and that the key may write the bucket"
         }
@@ -503,7 +532,7 @@ fn store_error(what: &str, at: &ObjectPath, e: &object_store::Error) -> String {
         }
         _ => "is the store reachable? check [archive] url and endpoint",
     };
-    format!("{what} {at}: {hint} ({e})")
+    format!("{what} {at}: {hint} ({cause})")
 }
 
 /// Puts `bytes` at `at`, reads the object back and compares the SHA-256; returns it.

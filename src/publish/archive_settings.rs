@@ -29,6 +29,10 @@ pub struct ArchiveSettings {
     /// which is recorded with every scan, holds no secret.
     #[serde(default)]
     pub secret_access_key_file: Option<PathBuf>,
+    /// A PEM file of the certificate authorities an `https://` endpoint's certificate must
+    /// chain to, for a store with the lab's own CA; the system's authorities are trusted too.
+    #[serde(default)]
+    pub ca_file: Option<PathBuf>,
     /// Days after which a scan directory is deleted from the station, once the archive is
     /// found again to hold a verified copy of it; none (the default) keeps every scan.
     #[serde(default)]
@@ -95,6 +99,30 @@ impl ArchiveSettings {
                 ));
             }
         }
+        if let Some(ca) = &self.ca_file {
+            if !self
+                .endpoint
+                .as_deref()
+                .is_some_and(|e| e.starts_with("https://"))
+            {
+                return Err((
+                    "archive.ca-file",
+                    "a CA file applies to an https:// endpoint only; set [archive] endpoint = \"https://HOST:PORT\" or remove ca-file".into(),
+                ));
+            }
+            let pem = std::fs::read(ca).map_err(|e| {
+                (
+                    "archive.ca-file",
+                    format!("cannot read {}: {e}", ca.display()),
+                )
+            })?;
+            if super::tls::certificates(&pem).is_empty() {
+                return Err((
+                    "archive.ca-file",
+                    format!("{} holds no PEM certificate", ca.display()),
+                ));
+            }
+        }
         if let Target::S3 { .. } = target {
             match (&self.access_key_id, &self.secret_access_key_file) {
                 (Some(_), Some(f)) => {
@@ -153,6 +181,7 @@ mod tests {
             region: None,
             access_key_id: None,
             secret_access_key_file: None,
+            ca_file: None,
             delete_after_days: None,
         }
     }

@@ -165,6 +165,14 @@ fn a_bad_archive_table_exits_78_naming_the_key() {
                 "url = \"s3://lab-archive/rough-3\"\nendpoint = \"127.0.0.1:3900\"",
                 "archive.endpoint",
             ),
+            (
+                "url = \"s3://lab-archive/rough-3\"\nendpoint = \"http://127.0.0.1:3900\"\nca-file = \"/etc/hostname\"",
+                "archive.ca-file",
+            ),
+            (
+                "url = \"s3://lab-archive/rough-3\"\nendpoint = \"https://127.0.0.1:3900\"\nca-file = \"/etc/hostname\"",
+                "archive.ca-file",
+            ),
         ],
     );
 }
@@ -252,4 +260,66 @@ async fn retention_deletes_a_scan_only_when_its_archived_copy_verifies_again() {
         !log.contains(&format!("scan {} deleted", id(second))),
         "{log}"
     );
+}
+
+/// An `https://` store whose certificate chains to no authority the station trusts (a real
+/// TLS server, `openssl s_server`, with a CA made for the test): named in the status with
+/// the settings that fix it, the scan unaffected and kept for the archive.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_store_certificate_that_does_not_verify_is_named_and_the_scan_is_kept() {
+    use crate::common::mosquitto::{free_port, Killed};
+    let r = e2e::rig().await;
+    let tls = crate::common::throwaway_tls(r.dir.path());
+    let port = free_port();
+    let _server = Killed(
+        Command::new("openssl")
+            .args(["s_server", "-quiet", "-www", "-accept", &port.to_string()])
+            .arg("-cert")
+            .arg(&tls.certificate)
+            .arg("-key")
+            .arg(&tls.key)
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let start = std::time::Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(
+            start.elapsed().as_secs() < 10,
+            "openssl s_server does not listen"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let secret = r.dir.path().join("archive.secret");
+    std::fs::write(&secret, "s3cret\n").unwrap();
+    let endpoint = format!("https://127.0.0.1:{port}");
+    let text = std::fs::read_to_string(&r.config).unwrap();
+    std::fs::write(
+        &r.config,
+        format!(
+            "{text}\n[archive]\nurl = \"s3://lab-archive/rough-3\"\nendpoint = {endpoint:?}\nregion = \"garage\"\naccess-key-id = \"GK1\"\nsecret-access-key-file = {:?}\n",
+            secret.display().to_string()
+        ),
+    )
+    .unwrap();
+
+    let mut d = crate::mqtt_broker::spawn_logged(&r);
+    crate::mqtt_broker::wait_socket(&r).await;
+    scan_to_the_end(&r, "tls-1", 0).await;
+    let s = e2e::wait_status(&r, "the certificate named", |s| {
+        s.links
+            .get("archive")
+            .is_some_and(|l| !l.ok && l.message.contains("certificate"))
+    })
+    .await;
+    let link = &s.links["archive"];
+    assert!(
+        link.message.contains("does not verify") && link.message.contains("ca-file"),
+        "{link:?}"
+    );
+    assert_eq!(link.queued, 1, "{link:?}");
+    e2e::sigterm(&d);
+    assert!(e2e::wait_exit(&mut d).success());
 }
