@@ -104,16 +104,9 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
     let dir = tempfile::tempdir().unwrap();
     // 13 lines of z = A·cos(2πx/λ), 4 whole periods of 100 points plus the closing point.
     let (rows, cols, amp) = (13usize, 401usize, 0.5);
-    let mut csv = String::new();
-    for _ in 0..rows {
-        let row: Vec<String> = (0..cols)
-            .map(|c| format!("{:.12}", amp * (2.0 * PI * c as f64 / 100.0).cos()))
-            .collect();
-        csv.push_str(&row.join(","));
-        csv.push('\n');
-    }
-    let input = dir.path().join("grid.csv");
-    std::fs::write(&input, csv).unwrap();
+    let input = write_grid_csv(dir.path(), rows, cols, |_, c| {
+        format!("{:.12}", amp * (2.0 * PI * c as f64 / 100.0).cos())
+    });
     let out = dir.path().join("out");
     let status = surfscan()
         .args([
@@ -225,16 +218,9 @@ fn analyze_grid_csv_reports_lines_areal_and_model_bac() {
 fn per_line_figures_are_svgs_and_their_pngs_are_written_when_asked() {
     let dir = tempfile::tempdir().unwrap();
     let (rows, cols) = (6usize, 401usize);
-    let mut csv = String::new();
-    for r in 0..rows {
-        let row: Vec<String> = (0..cols)
-            .map(|c| format!("{:.9}", (2.0 * PI * (c + 7 * r) as f64 / 100.0).cos()))
-            .collect();
-        csv.push_str(&row.join(","));
-        csv.push('\n');
-    }
-    let input = dir.path().join("grid.csv");
-    std::fs::write(&input, csv).unwrap();
+    let input = write_grid_csv(dir.path(), rows, cols, |r, c| {
+        format!("{:.9}", (2.0 * PI * (c + 7 * r) as f64 / 100.0).cos())
+    });
     let out = dir.path().join("out");
     for line_png in [true, false] {
         let mut cmd = surfscan();
@@ -787,4 +773,19 @@ fn no_filter_on_a_grid_of_uncentred_lines_is_warned_of() {
     assert!(!err.contains("not centred"), "{err}");
     let (err, _) = run("filtered", &grid(10.0), &["--lc", "0.08"]);
     assert!(!err.contains("not centred"), "{err}");
+}
+
+/// `grid.csv` in `dir`: `rows` lines of `cols` heights, `z(row, column)` each as written.
+fn write_grid_csv(
+    dir: &std::path::Path,
+    rows: usize,
+    cols: usize,
+    z: impl Fn(usize, usize) -> String,
+) -> std::path::PathBuf {
+    let csv: String = (0..rows)
+        .map(|r| (0..cols).map(|c| z(r, c)).collect::<Vec<_>>().join(",") + "\n")
+        .collect();
+    let input = dir.join("grid.csv");
+    std::fs::write(&input, csv).unwrap();
+    input
 }
