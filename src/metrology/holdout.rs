@@ -559,20 +559,29 @@ mod tests {
         Grid::new(z, cols, pitch_x_mm, y)
     }
 
+    /// [`between_lines`] with the default fit, interpolating in v.
+    fn held_out(
+        g: &Grid,
+        every: usize,
+        sq: f64,
+        threshold: f64,
+    ) -> Result<BetweenLines, MetrologyError> {
+        between_lines(
+            g,
+            FitOptions::default(),
+            VMethod::Interpolate,
+            every,
+            sq,
+            threshold,
+        )
+    }
+
     #[test]
     fn every_kth_line_is_held_out_inside_the_kept_range() {
         let g = grid(14, 40, 0.002, |r, c| {
             (c as f64 * 0.2).sin() + 0.1 * r as f64
         });
-        let b = between_lines(
-            &g,
-            FitOptions::default(),
-            VMethod::Interpolate,
-            3,
-            1.0,
-            SUPPORTED_BELOW_SQ,
-        )
-        .unwrap();
+        let b = held_out(&g, 3, 1.0, SUPPORTED_BELOW_SQ).unwrap();
         let held: Vec<usize> = b.lines.iter().map(|l| l.index).collect();
         // Rows 2, 5, 8, 11 are left out; 13 is kept, so 11 lies inside the kept range.
         assert_eq!(held, vec![2, 5, 8, 11]);
@@ -637,15 +646,7 @@ mod tests {
     fn pooled_rms_decides_against_the_threshold() {
         // Lines alternate +1/−1: a held-out (odd) line is −1 where every refitted line is +1.
         let g = grid(13, 30, 0.002, |r, _| if r % 2 == 0 { 1.0 } else { -1.0 });
-        let b = between_lines(
-            &g,
-            FitOptions::default(),
-            VMethod::Interpolate,
-            2,
-            1.0,
-            SUPPORTED_BELOW_SQ,
-        )
-        .unwrap();
+        let b = held_out(&g, 2, 1.0, SUPPORTED_BELOW_SQ).unwrap();
         assert!(
             (b.rms_um - 2.0).abs() < 1e-9 && (b.max_abs_um - 2.0).abs() < 1e-9,
             "{b:?}"
@@ -657,11 +658,7 @@ mod tests {
             "{}",
             b.short()
         );
-        assert!(
-            between_lines(&g, FitOptions::default(), VMethod::Interpolate, 1, 1.0, 0.3).is_err()
-        );
-        assert!(
-            between_lines(&g, FitOptions::default(), VMethod::Interpolate, 2, 0.0, 0.3).is_err()
-        );
+        assert!(held_out(&g, 1, 1.0, 0.3).is_err());
+        assert!(held_out(&g, 2, 0.0, 0.3).is_err());
     }
 }
