@@ -717,11 +717,11 @@ fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
         .map_err(|e| io(&path, e))?;
     // As a scan's summary.csv (without the instrument's columns): 1-based line, values with
     // the digits of their quantity.
-    use crate::report::render::summary::{line_cells, more_cells, LINE_HEADER, MORE_HEADER};
+    use crate::report::render::summary::{cells_of, line_cells, LINE_HEADER, MORE_HEADER};
     let mut csv = format!("{LINE_HEADER},{MORE_HEADER}\n");
     for l in &report.lines {
         let mut row = line_cells(l.index, l.y_mm, &l.params);
-        row.extend(more_cells(&l.params));
+        row.extend(cells_of(MORE_HEADER, &l.params));
         csv.push_str(&row.join(","));
         csv.push('\n');
     }

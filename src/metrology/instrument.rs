@@ -25,6 +25,7 @@
 //!
 //! Depends on [`super::params`] and [`crate::profile`].
 
+use super::parameter_table::parameter;
 use super::params::RoughnessParams;
 use crate::profile::InstrumentResult;
 use serde::Serialize;
@@ -115,42 +116,26 @@ fn ours_for(
     occurrence: usize,
 ) -> Option<Ours> {
     let k = key(name);
-    let named = |v: Option<f64>, unit: &'static str, n: &str| Some((v, unit, n.to_string()));
-    match k.as_str() {
-        "ra" => named(Some(p.ra_um), "um", "Ra"),
-        "rq" => named(Some(p.rq_um), "um", "Rq"),
-        "rz" if jis_ten_point_rz => named(p.rzjis_um, "um", "RzJIS"),
-        "rz" => named(Some(p.rz_um), "um", "Rz"),
-        "rp" => named(Some(p.rp_um), "um", "Rp"),
-        "rv" => named(Some(p.rv_um), "um", "Rv"),
-        "rt" => named(Some(p.rt_um), "um", "Rt"),
-        "rz1max" => named(Some(p.rz1max_um), "um", "Rz1max"),
-        "rzjis" => named(p.rzjis_um, "um", "RzJIS"),
-        "rsk" => named(Some(p.rsk), "", "Rsk"),
-        "rku" => named(Some(p.rku), "", "Rku"),
-        "rdq" | "rδq" | "rΔq" | "rdeltaq" => named(Some(p.rdq), "", "Rdq"),
-        "rda" | "rδa" | "rΔa" | "rdeltaa" | "da" => named(Some(p.rda), "", "Rda"),
-        "rsm" => named(p.rsm_um, "um", "RSm"),
-        "rc" => named(p.rc_um, "um", "Rc"),
-        "rpc" | "pc" => named(p.rpc_per_cm, "/cm", "RPc"),
-        "rppi" | "ppi" => named(p.rppi_per_inch, "/in", "Rppi"),
-        "rk" => named(Some(p.material.rk_um), "um", "Rk"),
-        "rpk" => named(Some(p.material.rpk_um), "um", "Rpk"),
-        "rvk" => named(Some(p.material.rvk_um), "um", "Rvk"),
-        "mr1" => named(Some(p.material.mr1_pct), "%", "Mr1"),
-        "mr2" => named(Some(p.material.mr2_pct), "%", "Mr2"),
-        "rmr" => named(Some(p.material.rmr_pct), "%", "Rmr"),
-        "rdc" | "rδc" | "rΔc" | "rdeltac" => named(Some(p.rdc_um), "um", "Rdc"),
+    let stem = match k.as_str() {
+        "rz" if jis_ten_point_rz => "rzjis",
+        "rδq" | "rΔq" | "rdeltaq" => "rdq",
+        "rδa" | "rΔa" | "rdeltaa" | "da" => "rda",
+        "pc" => "rpc",
+        "ppi" => "rppi",
+        "rδc" | "rΔc" | "rdeltac" => "rdc",
         "rmr(c)" | "mr(c)" | "mr[c]" => {
             let level = p.material.rmr_c.get(occurrence)?;
-            Some((
-                Some(level.value_pct),
-                "%",
-                format!("Rmr(c)@{}%Rt", level.depth_pct_rt),
-            ))
+            let name = format!("Rmr(c)@{}%Rt", level.depth_pct_rt);
+            return Some((Some(level.value_pct), "%", name));
         }
-        _ => None,
-    }
+        // The instrument's A1 and A2 are areas of its own counted 100-level curve: the SJ
+        // series' reading reproduces them (`sj_material_ratio`), ISO's is not compared.
+        "a1" | "a2" => return None,
+        k => k,
+    };
+    let t = parameter(stem)?;
+    let unit = if t.unit == "µm" { "um" } else { t.unit };
+    Some((t.of(p), unit, t.stem().to_owned()))
 }
 
 /// Factor from the instrument's unit to ours, `None` when not understood.

@@ -24,6 +24,7 @@ pub mod holdout;
 pub mod instrument;
 pub mod model;
 pub mod outliers;
+pub mod parameter_table;
 pub mod params;
 mod sampling;
 pub mod sj_material_ratio;

@@ -36,6 +36,7 @@
 use super::bearing::{level_at_material_ratio, material_ratio_pct};
 use super::filter::{self, END_TREATMENT};
 use super::form::{remove_form, Form};
+use super::parameter_table::PARAMETERS;
 use super::{check_heights, check_pitch, MetrologyError};
 use crate::profile::{FilterKind, Profile, ProfileKind};
 use serde::Serialize;
@@ -401,40 +402,19 @@ impl LineAnalysis {
     }
 }
 
-/// The definition ids written into every recipe.
+/// The definition ids written into every recipe: each parameter's of
+/// [`super::parameter_table::PARAMETERS`], and Rmr(c)'s as ISO and the SJ series state it.
 pub fn definitions() -> BTreeMap<String, String> {
-    [
-        ("Ra", "ISO4287:1997/Ra mean|Z| per lr, lr-mean, filter mean line"),
-        ("Rq", "ISO4287:1997/Rq rms Z per lr, lr-mean, filter mean line"),
-        ("Rp", "ISO4287:1997/Rp max Z per lr, lr-mean"),
-        ("Rv", "ISO4287:1997/Rv |min Z| per lr, lr-mean"),
-        ("Rz", "ISO4287:1997/Rz max height Rp+Rv per lr, lr-mean (RzDIN)"),
-        ("Rt", "ISO4287:1997/Rt max-min over ln"),
-        ("Rz1max", "ISO4287:1997/Rz1max largest per-lr Rz"),
-        ("RzJIS", "JIS-B0601:2001/RzJIS ten-point: 5 highest peaks + 5 deepest valleys (extremes between mean-line crossings) per lr, lr-mean"),
-        ("Rsk", "ISO4287:1997/Rsk mean Z^3/Rq^3 per lr (no mean removal), lr-mean"),
-        ("Rku", "ISO4287:1997/Rku mean Z^4/Rq^4 per lr (3 for Gaussian), lr-mean"),
-        ("Rdq", "ISO4287:1997/Rdq rms 7-point slope per lr, lr-mean"),
-        ("Rda", "SJ series RΔa (Da): mean |7-point slope| per lr, lr-mean"),
-        ("RSm", "ISO4287:1997/RSm elements between upward mean-line crossings; peak >= 10% Rz, valley <= -10% Rz of the lr; elements < 1% lr merged; lr-mean"),
-        ("Rc", "ISO4287:1997/Rc mean Zt = Zp + Zv of the RSm elements (SJ series Zp/Zv: 10% of Rz, 1% lr), lr-mean"),
-        ("RPc", "SJ series Pc/RPc = 1 cm / RSm, per cm (not the ASME count of +-c crossings)"),
-        ("Rppi", "SJ series Ppi = 1 inch / RSm (Pc for a unit length of 1 inch), per inch"),
+    let rmr_c = [
         ("Rmr(c)_SJ", "SJ series mr[c] peak reference: Rmr at a depth below the highest peak of ln given in % of Rt, linear crossings"),
-        ("Rdc", "ISO4287:1997/Rdc = C(Rmr1) - C(Rmr2) on the piecewise-linear material ratio curve over ln; SJ series levels 10% and 25%"),
-        ("Rmr", "ISO4287:1997/Rmr relative material ratio at C(Rmr0) - Rdc; SJ series Rmr0 = 0% (the highest peak), Rdc = 0.10 um"),
         ("Rmr(c)", "ISO4287:1997/Rmr(c) bearing length at depth c below the highest peak over ln, linear crossings"),
-        ("Rk", "ISO13565-2/Rk min-gradient 40% secant on linear-quantile Rmc(mr) over ln, 0.1% search step"),
-        ("Rpk", "ISO13565-2/Rpk = 2*A1/Mr1"),
-        ("Rvk", "ISO13565-2/Rvk = 2*A2/(100-Mr2)"),
-        ("Mr1", "ISO13565-2/Mr1 = Rmr at the upper core level C"),
-        ("Mr2", "ISO13565-2/Mr2 = Rmr at the lower core level D"),
-        ("A1", "ISO13565-2/A1 area above C for mr in [0, Mr1], um*%"),
-        ("A2", "ISO13565-2/A2 area below D for mr in [Mr2, 100], um*%"),
-    ]
-    .into_iter()
-    .map(|(k, v)| (k.to_string(), v.to_string()))
-    .collect()
+    ];
+    PARAMETERS
+        .iter()
+        .map(|p| (p.stem(), p.definition))
+        .chain(rmr_c)
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect()
 }
 
 /// Minimum points per sampling length (the 7-point slope and meaningful moments need some).

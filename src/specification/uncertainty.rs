@@ -12,6 +12,8 @@
 //!
 //! Layer 1 (pure): depends on [`crate::metrology::params`] for the per-line values.
 
+pub use crate::metrology::parameter_table::Scaling;
+use crate::metrology::parameter_table::PARAMETERS;
 use crate::metrology::params::RoughnessParams;
 use serde::Serialize;
 
@@ -47,70 +49,6 @@ impl InstrumentUncertainty {
         }
     }
 }
-
-/// How a parameter responds to the instrument's height scale.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Scaling {
-    /// Proportional to the heights: the height calibration's relative uncertainty applies.
-    Height,
-    /// Unchanged by the height scale (Rsk, Rku, material ratios).
-    ScaleFree,
-    /// A length along x or a count per length: the height calibration says nothing.
-    Lateral,
-    /// Depends on the height scale, but not proportionally (Rmr at a fixed depth).
-    Other,
-}
-
-/// One per-line parameter as report.json names it, with its value on a line and its scaling.
-pub struct ParameterColumn {
-    /// The report's name (`Ra_um`, `Rsk`).
-    pub name: &'static str,
-    /// The line's value, `None` when the line has none.
-    pub value: fn(&RoughnessParams) -> Option<f64>,
-    /// How the instrument's height calibration carries over.
-    pub scaling: Scaling,
-}
-
-macro_rules! col {
-    ($name:literal, $scaling:ident, |$p:ident| $v:expr) => {
-        ParameterColumn {
-            name: $name,
-            value: |$p: &RoughnessParams| $v,
-            scaling: Scaling::$scaling,
-        }
-    };
-}
-
-/// Every scalar per-line parameter of report.json, in its order.
-#[rustfmt::skip]
-pub const COLUMNS: &[ParameterColumn] = &[
-    col!("Ra_um", Height, |p| Some(p.ra_um)),
-    col!("Rq_um", Height, |p| Some(p.rq_um)),
-    col!("Rp_um", Height, |p| Some(p.rp_um)),
-    col!("Rv_um", Height, |p| Some(p.rv_um)),
-    col!("Rz_um", Height, |p| Some(p.rz_um)),
-    col!("Rt_um", Height, |p| Some(p.rt_um)),
-    col!("Rz1max_um", Height, |p| Some(p.rz1max_um)),
-    col!("RzJIS_um", Height, |p| p.rzjis_um),
-    col!("Rsk", ScaleFree, |p| Some(p.rsk)),
-    col!("Rku", ScaleFree, |p| Some(p.rku)),
-    col!("Rdq", Height, |p| Some(p.rdq)),
-    col!("Rda", Height, |p| Some(p.rda)),
-    col!("RSm_um", Lateral, |p| p.rsm_um),
-    col!("Rc_um", Height, |p| p.rc_um),
-    col!("RPc_per_cm", Lateral, |p| p.rpc_per_cm),
-    col!("Rppi_per_inch", Lateral, |p| p.rppi_per_inch),
-    col!("Rdc_um", Height, |p| Some(p.rdc_um)),
-    col!("Rmr_pct", Other, |p| Some(p.material.rmr_pct)),
-    col!("Rk_um", Height, |p| Some(p.material.rk_um)),
-    col!("Rpk_um", Height, |p| Some(p.material.rpk_um)),
-    col!("Rvk_um", Height, |p| Some(p.material.rvk_um)),
-    col!("Mr1_pct", ScaleFree, |p| Some(p.material.mr1_pct)),
-    col!("Mr2_pct", ScaleFree, |p| Some(p.material.mr2_pct)),
-    col!("A1", Height, |p| Some(p.material.a1_um_pct)),
-    col!("A2", Height, |p| Some(p.material.a2_um_pct)),
-];
 
 /// A parameter's mean over the lines with its uncertainty, in the parameter's unit.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -174,21 +112,17 @@ pub fn statistics(
     })
 }
 
-/// The statistics of every per-line parameter of [`COLUMNS`] over `lines`, by report name,
-/// in the columns' order; parameters no line has are left out.
+/// The statistics of every per-line parameter of [`PARAMETERS`] over `lines`, by report key,
+/// in the table's order; parameters no line has are left out.
 pub fn all_statistics(
     lines: &[&RoughnessParams],
     instrument: &InstrumentUncertainty,
 ) -> Vec<(&'static str, Statistics)> {
-    COLUMNS
+    PARAMETERS
         .iter()
         .filter_map(|c| {
-            let st = statistics(
-                lines.iter().filter_map(|p| (c.value)(p)),
-                c.scaling,
-                instrument,
-            )?;
-            Some((c.name, st))
+            let st = statistics(lines.iter().filter_map(|p| c.of(p)), c.scaling, instrument)?;
+            Some((c.key, st))
         })
         .collect()
 }

@@ -21,6 +21,7 @@
 //! [`crate::numfmt`]; returns text, the caller writes it.
 
 use super::print;
+use crate::metrology::parameter_table::{parameter, Parameter, Source, PARAMETERS};
 use crate::numfmt::{fmt, line_number, sig, Quantity};
 use crate::scan::journal::ResumeState;
 use base64::Engine as _;
@@ -233,74 +234,27 @@ const LINE_FAMILIES: &[(&str, &str, std::ops::Range<usize>)] = &[
     ),
 ];
 
-/// Per-line columns: report key, heading, quantity.
-const LINE_COLUMNS: &[(&str, &str, Quantity)] = &[
-    ("Ra_um", "Ra µm", Quantity::HeightUm),
-    ("Rq_um", "Rq µm", Quantity::HeightUm),
-    ("Rz_um", "Rz µm", Quantity::HeightUm),
-    ("Rp_um", "Rp µm", Quantity::HeightUm),
-    ("Rv_um", "Rv µm", Quantity::HeightUm),
-    ("Rt_um", "Rt µm", Quantity::HeightUm),
-    ("Rz1max_um", "Rz1max µm", Quantity::HeightUm),
-    ("RzJIS_um", "RzJIS µm", Quantity::HeightUm),
-    ("Rsk", "Rsk", Quantity::Ratio),
-    ("Rku", "Rku", Quantity::Ratio),
-    ("Rdq", "RΔq", Quantity::Ratio),
-    ("Rda", "RΔa", Quantity::Ratio),
-    ("RSm_um", "RSm µm", Quantity::HeightUm),
-    ("Rc_um", "Rc µm", Quantity::HeightUm),
-    ("RPc_per_cm", "RPc /cm", Quantity::PerLength),
-    ("Rppi_per_inch", "Rppi /in", Quantity::PerLength),
-    ("Rdc_um", "Rδc µm", Quantity::HeightUm),
-    ("Rmr_pct", "Rmr %", Quantity::Percent),
-    ("Rk_um", "Rk µm", Quantity::HeightUm),
-    ("Rpk_um", "Rpk µm", Quantity::HeightUm),
-    ("Rvk_um", "Rvk µm", Quantity::HeightUm),
-    ("Mr1_pct", "Mr1 %", Quantity::Percent),
-    ("Mr2_pct", "Mr2 %", Quantity::Percent),
-    ("A1", "A1 µm·%", Quantity::Area),
-    ("A2", "A2 µm·%", Quantity::Area),
-    (
-        "material_ratio_sj_series.Rmr_pct",
-        "Rmr %",
-        Quantity::Percent,
-    ),
-    (
-        "material_ratio_sj_series.Rk_um",
-        "Rk µm",
-        Quantity::HeightUm,
-    ),
-    (
-        "material_ratio_sj_series.Rpk_um",
-        "Rpk µm",
-        Quantity::HeightUm,
-    ),
-    (
-        "material_ratio_sj_series.Rvk_um",
-        "Rvk µm",
-        Quantity::HeightUm,
-    ),
-    (
-        "material_ratio_sj_series.Mr1_pct",
-        "Mr1 %",
-        Quantity::Percent,
-    ),
-    (
-        "material_ratio_sj_series.Mr2_pct",
-        "Mr2 %",
-        Quantity::Percent,
-    ),
-    ("material_ratio_sj_series.A1", "A1 µm·%", Quantity::Area),
-    ("material_ratio_sj_series.A2", "A2 µm·%", Quantity::Area),
-    ("evaluation_length.Ra_ln_um", "Ra ln µm", Quantity::HeightUm),
-    ("Ra_um", "Ra µm", Quantity::HeightUm),
-    ("evaluation_length.Rq_ln_um", "Rq ln µm", Quantity::HeightUm),
-    ("Rq_um", "Rq µm", Quantity::HeightUm),
-    ("evaluation_length.Rsk_ln", "Rsk ln", Quantity::Ratio),
-    ("Rsk", "Rsk", Quantity::Ratio),
-    ("evaluation_length.Rku_ln", "Rku ln", Quantity::Ratio),
-    ("Rku", "Rku", Quantity::Ratio),
-];
+/// Per-line columns, report key, heading and quantity: every parameter of the table, then
+/// the SJ series' reading of the material-ratio family, then Ra, Rq, Rsk and Rku over the
+/// whole evaluation length each beside its sampling-length mean.
+fn line_columns() -> Vec<(String, String, Quantity)> {
+    let column = |p: &Parameter| (p.key.to_owned(), p.heading(), p.quantity);
+    let mut columns: Vec<_> = PARAMETERS.iter().map(column).collect();
+    for p in PARAMETERS {
+        if let Source::Family(_) = p.source {
+            let key = format!("material_ratio_sj_series.{}", p.key);
+            columns.push((key, p.heading(), p.quantity));
+        }
+    }
+    for p in ["Ra", "Rq", "Rsk", "Rku"].into_iter().filter_map(parameter) {
+        let key = p
+            .key
+            .replacen(p.stem(), &format!("evaluation_length.{}_ln", p.stem()), 1);
+        let head = format!("{} ln {}", p.name, p.unit).trim_end().to_owned();
+        columns.extend([(key, head, p.quantity), column(p)]);
+    }
+    columns
+}
 
 /// The value at `key` of `v`, a `.` stepping into a member (`evaluation_length.Rq_ln_um`).
 fn field<'a>(v: &'a Value, key: &str) -> &'a Value {
@@ -556,16 +510,8 @@ fn uncertainty(h: &mut String, report: &Value) {
     h.push_str("<h2 id=\"uncertainty\">Means and their uncertainty</h2>\n<table id=\"t-uncertainty\">\n<tr><th class=\"t\">parameter</th><th>n</th><th>mean</th><th>s</th><th>u of the mean</th><th>u instrument</th><th>u<sub>c</sub></th><th>U (k = 2)</th></tr>\n");
     for p in params {
         let name = text(&p["parameter"]);
-        let (label, unit, q) = [
-            ("_um", "µm", Quantity::HeightUm),
-            ("_pct", "%", Quantity::Percent),
-            ("_per_cm", "1/cm", Quantity::PerLength),
-            ("_per_inch", "1/inch", Quantity::PerLength),
-        ]
-        .iter()
-        .find_map(|(suffix, unit, q)| Some((name.strip_suffix(suffix)?, *unit, *q)))
-        .unwrap_or((name.as_str(), "", Quantity::Ratio));
-        let label = format!("{label} {unit}").trim_end().to_owned();
+        let (label, q) =
+            parameter(&name).map_or((name, Quantity::Ratio), |t| (t.heading(), t.quantity));
         row(
             h,
             &[
@@ -938,8 +884,9 @@ fn lines(h: &mut String, report: &Value) {
     let definitions = &report["recipe"]["definitions"];
     // A parameter's definition, by the stem of its key ("Rdc_um" → "Rdc").
     let definition = |key: &str| definitions[key.split('_').next().unwrap_or(key)].as_str();
+    let all = line_columns();
     for (id, family, range) in LINE_FAMILIES {
-        let columns = &LINE_COLUMNS[range.clone()];
+        let columns = &all[range.clone()];
         let _ = write!(
             h,
             "<h3>{family}</h3>\n<div class=\"scroll\"><table id=\"{id}\">\n<thead><tr><th>line</th><th>y mm</th>"
@@ -1402,7 +1349,7 @@ mod tests {
         for (_, _, r) in LINE_FAMILIES {
             assert_eq!(r.start, next);
             assert!(r.len() <= 10, "a family of at most 10 columns fits a page");
-            for (k, _, _) in &LINE_COLUMNS[r.clone()] {
+            for (k, _, _) in &line_columns()[r.clone()] {
                 let stem = k.split('.').next().unwrap();
                 assert!(
                     stem == *k || ["material_ratio_sj_series", "evaluation_length"].contains(&stem),
@@ -1411,7 +1358,7 @@ mod tests {
             }
             next = r.end;
         }
-        assert_eq!(next, LINE_COLUMNS.len());
+        assert_eq!(next, line_columns().len());
     }
 
     #[test]
@@ -1483,9 +1430,10 @@ mod tests {
             .collect();
         assert!(scalar.len() >= 20, "{scalar:?}");
         // The columns of the line's own parameters (a `.` steps into another member).
-        let shown: Vec<&str> = LINE_COLUMNS
+        let columns = line_columns();
+        let shown: Vec<&str> = columns
             .iter()
-            .map(|(k, _, _)| *k)
+            .map(|(k, _, _)| k.as_str())
             .filter(|k| !k.contains('.'))
             .collect();
         for k in &scalar {
@@ -1497,15 +1445,19 @@ mod tests {
                 "column {k} is not a number of the line"
             );
         }
-        // And the page shows them, RPc among them.
+        // And the page shows them, RPc among them; the means' table names them alike (a key
+        // the table does not hold stands as it is).
         let mut line = serde_json::Value::Object(params.clone());
         line["index"] = 0.into();
         line["y_mm"] = 0.0.into();
-        let report = serde_json::json!({"kind": "grid", "lines": [line]});
+        let means =
+            serde_json::json!([{"parameter": "A1", "n": 1}, {"parameter": "Sx_um", "n": 1}]);
+        let report = serde_json::json!({"kind": "grid", "lines": [line], "uncertainty": {"parameters": means}});
         let h = render(&report, None, &[], None);
         let rpc = params["RPc_per_cm"].as_f64().unwrap();
         assert!(h.contains("<th>RPc /cm</th>"));
         assert!(h.contains(&format!("<td>{}</td>", fmt(rpc, Quantity::PerLength))));
+        assert!(h.contains("<td class=\"t\">A1 µm·%</td>") && h.contains(">Sx_um</td>"));
     }
 
     /// The per-line headings carry the recipe's definitions, and the levels of Rδc and Rmr

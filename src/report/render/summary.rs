@@ -5,6 +5,7 @@
 //! Layer 4 (reporting): a formatter over the report's line entries and the metrology's
 //! parameters; no I/O.
 
+use crate::metrology::parameter_table::parameter;
 use crate::metrology::params::RoughnessParams;
 use crate::numfmt::{fmt as nfmt, fmt_opt as nfmt_opt, line_number, Quantity};
 use crate::report::document::LineReport;
@@ -29,44 +30,23 @@ pub const MORE_HEADER: &str = "Rda,Rc_um,RPc_per_cm,Rppi_per_inch,Rdc_um,Rmr_pct
 
 /// The cells of [`LINE_HEADER`] for the line of file index `index` at `y_mm`.
 pub fn line_cells(index: u32, y_mm: f64, p: &RoughnessParams) -> Vec<String> {
-    use Quantity::{Area, HeightUm as H, Percent, PositionMm, Ratio};
-    vec![
+    let mut cells = vec![
         line_number(index).to_string(),
         format!("{index:04}"),
-        nfmt(y_mm, PositionMm),
-        nfmt(p.ra_um, H),
-        nfmt(p.rq_um, H),
-        nfmt(p.rz_um, H),
-        nfmt_opt(p.rzjis_um, H),
-        nfmt(p.rp_um, H),
-        nfmt(p.rv_um, H),
-        nfmt(p.rt_um, H),
-        nfmt(p.rz1max_um, H),
-        nfmt(p.rsk, Ratio),
-        nfmt(p.rku, Ratio),
-        nfmt(p.rdq, Ratio),
-        nfmt_opt(p.rsm_um, H),
-        nfmt(p.material.rk_um, H),
-        nfmt(p.material.rpk_um, H),
-        nfmt(p.material.rvk_um, H),
-        nfmt(p.material.mr1_pct, Percent),
-        nfmt(p.material.mr2_pct, Percent),
-        nfmt(p.material.a1_um_pct, Area),
-        nfmt(p.material.a2_um_pct, Area),
-    ]
+        nfmt(y_mm, Quantity::PositionMm),
+    ];
+    cells.extend(cells_of(LINE_HEADER, p));
+    cells
 }
 
-/// The cells of [`MORE_HEADER`], with the digits the HTML report gives them.
-pub fn more_cells(p: &RoughnessParams) -> Vec<String> {
-    use Quantity::{HeightUm as H, PerLength, Percent, Ratio};
-    vec![
-        nfmt(p.rda, Ratio),
-        nfmt_opt(p.rc_um, H),
-        nfmt_opt(p.rpc_per_cm, PerLength),
-        nfmt_opt(p.rppi_per_inch, PerLength),
-        nfmt(p.rdc_um, H),
-        nfmt(p.material.rmr_pct, Percent),
-    ]
+/// A line's value of each parameter `header` names (of [`LINE_HEADER`], [`MORE_HEADER`]),
+/// with the digits the HTML report gives it; the columns that are not parameters, `line` and
+/// the like, are not in the table.
+pub fn cells_of<'a>(header: &'a str, p: &'a RoughnessParams) -> impl Iterator<Item = String> + 'a {
+    header
+        .split(',')
+        .filter_map(parameter)
+        .map(|t| nfmt_opt(t.of(p), t.quantity))
 }
 
 /// `summary.csv` for people and spreadsheets: one row per line, `line` 1-based and `index`
@@ -93,7 +73,7 @@ pub fn summary_csv(lines: &[LineReport], specification: Option<&SpecificationVer
         for name in ["Ra", "Rq", "Rz"] {
             row.push(nfmt_opt(instrument_value(l, name), Quantity::HeightUm));
         }
-        row.extend(more_cells(&l.params));
+        row.extend(cells_of(MORE_HEADER, &l.params));
         let line = line_number(l.index);
         row.extend(limits.iter().map(|v| standing_cell(v, line).to_owned()));
         if let Some(s) = specification {
