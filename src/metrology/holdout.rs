@@ -133,7 +133,7 @@ pub fn holdout_with(
 ) -> Result<Holdout, MetrologyError> {
     let points_left_out = points_left_out(grid, options, method)?;
     let every = lines_every(grid.rows(), options.degree_v)?;
-    let lines_left_out = refit_without_lines(grid, options, method, every)?.lines;
+    let lines_left_out = lines_left_out(grid, options, method, every)?.lines;
     Ok(Holdout {
         points_left_out,
         lines_left_out,
@@ -188,21 +188,6 @@ pub fn lines_every(rows: usize, degree_v: usize) -> Result<usize, MetrologyError
         value: rows as f64,
         hint: "leaving a line out needs more lines than degree_v + 1; trace more lines or lower degree_v",
     })
-}
-
-/// The refit that both [`holdout_with`] (its second part) and [`between_lines`] make: every
-/// `every`-th line left out, the others refitted with `method` across the lines, and per
-/// held-out line inside the kept y range its statistics and the model's heights at its x. A
-/// caller that needs both computes it once and hands it to [`between_lines_given`].
-#[allow(clippy::type_complexity)]
-pub fn lines_left_out(
-    grid: &Grid,
-    options: FitOptions,
-    method: VMethod,
-    every: usize,
-) -> Result<HeldLines, MetrologyError> {
-    check_grid(grid)?;
-    refit_without_lines(grid, options, method, every)
 }
 
 /// The v where the surface's y equals `target` (y depends on v only; bisection of y(0, v)),
@@ -264,17 +249,18 @@ fn refit_keeping(
     Ok((fit, kept))
 }
 
-/// Leaves every `every`-th line out (rows every−1, 2·every−1, …), refits the others with
-/// `method` across the lines (least squares with the control rows scaled as
-/// [`refit_method`] says)
-/// and returns, per held-out line inside the kept y range, its statistics and the model's
-/// heights at its x.
-fn refit_without_lines(
+/// The refit that both [`holdout_with`] (its second part) and [`between_lines`] make: every
+/// `every`-th line left out (rows every−1, 2·every−1, …), the others refitted with `method`
+/// across the lines (least squares with the control rows scaled as [`refit_method`] says),
+/// and per held-out line inside the kept y range its statistics and the model's heights at
+/// its x. A caller that needs both computes it once and hands it to [`between_lines_given`].
+pub fn lines_left_out(
     grid: &Grid,
     options: FitOptions,
     method: VMethod,
     every: usize,
 ) -> Result<HeldLines, MetrologyError> {
+    check_grid(grid)?;
     let (cols, pitch_x_mm, y_mm) = (grid.cols, grid.pitch_x_mm, &grid.y_mm[..]);
     if every < 2 {
         return Err(MetrologyError::BadParameter {
@@ -463,7 +449,7 @@ pub fn between_lines(
     threshold: f64,
 ) -> Result<BetweenLines, MetrologyError> {
     between_lines_given(grid, method, every, sq_um, threshold, || {
-        refit_without_lines(grid, options, method, every)
+        lines_left_out(grid, options, method, every)
     })
 }
 
@@ -602,7 +588,7 @@ mod tests {
             (c as f64 * 0.21 + r as f64 * 0.7).sin() + 0.05 * ((r * 64 + c) % 7) as f64
         });
         let (y, z) = (&g.y_mm, &g.heights_um);
-        let held = refit_without_lines(&g, FitOptions::default(), VMethod::Interpolate, 2).unwrap();
+        let held = lines_left_out(&g, FitOptions::default(), VMethod::Interpolate, 2).unwrap();
         let kept: Vec<usize> = (0..15).filter(|r| r % 2 == 0).collect();
         let sub: Vec<f64> = kept
             .iter()
