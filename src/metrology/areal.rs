@@ -175,22 +175,12 @@ pub fn level_plane(grid: &HeightMap<'_>) -> Result<(Vec<f64>, [f64; 3]), Metrolo
 
 /// The definition ids of the areal parameters.
 pub fn definitions() -> BTreeMap<String, String> {
-    [
+    #[rustfmt::skip]
+    let more = [
         ("levelling", "least-squares plane z = a + b x + c y removed first"),
-        ("Sa", "ISO25178-2/Sa mean |z| over the grid"),
-        ("Sq", "ISO25178-2/Sq rms z over the grid"),
-        ("Sp", "ISO25178-2/Sp max z"),
-        ("Sv", "ISO25178-2/Sv |min z|"),
-        ("Sz", "ISO25178-2/Sz Sp + Sv (maximum height, not S10z)"),
-        ("Ssk", "ISO25178-2/Ssk mean z^3 / Sq^3"),
-        ("Sku", "ISO25178-2/Sku mean z^4 / Sq^4"),
-        ("Sdq", "ISO25178-2:2021 D/Sdq sqrt(mean (dz/dx)^2 + mean (dz/dy)^2), forward differences"),
-        ("Sdr", "ISO25178-2:2021 D.3/Sdr two-diagonal triangulation averaged, over (cols-1)(rows-1) cells"),
         ("Smr(c)", "ISO25178-2/Smr(c) pooled lines, linear crossings along x, levels equal over the range"),
-    ]
-    .into_iter()
-    .map(|(k, v)| (k.to_string(), v.to_string()))
-    .collect()
+    ];
+    super::parameter_table::areal_definitions("", &more)
 }
 
 /// Sa … Sdr of a grid after plane levelling.

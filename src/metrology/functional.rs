@@ -72,20 +72,7 @@ pub struct ArealFunctional {
 
 /// The definition ids of the functional parameters.
 pub fn definitions() -> BTreeMap<String, String> {
-    [
-        ("Sk", "ISO25178-2/Sk min-gradient 40% secant on the linear-quantile areal material ratio curve of the levelled grid, 0.1% search step (the profile Rk construction)"),
-        ("Spk", "ISO25178-2/Spk = 2*A1/Smr1"),
-        ("Svk", "ISO25178-2/Svk = 2*A2/(100-Smr2)"),
-        ("Smr1", "ISO25178-2/Smr1 areal material ratio at the upper core limit"),
-        ("Smr2", "ISO25178-2/Smr2 areal material ratio at the lower core limit"),
-        ("Vmp", "ISO25178-2/Vmp = Vm(p), p = 10%, exact integral of the linear-quantile curve, ml/m2"),
-        ("Vmc", "ISO25178-2/Vmc = Vm(q) - Vm(p), p = 10%, q = 80%, ml/m2"),
-        ("Vvc", "ISO25178-2/Vvc = Vv(p) - Vv(q), p = 10%, q = 80%, ml/m2"),
-        ("Vvv", "ISO25178-2/Vvv = Vv(q), q = 80%, ml/m2"),
-    ]
-    .into_iter()
-    .map(|(k, v)| (k.to_string(), v.to_string()))
-    .collect()
+    super::parameter_table::areal_definitions("functional", &[])
 }
 
 /// The Sk family and the volume parameters of `grid` after plane levelling.

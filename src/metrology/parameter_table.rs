@@ -2,7 +2,8 @@
 //! people read them, the digits it is written with, how the instrument's height calibration
 //! carries over to it, its value on a line and the definition id written into every recipe.
 //! Every renderer (report.html, summary.csv, the instrument comparison) and the verdict's
-//! statistics read the parameters from here, so a parameter is named once.
+//! statistics read the parameters from here, so a parameter is named once. [`AREAL`] is the
+//! same for the areal parameters: their recipes' definitions and report.html's rows.
 //!
 //! Adding a per-line parameter: its field in [`RoughnessParams`] (or [`MaterialRatio`] for
 //! the material-ratio family, which the SJ series' reading then has as well), its computation
@@ -13,6 +14,7 @@
 use super::params::{MaterialRatio, RoughnessParams};
 use crate::numfmt::Quantity::{self, Area, HeightUm, PerLength, Percent, Ratio};
 use serde::Serialize;
+use std::collections::BTreeMap;
 use Scaling::{Height, Lateral, Other, ScaleFree};
 use Source::{Family, Line};
 
@@ -116,6 +118,59 @@ pub const PARAMETERS: &[Parameter] = &[
     Parameter { key: "A2", name: "A2", unit: "µm·%", quantity: Area, scaling: Height, source: Family(|m| m.a2_um_pct), definition: "ISO13565-2/A2 area below D for mr in [Mr2, 100], um*%" },
 ];
 
+/// One areal parameter (ISO 25178-2) of a surface (the measured grid's or the model's).
+pub struct ArealParameter {
+    /// Its member in a surface's entry of report.json, a `.` stepping into the part of the
+    /// characterisation that computes it (`Sa_um`, `functional.Sk_um`, `spatial.Str`).
+    pub key: &'static str,
+    /// Its heading in report.html: name, unit and the levels it is read at.
+    pub heading: &'static str,
+    /// The digits it is written with.
+    pub quantity: Quantity,
+    /// The definition id in its part's recipe, under its name (the key's stem).
+    pub definition: &'static str,
+}
+
+/// Every areal parameter, in the order of report.html's rows.
+#[rustfmt::skip]
+pub const AREAL: &[ArealParameter] = &[
+    ArealParameter { key: "Sa_um", heading: "Sa µm", quantity: HeightUm, definition: "ISO25178-2/Sa mean |z| over the grid" },
+    ArealParameter { key: "Sq_um", heading: "Sq µm", quantity: HeightUm, definition: "ISO25178-2/Sq rms z over the grid" },
+    ArealParameter { key: "Sp_um", heading: "Sp µm", quantity: HeightUm, definition: "ISO25178-2/Sp max z" },
+    ArealParameter { key: "Sv_um", heading: "Sv µm", quantity: HeightUm, definition: "ISO25178-2/Sv |min z|" },
+    ArealParameter { key: "Sz_um", heading: "Sz µm", quantity: HeightUm, definition: "ISO25178-2/Sz Sp + Sv (maximum height, not S10z)" },
+    ArealParameter { key: "Ssk", heading: "Ssk", quantity: Ratio, definition: "ISO25178-2/Ssk mean z^3 / Sq^3" },
+    ArealParameter { key: "Sku", heading: "Sku", quantity: Ratio, definition: "ISO25178-2/Sku mean z^4 / Sq^4" },
+    ArealParameter { key: "Sdq", heading: "Sdq", quantity: Ratio, definition: "ISO25178-2:2021 D/Sdq sqrt(mean (dz/dx)^2 + mean (dz/dy)^2), forward differences" },
+    ArealParameter { key: "Sdr_pct", heading: "Sdr %", quantity: Percent, definition: "ISO25178-2:2021 D.3/Sdr two-diagonal triangulation averaged, over (cols-1)(rows-1) cells" },
+    ArealParameter { key: "functional.Sk_um", heading: "Sk µm", quantity: HeightUm, definition: "ISO25178-2/Sk min-gradient 40% secant on the linear-quantile areal material ratio curve of the levelled grid, 0.1% search step (the profile Rk construction)" },
+    ArealParameter { key: "functional.Spk_um", heading: "Spk µm", quantity: HeightUm, definition: "ISO25178-2/Spk = 2*A1/Smr1" },
+    ArealParameter { key: "functional.Svk_um", heading: "Svk µm", quantity: HeightUm, definition: "ISO25178-2/Svk = 2*A2/(100-Smr2)" },
+    ArealParameter { key: "functional.Smr1_pct", heading: "Smr1 %", quantity: Percent, definition: "ISO25178-2/Smr1 areal material ratio at the upper core limit" },
+    ArealParameter { key: "functional.Smr2_pct", heading: "Smr2 %", quantity: Percent, definition: "ISO25178-2/Smr2 areal material ratio at the lower core limit" },
+    ArealParameter { key: "functional.Vmp_ml_per_m2", heading: "Vmp ml/m² (p 10 %)", quantity: HeightUm, definition: "ISO25178-2/Vmp = Vm(p), p = 10%, exact integral of the linear-quantile curve, ml/m2" },
+    ArealParameter { key: "functional.Vmc_ml_per_m2", heading: "Vmc ml/m² (p 10 %, q 80 %)", quantity: HeightUm, definition: "ISO25178-2/Vmc = Vm(q) - Vm(p), p = 10%, q = 80%, ml/m2" },
+    ArealParameter { key: "functional.Vvc_ml_per_m2", heading: "Vvc ml/m² (p 10 %, q 80 %)", quantity: HeightUm, definition: "ISO25178-2/Vvc = Vv(p) - Vv(q), p = 10%, q = 80%, ml/m2" },
+    ArealParameter { key: "functional.Vvv_ml_per_m2", heading: "Vvv ml/m² (q 80 %)", quantity: HeightUm, definition: "ISO25178-2/Vvv = Vv(q), q = 80%, ml/m2" },
+    ArealParameter { key: "spatial.Sal_um", heading: "Sal µm (s 0.2)", quantity: HeightUm, definition: "ISO25178-2/Sal shortest lag at which f_ACF first falls below s = 0.2, along rays every 0.5 deg, bilinear ACF, linear crossing, um" },
+    ArealParameter { key: "spatial.Str", heading: "Str (s 0.2)", quantity: Ratio, definition: "ISO25178-2/Str fastest / slowest decay length to s = 0.2 (blank when a direction does not decay within the field)" },
+    ArealParameter { key: "spatial.Std_deg", heading: "Std °", quantity: Ratio, definition: "ISO25178-2:2021/Std angle of the maximum of the angular amplitude spectrum (|DFT| in 0.5 deg bins of the frequency direction, lower bin edge), deg counter-clockwise from +x, y along the scan" },
+];
+
+/// The definition ids of the areal parameters of `part` (`""`, `functional`, `spatial`: the
+/// module that computes them) under their names, and the `more` that part defines.
+pub fn areal_definitions(part: &str, more: &[(&str, &str)]) -> BTreeMap<String, String> {
+    let in_part = |p: &&ArealParameter| p.key.rsplit_once('.').map_or("", |(s, _)| s) == part;
+    let name = |key: &'static str| key.rsplit('.').next().and_then(|k| k.split('_').next());
+    AREAL
+        .iter()
+        .filter(in_part)
+        .filter_map(|p| Some((name(p.key)?, p.definition)))
+        .chain(more.iter().copied())
+        .map(|(k, v)| (k.to_owned(), v.to_owned()))
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -130,5 +185,16 @@ mod tests {
         }
         assert_eq!(parameter("A1_um_pct").map(|p| p.key), Some("A1"));
         assert!(parameter("y_mm").is_none());
+    }
+
+    /// Each areal parameter is defined in the recipe of the part that computes it, under its
+    /// name, and in no other.
+    #[test]
+    fn each_areal_parameter_is_defined_in_its_parts_recipe() {
+        let names = |part| areal_definitions(part, &[]).into_keys().collect::<Vec<_>>();
+        assert_eq!(names("").join(" "), "Sa Sdq Sdr Sku Sp Sq Ssk Sv Sz");
+        let functional = "Sk Smr1 Smr2 Spk Svk Vmc Vmp Vvc Vvv";
+        assert_eq!(names("functional").join(" "), functional);
+        assert_eq!(names("spatial").join(" "), "Sal Std Str");
     }
 }

@@ -204,16 +204,12 @@ fn section(acf: &Acf, deg: f64, range_um: f64, decay_um: Option<f64>) -> AcfSect
 
 /// The definition ids of the spatial parameters.
 pub fn definitions() -> BTreeMap<String, String> {
-    [
+    #[rustfmt::skip]
+    let more = [
         ("ACF", "ISO25178-2/f_ACF unbiased linear estimator (sum over overlapping pairs / their number, zero-padded FFT) of the plane-levelled grid, normalised to 1 at zero lag"),
-        ("Sal", "ISO25178-2/Sal shortest lag at which f_ACF first falls below s = 0.2, along rays every 0.5 deg, bilinear ACF, linear crossing, um"),
-        ("Str", "ISO25178-2/Str fastest / slowest decay length to s = 0.2 (blank when a direction does not decay within the field)"),
-        ("Std", "ISO25178-2:2021/Std angle of the maximum of the angular amplitude spectrum (|DFT| in 0.5 deg bins of the frequency direction, lower bin edge), deg counter-clockwise from +x, y along the scan"),
         ("PSD", "1D PSD along x (y): periodic Hann window scaled to mean square 1, C(q) = |dx DFT|^2 / L, +-q averaged, mean over lines (columns), um^3 vs q = 2 pi k / L in 1/um (SurfaceTopography's convention)"),
-    ]
-    .into_iter()
-    .map(|(k, v)| (k.to_string(), v.to_string()))
-    .collect()
+    ];
+    super::parameter_table::areal_definitions("spatial", &more)
 }
 
 /// Each column of the row-major `data` (`width` values a row) run through `f` in a

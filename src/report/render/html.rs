@@ -21,7 +21,7 @@
 //! [`crate::numfmt`]; returns text, the caller writes it.
 
 use super::print;
-use crate::metrology::parameter_table::{parameter, Parameter, Source, PARAMETERS};
+use crate::metrology::parameter_table::{parameter, Parameter, Source, AREAL, PARAMETERS};
 use crate::numfmt::{fmt, line_number, sig, Quantity};
 use crate::scan::journal::ResumeState;
 use base64::Engine as _;
@@ -260,47 +260,6 @@ fn line_columns() -> Vec<(String, String, Quantity)> {
 fn field<'a>(v: &'a Value, key: &str) -> &'a Value {
     key.split('.').fold(v, |v, k| &v[k])
 }
-
-/// Areal rows: report key, heading, quantity.
-const AREAL_ROWS: &[(&str, &str, Quantity)] = &[
-    ("Sa_um", "Sa µm", Quantity::HeightUm),
-    ("Sq_um", "Sq µm", Quantity::HeightUm),
-    ("Sp_um", "Sp µm", Quantity::HeightUm),
-    ("Sv_um", "Sv µm", Quantity::HeightUm),
-    ("Sz_um", "Sz µm", Quantity::HeightUm),
-    ("Ssk", "Ssk", Quantity::Ratio),
-    ("Sku", "Sku", Quantity::Ratio),
-    ("Sdq", "Sdq", Quantity::Ratio),
-    ("Sdr_pct", "Sdr %", Quantity::Percent),
-    ("functional.Sk_um", "Sk µm", Quantity::HeightUm),
-    ("functional.Spk_um", "Spk µm", Quantity::HeightUm),
-    ("functional.Svk_um", "Svk µm", Quantity::HeightUm),
-    ("functional.Smr1_pct", "Smr1 %", Quantity::Percent),
-    ("functional.Smr2_pct", "Smr2 %", Quantity::Percent),
-    (
-        "functional.Vmp_ml_per_m2",
-        "Vmp ml/m² (p 10 %)",
-        Quantity::HeightUm,
-    ),
-    (
-        "functional.Vmc_ml_per_m2",
-        "Vmc ml/m² (p 10 %, q 80 %)",
-        Quantity::HeightUm,
-    ),
-    (
-        "functional.Vvc_ml_per_m2",
-        "Vvc ml/m² (p 10 %, q 80 %)",
-        Quantity::HeightUm,
-    ),
-    (
-        "functional.Vvv_ml_per_m2",
-        "Vvv ml/m² (q 80 %)",
-        Quantity::HeightUm,
-    ),
-    ("spatial.Sal_um", "Sal µm (s 0.2)", Quantity::HeightUm),
-    ("spatial.Str", "Str (s 0.2)", Quantity::Ratio),
-    ("spatial.Std_deg", "Std °", Quantity::Ratio),
-];
 
 /// The model's verdict (whether the data support the surface between the lines) in short,
 /// where the report carries one.
@@ -794,10 +753,10 @@ fn areal(h: &mut String, report: &Value, figures: &[Figure]) {
         let _ = write!(h, "<th>{n}</th>");
     }
     h.push_str("</tr></thead>\n");
-    for (key, head, q) in AREAL_ROWS {
-        let mut cells = vec![("t", esc(head))];
+    for p in AREAL {
+        let mut cells = vec![("t", esc(p.heading))];
         for (_, s) in &cols {
-            cells.push(("", num(field(s, key), *q)));
+            cells.push(("", num(field(s, p.key), p.quantity)));
         }
         row(h, &cells);
     }
