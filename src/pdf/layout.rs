@@ -163,10 +163,10 @@ const BODY: f32 = 9.0;
 const TABLE: f32 = 7.5;
 const LEADING: f32 = 1.3;
 /// Table rows are set closer than prose.
-const TABLE_LEADING: f32 = 1.2;
+const TABLE_LEADING: f32 = 1.15;
 const PAD_X: f32 = 3.0;
-const PAD_Y: f32 = 1.0;
-const FIGURE_MAX_H: f32 = 105.0 * MM;
+const PAD_Y: f32 = 0.5;
+const FIGURE_MAX_H: f32 = 70.0 * MM;
 const LOGO_MAX: (f32, f32) = (50.0 * MM, 18.0 * MM);
 const TONE_INDENT: f32 = 8.0;
 
@@ -738,8 +738,14 @@ fn cell_is_wide(cell: &Cell) -> bool {
 
 /// What must fit below a heading or caption with it: the first line of a paragraph, a
 /// table's heading rows and first row, a whole figure.
-fn lead(block: Option<&Block>, sizes: &mut dyn Iterator<Item = &ImageSize>, measure: f32) -> f32 {
-    match block {
+fn lead(blocks: &[Block], sizes: &mut dyn Iterator<Item = &ImageSize>, measure: f32) -> f32 {
+    match blocks.first() {
+        // A heading or caption goes with what follows it (a heading before a figure's
+        // caption: the figure too).
+        Some(Block::Para {
+            kind: kind @ (Kind::Heading(_) | Kind::Caption),
+            ..
+        }) => size_of(*kind) * LEADING * 2.0 + lead(&blocks[1..], sizes, measure),
         Some(Block::Para { kind, .. }) => size_of(*kind) * LEADING * 2.0,
         Some(Block::Table { head, body, .. }) if body.iter().any(|r| r.tall) => {
             head.len() as f32 * (TABLE * TABLE_LEADING + 2.0 * PAD_Y)
@@ -796,7 +802,7 @@ pub fn typeset(
         ) = (b, blocks.get(i + 1))
         {
             let mut rest = images[image..].iter();
-            let h = lead(blocks.get(i + 1), &mut rest, sheet.measure());
+            let h = lead(&blocks[i + 1..], &mut rest, sheet.measure());
             let caption = wrap(runs, BODY, sheet.measure(), m).len() as f32 * BODY * LEADING;
             if let Some(Block::Image { across, .. }) = blocks.get(i + 1) {
                 s.cell(*across, caption * 2.0 + h + 14.0);
@@ -809,7 +815,7 @@ pub fn typeset(
                 let keep = match kind {
                     Kind::Heading(_) | Kind::Caption => {
                         let mut rest = images[image..].iter();
-                        lead(blocks.get(i + 1), &mut rest, sheet.measure())
+                        lead(&blocks[i + 1..], &mut rest, sheet.measure())
                     }
                     _ => 0.0,
                 };

@@ -354,7 +354,7 @@ impl Builder {
         }
         let across = match name {
             "div" if tag.has_class("areal-figures") => 3,
-            "details" if tag.has_class("print") => 2,
+            "details" if tag.has_class("print") => 3,
             _ => 0,
         };
         if across > 0 {

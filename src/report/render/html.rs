@@ -40,7 +40,8 @@ pub struct Figure {
     pub bytes: Vec<u8>,
     /// Shown collapsed (the per-line figures) rather than open.
     pub collapsed: bool,
-    /// Collapsed on screen but printed (the per-line figures [`print::printed_lines`] names).
+    /// On paper: an open figure only when set; a collapsed one (a per-line figure) too, those
+    /// of the lines [`print::printed_lines`] names.
     pub printed: bool,
     /// Not embedded but linked: the figure's file, relative to the report (`bytes` is then
     /// empty). Per-line figures beyond what a page of a few MB holds are linked.
@@ -121,7 +122,7 @@ img{max-width:100%;height:auto;border:1px solid #ddd}
 h3{font-size:1em;margin:.8em 0 .2em}
 .lab-header{display:flex;gap:1em;align-items:center;margin-bottom:.6em;padding-bottom:.4em}
 .lab-header img.logo{max-height:18mm;max-width:50mm;border:none}.lab-name{font-weight:bold;font-size:1.15em}
-tr.sign td{height:2.6em;min-width:10em}
+tr.sign td{height:2.6em;min-width:10em}.printonly{display:none}
 ";
 
 /// The tolerance of the instrument-vs-ours flag for a unit: 2 % of the instrument's value,
@@ -404,6 +405,19 @@ pub fn render(
     holdout(&mut h, report);
     contact(&mut h, report);
     recipe(&mut h, report);
+    let families =
+        (LINE_FAMILIES.iter()).filter(|f| report["lines"].is_array() && !on_paper(report, f.0));
+    let left_out: Vec<String> = (figures.iter().filter(|f| !f.collapsed && !f.printed))
+        .map(|f| format!("the figure “{}”", f.title))
+        .chain(families.map(|f| format!("the per-line table “{}”", f.1)))
+        .collect();
+    if !left_out.is_empty() {
+        let _ = writeln!(
+            h,
+            "<p class=\"printonly\" id=\"left-out\">Not printed, in report.html: {}.</p>",
+            left_out.join("; ")
+        );
+    }
     h.push_str(&print::signatures(report));
     h.push_str("</body>\n</html>\n");
     h
@@ -730,7 +744,8 @@ fn embed(h: &mut String, figures: &[Figure]) {
         } else {
             let _ = writeln!(
                 h,
-                "<figure><figcaption>{}</figcaption>{img}</figure>",
+                "<figure{}><figcaption>{}</figcaption>{img}</figure>",
+                if f.printed { "" } else { " class=\"noprint\"" },
                 esc(&f.title)
             );
         }
@@ -835,6 +850,17 @@ fn blank_reasons(h: &mut String, lines: &[Value]) {
     }
 }
 
+/// Whether the per-line family `id` is printed: those a verdict reads (the material ratio in
+/// the recipe's reading); the other reading and the whole-length values on screen only.
+fn on_paper(report: &Value, id: &str) -> bool {
+    let sj = report["recipe"]["material_ratio"] == "instrument";
+    match id {
+        "t-lines-material" => !sj,
+        "t-lines-sj" => sj,
+        _ => id != "t-lines-ln",
+    }
+}
+
 fn lines(h: &mut String, report: &Value) {
     let Some(lines) = report["lines"].as_array() else {
         return;
@@ -848,7 +874,8 @@ fn lines(h: &mut String, report: &Value) {
         let columns = &all[range.clone()];
         let _ = write!(
             h,
-            "<h3>{family}</h3>\n<div class=\"scroll\"><table id=\"{id}\">\n<thead><tr><th>line</th><th>y mm</th>"
+            "<section{}><h3>{family}</h3>\n<div class=\"scroll\"><table id=\"{id}\">\n<thead><tr><th>line</th><th>y mm</th>",
+            if on_paper(report, id) { "" } else { " class=\"noprint\"" }
         );
         for (key, head, _) in columns {
             match definition(key) {
@@ -890,7 +917,7 @@ fn lines(h: &mut String, report: &Value) {
             }
             row(h, &cells);
         }
-        h.push_str("</table></div>\n");
+        h.push_str("</table></div></section>\n");
     }
     blank_reasons(h, lines);
     // Rδc and Rmr depend on levels chosen per instrument and recipe: said on the page, not

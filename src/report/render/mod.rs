@@ -570,6 +570,11 @@ const PAGE_FIGURES: [(&str, &str, bool, bool); 8] = [
     ("surface3d", "3D view of the measured surface", true, false),
 ];
 
+/// The figures of [`PAGE_FIGURES`] on screen only: the pooled material ratio curves
+/// (summarised by the Sk family, drawn per line in the printed lines' Rk constructions) and
+/// the line left out of the model (summarised by the model section's hold-out figures).
+const SCREEN_ONLY: [&str; 2] = ["bac", "overlay"];
+
 /// The figure `stem` of `dir` (`stem.png|svg`) titled `title`: its SVG file when `vector`
 /// and there is one, else the smaller file; `None` when neither can be read.
 fn figure_file(dir: &Path, stem: &str, title: String, vector: bool) -> Option<html::Figure> {
@@ -594,6 +599,7 @@ fn page_figures(dir: &Path, contact: bool, vector: bool) -> Vec<html::Figure> {
             let f = figure_file(dir, stem, title.to_string(), vector)?;
             Some(html::Figure {
                 beside_areal: *beside_areal,
+                printed: !SCREEN_ONLY.contains(stem),
                 ..f
             })
         })
@@ -627,7 +633,7 @@ pub fn report_pdf(
     let contact = !report["contact"]["measured"].is_null();
     let mut figures = page_figures(dir, contact, true);
     let lines = report["lines"].as_array().map_or(&[][..], Vec::as_slice);
-    for (index, _) in print::printed_lines(report) {
+    for (index, _) in print::printed_lines(report).0 {
         let y = lines.iter().find(|l| l["index"] == index);
         let title = rk_title(
             index,
@@ -701,7 +707,7 @@ pub fn write_report(
             // The page without the per-line figures first, to know what room they have.
             let bare = html::render(&v, journal.as_ref(), &figures, logo).len();
             let budget = per_line_budget(bare, files.rk_plots.len());
-            let printed: Vec<u32> = print::printed_lines(&v).iter().map(|p| p.0).collect();
+            let printed: Vec<u32> = print::printed_lines(&v).0.iter().map(|p| p.0).collect();
             figures.extend(per_line_figures(out, &files.rk_plots, budget, &printed));
             html::render(&v, journal.as_ref(), &figures, logo)
         });

@@ -10,6 +10,7 @@
 //! Layer 4 (reporting): depends on [`super::html`]'s escaping and figures; returns text.
 
 use super::html::{esc, Figure};
+use crate::numfmt::{fmt, Quantity};
 use base64::Engine as _;
 use serde_json::Value;
 use std::fmt::Write as _;
@@ -50,15 +51,15 @@ pub fn page_style(report: &Value, title: &str) -> String {
 @bottom-right{{content:\"page \" counter(page) \" of \" counter(pages);font-size:8pt}}}}\n\
 @media print{{\
 body{{max-width:none;margin:0;padding:0;font-size:9pt;line-height:1.3}}\
-h1{{font-size:14pt}}h2{{font-size:11pt;margin-top:1.1em;break-after:avoid}}\
-table{{font-size:7.5pt;margin:.4em 0}}th,td{{padding:.1em .3em}}\
+h1{{font-size:14pt}}h2{{font-size:11pt;margin-top:1.1em}}h2,h3,figcaption{{break-after:avoid}}\
+table{{font-size:7.5pt;line-height:1.15;margin:.4em 0}}th,td{{padding:0 .3em}}\
 thead{{display:table-header-group}}tr{{break-inside:avoid}}\
 .scroll{{overflow:visible}}\
-figure{{break-inside:avoid;margin:.5em 0}}img{{max-height:105mm;max-width:100%}}\
+figure{{break-inside:avoid;margin:.5em 0}}img{{max-height:70mm;max-width:100%}}\
 .areal-figures{{gap:.5em}}.areal-figures figure{{flex:1 1 30%;min-width:0}}.areal-figures img{{max-height:48mm}}\
 details:not(.print),.noprint{{display:none}}\
-details.print{{display:inline-block;width:49%;vertical-align:top}}details.print::details-content{{content-visibility:visible;display:block}}details.print>summary{{list-style:none;font-weight:bold}}\
-.keep{{break-inside:avoid}}\
+details.print{{display:inline-block;width:32.5%;vertical-align:top}}details.print::details-content{{content-visibility:visible;display:block}}details.print>summary{{list-style:none;font-weight:bold}}\
+.keep{{break-inside:avoid}}.printonly{{display:block}}#blank-reasons{{columns:2;column-gap:1.5em;font-size:8pt}}\
 .signatures{{break-inside:avoid;margin-top:1.5em}}\
 .lab-header{{border-bottom:1px solid #999}}\
 }}\n",
@@ -146,40 +147,82 @@ pub fn to_the_second(s: &str) -> String {
     }
 }
 
-/// The lines whose assessed profile and Rk construction a print shows, by file index, with
-/// why: those of largest, median (the lower of two) and smallest Ra, each once, in that
-/// order — the lines that bound the result; every line when there are at most three. The
-/// rest are in `report.html` (opened on screen) and in `rk/NNNN.svg` beside it.
-pub fn printed_lines(report: &Value) -> Vec<(u32, &'static str)> {
-    let mut ra: Vec<(f64, u32)> = (report["lines"].as_array().into_iter().flatten())
-        .filter_map(|l| Some((l["Ra_um"].as_f64()?, l["index"].as_u64()?.try_into().ok()?)))
-        .collect();
-    ra.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+/// The lines whose assessed profile and Rk construction a print shows, by file index, each
+/// with the words naming it and why, and how they were chosen. Against a specification, the
+/// three nearest to or beyond its limits, worst first (by value ÷ limit for an upper limit,
+/// limit ÷ value for a lower one, a line's worst limit counting): the lines a verdict turns
+/// on. Without one, those of largest, median (the lower of two) and smallest Ra, each once:
+/// the lines that bound the result. Every line when there are at most three. The rest are
+/// in `report.html` (opened on screen) and in `rk/NNNN.svg` beside it.
+pub fn printed_lines(report: &Value) -> (Vec<(u32, String)>, &'static str) {
+    let lines = report["lines"].as_array().map_or(&[][..], Vec::as_slice);
+    // The lines `key` gives a value, largest first (equal ones in line order), with its words.
+    let ranked = |key: &dyn Fn(&Value) -> Option<(f64, String)>| {
+        let mut r: Vec<(f64, u32, String)> = (lines.iter())
+            .filter_map(|l| Some((key(l)?, l["index"].as_u64()?.try_into().ok()?)))
+            .map(|((k, why), i)| (k, i, why))
+            .collect();
+        r.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        r
+    };
+    let label = crate::numfmt::line_label;
+    let worst = ranked(&|l| nearest_limit(report, l));
+    if !worst.is_empty() {
+        let out = worst.into_iter().take(3);
+        let out = out.map(|(_, i, why)| (i, format!("line {}: {why}", label(i))));
+        let how = ", those nearest to or beyond the specification's limits, worst first";
+        return (out.collect(), how);
+    }
+    let ra = ranked(&|l| Some((l["Ra_um"].as_f64()?, String::new())));
     let n = ra.len();
-    let mut out: Vec<(u32, &'static str)> = Vec::with_capacity(3);
+    let mut out: Vec<(u32, String)> = Vec::with_capacity(3);
     for (k, why) in [
-        (0, "largest Ra"),
-        (n / 2, "median Ra"),
-        (n.saturating_sub(1), "smallest Ra"),
+        (0, "largest"),
+        (n / 2, "median"),
+        (n.max(1) - 1, "smallest"),
     ] {
-        match ra.get(k) {
-            Some(&(_, i)) if out.iter().all(|p| p.0 != i) => out.push((i, why)),
-            _ => {}
+        if let Some(&(_, i, _)) = ra.get(k).filter(|r| out.iter().all(|p| p.0 != r.1)) {
+            out.push((i, format!("{why} Ra: line {}", label(i))));
         }
     }
-    out
+    (out, "")
 }
 
-/// The sentence above the per-line figures saying which of them a print shows (none when
-/// no line has an Ra).
+/// How near `line` comes to the specification's limits: the largest value ÷ limit (upper)
+/// or limit ÷ value (lower) over the limits, above 1 beyond it, and the words saying so
+/// ("Rz 22.06 µm against Rz1 max 12.5"); `None` without a limit the line has a value for.
+/// Rk, Rpk and Rvk are read as the recipe's material ratio reading reads them.
+fn nearest_limit(report: &Value, line: &Value) -> Option<(f64, String)> {
+    let sj = report["recipe"]["material_ratio"] == "instrument";
+    (report["specification"]["limits"].as_array()?.iter())
+        .filter_map(|c| {
+            let p = c["parameter"].as_str()?;
+            let reading = match p {
+                "Rk" | "Rpk" | "Rvk" if sj => &line["material_ratio_sj_series"],
+                _ => line,
+            };
+            let v = reading[format!("{p}_um")].as_f64()?;
+            let limit = c["limit_um"].as_f64()?;
+            let share = if c["side"] == "lower" {
+                limit / v
+            } else {
+                v / limit
+            };
+            let callout = c["callout"].as_str()?;
+            let why = format!("{p} {} µm against {callout}", fmt(v, Quantity::HeightUm));
+            share.is_finite().then_some((share, why))
+        })
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+}
+
+/// The sentence above the per-line figures saying which of them a print shows and why (none
+/// when no line is chosen).
 pub fn printed_lines_sentence(report: &Value) -> Option<String> {
     let n = report["lines"].as_array().map_or(0, Vec::len);
-    let which: Vec<String> = printed_lines(report)
-        .iter()
-        .map(|(i, why)| format!("{why}: line {}", crate::numfmt::line_label(*i)))
-        .collect();
+    let (printed, how) = printed_lines(report);
+    let which: Vec<&str> = printed.iter().map(|p| p.1.as_str()).collect();
     (!which.is_empty()).then(|| format!(
-        "On paper, the assessed profile and Rk construction of {} of {n} lines ({}); every line's figure is in report.html and in rk/ beside it.",
+        "On paper, the assessed profile and Rk construction of {} of {n} lines{how} ({}); every line's figure is in report.html and in rk/ beside it.",
         which.len(),
         which.join("; ")
     ))
@@ -191,39 +234,48 @@ mod tests {
     use serde_json::json;
 
     #[test]
-    fn the_printed_lines_are_those_of_largest_median_and_smallest_ra_each_once() {
+    fn the_printed_lines_are_the_worst_against_the_specification_or_those_that_bound_ra() {
         let lines = |ra: &[f64]| {
             let l: Vec<Value> = (ra.iter().enumerate())
-                .map(|(i, r)| json!({"index": i + 10, "Ra_um": r}))
+                .map(|(i, r)| json!({"index": i + 10, "Ra_um": r, "Rz_um": 10.0 - r}))
                 .collect();
             json!({ "lines": l })
         };
-        let indices = |ra: &[f64]| {
-            printed_lines(&lines(ra))
-                .iter()
-                .map(|p| p.0)
-                .collect::<Vec<_>>()
-        };
+        let indices = |r: &Value| printed_lines(r).0.iter().map(|p| p.0).collect::<Vec<_>>();
         let five = lines(&[3.0, 1.0, 5.0, 2.0, 4.0]);
-        let why = ["largest Ra", "median Ra", "smallest Ra"];
-        assert_eq!(
-            printed_lines(&five),
-            [(12, why[0]), (10, why[1]), (11, why[2])]
-        );
+        assert_eq!(indices(&five), [12, 10, 11]);
         // Of an even count, the lower middle value; equal values by line order; each once.
-        assert_eq!(indices(&[1.0, 2.0, 2.0, 4.0]), [13, 12, 10]);
-        assert_eq!(
-            printed_lines(&lines(&[1.0, 2.0])),
-            [(11, why[0]), (10, why[1])]
-        );
-        assert_eq!(indices(&[1.0]), [10]);
-        let mut no_ra = lines(&[1.0, 9.0]);
-        no_ra["lines"][1]["Ra_um"] = Value::Null;
-        assert_eq!(indices(&[]), [0u32; 0]);
-        assert_eq!(printed_lines(&no_ra), [(10, why[0])]);
+        assert_eq!(indices(&lines(&[1.0, 2.0, 2.0, 4.0])), [13, 12, 10]);
+        assert_eq!(indices(&lines(&[1.0, 2.0])), [11, 10]);
+        assert_eq!(indices(&lines(&[])), [0u32; 0]);
         assert_eq!(printed_lines_sentence(&json!({})), None);
         let s = printed_lines_sentence(&five).unwrap();
         assert!(s.contains("3 of 5 lines (largest Ra: line 13 (0012); median Ra: line 11 (0010); smallest Ra: line 12 (0011))"), "{s}");
+        // Against Ra ≤ 1, Rz ≤ 10 and Rpk ≥ 2: line 15's Rpk 1.25 in the SJ series' reading
+        // the recipe asks for (2 ÷ 1.25 = 1.6; ISO's 4 would be within), line 12's Ra 1.2,
+        // line 14's Rz 9.9 (0.99); without a limit any line has a value for, by Ra.
+        let mut r = lines(&[0.5, 1.2, 0.2, 0.1, 0.3]);
+        r["lines"][4]["Rpk_um"] = json!(4.0);
+        r["lines"][4]["material_ratio_sj_series"] = json!({"Rpk_um": 1.25});
+        r["recipe"] = json!({"material_ratio": "instrument"});
+        let limit = |c: &str, p: &str, side: &str, l: f64| json!({"callout": c, "parameter": p, "side": side, "limit_um": l});
+        r["specification"]["limits"] = json!([
+            limit("Ra 1", "Ra", "upper", 1.0),
+            limit("Rz max 10", "Rz", "upper", 10.0),
+            limit("L Rpk 2", "Rpk", "lower", 2.0)
+        ]);
+        let (printed, how) = printed_lines(&r);
+        assert_eq!(indices(&r), [14, 11, 13]);
+        assert_eq!(printed[0].1, "line 15 (0014): Rpk 1.250 µm against L Rpk 2");
+        assert_eq!(
+            printed[2].1,
+            "line 14 (0013): Rz 9.900 µm against Rz max 10"
+        );
+        assert!(how.contains("nearest to or beyond the specification's limits, worst first"));
+        let s = printed_lines_sentence(&r).unwrap();
+        assert!(s.contains("3 of 5 lines, those nearest"), "{s}");
+        r["specification"]["limits"] = json!([limit("Rc 1", "Rc", "upper", 1.0)]);
+        assert_eq!(printed_lines(&r).0[0].1, "largest Ra: line 12 (0011)");
     }
 
     #[test]
