@@ -127,40 +127,24 @@ pub fn assemble(
     model: &Model<'_>,
     ctx: &ReportContext,
 ) -> (Report, FigureData) {
-    let Sections {
-        spikes,
-        lines,
-        specification,
-        surface_grid,
-        anisotropy,
-        surface,
-        model_vs_measured,
-        between_lines,
-        overlay,
-        contact,
-        failed,
-        not_possible,
-        warnings,
-        timings,
-    } = sections;
     let LinesSection {
         recipe,
         lines: mut line_reports,
         analyses,
-    } = lines;
-    if let Ok(h) = &model_vs_measured {
+    } = sections.lines;
+    if let Ok(h) = &sections.model_vs_measured {
         attach(&mut line_reports, h);
     }
-    let (surface_report, surface_error) = split(surface.surface);
-    let (surface_grid, surface_grid_error) = split(surface_grid);
-    let (model_vs_measured, model_vs_measured_error) = split(model_vs_measured);
-    let (between_lines, between_lines_error) = split(between_lines);
+    let (surface_report, surface_error) = split(sections.surface.surface);
+    let (surface_grid, surface_grid_error) = split(sections.surface_grid);
+    let (model_vs_measured, model_vs_measured_error) = split(sections.model_vs_measured);
+    let (between_lines, between_lines_error) = split(sections.between_lines);
     let report = Report {
         software: crate::build_info::software(),
         input: ctx.input.clone(),
         kind: ctx.kind,
-        specification: specification.verdict,
-        uncertainty: specification.uncertainty,
+        specification: sections.specification.verdict,
+        uncertainty: sections.specification.uncertainty,
         recipe,
         lines: line_reports,
         surface: surface_report,
@@ -171,7 +155,7 @@ pub fn assemble(
         model_vs_measured_error,
         between_lines,
         between_lines_error,
-        contact,
+        contact: sections.contact,
         model: ModelReport {
             v_method: model.recipe.method,
             description: model.recipe.describe(),
@@ -179,27 +163,27 @@ pub fn assemble(
             degree_v: model.recipe.degrees.degree_v,
             spikes_replaced: model.replaced.to_vec(),
         },
-        model_checks: surface.checks,
-        outliers: spikes,
-        anisotropy: anisotropy.ok(),
+        model_checks: sections.surface.checks,
+        outliers: sections.spikes,
+        anisotropy: sections.anisotropy.ok(),
         characterisation: Characterisation {
-            complete: failed.is_empty() && !grid.is_partial(),
+            complete: sections.failed.is_empty() && !grid.is_partial(),
             lines_in_input: grid.lines_in_input(),
             lines_left_out: grid.left_out.clone(),
-            failed_sections: failed,
-            sections_not_possible: not_possible,
+            failed_sections: sections.failed,
+            sections_not_possible: sections.not_possible,
         },
         traceability: ctx.traceability.clone(),
         scan: ctx.scan.clone(),
         fit: ctx.fit.clone(),
-        warnings,
-        timings_s: timings,
+        warnings: sections.warnings,
+        timings_s: sections.timings,
         lab: ctx.lab.clone(),
     };
     let figures = FigureData {
         analyses,
-        sampled: surface.sampled,
-        overlay,
+        sampled: sections.surface.sampled,
+        overlay: sections.overlay,
     };
     (report, figures)
 }
