@@ -1056,4 +1056,45 @@ mod tests {
         let page_of = |t: &str| l.pages.iter().position(|p| texts(p).contains(&t)).unwrap();
         assert_eq!(page_of("Approval"), page_of("Approved by"));
     }
+
+    #[test]
+    fn a_heading_before_a_captioned_figure_moves_with_the_figure() {
+        // 44 paragraphs leave room for the heading and the caption, not for the figure.
+        let para = |kind, t: &str| Block::Para {
+            kind,
+            tone: Tone::Plain,
+            runs: vec![run(t)],
+        };
+        let mut blocks: Vec<Block> = (0..44)
+            .map(|k| para(Kind::Body, &format!("p{k}")))
+            .collect();
+        blocks.push(para(Kind::Heading(2), "Plots"));
+        blocks.push(para(Kind::Caption, "Measured heights"));
+        blocks.push(Block::Image {
+            image: super::super::markup::Image {
+                media_type: "image/png".into(),
+                bytes: vec![],
+            },
+            logo: false,
+            across: 1,
+        });
+        let sizes = [Ok((400.0, 200.0))];
+        let l = typeset(
+            &blocks,
+            &sizes,
+            Sheet::new(false),
+            &Running::default(),
+            &Mono,
+        );
+        let page_of = |t: &str| l.pages.iter().position(|p| texts(p).contains(&t)).unwrap();
+        let figure = (l.pages.iter())
+            .position(|p| p.iter().any(|i| matches!(i, Item::Image { .. })))
+            .unwrap();
+        assert_eq!(page_of("p0"), 0);
+        assert_eq!(
+            (page_of("Plots"), page_of("Measured heights")),
+            (figure, figure)
+        );
+        assert_eq!(figure, 1, "the figure does not fit under the paragraphs");
+    }
 }

@@ -107,7 +107,7 @@ pub enum Block {
         body: Vec<Row>,
     },
     /// An image: a figure, or the laboratory's logo; `across` figures share a printed row
-    /// (3 beside the areal parameters, 2 of the per-line figures, else 1).
+    /// (3 beside the areal parameters, 3 of the per-line figures, else 1).
     #[allow(missing_docs)]
     Image {
         image: Image,
