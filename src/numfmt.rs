@@ -13,6 +13,9 @@ pub enum Quantity {
     HeightUm,
     /// Material ratios and other percentages (Mr1, Rmr(c), Smr): 3 significant digits.
     Percent,
+    /// Material ratios as the SJ series prints them (Mr1 5.822 %, Rmr 0.030 %): 3 decimal
+    /// places.
+    InstrumentPercent,
     /// Dimensionless shape parameters (Rsk, Rku, Rdq, Sdq): 3 significant digits.
     Ratio,
     /// Areas of the Rk construction (A1, A2, µm·%): 3 significant digits.
@@ -30,11 +33,13 @@ pub enum Quantity {
 }
 
 impl Quantity {
-    /// Significant digits (or, for [`Quantity::PositionMm`], decimal places).
+    /// Significant digits (or, for [`Quantity::PositionMm`] and
+    /// [`Quantity::InstrumentPercent`], decimal places).
     pub fn digits(self) -> usize {
         match self {
             Quantity::HeightUm | Quantity::LengthMm | Quantity::PositionMm => 4,
-            Quantity::Percent
+            Quantity::InstrumentPercent
+            | Quantity::Percent
             | Quantity::Ratio
             | Quantity::Area
             | Quantity::Seconds
@@ -45,11 +50,11 @@ impl Quantity {
 }
 
 /// `v` written for a person as quantity `q`: significant digits per [`Quantity::digits`]
-/// (decimal places for positions), plain decimal notation between 1e-4 and 1e6, exponent
+/// (decimal places for positions and the instrument's percentages), plain decimal notation between 1e-4 and 1e6, exponent
 /// notation outside; `NaN`, `inf` and `-inf` as such. Trailing zeros are kept: they are
 /// significant.
 pub fn fmt(v: f64, q: Quantity) -> String {
-    if q == Quantity::PositionMm {
+    if matches!(q, Quantity::PositionMm | Quantity::InstrumentPercent) {
         if !v.is_finite() {
             return non_finite(v);
         }

@@ -1,12 +1,14 @@
 //! `surfscan analyze`: surface characterisation of a scan directory (as the scan daemon writes
 //! it), a grid CSV, an X3P file or a profile CSV, read by the one reader ([`crate::input`]:
 //! its findings and the lines it left out are the report's first warnings, and a report made
-//! from fewer lines than the input holds is partial, exit 3). A scan directory and a grid go
-//! through [`crate::report`] (the daemon's entry point [`crate::report::characterise_scan`]
-//! for scans): `report.json`, `summary.csv`, `measured.x3p`, `model.x3p` (ISO 25178-72),
-//! `bac.png|svg`, `heightmap.png|svg`, `overlay.png|svg` (measured vs model of one line) and
-//! `psd|acf|surface3d.png|svg` (the areal PSD, ACF and 3D view). A
-//! profile (a profile CSV, an X3P file of one line) gets `report.json` and `summary.csv`.
+//! from fewer lines than the input holds is partial, exit 3). Every input goes through
+//! [`crate::report`] (the daemon's entry point [`crate::report::characterise_scan`] for
+//! scans): `report.json`, `report.html`, `summary.csv`, `rk/NNNN.svg` (each line's assessed
+//! profile and Rk construction), `measured.x3p`, `model.x3p` (ISO 25178-72), `bac.png|svg`,
+//! `heightmap.png|svg`, `overlay.png|svg` (measured vs model of one line) and
+//! `psd|acf|surface3d.png|svg` (the areal PSD, ACF and 3D view). A profile (a profile CSV, an
+//! X3P file of one line) is a grid of one line: what needs two lines or more is named as not
+//! applying to it, and its summary line gives its parameters as the instrument's display does.
 //!
 //! The model is fitted once at `--degree-u/--degree-v` and `--v-method` (default: a scan's
 //! frozen plan, else the paper's 5/5 interpolation); the report's model sections describe
@@ -34,8 +36,8 @@ use super::model_args::ModelArgs;
 use super::{CliError, Exit};
 use crate::input::{GridInput, Source};
 use crate::jobs::recipe::Recipe;
-use crate::metrology::params::{analyze_line, Options, Recipe as LineRecipe, RoughnessParams};
-use crate::metrology::sj_material_ratio::{sj_material_ratio, MaterialRatioReading};
+use crate::metrology::params::Options;
+use crate::metrology::sj_material_ratio::MaterialRatioReading;
 use crate::report::header::LabHeader;
 use crate::report::scan_dir::fit_for_report;
 use crate::report::{
@@ -43,7 +45,6 @@ use crate::report::{
     ScanOutputs,
 };
 use crate::specification::InstrumentUncertainty;
-use serde::Serialize;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `surfscan analyze`.
@@ -174,128 +175,6 @@ pub enum OutliersArg {
 /// Default λc in mm for CSV input.
 const DEFAULT_LC_MM: f64 = 0.8;
 
-/// One line's entry in the report.
-#[derive(Debug, Serialize)]
-struct LineReport {
-    index: u32,
-    y_mm: f64,
-    #[serde(flatten)]
-    params: RoughnessParams,
-    /// Rmr(c) at depths c = 0, 10, …, 100 % of Rt below the highest peak: `[c_um, Rmr_pct]`.
-    #[serde(rename = "Rmr_table")]
-    rmr_table: Vec<[f64; 2]>,
-    /// Ra, Rq, Rsk, Rku over the whole evaluation length.
-    evaluation_length: crate::metrology::params::EvaluationLengthMoments,
-    /// Why a parameter is blank, by its name.
-    #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
-    blank_reasons: std::collections::BTreeMap<String, String>,
-    /// The material-ratio family as the Mitutoyo SJ series reads it.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    material_ratio_sj_series: Option<crate::metrology::sj_material_ratio::SjMaterialRatio>,
-}
-
-#[derive(Debug, Serialize)]
-struct Report {
-    software: String,
-    input: String,
-    kind: &'static str,
-    recipe: LineRecipe,
-    /// The reading of the material-ratio family the summary line gives.
-    material_ratio: &'static str,
-    lines: Vec<LineReport>,
-    /// The spike rule, its policy and every spike found.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    outliers: Option<crate::report::document::OutliersReport>,
-    /// What the operator should know about these numbers.
-    warnings: Vec<String>,
-}
-
-/// One profile (a profile CSV, an X3P file of one line): its spikes found (and bridged when
-/// asked for), its parameters, the warnings printed and in the report, the outputs written
-/// and what they say printed.
-fn characterise_profile(
-    args: &Args,
-    input: GridInput,
-    options: &Options,
-    out: &Path,
-) -> Result<(), CliError> {
-    let GridInput {
-        mut grid,
-        described,
-        findings: mut warnings,
-        ..
-    } = input;
-    let pitch = grid.pitch_x_mm;
-    // Spikes, judged as a grid's lines are, and bridged when asked for.
-    let rule = args.model.spikes()?;
-    let exclude = args.outliers == Some(OutliersArg::Exclude);
-    let lambda_c = options.apply_lambda_c.then_some(options.lambda_c_mm);
-    let outliers = crate::report::sections::spikes::find(&grid, lambda_c, &rule, exclude);
-    crate::report::sections::spikes::warn(&outliers, &[], pitch, &mut warnings);
-    if exclude && !outliers.spikes.is_empty() {
-        grid = crate::metrology::outliers::bridged_grid(&grid, &outliers.spikes).0;
-    }
-    let z = grid.heights_um;
-    let a = analyze_line(&z, pitch, options)
-        .map_err(|e| failed(format!("{}: {e}", args.input.display())))?;
-    warnings.extend(crate::report::sections::lines::uncentred_warning(
-        std::slice::from_ref(&a),
-        &[0],
-        options,
-    ));
-    if options.form.is_none() {
-        warnings.extend(
-            crate::metrology::cutoff::iso4288_check(
-                a.params.ra_um,
-                a.params.rz_um,
-                options.lambda_c_mm,
-            )
-            .warning,
-        );
-    }
-    for w in &warnings {
-        tell!("surfscan: warning: {w}");
-    }
-    let sj = sj_material_ratio(
-        &a.roughness_um,
-        &crate::metrology::params::MaterialLevels::default(),
-    )
-    .ok();
-    let reading = args.material_ratio.unwrap_or_default();
-    let summary = profile_summary(
-        z.len(),
-        pitch,
-        &reading.applied(&a.params, sj.as_ref()),
-        reading,
-        options,
-    );
-    let report = Report {
-        software: crate::build_info::software(),
-        input: described,
-        kind: "profile",
-        recipe: a.recipe.clone(),
-        material_ratio: reading.statement(),
-        lines: vec![LineReport {
-            index: 0,
-            y_mm: 0.0,
-            rmr_table: crate::report::sections::lines::rmr_table(&a),
-            evaluation_length: a.evaluation_length.clone(),
-            blank_reasons: a.blank_reasons.clone(),
-            material_ratio_sj_series: sj,
-            params: a.params,
-        }],
-        outliers: Some(outliers),
-        warnings,
-    };
-    write_outputs(out, &report)?;
-    say!("{}: {summary}", out.join("report.json").display());
-    Ok(())
-}
-
-fn failed(msg: impl Into<String>) -> CliError {
-    CliError::new(Exit::Failed, msg)
-}
-
 /// The contact section's options from `--contact…`, every value checked (exit 2 naming the
 /// value); `None` without `--contact`.
 fn contact_options(
@@ -343,20 +222,18 @@ fn report_error(e: ReportError) -> CliError {
     }
 }
 
-/// Prints the warnings and the summary (the verdict against the specification first, with
-/// each limit's), and maps a part that does not conform to exit 4 when `judged` (`--recipe`),
-/// else a partial characterisation to exit 3.
-fn finish(o: &ScanOutputs, judged: bool) -> Result<(), CliError> {
+/// Prints the warnings and the summary (a profile's `profile` line; else the verdict against
+/// the specification first, with each limit's, and the verdict between lines), and maps a
+/// part that does not conform to exit 4 when `judged` (`--recipe`), else a partial
+/// characterisation to exit 3.
+fn finish(o: &ScanOutputs, judged: bool, profile: Option<String>) -> Result<(), CliError> {
     for w in &o.warnings {
         tell!("surfscan: warning: {w}");
     }
     let c = &o.report.characterisation;
-    say!(
-        "{}: {} characterised in {:.2} s",
-        o.report_json.display(),
-        c.lines_used(),
-        o.elapsed_s
-    );
+    let summary = profile
+        .unwrap_or_else(|| format!("{} characterised in {:.2} s", c.lines_used(), o.elapsed_s));
+    say!("{}: {summary}", o.report_json.display());
     if let Some(spec) = &o.report.specification {
         say!("verdict: {}", spec.verdict);
         for l in &spec.limits {
@@ -373,7 +250,9 @@ fn finish(o: &ScanOutputs, judged: bool) -> Result<(), CliError> {
             ));
         }
     }
-    say!("{}", o.verdict_line());
+    if o.report.kind != "profile" {
+        say!("{}", o.verdict_line());
+    }
     if o.complete() {
         return Ok(());
     }
@@ -453,8 +332,8 @@ fn check_args(args: &Args) -> Result<(), CliError> {
 }
 
 /// Runs `surfscan analyze`: the flags checked, the station and recipe loaded, the input read
-/// by the one reader, then a profile's parameters, or the characterisation of a scan or a
-/// grid with the options the flags and the scan's frozen plan make.
+/// by the one reader, then the characterisation of a scan or a grid (a profile being a grid
+/// of one line) with the options the flags and the scan's frozen plan make.
 pub fn run(args: Args) -> Result<(), CliError> {
     check_args(&args)?;
     let station = match &args.config {
@@ -467,21 +346,22 @@ pub fn run(args: Args) -> Result<(), CliError> {
     };
     let judged = recipe.is_some();
     let input = args.read.read(&args.input)?;
-    if input.is_profile() {
-        if judged {
-            return Err(CliError::new(
-                Exit::Usage,
-                "--recipe is for scan directories and grids: a single profile is one value, and the 16 % and max rules judge a surface's lines",
-            ));
-        }
-        return characterise_profile(&args, input, &line_options(&args), &out_dir(&args));
+    if input.is_profile() && judged {
+        return Err(CliError::new(
+            Exit::Usage,
+            "--recipe is for scan directories and grids: a single profile is one value, and the 16 % and max rules judge a surface's lines",
+        ));
     }
     let options = analysis_options(&args, &input, station.as_ref(), recipe)?;
     let outputs = match &input.source {
         Source::Scan(_) => characterise_scan(&input, &options),
         _ => characterise_grid(&args, &input, options),
-    };
-    finish(&outputs.map_err(report_error)?, judged)
+    }
+    .map_err(report_error)?;
+    let profile = input
+        .is_profile()
+        .then(|| profile_summary(&outputs, &args, input.grid.cols));
+    finish(&outputs, judged, profile)
 }
 
 /// Where a file's outputs go: `--out`, else the working directory.
@@ -641,7 +521,11 @@ fn characterise_grid(
     };
     let ctx = ReportContext {
         input: input.described.clone(),
-        kind: input.kind(),
+        kind: if input.is_profile() {
+            "profile"
+        } else {
+            input.kind()
+        },
         line_options,
         lambda_c_source,
         filter_reason: filter_reason.to_string(),
@@ -661,18 +545,18 @@ fn characterise_grid(
     characterise(&input.grid, model, ctx, &out_dir(args))
 }
 
-/// What `analyze` of a profile CSV says it found, as the instrument's display would show it:
-/// `profile of 2000 points (1 mm), λc 0.8 mm filter applied: Ra 0.2345 µm, Rq …, Rz …`.
-/// The summary line of a profile: its length, filter, the amplitude parameters and the Rk
-/// family of `p` in `reading` (named when it is the instrument's).
-fn profile_summary(
-    points: usize,
-    pitch_mm: f64,
-    p: &RoughnessParams,
-    reading: MaterialRatioReading,
-    options: &Options,
-) -> String {
+/// What `analyze` of a profile says it found, as the instrument's display would show it:
+/// `profile of 2000 points (1 mm), λc 0.8 mm filter applied: Ra 0.2345 µm, Rq …, Rz …; Rk …`,
+/// the Rk family in the reading `--material-ratio` asks for (named when it is the
+/// instrument's).
+fn profile_summary(o: &ScanOutputs, args: &Args, points: usize) -> String {
     use crate::numfmt::{fmt, Quantity};
+    let options = line_options(args);
+    let Some(line) = o.report.lines.first() else {
+        return "no line characterised".into();
+    };
+    let reading = args.material_ratio.unwrap_or_default();
+    let p = reading.applied(&line.params, line.material_ratio_sj_series.as_ref());
     let ls = options
         .lambda_s_um
         .map(|l| format!("λs {l} µm, "))
@@ -691,7 +575,7 @@ fn profile_summary(
     };
     format!(
         "profile of {points} points ({} mm), {filter}: {name}a {} µm, {name}q {} µm, {name}z {} µm; {name}k {} µm, {name}pk {} µm, {name}vk {} µm{read_as}",
-        fmt(points as f64 * pitch_mm, Quantity::LengthMm),
+        fmt(points as f64 * o.report.recipe.lines.pitch_mm, Quantity::LengthMm),
         fmt(p.ra_um, Quantity::HeightUm),
         fmt(p.rq_um, Quantity::HeightUm),
         fmt(p.rz_um, Quantity::HeightUm),
@@ -699,36 +583,6 @@ fn profile_summary(
         fmt(p.material.rpk_um, Quantity::HeightUm),
         fmt(p.material.rvk_um, Quantity::HeightUm)
     )
-}
-
-fn write_outputs(out: &Path, report: &Report) -> Result<(), CliError> {
-    let io = |p: &Path, e: std::io::Error| {
-        let hint = crate::atomic::write_hint(p, &e);
-        CliError::new(
-            Exit::Io,
-            format!("cannot write {}: {e}; {hint}", p.display()),
-        )
-    };
-    std::fs::create_dir_all(out).map_err(|e| io(out, e))?;
-    let json = serde_json::to_string_pretty(report)
-        .map_err(|e| failed(format!("cannot encode the report: {e}")))?;
-    let path = out.join("report.json");
-    crate::atomic::write_atomically(&path, |w| std::io::Write::write_all(w, json.as_bytes()))
-        .map_err(|e| io(&path, e))?;
-    // As a scan's summary.csv (without the instrument's columns): 1-based line, values with
-    // the digits of their quantity.
-    use crate::report::render::summary::{cells_of, line_cells, LINE_HEADER, MORE_HEADER};
-    let mut csv = format!("{LINE_HEADER},{MORE_HEADER}\n");
-    for l in &report.lines {
-        let mut row = line_cells(l.index, l.y_mm, &l.params);
-        row.extend(cells_of(MORE_HEADER, &l.params));
-        csv.push_str(&row.join(","));
-        csv.push('\n');
-    }
-    let path = out.join("summary.csv");
-    crate::atomic::write_atomically(&path, |w| std::io::Write::write_all(w, csv.as_bytes()))
-        .map_err(|e| io(&path, e))?;
-    Ok(())
 }
 
 #[cfg(test)]

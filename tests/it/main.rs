@@ -43,6 +43,7 @@ mod night_faults;
 mod notify_apprise;
 mod older_scans;
 mod profile_conditions_cli;
+mod profile_report;
 mod prometheus_scrape;
 mod report_areal_figures;
 mod report_pdf;

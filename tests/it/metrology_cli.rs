@@ -88,11 +88,13 @@ fn analyze_profile_csv_writes_report_and_summary() {
     assert_eq!(rows.len(), 2);
     assert!(rows[0].starts_with("line,index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um"));
     assert!(
-        rows[0].ends_with(",A2_um_pct,Rda,Rc_um,RPc_per_cm,Rppi_per_inch,Rdc_um,Rmr_pct"),
+        rows[0].ends_with(",A2_um_pct,instrument_Ra_um,instrument_Rq_um,instrument_Rz_um,Rda,Rc_um,RPc_per_cm,Rppi_per_inch,Rdc_um,Rmr_pct"),
         "{}",
         rows[0]
     );
+    // A grid's columns: the instrument's Ra, Rq, Rz are empty (a file carries none).
     assert!(rows[1].starts_with("1,0000,0.0000,"), "{}", rows[1]);
+    assert!(rows[1].contains(",,,"), "{}", rows[1]);
     // The sine has one profile element per period of 0.1 mm: RPc = 100 peaks /cm.
     let cells: Vec<&str> = rows[1].split(',').collect();
     assert_eq!(cells.len(), rows[0].split(',').count());

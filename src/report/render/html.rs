@@ -243,8 +243,13 @@ fn line_columns() -> Vec<(String, String, Quantity)> {
     let mut columns: Vec<_> = PARAMETERS.iter().map(column).collect();
     for p in PARAMETERS {
         if let Source::Family(_) = p.source {
+            // Its percentages to three decimals, as the instrument prints them.
+            let q = match p.quantity {
+                Quantity::Percent => Quantity::InstrumentPercent,
+                q => q,
+            };
             let key = format!("material_ratio_sj_series.{}", p.key);
-            columns.push((key, p.heading(), p.quantity));
+            columns.push((key, p.heading(), q));
         }
     }
     for p in ["Ra", "Rq", "Rsk", "Rku"].into_iter().filter_map(parameter) {
@@ -515,13 +520,17 @@ fn warnings(h: &mut String, report: &Value) {
         .as_array()
         .map(|w| w.iter().map(text).collect())
         .unwrap_or_default();
+    // A section the line count rules out is said once, in the report's warnings.
+    let not_possible = report["characterisation"]["sections_not_possible"].to_string();
     for (what, key) in [
-        ("model surface", "surface_error"),
-        ("measured grid", "surface_grid_error"),
-        ("model against measured", "model_vs_measured_error"),
+        ("model surface", "surface"),
+        ("measured grid", "surface_grid"),
+        ("model against measured", "model_vs_measured"),
     ] {
-        if let Some(e) = report[key].as_str() {
-            if !all.iter().any(|w| w.contains(e)) {
+        if let Some(e) = report[format!("{key}_error")].as_str() {
+            if !all.iter().any(|w| w.contains(e))
+                && !not_possible.contains(&format!("\"section\":\"{key}\""))
+            {
                 all.push(format!("no {what} results: {e}"));
             }
         }

@@ -189,9 +189,11 @@ fn write_plots(
             bac_curves.len()
         )
     };
-    plots.extend(
-        plot_bearing_curves(out, bac_curves, pooled, &bac_title, &caption).map_err(plot_err)?,
-    );
+    if !(bac_curves.is_empty() && pooled.is_empty()) {
+        plots.extend(
+            plot_bearing_curves(out, bac_curves, pooled, &bac_title, &caption).map_err(plot_err)?,
+        );
+    }
     plots.extend(height_map()?);
     // The spatial curves of the measured grid, drawn beside its areal parameters.
     if let Some(Ok(spatial)) = report.surface_grid.as_ref().map(|g| &g.spatial) {
@@ -244,8 +246,8 @@ fn rk_plot_panic(ctx: &ReportContext) -> ReportError {
 }
 
 /// The height map of the measured grid, `heightmap.png|svg`, and its 3D view,
-/// `surface3d.png|svg` (a grid of at least 2 × 2 points), listed between the bearing area
-/// curves and the overlay.
+/// `surface3d.png|svg`, listed between the bearing area curves and the overlay; none for a
+/// grid of fewer than 2 × 2 points.
 fn draw_height_map(
     out: &Path,
     measured: &HeightMap<'_>,
@@ -255,19 +257,17 @@ fn draw_height_map(
         what: format!("{}: plots", ctx.input),
         source,
     };
+    // One profile is no map: its figure is its assessed profile.
+    if measured.rows < 2 || measured.cols < 2 {
+        return Ok(Vec::new());
+    }
     let mut files = plot_height_map(out, measured, "Measured heights", &caption(ctx))
         .map_err(err)?
         .to_vec();
-    if measured.rows >= 2 && measured.cols >= 2 {
-        let (view, _) = areal_plots::plot_surface_view(
-            out,
-            measured,
-            "Measured surface, 3D view",
-            &caption(ctx),
-        )
-        .map_err(err)?;
-        files.extend(view);
-    }
+    let (view, _) =
+        areal_plots::plot_surface_view(out, measured, "Measured surface, 3D view", &caption(ctx))
+            .map_err(err)?;
+    files.extend(view);
     Ok(files)
 }
 

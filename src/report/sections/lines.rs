@@ -177,7 +177,10 @@ pub fn cutoff_warning(lines: &LinesSection, options: &Options) -> Option<String>
     let (ra, rz) = (mean(|l| l.params.ra_um)?, mean(|l| l.params.rz_um)?);
     iso4288_check(ra, rz, options.lambda_c_mm)
         .warning
-        .map(|w| format!("{w} (mean of the {} lines)", lines.lines.len()))
+        .map(|w| match lines.lines.len() {
+            1 => w,
+            n => format!("{w} (mean of the {n} lines)"),
+        })
 }
 
 /// Without the λc filter the heights are taken as a roughness profile about its mean line

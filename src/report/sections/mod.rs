@@ -126,7 +126,7 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
         spikes::warn(&spikes, model.replaced, grid.pitch_x_mm, &mut warnings);
         // The lines are filtered; the surface as traced is not (no areal λc filter fits the
         // few tenths of a mm a scan covers in y): say so where the two kinds of numbers meet.
-        if ctx.line_options.apply_lambda_c {
+        if ctx.line_options.apply_lambda_c && grid.rows() > 1 {
             warnings.push(format!(
                 "the line parameters are of the λc {} mm roughness profiles, but the areal parameters, the surface model and its bearing area curves, the height map and the X3P files are of the heights as traced, levelled by a plane: form and waviness longer than λc are in them",
                 ctx.line_options.lambda_c_mm
@@ -246,9 +246,17 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
             .partition(|f| match f.section.split('.').next().unwrap_or_default() {
                 "surface" => !fit_possible,
                 "model_vs_measured" | "between_lines" => !holdout_possible,
+                "surface_grid" | "anisotropy" => rows < 2,
                 _ => false,
             });
-        for f in &not_possible {
+        if rows == 1 && !not_possible.is_empty() {
+            let names: Vec<&str> = not_possible.iter().map(|f| f.section.as_str()).collect();
+            warnings.push(format!(
+                "a single profile: {} do not apply (they need two lines or more; characterisation.sections_not_possible says why each)",
+                names.join(", ")
+            ));
+        }
+        for f in not_possible.iter().filter(|_| rows > 1) {
             warnings.push(format!(
                 "{} not made ({rows} lines are too few): {}",
                 f.section, f.reason
