@@ -214,6 +214,7 @@ fn every_plot_is_png_and_svg_in_iso_words_with_a_key_for_every_colour() {
         "Rvk triangle (area A2)",
         "Mr1",
         "Mr2",
+        "\nµm·%\n",
     ] {
         assert!(text.contains(word), "rk svg lacks {word:?}");
     }

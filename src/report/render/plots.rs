@@ -28,6 +28,7 @@ use super::decimate::{extremes_per_column, extremes_per_column_of_pairs};
 use super::text_cache::TextCache;
 use crate::metrology::areal::HeightMap;
 use crate::metrology::model::ModelCurveBac;
+use crate::metrology::parameter_table::parameter;
 use crate::metrology::params::RkFamily;
 use crate::metrology::{check_pitch, MetrologyError};
 use crate::numfmt::{fmt, Quantity};
@@ -1367,17 +1368,19 @@ where
     }
     legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     // The values, in the side panel.
-    let rows = [
-        ("Rk", fmt(rk.rk_um, Quantity::HeightUm), "µm"),
-        ("Rpk", fmt(rk.rpk_um, Quantity::HeightUm), "µm"),
-        ("Rvk", fmt(rk.rvk_um, Quantity::HeightUm), "µm"),
-        ("Mr1", fmt(rk.mr1_pct, Quantity::Percent), "%"),
-        ("Mr2", fmt(rk.mr2_pct, Quantity::Percent), "%"),
-        ("A1", fmt(rk.a1_um_pct, Quantity::Area), "µm·%"),
-        ("A2", fmt(rk.a2_um_pct, Quantity::Area), "µm·%"),
-        ("C", fmt(c, Quantity::HeightUm), "µm"),
-        ("D", fmt(d, Quantity::HeightUm), "µm"),
+    // The Rk family named, in units and digits, as the parameter table says; the levels C, D.
+    let family = [
+        ("Rk", rk.rk_um),
+        ("Rpk", rk.rpk_um),
+        ("Rvk", rk.rvk_um),
+        ("Mr1", rk.mr1_pct),
+        ("Mr2", rk.mr2_pct),
+        ("A1", rk.a1_um_pct),
+        ("A2", rk.a2_um_pct),
     ];
+    let named = |(s, v): (&str, f64)| parameter(s).map(|t| (t.name, fmt(v, t.quantity), t.unit));
+    let levels = [("C", c), ("D", d)].map(|(n, v)| (n, fmt(v, Quantity::HeightUm), "µm"));
+    let rows = family.into_iter().filter_map(named).chain(levels);
     let mut y = 24;
     panel
         .draw_text("ISO 13565-2", &font(15), (10, y))
