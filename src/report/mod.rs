@@ -80,9 +80,9 @@ pub struct ScanOutputs {
 /// areal parameters, the hold-out refits, the verdict) never removes the per-line
 /// parameters, the measured grid's areal parameters, `measured.x3p` or the plots of the
 /// data; each failure is named in `warnings` and in `characterisation.failed_sections`, and
-/// [`ScanOutputs::complete`] is false. A section the grid has too few lines for (no fit
-/// below degree-v + 1 lines, no hold-out without lines to spare) is named in `warnings` and
-/// `characterisation.sections_not_possible` instead: it is not a failure.
+/// [`ScanOutputs::complete`] is false. A section the grid has too few lines for (no fit below
+/// degree-v + 1 lines, no hold-out without lines to spare, no areal section or contact of one
+/// line) is named in `warnings` and `characterisation.sections_not_possible` instead.
 pub fn characterise(
     grid: &Grid,
     model: Model<'_>,

@@ -86,6 +86,20 @@ fn the_mitutoyo_export_gets_its_profile_figure_and_the_instruments_reading() {
         stderr.contains("a single profile:") && stderr.contains("do not apply"),
         "{stderr}"
     );
+    // The contact of a flat is areal: with --contact it is named as not applying, no failure.
+    let contact = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .arg("analyze")
+        .arg(&csv)
+        .args(["--no-filter", "--lc", "2.5", "--contact", "--out"])
+        .arg(dir.path().join("contact"))
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&contact.stderr);
+    assert_eq!(contact.status.code(), Some(0), "{said}");
+    assert!(
+        said.contains("between_lines, contact do not apply"),
+        "{said}"
+    );
     // No height map or pooled bearing curve of a grid that is one line.
     for f in ["heightmap.svg", "bac.svg", "surface3d.svg"] {
         assert!(!out.join(f).exists(), "{f} written for one profile");

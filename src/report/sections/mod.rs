@@ -234,8 +234,8 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
                 c.model.as_ref().and_then(|m| m.error.as_ref()),
             ));
         }
-        // What the line count rules out is not a failure: the fit needs degree-v + 1 lines,
-        // the hold-outs more than that once lines are left out.
+        // What the line count rules out is not a failure: the fit needs degree-v + 1 lines, the
+        // hold-outs more once lines are left out, the areal sections and the contact two.
         let rows = grid.rows();
         let q = model.recipe.degrees.degree_v;
         let fit_possible = rows > q;
@@ -246,7 +246,7 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
             .partition(|f| match f.section.split('.').next().unwrap_or_default() {
                 "surface" => !fit_possible,
                 "model_vs_measured" | "between_lines" => !holdout_possible,
-                "surface_grid" | "anisotropy" => rows < 2,
+                "surface_grid" | "anisotropy" | "contact" => rows < 2,
                 _ => false,
             });
         if rows == 1 && !not_possible.is_empty() {
