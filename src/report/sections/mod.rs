@@ -111,14 +111,24 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
     // The model section (the densest work: the fold check, the model's bearing curves, the
     // sampled model) reads only the grid and the model: it runs beside every section below,
     // from the start. It never unwinds (a panic becomes its failure), so an early error
-    // return below, which joins it, cannot turn into a panic.
+    // return below, which joins it, cannot turn into a panic. Its areal parameters wait for
+    // the grid's and the hold-outs' to be done (`areal_go` sent or dropped, also by an early
+    // return): the model's autocorrelation, twice the sampled model's bytes, is the largest
+    // buffer of the run, and theirs would otherwise be held beside it.
     std::thread::scope(|scope| {
+        let (areal_go, areal_wait) = std::sync::mpsc::channel::<()>();
         let model_thread = scope.spawn(move || {
             let t = Instant::now();
-            let m =
-                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| surface::section(&input)))
-                    .unwrap_or_else(|_| surface::panicked());
-            (m, t.elapsed().as_secs_f64())
+            let mut waited = std::time::Duration::ZERO;
+            let m = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                surface::section(&input, || {
+                    let w = Instant::now();
+                    let _ = areal_wait.recv();
+                    waited = w.elapsed();
+                })
+            }))
+            .unwrap_or_else(|_| surface::panicked());
+            (m, (t.elapsed() - waited).as_secs_f64())
         });
 
         let t = Instant::now();
@@ -176,6 +186,7 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
         let sq = surface_grid.as_ref().map(|s| s.params.sq_um).ok();
         let (model_vs_measured, between_lines) = model_vs_measured::section(&input, sq);
         timings.holdout = t.elapsed().as_secs_f64();
+        drop(areal_go);
         let (surface, model_s) = model_thread
             .join()
             .unwrap_or_else(|_| (surface::panicked(), 0.0));

@@ -51,17 +51,20 @@ fn failed(section: &str, reason: impl Into<String>) -> FailedSection {
     }
 }
 
-/// Runs the section: the model of `input` against the grid's measured heights.
-pub fn section(input: &SectionInput<'_>) -> ModelSection {
+/// Runs the section: the model of `input` against the grid's measured heights. `before_areal`
+/// is called once the model is sampled and checked, before its areal parameters (whose
+/// autocorrelation takes twice the sampled model's bytes): a caller running other sections
+/// beside this one makes it wait there until their own large buffers are gone, so the two
+/// peaks do not add.
+pub fn section(input: &SectionInput<'_>, before_areal: impl FnOnce()) -> ModelSection {
     let g = input.grid;
     characterise(
         input.model,
         &g.heights_um,
-        g.rows(),
-        g.cols,
-        g.pitch_x_mm,
-        input.pitch_y_mm,
+        (g.rows(), g.cols),
+        (g.pitch_x_mm, input.pitch_y_mm),
         &input.ctx.options,
+        before_areal,
     )
 }
 
@@ -77,15 +80,15 @@ pub fn panicked() -> ModelSection {
 }
 
 /// The section for a grid of `rows` lines of `cols` points at `pitch_x_mm`, its lines
-/// `pitch_y_mm` apart on average, measured heights `heights_um`.
+/// `pitch_y_mm` apart on average, measured heights `heights_um`; `before_areal` as in
+/// [`section`].
 fn characterise(
     model: &Model<'_>,
     heights_um: &[f64],
-    rows: usize,
-    cols: usize,
-    pitch_x_mm: f64,
-    pitch_y_mm: f64,
+    (rows, cols): (usize, usize),
+    (pitch_x_mm, pitch_y_mm): (f64, f64),
     options: &ScanAnalysisOptions,
+    before_areal: impl FnOnce(),
 ) -> ModelSection {
     let fit = match model.fit {
         Ok(fit) => fit,
@@ -200,6 +203,7 @@ fn characterise(
             };
         }
     };
+    before_areal();
     let g = HeightMap {
         heights_um: &heights,
         rows,
