@@ -212,39 +212,69 @@ pub fn definitions() -> BTreeMap<String, String> {
     super::parameter_table::areal_definitions("spatial", &more)
 }
 
-/// Each column of the row-major `data` (`width` values a row) run through `f` in a
-/// `len`-long buffer, zero beyond the column's values; written back (the first
-/// `data.len() / width` values) when `write_back`. A few adjacent columns are gathered at a
-/// time, so each row's cache line is read once per block rather than once per column.
+/// Each column of `lines` (equal-length slices, one a row, column `first_col` of the data
+/// at their index 0) run through `f` in a `len`-long buffer, zero beyond the column's
+/// values; written back (the first `lines.len()` values) when `write_back`. A few adjacent
+/// columns are gathered at a time, so each row's cache line is read once per block rather
+/// than once per column.
 fn along_columns(
-    data: &mut [Complex64],
-    width: usize,
+    lines: &mut [&mut [Complex64]],
+    first_col: usize,
     len: usize,
     write_back: bool,
     mut f: impl FnMut(usize, &mut [Complex64]),
 ) {
     const BLOCK: usize = 8;
-    let rows = data.len() / width;
+    let (rows, width) = (lines.len(), lines.first().map_or(0, |l| l.len()));
     let mut block = vec![Complex64::default(); BLOCK * len];
     for k0 in (0..width).step_by(BLOCK) {
         let n = BLOCK.min(width - k0);
-        for (r, line) in data.chunks_exact(width).enumerate() {
+        for (r, line) in lines.iter().enumerate() {
             for (b, v) in line[k0..k0 + n].iter().enumerate() {
                 block[b * len + r] = *v;
             }
         }
         for (b, column) in block.chunks_exact_mut(len).take(n).enumerate() {
             column[rows..].fill(Complex64::default());
-            f(k0 + b, column);
+            f(first_col + k0 + b, column);
         }
         if write_back {
-            for (r, line) in data.chunks_exact_mut(width).enumerate() {
+            for (r, line) in lines.iter_mut().enumerate() {
                 for (b, v) in line[k0..k0 + n].iter_mut().enumerate() {
                     *v = block[b * len + r];
                 }
             }
         }
     }
+}
+
+/// The half spectrum of each line of `grid` levelled by `plane` and zero-padded to `r2c`'s
+/// length, into `spectra` (one after the other). The lines are split between two threads,
+/// each with its own buffers: the same transforms of the same values, the same bits.
+fn line_spectra(
+    grid: &HeightMap<'_>,
+    plane: &Plane,
+    r2c: &dyn realfft::RealToComplex<f64>,
+    spectra: &mut [Complex64],
+) {
+    let (cols, nk) = (grid.cols, r2c.complex_len());
+    let lines_of = |first: usize, spectra: &mut [Complex64]| {
+        let mut line = r2c.make_input_vec();
+        let mut scratch = r2c.make_scratch_vec();
+        let heights = grid.heights_um.chunks_exact(cols).skip(first);
+        for (r, (heights, spectrum)) in heights.zip(spectra.chunks_exact_mut(nk)).enumerate() {
+            plane.level_row(first + r, heights, &mut line[..cols]);
+            line[cols..].fill(0.0);
+            r2c.process_with_scratch(&mut line, spectrum, &mut scratch)
+                .expect("buffer sizes come from the plan");
+        }
+    };
+    let half = grid.rows / 2;
+    let (top, bottom) = spectra.split_at_mut(half * nk);
+    std::thread::scope(|s| {
+        s.spawn(|| lines_of(0, top));
+        lines_of(half, bottom);
+    });
 }
 
 /// The areal autocorrelation function of `grid` after plane levelling.
@@ -273,23 +303,33 @@ fn acf_of_levelled(grid: &HeightMap<'_>, plane: &Plane) -> Acf {
             .max(fwd.get_inplace_scratch_len())
             .max(inv.get_inplace_scratch_len())
     ];
+    let scratch_len = scratch.len();
     let mut line = vec![0.0; pc];
     let mut buf = vec![0.0f64; rows * 2 * nk];
     {
+        // Both passes split their independent transforms (lines, then columns) between two
+        // threads, each with its own small buffers: the same transforms of the same values,
+        // the same bits, in about half the wall time on two cores.
         let spectra: &mut [Complex64] = bytemuck::cast_slice_mut(&mut buf);
-        let lines = grid.heights_um.chunks_exact(cols);
-        for (r, (heights, spectrum)) in lines.zip(spectra.chunks_exact_mut(nk)).enumerate() {
-            plane.level_row(r, heights, &mut line[..cols]);
-            line[cols..].fill(0.0);
-            r2c.process_with_scratch(&mut line, spectrum, &mut scratch)
-                .expect("buffer sizes come from the plan");
-        }
-        along_columns(spectra, nk, pr, true, |_, column| {
-            fwd.process_with_scratch(column, &mut scratch);
-            column
-                .iter_mut()
-                .for_each(|v| *v = Complex64::new(v.norm_sqr(), 0.0));
-            inv.process_with_scratch(column, &mut scratch);
+        line_spectra(grid, plane, r2c.as_ref(), spectra);
+        let columns_of = |first: usize, lines: &mut [&mut [Complex64]]| {
+            let mut scratch = vec![Complex64::default(); scratch_len];
+            along_columns(lines, first, pr, true, |_, column| {
+                fwd.process_with_scratch(column, &mut scratch);
+                column
+                    .iter_mut()
+                    .for_each(|v| *v = Complex64::new(v.norm_sqr(), 0.0));
+                inv.process_with_scratch(column, &mut scratch);
+            });
+        };
+        let half = nk / 2;
+        let (mut left, mut right): (Vec<&mut [Complex64]>, Vec<&mut [Complex64]>) = spectra
+            .chunks_exact_mut(nk)
+            .map(|l| l.split_at_mut(half))
+            .unzip();
+        std::thread::scope(|s| {
+            s.spawn(|| columns_of(0, &mut left));
+            columns_of(half, &mut right);
         });
     }
     // Row ky of the values, (2·cols − 1) long, ends before row ky + 1 of the spectra starts
@@ -352,16 +392,9 @@ fn texture_direction(grid: &HeightMap<'_>, plane: &Plane) -> f64 {
     let nk = cols / 2 + 1;
     let r2c = RealFftPlanner::<f64>::new().plan_fft_forward(cols);
     let fwd = FftPlanner::<f64>::new().plan_fft_forward(rows);
-    let mut scratch =
-        vec![Complex64::default(); r2c.get_scratch_len().max(fwd.get_inplace_scratch_len())];
-    let mut line = vec![0.0; cols];
+    let mut scratch = vec![Complex64::default(); fwd.get_inplace_scratch_len()];
     let mut spectra = vec![Complex64::default(); rows * nk];
-    let lines = grid.heights_um.chunks_exact(cols);
-    for (r, (heights, spectrum)) in lines.zip(spectra.chunks_exact_mut(nk)).enumerate() {
-        plane.level_row(r, heights, &mut line);
-        r2c.process_with_scratch(&mut line, spectrum, &mut scratch)
-            .expect("buffer sizes come from the plan");
-    }
+    line_spectra(grid, plane, r2c.as_ref(), &mut spectra);
     let freq = |k: usize, n: usize, d: f64| {
         let k = if k < n.div_ceil(2) {
             k as f64
@@ -378,7 +411,8 @@ fn texture_direction(grid: &HeightMap<'_>, plane: &Plane) -> f64 {
         ((theta / ANGLE_STEP_DEG) as usize).min(bins - 1)
     };
     let mut spectrum = vec![0.0; bins];
-    along_columns(&mut spectra, nk, rows, false, |c, column| {
+    let mut lines: Vec<&mut [Complex64]> = spectra.chunks_exact_mut(nk).collect();
+    along_columns(&mut lines, 0, rows, false, |c, column| {
         fwd.process_with_scratch(column, &mut scratch);
         // Columns 0 and cols/2 are their own partners; the others' lie outside the half.
         let partner_outside = c != 0 && 2 * c != cols;
