@@ -116,13 +116,6 @@ impl Acf {
             .filter_map(|k| Some([k as f64 * self.pitch_x_um, self.at(0, k)?]))
             .collect()
     }
-
-    /// The ACF along +y at zero x lag: `[τy_um, value]`.
-    pub fn along_y(&self) -> Vec<[f64; 2]> {
-        (0..self.rows as isize)
-            .filter_map(|k| Some([k as f64 * self.pitch_y_um, self.at(k, 0)?]))
-            .collect()
-    }
 }
 
 /// Sal, Str and Std of a grid, with what limits them.
