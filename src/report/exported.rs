@@ -142,6 +142,12 @@ fn text(v: &Value, key: &str) -> String {
         .to_owned()
 }
 
+/// A value as both renderers write it (QIF's `xs:decimal`, DFQ's value fields): a decimal
+/// point, every digit of the value and never an exponent (Rust's shortest round-trip form).
+pub fn decimal(v: f64) -> String {
+    format!("{v}")
+}
+
 fn numbers(v: &Value) -> Vec<u64> {
     v.as_array()
         .map(|a| a.iter().filter_map(Value::as_u64).collect())
@@ -292,14 +298,15 @@ impl Exported {
                 {
                     c.verdict = Some(c.verdict.map_or(v, |w| worse(w, v)));
                 }
-                for n in numbers(l.get("lines_beyond").unwrap_or(&Value::Null)) {
-                    if !c.lines_beyond.contains(&n) {
-                        c.lines_beyond.push(n);
-                    }
-                }
-                for n in numbers(l.get("lines_undecided").unwrap_or(&Value::Null)) {
-                    if !c.lines_undecided.contains(&n) {
-                        c.lines_undecided.push(n);
+                let lists = [
+                    ("lines_beyond", &mut c.lines_beyond),
+                    ("lines_undecided", &mut c.lines_undecided),
+                ];
+                for (key, list) in lists {
+                    for n in numbers(l.get(key).unwrap_or(&Value::Null)) {
+                        if !list.contains(&n) {
+                            list.push(n);
+                        }
                     }
                 }
             }

@@ -42,7 +42,7 @@
 //!
 //! Layer 4 (reporting): a pure formatter of [`Exported`]; the caller writes the bytes.
 
-use crate::report::exported::{Characteristic, Exported};
+use crate::report::exported::{decimal, Characteristic, Exported};
 
 /// Field content on one line: no line breaks, ISO 8859-1, at most `max` characters.
 fn field(s: &str, max: usize) -> String {
@@ -93,11 +93,6 @@ fn operator_number(operator: &str) -> Option<&str> {
     (!o.is_empty() && o.len() <= 10 && o.chars().all(|c| c.is_ascii_digit())).then_some(o)
 }
 
-/// A number as the value fields carry it: a decimal point, every digit of the value.
-fn number(v: f64) -> String {
-    format!("{v}")
-}
-
 /// `K2002`: the callouts, or the parameter and the band it was evaluated in.
 fn description(c: &Characteristic, r: &Exported) -> String {
     let mut d = if c.callouts.is_empty() {
@@ -125,13 +120,13 @@ pub fn dfq_text(r: &Exported) -> String {
         push(&format!("K2004/{i}"), "0".into());
         push(&format!("K2022/{i}"), "4".into());
         if let (Some(lo), Some(hi)) = (c.lower_um, c.upper_um) {
-            push(&format!("K2101/{i}"), number((lo + hi) / 2.0));
+            push(&format!("K2101/{i}"), decimal((lo + hi) / 2.0));
         }
         if let Some(lo) = c.lower_um {
-            push(&format!("K2110/{i}"), number(lo));
+            push(&format!("K2110/{i}"), decimal(lo));
         }
         if let Some(hi) = c.upper_um {
-            push(&format!("K2111/{i}"), number(hi));
+            push(&format!("K2111/{i}"), decimal(hi));
         }
         push(&format!("K2142/{i}"), "µm".into());
     }
@@ -153,7 +148,7 @@ pub fn dfq_text(r: &Exported) -> String {
             let Some(v) = c.values_um.get(k).copied().flatten() else {
                 continue;
             };
-            push(&format!("K0001/{i}"), number(v));
+            push(&format!("K0001/{i}"), decimal(v));
             push(&format!("K0004/{i}"), when.clone());
             push(&format!("K0006/{i}"), batch(&r.scan_id));
             if let Some(n) = operator_number(&r.operator) {

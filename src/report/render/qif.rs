@@ -26,14 +26,9 @@
 //! Layer 4 (reporting): a pure formatter of [`Exported`]; the caller writes the bytes.
 
 use super::html::esc;
-use crate::report::exported::{Characteristic, Exported};
+use crate::report::exported::{decimal, Characteristic, Exported};
 use crate::specification::Verdict;
 use std::fmt::Write;
-
-/// An `xs:decimal`: Rust's shortest round-trip form never has an exponent.
-fn dec(v: f64) -> String {
-    format!("{v}")
-}
 
 /// A UUID for the document, the same for the same scan (so a file exported again is the
 /// same file): from the SHA-256 of the scan id, with the version 5 and variant bits.
@@ -164,15 +159,15 @@ pub fn qif(r: &Exported) -> String {
             let u = c
                 .expanded_u_um
                 .filter(|u| u.is_finite())
-                .map(|u| format!(" combinedUncertainty=\"{}\"", dec(u)))
+                .map(|u| format!(" combinedUncertainty=\"{}\"", decimal(u)))
                 .unwrap_or_default();
-            let mut value = format!("            <Value{u}>{}</Value>\n", dec(mean));
+            let mut value = format!("            <Value{u}>{}</Value>\n", decimal(mean));
             if let (Some(hi), Some(lo)) = (
                 finite.iter().copied().reduce(f64::max),
                 finite.iter().copied().reduce(f64::min),
             ) {
-                let _ = writeln!(value, "            <MaxValue>{}</MaxValue>", dec(hi));
-                let _ = writeln!(value, "            <MinValue>{}</MinValue>", dec(lo));
+                let _ = writeln!(value, "            <MaxValue>{}</MaxValue>", decimal(hi));
+                let _ = writeln!(value, "            <MinValue>{}</MinValue>", decimal(lo));
             }
             measure(
                 format!(
@@ -195,12 +190,12 @@ pub fn qif(r: &Exported) -> String {
                     "{} of line {} (y = {} mm)",
                     esc(&c.parameter),
                     line.number,
-                    dec(line.y_mm)
+                    decimal(line.y_mm)
                 ),
                 line_status(c, line.number),
                 ids_c.item,
                 time(line.time),
-                format!("            <Value>{}</Value>\n", dec(v)),
+                format!("            <Value>{}</Value>\n", decimal(v)),
             );
         }
     }
@@ -287,10 +282,10 @@ pub fn qif(r: &Exported) -> String {
             (lo, hi) => {
                 let _ = writeln!(b, "        <Tolerance>");
                 if let Some(hi) = hi {
-                    element(b, 10, "MaxValue", dec(hi));
+                    element(b, 10, "MaxValue", decimal(hi));
                 }
                 if let Some(lo) = lo {
-                    element(b, 10, "MinValue", dec(lo));
+                    element(b, 10, "MinValue", decimal(lo));
                 }
                 let _ = writeln!(
                     b,
