@@ -359,17 +359,17 @@ pub fn title(report: &Value) -> String {
     }
 }
 
-/// Renders the report. `report` is the report as serialized into `report.json`; `journal`
-/// the scan's journal when it could be read; `figures` are embedded in order.
+/// Renders the report, once. `report` is the report as serialized into `report.json`; `journal`
+/// the scan's journal when it could be read; `figures` (open) are embedded in order, then the
+/// per-line figures `per_line` gives for the bytes the page takes without them.
 pub fn render(
     report: &Value,
     journal: Option<&ResumeState>,
     figures: &[Figure],
     logo: Option<&Figure>,
+    per_line: impl FnOnce(usize) -> Vec<Figure>,
 ) -> String {
-    let mut h = String::with_capacity(
-        64 * 1024 + figures.iter().map(|f| f.bytes.len() * 4 / 3).sum::<usize>(),
-    );
+    let mut h = String::with_capacity(64 * 1024);
     let title = title(report);
     let _ = write!(
         h,
@@ -403,7 +403,7 @@ pub fn render(
     }
     let (areal_figures, others): (Vec<Figure>, Vec<Figure>) =
         figures.iter().cloned().partition(|f| f.beside_areal);
-    plots(&mut h, report, &others);
+    let at = h.len();
     areal(&mut h, report, &areal_figures);
     lines(&mut h, report);
     instrument(&mut h, report);
@@ -425,6 +425,20 @@ pub fn render(
     }
     h.push_str(&print::signatures(report));
     h.push_str("</body>\n</html>\n");
+    // The plots go in last, where they stand, so that the per-line figures are given the bytes
+    // the rest of the page takes: the page is made once.
+    let heading = "<h2 id=\"plots\">Plots</h2>\n";
+    let mut plots = String::new();
+    embed(&mut plots, &others);
+    let per_line = per_line(h.len() + plots.len() + heading.len() * usize::from(!plots.is_empty()));
+    if let (false, Some(s)) = (per_line.is_empty(), print::printed_lines_sentence(report)) {
+        let _ = writeln!(plots, "<p>{}</p>", esc(&s));
+    }
+    embed(&mut plots, &per_line);
+    if !plots.is_empty() {
+        plots.insert_str(0, heading);
+    }
+    h.insert_str(at, &plots);
     h
 }
 
@@ -712,19 +726,6 @@ fn events(h: &mut String, j: &ResumeState) {
             esc(&stop.reason)
         );
     }
-}
-
-fn plots(h: &mut String, report: &Value, figures: &[Figure]) {
-    if figures.is_empty() {
-        return;
-    }
-    h.push_str("<h2 id=\"plots\">Plots</h2>\n");
-    let (open, lines) = figures.split_at(figures.partition_point(|f| !f.collapsed));
-    embed(h, open);
-    if let (false, Some(s)) = (lines.is_empty(), print::printed_lines_sentence(report)) {
-        let _ = writeln!(h, "<p>{}</p>", esc(&s));
-    }
-    embed(h, lines);
 }
 
 /// Each figure as an embedded image (or a link to its file), in order.
@@ -1448,7 +1449,7 @@ mod tests {
         let means =
             serde_json::json!([{"parameter": "A1", "n": 1}, {"parameter": "Sx_um", "n": 1}]);
         let report = serde_json::json!({"kind": "grid", "lines": [line], "uncertainty": {"parameters": means}});
-        let h = render(&report, None, &[], None);
+        let h = render(&report, None, &[], None, |_| Vec::new());
         let rpc = params["RPc_per_cm"].as_f64().unwrap();
         assert!(h.contains("<th>RPc /cm</th>"));
         assert!(h.contains(&format!("<td>{}</td>", fmt(rpc, Quantity::PerLength))));
@@ -1468,7 +1469,7 @@ mod tests {
             }},
             "lines": [{"index": 0, "y_mm": 0.0, "Ra_um": 0.5, "Rdc_um": 0.2, "Rmr_pct": 12.0}],
         });
-        let h = render(&report, None, &[], None);
+        let h = render(&report, None, &[], None, |_| Vec::new());
         assert!(
             h.contains("<th title=\"ISO4287:1997/Ra &lt;mean&gt;\">Ra µm</th>"),
             "{h}"
@@ -1482,7 +1483,7 @@ mod tests {
         ), "{h}");
         // Without a recipe, no sentence of levels.
         let bare = serde_json::json!({"kind": "grid", "lines": [{"index": 0, "y_mm": 0.0}]});
-        assert!(!render(&bare, None, &[], None).contains("line-levels"));
+        assert!(!render(&bare, None, &[], None, |_| Vec::new()).contains("line-levels"));
     }
 
     #[test]
@@ -1506,7 +1507,7 @@ mod tests {
             "recipe": {"lambda_c_mm": 0.8, "spike_rule": "isolated spike: at most 5 points", "outliers": "flag",
                        "holdout_threshold_sq": 0.5}
         });
-        let h = render(&report, None, &[], None);
+        let h = render(&report, None, &[], None, |_| Vec::new());
         // The result first (what is signed), the warnings that qualify it right after.
         let warn = h.find("id=\"warnings\"").unwrap();
         assert!(h.find("id=\"result\"").unwrap() < warn);

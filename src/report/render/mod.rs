@@ -631,8 +631,9 @@ pub fn report_pdf(
         })
         .flatten();
     let contact = !report["contact"]["measured"].is_null();
-    let mut figures = page_figures(dir, contact, true);
+    let open = page_figures(dir, contact, true);
     let lines = report["lines"].as_array().map_or(&[][..], Vec::as_slice);
+    let mut printed = Vec::new();
     for (index, _) in print::printed_lines(report).0 {
         let y = lines.iter().find(|l| l["index"] == index);
         let title = rk_title(
@@ -640,7 +641,7 @@ pub fn report_pdf(
             y.and_then(|l| l["y_mm"].as_f64()).unwrap_or(f64::NAN),
         );
         let f = figure_file(&dir.join("rk"), &format!("{index:04}"), title, true);
-        figures.extend(f.map(|f| html::Figure {
+        printed.extend(f.map(|f| html::Figure {
             collapsed: true,
             printed: true,
             ..f
@@ -657,7 +658,7 @@ pub fn report_pdf(
             logo = None;
         }
     }
-    let page = html::render(report, journal.as_ref(), &figures, logo.as_ref());
+    let page = html::render(report, journal.as_ref(), &open, logo.as_ref(), |_| printed);
     let (left, software) = print::running(report);
     let running = crate::pdf::layout::Running {
         top_left: left.to_string(),
@@ -702,14 +703,13 @@ pub fn write_report(
             .contact
             .as_ref()
             .is_some_and(|c| c.measured.is_some());
-        let mut figures = page_figures(out, contact, false);
+        let figures = page_figures(out, contact, false);
         let page = serde_json::to_value(report).map(|v| {
-            // The page without the per-line figures first, to know what room they have.
-            let bare = html::render(&v, journal.as_ref(), &figures, logo).len();
-            let budget = per_line_budget(bare, files.rk_plots.len());
             let printed: Vec<u32> = print::printed_lines(&v).0.iter().map(|p| p.0).collect();
-            figures.extend(per_line_figures(out, &files.rk_plots, budget, &printed));
-            html::render(&v, journal.as_ref(), &figures, logo)
+            html::render(&v, journal.as_ref(), &figures, logo, |bare| {
+                let budget = per_line_budget(bare, files.rk_plots.len());
+                per_line_figures(out, &files.rk_plots, budget, &printed)
+            })
         });
         json.join().unwrap_or_else(|_| {
             let hint = "writing report.json panicked; report this with the input";
@@ -773,7 +773,7 @@ mod tests {
             ]
         );
         assert!(figures.iter().all(|f| f.collapsed));
-        let page = html::render(&serde_json::json!({}), None, &figures, None);
+        let page = html::render(&serde_json::json!({}), None, &[], None, |_| figures);
         assert!(
             page.contains("<a href=\"rk/0003.svg\">rk/0003.svg</a>"),
             "{page}"
