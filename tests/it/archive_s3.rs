@@ -6,6 +6,7 @@
 //! back, without a restart and without holding up a scan.
 
 use crate::archive_store::{files, scan_dirs, scan_to_the_end};
+use crate::common::append_config;
 use crate::common::garage::{Garage, BUCKET, REGION};
 use crate::daemon_e2e::{self as e2e, Rig};
 use std::io::Write;
@@ -18,17 +19,15 @@ const PREFIX: &str = "rough-3";
 /// Adds `[archive]` for the bucket of `g`, with `secret` in the key's secret file.
 fn with_s3_archive(r: &Rig, g: &Garage, secret: &str) {
     write_secret(r, secret);
-    let text = std::fs::read_to_string(&r.config).unwrap();
-    std::fs::write(
+    append_config(
         &r.config,
-        format!(
-            "{text}\n[archive]\nurl = \"s3://{BUCKET}/{PREFIX}\"\nendpoint = {:?}\nregion = {REGION:?}\naccess-key-id = {:?}\nsecret-access-key-file = {:?}\n",
+        &format!(
+            "\n[archive]\nurl = \"s3://{BUCKET}/{PREFIX}\"\nendpoint = {:?}\nregion = {REGION:?}\naccess-key-id = {:?}\nsecret-access-key-file = {:?}\n",
             g.endpoint,
             g.key_id,
             secret_path(r).display().to_string()
         ),
-    )
-    .unwrap();
+    );
 }
 
 fn secret_path(r: &Rig) -> std::path::PathBuf {

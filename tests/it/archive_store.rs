@@ -4,6 +4,7 @@
 //! nothing leaves the station without `delete-after-days`; with it, a scan whose archived
 //! copy verifies again is deleted and one whose copy was damaged is kept and named.
 
+use crate::common::append_config;
 use crate::daemon_e2e::{self as e2e, Rig};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -11,8 +12,7 @@ use surfscan::scan::ending::StopStatus;
 use surfscan::scan::status::{State, Status};
 
 fn with_archive(r: &Rig, url: &str) {
-    let text = std::fs::read_to_string(&r.config).unwrap();
-    std::fs::write(&r.config, format!("{text}\n[archive]\nurl = {url:?}\n")).unwrap();
+    append_config(&r.config, &format!("\n[archive]\nurl = {url:?}\n"));
 }
 
 pub(crate) fn scan_dirs(r: &Rig) -> Vec<PathBuf> {
@@ -220,8 +220,7 @@ async fn retention_deletes_a_scan_only_when_its_archived_copy_verifies_again() {
     bytes[0] ^= 1;
     std::fs::write(&damaged, bytes).unwrap();
 
-    let text = std::fs::read_to_string(&r.config).unwrap();
-    std::fs::write(&r.config, format!("{text}delete-after-days = 0\n")).unwrap();
+    append_config(&r.config, "delete-after-days = 0\n");
     let mut d = crate::mqtt_broker::spawn_logged(&r);
     crate::mqtt_broker::wait_socket(&r).await;
     let s = e2e::wait_status(&r, "the damaged copy named", |s| {
@@ -295,15 +294,13 @@ async fn a_store_certificate_that_does_not_verify_is_named_and_the_scan_is_kept(
     let secret = r.dir.path().join("archive.secret");
     std::fs::write(&secret, "s3cret\n").unwrap();
     let endpoint = format!("https://127.0.0.1:{port}");
-    let text = std::fs::read_to_string(&r.config).unwrap();
-    std::fs::write(
+    append_config(
         &r.config,
-        format!(
-            "{text}\n[archive]\nurl = \"s3://lab-archive/rough-3\"\nendpoint = {endpoint:?}\nregion = \"garage\"\naccess-key-id = \"GK1\"\nsecret-access-key-file = {:?}\n",
+        &format!(
+            "\n[archive]\nurl = \"s3://lab-archive/rough-3\"\nendpoint = {endpoint:?}\nregion = \"garage\"\naccess-key-id = \"GK1\"\nsecret-access-key-file = {:?}\n",
             secret.display().to_string()
         ),
-    )
-    .unwrap();
+    );
 
     let mut d = crate::mqtt_broker::spawn_logged(&r);
     crate::mqtt_broker::wait_socket(&r).await;

@@ -7,7 +7,7 @@
 //! waits in the queue across a restart, and the files arrive once they are back; a full one
 //! is named and keeps no partial file; `surfscan export` writes a scan again.
 
-use crate::common::{python, scan_command, Rig, RigOptions};
+use crate::common::{append_config, python, scan_command, Rig, RigOptions};
 use crate::daemon_e2e as e2e;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -303,17 +303,15 @@ async fn a_recipe_scan_exports_a_dfq_and_a_qif_that_read_back_as_its_report() {
     let qifs = rig.tmp.path().join("qif");
     std::fs::create_dir_all(&spc).unwrap();
     std::fs::create_dir_all(&qifs).unwrap();
-    let text = std::fs::read_to_string(&config).unwrap();
-    std::fs::write(
+    append_config(
         &config,
-        format!(
-            "{text}\n[jobs]\nrecipes = {:?}\n\n[export]\ndfq-dir = {:?}\nqif-dir = {:?}\n",
+        &format!(
+            "\n[jobs]\nrecipes = {:?}\n\n[export]\ndfq-dir = {:?}\nqif-dir = {:?}\n",
             recipes.display().to_string(),
             spc.display().to_string(),
             qifs.display().to_string()
         ),
-    )
-    .unwrap();
+    );
     let out = tokio::time::timeout(
         std::time::Duration::from_secs(120),
         scan_command(&config, &[])
@@ -422,16 +420,14 @@ async fn drop_directories_away_are_named_and_the_files_arrive_once_they_are_back
     let spc = r.dir.path().join("spc");
     let qifs = r.dir.path().join("qif");
     std::fs::create_dir(&qifs).unwrap();
-    let text = std::fs::read_to_string(&r.config).unwrap();
-    std::fs::write(
+    append_config(
         &r.config,
-        format!(
-            "{text}\n[export]\ndfq-dir = {:?}\nqif-dir = {:?}\n",
+        &format!(
+            "\n[export]\ndfq-dir = {:?}\nqif-dir = {:?}\n",
             spc.display().to_string(),
             qifs.display().to_string()
         ),
-    )
-    .unwrap();
+    );
     // The QIF directory read-only (EROFS, which root cannot write past either).
     let o = Command::new("mount")
         .args(["--bind"])

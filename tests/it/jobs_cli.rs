@@ -1,7 +1,7 @@
 //! Recipes, the queue's commands and the list of scans, through the real binary: what an
 //! operator types and what a program reads.
 
-use crate::common::edited;
+use crate::common::{append_config, edited};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use surfscan::jobs::synthetic::{write, SyntheticReport, SyntheticScan};
@@ -500,9 +500,10 @@ fn analyze_recipe_judges_a_grid_and_exits_4_when_the_part_does_not_conform() {
     // A station's recipe by name, with its calibration uncertainty: 3 % of 1.27 µm does not
     // bring the line within 0.8 µm; the uncertainty is stated in the verdict.
     let config = station(d);
-    let mut t = std::fs::read_to_string(&config).unwrap();
-    t.push_str("\n[traceability]\ncalibration-uncertainty-pct = 3.0\n");
-    std::fs::write(&config, t).unwrap();
+    append_config(
+        &config,
+        "\n[traceability]\ncalibration-uncertainty-pct = 3.0\n",
+    );
     std::fs::copy(&recipe, d.join("recipes/flange.toml")).unwrap();
     let by_name = d.join("by-name");
     let o = analyze_grid(

@@ -9,6 +9,7 @@
 //! password, and a broker certificate that does not verify, are named in the status and
 //! the log; and none of it touches the scan.
 
+use crate::common::append_config;
 use crate::common::mosquitto::{self, Broker, Seen};
 use crate::daemon_e2e::{self as e2e, Daemon, Rig};
 use std::path::{Path, PathBuf};
@@ -24,13 +25,14 @@ pub(crate) const STATION: &str = "st-1";
 pub(crate) fn with_mqtt(r: &Rig, url: &str, password: &str) {
     let pw = r.dir.path().join("mqtt.pw");
     std::fs::write(&pw, format!("{password}\n")).unwrap();
-    let mut text = std::fs::read_to_string(&r.config).unwrap();
-    text.push_str(&format!(
-        "\n[mqtt]\nurl = {url:?}\nstation = {STATION:?}\nusername = {:?}\npassword-file = {:?}\n",
-        mosquitto::STATION_USER,
-        pw.display().to_string()
-    ));
-    std::fs::write(&r.config, text).unwrap();
+    append_config(
+        &r.config,
+        &format!(
+            "\n[mqtt]\nurl = {url:?}\nstation = {STATION:?}\nusername = {:?}\npassword-file = {:?}\n",
+            mosquitto::STATION_USER,
+            pw.display().to_string()
+        ),
+    );
 }
 
 /// The daemon with its log in `daemon.log` of the rig's directory.
@@ -318,15 +320,10 @@ async fn a_completed_scan_s_results_reach_the_subscriber_with_its_verdict_statis
     let recipes = r.dir.path().join("recipes");
     std::fs::create_dir(&recipes).unwrap();
     std::fs::write(recipes.join("mirror.toml"), MIRROR).unwrap();
-    let text = std::fs::read_to_string(&r.config).unwrap();
-    std::fs::write(
+    append_config(
         &r.config,
-        format!(
-            "{text}\n[jobs]\nrecipes = {:?}\n",
-            recipes.display().to_string()
-        ),
-    )
-    .unwrap();
+        &format!("\n[jobs]\nrecipes = {:?}\n", recipes.display().to_string()),
+    );
     let out = r.dir.path().join("sub.txt");
     let _sub = broker.subscribe("watcher-r", &out);
     let mut d = spawn_logged(&r);

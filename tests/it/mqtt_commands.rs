@@ -5,6 +5,7 @@
 //! client's command topic is stopped by the broker; a retained command is refused; and with
 //! `[mqtt] commands = false` every command is refused and nothing happens.
 
+use crate::common::append_config;
 use crate::common::mosquitto::{self, Broker, Seen};
 use crate::daemon_e2e::{self as e2e, Rig};
 use crate::mqtt_broker::{log_path, spawn_logged, wait_socket, with_mqtt, STATION};
@@ -33,16 +34,14 @@ fn station(r: &Rig, broker: &Broker, commands: bool) {
     let recipes = r.dir.path().join("recipes");
     std::fs::create_dir(&recipes).unwrap();
     std::fs::write(recipes.join("long.toml"), LONG).unwrap();
-    let text = std::fs::read_to_string(&r.config).unwrap();
     // `[mqtt]` is the last table: its key first, then the jobs' table.
-    std::fs::write(
+    append_config(
         &r.config,
-        format!(
-            "{text}commands = {commands}\n[jobs]\nrecipes = {:?}\n",
+        &format!(
+            "commands = {commands}\n[jobs]\nrecipes = {:?}\n",
             recipes.display().to_string()
         ),
-    )
-    .unwrap();
+    );
 }
 
 /// Sends `payload` as `client`'s command and waits for the reply carrying its `id`.

@@ -8,6 +8,7 @@
 //! time), and a scan that was queued is not queued again. And the real thing: the daemon
 //! killed by SIGKILL the moment its scan's stop record is in the journal, then restarted.
 
+use crate::common::append_config;
 use crate::common::mosquitto::{self, Broker};
 use crate::daemon_e2e::{self as e2e, Rig};
 use crate::mqtt_broker::{log_path, spawn_logged, wait_socket, with_mqtt, STATION};
@@ -21,16 +22,14 @@ fn with_publishers(r: &Rig) -> (PathBuf, PathBuf) {
     let archive = r.dir.path().join("archive");
     std::fs::create_dir(&spc).unwrap();
     std::fs::create_dir(&archive).unwrap();
-    let text = std::fs::read_to_string(&r.config).unwrap();
-    std::fs::write(
+    append_config(
         &r.config,
-        format!(
-            "{text}\n[export]\ndfq-dir = {:?}\n[archive]\nurl = \"file://{}\"\n",
+        &format!(
+            "\n[export]\ndfq-dir = {:?}\n[archive]\nurl = \"file://{}\"\n",
             spc.display().to_string(),
             archive.display()
         ),
-    )
-    .unwrap();
+    );
     (spc, archive)
 }
 

@@ -11,6 +11,7 @@
 //! Depends on the public API of `surfscan` (transport, `sj210`, `devices`) and of
 //! `surfscan-sim` (builder, fault specs, bundled profiles, transcript reader), nothing else.
 
+use crate::common::append_config;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use surfscan::devices::{
@@ -920,15 +921,10 @@ async fn a_line_whose_ra_is_far_from_its_neighbours_is_kept_with_a_named_warning
         format!("[plan]\nlines = 6\ny-step-mm = 0.01\n[specification]\nlimits = [\"Ra1 max {RA_MAX_UM}\"]\n"),
     )
     .unwrap();
-    let text = std::fs::read_to_string(&config).unwrap();
-    std::fs::write(
+    append_config(
         &config,
-        format!(
-            "{text}\n[jobs]\nrecipes = {:?}\n",
-            recipes.display().to_string()
-        ),
-    )
-    .unwrap();
+        &format!("\n[jobs]\nrecipes = {:?}\n", recipes.display().to_string()),
+    );
     let o = tokio::time::timeout(
         Duration::from_secs(120),
         scan_command(&config, &[])

@@ -11,6 +11,7 @@
 //!
 //! Depends on the daemon rig of `daemon_e2e`, the DevTools driver and the HTTP test client.
 
+use crate::common::append_config;
 use crate::common::cdp::{Browser, Tab};
 use crate::common::http::{request, Events};
 use crate::daemon_e2e::{
@@ -42,12 +43,13 @@ fn with_page(r: &Rig) -> std::net::SocketAddr {
     std::fs::write(&tokens, format!("alice {ALICE}\n")).unwrap();
     std::fs::set_permissions(&tokens, std::fs::Permissions::from_mode(0o600)).unwrap();
     let addr: std::net::SocketAddr = format!("127.0.0.1:{}", free_port()).parse().unwrap();
-    let mut text = std::fs::read_to_string(&r.config).unwrap();
-    text.push_str(&format!(
-        "\n[web]\nlisten = \"{addr}\"\ntoken-file = {:?}\n",
-        tokens.display().to_string()
-    ));
-    std::fs::write(&r.config, text).unwrap();
+    append_config(
+        &r.config,
+        &format!(
+            "\n[web]\nlisten = \"{addr}\"\ntoken-file = {:?}\n",
+            tokens.display().to_string()
+        ),
+    );
     addr
 }
 
@@ -94,12 +96,10 @@ fn with_recipes(r: &Rig) {
     let dir = r.dir.path().join("recipes");
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("mirror.toml"), MIRROR).unwrap();
-    let mut text = std::fs::read_to_string(&r.config).unwrap();
-    text.push_str(&format!(
-        "\n[jobs]\nrecipes = {:?}\n",
-        dir.display().to_string()
-    ));
-    std::fs::write(&r.config, text).unwrap();
+    append_config(
+        &r.config,
+        &format!("\n[jobs]\nrecipes = {:?}\n", dir.display().to_string()),
+    );
 }
 
 /// Opens the page and signs in as alice; before, the page shows the sign-in form and

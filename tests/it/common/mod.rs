@@ -695,6 +695,16 @@ pub fn edited(text: &str, from: &str, to: &str) -> String {
     text.replace(from, to)
 }
 
+/// Appends `text` (a table or a key the test needs) to the configuration file `config`.
+#[track_caller]
+pub fn append_config(config: &Path, text: &str) {
+    let mut f = std::fs::OpenOptions::new()
+        .append(true)
+        .open(config)
+        .unwrap();
+    std::io::Write::write_all(&mut f, text.as_bytes()).unwrap();
+}
+
 /// Swaps the instrument's and the stage's ports (`instrument`, `stage`) in the configuration
 /// file `config`; returns them as the file quotes them, the instrument's first.
 pub fn swap_ports(config: &Path, instrument: &Path, stage: &Path) -> (String, String) {

@@ -145,13 +145,14 @@ impl Broker {
         let d = self.dir.clone();
         let tls = crate::common::throwaway_tls(&d);
         let conf = d.join("mosquitto.conf");
-        let mut text = std::fs::read_to_string(&conf).unwrap();
-        text.push_str(&format!(
-            "certfile {}\nkeyfile {}\n",
-            tls.certificate.display(),
-            tls.key.display()
-        ));
-        std::fs::write(&conf, text).unwrap();
+        crate::common::append_config(
+            &conf,
+            &format!(
+                "certfile {}\nkeyfile {}\n",
+                tls.certificate.display(),
+                tls.key.display()
+            ),
+        );
         self.restart();
         tls.ca
     }
