@@ -404,13 +404,11 @@ async fn a_scan_writes_the_configured_method_and_prints_the_verdict() {
     use crate::common::*;
     let rig = Rig::start(RigOptions::default()).await;
     let cfg = rig.config("out");
-    let text = std::fs::read_to_string(&cfg).unwrap();
-    let text = edited(
-        &text,
+    edit_file(
+        &cfg,
         "[output]",
         "v-method = \"least-squares\"\noutliers = \"replace\"\n\n[output]",
     );
-    std::fs::write(&cfg, text).unwrap();
     let o = run_scan(&cfg, &[]).await;
     assert!(o.status.success(), "{}", describe(&o));
     let stdout = String::from_utf8_lossy(&o.stdout);

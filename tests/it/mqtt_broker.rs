@@ -605,13 +605,11 @@ async fn a_broker_certificate_that_does_not_verify_is_named_and_the_scan_is_unaf
         "the log does not name the TLS failure: {log}"
     );
 
-    let text = std::fs::read_to_string(&r.config).unwrap();
-    let text = crate::common::edited(
-        &text,
+    crate::common::edit_file(
+        &r.config,
         &format!("url = {url:?}\n"),
         &format!("url = {url:?}\nca-file = {:?}\n", ca.display().to_string()),
     );
-    std::fs::write(&r.config, text).unwrap();
     let mut d = spawn_logged(&r);
     wait_socket(&r).await;
     e2e::wait_status(&r, "the link up with the CA trusted", |s| {

@@ -603,12 +603,7 @@ async fn a_resumed_scan_keeps_its_own_stage_settings_over_an_edited_configuratio
     let config = rig.config("out");
     let o = run_scan(&config, &[("SURFSCAN_TEST_CRASH", "2:after-commit")]).await;
     assert!(o.status.code().is_none(), "{}", describe(&o));
-    let text = std::fs::read_to_string(&config).unwrap();
-    std::fs::write(
-        &config,
-        edited(&text, "backlash-mm = 0.05", "backlash-mm = 0.08"),
-    )
-    .unwrap();
+    edit_file(&config, "backlash-mm = 0.05", "backlash-mm = 0.08");
 
     let before = rig.stage.move_targets_nm().len();
     let o = run_scan(&config, &[]).await;

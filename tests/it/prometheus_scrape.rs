@@ -62,13 +62,11 @@ fn promtool(text: &str) -> (bool, String) {
 }
 
 fn with_listen(r: &Rig, port: u16) {
-    let text = std::fs::read_to_string(&r.config).unwrap();
-    let text = crate::common::edited(
-        &text,
+    crate::common::edit_file(
+        &r.config,
         "[metrics]\n",
         &format!("[metrics]\nlisten = \"127.0.0.1:{port}\"\n"),
     );
-    std::fs::write(&r.config, text).unwrap();
 }
 
 /// A Prometheus server scraping 127.0.0.1:`target` every 250 ms; its own port returned.

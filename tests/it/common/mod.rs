@@ -695,6 +695,14 @@ pub fn edited(text: &str, from: &str, to: &str) -> String {
     text.replace(from, to)
 }
 
+/// Replaces `from` with `to` in the file at `path`, failing as [`edited`] does when it has no
+/// `from`.
+#[track_caller]
+pub fn edit_file(path: &Path, from: &str, to: &str) {
+    let text = std::fs::read_to_string(path).unwrap();
+    std::fs::write(path, edited(&text, from, to)).unwrap();
+}
+
 /// Appends `text` (a table or a key the test needs) to the configuration file `config`.
 #[track_caller]
 pub fn append_config(config: &Path, text: &str) {
