@@ -242,13 +242,15 @@ pub fn areal_params(grid: &HeightMap<'_>) -> Result<ArealParams, MetrologyError>
 }
 
 /// Sq alone of a grid after plane levelling: the bits of [`areal_params`]' `sq_um` (the same
-/// levelling and the same sum), without the other parameters' passes, for callers that need
+/// levelling and sum, in order, a row at a time with no levelled copy), for callers that need
 /// only Sq (the verdict between lines in `surfscan fit`).
 pub fn sq_um(grid: &HeightMap<'_>) -> Result<f64, MetrologyError> {
-    let (z, _) = level_plane(grid)?;
-    let n = z.len() as f64;
-    let m2 = z.iter().map(|v| v * v).sum::<f64>() / n;
-    Ok(m2.sqrt())
+    let (p, mut row, mut m2) = (Plane::of(grid)?, vec![0.0; grid.cols], 0.0);
+    for (r, line) in grid.heights_um.chunks_exact(grid.cols).enumerate() {
+        p.level_row(r, line, &mut row);
+        m2 = row.iter().fold(m2, |s, v| s + v * v);
+    }
+    Ok((m2 / grid.heights_um.len() as f64).sqrt())
 }
 
 /// The pooled areal material ratio curve Smr(c) of the levelled grid: `levels` equal steps from

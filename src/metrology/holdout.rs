@@ -244,7 +244,7 @@ fn refit_keeping(
         .collect();
     let method = refit_method(method, grid.rows(), kept.len(), options.degree_v);
     // The kept lines' copy is freed as soon as the refit has them.
-    let sub: Vec<f64> = kept.iter().flat_map(|&r| grid.row(r).to_vec()).collect();
+    let sub: Vec<f64> = kept.iter().flat_map(|&r| grid.row(r)).copied().collect();
     let fit = fit_grid_with(grid.pitch_x_mm, &ky, &sub, grid.cols, options, method)?;
     Ok((fit, kept))
 }
@@ -590,10 +590,7 @@ mod tests {
         let (y, z) = (&g.y_mm, &g.heights_um);
         let held = lines_left_out(&g, FitOptions::default(), VMethod::Interpolate, 2).unwrap();
         let kept: Vec<usize> = (0..15).filter(|r| r % 2 == 0).collect();
-        let sub: Vec<f64> = kept
-            .iter()
-            .flat_map(|&r| z[r * 64..(r + 1) * 64].to_vec())
-            .collect();
+        let sub: Vec<f64> = kept.iter().flat_map(|&r| g.row(r)).copied().collect();
         let ky: Vec<f64> = kept.iter().map(|&r| y[r]).collect();
         let fit = fit_grid_with(
             0.0005,
