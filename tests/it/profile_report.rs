@@ -232,4 +232,13 @@ fn the_mitutoyo_export_gets_its_profile_figure_and_the_instruments_reading() {
     }
     // ISO's reading stays ISO's (Rpk 2.722 µm on the continuous profile).
     assert!(row(iso).iter().any(|c| c == "2.722"), "{iso}");
+    // The recipe describes how the profile was evaluated, not a model between lines it has
+    // none of.
+    let recipe = browser.eval(&tab, "document.getElementById('t-recipe').innerText");
+    let recipe = recipe.as_str().unwrap();
+    assert!(recipe.contains("sampling lengths N"), "{recipe}");
+    assert!(
+        !recipe.contains("B-spline") && !recipe.contains("model between lines"),
+        "{recipe}"
+    );
 }

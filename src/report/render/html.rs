@@ -1301,7 +1301,11 @@ fn recipe(h: &mut String, report: &Value) {
         &format!("{} mm", num(&r["pitch_mm"], Quantity::LengthMm)),
     );
     kv(h, "mean line", &esc(&text(&r["mean_line"])));
-    kv(h, "surface", &esc(&text(&report["model"]["description"])));
+    // A single profile has no model between lines to describe.
+    let profile = report["kind"] == "profile";
+    if !profile {
+        kv(h, "surface", &esc(&text(&report["model"]["description"])));
+    }
     kv(
         h,
         "spikes",
@@ -1315,7 +1319,7 @@ fn recipe(h: &mut String, report: &Value) {
             }
         )),
     );
-    if let Some(t) = r["holdout_threshold_sq"].as_f64() {
+    if let Some(t) = r["holdout_threshold_sq"].as_f64().filter(|_| !profile) {
         kv(
             h,
             "model between lines",
