@@ -262,6 +262,17 @@ fn line_columns() -> Vec<(String, String, Quantity)> {
     columns
 }
 
+/// The recipe's name of the parameter a column's `key` holds (`Rk_um` and
+/// `material_ratio_sj_series.Rk_um` → `Rk`): its definition id and its blank reason's name.
+/// `None` for a value the table does not define (`evaluation_length.Ra_ln_um`).
+fn stem(key: &str) -> Option<&'static str> {
+    let member = key.rsplit('.').next().unwrap_or(key);
+    PARAMETERS
+        .iter()
+        .find(|p| p.key == member)
+        .map(Parameter::stem)
+}
+
 /// The value at `key` of `v`, a `.` stepping into a member (`evaluation_length.Rq_ln_um`).
 fn field<'a>(v: &'a Value, key: &str) -> &'a Value {
     key.split('.').fold(v, |v, k| &v[k])
@@ -831,8 +842,7 @@ fn blank_or(line: &Value, key: &str, q: Quantity) -> String {
     if v.is_number() {
         return num(v, q);
     }
-    let stem = key.split('_').next().unwrap_or(key);
-    match line["blank_reasons"][stem].as_str() {
+    match stem(key).and_then(|s| line["blank_reasons"][s].as_str()) {
         Some(why) => format!("<span class=\"blank\" title=\"{}\">—*</span>", esc(why)),
         None => String::new(),
     }
@@ -877,8 +887,16 @@ fn lines(h: &mut String, report: &Value) {
     };
     h.push_str("<h2 id=\"lines\">Per line (ISO 4287, ISO 13565-2)</h2>\n");
     let definitions = &report["recipe"]["definitions"];
-    // A parameter's definition, by the stem of its key ("Rdc_um" → "Rdc").
-    let definition = |key: &str| definitions[key.split('_').next().unwrap_or(key)].as_str();
+    // A column's definition: its parameter's, the SJ series' reading of it said so.
+    let definition = |key: &str| {
+        let d = definitions[stem(key)?].as_str()?;
+        Some(match key.starts_with("material_ratio_sj_series.") {
+            true => {
+                format!("{d}; here as the SJ series reads it (ordinates counted, 100-level curve)")
+            }
+            false => d.to_owned(),
+        })
+    };
     let all = line_columns();
     for (id, family, range) in LINE_FAMILIES {
         let columns = &all[range.clone()];
@@ -890,7 +908,7 @@ fn lines(h: &mut String, report: &Value) {
         for (key, head, _) in columns {
             match definition(key) {
                 Some(d) => {
-                    let _ = write!(h, "<th title=\"{}\">{}</th>", esc(d), esc(head));
+                    let _ = write!(h, "<th title=\"{}\">{}</th>", esc(&d), esc(head));
                 }
                 None => {
                     let _ = write!(h, "<th>{}</th>", esc(head));
@@ -934,7 +952,7 @@ fn lines(h: &mut String, report: &Value) {
     // only in a heading's tooltip.
     let levels: Vec<String> = [("Rdc_um", "Rδc"), ("Rmr_pct", "Rmr")]
         .iter()
-        .filter_map(|(key, name)| definition(key).map(|d| format!("{name}: {}", esc(d))))
+        .filter_map(|(key, name)| definition(key).map(|d| format!("{name}: {}", esc(&d))))
         .collect();
     if !levels.is_empty() {
         let _ = writeln!(h, "<p id=\"line-levels\">{}.</p>", levels.join("; "));
@@ -1488,6 +1506,54 @@ mod tests {
         // Without a recipe, no sentence of levels.
         let bare = serde_json::json!({"kind": "grid", "lines": [{"index": 0, "y_mm": 0.0}]});
         assert!(!render(&bare, None, &[], None, |_| Vec::new()).contains("line-levels"));
+    }
+
+    /// Every parameter heading of every per-line table carries the recipe's definition of
+    /// its parameter: the SJ series' reading too (its keys are members of
+    /// `material_ratio_sj_series`, whose stem is no parameter's name).
+    #[test]
+    fn every_line_heading_with_a_definition_has_its_tooltip_the_sj_readings_included() {
+        let definitions = crate::metrology::params::definitions();
+        let report = serde_json::json!({
+            "kind": "grid",
+            "recipe": {"definitions": definitions, "material_ratio": "iso"},
+            "lines": [{"index": 0, "y_mm": 0.0}],
+        });
+        let h = render(&report, None, &[], None, |_| Vec::new());
+        let table = |id: &str| {
+            let start = h.find(&format!("<table id=\"{id}\">")).expect(id);
+            h[start..][..h[start..].find("</thead>").unwrap()].to_owned()
+        };
+        let heads = |id: &str| table(id).matches("<th title=\"").count();
+        let mut sj = 0;
+        for p in PARAMETERS {
+            let d = esc(&definitions[p.stem()]);
+            let th = |id: &str| table(id).contains(&format!("<th title=\"{d}"));
+            assert!(
+                ["t-lines", "t-lines-spacing", "t-lines-material"]
+                    .iter()
+                    .any(|id| th(id)),
+                "{} has no tooltip",
+                p.key
+            );
+            if let Source::Family(_) = p.source {
+                assert!(th("t-lines-sj"), "the SJ series' {} has no tooltip", p.key);
+                sj += 1;
+            }
+        }
+        assert_eq!(sj, 8, "Rmr, Rk, Rpk, Rvk, Mr1, Mr2, A1, A2");
+        assert_eq!(heads("t-lines-sj"), sj);
+        assert!(table("t-lines-sj").contains("as the SJ series reads it"));
+        assert_eq!(
+            heads("t-lines") + heads("t-lines-spacing") + heads("t-lines-material"),
+            PARAMETERS.len(),
+            "one tooltip per parameter, none on a column the recipe does not define"
+        );
+        assert_eq!(
+            heads("t-lines-ln"),
+            4,
+            "Ra, Rq, Rsk, Rku beside their ln values"
+        );
     }
 
     #[test]
