@@ -579,9 +579,9 @@ fn profile_summary(o: &ScanOutputs, args: &Args, points: usize) -> String {
         fmt(p.ra_um, Quantity::HeightUm),
         fmt(p.rq_um, Quantity::HeightUm),
         fmt(p.rz_um, Quantity::HeightUm),
-        fmt(p.material.rk_um, Quantity::HeightUm),
-        fmt(p.material.rpk_um, Quantity::HeightUm),
-        fmt(p.material.rvk_um, Quantity::HeightUm)
+        fmt(p.material.rk.rk_um, Quantity::HeightUm),
+        fmt(p.material.rk.rpk_um, Quantity::HeightUm),
+        fmt(p.material.rk.rvk_um, Quantity::HeightUm)
     )
 }
 

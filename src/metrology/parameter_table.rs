@@ -109,13 +109,13 @@ pub const PARAMETERS: &[Parameter] = &[
     Parameter { key: "Rppi_per_inch", name: "Rppi", unit: "/in", quantity: PerLength, scaling: Lateral, source: Line(|p| p.rppi_per_inch), definition: "SJ series Ppi = 1 inch / RSm (Pc for a unit length of 1 inch), per inch" },
     Parameter { key: "Rdc_um", name: "Rδc", unit: "µm", quantity: HeightUm, scaling: Height, source: Line(|p| Some(p.rdc_um)), definition: "ISO4287:1997/Rdc = C(Rmr1) - C(Rmr2) on the piecewise-linear material ratio curve over ln; SJ series levels 10% and 25%" },
     Parameter { key: "Rmr_pct", name: "Rmr", unit: "%", quantity: Percent, scaling: Other, source: Family(|m| m.rmr_pct), definition: "ISO4287:1997/Rmr relative material ratio at C(Rmr0) - Rdc; SJ series Rmr0 = 0% (the highest peak), Rdc = 0.10 um" },
-    Parameter { key: "Rk_um", name: "Rk", unit: "µm", quantity: HeightUm, scaling: Height, source: Family(|m| m.rk_um), definition: "ISO13565-2/Rk min-gradient 40% secant on linear-quantile Rmc(mr) over ln, 0.1% search step" },
-    Parameter { key: "Rpk_um", name: "Rpk", unit: "µm", quantity: HeightUm, scaling: Height, source: Family(|m| m.rpk_um), definition: "ISO13565-2/Rpk = 2*A1/Mr1" },
-    Parameter { key: "Rvk_um", name: "Rvk", unit: "µm", quantity: HeightUm, scaling: Height, source: Family(|m| m.rvk_um), definition: "ISO13565-2/Rvk = 2*A2/(100-Mr2)" },
-    Parameter { key: "Mr1_pct", name: "Mr1", unit: "%", quantity: Percent, scaling: ScaleFree, source: Family(|m| m.mr1_pct), definition: "ISO13565-2/Mr1 = Rmr at the upper core level C" },
-    Parameter { key: "Mr2_pct", name: "Mr2", unit: "%", quantity: Percent, scaling: ScaleFree, source: Family(|m| m.mr2_pct), definition: "ISO13565-2/Mr2 = Rmr at the lower core level D" },
-    Parameter { key: "A1", name: "A1", unit: "µm·%", quantity: Area, scaling: Height, source: Family(|m| m.a1_um_pct), definition: "ISO13565-2/A1 area above C for mr in [0, Mr1], um*%" },
-    Parameter { key: "A2", name: "A2", unit: "µm·%", quantity: Area, scaling: Height, source: Family(|m| m.a2_um_pct), definition: "ISO13565-2/A2 area below D for mr in [Mr2, 100], um*%" },
+    Parameter { key: "Rk_um", name: "Rk", unit: "µm", quantity: HeightUm, scaling: Height, source: Family(|m| m.rk.rk_um), definition: "ISO13565-2/Rk min-gradient 40% secant on linear-quantile Rmc(mr) over ln, 0.1% search step" },
+    Parameter { key: "Rpk_um", name: "Rpk", unit: "µm", quantity: HeightUm, scaling: Height, source: Family(|m| m.rk.rpk_um), definition: "ISO13565-2/Rpk = 2*A1/Mr1" },
+    Parameter { key: "Rvk_um", name: "Rvk", unit: "µm", quantity: HeightUm, scaling: Height, source: Family(|m| m.rk.rvk_um), definition: "ISO13565-2/Rvk = 2*A2/(100-Mr2)" },
+    Parameter { key: "Mr1_pct", name: "Mr1", unit: "%", quantity: Percent, scaling: ScaleFree, source: Family(|m| m.rk.mr1_pct), definition: "ISO13565-2/Mr1 = Rmr at the upper core level C" },
+    Parameter { key: "Mr2_pct", name: "Mr2", unit: "%", quantity: Percent, scaling: ScaleFree, source: Family(|m| m.rk.mr2_pct), definition: "ISO13565-2/Mr2 = Rmr at the lower core level D" },
+    Parameter { key: "A1", name: "A1", unit: "µm·%", quantity: Area, scaling: Height, source: Family(|m| m.rk.a1_um_pct), definition: "ISO13565-2/A1 area above C for mr in [0, Mr1], um*%" },
+    Parameter { key: "A2", name: "A2", unit: "µm·%", quantity: Area, scaling: Height, source: Family(|m| m.rk.a2_um_pct), definition: "ISO13565-2/A2 area below D for mr in [Mr2, 100], um*%" },
 ];
 
 /// One areal parameter (ISO 25178-2) of a surface (the measured grid's or the model's).

@@ -216,27 +216,9 @@ pub struct MaterialRatio {
     /// Relative material ratio at [`MaterialLevels::rmr_delta_um`] below C(Rmr0), %.
     #[serde(rename = "Rmr_pct")]
     pub rmr_pct: f64,
-    /// Core roughness depth, µm.
-    #[serde(rename = "Rk_um")]
-    pub rk_um: f64,
-    /// Reduced peak height, µm.
-    #[serde(rename = "Rpk_um")]
-    pub rpk_um: f64,
-    /// Reduced valley depth, µm.
-    #[serde(rename = "Rvk_um")]
-    pub rvk_um: f64,
-    /// Material ratio at the upper core limit, %.
-    #[serde(rename = "Mr1_pct")]
-    pub mr1_pct: f64,
-    /// Material ratio at the lower core limit, %.
-    #[serde(rename = "Mr2_pct")]
-    pub mr2_pct: f64,
-    /// Peak area above the core, µm·% (report key `A1`, unit in the recipe's definition).
-    #[serde(rename = "A1")]
-    pub a1_um_pct: f64,
-    /// Valley area below the core, µm·% (report key `A2`, unit in the recipe's definition).
-    #[serde(rename = "A2")]
-    pub a2_um_pct: f64,
+    /// The Rk family: its seven values under their report keys (`Rk_um` … `A2`).
+    #[serde(flatten)]
+    pub rk: RkFamily,
 }
 
 impl MaterialRatio {
@@ -249,7 +231,7 @@ impl MaterialRatio {
         (top, rt): (f64, f64),
         ratio_pct: impl Fn(f64) -> f64,
         level_at: impl Fn(f64) -> f64,
-        rk: &RkFamily,
+        rk: RkFamily,
     ) -> MaterialRatio {
         let rmr_c = levels
             .rmr_c_depths_pct_rt
@@ -266,13 +248,7 @@ impl MaterialRatio {
         MaterialRatio {
             rmr_c,
             rmr_pct: ratio_pct(level_at(levels.rmr_reference_pct) - levels.rmr_delta_um),
-            rk_um: rk.rk_um,
-            rpk_um: rk.rpk_um,
-            rvk_um: rk.rvk_um,
-            mr1_pct: rk.mr1_pct,
-            mr2_pct: rk.mr2_pct,
-            a1_um_pct: rk.a1_um_pct,
-            a2_um_pct: rk.a2_um_pct,
+            rk,
         }
     }
 }
@@ -324,10 +300,8 @@ pub struct LineAnalysis {
     pub recipe: Recipe,
     /// The evaluated roughness ordinates (evaluation length only) in µm.
     pub roughness_um: Vec<f64>,
-    /// The ISO 13565-2 Rk family of those ordinates (the Rk values of `params` come from it).
-    pub rk: RkFamily,
     /// Their material ratio curve, [Mr %, height µm] at [`RK_CURVE_POINTS`] equal steps of
-    /// Mr, from the same sort as `rk`: what the Rk construction plot draws.
+    /// Mr, from the same sort as `params.material.rk`: what the Rk construction plot draws.
     pub rk_curve: Vec<[f64; 2]>,
     /// Ra, Rq, Rsk, Rku over the whole evaluation length (ISO 21920-2, ANSI), beside the
     /// per-sampling-length means of `params` (ISO 4287:1997, the SJ series).
@@ -591,12 +565,11 @@ pub fn analyze_line(
     let acc = Acc::of_sections(&r, &plan, pitch_mm);
     let (rk, rk_curve) = rk_family_and_curve(&r, RK_CURVE_POINTS)?;
     Ok(LineAnalysis {
-        params: acc.params(&r, plan.n_sec, &rk),
+        params: acc.params(&r, plan.n_sec, rk),
         recipe: line_recipe(options, filtered.lambda_c, &plan, n_all - used, pitch_mm),
         evaluation_length: EvaluationLengthMoments::of(&r),
         blank_reasons: acc.blank_reasons(plan.n_sec),
         roughness_um: r,
-        rk,
         rk_curve,
         evaluated_from: plan.start,
         primary_um: filtered.primary,
@@ -765,7 +738,7 @@ impl Acc {
 
     /// The parameters: the sums averaged over the `n_sec` sampling lengths, Rt and the
     /// material-ratio family over the evaluation length `r`, the Rk family `rk`.
-    fn params(&self, r: &[f64], n_sec: usize, rk: &RkFamily) -> RoughnessParams {
+    fn params(&self, r: &[f64], n_sec: usize, rk: RkFamily) -> RoughnessParams {
         let k = n_sec as f64;
         let max = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let min = r.iter().copied().fold(f64::INFINITY, f64::min);
@@ -954,28 +927,39 @@ fn profile_elements(z: &[f64], pitch_um: f64, h: f64, min_width_um: f64) -> Vec<
         .collect()
 }
 
-/// The Rk family of a set of ordinates.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The Rk family of a set of ordinates under one reading, with its construction (the core
+/// levels and the secant, which the report's keys leave out: the plots draw them).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct RkFamily {
-    /// Core depth C − D.
+    /// Core depth C − D, µm.
+    #[serde(rename = "Rk_um")]
     pub rk_um: f64,
-    /// Reduced peak height.
+    /// Reduced peak height, µm.
+    #[serde(rename = "Rpk_um")]
     pub rpk_um: f64,
-    /// Reduced valley depth.
+    /// Reduced valley depth, µm.
+    #[serde(rename = "Rvk_um")]
     pub rvk_um: f64,
-    /// Material ratio at C.
+    /// Material ratio at C, %.
+    #[serde(rename = "Mr1_pct")]
     pub mr1_pct: f64,
-    /// Material ratio at D.
+    /// Material ratio at D, %.
+    #[serde(rename = "Mr2_pct")]
     pub mr2_pct: f64,
-    /// Area above C, µm·%.
+    /// Area above C, µm·% (report key `A1`, unit in the recipe's definition).
+    #[serde(rename = "A1")]
     pub a1_um_pct: f64,
-    /// Area below D, µm·%.
+    /// Area below D, µm·% (report key `A2`, unit in the recipe's definition).
+    #[serde(rename = "A2")]
     pub a2_um_pct: f64,
     /// Upper core level C (the equivalent straight line at mr = 0 %), µm.
+    #[serde(skip)]
     pub upper_level_um: f64,
     /// Lower core level D (the equivalent straight line at mr = 100 %), µm.
+    #[serde(skip)]
     pub lower_level_um: f64,
     /// Where the 40 % secant of least gradient starts, % (it ends 40 % later).
+    #[serde(skip)]
     pub secant_start_pct: f64,
 }
 
@@ -1222,8 +1206,7 @@ mod tests {
             .map(|k| (k as f64 * 0.0123).sin() + 0.3 * (k as f64 * 0.21).cos())
             .collect();
         let a = analyze_line(&z, 0.0005, &Options::default()).unwrap();
-        assert_eq!(a.rk, rk_family(&a.roughness_um).unwrap());
-        assert_eq!(a.params.material.rk_um.to_bits(), a.rk.rk_um.to_bits());
+        assert_eq!(a.params.material.rk, rk_family(&a.roughness_um).unwrap());
         let want = material_ratio_curve(&a.roughness_um, RK_CURVE_POINTS);
         assert_eq!(a.rk_curve.len(), RK_CURVE_POINTS);
         for (got, want) in a.rk_curve.iter().zip(&want) {

@@ -185,7 +185,7 @@ pub fn sj_material_ratio(
                     .flatten()
                     .map_or(top, level)
             },
-            &rk,
+            rk,
         ),
         upper_level_pct_rt: c_pct,
         lower_level_pct_rt: d_pct,
@@ -245,12 +245,12 @@ mod tests {
         let z: Vec<f64> = (0..=10_000).map(|i| i as f64 * 1e-3).collect();
         let m = sj_material_ratio(&z, &MaterialLevels::default()).unwrap();
         assert!(
-            (m.material.rk_um - 10.0).abs() < 2e-3,
+            (m.material.rk.rk_um - 10.0).abs() < 2e-3,
             "{}",
-            m.material.rk_um
+            m.material.rk.rk_um
         );
         assert!(
-            m.material.rpk_um == 0.0 && (m.material.rvk_um - 0.2).abs() < 1e-9,
+            m.material.rk.rpk_um == 0.0 && (m.material.rk.rvk_um - 0.2).abs() < 1e-9,
             "{m:?}"
         );
         // 10 % of Rt below the top is 9 µm, an ordinate of its own: the 1000 above it count.

@@ -156,9 +156,9 @@ impl Parameter {
             Parameter::RzJIS => p.rzjis_um,
             Parameter::Rc => p.rc_um,
             Parameter::RSm => p.rsm_um,
-            Parameter::Rk => Some(p.material.rk_um),
-            Parameter::Rpk => Some(p.material.rpk_um),
-            Parameter::Rvk => Some(p.material.rvk_um),
+            Parameter::Rk => Some(p.material.rk.rk_um),
+            Parameter::Rpk => Some(p.material.rk.rpk_um),
+            Parameter::Rvk => Some(p.material.rk.rvk_um),
         }
     }
 

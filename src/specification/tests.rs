@@ -1,7 +1,7 @@
 //! The verdict section on hand-made lines whose counts are worked out by hand.
 
 use super::*;
-use crate::metrology::params::MaterialRatio;
+use crate::metrology::params::{MaterialRatio, RkFamily};
 
 fn params(ra: f64, rz: f64, rsm: Option<f64>) -> RoughnessParams {
     RoughnessParams {
@@ -25,13 +25,18 @@ fn params(ra: f64, rz: f64, rsm: Option<f64>) -> RoughnessParams {
         material: MaterialRatio {
             rmr_c: Vec::new(),
             rmr_pct: 50.0,
-            rk_um: 1.0,
-            rpk_um: 0.3,
-            rvk_um: 0.4,
-            mr1_pct: 10.0,
-            mr2_pct: 90.0,
-            a1_um_pct: 1.0,
-            a2_um_pct: 2.0,
+            rk: RkFamily {
+                rk_um: 1.0,
+                rpk_um: 0.3,
+                rvk_um: 0.4,
+                mr1_pct: 10.0,
+                mr2_pct: 90.0,
+                a1_um_pct: 1.0,
+                a2_um_pct: 2.0,
+                upper_level_um: 0.5,
+                lower_level_um: -0.5,
+                secant_start_pct: 0.0,
+            },
         },
     }
 }

@@ -234,7 +234,7 @@ fn rk_construction_is_consistent_with_the_parameters() {
     let a = analyze_line(&z, PX, &Options::default()).unwrap();
     let rk = rk_family(&a.roughness_um).unwrap();
     assert!((rk.upper_level_um - rk.lower_level_um - rk.rk_um).abs() < 1e-12);
-    assert!((rk.rk_um - a.params.material.rk_um).abs() < 1e-12);
+    assert!((rk.rk_um - a.params.material.rk.rk_um).abs() < 1e-12);
     let curve = material_ratio_curve(&a.roughness_um, 100_001);
     let height_at = |mr: f64| {
         let k = (mr / 100.0 * 100_000.0).round() as usize;

@@ -161,17 +161,17 @@ fn sine_parameters_match_closed_forms() {
     let mr2 = (d / amp).acos() / PI * 100.0;
     let a2 = d * (100.0 - mr2) + 100.0 * amp / PI * (PI * mr2 / 100.0).sin();
     assert!(
-        (p.material.rk_um - rk).abs() < 1e-3,
+        (p.material.rk.rk_um - rk).abs() < 1e-3,
         "Rk {} vs {rk}",
-        p.material.rk_um
+        p.material.rk.rk_um
     );
-    assert_eq!(p.material.mr1_pct, 0.0);
-    assert_eq!(p.material.rpk_um, 0.0);
+    assert_eq!(p.material.rk.mr1_pct, 0.0);
+    assert_eq!(p.material.rk.rpk_um, 0.0);
     // 200 samples per period hit each height twice: mr is resolved to about 1 %.
     assert!(
-        (p.material.mr2_pct - mr2).abs() < 0.6,
+        (p.material.rk.mr2_pct - mr2).abs() < 0.6,
         "Mr2 {} vs {mr2}",
-        p.material.mr2_pct
+        p.material.rk.mr2_pct
     );
     // Densely: ordinates A·cos(π(k + ½)/n) are the sine's heights at uniform phase.
     let n = 200_000;
@@ -226,9 +226,9 @@ fn triangle_wave_parameters_match_closed_forms() {
     );
     // Uniform heights: Rmc is a straight line, every secant ties, Rk = full range.
     assert!(
-        (p.material.rk_um - 2.0 * amp).abs() < 1e-3,
+        (p.material.rk.rk_um - 2.0 * amp).abs() < 1e-3,
         "Rk {}",
-        p.material.rk_um
+        p.material.rk.rk_um
     );
     assert!((p.rsm_um.unwrap() - lambda * 1000.0).abs() < 1e-6);
 }

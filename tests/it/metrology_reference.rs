@@ -167,21 +167,21 @@ fn real_profiles_agree_with_surfalize_and_scipy_where_conventions_agree() {
     println!(
         "Rk secant {:.4} vs least squares {:.4}; Mr1 {:.2} vs {:.2}; Mr2 {:.2} vs {:.2}; \
          Rpk {:.4} vs {:.4}; Rvk {:.4} vs {:.4}; Rdq 7-point {:.5} vs forward {:.5}",
-        p.material.rk_um,
+        p.material.rk.rk_um,
         num(m, "Rk_least_squares"),
-        p.material.mr1_pct,
+        p.material.rk.mr1_pct,
         num(m, "Mr1_least_squares"),
-        p.material.mr2_pct,
+        p.material.rk.mr2_pct,
         num(m, "Mr2_least_squares"),
-        p.material.rpk_um,
+        p.material.rk.rpk_um,
         num(m, "Rpk_least_squares"),
-        p.material.rvk_um,
+        p.material.rk.rvk_um,
         num(m, "Rvk_least_squares"),
         p.rdq,
         num(m, "Rdq_forward_difference"),
     );
     close(
-        p.material.rk_um,
+        p.material.rk.rk_um,
         num(m, "Rk_least_squares"),
         0.10,
         "Rk (secant vs least squares)",

@@ -311,7 +311,7 @@ fn analyze_scan_dir_writes_every_file_with_traceability_and_instrument_differenc
             .unwrap()
             .params;
         assert!((line["Ra_um"].as_f64().unwrap() - ours.ra_um).abs() < 1e-12);
-        assert!((line["A1"].as_f64().unwrap() - ours.material.a1_um_pct).abs() < 1e-12);
+        assert!((line["A1"].as_f64().unwrap() - ours.material.rk.a1_um_pct).abs() < 1e-12);
         let inst = line["instrument"].as_array().unwrap();
         let by = |n: &str| inst.iter().find(|c| c["name"] == n).unwrap().clone();
         let ra = by("Ra");

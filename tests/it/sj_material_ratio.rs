@@ -41,17 +41,17 @@ fn the_sj_reading_reproduces_the_instruments_printout() {
     within_one_digit("Rmr(c) at 10 % Rt", m.material.rmr_c[0].value_pct, 2.911, 3);
     within_one_digit("Rmr(c) at 15 % Rt", m.material.rmr_c[1].value_pct, 5.822, 3);
     within_one_digit("Rmr", m.material.rmr_pct, 0.030, 3);
-    within_one_digit("Rpk", m.material.rpk_um, 2.912, 3);
-    within_one_digit("Rvk", m.material.rvk_um, 3.980, 3);
-    within_one_digit("Mr1", m.material.mr1_pct, 5.822, 3);
-    within_one_digit("Mr2", m.material.mr2_pct, 92.617, 3);
-    within_one_digit("A1", m.material.a1_um_pct, 8.48, 2);
-    within_one_digit("A2", m.material.a2_um_pct, 14.69, 2);
-    let rk_rel = m.material.rk_um / 11.440 - 1.0;
+    within_one_digit("Rpk", m.material.rk.rpk_um, 2.912, 3);
+    within_one_digit("Rvk", m.material.rk.rvk_um, 3.980, 3);
+    within_one_digit("Mr1", m.material.rk.mr1_pct, 5.822, 3);
+    within_one_digit("Mr2", m.material.rk.mr2_pct, 92.617, 3);
+    within_one_digit("A1", m.material.rk.a1_um_pct, 8.48, 2);
+    within_one_digit("A2", m.material.rk.a2_um_pct, 14.69, 2);
+    let rk_rel = m.material.rk.rk_um / 11.440 - 1.0;
     assert!(
         rk_rel.abs() <= 0.002,
         "Rk {} is {:.3} % from the printed 11.440",
-        m.material.rk_um,
+        m.material.rk.rk_um,
         rk_rel * 100.0
     );
     // Counted ordinates, exactly: 194 and 388 of 6664 at 10 % and 15 % of Rt below the top,
@@ -118,15 +118,15 @@ fn the_iso_reading_differs_from_the_instruments_as_documented() {
     )
     .unwrap();
     assert!(
-        (a.params.material.rpk_um - 2.722).abs() < 5e-4,
+        (a.params.material.rk.rpk_um - 2.722).abs() < 5e-4,
         "{}",
-        a.params.material.rpk_um
+        a.params.material.rk.rpk_um
     );
     let m = sj_material_ratio(&a.roughness_um, &MaterialLevels::default()).unwrap();
     assert!(
-        m.material.rpk_um - a.params.material.rpk_um > 0.18,
+        m.material.rk.rpk_um - a.params.material.rk.rpk_um > 0.18,
         "{} vs {}",
-        m.material.rpk_um,
-        a.params.material.rpk_um
+        m.material.rk.rpk_um,
+        a.params.material.rk.rpk_um
     );
 }

@@ -366,7 +366,7 @@ fn draw_rk_run(
                 png: line_png,
             },
             &a.rk_curve,
-            &a.rk,
+            &a.params.material.rk,
             Some(&profile),
             &title,
             caption,

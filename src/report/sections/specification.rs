@@ -268,7 +268,7 @@ mod tests {
             )
             .unwrap(),
         );
-        assert!(l.params.material.rpk_um < 2.8);
+        assert!(l.params.material.rk.rpk_um < 2.8);
         let n = a.recipe.sampling_lengths;
         let spec = Specification::parse(&[format!("Rpk{n} max 2.8")]).unwrap();
         let none = InstrumentUncertainty::default();
