@@ -224,16 +224,7 @@ pub fn x3p<'a>(
             "the y of the first line ({first_y_mm} mm) is not a finite number"
         )));
     }
-    check_pitch(pitch_x_mm)?;
-    check_pitch(pitch_y_mm)?;
-    if rows.checked_mul(cols) != Some(heights_um.len()) || rows == 0 || cols == 0 {
-        return Err(MetrologyError::GridSize {
-            rows,
-            cols,
-            expected: rows.saturating_mul(cols),
-            got: heights_um.len(),
-        });
-    }
+    map.check_size(1)?;
     check_heights(heights_um)?;
     let (mut data_md5, mut crc) = (<md5::Md5 as md5::Digest>::new(), crc32fast::Hasher::new());
     data_bin(heights_um, |b| {

@@ -82,17 +82,25 @@ impl HeightMap<'_> {
         }
     }
 
-    fn check(&self) -> Result<(), MetrologyError> {
+    /// Checks the pitches, and that the heights fill `rows × cols`, each at least `min`.
+    pub(crate) fn check_size(&self, min: usize) -> Result<(), MetrologyError> {
         check_pitch(self.pitch_x_mm)?;
         check_pitch(self.pitch_y_mm)?;
-        if self.rows.checked_mul(self.cols) != Some(self.heights_um.len()) {
+        let (rows, cols, got) = (self.rows, self.cols, self.heights_um.len());
+        if rows.checked_mul(cols) != Some(got) || rows.min(cols) < min {
+            let expected = rows.saturating_mul(cols).max(min * min);
             return Err(MetrologyError::GridSize {
-                rows: self.rows,
-                cols: self.cols,
-                expected: self.rows.saturating_mul(self.cols),
-                got: self.heights_um.len(),
+                rows,
+                cols,
+                expected,
+                got,
             });
         }
+        Ok(())
+    }
+
+    fn check(&self) -> Result<(), MetrologyError> {
+        self.check_size(0)?;
         if self.rows < 2 || self.cols < 2 {
             return Err(MetrologyError::GridTooSmall {
                 rows: self.rows,

@@ -32,7 +32,7 @@ use super::plots::{
 use super::text_cache::TextCache;
 use crate::metrology::areal::HeightMap;
 use crate::metrology::spatial::{AcfSection, Psd, SpatialCurves};
-use crate::metrology::{check_pitch, MetrologyError};
+use crate::metrology::MetrologyError;
 use crate::numfmt::{fmt, Quantity};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -604,19 +604,7 @@ pub fn plot_surface_view(
     title: &str,
     caption: &str,
 ) -> Result<([PathBuf; 2], View), MetrologyError> {
-    if grid.rows < 2
-        || grid.cols < 2
-        || grid.rows.checked_mul(grid.cols) != Some(grid.heights_um.len())
-    {
-        return Err(MetrologyError::GridSize {
-            rows: grid.rows,
-            cols: grid.cols,
-            expected: grid.rows.saturating_mul(grid.cols).max(4),
-            got: grid.heights_um.len(),
-        });
-    }
-    check_pitch(grid.pitch_x_mm)?;
-    check_pitch(grid.pitch_y_mm)?;
+    grid.check_size(2)?;
     let (view, frame) = view_and_frame(grid, title, caption);
     let files: Result<[PathBuf; 2], MetrologyError> = (|| {
         png_and_svg!(dir, "surface3d", VIEW_SIZE, |root| draw_view(

@@ -950,9 +950,8 @@ fn lines(h: &mut String, report: &Value) {
     blank_reasons(h, lines);
     // Rδc and Rmr depend on levels chosen per instrument and recipe: said on the page, not
     // only in a heading's tooltip.
-    let levels: Vec<String> = [("Rdc_um", "Rδc"), ("Rmr_pct", "Rmr")]
-        .iter()
-        .filter_map(|(key, name)| definition(key).map(|d| format!("{name}: {}", esc(&d))))
+    let levels: Vec<String> = (["Rdc", "Rmr"].into_iter().filter_map(parameter))
+        .filter_map(|p| definition(p.key).map(|d| format!("{}: {}", p.name, esc(&d))))
         .collect();
     if !levels.is_empty() {
         let _ = writeln!(h, "<p id=\"line-levels\">{}.</p>", levels.join("; "));

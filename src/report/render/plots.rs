@@ -30,7 +30,7 @@ use crate::metrology::areal::HeightMap;
 use crate::metrology::model::ModelCurveBac;
 use crate::metrology::parameter_table::parameter;
 use crate::metrology::params::RkFamily;
-use crate::metrology::{check_pitch, MetrologyError};
+use crate::metrology::MetrologyError;
 use crate::numfmt::{fmt, Quantity};
 use plotters::chart::MeshStyle;
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
@@ -927,18 +927,9 @@ pub fn plot_map(
     title: &str,
     caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
-    let (heights_um, rows, cols) = (grid.heights_um, grid.rows, grid.cols);
+    grid.check_size(1)?;
+    let (rows, cols) = (grid.rows, grid.cols);
     let (pitch_x_mm, pitch_y_mm) = (grid.pitch_x_mm, grid.pitch_y_mm);
-    if rows.checked_mul(cols) != Some(heights_um.len()) || rows == 0 || cols == 0 {
-        return Err(MetrologyError::GridSize {
-            rows,
-            cols,
-            expected: rows.saturating_mul(cols),
-            got: heights_um.len(),
-        });
-    }
-    check_pitch(pitch_x_mm)?;
-    check_pitch(pitch_y_mm)?;
     let max_w = MAP_WIDTH - MAP_BAR_W - MAP_Y_AREA - 2 * MAP_MARGIN;
     let scale = map_scale(
         cols as f64 * pitch_x_mm,
