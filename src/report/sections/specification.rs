@@ -12,6 +12,7 @@
 
 use super::lines::LinesSection;
 use super::SectionInput;
+use crate::metrology::parameter_table::parameter;
 use crate::metrology::params::Recipe;
 use crate::metrology::sj_material_ratio::MaterialRatioReading;
 use crate::report::document::LineReport;
@@ -95,11 +96,10 @@ pub fn characterise(
             statistics,
         })
         .collect();
-    let table_1 = [("Ra_um", "Ra"), ("Rq_um", "Rq"), ("Rz_um", "Rz")]
-        .iter()
-        .filter_map(|(name, label)| {
-            let p = parameters.iter().find(|p| p.parameter == *name)?;
-            Some(mean_pm_s(label, &p.statistics, "µm"))
+    let table_1 = (["Ra", "Rq", "Rz"].into_iter().filter_map(parameter))
+        .filter_map(|q| {
+            let p = parameters.iter().find(|p| p.parameter == q.key)?;
+            Some(mean_pm_s(q.name, &p.statistics, q.unit))
         })
         .collect();
     let verdict = specification.filter(|s| !s.is_empty()).map(|s| {
