@@ -242,3 +242,56 @@ fn the_mitutoyo_export_gets_its_profile_figure_and_the_instruments_reading() {
         "{recipe}"
     );
 }
+
+#[test]
+fn a_profile_analysed_where_a_grid_was_shows_none_of_the_grids_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let grid = dir.path().join("grid.csv");
+    let rows: Vec<String> = (0..6)
+        .map(|r| {
+            (0..400)
+                .map(|c| format!("{:.4}", (c as f64 * 0.09 + r as f64 * 0.7).sin()))
+                .collect::<Vec<_>>()
+                .join(",")
+        })
+        .collect();
+    std::fs::write(&grid, rows.join("\n") + "\n").unwrap();
+    let analyze = |input: &Path, args: &[&str]| {
+        let run = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .arg("analyze")
+            .arg(input)
+            .args(args)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        String::from_utf8_lossy(&run.stderr).into_owned()
+    };
+    let said = analyze(&grid, &["--pitch-x", "0.004", "--pitch-y", "0.01"]);
+    let grid_figures = ["heightmap.svg", "surface3d.svg", "psd.svg", "acf.svg"];
+    for f in grid_figures {
+        assert!(out.join(f).exists(), "the grid drew no {f}: {said}");
+    }
+    let csv = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/real/mitutoyo_surftest_R.x_mm_z_um.csv");
+    let said = analyze(&csv, &["--no-filter", "--lc", "2.5"]);
+    for f in grid_figures.into_iter().chain(["bac.svg", "heightmap.png"]) {
+        assert!(
+            !out.join(f).exists(),
+            "{f} of the grid left beside the profile: {said}"
+        );
+    }
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    for title in [
+        "Measured heights",
+        "3D view of the measured surface",
+        "Autocorrelation",
+    ] {
+        let caption = format!("<figcaption>{title}</figcaption>");
+        assert!(
+            !page.contains(&caption),
+            "the profile's page shows the grid's {title}"
+        );
+    }
+}

@@ -399,6 +399,7 @@ pub fn write_data_files(
         "NURBS model sampled at half the x pitch on the data lines",
     );
     let input = ctx.input.clone();
+    remove_page_figures(out)?;
     // Both files share the measured lines' y: the model is sampled on them.
     let first_y_mm = grid.y_mm.first().copied().unwrap_or(0.0);
     let (plots, rk_plots, x3p) = std::thread::scope(|s| {
@@ -569,6 +570,28 @@ const PAGE_FIGURES: [(&str, &str, bool, bool); 8] = [
     ("acf", "Autocorrelation", true, false),
     ("surface3d", "3D view of the measured surface", true, false),
 ];
+
+/// Removes the [`PAGE_FIGURES`] an earlier analysis left in `out`: the page embeds what the
+/// folder holds, and a profile analysed where a grid was would show that grid's height map.
+fn remove_page_figures(out: &Path) -> Result<(), ReportError> {
+    for (stem, ..) in PAGE_FIGURES {
+        for path in [
+            out.join(format!("{stem}.png")),
+            out.join(format!("{stem}.svg")),
+        ] {
+            remove_if_there(&path).map_err(|source| ReportError::Io { path, source })?;
+        }
+    }
+    Ok(())
+}
+
+/// Removes the file `path` unless there is none.
+fn remove_if_there(path: &Path) -> std::io::Result<()> {
+    match std::fs::remove_file(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        r => r,
+    }
+}
 
 /// The figures of [`PAGE_FIGURES`] on screen only: the pooled material ratio curves
 /// (summarised by the Sk family, drawn per line in the printed lines' Rk constructions) and

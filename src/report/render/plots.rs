@@ -331,10 +331,7 @@ macro_rules! png_and_svg {
             write_png(&png, &rgb, (w, h))?;
         } else {
             // A PNG an earlier analysis left would show other results than the new SVG.
-            match std::fs::remove_file(&png) {
-                Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(plot_err(&png, e)),
-                _ => {}
-            }
+            crate::report::render::remove_if_there(&png).map_err(|e| plot_err(&png, e))?;
         }
         {
             let mut text = String::new();
