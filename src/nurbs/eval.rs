@@ -46,27 +46,7 @@ pub fn find_span(degree: usize, knots: &[f64], count: usize, t: f64) -> usize {
 
 /// The `degree + 1` non-vanishing basis functions `N_{span-degree..=span, degree}(t)` (P&T A2.2),
 /// written into `out[..=degree]`. `out`, `left` and `right` must hold at least `degree + 1` values.
-///
-/// Degrees 3 and 5 (the paper's) take [`basis_funs_of`], the same operations in the same order
-/// unrolled for that degree, so the values are the same bits in about half the time.
 pub fn basis_funs(
-    span: usize,
-    t: f64,
-    degree: usize,
-    knots: &[f64],
-    out: &mut [f64],
-    left: &mut [f64],
-    right: &mut [f64],
-) {
-    match degree {
-        5 => basis_funs_of::<5>(span, t, knots, out),
-        3 => basis_funs_of::<3>(span, t, knots, out),
-        _ => basis_funs_any(span, t, degree, knots, out, left, right),
-    }
-}
-
-/// A2.2 for any degree (see [`basis_funs`]).
-fn basis_funs_any(
     span: usize,
     t: f64,
     degree: usize,
@@ -79,32 +59,6 @@ fn basis_funs_any(
     for j in 1..=degree {
         left[j] = t - knots[span + 1 - j];
         right[j] = knots[span + j] - t;
-        let mut saved = 0.0;
-        for r in 0..j {
-            let temp = out[r] / (right[r + 1] + left[j - r]);
-            out[r] = saved + right[r + 1] * temp;
-            saved = left[j - r] * temp;
-        }
-        out[j] = saved;
-    }
-}
-
-/// [`basis_funs`] for degree `P` known when compiled: the loops unrolled, the knots read from
-/// one slice checked once, `left` and `right` in registers. The arithmetic is A2.2's, term by
-/// term (no fused multiply-add), so the bits are those of the general loop.
-#[inline(always)]
-fn basis_funs_of<const P: usize>(span: usize, t: f64, knots: &[f64], out: &mut [f64]) {
-    // k[i] = knots[span + 1 - P + i]: knots[span + 1 - j] = k[P - j], knots[span + j] = k[P - 1 + j].
-    let k = &knots[span + 1 - P..span + 1 + P];
-    let out = &mut out[..=P];
-    let (mut left, mut right) = (
-        [0.0f64; MAX_STACK_DEGREE + 1],
-        [0.0f64; MAX_STACK_DEGREE + 1],
-    );
-    out[0] = 1.0;
-    for j in 1..=P {
-        left[j] = t - k[P - j];
-        right[j] = k[P - 1 + j] - t;
         let mut saved = 0.0;
         for r in 0..j {
             let temp = out[r] / (right[r + 1] + left[j - r]);
@@ -816,56 +770,6 @@ mod tests {
             checked += 1;
         }
         assert_eq!(checked, ts.len() - 1);
-    }
-
-    /// The unrolled degrees give the general loop's bits: on averaged knots of uneven
-    /// chord-length parameters (as a fit makes), at the knots, beside them and between them.
-    #[test]
-    fn unrolled_degrees_give_the_general_loops_bits() {
-        let mut s: u64 = 0x2545_F491_4F6C_DD1D;
-        let mut params = vec![0.0f64];
-        for _ in 0..40 {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            params.push(params.last().unwrap() + 0.2 + (s >> 11) as f64 / (1u64 << 53) as f64);
-        }
-        let total = *params.last().unwrap();
-        params.iter_mut().for_each(|p| *p /= total);
-        let mut checked = 0;
-        for degree in [3, 5] {
-            // Clamped knots by averaging (P&T eq. 9.8).
-            let count = params.len();
-            let mut knots = vec![0.0; degree + 1];
-            for j in 1..count - degree {
-                knots.push(params[j..j + degree].iter().sum::<f64>() / degree as f64);
-            }
-            knots.extend(vec![1.0; degree + 1]);
-            let mut ts: Vec<f64> = (0..=997).map(|i| i as f64 / 997.0).collect();
-            for &k in &knots {
-                ts.extend([k, f64::from_bits(k.to_bits() + 1), k * 0.999_999_9]);
-            }
-            for t in ts.into_iter().filter(|t| (0.0..=1.0).contains(t)) {
-                let span = find_span(degree, &knots, count, t);
-                let (mut want, mut got) = ([0.0; 6], [f64::NAN; 6]);
-                let (mut l, mut r) = ([0.0; 6], [0.0; 6]);
-                basis_funs_any(span, t, degree, &knots, &mut want, &mut l, &mut r);
-                basis_funs(span, t, degree, &knots, &mut got, &mut l, &mut r);
-                assert_eq!(
-                    want[..=degree]
-                        .iter()
-                        .map(|v| v.to_bits())
-                        .collect::<Vec<_>>(),
-                    got[..=degree]
-                        .iter()
-                        .map(|v| v.to_bits())
-                        .collect::<Vec<_>>(),
-                    "degree {degree} at t = {t:e}"
-                );
-                checked += 1;
-            }
-        }
-        assert!(checked > 2000, "{checked}");
     }
 
     #[test]
