@@ -50,6 +50,18 @@ fn points(tag: &str) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// `surfscan analyze INPUT ARGS --out OUT`, run to its end.
+fn analyze(input: &Path, args: &[&str], out: &Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .arg("analyze")
+        .arg(input)
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap()
+}
+
 #[test]
 fn the_mitutoyo_export_gets_its_profile_figure_and_the_instruments_reading() {
     let csv = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -57,13 +69,7 @@ fn the_mitutoyo_export_gets_its_profile_figure_and_the_instruments_reading() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
     // As the instrument evaluated it (the export's conditions): an R profile, λc 2.5 mm.
-    let run = Command::new(env!("CARGO_BIN_EXE_surfscan"))
-        .arg("analyze")
-        .arg(&csv)
-        .args(["--no-filter", "--lc", "2.5", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
+    let run = analyze(&csv, &["--no-filter", "--lc", "2.5"], &out);
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert_eq!(run.status.code(), Some(0), "{stderr}");
     let report: Value =
@@ -87,13 +93,8 @@ fn the_mitutoyo_export_gets_its_profile_figure_and_the_instruments_reading() {
         "{stderr}"
     );
     // The contact of a flat is areal: with --contact it is named as not applying, no failure.
-    let contact = Command::new(env!("CARGO_BIN_EXE_surfscan"))
-        .arg("analyze")
-        .arg(&csv)
-        .args(["--no-filter", "--lc", "2.5", "--contact", "--out"])
-        .arg(dir.path().join("contact"))
-        .output()
-        .unwrap();
+    let args = ["--no-filter", "--lc", "2.5", "--contact"];
+    let contact = analyze(&csv, &args, &dir.path().join("contact"));
     let said = String::from_utf8_lossy(&contact.stderr);
     assert_eq!(contact.status.code(), Some(0), "{said}");
     assert!(
@@ -257,25 +258,17 @@ fn a_profile_analysed_where_a_grid_was_shows_none_of_the_grids_figures() {
         })
         .collect();
     std::fs::write(&grid, rows.join("\n") + "\n").unwrap();
-    let analyze = |input: &Path, args: &[&str]| {
-        let run = Command::new(env!("CARGO_BIN_EXE_surfscan"))
-            .arg("analyze")
-            .arg(input)
-            .args(args)
-            .arg("--out")
-            .arg(&out)
-            .output()
-            .unwrap();
-        String::from_utf8_lossy(&run.stderr).into_owned()
+    let stderr_of = |input: &Path, args: &[&str]| {
+        String::from_utf8_lossy(&analyze(input, args, &out).stderr).into_owned()
     };
-    let said = analyze(&grid, &["--pitch-x", "0.004", "--pitch-y", "0.01"]);
+    let said = stderr_of(&grid, &["--pitch-x", "0.004", "--pitch-y", "0.01"]);
     let grid_figures = ["heightmap.svg", "surface3d.svg", "psd.svg", "acf.svg"];
     for f in grid_figures {
         assert!(out.join(f).exists(), "the grid drew no {f}: {said}");
     }
     let csv = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data/real/mitutoyo_surftest_R.x_mm_z_um.csv");
-    let said = analyze(&csv, &["--no-filter", "--lc", "2.5"]);
+    let said = stderr_of(&csv, &["--no-filter", "--lc", "2.5"]);
     for f in grid_figures.into_iter().chain(["bac.svg", "heightmap.png"]) {
         assert!(
             !out.join(f).exists(),
