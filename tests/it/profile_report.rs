@@ -245,7 +245,7 @@ fn the_mitutoyo_export_gets_its_profile_figure_and_the_instruments_reading() {
 }
 
 #[test]
-fn a_profile_analysed_where_a_grid_was_shows_none_of_the_grids_figures() {
+fn a_profile_analysed_where_a_grid_was_shows_none_of_the_grids_figures_or_files() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
     let grid = dir.path().join("grid.csv");
@@ -261,15 +261,26 @@ fn a_profile_analysed_where_a_grid_was_shows_none_of_the_grids_figures() {
     let stderr_of = |input: &Path, args: &[&str]| {
         String::from_utf8_lossy(&analyze(input, args, &out).stderr).into_owned()
     };
-    let said = stderr_of(&grid, &["--pitch-x", "0.004", "--pitch-y", "0.01"]);
-    let grid_figures = ["heightmap.svg", "surface3d.svg", "psd.svg", "acf.svg"];
-    for f in grid_figures {
-        assert!(out.join(f).exists(), "the grid drew no {f}: {said}");
+    let said = stderr_of(
+        &grid,
+        &["--pitch-x", "0.004", "--pitch-y", "0.01", "--contact"],
+    );
+    let grid_files = [
+        "heightmap.svg",
+        "surface3d.svg",
+        "psd.svg",
+        "acf.svg",
+        "model.x3p",
+        "contact.json",
+        "load_area.svg",
+    ];
+    for f in grid_files {
+        assert!(out.join(f).exists(), "the grid wrote no {f}: {said}");
     }
     let csv = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data/real/mitutoyo_surftest_R.x_mm_z_um.csv");
     let said = stderr_of(&csv, &["--no-filter", "--lc", "2.5"]);
-    for f in grid_figures.into_iter().chain(["bac.svg", "heightmap.png"]) {
+    for f in grid_files.into_iter().chain(["bac.svg", "heightmap.png"]) {
         assert!(
             !out.join(f).exists(),
             "{f} of the grid left beside the profile: {said}"

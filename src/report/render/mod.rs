@@ -399,7 +399,7 @@ pub fn write_data_files(
         "NURBS model sampled at half the x pitch on the data lines",
     );
     let input = ctx.input.clone();
-    remove_page_figures(out)?;
+    remove_earlier_outputs(out)?;
     // Both files share the measured lines' y: the model is sampled on them.
     let first_y_mm = grid.y_mm.first().copied().unwrap_or(0.0);
     let (plots, rk_plots, x3p) = std::thread::scope(|s| {
@@ -571,16 +571,16 @@ const PAGE_FIGURES: [(&str, &str, bool, bool); 8] = [
     ("surface3d", "3D view of the measured surface", true, false),
 ];
 
-/// Removes the [`PAGE_FIGURES`] an earlier analysis left in `out`: the page embeds what the
-/// folder holds, and a profile analysed where a grid was would show that grid's height map.
-fn remove_page_figures(out: &Path) -> Result<(), ReportError> {
-    for (stem, ..) in PAGE_FIGURES {
-        for path in [
-            out.join(format!("{stem}.png")),
-            out.join(format!("{stem}.svg")),
-        ] {
-            remove_if_there(&path).map_err(|source| ReportError::Io { path, source })?;
-        }
+/// Removes what an earlier analysis left in `out` that this one writes only where it applies:
+/// the [`PAGE_FIGURES`] (the page embeds what the folder holds; a profile analysed where a grid
+/// was would show that grid's height map), `model.x3p` and `contact.json`.
+fn remove_earlier_outputs(out: &Path) -> Result<(), ReportError> {
+    let figures = PAGE_FIGURES
+        .iter()
+        .flat_map(|(stem, ..)| ["png", "svg"].map(|ext| format!("{stem}.{ext}")));
+    for name in figures.chain(["model.x3p".into(), "contact.json".into()]) {
+        let path = out.join(name);
+        remove_if_there(&path).map_err(|source| ReportError::Io { path, source })?;
     }
     Ok(())
 }
