@@ -520,28 +520,39 @@ fn per_line_budget(page_bytes: usize, lines: usize) -> usize {
 
 /// The per-line figures of `report.html` in line order: each embedded while the file bytes
 /// embedded stay within `budget`, the rest linked to their SVG file (a path relative to
-/// `out`, where the report is); those of the lines `printed` (file indices) always embedded
-/// and marked to print.
+/// `out`, where the report is); those of the lines `printed` (file indices) always embedded,
+/// marked to print and counted against `budget` before any other.
 fn per_line_figures(
     out: &Path,
     plots: &[(String, [PathBuf; 2])],
     budget: usize,
     printed: &[u32],
 ) -> Vec<html::Figure> {
-    let mut embedded = 0usize;
+    let is_printed = |png: &Path| {
+        png.file_stem()
+            .and_then(|s| s.to_str()?.parse::<u32>().ok())
+            .is_some_and(|i| printed.contains(&i))
+    };
+    // The printed lines' figures are embedded whatever the budget: theirs comes off it first.
+    let mut embedded: usize = plots
+        .iter()
+        .filter(|(_, [png, _])| is_printed(png))
+        .filter_map(|(title, [png, svg])| html::Figure::from_files(title, png, svg, true))
+        .map(|f| f.bytes.len())
+        .sum();
     let mut budget_left = true;
     plots
         .iter()
         .filter_map(|(title, [png, svg])| {
-            let index = png
-                .file_stem()
-                .and_then(|s| s.to_str()?.parse::<u32>().ok());
-            let print = index.is_some_and(|i| printed.contains(&i));
+            let print = is_printed(png);
             if budget_left || print {
                 // A figure that cannot be read is left out, as any figure is.
                 let mut f = html::Figure::from_files(title.clone(), png, svg, true)?;
                 f.printed = print;
-                if print || embedded + f.bytes.len() <= budget {
+                if print {
+                    return Some(f);
+                }
+                if embedded + f.bytes.len() <= budget {
                     embedded += f.bytes.len();
                     return Some(f);
                 }
@@ -751,9 +762,9 @@ pub fn write_report(
 mod tests {
     use super::*;
 
-    /// Per-line figures are embedded in line order while they fit in the budget; the first
-    /// that does not and all after it are linked to their SVG file by a path relative to the
-    /// report; a figure with no file is left out as before.
+    /// Per-line figures are embedded in line order while they fit in what the printed lines'
+    /// figures leave of the budget; the first that does not and all after it are linked to
+    /// their SVG file by a path relative to the report; a figure with no file is left out.
     #[test]
     fn per_line_figures_beyond_the_budget_are_linked_to_their_files() {
         let dir = tempfile::tempdir().unwrap();
@@ -773,8 +784,14 @@ mod tests {
             }
             plots.push((format!("line {k}"), [png, svg]));
         }
-        // Line 4 is one a print shows: embedded whatever the budget, and marked to print.
+        // Line 4 is one a print shows: embedded whatever the budget, and marked to print; its
+        // bytes are set aside first, so the others embedded leave the page within its budget.
         let figures = per_line_figures(dir.path(), &plots, budget, &[4]);
+        let embedded: usize = figures.iter().map(|f| f.bytes.len()).sum();
+        assert!(
+            embedded <= budget,
+            "{embedded} bytes embedded, budget {budget}"
+        );
         let shown: Vec<(&str, Option<&str>, usize, bool)> = figures
             .iter()
             .map(|f| {
@@ -790,7 +807,7 @@ mod tests {
             shown,
             [
                 ("line 0", None, size, false),
-                ("line 2", None, size, false),
+                ("line 2", Some("rk/0002.svg"), 0, false),
                 ("line 3", Some("rk/0003.svg"), 0, false),
                 ("line 4", None, size, true),
             ]
@@ -801,7 +818,7 @@ mod tests {
             page.contains("<a href=\"rk/0003.svg\">rk/0003.svg</a>"),
             "{page}"
         );
-        assert_eq!(page.matches("data:image/png;base64,").count(), 3);
+        assert_eq!(page.matches("data:image/png;base64,").count(), 2);
         assert_eq!(page.matches("<details class=\"print\">").count(), 1);
     }
 
