@@ -548,30 +548,44 @@ async fn a_broker_absent_when_the_daemon_starts_gets_the_scan_once_it_is_there()
     e2e::wait_exit(&mut d);
 }
 
+/// Runs the daemon until the MQTT link is down with a message containing `status`, then a scan
+/// of `specimen` to success, then stops the daemon; its log must contain `logged`. Returns the
+/// link's message.
+async fn link_fault_named(r: &Rig, status: &str, specimen: &str, logged: &str) -> String {
+    let mut d = spawn_logged(r);
+    wait_socket(r).await;
+    let s = e2e::wait_status(r, &format!("{status} in the status"), |s| {
+        s.links
+            .get("mqtt")
+            .is_some_and(|l| !l.ok && l.message.contains(status))
+    })
+    .await;
+    let message = s.links["mqtt"].message.clone();
+    let ended = scan_to_success(r, specimen).await;
+    assert_eq!(ended.last_stop.unwrap().status, StopStatus::Success);
+    e2e::sigterm(&d);
+    e2e::wait_exit(&mut d);
+    let log = std::fs::read_to_string(log_path(r)).unwrap();
+    assert!(
+        log.contains(logged),
+        "the log does not hold {logged:?}: {log}"
+    );
+    message
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_wrong_password_is_named_in_the_status_and_the_log_and_the_scan_is_unaffected() {
     let r = e2e::rig().await;
     let broker = Broker::start(r.dir.path());
     with_mqtt(&r, &broker.url(), "not-the-password");
-    let mut d = spawn_logged(&r);
-    wait_socket(&r).await;
-    let s = e2e::wait_status(&r, "refusal in the status", |s| {
-        s.links
-            .get("mqtt")
-            .is_some_and(|l| !l.ok && l.message.contains("credentials"))
-    })
+    let message = link_fault_named(
+        &r,
+        "credentials",
+        "mqtt-4",
+        "refused the station's credentials",
+    )
     .await;
-    let message = s.links["mqtt"].message.clone();
     assert!(message.contains("password-file"), "{message}");
-    let ended = scan_to_success(&r, "mqtt-4").await;
-    assert_eq!(ended.last_stop.unwrap().status, StopStatus::Success);
-    e2e::sigterm(&d);
-    e2e::wait_exit(&mut d);
-    let log = std::fs::read_to_string(log_path(&r)).unwrap();
-    assert!(
-        log.contains("refused the station's credentials"),
-        "the log does not name the refusal: {log}"
-    );
     drop(broker);
 }
 
@@ -585,25 +599,8 @@ async fn a_broker_certificate_that_does_not_verify_is_named_and_the_scan_is_unaf
     let ca = broker.with_tls();
     let url = format!("mqtts://127.0.0.1:{}", broker.port);
     with_mqtt(&r, &url, mosquitto::STATION_PASSWORD);
-    let mut d = spawn_logged(&r);
-    wait_socket(&r).await;
-    let s = e2e::wait_status(&r, "the TLS failure in the status", |s| {
-        s.links
-            .get("mqtt")
-            .is_some_and(|l| !l.ok && l.message.contains("TLS"))
-    })
-    .await;
-    let message = s.links["mqtt"].message.clone();
+    let message = link_fault_named(&r, "TLS", "mqtt-tls", "TLS with").await;
     assert!(message.contains("ca-file"), "{message}");
-    let ended = scan_to_success(&r, "mqtt-tls").await;
-    assert_eq!(ended.last_stop.unwrap().status, StopStatus::Success);
-    e2e::sigterm(&d);
-    e2e::wait_exit(&mut d);
-    let log = std::fs::read_to_string(log_path(&r)).unwrap();
-    assert!(
-        log.contains("TLS with"),
-        "the log does not name the TLS failure: {log}"
-    );
 
     crate::common::edit_file(
         &r.config,
