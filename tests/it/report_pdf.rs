@@ -8,6 +8,7 @@
 //! image is the height map's own bitmap). Bad input: no report, a report that is not one,
 //! a PDF that cannot be written, no `--pdf` — each named, with its exit status.
 
+use crate::common::tool_output;
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -21,15 +22,11 @@ fn surfscan(args: &[&std::ffi::OsStr]) -> Output {
 /// The images of `pdf` as `pdfimages -list` gives them: width, height and encoding of each
 /// image (soft masks left out); none asks to be interpolated (PDF/A forbids it).
 fn images(pdf: &Path) -> Vec<(u32, u32, String)> {
-    let out = Command::new("pdfimages")
-        .arg("-list")
-        .arg(pdf)
-        .output()
-        .unwrap_or_else(|e| {
-            panic!("pdfimages: {e}; run `bash .ci/run` or `apt-get install poppler-utils`")
-        });
-    assert!(out.status.success());
-    String::from_utf8_lossy(&out.stdout)
+    let out = tool_output(
+        Command::new("pdfimages").arg("-list").arg(pdf),
+        "poppler-utils",
+    );
+    String::from_utf8_lossy(&out)
         .lines()
         .skip(2)
         .filter_map(|l| {
@@ -49,14 +46,8 @@ fn images(pdf: &Path) -> Vec<(u32, u32, String)> {
 /// The fonts of `pdf` as `pdffonts` lists them: name (its subset tag removed), embedded,
 /// subset.
 pub fn fonts(pdf: &Path) -> Vec<(String, bool, bool)> {
-    let out = Command::new("pdffonts")
-        .arg(pdf)
-        .output()
-        .unwrap_or_else(|e| {
-            panic!("pdffonts: {e}; run `bash .ci/run` or `apt-get install poppler-utils`")
-        });
-    assert!(out.status.success());
-    String::from_utf8_lossy(&out.stdout)
+    let out = tool_output(Command::new("pdffonts").arg(pdf), "poppler-utils");
+    String::from_utf8_lossy(&out)
         .lines()
         .skip(2)
         .map(|l| {
@@ -77,13 +68,11 @@ pub fn fonts(pdf: &Path) -> Vec<(String, bool, bool)> {
 /// The PDF/A part and conformance level `pdf` claims in its XMP metadata (`pdfinfo -meta`),
 /// if any.
 pub fn pdfa_claim(pdf: &Path) -> Option<(String, String)> {
-    let out = Command::new("pdfinfo")
-        .arg("-meta")
-        .arg(pdf)
-        .output()
-        .unwrap();
-    assert!(out.status.success());
-    let xmp = String::from_utf8_lossy(&out.stdout);
+    let out = tool_output(
+        Command::new("pdfinfo").arg("-meta").arg(pdf),
+        "poppler-utils",
+    );
+    let xmp = String::from_utf8_lossy(&out);
     let start = xmp.find("<?xpacket")?;
     let doc = roxmltree::Document::parse(xmp[start..].trim()).unwrap();
     const NS: &str = "http://www.aiim.org/pdfa/ns/id/";
@@ -102,17 +91,9 @@ pub fn pdfa_claim(pdf: &Path) -> Option<(String, String)> {
 /// The output intents of `pdf`'s catalogue as `qpdf --json` reads them: each one's subtype
 /// and the number of colour components of its destination profile.
 pub fn output_intents(pdf: &Path) -> Vec<(String, i64)> {
-    let out = Command::new("qpdf")
-        .args(["--json=2", "--json-key=qpdf"])
-        .arg(pdf)
-        .output()
-        .unwrap_or_else(|e| panic!("qpdf: {e}; run `bash .ci/run` or `apt-get install qpdf`"));
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let mut command = Command::new("qpdf");
+    command.args(["--json=2", "--json-key=qpdf"]).arg(pdf);
+    let v: serde_json::Value = serde_json::from_slice(&tool_output(&mut command, "qpdf")).unwrap();
     let objects = &v["qpdf"][1];
     // A reference ("5 0 R") as what it refers to (a stream's dictionary for a stream); any
     // other value as it is.

@@ -6,36 +6,21 @@
 //! headers on the page (none cut off at the right margin), the instrument comparison in one
 //! sentence, and the signature block.
 
+use crate::common::tool_output;
 use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
 
 pub fn pdftotext(pdf: &Path) -> String {
-    let out = Command::new("pdftotext")
-        .arg("-layout")
-        .arg(pdf)
-        .arg("-")
-        .output()
-        .unwrap_or_else(|e| {
-            panic!("pdftotext: {e}; run `bash .ci/run` or `apt-get install poppler-utils`")
-        });
-    assert!(
-        out.status.success(),
-        "pdftotext: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
+    let mut command = Command::new("pdftotext");
+    command.arg("-layout").arg(pdf).arg("-");
+    String::from_utf8_lossy(&tool_output(&mut command, "poppler-utils")).into_owned()
 }
 
 /// The number of pages and the page size line of `pdfinfo`.
 pub fn info(pdf: &Path) -> (usize, String) {
-    let out = Command::new("pdfinfo")
-        .arg(pdf)
-        .output()
-        .unwrap_or_else(|e| {
-            panic!("pdfinfo: {e}; run `bash .ci/run` or `apt-get install poppler-utils`")
-        });
-    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    let out = tool_output(Command::new("pdfinfo").arg(pdf), "poppler-utils");
+    let text = String::from_utf8_lossy(&out).into_owned();
     let field = |name: &str| {
         text.lines()
             .find_map(|l| l.strip_prefix(name))

@@ -853,3 +853,18 @@ pub fn throwaway_tls(dir: &Path) -> ThrowawayTls {
         key: dir.join("server.key"),
     }
 }
+
+/// The standard output of `command`, a tool from the Debian package `package`: a tool that is
+/// missing names the package, and one that fails shows what it said.
+pub fn tool_output(command: &mut std::process::Command, package: &str) -> Vec<u8> {
+    let tool = command.get_program().to_string_lossy().into_owned();
+    let out = command.output().unwrap_or_else(|e| {
+        panic!("{tool}: {e}; run `bash .ci/run` or `apt-get install {package}`")
+    });
+    assert!(
+        out.status.success(),
+        "{tool}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out.stdout
+}
