@@ -11,7 +11,7 @@
 //!   highest point, as the instrument's exported curve has it.
 //! * **A 100-level bearing area curve.** Levels `L_k = zmin + k·Rt/100`, k = 1 … 100 (the
 //!   instrument's 100 points), and at each the counted share `mr_k = #(z > L_k)/n`; the lowest
-//!   point (k = 0) closes the curve at 100 %.
+//!   point (k = 0) closes the curve at 100 %, the highest (k = 100) at 0 %.
 //! * **The Rk family on that curve.** The curve is the polyline through `(mr_k, L_k)`; the
 //!   equivalent straight line is the secant between two of its points 40 % apart in mr with
 //!   the least gradient, its start searched in 1 % steps of mr (the curve's own resolution;
@@ -145,8 +145,10 @@ pub fn sj_material_ratio(
     // The share strictly above a level, by binary search in the descending sort.
     let above = |c: f64| 100.0 * sorted.partition_point(|v| *v > c) as f64 / n;
     let level = |k: usize| bottom + k as f64 * rt / LEVELS as f64;
-    let mr: Vec<f64> = (0..=LEVELS)
+    // The top closes the curve at 0 %: float noise can put level(100) an ulp below it.
+    let mr: Vec<f64> = (0..LEVELS)
         .map(|k| if k == 0 { 100.0 } else { above(level(k)) })
+        .chain([0.0])
         .collect();
 
     let (start, gradient) = least_gradient_secant(&mr, rt);
@@ -209,27 +211,21 @@ fn height_at(curve: &[f64], mr: f64) -> f64 {
         curve.get(k).copied().unwrap_or(0.0),
         curve.get(k - 1).copied().unwrap_or(100.0),
     );
-    let t = if m_lo > m_hi {
-        (m_lo - mr) / (m_lo - m_hi)
-    } else {
-        1.0
-    };
-    ((k - 1) as f64 + t) / LEVELS as f64
+    // m_lo > mr >= m_hi: k is the first level at or below mr.
+    ((k - 1) as f64 + (m_lo - mr) / (m_lo - m_hi)) / LEVELS as f64
 }
 
 /// The least-gradient 40 % secant: its start in % (1 % steps, the first if tied) and its
 /// gradient in µm per % of mr.
 fn least_gradient_secant(curve: &[f64], rt: f64) -> (f64, f64) {
-    let mut best: Option<(f64, f64)> = None;
-    for a in 0..=60u32 {
-        let a = f64::from(a);
+    let mut best = (f64::MAX, 0.0);
+    for a in (0..=60u32).map(f64::from) {
         let drop = (height_at(curve, a) - height_at(curve, a + 40.0)) * rt;
-        if best.is_none_or(|(b, _)| drop < b - 1e-12 * b.abs()) {
-            best = Some((drop, a));
+        if drop < best.0 - 1e-12 * best.0.abs() {
+            best = (drop, a);
         }
     }
-    let (drop, start) = best.unwrap_or((0.0, 0.0));
-    (start, drop / 40.0)
+    (best.1, best.0 / 40.0)
 }
 
 #[cfg(test)]

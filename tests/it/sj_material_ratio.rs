@@ -130,3 +130,75 @@ fn the_iso_reading_differs_from_the_instruments_as_documented() {
         a.params.material.rk.rpk_um
     );
 }
+
+/// The highest ordinate is never above the top level, whatever float noise does to the level:
+/// here `bottom + 100·Rt/100` falls an ulp below the top (9.090999999999998 µm, the export's
+/// highest point as read back from an X3P file in metres), and counting it would add one
+/// ordinate (0.015 %) to the curve's last point and to A1 and Rpk.
+#[test]
+fn the_highest_ordinate_is_not_counted_above_the_top_level() {
+    let (bottom, top) = (-13.1422, 9.090999999999998);
+    assert!(
+        bottom + 100.0 * (top - bottom) / 100.0 < top,
+        "no float noise to test"
+    );
+    let m = sj_material_ratio(&[bottom, 0.0, top], &MaterialLevels::default()).unwrap();
+    assert_eq!(m.curve[100][0], 0.0);
+    assert_eq!(m.curve[0][0], 100.0);
+}
+
+/// The export written as X3P (heights in metres as f64) and read back: every height equal to
+/// the encoding's precision (a few ulps: µm → m → µm is two roundings), and the SJ reading
+/// equal to the CSV's to 1e-12, Rpk and A1 included (they moved by the top level's float
+/// noise before, 2.9121 → 2.9132 µm).
+#[test]
+fn the_sj_reading_survives_an_x3p_round_trip() {
+    use surfscan::metrology::areal::HeightMap;
+    use surfscan::x3p::{read_x3p, to_x3p, X3pMeta};
+    let z = mitutoyo_r_profile();
+    let map = HeightMap {
+        heights_um: &z,
+        rows: 1,
+        cols: z.len(),
+        pitch_x_mm: 0.0015,
+        pitch_y_mm: 0.001,
+    };
+    let back = read_x3p(&to_x3p(&map, 0.0, &X3pMeta::default()).unwrap()).unwrap();
+    assert_eq!(back.heights_um.len(), z.len());
+    let mut moved = 0;
+    for (a, b) in z.iter().zip(&back.heights_um) {
+        assert!(
+            (a - b).abs() <= 4.0 * f64::EPSILON * a.abs(),
+            "{a} read back as {b}"
+        );
+        moved += usize::from(a != b);
+    }
+    assert!(
+        moved > 0,
+        "no height moved: the test no longer covers the float noise"
+    );
+    let (m, r) = (
+        sj_material_ratio(&z, &MaterialLevels::default()).unwrap(),
+        sj_material_ratio(&back.heights_um, &MaterialLevels::default()).unwrap(),
+    );
+    let (a, b) = (&m.material.rk, &r.material.rk);
+    for (name, x, y) in [
+        ("Rk", a.rk_um, b.rk_um),
+        ("Rpk", a.rpk_um, b.rpk_um),
+        ("Rvk", a.rvk_um, b.rvk_um),
+        ("Mr1", a.mr1_pct, b.mr1_pct),
+        ("Mr2", a.mr2_pct, b.mr2_pct),
+        ("A1", a.a1_um_pct, b.a1_um_pct),
+        ("A2", a.a2_um_pct, b.a2_um_pct),
+        ("Rmr", m.material.rmr_pct, r.material.rmr_pct),
+    ] {
+        assert!(
+            (x - y).abs() <= 1e-12 * x.abs(),
+            "{name}: {x} from the CSV, {y} from X3P"
+        );
+    }
+    within_one_digit("Rpk after X3P", b.rpk_um, 2.912, 3);
+    // The shares at the 100 levels, exactly (the levels' heights carry Rt's float noise).
+    let shares = |c: &[[f64; 2]]| c.iter().map(|p| p[0]).collect::<Vec<_>>();
+    assert_eq!(shares(&m.curve), shares(&r.curve));
+}
