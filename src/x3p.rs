@@ -2,7 +2,9 @@
 //! and write) of a regular height grid.
 //!
 //! The writer produces a zip archive (stored, uncompressed) holding `main.xml`,
-//! `bindata/data.bin` (little-endian f64 heights in metres, x fastest) and `md5checksum.hex`;
+//! `bindata/data.bin` (little-endian f64 heights in metres, x fastest) and `md5checksum.hex`,
+//! a grid of one line as a profile (`PRF`, the (N, 1, 1) matrix ISO 5436-2 defines for it), any
+//! other as a surface (`SUR`);
 //! the MD5 it needs is RustCrypto's `md-5` and the CRC-32 is `crc32fast` (the tests check
 //! them against the RFC 1321 vectors and the zip CRC's check value).
 //!
@@ -203,7 +205,7 @@ fn record2(meta: &X3pMeta) -> String {
 }
 
 /// The X3P archive of a height map (heights µm, `rows` lines along y, `cols` points along x,
-/// row-major). `first_y_mm` is the machine y of the first line, written as the CY axis offset
+/// row-major): a profile (`PRF`) when it is one line, else a surface (`SUR`). `first_y_mm` is the machine y of the first line, written as the CY axis offset
 /// so that the file places the grid where the stage traced it. `main.xml` is valid against
 /// the ISO 5436-2 schema (`tests/data/x3p/iso5436_2.xsd`); Record2 is left out when `meta`
 /// states no calibration date.
@@ -237,7 +239,7 @@ pub fn x3p<'a>(
     let xml = format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
 <p:ISO5436_2 xmlns:p="http://www.opengps.eu/2008/ISO5436_2" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:schemaLocation="http://www.opengps.eu/2008/ISO5436_2 http://www.opengps.eu/2008/ISO5436_2/ISO5436_2.xsd">
-<Record1><Revision>ISO5436 - 2000</Revision><FeatureType>SUR</FeatureType><Axes>
+<Record1><Revision>ISO5436 - 2000</Revision><FeatureType>{feature}</FeatureType><Axes>
 <CX><AxisType>I</AxisType><DataType>D</DataType><Increment>{ix:e}</Increment><Offset>0</Offset></CX>
 <CY><AxisType>I</AxisType><DataType>D</DataType><Increment>{iy:e}</Increment><Offset>{oy:e}</Offset></CY>
 <CZ><AxisType>A</AxisType><DataType>D</DataType><Increment>1</Increment><Offset>0</Offset></CZ>
@@ -246,6 +248,7 @@ pub fn x3p<'a>(
 <Record4><ChecksumFile>md5checksum.hex</ChecksumFile></Record4>
 </p:ISO5436_2>
 "#,
+        feature = if rows == 1 { "PRF" } else { "SUR" },
         ix = metres(pitch_x_mm),
         iy = metres(pitch_y_mm),
         oy = metres(first_y_mm),

@@ -484,3 +484,155 @@ fn analyze_leaves_out_lines_with_invalid_points_of_a_foreign_x3p() {
         .collect();
     assert_eq!(idx, vec![0, 2, 3]);
 }
+
+/// The Mitutoyo export's R profile (6664 ordinates 1.5 µm apart), heights in µm.
+fn mitutoyo_profile() -> Vec<f64> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/real/mitutoyo_surftest_R.x_mm_z_um.csv");
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+        .collect()
+}
+
+/// `tests/python/x3p_profile.py` (x3pio, a reader and writer independent of ours) with `args`;
+/// its JSON output when it prints any.
+fn x3pio(args: &[&std::ffi::OsStr]) -> Option<serde_json::Value> {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/x3p_profile.py");
+    let o = crate::common::python()
+        .arg(script)
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "x3pio failed on {args:?} (run `bash .ci/run`, which installs tests/python/requirements.txt into .venv/):\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    (!o.stdout.is_empty()).then(|| serde_json::from_slice(&o.stdout).unwrap())
+}
+
+/// A height read back from f64 metres: the one written to a few ulps (µm → m → µm rounds twice).
+fn assert_same_heights(got: &[f64], want: &[f64], reader: &str) {
+    assert_eq!(got.len(), want.len(), "{reader}");
+    for (a, b) in got.iter().zip(want) {
+        assert!(
+            (a - b).abs() <= 4.0 * f64::EPSILON * b.abs(),
+            "{reader}: {a} read back for {b}"
+        );
+    }
+}
+
+#[test]
+fn a_one_line_grid_is_written_as_a_profile_that_an_independent_reader_reads() {
+    let z = mitutoyo_profile();
+    let bytes = to_x3p(&map(&z, 1, z.len()), 0.0, &X3pMeta::default()).unwrap();
+    let xml = main_xml(&bytes);
+    assert!(xml.contains("<FeatureType>PRF</FeatureType>"), "{xml}");
+    assert!(
+        xml.contains("<SizeX>6664</SizeX><SizeY>1</SizeY><SizeZ>1</SizeZ>"),
+        "{xml}"
+    );
+    // Two lines or more stay a surface.
+    let two = to_x3p(&map(&z[..20], 2, 10), 0.0, &X3pMeta::default()).unwrap();
+    assert!(main_xml(&two).contains("<FeatureType>SUR</FeatureType>"));
+
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("profile.x3p");
+    std::fs::write(&file, &bytes).unwrap();
+    assert_valid_x3p(&file);
+    let back = read_x3p(&bytes).unwrap();
+    assert_eq!(
+        (back.feature_type.as_str(), back.rows, back.cols),
+        ("PRF", 1, 6664)
+    );
+    assert!((back.pitch_x_mm - 0.0015).abs() < 1e-15);
+    assert_same_heights(&back.heights_um, &z, "our reader");
+    let v = x3pio(&["read".as_ref(), file.as_os_str()]).unwrap();
+    assert_eq!(
+        (v["kind"].as_str(), v["points"].as_u64()),
+        (Some("Profile"), Some(6664))
+    );
+    assert!(
+        (v["step_x_um"].as_f64().unwrap() - 1.5).abs() < 1e-9,
+        "{}",
+        v["step_x_um"]
+    );
+    let h: Vec<f64> = v["heights_um"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert_same_heights(&h, &z, "x3pio");
+}
+
+/// Every number of `v` with its path (`a/b/0`), in document order.
+fn numbers(v: &serde_json::Value, path: String, out: &mut Vec<(String, f64)>) {
+    match v {
+        serde_json::Value::Number(n) => out.push((path, n.as_f64().unwrap())),
+        serde_json::Value::Array(a) => a
+            .iter()
+            .enumerate()
+            .for_each(|(i, x)| numbers(x, format!("{path}/{i}"), out)),
+        serde_json::Value::Object(m) => m
+            .iter()
+            .for_each(|(k, x)| numbers(x, format!("{path}/{k}"), out)),
+        _ => {}
+    }
+}
+
+#[test]
+fn a_profile_read_from_a_profile_x3p_is_the_line_of_its_csv() {
+    // The Mitutoyo export analysed as the instrument evaluated it (an R profile, λc 2.5 mm),
+    // then its own measured.x3p, then a PRF file x3pio writes of the same CSV: the one line
+    // each gives has every number of the CSV's line to 1e-12, the SJ reading's Rpk at the
+    // printed 2.912 µm.
+    let csv = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/real/mitutoyo_surftest_R.x_mm_z_um.csv");
+    let dir = tempfile::tempdir().unwrap();
+    let run = |input: &Path, out: &str| {
+        let out = dir.path().join(out);
+        let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .arg("analyze")
+            .arg(input)
+            .args(["--no-filter", "--lc", "2.5", "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+        assert_eq!(r["kind"], "profile", "{input:?}");
+        assert_eq!(r["lines"].as_array().unwrap().len(), 1, "{input:?}");
+        r
+    };
+    let from_csv = run(&csv, "csv");
+    let ours = dir.path().join("csv/measured.x3p");
+    assert_valid_x3p(&ours);
+    assert!(main_xml(&std::fs::read(&ours).unwrap()).contains("<FeatureType>PRF</FeatureType>"));
+    let theirs = dir.path().join("x3pio.x3p");
+    x3pio(&["write".as_ref(), csv.as_os_str(), theirs.as_os_str()]);
+    let mut want = Vec::new();
+    numbers(&from_csv["lines"][0], String::new(), &mut want);
+    assert!(want.len() > 200, "{} numbers", want.len());
+    for (input, out) in [(&ours, "ours"), (&theirs, "theirs")] {
+        let r = run(input, out);
+        let mut got = Vec::new();
+        numbers(&r["lines"][0], String::new(), &mut got);
+        assert_eq!(got.len(), want.len(), "{out}");
+        for ((p, a), (q, b)) in got.iter().zip(&want) {
+            assert_eq!(p, q, "{out}");
+            assert!(
+                (a - b).abs() <= 1e-12 * b.abs().max(1e-3),
+                "{out} {p}: {a}, the CSV's {b}"
+            );
+        }
+        let rpk = r["lines"][0]["material_ratio_sj_series"]["Rpk_um"]
+            .as_f64()
+            .unwrap();
+        assert!((rpk - 2.912).abs() <= 1e-3, "{out}: SJ Rpk {rpk}");
+    }
+}
