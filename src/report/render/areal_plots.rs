@@ -25,9 +25,9 @@
 
 use super::decimate::extremes_per_column_of_pairs;
 use super::plots::{
-    chart, draw_colour_bar, ensure_font, exaggeration_note, font, height_range, legend,
-    padded_range, plot_err, png_and_svg, replace_figure, tick, viridis, write_png, Frame, DATA,
-    EXAGGERATIONS, MAP_BAR_W, MODEL,
+    chart, draw_colour_bar, ensure_font, exaggeration_note, font, legend, min_max, padded_range,
+    plot_err, png_and_svg, replace_figure, tick, viridis, write_png, Frame, DATA, EXAGGERATIONS,
+    MAP_BAR_W, MODEL,
 };
 use super::text_cache::TextCache;
 use crate::metrology::areal::HeightMap;
@@ -52,11 +52,6 @@ pub const VIEW_NODES: usize = 360;
 const VIEW_PAD: u32 = 56;
 /// Grey of the threshold line.
 const GREY: RGBColor = RGBColor(120, 120, 120);
-
-/// `[a, b]` pairs drawn on a chart: reduced per pixel column when there are many.
-fn drawn(points: &[[f64; 2]], range: (f64, f64), columns: u32) -> Vec<(f64, f64)> {
-    extremes_per_column_of_pairs(points, range, columns)
-}
 
 /// The label of an ACF section in the legend.
 fn section_label(s: &AcfSection, which: &str) -> String {
@@ -120,7 +115,7 @@ where
         let colour = *colour;
         chart
             .draw_series(LineSeries::new(
-                drawn(&c.points, (0.0, x_hi), columns),
+                extremes_per_column_of_pairs(&c.points, (0.0, x_hi), columns),
                 colour.stroke_width(2),
             ))
             .map_err(|e| e.to_string())?
@@ -205,12 +200,8 @@ where
     let frame = Frame::new(root.dim_in_pixel().0, title, subtitle, caption);
     let body = frame.draw(root)?;
     let all = || series.iter().flat_map(|(p, _, _)| p.iter());
-    let (q_lo, q_hi) = all().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
-        (a.min(p[0]), b.max(p[0]))
-    });
-    let (c_lo, c_hi) = all().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
-        (a.min(p[1]), b.max(p[1]))
-    });
+    let (q_lo, q_hi) = min_max(all().map(|p| p[0]));
+    let (c_lo, c_hi) = min_max(all().map(|p| p[1]));
     let (q_lo, q_hi) = if q_lo.is_finite() && q_hi > q_lo {
         (q_lo / 1.2, q_hi * 1.2)
     } else {
@@ -236,10 +227,11 @@ where
         let colour = *colour;
         // Reduced per pixel column of the logarithmic axis.
         let logs: Vec<[f64; 2]> = points.iter().map(|p| [p[0].ln(), p[1]]).collect();
-        let kept: Vec<(f64, f64)> = drawn(&logs, (q_lo.ln(), q_hi.ln()), columns)
-            .into_iter()
-            .map(|(lq, c)| (lq.exp(), c))
-            .collect();
+        let kept: Vec<(f64, f64)> =
+            extremes_per_column_of_pairs(&logs, (q_lo.ln(), q_hi.ln()), columns)
+                .into_iter()
+                .map(|(lq, c)| (lq.exp(), c))
+                .collect();
         chart
             .draw_series(LineSeries::new(kept, colour.stroke_width(2)))
             .map_err(|e| e.to_string())?
@@ -312,7 +304,7 @@ impl View {
             (stretch_of(w_mm, h_mm), 1.0)
         };
         let longer = (w_mm * stretch.0).max(h_mm * stretch.1);
-        let z_range_um = height_range(grid.heights_um);
+        let z_range_um = min_max(grid.heights_um.iter().copied());
         let relief_mm = (z_range_um.1 - z_range_um.0) * 1e-3;
         let exaggeration = EXAGGERATIONS
             .iter()
@@ -356,16 +348,8 @@ impl View {
             .flat_map(|x| [0.0, h_mm].map(|y| (x, y)))
             .flat_map(|(x, y)| [z_range_um.0, z_range_um.1].map(|z| view.project(x, y, z)))
             .collect();
-        let (p_lo, p_hi) = corners
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), c| {
-                (a.min(c.0), b.max(c.0))
-            });
-        let (u_lo, u_hi) = corners
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), c| {
-                (a.min(c.1), b.max(c.1))
-            });
+        let (p_lo, p_hi) = min_max(corners.iter().map(|c| c.0));
+        let (u_lo, u_hi) = min_max(corners.iter().map(|c| c.1));
         let span = |lo: f64, hi: f64| if hi > lo { hi - lo } else { 1.0 };
         view.scale = (area.0 as f64 / span(p_lo, p_hi)).min(area.1 as f64 / span(u_lo, u_hi));
         view.origin = (p_lo, u_hi, at.0, at.1);
@@ -460,14 +444,8 @@ fn fill_triangle(rgb: &mut [u8], (w, h): (usize, usize), t: [(f64, f64); 3], col
     if area.abs() < 1e-12 {
         return;
     }
-    let (x0, x1) = (
-        t.iter().map(|p| p.0).fold(f64::INFINITY, f64::min),
-        t.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max),
-    );
-    let (y0, y1) = (
-        t.iter().map(|p| p.1).fold(f64::INFINITY, f64::min),
-        t.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max),
-    );
+    let (x0, x1) = min_max(t.iter().map(|p| p.0));
+    let (y0, y1) = min_max(t.iter().map(|p| p.1));
     let clamp = |v: f64, n: usize| v.clamp(0.0, n as f64) as usize;
     for py in clamp(y0.floor(), h)..clamp(y1.ceil() + 1.0, h) {
         for px in clamp(x0.floor(), w)..clamp(x1.ceil() + 1.0, w) {

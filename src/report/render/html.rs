@@ -312,11 +312,7 @@ pub fn result_summary(report: &Value) -> Vec<(&'static str, String)> {
         .unwrap_or_default();
     out.push(("lines", format!("{}{planned} characterised", ra.len())));
     if !ra.is_empty() {
-        let (lo, hi) = ra
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                (a.min(*v), b.max(*v))
-            });
+        let (lo, hi) = super::plots::min_max(ra.iter().copied());
         let (m, sd) = mean_sd(&ra);
         let h = Quantity::HeightUm;
         out.push((

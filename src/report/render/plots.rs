@@ -385,11 +385,7 @@ pub(super) fn replace_figure(
 /// The range of `values` padded by 5 % (a unit range around a constant, `fallback` when
 /// there is none).
 pub(super) fn padded_range(values: impl Iterator<Item = f64>, fallback: (f64, f64)) -> (f64, f64) {
-    let (lo, hi) = values
-        .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-            (lo.min(v), hi.max(v))
-        });
+    let (lo, hi) = min_max(values.filter(|v| v.is_finite()));
     if !(lo.is_finite() && hi.is_finite()) {
         return fallback;
     }
@@ -511,12 +507,7 @@ where
         "material ratio (%)",
         "height c from the mean line (µm)",
     )?;
-    let (y_lo, y_hi) = curves
-        .iter()
-        .map(|c| c.y_mm)
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| {
-            (a.min(y), b.max(y))
-        });
+    let (y_lo, y_hi) = min_max(curves.iter().map(|c| c.y_mm));
     let y_span = if y_hi > y_lo { y_hi - y_lo } else { 1.0 };
     let columns = chart.plotting_area().dim_in_pixel().0;
     // Drawn as (material ratio, height): decimated along the material ratio.
@@ -618,13 +609,8 @@ where
 {
     let frame = Frame::new(root.dim_in_pixel().0, title, subtitle, caption);
     let body = frame.draw(root)?;
-    let (p_lo, p_hi) = points
-        .iter()
-        .map(|p| p.nominal_pressure_mpa)
-        .filter(|p| p.is_finite() && *p > 0.0)
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
-            (a.min(p), b.max(p))
-        });
+    let pressures = points.iter().map(|p| p.nominal_pressure_mpa);
+    let (p_lo, p_hi) = min_max(pressures.filter(|p| p.is_finite() && *p > 0.0));
     let (p_lo, p_hi) = if p_lo.is_finite() {
         (p_lo / 1.5, p_hi * 1.5)
     } else {
@@ -768,7 +754,7 @@ const HEIGHTS: MapValues<'static> = MapValues {
 
 /// The subtitle of a map: size, points, value range and scale.
 fn map_subtitle(grid: &HeightMap<'_>, values: &MapValues<'_>, scale: &MapScale) -> String {
-    let (lo, hi) = height_range(grid.heights_um);
+    let (lo, hi) = min_max(grid.heights_um.iter().copied());
     format!(
         "{} × {} mm, {} lines × {} points; {} {} … {} {}; {}",
         fmt(grid.cols as f64 * grid.pitch_x_mm, Quantity::LengthMm),
@@ -783,11 +769,12 @@ fn map_subtitle(grid: &HeightMap<'_>, values: &MapValues<'_>, scale: &MapScale) 
     )
 }
 
-pub(super) fn height_range(z: &[f64]) -> (f64, f64) {
-    z.iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-            (lo.min(*v), hi.max(*v))
-        })
+/// The lowest and the highest of `values` (NaN is neither; +∞ and −∞ when there is none).
+pub(super) fn min_max(values: impl IntoIterator<Item = f64>) -> (f64, f64) {
+    let extremes = |(lo, hi): (f64, f64), v: f64| (lo.min(v), hi.max(v));
+    values
+        .into_iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), extremes)
 }
 
 /// The pixels of a height map `width` × `height` px over the whole grid, row 0 of the
@@ -842,7 +829,7 @@ where
     DB::ErrorType: 'static,
 {
     let (px, py) = (grid.pitch_x_mm, grid.pitch_y_mm);
-    let (lo, hi) = height_range(grid.heights_um);
+    let (lo, hi) = min_max(grid.heights_um.iter().copied());
     let w = grid.cols as f64 * px;
     let h = grid.rows as f64 * py;
     let body = frame.draw(root)?;
@@ -992,15 +979,8 @@ where
     DB::ErrorType: 'static,
 {
     // The x range is not padded: a profile starts and ends at its data.
-    let (x0, x1) = measured
-        .iter()
-        .chain(model)
-        .chain(residual)
-        .map(|p| p.0)
-        .filter(|x| x.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
-            (a.min(x), b.max(x))
-        });
+    let xs = measured.iter().chain(model).chain(residual).map(|p| p.0);
+    let (x0, x1) = min_max(xs.filter(|x| x.is_finite()));
     let (x0, x1) = if x1 > x0 { (x0, x1) } else { (0.0, 1.0) };
     let (z0, z1) = padded_range(measured.iter().chain(model).map(|p| p.1), (-1.0, 1.0));
     let probe_frame = |subtitle: &str| Frame::new(root.dim_in_pixel().0, title, subtitle, caption);
@@ -1201,9 +1181,7 @@ where
             grey.stroke_width(1),
         ))
         .map_err(err)?;
-    let points: Vec<(f64, f64)> = (0..p.z_um.len())
-        .map(|i| (i as f64 * p.pitch_mm, p.z_um[i]))
-        .collect();
+    let points = crate::report::sections::overlay::along_x(p.z_um, p.pitch_mm);
     let columns = area.dim_in_pixel().0;
     chart
         .draw_series(LineSeries::new(

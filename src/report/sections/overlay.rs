@@ -34,23 +34,13 @@ pub fn section(
 
 /// Line `row` of `grid` against the model sampled on it.
 fn data_line(grid: &Grid, model: &SampledModel, row: usize) -> Overlay {
-    let px = grid.pitch_x_mm;
     let index = grid.index.get(row).copied().unwrap_or(0);
     Overlay {
-        measured: grid
-            .row(row)
-            .iter()
-            .enumerate()
-            .map(|(i, v)| (i as f64 * px, *v))
-            .collect(),
-        model: model
-            .heights_um
-            .get(row * model.cols..(row + 1) * model.cols)
-            .unwrap_or(&[])
-            .iter()
-            .enumerate()
-            .map(|(i, v)| (i as f64 * model.pitch_x_mm, *v))
-            .collect(),
+        measured: along_x(grid.row(row), grid.pitch_x_mm),
+        model: along_x(
+            (model.heights_um.get(row * model.cols..(row + 1) * model.cols)).unwrap_or(&[]),
+            model.pitch_x_mm,
+        ),
         residual: Vec::new(),
         title: format!(
             "Line {} ({index:04}, y = {} mm): measured and model (fitted through these points; no line could be held out)",
@@ -61,6 +51,12 @@ fn data_line(grid: &Grid, model: &SampledModel, row: usize) -> Overlay {
             )
         ),
     }
+}
+
+/// `z` as `(x_mm, z)` points `pitch_mm` apart from x = 0.
+pub(crate) fn along_x(z: &[f64], pitch_mm: f64) -> Vec<(f64, f64)> {
+    let x = |i: usize| i as f64 * pitch_mm;
+    z.iter().enumerate().map(|(i, v)| (x(i), *v)).collect()
 }
 
 /// The overlay's row: the requested line when it is among the rows (else a warning and the
@@ -132,16 +128,8 @@ fn held_out_overlay(
         .heights_um
         .get(row * grid.cols..(row + 1) * grid.cols)?;
     Some(Overlay {
-        measured: measured
-            .iter()
-            .enumerate()
-            .map(|(i, v)| (i as f64 * px, *v))
-            .collect(),
-        model: model
-            .iter()
-            .enumerate()
-            .map(|(i, v)| (i as f64 * px, *v))
-            .collect(),
+        measured: along_x(measured, px),
+        model: along_x(&model, px),
         residual: model
             .iter()
             .zip(measured)
