@@ -4,7 +4,7 @@
 
 use crate::input::InputError;
 use crate::metrology::MetrologyError;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use thiserror::Error;
 
 /// Why a scan directory or grid cannot be characterised.
@@ -37,7 +37,18 @@ pub enum ReportError {
 }
 
 /// Wraps a metrology error with what was being characterised.
-pub(crate) fn metrology(what: impl Into<String>) -> impl FnOnce(MetrologyError) -> ReportError {
+pub(crate) fn metrology(what: impl Into<String>) -> impl Fn(MetrologyError) -> ReportError {
     let what = what.into();
-    move |source| ReportError::Metrology { what, source }
+    move |source| ReportError::Metrology {
+        what: what.clone(),
+        source,
+    }
+}
+
+/// Wraps an I/O error with the file it concerns.
+pub(crate) fn io(path: &Path) -> impl Fn(std::io::Error) -> ReportError + '_ {
+    |source| ReportError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
 }

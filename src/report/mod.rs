@@ -111,10 +111,7 @@ pub fn characterise(
             },
         });
     }
-    std::fs::create_dir_all(out).map_err(|source| ReportError::Io {
-        path: out.to_path_buf(),
-        source,
-    })?;
+    std::fs::create_dir_all(out).map_err(error::io(out))?;
     let sections = sections::run(grid, &model, &ctx)?;
     let mut timings = sections.timings.clone();
     let (mut report, figures) = document::assemble(sections, grid, &model, &ctx);

@@ -8,7 +8,7 @@
 
 use super::plots::{plot_load_area, plot_map, LoadAreaPoint, MapValues};
 use crate::metrology::areal::HeightMap;
-use crate::report::error::ReportError;
+use crate::report::error::{metrology, ReportError};
 use crate::report::sections::contact::{ContactSection, ContactSurface};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -82,10 +82,7 @@ fn write_figures(
             resolved: p.resolved,
         })
         .collect();
-    let plot_error = |source| ReportError::Metrology {
-        what: format!("{described}: the contact's figures"),
-        source,
-    };
+    let plot_error = metrology(format!("{described}: the contact's figures"));
     let mut files = Vec::new();
     files.extend(
         plot_load_area(
@@ -95,7 +92,7 @@ fn write_figures(
             &against,
             &format!("{described}; heights levelled by their least-squares plane"),
         )
-        .map_err(plot_error)?,
+        .map_err(&plot_error)?,
     );
     let pressure_map = HeightMap {
         heights_um: &measured.map_pressure_field_mpa,
@@ -120,7 +117,7 @@ fn write_figures(
             ),
             &format!("{described}; {against}"),
         )
-        .map_err(plot_error)?,
+        .map_err(&plot_error)?,
     );
     Ok(files)
 }

@@ -23,17 +23,17 @@ pub mod text_cache;
 
 use super::context::ReportContext;
 use super::document::{FigureData, Report};
-use super::error::{metrology, ReportError};
+use super::error::{io, metrology, ReportError};
 use super::header::LabHeader;
 use super::sections::overlay::Overlay;
 use crate::atomic::write_atomically;
 use crate::grid::Grid;
+use crate::input::scan::read_scan_journal;
 use crate::metrology::areal::HeightMap;
 use crate::metrology::model::ModelCurveBac;
 use crate::metrology::params::LineAnalysis;
 use crate::metrology::MetrologyError;
 use crate::numfmt::{fmt as nfmt, line_number, Quantity};
-use crate::scan::journal::{read_journal, ResumeState};
 use crate::x3p::{x3p, X3pMeta};
 use plots::{plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction};
 use std::io::Write;
@@ -152,10 +152,7 @@ fn x3p_meta(ctx: &ReportContext, what: &str) -> X3pMeta {
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
-    write_atomically(path, |w| w.write_all(bytes)).map_err(|source| ReportError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    write_atomically(path, |w| w.write_all(bytes)).map_err(io(path))
 }
 
 /// The plots: bearing curves (the model's when there are any, else the measured grid's
@@ -171,10 +168,7 @@ fn write_plots(
 ) -> Result<Vec<PathBuf>, ReportError> {
     let caption = caption(ctx);
     let mut plots = Vec::new();
-    let plot_err = |e: MetrologyError| ReportError::Metrology {
-        what: format!("{}: plots", ctx.input),
-        source: e,
-    };
+    let plot_err = metrology(format!("{}: plots", ctx.input));
     let (bac_curves, pooled): (&[ModelCurveBac], &[[f64; 2]]) =
         match (&report.surface, &report.surface_grid) {
             (Some(s), _) => (s.bac_curves.as_deref().unwrap_or(&[]), &s.bac),
@@ -191,7 +185,8 @@ fn write_plots(
     };
     if !(bac_curves.is_empty() && pooled.is_empty()) {
         plots.extend(
-            plot_bearing_curves(out, bac_curves, pooled, &bac_title, &caption).map_err(plot_err)?,
+            plot_bearing_curves(out, bac_curves, pooled, &bac_title, &caption)
+                .map_err(&plot_err)?,
         );
     }
     plots.extend(height_map()?);
@@ -205,7 +200,7 @@ fn write_plots(
                 "Power spectral density of the measured grid",
                 &caption,
             )
-            .map_err(plot_err)?,
+            .map_err(&plot_err)?,
         );
         plots.extend(
             areal_plots::plot_acf(
@@ -215,13 +210,13 @@ fn write_plots(
                 "Autocorrelation of the measured grid",
                 &caption,
             )
-            .map_err(plot_err)?,
+            .map_err(&plot_err)?,
         );
     }
     if let Some(o) = overlay {
         plots.extend(
             plot_profile_overlay(out, &o.measured, &o.model, &o.residual, &o.title, &caption)
-                .map_err(plot_err)?,
+                .map_err(&plot_err)?,
         );
     }
     Ok(plots)
@@ -253,20 +248,17 @@ fn draw_height_map(
     measured: &HeightMap<'_>,
     ctx: &ReportContext,
 ) -> Result<Vec<PathBuf>, ReportError> {
-    let err = |source| ReportError::Metrology {
-        what: format!("{}: plots", ctx.input),
-        source,
-    };
+    let err = metrology(format!("{}: plots", ctx.input));
     // One profile is no map: its figure is its assessed profile.
     if measured.rows < 2 || measured.cols < 2 {
         return Ok(Vec::new());
     }
     let mut files = plot_height_map(out, measured, "Measured heights", &caption(ctx))
-        .map_err(err)?
+        .map_err(&err)?
         .to_vec();
     let (view, _) =
         areal_plots::plot_surface_view(out, measured, "Measured surface, 3D view", &caption(ctx))
-            .map_err(err)?;
+            .map_err(&err)?;
     files.extend(view);
     Ok(files)
 }
@@ -281,15 +273,9 @@ fn write_rk_plots(
     ctx: &ReportContext,
 ) -> Result<Vec<(String, [PathBuf; 2])>, ReportError> {
     let caption = caption(ctx);
-    let plot_err = |e: MetrologyError| ReportError::Metrology {
-        what: format!("{}: plots", ctx.input),
-        source: e,
-    };
+    let plot_err = metrology(format!("{}: plots", ctx.input));
     let rk_dir = out.join("rk");
-    std::fs::create_dir_all(&rk_dir).map_err(|source| ReportError::Io {
-        path: rk_dir.clone(),
-        source,
-    })?;
+    std::fs::create_dir_all(&rk_dir).map_err(io(&rk_dir))?;
     // The figures are independent: drawn in parallel over the available cores, one run of
     // consecutive lines per thread, joined in line order (the first error in line order wins).
     let workers = std::thread::available_parallelism()
@@ -371,7 +357,7 @@ fn draw_rk_run(
             &title,
             caption,
         )
-        .map_err(plot_err)?;
+        .map_err(&plot_err)?;
         rk_plots.push((title, files));
     }
     Ok(rk_plots)
@@ -410,12 +396,7 @@ pub fn write_data_files(
                 let path = out.join(name);
                 let file =
                     x3p(map, first_y_mm, meta).map_err(metrology(format!("{input}: {name}")))?;
-                write_atomically(&path, |w| file.write_to(w)).map_err(|source| {
-                    ReportError::Io {
-                        path: path.clone(),
-                        source,
-                    }
-                })?;
+                write_atomically(&path, |w| file.write_to(w)).map_err(io(&path))?;
                 Ok::<_, ReportError>(path)
             };
             let measured_x3p = write("measured.x3p", measured, &measured_meta)?;
@@ -591,7 +572,7 @@ fn remove_earlier_outputs(out: &Path) -> Result<(), ReportError> {
         .flat_map(|(stem, ..)| ["png", "svg"].map(|ext| format!("{stem}.{ext}")));
     for name in figures.chain(["model.x3p".into(), "contact.json".into()]) {
         let path = out.join(name);
-        remove_if_there(&path).map_err(|source| ReportError::Io { path, source })?;
+        remove_if_there(&path).map_err(io(&path))?;
     }
     Ok(())
 }
@@ -652,10 +633,9 @@ pub fn report_pdf(
     let mut warnings = Vec::new();
     let journal = (report["kind"] == "scan")
         .then(|| {
-            let path = dir.join(crate::scan::journal::JOURNAL_FILE);
-            read_journal(&path)
-                .and_then(|r| ResumeState::from_records(&path, &r.records))
+            read_scan_journal(dir)
                 .map_err(|e| {
+                    let path = dir.join(crate::scan::journal::JOURNAL_FILE);
                     warnings.push(format!(
                         "{}: {e}; the PDF says nothing of what happened during the scan",
                         path.display()
@@ -726,12 +706,7 @@ pub fn write_report(
             write_file(&files.report_json, &json)
         });
         let journal = (ctx.kind == "scan")
-            .then(|| {
-                let path = Path::new(&ctx.input).join(crate::scan::journal::JOURNAL_FILE);
-                read_journal(&path)
-                    .and_then(|r| ResumeState::from_records(&path, &r.records))
-                    .ok()
-            })
+            .then(|| read_scan_journal(Path::new(&ctx.input)).ok())
             .flatten();
         let contact = report
             .contact
