@@ -29,11 +29,7 @@ pub fn material_ratio_pct(heights: &[f64], level: f64) -> f64 {
             _ => continue,
         };
         let (hi, lo) = if a >= b { (a, b) } else { (b, a) };
-        if lo >= level {
-            inside += 1.0;
-        } else if hi > level {
-            inside += (hi - level) / (hi - lo);
-        }
+        inside += segment_inside(hi, lo, level);
     }
     inside / (heights.len() - 1) as f64 * 100.0
 }
@@ -509,79 +505,6 @@ pub fn bearing_curve(heights: &[f64], levels: usize) -> Result<BearingCurve, Met
     curve_about_mean(heights, mean, levels, material_ratios_pct)
 }
 
-/// The bearing area curve of a curve given as a function of x (mm, heights in µm), sampled at
-/// `samples` uniform points over `[x0_mm, x1_mm]` (dense, not just at the data points).
-pub fn bearing_curve_of<F: Fn(f64) -> f64>(
-    curve: F,
-    x0_mm: f64,
-    x1_mm: f64,
-    samples: usize,
-    levels: usize,
-) -> Result<BearingCurve, MetrologyError> {
-    if !(x0_mm.is_finite() && x1_mm.is_finite() && x1_mm > x0_mm) {
-        return Err(MetrologyError::BadParameter {
-            what: "x range length (mm)",
-            value: x1_mm - x0_mm,
-            hint: "the curve's x range must be finite with x1 > x0",
-        });
-    }
-    if samples < 2 {
-        return Err(MetrologyError::BadParameter {
-            what: "samples",
-            value: samples as f64,
-            hint: "sample the curve at 2 points or more (densely: several per data point)",
-        });
-    }
-    let dx = (x1_mm - x0_mm) / (samples - 1) as f64;
-    let z: Vec<f64> = (0..samples).map(|i| curve(x0_mm + i as f64 * dx)).collect();
-    bearing_curve(&z, levels)
-}
-
-/// The pooled material ratio curve of several curves of equal length and spacing: at each level
-/// the cross-line lengths of all curves are summed over their total length. Heights are each
-/// referenced to their own mean line; levels span the pooled range.
-pub fn pooled_bearing_curve(
-    curves: &[Vec<f64>],
-    levels: usize,
-) -> Result<BearingCurve, MetrologyError> {
-    let mut centred = Vec::with_capacity(curves.len());
-    for c in curves {
-        let b = bearing_curve(c, 2)?;
-        centred.push(c.iter().map(|h| h - b.mean_line_um).collect::<Vec<f64>>());
-    }
-    if centred.is_empty() {
-        return Err(MetrologyError::BadParameter {
-            what: "curves",
-            value: 0.0,
-            hint: "give at least one curve",
-        });
-    }
-    let hs = levels_spanning(centred.iter().flatten().copied(), levels)?;
-    let weights: Vec<f64> = centred.iter().map(|c| (c.len() - 1) as f64).collect();
-    let total: f64 = weights.iter().sum();
-    let ratios: Vec<Vec<f64>> = centred
-        .iter()
-        .map(|c| material_ratios_pct(c, &hs))
-        .collect();
-    let points = hs
-        .iter()
-        .enumerate()
-        .map(|(k, &h)| {
-            let mr = ratios
-                .iter()
-                .zip(&weights)
-                .map(|(r, w)| r[k] * w)
-                .sum::<f64>()
-                / total;
-            [h, mr]
-        })
-        .collect();
-    Ok(BearingCurve {
-        mean_line_um: 0.0,
-        points,
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -754,30 +677,6 @@ mod tests {
                     .collect();
                 assert_close(&ratios, &slow, "bearing curve");
             }
-            // Pooled over three curves: each level's weighted ratios as before.
-            let curves = vec![zs.clone(), zs.iter().map(|z| 0.5 * z + 0.1).collect(), zs];
-            let pooled = pooled_bearing_curve(&curves, 51).unwrap();
-            let centred: Vec<Vec<f64>> = curves
-                .iter()
-                .map(|c| {
-                    let m = bearing_curve(c, 2).unwrap().mean_line_um;
-                    c.iter().map(|h| h - m).collect()
-                })
-                .collect();
-            let total: f64 = centred.iter().map(|c| (c.len() - 1) as f64).sum();
-            let slow: Vec<f64> = pooled
-                .points
-                .iter()
-                .map(|p| {
-                    centred
-                        .iter()
-                        .map(|c| material_ratio_pct(c, p[0]) * (c.len() - 1) as f64)
-                        .sum::<f64>()
-                        / total
-                })
-                .collect();
-            let fast: Vec<f64> = pooled.points.iter().map(|p| p[1]).collect();
-            assert_close(&fast, &slow, "pooled");
         }
     }
 

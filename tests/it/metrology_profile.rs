@@ -5,9 +5,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use std::f64::consts::PI;
-use surfscan::metrology::bearing::{
-    bearing_curve, bearing_curve_of, material_ratio_pct, pooled_bearing_curve,
-};
+use surfscan::metrology::bearing::{bearing_curve, material_ratio_pct};
 use surfscan::metrology::filter::{gaussian_mean_line, mean_line_transmission, split};
 use surfscan::metrology::params::{analyze_line, rk_family, Options};
 use surfscan::metrology::MetrologyError;
@@ -369,7 +367,8 @@ fn bearing_curve_of_a_sine_is_arccos() {
     // (π − 2 asin(h/A)) / 2π = arccos(h/A)/π of the length.
     let amp = 1.5;
     let curve = |x: f64| 4.0 + amp * (2.0 * PI * x / 0.25).sin(); // offset removed by mean line
-    let b = bearing_curve_of(curve, 0.0, 1.0, 40_001, 101).unwrap();
+    let z: Vec<f64> = (0..40_001).map(|i| curve(i as f64 / 40_000.0)).collect();
+    let b = bearing_curve(&z, 101).unwrap();
     assert_eq!(b.points.len(), 101);
     assert!((b.mean_line_um - 4.0).abs() < 1e-9);
     for [h, mr] in &b.points {
@@ -378,13 +377,6 @@ fn bearing_curve_of_a_sine_is_arccos() {
     }
     assert!((b.points[0][0] - amp).abs() < 1e-6);
     assert!((b.points[100][0] + amp).abs() < 1e-6);
-    // Pooling two copies of the same curve gives the same curve.
-    let z: Vec<f64> = (0..4001).map(|i| curve(i as f64 / 4000.0)).collect();
-    let single = bearing_curve(&z, 101).unwrap();
-    let pooled = pooled_bearing_curve(&[z.clone(), z], 101).unwrap();
-    for (a, b) in single.points.iter().zip(&pooled.points) {
-        assert!((a[0] - b[0]).abs() < 1e-12 && (a[1] - b[1]).abs() < 1e-9);
-    }
 }
 
 #[test]
