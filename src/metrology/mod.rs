@@ -188,3 +188,35 @@ pub(crate) fn check_pitch(pitch_mm: f64) -> Result<(), MetrologyError> {
         Err(MetrologyError::BadPitch { pitch_mm })
     }
 }
+
+/// `f(index, item)` of every item, in their order, worked out in parallel: one run of
+/// consecutive items per available core, each run in its own thread. The items of a run whose
+/// thread panicked get `panicked(index)`.
+pub(crate) fn map_in_parallel<T: Sync, R: Send>(
+    items: &[T],
+    f: impl Fn(usize, &T) -> R + Sync,
+    panicked: impl Fn(usize) -> R,
+) -> Vec<R> {
+    let workers = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+        .clamp(1, items.len().max(1));
+    let chunk = items.len().div_ceil(workers).max(1);
+    let f = &f;
+    std::thread::scope(|s| {
+        let runs: Vec<_> = (0..items.len())
+            .step_by(chunk)
+            .map(|first| {
+                let run = first..(first + chunk).min(items.len());
+                let work = run.clone();
+                (
+                    run,
+                    s.spawn(move || work.map(|i| f(i, &items[i])).collect::<Vec<R>>()),
+                )
+            })
+            .collect();
+        runs.into_iter()
+            .flat_map(|(run, h)| h.join().unwrap_or_else(|_| run.map(&panicked).collect()))
+            .collect()
+    })
+}

@@ -288,53 +288,21 @@ pub fn find_grid_spikes(
     options: &SpikeOptions,
 ) -> (Vec<LineSpike>, Vec<(u32, String)>) {
     let pitch_mm = grid.pitch_x_mm;
-    // Lines are independent: they are judged in parallel over the available cores, one run
-    // of consecutive rows per thread, and the results joined in row order.
-    let rows: Vec<(usize, &[f64])> = grid
-        .heights_um
-        .chunks(grid.cols.max(1))
-        .enumerate()
-        .collect();
-    let judge = |part: &[(usize, &[f64])]| -> Vec<(u32, Result<SpikeScan, String>)> {
-        part.iter()
-            .map(|&(row, z)| {
-                let line = grid.index_of(row);
-                let found = spike_roughness(z, pitch_mm, lambda_c_mm)
-                    .and_then(|r| find_spikes(&r, z, pitch_mm, options))
-                    .map_err(|e| e.to_string());
-                (line, found)
-            })
-            .collect()
-    };
-    let workers = std::thread::available_parallelism()
-        .map(|n| n.get())
-        .unwrap_or(1)
-        .clamp(1, rows.len().max(1));
-    let judged: Vec<(u32, Result<SpikeScan, String>)> = if workers == 1 {
-        judge(&rows)
-    } else {
-        let chunk = rows.len().div_ceil(workers).max(1);
-        std::thread::scope(|s| {
-            let handles: Vec<_> = rows
-                .chunks(chunk)
-                .map(|part| (part, s.spawn(move || judge(part))))
-                .collect();
-            handles
-                .into_iter()
-                .flat_map(|(part, h)| {
-                    h.join().unwrap_or_else(|_| {
-                        part.iter()
-                            .map(|&(row, _)| {
-                                let line = grid.index_of(row);
-                                let reason = "internal: the spike check panicked; report this with the input";
-                                (line, Err(reason.to_string()))
-                            })
-                            .collect()
-                    })
-                })
-                .collect()
-        })
-    };
+    // Lines are independent: they are judged in parallel.
+    let rows: Vec<&[f64]> = grid.heights_um.chunks(grid.cols.max(1)).collect();
+    let judged = super::map_in_parallel(
+        &rows,
+        |row, z| {
+            let found = spike_roughness(z, pitch_mm, lambda_c_mm)
+                .and_then(|r| find_spikes(&r, z, pitch_mm, options))
+                .map_err(|e| e.to_string());
+            (grid.index_of(row), found)
+        },
+        |row| {
+            let reason = "internal: the spike check panicked; report this with the input";
+            (grid.index_of(row), Err(reason.to_string()))
+        },
+    );
     let mut spikes = Vec::new();
     let mut failed = Vec::new();
     for (line, found) in judged {

@@ -57,38 +57,19 @@ fn analyse_lines(
     label: &str,
 ) -> Result<Vec<LineAnalysis>, ReportError> {
     let rows: Vec<&[f64]> = grid.heights_um.chunks(grid.cols.max(1)).collect();
-    let workers = std::thread::available_parallelism()
-        .map(|n| n.get())
-        .unwrap_or(1)
-        .clamp(1, rows.len().max(1));
-    let chunk = rows.len().div_ceil(workers).max(1);
-    let results: Vec<Vec<Result<LineAnalysis, MetrologyError>>> = std::thread::scope(|s| {
-        let handles: Vec<_> = rows
-            .chunks(chunk)
-            .map(|part| {
-                s.spawn(move || {
-                    part.iter()
-                        .map(|z| analyze_line(z, grid.pitch_x_mm, options).map(unshown_dropped))
-                        .collect::<Vec<_>>()
-                })
+    let results = crate::metrology::map_in_parallel(
+        &rows,
+        |_, z| analyze_line(z, grid.pitch_x_mm, options).map(unshown_dropped),
+        |_| {
+            Err(MetrologyError::BadParameter {
+                what: "line analysis thread",
+                value: f64::NAN,
+                hint: "a line analysis thread panicked; report this with the input",
             })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| {
-                h.join().unwrap_or_else(|_| {
-                    vec![Err(MetrologyError::BadParameter {
-                        what: "line analysis thread",
-                        value: f64::NAN,
-                        hint: "a line analysis thread panicked; report this with the input",
-                    })]
-                })
-            })
-            .collect()
-    });
+        },
+    );
     results
         .into_iter()
-        .flatten()
         .enumerate()
         .map(|(row, r)| {
             let index = grid.index_of(row);
