@@ -76,11 +76,8 @@ pub fn running(report: &Value) -> (&str, String) {
         .as_str()
         .filter(|s| !s.is_empty())
         .unwrap_or("Surface report");
-    let software = format!(
-        "written by {}",
-        report["software"].as_str().unwrap_or("surfscan")
-    );
-    (left, software)
+    let software = report["software"].as_str().unwrap_or("surfscan");
+    (left, format!("written by {software}"))
 }
 
 /// The laboratory's header (name, address lines, logo) when `[report]` names a laboratory
@@ -188,9 +185,9 @@ pub fn printed_lines(report: &Value) -> (Vec<(u32, String)>, &'static str) {
     (out, "")
 }
 
-/// How near `line` comes to the specification's limits: the largest value ÷ limit (upper)
-/// or limit ÷ value (lower) over the limits, above 1 beyond it, and the words saying so
-/// ("Rz 22.06 µm against Rz1 max 12.5"); `None` without a limit the line has a value for.
+/// How near `line` comes to the specification's limits: the largest value ÷ limit (upper) or
+/// limit ÷ value (lower; ∞ for a 0, the worst) over the limits, above 1 beyond it, and the
+/// words ("Rz 22.06 µm against Rz1 max 12.5"); `None` without a limit the line has a value for.
 /// Rk, Rpk and Rvk are read as the recipe's material ratio reading reads them.
 fn nearest_limit(report: &Value, line: &Value) -> Option<(f64, String)> {
     let sj = report["recipe"]["material_ratio"] == "instrument";
@@ -210,7 +207,7 @@ fn nearest_limit(report: &Value, line: &Value) -> Option<(f64, String)> {
             };
             let callout = c["callout"].as_str()?;
             let why = format!("{p} {} µm against {callout}", fmt(v, Quantity::HeightUm));
-            share.is_finite().then_some((share, why))
+            (!share.is_nan()).then_some((share, why))
         })
         .max_by(|a, b| a.0.total_cmp(&b.0))
 }
@@ -274,6 +271,9 @@ mod tests {
         assert!(how.contains("nearest to or beyond the specification's limits, worst first"));
         let s = printed_lines_sentence(&r).unwrap();
         assert!(s.contains("3 of 5 lines, those nearest"), "{s}");
+        r["lines"][2]["material_ratio_sj_series"] = json!({"Rpk_um": 0.0});
+        // Rpk 0 under L Rpk 2 is beyond it without end: the worst, not skipped.
+        assert_eq!(indices(&r), [12, 14, 11]);
         r["specification"]["limits"] = json!([limit("Rc 1", "Rc", "upper", 1.0)]);
         assert_eq!(printed_lines(&r).0[0].1, "largest Ra: line 12 (0011)");
     }
