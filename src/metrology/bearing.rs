@@ -205,21 +205,10 @@ pub fn bearing_curve_xz(
         }
     }
     let mean = area / total;
-    curve_about_mean(zs, mean, levels, |z, hs| material_ratios_xz_pct(xs, z, hs))
-}
-
-/// Heights referenced to `mean`, `levels` equal levels from the highest point (0 %) to the
-/// lowest (100 %), the ratios at the interior levels from `ratios(referenced heights, levels)`.
-fn curve_about_mean(
-    heights: &[f64],
-    mean: f64,
-    levels: usize,
-    ratios: impl Fn(&[f64], &[f64]) -> Vec<f64>,
-) -> Result<BearingCurve, MetrologyError> {
-    let z: Vec<f64> = heights.iter().map(|h| h - mean).collect();
+    let z: Vec<f64> = zs.iter().map(|h| h - mean).collect();
     Ok(BearingCurve {
         mean_line_um: mean,
-        points: curve_between_extremes(&z, levels, |hs| ratios(&z, hs))?,
+        points: curve_between_extremes(&z, levels, |hs| material_ratios_xz_pct(xs, &z, hs))?,
     })
 }
 
@@ -485,26 +474,6 @@ pub struct BearingCurve {
     pub points: Vec<[f64; 2]>,
 }
 
-/// The bearing area curve of a uniformly sampled curve with `levels` equal height levels
-/// (101 in the paper) spanning its range. The mean line is the mean of the piecewise-linear
-/// curve (trapezoidal rule).
-pub fn bearing_curve(heights: &[f64], levels: usize) -> Result<BearingCurve, MetrologyError> {
-    check_heights(heights)?;
-    if heights.len() < 2 {
-        return Err(MetrologyError::TooShort {
-            points: heights.len(),
-            length_mm: 0.0,
-            sampling_length_mm: 0.0,
-            min_points: 2,
-        });
-    }
-    let n = heights.len();
-    let first = heights.first().copied().unwrap_or(0.0);
-    let last = heights.last().copied().unwrap_or(0.0);
-    let mean = (heights.iter().sum::<f64>() - 0.5 * (first + last)) / (n - 1) as f64;
-    curve_about_mean(heights, mean, levels, material_ratios_pct)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -646,37 +615,26 @@ mod tests {
     #[test]
     fn bearing_curves_equal_the_per_level_computation() {
         for (xs, zs) in test_curves() {
-            for (curve, per_level) in [
-                (
-                    bearing_curve_xz(&xs, &zs, 101).unwrap(),
-                    Box::new(|z: &[f64], h: f64| material_ratio_xz_pct(&xs, z, h))
-                        as Box<dyn Fn(&[f64], f64) -> f64>,
-                ),
-                (
-                    bearing_curve(&zs, 101).unwrap(),
-                    Box::new(|z: &[f64], h: f64| material_ratio_pct(z, h)),
-                ),
-            ] {
-                // As the curve was computed before: heights about the mean, equal levels,
-                // each level's ratio on its own.
-                let z: Vec<f64> = zs.iter().map(|h| h - curve.mean_line_um).collect();
-                let top = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                let bottom = z.iter().copied().fold(f64::INFINITY, f64::min);
-                let (heights, ratios): (Vec<f64>, Vec<f64>) =
-                    curve.points.iter().map(|p| (p[0], p[1])).unzip();
-                let slow: Vec<f64> = (0..101)
-                    .map(|k| {
-                        let h = top - (top - bottom) * k as f64 / 100.0;
-                        assert_eq!(heights[k].to_bits(), h.to_bits(), "level {k}");
-                        match k {
-                            0 => 0.0,
-                            100 => 100.0,
-                            _ => per_level(&z, h),
-                        }
-                    })
-                    .collect();
-                assert_close(&ratios, &slow, "bearing curve");
-            }
+            let curve = bearing_curve_xz(&xs, &zs, 101).unwrap();
+            // As the curve was computed before: heights about the mean, equal levels, each
+            // level's ratio on its own.
+            let z: Vec<f64> = zs.iter().map(|h| h - curve.mean_line_um).collect();
+            let top = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let bottom = z.iter().copied().fold(f64::INFINITY, f64::min);
+            let (heights, ratios): (Vec<f64>, Vec<f64>) =
+                curve.points.iter().map(|p| (p[0], p[1])).unzip();
+            let slow: Vec<f64> = (0..101)
+                .map(|k| {
+                    let h = top - (top - bottom) * k as f64 / 100.0;
+                    assert_eq!(heights[k].to_bits(), h.to_bits(), "level {k}");
+                    match k {
+                        0 => 0.0,
+                        100 => 100.0,
+                        _ => material_ratio_xz_pct(&xs, &z, h),
+                    }
+                })
+                .collect();
+            assert_close(&ratios, &slow, "bearing curve");
         }
     }
 

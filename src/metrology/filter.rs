@@ -307,13 +307,6 @@ pub fn split(heights_um: &[f64], pitch_mm: f64, cutoff_mm: f64) -> Result<Split,
     })
 }
 
-/// The mean-line transmission of the ideal (untruncated, continuous) filter at wavelength λ:
-/// H_W(λ) = exp(−π·(α·λc/λ)²). Equals 0.5 at λ = λc.
-pub fn mean_line_transmission(cutoff_mm: f64, wavelength_mm: f64) -> f64 {
-    let r = ALPHA * cutoff_mm / wavelength_mm;
-    (-std::f64::consts::PI * r * r).exp()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

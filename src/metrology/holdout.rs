@@ -120,12 +120,7 @@ fn check_grid(grid: &Grid) -> Result<(), MetrologyError> {
 
 /// Runs both hold-out refits on a row-major grid (heights µm, one row per line at `y_mm[j]`,
 /// increasing; the lines need not be equally spaced, e.g. a scan with a line missing), with
-/// the paper's interpolation.
-pub fn holdout(grid: &Grid, options: FitOptions) -> Result<Holdout, MetrologyError> {
-    holdout_with(grid, options, VMethod::Interpolate)
-}
-
-/// [`holdout`] with `method` across the lines for both refits.
+/// `method` across the lines for both refits.
 pub fn holdout_with(
     grid: &Grid,
     options: FitOptions,

@@ -154,27 +154,12 @@ fn factor(unit_in: &str, ours: &str) -> Option<f64> {
     }
 }
 
-/// Pairs each instrument result with our value. Names we do not compute get `ours: None`.
-/// The instrument's `Rz` is the ISO 4287:1997 maximum height (see [`compare_under`] for
-/// the JIS ten-point Rz of the older JIS standards).
-pub fn compare(params: &RoughnessParams, instrument: &[InstrumentResult]) -> Vec<Comparison> {
-    compare_under(params, instrument, None)
-}
-
-/// Like [`compare`] for results evaluated under the instrument's `standard` (as recorded in
-/// its conditions, e.g. "ISO1997", "JIS1994"): under JIS1982 and JIS1994 the instrument's `Rz`
-/// is the ten-point height and is compared with our `RzJIS`. The tolerances are those of the
-/// instrument's own R profile (see [`compare_profile`]).
-pub fn compare_under(
-    params: &RoughnessParams,
-    instrument: &[InstrumentResult],
-    standard: Option<&str>,
-) -> Vec<Comparison> {
-    compare_profile(params, instrument, standard, false)
-}
-
-/// Like [`compare_under`], with the tolerances for a profile we filtered ourselves when
-/// `filtered_here` (a primary profile) instead of the instrument's own R profile.
+/// Pairs each instrument result with our value; names we do not compute get `ours: None`.
+/// Under `standard` (as the instrument's conditions record it, e.g. "ISO1997", "JIS1994") the
+/// instrument's `Rz` is the ISO 4287:1997 maximum height, except under JIS1982 and JIS1994,
+/// where it is the ten-point height and is compared with our `RzJIS`. The tolerances are those
+/// of the instrument's own R profile, or of a profile we filtered ourselves when
+/// `filtered_here` (a primary profile).
 pub fn compare_profile(
     params: &RoughnessParams,
     instrument: &[InstrumentResult],

@@ -47,16 +47,7 @@ pub struct ModelCurveBac {
     pub curve: BearingCurve,
 }
 
-/// The bearing area curves of `options.curves` iso-curves of `surface` (coordinates in mm;
-/// heights are reported in µm).
-pub fn model_bearing_curves(
-    surface: &NurbsSurface,
-    options: &ModelBacOptions,
-) -> Result<Vec<ModelCurveBac>, MetrologyError> {
-    model_bearing_curves_with(surface, options, None)
-}
-
-/// The u at which [`model_bearing_curves`] samples every curve: `samples` equally spaced
+/// The u at which [`model_bearing_curves_with`] samples every curve: `samples` equally spaced
 /// from 0 to 1 (`k / (samples − 1)`), as the fold check samples its iso-curves.
 pub fn bearing_sample_us(surface: &NurbsSurface, options: &ModelBacOptions) -> Vec<f64> {
     let samples = options
@@ -68,8 +59,9 @@ pub fn bearing_sample_us(surface: &NurbsSurface, options: &ModelBacOptions) -> V
         .collect()
 }
 
-/// [`model_bearing_curves`] with the u basis at [`bearing_sample_us`] already computed
-/// (`UBasis::new` of exactly those u; one of another length is not used).
+/// The bearing area curves of `options.curves` iso-curves of `surface` (coordinates in mm;
+/// heights are reported in µm), with the u basis at [`bearing_sample_us`] when the caller
+/// has computed it (`UBasis::new` of exactly those u; one of another length is not used).
 pub fn model_bearing_curves_with(
     surface: &NurbsSurface,
     options: &ModelBacOptions,
@@ -374,7 +366,7 @@ mod tests {
             levels: 21,
             samples_per_curve: None,
         };
-        let own = model_bearing_curves(s, &options).unwrap();
+        let own = model_bearing_curves_with(s, &options, None).unwrap();
         let us = bearing_sample_us(s, &options);
         assert_eq!(us.len(), 8 * s.count_u());
         assert_eq!((us[0], us[us.len() - 1]), (0.0, 1.0));

@@ -109,13 +109,6 @@ impl Acf {
                 + v(1, 1, tx * ty)?,
         )
     }
-
-    /// The ACF along +x at zero y lag: `[τx_um, value]`.
-    pub fn along_x(&self) -> Vec<[f64; 2]> {
-        (0..self.cols as isize)
-            .filter_map(|k| Some([k as f64 * self.pitch_x_um, self.at(0, k)?]))
-            .collect()
-    }
 }
 
 /// Sal, Str and Std of a grid, with what limits them.

@@ -3,7 +3,7 @@
 use std::f64::consts::PI;
 use surfscan::fit::{fit_grid, FitOptions};
 use surfscan::grid::Grid;
-use surfscan::metrology::model::{model_bearing_curves, ModelBacOptions};
+use surfscan::metrology::model::{model_bearing_curves_with, ModelBacOptions};
 
 #[test]
 fn model_bac_of_a_sinusoidal_grid_is_arccos() {
@@ -25,7 +25,7 @@ fn model_bac_of_a_sinusoidal_grid_is_arccos() {
         samples_per_curve: Some(8000),
         ..ModelBacOptions::default()
     };
-    let bac = model_bearing_curves(&fit.surface, &options).unwrap();
+    let bac = model_bearing_curves_with(&fit.surface, &options, None).unwrap();
     assert_eq!(bac.len(), 31);
     let mut worst: f64 = 0.0;
     for c in &bac {
@@ -124,7 +124,8 @@ fn model_sampled_on_the_real_31_line_grid_reproduces_data_and_keeps_sa_sq() {
 
 #[test]
 fn holdout_predicts_a_smooth_surface_and_misses_a_held_out_spike() {
-    use surfscan::metrology::holdout::holdout;
+    use surfscan::fit::VMethod;
+    use surfscan::metrology::holdout::holdout_with;
     // z = A·cos(2πx/λx)·cos(2πy/λy), 40 points per λx and 16 lines per λy: a degree 5 model of
     // the kept half predicts the held-out half to a small fraction of A.
     let (rows, cols, px, py, amp) = (21usize, 161usize, 0.001, 0.01, 1.0);
@@ -135,9 +136,10 @@ fn holdout_predicts_a_smooth_surface_and_misses_a_held_out_spike() {
         })
         .collect();
     let y: Vec<f64> = (0..rows).map(|r| r as f64 * py).collect();
-    let h = holdout(
+    let h = holdout_with(
         &Grid::new(z.clone(), cols, px, y.clone()),
         FitOptions::default(),
+        VMethod::Interpolate,
     )
     .unwrap();
     assert_eq!(h.points_left_out.len(), rows);
@@ -157,9 +159,10 @@ fn holdout_predicts_a_smooth_surface_and_misses_a_held_out_spike() {
     // A spike at a held-out point (line 3, column 81) is invisible to the refit: the difference
     // there is about the spike's height, and only line 3 sees it.
     z[3 * cols + 81] += 5.0;
-    let h = holdout(
+    let h = holdout_with(
         &Grid::new(z.clone(), cols, px, y.clone()),
         FitOptions::default(),
+        VMethod::Interpolate,
     )
     .unwrap();
     assert!(

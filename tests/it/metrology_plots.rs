@@ -6,7 +6,7 @@
 
 use surfscan::fit::{fit_grid, FitOptions};
 use surfscan::metrology::areal::{smr_curve, HeightMap};
-use surfscan::metrology::model::{model_bearing_curves, ModelBacOptions};
+use surfscan::metrology::model::{model_bearing_curves_with, ModelBacOptions};
 use surfscan::metrology::params::{analyze_line, material_ratio_curve, rk_family, Options};
 use surfscan::report::render::plots::{
     plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction,
@@ -100,7 +100,8 @@ fn every_plot_is_png_and_svg_in_iso_words_with_a_key_for_every_colour() {
     let z = grid();
     let y: Vec<f64> = (0..ROWS).map(|r| r as f64 * PY).collect();
     let fit = fit_grid(PX, &y, &z, COLS, FitOptions::default()).unwrap();
-    let curves = model_bearing_curves(&fit.surface, &ModelBacOptions::default()).unwrap();
+    let curves =
+        model_bearing_curves_with(&fit.surface, &ModelBacOptions::default(), None).unwrap();
     let g = HeightMap {
         heights_um: &z,
         rows: ROWS,

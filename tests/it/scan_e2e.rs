@@ -192,9 +192,10 @@ async fn a_scan_at_degree_3_reports_and_samples_the_surface_it_wrote() {
     assert_eq!(report["fit"]["degree_v"], 3);
     let recipe = report["surface"]["recipe"].as_str().unwrap_or_default();
     assert!(recipe.contains("degree 3/3"), "{recipe}");
-    let curves = surfscan::metrology::model::model_bearing_curves(
+    let curves = surfscan::metrology::model::model_bearing_curves_with(
         s,
         &surfscan::metrology::model::ModelBacOptions::default(),
+        None,
     )
     .unwrap();
     // The IGES text carries the poles to the last digit of their decimal form; the curves

@@ -4,7 +4,7 @@
 //! and the comparison with the instrument's own values, its tolerance flag included.
 
 use std::f64::consts::PI;
-use surfscan::metrology::instrument::{compare, tolerance_for};
+use surfscan::metrology::instrument::{compare_profile, tolerance_for};
 use surfscan::metrology::params::{analyze_line, MaterialLevels, Options};
 use surfscan::profile::InstrumentResult;
 
@@ -168,7 +168,7 @@ fn the_instruments_values_are_compared_within_a_documented_tolerance() {
         unit: unit.to_string(),
         ..InstrumentResult::default()
     };
-    let c = compare(
+    let c = compare_profile(
         &p,
         &[
             r("Rc", p.rc_um.unwrap() * 1.01, "um"),
@@ -182,6 +182,8 @@ fn the_instruments_values_are_compared_within_a_documented_tolerance() {
             r("RΔa", p.rda * 1.02, ""),
             r("Ppi", p.rppi_per_inch.unwrap() * 1.2, "/in"),
         ],
+        None,
+        false,
     );
     let names: Vec<&str> = c
         .iter()
