@@ -386,18 +386,10 @@ fn line_options(args: &Args) -> Options {
 /// `--config` names one), else a name in `station`'s recipe directory. A recipe without limits
 /// is a usage error: there is nothing to judge.
 fn recipe_of(arg: &Path, station: Option<&crate::config::Config>) -> Result<Recipe, CliError> {
-    use crate::jobs::recipe::{valid_name, RecipeError};
-    let err = |e: RecipeError| {
-        let exit = if e.is_usage() {
-            Exit::Usage
-        } else {
-            Exit::Config
-        };
-        CliError::new(exit, e.to_string())
-    };
+    use crate::jobs::recipe::valid_name;
     let name_arg = arg.to_str().filter(|n| valid_name(n) && !arg.exists());
     let recipe = match (name_arg, station) {
-        (Some(name), Some(c)) => Recipe::load(&c.jobs.recipes, name, c).map_err(err)?,
+        (Some(name), Some(c)) => Recipe::load(&c.jobs.recipes, name, c)?,
         (Some(name), None) if !name.ends_with(".toml") => {
             return Err(CliError::new(
                 Exit::Usage,
@@ -419,8 +411,7 @@ fn recipe_of(arg: &Path, station: Option<&crate::config::Config>) -> Result<Reci
             match station {
                 Some(c) => Recipe::from_text(&name, arg, &text, c),
                 None => Recipe::parse(&name, arg, &text),
-            }
-            .map_err(err)?
+            }?
         }
     };
     if recipe.specification.is_empty() {

@@ -173,6 +173,18 @@ impl From<crate::scan::choice::ChoiceError> for CliError {
     }
 }
 
+/// A recipe refused as given (a usage error, exit 2) or not fit for the station (exit 78), named.
+impl From<crate::jobs::recipe::RecipeError> for CliError {
+    fn from(e: crate::jobs::recipe::RecipeError) -> CliError {
+        let exit = if e.is_usage() {
+            Exit::Usage
+        } else {
+            Exit::Config
+        };
+        CliError::new(exit, e.to_string())
+    }
+}
+
 impl fmt::Display for CliError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(&self.message)

@@ -100,16 +100,8 @@ pub(super) fn with_recipe(
             format!("--y-start-mm {y} is not a position; give the y of the first line in mm"),
         ));
     }
-    let err = |e: crate::jobs::recipe::RecipeError| {
-        let exit = if e.is_usage() {
-            Exit::Usage
-        } else {
-            Exit::Config
-        };
-        CliError::new(exit, e.to_string())
-    };
-    let r = crate::jobs::recipe::Recipe::load(&config.jobs.recipes, name, config).map_err(err)?;
-    let c = r.config_for(config, y_start_mm).map_err(err)?;
+    let r = crate::jobs::recipe::Recipe::load(&config.jobs.recipes, name, config)?;
+    let c = r.config_for(config, y_start_mm)?;
     Ok((c, Some(r)))
 }
 
