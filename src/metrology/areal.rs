@@ -194,12 +194,7 @@ pub fn definitions() -> BTreeMap<String, String> {
 /// Sa … Sdr of a grid after plane levelling.
 pub fn areal_params(grid: &HeightMap<'_>) -> Result<ArealParams, MetrologyError> {
     let (z, plane) = level_plane(grid)?;
-    let n = z.len() as f64;
-    let sa = z.iter().map(|v| v.abs()).sum::<f64>() / n;
-    let m2 = z.iter().map(|v| v * v).sum::<f64>() / n;
-    let m3 = z.iter().map(|v| v * v * v).sum::<f64>() / n;
-    let m4 = z.iter().map(|v| v * v * v * v).sum::<f64>() / n;
-    let sq = m2.sqrt();
+    let m = super::params::EvaluationLengthMoments::of(&z);
     let sp = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let sv = -z.iter().copied().fold(f64::INFINITY, f64::min);
     let (rows, cols) = (grid.rows, grid.cols);
@@ -235,13 +230,13 @@ pub fn areal_params(grid: &HeightMap<'_>) -> Result<ArealParams, MetrologyError>
     }
     let projected = (cols - 1) as f64 * dx * (rows - 1) as f64 * dy;
     Ok(ArealParams {
-        sa_um: sa,
-        sq_um: sq,
+        sa_um: m.ra_um,
+        sq_um: m.rq_um,
         sp_um: sp,
         sv_um: sv,
         sz_um: sp + sv,
-        ssk: if sq > 0.0 { m3 / sq.powi(3) } else { 0.0 },
-        sku: if sq > 0.0 { m4 / (m2 * m2) } else { 0.0 },
+        ssk: m.rsk,
+        sku: m.rku,
         sdq,
         sdr_pct: (area / projected - 1.0) * 100.0,
         plane_um: plane,

@@ -336,7 +336,9 @@ pub struct EvaluationLengthMoments {
 }
 
 impl EvaluationLengthMoments {
-    fn of(z: &[f64]) -> EvaluationLengthMoments {
+    /// The moments of the heights `z` about zero, each sum taken in order: a line's over its
+    /// evaluation length or one sampling length, a levelled grid's Sa, Sq, Ssk and Sku.
+    pub(super) fn of(z: &[f64]) -> EvaluationLengthMoments {
         let n = z.len().max(1) as f64;
         let m2 = z.iter().map(|v| v * v).sum::<f64>() / n;
         let rq = m2.sqrt();
@@ -775,24 +777,17 @@ impl Acc {
     }
 
     fn add_section(&mut self, z: &[f64], slopes: &[Option<f64>], pitch_um: f64, lr_um: f64) {
-        let n = z.len().max(1) as f64;
-        let ra = z.iter().map(|v| v.abs()).sum::<f64>() / n;
-        let m2 = z.iter().map(|v| v * v).sum::<f64>() / n;
-        let m3 = z.iter().map(|v| v * v * v).sum::<f64>() / n;
-        let m4 = z.iter().map(|v| v * v * v * v).sum::<f64>() / n;
-        let rq = m2.sqrt();
+        let m = EvaluationLengthMoments::of(z);
         let rp = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let rv = -z.iter().copied().fold(f64::INFINITY, f64::min);
-        self.ra += ra;
-        self.rq += rq;
+        self.ra += m.ra_um;
+        self.rq += m.rq_um;
         self.rp += rp;
         self.rv += rv;
         self.rz += rp + rv;
         self.rz1max = self.rz1max.max(rp + rv);
-        if rq > 0.0 {
-            self.rsk += m3 / rq.powi(3);
-            self.rku += m4 / (m2 * m2);
-        }
+        self.rsk += m.rsk;
+        self.rku += m.rku;
         let sl: Vec<f64> = slopes.iter().flatten().copied().collect();
         if !sl.is_empty() {
             self.rdq += (sl.iter().map(|s| s * s).sum::<f64>() / sl.len() as f64).sqrt();
