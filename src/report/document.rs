@@ -189,7 +189,7 @@ pub fn assemble(
 }
 
 /// A section's result as report.json holds it: the value, or why there is none.
-fn split<T>(r: Result<T, String>) -> (Option<T>, Option<String>) {
+pub(crate) fn split<T>(r: Result<T, String>) -> (Option<T>, Option<String>) {
     match r {
         Ok(v) => (Some(v), None),
         Err(e) => (None, Some(e)),

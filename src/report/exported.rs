@@ -59,7 +59,7 @@ pub struct ExportLine {
 }
 
 /// One characteristic: a parameter with the limits the specification sets on it.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Characteristic {
     /// `Ra`, `Rz`, … (the callout's parameter).
     pub parameter: String,
@@ -136,10 +136,7 @@ fn time(v: &Value) -> Option<DateTime<Utc>> {
 }
 
 fn text(v: &Value, key: &str) -> String {
-    v.get(key)
-        .and_then(Value::as_str)
-        .unwrap_or_default()
-        .to_owned()
+    v[key].as_str().unwrap_or_default().to_owned()
 }
 
 /// A value as both renderers write it (QIF's `xs:decimal`, DFQ's value fields): a decimal
@@ -207,17 +204,14 @@ impl Exported {
                 line_times.insert(u64::from(l.id.index), l.time);
             }
         }
-        let line_values = report
-            .get("lines")
-            .and_then(Value::as_array)
-            .ok_or("no lines")?;
+        let line_values = report["lines"].as_array().ok_or("no lines")?;
         let lines: Vec<ExportLine> = line_values
             .iter()
             .map(|l| {
-                let index = l.get("index").and_then(Value::as_u64).unwrap_or_default();
+                let index = l["index"].as_u64().unwrap_or_default();
                 ExportLine {
                     number: index + 1,
-                    y_mm: l.get("y_mm").and_then(Value::as_f64).unwrap_or(f64::NAN),
+                    y_mm: l["y_mm"].as_f64().unwrap_or(f64::NAN),
                     time: line_times.get(&index).copied(),
                 }
             })
@@ -226,52 +220,34 @@ impl Exported {
             let key = format!("{parameter}_um");
             line_values
                 .iter()
-                .map(|l| l.get(&key)?.as_f64().filter(|v| v.is_finite()))
+                .map(|l| l[&key].as_f64().filter(|v| v.is_finite()))
                 .collect()
         };
-        let stats: BTreeMap<String, &Value> = report
-            .get("uncertainty")
-            .and_then(|u| u.get("parameters"))
-            .and_then(Value::as_array)
+        let stats: BTreeMap<String, &Value> = (report["uncertainty"]["parameters"].as_array())
             .map(|a| {
                 a.iter()
-                    .filter_map(|p| Some((p.get("parameter")?.as_str()?.to_owned(), p)))
+                    .filter_map(|p| Some((p["parameter"].as_str()?.to_owned(), p)))
                     .collect()
             })
             .unwrap_or_default();
         let with_stats = |mut c: Characteristic| {
             if let Some(s) = stats.get(&format!("{}_um", c.parameter)) {
-                c.mean_um = s.get("mean").and_then(Value::as_f64);
-                c.s_um = s.get("s").and_then(Value::as_f64);
-                c.expanded_u_um = s.get("U").and_then(Value::as_f64);
-                c.n = s.get("n").and_then(Value::as_u64).unwrap_or_default() as usize;
+                c.mean_um = s["mean"].as_f64();
+                c.s_um = s["s"].as_f64();
+                c.expanded_u_um = s["U"].as_f64();
+                c.n = s["n"].as_u64().unwrap_or_default() as usize;
             }
             c
         };
         let blank = |parameter: &str| Characteristic {
             parameter: parameter.to_owned(),
-            callouts: Vec::new(),
-            lower_um: None,
-            upper_um: None,
-            verdict: None,
-            reasons: Vec::new(),
             values_um: value_of(parameter),
-            lines_beyond: Vec::new(),
-            lines_undecided: Vec::new(),
-            mean_um: None,
-            s_um: None,
-            expanded_u_um: None,
-            n: 0,
+            ..Characteristic::default()
         };
         let spec = report.get("specification").filter(|s| !s.is_null());
         let mut characteristics: Vec<Characteristic> = Vec::new();
         if let Some(spec) = spec {
-            for l in spec
-                .get("limits")
-                .and_then(Value::as_array)
-                .into_iter()
-                .flatten()
-            {
+            for l in spec["limits"].as_array().into_iter().flatten() {
                 let parameter = text(l, "parameter");
                 let at = match characteristics
                     .iter()
@@ -284,18 +260,14 @@ impl Exported {
                     }
                 };
                 let c = &mut characteristics[at];
-                let limit = l.get("limit_um").and_then(Value::as_f64);
-                match l.get("side").and_then(Value::as_str) {
+                let limit = l["limit_um"].as_f64();
+                match l["side"].as_str() {
                     Some("lower") => c.lower_um = limit,
                     _ => c.upper_um = limit,
                 }
                 c.callouts.push(text(l, "callout"));
                 c.reasons.push(text(l, "reason"));
-                if let Some(v) = l
-                    .get("verdict")
-                    .and_then(Value::as_str)
-                    .and_then(Verdict::parse)
-                {
+                if let Some(v) = l["verdict"].as_str().and_then(Verdict::parse) {
                     c.verdict = Some(c.verdict.map_or(v, |w| worse(w, v)));
                 }
                 let lists = [
@@ -303,7 +275,7 @@ impl Exported {
                     ("lines_undecided", &mut c.lines_undecided),
                 ];
                 for (key, list) in lists {
-                    for n in numbers(l.get(key).unwrap_or(&Value::Null)) {
+                    for n in numbers(&l[key]) {
                         if !list.contains(&n) {
                             list.push(n);
                         }
@@ -314,11 +286,8 @@ impl Exported {
             characteristics = UNSPECIFIED.iter().map(|p| blank(p)).collect();
         }
         let characteristics = characteristics.into_iter().map(with_stats).collect();
-        let recipe = report.get("recipe");
-        let is_r = recipe
-            .and_then(|r| r.get("profile"))
-            .and_then(Value::as_str)
-            .is_some_and(|p| p == "R");
+        let recipe = &report["recipe"];
+        let is_r = recipe["profile"] == "R";
         let (number, description) = match &start.job {
             Some(job) => {
                 let description = toml::from_str::<toml::Table>(&job.recipe_text)
@@ -345,26 +314,16 @@ impl Exported {
             instrument: Instrument {
                 manufacturer: text(tr, "manufacturer"),
                 model: text(tr, "instrument_model"),
-                serial: tr
-                    .get("instrument_serial")
-                    .and_then(Value::as_str)
-                    .map(str::to_owned),
+                serial: tr["instrument_serial"].as_str().map(str::to_owned),
                 firmware: text(tr, "firmware"),
-                calibration_date: tr
-                    .get("calibration_date")
-                    .and_then(Value::as_str)
-                    .map(str::to_owned),
+                calibration_date: tr["calibration_date"].as_str().map(str::to_owned),
             },
-            lambda_c_mm: recipe
-                .filter(|_| is_r)
-                .and_then(|r| r.get("lambda_c_mm")?.as_f64()),
-            sampling_lengths: recipe
-                .filter(|_| is_r)
-                .and_then(|r| r.get("sampling_lengths")?.as_u64()),
+            lambda_c_mm: recipe["lambda_c_mm"].as_f64().filter(|_| is_r),
+            sampling_lengths: recipe["sampling_lengths"].as_u64().filter(|_| is_r),
             verdict: spec
-                .and_then(|s| s.get("verdict")?.as_str())
+                .and_then(|s| s["verdict"].as_str())
                 .and_then(Verdict::parse),
-            verdict_summary: spec.and_then(|s| s.get("summary")?.as_str().map(str::to_owned)),
+            verdict_summary: spec.and_then(|s| s["summary"].as_str().map(str::to_owned)),
             lines,
             characteristics,
         })

@@ -286,11 +286,7 @@ fn judged_by(
     warnings: &mut Vec<String>,
 ) -> (Option<Specification>, InstrumentUncertainty) {
     let instrument = InstrumentUncertainty {
-        expanded_relative_pct: start
-            .config
-            .get("traceability")
-            .and_then(|t| t.get("calibration-uncertainty-pct"))
-            .and_then(serde_json::Value::as_f64),
+        expanded_relative_pct: start.config["traceability"]["calibration-uncertainty-pct"].as_f64(),
     };
     let specification = start.job.as_ref().and_then(|j| {
         match Specification::of_recipe_text(&j.recipe_text) {

@@ -19,6 +19,7 @@ use crate::metrology::areal::{level_plane, HeightMap};
 use crate::metrology::holdout::BetweenLines;
 use crate::metrology::model::sample_model_grid;
 use crate::nurbs::NurbsSurface;
+use crate::report::document::split;
 use serde::Serialize;
 
 /// What the contact section is asked for.
@@ -177,14 +178,7 @@ pub fn section(
 ) -> ContactSection {
     let g = input.characterised;
     let e_gpa = crate::contact::effective_modulus_gpa(opts.contact.specimen, opts.contact.counter);
-    let measured = solve(
-        &g.heights_um,
-        g.rows(),
-        g.cols,
-        g.pitch_x_mm,
-        input.pitch_y_mm,
-        &opts.contact,
-    );
+    let measured = solve(HeightMap::of(g, input.pitch_y_mm), &opts.contact);
     let model = opts.model_pitch_y_mm.map(|s| {
         let (supported, verdict) = match between_lines {
             Ok(b) => (b.supported, b.verdict.clone()),
@@ -202,13 +196,18 @@ pub fn section(
                 g.pitch_x_mm,
                 s,
             )
-            .and_then(|(h, rows)| solve(&h, rows, g.cols, g.pitch_x_mm, s, &opts.contact)),
+            .and_then(|(h, rows)| {
+                let map = HeightMap::of(g, s);
+                let map = HeightMap {
+                    heights_um: &h,
+                    rows,
+                    ..map
+                };
+                solve(map, &opts.contact)
+            }),
             Err(e) => Err(format!("there is no model: {e}")),
         };
-        let (contact, error) = match contact {
-            Ok(c) => (Some(c), None),
-            Err(e) => (None, Some(e)),
-        };
+        let (contact, error) = split(contact);
         ModelContact {
             supported,
             verdict,
@@ -216,10 +215,7 @@ pub fn section(
             error,
         }
     });
-    let (measured, measured_error) = match measured {
-        Ok(c) => (Some(c), None),
-        Err(e) => (None, Some(e)),
-    };
+    let (measured, measured_error) = split(measured);
     ContactSection {
         specimen: opts.contact.specimen,
         counter_body: opts.contact.counter,
@@ -231,37 +227,19 @@ pub fn section(
     }
 }
 
-/// Levels `heights_um` by its least-squares plane and solves its contact.
-fn solve(
-    heights_um: &[f64],
-    rows: usize,
-    cols: usize,
-    pitch_x_mm: f64,
-    pitch_y_mm: f64,
-    opts: &ContactOptions,
-) -> Result<ContactSurface, String> {
-    let map = HeightMap {
-        heights_um,
-        rows,
-        cols,
-        pitch_x_mm,
-        pitch_y_mm,
-    };
+/// Levels `map` by its least-squares plane and solves its contact.
+fn solve(map: HeightMap<'_>, opts: &ContactOptions) -> Result<ContactSurface, String> {
     let (levelled, _) = level_plane(&map).map_err(|e| e.to_string())?;
+    let (rows, cols, px, py) = (map.rows, map.cols, map.pitch_x_mm, map.pitch_y_mm);
     let grid = ContactGrid {
         heights_um: &levelled,
         rows,
         cols,
-        pitch_x_mm,
-        pitch_y_mm,
+        pitch_x_mm: px,
+        pitch_y_mm: py,
     };
     let curve = contact_curve(&grid, opts).map_err(|e| e.to_string())?;
-    Ok(ContactSurface::of(
-        curve,
-        (rows, cols),
-        pitch_x_mm,
-        pitch_y_mm,
-    ))
+    Ok(ContactSurface::of(curve, (rows, cols), px, py))
 }
 
 /// The v of each row `y₀ + k·s` (k = 0, 1, … while ≤ the last line's y): the surface's y(v)
