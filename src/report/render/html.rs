@@ -1169,16 +1169,15 @@ fn contact(h: &mut String, report: &Value) {
         .map_or("elastic".to_string(), |v| {
             format!("perfectly plastic at a hardness of {} GPa", sig(v, 4))
         });
+    let or_dash = |v: &Value, f: fn(f64) -> String| v.as_f64().map_or("—".to_string(), f);
+    let plain: fn(f64) -> String = |v| v.to_string();
+    let sig4: fn(f64) -> String = |v| sig(v, 4);
     let body = |b: &Value| {
-        format!(
-            "E {} GPa, ν {}",
-            b["young_gpa"]
-                .as_f64()
-                .map_or("—".to_string(), |v| v.to_string()),
-            b["poisson"]
-                .as_f64()
-                .map_or("—".to_string(), |v| v.to_string())
-        )
+        let (e, nu) = (
+            or_dash(&b["young_gpa"], plain),
+            or_dash(&b["poisson"], plain),
+        );
+        format!("E {e} GPa, ν {nu}")
     };
     let counter = match &c["counter_body"] {
         b if b.is_object() => format!("an elastic flat ({})", body(b)),
@@ -1189,9 +1188,7 @@ fn contact(h: &mut String, report: &Value) {
         "<p id=\"contact-bodies\">The specimen ({}) against {}: composite modulus E* = {} GPa, {}; heights levelled by their least-squares plane.</p>",
         esc(&body(&c["specimen"])),
         esc(&counter),
-        c["effective_modulus_gpa"]
-            .as_f64()
-            .map_or("—".to_string(), |v| sig(v, 4)),
+        or_dash(&c["effective_modulus_gpa"], sig4),
         esc(&hardness)
     );
     let m = &c["model"];
@@ -1218,9 +1215,7 @@ fn contact(h: &mut String, report: &Value) {
             "{what} ({} × {}, y pitch {} mm)",
             s["rows"].as_u64().unwrap_or(0),
             s["cols"].as_u64().unwrap_or(0),
-            s["pitch_y_mm"]
-                .as_f64()
-                .map_or("—".to_string(), |v| sig(v, 4))
+            or_dash(&s["pitch_y_mm"], sig4)
         );
         for p in points {
             let num = |k: &str| p[k].as_f64().unwrap_or(f64::NAN);
@@ -1234,14 +1229,7 @@ fn contact(h: &mut String, report: &Value) {
                     ("", sig(num("mean_contact_pressure_mpa"), 4)),
                     ("", p["patches"].as_u64().unwrap_or(0).to_string()),
                     ("", fmt(100.0 * num("plastic_fraction"), Quantity::Percent)),
-                    (
-                        "t",
-                        if p["resolved"].as_bool() == Some(true) {
-                            "yes".into()
-                        } else {
-                            "no".into()
-                        },
-                    ),
+                    ("t", if p["resolved"] == true { "yes" } else { "no" }.into()),
                 ],
             );
         }

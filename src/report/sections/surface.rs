@@ -16,7 +16,6 @@ use crate::metrology::model::{
     bearing_sample_us, model_bearing_curves_with, sample_model_grid, ModelBacOptions,
 };
 use crate::nurbs::UBasis;
-use crate::report::context::{Model, ScanAnalysisOptions};
 use crate::report::document::{FailedSection, SurfaceReport};
 
 /// The model sampled on the data lines (their v) at half the x pitch, row-major: what
@@ -51,26 +50,9 @@ fn failed(section: &str, reason: impl Into<String>) -> FailedSection {
     }
 }
 
-/// Runs the section: the model of `input` against the grid's measured heights. `before_areal`
-/// is called once the model is sampled and checked, before its areal parameters (whose
-/// autocorrelation takes twice the sampled model's bytes): a caller running other sections
-/// beside this one makes it wait there until their own large buffers are gone, so the two
-/// peaks do not add.
-pub fn section(input: &SectionInput<'_>, before_areal: impl FnOnce()) -> ModelSection {
-    let g = input.grid;
-    characterise(
-        input.model,
-        &g.heights_um,
-        (g.rows(), g.cols),
-        (g.pitch_x_mm, input.pitch_y_mm),
-        &input.ctx.options,
-        before_areal,
-    )
-}
-
-/// The section when it panicked: a failed `surface` section that says so.
-pub fn panicked() -> ModelSection {
-    let reason = "internal: the model section panicked; report this with the input".to_string();
+/// The section with no surface, for `reason`.
+fn no_surface(reason: impl Into<String>) -> ModelSection {
+    let reason = reason.into();
     ModelSection {
         surface: Err(reason.clone()),
         sampled: None,
@@ -79,28 +61,23 @@ pub fn panicked() -> ModelSection {
     }
 }
 
-/// The section for a grid of `rows` lines of `cols` points at `pitch_x_mm`, its lines
-/// `pitch_y_mm` apart on average, measured heights `heights_um`; `before_areal` as in
-/// [`section`].
-fn characterise(
-    model: &Model<'_>,
-    heights_um: &[f64],
-    (rows, cols): (usize, usize),
-    (pitch_x_mm, pitch_y_mm): (f64, f64),
-    options: &ScanAnalysisOptions,
-    before_areal: impl FnOnce(),
-) -> ModelSection {
+/// The section when it panicked: a failed `surface` section that says so.
+pub fn panicked() -> ModelSection {
+    no_surface("internal: the model section panicked; report this with the input")
+}
+
+/// Runs the section: the model of `input` against the grid's measured heights. `before_areal`
+/// is called once the model is sampled and checked, before its areal parameters (whose
+/// autocorrelation takes twice the sampled model's bytes): a caller running other sections
+/// beside this one makes it wait there until their own large buffers are gone, so the two
+/// peaks do not add.
+pub fn section(input: &SectionInput<'_>, before_areal: impl FnOnce()) -> ModelSection {
+    let (model, options, g) = (input.model, &input.ctx.options, input.grid);
+    let (heights_um, rows, cols) = (&g.heights_um[..], g.rows(), g.cols);
+    let (pitch_x_mm, pitch_y_mm) = (g.pitch_x_mm, input.pitch_y_mm);
     let fit = match model.fit {
         Ok(fit) => fit,
-        Err(e) => {
-            let reason = format!("the NURBS fit failed: {e}");
-            return ModelSection {
-                surface: Err(reason.clone()),
-                sampled: None,
-                checks: None,
-                failed: vec![failed("surface", reason)],
-            };
-        }
+        Err(e) => return no_surface(format!("the NURBS fit failed: {e}")),
     };
     let mut fails = Vec::new();
     let model_cols = 2 * cols - 1;
@@ -144,18 +121,8 @@ fn characterise(
         });
         (checks, bac, sampled.join())
     });
-    let checks = match checks {
-        Ok(c) => c,
-        Err(_) => {
-            let reason =
-                "internal: the model checks panicked; report this with the input".to_string();
-            return ModelSection {
-                surface: Err(reason.clone()),
-                sampled: None,
-                checks: None,
-                failed: vec![failed("surface", reason)],
-            };
-        }
+    let Ok(checks) = checks else {
+        return no_surface("internal: the model checks panicked; report this with the input");
     };
     let sampled = sampled.unwrap_or(Err(crate::metrology::MetrologyError::BadParameter {
         what: "model sampling thread",
