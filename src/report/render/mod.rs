@@ -272,70 +272,13 @@ fn write_rk_plots(
     analyses: &[LineAnalysis],
     ctx: &ReportContext,
 ) -> Result<Vec<(String, [PathBuf; 2])>, ReportError> {
-    let caption = caption(ctx);
-    let plot_err = metrology(format!("{}: plots", ctx.input));
     let rk_dir = out.join("rk");
     std::fs::create_dir_all(&rk_dir).map_err(io(&rk_dir))?;
     // The figures are independent: drawn in parallel over the available cores, one run of
     // consecutive lines per thread, joined in line order (the first error in line order wins).
-    let workers = std::thread::available_parallelism()
-        .map(|n| n.get())
-        .unwrap_or(1)
-        .clamp(1, analyses.len().max(1));
-    let chunk = analyses.len().div_ceil(workers).max(1);
-    let draw = |first_row: usize, part: &[LineAnalysis]| {
-        draw_rk_run(
-            &rk_dir,
-            grid,
-            first_row,
-            part,
-            &caption,
-            &plot_err,
-            ctx.lab.line_png,
-        )
-    };
-    if workers == 1 {
-        return draw(0, analyses);
-    }
-    let parts: Vec<_> = std::thread::scope(|s| {
-        let handles: Vec<_> = analyses
-            .chunks(chunk)
-            .enumerate()
-            .map(|(k, part)| s.spawn(move || draw(k * chunk, part)))
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().unwrap_or_else(|_| Err(rk_plot_panic(ctx))))
-            .collect()
-    });
-    let mut rk_plots = Vec::with_capacity(analyses.len());
-    for part in parts {
-        rk_plots.extend(part?);
-    }
-    Ok(rk_plots)
-}
-
-/// The title of line `index`'s figure (its assessed profile and Rk construction).
-fn rk_title(index: u32, y_mm: f64) -> String {
-    let y = nfmt(y_mm, Quantity::PositionMm);
-    let n = line_number(index);
-    format!("Line {n} ({index:04}, y = {y} mm): assessed profile and ISO 13565-2 Rk construction")
-}
-
-/// The Rk figures of the consecutive lines `part`, the first of them grid row `first_row`,
-/// with their titles; stops at the first error.
-fn draw_rk_run(
-    rk_dir: &Path,
-    grid: &Grid,
-    first_row: usize,
-    part: &[LineAnalysis],
-    caption: &str,
-    plot_err: &dyn Fn(MetrologyError) -> ReportError,
-    line_png: bool,
-) -> Result<Vec<(String, [PathBuf; 2])>, ReportError> {
-    let mut rk_plots = Vec::with_capacity(part.len());
-    for (k, a) in part.iter().enumerate() {
-        let row = first_row + k;
+    let caption = caption(ctx);
+    let plot_err = metrology(format!("{}: plots", ctx.input));
+    let draw = |row: usize, a: &LineAnalysis| {
         let index = grid.index_of(row);
         let title = rk_title(index, grid.y_mm.get(row).copied().unwrap_or(f64::NAN));
         let profile = plots::AssessedProfile {
@@ -347,20 +290,30 @@ fn draw_rk_run(
         };
         let files = plot_rk_construction(
             plots::FigureFiles {
-                dir: rk_dir,
+                dir: &rk_dir,
                 stem: &format!("{index:04}"),
-                png: line_png,
+                png: ctx.lab.line_png,
             },
             &a.rk_curve,
             &a.params.material.rk,
             Some(&profile),
             &title,
-            caption,
+            &caption,
         )
         .map_err(&plot_err)?;
-        rk_plots.push((title, files));
-    }
-    Ok(rk_plots)
+        Ok((title, files))
+    };
+    let panicked = |_| Err(rk_plot_panic(ctx));
+    crate::metrology::map_in_parallel(analyses, draw, panicked)
+        .into_iter()
+        .collect()
+}
+
+/// The title of line `index`'s figure (its assessed profile and Rk construction).
+fn rk_title(index: u32, y_mm: f64) -> String {
+    let y = nfmt(y_mm, Quantity::PositionMm);
+    let n = line_number(index);
+    format!("Line {n} ({index:04}, y = {y} mm): assessed profile and ISO 13565-2 Rk construction")
 }
 
 /// Writes the plots (the Rk figures and the height map on threads of their own), the X3P
