@@ -309,14 +309,15 @@ pub fn lines_left_out(
 }
 
 /// The model at line `row` refitted without it (all other lines kept, `method` across the
-/// lines), sampled at the line's y and the data x: what an overlay of that line shows. The
-/// line must lie between two others (no extrapolation).
+/// lines), sampled at the line's y and the data x: what an overlay of that line shows, with
+/// the line's statistics against it. The line must lie between two others (no
+/// extrapolation).
 pub fn model_without_line(
     grid: &Grid,
     options: FitOptions,
     method: VMethod,
     row: usize,
-) -> Result<HoldoutLineModel, MetrologyError> {
+) -> Result<(HoldoutLine, Vec<f64>), MetrologyError> {
     check_grid(grid)?;
     if row == 0 || row + 1 >= grid.rows() {
         return Err(MetrologyError::BadParameter {
@@ -329,11 +330,7 @@ pub fn model_without_line(
     let y = grid.y_mm[row];
     let v = v_at_y(&fit.surface, y)?;
     let model = sample_model_grid(&fit.surface, &[v], 0.0, grid.pitch_x_mm, grid.cols)?;
-    let line = stats(row, y, &model, grid.row(row));
-    Ok(HoldoutLineModel {
-        line,
-        model_um: model,
-    })
+    Ok((stats(row, y, &model, grid.row(row)), model))
 }
 
 /// The lines-left-out refit at its held-out lines: their statistics, and the refit's heights
@@ -346,15 +343,6 @@ pub struct HeldLines {
     pub model_um: Vec<f64>,
     /// Heights per line.
     pub cols: usize,
-}
-
-/// One line left out: its statistics and the refit's heights at its x.
-#[derive(Debug, Clone, PartialEq)]
-pub struct HoldoutLineModel {
-    /// The statistics (index = the row).
-    pub line: HoldoutLine,
-    /// The refit at the line, µm.
-    pub model_um: Vec<f64>,
 }
 
 /// The between-line hold-out and its verdict (module docs).

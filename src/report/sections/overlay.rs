@@ -107,7 +107,7 @@ fn held_out_overlay(
     let own =
         crate::metrology::holdout::model_without_line(grid, recipe.degrees, recipe.method, wanted);
     let (row, rms, model) = match own {
-        Ok(m) => (wanted, m.line.rms_um, m.model_um),
+        Ok((line, model)) => (wanted, line.rms_um, model),
         Err(e) => {
             let b = b?;
             let (k, line) = b
