@@ -287,10 +287,8 @@ pub fn result_summary(report: &Value) -> Vec<(&'static str, String)> {
     let mut out = Vec::new();
     if let Some(v) = report["specification"]["verdict"].as_str() {
         out.push(("verdict", v.to_owned()));
-        for l in report["specification"]["limits"]
-            .as_array()
-            .map_or(&[][..], |a| &a[..])
-        {
+        let limits = &report["specification"]["limits"];
+        for l in limits.as_array().into_iter().flatten() {
             out.push((
                 "limit",
                 format!(
@@ -462,10 +460,7 @@ fn specification(h: &mut String, report: &Value) {
     for l in spec["limits"].as_array().map_or(&[][..], |a| &a[..]) {
         let count = |k: &str| l[k].as_u64().map(|n| n.to_string()).unwrap_or_default();
         let mut why = text(&l["reason"]);
-        for d in l["conditions_differ"]
-            .as_array()
-            .map_or(&[][..], |a| &a[..])
-        {
+        for d in l["conditions_differ"].as_array().into_iter().flatten() {
             why.push_str("; ");
             why.push_str(&text(d));
         }
@@ -896,14 +891,8 @@ fn lines(h: &mut String, report: &Value) {
             if on_paper(report, id) { "" } else { " class=\"noprint\"" }
         );
         for (key, head, _) in columns {
-            match definition(key) {
-                Some(d) => {
-                    let _ = write!(h, "<th title=\"{}\">{}</th>", esc(&d), esc(head));
-                }
-                None => {
-                    let _ = write!(h, "<th>{}</th>", esc(head));
-                }
-            }
+            let title = definition(key).map(|d| format!(" title=\"{}\"", esc(&d)));
+            let _ = write!(h, "<th{}>{}</th>", title.unwrap_or_default(), esc(head));
         }
         h.push_str("</tr></thead>\n");
         for l in lines {
@@ -924,14 +913,12 @@ fn lines(h: &mut String, report: &Value) {
                     .filter_map(|l| field(l, key).as_f64())
                     .collect();
                 let (m, sd) = mean_sd(&v);
-                cells.push((
-                    "",
-                    if v.is_empty() {
-                        String::new()
-                    } else {
-                        fmt(if mean { m } else { sd }, *q)
-                    },
-                ));
+                let cell = if v.is_empty() {
+                    String::new()
+                } else {
+                    fmt(if mean { m } else { sd }, *q)
+                };
+                cells.push(("", cell));
             }
             row(h, &cells);
         }
