@@ -148,6 +148,18 @@ pub fn characterise(
 mod tests {
     use super::*;
     use crate::metrology::params::{analyze_profile, LineAnalysis, RoughnessParams};
+    use crate::specification::Verdict;
+
+    /// The section of `lines` of a grid, no instrument uncertainty stated.
+    fn judged(
+        lines: &[LineReport],
+        recipe: &Recipe,
+        spec: Option<&Specification>,
+        reading: MaterialRatioReading,
+    ) -> SpecificationSection {
+        let none = InstrumentUncertainty::default();
+        characterise(lines, None, recipe, spec, &none, reading)
+    }
 
     fn line(index: u32, ra: f64, a: &LineAnalysis) -> LineReport {
         LineReport {
@@ -183,18 +195,11 @@ mod tests {
             .map(|(i, ra)| line(i as u32, *ra, &a))
             .collect();
         let spec = Specification::parse(&[format!("Ra{n} max 0.8")]).unwrap();
-        let none = InstrumentUncertainty::default();
-        let s = characterise(
-            &lines,
-            None,
-            &a.recipe,
-            Some(&spec),
-            &none,
-            MaterialRatioReading::Iso,
-        );
+        let iso = MaterialRatioReading::Iso;
+        let s = judged(&lines, &a.recipe, Some(&spec), iso);
         let v = s.verdict.unwrap();
         // Line 3 (index 2) is above 0.8 µm: the max rule fails, no uncertainty stated.
-        assert_eq!(v.verdict, crate::specification::Verdict::DoesNotConform);
+        assert_eq!(v.verdict, Verdict::DoesNotConform);
         assert_eq!(v.limits[0].lines_beyond, vec![3]);
         // Mean 0.7, s = 0.2, u = 0.2/√3; Table 1 with mean ± s.
         let ra = &s.uncertainty.parameters[0];
@@ -210,28 +215,10 @@ mod tests {
         // The same values as P parameters (a form-only evaluation): no roughness band.
         let mut p = a.recipe.clone();
         p.profile = "P";
-        let v = characterise(
-            &lines,
-            None,
-            &p,
-            Some(&spec),
-            &none,
-            MaterialRatioReading::Iso,
-        )
-        .verdict
-        .unwrap();
-        assert_eq!(v.verdict, crate::specification::Verdict::NotDecidable);
+        let v = judged(&lines, &p, Some(&spec), iso).verdict.unwrap();
+        assert_eq!(v.verdict, Verdict::NotDecidable);
         // Without a specification: the uncertainty only.
-        assert!(characterise(
-            &lines,
-            None,
-            &a.recipe,
-            None,
-            &none,
-            MaterialRatioReading::Iso
-        )
-        .verdict
-        .is_none());
+        assert!(judged(&lines, &a.recipe, None, iso).verdict.is_none());
     }
 
     /// The Mitutoyo export (an R profile, λc 2.5 mm): ISO's Rpk 2.722 µm, the SJ series'
@@ -271,35 +258,20 @@ mod tests {
         assert!(l.params.material.rk.rpk_um < 2.8);
         let n = a.recipe.sampling_lengths;
         let spec = Specification::parse(&[format!("Rpk{n} max 2.8")]).unwrap();
-        let none = InstrumentUncertainty::default();
-        let judged = |reading| {
-            characterise(
-                std::slice::from_ref(&l),
-                None,
-                &a.recipe,
-                Some(&spec),
-                &none,
-                reading,
-            )
-            .verdict
-            .unwrap()
+        let line = std::slice::from_ref(&l);
+        let verdict = |reading| {
+            judged(line, &a.recipe, Some(&spec), reading)
+                .verdict
+                .unwrap()
         };
-        let iso = judged(MaterialRatioReading::Iso);
-        assert_eq!(
-            iso.verdict,
-            crate::specification::Verdict::Conforms,
-            "{iso:?}"
-        );
+        let iso = verdict(MaterialRatioReading::Iso);
+        assert_eq!(iso.verdict, Verdict::Conforms, "{iso:?}");
         assert_eq!(
             iso.material_ratio,
             Some(MaterialRatioReading::Iso.statement())
         );
-        let sj = judged(MaterialRatioReading::Instrument);
-        assert_eq!(
-            sj.verdict,
-            crate::specification::Verdict::DoesNotConform,
-            "{sj:?}"
-        );
+        let sj = verdict(MaterialRatioReading::Instrument);
+        assert_eq!(sj.verdict, Verdict::DoesNotConform, "{sj:?}");
         assert!(sj
             .summary
             .ends_with("[Rk, Rpk, Rvk as the SJ series reads them]"));
@@ -309,21 +281,14 @@ mod tests {
         );
         // The means and their uncertainty stay ISO's whichever reading judges.
         let rpk = |reading| {
-            characterise(
-                std::slice::from_ref(&l),
-                None,
-                &a.recipe,
-                None,
-                &none,
-                reading,
-            )
-            .uncertainty
-            .parameters
-            .into_iter()
-            .find(|p| p.parameter == "Rpk_um")
-            .unwrap()
-            .statistics
-            .mean
+            judged(line, &a.recipe, None, reading)
+                .uncertainty
+                .parameters
+                .into_iter()
+                .find(|p| p.parameter == "Rpk_um")
+                .unwrap()
+                .statistics
+                .mean
         };
         assert_eq!(
             rpk(MaterialRatioReading::Iso),
