@@ -603,14 +603,9 @@ fn traceability(h: &mut String, report: &Value) {
     kv(h, "serial number", &or_na(&t["instrument_serial"]));
     kv(h, "firmware", &or_na(&t["firmware"]));
     kv(h, "drive unit", &or_na(&t["drive_unit"]));
-    kv(
-        h,
-        "stylus tip radius",
-        &t["stylus_tip_radius_um"]
-            .as_f64()
-            .map(|r| format!("{} µm", sig(r, 3)))
-            .unwrap_or_else(|| na.to_string()),
-    );
+    let tip_um = t["stylus_tip_radius_um"].as_f64();
+    let tip = tip_um.map(|r| sig(r, 3) + " µm");
+    kv(h, "stylus tip radius", &or_na(&tip.into()));
     kv(h, "calibration date", &or_na(&t["calibration_date"]));
     let c = &t["conditions"];
     let mut cond = Vec::new();
@@ -631,15 +626,7 @@ fn traceability(h: &mut String, report: &Value) {
         Some(n) => cond.push(format!("N = {n}")),
         None => {}
     }
-    kv(
-        h,
-        "conditions",
-        &if cond.is_empty() {
-            na.to_string()
-        } else {
-            esc(&cond.join(", "))
-        },
-    );
+    kv(h, "conditions", &or_na(&cond.join(", ").into()));
     kv(h, "scanned by", &or_na(&t["software_version"]));
     kv(
         h,
@@ -1241,46 +1228,24 @@ fn recipe(h: &mut String, report: &Value) {
     kv(h, "filter", &esc(&text(&r["filter"])));
     kv(h, "why", &esc(&text(&r["filter_reason"])));
     kv(h, "end treatment", &esc(&text(&r["end_treatment"])));
-    kv(
-        h,
-        "λc (sampling length)",
-        &format!(
-            "{} mm — {}",
-            r["lambda_c_mm"]
-                .as_f64()
-                .map(|v| sig(v, 3))
-                .unwrap_or_default(),
-            esc(&text(&r["lambda_c_source"]))
-        ),
-    );
-    kv(
-        h,
-        "λs",
-        &r["lambda_s_um"]
-            .as_f64()
-            .map(|v| format!("{} µm", sig(v, 3)))
-            .unwrap_or_else(|| "not applied by this software".into()),
-    );
-    kv(
-        h,
-        "sampling lengths N",
-        &format!(
-            "{} — {}",
-            text(&r["sampling_lengths"]),
-            esc(&text(&r["sampling_lengths_rule"]))
-        ),
-    );
+    let lc = r["lambda_c_mm"].as_f64().map(|v| sig(v, 3));
+    let lc_source = esc(&text(&r["lambda_c_source"]));
+    let lc = format!("{} mm — {lc_source}", lc.unwrap_or_default());
+    kv(h, "λc (sampling length)", &lc);
+    let ls = r["lambda_s_um"].as_f64().map(|v| sig(v, 3) + " µm");
+    let not_applied = "not applied by this software";
+    kv(h, "λs", &ls.unwrap_or_else(|| not_applied.into()));
+    let (n, rule) = (&r["sampling_lengths"], &r["sampling_lengths_rule"]);
+    let n_rule = format!("{} — {}", text(n), esc(&text(rule)));
+    kv(h, "sampling lengths N", &n_rule);
     kv(
         h,
         "points per sampling length",
         &text(&r["points_per_section"]),
     );
     kv(h, "points not evaluated", &text(&r["points_not_evaluated"]));
-    kv(
-        h,
-        "pitch",
-        &format!("{} mm", num(&r["pitch_mm"], Quantity::LengthMm)),
-    );
+    let pitch = num(&r["pitch_mm"], Quantity::LengthMm);
+    kv(h, "pitch", &format!("{pitch} mm"));
     kv(h, "mean line", &esc(&text(&r["mean_line"])));
     // A single profile has no model between lines to describe.
     let profile = report["kind"] == "profile";
