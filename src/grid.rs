@@ -24,6 +24,9 @@ pub struct Grid {
     pub cols: usize,
     /// x pitch, mm.
     pub pitch_x_mm: f64,
+    /// x of each line's first point, mm: 0 for a scan and a grid CSV, the first x of a
+    /// profile CSV, the x axis offset of an X3P file.
+    pub x0_mm: f64,
     /// y of each line, mm (increasing).
     pub y_mm: Vec<f64>,
     /// Index of each line in the input: a scan's `NNNN`, a grid CSV's or an X3P file's
@@ -64,6 +67,7 @@ impl Grid {
             heights_um,
             cols,
             pitch_x_mm,
+            x0_mm: 0.0,
             index: (0..rows as u32).collect(),
             y_readback_mm: vec![None; rows],
             instrument: None,
@@ -119,6 +123,7 @@ impl Grid {
             heights_um: Vec::new(),
             cols: self.cols,
             pitch_x_mm: self.pitch_x_mm,
+            x0_mm: self.x0_mm,
             y_mm: self.y_mm.clone(),
             index: self.index.clone(),
             y_readback_mm: self.y_readback_mm.clone(),
@@ -139,6 +144,7 @@ impl Grid {
                 .collect(),
             cols: self.cols,
             pitch_x_mm: self.pitch_x_mm,
+            x0_mm: self.x0_mm,
             y_mm: keep.iter().map(|&r| self.y_mm[r]).collect(),
             index: keep.iter().map(|&r| self.index_of(r)).collect(),
             y_readback_mm: keep.iter().map(|&r| self.y_readback_mm[r]).collect(),

@@ -205,13 +205,14 @@ fn record2(meta: &X3pMeta) -> String {
 }
 
 /// The X3P archive of a height map (heights µm, `rows` lines along y, `cols` points along x,
-/// row-major): a profile (`PRF`) when it is one line, else a surface (`SUR`). `first_y_mm` is the machine y of the first line, written as the CY axis offset
-/// so that the file places the grid where the stage traced it. `main.xml` is valid against
+/// row-major): a profile (`PRF`) when it is one line, else a surface (`SUR`). `origin_mm` is
+/// the x of each line's first point and the machine y of the first line, written as the CX and
+/// CY axis offsets so that the file places the grid where it was measured. `main.xml` is valid against
 /// the ISO 5436-2 schema (`tests/data/x3p/iso5436_2.xsd`); Record2 is left out when `meta`
 /// states no calibration date.
 pub fn x3p<'a>(
     map: &HeightMap<'a>,
-    first_y_mm: f64,
+    origin_mm: (f64, f64),
     meta: &X3pMeta,
 ) -> Result<X3p<'a>, MetrologyError> {
     let &HeightMap {
@@ -221,9 +222,9 @@ pub fn x3p<'a>(
         pitch_x_mm,
         pitch_y_mm,
     } = map;
-    if !first_y_mm.is_finite() {
+    if !(origin_mm.0.is_finite() && origin_mm.1.is_finite()) {
         return Err(bad(format!(
-            "the y of the first line ({first_y_mm} mm) is not a finite number"
+            "the x, y of the first point ({origin_mm:?} mm) are not finite numbers"
         )));
     }
     map.check_size(1)?;
@@ -240,7 +241,7 @@ pub fn x3p<'a>(
         r#"<?xml version="1.0" encoding="UTF-8"?>
 <p:ISO5436_2 xmlns:p="http://www.opengps.eu/2008/ISO5436_2" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:schemaLocation="http://www.opengps.eu/2008/ISO5436_2 http://www.opengps.eu/2008/ISO5436_2/ISO5436_2.xsd">
 <Record1><Revision>ISO5436 - 2000</Revision><FeatureType>{feature}</FeatureType><Axes>
-<CX><AxisType>I</AxisType><DataType>D</DataType><Increment>{ix:e}</Increment><Offset>0</Offset></CX>
+<CX><AxisType>I</AxisType><DataType>D</DataType><Increment>{ix:e}</Increment><Offset>{ox:e}</Offset></CX>
 <CY><AxisType>I</AxisType><DataType>D</DataType><Increment>{iy:e}</Increment><Offset>{oy:e}</Offset></CY>
 <CZ><AxisType>A</AxisType><DataType>D</DataType><Increment>1</Increment><Offset>0</Offset></CZ>
 </Axes></Record1>
@@ -251,7 +252,8 @@ pub fn x3p<'a>(
         feature = if rows == 1 { "PRF" } else { "SUR" },
         ix = metres(pitch_x_mm),
         iy = metres(pitch_y_mm),
-        oy = metres(first_y_mm),
+        ox = metres(origin_mm.0),
+        oy = metres(origin_mm.1),
         record2 = record2(meta),
     );
     let checksum = format!("{} *main.xml\n", hex(&md5(xml.as_bytes())));
@@ -310,10 +312,10 @@ impl X3p<'_> {
 /// [`x3p`]'s archive as bytes.
 pub fn to_x3p(
     map: &HeightMap<'_>,
-    first_y_mm: f64,
+    origin_mm: (f64, f64),
     meta: &X3pMeta,
 ) -> Result<Vec<u8>, MetrologyError> {
-    let file = x3p(map, first_y_mm, meta)?;
+    let file = x3p(map, origin_mm, meta)?;
     let mut bytes = Vec::new();
     file.write_to(&mut bytes)
         .expect("writing to memory cannot fail");
@@ -333,6 +335,8 @@ pub struct X3pGrid {
     pub pitch_x_mm: f64,
     /// y pitch, mm (1 for a profile without a y axis).
     pub pitch_y_mm: f64,
+    /// x of each line's first point, mm: the CX axis offset (0 when the file gives none).
+    pub offset_x_mm: f64,
     /// y of the first line, mm: the CY axis offset (0 when the file gives none).
     pub offset_y_mm: f64,
     /// `SUR` (a surface) or `PRF` (a profile).
@@ -562,6 +566,7 @@ pub fn read_x3p(zip: &[u8]) -> Result<X3pGrid, MetrologyError> {
     }
     let cx = child(axes, "CX").ok_or_else(|| bad("main.xml has no CX axis"))?;
     let pitch_x_m = number(cx, &["Increment"])?.ok_or_else(|| bad("CX has no Increment"))?;
+    let offset_x_m = number(cx, &["Offset"])?;
     let (pitch_y_m, offset_y_m) = match child(axes, "CY") {
         Some(cy) => (number(cy, &["Increment"])?, number(cy, &["Offset"])?),
         None => (None, None),
@@ -672,12 +677,14 @@ pub fn read_x3p(zip: &[u8]) -> Result<X3pGrid, MetrologyError> {
     };
     check_pitch(pitch_x_mm)?;
     check_pitch(pitch_y_mm)?;
-    let offset_y_mm = offset_y_m.unwrap_or(0.0) * 1e3;
-    if !offset_y_mm.is_finite() {
-        return Err(bad(format!(
-            "CY Offset {offset_y_mm} mm is not a finite number"
-        )));
-    }
+    let offset_mm = |axis: &str, m: Option<f64>| {
+        let mm = m.unwrap_or(0.0) * 1e3;
+        match mm.is_finite() {
+            true => Ok(mm),
+            false => Err(bad(format!("{axis} Offset {mm} mm is not a finite number"))),
+        }
+    };
+    let (offset_x_mm, offset_y_mm) = (offset_mm("CX", offset_x_m)?, offset_mm("CY", offset_y_m)?);
     let meta = match child(root, "Record2") {
         Some(r2) => {
             let f = |path: &[&str]| from_na(text_at(r2, path));
@@ -701,6 +708,7 @@ pub fn read_x3p(zip: &[u8]) -> Result<X3pGrid, MetrologyError> {
         cols,
         pitch_x_mm,
         pitch_y_mm,
+        offset_x_mm,
         offset_y_mm,
         feature_type: feature,
         invalid_points,

@@ -307,7 +307,10 @@ pub fn read_csv(
         }
         findings.extend(unit_finding(unit, stated, p.z_unit.is_some()));
         let cols = z.len();
-        let grid = Grid::new(z, cols, p.pitch_x_mm, vec![0.0]);
+        let grid = Grid {
+            x0_mm: p.x0_mm,
+            ..Grid::new(z, cols, p.pitch_x_mm, vec![0.0])
+        };
         return finish(path, grid, Source::ProfileCsv, findings, options, true);
     }
     let (Some(px), Some(py)) = (options.pitch_x_mm, options.pitch_y_mm) else {
@@ -520,6 +523,7 @@ fn read_x3p(path: &Path, bytes: &[u8]) -> Result<GridInput, InputError> {
             .map(|&r| x.offset_y_mm + r as f64 * x.pitch_y_mm)
             .collect(),
     );
+    grid.x0_mm = x.offset_x_mm;
     grid.index = complete.iter().map(|&r| r as u32).collect();
     grid.left_out = (0..x.rows)
         .filter(|r| !complete.contains(r))

@@ -11,6 +11,8 @@ use super::text::{column_name, units_named, Layout, Unit};
 pub struct ProfileText {
     /// x pitch, mm.
     pub pitch_x_mm: f64,
+    /// x of the first point, mm.
+    pub x0_mm: f64,
     /// Heights, in `z_unit` (µm when the header names none).
     pub z: Vec<f64>,
     /// The z unit the header names, if any.
@@ -120,6 +122,7 @@ pub fn read_profile(text: &str, layout: &Layout) -> Result<ProfileText, String> 
         } else {
             pitch * x_mm
         },
+        x0_mm: first * x_mm,
         z,
         z_unit,
         x_unit,
@@ -146,8 +149,9 @@ mod tests {
 
     #[test]
     fn other_units_separators_and_decimal_commas_are_read() {
-        let p = read("x [um];z [nm]\n0;1,5\n1,5;2\n3;3\n").unwrap();
+        let p = read("x [um];z [nm]\n1,5;1,5\n3;2\n4,5;3\n").unwrap();
         assert!((p.pitch_x_mm - 0.0015).abs() < 1e-15, "{}", p.pitch_x_mm);
+        assert!((p.x0_mm - 0.0015).abs() < 1e-15, "{}", p.x0_mm);
         assert_eq!(
             (p.z.clone(), p.z_unit),
             (vec![1.5, 2.0, 3.0], Some(Unit::Nm))

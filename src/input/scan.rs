@@ -308,6 +308,7 @@ pub fn grid_of_lines(lines: &[StoredLine], lines_dir: &Path) -> Result<Grid, Inp
         heights_um,
         cols,
         pitch_x_mm: px,
+        x0_mm: 0.0,
         y_mm: lines.iter().map(StoredLine::y_mm).collect(),
         index: lines.iter().map(|l| l.meta.id.index).collect(),
         y_readback_mm: lines

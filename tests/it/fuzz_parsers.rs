@@ -871,7 +871,7 @@ fn x3p_parts() -> (Vec<u8>, Vec<u8>, Vec<u8>) {
             pitch_x_mm: 0.0015,
             pitch_y_mm: 0.01,
         },
-        0.0,
+        (0.0, 0.0),
         &meta,
     )
     .unwrap();

@@ -113,7 +113,7 @@ fn x3p_round_trips_and_surfalize_reads_it() {
         comment: "measured grid <test> & more".to_string(),
         ..X3pMeta::default()
     };
-    let bytes = to_x3p(&map(&z, rows, cols), 0.0, &meta).unwrap();
+    let bytes = to_x3p(&map(&z, rows, cols), (0.0, 0.0), &meta).unwrap();
     let back = read_x3p(&bytes).unwrap();
     assert_eq!((back.rows, back.cols), (rows, cols));
     // Record2 comes back unescaped; empty fields were written as "not available".
@@ -228,7 +228,7 @@ fn x3p_files_of_other_software_are_read() {
 #[test]
 fn damaged_or_unsupported_x3p_files_are_named_clearly() {
     let (z, rows, cols) = grid();
-    let bytes = to_x3p(&map(&z, rows, cols), 0.0, &X3pMeta::default()).unwrap();
+    let bytes = to_x3p(&map(&z, rows, cols), (0.0, 0.0), &X3pMeta::default()).unwrap();
     let e = read_x3p(&bytes[..bytes.len() / 2]).unwrap_err().to_string();
     assert!(e.contains("not a readable X3P file"), "{e}");
     let e = read_x3p(b"x_mm,z_um\n0,1\n").unwrap_err().to_string();
@@ -247,7 +247,7 @@ fn calibration_date_and_manufacturer_are_what_the_caller_gives() {
         probe: "SJ-210 stylus, tip radius 2 µm".into(),
         ..X3pMeta::default()
     };
-    let back = read_x3p(&to_x3p(&map(&z, rows, cols), 0.0, &meta).unwrap()).unwrap();
+    let back = read_x3p(&to_x3p(&map(&z, rows, cols), (0.0, 0.0), &meta).unwrap()).unwrap();
     // The calibration date, not the scan's start; a plain date becomes an xsd:dateTime.
     assert_eq!(back.meta.calibration_date, "2026-03-14T00:00:00");
     assert_eq!(back.meta.date, "2026-11-30T09:15:00+00:00");
@@ -260,7 +260,7 @@ fn calibration_date_and_manufacturer_are_what_the_caller_gives() {
         calibration_date: String::new(),
         ..meta
     };
-    let bytes = to_x3p(&map(&z, rows, cols), 0.0, &unknown).unwrap();
+    let bytes = to_x3p(&map(&z, rows, cols), (0.0, 0.0), &unknown).unwrap();
     assert!(!main_xml(&bytes).contains("CalibrationDate"));
     assert!(!main_xml(&bytes).contains("Record2"));
     assert_eq!(read_x3p(&bytes).unwrap().meta, X3pMeta::default());
@@ -284,29 +284,29 @@ fn every_x3p_written_validates_against_iso_5436_2() {
         comment: "measured heights \"as traced\"".into(),
     };
     let dir = tempfile::tempdir().unwrap();
-    for (name, meta, first_y_mm) in [
-        ("full.x3p", full.clone(), 0.0),
-        ("bare.x3p", X3pMeta::default(), -20.0),
+    for (name, meta, origin_mm) in [
+        ("full.x3p", full.clone(), (0.0, 0.0)),
+        ("bare.x3p", X3pMeta::default(), (0.0015, -20.0)),
         (
             "undated.x3p",
             X3pMeta {
                 calibration_date: String::new(),
                 ..full
             },
-            12.34,
+            (-1.5, 12.34),
         ),
     ] {
         let path = dir.path().join(name);
         std::fs::write(
             &path,
-            to_x3p(&map(&z, rows, cols), first_y_mm, &meta).unwrap(),
+            to_x3p(&map(&z, rows, cols), origin_mm, &meta).unwrap(),
         )
         .unwrap();
         assert_valid_x3p(&path);
     }
     // The check catches a file the schema refuses: Record2 without its CalibrationDate (what
     // this writer wrote before).
-    let bytes = to_x3p(&map(&z, rows, cols), 0.0, &X3pMeta::default()).unwrap();
+    let bytes = to_x3p(&map(&z, rows, cols), (0.0, 0.0), &X3pMeta::default()).unwrap();
     let xml = main_xml(&bytes) + "</p:ISO5436_2>\n";
     let broken = crate::common::edited(
         &xml,
@@ -337,7 +337,7 @@ fn main_xml(bytes: &[u8]) -> String {
 }
 
 #[test]
-fn axes_carry_the_machine_y_of_the_first_line_and_pitches_without_float_noise() {
+fn axes_carry_the_first_point_s_x_the_machine_y_of_the_first_line_and_exact_pitches() {
     // 31 lines stepped 0.01 mm from y = 12.34 mm: their mean pitch carries float noise
     // (12.64 − 12.34 is not 0.3 in binary), which the file must not.
     let (z, _, cols) = grid();
@@ -353,22 +353,25 @@ fn axes_carry_the_machine_y_of_the_first_line_and_pitches_without_float_noise() 
             pitch_x_mm: 0.0015,
             pitch_y_mm,
         },
-        y[0],
+        (0.0015, y[0]),
         &X3pMeta::default(),
     )
     .unwrap();
     let xml = main_xml(&bytes);
-    assert!(xml.contains("<CX><AxisType>I</AxisType><DataType>D</DataType><Increment>1.5e-6</Increment><Offset>0</Offset></CX>"), "{xml}");
+    assert!(xml.contains("<CX><AxisType>I</AxisType><DataType>D</DataType><Increment>1.5e-6</Increment><Offset>1.5e-6</Offset></CX>"), "{xml}");
     assert!(xml.contains("<CY><AxisType>I</AxisType><DataType>D</DataType><Increment>1e-5</Increment><Offset>1.234e-2</Offset></CY>"), "{xml}");
     let back = read_x3p(&bytes).unwrap();
     assert!(
-        (back.offset_y_mm - 12.34).abs() < 1e-12,
-        "{}",
+        (back.offset_y_mm - 12.34).abs() < 1e-12 && (back.offset_x_mm - 0.0015).abs() < 1e-15,
+        "{} {}",
+        back.offset_x_mm,
         back.offset_y_mm
     );
     assert!((back.pitch_y_mm - 0.01).abs() < 1e-15);
-    // A non-finite first y is refused, not written.
-    assert!(to_x3p(&map(&z, 31, cols), f64::NAN, &X3pMeta::default()).is_err());
+    // A non-finite first x or y is refused, not written.
+    for origin_mm in [(0.0, f64::NAN), (f64::INFINITY, 0.0)] {
+        assert!(to_x3p(&map(&z, 31, cols), origin_mm, &X3pMeta::default()).is_err());
+    }
 }
 
 #[test]
@@ -397,7 +400,7 @@ fn analyze_reads_an_x3p_as_the_same_grid_as_its_csv() {
                 pitch_x_mm: 0.003484,
                 pitch_y_mm: 0.010452,
             },
-            0.0,
+            (0.25, 0.0),
             &X3pMeta::default(),
         )
         .unwrap(),
@@ -437,6 +440,9 @@ fn analyze_reads_an_x3p_as_the_same_grid_as_its_csv() {
         assert!((ra - rb).abs() <= 1e-12 * ra, "{ra} vs {rb}");
     }
     assert!(std::fs::metadata(dir.path().join("x3p/heightmap.png")).is_ok());
+    // The file's x offset is kept: the grid's X3P starts where the input did.
+    let x = read_x3p(&std::fs::read(dir.path().join("x3p/measured.x3p")).unwrap()).unwrap();
+    assert_eq!((x.offset_x_mm, x.offset_y_mm), (0.25, 0.0));
 }
 
 #[test]
@@ -528,7 +534,7 @@ fn assert_same_heights(got: &[f64], want: &[f64], reader: &str) {
 #[test]
 fn a_one_line_grid_is_written_as_a_profile_that_an_independent_reader_reads() {
     let z = mitutoyo_profile();
-    let bytes = to_x3p(&map(&z, 1, z.len()), 0.0, &X3pMeta::default()).unwrap();
+    let bytes = to_x3p(&map(&z, 1, z.len()), (0.0, 0.0), &X3pMeta::default()).unwrap();
     let xml = main_xml(&bytes);
     assert!(xml.contains("<FeatureType>PRF</FeatureType>"), "{xml}");
     assert!(
@@ -536,7 +542,7 @@ fn a_one_line_grid_is_written_as_a_profile_that_an_independent_reader_reads() {
         "{xml}"
     );
     // Two lines or more stay a surface.
-    let two = to_x3p(&map(&z[..20], 2, 10), 0.0, &X3pMeta::default()).unwrap();
+    let two = to_x3p(&map(&z[..20], 2, 10), (0.0, 0.0), &X3pMeta::default()).unwrap();
     assert!(main_xml(&two).contains("<FeatureType>SUR</FeatureType>"));
 
     let dir = tempfile::tempdir().unwrap();
@@ -613,6 +619,14 @@ fn a_profile_read_from_a_profile_x3p_is_the_line_of_its_csv() {
     let ours = dir.path().join("csv/measured.x3p");
     assert_valid_x3p(&ours);
     assert!(main_xml(&std::fs::read(&ours).unwrap()).contains("<FeatureType>PRF</FeatureType>"));
+    // The CSV's x starts at 0.0015 mm, and so does the file's, for our reader and x3pio's.
+    let back = read_x3p(&std::fs::read(&ours).unwrap()).unwrap();
+    assert_eq!((back.offset_x_mm, back.offset_y_mm), (0.0015, 0.0));
+    let v = x3pio(&["read".as_ref(), ours.as_os_str()]).unwrap();
+    assert!(
+        (v["first_x_um"].as_f64().unwrap() - 1.5).abs() < 1e-9,
+        "{v}"
+    );
     let theirs = dir.path().join("x3pio.x3p");
     x3pio(&["write".as_ref(), csv.as_os_str(), theirs.as_os_str()]);
     let mut want = Vec::new();

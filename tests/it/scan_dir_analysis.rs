@@ -482,13 +482,15 @@ fn x3p_of_a_scan_carries_the_traceability_and_surfalize_reads_it() {
         );
         assert_eq!(back.rows, 8);
         assert!((back.pitch_y_mm - STEP_Y_NM as f64 * 1e-6).abs() < 1e-12);
-        // The CY offset is the machine y of the first line; the increments are written
-        // without the float noise of the mean pitch.
+        // The CY offset is the machine y of the first line, CX the x of a line's first point
+        // (a scan's lines start at 0); the increments are written without the float noise of
+        // the mean pitch.
         assert!(
             (back.offset_y_mm - 2.0 * STEP_Y_NM as f64 * 1e-6).abs() < 1e-12,
             "{name}: {}",
             back.offset_y_mm
         );
+        assert_eq!(back.offset_x_mm, 0.0, "{name}");
         let xml = String::from_utf8_lossy(&std::fs::read(scan.join(name)).unwrap()).to_string();
         assert!(
             xml.contains("<Increment>1.0452e-5</Increment><Offset>2.0904e-5</Offset></CY>"),

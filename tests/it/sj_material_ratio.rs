@@ -163,7 +163,7 @@ fn the_sj_reading_survives_an_x3p_round_trip() {
         pitch_x_mm: 0.0015,
         pitch_y_mm: 0.001,
     };
-    let back = read_x3p(&to_x3p(&map, 0.0, &X3pMeta::default()).unwrap()).unwrap();
+    let back = read_x3p(&to_x3p(&map, (0.0, 0.0), &X3pMeta::default()).unwrap()).unwrap();
     assert_eq!(back.heights_um.len(), z.len());
     let mut moved = 0;
     for (a, b) in z.iter().zip(&back.heights_um) {

@@ -4,7 +4,8 @@ surfscan's (surfalize and SurfaceTopography read surfaces only).
 Usage:
   python3 x3p_profile.py read FILE.x3p
       prints as JSON what x3pio finds: the file's kind (Profile, Surface), its points, the x
-      increment in µm and the heights in µm.
+      of the first point and the x increment in µm (the axis offset placing the points), and
+      the heights in µm.
   python3 x3p_profile.py write PROFILE.csv OUT.x3p
       writes the profile CSV (header, then x_mm,z_um rows at a constant pitch) as a PRF file
       with x3pio's own writer (float64 heights in metres, x increment from the first two rows).
@@ -26,6 +27,7 @@ def read(path):
         {
             "kind": type(f).__name__,
             "points": int(z.size),
+            "first_x_um": float(points[0, 0] * 1e6),
             "step_x_um": float((points[1, 0] - points[0, 0]) * 1e6),
             "heights_um": [float(v) * 1e6 for v in z],
         },

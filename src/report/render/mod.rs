@@ -339,8 +339,8 @@ pub fn write_data_files(
     );
     let input = ctx.input.clone();
     remove_earlier_outputs(out)?;
-    // Both files share the measured lines' y: the model is sampled on them.
-    let first_y_mm = grid.y_mm.first().copied().unwrap_or(0.0);
+    // Both files start where the measured grid does: the model is sampled on its points.
+    let origin_mm = (grid.x0_mm, grid.y_mm.first().copied().unwrap_or(0.0));
     let (plots, rk_plots, x3p) = std::thread::scope(|s| {
         let x3p = s.spawn(|| -> Result<(PathBuf, Option<PathBuf>), ReportError> {
             // Encodes one height map as `name` and writes it, streamed: the archive's bytes
@@ -348,7 +348,7 @@ pub fn write_data_files(
             let write = |name: &str, map: &HeightMap<'_>, meta: &X3pMeta| {
                 let path = out.join(name);
                 let file =
-                    x3p(map, first_y_mm, meta).map_err(metrology(format!("{input}: {name}")))?;
+                    x3p(map, origin_mm, meta).map_err(metrology(format!("{input}: {name}")))?;
                 write_atomically(&path, |w| file.write_to(w)).map_err(io(&path))?;
                 Ok::<_, ReportError>(path)
             };
