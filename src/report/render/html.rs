@@ -571,11 +571,8 @@ fn traceability(h: &mut String, report: &Value) {
     ] {
         kv(h, k, &esc(&text(&t[key])));
     }
-    kv(
-        h,
-        "started",
-        &esc(&print::to_the_second(&text(&t["started_at"]))),
-    );
+    let started = print::to_the_second(&text(&t["started_at"]));
+    kv(h, "started", &esc(&started));
     match t["finished_at"].as_str() {
         Some(stop) => {
             kv(h, "finished", &esc(&print::to_the_second(stop)));
@@ -628,11 +625,8 @@ fn traceability(h: &mut String, report: &Value) {
     }
     kv(h, "conditions", &or_na(&cond.join(", ").into()));
     kv(h, "scanned by", &or_na(&t["software_version"]));
-    kv(
-        h,
-        "configuration",
-        &format!("sha256 <code>{}</code>", esc(&text(&t["config_hash"]))),
-    );
+    let hash = esc(&text(&t["config_hash"]));
+    kv(h, "configuration", &format!("sha256 <code>{hash}</code>"));
     h.push_str("</table>\n");
 }
 
@@ -1238,11 +1232,8 @@ fn recipe(h: &mut String, report: &Value) {
     let (n, rule) = (&r["sampling_lengths"], &r["sampling_lengths_rule"]);
     let n_rule = format!("{} — {}", text(n), esc(&text(rule)));
     kv(h, "sampling lengths N", &n_rule);
-    kv(
-        h,
-        "points per sampling length",
-        &text(&r["points_per_section"]),
-    );
+    let points = text(&r["points_per_section"]);
+    kv(h, "points per sampling length", &points);
     kv(h, "points not evaluated", &text(&r["points_not_evaluated"]));
     let pitch = num(&r["pitch_mm"], Quantity::LengthMm);
     kv(h, "pitch", &format!("{pitch} mm"));
@@ -1252,28 +1243,16 @@ fn recipe(h: &mut String, report: &Value) {
     if !profile {
         kv(h, "surface", &esc(&text(&report["model"]["description"])));
     }
-    kv(
-        h,
-        "spikes",
-        &esc(&format!(
-            "{} — {}",
-            text(&r["spike_rule"]),
-            match r["outliers"].as_str() {
-                Some("exclude") =>
-                    "excluded (bridged) from the per-line and measured-grid parameters",
-                _ => "flagged only, the data as measured",
-            }
-        )),
-    );
+    let spikes = match r["outliers"].as_str() {
+        Some("exclude") => "excluded (bridged) from the per-line and measured-grid parameters",
+        _ => "flagged only, the data as measured",
+    };
+    let spikes = format!("{} — {spikes}", text(&r["spike_rule"]));
+    kv(h, "spikes", &esc(&spikes));
     if let Some(t) = r["holdout_threshold_sq"].as_f64().filter(|_| !profile) {
-        kv(
-            h,
-            "model between lines",
-            &esc(&format!(
-                "supported by the data when the hold-out rms is at most {} × Sq",
-                sig(t, 2)
-            )),
-        );
+        let t = sig(t, 2);
+        let rule = format!("supported by the data when the hold-out rms is at most {t} × Sq");
+        kv(h, "model between lines", &esc(&rule));
     }
     h.push_str("</table>\n");
     if let Some(defs) = r["definitions"].as_object() {

@@ -193,25 +193,12 @@ fn write_plots(
     // The spatial curves of the measured grid, drawn beside its areal parameters.
     if let Some(Ok(spatial)) = report.surface_grid.as_ref().map(|g| &g.spatial) {
         let curves = &spatial.curves;
-        plots.extend(
-            areal_plots::plot_psd(
-                out,
-                curves,
-                "Power spectral density of the measured grid",
-                &caption,
-            )
-            .map_err(&plot_err)?,
-        );
-        plots.extend(
-            areal_plots::plot_acf(
-                out,
-                curves,
-                spatial.s,
-                "Autocorrelation of the measured grid",
-                &caption,
-            )
-            .map_err(&plot_err)?,
-        );
+        let title = "Power spectral density of the measured grid";
+        let psd = areal_plots::plot_psd(out, curves, title, &caption);
+        plots.extend(psd.map_err(&plot_err)?);
+        let title = "Autocorrelation of the measured grid";
+        let acf = areal_plots::plot_acf(out, curves, spatial.s, title, &caption);
+        plots.extend(acf.map_err(&plot_err)?);
     }
     if let Some(o) = overlay {
         plots.extend(
