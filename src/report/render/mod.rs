@@ -184,10 +184,8 @@ fn write_plots(
         )
     };
     if !(bac_curves.is_empty() && pooled.is_empty()) {
-        plots.extend(
-            plot_bearing_curves(out, bac_curves, pooled, &bac_title, &caption)
-                .map_err(&plot_err)?,
-        );
+        let bac = plot_bearing_curves(out, bac_curves, pooled, &bac_title, &caption);
+        plots.extend(bac.map_err(&plot_err)?);
     }
     plots.extend(height_map()?);
     // The spatial curves of the measured grid, drawn beside its areal parameters.
@@ -201,10 +199,9 @@ fn write_plots(
         plots.extend(acf.map_err(&plot_err)?);
     }
     if let Some(o) = overlay {
-        plots.extend(
-            plot_profile_overlay(out, &o.measured, &o.model, &o.residual, &o.title, &caption)
-                .map_err(&plot_err)?,
-        );
+        let (title, caption) = (&o.title, &caption);
+        let overlay = plot_profile_overlay(out, &o.measured, &o.model, &o.residual, title, caption);
+        plots.extend(overlay.map_err(&plot_err)?);
     }
     Ok(plots)
 }

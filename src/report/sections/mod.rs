@@ -225,25 +225,17 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
                 reason: e.clone(),
             })
         };
-        let mut failed: Vec<FailedSection> = [
-            failure("surface_grid", surface_grid.as_ref().err()),
-            failure("anisotropy", anisotropy.as_ref().err()),
-        ]
-        .into_iter()
-        .flatten()
-        .collect();
+        let mut failed: Vec<FailedSection> = Vec::new();
+        failed.extend(failure("surface_grid", surface_grid.as_ref().err()));
+        failed.extend(failure("anisotropy", anisotropy.as_ref().err()));
         failed.extend(surface.failed.iter().cloned());
-        failed.extend(failure(
-            "model_vs_measured",
-            model_vs_measured.as_ref().err(),
-        ));
+        let held_out = model_vs_measured.as_ref().err();
+        failed.extend(failure("model_vs_measured", held_out));
         failed.extend(failure("between_lines", between_lines.as_ref().err()));
         if let Some(c) = &contact {
             failed.extend(failure("contact", c.measured_error.as_ref()));
-            failed.extend(failure(
-                "contact.model",
-                c.model.as_ref().and_then(|m| m.error.as_ref()),
-            ));
+            let model = c.model.as_ref().and_then(|m| m.error.as_ref());
+            failed.extend(failure("contact.model", model));
         }
         // What the line count rules out is not a failure: the fit needs degree-v + 1 lines, the
         // hold-outs more once lines are left out, the areal sections and the contact two.
