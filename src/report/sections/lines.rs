@@ -168,25 +168,22 @@ pub fn cutoff_warning(lines: &LinesSection, options: &Options) -> Option<String>
 /// (z = 0). A line is not centred when the mean of its evaluated ordinates is more than half
 /// its Rq from zero, or its Rp or Rv comes out negative: an offset or form the filter would
 /// have removed remains, and its Ra, Rz … measure that. Returns the mean of such a line.
-pub fn uncentred_mean(a: &LineAnalysis) -> Option<f64> {
+fn uncentred_mean(a: &LineAnalysis) -> Option<f64> {
     let z = &a.roughness_um;
     let mean = z.iter().sum::<f64>() / z.len().max(1) as f64;
     let p = &a.params;
     (mean.abs() > 0.5 * p.rq_um || p.rp_um < 0.0 || p.rv_um < 0.0).then_some(mean)
 }
 
-/// The warning for unfiltered lines that are not centred ([`uncentred_mean`]): how many, the
+/// The warning for unfiltered lines that are not centred (`uncentred_mean`): how many, the
 /// worst with its mean against its Rq, and what to do; none with the λc filter or a form
 /// removed.
-pub fn uncentred_warning(
-    analyses: &[LineAnalysis],
-    indices: &[u32],
-    options: &Options,
-) -> Option<String> {
+pub fn uncentred_warning(lines: &LinesSection, options: &Options) -> Option<String> {
     use crate::numfmt::{fmt, Quantity};
     if options.apply_lambda_c || options.form.is_some() {
         return None;
     }
+    let analyses = &lines.analyses;
     let off: Vec<(usize, f64)> = analyses
         .iter()
         .enumerate()
@@ -201,7 +198,7 @@ pub fn uncentred_warning(
             "{} of {} lines are not centred (line {}: mean",
             off.len(),
             analyses.len(),
-            line_number(indices.get(worst).copied().unwrap_or(worst as u32))
+            line_number(lines.lines.get(worst).map_or(worst as u32, |l| l.index))
         )
     };
     Some(format!(

@@ -152,11 +152,7 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
         let specification = specification::section(&input, &lines);
         timings.lines = t.elapsed().as_secs_f64();
         warnings.extend(lines::cutoff_warning(&lines, &ctx.line_options));
-        warnings.extend(lines::uncentred_warning(
-            &lines.analyses,
-            &lines.lines.iter().map(|l| l.index).collect::<Vec<_>>(),
-            &ctx.line_options,
-        ));
+        warnings.extend(lines::uncentred_warning(&lines, &ctx.line_options));
 
         let t = Instant::now();
         if !evenly {
@@ -219,12 +215,7 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
         });
 
         // In the order the sections are made.
-        let failure = |section: &str, r: Option<&String>| {
-            r.map(|e| FailedSection {
-                section: section.into(),
-                reason: e.clone(),
-            })
-        };
+        let failure = |section: &str, r: Option<&String>| r.map(|e| surface::failed(section, e));
         let mut failed: Vec<FailedSection> = Vec::new();
         failed.extend(failure("surface_grid", surface_grid.as_ref().err()));
         failed.extend(failure("anisotropy", anisotropy.as_ref().err()));

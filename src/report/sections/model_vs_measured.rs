@@ -16,10 +16,6 @@ use crate::metrology::holdout::{
 use crate::metrology::surface_model::ModelRecipe;
 use crate::report::document::{LineHoldout, LineReport};
 
-fn line_index(grid: &Grid, row: usize) -> usize {
-    grid.index.get(row).copied().unwrap_or(row as u32) as usize
-}
-
 /// Maps the hold-out's rows to the grid's line indices.
 fn rows_of_holdout_to_lines(grid: &Grid, h: &mut Holdout) {
     for l in h
@@ -27,7 +23,7 @@ fn rows_of_holdout_to_lines(grid: &Grid, h: &mut Holdout) {
         .iter_mut()
         .chain(h.lines_left_out.iter_mut())
     {
-        l.index = line_index(grid, l.index);
+        l.index = grid.index_of(l.index) as usize;
     }
 }
 
@@ -58,7 +54,7 @@ pub fn section(
 /// every k-th line left out, is made once, beside the every-2nd-point refit: the same
 /// computations on the same inputs, so the same results and the same errors, in the order each
 /// of those functions reports them.
-pub fn characterise_and_judge(
+fn characterise_and_judge(
     grid: &Grid,
     recipe: &ModelRecipe,
     sq_um: Option<f64>,
@@ -108,7 +104,7 @@ pub fn characterise_and_judge(
 /// Maps the verdict's held-out rows to the grid's line indices.
 pub fn rows_to_lines(grid: &Grid, b: &mut BetweenLines) {
     for l in &mut b.lines {
-        l.index = line_index(grid, l.index);
+        l.index = grid.index_of(l.index) as usize;
     }
 }
 

@@ -43,7 +43,8 @@ pub struct ModelSection {
     pub failed: Vec<FailedSection>,
 }
 
-fn failed(section: &str, reason: impl Into<String>) -> FailedSection {
+/// The section `section` failed, for `reason`.
+pub(super) fn failed(section: &str, reason: impl Into<String>) -> FailedSection {
     FailedSection {
         section: section.to_string(),
         reason: reason.into(),
