@@ -79,41 +79,26 @@ pub fn level_at_material_ratio(heights: &[f64], mr_pct: f64) -> f64 {
         })
         .collect();
     let mut inside_count = 0usize;
-    let (mut lo, mut hi) = (bottom, top);
-    while hi - lo > 1e-12 * (top - bottom).max(f64::MIN_POSITIVE) {
-        let mid = 0.5 * (lo + hi);
-        let mut inside = inside_count as f64;
-        for &(a, b) in &open {
-            inside += segment_inside(a, b, mid);
-        }
+    bisect(top, bottom, |mid, (lo, hi)| {
+        // Every midpoint from here on lies in [lo, hi]: a segment whose lower end is at or
+        // above hi is wholly inside for all of them, one whose upper end is below lo wholly
+        // outside.
+        open.retain(|&(a, b)| {
+            inside_count += usize::from(b >= hi);
+            b < hi && a >= lo
+        });
+        let inside = open.iter().fold(inside_count as f64, |s, &(a, b)| {
+            s + segment_inside(a, b, mid)
+        });
         let margin = slack * (inside + 1.0);
-        let reaches = if ratio(inside - margin) >= mr_pct {
+        if ratio(inside - margin) >= mr_pct {
             true
         } else if ratio(inside + margin) < mr_pct {
             false
         } else {
             material_ratio_pct(heights, mid) >= mr_pct
-        };
-        if reaches {
-            lo = mid;
-        } else {
-            hi = mid;
         }
-        if mid == lo && mid == hi {
-            break;
-        }
-        // Every later midpoint lies in [lo, hi]: a segment whose lower end is at or above hi
-        // is wholly inside for all of them, one whose upper end is below lo wholly outside.
-        open.retain(|&(a, b)| {
-            if b >= hi {
-                inside_count += 1;
-                false
-            } else {
-                a >= lo
-            }
-        });
-    }
-    lo
+    })
 }
 
 /// The share (0 to 1) of one segment with upper end `hi` and lower end `lo` at or above
@@ -132,10 +117,18 @@ fn segment_inside(hi: f64, lo: f64, level: f64) -> f64 {
 /// The bisection of [`level_at_material_ratio`] with the ratio computed over the whole curve
 /// at every step (for curves holding NaN, where the bound on the sums does not hold).
 fn bisect_by_full_passes(heights: &[f64], mr_pct: f64, top: f64, bottom: f64) -> f64 {
+    bisect(top, bottom, |mid, _| {
+        material_ratio_pct(heights, mid) >= mr_pct
+    })
+}
+
+/// Bisection from [bottom, top] to 1e-12 of the range (or until the bracket stops shrinking):
+/// the lower end moves up to each midpoint where `reaches(midpoint, bracket)`; the last one.
+fn bisect(top: f64, bottom: f64, mut reaches: impl FnMut(f64, (f64, f64)) -> bool) -> f64 {
     let (mut lo, mut hi) = (bottom, top);
     while hi - lo > 1e-12 * (top - bottom).max(f64::MIN_POSITIVE) {
         let mid = 0.5 * (lo + hi);
-        if material_ratio_pct(heights, mid) >= mr_pct {
+        if reaches(mid, (lo, hi)) {
             lo = mid;
         } else {
             hi = mid;
