@@ -483,13 +483,15 @@ fn draw_view<DB: DrawingBackend>(
     grid: &HeightMap<'_>,
     view: &View,
     frame: &Frame,
+    pixels: &std::cell::OnceCell<Vec<u8>>,
 ) -> Result<(), String>
 where
     DB::ErrorType: 'static,
 {
     frame.draw(root)?;
     let (size, at) = view_area(frame);
-    let bitmap = BitMapElement::with_owned_buffer(at, size, view.pixels(size, at))
+    let pixels = pixels.get_or_init(|| view.pixels(size, at)); // the PNG's, kept for the SVG
+    let bitmap = BitMapElement::with_ref(at, size, pixels)
         .ok_or_else(|| "3D view bitmap of the wrong size".to_string())?;
     root.draw(&bitmap).map_err(|e| e.to_string())?;
     // The axes along the two front edges of the base and up the nearest corner.
@@ -584,9 +586,10 @@ pub fn plot_surface_view(
 ) -> Result<([PathBuf; 2], View), MetrologyError> {
     grid.check_size(2)?;
     let (view, frame) = view_and_frame(grid, title, caption);
+    let pixels = std::cell::OnceCell::new();
     let files: Result<[PathBuf; 2], MetrologyError> = (|| {
         png_and_svg!(dir, "surface3d", VIEW_SIZE, |root| draw_view(
-            &root, grid, &view, &frame
+            &root, grid, &view, &frame, &pixels
         ))
     })();
     Ok((files?, view))

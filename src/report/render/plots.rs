@@ -824,6 +824,7 @@ fn draw_map<DB: DrawingBackend>(
     bar: &str,
     scale: &MapScale,
     frame: &Frame,
+    pixels: &std::cell::OnceCell<Vec<u8>>,
 ) -> Result<(), String>
 where
     DB::ErrorType: 'static,
@@ -853,11 +854,11 @@ where
         .y_labels(4)
         .draw()
         .map_err(|e| e.to_string())?;
-    // The map as one bitmap at the pixels it covers: its size follows the figure, not the
-    // grid (an SVG embeds it as one PNG image).
+    // The map as one bitmap at the pixels it covers, the figure's not the grid's (an SVG embeds
+    // it as one PNG image): made for the PNG, kept for the SVG (one size, the same chart).
     let size = map_size_px(&chart, w, h);
-    let pixels = map_pixels(grid, size, (lo, hi));
-    let bitmap = BitMapElement::with_owned_buffer((0.0, h), size, pixels)
+    let pixels = pixels.get_or_init(|| map_pixels(grid, size, (lo, hi)));
+    let bitmap = BitMapElement::with_ref((0.0, h), size, pixels)
         .ok_or_else(|| "height map bitmap of the wrong size".to_string())?;
     chart
         .plotting_area()
@@ -938,8 +939,9 @@ pub fn plot_map(
         + scale.plot_h.max(MAP_MIN_BAR_H)
         + 2 * MAP_MARGIN
         + MAP_X_AREA;
+    let pixels = std::cell::OnceCell::new();
     png_and_svg!(dir, values.stem, (MAP_WIDTH, height), |root| draw_map(
-        &root, grid, values.bar, &scale, &frame
+        &root, grid, values.bar, &scale, &frame, &pixels
     ))
 }
 
