@@ -155,11 +155,15 @@ impl Plane {
     /// Row `row`'s heights `line` less the plane, into `out` (as long as `line`): a consumer
     /// that reads the levelled grid a row at a time needs no levelled copy of it.
     pub fn level_row(&self, row: usize, line: &[f64], out: &mut [f64]) {
-        let y = row as f64 - self.yc;
         for (col, (o, z)) in out.iter_mut().zip(line).enumerate() {
-            let x = col as f64 - self.xc;
-            *o = z - (self.a + self.b * x + self.c * y);
+            *o = self.level_at(row, col, *z);
         }
+    }
+
+    /// The height `z` at (`row`, `col`) less the plane.
+    pub fn level_at(&self, row: usize, col: usize, z: f64) -> f64 {
+        let (x, y) = (col as f64 - self.xc, row as f64 - self.yc);
+        z - (self.a + self.b * x + self.c * y)
     }
 }
 

@@ -32,14 +32,15 @@
 //!
 //! Memory: the ACF's lags ky ≥ 0 only (the rays of Sal and Str read no others), made in one
 //! buffer of about 2·rows·cols f64 by real-to-complex transforms (see [`autocorrelation`]);
-//! Std's spectrum is the lines' half spectra, rows·(cols/2 + 1) complex values. Both read
-//! the lines levelled as they go ([`Plane::level_row`]): no levelled copy of the grid.
+//! Std's spectrum is the lines' half spectra, rows·(cols/2 + 1) complex values. They and
+//! the PSDs read the lines (columns) levelled as they go ([`Plane::level_row`]): no
+//! levelled copy of the grid.
 //!
 //! Depends on [`super::areal`] (levelling), [`super::filter`] (FFT lengths),
 //! [`super::MetrologyError`] and the FFT crates (`realfft`, `rustfft`, `bytemuck` to view
 //! one buffer as both).
 
-use super::areal::{level_plane, HeightMap, Plane};
+use super::areal::{HeightMap, Plane};
 use super::filter::fft_len;
 use super::MetrologyError;
 use realfft::RealFftPlanner;
@@ -497,11 +498,8 @@ pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyEr
     };
     // Its buffers are gone before the PSDs and the spectrum for Std take their own.
     drop(acf);
-    // The PSDs need the levelled heights: a copy held only while they are made.
-    let (z, _) = level_plane(grid)?;
-    curves.psd_x = psd_x_of(&z, grid);
-    curves.psd_y = psd_y_of(&z, grid);
-    drop(z);
+    curves.psd_x = psd_along_x(grid, &plane);
+    curves.psd_y = psd_along_y(grid, &plane);
     if let Some((_, sal)) = fastest {
         if sal < dy && dy > 2.0 * dx {
             caveats.push(format!(
@@ -533,42 +531,33 @@ pub struct Psd {
     pub c_um3: Vec<f64>,
 }
 
-/// The PSD along x, averaged over the lines of the plane-levelled grid.
-pub fn psd_along_x(grid: &HeightMap<'_>) -> Result<Psd, MetrologyError> {
-    Ok(psd_x_of(&level_plane(grid)?.0, grid))
+/// The PSD along x, averaged over the lines of `grid` levelled by `plane` as they are read.
+pub fn psd_along_x(grid: &HeightMap<'_>, plane: &Plane) -> Psd {
+    let cols = grid.cols;
+    psd_of_profiles(grid.rows, cols, grid.pitch_x_mm * 1000.0, |r, out| {
+        plane.level_row(r, &grid.heights_um[r * cols..(r + 1) * cols], out)
+    })
 }
 
-/// The PSD along y, averaged over the columns of the plane-levelled grid.
-pub fn psd_along_y(grid: &HeightMap<'_>) -> Result<Psd, MetrologyError> {
-    Ok(psd_y_of(&level_plane(grid)?.0, grid))
+/// The PSD along y, averaged over the columns of `grid` levelled by `plane` as they are read.
+pub fn psd_along_y(grid: &HeightMap<'_>, plane: &Plane) -> Psd {
+    psd_of_profiles(grid.cols, grid.rows, grid.pitch_y_mm * 1000.0, |c, out| {
+        for (r, o) in out.iter_mut().enumerate() {
+            *o = plane.level_at(r, c, grid.heights_um[r * grid.cols + c]);
+        }
+    })
 }
 
-/// The PSD along x of the levelled heights `z` of `grid`.
-fn psd_x_of(z: &[f64], grid: &HeightMap<'_>) -> Psd {
-    let lines: Vec<&[f64]> = z.chunks_exact(grid.cols).collect();
-    psd_of_profiles(&lines, grid.pitch_x_mm * 1000.0)
-}
-
-/// The PSD along y of the levelled heights `z` of `grid`.
-fn psd_y_of(z: &[f64], grid: &HeightMap<'_>) -> Psd {
-    let columns: Vec<Vec<f64>> = (0..grid.cols)
-        .map(|c| {
-            (0..grid.rows)
-                .filter_map(|r| z.get(r * grid.cols + c).copied())
-                .collect()
-        })
-        .collect();
-    let columns: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
-    psd_of_profiles(&columns, grid.pitch_y_mm * 1000.0)
-}
-
-fn psd_of_profiles(profiles: &[&[f64]], pitch_um: f64) -> Psd {
-    let n = profiles.first().map_or(0, |p| p.len());
-    if n < 2 || profiles.is_empty() {
-        return Psd {
-            q_per_um: Vec::new(),
-            c_um3: Vec::new(),
-        };
+/// The mean PSD of `count` profiles of `n` heights at `pitch_um`, profile `i` levelled into
+/// its buffer by `profile(i, buffer)` as it is read: no levelled copy of the grid.
+fn psd_of_profiles(
+    count: usize,
+    n: usize,
+    pitch_um: f64,
+    mut profile: impl FnMut(usize, &mut [f64]),
+) -> Psd {
+    if n < 2 || count == 0 {
+        return Psd::default();
     }
     // Periodic Hann, scaled to mean square 1.
     let mut window: Vec<f64> = (0..n)
@@ -581,8 +570,10 @@ fn psd_of_profiles(profiles: &[&[f64]], pitch_um: f64) -> Psd {
     let half = n / 2;
     let mut sum = vec![0.0; half];
     let mut buf = vec![Complex64::new(0.0, 0.0); n];
-    for p in profiles {
-        for ((b, z), w) in buf.iter_mut().zip(p.iter()).zip(&window) {
+    let mut p = vec![0.0; n];
+    for i in 0..count {
+        profile(i, &mut p);
+        for ((b, z), w) in buf.iter_mut().zip(&p).zip(&window) {
             *b = Complex64::new(z * w * pitch_um, 0.0);
         }
         fft.process(&mut buf);
@@ -595,7 +586,7 @@ fn psd_of_profiles(profiles: &[&[f64]], pitch_um: f64) -> Psd {
             };
         }
     }
-    let count = profiles.len() as f64;
+    let count = count as f64;
     Psd {
         q_per_um: (0..half).map(|k| 2.0 * PI * k as f64 / length).collect(),
         c_um3: sum.into_iter().map(|s| s / count).collect(),
@@ -605,6 +596,7 @@ fn psd_of_profiles(profiles: &[&[f64]], pitch_um: f64) -> Psd {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::metrology::areal::level_plane;
 
     fn grid_of<'a>(z: &'a [f64], rows: usize, cols: usize, px: f64, py: f64) -> HeightMap<'a> {
         HeightMap {
@@ -697,7 +689,8 @@ mod tests {
         let z: Vec<f64> = (0..rows * cols)
             .map(|k| (2.0 * PI * k0 as f64 * (k % cols) as f64 / cols as f64).sin())
             .collect();
-        let psd = psd_along_x(&grid_of(&z, rows, cols, px, 0.01)).unwrap();
+        let grid = grid_of(&z, rows, cols, px, 0.01);
+        let psd = psd_along_x(&grid, &Plane::of(&grid).unwrap());
         let (imax, _) =
             psd.c_um3
                 .iter()

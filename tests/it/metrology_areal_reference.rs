@@ -9,7 +9,7 @@
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use surfscan::metrology::areal::HeightMap;
+use surfscan::metrology::areal::{HeightMap, Plane};
 use surfscan::metrology::functional::areal_functional;
 use surfscan::metrology::spatial::{autocorrelation, psd_along_x, psd_along_y, spatial_params};
 
@@ -286,8 +286,8 @@ fn check(name: &str, px: f64, py: f64, bounds: Bounds) {
 
     // PSD along x and y: SurfaceTopography's convention, to rounding.
     for (dir, psd) in [
-        ("x", psd_along_x(&grid).unwrap()),
-        ("y", psd_along_y(&grid).unwrap()),
+        ("x", psd_along_x(&grid, &Plane::of(&grid).unwrap())),
+        ("y", psd_along_y(&grid, &Plane::of(&grid).unwrap())),
     ] {
         let st = &r[format!("st_psd_{dir}")];
         let q: Vec<f64> = st["q"]

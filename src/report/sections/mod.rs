@@ -180,8 +180,14 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
         // run beside it.
         let t = Instant::now();
         let sq = surface_grid.as_ref().map(|s| s.params.sq_um).ok();
-        let (model_vs_measured, between_lines) = model_vs_measured::section(&input, sq);
+        let (model_vs_measured, mut between_lines) = model_vs_measured::section(&input, sq);
         timings.holdout = t.elapsed().as_secs_f64();
+        // The overlay of a held-out line (the rows are still the grid's here) is made, and the
+        // hold-out's heights it may draw are dropped, before the model's autocorrelation.
+        let (overlay, said) = overlay::section(&input, between_lines.as_ref().ok());
+        if let Ok(b) = &mut between_lines {
+            b.model_um = Vec::new();
+        }
         drop(areal_go);
         let (surface, model_s) = model_thread
             .join()
@@ -190,13 +196,10 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
         if let Some(c) = &surface.checks {
             warnings.extend(c.warnings());
         }
-
-        // The overlay draws the model at a held-out line: the rows are still the grid's here.
-        let (overlay, said) = overlay::section(
-            &input,
-            between_lines.as_ref().ok(),
-            surface.sampled.as_ref(),
-        );
+        let overlay = match overlay {
+            Ok(o) => Some(o),
+            Err(row) => (surface.sampled.as_ref()).map(|m| overlay::data_line(grid, m, row)),
+        };
         warnings.extend(said);
         let between_lines = between_lines.map(|mut b| {
             model_vs_measured::rows_to_lines(grid, &mut b);

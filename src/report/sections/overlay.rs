@@ -12,15 +12,15 @@ use crate::metrology::holdout::BetweenLines;
 use crate::numfmt::{fmt as nfmt, line_label, line_number, Quantity};
 use crate::report::context::ReportContext;
 
-/// The curves of the figure, with its title.
+/// The curves of the figure with its title, held out; else the row to draw with
+/// [`data_line`]. The hold-out's heights in `verdict` are read here only: they can be
+/// dropped after.
 pub fn section(
     input: &SectionInput<'_>,
     verdict: Option<&BetweenLines>,
-    sampled: Option<&SampledModel>,
-) -> (Option<Overlay>, Vec<String>) {
-    let (grid, ctx) = (input.grid, input.ctx);
+) -> (Result<Overlay, usize>, Vec<String>) {
     let mut warnings = Vec::new();
-    let row = overlay_row(grid, ctx, &mut warnings);
+    let row = overlay_row(input.grid, input.ctx, &mut warnings);
     let held_out = held_out_overlay(
         input.characterised,
         &input.model.recipe,
@@ -28,12 +28,11 @@ pub fn section(
         row,
         &mut warnings,
     );
-    let overlay = held_out.or_else(|| sampled.map(|m| data_line(grid, m, row)));
-    (overlay, warnings)
+    (held_out.ok_or(row), warnings)
 }
 
 /// Line `row` of `grid` against the model sampled on it.
-fn data_line(grid: &Grid, model: &SampledModel, row: usize) -> Overlay {
+pub fn data_line(grid: &Grid, model: &SampledModel, row: usize) -> Overlay {
     let index = grid.index.get(row).copied().unwrap_or(0);
     Overlay {
         measured: along_x(grid.row(row), grid.pitch_x_mm),
