@@ -150,12 +150,7 @@ fn x3p_round_trips_and_surfalize_reads_it() {
     assert_eq!(v["cols"], cols);
     assert!((v["step_x_um"].as_f64().unwrap() - 1.5).abs() < 1e-9);
     assert!((v["step_y_um"].as_f64().unwrap() - 10.0).abs() < 1e-9);
-    let h: Vec<f64> = v["heights_um"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect();
+    let h = heights_um(&v);
     for (a, b) in h.iter().zip(&z) {
         assert!((a - b).abs() < 1e-9, "{a} vs {b}");
     }
@@ -491,18 +486,6 @@ fn analyze_leaves_out_lines_with_invalid_points_of_a_foreign_x3p() {
     assert_eq!(idx, vec![0, 2, 3]);
 }
 
-/// The Mitutoyo export's R profile (6664 ordinates 1.5 µm apart), heights in µm.
-fn mitutoyo_profile() -> Vec<f64> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data/real/mitutoyo_surftest_R.x_mm_z_um.csv");
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
-        .collect()
-}
-
 /// `tests/python/x3p_profile.py` (x3pio, a reader and writer independent of ours) with `args`;
 /// its JSON output when it prints any.
 fn x3pio(args: &[&std::ffi::OsStr]) -> Option<serde_json::Value> {
@@ -533,7 +516,7 @@ fn assert_same_heights(got: &[f64], want: &[f64], reader: &str) {
 
 #[test]
 fn a_one_line_grid_is_written_as_a_profile_that_an_independent_reader_reads() {
-    let z = mitutoyo_profile();
+    let z = crate::common::mitutoyo_r_profile();
     let bytes = to_x3p(&map(&z, 1, z.len()), (0.0, 0.0), &X3pMeta::default()).unwrap();
     let xml = main_xml(&bytes);
     assert!(xml.contains("<FeatureType>PRF</FeatureType>"), "{xml}");
@@ -566,12 +549,7 @@ fn a_one_line_grid_is_written_as_a_profile_that_an_independent_reader_reads() {
         "{}",
         v["step_x_um"]
     );
-    let h: Vec<f64> = v["heights_um"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect();
+    let h = heights_um(&v);
     assert_same_heights(&h, &z, "x3pio");
 }
 
@@ -649,4 +627,10 @@ fn a_profile_read_from_a_profile_x3p_is_the_line_of_its_csv() {
             .unwrap();
         assert!((rpk - 2.912).abs() <= 1e-3, "{out}: SJ Rpk {rpk}");
     }
+}
+
+/// The `heights_um` array of a reader's JSON output.
+fn heights_um(v: &serde_json::Value) -> Vec<f64> {
+    let h = v["heights_um"].as_array().unwrap();
+    h.iter().map(|x| x.as_f64().unwrap()).collect()
 }

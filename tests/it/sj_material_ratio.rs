@@ -9,20 +9,7 @@
 use surfscan::metrology::params::{analyze_line, MaterialLevels, Options};
 use surfscan::metrology::sj_material_ratio::sj_material_ratio;
 
-/// The second column of a CSV file with a header row in `tests/data/real`.
-fn second_column(name: &str) -> Vec<f64> {
-    let path = format!("{}/tests/data/real/{name}", env!("CARGO_MANIFEST_DIR"));
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
-        .collect()
-}
-
-fn mitutoyo_r_profile() -> Vec<f64> {
-    second_column("mitutoyo_surftest_R.x_mm_z_um.csv")
-}
+use crate::common::{mitutoyo_r_profile, second_column};
 
 /// `got` printed to `decimals` digits is within one unit of the last digit of `printed`.
 fn within_one_digit(name: &str, got: f64, printed: f64, decimals: i32) {

@@ -868,3 +868,19 @@ pub fn tool_output(command: &mut std::process::Command, package: &str) -> Vec<u8
     );
     out.stdout
 }
+
+/// The second column of a CSV file with a header row in `tests/data/real`.
+pub fn second_column(name: &str) -> Vec<f64> {
+    let path = format!("{}/tests/data/real/{name}", env!("CARGO_MANIFEST_DIR"));
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+        .collect()
+}
+
+/// The Mitutoyo export's R profile (6664 ordinates 1.5 µm apart), heights in µm.
+pub fn mitutoyo_r_profile() -> Vec<f64> {
+    second_column("mitutoyo_surftest_R.x_mm_z_um.csv")
+}
