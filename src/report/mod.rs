@@ -36,9 +36,9 @@ pub mod scan_dir;
 pub mod sections;
 
 pub use context::{Model, ReportContext, ScanAnalysisOptions};
-pub use document::{manufacturer_of, Report, ScanStatus, Traceability};
+pub use document::Report;
 pub use error::ReportError;
-pub use scan_dir::{characterise_scan, scan_line_options, ScanCharacteriser};
+pub use scan_dir::{characterise_scan, ScanCharacteriser};
 
 use crate::grid::Grid;
 use crate::metrology::MetrologyError;

@@ -245,7 +245,7 @@ fn solve(map: HeightMap<'_>, opts: &ContactOptions) -> Result<ContactSurface, St
 /// The v of each row `y₀ + k·s` (k = 0, 1, … while ≤ the last line's y): the surface's y(v)
 /// inverted by bisection between the parameters of the two data lines the row lies between
 /// (the lines' y ascending or descending).
-pub fn rows_v(
+fn rows_v(
     surface: &NurbsSurface,
     params_v: &[f64],
     y_mm: &[f64],
