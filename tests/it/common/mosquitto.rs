@@ -248,10 +248,13 @@ impl Seen {
     }
 }
 
-/// Every message in a subscriber's output so far.
+/// Every message in a subscriber's output so far: the complete lines only. A large payload
+/// reaches the file in more than one write, so a line without its newline is still being
+/// written and is left for the next read.
 pub fn seen(out: &Path) -> Vec<Seen> {
-    std::fs::read_to_string(out)
-        .unwrap_or_default()
+    let bytes = std::fs::read(out).unwrap_or_default();
+    let end = bytes.iter().rposition(|b| *b == b'\n').unwrap_or(0);
+    String::from_utf8_lossy(&bytes[..end])
         .lines()
         .filter_map(|l| {
             let (r, rest) = l.split_once(' ')?;
