@@ -277,6 +277,9 @@ fn a_profile_analysed_where_a_grid_was_shows_none_of_the_grids_figures_or_files(
     for f in grid_files {
         assert!(out.join(f).exists(), "the grid wrote no {f}: {said}");
     }
+    // Six lines have means with a spread and an uncertainty.
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(page.contains("<table id=\"t-uncertainty\">"));
     let csv = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data/real/mitutoyo_surftest_R.x_mm_z_um.csv");
     let said = stderr_of(&csv, &["--no-filter", "--lc", "2.5"]);
@@ -287,6 +290,23 @@ fn a_profile_analysed_where_a_grid_was_shows_none_of_the_grids_figures_or_files(
         );
     }
     let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    // One line has no mean, s or U over lines: the section says so instead of a table of
+    // blanks, on the page and on paper (the PDF typesets the same page).
+    let one_line = "One line: its values are those of the per-line tables";
+    assert!(!page.contains("t-uncertainty") && page.contains(one_line));
+    let pdf = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .arg("report")
+        .arg(&out)
+        .arg("--pdf")
+        .output()
+        .unwrap();
+    assert_eq!(pdf.status.code(), Some(0), "{pdf:?}");
+    let text = crate::report_print::pdftotext(&out.join("report.pdf"));
+    let text = text.split_whitespace().collect::<Vec<_>>().join(" ");
+    assert!(
+        text.contains(one_line) && !text.contains("u of the mean"),
+        "{text}"
+    );
     for title in [
         "Measured heights",
         "3D view of the measured surface",

@@ -464,21 +464,17 @@ fn specification(h: &mut String, report: &Value) {
             why.push_str("; ");
             why.push_str(&text(d));
         }
-        row(
-            h,
-            &[
-                ("t", esc(&text(&l["callout"]))),
-                ("t", esc(&text(&l["verdict"]))),
-                ("", count("n_values")),
-                ("", count("n_beyond")),
-                ("", count("n_undecided")),
-                ("", count("n_allowed")),
-                ("", num(&l["min_um"], Quantity::HeightUm)),
-                ("", num(&l["max_um"], Quantity::HeightUm)),
-                ("", num(&l["line_u_pct"], Quantity::Percent)),
-                ("t", esc(&why)),
-            ],
-        );
+        let mut cells = vec![
+            ("t", esc(&text(&l["callout"]))),
+            ("t", esc(&text(&l["verdict"]))),
+        ];
+        cells.extend(["n_values", "n_beyond", "n_undecided", "n_allowed"].map(|k| ("", count(k))));
+        let (um, pct) = (Quantity::HeightUm, Quantity::Percent);
+        for (k, q) in [("min_um", um), ("max_um", um), ("line_u_pct", pct)] {
+            cells.push(("", num(&l[k], q)));
+        }
+        cells.push(("t", esc(&why)));
+        row(h, &cells);
     }
     let _ = writeln!(
         h,
@@ -488,38 +484,35 @@ fn specification(h: &mut String, report: &Value) {
     );
 }
 
-/// Every line parameter's mean with its uncertainty.
+/// Every line parameter's mean with its uncertainty; of one line, why there is none.
 fn uncertainty(h: &mut String, report: &Value) {
     let u = &report["uncertainty"];
     let params = u["parameters"].as_array().map_or(&[][..], |a| &a[..]);
     if params.is_empty() {
         return;
     }
-    h.push_str("<h2 id=\"uncertainty\">Means and their uncertainty</h2>\n<table id=\"t-uncertainty\">\n<tr><th class=\"t\">parameter</th><th>n</th><th>mean</th><th>s</th><th>u of the mean</th><th>u instrument</th><th>u<sub>c</sub></th><th>U (k = 2)</th></tr>\n");
-    for p in params {
-        let name = text(&p["parameter"]);
-        let (label, q) =
-            parameter(&name).map_or((name, Quantity::Ratio), |t| (t.heading(), t.quantity));
-        row(
-            h,
-            &[
-                ("t", esc(&label)),
-                (
-                    "",
-                    p["n"].as_u64().map(|n| n.to_string()).unwrap_or_default(),
-                ),
-                ("", num(&p["mean"], q)),
-                ("", num(&p["s"], q)),
-                ("", num(&p["u_mean"], q)),
-                ("", num(&p["u_instrument"], q)),
-                ("", num(&p["u_c"], q)),
-                ("", num(&p["U"], q)),
-            ],
-        );
-    }
+    h.push_str("<h2 id=\"uncertainty\">Means and their uncertainty</h2>\n");
+    let why = if params.iter().all(|p| p["n"].as_u64() < Some(2)) {
+        "One line: its values are those of the per-line tables; a mean over lines, their spread s and an uncertainty from it need two lines or more."
+    } else {
+        h.push_str("<table id=\"t-uncertainty\">\n<tr><th class=\"t\">parameter</th><th>n</th><th>mean</th><th>s</th><th>u of the mean</th><th>u instrument</th><th>u<sub>c</sub></th><th>U (k = 2)</th></tr>\n");
+        for p in params {
+            let name = text(&p["parameter"]);
+            let (label, q) =
+                parameter(&name).map_or((name, Quantity::Ratio), |t| (t.heading(), t.quantity));
+            let n = p["n"].as_u64().map(|n| n.to_string());
+            let mut cells = vec![("t", esc(&label)), ("", n.unwrap_or_default())];
+            for k in ["mean", "s", "u_mean", "u_instrument", "u_c", "U"] {
+                cells.push(("", num(&p[k], q)));
+            }
+            row(h, &cells);
+        }
+        h.push_str("</table>\n");
+        "s over the lines, u of the mean s/√n, the instrument's u from its calibration, u<sub>c</sub> combined (GUM), U = 2·u<sub>c</sub>."
+    };
     let _ = writeln!(
         h,
-        "</table>\n<p class=\"muted\">s over the lines, u of the mean s/√n, the instrument's u from its calibration, u<sub>c</sub> combined (GUM), U = 2·u<sub>c</sub>. {}</p>",
+        "<p class=\"muted\">{why} {}</p>",
         esc(&text(&u["instrument"]))
     );
 }
@@ -1376,7 +1369,7 @@ mod tests {
         line["index"] = 0.into();
         line["y_mm"] = 0.0.into();
         let means =
-            serde_json::json!([{"parameter": "A1", "n": 1}, {"parameter": "Sx_um", "n": 1}]);
+            serde_json::json!([{"parameter": "A1", "n": 2}, {"parameter": "Sx_um", "n": 2}]);
         let report = serde_json::json!({"kind": "grid", "lines": [line], "uncertainty": {"parameters": means}});
         let h = render(&report, None, &[], None, |_| Vec::new());
         let rpc = params["RPc_per_cm"].as_f64().unwrap();
