@@ -591,7 +591,9 @@ impl<'a> Fitting<'a> {
         let t_fit = Instant::now();
         let fitted = fit_surface(&self.args.input, grid, &self.recipe, &self.progress);
         self.progress.finish_and_clear();
-        let (fit, replaced) = fitted?;
+        let (mut fit, replaced) = fitted?;
+        // Written where it was measured: an X3P input's x offset (its y is the lines' own).
+        fit.place_at_x(grid.x0_mm);
         report_replaced(&replaced);
         let fit_s = t_fit.elapsed().as_secs_f64();
         let t_shape = Instant::now();
@@ -763,6 +765,7 @@ impl<'a> Fitting<'a> {
             "output": self.output.display().to_string(),
             "grid": { "rows": l.rows(), "cols": l.cols },
             "lines_in_input": l.lines_in_input(),
+            "x0_mm": l.x0_mm,
             "pitch_x_mm": l.pitch_x_mm,
             "pitch_y_mm": self.pitch_y_mm,
             "y_mm": l.y_mm,

@@ -255,6 +255,7 @@ pub fn approximate_v(
         surface,
         params_u: paper.params_u,
         params_v,
+        x0_mm: 0.0,
         timings: FitTimings {
             params_s,
             knots_factor_s,

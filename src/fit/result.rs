@@ -36,4 +36,21 @@ pub struct FitResult {
     pub params_v: Vec<f64>,
     /// Time per stage.
     pub timings: FitTimings,
+    /// x of the data's first column, mm: the surface is fitted from x = 0 and then placed
+    /// there ([`FitResult::place_at_x`]); 0 until it is.
+    pub x0_mm: f64,
+}
+
+impl FitResult {
+    /// Places the surface where the data's first column is, `x0_mm` along x. The fit is made
+    /// from x = 0: its chord-length parameters and knots depend on differences of x alone,
+    /// and the poles' x solve interpolates x with basis functions that sum to 1, so a fit
+    /// from `x0_mm` would give the same surface moved by `x0_mm` (to rounding).
+    pub fn place_at_x(&mut self, x0_mm: f64) {
+        // A zero offset leaves every bit as fitted (even a pole x of −0).
+        if x0_mm != 0.0 {
+            self.surface.shift_x(x0_mm);
+            self.x0_mm = x0_mm;
+        }
+    }
 }

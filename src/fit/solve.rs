@@ -86,6 +86,7 @@ impl IncrementalFitter {
             params_u,
             params_v,
             timings,
+            x0_mm: 0.0,
         })
     }
 }

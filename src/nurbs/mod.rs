@@ -260,4 +260,9 @@ impl NurbsSurface {
     pub fn pole(&self, i: usize, j: usize) -> [f64; 3] {
         self.net.pole(i, j)
     }
+    /// The surface moved by `dx_mm` along x: every pole's x plus `dx_mm`, the knots as they
+    /// are (the basis functions sum to 1, so every point S(u, v) moves by `dx_mm`).
+    pub fn shift_x(&mut self, dx_mm: f64) {
+        self.net.shift_x(dx_mm);
+    }
 }

@@ -248,6 +248,12 @@ impl PoleNet {
         out
     }
 
+    /// Every pole moved by `dx` along x.
+    pub fn shift_x(&mut self, dx: f64) {
+        let own = self.own_x.iter_mut().flatten().flatten();
+        self.x.iter_mut().chain(own).for_each(|x| *x += dx);
+    }
+
     /// The x per column that rows without their own x share.
     pub fn column_x(&self) -> &[f64] {
         &self.x

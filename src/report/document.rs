@@ -37,6 +37,9 @@ pub struct Report {
     pub input: String,
     /// `grid` or `scan`.
     pub kind: &'static str,
+    /// x of each line's first point, mm: 0 for a scan and a grid CSV, a profile CSV's first
+    /// x, an X3P file's x offset (each line's y is in `lines`).
+    pub x0_mm: f64,
     /// The verdict of the lines against the part's specification (a scan of a recipe with
     /// limits): first, as it is what the report is read for.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -143,6 +146,7 @@ pub fn assemble(
         software: crate::build_info::software(),
         input: ctx.input.clone(),
         kind: ctx.kind,
+        x0_mm: grid.x0_mm,
         specification: sections.specification.verdict,
         uncertainty: sections.specification.uncertainty,
         recipe,

@@ -2,6 +2,7 @@
 //! IGES (once whole, once forced into patches) and read back by OpenCascade through
 //! `tests/python/check_iges_occt.py`, which must find one B-spline face per patch with the
 //! right degrees, pole counts and bit-identical knots, that passes through the measured points within 1e-10 mm.
+//! An X3P input's surface is found where the file places the data (its CX and CY offsets).
 //! Fails (does not skip) when python3 or OCP is missing.
 use surfscan::fit::{fit_grid, FitOptions};
 use surfscan::iges::{parameter_lines_bound, write_iges, IgesOptions};
@@ -9,6 +10,29 @@ use surfscan::iges::{parameter_lines_bound, write_iges, IgesOptions};
 use super::common::{
     sur2_window as window, SUR2_PITCH_X_MM as PITCH_X_MM, SUR2_PITCH_Y_MM as PITCH_Y_MM,
 };
+
+/// Writes `expect` beside `igs` and has OpenCascade check the file against it.
+fn occt_check(igs: &std::path::Path, expect: &serde_json::Value) {
+    let json = igs.with_extension("expect.json");
+    std::fs::write(&json, serde_json::to_vec(expect).unwrap()).unwrap();
+    let script = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/python/check_iges_occt.py"
+    );
+    let out = crate::common::python()
+        .arg(script)
+        .arg(igs)
+        .arg(&json)
+        .output()
+        .expect("python3 must be installed for the OpenCascade check");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && stdout.lines().any(|l| l.starts_with("OK:")),
+        "OpenCascade check failed ({}):\n{stdout}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
 
 /// `split`: force patches by limiting an entity to 3/4 of the lines the whole surface needs.
 fn check(split: bool, expect_patches_at_least: usize) {
@@ -63,25 +87,7 @@ fn check(split: bool, expect_patches_at_least: usize) {
         "patches": expect_patches,
         "tolerance_mm": 1e-10,
     });
-    let json = dir.path().join("expect.json");
-    std::fs::write(&json, serde_json::to_vec(&expect).unwrap()).unwrap();
-    let script = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/python/check_iges_occt.py"
-    );
-    let out = crate::common::python()
-        .arg(script)
-        .arg(&igs)
-        .arg(&json)
-        .output()
-        .expect("python3 must be installed for the OpenCascade check");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success() && stdout.lines().any(|l| l.starts_with("OK:")),
-        "OpenCascade check failed ({}):\n{stdout}\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
+    occt_check(&igs, &expect);
 }
 
 #[test]
@@ -92,4 +98,72 @@ fn opencascade_reads_the_fitted_window_exactly() {
 #[test]
 fn opencascade_reads_split_patches_exactly() {
     check(true, 2);
+}
+
+/// A window of sur-2 as an X3P file whose first point is at x = 0.25 mm (CX offset) and whose
+/// first line is at the machine's y = −20 mm (CY offset): `surfscan fit` writes the surface
+/// there, and OpenCascade finds it through every data point at x = 0.25 + k·pitch,
+/// y = −20 + l·pitch (a surface written from x = 0 misses them by 0.25 mm).
+#[test]
+fn opencascade_finds_an_x3p_inputs_surface_where_it_was_measured() {
+    use surfscan::metrology::areal::HeightMap;
+    use surfscan::x3p::{read_x3p, to_x3p, X3pMeta};
+    let (rows, cols, (x0, y0)) = (12, 40, (0.25, -20.0));
+    let map = HeightMap {
+        heights_um: &window(rows, cols),
+        rows,
+        cols,
+        pitch_x_mm: PITCH_X_MM,
+        pitch_y_mm: PITCH_Y_MM,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (x3p, igs) = (dir.path().join("w.x3p"), dir.path().join("w.igs"));
+    let file = to_x3p(&map, (x0, y0), &X3pMeta::default()).unwrap();
+    std::fs::write(&x3p, file).unwrap();
+    let report = dir.path().join("fit.json");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
+        .arg("fit")
+        .arg(&x3p)
+        .arg("-o")
+        .arg(&igs)
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(report["x0_mm"], 0.25);
+    // The heights as the file holds them; the fit's parameters depend on differences of x and
+    // y alone, so the fit from 0 gives them.
+    let read = read_x3p(&std::fs::read(&x3p).unwrap()).unwrap();
+    let y_mm: Vec<f64> = (0..rows).map(|r| y0 + r as f64 * PITCH_Y_MM).collect();
+    let fit = fit_grid(
+        PITCH_X_MM,
+        &y_mm,
+        &read.heights_um,
+        cols,
+        FitOptions::default(),
+    )
+    .unwrap();
+    let mut points = Vec::new();
+    for (l, &v) in fit.params_v.iter().enumerate() {
+        for (k, &u) in fit.params_u.iter().enumerate() {
+            let (x, z) = (
+                x0 + k as f64 * PITCH_X_MM,
+                read.heights_um[l * cols + k] / 1000.0,
+            );
+            points.push([u, v, x, y_mm[l], z]);
+        }
+    }
+    let expect = serde_json::json!({
+        "faces": 1,
+        "patches": [{"degree_u": 5, "degree_v": 5, "poles_u": cols, "poles_v": rows, "points": points}],
+        "tolerance_mm": 1e-10,
+    });
+    occt_check(&igs, &expect);
 }

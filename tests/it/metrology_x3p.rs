@@ -435,9 +435,17 @@ fn analyze_reads_an_x3p_as_the_same_grid_as_its_csv() {
         assert!((ra - rb).abs() <= 1e-12 * ra, "{ra} vs {rb}");
     }
     assert!(std::fs::metadata(dir.path().join("x3p/heightmap.png")).is_ok());
-    // The file's x offset is kept: the grid's X3P starts where the input did.
-    let x = read_x3p(&std::fs::read(dir.path().join("x3p/measured.x3p")).unwrap()).unwrap();
-    assert_eq!((x.offset_x_mm, x.offset_y_mm), (0.25, 0.0));
+    // The file's x offset is kept: report.json gives it, and the grid's X3P and the model's
+    // sampled on its points start where the input did.
+    assert_eq!(
+        (&from_x3p["x0_mm"], &from_csv["x0_mm"]),
+        (&0.25.into(), &0.0.into())
+    );
+    for f in ["measured", "model"] {
+        let x = read_x3p(&std::fs::read(dir.path().join(format!("x3p/{f}.x3p"))).unwrap());
+        let x = x.unwrap();
+        assert_eq!((x.offset_x_mm, x.offset_y_mm), (0.25, 0.0), "{f}.x3p");
+    }
 }
 
 #[test]

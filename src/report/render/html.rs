@@ -971,19 +971,10 @@ fn comparison_table(h: &mut String, id: &str, rows: &[&Comparison]) {
             Some(_) => "<span class=\"flag\">NO</span>".to_string(),
             None => "<span class=\"muted\">not compared</span>".to_string(),
         };
-        let [a, b, d, t] = &c.cells;
-        row(
-            h,
-            &[
-                ("", c.line.clone()),
-                ("t", esc(&c.name)),
-                ("", a.clone()),
-                ("", b.clone()),
-                ("", d.clone()),
-                ("", t.clone()),
-                ("t", within),
-            ],
-        );
+        let mut cells = vec![("", c.line.clone()), ("t", esc(&c.name))];
+        cells.extend(c.cells.iter().map(|v| ("", v.clone())));
+        cells.push(("t", within));
+        row(h, &cells);
     }
     h.push_str("</table></div>\n");
 }
