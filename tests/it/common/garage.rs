@@ -4,7 +4,7 @@
 //! and a key made with its own CLI. Objects are read back with `curl --aws-sigv4`, an S3
 //! client independent of the code under test.
 
-use super::mosquitto::{free_port, Killed};
+use super::mosquitto::{free_ports, Killed};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -53,7 +53,7 @@ impl Garage {
     pub fn start(dir: &Path) -> Garage {
         let dir = dir.join("garage");
         std::fs::create_dir_all(&dir).unwrap();
-        let (rpc_port, s3_port) = (free_port(), free_port());
+        let [rpc_port, s3_port] = free_ports();
         let mut bytes = [0u8; 32];
         ring::rand::SecureRandom::fill(&ring::rand::SystemRandom::new(), &mut bytes).unwrap();
         let secret: String = bytes.iter().map(|b| format!("{b:02x}")).collect();

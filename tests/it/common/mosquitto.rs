@@ -19,14 +19,21 @@ const WATCHER_PASSWORD: &str = "w4tcher-pw";
 /// A lab's client that commands stations (no topic of its own beyond the ACL's patterns).
 pub const OPERATOR_USER: &str = "operator";
 const OPERATOR_PASSWORD: &str = "op3rator-pw";
+/// The longest the broker may take to start, to stop, or to pass on what a test waits for:
+/// a guard against a hang, long enough for a loaded machine.
+const DEADLINE: Duration = Duration::from_secs(90);
 
 /// A free loopback TCP port (bound and released; the caller binds it next).
 pub fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
+    let [port] = free_ports();
+    port
+}
+
+/// `N` different free loopback TCP ports: each held until all are picked (a port released
+/// at once could be picked again for the next).
+pub fn free_ports<const N: usize>() -> [u16; N] {
+    let held: [TcpListener; N] = std::array::from_fn(|_| TcpListener::bind("127.0.0.1:0").unwrap());
+    held.map(|l| l.local_addr().unwrap().port())
 }
 
 /// A child process killed when dropped.
@@ -87,32 +94,41 @@ impl Broker {
             ),
         )
         .unwrap();
-        let port = free_port();
-        // Started as root, mosquitto drops to the user `mosquitto`, who cannot write the
-        // test's directory (its persistence and log): it stays root then (CI runs as root).
-        let user = if nix::unistd::geteuid().is_root() {
-            "user root\n"
-        } else {
-            ""
-        };
-        std::fs::write(
-            dir.join("mosquitto.conf"),
-            format!(
-                "{user}listener {port} 127.0.0.1\nallow_anonymous false\npassword_file {}\nacl_file {}\npersistence true\npersistence_location {}/\nlog_dest file {}\n",
-                passwd.display(),
-                dir.join("acl").display(),
-                dir.join("data").display(),
-                dir.join("mosquitto.log").display(),
-            ),
-        )
-        .unwrap();
-        let mut b = Broker {
-            port,
-            dir,
-            process: None,
-        };
-        b.restart();
-        b
+        // The port is free when picked, but another process may bind it before the broker
+        // does (the tests run in parallel): then the broker exits naming it, and another
+        // port is tried.
+        let mut attempts = 0;
+        loop {
+            let port = free_port();
+            // Started as root, mosquitto drops to the user `mosquitto`, who cannot write the
+            // test's directory (its persistence and log): it stays root then (CI runs as root).
+            let user = if nix::unistd::geteuid().is_root() {
+                "user root\n"
+            } else {
+                ""
+            };
+            std::fs::write(
+                dir.join("mosquitto.conf"),
+                format!(
+                    "{user}listener {port} 127.0.0.1\nallow_anonymous false\npassword_file {}\nacl_file {}\npersistence true\npersistence_location {}/\nlog_dest file {}\n",
+                    passwd.display(),
+                    dir.join("acl").display(),
+                    dir.join("data").display(),
+                    dir.join("mosquitto.log").display(),
+                ),
+            )
+            .unwrap();
+            let mut b = Broker {
+                port,
+                dir: dir.clone(),
+                process: None,
+            };
+            match b.launch() {
+                Ok(()) => return b,
+                Err(e) if e.contains("Address already in use") && attempts < 5 => attempts += 1,
+                Err(e) => panic!("{e}"),
+            }
+        }
     }
 
     /// The broker's URL.
@@ -128,7 +144,7 @@ impl Broker {
             let start = Instant::now();
             while p.0.try_wait().unwrap().is_none() {
                 assert!(
-                    start.elapsed() < Duration::from_secs(10),
+                    start.elapsed() < DEADLINE,
                     "mosquitto does not stop: {}",
                     std::fs::read_to_string(self.dir.join("mosquitto.log")).unwrap_or_default()
                 );
@@ -159,7 +175,18 @@ impl Broker {
 
     /// Starts the broker again on the same port, with what it saved.
     pub fn restart(&mut self) {
+        if let Err(e) = self.launch() {
+            panic!("{e}");
+        }
+    }
+
+    /// Starts the broker and waits until it listens: until its log says it runs, which it
+    /// writes once all its listeners are open (another process listening on the port would
+    /// answer a connection too), or it exits naming what it could not do.
+    fn launch(&mut self) -> Result<(), String> {
         assert!(self.process.is_none(), "the broker is running");
+        let log = self.dir.join("mosquitto.log");
+        let from = std::fs::metadata(&log).map_or(0, |m| m.len() as usize);
         let child = Command::new(which("mosquitto"))
             .arg("-c")
             .arg(self.dir.join("mosquitto.conf"))
@@ -170,20 +197,25 @@ impl Broker {
             .unwrap();
         let mut child = Killed(child);
         let start = Instant::now();
-        while std::net::TcpStream::connect(("127.0.0.1", self.port)).is_err() {
+        loop {
+            let bytes = std::fs::read(&log).unwrap_or_default();
+            let said = String::from_utf8_lossy(bytes.get(from..).unwrap_or(&bytes));
             if let Some(st) = child.0.try_wait().unwrap() {
-                panic!(
-                    "mosquitto exited ({st}): {}",
-                    std::fs::read_to_string(self.dir.join("mosquitto.log")).unwrap_or_default()
-                );
+                return Err(format!("mosquitto exited ({st}): {said}"));
+            }
+            if said.contains(" running\n")
+                && std::net::TcpStream::connect(("127.0.0.1", self.port)).is_ok()
+            {
+                break;
             }
             assert!(
-                start.elapsed() < Duration::from_secs(10),
-                "mosquitto does not listen"
+                start.elapsed() < DEADLINE,
+                "mosquitto does not listen: {said}"
             );
             std::thread::sleep(Duration::from_millis(20));
         }
         self.process = Some(child);
+        Ok(())
     }
 
     /// Starts `mosquitto_sub` as the watcher with a persistent session (client id `id`,
@@ -277,7 +309,7 @@ pub async fn wait_seen(out: &Path, what: &str, done: impl Fn(&[Seen]) -> bool) -
             return s;
         }
         assert!(
-            start.elapsed() < Duration::from_secs(90),
+            start.elapsed() < DEADLINE,
             "{what}: the subscriber saw {s:#?}"
         );
         tokio::time::sleep(Duration::from_millis(50)).await;
