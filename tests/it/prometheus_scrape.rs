@@ -181,10 +181,17 @@ async fn a_real_prometheus_scrapes_the_station_and_sees_the_scan_progress() {
     })
     .await;
     assert_eq!(ended.last_stop.unwrap().status, StopStatus::Success);
-    // Give it two more scrapes, then ask what it saw of the lines.
-    tokio::time::sleep(Duration::from_millis(600)).await;
-    let done = samples(prom_port, "surfscan_lines_done{scan!=\"\"}");
+    // Wait for a scrape after the scan's end (one every 250 ms, later on a loaded machine),
+    // then ask what it saw of the lines.
     let total = f64::from(e2e::LINES);
+    let start = Instant::now();
+    let done = loop {
+        let done = samples(prom_port, "surfscan_lines_done{scan!=\"\"}");
+        if done.last() == Some(&total) || start.elapsed() > e2e::DEADLINE {
+            break done;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
     assert_eq!(done.last(), Some(&total), "{done:?}");
     assert!(
         done.iter().any(|v| *v > 0.0 && *v < total),
