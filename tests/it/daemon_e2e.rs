@@ -513,7 +513,7 @@ fn a_bad_config_exits_78_naming_the_key() {
         .spawn()
         .unwrap();
     let start = Instant::now();
-    while d.try_wait().unwrap().is_none() && start.elapsed() < Duration::from_secs(10) {
+    while d.try_wait().unwrap().is_none() && start.elapsed() < DEADLINE {
         std::thread::sleep(Duration::from_millis(20));
     }
     if d.try_wait().unwrap().is_none() {

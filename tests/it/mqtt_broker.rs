@@ -245,7 +245,7 @@ async fn a_scan_is_seen_by_a_subscriber_with_its_status_events_and_last_will() {
     assert_eq!(status_msg["links"]["mqtt"]["ok"], true, "{status_msg}");
     // Nothing is left to deliver: the outbox drains (a message written just after the last
     // status, such as a later status or event, may still be on its way at this instant).
-    let until = std::time::Instant::now() + Duration::from_secs(15);
+    let until = std::time::Instant::now() + e2e::DEADLINE;
     while outbox_files(&r) != 0 && std::time::Instant::now() < until {
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
