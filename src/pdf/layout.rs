@@ -29,19 +29,20 @@ pub struct Sheet {
 }
 
 impl Sheet {
-    /// A4 or US Letter with the printed report's margins (16, 13, 17, 13 mm).
+    /// A4 or US Letter with the printed report's margins: 16, 13, 17, 13 mm on A4; 10 and 11
+    /// mm at top and bottom on Letter, which is 17.6 mm shorter.
     pub fn new(letter: bool) -> Sheet {
-        let (width, height) = if letter {
-            (612.0, 792.0)
+        let (width, height, top, bottom) = if letter {
+            (612.0, 792.0, 10.0, 11.0)
         } else {
-            (210.0 * MM, 297.0 * MM)
+            (210.0 * MM, 297.0 * MM, 16.0, 17.0)
         };
         Sheet {
             width,
             height,
-            top: 16.0 * MM,
+            top: top * MM,
             right: 13.0 * MM,
-            bottom: 17.0 * MM,
+            bottom: bottom * MM,
             left: 13.0 * MM,
         }
     }
@@ -848,8 +849,10 @@ fn running_items(
     m: &dyn Measure,
 ) {
     let right = sheet.width - sheet.right;
-    let top = sheet.top - 6.0 * MM;
-    let foot = sheet.height - sheet.bottom + 8.0 * MM;
+    // Baselines 6 mm above and 8 mm below the text block; in Letter's narrower margins no
+    // nearer the paper's edge than 7 and 5.5 mm.
+    let top = sheet.top - (6.0 * MM).min(sheet.top - 7.0 * MM);
+    let foot = sheet.height - sheet.bottom + (8.0 * MM).min(sheet.bottom - 5.5 * MM);
     let number = format!("page {n} of {total}");
     let mut text = |x: f32, y: f32, size: f32, t: &str| {
         page.push(Item::Text {
