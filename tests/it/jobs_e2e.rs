@@ -489,7 +489,7 @@ async fn the_queue_runs_every_job_once_in_order_through_kill_9_at_random_moments
         all[2].1.start.time
     );
     // Every queue command is in the log with who sent it.
-    let log = std::fs::read_to_string(r.out().join("queue-log.jsonl")).unwrap();
+    let log = crate::common::complete_lines(&r.out().join("queue-log.jsonl"));
     let adds: Vec<serde_json::Value> = log
         .lines()
         .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())

@@ -115,12 +115,13 @@ fn files_named(r: &Rig, name: &str) -> Vec<PathBuf> {
     found
 }
 
-/// Every entry of the queue's log.
+/// Every entry of the queue's log so far (its complete lines: the daemon appends its own
+/// entries, such as a job's start and finish, while the test reads).
 fn queue_log(r: &Rig) -> Vec<serde_json::Value> {
     files_named(r, "queue-log.jsonl")
         .iter()
         .flat_map(|p| {
-            let text = std::fs::read_to_string(p).unwrap();
+            let text = crate::common::complete_lines(p);
             text.lines()
                 .map(|l| serde_json::from_str(l).unwrap())
                 .collect::<Vec<_>>()

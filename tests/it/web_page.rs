@@ -622,7 +622,7 @@ async fn a_job_queued_from_the_page_waits_for_its_specimen_then_runs_to_its_verd
     assert!(history.as_str().unwrap().contains("mirror"), "{history}");
 
     // The queue's log names alice, with where she was, for each of her commands.
-    let log = std::fs::read_to_string(r.out().join("queue-log.jsonl")).unwrap();
+    let log = crate::common::complete_lines(&r.out().join("queue-log.jsonl"));
     let by_alice: Vec<(String, Vec<u64>)> = log
         .lines()
         .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())

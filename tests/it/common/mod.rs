@@ -454,6 +454,17 @@ pub async fn wait_until(limit: Duration, what: &str, mut cond: impl FnMut() -> b
     }
 }
 
+/// The complete lines of a file another process appends to (up to its last newline; empty
+/// while there is no file). A line may reach the file in more than one write (a buffered
+/// writer's 4 KiB blocks; a write that crosses a page of the page cache is seen a page at a
+/// time), so a line without its newline is still being written and is left for the next
+/// read.
+pub fn complete_lines(path: &Path) -> String {
+    let mut bytes = std::fs::read(path).unwrap_or_default();
+    bytes.truncate(bytes.iter().rposition(|b| *b == b'\n').map_or(0, |i| i + 1));
+    String::from_utf8_lossy(&bytes).into_owned()
+}
+
 /// Number of line records in the journal of the one scan under `out` (0 while none).
 pub fn committed_lines(out: &Path) -> usize {
     let Ok(entries) = std::fs::read_dir(out) else {

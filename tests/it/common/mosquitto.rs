@@ -280,13 +280,12 @@ impl Seen {
     }
 }
 
-/// Every message in a subscriber's output so far: the complete lines only. A large payload
-/// reaches the file in more than one write, so a line without its newline is still being
-/// written and is left for the next read.
+/// Every message in a subscriber's output so far: the complete lines only. mosquitto_sub's
+/// output is a file, written through stdio's 4 KiB buffer: a results message (about 6 KB)
+/// reaches it in two writes, and a read between them sees the first part without its
+/// newline, which is left for the next read.
 pub fn seen(out: &Path) -> Vec<Seen> {
-    let bytes = std::fs::read(out).unwrap_or_default();
-    let end = bytes.iter().rposition(|b| *b == b'\n').unwrap_or(0);
-    String::from_utf8_lossy(&bytes[..end])
+    crate::common::complete_lines(out)
         .lines()
         .filter_map(|l| {
             let (r, rest) = l.split_once(' ')?;
