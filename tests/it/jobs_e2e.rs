@@ -439,12 +439,15 @@ async fn the_queue_runs_every_job_once_in_order_through_kill_9_at_random_moments
     // have suspended before (a device busy after a kill): its success is the block sought.
     let hook_log = r.dir.path().join("hook.log");
     let id_line = format!("SURFSCAN_SCAN_ID={}\n", all[3].0);
+    // A block is whole once the hook's blank line follows it (`sort` writes it first; a
+    // read while it is written may see only its first part).
     let success = |t: &str| -> Option<String> {
-        t.split("\n\n")
+        t.split_inclusive("\n\n")
+            .filter(|b| b.ends_with("\n\n"))
             .find(|b| b.contains(&id_line) && b.contains("SURFSCAN_STATUS=success\n"))
             .map(str::to_owned)
     };
-    let until = Instant::now() + Duration::from_secs(30);
+    let until = Instant::now() + DEADLINE;
     let last_hook = loop {
         let t = std::fs::read_to_string(&hook_log).unwrap_or_default();
         if let Some(b) = success(&t) {
