@@ -16,22 +16,30 @@ use serde::Serialize;
 /// Material ratio in % of a piecewise-linear curve through `heights` (uniform spacing) at
 /// `level`: the fraction of its length where the curve is at or above `level`.
 pub fn material_ratio_pct(heights: &[f64], level: f64) -> f64 {
+    material_ratio_pct_at(heights, [level])[0]
+}
+
+/// [`material_ratio_pct`] at each of `levels` from one pass over the curve: each level's terms
+/// are added in the same order as there, so each ratio is the same bits.
+pub fn material_ratio_pct_at<const L: usize>(heights: &[f64], levels: [f64; L]) -> [f64; L] {
     if heights.len() < 2 {
-        return match heights.first() {
+        return levels.map(|level| match heights.first() {
             Some(z) if *z >= level => 100.0,
             _ => 0.0,
-        };
+        });
     }
-    let mut inside = 0.0;
+    let mut inside = [0.0; L];
     for w in heights.windows(2) {
         let (a, b) = match w {
             [a, b] => (*a, *b),
             _ => continue,
         };
         let (hi, lo) = if a >= b { (a, b) } else { (b, a) };
-        inside += segment_inside(hi, lo, level);
+        for (s, level) in inside.iter_mut().zip(levels) {
+            *s += segment_inside(hi, lo, level);
+        }
     }
-    inside / (heights.len() - 1) as f64 * 100.0
+    inside.map(|s| s / (heights.len() - 1) as f64 * 100.0)
 }
 
 /// C(mr): the level at which the material ratio of the piecewise-linear curve through

@@ -365,19 +365,6 @@ pub const AVERAGING: &str = "Ra Rq Rp Rv Rz Rsk Rku RDq RDa RSm Rc RzJIS: per sa
 /// Points of [`LineAnalysis::rk_curve`] (0.1 % steps of Mr).
 pub const RK_CURVE_POINTS: usize = 1001;
 
-impl LineAnalysis {
-    /// Rmr(c): material ratio in % at `depth_um` below the highest peak of the evaluation length,
-    /// from the lengths of the cross line on the piecewise-linear profile.
-    pub fn rmr_pct(&self, depth_um: f64) -> f64 {
-        let top = self
-            .roughness_um
-            .iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max);
-        material_ratio_pct(&self.roughness_um, top - depth_um)
-    }
-}
-
 /// The definition ids written into every recipe: each parameter's of
 /// [`super::parameter_table::PARAMETERS`], and Rmr(c)'s as ISO and the SJ series state it.
 pub fn definitions() -> BTreeMap<String, String> {

@@ -5,7 +5,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use std::f64::consts::PI;
-use surfscan::metrology::bearing::{bearing_curve_xz, material_ratio_pct};
+use surfscan::metrology::bearing::{bearing_curve_xz, material_ratio_pct, material_ratio_pct_at};
 use surfscan::metrology::filter::{gaussian_mean_line, split};
 use surfscan::metrology::params::{analyze_line, rk_family, Options};
 use surfscan::metrology::MetrologyError;
@@ -187,11 +187,36 @@ fn sine_parameters_match_closed_forms() {
     assert_eq!(f.mr1_pct, 0.0);
     // Rmr at depth A below the top (the mean line) is 50 %.
     // (4000 of the 7999 segments lie at or above the mean line.)
-    assert!(
-        (a.rmr_pct(amp) - 4000.0 / 7999.0 * 100.0).abs() < 1e-9,
-        "{}",
-        a.rmr_pct(amp)
-    );
+    let top = a
+        .roughness_um
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max);
+    let rmr = material_ratio_pct(&a.roughness_um, top - amp);
+    assert!((rmr - 4000.0 / 7999.0 * 100.0).abs() < 1e-9, "{rmr}");
+}
+
+#[test]
+fn material_ratios_from_one_pass_are_each_levels_own_bits() {
+    // A rough profile with flats (levels on samples and between them), and the short ones.
+    let z: Vec<f64> = (0..5000)
+        .map(|k| ((k as f64 * 0.37).sin() * 3.0 + (k as f64 * 0.011).cos()).round() / 4.0)
+        .chain((0..3000).map(|k| (k as f64 * 0.05).sin() * 0.731))
+        .collect();
+    let levels: [f64; 11] = std::array::from_fn(|k| 1.0 - 0.31 * k as f64);
+    for h in [&z[..], &z[..1], &[][..]] {
+        let each = material_ratio_pct_at(h, levels);
+        for (got, level) in each.iter().zip(levels) {
+            assert_eq!(
+                got.to_bits(),
+                material_ratio_pct(h, level).to_bits(),
+                "{level}"
+            );
+        }
+    }
+    // Not the trivial answer: the levels cut the profile.
+    let each = material_ratio_pct_at(&z, levels);
+    assert!(each.iter().any(|m| *m > 1.0 && *m < 99.0), "{each:?}");
 }
 
 #[test]

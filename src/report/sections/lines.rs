@@ -7,6 +7,7 @@
 use super::SectionInput;
 use crate::grid::Grid;
 use crate::metrology::areal;
+use crate::metrology::bearing::material_ratio_pct_at;
 use crate::metrology::cutoff::iso4288_check;
 use crate::metrology::instrument::compare_profile;
 use crate::metrology::params::{analyze_line, LineAnalysis, MaterialLevels, Options};
@@ -29,14 +30,14 @@ pub struct LinesSection {
     pub analyses: Vec<LineAnalysis>,
 }
 
-/// Rmr(c) at depths c = 0, 10, …, 100 % of Rt below the highest peak: `[c_um, Rmr_pct]`.
+/// Rmr(c) at depths c = 0, 10, …, 100 % of Rt below the highest peak: `[c_um, Rmr_pct]`,
+/// the material ratio of the evaluated profile's cross line, all depths from one pass.
 pub fn rmr_table(a: &LineAnalysis) -> Vec<[f64; 2]> {
-    (0..=10)
-        .map(|k| {
-            let c = a.params.rt_um * k as f64 / 10.0;
-            [c, a.rmr_pct(c)]
-        })
-        .collect()
+    let r = &a.roughness_um;
+    let top = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let depths: [f64; 11] = std::array::from_fn(|k| a.params.rt_um * k as f64 / 10.0);
+    let ratios = material_ratio_pct_at(r, depths.map(|c| top - c));
+    (0..11).map(|k| [depths[k], ratios[k]]).collect()
 }
 
 /// `a` without the primary profile and the mean line: the report draws each line's
