@@ -198,7 +198,12 @@ pub fn definitions() -> BTreeMap<String, String> {
 /// Sa … Sdr of a grid after plane levelling.
 pub fn areal_params(grid: &HeightMap<'_>) -> Result<ArealParams, MetrologyError> {
     let (z, plane) = level_plane(grid)?;
-    let m = super::params::EvaluationLengthMoments::of(&z);
+    Ok(areal_params_of_levelled(grid, &z, plane))
+}
+
+/// [`areal_params`] from `grid`'s heights `z` and `plane` as [`level_plane`] gives them.
+pub fn areal_params_of_levelled(grid: &HeightMap<'_>, z: &[f64], plane: [f64; 3]) -> ArealParams {
+    let m = super::params::EvaluationLengthMoments::of(z);
     let sp = z.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let sv = -z.iter().copied().fold(f64::INFINITY, f64::min);
     let (rows, cols) = (grid.rows, grid.cols);
@@ -233,7 +238,7 @@ pub fn areal_params(grid: &HeightMap<'_>) -> Result<ArealParams, MetrologyError>
         }
     }
     let projected = (cols - 1) as f64 * dx * (rows - 1) as f64 * dy;
-    Ok(ArealParams {
+    ArealParams {
         sa_um: m.ra_um,
         sq_um: m.rq_um,
         sp_um: sp,
@@ -245,7 +250,7 @@ pub fn areal_params(grid: &HeightMap<'_>) -> Result<ArealParams, MetrologyError>
         sdr_pct: (area / projected - 1.0) * 100.0,
         plane_um: plane,
         definitions: definitions(),
-    })
+    }
 }
 
 /// Sq alone of a grid after plane levelling: the bits of [`areal_params`]' `sq_um` (the same
@@ -260,16 +265,15 @@ pub fn sq_um(grid: &HeightMap<'_>) -> Result<f64, MetrologyError> {
     Ok((m2 / grid.heights_um.len() as f64).sqrt())
 }
 
-/// The pooled areal material ratio curve Smr(c) of the levelled grid: `levels` equal steps from
-/// the highest to the lowest point, as `[height_um, material_ratio_pct]` pairs.
-pub fn smr_curve(grid: &HeightMap<'_>, levels: usize) -> Result<Vec<[f64; 2]>, MetrologyError> {
-    let (z, _) = level_plane(grid)?;
-    curve_between_extremes(&z, levels, |interior| {
+/// The pooled areal material ratio curve Smr(c) of heights `z` (lines of `cols`) levelled by
+/// [`level_plane`]: `levels` equal steps from the highest to the lowest point, `[µm, %]` pairs.
+pub fn smr_curve(z: &[f64], cols: usize, levels: usize) -> Result<Vec<[f64; 2]>, MetrologyError> {
+    curve_between_extremes(z, levels, |interior| {
         let rows: Vec<Vec<f64>> = z
-            .chunks_exact(grid.cols)
+            .chunks_exact(cols)
             .map(|row| material_ratios_pct(row, interior))
             .collect();
-        let mean_of = |k: usize| rows.iter().map(|r| r[k]).sum::<f64>() / grid.rows as f64;
+        let mean_of = |k: usize| rows.iter().map(|r| r[k]).sum::<f64>() / rows.len() as f64;
         (0..interior.len()).map(mean_of).collect()
     })
 }
@@ -307,8 +311,8 @@ mod tests {
         let steps: Vec<f64> = (0..rows * cols).map(|_| (noise() * 6.0).floor()).collect();
         for heights in [rough, steps] {
             let grid = test_grid(&heights, rows, cols);
-            let curve = smr_curve(&grid, 101).unwrap();
             let (z, _) = level_plane(&grid).unwrap();
+            let curve = smr_curve(&z, cols, 101).unwrap();
             for (k, p) in curve.iter().enumerate() {
                 let slow = match k {
                     0 => 0.0,

@@ -21,7 +21,6 @@
 //! Depends on [`super::areal`] (levelling), [`super::params`] (the material ratio curve and the
 //! Rk construction) and [`super::MetrologyError`].
 
-use super::areal::{level_plane, HeightMap};
 use super::params::{checked_sorted_desc, rk_of_sorted, rmc};
 use super::MetrologyError;
 use serde::Serialize;
@@ -75,9 +74,9 @@ pub fn definitions() -> BTreeMap<String, String> {
     super::parameter_table::areal_definitions("functional", &[])
 }
 
-/// The Sk family and the volume parameters of `grid` after plane levelling.
-pub fn areal_functional(grid: &HeightMap<'_>) -> Result<ArealFunctional, MetrologyError> {
-    let (z, _) = level_plane(grid)?;
+/// The Sk family and the volume parameters of a grid from its heights `z` levelled by
+/// [`super::areal::level_plane`].
+pub fn areal_functional(z: Vec<f64>) -> Result<ArealFunctional, MetrologyError> {
     let s = checked_sorted_desc(z)?;
     let rk = rk_of_sorted(&s);
     let curve = QuantileCurve::new(&s);
@@ -146,6 +145,7 @@ impl<'a> QuantileCurve<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::metrology::areal::{level_plane, HeightMap};
 
     /// Ordinates uniform on [−h, h]: Smc is the straight line h·(1 − 2x) over x in [0, 1], so
     /// Vm(p) = h·p² and Vv(p) = h·(1 − p)² exactly on the polyline; the secant is the curve
@@ -180,14 +180,14 @@ mod tests {
         let mut pitted = base.clone();
         pitted[2 * cols + 200] -= 50.0;
         let g = |z: &[f64]| {
-            areal_functional(&HeightMap {
+            let g = HeightMap {
                 heights_um: z,
                 rows,
                 cols,
                 pitch_x_mm: 0.001,
                 pitch_y_mm: 0.01,
-            })
-            .unwrap()
+            };
+            areal_functional(level_plane(&g).unwrap().0).unwrap()
         };
         let (a, b) = (g(&base), g(&pitted));
         assert!(b.vvv_ml_m2 > a.vvv_ml_m2, "{a:?}\n{b:?}");

@@ -1,7 +1,7 @@
 //! Areal parameters of a tilted cosine grid against closed forms.
 
 use std::f64::consts::PI;
-use surfscan::metrology::areal::{areal_params, smr_curve, HeightMap};
+use surfscan::metrology::areal::{areal_params, level_plane, smr_curve, HeightMap};
 use surfscan::metrology::MetrologyError;
 
 /// z = 2 + 0.5·x_mm − 0.3·y_mm + A·cos(2πx/λ): 200 points per period, 4 periods plus the
@@ -78,7 +78,7 @@ fn smr_curve_of_a_cosine_grid_is_arccos() {
         pitch_y_mm: py,
     };
     let e = amp / cols as f64; // the levelled frame is shifted by the samples' mean
-    let smr = smr_curve(&g, 101).unwrap();
+    let smr = smr_curve(&level_plane(&g).unwrap().0, g.cols, 101).unwrap();
     assert_eq!(smr.len(), 101);
     for [h, mr] in &smr {
         // Fraction of a period where cos θ ≥ h/A is arccos(h/A)/π.

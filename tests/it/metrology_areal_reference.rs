@@ -9,7 +9,7 @@
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use surfscan::metrology::areal::{HeightMap, Plane};
+use surfscan::metrology::areal::{level_plane, HeightMap, Plane};
 use surfscan::metrology::functional::areal_functional;
 use surfscan::metrology::spatial::{autocorrelation, psd_along_x, psd_along_y, spatial_params};
 
@@ -108,7 +108,7 @@ fn check(name: &str, px: f64, py: f64, bounds: Bounds) {
         pitch_y_mm: py,
     };
     let r = reference(&path, px, py);
-    let f = areal_functional(&grid).unwrap();
+    let f = areal_functional(level_plane(&grid).unwrap().0).unwrap();
     let s = spatial_params(&grid).unwrap();
     let ours = [
         ("Sk", f.sk_um),

@@ -5,7 +5,7 @@
 //! `SURFSCAN_PLOT_DIR=DIR` keeps the figures in DIR to look at them.
 
 use surfscan::fit::{fit_grid, FitOptions};
-use surfscan::metrology::areal::{smr_curve, HeightMap};
+use surfscan::metrology::areal::{level_plane, smr_curve, HeightMap};
 use surfscan::metrology::model::{model_bearing_curves_with, ModelBacOptions};
 use surfscan::metrology::params::{analyze_line, material_ratio_curve, rk_family, Options};
 use surfscan::report::render::plots::{
@@ -109,7 +109,7 @@ fn every_plot_is_png_and_svg_in_iso_words_with_a_key_for_every_colour() {
         pitch_x_mm: PX,
         pitch_y_mm: PY,
     };
-    let pooled = smr_curve(&g, 101).unwrap();
+    let pooled = smr_curve(&level_plane(&g).unwrap().0, g.cols, 101).unwrap();
 
     let [png, svg] = plot_bearing_curves(
         &out.dir,
