@@ -5,7 +5,7 @@
 //! **The curve.** Smc(mr), the height at areal material ratio mr, is the linear-quantile curve
 //! of the plane-levelled heights (the highest at 0 %, the lowest at 100 %, linear between the
 //! ordinates at equal steps of mr): the curve the profile Rk family is built on
-//! ([`super::params::rk_family`]).
+//! ([`super::params::rk_family_and_curve`]).
 //!
 //! **Sk family** by the same construction as the profile's Rk family: the 40 % secant of
 //! least gradient (searched in 0.1 % steps, the first if tied) extended to 0 % and 100 % gives

@@ -979,12 +979,6 @@ fn mr_at(sorted_desc: &[f64], c: f64) -> f64 {
     ((k - 1) as f64 + t) / (n - 1) as f64 * 100.0
 }
 
-/// The ISO 13565-2 Rk family from ordinates (µm): minimum-gradient 40 % secant on the
-/// linear-quantile material ratio curve, searched in 0.1 % steps.
-pub fn rk_family(z: &[f64]) -> Result<RkFamily, MetrologyError> {
-    Ok(rk_of_sorted(&checked_sorted_desc(z)?))
-}
-
 /// The ordinates highest first, after the checks the Rk family needs: all finite, at least two.
 pub(super) fn checked_sorted_desc(z: impl Into<Vec<f64>>) -> Result<Vec<f64>, MetrologyError> {
     let z = z.into();
@@ -1022,8 +1016,8 @@ fn sorted_desc(mut s: Vec<f64>) -> Vec<f64> {
     s
 }
 
-/// [`rk_family`] and [`material_ratio_curve`] of the same ordinates, from one sort of them
-/// (what the Rk construction plot of a line draws): the same values as the two calls.
+/// The ISO 13565-2 Rk family of ordinates `z` (µm) and the material ratio curve it is built on,
+/// `points` pairs `[mr_pct, height_um]`, from one sort of them: what a line's Rk plot draws.
 pub fn rk_family_and_curve(
     z: &[f64],
     points: usize,
@@ -1032,7 +1026,8 @@ pub fn rk_family_and_curve(
     Ok((rk_of_sorted(&s), curve_of_sorted(&s, points)))
 }
 
-/// [`rk_family`] of at least two ordinates sorted highest first.
+/// The Rk family of at least two ordinates sorted highest first: the minimum-gradient 40 %
+/// secant on their linear-quantile material ratio curve, searched in 0.1 % steps.
 pub(super) fn rk_of_sorted(s: &[f64]) -> RkFamily {
     const STEPS: usize = 1000; // 0.1 % grid
     let h: Vec<f64> = (0..=STEPS)
@@ -1108,17 +1103,9 @@ impl RkFamily {
     }
 }
 
-/// The material ratio curve Rmc(mr) that [`rk_family`] works on, as `points` pairs
+/// The material ratio curve Rmc(mr) of ordinates `s` sorted highest first, as `points` pairs
 /// `[mr_pct, height_um]` at equal steps of mr from 0 to 100 % (linear quantiles of the
 /// ordinates, the highest at 0 %); empty for fewer than 2 ordinates or points.
-pub fn material_ratio_curve(z: &[f64], points: usize) -> Vec<[f64; 2]> {
-    if z.len() < 2 || points < 2 {
-        return Vec::new();
-    }
-    curve_of_sorted(&sorted_desc(z.to_vec()), points)
-}
-
-/// [`material_ratio_curve`] of ordinates sorted highest first.
 fn curve_of_sorted(s: &[f64], points: usize) -> Vec<[f64; 2]> {
     if s.len() < 2 || points < 2 {
         return Vec::new();
@@ -1155,42 +1142,45 @@ mod tests {
         }
     }
 
+    /// The Rk family and curve of `z` from the standard library's sort by `total_cmp`.
+    fn by_std_sort(z: &[f64], points: usize) -> (RkFamily, Vec<[f64; 2]>) {
+        let mut s = z.to_vec();
+        s.sort_by(|a, b| b.total_cmp(a));
+        (rk_of_sorted(&s), curve_of_sorted(&s, points))
+    }
+
     #[test]
-    fn rk_family_and_curve_from_one_sort_equal_the_two_calls() {
+    fn rk_family_and_curve_are_those_of_the_ordinates_sorted() {
         // Ties, a constant run, negative heights and a short line: the figures and the curve
-        // are the bits of `rk_family` and `material_ratio_curve`; the errors are its errors.
+        // are the bits of the construction on the ordinates sorted by the standard library.
         let mut z: Vec<f64> = (0..5000)
             .map(|k| ((k as f64 * 0.37).sin() * 2.0 + (k as f64 * 0.011).cos()).round() / 8.0)
             .collect();
         z.extend(std::iter::repeat_n(0.25, 300));
         for (zs, points) in [(&z[..], 1001), (&z[..], 2), (&z[..], 1), (&z[..7], 1001)] {
             let (rk, curve) = rk_family_and_curve(zs, points).unwrap();
-            assert_eq!(format!("{rk:?}"), format!("{:?}", rk_family(zs).unwrap()));
-            assert_eq!(rk, rk_family(zs).unwrap());
-            let want = material_ratio_curve(zs, points);
+            let (want_rk, want) = by_std_sort(zs, points);
+            assert_eq!(format!("{rk:?}"), format!("{want_rk:?}"));
             assert_eq!(curve.len(), want.len());
             for (a, b) in curve.iter().zip(&want) {
                 assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
             }
         }
         for bad in [&[1.0][..], &[], &[1.0, f64::NAN, 2.0]] {
-            assert_eq!(
-                format!("{:?}", rk_family_and_curve(bad, 11).unwrap_err()),
-                format!("{:?}", rk_family(bad).unwrap_err())
-            );
+            assert!(rk_family_and_curve(bad, 11).is_err(), "{bad:?}");
         }
     }
 
-    /// A line's stored Rk family and curve are those of its roughness ordinates, as the two
-    /// functions give them from the ordinates, and its Rk parameters are that family's.
+    /// A line's stored Rk family and curve are those of its roughness ordinates, and its Rk
+    /// parameters are that family's.
     #[test]
     fn a_line_carries_the_rk_family_and_curve_of_its_roughness() {
         let z: Vec<f64> = (0..6000)
             .map(|k| (k as f64 * 0.0123).sin() + 0.3 * (k as f64 * 0.21).cos())
             .collect();
         let a = analyze_line(&z, 0.0005, &Options::default()).unwrap();
-        assert_eq!(a.params.material.rk, rk_family(&a.roughness_um).unwrap());
-        let want = material_ratio_curve(&a.roughness_um, RK_CURVE_POINTS);
+        let (rk, want) = by_std_sort(&a.roughness_um, RK_CURVE_POINTS);
+        assert_eq!(a.params.material.rk, rk);
         assert_eq!(a.rk_curve.len(), RK_CURVE_POINTS);
         for (got, want) in a.rk_curve.iter().zip(&want) {
             assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits));

@@ -7,7 +7,7 @@
 use surfscan::fit::{fit_grid, FitOptions};
 use surfscan::metrology::areal::{level_plane, smr_curve, HeightMap};
 use surfscan::metrology::model::{model_bearing_curves_with, ModelBacOptions};
-use surfscan::metrology::params::{analyze_line, material_ratio_curve, rk_family, Options};
+use surfscan::metrology::params::{analyze_line, rk_family_and_curve, Options};
 use surfscan::report::render::plots::{
     plot_bearing_curves, plot_height_map, plot_profile_overlay, plot_rk_construction,
     AssessedProfile, FigureFiles,
@@ -171,8 +171,7 @@ fn every_plot_is_png_and_svg_in_iso_words_with_a_key_for_every_colour() {
     assert!(text.contains("lower panel: model − measured"));
 
     let a = analyze_line(&z[..COLS], PX, &Options::default()).unwrap();
-    let rk = rk_family(&a.roughness_um).unwrap();
-    let curve = material_ratio_curve(&a.roughness_um, 1001);
+    let (rk, curve) = rk_family_and_curve(&a.roughness_um, 1001).unwrap();
     let assessed = AssessedProfile {
         z_um: &a.roughness_um,
         pitch_mm: PX,
@@ -233,10 +232,9 @@ fn rk_construction_is_consistent_with_the_parameters() {
     // curve crosses C at Mr1 and D at Mr2.
     let z = profile(3, COLS);
     let a = analyze_line(&z, PX, &Options::default()).unwrap();
-    let rk = rk_family(&a.roughness_um).unwrap();
+    let (rk, curve) = rk_family_and_curve(&a.roughness_um, 100_001).unwrap();
     assert!((rk.upper_level_um - rk.lower_level_um - rk.rk_um).abs() < 1e-12);
     assert!((rk.rk_um - a.params.material.rk.rk_um).abs() < 1e-12);
-    let curve = material_ratio_curve(&a.roughness_um, 100_001);
     let height_at = |mr: f64| {
         let k = (mr / 100.0 * 100_000.0).round() as usize;
         curve[k][1]

@@ -7,7 +7,7 @@
 use std::f64::consts::PI;
 use surfscan::metrology::bearing::{bearing_curve_xz, material_ratio_pct, material_ratio_pct_at};
 use surfscan::metrology::filter::{gaussian_mean_line, split};
-use surfscan::metrology::params::{analyze_line, rk_family, Options};
+use surfscan::metrology::params::{analyze_line, rk_family_and_curve, Options};
 use surfscan::metrology::MetrologyError;
 
 fn sine(n: usize, pitch_mm: f64, wavelength_mm: f64, amp: f64) -> Vec<f64> {
@@ -175,7 +175,7 @@ fn sine_parameters_match_closed_forms() {
     let dense: Vec<f64> = (0..n)
         .map(|k| amp * (PI * (k as f64 + 0.5) / n as f64).cos())
         .collect();
-    let f = rk_family(&dense).unwrap();
+    let (f, _) = rk_family_and_curve(&dense, 2).unwrap();
     assert!((f.rk_um - rk).abs() < 1e-4, "Rk {} vs {rk}", f.rk_um);
     assert!((f.mr2_pct - mr2).abs() < 0.01, "Mr2 {} vs {mr2}", f.mr2_pct);
     assert!(
@@ -306,7 +306,7 @@ fn gaussian_heights_give_rk_2_622_rq() {
     let z: Vec<f64> = (0..200_000)
         .map(|_| (-2.0 * uni().ln()).sqrt() * (2.0 * PI * uni()).cos())
         .collect();
-    let rk = rk_family(&z).unwrap();
+    let (rk, _) = rk_family_and_curve(&z, 2).unwrap();
     assert!((rk.rk_um - 2.622).abs() < 0.03, "Rk {}", rk.rk_um);
     assert!(rk.mr1_pct > 3.0 && rk.mr1_pct < 15.0, "Mr1 {}", rk.mr1_pct);
     assert!(rk.mr2_pct > 85.0 && rk.mr2_pct < 97.0, "Mr2 {}", rk.mr2_pct);

@@ -1381,7 +1381,7 @@ pub struct FigureFiles<'a> {
 
 /// Writes `STEM.png` and `STEM.svg` into `dir`: the ISO 13565-2 construction of one line —
 /// its material ratio curve (`[mr_pct, height_um]` pairs, e.g. from
-/// [`crate::metrology::params::material_ratio_curve`]), the equivalent straight line and its 40 %
+/// [`crate::metrology::params::rk_family_and_curve`]), the equivalent straight line and its 40 %
 /// secant, the levels C and D, Mr1 and Mr2, and the Rpk/Rvk triangles — with the values in a
 /// side panel, below the line's assessed profile with its sampling lengths when `profile` is
 /// given. `caption` (may be empty) is the traceability footer. Without `to.png` only the
