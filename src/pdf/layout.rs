@@ -850,9 +850,11 @@ fn running_items(
 ) {
     let right = sheet.width - sheet.right;
     // Baselines 6 mm above and 8 mm below the text block; in Letter's narrower margins no
-    // nearer the paper's edge than 7 and 5.5 mm.
-    let top = sheet.top - (6.0 * MM).min(sheet.top - 7.0 * MM);
-    let foot = sheet.height - sheet.bottom + (8.0 * MM).min(sheet.bottom - 5.5 * MM);
+    // nearer the paper's edge than 8.5 and 7 mm, so that the letters (ascenders above the
+    // header's baseline, descenders below the footer's) stay 5 mm or more from it, clear of
+    // the 4 mm or so a printer leaves unprinted.
+    let top = sheet.top - (6.0 * MM).min(sheet.top - 8.5 * MM);
+    let foot = sheet.height - sheet.bottom + (8.0 * MM).min(sheet.bottom - 7.0 * MM);
     let number = format!("page {n} of {total}");
     let mut text = |x: f32, y: f32, size: f32, t: &str| {
         page.push(Item::Text {

@@ -30,6 +30,35 @@ pub fn info(pdf: &Path) -> (usize, String) {
     (field("Pages:").parse().unwrap(), field("Page size:"))
 }
 
+/// The least distance, in mm, of any printed word from the paper's edge (`pdftotext -bbox`):
+/// a printer leaves about 4 mm at each edge unprinted.
+fn nearest_to_edge_mm(pdf: &Path) -> (f64, String) {
+    let mut command = Command::new("pdftotext");
+    command.arg("-bbox").arg(pdf).arg("-");
+    let out = String::from_utf8_lossy(&tool_output(&mut command, "poppler-utils")).into_owned();
+    let attr = |tag: &str, name: &str| -> f64 {
+        let at = tag.find(&format!(" {name}=\"")).unwrap() + name.len() + 3;
+        tag[at..at + tag[at..].find('"').unwrap()].parse().unwrap()
+    };
+    let (mut width, mut height) = (0.0, 0.0);
+    let mut nearest = (f64::INFINITY, String::new());
+    for tag in out.lines().map(str::trim) {
+        if tag.starts_with("<page ") {
+            (width, height) = (attr(tag, "width"), attr(tag, "height"));
+        } else if tag.starts_with("<word ") {
+            let (x0, y0) = (attr(tag, "xMin"), attr(tag, "yMin"));
+            let (x1, y1) = (attr(tag, "xMax"), attr(tag, "yMax"));
+            let pt = x0.min(y0).min(width - x1).min(height - y1);
+            if pt < nearest.0 {
+                let word = &tag[tag.find('>').unwrap() + 1..tag.rfind('<').unwrap()];
+                nearest = (pt, word.to_owned());
+            }
+        }
+    }
+    assert!(nearest.0.is_finite(), "no word in {}", pdf.display());
+    (nearest.0 * 25.4 / 72.0, nearest.1)
+}
+
 /// Text without tags, entities decoded, runs of white space as one space.
 fn plain(s: &str) -> String {
     let mut out = String::new();
@@ -148,6 +177,14 @@ pub fn check_pdf(dir: &Path, pdf: &Path, lab: &str, roles: &[&str]) -> String {
     assert!(
         (2..=6).contains(&pages),
         "a few pages, not {pages} (the screen's page printed 17)"
+    );
+    // The running header and footer sit in the page's margin, clear of what a printer
+    // cannot print (Letter's header was 3.2 mm from the top before it was set against the
+    // text block).
+    let (edge, word) = nearest_to_edge_mm(pdf);
+    assert!(
+        edge >= 5.0,
+        "{word:?} {edge:.1} mm from the paper's edge ({size})"
     );
     let text = pdftotext(pdf).replace('\u{fb01}', "fi");
     // "page X of Y" on every page, Y the document's page count: the paged-media margin boxes

@@ -37,8 +37,8 @@ pub fn css_string(s: &str) -> String {
 /// The page rules and the print media rules: `title` runs along the top of every page,
 /// the laboratory (when `[report]` names one) on the left, "page X of Y" at the bottom.
 pub fn page_style(report: &Value, title: &str) -> String {
-    // Letter is 17.6 mm shorter than A4: 6 mm less margin at top and bottom (Chromium's own is
-    // 0.4 in; header and footer still in it) keeps its text block (258 mm) near A4's (264 mm).
+    // Letter, 17.6 mm shorter, has 6 mm less margin at top and bottom (text block 258 mm, A4's
+    // 264); the running texts sit against the text block, clear of a printer's unprinted edge.
     let (size, margin) = match report["lab"]["paper"].as_str() {
         Some("Letter") => ("letter", "10mm 13mm 11mm"),
         _ => ("A4", "16mm 13mm 17mm"),
@@ -46,10 +46,10 @@ pub fn page_style(report: &Value, title: &str) -> String {
     let (left, software) = running(report);
     format!(
         "@page{{size:{size};margin:{margin} 13mm;\
-@top-left{{content:{left};font-size:8pt;color:#555}}\
-@top-right{{content:{title};font-size:8pt;color:#555}}\
-@bottom-left{{content:{software};font-size:7pt;color:#777}}\
-@bottom-right{{content:\"page \" counter(page) \" of \" counter(pages);font-size:8pt}}}}\n\
+@top-left{{content:{left};font-size:8pt;color:#555;vertical-align:bottom}}\
+@top-right{{content:{title};font-size:8pt;color:#555;vertical-align:bottom}}\
+@bottom-left{{content:{software};font-size:7pt;color:#777;vertical-align:top}}\
+@bottom-right{{content:\"page \" counter(page) \" of \" counter(pages);font-size:8pt;vertical-align:top}}}}\n\
 @media print{{\
 body{{max-width:none;margin:0;padding:0;font-size:9pt;line-height:1.3}}\
 h1{{font-size:14pt}}h2{{font-size:11pt;margin-top:1.1em}}h2,h3,figcaption{{break-after:avoid}}\
