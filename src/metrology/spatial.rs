@@ -93,9 +93,10 @@ impl Acf {
         if !(fx.abs() <= mx && fy.abs() <= my) {
             return None;
         }
-        let (x0, y0) = (fx.floor(), fy.floor());
-        let (tx, ty) = (fx - x0, fy - y0);
-        let (x0, y0) = (x0 as isize, y0 as isize);
+        // ⌊f⌋ without a library call: truncated, and one less where that is above f.
+        let floor = |f: f64| f as isize - isize::from((f as isize) as f64 > f);
+        let (x0, y0) = (floor(fx), floor(fy));
+        let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
         let v = |dy: isize, dx: isize, w: f64| -> Option<f64> {
             if w == 0.0 {
                 Some(0.0)
