@@ -118,6 +118,45 @@ async fn the_sj210_form_reads_first_and_the_probe_stops_there() {
         .contains("profile-block = \"RDEVA{n}\""));
 }
 
+/// A form the instrument read (`RDEVA100`) does not make another form of the same mnemonic
+/// (`RDEVA00`, `NG031`) a stray reply on that link: it is still a wrong form. (The probe
+/// reads during the drive's return before it tries the forms; when the return had ended by
+/// then, `RDEVA100` was answered first and every form after it was called "no usable
+/// answer".) The same form refused after it read is a stray reply.
+#[tokio::test]
+async fn a_wrong_form_after_another_form_read_is_still_a_wrong_form() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = InstrumentConfig {
+        readout_form: SimForm::Only(Some(1)),
+        ..InstrumentConfig::default()
+    };
+    let sim = start(dir.path(), cfg, None).await;
+    let mut c = client(
+        &dir.path().join("sj210"),
+        ModelTable::builtin(ModelId::Sj210),
+    );
+    c.run_trace().await.unwrap();
+    let first = c.probe_readout_forms(&[form("RDEVA100")]).await.unwrap();
+    assert!(
+        matches!(verdicts(&first)[..], [("RDEVA100", FormVerdict::Read(_))]),
+        "{:?}",
+        verdicts(&first)
+    );
+    let then = c
+        .probe_readout_forms(&[form("RDEVA00"), form("RDEVA000")])
+        .await
+        .unwrap();
+    assert_eq!(
+        verdicts(&then),
+        [
+            ("RDEVA00", &FormVerdict::WrongForm(NgCode::InvalidFormat)),
+            ("RDEVA000", &FormVerdict::WrongForm(NgCode::InvalidFormat)),
+        ]
+    );
+    drop(c);
+    sim.shutdown().await;
+}
+
 #[tokio::test]
 async fn only_the_b_selector_form_answers_after_two_wrong_forms() {
     let cfg = InstrumentConfig {

@@ -181,16 +181,14 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
         loop {
             match self.transact(command).await {
                 Ok(Reply::Ok(payload)) => {
-                    let mnemonic = mnemonic(command);
-                    if !self.answered.contains(mnemonic) {
-                        self.answered.insert(mnemonic.to_owned());
+                    for key in [mnemonic(command), command] {
+                        if !self.answered.contains(key) {
+                            self.answered.insert(key.to_owned());
+                        }
                     }
                     return Ok(payload);
                 }
-                Ok(Reply::Ng { code, .. })
-                    if (30..=32).contains(&code.code())
-                        && self.answered.contains(mnemonic(command)) =>
-                {
+                Ok(Reply::Ng { code, .. }) if self.contradicts(command, code.code()) => {
                     // The instrument understood this command before on this link: the
                     // conversation went wrong (a stray or late reply), the table is not wrong.
                     self.recover().await;
@@ -242,6 +240,21 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
 
 /// The command's mnemonic: its first five characters (`RDEVA05` → `RDEVA`), all of it when
 /// shorter.
+impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
+    /// Whether "not understood" (`NG0nn`) to `command` contradicts what the instrument said
+    /// on this link: `NG030` (no such command) to a command whose mnemonic it answered, or
+    /// `NG031`/`NG032` (a wrong data form) to this very command. Another data form of an
+    /// answered mnemonic may well be wrong: the read-out forms `RDEVA100` and `RDEVA00` share
+    /// `RDEVA`, and a firmware that reads one refuses the other with `NG031`.
+    fn contradicts(&self, command: &str, code: u16) -> bool {
+        match code {
+            30 => self.answered.contains(mnemonic(command)),
+            31 | 32 => self.answered.contains(command),
+            _ => false,
+        }
+    }
+}
+
 fn mnemonic(command: &str) -> &str {
     command.get(..5).unwrap_or(command)
 }

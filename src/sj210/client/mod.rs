@@ -69,9 +69,9 @@ pub struct Sj210Client<S> {
     /// When the drive of the last trace is expected back at its start, once seen returning:
     /// the next wait for idle asks the status then.
     back_at: Option<tokio::time::Instant>,
-    /// Command mnemonics (`RDCON`, `RDSTU`, …) the instrument has answered `OK` on this
-    /// link: a "command not understood" answer to one of them is a stray or late reply, not
-    /// a model table that is wrong for the firmware.
+    /// Commands and their mnemonics (`RDCON`, `RDSTU`, …) the instrument has answered `OK`
+    /// on this link: a "command not understood" answer that contradicts them is a stray or
+    /// late reply, not a model table that is wrong for the firmware.
     answered: std::collections::BTreeSet<String>,
     /// Whether any byte at all has come from the port on this link (a reply, a late one,
     /// noise): a link that has ever spoken is not a stage controller ignoring our lines.
