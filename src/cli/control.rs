@@ -327,24 +327,15 @@ async fn confirm_start(path: &Path, before: u64, json: bool) -> Result<(), CliEr
     let deadline = tokio::time::Instant::now() + START_WAIT;
     loop {
         if let Message::Status(s) = &m.message {
-            if s.starts > before && s.state != State::Starting {
+            if let Some(outcome) = start_outcome(before, s) {
                 if json {
                     say!("{}", m.raw);
+                } else if outcome.is_ok() {
+                    say!("{}", s.summary());
                 }
-                return match (&s.state, &s.last_stop) {
-                    (State::Idle, Some(stop)) if stop.status == StopStatus::Fail => {
-                        Err(CliError::new(
-                            Exit::Failed,
-                            format!("the scan did not start: {}", stop.reason),
-                        ))
-                    }
-                    _ => {
-                        if !json {
-                            say!("{}", s.summary());
-                        }
-                        Ok(())
-                    }
-                };
+                return outcome.map_err(|reason| {
+                    CliError::new(Exit::Failed, format!("the scan did not start: {reason}"))
+                });
             }
         }
         m = match tokio::time::timeout_at(deadline, client.next()).await {
@@ -364,6 +355,19 @@ async fn confirm_start(path: &Path, before: u64, json: bool) -> Result<(), CliEr
             }
         };
     }
+}
+
+/// What a status snapshot says of a start accepted when `before` scans had begun: nothing
+/// yet (`None`: the count has not grown, or the scan is still starting), under way or ended
+/// (`Ok`), or ended without starting (`Err` with the stop's reason).
+fn start_outcome(before: u64, s: &Status) -> Option<Result<(), String>> {
+    if s.starts <= before || s.state == State::Starting {
+        return None;
+    }
+    Some(match (&s.state, &s.last_stop) {
+        (State::Idle, Some(stop)) if stop.status == StopStatus::Fail => Err(stop.reason.clone()),
+        _ => Ok(()),
+    })
 }
 
 /// Sends one request and prints its reply (`--json`: as the daemon sent it).
@@ -588,6 +592,44 @@ mod tests {
         s.instrument = DeviceState::Connected;
         s.stage = DeviceState::Reconnecting;
         s
+    }
+
+    /// The daemon's start as `surfscan start` sees it: from the first snapshot with the
+    /// grown count on, the outcome is the scan's own. The count grown beside the idle state
+    /// from before was taken for a start that went ahead, so a start whose devices could not
+    /// be opened a moment later exited 0 (seen on a loaded machine).
+    #[test]
+    fn a_start_is_decided_by_the_scans_own_snapshots() {
+        let mut s = Status::idle();
+        s.last_stop = Some(LastStop {
+            scan_id: "G-0141".into(),
+            status: StopStatus::Success,
+            reason: "all 31 lines".into(),
+            dir: "/scans/G-0141".into(),
+            verdict: None,
+            results: None,
+        });
+        let before = s.starts;
+        assert_eq!(start_outcome(before, &s), None, "nothing begun yet");
+        s.begin_start();
+        assert_eq!(start_outcome(before, &s), None, "begun, not yet decided");
+        let failed = crate::scan::status::ended_status(
+            &s,
+            StopStatus::Fail,
+            "the instrument is not at /dev/sj210",
+        );
+        assert_eq!(
+            start_outcome(before, &failed),
+            Some(Err("the instrument is not at /dev/sj210".into()))
+        );
+        let mut under_way = scanning();
+        under_way.starts = before + 1;
+        assert_eq!(start_outcome(before, &under_way), Some(Ok(())));
+        assert_eq!(
+            start_outcome(before + 1, &under_way),
+            None,
+            "an earlier start's"
+        );
     }
 
     #[test]

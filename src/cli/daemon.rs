@@ -295,7 +295,7 @@ async fn daemon(
                 ScanRequest::Continue { dir, .. } => ScanRequest::Continue { dir, peer: None },
                 other => other,
             };
-            ctl.status.send_modify(|s| s.starts += 1);
+            ctl.status.send_modify(Status::begin_start);
             let outcome = run_scan(&mut station, &mut ctl, &settings, req).await;
             stop = outcome.end == End::Shutdown;
             awaiting = Awaiting::after(&outcome, &settings);
@@ -329,7 +329,7 @@ async fn daemon(
                 } => {
                     waiting(&ctl.status, None);
                     ctl.status.send_modify(|s| {
-                        s.starts += 1;
+                        s.begin_start();
                         s.queue = Some(Box::new(jobs.queue.status()));
                     });
                     let outcome = run_scan(&mut station, &mut ctl, &job_settings, request).await;
@@ -387,13 +387,16 @@ async fn daemon(
                             continue;
                         }
                         waiting(&ctl.status, None);
-                        ctl.status.send_modify(|s| s.starts += 1);
+                        ctl.status.send_modify(Status::begin_start);
                         // The operator's start takes over from a continuation the daemon
                         // was waiting to make.
                         awaiting = None;
                         let request = match start.choice.commit().map_err(CliError::from) {
                             Ok(Some(r)) => with_job(r, start.job),
-                            Ok(None) => continue,
+                            Ok(None) => {
+                                ctl.status.send_modify(|s| s.state = State::Idle);
+                                continue;
+                            }
                             Err(e) => {
                                 tracing::error!("{e}");
                                 let ended = ended_status(&ctl.status.borrow(), StopStatus::Fail, &e.to_string());
@@ -432,7 +435,7 @@ async fn daemon(
                             let dir = a.dir.clone();
                             tracing::info!("the devices answer again: continuing the scan {} that failed for its transient budget", dir.display());
                             ctl.status.send_modify(|s| {
-                                s.starts += 1;
+                                s.begin_start();
                                 s.reason = None;
                             });
                             let req = ScanRequest::Continue { dir, peer: None };

@@ -163,6 +163,14 @@ impl Status {
         }
     }
 
+    /// A scan begins: the count of scans begun grows and the state is Starting in one
+    /// update, so that whoever waits for a start's outcome (`surfscan start`) never sees the
+    /// new count beside the idle state from before it; the scan's own snapshots say the rest.
+    pub fn begin_start(&mut self) {
+        self.starts += 1;
+        self.state = State::Starting;
+    }
+
     /// One line for systemd's `STATUS=` and for logs, e.g.
     /// `scan X: line 12/31, y=0.110 mm`.
     pub fn summary(&self) -> String {
