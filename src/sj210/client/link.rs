@@ -236,11 +236,7 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
             }
         }
     }
-}
 
-/// The command's mnemonic: its first five characters (`RDEVA05` → `RDEVA`), all of it when
-/// shorter.
-impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
     /// Whether "not understood" (`NG0nn`) to `command` contradicts what the instrument said
     /// on this link: `NG030` (no such command) to a command whose mnemonic it answered, or
     /// `NG031`/`NG032` (a wrong data form) to this very command. Another data form of an
@@ -255,6 +251,8 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Sj210Client<S> {
     }
 }
 
+/// The command's mnemonic: its first five characters (`RDEVA05` → `RDEVA`), all of it when
+/// shorter.
 fn mnemonic(command: &str) -> &str {
     command.get(..5).unwrap_or(command)
 }
