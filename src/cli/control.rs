@@ -578,6 +578,18 @@ mod tests {
     use super::*;
     use crate::scan::status::LastStop;
 
+    /// Scan G-0141's stop in `/d/G-0141`, without a verdict.
+    fn stop(status: StopStatus, reason: &str) -> LastStop {
+        LastStop {
+            scan_id: "G-0141".into(),
+            status,
+            reason: reason.into(),
+            dir: "/d/G-0141".into(),
+            verdict: None,
+            results: None,
+        }
+    }
+
     fn scanning() -> Status {
         let mut s = Status::idle();
         s.state = State::Scanning;
@@ -601,14 +613,7 @@ mod tests {
     #[test]
     fn a_start_is_decided_by_the_scans_own_snapshots() {
         let mut s = Status::idle();
-        s.last_stop = Some(LastStop {
-            scan_id: "G-0141".into(),
-            status: StopStatus::Success,
-            reason: "all 31 lines".into(),
-            dir: "/scans/G-0141".into(),
-            verdict: None,
-            results: None,
-        });
+        s.last_stop = Some(stop(StopStatus::Success, "31 lines"));
         let before = s.starts;
         assert_eq!(start_outcome(before, &s), None, "nothing begun yet");
         s.begin_start();
@@ -651,12 +656,9 @@ mod tests {
             ..Default::default()
         };
         s.last_stop = Some(LastStop {
-            scan_id: "G-0141".into(),
-            status: StopStatus::Success,
-            reason: "31 lines".into(),
-            dir: "/d/G-0141".into(),
             verdict: Some(results.line("success")),
             results: Some(Box::new(results)),
+            ..stop(StopStatus::Success, "31 lines")
         });
         s.queue = Some(Box::new(crate::scan::status::QueueStatus {
             queued: 2,
@@ -688,14 +690,7 @@ mod tests {
     #[test]
     fn idle_block_shows_the_last_stop_and_no_scan_fields() {
         let mut s = Status::idle();
-        s.last_stop = Some(LastStop {
-            scan_id: "G-0141".into(),
-            status: StopStatus::Fail,
-            reason: "stage following error".into(),
-            dir: "/d/G-0141".into(),
-            verdict: None,
-            results: None,
-        });
+        s.last_stop = Some(stop(StopStatus::Fail, "stage following error"));
         s.reason = Some("stage following error".into());
         let text = render_status(&s);
         assert!(!text.contains("lines"), "{text}");
