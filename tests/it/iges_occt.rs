@@ -4,7 +4,7 @@
 //! right degrees, pole counts and bit-identical knots, that passes through the measured points within 1e-10 mm.
 //! An X3P input's surface is found where the file places the data (its CX and CY offsets).
 //! Fails (does not skip) when python3 or OCP is missing.
-use surfscan::fit::{fit_grid, FitOptions};
+use surfscan::fit::{fit_grid, FitOptions, FitResult};
 use surfscan::iges::{parameter_lines_bound, write_iges, IgesOptions};
 
 use super::common::{
@@ -32,6 +32,29 @@ fn occt_check(igs: &std::path::Path, expect: &serde_json::Value) {
         out.status,
         String::from_utf8_lossy(&out.stderr)
     );
+}
+
+/// The data points Q(k, l) = (x0 + k·pitch_x, y_l, z/1000) as `[u, v, x, y, z]` at the fit's
+/// parameters, those of the lines whose v lies in `v0..=v1`.
+fn data_points(
+    fit: &FitResult,
+    heights_um: &[f64],
+    y_mm: &[f64],
+    x0: f64,
+    (v0, v1): (f64, f64),
+) -> Vec<[f64; 5]> {
+    let cols = fit.params_u.len();
+    let mut points = Vec::new();
+    for (l, &v) in fit.params_v.iter().enumerate() {
+        if v < v0 || v > v1 {
+            continue;
+        }
+        for (k, &u) in fit.params_u.iter().enumerate() {
+            let z = heights_um[l * cols + k] / 1000.0;
+            points.push([u, v, x0 + k as f64 * PITCH_X_MM, y_mm[l], z]);
+        }
+    }
+    points
 }
 
 /// `split`: force patches by limiting an entity to 3/4 of the lines the whole surface needs.
@@ -62,17 +85,8 @@ fn check(split: bool, expect_patches_at_least: usize) {
     // assigned to the patch whose v range holds it.
     let mut expect_patches = Vec::new();
     for p in &patches {
-        let (v0, v1) = (p.knots_v()[0], *p.knots_v().last().unwrap());
-        let mut points = Vec::new();
-        for (l, &v) in fit.params_v.iter().enumerate() {
-            if v < v0 || v > v1 {
-                continue;
-            }
-            for (k, &u) in fit.params_u.iter().enumerate() {
-                let z = heights_um[l * cols + k] / 1000.0;
-                points.push([u, v, k as f64 * PITCH_X_MM, y_mm[l], z]);
-            }
-        }
+        let v_range = (p.knots_v()[0], *p.knots_v().last().unwrap());
+        let points = data_points(&fit, &heights_um, &y_mm, 0.0, v_range);
         assert!(!points.is_empty());
         expect_patches.push(serde_json::json!({
             "degree_u": 5, "degree_v": 5,
@@ -150,16 +164,7 @@ fn opencascade_finds_an_x3p_inputs_surface_where_it_was_measured() {
         FitOptions::default(),
     )
     .unwrap();
-    let mut points = Vec::new();
-    for (l, &v) in fit.params_v.iter().enumerate() {
-        for (k, &u) in fit.params_u.iter().enumerate() {
-            let (x, z) = (
-                x0 + k as f64 * PITCH_X_MM,
-                read.heights_um[l * cols + k] / 1000.0,
-            );
-            points.push([u, v, x, y_mm[l], z]);
-        }
-    }
+    let points = data_points(&fit, &read.heights_um, &y_mm, x0, (f64::MIN, f64::MAX));
     let expect = serde_json::json!({
         "faces": 1,
         "patches": [{"degree_u": 5, "degree_v": 5, "poles_u": cols, "poles_v": rows, "points": points}],
