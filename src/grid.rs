@@ -90,6 +90,12 @@ impl Grid {
             .unwrap_or(&[])
     }
 
+    /// x of point `col` of every line, mm, in the input's coordinates (from [`Grid::x0_mm`]):
+    /// where every position a report names along x comes from.
+    pub fn x_mm(&self, col: usize) -> f64 {
+        self.x0_mm + col as f64 * self.pitch_x_mm
+    }
+
     /// The line index of row `r`.
     pub fn index_of(&self, r: usize) -> u32 {
         self.index.get(r).copied().unwrap_or(r as u32)

@@ -334,7 +334,10 @@ fn fit_surface(
                 .map_err(|e| failed(&e))?;
             progress.inc(1);
         }
-        Ok((fitter.finish().map_err(|e| failed(&e))?, Vec::new()))
+        let mut fit = fitter.finish().map_err(|e| failed(&e))?;
+        // Where it was measured, as `fit_model` places its surface (an X3P input's x offset).
+        fit.place_at_x(grid.x0_mm);
+        Ok((fit, Vec::new()))
     } else {
         let m = fit_model(grid, recipe).map_err(|e| failed(&e))?;
         Ok((m.fit, m.replaced))
@@ -357,21 +360,8 @@ fn shape_checks(fit: &FitResult, fitted_heights_um: &[f64]) -> Option<ModelCheck
 
 /// The IGES Start section's words for a fold of the surface (ASCII, as the section is).
 fn fold_start_line(f: &IsoFold) -> String {
-    let (c, other) = if f.direction == "u" {
-        ("x", "y")
-    } else {
-        ("y", "x")
-    };
-    format!(
-        "NOT A HEIGHT MAP: the surface folds, {c} runs backwards along {} by up to {} um ({c} {} .. {} mm) on {} of {} iso-curves (worst at {other} = {} mm).",
-        f.direction,
-        crate::numfmt::fmt(f.back_mm * 1000.0, crate::numfmt::Quantity::HeightUm),
-        crate::numfmt::fmt(f.range_mm[0], crate::numfmt::Quantity::PositionMm),
-        crate::numfmt::fmt(f.range_mm[1], crate::numfmt::Quantity::PositionMm),
-        f.affected,
-        f.checked,
-        crate::numfmt::fmt(f.at_mm, crate::numfmt::Quantity::PositionMm)
-    )
+    let words = f.words("..", "um");
+    format!("NOT A HEIGHT MAP: the surface folds, {words}.")
 }
 
 /// Names every spike replaced before fitting (only ever when asked for).
@@ -591,9 +581,7 @@ impl<'a> Fitting<'a> {
         let t_fit = Instant::now();
         let fitted = fit_surface(&self.args.input, grid, &self.recipe, &self.progress);
         self.progress.finish_and_clear();
-        let (mut fit, replaced) = fitted?;
-        // Written where it was measured: an X3P input's x offset (its y is the lines' own).
-        fit.place_at_x(grid.x0_mm);
+        let (fit, replaced) = fitted?;
         report_replaced(&replaced);
         let fit_s = t_fit.elapsed().as_secs_f64();
         let t_shape = Instant::now();

@@ -89,6 +89,25 @@ pub struct IsoFold {
     pub back_mm: f64,
 }
 
+impl IsoFold {
+    /// Where and how far the worst curve runs back, in words, with `dots` for a range and
+    /// `um` for micrometres (ASCII for an IGES Start section).
+    pub fn words(&self, dots: &str, um: &str) -> String {
+        let (c, other) = [("x", "y"), ("y", "x")][usize::from(self.direction != "u")];
+        let mm = |v: f64| fmt(v, Quantity::PositionMm);
+        format!(
+            "{c} runs backwards along {} by up to {} {um} ({c} {} {dots} {} mm) on {} of {} iso-curves (worst at {other} = {} mm)",
+            self.direction,
+            fmt(self.back_mm * 1000.0, Quantity::HeightUm),
+            mm(self.range_mm[0]),
+            mm(self.range_mm[1]),
+            self.affected,
+            self.checked,
+            mm(self.at_mm)
+        )
+    }
+}
+
 /// The model's sampled height range against the measured one.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct HeightRange {
@@ -142,24 +161,10 @@ impl ModelChecks {
     /// [`OVERSHOOT_WARN_PCT`].
     pub fn warnings(&self) -> Vec<String> {
         let mut w = Vec::new();
-        for f in &self.iso_curves {
-            let (c, other) = if f.direction == "u" {
-                ("x", "y")
-            } else {
-                ("y", "x")
-            };
-            w.push(format!(
-                "model fold: {c} runs backwards along {} by up to {} µm ({c} {} … {} mm) on {} of {} iso-curves (worst at {} = {} mm); the surface is not a height map there",
-                f.direction,
-                fmt(f.back_mm * 1000.0, Quantity::HeightUm),
-                fmt(f.range_mm[0], Quantity::PositionMm),
-                fmt(f.range_mm[1], Quantity::PositionMm),
-                f.affected,
-                f.checked,
-                other,
-                fmt(f.at_mm, Quantity::PositionMm)
-            ));
-        }
+        w.extend(
+            (self.iso_curves.iter().map(|f| f.words("…", "µm")))
+                .map(|f| format!("model fold: {f}; the surface is not a height map there")),
+        );
         for f in &self.net {
             let (c, what) = if f.direction == "u" {
                 ("x", "pole rows")
@@ -167,7 +172,7 @@ impl ModelChecks {
                 ("y", "pole columns")
             };
             w.push(format!(
-                "control net fold: {c} decreases from pole {} to {} ({} → {} mm) in {} of {} {what} (largest step back {} µm)",
+                "control net fold: {c} decreases from pole {} to {} ({c} {} → {} mm) in {} of {} {what} (largest step back {} µm)",
                 f.at_pole + 1,
                 f.at_pole + 2,
                 fmt(f.from_mm, Quantity::PositionMm),

@@ -92,7 +92,8 @@ pub struct Spike {
     pub last: usize,
     /// The point of the run farthest from the median.
     pub peak: usize,
-    /// x of that point, mm (x = index × pitch).
+    /// x of that point, mm: index × pitch from the line's first point, in the grid's
+    /// coordinates ([`crate::grid::Grid::x_mm`]) for a spike of [`find_grid_spikes`].
     pub x_mm: f64,
     /// Its height as measured, µm.
     pub height_um: f64,
@@ -279,9 +280,9 @@ pub struct LineSpike {
     pub spike: Spike,
 }
 
-/// The spikes of every line of `grid` (named by their index), judged on each line's
-/// roughness profile ([`spike_roughness`] with `lambda_c_mm`). A line that cannot be judged
-/// (e.g. shorter than the filter needs) is named in the second list with the reason.
+/// The spikes of every line of `grid` (named by their index, at their x in its coordinates),
+/// judged on each line's roughness profile ([`spike_roughness`] with `lambda_c_mm`). A line
+/// that cannot be judged (e.g. shorter than the filter needs) is named in the second list.
 pub fn find_grid_spikes(
     grid: &Grid,
     lambda_c_mm: Option<f64>,
@@ -311,6 +312,8 @@ pub fn find_grid_spikes(
             Err(e) => failed.push((line, e)),
         }
     }
+    // Where the grid places them: its lines start at its x0.
+    (spikes.iter_mut()).for_each(|s| s.spike.x_mm = grid.x_mm(s.spike.peak));
     (spikes, failed)
 }
 

@@ -88,7 +88,9 @@ pub struct FittedModel {
     pub replaced: Vec<LineSpike>,
 }
 
-/// Fits `grid` as `recipe` says.
+/// Fits `grid` as `recipe` says, the surface placed in the grid's coordinates (its first
+/// column at [`Grid::x0_mm`], its lines at their y), so that every position read from it is
+/// one the input names.
 pub fn fit_model(grid: &Grid, recipe: &ModelRecipe) -> Result<FittedModel, MethodError> {
     let (bridged, replaced) = match &recipe.replace_spikes {
         Some(rule) => {
@@ -98,7 +100,7 @@ pub fn fit_model(grid: &Grid, recipe: &ModelRecipe) -> Result<FittedModel, Metho
         None => (None, Vec::new()),
     };
     let z = &bridged.as_ref().unwrap_or(grid).heights_um;
-    let fit = fit_grid_with(
+    let mut fit = fit_grid_with(
         grid.pitch_x_mm,
         &grid.y_mm,
         z,
@@ -106,6 +108,7 @@ pub fn fit_model(grid: &Grid, recipe: &ModelRecipe) -> Result<FittedModel, Metho
         recipe.degrees,
         recipe.method,
     )?;
+    fit.place_at_x(grid.x0_mm);
     Ok(FittedModel { fit, replaced })
 }
 

@@ -40,6 +40,9 @@ pub struct Report {
     /// x of each line's first point, mm: 0 for a scan and a grid CSV, a profile CSV's first
     /// x, an X3P file's x offset (each line's y is in `lines`).
     pub x0_mm: f64,
+    /// Which origin every position the report names uses (the warnings, `outliers`,
+    /// `model_checks`, `lines`), in words: the input's own coordinates.
+    pub positions: String,
     /// The verdict of the lines against the part's specification (a scan of a recipe with
     /// limits): first, as it is what the report is read for.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -147,6 +150,7 @@ pub fn assemble(
         input: ctx.input.clone(),
         kind: ctx.kind,
         x0_mm: grid.x0_mm,
+        positions: positions(grid.x0_mm, ctx.kind),
         specification: sections.specification.verdict,
         uncertainty: sections.specification.uncertainty,
         recipe,
@@ -190,6 +194,18 @@ pub fn assemble(
         overlay: sections.overlay,
     };
     (report, figures)
+}
+
+/// The origin of the positions a report of a `kind` input whose lines start at `x0_mm` names.
+fn positions(x0_mm: f64, kind: &str) -> String {
+    let (x, y) = match kind {
+        "x3p" => (" (the file's x offset)", ", from the file's y offset"),
+        _ => ("", ""),
+    };
+    format!(
+        "x and y in mm in the input's coordinates: each line's first point at x = {} mm{x}, each line at its own y{y}",
+        crate::numfmt::fmt(x0_mm, crate::numfmt::Quantity::PositionMm)
+    )
 }
 
 /// A section's result as report.json holds it: the value, or why there is none.

@@ -369,20 +369,28 @@ fn axes_carry_the_first_point_s_x_the_machine_y_of_the_first_line_and_exact_pitc
     }
 }
 
-#[test]
-fn analyze_reads_an_x3p_as_the_same_grid_as_its_csv() {
-    // The bundled sur-2 grid as CSV and as X3P: the lines analyze reports from the X3P are
-    // the CSV's, with the same numbers.
-    let csv =
-        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/sur-2.grid.csv");
-    let text = std::fs::read_to_string(&csv).unwrap();
+fn sur_2_csv() -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/sur-2.grid.csv")
+}
+
+/// The bundled sur-2 grid's heights, lines and points per line.
+fn sur_2() -> (Vec<f64>, usize, usize) {
+    let text = std::fs::read_to_string(sur_2_csv()).unwrap();
     let rows: Vec<Vec<f64>> = text
         .lines()
         .filter(|l| !l.trim().is_empty())
         .map(|l| l.split(',').map(|v| v.trim().parse().unwrap()).collect())
         .collect();
-    let cols = rows[0].len();
-    let z: Vec<f64> = rows.iter().flatten().copied().collect();
+    let z = rows.iter().flatten().copied().collect();
+    (z, rows.len(), rows[0].len())
+}
+
+#[test]
+fn analyze_reads_an_x3p_as_the_same_grid_as_its_csv() {
+    // The bundled sur-2 grid as CSV and as X3P: the lines analyze reports from the X3P are
+    // the CSV's, with the same numbers.
+    let csv = sur_2_csv();
+    let (z, rows, cols) = sur_2();
     let dir = tempfile::tempdir().unwrap();
     let x3p = dir.path().join("sur-2.x3p");
     std::fs::write(
@@ -390,12 +398,12 @@ fn analyze_reads_an_x3p_as_the_same_grid_as_its_csv() {
         to_x3p(
             &HeightMap {
                 heights_um: &z,
-                rows: rows.len(),
+                rows,
                 cols,
                 pitch_x_mm: 0.003484,
                 pitch_y_mm: 0.010452,
             },
-            (0.25, 0.0),
+            (0.25, -20.0),
             &X3pMeta::default(),
         )
         .unwrap(),
@@ -423,7 +431,7 @@ fn analyze_reads_an_x3p_as_the_same_grid_as_its_csv() {
     );
     let (from_x3p, _) = run(&x3p, "x3p", &[]);
     assert_eq!(from_x3p["kind"], "x3p");
-    assert_eq!(from_x3p["lines"].as_array().unwrap().len(), rows.len());
+    assert_eq!(from_x3p["lines"].as_array().unwrap().len(), rows);
     for (a, b) in from_csv["lines"]
         .as_array()
         .unwrap()
@@ -435,8 +443,8 @@ fn analyze_reads_an_x3p_as_the_same_grid_as_its_csv() {
         assert!((ra - rb).abs() <= 1e-12 * ra, "{ra} vs {rb}");
     }
     assert!(std::fs::metadata(dir.path().join("x3p/heightmap.png")).is_ok());
-    // The file's x offset is kept: report.json gives it, and the grid's X3P and the model's
-    // sampled on its points start where the input did.
+    // The file's offsets are kept: report.json gives x's, and the grid's X3P and the model's
+    // sampled on its points start where the input did (x and y).
     assert_eq!(
         (&from_x3p["x0_mm"], &from_csv["x0_mm"]),
         (&0.25.into(), &0.0.into())
@@ -444,7 +452,7 @@ fn analyze_reads_an_x3p_as_the_same_grid_as_its_csv() {
     for f in ["measured", "model"] {
         let x = read_x3p(&std::fs::read(dir.path().join(format!("x3p/{f}.x3p"))).unwrap());
         let x = x.unwrap();
-        assert_eq!((x.offset_x_mm, x.offset_y_mm), (0.25, 0.0), "{f}.x3p");
+        assert_eq!((x.offset_x_mm, x.offset_y_mm), (0.25, -20.0), "{f}.x3p");
     }
 }
 
@@ -641,4 +649,268 @@ fn a_profile_read_from_a_profile_x3p_is_the_line_of_its_csv() {
 fn heights_um(v: &serde_json::Value) -> Vec<f64> {
     let h = v["heights_um"].as_array().unwrap();
     h.iter().map(|x| x.as_f64().unwrap()).collect()
+}
+
+/// Every position (a number after `x =`, `y =`, `(x`, or after `…`/`→` in such a range) that
+/// `b` names where `a` names the same words is `a`'s plus `offset_mm` (x, y), to the 4
+/// decimals positions are printed with (and `slack_mm`); every other number is `a`'s (to the last printed
+/// digit), every word the same. Returns how many x and y positions were compared.
+fn positions_moved_by(a: &str, b: &str, offset_mm: [f64; 2], slack_mm: [f64; 2]) -> [usize; 2] {
+    let number = |t: &str| -> Option<f64> {
+        let t = t.trim_start_matches('(');
+        t.trim_end_matches([',', ';', ':', ')']).parse().ok()
+    };
+    let (ta, tb): (Vec<&str>, Vec<&str>) = (
+        a.split_whitespace().collect(),
+        b.split_whitespace().collect(),
+    );
+    assert_eq!(ta.len(), tb.len(), "{a}\n{b}");
+    let (mut axis, mut range, mut counts) = (None, None, [0, 0]);
+    for (wa, wb) in ta.iter().zip(&tb) {
+        let word = wa.trim_start_matches('(');
+        (axis, range) = match (word, number(wa), number(wb)) {
+            ("x" | "y", ..) => (Some(usize::from(word == "y")), None),
+            ("=", ..) if axis.is_some() => (axis, None),
+            ("…" | "→", ..) if range.is_some() => (range, None),
+            (_, Some(va), Some(vb)) => match axis {
+                Some(k) => {
+                    assert!(
+                        (vb - va - offset_mm[k]).abs() <= 1.01e-4 + slack_mm[k],
+                        "{} {va} → {vb}, not moved by {} mm in\n{a}\n{b}",
+                        ["x", "y"][k],
+                        offset_mm[k]
+                    );
+                    counts[k] += 1;
+                    (None, (!wa.ends_with([',', ';', ':', ')'])).then_some(k))
+                }
+                None => {
+                    assert!(
+                        (vb - va).abs() <= 1e-3 * va.abs().max(1e-3),
+                        "{wa} → {wb} in\n{a}\n{b}"
+                    );
+                    (None, None)
+                }
+            },
+            _ => {
+                assert_eq!(wa, wb, "in\n{a}\n{b}");
+                (None, None)
+            }
+        };
+    }
+    counts
+}
+
+/// An X3P file places its data where the machine measured them (CX and CY offsets): the
+/// positions `analyze` names are in its coordinates. Two grids, each written as X3P twice:
+/// the sur-2 grid (spikes, the model's overshoot) at offsets (0, 0) and (0.25, −20) mm, and
+/// 31 uncorrelated lines of 400 points with a 100 µm spike in line 13 (a spike, a fold of the
+/// surface and of its control net, an overshoot) at (0, −20) and (0.25, −20) mm: every x
+/// named in the warnings on stderr, in report.json and in report.html of the second file must
+/// be the first's + 0.25 mm and every y the first's + the y offset between them (the offsets
+/// written into the files). The folding grid keeps its y offset, and the y of its model's
+/// places may be anywhere on the grid: all 121 of its iso-curves fold by the same amount to
+/// rounding, and which is the worst (whose y is named) changes with the rounding of x moved.
+#[test]
+fn analyze_names_positions_in_the_x3p_files_coordinates() {
+    use crate::model_honesty::{uncorrelated_grid, COLS, PX, PY, ROWS};
+    let (z, rows, cols) = sur_2();
+    let sur_2 = map_of(&z, rows, cols, 0.003484, 0.010452);
+    let kinds = ["spike in line", "model overshoot"];
+    positions_move(&sur_2, &[], [[0.0, 0.0], [0.25, -20.0]], &kinds, 0.0);
+    let mut z = uncorrelated_grid(11);
+    z[12 * COLS + 233] += 100.0;
+    let folding = map_of(&z, ROWS, COLS, PX, PY);
+    let kinds = [
+        "spike in line",
+        "model fold",
+        "control net fold",
+        "model overshoot",
+    ];
+    positions_move(
+        &folding,
+        &["--lc", "0.08"],
+        [[0.0, -20.0], [0.25, -20.0]],
+        &kinds,
+        (ROWS - 1) as f64 * PY,
+    );
+}
+
+fn map_of(z: &[f64], rows: usize, cols: usize, pitch_x_mm: f64, pitch_y_mm: f64) -> HeightMap<'_> {
+    HeightMap {
+        heights_um: z,
+        rows,
+        cols,
+        pitch_x_mm,
+        pitch_y_mm,
+    }
+}
+
+/// `map` written as X3P at each of `origins` and analyzed (with `extra`): the positions the
+/// second names are the first's moved by the difference of the origins, and every kind of
+/// warning of `kinds` names some.
+fn positions_move(
+    map: &HeightMap<'_>,
+    extra: &[&str],
+    origins: [[f64; 2]; 2],
+    kinds: &[&str],
+    slack_y_mm: f64,
+) {
+    let slack = [0.0, slack_y_mm];
+    let dir = tempfile::tempdir().unwrap();
+    let offset_mm = [origins[1][0] - origins[0][0], origins[1][1] - origins[0][1]];
+    let run = |name: &str, origin: [f64; 2]| {
+        let x3p = dir.path().join(format!("{name}.x3p"));
+        std::fs::write(
+            &x3p,
+            to_x3p(map, (origin[0], origin[1]), &X3pMeta::default()).unwrap(),
+        )
+        .unwrap();
+        let out = dir.path().join(name);
+        let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .arg("analyze")
+            .arg(&x3p)
+            .arg("--out")
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(
+            o.status.code().is_some_and(|c| c == 0 || c == 3),
+            "{stderr}"
+        );
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+        let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+        (report, stderr, html)
+    };
+    let (a, a_err, a_html) = run("first", origins[0]);
+    let (b, b_err, b_html) = run("second", origins[1]);
+    let warnings = |r: &serde_json::Value| -> Vec<String> {
+        r["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|w| w.as_str().unwrap().to_string())
+            .collect()
+    };
+    let (wa, wb) = (warnings(&a), warnings(&b));
+    // Every kind of position the grid gives rise to is named.
+    for kind in kinds {
+        assert!(
+            wb.iter().any(|w| w.starts_with(kind)),
+            "no {kind:?} in {wb:#?}"
+        );
+    }
+    // report.json's warnings, the same on stderr, and in report.html's warnings.
+    let in_html = |h: &str| {
+        let from = h.find("id=\"warnings\"").unwrap();
+        let section = &h[from..from + h[from..].find("<h2").unwrap_or(h.len() - from)];
+        let mut text = String::new();
+        let mut tag = false;
+        for c in section.chars() {
+            match c {
+                '<' => (tag, text) = (true, text + " "),
+                '>' => tag = false,
+                c if !tag => text.push(c),
+                _ => {}
+            }
+        }
+        text.replace("&#39;", "'")
+            .replace("&quot;", "\"")
+            .replace("&amp;", "&")
+    };
+    let on_stderr = |s: &str| -> String {
+        s.lines()
+            .filter(|l| l.starts_with("surfscan: warning: "))
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    let mut named = [0, 0];
+    for (x, y) in [
+        (wa.join("\n"), wb.join("\n")),
+        (on_stderr(&a_err), on_stderr(&b_err)),
+        (in_html(&a_html), in_html(&b_html)),
+    ] {
+        let [nx, ny] = positions_moved_by(&x, &y, offset_mm, slack);
+        assert!(nx >= 5 && ny >= 2, "{nx} x and {ny} y positions in\n{y}");
+        named = [named[0] + nx, named[1] + ny];
+    }
+    // report.json's numbers, unrounded: the spikes' x, the model's checks, the lines' y.
+    let f = |v: &serde_json::Value| v.as_f64().unwrap();
+    let moved = |va: &serde_json::Value, vb: &serde_json::Value, k: usize, tol: f64| {
+        assert!((f(vb) - f(va) - offset_mm[k]).abs() <= tol, "{va} → {vb}");
+    };
+    let (sa, sb) = (&a["outliers"]["spikes"], &b["outliers"]["spikes"]);
+    assert!(!sb.as_array().unwrap().is_empty());
+    for (s, t) in sa.as_array().unwrap().iter().zip(sb.as_array().unwrap()) {
+        moved(&s["x_mm"], &t["x_mm"], 0, 1e-12);
+    }
+    for (la, lb) in a["lines"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(b["lines"].as_array().unwrap())
+    {
+        moved(&la["y_mm"], &lb["y_mm"], 1, 1e-12);
+    }
+    // The model is fitted to the same heights: its checks name the same places, moved (to
+    // 1 nm: the fit at y −20 mm rounds differently).
+    let (ca, cb) = (&a["model_checks"], &b["model_checks"]);
+    for at in ["model_max_at_mm", "model_min_at_mm"] {
+        for k in 0..2 {
+            moved(
+                &ca["height_range"][at][k],
+                &cb["height_range"][at][k],
+                k,
+                1e-6 + slack[k],
+            );
+        }
+    }
+    for (fa, fb) in ca["iso_curves"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(cb["iso_curves"].as_array().unwrap())
+    {
+        let along = usize::from(fa["direction"] == "v");
+        for k in 0..2 {
+            moved(
+                &fa["range_mm"][k],
+                &fb["range_mm"][k],
+                along,
+                1e-6 + slack[along],
+            );
+        }
+        moved(
+            &fa["at_mm"],
+            &fb["at_mm"],
+            1 - along,
+            1e-6 + slack[1 - along],
+        );
+    }
+    for (na, nb) in ca["net"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(cb["net"].as_array().unwrap())
+    {
+        let along = usize::from(na["direction"] == "v");
+        moved(&na["from_mm"], &nb["from_mm"], along, 1e-6 + slack[along]);
+        moved(&na["to_mm"], &nb["to_mm"], along, 1e-6 + slack[along]);
+    }
+    let folds = |k: &str| !cb[k].as_array().unwrap().is_empty();
+    assert_eq!(
+        kinds.contains(&"model fold"),
+        folds("iso_curves") && folds("net")
+    );
+    // The report says which origin its positions use (a model that folds has no model.x3p:
+    // `analyze_reads_an_x3p_as_the_same_grid_as_its_csv` checks it keeps the offsets).
+    let origin = "each line's first point at x = 0.2500 mm (the file's x offset)";
+    assert!(
+        b["positions"].as_str().unwrap().contains(origin),
+        "{}",
+        b["positions"]
+    );
+    assert!(b_html.replace("&#39;", "'").contains(origin));
 }

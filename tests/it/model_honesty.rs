@@ -11,10 +11,10 @@ use surfscan::metrology::folds::{check_model, net_folds, FoldOptions};
 use surfscan::metrology::holdout::{between_lines, SUPPORTED_BELOW_SQ};
 use surfscan::metrology::outliers::{find_spikes, spike_roughness, SpikeOptions};
 
-const ROWS: usize = 31;
-const COLS: usize = 400;
-const PX: f64 = 0.0015;
-const PY: f64 = 0.01;
+pub(crate) const ROWS: usize = 31;
+pub(crate) const COLS: usize = 400;
+pub(crate) const PX: f64 = 0.0015;
+pub(crate) const PY: f64 = 0.01;
 
 /// A small deterministic generator (splitmix64) for reproducible random grids.
 struct Rng(u64);
@@ -49,7 +49,7 @@ fn sine_grid() -> Vec<f64> {
 
 /// Each line a rough profile of its own (smooth along x, correlation length a few µm),
 /// independent of its neighbours.
-fn uncorrelated_grid(seed: u64) -> Vec<f64> {
+pub(crate) fn uncorrelated_grid(seed: u64) -> Vec<f64> {
     let mut rng = Rng(seed);
     let mut z = Vec::with_capacity(ROWS * COLS);
     for _ in 0..ROWS {

@@ -381,12 +381,16 @@ pub fn render(
         Some(s) => format!("{s} scan"),
         None => text(&report["kind"]),
     };
+    // On paper where the origin is not the first point's x = 0 (an X3P file's offsets).
+    let offset = report["kind"] == "x3p" || report["x0_mm"].as_f64().is_some_and(|x| x != 0.0);
     let _ = writeln!(
         h,
-        "<p class=\"muted\">{} · {} · written by {}</p>",
+        "<p class=\"muted\">{} · {} · written by {}</p>\n<p class=\"muted{}\" id=\"positions\">Positions: {}.</p>",
         esc(&text(&report["input"])),
         esc(&status),
-        esc(&text(&report["software"]))
+        esc(&text(&report["software"])),
+        if offset { "" } else { " noprint" },
+        esc(&text(&report["positions"]))
     );
     specification(&mut h, report);
     h.push_str("<h2 id=\"result\">Result</h2>\n<table id=\"t-result\">\n");

@@ -15,6 +15,8 @@
 
 use super::SectionInput;
 use crate::contact::{contact_curve, ContactCurve, ContactGrid, ContactOptions};
+use crate::fit::FitResult;
+use crate::grid::Grid;
 use crate::metrology::areal::{level_plane, HeightMap};
 use crate::metrology::holdout::BetweenLines;
 use crate::metrology::model::sample_model_grid;
@@ -188,15 +190,7 @@ pub fn section(
             ),
         };
         let contact = match input.model.fit {
-            Ok(fit) => sample_between(
-                &fit.surface,
-                &fit.params_v,
-                &g.y_mm,
-                g.cols,
-                g.pitch_x_mm,
-                s,
-            )
-            .and_then(|(h, rows)| {
+            Ok(fit) => sample_between(fit, g, s).and_then(|(h, rows)| {
                 let map = HeightMap::of(g, s);
                 let map = HeightMap {
                     heights_um: &h,
@@ -316,16 +310,9 @@ fn rows_v(
 
 /// The model sampled at the data's x pitch on rows `spacing_mm` apart; returns the heights
 /// (µm, row-major) and the number of rows.
-fn sample_between(
-    surface: &NurbsSurface,
-    params_v: &[f64],
-    y_mm: &[f64],
-    cols: usize,
-    pitch_x_mm: f64,
-    spacing_mm: f64,
-) -> Result<(Vec<f64>, usize), String> {
-    let vs = rows_v(surface, params_v, y_mm, spacing_mm)?;
-    let h = sample_model_grid(surface, &vs, 0.0, pitch_x_mm, cols)
+fn sample_between(fit: &FitResult, g: &Grid, spacing_mm: f64) -> Result<(Vec<f64>, usize), String> {
+    let vs = rows_v(&fit.surface, &fit.params_v, &g.y_mm, spacing_mm)?;
+    let h = sample_model_grid(&fit.surface, &vs, fit.x0_mm, g.pitch_x_mm, g.cols)
         .map_err(|e| format!("sampling the model at a {spacing_mm} mm y spacing: {e}"))?;
     Ok((h, vs.len()))
 }

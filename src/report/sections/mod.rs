@@ -133,7 +133,7 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
 
         let t = Instant::now();
         let spikes = spikes::section(&input);
-        spikes::warn(&spikes, model.replaced, grid.pitch_x_mm, &mut warnings);
+        spikes::warn(&spikes, model.replaced, grid, &mut warnings);
         // The lines are filtered; the surface as traced is not (no areal λc filter fits the
         // few tenths of a mm a scan covers in y): say so where the two kinds of numbers meet.
         if ctx.line_options.apply_lambda_c && grid.rows() > 1 {

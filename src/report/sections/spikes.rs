@@ -1,5 +1,5 @@
-//! Section `outliers`: the spikes of every line ([`crate::metrology::outliers`]), named
-//! there and in the warnings with line, x and height. By default the data stay as measured; when
+//! Section `outliers`: the spikes of every line ([`crate::metrology::outliers`]), named there
+//! and in the warnings with line, x (the input's) and height. By default the data stay as measured; when
 //! characterisation excludes them, the per-line and measured-grid parameters (and the
 //! hold-out) use a copy of the grid with each spike bridged by the straight line between its
 //! neighbours, and the files of the data (`measured.x3p`, the height map) stay as traced.
@@ -50,14 +50,8 @@ pub fn find(
 
 /// The warnings: every spike (the first [`LISTED`], then a count) with its line (1-based,
 /// the file index beside it), x and height, what was done with them, and the lines that could
-/// not be judged. `pitch_x_mm` places the points of a spike along x.
-pub fn warn(
-    o: &OutliersReport,
-    replaced: &[LineSpike],
-    pitch_x_mm: f64,
-    warnings: &mut Vec<String>,
-) {
-    let px = pitch_x_mm;
+/// not be judged. `grid` places the points of a spike along x.
+pub fn warn(o: &OutliersReport, replaced: &[LineSpike], grid: &Grid, warnings: &mut Vec<String>) {
     for s in o.spikes.iter().take(LISTED) {
         warnings.push(format!(
             "spike in line {} at x = {} mm: height {} µm, {} robust σ from the line's median roughness ({} point(s), x = {} … {} mm); {}",
@@ -66,8 +60,8 @@ pub fn warn(
             fmt(s.spike.height_um, Quantity::HeightUm),
             sig(s.spike.deviation_sigma, 3),
             s.spike.last - s.spike.first + 1,
-            fmt(s.spike.first as f64 * px, Quantity::PositionMm),
-            fmt(s.spike.last as f64 * px, Quantity::PositionMm),
+            fmt(grid.x_mm(s.spike.first), Quantity::PositionMm),
+            fmt(grid.x_mm(s.spike.last), Quantity::PositionMm),
             match o.policy {
                 "exclude" => "left out of the per-line and measured-grid parameters (bridged)",
                 _ => "flagged only, the data stay as measured",

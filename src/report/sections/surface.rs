@@ -96,7 +96,7 @@ pub fn section(input: &SectionInput<'_>, before_areal: impl FnOnce()) -> ModelSe
             sample_model_grid(
                 &fit.surface,
                 &fit.params_v,
-                0.0,
+                fit.x0_mm,
                 pitch_x_mm / 2.0,
                 model_cols,
             )
