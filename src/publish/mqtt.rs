@@ -20,7 +20,9 @@
 //! does not verify is named there and in the log, and tried again with backoff (1 s doubling
 //! to 30 s). Each connection starts a fresh client, so the outbox is the one place that knows
 //! what is still to be sent: the message in flight when a connection broke is sent again,
-//! with the same id.
+//! with the same id. A clean stop waits for the broker's acknowledgement of the message in
+//! flight (within [`STOP_DEADLINE`]) before it disconnects, so one the broker has taken is
+//! removed from the outbox and not sent again at the next start.
 //!
 //! Commands are carried out one at a time, in their order of arrival, by a task of their own
 //! ([`super::commands`]), so a command waiting for the runner never holds up the link.
@@ -300,16 +302,8 @@ impl MqttLink {
                         last_status.clear();
                         status_due = Some(Instant::now());
                     }
-                    Ok(Event::Outgoing(Outgoing::Publish(pkid))) => {
-                        if let Some(tag) = tags.pop_front() {
-                            sent.insert(pkid, tag);
-                        }
-                    }
-                    Ok(Event::Incoming(Packet::PubAck(ack))) => {
-                        if let Some(Tag::Outbox(seq)) = sent.remove(&ack.pkid) {
-                            if let Err(e) = self.ack(seq).await {
-                                tracing::error!("mqtt: cannot remove a delivered message from the outbox: {e}; it will be sent again");
-                            }
+                    Ok(ev @ (Event::Outgoing(Outgoing::Publish(_)) | Event::Incoming(Packet::PubAck(_)))) => {
+                        if self.delivered(&ev, &mut tags, &mut sent).await {
                             inflight = None;
                             self.report(true, format!("connected to {}", self.settings.url));
                         }
@@ -355,7 +349,7 @@ impl MqttLink {
                 _ = self.wake.notified() => {}
                 _ = shutdown.changed() => {
                     if connected {
-                        self.stop(&client, &mut events).await;
+                        self.stop(&client, &mut events, &mut tags, &mut sent).await;
                     }
                     return Ended::Shutdown;
                 }
@@ -363,16 +357,71 @@ impl MqttLink {
         }
     }
 
-    /// Says `offline` (a clean disconnect sends no last will) and disconnects, within
-    /// [`STOP_DEADLINE`].
-    async fn stop(&self, client: &AsyncClient, events: &mut rumqttc::EventLoop) {
-        let _ = client.try_publish(
-            self.topic("status"),
-            QoS::AtLeastOnce,
-            true,
-            self.status_payload(),
-        );
-        let _ = client.try_publish(self.topic("online"), QoS::AtLeastOnce, true, "offline");
+    /// Follows a publish going out (its packet id, for its tag) and an acknowledgement coming
+    /// in: true when it acknowledged an outbox message, which is then removed from the outbox.
+    async fn delivered(
+        &self,
+        ev: &Event,
+        tags: &mut VecDeque<Tag>,
+        sent: &mut HashMap<u16, Tag>,
+    ) -> bool {
+        match ev {
+            Event::Outgoing(Outgoing::Publish(pkid)) => {
+                if let Some(tag) = tags.pop_front() {
+                    sent.insert(*pkid, tag);
+                }
+                false
+            }
+            Event::Incoming(Packet::PubAck(ack)) => match sent.remove(&ack.pkid) {
+                Some(Tag::Outbox(seq)) => {
+                    if let Err(e) = self.ack(seq).await {
+                        tracing::error!("mqtt: cannot remove a delivered message from the outbox: {e}; it will be sent again");
+                    }
+                    true
+                }
+                _ => false,
+            },
+            _ => false,
+        }
+    }
+
+    /// Says `offline` (a clean disconnect sends no last will), waits for the broker's
+    /// acknowledgement of an outbox message in flight (removing it from the outbox, so the next
+    /// start does not send it again), and disconnects, each within [`STOP_DEADLINE`].
+    async fn stop(
+        &self,
+        client: &AsyncClient,
+        events: &mut rumqttc::EventLoop,
+        tags: &mut VecDeque<Tag>,
+        sent: &mut HashMap<u16, Tag>,
+    ) {
+        for (leaf, payload) in [
+            ("status", self.status_payload()),
+            ("online", "offline".into()),
+        ] {
+            if client
+                .try_publish(self.topic(leaf), QoS::AtLeastOnce, true, payload)
+                .is_ok()
+            {
+                tags.push_back(Tag::Other);
+            }
+        }
+        let outbox_in_flight = |tags: &VecDeque<Tag>, sent: &HashMap<u16, Tag>| {
+            tags.iter()
+                .chain(sent.values())
+                .any(|t| matches!(t, Tag::Outbox(_)))
+        };
+        let _ = tokio::time::timeout(STOP_DEADLINE, async {
+            while outbox_in_flight(tags, sent) {
+                match events.poll().await {
+                    Ok(ev) => {
+                        self.delivered(&ev, tags, sent).await;
+                    }
+                    Err(_) => break,
+                }
+            }
+        })
+        .await;
         let _ = client.try_disconnect();
         let _ = tokio::time::timeout(STOP_DEADLINE, async {
             while let Ok(ev) = events.poll().await {

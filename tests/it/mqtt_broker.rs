@@ -636,3 +636,109 @@ fn a_bad_mqtt_table_exits_78_naming_the_key() {
         ],
     );
 }
+
+/// A proxy between the station and the broker that holds back what the broker sends (its
+/// acknowledgements) while `hold` is set; returns its port.
+async fn holding_proxy(
+    broker_port: u16,
+    hold: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> u16 {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let port = listener.local_addr().unwrap().port();
+    tokio::spawn(async move {
+        while let Ok((down, _)) = listener.accept().await {
+            let Ok(up) = tokio::net::TcpStream::connect(("127.0.0.1", broker_port)).await else {
+                continue;
+            };
+            let ((mut down_r, mut down_w), (mut up_r, mut up_w)) =
+                (down.into_split(), up.into_split());
+            tokio::spawn(async move { tokio::io::copy(&mut down_r, &mut up_w).await });
+            let hold = hold.clone();
+            tokio::spawn(async move {
+                let mut buf = vec![0u8; 64 * 1024];
+                while let Ok(n @ 1..) = up_r.read(&mut buf).await {
+                    while hold.load(std::sync::atomic::Ordering::SeqCst) {
+                        tokio::time::sleep(Duration::from_millis(10)).await;
+                    }
+                    if down_w.write_all(&buf[..n]).await.is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+    });
+    port
+}
+
+/// A results message the broker has acknowledged is not sent again at the next start when
+/// its acknowledgement arrives during a clean stop: the stop waits for it (within its
+/// deadline) and removes the message from the outbox. The broker's acknowledgement is held
+/// back by a proxy until the stop has begun (the broker has the station's `offline`); after
+/// the link has stopped, the outbox is empty (before, the stop ignored the acknowledgement
+/// and the message stayed, to be sent again).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_message_acknowledged_during_a_clean_stop_is_not_sent_again() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::{Arc, Mutex};
+    use surfscan::publish::mqtt::MqttLink;
+    use surfscan::publish::outbox::Outbox;
+    let tmp = tempfile::tempdir().unwrap();
+    let broker = Broker::start(tmp.path());
+    let seen_file = tmp.path().join("seen.txt");
+    let _watcher = broker.subscribe("watcher-stop", &seen_file);
+    let hold = Arc::new(AtomicBool::new(false));
+    let port = holding_proxy(broker.port, hold.clone()).await;
+    let password = tmp.path().join("password");
+    std::fs::write(&password, format!("{}\n", mosquitto::STATION_PASSWORD)).unwrap();
+    let settings = toml::from_str(&format!(
+        "url = \"mqtt://127.0.0.1:{port}\"\nstation = {STATION:?}\nusername = {:?}\npassword-file = {:?}\n",
+        mosquitto::STATION_USER,
+        password
+    ))
+    .unwrap();
+    let outbox = Arc::new(Mutex::new(
+        Outbox::open(&tmp.path().join("outbox"), 100).unwrap(),
+    ));
+    let wake = Arc::new(tokio::sync::Notify::new());
+    let (status, _status_rx) = tokio::sync::watch::channel(Status::idle());
+    let link = MqttLink::new(settings, outbox.clone(), wake.clone(), status, None).unwrap();
+    let (stop, stop_rx) = tokio::sync::watch::channel(false);
+    let running = tokio::spawn(link.run(stop_rx));
+    let seen = |what: &str| {
+        std::fs::read_to_string(&seen_file)
+            .unwrap_or_default()
+            .contains(what)
+    };
+    let wait_for = |what: &str| {
+        let deadline = std::time::Instant::now() + Duration::from_secs(20);
+        while !seen(what) {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "the watcher never saw {what:?}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    wait_for(&format!("{} online", topic("online")));
+    // From here the broker's acknowledgements wait in the proxy.
+    hold.store(true, Ordering::SeqCst);
+    let mut payload = serde_json::Map::new();
+    payload.insert("scan_id".into(), "held-ack".into());
+    outbox.lock().unwrap().push("results", payload).unwrap();
+    wake.notify_one();
+    // The broker has the message (and has acknowledged it): then the station stops.
+    wait_for("held-ack");
+    stop.send(true).unwrap();
+    // The stop has begun when the broker has its `offline` (what the station sends passes).
+    wait_for(&format!("{} offline", topic("online")));
+    hold.store(false, Ordering::SeqCst);
+    tokio::time::timeout(Duration::from_secs(10), running)
+        .await
+        .expect("the link stops within its deadlines")
+        .unwrap();
+    assert!(
+        outbox.lock().unwrap().is_empty(),
+        "the acknowledged message is still in the outbox: it would be sent again"
+    );
+}
