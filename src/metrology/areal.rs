@@ -160,6 +160,19 @@ impl Plane {
         }
     }
 
+    /// `grid`'s heights less the plane, and (a, b, c) of z = a + b·x + c·y in mm from the
+    /// first point: what [`level_plane`] returns, for a caller that keeps the plane.
+    pub fn level(&self, grid: &HeightMap<'_>) -> (Vec<f64>, [f64; 3]) {
+        let mut levelled = vec![0.0; grid.heights_um.len()];
+        let rows = grid.heights_um.chunks_exact(grid.cols);
+        for (row, (line, out)) in rows.zip(levelled.chunks_exact_mut(grid.cols)).enumerate() {
+            self.level_row(row, line, out);
+        }
+        let (b_mm, c_mm) = (self.b / grid.pitch_x_mm, self.c / grid.pitch_y_mm);
+        let a_mm = self.a - self.b * self.xc - self.c * self.yc;
+        (levelled, [a_mm, b_mm, c_mm])
+    }
+
     /// The height `z` at (`row`, `col`) less the plane.
     pub fn level_at(&self, row: usize, col: usize, z: f64) -> f64 {
         let (x, y) = (col as f64 - self.xc, row as f64 - self.yc);
@@ -169,20 +182,7 @@ impl Plane {
 
 /// Removes the least-squares plane z = a + b·x + c·y; returns the residual heights and (a, b, c).
 pub fn level_plane(grid: &HeightMap<'_>) -> Result<(Vec<f64>, [f64; 3]), MetrologyError> {
-    let p = Plane::of(grid)?;
-    let mut levelled = vec![0.0; grid.heights_um.len()];
-    for (row, (line, out)) in grid
-        .heights_um
-        .chunks_exact(grid.cols)
-        .zip(levelled.chunks_exact_mut(grid.cols))
-        .enumerate()
-    {
-        p.level_row(row, line, out);
-    }
-    // In mm from the first point: z = a' + b'·x_mm + c'·y_mm.
-    let b_mm = p.b / grid.pitch_x_mm;
-    let c_mm = p.c / grid.pitch_y_mm;
-    Ok((levelled, [p.a - p.b * p.xc - p.c * p.yc, b_mm, c_mm]))
+    Ok(Plane::of(grid)?.level(grid))
 }
 
 /// The definition ids of the areal parameters.

@@ -85,7 +85,7 @@ impl Acf {
             .copied()
     }
 
-    /// Bilinear interpolation at the lag (τx, τy) in µm; `None` outside the grid's lags.
+    /// Bilinear interpolation at the lag (τx, τy ≥ 0) in µm; `None` outside the lags held.
     pub fn interpolate(&self, tx_um: f64, ty_um: f64) -> Option<f64> {
         let fx = tx_um / self.pitch_x_um;
         let fy = ty_um / self.pitch_y_um;
@@ -97,18 +97,18 @@ impl Acf {
         let floor = |f: f64| f as isize - isize::from((f as isize) as f64 > f);
         let (x0, y0) = (floor(fx), floor(fy));
         let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
-        let v = |dy: isize, dx: isize, w: f64| -> Option<f64> {
-            if w == 0.0 {
-                Some(0.0)
-            } else {
-                self.at(y0 + dy, x0 + dx).map(|a| a * w)
-            }
+        // Corners (y0, x0) … (y0 + 1, x0 + 1); one of weight 0 is not read (may lie outside).
+        let w = 2 * self.cols - 1;
+        let first = usize::try_from(y0).ok()? * w + (x0 + self.cols as isize - 1) as usize;
+        let v = |i: usize, weight: f64| match weight == 0.0 {
+            true => Some(0.0),
+            false => self.values.get(first + i).map(|a| a * weight),
         };
         Some(
-            v(0, 0, (1.0 - tx) * (1.0 - ty))?
-                + v(0, 1, tx * (1.0 - ty))?
-                + v(1, 0, (1.0 - tx) * ty)?
-                + v(1, 1, tx * ty)?,
+            v(0, (1.0 - tx) * (1.0 - ty))?
+                + v(1, tx * (1.0 - ty))?
+                + v(w, (1.0 - tx) * ty)?
+                + v(w + 1, tx * ty)?,
         )
     }
 }
@@ -384,18 +384,18 @@ fn texture_direction(grid: &HeightMap<'_>, plane: &Plane) -> f64 {
     let mut spectra = vec![Complex64::default(); rows * nk];
     line_spectra(grid, plane, r2c.as_ref(), &mut spectra);
     let freq = |k: usize, n: usize, d: f64| {
-        let k = if k < n.div_ceil(2) {
-            k as f64
-        } else {
-            k as f64 - n as f64
-        };
-        k / (n as f64 * d)
+        (k as f64 - if k < n.div_ceil(2) { 0.0 } else { n as f64 }) / (n as f64 * d)
     };
     let bins = (180.0 / ANGLE_STEP_DEG) as usize;
     let bin = |r: usize, c: usize| {
         let fy = freq(r, rows, grid.pitch_y_mm);
         let fx = freq(c, cols, grid.pitch_x_mm);
-        let theta = fy.atan2(fx).to_degrees().rem_euclid(180.0);
+        let t = fy.atan2(fx).to_degrees();
+        // rem_euclid(180.0) without fmod for |t| < 180° (t + 0 turns −0 to 0: the same bin).
+        let theta = match t.abs() < 180.0 {
+            true => t + if t < 0.0 { 180.0 } else { 0.0 },
+            false => t.rem_euclid(180.0),
+        };
         ((theta / ANGLE_STEP_DEG) as usize).min(bins - 1)
     };
     let mut spectrum = vec![0.0; bins];
@@ -415,23 +415,18 @@ fn texture_direction(grid: &HeightMap<'_>, plane: &Plane) -> f64 {
             }
         }
     });
-    let (best, _) = spectrum
-        .iter()
-        .enumerate()
-        .fold((0, f64::NEG_INFINITY), |(bi, bv), (i, v)| {
-            if *v > bv {
-                (i, *v)
-            } else {
-                (bi, bv)
-            }
-        });
-    best as f64 * ANGLE_STEP_DEG
+    let mut best = (0, f64::NEG_INFINITY);
+    for (i, &v) in spectrum.iter().enumerate() {
+        if v > best.1 {
+            best = (i, v);
+        }
+    }
+    best.0 as f64 * ANGLE_STEP_DEG
 }
 
-/// Sal, Str and Std of `grid` after plane levelling.
-pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyError> {
-    let plane = Plane::of(grid)?;
-    let acf = acf_of_levelled(grid, &plane);
+/// Sal, Str and Std of `grid` levelled by `plane` ([`Plane::of`] the grid, which checks it).
+pub fn spatial_params(grid: &HeightMap<'_>, plane: &Plane) -> SpatialParams {
+    let acf = acf_of_levelled(grid, plane);
     let rays = (180.0 / ANGLE_STEP_DEG) as usize;
     let lengths: Vec<(f64, Option<f64>)> = (0..rays)
         .map(|i| {
@@ -454,7 +449,7 @@ pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyEr
     let undecayed: Vec<f64> = lengths
         .iter()
         .filter(|(_, l)| l.is_none())
-        .map(|(d, _)| *d)
+        .map(|p| p.0)
         .collect();
     let mut blank_reasons = BTreeMap::new();
     let mut caveats = Vec::new();
@@ -499,8 +494,8 @@ pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyEr
     };
     // Its buffers are gone before the PSDs and the spectrum for Std take their own.
     drop(acf);
-    curves.psd_x = psd_along_x(grid, &plane);
-    curves.psd_y = psd_along_y(grid, &plane);
+    curves.psd_x = psd_along_x(grid, plane);
+    curves.psd_y = psd_along_y(grid, plane);
     if let Some((_, sal)) = fastest {
         if sal < dy && dy > 2.0 * dx {
             caveats.push(format!(
@@ -508,10 +503,10 @@ pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyEr
             ));
         }
     }
-    Ok(SpatialParams {
+    SpatialParams {
         sal_um: fastest.map(|(_, l)| l),
         str_ratio,
-        std_deg: texture_direction(grid, &plane),
+        std_deg: texture_direction(grid, plane),
         s: S_THRESHOLD,
         fastest_decay_direction_deg: fastest.map(|(d, _)| d),
         slowest_decay_direction_deg: str_ratio.and(slowest.map(|(d, _)| d)),
@@ -520,7 +515,7 @@ pub fn spatial_params(grid: &HeightMap<'_>) -> Result<SpatialParams, MetrologyEr
         caveats,
         definitions: definitions(),
         curves,
-    })
+    }
 }
 
 /// A one-dimensional power spectral density averaged over profiles.
@@ -571,13 +566,14 @@ fn psd_of_profiles(
     let half = n / 2;
     let mut sum = vec![0.0; half];
     let mut buf = vec![Complex64::new(0.0, 0.0); n];
+    let mut scratch = vec![Complex64::new(0.0, 0.0); fft.get_inplace_scratch_len()];
     let mut p = vec![0.0; n];
     for i in 0..count {
         profile(i, &mut p);
         for ((b, z), w) in buf.iter_mut().zip(&p).zip(&window) {
             *b = Complex64::new(z * w * pitch_um, 0.0);
         }
-        fft.process(&mut buf);
+        fft.process_with_scratch(&mut buf, &mut scratch);
         let raw = |k: usize| buf.get(k).map_or(0.0, |v| v.norm_sqr()) / length;
         for (k, s) in sum.iter_mut().enumerate() {
             *s += if k == 0 {
@@ -654,7 +650,7 @@ mod tests {
             .map(|k| (2.0 * PI * (k % cols) as f64 * px * 1000.0 / lambda_um).cos())
             .collect();
         let g = grid_of(&z, rows, cols, px, py);
-        let p = spatial_params(&g).unwrap();
+        let p = spatial_params(&g, &Plane::of(&g).unwrap());
         let want = lambda_um * 0.2f64.acos() / (2.0 * PI);
         let sal = p.sal_um.unwrap();
         assert!((sal - want).abs() < 0.02 * want, "Sal {sal} vs {want}");
@@ -678,7 +674,8 @@ mod tests {
                 (2.0 * PI * (fx * c + fy * r)).cos()
             })
             .collect();
-        let s = spatial_params(&grid_of(&z, rows, cols, p, p)).unwrap();
+        let g = grid_of(&z, rows, cols, p, p);
+        let s = spatial_params(&g, &Plane::of(&g).unwrap());
         assert_eq!(s.std_deg, 29.5);
     }
 

@@ -8,7 +8,7 @@
 
 use super::SectionInput;
 use crate::metrology::anisotropy::Anisotropy;
-use crate::metrology::areal::{areal_params_of_levelled, level_plane, smr_curve, HeightMap};
+use crate::metrology::areal::{areal_params_of_levelled, smr_curve, HeightMap, Plane};
 use crate::metrology::functional::areal_functional;
 use crate::metrology::spatial::spatial_params;
 use crate::report::document::SurfaceReport;
@@ -19,8 +19,9 @@ pub fn surface_report(
     levels: usize,
     recipe: String,
 ) -> Result<SurfaceReport, String> {
-    let (z, plane) = level_plane(g).map_err(|e| e.to_string())?;
-    let params = areal_params_of_levelled(g, &z, plane);
+    let plane = Plane::of(g).map_err(|e| e.to_string())?;
+    let (z, coefficients) = plane.level(g);
+    let params = areal_params_of_levelled(g, &z, coefficients);
     let bac = smr_curve(&z, g.cols, levels).map_err(|e| e.to_string())?;
     Ok(SurfaceReport {
         params,
@@ -29,7 +30,7 @@ pub fn surface_report(
         bac_curves: None,
         bac_curves_recipe: None,
         functional: areal_functional(z).map_err(|e| e.to_string()),
-        spatial: spatial_params(g).map_err(|e| e.to_string()),
+        spatial: Ok(spatial_params(g, &plane)),
     })
 }
 
