@@ -37,7 +37,7 @@ pub mod approx_v;
 mod banded;
 mod error;
 mod incremental;
-mod memory;
+pub(crate) mod memory;
 mod options;
 mod params;
 mod residual;

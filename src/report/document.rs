@@ -111,12 +111,10 @@ pub struct Report {
     pub lab: super::header::LabHeader,
 }
 
-/// What the figures are drawn from beyond the report: each line's analysis (its Rk
-/// construction), the model sampled on the data lines, the line drawn against the model.
+/// What the figures are drawn from beyond the report (the lines' Rk constructions are drawn
+/// as their section ends): the model sampled on the data lines, the line drawn against it.
 #[derive(Debug)]
 pub struct FigureData {
-    /// Each row's analysis, in grid order.
-    pub analyses: Vec<crate::metrology::params::LineAnalysis>,
     /// The model sampled on the data lines, when it could be.
     pub sampled: Option<crate::report::sections::surface::SampledModel>,
     /// The line drawn against the model.
@@ -136,7 +134,7 @@ pub fn assemble(
     let LinesSection {
         recipe,
         lines: mut line_reports,
-        analyses,
+        ..
     } = sections.lines;
     if let Ok(h) = &sections.model_vs_measured {
         attach(&mut line_reports, h);
@@ -189,7 +187,6 @@ pub fn assemble(
         lab: ctx.lab.clone(),
     };
     let figures = FigureData {
-        analyses,
         sampled: sections.surface.sampled,
         overlay: sections.overlay,
     };

@@ -112,13 +112,17 @@ pub fn characterise(
         });
     }
     std::fs::create_dir_all(out).map_err(error::io(out))?;
-    let sections = sections::run(grid, &model, &ctx)?;
+    let (sections, (rk_plots, rk_s)) = sections::run(grid, &model, &ctx, |analyses| {
+        let t = Instant::now();
+        let drawn = render::write_rk_plots(out, grid, analyses, &ctx);
+        (drawn, t.elapsed())
+    })?;
     let mut timings = sections.timings.clone();
     let (mut report, figures) = document::assemble(sections, grid, &model, &ctx);
     let logo = render::read_logo(&report.lab, &mut report.warnings);
     let t = Instant::now();
-    let written = render::write_data_files(out, grid, &report, &figures, &ctx)?;
-    timings.write = t.elapsed().as_secs_f64();
+    let written = render::write_data_files(out, grid, &report, &figures, rk_plots, &ctx)?;
+    timings.write = (t.elapsed() + rk_s).as_secs_f64();
     // The fit came before this call; it is part of the whole.
     timings.fit = model.fit_s;
     timings.total = t_all.elapsed().as_secs_f64() + model.fit_s;

@@ -68,25 +68,20 @@ fn caption(ctx: &ReportContext) -> String {
     match &ctx.traceability {
         Some(t) => {
             let c = &t.conditions;
-            let mut cond = Vec::new();
-            if let Some(s) = &c.standard {
-                cond.push(s.clone());
-            }
-            if let Some(f) = c.filter {
-                cond.push(format!("{f:?}"));
-            }
-            if let Some(l) = c.lambda_c_mm {
-                cond.push(format!("λc {l} mm"));
-            }
-            if let Some(l) = c.lambda_s_um {
-                cond.push(format!("λs {l} µm"));
-            }
-            match c.sampling_lengths {
+            let cond: Vec<String> = [
+                c.standard.clone(),
+                c.filter.map(|f| format!("{f:?}")),
+                c.lambda_c_mm.map(|l| format!("λc {l} mm")),
+                c.lambda_s_um.map(|l| format!("λs {l} µm")),
                 // The SJ series' N = 0: an arbitrary evaluation length, one section.
-                Some(0) => cond.push("arbitrary evaluation length".to_string()),
-                Some(n) => cond.push(format!("N = {n}")),
-                None => {}
-            }
+                c.sampling_lengths.map(|n| match n {
+                    0 => "arbitrary evaluation length".to_string(),
+                    n => format!("N = {n}"),
+                }),
+            ]
+            .into_iter()
+            .flatten()
+            .collect();
             let cond = if cond.is_empty() {
                 "conditions not recorded".to_string()
             } else {
@@ -175,13 +170,9 @@ fn write_plots(
             (None, Some(g)) => (&[], &g.bac),
             (None, None) => (&[], &[]),
         };
-    let bac_title = if bac_curves.is_empty() {
-        "Bearing area curve of the measured grid, pooled".to_string()
-    } else {
-        format!(
-            "Bearing area curves: {} model curves, pooled",
-            bac_curves.len()
-        )
+    let bac_title = match bac_curves.len() {
+        0 => "Bearing area curve of the measured grid, pooled".to_string(),
+        n => format!("Bearing area curves: {n} model curves, pooled"),
     };
     if !(bac_curves.is_empty() && pooled.is_empty()) {
         let bac = plot_bearing_curves(out, bac_curves, pooled, &bac_title, &caption);
@@ -218,12 +209,6 @@ fn panicked(input: &str, file: &str, thread: &'static str, hint: &'static str) -
     ReportError::Metrology { what, source }
 }
 
-/// The error of an Rk figure thread that panicked.
-fn rk_plot_panic(ctx: &ReportContext) -> ReportError {
-    let hint = "drawing the Rk figures panicked; report this with the input";
-    panicked(&ctx.input, "plots", "Rk plot thread", hint)
-}
-
 /// The height map of the measured grid, `heightmap.png|svg`, and its 3D view,
 /// `surface3d.png|svg`, listed between the bearing area curves and the overlay; none for a
 /// grid of fewer than 2 × 2 points.
@@ -249,11 +234,13 @@ fn draw_height_map(
 
 /// The ISO 13565-2 construction of every line, from the ordinates its Rk family came from:
 /// `rk/NNNN.svg` (and `rk/NNNN.png` when `[report] line-png` asks for it), with each figure's
-/// title.
-fn write_rk_plots(
+/// title. Drawn as the lines' section ends ([`super::sections::run`]): the analyses are then
+/// dropped and their pages given back before the areal sections; [`write_data_files`] reports
+/// the result in its turn.
+pub fn write_rk_plots(
     out: &Path,
     grid: &Grid,
-    analyses: &[LineAnalysis],
+    analyses: Vec<LineAnalysis>,
     ctx: &ReportContext,
 ) -> Result<Vec<(String, [PathBuf; 2])>, ReportError> {
     let rk_dir = out.join("rk");
@@ -287,10 +274,12 @@ fn write_rk_plots(
         .map_err(&plot_err)?;
         Ok((title, files))
     };
-    let panicked = |_| Err(rk_plot_panic(ctx));
-    crate::metrology::map_in_parallel(analyses, draw, panicked)
-        .into_iter()
-        .collect()
+    let hint = "drawing the Rk figures panicked; report this with the input";
+    let panicked = |_| Err(panicked(&ctx.input, "plots", "Rk plot thread", hint));
+    let drawn = crate::metrology::map_in_parallel(&analyses, draw, panicked);
+    drop(analyses);
+    crate::fit::memory::release_free_heap();
+    drawn.into_iter().collect()
 }
 
 /// The title of line `index`'s figure (its assessed profile and Rk construction).
@@ -300,15 +289,16 @@ fn rk_title(index: u32, y_mm: f64) -> String {
     format!("Line {n} ({index:04}, y = {y} mm): assessed profile and ISO 13565-2 Rk construction")
 }
 
-/// Writes the plots (the Rk figures and the height map on threads of their own), the X3P
-/// files beside them, the contact's files (when the report has a contact), then
-/// `summary.csv`; `report.json` and `report.html` are written last by
-/// [`write_report`], once the report's timings are final.
+/// Writes the plots (the height map on a thread of its own), the X3P files beside them, the
+/// contact's files (when the report has a contact), then `summary.csv`, with `rk_plots`
+/// (drawn before); `report.json` and `report.html` are written last by [`write_report`], once
+/// the report's timings are final.
 pub fn write_data_files(
     out: &Path,
     grid: &Grid,
     report: &Report,
     figures: &FigureData,
+    rk_plots: Result<Vec<(String, [PathBuf; 2])>, ReportError>,
     ctx: &ReportContext,
 ) -> Result<Files, ReportError> {
     let measured = &HeightMap::of(grid, grid.mean_pitch_y().0);
@@ -325,7 +315,7 @@ pub fn write_data_files(
     remove_earlier_outputs(out)?;
     // Both files start where the measured grid does: the model is sampled on its points.
     let origin_mm = (grid.x0_mm, grid.y_mm.first().copied().unwrap_or(0.0));
-    let (plots, rk_plots, x3p) = std::thread::scope(|s| {
+    let (plots, x3p) = std::thread::scope(|s| {
         let x3p = s.spawn(|| -> Result<(PathBuf, Option<PathBuf>), ReportError> {
             // Encodes one height map as `name` and writes it, streamed: the archive's bytes
             // are never held whole.
@@ -351,7 +341,6 @@ pub fn write_data_files(
                 .transpose()?;
             Ok((measured_x3p, model_x3p))
         });
-        let rk_plots = s.spawn(|| write_rk_plots(out, grid, &figures.analyses, ctx));
         let height_map = s.spawn(|| draw_height_map(out, measured, ctx));
         let height_map = || {
             height_map.join().unwrap_or_else(|_| {
@@ -360,8 +349,7 @@ pub fn write_data_files(
             })
         };
         let plots = write_plots(out, height_map, figures.overlay.as_ref(), report, ctx);
-        let rk_plots = rk_plots.join().unwrap_or_else(|_| Err(rk_plot_panic(ctx)));
-        (plots, rk_plots, x3p.join())
+        (plots, x3p.join())
     });
     let mut plots = plots?;
     let rk_plots = rk_plots?;

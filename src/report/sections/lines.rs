@@ -26,7 +26,7 @@ pub struct LinesSection {
     /// One entry per row of the grid.
     pub lines: Vec<LineReport>,
     /// Each row's analysis (its roughness profile draws the Rk construction), without the
-    /// primary profile and the mean line, which no figure draws.
+    /// primary profile and the mean line, which no figure draws; [`super::run`] keeps none.
     pub analyses: Vec<LineAnalysis>,
 }
 

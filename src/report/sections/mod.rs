@@ -15,11 +15,11 @@
 //! | the contact of the grid and of the model between lines (`contact`, when asked for) | [`contact`] | the grid as characterised, the model, `between_lines` |
 //! | the means' uncertainty and the verdict against the specification (`uncertainty`, `specification`) | [`specification`] | `lines`, the context's specification |
 //!
-//! [`run`] composes them — the model section beside the others, as it needs only the grid
-//! and the model — and collects the warnings and what could not be made. A section that fails
-//! never takes another down: its error is its result, named in
-//! `characterisation.failed_sections`; what the number of lines rules out is named in
-//! `characterisation.sections_not_possible` instead.
+//! [`run`] composes them — the model section beside the others, as it needs only the grid and the
+//! model; the lines' analyses handed to the caller (for the Rk figures) as their section ends — and
+//! collects the warnings and what failed. A section that fails never takes another down: its error
+//! is its result, named in `characterisation.failed_sections`; what the number of lines rules out
+//! is named in `characterisation.sections_not_possible` instead.
 //!
 //! Adding a section: a file here with `pub fn section(input: &SectionInput<'_>, …) ->
 //! Result<T, String>` (its earlier results as further arguments), a field in [`Sections`], its
@@ -43,6 +43,7 @@ use super::error::ReportError;
 use crate::grid::Grid;
 use crate::metrology::anisotropy::Anisotropy;
 use crate::metrology::holdout::{BetweenLines, Holdout};
+use crate::metrology::params::LineAnalysis;
 use std::time::Instant;
 
 /// What every section reads.
@@ -96,8 +97,15 @@ pub struct Sections {
 }
 
 /// Runs every section on `grid` with `model`. An error only when the lines cannot be
-/// characterised at all.
-pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sections, ReportError> {
+/// characterised at all. The lines' analyses go to `draw_lines` (the caller draws their Rk
+/// figures) as soon as their section is done and are not kept: a 1000-line grid's roughness
+/// profiles and Rk curves (about 93 MB) are gone before the areal sections' buffers.
+pub fn run<D>(
+    grid: &Grid,
+    model: &Model<'_>,
+    ctx: &ReportContext,
+    draw_lines: impl FnOnce(Vec<LineAnalysis>) -> D,
+) -> Result<(Sections, D), ReportError> {
     let mut warnings = ctx.warnings.clone();
     let mut timings = Timings::default();
     let (pitch_y_mm, evenly) = grid.mean_pitch_y();
@@ -148,11 +156,12 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
             characterised: bridged.as_ref().unwrap_or(grid),
             ..input
         };
-        let lines = lines::section(&input)?;
+        let mut lines = lines::section(&input)?;
         let specification = specification::section(&input, &lines);
         timings.lines = t.elapsed().as_secs_f64();
         warnings.extend(lines::cutoff_warning(&lines, &ctx.line_options));
         warnings.extend(lines::uncentred_warning(&lines, &ctx.line_options));
+        let drawn = draw_lines(std::mem::take(&mut lines.analyses));
 
         let t = Instant::now();
         if !evenly {
@@ -183,11 +192,12 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
         let (model_vs_measured, mut between_lines) = model_vs_measured::section(&input, sq);
         timings.holdout = t.elapsed().as_secs_f64();
         // The overlay of a held-out line (the rows are still the grid's here) is made, and the
-        // hold-out's heights it may draw are dropped, before the model's autocorrelation.
+        // hold-out's heights it may draw are dropped, their pages given back, before the ACF.
         let (overlay, said) = overlay::section(&input, between_lines.as_ref().ok());
         if let Ok(b) = &mut between_lines {
             b.model_um = Vec::new();
         }
+        crate::fit::memory::release_free_heap();
         drop(areal_go);
         let (surface, model_s) = model_thread
             .join()
@@ -262,7 +272,7 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
         for f in &failed {
             warnings.push(format!("{} could not be made: {}", f.section, f.reason));
         }
-        Ok(Sections {
+        let sections = Sections {
             spikes,
             lines,
             specification,
@@ -277,6 +287,7 @@ pub fn run(grid: &Grid, model: &Model<'_>, ctx: &ReportContext) -> Result<Sectio
             not_possible,
             warnings,
             timings,
-        })
+        };
+        Ok((sections, drawn))
     })
 }
