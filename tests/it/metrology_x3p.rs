@@ -837,21 +837,23 @@ fn positions_move(
         named = [named[0] + nx, named[1] + ny];
     }
     // report.json's numbers, unrounded: the spikes' x, the model's checks, the lines' y.
+    // Two runs' arrays, item by item.
+    fn pairs<'v>(
+        a: &'v serde_json::Value,
+        b: &'v serde_json::Value,
+    ) -> impl Iterator<Item = (&'v serde_json::Value, &'v serde_json::Value)> {
+        a.as_array().unwrap().iter().zip(b.as_array().unwrap())
+    }
     let f = |v: &serde_json::Value| v.as_f64().unwrap();
     let moved = |va: &serde_json::Value, vb: &serde_json::Value, k: usize, tol: f64| {
         assert!((f(vb) - f(va) - offset_mm[k]).abs() <= tol, "{va} → {vb}");
     };
     let (sa, sb) = (&a["outliers"]["spikes"], &b["outliers"]["spikes"]);
     assert!(!sb.as_array().unwrap().is_empty());
-    for (s, t) in sa.as_array().unwrap().iter().zip(sb.as_array().unwrap()) {
+    for (s, t) in pairs(sa, sb) {
         moved(&s["x_mm"], &t["x_mm"], 0, 1e-12);
     }
-    for (la, lb) in a["lines"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .zip(b["lines"].as_array().unwrap())
-    {
+    for (la, lb) in pairs(&a["lines"], &b["lines"]) {
         moved(&la["y_mm"], &lb["y_mm"], 1, 1e-12);
     }
     // The model is fitted to the same heights: its checks name the same places, moved (to
@@ -867,12 +869,7 @@ fn positions_move(
             );
         }
     }
-    for (fa, fb) in ca["iso_curves"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .zip(cb["iso_curves"].as_array().unwrap())
-    {
+    for (fa, fb) in pairs(&ca["iso_curves"], &cb["iso_curves"]) {
         let along = usize::from(fa["direction"] == "v");
         for k in 0..2 {
             moved(
@@ -889,12 +886,7 @@ fn positions_move(
             1e-6 + slack[1 - along],
         );
     }
-    for (na, nb) in ca["net"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .zip(cb["net"].as_array().unwrap())
-    {
+    for (na, nb) in pairs(&ca["net"], &cb["net"]) {
         let along = usize::from(na["direction"] == "v");
         moved(&na["from_mm"], &nb["from_mm"], along, 1e-6 + slack[along]);
         moved(&na["to_mm"], &nb["to_mm"], along, 1e-6 + slack[along]);
