@@ -23,15 +23,6 @@ pub const ALPHA: f64 = 0.469_718_639_349_825_8;
 pub const END_TREATMENT: &str =
     "ISO 16610-28 first-order moment criterion (Gaussian-weighted local line at the ends)";
 
-/// The result of splitting a profile at λc: the mean line (waviness W) and the roughness R = P − W.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Split {
-    /// The λc mean line (waviness profile) in µm, one value per input point.
-    pub mean_line_um: Vec<f64>,
-    /// The roughness profile R = P − W in µm.
-    pub roughness_um: Vec<f64>,
-}
-
 /// The sampled, truncated (±`cutoff_mm`) and unnormalised Gaussian weights w_k for offsets
 /// k = 0, 1, …, half (the kernel is symmetric), for a profile of `points` points: taps farther
 /// than `points` samples meet no data, so half is at most `points`. Without that bound a pitch
@@ -293,18 +284,18 @@ fn mean_line_fft(heights_um: &[f64], w: &[f64]) -> Vec<f64> {
     })
 }
 
-/// Splits a primary profile at λc into mean line W and roughness R = P − W.
-pub fn split(heights_um: &[f64], pitch_mm: f64, cutoff_mm: f64) -> Result<Split, MetrologyError> {
+/// The roughness profile R = P − W of a primary profile P, W its λc mean line, µm.
+pub fn roughness(
+    heights_um: &[f64],
+    pitch_mm: f64,
+    cutoff_mm: f64,
+) -> Result<Vec<f64>, MetrologyError> {
     let mean_line_um = gaussian_mean_line(heights_um, pitch_mm, cutoff_mm)?;
-    let roughness_um = heights_um
+    Ok(heights_um
         .iter()
         .zip(&mean_line_um)
         .map(|(p, w)| p - w)
-        .collect();
-    Ok(Split {
-        mean_line_um,
-        roughness_um,
-    })
+        .collect())
 }
 
 #[cfg(test)]

@@ -128,7 +128,7 @@ pub fn spike_roughness(
     check_pitch(pitch_mm)?;
     check_heights(heights_um)?;
     if let Some(lc) = lambda_c_mm {
-        return Ok(filter::split(heights_um, pitch_mm, lc)?.roughness_um);
+        return filter::roughness(heights_um, pitch_mm, lc);
     }
     let n = heights_um.len();
     if n < 2 {

@@ -308,13 +308,6 @@ pub struct LineAnalysis {
     pub evaluation_length: EvaluationLengthMoments,
     /// Why a parameter of `params` is blank, by its name (`RzJIS`, `RSm`, …).
     pub blank_reasons: BTreeMap<String, String>,
-    /// Index of the first evaluated point in the input line (the run-up left out before it).
-    pub evaluated_from: usize,
-    /// The profile as given after λs (and the form, in a form-only evaluation), the whole
-    /// traced length, µm: the primary profile an instrument prints above the R profile.
-    pub primary_um: Vec<f64>,
-    /// The λc mean line over the whole traced length when the filter ran here, µm.
-    pub mean_line_um: Option<Vec<f64>>,
 }
 
 /// Amplitude parameters over the whole evaluation length, heights about the same reference
@@ -525,7 +518,7 @@ pub fn analyze_line(
     if !(lc.is_finite() && lc > 0.0) {
         return Err(MetrologyError::BadCutoff { cutoff_mm: lc });
     }
-    let filtered = filtered_profiles(heights_um, pitch_mm, options)?;
+    let (r_all, lambda_c) = filtered_profile(heights_um, pitch_mm, options)?;
     // Form-only: P parameters, the whole length one section unless N is given.
     let sampling_lengths = match (options.form, options.sampling_lengths) {
         (Some(_), None) => Some(1),
@@ -540,7 +533,7 @@ pub fn analyze_line(
         sampling_lengths,
     )?;
     let used = plan.n_sec * plan.per;
-    let r: Vec<f64> = match filtered.r_all.get(plan.start..plan.start + used) {
+    let r: Vec<f64> = match r_all.get(plan.start..plan.start + used) {
         Some(r) => r.to_vec(),
         None => {
             return Err(MetrologyError::TooShort {
@@ -555,33 +548,22 @@ pub fn analyze_line(
     let (rk, rk_curve) = rk_family_and_curve(&r, RK_CURVE_POINTS)?;
     Ok(LineAnalysis {
         params: acc.params(&r, plan.n_sec, rk),
-        recipe: line_recipe(options, filtered.lambda_c, &plan, n_all - used, pitch_mm),
+        recipe: line_recipe(options, lambda_c, &plan, n_all - used, pitch_mm),
         evaluation_length: EvaluationLengthMoments::of(&r),
         blank_reasons: acc.blank_reasons(plan.n_sec),
         roughness_um: r,
         rk_curve,
-        evaluated_from: plan.start,
-        primary_um: filtered.primary,
-        mean_line_um: filtered.mean_line_um,
     })
 }
 
-/// A line's profiles before its sampling lengths are cut: the primary profile (λs, then the
-/// stated form removed), and the roughness profile with its λc mean line when λc applies.
-struct FilteredProfiles {
-    primary: Vec<f64>,
-    r_all: Vec<f64>,
-    mean_line_um: Option<Vec<f64>>,
-    /// Whether the λc filter made `r_all`.
-    lambda_c: bool,
-}
-
-/// λs, then λc or (form-only) the stated form, as `options` say.
-fn filtered_profiles(
+/// λs, then λc or (form-only) the stated form, as `options` say: the roughness profile over
+/// the whole traced length (the primary profile where λc does not apply), and whether the λc
+/// filter made it.
+fn filtered_profile(
     heights_um: &[f64],
     pitch_mm: f64,
     options: &Options,
-) -> Result<FilteredProfiles, MetrologyError> {
+) -> Result<(Vec<f64>, bool), MetrologyError> {
     let primary = match options.lambda_s_um {
         Some(ls) => filter::gaussian_mean_line(heights_um, pitch_mm, ls / 1000.0)?,
         None => heights_um.to_vec(),
@@ -590,19 +572,13 @@ fn filtered_profiles(
         Some(form) => remove_form(&primary, form)?,
         None => primary,
     };
-    let lambda_c = options.apply_lambda_c && options.form.is_none();
-    let (r_all, mean_line_um) = if lambda_c {
-        let split = filter::split(&primary, pitch_mm, options.lambda_c_mm)?;
-        (split.roughness_um, Some(split.mean_line_um))
-    } else {
-        (primary.clone(), None)
-    };
-    Ok(FilteredProfiles {
-        primary,
-        r_all,
-        mean_line_um,
-        lambda_c,
-    })
+    if !options.apply_lambda_c || options.form.is_some() {
+        return Ok((primary, false));
+    }
+    Ok((
+        filter::roughness(&primary, pitch_mm, options.lambda_c_mm)?,
+        true,
+    ))
 }
 
 /// How a line was evaluated: the standard, the filter and its end treatment, the sampling

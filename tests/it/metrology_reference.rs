@@ -23,7 +23,7 @@
 use serde_json::Value;
 use std::path::PathBuf;
 use surfscan::metrology::areal::{areal_params, HeightMap};
-use surfscan::metrology::filter::split;
+use surfscan::metrology::filter::roughness;
 use surfscan::metrology::params::{analyze_line, Options};
 
 fn data_dir() -> PathBuf {
@@ -202,9 +202,7 @@ fn real_profiles_agree_with_surfalize_and_scipy_where_conventions_agree() {
         let (_, z) = load(file);
         let pitch = num(g, "pitch_mm");
         let skip = num(g, "skip_points") as usize;
-        let r = split(&z, pitch, num(g, "lambda_c_mm"))
-            .unwrap()
-            .roughness_um;
+        let r = roughness(&z, pitch, num(g, "lambda_c_mm")).unwrap();
         let inner = &r[skip..r.len() - skip];
         let ra = inner.iter().map(|v| v.abs()).sum::<f64>() / inner.len() as f64;
         let rq = (inner.iter().map(|v| v * v).sum::<f64>() / inner.len() as f64).sqrt();

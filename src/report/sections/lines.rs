@@ -25,8 +25,8 @@ pub struct LinesSection {
     pub recipe: ReportRecipe,
     /// One entry per row of the grid.
     pub lines: Vec<LineReport>,
-    /// Each row's analysis (its roughness profile draws the Rk construction), without the
-    /// primary profile and the mean line, which no figure draws; [`super::run`] keeps none.
+    /// Each row's analysis (its roughness profile draws the Rk construction); [`super::run`]
+    /// keeps none.
     pub analyses: Vec<LineAnalysis>,
 }
 
@@ -40,17 +40,6 @@ pub fn rmr_table(a: &LineAnalysis) -> Vec<[f64; 2]> {
     (0..11).map(|k| [depths[k], ratios[k]]).collect()
 }
 
-/// `a` without the primary profile and the mean line: the report draws each line's
-/// roughness profile only, and a 1000-line grid would hold two more traced lengths a line
-/// (about 150 MB) until its files are written.
-fn unshown_dropped(a: LineAnalysis) -> LineAnalysis {
-    LineAnalysis {
-        primary_um: Vec::new(),
-        mean_line_um: None,
-        ..a
-    }
-}
-
 /// Characterises every line, in parallel over the available cores (lines are independent).
 fn analyse_lines(
     grid: &Grid,
@@ -60,7 +49,7 @@ fn analyse_lines(
     let rows: Vec<&[f64]> = grid.heights_um.chunks(grid.cols.max(1)).collect();
     let results = crate::metrology::map_in_parallel(
         &rows,
-        |_, z| analyze_line(z, grid.pitch_x_mm, options).map(unshown_dropped),
+        |_, z| analyze_line(z, grid.pitch_x_mm, options),
         |_| {
             Err(MetrologyError::BadParameter {
                 what: "line analysis thread",
