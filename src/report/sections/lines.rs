@@ -25,9 +25,6 @@ pub struct LinesSection {
     pub recipe: ReportRecipe,
     /// One entry per row of the grid.
     pub lines: Vec<LineReport>,
-    /// Each row's analysis (its roughness profile draws the Rk construction); [`super::run`]
-    /// keeps none.
-    pub analyses: Vec<LineAnalysis>,
 }
 
 /// Rmr(c) at depths c = 0, 10, …, 100 % of Rt below the highest peak: `[c_um, Rmr_pct]`,
@@ -72,7 +69,8 @@ fn analyse_lines(
 }
 
 /// Runs the section on the grid as characterised; an error when a line cannot be evaluated.
-pub fn section(input: &SectionInput<'_>) -> Result<LinesSection, ReportError> {
+/// Beside it, each row's analysis (its roughness profile draws the Rk construction).
+pub fn section(input: &SectionInput<'_>) -> Result<(LinesSection, Vec<LineAnalysis>), ReportError> {
     let (grid, ctx) = (input.characterised, input.ctx);
     let analyses = analyse_lines(grid, &ctx.line_options, &ctx.input)?;
     let mut recipe = analyses.first().map(|a| a.recipe.clone()).ok_or_else(|| {
@@ -110,7 +108,7 @@ pub fn section(input: &SectionInput<'_>) -> Result<LinesSection, ReportError> {
             .ok(),
         })
         .collect();
-    Ok(LinesSection {
+    let section = LinesSection {
         recipe: ReportRecipe {
             lines: recipe,
             lambda_c_source: ctx.lambda_c_source.clone(),
@@ -125,8 +123,8 @@ pub fn section(input: &SectionInput<'_>) -> Result<LinesSection, ReportError> {
             material_ratio: ctx.options.material_ratio.name(),
         },
         lines,
-        analyses,
-    })
+    };
+    Ok((section, analyses))
 }
 
 /// ISO 4288's check of λc against the result (the mean Ra and Rz of the lines): a warning
@@ -167,13 +165,16 @@ fn uncentred_mean(a: &LineAnalysis) -> Option<f64> {
 
 /// The warning for unfiltered lines that are not centred (`uncentred_mean`): how many, the
 /// worst with its mean against its Rq, and what to do; none with the λc filter or a form
-/// removed.
-pub fn uncentred_warning(lines: &LinesSection, options: &Options) -> Option<String> {
+/// removed. `analyses` are the lines' in the order of `lines`.
+pub fn uncentred_warning(
+    lines: &LinesSection,
+    analyses: &[LineAnalysis],
+    options: &Options,
+) -> Option<String> {
     use crate::numfmt::{fmt, Quantity};
     if options.apply_lambda_c || options.form.is_some() {
         return None;
     }
-    let analyses = &lines.analyses;
     let off: Vec<(usize, f64)> = analyses
         .iter()
         .enumerate()

@@ -156,12 +156,16 @@ pub fn run<D>(
             characterised: bridged.as_ref().unwrap_or(grid),
             ..input
         };
-        let mut lines = lines::section(&input)?;
+        let (lines, analyses) = lines::section(&input)?;
         let specification = specification::section(&input, &lines);
         timings.lines = t.elapsed().as_secs_f64();
         warnings.extend(lines::cutoff_warning(&lines, &ctx.line_options));
-        warnings.extend(lines::uncentred_warning(&lines, &ctx.line_options));
-        let drawn = draw_lines(std::mem::take(&mut lines.analyses));
+        warnings.extend(lines::uncentred_warning(
+            &lines,
+            &analyses,
+            &ctx.line_options,
+        ));
+        let drawn = draw_lines(analyses);
 
         let t = Instant::now();
         if !evenly {
