@@ -100,9 +100,12 @@ impl Acf {
         // Corners (y0, x0) … (y0 + 1, x0 + 1); one of weight 0 is not read (may lie outside).
         let w = 2 * self.cols - 1;
         let first = usize::try_from(y0).ok()? * w + (x0 + self.cols as isize - 1) as usize;
-        let v = |i: usize, weight: f64| match weight == 0.0 {
-            true => Some(0.0),
-            false => self.values.get(first + i).map(|a| a * weight),
+        let v = |i: usize, weight: f64| {
+            if weight == 0.0 {
+                Some(0.0)
+            } else {
+                self.values.get(first + i).map(|a| a * weight)
+            }
         };
         Some(
             v(0, (1.0 - tx) * (1.0 - ty))?
@@ -392,9 +395,10 @@ fn texture_direction(grid: &HeightMap<'_>, plane: &Plane) -> f64 {
         let fx = freq(c, cols, grid.pitch_x_mm);
         let t = fy.atan2(fx).to_degrees();
         // rem_euclid(180.0) without fmod for |t| < 180° (t + 0 turns −0 to 0: the same bin).
-        let theta = match t.abs() < 180.0 {
-            true => t + if t < 0.0 { 180.0 } else { 0.0 },
-            false => t.rem_euclid(180.0),
+        let theta = if t.abs() < 180.0 {
+            t + if t < 0.0 { 180.0 } else { 0.0 }
+        } else {
+            t.rem_euclid(180.0)
         };
         ((theta / ANGLE_STEP_DEG) as usize).min(bins - 1)
     };
