@@ -395,20 +395,12 @@ pub struct ScanCharacteriser {
 /// A report in a few figures for the status, the hook and the queue: the specification's
 /// verdict, the Ra and Rz means over the lines, the measured grid's Sa, the warnings.
 pub fn results_of(report: &Report) -> ScanResults {
-    let mean = |f: fn(&crate::metrology::params::RoughnessParams) -> f64| {
-        let v: Vec<f64> = report
-            .lines
-            .iter()
-            .map(|l| f(&l.params))
-            .filter(|v| v.is_finite())
-            .collect();
-        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-    };
+    let mean = |f| crate::report::sections::lines::finite_mean(&report.lines, f);
     ScanResults {
         verdict: report.specification.as_ref().map(|s| s.verdict),
         verdict_summary: report.specification.as_ref().map(|s| s.summary.clone()),
-        ra_mean_um: mean(|p| p.ra_um),
-        rz_mean_um: mean(|p| p.rz_um),
+        ra_mean_um: mean(|l| l.params.ra_um),
+        rz_mean_um: mean(|l| l.params.rz_um),
         sa_um: report.surface_grid.as_ref().map(|g| g.params.sa_um),
         warnings: report.warnings.len(),
     }

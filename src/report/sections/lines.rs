@@ -127,6 +127,13 @@ pub fn section(input: &SectionInput<'_>) -> Result<(LinesSection, Vec<LineAnalys
     Ok((section, analyses))
 }
 
+/// The mean of a value `f` of the lines where it is finite; `None` where it is nowhere finite
+/// (the Ra and Rz a result is summed up by).
+pub fn finite_mean(lines: &[LineReport], f: fn(&LineReport) -> f64) -> Option<f64> {
+    let v: Vec<f64> = lines.iter().map(f).filter(|v| v.is_finite()).collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
 /// ISO 4288's check of λc against the result (the mean Ra and Rz of the lines): a warning
 /// naming the band the result falls in when λc does not fit it; none for a form-only
 /// evaluation (no λc) or without lines.
@@ -134,15 +141,7 @@ pub fn cutoff_warning(lines: &LinesSection, options: &Options) -> Option<String>
     if options.form.is_some() || lines.lines.is_empty() {
         return None;
     }
-    let mean = |f: fn(&LineReport) -> f64| {
-        let v: Vec<f64> = lines
-            .lines
-            .iter()
-            .map(f)
-            .filter(|v| v.is_finite())
-            .collect();
-        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-    };
+    let mean = |f: fn(&LineReport) -> f64| finite_mean(&lines.lines, f);
     let (ra, rz) = (mean(|l| l.params.ra_um)?, mean(|l| l.params.rz_um)?);
     iso4288_check(ra, rz, options.lambda_c_mm)
         .warning
