@@ -630,8 +630,7 @@ pub fn check_model_with(
         });
     }
 
-    let mmin = heights_um.iter().copied().fold(f64::INFINITY, f64::min);
-    let mmax = heights_um.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let (mmin, mmax) = super::min_max(heights_um.iter().copied());
     let overshoot = (range.2 - mmax).max(0.0) + (mmin - range.0).max(0.0);
     let span = mmax - mmin;
     ModelChecks {

@@ -180,6 +180,15 @@ pub(crate) fn check_heights(heights: &[f64]) -> Result<(), MetrologyError> {
     }
 }
 
+/// The lowest and the highest of `values` (NaN is neither; +∞ and −∞ when there is none): the
+/// `f64::min` and `f64::max` folds of the values, in one pass.
+pub fn min_max(values: impl IntoIterator<Item = f64>) -> (f64, f64) {
+    let extremes = |(lo, hi): (f64, f64), v: f64| (lo.min(v), hi.max(v));
+    values
+        .into_iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), extremes)
+}
+
 /// Checks a lateral pitch in mm.
 pub(crate) fn check_pitch(pitch_mm: f64) -> Result<(), MetrologyError> {
     if pitch_mm.is_finite() && pitch_mm > 0.0 {

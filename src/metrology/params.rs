@@ -705,8 +705,7 @@ impl Acc {
     /// material-ratio family over the evaluation length `r`, the Rk family `rk`.
     fn params(&self, r: &[f64], n_sec: usize, rk: RkFamily) -> RoughnessParams {
         let k = n_sec as f64;
-        let max = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let min = r.iter().copied().fold(f64::INFINITY, f64::min);
+        let (min, max) = super::min_max(r.iter().copied());
         let levels = MaterialLevels::default();
         let rt = max - min;
         let rsm_um = (self.rsm_n > 0).then(|| self.rsm / self.rsm_n as f64);

@@ -145,8 +145,7 @@ mod tests {
             if inside.is_empty() {
                 continue;
             }
-            let min = inside.iter().map(|q| q.1).fold(f64::INFINITY, f64::min);
-            let max = inside.iter().map(|q| q.1).fold(f64::NEG_INFINITY, f64::max);
+            let (min, max) = crate::metrology::min_max(inside.iter().map(|q| q.1));
             let kept_here: Vec<(f64, f64)> = kept
                 .iter()
                 .copied()

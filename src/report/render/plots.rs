@@ -769,13 +769,7 @@ fn map_subtitle(grid: &HeightMap<'_>, values: &MapValues<'_>, scale: &MapScale) 
     )
 }
 
-/// The lowest and the highest of `values` (NaN is neither; +∞ and −∞ when there is none).
-pub(super) fn min_max(values: impl IntoIterator<Item = f64>) -> (f64, f64) {
-    let extremes = |(lo, hi): (f64, f64), v: f64| (lo.min(v), hi.max(v));
-    values
-        .into_iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), extremes)
-}
+pub(super) use crate::metrology::min_max;
 
 /// The pixels of a height map `width` × `height` px over the whole grid, row 0 of the
 /// bitmap at the grid's last line (y up): each pixel the mean of the points whose cells
