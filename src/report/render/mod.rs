@@ -60,10 +60,6 @@ pub struct Files {
     pub model_x3p: Option<PathBuf>,
 }
 
-pub(crate) fn software() -> String {
-    crate::build_info::software()
-}
-
 fn caption(ctx: &ReportContext) -> String {
     match &ctx.traceability {
         Some(t) => {
@@ -99,7 +95,7 @@ fn caption(ctx: &ReportContext) -> String {
                 t.software_version
             )
         }
-        None => format!("{} · {}", ctx.input, software()),
+        None => format!("{} · {}", ctx.input, crate::build_info::software()),
     }
 }
 
@@ -133,13 +129,13 @@ fn x3p_meta(ctx: &ReportContext, what: &str) -> X3pMeta {
                     conditions,
                     t.software_version,
                     t.config_hash,
-                    software()
+                    crate::build_info::software()
                 ),
             }
         }
         None => X3pMeta {
             date: chrono::Utc::now().to_rfc3339(),
-            version: software(),
+            version: crate::build_info::software(),
             comment: format!("{what} of {}", ctx.input),
             ..X3pMeta::default()
         },
