@@ -108,25 +108,22 @@ pub fn scan_line_options(
         ),
     };
     let kind = line.meta.profile.kind;
-    let (apply, filter_reason) = if options.no_filter {
-        (false, "no λc filter: asked for (--no-filter)".to_string())
+    let unfiltered = if options.no_filter {
+        Some("asked for (--no-filter)")
     } else if kind == ProfileKind::R {
-        (
-            false,
-            "no λc filter: the instrument exported an R profile, already λc-filtered".to_string(),
-        )
+        Some("the instrument exported an R profile, already λc-filtered")
     } else if line.profile.conditions.filter == Some(FilterKind::None) {
-        (
-            false,
-            "no λc filter: the instrument's conditions record the filter as none".to_string(),
-        )
+        Some("the instrument's conditions record the filter as none")
     } else {
-        (
-            true,
-            format!("λc filter applied: the stored profile is of kind {kind:?}, not an R profile"),
-        )
+        None
     };
-    o.apply_lambda_c = apply;
+    o.apply_lambda_c = unfiltered.is_none();
+    let filter_reason = match unfiltered {
+        Some(why) => format!("no λc filter: {why}"),
+        None => {
+            format!("λc filter applied: the stored profile is of kind {kind:?}, not an R profile")
+        }
+    };
     (o, lambda_c_source, filter_reason)
 }
 
