@@ -503,9 +503,7 @@ pub fn check_model_with(
     // `UBasis::new` and `SampleBasis::new` find the same span and call `basis_funs` with the
     // same clamped parameter: a shared basis of the right length has the same values.
     let shared_u = shared_u.filter(|b| {
-        b.len() == n_u
-            && surface.degree_u() <= MAX_SAMPLE_DEGREE
-            && SampleBasis::fits(surface.degree_u(), surface.knots_u(), nu, n_u)
+        b.len() == n_u && SampleBasis::fits(surface.degree_u(), surface.knots_u(), nu, n_u)
     });
     let own_u = match shared_u {
         Some(_) => None,
@@ -516,11 +514,7 @@ pub fn check_model_with(
         None => own_u.as_ref().map(SampleBasis::basis),
     };
     let xz_sampler = u_sampler.map(TwoLanes::new);
-    let general = if u_sampler.is_none() {
-        Some(UBasis::new(surface, &us))
-    } else {
-        None
-    };
+    let general = u_sampler.is_none().then(|| UBasis::new(surface, &us));
     let mut poles = Vec::new();
     let (mut xs, mut zs): (Vec<f64>, Vec<f64>) = (Vec::with_capacity(n_u), Vec::with_capacity(n_u));
     for &v in &vs {

@@ -189,7 +189,7 @@ pub fn find_spikes(
         });
     }
     let med = median(&mut roughness_um.to_vec());
-    let mut dev: Vec<f64> = roughness_um.iter().map(|r| (r - med).abs()).collect();
+    let dev: Vec<f64> = roughness_um.iter().map(|r| (r - med).abs()).collect();
     let mad = median(&mut dev.clone());
     let sigma = if mad > 0.0 {
         MAD_TO_SIGMA * mad
@@ -232,7 +232,6 @@ pub fn find_spikes(
             });
         }
     }
-    dev.clear();
     Ok(SpikeScan {
         median_um: med,
         sigma_um: sigma,
