@@ -494,7 +494,6 @@ pub fn check_model_with(
     let n_u = iso_curve_sample_count(surface, options);
     let us: Vec<f64> = (0..n_u).map(|k| k as f64 / (n_u - 1) as f64).collect();
     let mut range = (f64::INFINITY, [0.0; 2], f64::NEG_INFINITY, [0.0; 2]);
-    let mut iso = Vec::new();
     let mut fold_u: (usize, Option<Worst>) = (0, None);
     // The u basis is computed once for every iso-curve (all are sampled at the same u), and
     // one curve is held at a time. Only x (for the fold) and z (for the range) are summed at
@@ -570,17 +569,6 @@ pub fn check_model_with(
             }
         }
     }
-    if let Some((v, y, (lo, hi, back))) = fold_u.1 {
-        iso.push(IsoFold {
-            direction: "u",
-            affected: fold_u.0,
-            checked: vs.len(),
-            at_parameter: v,
-            at_mm: y,
-            range_mm: [lo, hi],
-            back_mm: back,
-        });
-    }
     let n_v = (per * nv).max(2);
     let mut fold_v: (usize, Option<Worst>) = (0, None);
     let curves_v = nu.max(2);
@@ -612,16 +600,22 @@ pub fn check_model_with(
             }
         }
     }
-    if let Some((u, x, (lo, hi, back))) = fold_v.1 {
-        iso.push(IsoFold {
-            direction: "v",
-            affected: fold_v.0,
-            checked: curves_v,
-            at_parameter: u,
-            at_mm: x,
-            range_mm: [lo, hi],
-            back_mm: back,
-        });
+    // The worst backward run of each direction, u first.
+    let mut iso = Vec::new();
+    for (direction, (affected, worst), checked) in
+        [("u", fold_u, vs.len()), ("v", fold_v, curves_v)]
+    {
+        if let Some((at_parameter, at_mm, (lo, hi, back_mm))) = worst {
+            iso.push(IsoFold {
+                direction,
+                affected,
+                checked,
+                at_parameter,
+                at_mm,
+                range_mm: [lo, hi],
+                back_mm,
+            });
+        }
     }
 
     let (mmin, mmax) = super::min_max(heights_um.iter().copied());
