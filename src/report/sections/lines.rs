@@ -13,7 +13,7 @@ use crate::metrology::instrument::compare_profile;
 use crate::metrology::params::{analyze_line, LineAnalysis, MaterialLevels, Options};
 use crate::metrology::sj_material_ratio::sj_material_ratio;
 use crate::metrology::MetrologyError;
-use crate::numfmt::line_number;
+use crate::numfmt::{line_label, line_number};
 use crate::report::document::{LineReport, ReportRecipe};
 use crate::report::error::{metrology, ReportError};
 use std::path::PathBuf;
@@ -59,11 +59,8 @@ fn analyse_lines(
         .into_iter()
         .enumerate()
         .map(|(row, r)| {
-            let index = grid.index_of(row);
-            r.map_err(metrology(format!(
-                "{label} line {} ({index:04})",
-                line_number(index)
-            )))
+            let line = line_label(grid.index_of(row));
+            r.map_err(metrology(format!("{label} line {line}")))
         })
         .collect()
 }
