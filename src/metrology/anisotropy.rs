@@ -94,10 +94,10 @@ pub fn anisotropy(grid: &HeightMap<'_>) -> Result<Anisotropy, MetrologyError> {
     let (px, py) = (grid.pitch_x_mm, grid.pitch_y_mm);
     let row = |r: usize| z.get(r * cols..(r + 1) * cols).unwrap_or(&[]);
     let line_r = mean((0..rows - 1).filter_map(|r| pearson(row(r), row(r + 1)))).unwrap_or(0.0);
-    let lag = py / px;
-    let along = if lag < (cols as f64) / 2.0 {
-        let whole = lag.floor() as usize;
-        let t = lag - whole as f64;
+    let ratio = py / px;
+    let along = if ratio < (cols as f64) / 2.0 {
+        let whole = ratio.floor() as usize;
+        let t = ratio - whole as f64;
         let n = cols - whole - 1;
         mean((0..rows).filter_map(|r| {
             let line = row(r);
@@ -135,7 +135,6 @@ pub fn anisotropy(grid: &HeightMap<'_>) -> Result<Anisotropy, MetrologyError> {
     };
     let (sdr_x, sdr_y) = (ax / nx * 100.0, ay / ny * 100.0);
     let dominant = if sy2 > sx2 { "y" } else { "x" };
-    let ratio = py / px;
     let mut a = Anisotropy {
         pitch_x_mm: px,
         pitch_y_mm: py,
