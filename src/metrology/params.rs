@@ -386,6 +386,16 @@ struct SectionPlan {
     section_length_mm: f64,
 }
 
+/// A line of `points` at `pitch_mm` too short to evaluate with the cut-off `lc` mm.
+fn too_short(points: usize, pitch_mm: f64, lc: f64) -> MetrologyError {
+    MetrologyError::TooShort {
+        points,
+        length_mm: points as f64 * pitch_mm,
+        sampling_length_mm: lc,
+        min_points: MIN_POINTS_PER_SECTION,
+    }
+}
+
 /// The sections of `n_all` points at `pitch_mm` for the cut-off `lc`: the central `central`
 /// sampling lengths when given, else `sampling_lengths` of ⌊n/N⌋ points each when given, else
 /// N from L/λc (within 1 % of a whole number, or truncated with the central N·lr evaluated).
@@ -396,12 +406,6 @@ fn plan_sections(
     central: Option<u32>,
     sampling_lengths: Option<u32>,
 ) -> Result<SectionPlan, MetrologyError> {
-    let too_short = || MetrologyError::TooShort {
-        points: n_all,
-        length_mm: n_all as f64 * pitch_mm,
-        sampling_length_mm: lc,
-        min_points: MIN_POINTS_PER_SECTION,
-    };
     let length_mm = n_all as f64 * pitch_mm;
     let ratio = length_mm / lc;
     let (n_sec, rule, start, per) = match (central, sampling_lengths) {
@@ -411,7 +415,7 @@ fn plan_sections(
             let per = (lc / pitch_mm).round() as usize;
             let used = k.saturating_mul(per);
             if used > n_all {
-                return Err(too_short());
+                return Err(too_short(n_all, pitch_mm, lc));
             }
             let left = (n_all - used) / 2;
             (
@@ -441,7 +445,7 @@ fn plan_sections(
             } else {
                 let k = ratio.floor() as usize;
                 if k == 0 {
-                    return Err(too_short());
+                    return Err(too_short(n_all, pitch_mm, lc));
                 }
                 let per = (lc / pitch_mm).round() as usize;
                 let used = (k * per).min(n_all);
@@ -463,7 +467,7 @@ fn plan_sections(
                 min_points: MIN_POINTS_PER_SECTION,
             });
         }
-        return Err(too_short());
+        return Err(too_short(n_all, pitch_mm, lc));
     }
     let section_length_mm = per as f64 * pitch_mm;
     // Say plainly when a section is not a sampling length of λc (an instrument's arbitrary
@@ -533,17 +537,10 @@ pub fn analyze_line(
         sampling_lengths,
     )?;
     let used = plan.n_sec * plan.per;
-    let r: Vec<f64> = match r_all.get(plan.start..plan.start + used) {
-        Some(r) => r.to_vec(),
-        None => {
-            return Err(MetrologyError::TooShort {
-                points: n_all,
-                length_mm: n_all as f64 * pitch_mm,
-                sampling_length_mm: lc,
-                min_points: MIN_POINTS_PER_SECTION,
-            })
-        }
+    let Some(r) = r_all.get(plan.start..plan.start + used) else {
+        return Err(too_short(n_all, pitch_mm, lc));
     };
+    let r = r.to_vec();
     let acc = Acc::of_sections(&r, &plan, pitch_mm);
     let (rk, rk_curve) = rk_family_and_curve(&r, RK_CURVE_POINTS)?;
     Ok(LineAnalysis {
