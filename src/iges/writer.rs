@@ -5,8 +5,9 @@
 //! a formatter over any `io::Write` (the caller picks and syncs the file).
 //!
 //! The Parameter Data is streamed: each entity's records are formatted in pieces (the reals
-//! on worker threads, packed into records in order on the calling thread) and written as they
-//! come, so a file of any size needs a few MB of buffers. The Directory Entry section, which
+//! on worker threads started with the entity, so they run beside its header, knots and
+//! weights, each reusing its pieces' buffers; packed into records in order on the calling
+//! thread) and written as they come, so a file of any size needs a few MB of buffers. The Directory Entry section, which
 //! precedes the data but holds each entity's line count, is written with zero counts first and
 //! rewritten in place at the end (its lines have a fixed width); [`write_iges_seekable`] does
 //! this on a seekable writer such as a file, [`write_iges`] on any writer through a buffer.
@@ -271,58 +272,80 @@ fn worker_count() -> usize {
         .clamp(1, 4)
 }
 
-/// Formats the coordinates of the poles numbered `poles` of `net` piece by piece on `workers`
-/// threads (worker w takes pieces w, w + workers, …, at most two ahead; each copies its
-/// piece's poles out of the net) and hands each piece's tokens to `consume` in pole order.
-fn for_each_piece_in_order(
+/// The pole pieces of a net of `count` poles laid out in chunks of `chunk` poles: each piece
+/// at most [`PIECE_POLES`] poles, none crossing a chunk's end, in pole order; with whether
+/// it ends its chunk.
+fn pole_pieces(count: usize, chunk: usize) -> Vec<(std::ops::Range<usize>, bool)> {
+    (0..count)
+        .step_by(chunk.max(1))
+        .flat_map(|c| {
+            let end = (c + chunk.max(1)).min(count);
+            (c..end)
+                .step_by(PIECE_POLES)
+                .map(move |k| (k..(k + PIECE_POLES).min(end), k + PIECE_POLES >= end))
+        })
+        .collect()
+}
+
+/// A piece's tokens, or the first non-finite coordinate in it (pole index, value).
+type Formatted = Result<Tokens, (usize, f64)>;
+
+/// Where the pieces' tokens come from, in pole order: formatted on this thread when asked
+/// for, or by workers that run ahead.
+enum PieceTokens {
+    Here {
+        buf: Vec<[f64; 3]>,
+        tokens: Tokens,
+    },
+    /// Piece i comes from worker i % n, each at most two pieces ahead; a piece's buffers are
+    /// handed back to its worker for the next one (no fresh pages per piece).
+    Workers {
+        ready: Vec<std::sync::mpsc::Receiver<Formatted>>,
+        spent: Vec<std::sync::mpsc::Sender<Tokens>>,
+        last: Option<Tokens>,
+    },
+}
+
+/// Formats `piece` of `net` (its coordinates copied out first) into `tokens`.
+fn format_piece(
     net: &PoleNet,
-    poles: std::ops::Range<usize>,
+    piece: &std::ops::Range<usize>,
     texts: &NetTexts,
-    patch: usize,
-    workers: usize,
-    consume: &mut dyn FnMut(&Tokens) -> Result<(), IgesError>,
-) -> Result<(), IgesError> {
-    let non_finite = |(index, value): (usize, f64)| IgesError::NonFinite {
-        patch,
-        what: "pole coordinate",
-        index,
-        value,
-    };
-    let first = poles.start;
-    let pieces: Vec<std::ops::Range<usize>> = poles
-        .clone()
-        .step_by(PIECE_POLES)
-        .map(|k| k..(k + PIECE_POLES).min(poles.end))
-        .collect();
-    let gather = |range: &std::ops::Range<usize>, buf: &mut Vec<[f64; 3]>| {
-        buf.clear();
-        net.extend_poles(range.clone(), buf);
-    };
-    if workers <= 1 || pieces.len() <= 1 {
-        let mut tokens = Tokens::default();
-        let mut buf = Vec::with_capacity(PIECE_POLES);
-        for (i, piece) in pieces.iter().enumerate() {
-            gather(piece, &mut buf);
-            format_pole_tokens(&buf, first + i * PIECE_POLES, texts, &mut tokens)
-                .map_err(non_finite)?;
-            consume(&tokens)?;
+    buf: &mut Vec<[f64; 3]>,
+    tokens: &mut Tokens,
+) -> Result<(), (usize, f64)> {
+    buf.clear();
+    net.extend_poles(piece.clone(), buf);
+    format_pole_tokens(buf, piece.start, texts, tokens)
+}
+
+impl PieceTokens {
+    /// Starts formatting `pieces` of `net`: on `workers` threads of `scope` when there are
+    /// several workers and pieces, else on demand on the calling thread.
+    fn start<'scope, 'env>(
+        scope: &'scope std::thread::Scope<'scope, 'env>,
+        net: &'env PoleNet,
+        pieces: &'env [(std::ops::Range<usize>, bool)],
+        texts: &'env NetTexts,
+        workers: usize,
+    ) -> PieceTokens {
+        if workers <= 1 || pieces.len() <= 1 {
+            return PieceTokens::Here {
+                buf: Vec::with_capacity(PIECE_POLES),
+                tokens: Tokens::default(),
+            };
         }
-        return Ok(());
-    }
-    std::thread::scope(|scope| {
-        let mut receivers = Vec::with_capacity(workers);
+        let (mut ready, mut spent) = (Vec::new(), Vec::new());
         for w in 0..workers {
-            let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Tokens, (usize, f64)>>(2);
-            receivers.push(rx);
-            let pieces = &pieces;
-            let gather = &gather;
+            let (tx, rx) = std::sync::mpsc::sync_channel::<Formatted>(2);
+            let (back_tx, back_rx) = std::sync::mpsc::channel::<Tokens>();
+            ready.push(rx);
+            spent.push(back_tx);
             scope.spawn(move || {
                 let mut buf = Vec::with_capacity(PIECE_POLES);
-                for i in (w..pieces.len()).step_by(workers) {
-                    let mut tokens = Tokens::default();
-                    gather(&pieces[i], &mut buf);
-                    let r = format_pole_tokens(&buf, first + i * PIECE_POLES, texts, &mut tokens)
-                        .map(|()| tokens);
+                for (piece, _) in pieces.iter().skip(w).step_by(workers) {
+                    let mut tokens = back_rx.try_recv().unwrap_or_default();
+                    let r = format_piece(net, piece, texts, &mut buf, &mut tokens).map(|()| tokens);
                     let failed = r.is_err();
                     // A closed channel means the consumer stopped (an error): stop too.
                     if tx.send(r).is_err() || failed {
@@ -331,14 +354,47 @@ fn for_each_piece_in_order(
                 }
             });
         }
-        for i in 0..pieces.len() {
-            let piece = receivers[i % workers].recv().map_err(|_| {
-                IgesError::Io(io::Error::other("a formatting thread stopped early"))
-            })?;
-            consume(&piece.map_err(non_finite)?)?;
+        PieceTokens::Workers {
+            ready,
+            spent,
+            last: None,
         }
-        Ok(())
-    })
+    }
+
+    /// The tokens of piece `i` (asked for in order).
+    fn get(
+        &mut self,
+        i: usize,
+        net: &PoleNet,
+        pieces: &[(std::ops::Range<usize>, bool)],
+        texts: &NetTexts,
+        patch: usize,
+    ) -> Result<&Tokens, IgesError> {
+        let non_finite = |(index, value): (usize, f64)| IgesError::NonFinite {
+            patch,
+            what: "pole coordinate",
+            index,
+            value,
+        };
+        match self {
+            PieceTokens::Here { buf, tokens } => {
+                let (piece, _) = &pieces[i];
+                format_piece(net, piece, texts, buf, tokens).map_err(non_finite)?;
+                Ok(tokens)
+            }
+            PieceTokens::Workers { ready, spent, last } => {
+                let n = ready.len();
+                // The previous piece's buffers go back to the worker that formatted it.
+                if let Some(t) = last.take() {
+                    let _ = spent[(i + n - 1) % n].send(t);
+                }
+                let got = ready[i % n].recv().map_err(|_| {
+                    IgesError::Io(io::Error::other("a formatting thread stopped early"))
+                })?;
+                Ok(last.insert(got.map_err(non_finite)?))
+            }
+        }
+    }
 }
 
 /// Streams the P lines of one entity 128 through `p` (whose DE back-pointer the caller has
@@ -355,59 +411,6 @@ fn stream_entity_128(
     emit: &mut dyn FnMut(&[u8]) -> Result<(), IgesError>,
 ) -> Result<usize, IgesError> {
     let (nu, nv) = (s.count_u(), s.count_v());
-    let first_line = p.complete_records();
-    let mut hand_on = |p: &mut FieldPacker| -> Result<(), IgesError> {
-        if p.bytes() >= BLOCK_BYTES {
-            p.drain_records(&mut *emit)?;
-        }
-        Ok(())
-    };
-    let mut tok = Vec::with_capacity(32);
-    let closed_u = (0..nv).all(|j| s.pole(0, j) == s.pole(nu - 1, j));
-    let closed_v = (0..nu).all(|i| s.pole(i, 0) == s.pole(i, nv - 1));
-    let head: [u64; 10] = [
-        128,
-        (nu - 1) as u64,
-        (nv - 1) as u64,
-        s.degree_u() as u64,
-        s.degree_v() as u64,
-        u64::from(closed_u),
-        u64::from(closed_v),
-        1, // polynomial: all weights 1
-        0,
-        0,
-    ];
-    for h in head {
-        tok.clear();
-        push_uint(&mut tok, h);
-        p.push(&tok, b',');
-    }
-    let real = |p: &mut FieldPacker, v: f64, what: &'static str, index: usize, delim: u8| {
-        if p.push_real(v, delim) {
-            Ok(())
-        } else {
-            Err(IgesError::NonFinite {
-                patch,
-                what,
-                index,
-                value: v,
-            })
-        }
-    };
-    for (i, &k) in s.knots_u().iter().enumerate() {
-        real(p, k, "u knot", i, b',')?;
-    }
-    for (i, &k) in s.knots_v().iter().enumerate() {
-        real(p, k, "v knot", i, b',')?;
-    }
-    let mut weights = nu * nv;
-    while weights > 0 {
-        let n = weights.min(65_536);
-        p.push_repeated(b"1.", b',', n);
-        weights -= n;
-        hand_on(p)?;
-    }
-    p.pad_last();
     let net = s.net();
     let count = net.len();
     let chunk = if count >= PARALLEL_POLES {
@@ -416,28 +419,80 @@ fn stream_entity_128(
         count.max(1)
     };
     let texts = NetTexts::of(s);
-    for first in (0..count).step_by(chunk) {
-        for_each_piece_in_order(
-            net,
-            first..(first + chunk).min(count),
-            &texts,
-            patch,
-            workers,
-            &mut |t: &Tokens| {
-                p.push_tokens(&t.text, &t.lens, b',');
-                hand_on(p)
-            },
-        )?;
+    let pieces = pole_pieces(count, chunk);
+    // The poles' reals are formatted from the start, beside the header, knots and weights.
+    std::thread::scope(|scope| {
+        let mut poles = PieceTokens::start(scope, net, &pieces, &texts, workers);
+        let first_line = p.complete_records();
+        let mut hand_on = |p: &mut FieldPacker| -> Result<(), IgesError> {
+            if p.bytes() >= BLOCK_BYTES {
+                p.drain_records(&mut *emit)?;
+            }
+            Ok(())
+        };
+        let mut tok = Vec::with_capacity(32);
+        let closed_u = (0..nv).all(|j| s.pole(0, j) == s.pole(nu - 1, j));
+        let closed_v = (0..nu).all(|i| s.pole(i, 0) == s.pole(i, nv - 1));
+        let head: [u64; 10] = [
+            128,
+            (nu - 1) as u64,
+            (nv - 1) as u64,
+            s.degree_u() as u64,
+            s.degree_v() as u64,
+            u64::from(closed_u),
+            u64::from(closed_v),
+            1, // polynomial: all weights 1
+            0,
+            0,
+        ];
+        for h in head {
+            tok.clear();
+            push_uint(&mut tok, h);
+            p.push(&tok, b',');
+        }
+        let real = |p: &mut FieldPacker, v: f64, what: &'static str, index: usize, delim: u8| {
+            if p.push_real(v, delim) {
+                Ok(())
+            } else {
+                Err(IgesError::NonFinite {
+                    patch,
+                    what,
+                    index,
+                    value: v,
+                })
+            }
+        };
+        for (i, &k) in s.knots_u().iter().enumerate() {
+            real(p, k, "u knot", i, b',')?;
+        }
+        for (i, &k) in s.knots_v().iter().enumerate() {
+            real(p, k, "v knot", i, b',')?;
+        }
+        let mut weights = nu * nv;
+        while weights > 0 {
+            let n = weights.min(65_536);
+            p.push_repeated(b"1.", b',', n);
+            weights -= n;
+            hand_on(p)?;
+        }
         p.pad_last();
-    }
-    let (ku, kv) = (s.knots_u(), s.knots_v());
-    let dom = [ku[s.degree_u()], ku[nu], kv[s.degree_v()], kv[nv]];
-    for (i, &d) in dom.iter().enumerate() {
-        real(p, d, "parameter range", i, if i == 3 { b';' } else { b',' })?;
-    }
-    p.pad_last();
-    hand_on(p)?;
-    Ok(p.complete_records() - first_line)
+        for (i, (_, ends_chunk)) in pieces.iter().enumerate() {
+            let t = poles.get(i, net, &pieces, &texts, patch)?;
+            p.push_tokens(&t.text, &t.lens, b',');
+            hand_on(p)?;
+            if *ends_chunk {
+                p.pad_last();
+            }
+        }
+        let (ku, kv) = (s.knots_u(), s.knots_v());
+        let dom = [ku[s.degree_u()], ku[nu], kv[s.degree_v()], kv[nv]];
+        for (i, &d) in dom.iter().enumerate() {
+            real(p, d, "parameter range", i, if i == 3 { b';' } else { b',' })?;
+        }
+        p.pad_last();
+        hand_on(p)?;
+        Ok(p.complete_records() - first_line)
+    })
 }
 
 /// Splits `surface` along v until each patch's P lines are bounded by `max_lines` (from
