@@ -853,11 +853,10 @@ fn lines(h: &mut String, report: &Value) {
     // A column's definition: its parameter's, the SJ series' reading of it said so.
     let definition = |key: &str| {
         let d = definitions[stem(key)?].as_str()?;
-        Some(match key.starts_with("material_ratio_sj_series.") {
-            true => {
-                format!("{d}; here as the SJ series reads it (ordinates counted, 100-level curve)")
-            }
-            false => d.to_owned(),
+        Some(if key.starts_with("material_ratio_sj_series.") {
+            format!("{d}; here as the SJ series reads it (ordinates counted, 100-level curve)")
+        } else {
+            d.to_owned()
         })
     };
     let all = line_columns();
