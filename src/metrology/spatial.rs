@@ -47,6 +47,7 @@ use realfft::RealFftPlanner;
 use rustfft::num_complex::Complex64;
 use rustfft::FftPlanner;
 use serde::Serialize;
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
@@ -240,21 +241,26 @@ fn along_columns(
 }
 
 /// The half spectrum of each line of `grid` levelled by `plane` and zero-padded to `r2c`'s
-/// length, into `spectra` (one after the other). The lines are split between two threads,
-/// each with its own buffers: the same transforms of the same values, the same bits.
+/// length, into `spectra` (one after the other); `in_place`: each line read from the start of
+/// its spectrum's place, not from `grid`. The lines are split between two threads, each with
+/// its own buffers: the same transforms of the same values, the same bits.
 fn line_spectra(
     grid: &HeightMap<'_>,
     plane: &Plane,
     r2c: &dyn realfft::RealToComplex<f64>,
     spectra: &mut [Complex64],
+    in_place: bool,
 ) {
     let (cols, nk) = (grid.cols, r2c.complex_len());
     let lines_of = |first: usize, spectra: &mut [Complex64]| {
         let mut line = r2c.make_input_vec();
         let mut scratch = r2c.make_scratch_vec();
-        let heights = grid.heights_um.chunks_exact(cols).skip(first);
-        for (r, (heights, spectrum)) in heights.zip(spectra.chunks_exact_mut(nk)).enumerate() {
-            plane.level_row(first + r, heights, &mut line[..cols]);
+        for (r, spectrum) in (first..).zip(spectra.chunks_exact_mut(nk)) {
+            let heights = match in_place {
+                true => &bytemuck::cast_slice(spectrum)[..cols],
+                false => &grid.heights_um[r * cols..(r + 1) * cols],
+            };
+            plane.level_row(r, heights, &mut line[..cols]);
             line[cols..].fill(0.0);
             r2c.process_with_scratch(&mut line, spectrum, &mut scratch)
                 .expect("buffer sizes come from the plan");
@@ -270,7 +276,11 @@ fn line_spectra(
 
 /// The areal autocorrelation function of `grid` after plane levelling.
 pub fn autocorrelation(grid: &HeightMap<'_>) -> Result<Acf, MetrologyError> {
-    Ok(acf_of_levelled(grid, &Plane::of(grid)?))
+    Ok(acf_of_levelled(
+        grid.heights_um.to_vec(),
+        grid,
+        &Plane::of(grid)?,
+    ))
 }
 
 /// The ACF at lags ky ≥ 0 by a real-to-complex FFT of each line zero-padded to a 5-smooth
@@ -278,8 +288,10 @@ pub fn autocorrelation(grid: &HeightMap<'_>) -> Result<Acf, MetrologyError> {
 /// y (keeping ky < rows) and a complex-to-real inverse along x. One f64 buffer holds the
 /// lines' half spectra, then in place their autocorrelation along y, then the values: about
 /// 2·rows·cols f64, where the full padded complex 2-D transform took eight times that. The
-/// lines are levelled by `plane` as they are read.
-fn acf_of_levelled(grid: &HeightMap<'_>, plane: &Plane) -> Acf {
+/// lines are levelled by `plane` as they are read. That buffer is `heights` (of a grid shaped
+/// as `grid`) grown in place, each line moved to its spectrum's place: they are not held
+/// beside it.
+fn acf_of_levelled(mut buf: Vec<f64>, grid: &HeightMap<'_>, plane: &Plane) -> Acf {
     let (rows, cols) = (grid.rows, grid.cols);
     let (pr, pc) = (fft_len(2 * rows - 1), fft_len(2 * cols - 1));
     let nk = pc / 2 + 1;
@@ -296,13 +308,17 @@ fn acf_of_levelled(grid: &HeightMap<'_>, plane: &Plane) -> Acf {
     ];
     let scratch_len = scratch.len();
     let mut line = vec![0.0; pc];
-    let mut buf = vec![0.0f64; rows * 2 * nk];
+    buf.resize(rows * 2 * nk, 0.0);
+    // Last line first: each moves later (2·nk > cols), over no line still to be moved.
+    for r in (0..rows).rev() {
+        buf.copy_within(r * cols..(r + 1) * cols, r * 2 * nk);
+    }
     {
         // Both passes split their independent transforms (lines, then columns) between two
         // threads, each with its own small buffers: the same transforms of the same values,
         // the same bits, in about half the wall time on two cores.
         let spectra: &mut [Complex64] = bytemuck::cast_slice_mut(&mut buf);
-        line_spectra(grid, plane, r2c.as_ref(), spectra);
+        line_spectra(grid, plane, r2c.as_ref(), spectra, true);
         let columns_of = |first: usize, lines: &mut [&mut [Complex64]]| {
             let mut scratch = vec![Complex64::default(); scratch_len];
             along_columns(lines, first, pr, true, |_, column| {
@@ -385,7 +401,7 @@ fn texture_direction(grid: &HeightMap<'_>, plane: &Plane) -> f64 {
     let fwd = FftPlanner::<f64>::new().plan_fft_forward(rows);
     let mut scratch = vec![Complex64::default(); fwd.get_inplace_scratch_len()];
     let mut spectra = vec![Complex64::default(); rows * nk];
-    line_spectra(grid, plane, r2c.as_ref(), &mut spectra);
+    line_spectra(grid, plane, r2c.as_ref(), &mut spectra, false);
     let freq = |k: usize, n: usize, d: f64| {
         (k as f64 - if k < n.div_ceil(2) { 0.0 } else { n as f64 }) / (n as f64 * d)
     };
@@ -428,9 +444,22 @@ fn texture_direction(grid: &HeightMap<'_>, plane: &Plane) -> f64 {
     best.0 as f64 * ANGLE_STEP_DEG
 }
 
-/// Sal, Str and Std of `grid` levelled by `plane` ([`Plane::of`] the grid, which checks it).
-pub fn spatial_params(grid: &HeightMap<'_>, plane: &Plane) -> SpatialParams {
-    let acf = acf_of_levelled(grid, plane);
+/// Sal, Str and Std of `heights` in the shape of `grid` (whose own heights are not read),
+/// levelled by `plane` ([`Plane::of`] them, which checks them). The PSDs and Std come first,
+/// then the ACF grows its buffer from `heights` in place: owned (a model sampled for them),
+/// they are never held beside it; borrowed, they are copied then.
+pub fn spatial_params(
+    heights: Cow<'_, [f64]>,
+    grid: &HeightMap<'_>,
+    plane: &Plane,
+) -> SpatialParams {
+    let map = &HeightMap {
+        heights_um: &heights,
+        ..*grid
+    };
+    let (psd_x, psd_y) = (psd_along_x(map, plane), psd_along_y(map, plane));
+    let std_deg = texture_direction(map, plane);
+    let acf = acf_of_levelled(heights.into_owned(), grid, plane);
     let rays = (180.0 / ANGLE_STEP_DEG) as usize;
     let lengths: Vec<(f64, Option<f64>)> = (0..rays)
         .map(|i| {
@@ -489,17 +518,14 @@ pub fn spatial_params(grid: &HeightMap<'_>, plane: &Plane) -> SpatialParams {
         Some((_, Some(l))) => 5.0 * l,
         _ => wx.hypot(wy),
     };
-    let mut curves = SpatialCurves {
+    let curves = SpatialCurves {
         fastest: fastest.map(|(d, l)| section(&acf, d, range_um, Some(l))),
         slowest: slowest_drawn
             .filter(|(d, _)| fastest.is_none_or(|(f, _)| f != *d))
             .map(|(d, l)| section(&acf, d, range_um, l)),
-        ..SpatialCurves::default()
+        psd_x,
+        psd_y,
     };
-    // Its buffers are gone before the PSDs and the spectrum for Std take their own.
-    drop(acf);
-    curves.psd_x = psd_along_x(grid, plane);
-    curves.psd_y = psd_along_y(grid, plane);
     if let Some((_, sal)) = fastest {
         if sal < dy && dy > 2.0 * dx {
             caveats.push(format!(
@@ -510,7 +536,7 @@ pub fn spatial_params(grid: &HeightMap<'_>, plane: &Plane) -> SpatialParams {
     SpatialParams {
         sal_um: fastest.map(|(_, l)| l),
         str_ratio,
-        std_deg: texture_direction(grid, plane),
+        std_deg,
         s: S_THRESHOLD,
         fastest_decay_direction_deg: fastest.map(|(d, _)| d),
         slowest_decay_direction_deg: str_ratio.and(slowest.map(|(d, _)| d)),
@@ -654,7 +680,7 @@ mod tests {
             .map(|k| (2.0 * PI * (k % cols) as f64 * px * 1000.0 / lambda_um).cos())
             .collect();
         let g = grid_of(&z, rows, cols, px, py);
-        let p = spatial_params(&g, &Plane::of(&g).unwrap());
+        let p = spatial_params(g.heights_um.into(), &g, &Plane::of(&g).unwrap());
         let want = lambda_um * 0.2f64.acos() / (2.0 * PI);
         let sal = p.sal_um.unwrap();
         assert!((sal - want).abs() < 0.02 * want, "Sal {sal} vs {want}");
@@ -679,7 +705,7 @@ mod tests {
             })
             .collect();
         let g = grid_of(&z, rows, cols, p, p);
-        let s = spatial_params(&g, &Plane::of(&g).unwrap());
+        let s = spatial_params(g.heights_um.into(), &g, &Plane::of(&g).unwrap());
         assert_eq!(s.std_deg, 29.5);
     }
 

@@ -112,11 +112,9 @@ pub struct Report {
 }
 
 /// What the figures are drawn from beyond the report (the lines' Rk constructions are drawn
-/// as their section ends): the model sampled on the data lines, the line drawn against it.
+/// as their section ends, `model.x3p` as the model is sampled): the line drawn against it.
 #[derive(Debug)]
 pub struct FigureData {
-    /// The model sampled on the data lines, when it could be.
-    pub sampled: Option<crate::report::sections::surface::SampledModel>,
     /// The line drawn against the model.
     pub overlay: Option<crate::report::sections::overlay::Overlay>,
 }
@@ -187,7 +185,6 @@ pub fn assemble(
         lab: ctx.lab.clone(),
     };
     let figures = FigureData {
-        sampled: sections.surface.sampled,
         overlay: sections.overlay,
     };
     (report, figures)

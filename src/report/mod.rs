@@ -112,17 +112,24 @@ pub fn characterise(
         });
     }
     std::fs::create_dir_all(out).map_err(error::io(out))?;
-    let (sections, (rk_plots, rk_s)) = sections::run(grid, &model, &ctx, |analyses| {
-        let t = Instant::now();
-        let drawn = render::write_rk_plots(out, grid, analyses, &ctx);
-        (drawn, t.elapsed())
-    })?;
+    let (sections, (rk_plots, rk_s), model_x3p) = sections::run(
+        grid,
+        &model,
+        &ctx,
+        |analyses| timed(|| render::write_rk_plots(out, grid, analyses, &ctx)),
+        |m| {
+            let what = "NURBS model sampled at half the x pitch on the data lines";
+            timed(|| render::write_x3p(out, "model.x3p", grid, m, &ctx, what))
+        },
+    )?;
+    let (model_x3p, x3p_s) = model_x3p.unzip();
     let mut timings = sections.timings.clone();
     let (mut report, figures) = document::assemble(sections, grid, &model, &ctx);
     let logo = render::read_logo(&report.lab, &mut report.warnings);
     let t = Instant::now();
-    let written = render::write_data_files(out, grid, &report, &figures, rk_plots, &ctx)?;
-    timings.write = (t.elapsed() + rk_s).as_secs_f64();
+    let written =
+        render::write_data_files(out, grid, &report, &figures, rk_plots, model_x3p, &ctx)?;
+    timings.write = (t.elapsed() + rk_s + x3p_s.unwrap_or_default()).as_secs_f64();
     // The fit came before this call; it is part of the whole.
     timings.fit = model.fit_s;
     timings.total = t_all.elapsed().as_secs_f64() + model.fit_s;
@@ -157,6 +164,12 @@ pub fn characterise(
         elapsed_s: t_all.elapsed().as_secs_f64() + model.fit_s,
         report,
     })
+}
+
+/// What `f` returns and how long it took.
+fn timed<R>(f: impl FnOnce() -> R) -> (R, std::time::Duration) {
+    let t = Instant::now();
+    (f(), t.elapsed())
 }
 
 impl ScanOutputs {

@@ -109,7 +109,7 @@ fn check(name: &str, px: f64, py: f64, bounds: Bounds) {
     };
     let r = reference(&path, px, py);
     let f = areal_functional(level_plane(&grid).unwrap().0).unwrap();
-    let s = spatial_params(&grid, &Plane::of(&grid).unwrap());
+    let s = spatial_params(grid.heights_um.into(), &grid, &Plane::of(&grid).unwrap());
     let ours = [
         ("Sk", f.sk_um),
         ("Spk", f.spk_um),
@@ -393,7 +393,7 @@ fn sal_str_std_are_those_of_the_full_complex_transform() {
             pitch_x_mm: px,
             pitch_y_mm: py,
         };
-        let s = spatial_params(&grid, &Plane::of(&grid).unwrap());
+        let s = spatial_params(grid.heights_um.into(), &grid, &Plane::of(&grid).unwrap());
         close(&format!("{name} Sal"), s.sal_um.unwrap(), sal, 1e-9, 0.0);
         close(
             &format!("{name} Str"),

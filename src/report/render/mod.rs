@@ -285,58 +285,48 @@ fn rk_title(index: u32, y_mm: f64) -> String {
     format!("Line {n} ({index:04}, y = {y} mm): assessed profile and ISO 13565-2 Rk construction")
 }
 
-/// Writes the plots (the height map on a thread of its own), the X3P files beside them, the
-/// contact's files (when the report has a contact), then `summary.csv`, with `rk_plots`
-/// (drawn before); `report.json` and `report.html` are written last by [`write_report`], once
-/// the report's timings are final.
+/// Encodes `map` (`what` it holds) as `out/name` and writes it, streamed (the archive's bytes
+/// are never held whole), its origin `grid`'s first point: the model is sampled on the
+/// measured points. `model.x3p` is written as the model section samples it, before its areal
+/// parameters take the heights ([`super::sections::run`]), and reported by
+/// [`write_data_files`] in its turn.
+pub fn write_x3p(
+    out: &Path,
+    name: &str,
+    grid: &Grid,
+    map: &HeightMap<'_>,
+    ctx: &ReportContext,
+    what: &str,
+) -> Result<PathBuf, ReportError> {
+    let origin_mm = (grid.x0_mm, grid.y_mm.first().copied().unwrap_or(0.0));
+    let path = out.join(name);
+    let file = x3p(map, origin_mm, &x3p_meta(ctx, what));
+    let file = file.map_err(metrology(format!("{}: {name}", ctx.input)))?;
+    write_atomically(&path, |w| file.write_to(w)).map_err(io(&path))?;
+    Ok(path)
+}
+
+/// Writes the plots (the height map on a thread of its own), `measured.x3p` beside them, the
+/// contact's files (when the report has a contact), then `summary.csv`, with `rk_plots` and
+/// `model_x3p` (written before, `None` when the model was not sampled); `report.json` and
+/// `report.html` are written last by [`write_report`], once the report's timings are final.
 pub fn write_data_files(
     out: &Path,
     grid: &Grid,
     report: &Report,
     figures: &FigureData,
     rk_plots: Result<Vec<(String, [PathBuf; 2])>, ReportError>,
+    model_x3p: Option<Result<PathBuf, ReportError>>,
     ctx: &ReportContext,
 ) -> Result<Files, ReportError> {
     let measured = &HeightMap::of(grid, grid.mean_pitch_y().0);
-    let sampled = figures.sampled.as_ref();
-    // The X3P files are encoded (MD5, deflate) and written beside the plots: they read only
-    // the heights and their metadata. Errors are reported in the order the files were
-    // written before: the plots, the Rk figures, then the X3P files.
-    let measured_meta = x3p_meta(ctx, "measured heights as traced");
-    let model_meta = x3p_meta(
-        ctx,
-        "NURBS model sampled at half the x pitch on the data lines",
-    );
-    let input = ctx.input.clone();
-    remove_earlier_outputs(out)?;
-    // Both files start where the measured grid does: the model is sampled on its points.
-    let origin_mm = (grid.x0_mm, grid.y_mm.first().copied().unwrap_or(0.0));
+    // The X3P file is encoded (MD5, deflate) and written beside the plots: it reads only the
+    // heights and their metadata. Errors are reported in the order the files were written
+    // before: the plots, the Rk figures, then the X3P files.
+    remove_earlier_outputs(out, !matches!(model_x3p, Some(Ok(_))))?;
     let (plots, x3p) = std::thread::scope(|s| {
-        let x3p = s.spawn(|| -> Result<(PathBuf, Option<PathBuf>), ReportError> {
-            // Encodes one height map as `name` and writes it, streamed: the archive's bytes
-            // are never held whole.
-            let write = |name: &str, map: &HeightMap<'_>, meta: &X3pMeta| {
-                let path = out.join(name);
-                let file =
-                    x3p(map, origin_mm, meta).map_err(metrology(format!("{input}: {name}")))?;
-                write_atomically(&path, |w| file.write_to(w)).map_err(io(&path))?;
-                Ok::<_, ReportError>(path)
-            };
-            let measured_x3p = write("measured.x3p", measured, &measured_meta)?;
-            // The model is sampled on the measured lines, at its own x pitch.
-            let model_x3p = sampled
-                .map(|m| {
-                    let map = HeightMap {
-                        heights_um: &m.heights_um,
-                        cols: m.cols,
-                        pitch_x_mm: m.pitch_x_mm,
-                        ..*measured
-                    };
-                    write("model.x3p", &map, &model_meta)
-                })
-                .transpose()?;
-            Ok((measured_x3p, model_x3p))
-        });
+        let what = "measured heights as traced";
+        let x3p = s.spawn(|| write_x3p(out, "measured.x3p", grid, measured, ctx, what));
         let height_map = s.spawn(|| draw_height_map(out, measured, ctx));
         let height_map = || {
             height_map.join().unwrap_or_else(|_| {
@@ -349,10 +339,11 @@ pub fn write_data_files(
     });
     let mut plots = plots?;
     let rk_plots = rk_plots?;
-    let (measured_x3p, model_x3p) = x3p.map_err(|_| {
+    let measured_x3p = x3p.map_err(|_| {
         let hint = "encoding the X3P files panicked; report this with the input";
-        panicked(&input, "measured.x3p", "X3P encoding thread", hint)
+        panicked(&ctx.input, "measured.x3p", "X3P encoding thread", hint)
     })??;
+    let model_x3p = model_x3p.transpose()?;
     if let Some(c) = &report.contact {
         plots.extend(contact::write_contact_files(
             out,
@@ -486,12 +477,14 @@ const PAGE_FIGURES: [(&str, &str, bool, bool); 8] = [
 
 /// Removes what an earlier analysis left in `out` that this one writes only where it applies:
 /// the [`PAGE_FIGURES`] (the page embeds what the folder holds; a profile analysed where a grid
-/// was would show that grid's height map), `model.x3p` and `contact.json`.
-fn remove_earlier_outputs(out: &Path) -> Result<(), ReportError> {
+/// was would show that grid's height map), `model.x3p` (when `model_x3p`: none was written
+/// this time) and `contact.json`.
+fn remove_earlier_outputs(out: &Path, model_x3p: bool) -> Result<(), ReportError> {
     let figures = PAGE_FIGURES
         .iter()
         .flat_map(|(stem, ..)| ["png", "svg"].map(|ext| format!("{stem}.{ext}")));
-    for name in figures.chain(["model.x3p".into(), "contact.json".into()]) {
+    let model = model_x3p.then(|| "model.x3p".to_string());
+    for name in figures.chain(model).chain(["contact.json".into()]) {
         let path = out.join(name);
         remove_if_there(&path).map_err(io(&path))?;
     }

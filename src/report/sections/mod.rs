@@ -42,6 +42,7 @@ use super::document::{FailedSection, OutliersReport, SurfaceReport, Timings};
 use super::error::ReportError;
 use crate::grid::Grid;
 use crate::metrology::anisotropy::Anisotropy;
+use crate::metrology::areal::HeightMap;
 use crate::metrology::holdout::{BetweenLines, Holdout};
 use crate::metrology::params::LineAnalysis;
 use std::time::Instant;
@@ -99,13 +100,17 @@ pub struct Sections {
 /// Runs every section on `grid` with `model`. An error only when the lines cannot be
 /// characterised at all. The lines' analyses go to `draw_lines` (the caller draws their Rk
 /// figures) as soon as their section is done and are not kept: a 1000-line grid's roughness
-/// profiles and Rk curves (about 93 MB) are gone before the areal sections' buffers.
-pub fn run<D>(
+/// profiles and Rk curves (about 93 MB) are gone before the areal sections' buffers. The
+/// model sampled on the data lines goes to `write_model` (the caller writes `model.x3p`) on
+/// the model's thread before its areal parameters, whose autocorrelation grows from it: the
+/// sampled model is not kept (what it returns comes back, `None` when it was not sampled).
+pub fn run<D, M: Send>(
     grid: &Grid,
     model: &Model<'_>,
     ctx: &ReportContext,
     draw_lines: impl FnOnce(Vec<LineAnalysis>) -> D,
-) -> Result<(Sections, D), ReportError> {
+    write_model: impl FnOnce(&HeightMap<'_>) -> M + Send,
+) -> Result<(Sections, D, Option<M>), ReportError> {
     let mut warnings = ctx.warnings.clone();
     let mut timings = Timings::default();
     let (pitch_y_mm, evenly) = grid.mean_pitch_y();
@@ -120,23 +125,27 @@ pub fn run<D>(
     // sampled model) reads only the grid and the model: it runs beside every section below,
     // from the start. It never unwinds (a panic becomes its failure), so an early error
     // return below, which joins it, cannot turn into a panic. Its areal parameters wait for
-    // the grid's and the hold-outs' to be done (`areal_go` sent or dropped, also by an early
+    // the grid's and the hold-outs' to be done (`areal_go` sent, with the row of the overlay
+    // to draw from the sampled model when no line was held out; or dropped by an early
     // return): the model's autocorrelation, twice the sampled model's bytes, is the largest
     // buffer of the run, and theirs would otherwise be held beside it.
     std::thread::scope(|scope| {
-        let (areal_go, areal_wait) = std::sync::mpsc::channel::<()>();
+        let (areal_go, areal_wait) = std::sync::mpsc::channel::<Option<usize>>();
         let model_thread = scope.spawn(move || {
             let t = Instant::now();
-            let mut waited = std::time::Duration::ZERO;
+            let (mut waited, mut made) = (std::time::Duration::ZERO, (None, None));
             let m = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                surface::section(&input, || {
+                surface::section(&input, |sampled| {
                     let w = Instant::now();
-                    let _ = areal_wait.recv();
+                    if let Ok(row) = areal_wait.recv() {
+                        let overlay = row.map(|row| overlay::data_line(grid, sampled, row));
+                        made = (overlay, Some(write_model(sampled)));
+                    }
                     waited = w.elapsed();
                 })
             }))
             .unwrap_or_else(|_| surface::panicked());
-            (m, (t.elapsed() - waited).as_secs_f64())
+            (m, made, (t.elapsed() - waited).as_secs_f64())
         });
 
         let t = Instant::now();
@@ -202,18 +211,15 @@ pub fn run<D>(
             b.model_um = Vec::new();
         }
         crate::fit::memory::release_free_heap();
-        drop(areal_go);
-        let (surface, model_s) = model_thread
+        let _ = areal_go.send(overlay.as_ref().err().copied());
+        let (surface, (model_overlay, written), model_s) = model_thread
             .join()
-            .unwrap_or_else(|_| (surface::panicked(), 0.0));
+            .unwrap_or_else(|_| (surface::panicked(), (None, None), 0.0));
         timings.model = model_s;
         if let Some(c) = &surface.checks {
             warnings.extend(c.warnings());
         }
-        let overlay = match overlay {
-            Ok(o) => Some(o),
-            Err(row) => (surface.sampled.as_ref()).map(|m| overlay::data_line(grid, m, row)),
-        };
+        let overlay = overlay.ok().or(model_overlay);
         warnings.extend(said);
         let between_lines = between_lines.map(|mut b| {
             model_vs_measured::rows_to_lines(grid, &mut b);
@@ -292,6 +298,6 @@ pub fn run<D>(
             warnings,
             timings,
         };
-        Ok((sections, drawn))
+        Ok((sections, drawn, written))
     })
 }

@@ -5,9 +5,9 @@
 //!
 //! Layer 4 (reporting): depends on [`crate::metrology::holdout`] (the refit).
 
-use super::surface::SampledModel;
 use super::SectionInput;
 use crate::grid::Grid;
+use crate::metrology::areal::HeightMap;
 use crate::metrology::holdout::BetweenLines;
 use crate::numfmt::{fmt as nfmt, line_label, line_number, Quantity};
 use crate::report::context::ReportContext;
@@ -32,7 +32,7 @@ pub fn section(
 }
 
 /// Line `row` of `grid` against the model sampled on it.
-pub fn data_line(grid: &Grid, model: &SampledModel, row: usize) -> Overlay {
+pub fn data_line(grid: &Grid, model: &HeightMap<'_>, row: usize) -> Overlay {
     let index = grid.index.get(row).copied().unwrap_or(0);
     Overlay {
         measured: along_x(grid.row(row), grid.pitch_x_mm),

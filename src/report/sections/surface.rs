@@ -18,25 +18,11 @@ use crate::metrology::model::{
 use crate::nurbs::UBasis;
 use crate::report::document::{FailedSection, SurfaceReport};
 
-/// The model sampled on the data lines (their v) at half the x pitch, row-major: what
-/// `model.x3p` shows.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SampledModel {
-    /// Heights in µm, `rows × cols`.
-    pub heights_um: Vec<f64>,
-    /// Points per line (2 × the data's − 1).
-    pub cols: usize,
-    /// x pitch of the samples, mm (half the data's).
-    pub pitch_x_mm: f64,
-}
-
 /// What the section produces.
 #[derive(Debug, Clone)]
 pub struct ModelSection {
     /// The areal parameters and bearing curves of the model, or why there are none.
     pub surface: Result<SurfaceReport, String>,
-    /// The sampled model, when the surface could be sampled.
-    pub sampled: Option<SampledModel>,
     /// The checks, when there is a surface.
     pub checks: Option<ModelChecks>,
     /// The parts that failed.
@@ -56,7 +42,6 @@ fn no_surface(reason: impl Into<String>) -> ModelSection {
     let reason = reason.into();
     ModelSection {
         surface: Err(reason.clone()),
-        sampled: None,
         checks: None,
         failed: vec![failed("surface", reason)],
     }
@@ -68,11 +53,15 @@ pub fn panicked() -> ModelSection {
 }
 
 /// Runs the section: the model of `input` against the grid's measured heights. `before_areal`
-/// is called once the model is sampled and checked, before its areal parameters (whose
-/// autocorrelation takes twice the sampled model's bytes): a caller running other sections
-/// beside this one makes it wait there until their own large buffers are gone, so the two
-/// peaks do not add.
-pub fn section(input: &SectionInput<'_>, before_areal: impl FnOnce()) -> ModelSection {
+/// is given the sampled model once it is checked, before its areal parameters (whose
+/// autocorrelation takes twice its bytes and grows from them): all that reads the sampled
+/// model beyond them (`model.x3p`, a data line's overlay) is made there. A caller running
+/// other sections beside this one makes it wait there until their own large buffers are
+/// gone, so the two peaks do not add.
+pub fn section(
+    input: &SectionInput<'_>,
+    before_areal: impl FnOnce(&HeightMap<'_>),
+) -> ModelSection {
     let (model, options, g) = (input.model, &input.ctx.options, input.grid);
     let (heights_um, rows, cols) = (&g.heights_um[..], g.rows(), g.cols);
     let (pitch_x_mm, pitch_y_mm) = (g.pitch_x_mm, input.pitch_y_mm);
@@ -165,22 +154,26 @@ pub fn section(input: &SectionInput<'_>, before_areal: impl FnOnce()) -> ModelSe
             fails.push(failed("surface", reason.clone()));
             return ModelSection {
                 surface: Err(reason),
-                sampled: None,
                 checks: Some(checks),
                 failed: fails,
             };
         }
     };
-    before_areal();
-    let g = HeightMap {
-        heights_um: &heights,
+    let shape = HeightMap {
+        heights_um: &[],
         rows,
         cols: model_cols,
         pitch_x_mm: pitch_x_mm / 2.0,
         pitch_y_mm,
     };
+    // The model sampled on the data lines (their v) at half the x pitch: what `model.x3p` shows.
+    before_areal(&HeightMap {
+        heights_um: &heights,
+        ..shape
+    });
     let surface = surface_report(
-        &g,
+        std::borrow::Cow::Owned(heights),
+        &shape,
         options.levels,
         format!(
             "the {what} NURBS surface sampled on the data lines (their v) at half the x pitch ({model_cols} points per line, x(u) inverted numerically), then levelled and evaluated as surface_grid"
@@ -201,11 +194,6 @@ pub fn section(input: &SectionInput<'_>, before_areal: impl FnOnce()) -> ModelSe
     }
     ModelSection {
         surface,
-        sampled: Some(SampledModel {
-            heights_um: heights,
-            cols: model_cols,
-            pitch_x_mm: pitch_x_mm / 2.0,
-        }),
         checks: Some(checks),
         failed: fails,
     }

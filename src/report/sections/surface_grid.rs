@@ -12,13 +12,20 @@ use crate::metrology::areal::{areal_params_of_levelled, smr_curve, HeightMap, Pl
 use crate::metrology::functional::areal_functional;
 use crate::metrology::spatial::spatial_params;
 use crate::report::document::SurfaceReport;
+use std::borrow::Cow;
 
-/// Areal parameters and the pooled Smr curve of `g` at `levels` levels.
+/// Areal parameters and the pooled Smr curve of `heights` in the shape of `shape` at `levels`
+/// levels; owned heights are dropped as the spatial parameters take their buffer.
 pub fn surface_report(
-    g: &HeightMap<'_>,
+    heights: Cow<'_, [f64]>,
+    shape: &HeightMap<'_>,
     levels: usize,
     recipe: String,
 ) -> Result<SurfaceReport, String> {
+    let g = &HeightMap {
+        heights_um: &heights,
+        ..*shape
+    };
     let plane = Plane::of(g).map_err(|e| e.to_string())?;
     let (z, coefficients) = plane.level(g);
     let params = areal_params_of_levelled(g, &z, coefficients);
@@ -30,14 +37,15 @@ pub fn surface_report(
         bac_curves: None,
         bac_curves_recipe: None,
         functional: areal_functional(z).map_err(|e| e.to_string()),
-        spatial: Ok(spatial_params(g, &plane)),
+        spatial: Ok(spatial_params(heights, shape, &plane)),
     })
 }
 
 /// The areal parameters and pooled bearing curve of the grid as characterised.
 pub fn section(input: &SectionInput<'_>) -> Result<SurfaceReport, String> {
     let measured = HeightMap::of(input.characterised, input.pitch_y_mm);
-    surface_report(&measured, input.ctx.options.levels, grid_recipe(&measured))
+    let (heights, recipe) = (Cow::Borrowed(measured.heights_um), grid_recipe(&measured));
+    surface_report(heights, &measured, input.ctx.options.levels, recipe)
 }
 
 /// How the grid's areal parameters were obtained, its pitches to the nanometre (the
