@@ -121,31 +121,38 @@ pub fn run<D, M: Send>(
         model,
         ctx,
     };
-    // The model section (the densest work: the fold check, the model's bearing curves, the
-    // sampled model) reads only the grid and the model: it runs beside every section below,
-    // from the start. It never unwinds (a panic becomes its failure), so an early error
-    // return below, which joins it, cannot turn into a panic. Its areal parameters wait for
-    // the grid's and the hold-outs' to be done (`areal_go` sent, with the row of the overlay
-    // to draw from the sampled model when no line was held out; or dropped by an early
-    // return): the model's autocorrelation, twice the sampled model's bytes, is the largest
-    // buffer of the run, and theirs would otherwise be held beside it.
+    // The model section (the densest work: the fold check, the model's bearing curves) reads
+    // only the grid and the model: it runs beside every section below, from the start. It
+    // never unwinds (a panic becomes its failure), so an early error return below, which
+    // joins it, cannot turn into a panic. It samples the model (twice the grid's bytes, at
+    // half the x pitch; its autocorrelation grows from that to twice as much) only once the
+    // grid's sections, the hold-outs and the overlay are done (`areal_go` sent, with the row
+    // of the overlay to draw from the sampled model when no line was held out; or dropped by
+    // an early return): their buffers would otherwise be held beside it.
     std::thread::scope(|scope| {
         let (areal_go, areal_wait) = std::sync::mpsc::channel::<Option<usize>>();
         let model_thread = scope.spawn(move || {
             let t = Instant::now();
-            let (mut waited, mut made) = (std::time::Duration::ZERO, (None, None));
+            let (mut waited, mut wrote) = (std::time::Duration::ZERO, std::time::Duration::ZERO);
+            let mut made = (None, None);
             let m = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                surface::section(&input, |sampled| {
+                let wait = || {
                     let w = Instant::now();
-                    if let Ok(row) = areal_wait.recv() {
+                    let row = areal_wait.recv();
+                    waited = w.elapsed();
+                    row
+                };
+                surface::section(&input, wait, |row, sampled| {
+                    let w = Instant::now();
+                    if let Ok(row) = row {
                         let overlay = row.map(|row| overlay::data_line(grid, sampled, row));
                         made = (overlay, Some(write_model(sampled)));
                     }
-                    waited = w.elapsed();
+                    wrote = w.elapsed();
                 })
             }))
             .unwrap_or_else(|_| surface::panicked());
-            (m, made, (t.elapsed() - waited).as_secs_f64())
+            (m, made, (t.elapsed() - waited - wrote).as_secs_f64())
         });
 
         let t = Instant::now();

@@ -52,15 +52,17 @@ pub fn panicked() -> ModelSection {
     no_surface("internal: the model section panicked; report this with the input")
 }
 
-/// Runs the section: the model of `input` against the grid's measured heights. `before_areal`
-/// is given the sampled model once it is checked, before its areal parameters (whose
-/// autocorrelation takes twice its bytes and grows from them): all that reads the sampled
-/// model beyond them (`model.x3p`, a data line's overlay) is made there. A caller running
-/// other sections beside this one makes it wait there until their own large buffers are
-/// gone, so the two peaks do not add.
-pub fn section(
+/// Runs the section: the model of `input` against the grid's measured heights. Once it is
+/// checked, `before_sampling` is called and the model sampled (not when it folds), then
+/// `before_areal` is given what the first returned and the sampled model, before its areal
+/// parameters (whose autocorrelation takes twice its bytes and grows from them): all that
+/// reads the sampled model beyond them (`model.x3p`, a data line's overlay) is made there. A
+/// caller running other sections beside this one makes it wait in `before_sampling` until
+/// their own large buffers are gone, so the peaks do not add.
+pub fn section<W>(
     input: &SectionInput<'_>,
-    before_areal: impl FnOnce(&HeightMap<'_>),
+    before_sampling: impl FnOnce() -> W,
+    before_areal: impl FnOnce(W, &HeightMap<'_>),
 ) -> ModelSection {
     let (model, options, g) = (input.model, &input.ctx.options, input.grid);
     let (heights_um, rows, cols) = (&g.heights_um[..], g.rows(), g.cols);
@@ -71,54 +73,36 @@ pub fn section(
     };
     let mut fails = Vec::new();
     let model_cols = 2 * cols - 1;
-    // The checks, the bearing curves and the sampling read the same surface: they run side
-    // by side. The curves and the samples of a surface that folds are dropped below, as the
-    // checks say.
+    // The checks and the bearing curves read the same surface: they run side by side. A
+    // surface that folds is not sampled (below), as the checks say.
     let bac_options = ModelBacOptions {
         curves: options.curves,
         levels: options.levels,
         samples_per_curve: None,
     };
     let fold_options = FoldOptions::default();
-    let (checks, bac, sampled) = std::thread::scope(|s| {
-        let sampled = s.spawn(|| {
-            sample_model_grid(
+    // The fold check's iso-curves and the bearing curves are sampled at the same u when their
+    // densities agree (the defaults do): the u basis is computed once for both.
+    let us = bearing_sample_us(&fit.surface, &bac_options);
+    let fold_n_u = iso_curve_sample_count(&fit.surface, &fold_options);
+    let shared = (us.len() == fold_n_u).then(|| UBasis::new(&fit.surface, &us));
+    let shared = shared.as_ref();
+    let (checks, bac) = std::thread::scope(|inner| {
+        let checks = inner.spawn(|| {
+            check_model_with(
                 &fit.surface,
                 &fit.params_v,
-                fit.x0_mm,
-                pitch_x_mm / 2.0,
-                model_cols,
+                heights_um,
+                &fold_options,
+                shared,
             )
         });
-        // The fold check's iso-curves and the bearing curves are sampled at the same u when
-        // their densities agree (the defaults do): the u basis is computed once for both.
-        let us = bearing_sample_us(&fit.surface, &bac_options);
-        let fold_n_u = iso_curve_sample_count(&fit.surface, &fold_options);
-        let shared = (us.len() == fold_n_u).then(|| UBasis::new(&fit.surface, &us));
-        let shared = shared.as_ref();
-        let (checks, bac) = std::thread::scope(|inner| {
-            let checks = inner.spawn(|| {
-                check_model_with(
-                    &fit.surface,
-                    &fit.params_v,
-                    heights_um,
-                    &fold_options,
-                    shared,
-                )
-            });
-            let bac = model_bearing_curves_with(&fit.surface, &bac_options, shared);
-            (checks.join(), bac)
-        });
-        (checks, bac, sampled.join())
+        let bac = model_bearing_curves_with(&fit.surface, &bac_options, shared);
+        (checks.join(), bac)
     });
     let Ok(checks) = checks else {
         return no_surface("internal: the model checks panicked; report this with the input");
     };
-    let sampled = sampled.unwrap_or(Err(crate::metrology::MetrologyError::BadParameter {
-        what: "model sampling thread",
-        value: f64::NAN,
-        hint: "sampling the model panicked; report this with the input",
-    }));
     let folds = checks.folds();
     let (p, q) = (model.recipe.degrees.degree_u, model.recipe.degrees.degree_v);
     let what = match model.recipe.method {
@@ -146,9 +130,14 @@ pub fn section(
     let sampled = if folds {
         Err("the model folds (x runs backwards along its iso-curves, see model_checks), so it is not a height map: no model.x3p and no areal parameters of the model".to_string())
     } else {
-        sampled.map_err(|e| format!("sampling the model on the data lines: {e}"))
+        let w = before_sampling();
+        let (v, x0_mm) = (&fit.params_v, fit.x0_mm);
+        let sampled = sample_model_grid(&fit.surface, v, x0_mm, pitch_x_mm / 2.0, model_cols);
+        sampled
+            .map(|h| (w, h))
+            .map_err(|e| format!("sampling the model on the data lines: {e}"))
     };
-    let heights = match sampled {
+    let (w, heights) = match sampled {
         Ok(h) => h,
         Err(reason) => {
             fails.push(failed("surface", reason.clone()));
@@ -167,10 +156,13 @@ pub fn section(
         pitch_y_mm,
     };
     // The model sampled on the data lines (their v) at half the x pitch: what `model.x3p` shows.
-    before_areal(&HeightMap {
-        heights_um: &heights,
-        ..shape
-    });
+    before_areal(
+        w,
+        &HeightMap {
+            heights_um: &heights,
+            ..shape
+        },
+    );
     let surface = surface_report(
         std::borrow::Cow::Owned(heights),
         &shape,
