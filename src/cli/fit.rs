@@ -223,13 +223,12 @@ fn read_input(args: &Args) -> Result<Input, CliError> {
             return Err(CliError::new(
                 Exit::Usage,
                 format!(
-                    "a {} needs -o OUT.igs (only a scan directory has a default output)",
+                    "{} needs -o OUT.igs (only a scan directory has a default output)",
                     match input.source {
                         Source::X3p { .. } => "an X3P file",
-                        Source::ProfileCsv => "profile CSV",
-                        _ => "grid CSV",
+                        Source::ProfileCsv => "a profile CSV",
+                        _ => "a grid CSV",
                     }
-                    .trim_start_matches("a ")
                 ),
             ));
         };

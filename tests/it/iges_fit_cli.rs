@@ -374,3 +374,42 @@ fn fit_onto_standard_output_keeps_the_summary_off_it() {
     // No file named "-" was made.
     assert!(!dir.path().join("-").exists());
 }
+
+#[test]
+fn an_input_other_than_a_scan_without_o_is_named_with_its_article_and_nothing_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let z = [0.0, 1.0, 2.0, 3.0, 1.0, 2.0, 3.0, 4.0, 2.0, 3.0, 4.0, 5.0];
+    let map = surfscan::metrology::areal::HeightMap {
+        heights_um: &z,
+        rows: 3,
+        cols: 4,
+        pitch_x_mm: 0.01,
+        pitch_y_mm: 0.02,
+    };
+    let x3p = surfscan::x3p::to_x3p(&map, (0.0, 0.0), &surfscan::x3p::X3pMeta::default());
+    std::fs::write(dir.path().join("in.x3p"), x3p.unwrap()).unwrap();
+    std::fs::write(dir.path().join("in.csv"), plane_grid(3, 4, 0.01, 0.02)).unwrap();
+    let pitches = ["--pitch-x", "0.01", "--pitch-y", "0.02"];
+    for (file, kind, extra) in [
+        ("in.x3p", "an X3P file", &[][..]),
+        ("in.csv", "a grid CSV", &pitches[..]),
+    ] {
+        let o = surfscan()
+            .current_dir(dir.path())
+            .args(["fit", file])
+            .args(extra)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        let sentence =
+            format!("{kind} needs -o OUT.igs (only a scan directory has a default output)");
+        assert_eq!(err, format!("surfscan: {sentence}\n"));
+        let mut names: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["in.csv", "in.x3p"], "{file}");
+    }
+}
