@@ -905,4 +905,47 @@ fn positions_move(
         b["positions"]
     );
     assert!(b_html.replace("&#39;", "'").contains(origin));
+    // The figures' x axes: the overlay's (and its residual panel's) and the height map's.
+    for svg in ["overlay.svg", "heightmap.svg"] {
+        let figure = |run: &str| std::fs::read_to_string(dir.path().join(run).join(svg)).unwrap();
+        x_axes_moved(&figure("first"), &figure("second"), offset_mm[0]);
+    }
+}
+
+/// The x axes of two drawings of one figure, `b`'s data `offset_mm` further along x: the
+/// pixel of each of `b`'s tick labels is where `a`'s ticks put its value − `offset_mm`
+/// (linear between `a`'s first and last tick of the same axis; to the pixel, as SVG rounds).
+fn x_axes_moved(a: &str, b: &str, offset_mm: f64) {
+    // An x axis: the numbers centred on one row (y px), as (value, x px).
+    let axes = |svg: &str| {
+        let mut rows = std::collections::BTreeMap::<String, Vec<(f64, f64)>>::new();
+        for t in svg.split("<text ").skip(1) {
+            let attr = |k: &str| t.split(&format!("{k}=\"")).nth(1)?.split('"').next();
+            let text = t.split('>').nth(1).and_then(|s| s.split('<').next());
+            let value = text.and_then(|s| s.trim().parse::<f64>().ok());
+            if let (Some(v), Some("middle"), Some(x), Some(y)) =
+                (value, attr("text-anchor"), attr("x"), attr("y"))
+            {
+                rows.entry(y.to_string())
+                    .or_default()
+                    .push((v, x.parse().unwrap()));
+            }
+        }
+        rows
+    };
+    let (a, b) = (axes(a), axes(b));
+    assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+    assert!(!a.is_empty());
+    for (y, ticks) in &b {
+        let (&(v0, p0), &(v1, p1)) = (a[y].first().unwrap(), a[y].last().unwrap());
+        assert!(ticks.len() >= 3, "{ticks:?}");
+        for &(v, p) in ticks {
+            let want = p0 + (v - offset_mm - v0) * (p1 - p0) / (v1 - v0);
+            assert!(
+                (p - want).abs() <= 1.0,
+                "tick {v} at {p} px, not {want}: {ticks:?} vs {:?}",
+                a[y]
+            );
+        }
+    }
 }

@@ -105,6 +105,7 @@ fn write_figures(
         plot_map(
             out,
             &pressure_map,
+            0.0,
             &MapValues {
                 stem: "pressure",
                 name: "pressures",

@@ -815,6 +815,7 @@ fn map_is_averaged(grid: &HeightMap<'_>, (width, height): (u32, u32)) -> bool {
 fn draw_map<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     grid: &HeightMap<'_>,
+    x0_mm: f64,
     bar: &str,
     scale: &MapScale,
     frame: &Frame,
@@ -840,7 +841,7 @@ where
         .margin(MAP_MARGIN)
         .x_label_area_size(MAP_X_AREA)
         .y_label_area_size(MAP_Y_AREA)
-        .build_cartesian_2d(0f64..w, 0f64..y_top.max(h))
+        .build_cartesian_2d(x0_mm..x0_mm + w, 0f64..y_top.max(h))
         .map_err(|e| e.to_string())?;
     mesh(&mut chart, "x (mm)", "y (mm)")
         .disable_mesh()
@@ -850,9 +851,9 @@ where
         .map_err(|e| e.to_string())?;
     // The map as one bitmap at the pixels it covers, the figure's not the grid's (an SVG embeds
     // it as one PNG image): made for the PNG, kept for the SVG (one size, the same chart).
-    let size = map_size_px(&chart, w, h);
+    let size = map_size_px(&chart, (x0_mm, x0_mm + w), h);
     let pixels = pixels.get_or_init(|| map_pixels(grid, size, (lo, hi)));
-    let bitmap = BitMapElement::with_ref((0.0, h), size, pixels)
+    let bitmap = BitMapElement::with_ref((x0_mm, h), size, pixels)
         .ok_or_else(|| "height map bitmap of the wrong size".to_string())?;
     chart
         .plotting_area()
@@ -868,14 +869,15 @@ where
     )
 }
 
-/// The pixels the grid's `w_mm` × `h_mm` cover in `chart` (at least one each way).
+/// The pixels the grid from `x_mm.0` to `x_mm.1` and `h_mm` high cover in `chart` (at least
+/// one each way).
 fn map_size_px<DB: DrawingBackend>(
     chart: &ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
-    w_mm: f64,
+    x_mm: (f64, f64),
     h_mm: f64,
 ) -> (u32, u32) {
-    let (x0, y0) = chart.backend_coord(&(0.0, h_mm));
-    let (x1, y1) = chart.backend_coord(&(w_mm, 0.0));
+    let (x0, y0) = chart.backend_coord(&(x_mm.0, h_mm));
+    let (x1, y1) = chart.backend_coord(&(x_mm.1, 0.0));
     ((x1 - x0).max(1) as u32, (y1 - y0).max(1) as u32)
 }
 
@@ -886,22 +888,25 @@ const MAP_MIN_BAR_H: u32 = 160;
 /// in viridis with a colour bar, to true scale or with the exaggeration stated. The map is
 /// drawn at the figure's resolution: where a pixel covers several points it shows their mean
 /// (said in the title); the subtitle's range and the colour bar are the points' own.
-/// `caption` (may be empty) is the traceability footer.
+/// `caption` (may be empty) is the traceability footer; x starts at `x0_mm` (the input's
+/// coordinates, [`crate::grid::Grid::x0_mm`]).
 pub fn plot_height_map(
     dir: &Path,
     grid: &HeightMap<'_>,
+    x0_mm: f64,
     title: &str,
     caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
-    plot_map(dir, grid, &HEIGHTS, title, caption)
+    plot_map(dir, grid, x0_mm, &HEIGHTS, title, caption)
 }
 
 /// Writes `<values.stem>.png|svg` into `dir`: a map of any row-major values (the heights of
-/// [`HeightMap`] read as the values named by `values`) drawn as [`plot_height_map`] draws
-/// heights.
+/// [`HeightMap`] read as the values named by `values`, x from `x0_mm`) drawn as
+/// [`plot_height_map`] draws heights.
 pub fn plot_map(
     dir: &Path,
     grid: &HeightMap<'_>,
+    x0_mm: f64,
     values: &MapValues<'_>,
     title: &str,
     caption: &str,
@@ -935,7 +940,7 @@ pub fn plot_map(
         + MAP_X_AREA;
     let pixels = std::cell::OnceCell::new();
     png_and_svg!(dir, values.stem, (MAP_WIDTH, height), |root| draw_map(
-        &root, grid, values.bar, &scale, &frame, &pixels
+        &root, grid, x0_mm, values.bar, &scale, &frame, &pixels
     ))
 }
 
@@ -1177,7 +1182,7 @@ where
             grey.stroke_width(1),
         ))
         .map_err(err)?;
-    let points = crate::report::sections::overlay::along_x(p.z_um, p.pitch_mm);
+    let points = crate::report::sections::overlay::along_x(p.z_um, 0.0, p.pitch_mm);
     let columns = area.dim_in_pixel().0;
     chart
         .draw_series(LineSeries::new(

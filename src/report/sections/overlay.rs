@@ -35,9 +35,10 @@ pub fn section(
 pub fn data_line(grid: &Grid, model: &HeightMap<'_>, row: usize) -> Overlay {
     let index = grid.index.get(row).copied().unwrap_or(0);
     Overlay {
-        measured: along_x(grid.row(row), grid.pitch_x_mm),
+        measured: along_x(grid.row(row), grid.x0_mm, grid.pitch_x_mm),
         model: along_x(
             (model.heights_um.get(row * model.cols..(row + 1) * model.cols)).unwrap_or(&[]),
+            grid.x0_mm,
             model.pitch_x_mm,
         ),
         residual: Vec::new(),
@@ -52,9 +53,10 @@ pub fn data_line(grid: &Grid, model: &HeightMap<'_>, row: usize) -> Overlay {
     }
 }
 
-/// `z` as `(x_mm, z)` points `pitch_mm` apart from x = 0.
-pub(crate) fn along_x(z: &[f64], pitch_mm: f64) -> Vec<(f64, f64)> {
-    let x = |i: usize| i as f64 * pitch_mm;
+/// `z` as `(x_mm, z)` points `pitch_mm` apart from `x0_mm` (the input's coordinates, as
+/// [`Grid::x_mm`]).
+pub(crate) fn along_x(z: &[f64], x0_mm: f64, pitch_mm: f64) -> Vec<(f64, f64)> {
+    let x = |i: usize| x0_mm + i as f64 * pitch_mm;
     z.iter().enumerate().map(|(i, v)| (x(i), *v)).collect()
 }
 
@@ -122,19 +124,15 @@ fn held_out_overlay(
             (line.index, line.rms_um, b.model_line(k)?.to_vec())
         }
     };
-    let px = grid.pitch_x_mm;
+    let (x0, px) = (grid.x0_mm, grid.pitch_x_mm);
     let measured = grid
         .heights_um
         .get(row * grid.cols..(row + 1) * grid.cols)?;
+    let residual: Vec<f64> = model.iter().zip(measured).map(|(m, z)| m - z).collect();
     Some(Overlay {
-        measured: along_x(measured, px),
-        model: along_x(&model, px),
-        residual: model
-            .iter()
-            .zip(measured)
-            .enumerate()
-            .map(|(i, (m, z))| (i as f64 * px, m - z))
-            .collect(),
+        measured: along_x(measured, x0, px),
+        model: along_x(&model, x0, px),
+        residual: along_x(&residual, x0, px),
         title: format!(
             "Line {} ({:04}, y = {} mm) left out: its measured heights and the model refitted without it (rms {} µm)",
             line_number(grid.index_of(row)),
