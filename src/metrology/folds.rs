@@ -408,6 +408,8 @@ unsafe fn strictly_increasing_avx2(values: &[f64]) -> bool {
 /// iso-curves of [`check_model`] to say whether and where the surface itself folds.
 pub fn net_folds(surface: &NurbsSurface) -> Vec<NetFold> {
     let (nu, nv) = (surface.count_u(), surface.count_v());
+    // The pole rows' views once (x and y read from them, not a pole assembled per step).
+    let rows: Vec<_> = surface.net().rows().collect();
     let mut net = Vec::new();
     for (direction, lines, along) in [("u", nv, nu), ("v", nu, nv)] {
         let (mut affected, mut first, mut worst) = (0usize, None, 0.0f64);
@@ -415,16 +417,14 @@ pub fn net_folds(surface: &NurbsSurface) -> Vec<NetFold> {
             let mut hit = false;
             for i in 0..along.saturating_sub(1) {
                 let (a, b) = if direction == "u" {
-                    (surface.pole(i, line)[0], surface.pole(i + 1, line)[0])
+                    (rows[line].x[i], rows[line].x[i + 1])
                 } else {
-                    (surface.pole(line, i)[1], surface.pole(line, i + 1)[1])
+                    (rows[i].y.at(line), rows[i + 1].y.at(line))
                 };
                 if b <= a {
                     hit = true;
                     worst = worst.max(a - b);
-                    if first.is_none() {
-                        first = Some((line, i, a, b));
-                    }
+                    first.get_or_insert((line, i, a, b));
                 }
             }
             affected += usize::from(hit);
