@@ -949,3 +949,33 @@ fn x_axes_moved(a: &str, b: &str, offset_mm: f64) {
         }
     }
 }
+
+#[test]
+fn contact_draws_its_pressure_map_in_the_x3p_files_coordinates() {
+    // The first 160 points of each line of sur-2, enough for a map's axis.
+    let (z, rows, cols) = sur_2();
+    let z: Vec<f64> = z.chunks(cols).flat_map(|l| &l[..160]).copied().collect();
+    let map = map_of(&z, rows, 160, 0.003484, 0.010452);
+    let dir = tempfile::tempdir().unwrap();
+    let pressure_map = |name: &str, x0_mm: f64| {
+        let x3p = dir.path().join(format!("{name}.x3p"));
+        let bytes = to_x3p(&map, (x0_mm, 0.0), &X3pMeta::default()).unwrap();
+        std::fs::write(&x3p, bytes).unwrap();
+        let out = dir.path().join(name);
+        let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .arg("contact")
+            .arg(&x3p)
+            .args(["--young", "100", "--poisson", "0.34", "--pressures", "5"])
+            .args(["--map-pressure", "5", "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read_to_string(out.join("pressure.svg")).unwrap()
+    };
+    x_axes_moved(
+        &pressure_map("at-0", 0.0),
+        &pressure_map("at-0.25", 0.25),
+        0.25,
+    );
+}

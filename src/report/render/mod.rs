@@ -349,6 +349,7 @@ pub fn write_data_files(
         plots.extend(contact::write_contact_files(
             out,
             c,
+            grid.x0_mm,
             &ctx.input,
             &c.warnings(),
         )?);
