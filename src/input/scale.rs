@@ -76,11 +76,24 @@ pub fn implausible(grid: &Grid, profile: bool) -> Vec<Implausible> {
     if z.is_empty() || grid.cols == 0 {
         return out;
     }
-    let (lo, hi) = z
+    // The extremes over eight running pairs, not one chain of dependent comparisons through
+    // the grid (on the way from the read to the fit): exact in any order.
+    let (mut lo8, mut hi8) = ([f64::INFINITY; 8], [f64::NEG_INFINITY; 8]);
+    let mut blocks = z.chunks_exact(8);
+    for b in &mut blocks {
+        for k in 0..8 {
+            (lo8[k], hi8[k]) = (lo8[k].min(b[k]), hi8[k].max(b[k]));
+        }
+    }
+    let rest = blocks.remainder();
+    let lo = rest
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
+        .chain(&lo8)
+        .fold(f64::INFINITY, |a, &v| a.min(v));
+    let hi = rest
+        .iter()
+        .chain(&hi8)
+        .fold(f64::NEG_INFINITY, |a, &v| a.max(v));
     if hi - lo > MAX_RANGE_UM {
         out.push(Implausible::RangeTooLarge(hi - lo));
     }
