@@ -124,6 +124,9 @@ pub struct Recipe {
     pub points_per_section: usize,
     /// Points of the input left out of the evaluation (remainder or truncation).
     pub points_not_evaluated: usize,
+    /// The input's point the evaluation length starts at (the first of the ordinates).
+    #[serde(skip)]
+    pub first_point: usize,
     /// Pitch in mm.
     pub pitch_mm: f64,
     /// Reference line for heights.
@@ -609,6 +612,7 @@ fn line_recipe(
         sampling_lengths_rule: plan.rule.clone(),
         points_per_section: plan.per,
         points_not_evaluated: not_evaluated,
+        first_point: plan.start,
         pitch_mm,
         mean_line: match (options.form, filtered) {
             (Some(form), _) => format!("the {} of the primary profile", form.describe()),

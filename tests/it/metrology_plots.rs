@@ -175,6 +175,7 @@ fn every_plot_is_png_and_svg_in_iso_words_with_a_key_for_every_colour() {
     let assessed = AssessedProfile {
         z_um: &a.roughness_um,
         pitch_mm: PX,
+        x0_mm: 0.0,
         sampling_length_mm: a.recipe.section_length_mm,
         sampling_lengths: a.recipe.sampling_lengths,
         kind: "R",

@@ -912,6 +912,50 @@ fn positions_move(
     }
 }
 
+#[test]
+fn the_assessed_profile_is_drawn_where_its_evaluation_length_lies_on_the_line() {
+    // 1067 points at 2.5 µm, λc 0.8 mm: L/λc = 3.33, the central 3 × 320 points evaluated,
+    // (1067 − 960) / 2 = 53 left out before them. The same lines cropped to those 960 points
+    // (L/λc = 2.997, within 1 % of 3: all evaluated from the first): the full lines' profile
+    // axis is the cropped one's moved by 53 × 0.0025 = 0.1325 mm.
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/demo.grid.csv"),
+    )
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let profile = |name: &str, from: usize, to: usize| {
+        let lines: Vec<String> = (text.lines().take(3))
+            .map(|l| l.split(',').collect::<Vec<_>>()[from..to].join(","))
+            .collect();
+        let csv = dir.path().join(format!("{name}.csv"));
+        std::fs::write(&csv, lines.join("\n")).unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
+            .arg("analyze")
+            .arg(&csv)
+            .args([
+                "--pitch-x",
+                "0.0025",
+                "--pitch-y",
+                "0.05",
+                "--lc",
+                "0.8",
+                "--out",
+            ])
+            .arg(dir.path().join(name))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let svg = std::fs::read_to_string(dir.path().join(name).join("rk/0000.svg")).unwrap();
+        // The assessed profile, drawn before the Rk construction.
+        svg[..svg.find("height c (µm)").unwrap()].to_string()
+    };
+    x_axes_moved(
+        &profile("cropped", 53, 1013),
+        &profile("full", 0, 1067),
+        0.1325,
+    );
+}
+
 /// The x axes of two drawings of one figure, `b`'s data `offset_mm` further along x: the
 /// pixel of each of `b`'s tick labels is where `a`'s ticks put its value − `offset_mm`
 /// (linear between `a`'s first and last tick of the same axis; to the pixel, as SVG rounds).

@@ -252,6 +252,7 @@ pub fn write_rk_plots(
         let profile = plots::AssessedProfile {
             z_um: &a.roughness_um,
             pitch_mm: a.recipe.pitch_mm,
+            x0_mm: grid.x_mm(a.recipe.first_point),
             sampling_length_mm: a.recipe.section_length_mm,
             sampling_lengths: a.recipe.sampling_lengths,
             kind: a.recipe.profile,

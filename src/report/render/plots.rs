@@ -1131,6 +1131,8 @@ pub struct AssessedProfile<'a> {
     pub z_um: &'a [f64],
     /// Their pitch, mm.
     pub pitch_mm: f64,
+    /// x of the first, mm, in the input's coordinates.
+    pub x0_mm: f64,
     /// The sampling length, mm.
     pub sampling_length_mm: f64,
     /// How many sampling lengths the evaluation length holds.
@@ -1150,6 +1152,7 @@ where
 {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     let length = p.z_um.len().saturating_sub(1) as f64 * p.pitch_mm;
+    let (x0, x1) = (p.x0_mm, p.x0_mm + length);
     let (lo, hi) = padded_range(p.z_um.iter().copied(), (-1.0, 1.0));
     let mut chart = ChartBuilder::on(area)
         .margin(RATIO_CHART_MARGIN)
@@ -1166,27 +1169,23 @@ where
             ),
             font(14),
         )
-        .build_cartesian_2d(0f64..length.max(p.pitch_mm), lo..hi)
+        .build_cartesian_2d(x0..x0 + length.max(p.pitch_mm), lo..hi)
         .map_err(err)?;
-    mesh(
-        &mut chart,
-        "x along the evaluation length (mm)",
-        "height (µm)",
-    )
-    .draw()
-    .map_err(err)?;
+    mesh(&mut chart, "x (mm)", "height (µm)")
+        .draw()
+        .map_err(err)?;
     let grey = RGBColor(110, 110, 110);
     chart
         .draw_series(LineSeries::new(
-            [(0.0, 0.0), (length, 0.0)],
+            [(x0, 0.0), (x1, 0.0)],
             grey.stroke_width(1),
         ))
         .map_err(err)?;
-    let points = crate::report::sections::overlay::along_x(p.z_um, 0.0, p.pitch_mm);
+    let points = crate::report::sections::overlay::along_x(p.z_um, x0, p.pitch_mm);
     let columns = area.dim_in_pixel().0;
     chart
         .draw_series(LineSeries::new(
-            extremes_per_column(&points, (0.0, length), columns)
+            extremes_per_column(&points, (x0, x1), columns)
                 .iter()
                 .copied(),
             DATA.stroke_width(1),
@@ -1194,11 +1193,11 @@ where
         .map_err(err)?;
     let tag = font(13).color(&grey);
     for k in 0..p.sampling_lengths {
-        let x0 = f64::from(k) * p.sampling_length_mm;
+        let from = x0 + f64::from(k) * p.sampling_length_mm;
         if k > 0 {
             chart
                 .draw_series(DashedLineSeries::new(
-                    [(x0, lo), (x0, hi)],
+                    [(from, lo), (from, hi)],
                     6,
                     4,
                     grey.stroke_width(1),
@@ -1208,7 +1207,7 @@ where
         chart
             .draw_series(std::iter::once(Text::new(
                 format!("lr{}", k + 1),
-                (x0 + 0.5 * p.sampling_length_mm, hi),
+                (from + 0.5 * p.sampling_length_mm, hi),
                 tag.clone(),
             )))
             .map_err(err)?;
