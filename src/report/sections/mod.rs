@@ -122,9 +122,9 @@ pub fn run<D, M: Send>(
         ctx,
     };
     // The model section (the densest work: the fold check, the model's bearing curves) reads
-    // only the grid and the model: it runs beside every section below, from the start. It
-    // never unwinds (a panic becomes its failure), so an early error return below, which
-    // joins it, cannot turn into a panic. It samples the model (twice the grid's bytes, at
+    // only the grid and the model: it runs beside every section below, from the start. Where
+    // the build unwinds (tests; the release profile aborts on any panic) a panic becomes its
+    // failure, so an early error return below, which joins it, is no panic. It samples the model (twice the grid's bytes, at
     // half the x pitch; its autocorrelation grows from that to twice as much) only once the
     // grid's sections, the hold-outs and the overlay are done (`areal_go` sent, with the row
     // of the overlay to draw from the sampled model when no line was held out; or dropped by
