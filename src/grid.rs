@@ -96,6 +96,12 @@ impl Grid {
         self.x0_mm + col as f64 * self.pitch_x_mm
     }
 
+    /// Where the grid starts in the input's coordinates, mm: (x of each line's first point,
+    /// y of the first line); (0, 0) for a grid without lines.
+    pub fn origin_mm(&self) -> (f64, f64) {
+        (self.x0_mm, self.y_mm.first().copied().unwrap_or(0.0))
+    }
+
     /// The line index of row `r`.
     pub fn index_of(&self, r: usize) -> u32 {
         self.index.get(r).copied().unwrap_or(r as u32)

@@ -34,7 +34,8 @@ fn the_first_height_map_of_a_process_wraps_its_footer_to_the_figure() {
     };
     // A scan's traceability footer: far wider than the figure on one line.
     let caption = "specimen demo: Mitutoyo R profile windows · sj210 fw V1.00 (000 standard) · ISO1997 Gaussian λc 2.5 mm λs 8 µm arbitrary evaluation length · scan 20261203T072144Z-demo-mitutoyo-r-profile-windows · surfscan 0.1.0 (commit 0123456789ab)";
-    let [png, svg] = plot_height_map(dir.path(), &grid, 0.0, "Measured heights", caption).unwrap();
+    let [png, svg] =
+        plot_height_map(dir.path(), &grid, (0.0, 0.0), "Measured heights", caption).unwrap();
     assert!(png.exists());
     let texts = texts(&std::fs::read_to_string(&svg).unwrap());
     let first = texts

@@ -181,7 +181,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         )
     })?;
     let described = input.described.clone();
-    write_contact_files(&out, &section, grid.x0_mm, &described, &warnings)
+    write_contact_files(&out, &section, grid.origin_mm(), &described, &warnings)
         .map_err(|e| CliError::new(Exit::Io, e.to_string()))?;
     let path = out.join("contact.json");
     say!(

@@ -130,7 +130,8 @@ fn every_plot_is_png_and_svg_in_iso_words_with_a_key_for_every_colour() {
     // One polyline per model curve plus the pooled one (the legend samples are paths too).
     assert!(text.matches("<polyline").count() > curves.len());
 
-    let [png, svg] = plot_height_map(&out.dir, &g, 0.0, "Measured heights", LONG_CAPTION).unwrap();
+    let [png, svg] =
+        plot_height_map(&out.dir, &g, (0.0, 0.0), "Measured heights", LONG_CAPTION).unwrap();
     assert_nothing_at_the_edge(&png);
     let text = std::fs::read_to_string(&svg).unwrap();
     // 1.6 × 0.31 mm: too thin at true scale, so the stretch is stated; the colour bar is
@@ -270,7 +271,8 @@ fn dense_data_is_drawn_at_the_figures_resolution() {
         pitch_x_mm: 0.0005,
         pitch_y_mm: 0.01,
     };
-    let [png, svg] = plot_height_map(&out.dir, &g, 0.0, "Measured heights", LONG_CAPTION).unwrap();
+    let [png, svg] =
+        plot_height_map(&out.dir, &g, (0.0, 0.0), "Measured heights", LONG_CAPTION).unwrap();
     assert_nothing_at_the_edge(&png);
     let text = std::fs::read_to_string(&svg).unwrap();
     // At most 776 × 520 RGB pixels, as PNG in base64: under 2 MB even incompressible; the

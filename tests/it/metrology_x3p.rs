@@ -710,6 +710,7 @@ fn positions_moved_by(a: &str, b: &str, offset_mm: [f64; 2], slack_mm: [f64; 2])
 /// written into the files). The folding grid keeps its y offset, and the y of its model's
 /// places may be anywhere on the grid: all 121 of its iso-curves fold by the same amount to
 /// rounding, and which is the worst (whose y is named) changes with the rounding of x moved.
+/// The figures move with them: the overlay's and the height map's x axes, the height map's y.
 #[test]
 fn analyze_names_positions_in_the_x3p_files_coordinates() {
     use crate::model_honesty::{uncorrelated_grid, COLS, PX, PY, ROWS};
@@ -905,11 +906,21 @@ fn positions_move(
         b["positions"]
     );
     assert!(b_html.replace("&#39;", "'").contains(origin));
-    // The figures' x axes: the overlay's (and its residual panel's) and the height map's.
+    // The figures' x axes: the overlay's (and its residual panel's) and the height map's;
+    // the height map's y axis.
+    let figure = |run: &str, svg: &str| std::fs::read_to_string(dir.path().join(run).join(svg));
     for svg in ["overlay.svg", "heightmap.svg"] {
-        let figure = |run: &str| std::fs::read_to_string(dir.path().join(run).join(svg)).unwrap();
-        x_axes_moved(&figure("first"), &figure("second"), offset_mm[0]);
+        let (a, b) = (
+            figure("first", svg).unwrap(),
+            figure("second", svg).unwrap(),
+        );
+        x_axes_moved(&a, &b, offset_mm[0]);
     }
+    let (a, b) = (
+        figure("first", "heightmap.svg"),
+        figure("second", "heightmap.svg"),
+    );
+    map_y_axis_moved(&a.unwrap(), &b.unwrap(), offset_mm[1]);
 }
 
 #[test]
@@ -960,35 +971,71 @@ fn the_assessed_profile_is_drawn_where_its_evaluation_length_lies_on_the_line() 
 /// pixel of each of `b`'s tick labels is where `a`'s ticks put its value − `offset_mm`
 /// (linear between `a`'s first and last tick of the same axis; to the pixel, as SVG rounds).
 fn x_axes_moved(a: &str, b: &str, offset_mm: f64) {
-    // An x axis: the numbers centred on one row (y px), as (value, x px).
-    let axes = |svg: &str| {
-        let mut rows = std::collections::BTreeMap::<String, Vec<(f64, f64)>>::new();
-        for t in svg.split("<text ").skip(1) {
-            let attr = |k: &str| t.split(&format!("{k}=\"")).nth(1)?.split('"').next();
-            let text = t.split('>').nth(1).and_then(|s| s.split('<').next());
-            let value = text.and_then(|s| s.trim().parse::<f64>().ok());
-            if let (Some(v), Some("middle"), Some(x), Some(y)) =
-                (value, attr("text-anchor"), attr("x"), attr("y"))
-            {
-                rows.entry(y.to_string())
-                    .or_default()
-                    .push((v, x.parse().unwrap()));
-            }
-        }
-        rows
+    ticks_moved(
+        &tick_labels(a, "middle"),
+        &tick_labels(b, "middle"),
+        offset_mm,
+    );
+}
+
+/// The y axis of two drawings of one map, `b`'s data `offset_mm` further along y, as
+/// [`x_axes_moved`]: the map's y axis is its leftmost column of right-aligned numbers (the
+/// colour bar's, which must not move, lie right of the map).
+fn map_y_axis_moved(a: &str, b: &str, offset_mm: f64) {
+    let y_axis = |svg: &str| {
+        let mut columns: Vec<_> = tick_labels(svg, "end").into_iter().collect();
+        columns.sort_by(|(x, _), (y, _)| x.parse::<f64>().unwrap().total_cmp(&y.parse().unwrap()));
+        columns.into_iter().take(1).collect()
     };
-    let (a, b) = (axes(a), axes(b));
+    ticks_moved(&y_axis(a), &y_axis(b), offset_mm);
+}
+
+/// The numbers of `svg` drawn with `anchor` ("middle": an x axis's, centred under their tick;
+/// "end": a y axis's, right-aligned beside it), grouped by the pixel they share across the
+/// axis (a row for x, a column for y), as (value, pixel along the axis).
+fn tick_labels(svg: &str, anchor: &str) -> std::collections::BTreeMap<String, Vec<(f64, f64)>> {
+    let (across, along) = if anchor == "end" {
+        ("x", "y")
+    } else {
+        ("y", "x")
+    };
+    let mut axes = std::collections::BTreeMap::<String, Vec<(f64, f64)>>::new();
+    for t in svg.split("<text ").skip(1) {
+        let attr = |k: &str| t.split(&format!("{k}=\"")).nth(1)?.split('"').next();
+        let text = t.split('>').nth(1).and_then(|s| s.split('<').next());
+        let value = text.and_then(|s| s.trim().parse::<f64>().ok());
+        if let (Some(v), true, Some(key), Some(p)) = (
+            value,
+            attr("text-anchor") == Some(anchor),
+            attr(across),
+            attr(along),
+        ) {
+            axes.entry(key.to_string())
+                .or_default()
+                .push((v, p.parse().unwrap()));
+        }
+    }
+    axes
+}
+
+/// Each of `b`'s axes (as [`tick_labels`]) against `a`'s at the same pixel across: every label
+/// of `b` at the pixel where `a`'s first and last label put its value − `offset_mm`.
+fn ticks_moved(
+    a: &std::collections::BTreeMap<String, Vec<(f64, f64)>>,
+    b: &std::collections::BTreeMap<String, Vec<(f64, f64)>>,
+    offset_mm: f64,
+) {
     assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
     assert!(!a.is_empty());
-    for (y, ticks) in &b {
-        let (&(v0, p0), &(v1, p1)) = (a[y].first().unwrap(), a[y].last().unwrap());
+    for (across, ticks) in b {
+        let (&(v0, p0), &(v1, p1)) = (a[across].first().unwrap(), a[across].last().unwrap());
         assert!(ticks.len() >= 3, "{ticks:?}");
         for &(v, p) in ticks {
             let want = p0 + (v - offset_mm - v0) * (p1 - p0) / (v1 - v0);
             assert!(
                 (p - want).abs() <= 1.0,
                 "tick {v} at {p} px, not {want}: {ticks:?} vs {:?}",
-                a[y]
+                a[across]
             );
         }
     }
@@ -996,14 +1043,15 @@ fn x_axes_moved(a: &str, b: &str, offset_mm: f64) {
 
 #[test]
 fn contact_draws_its_pressure_map_in_the_x3p_files_coordinates() {
-    // The first 160 points of each line of sur-2, enough for a map's axis.
+    // The first 160 points of each line of sur-2, enough for a map's axes, written at (0, 0)
+    // and at (0.25, −20) mm: the second's x and y axes are the first's moved by the offsets.
     let (z, rows, cols) = sur_2();
     let z: Vec<f64> = z.chunks(cols).flat_map(|l| &l[..160]).copied().collect();
     let map = map_of(&z, rows, 160, 0.003484, 0.010452);
     let dir = tempfile::tempdir().unwrap();
-    let pressure_map = |name: &str, x0_mm: f64| {
+    let pressure_map = |name: &str, origin_mm: (f64, f64)| {
         let x3p = dir.path().join(format!("{name}.x3p"));
-        let bytes = to_x3p(&map, (x0_mm, 0.0), &X3pMeta::default()).unwrap();
+        let bytes = to_x3p(&map, origin_mm, &X3pMeta::default()).unwrap();
         std::fs::write(&x3p, bytes).unwrap();
         let out = dir.path().join(name);
         let o = Command::new(env!("CARGO_BIN_EXE_surfscan"))
@@ -1017,9 +1065,10 @@ fn contact_draws_its_pressure_map_in_the_x3p_files_coordinates() {
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         std::fs::read_to_string(out.join("pressure.svg")).unwrap()
     };
-    x_axes_moved(
-        &pressure_map("at-0", 0.0),
-        &pressure_map("at-0.25", 0.25),
-        0.25,
+    let (a, b) = (
+        pressure_map("at-0", (0.0, 0.0)),
+        pressure_map("at-0.25", (0.25, -20.0)),
     );
+    x_axes_moved(&a, &b, 0.25);
+    map_y_axis_moved(&a, &b, -20.0);
 }

@@ -14,19 +14,19 @@ use serde_json::json;
 use std::path::{Path, PathBuf};
 
 /// Writes `contact.json` and the figures of the measured grid's contact into `out`, `described`
-/// naming the input, its pressure map's x from `x0_mm` (the input's coordinates); returns the
+/// naming the input, its pressure map from `origin_mm` (the input's coordinates); returns the
 /// figures written (none, and no file, when the measured grid's contact could not be computed).
 pub fn write_contact_files(
     out: &Path,
     section: &ContactSection,
-    x0_mm: f64,
+    origin_mm: (f64, f64),
     described: &str,
     warnings: &[String],
 ) -> Result<Vec<PathBuf>, ReportError> {
     let Some(measured) = &section.measured else {
         return Ok(Vec::new());
     };
-    let figures = write_figures(out, section, x0_mm, measured, described)?;
+    let figures = write_figures(out, section, origin_mm, measured, described)?;
     let names: Vec<String> = figures
         .iter()
         .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
@@ -70,7 +70,7 @@ pub fn write_contact_files(
 fn write_figures(
     out: &Path,
     section: &ContactSection,
-    x0_mm: f64,
+    origin_mm: (f64, f64),
     measured: &ContactSurface,
     described: &str,
 ) -> Result<Vec<PathBuf>, ReportError> {
@@ -107,7 +107,7 @@ fn write_figures(
         plot_map(
             out,
             &pressure_map,
-            x0_mm,
+            origin_mm,
             &MapValues {
                 stem: "pressure",
                 name: "pressures",

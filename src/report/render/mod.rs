@@ -211,7 +211,7 @@ fn panicked(input: &str, file: &str, thread: &'static str, hint: &'static str) -
 fn draw_height_map(
     out: &Path,
     measured: &HeightMap<'_>,
-    x0_mm: f64,
+    origin_mm: (f64, f64),
     ctx: &ReportContext,
 ) -> Result<Vec<PathBuf>, ReportError> {
     let err = metrology(format!("{}: plots", ctx.input));
@@ -219,7 +219,7 @@ fn draw_height_map(
     if measured.rows < 2 || measured.cols < 2 {
         return Ok(Vec::new());
     }
-    let mut files = plot_height_map(out, measured, x0_mm, "Measured heights", &caption(ctx))
+    let mut files = plot_height_map(out, measured, origin_mm, "Measured heights", &caption(ctx))
         .map_err(&err)?
         .to_vec();
     let (view, _) =
@@ -300,9 +300,8 @@ pub fn write_x3p(
     ctx: &ReportContext,
     what: &str,
 ) -> Result<PathBuf, ReportError> {
-    let origin_mm = (grid.x0_mm, grid.y_mm.first().copied().unwrap_or(0.0));
     let path = out.join(name);
-    let file = x3p(map, origin_mm, &x3p_meta(ctx, what));
+    let file = x3p(map, grid.origin_mm(), &x3p_meta(ctx, what));
     let file = file.map_err(metrology(format!("{}: {name}", ctx.input)))?;
     write_atomically(&path, |w| file.write_to(w)).map_err(io(&path))?;
     Ok(path)
@@ -329,7 +328,7 @@ pub fn write_data_files(
     let (plots, x3p) = std::thread::scope(|s| {
         let what = "measured heights as traced";
         let x3p = s.spawn(|| write_x3p(out, "measured.x3p", grid, measured, ctx, what));
-        let height_map = s.spawn(|| draw_height_map(out, measured, grid.x0_mm, ctx));
+        let height_map = s.spawn(|| draw_height_map(out, measured, grid.origin_mm(), ctx));
         let height_map = || {
             height_map.join().unwrap_or_else(|_| {
                 let hint = "drawing the height map panicked; report this with the input";
@@ -350,7 +349,7 @@ pub fn write_data_files(
         plots.extend(contact::write_contact_files(
             out,
             c,
-            grid.x0_mm,
+            grid.origin_mm(),
             &ctx.input,
             &c.warnings(),
         )?);

@@ -815,7 +815,7 @@ fn map_is_averaged(grid: &HeightMap<'_>, (width, height): (u32, u32)) -> bool {
 fn draw_map<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     grid: &HeightMap<'_>,
-    x0_mm: f64,
+    (x0_mm, y0_mm): (f64, f64),
     bar: &str,
     scale: &MapScale,
     frame: &Frame,
@@ -841,7 +841,7 @@ where
         .margin(MAP_MARGIN)
         .x_label_area_size(MAP_X_AREA)
         .y_label_area_size(MAP_Y_AREA)
-        .build_cartesian_2d(x0_mm..x0_mm + w, 0f64..y_top.max(h))
+        .build_cartesian_2d(x0_mm..x0_mm + w, y0_mm..y0_mm + y_top.max(h))
         .map_err(|e| e.to_string())?;
     mesh(&mut chart, "x (mm)", "y (mm)")
         .disable_mesh()
@@ -851,9 +851,10 @@ where
         .map_err(|e| e.to_string())?;
     // The map as one bitmap at the pixels it covers, the figure's not the grid's (an SVG embeds
     // it as one PNG image): made for the PNG, kept for the SVG (one size, the same chart).
-    let size = map_size_px(&chart, (x0_mm, x0_mm + w), h);
+    let (x1_mm, y1_mm) = (x0_mm + w, y0_mm + h);
+    let size = map_size_px(&chart, (x0_mm, y1_mm), (x1_mm, y0_mm));
     let pixels = pixels.get_or_init(|| map_pixels(grid, size, (lo, hi)));
-    let bitmap = BitMapElement::with_ref((x0_mm, h), size, pixels)
+    let bitmap = BitMapElement::with_ref((x0_mm, y1_mm), size, pixels)
         .ok_or_else(|| "height map bitmap of the wrong size".to_string())?;
     chart
         .plotting_area()
@@ -869,15 +870,15 @@ where
     )
 }
 
-/// The pixels the grid from `x_mm.0` to `x_mm.1` and `h_mm` high cover in `chart` (at least
-/// one each way).
+/// The pixels the grid from its top left corner to its bottom right (x, y mm) cover in
+/// `chart` (at least one each way).
 fn map_size_px<DB: DrawingBackend>(
     chart: &ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
-    x_mm: (f64, f64),
-    h_mm: f64,
+    top_left_mm: (f64, f64),
+    bottom_right_mm: (f64, f64),
 ) -> (u32, u32) {
-    let (x0, y0) = chart.backend_coord(&(x_mm.0, h_mm));
-    let (x1, y1) = chart.backend_coord(&(x_mm.1, 0.0));
+    let (x0, y0) = chart.backend_coord(&top_left_mm);
+    let (x1, y1) = chart.backend_coord(&bottom_right_mm);
     ((x1 - x0).max(1) as u32, (y1 - y0).max(1) as u32)
 }
 
@@ -888,25 +889,25 @@ const MAP_MIN_BAR_H: u32 = 160;
 /// in viridis with a colour bar, to true scale or with the exaggeration stated. The map is
 /// drawn at the figure's resolution: where a pixel covers several points it shows their mean
 /// (said in the title); the subtitle's range and the colour bar are the points' own.
-/// `caption` (may be empty) is the traceability footer; x starts at `x0_mm` (the input's
-/// coordinates, [`crate::grid::Grid::x0_mm`]).
+/// `caption` (may be empty) is the traceability footer; x and y start at `origin_mm` (the
+/// input's coordinates, [`crate::grid::Grid::origin_mm`]).
 pub fn plot_height_map(
     dir: &Path,
     grid: &HeightMap<'_>,
-    x0_mm: f64,
+    origin_mm: (f64, f64),
     title: &str,
     caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
-    plot_map(dir, grid, x0_mm, &HEIGHTS, title, caption)
+    plot_map(dir, grid, origin_mm, &HEIGHTS, title, caption)
 }
 
 /// Writes `<values.stem>.png|svg` into `dir`: a map of any row-major values (the heights of
-/// [`HeightMap`] read as the values named by `values`, x from `x0_mm`) drawn as
+/// [`HeightMap`] read as the values named by `values`, from `origin_mm`) drawn as
 /// [`plot_height_map`] draws heights.
 pub fn plot_map(
     dir: &Path,
     grid: &HeightMap<'_>,
-    x0_mm: f64,
+    origin_mm: (f64, f64),
     values: &MapValues<'_>,
     title: &str,
     caption: &str,
@@ -940,7 +941,7 @@ pub fn plot_map(
         + MAP_X_AREA;
     let pixels = std::cell::OnceCell::new();
     png_and_svg!(dir, values.stem, (MAP_WIDTH, height), |root| draw_map(
-        &root, grid, x0_mm, values.bar, &scale, &frame, &pixels
+        &root, grid, origin_mm, values.bar, &scale, &frame, &pixels
     ))
 }
 
