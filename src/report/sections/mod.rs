@@ -229,7 +229,7 @@ pub fn run<D, M: Send>(
         let overlay = overlay.ok().or(model_overlay);
         warnings.extend(said);
         let between_lines = between_lines.map(|mut b| {
-            model_vs_measured::rows_to_lines(grid, &mut b);
+            model_vs_measured::rows_to_lines(grid, &mut b.lines);
             if !b.supported {
                 warnings.push(b.verdict.clone());
             }

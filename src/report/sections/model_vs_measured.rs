@@ -16,17 +16,6 @@ use crate::metrology::holdout::{
 use crate::metrology::surface_model::ModelRecipe;
 use crate::report::document::{LineHoldout, LineReport};
 
-/// Maps the hold-out's rows to the grid's line indices.
-fn rows_of_holdout_to_lines(grid: &Grid, h: &mut Holdout) {
-    for l in h
-        .points_left_out
-        .iter_mut()
-        .chain(h.lines_left_out.iter_mut())
-    {
-        l.index = grid.index_of(l.index) as usize;
-    }
-}
-
 /// What a panic in the shared lines-left-out refit becomes.
 const LINES_REFIT_PANICKED: &str =
     "internal: the between-lines refit panicked; report this with the input";
@@ -83,7 +72,10 @@ fn characterise_and_judge(
             points_left_out,
             lines_left_out,
         };
-        rows_of_holdout_to_lines(grid, &mut h);
+        rows_to_lines(
+            grid,
+            h.points_left_out.iter_mut().chain(&mut h.lines_left_out),
+        );
         Ok(h)
     })();
     let verdict = match sq_um {
@@ -101,9 +93,9 @@ fn characterise_and_judge(
     (model_vs_measured, verdict)
 }
 
-/// Maps the verdict's held-out rows to the grid's line indices.
-pub fn rows_to_lines(grid: &Grid, b: &mut BetweenLines) {
-    for l in &mut b.lines {
+/// Maps held-out rows (the hold-out's, the verdict's) to the grid's line indices.
+pub fn rows_to_lines<'a>(grid: &Grid, rows: impl IntoIterator<Item = &'a mut HoldoutLine>) {
+    for l in rows {
         l.index = grid.index_of(l.index) as usize;
     }
 }
@@ -130,7 +122,10 @@ mod tests {
     /// mapped to the grid's.
     fn characterise(grid: &Grid, recipe: &ModelRecipe) -> Result<Holdout, String> {
         let mut h = holdout_with(grid, recipe.degrees, recipe.method).map_err(|e| e.to_string())?;
-        rows_of_holdout_to_lines(grid, &mut h);
+        rows_to_lines(
+            grid,
+            h.points_left_out.iter_mut().chain(&mut h.lines_left_out),
+        );
         Ok(h)
     }
 
