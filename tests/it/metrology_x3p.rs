@@ -921,6 +921,41 @@ fn positions_move(
         figure("second", "heightmap.svg"),
     );
     map_y_axis_moved(&a.unwrap(), &b.unwrap(), offset_mm[1]);
+    // The 3D view's labels: its nearest corner (the first point) and the ends of its x and y
+    // edges, in the file's coordinates, to the 4 significant digits they are printed with.
+    let (a, b) = (
+        view_labels(&figure("first", "surface3d.svg").unwrap()),
+        view_labels(&figure("second", "surface3d.svg").unwrap()),
+    );
+    for (k, moved) in [0, 1, 0, 1].into_iter().enumerate() {
+        let want = a[k] + offset_mm[moved];
+        assert!(
+            (b[k] - want).abs() <= 0.01,
+            "{b:?} against {a:?} + {offset_mm:?}"
+        );
+    }
+}
+
+/// The 3D view's corner label ("x, y, z µm") and its edges' ("x … mm", "y … mm"), as
+/// [corner x, corner y, x edge's end, y edge's end].
+fn view_labels(svg: &str) -> [f64; 4] {
+    let texts: Vec<&str> = (svg.split("<text ").skip(1))
+        .filter_map(|t| Some(t.split('>').nth(1)?.split('<').next()?.trim()))
+        .collect();
+    let number = |s: &str| s.trim().parse::<f64>().unwrap();
+    let edge = |axis: &str| {
+        let t = texts
+            .iter()
+            .find(|t| t.starts_with(axis) && t.ends_with(" mm"));
+        number(&t.unwrap()[2..t.unwrap().len() - 3])
+    };
+    let corner: Vec<f64> = (texts.iter().find(|t| t.matches(", ").count() == 2))
+        .unwrap()
+        .split(", ")
+        .take(2)
+        .map(number)
+        .collect();
+    [corner[0], corner[1], edge("x "), edge("y ")]
 }
 
 #[test]

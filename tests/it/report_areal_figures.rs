@@ -192,7 +192,7 @@ fn the_3d_view_puts_the_highest_and_lowest_heights_where_its_projection_says() {
     };
     let dir = tempfile::tempdir().unwrap();
     let ([png, svg], view) =
-        plot_surface_view(dir.path(), &grid, "Test surface", "caption").unwrap();
+        plot_surface_view(dir.path(), &grid, (0.0, 0.0), "Test surface", "caption").unwrap();
     assert!(svg.exists());
     // One node per point: nothing averaged.
     assert_eq!((view.nx, view.ny), (cols, rows));

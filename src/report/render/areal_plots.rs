@@ -12,8 +12,9 @@
 //!
 //! **The 3D view** is an orthographic (axonometric) projection: the grid turned
 //! [`AZIMUTH_DEG`] about the vertical, x running to the right and away, y to the left and
-//! away, and seen from [`ELEVATION_DEG`] above the horizon, so the corner (x 0, y 0) is the
-//! nearest. Lengths along x and y are at one scale, or the shorter side stretched by a stated
+//! away, and seen from [`ELEVATION_DEG`] above the horizon, so the corner at the grid's first
+//! point is the nearest (labelled with its x and y in the input's coordinates, as the edges'
+//! ends are). Lengths along x and y are at one scale, or the shorter side stretched by a stated
 //! factor when it would be thinner than a quarter of the longer; heights are exaggerated by
 //! the stated factor that makes the relief at most 40 % of the longer side. Cells are filled
 //! back to front in viridis of their mean height, darkened by their slope (a level cell keeps
@@ -481,6 +482,7 @@ fn view_area(frame: &Frame) -> ((u32, u32), (i32, i32)) {
 fn draw_view<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     grid: &HeightMap<'_>,
+    (x0_mm, y0_mm): (f64, f64),
     view: &View,
     frame: &Frame,
     pixels: &std::cell::OnceCell<Vec<u8>>,
@@ -518,10 +520,12 @@ where
             .map_err(|e| e.to_string())
     };
     let (x_end, y_end, z_top) = (p(w_mm, 0.0, lo), p(0.0, h_mm, lo), p(0.0, 0.0, hi));
-    label(format!("x {} mm", tick(w_mm)), (x_end.0 - 40, x_end.1 + 8))?;
-    label(format!("y {} mm", tick(h_mm)), (y_end.0 + 6, y_end.1 - 20))?;
+    let (x_end_mm, y_end_mm) = (tick(x0_mm + w_mm), tick(y0_mm + h_mm));
+    label(format!("x {x_end_mm} mm"), (x_end.0 - 40, x_end.1 + 8))?;
+    label(format!("y {y_end_mm} mm"), (y_end.0 + 6, y_end.1 - 20))?;
     label(format!("z {} µm", tick(hi)), (z_top.0 - 48, z_top.1 - 18))?;
-    label(format!("0, 0, {} µm", tick(lo)), {
+    let corner = format!("{}, {}, {} µm", tick(x0_mm), tick(y0_mm), tick(lo));
+    label(corner, {
         let o = p(0.0, 0.0, lo);
         (o.0 - 30, o.1 + 6)
     })?;
@@ -576,11 +580,13 @@ fn view_and_frame(grid: &HeightMap<'_>, title: &str, caption: &str) -> (View, Fr
 }
 
 /// Writes `surface3d.png` and `surface3d.svg` into `dir`: the axonometric view of `grid`
-/// (at least 2 × 2 points). Returns the two paths and the view drawn (where each point
-/// lands).
+/// (at least 2 × 2 points), its corner and edges labelled in the input's coordinates from
+/// `origin_mm` (x, y of its first point). Returns the two paths and the view drawn (where
+/// each point lands).
 pub fn plot_surface_view(
     dir: &Path,
     grid: &HeightMap<'_>,
+    origin_mm: (f64, f64),
     title: &str,
     caption: &str,
 ) -> Result<([PathBuf; 2], View), MetrologyError> {
@@ -589,7 +595,7 @@ pub fn plot_surface_view(
     let pixels = std::cell::OnceCell::new();
     let files: Result<[PathBuf; 2], MetrologyError> = (|| {
         png_and_svg!(dir, "surface3d", VIEW_SIZE, |root| draw_view(
-            &root, grid, &view, &frame, &pixels
+            &root, grid, origin_mm, &view, &frame, &pixels
         ))
     })();
     Ok((files?, view))

@@ -222,9 +222,14 @@ fn draw_height_map(
     let mut files = plot_height_map(out, measured, origin_mm, "Measured heights", &caption(ctx))
         .map_err(&err)?
         .to_vec();
-    let (view, _) =
-        areal_plots::plot_surface_view(out, measured, "Measured surface, 3D view", &caption(ctx))
-            .map_err(&err)?;
+    let (view, _) = areal_plots::plot_surface_view(
+        out,
+        measured,
+        origin_mm,
+        "Measured surface, 3D view",
+        &caption(ctx),
+    )
+    .map_err(&err)?;
     files.extend(view);
     Ok(files)
 }
