@@ -10,7 +10,7 @@
 //!    metadata), [`grid`] (the one grid of traced lines every analysis reads), [`nurbs`] (the
 //!    surface as a value), [`devices`] (the contracts between the
 //!    scan runner and the drivers), [`numbers`] (decimal numbers in CSV text, read fast),
-//!    [`port_swap`] (a reply in the other device's language: the ports swapped).
+//!    [`extremes`] (the lowest and highest of a run of numbers), [`port_swap`] (a reply in the other device's language: the ports swapped).
 //! 1. Pure logic: [`fit`] (the paper's interpolation, incremental), [`iges`] (IGES 5.3
 //!    writer/reader), [`metrology`] (ISO roughness, bearing area curves, areal parameters),
 //!    [`specification`] (a part's limits, the 16 % and max rules, the uncertainty of a mean
@@ -47,6 +47,7 @@ pub mod config;
 pub mod contact;
 pub mod control;
 pub mod devices;
+pub mod extremes;
 pub mod fit;
 pub mod grid;
 pub mod hook;

@@ -1,7 +1,8 @@
 //! The IGES 5.3 writer: Start, Global, Directory Entry, Parameter Data and Terminate sections
 //! for one independent entity 128 (polynomial B-spline surface, form 0) per patch, in mm.
 //!
-//! Layer 1 (pure logic): depends on [`crate::nurbs`] and the formatting in [`super::format`];
+//! Layer 1 (pure logic): depends on [`crate::nurbs`], [`crate::extremes`] and the formatting
+//! in [`super::format`];
 //! a formatter over any `io::Write` (the caller picks and syncs the file).
 //!
 //! The Parameter Data is streamed: each entity's records are formatted in pieces (the reals
@@ -19,6 +20,7 @@ use super::format::{
 };
 use super::split::{split_middle_shapes, split_v_middle, split_v_middle_side, PatchShape, Side};
 use super::IgesError;
+use crate::extremes::min_max;
 use crate::nurbs::{NurbsSurface, PoleNet, RowY};
 use std::borrow::Cow;
 use std::io::{self, Write};
@@ -768,22 +770,15 @@ fn date_stamp(t: &chrono::NaiveDateTime) -> String {
 
 /// The largest |coordinate| of the poles of `net` (0 for none): the maximum is exact
 /// whatever order it is taken in, so it is taken per coordinate as the net holds them (a
-/// row's shared x or y once, not once per pole) over eight running maxima at a time instead
-/// of one chain of dependent comparisons through the whole net.
+/// row's shared x or y once, not once per pole), each slice's from its lowest and highest.
 fn max_abs_coordinate(net: &PoleNet) -> f64 {
+    // Absolute values are never −0.0, so which zero `min_max` keeps does not show.
     fn max_abs(v: &[f64]) -> f64 {
-        let mut m = [0.0f64; 8];
-        let mut blocks = v.chunks_exact(8);
-        for b in &mut blocks {
-            for (m, x) in m.iter_mut().zip(b) {
-                *m = m.max(x.abs());
-            }
+        let (lo, hi) = min_max(v);
+        if lo > hi {
+            return 0.0;
         }
-        let tail = blocks
-            .remainder()
-            .iter()
-            .fold(0.0f64, |a, x| a.max(x.abs()));
-        m.into_iter().fold(tail, f64::max)
+        lo.abs().max(hi.abs())
     }
     let mut m = 0.0f64;
     let mut column_x_seen = false;

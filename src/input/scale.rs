@@ -5,8 +5,9 @@
 //! SJ-210 resolves 2 nm at best — unless the heights lie on a plane (no roughness to judge), a height range above [`MAX_RANGE_UM`], a profile whose x
 //! spans less than [`MIN_X_SPAN_MM`]. Each finding names the likely mix-up and what fixes it.
 //!
-//! Pure (no I/O), inside the reading layer: numbers in, findings out; depends on [`crate::grid`] and [`crate::numfmt`].
+//! Pure (no I/O), inside the reading layer: numbers in, findings out; depends on [`crate::grid`], [`crate::extremes`] and [`crate::numfmt`].
 
+use crate::extremes::min_max;
 use crate::grid::Grid;
 use crate::numfmt::{fmt, Quantity};
 
@@ -76,24 +77,7 @@ pub fn implausible(grid: &Grid, profile: bool) -> Vec<Implausible> {
     if z.is_empty() || grid.cols == 0 {
         return out;
     }
-    // The extremes over eight running pairs, not one chain of dependent comparisons through
-    // the grid (on the way from the read to the fit): exact in any order.
-    let (mut lo8, mut hi8) = ([f64::INFINITY; 8], [f64::NEG_INFINITY; 8]);
-    let mut blocks = z.chunks_exact(8);
-    for b in &mut blocks {
-        for k in 0..8 {
-            (lo8[k], hi8[k]) = (lo8[k].min(b[k]), hi8[k].max(b[k]));
-        }
-    }
-    let rest = blocks.remainder();
-    let lo = rest
-        .iter()
-        .chain(&lo8)
-        .fold(f64::INFINITY, |a, &v| a.min(v));
-    let hi = rest
-        .iter()
-        .chain(&hi8)
-        .fold(f64::NEG_INFINITY, |a, &v| a.max(v));
+    let (lo, hi) = min_max(z);
     if hi - lo > MAX_RANGE_UM {
         out.push(Implausible::RangeTooLarge(hi - lo));
     }

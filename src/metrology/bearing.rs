@@ -58,7 +58,7 @@ pub fn material_ratio_pct_at<const L: usize>(heights: &[f64], levels: [f64; L]) 
 /// the level is the same to the bit, from a few passes over the curve instead of one per
 /// step.
 pub fn level_at_material_ratio(heights: &[f64], mr_pct: f64) -> f64 {
-    let (bottom, top) = super::min_max(heights.iter().copied());
+    let (bottom, top) = crate::extremes::min_max(heights);
     if !(top.is_finite() && bottom.is_finite()) || mr_pct <= 0.0 {
         return top;
     }
@@ -219,7 +219,7 @@ pub(crate) fn curve_between_extremes(
     levels: usize,
     interior: impl FnOnce(&[f64]) -> Vec<f64>,
 ) -> Result<Vec<[f64; 2]>, MetrologyError> {
-    let hs = levels_spanning(z.iter().copied(), levels)?;
+    let hs = levels_spanning(z, levels)?;
     let inner = interior(&hs[1..levels - 1]);
     Ok(hs
         .iter()
@@ -238,10 +238,7 @@ pub(crate) fn curve_between_extremes(
 }
 
 /// [`equal_levels`] from the highest of `z` to the lowest, refused for fewer than 2 levels.
-fn levels_spanning(
-    z: impl Iterator<Item = f64>,
-    levels: usize,
-) -> Result<Vec<f64>, MetrologyError> {
+fn levels_spanning(z: &[f64], levels: usize) -> Result<Vec<f64>, MetrologyError> {
     if levels < 2 {
         return Err(MetrologyError::BadParameter {
             what: "levels",
@@ -249,7 +246,7 @@ fn levels_spanning(
             hint: "give at least 2 height levels (the paper uses 101)",
         });
     }
-    let (bottom, top) = super::min_max(z);
+    let (bottom, top) = crate::extremes::min_max(z);
     Ok(equal_levels(top, bottom, levels))
 }
 
@@ -571,7 +568,7 @@ mod tests {
     #[test]
     fn ratios_at_many_levels_equal_the_ratio_at_each_level() {
         for (xs, zs) in test_curves() {
-            let (bottom, top) = crate::metrology::min_max(zs.iter().copied());
+            let (bottom, top) = crate::extremes::min_max(&zs);
             // The bearing curve's levels (on the quantised curve 101 levels over a range of 9
             // fall on every sample height), levels outside the range, and repeated levels.
             let mut cases = vec![
@@ -617,7 +614,7 @@ mod tests {
             // As the curve was computed before: heights about the mean, equal levels, each
             // level's ratio on its own.
             let z: Vec<f64> = zs.iter().map(|h| h - curve.mean_line_um).collect();
-            let (bottom, top) = crate::metrology::min_max(z.iter().copied());
+            let (bottom, top) = crate::extremes::min_max(&z);
             let (heights, ratios): (Vec<f64>, Vec<f64>) =
                 curve.points.iter().map(|p| (p[0], p[1])).unzip();
             let slow: Vec<f64> = (0..101)
@@ -673,7 +670,7 @@ mod tests {
         curves.push(vec![0.0, 1.0, f64::NAN, 0.5, 0.2]);
         let mut checked = 0;
         for z in &curves {
-            let (bottom, top) = crate::metrology::min_max(z.iter().copied());
+            let (bottom, top) = crate::extremes::min_max(z);
             for mr in [1e-9, 0.5, 2.5, 10.0, 20.0, 33.3, 50.0, 80.0, 97.5, 99.999] {
                 let fast = level_at_material_ratio(z, mr);
                 let plain = bisect_by_full_passes(z, mr, top, bottom);

@@ -618,7 +618,7 @@ pub fn check_model_with(
         }
     }
 
-    let (mmin, mmax) = super::min_max(heights_um.iter().copied());
+    let (mmin, mmax) = crate::extremes::min_max(heights_um);
     let overshoot = (range.2 - mmax).max(0.0) + (mmin - range.0).max(0.0);
     let span = mmax - mmin;
     ModelChecks {

@@ -9,7 +9,8 @@
 //!
 //! Layer 1 (pure logic): numbers in, values out, no I/O: what the report shows is drawn and
 //! written by [`crate::report`]'s renderers. Depends only on [`crate::profile`],
-//! [`crate::grid`] and [`crate::nurbs`], and [`crate::fit`] for the hold-out refits.
+//! [`crate::grid`], [`crate::nurbs`] and [`crate::extremes`], and [`crate::fit`] for the
+//! hold-out refits.
 
 pub mod alternatives;
 pub mod anisotropy;
@@ -178,15 +179,6 @@ pub(crate) fn check_heights(heights: &[f64]) -> Result<(), MetrologyError> {
         }
         None => Ok(()),
     }
-}
-
-/// The lowest and the highest of `values` (NaN is neither; +∞ and −∞ when there is none): the
-/// `f64::min` and `f64::max` folds of the values, in one pass.
-pub fn min_max(values: impl IntoIterator<Item = f64>) -> (f64, f64) {
-    let extremes = |(lo, hi): (f64, f64), v: f64| (lo.min(v), hi.max(v));
-    values
-        .into_iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), extremes)
 }
 
 /// Checks a lateral pitch in mm.

@@ -706,7 +706,7 @@ impl Acc {
     /// material-ratio family over the evaluation length `r`, the Rk family `rk`.
     fn params(&self, r: &[f64], n_sec: usize, rk: RkFamily) -> RoughnessParams {
         let k = n_sec as f64;
-        let (min, max) = super::min_max(r.iter().copied());
+        let (min, max) = crate::extremes::min_max(r);
         let levels = MaterialLevels::default();
         let rt = max - min;
         let rsm_um = (self.rsm_n > 0).then(|| self.rsm / self.rsm_n as f64);

@@ -22,15 +22,16 @@
 //!
 //! A renderer: numbers in, files out. Depends on [`super::plots`], [`super::decimate`],
 //! [`super::text_cache`] (through the figure macro), [`crate::metrology`] (the curves and the
-//! grid) and [`crate::numfmt`].
+//! grid), [`crate::extremes`] and [`crate::numfmt`].
 
 use super::decimate::extremes_per_column_of_pairs;
 use super::plots::{
-    chart, draw_colour_bar, ensure_font, exaggeration_note, font, legend, min_max, padded_range,
-    plot_err, png_and_svg, replace_figure, tick, viridis, write_png, Frame, DATA, EXAGGERATIONS,
-    MAP_BAR_W, MODEL,
+    chart, draw_colour_bar, ensure_font, exaggeration_note, font, legend, padded_range, plot_err,
+    png_and_svg, replace_figure, tick, viridis, write_png, Frame, DATA, EXAGGERATIONS, MAP_BAR_W,
+    MODEL,
 };
 use super::text_cache::TextCache;
+use crate::extremes::min_max;
 use crate::metrology::areal::HeightMap;
 use crate::metrology::spatial::{AcfSection, Psd, SpatialCurves};
 use crate::metrology::MetrologyError;
@@ -201,8 +202,8 @@ where
     let frame = Frame::new(root.dim_in_pixel().0, title, subtitle, caption);
     let body = frame.draw(root)?;
     let all = || series.iter().flat_map(|(p, _, _)| p.iter());
-    let (q_lo, q_hi) = min_max(all().map(|p| p[0]));
-    let (c_lo, c_hi) = min_max(all().map(|p| p[1]));
+    let (q_lo, q_hi) = min_max(&all().map(|p| p[0]).collect::<Vec<_>>());
+    let (c_lo, c_hi) = min_max(&all().map(|p| p[1]).collect::<Vec<_>>());
     let (q_lo, q_hi) = if q_lo.is_finite() && q_hi > q_lo {
         (q_lo / 1.2, q_hi * 1.2)
     } else {
@@ -305,7 +306,7 @@ impl View {
             (stretch_of(w_mm, h_mm), 1.0)
         };
         let longer = (w_mm * stretch.0).max(h_mm * stretch.1);
-        let z_range_um = min_max(grid.heights_um.iter().copied());
+        let z_range_um = min_max(grid.heights_um);
         let relief_mm = (z_range_um.1 - z_range_um.0) * 1e-3;
         let exaggeration = EXAGGERATIONS
             .iter()
@@ -349,8 +350,8 @@ impl View {
             .flat_map(|x| [0.0, h_mm].map(|y| (x, y)))
             .flat_map(|(x, y)| [z_range_um.0, z_range_um.1].map(|z| view.project(x, y, z)))
             .collect();
-        let (p_lo, p_hi) = min_max(corners.iter().map(|c| c.0));
-        let (u_lo, u_hi) = min_max(corners.iter().map(|c| c.1));
+        let (p_lo, p_hi) = min_max(&corners.iter().map(|c| c.0).collect::<Vec<_>>());
+        let (u_lo, u_hi) = min_max(&corners.iter().map(|c| c.1).collect::<Vec<_>>());
         let span = |lo: f64, hi: f64| if hi > lo { hi - lo } else { 1.0 };
         view.scale = (area.0 as f64 / span(p_lo, p_hi)).min(area.1 as f64 / span(u_lo, u_hi));
         view.origin = (p_lo, u_hi, at.0, at.1);
@@ -445,8 +446,8 @@ fn fill_triangle(rgb: &mut [u8], (w, h): (usize, usize), t: [(f64, f64); 3], col
     if area.abs() < 1e-12 {
         return;
     }
-    let (x0, x1) = min_max(t.iter().map(|p| p.0));
-    let (y0, y1) = min_max(t.iter().map(|p| p.1));
+    let (x0, x1) = min_max(&t.map(|p| p.0));
+    let (y0, y1) = min_max(&t.map(|p| p.1));
     let clamp = |v: f64, n: usize| v.clamp(0.0, n as f64) as usize;
     for py in clamp(y0.floor(), h)..clamp(y1.ceil() + 1.0, h) {
         for px in clamp(x0.floor(), w)..clamp(x1.ceil() + 1.0, w) {

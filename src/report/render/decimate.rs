@@ -145,7 +145,8 @@ mod tests {
             if inside.is_empty() {
                 continue;
             }
-            let (min, max) = crate::metrology::min_max(inside.iter().map(|q| q.1));
+            let (min, max) =
+                crate::extremes::min_max(&inside.iter().map(|q| q.1).collect::<Vec<_>>());
             let kept_here: Vec<(f64, f64)> = kept
                 .iter()
                 .copied()

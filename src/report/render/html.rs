@@ -310,7 +310,7 @@ pub fn result_summary(report: &Value) -> Vec<(&'static str, String)> {
         .unwrap_or_default();
     out.push(("lines", format!("{}{planned} characterised", ra.len())));
     if !ra.is_empty() {
-        let (lo, hi) = super::plots::min_max(ra.iter().copied());
+        let (lo, hi) = crate::extremes::min_max(&ra);
         let (m, sd) = mean_sd(&ra);
         let h = Quantity::HeightUm;
         out.push((

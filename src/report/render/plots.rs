@@ -20,12 +20,13 @@
 //! A renderer: numbers in, files out, into the directory the caller gives. Depends on
 //! [`crate::metrology`] (the curves, the height map, the Rk family, the checks of a grid and
 //! its errors), [`super::text_cache`] (the PNGs' text memo), [`super::decimate`] (the series
-//! at display resolution), [`crate::numfmt`] and
+//! at display resolution), [`crate::extremes`], [`crate::numfmt`] and
 //! [`crate::atomic`] (each file replaced whole); plotters draws, and `image` encodes the PNG
 //! files.
 
 use super::decimate::{extremes_per_column, extremes_per_column_of_pairs};
 use super::text_cache::TextCache;
+use crate::extremes::min_max;
 use crate::metrology::areal::HeightMap;
 use crate::metrology::model::ModelCurveBac;
 use crate::metrology::parameter_table::parameter;
@@ -385,7 +386,8 @@ pub(super) fn replace_figure(
 /// The range of `values` padded by 5 % (a unit range around a constant, `fallback` when
 /// there is none).
 pub(super) fn padded_range(values: impl Iterator<Item = f64>, fallback: (f64, f64)) -> (f64, f64) {
-    let (lo, hi) = min_max(values.filter(|v| v.is_finite()));
+    let finite: Vec<f64> = values.filter(|v| v.is_finite()).collect();
+    let (lo, hi) = min_max(&finite);
     if !(lo.is_finite() && hi.is_finite()) {
         return fallback;
     }
@@ -507,7 +509,7 @@ where
         "material ratio (%)",
         "height c from the mean line (µm)",
     )?;
-    let (y_lo, y_hi) = min_max(curves.iter().map(|c| c.y_mm));
+    let (y_lo, y_hi) = min_max(&curves.iter().map(|c| c.y_mm).collect::<Vec<_>>());
     let y_span = if y_hi > y_lo { y_hi - y_lo } else { 1.0 };
     let columns = chart.plotting_area().dim_in_pixel().0;
     // Drawn as (material ratio, height): decimated along the material ratio.
@@ -610,7 +612,11 @@ where
     let frame = Frame::new(root.dim_in_pixel().0, title, subtitle, caption);
     let body = frame.draw(root)?;
     let pressures = points.iter().map(|p| p.nominal_pressure_mpa);
-    let (p_lo, p_hi) = min_max(pressures.filter(|p| p.is_finite() && *p > 0.0));
+    let (p_lo, p_hi) = min_max(
+        &pressures
+            .filter(|p| p.is_finite() && *p > 0.0)
+            .collect::<Vec<_>>(),
+    );
     let (p_lo, p_hi) = if p_lo.is_finite() {
         (p_lo / 1.5, p_hi * 1.5)
     } else {
@@ -754,7 +760,7 @@ const HEIGHTS: MapValues<'static> = MapValues {
 
 /// The subtitle of a map: size, points, value range and scale.
 fn map_subtitle(grid: &HeightMap<'_>, values: &MapValues<'_>, scale: &MapScale) -> String {
-    let (lo, hi) = min_max(grid.heights_um.iter().copied());
+    let (lo, hi) = min_max(grid.heights_um);
     format!(
         "{} × {} mm, {} lines × {} points; {} {} … {} {}; {}",
         fmt(grid.cols as f64 * grid.pitch_x_mm, Quantity::LengthMm),
@@ -768,8 +774,6 @@ fn map_subtitle(grid: &HeightMap<'_>, values: &MapValues<'_>, scale: &MapScale) 
         map_note(scale)
     )
 }
-
-pub(super) use crate::metrology::min_max;
 
 /// The pixels of a height map `width` × `height` px over the whole grid, row 0 of the
 /// bitmap at the grid's last line (y up): each pixel the mean of the points whose cells
@@ -825,7 +829,7 @@ where
     DB::ErrorType: 'static,
 {
     let (px, py) = (grid.pitch_x_mm, grid.pitch_y_mm);
-    let (lo, hi) = min_max(grid.heights_um.iter().copied());
+    let (lo, hi) = min_max(grid.heights_um);
     let w = grid.cols as f64 * px;
     let h = grid.rows as f64 * py;
     let body = frame.draw(root)?;
@@ -982,7 +986,7 @@ where
 {
     // The x range is not padded: a profile starts and ends at its data.
     let xs = measured.iter().chain(model).chain(residual).map(|p| p.0);
-    let (x0, x1) = min_max(xs.filter(|x| x.is_finite()));
+    let (x0, x1) = min_max(&xs.filter(|x| x.is_finite()).collect::<Vec<_>>());
     let (x0, x1) = if x1 > x0 { (x0, x1) } else { (0.0, 1.0) };
     let (z0, z1) = padded_range(measured.iter().chain(model).map(|p| p.1), (-1.0, 1.0));
     let probe_frame = |subtitle: &str| Frame::new(root.dim_in_pixel().0, title, subtitle, caption);
