@@ -28,12 +28,13 @@ fn is_blank(b: u8) -> bool {
     b == b' ' || b == b'\t'
 }
 
-/// Appends the finite numbers of one `,`-separated line to `out` and returns how many there
-/// were, or returns `None` (with `out` unchanged) when the line is anything but finite numbers
-/// with optional spaces or tabs around them. `None` means "decide with `str::parse`", never
+/// Writes the finite numbers of one `,`-separated line to the front of `out` and returns how
+/// many there were, or returns `None` when the line is anything but finite numbers with
+/// optional spaces or tabs around them, or has more numbers than `out` has room for (what
+/// was written is then to be ignored). `None` means "decide with `str::parse`", never
 /// "invalid".
-pub fn parse_csv_line(line: &[u8], out: &mut Vec<f64>) -> Option<usize> {
-    let start = out.len();
+pub fn parse_csv_line(line: &[u8], out: &mut [f64]) -> Option<usize> {
+    let mut n = 0;
     let mut rest = line;
     loop {
         while let [b, tail @ ..] = rest {
@@ -42,15 +43,12 @@ pub fn parse_csv_line(line: &[u8], out: &mut Vec<f64>) -> Option<usize> {
             }
             rest = tail;
         }
-        let Ok((value, used)) = fast_float2::parse_partial::<f64, _>(rest) else {
-            out.truncate(start);
-            return None;
-        };
+        let (value, used) = fast_float2::parse_partial::<f64, _>(rest).ok()?;
         if used == 0 || !value.is_finite() {
-            out.truncate(start);
             return None;
         }
-        out.push(value);
+        *out.get_mut(n)? = value;
+        n += 1;
         rest = &rest[used..];
         while let [b, tail @ ..] = rest {
             if !is_blank(*b) {
@@ -59,12 +57,9 @@ pub fn parse_csv_line(line: &[u8], out: &mut Vec<f64>) -> Option<usize> {
             rest = tail;
         }
         match rest {
-            [] => return Some(out.len() - start),
+            [] => return Some(n),
             [b',', tail @ ..] => rest = tail,
-            _ => {
-                out.truncate(start);
-                return None;
-            }
+            _ => return None,
         }
     }
 }
@@ -147,24 +142,25 @@ mod tests {
             .map(String::from),
         );
         for line in &lines {
-            let mut out = vec![42.0];
-            match parse_csv_line(line.as_bytes(), &mut out) {
-                Some(n) => {
-                    let std = by_std(line).unwrap_or_else(|| {
-                        panic!("{line:?}: the fast path accepts what str::parse refuses")
-                    });
-                    assert_eq!(n, std.len(), "{line:?}");
-                    assert_eq!(out[0], 42.0);
-                    for (a, b) in out[1..].iter().zip(&std) {
-                        assert_eq!(a.to_bits(), b.to_bits(), "{line:?}");
-                    }
+            // Room for one number per comma and one more: as many as any line can hold.
+            let mut out = vec![42.0; line.matches(',').count() + 2];
+            // `None` leaves the line to `str::parse`: whatever it wrote is ignored.
+            if let Some(n) = parse_csv_line(line.as_bytes(), &mut out) {
+                let std = by_std(line).unwrap_or_else(|| {
+                    panic!("{line:?}: the fast path accepts what str::parse refuses")
+                });
+                assert_eq!(n, std.len(), "{line:?}");
+                assert_eq!(out[n], 42.0, "{line:?}: written past its numbers");
+                for (a, b) in out.iter().zip(&std) {
+                    assert_eq!(a.to_bits(), b.to_bits(), "{line:?}");
                 }
-                None => assert_eq!(out, vec![42.0], "{line:?}: output touched"),
             }
         }
-        // Plain data lines are taken by the fast path.
-        let mut out = Vec::new();
+        // Plain data lines are taken by the fast path; a line with more numbers than room is
+        // not.
+        let mut out = [0.0; 4];
         assert_eq!(parse_csv_line(b"-0.1234,5,1e-3, 7.5", &mut out), Some(4));
-        assert_eq!(out, vec![-0.1234, 5.0, 1e-3, 7.5]);
+        assert_eq!(out, [-0.1234, 5.0, 1e-3, 7.5]);
+        assert_eq!(parse_csv_line(b"1,2,3,4,5", &mut out), None);
     }
 }

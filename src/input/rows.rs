@@ -7,8 +7,9 @@
 //! the row is left out and named with its line in the file and why, and the other rows keep
 //! their place (their y). Nothing is filled in. An error only when no row can be used.
 //!
-//! A large file is read as two runs of whole lines on two threads; the rows, the values and
-//! what is left out are those of reading it line by line.
+//! A large file is read as two runs of whole lines on two threads, each writing its values
+//! into its own part of the one buffer the grid keeps; the rows, the values and what is left
+//! out are those of reading it line by line.
 //!
 //! Pure (no I/O), inside the reading layer: text in, values out; depends on [`crate::numbers`] and the metrology's
 //! height bound.
@@ -33,27 +34,23 @@ pub struct Rows {
 /// Files of at least this many bytes are read in two halves side by side.
 pub const PARALLEL_BYTES: usize = 256 << 10;
 
-/// One row as read: its 0-based line in the file, and how many values it appended or why it
+/// One row as read: its 0-based line in the file, and how many values it wrote or why it
 /// cannot be used.
 type RowRead = (usize, Result<usize, String>);
 
-/// A run of lines as read.
-struct Run {
-    rows: Vec<RowRead>,
-    values: Vec<f64>,
-}
-
 /// Reads the rows of `text` (laid out as `layout` says) in µm (`um_per_unit` µm per unit of
-/// the file), in two runs on two threads when it has at least `parallel_bytes` bytes. The
-/// text is dropped as soon as both runs have read it, before their values are joined, so the
-/// text and the whole grid are never in memory beside the second run's copy.
+/// the file), in two runs on two threads when it has at least `parallel_bytes` bytes. Both
+/// runs write into one buffer with room for every value, the second run's part right after
+/// the first's, so the values of a file whose rows are all kept are in place when the runs
+/// end: nothing is copied, and no page is touched twice. The text is dropped before the
+/// rows left out (if any) are compacted.
 pub fn read_rows(
     text: String,
     layout: &Layout,
     um_per_unit: f64,
     parallel_bytes: usize,
 ) -> Result<Rows, String> {
-    let (first, second) = {
+    let (values, first, second) = {
         let lines: Vec<(usize, &str)> = text
             .lines()
             .enumerate()
@@ -74,48 +71,61 @@ pub fn read_rows(
             lines.len()
         };
         let (head, tail) = lines.split_at(split);
-        // Room for every field at once, so a large grid is not copied while it grows.
+        // Room for every value: a line holds at most one more than its separators.
         let sep = layout.dialect.separator;
-        let fields = |ls: &[(usize, &str)]| -> usize {
+        let room = |ls: &[(usize, &str)]| -> usize {
             ls.iter()
                 .map(|(_, l)| l.bytes().filter(|&b| b == sep).count() + 1)
                 .sum()
         };
-        let read = |ls: &[(usize, &str)], capacity: usize| {
-            let mut run = Run {
-                rows: Vec::with_capacity(ls.len()),
-                values: Vec::with_capacity(capacity),
-            };
-            for &(n, line) in ls {
-                let r = read_row(line, &layout.dialect, um_per_unit, &mut run.values);
-                run.rows.push((n, r));
-            }
-            run
+        let head_room = room(head);
+        // Zeroed by the allocator (fresh pages for a large grid): no page is touched before
+        // a run writes its values there.
+        let mut values = vec![0.0; head_room + room(tail)];
+        let read = |ls: &[(usize, &str)], out: &mut [f64]| -> Vec<RowRead> {
+            let mut at = 0;
+            ls.iter()
+                .map(|&(n, line)| {
+                    let room = out.get_mut(at..).unwrap_or_default();
+                    let r = read_row(line, &layout.dialect, um_per_unit, room);
+                    at += r.as_ref().map_or(0, |count| *count);
+                    (n, r)
+                })
+                .collect()
         };
-        if tail.is_empty() {
-            (read(head, fields(head)), None)
+        let (head_out, tail_out) = values.split_at_mut(head_room);
+        let (first, second) = if tail.is_empty() {
+            (read(head, head_out), None)
         } else {
             std::thread::scope(|s| {
-                let second = s.spawn(|| read(tail, fields(tail)));
-                let first = read(head, fields(head) + fields(tail));
+                let second = s.spawn(|| read(tail, tail_out));
+                let first = read(head, head_out);
                 let second = second
                     .join()
                     .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
                 (first, Some(second))
             })
-        }
+        };
+        (values, first, second.map(|rows| (head_room, rows)))
     };
     drop(text);
-    join(first, second)
+    join(values, first, second)
 }
 
-/// The rows of both runs: the rows' length decided, the rows of another length left out, the
-/// kept values compacted in file order.
-fn join(first: Run, second: Option<Run>) -> Result<Rows, String> {
-    let runs = std::iter::once(&first).chain(second.as_ref());
+/// The rows of both runs (the second's values from `second.0` in `values`): the rows' length
+/// decided, the rows of another length left out, the kept values moved down in file order
+/// (where a row before them was left out, or the first run wrote less than its room).
+fn join(
+    mut values: Vec<f64>,
+    first: Vec<RowRead>,
+    second: Option<(usize, Vec<RowRead>)>,
+) -> Result<Rows, String> {
+    let runs: Vec<(usize, &[RowRead])> = std::iter::once((0, &first[..]))
+        .chain(second.as_ref().map(|(at, rows)| (*at, &rows[..])))
+        .collect();
     // The rows' length: the most common, the first such on a tie.
     let mut counts: std::collections::HashMap<usize, (usize, usize)> = Default::default();
-    let all_rows = || runs.clone().flat_map(|r| r.rows.iter());
+    let all_rows = || runs.iter().flat_map(|(_, rows)| rows.iter());
     for (at, (_, r)) in all_rows().enumerate() {
         if let Ok(c) = r {
             counts.entry(*c).or_insert((0, at)).0 += 1;
@@ -141,41 +151,21 @@ fn join(first: Run, second: Option<Run>) -> Result<Rows, String> {
         kept: Vec::new(),
         left_out: Vec::new(),
     };
-    // The first run's values are compacted in their own buffer (which has room for all);
-    // the second run's kept rows follow them.
-    let Run { rows, mut values } = first;
-    let mut kept = 0usize;
-    let mut place = 0usize;
-    let mut start = 0usize;
-    for (line, r) in &rows {
-        if let Some(count) = out.take(place, *line, r, cols) {
-            if start != kept {
-                values.copy_within(start..start + cols, kept);
-            }
-            kept += cols;
-            start += count;
-        } else if let Ok(count) = r {
-            start += count;
-        }
-        place += 1;
-    }
-    values.truncate(kept);
-    if let Some(Run {
-        rows,
-        values: second,
-    }) = second
-    {
-        let mut start = 0usize;
-        for (line, r) in &rows {
+    let (mut kept, mut place) = (0usize, 0usize);
+    for &(from, rows) in &runs {
+        let mut start = from;
+        for (line, r) in rows {
             if out.take(place, *line, r, cols).is_some() {
-                values.extend_from_slice(&second[start..start + cols]);
+                if start != kept {
+                    values.copy_within(start..start + cols, kept);
+                }
+                kept += cols;
             }
-            if let Ok(count) = r {
-                start += count;
-            }
+            start += r.as_ref().map_or(0, |count| *count);
             place += 1;
         }
     }
+    values.truncate(kept);
     out.heights_um = values;
     Ok(out)
 }
@@ -211,31 +201,40 @@ impl Rows {
     }
 }
 
-/// Appends the heights of one row (`line`, read as `dialect` says, scaled by `um_per_unit`)
-/// to `out` and returns how many, or why the row cannot be used (with `out` unchanged).
+/// Writes the heights of one row (`line`, read as `dialect` says, scaled by `um_per_unit`)
+/// to the front of `out` (room for one more than the line's separators) and returns how
+/// many, or why the row cannot be used (what it wrote then counts for nothing).
 fn read_row(
     line: &str,
     dialect: &Dialect,
     um_per_unit: f64,
-    out: &mut Vec<f64>,
+    out: &mut [f64],
 ) -> Result<usize, String> {
-    let start = out.len();
     // Plain lines of finite numbers take one pass; anything else field by field.
-    let fast = *dialect == Dialect::PLAIN
-        && crate::numbers::parse_csv_line(line.as_bytes(), out).is_some();
-    if !fast {
-        for (k, f) in dialect.fields(line).into_iter().enumerate() {
-            match dialect.number(f) {
-                Some(v) => out.push(v),
-                None => {
-                    out.truncate(start);
-                    return Err(format!("column {}: {f:?} is not a number", k + 1));
+    let fast = match *dialect == Dialect::PLAIN {
+        true => crate::numbers::parse_csv_line(line.as_bytes(), out),
+        false => None,
+    };
+    let count = match fast {
+        Some(count) => count,
+        None => {
+            let fields = dialect.fields(line);
+            for (k, f) in fields.iter().enumerate() {
+                match (dialect.number(f), out.get_mut(k)) {
+                    (Some(v), Some(slot)) => *slot = v,
+                    (Some(_), None) => {
+                        return Err(format!(
+                            "more values than the {} it has room for",
+                            out.len()
+                        ))
+                    }
+                    (None, _) => return Err(format!("column {}: {f:?} is not a number", k + 1)),
                 }
             }
+            fields.len()
         }
-    }
-    let values = &mut out[start..];
-    let count = values.len();
+    };
+    let values = &mut out[..count];
     if um_per_unit != 1.0 {
         values.iter_mut().for_each(|v| *v *= um_per_unit);
     }
@@ -253,7 +252,6 @@ fn read_row(
     } else {
         return Ok(count);
     };
-    out.truncate(start);
     Err(why)
 }
 
