@@ -400,7 +400,9 @@ struct Fitted {
     /// rules a fold out).
     shape: Option<ModelChecks>,
     shape_s: f64,
-    residual: (f64, f64),
+    /// The largest residual at the data points, mm, and the seconds it took (only for
+    /// `--report`, which shows it).
+    residual: Option<(f64, f64)>,
     judged: Judged,
     written: Vec<WrittenIges>,
     write_s: f64,
@@ -485,7 +487,7 @@ impl<'a> Fitting<'a> {
         let threshold = self.args.model.holdout_threshold();
         let (
             (fit, replaced, fit_s, (shape, shape_s)),
-            (residual_mm, residual_s),
+            residual_at_points,
             judged,
             (written, write_s),
         ) = match threshold {
@@ -561,7 +563,7 @@ impl<'a> Fitting<'a> {
             fit_s,
             shape,
             shape_s,
-            residual: (residual_mm, residual_s),
+            residual: residual_at_points,
             judged,
             written,
             write_s,
@@ -594,13 +596,13 @@ impl<'a> Fitting<'a> {
         ))
     }
 
-    /// The largest residual at the data points in mm (timed): only `--report` shows it (else NaN).
-    fn residual(&self, fit: &FitResult, grid: &Grid) -> (f64, f64) {
-        let t_res = Instant::now();
-        match self.args.report {
-            Some(_) => (max_residual_mm(fit, grid), t_res.elapsed().as_secs_f64()),
-            None => (f64::NAN, 0.0),
-        }
+    /// The largest residual at the data points in mm (timed), computed only for `--report`,
+    /// which alone shows it.
+    fn residual(&self, fit: &FitResult, grid: &Grid) -> Option<(f64, f64)> {
+        self.args.report.as_ref().map(|_| {
+            let t_res = Instant::now();
+            (max_residual_mm(fit, grid), t_res.elapsed().as_secs_f64())
+        })
     }
 
     /// Writes the surface's IGES files (timed), their Start section naming the recipe, the
@@ -758,7 +760,7 @@ impl<'a> Fitting<'a> {
             "y_mm": l.y_mm,
             "lines": l.index,
             "lines_left_out": l.left_out,
-            "max_residual_mm": f.residual.0,
+            "max_residual_mm": f.residual.map(|r| r.0),
             "patches": stats.patches,
             "iges_bytes": stats.bytes,
             "iges_parameter_lines": stats.parameter_lines,
@@ -798,7 +800,7 @@ impl<'a> Fitting<'a> {
                 "fit_solve_v": f.fit.timings.solve_v_s,
                 "fit_total": f.fit_s,
                 "shape_check": f.shape_s,
-                "residual": f.residual.1,
+                "residual": f.residual.map(|r| r.1),
                 "write_iges": f.write_s,
                 "write_step": f.step.as_ref().map(|s| s.1),
             },
