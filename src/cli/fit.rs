@@ -649,7 +649,7 @@ impl<'a> Fitting<'a> {
         };
         let sq = areal_sq_um(&HeightMap::of(fitted, mean_py)).map_err(|e| e.to_string());
         let degrees = self.recipe.degrees;
-        let every = holdout_every_or_reason(rows, degrees.degree_v);
+        let every = holdout_every_or_reason(rows, degrees.degree_v).map_err(|e| e.to_string());
         let verdict = sq.clone().and_then(|sq| {
             let every = every.clone()?;
             between_lines(fitted, degrees, self.recipe.method, every, sq, threshold)

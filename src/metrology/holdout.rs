@@ -43,15 +43,10 @@ pub fn holdout_every(rows: usize, degree_v: usize) -> Option<usize> {
     })
 }
 
-/// [`holdout_every`], or the reason no line can be held out, in the words `fit` and the
-/// report both print.
-pub fn holdout_every_or_reason(rows: usize, degree_v: usize) -> Result<usize, String> {
-    holdout_every(rows, degree_v).ok_or_else(|| {
-        format!(
-            "{rows} lines cannot verify the surface between them: leaving one out leaves at most degree-v + 1 = {} for the refit; trace more lines or lower degree-v",
-            degree_v + 1
-        )
-    })
+/// [`holdout_every`], or why no line can be held out, in the words `fit` and the report both
+/// print for the hold-outs and the verdict between lines.
+pub fn holdout_every_or_reason(rows: usize, degree_v: usize) -> Result<usize, MetrologyError> {
+    holdout_every(rows, degree_v).ok_or(MetrologyError::NoLineToHoldOut { rows, degree_v })
 }
 
 /// Differences at the held-out points of one line.
@@ -127,7 +122,7 @@ pub fn holdout_with(
     method: VMethod,
 ) -> Result<Holdout, MetrologyError> {
     let points_left_out = points_left_out(grid, options, method)?;
-    let every = lines_every(grid.rows(), options.degree_v)?;
+    let every = holdout_every_or_reason(grid.rows(), options.degree_v)?;
     let lines_left_out = lines_left_out(grid, options, method, every)?.lines;
     Ok(Holdout {
         points_left_out,
@@ -173,16 +168,6 @@ pub fn points_left_out(
             stats(r, y.get(r).copied().unwrap_or(0.0), m, &measured)
         })
         .collect())
-}
-
-/// [`holdout_every`] for the lines-left-out refit of [`holdout_with`], or why no line can be
-/// left out.
-pub fn lines_every(rows: usize, degree_v: usize) -> Result<usize, MetrologyError> {
-    holdout_every(rows, degree_v).ok_or(MetrologyError::BadParameter {
-        what: "lines for a hold-out refit",
-        value: rows as f64,
-        hint: "leaving a line out needs more lines than degree_v + 1; trace more lines or lower degree_v",
-    })
 }
 
 /// The v where the surface's y equals `target` (y depends on v only; bisection of y(0, v)),

@@ -148,6 +148,15 @@ pub enum MetrologyError {
         /// What is wrong, with the value found.
         reason: String,
     },
+    /// Too few lines to leave one out and refit the rest (the hold-outs and the verdict
+    /// between lines).
+    #[error("{rows} lines cannot verify the surface between them: leaving one out leaves at most degree-v + 1 = {} for the refit; trace more lines or lower degree-v", degree_v + 1)]
+    NoLineToHoldOut {
+        /// The lines of the grid.
+        rows: usize,
+        /// The refit's degree across the lines.
+        degree_v: usize,
+    },
     /// A bearing-area parameter is out of range.
     #[error("{what} = {value} is out of range; {hint}")]
     BadParameter {

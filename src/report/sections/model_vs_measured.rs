@@ -10,8 +10,8 @@
 use super::SectionInput;
 use crate::grid::Grid;
 use crate::metrology::holdout::{
-    between_lines_given, holdout_every, holdout_every_or_reason, lines_every, lines_left_out,
-    points_left_out, BetweenLines, Holdout, HoldoutLine,
+    between_lines_given, holdout_every_or_reason, lines_left_out, points_left_out, BetweenLines,
+    Holdout, HoldoutLine,
 };
 use crate::metrology::surface_model::ModelRecipe;
 use crate::report::document::{LineHoldout, LineReport};
@@ -50,22 +50,24 @@ fn characterise_and_judge(
     threshold: f64,
 ) -> (Result<Holdout, String>, Result<BetweenLines, String>) {
     let (degrees, method) = (recipe.degrees, recipe.method);
-    let every = holdout_every(grid.rows(), degrees.degree_v);
+    let every = holdout_every_or_reason(grid.rows(), degrees.degree_v).map_err(|e| e.to_string());
     let (points, lines) = std::thread::scope(|s| {
-        let lines =
-            every.map(|every| s.spawn(move || lines_left_out(grid, degrees, method, every)));
+        let lines = every
+            .clone()
+            .ok()
+            .map(|every| s.spawn(move || lines_left_out(grid, degrees, method, every)));
         let points = points_left_out(grid, degrees, method);
         // `Err(())`: the refit panicked.
         (points, lines.map(|h| h.join().map_err(|_| ())))
     });
     let model_vs_measured = (|| {
         let points_left_out = points.map_err(|e| e.to_string())?;
-        lines_every(grid.rows(), degrees.degree_v).map_err(|e| e.to_string())?;
+        every.clone()?;
         let lines_left_out = match &lines {
             Some(Ok(Ok(held))) => held.lines.clone(),
             Some(Ok(Err(e))) => return Err(e.to_string()),
             Some(Err(())) => return Err(LINES_REFIT_PANICKED.to_string()),
-            // `lines_every` found no k either.
+            // Not reached: no k was found above.
             None => Vec::new(),
         };
         let mut h = Holdout {
@@ -81,7 +83,7 @@ fn characterise_and_judge(
     let verdict = match sq_um {
         None => Err("the measured grid has no Sq to judge the hold-out against".to_string()),
         Some(_) if matches!(lines, Some(Err(()))) => Err(LINES_REFIT_PANICKED.to_string()),
-        Some(sq_um) => holdout_every_or_reason(grid.rows(), degrees.degree_v).and_then(|every| {
+        Some(sq_um) => every.and_then(|every| {
             between_lines_given(grid, method, every, sq_um, threshold, || match lines {
                 Some(Ok(held)) => held,
                 // Not reached: `every` was found above as it was for the refit.
@@ -137,8 +139,10 @@ mod tests {
         sq_um: f64,
         threshold: f64,
     ) -> Result<BetweenLines, String> {
-        let every = holdout_every_or_reason(grid.rows(), recipe.degrees.degree_v)?;
-        between_lines(grid, recipe.degrees, recipe.method, every, sq_um, threshold)
+        holdout_every_or_reason(grid.rows(), recipe.degrees.degree_v)
+            .and_then(|every| {
+                between_lines(grid, recipe.degrees, recipe.method, every, sq_um, threshold)
+            })
             .map_err(|e| e.to_string())
     }
 
