@@ -15,9 +15,7 @@
 //! Parts and patches are planned from token counts (an upper bound on the lines of each
 //! entity), never by formatting the surface first.
 
-use super::format::{
-    ascii_printable, hollerith, push_real, push_right, push_uint, FieldPacker, P_LINE_TAIL,
-};
+use super::format::{ascii_printable, hollerith, push_real, push_right, push_uint, FieldPacker};
 use super::split::{split_middle_shapes, split_v_middle, split_v_middle_side, PatchShape, Side};
 use super::IgesError;
 use crate::extremes::min_max;
@@ -901,10 +899,6 @@ fn terminate(out: &mut Vec<u8>, counts: [usize; 4]) {
     record(out, &t, b'T', 1);
 }
 
-/// Bytes of one P line: 64 data columns, then the DE back-pointer, `P`, the sequence number
-/// and the newline.
-const LINE_BYTES: usize = 64 + P_LINE_TAIL;
-
 /// Splits each surface into the patches one file holds (bounded by
 /// `opts.max_parameter_lines_per_entity`), borrowing those that fit.
 fn file_patches<'a>(
@@ -957,7 +951,11 @@ pub fn write_iges_seekable<W: Write + Seek>(
     w.write_all(&buf)?;
     buf.clear();
     let workers = worker_count();
-    let mut lines = FieldPacker::parameter_lines(BLOCK_BYTES + 64 * LINE_BYTES);
+    // Room for a block and for what one step adds past it before it is handed on (a piece of
+    // poles, at most about 0.5 MB of lines, or a batch of weights, 0.25 MB): for the nets of
+    // a scan the packer never regrows, which would copy a block into pages touched for the
+    // first time.
+    let mut lines = FieldPacker::parameter_lines(2 * BLOCK_BYTES);
     let mut counts = Vec::with_capacity(patches.len());
     for (k, patch) in patches.iter().enumerate() {
         lines.set_back_pointer(2 * k + 1);
@@ -1014,6 +1012,10 @@ mod tests {
     use super::*;
     use crate::iges::format::SequenceField;
     use crate::iges::reference::{entity_128_params, ParamText};
+
+    /// Bytes of one P line: 64 data columns, then the DE back-pointer, `P`, the sequence
+    /// number and the newline.
+    const LINE_BYTES: usize = 64 + crate::iges::format::P_LINE_TAIL;
 
     /// Turns 64-column parameter records into P lines (the writer's framing before it packed
     /// into lines directly): each is assembled in a fixed 81-byte template with the sequence
