@@ -1,7 +1,7 @@
 //! The SJ series' material-ratio reading against the instrument's own printout: the Mitutoyo
 //! SurfTest export in `tests/data/real` (its R profile, λc 2.5 mm, N = 4, 6664 ordinates) with
-//! the results the instrument printed for it (`docs/metrology.md`, "How the SJ series
-//! evaluates the material-ratio family"). Each value must come out within one unit of the
+//! the results the instrument printed for it (`docs/metrology.md`, "Where the SJ-210's
+//! material-ratio numbers differ"). Each value must come out within one unit of the
 //! printed digit; Rk, which no reading of the manual's secant on the 100-level curve
 //! reproduces exactly, within 0.2 % (it comes out 0.19 % low). The curve itself is checked
 //! against the one the instrument exported with the profile (`mitutoyo_surftest_bac.csv`).

@@ -124,11 +124,12 @@ pub fn run<D, M: Send>(
     // The model section (the densest work: the fold check, the model's bearing curves) reads
     // only the grid and the model: it runs beside every section below, from the start. Where
     // the build unwinds (tests; the release profile aborts on any panic) a panic becomes its
-    // failure, so an early error return below, which joins it, is no panic. It samples the model (twice the grid's bytes, at
-    // half the x pitch; its autocorrelation grows from that to twice as much) only once the
-    // grid's sections, the hold-outs and the overlay are done (`areal_go` sent, with the row
-    // of the overlay to draw from the sampled model when no line was held out; or dropped by
-    // an early return): their buffers would otherwise be held beside it.
+    // failure, so an early error return below, which joins it, is no panic. It samples a
+    // large model (twice the grid's bytes, at half the x pitch; its autocorrelation grows from
+    // that to twice as much) only once the grid's sections, the hold-outs and the overlay are
+    // done (`areal_go` sent, with the row of the overlay to draw from the sampled model when
+    // no line was held out; or dropped by an early return): their buffers would otherwise be
+    // held beside it. A small one is sampled before that wait (`surface::section`).
     std::thread::scope(|scope| {
         let (areal_go, areal_wait) = std::sync::mpsc::channel::<Option<usize>>();
         let model_thread = scope.spawn(move || {

@@ -17,6 +17,10 @@ use crate::metrology::model::{
 };
 use crate::nurbs::UBasis;
 use crate::report::document::{FailedSection, SurfaceReport};
+use std::borrow::Cow;
+
+/// The most model samples (f64, 8 MiB) sampled and characterised before the caller's wait.
+const EARLY_SAMPLES: usize = 1 << 20;
 
 /// What the section produces.
 #[derive(Debug, Clone)]
@@ -53,12 +57,14 @@ pub fn panicked() -> ModelSection {
 }
 
 /// Runs the section: the model of `input` against the grid's measured heights. Once it is
-/// checked, `before_sampling` is called and the model sampled (not when it folds), then
-/// `before_areal` is given what the first returned and the sampled model, before its areal
-/// parameters (whose autocorrelation takes twice its bytes and grows from them): all that
-/// reads the sampled model beyond them (`model.x3p`, a data line's overlay) is made there. A
-/// caller running other sections beside this one makes it wait in `before_sampling` until
-/// their own large buffers are gone, so the peaks do not add.
+/// checked (and unless it folds) the model is sampled; `before_areal` is given what
+/// `before_sampling` returned and the sampled model, for all that reads it beyond its areal
+/// parameters (`model.x3p`, a data line's overlay). A caller running other sections beside
+/// this one makes it wait in `before_sampling` until their own large buffers are gone: a large
+/// model is sampled after that wait and its areal parameters (whose autocorrelation takes
+/// twice its bytes and grows from them) made after `before_areal`, so the peaks do not add; a
+/// model of at most [`EARLY_SAMPLES`] samples is sampled and its areal parameters made before
+/// the wait, while the other sections run.
 pub fn section<W>(
     input: &SectionInput<'_>,
     before_sampling: impl FnOnce() -> W,
@@ -125,29 +131,6 @@ pub fn section<W>(
             None
         }
     };
-    // Over a fold the surface has several heights at one x: no grid of heights describes it,
-    // whichever branch an inversion of x(u) would pick.
-    let sampled = if folds {
-        Err("the model folds (x runs backwards along its iso-curves, see model_checks), so it is not a height map: no model.x3p and no areal parameters of the model".to_string())
-    } else {
-        let w = before_sampling();
-        let (v, x0_mm) = (&fit.params_v, fit.x0_mm);
-        let sampled = sample_model_grid(&fit.surface, v, x0_mm, pitch_x_mm / 2.0, model_cols);
-        sampled
-            .map(|h| (w, h))
-            .map_err(|e| format!("sampling the model on the data lines: {e}"))
-    };
-    let (w, heights) = match sampled {
-        Ok(h) => h,
-        Err(reason) => {
-            fails.push(failed("surface", reason.clone()));
-            return ModelSection {
-                surface: Err(reason),
-                checks: Some(checks),
-                failed: fails,
-            };
-        }
-    };
     let shape = HeightMap {
         heights_um: &[],
         rows,
@@ -155,22 +138,49 @@ pub fn section<W>(
         pitch_x_mm: pitch_x_mm / 2.0,
         pitch_y_mm,
     };
+    let areal = |heights: Cow<'_, [f64]>| {
+        surface_report(
+            heights,
+            &shape,
+            options.levels,
+            format!(
+                "the {what} NURBS surface sampled on the data lines (their v) at half the x pitch ({model_cols} points per line, x(u) inverted numerically), then levelled and evaluated as surface_grid"
+            ),
+        )
+    };
     // The model sampled on the data lines (their v) at half the x pitch: what `model.x3p` shows.
-    before_areal(
-        w,
-        &HeightMap {
-            heights_um: &heights,
-            ..shape
-        },
-    );
-    let surface = surface_report(
-        std::borrow::Cow::Owned(heights),
-        &shape,
-        options.levels,
-        format!(
-            "the {what} NURBS surface sampled on the data lines (their v) at half the x pitch ({model_cols} points per line, x(u) inverted numerically), then levelled and evaluated as surface_grid"
-        ),
-    )
+    let (v, x0_mm) = (&fit.params_v, fit.x0_mm);
+    let sample = || {
+        sample_model_grid(&fit.surface, v, x0_mm, pitch_x_mm / 2.0, model_cols)
+            .map_err(|e| format!("sampling the model on the data lines: {e}"))
+    };
+    // Over a fold the surface has several heights at one x: no grid of heights describes it,
+    // whichever branch an inversion of x(u) would pick. A small model's buffers add little to
+    // the other sections' peak: it does not wait (see above).
+    let surface = if folds {
+        Err("the model folds (x runs backwards along its iso-curves, see model_checks), so it is not a height map: no model.x3p and no areal parameters of the model".to_string())
+    } else if rows * model_cols <= EARLY_SAMPLES {
+        sample().and_then(|heights| {
+            let surface = areal(Cow::Borrowed(&heights));
+            let map = HeightMap {
+                heights_um: &heights,
+                ..shape
+            };
+            before_areal(before_sampling(), &map);
+            surface
+        })
+    } else {
+        let w = before_sampling();
+        sample().and_then(|heights| {
+            let map = HeightMap {
+                heights_um: &heights,
+                ..shape
+            };
+            before_areal(w, &map);
+            areal(Cow::Owned(heights))
+        })
+    };
+    let surface = surface
     .map(|mut s| {
         if let Some(curves) = curves {
             s.bac_curves_recipe = Some(format!(
