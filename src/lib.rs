@@ -8,9 +8,10 @@
 //! 0. Vocabulary, no I/O: [`units`] (mm, µm, integer nm), [`numfmt`] (numbers written for
 //!    people), [`build_info`] (version and commit), [`profile`] (a traced line with its
 //!    metadata), [`grid`] (the one grid of traced lines every analysis reads), [`nurbs`] (the
-//!    surface as a value), [`devices`] (the contracts between the
-//!    scan runner and the drivers), [`numbers`] (decimal numbers in CSV text, read fast),
-//!    [`extremes`] (the lowest and highest of a run of numbers), [`port_swap`] (a reply in the other device's language: the ports swapped).
+//!    surface as a value), [`devices`] (the contracts between the scan runner and the
+//!    drivers), [`numbers`] (decimal numbers in CSV text, read fast), [`extremes`] (the lowest
+//!    and highest of a run of numbers), [`port_swap`] (a reply in the other device's language:
+//!    the ports swapped).
 //! 1. Pure logic: [`fit`] (the paper's interpolation, incremental), [`iges`] (IGES 5.3
 //!    writer/reader), [`metrology`] (ISO roughness, bearing area curves, areal parameters),
 //!    [`specification`] (a part's limits, the 16 % and max rules, the uncertainty of a mean

@@ -2,10 +2,12 @@
 //! it is read in passes every other check: heights in mm read as µm give an Sq in the nm range,
 //! heights in nm read as µm a range of metres, x in µm read as mm a profile of a few µm. The
 //! bounds: Sq (about the least-squares plane, or line for one line) below [`MIN_SQ_UM`] — an
-//! SJ-210 resolves 2 nm at best — unless the heights lie on a plane (no roughness to judge), a height range above [`MAX_RANGE_UM`], a profile whose x
-//! spans less than [`MIN_X_SPAN_MM`]. Each finding names the likely mix-up and what fixes it.
+//! SJ-210 resolves 2 nm at best — unless the heights lie on a plane (no roughness to judge), a
+//! height range above [`MAX_RANGE_UM`], a profile whose x spans less than [`MIN_X_SPAN_MM`].
+//! Each finding names the likely mix-up and what fixes it.
 //!
-//! Pure (no I/O), inside the reading layer: numbers in, findings out; depends on [`crate::grid`], [`crate::extremes`] and [`crate::numfmt`].
+//! Pure (no I/O), inside the reading layer: numbers in, findings out; depends on
+//! [`crate::grid`], [`crate::extremes`] and [`crate::numfmt`].
 
 use crate::extremes::min_max;
 use crate::grid::Grid;
