@@ -18,12 +18,13 @@
 //!   above plus below) is reported in µm and in % of the measured range, and named as a
 //!   warning beyond [`OVERSHOOT_WARN_PCT`].
 //!
-//! Depends on [`crate::nurbs`], [`super::sampling`] (the dense samples) and [`crate::numfmt`]
-//! (the warnings' figures).
+//! Depends on [`crate::nurbs`], [`super::sampling`] (the dense samples), [`crate::extremes`]
+//! and [`crate::numfmt`] (the warnings' figures).
 
 use super::sampling::{Basis, TwoLanes};
+use crate::extremes::min_max;
 use crate::numfmt::{fmt, Quantity};
-use crate::nurbs::{basis_funs, find_span, BSplineCurve, NurbsSurface, UBasis};
+use crate::nurbs::{BSplineCurve, NurbsSurface, UBasis};
 use serde::Serialize;
 
 /// An overshoot beyond this share of the measured height range is named as a warning (%).
@@ -202,65 +203,16 @@ impl ModelChecks {
     }
 }
 
-/// The basis functions of a curve's knot vector at `n` equally spaced parameters in [0, 1],
-/// computed once for many curves on the same knots (the iso-curves along v of one surface all
-/// have its v knots), applied as [`BSplineCurve::evaluate`] applies them: the same clamped
-/// parameter, span and basis values, Σ basis·pole from zero in pole order, so each point is
-/// the one [`samples`] gives, to the bit.
-struct SampleBasis {
-    degree: usize,
-    /// Index of the first pole of each parameter's basis (span − degree).
-    first: Vec<usize>,
-    /// `degree + 1` values per parameter.
-    values: Vec<f64>,
+/// Whether a [`UBasis`] of `n` equally spaced parameters on these knots is applied by the
+/// shared sampler (a degree its stack buffers hold, a knot vector that fits `count` poles, at
+/// least two samples): each point is then the one [`samples`] gives, to the bit.
+fn basis_fits(degree: usize, knots: &[f64], count: usize, n: usize) -> bool {
+    degree <= 15 && count > degree && knots.len() == count + degree + 1 && n >= 2
 }
 
-/// Degrees up to this have their basis values computed in stack buffers.
-const MAX_SAMPLE_DEGREE: usize = 15;
-
-impl SampleBasis {
-    /// `None` where [`samples`] must be used instead (a degree above the stack buffers, a knot
-    /// vector that does not fit `count` poles, fewer than two samples).
-    fn new(degree: usize, knots: &[f64], count: usize, n: usize) -> Option<SampleBasis> {
-        if !SampleBasis::fits(degree, knots, count, n) {
-            return None;
-        }
-        let (lo, hi) = (knots[degree], knots[count]);
-        let mut first = Vec::with_capacity(n);
-        let mut values = Vec::with_capacity(n * (degree + 1));
-        let (mut b, mut left, mut right) = (
-            [0.0; MAX_SAMPLE_DEGREE + 1],
-            [0.0; MAX_SAMPLE_DEGREE + 1],
-            [0.0; MAX_SAMPLE_DEGREE + 1],
-        );
-        for k in 0..n {
-            let t = k as f64 / (n - 1) as f64;
-            let t = if t.is_nan() { lo } else { t.clamp(lo, hi) };
-            let span = find_span(degree, knots, count, t);
-            basis_funs(span, t, degree, knots, &mut b, &mut left, &mut right);
-            first.push(span - degree);
-            values.extend_from_slice(&b[..=degree]);
-        }
-        Some(SampleBasis {
-            degree,
-            first,
-            values,
-        })
-    }
-
-    /// Whether [`SampleBasis::new`] makes a basis for these (else [`samples`] is used).
-    fn fits(degree: usize, knots: &[f64], count: usize, n: usize) -> bool {
-        degree <= MAX_SAMPLE_DEGREE && count > degree && knots.len() == count + degree + 1 && n >= 2
-    }
-
-    /// The basis as the shared sampler takes it.
-    fn basis(&self) -> Basis<'_> {
-        Basis {
-            degree: self.degree,
-            first: &self.first,
-            values: &self.values,
-        }
-    }
+/// `n` equally spaced parameters in [0, 1].
+fn equally_spaced(n: usize) -> Vec<f64> {
+    (0..n).map(|k| k as f64 / (n - 1) as f64).collect()
 }
 
 /// Samples of a curve at `n` equally spaced parameters in [0, 1].
@@ -297,68 +249,6 @@ fn backward_run_by(n: usize, at: impl Fn(usize) -> f64) -> Option<(f64, f64, f64
         k += 1;
     }
     worst
-}
-
-/// The lowest and the highest of `v·scale` over `values` by strict comparison (NaN never
-/// lower or higher; +∞ and −∞ when none is). Where the two are equal in value but not in
-/// sign (±0), either may come back: callers look up where the first equal value is.
-fn lowest_highest(values: &[f64], scale: f64) -> (f64, f64) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2, checked just above.
-            return unsafe { lowest_highest_avx2(values, scale) };
-        }
-    }
-    lowest_highest_from(values, scale, (f64::INFINITY, f64::NEG_INFINITY))
-}
-
-/// [`lowest_highest`] over `values`, starting from `(lo, hi)`.
-fn lowest_highest_from(values: &[f64], scale: f64, (mut lo, mut hi): (f64, f64)) -> (f64, f64) {
-    for &v in values {
-        let v = v * scale;
-        if v < lo {
-            lo = v;
-        }
-        if v > hi {
-            hi = v;
-        }
-    }
-    (lo, hi)
-}
-
-/// [`lowest_highest`], four values at a time.
-///
-/// # Safety
-/// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn lowest_highest_avx2(values: &[f64], scale: f64) -> (f64, f64) {
-    use std::arch::x86_64::*;
-    let s = _mm256_set1_pd(scale);
-    let (mut lo, mut hi) = (
-        _mm256_set1_pd(f64::INFINITY),
-        _mm256_set1_pd(f64::NEG_INFINITY),
-    );
-    let chunks = values.chunks_exact(4);
-    let rest = chunks.remainder();
-    for c in chunks {
-        // SAFETY: `c` holds four readable f64.
-        let v = _mm256_mul_pd(unsafe { _mm256_loadu_pd(c.as_ptr()) }, s);
-        lo = _mm256_blendv_pd(lo, v, _mm256_cmp_pd::<_CMP_LT_OQ>(v, lo));
-        hi = _mm256_blendv_pd(hi, v, _mm256_cmp_pd::<_CMP_GT_OQ>(v, hi));
-    }
-    let (mut l, mut h) = ([0.0f64; 4], [0.0f64; 4]);
-    // SAFETY: `l` and `h` hold four writable f64 each.
-    unsafe {
-        _mm256_storeu_pd(l.as_mut_ptr(), lo);
-        _mm256_storeu_pd(h.as_mut_ptr(), hi);
-    }
-    // The lanes' lowest among the lowest, highest among the highest, compared as the values
-    // are (1.0 is the identity of the scale).
-    let lo = lowest_highest_from(&l, 1.0, (f64::INFINITY, f64::NEG_INFINITY)).0;
-    let hi = lowest_highest_from(&h, 1.0, (f64::INFINITY, f64::NEG_INFINITY)).1;
-    lowest_highest_from(rest, scale, (lo, hi))
 }
 
 /// Whether every value is greater than the one before it (NaN never is).
@@ -492,26 +382,18 @@ pub fn check_model_with(
         vs = vec![0.0, 1.0];
     }
     let n_u = iso_curve_sample_count(surface, options);
-    let us: Vec<f64> = (0..n_u).map(|k| k as f64 / (n_u - 1) as f64).collect();
+    let us = equally_spaced(n_u);
     let mut range = (f64::INFINITY, [0.0; 2], f64::NEG_INFINITY, [0.0; 2]);
     let mut fold_u: (usize, Option<Worst>) = (0, None);
     // The u basis is computed once for every iso-curve (all are sampled at the same u), and
     // one curve is held at a time. Only x (for the fold) and z (for the range) are summed at
     // every sample; y where a sample becomes the highest or lowest, or starts a folding
     // curve. Each lane is the sum `evaluate_grid` makes for it, to the bit.
-    // `UBasis::new` and `SampleBasis::new` find the same span and call `basis_funs` with the
-    // same clamped parameter: a shared basis of the right length has the same values.
-    let shared_u = shared_u.filter(|b| {
-        b.len() == n_u && SampleBasis::fits(surface.degree_u(), surface.knots_u(), nu, n_u)
-    });
-    let own_u = match shared_u {
-        Some(_) => None,
-        None => SampleBasis::new(surface.degree_u(), surface.knots_u(), nu, n_u),
-    };
-    let u_sampler: Option<Basis<'_>> = match shared_u {
-        Some(b) => Some(Basis::of(b)),
-        None => own_u.as_ref().map(SampleBasis::basis),
-    };
+    // A shared basis of the right length is the one made here.
+    let fits = basis_fits(surface.degree_u(), surface.knots_u(), nu, n_u);
+    let shared_u = shared_u.filter(|b| b.len() == n_u && fits);
+    let own_u = (shared_u.is_none() && fits).then(|| UBasis::new(surface, &us));
+    let u_sampler: Option<Basis<'_>> = shared_u.or(own_u.as_ref()).map(Basis::of);
     let xz_sampler = u_sampler.map(TwoLanes::new);
     let general = u_sampler.is_none().then(|| UBasis::new(surface, &us));
     let mut poles = Vec::new();
@@ -542,8 +424,10 @@ pub fn check_model_with(
             (None, None) => {}
         }
         // The lowest and highest sample in µm, each where it first occurs: what a running
-        // strict comparison over the samples, carried from curve to curve, keeps.
-        let (lo, hi) = lowest_highest(&zs, 1000.0);
+        // strict comparison over the samples, carried from curve to curve, keeps (scaling
+        // keeps the order, so the scaled extremes are the extremes of the scaled samples).
+        let (lo, hi) = min_max(&zs);
+        let (lo, hi) = (lo * 1000.0, hi * 1000.0);
         let first_equal = |h: f64| zs.iter().position(|&z| z * 1000.0 == h).unwrap_or(0);
         if lo < range.0 {
             let k = first_equal(lo);
@@ -572,9 +456,10 @@ pub fn check_model_with(
     let n_v = (per * nv).max(2);
     let mut fold_v: (usize, Option<Worst>) = (0, None);
     let curves_v = nu.max(2);
-    let v_basis = SampleBasis::new(surface.degree_v(), surface.knots_v(), nv, n_v);
+    let v_basis = basis_fits(surface.degree_v(), surface.knots_v(), nv, n_v)
+        .then(|| UBasis::along_v(surface, &equally_spaced(n_v)));
     // Only y (for the fold) and x (where a folding curve starts) of each sample are needed.
-    let v_lanes = v_basis.as_ref().map(|b| TwoLanes::new(b.basis()));
+    let v_lanes = v_basis.as_ref().map(|b| TwoLanes::new(Basis::of(b)));
     let (mut ys, mut xs) = (Vec::with_capacity(n_v), Vec::with_capacity(n_v));
     let mut padded = Vec::with_capacity(nv);
     for k in 0..curves_v {
@@ -618,7 +503,7 @@ pub fn check_model_with(
         }
     }
 
-    let (mmin, mmax) = crate::extremes::min_max(heights_um);
+    let (mmin, mmax) = min_max(heights_um);
     let overshoot = (range.2 - mmax).max(0.0) + (mmin - range.0).max(0.0);
     let span = mmax - mmin;
     ModelChecks {
@@ -669,8 +554,8 @@ mod tests {
         let fit = fit_grid(0.002, &y, &z, cols, FitOptions::default()).unwrap();
         let s = &fit.surface;
         for n in [2, 7, 8 * s.count_v()] {
-            let b = SampleBasis::new(s.degree_v(), s.knots_v(), s.count_v(), n).unwrap();
-            let lanes = TwoLanes::new(b.basis());
+            let b = UBasis::along_v(s, &equally_spaced(n));
+            let lanes = TwoLanes::new(Basis::of(&b));
             for k in 0..s.count_u() {
                 let iso = s.iso_curve_v(k as f64 / (s.count_u() - 1) as f64);
                 let padded: Vec<[f64; 4]> =
@@ -690,7 +575,7 @@ mod tests {
                 }
             }
         }
-        assert!(SampleBasis::new(s.degree_v(), s.knots_v(), s.count_v() + 1, 10).is_none());
+        assert!(!basis_fits(s.degree_v(), s.knots_v(), s.count_v() + 1, 10));
     }
 
     /// The vector extremes and the increase test agree with the running strict comparisons
@@ -739,7 +624,8 @@ mod tests {
                         (hi, hi_at) = (z, Some(k));
                     }
                 }
-                let (l, h) = lowest_highest(&v, 1000.0);
+                let (l, h) = min_max(&v);
+                let (l, h) = (l * 1000.0, h * 1000.0);
                 let first = |x: f64| v.iter().position(|&z| z * 1000.0 == x);
                 let at = |found: f64| (found < f64::INFINITY).then(|| first(found)).flatten();
                 assert_eq!(at(l), lo_at, "{v:?}: lowest at");
@@ -775,7 +661,7 @@ mod tests {
         vs: &[f64],
         n_u: usize,
     ) -> ((usize, Option<Worst>), (f64, [f64; 2], f64, [f64; 2])) {
-        let us: Vec<f64> = (0..n_u).map(|k| k as f64 / (n_u - 1) as f64).collect();
+        let us = equally_spaced(n_u);
         let grid = surface.evaluate_grid(&us, vs);
         let mut range = (f64::INFINITY, [0.0; 2], f64::NEG_INFINITY, [0.0; 2]);
         let mut fold: (usize, Option<Worst>) = (0, None);
@@ -875,7 +761,7 @@ mod tests {
             assert_eq!(spike, own.folds(), "{own:?}");
             let n_u = options.samples_per_pole * s.count_u();
             for n in [n_u, n_u - 1] {
-                let us: Vec<f64> = (0..n).map(|k| k as f64 / (n - 1) as f64).collect();
+                let us = equally_spaced(n);
                 let basis = UBasis::new(s, &us);
                 let shared = check_model_with(s, &fit.params_v, &z, &options, Some(&basis));
                 assert_eq!(

@@ -139,8 +139,9 @@ fn span_basis_after(
     span
 }
 
-/// The non-vanishing basis functions along u of a surface at a list of parameters, computed
-/// once and applied to any number of iso-curves (every row of a grid shares its u values).
+/// The non-vanishing basis functions along u (or, [`UBasis::along_v`], along v) of a surface
+/// at a list of parameters, computed once and applied to any number of iso-curves (every row
+/// of a grid shares its u values; every iso-curve along v has the surface's v knots).
 #[derive(Debug, Clone)]
 pub struct UBasis {
     degree: usize,
@@ -153,12 +154,22 @@ pub struct UBasis {
 impl UBasis {
     /// The basis along u of `surface` at each of `us` (clamped into the domain).
     pub fn new(surface: &NurbsSurface, us: &[f64]) -> UBasis {
-        let d = surface.degree_u;
-        let mut first = Vec::with_capacity(us.len());
-        let mut values = vec![0.0; us.len() * (d + 1)];
-        let (knots, count) = (&surface.knots_u, surface.count_u);
+        UBasis::of_knots(surface.degree_u, &surface.knots_u, surface.count_u, us)
+    }
+
+    /// The basis along v of `surface` at each of `vs` (clamped into the domain): applied to
+    /// the poles of an iso-curve along v ([`NurbsSurface::iso_curve_v`]), each point is the
+    /// one [`BSplineCurve::evaluate`] gives, to the bit.
+    pub fn along_v(surface: &NurbsSurface, vs: &[f64]) -> UBasis {
+        UBasis::of_knots(surface.degree_v, &surface.knots_v, surface.count_v, vs)
+    }
+
+    /// The basis of degree `d` on `knots` (for `count` poles) at each of `ts`.
+    fn of_knots(d: usize, knots: &[f64], count: usize, ts: &[f64]) -> UBasis {
+        let mut first = Vec::with_capacity(ts.len());
+        let mut values = vec![0.0; ts.len() * (d + 1)];
         let mut last = None;
-        for (&u, out) in us.iter().zip(values.chunks_exact_mut(d + 1)) {
+        for (&u, out) in ts.iter().zip(values.chunks_exact_mut(d + 1)) {
             let span = match last {
                 Some(s) if d <= MAX_STACK_DEGREE => span_basis_after(d, knots, count, u, s, out),
                 _ => span_basis_into(d, knots, count, u, out),
