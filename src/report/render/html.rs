@@ -17,13 +17,15 @@
 //! The renderer reads the serialized report (its field names are the report's documented
 //! contract), so every field any section adds is there to show without a second data model.
 //!
-//! Layer 4 (reporting): depends on the scan's journal records ([`crate::scan::journal`]) and
-//! [`crate::numfmt`]; returns text, the caller writes it.
+//! Layer 4 (reporting): depends on the scan's journal records ([`crate::scan::journal`]),
+//! [`crate::specification`] (a mean and its s.d.) and [`crate::numfmt`]; returns text, the
+//! caller writes it.
 
 use super::print;
-use crate::metrology::parameter_table::{parameter, Parameter, Source, AREAL, PARAMETERS};
+use crate::metrology::parameter_table::{parameter, Parameter, Scaling, Source, AREAL, PARAMETERS};
 use crate::numfmt::{fmt, line_number, sig, Quantity};
 use crate::scan::journal::ResumeState;
+use crate::specification::uncertainty::{statistics, InstrumentUncertainty};
 use base64::Engine as _;
 use serde_json::Value;
 use std::fmt::Write as _;
@@ -146,19 +148,14 @@ fn quantity(unit: &str) -> (Quantity, &str) {
     }
 }
 
-/// Mean and sample standard deviation (NaN for no values).
+/// Mean and sample standard deviation as the uncertainty section makes them (NaN for no
+/// values, a s.d. of 0 for one).
 pub fn mean_sd(v: &[f64]) -> (f64, f64) {
-    if v.is_empty() {
-        return (f64::NAN, f64::NAN);
+    let none = InstrumentUncertainty::default();
+    match statistics(v.iter().copied(), Scaling::Other, &none) {
+        Some(s) => (s.mean, s.s.unwrap_or(0.0)),
+        None => (f64::NAN, f64::NAN),
     }
-    let n = v.len() as f64;
-    let m = v.iter().sum::<f64>() / n;
-    let sd = if v.len() > 1 {
-        (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0)).sqrt()
-    } else {
-        0.0
-    };
-    (m, sd)
 }
 
 /// A line as a person names it: `3` and the index of its files, `0002`.
