@@ -64,7 +64,7 @@ pub fn panicked() -> ModelSection {
 /// model is sampled after that wait and its areal parameters (whose autocorrelation takes
 /// twice its bytes and grows from them) made after `before_areal`, so the peaks do not add; a
 /// model of at most [`EARLY_SAMPLES`] samples is sampled and its areal parameters made before
-/// the wait, while the other sections run.
+/// the wait, while the other sections run, when the process may use more than one core.
 pub fn section<W>(
     input: &SectionInput<'_>,
     before_sampling: impl FnOnce() -> W,
@@ -156,10 +156,13 @@ pub fn section<W>(
     };
     // Over a fold the surface has several heights at one x: no grid of heights describes it,
     // whichever branch an inversion of x(u) would pick. A small model's buffers add little to
-    // the other sections' peak: it does not wait (see above).
+    // the other sections' peak: it does not wait (see above), unless the process has one core,
+    // where there is no idle time to fill and the areal section's copy of the samples is only
+    // a cost.
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let surface = if folds {
         Err("the model folds (x runs backwards along its iso-curves, see model_checks), so it is not a height map: no model.x3p and no areal parameters of the model".to_string())
-    } else if rows * model_cols <= EARLY_SAMPLES {
+    } else if rows * model_cols <= EARLY_SAMPLES && cores > 1 {
         sample().and_then(|heights| {
             let surface = areal(Cow::Borrowed(&heights));
             let map = HeightMap {
