@@ -3,7 +3,8 @@
 //! (partial characterisation); a smooth sine grid is supported between lines and uncorrelated
 //! lines are not, and the summaries say so; spikes are replaced for the fit only when asked
 //! and then named in the IGES Start section; `fit --compare` prints the alternatives; the
-//! default IGES surface is the paper's fit bit for bit.
+//! default IGES surface is the paper's fit bit for bit; the model section's two orders (on
+//! one core and on more) give the same files.
 
 use serde_json::Value;
 use std::path::Path;
@@ -453,4 +454,91 @@ async fn a_scan_writes_the_configured_method_and_prints_the_verdict() {
         .unwrap()
         .contains("replaced by the straight line"));
     rig.shutdown().await;
+}
+
+/// `v` without its `timings_s` (the report's and the fit's), which differ from run to run.
+fn without_timings(v: &mut Value) {
+    match v {
+        Value::Object(m) => {
+            m.remove("timings_s");
+            m.values_mut().for_each(without_timings);
+        }
+        Value::Array(a) => a.iter_mut().for_each(without_timings),
+        _ => {}
+    }
+}
+
+/// Every file below `dir` (relative path, bytes), report.json without its timings.
+fn outputs(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files = Vec::new();
+    let mut todo = vec![dir.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                todo.push(p);
+                continue;
+            }
+            let name = p.strip_prefix(dir).unwrap().display().to_string();
+            let mut bytes = std::fs::read(&p).unwrap();
+            if name == "report.json" {
+                let mut r: Value = serde_json::from_slice(&bytes).unwrap();
+                without_timings(&mut r);
+                bytes = r.to_string().into_bytes();
+            }
+            files.push((name, bytes));
+        }
+    }
+    files.sort();
+    files
+}
+
+/// With a second core the model section makes a small model's areal parameters while the
+/// grid's sections run; with one (or for a large model) it makes them after, once the
+/// overlay is drawn. The order changes no result: `analyze` pinned to one core (`taskset -c
+/// 0`; the program's count of cores follows the affinity) and free on this machine's cores
+/// gives the same files, byte for byte (report.json but for its timings), model.x3p and the
+/// overlay, made from the model's samples in the one order and the other, among them. On the
+/// two cores `.ci/run` is sized for, the two runs take the two orders.
+#[test]
+fn the_model_sections_order_changes_no_result() {
+    let dir = tempfile::tempdir().unwrap();
+    let grid = dir.path().join("sine.csv");
+    write_grid(&grid, &sine());
+    let (free, pinned) = (dir.path().join("free"), dir.path().join("pinned"));
+    let o = analyze(&grid, &free, &[]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o).1);
+    let mut cmd = Command::new("taskset");
+    cmd.args(["-c", "0", env!("CARGO_BIN_EXE_surfscan"), "analyze"])
+        .arg(&grid)
+        .args(["--pitch-x", &PX.to_string(), "--pitch-y", &PY.to_string()])
+        .args([
+            "--no-filter",
+            "--lc",
+            "0.08",
+            "--curves",
+            "5",
+            "--levels",
+            "21",
+        ])
+        .arg("--out")
+        .arg(&pinned);
+    let o = cmd.output().expect("taskset (util-linux) runs");
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o).1);
+    let (a, b) = (outputs(&free), outputs(&pinned));
+    let names = |f: &[(String, Vec<u8>)]| f.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();
+    assert_eq!(names(&a), names(&b));
+    assert!(
+        names(&a).contains(&"model.x3p".to_string()),
+        "{:?}",
+        names(&a)
+    );
+    assert!(
+        names(&a).contains(&"overlay.svg".to_string()),
+        "{:?}",
+        names(&a)
+    );
+    for ((name, x), (_, y)) in a.iter().zip(&b) {
+        assert!(x == y, "{name} differs between the two orders");
+    }
 }
