@@ -75,7 +75,12 @@ fn write_grid(path: &Path, z: &[f64]) {
 }
 
 fn analyze(grid: &Path, out: &Path, extra: &[&str]) -> Output {
-    surfscan()
+    analyze_by(surfscan(), grid, out, extra)
+}
+
+/// [`analyze`] run by `program` (surfscan, or a command that runs it with its own arguments).
+fn analyze_by(mut program: Command, grid: &Path, out: &Path, extra: &[&str]) -> Output {
+    program
         .arg("analyze")
         .arg(grid)
         .args(["--pitch-x", &PX.to_string(), "--pitch-y", &PY.to_string()])
@@ -92,7 +97,7 @@ fn analyze(grid: &Path, out: &Path, extra: &[&str]) -> Output {
         .arg(out)
         .args(extra)
         .output()
-        .unwrap()
+        .expect("surfscan (or taskset, util-linux) starts")
 }
 
 fn report(dir: &Path) -> Value {
@@ -456,18 +461,6 @@ async fn a_scan_writes_the_configured_method_and_prints_the_verdict() {
     rig.shutdown().await;
 }
 
-/// `v` without its `timings_s` (the report's and the fit's), which differ from run to run.
-fn without_timings(v: &mut Value) {
-    match v {
-        Value::Object(m) => {
-            m.remove("timings_s");
-            m.values_mut().for_each(without_timings);
-        }
-        Value::Array(a) => a.iter_mut().for_each(without_timings),
-        _ => {}
-    }
-}
-
 /// Every file below `dir` (relative path, bytes), report.json without its timings.
 fn outputs(dir: &Path) -> Vec<(String, Vec<u8>)> {
     let mut files = Vec::new();
@@ -482,9 +475,8 @@ fn outputs(dir: &Path) -> Vec<(String, Vec<u8>)> {
             let name = p.strip_prefix(dir).unwrap().display().to_string();
             let mut bytes = std::fs::read(&p).unwrap();
             if name == "report.json" {
-                let mut r: Value = serde_json::from_slice(&bytes).unwrap();
-                without_timings(&mut r);
-                bytes = r.to_string().into_bytes();
+                let r: Value = serde_json::from_slice(&bytes).unwrap();
+                bytes = crate::results_unchanged::pruned(r).to_string().into_bytes();
             }
             files.push((name, bytes));
         }
@@ -508,22 +500,9 @@ fn the_model_sections_order_changes_no_result() {
     let (free, pinned) = (dir.path().join("free"), dir.path().join("pinned"));
     let o = analyze(&grid, &free, &[]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o).1);
-    let mut cmd = Command::new("taskset");
-    cmd.args(["-c", "0", env!("CARGO_BIN_EXE_surfscan"), "analyze"])
-        .arg(&grid)
-        .args(["--pitch-x", &PX.to_string(), "--pitch-y", &PY.to_string()])
-        .args([
-            "--no-filter",
-            "--lc",
-            "0.08",
-            "--curves",
-            "5",
-            "--levels",
-            "21",
-        ])
-        .arg("--out")
-        .arg(&pinned);
-    let o = cmd.output().expect("taskset (util-linux) runs");
+    let mut taskset = Command::new("taskset");
+    taskset.args(["-c", "0", env!("CARGO_BIN_EXE_surfscan")]);
+    let o = analyze_by(taskset, &grid, &pinned, &[]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o).1);
     let (a, b) = (outputs(&free), outputs(&pinned));
     let names = |f: &[(String, Vec<u8>)]| f.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();

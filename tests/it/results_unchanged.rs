@@ -33,7 +33,7 @@ fn capturing() -> bool {
 }
 
 /// `v` without its timings and a scan's duration (they differ from run to run).
-fn pruned(mut v: Value) -> Value {
+pub fn pruned(mut v: Value) -> Value {
     fn walk(v: &mut Value) {
         match v {
             Value::Object(m) => {
