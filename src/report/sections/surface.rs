@@ -58,16 +58,16 @@ pub fn panicked() -> ModelSection {
 
 /// Runs the section: the model of `input` against the grid's measured heights. Once it is
 /// checked (and unless it folds) the model is sampled; `before_areal` is given what
-/// `before_sampling` returned and the sampled model, for all that reads it beyond its areal
+/// `wait` returned and the sampled model, for all that reads it beyond its areal
 /// parameters (`model.x3p`, a data line's overlay). A caller running other sections beside
-/// this one makes it wait in `before_sampling` until their own large buffers are gone: a large
+/// this one returns from `wait` once their own large buffers are gone: a large
 /// model is sampled after that wait and its areal parameters (whose autocorrelation takes
 /// twice its bytes and grows from them) made after `before_areal`, so the peaks do not add; a
 /// model of at most [`EARLY_SAMPLES`] samples is sampled and its areal parameters made before
 /// the wait, while the other sections run, when the process may use more than one core.
 pub fn section<W>(
     input: &SectionInput<'_>,
-    before_sampling: impl FnOnce() -> W,
+    wait: impl FnOnce() -> W,
     before_areal: impl FnOnce(W, &HeightMap<'_>),
 ) -> ModelSection {
     let (model, options, g) = (input.model, &input.ctx.options, input.grid);
@@ -169,11 +169,11 @@ pub fn section<W>(
                 heights_um: &heights,
                 ..shape
             };
-            before_areal(before_sampling(), &map);
+            before_areal(wait(), &map);
             surface
         })
     } else {
-        let w = before_sampling();
+        let w = wait();
         sample().and_then(|heights| {
             let map = HeightMap {
                 heights_um: &heights,
@@ -183,8 +183,7 @@ pub fn section<W>(
             areal(Cow::Owned(heights))
         })
     };
-    let surface = surface
-    .map(|mut s| {
+    let surface = surface.map(|mut s| {
         if let Some(curves) = curves {
             s.bac_curves_recipe = Some(format!(
                 "paper Appendix A: {} iso-curves along x of the {what} surface at equally spaced v, each sampled at 8 points per control point along u, referenced to its x-weighted mean line, {} equal levels, crossings linear along x",
