@@ -19,9 +19,9 @@
 //! atomic writer.
 
 use super::export_settings::ExportSettings;
+use super::exported::Exported;
 use super::scan_queue::next_backoff;
-use crate::report::exported::Exported;
-use crate::report::render::{dfq::dfq, qif::qif};
+use super::{dfq::dfq, qif::qif};
 use crate::scan::status::Status;
 use serde::{Deserialize, Serialize};
 use std::io::Write;

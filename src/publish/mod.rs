@@ -1,7 +1,8 @@
 //! What leaves the station for the lab's systems: the scan's events through a durable outbox
 //! on disk to the publishers (the MQTT broker), the completed scans to the raw-data archive
-//! ([`archive`]) and as DFQ and QIF files to the lab's drop directories ([`export`]), and the
-//! metrics on `/metrics`, all off the scan's path.
+//! ([`archive`]) and as DFQ and QIF files to the lab's drop directories ([`export`]; what a
+//! scan exports is read back from its directory by [`exported`] and formatted by [`dfq`] and
+//! [`qif`]), and the metrics on `/metrics`, all off the scan's path.
 //!
 //! ```text
 //! scan runner ──events──► writer task ──► outbox/mqtt/ (disk) ──► MqttLink ──► broker
@@ -19,11 +20,14 @@
 pub mod archive;
 pub mod archive_settings;
 pub mod commands;
+pub mod dfq;
 pub mod export;
 pub mod export_settings;
+pub mod exported;
 pub mod metrics;
 pub mod mqtt;
 pub mod outbox;
+pub mod qif;
 pub mod results;
 pub mod retention;
 pub mod scan_queue;

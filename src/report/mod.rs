@@ -17,7 +17,6 @@
 //!    and `timings_s`;
 //! 3. [`render`]: every file made from the report and the figures' data, nothing computed.
 //!
-//! [`exported`] reads a completed scan's results back for the DFQ and QIF renderers.
 //! [`scan_dir`] holds the scan-facing entry points (a scan directory read back, the runner's
 //! [`ScanCharacteriser`]); [`context`] what the pipeline is given besides the grid.
 //!
@@ -29,7 +28,6 @@
 pub mod context;
 pub mod document;
 pub mod error;
-pub mod exported;
 pub mod header;
 pub mod render;
 pub mod scan_dir;

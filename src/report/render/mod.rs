@@ -3,21 +3,18 @@
 //! line: [`plots`]; the PSD, the ACF and the 3D view beside the areal parameters:
 //! [`areal_plots`]), the contact's `contact.json` and figures ([`contact`]), `measured.x3p` and `model.x3p` ([`crate::x3p`]), `summary.csv`
 //! ([`summary`]), `report.json` and `report.html` ([`html`], laid out for paper by
-//! [`print`]), each replaced atomically; and the files for the lab's quality systems, made
-//! from a completed scan's [`super::exported::Exported`]: the Q-DAS DFQ ([`dfq`]) and the
-//! QIF 3.0 Results document ([`qif`]), pure formatters whose bytes the caller writes. Nothing
-//! here computes a result; the numbers come from the sections.
+//! [`print`]), each replaced atomically. Nothing here computes a result; the numbers come from
+//! the sections. The files for the lab's quality systems (DFQ, QIF) are not made from the
+//! sections but from a completed scan's directory read back: [`crate::publish`] makes them.
 //!
 //! Layer 4 (reporting): depends on [`crate::x3p`], [`crate::atomic`] and the report's types.
 
 pub mod areal_plots;
 pub mod contact;
 pub mod decimate;
-pub mod dfq;
 pub mod html;
 pub mod plots;
 pub mod print;
-pub mod qif;
 pub mod summary;
 pub mod text_cache;
 

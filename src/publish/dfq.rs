@@ -40,9 +40,9 @@
 //! Lines end with CR LF, and the text is ISO 8859-1 (the manual's character set; a character
 //! outside it becomes `?`). A line without a value of a parameter has no `K0001` for it.
 //!
-//! Layer 4 (reporting): a pure formatter of [`Exported`]; the caller writes the bytes.
+//! Layer 4 (the lab's systems): a pure formatter of [`Exported`]; the caller writes the bytes.
 
-use crate::report::exported::{decimal, Characteristic, Exported};
+use super::exported::{decimal, Characteristic, Exported};
 
 /// Field content on one line: no line breaks, ISO 8859-1, at most `max` characters.
 fn field(s: &str, max: usize) -> String {

@@ -23,10 +23,10 @@
 //! `INDETERMINATE` for a characteristic and `UNKNOWN` for the part. The file's linear unit
 //! is the micrometre.
 //!
-//! Layer 4 (reporting): a pure formatter of [`Exported`]; the caller writes the bytes.
+//! Layer 4 (the lab's systems): a pure formatter of [`Exported`]; the caller writes the bytes.
 
-use super::html::esc;
-use crate::report::exported::{decimal, Characteristic, Exported};
+use super::exported::{decimal, Characteristic, Exported};
+use crate::report::render::html::esc;
 use crate::specification::Verdict;
 use std::fmt::Write;
 

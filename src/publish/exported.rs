@@ -1,5 +1,5 @@
 //! What a completed scan hands to the lab's quality systems (the Q-DAS DFQ and QIF renderers,
-//! [`super::render::dfq`] and [`super::render::qif`]): the part, the specimen, the operator,
+//! [`super::dfq`] and [`super::qif`]): the part, the specimen, the operator,
 //! the instrument, and one characteristic per specified parameter with its limits, each
 //! line's value, the mean with its uncertainty and the verdict.
 //!
@@ -12,8 +12,9 @@
 //! A scan without a specification exports Ra, Rq and Rz without limits (one characteristic
 //! each), so an SPC system still receives its values.
 //!
-//! Layer 4 (reporting): depends on [`crate::scan::journal`] (the records), the report's
-//! documented JSON and [`crate::specification::Verdict`]; no writing.
+//! Layer 4 (the lab's systems): depends on [`crate::scan::journal`] (the records), the
+//! report's documented JSON (read as JSON, not through the report's types) and
+//! [`crate::specification::Verdict`]; no writing.
 
 use crate::scan::journal::{read_journal, Record};
 use crate::specification::Verdict;
