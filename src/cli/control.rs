@@ -19,10 +19,10 @@
 //!
 //! Layer 5 (composition): depends on [`crate::control`].
 
+use super::start_args::{self, StartChoiceArgs};
 use super::{CliError, Exit};
 use crate::control::client::{ClientError, ControlClient, Received};
 use crate::control::protocol::{Message, Request};
-use crate::scan::command::StartMode;
 use crate::scan::ending::StopStatus;
 use crate::scan::status::{DeviceState, State, Status};
 use std::fmt::Write as _;
@@ -82,26 +82,9 @@ pub struct StartArgs {
     /// Free-text notes, recorded with the scan.
     #[arg(long, value_name = "TEXT", default_value = "")]
     pub notes: String,
-    /// Continue the newest unfinished or failed scan at its first missing line (after the
-    /// cause of a failure was cleared).
-    #[arg(long, conflicts_with = "new")]
-    pub resume: bool,
-    /// Start a new scan even when one is unfinished (that one is recorded as abandoned).
-    #[arg(long)]
-    pub new: bool,
-    /// Scan with this recipe (`NAME.toml` in the station's `[jobs] recipes` directory): its
-    /// plan, measuring conditions, analysis and specification, instead of the station's plan.
-    #[arg(long, value_name = "NAME")]
-    pub recipe: Option<String>,
-    /// y of the first line, mm (machine coordinates), for the recipe's scan [default: the
-    /// recipe's, else the station's].
-    #[arg(
-        long,
-        value_name = "Y",
-        requires = "recipe",
-        allow_negative_numbers = true
-    )]
-    pub y_start_mm: Option<f64>,
+    /// Which scan: resume, new, a recipe.
+    #[command(flatten)]
+    pub choice: StartChoiceArgs,
 }
 
 /// Which operator command to send.
@@ -265,23 +248,13 @@ pub fn run_command(verb: Verb, args: CommandArgs) -> Result<(), CliError> {
 
 /// Runs `surfscan start`.
 pub fn run_start(args: StartArgs) -> Result<(), CliError> {
-    let operator = args
-        .operator
-        .or_else(|| std::env::var("USER").ok())
-        .unwrap_or_default();
-    if let Some(y) = args.y_start_mm.filter(|y| !y.is_finite()) {
-        return Err(CliError::new(
-            Exit::Usage,
-            format!("--y-start-mm {y} is not a position; give the y of the first line in mm"),
-        ));
-    }
     let request = Request::Start {
         specimen: args.specimen,
-        operator,
+        operator: start_args::operator_or_user(args.operator),
         notes: args.notes,
-        mode: StartMode::from_flags(args.resume, args.new),
-        recipe: args.recipe,
-        y_start_mm: args.y_start_mm,
+        mode: args.choice.mode(),
+        y_start_mm: args.choice.y_start_mm()?,
+        recipe: args.choice.recipe,
     };
     let path = socket_path(&args.target)?;
     let json = args.target.json;

@@ -55,6 +55,7 @@ pub mod probe;
 pub mod queue;
 pub mod report;
 pub mod scan;
+pub mod start_args;
 pub mod station;
 
 /// The station configuration read when `--config` is not given.

@@ -12,7 +12,8 @@
 //! types for the listing.
 
 use super::control::{send_command, Target};
-use super::{CliError, Exit};
+use super::start_args;
+use super::CliError;
 use crate::control::protocol::Request;
 use crate::jobs::queue::{Job, JobState, Queue};
 use crate::numfmt::{fmt, Quantity};
@@ -103,26 +104,15 @@ pub struct ReadyArgs {
 pub fn run(args: Args) -> Result<(), CliError> {
     match args.command {
         QueueCommand::Add(a) => {
-            if let Some(y) = a.y_start_mm.filter(|y| !y.is_finite()) {
-                return Err(CliError::new(
-                    Exit::Usage,
-                    format!(
-                        "--y-start-mm {y} is not a position; give the y of the first line in mm"
-                    ),
-                ));
-            }
-            let operator = a
-                .operator
-                .or_else(|| std::env::var("USER").ok())
-                .unwrap_or_default();
+            let y_start_mm = start_args::y_start_mm(a.y_start_mm)?;
             send_command(
                 &a.target,
                 Request::QueueAdd {
                     recipe: a.recipe,
                     specimen: a.specimen,
-                    operator,
+                    operator: start_args::operator_or_user(a.operator),
                     notes: a.notes,
-                    y_start_mm: a.y_start_mm,
+                    y_start_mm,
                     needs_loading: a.needs_loading,
                 },
             )

@@ -22,6 +22,7 @@
 //! Layer 5 (composition): [`super::station`] (the configuration as the runner's settings, the
 //! station's lock), [`super::check_config`]'s port check, the runner, signals, terminal.
 
+use super::start_args::{self, StartChoiceArgs};
 use super::station::{
     ignore_hangups, load_config, lock_station, recipe_conflict, record_scan_in_lock, run_settings,
     with_job,
@@ -31,7 +32,7 @@ use crate::config::Config;
 use crate::publish::Publishers;
 use crate::scan::channels::Control;
 use crate::scan::choice::{self, Asker};
-use crate::scan::command::{Peer, StartMode};
+use crate::scan::command::Peer;
 use crate::scan::ending::{End, FailKind};
 use crate::scan::outcome::{Outcome, ScanRequest};
 use crate::scan::runner::run_scan;
@@ -61,26 +62,9 @@ pub struct Args {
     /// Free-text notes (recorded with the scan).
     #[arg(long, default_value = "")]
     pub notes: String,
-    /// Continue the newest unfinished or failed scan at its first missing line (after the
-    /// cause of a failure was cleared).
-    #[arg(long, conflicts_with = "new")]
-    pub resume: bool,
-    /// Start a new scan even when one is unfinished (that one is recorded as abandoned).
-    #[arg(long)]
-    pub new: bool,
-    /// Scan with this recipe (`NAME.toml` in the station's `[jobs] recipes` directory): its
-    /// plan, measuring conditions, analysis and specification, instead of the station's plan.
-    #[arg(long, value_name = "NAME")]
-    pub recipe: Option<String>,
-    /// y of the first line, mm (machine coordinates), for the recipe's scan [default: the
-    /// recipe's, else the station's].
-    #[arg(
-        long,
-        value_name = "Y",
-        requires = "recipe",
-        allow_negative_numbers = true
-    )]
-    pub y_start_mm: Option<f64>,
+    /// Which scan: resume, new, a recipe.
+    #[command(flatten)]
+    pub choice: StartChoiceArgs,
 }
 
 /// The station's configuration with the recipe's plan and analysis, and the recipe's job for
@@ -94,12 +78,7 @@ pub(super) fn with_recipe(
     let Some(name) = recipe else {
         return Ok((config.clone(), None));
     };
-    if let Some(y) = y_start_mm.filter(|y| !y.is_finite()) {
-        return Err(CliError::new(
-            Exit::Usage,
-            format!("--y-start-mm {y} is not a position; give the y of the first line in mm"),
-        ));
-    }
+    let y_start_mm = start_args::y_start_mm(y_start_mm)?;
     let r = crate::jobs::recipe::Recipe::load(&config.jobs.recipes, name, config)?;
     let c = r.config_for(config, y_start_mm)?;
     Ok((c, Some(r)))
@@ -398,10 +377,11 @@ pub fn run(args: Args) -> Result<(), CliError> {
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
     let mut station = SerialStation::new(config.instrument.clone(), config.stage.clone())
         .map_err(|e| CliError::new(Exit::Config, e))?;
-    let (run_config, recipe) = with_recipe(&config, args.recipe.as_deref(), args.y_start_mm)?;
+    let recipe = args.choice.recipe.as_deref();
+    let (run_config, recipe) = with_recipe(&config, recipe, args.choice.y_start_mm)?;
     let choice = choice::choose(
         &config.output.dir,
-        Asker::Operator(StartMode::from_flags(args.resume, args.new)),
+        Asker::Operator(args.choice.mode()),
         Peer::this_process(),
         (args.specimen, args.operator, args.notes),
     )
