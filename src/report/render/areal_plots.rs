@@ -26,9 +26,9 @@
 
 use super::decimate::extremes_per_column_of_pairs;
 use super::plots::{
-    chart, draw_colour_bar, ensure_font, exaggeration_note, font, legend, padded_range, plot_err,
-    png_and_svg, replace_figure, tick, viridis, write_png, Frame, DATA, EXAGGERATIONS, MAP_BAR_W,
-    MODEL,
+    chart, draw_colour_bar, ensure_font, exaggeration_note, font, legend, line_key, padded_range,
+    plot_err, png_and_svg, replace_figure, tick, viridis, write_png, Frame, DATA, EXAGGERATIONS,
+    MAP_BAR_W, MODEL,
 };
 use super::text_cache::TextCache;
 use crate::extremes::min_max;
@@ -114,23 +114,21 @@ where
         .map_err(|e| e.to_string())?;
     let columns = chart.plotting_area().dim_in_pixel().0;
     for (c, colour, which) in &sections {
-        let colour = *colour;
+        let line = colour.stroke_width(2);
         chart
             .draw_series(LineSeries::new(
                 extremes_per_column_of_pairs(&c.points, (0.0, x_hi), columns),
-                colour.stroke_width(2),
+                line,
             ))
             .map_err(|e| e.to_string())?
             .label(section_label(c, which))
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 24, y)], colour.stroke_width(2))
-            });
+            .legend(line_key(line));
         // The decay length: a vertical marker from the axis up to s, named at its top.
         if let Some(l) = c.decay_um {
             chart
                 .draw_series(std::iter::once(PathElement::new(
                     vec![(l, y_lo), (l, s)],
-                    colour.stroke_width(2),
+                    line,
                 )))
                 .map_err(|e| e.to_string())?;
             let name = if *which == "fastest" {
@@ -142,7 +140,7 @@ where
                 .draw_series(std::iter::once(Text::new(
                     format!("{name} {} µm", fmt(l, Quantity::HeightUm)),
                     (l, s),
-                    font(13).color(&colour),
+                    font(13).color(colour),
                 )))
                 .map_err(|e| e.to_string())?;
         }
@@ -226,7 +224,7 @@ where
         if points.is_empty() {
             continue;
         }
-        let colour = *colour;
+        let line = colour.stroke_width(2);
         // Reduced per pixel column of the logarithmic axis.
         let logs: Vec<[f64; 2]> = points.iter().map(|p| [p[0].ln(), p[1]]).collect();
         let kept: Vec<(f64, f64)> =
@@ -235,12 +233,10 @@ where
                 .map(|(lq, c)| (lq.exp(), c))
                 .collect();
         chart
-            .draw_series(LineSeries::new(kept, colour.stroke_width(2)))
+            .draw_series(LineSeries::new(kept, line))
             .map_err(|e| e.to_string())?
             .label(*label)
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 24, y)], colour.stroke_width(2))
-            });
+            .legend(line_key(line));
     }
     legend(&mut chart, SeriesLabelPosition::LowerLeft)
 }

@@ -436,6 +436,11 @@ where
         .map_err(|e| e.to_string())
 }
 
+/// A legend's key for a series drawn as a line in `style`: a stroke 24 px long.
+pub(super) fn line_key(style: ShapeStyle) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+    move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style)
+}
+
 /// A chart of [`chart`]: its coordinates those of its two ranges.
 pub(super) type Chart<'a, DB, X, Y> = ChartContext<
     'a,
@@ -528,9 +533,7 @@ where
         if k == 0 {
             series
                 .label("Rmr(c) of one model profile curve (colour: its y)")
-                .legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], viridis(0.5).stroke_width(2))
-                });
+                .legend(line_key(viridis(0.5).stroke_width(2)));
         }
     }
     if !pooled.is_empty() {
@@ -542,7 +545,7 @@ where
             } else {
                 "Smr(c), pooled over the model surface"
             })
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], BLACK.stroke_width(3)));
+            .legend(line_key(BLACK.stroke_width(3)));
     }
     if !curves.is_empty() || !pooled.is_empty() {
         legend(&mut chart, SeriesLabelPosition::UpperRight)?;
@@ -1054,7 +1057,7 @@ where
         ))
         .map_err(|e| e.to_string())?
         .label("NURBS model")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], MODEL.stroke_width(2)));
+        .legend(line_key(MODEL.stroke_width(2)));
     chart
         .draw_series(
             measured
@@ -1301,7 +1304,7 @@ where
         ))
         .map_err(err)?
         .label("material ratio curve of the line")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], DATA.stroke_width(2)));
+        .legend(line_key(DATA.stroke_width(2)));
     // The equivalent straight line, with the 40 % secant it is the extension of.
     chart
         .draw_series(LineSeries::new(
@@ -1310,7 +1313,7 @@ where
         ))
         .map_err(err)?
         .label("equivalent straight line")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], MODEL.stroke_width(1)));
+        .legend(line_key(MODEL.stroke_width(1)));
     let s = rk.secant_start_pct;
     let at = |mr: f64| c + (d - c) * mr / 100.0;
     chart
@@ -1320,7 +1323,7 @@ where
         ))
         .map_err(err)?
         .label("40 % secant of least gradient")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], MODEL.stroke_width(4)));
+        .legend(line_key(MODEL.stroke_width(4)));
     let tag = font(13).color(&grey);
     for (text, x, y) in [
         ("C", 50.0, c),
