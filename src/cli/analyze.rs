@@ -527,13 +527,13 @@ fn characterise_grid(
         options,
         warnings: input.findings.clone(),
     };
+    let (surface, replaced) = crate::report::scan_dir::handed_over(fitted);
     let model = Model {
         recipe,
-        fit: fitted.as_ref().map(|m| &m.fit),
-        replaced: fitted.as_ref().map_or(&[][..], |m| &m.replaced[..]),
+        replaced: &replaced,
         fit_s,
     };
-    characterise(&input.grid, model, ctx, &out_dir(args))
+    characterise(&input.grid, model, surface, ctx, &out_dir(args))
 }
 
 /// What `analyze` of a profile says it found, as the instrument's display would show it:

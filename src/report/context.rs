@@ -14,6 +14,7 @@ use crate::metrology::surface_model::ModelRecipe;
 use crate::scan::outputs::FitSummary;
 use crate::scan::plan::AnalysisPlan;
 use crate::specification::{InstrumentUncertainty, Specification};
+use std::borrow::Cow;
 use std::path::PathBuf;
 
 /// How a scan or grid is characterised. [`Default`]: 31 model curves, 101 levels, λc and
@@ -116,15 +117,19 @@ impl Default for ScanAnalysisOptions {
     }
 }
 
-/// The surface the model sections describe: the fit (or why there is none) and how it was
-/// made (degrees, method across the lines, spikes replaced), which the hold-out refits
-/// follow too.
+/// The fitted surface the model sections describe, with its data parameters, or why the
+/// grid could not be fitted: borrowed from a caller that keeps it (the runner, which wrote
+/// it), or handed over ([`Cow::Owned`]) so that the characterisation lets it go once the
+/// model is sampled (a 1000×10000 grid's net is 80 MB, beside the model's autocorrelation).
+pub type ModelFit<'a> = Result<Cow<'a, FitResult>, MethodError>;
+
+/// How the surface the model sections describe was made (degrees, method across the lines,
+/// spikes replaced), which the hold-out refits follow too; the surface itself is a
+/// [`ModelFit`].
 #[derive(Debug, Clone, Copy)]
 pub struct Model<'a> {
     /// How the surface was made.
     pub recipe: ModelRecipe,
-    /// The fitted surface with its data parameters, or why the grid could not be fitted.
-    pub fit: Result<&'a FitResult, &'a MethodError>,
     /// The spikes replaced before fitting (empty unless the recipe asks for it).
     pub replaced: &'a [LineSpike],
     /// Seconds the caller spent fitting the surface for this report, counted in the report's

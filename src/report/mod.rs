@@ -33,7 +33,7 @@ pub mod render;
 pub mod scan_dir;
 pub mod sections;
 
-pub use context::{Model, ReportContext, ScanAnalysisOptions};
+pub use context::{Model, ModelFit, ReportContext, ScanAnalysisOptions};
 pub use document::Report;
 pub use error::ReportError;
 pub use scan_dir::{characterise_scan, ScanCharacteriser};
@@ -70,9 +70,10 @@ pub struct ScanOutputs {
     pub elapsed_s: f64,
 }
 
-/// Characterises a grid of lines with `model` (the surface fitted through them, or why there
-/// is none) and writes every output into `out`: the work behind the scan entry points of
-/// [`scan_dir`] and `surfscan analyze GRID.csv`.
+/// Characterises a grid of lines with `fit` (the surface fitted through them as `model` says,
+/// or why there is none) and writes every output into `out`: the work behind the scan entry
+/// points of [`scan_dir`] and `surfscan analyze GRID.csv`. A `fit` handed over is dropped once
+/// the model is sampled, unless the contact of the model between lines still needs it.
 ///
 /// Sections fail alone: a failure in a model section (the fit, the model's bearing curves or
 /// areal parameters, the hold-out refits, the verdict) never removes the per-line
@@ -84,6 +85,7 @@ pub struct ScanOutputs {
 pub fn characterise(
     grid: &Grid,
     model: Model<'_>,
+    fit: ModelFit<'_>,
     ctx: ReportContext,
     out: &Path,
 ) -> Result<ScanOutputs, ReportError> {
@@ -113,6 +115,7 @@ pub fn characterise(
     let (sections, (rk_plots, rk_s), model_x3p) = sections::run(
         grid,
         &model,
+        fit,
         &ctx,
         |analyses| timed(|| render::write_rk_plots(out, grid, analyses, &ctx)),
         |m| {

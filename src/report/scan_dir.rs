@@ -11,7 +11,7 @@
 //! [`Characterise`] contract the runner calls), [`crate::input`], [`crate::fit`] and the
 //! sections.
 
-use super::context::{Model, ReportContext, ScanAnalysisOptions};
+use super::context::{Model, ModelFit, ReportContext, ScanAnalysisOptions};
 use super::document::{Completeness, Report, ScanStatus, Traceability};
 use super::error::ReportError;
 use super::header::LabHeader;
@@ -20,6 +20,7 @@ use crate::fit::{max_residual_mm, FitOptions, MethodError};
 use crate::grid::Grid;
 use crate::input::scan::grid_of_lines;
 use crate::input::{GridInput, InputError, Source, VouchedLines};
+use crate::metrology::outliers::LineSpike;
 use crate::metrology::params::Options;
 use crate::metrology::surface_model::{fit_model, FittedModel, ModelRecipe};
 use crate::numfmt::line_label;
@@ -29,6 +30,7 @@ use crate::scan::line::StoredLine;
 use crate::scan::outputs::{Characterise, Characterised, CompletedScan, FitSummary, GridShape};
 use crate::scan::results::ScanResults;
 use crate::specification::{InstrumentUncertainty, Specification};
+use std::borrow::Cow;
 use std::path::Path;
 use std::time::Instant;
 
@@ -162,6 +164,7 @@ pub struct ScanLines<'a> {
 pub fn characterise_scan_lines(
     scan_lines: ScanLines<'_>,
     model: Model<'_>,
+    surface: ModelFit<'_>,
     fit: Option<FitSummary>,
     options: &ScanAnalysisOptions,
     mut warnings: Vec<String>,
@@ -269,7 +272,7 @@ pub fn characterise_scan_lines(
         }),
     };
     let out = options.out_dir.clone().unwrap_or_else(|| dir.to_path_buf());
-    let mut outputs = characterise(grid, model, ctx, &out)?;
+    let mut outputs = characterise(grid, model, surface, ctx, &out)?;
     outputs.incomplete_lines = incomplete.to_vec();
     Ok(outputs)
 }
@@ -299,6 +302,17 @@ fn judged_by(
         }
     });
     (specification, instrument)
+}
+
+/// The surface of `fitted` handed over to the characterisation (which lets it go once the
+/// model is sampled), with the spikes replaced before fitting.
+pub fn handed_over(
+    fitted: Result<FittedModel, MethodError>,
+) -> (ModelFit<'static>, Vec<LineSpike>) {
+    match fitted {
+        Ok(m) => (Ok(Cow::Owned(m.fit)), m.replaced),
+        Err(e) => (Err(e), Vec::new()),
+    }
 }
 
 /// Fits `grid` as `recipe` says and summarises the fit (no IGES written).
@@ -358,10 +372,10 @@ pub fn characterise_scan(
         journal_lines: &journal_lines,
         completing: false,
     });
+    let (surface, replaced) = handed_over(fitted);
     let model = Model {
         recipe,
-        fit: fitted.as_ref().map(|m| &m.fit),
-        replaced: fitted.as_ref().map_or(&[][..], |m| &m.replaced[..]),
+        replaced: &replaced,
         fit_s,
     };
     characterise_scan_lines(
@@ -373,6 +387,7 @@ pub fn characterise_scan(
             facts,
         },
         model,
+        surface,
         summary,
         options,
         input.findings.clone(),
@@ -421,7 +436,6 @@ impl Characterise for ScanCharacteriser {
         };
         let model = Model {
             recipe: scan.recipe,
-            fit: Ok(scan.fit),
             replaced: scan.replaced,
             fit_s: 0.0,
         };
@@ -435,6 +449,7 @@ impl Characterise for ScanCharacteriser {
                 facts: Some(facts),
             },
             model,
+            Ok(Cow::Borrowed(scan.fit)),
             Some(scan.summary.clone()),
             &options,
             Vec::new(),

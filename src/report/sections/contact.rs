@@ -171,12 +171,13 @@ impl ContactSection {
     }
 }
 
-/// Runs the section on the grid as characterised and, when asked for, on the model sampled
-/// at `opts.model_pitch_y_mm`, judged by `between_lines`.
+/// Runs the section on the grid as characterised and, when asked for, on the model (`fit`, or
+/// why there is none) sampled at `opts.model_pitch_y_mm`, judged by `between_lines`.
 pub fn section(
     input: &SectionInput<'_>,
     opts: &ContactSectionOptions,
     between_lines: Result<&BetweenLines, &String>,
+    fit: Result<&FitResult, &str>,
 ) -> ContactSection {
     let g = input.characterised;
     let e_gpa = crate::contact::effective_modulus_gpa(opts.contact.specimen, opts.contact.counter);
@@ -189,7 +190,7 @@ pub fn section(
                 format!("the model between lines could not be judged: {e}"),
             ),
         };
-        let contact = match input.model.fit {
+        let contact = match fit {
             Ok(fit) => sample_between(fit, g, s).and_then(|(h, rows)| {
                 let map = HeightMap::of(g, s);
                 let map = HeightMap {

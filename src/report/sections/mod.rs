@@ -37,7 +37,7 @@ pub mod spikes;
 pub mod surface;
 pub mod surface_grid;
 
-use super::context::{Model, ReportContext};
+use super::context::{Model, ModelFit, ReportContext};
 use super::document::{FailedSection, OutliersReport, SurfaceReport, Timings};
 use super::error::ReportError;
 use crate::grid::Grid;
@@ -104,9 +104,12 @@ pub struct Sections {
 /// model sampled on the data lines goes to `write_model` (the caller writes `model.x3p`) on
 /// the model's thread before its areal parameters, whose autocorrelation grows from it: the
 /// sampled model is not kept (what it returns comes back, `None` when it was not sampled).
+/// The surface `fit` goes to the model's thread, which drops it (when it was handed over)
+/// once the model is sampled unless the contact of the model between lines reads it after.
 pub fn run<D, M: Send>(
     grid: &Grid,
     model: &Model<'_>,
+    fit: ModelFit<'_>,
     ctx: &ReportContext,
     draw_lines: impl FnOnce(Vec<LineAnalysis>) -> D,
     write_model: impl FnOnce(&HeightMap<'_>) -> M + Send,
@@ -130,12 +133,15 @@ pub fn run<D, M: Send>(
     // done (`areal_go` sent, with the row of the overlay to draw from the sampled model when
     // no line was held out; or dropped by an early return): their buffers would otherwise be
     // held beside it. A small one is sampled before that wait (`surface::section`).
+    let keep_fit = ctx.options.contact.as_ref();
+    let keep_fit = keep_fit.is_some_and(|c| c.model_pitch_y_mm.is_some());
+    let no_fit = fit.as_ref().err().map(ToString::to_string);
     std::thread::scope(|scope| {
         let (areal_go, areal_wait) = std::sync::mpsc::channel::<Option<usize>>();
         let model_thread = scope.spawn(move || {
             let t = Instant::now();
             let (mut waited, mut wrote) = (std::time::Duration::ZERO, std::time::Duration::ZERO);
-            let mut made = (None, None);
+            let (mut made, mut kept) = ((None, None), None);
             let m = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                 let wait = || {
                     let w = Instant::now();
@@ -143,17 +149,20 @@ pub fn run<D, M: Send>(
                     waited = w.elapsed();
                     row
                 };
-                surface::section(&input, wait, |row, sampled| {
-                    let w = Instant::now();
-                    if let Ok(row) = row {
-                        let overlay = row.map(|row| overlay::data_line(grid, sampled, row));
-                        made = (overlay, Some(write_model(sampled)));
-                    }
-                    wrote = w.elapsed();
-                })
+                let (section, fit) =
+                    surface::section(&input, fit, keep_fit, wait, |row, sampled| {
+                        let w = Instant::now();
+                        if let Ok(row) = row {
+                            let overlay = row.map(|row| overlay::data_line(grid, sampled, row));
+                            made = (overlay, Some(write_model(sampled)));
+                        }
+                        wrote = w.elapsed();
+                    });
+                kept = fit;
+                section
             }))
             .unwrap_or_else(|_| surface::panicked());
-            (m, made, (t.elapsed() - waited - wrote).as_secs_f64())
+            (m, made, (t.elapsed() - waited - wrote).as_secs_f64(), kept)
         });
 
         let t = Instant::now();
@@ -220,9 +229,9 @@ pub fn run<D, M: Send>(
         }
         crate::fit::memory::release_free_heap();
         let _ = areal_go.send(overlay.as_ref().err().copied());
-        let (surface, (model_overlay, written), model_s) = model_thread
+        let (surface, (model_overlay, written), model_s, kept) = model_thread
             .join()
-            .unwrap_or_else(|_| (surface::panicked(), (None, None), 0.0));
+            .unwrap_or_else(|_| (surface::panicked(), (None, None), 0.0, None));
         timings.model = model_s;
         if let Some(c) = &surface.checks {
             warnings.extend(c.warnings());
@@ -240,7 +249,9 @@ pub fn run<D, M: Send>(
         // The contact (when asked for): of the grid as characterised, and of the model
         // between lines with the verdict between lines beside it.
         let contact = ctx.options.contact.as_ref().map(|opts| {
-            let c = contact::section(&input, opts, between_lines.as_ref());
+            let no_fit = no_fit.as_deref().unwrap_or(surface::PANICKED);
+            let fit = kept.as_deref().ok_or(no_fit);
+            let c = contact::section(&input, opts, between_lines.as_ref(), fit);
             warnings.extend(c.warnings());
             c
         });

@@ -10,12 +10,14 @@
 
 use super::surface_grid::surface_report;
 use super::SectionInput;
+use crate::fit::FitResult;
 use crate::metrology::areal::HeightMap;
 use crate::metrology::folds::{check_model_with, iso_curve_sample_count, FoldOptions, ModelChecks};
 use crate::metrology::model::{
     bearing_sample_us, model_bearing_curves_with, sample_model_grid, ModelBacOptions,
 };
 use crate::nurbs::UBasis;
+use crate::report::context::ModelFit;
 use crate::report::document::{FailedSection, SurfaceReport};
 use std::borrow::Cow;
 
@@ -51,9 +53,12 @@ fn no_surface(reason: impl Into<String>) -> ModelSection {
     }
 }
 
+/// Why there is no model when its section panicked.
+pub const PANICKED: &str = "internal: the model section panicked; report this with the input";
+
 /// The section when it panicked: a failed `surface` section that says so.
 pub fn panicked() -> ModelSection {
-    no_surface("internal: the model section panicked; report this with the input")
+    no_surface(PANICKED)
 }
 
 /// Runs the section: the model of `input` against the grid's measured heights. Once it is
@@ -65,17 +70,21 @@ pub fn panicked() -> ModelSection {
 /// twice its bytes and grows from them) made after `before_areal`, so the peaks do not add; a
 /// model of at most [`EARLY_SAMPLES`] samples is sampled and its areal parameters made before
 /// the wait, while the other sections run, when the process may use more than one core.
-pub fn section<W>(
+/// `fit` is dropped once the model is sampled (its net, as large as the grid, is then not
+/// held beside the areal parameters' autocorrelation) and returned only when `keep_fit`.
+pub fn section<'f, W>(
     input: &SectionInput<'_>,
+    fit: ModelFit<'f>,
+    keep_fit: bool,
     wait: impl FnOnce() -> W,
     before_areal: impl FnOnce(W, &HeightMap<'_>),
-) -> ModelSection {
+) -> (ModelSection, Option<Cow<'f, FitResult>>) {
     let (model, options, g) = (input.model, &input.ctx.options, input.grid);
     let (heights_um, rows, cols) = (&g.heights_um[..], g.rows(), g.cols);
     let (pitch_x_mm, pitch_y_mm) = (g.pitch_x_mm, input.pitch_y_mm);
-    let fit = match model.fit {
+    let fit = match fit {
         Ok(fit) => fit,
-        Err(e) => return no_surface(format!("the NURBS fit failed: {e}")),
+        Err(e) => return (no_surface(format!("the NURBS fit failed: {e}")), None),
     };
     let mut fails = Vec::new();
     let model_cols = 2 * cols - 1;
@@ -107,7 +116,8 @@ pub fn section<W>(
         (checks.join(), bac)
     });
     let Ok(checks) = checks else {
-        return no_surface("internal: the model checks panicked; report this with the input");
+        let why = "internal: the model checks panicked; report this with the input";
+        return (no_surface(why), keep_fit.then_some(fit));
     };
     let folds = checks.folds();
     let (p, q) = (model.recipe.degrees.degree_u, model.recipe.degrees.degree_v);
@@ -149,21 +159,30 @@ pub fn section<W>(
         )
     };
     // The model sampled on the data lines (their v) at half the x pitch: what `model.x3p` shows.
-    let (v, x0_mm) = (&fit.params_v, fit.x0_mm);
-    let sample = || {
-        sample_model_grid(&fit.surface, v, x0_mm, pitch_x_mm / 2.0, model_cols)
-            .map_err(|e| format!("sampling the model on the data lines: {e}"))
+    let sample = |f: &FitResult| {
+        sample_model_grid(
+            &f.surface,
+            &f.params_v,
+            f.x0_mm,
+            pitch_x_mm / 2.0,
+            model_cols,
+        )
+        .map_err(|e| format!("sampling the model on the data lines: {e}"))
     };
+    // Once sampled the fit is let go, unless it is kept for the caller.
+    let let_go = |fit: Cow<'f, FitResult>| keep_fit.then_some(fit);
     // Over a fold the surface has several heights at one x: no grid of heights describes it,
     // whichever branch an inversion of x(u) would pick. A small model's buffers add little to
     // the other sections' peak: it does not wait (see above), unless the process has one core,
     // where there is no idle time to fill and the areal section's copy of the samples is only
     // a cost.
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let surface = if folds {
-        Err("the model folds (x runs backwards along its iso-curves, see model_checks), so it is not a height map: no model.x3p and no areal parameters of the model".to_string())
+    let (surface, fit) = if folds {
+        (Err("the model folds (x runs backwards along its iso-curves, see model_checks), so it is not a height map: no model.x3p and no areal parameters of the model".to_string()), let_go(fit))
     } else if rows * model_cols <= EARLY_SAMPLES && cores > 1 {
-        sample().and_then(|heights| {
+        let sampled = sample(&fit);
+        let fit = let_go(fit);
+        let surface = sampled.and_then(|heights| {
             let surface = areal(Cow::Borrowed(&heights));
             let map = HeightMap {
                 heights_um: &heights,
@@ -171,17 +190,21 @@ pub fn section<W>(
             };
             before_areal(wait(), &map);
             surface
-        })
+        });
+        (surface, fit)
     } else {
         let w = wait();
-        sample().and_then(|heights| {
+        let sampled = sample(&fit);
+        let fit = let_go(fit);
+        let surface = sampled.and_then(|heights| {
             let map = HeightMap {
                 heights_um: &heights,
                 ..shape
             };
             before_areal(w, &map);
             areal(Cow::Owned(heights))
-        })
+        });
+        (surface, fit)
     };
     let surface = surface.map(|mut s| {
         if let Some(curves) = curves {
@@ -196,9 +219,10 @@ pub fn section<W>(
     if let Err(e) = &surface {
         fails.push(failed("surface", e.clone()));
     }
-    ModelSection {
+    let section = ModelSection {
         surface,
         checks: Some(checks),
         failed: fails,
-    }
+    };
+    (section, fit)
 }
