@@ -737,7 +737,7 @@ fn bench_scan(dir: &Path, cols: usize, runs: usize, kinds: &[ProfileKind]) {
             wall.push(t.elapsed().as_secs_f64());
             cpu.push(process_cpu_s() - c);
             assert_eq!(out.lines_used.len(), 31);
-            let report: serde_json::Value = std::fs::read_to_string(&out.report_json)
+            let report: serde_json::Value = std::fs::read_to_string(&out.files.report_json)
                 .ok()
                 .and_then(|t| serde_json::from_str(&t).ok())
                 .unwrap_or_default();

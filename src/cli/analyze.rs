@@ -233,7 +233,7 @@ fn finish(o: &ScanOutputs, judged: bool, profile: Option<String>) -> Result<(), 
     let c = &o.report.characterisation;
     let summary = profile
         .unwrap_or_else(|| format!("{} characterised in {:.2} s", c.lines_used(), o.elapsed_s));
-    say!("{}: {summary}", o.report_json.display());
+    say!("{}: {summary}", o.files.report_json.display());
     if let Some(spec) = &o.report.specification {
         say!("verdict: {}", spec.verdict);
         for l in &spec.limits {
@@ -245,7 +245,7 @@ fn finish(o: &ScanOutputs, judged: bool, profile: Option<String>) -> Result<(), 
                 Exit::DoesNotConform,
                 format!(
                     "the part does not conform to its specification (report.json's specification names the limits and lines): {}",
-                    o.report_json.display()
+                    o.files.report_json.display()
                 ),
             ));
         }
@@ -272,7 +272,7 @@ fn finish(o: &ScanOutputs, judged: bool, profile: Option<String>) -> Result<(), 
         partial.push(format!(
             "{} could not be made (the reasons are in the warnings above and in {})",
             failed.join(", "),
-            o.report_json.display()
+            o.files.report_json.display()
         ));
     }
     Err(CliError::new(

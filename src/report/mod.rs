@@ -40,7 +40,7 @@ pub use scan_dir::{characterise_scan, ScanCharacteriser};
 
 use crate::grid::Grid;
 use crate::metrology::MetrologyError;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 /// What a characterisation wrote and used.
@@ -48,18 +48,9 @@ use std::time::Instant;
 pub struct ScanOutputs {
     /// The report as written to `report.json`.
     pub report: Report,
-    /// `report.json`.
-    pub report_json: PathBuf,
-    /// `report.html`, the report for people (plots embedded).
-    pub report_html: PathBuf,
-    /// `summary.csv`.
-    pub summary_csv: PathBuf,
-    /// The PNG and SVG plots written.
-    pub plots: Vec<PathBuf>,
-    /// `measured.x3p`, when the grid could be written (every height finite).
-    pub measured_x3p: Option<PathBuf>,
-    /// `model.x3p`, when the NURBS model could be sampled.
-    pub model_x3p: Option<PathBuf>,
+    /// The files written: `report.json`, `report.html`, `summary.csv`, the plots, the X3P
+    /// files.
+    pub files: render::Files,
     /// Line indices characterised.
     pub lines_used: Vec<u32>,
     /// Line indices with only one of their two files (left out).
@@ -139,22 +130,8 @@ pub fn characterise(
         ..report
     };
     render::write_report(out, &written, &report, &ctx, logo.as_ref())?;
-    let mut plots = written.plots;
-    let line_png = ctx.lab.line_png;
-    plots.extend(
-        written
-            .rk_plots
-            .into_iter()
-            .flat_map(|(_, [png, svg])| [line_png.then_some(png), Some(svg)])
-            .flatten(),
-    );
     Ok(ScanOutputs {
-        report_json: written.report_json,
-        report_html: written.report_html,
-        summary_csv: written.summary_csv,
-        plots,
-        measured_x3p: Some(written.measured_x3p),
-        model_x3p: written.model_x3p,
+        files: written,
         lines_used: grid.index.clone(),
         incomplete_lines: ctx
             .scan

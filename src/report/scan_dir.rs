@@ -456,10 +456,11 @@ impl Characterise for ScanCharacteriser {
         )?;
         let complete = out.complete();
         let verdict = out.verdict_line();
-        let mut files = vec![out.report_html, out.summary_csv];
-        files.extend(out.plots);
-        files.extend(out.measured_x3p);
-        files.extend(out.model_x3p);
+        let written = out.files;
+        let mut files = vec![written.report_html, written.summary_csv];
+        files.extend(written.plots);
+        files.push(written.measured_x3p);
+        files.extend(written.model_x3p);
         let results = results_of(&out.report);
         Ok(Characterised {
             files,

@@ -886,17 +886,17 @@ fn characterise_scan_reports_the_fit_it_describes_and_returns_the_paths() {
     // The figures drawn on this thread leave no texts behind for the next report: a daemon
     // characterising scan after scan holds no memory for the ones before.
     assert_eq!(surfscan::report::render::text_cache::remembered(), (0, 0));
-    assert_eq!(out.report_json, scan.join("report.json"));
+    assert_eq!(out.files.report_json, scan.join("report.json"));
     assert_eq!(out.lines_used, (0..7).collect::<Vec<u32>>());
     assert!(out.incomplete_lines.is_empty());
     // Bearing curves, height map and its 3D view, PSD, ACF, overlay (PNG and SVG each), and
     // the Rk construction of each of the 7 lines (an SVG: no `[report] line-png`).
-    assert_eq!(out.plots.len(), 12 + 7);
-    assert!(out.report_html.exists());
-    for p in out.plots.iter().chain([&out.summary_csv]) {
+    assert_eq!(out.files.plots.len(), 12 + 7);
+    assert!(out.files.report_html.exists());
+    for p in out.files.plots.iter().chain([&out.files.summary_csv]) {
         assert!(p.starts_with(&scan) && p.exists(), "{}", p.display());
     }
-    assert!(out.model_x3p.as_ref().is_some_and(|p| p.exists()));
+    assert!(out.files.model_x3p.as_ref().is_some_and(|p| p.exists()));
     let r = report(&scan);
     // The fit section describes the surface of the model sections: the 7 lines.
     assert_eq!(

@@ -46,7 +46,8 @@ pub struct Files {
     pub report_html: PathBuf,
     /// `summary.csv`.
     pub summary_csv: PathBuf,
-    /// The PNG and SVG plots (the Rk constructions are in `rk_plots`).
+    /// Every plot written, the Rk constructions last (their PNGs only with `[report]
+    /// line-png`).
     pub plots: Vec<PathBuf>,
     /// The Rk construction of each line: its title and its PNG (written only when
     /// `[report] line-png` asks for it) and SVG.
@@ -361,6 +362,11 @@ pub fn write_data_files(
         &summary,
         summary_csv(&report.lines, report.specification.as_ref()).as_bytes(),
     )?;
+    let line_png = ctx.lab.line_png;
+    let rk_files = rk_plots
+        .iter()
+        .flat_map(|(_, [png, svg])| [line_png.then_some(png), Some(svg)]);
+    plots.extend(rk_files.flatten().cloned());
     Ok(Files {
         report_json: out.join("report.json"),
         report_html: out.join("report.html"),
