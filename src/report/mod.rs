@@ -103,7 +103,7 @@ pub fn characterise(
         });
     }
     std::fs::create_dir_all(out).map_err(error::io(out))?;
-    let (sections, (rk_plots, rk_s), model_x3p) = sections::run(
+    let (sections, (rk_plots, rk_s), model_x3p, (measured, measured_s)) = sections::run(
         grid,
         &model,
         fit,
@@ -113,15 +113,21 @@ pub fn characterise(
             let what = "NURBS model sampled at half the x pitch on the data lines";
             timed(|| render::write_x3p(out, "model.x3p", grid, m, &ctx, what))
         },
+        || timed(|| render::write_measured(out, grid, &ctx)),
     )?;
     let (model_x3p, x3p_s) = model_x3p.unzip();
     let mut timings = sections.timings.clone();
     let (mut report, figures) = document::assemble(sections, grid, &model, &ctx);
     let logo = render::read_logo(&report.lab, &mut report.warnings);
     let t = Instant::now();
-    let written =
-        render::write_data_files(out, grid, &report, &figures, rk_plots, model_x3p, &ctx)?;
-    timings.write = (t.elapsed() + rk_s + x3p_s.unwrap_or_default()).as_secs_f64();
+    let early = render::Early {
+        rk_plots,
+        model_x3p,
+        measured,
+    };
+    let written = render::write_data_files(out, grid, &report, &figures, early, &ctx)?;
+    let before = rk_s + x3p_s.unwrap_or_default() + measured_s;
+    timings.write = (t.elapsed() + before).as_secs_f64();
     // The fit came before this call; it is part of the whole.
     timings.fit = model.fit_s;
     timings.total = t_all.elapsed().as_secs_f64() + model.fit_s;

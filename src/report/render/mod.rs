@@ -150,7 +150,7 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
 /// line, which the model interpolates by construction.
 fn write_plots(
     out: &Path,
-    height_map: impl FnOnce() -> Result<Vec<PathBuf>, ReportError>,
+    height_map: Result<Vec<PathBuf>, ReportError>,
     overlay: Option<&Overlay>,
     report: &Report,
     ctx: &ReportContext,
@@ -172,7 +172,7 @@ fn write_plots(
         let bac = plot_bearing_curves(out, bac_curves, pooled, &bac_title, &caption);
         plots.extend(bac.map_err(&plot_err)?);
     }
-    plots.extend(height_map()?);
+    plots.extend(height_map?);
     // The spatial curves of the measured grid, drawn beside its areal parameters.
     if let Some(Ok(spatial)) = report.surface_grid.as_ref().map(|g| &g.spatial) {
         let curves = &spatial.curves;
@@ -310,43 +310,79 @@ pub fn write_x3p(
     Ok(path)
 }
 
-/// Writes the plots (the height map on a thread of its own), `measured.x3p` beside them, the
-/// contact's files (when the report has a contact), then `summary.csv`, with `rk_plots` and
-/// `model_x3p` (written before, `None` when the model was not sampled); `report.json` and
-/// `report.html` are written last by [`write_report`], once the report's timings are final.
+/// The files of the measured grid alone, made by [`write_measured`]: its height map and 3D
+/// view, and `measured.x3p`, each or why not; or why the earlier figures could not be removed
+/// (then nothing was made).
+pub struct Measured(Result<(HeightMapFiles, Result<PathBuf, ReportError>), ReportError>);
+
+/// The height map's and the 3D view's files, or why not.
+type HeightMapFiles = Result<Vec<PathBuf>, ReportError>;
+
+/// Removes the figures an earlier analysis left ([`remove_earlier_outputs`]), then draws the
+/// measured height map and its 3D view and writes `measured.x3p` (encoded on a thread of its
+/// own): they read only the grid, so the caller makes them while the model's areal parameters
+/// are still being made. [`write_data_files`] reports what they gave in its turn.
+pub fn write_measured(out: &Path, grid: &Grid, ctx: &ReportContext) -> Measured {
+    Measured(remove_earlier_outputs(out).map(|()| {
+        let measured = &HeightMap::of(grid, grid.mean_pitch_y().0);
+        std::thread::scope(|s| {
+            let what = "measured heights as traced";
+            let x3p = s.spawn(|| write_x3p(out, "measured.x3p", grid, measured, ctx, what));
+            let height_map = s.spawn(|| draw_height_map(out, measured, grid.origin_mm(), ctx));
+            let height_map = height_map.join().unwrap_or_else(|_| {
+                let hint = "drawing the height map panicked; report this with the input";
+                Err(panicked(&ctx.input, "plots", "height map thread", hint))
+            });
+            let x3p = x3p.join().unwrap_or_else(|_| {
+                let hint = "encoding the X3P files panicked; report this with the input";
+                Err(panicked(
+                    &ctx.input,
+                    "measured.x3p",
+                    "X3P encoding thread",
+                    hint,
+                ))
+            });
+            (height_map, x3p)
+        })
+    }))
+}
+
+/// The files written while the sections ran, each or why not.
+pub struct Early {
+    /// The Rk figures.
+    pub rk_plots: Result<Vec<(String, [PathBuf; 2])>, ReportError>,
+    /// `model.x3p`, `None` when the model was not sampled.
+    pub model_x3p: Option<Result<PathBuf, ReportError>>,
+    /// The measured grid's own ([`write_measured`]).
+    pub measured: Measured,
+}
+
+/// Writes the plots, the contact's files (when the report has a contact), then `summary.csv`,
+/// with the files written before (`early`; an earlier `model.x3p` is removed when none was
+/// written this time); `report.json` and `report.html` are written last by [`write_report`],
+/// once the report's timings are final. Errors are reported in the order the files were
+/// written: the plots, the Rk figures, then the X3P files.
 pub fn write_data_files(
     out: &Path,
     grid: &Grid,
     report: &Report,
     figures: &FigureData,
-    rk_plots: Result<Vec<(String, [PathBuf; 2])>, ReportError>,
-    model_x3p: Option<Result<PathBuf, ReportError>>,
+    early: Early,
     ctx: &ReportContext,
 ) -> Result<Files, ReportError> {
-    let measured = &HeightMap::of(grid, grid.mean_pitch_y().0);
-    // The X3P file is encoded (MD5, deflate) and written beside the plots: it reads only the
-    // heights and their metadata. Errors are reported in the order the files were written
-    // before: the plots, the Rk figures, then the X3P files.
-    remove_earlier_outputs(out, !matches!(model_x3p, Some(Ok(_))))?;
-    let (plots, x3p) = std::thread::scope(|s| {
-        let what = "measured heights as traced";
-        let x3p = s.spawn(|| write_x3p(out, "measured.x3p", grid, measured, ctx, what));
-        let height_map = s.spawn(|| draw_height_map(out, measured, grid.origin_mm(), ctx));
-        let height_map = || {
-            height_map.join().unwrap_or_else(|_| {
-                let hint = "drawing the height map panicked; report this with the input";
-                Err(panicked(&ctx.input, "plots", "height map thread", hint))
-            })
-        };
-        let plots = write_plots(out, height_map, figures.overlay.as_ref(), report, ctx);
-        (plots, x3p.join())
-    });
-    let mut plots = plots?;
+    let Early {
+        rk_plots,
+        model_x3p,
+        measured,
+    } = early;
+    let (height_map, measured_x3p) = measured.0?;
+    if !matches!(model_x3p, Some(Ok(_))) {
+        let path = out.join("model.x3p");
+        remove_if_there(&path).map_err(io(&path))?;
+    }
+    let mut plots = write_plots(out, height_map, figures.overlay.as_ref(), report, ctx)?;
     let rk_plots = rk_plots?;
-    let measured_x3p = x3p.map_err(|_| {
-        let hint = "encoding the X3P files panicked; report this with the input";
-        panicked(&ctx.input, "measured.x3p", "X3P encoding thread", hint)
-    })??;
+    let measured_x3p = measured_x3p?;
     let model_x3p = model_x3p.transpose()?;
     if let Some(c) = &report.contact {
         plots.extend(contact::write_contact_files(
@@ -487,14 +523,13 @@ const PAGE_FIGURES: [(&str, &str, bool, bool); 8] = [
 
 /// Removes what an earlier analysis left in `out` that this one writes only where it applies:
 /// the [`PAGE_FIGURES`] (the page embeds what the folder holds; a profile analysed where a grid
-/// was would show that grid's height map), `model.x3p` (when `model_x3p`: none was written
-/// this time) and `contact.json`.
-fn remove_earlier_outputs(out: &Path, model_x3p: bool) -> Result<(), ReportError> {
+/// was would show that grid's height map) and `contact.json`; `model.x3p` is removed by
+/// [`write_data_files`] when none was written this time.
+fn remove_earlier_outputs(out: &Path) -> Result<(), ReportError> {
     let figures = PAGE_FIGURES
         .iter()
         .flat_map(|(stem, ..)| ["png", "svg"].map(|ext| format!("{stem}.{ext}")));
-    let model = model_x3p.then(|| "model.x3p".to_string());
-    for name in figures.chain(model).chain(["contact.json".into()]) {
+    for name in figures.chain(["contact.json".into()]) {
         let path = out.join(name);
         remove_if_there(&path).map_err(io(&path))?;
     }

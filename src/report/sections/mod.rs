@@ -106,14 +106,17 @@ pub struct Sections {
 /// sampled model is not kept (what it returns comes back, `None` when it was not sampled).
 /// The surface `fit` goes to the model's thread, which drops it (when it was handed over)
 /// once the model is sampled unless the contact of the model between lines reads it after.
-pub fn run<D, M: Send>(
+/// `while_waiting` (the caller writes the measured grid's own files) runs once every section
+/// but the model's is done, while the model's areal parameters are still being made.
+pub fn run<D, M: Send, W>(
     grid: &Grid,
     model: &Model<'_>,
     fit: ModelFit<'_>,
     ctx: &ReportContext,
     draw_lines: impl FnOnce(Vec<LineAnalysis>) -> D,
     write_model: impl FnOnce(&HeightMap<'_>) -> M + Send,
-) -> Result<(Sections, D, Option<M>), ReportError> {
+    while_waiting: impl FnOnce() -> W,
+) -> Result<(Sections, D, Option<M>, W), ReportError> {
     let mut warnings = ctx.warnings.clone();
     let mut timings = Timings::default();
     let (pitch_y_mm, evenly) = grid.mean_pitch_y();
@@ -229,6 +232,7 @@ pub fn run<D, M: Send>(
         }
         crate::fit::memory::release_free_heap();
         let _ = areal_go.send(overlay.as_ref().err().copied());
+        let waited = while_waiting();
         let (surface, (model_overlay, written), model_s, kept) = model_thread
             .join()
             .unwrap_or_else(|_| (surface::panicked(), (None, None), 0.0, None));
@@ -317,6 +321,6 @@ pub fn run<D, M: Send>(
             warnings,
             timings,
         };
-        Ok((sections, drawn, written))
+        Ok((sections, drawn, written, waited))
     })
 }
