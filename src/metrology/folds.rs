@@ -21,7 +21,7 @@
 //! Depends on [`crate::nurbs`], [`super::sampling`] (the dense samples), [`crate::extremes`]
 //! and [`crate::numfmt`] (the warnings' figures).
 
-use super::sampling::{Basis, TwoLanes};
+use super::sampling::{equally_spaced, Basis, TwoLanes};
 use crate::extremes::min_max;
 use crate::numfmt::{fmt, Quantity};
 use crate::nurbs::{BSplineCurve, NurbsSurface, UBasis};
@@ -210,11 +210,6 @@ fn basis_fits(degree: usize, knots: &[f64], count: usize, n: usize) -> bool {
     degree <= 15 && count > degree && knots.len() == count + degree + 1 && n >= 2
 }
 
-/// `n` equally spaced parameters in [0, 1].
-fn equally_spaced(n: usize) -> Vec<f64> {
-    (0..n).map(|k| k as f64 / (n - 1) as f64).collect()
-}
-
 /// Samples of a curve at `n` equally spaced parameters in [0, 1].
 fn samples(curve: &BSplineCurve, n: usize) -> Vec<[f64; 3]> {
     (0..n)
@@ -353,15 +348,16 @@ pub fn check_model(
 }
 
 /// [`check_model`] with the u basis at the `samples_per_pole · count_u` equally spaced u of
-/// the iso-curves already computed (`UBasis::new` at `k / (n − 1)`, as the model's bearing
-/// curves sample them): used where it has that length and the degree is one the fold check
-/// builds its own basis for, so every sum is the one [`check_model`] makes, to the bit.
+/// the iso-curves already computed and regrouped (`TwoLanes` of the `UBasis::new` at
+/// `k / (n − 1)`, as the model's bearing curves sample them): used where it has that length
+/// and the degree is one the fold check builds its own basis for, so every sum is the one
+/// [`check_model`] makes, to the bit.
 pub fn check_model_with(
     surface: &NurbsSurface,
     line_vs: &[f64],
     heights_um: &[f64],
     options: &FoldOptions,
-    shared_u: Option<&UBasis>,
+    shared_u: Option<&TwoLanes<'_>>,
 ) -> ModelChecks {
     let (nu, nv) = (surface.count_u(), surface.count_v());
     let per = options.samples_per_pole.max(1);
@@ -391,38 +387,31 @@ pub fn check_model_with(
     // curve. Each lane is the sum `evaluate_grid` makes for it, to the bit.
     // A shared basis of the right length is the one made here.
     let fits = basis_fits(surface.degree_u(), surface.knots_u(), nu, n_u);
-    let shared_u = shared_u.filter(|b| b.len() == n_u && fits);
+    let shared_u = shared_u.filter(|b| b.basis.first.len() == n_u && fits);
     let own_u = (shared_u.is_none() && fits).then(|| UBasis::new(surface, &us));
-    let u_sampler: Option<Basis<'_>> = shared_u.or(own_u.as_ref()).map(Basis::of);
-    let xz_sampler = u_sampler.map(TwoLanes::new);
+    let own_lanes = own_u.as_ref().map(|b| TwoLanes::new(Basis::of(b)));
+    let xz_sampler = shared_u.or(own_lanes.as_ref());
+    let u_sampler: Option<Basis<'_>> = xz_sampler.map(|l| l.basis);
     let general = u_sampler.is_none().then(|| UBasis::new(surface, &us));
     let mut poles = Vec::new();
     let (mut xs, mut zs): (Vec<f64>, Vec<f64>) = (Vec::with_capacity(n_u), Vec::with_capacity(n_u));
+    let mut ys = Vec::new(); // y of every sample where no sampler gives it alone
     for &v in &vs {
         surface.iso_poles_u_padded(v, &mut poles);
-        let y_at = |k: usize| match (&u_sampler, &general) {
-            (Some(b), _) => b.lane(&poles, k, 1),
-            (None, Some(g)) => {
-                let mut y = f64::NAN;
-                g.for_each_point(&poles, |j, p| {
-                    if j == k {
-                        y = p[1];
-                    }
-                });
-                y
-            }
-            (None, None) => f64::NAN,
-        };
         xs.clear();
+        ys.clear();
         zs.clear();
         match (&xz_sampler, &general) {
             (Some(b), _) => b.points(&poles, [0, 2], &mut xs, &mut zs),
             (None, Some(g)) => g.for_each_point(&poles, |_, p| {
                 xs.push(p[0]);
+                ys.push(p[1]);
                 zs.push(p[2]);
             }),
             (None, None) => {}
         }
+        let y_at = |k| u_sampler.map_or(ys.get(k).copied(), |b| Some(b.lane(&poles, k, 1)));
+        let y_at = |k: usize| y_at(k).unwrap_or(f64::NAN);
         // The lowest and highest sample in µm, each where it first occurs: what a running
         // strict comparison over the samples, carried from curve to curve, keeps (scaling
         // keeps the order, so the scaled extremes are the extremes of the scaled samples).
@@ -763,7 +752,8 @@ mod tests {
             for n in [n_u, n_u - 1] {
                 let us = equally_spaced(n);
                 let basis = UBasis::new(s, &us);
-                let shared = check_model_with(s, &fit.params_v, &z, &options, Some(&basis));
+                let lanes = TwoLanes::new(Basis::of(&basis));
+                let shared = check_model_with(s, &fit.params_v, &z, &options, Some(&lanes));
                 assert_eq!(
                     format!("{shared:?}"),
                     format!("{own:?}"),

@@ -28,6 +28,7 @@ pub mod outliers;
 pub mod parameter_table;
 pub mod params;
 mod sampling;
+pub(crate) use sampling::{Basis, TwoLanes};
 pub mod sj_material_ratio;
 pub mod spatial;
 pub mod surface_model;

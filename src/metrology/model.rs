@@ -8,7 +8,7 @@
 //! [`super::bearing`].
 
 use super::bearing::{bearing_curve_xz, BearingCurve};
-use super::sampling::{Basis, TwoLanes};
+use super::sampling::{equally_spaced, Basis, TwoLanes};
 use super::MetrologyError;
 use crate::nurbs::{basis_funs, find_span, BSplineCurve, NurbsSurface, UBasis};
 use serde::Serialize;
@@ -50,22 +50,23 @@ pub struct ModelCurveBac {
 /// The u at which [`model_bearing_curves_with`] samples every curve: `samples` equally spaced
 /// from 0 to 1 (`k / (samples − 1)`), as the fold check samples its iso-curves.
 pub fn bearing_sample_us(surface: &NurbsSurface, options: &ModelBacOptions) -> Vec<f64> {
-    let samples = options
-        .samples_per_curve
-        .unwrap_or(8 * surface.count_u())
-        .max(2);
-    (0..samples)
-        .map(|k| k as f64 / (samples - 1) as f64)
-        .collect()
+    equally_spaced(bearing_samples(surface, options))
+}
+
+/// How many u [`bearing_sample_us`] gives: `samples_per_curve`, by default 8 per pole.
+fn bearing_samples(surface: &NurbsSurface, options: &ModelBacOptions) -> usize {
+    let n = options.samples_per_curve.unwrap_or(8 * surface.count_u());
+    n.max(2)
 }
 
 /// The bearing area curves of `options.curves` iso-curves of `surface` (coordinates in mm;
 /// heights are reported in µm), with the u basis at [`bearing_sample_us`] when the caller
-/// has computed it (`UBasis::new` of exactly those u; one of another length is not used).
+/// has computed and regrouped it (`TwoLanes` of the `UBasis::new` of exactly those u; one of
+/// another length is not used).
 pub fn model_bearing_curves_with(
     surface: &NurbsSurface,
     options: &ModelBacOptions,
-    shared_u: Option<&UBasis>,
+    shared_u: Option<&TwoLanes<'_>>,
 ) -> Result<Vec<ModelCurveBac>, MetrologyError> {
     if options.curves == 0 {
         return Err(MetrologyError::BadParameter {
@@ -74,21 +75,18 @@ pub fn model_bearing_curves_with(
             hint: "extract at least 1 profile curve from the model (the paper uses 31)",
         });
     }
-    let samples = options
-        .samples_per_curve
-        .unwrap_or(8 * surface.count_u())
-        .max(2);
+    let samples = bearing_samples(surface, options);
     // Every curve is sampled at the same u, so the basis along u is computed once.
-    let own;
-    let basis = match shared_u.filter(|b| b.len() == samples) {
+    let (own, own_lanes);
+    let xz = match shared_u.filter(|b| b.basis.first.len() == samples) {
         Some(b) => b,
         None => {
             own = UBasis::new(surface, &bearing_sample_us(surface, options));
-            &own
+            own_lanes = TwoLanes::new(Basis::of(&own));
+            &own_lanes
         }
     };
-    let sampler = Basis::of(basis);
-    let xz = TwoLanes::new(sampler);
+    let sampler = xz.basis;
     let mut poles = Vec::new();
     let mut out = Vec::with_capacity(options.curves);
     for j in 0..options.curves {
@@ -268,7 +266,8 @@ fn x_depends_on_u_only(surface: &NurbsSurface) -> bool {
 }
 
 /// The u of each target x = `x0_mm` + k·`pitch_x_mm`, k < `cols`, along a curve whose x is
-/// `x_at(u)` (increasing), each bracketed from the previous one's u.
+/// `x_at(u)` (increasing), each bracketed from the previous one's u and x (the x its search
+/// ended on, not evaluated again).
 fn invert_row<F: Fn(f64) -> f64>(
     x_at: &F,
     x0_mm: f64,
@@ -282,30 +281,30 @@ fn invert_row<F: Fn(f64) -> f64>(
     };
     let (lo_x, hi_x) = (x_at(0.0), x_at(1.0));
     let mut us = Vec::with_capacity(cols);
-    let mut u_from = 0.0f64;
+    let mut from = (0.0f64, lo_x);
     for k in 0..cols {
         let x = x0_mm + k as f64 * pitch_x_mm;
         if x < lo_x - 1e-9 * pitch_x_mm.max(1.0) || x > hi_x + 1e-9 * hi_x.abs().max(1.0) {
             return Err(bad("x (mm) outside the model", x));
         }
-        let u = invert_x(x_at, x, u_from, hi_x);
-        u_from = u;
-        us.push(u);
+        from = invert_x(x_at, x, from, hi_x);
+        us.push(from.0);
     }
     Ok(us)
 }
 
-/// The u in [`u_from`, 1] where the curve's x equals `x_mm` (Illinois false position).
-fn invert_x<F: Fn(f64) -> f64>(at: &F, x_mm: f64, u_from: f64, x_at_1: f64) -> f64 {
+/// The u in [u, 1] where the curve's x equals `x_mm` (Illinois false position) and `at` of it,
+/// from `from` = (u, `at(u)`).
+fn invert_x(at: &impl Fn(f64) -> f64, x_mm: f64, from: (f64, f64), x_at_1: f64) -> (f64, f64) {
     const X_TOL_MM: f64 = 1e-13;
-    let (mut a, mut b) = (u_from, 1.0f64);
-    let mut fa = at(a) - x_mm;
+    let (mut a, mut b) = (from.0, 1.0f64);
+    let mut fa = from.1 - x_mm;
     let mut fb = x_at_1 - x_mm;
     if fa >= -X_TOL_MM {
-        return a;
+        return from;
     }
     if fb <= X_TOL_MM {
-        return b;
+        return (b, x_at_1);
     }
     // 0: no side repeated yet; 1: a kept last time; 2: b kept last time.
     let mut side = 0u8;
@@ -317,9 +316,10 @@ fn invert_x<F: Fn(f64) -> f64>(at: &F, x_mm: f64, u_from: f64, x_at_1: f64) -> f
         };
         // Keep c strictly inside the bracket (rounding can put it on an end).
         let c = if c > a && c < b { c } else { 0.5 * (a + b) };
-        let fc = at(c) - x_mm;
+        let xc = at(c);
+        let fc = xc - x_mm;
         if fc.abs() <= X_TOL_MM || b - a <= 1e-15 {
-            return c;
+            return (c, xc);
         }
         if fc < 0.0 {
             a = c;
@@ -337,7 +337,7 @@ fn invert_x<F: Fn(f64) -> f64>(at: &F, x_mm: f64, u_from: f64, x_at_1: f64) -> f
             side = 2;
         }
     }
-    0.5 * (a + b)
+    (0.5 * (a + b), at(0.5 * (a + b)))
 }
 
 #[cfg(test)]
@@ -372,7 +372,8 @@ mod tests {
         assert_eq!((us[0], us[us.len() - 1]), (0.0, 1.0));
         let wrong = UBasis::new(s, &us[1..]);
         for basis in [UBasis::new(s, &us), wrong] {
-            let shared = model_bearing_curves_with(s, &options, Some(&basis)).unwrap();
+            let lanes = TwoLanes::new(Basis::of(&basis));
+            let shared = model_bearing_curves_with(s, &options, Some(&lanes)).unwrap();
             assert_eq!(format!("{shared:?}"), format!("{own:?}"));
             assert_eq!(shared, own);
         }

@@ -9,6 +9,11 @@
 //!
 //! Layer 1 (pure logic): depends on `std` and, for the basis it takes, [`crate::nurbs::UBasis`].
 
+/// `n` equally spaced parameters in [0, 1] (`k / (n − 1)`).
+pub(crate) fn equally_spaced(n: usize) -> Vec<f64> {
+    (0..n).map(|k| k as f64 / (n - 1) as f64).collect()
+}
+
 /// A basis along u at many parameters: for parameter k, `first[k]` is the first pole its
 /// `degree + 1` values `values[k·(degree+1)..]` apply to.
 #[derive(Debug, Clone, Copy)]
@@ -69,8 +74,9 @@ impl<'a> Basis<'a> {
 /// lane, as [`Basis::lane`] sums it. Hand-written: the equal-bits contract with the other
 /// samplers is this project's own.
 #[derive(Debug, Clone)]
-pub(crate) struct TwoLanes<'a> {
-    basis: Basis<'a>,
+pub struct TwoLanes<'a> {
+    /// The basis regrouped.
+    pub(crate) basis: Basis<'a>,
     /// Per whole block of four parameters: the first pole of its window and where its
     /// window's values start in `values`.
     blocks: Vec<(usize, usize)>,

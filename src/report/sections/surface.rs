@@ -16,6 +16,7 @@ use crate::metrology::folds::{check_model_with, iso_curve_sample_count, FoldOpti
 use crate::metrology::model::{
     bearing_sample_us, model_bearing_curves_with, sample_model_grid, ModelBacOptions,
 };
+use crate::metrology::{Basis, TwoLanes};
 use crate::nurbs::UBasis;
 use crate::report::context::ModelFit;
 use crate::report::document::{FailedSection, SurfaceReport};
@@ -97,10 +98,11 @@ pub fn section<'f, W>(
     };
     let fold_options = FoldOptions::default();
     // The fold check's iso-curves and the bearing curves are sampled at the same u when their
-    // densities agree (the defaults do): the u basis is computed once for both.
+    // densities agree (the defaults do): the u basis is computed and regrouped once for both.
     let us = bearing_sample_us(&fit.surface, &bac_options);
     let fold_n_u = iso_curve_sample_count(&fit.surface, &fold_options);
-    let shared = (us.len() == fold_n_u).then(|| UBasis::new(&fit.surface, &us));
+    let basis = (us.len() == fold_n_u).then(|| UBasis::new(&fit.surface, &us));
+    let shared = basis.as_ref().map(|b| TwoLanes::new(Basis::of(b)));
     let shared = shared.as_ref();
     let (checks, bac) = std::thread::scope(|inner| {
         let checks = inner.spawn(|| {
