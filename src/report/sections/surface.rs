@@ -102,8 +102,7 @@ pub fn section<'f, W>(
     let us = bearing_sample_us(&fit.surface, &bac_options);
     let fold_n_u = iso_curve_sample_count(&fit.surface, &fold_options);
     let basis = (us.len() == fold_n_u).then(|| UBasis::new(&fit.surface, &us));
-    let shared = basis.as_ref().map(|b| TwoLanes::new(Basis::of(b)));
-    let shared = shared.as_ref();
+    let lanes = basis.as_ref().map(|b| TwoLanes::new(Basis::of(b)));
     let (checks, bac) = std::thread::scope(|inner| {
         let checks = inner.spawn(|| {
             check_model_with(
@@ -111,12 +110,13 @@ pub fn section<'f, W>(
                 &fit.params_v,
                 heights_um,
                 &fold_options,
-                shared,
+                lanes.as_ref(),
             )
         });
-        let bac = model_bearing_curves_with(&fit.surface, &bac_options, shared);
+        let bac = model_bearing_curves_with(&fit.surface, &bac_options, lanes.as_ref());
         (checks.join(), bac)
     });
+    drop(lanes); // not held while the model is sampled
     let Ok(checks) = checks else {
         let why = "internal: the model checks panicked; report this with the input";
         return (no_surface(why), keep_fit.then_some(fit));
