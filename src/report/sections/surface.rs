@@ -116,7 +116,9 @@ pub fn section<'f, W>(
         let bac = model_bearing_curves_with(&fit.surface, &bac_options, lanes.as_ref());
         (checks.join(), bac)
     });
-    drop(lanes); // not held while the model is sampled
+    // The u basis is not held while the model is sampled.
+    drop(lanes);
+    drop((basis, us));
     let Ok(checks) = checks else {
         let why = "internal: the model checks panicked; report this with the input";
         return (no_surface(why), keep_fit.then_some(fit));
