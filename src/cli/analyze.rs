@@ -498,7 +498,7 @@ fn characterise_grid(
     recipe.lambda_c_mm = line_options
         .apply_lambda_c
         .then_some(line_options.lambda_c_mm);
-    let (fitted, fit, fit_s) = fit_for_report(&input.grid, &recipe);
+    let ((surface, replaced), fit, fit_s) = fit_for_report(&input.grid, &recipe);
     let lambda_c_source = match args.lc {
         Some(v) => format!("given ({v} mm)"),
         None => format!("default {DEFAULT_LC_MM} mm (set --lc to choose)"),
@@ -527,7 +527,6 @@ fn characterise_grid(
         options,
         warnings: input.findings.clone(),
     };
-    let (surface, replaced) = crate::report::scan_dir::handed_over(fitted);
     let model = Model {
         recipe,
         replaced: &replaced,

@@ -16,13 +16,13 @@ use super::document::{Completeness, Report, ScanStatus, Traceability};
 use super::error::ReportError;
 use super::header::LabHeader;
 use super::{characterise, ScanOutputs};
-use crate::fit::{max_residual_mm, FitOptions, MethodError};
+use crate::fit::{max_residual_mm, FitOptions};
 use crate::grid::Grid;
 use crate::input::scan::grid_of_lines;
 use crate::input::{GridInput, InputError, Source, VouchedLines};
 use crate::metrology::outliers::LineSpike;
 use crate::metrology::params::Options;
-use crate::metrology::surface_model::{fit_model, FittedModel, ModelRecipe};
+use crate::metrology::surface_model::{fit_model, ModelRecipe};
 use crate::numfmt::line_label;
 use crate::profile::{FilterKind, ProfileKind};
 use crate::scan::journal::{StartRecord, StopRecord, StopStatus};
@@ -304,22 +304,13 @@ fn judged_by(
     (specification, instrument)
 }
 
-/// The surface of `fitted` handed over to the characterisation (which lets it go once the
-/// model is sampled), with the spikes replaced before fitting.
-pub fn handed_over(
-    fitted: Result<FittedModel, MethodError>,
-) -> (ModelFit<'static>, Vec<LineSpike>) {
-    match fitted {
-        Ok(m) => (Ok(Cow::Owned(m.fit)), m.replaced),
-        Err(e) => (Err(e), Vec::new()),
-    }
-}
-
-/// Fits `grid` as `recipe` says and summarises the fit (no IGES written).
+/// Fits `grid` as `recipe` says and summarises the fit (no IGES written): the surface to
+/// hand over to the characterisation (which lets it go once the model is sampled) with the
+/// spikes replaced before fitting, the summary, and the seconds the fit took.
 pub fn fit_for_report(
     grid: &Grid,
     recipe: &ModelRecipe,
-) -> (Result<FittedModel, MethodError>, Option<FitSummary>, f64) {
+) -> ((ModelFit<'static>, Vec<LineSpike>), Option<FitSummary>, f64) {
     let t = Instant::now();
     let fit = fit_model(grid, recipe);
     let fit_s = t.elapsed().as_secs_f64();
@@ -338,7 +329,11 @@ pub fn fit_for_report(
             None,
         )
     });
-    (fit, summary, fit_s)
+    let handed_over = match fit {
+        Ok(m) => (Ok(Cow::Owned(m.fit)), m.replaced),
+        Err(e) => (Err(e), Vec::new()),
+    };
+    (handed_over, summary, fit_s)
 }
 
 /// Characterises the scan in `dir` (a partial, aborted or failed one with the complete lines
@@ -362,7 +357,7 @@ pub fn characterise_scan(
     } = vouched.as_ref();
     let state = journal.as_ref().ok();
     let recipe = scan_recipe(options, state.map(|s| &s.start), lines);
-    let (fitted, summary, fit_s) = fit_for_report(grid, &recipe);
+    let ((surface, replaced), summary, fit_s) = fit_for_report(grid, &recipe);
     let journal_lines: Vec<u32> = state
         .map(|s| s.lines.iter().map(|l| l.id.index).collect())
         .unwrap_or_default();
@@ -372,7 +367,6 @@ pub fn characterise_scan(
         journal_lines: &journal_lines,
         completing: false,
     });
-    let (surface, replaced) = handed_over(fitted);
     let model = Model {
         recipe,
         replaced: &replaced,
