@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The station's Debian package end to end, on this Debian machine, as root (CI runs it from
 # .ci/run): build it (packaging/build-deb), lintian without errors, install it with dpkg, check
-# the files, conffiles, user, groups, directories and the unit (`systemd-analyze verify`),
+# the files, that every relative link in the installed docs leads to an installed file
+# (doc_links.sh), conffiles, user, groups, directories and the unit (`systemd-analyze verify`),
 # `surfscan --version` and `check-config` of the installed example; upgrade to a scratch copy
 # with the version bumped and a changed shipped configuration, over an edited one, and check
 # the edit and a scan survive; remove, then purge, and check what stays (the scans, the user)
@@ -110,11 +111,14 @@ for f in /usr/bin/surfscan \
   /usr/share/doc/surfscan/changelog.gz \
   /usr/share/doc/surfscan/README.md \
   /usr/share/doc/surfscan/docs/operator-guide.md \
-  /usr/share/doc/surfscan/systemd.md; do
+  /usr/share/doc/surfscan/systemd/README.md; do
   [ -f "$f" ] || fail "$f is not installed"
 done
 [ ! -e /etc/udev/rules.d/99-surfscan.rules ] || fail "the package installed the udev rule into /etc/udev/rules.d, the administrator's directory"
 ok "binary, unit, sysusers, tmpfiles, configuration, recipe, man pages, completions, docs and the example udev rule are in place"
+
+tests/package/doc_links.sh / || fail "links in the installed documentation lead to files the package does not install (above)"
+ok "every relative link in the installed documentation leads to an installed file"
 
 cmp -s config/surfscan.toml /etc/surfscan/surfscan.toml || fail "/etc/surfscan/surfscan.toml is not the shipped example"
 zcat /usr/share/man/man1/surfscan-check-config.1.gz | grep -q -- 'require\\-devices' \
