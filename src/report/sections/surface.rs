@@ -163,18 +163,18 @@ pub fn section<'f, W>(
         )
     };
     // The model sampled on the data lines (their v) at half the x pitch: what `model.x3p` shows.
-    let sample = |f: &FitResult| {
-        sample_model_grid(
+    // Once sampled the fit is let go, unless it is kept for the caller.
+    let sample = |f: Cow<'f, FitResult>| {
+        let sampled = sample_model_grid(
             &f.surface,
             &f.params_v,
             f.x0_mm,
             pitch_x_mm / 2.0,
             model_cols,
         )
-        .map_err(|e| format!("sampling the model on the data lines: {e}"))
+        .map_err(|e| format!("sampling the model on the data lines: {e}"));
+        (sampled, keep_fit.then_some(f))
     };
-    // Once sampled the fit is let go, unless it is kept for the caller.
-    let let_go = |fit: Cow<'f, FitResult>| keep_fit.then_some(fit);
     // Over a fold the surface has several heights at one x: no grid of heights describes it,
     // whichever branch an inversion of x(u) would pick. A small model's buffers add little to
     // the other sections' peak: it does not wait (see above), unless the process has one core,
@@ -182,10 +182,9 @@ pub fn section<'f, W>(
     // a cost.
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let (surface, fit) = if folds {
-        (Err("the model folds (x runs backwards along its iso-curves, see model_checks), so it is not a height map: no model.x3p and no areal parameters of the model".to_string()), let_go(fit))
+        (Err("the model folds (x runs backwards along its iso-curves, see model_checks), so it is not a height map: no model.x3p and no areal parameters of the model".to_string()), keep_fit.then_some(fit))
     } else if rows * model_cols <= EARLY_SAMPLES && cores > 1 {
-        let sampled = sample(&fit);
-        let fit = let_go(fit);
+        let (sampled, fit) = sample(fit);
         let surface = sampled.and_then(|heights| {
             let surface = areal(Cow::Borrowed(&heights));
             let map = HeightMap {
@@ -198,8 +197,7 @@ pub fn section<'f, W>(
         (surface, fit)
     } else {
         let w = wait();
-        let sampled = sample(&fit);
-        let fit = let_go(fit);
+        let (sampled, fit) = sample(fit);
         let surface = sampled.and_then(|heights| {
             let map = HeightMap {
                 heights_um: &heights,
