@@ -58,7 +58,7 @@ use crate::metrology::alternatives::{
 };
 use crate::metrology::areal::{sq_um as areal_sq_um, HeightMap};
 use crate::metrology::folds::{check_model, net_folds, FoldOptions, IsoFold, ModelChecks};
-use crate::metrology::holdout::{between_lines, holdout_every_or_reason, ordinal};
+use crate::metrology::holdout::{between_lines, holdout_every_or_reason, ordinal, BetweenLines};
 use crate::metrology::outliers::LineSpike;
 use crate::metrology::surface_model::{fit_model, ModelRecipe};
 use crate::scan::outputs::SurfaceShape;
@@ -415,7 +415,7 @@ struct Judged {
     threshold: f64,
     sq: Result<f64, String>,
     every: Result<usize, String>,
-    verdict: Result<crate::metrology::holdout::BetweenLines, String>,
+    verdict: Result<BetweenLines, String>,
     alternatives: Option<Vec<crate::metrology::alternatives::Alternative>>,
     holdout_s: f64,
 }
@@ -853,10 +853,10 @@ impl<'a> Fitting<'a> {
                 step["bytes"]
             );
         }
-        match &judged.verdict {
-            Ok(b) => say!("{}", b.short()),
-            Err(e) => say!("no verdict on the model between lines: {e}"),
-        }
+        say!(
+            "{}",
+            BetweenLines::line(judged.verdict.as_ref().map_err(|e| Some(&e[..])))
+        );
         if let Some(alts) = &judged.alternatives {
             say!(
                 "\nhold-out of the alternatives (every {} line left out and refitted; supported means rms ≤ {} × Sq):",

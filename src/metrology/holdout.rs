@@ -391,6 +391,15 @@ impl BetweenLines {
             sig(self.rms_over_sq, 2)
         )
     }
+
+    /// The verdict in one line for a terminal, or that there is none (and why, when known).
+    pub fn line(verdict: Result<&Self, Option<&str>>) -> String {
+        match verdict {
+            Ok(b) => b.short(),
+            Err(Some(why)) => format!("no verdict on the model between lines: {why}"),
+            Err(None) => "no verdict on the model between lines".to_string(),
+        }
+    }
 }
 
 /// `2nd`, `3rd`, `11th`: how the verdict names every k-th line.

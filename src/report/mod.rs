@@ -39,6 +39,7 @@ pub use error::ReportError;
 pub use scan_dir::{characterise_scan, ScanCharacteriser};
 
 use crate::grid::Grid;
+use crate::metrology::holdout::BetweenLines;
 use crate::metrology::MetrologyError;
 use std::path::Path;
 use std::time::Instant;
@@ -165,10 +166,7 @@ impl ScanOutputs {
     /// The verdict on the surface between lines in one line for a terminal, or why there is
     /// none.
     pub fn verdict_line(&self) -> String {
-        match (&self.report.between_lines, &self.report.between_lines_error) {
-            (Some(b), _) => b.short(),
-            (None, Some(e)) => format!("no verdict on the model between lines: {e}"),
-            (None, None) => "no verdict on the model between lines".to_string(),
-        }
+        let (b, e) = (&self.report.between_lines, &self.report.between_lines_error);
+        BetweenLines::line(b.as_ref().ok_or(e.as_deref()))
     }
 }

@@ -20,6 +20,7 @@ use crate::fit::{
 };
 use crate::grid::Grid;
 use crate::iges::IgesOptions;
+use crate::metrology::holdout::BetweenLines;
 use crate::metrology::outliers::LineSpike;
 use crate::metrology::surface_model::{fit_model, ModelRecipe};
 use crate::nurbs::NurbsSurface;
@@ -394,12 +395,11 @@ pub fn write_outputs(
         iges: iges_files,
         report: report_path,
         files: Vec::new(),
-        verdict: format!(
-            "no verdict on the model between lines: {}",
+        verdict: BetweenLines::line(Err(Some(
             characterisation_error
                 .as_deref()
-                .unwrap_or("no characterisation was run")
-        ),
+                .unwrap_or("no characterisation was run"),
+        ))),
         characterisation_error,
         characterisation_complete: false,
         results: None,
