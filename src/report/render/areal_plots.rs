@@ -27,8 +27,8 @@
 use super::decimate::extremes_per_column_of_pairs;
 use super::plots::{
     chart, draw_colour_bar, ensure_font, exaggeration_note, font, legend, line_key, padded_range,
-    plot_err, png_and_svg, replace_figure, tick, viridis, write_png, Frame, DATA, EXAGGERATIONS,
-    MAP_BAR_W, MODEL,
+    plot_err, png_and_svg, points_under, replace_figure, tick, viridis, write_png, Frame, DATA,
+    EXAGGERATIONS, MAP_BAR_W, MODEL,
 };
 use super::text_cache::TextCache;
 use crate::extremes::min_max;
@@ -312,12 +312,8 @@ impl View {
             .unwrap_or(1.0);
         let nx = cols.clamp(1, VIEW_NODES);
         let ny = rows.clamp(1, VIEW_NODES);
-        let under = |p: usize, n: usize, k: usize| {
-            let a = (p * n / k).min(n - 1);
-            (a, ((p + 1) * n / k).clamp(a + 1, n))
-        };
-        let xs: Vec<(usize, usize)> = (0..nx).map(|i| under(i, cols, nx)).collect();
-        let ys: Vec<(usize, usize)> = (0..ny).map(|j| under(j, rows, ny)).collect();
+        let xs: Vec<(usize, usize)> = (0..nx).map(|i| points_under(i, cols, nx)).collect();
+        let ys: Vec<(usize, usize)> = (0..ny).map(|j| points_under(j, rows, ny)).collect();
         let mut z_um = Vec::with_capacity(nx * ny);
         for &(a, b) in &ys {
             for &(c, d) in &xs {

@@ -778,6 +778,13 @@ fn map_subtitle(grid: &HeightMap<'_>, values: &MapValues<'_>, scale: &MapScale) 
     )
 }
 
+/// The points `a..b` along an axis of `n` (at least one) under pixel `p` of `px`: those whose
+/// cells start within it, else the one point under it.
+pub(super) fn points_under(p: usize, n: usize, px: usize) -> (usize, usize) {
+    let a = (p * n / px).min(n - 1);
+    (a, ((p + 1) * n / px).clamp(a + 1, n))
+}
+
 /// The pixels of a height map `width` × `height` px over the whole grid, row 0 of the
 /// bitmap at the grid's last line (y up): each pixel the mean of the points whose cells
 /// start within it (the one point under it when the grid is coarser than the pixels), in
@@ -785,13 +792,8 @@ fn map_subtitle(grid: &HeightMap<'_>, values: &MapValues<'_>, scale: &MapScale) 
 fn map_pixels(grid: &HeightMap<'_>, (width, height): (u32, u32), (lo, hi): (f64, f64)) -> Vec<u8> {
     let (z, rows, cols) = (grid.heights_um, grid.rows, grid.cols);
     let (w, h) = (width.max(1) as usize, height.max(1) as usize);
-    // The points `a..b` along an axis of `n` under pixel `p` of `px`.
-    let under = |p: usize, n: usize, px: usize| {
-        let a = (p * n / px).min(n - 1);
-        (a, ((p + 1) * n / px).clamp(a + 1, n))
-    };
     // Each line's sums over the pixel columns, then the lines under each pixel row.
-    let columns: Vec<(usize, usize)> = (0..w).map(|i| under(i, cols, w)).collect();
+    let columns: Vec<(usize, usize)> = (0..w).map(|i| points_under(i, cols, w)).collect();
     let mut sums = vec![0.0; rows * w];
     for (r, line) in z.chunks_exact(cols).enumerate() {
         for (i, &(a, b)) in columns.iter().enumerate() {
@@ -801,7 +803,7 @@ fn map_pixels(grid: &HeightMap<'_>, (width, height): (u32, u32), (lo, hi): (f64,
     let span = if hi > lo { hi - lo } else { 1.0 };
     let mut rgb = Vec::with_capacity(w * h * 3);
     for j in 0..h {
-        let (a, b) = under(j, rows, h);
+        let (a, b) = points_under(j, rows, h);
         // Pixel row 0 is the top of the map: the last lines.
         let (a, b) = (rows - b, rows - a);
         for (i, &(c0, c1)) in columns.iter().enumerate() {
