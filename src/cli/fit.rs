@@ -218,8 +218,31 @@ fn left_out_start_line(left_out: &[LeftOut]) -> Option<String> {
 /// else the paper's and `-o`.
 fn read_input(args: &Args) -> Result<Input, CliError> {
     let input = args.read.read(&args.input)?;
-    let Source::Scan(vouched) = &input.source else {
-        let Some(output) = args.output.clone() else {
+    let vouched = match &input.source {
+        Source::Scan(vouched) => Some(vouched),
+        _ => None,
+    };
+    let output = match (&args.output, vouched) {
+        (Some(output), _) => output.clone(),
+        (None, Some(vouched)) => {
+            let default_output = args.input.join("surface.igs");
+            if let Some(existing) = existing_surface(&default_output).filter(|_| !args.force) {
+                return Err(CliError::new(
+                    Exit::Usage,
+                    format!(
+                        "{} exists ({}); it is kept: pass --force to replace it, or -o OTHER.igs to write the new fit elsewhere",
+                        existing.display(),
+                        if vouched.completed() {
+                            "the surface the completed scan wrote"
+                        } else {
+                            "an earlier fit of this scan"
+                        }
+                    ),
+                ));
+            }
+            default_output
+        }
+        (None, None) => {
             return Err(CliError::new(
                 Exit::Usage,
                 format!(
@@ -230,50 +253,23 @@ fn read_input(args: &Args) -> Result<Input, CliError> {
                         _ => "a grid CSV",
                     }
                 ),
-            ));
-        };
-        tell_findings(&input);
-        return Ok(Input {
-            input,
-            output,
-            degrees: crate::report::scan_dir::scan_degrees(
-                args.model.degree_u,
-                args.model.degree_v,
-                None,
-            ),
-            plan: None,
-            lambda_c_mm: None,
-        });
-    };
-    let default_output = args.input.join("surface.igs");
-    if args.output.is_none() && !args.force {
-        if let Some(existing) = existing_surface(&default_output) {
-            return Err(CliError::new(
-                Exit::Usage,
-                format!(
-                    "{} exists ({}); it is kept: pass --force to replace it, or -o OTHER.igs to write the new fit elsewhere",
-                    existing.display(),
-                    if vouched.completed() {
-                        "the surface the completed scan wrote"
-                    } else {
-                        "an earlier fit of this scan"
-                    }
-                ),
-            ));
+            ))
         }
-    }
-    let start = vouched.journal.as_ref().ok().map(|s| &s.start);
+    };
+    let start = vouched
+        .and_then(|v| v.journal.as_ref().ok())
+        .map(|s| &s.start);
     let degrees =
         crate::report::scan_dir::scan_degrees(args.model.degree_u, args.model.degree_v, start);
     let plan = start.map(|s| s.plan.clone());
-    let lambda_c_mm = vouched.lines.first().and_then(|l| {
+    let lambda_c_mm = vouched.and_then(|v| v.lines.first()).and_then(|l| {
         let o = crate::metrology::params::Options::from_profile(&l.profile);
         o.apply_lambda_c.then_some(o.lambda_c_mm)
     });
     tell_findings(&input);
     Ok(Input {
         input,
-        output: args.output.clone().unwrap_or(default_output),
+        output,
         degrees,
         plan,
         lambda_c_mm,
