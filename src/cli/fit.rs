@@ -684,6 +684,15 @@ impl<'a> Fitting<'a> {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
+        // A grid's y pitch, else a scan's lines at their own y.
+        let end = |y: Option<&f64>| y.copied().unwrap_or(f64::NAN);
+        let (scan, y) = match self.pitch_y_mm {
+            Some(py) => ("", format!("pitch y {py} mm")),
+            None => (
+                "scan ",
+                format!("y {} .. {} mm", end(y_mm.first()), end(y_mm.last())),
+            ),
+        };
         IgesOptions {
             file_name,
             start_lines: vec![
@@ -699,25 +708,10 @@ impl<'a> Fitting<'a> {
                     options.degree_u,
                     options.degree_v
                 ),
-                match self.pitch_y_mm {
-                    Some(py) => format!(
-                        "Input: {} ({} lines x {} points, pitch x {} mm, pitch y {} mm, heights um).",
-                        args.input.display(),
-                        rows,
-                        cols,
-                        pitch_x_mm,
-                        py
-                    ),
-                    None => format!(
-                        "Input: scan {} ({} lines x {} points, pitch x {} mm, y {} .. {} mm, heights um).",
-                        args.input.display(),
-                        rows,
-                        cols,
-                        pitch_x_mm,
-                        y_mm.first().copied().unwrap_or(f64::NAN),
-                        y_mm.last().copied().unwrap_or(f64::NAN)
-                    ),
-                },
+                format!(
+                    "Input: {scan}{} ({rows} lines x {cols} points, pitch x {pitch_x_mm} mm, {y}, heights um).",
+                    args.input.display()
+                ),
             ],
             timestamp: chrono::Utc::now().naive_utc(),
             max_parameter_lines_per_file: args.max_iges_lines_per_file,
