@@ -563,15 +563,12 @@ fn profile_summary(o: &ScanOutputs, args: &Args, points: usize) -> String {
         MaterialRatioReading::Iso => "",
         MaterialRatioReading::Instrument => " (as the SJ series reads them)",
     };
+    let rk = &p.material.rk;
+    let [a, q, z, k, pk, vk] = [p.ra_um, p.rq_um, p.rz_um, rk.rk_um, rk.rpk_um, rk.rvk_um]
+        .map(|v| fmt(v, Quantity::HeightUm));
     format!(
-        "profile of {points} points ({} mm), {filter}: {name}a {} µm, {name}q {} µm, {name}z {} µm; {name}k {} µm, {name}pk {} µm, {name}vk {} µm{read_as}",
+        "profile of {points} points ({} mm), {filter}: {name}a {a} µm, {name}q {q} µm, {name}z {z} µm; {name}k {k} µm, {name}pk {pk} µm, {name}vk {vk} µm{read_as}",
         fmt(points as f64 * o.report.recipe.lines.pitch_mm, Quantity::LengthMm),
-        fmt(p.ra_um, Quantity::HeightUm),
-        fmt(p.rq_um, Quantity::HeightUm),
-        fmt(p.rz_um, Quantity::HeightUm),
-        fmt(p.material.rk.rk_um, Quantity::HeightUm),
-        fmt(p.material.rk.rpk_um, Quantity::HeightUm),
-        fmt(p.material.rk.rvk_um, Quantity::HeightUm)
     )
 }
 
