@@ -17,8 +17,9 @@
 //!    [`specification`] (a part's limits, the 16 % and max rules, the uncertainty of a mean
 //!    and the verdict), the codecs inside [`sj210`] and [`stage`].
 //! 2. I/O adapters: [`transport`] (the only code that opens a serial port), the clients in
-//!    [`sj210`] and [`stage`], generic over `AsyncRead + AsyncWrite`, and [`atomic`] (durable
-//!    file replacement, the one write primitive of the scan's files and the outputs).
+//!    [`sj210`] and [`stage`], generic over `AsyncRead + AsyncWrite`, [`atomic`] (durable
+//!    file replacement, the one write primitive of the scan's files and the outputs) and
+//!    [`panics`] (what a panic ends: its piece of work, or the process).
 //! 3. The session: [`scan`] (plan, station, durable storage and journal, resume, the sans-IO
 //!    session machine and the runner that performs its actions, the outputs of a completed
 //!    scan).
@@ -59,6 +60,7 @@ pub mod metrology;
 pub mod numbers;
 pub mod numfmt;
 pub mod nurbs;
+pub mod panics;
 pub mod pdf;
 pub mod port_swap;
 pub mod profile;

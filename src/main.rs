@@ -17,11 +17,14 @@ fn main() {
         }
     };
     surfscan::telemetry::init(cli.verbose);
-    match cli::run(cli) {
-        Ok(()) => {}
-        Err(e) => {
+    // A panic that no layer ended earlier (`surfscan::panics`) ends the command with the
+    // documented internal-error status, not Rust's 101.
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| cli::run(cli))) {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => {
             cli::console::err(format_args!("surfscan: {e}"));
             std::process::exit(e.exit as i32);
         }
+        Err(p) => surfscan::panics::exit_internal("the command", surfscan::panics::message(&*p)),
     }
 }

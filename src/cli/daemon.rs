@@ -35,6 +35,7 @@ use crate::control::server;
 use crate::devices::Fault;
 use crate::hook::Hook;
 use crate::jobs::service::QueueService;
+use crate::panics::spawn_vital;
 use crate::publish::Publishers;
 use crate::scan::channels::Control;
 use crate::scan::choice::{self, Asker};
@@ -114,7 +115,17 @@ pub fn run(args: Args) -> Result<(), CliError> {
         .enable_all()
         .build()
         .map_err(|e| CliError::new(Exit::Failed, format!("cannot start the runtime: {e}")))?;
-    rt.block_on(daemon(&config, settings, jobs, station, control, lock))
+    // A panic in the daemon's own loop (the scan's state machine, the idle loop) leaves no
+    // state to go on from: the runtime is stopped and the process exits with status 70, which
+    // systemd restarts (the unfinished scan resumes from its journal). `panics` says where a
+    // panic ends less than the process.
+    let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        rt.block_on(daemon(&config, settings, jobs, station, control, lock))
+    }));
+    ran.unwrap_or_else(|p| {
+        rt.shutdown_timeout(Duration::from_secs(5));
+        crate::panics::exit_internal("the daemon's loop", crate::panics::message(&*p))
+    })
 }
 
 fn presence(present: bool) -> DeviceState {
@@ -177,16 +188,19 @@ async fn daemon(
         None => None,
     };
     let mut srv_shutdown = shutdown_rx.clone();
-    let server_task = tokio::spawn(srv.serve(
-        ControlChannels {
-            status: status_rx.clone(),
-            commands: cmd_tx.clone(),
-            queue: Some(jobs.queue.clone()),
-        },
-        async move {
-            let _ = srv_shutdown.wait_for(|v| *v).await;
-        },
-    ));
+    let server_task = spawn_vital(
+        "the control socket's server",
+        srv.serve(
+            ControlChannels {
+                status: status_rx.clone(),
+                commands: cmd_tx.clone(),
+                queue: Some(jobs.queue.clone()),
+            },
+            async move {
+                let _ = srv_shutdown.wait_for(|v| *v).await;
+            },
+        ),
+    );
     tracing::info!(
         "surfscan daemon {} ready: control socket {}, scans in {}",
         env!("CARGO_PKG_VERSION"),
@@ -195,12 +209,15 @@ async fn daemon(
     );
     notifier.ready();
 
-    tokio::spawn(record_scan_in_lock(lock, status_rx.clone()));
+    spawn_vital(
+        "the station lock's record",
+        record_scan_in_lock(lock, status_rx.clone()),
+    );
 
     // STATUS= on every change.
     let n = notifier.clone();
     let mut rx = status_rx.clone();
-    tokio::spawn(async move {
+    spawn_vital("the systemd status", async move {
         let mut last = String::new();
         loop {
             let text = rx.borrow_and_update().summary();
@@ -215,13 +232,13 @@ async fn daemon(
     });
 
     // SIGHUP changes nothing: the configuration is read once, at start.
-    tokio::spawn(ignore_hangups(
+    spawn_vital("the SIGHUP handler", ignore_hangups(
         "ignored; the daemon reads its configuration only at start (systemctl restart surfscan applies a change; an unfinished scan resumes)",
     ));
 
     // SIGTERM / SIGINT.
     let n = notifier.clone();
-    tokio::spawn(async move {
+    spawn_vital("the SIGTERM handler", async move {
         use tokio::signal::unix::{signal, SignalKind};
         let (Ok(mut term), Ok(mut int)) = (
             signal(SignalKind::terminate()),
@@ -252,7 +269,7 @@ async fn daemon(
     let to_publishers = publishers.sender();
     let (ev_tx, mut ev_rx) = mpsc::unbounded_channel::<ScanEvent>();
     let hook = config.notify.as_ref().and_then(Hook::new);
-    let events_task = tokio::spawn(async move {
+    let events_task = spawn_vital("the scan's events", async move {
         while let Some(ev) = ev_rx.recv().await {
             if let Some(h) = hook.as_ref().filter(|_| ev.kind.runs_hook()) {
                 h.fire(ev.clone());

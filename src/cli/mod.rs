@@ -137,6 +137,8 @@ pub enum Exit {
     DoesNotConform = 4,
     /// 69: a device is unavailable.
     Unavailable = 69,
+    /// 70: internal error: a part of the process panicked (`panics`); report it.
+    Internal = 70,
     /// 74: input/output error (files, disk).
     Io = 74,
     /// 78: configuration error.

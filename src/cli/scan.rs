@@ -29,6 +29,7 @@ use super::station::{
 };
 use super::{CliError, Exit};
 use crate::config::Config;
+use crate::panics::spawn_vital;
 use crate::publish::Publishers;
 use crate::scan::channels::Control;
 use crate::scan::choice::{self, Asker};
@@ -325,13 +326,19 @@ pub async fn run_foreground_locked(
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let (status_tx, status_rx) = watch::channel(Status::idle());
     if let Some(lock) = lock {
-        tokio::spawn(record_scan_in_lock(lock, status_rx.clone()));
+        spawn_vital(
+            "the station lock's record",
+            record_scan_in_lock(lock, status_rx.clone()),
+        );
     }
-    let bar = tokio::spawn(progress(status_rx));
-    let hangups = tokio::spawn(ignore_hangups(
-        "the scan goes on; SIGTERM (kill PID) or Ctrl-C in a terminal interrupts it resumably",
-    ));
-    let signals = tokio::spawn(async move {
+    let bar = spawn_vital("the progress bar", progress(status_rx));
+    let hangups = spawn_vital(
+        "the SIGHUP handler",
+        ignore_hangups(
+            "the scan goes on; SIGTERM (kill PID) or Ctrl-C in a terminal interrupts it resumably",
+        ),
+    );
+    let signals = spawn_vital("the SIGTERM handler", async move {
         use tokio::signal::unix::{signal, SignalKind};
         let (Ok(mut term), Ok(mut int)) = (
             signal(SignalKind::terminate()),

@@ -37,6 +37,7 @@ pub mod tls;
 
 use crate::config::Config;
 use crate::control::protocol::ControlChannels;
+use crate::panics::spawn_vital;
 use crate::scan::event::ScanEvent;
 use crate::scan::metrics::ScanMetrics;
 use crate::scan::status::{LinkStatus, Status};
@@ -226,7 +227,7 @@ impl Publishers {
             {
                 Ok(l) => {
                     tracing::info!("metrics on http://{listen}/metrics");
-                    p.links.push(tokio::spawn(metrics::serve(
+                    p.links.push(spawn_vital("the metrics endpoint", metrics::serve(
                         l,
                         status.subscribe(),
                         scan_metrics_rx,
@@ -266,7 +267,7 @@ impl Publishers {
             let (tx, mut rx) = mpsc::unbounded_channel::<ScanEvent>();
             p.writers.insert(
                 0,
-                tokio::spawn(async move {
+                spawn_vital("the publishers' events", async move {
                     while let Some(ev) = rx.recv().await {
                         for s in &sinks {
                             let _ = s.tx.send(ev.clone());
@@ -328,7 +329,8 @@ impl Publishers {
             status.clone(),
             wake.clone(),
         );
-        self.links.push(tokio::spawn(archiver.run(stop_rx)));
+        self.links
+            .push(spawn_vital("the archive", archiver.run(stop_rx)));
         self.queue_successes(
             "archive",
             known_of(archive::LINK, &queue),
@@ -359,7 +361,7 @@ impl Publishers {
         P: Fn(&str, &Path) -> std::io::Result<PathBuf> + Clone + Send + Sync + 'static,
     {
         let (tx, mut rx) = mpsc::unbounded_channel::<ScanEvent>();
-        self.writers.push(tokio::spawn(async move {
+        self.writers.push(spawn_vital(link, async move {
             while let Some(ev) = rx.recv().await {
                 if ev.kind != crate::scan::event::ScanEventKind::Success {
                     continue;
@@ -394,7 +396,8 @@ impl Publishers {
         let wake = Arc::new(Notify::new());
         let exporter =
             export::Exporter::new(x.clone(), queue.clone(), status.clone(), wake.clone());
-        self.links.push(tokio::spawn(exporter.run(stop_rx)));
+        self.links
+            .push(spawn_vital("the export", exporter.run(stop_rx)));
         self.queue_successes(
             "export",
             known_of(export::LINK, &queue),
@@ -448,11 +451,12 @@ impl Publishers {
             status.clone(),
             commands,
         )?;
-        self.links.push(tokio::spawn(link.run(stop_rx)));
+        self.links
+            .push(spawn_vital("the MQTT link", link.run(stop_rx)));
         let (tx, mut rx) = mpsc::unbounded_channel::<ScanEvent>();
         let station = m.station.clone();
         let status = status.clone();
-        self.writers.push(tokio::spawn(async move {
+        self.writers.push(spawn_vital("the MQTT outbox's writer", async move {
             while let Some(ev) = rx.recv().await {
                 let o = outbox.clone();
                 let (st, e) = (station.clone(), ev.clone());
@@ -465,10 +469,7 @@ impl Publishers {
                     }
                     let mut dropped = 0;
                     for (topic, payload) in messages {
-                        dropped += o
-                            .lock()
-                            .map_err(|_| std::io::Error::other("outbox lock poisoned"))?
-                            .push(topic, payload)?;
+                        dropped += mqtt::held(&o).push(topic, payload)?;
                     }
                     if success {
                         // After the outbox: a process killed between the two sends the

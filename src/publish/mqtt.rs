@@ -208,7 +208,7 @@ impl MqttLink {
         let mut task = self.commands.take().map(|mut c| {
             let (to, mut from) = mpsc::channel::<Incoming>(COMMANDS_WAITING);
             let (reply, replies) = mpsc::unbounded_channel();
-            tokio::spawn(async move {
+            crate::panics::spawn_vital("the MQTT commands", async move {
                 while let Some(m) = from.recv().await {
                     if let Some(r) = c.answer(m).await {
                         let _ = reply.send(r);
@@ -450,13 +450,9 @@ impl MqttLink {
 
     async fn head(&self) -> std::io::Result<Option<Message>> {
         let o = self.outbox.clone();
-        let (m, damaged) = tokio::task::spawn_blocking(move || {
-            o.lock()
-                .map_err(|_| std::io::Error::other("outbox lock poisoned"))?
-                .head()
-        })
-        .await
-        .map_err(std::io::Error::other)??;
+        let (m, damaged) = tokio::task::spawn_blocking(move || held(&o).head())
+            .await
+            .map_err(std::io::Error::other)??;
         for d in damaged {
             tracing::error!(
                 "mqtt: an outbox message could not be read back and was set aside: {}",
@@ -468,14 +464,19 @@ impl MqttLink {
 
     async fn ack(&self, seq: u64) -> std::io::Result<()> {
         let o = self.outbox.clone();
-        tokio::task::spawn_blocking(move || {
-            o.lock()
-                .map_err(|_| std::io::Error::other("outbox lock poisoned"))?
-                .ack(seq)
-        })
-        .await
-        .map_err(std::io::Error::other)?
+        tokio::task::spawn_blocking(move || held(&o).ack(seq))
+            .await
+            .map_err(std::io::Error::other)?
     }
+}
+
+/// The outbox, locked. A panic while it was held (its files half changed, its count
+/// unknown) would otherwise leave every later message unstored: the process ends instead
+/// ([`crate::panics`]) and reopens the outbox from its files at the next start.
+pub(super) fn held(o: &Mutex<Outbox>) -> std::sync::MutexGuard<'_, Outbox> {
+    o.lock().unwrap_or_else(|_| {
+        crate::panics::exit_internal("a write to the MQTT outbox", "its lock was poisoned")
+    })
 }
 
 /// The command task's next reply (never, without the task).

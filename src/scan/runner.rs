@@ -309,9 +309,9 @@ const WATCHED_LIMIT: std::time::Duration = std::time::Duration::from_secs(3600);
 
 /// Runs `work` (disk and CPU work of seconds: reopening a scan, writing its outputs) on a
 /// blocking thread of its own while this loop goes on feeding the watchdog, so that systemd
-/// does not take a long piece of work for a hung daemon; for at most [`WATCHED_LIMIT`]. A
-/// panic in `work` goes on as if it had happened here; `Err` only if the runtime cancelled
-/// the work (it shuts down).
+/// does not take a long piece of work for a hung daemon; for at most [`WATCHED_LIMIT`].
+/// `Err` if the runtime cancelled the work (it shuts down) or `work` panicked ([`joined`]):
+/// the scan is then refused or fails with that reason, and the daemon serves on.
 async fn watched<T: Send + 'static>(
     ctl: &Control,
     what: &str,
@@ -323,13 +323,7 @@ async fn watched<T: Send + 'static>(
     let mut warned = false;
     loop {
         tokio::select! {
-            done = &mut task => {
-                return match done {
-                    Ok(v) => Ok(v),
-                    Err(e) if e.is_panic() => std::panic::resume_unwind(e.into_panic()),
-                    Err(e) => Err(format!("internal: {what} was cancelled: {e}")),
-                };
-            }
+            done = &mut task => return joined(done, what),
             _ = tick.tick() => {
                 if started.elapsed() < WATCHED_LIMIT {
                     ctl.pet();
@@ -345,6 +339,22 @@ async fn watched<T: Send + 'static>(
     }
 }
 
+/// The result of [`watched`] work: a panic in it as the reason the scan stops, in words
+/// (its place and message are in the log, printed by the panic hook).
+fn joined<T>(done: Result<T, tokio::task::JoinError>, what: &str) -> Result<T, String> {
+    match done {
+        Ok(v) => Ok(v),
+        Err(e) if e.is_panic() => Err(panicked(what, &*e.into_panic())),
+        Err(e) => Err(format!("internal: {what} was cancelled: {e}")),
+    }
+}
+
+/// Why the scan stops after `what` panicked with `payload`.
+fn panicked(what: &str, payload: &(dyn std::any::Any + Send)) -> String {
+    let message = crate::panics::message(payload);
+    format!("internal error: {what} panicked ({message}); report this with the scan's directory and the log")
+}
+
 /// Writes the scan's outputs [`watched`], with the ledger moved to the worker and back.
 async fn write_outputs_watched(books: &mut Books<'_>, ctl: &Control) -> Event {
     let Some(mut ledger) = books.ledger.take() else {
@@ -352,15 +362,26 @@ async fn write_outputs_watched(books: &mut Books<'_>, ctl: &Control) -> Event {
         return books.disk(&Action::WriteOutputs, None, 0);
     };
     let characterise = books.settings.characterise.clone();
+    // A panic is caught here rather than by `watched`, so that the ledger comes back to
+    // write the failed scan's stop record (the journal then says why, and the scan is not
+    // resumed into the same outputs at the next start). Only its journal is used after it.
     let done = watched(ctl, "writing the outputs", move || {
-        let written = ledger.write_outputs(characterise.as_deref());
+        let written = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            ledger.write_outputs(characterise.as_deref())
+        }));
         (ledger, written)
     })
     .await;
     match done {
         Ok((ledger, written)) => {
             books.ledger = Some(ledger);
-            books.outputs_event(written)
+            match written {
+                Ok(written) => books.outputs_event(written),
+                Err(p) => Event::StorageFailed(StorageFailure::not_storage(panicked(
+                    "writing the outputs",
+                    &*p,
+                ))),
+            }
         }
         Err(message) => Event::StorageFailed(StorageFailure::not_storage(message)),
     }
@@ -523,5 +544,25 @@ fn finish(ctl: &Control, machine: &Machine, mut books: Books<'_>) -> Outcome {
         end,
         dir: Some(dir),
         outputs,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::joined;
+
+    /// A panic in [`super::watched`] work becomes the scan's reason, naming the work and the
+    /// panic's message, instead of going on up the daemon's loop; a value passes through.
+    #[tokio::test]
+    async fn a_panic_in_watched_work_is_the_scans_reason() {
+        let done =
+            tokio::task::spawn_blocking(|| -> u32 { panic!("no knot vector for {} lines", 3) })
+                .await;
+        assert_eq!(
+            joined(done, "reopening the scan"),
+            Err("internal error: reopening the scan panicked (no knot vector for 3 lines); report this with the scan's directory and the log".to_string())
+        );
+        let done = tokio::task::spawn_blocking(|| 7u32).await;
+        assert_eq!(joined(done, "reopening the scan"), Ok(7));
     }
 }

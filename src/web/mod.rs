@@ -133,11 +133,20 @@ pub fn start(
     let thread = std::thread::Builder::new()
         .name("surfscan-web".into())
         .spawn(move || {
-            rt.block_on(async move {
-                let feed = tokio::spawn(live::run(status, out, view_tx));
-                server::serve(listener, acceptor, api::router(app), max, shutdown_rx).await;
-                feed.abort();
-            });
+            // A panic in one request ends that connection only; one in the accept loop or
+            // the live feed would leave the daemon without its page: the process ends
+            // ([`crate::panics`]) and systemd starts it again.
+            let served = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                rt.block_on(async move {
+                    let feed = live::run(status, out, view_tx);
+                    let feed = crate::panics::spawn_vital("the station's page's feed", feed);
+                    server::serve(listener, acceptor, api::router(app), max, shutdown_rx).await;
+                    feed.abort();
+                })
+            }));
+            if let Err(p) = served {
+                crate::panics::exit_internal("the station's page", crate::panics::message(&*p));
+            }
         })
         .map_err(|e| WebError::Start(e.to_string()))?;
     Ok(WebHandle {

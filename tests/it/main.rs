@@ -42,6 +42,7 @@ mod mqtt_commands;
 mod night_faults;
 mod notify_apprise;
 mod older_scans;
+mod panic_strategy;
 mod profile_conditions_cli;
 mod profile_report;
 mod prometheus_scrape;

@@ -549,6 +549,51 @@ fn the_watchdog_is_fed_while_the_outputs_are_written() {
     );
 }
 
+/// A characterisation with a bug that panics.
+struct PanickingCharacterisation;
+
+impl surfscan::scan::outputs::Characterise for PanickingCharacterisation {
+    fn characterise(
+        &self,
+        _scan: &surfscan::scan::outputs::CompletedScan<'_>,
+    ) -> Result<surfscan::scan::outputs::Characterised, Box<dyn std::error::Error + Send + Sync>>
+    {
+        panic!("a bug in the characterisation of {} lines", LINES)
+    }
+}
+
+/// A panic while a completed scan's outputs are written fails that scan with a reason that
+/// says so, in the outcome and in the journal's stop record (so a restart does not resume it
+/// into the same outputs), and the runner goes on: the next scan runs and succeeds. Built
+/// with `panic = "abort"`, as the release build was, the process died here.
+#[tokio::test(start_paused = true)]
+async fn a_panic_while_the_outputs_are_written_fails_the_scan_and_the_runner_goes_on() {
+    let mut h = harness();
+    let plain = settings(h.tmp.path());
+    let panicking = RunSettings {
+        characterise: Some(Arc::new(PanickingCharacterisation)),
+        ..plain.clone()
+    };
+    let mut station = FakeStation(h.world.clone());
+    let outcome = run_scan(&mut station, &mut h.ctl, &panicking, new_scan()).await;
+    let why = format!(
+        "internal error: writing the outputs panicked (a bug in the characterisation of {LINES} lines); report this with the scan's directory and the log"
+    );
+    match &outcome.end {
+        End::Fail(reason) => assert_eq!(reason.to_string(), why),
+        other => panic!("{other:?}"),
+    }
+    let recs = records(&scan_dir_of(&outcome));
+    let stop = recs.iter().find_map(|r| match r {
+        Record::Stop(s) => Some((s.status, s.reason.clone())),
+        _ => None,
+    });
+    assert_eq!(stop, Some((StopStatus::Fail, why)));
+    let next = run_scan(&mut station, &mut h.ctl, &plain, new_scan()).await;
+    assert!(matches!(next.end, End::Success { .. }), "{next:?}");
+    assert_ne!(next.dir, outcome.dir);
+}
+
 #[tokio::test(start_paused = true)]
 async fn abort_mid_trace_stops_the_devices_and_records_abort() {
     let mut h = harness();
