@@ -66,7 +66,9 @@ pub fn max_residual_mm(result: &FitResult, grid: &Grid) -> f64 {
                 .collect();
             handles
                 .into_iter()
-                .map(|h| h.join().unwrap_or(f64::INFINITY))
+                // A panic goes on to the caller's handler (a scan's outputs, the command;
+                // `crate::panics`), rather than reading as a surface infinitely far off.
+                .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
                 .fold(0.0f64, f64::max)
         })
     };
