@@ -159,8 +159,9 @@ impl QueueService {
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Queue> {
-        // A panic while holding the lock would have aborted the process (panic = "abort"
-        // in release); in tests the queue is still consistent, as changes are applied whole.
+        // A panic of a request that held the lock (the daemon serves on, `crate::panics`)
+        // leaves the last whole queue: a change is made to a copy, written, and only then
+        // made the queue.
         self.inner
             .queue
             .lock()

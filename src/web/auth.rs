@@ -294,7 +294,7 @@ impl Sessions {
             &tag,
         )
         .ok()?;
-        if self.revoked.lock().ok()?.contains_key(nonce) {
+        if self.signed_out().contains_key(nonce) {
             return None;
         }
         Some((
@@ -319,10 +319,16 @@ impl Sessions {
     /// Signs a session out: its cookie is refused from now on. Revocations past their
     /// cookie's expiry at `now` are forgotten.
     pub fn revoke(&self, session: &Session, now: i64) {
-        if let Ok(mut r) = self.revoked.lock() {
-            r.retain(|_, expires| *expires > now);
-            r.insert(session.nonce.clone(), session.expires);
-        }
+        let mut r = self.signed_out();
+        r.retain(|_, expires| *expires > now);
+        r.insert(session.nonce.clone(), session.expires);
+    }
+
+    /// The signed-out sessions, also after a panic of a request that held them: each change
+    /// is one map operation, so the map is whole (refusing every cookie, or forgetting the
+    /// sign-outs, would leave the page unusable or open).
+    fn signed_out(&self) -> std::sync::MutexGuard<'_, HashMap<String, i64>> {
+        self.revoked.lock().unwrap_or_else(|p| p.into_inner())
     }
 }
 
@@ -500,6 +506,18 @@ mod tests {
         // Signed out.
         sessions.revoke(&session, 0);
         assert!(sessions.check(&users, &cookie, 0).is_none());
+        // A request that panicked while it held the sign-outs (the page serves on): the
+        // sign-out still holds, and a new session is still accepted and can sign out.
+        let poisoned = std::panic::catch_unwind(|| {
+            let _held = sessions.revoked.lock().unwrap();
+            panic!("a request's bug");
+        });
+        assert!(poisoned.is_err() && sessions.revoked.is_poisoned());
+        assert!(sessions.check(&users, &cookie, 0).is_none());
+        let (fresh, fresh_session) = sessions.issue(alice, 1_000).unwrap();
+        assert!(sessions.check(&users, &fresh, 0).is_some());
+        sessions.revoke(&fresh_session, 0);
+        assert!(sessions.check(&users, &fresh, 0).is_none());
     }
 
     #[test]
