@@ -558,12 +558,8 @@ fn traceability(h: &mut String, report: &Value) {
     h.push_str("<h2 id=\"traceability\">Traceability</h2>\n<table id=\"t-traceability\">\n");
     let id = esc(&text(&t["scan_id"]));
     kv(h, "scan", &format!("<code>{id}</code>"));
-    for (k, key) in [
-        ("specimen", "specimen"),
-        ("operator", "operator"),
-        ("notes", "notes"),
-    ] {
-        kv(h, k, &esc(&text(&t[key])));
+    for k in ["specimen", "operator", "notes"] {
+        kv(h, k, &esc(&text(&t[k])));
     }
     let started = print::to_the_second(&text(&t["started_at"]));
     kv(h, "started", &esc(&started));
