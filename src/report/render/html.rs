@@ -307,19 +307,10 @@ pub fn result_summary(report: &Value) -> Vec<(&'static str, String)> {
         .unwrap_or_default();
     out.push(("lines", format!("{}{planned} characterised", ra.len())));
     if !ra.is_empty() {
-        let (lo, hi) = crate::extremes::min_max(&ra);
-        let (m, sd) = mean_sd(&ra);
-        let h = Quantity::HeightUm;
-        out.push((
-            "Ra",
-            format!(
-                "{} … {} µm (mean {} µm, s.d. {} µm)",
-                fmt(lo, h),
-                fmt(hi, h),
-                fmt(m, h),
-                fmt(sd, h)
-            ),
-        ));
+        let ((lo, hi), (m, sd)) = (crate::extremes::min_max(&ra), mean_sd(&ra));
+        let [lo, hi, m, sd] = [lo, hi, m, sd].map(|v| fmt(v, Quantity::HeightUm));
+        let ra = format!("{lo} … {hi} µm (mean {m} µm, s.d. {sd} µm)");
+        out.push(("Ra", ra));
     }
     let table_1: Vec<&str> = report["uncertainty"]["table_1"]
         .as_array()
@@ -1050,14 +1041,10 @@ fn holdout(h: &mut String, report: &Value) {
         r["measured_max_um"].as_f64(),
         r["overshoot_pct"].as_f64(),
     ) {
-        let q = Quantity::HeightUm;
+        let [lo, hi, mlo, mhi] = [lo, hi, mlo, mhi].map(|v| fmt(v, Quantity::HeightUm));
         let _ = writeln!(
             h,
-            "<p id=\"height-range\">Sampled densely, the model spans {} … {} µm where the measured heights span {} … {} µm ({} % beyond the measured range).</p>",
-            fmt(lo, q),
-            fmt(hi, q),
-            fmt(mlo, q),
-            fmt(mhi, q),
+            "<p id=\"height-range\">Sampled densely, the model spans {lo} … {hi} µm where the measured heights span {mlo} … {mhi} µm ({} % beyond the measured range).</p>",
             fmt(pct, Quantity::Percent)
         );
     }
