@@ -497,16 +497,13 @@ pub fn between_lines_given(
         lines,
     };
     out.summary = out.short();
+    let [rms, max_abs, sq] = [rms, max_abs, sq_um].map(|v| fmt(v, Quantity::HeightUm));
     out.verdict = format!(
-        "{}: every {} line left out ({} lines) and the rest refitted ({}), the refit misses them by {} µm rms and {} µm at worst, against Sq {} µm; supported means rms ≤ {} × Sq",
+        "{}: every {} line left out ({} lines) and the rest refitted ({}), the refit misses them by {rms} µm rms and {max_abs} µm at worst, against Sq {sq} µm; supported means rms ≤ {threshold} × Sq",
         out.summary,
         ordinal(every),
         out.lines.len(),
         method.name(),
-        fmt(rms, Quantity::HeightUm),
-        fmt(max_abs, Quantity::HeightUm),
-        fmt(sq_um, Quantity::HeightUm),
-        threshold
     );
     Ok(out)
 }

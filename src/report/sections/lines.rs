@@ -188,12 +188,9 @@ pub fn uncentred_warning(
             line_number(lines.lines.get(worst).map_or(worst as u32, |l| l.index))
         )
     };
+    let [mean, rq, rp, rv] = [mean, p.rq_um, p.rp_um, p.rv_um].map(|v| fmt(v, Quantity::HeightUm));
     Some(format!(
-        "without the λc filter (--no-filter, [analysis] no-filter) the heights are taken as a roughness profile about its mean line, but {which} {} µm against Rq {} µm (Rp {} µm, Rv {} µm){}: an offset or form remains and Ra, Rz … measure it; leave out --no-filter to apply the λc filter",
-        fmt(mean, Quantity::HeightUm),
-        fmt(p.rq_um, Quantity::HeightUm),
-        fmt(p.rp_um, Quantity::HeightUm),
-        fmt(p.rv_um, Quantity::HeightUm),
+        "without the λc filter (--no-filter, [analysis] no-filter) the heights are taken as a roughness profile about its mean line, but {which} {mean} µm against Rq {rq} µm (Rp {rp} µm, Rv {rv} µm){}: an offset or form remains and Ra, Rz … measure it; leave out --no-filter to apply the λc filter",
         if analyses.len() == 1 { "" } else { ")" }
     ))
 }
