@@ -386,8 +386,8 @@ fn print_floor(csv: &Path, reference_s: f64, disk_s: f64, runs: usize) {
 
 /// The time the disk takes to make `file`'s bytes durable, as `fit` must: the bytes (already
 /// in memory) written into a new file beside it through the same durable path `fit` writes
-/// through (`write_atomically_streamed`: 1 MiB chunks with `O_DIRECT` where the file system
-/// takes it, fsync, rename, the directory's fsync), in 1 MiB pieces, then removed. Returns the
+/// through (`write_atomically_streamed`: writeback started as it goes, fsync, rename, the
+/// directory's fsync), in the pieces `fit`'s 1 MiB buffer hands it, then removed. Returns the
 /// median wall time and the byte count.
 fn disk_floor(file: &Path, runs: usize) -> (f64, usize) {
     use std::io::Write;

@@ -7,18 +7,18 @@
 //! /dev/null` leaves `/dev/null` a device. A scan's own files go through
 //! [`write_regular_atomically`], which refuses anything but a regular file there.
 //!
-//! A large file can be written through [`write_atomically_streamed`], whose [`StreamedFile`]
-//! writes 1 MiB chunks with `O_DIRECT` where the file system takes it (no copy into the page
-//! cache, and the final fsync finds almost nothing left to write), or else buffered with
-//! each chunk's writeback started at once (Linux `sync_file_range`), so the disk works while
-//! the rest is still being produced. The durability is the fsync's, as for every other file:
-//! how the bytes reach the disk changes only when the disk works, never what is on it.
+//! A large file can be written through [`write_atomically_streamed`], which asks the kernel to
+//! start writing each MiB to disk as soon as it is written (Linux `sync_file_range`
+//! with `SYNC_FILE_RANGE_WRITE`; elsewhere nothing), so the disk works while the rest is
+//! still being produced and the final fsync waits only for the tail. The durability is the
+//! fsync's, as for every other file: starting writeback early changes only when the disk
+//! works, never what is on it.
 //!
 //! [`write_hint`] turns a failed write into what to do about it (a full disk, a read-only
 //! file system, a file where a directory must be).
 //!
-//! Layer 2 (I/O adapter): depends on std and `libc` (the error numbers the hints tell apart),
-//! and through [`StreamedFile`] on `nix` and `tracing`.
+//! Layer 2 (I/O adapter): depends on std and `libc` (one advisory call on Linux, and the
+//! error numbers the hints tell apart).
 
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
@@ -41,44 +41,18 @@ fn temp_path(path: &Path) -> io::Result<(PathBuf, PathBuf)> {
     Ok((dir.join(tmp_name), dir))
 }
 
-mod streamed;
-pub use streamed::StreamedFile;
-
 /// A file under construction, as [`write_impl`] opens it for the body.
 trait Target: Write + Sized {
-    /// The temporary file at `tmp`, created exclusively (`O_EXCL`).
-    fn create_new(tmp: &Path) -> io::Result<Self>;
-    /// Over a spool, which a direct write's body goes to first.
-    fn spool(file: File) -> Self;
-    /// The file, its bytes written.
-    fn into_file(self) -> io::Result<File>;
+    fn open(file: File) -> Self;
+    fn into_file(self) -> File;
 }
 
-impl Target for BufWriter<File> {
-    fn create_new(tmp: &Path) -> io::Result<Self> {
-        let file = fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(tmp)?;
-        Ok(BufWriter::with_capacity(1 << 20, file))
+impl Target for File {
+    fn open(file: File) -> Self {
+        file
     }
-    fn spool(file: File) -> Self {
-        BufWriter::with_capacity(1 << 20, file)
-    }
-    fn into_file(self) -> io::Result<File> {
-        self.into_inner().map_err(|e| e.into_error())
-    }
-}
-
-impl Target for StreamedFile {
-    fn create_new(tmp: &Path) -> io::Result<Self> {
-        StreamedFile::create_new(tmp)
-    }
-    fn spool(file: File) -> Self {
-        StreamedFile::buffered(file)
-    }
-    fn into_file(self) -> io::Result<File> {
-        Ok(StreamedFile::into_file(self))
+    fn into_file(self) -> File {
+        self
     }
 }
 
@@ -186,8 +160,13 @@ fn destination(path: &Path, links: Links) -> io::Result<Destination> {
 
 /// Creates the temporary file exclusively: never through a link planted at its name. A
 /// leftover of an earlier process with this pid (a file or a link) is removed first.
-fn create_temp<W: Target>(tmp: &Path) -> io::Result<W> {
-    let create = || W::create_new(tmp);
+fn create_temp(tmp: &Path) -> io::Result<File> {
+    let create = || {
+        fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(tmp)
+    };
     match create() {
         Err(e) if e.kind() == io::ErrorKind::AlreadyExists => {
             if fs::symlink_metadata(tmp).is_ok_and(|m| !m.is_dir()) {
@@ -228,15 +207,15 @@ fn write_impl<W: Target, T>(
     path: &Path,
     sync: bool,
     links: Links,
-    body: impl FnOnce(&mut W) -> io::Result<T>,
+    body: impl FnOnce(&mut BufWriter<W>) -> io::Result<T>,
 ) -> io::Result<T> {
     let path = match destination(path, links)? {
         Destination::Replace(p) => p,
         Destination::Stream(mut target) => {
-            let mut w = W::spool(spool()?);
+            let mut w = BufWriter::with_capacity(1 << 20, W::open(spool()?));
             let value = body(&mut w)?;
             w.flush()?;
-            let mut spooled = w.into_file()?;
+            let mut spooled = w.into_inner().map_err(|e| e.into_error())?.into_file();
             io::Seek::seek(&mut spooled, io::SeekFrom::Start(0))?;
             io::copy(&mut spooled, &mut target)?;
             target.flush()?;
@@ -246,10 +225,10 @@ fn write_impl<W: Target, T>(
     let path = path.as_path();
     let (tmp, dir) = temp_path(path)?;
     let result = (|| {
-        let mut w: W = create_temp(&tmp)?;
+        let mut w = BufWriter::with_capacity(1 << 20, W::open(create_temp(&tmp)?));
         let value = body(&mut w)?;
         w.flush()?;
-        let file = w.into_file()?;
+        let file = w.into_inner().map_err(|e| e.into_error())?.into_file();
         if sync {
             file.sync_all()?;
         }
@@ -286,12 +265,93 @@ pub fn write_regular_atomically<T>(
     write_impl(path, true, Links::Refuse, body)
 }
 
+/// Writeback is started once this many bytes have been written since the last start. The
+/// final fsync waits for what was written after the last start, so a small step shortens it:
+/// on a 21 MB IGES file (`surfscan fit` 31×8000) 1 MiB took the whole process from 45.8 to
+/// 43.1 ms (medians of 25 alternating runs) against 8 MiB, and the 853 MB of the 1000×10000
+/// fit took the same time within the disk's spread.
+const WRITEBACK_BYTES: u64 = 1 << 20;
+
+/// A file that starts writeback of every [`WRITEBACK_BYTES`] written (module docs).
+pub struct StreamedFile {
+    file: File,
+    /// Position of the next write.
+    pos: u64,
+    /// Bytes before this offset have had their writeback started.
+    started: u64,
+}
+
+impl StreamedFile {
+    /// Starts writeback of `[started, pos)` once it is large enough.
+    fn start_writeback(&mut self) {
+        if self.pos < self.started + WRITEBACK_BYTES {
+            return;
+        }
+        start_writeback(&self.file, self.started, self.pos - self.started);
+        self.started = self.pos;
+    }
+}
+
+/// Asks the kernel to start writing the dirty pages of `len` bytes at `offset` of `file` to
+/// disk, without waiting. Advisory: a failure is ignored, since the fsync that ends every
+/// write reports any real error.
+#[cfg(target_os = "linux")]
+fn start_writeback(file: &File, offset: u64, len: u64) {
+    use std::os::fd::AsRawFd;
+    let (Ok(offset), Ok(len)) = (i64::try_from(offset), i64::try_from(len)) else {
+        return;
+    };
+    // SAFETY: the descriptor is open (borrowed from `file` for the call); sync_file_range
+    // reads no memory of ours and only schedules I/O of pages the file already has.
+    let _ = unsafe {
+        libc::sync_file_range(file.as_raw_fd(), offset, len, libc::SYNC_FILE_RANGE_WRITE)
+    };
+}
+
+/// Elsewhere writeback is left to the final fsync.
+#[cfg(not(target_os = "linux"))]
+fn start_writeback(_file: &File, _offset: u64, _len: u64) {}
+
+impl Target for StreamedFile {
+    fn open(file: File) -> Self {
+        StreamedFile {
+            file,
+            pos: 0,
+            started: 0,
+        }
+    }
+    fn into_file(self) -> File {
+        self.file
+    }
+}
+
+impl Write for StreamedFile {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let n = self.file.write(buf)?;
+        self.pos += n as u64;
+        self.start_writeback();
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        self.file.flush()
+    }
+}
+
+impl io::Seek for StreamedFile {
+    fn seek(&mut self, to: io::SeekFrom) -> io::Result<u64> {
+        // A rewrite behind the started range (a header filled in at the end) is left to the
+        // final fsync; writeback goes on from the furthest byte started.
+        self.pos = self.file.seek(to)?;
+        Ok(self.pos)
+    }
+}
+
 /// [`write_atomically`] for a large file: the body writes (and may seek) in a
-/// [`StreamedFile`], which writes 1 MiB chunks with `O_DIRECT` where the file system takes
-/// it, or else buffered with their writeback started at once (module docs).
+/// [`StreamedFile`], whose writeback starts while the body is still writing (module docs).
 pub fn write_atomically_streamed<T>(
     path: &Path,
-    body: impl FnOnce(&mut StreamedFile) -> io::Result<T>,
+    body: impl FnOnce(&mut BufWriter<StreamedFile>) -> io::Result<T>,
 ) -> io::Result<T> {
     write_impl(path, true, Links::Follow, body)
 }

@@ -14,14 +14,6 @@
 //! this on a seekable writer such as a file, [`write_iges`] on any writer through a buffer.
 //! Parts and patches are planned from token counts (an upper bound on the lines of each
 //! entity), never by formatting the surface first.
-//!
-//! `fit` and a scan hand [`write_iges_seekable`] a [`crate::atomic::StreamedFile`], which
-//! takes the ~1 MiB blocks into an aligned buffer of its own and writes them with `O_DIRECT`
-//! (on a thread of its own while the next block is packed) where the file system takes it,
-//! else buffered: the page cache copy was about 5 ms of CPU and the fsync at the end 10 ms
-//! for a 21 MB file on this machine's disk, against 1.6 and 2.3 ms directly. It is done by
-//! hand in that adapter (std's positional writes, one `fcntl`), not here: the writer stays a
-//! formatter over any `io::Write + Seek`, and its bytes are the same either way.
 
 use super::format::{ascii_printable, hollerith, push_real, push_right, push_uint, FieldPacker};
 use super::split::{split_middle_shapes, split_v_middle, split_v_middle_side, PatchShape, Side};

@@ -1,8 +1,7 @@
 //! Writing a fitted surface as IGES: `surface.igs`, or several complete files
 //! `surface.part<i>-of-<n>.igs` of whole exact patches when one file cannot hold it (the P
-//! section is capped at 9,999,999 lines). Each file is replaced atomically and written in
-//! 1 MiB chunks with `O_DIRECT` where the file system takes it, else buffered with each chunk's
-//! writeback started at once ([`write_atomically_streamed`]), so the fsync that ends it is
+//! section is capped at 9,999,999 lines). Each file is replaced atomically, its writeback to
+//! disk started as it is written ([`write_atomically_streamed`]), so the fsync that ends it is
 //! short.
 //!
 //! Layer 3 (session): depends on [`crate::iges`], [`crate::nurbs`] and [`crate::atomic`].
