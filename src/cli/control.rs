@@ -558,6 +558,7 @@ mod tests {
             status,
             reason: reason.into(),
             dir: "/d/G-0141".into(),
+            internal: false,
             verdict: None,
             results: None,
         }

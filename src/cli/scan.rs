@@ -120,6 +120,7 @@ pub fn outcome_result(outcome: &Outcome) -> Result<(), CliError> {
                 FailKind::Scan => Exit::Failed,
                 FailKind::Unavailable => Exit::Unavailable,
                 FailKind::Io => Exit::Io,
+                FailKind::Internal => Exit::Internal,
             };
             let msg = match dir {
                 Some(_) => format!("scan failed: {reason}{}", kept(dir)),

@@ -113,6 +113,7 @@ pub fn write(output_dir: &Path, scan: &SyntheticScan) -> std::io::Result<PathBuf
             status,
             reason: "synthetic".into(),
             cause: None,
+            internal: false,
             time: scan.started + chrono::Duration::minutes(30),
         }))?;
     }

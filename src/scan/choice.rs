@@ -16,6 +16,10 @@
 //!   and starts nothing else; an operator's plain start begins a new scan, warning when the
 //!   scan started last failed.
 //!
+//! A scan that failed with an internal error while its outputs were written (a bug; every
+//! line on disk) is the operator's: only `--resume` continues it, which writes its outputs
+//! again and traces nothing; the daemon never does by itself (the same bug would panic again).
+//!
 //! Layer 3 (session): the decision is pure; [`choose`] reads the journals and
 //! [`Choice::commit`] appends to them ([`super::journal`]).
 
@@ -103,11 +107,16 @@ pub fn decide(s: &Survey, asker: Asker, out: &Path) -> Decided {
             _ => Decision::Nothing,
         },
         Asker::Operator(StartMode::Auto) => {
-            if let Some(f) = last_failed {
-                warnings.push(format!(
+            match last_failed {
+                Some(f) if f.internal => warnings.push(format!(
+                    "the last scan {} failed with an internal error while its outputs were written (every line is on disk); a new scan starts (`--resume` writes the failed one's outputs again, `surfscan fit`/`analyze` on its directory makes them by hand)",
+                    f.dir.display()
+                )),
+                Some(f) => warnings.push(format!(
                     "the last scan {} failed; a new scan starts (`--resume` continues the failed one at its first missing line)",
                     f.dir.display()
-                ));
+                )),
+                None => {}
             }
             Decision::New {
                 abandon: Vec::new(),
@@ -235,6 +244,7 @@ fn record_abandoned(dir: &Path, peer: &Peer) -> Result<(), ChoiceError> {
             status: StopStatus::Abandoned,
             reason: reason.clone(),
             cause: None,
+            internal: false,
             time: chrono::Utc::now(),
         }))
         .map_err(|e| io(e.to_string()))?;
@@ -267,6 +277,7 @@ mod tests {
             sequence,
             started: at(sequence as u32),
             cause,
+            internal: false,
         }
     }
 
@@ -418,6 +429,36 @@ mod tests {
             let d = decide(&s, AUTO, Path::new("/out"));
             assert!(d.warnings.is_empty(), "{:?}", d.warnings);
         }
+    }
+
+    /// A bug ended the scan while its outputs were written: only the operator's `--resume`
+    /// continues it (writing the outputs again); a plain start begins a new scan and says how
+    /// to get the outputs; the daemon at start-up leaves it alone, so a panic is never
+    /// repeated in a loop.
+    #[test]
+    fn a_scan_ended_by_an_internal_error_is_continued_only_by_resume() {
+        let bug = Failed {
+            internal: true,
+            ..failed("f", 2, FailCause::Operator)
+        };
+        let s = survey_of(Vec::new(), vec![bug], 2);
+        assert_eq!(decision(&s, RESUME), Decision::Continue("f".into()));
+        assert_eq!(decision(&s, Asker::DaemonStartUp), Decision::Nothing);
+        let d = decide(&s, AUTO, Path::new("/out"));
+        assert_eq!(
+            d.decision,
+            Decision::New {
+                abandon: Vec::new()
+            }
+        );
+        assert!(
+            d.warnings.iter().any(|w| w
+                .starts_with("the last scan f failed with an internal error")
+                && w.contains("`--resume` writes the failed one's outputs again")
+                && w.contains("`surfscan fit`/`analyze`")),
+            "{:?}",
+            d.warnings
+        );
     }
 
     #[test]

@@ -313,10 +313,10 @@ impl Books<'_> {
         }
         // After a shutdown the machine recorded the interruption: no stop record, the scan
         // resumes.
-        let Some((status, reason, cause)) = end.stop_record() else {
+        let Some(words) = end.stop_record() else {
             return;
         };
-        let written = l.stop(status, &reason, cause);
+        let written = l.stop(&words);
         if let Err(e) = written {
             tracing::error!(scan_id = %l.id, "cannot write the stop record: {e}");
             self.stop_error = Some(e.to_string());

@@ -104,6 +104,11 @@ pub enum FailReason {
     /// Every line is on disk but the outputs could not be made (the message says how to
     /// make them by hand).
     Outputs(String),
+    /// Every line is on disk but the outputs were not made because of a bug: making them
+    /// panicked (an internal error). The message says what panicked, that the lines are safe,
+    /// that it is to be reported with the scan's directory, and how to make the outputs by
+    /// hand.
+    OutputsInternal(String),
     /// The scan could not be begun or reopened, or its end not recorded: the message says
     /// why.
     Refused {
@@ -115,13 +120,21 @@ pub enum FailReason {
 }
 
 impl FailReason {
-    /// What may continue the scan.
+    /// What may continue the scan. An internal error is the operator's: only their
+    /// `--resume` makes the outputs again, never a plain start or the daemon by itself (the
+    /// same bug would panic again).
     pub fn cause(&self) -> FailCause {
         match self {
             FailReason::BudgetExhausted { .. } => FailCause::Budget,
             FailReason::Storage(_) => FailCause::Storage,
             _ => FailCause::Operator,
         }
+    }
+
+    /// True when a bug, not the devices, the disk or the lines, ended the scan (the stop
+    /// record's `internal`).
+    pub fn is_internal(&self) -> bool {
+        matches!(self, FailReason::OutputsInternal(_))
     }
 
     /// The exit-code class of the failure.
@@ -133,6 +146,7 @@ impl FailReason {
                 FailKind::Unavailable
             }
             FailReason::Storage(_) | FailReason::Outputs(_) => FailKind::Io,
+            FailReason::OutputsInternal(_) => FailKind::Internal,
             FailReason::Refused { kind, .. } => *kind,
             _ => FailKind::Scan,
         }
@@ -172,7 +186,7 @@ impl fmt::Display for FailReason {
                 line + 1
             ),
             FailReason::Storage(m) => write!(f, "storage: {m}"),
-            FailReason::Outputs(m) => f.write_str(m),
+            FailReason::Outputs(m) | FailReason::OutputsInternal(m) => f.write_str(m),
             FailReason::Refused { message, .. } => f.write_str(message),
         }
     }
@@ -217,6 +231,22 @@ pub enum FailKind {
     Unavailable,
     /// The disk refused (read-only, permissions).
     Io,
+    /// A bug: part of the work panicked (exit 70, to be reported).
+    Internal,
+}
+
+/// What a stop record says of an ending: its status, reason, a failure's cause, and whether
+/// a bug ended it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StopWords {
+    /// How it ended.
+    pub status: StopStatus,
+    /// Why, for people.
+    pub reason: String,
+    /// What may continue a failed scan.
+    pub cause: Option<FailCause>,
+    /// A bug ended it (an internal error).
+    pub internal: bool,
 }
 
 /// How the scan ends.
@@ -261,14 +291,29 @@ impl End {
         }
     }
 
-    /// The journal's stop record (status, reason and, for a failure, its cause); none after
-    /// a shutdown, which leaves the scan resumable.
-    pub fn stop_record(&self) -> Option<(StopStatus, String, Option<FailCause>)> {
+    /// What the journal's stop record says (its time is added as it is written); none
+    /// after a shutdown, which leaves the scan resumable.
+    pub fn stop_record(&self) -> Option<StopWords> {
         match self {
             End::Shutdown => None,
-            End::Fail(r) => Some((StopStatus::Fail, r.to_string(), Some(r.cause()))),
-            end => Some((end.status(), end.reason(true), None)),
+            End::Fail(r) => Some(StopWords {
+                status: StopStatus::Fail,
+                reason: r.to_string(),
+                cause: Some(r.cause()),
+                internal: r.is_internal(),
+            }),
+            end => Some(StopWords {
+                status: end.status(),
+                reason: end.reason(true),
+                cause: None,
+                internal: false,
+            }),
         }
+    }
+
+    /// True when a bug ended the scan ([`FailReason::is_internal`]).
+    pub fn is_internal(&self) -> bool {
+        matches!(self, End::Fail(r) if r.is_internal())
     }
 
     /// The notification hook's event, for a scan that was created (a start that failed
@@ -319,10 +364,13 @@ mod tests {
             None,
             "a start that failed has no scan to tell of"
         );
-        let (status, reason, cause) = fail.stop_record().unwrap();
-        assert_eq!((status, cause), (StopStatus::Fail, Some(FailCause::Budget)));
+        let words = fail.stop_record().unwrap();
         assert_eq!(
-            reason,
+            (words.status, words.cause, words.internal),
+            (StopStatus::Fail, Some(FailCause::Budget), false)
+        );
+        assert_eq!(
+            words.reason,
             "line 3: transient faults since 2026-12-02T01:00:00Z outlasted the 600 s budget (4 trace(s) started); last: line 3: instrument: NG011"
         );
         assert_eq!(fail.fail_kind(), Some(FailKind::Scan));
@@ -332,7 +380,12 @@ mod tests {
         assert_eq!(abort.reason(false), "aborted before the first line");
         assert_eq!(
             abort.stop_record(),
-            Some((StopStatus::Abort, "aborted by the operator".into(), None))
+            Some(StopWords {
+                status: StopStatus::Abort,
+                reason: "aborted by the operator".into(),
+                cause: None,
+                internal: false,
+            })
         );
         assert_eq!(abort.event(true), Some(ScanEventKind::Abort));
 
@@ -349,9 +402,48 @@ mod tests {
         };
         assert_eq!(
             ok.stop_record(),
-            Some((StopStatus::Success, "3 lines".into(), None))
+            Some(StopWords {
+                status: StopStatus::Success,
+                reason: "3 lines".into(),
+                cause: None,
+                internal: false,
+            })
         );
         assert_eq!(ok.fail_kind(), None);
+    }
+
+    /// Outputs not made because of a bug are an internal error (exit 70), not the disk's
+    /// (74, as outputs the lines cannot make are): the stop record says so, and what may
+    /// continue the scan is the operator's `--resume` alone (a cause every version reads).
+    #[test]
+    fn outputs_not_made_because_of_a_bug_are_an_internal_error() {
+        let bug =
+            FailReason::OutputsInternal("internal error: writing the outputs panicked".into());
+        assert_eq!(bug.kind(), FailKind::Internal);
+        assert_eq!(bug.cause(), FailCause::Operator);
+        assert!(bug.is_internal());
+        let end = End::Fail(bug);
+        assert_eq!(end.fail_kind(), Some(FailKind::Internal));
+        assert_eq!(end.event(true), Some(ScanEventKind::Fail));
+        assert!(end.is_internal());
+        assert_eq!(
+            end.stop_record(),
+            Some(StopWords {
+                status: StopStatus::Fail,
+                reason: "internal error: writing the outputs panicked".into(),
+                cause: Some(FailCause::Operator),
+                internal: true,
+            })
+        );
+        // The ordinary outputs failure stays the disk's class, and no bug.
+        let unmade =
+            FailReason::Outputs("all lines are on disk but the outputs could not be made".into());
+        assert_eq!(
+            (unmade.kind(), unmade.cause()),
+            (FailKind::Io, FailCause::Operator)
+        );
+        assert!(!unmade.is_internal());
+        assert!(!End::Fail(unmade).stop_record().unwrap().internal);
     }
 
     #[test]

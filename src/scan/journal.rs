@@ -219,6 +219,13 @@ pub struct StopRecord {
     /// [`StopRecord::fail_cause`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cause: Option<FailCause>,
+    /// A bug ended the scan (an internal error: making its outputs panicked); written only
+    /// when true, so a record without it (every earlier version's) reads as false. Its
+    /// `cause` stays one every version reads (`operator`): an earlier version ignores this
+    /// member, whereas a `cause` it did not know would make it take the record for a torn
+    /// tail, cut it off and resume the scan into the same outputs.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub internal: bool,
     /// When.
     pub time: DateTime<Utc>,
 }
@@ -665,6 +672,8 @@ pub struct Failed {
     pub started: DateTime<Utc>,
     /// What ended it.
     pub cause: FailCause,
+    /// A bug ended it (its stop record's `internal`).
+    pub internal: bool,
 }
 
 /// A scan whose stop record says it succeeded.
@@ -761,12 +770,17 @@ pub fn survey(output_dir: &Path) -> Result<Survey, JournalError> {
         match state {
             Ok(Some(st)) => {
                 out.max_sequence = out.max_sequence.max(st.start.sequence);
-                if let Some(cause) = st.stop.as_ref().and_then(StopRecord::fail_cause) {
+                let failed = st
+                    .stop
+                    .as_ref()
+                    .and_then(|s| Some((s.fail_cause()?, s.internal)));
+                if let Some((cause, internal)) = failed {
                     out.failed.push(Failed {
                         dir: dir.clone(),
                         sequence: st.start.sequence,
                         started: st.start.time,
                         cause,
+                        internal,
                     });
                 }
                 if let Some(stop) = st.stop.as_ref().filter(|s| s.status == StopStatus::Success) {
@@ -914,6 +928,42 @@ mod tests {
         let (back, crc) = decode_line(&encode_record(&r).unwrap()).unwrap();
         assert!(crc);
         assert_eq!(back, r);
+    }
+
+    /// A bug that ended the scan is said by a member of its own, `internal`, written only
+    /// when true, beside a `cause` every version reads: an unknown `cause` would make a
+    /// version that does not know it take the record for a torn tail (as this version does
+    /// with one it does not know, below), cut it off and resume the scan into the same bug.
+    #[test]
+    fn a_stop_record_says_a_bug_ended_the_scan_in_a_member_earlier_versions_skip() {
+        let stop = |internal: bool| {
+            Record::Stop(StopRecord {
+                status: StopStatus::Fail,
+                reason: "internal error: writing the outputs panicked (x)".into(),
+                cause: Some(FailCause::Operator),
+                internal,
+                time: "2026-12-07T18:00:00Z".parse().unwrap(),
+            })
+        };
+        let line = |internal: &str| {
+            format!(
+                r#"{{"class":"stop","status":"fail","reason":"internal error: writing the outputs panicked (x)","cause":"operator",{internal}"time":"2026-12-07T18:00:00Z"}}"#
+            )
+        };
+        assert_eq!(
+            serde_json::to_string(&stop(true)).unwrap(),
+            line(r#""internal":true,"#)
+        );
+        assert_eq!(serde_json::to_string(&stop(false)).unwrap(), line(""));
+        let (back, crc) = decode_line(&encode_record(&stop(true)).unwrap()).unwrap();
+        assert!(crc);
+        assert_eq!(back, stop(true));
+        // A record of an earlier version, without the member: no bug.
+        let (back, _) = decode_line(line("").as_bytes()).unwrap();
+        assert_eq!(back, stop(false));
+        let unknown = line("").replace(r#""cause":"operator""#, r#""cause":"internal""#);
+        let e = decode_line(unknown.as_bytes()).unwrap_err();
+        assert!(e.contains("unknown variant `internal`"), "{e}");
     }
 
     #[test]

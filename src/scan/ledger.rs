@@ -5,9 +5,7 @@
 //! Layer 3 (session): depends on [`super::store`], [`super::journal`], [`super::outputs`],
 //! [`super::metrics`], [`super::testhooks`] and [`crate::fit`].
 
-use super::journal::{
-    InterruptionRecord, Journal, JournalError, Record, StartRecord, StopRecord, StopStatus,
-};
+use super::journal::{InterruptionRecord, Journal, JournalError, Record, StartRecord, StopRecord};
 use super::line::{LineMeta, StoredLine};
 use super::machine::Note;
 use super::metrics::ScanMetrics;
@@ -117,18 +115,14 @@ impl Ledger {
     }
 
     /// Appends the stop record (after any interruption still waiting to be recorded).
-    pub fn stop(
-        &mut self,
-        status: StopStatus,
-        reason: &str,
-        cause: Option<super::ending::FailCause>,
-    ) -> Result<(), JournalError> {
+    pub fn stop(&mut self, words: &super::ending::StopWords) -> Result<(), JournalError> {
         self.record_unrecorded();
         let time = Utc::now();
         let written = self.journal.append(&Record::Stop(StopRecord {
-            status,
-            reason: reason.to_owned(),
-            cause,
+            status: words.status,
+            reason: words.reason.clone(),
+            cause: words.cause,
+            internal: words.internal,
             time,
         }));
         self.stopped = written.is_ok().then_some(time);
@@ -279,7 +273,7 @@ fn fitter_of(plan: &Plan) -> IncrementalFitter {
 mod tests {
     use super::*;
     use crate::scan::faults::{StorageFaults, WriteStep};
-    use crate::scan::journal::read_journal;
+    use crate::scan::journal::{read_journal, StopStatus};
     use crate::scan::scan_id::ScanId;
     use crate::units::Nm;
     use chrono::TimeZone;
@@ -398,9 +392,15 @@ mod tests {
         let mut l = ledger(dir.path(), disk.clone());
         disk.full.store(true, Ordering::SeqCst);
         l.note(&note("suspended: disk full"));
-        assert!(l.stop(StopStatus::Abort, "aborted", None).is_err());
+        let aborted = crate::scan::ending::StopWords {
+            status: StopStatus::Abort,
+            reason: "aborted".into(),
+            cause: None,
+            internal: false,
+        };
+        assert!(l.stop(&aborted).is_err());
         disk.full.store(false, Ordering::SeqCst);
-        l.stop(StopStatus::Abort, "aborted", None).unwrap();
+        l.stop(&aborted).unwrap();
         assert_eq!(
             records(&l),
             [

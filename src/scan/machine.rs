@@ -265,6 +265,9 @@ pub enum Event {
     },
     /// A durable write failed (commit, or the outputs when finishing).
     StorageFailed(StorageFailure),
+    /// Writing the outputs panicked (a bug): the scan fails with
+    /// [`FailReason::OutputsInternal`] and these words.
+    OutputsPanicked(String),
     /// The new scan must not be made: the instrument is not set as its recipe expects
     /// (what differs, named). The scan fails before its directory exists.
     CreateRefused(String),
@@ -328,9 +331,8 @@ pub enum Action {
         line: u32,
     },
     /// Finish the fit and write IGES, report, X3P, plots. Result:
-    /// [`Event::OutputsWritten`], [`Event::StorageFailed`] (disk full) or
-    /// [`Event::PushRefused`]-free failure as [`Event::StorageFailed`] with `disk_full`
-    /// false.
+    /// [`Event::OutputsWritten`], [`Event::StorageFailed`] (a refused write, or outputs the
+    /// lines cannot make, without a storage class) or [`Event::OutputsPanicked`] (a bug).
     WriteOutputs,
     /// Read the free space of the output directory. Result: [`Event::SpaceChecked`].
     CheckSpace,
@@ -728,6 +730,9 @@ impl Machine {
             }
             (Doing::Outputs, Event::StorageFailed(s)) => {
                 self.trouble(Step::Outputs, Trouble::Storage(s), now, out)
+            }
+            (Doing::Outputs, Event::OutputsPanicked(words)) => {
+                self.fail(FailReason::OutputsInternal(words), out)
             }
             (
                 Doing::CheckSpace,
@@ -1474,6 +1479,9 @@ impl Machine {
             self.status.state = State::Stopping;
         } else {
             self.status = ended_status(&self.status, ending, &reason);
+            if let Some(stop) = self.status.last_stop.as_mut() {
+                stop.internal = end.is_internal();
+            }
         }
         self.publish(out);
     }

@@ -19,6 +19,15 @@ pub fn mb(bytes: u64) -> String {
     format!("{:.1}", bytes as f64 / 1e6)
 }
 
+/// Why a scan failed when writing its outputs panicked (a bug; `panic` is its message): the
+/// lines in `dir` are safe, the bug is to be reported, and the outputs can be made by hand.
+pub fn outputs_internal(panic: &str, dir: &std::path::Path) -> String {
+    let d = dir.display();
+    format!(
+        "internal error: writing the outputs panicked ({panic}); every line is on disk, but the outputs were not made because of a bug: report it with the scan's directory and the log; make them by hand with `surfscan fit {d}` and `surfscan analyze {d}`, or again with `surfscan scan --resume`"
+    )
+}
+
 /// A fault on line `line` (0-based), as the last fault of a retried line names it.
 pub fn on_line(line: u32, what: &dyn std::fmt::Display) -> String {
     format!("line {}: {what}", line + 1)

@@ -10,7 +10,8 @@
 //!
 //! Layer 3 (session): depends on [`super::machine`], [`super::device_ops`] (devices),
 //! [`super::disk_ops`], [`super::ledger`] and [`super::opening`] (disk),
-//! [`super::channels`], and the session's own settings, status, command and outcome types.
+//! [`super::channels`], the session's own settings, status, command and outcome types, and
+//! [`super::reasons`]' words for a bug in the outputs.
 
 use super::channels::Control;
 use super::command::{OperatorRequest, PauseMark, Peer};
@@ -18,9 +19,10 @@ use super::device_ops::{is_device_effect, Hands};
 use super::disk_ops::Books;
 use super::ending::{End, FailKind, FailReason, StopStatus};
 use super::ledger::Ledger;
-use super::machine::{Action, Event, Machine, Now, Policy, StorageFailure};
+use super::machine::{Action, Event, Machine, Now, Policy};
 use super::opening::{self, NewScan};
 use super::outcome::{Outcome, ScanRequest};
+use super::reasons;
 use super::settings::RunSettings;
 use super::station::Station;
 use super::status::ended_status;
@@ -355,12 +357,14 @@ fn panicked(what: &str, payload: &(dyn std::any::Any + Send)) -> String {
     format!("internal error: {what} panicked ({message}); report this with the scan's directory and the log")
 }
 
-/// Writes the scan's outputs [`watched`], with the ledger moved to the worker and back.
+/// Writes the scan's outputs [`watched`], with the ledger moved to the worker and back. A
+/// panic is [`Event::OutputsPanicked`]: an internal error, not the disk's.
 async fn write_outputs_watched(books: &mut Books<'_>, ctl: &Control) -> Event {
     let Some(mut ledger) = books.ledger.take() else {
         // Says so as the effect itself does.
         return books.disk(&Action::WriteOutputs, None, 0);
     };
+    let dir = ledger.dir.clone();
     let characterise = books.settings.characterise.clone();
     // A panic is caught here rather than by `watched`, so that the ledger comes back to
     // write the failed scan's stop record (the journal then says why, and the scan is not
@@ -377,13 +381,15 @@ async fn write_outputs_watched(books: &mut Books<'_>, ctl: &Control) -> Event {
             books.ledger = Some(ledger);
             match written {
                 Ok(written) => books.outputs_event(written),
-                Err(p) => Event::StorageFailed(StorageFailure::not_storage(panicked(
-                    "writing the outputs",
-                    &*p,
-                ))),
+                Err(p) => Event::OutputsPanicked(reasons::outputs_internal(
+                    crate::panics::message(&*p),
+                    &dir,
+                )),
             }
         }
-        Err(message) => Event::StorageFailed(StorageFailure::not_storage(message)),
+        // Cancelled by the runtime's shutdown (the panic is caught above): the ledger is
+        // gone, so no stop record can say it.
+        Err(message) => Event::OutputsPanicked(message),
     }
 }
 

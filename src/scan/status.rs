@@ -69,6 +69,10 @@ pub struct LastStop {
     pub reason: String,
     /// Scan directory.
     pub dir: String,
+    /// A bug ended the scan (an internal error, as the journal's stop record says); present
+    /// only when true.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub internal: bool,
     /// A completed scan in one line with its verdict and warnings: `success: does not
     /// conform (Rz 16 % rule: 9 of 31 lines above 6.3 µm …)`, `success, 3 warnings`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -245,6 +249,7 @@ pub fn ended_status(s: &Status, ending: StopStatus, reason: &str) -> Status {
             status: ending,
             reason: reason.to_owned(),
             dir: s.scan_dir.clone().unwrap_or_default(),
+            internal: false,
             verdict: None,
             results: None,
         }),
@@ -306,13 +311,26 @@ mod tests {
             status: StopStatus::Interrupted,
             reason: "shutdown".into(),
             dir: String::new(),
+            internal: false,
             verdict: None,
             results: None,
         };
         let v = serde_json::to_value(&stop).unwrap();
         assert_eq!(v["status"], "interrupted");
+        assert_eq!(
+            v.get("internal"),
+            None,
+            "said only when a bug ended the scan"
+        );
         let back: LastStop = serde_json::from_value(v).unwrap();
         assert_eq!(back, stop);
+        let bug = LastStop {
+            internal: true,
+            ..stop.clone()
+        };
+        let v = serde_json::to_value(&bug).unwrap();
+        assert_eq!(v["internal"], true);
+        assert_eq!(serde_json::from_value::<LastStop>(v).unwrap(), bug);
         let mut s = Status::idle();
         s.last_stop = Some(stop);
         assert_eq!(s.summary(), "idle; last scan X: interrupted (shutdown)");

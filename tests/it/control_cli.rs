@@ -505,6 +505,7 @@ async fn a_start_that_fails_at_once_is_reported_as_failed() {
                     status: surfscan::scan::ending::StopStatus::Fail,
                     reason: "instrument unavailable: /dev/sj210 is absent".into(),
                     dir: String::new(),
+                    internal: false,
                     verdict: None,
                     results: None,
                 });

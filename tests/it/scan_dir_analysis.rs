@@ -199,6 +199,7 @@ fn build_scan(
                 status,
                 reason: "test".into(),
                 cause: None,
+                internal: false,
                 time: start,
             }))
             .unwrap();
@@ -1007,6 +1008,7 @@ fn the_html_report_of_a_scan_renders_in_chromium_with_its_tables_and_plots() {
             status: StopStatus::Success,
             reason: "all lines traced".into(),
             cause: None,
+            internal: false,
             time: Utc.with_ymd_and_hms(2026, 11, 30, 10, 17, 30).unwrap(),
         }))
         .unwrap();

@@ -16,7 +16,7 @@ use surfscan::profile::{Conditions, Profile, ProfileKind};
 use surfscan::scan::channels::Control;
 use surfscan::scan::choice::{choose, Asker, Choice};
 use surfscan::scan::command::{OperatorCommand, OperatorRequest, Peer, StartMode};
-use surfscan::scan::ending::End;
+use surfscan::scan::ending::{End, FailCause, FailKind};
 use surfscan::scan::journal::{read_journal, Record, StopStatus};
 use surfscan::scan::outcome::{Outcome, ScanRequest};
 use surfscan::scan::runner::run_scan;
@@ -562,10 +562,13 @@ impl surfscan::scan::outputs::Characterise for PanickingCharacterisation {
     }
 }
 
-/// A panic while a completed scan's outputs are written fails that scan with a reason that
-/// says so, in the outcome and in the journal's stop record (so a restart does not resume it
-/// into the same outputs), and the runner goes on: the next scan runs and succeeds. Built
-/// with `panic = "abort"`, as the release build was, the process died here.
+/// A panic while a completed scan's outputs are written fails that scan as an internal error
+/// (a bug, exit 70 for `surfscan scan`, not the disk's 74), in the outcome and in the
+/// journal's stop record (`internal`, with a cause the operator clears, so neither a restart
+/// nor a plain start runs it into the same outputs), and the runner goes on: the next scan
+/// runs and succeeds. Only `--resume` continues it, which writes the outputs again without
+/// tracing a line. Built with `panic = "abort"`, as the release build was, the process died
+/// here.
 #[tokio::test(start_paused = true)]
 async fn a_panic_while_the_outputs_are_written_fails_the_scan_and_the_runner_goes_on() {
     let mut h = harness();
@@ -576,22 +579,76 @@ async fn a_panic_while_the_outputs_are_written_fails_the_scan_and_the_runner_goe
     };
     let mut station = FakeStation(h.world.clone());
     let outcome = run_scan(&mut station, &mut h.ctl, &panicking, new_scan()).await;
+    let dir = scan_dir_of(&outcome);
+    let d = dir.display();
     let why = format!(
-        "internal error: writing the outputs panicked (a bug in the characterisation of {LINES} lines); report this with the scan's directory and the log"
+        "internal error: writing the outputs panicked (a bug in the characterisation of {LINES} lines); every line is on disk, but the outputs were not made because of a bug: report it with the scan's directory and the log; make them by hand with `surfscan fit {d}` and `surfscan analyze {d}`, or again with `surfscan scan --resume`"
     );
     match &outcome.end {
-        End::Fail(reason) => assert_eq!(reason.to_string(), why),
+        End::Fail(reason) => {
+            assert_eq!(reason.to_string(), why);
+            assert_eq!(reason.kind(), FailKind::Internal);
+        }
         other => panic!("{other:?}"),
     }
-    let recs = records(&scan_dir_of(&outcome));
+    let exit = surfscan::cli::scan::outcome_result(&outcome).unwrap_err();
+    assert_eq!(exit.exit as i32, 70, "{}", exit.message);
+    assert_eq!(
+        exit.message,
+        format!("scan failed: {why} (lines kept in {d})")
+    );
+    let last = h.ctl.status.borrow().last_stop.clone().expect("last stop");
+    assert_eq!((last.status, last.internal), (StopStatus::Fail, true));
+    assert_eq!(last.reason, why);
+    let recs = records(&dir);
     let stop = recs.iter().find_map(|r| match r {
-        Record::Stop(s) => Some((s.status, s.reason.clone())),
+        Record::Stop(s) => Some((s.status, s.reason.clone(), s.cause, s.internal)),
         _ => None,
     });
-    assert_eq!(stop, Some((StopStatus::Fail, why)));
+    assert_eq!(
+        stop,
+        Some((StopStatus::Fail, why, Some(FailCause::Operator), true))
+    );
+    let lines = line_indices(&recs);
+    assert_eq!(lines, (0..LINES).collect::<Vec<_>>());
+
+    // Neither the daemon at its start nor an operator's plain start continues it.
+    let out = runner_config(h.tmp.path()).output.dir;
+    let start = |asker| {
+        choose(&out, asker, Peer::this_process(), Default::default())
+            .and_then(Choice::commit)
+            .expect("a decision")
+    };
+    assert_eq!(start(Asker::DaemonStartUp), None);
+    let auto = start(Asker::Operator(StartMode::Auto)).expect("a scan to run");
+    assert!(matches!(auto, ScanRequest::New { .. }), "{auto:?}");
     let next = run_scan(&mut station, &mut h.ctl, &plain, new_scan()).await;
     assert!(matches!(next.end, End::Success { .. }), "{next:?}");
     assert_ne!(next.dir, outcome.dir);
+
+    // `--resume` writes its outputs again, tracing nothing: its lines are the same.
+    let resume = start(Asker::Operator(StartMode::Resume)).expect("a scan to run");
+    assert_eq!(
+        resume,
+        ScanRequest::Continue {
+            dir: dir.clone(),
+            peer: Some(Peer::this_process())
+        }
+    );
+    let traces = || {
+        with(&h.world, |w| {
+            w.log.iter().filter(|e| **e == Event::TraceStart).count()
+        })
+    };
+    let before = traces();
+    let again = run_scan(&mut station, &mut h.ctl, &plain, resume).await;
+    assert!(matches!(again.end, End::Success { .. }), "{again:?}");
+    assert_eq!(again.dir.as_deref(), Some(dir.as_path()));
+    assert_eq!(traces(), before, "no line traced again");
+    let recs = records(&dir);
+    assert_eq!(line_indices(&recs), lines);
+    assert!(matches!(recs.last(), Some(Record::Stop(s)) if s.status == StopStatus::Success));
+    assert!(dir.join("report.json").is_file());
 }
 
 #[tokio::test(start_paused = true)]

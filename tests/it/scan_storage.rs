@@ -277,6 +277,7 @@ fn disk_full_during_a_line_fails_cleanly_with_earlier_lines_intact() {
                 status: StopStatus::Fail,
                 reason: format!("disk full: {err}"),
                 cause: None,
+                internal: false,
                 time: Utc::now(),
             }))
             .unwrap();
@@ -423,6 +424,7 @@ fn resume_state_and_unfinished_scan_discovery() {
         status: StopStatus::Success,
         reason: "complete".into(),
         cause: None,
+        internal: false,
         time: Utc::now(),
     }))
     .unwrap();
@@ -843,6 +845,7 @@ fn the_scan_to_resume_comes_from_the_journals_and_a_damaged_one_is_skipped_and_n
                 status: StopStatus::Success,
                 reason: "complete".into(),
                 cause: None,
+                internal: false,
                 time: Utc::now(),
             }))
             .unwrap();
