@@ -226,7 +226,9 @@ impl Publishers {
                 .and_then(tokio::net::TcpListener::from_std)
             {
                 Ok(l) => {
-                    tracing::info!("metrics on http://{listen}/metrics");
+                    // The address bound: with port 0 the one the system picked.
+                    let at = l.local_addr().map_or_else(|_| listen.clone(), |a| a.to_string());
+                    tracing::info!("metrics on http://{at}/metrics");
                     p.links.push(spawn_vital("the metrics endpoint", metrics::serve(
                         l,
                         status.subscribe(),

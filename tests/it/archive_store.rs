@@ -266,31 +266,42 @@ async fn retention_deletes_a_scan_only_when_its_archived_copy_verifies_again() {
 /// the settings that fix it, the scan unaffected and kept for the archive.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_store_certificate_that_does_not_verify_is_named_and_the_scan_is_kept() {
-    use crate::common::mosquitto::{free_port, Killed};
+    use crate::common::mosquitto::{on_fresh_ports, port_taken, Killed};
     let r = e2e::rig().await;
     let tls = crate::common::throwaway_tls(r.dir.path());
-    let port = free_port();
-    let _server = Killed(
-        Command::new("openssl")
-            .args(["s_server", "-quiet", "-www", "-accept", &port.to_string()])
-            .arg("-cert")
-            .arg(&tls.certificate)
-            .arg("-key")
-            .arg(&tls.key)
-            .stdin(std::process::Stdio::null())
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let start = std::time::Instant::now();
-    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(
-            start.elapsed().as_secs() < 10,
-            "openssl s_server does not listen"
+    let said = r.dir.path().join("s_server.log");
+    // The server exits naming a port another process took first.
+    let (_server, port) = on_fresh_ports("openssl s_server", |[port]| {
+        let mut server = Killed(
+            Command::new("openssl")
+                .args(["s_server", "-quiet", "-www", "-accept", &port.to_string()])
+                .arg("-cert")
+                .arg(&tls.certificate)
+                .arg("-key")
+                .arg(&tls.key)
+                .stdin(std::process::Stdio::null())
+                .stdout(std::process::Stdio::null())
+                .stderr(std::fs::File::create(&said).unwrap())
+                .spawn()
+                .unwrap(),
         );
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
+        let start = std::time::Instant::now();
+        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+            if let Some(st) = server.0.try_wait().unwrap() {
+                let log = std::fs::read_to_string(&said).unwrap_or_default();
+                if port_taken(&log) {
+                    return Err(log);
+                }
+                panic!("openssl s_server exited ({st}): {log}");
+            }
+            assert!(
+                start.elapsed().as_secs() < 10,
+                "openssl s_server does not listen"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        Ok((server, port))
+    });
     let secret = r.dir.path().join("archive.secret");
     std::fs::write(&secret, "s3cret\n").unwrap();
     let endpoint = format!("https://127.0.0.1:{port}");

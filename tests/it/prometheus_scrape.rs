@@ -3,7 +3,7 @@
 //! and a real Prometheus server (Debian package `prometheus`, started on a loopback port)
 //! scraping it through a simulated scan and seeing the lines go by.
 
-use crate::common::mosquitto::{free_port, Killed};
+use crate::common::mosquitto::{on_fresh_ports, port_taken, Killed};
 use crate::daemon_e2e::{self as e2e, Rig};
 use std::io::{Read as _, Write as _};
 use std::process::{Command, Stdio};
@@ -61,12 +61,36 @@ fn promtool(text: &str) -> (bool, String) {
     )
 }
 
+/// `[metrics] listen` on 127.0.0.1:`port`; 0 lets the system pick a free port, which the
+/// daemon's log names ([`metrics_port`]): a port picked here and let go could be taken by
+/// another process before the daemon binds it.
 fn with_listen(r: &Rig, port: u16) {
     crate::common::edit_file(
         &r.config,
         "[metrics]\n",
         &format!("[metrics]\nlisten = \"127.0.0.1:{port}\"\n"),
     );
+}
+
+/// The port the daemon serves `/metrics` on, as its log names it once it is bound.
+fn metrics_port(r: &Rig) -> u16 {
+    const SAID: &str = "metrics on http://127.0.0.1:";
+    let start = Instant::now();
+    loop {
+        let log = std::fs::read_to_string(r.dir.path().join("daemon.log")).unwrap_or_default();
+        let port = log.rfind(SAID).and_then(|at| {
+            let rest = &log[at + SAID.len()..];
+            rest[..rest.find('/')?].parse().ok()
+        });
+        if let Some(port) = port {
+            return port;
+        }
+        assert!(
+            start.elapsed() < e2e::DEADLINE,
+            "the daemon's log names no metrics port: {log}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
 }
 
 /// A Prometheus server scraping 127.0.0.1:`target` every 250 ms; its own port returned.
@@ -80,7 +104,15 @@ fn prometheus(r: &Rig, target: u16) -> (Killed, u16) {
         ),
     )
     .unwrap();
-    let port = free_port();
+    // Prometheus exits naming a port another process took first.
+    on_fresh_ports("prometheus", |[port]| {
+        launch_prometheus(&dir, port).map(|child| (child, port))
+    })
+}
+
+/// Starts Prometheus with `dir`'s configuration on `port` and waits until it is ready; `Err`
+/// with its log when it exits first.
+fn launch_prometheus(dir: &std::path::Path, port: u16) -> Result<Killed, String> {
     let child = Command::new("prometheus")
         .arg(format!(
             "--config.file={}",
@@ -107,10 +139,11 @@ fn prometheus(r: &Rig, target: u16) -> (Killed, u16) {
             }
         }
         if let Some(st) = child.0.try_wait().unwrap() {
-            panic!(
-                "prometheus exited ({st}): {}",
-                std::fs::read_to_string(dir.join("prometheus.log")).unwrap_or_default()
-            );
+            let said = std::fs::read_to_string(dir.join("prometheus.log")).unwrap_or_default();
+            if port_taken(&said) {
+                return Err(said);
+            }
+            panic!("prometheus exited ({st}): {said}");
         }
         assert!(
             start.elapsed() < Duration::from_secs(60),
@@ -118,7 +151,7 @@ fn prometheus(r: &Rig, target: u16) -> (Killed, u16) {
         );
         std::thread::sleep(Duration::from_millis(100));
     }
-    (child, port)
+    Ok(child)
 }
 
 /// The samples Prometheus holds for `series` over the last ten minutes.
@@ -142,10 +175,10 @@ fn samples(port: u16, series: &str) -> Vec<f64> {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_real_prometheus_scrapes_the_station_and_sees_the_scan_progress() {
     let r = e2e::rig().await;
-    let port = free_port();
-    with_listen(&r, port);
+    with_listen(&r, 0);
     let mut d = crate::mqtt_broker::spawn_logged(&r);
     crate::mqtt_broker::wait_socket(&r).await;
+    let port = metrics_port(&r);
     // Served before any scan, in a form promtool accepts.
     let (status, headers, body) = get(port, "/metrics").unwrap();
     assert!(status.contains(" 200 "), "{status}");
@@ -258,10 +291,10 @@ async fn a_port_already_in_use_is_named_in_the_status_and_the_station_scans_on()
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_client_that_never_finishes_its_request_is_closed_and_others_are_still_served() {
     let r = e2e::rig().await;
-    let port = free_port();
-    with_listen(&r, port);
+    with_listen(&r, 0);
     let mut d = crate::mqtt_broker::spawn_logged(&r);
     crate::mqtt_broker::wait_socket(&r).await;
+    let port = metrics_port(&r);
     let start = Instant::now();
     while get(port, "/metrics").is_err() {
         assert!(start.elapsed() < e2e::DEADLINE, "/metrics never answered");

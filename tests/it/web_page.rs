@@ -15,8 +15,8 @@ use crate::common::append_config;
 use crate::common::cdp::{Browser, Tab};
 use crate::common::http::{request, Events};
 use crate::daemon_e2e::{
-    notify_until, records, rig, scan_dir, sigterm, spawn_daemon, start_scan, status, wait_exit,
-    wait_status, Rig, LINES,
+    notify_until, records, rig, scan_dir, sigterm, spawn_daemon, spawn_daemon_to, start_scan,
+    status, wait_exit, wait_status, Daemon, Rig, LINES,
 };
 use serde_json::json;
 use std::os::unix::fs::PermissionsExt;
@@ -28,29 +28,53 @@ use surfscan::scan::status::State;
 const ALICE: &str = "alice-page-token-5f0c2a9e77d1";
 const WAIT: Duration = Duration::from_secs(90);
 
-/// A free loopback port (bound and let go; the daemon binds it right after).
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
+/// The page on a loopback port the system picks (a port picked here and let go could be
+/// taken by another process before the daemon binds it): [`page_addr`] reads which.
+const ANY_PORT: &str = "127.0.0.1:0";
 
-/// Adds `[web]` to the rig's configuration, alice may operate; the page's address.
-fn with_page(r: &Rig) -> std::net::SocketAddr {
+/// Adds `[web]` listening on `listen` to the rig's configuration, alice may operate.
+fn with_page(r: &Rig, listen: &str) {
     let tokens = r.dir.path().join("web-tokens");
     std::fs::write(&tokens, format!("alice {ALICE}\n")).unwrap();
     std::fs::set_permissions(&tokens, std::fs::Permissions::from_mode(0o600)).unwrap();
-    let addr: std::net::SocketAddr = format!("127.0.0.1:{}", free_port()).parse().unwrap();
     append_config(
         &r.config,
         &format!(
-            "\n[web]\nlisten = \"{addr}\"\ntoken-file = {:?}\n",
+            "\n[web]\nlisten = \"{listen}\"\ntoken-file = {:?}\n",
             tokens.display().to_string()
         ),
     );
-    addr
+}
+
+/// The daemon with its log in the rig's `daemon.log` (appended to).
+fn spawn_logged(r: &Rig) -> Daemon {
+    let log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(r.dir.path().join("daemon.log"))
+        .unwrap();
+    spawn_daemon_to(r, log.into())
+}
+
+/// The page's address as the daemon's log last named it, once it has.
+fn page_addr(r: &Rig) -> std::net::SocketAddr {
+    const SAID: &str = "the station's page is at http://";
+    let start = std::time::Instant::now();
+    loop {
+        let log = std::fs::read_to_string(r.dir.path().join("daemon.log")).unwrap_or_default();
+        let addr = log.rfind(SAID).and_then(|at| {
+            let rest = &log[at + SAID.len()..];
+            rest[..rest.find('/')?].parse().ok()
+        });
+        if let Some(addr) = addr {
+            return addr;
+        }
+        assert!(
+            start.elapsed() < WAIT,
+            "the daemon's log names no page address: {log}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
 }
 
 /// Serves, on another port of the same host, a page that tries to pause the station at
@@ -177,9 +201,10 @@ fn progress(b: &mut Browser, tab: &Tab) -> (u64, u64) {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_scan_started_paused_and_resumed_from_the_page_is_watched_to_its_result() {
     let r = rig().await;
-    let addr = with_page(&r);
-    let mut d = spawn_daemon(&r);
+    with_page(&r, ANY_PORT);
+    let mut d = spawn_logged(&r);
     notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    let addr = page_addr(&r);
 
     let mut b = Browser::launch();
     let tab = sign_in(&mut b, addr);
@@ -414,8 +439,15 @@ async fn a_scan_started_paused_and_resumed_from_the_page_is_watched_to_its_resul
         |v| v == &json!("down"),
     );
     assert!(text_of(&mut b, &tab, "link").contains("not reachable"));
-    let mut d = spawn_daemon(&r);
+    // The page carries on at its address: the restarted daemon binds the same port.
+    crate::common::edit_file(
+        &r.config,
+        &format!("listen = \"{ANY_PORT}\""),
+        &format!("listen = \"{addr}\""),
+    );
+    let mut d = spawn_logged(&r);
     notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    assert_eq!(page_addr(&r), addr);
     b.wait_for(
         &tab,
         "the page live again",
@@ -467,8 +499,9 @@ async fn a_scan_started_paused_and_resumed_from_the_page_is_watched_to_its_resul
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_page_that_cannot_listen_is_named_and_the_station_scans_on() {
     let r = rig().await;
-    let addr = with_page(&r);
-    let _taken = std::net::TcpListener::bind(addr).unwrap();
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = taken.local_addr().unwrap();
+    with_page(&r, &addr.to_string());
     let mut d = spawn_daemon(&r);
     notify_until(&r, &mut d, |m| m.contains("READY=1"));
     let s = status(&r).await;
@@ -524,10 +557,11 @@ fn queue_from_page(b: &mut Browser, tab: &Tab, recipe: &str, specimen: &str, loa
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_job_queued_from_the_page_waits_for_its_specimen_then_runs_to_its_verdict() {
     let r = rig().await;
-    let addr = with_page(&r);
+    with_page(&r, ANY_PORT);
     with_recipes(&r);
-    let mut d = spawn_daemon(&r);
+    let mut d = spawn_logged(&r);
     notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    let addr = page_addr(&r);
     let mut b = Browser::launch();
     let tab = sign_in(&mut b, addr);
     b.wait_for(

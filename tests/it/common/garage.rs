@@ -4,7 +4,7 @@
 //! and a key made with its own CLI. Objects are read back with `curl --aws-sigv4`, an S3
 //! client independent of the code under test.
 
-use super::mosquitto::{free_ports, Killed};
+use super::mosquitto::{on_fresh_ports, port_taken, Killed};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -53,30 +53,43 @@ impl Garage {
     pub fn start(dir: &Path) -> Garage {
         let dir = dir.join("garage");
         std::fs::create_dir_all(&dir).unwrap();
-        let [rpc_port, s3_port] = free_ports();
         let mut bytes = [0u8; 32];
         ring::rand::SecureRandom::fill(&ring::rand::SystemRandom::new(), &mut bytes).unwrap();
         let secret: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
         let config = dir.join("garage.toml");
-        std::fs::write(
-            &config,
-            format!(
-                "metadata_dir = \"{d}/meta\"\ndata_dir = \"{d}/data\"\ndb_engine = \"sqlite\"\nreplication_factor = 1\nrpc_bind_addr = \"127.0.0.1:{rpc_port}\"\nrpc_public_addr = \"127.0.0.1:{rpc_port}\"\nrpc_secret = \"{secret}\"\n\n[s3_api]\ns3_region = \"{REGION}\"\napi_bind_addr = \"127.0.0.1:{s3_port}\"\nroot_domain = \".s3.garage.localhost\"\n",
-                d = dir.display()
-            ),
-        )
-        .unwrap();
-        let mut g = Garage {
-            endpoint: format!("http://127.0.0.1:{s3_port}"),
-            key_id: String::new(),
-            secret: String::new(),
-            dir,
-            config,
-            s3_port,
-            process: None,
-        };
-        g.restart();
-        let id = g.cli(&["node", "id", "-q"]);
+        // A port another process took first: Garage logs it (and exits, or serves on without
+        // its S3 API, whose port then answers with the other process).
+        let (mut g, id) = on_fresh_ports("garage", |[rpc_port, s3_port]| {
+            let _ = std::fs::remove_file(dir.join("garage.log"));
+            std::fs::write(
+                &config,
+                format!(
+                    "metadata_dir = \"{d}/meta\"\ndata_dir = \"{d}/data\"\ndb_engine = \"sqlite\"\nreplication_factor = 1\nrpc_bind_addr = \"127.0.0.1:{rpc_port}\"\nrpc_public_addr = \"127.0.0.1:{rpc_port}\"\nrpc_secret = \"{secret}\"\n\n[s3_api]\ns3_region = \"{REGION}\"\napi_bind_addr = \"127.0.0.1:{s3_port}\"\nroot_domain = \".s3.garage.localhost\"\n",
+                    d = dir.display()
+                ),
+            )
+            .unwrap();
+            let mut g = Garage {
+                endpoint: format!("http://127.0.0.1:{s3_port}"),
+                key_id: String::new(),
+                secret: String::new(),
+                dir: dir.clone(),
+                config: config.clone(),
+                s3_port,
+                process: None,
+            };
+            match g.launch() {
+                Ok(()) => {}
+                Err(e) if port_taken(&e) => return Err(e),
+                Err(e) => panic!("{e}"),
+            }
+            // Its node answers once it has started its servers, each bound or logged failed.
+            let id = g.cli(&["node", "id", "-q"]);
+            match g.log() {
+                log if port_taken(&log) => Err(log),
+                _ => Ok((g, id)),
+            }
+        });
         let id = id.trim().split('@').next().unwrap().to_owned();
         g.cli(&["layout", "assign", "-z", "dc1", "-c", "1G", &id]);
         g.cli(&["layout", "apply", "--version", "1"]);
@@ -143,7 +156,16 @@ impl Garage {
 
     /// Starts the server again on the same ports, with what it stored.
     pub fn restart(&mut self) {
+        if let Err(e) = self.launch() {
+            panic!("{e}");
+        }
+    }
+
+    /// Starts the server and waits until its S3 port answers; `Err` with its log (what it
+    /// wrote since) when it exits first.
+    fn launch(&mut self) -> Result<(), String> {
         assert!(self.process.is_none(), "garage is running");
+        let from = std::fs::metadata(self.dir.join("garage.log")).map_or(0, |m| m.len() as usize);
         let log = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
@@ -163,7 +185,11 @@ impl Garage {
         let start = Instant::now();
         while std::net::TcpStream::connect(("127.0.0.1", self.s3_port)).is_err() {
             if let Some(st) = child.0.try_wait().unwrap() {
-                panic!("garage exited ({st}): {}", self.log());
+                let log = self.log();
+                return Err(format!(
+                    "garage exited ({st}): {}",
+                    log.get(from..).unwrap_or(&log)
+                ));
             }
             assert!(
                 start.elapsed() < Duration::from_secs(30),
@@ -173,6 +199,7 @@ impl Garage {
             std::thread::sleep(Duration::from_millis(50));
         }
         self.process = Some(child);
+        Ok(())
     }
 
     /// GET of `key` in [`BUCKET`] with curl's SigV4: the body, or None for a 404.

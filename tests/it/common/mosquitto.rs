@@ -2,7 +2,8 @@
 //! directory with a password file and an ACL, `mosquitto_sub` as the independent
 //! subscriber and `mosquitto_pub` as a lab's client commanding the station. The ACL is the
 //! one docs/integration.md gives: a client writes only its own command topic. Both are Debian packages (`mosquitto`, `mosquitto-clients`) that `.ci/run`
-//! installs.
+//! installs. Also the loopback ports the tests' other servers are started on ([`free_ports`],
+//! [`on_fresh_ports`]).
 
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
@@ -23,17 +24,41 @@ const OPERATOR_PASSWORD: &str = "op3rator-pw";
 /// a guard against a hang, long enough for a loaded machine.
 const DEADLINE: Duration = Duration::from_secs(90);
 
-/// A free loopback TCP port (bound and released; the caller binds it next).
-pub fn free_port() -> u16 {
-    let [port] = free_ports();
-    port
-}
-
 /// `N` different free loopback TCP ports: each held until all are picked (a port released
-/// at once could be picked again for the next).
+/// at once could be picked again for the next), then released for the caller to bind.
+/// Another process may take one before the caller does: a server of ours is bound to port 0
+/// instead (the daemon logs the address it bound), another program's is started with
+/// [`on_fresh_ports`].
 pub fn free_ports<const N: usize>() -> [u16; N] {
     let held: [TcpListener; N] = std::array::from_fn(|_| TcpListener::bind("127.0.0.1:0").unwrap());
     held.map(|l| l.local_addr().unwrap().port())
+}
+
+/// Starts another program's server (the broker, an S3 server, Prometheus) on `N` free loopback
+/// ports: `start` launches it on the ports given and waits until it listens, or returns
+/// `Err` (the program's words) when it could not bind one of them. A port [`free_ports`]
+/// picked is released before the program binds it, so another process (the tests run in
+/// parallel) may take it meanwhile: the start is then made again on fresh ports, for up to
+/// [`DEADLINE`]. Any other failure is `start`'s to panic on.
+pub fn on_fresh_ports<const N: usize, T>(
+    what: &str,
+    mut start: impl FnMut([u16; N]) -> Result<T, String>,
+) -> T {
+    let begun = Instant::now();
+    loop {
+        match start(free_ports()) {
+            Ok(t) => return t,
+            Err(e) if begun.elapsed() < DEADLINE => {
+                eprintln!("{what} could not bind its port, trying fresh ones: {e}");
+            }
+            Err(e) => panic!("{what} found no free port in {} s: {e}", DEADLINE.as_secs()),
+        }
+    }
+}
+
+/// Whether a server's words say it could not bind its port.
+pub fn port_taken(said: &str) -> bool {
+    said.contains("Address already in use") || said.contains("address already in use")
 }
 
 /// A child process killed when dropped.
@@ -94,12 +119,8 @@ impl Broker {
             ),
         )
         .unwrap();
-        // The port is free when picked, but another process may bind it before the broker
-        // does (the tests run in parallel): then the broker exits naming it, and another
-        // port is tried.
-        let mut attempts = 0;
-        loop {
-            let port = free_port();
+        // The broker exits naming a port another process took first.
+        on_fresh_ports("mosquitto", |[port]| {
             // Started as root, mosquitto drops to the user `mosquitto`, who cannot write the
             // test's directory (its persistence and log): it stays root then (CI runs as root).
             let user = if nix::unistd::geteuid().is_root() {
@@ -124,11 +145,11 @@ impl Broker {
                 process: None,
             };
             match b.launch() {
-                Ok(()) => return b,
-                Err(e) if e.contains("Address already in use") && attempts < 5 => attempts += 1,
+                Ok(()) => Ok(b),
+                Err(e) if port_taken(&e) => Err(e),
                 Err(e) => panic!("{e}"),
             }
-        }
+        })
     }
 
     /// The broker's URL.
@@ -313,4 +334,29 @@ pub async fn wait_seen(out: &Path, what: &str, done: impl Fn(&[Seen]) -> bool) -
         );
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
+}
+
+/// A start that finds its port taken by another process is made again on a fresh port, and
+/// the system's words for a taken port are recognised.
+#[test]
+fn a_server_whose_port_was_taken_is_started_on_a_fresh_one() {
+    let mut other: Option<TcpListener> = None;
+    let mut refused = Vec::new();
+    let (_server, port) = on_fresh_ports("a test server", |[port]| {
+        if other.is_none() {
+            // Another process binds the port between its pick and the server's start.
+            other = Some(TcpListener::bind(("127.0.0.1", port)).unwrap());
+        }
+        match TcpListener::bind(("127.0.0.1", port)) {
+            Ok(l) => Ok((l, port)),
+            Err(e) => {
+                refused.push(e.to_string());
+                Err(e.to_string())
+            }
+        }
+    });
+    let taken = other.unwrap().local_addr().unwrap().port();
+    assert_ne!(port, taken);
+    assert_eq!(refused.len(), 1, "{refused:?}");
+    assert!(port_taken(&refused[0]), "{refused:?}");
 }
