@@ -87,27 +87,21 @@ fn stats(index: usize, y_mm: f64, model: &[f64], measured: &[f64]) -> HoldoutLin
 }
 
 fn check_grid(grid: &Grid) -> Result<(), MetrologyError> {
-    let (heights_um, cols, pitch_x_mm, y_mm) = (
-        &grid.heights_um[..],
-        grid.cols,
-        grid.pitch_x_mm,
-        &grid.y_mm[..],
-    );
-    super::check_pitch(pitch_x_mm)?;
-    let rows = y_mm.len();
-    if let Some(w) = y_mm.windows(2).find(|w| !matches!(w, [a, b] if b > a)) {
+    super::check_pitch(grid.pitch_x_mm)?;
+    let (rows, cols, got) = (grid.y_mm.len(), grid.cols, grid.heights_um.len());
+    if let Some(w) = grid.y_mm.windows(2).find(|w| !matches!(w, [a, b] if b > a)) {
         return Err(MetrologyError::BadParameter {
             what: "y (mm) of a line",
             value: w.get(1).copied().unwrap_or(f64::NAN),
             hint: "line y values must be finite and strictly increasing",
         });
     }
-    if rows.checked_mul(cols) != Some(heights_um.len()) {
+    if rows.checked_mul(cols) != Some(got) {
         return Err(MetrologyError::GridSize {
             rows,
             cols,
             expected: rows.saturating_mul(cols),
-            got: heights_um.len(),
+            got,
         });
     }
     Ok(())
@@ -139,12 +133,11 @@ pub fn points_left_out(
 ) -> Result<Vec<HoldoutLine>, MetrologyError> {
     check_grid(grid)?;
     let (rows, cols, pitch_x_mm, y) = (grid.rows(), grid.cols, grid.pitch_x_mm, &grid.y_mm[..]);
-    let row = |r: usize| grid.row(r);
 
     // Every 2nd point of each line out: fit the even columns at twice the pitch.
     let kept_cols = cols.div_ceil(2);
     let sub: Vec<f64> = (0..rows)
-        .flat_map(|r| row(r).iter().step_by(2).copied().collect::<Vec<f64>>())
+        .flat_map(|r| grid.row(r).iter().step_by(2).copied().collect::<Vec<f64>>())
         .collect();
     let fit = fit_grid_with(2.0 * pitch_x_mm, y, &sub, kept_cols, options, method)?;
     let held = (cols.saturating_sub(1)) / 2;
@@ -157,7 +150,8 @@ pub fn points_left_out(
     )?;
     Ok((0..rows)
         .map(|r| {
-            let measured: Vec<f64> = row(r)
+            let measured: Vec<f64> = grid
+                .row(r)
                 .iter()
                 .skip(1)
                 .step_by(2)
