@@ -459,13 +459,17 @@ pub struct Traceability {
     pub conditions: Conditions,
 }
 
-impl From<&StartRecord> for Traceability {
-    fn from(s: &StartRecord) -> Traceability {
+impl Traceability {
+    /// Traceability of a scan started as `s` says and finished at `finished`.
+    pub fn of_scan(s: &StartRecord, finished: Option<chrono::DateTime<chrono::Utc>>) -> Self {
+        // A key of the `[traceability]` table of the configuration the scan recorded.
+        let key = |k: &str| s.config.get("traceability")?.get(k);
+        let text = |k: &str| key(k).and_then(|v| v.as_str().map(str::to_owned));
         Traceability {
             scan_id: s.scan_id.clone(),
             started_at: s.time.to_rfc3339(),
-            finished_at: None,
-            duration_s: None,
+            finished_at: finished.map(|f| f.to_rfc3339()),
+            duration_s: finished.map(|f| (f - s.time).num_milliseconds() as f64 / 1000.0),
             specimen: s.specimen.clone(),
             operator: s.operator.clone(),
             notes: s.notes.clone(),
@@ -475,32 +479,12 @@ impl From<&StartRecord> for Traceability {
             firmware: s.firmware.clone(),
             drive_unit: s.drive_unit.clone(),
             manufacturer: manufacturer_of(&s.instrument_model).to_string(),
-            instrument_serial: traceability_key(s, "serial-number")
-                .and_then(|v| v.as_str().map(str::to_owned)),
-            stylus_tip_radius_um: traceability_key(s, "stylus-tip-radius-um")
-                .and_then(serde_json::Value::as_f64),
-            calibration_date: traceability_key(s, "calibration-date")
-                .and_then(|v| v.as_str().map(str::to_owned)),
+            instrument_serial: text("serial-number"),
+            stylus_tip_radius_um: key("stylus-tip-radius-um").and_then(serde_json::Value::as_f64),
+            calibration_date: text("calibration-date"),
             conditions: s.conditions.clone(),
         }
     }
-}
-
-impl Traceability {
-    /// Traceability of a scan started as `start` says and finished at `finished`.
-    pub fn of_scan(start: &StartRecord, finished: Option<chrono::DateTime<chrono::Utc>>) -> Self {
-        let mut t = Traceability::from(start);
-        if let Some(f) = finished {
-            t.finished_at = Some(f.to_rfc3339());
-            t.duration_s = Some((f - start.time).num_milliseconds() as f64 / 1000.0);
-        }
-        t
-    }
-}
-
-/// A key of the `[traceability]` table of the configuration a scan recorded at its start.
-fn traceability_key<'a>(s: &'a StartRecord, key: &str) -> Option<&'a serde_json::Value> {
-    s.config.get("traceability")?.get(key)
 }
 
 /// The maker of an instrument model: the scan daemon drives the Mitutoyo SJ series
