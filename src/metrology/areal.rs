@@ -299,12 +299,7 @@ mod tests {
         // A rough tilted grid, and one of quantised heights whose levels fall on samples.
         let (rows, cols) = (7, 900);
         let mut seed = 0x2545_F491_4F6C_DD1Du64;
-        let mut noise = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut noise = || crate::metrology::lcg(&mut seed);
         let rough: Vec<f64> = (0..rows * cols)
             .map(|k| 0.001 * k as f64 + ((k % cols) as f64 * 0.02).sin() + noise())
             .collect();

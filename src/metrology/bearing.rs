@@ -474,13 +474,7 @@ pub struct BearingCurve {
 mod tests {
     use super::*;
 
-    /// Uniform in [0, 1) from an LCG (deterministic).
-    fn lcg(seed: &mut u64) -> f64 {
-        *seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (*seed >> 11) as f64 / (1u64 << 53) as f64
-    }
+    use crate::metrology::lcg;
 
     fn assert_close(fast: &[f64], slow: &[f64], what: &str) {
         assert_eq!(fast.len(), slow.len(), "{what}");

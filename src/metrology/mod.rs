@@ -231,3 +231,12 @@ pub(crate) fn map_in_parallel<T: Sync, R: Send>(
             .collect()
     })
 }
+
+/// Uniform in [0, 1) from a linear congruential generator: deterministic noise for the tests.
+#[cfg(test)]
+pub(crate) fn lcg(seed: &mut u64) -> f64 {
+    *seed = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    (*seed >> 11) as f64 / (1u64 << 53) as f64
+}

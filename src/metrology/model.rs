@@ -419,10 +419,7 @@ mod tests {
         let mut s: u64 = 0x9E37_79B9_7F4A_7C15;
         let h: Vec<f64> = (0..rows * cols)
             .map(|k| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                let noise = (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+                let noise = crate::metrology::lcg(&mut s) - 0.5;
                 (k % cols) as f64 * 0.002 + (k as f64 * 0.05).sin() + 0.4 * noise
             })
             .collect();

@@ -274,11 +274,7 @@ mod tests {
 
     impl Rng {
         fn next(&mut self) -> f64 {
-            self.0 = self
-                .0
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64 - 0.3
+            crate::metrology::lcg(&mut self.0) - 0.3
         }
 
         fn below(&mut self, n: usize) -> usize {
