@@ -129,13 +129,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         tell!("surfscan: warning: {w}");
         warnings.push(w);
     }
-    let map = HeightMap {
-        heights_um: &grid.heights_um,
-        rows,
-        cols: grid.cols,
-        pitch_x_mm: grid.pitch_x_mm,
-        pitch_y_mm,
-    };
+    let map = HeightMap::of(grid, pitch_y_mm);
     let (levelled, _) = level_plane(&map)
         .map_err(|e| CliError::new(Exit::Failed, format!("{}: {e}", args.input.display())))?;
     let cgrid = ContactGrid {
@@ -158,18 +152,12 @@ pub fn run(args: Args) -> Result<(), CliError> {
         tell!("surfscan: warning: {w}");
         warnings.push(w);
     }
-    let (cols, hardness_gpa) = (grid.cols, curve.hardness_gpa);
     let section = ContactSection {
         specimen: opts.specimen,
         counter_body: opts.counter,
         effective_modulus_gpa: curve.effective_modulus_gpa,
-        hardness_gpa,
-        measured: Some(ContactSurface::of(
-            curve,
-            (rows, cols),
-            grid.pitch_x_mm,
-            pitch_y_mm,
-        )),
+        hardness_gpa: curve.hardness_gpa,
+        measured: Some(ContactSurface::of(curve, &map)),
         measured_error: None,
         model: None,
     };
@@ -188,7 +176,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
         "contact of {} ({} lines × {} points, pitches {} mm × {} mm), E* = {} GPa{}:",
         described,
         rows,
-        cols,
+        grid.cols,
         grid.pitch_x_mm,
         pitch_y_mm,
         crate::numfmt::sig(section.effective_modulus_gpa, 4),

@@ -68,13 +68,8 @@ pub struct ContactSurface {
 }
 
 impl ContactSurface {
-    /// The contact of a `rows` × `cols` grid at these pitches, as solved.
-    pub fn of(
-        curve: ContactCurve,
-        (rows, cols): (usize, usize),
-        pitch_x_mm: f64,
-        pitch_y_mm: f64,
-    ) -> ContactSurface {
+    /// The contact of `grid` (its size and pitches), as solved.
+    pub fn of(curve: ContactCurve, grid: &HeightMap<'_>) -> ContactSurface {
         let ContactCurve {
             points,
             map,
@@ -82,10 +77,10 @@ impl ContactSurface {
             ..
         } = curve;
         ContactSurface {
-            rows,
-            cols,
-            pitch_x_mm,
-            pitch_y_mm,
+            rows: grid.rows,
+            cols: grid.cols,
+            pitch_x_mm: grid.pitch_x_mm,
+            pitch_y_mm: grid.pitch_y_mm,
             padded,
             curve: points,
             map_pressure_mpa: map.nominal_pressure_mpa,
@@ -225,16 +220,15 @@ pub fn section(
 /// Levels `map` by its least-squares plane and solves its contact.
 fn solve(map: HeightMap<'_>, opts: &ContactOptions) -> Result<ContactSurface, String> {
     let (levelled, _) = level_plane(&map).map_err(|e| e.to_string())?;
-    let (rows, cols, px, py) = (map.rows, map.cols, map.pitch_x_mm, map.pitch_y_mm);
     let grid = ContactGrid {
         heights_um: &levelled,
-        rows,
-        cols,
-        pitch_x_mm: px,
-        pitch_y_mm: py,
+        rows: map.rows,
+        cols: map.cols,
+        pitch_x_mm: map.pitch_x_mm,
+        pitch_y_mm: map.pitch_y_mm,
     };
     let curve = contact_curve(&grid, opts).map_err(|e| e.to_string())?;
-    Ok(ContactSurface::of(curve, (rows, cols), px, py))
+    Ok(ContactSurface::of(curve, &map))
 }
 
 /// The v of each row `y₀ + k·s` (k = 0, 1, … while ≤ the last line's y): the surface's y(v)
