@@ -199,19 +199,17 @@ where
     let subtitle = "1D power spectral density C(q) = |Δx·DFT(z)|² / L of the plane-levelled heights (periodic Hann window scaled to mean square 1), wavevector q = 2π / wavelength";
     let frame = Frame::new(root.dim_in_pixel().0, title, subtitle, caption);
     let body = frame.draw(root)?;
-    let all = || series.iter().flat_map(|(p, _, _)| p.iter());
-    let (q_lo, q_hi) = min_max(&all().map(|p| p[0]).collect::<Vec<_>>());
-    let (c_lo, c_hi) = min_max(&all().map(|p| p[1]).collect::<Vec<_>>());
-    let (q_lo, q_hi) = if q_lo.is_finite() && q_hi > q_lo {
-        (q_lo / 1.2, q_hi * 1.2)
-    } else {
-        (1e-3, 1.0)
+    // The points' range of q (k = 0) or C (k = 1), widened by the factor `f` at both ends.
+    let range = |k: usize, f: f64, fallback: (f64, f64)| {
+        let all = series.iter().flat_map(|(p, _, _)| p.iter().map(|p| p[k]));
+        let (lo, hi) = min_max(&all.collect::<Vec<_>>());
+        if lo.is_finite() && hi > lo {
+            (lo / f, hi * f)
+        } else {
+            fallback
+        }
     };
-    let (c_lo, c_hi) = if c_lo.is_finite() && c_hi > c_lo {
-        (c_lo / 2.0, c_hi * 2.0)
-    } else {
-        (1e-6, 1.0)
-    };
+    let ((q_lo, q_hi), (c_lo, c_hi)) = (range(0, 1.2, (1e-3, 1.0)), range(1, 2.0, (1e-6, 1.0)));
     let mut chart = chart(
         &body,
         (q_lo..q_hi).log_scale(),
