@@ -699,12 +699,7 @@ impl<'a> Fitting<'a> {
                 format!(
                     "Surface fitted by surfscan {} ({}, p={}, q={}); units mm.",
                     env!("CARGO_PKG_VERSION"),
-                    match recipe.method {
-                        crate::fit::VMethod::Interpolate => "global B-spline interpolation".to_string(),
-                        crate::fit::VMethod::LeastSquares { control_rows } => format!(
-                            "B-spline interpolation along x, least squares across the lines with {control_rows} control rows"
-                        ),
-                    },
+                    recipe.method.in_brief(),
                     options.degree_u,
                     options.degree_v
                 ),

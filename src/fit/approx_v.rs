@@ -58,6 +58,16 @@ impl VMethod {
         }
     }
 
+    /// The method in a few words, as the IGES Start section of a surface names it.
+    pub fn in_brief(&self) -> String {
+        match self {
+            VMethod::Interpolate => "global B-spline interpolation".to_string(),
+            VMethod::LeastSquares { control_rows } => format!(
+                "B-spline interpolation along x, least squares across the lines with {control_rows} control rows"
+            ),
+        }
+    }
+
     /// One sentence for IGES Start sections and reports.
     pub fn describe(&self, options: FitOptions) -> String {
         match self {

@@ -13,12 +13,7 @@ pub fn traceability_lines(start: &StartRecord, plan: &Plan) -> Vec<String> {
         format!(
             "Surface fitted by {} ({}, p={}, q={}); units mm.",
             start.software_version,
-            match plan.v_method {
-                crate::fit::VMethod::Interpolate => "global B-spline interpolation".to_string(),
-                crate::fit::VMethod::LeastSquares { control_rows } => format!(
-                    "B-spline interpolation along x, least squares across the lines with {control_rows} control rows"
-                ),
-            },
+            plan.v_method.in_brief(),
             plan.degree_u,
             plan.degree_v
         ),
