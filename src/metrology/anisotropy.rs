@@ -183,6 +183,7 @@ pub fn anisotropy(grid: &HeightMap<'_>) -> Result<Anisotropy, MetrologyError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::metrology::areal::test_map;
 
     fn make(rows: usize, cols: usize, f: impl Fn(usize, usize) -> f64) -> Vec<f64> {
         (0..rows * cols).map(|k| f(k / cols, k % cols)).collect()
@@ -191,13 +192,7 @@ mod tests {
     #[test]
     fn identical_lines_correlate_fully_and_have_no_y_slope() {
         let z = make(10, 200, |_, c| (c as f64 * 0.3).sin());
-        let g = HeightMap {
-            heights_um: &z,
-            rows: 10,
-            cols: 200,
-            pitch_x_mm: 0.001,
-            pitch_y_mm: 0.01,
-        };
+        let g = test_map(&z, 10, 200, 0.001, 0.01);
         let a = anisotropy(&g).unwrap();
         assert!((a.line_correlation_at_pitch_y - 1.0).abs() < 1e-12);
         assert!(a.sdq_y < 1e-12 && a.sdq_y_share_pct < 1e-9 && a.dominant == "x");
@@ -219,13 +214,7 @@ mod tests {
             let sign = if r % 2 == 0 { 1.0 } else { -1.0 };
             sign * (1.0 + 0.01 * (c as f64 * 0.7).sin())
         });
-        let g = HeightMap {
-            heights_um: &z,
-            rows: 12,
-            cols: 100,
-            pitch_x_mm: 0.001,
-            pitch_y_mm: 0.001,
-        };
+        let g = test_map(&z, 12, 100, 0.001, 0.001);
         let a = anisotropy(&g).unwrap();
         assert!(a.line_correlation_at_pitch_y < -0.99, "{a:?}");
         assert_eq!(a.dominant, "y");

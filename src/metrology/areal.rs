@@ -69,6 +69,24 @@ pub struct HeightMap<'a> {
     pub pitch_y_mm: f64,
 }
 
+/// The map of `heights_um`, `rows` × `cols` at pitches `px` and `py` mm: the tests' maps.
+#[cfg(test)]
+pub(crate) fn test_map(
+    heights_um: &[f64],
+    rows: usize,
+    cols: usize,
+    px: f64,
+    py: f64,
+) -> HeightMap<'_> {
+    HeightMap {
+        heights_um,
+        rows,
+        cols,
+        pitch_x_mm: px,
+        pitch_y_mm: py,
+    }
+}
+
 impl HeightMap<'_> {
     /// `grid`'s heights, its rows taken `pitch_y_mm` apart (the lines' mean y pitch, or the
     /// one the input states).
@@ -283,17 +301,6 @@ mod tests {
     use super::*;
     use crate::metrology::bearing::material_ratio_pct;
 
-    /// A grid at 0.5 µm along x and 10 µm between lines.
-    fn test_grid(heights_um: &[f64], rows: usize, cols: usize) -> HeightMap<'_> {
-        HeightMap {
-            heights_um,
-            rows,
-            cols,
-            pitch_x_mm: 0.0005,
-            pitch_y_mm: 0.01,
-        }
-    }
-
     #[test]
     fn smr_curve_equals_the_per_level_pooled_ratio() {
         // A rough tilted grid, and one of quantised heights whose levels fall on samples.
@@ -305,7 +312,7 @@ mod tests {
             .collect();
         let steps: Vec<f64> = (0..rows * cols).map(|_| (noise() * 6.0).floor()).collect();
         for heights in [rough, steps] {
-            let grid = test_grid(&heights, rows, cols);
+            let grid = test_map(&heights, rows, cols, 0.0005, 0.01);
             let (z, _) = level_plane(&grid).unwrap();
             let curve = smr_curve(&z, cols, 101).unwrap();
             for (k, p) in curve.iter().enumerate() {
@@ -335,7 +342,7 @@ mod tests {
             let heights: Vec<f64> = (0..rows * cols)
                 .map(|k| ((k as f64) * 0.71).sin() * 3.0 + tilt * k as f64 + 40.0)
                 .collect();
-            let grid = test_grid(&heights, rows, cols);
+            let grid = test_map(&heights, rows, cols, 0.0005, 0.01);
             let all = areal_params(&grid).unwrap().sq_um;
             assert!(all > 0.1, "{rows}×{cols}: Sq {all}");
             assert_eq!(
@@ -345,7 +352,7 @@ mod tests {
             );
         }
         let short = [1.0; 5];
-        let bad = test_grid(&short, 2, 3);
+        let bad = test_map(&short, 2, 3, 0.0005, 0.01);
         assert_eq!(sq_um(&bad).unwrap_err(), areal_params(&bad).unwrap_err());
     }
 
@@ -357,7 +364,7 @@ mod tests {
             let heights: Vec<f64> = (0..rows * cols)
                 .map(|k| ((k as f64) * 0.37).sin() + 0.01 * k as f64 - 2.0)
                 .collect();
-            let grid = test_grid(&heights, rows, cols);
+            let grid = test_map(&heights, rows, cols, 0.0005, 0.01);
             let (xc, yc) = ((cols - 1) as f64 * 0.5, (rows - 1) as f64 * 0.5);
             let (mut sz, mut sxz, mut syz, mut sxx, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0);
             for (k, z) in heights.iter().enumerate() {

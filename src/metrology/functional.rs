@@ -145,7 +145,7 @@ impl<'a> QuantileCurve<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::metrology::areal::{level_plane, HeightMap};
+    use crate::metrology::areal::{level_plane, test_map};
 
     /// Ordinates uniform on [−h, h]: Smc is the straight line h·(1 − 2x) over x in [0, 1], so
     /// Vm(p) = h·p² and Vv(p) = h·(1 − p)² exactly on the polyline; the secant is the curve
@@ -180,13 +180,7 @@ mod tests {
         let mut pitted = base.clone();
         pitted[2 * cols + 200] -= 50.0;
         let g = |z: &[f64]| {
-            let g = HeightMap {
-                heights_um: z,
-                rows,
-                cols,
-                pitch_x_mm: 0.001,
-                pitch_y_mm: 0.01,
-            };
+            let g = test_map(z, rows, cols, 0.001, 0.01);
             areal_functional(level_plane(&g).unwrap().0).unwrap()
         };
         let (a, b) = (g(&base), g(&pitted));

@@ -623,17 +623,7 @@ fn psd_of_profiles(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::metrology::areal::level_plane;
-
-    fn grid_of<'a>(z: &'a [f64], rows: usize, cols: usize, px: f64, py: f64) -> HeightMap<'a> {
-        HeightMap {
-            heights_um: z,
-            rows,
-            cols,
-            pitch_x_mm: px,
-            pitch_y_mm: py,
-        }
-    }
+    use crate::metrology::areal::{level_plane, test_map};
 
     /// The FFT estimator equals the direct sum over the overlapping pairs.
     #[test]
@@ -642,7 +632,7 @@ mod tests {
         let z: Vec<f64> = (0..rows * cols)
             .map(|k| ((k * 37 % 11) as f64 - 5.0) * 0.3 + (k as f64 * 0.7).sin())
             .collect();
-        let g = grid_of(&z, rows, cols, 0.001, 0.002);
+        let g = test_map(&z, rows, cols, 0.001, 0.002);
         let acf = autocorrelation(&g).unwrap();
         let (l, _) = level_plane(&g).unwrap();
         let at = |r: isize, c: isize| l[(r as usize) * cols + c as usize];
@@ -679,7 +669,7 @@ mod tests {
         let z: Vec<f64> = (0..rows * cols)
             .map(|k| (2.0 * PI * (k % cols) as f64 * px * 1000.0 / lambda_um).cos())
             .collect();
-        let g = grid_of(&z, rows, cols, px, py);
+        let g = test_map(&z, rows, cols, px, py);
         let p = spatial_params(g.heights_um.into(), &g, &Plane::of(&g).unwrap());
         let want = lambda_um * 0.2f64.acos() / (2.0 * PI);
         let sal = p.sal_um.unwrap();
@@ -704,7 +694,7 @@ mod tests {
                 (2.0 * PI * (fx * c + fy * r)).cos()
             })
             .collect();
-        let g = grid_of(&z, rows, cols, p, p);
+        let g = test_map(&z, rows, cols, p, p);
         let s = spatial_params(g.heights_um.into(), &g, &Plane::of(&g).unwrap());
         assert_eq!(s.std_deg, 29.5);
     }
@@ -717,7 +707,7 @@ mod tests {
         let z: Vec<f64> = (0..rows * cols)
             .map(|k| (2.0 * PI * k0 as f64 * (k % cols) as f64 / cols as f64).sin())
             .collect();
-        let grid = grid_of(&z, rows, cols, px, 0.01);
+        let grid = test_map(&z, rows, cols, px, 0.01);
         let psd = psd_along_x(&grid, &Plane::of(&grid).unwrap());
         let (imax, _) =
             psd.c_um3

@@ -1444,13 +1444,7 @@ mod tests {
             1.0, 3.0, 2.0, 2.0, 6.0, 10.0,
             3.0, 1.0, 2.0, 2.0, 6.0, 10.0,
         ];
-        let grid = HeightMap {
-            heights_um: &z,
-            rows: 4,
-            cols: 6,
-            pitch_x_mm: 0.001,
-            pitch_y_mm: 0.001,
-        };
+        let grid = crate::metrology::areal::test_map(&z, 4, 6, 0.001, 0.001);
         let colour = |v: f64| {
             let RGBColor(r, g, b) = viridis(v / 10.0);
             [r, g, b]
