@@ -637,11 +637,6 @@ mod tests {
         ));
     }
 
-    /// The worst backward run of coordinate `c` along `pts`: (lower, upper, back) in mm.
-    fn backward_run(pts: &[[f64; 3]], c: usize) -> Option<(f64, f64, f64)> {
-        backward_run_by(pts.len(), |k| pts[k][c])
-    }
-
     /// The u iso-curve part of [`check_model`] as it was first written: every point of
     /// `evaluate_grid`, then the range and the fold. (fold count, worst, range.)
     #[allow(clippy::type_complexity)]
@@ -664,7 +659,7 @@ mod tests {
                     range = (range.0, range.1, z, [p[0], p[1]]);
                 }
             }
-            if let Some(run) = backward_run(pts, 0) {
+            if let Some(run) = backward_run_by(pts.len(), |k| pts[k][0]) {
                 fold.0 += 1;
                 if fold.1.is_none_or(|(_, _, w)| run.2 > w.2) {
                     fold.1 = Some((v, pts[0][1], run));
