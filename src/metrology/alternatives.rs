@@ -144,18 +144,11 @@ mod tests {
 
     #[test]
     fn the_table_names_every_alternative_and_its_verdict() {
-        let (rows, cols) = (13, 40);
-        let y: Vec<f64> = (0..rows).map(|r| r as f64 * 0.01).collect();
-        let z: Vec<f64> = (0..rows * cols)
-            .map(|k| ((k % cols) as f64 * 0.3).sin() * (1.0 + 0.01 * (k / cols) as f64))
-            .collect();
-        let alts = compare(
-            &Grid::new(z, cols, 0.002, y),
-            FitOptions::default(),
-            2,
-            0.7,
-            0.5,
-        );
+        let rows = 13;
+        let grid = crate::metrology::test_grid(rows, 40, 0.002, |r, c| {
+            (c as f64 * 0.3).sin() * (1.0 + 0.01 * r as f64)
+        });
+        let alts = compare(&grid, FitOptions::default(), 2, 0.7, 0.5);
         assert_eq!(alts.len(), candidates(rows, FitOptions::default()).len());
         let t = table(&alts);
         assert!(t.lines().count() == alts.len() + 1, "{t}");

@@ -506,12 +506,7 @@ pub fn between_lines_given(
 mod tests {
     use super::*;
 
-    /// `rows` lines 0.01 mm apart of `cols` points at `pitch_x_mm`, heights `f(row, col)`.
-    fn grid(rows: usize, cols: usize, pitch_x_mm: f64, f: impl Fn(usize, usize) -> f64) -> Grid {
-        let y = (0..rows).map(|r| r as f64 * 0.01).collect();
-        let z = (0..rows * cols).map(|k| f(k / cols, k % cols)).collect();
-        Grid::new(z, cols, pitch_x_mm, y)
-    }
+    use crate::metrology::test_grid as grid;
 
     /// [`between_lines`] with the default fit, interpolating in v.
     fn held_out(

@@ -240,3 +240,17 @@ pub(crate) fn lcg(seed: &mut u64) -> f64 {
         .wrapping_add(1442695040888963407);
     (*seed >> 11) as f64 / (1u64 << 53) as f64
 }
+
+/// `rows` lines 0.01 mm apart of `cols` points at `pitch_x_mm`, heights `f(row, col)`: the
+/// tests' grids.
+#[cfg(test)]
+pub(crate) fn test_grid(
+    rows: usize,
+    cols: usize,
+    pitch_x_mm: f64,
+    f: impl Fn(usize, usize) -> f64,
+) -> crate::grid::Grid {
+    let y = (0..rows).map(|r| r as f64 * 0.01).collect();
+    let z = (0..rows * cols).map(|k| f(k / cols, k % cols)).collect();
+    crate::grid::Grid::new(z, cols, pitch_x_mm, y)
+}

@@ -118,10 +118,8 @@ mod tests {
     use crate::fit::fit_grid;
 
     fn grid(rows: usize, cols: usize) -> Grid {
-        let z = (0..rows * cols)
-            .map(|k| ((k % cols) as f64 * 0.21).sin() + 0.5 * ((k / cols) as f64 * 0.7).cos())
-            .collect();
-        Grid::new(z, cols, 0.002, (0..rows).map(|r| r as f64 * 0.01).collect())
+        let wavy = |r: usize, c: usize| (c as f64 * 0.21).sin() + 0.5 * (r as f64 * 0.7).cos();
+        crate::metrology::test_grid(rows, cols, 0.002, wavy)
     }
 
     #[test]

@@ -149,12 +149,8 @@ mod tests {
     fn grid(rows: usize, cols: usize, y_mm: Vec<f64>, f: impl Fn(usize, usize) -> f64) -> Grid {
         Grid {
             index: (0..rows as u32).map(|r| 3 + 2 * r).collect(),
-            ..Grid::new(
-                (0..rows * cols).map(|k| f(k / cols, k % cols)).collect(),
-                cols,
-                0.002,
-                y_mm,
-            )
+            y_mm,
+            ..crate::metrology::test_grid(rows, cols, 0.002, f)
         }
     }
 
