@@ -18,16 +18,6 @@ pub enum Paper {
     Letter,
 }
 
-impl Paper {
-    /// The CSS `size` keyword.
-    pub fn css(self) -> &'static str {
-        match self {
-            Paper::A4 => "A4",
-            Paper::Letter => "letter",
-        }
-    }
-}
-
 /// `[report]`: the issuing laboratory and the printed layout. Every key is optional.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
