@@ -33,24 +33,29 @@ pub fn section(
 
 /// Line `row` of `grid` against the model sampled on it.
 pub fn data_line(grid: &Grid, model: &HeightMap<'_>, row: usize) -> Overlay {
-    let index = grid.index.get(row).copied().unwrap_or(0);
     Overlay {
         measured: along_x(grid.row(row), grid.x0_mm, grid.pitch_x_mm),
         model: along_x(
-            (model.heights_um.get(row * model.cols..(row + 1) * model.cols)).unwrap_or(&[]),
+            model
+                .heights_um
+                .get(row * model.cols..(row + 1) * model.cols)
+                .unwrap_or(&[]),
             grid.x0_mm,
             model.pitch_x_mm,
         ),
         residual: Vec::new(),
         title: format!(
-            "Line {} ({index:04}, y = {} mm): measured and model (fitted through these points; no line could be held out)",
-            line_number(index),
-            nfmt(
-                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
-                Quantity::PositionMm
-            )
+            "{}: measured and model (fitted through these points; no line could be held out)",
+            line_named(grid, row)
         ),
     }
+}
+
+/// "Line 5 (0004, y = 0.040 mm)": how a title names row `row` of `grid`.
+fn line_named(grid: &Grid, row: usize) -> String {
+    let (index, y_mm) = (grid.index_of(row), grid.y_mm.get(row).copied());
+    let y = nfmt(y_mm.unwrap_or(f64::NAN), Quantity::PositionMm);
+    format!("Line {} ({index:04}, y = {y} mm)", line_number(index))
 }
 
 /// `z` as `(x_mm, z)` points `pitch_mm` apart from `x0_mm` (the input's coordinates, as
@@ -134,13 +139,8 @@ fn held_out_overlay(
         model: along_x(&model, x0, px),
         residual: along_x(&residual, x0, px),
         title: format!(
-            "Line {} ({:04}, y = {} mm) left out: its measured heights and the model refitted without it (rms {} µm)",
-            line_number(grid.index_of(row)),
-            grid.index_of(row),
-            nfmt(
-                grid.y_mm.get(row).copied().unwrap_or(f64::NAN),
-                Quantity::PositionMm
-            ),
+            "{} left out: its measured heights and the model refitted without it (rms {} µm)",
+            line_named(grid, row),
             nfmt(rms, Quantity::HeightUm)
         ),
     })
