@@ -93,15 +93,12 @@ pub fn characterise(
     let t_all = Instant::now();
     let (rows, cols) = (grid.rows(), grid.cols);
     if rows == 0 || cols == 0 || grid.heights_um.len() != rows * cols {
-        return Err(ReportError::Metrology {
-            what: ctx.input.clone(),
-            source: MetrologyError::GridSize {
-                rows,
-                cols,
-                expected: rows.saturating_mul(cols),
-                got: grid.heights_um.len(),
-            },
-        });
+        return Err(error::metrology(&ctx.input)(MetrologyError::GridSize {
+            rows,
+            cols,
+            expected: rows.saturating_mul(cols),
+            got: grid.heights_um.len(),
+        }));
     }
     std::fs::create_dir_all(out).map_err(error::io(out))?;
     let (sections, (rk_plots, rk_s), model_x3p, (measured, measured_s)) = sections::run(

@@ -194,13 +194,11 @@ fn write_plots(
 /// The error of a renderer's `thread` that panicked making `file` of the input `input`;
 /// `hint` says what it was doing.
 fn panicked(input: &str, file: &str, thread: &'static str, hint: &'static str) -> ReportError {
-    let source = MetrologyError::BadParameter {
+    metrology(format!("{input}: {file}"))(MetrologyError::BadParameter {
         what: thread,
         value: f64::NAN,
         hint,
-    };
-    let what = format!("{input}: {file}");
-    ReportError::Metrology { what, source }
+    })
 }
 
 /// The height map of the measured grid, `heightmap.png|svg`, and its 3D view,
