@@ -120,6 +120,27 @@ pub(crate) fn spawn_daemon_to(r: &Rig, log: Stdio) -> Daemon {
     )
 }
 
+/// The address the daemon's log (the rig's `daemon.log`) last names right after `said`, up to
+/// the next `/`, once it names one: where a server configured on port 0 was bound.
+pub(crate) fn logged_address(r: &Rig, said: &str) -> std::net::SocketAddr {
+    let start = Instant::now();
+    loop {
+        let log = std::fs::read_to_string(r.dir.path().join("daemon.log")).unwrap_or_default();
+        let addr = log.rfind(said).and_then(|at| {
+            let rest = &log[at + said.len()..];
+            rest[..rest.find('/')?].parse().ok()
+        });
+        if let Some(addr) = addr {
+            return addr;
+        }
+        assert!(
+            start.elapsed() < DEADLINE,
+            "the daemon's log names no address after {said:?}: {log}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// Reads notify datagrams until one satisfies `want`; returns all seen. Fails at once when
 /// the daemon has exited.
 pub(crate) fn notify_until(r: &Rig, d: &mut Child, want: impl Fn(&str) -> bool) -> Vec<String> {

@@ -74,23 +74,7 @@ fn with_listen(r: &Rig, port: u16) {
 
 /// The port the daemon serves `/metrics` on, as its log names it once it is bound.
 fn metrics_port(r: &Rig) -> u16 {
-    const SAID: &str = "metrics on http://127.0.0.1:";
-    let start = Instant::now();
-    loop {
-        let log = std::fs::read_to_string(r.dir.path().join("daemon.log")).unwrap_or_default();
-        let port = log.rfind(SAID).and_then(|at| {
-            let rest = &log[at + SAID.len()..];
-            rest[..rest.find('/')?].parse().ok()
-        });
-        if let Some(port) = port {
-            return port;
-        }
-        assert!(
-            start.elapsed() < e2e::DEADLINE,
-            "the daemon's log names no metrics port: {log}"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    e2e::logged_address(r, "metrics on http://").port()
 }
 
 /// A Prometheus server scraping 127.0.0.1:`target` every 250 ms; its own port returned.

@@ -58,23 +58,7 @@ fn spawn_logged(r: &Rig) -> Daemon {
 
 /// The page's address as the daemon's log last named it, once it has.
 fn page_addr(r: &Rig) -> std::net::SocketAddr {
-    const SAID: &str = "the station's page is at http://";
-    let start = std::time::Instant::now();
-    loop {
-        let log = std::fs::read_to_string(r.dir.path().join("daemon.log")).unwrap_or_default();
-        let addr = log.rfind(SAID).and_then(|at| {
-            let rest = &log[at + SAID.len()..];
-            rest[..rest.find('/')?].parse().ok()
-        });
-        if let Some(addr) = addr {
-            return addr;
-        }
-        assert!(
-            start.elapsed() < WAIT,
-            "the daemon's log names no page address: {log}"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    crate::daemon_e2e::logged_address(r, "the station's page is at http://")
 }
 
 /// Serves, on another port of the same host, a page that tries to pause the station at
