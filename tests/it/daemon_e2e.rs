@@ -120,12 +120,17 @@ pub(crate) fn spawn_daemon_to(r: &Rig, log: Stdio) -> Daemon {
     )
 }
 
+/// The rig's `daemon.log`, where a daemon spawned with it appends its log.
+pub(crate) fn log_path(r: &Rig) -> PathBuf {
+    r.dir.path().join("daemon.log")
+}
+
 /// The address the daemon's log (the rig's `daemon.log`) last names right after `said`, up to
 /// the next `/`, once it names one: where a server configured on port 0 was bound.
 pub(crate) fn logged_address(r: &Rig, said: &str) -> std::net::SocketAddr {
     let start = Instant::now();
     loop {
-        let log = std::fs::read_to_string(r.dir.path().join("daemon.log")).unwrap_or_default();
+        let log = std::fs::read_to_string(log_path(r)).unwrap_or_default();
         let addr = log.rfind(said).and_then(|at| {
             let rest = &log[at + said.len()..];
             rest[..rest.find('/')?].parse().ok()

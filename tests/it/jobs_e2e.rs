@@ -111,11 +111,6 @@ impl Drop for Daemon {
 }
 
 fn spawn_daemon(r: &Rig) -> Daemon {
-    let log = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(r.dir.path().join("daemon.log"))
-        .unwrap();
     Daemon(
         Command::new(env!("CARGO_BIN_EXE_surfscan"))
             .args(["daemon", "--config"])
@@ -125,7 +120,7 @@ fn spawn_daemon(r: &Rig) -> Daemon {
             .env_remove("WATCHDOG_USEC")
             .stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(log)
+            .stderr(crate::common::appending(&r.dir.path().join("daemon.log")))
             .spawn()
             .unwrap(),
     )

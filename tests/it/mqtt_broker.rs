@@ -11,7 +11,7 @@
 
 use crate::common::append_config;
 use crate::common::mosquitto::{self, Broker, Seen};
-use crate::daemon_e2e::{self as e2e, Daemon, Rig};
+use crate::daemon_e2e::{self as e2e, log_path, Daemon, Rig};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;
@@ -37,11 +37,6 @@ pub(crate) fn with_mqtt(r: &Rig, url: &str, password: &str) {
 
 /// The daemon with its log in `daemon.log` of the rig's directory.
 pub(crate) fn spawn_logged(r: &Rig) -> Daemon {
-    let log = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(log_path(r))
-        .unwrap();
     Daemon(
         Command::new(env!("CARGO_BIN_EXE_surfscan"))
             .args(["daemon", "--config"])
@@ -51,14 +46,10 @@ pub(crate) fn spawn_logged(r: &Rig) -> Daemon {
             .env("RUST_LOG", "info")
             .stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(log)
+            .stderr(crate::common::appending(&log_path(r)))
             .spawn()
             .unwrap(),
     )
-}
-
-pub(crate) fn log_path(r: &Rig) -> PathBuf {
-    r.dir.path().join("daemon.log")
 }
 
 pub(crate) async fn wait_socket(r: &Rig) {

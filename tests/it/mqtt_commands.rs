@@ -7,8 +7,9 @@
 
 use crate::common::append_config;
 use crate::common::mosquitto::{self, Broker, Seen};
+use crate::daemon_e2e::log_path;
 use crate::daemon_e2e::{self as e2e, Rig};
-use crate::mqtt_broker::{log_path, spawn_logged, wait_socket, with_mqtt, STATION};
+use crate::mqtt_broker::{spawn_logged, wait_socket, with_mqtt, STATION};
 use std::path::{Path, PathBuf};
 use surfscan::control::client::ControlClient;
 use surfscan::control::protocol::{Message, Request};

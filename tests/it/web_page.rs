@@ -48,12 +48,7 @@ fn with_page(r: &Rig, listen: &str) {
 
 /// The daemon with its log in the rig's `daemon.log` (appended to).
 fn spawn_logged(r: &Rig) -> Daemon {
-    let log = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(r.dir.path().join("daemon.log"))
-        .unwrap();
-    spawn_daemon_to(r, log.into())
+    spawn_daemon_to(r, crate::common::appending(&crate::daemon_e2e::log_path(r)))
 }
 
 /// The page's address as the daemon's log last named it, once it has.

@@ -48,6 +48,17 @@ pub const SPEED_UP: f64 = 100.0;
 /// The stage's simulated motion runs this many times faster than real time.
 pub const STAGE_SPEED_UP: f64 = 1000.0;
 
+/// `path` opened for a child's output to be appended to (created if missing): a daemon's log
+/// that a restarted daemon goes on writing.
+pub fn appending(path: &Path) -> std::process::Stdio {
+    std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .unwrap()
+        .into()
+}
+
 /// Height of point `i` of line `k` in integer nanometres: a smooth form plus a
 /// line-dependent ripple, different for every line so a trace at the wrong y is caught.
 pub fn height_nm(k: usize, i: usize) -> i64 {
