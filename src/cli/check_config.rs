@@ -201,6 +201,15 @@ pub fn check_ports(config: &Config) -> Result<Vec<String>, String> {
     Ok(notes)
 }
 
+/// The configuration at `path` loaded as [`load_config`] loads it, its ports checked by
+/// [`check_ports`]: with its hash and the notes on absent devices, or exit 78 naming the file.
+pub fn load_checked(path: &Path) -> Result<(Config, String, Vec<String>), CliError> {
+    let (config, hash) = load_config(path)?;
+    let notes = check_ports(&config)
+        .map_err(|e| CliError::new(Exit::Config, format!("config {}: {e}", path.display())))?;
+    Ok((config, hash, notes))
+}
+
 /// Every recipe of the station's `[jobs] recipes` directory, read and validated as a start
 /// reads it: their lines for people and notes, or the first invalid one (exit 78).
 pub fn check_recipes(config: &Config) -> Result<(String, Vec<String>), CliError> {
@@ -233,9 +242,7 @@ pub fn check_recipes(config: &Config) -> Result<(String, Vec<String>), CliError>
 /// Runs `surfscan check-config`.
 pub fn run(args: Args) -> Result<(), CliError> {
     let path = args.path();
-    let (config, hash) = load_config(&path)?;
-    let notes = check_ports(&config)
-        .map_err(|e| CliError::new(Exit::Config, format!("config {}: {e}", path.display())))?;
+    let (config, hash, notes) = load_checked(&path)?;
     if args.require_devices {
         if let Some(absent) = notes.first() {
             return Err(CliError::new(

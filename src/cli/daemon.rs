@@ -20,13 +20,12 @@
 //! before READY (a token file or certificate it cannot use is exit 78, an address it cannot
 //! listen on exit 69), and stopped after the scan loop.
 //!
-//! Layer 5 (composition): [`super::station`], control server, the station's page, runner,
-//! service notifications, hook.
+//! Layer 5 (composition): [`super::station`], [`super::check_config`]'s port check, control
+//! server, the station's page, runner, service notifications, hook.
 
 use super::daemon_jobs::{Jobs, Turn};
 use super::station::{
-    ignore_hangups, load_config, lock_station, recipe_conflict, record_scan_in_lock, run_settings,
-    with_job,
+    ignore_hangups, lock_station, recipe_conflict, record_scan_in_lock, run_settings, with_job,
 };
 use super::{CliError, Exit};
 use crate::config::Config;
@@ -69,17 +68,11 @@ const IDLE_TICK: Duration = Duration::from_secs(2);
 
 /// Runs `surfscan daemon`.
 pub fn run(args: Args) -> Result<(), CliError> {
-    let (config, config_hash) = load_config(&args.config)?;
     // A port that can never be a serial device (a directory, a regular file) is a
     // configuration to correct, as `check-config` and `scan` say: exit 78, which the unit's
     // RestartPreventExitStatus= keeps from restarting in a loop. An absent device is not: it
     // may be plugged in later.
-    super::check_config::check_ports(&config).map_err(|e| {
-        CliError::new(
-            Exit::Config,
-            format!("config {}: {e}", args.config.display()),
-        )
-    })?;
+    let (config, config_hash, _) = super::check_config::load_checked(&args.config)?;
     let control = server::ServerOptions {
         allowed_groups: match &config.control.allowed_groups {
             Some(names) => Some(server::resolve_groups(names).map_err(|e| {

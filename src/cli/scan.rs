@@ -24,8 +24,7 @@
 
 use super::start_args::{self, StartChoiceArgs};
 use super::station::{
-    ignore_hangups, load_config, lock_station, recipe_conflict, record_scan_in_lock, run_settings,
-    with_job,
+    ignore_hangups, lock_station, recipe_conflict, record_scan_in_lock, run_settings, with_job,
 };
 use super::{CliError, Exit};
 use crate::config::Config;
@@ -371,15 +370,9 @@ pub async fn run_foreground_locked(
 
 /// Runs `surfscan scan`.
 pub fn run(args: Args) -> Result<(), CliError> {
-    let (config, config_hash) = load_config(&args.config)?;
     // A port that can never be a serial device (a directory, a regular file) is a
     // configuration to correct, as `check-config` says, not a scan that failed.
-    super::check_config::check_ports(&config).map_err(|e| {
-        CliError::new(
-            Exit::Config,
-            format!("config {}: {e}", args.config.display()),
-        )
-    })?;
+    let (config, config_hash, _) = super::check_config::load_checked(&args.config)?;
     let lock = lock_station(&config, "scan")?;
     refuse_if_daemon(&config)?;
     let hooks = TestHooks::from_env().map_err(|e| CliError::new(Exit::Usage, e))?;
