@@ -175,6 +175,11 @@ fn fault_event(device: Device, class: FaultClass, message: &str, trace_started: 
     }
 }
 
+/// A fault of the instrument; `trace_started`: it broke off a trace.
+fn instrument_fault(class: FaultClass, message: &str, trace_started: bool) -> Event {
+    fault_event(Device::Instrument, class, message, trace_started)
+}
+
 /// The effect of a batch (its last action, when it is one).
 fn effect(actions: &[Action]) -> Option<&Action> {
     actions.last().filter(|a| a.is_effect())
@@ -295,7 +300,7 @@ fn every_fault_class_in_every_step_of_a_line_gets_its_reaction() {
         for (class, want) in &table {
             let mut r = Rig::started();
             to_step(&mut r);
-            let a = r.feed(fault_event(Device::Instrument, *class, "boom", false));
+            let a = r.feed(instrument_fault(*class, "boom", false));
             assert_eq!(&reaction(&a), want, "{class:?} while {step}");
             if *want == Reaction::Rehome {
                 let a = r.feed(Event::Idle);
@@ -341,8 +346,7 @@ fn every_fault_class_in_every_step_of_a_line_gets_its_reaction() {
 fn a_silent_instrument_is_waited_for_past_the_budget_and_the_scan_goes_on() {
     let mut r = Rig::started();
     r.up_to_trace();
-    let a = r.feed(fault_event(
-        Device::Instrument,
+    let a = r.feed(instrument_fault(
         FaultClass::Silent,
         "\"CTSTA\": no reply within 2000 ms",
         true,
@@ -354,8 +358,7 @@ fn a_silent_instrument_is_waited_for_past_the_budget_and_the_scan_goes_on() {
     let budget = policy().transient_budget;
     let mut waits = Vec::new();
     while r.elapsed < budget * 10 {
-        let a = r.feed(fault_event(
-            Device::Instrument,
+        let a = r.feed(instrument_fault(
             FaultClass::Silent,
             "\"RDSJ 01\": no reply within 2000 ms",
             false,
@@ -389,12 +392,7 @@ fn a_silent_instrument_is_waited_for_past_the_budget_and_the_scan_goes_on() {
     // It answers: the line is traced again, and a transient fault now has the whole budget.
     r.feed(opened(Device::Instrument));
     r.up_to_trace();
-    let a = r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Transient,
-        "NG011",
-        true,
-    ));
+    let a = r.feed(instrument_fault(FaultClass::Transient, "NG011", true));
     assert_eq!(
         effect(&a),
         Some(&Action::SetTimer(Duration::from_secs(1))),
@@ -485,12 +483,7 @@ fn transient_faults_are_retried_with_backoff_until_the_budget_is_spent() {
     r.up_to_trace();
     let mut waits = Vec::new();
     loop {
-        let a = r.feed(fault_event(
-            Device::Instrument,
-            FaultClass::Transient,
-            "NG011 busy",
-            false,
-        ));
+        let a = r.feed(instrument_fault(FaultClass::Transient, "NG011 busy", false));
         if let Some(end) = stop_of(&a) {
             match end {
                 End::Fail(FailReason::BudgetExhausted {
@@ -529,12 +522,7 @@ fn transient_faults_are_retried_with_backoff_until_the_budget_is_spent() {
 fn the_budget_starts_again_when_a_line_commits() {
     let mut r = Rig::started();
     r.up_to_trace();
-    r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Transient,
-        "timeout",
-        true,
-    ));
+    r.feed(instrument_fault(FaultClass::Transient, "timeout", true));
     r.wait(Duration::from_secs(50));
     r.feed(Event::TimerFired);
     let a = r.line_ok();
@@ -551,32 +539,17 @@ fn the_budget_starts_again_when_a_line_commits() {
         .any(|n| n.starts_with("line 1 on disk after 50 s of faults")));
     // Line 2: 50 s already went by, yet a fault now opens a fresh 60 s budget.
     r.up_to_trace();
-    let a = r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Transient,
-        "timeout",
-        true,
-    ));
+    let a = r.feed(instrument_fault(FaultClass::Transient, "timeout", true));
     assert_eq!(reaction(&a), Reaction::RetryAfter(Duration::from_secs(1)));
     r.wait(Duration::from_secs(59));
     r.feed(Event::TimerFired);
     r.up_to_trace();
-    let a = r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Transient,
-        "timeout",
-        true,
-    ));
+    let a = r.feed(instrument_fault(FaultClass::Transient, "timeout", true));
     assert_eq!(reaction(&a), Reaction::RetryAfter(Duration::from_secs(1)));
     r.wait(Duration::from_secs(1));
     r.feed(Event::TimerFired);
     r.up_to_trace();
-    let a = r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Transient,
-        "timeout",
-        true,
-    ));
+    let a = r.feed(instrument_fault(FaultClass::Transient, "timeout", true));
     assert!(matches!(
         stop_of(&a),
         Some(End::Fail(FailReason::BudgetExhausted {
@@ -594,8 +567,7 @@ fn the_budget_starts_again_when_a_line_commits() {
 fn time_a_device_was_absent_is_not_spent_from_the_transient_budget() {
     let mut r = Rig::started();
     r.up_to_trace();
-    let a = r.feed(fault_event(
-        Device::Instrument,
+    let a = r.feed(instrument_fault(
         FaultClass::Transient,
         "NG007 over-range",
         false,
@@ -605,26 +577,15 @@ fn time_a_device_was_absent_is_not_spent_from_the_transient_budget() {
     r.feed(Event::TimerFired);
     r.up_to_trace();
     // Unplugged mid-trace, back after two hours (the budget is 60 s).
-    let a = r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Absent,
-        "EOF",
-        true,
-    ));
+    let a = r.feed(instrument_fault(FaultClass::Absent, "EOF", true));
     assert_eq!(reaction(&a), Reaction::Reopen(Device::Instrument));
-    r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Absent,
-        "no such port",
-        false,
-    ));
+    r.feed(instrument_fault(FaultClass::Absent, "no such port", false));
     r.wait(Duration::from_secs(7200));
     r.feed(Event::TimerFired);
     let a = r.feed(opened(Device::Instrument));
     assert_eq!(effect(&a), Some(&Action::EnsureIdle));
     r.up_to_trace();
-    let a = r.feed(fault_event(
-        Device::Instrument,
+    let a = r.feed(instrument_fault(
         FaultClass::Transient,
         "NG007 over-range",
         false,
@@ -645,19 +606,9 @@ fn an_attempt_counts_only_when_a_trace_was_really_started() {
     let mut r = Rig::started();
     // Refused before it began (busy), then a fault outside the trace: no attempt.
     r.up_to_trace();
-    r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Transient,
-        "NG011",
-        false,
-    ));
+    r.feed(instrument_fault(FaultClass::Transient, "NG011", false));
     r.feed(Event::TimerFired);
-    r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Transient,
-        "not idle",
-        false,
-    ));
+    r.feed(instrument_fault(FaultClass::Transient, "not idle", false));
     r.feed(Event::TimerFired);
     r.up_to_trace();
     let a = r.feed(Event::Traced(good_line()));
@@ -672,12 +623,7 @@ fn an_attempt_counts_only_when_a_trace_was_really_started() {
     r.feed(Event::Pushed);
     // A trace that started and broke off counts.
     r.up_to_trace();
-    r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Transient,
-        "timeout",
-        true,
-    ));
+    r.feed(instrument_fault(FaultClass::Transient, "timeout", true));
     r.feed(Event::TimerFired);
     r.up_to_trace();
     let a = r.feed(Event::Traced(good_line()));
@@ -694,21 +640,11 @@ fn an_attempt_counts_only_when_a_trace_was_really_started() {
 fn a_vanished_device_is_reopened_with_backoff_and_costs_no_attempt() {
     let mut r = Rig::started();
     r.up_to_trace();
-    let a = r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Absent,
-        "EOF",
-        true,
-    ));
+    let a = r.feed(instrument_fault(FaultClass::Absent, "EOF", true));
     assert_eq!(reaction(&a), Reaction::Reopen(Device::Instrument));
     let mut waits = Vec::new();
     for _ in 0..4 {
-        let a = r.feed(fault_event(
-            Device::Instrument,
-            FaultClass::Absent,
-            "no such port",
-            false,
-        ));
+        let a = r.feed(instrument_fault(FaultClass::Absent, "no such port", false));
         let s = r.m.status();
         assert_eq!(s.state, State::Suspended);
         assert_eq!(s.instrument, DeviceState::Reconnecting);
@@ -764,14 +700,8 @@ fn a_vanished_device_is_reopened_with_backoff_and_costs_no_attempt() {
 #[test]
 fn a_different_instrument_after_a_reconnect_fails_the_scan() {
     let mut r = Rig::started();
-    r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Absent,
-        "EOF",
-        false,
-    ));
-    let a = r.feed(fault_event(
-        Device::Instrument,
+    r.feed(instrument_fault(FaultClass::Absent, "EOF", false));
+    let a = r.feed(instrument_fault(
         FaultClass::Fatal,
         "a different instrument answered",
         false,
@@ -1218,12 +1148,7 @@ fn a_resumed_scan_reopens_its_devices_and_goes_on_at_its_first_missing_line() {
     let a = r.start();
     assert_eq!(effect(&a), Some(&Action::Open(Device::Instrument)));
     // Not there yet: a resumed scan waits for it like a suspended one.
-    let a = r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Absent,
-        "no port",
-        false,
-    ));
+    let a = r.feed(instrument_fault(FaultClass::Absent, "no port", false));
     assert_eq!(stop_of(&a), None);
     r.feed(Event::TimerFired);
     r.feed(opened(Device::Instrument));
@@ -1372,12 +1297,7 @@ fn shutdown_abandons_the_line_and_leaves_the_scan_resumable() {
 fn a_device_missing_at_the_start_of_a_new_scan_is_unavailable_not_a_suspension() {
     let mut r = Rig::fresh();
     r.start();
-    let a = r.feed(fault_event(
-        Device::Instrument,
-        FaultClass::Absent,
-        "no such port",
-        false,
-    ));
+    let a = r.feed(instrument_fault(FaultClass::Absent, "no such port", false));
     let Some(End::Fail(reason)) = stop_of(&a) else {
         panic!("{a:?}")
     };
