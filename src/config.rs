@@ -975,6 +975,11 @@ dir = "/var/lib/surfscan/scans"
         Config::parse(Path::new("t.toml"), text)
     }
 
+    /// The error a file that must be refused is refused with.
+    fn refused(text: &str) -> String {
+        parse(text).unwrap_err().to_string()
+    }
+
     #[test]
     fn minimal_file_gets_documented_defaults() {
         let c = parse(MINIMAL).unwrap();
@@ -1007,16 +1012,12 @@ dir = "/var/lib/surfscan/scans"
                 .report
                 .line_png
         );
-        let e = parse(&with.replace("logo.png", "logo.bmp"))
-            .unwrap_err()
-            .to_string();
+        let e = refused(&with.replace("logo.png", "logo.bmp"));
         assert!(
             e.contains("report.logo") && e.contains("PNG, JPEG or SVG"),
             "{e}"
         );
-        let e = parse(&with.replace("\"Letter\"", "\"A3\""))
-            .unwrap_err()
-            .to_string();
+        let e = refused(&with.replace("\"Letter\"", "\"A3\""));
         assert!(e.contains("A3") || e.contains("paper"), "{e}");
     }
 
@@ -1033,47 +1034,35 @@ dir = "/var/lib/surfscan/scans"
         assert_eq!(t.serial_number.as_deref(), Some("SN-7"));
         assert_eq!(t.stylus_tip_radius_um, Some(2.0));
         assert_eq!(t.calibration_date.as_deref(), Some("2026-03-14"));
-        let e = parse(&with.replace("2026-03-14", "14.03.2026"))
-            .unwrap_err()
-            .to_string();
+        let e = refused(&with.replace("2026-03-14", "14.03.2026"));
         assert!(
             e.contains("traceability.calibration-date") && e.contains("YYYY-MM-DD"),
             "{e}"
         );
-        let e = parse(&with.replace("= 2.0", "= -2.0"))
-            .unwrap_err()
-            .to_string();
+        let e = refused(&with.replace("= 2.0", "= -2.0"));
         assert!(e.contains("traceability.stylus-tip-radius-um"), "{e}");
-        let e = parse(&with.replace("serial-number", "serial"))
-            .unwrap_err()
-            .to_string();
+        let e = refused(&with.replace("serial-number", "serial"));
         assert!(e.contains("serial"), "{e}");
     }
 
     #[test]
     fn too_few_lines_for_the_degree_is_named() {
         let text = MINIMAL.replace("lines = 31", "lines = 5");
-        let e = parse(&text).unwrap_err().to_string();
+        let e = refused(&text);
         assert!(e.contains("scan.lines") && e.contains("at least 6"), "{e}");
     }
 
     #[test]
     fn inexact_or_zero_step_is_refused() {
-        let e = parse(&MINIMAL.replace("y-step-mm = 0.01", "y-step-mm = 0.0100003"))
-            .unwrap_err()
-            .to_string();
+        let e = refused(&MINIMAL.replace("y-step-mm = 0.01", "y-step-mm = 0.0100003"));
         assert!(
             e.contains("scan.y-step-mm") && e.contains("nanometres"),
             "{e}"
         );
-        let e = parse(&MINIMAL.replace("y-step-mm = 0.01", "y-step-mm = 0.0"))
-            .unwrap_err()
-            .to_string();
+        let e = refused(&MINIMAL.replace("y-step-mm = 0.01", "y-step-mm = 0.0"));
         assert!(e.contains("must not be 0"), "{e}");
         // A step that is not 0 but rounds to 0 nm is told as such, not as a 0 typed.
-        let e = parse(&MINIMAL.replace("y-step-mm = 0.01", "y-step-mm = 1e-12"))
-            .unwrap_err()
-            .to_string();
+        let e = refused(&MINIMAL.replace("y-step-mm = 0.01", "y-step-mm = 1e-12"));
         assert!(
             e.contains("scan.y-step-mm")
                 && e.contains("rounds to 0 nm")
@@ -1084,22 +1073,16 @@ dir = "/var/lib/surfscan/scans"
 
     #[test]
     fn unknown_keys_and_plans_beyond_the_limits_are_refused() {
-        let e = parse(&MINIMAL.replace("lines = 31", "lines = 31\nline = 3"))
-            .unwrap_err()
-            .to_string();
+        let e = refused(&MINIMAL.replace("lines = 31", "lines = 31\nline = 3"));
         assert!(e.contains("unknown field") && e.contains("line"), "{e}");
-        let e = parse(&MINIMAL.replace("soft-limit-max-mm = 50.0", "soft-limit-max-mm = 1.2"))
-            .unwrap_err()
-            .to_string();
+        let e = refused(&MINIMAL.replace("soft-limit-max-mm = 50.0", "soft-limit-max-mm = 1.2"));
         assert!(e.contains("line 31") && e.contains("soft limits"), "{e}");
-        let e = parse(&MINIMAL.replace("steps-per-mm", "poll-interval-ms = 50\nsteps-per-mm"))
-            .unwrap_err()
-            .to_string();
+        let e = refused(&MINIMAL.replace("steps-per-mm", "poll-interval-ms = 50\nsteps-per-mm"));
         assert!(
             e.contains("stage") && e.contains("poll-interval-ms = 50"),
             "{e}"
         );
-        let e = parse("[scan]\nlines = 3").unwrap_err().to_string();
+        let e = refused("[scan]\nlines = 3");
         assert!(e.contains("missing field"), "{e}");
     }
 
@@ -1322,7 +1305,7 @@ dir = "/var/lib/surfscan/scans"
                 "analysis.holdout-threshold",
             ),
         ] {
-            let e = parse(&bad).unwrap_err().to_string();
+            let e = refused(&bad);
             assert!(e.contains(key), "{e}");
         }
     }
