@@ -1,6 +1,7 @@
 //! The queue's keeper: what it refuses, what it writes, what a restart makes of a job.
 
 use super::*;
+use crate::config::tests::MINIMAL;
 use crate::jobs::queue::JobState;
 use crate::jobs::synthetic::{write, SyntheticScan};
 use crate::scan::journal::StopStatus;
@@ -12,27 +13,12 @@ y-step-mm = 0.01
 limits = ["Ra 0.8"]
 "#;
 
+/// The configuration's smallest station, its output and recipes in `dir`.
 fn station(dir: &Path) -> Config {
+    let out = dir.join("out").display().to_string();
     let text = format!(
-        r#"
-[instrument]
-port = "/dev/null"
-[stage]
-port = "/dev/zero"
-protocol = "grbl"
-steps-per-mm = 1000.0
-soft-limit-min-mm = 0.0
-soft-limit-max-mm = 50.0
-[scan]
-lines = 31
-y-start-mm = 1.0
-y-step-mm = 0.01
-[output]
-dir = "{}"
-[jobs]
-recipes = "{}"
-"#,
-        dir.join("out").display(),
+        "{}[jobs]\nrecipes = \"{}\"\n",
+        MINIMAL.replace("/var/lib/surfscan/scans", &out),
         dir.join("recipes").display()
     );
     std::fs::create_dir_all(dir.join("recipes")).unwrap();
