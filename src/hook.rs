@@ -8,7 +8,8 @@
 //! with the command and the cause and otherwise ignored.
 //!
 //! The command sees `SURFSCAN_SCAN_ID`, `SURFSCAN_STATUS` (`success|fail|abort|suspended`),
-//! `SURFSCAN_REASON` and `SURFSCAN_SCAN_DIR`, and a completed scan's results
+//! `SURFSCAN_REASON`, `SURFSCAN_SCAN_DIR`, `SURFSCAN_INTERNAL` (`1` when a bug ended the scan,
+//! `0` otherwise), and a completed scan's results
 //! ([`crate::scan::results::ScanResults::env`]: `SURFSCAN_VERDICT`,
 //! `SURFSCAN_VERDICT_SUMMARY`, `SURFSCAN_WARNINGS`, `SURFSCAN_RA_MEAN_UM`,
 //! `SURFSCAN_RZ_MEAN_UM`, `SURFSCAN_SA_UM`; every one set, empty when it does not apply);
@@ -157,6 +158,7 @@ impl Hook {
             .env("SURFSCAN_STATUS", event.kind.as_str())
             .env("SURFSCAN_REASON", &event.reason)
             .env("SURFSCAN_SCAN_DIR", &event.dir)
+            .env("SURFSCAN_INTERNAL", if event.internal { "1" } else { "0" })
             .envs(event.results.clone().unwrap_or_default().env())
             .env_remove("NOTIFY_SOCKET")
             .env_remove("WATCHDOG_USEC")

@@ -176,11 +176,16 @@ fn about(
     m.insert("scan_dir".into(), ev.dir.display().to_string().into());
 }
 
-/// The JSON of an event as the publishers send it.
+/// The JSON of an event as the publishers send it. `internal: true` only when a bug ended the
+/// scan, absent otherwise, as in the stop record and the status's `last_stop`: every other
+/// event is what it was before the member existed.
 pub fn event_payload(ev: &ScanEvent, station: &str) -> serde_json::Map<String, serde_json::Value> {
     let mut m = serde_json::Map::new();
     m.insert("kind".into(), ev.kind.as_str().into());
     m.insert("reason".into(), ev.reason.clone().into());
+    if ev.internal {
+        m.insert("internal".into(), true.into());
+    }
     about(ev, ev.kind.as_str(), station, &mut m);
     m
 }

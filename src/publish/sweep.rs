@@ -61,6 +61,9 @@ pub fn missed(succeeded: &[Succeeded], known: &Known) -> Vec<ScanEvent> {
             kind: ScanEventKind::Success,
             reason: s.reason.clone(),
             time: s.ended,
+            // A success, which no bug ends (`End::is_internal`): its stop record has no
+            // `internal`, and its live event said false too.
+            internal: false,
             results: None,
         })
         .collect()

@@ -6,10 +6,9 @@
 //! event types.
 
 use super::command::OperatorRequest;
-use super::event::{ScanEvent, ScanEventKind};
+use super::event::ScanEvent;
 use super::metrics::ScanMetrics;
 use super::status::Status;
-use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
@@ -64,25 +63,10 @@ impl Control {
         });
     }
 
-    /// Tells the notification hook.
-    pub(super) fn event(
-        &self,
-        scan_id: &str,
-        dir: &Path,
-        kind: ScanEventKind,
-        reason: &str,
-        time: chrono::DateTime<chrono::Utc>,
-        results: Option<super::results::ScanResults>,
-    ) {
+    /// Tells the notification hook and the publishers.
+    pub(super) fn event(&self, event: ScanEvent) {
         if let Some(tx) = &self.events {
-            let _ = tx.send(ScanEvent {
-                scan_id: scan_id.to_owned(),
-                dir: dir.to_path_buf(),
-                kind,
-                reason: reason.to_owned(),
-                time,
-                results,
-            });
+            let _ = tx.send(event);
         }
     }
 

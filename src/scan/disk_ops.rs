@@ -4,13 +4,14 @@
 //! [`Event`].
 //!
 //! Layer 3 (session): depends on [`super::ledger`], [`super::opening`], [`super::disk`],
-//! [`super::channels`], [`super::machine`], the scan's line and outputs types, and
+//! [`super::channels`], [`super::machine`], the scan's line, outputs and event types, and
 //! [`crate::sj210::sanity`] (a committed line's Ra against the lines before it).
 
 use super::channels::Control;
 use super::device_ops::Held;
 use super::disk::{free_space, outputs_bytes};
 use super::ending::End;
+use super::event::ScanEvent;
 use super::ledger::Ledger;
 use super::line::{LineIdentity, LineMeta, StoredLine};
 use super::machine::{Action, Event, Note, StorageFailure};
@@ -58,11 +59,22 @@ impl Books<'_> {
             Action::Notify(kind, reason) => {
                 if let Some(l) = &self.ledger {
                     let results = self.outputs.as_ref().and_then(|o| o.results.clone());
+                    // An ending is told after its `Stop`: its time is the stop record's, and
+                    // a bug is said as the stop record says it.
                     let time = l
                         .stopped
                         .filter(|_| kind.is_ending())
                         .unwrap_or_else(chrono::Utc::now);
-                    ctl.event(&l.id, &l.dir, kind, &reason, time, results);
+                    let internal = self.end.as_ref().is_some_and(|e| e.tells_internal(kind));
+                    ctl.event(ScanEvent {
+                        scan_id: l.id.clone(),
+                        dir: l.dir.clone(),
+                        kind,
+                        reason,
+                        time,
+                        internal,
+                        results,
+                    });
                 }
             }
             Action::Reply(r) => {

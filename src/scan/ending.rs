@@ -316,6 +316,13 @@ impl End {
         matches!(self, End::Fail(r) if r.is_internal())
     }
 
+    /// Whether the scan's event of `kind` says a bug ended it ([`super::event::ScanEvent`]'s
+    /// `internal`): the ending's own event when [`End::is_internal`], as its stop record
+    /// says; never a start, suspension or resumption told before.
+    pub fn tells_internal(&self, kind: ScanEventKind) -> bool {
+        kind.is_ending() && self.is_internal()
+    }
+
     /// The notification hook's event, for a scan that was created (a start that failed
     /// before has no scan to tell of).
     pub fn event(&self, created: bool) -> Option<ScanEventKind> {
@@ -444,6 +451,46 @@ mod tests {
         );
         assert!(!unmade.is_internal());
         assert!(!End::Fail(unmade).stop_record().unwrap().internal);
+    }
+
+    /// The events say a bug ended the scan exactly where its stop record does: only the
+    /// `fail` event of outputs that panicked, not an ordinary failure (of the outputs, the
+    /// budget), a success or an abort, and no event but the ending.
+    #[test]
+    fn an_event_says_a_bug_ended_the_scan_as_its_stop_record_does() {
+        let ends = [
+            (
+                End::Fail(FailReason::OutputsInternal("panicked".into())),
+                true,
+            ),
+            (
+                End::Fail(FailReason::Outputs("cannot be made".into())),
+                false,
+            ),
+            (End::Fail(budget()), false),
+            (
+                End::Success {
+                    summary: "5 lines".into(),
+                },
+                false,
+            ),
+            (End::Abort { peer: None }, false),
+        ];
+        for (end, bug) in ends {
+            let kind = end.event(true).expect("a created scan's ending is told");
+            assert_eq!(end.tells_internal(kind), bug, "{end:?}");
+            assert_eq!(end.stop_record().map(|w| w.internal), Some(bug), "{end:?}");
+            for before in [
+                ScanEventKind::Started,
+                ScanEventKind::Suspended,
+                ScanEventKind::Resumed,
+            ] {
+                assert!(!end.tells_internal(before), "{end:?} {before}");
+            }
+        }
+        // A shutdown is told by no event and records nothing.
+        assert_eq!(End::Shutdown.event(true), None);
+        assert!(!End::Shutdown.is_internal());
     }
 
     #[test]

@@ -76,6 +76,9 @@ pub struct ScanEvent {
     /// When it happened: for an ending, the time of the journal's stop record (so the same
     /// ending read back from the journal is the same event); otherwise when it was told.
     pub time: chrono::DateTime<chrono::Utc>,
+    /// A bug ended the scan (an internal error): true only for the `fail` event of an ending
+    /// whose [`super::ending::End::is_internal`], as the stop record's `internal`.
+    pub internal: bool,
     /// A completed scan's verdict, means and warnings.
     pub results: Option<super::results::ScanResults>,
 }

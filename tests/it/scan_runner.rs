@@ -13,11 +13,13 @@ use surfscan::devices::{
     ProfileReadout, StageReport, TracedLine, YAxis,
 };
 use surfscan::profile::{Conditions, Profile, ProfileKind};
+use surfscan::publish::{event_payload, sweep};
 use surfscan::scan::channels::Control;
 use surfscan::scan::choice::{choose, Asker, Choice};
 use surfscan::scan::command::{OperatorCommand, OperatorRequest, Peer, StartMode};
 use surfscan::scan::ending::{End, FailCause, FailKind};
-use surfscan::scan::journal::{read_journal, Record, StopStatus};
+use surfscan::scan::event::{ScanEvent, ScanEventKind};
+use surfscan::scan::journal::{read_journal, survey, Record, StopStatus};
 use surfscan::scan::outcome::{Outcome, ScanRequest};
 use surfscan::scan::runner::run_scan;
 use surfscan::scan::settings::RunSettings;
@@ -323,6 +325,20 @@ fn new_scan() -> ScanRequest {
     }
 }
 
+/// The last of the events told so far (the scan's ending, once it ended).
+fn last_told(told: &mut mpsc::UnboundedReceiver<ScanEvent>) -> ScanEvent {
+    let mut last = None;
+    while let Ok(ev) = told.try_recv() {
+        last = Some(ev);
+    }
+    last.expect("an event was told")
+}
+
+/// The events topic's `internal` member of `ev`.
+fn internal_member(ev: &ScanEvent) -> Option<serde_json::Value> {
+    event_payload(ev, "rough-3").get("internal").cloned()
+}
+
 async fn request(tx: &mpsc::Sender<OperatorRequest>, command: OperatorCommand) -> String {
     let (reply, rx) = oneshot::channel();
     tx.send(OperatorRequest {
@@ -577,6 +593,8 @@ async fn a_panic_while_the_outputs_are_written_fails_the_scan_and_the_runner_goe
         characterise: Some(Arc::new(PanickingCharacterisation)),
         ..plain.clone()
     };
+    let (tx, mut told) = mpsc::unbounded_channel();
+    h.ctl.events = Some(tx);
     let mut station = FakeStation(h.world.clone());
     let outcome = run_scan(&mut station, &mut h.ctl, &panicking, new_scan()).await;
     let dir = scan_dir_of(&outcome);
@@ -600,6 +618,14 @@ async fn a_panic_while_the_outputs_are_written_fails_the_scan_and_the_runner_goe
     let last = h.ctl.status.borrow().last_stop.clone().expect("last stop");
     assert_eq!((last.status, last.internal), (StopStatus::Fail, true));
     assert_eq!(last.reason, why);
+    // Its `fail` event says the bug in a member of its own (the hook's SURFSCAN_INTERNAL, the
+    // events topic's `internal: true`), not only in words.
+    let fail = last_told(&mut told);
+    assert_eq!(
+        (fail.kind, fail.internal, fail.reason.as_str()),
+        (ScanEventKind::Fail, true, why.as_str())
+    );
+    assert_eq!(internal_member(&fail), Some(serde_json::Value::Bool(true)));
     let recs = records(&dir);
     let stop = recs.iter().find_map(|r| match r {
         Record::Stop(s) => Some((s.status, s.reason.clone(), s.cause, s.internal)),
@@ -649,6 +675,32 @@ async fn a_panic_while_the_outputs_are_written_fails_the_scan_and_the_runner_goe
     assert_eq!(line_indices(&recs), lines);
     assert!(matches!(recs.last(), Some(Record::Stop(s)) if s.status == StopStatus::Success));
     assert!(dir.join("report.json").is_file());
+    // Its success is no bug's, and its events-topic JSON is what it was before the member.
+    let success = last_told(&mut told);
+    assert_eq!(
+        (success.kind, success.internal, success.dir.as_path()),
+        (ScanEventKind::Success, false, dir.as_path())
+    );
+    assert_eq!(internal_member(&success), None);
+    // The same ending read back from the journal at a start (the sweep of a success whose
+    // event never reached a publisher) is the same event, but for the results, which a
+    // publisher reads from the directory.
+    let known = sweep::Known {
+        since: chrono::DateTime::<chrono::Utc>::MIN_UTC,
+        scans: Default::default(),
+    };
+    let replayed = sweep::missed(&survey(&out).expect("survey").succeeded, &known);
+    let replayed = replayed
+        .iter()
+        .find(|e| e.scan_id == success.scan_id)
+        .expect("the sweep replays the success");
+    assert_eq!(
+        *replayed,
+        ScanEvent {
+            results: None,
+            ..success
+        }
+    );
 }
 
 #[tokio::test(start_paused = true)]
@@ -856,11 +908,17 @@ async fn a_failed_scan_continues_at_its_first_missing_line() {
         w.traces = [None, None, Some(FaultClass::Fatal)].into();
     });
     let settings = settings_for(&h);
+    let (tx, mut told) = mpsc::unbounded_channel();
+    h.ctl.events = Some(tx);
     let mut station = FakeStation(h.world.clone());
     let outcome = run_scan(&mut station, &mut h.ctl, &settings, new_scan()).await;
     assert!(matches!(outcome.end, End::Fail(_)), "{outcome:?}");
     let dir = scan_dir_of(&outcome);
     assert_eq!(stop_status(&records(&dir)), Some(StopStatus::Fail));
+    // A device's fault is no bug: the `fail` event says so, and its JSON has no `internal`.
+    let fail = last_told(&mut told);
+    assert_eq!((fail.kind, fail.internal), (ScanEventKind::Fail, false));
+    assert_eq!(internal_member(&fail), None);
     let csv0 = std::fs::read(dir.join("lines/0000.csv")).expect("line 1");
 
     // Without asking for it, a failed scan is not resumed: a new one would start.

@@ -14,6 +14,7 @@ fn event(kind: HookStatus) -> ScanEvent {
         reason: "stage following error on line 12".into(),
         dir: PathBuf::from("/var/lib/surfscan/scans/G-0142"),
         time: "2026-03-01T10:00:00Z".parse().unwrap(),
+        internal: false,
         results: None,
     }
 }
@@ -36,14 +37,14 @@ fn hook(command: Vec<String>, timeout_s: u64) -> Hook {
 // away from the other tests of this binary, and nothing inside this test contends for it.
 #[allow(clippy::await_holding_lock)]
 #[tokio::test]
-async fn the_hook_sees_the_four_variables() {
+async fn the_hook_sees_the_scan_s_variables() {
     let _env = crate::process_state();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("env.txt");
     let s = script(
         dir.path(),
         "hook.sh",
-        r#"printf '%s|%s|%s|%s|%s|%s\n' "$SURFSCAN_SCAN_ID" "$SURFSCAN_STATUS" "$SURFSCAN_REASON" "$SURFSCAN_SCAN_DIR" "$1" "${NOTIFY_SOCKET-unset}" > "$2""#,
+        r#"printf '%s|%s|%s|%s|%s|%s|%s\n' "$SURFSCAN_SCAN_ID" "$SURFSCAN_STATUS" "$SURFSCAN_REASON" "$SURFSCAN_SCAN_DIR" "${SURFSCAN_INTERNAL-unset}" "$1" "${NOTIFY_SOCKET-unset}" > "$2""#,
     );
     let h = hook(
         vec![
@@ -59,8 +60,18 @@ async fn the_hook_sees_the_four_variables() {
     assert!(matches!(outcome, HookOutcome::Succeeded), "{outcome:?}");
     assert_eq!(
         std::fs::read_to_string(&out).unwrap(),
-        "G-0142|fail|stage following error on line 12|/var/lib/surfscan/scans/G-0142|first arg with spaces|unset\n"
+        "G-0142|fail|stage following error on line 12|/var/lib/surfscan/scans/G-0142|0|first arg with spaces|unset\n"
     );
+    // A bug that ended the scan: `SURFSCAN_INTERNAL` is 1.
+    let bug = ScanEvent {
+        internal: true,
+        ..event(HookStatus::Fail)
+    };
+    let outcome = h.run(&bug).await;
+    assert!(matches!(outcome, HookOutcome::Succeeded), "{outcome:?}");
+    let line = std::fs::read_to_string(&out).unwrap();
+    assert_eq!(line.split('|').nth(4), Some("1"), "{line}");
+    // Every other run sets it too, to 0.
     for (status, word) in [
         (HookStatus::Success, "success"),
         (HookStatus::Abort, "abort"),
@@ -69,7 +80,8 @@ async fn the_hook_sees_the_four_variables() {
         let outcome = h.run(&event(status)).await;
         assert!(matches!(outcome, HookOutcome::Succeeded), "{outcome:?}");
         let line = std::fs::read_to_string(&out).unwrap();
-        assert_eq!(line.split('|').nth(1), Some(word), "{line}");
+        let fields: Vec<&str> = line.split('|').collect();
+        assert_eq!((fields[1], fields[4]), (word, "0"), "{line}");
     }
 }
 
