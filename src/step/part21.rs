@@ -72,6 +72,16 @@ impl<W: Write> Part21<W> {
         r.map(|_| Ref(id))
     }
 
+    /// Writes `#n=HEAD#a,#b,…TAIL;`, an entity whose fields besides the fixed `head` and
+    /// `tail` are the references `refs`, and returns `#n`.
+    pub fn linking(&mut self, head: &[u8], refs: &[Ref], tail: &[u8]) -> io::Result<Ref> {
+        self.entity(|b| {
+            b.extend_from_slice(head);
+            joined(b, refs);
+            b.extend_from_slice(tail);
+        })
+    }
+
     /// A `CARTESIAN_POINT('',(x,y,z))`.
     pub fn point(&mut self, p: [f64; 3]) -> io::Result<Ref> {
         self.entity(|b| {
@@ -155,15 +165,20 @@ pub fn reference(b: &mut Vec<u8>, r: Ref) {
     push_usize(b, r.0);
 }
 
-/// Appends `(#a,#b,…)`.
-pub fn references(b: &mut Vec<u8>, rs: &[Ref]) {
-    b.push(b'(');
+/// Appends `#a,#b,…`.
+fn joined(b: &mut Vec<u8>, rs: &[Ref]) {
     for (k, r) in rs.iter().enumerate() {
         if k > 0 {
             b.push(b',');
         }
         reference(b, *r);
     }
+}
+
+/// Appends `(#a,#b,…)`.
+pub fn references(b: &mut Vec<u8>, rs: &[Ref]) {
+    b.push(b'(');
+    joined(b, rs);
     b.push(b')');
 }
 
@@ -207,9 +222,10 @@ mod tests {
             })
             .unwrap();
         assert_eq!(e, Ref(3));
+        assert_eq!(p.linking(b"Y('',", &[a, e], b",.T.)").unwrap(), Ref(4));
         let (bytes, n, count) = p.finish().unwrap();
         let text = String::from_utf8(bytes).unwrap();
-        assert_eq!(count, 3);
+        assert_eq!(count, 4);
         assert_eq!(n as usize, text.len());
         assert!(text.starts_with("ISO-10303-21;\nHEADER;\n"), "{text}");
         assert!(
@@ -218,6 +234,7 @@ mod tests {
         );
         assert!(text.contains("#2=DIRECTION('',(0.,0.,1.));\n"), "{text}");
         assert!(text.contains("#3=X((#1,#2),(6,1,6));\n"), "{text}");
+        assert!(text.contains("#4=Y('',#1,#3,.T.);\n"), "{text}");
         assert!(text.ends_with("ENDSEC;\nEND-ISO-10303-21;\n"));
     }
 }

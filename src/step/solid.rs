@@ -203,51 +203,28 @@ pub fn write_solid_step<W: Write>(
     )?;
     // Product structure and units (millimetre, radian, steradian; uncertainty 1e-7 mm).
     let app = f.entity(|b| b.extend_from_slice(b"APPLICATION_CONTEXT('automotive design')"))?;
-    f.entity(|b| {
-        b.extend_from_slice(
-            b"APPLICATION_PROTOCOL_DEFINITION('international standard','automotive_design',2000,",
-        );
-        reference(b, app);
-        b.push(b')');
-    })?;
-    let pctx = f.entity(|b| {
-        b.extend_from_slice(b"PRODUCT_CONTEXT('',");
-        reference(b, app);
-        b.extend_from_slice(b",'mechanical')");
-    })?;
+    f.linking(
+        b"APPLICATION_PROTOCOL_DEFINITION('international standard','automotive_design',2000,",
+        &[app],
+        b")",
+    )?;
+    let pctx = f.linking(b"PRODUCT_CONTEXT('',", &[app], b",'mechanical')")?;
     let name = string(&opts.product_name);
-    let product = f.entity(|b| {
-        b.extend_from_slice(format!("PRODUCT({name},{name},'',(").as_bytes());
-        reference(b, pctx);
-        b.extend_from_slice(b"))");
-    })?;
-    f.entity(|b| {
-        b.extend_from_slice(b"PRODUCT_RELATED_PRODUCT_CATEGORY('part',$,(");
-        reference(b, product);
-        b.extend_from_slice(b"))");
-    })?;
-    let formation = f.entity(|b| {
-        b.extend_from_slice(b"PRODUCT_DEFINITION_FORMATION('','',");
-        reference(b, product);
-        b.push(b')');
-    })?;
-    let dctx = f.entity(|b| {
-        b.extend_from_slice(b"PRODUCT_DEFINITION_CONTEXT('part definition',");
-        reference(b, app);
-        b.extend_from_slice(b",'design')");
-    })?;
-    let definition = f.entity(|b| {
-        b.extend_from_slice(b"PRODUCT_DEFINITION('design','',");
-        reference(b, formation);
-        b.push(b',');
-        reference(b, dctx);
-        b.push(b')');
-    })?;
-    let shape = f.entity(|b| {
-        b.extend_from_slice(b"PRODUCT_DEFINITION_SHAPE('','',");
-        reference(b, definition);
-        b.push(b')');
-    })?;
+    let head = format!("PRODUCT({name},{name},'',(");
+    let product = f.linking(head.as_bytes(), &[pctx], b"))")?;
+    f.linking(
+        b"PRODUCT_RELATED_PRODUCT_CATEGORY('part',$,(",
+        &[product],
+        b"))",
+    )?;
+    let formation = f.linking(b"PRODUCT_DEFINITION_FORMATION('','',", &[product], b")")?;
+    let dctx = f.linking(
+        b"PRODUCT_DEFINITION_CONTEXT('part definition',",
+        &[app],
+        b",'design')",
+    )?;
+    let definition = f.linking(b"PRODUCT_DEFINITION('design','',", &[formation, dctx], b")")?;
+    let shape = f.linking(b"PRODUCT_DEFINITION_SHAPE('','',", &[definition], b")")?;
     let mm =
         f.entity(|b| b.extend_from_slice(b"(LENGTH_UNIT()NAMED_UNIT(*)SI_UNIT(.MILLI.,.METRE.))"))?;
     let rad =
@@ -255,11 +232,11 @@ pub fn write_solid_step<W: Write>(
     let sr = f.entity(|b| {
         b.extend_from_slice(b"(NAMED_UNIT(*)SI_UNIT($,.STERADIAN.)SOLID_ANGLE_UNIT())")
     })?;
-    let unc = f.entity(|b| {
-        b.extend_from_slice(b"UNCERTAINTY_MEASURE_WITH_UNIT(LENGTH_MEASURE(1.E-7),");
-        reference(b, mm);
-        b.extend_from_slice(b",'distance_accuracy_value','confusion accuracy')");
-    })?;
+    let unc = f.linking(
+        b"UNCERTAINTY_MEASURE_WITH_UNIT(LENGTH_MEASURE(1.E-7),",
+        &[mm],
+        b",'distance_accuracy_value','confusion accuracy')",
+    )?;
     let gctx = f.entity(|b| {
         b.extend_from_slice(
             b"(GEOMETRIC_REPRESENTATION_CONTEXT(3)GLOBAL_UNCERTAINTY_ASSIGNED_CONTEXT((",
@@ -326,26 +303,15 @@ pub fn write_solid_step<W: Write>(
     let mut bv = [Ref(0); 4];
     let mut bp = [Ref(0); 4];
     for k in 0..4 {
-        tv[k] = f.entity(|b| {
-            b.extend_from_slice(b"VERTEX_POINT('',");
-            reference(
-                b,
-                pole_refs[match k {
-                    0 => 0,
-                    1 => (nu - 1) * nv,
-                    2 => nu * nv - 1,
-                    _ => nv - 1,
-                }],
-            );
-            b.push(b')');
-        })?;
+        let corner = match k {
+            0 => 0,
+            1 => (nu - 1) * nv,
+            2 => nu * nv - 1,
+            _ => nv - 1,
+        };
+        tv[k] = f.linking(b"VERTEX_POINT('',", &[pole_refs[corner]], b")")?;
         bp[k] = f.point([top[k][0], top[k][1], bottom])?;
-        let p = bp[k];
-        bv[k] = f.entity(|b| {
-            b.extend_from_slice(b"VERTEX_POINT('',");
-            reference(b, p);
-            b.push(b')');
-        })?;
+        bv[k] = f.linking(b"VERTEX_POINT('',", &[bp[k]], b")")?;
     }
     // Straight edges: a LINE through the start point along the edge.
     let bottom_pts: Vec<[f64; 3]> = top.iter().map(|p| [p[0], p[1], bottom]).collect();
@@ -414,18 +380,12 @@ pub fn write_solid_step<W: Write>(
     ];
     faces.push(face(&mut f, &l, mirrored, side, true)?);
 
-    let shell = f.entity(|b| {
-        b.extend_from_slice(b"CLOSED_SHELL('',");
-        references(b, &faces);
-        b.push(b')');
-    })?;
-    let brep = f.entity(|b| {
-        b.extend_from_slice(b"MANIFOLD_SOLID_BREP(");
-        b.extend_from_slice(string(&opts.product_name).as_bytes());
-        b.push(b',');
-        reference(b, shell);
-        b.push(b')');
-    })?;
+    let shell = f.linking(b"CLOSED_SHELL('',(", &faces, b"))")?;
+    let brep = f.linking(
+        format!("MANIFOLD_SOLID_BREP({name},").as_bytes(),
+        &[shell],
+        b")",
+    )?;
     let origin = placement(&mut f, [0.0; 3], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])?;
     let rep = f.entity(|b| {
         b.extend_from_slice(b"ADVANCED_BREP_SHAPE_REPRESENTATION('',");
@@ -434,13 +394,7 @@ pub fn write_solid_step<W: Write>(
         reference(b, gctx);
         b.push(b')');
     })?;
-    f.entity(|b| {
-        b.extend_from_slice(b"SHAPE_DEFINITION_REPRESENTATION(");
-        reference(b, shape);
-        b.push(b',');
-        reference(b, rep);
-        b.push(b')');
-    })?;
+    f.linking(b"SHAPE_DEFINITION_REPRESENTATION(", &[shape, rep], b")")?;
     let (_, bytes, entities) = f.finish()?;
     Ok(SolidStats {
         bytes,
@@ -483,15 +437,7 @@ fn placement<W: Write>(
     let o = f.point(origin)?;
     let n = f.direction(normal)?;
     let r = f.direction(refdir)?;
-    f.entity(|b| {
-        b.extend_from_slice(b"AXIS2_PLACEMENT_3D('',");
-        reference(b, o);
-        b.push(b',');
-        reference(b, n);
-        b.push(b',');
-        reference(b, r);
-        b.push(b')');
-    })
+    f.linking(b"AXIS2_PLACEMENT_3D('',", &[o, n, r], b")")
 }
 
 /// A `PLANE` through `origin` with normal `normal`.
@@ -502,11 +448,7 @@ fn plane<W: Write>(
     refdir: [f64; 3],
 ) -> std::io::Result<Ref> {
     let a = placement(f, origin, normal, refdir)?;
-    f.entity(|b| {
-        b.extend_from_slice(b"PLANE('',");
-        reference(b, a);
-        b.push(b')');
-    })
+    f.linking(b"PLANE('',", &[a], b")")
 }
 
 /// An edge from `start` (at `a`) to `end` (at `z`) along a `LINE` through `a`.
@@ -528,27 +470,13 @@ fn line_edge<W: Write>(
         real(b, 1.0);
         b.push(b')');
     })?;
-    let line = f.entity(|b| {
-        b.extend_from_slice(b"LINE('',");
-        reference(b, origin);
-        b.push(b',');
-        reference(b, vec);
-        b.push(b')');
-    })?;
+    let line = f.linking(b"LINE('',", &[origin, vec], b")")?;
     edge(f, start, end, line)
 }
 
 /// An `EDGE_CURVE` from `start` to `end` along `curve` (in the curve's own direction).
 fn edge<W: Write>(f: &mut Part21<W>, start: Ref, end: Ref, curve: Ref) -> std::io::Result<Ref> {
-    f.entity(|b| {
-        b.extend_from_slice(b"EDGE_CURVE('',");
-        reference(b, start);
-        b.push(b',');
-        reference(b, end);
-        b.push(b',');
-        reference(b, curve);
-        b.extend_from_slice(b",.T.)");
-    })
+    f.linking(b"EDGE_CURVE('',", &[start, end, curve], b",.T.)")
 }
 
 /// An `ADVANCED_FACE` on `surface` bounded by the loop `edges` (reversed, each edge's
@@ -568,22 +496,11 @@ fn face<W: Write>(
         edges.to_vec()
     };
     for (e, forward) in order {
-        oriented.push(f.entity(|b| {
-            b.extend_from_slice(b"ORIENTED_EDGE('',*,*,");
-            reference(b, e);
-            b.extend_from_slice(if forward { b",.T.)" } else { b",.F.)" });
-        })?);
+        let sense: &[u8] = if forward { b",.T.)" } else { b",.F.)" };
+        oriented.push(f.linking(b"ORIENTED_EDGE('',*,*,", &[e], sense)?);
     }
-    let lp = f.entity(|b| {
-        b.extend_from_slice(b"EDGE_LOOP('',");
-        references(b, &oriented);
-        b.push(b')');
-    })?;
-    let bound = f.entity(|b| {
-        b.extend_from_slice(b"FACE_OUTER_BOUND('',");
-        reference(b, lp);
-        b.extend_from_slice(b",.T.)");
-    })?;
+    let lp = f.linking(b"EDGE_LOOP('',(", &oriented, b"))")?;
+    let bound = f.linking(b"FACE_OUTER_BOUND('',", &[lp], b",.T.)")?;
     f.entity(|b| {
         b.extend_from_slice(b"ADVANCED_FACE('',(");
         reference(b, bound);
