@@ -113,7 +113,7 @@ pub async fn run_scan<S: Station>(
             move || reopen(&settings, &dir, peer, after_failure)
         })
         .await
-        .unwrap_or_else(|e| Err((e, FailKind::Scan)))
+        .unwrap_or_else(Err)
         {
             Ok((resumed, mut l)) => {
                 for kept in hands.station.freeze(Some(&l.start.config)) {
@@ -318,7 +318,7 @@ async fn watched<T: Send + 'static>(
     ctl: &Control,
     what: &str,
     work: impl FnOnce() -> T + Send + 'static,
-) -> Result<T, String> {
+) -> Result<T, (String, FailKind)> {
     let mut task = tokio::task::spawn_blocking(work);
     let mut tick = ctl.watchdog_tick();
     let started = tokio::time::Instant::now();
@@ -342,12 +342,16 @@ async fn watched<T: Send + 'static>(
 }
 
 /// The result of [`watched`] work: a panic in it as the reason the scan stops, in words
-/// (its place and message are in the log, printed by the panic hook).
-fn joined<T>(done: Result<T, tokio::task::JoinError>, what: &str) -> Result<T, String> {
+/// (its place and message are in the log, printed by the panic hook), of the class of a bug
+/// (exit 70); work the runtime cancelled as it shuts down, of the scan's.
+fn joined<T>(done: Result<T, tokio::task::JoinError>, what: &str) -> Result<T, (String, FailKind)> {
     match done {
         Ok(v) => Ok(v),
-        Err(e) if e.is_panic() => Err(panicked(what, &*e.into_panic())),
-        Err(e) => Err(format!("internal: {what} was cancelled: {e}")),
+        Err(e) if e.is_panic() => Err((panicked(what, &*e.into_panic()), FailKind::Internal)),
+        Err(e) => Err((
+            format!("internal: {what} was cancelled: {e}"),
+            FailKind::Scan,
+        )),
     }
 }
 
@@ -389,7 +393,7 @@ async fn write_outputs_watched(books: &mut Books<'_>, ctl: &Control) -> Event {
         }
         // Cancelled by the runtime's shutdown (the panic is caught above): the ledger is
         // gone, so no stop record can say it.
-        Err(message) => Event::OutputsPanicked(message),
+        Err((message, _)) => Event::OutputsPanicked(message),
     }
 }
 
@@ -556,9 +560,12 @@ fn finish(ctl: &Control, machine: &Machine, mut books: Books<'_>) -> Outcome {
 #[cfg(test)]
 mod tests {
     use super::joined;
+    use crate::scan::ending::FailKind;
 
     /// A panic in [`super::watched`] work becomes the scan's reason, naming the work and the
-    /// panic's message, instead of going on up the daemon's loop; a value passes through.
+    /// panic's message, instead of going on up the daemon's loop, and is a bug's (exit 70 for
+    /// `surfscan scan`, also when reopening a scan panicked); work cancelled as the runtime
+    /// shuts down is no bug; a value passes through.
     #[tokio::test]
     async fn a_panic_in_watched_work_is_the_scans_reason() {
         let done =
@@ -566,8 +573,16 @@ mod tests {
                 .await;
         assert_eq!(
             joined(done, "reopening the scan"),
-            Err("internal error: reopening the scan panicked (no knot vector for 3 lines); report this with the scan's directory and the log".to_string())
+            Err(("internal error: reopening the scan panicked (no knot vector for 3 lines); report this with the scan's directory and the log".to_string(), FailKind::Internal))
         );
+        let cancelled = tokio::spawn(std::future::pending::<u32>());
+        cancelled.abort();
+        let (why, kind) = joined(cancelled.await, "reopening the scan").unwrap_err();
+        assert!(
+            why.starts_with("internal: reopening the scan was cancelled"),
+            "{why}"
+        );
+        assert_eq!(kind, FailKind::Scan);
         let done = tokio::task::spawn_blocking(|| 7u32).await;
         assert_eq!(joined(done, "reopening the scan"), Ok(7));
     }
