@@ -77,7 +77,7 @@ impl<W: Write> Part21<W> {
     pub fn linking(&mut self, head: &[u8], refs: &[Ref], tail: &[u8]) -> io::Result<Ref> {
         self.entity(|b| {
             b.extend_from_slice(head);
-            joined(b, refs);
+            joined(b, refs, reference);
             b.extend_from_slice(tail);
         })
     }
@@ -147,16 +147,26 @@ pub fn real(b: &mut Vec<u8>, v: f64) {
     debug_assert!(ok, "STEP reals are finite");
 }
 
-/// Appends `(a,b,c)` of reals.
-pub fn reals(b: &mut Vec<u8>, vs: &[f64]) {
-    b.push(b'(');
+/// Appends `a,b,…`, each item by `one`.
+fn joined<T: Copy>(b: &mut Vec<u8>, vs: &[T], one: impl Fn(&mut Vec<u8>, T)) {
     for (k, v) in vs.iter().enumerate() {
         if k > 0 {
             b.push(b',');
         }
-        real(b, *v);
+        one(b, *v);
     }
+}
+
+/// Appends `(a,b,…)`, each item by `one`.
+fn list<T: Copy>(b: &mut Vec<u8>, vs: &[T], one: impl Fn(&mut Vec<u8>, T)) {
+    b.push(b'(');
+    joined(b, vs, one);
     b.push(b')');
+}
+
+/// Appends `(a,b,c)` of reals.
+pub fn reals(b: &mut Vec<u8>, vs: &[f64]) {
+    list(b, vs, real);
 }
 
 /// Appends `#n`.
@@ -165,33 +175,14 @@ pub fn reference(b: &mut Vec<u8>, r: Ref) {
     push_usize(b, r.0);
 }
 
-/// Appends `#a,#b,…`.
-fn joined(b: &mut Vec<u8>, rs: &[Ref]) {
-    for (k, r) in rs.iter().enumerate() {
-        if k > 0 {
-            b.push(b',');
-        }
-        reference(b, *r);
-    }
-}
-
 /// Appends `(#a,#b,…)`.
 pub fn references(b: &mut Vec<u8>, rs: &[Ref]) {
-    b.push(b'(');
-    joined(b, rs);
-    b.push(b')');
+    list(b, rs, reference);
 }
 
 /// Appends `(1,2,…)` of integers.
 pub fn integers(b: &mut Vec<u8>, vs: &[usize]) {
-    b.push(b'(');
-    for (k, v) in vs.iter().enumerate() {
-        if k > 0 {
-            b.push(b',');
-        }
-        push_usize(b, *v);
-    }
-    b.push(b')');
+    list(b, vs, push_usize);
 }
 
 #[cfg(test)]
