@@ -18,7 +18,10 @@ use tokio::task::JoinHandle;
 type Step = (&'static str, Option<&'static [u8]>);
 const DROP: &[u8] = b"<drop>";
 
-fn device(script: Vec<Step>) -> (DuplexStream, JoinHandle<Result<usize, String>>) {
+/// The scripted device's task: the steps it consumed, or where the script went wrong.
+type DeviceTask = JoinHandle<Result<usize, String>>;
+
+fn device(script: Vec<Step>) -> (DuplexStream, DeviceTask) {
     let (host, mut dev) = tokio::io::duplex(4096);
     let h = tokio::spawn(async move {
         for (i, (expect, reply)) in script.iter().enumerate() {
@@ -54,6 +57,18 @@ fn device(script: Vec<Step>) -> (DuplexStream, JoinHandle<Result<usize, String>>
         }
     });
     (host, h)
+}
+
+/// A client of `model`'s table talking to `device(script)`, the device's task and the
+/// script's length (for [`finish`]).
+fn scripted(model: ModelId, script: Vec<Step>) -> (Sj210Client<DuplexStream>, DeviceTask, usize) {
+    let n = script.len();
+    let (io, h) = device(script);
+    (
+        Sj210Client::new(io, ModelTable::builtin(model), opts()),
+        h,
+        n,
+    )
 }
 
 /// A device that answers each command (without CR) by `respond(command, commands seen
@@ -113,7 +128,7 @@ fn short_profile_opts() -> ClientOptions {
     }
 }
 
-async fn finish<S>(client: Sj210Client<S>, h: JoinHandle<Result<usize, String>>, steps: usize)
+async fn finish<S>(client: Sj210Client<S>, h: DeviceTask, steps: usize)
 where
     S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin,
 {
@@ -134,9 +149,7 @@ const PROBE_HEAD: [Step; 5] = [
 async fn probe_sj210_as_documented_reports_no_readout_and_low_battery() {
     let mut script = PROBE_HEAD.to_vec();
     script.push(("CTOFF01", Some(b"OK\r")));
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     let r = c.probe_report().await.unwrap();
     assert_eq!(r.identity.firmware, "V1.00");
     assert_eq!(r.identity.drive_unit, "000 standard");
@@ -200,9 +213,7 @@ async fn battery_abnormal_is_fatal_at_probe() {
         ("CTOFF01", Some(b"OK\r")),
         ("RDEVA000", Some(b"OK00000\r")),
     ];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj410), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj410, script);
     let e = Instrument::probe(&mut c).await.unwrap_err();
     assert!(matches!(e, Sj210Error::BatteryAbnormal));
     assert_eq!(e.class(), FaultClass::Fatal);
@@ -326,9 +337,7 @@ async fn profile_readout_failing_twice_means_retrace_and_no_block_is_retried() {
     script.push(("RDEVA000", Some(b"OK00060\r")));
     script.push(("RDEVA050", Some(block(0, 50))));
     script.push(("RDEVA010", Some(b"OK0.0\r")));
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj410), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj410, script);
     let e = c.trace_line().await.unwrap_err();
     match &e {
         Sj210Error::ProfileReadoutFailed { first, second } => {
@@ -354,9 +363,7 @@ async fn start_refused_busy_is_not_retried() {
         ("RDSTU00", Some(b"OK000\r")),
         ("CTSTA", Some(b"NG011\r")),
     ];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     let e = c.trace_line().await.unwrap_err();
     assert_eq!(e.code(), Some(NgCode::Busy));
     assert!(e.to_string().contains("\"CTSTA\""));
@@ -376,9 +383,7 @@ async fn never_reaching_measuring_is_stylus_not_on_workpiece() {
         ("RDSTU00", Some(b"OK000\r")),
         ("RDSTU00", Some(b"OK000\r")),
     ];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     let e = c.trace_line().await.unwrap_err();
     assert!(
         matches!(e, Sj210Error::StylusNotOnWorkpiece { last_status: 0, waited_ms } if waited_ms >= 1000),
@@ -397,9 +402,7 @@ async fn over_range_reads_the_detector_position() {
         ("RDSTU00", Some(b"NG007\r")),
         ("RDPSA", Some(b"OK-201.5\r")),
     ];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     let e = c.trace_line().await.unwrap_err();
     assert!(
         matches!(&e, Sj210Error::OverRange { position: Some(p) } if p == "-201.5"),
@@ -418,9 +421,7 @@ async fn retract_state_during_trace_is_named() {
         ("RDSTU00", Some(b"OK001\r")),
         ("RDSTU00", Some(b"OK004\r")),
     ];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     let e = c.trace_line().await.unwrap_err();
     assert!(matches!(e, Sj210Error::Retracted { status: 4 }), "{e:?}");
     assert_eq!(e.class(), FaultClass::Fatal);
@@ -430,9 +431,7 @@ async fn retract_state_during_trace_is_named() {
 #[tokio::test(start_paused = true)]
 async fn first_byte_timeout_recovers_with_a_status_read() {
     let script: Vec<Step> = vec![("RDSJ 01", None), ("RDSTU00", Some(b"OK000\r"))];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     let e = c.probe_report().await.unwrap_err();
     match &e {
         Sj210Error::Link {
@@ -449,9 +448,7 @@ async fn first_byte_timeout_recovers_with_a_status_read() {
 #[tokio::test(start_paused = true)]
 async fn stalled_reply_is_an_inter_byte_timeout_with_the_partial_bytes() {
     let script: Vec<Step> = vec![("RDSTU00", Some(b"OK0")), ("RDSTU00", Some(b"OK000\r"))];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     let e = c.status().await.unwrap_err();
     assert!(
         matches!(&e, Sj210Error::Link { source: LinkError::InterByteTimeout { partial, waited_ms: 200 }, .. } if partial == "OK0"),
@@ -484,9 +481,7 @@ async fn vanished_device_is_absent() {
 async fn read_retry_is_bounded_by_the_budget() {
     // Budget 1000 ms, interval 250 ms: attempts at 0, 250, 500, 750, 1000 ms, then give up.
     let script: Vec<Step> = vec![("RDPAR", Some(b"NG033\r")); 5];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     let e = c.parameter_count().await.unwrap_err();
     assert_eq!(e.code(), Some(NgCode::Processing));
     finish(c, h, n).await;
@@ -499,9 +494,7 @@ async fn abort_is_sent_only_while_measuring() {
         ("RDSTU00", Some(b"OK001\r")),
         ("CTSTA", Some(b"OK\r")),
     ];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     Instrument::abort(&mut c).await.unwrap();
     Instrument::abort(&mut c).await.unwrap();
     finish(c, h, n).await;
@@ -515,9 +508,7 @@ async fn ensure_idle_returns_the_detector_from_005() {
         ("RDSTU00", Some(b"OK002\r")),
         ("RDSTU00", Some(b"OK000\r")),
     ];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     Instrument::ensure_idle(&mut c).await.unwrap();
     finish(c, h, n).await;
 }
@@ -529,9 +520,7 @@ async fn parameter_calculation_error_is_recorded_without_value() {
         ("RDRES02,01,00", Some(b"OKRa     0.123  um\r")),
         ("RDRES02,02,00", Some(b"NG110\r")),
     ];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     let mut w = Vec::new();
     let r = c.read_results(&mut w).await.unwrap();
     assert_eq!(r[0].value, Some(0.123));
@@ -578,9 +567,7 @@ async fn start_with_non_empty_payload_is_a_protocol_error() {
         ("RDSTU00", Some(b"OK000\r")),
         ("CTSTA", Some(b"OK001\r")),
     ];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     let e = c.trace_line().await.unwrap_err();
     assert!(
         matches!(&e, Sj210Error::UnexpectedReply { command, payload, .. } if command == "CTSTA" && payload == "001"),
@@ -595,9 +582,7 @@ async fn trace_refuses_to_start_unless_idle() {
         ("RDCON", Some(b"OK3120504.0012\r")),
         ("RDSTU00", Some(b"OK005\r")),
     ];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     let e = c.trace_line().await.unwrap_err();
     assert!(matches!(e, Sj210Error::NotIdle { status: 5, .. }), "{e:?}");
     finish(c, h, n).await;
@@ -639,9 +624,7 @@ async fn a_table_error_after_the_command_worked_is_a_stray_reply_not_a_wrong_tab
         ("RDSTU00", Some(b"OK000\r")),
         ("RDCON", Some(b"OK3120504.0012\r")),
     ];
-    let n = script.len();
-    let (io, h) = device(script);
-    let mut c = Sj210Client::new(io, ModelTable::builtin(ModelId::Sj210), opts());
+    let (mut c, h, n) = scripted(ModelId::Sj210, script);
     c.conditions().await.unwrap();
     let e = c.conditions().await.unwrap_err();
     assert!(matches!(e, Sj210Error::UnexpectedReply { .. }), "{e:?}");
