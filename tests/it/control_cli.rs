@@ -1,6 +1,7 @@
 //! The `surfscan status|pause|resume|abort|start` binary against a real control socket served
 //! in this process, and against sockets where no daemon (or a wrong one) answers.
 
+use crate::common::control_channels;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 use std::sync::{Arc, Mutex};
@@ -70,15 +71,7 @@ impl Daemon {
         });
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("control.sock");
-        let (stop, task) = serve_with(
-            &path,
-            ControlChannels {
-                status: status_rx,
-                commands: cmd_tx,
-                queue: None,
-            },
-        )
-        .await;
+        let (stop, task) = serve_with(&path, control_channels(status_rx, cmd_tx)).await;
         Daemon {
             _dir: dir,
             path,
@@ -305,15 +298,7 @@ async fn serve_at(
 ) {
     let (status_tx, status_rx) = watch::channel(status);
     let (cmd_tx, _cmd_rx) = mpsc::channel::<OperatorRequest>(4);
-    let (stop, task) = serve_with(
-        path,
-        ControlChannels {
-            status: status_rx,
-            commands: cmd_tx,
-            queue: None,
-        },
-    )
-    .await;
+    let (stop, task) = serve_with(path, control_channels(status_rx, cmd_tx)).await;
     (status_tx, stop, task)
 }
 
@@ -512,15 +497,7 @@ async fn a_start_that_fails_at_once_is_reported_as_failed() {
             });
         }
     });
-    let (stop, task) = serve_with(
-        &path,
-        ControlChannels {
-            status: status_rx,
-            commands: cmd_tx,
-            queue: None,
-        },
-    )
-    .await;
+    let (stop, task) = serve_with(&path, control_channels(status_rx, cmd_tx)).await;
     let out = run(&["start", "--specimen", "B13"], &path).await;
     let stderr = text(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");

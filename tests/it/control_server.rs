@@ -1,6 +1,7 @@
 //! The control-socket server over a real Unix socket, against a fake scan runner that answers
 //! commands and publishes status the way the real runner does.
 
+use crate::common::control_channels;
 use serde_json::{json, Value};
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
@@ -73,11 +74,7 @@ fn fake_runner(initial: Status) -> (ControlChannels, Runner) {
         }
     });
     (
-        ControlChannels {
-            status: status_rx,
-            commands: cmd_tx,
-            queue: None,
-        },
+        control_channels(status_rx, cmd_tx),
         Runner {
             status: status_tx,
             seen,
@@ -386,11 +383,7 @@ async fn a_runner_that_is_gone_or_silent_gives_an_error_not_a_hang() {
     let (cmd_tx, cmd_rx) = mpsc::channel::<OperatorRequest>(1);
     drop(cmd_rx);
     let served = serve(
-        ControlChannels {
-            status: status_rx,
-            commands: cmd_tx,
-            queue: None,
-        },
+        control_channels(status_rx, cmd_tx),
         ServerOptions::default(),
     )
     .await;
@@ -421,15 +414,7 @@ async fn a_runner_that_is_gone_or_silent_gives_an_error_not_a_hang() {
         reply_timeout: Duration::from_millis(300),
         ..ServerOptions::default()
     };
-    let served = serve(
-        ControlChannels {
-            status: status_rx,
-            commands: cmd_tx,
-            queue: None,
-        },
-        options,
-    )
-    .await;
+    let served = serve(control_channels(status_rx, cmd_tx), options).await;
     let mut c = Conn::greeted(&served.path).await;
     let t0 = std::time::Instant::now();
     let e = c.ask(json!({"class":"pause"})).await;
@@ -860,15 +845,7 @@ async fn a_command_the_operator_was_told_failed_reaches_the_runner_marked_abando
         reply_timeout: Duration::from_millis(200),
         ..ServerOptions::default()
     };
-    let served = serve(
-        ControlChannels {
-            status: status_rx,
-            commands: cmd_tx,
-            queue: None,
-        },
-        options,
-    )
-    .await;
+    let served = serve(control_channels(status_rx, cmd_tx), options).await;
     let mut c = Conn::greeted(&served.path).await;
     let e = c
         .ask(json!({"class":"start","specimen":"GHOST","operator":"","notes":""}))

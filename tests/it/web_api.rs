@@ -3,6 +3,7 @@
 //! everything but `/healthz`, the socket's requests mirrored, CSRF refusals, bounded and
 //! timed-out connections, the scans' files.
 
+use crate::common::control_channels;
 use crate::common::http::{exchange, request, Events, Reply};
 use serde_json::{json, Value};
 use std::net::SocketAddr;
@@ -10,7 +11,7 @@ use std::os::unix::fs::PermissionsExt;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use surfscan::control::protocol::{ControlChannels, Message};
+use surfscan::control::protocol::Message;
 use surfscan::scan::command::{OperatorCommand, OperatorRequest, Peer};
 use surfscan::scan::status::{State, Status};
 use surfscan::web::settings::WebSettings;
@@ -107,11 +108,7 @@ async fn station_with(extra: &str) -> Station {
             let _ = req.reply.send(answer);
         }
     });
-    let channels = ControlChannels {
-        status: status_rx,
-        commands: cmd_tx,
-        queue: None,
-    };
+    let channels = control_channels(status_rx, cmd_tx);
     let s = settings(dir.path(), extra);
     let page = web::start(&s, channels, dir.path().join("scans")).unwrap();
     Station {
@@ -640,11 +637,7 @@ async fn a_token_file_others_can_read_a_bad_certificate_or_a_taken_port_is_named
     let dir = tempfile::tempdir().unwrap();
     let (status_tx, status_rx) = watch::channel(Status::idle());
     let (cmd_tx, _cmd_rx) = mpsc::channel::<OperatorRequest>(1);
-    let channels = || ControlChannels {
-        status: status_rx.clone(),
-        commands: cmd_tx.clone(),
-        queue: None,
-    };
+    let channels = || control_channels(status_rx.clone(), cmd_tx.clone());
     let mut s = settings(dir.path(), "");
     std::fs::set_permissions(&s.token_file, std::fs::Permissions::from_mode(0o644)).unwrap();
     let e = web::start(&s, channels(), dir.path().into()).err().unwrap();

@@ -23,6 +23,19 @@ use surfscan_sim::data::ServedProfile;
 use surfscan_sim::grbl::{GrblSimConfig, StageShared};
 use surfscan_sim::{FaultSpec, InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
 
+/// The control socket's channels to a runner the test plays (its status and commands), no job
+/// queue.
+pub fn control_channels(
+    status: tokio::sync::watch::Receiver<surfscan::scan::status::Status>,
+    commands: tokio::sync::mpsc::Sender<surfscan::scan::command::OperatorRequest>,
+) -> surfscan::control::protocol::ControlChannels {
+    surfscan::control::protocol::ControlChannels {
+        status,
+        commands,
+        queue: None,
+    }
+}
+
 /// The writing end of a pipe whose reader has already gone, to stand for a terminal that
 /// hung up or a `| head` that exited: a write to it fails with EPIPE. Both ends are
 /// close-on-exec, so no process another test starts meanwhile keeps the reader open (the
