@@ -184,14 +184,11 @@ pub fn anisotropy(grid: &HeightMap<'_>) -> Result<Anisotropy, MetrologyError> {
 mod tests {
     use super::*;
     use crate::metrology::areal::test_map;
-
-    fn make(rows: usize, cols: usize, f: impl Fn(usize, usize) -> f64) -> Vec<f64> {
-        (0..rows * cols).map(|k| f(k / cols, k % cols)).collect()
-    }
+    use crate::metrology::test_grid;
 
     #[test]
     fn identical_lines_correlate_fully_and_have_no_y_slope() {
-        let z = make(10, 200, |_, c| (c as f64 * 0.3).sin());
+        let z = test_grid(10, 200, 0.001, |_, c| (c as f64 * 0.3).sin()).heights_um;
         let g = test_map(&z, 10, 200, 0.001, 0.01);
         let a = anisotropy(&g).unwrap();
         assert!((a.line_correlation_at_pitch_y - 1.0).abs() < 1e-12);
@@ -210,10 +207,11 @@ mod tests {
 
     #[test]
     fn alternating_lines_anticorrelate_and_dominate_the_slopes() {
-        let z = make(12, 100, |r, c| {
+        let z = test_grid(12, 100, 0.001, |r, c| {
             let sign = if r % 2 == 0 { 1.0 } else { -1.0 };
             sign * (1.0 + 0.01 * (c as f64 * 0.7).sin())
-        });
+        })
+        .heights_um;
         let g = test_map(&z, 12, 100, 0.001, 0.001);
         let a = anisotropy(&g).unwrap();
         assert!(a.line_correlation_at_pitch_y < -0.99, "{a:?}");

@@ -117,7 +117,7 @@ pub fn attach(lines: &mut [LineReport], h: &Holdout) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::{FitOptions, VMethod};
+    use crate::fit::VMethod;
     use crate::metrology::holdout::{between_lines, holdout_with};
 
     /// `model_vs_measured` on its own: both refits of [`holdout_with`], the line indices
@@ -146,20 +146,11 @@ mod tests {
             .map_err(|e| e.to_string())
     }
 
-    fn grid(rows: usize, cols: usize, y_mm: Vec<f64>, f: impl Fn(usize, usize) -> f64) -> Grid {
+    /// Lines 0.01 mm apart, indexed 3, 5, 7, … (not their rows).
+    fn grid(rows: usize, cols: usize, f: impl Fn(usize, usize) -> f64) -> Grid {
         Grid {
             index: (0..rows as u32).map(|r| 3 + 2 * r).collect(),
-            y_mm,
             ..crate::metrology::test_grid(rows, cols, 0.002, f)
-        }
-    }
-
-    fn recipe(method: VMethod) -> ModelRecipe {
-        ModelRecipe {
-            degrees: FitOptions::default(),
-            method,
-            replace_spikes: None,
-            lambda_c_mm: None,
         }
     }
 
@@ -173,62 +164,30 @@ mod tests {
         let rough = |r: usize, c: usize| {
             (c as f64 * 0.37).sin() + 0.4 * ((r * 7 + c * 3) % 11) as f64 + 0.05 * r as f64
         };
-        let ys = |rows: usize| (0..rows).map(|r| r as f64 * 0.01).collect::<Vec<f64>>();
-        let mut short = grid(12, 50, ys(12), rough);
+        let mut short = grid(12, 50, rough);
         short.heights_um.pop();
-        let mut backwards = ys(12);
-        backwards.swap(4, 5);
+        let mut backwards = grid(12, 40, rough);
+        backwards.y_mm.swap(4, 5);
+        // The paper's surface: interpolation at degrees 5/5.
+        let paper = ModelRecipe::default();
         let cases: Vec<(&str, Grid, ModelRecipe, Option<f64>, f64)> = vec![
-            (
-                "rough",
-                grid(13, 50, ys(13), rough),
-                recipe(VMethod::Interpolate),
-                Some(1.1),
-                0.5,
-            ),
+            ("rough", grid(13, 50, rough), paper, Some(1.1), 0.5),
             (
                 "least squares",
-                grid(15, 40, ys(15), rough),
-                recipe(VMethod::LeastSquares { control_rows: 9 }),
+                grid(15, 40, rough),
+                ModelRecipe {
+                    method: VMethod::LeastSquares { control_rows: 9 },
+                    ..paper
+                },
                 Some(1.1),
                 0.5,
             ),
-            (
-                "six lines",
-                grid(6, 40, ys(6), rough),
-                recipe(VMethod::Interpolate),
-                Some(1.0),
-                0.5,
-            ),
-            (
-                "flat",
-                grid(12, 40, ys(12), |_, _| 0.25),
-                recipe(VMethod::Interpolate),
-                Some(0.0),
-                0.5,
-            ),
-            (
-                "no Sq",
-                grid(12, 40, ys(12), rough),
-                recipe(VMethod::Interpolate),
-                None,
-                0.5,
-            ),
-            (
-                "bad threshold",
-                grid(12, 40, ys(12), rough),
-                recipe(VMethod::Interpolate),
-                Some(1.0),
-                -1.0,
-            ),
-            ("short", short, recipe(VMethod::Interpolate), Some(1.0), 0.5),
-            (
-                "backwards",
-                grid(12, 40, backwards, rough),
-                recipe(VMethod::Interpolate),
-                Some(1.0),
-                0.5,
-            ),
+            ("six lines", grid(6, 40, rough), paper, Some(1.0), 0.5),
+            ("flat", grid(12, 40, |_, _| 0.25), paper, Some(0.0), 0.5),
+            ("no Sq", grid(12, 40, rough), paper, None, 0.5),
+            ("bad threshold", grid(12, 40, rough), paper, Some(1.0), -1.0),
+            ("short", short, paper, Some(1.0), 0.5),
+            ("backwards", backwards, paper, Some(1.0), 0.5),
         ];
         let mut seen_ok = [0; 2];
         for (what, g, recipe, sq, threshold) in cases {
