@@ -91,12 +91,10 @@ pub fn table(alternatives: &[Alternative]) -> String {
             VMethod::LeastSquares { .. } => "least-squares",
         };
         let degrees = format!("{}/{}", a.options.degree_u, a.options.degree_v);
+        s.push_str(&format!("{name:<26} {degrees:>6} {:>7}", a.poles_v));
         match &a.holdout {
             Ok(h) => s.push_str(&format!(
-                "{:<26} {:>6} {:>7} {:>11.3} µm {:>7.2} {:>9.3} µm  {}\n",
-                name,
-                degrees,
-                a.poles_v,
+                " {:>11.3} µm {:>7.2} {:>9.3} µm  {}\n",
                 h.rms_um,
                 h.rms_over_sq,
                 h.max_abs_um,
@@ -106,10 +104,7 @@ pub fn table(alternatives: &[Alternative]) -> String {
                     "not supported"
                 }
             )),
-            Err(e) => s.push_str(&format!(
-                "{:<26} {:>6} {:>7}  no hold-out: {e}\n",
-                name, degrees, a.poles_v
-            )),
+            Err(e) => s.push_str(&format!("  no hold-out: {e}\n")),
         }
     }
     s

@@ -99,6 +99,13 @@ pub fn iso4288_check(ra_um: f64, rz_um: f64, lambda_c_mm: f64) -> CutoffCheck {
         ),
         None => format!("{name} {} µm is outside ISO 4288's tables", sig(v)),
     };
+    let one = |fits: &str, v: f64, not: &str, w: f64, b: Option<Band>| {
+        format!(
+            "λc {lambda_c_mm} mm fits {fits} {} µm but not {not}: {}; for an {not} specification ISO 4288 measures again at that band's λc",
+            sig(v),
+            say(not, w, b)
+        )
+    };
     let warning = match (fits_ra, fits_rz) {
         (true, true) => None,
         (false, false) => Some(format!(
@@ -106,16 +113,8 @@ pub fn iso4288_check(ra_um: f64, rz_um: f64, lambda_c_mm: f64) -> CutoffCheck {
             say("Ra", ra_um, ra_band),
             say("Rz", rz_um, rz_band)
         )),
-        (true, false) => Some(format!(
-            "λc {lambda_c_mm} mm fits Ra {} µm but not Rz: {}; for an Rz specification ISO 4288 measures again at that band's λc",
-            sig(ra_um),
-            say("Rz", rz_um, rz_band)
-        )),
-        (false, true) => Some(format!(
-            "λc {lambda_c_mm} mm fits Rz {} µm but not Ra: {}; for an Ra specification ISO 4288 measures again at that band's λc",
-            sig(rz_um),
-            say("Ra", ra_um, ra_band)
-        )),
+        (true, false) => Some(one("Ra", ra_um, "Rz", rz_um, rz_band)),
+        (false, true) => Some(one("Rz", rz_um, "Ra", ra_um, ra_band)),
     };
     CutoffCheck {
         lambda_c_mm,

@@ -129,10 +129,7 @@ fn held_out_overlay(
             (line.index, line.rms_um, b.model_line(k)?.to_vec())
         }
     };
-    let (x0, px) = (grid.x0_mm, grid.pitch_x_mm);
-    let measured = grid
-        .heights_um
-        .get(row * grid.cols..(row + 1) * grid.cols)?;
+    let (x0, px, measured) = (grid.x0_mm, grid.pitch_x_mm, grid.row(row));
     let residual: Vec<f64> = model.iter().zip(measured).map(|(m, z)| m - z).collect();
     Some(Overlay {
         measured: along_x(measured, x0, px),

@@ -8,35 +8,22 @@
 
 use super::SectionInput;
 use crate::grid::Grid;
-use crate::metrology::outliers::{find_grid_spikes, LineSpike, SpikeOptions};
+use crate::metrology::outliers::{find_grid_spikes, LineSpike};
 use crate::numfmt::{fmt, line_label, sig, Quantity};
 use crate::report::document::{LineNotJudged, OutliersReport};
 
 /// At most this many spikes are listed one by one in the warnings (all are in the report).
 const LISTED: usize = 20;
 
-/// Finds the spikes of `grid`'s lines on the roughness profile the lines are evaluated on
-/// (the λc roughness when the lines are filtered, else the heights minus their line).
+/// Finds the spikes of the grid's lines on the roughness profile the lines are evaluated on
+/// (the λc roughness when the lines are filtered, else the heights minus their line), as the
+/// report names them: the rule, the policy (`exclude` when they are to be bridged, else
+/// `flag`), every spike and the lines that could not be judged.
 pub fn section(input: &SectionInput<'_>) -> OutliersReport {
-    let o = &input.ctx.line_options;
-    find(
-        input.grid,
-        o.apply_lambda_c.then_some(o.lambda_c_mm),
-        &input.ctx.options.spikes,
-        input.ctx.options.exclude_spikes,
-    )
-}
-
-/// The spikes of `grid`'s lines by `rule`, judged on the λc roughness when `lambda_c_mm` is
-/// given, as the report names them: the rule, the policy (`exclude` when they are to be
-/// bridged, else `flag`), every spike and the lines that could not be judged.
-pub fn find(
-    grid: &Grid,
-    lambda_c_mm: Option<f64>,
-    rule: &SpikeOptions,
-    exclude: bool,
-) -> OutliersReport {
-    let (spikes, failed) = find_grid_spikes(grid, lambda_c_mm, rule);
+    let (o, rule) = (&input.ctx.line_options, &input.ctx.options.spikes);
+    let exclude = input.ctx.options.exclude_spikes;
+    let (spikes, failed) =
+        find_grid_spikes(input.grid, o.apply_lambda_c.then_some(o.lambda_c_mm), rule);
     OutliersReport {
         rule: rule.describe(),
         policy: if exclude { "exclude" } else { "flag" },
