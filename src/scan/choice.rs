@@ -16,19 +16,19 @@
 //!   and starts nothing else; an operator's plain start begins a new scan, warning when the
 //!   scan started last failed.
 //!
-//! A scan that failed with an internal error while its outputs were written (a bug; every
-//! line on disk) is the operator's: only `--resume` continues it, which writes its outputs
-//! again and traces nothing; the daemon never does by itself (the same bug would panic again).
+//! A scan that failed with an internal error (a bug: writing its outputs, every line on disk,
+//! or reopening it panicked) is the operator's: only `--resume` continues it (it writes a
+//! complete scan's outputs again and traces nothing); the daemon never does by itself (the
+//! same bug would panic again).
 //!
 //! Layer 3 (session): the decision is pure; [`choose`] reads the journals and
 //! [`Choice::commit`] appends to them ([`super::journal`]).
 
 use super::command::{Peer, StartMode};
 use super::ending::{FailCause, StopStatus};
-use super::journal::{survey, Journal, Record, StopRecord, Survey, JOURNAL_FILE};
+use super::journal::{survey, Journal, StopRecord, Survey, JOURNAL_FILE};
 use super::outcome::ScanRequest;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 /// Who asks for the start.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -109,7 +109,7 @@ pub fn decide(s: &Survey, asker: Asker, out: &Path) -> Decided {
         Asker::Operator(StartMode::Auto) => {
             match last_failed {
                 Some(f) if f.internal => warnings.push(format!(
-                    "the last scan {} failed with an internal error while its outputs were written (every line is on disk); a new scan starts (`--resume` writes the failed one's outputs again, `surfscan fit`/`analyze` on its directory makes them by hand)",
+                    "the last scan {} failed with an internal error (a bug: writing its outputs or reopening it panicked, as its stop record says); a new scan starts (`--resume` tries the failed one again, and writes its outputs again when every line is on disk; `surfscan fit`/`analyze` on its directory makes them by hand)",
                     f.dir.display()
                 )),
                 Some(f) => warnings.push(format!(
@@ -233,21 +233,18 @@ fn record_abandoned(dir: &Path, peer: &Peer) -> Result<(), ChoiceError> {
             dir.display()
         ))
     };
-    let (mut journal, _) =
-        Journal::open(&path, Arc::new(super::faults::NoFaults)).map_err(|e| io(e.to_string()))?;
     let reason = format!(
         "abandoned: a new scan was started instead (--new, by {})",
         peer.describe_briefly()
     );
-    journal
-        .append(&Record::Stop(StopRecord {
-            status: StopStatus::Abandoned,
-            reason: reason.clone(),
-            cause: None,
-            internal: false,
-            time: chrono::Utc::now(),
-        }))
-        .map_err(|e| io(e.to_string()))?;
+    let stop = StopRecord {
+        status: StopStatus::Abandoned,
+        reason: reason.clone(),
+        cause: None,
+        internal: false,
+        time: chrono::Utc::now(),
+    };
+    Journal::append_stop(&path, stop).map_err(|e| io(e.to_string()))?;
     tracing::warn!("{}: {reason}", dir.display());
     Ok(())
 }
@@ -454,7 +451,7 @@ mod tests {
         assert!(
             d.warnings.iter().any(|w| w
                 .starts_with("the last scan f failed with an internal error")
-                && w.contains("`--resume` writes the failed one's outputs again")
+                && w.contains("`--resume` tries the failed one again")
                 && w.contains("`surfscan fit`/`analyze`")),
             "{:?}",
             d.warnings

@@ -110,7 +110,8 @@ pub enum FailReason {
     /// hand.
     OutputsInternal(String),
     /// The scan could not be begun or reopened, or its end not recorded: the message says
-    /// why.
+    /// why. A reopening that panicked (kind [`FailKind::Internal`]) is the scan's ending by a
+    /// bug, recorded as such; any other refusal records nothing.
     Refused {
         /// Why.
         message: String,
@@ -132,9 +133,9 @@ impl FailReason {
     }
 
     /// True when a bug, not the devices, the disk or the lines, ended the scan (the stop
-    /// record's `internal`).
+    /// record's `internal`): its outputs, or reopening it, panicked.
     pub fn is_internal(&self) -> bool {
-        matches!(self, FailReason::OutputsInternal(_))
+        self.kind() == FailKind::Internal
     }
 
     /// The exit-code class of the failure.
@@ -454,8 +455,9 @@ mod tests {
     }
 
     /// The events say a bug ended the scan exactly where its stop record does: only the
-    /// `fail` event of outputs that panicked, not an ordinary failure (of the outputs, the
-    /// budget), a success or an abort, and no event but the ending.
+    /// `fail` event of outputs or a reopening that panicked, not an ordinary failure (of the
+    /// outputs, the budget, a refused reopening), a success or an abort, and no event but the
+    /// ending.
     #[test]
     fn an_event_says_a_bug_ended_the_scan_as_its_stop_record_does() {
         let ends = [
@@ -468,6 +470,21 @@ mod tests {
                 false,
             ),
             (End::Fail(budget()), false),
+            // A reopening that panicked, and one refused for the scan's own reason.
+            (
+                End::Fail(FailReason::Refused {
+                    message: "internal error: reopening the scan panicked".into(),
+                    kind: FailKind::Internal,
+                }),
+                true,
+            ),
+            (
+                End::Fail(FailReason::Refused {
+                    message: "scan X has ended; it cannot be continued".into(),
+                    kind: FailKind::Scan,
+                }),
+                false,
+            ),
             (
                 End::Success {
                     summary: "5 lines".into(),

@@ -219,7 +219,8 @@ pub struct StopRecord {
     /// [`StopRecord::fail_cause`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cause: Option<FailCause>,
-    /// A bug ended the scan (an internal error: making its outputs panicked); written only
+    /// A bug ended the scan (an internal error: making its outputs, or reopening it,
+    /// panicked); written only
     /// when true, so a record without it (every earlier version's) reads as false. Its
     /// `cause` stays one every version reads (`operator`): an earlier version ignores this
     /// member, whereas a `cause` it did not know would make it take the record for a torn
@@ -500,6 +501,13 @@ impl Journal {
             },
             rec,
         ))
+    }
+
+    /// Ends the scan whose journal is at `path` by `stop`, from outside a run: a scan given up
+    /// for a new one, or one whose reopening panicked.
+    pub fn append_stop(path: &Path, stop: StopRecord) -> Result<(), JournalError> {
+        let (mut journal, _) = Journal::open(path, Arc::new(super::faults::NoFaults))?;
+        journal.append(&Record::Stop(stop))
     }
 
     /// The journal's path.

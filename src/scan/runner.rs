@@ -10,14 +10,17 @@
 //!
 //! Layer 3 (session): depends on [`super::machine`], [`super::device_ops`] (devices),
 //! [`super::disk_ops`], [`super::ledger`] and [`super::opening`] (disk),
-//! [`super::channels`], the session's own settings, status, command and outcome types, and
-//! [`super::reasons`]' words for a bug in the outputs.
+//! [`super::channels`], the session's own settings, status, command, event and outcome types,
+//! [`super::reasons`]' words for a bug in the outputs, and [`super::journal`], whose stop
+//! record a reopening that panicked is recorded by.
 
 use super::channels::Control;
 use super::command::{OperatorRequest, PauseMark, Peer};
 use super::device_ops::{is_device_effect, Hands};
 use super::disk_ops::Books;
 use super::ending::{End, FailKind, FailReason, StopStatus};
+use super::event::ScanEvent;
+use super::journal::{Journal, StopRecord, JOURNAL_FILE};
 use super::ledger::Ledger;
 use super::machine::{Action, Event, Machine, Now, Policy};
 use super::opening::{self, NewScan};
@@ -106,32 +109,34 @@ pub async fn run_scan<S: Station>(
     hands.station.freeze(None);
     let mut machine = match reopening {
         None => Machine::new_scan(settings.plan.clone(), policy, before),
-        Some((dir, peer, after_failure)) => match watched(ctl, "reopening the scan", {
+        Some((dir, peer, after_failure)) => {
             // Reading back every committed line and refitting them takes seconds for a large
             // scan: done beside the loop, which meanwhile feeds the watchdog.
             let settings = settings.clone();
-            move || reopen(&settings, &dir, peer, after_failure)
-        })
-        .await
-        .unwrap_or_else(Err)
-        {
-            Ok((resumed, mut l)) => {
-                for kept in hands.station.freeze(Some(&l.start.config)) {
-                    l.note(&super::machine::Note {
-                        reason: kept,
-                        device: None,
-                        line: None,
-                        peer: None,
-                        pause: None,
-                    });
+            let at = dir.clone();
+            match reopened(ctl, at, move || {
+                reopen(&settings, &dir, peer, after_failure)
+            })
+            .await
+            {
+                Ok((resumed, mut l)) => {
+                    for kept in hands.station.freeze(Some(&l.start.config)) {
+                        l.note(&super::machine::Note {
+                            reason: kept,
+                            device: None,
+                            line: None,
+                            peer: None,
+                            pause: None,
+                        });
+                    }
+                    hands.attach(&l);
+                    let plan = l.plan.clone();
+                    books.ledger = Some(l);
+                    Machine::resumed(plan, policy, before, resumed)
                 }
-                hands.attach(&l);
-                let plan = l.plan.clone();
-                books.ledger = Some(l);
-                Machine::resumed(plan, policy, before, resumed)
+                Err(refusal) => return refusal,
             }
-            Err((reason, kind)) => return refused(ctl, reason, kind),
-        },
+        }
     };
     drive(&mut machine, &mut hands, &mut books, ctl).await;
     finish(ctl, &machine, books)
@@ -182,11 +187,88 @@ fn reopen(
     Ok((resumed, ledger))
 }
 
-fn refused(ctl: &Control, message: String, kind: FailKind) -> Outcome {
+/// Reopens the scan in `dir` by `work` ([`watched`]); the outcome when it cannot be run.
+///
+/// A reopening that panicked (a bug) is the scan's ending, recorded as such in its journal
+/// (`fail`, cause `operator`, `internal`): the daemon at start-up and its queue leave a scan
+/// that a bug ended alone, so the bug is not run again at every start and every turn of the
+/// queue; only the operator's `--resume` tries it again. The status's last stop, the `fail`
+/// event and the outcome (exit 70) say the same. Any other refusal is no ending: the scan
+/// stays as it was.
+async fn reopened<T: Send + 'static>(
+    ctl: &Control,
+    dir: PathBuf,
+    work: impl FnOnce() -> Result<T, (String, FailKind)> + Send + 'static,
+) -> Result<T, Outcome> {
+    let (message, kind) = match watched(ctl, "reopening the scan", work).await {
+        Ok(Ok(reopened)) => return Ok(reopened),
+        Ok(Err(refusal)) | Err(refusal) => refusal,
+    };
+    let end = End::Fail(FailReason::Refused { message, kind });
+    let Some(words) = end.stop_record().filter(|w| w.internal) else {
+        return Err(refused(ctl, end));
+    };
+    let path = dir.join(JOURNAL_FILE);
+    let stop = StopRecord {
+        status: words.status,
+        reason: words.reason.clone(),
+        cause: words.cause,
+        internal: words.internal,
+        time: Utc::now(),
+    };
+    let time = stop.time;
+    let recorded = watched(ctl, "recording the scan's ending", move || {
+        Journal::append_stop(&path, stop).map_err(|e| e.to_string())
+    })
+    .await
+    .unwrap_or_else(|(e, _)| Err(e));
+    match recorded {
+        Ok(()) => tracing::error!(
+            "{}: {}; recorded as its ending: the daemon does not reopen it again, `surfscan scan --resume` does",
+            dir.display(),
+            words.reason
+        ),
+        Err(e) => tracing::error!(
+            "{}: {}; its ending could not be recorded ({e}): the scan stays as it was, and the daemon may reopen it again at its next start",
+            dir.display(),
+            words.reason
+        ),
+    }
+    let scan_id = dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let mut s = ended_status(&ctl.status.borrow(), words.status, &words.reason);
+    if let Some(last) = s.last_stop.as_mut() {
+        last.scan_id.clone_from(&scan_id);
+        last.dir = dir.display().to_string();
+        last.internal = words.internal;
+    }
+    ctl.publish(s);
+    if let Some(kind) = end.event(true) {
+        ctl.event(ScanEvent {
+            scan_id,
+            dir: dir.clone(),
+            kind,
+            reason: words.reason,
+            time,
+            internal: end.tells_internal(kind),
+            results: None,
+        });
+    }
+    Err(Outcome {
+        end,
+        dir: Some(dir),
+        outputs: None,
+    })
+}
+
+fn refused(ctl: &Control, end: End) -> Outcome {
+    let message = end.reason(false);
     tracing::error!("scan cannot start: {message}");
     let s = ended_status(&ctl.status.borrow(), StopStatus::Fail, &message);
     ctl.publish(s);
-    Outcome::without_scan(End::Fail(FailReason::Refused { message, kind }))
+    Outcome::without_scan(end)
 }
 
 /// The executor loop: actions out of the machine performed, results fed back, commands and
@@ -559,8 +641,140 @@ fn finish(ctl: &Control, machine: &Machine, mut books: Books<'_>) -> Outcome {
 
 #[cfg(test)]
 mod tests {
-    use super::joined;
-    use crate::scan::ending::FailKind;
+    use super::{joined, reopened};
+    use crate::jobs::synthetic::{self, SyntheticScan};
+    use crate::scan::channels::Control;
+    use crate::scan::choice::{decide, Asker, Decision};
+    use crate::scan::command::StartMode;
+    use crate::scan::ending::{End, FailCause, FailKind, FailReason, StopStatus};
+    use crate::scan::event::ScanEventKind;
+    use crate::scan::journal::{read_journal, survey, Record, JOURNAL_FILE};
+    use crate::scan::status::Status;
+    use std::path::{Path, PathBuf};
+    use tokio::sync::{mpsc, watch};
+
+    /// An unfinished scan of 3 lines with 1 done in `out`, as the daemon finds it at start-up.
+    fn unfinished(out: &Path) -> PathBuf {
+        let scan = SyntheticScan {
+            id: "20261207-2200-block".into(),
+            sequence: 1,
+            started: "2026-12-07T22:00:00Z".parse().expect("a time"),
+            specimen: "block".into(),
+            recipe: None,
+            lines: 3,
+            done: 1,
+            stop: None,
+            report: None,
+        };
+        let dir = synthetic::write(out, &scan).expect("written");
+        assert_eq!(
+            decide(&survey(out).expect("survey"), Asker::DaemonStartUp, out).decision,
+            Decision::Resume(dir.clone())
+        );
+        dir
+    }
+
+    /// What the daemon at start-up, a plain start and `--resume` each run in `out`.
+    fn decisions(out: &Path) -> [Decision; 3] {
+        let s = survey(out).expect("survey");
+        [
+            Asker::DaemonStartUp,
+            Asker::Operator(StartMode::Auto),
+            Asker::Operator(StartMode::Resume),
+        ]
+        .map(|asker| decide(&s, asker, out).decision)
+    }
+
+    /// A reopening that panicked is the scan's ending by a bug, said alike by the outcome
+    /// (exit 70), the journal's stop record, the status's last stop and the `fail` event;
+    /// recorded, it is not reopened again by the daemon at its next start (nor by its queue,
+    /// which takes the same decision): a plain start begins a new scan, only `--resume`
+    /// tries it again. Without the record the daemon resumed it into the same panic at every
+    /// start.
+    #[tokio::test]
+    async fn a_reopening_that_panicked_is_recorded_as_the_scans_ending_by_a_bug() {
+        let out = tempfile::tempdir().expect("tmp");
+        let dir = unfinished(out.path());
+        let (_commands, commands) = mpsc::channel(1);
+        let (_shutdown, shutdown) = watch::channel(false);
+        let (status, seen) = watch::channel(Status::idle());
+        let mut ctl = Control::new(commands, shutdown, status);
+        let (events, mut told) = mpsc::unbounded_channel();
+        ctl.events = Some(events);
+
+        let outcome = reopened(&ctl, dir.clone(), || -> Result<(), (String, FailKind)> {
+            panic!("no knot vector for {} lines", 1)
+        })
+        .await
+        .expect_err("refused");
+        let why = "internal error: reopening the scan panicked (no knot vector for 1 lines); report this with the scan's directory and the log";
+        assert_eq!(
+            outcome.end,
+            End::Fail(FailReason::Refused {
+                message: why.into(),
+                kind: FailKind::Internal
+            })
+        );
+        assert_eq!(outcome.dir.as_deref(), Some(dir.as_path()));
+        let exit = crate::cli::scan::outcome_result(&outcome).expect_err("a failure");
+        assert_eq!(exit.exit as i32, 70, "{}", exit.message);
+
+        let journal = read_journal(&dir.join(JOURNAL_FILE)).expect("journal");
+        let Some(Record::Stop(stop)) = journal.records.last() else {
+            panic!("no stop record: {:?}", journal.records.last());
+        };
+        assert_eq!(
+            (stop.status, stop.reason.as_str(), stop.cause, stop.internal),
+            (StopStatus::Fail, why, Some(FailCause::Operator), true)
+        );
+        let last = seen.borrow().last_stop.clone().expect("last stop");
+        assert_eq!(
+            (last.scan_id.as_str(), last.status, last.reason.as_str()),
+            ("20261207-2200-block", StopStatus::Fail, why)
+        );
+        assert_eq!((last.dir, last.internal), (dir.display().to_string(), true));
+        let ev = told.try_recv().expect("the fail event");
+        assert_eq!(
+            (ev.kind, ev.internal, ev.reason.as_str(), ev.time, &ev.dir),
+            (ScanEventKind::Fail, true, why, stop.time, &dir)
+        );
+        assert!(told.try_recv().is_err(), "one event");
+
+        let [daemon, plain, resume] = decisions(out.path());
+        assert_eq!(daemon, Decision::Nothing);
+        assert!(matches!(plain, Decision::New { .. }), "{plain:?}");
+        assert_eq!(resume, Decision::Continue(dir));
+    }
+
+    /// A reopening refused for the scan's own reason (here: cancelled as the runtime shuts
+    /// down) ends nothing: no stop record, no event, no bug in the status; the daemon
+    /// resumes the scan at its next start, as before.
+    #[tokio::test]
+    async fn a_reopening_refused_for_no_bug_leaves_the_scan_as_it_was() {
+        let out = tempfile::tempdir().expect("tmp");
+        let dir = unfinished(out.path());
+        let (_commands, commands) = mpsc::channel(1);
+        let (_shutdown, shutdown) = watch::channel(false);
+        let (status, seen) = watch::channel(Status::idle());
+        let mut ctl = Control::new(commands, shutdown, status);
+        let (events, mut told) = mpsc::unbounded_channel();
+        ctl.events = Some(events);
+
+        let outcome = reopened(&ctl, dir.clone(), || -> Result<(), (String, FailKind)> {
+            Err((
+                "internal: reopening the scan was cancelled".into(),
+                FailKind::Scan,
+            ))
+        })
+        .await
+        .expect_err("refused");
+        assert_eq!(outcome.dir, None);
+        assert!(!outcome.end.is_internal());
+        let last = seen.borrow().last_stop.clone().expect("last stop");
+        assert_eq!((last.status, last.internal), (StopStatus::Fail, false));
+        assert!(told.try_recv().is_err(), "no event");
+        assert_eq!(decisions(out.path())[0], Decision::Resume(dir));
+    }
 
     /// A panic in [`super::watched`] work becomes the scan's reason, naming the work and the
     /// panic's message, instead of going on up the daemon's loop, and is a bug's (exit 70 for
