@@ -7,7 +7,7 @@
 //! (columns × x pitch by rows × y pitch). The outputs, the refusals of bad input with their
 //! exit statuses, and the STEP solid of a tilted plane — whose volume OpenCascade measures
 //! against the block's volume integrated by hand — are checked as a user meets them.
-use super::common::python;
+use super::common::{json_from, reference_script};
 use std::process::Command;
 
 fn surfscan() -> Command {
@@ -331,22 +331,15 @@ fn fit_writes_a_step_solid_opencascade_finds_valid_with_the_planes_volume() {
     let bottom = rep["step"]["bottom_z_mm"].as_f64().unwrap();
     assert!((bottom + depth).abs() < 1e-9, "{}", rep["step"]);
     let y_mm: Vec<f64> = (0..rows).map(|r| r as f64 * py).collect();
-    let script = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/python/check_step_occt.py"
+    let r = json_from(
+        reference_script("check_step_occt.py")
+            .arg(&step)
+            .arg(&input)
+            .arg(px.to_string())
+            .arg(serde_json::to_string(&y_mm).unwrap())
+            .arg(bottom.to_string())
+            .arg("0"),
     );
-    let out = python()
-        .arg(script)
-        .arg(&step)
-        .arg(&input)
-        .arg(px.to_string())
-        .arg(serde_json::to_string(&y_mm).unwrap())
-        .arg(bottom.to_string())
-        .arg("0")
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", stderr(&out));
-    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(r["solids"], 1, "{r}");
     assert_eq!(r["faces"], 6, "{r}");
     assert_eq!(r["valid"], true, "BRepCheck_Analyzer: {r}");

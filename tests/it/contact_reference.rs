@@ -14,7 +14,7 @@
 //! whose hardness makes part of the contact flow. Both sides are solved in the test; nothing
 //! is precomputed. Fails (does not skip) when python3, SurfaceTopography or ContactMechanics
 //! is missing.
-use super::common::python;
+use super::common::{json_from, reference_script};
 use std::path::Path;
 use surfscan::contact::{contact_curve, Body, ContactGrid, ContactOptions};
 
@@ -83,13 +83,9 @@ fn write_sur2_window(path: &Path) {
 #[test]
 fn contact_agrees_with_contactmechanics_elastic_and_plastic() {
     let dir = tempfile::tempdir().unwrap();
-    let script = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/python/contact_reference.py"
-    );
     let selfaffine = dir.path().join("selfaffine.csv");
-    let out = python()
-        .args([script, "selfaffine"])
+    let out = reference_script("contact_reference.py")
+        .arg("selfaffine")
         .arg(&selfaffine)
         .args(["64", "64", "1.0", "4.0", "7"])
         .output()
@@ -206,14 +202,13 @@ fn contact_agrees_with_contactmechanics_elastic_and_plastic() {
     let req = dir.path().join("request.json");
     std::fs::write(&req, serde_json::to_vec(&request).unwrap()).unwrap();
     let t = std::time::Instant::now();
-    let out = python().args([script, "solve"]).arg(&req).output().unwrap();
-    eprintln!("ContactMechanics: {:.1} s", t.elapsed().as_secs_f64());
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let theirs = json_from(
+        reference_script("contact_reference.py")
+            .arg("solve")
+            .arg(&req),
     );
-    let theirs: Vec<Vec<serde_json::Value>> = serde_json::from_slice(&out.stdout).unwrap();
+    eprintln!("ContactMechanics: {:.1} s", t.elapsed().as_secs_f64());
+    let theirs: Vec<Vec<serde_json::Value>> = serde_json::from_value(theirs).unwrap();
     for ((case, curve), reference) in cases.iter().zip(&ours).zip(&theirs) {
         assert_eq!(curve.points.len(), reference.len(), "{}", case.name);
         for (p, r) in curve.points.iter().zip(reference) {

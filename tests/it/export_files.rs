@@ -7,7 +7,7 @@
 //! waits in the queue across a restart, and the files arrive once they are back; a full one
 //! is named and keeps no partial file; `surfscan export` writes a scan again.
 
-use crate::common::{append_config, python, scan_command, Rig, RigOptions};
+use crate::common::{append_config, json_from, reference_script, scan_command, Rig, RigOptions};
 use crate::daemon_e2e as e2e;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -33,18 +33,7 @@ fn assert_valid_qif(file: &Path) {
 }
 
 fn read_dfq(file: &Path) -> Value {
-    let o = python()
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/dfq_read.py"))
-        .arg(file)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "dfq_read.py refused {}: {}",
-        file.display(),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    serde_json::from_slice(&o.stdout).unwrap()
+    json_from(reference_script("dfq_read.py").arg(file))
 }
 
 fn scan_dirs(out: &Path) -> Vec<PathBuf> {

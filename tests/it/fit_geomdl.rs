@@ -2,6 +2,7 @@
 //! `geomdl.fitting.interpolate_surface` (P&T A9.4, dense Doolittle LU per line), run through
 //! `tests/python/fit_geomdl.py`. Fails (never skips) when python3 or geomdl is missing.
 
+use crate::common::{json_from, reference_script};
 use std::io::Write;
 use surfscan::fit::{fit_grid, FitOptions};
 
@@ -47,25 +48,13 @@ fn check(rows: usize, cols: usize, pitch_x_mm: f64, y_mm: &[f64], p: usize, q: u
     }
     drop(f);
 
-    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/fit_geomdl.py");
-    let out = crate::common::python()
-        .arg(script)
-        .arg(&csv)
-        .arg(format!("{pitch_x_mm:e}"))
-        .arg(p.to_string())
-        .arg(q.to_string())
-        .output()
-        .unwrap_or_else(|e| {
-            panic!("cannot run python3 ({e}); run `bash .ci/run` to create .venv/")
-        });
-    assert!(
-        out.status.success(),
-        "fit_geomdl.py failed ({}); if geomdl is missing, run `bash .ci/run` to create .venv/\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
+    let v = json_from(
+        reference_script("fit_geomdl.py")
+            .arg(&csv)
+            .arg(format!("{pitch_x_mm:e}"))
+            .arg(p.to_string())
+            .arg(q.to_string()),
     );
-    let v: serde_json::Value =
-        serde_json::from_slice(&out.stdout).expect("JSON from fit_geomdl.py");
     let nums = |key: &str| -> Vec<f64> {
         v[key]
             .as_array()

@@ -43,26 +43,15 @@ fn reference_json(
         })
         .collect();
     std::fs::write(&csv, text).expect("write csv");
-    let path = format!("{}/tests/python/{script}", env!("CARGO_MANIFEST_DIR"));
-    let out = crate::common::python()
-        .arg(path)
-        .arg(&csv)
-        .arg(format!("{pitch_x:e}"))
-        .arg(format!("{pitch_y:e}"))
-        .arg(p.to_string())
-        .arg(q.to_string())
-        .arg("--json")
-        .output()
-        .unwrap_or_else(|e| {
-            panic!("cannot run python3 ({e}); run `bash .ci/run` to create .venv/")
-        });
-    assert!(
-        out.status.success(),
-        "{script} failed ({}); run `bash .ci/run` to create .venv/\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("JSON from the reference")
+    crate::common::json_from(
+        crate::common::reference_script(script)
+            .arg(&csv)
+            .arg(format!("{pitch_x:e}"))
+            .arg(format!("{pitch_y:e}"))
+            .arg(p.to_string())
+            .arg(q.to_string())
+            .arg("--json"),
+    )
 }
 
 fn check(rows: usize, cols: usize, pitch_x: f64, pitch_y: f64, p: usize, q: usize) {

@@ -15,12 +15,7 @@ use super::common::{
 fn occt_check(igs: &std::path::Path, expect: &serde_json::Value) {
     let json = igs.with_extension("expect.json");
     std::fs::write(&json, serde_json::to_vec(expect).unwrap()).unwrap();
-    let script = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/python/check_iges_occt.py"
-    );
-    let out = crate::common::python()
-        .arg(script)
+    let out = crate::common::reference_script("check_iges_occt.py")
         .arg(igs)
         .arg(&json)
         .output()

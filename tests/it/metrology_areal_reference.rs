@@ -7,6 +7,7 @@
 //!
 //! Requires `bash .ci/run` (tests/python/requirements.txt in .venv/).
 
+use crate::common::{json_from, reference_script};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use surfscan::metrology::areal::{level_plane, HeightMap, Plane};
@@ -32,20 +33,12 @@ fn read_grid(path: &Path) -> (Vec<f64>, usize, usize) {
 }
 
 fn reference(path: &Path, px: f64, py: f64) -> Value {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/areal_reference.py");
-    let out = crate::common::python()
-        .arg(&script)
-        .arg(path)
-        .arg(px.to_string())
-        .arg(py.to_string())
-        .output()
-        .expect("python3 must be installed to run the independent reference");
-    assert!(
-        out.status.success(),
-        "reference script failed (run `bash .ci/run`, which installs tests/python/requirements.txt into .venv/):\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("reference script prints JSON")
+    json_from(
+        reference_script("areal_reference.py")
+            .arg(path)
+            .arg(px.to_string())
+            .arg(py.to_string()),
+    )
 }
 
 /// report.json of `surfscan analyze` of the grid at `path` with its pitches.

@@ -20,6 +20,7 @@
 //!   to 1e-6 relative.
 //! * No filter on the Mitutoyo export: it already is an R profile (λc 2.5 mm, N = 4).
 
+use crate::common::{json_from, reference_script};
 use serde_json::Value;
 use std::path::PathBuf;
 use surfscan::metrology::areal::{areal_params, HeightMap};
@@ -48,19 +49,7 @@ fn load(name: &str) -> (Vec<f64>, Vec<f64>) {
 }
 
 fn reference() -> Value {
-    let script =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/python/metrology_surfalize.py");
-    let out = crate::common::python()
-        .arg(&script)
-        .arg(data_dir())
-        .output()
-        .expect("python3 must be installed to run the independent reference");
-    assert!(
-        out.status.success(),
-        "reference script failed (run `bash .ci/run`, which installs tests/python/requirements.txt into .venv/):\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("reference script prints JSON")
+    json_from(reference_script("metrology_surfalize.py").arg(data_dir()))
 }
 
 fn num(v: &Value, key: &str) -> f64 {

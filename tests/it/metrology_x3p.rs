@@ -4,6 +4,7 @@
 //! xmllint against the official ISO 5436-2 schema (`tests/data/x3p/`) with its MD5 files
 //! checked by `md5sum -c` ([`assert_valid_x3p`], used by every test that writes an X3P file).
 
+use crate::common::{json_from, reference_script};
 use std::path::Path;
 use std::process::Command;
 use surfscan::metrology::areal::HeightMap;
@@ -133,19 +134,7 @@ fn x3p_round_trips_and_surfalize_reads_it() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("grid.x3p");
     std::fs::write(&path, &bytes).unwrap();
-    let script = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/python/metrology_x3p_read.py");
-    let out = crate::common::python()
-        .arg(&script)
-        .arg(&path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "surfalize could not read the X3P (run `bash .ci/run`, which installs tests/python/requirements.txt into .venv/):\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = json_from(reference_script("metrology_x3p_read.py").arg(&path));
     assert_eq!(v["rows"], rows);
     assert_eq!(v["cols"], cols);
     assert!((v["step_x_um"].as_f64().unwrap() - 1.5).abs() < 1e-9);
@@ -162,19 +151,7 @@ fn x3p_files_of_other_software_are_read() {
     // (deflated entries, int16 with z scaling, a validity mask, a DataList profile); the
     // script reports what it put in.
     let dir = tempfile::tempdir().unwrap();
-    let script =
-        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/python/x3p_write.py");
-    let out = crate::common::python()
-        .arg(&script)
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "x3p_write.py failed (run `bash .ci/run`, which installs tests/python/requirements.txt into .venv/):\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let files: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let files = json_from(reference_script("x3p_write.py").arg(dir.path()));
     let files = files.as_object().unwrap();
     assert_eq!(files.len(), 4);
     for (name, want) in files {
@@ -459,18 +436,7 @@ fn analyze_reads_an_x3p_as_the_same_grid_as_its_csv() {
 #[test]
 fn analyze_leaves_out_lines_with_invalid_points_of_a_foreign_x3p() {
     let dir = tempfile::tempdir().unwrap();
-    let script =
-        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/python/x3p_write.py");
-    let out = crate::common::python()
-        .arg(&script)
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    json_from(reference_script("x3p_write.py").arg(dir.path()));
     // 5 lines × 200 points at 2 µm, NaN on lines 2 and 5: three lines characterised.
     let o = std::process::Command::new(env!("CARGO_BIN_EXE_surfscan"))
         .arg("analyze")
@@ -505,9 +471,7 @@ fn analyze_leaves_out_lines_with_invalid_points_of_a_foreign_x3p() {
 /// `tests/python/x3p_profile.py` (x3pio, a reader and writer independent of ours) with `args`;
 /// its JSON output when it prints any.
 fn x3pio(args: &[&std::ffi::OsStr]) -> Option<serde_json::Value> {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/x3p_profile.py");
-    let o = crate::common::python()
-        .arg(script)
+    let o = reference_script("x3p_profile.py")
         .args(args)
         .output()
         .unwrap();

@@ -4,6 +4,7 @@
 //! computed here, then `surfscan analyze SCAN_DIR`, `surfscan fit SCAN_DIR` and
 //! `report::characterise_scan` are checked against what was put in.
 
+use crate::common::{json_from, reference_script};
 use chrono::{TimeZone, Utc};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -502,19 +503,7 @@ fn x3p_of_a_scan_carries_the_traceability_and_surfalize_reads_it() {
     assert_eq!(measured.cols, data[0].len());
     assert!((measured.heights_um[3 * measured.cols + 10] - data[5][10]).abs() < 1e-9);
 
-    let script =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/python/metrology_x3p_read.py");
-    let out = crate::common::python()
-        .arg(&script)
-        .arg(scan.join("measured.x3p"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "surfalize could not read the scan's X3P:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = json_from(reference_script("metrology_x3p_read.py").arg(scan.join("measured.x3p")));
     assert_eq!(v["rows"], 8);
     assert_eq!(v["cols"], data[0].len());
     assert!((v["heights_um"][10].as_f64().unwrap() - data[2][10]).abs() < 1e-9);

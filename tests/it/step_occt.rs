@@ -11,7 +11,7 @@
 //! gmsh meshes into tetrahedra whose volumes add up to OpenCascade's within 0.1 %. The
 //! mirrored case (y decreasing along the surface's v) takes the writer's other orientation.
 //! Fails (does not skip) when python3, OCP or gmsh is missing.
-use super::common::python;
+use super::common::{json_from, reference_script};
 use surfscan::fit::{fit_grid, FitOptions};
 use surfscan::nurbs::NurbsSurface;
 use surfscan::step::{write_solid_step, StepOptions};
@@ -57,26 +57,15 @@ fn check(
         })
         .collect();
     std::fs::write(&grid, text.join("\n")).unwrap();
-    let script = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/python/check_step_occt.py"
+    let r = json_from(
+        reference_script("check_step_occt.py")
+            .arg(&step)
+            .arg(&grid)
+            .arg(PITCH_X_MM.to_string())
+            .arg(serde_json::to_string(y_mm).unwrap())
+            .arg(stats.bottom_z_mm.to_string())
+            .arg(if mesh { "1" } else { "0" }),
     );
-    let out = python()
-        .arg(script)
-        .arg(&step)
-        .arg(&grid)
-        .arg(PITCH_X_MM.to_string())
-        .arg(serde_json::to_string(y_mm).unwrap())
-        .arg(stats.bottom_z_mm.to_string())
-        .arg(if mesh { "1" } else { "0" })
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(r["solids"], 1, "{r}");
     assert_eq!(r["shells"], 1, "{r}");
     assert_eq!(r["faces"], 6, "{r}");

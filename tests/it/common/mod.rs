@@ -521,6 +521,29 @@ pub fn python() -> std::process::Command {
     std::process::Command::new(python)
 }
 
+/// The reference script `tests/python/NAME` under [`python`]; its arguments follow.
+pub fn reference_script(name: &str) -> Command {
+    let mut c = python();
+    c.arg(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/python")
+            .join(name),
+    );
+    c
+}
+
+/// Runs a reference script and returns the JSON it prints; a script that fails fails the test
+/// with its command line and standard error.
+pub fn json_from(script: &mut Command) -> serde_json::Value {
+    let out = script.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{script:?} failed (run `bash .ci/run`, which installs tests/python/requirements.txt into .venv/):\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("a reference script prints JSON")
+}
+
 /// Copies the directory tree `from` to `to` (created), files and subdirectories.
 pub fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
