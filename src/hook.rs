@@ -7,14 +7,11 @@
 //! stream. Whatever happens to it (cannot start, non-zero exit, killed on timeout) is logged
 //! with the command and the cause and otherwise ignored.
 //!
-//! The command sees `SURFSCAN_SCAN_ID`, `SURFSCAN_STATUS` (`success|fail|abort|suspended`),
-//! `SURFSCAN_REASON`, `SURFSCAN_SCAN_DIR`, `SURFSCAN_INTERNAL` (`1` when a bug ended the scan,
-//! `0` otherwise), and a completed scan's results
-//! ([`crate::scan::results::ScanResults::env`]: `SURFSCAN_VERDICT`,
-//! `SURFSCAN_VERDICT_SUMMARY`, `SURFSCAN_WARNINGS`, `SURFSCAN_RA_MEAN_UM`,
-//! `SURFSCAN_RZ_MEAN_UM`, `SURFSCAN_SA_UM`; every one set, empty when it does not apply);
-//! systemd's notification variables are removed so the hook cannot speak to the service
-//! manager on the daemon's behalf.
+//! The command sees the event's `SURFSCAN_*` variables (set where it is spawned) and a
+//! completed scan's results ([`crate::scan::results::ScanResults::env`]; every one set, empty
+//! when it does not apply); their one full list, for the people who write hooks, is
+//! docs/integration.md's "The notification hook". systemd's notification variables are
+//! removed so the hook cannot speak to the service manager on the daemon's behalf.
 //!
 //! Layer 4 (process edge): depends on the scan's events ([`crate::scan::event`]), tokio's
 //! process support, nix for the process group and serde for [`HookSettings`].

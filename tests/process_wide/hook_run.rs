@@ -85,6 +85,53 @@ async fn the_hook_sees_the_scan_s_variables() {
     }
 }
 
+/// The `SURFSCAN_*` names in `text`.
+fn surfscan_names(text: &str) -> std::collections::BTreeSet<String> {
+    text.split(|c: char| !(c.is_ascii_uppercase() || c.is_ascii_digit() || c == '_'))
+        .filter(|w| w.starts_with("SURFSCAN_"))
+        .map(str::to_owned)
+        .collect()
+}
+
+/// The hook's variables are exactly the rows of docs/integration.md's table, the one full
+/// list the configuration's example, systemd/README.md and the module doc point to: a
+/// variable added to the hook and not to that table (or one the table names and the hook
+/// does not set) fails here.
+#[allow(clippy::await_holding_lock)]
+#[tokio::test]
+async fn the_hook_sets_the_variables_its_one_documented_list_names() {
+    let _env = crate::process_state();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("env.txt");
+    let s = script(dir.path(), "env.sh", r#"env > "$1""#);
+    let h = hook(vec![s.display().to_string(), out.display().to_string()], 10);
+    let outcome = h.run(&event(HookStatus::Fail)).await;
+    assert!(matches!(outcome, HookOutcome::Succeeded), "{outcome:?}");
+    let inherited: Vec<String> = std::env::vars().map(|(k, _)| k).collect();
+    let mut set: std::collections::BTreeSet<String> = std::fs::read_to_string(&out)
+        .unwrap()
+        .lines()
+        .filter_map(|l| l.split_once('=').map(|(k, _)| k.to_owned()))
+        .filter(|k| k.starts_with("SURFSCAN_"))
+        .collect();
+    set.retain(|k| !inherited.contains(k));
+
+    let doc =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/integration.md"))
+            .unwrap();
+    let section = doc
+        .split("\n## ")
+        .find(|s| s.starts_with("The notification hook\n"))
+        .expect("the section");
+    let documented: std::collections::BTreeSet<String> = section
+        .lines()
+        .filter(|l| l.starts_with("| `SURFSCAN_"))
+        .flat_map(|l| surfscan_names(l.split('|').nth(1).unwrap_or_default()))
+        .collect();
+    assert_eq!(set, documented);
+    assert_eq!(documented.len(), 11, "{documented:?}");
+}
+
 #[tokio::test]
 async fn a_non_zero_exit_is_reported() {
     let dir = tempfile::tempdir().unwrap();
