@@ -174,6 +174,16 @@ mod tests {
     use Rule::{Max, SixteenPercent as P16};
     use Verdict::{Conforms as C, DoesNotConform as NC, NotDecidable as ND};
 
+    /// A tally of `n` measured values, `beyond` and `undecided` of them, `missing` not measured.
+    fn counts(n: usize, beyond: usize, undecided: usize, missing: usize) -> Tally {
+        Tally {
+            n,
+            beyond,
+            undecided,
+            missing,
+        }
+    }
+
     fn tally(values: &[f64], u: f64, limit: f64, side: Side) -> Tally {
         let mut t = Tally::default();
         for &v in values {
@@ -250,77 +260,17 @@ mod tests {
 
         // 25 values: 3 proven above, 2 undecided. Counted beyond: 5 of 25 (20 %) breaks
         // the rule; counted within: 3 of 25 (12 %) meets it. Not decidable.
-        let t = Tally {
-            n: 25,
-            beyond: 3,
-            undecided: 2,
-            missing: 0,
-        };
+        let t = counts(25, 3, 2, 0);
         assert_eq!(decide(P16, t), ND);
         // 1 undecided: 4 of 25 at worst is exactly 16 %: conforms.
-        assert_eq!(
-            decide(
-                P16,
-                Tally {
-                    n: 25,
-                    beyond: 3,
-                    undecided: 1,
-                    missing: 0,
-                }
-            ),
-            C
-        );
+        assert_eq!(decide(P16, counts(25, 3, 1, 0)), C);
         // 5 proven above: 20 % whatever the undecided ones are.
-        assert_eq!(
-            decide(
-                P16,
-                Tally {
-                    n: 25,
-                    beyond: 5,
-                    undecided: 7,
-                    missing: 0,
-                }
-            ),
-            NC
-        );
+        assert_eq!(decide(P16, counts(25, 5, 7, 0)), NC);
         // The max rule: one undecided value and none proven beyond is not decidable; one
         // proven beyond does not conform.
-        assert_eq!(
-            decide(
-                Max,
-                Tally {
-                    n: 25,
-                    beyond: 0,
-                    undecided: 1,
-                    missing: 0,
-                }
-            ),
-            ND
-        );
-        assert_eq!(
-            decide(
-                Max,
-                Tally {
-                    n: 25,
-                    beyond: 1,
-                    undecided: 3,
-                    missing: 0,
-                }
-            ),
-            NC
-        );
-        assert_eq!(
-            decide(
-                Max,
-                Tally {
-                    n: 25,
-                    beyond: 0,
-                    undecided: 0,
-                    missing: 0,
-                }
-            ),
-            C
-        );
+        assert_eq!(decide(Max, counts(25, 0, 1, 0)), ND);
+        assert_eq!(decide(Max, counts(25, 1, 3, 0)), NC);
+        assert_eq!(decide(Max, counts(25, 0, 0, 0)), C);
 
         // The same values with and without an uncertainty: what U = 0 calls conforming
         // is not decidable once U holds the limit.
@@ -331,33 +281,27 @@ mod tests {
 
     #[test]
     fn a_partial_scan_counts_its_missing_lines_as_undecided() {
-        let t = |n, beyond, undecided, missing| Tally {
-            n,
-            beyond,
-            undecided,
-            missing,
-        };
         // 31 lines planned, 20 traced, none beyond: under the 16 % rule, 11 lines that might
         // all be beyond are 35 % of 31, so it is not decidable; the traced 20 alone would
         // conform.
-        assert_eq!(decide(P16, t(20, 0, 0, 0)), C);
-        assert_eq!(decide(P16, t(20, 0, 0, 11)), ND);
+        assert_eq!(decide(P16, counts(20, 0, 0, 0)), C);
+        assert_eq!(decide(P16, counts(20, 0, 0, 11)), ND);
         // 28 of 31 traced, one beyond: 1 + 3 = 4 of 31 (12.9 %) meets the rule whatever the
         // three missing hold; one more undecided value (5 of 31, 16.1 %) leaves it open.
-        assert_eq!(decide(P16, t(28, 1, 0, 3)), C);
-        assert_eq!(decide(P16, t(28, 1, 1, 3)), ND);
+        assert_eq!(decide(P16, counts(28, 1, 0, 3)), C);
+        assert_eq!(decide(P16, counts(28, 1, 1, 3)), ND);
         // 20 of 31 traced, 5 beyond: 5 of 31 (16.1 %) breaks the rule even if the 11 missing
         // are all within, so it does not conform; 4 beyond (4 of 31, 12.9 %) might still
         // conform, though 4 of the 20 traced (20 %) would not.
-        assert_eq!(decide(P16, t(20, 5, 0, 11)), NC);
-        assert_eq!(decide(P16, t(20, 4, 0, 11)), ND);
-        assert_eq!(decide(P16, t(20, 4, 0, 0)), NC);
+        assert_eq!(decide(P16, counts(20, 5, 0, 11)), NC);
+        assert_eq!(decide(P16, counts(20, 4, 0, 11)), ND);
+        assert_eq!(decide(P16, counts(20, 4, 0, 0)), NC);
         // The max rule: one value beyond decides it; a missing line keeps it from conforming.
-        assert_eq!(decide(Max, t(30, 1, 0, 1)), NC);
-        assert_eq!(decide(Max, t(30, 0, 0, 1)), ND);
-        assert_eq!(decide(Max, t(31, 0, 0, 0)), C);
+        assert_eq!(decide(Max, counts(30, 1, 0, 1)), NC);
+        assert_eq!(decide(Max, counts(30, 0, 0, 1)), ND);
+        assert_eq!(decide(Max, counts(31, 0, 0, 0)), C);
         // No value at all decides nothing.
-        assert_eq!(decide(P16, t(0, 0, 0, 31)), ND);
+        assert_eq!(decide(P16, counts(0, 0, 0, 31)), ND);
     }
 
     #[test]
