@@ -292,6 +292,10 @@ mod tests {
     const RESUME: Asker = Asker::Operator(StartMode::Resume);
     const NEW: Asker = Asker::Operator(StartMode::New);
     const ALL: [Asker; 4] = [AUTO, RESUME, NEW, Asker::DaemonStartUp];
+    /// A new scan that leaves no unfinished one behind.
+    const FRESH: Decision = Decision::New {
+        abandon: Vec::new(),
+    };
 
     fn decision(s: &Survey, asker: Asker) -> Decision {
         decide(s, asker, Path::new("/out")).decision
@@ -300,11 +304,8 @@ mod tests {
     #[test]
     fn an_empty_output_directory() {
         let s = Survey::default();
-        let new = Decision::New {
-            abandon: Vec::new(),
-        };
-        assert_eq!(decision(&s, AUTO), new);
-        assert_eq!(decision(&s, NEW), new);
+        assert_eq!(decision(&s, AUTO), FRESH);
+        assert_eq!(decision(&s, NEW), FRESH);
         assert_eq!(decision(&s, Asker::DaemonStartUp), Decision::Nothing);
         match decision(&s, RESUME) {
             Decision::Refuse(why) => assert!(
@@ -365,20 +366,10 @@ mod tests {
                 "{asker:?}"
             );
         }
-        assert_eq!(
-            decision(&s, NEW),
-            Decision::New {
-                abandon: Vec::new()
-            }
-        );
+        assert_eq!(decision(&s, NEW), FRESH);
         // Not when a newer scan ran since: it is history.
         let s = survey_of(Vec::new(), vec![failed("f", 3, FailCause::Storage)], 4);
-        assert_eq!(
-            decision(&s, AUTO),
-            Decision::New {
-                abandon: Vec::new()
-            }
-        );
+        assert_eq!(decision(&s, AUTO), FRESH);
         assert_eq!(decision(&s, Asker::DaemonStartUp), Decision::Nothing);
     }
 
@@ -407,12 +398,7 @@ mod tests {
                 assert_eq!(decision(&s, Asker::DaemonStartUp), Decision::Nothing);
             }
             let d = decide(&s, AUTO, Path::new("/out"));
-            assert_eq!(
-                d.decision,
-                Decision::New {
-                    abandon: Vec::new()
-                }
-            );
+            assert_eq!(d.decision, FRESH);
             assert!(
                 d.warnings
                     .iter()
@@ -442,12 +428,7 @@ mod tests {
         assert_eq!(decision(&s, RESUME), Decision::Continue("f".into()));
         assert_eq!(decision(&s, Asker::DaemonStartUp), Decision::Nothing);
         let d = decide(&s, AUTO, Path::new("/out"));
-        assert_eq!(
-            d.decision,
-            Decision::New {
-                abandon: Vec::new()
-            }
-        );
+        assert_eq!(d.decision, FRESH);
         assert!(
             d.warnings.iter().any(|w| w
                 .starts_with("the last scan f failed with an internal error")
