@@ -9,7 +9,9 @@
 //! ([`crate::jobs::queue`]). A job whose scan could not begin because a device is missing
 //! goes back to its place and is tried again with the reconnection backoff: a condition
 //! that clears by itself never consumes a night's job. A scan that ends by a shutdown
-//! leaves its job running: the scan resumes at the next start.
+//! leaves its job running: the scan resumes at the next start. A scan whose reopening
+//! panicked has ended by a bug (the runner records it): its job ends `fail` with it, and the
+//! queue does not reopen it again.
 //!
 //! Layer 5 (composition): depends on [`crate::jobs`], [`crate::scan`]'s choice and
 //! settings, and [`super::station`].
@@ -336,4 +338,81 @@ fn names_job(dir: &Path, id: u64) -> bool {
         .and_then(|s| s.start.job)
         .and_then(|j| j.id)
         == Some(id)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Jobs, Turn};
+    use crate::jobs::queue::JobState;
+    use crate::jobs::service::{tests::station, AddJob, QueueService};
+    use crate::jobs::synthetic::{write, SyntheticScan};
+    use crate::scan::ending::{End, FailKind, FailReason};
+    use crate::scan::outcome::Outcome;
+    use crate::scan::testhooks::TestHooks;
+    use std::time::Instant;
+
+    /// A job's scan whose reopening panicked (the daemon's at its start, as the runner ends
+    /// it: a failure by a bug, with the scan's directory) ends the job `fail` with its scan,
+    /// and the queue's next turn does not reopen the scan again. Refused without its
+    /// directory, as before, the job stayed running and the turn reopened its scan a second
+    /// time.
+    #[test]
+    fn a_job_whose_scan_could_not_be_reopened_for_a_bug_ends_with_its_scan() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let config = station(tmp.path());
+        let base =
+            super::run_settings(&config, "ab".repeat(32), TestHooks::default()).expect("settings");
+        let (queue, _) = QueueService::open(config).expect("queue");
+        let job = queue
+            .add(
+                AddJob {
+                    recipe: "brass".into(),
+                    specimen: "C-1".into(),
+                    operator: String::new(),
+                    notes: String::new(),
+                    y_start_mm: None,
+                    needs_loading: false,
+                },
+                None,
+            )
+            .expect("added")
+            .id;
+        queue.mark_running(job).expect("running");
+        let scan = SyntheticScan {
+            id: "20261207-2200-C-1".into(),
+            sequence: 1,
+            started: "2026-12-07T22:00:00Z".parse().expect("a time"),
+            specimen: "C-1".into(),
+            recipe: Some(("brass".into(), Some(job))),
+            lines: 11,
+            done: 4,
+            stop: None,
+            report: None,
+        };
+        let dir = write(&base.output_dir, &scan).expect("scan");
+        queue.set_scan(job, &scan.id).expect("its scan");
+        let mut jobs = Jobs::new(queue, "ab".repeat(32));
+        let why = "internal error: reopening the scan panicked (a bug); report this with the scan's directory and the log";
+        let outcome = Outcome {
+            end: End::Fail(FailReason::Refused {
+                message: why.into(),
+                kind: FailKind::Internal,
+            }),
+            dir: Some(dir),
+            outputs: None,
+        };
+
+        jobs.settle_if_a_job(&outcome, &base);
+        let snapshot = jobs.queue.snapshot();
+        let state = &snapshot.get(job).expect("the job").state;
+        assert!(
+            matches!(state, JobState::Finished { scan_id: Some(s), outcome, reason, .. }
+                if *s == scan.id && outcome == "fail" && reason == why),
+            "{state:?}"
+        );
+        assert!(
+            matches!(jobs.turn(&base, true, Instant::now()), Turn::Nothing),
+            "the scan is reopened again"
+        );
+    }
 }

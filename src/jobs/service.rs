@@ -464,4 +464,4 @@ fn find_job_scan(out: &Path, id: u64, recorded: Option<&str>) -> Option<JobScan>
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -13,8 +13,8 @@ y-step-mm = 0.01
 limits = ["Ra 0.8"]
 "#;
 
-/// The configuration's smallest station, its output and recipes in `dir`.
-fn station(dir: &Path) -> Config {
+/// The configuration's smallest station, its output and recipes in `dir` (a recipe `brass`).
+pub(crate) fn station(dir: &Path) -> Config {
     let out = dir.join("out").display().to_string();
     let text = format!(
         "{}[jobs]\nrecipes = \"{}\"\n",
