@@ -90,11 +90,7 @@ fn contact_agrees_with_contactmechanics_elastic_and_plastic() {
         .args(["64", "64", "1.0", "4.0", "7"])
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert!(out.status.success(), "{}", crate::common::describe(&out));
     let demo = dir.path().join("demo.csv");
     write_demo_window(&demo);
     let sur2 = dir.path().join("sur2.csv");

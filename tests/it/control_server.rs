@@ -808,11 +808,7 @@ async fn a_supplementary_group_of_the_peer_counts_for_allowed_groups() {
     })
     .await
     .unwrap();
-    assert!(
-        ok.status.success(),
-        "{}",
-        String::from_utf8_lossy(&ok.stderr)
-    );
+    assert!(ok.status.success(), "{}", crate::common::describe(&ok));
     let peers = runner.peers.lock().unwrap().clone();
     assert_eq!(peers.len(), 1);
     assert_eq!((peers[0].uid, peers[0].gid), (0, primary));

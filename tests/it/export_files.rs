@@ -351,12 +351,7 @@ async fn a_recipe_scan_exports_a_dfq_and_a_qif_that_read_back_as_its_report() {
         .arg(dir)
         .output()
         .unwrap();
-    assert_eq!(
-        o.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    assert_eq!(o.status.code(), Some(0), "{}", crate::common::describe(&o));
     assert_eq!(
         std::fs::read(again.join(format!("{id}.dfq"))).unwrap(),
         std::fs::read(&dfq_path).unwrap()

@@ -36,11 +36,7 @@ fn fits_a_plane_and_writes_iges_and_report_into_new_directories() {
         .arg(&report)
         .output()
         .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
-    );
+    assert!(st.status.success(), "{}", crate::common::describe(&st));
     let file = surfscan::iges::read_iges(&std::fs::read(&out).unwrap()).unwrap();
     assert_eq!(file.surfaces.len(), 1);
     let s = &file.surfaces[0];
@@ -197,11 +193,7 @@ fn a_surface_too_large_for_one_file_is_written_as_named_parts_with_a_report() {
             .args(caps)
             .output()
             .unwrap();
-        assert!(
-            st.status.success(),
-            "{}",
-            String::from_utf8_lossy(&st.stderr)
-        );
+        assert!(st.status.success(), "{}", crate::common::describe(&st));
         let rep: serde_json::Value =
             serde_json::from_slice(&std::fs::read(report).unwrap()).unwrap();
         (String::from_utf8_lossy(&st.stdout).into_owned(), rep)
@@ -331,11 +323,7 @@ fn fit_onto_a_character_device_writes_into_it_and_leaves_it_a_device() {
         .args(["--pitch-x", "0.01", "--pitch-y", "0.02"])
         .output()
         .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
-    );
+    assert!(st.status.success(), "{}", crate::common::describe(&st));
     let meta = std::fs::symlink_metadata(&node).unwrap();
     assert!(meta.file_type().is_char_device(), "{meta:?}");
     assert_eq!(meta.rdev(), libc::makedev(1, 3));

@@ -139,11 +139,7 @@ fn opencascade_finds_an_x3p_inputs_surface_where_it_was_measured() {
         .arg(&report)
         .output()
         .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    assert!(run.status.success(), "{}", crate::common::describe(&run));
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     assert_eq!(report["x0_mm"], 0.25);

@@ -435,12 +435,7 @@ fn a_profile_csv_with_a_byte_order_mark_is_read_as_a_profile() {
         .arg(&out)
         .output()
         .unwrap();
-    assert_eq!(
-        o.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    assert_eq!(o.status.code(), Some(0), "{}", crate::common::describe(&o));
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["kind"], "profile");
@@ -501,7 +496,7 @@ fn analysis_flags_outside_the_configurations_ranges_are_usage_errors() {
         run.status.code(),
         Some(0),
         "{}",
-        String::from_utf8_lossy(&run.stderr)
+        crate::common::describe(&run)
     );
 }
 
@@ -630,12 +625,7 @@ fn an_uncentred_unfiltered_profile_and_an_x_in_micrometres_are_warned_of() {
             .arg(&out)
             .output()
             .unwrap();
-        assert_eq!(
-            r.status.code(),
-            Some(0),
-            "{}",
-            String::from_utf8_lossy(&r.stderr)
-        );
+        assert_eq!(r.status.code(), Some(0), "{}", crate::common::describe(&r));
         String::from_utf8_lossy(&r.stderr).into_owned()
     };
     let offset = write("offset.csv", &|x, z| (x, z + 100.0));
@@ -683,12 +673,7 @@ fn sampling_lengths_evaluates_the_central_sections_of_a_traverse() {
         (r, report)
     };
     let (r, report) = run(&["--sampling-lengths", "5"]);
-    assert_eq!(
-        r.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&r.stderr)
-    );
+    assert_eq!(r.status.code(), Some(0), "{}", crate::common::describe(&r));
     let report = report.unwrap();
     assert_eq!(report["recipe"]["sampling_lengths"], 5);
     assert_eq!(report["recipe"]["points_not_evaluated"], 1600);
@@ -704,12 +689,7 @@ fn sampling_lengths_evaluates_the_central_sections_of_a_traverse() {
     );
     // More sections than the traverse holds: the profile is too short for them.
     let (r, _) = run(&["--sampling-lengths", "7"]);
-    assert_eq!(
-        r.status.code(),
-        Some(1),
-        "{}",
-        String::from_utf8_lossy(&r.stderr)
-    );
+    assert_eq!(r.status.code(), Some(1), "{}", crate::common::describe(&r));
     assert!(String::from_utf8_lossy(&r.stderr).contains("shorter than"));
     // None is not a number of sections.
     let (r, _) = run(&["--sampling-lengths", "0"]);
@@ -746,12 +726,7 @@ fn no_filter_on_a_grid_of_uncentred_lines_is_warned_of() {
             .args(extra)
             .output()
             .unwrap();
-        assert_eq!(
-            o.status.code(),
-            Some(0),
-            "{}",
-            String::from_utf8_lossy(&o.stderr)
-        );
+        assert_eq!(o.status.code(), Some(0), "{}", crate::common::describe(&o));
         let report: Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
                 .unwrap();
