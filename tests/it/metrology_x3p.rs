@@ -682,7 +682,7 @@ fn analyze_names_positions_in_the_x3p_files_coordinates() {
     let sur_2 = map_of(&z, rows, cols, 0.003484, 0.010452);
     let kinds = ["spike in line", "model overshoot"];
     positions_move(&sur_2, &[], [[0.0, 0.0], [0.25, -20.0]], &kinds, 0.0);
-    let mut z = uncorrelated_grid(11);
+    let mut z = uncorrelated_grid(11, COLS);
     z[12 * COLS + 233] += 100.0;
     let folding = map_of(&z, ROWS, COLS, PX, PY);
     let kinds = [

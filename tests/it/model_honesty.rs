@@ -36,11 +36,12 @@ fn y_mm(rows: usize) -> Vec<f64> {
     (0..rows).map(|r| r as f64 * PY).collect()
 }
 
-/// Smooth along x and y: the lines, 10 µm apart, sample a 0.25 mm wavelength in y densely.
-fn sine_grid() -> Vec<f64> {
-    (0..ROWS * COLS)
+/// Smooth along x and y: the lines, 10 µm apart, sample a 0.25 mm wavelength in y densely
+/// (25 lines per period); `cols` points a line.
+pub(crate) fn sine_grid(cols: usize) -> Vec<f64> {
+    (0..ROWS * cols)
         .map(|k| {
-            let (x, y) = ((k % COLS) as f64 * PX, (k / COLS) as f64 * PY);
+            let (x, y) = ((k % cols) as f64 * PX, (k / cols) as f64 * PY);
             3.0 * (x / 0.08 * std::f64::consts::TAU).sin()
                 * (y / 0.25 * std::f64::consts::TAU).cos()
         })
@@ -48,14 +49,14 @@ fn sine_grid() -> Vec<f64> {
 }
 
 /// Each line a rough profile of its own (smooth along x, correlation length a few µm),
-/// independent of its neighbours.
-pub(crate) fn uncorrelated_grid(seed: u64) -> Vec<f64> {
+/// independent of its neighbours; `cols` points a line.
+pub(crate) fn uncorrelated_grid(seed: u64, cols: usize) -> Vec<f64> {
     let mut rng = Rng(seed);
-    let mut z = Vec::with_capacity(ROWS * COLS);
+    let mut z = Vec::with_capacity(ROWS * cols);
     for _ in 0..ROWS {
-        let noise: Vec<f64> = (0..COLS + 8).map(|_| rng.gauss()).collect();
+        let noise: Vec<f64> = (0..cols + 8).map(|_| rng.gauss()).collect();
         // A 9-point moving average: correlated along the line, not across.
-        z.extend((0..COLS).map(|i| noise[i..i + 9].iter().sum::<f64>() / 3.0));
+        z.extend((0..cols).map(|i| noise[i..i + 9].iter().sum::<f64>() / 3.0));
     }
     z
 }
@@ -86,7 +87,7 @@ fn verdict(z: &[f64], method: VMethod) -> surfscan::metrology::holdout::BetweenL
 
 #[test]
 fn a_smooth_sine_grid_is_supported_between_lines() {
-    let z = sine_grid();
+    let z = sine_grid(COLS);
     // The interpolant predicts the sine between lines to a tiny fraction of its height; the
     // least-squares refit (12 control rows scaled to the 16 lines kept: 6) less closely.
     for (method, within) in [
@@ -111,7 +112,7 @@ fn a_smooth_sine_grid_is_supported_between_lines() {
 
 #[test]
 fn uncorrelated_lines_are_not_supported_and_the_interpolant_overshoots() {
-    let z = uncorrelated_grid(7);
+    let z = uncorrelated_grid(7, COLS);
     let b = verdict(&z, VMethod::Interpolate);
     assert!(!b.supported, "{}", b.verdict);
     // Worse than a flat plane (which would score about 1): the interpolant swings.
@@ -144,7 +145,7 @@ fn uncorrelated_lines_are_not_supported_and_the_interpolant_overshoots() {
 
 #[test]
 fn a_100_um_spike_is_named_and_the_default_surface_folds_with_a_named_warning() {
-    let mut z = uncorrelated_grid(11);
+    let mut z = uncorrelated_grid(11, COLS);
     let (line, at) = (12usize, 233usize);
     z[line * COLS + at] += 100.0;
     let mut found = Vec::new();
@@ -189,7 +190,7 @@ fn a_surface_folds_only_where_its_control_net_runs_back() {
     let mut rng = Rng(77);
     let (mut clean, mut folding) = (0, 0);
     for case in 0..16u64 {
-        let mut z = uncorrelated_grid(100 + case);
+        let mut z = uncorrelated_grid(100 + case, COLS);
         for _ in 0..(case % 4) {
             let at = (rng.next() * (ROWS * COLS) as f64) as usize;
             z[at] += rng.next() * 150.0;
@@ -266,7 +267,7 @@ fn the_default_fit_is_the_papers_bit_for_bit() {
 #[test]
 fn fit_names_a_folding_surface_as_analyze_does_and_exits_3_with_the_surface_written() {
     let dir = tempfile::tempdir().unwrap();
-    let mut z = uncorrelated_grid(11);
+    let mut z = uncorrelated_grid(11, COLS);
     z[12 * COLS + 233] += 100.0;
     let csv: String = z
         .chunks(COLS)

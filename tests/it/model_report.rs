@@ -6,6 +6,7 @@
 //! default IGES surface is the paper's fit bit for bit; the model section's two orders (on
 //! one core and on more) give the same files.
 
+use crate::model_honesty::{sine_grid, uncorrelated_grid};
 use serde_json::Value;
 use std::path::Path;
 use std::process::{Command, Output};
@@ -19,43 +20,6 @@ const PY: f64 = 0.01;
 
 fn surfscan() -> Command {
     Command::new(env!("CARGO_BIN_EXE_surfscan"))
-}
-
-/// splitmix64 → approximately Gaussian (sum of 4 uniforms), unit variance.
-struct Rng(u64);
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn gauss(&mut self) -> f64 {
-        ((0..4).map(|_| self.uniform()).sum::<f64>() - 2.0) * 3.0f64.sqrt()
-    }
-}
-
-/// Independent rough lines (a 9-point moving average of noise along each line).
-fn uncorrelated(seed: u64) -> Vec<f64> {
-    let mut rng = Rng(seed);
-    let mut z = Vec::with_capacity(ROWS * COLS);
-    for _ in 0..ROWS {
-        let noise: Vec<f64> = (0..COLS + 8).map(|_| rng.gauss()).collect();
-        z.extend((0..COLS).map(|i| noise[i..i + 9].iter().sum::<f64>() / 3.0));
-    }
-    z
-}
-
-/// Smooth along x and y (0.25 mm wavelength across the lines, 25 lines per period).
-fn sine() -> Vec<f64> {
-    (0..ROWS * COLS)
-        .map(|k| {
-            let (x, y) = ((k % COLS) as f64 * PX, (k / COLS) as f64 * PY);
-            3.0 * (x / 0.08 * std::f64::consts::TAU).sin()
-                * (y / 0.25 * std::f64::consts::TAU).cos()
-        })
-        .collect()
 }
 
 fn write_grid(path: &Path, z: &[f64]) {
@@ -114,7 +78,7 @@ fn text(o: &Output) -> (String, String) {
 #[test]
 fn a_100_um_spike_keeps_every_lines_parameters_names_the_spike_and_exits_partial() {
     let dir = tempfile::tempdir().unwrap();
-    let mut z = uncorrelated(3);
+    let mut z = uncorrelated_grid(3, COLS);
     let (line, at) = (12usize, 150usize);
     z[line * COLS + at] += 100.0;
     let grid = dir.path().join("spike.csv");
@@ -190,7 +154,10 @@ fn a_100_um_spike_keeps_every_lines_parameters_names_the_spike_and_exits_partial
 #[test]
 fn analyze_says_a_sine_grid_is_supported_and_uncorrelated_lines_are_not() {
     let dir = tempfile::tempdir().unwrap();
-    for (name, z, supported) in [("sine", sine(), true), ("noise", uncorrelated(5), false)] {
+    for (name, z, supported) in [
+        ("sine", sine_grid(COLS), true),
+        ("noise", uncorrelated_grid(5, COLS), false),
+    ] {
         let grid = dir.path().join(format!("{name}.csv"));
         write_grid(&grid, &z);
         let out = dir.path().join(name);
@@ -238,7 +205,7 @@ fn analyze_says_a_sine_grid_is_supported_and_uncorrelated_lines_are_not() {
 #[test]
 fn sections_the_line_count_rules_out_are_named_but_not_a_partial_characterisation() {
     let dir = tempfile::tempdir().unwrap();
-    let z = sine();
+    let z = sine_grid(COLS);
     for (lines, degree_v, missing) in [
         (4usize, "3", &["model_vs_measured", "between_lines"][..]),
         (
@@ -295,7 +262,7 @@ fn sections_the_line_count_rules_out_are_named_but_not_a_partial_characterisatio
 #[test]
 fn spikes_are_replaced_for_the_fit_only_when_asked_and_then_named() {
     let dir = tempfile::tempdir().unwrap();
-    let mut z = uncorrelated(9);
+    let mut z = uncorrelated_grid(9, COLS);
     z[7 * COLS + 40] -= 100.0;
     let grid = dir.path().join("spike.csv");
     write_grid(&grid, &z);
@@ -382,7 +349,7 @@ fn spikes_are_replaced_for_the_fit_only_when_asked_and_then_named() {
 fn fit_compare_prints_the_alternatives_side_by_side() {
     let dir = tempfile::tempdir().unwrap();
     let grid = dir.path().join("sine.csv");
-    write_grid(&grid, &sine());
+    write_grid(&grid, &sine_grid(COLS));
     let o = surfscan()
         .arg("fit")
         .arg(&grid)
@@ -494,7 +461,7 @@ fn outputs(dir: &Path) -> Vec<(String, Vec<u8>)> {
 fn the_model_sections_order_changes_no_result() {
     let dir = tempfile::tempdir().unwrap();
     let grid = dir.path().join("sine.csv");
-    write_grid(&grid, &sine());
+    write_grid(&grid, &sine_grid(COLS));
     let (free, pinned) = (dir.path().join("free"), dir.path().join("pinned"));
     let o = analyze(&grid, &free, &[]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o).1);
