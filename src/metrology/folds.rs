@@ -528,6 +528,7 @@ pub fn check_model_with(
 mod tests {
     use super::*;
     use crate::fit::{fit_grid, FitOptions};
+    use crate::metrology::{test_fit, test_grid};
 
     #[test]
     fn iso_curves_along_v_sampled_once_equal_each_curve_evaluated() {
@@ -672,18 +673,14 @@ mod tests {
     /// A 9×120 grid fitted as it is (smooth) and with a 400 µm spike on one line (the fit
     /// folds): whether it has the spike, its heights and the fit.
     fn smooth_and_folding_fits() -> Vec<(bool, Vec<f64>, crate::fit::FitResult)> {
-        let (rows, cols) = (9, 120);
-        let y: Vec<f64> = (0..rows).map(|r| r as f64 * 0.01).collect();
-        let mut z: Vec<f64> = (0..rows * cols)
-            .map(|k| 2.0 * ((k % cols) as f64 * 0.21).sin() + ((k / cols) as f64 * 0.9).cos())
-            .collect();
+        let wavy = |r: usize, c: usize| 2.0 * (c as f64 * 0.21).sin() + (r as f64 * 0.9).cos();
+        let mut g = test_grid(9, 120, 0.0005, wavy);
         let mut fits = Vec::new();
         for spike in [false, true] {
             if spike {
-                z[4 * cols + 60] += 400.0;
+                g.heights_um[4 * 120 + 60] += 400.0;
             }
-            let fit = fit_grid(0.0005, &y, &z, cols, FitOptions::default()).unwrap();
-            fits.push((spike, z.clone(), fit));
+            fits.push((spike, g.heights_um.clone(), test_fit(&g)));
         }
         fits
     }
@@ -761,13 +758,10 @@ mod tests {
 
     #[test]
     fn a_smooth_surface_neither_folds_nor_overshoots() {
-        let (rows, cols) = (8, 60);
-        let y: Vec<f64> = (0..rows).map(|r| r as f64 * 0.01).collect();
-        let z: Vec<f64> = (0..rows * cols)
-            .map(|k| 2.0 * ((k % cols) as f64 * 0.05).sin() + ((k / cols) as f64 * 0.3).cos())
-            .collect();
-        let fit = fit_grid(0.002, &y, &z, cols, FitOptions::default()).unwrap();
-        let c = check_model(&fit.surface, &fit.params_v, &z, &FoldOptions::default());
+        let wavy = |r: usize, c: usize| 2.0 * (c as f64 * 0.05).sin() + (r as f64 * 0.3).cos();
+        let g = test_grid(8, 60, 0.002, wavy);
+        let (fit, z) = (test_fit(&g), &g.heights_um);
+        let c = check_model(&fit.surface, &fit.params_v, z, &FoldOptions::default());
         assert!(c.net.is_empty() && !c.folds(), "{c:?}");
         assert!(c.height_range.overshoot_pct < 2.0, "{:?}", c.height_range);
         assert!(c.warnings().is_empty(), "{:?}", c.warnings());
@@ -819,13 +813,12 @@ mod tests {
     #[test]
     fn overshoot_is_measured_against_the_data_range() {
         // Lines alternating ±1 µm: the interpolant between them swings beyond ±1.
-        let (rows, cols) = (12, 30);
-        let y: Vec<f64> = (0..rows).map(|r| r as f64 * 0.01).collect();
-        let z: Vec<f64> = (0..rows * cols)
-            .map(|k| if (k / cols) % 3 == 0 { 1.0 } else { -1.0 } * (1.0 + 0.1 * (k % cols) as f64 / cols as f64))
-            .collect();
-        let fit = fit_grid(0.002, &y, &z, cols, FitOptions::default()).unwrap();
-        let c = check_model(&fit.surface, &fit.params_v, &z, &FoldOptions::default());
+        let g = test_grid(12, 30, 0.002, |r, c| {
+            let sign = if r % 3 == 0 { 1.0 } else { -1.0 };
+            sign * (1.0 + 0.1 * c as f64 / 30.0)
+        });
+        let (fit, z) = (test_fit(&g), &g.heights_um);
+        let c = check_model(&fit.surface, &fit.params_v, z, &FoldOptions::default());
         let h = &c.height_range;
         assert!(h.measured_max_um <= 1.1 && h.measured_min_um >= -1.1);
         assert!(

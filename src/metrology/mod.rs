@@ -248,9 +248,16 @@ pub(crate) fn test_grid(
     rows: usize,
     cols: usize,
     pitch_x_mm: f64,
-    f: impl Fn(usize, usize) -> f64,
+    mut f: impl FnMut(usize, usize) -> f64,
 ) -> crate::grid::Grid {
     let y = (0..rows).map(|r| r as f64 * 0.01).collect();
     let z = (0..rows * cols).map(|k| f(k / cols, k % cols)).collect();
     crate::grid::Grid::new(z, cols, pitch_x_mm, y)
+}
+
+/// The paper's fit (degrees 5/5) of `grid`: the tests' fitted surfaces.
+#[cfg(test)]
+pub(crate) fn test_fit(grid: &crate::grid::Grid) -> crate::fit::FitResult {
+    let (z, o) = (&grid.heights_um, crate::fit::FitOptions::default());
+    crate::fit::fit_grid(grid.pitch_x_mm, &grid.y_mm, z, grid.cols, o).unwrap()
 }

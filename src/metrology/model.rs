@@ -343,16 +343,13 @@ fn invert_x(at: &impl Fn(f64) -> f64, x_mm: f64, from: (f64, f64), x_at_1: f64) 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::{fit_grid, FitOptions};
+    use crate::metrology::{test_fit, test_grid};
 
     /// A smooth wavy 7×300 grid at 0.5 µm pitch, fitted.
     fn wavy_fit() -> crate::fit::FitResult {
-        let (rows, cols, px) = (7, 300, 0.0005);
-        let h: Vec<f64> = (0..rows * cols)
-            .map(|k| ((k % cols) as f64 * 0.17).sin() + 0.3 * (k as f64 * 0.013).cos())
-            .collect();
-        let y: Vec<f64> = (0..rows).map(|l| l as f64 * 0.01).collect();
-        fit_grid(px, &y, &h, cols, FitOptions::default()).unwrap()
+        test_fit(&test_grid(7, 300, 0.0005, |r, c| {
+            (c as f64 * 0.17).sin() + 0.3 * ((r * 300 + c) as f64 * 0.013).cos()
+        }))
     }
 
     #[test]
@@ -415,16 +412,12 @@ mod tests {
     fn one_inversion_for_all_lines_equals_one_per_line() {
         // A fitted net (x constant down each column) sampled both ways, at half the pitch as
         // the report does and at an offset, unrelated pitch.
-        let (rows, cols, px) = (9, 400, 0.0005);
+        let (cols, px) = (400, 0.0005);
         let mut s: u64 = 0x9E37_79B9_7F4A_7C15;
-        let h: Vec<f64> = (0..rows * cols)
-            .map(|k| {
-                let noise = crate::metrology::lcg(&mut s) - 0.5;
-                (k % cols) as f64 * 0.002 + (k as f64 * 0.05).sin() + 0.4 * noise
-            })
-            .collect();
-        let y: Vec<f64> = (0..rows).map(|l| l as f64 * 0.01).collect();
-        let fit = fit_grid(px, &y, &h, cols, FitOptions::default()).unwrap();
+        let fit = test_fit(&test_grid(9, cols, px, |r, c| {
+            let noise = crate::metrology::lcg(&mut s) - 0.5;
+            c as f64 * 0.002 + ((r * cols + c) as f64 * 0.05).sin() + 0.4 * noise
+        }));
         assert!(x_depends_on_u_only(&fit.surface));
         for (x0, pitch, n) in [(0.0, px / 2.0, 2 * cols - 1), (0.00013, 0.00071, 250)] {
             let shared = sample_model_grid(&fit.surface, &fit.params_v, x0, pitch, n).unwrap();

@@ -115,7 +115,7 @@ pub fn fit_model(grid: &Grid, recipe: &ModelRecipe) -> Result<FittedModel, Metho
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::fit_grid;
+    use crate::metrology::test_fit;
 
     fn grid(rows: usize, cols: usize) -> Grid {
         let wavy = |r: usize, c: usize| (c as f64 * 0.21).sin() + 0.5 * (r as f64 * 0.7).cos();
@@ -129,7 +129,7 @@ mod tests {
         let r = ModelRecipe::default();
         assert!(r.is_paper());
         let m = fit_model(&g, &r).unwrap();
-        let paper = fit_grid(0.002, &g.y_mm, &g.heights_um, 200, FitOptions::default()).unwrap();
+        let paper = test_fit(&g);
         assert_eq!(m.fit.surface, paper.surface);
         assert_eq!(
             (&m.fit.params_u, &m.fit.params_v),
