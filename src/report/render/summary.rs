@@ -1,6 +1,5 @@
 //! `summary.csv`: one row per line with our ISO parameters and the instrument's Ra, Rq and Rz,
-//! each value with the significant digits of its quantity; also the columns of `analyze`'s
-//! summary of a single profile.
+//! each value with the significant digits of its quantity.
 //!
 //! Layer 4 (reporting): a formatter over the report's line entries and the metrology's
 //! parameters; no I/O.
@@ -27,17 +26,6 @@ pub const LINE_HEADER: &str = "line,index,y_mm,Ra_um,Rq_um,Rz_um,RzJIS_um,Rp_um,
 /// The columns after those (and after a scan's instrument columns): the parameters added
 /// since, at the end so a reader that goes by position finds the others where they were.
 pub const MORE_HEADER: &str = "Rda,Rc_um,RPc_per_cm,Rppi_per_inch,Rdc_um,Rmr_pct";
-
-/// The cells of [`LINE_HEADER`] for the line of file index `index` at `y_mm`.
-pub fn line_cells(index: u32, y_mm: f64, p: &RoughnessParams) -> Vec<String> {
-    let mut cells = vec![
-        line_number(index).to_string(),
-        format!("{index:04}"),
-        nfmt(y_mm, Quantity::PositionMm),
-    ];
-    cells.extend(cells_of(LINE_HEADER, p));
-    cells
-}
 
 /// A line's value of each parameter `header` names (of [`LINE_HEADER`], [`MORE_HEADER`]),
 /// with the digits the HTML report gives it; the columns that are not parameters, `line` and
@@ -69,7 +57,12 @@ pub fn summary_csv(lines: &[LineReport], specification: Option<&SpecificationVer
     }
     csv.push('\n');
     for l in lines {
-        let mut row = line_cells(l.index, l.y_mm, &l.params);
+        let mut row = vec![
+            line_number(l.index).to_string(),
+            format!("{:04}", l.index),
+            nfmt(l.y_mm, Quantity::PositionMm),
+        ];
+        row.extend(cells_of(LINE_HEADER, &l.params));
         for name in ["Ra", "Rq", "Rz"] {
             row.push(nfmt_opt(instrument_value(l, name), Quantity::HeightUm));
         }
