@@ -231,25 +231,10 @@ async fn a_really_full_disk_suspends_the_scan_which_goes_on_when_space_is_freed(
     let out = rig.out_dir("out");
     // Room for the pre-flight estimate of 8 short lines (about 9.7 MB), not much more.
     let mount = Mount::tmpfs(&out, 11 << 20);
-    let metrics = rig.tmp.path().join("surfscan.prom");
-    let config = rig.config_with(
-        "out",
-        &format!("\n[metrics]\nfile = {:?}\n", metrics.display().to_string()),
-    );
-    let mut scan = scan_command(&config, &[]).spawn().expect("scan starts");
-    wait_until(Duration::from_secs(60), "two lines on disk", || {
-        committed_lines(&out) >= 2
-    })
-    .await;
+    let (mut scan, metrics) = rig.scan_past_two_lines("out").await;
     let ballast = out.join("ballast");
     assert!(fill(&ballast) > 0);
-    wait_until(Duration::from_secs(60), "the scan suspended", || {
-        std::fs::read_to_string(&metrics).is_ok_and(|m| {
-            m.lines()
-                .any(|l| l.starts_with("surfscan_suspensions_total{") && !l.ends_with(" 0"))
-        })
-    })
-    .await;
+    wait_for_suspension(&metrics).await;
     let held = committed_lines(&out);
     assert!(held < N, "suspended before the end");
     tokio::time::sleep(Duration::from_millis(500)).await;

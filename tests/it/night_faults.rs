@@ -396,16 +396,7 @@ async fn storage_refuses_mid_scan(how: Refuse) {
     .await;
     let out = rig.out_dir("out");
     std::fs::create_dir_all(&out).unwrap();
-    let metrics = rig.tmp.path().join("surfscan.prom");
-    let config = rig.config_with(
-        "out",
-        &format!("\n[metrics]\nfile = {:?}\n", metrics.display().to_string()),
-    );
-    let mut scan = scan_command(&config, &[]).spawn().expect("scan starts");
-    wait_until(Duration::from_secs(60), "two lines on disk", || {
-        committed_lines(&out) >= 2
-    })
-    .await;
+    let (mut scan, metrics) = rig.scan_past_two_lines("out").await;
     let dir = scan_dir(&out);
     let lines = dir.join("lines");
     let bind = match how {
@@ -420,13 +411,7 @@ async fn storage_refuses_mid_scan(how: Refuse) {
             None
         }
     };
-    wait_until(Duration::from_secs(60), "the scan suspended", || {
-        std::fs::read_to_string(&metrics).is_ok_and(|m| {
-            m.lines()
-                .any(|l| l.starts_with("surfscan_suspensions_total{") && !l.ends_with(" 0"))
-        })
-    })
-    .await;
+    wait_for_suspension(&metrics).await;
     let held = committed_lines(&out);
     tokio::time::sleep(Duration::from_secs(3)).await;
     assert_eq!(

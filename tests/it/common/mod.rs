@@ -254,6 +254,23 @@ socket = {sock:?}
         self.tmp.path().join(out)
     }
 
+    /// Starts `surfscan scan` into `out` with a metrics file and waits until two of its lines
+    /// are on disk: the running scan and the metrics file.
+    pub async fn scan_past_two_lines(&self, out: &str) -> (tokio::process::Child, PathBuf) {
+        let metrics = self.tmp.path().join("surfscan.prom");
+        let config = self.config_with(
+            out,
+            &format!("\n[metrics]\nfile = {:?}\n", metrics.display().to_string()),
+        );
+        let scan = scan_command(&config, &[]).spawn().expect("scan starts");
+        let dir = self.out_dir(out);
+        wait_until(Duration::from_secs(60), "two lines on disk", || {
+            committed_lines(&dir) >= 2
+        })
+        .await;
+        (scan, metrics)
+    }
+
     /// Stops the simulator.
     pub async fn shutdown(mut self) {
         if let Some(h) = self.sim.take() {
@@ -501,6 +518,17 @@ pub fn committed_lines(out: &Path) -> usize {
         }
     }
     0
+}
+
+/// Waits until the metrics file `metrics` counts a suspension of the scan.
+pub async fn wait_for_suspension(metrics: &Path) {
+    wait_until(Duration::from_secs(60), "the scan suspended", || {
+        std::fs::read_to_string(metrics).is_ok_and(|m| {
+            m.lines()
+                .any(|l| l.starts_with("surfscan_suspensions_total{") && !l.ends_with(" 0"))
+        })
+    })
+    .await;
 }
 
 /// The Python interpreter of the independent reference checks: `$SURFSCAN_PYTHON` when set,
