@@ -171,6 +171,16 @@ fn check_edited(edit: impl Fn(String) -> String) -> (Option<i32>, String) {
     (out.status.code(), text(&out.stderr))
 }
 
+/// The line after the table header `[table]` in the configuration `t` (its first key).
+fn first_key_of(t: &str, table: &str) -> String {
+    let header = format!("[{table}]");
+    t.lines()
+        .skip_while(|l| *l != header)
+        .nth(1)
+        .unwrap()
+        .to_owned()
+}
+
 /// A y step the stage cannot make exactly (the demo's stage: 400 steps/mm, a step of
 /// 2.5 µm): refused at `check-config` naming the key, the stage's step and whole-step
 /// choices, where the scan used to find out only when the stage connected.
@@ -225,15 +235,8 @@ fn check_config_refuses_output_dirs_that_keep_no_files_and_a_socket_inside_them(
         "/sys/kernel",
         "/dev/surfscan",
     ] {
-        let (code, err) = check_edited(|t| {
-            let dir = t
-                .lines()
-                .skip_while(|l| *l != "[output]")
-                .nth(1)
-                .unwrap()
-                .to_owned();
-            edited(&t, &dir, &format!("dir = {bad:?}"))
-        });
+        let (code, err) =
+            check_edited(|t| edited(&t, &first_key_of(&t, "output"), &format!("dir = {bad:?}")));
         assert_eq!(code, Some(78), "{bad}: {err}");
         assert!(
             err.contains(&format!("output.dir = {bad} lies on")) && err.contains("keeps no files"),
@@ -241,35 +244,15 @@ fn check_config_refuses_output_dirs_that_keep_no_files_and_a_socket_inside_them(
         );
     }
     // A regular file named as the directory.
-    let (code, err) = check_edited(|t| {
-        let dir = t
-            .lines()
-            .skip_while(|l| *l != "[output]")
-            .nth(1)
-            .unwrap()
-            .to_owned();
-        edited(&t, &dir, "dir = \"/etc/passwd\"")
-    });
+    let (code, err) =
+        check_edited(|t| edited(&t, &first_key_of(&t, "output"), "dir = \"/etc/passwd\""));
     assert_eq!(code, Some(78), "{err}");
     assert!(err.contains("is not a directory"), "{err}");
     // The socket inside the scans' tree, even in a directory not made yet.
     let (code, err) = check_edited(|t| {
-        let dir = t
-            .lines()
-            .skip_while(|l| *l != "[output]")
-            .nth(1)
-            .unwrap()
-            .to_owned();
-        let out = dir
-            .trim_start_matches("dir = ")
-            .trim_matches('"')
-            .to_owned();
-        let sock = t
-            .lines()
-            .skip_while(|l| *l != "[control]")
-            .nth(1)
-            .unwrap()
-            .to_owned();
+        let dir = first_key_of(&t, "output");
+        let out = dir.trim_start_matches("dir = ").trim_matches('"');
+        let sock = first_key_of(&t, "control");
         edited(&t, &sock, &format!("socket = \"{out}/run/control.sock\""))
     });
     assert_eq!(code, Some(78), "{err}");
