@@ -315,6 +315,13 @@ fn harness() -> Harness {
     }
 }
 
+/// What a start by `asker` runs over the scans in `out` (the choice made and committed).
+fn start(out: &Path, asker: Asker) -> Option<ScanRequest> {
+    choose(out, asker, Peer::this_process(), Default::default())
+        .and_then(Choice::commit)
+        .expect("a decision")
+}
+
 fn new_scan() -> ScanRequest {
     ScanRequest::New {
         specimen: "fake".into(),
@@ -640,20 +647,15 @@ async fn a_panic_while_the_outputs_are_written_fails_the_scan_and_the_runner_goe
 
     // Neither the daemon at its start nor an operator's plain start continues it.
     let out = runner_config(h.tmp.path()).output.dir;
-    let start = |asker| {
-        choose(&out, asker, Peer::this_process(), Default::default())
-            .and_then(Choice::commit)
-            .expect("a decision")
-    };
-    assert_eq!(start(Asker::DaemonStartUp), None);
-    let auto = start(Asker::Operator(StartMode::Auto)).expect("a scan to run");
+    assert_eq!(start(&out, Asker::DaemonStartUp), None);
+    let auto = start(&out, Asker::Operator(StartMode::Auto)).expect("a scan to run");
     assert!(matches!(auto, ScanRequest::New { .. }), "{auto:?}");
     let next = run_scan(&mut station, &mut h.ctl, &plain, new_scan()).await;
     assert!(matches!(next.end, End::Success { .. }), "{next:?}");
     assert_ne!(next.dir, outcome.dir);
 
     // `--resume` writes its outputs again, tracing nothing: its lines are the same.
-    let resume = start(Asker::Operator(StartMode::Resume)).expect("a scan to run");
+    let resume = start(&out, Asker::Operator(StartMode::Resume)).expect("a scan to run");
     assert_eq!(
         resume,
         ScanRequest::Continue {
@@ -923,25 +925,10 @@ async fn a_failed_scan_continues_at_its_first_missing_line() {
 
     // Without asking for it, a failed scan is not resumed: a new one would start.
     let config = runner_config(h.tmp.path());
-    let auto = choose(
-        &config.output.dir,
-        Asker::Operator(StartMode::Auto),
-        Peer::this_process(),
-        Default::default(),
-    )
-    .and_then(Choice::commit)
-    .expect("request")
-    .expect("a scan to run");
+    let auto = start(&config.output.dir, Asker::Operator(StartMode::Auto)).expect("a scan to run");
     assert!(matches!(auto, ScanRequest::New { .. }), "{auto:?}");
-    let request = choose(
-        &config.output.dir,
-        Asker::Operator(StartMode::Resume),
-        Peer::this_process(),
-        Default::default(),
-    )
-    .and_then(Choice::commit)
-    .expect("request")
-    .expect("a scan to run");
+    let request =
+        start(&config.output.dir, Asker::Operator(StartMode::Resume)).expect("a scan to run");
     assert_eq!(
         request,
         ScanRequest::Continue {
@@ -989,15 +976,8 @@ async fn starting_over_records_the_unfinished_scan_as_abandoned() {
     let dir = scan_dir_of(&outcome);
     assert!(matches!(outcome.end, End::Shutdown), "{outcome:?}");
     let config = runner_config(h.tmp.path());
-    let request = choose(
-        &config.output.dir,
-        Asker::Operator(StartMode::New),
-        Peer::this_process(),
-        Default::default(),
-    )
-    .and_then(Choice::commit)
-    .expect("request")
-    .expect("a scan to run");
+    let request =
+        start(&config.output.dir, Asker::Operator(StartMode::New)).expect("a scan to run");
     assert!(matches!(request, ScanRequest::New { .. }), "{request:?}");
     let recs = records(&dir);
     match recs.last() {
