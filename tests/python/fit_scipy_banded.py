@@ -79,7 +79,17 @@ def fit(z, pitch_x, pitch_y, p, q):
     return ku, kv, px, py, pz
 
 
-def main():
+def poles_json(result):
+    """The knots and poles of `fit`'s result as the members of the JSON printed."""
+    ku, kv, px, py, pz = result
+    return dict(
+        knots_u=ku.tolist(), knots_v=kv.tolist(), x=px.tolist(), y=py.tolist(), z=pz.tolist()
+    )
+
+
+def main(fit, doc, poles_json):
+    """Reads the arguments (`doc` says them), times `fit` and prints the JSON, with
+    --json `poles_json` of its result."""
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
     want_json = "--json" in sys.argv
     repeat = 1
@@ -87,7 +97,7 @@ def main():
         repeat = int(sys.argv[sys.argv.index("--repeat") + 1])
         args.remove(str(repeat))
     if len(args) != 5:
-        sys.stderr.write(__doc__)
+        sys.stderr.write(doc)
         sys.exit(2)
     path = args[0]
     pitch_x, pitch_y = float(args[1]), float(args[2])
@@ -107,12 +117,9 @@ def main():
         "fit_cpu_s": sorted(cpus)[len(cpus) // 2],
     }
     if want_json:
-        ku, kv, px, py, pz = result
-        out.update(
-            knots_u=ku.tolist(), knots_v=kv.tolist(), x=px.tolist(), y=py.tolist(), z=pz.tolist()
-        )
+        out.update(poles_json(result))
     json.dump(out, sys.stdout)
 
 
 if __name__ == "__main__":
-    main()
+    main(fit, __doc__, poles_json)

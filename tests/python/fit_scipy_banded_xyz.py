@@ -20,17 +20,15 @@ over N repeats after a warm-up fit of a small corner of the grid, CSV reading an
 excluded), and with --json also knots_u, knots_v and x, y, z (each row-major: z[j][i] is the z
 of pole (i, j)).
 """
-import json
 import os
 import sys
-import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 try:
     import numpy as np
     from scipy.linalg import solve_banded
-    from fit_scipy_banded import banded, knots, params
+    from fit_scipy_banded import banded, knots, main, params
 except ImportError as exc:  # fail loudly: the Rust side reports this text
     sys.stderr.write("numpy/scipy are not installed ({}); run: bash .ci/run\n".format(exc))
     sys.exit(3)
@@ -57,44 +55,17 @@ def fit(z, pitch_x, pitch_y, p, q):
     return ku, kv, poles
 
 
-def main():
-    args = [a for a in sys.argv[1:] if not a.startswith("--")]
-    want_json = "--json" in sys.argv
-    repeat = 1
-    if "--repeat" in sys.argv:
-        repeat = int(sys.argv[sys.argv.index("--repeat") + 1])
-        args.remove(str(repeat))
-    if len(args) != 5:
-        sys.stderr.write(__doc__)
-        sys.exit(2)
-    path = args[0]
-    pitch_x, pitch_y = float(args[1]), float(args[2])
-    p, q = int(args[3]), int(args[4])
-    z = np.loadtxt(path, delimiter=",", ndmin=2) / 1000.0
-    # Warm-up on a small corner of the grid, so that scipy's lazily imported modules are not
-    # counted as fit time.
-    fit(z[: q + 3, : p + 3].copy(), pitch_x, pitch_y, p, q)
-    walls, cpus = [], []
-    for _ in range(repeat):
-        t0, c0 = time.perf_counter(), time.process_time()
-        result = fit(z, pitch_x, pitch_y, p, q)
-        walls.append(time.perf_counter() - t0)
-        cpus.append(time.process_time() - c0)
-    out = {
-        "fit_s": sorted(walls)[len(walls) // 2],
-        "fit_cpu_s": sorted(cpus)[len(cpus) // 2],
-    }
-    if want_json:
-        ku, kv, poles = result
-        out.update(
-            knots_u=ku.tolist(),
-            knots_v=kv.tolist(),
-            x=poles[:, :, 0].tolist(),
-            y=poles[:, :, 1].tolist(),
-            z=poles[:, :, 2].tolist(),
-        )
-    json.dump(out, sys.stdout)
+def poles_json(result):
+    """The knots and the poles' x, y and z (each row-major) as the members of the JSON."""
+    ku, kv, poles = result
+    return dict(
+        knots_u=ku.tolist(),
+        knots_v=kv.tolist(),
+        x=poles[:, :, 0].tolist(),
+        y=poles[:, :, 1].tolist(),
+        z=poles[:, :, 2].tolist(),
+    )
 
 
 if __name__ == "__main__":
-    main()
+    main(fit, __doc__, poles_json)
