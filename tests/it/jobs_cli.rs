@@ -4,6 +4,7 @@
 use crate::common::{append_config, edited};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use surfscan::cli::demo::demo_config;
 use surfscan::jobs::synthetic::{write, SyntheticReport, SyntheticScan};
 use surfscan::scan::journal::StopStatus;
 use surfscan::specification::Verdict;
@@ -23,18 +24,21 @@ fn text(b: &[u8]) -> String {
 /// A station configuration (the demo's, with character devices as ports) whose recipes are
 /// in `dir/recipes`.
 fn station(dir: &Path) -> PathBuf {
+    let out = dir.join("out");
+    with_recipes(
+        dir,
+        demo_config(Path::new("/dev/null"), Path::new("/dev/zero"), &out),
+    )
+}
+
+/// Writes the configuration `text` with `[jobs] recipes` in `dir/recipes` (made) as
+/// `dir/station.toml`; its path.
+fn with_recipes(dir: &Path, mut text: String) -> PathBuf {
     let p = dir.join("station.toml");
-    let mut t = surfscan::cli::demo::demo_config(
-        Path::new("/dev/null"),
-        Path::new("/dev/zero"),
-        &dir.join("out"),
-    );
-    t.push_str(&format!(
-        "\n[jobs]\nrecipes = \"{}\"\n",
-        dir.join("recipes").display()
-    ));
-    std::fs::write(&p, t).unwrap();
-    std::fs::create_dir_all(dir.join("recipes")).unwrap();
+    let recipes = dir.join("recipes");
+    text.push_str(&format!("\n[jobs]\nrecipes = \"{}\"\n", recipes.display()));
+    std::fs::write(&p, text).unwrap();
+    std::fs::create_dir_all(recipes).unwrap();
     p
 }
 
@@ -202,17 +206,11 @@ impl Drop for IdleDaemon {
 }
 
 fn idle_daemon(dir: &Path) -> (IdleDaemon, PathBuf) {
-    let p = dir.join("station.toml");
     let socket = dir.join("control.sock");
     let out = dir.join("out");
-    let mut t =
+    let t =
         crate::common::demo_config_at(&dir.join("no-sj210"), &dir.join("no-stage"), &out, &socket);
-    t.push_str(&format!(
-        "\n[jobs]\nrecipes = \"{}\"\n",
-        dir.join("recipes").display()
-    ));
-    std::fs::write(&p, t).unwrap();
-    std::fs::create_dir_all(dir.join("recipes")).unwrap();
+    let p = with_recipes(dir, t);
     std::fs::write(dir.join("recipes/brass.toml"), BRASS).unwrap();
     let child = Command::new(env!("CARGO_BIN_EXE_surfscan"))
         .args(["daemon", "--config"])
