@@ -281,19 +281,14 @@ fn existing_surface(output: &Path) -> Option<PathBuf> {
     if output.exists() {
         return Some(output.to_path_buf());
     }
-    let stem = output.file_stem()?.to_string_lossy().into_owned();
-    let dir = output.parent()?;
-    std::fs::read_dir(dir)
+    let first_part = format!("{}.part1-of-", output.file_stem()?.to_string_lossy());
+    std::fs::read_dir(output.parent()?)
         .ok()?
         .flatten()
         .map(|e| e.path())
         .find(|p| {
             p.file_name()
-                .map(|n| {
-                    n.to_string_lossy()
-                        .starts_with(&format!("{stem}.part1-of-"))
-                })
-                .unwrap_or(false)
+                .is_some_and(|n| n.to_string_lossy().starts_with(&first_part))
         })
 }
 
