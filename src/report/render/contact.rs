@@ -85,17 +85,14 @@ fn write_figures(
         })
         .collect();
     let plot_error = metrology(format!("{described}: the contact's figures"));
-    let mut files = Vec::new();
-    files.extend(
-        plot_load_area(
-            out,
-            &points,
-            "Load–area curve",
-            &against,
-            &format!("{described}; heights levelled by their least-squares plane"),
-        )
-        .map_err(&plot_error)?,
-    );
+    let load_area = plot_load_area(
+        out,
+        &points,
+        "Load–area curve",
+        &against,
+        &format!("{described}; heights levelled by their least-squares plane"),
+    )
+    .map_err(&plot_error)?;
     let pressure_map = HeightMap {
         heights_um: &measured.map_pressure_field_mpa,
         rows: measured.rows,
@@ -103,26 +100,24 @@ fn write_figures(
         pitch_x_mm: measured.pitch_x_mm,
         pitch_y_mm: measured.pitch_y_mm,
     };
-    files.extend(
-        plot_map(
-            out,
-            &pressure_map,
-            origin_mm,
-            &MapValues {
-                stem: "pressure",
-                name: "pressures",
-                unit: "MPa",
-                bar: "contact pressure (MPa)",
-            },
-            &format!(
-                "Contact pressure at {} MPa nominal (0: no contact)",
-                measured.map_pressure_mpa
-            ),
-            &format!("{described}; {against}"),
-        )
-        .map_err(&plot_error)?,
-    );
-    Ok(files)
+    let pressure = plot_map(
+        out,
+        &pressure_map,
+        origin_mm,
+        &MapValues {
+            stem: "pressure",
+            name: "pressures",
+            unit: "MPa",
+            bar: "contact pressure (MPa)",
+        },
+        &format!(
+            "Contact pressure at {} MPa nominal (0: no contact)",
+            measured.map_pressure_mpa
+        ),
+        &format!("{described}; {against}"),
+    )
+    .map_err(&plot_error)?;
+    Ok([load_area, pressure].concat())
 }
 
 /// "specimen (E 210 GPa, ν 0.3) against a rigid flat: E* 230.8 GPa, elastic".
