@@ -316,10 +316,7 @@ mod tests {
             (x * 40.0).sin() * (1.0 + 30.0 * y - 400.0 * y * y + 2000.0 * y * y * y)
         };
         let (y, z) = grid(21, 30, f);
-        let options = FitOptions {
-            degree_u: 5,
-            degree_v: 3,
-        };
+        let options = FitOptions::degrees(5, 3);
         for rows in [4, 7, 12] {
             let r = approximate_v(0.002, &y, &z, 30, options, rows).unwrap();
             assert_eq!(r.surface.count_v(), rows);

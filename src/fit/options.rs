@@ -11,11 +11,15 @@ pub struct FitOptions {
     pub degree_v: usize,
 }
 
+impl FitOptions {
+    /// The options of degree `degree_u` along u and `degree_v` along v.
+    pub const fn degrees(degree_u: usize, degree_v: usize) -> FitOptions {
+        FitOptions { degree_u, degree_v }
+    }
+}
+
 impl Default for FitOptions {
     fn default() -> Self {
-        FitOptions {
-            degree_u: 5,
-            degree_v: 5,
-        }
+        FitOptions::degrees(5, 5)
     }
 }

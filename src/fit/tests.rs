@@ -59,10 +59,7 @@ fn parameters_are_averaged_chord_lengths_in_mm() {
         &[0.0, 1.0],
         &[0.0, 0.0, 0.0, 0.0, 0.0, s3],
         3,
-        FitOptions {
-            degree_u: 1,
-            degree_v: 1,
-        },
+        FitOptions::degrees(1, 1),
     )
     .unwrap();
     assert_eq!(r.params_u.len(), 3);
@@ -80,17 +77,7 @@ fn knots_and_parameters_are_well_formed() {
     let (rows, cols) = (9, 60);
     let h = rough_grid(rows, cols, 7);
     for (p, q) in [(5, 5), (3, 2), (1, 4)] {
-        let r = fit_grid(
-            0.0005,
-            &ys(rows, 0.01),
-            &h,
-            cols,
-            FitOptions {
-                degree_u: p,
-                degree_v: q,
-            },
-        )
-        .unwrap();
+        let r = fit_grid(0.0005, &ys(rows, 0.01), &h, cols, FitOptions::degrees(p, q)).unwrap();
         for (params, n) in [(&r.params_u, cols), (&r.params_v, rows)] {
             assert_eq!(params.len(), n);
             assert_eq!(params[0], 0.0);
@@ -131,17 +118,7 @@ fn plane_is_reproduced_everywhere() {
         }
     }
     for (p, q) in [(5, 5), (3, 2), (1, 1)] {
-        let r = fit_grid(
-            pitch,
-            &y,
-            &h,
-            cols,
-            FitOptions {
-                degree_u: p,
-                degree_v: q,
-            },
-        )
-        .unwrap();
+        let r = fit_grid(pitch, &y, &h, cols, FitOptions::degrees(p, q)).unwrap();
         for i in 0..=50 {
             for j in 0..=30 {
                 let s = r.surface.evaluate(i as f64 / 50.0, j as f64 / 30.0);
@@ -207,10 +184,7 @@ fn errors_name_the_offending_numbers() {
     let opts = FitOptions::default();
     let row: Vec<f64> = (0..10).map(|i| i as f64 * 0.1).collect();
 
-    let mut f = IncrementalFitter::new(FitOptions {
-        degree_u: 0,
-        degree_v: 2,
-    });
+    let mut f = IncrementalFitter::new(FitOptions::degrees(0, 2));
     assert_eq!(
         f.push_row(0.0, 0.001, &row),
         Err(FitError::InvalidDegree {
@@ -288,10 +262,7 @@ fn errors_name_the_offending_numbers() {
     );
 
     // Coincident points along u: a pitch so small that the chord underflows to zero.
-    let mut f = IncrementalFitter::new(FitOptions {
-        degree_u: 1,
-        degree_v: 1,
-    });
+    let mut f = IncrementalFitter::new(FitOptions::degrees(1, 1));
     let flat = [1.0, 1.0, 1.0];
     match f.push_row(0.5, 1e-170, &flat) {
         Err(FitError::CoincidentPoints {
@@ -367,17 +338,7 @@ fn residual_reusing_the_basis_equals_per_point_evaluation_to_the_bit() {
     ] {
         let h = rough_grid(rows, cols, (rows * cols) as u64);
         let y = ys(rows, 0.01);
-        let r = fit_grid(
-            0.0005,
-            &y,
-            &h,
-            cols,
-            FitOptions {
-                degree_u: p,
-                degree_v: q,
-            },
-        )
-        .unwrap();
+        let r = fit_grid(0.0005, &y, &h, cols, FitOptions::degrees(p, q)).unwrap();
         let fast = max_residual_mm(&r, &grid(0.0005, &y, &h, cols));
         let slow = residual_by_curve_evaluation(&r, 0.0005, &y, &h);
         assert_eq!(

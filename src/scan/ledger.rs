@@ -263,10 +263,7 @@ impl Ledger {
 }
 
 fn fitter_of(plan: &Plan) -> IncrementalFitter {
-    IncrementalFitter::new(FitOptions {
-        degree_u: plan.degree_u,
-        degree_v: plan.degree_v,
-    })
+    IncrementalFitter::new(FitOptions::degrees(plan.degree_u, plan.degree_v))
 }
 
 #[cfg(test)]

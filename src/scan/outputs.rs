@@ -240,10 +240,7 @@ pub fn recipe_of(plan: &Plan, lines: &[StoredLine]) -> ModelRecipe {
         o.apply_lambda_c.then_some(o.lambda_c_mm)
     });
     ModelRecipe {
-        degrees: FitOptions {
-            degree_u: plan.degree_u,
-            degree_v: plan.degree_v,
-        },
+        degrees: FitOptions::degrees(plan.degree_u, plan.degree_v),
         method: plan.v_method,
         replace_spikes: plan.replace_spikes,
         lambda_c_mm,

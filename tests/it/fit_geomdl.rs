@@ -24,17 +24,7 @@ fn heights(rows: usize, cols: usize, seed: u64) -> Vec<f64> {
 
 fn check(rows: usize, cols: usize, pitch_x_mm: f64, y_mm: &[f64], p: usize, q: usize) {
     let h = heights(rows, cols, (rows * 1000 + cols) as u64);
-    let ours = fit_grid(
-        pitch_x_mm,
-        y_mm,
-        &h,
-        cols,
-        FitOptions {
-            degree_u: p,
-            degree_v: q,
-        },
-    )
-    .expect("fit");
+    let ours = fit_grid(pitch_x_mm, y_mm, &h, cols, FitOptions::degrees(p, q)).expect("fit");
 
     let dir = tempfile::tempdir().expect("tempdir");
     let csv = dir.path().join("grid.csv");

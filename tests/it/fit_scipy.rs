@@ -57,17 +57,7 @@ fn reference_json(
 fn check(rows: usize, cols: usize, pitch_x: f64, pitch_y: f64, p: usize, q: usize) {
     let h = heights(rows, cols);
     let y: Vec<f64> = (0..rows).map(|l| l as f64 * pitch_y).collect();
-    let ours = fit_grid(
-        pitch_x,
-        &y,
-        &h,
-        cols,
-        FitOptions {
-            degree_u: p,
-            degree_v: q,
-        },
-    )
-    .expect("fit");
+    let ours = fit_grid(pitch_x, &y, &h, cols, FitOptions::degrees(p, q)).expect("fit");
     let v = reference_json("fit_scipy_banded.py", &h, cols, pitch_x, pitch_y, p, q);
     let nums = |value: &serde_json::Value| -> Vec<f64> {
         value
@@ -136,10 +126,7 @@ fn matches_the_banded_reference_12x300_degree_3_2() {
 fn check_xyz(rows: usize, cols: usize, pitch_x: f64, pitch_y: f64, p: usize, q: usize) {
     let h = heights(rows, cols);
     let y: Vec<f64> = (0..rows).map(|l| l as f64 * pitch_y).collect();
-    let options = FitOptions {
-        degree_u: p,
-        degree_v: q,
-    };
+    let options = FitOptions::degrees(p, q);
     let ours = fit_grid(pitch_x, &y, &h, cols, options).expect("fit");
     let v = reference_json("fit_scipy_banded_xyz.py", &h, cols, pitch_x, pitch_y, p, q);
     let grid = |name: &str| -> Vec<Vec<f64>> {

@@ -699,10 +699,7 @@ fn small_surface() -> surfscan::nurbs::NurbsSurface {
         .map(|i| ((i * 7) % 11) as f64 * 0.1 - 0.5)
         .collect();
     let y: Vec<f64> = (0..rows).map(|j| j as f64 * 0.01).collect();
-    let options = surfscan::fit::FitOptions {
-        degree_u: 3,
-        degree_v: 2,
-    };
+    let options = surfscan::fit::FitOptions::degrees(3, 2);
     surfscan::fit::fit_grid(0.0015, &y, &heights, cols, options)
         .unwrap()
         .surface

@@ -285,10 +285,7 @@ fn large_nets_formatted_in_parallel_chunks_round_trip_bit_identical() {
 /// A fitted 60×25 grid (degree 5×5) of a wavy height field.
 fn fitted_surface() -> NurbsSurface {
     use surfscan::fit::{FitOptions, IncrementalFitter};
-    let mut f = IncrementalFitter::new(FitOptions {
-        degree_u: 5,
-        degree_v: 5,
-    });
+    let mut f = IncrementalFitter::new(FitOptions::degrees(5, 5));
     for r in 0..60 {
         let row: Vec<f64> = (0..25)
             .map(|c| 0.8 * ((c as f64) * 0.37 + (r as f64) * 0.21).sin() + 0.01 * (r * c) as f64)

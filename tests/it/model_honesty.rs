@@ -236,10 +236,7 @@ fn the_default_fit_is_the_papers_bit_for_bit() {
         }
         let method = settings.v_method_for(rows);
         assert_eq!(method, VMethod::Interpolate);
-        let options = FitOptions {
-            degree_u: settings.degree_u,
-            degree_v: settings.degree_v,
-        };
+        let options = FitOptions::degrees(settings.degree_u, settings.degree_v);
         let paper = fit_grid(px, &ys, &z, cols, FitOptions::default()).unwrap();
         let ours = fit_grid_with(px, &ys, &z, cols, options, method).unwrap();
         let bits = |s: &surfscan::nurbs::NurbsSurface| -> Vec<u64> {
