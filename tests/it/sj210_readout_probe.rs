@@ -567,55 +567,20 @@ async fn probe_refuses_bad_arguments_as_usage_errors() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = absent_port_config(dir.path(), "baud = 38400\n");
     let cfg = cfg.to_str().unwrap();
-    for (args, says) in [
+    for (rest, says) in [
         (
-            vec![
-                "--config",
-                cfg,
-                "--passthrough",
-                "/dev/null",
-                "--record",
-                "x",
-                "--for-s",
-                "1e300",
-            ],
+            "--passthrough /dev/null --record x --for-s 1e300",
             "--for-s",
         ),
-        (
-            vec![
-                "--config",
-                cfg,
-                "--passthrough",
-                "/dev/null",
-                "--record",
-                "x",
-                "--for-s",
-                "0",
-            ],
-            "--for-s",
-        ),
-        (
-            vec![
-                "--config",
-                cfg,
-                "--passthrough",
-                "/dev/null",
-                "--record",
-                "x",
-                "--for-s",
-                "nan",
-            ],
-            "--for-s",
-        ),
-        (
-            vec!["--config", cfg, "--readout", "--form", "RDEVA"],
-            "does not end in 00",
-        ),
-        (
-            vec!["--config", cfg, "--readout", "--form", "RDX00=RDX"],
-            "must hold {n}",
-        ),
+        ("--passthrough /dev/null --record x --for-s 0", "--for-s"),
+        ("--passthrough /dev/null --record x --for-s nan", "--for-s"),
+        ("--readout --form RDEVA", "does not end in 00"),
+        ("--readout --form RDX00=RDX", "must hold {n}"),
     ] {
+        let args: Vec<&str> = ["--config", cfg]
+            .into_iter()
+            .chain(rest.split(' '))
+            .collect();
         let (code, stdout, stderr) = run_probe(&args).await;
         assert_eq!(
             code,
