@@ -15,7 +15,7 @@ use surfscan::scan::command::StartMode;
 use surfscan::scan::journal::{read_journal, Record, StopStatus};
 use surfscan::scan::status::{DeviceState, State, Status};
 use surfscan_sim::grbl::StageShared;
-use surfscan_sim::{SimEvent, SimHandle, Simulator};
+use surfscan_sim::{SimHandle, Simulator};
 
 pub(crate) const SPEED_UP: f64 = 50.0;
 pub(crate) const LINES: u32 = 8;
@@ -39,13 +39,10 @@ pub(crate) async fn rig() -> Rig {
     let dir = tempfile::tempdir().unwrap();
     let inst = dir.path().join("sj210");
     let stage = dir.path().join("ystage");
-    let mut sim = Simulator::sped_up_station(&inst, &stage, SPEED_UP, StageShared::new())
-        .and_then(Simulator::start)
-        .unwrap();
-    match tokio::time::timeout(Duration::from_secs(10), sim.next_event()).await {
-        Ok(Some(SimEvent::Ready(_))) => {}
-        other => panic!("simulator not ready: {other:?}"),
-    }
+    let sim = crate::common::started(
+        Simulator::sped_up_station(&inst, &stage, SPEED_UP, StageShared::new()).unwrap(),
+    )
+    .await;
     let socket = dir.path().join("run").join("control.sock");
     let text = edited(
         &demo_config_at(&inst, &stage, &dir.path().join("scans"), &socket),

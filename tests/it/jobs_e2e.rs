@@ -17,7 +17,7 @@ use surfscan::scan::journal::{read_journal, ResumeState, StopStatus};
 use surfscan::scan::status::{State, Status};
 use surfscan::specification::Verdict;
 use surfscan_sim::grbl::StageShared;
-use surfscan_sim::{SimEvent, SimHandle, Simulator};
+use surfscan_sim::{SimHandle, Simulator};
 
 const SPEED_UP: f64 = 50.0;
 const LINES: u32 = 5;
@@ -63,13 +63,10 @@ async fn rig(recipes: &[(&str, &str)]) -> Rig {
     let dir = tempfile::tempdir().unwrap();
     let inst = dir.path().join("sj210");
     let stage = dir.path().join("ystage");
-    let mut sim = Simulator::sped_up_station(&inst, &stage, SPEED_UP, StageShared::new())
-        .and_then(Simulator::start)
-        .unwrap();
-    match tokio::time::timeout(Duration::from_secs(10), sim.next_event()).await {
-        Ok(Some(SimEvent::Ready(_))) => {}
-        other => panic!("simulator not ready: {other:?}"),
-    }
+    let sim = crate::common::started(
+        Simulator::sped_up_station(&inst, &stage, SPEED_UP, StageShared::new()).unwrap(),
+    )
+    .await;
     let scans = dir.path().join("scans");
     let socket = dir.path().join("run").join("control.sock");
     let recipes_dir = dir.path().join("recipes");

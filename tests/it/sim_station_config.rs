@@ -7,11 +7,10 @@
 use crate::common::*;
 use std::path::Path;
 use std::process::Command;
-use std::time::Duration;
 use surfscan_sim::grbl::{GrblSimConfig, StageShared};
 use surfscan_sim::station_config::{station_config, SimStage, StationConfigRequest};
 use surfscan_sim::zaber::ZaberSimConfig;
-use surfscan_sim::{InstrumentConfig, SimEvent, Simulator};
+use surfscan_sim::{InstrumentConfig, Simulator};
 
 /// Six lines: the fewest a degree-5 surface needs, each different from the others.
 const LINES: usize = 6;
@@ -69,11 +68,7 @@ async fn scan_with_the_written_config(stage: Stage) {
         Stage::Grbl(g) => sim.grbl_stage(&stage_link, g, StageShared::new()),
         Stage::Zaber(z) => sim.zaber_stage(&stage_link, z, StageShared::new()),
     };
-    let mut handle = sim.start().expect("simulator starts");
-    match tokio::time::timeout(Duration::from_secs(10), handle.next_event()).await {
-        Ok(Some(SimEvent::Ready(_))) => {}
-        other => panic!("simulator not ready: {other:?}"),
-    }
+    let handle = crate::common::started(sim).await;
     let o = run_scan(&config, &[]).await;
     handle.shutdown().await;
     assert!(o.status.success(), "{}\n{}", describe(&o), written.toml);

@@ -5,25 +5,21 @@
 //! while searching.
 
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 use surfscan_sim::line::Mismatch;
 use surfscan_sim::stats::SimStats;
-use surfscan_sim::{InstrumentConfig, SimEvent, SimHandle, Simulator};
+use surfscan_sim::{InstrumentConfig, SimHandle, Simulator};
 
 async fn start(dir: &Path, baud: u32, mismatch: Mismatch) -> SimHandle {
-    let mut sim = Simulator::new(dir.join("sj210"))
-        .instrument(InstrumentConfig {
-            time_scale: 0.01,
-            ..InstrumentConfig::default()
-        })
-        .baud(baud)
-        .line_check(mismatch)
-        .start()
-        .unwrap();
-    match tokio::time::timeout(Duration::from_secs(10), sim.next_event()).await {
-        Ok(Some(SimEvent::Ready(_))) => sim,
-        other => panic!("expected the ready event, got {other:?}"),
-    }
+    crate::common::started(
+        Simulator::new(dir.join("sj210"))
+            .instrument(InstrumentConfig {
+                time_scale: 0.01,
+                ..InstrumentConfig::default()
+            })
+            .baud(baud)
+            .line_check(mismatch),
+    )
+    .await
 }
 
 /// A probe config at `baud`, with short timeouts so each silent rate costs little.

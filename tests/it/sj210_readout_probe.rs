@@ -17,7 +17,7 @@ use surfscan::sj210::readout_probe::{Conclusion, FormVerdict, ReadoutForm, Reado
 use surfscan::sj210::settings::ClientOptions;
 use surfscan::transport::{self, FlowControl, Parity, SerialSettings};
 use surfscan_sim::instrument::ReadoutForm as SimForm;
-use surfscan_sim::{InstrumentConfig, ProfileSet, SimEvent, SimHandle, Simulator};
+use surfscan_sim::{InstrumentConfig, ProfileSet, SimHandle, Simulator};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio_serial::SerialStream;
 
@@ -36,11 +36,7 @@ async fn start(dir: &Path, cfg: InstrumentConfig, profiles: Option<ProfileSet>) 
     if let Some(p) = profiles {
         b = b.profiles(p);
     }
-    let mut sim = b.start().unwrap();
-    match tokio::time::timeout(EVENT_WAIT, sim.next_event()).await {
-        Ok(Some(SimEvent::Ready(_))) => sim,
-        other => panic!("expected the ready event, got {other:?}"),
-    }
+    crate::common::started(b).await
 }
 
 fn client(link: &Path, table: ModelTable) -> Sj210Client<SerialStream> {
@@ -365,15 +361,12 @@ async fn probe_readout_binary_prints_verdicts_and_a_snippet_that_works() {
     // same way, verdict for verdict.
     let replay_dir = tempfile::tempdir().unwrap();
     let replay_link = replay_dir.path().join("sj210");
-    let mut replay = Simulator::new(&replay_link)
-        .replay(surfscan_sim::replay::Transcript::parse(&text).unwrap(), 1.0)
-        .pacing_time_scale(0.0)
-        .start()
-        .unwrap();
-    match tokio::time::timeout(EVENT_WAIT, replay.next_event()).await {
-        Ok(Some(SimEvent::Ready(_))) => {}
-        other => panic!("expected the ready event, got {other:?}"),
-    }
+    let replay = crate::common::started(
+        Simulator::new(&replay_link)
+            .replay(surfscan_sim::replay::Transcript::parse(&text).unwrap(), 1.0)
+            .pacing_time_scale(0.0),
+    )
+    .await;
     let cfg_replay = config(replay_dir.path(), "probe.toml", &replay_link, "");
     let (code, again, stderr) = run_probe(&[
         "--config",
@@ -597,18 +590,12 @@ async fn probe_refuses_bad_arguments_as_usage_errors() {
 /// the return to come back before it ends; and a config whose speeds say so.
 async fn start_slow(dir: &Path, reads_during_return: bool) -> (SimHandle, PathBuf) {
     let link = dir.join("sj210");
-    let mut sim = Simulator::new(&link)
-        .instrument(InstrumentConfig {
-            time_scale: 0.1,
-            reads_during_return,
-            ..InstrumentConfig::default()
-        })
-        .start()
-        .unwrap();
-    match tokio::time::timeout(EVENT_WAIT, sim.next_event()).await {
-        Ok(Some(SimEvent::Ready(_))) => {}
-        other => panic!("expected the ready event, got {other:?}"),
-    }
+    let sim = crate::common::started(Simulator::new(&link).instrument(InstrumentConfig {
+        time_scale: 0.1,
+        reads_during_return,
+        ..InstrumentConfig::default()
+    }))
+    .await;
     let cfg = dir.join("slow.toml");
     std::fs::write(
         &cfg,

@@ -600,15 +600,7 @@ async fn the_mitutoyo_r_profile_under_its_conditions_is_6664_points_at_1_5_um() 
         .iter()
         .map(|z| (z * 1000.0).round() / 1000.0)
         .collect();
-    let mut sim = Simulator::new(&link)
-        .instrument(cfg)
-        .profiles(set)
-        .start()
-        .unwrap();
-    assert!(matches!(
-        tokio::time::timeout(EVENT_WAIT, sim.next_event()).await,
-        Ok(Some(SimEvent::Ready(_)))
-    ));
+    let sim = crate::common::started(Simulator::new(&link).instrument(cfg).profiles(set)).await;
     let mut c = open_with(
         &link,
         ClientOptions {

@@ -13,7 +13,7 @@ use std::time::Duration;
 use surfscan::scan::journal::Record;
 use surfscan_sim::grbl::{StageFault, StageShared};
 use surfscan_sim::zaber::ZaberSimConfig;
-use surfscan_sim::{InstrumentConfig, SimEvent, SimHandle, Simulator};
+use surfscan_sim::{InstrumentConfig, SimHandle, Simulator};
 
 /// y of line 0, mm: Zaber positions are microsteps above the home sensor, all positive.
 const Y0_MM: f64 = 20.0;
@@ -61,11 +61,7 @@ impl ZaberRig {
             .profiles(profiles)
             .baud(38400 * 100)
             .zaber_stage(&stage_link, axis, stage.clone());
-        let mut handle = sim.start().expect("simulator starts");
-        match tokio::time::timeout(Duration::from_secs(10), handle.next_event()).await {
-            Ok(Some(SimEvent::Ready(_))) => {}
-            other => panic!("simulator not ready: {other:?}"),
-        }
+        let handle = crate::common::started(sim).await;
         ZaberRig {
             tmp,
             sim: Some(handle),

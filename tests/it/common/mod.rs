@@ -36,6 +36,15 @@ pub fn control_channels(
     }
 }
 
+/// Starts the simulator `sim` and waits (up to 10 s) for its ready event.
+pub async fn started(sim: Simulator) -> SimHandle {
+    let mut handle = sim.start().expect("simulator starts");
+    match tokio::time::timeout(Duration::from_secs(10), handle.next_event()).await {
+        Ok(Some(SimEvent::Ready(_))) => handle,
+        other => panic!("simulator not ready: {other:?}"),
+    }
+}
+
 /// The writing end of a pipe whose reader has already gone, to stand for a terminal that
 /// hung up or a `| head` that exited: a write to it fails with EPIPE. Both ends are
 /// close-on-exec, so no process another test starts meanwhile keeps the reader open (the
@@ -178,14 +187,9 @@ impl Rig {
                 other => panic!("fault spec {spec}: {other:?}"),
             }
         }
-        let mut handle = sim.start().expect("simulator starts");
-        match tokio::time::timeout(Duration::from_secs(10), handle.next_event()).await {
-            Ok(Some(SimEvent::Ready(_))) => {}
-            other => panic!("simulator not ready: {other:?}"),
-        }
         Rig {
             tmp,
-            sim: Some(handle),
+            sim: Some(started(sim).await),
             stage,
             options,
             instrument_link,
