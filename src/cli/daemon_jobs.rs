@@ -173,9 +173,17 @@ impl Jobs {
                     settings: Box::new(settings),
                 };
             }
-            Decision::Resume(dir) | Decision::Continue(dir) => {
+            Decision::Resume(dir) => {
                 return Turn::Wait(format!(
                     "job {id} waits: the unfinished scan {} must end first (resume it with `surfscan resume` or `surfscan start`, or abort it)",
+                    dir.display()
+                ))
+            }
+            // A plain start continues only a scan an earlier version failed because the file
+            // system refused a write (see the choice).
+            Decision::Continue(dir) => {
+                return Turn::Wait(format!(
+                    "job {id} waits: the scan {} failed when the file system refused a write and is continued first (`surfscan start` continues it)",
                     dir.display()
                 ))
             }
@@ -346,20 +354,18 @@ mod tests {
     use crate::jobs::queue::JobState;
     use crate::jobs::service::{tests::station, AddJob, QueueService};
     use crate::jobs::synthetic::{write, SyntheticScan};
-    use crate::scan::ending::{End, FailKind, FailReason};
+    use crate::scan::ending::{End, FailCause, FailKind, FailReason, StopStatus};
+    use crate::scan::journal::{Journal, StopRecord, JOURNAL_FILE};
     use crate::scan::outcome::Outcome;
+    use crate::scan::settings::RunSettings;
     use crate::scan::testhooks::TestHooks;
+    use std::path::{Path, PathBuf};
     use std::time::Instant;
 
-    /// A job's scan whose reopening panicked (the daemon's at its start, as the runner ends
-    /// it: a failure by a bug, with the scan's directory) ends the job `fail` with its scan,
-    /// and the queue's next turn does not reopen the scan again. Refused without its
-    /// directory, as before, the job stayed running and the turn reopened its scan a second
-    /// time.
-    #[test]
-    fn a_job_whose_scan_could_not_be_reopened_for_a_bug_ends_with_its_scan() {
-        let tmp = tempfile::tempdir().expect("tmp");
-        let config = station(tmp.path());
+    /// The station's settings, its queue in `dir` and the one job queued in it (recipe
+    /// `brass`, specimen C-1).
+    fn one_job(dir: &Path) -> (RunSettings, QueueService, u64) {
+        let config = station(dir);
         let base =
             super::run_settings(&config, "ab".repeat(32), TestHooks::default()).expect("settings");
         let (queue, _) = QueueService::open(config).expect("queue");
@@ -377,19 +383,67 @@ mod tests {
             )
             .expect("added")
             .id;
-        queue.mark_running(job).expect("running");
+        (base, queue, job)
+    }
+
+    /// A scan of 11 lines with 4 done, unfinished, in `out`: job `job`'s when given.
+    fn scan_of(out: &Path, job: Option<u64>) -> (SyntheticScan, PathBuf) {
         let scan = SyntheticScan {
             id: "20261207-2200-C-1".into(),
             sequence: 1,
             started: "2026-12-07T22:00:00Z".parse().expect("a time"),
             specimen: "C-1".into(),
-            recipe: Some(("brass".into(), Some(job))),
+            recipe: Some(("brass".into(), job)),
             lines: 11,
             done: 4,
             stop: None,
             report: None,
         };
-        let dir = write(&base.output_dir, &scan).expect("scan");
+        let dir = write(out, &scan).expect("scan");
+        (scan, dir)
+    }
+
+    /// A queued job waits for a scan an earlier version failed because the file system
+    /// refused a write (a plain start continues it, so the choice does): the wait names it as
+    /// failed and how to continue it, not as an unfinished scan to resume or abort (it has
+    /// ended; there is nothing to abort).
+    #[test]
+    fn a_job_waiting_for_a_scan_failed_for_storage_says_it_failed() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let (base, queue, job) = one_job(tmp.path());
+        let (_, dir) = scan_of(&base.output_dir, None);
+        let stop = StopRecord {
+            status: StopStatus::Fail,
+            reason: "storage: write lines/0004.csv: Read-only file system (os error 30)".into(),
+            cause: Some(FailCause::Storage),
+            internal: false,
+            time: "2026-12-07T22:30:00Z".parse().expect("a time"),
+        };
+        Journal::append_stop(&dir.join(JOURNAL_FILE), stop).expect("stopped");
+        let mut jobs = Jobs::new(queue, "ab".repeat(32));
+        let Turn::Wait(why) = jobs.turn(&base, true, Instant::now()) else {
+            panic!("the job does not wait");
+        };
+        assert_eq!(
+            why,
+            format!(
+                "job {job} waits: the scan {} failed when the file system refused a write and is continued first (`surfscan start` continues it)",
+                dir.display()
+            )
+        );
+    }
+
+    /// A job's scan whose reopening panicked (the daemon's at its start, as the runner ends
+    /// it: a failure by a bug, with the scan's directory) ends the job `fail` with its scan,
+    /// and the queue's next turn does not reopen the scan again. Refused without its
+    /// directory, as before, the job stayed running and the turn reopened its scan a second
+    /// time.
+    #[test]
+    fn a_job_whose_scan_could_not_be_reopened_for_a_bug_ends_with_its_scan() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let (base, queue, job) = one_job(tmp.path());
+        queue.mark_running(job).expect("running");
+        let (scan, dir) = scan_of(&base.output_dir, Some(job));
         queue.set_scan(job, &scan.id).expect("its scan");
         let mut jobs = Jobs::new(queue, "ab".repeat(32));
         let why = "internal error: reopening the scan panicked (a bug); report this with the scan's directory and the log";
