@@ -10,8 +10,10 @@
 //! goes back to its place and is tried again with the reconnection backoff: a condition
 //! that clears by itself never consumes a night's job. A scan that ends by a shutdown
 //! leaves its job running: the scan resumes at the next start. A scan whose reopening
-//! panicked has ended by a bug (the runner records it): its job ends `fail` with it, and the
-//! queue does not reopen it again.
+//! was refused for its own files, or panicked, has ended (the runner records it): its job
+//! ends `fail` with it, and the queue does not reopen it again. One whose reopening the file
+//! system refused is left as it is, which can clear by itself: its job stays running with
+//! it, and its turn reopens it again with the reconnection backoff, saying why meanwhile.
 //!
 //! Layer 5 (composition): depends on [`crate::jobs`], [`crate::scan`]'s choice and
 //! settings, and [`super::station`].
@@ -23,7 +25,7 @@ use crate::jobs::service::QueueService;
 use crate::scan::choice::{self, Asker, Decision};
 use crate::scan::command::RecipeStart;
 use crate::scan::command::{Peer, StartMode};
-use crate::scan::ending::{End, FailCause, FailReason};
+use crate::scan::ending::{End, FailCause, FailKind, FailReason};
 use crate::scan::journal::{read_journal, ResumeState, JOURNAL_FILE};
 use crate::scan::outcome::{NewJob, Outcome, ScanRequest};
 use crate::scan::settings::RunSettings;
@@ -98,6 +100,11 @@ impl Jobs {
             Next::Start(id) => (id, None),
             Next::Continue { id, scan_id } => (id, Some(scan_id)),
         };
+        if let Some((at, why)) = &self.retry {
+            if now < *at {
+                return Turn::Wait(why.clone());
+            }
+        }
         let plan = match self.queue.plan_of(id) {
             Ok(p) => p,
             Err(why) if matches!(existing, Some(Some(_))) => {
@@ -137,11 +144,6 @@ impl Jobs {
                 },
                 settings: Box::new(settings),
             };
-        }
-        if let Some((at, why)) = &self.retry {
-            if now < *at {
-                return Turn::Wait(why.clone());
-            }
         }
         if !devices_present {
             return Turn::Wait(format!(
@@ -246,19 +248,19 @@ impl Jobs {
             (End::Shutdown, _) => {}
             (End::Fail(r), Some(_)) if r.cause() == FailCause::Budget => {}
             (End::Fail(FailReason::NotStarted(fault)), None) => {
-                self.delay = if self.delay.is_zero() {
-                    base.backoff.initial
-                } else {
-                    (self.delay * 2).min(base.backoff.max)
-                };
-                let why = format!(
-                    "job {id} waits for its devices: {fault}; tried again in {} s",
-                    self.delay.as_secs()
-                );
+                let why = self.back_off(base, |s| {
+                    format!("job {id} waits for its devices: {fault}; tried again in {s} s")
+                });
                 if let Err(e) = self.queue.requeue(id, &why) {
                     tracing::error!("{e}");
                 }
-                self.retry = Some((Instant::now() + self.delay, why));
+            }
+            // The file system refused reopening its scan, which can clear by itself: the scan
+            // is left as it is and the job running; its turn tries it again with backoff.
+            (End::Fail(r @ FailReason::Refused { .. }), Some(scan)) if r.kind() == FailKind::Io => {
+                self.back_off(base, |s| {
+                    format!("job {id} waits: its scan {scan} could not be reopened: {r}; tried again in {s} s")
+                });
             }
             (end, _) => {
                 self.retry = None;
@@ -284,6 +286,20 @@ impl Jobs {
                 );
             }
         }
+    }
+
+    /// Waits the next step of the backoff before the job's next try (the reconnection
+    /// backoff's, doubling up to its maximum); the reason, made by `why` of the seconds, is
+    /// the turn's meanwhile.
+    fn back_off(&mut self, base: &RunSettings, why: impl FnOnce(u64) -> String) -> String {
+        self.delay = if self.delay.is_zero() {
+            base.backoff.initial
+        } else {
+            (self.delay * 2).min(base.backoff.max)
+        };
+        let why = why(self.delay.as_secs());
+        self.retry = Some((Instant::now() + self.delay, why.clone()));
+        why
     }
 
     /// After a scan that was not started as a job (the daemon's resumption at start-up, an
@@ -356,7 +372,7 @@ mod tests {
     use crate::jobs::synthetic::{write, SyntheticScan};
     use crate::scan::ending::{End, FailCause, FailKind, FailReason, StopStatus};
     use crate::scan::journal::{Journal, StopRecord, JOURNAL_FILE};
-    use crate::scan::outcome::Outcome;
+    use crate::scan::outcome::{Outcome, ScanRequest};
     use crate::scan::settings::RunSettings;
     use crate::scan::testhooks::TestHooks;
     use std::path::{Path, PathBuf};
@@ -433,24 +449,79 @@ mod tests {
         );
     }
 
-    /// A job's scan whose reopening panicked (the daemon's at its start, as the runner ends
-    /// it: a failure by a bug, with the scan's directory) ends the job `fail` with its scan,
-    /// and the queue's next turn does not reopen the scan again. Refused without its
-    /// directory, as before, the job stayed running and the turn reopened its scan a second
-    /// time.
+    /// A job's scan whose reopening the file system refused (the daemon's at its start) is
+    /// left as it is, which can clear by itself: the job stays running with its scan, the
+    /// queue's turn waits, naming the scan and the refusal (with its fix), for the backoff's
+    /// first step, then reopens the scan again. Before, the runner's outcome did not name the
+    /// scan: the job stayed running and its turn reopened the scan at once, then ended the job
+    /// `refused` without its scan id.
     #[test]
-    fn a_job_whose_scan_could_not_be_reopened_for_a_bug_ends_with_its_scan() {
+    fn a_job_whose_scan_the_file_system_refused_to_reopen_waits_with_its_scan() {
         let tmp = tempfile::tempdir().expect("tmp");
         let (base, queue, job) = one_job(tmp.path());
         queue.mark_running(job).expect("running");
         let (scan, dir) = scan_of(&base.output_dir, Some(job));
         queue.set_scan(job, &scan.id).expect("its scan");
         let mut jobs = Jobs::new(queue, "ab".repeat(32));
-        let why = "internal error: reopening the scan panicked (a bug); report this with the scan's directory and the log";
+        let why = "the file system refused reading its lines back (EROFS: …); …; remount the output directory's file system read-write";
         let outcome = Outcome {
             end: End::Fail(FailReason::Refused {
                 message: why.into(),
-                kind: FailKind::Internal,
+                kind: FailKind::Io,
+            }),
+            dir: Some(dir.clone()),
+            outputs: None,
+        };
+
+        let now = Instant::now();
+        jobs.settle_if_a_job(&outcome, &base);
+        let snapshot = jobs.queue.snapshot();
+        let state = &snapshot.get(job).expect("the job").state;
+        assert!(
+            matches!(state, JobState::Running { scan_id: Some(s), .. } if *s == scan.id),
+            "{state:?}"
+        );
+        let Turn::Wait(waits) = jobs.turn(&base, true, now) else {
+            panic!("the scan is reopened again at once");
+        };
+        let step = base.backoff.initial;
+        assert_eq!(
+            waits,
+            format!(
+                "job {job} waits: its scan {} could not be reopened: {why}; tried again in {} s",
+                scan.id,
+                step.as_secs()
+            )
+        );
+        let later = Instant::now() + step;
+        assert!(
+            matches!(jobs.turn(&base, true, later), Turn::Run { job: j, request: ScanRequest::Resume { dir: d, .. }, .. } if j == job && d == dir),
+            "the scan is not reopened after the backoff"
+        );
+    }
+
+    /// A job's scan whose reopening panicked, or was refused for the scan's own files (the
+    /// daemon's at its start, as the runner ends it: a failure recorded, with the scan's
+    /// directory) ends the job `fail` with its scan, and the queue's next turn does not
+    /// reopen the scan again. Refused without its directory, as before, the job stayed
+    /// running and the turn reopened its scan a second time, then ended it `refused` without
+    /// its scan id.
+    #[test]
+    fn a_job_whose_scan_could_not_be_reopened_for_good_ends_with_its_scan() {
+        for (why, kind) in [
+            ("internal error: reopening the scan panicked (a bug); report this with the scan's directory and the log", FailKind::Internal),
+            ("the scan cannot be reopened: reading its journal: …; nothing reopens it by itself: …", FailKind::Scan),
+        ] {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let (base, queue, job) = one_job(tmp.path());
+        queue.mark_running(job).expect("running");
+        let (scan, dir) = scan_of(&base.output_dir, Some(job));
+        queue.set_scan(job, &scan.id).expect("its scan");
+        let mut jobs = Jobs::new(queue, "ab".repeat(32));
+        let outcome = Outcome {
+            end: End::Fail(FailReason::Refused {
+                message: why.into(),
+                kind,
             }),
             dir: Some(dir),
             outputs: None,
@@ -468,5 +539,6 @@ mod tests {
             matches!(jobs.turn(&base, true, Instant::now()), Turn::Nothing),
             "the scan is reopened again"
         );
+        }
     }
 }

@@ -282,25 +282,17 @@ fn internal(message: &str) -> Event {
 /// How the file system refused a write, from the error chain: its first operating-system
 /// error; a full disk (`ENOSPC`, `EDQUOT`, or the pre-flight finding too little room) apart.
 fn storage_failure(e: &(dyn std::error::Error + 'static)) -> StorageFailure {
-    let mut errno = None;
-    let mut cur: Option<&(dyn std::error::Error + 'static)> = Some(e);
-    while let Some(err) = cur {
-        if let Some(
-            super::store_error::StoreError::DiskTooSmall { .. }
-            | super::store_error::StoreError::TooFewInodes { .. },
-        ) = err.downcast_ref()
-        {
-            return StorageFailure::full(e.to_string());
-        }
-        if let Some(code) = err
-            .downcast_ref::<std::io::Error>()
-            .and_then(std::io::Error::raw_os_error)
-        {
-            errno = Some(code);
-            break;
-        }
-        cur = err.source();
+    use super::store_error::StoreError;
+    let too_small = |err: &(dyn std::error::Error + 'static)| {
+        matches!(
+            err.downcast_ref(),
+            Some(StoreError::DiskTooSmall { .. } | StoreError::TooFewInodes { .. })
+        )
+    };
+    if std::iter::successors(Some(e), |e| e.source()).any(too_small) {
+        return StorageFailure::full(e.to_string());
     }
+    let errno = super::store_error::os_error(e);
     let class = match errno {
         Some(libc::ENOSPC | libc::EDQUOT) => StorageClass::Full,
         _ => StorageClass::Refused,

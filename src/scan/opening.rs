@@ -2,18 +2,26 @@
 //! record) once its devices answered, or reopening an unfinished or failed one and loading
 //! its committed lines into memory and the fitter.
 //!
+//! A reopening refused is classed by what can clear it ([`Refusal`]): the file system
+//! refusing (an operating-system error) can clear by itself and leaves the scan as it is;
+//! the scan's own files unreadable or inconsistent are the operator's, and the refusal is
+//! the scan's ending (the runner records it).
+//!
 //! Layer 3 (session): depends on [`super::store`], [`super::journal`], [`super::disk`],
-//! [`super::ledger`], the session's settings and [`crate::devices`]' reports.
+//! [`super::ledger`], the session's settings, [`super::reasons`]' words for a refusal and
+//! [`crate::devices`]' reports.
 
 use super::command::Peer;
 use super::disk::preflight_disk;
+use super::ending::FailKind;
 use super::journal::{Journal, Record, ResumeState, StartRecord};
 use super::ledger::Ledger;
 use super::machine::Resumed;
+use super::reasons;
 use super::scan_id::ScanId;
 use super::settings::RunSettings;
 use super::store::ScanStore;
-use super::store_error::StoreError;
+use super::store_error::{os_error, StoreError};
 use crate::devices::ProbeReport;
 use crate::profile::Conditions;
 use chrono::Utc;
@@ -122,6 +130,58 @@ pub(super) struct Reopened {
     pub failed: Option<String>,
 }
 
+/// Why a scan could not be reopened, as far as what becomes of it depends on it: the
+/// project's rule is that what can clear by itself never ends a scan, and what the operator
+/// must fix is not tried again by itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Refusal {
+    /// There is nothing to reopen or no time to: the scan has ended already, or the work
+    /// was cancelled as the process shuts down. The scan is left as it is.
+    Left,
+    /// The file system refused reading or writing the scan's files (an operating-system
+    /// error: a remount, a permission, a disk that went away): it can clear by itself, so
+    /// the scan is left as it is and tried again.
+    FileSystem,
+    /// The scan's own files cannot be read back as a scan (its journal's records, a line
+    /// file, a line the fitter refuses): the operator's to repair or give up; the refusal is
+    /// the scan's ending.
+    Scan,
+    /// A bug: reopening panicked; the refusal is the scan's ending by a bug.
+    Bug,
+}
+
+impl Refusal {
+    /// The exit class.
+    pub fn kind(self) -> FailKind {
+        match self {
+            Refusal::Left | Refusal::Scan => FailKind::Scan,
+            Refusal::FileSystem => FailKind::Io,
+            Refusal::Bug => FailKind::Internal,
+        }
+    }
+
+    /// Whether the refusal is recorded as the scan's ending (a `fail` stop record), so that
+    /// neither the daemon at its start nor its queue reopens the scan again by itself.
+    pub fn ends_the_scan(self) -> bool {
+        matches!(self, Refusal::Scan | Refusal::Bug)
+    }
+}
+
+/// The refusal of a reopening by `e` while doing `what`: the file system's when an
+/// operating-system error is behind it, else the scan's own; its reason says what to do.
+pub(super) fn refusal(what: &str, e: &(dyn std::error::Error + 'static)) -> (String, Refusal) {
+    match os_error(e) {
+        Some(errno) => (
+            reasons::reopening_refused(what, Some(errno), &e.to_string()),
+            Refusal::FileSystem,
+        ),
+        None => (
+            reasons::reopening_impossible(what, &e.to_string()),
+            Refusal::Scan,
+        ),
+    }
+}
+
 /// Reopens the scan in `dir`: journal (a torn tail truncated), committed lines checked
 /// against their hashes, the fitter rebuilt. A scan with a stop record is refused unless
 /// `continue_failed` and it failed.
@@ -129,24 +189,33 @@ pub(super) fn reopen(
     settings: &RunSettings,
     dir: &Path,
     continue_failed: bool,
-) -> Result<Reopened, String> {
+) -> Result<Reopened, (String, Refusal)> {
     let faults = settings.hooks.clone();
-    let store = ScanStore::open(dir, faults.clone()).map_err(|e| format!("storage: {e}"))?;
-    let (journal, recovery) =
-        Journal::open(&store.journal_path(), faults).map_err(|e| e.to_string())?;
-    let state =
-        ResumeState::from_records(journal.path(), &recovery.records).map_err(|e| e.to_string())?;
+    // A directory that is not one (a symbolic link) is no scan to record an ending in.
+    let store = ScanStore::open(dir, faults.clone()).map_err(|e| {
+        match refusal("opening its directory", &e) {
+            (why, Refusal::Scan) => (why, Refusal::Left),
+            other => other,
+        }
+    })?;
+    let (journal, recovery) = Journal::open(&store.journal_path(), faults)
+        .map_err(|e| refusal("reading its journal", &e))?;
+    let state = ResumeState::from_records(journal.path(), &recovery.records)
+        .map_err(|e| refusal("reading its journal", &e))?;
     let failed = match &state.stop {
         None => None,
         Some(s) if continue_failed && s.status == super::journal::StopStatus::Fail => {
             Some(s.reason.clone())
         }
         Some(s) => {
-            return Err(format!(
-                "scan {} has ended ({}: {}); it cannot be continued",
-                state.start.scan_id,
-                s.status.as_str(),
-                s.reason
+            return Err((
+                format!(
+                    "scan {} has ended ({}: {}); it cannot be continued",
+                    state.start.scan_id,
+                    s.status.as_str(),
+                    s.reason
+                ),
+                Refusal::Left,
             ))
         }
     };
@@ -169,13 +238,13 @@ pub(super) fn reopen(
     let checked = ledger
         .store
         .load_committed_repairing(&state.lines, Utc::now())
-        .map_err(|e| format!("cannot rebuild the fit: {e}"))?;
+        .map_err(|e| refusal("reading its lines back", &e))?;
     for q in &checked.quarantined {
         tracing::warn!(scan_id = %ledger.id, line = q.index + 1, "{} (now {})", q.reason, q.moved_to);
         ledger
             .journal
             .append(&Record::Quarantine(q.clone()))
-            .map_err(|e| format!("cannot record the line moved aside: {e}"))?;
+            .map_err(|e| refusal("recording a line moved aside", &e))?;
     }
     let mut lines = checked.lines;
     lines.sort_by_key(|l| l.meta.id.index);
@@ -199,7 +268,7 @@ pub(super) fn reopen(
         let index = l.meta.id.index;
         ledger
             .push(l)
-            .map_err(|e| format!("cannot rebuild the fit from line {}: {e}", index + 1))?;
+            .map_err(|e| refusal(&format!("rebuilding the fit from line {}", index + 1), &e))?;
     }
     let quarantined: Vec<String> = checked
         .quarantined

@@ -188,6 +188,15 @@ pub fn errno_name(errno: i32) -> Option<&'static str> {
 /// The status reason (and the note, after `suspended: `) when the file system refused a
 /// write for another reason than space.
 pub fn storage_refused(what: &str, errno: Option<i32>, message: &str) -> String {
+    let (code, fix) = refusal_words(errno);
+    format!(
+        "the file system refused writing {what} ({code}{message}); it is kept in memory and written again with backoff, and the scan goes on by itself; {fix}"
+    )
+}
+
+/// The error's symbolic name (`EROFS: `, empty when not known) and the fix the operator can
+/// make, for a refusal of the file system with `errno`.
+fn refusal_words(errno: Option<i32>) -> (String, &'static str) {
     let code = errno
         .and_then(errno_name)
         .map_or(String::new(), |n| format!("{n}: "));
@@ -200,8 +209,24 @@ pub fn storage_refused(what: &str, errno: Option<i32>, message: &str) -> String 
         Some(libc::EIO) => "check the disk (a USB disk or a network file system that went away)",
         _ => "make the output directory writable",
     };
+    (code, fix)
+}
+
+/// The reason a scan is not reopened when the file system refused `what` (reading or
+/// writing its files): a condition that can clear, so the scan is left as it is.
+pub fn reopening_refused(what: &str, errno: Option<i32>, message: &str) -> String {
+    let (code, fix) = refusal_words(errno);
     format!(
-        "the file system refused writing {what} ({code}{message}); it is kept in memory and written again with backoff, and the scan goes on by itself; {fix}"
+        "the file system refused {what} ({code}{message}); the scan is left as it is and reopened once the file system allows it (the daemon tries again at its next start, a queued job's scan with backoff); {fix}"
+    )
+}
+
+/// The reason a scan is not reopened when its own files cannot be read back as a scan
+/// (`what`: its journal's records, a line the fitter refuses): the operator's to repair or
+/// give up; nothing reopens it by itself.
+pub fn reopening_impossible(what: &str, message: &str) -> String {
+    format!(
+        "the scan cannot be reopened: {what}: {message}; nothing reopens it by itself: repair its files and continue it with `surfscan start --resume`, or begin a new scan with a plain `surfscan start`"
     )
 }
 

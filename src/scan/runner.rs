@@ -23,7 +23,7 @@ use super::event::ScanEvent;
 use super::journal::{Journal, StopRecord, JOURNAL_FILE};
 use super::ledger::Ledger;
 use super::machine::{Action, Event, Machine, Now, Policy};
-use super::opening::{self, NewScan};
+use super::opening::{self, NewScan, Refusal};
 use super::outcome::{Outcome, ScanRequest};
 use super::reasons;
 use super::settings::RunSettings;
@@ -142,16 +142,15 @@ pub async fn run_scan<S: Station>(
     finish(ctl, &machine, books)
 }
 
-/// Reopens a scan directory for the machine; the refusal (reason and kind) when it cannot
+/// Reopens a scan directory for the machine; the refusal (reason and class) when it cannot
 /// be run.
 fn reopen(
     settings: &RunSettings,
     dir: &std::path::Path,
     peer: Option<Peer>,
     after_failure: bool,
-) -> Result<(super::machine::Resumed, Ledger), (String, FailKind)> {
-    let r =
-        opening::reopen(settings, dir, after_failure).map_err(|reason| (reason, FailKind::Scan))?;
+) -> Result<(super::machine::Resumed, Ledger), (String, Refusal)> {
+    let r = opening::reopen(settings, dir, after_failure)?;
     let (mut ledger, mut resumed) = (r.ledger, r.resumed);
     let mut note = match &r.failed {
         Some(reason) => format!("{}; it had failed: {reason}", r.note),
@@ -175,7 +174,7 @@ fn reopen(
     if r.failed.is_some() {
         ledger
             .reopen_failed(peer.clone())
-            .map_err(|e| (format!("cannot record the continuation: {e}"), FailKind::Io))?;
+            .map_err(|e| opening::refusal("recording the continuation", &e))?;
     }
     ledger.note(&super::machine::Note {
         reason: note,
@@ -189,25 +188,53 @@ fn reopen(
 
 /// Reopens the scan in `dir` by `work` ([`watched`]); the outcome when it cannot be run.
 ///
-/// A reopening that panicked (a bug) is the scan's ending, recorded as such in its journal
-/// (`fail`, cause `operator`, `internal`): the daemon at start-up and its queue leave a scan
-/// that a bug ended alone, so the bug is not run again at every start and every turn of the
-/// queue; only the operator's `--resume` tries it again. The status's last stop, the `fail`
-/// event and the outcome (exit 70) say the same. Any other refusal is no ending: the scan
-/// stays as it was.
+/// A refusal that is the scan's ending ([`Refusal::ends_the_scan`]: its files cannot be read
+/// back as a scan, or reopening panicked, a bug) is recorded as such in its journal (`fail`,
+/// cause `operator`, `internal` for a bug): the daemon at start-up and its queue leave such a
+/// scan alone, so it is not reopened again at every start and every turn of the queue; only
+/// the operator's `--resume` tries it again. The status's last stop, the `fail` event and the
+/// outcome (exit 1, or 70 for a bug) say the same. A refusal by the file system can clear
+/// by itself: the scan is left as it is (no record, no event), and the outcome names it for
+/// its job to wait. Any other refusal (the scan has ended, the process shuts down) is
+/// without the scan.
 async fn reopened<T: Send + 'static>(
     ctl: &Control,
     dir: PathBuf,
-    work: impl FnOnce() -> Result<T, (String, FailKind)> + Send + 'static,
+    work: impl FnOnce() -> Result<T, (String, Refusal)> + Send + 'static,
 ) -> Result<T, Outcome> {
-    let (message, kind) = match watched(ctl, "reopening the scan", work).await {
+    let (message, refusal) = match watched(ctl, "reopening the scan", work).await {
         Ok(Ok(reopened)) => return Ok(reopened),
-        Ok(Err(refusal)) | Err(refusal) => refusal,
+        Ok(Err(refusal)) => refusal,
+        Err((message, FailKind::Internal)) => (message, Refusal::Bug),
+        Err((message, _)) => (message, Refusal::Left),
     };
-    let end = End::Fail(FailReason::Refused { message, kind });
-    let Some(words) = end.stop_record().filter(|w| w.internal) else {
-        return Err(refused(ctl, end));
+    let end = End::Fail(FailReason::Refused {
+        message,
+        kind: refusal.kind(),
+    });
+    let words = match end.stop_record() {
+        Some(words) if refusal != Refusal::Left => words,
+        _ => return Err(refused(ctl, end)),
     };
+    let scan_id = dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let mut s = ended_status(&ctl.status.borrow(), words.status, &words.reason);
+    if let Some(last) = s.last_stop.as_mut() {
+        last.scan_id.clone_from(&scan_id);
+        last.dir = dir.display().to_string();
+        last.internal = words.internal;
+    }
+    if !refusal.ends_the_scan() {
+        tracing::error!("{}: {}", dir.display(), words.reason);
+        ctl.publish(s);
+        return Err(Outcome {
+            end,
+            dir: Some(dir),
+            outputs: None,
+        });
+    }
     let path = dir.join(JOURNAL_FILE);
     let stop = StopRecord {
         status: words.status,
@@ -233,16 +260,6 @@ async fn reopened<T: Send + 'static>(
             dir.display(),
             words.reason
         ),
-    }
-    let scan_id = dir
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let mut s = ended_status(&ctl.status.borrow(), words.status, &words.reason);
-    if let Some(last) = s.last_stop.as_mut() {
-        last.scan_id.clone_from(&scan_id);
-        last.dir = dir.display().to_string();
-        last.internal = words.internal;
     }
     ctl.publish(s);
     if let Some(kind) = end.event(true) {
@@ -648,8 +665,11 @@ mod tests {
     use crate::scan::command::StartMode;
     use crate::scan::ending::{End, FailCause, FailKind, FailReason, StopStatus};
     use crate::scan::event::ScanEventKind;
+    use crate::scan::journal::JournalError;
     use crate::scan::journal::{read_journal, survey, Record, JOURNAL_FILE};
+    use crate::scan::opening::{refusal, Refusal};
     use crate::scan::status::Status;
+    use crate::scan::store_error::StoreError;
     use std::path::{Path, PathBuf};
     use tokio::sync::{mpsc, watch};
 
@@ -702,7 +722,7 @@ mod tests {
         let (events, mut told) = mpsc::unbounded_channel();
         ctl.events = Some(events);
 
-        let outcome = reopened(&ctl, dir.clone(), || -> Result<(), (String, FailKind)> {
+        let outcome = reopened(&ctl, dir.clone(), || -> Result<(), (String, Refusal)> {
             panic!("no knot vector for {} lines", 1)
         })
         .await
@@ -760,10 +780,10 @@ mod tests {
         let (events, mut told) = mpsc::unbounded_channel();
         ctl.events = Some(events);
 
-        let outcome = reopened(&ctl, dir.clone(), || -> Result<(), (String, FailKind)> {
+        let outcome = reopened(&ctl, dir.clone(), || -> Result<(), (String, Refusal)> {
             Err((
                 "internal: reopening the scan was cancelled".into(),
-                FailKind::Scan,
+                Refusal::Left,
             ))
         })
         .await
@@ -774,6 +794,177 @@ mod tests {
         assert_eq!((last.status, last.internal), (StopStatus::Fail, false));
         assert!(told.try_recv().is_err(), "no event");
         assert_eq!(decisions(out.path())[0], Decision::Resume(dir));
+    }
+
+    /// A control channel whose status and events the test reads.
+    fn control() -> (
+        Control,
+        watch::Receiver<Status>,
+        mpsc::UnboundedReceiver<crate::scan::event::ScanEvent>,
+    ) {
+        let (_commands, commands) = mpsc::channel(1);
+        let (_shutdown, shutdown) = watch::channel(false);
+        let (status, seen) = watch::channel(Status::idle());
+        let mut ctl = Control::new(commands, shutdown, status);
+        let (events, told) = mpsc::unbounded_channel();
+        ctl.events = Some(events);
+        (ctl, seen, told)
+    }
+
+    /// What each class of refusal means, as a table: its exit class and whether it is the
+    /// scan's ending. The file system refusing can clear by itself (a remount, a permission
+    /// given back): never an ending. The scan's own files, or a bug, cannot: recorded, so
+    /// that nothing reopens the scan again without the operator. A scan that has ended, or a
+    /// shutdown, leaves nothing to record.
+    #[test]
+    fn each_refusal_class_says_whether_it_ends_the_scan() {
+        let table = [
+            (Refusal::Left, FailKind::Scan, false),
+            (Refusal::FileSystem, FailKind::Io, false),
+            (Refusal::Scan, FailKind::Scan, true),
+            (Refusal::Bug, FailKind::Internal, true),
+        ];
+        for (r, kind, ends) in table {
+            assert_eq!((r.kind(), r.ends_the_scan()), (kind, ends), "{r:?}");
+        }
+    }
+
+    /// An operating-system error anywhere behind the error is the file system's refusal,
+    /// named with its errno and its fix; an error of what was read (a second start record
+    /// in the journal) is the scan's own, with what the operator may do.
+    #[test]
+    fn a_refusal_is_the_file_systems_when_an_os_error_is_behind_it() {
+        let io = StoreError::Io {
+            op: "read",
+            path: "lines/0002.csv".into(),
+            source: std::io::Error::from_raw_os_error(libc::EIO),
+        };
+        let (why, class) = refusal("reading its lines back", &io);
+        assert_eq!(class, Refusal::FileSystem);
+        assert!(
+            why.starts_with(
+                "the file system refused reading its lines back (EIO: read lines/0002.csv"
+            ) && why
+                .ends_with("check the disk (a USB disk or a network file system that went away)"),
+            "{why}"
+        );
+        let journal = StoreError::Journal(JournalError::Io {
+            op: "open",
+            path: "journal.jsonl".into(),
+            source: std::io::Error::from_raw_os_error(libc::EROFS),
+        });
+        assert_eq!(
+            refusal("reading its journal", &journal).1,
+            Refusal::FileSystem
+        );
+        let second = JournalError::SecondStart {
+            path: "journal.jsonl".into(),
+            line: 5,
+        };
+        let (why, class) = refusal("reading its journal", &second);
+        assert_eq!(class, Refusal::Scan);
+        assert_eq!(
+            why,
+            "the scan cannot be reopened: reading its journal: journal.jsonl: line 5 is a second start record; nothing reopens it by itself: repair its files and continue it with `surfscan start --resume`, or begin a new scan with a plain `surfscan start`"
+        );
+    }
+
+    /// A reopening refused by the file system leaves the scan as it was (no stop record, no
+    /// event: the daemon resumes it at its next start), but names it: the outcome carries its
+    /// directory (for its job, which waits) with the exit class of a file error (74), and the
+    /// status's last stop its id, directory and the fix.
+    #[tokio::test]
+    async fn a_reopening_refused_by_the_file_system_leaves_the_scan_and_names_it() {
+        let out = tempfile::tempdir().expect("tmp");
+        let dir = unfinished(out.path());
+        let (ctl, seen, mut told) = control();
+        let records = read_journal(&dir.join(JOURNAL_FILE))
+            .expect("journal")
+            .records;
+
+        let outcome = reopened(&ctl, dir.clone(), || -> Result<(), (String, Refusal)> {
+            let e = StoreError::Io {
+                op: "list",
+                path: "lines".into(),
+                source: std::io::Error::from_raw_os_error(libc::EACCES),
+            };
+            Err(refusal("reading its lines back", &e))
+        })
+        .await
+        .expect_err("refused");
+        assert_eq!(outcome.dir.as_deref(), Some(dir.as_path()));
+        let exit = crate::cli::scan::outcome_result(&outcome).expect_err("a failure");
+        assert_eq!(exit.exit as i32, 74, "{}", exit.message);
+        assert_eq!(
+            read_journal(&dir.join(JOURNAL_FILE))
+                .expect("journal")
+                .records,
+            records,
+            "the journal is left as it was"
+        );
+        assert!(told.try_recv().is_err(), "no event");
+        let last = seen.borrow().last_stop.clone().expect("last stop");
+        assert_eq!(
+            (last.scan_id.as_str(), last.dir, last.internal),
+            ("20261207-2200-block", dir.display().to_string(), false)
+        );
+        assert!(
+            last.reason
+                .ends_with("give the daemon's user write permission on the output directory"),
+            "{}",
+            last.reason
+        );
+        assert_eq!(decisions(out.path())[0], Decision::Resume(dir));
+    }
+
+    /// A reopening refused because the scan's own files cannot be read back is the scan's
+    /// ending, the operator's: a `fail` stop record (cause `operator`, no bug), the status's
+    /// last stop and one `fail` event with its id, and the outcome with its directory (exit
+    /// 1); the daemon no longer reopens it at its start, a plain start begins a new scan and
+    /// `--resume` tries it again. Before, nothing was recorded and the daemon reopened it
+    /// into the same refusal at every start.
+    #[tokio::test]
+    async fn a_reopening_refused_for_the_scans_own_files_is_its_ending() {
+        let out = tempfile::tempdir().expect("tmp");
+        let dir = unfinished(out.path());
+        let (ctl, seen, mut told) = control();
+
+        let outcome = reopened(&ctl, dir.clone(), || -> Result<(), (String, Refusal)> {
+            let e = JournalError::SecondStart {
+                path: "journal.jsonl".into(),
+                line: 3,
+            };
+            Err(refusal("reading its journal", &e))
+        })
+        .await
+        .expect_err("refused");
+        let why = "the scan cannot be reopened: reading its journal: journal.jsonl: line 3 is a second start record; nothing reopens it by itself: repair its files and continue it with `surfscan start --resume`, or begin a new scan with a plain `surfscan start`";
+        assert_eq!(outcome.dir.as_deref(), Some(dir.as_path()));
+        let exit = crate::cli::scan::outcome_result(&outcome).expect_err("a failure");
+        assert_eq!(exit.exit as i32, 1, "{}", exit.message);
+        let journal = read_journal(&dir.join(JOURNAL_FILE)).expect("journal");
+        let Some(Record::Stop(stop)) = journal.records.last() else {
+            panic!("no stop record: {:?}", journal.records.last());
+        };
+        assert_eq!(
+            (stop.status, stop.reason.as_str(), stop.cause, stop.internal),
+            (StopStatus::Fail, why, Some(FailCause::Operator), false)
+        );
+        let last = seen.borrow().last_stop.clone().expect("last stop");
+        assert_eq!(
+            (last.scan_id.as_str(), last.reason.as_str(), last.internal),
+            ("20261207-2200-block", why, false)
+        );
+        let ev = told.try_recv().expect("the fail event");
+        assert_eq!(
+            (ev.kind, ev.internal, ev.scan_id.as_str(), ev.time),
+            (ScanEventKind::Fail, false, "20261207-2200-block", stop.time)
+        );
+        assert!(told.try_recv().is_err(), "one event");
+        let [daemon, plain, resume] = decisions(out.path());
+        assert_eq!(daemon, Decision::Nothing);
+        assert!(matches!(plain, Decision::New { .. }), "{plain:?}");
+        assert_eq!(resume, Decision::Continue(dir));
     }
 
     /// A panic in [`super::watched`] work becomes the scan's reason, naming the work and the

@@ -117,6 +117,15 @@ impl StoreError {
     }
 }
 
+/// The operating system's error number behind `e`, the first along its sources: the file
+/// system refused, as opposed to what was read being wrong.
+pub(crate) fn os_error(e: &(dyn std::error::Error + 'static)) -> Option<i32> {
+    std::iter::successors(Some(e), |e| e.source()).find_map(|e| {
+        e.downcast_ref::<io::Error>()
+            .and_then(io::Error::raw_os_error)
+    })
+}
+
 /// What to check after a failed `op`: a read needs a readable file (free space has nothing
 /// to do with it), a listing a readable directory; whatever writes needs permission and space.
 fn io_hint(op: &str) -> &'static str {
