@@ -364,11 +364,6 @@ pub fn run(args: Args) -> Result<(), CliError> {
     finish(&outputs, judged, profile)
 }
 
-/// Where a file's outputs go: `--out`, else the working directory.
-fn out_dir(args: &Args) -> PathBuf {
-    args.out.clone().unwrap_or_else(|| PathBuf::from("."))
-}
-
 /// How a file's lines are evaluated: `--lc` (default 0.8 mm), `--no-filter`, `--ls`,
 /// `--sampling-lengths` and `--form`.
 fn line_options(args: &Args) -> Options {
@@ -532,7 +527,9 @@ fn characterise_grid(
         replaced: &replaced,
         fit_s,
     };
-    characterise(&input.grid, model, surface, ctx, &out_dir(args))
+    // A file's outputs go to `--out`, else the working directory.
+    let out = args.out.as_deref().unwrap_or(Path::new("."));
+    characterise(&input.grid, model, surface, ctx, out)
 }
 
 /// What `analyze` of a profile says it found, as the instrument's display would show it:
