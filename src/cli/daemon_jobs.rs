@@ -164,14 +164,17 @@ impl Jobs {
         match &choice.decision {
             Decision::New { .. } => {}
             Decision::Resume(dir) | Decision::Continue(dir) if names_job(dir, id) => {
-                // Its scan was created before the queue recorded it.
+                // Its scan was created before the queue recorded it; a failed one is
+                // continued (reopened as unfinished, it would be refused for having ended).
                 let _ = self.queue.mark_running(id);
+                let (dir, peer) = (dir.clone(), None);
+                let request = match choice.decision {
+                    Decision::Continue(_) => ScanRequest::Continue { dir, peer },
+                    _ => ScanRequest::Resume { dir, peer },
+                };
                 return Turn::Run {
                     job: id,
-                    request: ScanRequest::Resume {
-                        dir: dir.clone(),
-                        peer: None,
-                    },
+                    request,
                     settings: Box::new(settings),
                 };
             }
@@ -446,6 +449,31 @@ mod tests {
                 "job {job} waits: the scan {} failed when the file system refused a write and is continued first (`surfscan start` continues it)",
                 dir.display()
             )
+        );
+    }
+
+    /// A queued job whose own scan an earlier version failed because the file system refused
+    /// a write (its scan created before the queue recorded it) has it continued, as the
+    /// choice decides: reopened as an unfinished scan, it was refused for having ended, and
+    /// the job ended `refused` without its scan.
+    #[test]
+    fn a_job_whose_own_scan_failed_for_storage_continues_it() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let (base, queue, job) = one_job(tmp.path());
+        let (_, dir) = scan_of(&base.output_dir, Some(job));
+        let stop = StopRecord {
+            status: StopStatus::Fail,
+            reason: "storage: write lines/0004.csv: Read-only file system (os error 30)".into(),
+            cause: Some(FailCause::Storage),
+            internal: false,
+            time: "2026-12-07T22:30:00Z".parse().expect("a time"),
+        };
+        Journal::append_stop(&dir.join(JOURNAL_FILE), stop).expect("stopped");
+        let mut jobs = Jobs::new(queue, "ab".repeat(32));
+        let turn = jobs.turn(&base, true, Instant::now());
+        assert!(
+            matches!(&turn, Turn::Run { job: j, request: ScanRequest::Continue { dir: d, peer: None }, .. } if *j == job && *d == dir),
+            "not continued"
         );
     }
 
