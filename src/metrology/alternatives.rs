@@ -32,10 +32,7 @@ pub fn candidates(lines: usize, options: FitOptions) -> Vec<(FitOptions, VMethod
         degrees_v.push(3);
     }
     for q in degrees_v {
-        let o = FitOptions {
-            degree_u: options.degree_u,
-            degree_v: q,
-        };
+        let o = FitOptions::degrees(options.degree_u, q);
         for rows in [
             default_control_rows(lines, q),
             lines.div_ceil(2).max(q + 1),

@@ -42,14 +42,14 @@ pub fn scan_degrees(
     start: Option<&StartRecord>,
 ) -> FitOptions {
     let paper = FitOptions::default();
-    FitOptions {
-        degree_u: degree_u
+    FitOptions::degrees(
+        degree_u
             .or(start.map(|s| s.plan.degree_u))
             .unwrap_or(paper.degree_u),
-        degree_v: degree_v
+        degree_v
             .or(start.map(|s| s.plan.degree_v))
             .unwrap_or(paper.degree_v),
-    }
+    )
 }
 
 /// How to fit a scan's `lines`: degrees by [`scan_degrees`], the method across the lines and
