@@ -17,8 +17,8 @@
 //! [`write_hint`] turns a failed write into what to do about it (a full disk, a read-only
 //! file system, a file where a directory must be).
 //!
-//! Layer 2 (I/O adapter): depends on std and `libc` (one advisory call on Linux, and the
-//! error numbers the hints tell apart).
+//! Layer 2 (I/O adapter): depends on std, `libc` (one advisory call on Linux, and the
+//! error numbers the hints tell apart) and serde_json (the JSON files written whole).
 
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
@@ -253,6 +253,14 @@ pub fn write_atomically<T>(
     body: impl FnOnce(&mut BufWriter<File>) -> io::Result<T>,
 ) -> io::Result<T> {
     write_impl(path, true, Links::Follow, body)
+}
+
+/// [`write_atomically`] of `value` as indented JSON ending in a line break.
+pub fn write_json_atomically(path: &Path, value: &impl serde::Serialize) -> io::Result<()> {
+    write_atomically(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, value).map_err(io::Error::other)?;
+        w.write_all(b"\n")
+    })
 }
 
 /// [`write_atomically`] for a scan's own files: the target must be a regular file or

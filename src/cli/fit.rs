@@ -48,7 +48,7 @@
 use super::input_args::{tell_findings, InputArgs};
 use super::model_args::ModelArgs;
 use super::{CliError, Exit};
-use crate::atomic::write_atomically;
+use crate::atomic::{write_atomically, write_json_atomically};
 use crate::fit::{max_residual_mm, FitOptions, FitResult, IncrementalFitter};
 use crate::grid::{Grid, LeftOut};
 use crate::iges::{IgesOptions, MAX_SECTION_LINES};
@@ -919,11 +919,7 @@ pub fn run(args: Args) -> Result<(), CliError> {
     if let Some(path) = &args.report {
         ensure_parent(path)?;
         let report = fitting.report(&fitted, read_s);
-        write_atomically(path, |w| {
-            serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)?;
-            std::io::Write::write_all(w, b"\n")
-        })
-        .map_err(|e| io_err("cannot write report", path, e))?;
+        write_json_atomically(path, &report).map_err(|e| io_err("cannot write report", path, e))?;
     }
     fitting.tell(&fitted);
     fitting.status(&fitted)

@@ -613,11 +613,7 @@ impl QueueStore {
             path: self.dir.clone(),
             hint: crate::atomic::write_hint(&self.dir, &e),
         })?;
-        crate::atomic::write_atomically(&path, |w| {
-            serde_json::to_writer_pretty(&mut *w, q).map_err(std::io::Error::other)?;
-            w.write_all(b"\n")
-        })
-        .map_err(|e| StoreError::Io {
+        crate::atomic::write_json_atomically(&path, q).map_err(|e| StoreError::Io {
             op: "write",
             path: path.clone(),
             hint: crate::atomic::write_hint(&path, &e),

@@ -14,7 +14,7 @@ use super::line::StoredLine;
 use super::plan::Plan;
 use super::surface_files::{write_surface_files, SurfaceWriteError, WrittenIges};
 use super::traceability::{traceability_json, traceability_lines};
-use crate::atomic::write_atomically;
+use crate::atomic::write_json_atomically;
 use crate::fit::{
     max_residual_mm, FitError, FitOptions, FitResult, IncrementalFitter, MethodError,
 };
@@ -380,11 +380,7 @@ pub fn write_outputs(
         "lines": line_json,
         "characterisation_error": characterisation_error,
     });
-    write_atomically(&report_path, |w| {
-        serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)?;
-        std::io::Write::write_all(w, b"\n")
-    })
-    .map_err(|source| OutputsError::Report {
+    write_json_atomically(&report_path, &report).map_err(|source| OutputsError::Report {
         path: report_path.clone(),
         source,
     })?;

@@ -8,7 +8,7 @@
 
 use super::plots::{plot_load_area, plot_map, LoadAreaPoint, MapValues};
 use crate::metrology::areal::HeightMap;
-use crate::report::error::{metrology, ReportError};
+use crate::report::error::{io, metrology, ReportError};
 use crate::report::sections::contact::{ContactSection, ContactSurface};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -58,11 +58,7 @@ pub fn write_contact_files(
         doc["model"] = serde_json::to_value(m)?;
     }
     let path = out.join("contact.json");
-    crate::atomic::write_atomically(&path, |w| {
-        serde_json::to_writer_pretty(&mut *w, &doc).map_err(std::io::Error::other)?;
-        std::io::Write::write_all(w, b"\n")
-    })
-    .map_err(|source| ReportError::Io { path, source })?;
+    crate::atomic::write_json_atomically(&path, &doc).map_err(io(&path))?;
     Ok(figures)
 }
 
