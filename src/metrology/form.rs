@@ -28,16 +28,13 @@ pub enum Form {
 impl Form {
     /// Parses `line` or `polyN` (N in 2 … [`MAX_DEGREE`]); `poly1` is the line.
     pub fn parse(s: &str) -> Result<Form, String> {
-        let bad = || {
-            format!(
-                "form {s:?} is not one surfscan removes; give line or poly2 … poly{MAX_DEGREE} (a least-squares polynomial of that degree in x)"
-            )
-        };
         match s.trim() {
             "line" | "poly1" => Ok(Form::Line),
             t => match t.strip_prefix("poly").and_then(|d| d.parse::<u8>().ok()) {
                 Some(d) if (2..=MAX_DEGREE).contains(&d) => Ok(Form::Polynomial(d)),
-                _ => Err(bad()),
+                _ => Err(format!(
+                    "form {s:?} is not one surfscan removes; give line or poly2 … poly{MAX_DEGREE} (a least-squares polynomial of that degree in x)"
+                )),
             },
         }
     }
