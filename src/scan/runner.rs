@@ -666,7 +666,7 @@ mod tests {
     use crate::scan::ending::{End, FailCause, FailKind, FailReason, StopStatus};
     use crate::scan::event::ScanEventKind;
     use crate::scan::journal::JournalError;
-    use crate::scan::journal::{read_journal, survey, Record, JOURNAL_FILE};
+    use crate::scan::journal::{read_journal, survey, Record, StopRecord, JOURNAL_FILE};
     use crate::scan::opening::{refusal, Refusal};
     use crate::scan::status::Status;
     use crate::scan::store_error::StoreError;
@@ -715,12 +715,7 @@ mod tests {
     async fn a_reopening_that_panicked_is_recorded_as_the_scans_ending_by_a_bug() {
         let out = tempfile::tempdir().expect("tmp");
         let dir = unfinished(out.path());
-        let (_commands, commands) = mpsc::channel(1);
-        let (_shutdown, shutdown) = watch::channel(false);
-        let (status, seen) = watch::channel(Status::idle());
-        let mut ctl = Control::new(commands, shutdown, status);
-        let (events, mut told) = mpsc::unbounded_channel();
-        ctl.events = Some(events);
+        let (ctl, seen, mut told) = control();
 
         let outcome = reopened(&ctl, dir.clone(), || -> Result<(), (String, Refusal)> {
             panic!("no knot vector for {} lines", 1)
@@ -739,10 +734,7 @@ mod tests {
         let exit = crate::cli::scan::outcome_result(&outcome).expect_err("a failure");
         assert_eq!(exit.exit as i32, 70, "{}", exit.message);
 
-        let journal = read_journal(&dir.join(JOURNAL_FILE)).expect("journal");
-        let Some(Record::Stop(stop)) = journal.records.last() else {
-            panic!("no stop record: {:?}", journal.records.last());
-        };
+        let stop = last_stop_record(&dir);
         assert_eq!(
             (stop.status, stop.reason.as_str(), stop.cause, stop.internal),
             (StopStatus::Fail, why, Some(FailCause::Operator), true)
@@ -773,12 +765,7 @@ mod tests {
     async fn a_reopening_refused_for_no_bug_leaves_the_scan_as_it_was() {
         let out = tempfile::tempdir().expect("tmp");
         let dir = unfinished(out.path());
-        let (_commands, commands) = mpsc::channel(1);
-        let (_shutdown, shutdown) = watch::channel(false);
-        let (status, seen) = watch::channel(Status::idle());
-        let mut ctl = Control::new(commands, shutdown, status);
-        let (events, mut told) = mpsc::unbounded_channel();
-        ctl.events = Some(events);
+        let (ctl, seen, mut told) = control();
 
         let outcome = reopened(&ctl, dir.clone(), || -> Result<(), (String, Refusal)> {
             Err((
@@ -794,6 +781,15 @@ mod tests {
         assert_eq!((last.status, last.internal), (StopStatus::Fail, false));
         assert!(told.try_recv().is_err(), "no event");
         assert_eq!(decisions(out.path())[0], Decision::Resume(dir));
+    }
+
+    /// The last record of the journal in `dir`, which the test expects to be a stop record.
+    fn last_stop_record(dir: &Path) -> StopRecord {
+        let journal = read_journal(&dir.join(JOURNAL_FILE)).expect("journal");
+        match journal.records.last() {
+            Some(Record::Stop(stop)) => stop.clone(),
+            last => panic!("no stop record: {last:?}"),
+        }
     }
 
     /// A control channel whose status and events the test reads.
@@ -942,10 +938,7 @@ mod tests {
         assert_eq!(outcome.dir.as_deref(), Some(dir.as_path()));
         let exit = crate::cli::scan::outcome_result(&outcome).expect_err("a failure");
         assert_eq!(exit.exit as i32, 1, "{}", exit.message);
-        let journal = read_journal(&dir.join(JOURNAL_FILE)).expect("journal");
-        let Some(Record::Stop(stop)) = journal.records.last() else {
-            panic!("no stop record: {:?}", journal.records.last());
-        };
+        let stop = last_stop_record(&dir);
         assert_eq!(
             (stop.status, stop.reason.as_str(), stop.cause, stop.internal),
             (StopStatus::Fail, why, Some(FailCause::Operator), false)
