@@ -422,6 +422,19 @@ mod tests {
         (scan, dir)
     }
 
+    /// Ends the scan in `dir` as an earlier version did when the file system refused a write
+    /// (a `fail` stop record of cause `storage`, which a plain start continues).
+    fn failed_for_storage(dir: &Path) {
+        let stop = StopRecord {
+            status: StopStatus::Fail,
+            reason: "storage: write lines/0004.csv: Read-only file system (os error 30)".into(),
+            cause: Some(FailCause::Storage),
+            internal: false,
+            time: "2026-12-07T22:30:00Z".parse().expect("a time"),
+        };
+        Journal::append_stop(&dir.join(JOURNAL_FILE), stop).expect("stopped");
+    }
+
     /// A queued job waits for a scan an earlier version failed because the file system
     /// refused a write (a plain start continues it, so the choice does): the wait names it as
     /// failed and how to continue it, not as an unfinished scan to resume or abort (it has
@@ -431,14 +444,7 @@ mod tests {
         let tmp = tempfile::tempdir().expect("tmp");
         let (base, queue, job) = one_job(tmp.path());
         let (_, dir) = scan_of(&base.output_dir, None);
-        let stop = StopRecord {
-            status: StopStatus::Fail,
-            reason: "storage: write lines/0004.csv: Read-only file system (os error 30)".into(),
-            cause: Some(FailCause::Storage),
-            internal: false,
-            time: "2026-12-07T22:30:00Z".parse().expect("a time"),
-        };
-        Journal::append_stop(&dir.join(JOURNAL_FILE), stop).expect("stopped");
+        failed_for_storage(&dir);
         let mut jobs = Jobs::new(queue, "ab".repeat(32));
         let Turn::Wait(why) = jobs.turn(&base, true, Instant::now()) else {
             panic!("the job does not wait");
@@ -461,14 +467,7 @@ mod tests {
         let tmp = tempfile::tempdir().expect("tmp");
         let (base, queue, job) = one_job(tmp.path());
         let (_, dir) = scan_of(&base.output_dir, Some(job));
-        let stop = StopRecord {
-            status: StopStatus::Fail,
-            reason: "storage: write lines/0004.csv: Read-only file system (os error 30)".into(),
-            cause: Some(FailCause::Storage),
-            internal: false,
-            time: "2026-12-07T22:30:00Z".parse().expect("a time"),
-        };
-        Journal::append_stop(&dir.join(JOURNAL_FILE), stop).expect("stopped");
+        failed_for_storage(&dir);
         let mut jobs = Jobs::new(queue, "ab".repeat(32));
         let turn = jobs.turn(&base, true, Instant::now());
         assert!(
