@@ -42,11 +42,9 @@ pub fn extremes_per_column(
     let flush = |run: &mut Option<(usize, [usize; 4])>, kept: &mut Vec<(f64, f64)>| {
         if let Some((_, mut idx)) = run.take() {
             idx.sort_unstable();
-            let mut last = usize::MAX;
-            for i in idx {
-                if i != last {
+            for (k, &i) in idx.iter().enumerate() {
+                if k == 0 || idx[k - 1] != i {
                     kept.push(points[i]);
-                    last = i;
                 }
             }
         }
