@@ -586,13 +586,9 @@ mod tests {
             1.0 + f64::EPSILON,
             -3.5,
         ];
+        // The generator's top 31 bits (its 53 scaled by 2^-22, exactly).
         let mut s = 7u64;
-        let mut pick = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 33) as usize
-        };
+        let mut pick = || (crate::metrology::lcg(&mut s) * (1u64 << 31) as f64) as usize;
         for len in 0..=13 {
             for _ in 0..400 {
                 let v: Vec<f64> = (0..len)
