@@ -20,32 +20,23 @@ pub enum Paper {
 
 /// `[report]`: the issuing laboratory and the printed layout. Every key is optional.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct LabHeader {
     /// The laboratory's name, first line of the printed header.
-    #[serde(default)]
     pub lab: String,
     /// Its address; a `\n` starts a new line.
-    #[serde(default)]
     pub address: String,
     /// A logo (PNG, JPEG or SVG) embedded in the header; read when the report is written, so
     /// a missing file costs the logo (with a warning), never the report.
-    #[serde(default)]
     pub logo: Option<PathBuf>,
     /// `"A4"` or `"Letter"`.
-    #[serde(default)]
     pub paper: Paper,
     /// The roles of the signature block, in order (each gets name, signature and date).
-    #[serde(default = "default_signatures")]
     pub signatures: Vec<String>,
     /// Also write each line's Rk figure as a PNG (`rk/NNNN.png`) beside its SVG. Off by
     /// default: the page embeds the SVG, and the PNGs cost most of a 31-line analysis's work.
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub line_png: bool,
-}
-
-fn default_signatures() -> Vec<String> {
-    vec!["Measured by".into(), "Approved by".into()]
 }
 
 impl Default for LabHeader {
@@ -55,7 +46,7 @@ impl Default for LabHeader {
             address: String::new(),
             logo: None,
             paper: Paper::default(),
-            signatures: default_signatures(),
+            signatures: vec!["Measured by".into(), "Approved by".into()],
             line_png: false,
         }
     }
