@@ -167,12 +167,11 @@ pub fn compare_profile(
     filtered_here: bool,
 ) -> Vec<Comparison> {
     let jis = standard.is_some_and(|s| {
-        let s: String = s
-            .chars()
-            .filter(|c| c.is_ascii_alphanumeric())
-            .collect::<String>()
-            .to_ascii_uppercase();
-        s == "JIS1982" || s == "JIS1994" || s == "JIS82" || s == "JIS94"
+        let s: String = s.chars().filter(char::is_ascii_alphanumeric).collect();
+        matches!(
+            s.to_ascii_uppercase().as_str(),
+            "JIS1982" | "JIS1994" | "JIS82" | "JIS94"
+        )
     });
     let mut seen: HashMap<String, usize> = HashMap::new();
     instrument
