@@ -149,13 +149,12 @@ pub fn anisotropy(grid: &HeightMap<'_>) -> Result<Anisotropy, MetrologyError> {
         dominant,
         caveats: Vec::new(),
     };
-    let mut c = Vec::new();
     if ratio >= ANISOTROPIC_RATIO {
-        c.push(format!(
+        a.caveats.push(format!(
             "anisotropic grid: the y pitch ({py} mm) is {ratio:.1} × the x pitch ({px} mm); across the lines the surface is sampled {ratio:.1} times more coarsely than along them"
         ));
     }
-    c.push(match along {
+    a.caveats.push(match along {
         Some(r_x) => format!(
             "adjacent lines ({py} mm apart) correlate at r = {line_r:.2}; along a line, points {py} mm apart correlate at r = {r_x:.2}{}",
             if line_r < r_x - 0.2 {
@@ -166,7 +165,7 @@ pub fn anisotropy(grid: &HeightMap<'_>) -> Result<Anisotropy, MetrologyError> {
         ),
         None => format!("adjacent lines ({py} mm apart) correlate at r = {line_r:.2}"),
     });
-    c.push(format!(
+    a.caveats.push(format!(
         "Sdq is dominated by dz/d{dominant}: {share:.0} % of Sdq² comes from dz/dy (rms dz/dx {:.3}, dz/dy {:.3}); Sdr from dz/dx alone {sdr_x:.2} %, from dz/dy alone {sdr_y:.2} %{}",
         a.sdq_x,
         a.sdq_y,
@@ -176,7 +175,6 @@ pub fn anisotropy(grid: &HeightMap<'_>) -> Result<Anisotropy, MetrologyError> {
             ""
         }
     ));
-    a.caveats = c;
     Ok(a)
 }
 
