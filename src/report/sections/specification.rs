@@ -226,27 +226,20 @@ mod tests {
     /// does not in the instrument's; the verdict says which reading it used.
     #[test]
     fn a_limit_on_rpk_is_judged_in_the_reading_asked_for() {
-        let csv = std::fs::read_to_string(concat!(
+        let path = concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/tests/data/real/mitutoyo_surftest_R.x_mm_z_um.csv"
-        ))
-        .unwrap();
-        let rows: Vec<(f64, f64)> = csv
-            .lines()
-            .skip(1)
-            .map(|l| {
-                let (x, z) = l.split_once(',').unwrap();
-                (x.parse().unwrap(), z.parse().unwrap())
-            })
-            .collect();
-        let z: Vec<f64> = rows.iter().map(|r| r.1).collect();
-        let pitch = (rows[rows.len() - 1].0 - rows[0].0) / (rows.len() - 1) as f64;
+        );
+        let g = crate::input::read(path.as_ref(), &Default::default())
+            .unwrap()
+            .grid;
         let options = crate::metrology::params::Options {
             lambda_c_mm: 2.5,
             apply_lambda_c: false,
             ..Default::default()
         };
-        let a = crate::metrology::params::analyze_line(&z, pitch, &options).unwrap();
+        let a =
+            crate::metrology::params::analyze_line(&g.heights_um, g.pitch_x_mm, &options).unwrap();
         let mut l = line(0, a.params.ra_um, &a);
         l.material_ratio_sj_series = Some(
             crate::metrology::sj_material_ratio::sj_material_ratio(
