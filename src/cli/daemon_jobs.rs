@@ -14,12 +14,15 @@
 //! ends `fail` with it, and the queue does not reopen it again. One whose reopening the file
 //! system refused is left as it is, which can clear by itself: its job stays running with
 //! it, and its turn reopens it again with the reconnection backoff, saying why meanwhile.
+//! A reopening cut short by a shutdown is a shutdown's. A running job's scan refused for
+//! having ended (its ending not yet in the queue) settles the job as its journal says, as
+//! after a restart; any other refusal of its scan ends the job `refused` with its scan id.
 //!
 //! Layer 5 (composition): depends on [`crate::jobs`], [`crate::scan`]'s choice and
 //! settings, and [`super::station`].
 
 use super::station::run_settings;
-use crate::jobs::queue::{JobOutcome, Next};
+use crate::jobs::queue::{JobOutcome, JobState, Next};
 use crate::jobs::recipe::Recipe;
 use crate::jobs::service::QueueService;
 use crate::scan::choice::{self, Asker, Decision};
@@ -265,10 +268,18 @@ impl Jobs {
                     format!("job {id} waits: its scan {scan} could not be reopened: {r}; tried again in {s} s")
                 });
             }
+            // A running job's scan the runner would not reopen for having ended (its ending
+            // recorded in its journal, not yet in the queue): the job ends as its journal
+            // says, as after a restart, with its scan and verdict.
+            (End::Fail(r @ FailReason::Refused { .. }), None)
+                if r.kind() == FailKind::Scan && self.settled_by_its_journal(id) => {}
             (end, _) => {
                 self.retry = None;
                 self.delay = Duration::ZERO;
                 let created = scan_id.is_some();
+                // A running job's scan refused for another reason than its own files (a
+                // directory that is not one) is still named in the job's record.
+                let scan_id = scan_id.or_else(|| self.running_scan(id));
                 let verdict = outcome
                     .outputs
                     .as_ref()
@@ -289,6 +300,27 @@ impl Jobs {
                 );
             }
         }
+    }
+
+    /// The scan recorded for running job `id`, if any.
+    fn running_scan(&self, id: u64) -> Option<String> {
+        match &self.queue.snapshot().get(id)?.state {
+            JobState::Running { scan_id, .. } => scan_id.clone(),
+            _ => None,
+        }
+    }
+
+    /// Whether running job `id` with a scan was settled by what the journals say of it
+    /// ([`QueueService::reconcile`]): its scan has ended.
+    fn settled_by_its_journal(&self, id: u64) -> bool {
+        if self.running_scan(id).is_none() {
+            return false;
+        }
+        match self.queue.reconcile() {
+            Ok(notes) => notes.iter().for_each(|n| tracing::info!("{n}")),
+            Err(e) => tracing::error!("{e}"),
+        }
+        self.queue.status().running != Some(id)
     }
 
     /// Waits the next step of the backoff before the job's next try (the reconnection
@@ -567,5 +599,67 @@ mod tests {
             "the scan is reopened again"
         );
         }
+    }
+
+    /// A running job whose scan has ended (its ending in its journal, not yet in the queue)
+    /// is refused reopening without the scan (the runner cannot continue an ended scan):
+    /// the job ends as its scan's journal says, as after a restart: `success` here, with its
+    /// scan id and its report's verdict, not `refused` without its scan. A scan refused for
+    /// another reason than its end (a symbolic link) still names the job's scan.
+    #[test]
+    fn a_running_job_whose_scan_has_ended_ends_as_its_journal_says() {
+        use crate::jobs::synthetic::SyntheticReport;
+        use crate::specification::rule::Verdict;
+        let refusal = |message: &str| {
+            Outcome::without_scan(End::Fail(FailReason::Refused {
+                message: message.into(),
+                kind: FailKind::Scan,
+            }))
+        };
+        let tmp = tempfile::tempdir().expect("tmp");
+        let (base, queue, job) = one_job(tmp.path());
+        queue.mark_running(job).expect("running");
+        let (mut scan, _) = scan_of(&base.output_dir, Some(job));
+        scan.done = scan.lines;
+        scan.stop = Some(StopStatus::Success);
+        scan.report = Some(SyntheticReport {
+            verdict: Some(Verdict::Conforms),
+            ra_um: vec![0.5; 11],
+            sa_um: 0.6,
+            warnings: 0,
+        });
+        write(&base.output_dir, &scan).expect("ended scan");
+        queue.set_scan(job, &scan.id).expect("its scan");
+        let mut jobs = Jobs::new(queue, "ab".repeat(32));
+        jobs.settle(
+            job,
+            &refusal(
+                "scan 20261207-2200-C-1 has ended (success: synthetic); it cannot be continued",
+            ),
+            &base,
+        );
+        let snapshot = jobs.queue.snapshot();
+        let state = &snapshot.get(job).expect("the job").state;
+        assert!(
+            matches!(state, JobState::Finished { scan_id: Some(s), outcome, verdict: Some(Verdict::Conforms), reason, .. }
+                if *s == scan.id && outcome == "success" && reason == "synthetic"),
+            "{state:?}"
+        );
+
+        let tmp = tempfile::tempdir().expect("tmp");
+        let (base, queue, job) = one_job(tmp.path());
+        queue.mark_running(job).expect("running");
+        let (scan, _) = scan_of(&base.output_dir, Some(job));
+        queue.set_scan(job, &scan.id).expect("its scan");
+        let mut jobs = Jobs::new(queue, "ab".repeat(32));
+        let why = "the scan's directory is not one";
+        jobs.settle(job, &refusal(why), &base);
+        let snapshot = jobs.queue.snapshot();
+        let state = &snapshot.get(job).expect("the job").state;
+        assert!(
+            matches!(state, JobState::Finished { scan_id: Some(s), outcome, reason, .. }
+                if *s == scan.id && outcome == "refused" && reason == why),
+            "{state:?}"
+        );
     }
 }

@@ -135,9 +135,12 @@ pub(super) struct Reopened {
 /// must fix is not tried again by itself.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Refusal {
-    /// There is nothing to reopen or no time to: the scan has ended already, or the work
-    /// was cancelled as the process shuts down. The scan is left as it is.
+    /// There is nothing to reopen: the scan has ended already, or its directory is not one
+    /// (a symbolic link). The scan is left as it is.
     Left,
+    /// The work was cancelled as the process shuts down: the scan is left as it is and
+    /// resumes at the next start, as after a shutdown while it ran.
+    Shutdown,
     /// The file system refused reading or writing the scan's files (an operating-system
     /// error: a remount, a permission, a disk that went away): it can clear by itself, so
     /// the scan is left as it is and tried again.
@@ -154,7 +157,7 @@ impl Refusal {
     /// The exit class.
     pub fn kind(self) -> FailKind {
         match self {
-            Refusal::Left | Refusal::Scan => FailKind::Scan,
+            Refusal::Left | Refusal::Shutdown | Refusal::Scan => FailKind::Scan,
             Refusal::FileSystem => FailKind::Io,
             Refusal::Bug => FailKind::Internal,
         }

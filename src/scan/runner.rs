@@ -195,19 +195,29 @@ fn reopen(
 /// the operator's `--resume` tries it again. The status's last stop, the `fail` event and the
 /// outcome (exit 1, or 70 for a bug) say the same. A refusal by the file system can clear
 /// by itself: the scan is left as it is (no record, no event), and the outcome names it for
-/// its job to wait. Any other refusal (the scan has ended, the process shuts down) is
-/// without the scan.
+/// its job to wait. Work cancelled as the process shuts down is a shutdown's outcome with
+/// the scan: nothing recorded, its job goes on, and the scan resumes at the next start.
+/// Any other refusal (the scan has ended, a directory that is not one) is without the scan.
 async fn reopened<T: Send + 'static>(
     ctl: &Control,
     dir: PathBuf,
     work: impl FnOnce() -> Result<T, (String, Refusal)> + Send + 'static,
 ) -> Result<T, Outcome> {
-    let (message, refusal) = match watched(ctl, "reopening the scan", work).await {
-        Ok(Ok(reopened)) => return Ok(reopened),
-        Ok(Err(refusal)) => refusal,
-        Err((message, FailKind::Internal)) => (message, Refusal::Bug),
-        Err((message, _)) => (message, Refusal::Left),
+    let (message, refusal) = match refusal_of(watched(ctl, "reopening the scan", work).await) {
+        Ok(reopened) => return Ok(reopened),
+        Err(refusal) => refusal,
     };
+    if refusal == Refusal::Shutdown {
+        tracing::warn!(
+            "{}: {message}; the scan is left as it was and resumes at the next start",
+            dir.display()
+        );
+        return Err(Outcome {
+            end: End::Shutdown,
+            dir: Some(dir),
+            outputs: None,
+        });
+    }
     let end = End::Fail(FailReason::Refused {
         message,
         kind: refusal.kind(),
@@ -278,6 +288,18 @@ async fn reopened<T: Send + 'static>(
         dir: Some(dir),
         outputs: None,
     })
+}
+
+/// The reopening's result, or its refusal: [`watched`] work that panicked is a bug's,
+/// work the runtime cancelled as it shuts down a shutdown's.
+fn refusal_of<T>(
+    done: Result<Result<T, (String, Refusal)>, (String, FailKind)>,
+) -> Result<T, (String, Refusal)> {
+    match done {
+        Ok(reopened) => reopened,
+        Err((message, FailKind::Internal)) => Err((message, Refusal::Bug)),
+        Err((message, _)) => Err((message, Refusal::Shutdown)),
+    }
 }
 
 fn refused(ctl: &Control, end: End) -> Outcome {
@@ -412,7 +434,8 @@ const WATCHED_LIMIT: std::time::Duration = std::time::Duration::from_secs(3600);
 /// blocking thread of its own while this loop goes on feeding the watchdog, so that systemd
 /// does not take a long piece of work for a hung daemon; for at most [`WATCHED_LIMIT`].
 /// `Err` if the runtime cancelled the work (it shuts down) or `work` panicked ([`joined`]):
-/// the scan is then refused or fails with that reason, and the daemon serves on.
+/// the scan then fails with that reason (a reopening cancelled is a shutdown's,
+/// [`refusal_of`]), and the daemon serves on.
 async fn watched<T: Send + 'static>(
     ctl: &Control,
     what: &str,
@@ -658,7 +681,7 @@ fn finish(ctl: &Control, machine: &Machine, mut books: Books<'_>) -> Outcome {
 
 #[cfg(test)]
 mod tests {
-    use super::{joined, reopened};
+    use super::{joined, refusal_of, reopened};
     use crate::jobs::synthetic::{self, SyntheticScan};
     use crate::scan::channels::Control;
     use crate::scan::choice::{decide, Asker, Decision};
@@ -758,27 +781,37 @@ mod tests {
         assert_eq!(resume, Decision::Continue(dir));
     }
 
-    /// A reopening refused for the scan's own reason (here: cancelled as the runtime shuts
-    /// down) ends nothing: no stop record, no event, no bug in the status; the daemon
-    /// resumes the scan at its next start, as before.
+    /// A reopening cancelled as the runtime shuts down (`systemctl stop` while the daemon
+    /// reopens a scan) is a shutdown's outcome with the scan: no stop record, no event, the
+    /// status's last stop untouched, so its job stays running with its scan (the queue
+    /// leaves a job running after a shutdown) and the daemon resumes the scan at its next
+    /// start. Before, it was a refusal without the scan, and the scan's job ended `refused`.
     #[tokio::test]
-    async fn a_reopening_refused_for_no_bug_leaves_the_scan_as_it_was() {
+    async fn a_reopening_cancelled_by_a_shutdown_leaves_the_scan_to_resume() {
+        let cancelled = tokio::spawn(std::future::pending::<Result<(), (String, Refusal)>>());
+        cancelled.abort();
+        let (why, class) =
+            refusal_of(joined(cancelled.await, "reopening the scan")).expect_err("cancelled");
+        assert_eq!(class, Refusal::Shutdown, "{why}");
+
         let out = tempfile::tempdir().expect("tmp");
         let dir = unfinished(out.path());
+        let before = std::fs::read(dir.join(JOURNAL_FILE)).expect("journal");
         let (ctl, seen, mut told) = control();
-
-        let outcome = reopened(&ctl, dir.clone(), || -> Result<(), (String, Refusal)> {
-            Err((
-                "internal: reopening the scan was cancelled".into(),
-                Refusal::Left,
-            ))
+        let outcome = reopened(&ctl, dir.clone(), move || -> Result<(), _> {
+            Err((why, class))
         })
         .await
-        .expect_err("refused");
-        assert_eq!(outcome.dir, None);
-        assert!(!outcome.end.is_internal());
-        let last = seen.borrow().last_stop.clone().expect("last stop");
-        assert_eq!((last.status, last.internal), (StopStatus::Fail, false));
+        .expect_err("not reopened");
+        assert_eq!(
+            (outcome.end, outcome.dir),
+            (End::Shutdown, Some(dir.clone()))
+        );
+        assert_eq!(
+            std::fs::read(dir.join(JOURNAL_FILE)).expect("journal"),
+            before
+        );
+        assert!(seen.borrow().last_stop.is_none(), "no last stop");
         assert!(told.try_recv().is_err(), "no event");
         assert_eq!(decisions(out.path())[0], Decision::Resume(dir));
     }
@@ -816,6 +849,7 @@ mod tests {
     fn each_refusal_class_says_whether_it_ends_the_scan() {
         let table = [
             (Refusal::Left, FailKind::Scan, false),
+            (Refusal::Shutdown, FailKind::Scan, false),
             (Refusal::FileSystem, FailKind::Io, false),
             (Refusal::Scan, FailKind::Scan, true),
             (Refusal::Bug, FailKind::Internal, true),
