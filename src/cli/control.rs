@@ -332,13 +332,16 @@ async fn confirm_start(path: &Path, before: u64, json: bool) -> Result<(), CliEr
 
 /// What a status snapshot says of a start accepted when `before` scans had begun: nothing
 /// yet (`None`: the count has not grown, or the scan is still starting), under way or ended
-/// (`Ok`), or ended without starting (`Err` with the stop's reason).
+/// (`Ok`), or ended without starting (`Err` with the stop's reason, or the reason of an idle
+/// daemon: the scan to reopen was refused by the file system and has not ended).
 fn start_outcome(before: u64, s: &Status) -> Option<Result<(), String>> {
     if s.starts <= before || s.state == State::Starting {
         return None;
     }
-    Some(match (&s.state, &s.last_stop) {
-        (State::Idle, Some(stop)) if stop.status == StopStatus::Fail => Err(stop.reason.clone()),
+    Some(match (&s.state, &s.last_stop, &s.reason) {
+        // The scan the start reopens was refused by the file system: it has not ended.
+        (State::Idle, _, Some(why)) => Err(why.clone()),
+        (State::Idle, Some(stop), _) if stop.status == StopStatus::Fail => Err(stop.reason.clone()),
         _ => Ok(()),
     })
 }
@@ -600,6 +603,17 @@ mod tests {
         assert_eq!(
             start_outcome(before, &failed),
             Some(Err("the instrument is not at /dev/sj210".into()))
+        );
+        // The scan it reopens refused by the file system: not ended, so the last stop is
+        // the earlier scan's success; the reason says why, and the start did not go ahead.
+        let mut refused = failed.clone();
+        refused.last_stop.clone_from(&s.last_stop);
+        refused.reason = Some("scan B-1 (/scans/B-1) waits for the file system: …".into());
+        assert_eq!(
+            start_outcome(before, &refused),
+            Some(Err(
+                "scan B-1 (/scans/B-1) waits for the file system: …".into()
+            ))
         );
         let mut under_way = scanning();
         under_way.starts = before + 1;

@@ -194,8 +194,9 @@ fn reopen(
 /// scan alone, so it is not reopened again at every start and every turn of the queue; only
 /// the operator's `--resume` tries it again. The status's last stop, the `fail` event and the
 /// outcome (exit 1, or 70 for a bug) say the same. A refusal by the file system can clear
-/// by itself: the scan is left as it is (no record, no event), and the outcome names it for
-/// its job to wait. Work cancelled as the process shuts down is a shutdown's outcome with
+/// by itself: the scan is left as it is (no record, no event, its last stop not a stop:
+/// the idle status's reason names it and the fix), and the outcome names it for its job to
+/// wait. Work cancelled as the process shuts down is a shutdown's outcome with
 /// the scan: nothing recorded, its job goes on, and the scan resumes at the next start.
 /// Any other refusal (the scan has ended, a directory that is not one) is without the scan.
 async fn reopened<T: Send + 'static>(
@@ -238,6 +239,14 @@ async fn reopened<T: Send + 'static>(
     }
     if !refusal.ends_the_scan() {
         tracing::error!("{}: {}", dir.display(), words.reason);
+        // The scan has not ended: the last stop stays the last scan's ending, and the
+        // reason says what the scan waits for.
+        s.last_stop.clone_from(&ctl.status.borrow().last_stop);
+        s.reason = Some(format!(
+            "scan {scan_id} ({}) waits for the file system: {}",
+            dir.display(),
+            words.reason
+        ));
         ctl.publish(s);
         return Err(Outcome {
             end,
@@ -691,7 +700,7 @@ mod tests {
     use crate::scan::journal::JournalError;
     use crate::scan::journal::{read_journal, survey, Record, StopRecord, JOURNAL_FILE};
     use crate::scan::opening::{refusal, Refusal};
-    use crate::scan::status::Status;
+    use crate::scan::status::{State, Status};
     use crate::scan::store_error::StoreError;
     use std::path::{Path, PathBuf};
     use tokio::sync::{mpsc, watch};
@@ -902,7 +911,8 @@ mod tests {
     /// A reopening refused by the file system leaves the scan as it was (no stop record, no
     /// event: the daemon resumes it at its next start), but names it: the outcome carries its
     /// directory (for its job, which waits) with the exit class of a file error (74), and the
-    /// status's last stop its id, directory and the fix.
+    /// status's reason its id, directory and the fix; its last stop is not the scan's, which
+    /// has not ended (it read `fail`).
     #[tokio::test]
     async fn a_reopening_refused_by_the_file_system_leaves_the_scan_and_names_it() {
         let out = tempfile::tempdir().expect("tmp");
@@ -933,16 +943,20 @@ mod tests {
             "the journal is left as it was"
         );
         assert!(told.try_recv().is_err(), "no event");
-        let last = seen.borrow().last_stop.clone().expect("last stop");
-        assert_eq!(
-            (last.scan_id.as_str(), last.dir, last.internal),
-            ("20261207-2200-block", dir.display().to_string(), false)
+        // The scan has not ended: no last stop (none ended since the daemon started), the
+        // daemon idle, the reason naming the scan, its directory and the fix.
+        let status = seen.borrow().clone();
+        assert!(status.last_stop.is_none(), "{:?}", status.last_stop);
+        assert_eq!(status.state, State::Idle);
+        let reason = status.reason.expect("a reason");
+        let head = format!(
+            "scan 20261207-2200-block ({}) waits for the file system: the file system refused reading its lines back",
+            dir.display()
         );
+        assert!(reason.starts_with(&head), "{reason}");
         assert!(
-            last.reason
-                .ends_with("give the daemon's user write permission on the output directory"),
-            "{}",
-            last.reason
+            reason.ends_with("give the daemon's user write permission on the output directory"),
+            "{reason}"
         );
         assert_eq!(decisions(out.path())[0], Decision::Resume(dir));
     }

@@ -170,9 +170,11 @@ impl Status {
     /// A scan begins: the count of scans begun grows and the state is Starting in one
     /// update, so that whoever waits for a start's outcome (`surfscan start`) never sees the
     /// new count beside the idle state from before it; the scan's own snapshots say the rest.
+    /// What the idle daemon waited for (`reason`) is not the new scan's.
     pub fn begin_start(&mut self) {
         self.starts += 1;
         self.state = State::Starting;
+        self.reason = None;
     }
 
     /// One line for systemd's `STATUS=` and for logs, e.g.
@@ -264,6 +266,16 @@ pub fn ended_status(s: &Status, ending: StopStatus, reason: &str) -> Status {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A start after the idle daemon said what a scan waits for (the file system refused
+    /// reopening it) does not carry that reason into the new scan's snapshots.
+    #[test]
+    fn a_start_clears_what_the_idle_daemon_waited_for() {
+        let mut s = Status::idle();
+        s.reason = Some("scan B-1 (/scans/B-1) waits for the file system: …".into());
+        s.begin_start();
+        assert_eq!((s.state, s.starts, s.reason), (State::Starting, 1, None));
+    }
 
     #[test]
     fn status_summary_is_what_systemd_shows() {
