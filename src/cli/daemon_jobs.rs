@@ -14,7 +14,8 @@
 //! ends `fail` with it, and the queue does not reopen it again. One whose reopening the file
 //! system refused is left as it is, which can clear by itself: its job stays running with
 //! it, and its turn reopens it again with the reconnection backoff, saying why meanwhile.
-//! A reopening cut short by a shutdown is a shutdown's. A running job's scan refused for
+//! A job queued behind a scan of no job the file system refused to reopen waits for it,
+//! saying so. A reopening cut short by a shutdown is a shutdown's. A running job's scan refused for
 //! having ended (its ending not yet in the queue) settles the job as its journal says, as
 //! after a restart; any other refusal of its scan ends the job `refused` with its scan id.
 //!
@@ -62,6 +63,9 @@ pub(super) struct Jobs {
     /// meanwhile; the delay doubles up to the reconnection backoff's maximum.
     retry: Option<(Instant, String)>,
     delay: Duration,
+    /// The last scan of no job the file system refused to reopen, and why: the queue's
+    /// next job waits for it (nothing retries it before the next start or an operator's).
+    refused_scan: Option<(std::path::PathBuf, String)>,
 }
 
 impl Jobs {
@@ -72,6 +76,7 @@ impl Jobs {
             config_hash,
             retry: None,
             delay: Duration::ZERO,
+            refused_scan: None,
         }
     }
 
@@ -182,10 +187,16 @@ impl Jobs {
                 };
             }
             Decision::Resume(dir) => {
+                let refused = match &self.refused_scan {
+                    Some((d, why)) if d == dir => format!(
+                        "; the file system refused reopening it ({why}), and it is tried again only at the daemon's next start or `surfscan start`"
+                    ),
+                    _ => String::new(),
+                };
                 return Turn::Wait(format!(
-                    "job {id} waits: the unfinished scan {} must end first (resume it with `surfscan resume` or `surfscan start`, or abort it)",
+                    "job {id} waits: the unfinished scan {} must end first (resume it with `surfscan resume` or `surfscan start`, or abort it){refused}",
                     dir.display()
-                ))
+                ));
             }
             // A plain start continues only a scan an earlier version failed because the file
             // system refused a write (see the choice).
@@ -338,8 +349,15 @@ impl Jobs {
     }
 
     /// After a scan that was not started as a job (the daemon's resumption at start-up, an
-    /// operator's start): when it was the running job's scan, the job's ending is recorded.
+    /// operator's start): when it was the running job's scan, the job's ending is recorded;
+    /// a scan the file system refused to reopen is remembered for the queue's wait.
     pub fn settle_if_a_job(&mut self, outcome: &Outcome, base: &RunSettings) {
+        self.refused_scan = match (&outcome.end, &outcome.dir) {
+            (End::Fail(r @ FailReason::Refused { .. }), Some(dir)) if r.kind() == FailKind::Io => {
+                Some((dir.clone(), r.to_string()))
+            }
+            _ => None,
+        };
         let Some(id) = self.queue.status().running else {
             return;
         };
@@ -661,5 +679,45 @@ mod tests {
                 if *s == scan.id && outcome == "refused" && reason == why),
             "{state:?}"
         );
+    }
+
+    /// A queued job behind a scan of no job that the file system refused to reopen at the
+    /// daemon's start waits for it, and the wait says so and that nothing tries it again
+    /// before the next start or an operator's: it read only that the unfinished scan must
+    /// end first. Once another outcome follows (an operator's start of it), the wait is the
+    /// plain one again.
+    #[test]
+    fn a_job_behind_a_scan_the_file_system_refused_says_so() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let (base, queue, job) = one_job(tmp.path());
+        let (_, dir) = scan_of(&base.output_dir, None);
+        let mut jobs = Jobs::new(queue, "ab".repeat(32));
+        let why = "the file system refused reading its journal (EIO: …); …; check the disk";
+        let refused = Outcome {
+            end: End::Fail(FailReason::Refused {
+                message: why.into(),
+                kind: FailKind::Io,
+            }),
+            dir: Some(dir.clone()),
+            outputs: None,
+        };
+        jobs.settle_if_a_job(&refused, &base);
+        let plain = format!(
+            "job {job} waits: the unfinished scan {} must end first (resume it with `surfscan resume` or `surfscan start`, or abort it)",
+            dir.display()
+        );
+        let Turn::Wait(waits) = jobs.turn(&base, true, Instant::now()) else {
+            panic!("the job does not wait");
+        };
+        assert_eq!(
+            waits,
+            format!("{plain}; the file system refused reopening it ({why}), and it is tried again only at the daemon's next start or `surfscan start`")
+        );
+
+        jobs.settle_if_a_job(&Outcome::without_scan(End::Shutdown), &base);
+        let Turn::Wait(waits) = jobs.turn(&base, true, Instant::now()) else {
+            panic!("the job does not wait");
+        };
+        assert_eq!(waits, plain);
     }
 }
