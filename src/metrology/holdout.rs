@@ -167,16 +167,7 @@ pub fn points_left_out(
 /// The v where the surface's y equals `target` (y depends on v only; bisection of y(0, v)),
 /// or an error when y(v) does not reach it (a fold across the lines).
 fn v_at_y(surface: &crate::nurbs::NurbsSurface, target: f64) -> Result<f64, MetrologyError> {
-    let (mut a, mut b) = (0.0f64, 1.0f64);
-    for _ in 0..60 {
-        let m = 0.5 * (a + b);
-        if surface.evaluate(0.0, m)[1] < target {
-            a = m;
-        } else {
-            b = m;
-        }
-    }
-    let v = 0.5 * (a + b);
+    let v = super::bisect(0.0, 1.0, |m| surface.evaluate(0.0, m)[1] < target);
     let y = surface.evaluate(0.0, v)[1];
     if (y - target).abs() > 1e-9 * target.abs().max(1.0) {
         return Err(MetrologyError::BadParameter {

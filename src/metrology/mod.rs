@@ -232,6 +232,20 @@ pub(crate) fn map_in_parallel<T: Sync, R: Send>(
     })
 }
 
+/// The middle of the bracket [`a`, `b`] after 60 halvings: each midpoint `m` replaces `a`
+/// when `below(m)` (the sought point lies beyond `m`), else `b`.
+pub(crate) fn bisect(mut a: f64, mut b: f64, below: impl Fn(f64) -> bool) -> f64 {
+    for _ in 0..60 {
+        let m = 0.5 * (a + b);
+        if below(m) {
+            a = m;
+        } else {
+            b = m;
+        }
+    }
+    0.5 * (a + b)
+}
+
 /// Uniform in [0, 1) from a linear congruential generator: deterministic noise for the tests.
 #[cfg(test)]
 pub(crate) fn lcg(seed: &mut u64) -> f64 {

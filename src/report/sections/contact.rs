@@ -18,6 +18,7 @@ use crate::contact::{contact_curve, ContactCurve, ContactGrid, ContactOptions};
 use crate::fit::FitResult;
 use crate::grid::Grid;
 use crate::metrology::areal::{level_plane, HeightMap};
+use crate::metrology::bisect;
 use crate::metrology::holdout::BetweenLines;
 use crate::metrology::model::sample_model_grid;
 use crate::nurbs::NurbsSurface;
@@ -270,9 +271,8 @@ fn rows_v(
         while seg + 2 < n && sign * (y_mm[seg + 1] - y_mm[0]) < d {
             seg += 1;
         }
-        let (v0, v1) = (params_v[seg], params_v[seg + 1]);
+        let (a, b) = (params_v[seg], params_v[seg + 1]);
         let target = y_mm[0] + sign * d;
-        let (mut a, mut b) = (v0, v1);
         let (fa, fb) = (y_at(a) - target, y_at(b) - target);
         if fa == 0.0 {
             vs.push(a);
@@ -289,16 +289,7 @@ fn rows_v(
                 seg + 1
             ));
         }
-        for _ in 0..60 {
-            let m = 0.5 * (a + b);
-            let fm = y_at(m) - target;
-            if fm.signum() == fa.signum() {
-                a = m;
-            } else {
-                b = m;
-            }
-        }
-        vs.push(0.5 * (a + b));
+        vs.push(bisect(a, b, |m| (y_at(m) - target).signum() == fa.signum()));
     }
     Ok(vs)
 }
