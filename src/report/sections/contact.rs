@@ -134,20 +134,16 @@ impl ContactSection {
     /// grid does not resolve.
     pub fn warnings(&self) -> Vec<String> {
         let mut w = Vec::new();
-        if let Some(m) = &self.model {
-            if m.contact.is_some() && !m.supported {
-                w.push(format!(
-                    "contact.model is computed on a model the data do not support between lines: {}",
-                    m.verdict
-                ));
-            }
+        let model = self.model.as_ref();
+        if let Some(m) = model.filter(|m| m.contact.is_some() && !m.supported) {
+            w.push(format!(
+                "contact.model is computed on a model the data do not support between lines: {}",
+                m.verdict
+            ));
         }
         for (what, s) in [
             ("measured grid", self.measured.as_ref()),
-            (
-                "model",
-                self.model.as_ref().and_then(|m| m.contact.as_ref()),
-            ),
+            ("model", model.and_then(|m| m.contact.as_ref())),
         ] {
             let Some(s) = s else { continue };
             let unresolved: Vec<String> = s
@@ -188,11 +184,10 @@ pub fn section(
         };
         let contact = match fit {
             Ok(fit) => sample_between(fit, g, s).and_then(|(h, rows)| {
-                let map = HeightMap::of(g, s);
                 let map = HeightMap {
                     heights_um: &h,
                     rows,
-                    ..map
+                    ..HeightMap::of(g, s)
                 };
                 solve(map, &opts.contact)
             }),
