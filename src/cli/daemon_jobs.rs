@@ -526,6 +526,18 @@ mod tests {
         );
     }
 
+    /// The runner's outcome when the file system refused reopening the scan in `dir`, `why`.
+    fn refused_by_the_file_system(why: &str, dir: &Path) -> Outcome {
+        Outcome {
+            end: End::Fail(FailReason::Refused {
+                message: why.into(),
+                kind: FailKind::Io,
+            }),
+            dir: Some(dir.to_path_buf()),
+            outputs: None,
+        }
+    }
+
     /// A job's scan whose reopening the file system refused (the daemon's at its start) is
     /// left as it is, which can clear by itself: the job stays running with its scan, the
     /// queue's turn waits, naming the scan and the refusal (with its fix), for the backoff's
@@ -541,14 +553,7 @@ mod tests {
         queue.set_scan(job, &scan.id).expect("its scan");
         let mut jobs = Jobs::new(queue, "ab".repeat(32));
         let why = "the file system refused reading its lines back (EROFS: …); …; remount the output directory's file system read-write";
-        let outcome = Outcome {
-            end: End::Fail(FailReason::Refused {
-                message: why.into(),
-                kind: FailKind::Io,
-            }),
-            dir: Some(dir.clone()),
-            outputs: None,
-        };
+        let outcome = refused_by_the_file_system(why, &dir);
 
         let now = Instant::now();
         jobs.settle_if_a_job(&outcome, &base);
@@ -693,14 +698,7 @@ mod tests {
         let (_, dir) = scan_of(&base.output_dir, None);
         let mut jobs = Jobs::new(queue, "ab".repeat(32));
         let why = "the file system refused reading its journal (EIO: …); …; check the disk";
-        let refused = Outcome {
-            end: End::Fail(FailReason::Refused {
-                message: why.into(),
-                kind: FailKind::Io,
-            }),
-            dir: Some(dir.clone()),
-            outputs: None,
-        };
+        let refused = refused_by_the_file_system(why, &dir);
         jobs.settle_if_a_job(&refused, &base);
         let plain = format!(
             "job {job} waits: the unfinished scan {} must end first (resume it with `surfscan resume` or `surfscan start`, or abort it)",
