@@ -95,10 +95,9 @@ pub fn tolerance_for(name: &str, filtered_here: bool) -> Option<Tolerance> {
         "rsk" | "rku" => t(0.05, 0.15, 0.02),
         "rdq" | "rda" => t(0.03, 0.10, 0.002),
         "rsm" => t(0.05, 0.10, 0.5),
-        "rc" => t(0.05, 0.10, 0.005),
         "rpc" => t(0.05, 0.10, 1.0),
         "rppi" => t(0.05, 0.10, 2.5),
-        "rk" | "rpk" | "rvk" | "rdc" => t(0.05, 0.10, 0.005),
+        "rc" | "rk" | "rpk" | "rvk" | "rdc" => t(0.05, 0.10, 0.005),
         "mr1" | "mr2" | "rmr" | "rmr(c)" => t(0.0, 0.0, if filtered_here { 2.0 } else { 1.0 }),
         _ => None,
     }
