@@ -68,20 +68,17 @@ pub(crate) fn along_x(z: &[f64], x0_mm: f64, pitch_mm: f64) -> Vec<(f64, f64)> {
 /// The overlay's row: the requested line when it is among the rows (else a warning and the
 /// middle row).
 fn overlay_row(grid: &Grid, ctx: &ReportContext, warnings: &mut Vec<String>) -> usize {
-    let rows = grid.rows();
-    match ctx.options.overlay_line {
-        Some(i) => match grid.index.iter().position(|&k| k == i) {
-            Some(r) => r,
-            None => {
-                warnings.push(format!(
-                    "overlay line {i} is not among the lines used ({:?}); the middle line is drawn",
-                    grid.index
-                ));
-                rows / 2
-            }
-        },
-        None => rows / 2,
-    }
+    let middle = grid.rows() / 2;
+    let Some(i) = ctx.options.overlay_line else {
+        return middle;
+    };
+    grid.index.iter().position(|&k| k == i).unwrap_or_else(|| {
+        warnings.push(format!(
+            "overlay line {i} is not among the lines used ({:?}); the middle line is drawn",
+            grid.index
+        ));
+        middle
+    })
 }
 
 /// The overlay of a held-out line: its measured heights, the model refitted without it and
