@@ -117,11 +117,11 @@ fn ours_for(
     let k = key(name);
     let stem = match k.as_str() {
         "rz" if jis_ten_point_rz => "rzjis",
-        "rδq" | "rΔq" | "rdeltaq" => "rdq",
-        "rδa" | "rΔa" | "rdeltaa" | "da" => "rda",
+        "rδq" | "rdeltaq" => "rdq",
+        "rδa" | "rdeltaa" | "da" => "rda",
         "pc" => "rpc",
         "ppi" => "rppi",
-        "rδc" | "rΔc" | "rdeltac" => "rdc",
+        "rδc" | "rdeltac" => "rdc",
         "rmr(c)" | "mr(c)" | "mr[c]" => {
             let level = p.material.rmr_c.get(occurrence)?;
             let name = format!("Rmr(c)@{}%Rt", level.depth_pct_rt);
