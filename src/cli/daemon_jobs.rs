@@ -485,6 +485,16 @@ mod tests {
         Journal::append_stop(&dir.join(JOURNAL_FILE), stop).expect("stopped");
     }
 
+    /// One job running with its scan of [`scan_of`], as the queue keeper holds it after the
+    /// scan began: the settings, the keeper, the job, the scan and its directory.
+    fn running_with_its_scan(root: &Path) -> (RunSettings, Jobs, u64, SyntheticScan, PathBuf) {
+        let (base, queue, job) = one_job(root);
+        queue.mark_running(job).expect("running");
+        let (scan, dir) = scan_of(&base.output_dir, Some(job));
+        queue.set_scan(job, &scan.id).expect("its scan");
+        (base, Jobs::new(queue, "ab".repeat(32)), job, scan, dir)
+    }
+
     /// A queued job waits for a scan an earlier version failed because the file system
     /// refused a write (a plain start continues it, so the choice does): the wait names it as
     /// failed and how to continue it, not as an unfinished scan to resume or abort (it has
@@ -547,11 +557,7 @@ mod tests {
     #[test]
     fn a_job_whose_scan_the_file_system_refused_to_reopen_waits_with_its_scan() {
         let tmp = tempfile::tempdir().expect("tmp");
-        let (base, queue, job) = one_job(tmp.path());
-        queue.mark_running(job).expect("running");
-        let (scan, dir) = scan_of(&base.output_dir, Some(job));
-        queue.set_scan(job, &scan.id).expect("its scan");
-        let mut jobs = Jobs::new(queue, "ab".repeat(32));
+        let (base, mut jobs, job, scan, dir) = running_with_its_scan(tmp.path());
         let why = "the file system refused reading its lines back (EROFS: …); …; remount the output directory's file system read-write";
         let outcome = refused_by_the_file_system(why, &dir);
 
@@ -595,11 +601,7 @@ mod tests {
             ("the scan cannot be reopened: reading its journal: …; nothing reopens it by itself: …", FailKind::Scan),
         ] {
         let tmp = tempfile::tempdir().expect("tmp");
-        let (base, queue, job) = one_job(tmp.path());
-        queue.mark_running(job).expect("running");
-        let (scan, dir) = scan_of(&base.output_dir, Some(job));
-        queue.set_scan(job, &scan.id).expect("its scan");
-        let mut jobs = Jobs::new(queue, "ab".repeat(32));
+        let (base, mut jobs, job, scan, dir) = running_with_its_scan(tmp.path());
         let outcome = Outcome {
             end: End::Fail(FailReason::Refused {
                 message: why.into(),
@@ -670,11 +672,7 @@ mod tests {
         );
 
         let tmp = tempfile::tempdir().expect("tmp");
-        let (base, queue, job) = one_job(tmp.path());
-        queue.mark_running(job).expect("running");
-        let (scan, _) = scan_of(&base.output_dir, Some(job));
-        queue.set_scan(job, &scan.id).expect("its scan");
-        let mut jobs = Jobs::new(queue, "ab".repeat(32));
+        let (base, mut jobs, job, scan, _) = running_with_its_scan(tmp.path());
         let why = "the scan's directory is not one";
         jobs.settle(job, &refusal(why), &base);
         let snapshot = jobs.queue.snapshot();
