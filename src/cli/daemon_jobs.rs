@@ -12,8 +12,9 @@
 //! leaves its job running: the scan resumes at the next start. A scan whose reopening
 //! was refused for its own files, or panicked, has ended (the runner records it): its job
 //! ends `fail` with it, and the queue does not reopen it again. One whose reopening the file
-//! system refused is left as it is, which can clear by itself: its job stays running with
-//! it, and its turn reopens it again with the reconnection backoff, saying why meanwhile.
+//! system refused, or whose ending it refused to record, is left as it is, which can clear
+//! by itself: its job stays running with it, and its turn reopens it again with the
+//! reconnection backoff, saying why meanwhile.
 //! A job queued behind a scan of no job the file system refused to reopen waits for it,
 //! saying so. A reopening cut short by a shutdown is a shutdown's. A running job's scan refused for
 //! having ended (its ending not yet in the queue) settles the job as its journal says, as

@@ -111,7 +111,9 @@ pub enum FailReason {
     OutputsInternal(String),
     /// The scan could not be begun or reopened, or its end not recorded: the message says
     /// why. A reopening that panicked (kind [`FailKind::Internal`]) is the scan's ending by a
-    /// bug, recorded as such; any other refusal records nothing.
+    /// bug, and one refused for the scan's own files the operator's, each recorded as such;
+    /// one the file system refused (kind [`FailKind::Io`]: reopening, or recording such an
+    /// ending) records nothing.
     Refused {
         /// Why.
         message: String,

@@ -196,8 +196,11 @@ fn reopen(
 /// outcome (exit 1, or 70 for a bug) say the same. A refusal by the file system can clear
 /// by itself: the scan is left as it is (no record, no event, its last stop not a stop:
 /// the idle status's reason names it and the fix), and the outcome names it for its job to
-/// wait. Work cancelled as the process shuts down is a shutdown's outcome with
-/// the scan: nothing recorded, its job goes on, and the scan resumes at the next start.
+/// wait. So is a scan whose ending the file system refused to record (a full or read-only
+/// disk): nothing tells it ended before its journal says so, and the next reopening, once
+/// the file system takes the record, records it. Work cancelled as the process shuts down
+/// is a shutdown's outcome with the scan: nothing recorded, its job goes on, and the scan
+/// resumes at the next start.
 /// Any other refusal (the scan has ended, a directory that is not one) is without the scan.
 async fn reopened<T: Send + 'static>(
     ctl: &Control,
@@ -227,32 +230,9 @@ async fn reopened<T: Send + 'static>(
         Some(words) if refusal != Refusal::Left => words,
         _ => return Err(refused(ctl, end)),
     };
-    let scan_id = dir
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let mut s = ended_status(&ctl.status.borrow(), words.status, &words.reason);
-    if let Some(last) = s.last_stop.as_mut() {
-        last.scan_id.clone_from(&scan_id);
-        last.dir = dir.display().to_string();
-        last.internal = words.internal;
-    }
     if !refusal.ends_the_scan() {
         tracing::error!("{}: {}", dir.display(), words.reason);
-        // The scan has not ended: the last stop stays the last scan's ending, and the
-        // reason says what the scan waits for.
-        s.last_stop.clone_from(&ctl.status.borrow().last_stop);
-        s.reason = Some(format!(
-            "scan {scan_id} ({}) waits for the file system: {}",
-            dir.display(),
-            words.reason
-        ));
-        ctl.publish(s);
-        return Err(Outcome {
-            end,
-            dir: Some(dir),
-            outputs: None,
-        });
+        return Err(waits_for_the_file_system(ctl, dir, words.reason));
     }
     let path = dir.join(JOURNAL_FILE);
     let stop = StopRecord {
@@ -263,22 +243,56 @@ async fn reopened<T: Send + 'static>(
         time: Utc::now(),
     };
     let time = stop.time;
-    let recorded = watched(ctl, "recording the scan's ending", move || {
-        Journal::append_stop(&path, stop).map_err(|e| e.to_string())
-    })
-    .await
-    .unwrap_or_else(|(e, _)| Err(e));
+    let recorded = refusal_of(
+        watched(ctl, "recording the scan's ending", move || {
+            Journal::append_stop(&path, stop)
+                .map_err(|e| opening::refusal("recording the scan's ending", &e))
+        })
+        .await,
+    );
     match recorded {
         Ok(()) => tracing::error!(
             "{}: {}; recorded as its ending: the daemon does not reopen it again, `surfscan scan --resume` does",
             dir.display(),
             words.reason
         ),
-        Err(e) => tracing::error!(
-            "{}: {}; its ending could not be recorded ({e}): the scan stays as it was, and the daemon may reopen it again at its next start",
+        // Told as ended only once recorded as ended: the scan is left as it is, as when
+        // the file system refused reopening it, and its ending is recorded when it is
+        // reopened again and the file system takes the record.
+        Err((why, Refusal::FileSystem)) => {
+            tracing::error!(
+                "{}: {}; its ending could not be recorded: {why}",
+                dir.display(),
+                words.reason
+            );
+            return Err(waits_for_the_file_system(ctl, dir, why));
+        }
+        Err((why, Refusal::Shutdown)) => {
+            tracing::warn!(
+                "{}: {}; its ending was not recorded ({why}): the scan is left as it was and reopened at the next start",
+                dir.display(),
+                words.reason
+            );
+            return Err(Outcome {
+                end: End::Shutdown,
+                dir: Some(dir),
+                outputs: None,
+            });
+        }
+        // The journal cannot be read back to append to (a damaged record): the daemon
+        // skips such a scan, as it skips any damaged journal, and never reopens it.
+        Err((why, _)) => tracing::error!(
+            "{}: {}; its ending could not be recorded ({why}): the scan is skipped as long as its journal is damaged",
             dir.display(),
             words.reason
         ),
+    }
+    let scan_id = scan_id_of(&dir);
+    let mut s = ended_status(&ctl.status.borrow(), words.status, &words.reason);
+    if let Some(last) = s.last_stop.as_mut() {
+        last.scan_id.clone_from(&scan_id);
+        last.dir = dir.display().to_string();
+        last.internal = words.internal;
     }
     ctl.publish(s);
     if let Some(kind) = end.event(true) {
@@ -297,6 +311,36 @@ async fn reopened<T: Send + 'static>(
         dir: Some(dir),
         outputs: None,
     })
+}
+
+/// The scan's id: its directory's name.
+fn scan_id_of(dir: &std::path::Path) -> String {
+    dir.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// The outcome of a scan in `dir` left as it is because the file system refused reopening
+/// it or recording its ending, `why` (with the fix): nothing recorded, no event; the idle
+/// status's reason names the scan, and its last stop stays the last scan that ended (this
+/// one has not); the outcome (exit 74) names the scan for its job, which waits.
+fn waits_for_the_file_system(ctl: &Control, dir: PathBuf, why: String) -> Outcome {
+    let mut s = ended_status(&ctl.status.borrow(), StopStatus::Fail, &why);
+    s.last_stop.clone_from(&ctl.status.borrow().last_stop);
+    s.reason = Some(format!(
+        "scan {} ({}) waits for the file system: {why}",
+        scan_id_of(&dir),
+        dir.display()
+    ));
+    ctl.publish(s);
+    Outcome {
+        end: End::Fail(FailReason::Refused {
+            message: why,
+            kind: FailKind::Io,
+        }),
+        dir: Some(dir),
+        outputs: None,
+    }
 }
 
 /// The reopening's result, or its refusal: [`watched`] work that panicked is a bug's,
@@ -1006,6 +1050,79 @@ mod tests {
         assert_eq!(daemon, Decision::Nothing);
         assert!(matches!(plain, Decision::New { .. }), "{plain:?}");
         assert_eq!(resume, Decision::Continue(dir));
+    }
+
+    /// A reopening that ends the scan (its own files refused) whose ending the file system
+    /// will not record (here its journal's path is a directory, which fails for root too, as
+    /// a full or read-only disk does) is not told as ended: the scan is left as it is, as
+    /// when the file system refuses reopening it (no event, so no hook; no last stop; the
+    /// idle status's reason names it; exit 74, so its job stays running and is tried again
+    /// with backoff), and the daemon still reopens it. Once the file system takes the
+    /// record, the next reopening records the ending and tells it. Before, the scan was told
+    /// `fail` (event, last stop, its job ended) with nothing recorded, and the daemon
+    /// reopened it at every start.
+    #[tokio::test]
+    async fn an_ending_the_file_system_will_not_record_leaves_the_scan_to_reopen() {
+        let out = tempfile::tempdir().expect("tmp");
+        let dir = unfinished(out.path());
+        let (ctl, seen, mut told) = control();
+        let own_files = || -> Result<(), (String, Refusal)> {
+            let e = JournalError::SecondStart {
+                path: "journal.jsonl".into(),
+                line: 3,
+            };
+            Err(refusal("reading its journal", &e))
+        };
+        let journal = dir.join(JOURNAL_FILE);
+        let kept = dir.join("journal.kept");
+        std::fs::rename(&journal, &kept).expect("moved aside");
+        std::fs::create_dir(&journal).expect("a directory in its place");
+
+        let outcome = reopened(&ctl, dir.clone(), own_files)
+            .await
+            .expect_err("refused");
+        assert_eq!(outcome.dir.as_deref(), Some(dir.as_path()));
+        let exit = crate::cli::scan::outcome_result(&outcome).expect_err("a failure");
+        assert_eq!(exit.exit as i32, 74, "{}", exit.message);
+        assert!(told.try_recv().is_err(), "no event");
+        let status = seen.borrow().clone();
+        assert!(status.last_stop.is_none(), "{:?}", status.last_stop);
+        assert_eq!(status.state, State::Idle);
+        let reason = status.reason.expect("a reason");
+        let head = format!(
+            "scan 20261207-2200-block ({}) waits for the file system: the file system refused recording the scan's ending (",
+            dir.display()
+        );
+        assert!(reason.starts_with(&head), "{reason}");
+
+        std::fs::remove_dir(&journal).expect("the directory removed");
+        std::fs::rename(&kept, &journal).expect("put back");
+        assert!(
+            !matches!(
+                read_journal(&journal).expect("journal").records.last(),
+                Some(Record::Stop(_))
+            ),
+            "nothing recorded"
+        );
+        assert_eq!(decisions(out.path())[0], Decision::Resume(dir.clone()));
+
+        let outcome = reopened(&ctl, dir.clone(), own_files)
+            .await
+            .expect_err("refused");
+        let exit = crate::cli::scan::outcome_result(&outcome).expect_err("a failure");
+        assert_eq!(exit.exit as i32, 1, "{}", exit.message);
+        let stop = last_stop_record(&dir);
+        assert_eq!(
+            (stop.status, stop.cause),
+            (StopStatus::Fail, Some(FailCause::Operator))
+        );
+        let ev = told.try_recv().expect("the fail event");
+        assert_eq!((ev.kind, ev.time), (ScanEventKind::Fail, stop.time));
+        assert_eq!(
+            seen.borrow().last_stop.as_ref().map(|l| l.status),
+            Some(StopStatus::Fail)
+        );
+        assert_eq!(decisions(out.path())[0], Decision::Nothing);
     }
 
     /// A panic in [`super::watched`] work becomes the scan's reason, naming the work and the
