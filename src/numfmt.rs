@@ -125,9 +125,34 @@ pub fn line_label(index: u32) -> String {
     format!("{} ({index:04})", line_number(index))
 }
 
+/// A duration for people, rounded to the second: `45 s`, `12 min 30 s`, `2 h 05 min`; `None`
+/// for a negative or non-finite one.
+pub fn duration(seconds: f64) -> Option<String> {
+    if !seconds.is_finite() || seconds < 0.0 {
+        return None;
+    }
+    let s = seconds.round() as u64;
+    Some(if s < 60 {
+        format!("{s} s")
+    } else if s < 3600 {
+        format!("{} min {:02} s", s / 60, s % 60)
+    } else {
+        format!("{} h {:02} min", s / 3600, (s % 3600) / 60)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn durations_are_rounded_into_units() {
+        assert_eq!(duration(44.6).as_deref(), Some("45 s"));
+        assert_eq!(duration(60.0).as_deref(), Some("1 min 00 s"));
+        assert_eq!(duration(7530.0).as_deref(), Some("2 h 05 min"));
+        assert_eq!(duration(-1.0), None);
+        assert_eq!(duration(f64::NAN), None);
+    }
 
     #[test]
     fn float_noise_is_not_printed() {

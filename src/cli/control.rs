@@ -447,25 +447,10 @@ fn devices(s: &Status) -> String {
 /// then it would promise an end that recedes for as long as the scan waits.
 pub fn eta_while_scanning(s: &Status) -> Option<String> {
     if s.state == State::Scanning {
-        s.eta_s.and_then(format_eta)
+        s.eta_s.and_then(crate::numfmt::duration)
     } else {
         None
     }
-}
-
-/// A duration for people: `45 s`, `12 min 30 s`, `2 h 05 min`.
-pub fn format_eta(seconds: f64) -> Option<String> {
-    if !seconds.is_finite() || seconds < 0.0 {
-        return None;
-    }
-    let s = seconds.round() as u64;
-    Some(if s < 60 {
-        format!("{s} s")
-    } else if s < 3600 {
-        format!("{} min {:02} s", s / 60, s % 60)
-    } else {
-        format!("{} h {:02} min", s / 3600, (s % 3600) / 60)
-    })
 }
 
 /// The status as a block of labelled lines for people.
@@ -691,15 +676,6 @@ mod tests {
             text.contains("  last stop  G-0141: fail (stage following error) in /d/G-0141\n"),
             "{text}"
         );
-    }
-
-    #[test]
-    fn eta_is_rounded_into_units() {
-        assert_eq!(format_eta(44.6).as_deref(), Some("45 s"));
-        assert_eq!(format_eta(60.0).as_deref(), Some("1 min 00 s"));
-        assert_eq!(format_eta(7530.0).as_deref(), Some("2 h 05 min"));
-        assert_eq!(format_eta(-1.0), None);
-        assert_eq!(format_eta(f64::NAN), None);
     }
 
     #[test]

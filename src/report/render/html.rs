@@ -23,7 +23,7 @@
 
 use super::print;
 use crate::metrology::parameter_table::{parameter, Parameter, Scaling, Source, AREAL, PARAMETERS};
-use crate::numfmt::{fmt, line_number, sig, Quantity};
+use crate::numfmt::{duration, fmt, line_number, sig, Quantity};
 use crate::scan::journal::ResumeState;
 use crate::specification::uncertainty::{statistics, InstrumentUncertainty};
 use base64::Engine as _;
@@ -162,18 +162,6 @@ pub fn mean_sd(v: &[f64]) -> (f64, f64) {
 fn line_label(index: u64) -> String {
     let number = u32::try_from(index).map_or(index + 1, line_number);
     format!("{number} <span class=\"muted\">({index:04})</span>")
-}
-
-/// A duration for people: `45 s`, `12 min 30 s`, `2 h 05 min`.
-fn duration(seconds: i64) -> String {
-    let s = seconds.max(0);
-    if s < 60 {
-        format!("{s} s")
-    } else if s < 3600 {
-        format!("{} min {:02} s", s / 60, s % 60)
-    } else {
-        format!("{} h {:02} min", s / 3600, (s % 3600) / 60)
-    }
 }
 
 fn text(v: &Value) -> String {
@@ -557,8 +545,9 @@ fn traceability(h: &mut String, report: &Value) {
     match t["finished_at"].as_str() {
         Some(stop) => {
             kv(h, "finished", &esc(&print::to_the_second(stop)));
-            if let Some(d) = t["duration_s"].as_f64() {
-                kv(h, "duration", &esc(&duration(d.round() as i64)));
+            // A stop recorded before the start (the clock set back) lasted 0 s.
+            if let Some(d) = t["duration_s"].as_f64().and_then(|d| duration(d.max(0.0))) {
+                kv(h, "duration", &esc(&d));
             }
         }
         None => kv(
