@@ -16,9 +16,12 @@
 //! by itself: its job stays running with it, and its turn reopens it again with the
 //! reconnection backoff, saying why meanwhile.
 //! A job queued behind a scan of no job the file system refused to reopen waits for it,
-//! saying so. A reopening cut short by a shutdown is a shutdown's. A running job's scan refused for
-//! having ended (its ending not yet in the queue) settles the job as its journal says, as
-//! after a restart; any other refusal of its scan ends the job `refused` with its scan id.
+//! saying so. A reopening cut short by a shutdown is a shutdown's. A running job's turn
+//! reopens its scan as the scan's journal says: resumed when it has not ended, continued when
+//! it failed for its transient budget (once its devices are present) or, in an earlier
+//! version, for storage; an ended scan (its ending not yet in the queue) settles the job as
+//! its journal says, as after a restart, and so does a refusal of its scan for having ended;
+//! any other refusal of its scan ends the job `refused` with its scan id.
 //!
 //! Layer 5 (composition): depends on [`crate::jobs`], [`crate::scan`]'s choice and
 //! settings, and [`super::station`].
@@ -123,14 +126,7 @@ impl Jobs {
                 let Some(Some(scan)) = existing else {
                     unreachable!()
                 };
-                return Turn::Run {
-                    job: id,
-                    request: ScanRequest::Resume {
-                        dir: out.join(scan),
-                        peer: None,
-                    },
-                    settings: Box::new(base.clone()),
-                };
+                return self.its_scan(id, &scan, &out, base.clone(), devices_present);
             }
             Err(why) => {
                 self.end(id, refused(why));
@@ -145,14 +141,7 @@ impl Jobs {
             }
         };
         if let Some(Some(scan)) = existing {
-            return Turn::Run {
-                job: id,
-                request: ScanRequest::Resume {
-                    dir: out.join(scan),
-                    peer: None,
-                },
-                settings: Box::new(settings),
-            };
+            return self.its_scan(id, &scan, &out, settings, devices_present);
         }
         if !devices_present {
             return Turn::Wait(format!(
@@ -253,6 +242,60 @@ impl Jobs {
         }
     }
 
+    /// The turn of running job `id` whose scan `scan` is in `out`, as the scan's journal
+    /// says: resumed when it has not ended; continued when it failed for a cause the daemon
+    /// continues by itself (its transient budget, once its devices are present; the file
+    /// system refusing a write, which earlier versions ended a scan for); when it has ended
+    /// otherwise (its ending not yet in the queue), the job settled as after a restart.
+    fn its_scan(
+        &mut self,
+        id: u64,
+        scan: &str,
+        out: &Path,
+        settings: RunSettings,
+        devices_present: bool,
+    ) -> Turn {
+        let dir = out.join(scan);
+        let stop = state_of(&dir).and_then(|s| s.stop);
+        let request = match stop.as_ref().map(|s| s.fail_cause()) {
+            // Not ended, or its journal unreadable: the reopening says why.
+            None => ScanRequest::Resume { dir, peer: None },
+            Some(Some(FailCause::Budget)) if !devices_present => {
+                return Turn::Wait(format!(
+                    "job {id} waits: its scan {scan} failed for its transient budget and is continued once the instrument and the stage are present"
+                ))
+            }
+            Some(Some(FailCause::Budget | FailCause::Storage)) => {
+                ScanRequest::Continue { dir, peer: None }
+            }
+            Some(_) => {
+                return match self.settle_by_its_journal(id) {
+                    // The queue changed: its next turn looks at it again.
+                    Ok(()) => Turn::Nothing,
+                    Err(e) => Turn::Wait(format!(
+                        "job {id}: its scan {scan} has ended, and the queue could not record it: {e}"
+                    )),
+                }
+            }
+        };
+        Turn::Run {
+            job: id,
+            request,
+            settings: Box::new(settings),
+        }
+    }
+
+    /// Settles the running jobs by what the journals say of their scans
+    /// ([`QueueService::reconcile`]), as after a restart; the notes go to the log.
+    fn settle_by_its_journal(&self, id: u64) -> Result<(), String> {
+        let notes = self.queue.reconcile().map_err(|e| {
+            tracing::error!("job {id}: {e}");
+            e.to_string()
+        })?;
+        notes.iter().for_each(|n| tracing::info!("{n}"));
+        Ok(())
+    }
+
     /// Records how job `id`'s scan ended (see the module docs for what ends a job).
     pub fn settle(&mut self, id: u64, outcome: &Outcome, base: &RunSettings) {
         let scan_id = outcome
@@ -328,10 +371,7 @@ impl Jobs {
         if self.running_scan(id).is_none() {
             return false;
         }
-        match self.queue.reconcile() {
-            Ok(notes) => notes.iter().for_each(|n| tracing::info!("{n}")),
-            Err(e) => tracing::error!("{e}"),
-        }
+        let _ = self.settle_by_its_journal(id);
         self.queue.status().running != Some(id)
     }
 
@@ -409,13 +449,15 @@ fn refused(why: String) -> JobOutcome {
 
 /// Whether the scan in `dir` was made for job `id`.
 fn names_job(dir: &Path, id: u64) -> bool {
+    state_of(dir).and_then(|s| s.start.job).and_then(|j| j.id) == Some(id)
+}
+
+/// What the journal of the scan in `dir` says, when it can be read.
+fn state_of(dir: &Path) -> Option<ResumeState> {
     let path = dir.join(JOURNAL_FILE);
     read_journal(&path)
         .ok()
         .and_then(|r| ResumeState::from_records(&path, &r.records).ok())
-        .and_then(|s| s.start.job)
-        .and_then(|j| j.id)
-        == Some(id)
 }
 
 #[cfg(test)]
@@ -476,10 +518,19 @@ mod tests {
     /// Ends the scan in `dir` as an earlier version did when the file system refused a write
     /// (a `fail` stop record of cause `storage`, which a plain start continues).
     fn failed_for_storage(dir: &Path) {
+        failed_for(
+            dir,
+            FailCause::Storage,
+            "storage: write lines/0004.csv: Read-only file system (os error 30)",
+        );
+    }
+
+    /// Ends the scan in `dir` by a `fail` stop record of `cause`, saying `reason`.
+    fn failed_for(dir: &Path, cause: FailCause, reason: &str) {
         let stop = StopRecord {
             status: StopStatus::Fail,
-            reason: "storage: write lines/0004.csv: Read-only file system (os error 30)".into(),
-            cause: Some(FailCause::Storage),
+            reason: reason.into(),
+            cause: Some(cause),
             internal: false,
             time: "2026-12-07T22:30:00Z".parse().expect("a time"),
         };
@@ -681,6 +732,61 @@ mod tests {
         assert!(
             matches!(state, JobState::Finished { scan_id: Some(s), outcome, reason, .. }
                 if *s == scan.id && outcome == "refused" && reason == why),
+            "{state:?}"
+        );
+    }
+
+    /// A running job's scan that failed for its transient budget (the daemon was waiting for
+    /// its devices when its continuation was refused by the file system, say) is continued
+    /// at the job's turn once its devices are present, as the daemon continues such a scan,
+    /// and waits for them meanwhile. Before, the turn asked to resume it as an unfinished
+    /// scan, the reopening refused it for having ended, and the job ended `refused`.
+    #[test]
+    fn a_running_jobs_scan_failed_for_its_budget_is_continued_at_its_turn() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let (base, mut jobs, job, scan, dir) = running_with_its_scan(tmp.path());
+        failed_for(
+            &dir,
+            FailCause::Budget,
+            "line 5: the instrument kept answering wrongly",
+        );
+        let Turn::Wait(waits) = jobs.turn(&base, false, Instant::now()) else {
+            panic!("continued without its devices");
+        };
+        assert_eq!(
+            waits,
+            format!(
+                "job {job} waits: its scan {} failed for its transient budget and is continued once the instrument and the stage are present",
+                scan.id
+            )
+        );
+        assert!(
+            matches!(jobs.turn(&base, true, Instant::now()), Turn::Run { job: j, request: ScanRequest::Continue { dir: d, peer: None }, .. } if j == job && d == dir),
+            "not continued"
+        );
+    }
+
+    /// A running job whose scan has ended without the queue recording it (its reopening
+    /// refused for its own files and recorded so, the job's ending lost) is settled at its
+    /// turn as its journal says, as after a restart: `fail` with its scan and the stop
+    /// record's reason, and the scan is not reopened. Before, the turn asked to resume it as
+    /// an unfinished scan.
+    #[test]
+    fn a_running_jobs_scan_that_has_ended_settles_the_job_at_its_turn() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let (base, mut jobs, job, scan, dir) = running_with_its_scan(tmp.path());
+        let why = "the scan cannot be reopened: reading its journal: …";
+        failed_for(&dir, FailCause::Operator, why);
+        let turn = jobs.turn(&base, true, Instant::now());
+        assert!(
+            !matches!(turn, Turn::Run { .. }),
+            "the ended scan is reopened"
+        );
+        let snapshot = jobs.queue.snapshot();
+        let state = &snapshot.get(job).expect("the job").state;
+        assert!(
+            matches!(state, JobState::Finished { scan_id: Some(s), outcome, reason, .. }
+                if *s == scan.id && outcome == "fail" && reason == why),
             "{state:?}"
         );
     }
