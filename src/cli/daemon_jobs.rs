@@ -325,36 +325,47 @@ impl Jobs {
             }
             // A running job's scan the runner would not reopen for having ended (its ending
             // recorded in its journal, not yet in the queue): the job ends as its journal
-            // says, as after a restart, with its scan and verdict.
+            // says, as after a restart, with its scan and verdict; still running after that
+            // (its scan refused for another reason), it ends by the refusal.
             (End::Fail(r @ FailReason::Refused { .. }), None)
-                if r.kind() == FailKind::Scan && self.settled_by_its_journal(id) => {}
-            (end, _) => {
-                self.retry = None;
-                self.delay = Duration::ZERO;
-                let created = scan_id.is_some();
-                // A running job's scan refused for another reason than its own files (a
-                // directory that is not one) is still named in the job's record.
-                let scan_id = scan_id.or_else(|| self.running_scan(id));
-                let verdict = outcome
-                    .outputs
-                    .as_ref()
-                    .and_then(|o| o.results.as_ref())
-                    .and_then(|r| r.verdict);
-                let outcome_word = match end {
-                    End::Fail(FailReason::Refused { .. }) if !created => "refused".to_owned(),
-                    e => e.status().as_str().to_owned(),
-                };
-                self.end(
-                    id,
-                    JobOutcome {
-                        scan_id,
-                        outcome: outcome_word,
-                        verdict,
-                        reason: end.reason(created),
-                    },
-                );
+                if r.kind() == FailKind::Scan && self.running_scan(id).is_some() =>
+            {
+                let _ = self.settle_by_its_journal(id);
+                if self.queue.status().running == Some(id) {
+                    self.ends_by(id, outcome, None);
+                }
             }
+            _ => self.ends_by(id, outcome, scan_id),
         }
+    }
+
+    /// Ends job `id` by its scan's `outcome` (`scan_id`: the scan the outcome names).
+    fn ends_by(&mut self, id: u64, outcome: &Outcome, scan_id: Option<String>) {
+        self.retry = None;
+        self.delay = Duration::ZERO;
+        let end = &outcome.end;
+        let created = scan_id.is_some();
+        // A running job's scan refused for another reason than its own files (a directory
+        // that is not one) is still named in the job's record.
+        let scan_id = scan_id.or_else(|| self.running_scan(id));
+        let verdict = outcome
+            .outputs
+            .as_ref()
+            .and_then(|o| o.results.as_ref())
+            .and_then(|r| r.verdict);
+        let outcome_word = match end {
+            End::Fail(FailReason::Refused { .. }) if !created => "refused".to_owned(),
+            e => e.status().as_str().to_owned(),
+        };
+        self.end(
+            id,
+            JobOutcome {
+                scan_id,
+                outcome: outcome_word,
+                verdict,
+                reason: end.reason(created),
+            },
+        );
     }
 
     /// The scan recorded for running job `id`, if any.
@@ -363,16 +374,6 @@ impl Jobs {
             JobState::Running { scan_id, .. } => scan_id.clone(),
             _ => None,
         }
-    }
-
-    /// Whether running job `id` with a scan was settled by what the journals say of it
-    /// ([`QueueService::reconcile`]): its scan has ended.
-    fn settled_by_its_journal(&self, id: u64) -> bool {
-        if self.running_scan(id).is_none() {
-            return false;
-        }
-        let _ = self.settle_by_its_journal(id);
-        self.queue.status().running != Some(id)
     }
 
     /// Waits the next step of the backoff before the job's next try (the reconnection
