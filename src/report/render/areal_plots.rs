@@ -26,9 +26,9 @@
 
 use super::decimate::extremes_per_column_of_pairs;
 use super::plots::{
-    chart, draw_colour_bar, ensure_font, exaggeration_note, font, legend, line_key, padded_range,
-    plot_err, png_and_svg, points_under, replace_figure, tick, viridis, write_png, Frame, DATA,
-    EXAGGERATIONS, MAP_BAR_W, MODEL,
+    chart, draw_colour_bar, ensure_font, err, exaggeration_note, font, legend, line_key,
+    padded_range, plot_err, png_and_svg, points_under, replace_figure, tick, viridis, write_png,
+    Frame, DATA, EXAGGERATIONS, MAP_BAR_W, MODEL,
 };
 use super::text_cache::TextCache;
 use crate::extremes::min_max;
@@ -111,7 +111,7 @@ where
     )?;
     chart
         .draw_series(LineSeries::new([(0.0, s), (x_hi, s)], GREY.stroke_width(1)))
-        .map_err(|e| e.to_string())?;
+        .map_err(err)?;
     let columns = chart.plotting_area().dim_in_pixel().0;
     for (c, colour, which) in &sections {
         let line = colour.stroke_width(2);
@@ -120,7 +120,7 @@ where
                 extremes_per_column_of_pairs(&c.points, (0.0, x_hi), columns),
                 line,
             ))
-            .map_err(|e| e.to_string())?
+            .map_err(err)?
             .label(section_label(c, which))
             .legend(line_key(line));
         // The decay length: a vertical marker from the axis up to s, named at its top.
@@ -130,7 +130,7 @@ where
                     vec![(l, y_lo), (l, s)],
                     line,
                 )))
-                .map_err(|e| e.to_string())?;
+                .map_err(err)?;
             let name = if *which == "fastest" {
                 "Sal"
             } else {
@@ -142,7 +142,7 @@ where
                     (l, s),
                     font(13).color(colour),
                 )))
-                .map_err(|e| e.to_string())?;
+                .map_err(err)?;
         }
     }
     if !sections.is_empty() {
@@ -232,7 +232,7 @@ where
                 .collect();
         chart
             .draw_series(LineSeries::new(kept, line))
-            .map_err(|e| e.to_string())?
+            .map_err(err)?
             .label(*label)
             .legend(line_key(line));
     }
@@ -486,7 +486,7 @@ where
     let pixels = pixels.get_or_init(|| view.pixels(size, at)); // the PNG's, kept for the SVG
     let bitmap = BitMapElement::with_ref(at, size, pixels)
         .ok_or_else(|| "3D view bitmap of the wrong size".to_string())?;
-    root.draw(&bitmap).map_err(|e| e.to_string())?;
+    root.draw(&bitmap).map_err(err)?;
     // The axes along the two front edges of the base and up the nearest corner.
     let (lo, hi) = view.z_range_um;
     let (w_mm, h_mm) = (
@@ -504,11 +504,10 @@ where
         (p(0.0, 0.0, lo), p(0.0, 0.0, hi)),
     ];
     for (a, b) in axes {
-        root.draw(&line(a, b)).map_err(|e| e.to_string())?;
+        root.draw(&line(a, b)).map_err(err)?;
     }
     let label = |text: String, at: (i32, i32)| -> Result<(), String> {
-        root.draw_text(&text, &font(13), at)
-            .map_err(|e| e.to_string())
+        root.draw_text(&text, &font(13), at).map_err(err)
     };
     let (x_end, y_end, z_top) = (p(w_mm, 0.0, lo), p(0.0, h_mm, lo), p(0.0, 0.0, hi));
     let (x_end_mm, y_end_mm) = (tick(x0_mm + w_mm), tick(y0_mm + h_mm));

@@ -59,6 +59,11 @@ pub(super) fn ensure_font() -> Result<(), String> {
     }
 }
 
+/// A drawing error as the text a figure's error carries ([`plot_err`] adds the file).
+pub(super) fn err(e: impl std::fmt::Display) -> String {
+    e.to_string()
+}
+
 pub(super) fn plot_err(path: &Path, e: impl std::fmt::Display) -> MetrologyError {
     MetrologyError::Plot {
         path: path.display().to_string(),
@@ -229,12 +234,12 @@ impl Frame {
     where
         DB::ErrorType: 'static,
     {
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        root.fill(&WHITE).map_err(err)?;
         // Lines of text `px` high and `gap` apart from `y` down; returns the y below them.
         let text = |lines: &[String], px: u32, colour: RGBColor, gap: u32, mut y: i32| {
             for l in lines {
                 root.draw_text(l, &font(px).color(&colour), (SIDE_PAD as i32, y))
-                    .map_err(|e| e.to_string())?;
+                    .map_err(err)?;
                 y += (px + gap) as i32;
             }
             Ok::<i32, String>(y)
@@ -276,7 +281,7 @@ where
         .margin_right(w.saturating_sub(24 + 22 + 90))
         .right_y_label_area_size(90)
         .build_cartesian_2d(0f64..1f64, lo_..hi)
-        .map_err(|e| e.to_string())?;
+        .map_err(err)?;
     bar.configure_mesh()
         .disable_mesh()
         .disable_x_axis()
@@ -286,7 +291,7 @@ where
         .y_desc(label)
         .axis_desc_style(font(13))
         .draw()
-        .map_err(|e| e.to_string())?;
+        .map_err(err)?;
     let steps = 128;
     bar.draw_series((0..steps).map(|k| {
         let a = lo_ + (hi - lo_) * k as f64 / steps as f64;
@@ -296,12 +301,12 @@ where
             viridis((k as f64 + 0.5) / steps as f64).filled(),
         )
     }))
-    .map_err(|e| e.to_string())?;
+    .map_err(err)?;
     bar.draw_series(std::iter::once(Rectangle::new(
         [(0.0, lo_), (1.0, hi)],
         BLACK.stroke_width(1),
     )))
-    .map_err(|e| e.to_string())?;
+    .map_err(err)?;
     Ok(())
 }
 
@@ -433,7 +438,7 @@ where
         .border_style(BLACK)
         .background_style(WHITE.mix(0.9))
         .draw()
-        .map_err(|e| e.to_string())
+        .map_err(err)
 }
 
 /// A legend's key for a series drawn as a line in `style`: a stroke 24 px long.
@@ -470,11 +475,11 @@ where
         .x_label_area_size(RATIO_CHART_X_AREA)
         .y_label_area_size(80)
         .build_cartesian_2d(x, y)
-        .map_err(|e| e.to_string())?;
+        .map_err(err)?;
     mesh(&mut chart, x_desc, y_desc)
         .y_label_formatter(y_tick)
         .draw()
-        .map_err(|e| e.to_string())?;
+        .map_err(err)?;
     Ok(chart)
 }
 
@@ -529,7 +534,7 @@ where
                 drawn(&c.curve.points),
                 colour.stroke_width(1),
             ))
-            .map_err(|e| e.to_string())?;
+            .map_err(err)?;
         if k == 0 {
             series
                 .label("Rmr(c) of one model profile curve (colour: its y)")
@@ -539,7 +544,7 @@ where
     if !pooled.is_empty() {
         chart
             .draw_series(LineSeries::new(drawn(pooled), BLACK.stroke_width(3)))
-            .map_err(|e| e.to_string())?
+            .map_err(err)?
             .label(if curves.is_empty() {
                 "Smr(c), measured grid"
             } else {
@@ -641,7 +646,7 @@ where
             points.iter().map(|p| (p.nominal_pressure_mpa, p.area_pct)),
             DATA.stroke_width(2),
         ))
-        .map_err(|e| e.to_string())?;
+        .map_err(err)?;
     chart
         .draw_series(
             points
@@ -649,7 +654,7 @@ where
                 .filter(|p| p.resolved)
                 .map(|p| Circle::new((p.nominal_pressure_mpa, p.area_pct), 4, DATA.filled())),
         )
-        .map_err(|e| e.to_string())?
+        .map_err(err)?
         .label("resolved by the grid")
         .legend(|(x, y)| Circle::new((x + 12, y), 4, DATA.filled()));
     if points.iter().any(|p| !p.resolved) {
@@ -661,7 +666,7 @@ where
                     MODEL.stroke_width(2),
                 )
             }))
-            .map_err(|e| e.to_string())?
+            .map_err(err)?
             .label("not resolved: most contact points are isolated single points")
             .legend(|(x, y)| Circle::new((x + 12, y), 4, MODEL.stroke_width(2)));
     }
@@ -851,13 +856,13 @@ where
         .x_label_area_size(MAP_X_AREA)
         .y_label_area_size(MAP_Y_AREA)
         .build_cartesian_2d(x0_mm..x0_mm + w, y0_mm..y0_mm + y_top.max(h))
-        .map_err(|e| e.to_string())?;
+        .map_err(err)?;
     mesh(&mut chart, "x (mm)", "y (mm)")
         .disable_mesh()
         .x_labels(8)
         .y_labels(4)
         .draw()
-        .map_err(|e| e.to_string())?;
+        .map_err(err)?;
     // The map as one bitmap at the pixels it covers, the figure's not the grid's (an SVG embeds
     // it as one PNG image): made for the PNG, kept for the SVG (one size, the same chart).
     let (x1_mm, y1_mm) = (x0_mm + w, y0_mm + h);
@@ -865,10 +870,7 @@ where
     let pixels = pixels.get_or_init(|| map_pixels(grid, size, (lo, hi)));
     let bitmap = BitMapElement::with_ref((x0_mm, y1_mm), size, pixels)
         .ok_or_else(|| "height map bitmap of the wrong size".to_string())?;
-    chart
-        .plotting_area()
-        .draw(&bitmap)
-        .map_err(|e| e.to_string())?;
+    chart.plotting_area().draw(&bitmap).map_err(err)?;
     draw_colour_bar(
         &bar_area,
         lo,
@@ -1044,20 +1046,20 @@ where
         .x_label_area_size(upper_x_area)
         .y_label_area_size(y_area)
         .build_cartesian_2d(x0..x1, z0..z1)
-        .map_err(|e| e.to_string())?;
+        .map_err(err)?;
     mesh(
         &mut chart,
         if residual.is_empty() { "x (mm)" } else { "" },
         "height (µm)",
     )
     .draw()
-    .map_err(|e| e.to_string())?;
+    .map_err(err)?;
     chart
         .draw_series(LineSeries::new(
             model.iter().copied(),
             MODEL.stroke_width(1),
         ))
-        .map_err(|e| e.to_string())?
+        .map_err(err)?
         .label("NURBS model")
         .legend(line_key(MODEL.stroke_width(2)));
     chart
@@ -1066,7 +1068,7 @@ where
                 .iter()
                 .map(|&(x, z)| Circle::new((x, z), 2, DATA.filled())),
         )
-        .map_err(|e| e.to_string())?
+        .map_err(err)?
         .label("measured")
         .legend(|(x, y)| Circle::new((x + 12, y), 3, DATA.filled()));
     legend(&mut chart, SeriesLabelPosition::UpperRight)?;
@@ -1083,21 +1085,21 @@ where
             .x_label_area_size(x_area)
             .y_label_area_size(y_area)
             .build_cartesian_2d(x0..x1, -r..r)
-            .map_err(|e| e.to_string())?;
+            .map_err(err)?;
         mesh(&mut res, "x (mm)", "model − data (µm)")
             .y_labels(5)
             .draw()
-            .map_err(|e| e.to_string())?;
+            .map_err(err)?;
         res.draw_series(LineSeries::new(
             [(x0, 0.0), (x1, 0.0)],
             BLACK.stroke_width(1),
         ))
-        .map_err(|e| e.to_string())?;
+        .map_err(err)?;
         res.draw_series(LineSeries::new(
             residual.iter().copied(),
             MODEL.stroke_width(1),
         ))
-        .map_err(|e| e.to_string())?;
+        .map_err(err)?;
     }
     Ok(())
 }
@@ -1160,7 +1162,6 @@ fn draw_assessed_profile<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     let length = p.z_um.len().saturating_sub(1) as f64 * p.pitch_mm;
     let (x0, x1) = (p.x0_mm, p.x0_mm + length);
     let (lo, hi) = padded_range(p.z_um.iter().copied(), (-1.0, 1.0));
@@ -1267,7 +1268,6 @@ where
         "material ratio Rmr (%)",
         "height c (µm)",
     )?;
-    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     // Rpk and Rvk triangles (areas equal to A1 and A2).
     chart
         .draw_series(std::iter::once(Polygon::new(
