@@ -77,6 +77,12 @@ impl Figure {
         })
     }
 
+    /// The figure's bytes as a `data:` URI, for an `<img>` element's `src`.
+    pub fn data_uri(&self) -> String {
+        let data = base64::engine::general_purpose::STANDARD.encode(&self.bytes);
+        format!("data:{};base64,{data}", self.media_type)
+    }
+
     /// A figure shown as a link to its file `href` (relative to the report), not embedded.
     pub fn linked(title: impl Into<String>, href: impl Into<String>, collapsed: bool) -> Figure {
         Figure {
@@ -677,19 +683,13 @@ fn events(h: &mut String, j: &ResumeState) {
 
 /// Each figure as an embedded image (or a link to its file), in order.
 fn embed(h: &mut String, figures: &[Figure]) {
-    let engine = base64::engine::general_purpose::STANDARD;
     for f in figures {
         let img = match &f.link {
             Some(href) => format!(
                 "<p class=\"muted\">Not embedded, to keep this page small: <a href=\"{h}\">{h}</a> beside this report.</p>",
                 h = esc(href)
             ),
-            None => format!(
-                "<img alt=\"{}\" src=\"data:{};base64,{}\">",
-                esc(&f.title),
-                f.media_type,
-                engine.encode(&f.bytes)
-            ),
+            None => format!("<img alt=\"{}\" src=\"{}\">", esc(&f.title), f.data_uri()),
         };
         if f.collapsed {
             let _ = writeln!(

@@ -11,7 +11,6 @@
 
 use super::html::{esc, Figure};
 use crate::numfmt::{fmt, Quantity};
-use base64::Engine as _;
 use serde_json::Value;
 use std::fmt::Write as _;
 
@@ -92,10 +91,9 @@ pub fn lab_header(report: &Value, logo: Option<&Figure>) -> String {
     if let Some(f) = logo {
         let _ = write!(
             h,
-            "<img class=\"logo\" alt=\"{} logo\" src=\"data:{};base64,{}\">",
+            "<img class=\"logo\" alt=\"{} logo\" src=\"{}\">",
             esc(name),
-            f.media_type,
-            base64::engine::general_purpose::STANDARD.encode(&f.bytes)
+            f.data_uri()
         );
     }
     h.push_str("<div>");
