@@ -35,7 +35,6 @@ use crate::metrology::MetrologyError;
 use crate::numfmt::{fmt, Quantity};
 use plotters::chart::MeshStyle;
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
-use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
@@ -407,21 +406,9 @@ pub(super) fn padded_range(values: impl Iterator<Item = f64>, fallback: (f64, f6
 /// Figure size of the bearing area curve plot.
 const BAC_SIZE: (u32, u32) = (1000, 640);
 
-/// The margin and the x label area of a material-ratio chart, in pixels.
-const RATIO_CHART_MARGIN: u32 = 12;
-const RATIO_CHART_X_AREA: u32 = 50;
-
-/// A material-ratio chart on `area`: 0–100 % across, heights `lo..hi` up, its mesh drawn with
-/// the axes described as `x_desc` and `y_desc` (the bearing area curves and the Rk
-/// construction share it).
-fn material_ratio_chart<'a, DB: DrawingBackend>(
-    area: &'a DrawingArea<DB, Shift>,
-    (lo, hi): (f64, f64),
-    x_desc: &str,
-    y_desc: &str,
-) -> Result<ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>, String> {
-    chart(area, 0f64..100f64, lo..hi, (x_desc, y_desc), &|v| tick(*v))
-}
+/// The margin and the x label area of a chart ([`chart`]), in pixels.
+const CHART_MARGIN: u32 = 12;
+const CHART_X_AREA: u32 = 50;
 
 /// Draws the legend of `chart`'s labelled series at `position`, boxed on white.
 pub(super) fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
@@ -471,8 +458,8 @@ where
     Y::CoordDescType: ValueFormatter<f64>,
 {
     let mut chart = ChartBuilder::on(area)
-        .margin(RATIO_CHART_MARGIN)
-        .x_label_area_size(RATIO_CHART_X_AREA)
+        .margin(CHART_MARGIN)
+        .x_label_area_size(CHART_X_AREA)
         .y_label_area_size(80)
         .build_cartesian_2d(x, y)
         .map_err(err)?;
@@ -512,12 +499,12 @@ where
         .chain(pooled.iter())
         .map(|p| p[0]);
     let (lo, hi) = padded_range(all, (-1.0, 1.0));
-    let (margin, x_area) = (RATIO_CHART_MARGIN, RATIO_CHART_X_AREA);
-    let mut chart = material_ratio_chart(
+    let mut chart = chart(
         &plot_area,
-        (lo, hi),
-        "material ratio (%)",
-        "height c from the mean line (µm)",
+        0f64..100f64,
+        lo..hi,
+        ("material ratio (%)", "height c from the mean line (µm)"),
+        &|v| tick(*v),
     )?;
     let (y_lo, y_hi) = min_max(&curves.iter().map(|c| c.y_mm).collect::<Vec<_>>());
     let y_span = if y_hi > y_lo { y_hi - y_lo } else { 1.0 };
@@ -559,8 +546,8 @@ where
         let plot_h = plot_area
             .dim_in_pixel()
             .1
-            .saturating_sub(2 * margin + x_area);
-        draw_colour_bar(&bar_area, y_lo, y_hi, "curve y (mm)", margin, plot_h)?;
+            .saturating_sub(2 * CHART_MARGIN + CHART_X_AREA);
+        draw_colour_bar(&bar_area, y_lo, y_hi, "curve y (mm)", CHART_MARGIN, plot_h)?;
     }
     Ok(())
 }
@@ -863,10 +850,13 @@ where
         .y_labels(4)
         .draw()
         .map_err(err)?;
-    // The map as one bitmap at the pixels it covers, the figure's not the grid's (an SVG embeds
-    // it as one PNG image): made for the PNG, kept for the SVG (one size, the same chart).
+    // The map as one bitmap at the pixels it covers from the grid's top left corner to its
+    // bottom right (at least one each way), the figure's not the grid's (an SVG embeds it as
+    // one PNG image): made for the PNG, kept for the SVG (one size, the same chart).
     let (x1_mm, y1_mm) = (x0_mm + w, y0_mm + h);
-    let size = map_size_px(&chart, (x0_mm, y1_mm), (x1_mm, y0_mm));
+    let (left, top) = chart.backend_coord(&(x0_mm, y1_mm));
+    let (right, bottom) = chart.backend_coord(&(x1_mm, y0_mm));
+    let size = ((right - left).max(1) as u32, (bottom - top).max(1) as u32);
     let pixels = pixels.get_or_init(|| map_pixels(grid, size, (lo, hi)));
     let bitmap = BitMapElement::with_ref((x0_mm, y1_mm), size, pixels)
         .ok_or_else(|| "height map bitmap of the wrong size".to_string())?;
@@ -879,18 +869,6 @@ where
         MAP_MARGIN,
         scale.plot_h.max(MAP_MIN_BAR_H),
     )
-}
-
-/// The pixels the grid from its top left corner to its bottom right (x, y mm) cover in
-/// `chart` (at least one each way).
-fn map_size_px<DB: DrawingBackend>(
-    chart: &ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
-    top_left_mm: (f64, f64),
-    bottom_right_mm: (f64, f64),
-) -> (u32, u32) {
-    let (x0, y0) = chart.backend_coord(&top_left_mm);
-    let (x1, y1) = chart.backend_coord(&bottom_right_mm);
-    ((x1 - x0).max(1) as u32, (y1 - y0).max(1) as u32)
 }
 
 /// The colour bar is at least this tall even beside a thin map, px.
@@ -997,7 +975,7 @@ where
     let (x0, x1) = if x1 > x0 { (x0, x1) } else { (0.0, 1.0) };
     let (z0, z1) = padded_range(measured.iter().chain(model).map(|p| p.1), (-1.0, 1.0));
     let probe_frame = |subtitle: &str| Frame::new(root.dim_in_pixel().0, title, subtitle, caption);
-    let (margin, x_area, y_area) = (12u32, 50u32, 80u32);
+    let (margin, x_area, y_area) = (CHART_MARGIN, CHART_X_AREA, 80u32);
     // With a residual panel the profile takes the upper 65 % of the body and names x only
     // once, below the residual.
     let share = |h: u32| if residual.is_empty() { h } else { h * 65 / 100 };
@@ -1166,8 +1144,8 @@ where
     let (x0, x1) = (p.x0_mm, p.x0_mm + length);
     let (lo, hi) = padded_range(p.z_um.iter().copied(), (-1.0, 1.0));
     let mut chart = ChartBuilder::on(area)
-        .margin(RATIO_CHART_MARGIN)
-        .x_label_area_size(RATIO_CHART_X_AREA)
+        .margin(CHART_MARGIN)
+        .x_label_area_size(CHART_X_AREA)
         .y_label_area_size(80)
         .caption(
             format!(
@@ -1262,11 +1240,12 @@ where
         .map(|p| p[1])
         .chain([c + rk.rpk_um, d - rk.rvk_um, c, d]);
     let (lo, hi) = padded_range(heights, (-1.0, 1.0));
-    let mut chart = material_ratio_chart(
+    let mut chart = chart(
         &plot_area,
-        (lo, hi),
-        "material ratio Rmr (%)",
-        "height c (µm)",
+        0f64..100f64,
+        lo..hi,
+        ("material ratio Rmr (%)", "height c (µm)"),
+        &|v| tick(*v),
     )?;
     // Rpk and Rvk triangles (areas equal to A1 and A2).
     chart
