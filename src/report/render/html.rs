@@ -137,20 +137,16 @@ tr.sign td{height:2.6em;min-width:10em}.printonly{display:none}
 /// at least 0.005 µm, 1 % point or 0.05 (dimensionless) — about what the instrument's
 /// display resolution and the filter's end treatment account for.
 pub fn tolerance(instrument: f64, unit: &str) -> f64 {
-    let floor = match unit {
-        "um" | "µm" => 0.005,
-        "%" => 1.0,
-        _ => 0.05,
-    };
-    (0.02 * instrument.abs()).max(floor)
+    (0.02 * instrument.abs()).max(quantity(unit).2)
 }
 
-/// The digits and the unit as people read it of an instrument's value in `unit`.
-fn quantity(unit: &str) -> (Quantity, &str) {
+/// The digits, the unit as people read it and the floor of the [`tolerance`] of an
+/// instrument's value in `unit`.
+fn quantity(unit: &str) -> (Quantity, &str, f64) {
     match unit {
-        "um" | "µm" => (Quantity::HeightUm, "µm"),
-        "%" => (Quantity::Percent, unit),
-        _ => (Quantity::Ratio, unit),
+        "um" | "µm" => (Quantity::HeightUm, "µm", 0.005),
+        "%" => (Quantity::Percent, unit, 1.0),
+        _ => (Quantity::Ratio, unit, 0.05),
     }
 }
 
@@ -901,7 +897,7 @@ fn comparisons(lines: &[Value]) -> Vec<Comparison> {
     for l in lines {
         for c in l["instrument"].as_array().into_iter().flatten() {
             let unit = c["unit"].as_str().unwrap_or("");
-            let (q, u) = quantity(unit);
+            let (q, u, _) = quantity(unit);
             let (inst, ours, diff) = (
                 c["instrument"].as_f64(),
                 c["ours"].as_f64(),
