@@ -3,7 +3,8 @@
 //! Start-up: logging is already on; the configuration is loaded (exit 78 on a bad file),
 //! the station locked (exit 69 naming the process that holds it) and leftovers of
 //! interrupted writes swept, the control socket bound, then `READY=1` — devices may appear later and are reported in
-//! `STATUS=`. An unfinished scan in `output.dir` is resumed at once; otherwise the daemon
+//! `STATUS=`. An unfinished scan in `output.dir` is resumed at once (one the file system
+//! refused to reopen is tried again with the reconnection backoff); otherwise the daemon
 //! waits for `surfscan start`, and never starts a scan by itself. Every status change is
 //! sent as `STATUS=`; `WATCHDOG=1` comes from the scan loop itself (also while it reopens a
 //! scan or writes its outputs, beside that work) and the idle loop.
@@ -306,11 +307,16 @@ async fn daemon(
                 other => other,
             };
             ctl.status.send_modify(Status::begin_start);
-            let outcome = run_scan(&mut station, &mut ctl, &settings, req).await;
-            stop = outcome.end == End::Shutdown;
-            awaiting = Awaiting::after(&outcome, &settings);
-            tokio::task::block_in_place(|| jobs.settle_if_a_job(&outcome, &settings));
-            note_damaged_journals(config, &ctl.status);
+            (stop, awaiting) = unqueued(
+                &mut station,
+                &mut ctl,
+                &mut jobs,
+                config,
+                &settings,
+                &settings,
+                req,
+            )
+            .await;
         }
         Ok(None) => {}
         Err(e) => tracing::error!("{e}"),
@@ -347,6 +353,22 @@ async fn daemon(
                     awaiting = Awaiting::after(&outcome, &job_settings);
                     tokio::task::block_in_place(|| jobs.settle(job, &outcome, &settings));
                     note_damaged_journals(config, &ctl.status);
+                    continue;
+                }
+                // A scan the file system refused to reopen, tried again with backoff.
+                Turn::Reopen(request) => {
+                    waiting(&ctl.status, None);
+                    ctl.status.send_modify(Status::begin_start);
+                    (stop, awaiting) = unqueued(
+                        &mut station,
+                        &mut ctl,
+                        &mut jobs,
+                        config,
+                        &settings,
+                        &settings,
+                        request,
+                    )
+                    .await;
                     continue;
                 }
                 Turn::Wait(why) => waiting(&ctl.status, Some(why)),
@@ -415,11 +437,7 @@ async fn daemon(
                                 continue;
                             }
                         };
-                        let outcome = run_scan(&mut station, &mut ctl, &start.settings, request).await;
-                        stop = outcome.end == End::Shutdown;
-                        awaiting = Awaiting::after(&outcome, &start.settings);
-                        tokio::task::block_in_place(|| jobs.settle_if_a_job(&outcome, &settings));
-                        note_damaged_journals(config, &ctl.status);
+                        (stop, awaiting) = unqueued(&mut station, &mut ctl, &mut jobs, config, &start.settings, &settings, request).await;
                     }
                     OperatorCommand::Pause | OperatorCommand::Resume | OperatorCommand::Abort => {
                         let _ = req.reply.send(Err(
@@ -449,11 +467,7 @@ async fn daemon(
                                 s.reason = None;
                             });
                             let req = ScanRequest::Continue { dir, peer: None };
-                            let outcome = run_scan(&mut station, &mut ctl, &settings, req).await;
-                            stop = outcome.end == End::Shutdown;
-                            awaiting = Awaiting::after(&outcome, &settings);
-                            tokio::task::block_in_place(|| jobs.settle_if_a_job(&outcome, &settings));
-                            note_damaged_journals(config, &ctl.status);
+                            (stop, awaiting) = unqueued(&mut station, &mut ctl, &mut jobs, config, &settings, &settings, req).await;
                         }
                         Err(fault) => {
                             let reason = a.not_yet(&fault, &settings);
@@ -482,6 +496,27 @@ async fn daemon(
     publishers.finish(Duration::from_secs(4)).await;
     tracing::info!("surfscan daemon stopped");
     Ok(())
+}
+
+/// Runs `request`, a scan not started as a job (the daemon's own resumption or continuation,
+/// an operator's start), with `settings`; a job's scan among them settles its job, and a
+/// refused reopening is remembered ([`Jobs::settle_if_a_job`], with the station's settings
+/// `base`). Whether the daemon stops (a shutdown ended the scan), and the continuation it
+/// then awaits.
+async fn unqueued(
+    station: &mut SerialStation,
+    ctl: &mut Control,
+    jobs: &mut Jobs,
+    config: &Config,
+    settings: &RunSettings,
+    base: &RunSettings,
+    request: ScanRequest,
+) -> (bool, Option<Awaiting>) {
+    let outcome = run_scan(station, ctl, settings, request).await;
+    let awaiting = Awaiting::after(&outcome, settings);
+    tokio::task::block_in_place(|| jobs.settle_if_a_job(&outcome, base));
+    note_damaged_journals(config, &ctl.status);
+    (outcome.end == End::Shutdown, awaiting)
 }
 
 /// A scan that failed for its transient budget (a device kept answering wrongly), which the

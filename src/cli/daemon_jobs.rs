@@ -15,8 +15,8 @@
 //! system refused, or whose ending it refused to record, is left as it is, which can clear
 //! by itself: its job stays running with it, and its turn reopens it again with the
 //! reconnection backoff, saying why meanwhile.
-//! A job queued behind a scan of no job the file system refused to reopen waits for it,
-//! saying so. A reopening cut short by a shutdown is a shutdown's. A running job's turn
+//! A scan of no job the file system refused to reopen is reopened again with the same
+//! backoff ([`Turn::Reopen`]); a job queued behind it waits for it, saying so. A reopening cut short by a shutdown is a shutdown's. A running job's turn
 //! reopens its scan as the scan's journal says: resumed when it has not ended, continued when
 //! it failed for its transient budget (once its devices are present) or, in an earlier
 //! version, for storage; an ended scan (its ending not yet in the queue) settles the job as
@@ -38,7 +38,7 @@ use crate::scan::journal::{read_journal, ResumeState, JOURNAL_FILE};
 use crate::scan::outcome::{NewJob, Outcome, ScanRequest};
 use crate::scan::settings::RunSettings;
 use crate::scan::testhooks::TestHooks;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 /// What the daemon does with the queue when no scan runs.
@@ -52,6 +52,9 @@ pub(super) enum Turn {
         /// The runner's settings of its recipe.
         settings: Box<RunSettings>,
     },
+    /// Reopen this scan of no job, which the file system refused to reopen, now that the
+    /// backoff's wait is over.
+    Reopen(ScanRequest),
     /// The next job cannot begin yet: why, for the status.
     Wait(String),
     /// Nothing to run.
@@ -67,9 +70,18 @@ pub(super) struct Jobs {
     /// meanwhile; the delay doubles up to the reconnection backoff's maximum.
     retry: Option<(Instant, String)>,
     delay: Duration,
-    /// The last scan of no job the file system refused to reopen, and why: the queue's
-    /// next job waits for it (nothing retries it before the next start or an operator's).
-    refused_scan: Option<(std::path::PathBuf, String)>,
+    /// The last scan of no job the file system refused to reopen: reopened again with the
+    /// reconnection backoff; the queue's next job waits for it.
+    refused_scan: Option<RefusedScan>,
+}
+
+/// A scan of no job the file system refused to reopen, and why: reopened again at `at`,
+/// `delay` after the refusal (the reconnection backoff's step).
+struct RefusedScan {
+    dir: PathBuf,
+    why: String,
+    at: Instant,
+    delay: Duration,
 }
 
 impl Jobs {
@@ -98,6 +110,9 @@ impl Jobs {
 
     /// What the queue's next job needs now. `devices_present`: both ports are there.
     pub fn turn(&mut self, base: &RunSettings, devices_present: bool, now: Instant) -> Turn {
+        if let Some(request) = self.refused_scan_due(now) {
+            return Turn::Reopen(request);
+        }
         let out = base.output_dir.clone();
         let (id, existing) = match self.queue.next() {
             Next::Idle => return Turn::Nothing,
@@ -178,8 +193,10 @@ impl Jobs {
             }
             Decision::Resume(dir) => {
                 let refused = match &self.refused_scan {
-                    Some((d, why)) if d == dir => format!(
-                        "; the file system refused reopening it ({why}), and it is tried again only at the daemon's next start or `surfscan start`"
+                    Some(r) if r.dir == *dir => format!(
+                        "; the file system refused reopening it ({}), and it is tried again within {} s, or by `surfscan start`",
+                        r.why,
+                        r.delay.as_secs()
                     ),
                     _ => String::new(),
                 };
@@ -380,32 +397,58 @@ impl Jobs {
     /// backoff's, doubling up to its maximum); the reason, made by `why` of the seconds, is
     /// the turn's meanwhile.
     fn back_off(&mut self, base: &RunSettings, why: impl FnOnce(u64) -> String) -> String {
-        self.delay = if self.delay.is_zero() {
-            base.backoff.initial
-        } else {
-            (self.delay * 2).min(base.backoff.max)
-        };
+        self.delay = base.backoff.next(self.delay);
         let why = why(self.delay.as_secs());
         self.retry = Some((Instant::now() + self.delay, why.clone()));
         why
     }
 
-    /// After a scan that was not started as a job (the daemon's resumption at start-up, an
-    /// operator's start): when it was the running job's scan, the job's ending is recorded;
-    /// a scan the file system refused to reopen is remembered for the queue's wait.
+    /// The scan of no job the file system refused to reopen, to reopen now that its wait is
+    /// over ([`Turn::Reopen`]), as the daemon reopens it at its start: while its journal has
+    /// no stop record (or cannot be read: the reopening says why). One that has ended
+    /// meanwhile is forgotten.
+    fn refused_scan_due(&mut self, now: Instant) -> Option<ScanRequest> {
+        let r = self.refused_scan.as_ref().filter(|r| now >= r.at)?;
+        if state_of(&r.dir).is_some_and(|s| s.stop.is_some()) {
+            self.refused_scan = None;
+            return None;
+        }
+        Some(ScanRequest::Resume {
+            dir: r.dir.clone(),
+            peer: None,
+        })
+    }
+
+    /// After a scan that was not started as a job (the daemon's resumption at start-up or
+    /// with backoff, an operator's start): when it was the running job's scan, the job's
+    /// ending is recorded; a scan the file system refused to reopen is reopened again after
+    /// the backoff's next step (longer each time the same scan is refused again), and the
+    /// queue's next job waits for it.
     pub fn settle_if_a_job(&mut self, outcome: &Outcome, base: &RunSettings) {
+        let before = self.refused_scan.take();
+        let running = self.queue.status().running;
+        if let Some(id) =
+            running.filter(|id| outcome.dir.as_deref().is_some_and(|d| names_job(d, *id)))
+        {
+            // A job's scan: its turn tries it again.
+            return self.settle(id, outcome, base);
+        }
         self.refused_scan = match (&outcome.end, &outcome.dir) {
             (End::Fail(r @ FailReason::Refused { .. }), Some(dir)) if r.kind() == FailKind::Io => {
-                Some((dir.clone(), r.to_string()))
+                let waited = before
+                    .filter(|b| b.dir == *dir)
+                    .map_or(Duration::ZERO, |b| b.delay);
+                let delay = base.backoff.next(waited);
+                tracing::info!("{}: reopened again in {} s", dir.display(), delay.as_secs());
+                Some(RefusedScan {
+                    dir: dir.clone(),
+                    why: r.to_string(),
+                    at: Instant::now() + delay,
+                    delay,
+                })
             }
             _ => None,
         };
-        let Some(id) = self.queue.status().running else {
-            return;
-        };
-        if outcome.dir.as_deref().is_some_and(|d| names_job(d, id)) {
-            self.settle(id, outcome, base);
-        }
     }
 
     /// The settings and the new scan's job of `start --recipe`: the recipe's text as the
@@ -793,10 +836,9 @@ mod tests {
     }
 
     /// A queued job behind a scan of no job that the file system refused to reopen at the
-    /// daemon's start waits for it, and the wait says so and that nothing tries it again
-    /// before the next start or an operator's: it read only that the unfinished scan must
-    /// end first. Once another outcome follows (an operator's start of it), the wait is the
-    /// plain one again.
+    /// daemon's start waits for it, and the wait says so and when it is tried again: it read
+    /// only that the unfinished scan must end first. Once another outcome follows (an
+    /// operator's start of it), the wait is the plain one again.
     #[test]
     fn a_job_behind_a_scan_the_file_system_refused_says_so() {
         let tmp = tempfile::tempdir().expect("tmp");
@@ -815,7 +857,7 @@ mod tests {
         };
         assert_eq!(
             waits,
-            format!("{plain}; the file system refused reopening it ({why}), and it is tried again only at the daemon's next start or `surfscan start`")
+            format!("{plain}; the file system refused reopening it ({why}), and it is tried again within {} s, or by `surfscan start`", base.backoff.initial.as_secs())
         );
 
         jobs.settle_if_a_job(&Outcome::without_scan(End::Shutdown), &base);
@@ -823,5 +865,52 @@ mod tests {
             panic!("the job does not wait");
         };
         assert_eq!(waits, plain);
+    }
+
+    /// A scan of no job the file system refused to reopen (at the daemon's start) is reopened
+    /// again by the daemon after the reconnection backoff's step, as a job's scan is, the wait
+    /// doubling while the same scan is refused again; one that has ended meanwhile is not.
+    /// Before, it was tried again only at the next start or an operator's start: a disk that
+    /// cleared at night left the station idle until morning.
+    #[test]
+    fn a_scan_of_no_job_the_file_system_refused_is_reopened_with_backoff() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let (base, queue, _) = one_job(tmp.path());
+        queue.clear(None).expect("no job");
+        let (_, dir) = scan_of(&base.output_dir, None);
+        let mut jobs = Jobs::new(queue, "ab".repeat(32));
+        let refused = refused_by_the_file_system("the file system refused …", &dir);
+        let step = base.backoff.initial;
+        let reopens = |jobs: &mut Jobs, at: Instant| matches!(jobs.turn(&base, true, at), Turn::Reopen(ScanRequest::Resume { dir: d, peer: None }) if d == dir);
+
+        let now = Instant::now();
+        jobs.settle_if_a_job(&refused, &base);
+        assert!(
+            !reopens(&mut jobs, now),
+            "reopened before the backoff's step"
+        );
+        assert!(
+            reopens(&mut jobs, Instant::now() + step),
+            "not reopened after it"
+        );
+
+        // Refused again: twice the wait.
+        let now = Instant::now();
+        jobs.settle_if_a_job(&refused, &base);
+        assert!(!reopens(&mut jobs, now + step), "the wait did not double");
+        assert!(
+            reopens(&mut jobs, Instant::now() + 2 * step),
+            "not reopened after twice the step"
+        );
+
+        // Ended meanwhile (its stop record written by hand, say): forgotten.
+        failed_for(&dir, FailCause::Operator, "ended by hand");
+        assert!(
+            matches!(
+                jobs.turn(&base, true, Instant::now() + 4 * step),
+                Turn::Nothing
+            ),
+            "an ended scan is reopened"
+        );
     }
 }

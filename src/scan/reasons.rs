@@ -217,7 +217,7 @@ fn refusal_words(errno: Option<i32>) -> (String, &'static str) {
 pub fn reopening_refused(what: &str, errno: Option<i32>, message: &str) -> String {
     let (code, fix) = refusal_words(errno);
     format!(
-        "the file system refused {what} ({code}{message}); the scan is left as it is and reopened once the file system allows it (the daemon tries again at its next start, a queued job's scan with backoff); {fix}"
+        "the file system refused {what} ({code}{message}); the scan is left as it is and reopened once the file system allows it (the daemon tries it again with the reconnection backoff); {fix}"
     )
 }
 

@@ -818,3 +818,52 @@ async fn a_stuck_trace_starves_the_watchdog_and_the_restarted_daemon_resumes_the
     sigterm(&d);
     d.wait().unwrap();
 }
+
+/// An unfinished scan the file system refuses to reopen when the daemon starts (here a
+/// committed line's file replaced by a directory: EISDIR, which fails for root too) is left
+/// as it is, the idle daemon saying so and nothing recorded; once the file system allows it,
+/// the daemon reopens it by itself with the reconnection backoff and completes it, with no
+/// start command nor restart. Before, it was tried again only at the daemon's next start or
+/// an operator's start.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_scan_the_file_system_refused_to_reopen_is_reopened_once_it_allows_it() {
+    let r = rig().await;
+    let mut d = spawn_daemon(&r);
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    start_scan(&r, "refused").await;
+    wait_status(&r, "two lines", |s| s.lines_done >= 2).await;
+    sigterm(&d);
+    assert!(wait_exit(&mut d).success());
+    let dir = scan_dir(&r);
+    let line = dir.join("lines").join("0000.csv");
+    let kept = dir.join("0000.csv.kept");
+    std::fs::rename(&line, &kept).unwrap();
+    std::fs::create_dir(&line).unwrap();
+
+    let mut d = spawn_daemon(&r);
+    notify_until(&r, &mut d, |m| m.contains("READY=1"));
+    let s = wait_status(&r, "waiting for the file system", |s| {
+        s.reason
+            .as_deref()
+            .is_some_and(|w| w.contains("waits for the file system"))
+    })
+    .await;
+    assert_eq!(s.state, State::Idle, "{s:?}");
+    assert!(
+        s.last_stop.is_none() && !records(&dir).iter().any(|r| matches!(r, Record::Stop(_))),
+        "{s:?}"
+    );
+
+    std::fs::remove_dir(&line).unwrap();
+    std::fs::rename(&kept, &line).unwrap();
+    wait_status(&r, "complete once the file system allows it", |s| {
+        s.last_stop
+            .as_ref()
+            .is_some_and(|l| l.status == StopStatus::Success)
+    })
+    .await;
+    assert_eq!(line_indices(&records(&dir)), (0..LINES).collect::<Vec<_>>());
+    sigterm(&d);
+    assert!(wait_exit(&mut d).success());
+    r.sim.shutdown().await;
+}
