@@ -18,8 +18,11 @@
 //! A scan of no job the file system refused to reopen is reopened again with the same
 //! backoff ([`Turn::Reopen`]); a job queued behind it waits for it, saying so. A reopening cut short by a shutdown is a shutdown's. A running job's turn
 //! reopens its scan as the scan's journal says: resumed when it has not ended, continued when
-//! it failed for its transient budget (once its devices are present) or, in an earlier
-//! version, for storage; an ended scan (its ending not yet in the queue) settles the job as
+//! its stop record is a failure the daemon continues by itself (the one rule the start-up
+//! choice and the settling after a restart ask too:
+//! [`crate::scan::ending::FailCause::continued_by_the_daemon`]): its transient budget's (once
+//! its devices are present) or, in an earlier version, storage's; an ended scan (its ending
+//! not yet in the queue) settles the job as
 //! its journal says, as after a restart, and so does a refusal of its scan for having ended;
 //! any other refusal of its scan ends the job `refused` with its scan id.
 //!
@@ -274,17 +277,15 @@ impl Jobs {
     ) -> Turn {
         let dir = out.join(scan);
         let stop = state_of(&dir).and_then(|s| s.stop);
-        let request = match stop.as_ref().map(|s| s.fail_cause()) {
+        let request = match &stop {
             // Not ended, or its journal unreadable: the reopening says why.
             None => ScanRequest::Resume { dir, peer: None },
-            Some(Some(FailCause::Budget)) if !devices_present => {
+            Some(s) if s.fail_cause() == Some(FailCause::Budget) && !devices_present => {
                 return Turn::Wait(format!(
                     "job {id} waits: its scan {scan} failed for its transient budget and is continued once the instrument and the stage are present"
                 ))
             }
-            Some(Some(FailCause::Budget | FailCause::Storage)) => {
-                ScanRequest::Continue { dir, peer: None }
-            }
+            Some(s) if s.continued_by_the_daemon() => ScanRequest::Continue { dir, peer: None },
             Some(_) => {
                 return match self.settle_by_its_journal(id) {
                     // The queue changed: its next turn looks at it again.
@@ -510,6 +511,8 @@ mod tests {
     use crate::jobs::queue::JobState;
     use crate::jobs::service::{tests::station, AddJob, QueueService};
     use crate::jobs::synthetic::{write, SyntheticScan};
+    use crate::scan::choice::{self, Asker, Decision};
+    use crate::scan::command::Peer;
     use crate::scan::ending::{End, FailCause, FailKind, FailReason, StopStatus};
     use crate::scan::journal::{Journal, StopRecord, JOURNAL_FILE};
     use crate::scan::outcome::{Outcome, ScanRequest};
@@ -808,6 +811,60 @@ mod tests {
             matches!(jobs.turn(&base, true, Instant::now()), Turn::Run { job: j, request: ScanRequest::Continue { dir: d, peer: None }, .. } if j == job && d == dir),
             "not continued"
         );
+    }
+
+    /// Whether a running job's failed scan is continued or has ended for its job is one rule,
+    /// asked alike by the queue's settling after a restart, the job's turn and the daemon's
+    /// start-up choice. By the fault policy's table: the daemon continues a scan that failed
+    /// for its transient budget or (an earlier version's ending) because the file system
+    /// refused a write, and an operator's fault ends it. Before, the settling after a restart
+    /// took a `storage` failure for the scan's ending and finished the job `fail`, while the
+    /// start-up choice and the job's turn continued that scan.
+    #[test]
+    fn a_running_jobs_failed_scan_is_continued_or_ended_by_one_rule() {
+        for (cause, reason, continued) in [
+            (FailCause::Budget, "line 5: transient faults since 22:10:00 outlasted the 60 s budget (3 trace(s) started); last: …", true),
+            (FailCause::Storage, "storage: write lines/0004.csv: Read-only file system (os error 30)", true),
+            (FailCause::Operator, "line 5: instrument: battery abnormal", false),
+        ] {
+            let tmp = tempfile::tempdir().expect("tmp");
+            let (base, mut jobs, job, scan, dir) = running_with_its_scan(tmp.path());
+            failed_for(&dir, cause, reason);
+
+            let at_start = choice::choose(
+                &base.output_dir,
+                Asker::DaemonStartUp,
+                Peer::this_process(),
+                Default::default(),
+            )
+            .expect("chosen")
+            .decision;
+            assert_eq!(
+                matches!(&at_start, Decision::Continue(d) | Decision::AwaitDevices(d) if *d == dir),
+                continued,
+                "{cause:?}: the start-up choice {at_start:?}"
+            );
+
+            jobs.queue.reconcile().expect("settled");
+            let snapshot = jobs.queue.snapshot();
+            let state = &snapshot.get(job).expect("the job").state;
+            if continued {
+                assert!(
+                    matches!(state, JobState::Running { scan_id: Some(s), .. } if *s == scan.id),
+                    "{cause:?}: settled {state:?}"
+                );
+                assert!(
+                    matches!(jobs.turn(&base, true, Instant::now()), Turn::Run { job: j, request: ScanRequest::Continue { dir: d, peer: None }, .. } if j == job && d == dir),
+                    "{cause:?}: not continued at its turn"
+                );
+            } else {
+                assert!(
+                    matches!(state, JobState::Finished { scan_id: Some(s), outcome, reason: r, .. }
+                        if *s == scan.id && outcome == "fail" && r == reason),
+                    "{cause:?}: settled {state:?}"
+                );
+            }
+        }
     }
 
     /// A running job whose scan has ended without the queue recording it (its reopening

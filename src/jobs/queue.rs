@@ -11,8 +11,8 @@
 //! Exactly once, in order: a job is marked running (durably) before its scan is created, and
 //! the scan's start record names the job ([`crate::scan::journal::StartRecord::job`]). After a
 //! crash, [`Queue::reconcile`] asks the journals (the truth) what became of a running job: a
-//! scan that names it and has ended finishes it; a scan that names it and has not ended is
-//! resumed; no scan naming it means none was created, and the job starts. No job is run
+//! scan that names it and has ended finishes it; a scan that names it and has not ended (or
+//! failed for a cause the daemon continues by itself) is resumed (continued); no scan naming it means none was created, and the job starts. No job is run
 //! twice, none is lost, and the queued ones keep their order.
 //!
 //! [`Queue`] is the pure state with its transitions (tested without files); [`QueueStore`]
@@ -218,7 +218,9 @@ pub struct JobOutcome {
 pub struct JobScan {
     /// The scan's id.
     pub scan_id: String,
-    /// Its stop record's status and reason, when it has ended.
+    /// Its stop record's status and reason, when it has ended for its job (a failure the
+    /// daemon continues by itself does not end it:
+    /// [`crate::scan::journal::StopRecord::continued_by_the_daemon`]).
     pub ended: Option<(StopStatus, String)>,
     /// Its verdict, when its report holds one.
     pub verdict: Option<Verdict>,

@@ -443,11 +443,11 @@ fn find_job_scan(out: &Path, id: u64, recorded: Option<&str>) -> Option<JobScan>
             .and_then(|(e, _)| e.verdict);
         Some(JobScan {
             scan_id: dir_name.to_owned(),
-            // A scan failed for its transient budget is continued by the daemon once its
-            // devices answer: its job is not over.
+            // A failure the daemon continues by itself (its transient budget, an earlier
+            // version's storage error) does not end the job, as its turn continues the scan.
             ended: st
                 .stop
-                .filter(|s| s.fail_cause() != Some(crate::scan::ending::FailCause::Budget))
+                .filter(|s| !s.continued_by_the_daemon())
                 .map(|s| (s.status, s.reason)),
             verdict,
         })

@@ -16,6 +16,10 @@
 //!   and starts nothing else; an operator's plain start begins a new scan, warning when the
 //!   scan started last failed.
 //!
+//! The failures the daemon continues by itself (the two rows above: storage, budget) are
+//! [`FailCause::continued_by_the_daemon`]'s, the rule a running job's turn and the queue's
+//! settling after a restart ask too: such a failure does not end a job.
+//!
 //! A scan that failed with an internal error (a bug: writing its outputs, every line on disk,
 //! or reopening it panicked) is the operator's: only `--resume` continues it (it writes a
 //! complete scan's outputs again and traces nothing); the daemon never does by itself (the
@@ -102,8 +106,10 @@ pub fn decide(s: &Survey, asker: Asker, out: &Path) -> Decided {
                 out.display()
             )),
         },
+        // Of the failures the daemon continues by itself, the file system's is continued
+        // above; its transient budget's waits for its devices.
         Asker::DaemonStartUp => match last_failed {
-            Some(f) if f.cause == FailCause::Budget => Decision::AwaitDevices(f.dir.clone()),
+            Some(f) if f.cause.continued_by_the_daemon() => Decision::AwaitDevices(f.dir.clone()),
             _ => Decision::Nothing,
         },
         Asker::Operator(StartMode::Auto) => {

@@ -211,6 +211,16 @@ pub enum FailCause {
 }
 
 impl FailCause {
+    /// True when the daemon continues a scan that failed for this cause by itself, so that
+    /// the failure does not end its job: its transient budget (once its devices answer
+    /// again) and the file system refusing a write (an earlier version's ending, which a
+    /// plain start continues). The one rule for the daemon's start-up choice
+    /// ([`super::choice::decide`]), a running job's turn and the queue's settling after a
+    /// restart.
+    pub fn continued_by_the_daemon(self) -> bool {
+        matches!(self, FailCause::Budget | FailCause::Storage)
+    }
+
     /// The cause of a stop record written before records named it, read from its reason.
     pub fn of_reason(reason: &str) -> FailCause {
         if reason.starts_with("storage: ")

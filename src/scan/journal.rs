@@ -240,6 +240,13 @@ impl StopRecord {
                 .unwrap_or_else(|| FailCause::of_reason(&self.reason))
         })
     }
+
+    /// True when the record is a failure the daemon continues by itself
+    /// ([`FailCause::continued_by_the_daemon`]): the scan has not ended for its job.
+    pub fn continued_by_the_daemon(&self) -> bool {
+        self.fail_cause()
+            .is_some_and(FailCause::continued_by_the_daemon)
+    }
 }
 
 /// The operator continued a failed scan after clearing the cause: the stop record before
