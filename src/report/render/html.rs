@@ -54,15 +54,18 @@ pub struct Figure {
 }
 
 impl Figure {
-    /// The smaller of a plot's PNG and SVG files (text-heavy plots are smaller as SVG, maps
-    /// as PNG), read from disk; `None` when neither can be read.
+    /// A plot read from disk: its SVG file when `vector` and there is one, else the smaller of
+    /// its PNG and SVG files (text-heavy plots are smaller as SVG, maps as PNG); `None` when
+    /// neither can be read.
     pub fn from_files(
         title: impl Into<String>,
         png: &Path,
         svg: &Path,
-        collapsed: bool,
+        vector: bool,
     ) -> Option<Figure> {
-        let (media_type, bytes) = match (std::fs::read(png).ok(), std::fs::read(svg).ok()) {
+        let svg = std::fs::read(svg).ok();
+        let png = (!vector || svg.is_none()).then(|| std::fs::read(png).ok());
+        let (media_type, bytes) = match (png.flatten(), svg) {
             (Some(p), Some(s)) if s.len() < p.len() => ("image/svg+xml", s),
             (Some(p), _) => ("image/png", p),
             (None, Some(s)) => ("image/svg+xml", s),
@@ -72,7 +75,6 @@ impl Figure {
             title: title.into(),
             media_type,
             bytes,
-            collapsed,
             ..Figure::default()
         })
     }

@@ -474,7 +474,7 @@ fn per_line_figures(
     let mut embedded: usize = plots
         .iter()
         .filter(|(_, [png, _])| is_printed(png))
-        .filter_map(|(title, [png, svg])| html::Figure::from_files(title, png, svg, true))
+        .filter_map(|(title, [png, svg])| html::Figure::from_files(title, png, svg, false))
         .map(|f| f.bytes.len())
         .sum();
     let mut budget_left = true;
@@ -484,8 +484,8 @@ fn per_line_figures(
             let print = is_printed(png);
             if budget_left || print {
                 // A figure that cannot be read is left out, as any figure is.
-                let mut f = html::Figure::from_files(title.clone(), png, svg, true)?;
-                f.printed = print;
+                let mut f = html::Figure::from_files(title.clone(), png, svg, false)?;
+                (f.collapsed, f.printed) = (true, print);
                 if print {
                     return Some(f);
                 }
@@ -547,19 +547,11 @@ fn remove_if_there(path: &Path) -> std::io::Result<()> {
 /// the line left out of the model (summarised by the model section's hold-out figures).
 const SCREEN_ONLY: [&str; 2] = ["bac", "overlay"];
 
-/// The figure `stem` of `dir` (`stem.png|svg`) titled `title`: its SVG file when `vector`
-/// and there is one, else the smaller file; `None` when neither can be read.
+/// The figure `stem` of `dir` (`stem.png|svg`) titled `title`, read as
+/// [`html::Figure::from_files`] reads it.
 fn figure_file(dir: &Path, stem: &str, title: String, vector: bool) -> Option<html::Figure> {
-    let svg = dir.join(format!("{stem}.svg"));
-    match vector.then(|| std::fs::read(&svg).ok()).flatten() {
-        Some(bytes) => Some(html::Figure {
-            title,
-            media_type: "image/svg+xml",
-            bytes,
-            ..html::Figure::default()
-        }),
-        None => html::Figure::from_files(title, &dir.join(format!("{stem}.png")), &svg, false),
-    }
+    let [png, svg] = ["png", "svg"].map(|ext| dir.join(format!("{stem}.{ext}")));
+    html::Figure::from_files(title, &png, &svg, vector)
 }
 
 /// The figures of [`PAGE_FIGURES`] that `dir` holds, the contact ones only when `contact`.
