@@ -89,11 +89,7 @@ impl Options {
             lambda_c_mm: c.lambda_c_mm.unwrap_or(0.8),
             apply_lambda_c: kind != ProfileKind::R && c.filter != Some(FilterKind::None),
             // An exported R profile has had λs applied by the instrument already.
-            lambda_s_um: if kind == ProfileKind::R {
-                None
-            } else {
-                c.lambda_s_um
-            },
+            lambda_s_um: c.lambda_s_um.filter(|_| kind != ProfileKind::R),
             // The SJ series reports N = 0 for an arbitrary evaluation length: its
             // parameters are then taken over the whole length as one section.
             sampling_lengths: c.sampling_lengths.map(|n| n.max(1)),
@@ -527,10 +523,7 @@ pub fn analyze_line(
     }
     let (r_all, lambda_c) = filtered_profile(heights_um, pitch_mm, options)?;
     // Form-only: P parameters, the whole length one section unless N is given.
-    let sampling_lengths = match (options.form, options.sampling_lengths) {
-        (Some(_), None) => Some(1),
-        (_, n) => n,
-    };
+    let sampling_lengths = options.sampling_lengths.or(options.form.map(|_| 1));
     let n_all = heights_um.len();
     let plan = plan_sections(
         n_all,
@@ -601,11 +594,7 @@ fn line_recipe(
             (None, true) => "ISO 16610-21 Gaussian, kernel truncated at ±λc".to_string(),
             (None, false) => "none (input is an R profile)".to_string(),
         },
-        end_treatment: if filtered {
-            END_TREATMENT.to_string()
-        } else {
-            "none".to_string()
-        },
+        end_treatment: if filtered { END_TREATMENT } else { "none" }.to_string(),
         lambda_c_mm: options.lambda_c_mm,
         lambda_s_um: options.lambda_s_um,
         sampling_lengths: plan.n_sec as u32,
@@ -646,7 +635,6 @@ struct Acc {
     rz: f64,
     rz1max: f64,
     rzjis: Option<f64>,
-    rzjis_missing: bool,
     /// Peaks and valleys of the last section when it had too few for RzJIS.
     ten_point_short: Option<(usize, usize)>,
     /// The first section with too few peaks or valleys for RzJIS: (index, peaks, valleys).
@@ -756,16 +744,13 @@ impl Acc {
             self.rdq += (sl.iter().map(|s| s * s).sum::<f64>() / sl.len() as f64).sqrt();
             self.rda += sl.iter().map(|s| s.abs()).sum::<f64>() / sl.len() as f64;
         }
-        self.ten_point_short = None;
-        match ten_point(z) {
-            Ok(v) if !self.rzjis_missing => self.rzjis = Some(self.rzjis.unwrap_or(0.0) + v),
-            Ok(_) => {}
-            Err(counts) => {
-                self.ten_point_short = Some(counts);
-                self.rzjis_missing = true;
-                self.rzjis = None;
-            }
-        }
+        // RzJIS is blank once a section has too few peaks or valleys.
+        let rzjis = ten_point(z);
+        self.ten_point_short = rzjis.err();
+        self.rzjis = match rzjis {
+            Ok(v) if self.rzjis_short_section.is_none() => Some(self.rzjis.unwrap_or(0.0) + v),
+            _ => None,
+        };
         let elements = profile_elements(z, pitch_um, 0.1 * (rp + rv), 0.01 * lr_um);
         if !elements.is_empty() {
             let n = elements.len() as f64;
@@ -791,11 +776,7 @@ fn ten_point(z: &[f64]) -> Result<f64, (usize, usize)> {
         cur = match cur {
             Some((a, ext)) if a == above => Some((a, if above { ext.max(v) } else { ext.min(v) })),
             Some((a, ext)) => {
-                if a {
-                    peaks.push(ext);
-                } else {
-                    valleys.push(ext);
-                }
+                if a { &mut peaks } else { &mut valleys }.push(ext);
                 Some((above, v))
             }
             None => Some((above, v)),
@@ -844,14 +825,11 @@ fn profile_elements(z: &[f64], pitch_um: f64, h: f64, min_width_um: f64) -> Vec<
     let mut bounds: Vec<f64> = Vec::new();
     let mut last_up: Option<f64> = None;
     let mut seen_valley = false;
-    for i in 1..z.len() {
-        let (a, b) = match (z.get(i - 1), z.get(i)) {
-            (Some(a), Some(b)) => (*a, *b),
-            _ => continue,
-        };
+    for (i, pair) in z.windows(2).enumerate() {
+        let (a, b) = (pair[0], pair[1]);
         if a <= 0.0 && b > 0.0 {
             let t = a / (a - b);
-            last_up = Some((i as f64 - 1.0 + t) * pitch_um);
+            last_up = Some((i as f64 + t) * pitch_um);
         }
         if b <= -h {
             seen_valley = true;
