@@ -4,7 +4,9 @@
 //! the station locked (exit 69 naming the process that holds it) and leftovers of
 //! interrupted writes swept, the control socket bound, then `READY=1` — devices may appear later and are reported in
 //! `STATUS=`. An unfinished scan in `output.dir` is resumed at once (one the file system
-//! refused to reopen is tried again with the reconnection backoff); otherwise the daemon
+//! refused to reopen is tried again with the reconnection backoff; one failed for its transient
+//! budget is continued once its devices answer, a continuation the file system refused
+//! tried again so, with the same backoff); otherwise the daemon
 //! waits for `surfscan start`, and never starts a scan by itself. Every status change is
 //! sent as `STATUS=`; `WATCHDOG=1` comes from the scan loop itself (also while it reopens a
 //! scan or writes its outputs, beside that work) and the idle loop.
@@ -315,6 +317,7 @@ async fn daemon(
                 &settings,
                 &settings,
                 req,
+                None,
             )
             .await;
         }
@@ -350,7 +353,7 @@ async fn daemon(
                     });
                     let outcome = run_scan(&mut station, &mut ctl, &job_settings, request).await;
                     stop = outcome.end == End::Shutdown;
-                    awaiting = Awaiting::after(&outcome, &job_settings);
+                    awaiting = Awaiting::after(&outcome, &job_settings, None);
                     tokio::task::block_in_place(|| jobs.settle(job, &outcome, &settings));
                     note_damaged_journals(config, &ctl.status);
                     continue;
@@ -367,6 +370,7 @@ async fn daemon(
                         &settings,
                         &settings,
                         request,
+                        None,
                     )
                     .await;
                     continue;
@@ -437,7 +441,7 @@ async fn daemon(
                                 continue;
                             }
                         };
-                        (stop, awaiting) = unqueued(&mut station, &mut ctl, &mut jobs, config, &start.settings, &settings, request).await;
+                        (stop, awaiting) = unqueued(&mut station, &mut ctl, &mut jobs, config, &start.settings, &settings, request, None).await;
                     }
                     OperatorCommand::Pause | OperatorCommand::Resume | OperatorCommand::Abort => {
                         let _ = req.reply.send(Err(
@@ -467,7 +471,9 @@ async fn daemon(
                                 s.reason = None;
                             });
                             let req = ScanRequest::Continue { dir, peer: None };
-                            (stop, awaiting) = unqueued(&mut station, &mut ctl, &mut jobs, config, &settings, &settings, req).await;
+                            // Awaited again when the file system refuses it.
+                            let awaited = awaiting.take();
+                            (stop, awaiting) = unqueued(&mut station, &mut ctl, &mut jobs, config, &settings, &settings, req, awaited).await;
                         }
                         Err(fault) => {
                             let reason = a.not_yet(&fault, &settings);
@@ -502,7 +508,9 @@ async fn daemon(
 /// an operator's start), with `settings`; a job's scan among them settles its job, and a
 /// refused reopening is remembered ([`Jobs::settle_if_a_job`], with the station's settings
 /// `base`). Whether the daemon stops (a shutdown ended the scan), and the continuation it
-/// then awaits.
+/// then awaits (`awaited`, the one `request` carries out, again when the file system refused
+/// it: [`Awaiting::after`]).
+#[allow(clippy::too_many_arguments)]
 async fn unqueued(
     station: &mut SerialStation,
     ctl: &mut Control,
@@ -511,9 +519,10 @@ async fn unqueued(
     settings: &RunSettings,
     base: &RunSettings,
     request: ScanRequest,
+    awaited: Option<Awaiting>,
 ) -> (bool, Option<Awaiting>) {
     let outcome = run_scan(station, ctl, settings, request).await;
-    let awaiting = Awaiting::after(&outcome, settings);
+    let awaiting = Awaiting::after(&outcome, settings, awaited);
     tokio::task::block_in_place(|| jobs.settle_if_a_job(&outcome, base));
     note_damaged_journals(config, &ctl.status);
     (outcome.end == End::Shutdown, awaiting)
@@ -521,7 +530,9 @@ async fn unqueued(
 
 /// A scan that failed for its transient budget (a device kept answering wrongly), which the
 /// daemon continues by itself once both devices answer properly again; they are asked with
-/// the scan's backoff.
+/// the scan's backoff. A continuation the file system refused is awaited again, the wait
+/// going on doubling.
+#[derive(Debug)]
 struct Awaiting {
     dir: PathBuf,
     next: tokio::time::Instant,
@@ -542,20 +553,42 @@ impl Awaiting {
         }
     }
 
-    /// What to wait for after a scan ended: its continuation when it failed for its budget.
-    fn after(outcome: &Outcome, settings: &RunSettings) -> Option<Awaiting> {
+    /// What to wait for after a scan ended: its continuation when it failed for its budget;
+    /// the continuation `awaited` (the one that ran) again, after the backoff's next step,
+    /// when the file system refused it, which can clear by itself (the scan's stop record
+    /// stays, so nothing else tries it before the next start).
+    fn after(
+        outcome: &Outcome,
+        settings: &RunSettings,
+        awaited: Option<Awaiting>,
+    ) -> Option<Awaiting> {
         match (&outcome.end, &outcome.dir) {
             (End::Fail(r), Some(dir)) if r.cause() == FailCause::Budget => {
                 Some(Awaiting::new(dir.clone(), settings))
+            }
+            (End::Fail(r), Some(dir)) if r.refused_by_the_file_system() => {
+                let mut a = awaited.filter(|a| a.dir == *dir)?;
+                a.later(settings);
+                tracing::info!(
+                    "the file system refused continuing the scan {}; it is continued once it allows it and the devices answer, tried again in {} s",
+                    dir.display(),
+                    a.wait.as_secs()
+                );
+                Some(a)
             }
             _ => None,
         }
     }
 
-    /// The devices did not answer yet: the next try after a longer wait; the status's reason.
-    fn not_yet(&mut self, fault: &Fault, settings: &RunSettings) -> String {
+    /// The next try after the backoff's next step.
+    fn later(&mut self, settings: &RunSettings) {
         self.wait = settings.backoff.next(self.wait);
         self.next = tokio::time::Instant::now() + self.wait;
+    }
+
+    /// The devices did not answer yet: the next try after a longer wait; the status's reason.
+    fn not_yet(&mut self, fault: &Fault, settings: &RunSettings) -> String {
+        self.later(settings);
         tracing::debug!("devices not answering yet: {fault}");
         format!(
             "the scan {} failed for its transient budget and is continued once the devices answer again; last try: {fault}",
@@ -680,4 +713,61 @@ fn damaged_journal_warnings(config: &Config) -> Vec<String> {
         tracing::warn!("{w}");
     }
     warnings
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Awaiting;
+    use crate::jobs::service::tests::station;
+    use crate::scan::ending::{End, FailKind, FailReason};
+    use crate::scan::outcome::Outcome;
+    use crate::scan::policy::Backoff;
+    use crate::scan::testhooks::TestHooks;
+    use std::time::Duration;
+
+    /// A budget-failed scan's continuation that the file system refused (a full or read-only
+    /// disk) is awaited again, after the backoff's next step, as a refused reopening is tried
+    /// again. Before, the daemon stopped waiting on it, and the retry of refused reopenings
+    /// skipped it for its stop record: it was continued only at the daemon's next start.
+    /// A refusal with nothing awaited, or of another scan, awaits nothing.
+    #[test]
+    fn a_continuation_the_file_system_refused_is_awaited_again_with_backoff() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let mut settings = super::super::station::run_settings(
+            &station(tmp.path()),
+            "ab".repeat(32),
+            TestHooks::default(),
+        )
+        .expect("settings");
+        settings.backoff = Backoff {
+            initial: Duration::from_secs(2),
+            max: Duration::from_secs(60),
+        };
+        let dir = settings.output_dir.join("20261207-2200-C-1");
+        let refused = |dir: &std::path::Path| Outcome {
+            end: End::Fail(FailReason::Refused {
+                message: "the file system refused reading its lines back (EIO: …); …".into(),
+                kind: FailKind::Io,
+            }),
+            dir: Some(dir.to_path_buf()),
+            outputs: None,
+        };
+
+        let awaited = Awaiting::new(dir.clone(), &settings);
+        assert_eq!(awaited.wait, Duration::from_secs(2));
+        let before = tokio::time::Instant::now();
+        let again = Awaiting::after(&refused(&dir), &settings, Some(awaited))
+            .expect("the refused continuation is no longer awaited");
+        assert_eq!(again.dir, dir);
+        // 2 s, doubled.
+        assert_eq!(again.wait, Duration::from_secs(4));
+        assert!(again.next >= before + Duration::from_secs(4));
+        // Refused again: 8 s.
+        let again = Awaiting::after(&refused(&dir), &settings, Some(again)).expect("awaited");
+        assert_eq!(again.wait, Duration::from_secs(8));
+
+        assert!(Awaiting::after(&refused(&dir), &settings, None).is_none());
+        let other = Awaiting::new(dir.with_file_name("20261207-2300-C-2"), &settings);
+        assert!(Awaiting::after(&refused(&dir), &settings, Some(other)).is_none());
+    }
 }

@@ -336,7 +336,7 @@ impl Jobs {
             }
             // The file system refused reopening its scan, which can clear by itself: the scan
             // is left as it is and the job running; its turn tries it again with backoff.
-            (End::Fail(r @ FailReason::Refused { .. }), Some(scan)) if r.kind() == FailKind::Io => {
+            (End::Fail(r), Some(scan)) if r.refused_by_the_file_system() => {
                 self.back_off(base, |s| {
                     format!("job {id} waits: its scan {scan} could not be reopened: {r}; tried again in {s} s")
                 });
@@ -435,7 +435,7 @@ impl Jobs {
             return self.settle(id, outcome, base);
         }
         self.refused_scan = match (&outcome.end, &outcome.dir) {
-            (End::Fail(r @ FailReason::Refused { .. }), Some(dir)) if r.kind() == FailKind::Io => {
+            (End::Fail(r), Some(dir)) if r.refused_by_the_file_system() => {
                 let waited = before
                     .filter(|b| b.dir == *dir)
                     .map_or(Duration::ZERO, |b| b.delay);

@@ -140,6 +140,18 @@ impl FailReason {
         self.kind() == FailKind::Internal
     }
 
+    /// True when the file system refused reopening the scan, or recording its ending: the
+    /// scan is left as it is, to be reopened again, since the cause can clear by itself.
+    pub fn refused_by_the_file_system(&self) -> bool {
+        matches!(
+            self,
+            FailReason::Refused {
+                kind: FailKind::Io,
+                ..
+            }
+        )
+    }
+
     /// The exit-code class of the failure.
     pub fn kind(&self) -> FailKind {
         match self {
