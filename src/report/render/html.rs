@@ -84,16 +84,6 @@ impl Figure {
         let data = base64::engine::general_purpose::STANDARD.encode(&self.bytes);
         format!("data:{};base64,{data}", self.media_type)
     }
-
-    /// A figure shown as a link to its file `href` (relative to the report), not embedded.
-    pub fn linked(title: impl Into<String>, href: impl Into<String>, collapsed: bool) -> Figure {
-        Figure {
-            title: title.into(),
-            collapsed,
-            link: Some(href.into()),
-            ..Figure::default()
-        }
-    }
 }
 
 /// Text escaped for HTML and XML element content and attribute values (`report.html`, the

@@ -501,7 +501,12 @@ fn per_line_figures(
                 .map(|c| c.as_os_str().to_string_lossy().into_owned())
                 .collect::<Vec<_>>()
                 .join("/");
-            Some(html::Figure::linked(title.clone(), href, true))
+            Some(html::Figure {
+                title: title.clone(),
+                collapsed: true,
+                link: Some(href),
+                ..html::Figure::default()
+            })
         })
         .collect()
 }
