@@ -497,28 +497,21 @@ where
         let (a, b) = view.px(x, y, z);
         (a.round() as i32, b.round() as i32)
     };
-    let line = |a: (i32, i32), b: (i32, i32)| PathElement::new(vec![a, b], BLACK.stroke_width(1));
-    let axes = [
-        (p(0.0, 0.0, lo), p(w_mm, 0.0, lo)),
-        (p(0.0, 0.0, lo), p(0.0, h_mm, lo)),
-        (p(0.0, 0.0, lo), p(0.0, 0.0, hi)),
-    ];
-    for (a, b) in axes {
-        root.draw(&line(a, b)).map_err(err)?;
+    let o = p(0.0, 0.0, lo);
+    let (x_end, y_end, z_top) = (p(w_mm, 0.0, lo), p(0.0, h_mm, lo), p(0.0, 0.0, hi));
+    for end in [x_end, y_end, z_top] {
+        let axis = PathElement::new(vec![o, end], BLACK.stroke_width(1));
+        root.draw(&axis).map_err(err)?;
     }
     let label = |text: String, at: (i32, i32)| -> Result<(), String> {
         root.draw_text(&text, &font(13), at).map_err(err)
     };
-    let (x_end, y_end, z_top) = (p(w_mm, 0.0, lo), p(0.0, h_mm, lo), p(0.0, 0.0, hi));
     let (x_end_mm, y_end_mm) = (tick(x0_mm + w_mm), tick(y0_mm + h_mm));
     label(format!("x {x_end_mm} mm"), (x_end.0 - 40, x_end.1 + 8))?;
     label(format!("y {y_end_mm} mm"), (y_end.0 + 6, y_end.1 - 20))?;
     label(format!("z {} µm", tick(hi)), (z_top.0 - 48, z_top.1 - 18))?;
     let corner = format!("{}, {}, {} µm", tick(x0_mm), tick(y0_mm), tick(lo));
-    label(corner, {
-        let o = p(0.0, 0.0, lo);
-        (o.0 - 30, o.1 + 6)
-    })?;
+    label(corner, (o.0 - 30, o.1 + 6))?;
     let (w, h) = root.dim_in_pixel();
     let (_, bar) = root.split_horizontally(w.saturating_sub(MAP_BAR_W));
     let top = frame.top_px();
@@ -583,10 +576,9 @@ pub fn plot_surface_view(
     grid.check_size(2)?;
     let (view, frame) = view_and_frame(grid, title, caption);
     let pixels = std::cell::OnceCell::new();
-    let files: Result<[PathBuf; 2], MetrologyError> = (|| {
+    let files: Result<[PathBuf; 2], MetrologyError> =
         png_and_svg!(dir, "surface3d", VIEW_SIZE, |root| draw_view(
             &root, grid, origin_mm, &view, &frame, &pixels
-        ))
-    })();
+        ));
     Ok((files?, view))
 }
