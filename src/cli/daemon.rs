@@ -53,7 +53,7 @@ use crate::scan::testhooks::TestHooks;
 use crate::service::Notifier;
 use crate::stage::ScanDirection;
 use crate::station_lock::StationLock;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
@@ -148,7 +148,7 @@ async fn daemon(
     // and so are the devices: a scan reopened at once (paused, or straight into its outputs)
     // would otherwise show them absent until the idle loop first looks.
     let (status_tx, status_rx) = watch::channel(Status {
-        damaged_journals: damaged_journal_warnings(config),
+        damaged_journals: damaged_journal_warnings(&config.output.dir),
         instrument: presence(station.instrument_present()),
         stage: presence(station.stage_present()),
         ..Status::idle()
@@ -313,7 +313,6 @@ async fn daemon(
                 &mut station,
                 &mut ctl,
                 &mut jobs,
-                config,
                 &settings,
                 &settings,
                 req,
@@ -355,7 +354,7 @@ async fn daemon(
                     stop = outcome.end == End::Shutdown;
                     awaiting = Awaiting::after(&outcome, &job_settings, None);
                     tokio::task::block_in_place(|| jobs.settle(job, &outcome, &settings));
-                    note_damaged_journals(config, &ctl.status);
+                    note_damaged_journals(&config.output.dir, &ctl.status);
                     continue;
                 }
                 // A scan the file system refused to reopen, tried again with backoff.
@@ -366,7 +365,6 @@ async fn daemon(
                         &mut station,
                         &mut ctl,
                         &mut jobs,
-                        config,
                         &settings,
                         &settings,
                         request,
@@ -437,11 +435,11 @@ async fn daemon(
                                 tracing::error!("{e}");
                                 let ended = ended_status(&ctl.status.borrow(), StopStatus::Fail, &e.to_string());
                                 ctl.status.send_replace(ended);
-                                note_damaged_journals(config, &ctl.status);
+                                note_damaged_journals(&config.output.dir, &ctl.status);
                                 continue;
                             }
                         };
-                        (stop, awaiting) = unqueued(&mut station, &mut ctl, &mut jobs, config, &start.settings, &settings, request, None).await;
+                        (stop, awaiting) = unqueued(&mut station, &mut ctl, &mut jobs, &start.settings, &settings, request, None).await;
                     }
                     OperatorCommand::Pause | OperatorCommand::Resume | OperatorCommand::Abort => {
                         let _ = req.reply.send(Err(
@@ -473,7 +471,7 @@ async fn daemon(
                             let req = ScanRequest::Continue { dir, peer: None };
                             // Awaited again when the file system refuses it.
                             let awaited = awaiting.take();
-                            (stop, awaiting) = unqueued(&mut station, &mut ctl, &mut jobs, config, &settings, &settings, req, awaited).await;
+                            (stop, awaiting) = unqueued(&mut station, &mut ctl, &mut jobs, &settings, &settings, req, awaited).await;
                         }
                         Err(fault) => {
                             let reason = a.not_yet(&fault, &settings);
@@ -510,12 +508,10 @@ async fn daemon(
 /// `base`). Whether the daemon stops (a shutdown ended the scan), and the continuation it
 /// then awaits (`awaited`, the one `request` carries out, again when the file system refused
 /// it: [`Awaiting::after`]).
-#[allow(clippy::too_many_arguments)]
 async fn unqueued(
     station: &mut SerialStation,
     ctl: &mut Control,
     jobs: &mut Jobs,
-    config: &Config,
     settings: &RunSettings,
     base: &RunSettings,
     request: ScanRequest,
@@ -524,7 +520,7 @@ async fn unqueued(
     let outcome = run_scan(station, ctl, settings, request).await;
     let awaiting = Awaiting::after(&outcome, settings, awaited);
     tokio::task::block_in_place(|| jobs.settle_if_a_job(&outcome, base));
-    note_damaged_journals(config, &ctl.status);
+    note_damaged_journals(&base.output_dir, &ctl.status);
     (outcome.end == End::Shutdown, awaiting)
 }
 
@@ -695,8 +691,8 @@ fn waiting(status: &watch::Sender<Status>, why: Option<String>) {
 
 /// Shows in the status the scans skipped because their journal is damaged (the snapshot a
 /// scan's end publishes starts afresh, so this is noted again after each scan).
-fn note_damaged_journals(config: &Config, status: &watch::Sender<Status>) {
-    let warnings = damaged_journal_warnings(config);
+fn note_damaged_journals(output_dir: &Path, status: &watch::Sender<Status>) {
+    let warnings = damaged_journal_warnings(output_dir);
     status.send_if_modified(|s| {
         let changed = s.damaged_journals != warnings;
         s.damaged_journals = warnings;
@@ -705,8 +701,8 @@ fn note_damaged_journals(config: &Config, status: &watch::Sender<Status>) {
 }
 
 /// One warning per scan of the output directory whose journal is damaged (also logged).
-fn damaged_journal_warnings(config: &Config) -> Vec<String> {
-    let warnings = crate::scan::journal::survey(&config.output.dir)
+fn damaged_journal_warnings(output_dir: &Path) -> Vec<String> {
+    let warnings = crate::scan::journal::survey(output_dir)
         .map(|s| s.warnings())
         .unwrap_or_default();
     for w in &warnings {
