@@ -519,13 +519,8 @@ mod tests {
                 0.5 * (s[n / 2 - 1] + s[n / 2])
             }
         };
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut s = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || (crate::metrology::lcg(&mut s) * (1u64 << 53) as f64) as u64;
         for n in (1..40).chain([999, 1000, 8000, 8001]) {
             for round in 0..20 {
                 let v: Vec<f64> = (0..n)
@@ -536,7 +531,7 @@ mod tests {
                             0 => (r % 5) as f64 - 2.0,
                             // Both zeros among the ties.
                             1 => [0.0, -0.0, 1.0, -1.0][(r % 4) as usize],
-                            _ => (r >> 11) as f64 / (1u64 << 53) as f64 * 20.0 - 10.0,
+                            _ => r as f64 / (1u64 << 53) as f64 * 20.0 - 10.0,
                         }
                     })
                     .collect();
