@@ -890,11 +890,7 @@ fn comparisons(lines: &[Value]) -> Vec<Comparison> {
         for c in l["instrument"].as_array().into_iter().flatten() {
             let unit = c["unit"].as_str().unwrap_or("");
             let (q, u, _) = quantity(unit);
-            let (inst, ours, diff) = (
-                c["instrument"].as_f64(),
-                c["ours"].as_f64(),
-                c["difference"].as_f64(),
-            );
+            let [inst, ours, diff] = ["instrument", "ours", "difference"].map(|k| c[k].as_f64());
             let tol = inst.map(|i| tolerance(i, unit));
             let name = text(&c["name"]).trim().to_string();
             let name = match c["compared_with"].as_str() {
@@ -1085,10 +1081,7 @@ fn contact(h: &mut String, report: &Value) {
     let plain: fn(f64) -> String = |v| v.to_string();
     let sig4: fn(f64) -> String = |v| sig(v, 4);
     let body = |b: &Value| {
-        let (e, nu) = (
-            or_dash(&b["young_gpa"], plain),
-            or_dash(&b["poisson"], plain),
-        );
+        let [e, nu] = ["young_gpa", "poisson"].map(|k| or_dash(&b[k], plain));
         format!("E {e} GPa, ν {nu}")
     };
     let counter = match &c["counter_body"] {

@@ -703,10 +703,7 @@ mod tests {
         let size = budget / 3 + 1;
         let mut plots = Vec::new();
         for k in 0..5 {
-            let (png, svg) = (
-                rk.join(format!("{k:04}.png")),
-                rk.join(format!("{k:04}.svg")),
-            );
+            let [png, svg] = ["png", "svg"].map(|ext| rk.join(format!("{k:04}.{ext}")));
             if k != 1 {
                 std::fs::write(&png, vec![1u8; size]).unwrap();
                 std::fs::write(&svg, vec![b'<'; size + 10]).unwrap();
