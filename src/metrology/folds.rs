@@ -336,6 +336,21 @@ pub fn iso_curve_sample_count(surface: &NurbsSurface, options: &FoldOptions) -> 
     (options.samples_per_pole.max(1) * surface.count_u()).max(2)
 }
 
+/// The v of the iso-curves along u: each line's, and `between` equally spaced inside each
+/// interval between consecutive lines (0 and 1 without lines).
+fn iso_vs_along_u(line_vs: &[f64], between: usize) -> Vec<f64> {
+    if line_vs.is_empty() {
+        return vec![0.0, 1.0];
+    }
+    let mut vs = Vec::new();
+    for w in line_vs.windows(2) {
+        vs.push(w[0]);
+        vs.extend((1..=between).map(|b| w[0] + (w[1] - w[0]) * b as f64 / (between + 1) as f64));
+    }
+    vs.extend(line_vs.last());
+    vs
+}
+
 /// Checks the control net, the sampled iso-curves and the height range of `surface` fitted to
 /// data lines at parameters `line_vs` (increasing), against the measured `heights_um`.
 pub fn check_model(
@@ -365,18 +380,7 @@ pub fn check_model_with(
     let net = net_folds(surface);
 
     // Iso-curves along u at and between the lines; they also give the height range.
-    let mut vs: Vec<f64> = Vec::new();
-    for (k, &v) in line_vs.iter().enumerate() {
-        vs.push(v);
-        if let Some(&next) = line_vs.get(k + 1) {
-            for b in 1..=options.between {
-                vs.push(v + (next - v) * b as f64 / (options.between + 1) as f64);
-            }
-        }
-    }
-    if vs.is_empty() {
-        vs = vec![0.0, 1.0];
-    }
+    let vs = iso_vs_along_u(line_vs, options.between);
     let n_u = iso_curve_sample_count(surface, options);
     let us = equally_spaced(n_u);
     let mut range = (f64::INFINITY, [0.0; 2], f64::NEG_INFINITY, [0.0; 2]);
@@ -437,8 +441,7 @@ pub fn check_model_with(
         if let Some(run) = run {
             fold_u.0 += 1;
             if fold_u.1.is_none_or(|(_, _, w)| run.2 > w.2) {
-                let y0 = if xs.is_empty() { f64::NAN } else { y_at(0) };
-                fold_u.1 = Some((v, y0, run));
+                fold_u.1 = Some((v, y_at(0), run));
             }
         }
     }
@@ -689,15 +692,7 @@ mod tests {
             let s = &fit.surface;
             let options = FoldOptions::default();
             let c = check_model(s, &fit.params_v, &z, &options);
-            let mut vs = Vec::new();
-            for (k, &v) in fit.params_v.iter().enumerate() {
-                vs.push(v);
-                if let Some(&next) = fit.params_v.get(k + 1) {
-                    for b in 1..=options.between {
-                        vs.push(v + (next - v) * b as f64 / (options.between + 1) as f64);
-                    }
-                }
-            }
+            let vs = iso_vs_along_u(&fit.params_v, options.between);
             let n_u = options.samples_per_pole * s.count_u();
             let ((count, worst), range) = u_checks_by_evaluate_grid(s, &vs, n_u);
             let h = &c.height_range;
