@@ -336,14 +336,11 @@ fn check_args(args: &Args) -> Result<(), CliError> {
 /// of one line) with the options the flags and the scan's frozen plan make.
 pub fn run(args: Args) -> Result<(), CliError> {
     check_args(&args)?;
-    let station = match &args.config {
-        Some(path) => Some(super::station::load_config(path)?.0),
-        None => None,
-    };
-    let recipe = match &args.recipe {
-        Some(r) => Some(recipe_of(r, station.as_ref())?),
-        None => None,
-    };
+    let station = args.config.as_deref().map(super::station::load_config);
+    let station = station.transpose()?.map(|(config, _)| config);
+    let recipe = (args.recipe.as_deref())
+        .map(|r| recipe_of(r, station.as_ref()))
+        .transpose()?;
     let judged = recipe.is_some();
     let input = args.read.read(&args.input)?;
     if input.is_profile() && judged {
@@ -436,10 +433,9 @@ fn analysis_options(
         _ => None,
     };
     let frozen = journal.and_then(|s| s.start.plan.analysis.as_ref());
-    let base = match frozen {
-        Some(a) => ScanAnalysisOptions::default().with_frozen(a),
-        None => ScanAnalysisOptions::default(),
-    };
+    let base = frozen.map_or_else(ScanAnalysisOptions::default, |a| {
+        ScanAnalysisOptions::default().with_frozen(a)
+    });
     let scan = matches!(input.source, Source::Scan(_));
     let paper_q = crate::fit::FitOptions::default().degree_v;
     Ok(ScanAnalysisOptions {
