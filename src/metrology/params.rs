@@ -782,18 +782,16 @@ fn ten_point(z: &[f64]) -> Result<f64, (usize, usize)> {
             None => Some((above, v)),
         };
     }
-    // The portions cut by the section ends are incomplete and do not count.
-    if peaks.len() + valleys.len() > 0 {
-        // the first portion was pushed when the second began: drop it as incomplete.
-        let first_above = z.iter().find(|v| **v != 0.0).map(|v| *v > 0.0);
-        match first_above {
-            Some(true) if !peaks.is_empty() => {
-                peaks.remove(0);
-            }
-            Some(false) if !valleys.is_empty() => {
-                valleys.remove(0);
-            }
-            _ => {}
+    // The portions cut by the section ends are incomplete and do not count: the first was
+    // pushed when the second began (the last is still `cur`).
+    if let Some(&first) = z.iter().find(|v| **v != 0.0) {
+        let list = if first > 0.0 {
+            &mut peaks
+        } else {
+            &mut valleys
+        };
+        if !list.is_empty() {
+            list.remove(0);
         }
     }
     if peaks.len() < 5 || valleys.len() < 5 {
@@ -925,8 +923,7 @@ fn mr_at(sorted_desc: &[f64], c: f64) -> f64 {
         return 100.0;
     }
     // First index with value < c (values are non-increasing).
-    let k = sorted_desc.partition_point(|v| *v >= c);
-    let k = k.max(1);
+    let k = sorted_desc.partition_point(|v| *v >= c).max(1);
     let hi = sorted_desc.get(k - 1).copied().unwrap_or(first);
     let lo = sorted_desc.get(k).copied().unwrap_or(last);
     let t = if hi > lo { (hi - c) / (hi - lo) } else { 0.0 };
@@ -992,11 +989,7 @@ pub(super) fn rk_of_sorted(s: &[f64]) -> RkFamily {
     for a in 0..=(STEPS - win) {
         let drop = h.get(a).copied().unwrap_or(0.0) - h.get(a + win).copied().unwrap_or(0.0);
         // Strictly smaller beyond rounding: the first secant wins a tie.
-        let better = match best {
-            None => true,
-            Some((b, _)) => drop < b - 1e-12 * b.abs(),
-        };
-        if better {
+        if best.is_none_or(|(b, _)| drop < b - 1e-12 * b.abs()) {
             best = Some((drop, a));
         }
     }
