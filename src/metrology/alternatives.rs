@@ -27,23 +27,15 @@ pub struct Alternative {
 /// The candidates for `lines` lines at `options` (deduplicated, the paper's first).
 pub fn candidates(lines: usize, options: FitOptions) -> Vec<(FitOptions, VMethod)> {
     let mut out = vec![(options, VMethod::Interpolate)];
-    let mut degrees_v = vec![options.degree_v];
-    if options.degree_v != 3 {
-        degrees_v.push(3);
-    }
-    for q in degrees_v {
+    // Degree 3 twice when it is the chosen one: its candidates are already in.
+    for q in [options.degree_v, 3] {
         let o = FitOptions::degrees(options.degree_u, q);
         for rows in [
             default_control_rows(lines, q),
             lines.div_ceil(2).max(q + 1),
             q + 1,
         ] {
-            let c = (
-                o,
-                VMethod::LeastSquares {
-                    control_rows: rows.min(lines),
-                },
-            );
+            let c = (o, VMethod::LeastSquares { control_rows: rows });
             if rows <= lines && !out.contains(&c) {
                 out.push(c);
             }

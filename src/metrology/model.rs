@@ -137,8 +137,7 @@ pub fn sample_model_grid(
     let mut out = Vec::with_capacity(vs.len().saturating_mul(cols));
     let mut poles = Vec::new();
     let x_curve = XOfU::new(surface);
-    let x_at = |u: f64| x_curve.at(u);
-    let us = invert_row(&x_at, x0_mm, pitch_x_mm, cols)?;
+    let us = invert_row(&|u| x_curve.at(u), x0_mm, pitch_x_mm, cols)?;
     let basis = UBasis::new(surface, &us);
     // Only z is kept; the two-lane sampler sums z (and x, unused) with the bits of
     // `UBasis::for_each_point`, without the y and padding lanes.
