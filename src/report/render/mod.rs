@@ -559,8 +559,10 @@ fn figure_file(dir: &Path, stem: &str, title: String, vector: bool) -> Option<ht
     html::Figure::from_files(title, &png, &svg, vector)
 }
 
-/// The figures of [`PAGE_FIGURES`] that `dir` holds, the contact ones only when `contact`.
-fn page_figures(dir: &Path, contact: bool, vector: bool) -> Vec<html::Figure> {
+/// The figures of [`PAGE_FIGURES`] that `dir` holds, the contact ones only when `report` (as
+/// report.json holds it) has the measured grid's contact.
+fn page_figures(dir: &Path, report: &serde_json::Value, vector: bool) -> Vec<html::Figure> {
+    let contact = !report["contact"]["measured"].is_null();
     PAGE_FIGURES
         .iter()
         .filter(|f| contact || !f.3)
@@ -598,8 +600,7 @@ pub fn report_pdf(
                 .ok()
         })
         .flatten();
-    let contact = !report["contact"]["measured"].is_null();
-    let open = page_figures(dir, contact, true);
+    let open = page_figures(dir, report, true);
     let lines = report["lines"].as_array().map_or(&[][..], Vec::as_slice);
     let mut printed = Vec::new();
     for (index, _) in print::printed_lines(report).0 {
@@ -662,12 +663,8 @@ pub fn write_report(
         let journal = (ctx.kind == "scan")
             .then(|| read_scan_journal(Path::new(&ctx.input)).ok())
             .flatten();
-        let contact = report
-            .contact
-            .as_ref()
-            .is_some_and(|c| c.measured.is_some());
-        let figures = page_figures(out, contact, false);
         let page = serde_json::to_value(report).map(|v| {
+            let figures = page_figures(out, &v, false);
             let printed: Vec<u32> = print::printed_lines(&v).0.iter().map(|p| p.0).collect();
             html::render(&v, journal.as_ref(), &figures, logo, |bare| {
                 let budget = per_line_budget(bare, files.rk_plots.len());
