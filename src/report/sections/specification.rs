@@ -116,13 +116,8 @@ pub fn characterise(
                 flagged: !l.readout_warnings.is_empty(),
             })
             .collect();
-        let mut v = judge(
-            s,
-            &values,
-            planned_lines,
-            band_of(recipe).as_ref(),
-            instrument,
-        );
+        let band = band_of(recipe);
+        let mut v = judge(s, &values, planned_lines, band.as_ref(), instrument);
         v.material_ratio = Some(reading.statement());
         let on_material_ratio = s.limits.iter().any(|c| {
             use crate::specification::Parameter::{Rk, Rpk, Rvk};
