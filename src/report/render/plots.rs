@@ -825,10 +825,11 @@ fn draw_map<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let (px, py) = (grid.pitch_x_mm, grid.pitch_y_mm);
     let (lo, hi) = min_max(grid.heights_um);
-    let w = grid.cols as f64 * px;
-    let h = grid.rows as f64 * py;
+    let (w, h) = (
+        grid.cols as f64 * grid.pitch_x_mm,
+        grid.rows as f64 * grid.pitch_y_mm,
+    );
     let body = frame.draw(root)?;
     let chart_w = scale.plot_w + MAP_Y_AREA + 2 * MAP_MARGIN;
     let (chart_area, rest) = body.split_horizontally(chart_w);
@@ -902,16 +903,12 @@ pub fn plot_map(
     caption: &str,
 ) -> Result<[PathBuf; 2], MetrologyError> {
     grid.check_size(1)?;
-    let (rows, cols) = (grid.rows, grid.cols);
-    let (pitch_x_mm, pitch_y_mm) = (grid.pitch_x_mm, grid.pitch_y_mm);
-    let max_w = MAP_WIDTH - MAP_BAR_W - MAP_Y_AREA - 2 * MAP_MARGIN;
-    let scale = map_scale(
-        cols as f64 * pitch_x_mm,
-        rows as f64 * pitch_y_mm,
-        max_w,
-        520,
-        160,
+    let (w_mm, h_mm) = (
+        grid.cols as f64 * grid.pitch_x_mm,
+        grid.rows as f64 * grid.pitch_y_mm,
     );
+    let max_w = MAP_WIDTH - MAP_BAR_W - MAP_Y_AREA - 2 * MAP_MARGIN;
+    let scale = map_scale(w_mm, h_mm, max_w, 520, 160);
     let title = if map_is_averaged(grid, (scale.plot_w, scale.plot_h)) {
         format!("{title} (each pixel the mean of the points under it)")
     } else {
