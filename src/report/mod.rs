@@ -114,7 +114,6 @@ pub fn characterise(
         || timed(|| render::write_measured(out, grid, &ctx)),
     )?;
     let (model_x3p, x3p_s) = model_x3p.unzip();
-    let mut timings = sections.timings.clone();
     let (mut report, figures) = document::assemble(sections, grid, &model, &ctx);
     let logo = render::read_logo(&report.lab, &mut report.warnings);
     let t = Instant::now();
@@ -125,14 +124,11 @@ pub fn characterise(
     };
     let written = render::write_data_files(out, grid, &report, &figures, early, &ctx)?;
     let before = rk_s + x3p_s.unwrap_or_default() + measured_s;
+    let timings = &mut report.timings_s;
     timings.write = (t.elapsed() + before).as_secs_f64();
     // The fit came before this call; it is part of the whole.
     timings.fit = model.fit_s;
     timings.total = t_all.elapsed().as_secs_f64() + model.fit_s;
-    let report = Report {
-        timings_s: timings,
-        ..report
-    };
     render::write_report(out, &written, &report, &ctx, logo.as_ref())?;
     Ok(ScanOutputs {
         files: written,
