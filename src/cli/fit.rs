@@ -164,14 +164,6 @@ fn write_step_solid(
 
 pub use crate::scan::surface_files::part_path;
 
-fn iges_write_error(e: SurfaceWriteError) -> CliError {
-    let exit = match e {
-        SurfaceWriteError::Format { .. } => Exit::Failed,
-        SurfaceWriteError::Io { .. } => Exit::Io,
-    };
-    CliError::new(exit, e.to_string())
-}
-
 fn io_err(what: &str, path: &Path, e: impl std::fmt::Display) -> CliError {
     CliError::new(Exit::Io, format!("{what} {}: {e}", path.display()))
 }
@@ -352,18 +344,6 @@ fn shape_checks(fit: &FitResult, fitted_heights_um: &[f64]) -> Option<ModelCheck
 fn fold_start_line(f: &IsoFold) -> String {
     let words = f.words("..", "um");
     format!("NOT A HEIGHT MAP: the surface folds, {words}.")
-}
-
-/// Names every spike replaced before fitting (only ever when asked for).
-fn report_replaced(replaced: &[LineSpike]) {
-    for r in replaced {
-        tell!(
-            "surfscan: replaced before fitting (asked for): spike in line {} at x = {} mm, height {} µm",
-            crate::numfmt::line_label(r.line),
-            crate::numfmt::fmt(r.spike.x_mm, crate::numfmt::Quantity::PositionMm),
-            crate::numfmt::fmt(r.spike.height_um, crate::numfmt::Quantity::HeightUm)
-        );
-    }
 }
 
 /// What a fit follows once the input is read: the arguments, the output, the recipe, and the
@@ -572,7 +552,15 @@ impl<'a> Fitting<'a> {
         let fitted = fit_surface(&self.args.input, grid, &self.recipe, &self.progress);
         self.progress.finish_and_clear();
         let (fit, replaced) = fitted?;
-        report_replaced(&replaced);
+        // Every spike replaced before fitting named (only ever when asked for).
+        for r in &replaced {
+            tell!(
+                "surfscan: replaced before fitting (asked for): spike in line {} at x = {} mm, height {} µm",
+                crate::numfmt::line_label(r.line),
+                crate::numfmt::fmt(r.spike.x_mm, crate::numfmt::Quantity::PositionMm),
+                crate::numfmt::fmt(r.spike.height_um, crate::numfmt::Quantity::HeightUm)
+            );
+        }
         let fit_s = t_fit.elapsed().as_secs_f64();
         let t_shape = Instant::now();
         let shape = shape_checks(&fit, &self.fitted(grid, &replaced).heights_um);
@@ -615,8 +603,13 @@ impl<'a> Fitting<'a> {
         );
         ensure_parent(&self.output)?;
         let t_write = Instant::now();
-        let written =
-            write_surface_files(&self.output, &fit.surface, &opts).map_err(iges_write_error)?;
+        let written = write_surface_files(&self.output, &fit.surface, &opts).map_err(|e| {
+            let exit = match e {
+                SurfaceWriteError::Format { .. } => Exit::Failed,
+                SurfaceWriteError::Io { .. } => Exit::Io,
+            };
+            CliError::new(exit, e.to_string())
+        })?;
         Ok((written, t_write.elapsed().as_secs_f64()))
     }
 
