@@ -211,10 +211,8 @@ pub fn run<D, M: Send, W>(
         }
         let surface_grid = surface_grid::section(&input);
         let anisotropy = surface_grid::anisotropy(&input);
-        if let Ok(a) = &anisotropy {
-            if a.slopes_untrustworthy() {
-                warnings.extend(a.caveats.last().cloned());
-            }
+        for a in anisotropy.iter().filter(|a| a.slopes_untrustworthy()) {
+            warnings.extend(a.caveats.last().cloned());
         }
         timings.surface_grid = t.elapsed().as_secs_f64();
 
