@@ -95,20 +95,15 @@ pub fn scan_line_options(
     let mut o = Options::from_profile(&line.profile);
     let recorded = line.profile.conditions.lambda_c_mm;
     let lambda_c_source = match (options.lambda_c_mm, recorded) {
-        (Some(lc), Some(r)) => {
-            o.lambda_c_mm = lc;
-            format!("given ({lc} mm, overriding the recorded {r} mm)")
-        }
-        (Some(lc), None) => {
-            o.lambda_c_mm = lc;
-            format!("given ({lc} mm; the instrument recorded none)")
-        }
+        (Some(lc), Some(r)) => format!("given ({lc} mm, overriding the recorded {r} mm)"),
+        (Some(lc), None) => format!("given ({lc} mm; the instrument recorded none)"),
         (None, Some(r)) => format!("the instrument's recorded conditions ({r} mm)"),
         (None, None) => format!(
             "default {} mm (the instrument recorded no λc; set --lc to choose)",
             o.lambda_c_mm
         ),
     };
+    o.lambda_c_mm = options.lambda_c_mm.unwrap_or(o.lambda_c_mm);
     let kind = line.meta.profile.kind;
     let unfiltered = if options.no_filter {
         Some("asked for (--no-filter)")
@@ -226,17 +221,15 @@ pub fn characterise_scan_lines(
             lines_in_journal: f.journal_lines.to_vec(),
         }
     });
-    if let Some(s) = &scan {
-        if s.status == Completeness::Partial {
-            warnings.push(format!(
-                "partial scan ({}): characterised with the {} lines it has",
-                match &s.stop {
-                    Some(st) => format!("stopped: {}, {}", st.status.as_str(), st.reason),
-                    None => "no stop record".to_string(),
-                },
-                lines_used.len()
-            ));
-        }
+    if let Some(s) = scan.as_ref().filter(|s| s.status == Completeness::Partial) {
+        warnings.push(format!(
+            "partial scan ({}): characterised with the {} lines it has",
+            match &s.stop {
+                Some(st) => format!("stopped: {}, {}", st.status.as_str(), st.reason),
+                None => "no stop record".to_string(),
+            },
+            lines_used.len()
+        ));
     }
     // A complete scan finished when its last line was read out (the runner writing its
     // outputs and `analyze` reading the directory afterwards give the same time); one that
