@@ -199,7 +199,6 @@ pub fn characterise_scan_lines(
             ));
         }
     }
-    let lines_used: Vec<u32> = grid.index.clone();
     let scan = facts.map(|f| {
         let lines_planned = f.start.plan.lines;
         let stopped_ok = match f.stop {
@@ -207,7 +206,7 @@ pub fn characterise_scan_lines(
             None => f.completing,
         };
         let complete =
-            stopped_ok && incomplete.is_empty() && lines_planned as usize == lines_used.len();
+            stopped_ok && incomplete.is_empty() && lines_planned as usize == grid.index.len();
         ScanStatus {
             status: if complete {
                 Completeness::Complete
@@ -216,7 +215,7 @@ pub fn characterise_scan_lines(
             },
             stop: f.stop.cloned(),
             lines_planned,
-            lines_used: lines_used.clone(),
+            lines_used: grid.index.clone(),
             lines_incomplete: incomplete.to_vec(),
             lines_in_journal: f.journal_lines.to_vec(),
         }
@@ -228,7 +227,7 @@ pub fn characterise_scan_lines(
                 Some(st) => format!("stopped: {}, {}", st.status.as_str(), st.reason),
                 None => "no stop record".to_string(),
             },
-            lines_used.len()
+            grid.index.len()
         ));
     }
     // A complete scan finished when its last line was read out (the runner writing its
